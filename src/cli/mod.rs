@@ -1,0 +1,19 @@
+//! Subcommands. Each file turns its arguments into library configuration, then calls the library.
+
+use clap::{Parser, Subcommand};
+
+/// Hand-eye and base-world calibration for robot cells.
+#[derive(Debug, Parser)]
+#[command(name = "handeye", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {}
+
+/// Runs one parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {}
+}

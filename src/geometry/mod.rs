@@ -1,0 +1,108 @@
+//! Rigid transforms on nalgebra, and the one naming convention of the project.
+//!
+//! `T_a_b` (docs, YAML) is `a_from_b` in code: it maps a point expressed in frame
+//! `b` into frame `a` (`p_a = T_a_b * p_b`), so compositions cancel inner names:
+//! `base_from_camera = base_from_flange * flange_from_camera`.
+//! Units are metres and radians. This module depends on nothing else of ours.
+
+pub mod yaml;
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+pub use yaml::{PoseError, PoseRecord, PoseYaml};
+
+/// A rigid transform `T_a_b`; the frames live in the binding's name (`base_from_flange`).
+pub type Pose = Isometry3<f64>;
+
+/// Builds a pose from a translation (m) and a rotation vector (axis · angle, rad) — the form a UR
+/// controller reports (`p[x, y, z, rx, ry, rz]`).
+pub fn pose_from_rotvec(translation: Vector3<f64>, rotvec: Vector3<f64>) -> Pose {
+    Isometry3::from_parts(
+        Translation3::from(translation),
+        UnitQuaternion::from_scaled_axis(rotvec),
+    )
+}
+
+/// The rotation vector (axis · angle, rad, angle in [0, π]) of a rotation.
+///
+/// Goes through the quaternion, which stays well conditioned near 180° where the
+/// matrix-log formula divides by `sin θ ≈ 0`.
+pub fn rotvec(rotation: &UnitQuaternion<f64>) -> Vector3<f64> {
+    // Pick the hemisphere with w >= 0 so the angle is the short one (≤ π).
+    let q = if rotation.w < 0.0 {
+        UnitQuaternion::new_unchecked(-rotation.into_inner())
+    } else {
+        *rotation
+    };
+    q.scaled_axis()
+}
+
+/// The rotation angle between two rotations, in radians, in [0, π].
+pub fn rotation_angle_between(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
+    a.angle_to(b)
+}
+
+/// The translation distance between two poses' origins, in metres.
+pub fn translation_distance(a: &Pose, b: &Pose) -> f64 {
+    (a.translation.vector - b.translation.vector).norm()
+}
+
+/// Builds a rotation from a 3x3 matrix that must already be orthonormal with determinant +1
+/// (checked to `tol` in the Frobenius norm); returns `None` otherwise.
+pub fn rotation_from_matrix(m: &Matrix3<f64>, tol: f64) -> Option<UnitQuaternion<f64>> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let orthonormality_error = (m.transpose() * m - Matrix3::identity()).norm();
+    if orthonormality_error > tol || (m.determinant() - 1.0).abs() > tol {
+        return None;
+    }
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(*m),
+    ))
+}
+
+/// The 4x4 homogeneous matrix of a pose (row-major nested arrays, as written in files).
+pub fn to_matrix4_rows(pose: &Pose) -> [[f64; 4]; 4] {
+    let m = pose.to_homogeneous();
+    let mut rows = [[0.0; 4]; 4];
+    for (r, row) in rows.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = m[(r, c)];
+        }
+    }
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn rotvec_round_trips_near_180_degrees() {
+        for angle in [0.0, 1e-9, 0.3, PI - 1e-6, PI - 1e-12, PI] {
+            let axis = Vector3::new(0.3, -0.5, 0.8).normalize();
+            let q = UnitQuaternion::from_scaled_axis(axis * angle);
+            let back = UnitQuaternion::from_scaled_axis(rotvec(&q));
+            assert!(q.angle_to(&back) < 1e-9, "angle {angle}");
+            assert!(rotvec(&q).norm() <= PI + 1e-12);
+        }
+    }
+
+    #[test]
+    fn rotvec_uses_short_angle_for_negative_w() {
+        let q = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.5));
+        let flipped = UnitQuaternion::new_unchecked(-q.into_inner());
+        assert!((rotvec(&flipped) - Vector3::new(0.0, 0.0, 0.5)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn rejects_non_orthonormal_matrix() {
+        let mut m = Matrix3::identity();
+        m[(0, 1)] = 0.1;
+        assert!(rotation_from_matrix(&m, 1e-6).is_none());
+        assert!(rotation_from_matrix(&-Matrix3::identity(), 1e-6).is_none());
+        assert!(rotation_from_matrix(&Matrix3::identity(), 1e-6).is_some());
+    }
+}

@@ -1,0 +1,6 @@
+//! handeye: hand-eye (camera ↔ flange) and base-world (base ↔ target) calibration for robot
+//! cells. See `DESIGN.md` in the shared folder and the README for the frame convention
+//! (`T_a_b` maps points in frame `b` into frame `a`; `a_from_b` in code) and the layers.
+#![warn(missing_docs)]
+
+pub mod geometry;
