@@ -36,8 +36,17 @@ pub struct QuaternionYaml {
 impl From<&UnitQuaternion<f64>> for QuaternionYaml {
     fn from(q: &UnitQuaternion<f64>) -> Self {
         // Write the w >= 0 hemisphere: one canonical form for diffs and people.
-        let q = if q.w < 0.0 { -q.into_inner() } else { q.into_inner() };
-        QuaternionYaml { w: q.w, x: q.i, y: q.j, z: q.k }
+        let q = if q.w < 0.0 {
+            -q.into_inner()
+        } else {
+            q.into_inner()
+        };
+        QuaternionYaml {
+            w: q.w,
+            x: q.i,
+            y: q.j,
+            z: q.k,
+        }
     }
 }
 
@@ -125,7 +134,10 @@ fn vector3(values: &[f64], path: &str, field: &str) -> Result<Vector3<f64>, Pose
         return Err(err(
             path,
             field,
-            PoseProblem::WrongLength { expected: 3, found: values.len() },
+            PoseProblem::WrongLength {
+                expected: 3,
+                found: values.len(),
+            },
         ));
     }
     finite(values, path, field)?;
@@ -199,7 +211,10 @@ fn matrix_rotation(rows: &[Vec<f64>], path: &str) -> Result<UnitQuaternion<f64>,
         return Err(err(
             path,
             "matrix",
-            PoseProblem::WrongLength { expected: 3, found: rows.len() },
+            PoseProblem::WrongLength {
+                expected: 3,
+                found: rows.len(),
+            },
         ));
     }
     let mut m = Matrix3::zeros();
@@ -209,7 +224,10 @@ fn matrix_rotation(rows: &[Vec<f64>], path: &str) -> Result<UnitQuaternion<f64>,
             return Err(err(
                 path,
                 &field,
-                PoseProblem::WrongLength { expected: 3, found: row.len() },
+                PoseProblem::WrongLength {
+                    expected: 3,
+                    found: row.len(),
+                },
             ));
         }
         finite(row, path, &field)?;
@@ -257,8 +275,11 @@ impl PoseRecord {
     pub fn to_pose(&self, path: &str) -> Result<Pose, PoseError> {
         let translation = vector3(&self.translation, path, "translation")?;
         let rotation = unit_quaternion(&self.quaternion, path)?;
-        let from_rotvec =
-            UnitQuaternion::from_scaled_axis(vector3(&self.rotation_vector, path, "rotation_vector")?);
+        let from_rotvec = UnitQuaternion::from_scaled_axis(vector3(
+            &self.rotation_vector,
+            path,
+            "rotation_vector",
+        )?);
         let disagreement = rotation.angle_to(&from_rotvec);
         if disagreement > RECORD_CONSISTENCY_TOLERANCE {
             return Err(err(path, "", PoseProblem::InconsistentForms(disagreement)));
@@ -279,8 +300,10 @@ mod tests {
     #[test]
     fn reads_each_rotation_form_to_the_same_pose() {
         let q = parse("translation: [1, 2, 3]\nquaternion: {w: 0.7071067811865476, x: 0, y: 0, z: 0.7071067811865476}").unwrap();
-        let rv = parse("translation: [1, 2, 3]\nrotation_vector: [0, 0, 1.5707963267948966]").unwrap();
-        let m = parse("translation: [1, 2, 3]\nmatrix: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]").unwrap();
+        let rv =
+            parse("translation: [1, 2, 3]\nrotation_vector: [0, 0, 1.5707963267948966]").unwrap();
+        let m =
+            parse("translation: [1, 2, 3]\nmatrix: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]").unwrap();
         assert!(q.rotation.angle_to(&rv.rotation) < 1e-12);
         assert!(q.rotation.angle_to(&m.rotation) < 1e-12);
         assert_eq!(q.translation.vector, Vector3::new(1.0, 2.0, 3.0));
@@ -315,7 +338,8 @@ mod tests {
 
     #[test]
     fn tiny_norm_error_is_accepted_and_normalised() {
-        let p = parse("translation: [0, 0, 0]\nquaternion: {w: 1.0000004, x: 0, y: 0, z: 0}").unwrap();
+        let p =
+            parse("translation: [0, 0, 0]\nquaternion: {w: 1.0000004, x: 0, y: 0, z: 0}").unwrap();
         assert!((p.rotation.into_inner().norm() - 1.0).abs() < 1e-15);
     }
 

@@ -1,0 +1,137 @@
+//! The robot arm contract: [`Robot`] and its error. Backends live in `robot/` (the simulated arm,
+//! and the Universal Robots arm through ur_rtde behind the `ur-rtde` feature); the session sees
+//! only this trait.
+//!
+//! Frames: every pose here is `T_base_flange` (the tool flange, tool0, with no TCP offset) in the
+//! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
+
+use std::time::Duration;
+
+use nalgebra::Vector3;
+
+use crate::geometry::Pose;
+
+/// Joint positions in radians, base joint first.
+pub type Joints = [f64; 6];
+
+/// Speed and acceleration caps for a move. Backends never exceed these; the session takes them
+/// from the cell config.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionLimits {
+    /// Linear tool speed for linear moves, m/s.
+    pub linear_speed: f64,
+    /// Linear tool acceleration, m/s².
+    pub linear_acceleration: f64,
+    /// Joint speed for joint moves, rad/s.
+    pub joint_speed: f64,
+    /// Joint acceleration, rad/s².
+    pub joint_acceleration: f64,
+}
+
+impl Default for MotionLimits {
+    /// Conservative limits for calibration moves near people: 0.1 m/s, 30 °/s.
+    fn default() -> Self {
+        MotionLimits {
+            linear_speed: 0.10,
+            linear_acceleration: 0.5,
+            joint_speed: 30f64.to_radians(),
+            joint_acceleration: 60f64.to_radians(),
+        }
+    }
+}
+
+/// An axis-aligned box in the base frame that the flange origin must stay inside, in metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorkspaceBox {
+    /// Lower corner (x, y, z), m.
+    pub min: Vector3<f64>,
+    /// Upper corner (x, y, z), m.
+    pub max: Vector3<f64>,
+}
+
+impl WorkspaceBox {
+    /// Whether the flange origin of `base_from_flange` lies inside the box (bounds included).
+    pub fn contains(&self, base_from_flange: &Pose) -> bool {
+        let p = base_from_flange.translation.vector;
+        (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
+    }
+}
+
+/// What the controller says about its ability to move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotStatus {
+    /// Powered, no stop active, ready to take a move.
+    Ready,
+    /// A protective stop is active (collision or limit): needs a person to clear it.
+    ProtectiveStop,
+    /// An emergency stop is active.
+    EmergencyStop,
+    /// The controller is not in a state to run programs (powered off, in local mode, ...).
+    NotReady,
+}
+
+/// Why a robot call failed. After any error the arm is stopped or was never moving; the session
+/// turns these into a clean stop that keeps every recorded sample.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// Could not reach the controller within the timeout.
+    #[error("cannot connect to the robot at {address} within {timeout:?}: {reason}")]
+    Connect {
+        /// Host or address that was tried.
+        address: String,
+        /// Timeout that ran out, or the time the attempt took.
+        timeout: Duration,
+        /// What the transport said.
+        reason: String,
+    },
+    /// The connection dropped during a call.
+    #[error("lost the connection to the robot: {0}")]
+    ConnectionLost(String),
+    /// A protective stop interrupted or prevented the move.
+    #[error("protective stop on the robot: clear it on the teach pendant, then resume")]
+    ProtectiveStop,
+    /// An emergency stop interrupted or prevented the move.
+    #[error("emergency stop on the robot: release it and re-enable the arm, then resume")]
+    EmergencyStop,
+    /// The target lies outside the configured workspace box; nothing was sent.
+    #[error("target flange position [{x:.4}, {y:.4}, {z:.4}] m is outside the workspace box; nothing was sent")]
+    OutsideWorkspace {
+        /// Target x, m.
+        x: f64,
+        /// Target y, m.
+        y: f64,
+        /// Target z, m.
+        z: f64,
+    },
+    /// No joint solution within the joint limits reaches the target.
+    #[error("target pose is not reachable within the joint limits: {0}")]
+    Unreachable(String),
+    /// A move did not finish in time.
+    #[error("move did not finish within {0:?}; the arm was stopped")]
+    MoveTimeout(Duration),
+    /// Anything else the backend reports.
+    #[error("robot backend error")]
+    Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// A robot arm. All calls block until done (a move returns when the arm has arrived and
+/// stopped); a blocking driver therefore runs on a thread of its own in the session.
+pub trait Robot: Send {
+    /// The current flange pose `T_base_flange` as the controller measures it.
+    fn base_from_flange(&mut self) -> Result<Pose, RobotError>;
+    /// The current joint positions, radians.
+    fn joint_positions(&mut self) -> Result<Joints, RobotError>;
+    /// Moves the flange along a straight line to `base_from_flange`, within `limits`; returns when
+    /// the arm has stopped there.
+    fn move_linear(
+        &mut self,
+        base_from_flange: &Pose,
+        limits: &MotionLimits,
+    ) -> Result<(), RobotError>;
+    /// Moves in joint space to `joints`, within `limits`; returns when the arm has stopped there.
+    fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError>;
+    /// Stops any motion now (decelerating within the controller's limits).
+    fn stop(&mut self) -> Result<(), RobotError>;
+    /// The controller's safety and readiness state.
+    fn status(&mut self) -> Result<RobotStatus, RobotError>;
+}
