@@ -3,5 +3,6 @@
 //! (`T_a_b` maps points in frame `b` into frame `a`; `a_from_b` in code) and the layers.
 #![warn(missing_docs)]
 
+pub mod atomic_file;
 pub mod geometry;
 pub mod robot;
