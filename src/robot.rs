@@ -5,6 +5,8 @@
 //! Frames: every pose here is `T_base_flange` (the tool flange, tool0, with no TCP offset) in the
 //! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
 
+pub mod kinematics;
+
 use std::time::Duration;
 
 use nalgebra::Vector3;
