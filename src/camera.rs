@@ -1,0 +1,57 @@
+//! The camera contract: [`Camera`] and its error, plus the camera model (`model`: pinhole +
+//! distortion, intrinsics files) and the frame renderer (`render`). Backends live in `camera/`:
+//! the simulated camera (`sim`), an image folder (`files`), and USB/UVC through nokhwa (`uvc`,
+//! behind the `uvc` feature). The session sees only the trait.
+
+pub mod model;
+pub mod render;
+pub mod sim;
+
+use std::time::Instant;
+
+use image::GrayImage;
+
+use model::CameraModel;
+
+/// One grabbed frame.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// The grey image.
+    pub image: GrayImage,
+    /// When the exposure happened (or the best the backend knows).
+    pub captured_at: Instant,
+}
+
+/// Why a camera call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    /// The camera could not be opened.
+    #[error("cannot open the camera: {0}")]
+    Open(String),
+    /// No frame newer than the requested instant arrived in time.
+    #[error("no fresh frame within {0:?}")]
+    Timeout(std::time::Duration),
+    /// A frame source ran out (an image folder with fewer frames than plan poses).
+    #[error("no more frames: {0}")]
+    Exhausted(String),
+    /// A frame could not be read or decoded.
+    #[error("cannot read frame {path}: {reason}")]
+    Frame {
+        /// Where the frame came from.
+        path: String,
+        /// What went wrong.
+        reason: String,
+    },
+    /// Anything else the backend reports.
+    #[error("camera backend error")]
+    Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// A camera. `grab` blocks until a frame exposed no earlier than `not_before` is available, so a
+/// frame buffered while the arm was still moving is never used.
+pub trait Camera: Send {
+    /// The next frame exposed at or after `not_before`.
+    fn grab(&mut self, not_before: Instant) -> Result<Frame, CameraError>;
+    /// The camera's intrinsics.
+    fn model(&self) -> &CameraModel;
+}

@@ -1,0 +1,77 @@
+//! The simulated camera: renders each frame from the TRUE chain of the simulated cell (true flange
+//! pose, true hand-eye and base-world), so the solver, which sees only the rendered frames and
+//! the robot's noisy reported poses, has something real to recover.
+
+use std::collections::BTreeSet;
+use std::time::Instant;
+
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+use crate::geometry::Pose;
+use crate::plan::CellTransforms;
+use crate::target::Board;
+
+use super::model::CameraModel;
+use super::render::{render, RenderOptions};
+use super::{Camera, CameraError, Frame};
+
+/// Where the simulated camera learns the arm's true flange pose `T_base_flange`.
+pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;
+
+/// A camera that renders the board as the simulated cell truly is.
+pub struct SimCamera {
+    model: CameraModel,
+    board: Board,
+    truth: CellTransforms,
+    true_base_from_flange: TrueFlangePose,
+    options: RenderOptions,
+    rng: StdRng,
+    hidden_grabs: BTreeSet<usize>,
+    grabs: usize,
+}
+
+impl SimCamera {
+    /// A simulated camera. `hidden_grabs` lists grab numbers (0-based) in which something blocks
+    /// the view of the board (fault injection).
+    pub fn new(
+        model: CameraModel,
+        board: Board,
+        truth: CellTransforms,
+        true_base_from_flange: TrueFlangePose,
+        options: RenderOptions,
+        seed: u64,
+        hidden_grabs: BTreeSet<usize>,
+    ) -> Self {
+        SimCamera {
+            model,
+            board,
+            truth,
+            true_base_from_flange,
+            options,
+            rng: StdRng::seed_from_u64(seed),
+            hidden_grabs,
+            grabs: 0,
+        }
+    }
+}
+
+impl Camera for SimCamera {
+    fn grab(&mut self, _not_before: Instant) -> Result<Frame, CameraError> {
+        let grab = self.grabs;
+        self.grabs += 1;
+        let camera_from_target = if self.hidden_grabs.contains(&grab) {
+            // The board is behind the camera: the frame shows only the background.
+            Pose::translation(0.0, 0.0, -10.0)
+        } else {
+            self.truth.camera_from_target(&(self.true_base_from_flange)())
+        };
+        let image = render(&self.board, &self.model, &camera_from_target, &self.options, &mut self.rng);
+        // Rendering happens after the request, so the frame is never older than `not_before`.
+        Ok(Frame { image, captured_at: Instant::now() })
+    }
+
+    fn model(&self) -> &CameraModel {
+        &self.model
+    }
+}

@@ -1,0 +1,163 @@
+//! A cell made ready to run: the config read, the board and intrinsics loaded, the plan built and
+//! checked, and — only when asked — the robot and camera backends the config names opened.
+//! This is the one place that maps config backends to implementations.
+
+pub mod sim;
+
+use std::path::Path;
+
+use crate::camera::model::CameraModel;
+use crate::camera::Camera;
+use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
+use crate::geometry::{Pose, PoseYaml};
+use crate::plan::check::{check_plan, CheckContext, PlanReport};
+use crate::plan::{generate, Plan, PlanError, Waypoint};
+use crate::robot::kinematics::UrModel;
+use crate::robot::{Joints, Robot};
+use crate::session::{PlannedPose, SessionManifest};
+use crate::target::{Board, DetectorOptions};
+
+/// Why a cell could not be prepared or opened.
+#[derive(Debug, thiserror::Error)]
+pub enum CellError {
+    /// The config is wrong.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The plan file is wrong.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// The board file is wrong.
+    #[error("board {file}")]
+    Board {
+        /// The board file.
+        file: std::path::PathBuf,
+        /// What is wrong.
+        #[source]
+        source: crate::target::TargetError,
+    },
+    /// The intrinsics file is wrong.
+    #[error("intrinsics {file}")]
+    Intrinsics {
+        /// The intrinsics file.
+        file: std::path::PathBuf,
+        /// What is wrong.
+        #[source]
+        source: crate::camera::model::CameraModelError,
+    },
+    /// A backend could not be opened.
+    #[error("{0}")]
+    Backend(String),
+}
+
+/// The robot and camera of a cell, opened.
+pub struct Hardware {
+    /// The arm.
+    pub robot: Box<dyn Robot>,
+    /// The camera.
+    pub camera: Box<dyn Camera>,
+}
+
+/// A cell whose config, board, intrinsics and plan are loaded and checked.
+pub struct PreparedCell {
+    /// The config.
+    pub config: CellConfig,
+    /// The board.
+    pub board: Board,
+    /// The intrinsics.
+    pub camera_model: CameraModel,
+    /// The arm's kinematics.
+    pub arm: UrModel,
+    /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
+    pub start_joints: Joints,
+    /// The plan.
+    pub plan: Plan,
+    /// The plan check.
+    pub report: PlanReport,
+}
+
+/// Loads everything a config names and checks the plan. Nothing moves.
+pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
+    let config = CellConfig::load(config_file)?;
+    let board = Board::load(&config.target).map_err(|source| CellError::Board { file: config.target.clone(), source })?;
+    let camera_model = CameraModel::load(&config.intrinsics)
+        .map_err(|source| CellError::Intrinsics { file: config.intrinsics.clone(), source })?;
+    let arm = UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
+    let start_joints = match &config.robot {
+        RobotConfig::Sim { start_joints_deg, .. } => start_joints_deg.map(f64::to_radians),
+        RobotConfig::Ur { .. } => crate::config::default_start_joints(),
+    };
+    let plan = match (&config.plan.file, &config.plan.generate) {
+        (Some(file), _) => Plan::load(file)?,
+        (None, Some(spec)) => Plan { waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect() },
+        (None, None) => unreachable!("the config requires a plan source"),
+    };
+    let report = check_plan(
+        &plan,
+        &CheckContext {
+            arm: &arm,
+            start_joints,
+            cell: &config.nominal,
+            workspace: &config.workspace,
+            limits: &config.limits,
+            camera: &camera_model,
+            board: &board,
+            margin_px: config.session.image_margin_px,
+        },
+    );
+    Ok(PreparedCell { config, board, camera_model, arm, start_joints, plan, report })
+}
+
+impl PreparedCell {
+    /// Whether both backends are simulated (no real hardware moves).
+    pub fn is_simulated(&self) -> bool {
+        matches!(self.config.robot, RobotConfig::Sim { .. })
+    }
+
+    /// Detector settings from the config.
+    pub fn detector_options(&self) -> DetectorOptions {
+        let d = self.config.detector;
+        DetectorOptions { decimation: d.decimate, threads: d.threads, max_hamming: d.max_hamming, ..DetectorOptions::default() }
+    }
+
+    /// The session manifest for a validated plan.
+    pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
+        SessionManifest {
+            config: std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone()),
+            setup: self.config.setup,
+            plan: plan
+                .iter()
+                .map(|(pose, q)| PlannedPose { base_from_flange: PoseYaml::from_pose(pose), joints_deg: q.map(f64::to_degrees) })
+                .collect(),
+        }
+    }
+
+    /// Opens the robot and camera the config names.
+    pub fn open_hardware(&self) -> Result<Hardware, CellError> {
+        match (&self.config.robot, &self.config.camera) {
+            (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
+                let truth = self.config.simulation.expect("validated: sim backends have ground truth");
+                let (robot, camera) = sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model.clone(), self.board.clone())?;
+                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+            }
+            (robot, camera) => Err(CellError::Backend(format!(
+                "the combination robot backend `{}` with camera backend `{}` is not available in this build",
+                robot_name(robot),
+                camera_name(camera)
+            ))),
+        }
+    }
+}
+
+fn robot_name(r: &RobotConfig) -> &'static str {
+    match r {
+        RobotConfig::Sim { .. } => "sim",
+        RobotConfig::Ur { .. } => "ur",
+    }
+}
+
+fn camera_name(c: &CameraConfig) -> &'static str {
+    match c {
+        CameraConfig::Sim { .. } => "sim",
+        CameraConfig::Files { .. } => "files",
+    }
+}

@@ -1,0 +1,75 @@
+//! `handeye plan generate|check`: make a plan, or validate one with the arm standing still.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand};
+
+use handeye::cell;
+use handeye::plan::{generate, GenerateSpec, Plan, Waypoint};
+
+/// Generate or check pose plans.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    #[command(subcommand)]
+    command: PlanCommand,
+}
+
+#[derive(Debug, Subcommand)]
+enum PlanCommand {
+    /// Sample views on a spherical cap above the board and write them as a scripted plan.
+    Generate {
+        /// Number of views.
+        #[arg(short = 'n', long, default_value_t = 20)]
+        count: usize,
+        /// Nearest camera-to-board distance, m.
+        #[arg(long, default_value_t = 0.45)]
+        near: f64,
+        /// Farthest camera-to-board distance, m.
+        #[arg(long, default_value_t = 0.65)]
+        far: f64,
+        /// Largest tilt from the board normal, degrees.
+        #[arg(long, default_value_t = 30.0)]
+        max_tilt_deg: f64,
+        /// Largest roll about the optical axis, degrees.
+        #[arg(long, default_value_t = 30.0)]
+        max_roll_deg: f64,
+        /// Jitter seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Where to write the plan.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Check the plan a cell config names: reach, joint limits, workspace box, board in view,
+    /// rotation diversity, move times. Exits non-zero when any check fails. Nothing moves.
+    Check {
+        /// The cell config.
+        #[arg(long)]
+        config: PathBuf,
+    },
+}
+
+/// Runs `handeye plan`.
+pub fn run(args: PlanArgs) -> anyhow::Result<()> {
+    match args.command {
+        PlanCommand::Generate { count, near, far, max_tilt_deg, max_roll_deg, seed, output } => {
+            let spec = GenerateSpec { count, distance: [near, far], max_tilt_deg, max_roll_deg, seed };
+            if let Err(problem) = spec.validate() {
+                bail!("{problem}");
+            }
+            let plan = Plan { waypoints: generate(&spec).into_iter().map(Waypoint::LookAt).collect() };
+            plan.save(&output)?;
+            println!("wrote {count} look-at views to {}; check them with `handeye plan check`", output.display());
+            Ok(())
+        }
+        PlanCommand::Check { config } => {
+            let prepared = cell::prepare(&config).with_context(|| format!("preparing {}", config.display()))?;
+            println!("{}", prepared.report);
+            if !prepared.report.ok() {
+                bail!("the plan failed its checks");
+            }
+            Ok(())
+        }
+    }
+}

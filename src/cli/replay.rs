@@ -1,0 +1,66 @@
+//! `handeye replay <session>`: detect again in the saved frames, solve again, compare.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use handeye::cell;
+use handeye::session::{replay, SessionFolder};
+use handeye::solve;
+
+/// Re-detect the board in a session's frames and solve again offline.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The session folder.
+    session: PathBuf,
+    /// Use this cell config instead of the one the session was run with.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Where to write the replayed result (default: <session>/replay-result.yaml).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+}
+
+/// Runs `handeye replay`.
+pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    let folder = SessionFolder::open(&args.session)?;
+    let manifest = folder.read_manifest()?;
+    let config_path = args.config.clone().unwrap_or(manifest.config);
+    let prepared = cell::prepare(&config_path).with_context(|| format!("reading {}", config_path.display()))?;
+    let (dataset, visits) = replay::redetect(
+        &folder,
+        &prepared.board,
+        &prepared.camera_model,
+        prepared.detector_options(),
+        prepared.config.session.max_reprojection_rms_px,
+    )?;
+    for v in &visits {
+        match (&v.rejected, v.reprojection_rms_px) {
+            (None, Some(rms)) => println!("pose {:>3}: {} tags, board RMS {rms:.3} px", v.plan_index, v.tags),
+            (Some(why), _) => println!("pose {:>3}: skipped: {why}", v.plan_index),
+            _ => {}
+        }
+    }
+    let pairs = dataset.pairs()?;
+    let calibration = solve::solve(dataset.setup, &pairs, &prepared.config.solver.to_options())?;
+    let output = args.output.unwrap_or_else(|| folder.root().join("replay-result.yaml"));
+    handeye::result::write_result(&output, &calibration, &pairs)?;
+    println!("{}", calibration.summary());
+    if folder.result_path().is_file() {
+        let recorded = handeye::result::read_result(&folder.result_path())?;
+        for ((key, now), (_, then)) in calibration.unknowns().iter().zip(recorded.unknowns().iter()) {
+            println!(
+                "{key}: replay differs from the recorded result by {:.4} mm, {:.5}°",
+                (now.translation.vector - then.translation.vector).norm() * 1e3,
+                now.rotation.angle_to(&then.rotation).to_degrees()
+            );
+        }
+    }
+    if let Some(truth) = &prepared.config.simulation {
+        let solved = handeye::session::SolvedSession { calibration, summary: String::new() };
+        println!("{}", solved.compare_with_truth(truth));
+    }
+    println!("wrote {}", output.display());
+    Ok(())
+}

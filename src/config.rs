@@ -1,0 +1,542 @@
+//! The cell config: one YAML file that says what the cell is (setup, robot, camera, board), what is
+//! roughly known about it, how to move, and how to solve. Read and validated completely before
+//! anything moves; every error names the file, the key and what was expected.
+//!
+//! Relative paths inside the file are relative to the file's folder. Units are SI with the suffix
+//! in the key where a person reads (`_deg`, `_mm`, `_s`).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{PoseError, PoseYaml};
+use crate::plan::{CellTransforms, GenerateSpec};
+use crate::robot::{MotionLimits, WorkspaceBox};
+use crate::solve::Setup;
+
+/// Ceilings on the configurable motion limits: calibration moves near people never need more.
+pub const MAX_LINEAR_SPEED: f64 = 0.5;
+/// Ceiling on linear acceleration, m/s².
+pub const MAX_LINEAR_ACCELERATION: f64 = 2.0;
+/// Ceiling on joint speed, °/s.
+pub const MAX_JOINT_SPEED_DEG: f64 = 90.0;
+/// Ceiling on joint acceleration, °/s².
+pub const MAX_JOINT_ACCELERATION_DEG: f64 = 180.0;
+
+/// A config problem: the file, the key (YAML path) and what was expected.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config {file}")]
+    Read {
+        /// The config file.
+        file: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A key is unknown, missing, or of the wrong type.
+    #[error("{file}: {path}: {message}")]
+    Shape {
+        /// The config file.
+        file: PathBuf,
+        /// YAML path of the problem (`.` for the document).
+        path: String,
+        /// What serde said.
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{file}: {key}: {problem}")]
+    Value {
+        /// The config file.
+        file: PathBuf,
+        /// The key.
+        key: String,
+        /// What was expected.
+        problem: String,
+    },
+    /// A pose is malformed.
+    #[error("{file}: {source}")]
+    Pose {
+        /// The config file.
+        file: PathBuf,
+        /// The pose problem with its YAML path.
+        #[source]
+        source: PoseError,
+    },
+}
+
+/// Which arm drives the cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "backend", rename_all = "snake_case", deny_unknown_fields)]
+pub enum RobotConfig {
+    /// The simulated UR arm.
+    Sim {
+        /// `ur5e` or `ur10e`.
+        #[serde(default = "default_model")]
+        model: String,
+        /// Where the arm starts, degrees.
+        #[serde(default = "default_start_joints_deg")]
+        start_joints_deg: [f64; 6],
+        /// Time each move takes, s (0 = instant).
+        #[serde(default)]
+        move_duration_s: f64,
+        /// 1-sigma position noise on the reported flange pose, mm.
+        #[serde(default)]
+        repeatability_mm: f64,
+        /// 1-sigma rotation noise on the reported flange pose, degrees.
+        #[serde(default)]
+        repeatability_deg: f64,
+        /// Raise a protective stop after this many moves (fault injection for tests).
+        #[serde(default)]
+        protective_stop_after_moves: Option<usize>,
+        /// Noise seed.
+        #[serde(default)]
+        seed: u64,
+    },
+    /// A Universal Robots controller through ur_rtde (needs the `ur-rtde` feature).
+    Ur {
+        /// Controller address.
+        host: String,
+        /// `ur5e` or `ur10e`: used to check reachability before moving.
+        #[serde(default = "default_model")]
+        model: String,
+        /// Give up connecting after this long, s.
+        #[serde(default = "default_connect_timeout_s")]
+        connect_timeout_s: f64,
+    },
+}
+
+fn default_model() -> String {
+    "ur5e".into()
+}
+fn default_start_joints_deg() -> [f64; 6] {
+    [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]
+}
+
+/// The joints a plan assumes the arm starts from when the config gives none (UR's upright
+/// "home" with the tool pointing down), radians.
+pub fn default_start_joints() -> [f64; 6] {
+    default_start_joints_deg().map(f64::to_radians)
+}
+fn default_connect_timeout_s() -> f64 {
+    5.0
+}
+
+impl RobotConfig {
+    /// The arm model name, for kinematics checks.
+    pub fn model(&self) -> &str {
+        match self {
+            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model,
+        }
+    }
+}
+
+/// Which camera takes the frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "backend", rename_all = "snake_case", deny_unknown_fields)]
+pub enum CameraConfig {
+    /// Frames rendered from the simulated cell's true chain.
+    Sim {
+        /// Sensor noise, grey levels (1-sigma).
+        #[serde(default = "default_noise")]
+        noise_sigma: f64,
+        /// Optical blur, pixels (1-sigma of a Gaussian), 0 = none.
+        #[serde(default)]
+        blur_sigma_px: f64,
+        /// Render seed.
+        #[serde(default)]
+        seed: u64,
+        /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
+        #[serde(default)]
+        hide_board_in_grabs: Vec<usize>,
+    },
+    /// Frames from an image folder, in plan order.
+    Files {
+        /// The folder.
+        folder: PathBuf,
+    },
+}
+
+fn default_noise() -> f64 {
+    2.0
+}
+
+/// Motion limits as written (degrees for joints).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitsConfig {
+    /// m/s.
+    pub linear_speed: f64,
+    /// m/s².
+    pub linear_acceleration: f64,
+    /// °/s.
+    pub joint_speed_deg: f64,
+    /// °/s².
+    pub joint_acceleration_deg: f64,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        let l = MotionLimits::default();
+        LimitsConfig {
+            linear_speed: l.linear_speed,
+            linear_acceleration: l.linear_acceleration,
+            joint_speed_deg: l.joint_speed.to_degrees(),
+            joint_acceleration_deg: l.joint_acceleration.to_degrees(),
+        }
+    }
+}
+
+/// The workspace box as written, m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkspaceConfig {
+    /// Lower corner, m.
+    pub min: [f64; 3],
+    /// Upper corner, m.
+    pub max: [f64; 3],
+}
+
+/// Where the plan comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanConfig {
+    /// A scripted plan file.
+    #[serde(default)]
+    pub file: Option<PathBuf>,
+    /// Generate views on a cap around the board.
+    #[serde(default)]
+    pub generate: Option<GenerateSpec>,
+}
+
+/// Detector settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectorConfig {
+    /// Image decimation before quad detection (1 = full resolution).
+    #[serde(default = "default_decimate")]
+    pub decimate: f32,
+    /// Detector threads.
+    #[serde(default = "default_threads")]
+    pub threads: usize,
+    /// Largest accepted number of corrected bits.
+    #[serde(default)]
+    pub max_hamming: u32,
+}
+
+fn default_decimate() -> f32 {
+    2.0
+}
+fn default_threads() -> usize {
+    2
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        DetectorConfig { decimate: default_decimate(), threads: default_threads(), max_hamming: 0 }
+    }
+}
+
+/// Solver settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    /// `refined` (default), `iterative` or `closed-form`.
+    #[serde(default = "default_method")]
+    pub method: String,
+    /// Expected rotation noise of a board pose, degrees (1-sigma).
+    #[serde(default = "default_rotation_sigma_deg")]
+    pub rotation_sigma_deg: f64,
+    /// Expected translation noise of a board pose, mm (1-sigma).
+    #[serde(default = "default_translation_sigma_mm")]
+    pub translation_sigma_mm: f64,
+    /// Drop flagged outliers and solve again.
+    #[serde(default = "yes")]
+    pub drop_outliers: bool,
+}
+
+fn default_method() -> String {
+    "refined".into()
+}
+fn default_rotation_sigma_deg() -> f64 {
+    0.05
+}
+fn default_translation_sigma_mm() -> f64 {
+    0.3
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            method: default_method(),
+            rotation_sigma_deg: default_rotation_sigma_deg(),
+            translation_sigma_mm: default_translation_sigma_mm(),
+            drop_outliers: true,
+        }
+    }
+}
+
+/// Session settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionConfig {
+    /// Wait after the arm stops before grabbing, s (lets vibrations die down).
+    #[serde(default = "default_settle_s")]
+    pub settle_s: f64,
+    /// Largest accepted board reprojection RMS, px; a worse frame is retried, then skipped.
+    #[serde(default = "default_max_rms_px")]
+    pub max_reprojection_rms_px: f64,
+    /// Margin kept between the board and the image border when checking a plan, px.
+    #[serde(default = "default_margin_px")]
+    pub image_margin_px: f64,
+}
+
+fn default_settle_s() -> f64 {
+    0.2
+}
+fn default_max_rms_px() -> f64 {
+    1.0
+}
+fn default_margin_px() -> f64 {
+    20.0
+}
+
+impl Default for SessionConfig {
+    fn default() -> Self {
+        SessionConfig {
+            settle_s: default_settle_s(),
+            max_reprojection_rms_px: default_max_rms_px(),
+            image_margin_px: default_margin_px(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    setup: Setup,
+    target: PathBuf,
+    intrinsics: PathBuf,
+    robot: RobotConfig,
+    camera: CameraConfig,
+    nominal: BTreeMap<String, PoseYaml>,
+    #[serde(default)]
+    simulation: Option<BTreeMap<String, PoseYaml>>,
+    plan: PlanConfig,
+    #[serde(default)]
+    limits: LimitsConfig,
+    workspace: WorkspaceConfig,
+    #[serde(default)]
+    detector: DetectorConfig,
+    #[serde(default)]
+    solver: SolverConfig,
+    #[serde(default)]
+    session: SessionConfig,
+}
+
+/// A validated cell config with paths resolved.
+#[derive(Debug, Clone)]
+pub struct CellConfig {
+    /// The file it came from.
+    pub file: PathBuf,
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// Board spec file.
+    pub target: PathBuf,
+    /// Camera intrinsics file (camera_info YAML or Kalibr camchain).
+    pub intrinsics: PathBuf,
+    /// The arm.
+    pub robot: RobotConfig,
+    /// The camera.
+    pub camera: CameraConfig,
+    /// The cell's transforms as known before calibrating (used to plan).
+    pub nominal: CellTransforms,
+    /// The simulator's ground truth (sim backends only).
+    pub simulation: Option<CellTransforms>,
+    /// Where the plan comes from (file paths resolved).
+    pub plan: PlanConfig,
+    /// Motion limits.
+    pub limits: MotionLimits,
+    /// Workspace box for the flange origin.
+    pub workspace: WorkspaceBox,
+    /// Detector settings.
+    pub detector: DetectorConfig,
+    /// Solver settings.
+    pub solver: SolverConfig,
+    /// Session settings.
+    pub session: SessionConfig,
+}
+
+impl CellConfig {
+    /// Reads and validates a cell config.
+    pub fn load(file: &Path) -> Result<CellConfig, ConfigError> {
+        let text = std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
+            file: file.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, file)
+    }
+
+    /// Parses config YAML; relative paths resolve against `file`'s folder.
+    pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
+        let deserializer = serde_yaml_ng::Deserializer::from_str(text);
+        let raw: RawConfig = serde_path_to_error::deserialize(deserializer).map_err(|e| {
+            ConfigError::Shape {
+                file: file.to_path_buf(),
+                path: e.path().to_string(),
+                message: e.inner().to_string(),
+            }
+        })?;
+        let folder = file.parent().unwrap_or(Path::new("."));
+        let resolve = |p: &Path| if p.is_absolute() { p.to_path_buf() } else { folder.join(p) };
+        let value_error = |key: &str, problem: String| ConfigError::Value {
+            file: file.to_path_buf(),
+            key: key.to_string(),
+            problem,
+        };
+
+        let (camera_key, target_key) = match raw.setup {
+            Setup::EyeInHand => ("T_flange_camera", "T_base_target"),
+            Setup::EyeToHand => ("T_base_camera", "T_flange_target"),
+        };
+        let transforms = |section: &str, map: &BTreeMap<String, PoseYaml>| {
+            for key in map.keys() {
+                if key != camera_key && key != target_key {
+                    return Err(value_error(
+                        &format!("{section}.{key}"),
+                        format!("unknown transform for setup {:?}: expected `{camera_key}` and `{target_key}`", raw.setup),
+                    ));
+                }
+            }
+            let get = |key: &str| {
+                let pose = map.get(key).ok_or_else(|| {
+                    value_error(section, format!("missing `{key}` (expected `{camera_key}` and `{target_key}`)"))
+                })?;
+                pose.to_pose(&format!("{section}.{key}")).map_err(|source| ConfigError::Pose {
+                    file: file.to_path_buf(),
+                    source,
+                })
+            };
+            Ok(CellTransforms { setup: raw.setup, camera_mount: get(camera_key)?, target_mount: get(target_key)? })
+        };
+        let nominal = transforms("nominal", &raw.nominal)?;
+        let simulation = raw.simulation.as_ref().map(|m| transforms("simulation", m)).transpose()?;
+        let uses_sim = matches!(raw.robot, RobotConfig::Sim { .. }) || matches!(raw.camera, CameraConfig::Sim { .. });
+        if uses_sim && simulation.is_none() {
+            return Err(value_error(
+                "simulation",
+                format!("the sim backends need the ground truth: `simulation: {{{camera_key}: ..., {target_key}: ...}}`"),
+            ));
+        }
+
+        if let RobotConfig::Sim { model, move_duration_s, repeatability_mm, repeatability_deg, .. } = &raw.robot {
+            check_model(model).map_err(|p| value_error("robot.model", p))?;
+            for (key, v) in [("robot.move_duration_s", *move_duration_s), ("robot.repeatability_mm", *repeatability_mm), ("robot.repeatability_deg", *repeatability_deg)] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(value_error(key, format!("expected a non-negative number, got {v}")));
+                }
+            }
+        }
+        if let RobotConfig::Ur { model, connect_timeout_s, host } = &raw.robot {
+            check_model(model).map_err(|p| value_error("robot.model", p))?;
+            if host.trim().is_empty() {
+                return Err(value_error("robot.host", "expected the controller's IP address or host name".into()));
+            }
+            if !(connect_timeout_s.is_finite() && *connect_timeout_s > 0.0 && *connect_timeout_s <= 120.0) {
+                return Err(value_error("robot.connect_timeout_s", format!("expected seconds in (0, 120], got {connect_timeout_s}")));
+            }
+        }
+
+        let l = raw.limits;
+        for (key, v, ceiling, unit) in [
+            ("limits.linear_speed", l.linear_speed, MAX_LINEAR_SPEED, "m/s"),
+            ("limits.linear_acceleration", l.linear_acceleration, MAX_LINEAR_ACCELERATION, "m/s²"),
+            ("limits.joint_speed_deg", l.joint_speed_deg, MAX_JOINT_SPEED_DEG, "°/s"),
+            ("limits.joint_acceleration_deg", l.joint_acceleration_deg, MAX_JOINT_ACCELERATION_DEG, "°/s²"),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= ceiling) {
+                return Err(value_error(key, format!("expected a value in (0, {ceiling}] {unit} (the calibration safety ceiling), got {v}")));
+            }
+        }
+        let limits = MotionLimits {
+            linear_speed: l.linear_speed,
+            linear_acceleration: l.linear_acceleration,
+            joint_speed: l.joint_speed_deg.to_radians(),
+            joint_acceleration: l.joint_acceleration_deg.to_radians(),
+        };
+
+        let w = raw.workspace;
+        if !(0..3).all(|i| w.min[i].is_finite() && w.max[i].is_finite() && w.min[i] < w.max[i]) {
+            return Err(value_error("workspace", format!("expected min < max on every axis, got min {:?}, max {:?}", w.min, w.max)));
+        }
+        let workspace = WorkspaceBox { min: Vector3::from(w.min), max: Vector3::from(w.max) };
+
+        let mut plan = raw.plan.clone();
+        match (&plan.file, &plan.generate) {
+            (Some(_), None) => {}
+            (None, Some(spec)) => spec.validate().map_err(|p| value_error("plan.generate", p))?,
+            _ => return Err(value_error("plan", "expected exactly one of `file` (a scripted plan) and `generate`".into())),
+        }
+        plan.file = plan.file.as_deref().map(resolve);
+
+        let camera = match raw.camera {
+            CameraConfig::Files { folder } => CameraConfig::Files { folder: resolve(&folder) },
+            CameraConfig::Sim { noise_sigma, blur_sigma_px, seed, hide_board_in_grabs } => {
+                if !(noise_sigma.is_finite() && noise_sigma >= 0.0 && blur_sigma_px.is_finite() && blur_sigma_px >= 0.0) {
+                    return Err(value_error("camera", "noise_sigma and blur_sigma_px must be non-negative numbers".into()));
+                }
+                CameraConfig::Sim { noise_sigma, blur_sigma_px, seed, hide_board_in_grabs }
+            }
+        };
+        if !(raw.detector.decimate >= 1.0 && raw.detector.threads >= 1) {
+            return Err(value_error("detector", "decimate must be >= 1 and threads >= 1".into()));
+        }
+        let s = raw.session;
+        if !(s.settle_s.is_finite() && s.settle_s >= 0.0 && s.max_reprojection_rms_px > 0.0 && s.image_margin_px >= 0.0) {
+            return Err(value_error("session", "settle_s >= 0, max_reprojection_rms_px > 0 and image_margin_px >= 0 expected".into()));
+        }
+        let sv = &raw.solver;
+        if !["refined", "iterative", "closed-form"].contains(&sv.method.as_str()) {
+            return Err(value_error("solver.method", format!("expected refined, iterative or closed-form, got `{}`", sv.method)));
+        }
+        if !(sv.rotation_sigma_deg > 0.0 && sv.translation_sigma_mm > 0.0) {
+            return Err(value_error("solver", "rotation_sigma_deg and translation_sigma_mm must be positive".into()));
+        }
+
+        Ok(CellConfig {
+            file: file.to_path_buf(),
+            setup: raw.setup,
+            target: resolve(&raw.target),
+            intrinsics: resolve(&raw.intrinsics),
+            robot: raw.robot,
+            camera,
+            nominal,
+            simulation,
+            plan,
+            limits,
+            workspace,
+            detector: raw.detector,
+            solver: raw.solver,
+            session: raw.session,
+        })
+    }
+
+    /// The settle time as a duration.
+    pub fn settle(&self) -> Duration {
+        Duration::from_secs_f64(self.session.settle_s)
+    }
+}
+
+fn check_model(model: &str) -> Result<(), String> {
+    match model {
+        "ur5e" | "ur10e" => Ok(()),
+        other => Err(format!("expected ur5e or ur10e, got `{other}`")),
+    }
+}

@@ -1,0 +1,210 @@
+//! Plan validation before anything moves: every pose reachable inside the joint limits by a joint
+//! move whose whole path keeps the flange inside the workspace box, the whole board inside the
+//! image with a margin at the expected target position, enough rotation diversity for the solver
+//! (the solver's own observability rule), and move times at the configured speed limits.
+
+use std::fmt;
+
+use nalgebra::Point3;
+
+use crate::camera::model::CameraModel;
+use crate::geometry::{rotvec, Pose};
+use crate::robot::kinematics::UrModel;
+use crate::robot::{Joints, MotionLimits, WorkspaceBox};
+use crate::target::Board;
+
+use super::{CellTransforms, Plan};
+
+/// Points checked along each joint move (the path in joint space is a straight line).
+const PATH_SAMPLES: usize = 16;
+
+/// What the checker needs to know about the cell.
+pub struct CheckContext<'a> {
+    /// The arm's kinematics and joint limits.
+    pub arm: &'a UrModel,
+    /// Where the arm is before the first move.
+    pub start_joints: Joints,
+    /// Nominal cell transforms.
+    pub cell: &'a CellTransforms,
+    /// Flange workspace box.
+    pub workspace: &'a WorkspaceBox,
+    /// Motion limits.
+    pub limits: &'a MotionLimits,
+    /// Camera intrinsics.
+    pub camera: &'a CameraModel,
+    /// The board.
+    pub board: &'a Board,
+    /// Margin between the board and the image border, px.
+    pub margin_px: f64,
+}
+
+/// The verdict on one plan pose.
+#[derive(Debug, Clone)]
+pub struct PoseCheck {
+    /// Plan index.
+    pub index: usize,
+    /// The flange pose.
+    pub base_from_flange: Pose,
+    /// The joint solution reached by the move, if one exists.
+    pub joints: Option<Joints>,
+    /// Expected camera-to-board distance, m.
+    pub distance_m: f64,
+    /// Smallest distance from a board corner to the image border, px (negative = outside).
+    pub image_margin_px: f64,
+    /// Estimated duration of the joint move from the previous pose, s.
+    pub move_time_s: f64,
+    /// Problems found; empty when the pose is good.
+    pub problems: Vec<String>,
+}
+
+/// The verdict on a whole plan.
+#[derive(Debug, Clone)]
+pub struct PlanReport {
+    /// One line per pose.
+    pub poses: Vec<PoseCheck>,
+    /// Problems of the plan as a whole (rotation diversity).
+    pub plan_problems: Vec<String>,
+}
+
+impl PlanReport {
+    /// Whether the plan may run.
+    pub fn ok(&self) -> bool {
+        self.plan_problems.is_empty() && self.poses.iter().all(|p| p.problems.is_empty())
+    }
+
+    /// The validated plan as (flange pose, joints) pairs; `None` if any check failed.
+    pub fn validated(&self) -> Option<Vec<(Pose, Joints)>> {
+        if !self.ok() {
+            return None;
+        }
+        self.poses.iter().map(|p| p.joints.map(|q| (p.base_from_flange, q))).collect()
+    }
+}
+
+/// Checks every pose of `plan` and the plan as a whole.
+pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
+    let board_points = ctx.board.all_corners_in_target();
+    let centre = ctx.board.centre_in_target();
+    let mut previous = ctx.start_joints;
+    let mut poses = Vec::with_capacity(plan.waypoints.len());
+    for (index, waypoint) in plan.waypoints.iter().enumerate() {
+        let base_from_flange = ctx.cell.resolve(waypoint, &centre, |q| ctx.arm.forward(q));
+        let mut problems = Vec::new();
+        let joints = match waypoint {
+            super::Waypoint::Joints(q) if ctx.arm.within_limits(q) => Some(*q),
+            super::Waypoint::Joints(_) => None,
+            _ => ctx.arm.inverse_nearest(&base_from_flange, &previous),
+        };
+        let mut move_time_s = 0.0;
+        match joints {
+            None => problems.push("unreachable: no inverse-kinematics solution inside the joint limits".into()),
+            Some(q) => {
+                if let Some(outside) = path_leaves_box(ctx.arm, &previous, &q, ctx.workspace) {
+                    problems.push(outside);
+                }
+                move_time_s = joint_move_time(&previous, &q, ctx.limits);
+                previous = q;
+            }
+        }
+        if !ctx.workspace.contains(&base_from_flange) {
+            let p = base_from_flange.translation.vector;
+            problems.push(format!("flange at [{:.3}, {:.3}, {:.3}] m is outside the workspace box", p.x, p.y, p.z));
+        }
+        let camera_from_target = ctx.cell.camera_from_target(&base_from_flange);
+        let distance_m = (camera_from_target * centre).coords.norm();
+        let image_margin_px = board_margin(ctx.camera, &camera_from_target, &board_points);
+        if image_margin_px < ctx.margin_px {
+            problems.push(if image_margin_px == f64::NEG_INFINITY {
+                "board is behind the camera".to_string()
+            } else {
+                format!(
+                    "board not fully inside the image with {:.0} px margin (closest corner {:.0} px from the border)",
+                    ctx.margin_px, image_margin_px
+                )
+            });
+        }
+        poses.push(PoseCheck { index, base_from_flange, joints, distance_m, image_margin_px, move_time_s, problems });
+    }
+    let flange_poses: Vec<Pose> = poses.iter().map(|p| p.base_from_flange).collect();
+    let mut plan_problems = Vec::new();
+    if let Err(e) = crate::solve::check_rotation_diversity(&flange_poses) {
+        plan_problems.push(e.to_string());
+    }
+    PlanReport { poses, plan_problems }
+}
+
+/// The first point of a straight joint-space move that leaves the box, as a message.
+fn path_leaves_box(arm: &UrModel, from: &Joints, to: &Joints, workspace: &WorkspaceBox) -> Option<String> {
+    (0..=PATH_SAMPLES).find_map(|k| {
+        let s = k as f64 / PATH_SAMPLES as f64;
+        let mut q = [0.0; 6];
+        for j in 0..6 {
+            q[j] = from[j] + (to[j] - from[j]) * s;
+        }
+        let pose = arm.forward(&q);
+        (!workspace.contains(&pose)).then(|| {
+            let p = pose.translation.vector;
+            format!(
+                "the joint move leaves the workspace box at {:.0} % of the way ([{:.3}, {:.3}, {:.3}] m)",
+                s * 100.0,
+                p.x,
+                p.y,
+                p.z
+            )
+        })
+    })
+}
+
+/// Duration of a synchronised joint move with a trapezoidal speed profile at the limits.
+fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
+    let travel = from.iter().zip(to).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let (v, a) = (limits.joint_speed, limits.joint_acceleration);
+    if travel <= v * v / a {
+        2.0 * (travel / a).sqrt()
+    } else {
+        travel / v + v / a
+    }
+}
+
+/// Smallest distance from any board point's projection to the image border (px); −∞ if a point
+/// is behind the camera.
+fn board_margin(camera: &CameraModel, camera_from_target: &Pose, points: &[Point3<f64>]) -> f64 {
+    let (w, h) = (camera.width as f64, camera.height as f64);
+    points
+        .iter()
+        .map(|p| match camera.project(&(camera_from_target * p)) {
+            None => f64::NEG_INFINITY,
+            // Pixel centres are integers: the image spans [-0.5, w - 0.5].
+            Some(px) => (px.x + 0.5).min(w - 0.5 - px.x).min(px.y + 0.5).min(h - 0.5 - px.y),
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+impl fmt::Display for PlanReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{:>4}  {:>24}  {:>9}  {:>9}  {:>7}  status", "pose", "flange xyz (m)", "dist (m)", "margin px", "move s")?;
+        for p in &self.poses {
+            let t = p.base_from_flange.translation.vector;
+            let rv = rotvec(&p.base_from_flange.rotation);
+            let _ = rv;
+            let status = if p.problems.is_empty() { "ok".to_string() } else { p.problems.join("; ") };
+            writeln!(
+                f,
+                "{:>4}  [{:>6.3}, {:>6.3}, {:>6.3}]  {:>9.3}  {:>9.0}  {:>7.2}  {}",
+                p.index, t.x, t.y, t.z, p.distance_m, p.image_margin_px, p.move_time_s, status
+            )?;
+        }
+        for problem in &self.plan_problems {
+            writeln!(f, "plan: {problem}")?;
+        }
+        let total: f64 = self.poses.iter().map(|p| p.move_time_s).sum();
+        write!(
+            f,
+            "{} poses, {} with problems; total move time {:.1} s at the configured limits — {}",
+            self.poses.len(),
+            self.poses.iter().filter(|p| !p.problems.is_empty()).count(),
+            total,
+            if self.ok() { "plan OK" } else { "plan REJECTED" }
+        )
+    }
+}

@@ -1,0 +1,369 @@
+//! Pose plans: where the arm goes to take each calibration frame.
+//!
+//! A plan is a list of waypoints, each a flange pose (`T_base_flange`), a joint configuration, or a
+//! [`LookAt`] view relative to the board. Plans are scripted in YAML or generated on a spherical cap
+//! around the board ([`generate`]); [`check`] validates a plan before anything moves.
+//!
+//! Frames: look-at views give `T_target_camera`; with the cell's nominal (expected) transforms they
+//! become flange poses through the setup's chain (see [`CellTransforms`]).
+
+pub mod check;
+pub mod generate;
+pub mod lookat;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{Pose, PoseError, PoseYaml};
+use crate::robot::Joints;
+use crate::solve::Setup;
+
+pub use generate::{generate, GenerateSpec};
+pub use lookat::LookAt;
+
+/// One place to take a frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Waypoint {
+    /// A flange pose in the base frame.
+    FlangePose(Pose),
+    /// A joint configuration, radians.
+    Joints(Joints),
+    /// A view of the board.
+    LookAt(LookAt),
+}
+
+/// A scripted plan: the waypoints in order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Waypoints in the order the arm visits them.
+    pub waypoints: Vec<Waypoint>,
+}
+
+/// Why a plan could not be read or is not safe to run.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// The plan file could not be read.
+    #[error("cannot read plan {file}")]
+    Read {
+        /// The plan file.
+        file: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The plan file's YAML does not have the plan's shape.
+    #[error("{file}: {path}: {message}")]
+    Shape {
+        /// The plan file.
+        file: PathBuf,
+        /// YAML path of the problem.
+        path: String,
+        /// What serde said.
+        message: String,
+    },
+    /// A waypoint's values are wrong.
+    #[error("{file}: {path}: {problem}")]
+    Waypoint {
+        /// The plan file.
+        file: PathBuf,
+        /// YAML path of the waypoint.
+        path: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A flange pose in the plan is malformed.
+    #[error("{file}: {source}")]
+    Pose {
+        /// The plan file.
+        file: PathBuf,
+        /// The pose problem, with its YAML path.
+        #[source]
+        source: PoseError,
+    },
+    /// The plan has no waypoints.
+    #[error("{0}: the plan has no waypoints (expected a list under `waypoints`)")]
+    Empty(PathBuf),
+    /// Validation failed; the report says which poses and why.
+    #[error("the plan failed its checks:\n{0}")]
+    Rejected(String),
+    /// Writing the plan failed.
+    #[error("cannot write plan {file}")]
+    Write {
+        /// The destination.
+        file: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanFile {
+    waypoints: Vec<WaypointYaml>,
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WaypointYaml {
+    #[serde(rename = "T_base_flange", default, skip_serializing_if = "Option::is_none")]
+    base_from_flange: Option<PoseYaml>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    joints_deg: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    look_at: Option<LookAt>,
+}
+
+impl Plan {
+    /// Reads a scripted plan from YAML, naming file and YAML path in every error.
+    pub fn load(file: &Path) -> Result<Plan, PlanError> {
+        let text = std::fs::read_to_string(file).map_err(|source| PlanError::Read {
+            file: file.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, file)
+    }
+
+    /// Parses plan YAML; `file` is used in messages only.
+    pub fn parse(text: &str, file: &Path) -> Result<Plan, PlanError> {
+        let deserializer = serde_yaml_ng::Deserializer::from_str(text);
+        let raw: PlanFile = serde_path_to_error::deserialize(deserializer).map_err(|e| {
+            PlanError::Shape {
+                file: file.to_path_buf(),
+                path: e.path().to_string(),
+                message: e.inner().to_string(),
+            }
+        })?;
+        if raw.waypoints.is_empty() {
+            return Err(PlanError::Empty(file.to_path_buf()));
+        }
+        let waypoints = raw
+            .waypoints
+            .iter()
+            .enumerate()
+            .map(|(i, w)| w.to_waypoint(&format!("waypoints[{i}]"), file))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Plan { waypoints })
+    }
+
+    /// Writes the plan as YAML (atomically).
+    pub fn save(&self, file: &Path) -> Result<(), PlanError> {
+        let raw = PlanFile {
+            waypoints: self.waypoints.iter().map(WaypointYaml::from_waypoint).collect(),
+        };
+        let text = serde_yaml_ng::to_string(&raw).expect("plan serialises");
+        crate::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| {
+            PlanError::Write {
+                file: file.to_path_buf(),
+                source,
+            }
+        })
+    }
+}
+
+impl WaypointYaml {
+    fn to_waypoint(&self, path: &str, file: &Path) -> Result<Waypoint, PlanError> {
+        let problem = |problem: String| PlanError::Waypoint {
+            file: file.to_path_buf(),
+            path: path.to_string(),
+            problem,
+        };
+        let given = [
+            self.base_from_flange.is_some(),
+            self.joints_deg.is_some(),
+            self.look_at.is_some(),
+        ]
+        .iter()
+        .filter(|g| **g)
+        .count();
+        if given != 1 {
+            return Err(problem(format!(
+                "expected exactly one of `T_base_flange`, `joints_deg`, `look_at`; found {given}"
+            )));
+        }
+        if let Some(pose) = &self.base_from_flange {
+            let pose = pose
+                .to_pose(&format!("{path}.T_base_flange"))
+                .map_err(|source| PlanError::Pose {
+                    file: file.to_path_buf(),
+                    source,
+                })?;
+            return Ok(Waypoint::FlangePose(pose));
+        }
+        if let Some(joints) = &self.joints_deg {
+            if joints.len() != 6 {
+                return Err(problem(format!(
+                    "joints_deg: expected 6 joint angles in degrees, found {}",
+                    joints.len()
+                )));
+            }
+            if let Some(bad) = joints.iter().find(|v| !v.is_finite()) {
+                return Err(problem(format!("joints_deg: value is not finite ({bad})")));
+            }
+            let mut q = [0.0; 6];
+            for (dst, src) in q.iter_mut().zip(joints) {
+                *dst = src.to_radians();
+            }
+            return Ok(Waypoint::Joints(q));
+        }
+        let view = self.look_at.expect("one key is present");
+        view.validate().map_err(|m| problem(format!("look_at: {m}")))?;
+        Ok(Waypoint::LookAt(view))
+    }
+
+    fn from_waypoint(waypoint: &Waypoint) -> Self {
+        match waypoint {
+            Waypoint::FlangePose(p) => WaypointYaml {
+                base_from_flange: Some(PoseYaml::from_pose(p)),
+                ..Default::default()
+            },
+            Waypoint::Joints(q) => WaypointYaml {
+                joints_deg: Some(q.iter().map(|v| v.to_degrees()).collect()),
+                ..Default::default()
+            },
+            Waypoint::LookAt(v) => WaypointYaml {
+                look_at: Some(*v),
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// The cell's two fixed transforms as far as they are known before calibrating (nominal values
+/// from a drawing or a tape measure, or the simulator's truth), used to turn views into flange
+/// poses and to predict what the camera will see.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellTransforms {
+    /// Which setup the cell is.
+    pub setup: Setup,
+    /// eye_in_hand: `T_flange_camera`; eye_to_hand: `T_base_camera`.
+    pub camera_mount: Pose,
+    /// eye_in_hand: `T_base_target`; eye_to_hand: `T_flange_target`.
+    pub target_mount: Pose,
+}
+
+impl CellTransforms {
+    /// The flange pose that puts the camera at `target_from_camera` relative to the board.
+    pub fn base_from_flange_for_view(&self, target_from_camera: &Pose) -> Pose {
+        match self.setup {
+            // T_base_flange = T_base_target · T_target_camera · T_camera_flange
+            Setup::EyeInHand => {
+                self.target_mount * target_from_camera * self.camera_mount.inverse()
+            }
+            // T_base_flange = T_base_camera · T_camera_target · T_target_flange
+            Setup::EyeToHand => {
+                self.camera_mount * target_from_camera.inverse() * self.target_mount.inverse()
+            }
+        }
+    }
+
+    /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
+    pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
+        self.setup
+            .predict_camera_from_target(&self.camera_mount, &self.target_mount, base_from_flange)
+    }
+
+    /// Turns a waypoint into a flange pose (joint waypoints go through forward kinematics).
+    pub fn resolve(
+        &self,
+        waypoint: &Waypoint,
+        board_centre: &Point3<f64>,
+        forward: impl Fn(&Joints) -> Pose,
+    ) -> Pose {
+        match waypoint {
+            Waypoint::FlangePose(p) => *p,
+            Waypoint::Joints(q) => forward(q),
+            Waypoint::LookAt(view) => {
+                self.base_from_flange_for_view(&view.target_from_camera(board_centre))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn parse(text: &str) -> Result<Plan, PlanError> {
+        Plan::parse(text, Path::new("plan.yaml"))
+    }
+
+    #[test]
+    fn reads_all_waypoint_kinds_and_round_trips() {
+        let plan = parse(
+            "waypoints:\n\
+             - T_base_flange: {translation: [0.4, 0.1, 0.5], rotation_vector: [3.1, 0.1, 0]}\n\
+             - joints_deg: [0, -90, 90, -90, -90, 0]\n\
+             - look_at: {distance: 0.6, azimuth_deg: 30, elevation_deg: 70, roll_deg: 10}\n",
+        )
+        .unwrap();
+        assert_eq!(plan.waypoints.len(), 3);
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("plan.yaml");
+        plan.save(&file).unwrap();
+        let back = Plan::load(&file).unwrap();
+        match (&plan.waypoints[0], &back.waypoints[0]) {
+            (Waypoint::FlangePose(a), Waypoint::FlangePose(b)) => {
+                assert!(a.rotation.angle_to(&b.rotation) < 1e-12)
+            }
+            _ => panic!("kind changed"),
+        }
+        match (&plan.waypoints[1], &back.waypoints[1]) {
+            (Waypoint::Joints(a), Waypoint::Joints(b)) => {
+                assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12))
+            }
+            _ => panic!("kind changed"),
+        }
+        assert_eq!(plan.waypoints[2], back.waypoints[2]);
+    }
+
+    #[test]
+    fn malformed_plans_get_clear_errors() {
+        let cases = [
+            ("waypoints: []", "no waypoints"),
+            ("waypoints:\n- {joints_deg: [0, 1, 2]}", "plan.yaml: waypoints[0]: joints_deg: expected 6 joint angles"),
+            ("waypoints:\n- {look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 0}}", "waypoints[0]: look_at: elevation_deg must be in (0, 90]"),
+            ("waypoints:\n- {look_at: {distance: -1, azimuth_deg: 0, elevation_deg: 80}}", "distance must be a positive"),
+            ("waypoints:\n- {joints_deg: [0,0,0,0,0,0], look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 80}}", "exactly one of"),
+            ("waypoints:\n- {}\n", "found 0"),
+            ("waypoints:\n- {T_base_flange: {translation: [0, 0], rotation_vector: [0, 0, 0]}}", "waypoints[0].T_base_flange.translation: expected 3 numbers"),
+            ("waypoints:\n- {look_at: {distance: 0.5, azimuth: 0, elevation_deg: 80}}", "waypoints[0].look_at"),
+            ("waypoint: []", "unknown field `waypoint`"),
+        ];
+        for (text, expected) in cases {
+            let message = match parse(text) {
+                Ok(_) => panic!("{text:?} was accepted"),
+                Err(e) => e.to_string(),
+            };
+            assert!(message.contains(expected), "{text:?} gave {message:?}");
+        }
+    }
+
+    #[test]
+    fn views_become_flange_poses_that_show_the_same_view_in_both_setups() {
+        let centre = Point3::new(0.14, 0.14, 0.0);
+        let view = LookAt { distance: 0.55, azimuth_deg: 40.0, elevation_deg: 65.0, roll_deg: 15.0 };
+        let target_from_camera = view.target_from_camera(&centre);
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let cell = CellTransforms {
+                setup,
+                camera_mount: Pose::from_parts(
+                    Translation3::new(0.03, -0.05, 0.08),
+                    UnitQuaternion::from_euler_angles(0.1, -0.2, 1.5),
+                ),
+                target_mount: Pose::from_parts(
+                    Translation3::new(0.5, 0.1, 0.02),
+                    UnitQuaternion::from_euler_angles(0.0, 0.05, 0.3),
+                ),
+            };
+            let base_from_flange = cell.base_from_flange_for_view(&target_from_camera);
+            let seen = cell.camera_from_target(&base_from_flange);
+            let expected = target_from_camera.inverse();
+            assert!(seen.rotation.angle_to(&expected.rotation) < 1e-12);
+            assert!((seen.translation.vector - expected.translation.vector).norm() < 1e-12);
+        }
+    }
+}

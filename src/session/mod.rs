@@ -1,0 +1,104 @@
+//! The session: drives a validated plan on a robot and a camera, records every sample to disk as
+//! it is taken, then solves. The only layer that knows about time, hardware and disk; it sees the
+//! `Robot` and `Camera` traits, never a backend.
+//!
+//! Per pose: move (joint move to the validated joint solution) → settle → grab a frame newer than
+//! the settle instant → read the measured `T_base_flange` → hand the frame to the detection
+//! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
+//! already moving to the next pose.
+
+pub mod driver;
+pub mod folder;
+pub mod replay;
+pub mod solve;
+
+use std::path::PathBuf;
+
+pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
+pub use folder::{PlannedPose, PoseVisit, SessionFolder, SessionManifest};
+pub use solve::{solve_folder, SolvedSession};
+
+use crate::camera::CameraError;
+use crate::geometry::PoseError;
+use crate::robot::RobotError;
+
+/// Why a session stopped or could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The output folder already holds something.
+    #[error("session folder {0} already exists and is not empty; choose another --out or --resume it")]
+    FolderExists(PathBuf),
+    /// `--resume` was given a folder that is not a session.
+    #[error("{0} is not a session folder (no session.yaml)")]
+    NotASession(PathBuf),
+    /// A file could not be read or written.
+    #[error("cannot access {path}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A session record is malformed.
+    #[error("{file}: {path}: {message}")]
+    Record {
+        /// The file.
+        file: PathBuf,
+        /// YAML path.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A pose in a session record is malformed.
+    #[error("{file}: {source}")]
+    Pose {
+        /// The file.
+        file: PathBuf,
+        /// The pose problem.
+        #[source]
+        source: PoseError,
+    },
+    /// The robot stopped the run; every sample so far is kept.
+    #[error("robot stopped the run at plan pose {plan_index} ({recorded} poses recorded); resume with `handeye run --resume {folder}`")]
+    Robot {
+        /// Where it stopped.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The robot error.
+        #[source]
+        source: RobotError,
+    },
+    /// The camera failed; every sample so far is kept.
+    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); resume with `handeye run --resume {folder}`")]
+    Camera {
+        /// Where it failed.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The camera error.
+        #[source]
+        source: CameraError,
+    },
+    /// Interrupted by the user; the arm was stopped and every sample so far is kept.
+    #[error("interrupted at plan pose {plan_index} ({recorded} poses recorded); the arm was stopped; resume with `handeye run --resume {folder}`")]
+    Interrupted {
+        /// Where it stopped.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+    },
+    /// Solving the recorded samples failed.
+    #[error("solving the session failed: {0}")]
+    Solve(String),
+    /// The detection thread failed.
+    #[error("detection failed: {0}")]
+    Detection(String),
+}

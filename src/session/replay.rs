@@ -1,0 +1,49 @@
+//! Replay: detect the board again in a session's saved frames and solve again, offline — to
+//! check a result, or to re-run with other detector or solver settings.
+
+use crate::camera::model::CameraModel;
+use crate::dataset::{Dataset, Sample};
+use crate::target::{Board, DetectorOptions, TagDetector};
+
+use super::driver::measure;
+use super::{PoseVisit, SessionError, SessionFolder};
+
+/// Re-detects every saved frame of `folder` and returns the dataset the frames give now, with the
+/// visits as re-measured (in plan order).
+pub fn redetect(
+    folder: &SessionFolder,
+    board: &Board,
+    camera_model: &CameraModel,
+    detector: DetectorOptions,
+    max_rms: f64,
+) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
+    let manifest = folder.read_manifest()?;
+    let detector = TagDetector::spawn(board, detector).map_err(|e| SessionError::Detection(e.to_string()))?;
+    let mut samples = Vec::new();
+    let mut visits = Vec::new();
+    for recorded in folder.read_visits()? {
+        let frame_path = folder.root().join(&recorded.frame);
+        let image = image::open(&frame_path)
+            .map_err(|e| SessionError::Detection(format!("cannot read frame {}: {e}", frame_path.display())))?
+            .into_luma8();
+        let (base_from_flange, _) = recorded.poses(&frame_path)?;
+        let visit = measure(
+            &detector,
+            board,
+            camera_model,
+            &image,
+            max_rms,
+            PoseVisit::new(recorded.plan_index, &base_from_flange, recorded.frame.clone()),
+        );
+        if let Some(camera_from_target) = &visit.camera_from_target {
+            samples.push(Sample {
+                id: Some(format!("pose-{:03}", visit.plan_index)),
+                weight: None,
+                base_from_flange: visit.base_from_flange.clone(),
+                camera_from_target: camera_from_target.clone(),
+            });
+        }
+        visits.push(visit);
+    }
+    Ok((Dataset { setup: manifest.setup, samples }, visits))
+}

@@ -1,0 +1,241 @@
+//! The simulated cell end to end: rendered frames, real detection, the real solver, the session
+//! driver with its records, faults, resume and replay.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use handeye::cell::{self, PreparedCell};
+use handeye::geometry::Pose;
+use handeye::plan::CellTransforms;
+use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A copy of a repo config in `dir` with its relative paths made absolute and `edits`
+/// (pairs of text to replace) applied.
+fn config_variant(dir: &Path, base: &str, edits: &[(&str, &str)]) -> PathBuf {
+    let configs = repo().join("configs");
+    let mut text = std::fs::read_to_string(configs.join(base)).unwrap();
+    for key in ["target: ", "intrinsics: "] {
+        text = text.replace(&format!("{key}targets/"), &format!("{key}{}/targets/", configs.display()));
+        text = text.replace(&format!("{key}cameras/"), &format!("{key}{}/cameras/", configs.display()));
+    }
+    for (from, to) in edits {
+        assert!(text.contains(from), "config {base} has no {from:?}");
+        text = text.replace(from, to);
+    }
+    let path = dir.join(base);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome, SessionError> {
+    let plan = prepared.report.validated().expect("plan passes its checks");
+    if folder.read_manifest().is_err() {
+        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    }
+    let mut hardware = prepared.open_hardware().unwrap();
+    let setup = SessionSetup {
+        folder: folder.clone(),
+        setup: prepared.config.setup,
+        plan,
+        limits: prepared.config.limits,
+        settle: prepared.config.settle(),
+        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
+        board: prepared.board.clone(),
+        detector: prepared.detector_options(),
+        stop: Arc::new(AtomicBool::new(false)),
+    };
+    session::run_session(setup, hardware.robot.as_mut(), hardware.camera.as_mut(), &mut |_e: SessionEvent| {})
+}
+
+fn errors(estimate: &Pose, truth: &Pose) -> (f64, f64) {
+    (
+        (estimate.translation.vector - truth.translation.vector).norm() * 1e3,
+        estimate.rotation.angle_to(&truth.rotation).to_degrees(),
+    )
+}
+
+fn assert_recovers_truth(solved: &session::SolvedSession, truth: &CellTransforms) {
+    let [(camera_key, camera_mount), (target_key, target_mount)] = solved.calibration.unknowns();
+    for (key, estimate, truth) in [(camera_key, camera_mount, truth.camera_mount), (target_key, target_mount, truth.target_mount)] {
+        let (mm, deg) = errors(&estimate, &truth);
+        eprintln!("{key}: {mm:.3} mm, {deg:.4} deg from the truth");
+        assert!(mm < 0.5 && deg < 0.05, "{key}: {mm:.3} mm, {deg:.4}° (limits 0.5 mm, 0.05°)");
+    }
+}
+
+fn full_run(config: &Path, out: &Path) -> (PreparedCell, SessionFolder, session::SolvedSession) {
+    let prepared = cell::prepare(config).unwrap();
+    assert!(prepared.report.ok(), "{}", prepared.report);
+    let folder = SessionFolder::create(out).unwrap();
+    let outcome = run(&prepared, &folder).unwrap();
+    assert_eq!(outcome.accepted.len(), prepared.plan.waypoints.len(), "skipped: {:?}", outcome.skipped);
+    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    (prepared, folder, solved)
+}
+
+#[test]
+fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = repo().join("configs/sim-cell.yaml");
+    let (prepared, folder, solved) = full_run(&config, &dir.path().join("s"));
+    assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
+    assert!(folder.result_path().is_file());
+    // Every pose left its frame and record on disk.
+    for i in 0..prepared.plan.waypoints.len() {
+        assert!(folder.root().join(format!("frames/{i:03}.png")).is_file());
+        assert!(folder.root().join(format!("poses/{i:03}.yaml")).is_file());
+    }
+
+    // Replay re-detects the saved frames and reproduces the result.
+    let (dataset, _) = session::replay::redetect(
+        &folder,
+        &prepared.board,
+        &prepared.camera_model,
+        prepared.detector_options(),
+        prepared.config.session.max_reprojection_rms_px,
+    )
+    .unwrap();
+    let pairs = dataset.pairs().unwrap();
+    let again = handeye::solve::solve(dataset.setup, &pairs, &prepared.config.solver.to_options()).unwrap();
+    for ((key, a), (_, b)) in again.unknowns().iter().zip(solved.calibration.unknowns().iter()) {
+        let (mm, deg) = errors(a, b);
+        assert!(mm < 1e-6 && deg < 1e-6, "replay of {key} differs by {mm} mm, {deg}°");
+    }
+}
+
+#[test]
+fn eye_to_hand_sim_cell_recovers_the_ground_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = repo().join("configs/sim-cell-eye-to-hand.yaml");
+    let (prepared, _, solved) = full_run(&config, &dir.path().join("s"));
+    assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
+}
+
+#[test]
+fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
+    let dir = tempfile::tempdir().unwrap();
+    // 14 poses: grabs 0..13 are the first pass; grab 3 and 8 are hidden, and so is grab 14, the
+    // retry of pose 3 (retries come after the pass, in order) — so pose 3 is skipped and pose 8
+    // succeeds on its retry.
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("count: 20", "count: 14"), ("seed: 11", "seed: 11\n  hide_board_in_grabs: [3, 8, 14]")],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+    let outcome = run(&prepared, &folder).unwrap();
+    assert_eq!(outcome.skipped.iter().map(|(i, _)| *i).collect::<Vec<_>>(), vec![3]);
+    assert!(outcome.skipped[0].1.to_lowercase().contains("no tag") || outcome.skipped[0].1.to_lowercase().contains("not found"),
+        "reason: {}", outcome.skipped[0].1);
+    assert_eq!(outcome.accepted.len(), 13);
+    assert!(outcome.accepted.contains(&8));
+    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let [(_, camera_mount), _] = solved.calibration.unknowns();
+    let (mm, deg) = errors(&camera_mount, &prepared.config.simulation.unwrap().camera_mount);
+    assert!(mm < 1.0 && deg < 0.1, "{mm} mm {deg}°");
+}
+
+#[test]
+fn protective_stop_keeps_the_data_and_resume_finishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("count: 20", "count: 12"), ("seed: 7", "seed: 7\n  protective_stop_after_moves: 5")],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    let out = dir.path().join("s");
+    let folder = SessionFolder::create(&out).unwrap();
+    let error = run(&prepared, &folder).unwrap_err();
+    let message = error.to_string();
+    assert!(matches!(error, SessionError::Robot { .. }), "{message}");
+    assert!(message.contains("--resume"), "{message}");
+    let kept = folder.read_visits().unwrap();
+    assert_eq!(kept.len(), 5, "the five poses before the stop are on disk");
+
+    // The person clears the stop; resuming (a fresh process: new robot, no fault) finishes the plan.
+    let config = config_variant(dir.path(), "sim-cell.yaml", &[("count: 20", "count: 12")]);
+    let prepared = cell::prepare(&config).unwrap();
+    let folder = SessionFolder::open(&out).unwrap();
+    let outcome = run(&prepared, &folder).unwrap();
+    assert_eq!(outcome.visited_now, 7);
+    assert_eq!(outcome.accepted, (0..12).collect::<Vec<_>>());
+    let dataset = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    assert_eq!(dataset.samples.len(), 12);
+}
+
+#[test]
+fn a_plan_rotating_about_one_axis_is_refused_before_any_motion() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("coaxial.yaml");
+    // Six views straight above the board, differing only by roll about the optical axis.
+    let mut text = String::from("waypoints:\n");
+    for roll in [-25, -15, -5, 5, 15, 25] {
+        text += &format!("  - look_at: {{distance: 0.6, azimuth_deg: 0, elevation_deg: 90, roll_deg: {roll}}}\n");
+    }
+    std::fs::write(&plan, text).unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}", &format!("file: {}", plan.display()))],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    assert!(!prepared.report.ok());
+    assert!(prepared.report.validated().is_none());
+    let table = prepared.report.to_string();
+    assert!(table.contains("plan REJECTED"), "{table}");
+    assert!(table.to_lowercase().contains("axis"), "{table}");
+}
+
+#[test]
+fn an_unreachable_pose_is_reported_with_its_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("far.yaml");
+    std::fs::write(
+        &plan,
+        "waypoints:\n\
+         - look_at: {distance: 0.6, azimuth_deg: 0, elevation_deg: 80}\n\
+         - look_at: {distance: 0.6, azimuth_deg: 120, elevation_deg: 65, roll_deg: 20}\n\
+         - T_base_flange: {translation: [3.0, 0.0, 0.5], rotation_vector: [3.14159, 0, 0]}\n\
+         - look_at: {distance: 0.6, azimuth_deg: 240, elevation_deg: 65, roll_deg: -20}\n",
+    )
+    .unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}", &format!("file: {}", plan.display()))],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    let bad: Vec<usize> = prepared.report.poses.iter().filter(|p| !p.problems.is_empty()).map(|p| p.index).collect();
+    assert_eq!(bad, vec![2], "{}", prepared.report);
+    assert!(prepared.report.poses[2].problems.iter().any(|p| p.contains("unreachable")));
+}
+
+#[test]
+fn malformed_configs_name_file_key_and_expectation() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: &[(&[(&str, &str)], &str)] = &[
+        (&[("setup: eye_in_hand", "setup: eye_on_hand")], "setup"),
+        (&[("noise_sigma: 2.0", "noise_sigm: 2.0")], "noise_sigm"),
+        (&[("linear_speed: 0.25", "linear_speed: 3.0")], "limits.linear_speed"),
+        (&[("model: ur10e", "model: ur3")], "robot.model"),
+        (&[("min: [-1.0, -1.0, 0.05]", "min: [-1.0, 2.0, 0.05]")], "workspace"),
+        (&[("T_base_target: {translation: [0.5, -0.15, 0.0], rotation_vector: [0.0, 0.0, 0.3]}", "T_base_target: {translation: [0.5, -0.15], rotation_vector: [0.0, 0.0, 0.3]}")], "nominal.T_base_target.translation: expected 3 numbers"),
+        (&[("count: 20", "count: 2")], "plan.generate"),
+    ];
+    for (edits, expected) in cases {
+        let config = config_variant(dir.path(), "sim-cell.yaml", edits);
+        let message = match cell::prepare(&config) {
+            Ok(_) => panic!("{edits:?} was accepted"),
+            Err(e) => format!("{e:#}"),
+        };
+        assert!(message.contains("sim-cell.yaml"), "{message}");
+        assert!(message.contains(expected), "{edits:?}: {message}");
+    }
+}
