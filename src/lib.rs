@@ -6,3 +6,4 @@
 pub mod atomic_file;
 pub mod geometry;
 pub mod robot;
+pub mod solve;
