@@ -4,5 +4,8 @@
 #![warn(missing_docs)]
 
 pub mod atomic_file;
+pub mod dataset;
 pub mod geometry;
+pub mod result;
 pub mod robot;
+pub mod solve;

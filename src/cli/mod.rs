@@ -1,5 +1,7 @@
 //! Subcommands. Each file turns its arguments into library configuration, then calls the library.
 
+mod solve;
+
 use clap::{Parser, Subcommand};
 
 /// Hand-eye and base-world calibration for robot cells.
@@ -11,9 +13,14 @@ pub struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
-enum Command {}
+enum Command {
+    /// Solve a dataset file for both unknowns and write the result YAML.
+    Solve(solve::SolveArgs),
+}
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {}
+    match cli.command {
+        Command::Solve(args) => solve::run(args),
+    }
 }

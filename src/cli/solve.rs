@@ -1,0 +1,165 @@
+//! `handeye solve <samples.yaml> [-o result.yaml] [--method ...]`: solves a dataset file, prints a
+//! short summary, and writes the result file atomically (nothing is written on any error).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+
+use handeye::dataset::Dataset;
+use handeye::result::ResultFile;
+use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
+
+/// Estimator choice on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// The paper's iterative quaternion-averaging method.
+    Iterative,
+    /// Shah's closed form.
+    ClosedForm,
+    /// Weighted nonlinear least squares from the iterative answer (default).
+    Refined,
+}
+
+/// Robust loss on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RobustArg {
+    /// Plain least squares.
+    None,
+    /// Huber loss.
+    Huber,
+    /// Cauchy loss.
+    Cauchy,
+}
+
+/// Arguments of `handeye solve`.
+#[derive(Debug, Args)]
+pub struct SolveArgs {
+    /// Dataset file (setup + samples of T_base_flange and T_camera_target).
+    samples: PathBuf,
+    /// Write the result YAML here.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Estimator.
+    #[arg(long, value_enum, default_value_t = MethodArg::Refined)]
+    method: MethodArg,
+    /// Per-axis rotation noise of T_camera_target, degrees.
+    #[arg(long, default_value_t = 0.2)]
+    rotation_sigma_deg: f64,
+    /// Per-axis translation noise of T_camera_target, mm.
+    #[arg(long, default_value_t = 1.0)]
+    translation_sigma_mm: f64,
+    /// Robust loss of the refinement.
+    #[arg(long, value_enum, default_value_t = RobustArg::None)]
+    robust: RobustArg,
+    /// Scale of the robust loss, in sigmas.
+    #[arg(long, default_value_t = 3.0)]
+    robust_scale: f64,
+    /// Drop samples flagged as outliers and solve again.
+    #[arg(long)]
+    drop_outliers: bool,
+    /// Start the iterative method from the closed form instead of the identity.
+    #[arg(long)]
+    warm_start: bool,
+}
+
+impl SolveArgs {
+    fn options(&self) -> anyhow::Result<SolveOptions> {
+        for (name, value) in [
+            ("--rotation-sigma-deg", self.rotation_sigma_deg),
+            ("--translation-sigma-mm", self.translation_sigma_mm),
+            ("--robust-scale", self.robust_scale),
+        ] {
+            anyhow::ensure!(
+                value.is_finite() && value > 0.0,
+                "{name} = {value}: must be a positive number"
+            );
+        }
+        let mut options = SolveOptions {
+            method: match self.method {
+                MethodArg::Iterative => Method::Iterative,
+                MethodArg::ClosedForm => Method::ClosedForm,
+                MethodArg::Refined => Method::Refined,
+            },
+            noise: NoiseModel {
+                rotation_sigma_rad: self.rotation_sigma_deg.to_radians(),
+                translation_sigma_m: self.translation_sigma_mm * 1e-3,
+            },
+            robust: match self.robust {
+                RobustArg::None => RobustLoss::None,
+                RobustArg::Huber => RobustLoss::Huber(self.robust_scale),
+                RobustArg::Cauchy => RobustLoss::Cauchy(self.robust_scale),
+            },
+            drop_outliers: self.drop_outliers,
+            ..SolveOptions::default()
+        };
+        options.iterative.warm_start = self.warm_start;
+        Ok(options)
+    }
+}
+
+fn format_pose(pose: &handeye::geometry::Pose) -> String {
+    let t = pose.translation.vector * 1e3;
+    let rv = handeye::geometry::rotvec(&pose.rotation);
+    format!(
+        "translation [{:.2}, {:.2}, {:.2}] mm, rotation_vector [{:.5}, {:.5}, {:.5}] rad ({:.3}°)",
+        t.x,
+        t.y,
+        t.z,
+        rv.x,
+        rv.y,
+        rv.z,
+        rv.norm().to_degrees()
+    )
+}
+
+/// Runs `handeye solve`.
+pub fn run(args: SolveArgs) -> anyhow::Result<()> {
+    let options = args.options()?;
+    let dataset = Dataset::load(&args.samples)?;
+    let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
+        .with_context(|| format!("solving {}", args.samples.display()))?;
+
+    println!(
+        "{} samples, setup {}, method {} ({} iterations, {}converged, {} restarts)",
+        dataset.pairs.len(),
+        calibration.setup,
+        calibration.solver.method.name(),
+        calibration.solver.iterations,
+        if calibration.solver.converged {
+            ""
+        } else {
+            "NOT "
+        },
+        calibration.solver.restarts
+    );
+    let sigmas = calibration
+        .uncertainty
+        .as_ref()
+        .map(|u| [u.camera_mount, u.target_mount]);
+    for (k, (name, pose)) in calibration.unknowns().iter().enumerate() {
+        println!("{name}: {}", format_pose(pose));
+        if let Some(s) = sigmas {
+            println!(
+                "    1-sigma {:.3}°, {:.3} mm",
+                s[k].rotation_deg, s[k].translation_mm
+            );
+        }
+    }
+    let r = &calibration.residuals;
+    println!(
+        "residuals: rotation RMS {:.3}° (max {:.3}°), translation RMS {:.3} mm (max {:.3} mm)",
+        r.rotation_rms_deg, r.rotation_max_deg, r.translation_rms_mm, r.translation_max_mm
+    );
+    if !calibration.outliers.is_empty() {
+        println!("outliers: {:?}", calibration.outliers);
+    }
+    for warning in &calibration.warnings {
+        eprintln!("warning: {warning}");
+    }
+    if let Some(output) = &args.output {
+        ResultFile::from_calibration(&calibration, &dataset.pairs).save(output)?;
+        println!("wrote {}", output.display());
+    }
+    Ok(())
+}

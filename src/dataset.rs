@@ -1,0 +1,289 @@
+//! The dataset file: the solver's input, and what a calibration session writes.
+//!
+//! ```yaml
+//! setup: eye_in_hand          # or eye_to_hand
+//! samples:
+//!   - T_base_flange:   {translation: [..], quaternion: {w: .., x: .., y: .., z: ..}}
+//!     T_camera_target: {translation: [..], rotation_vector: [..]}
+//!     id: pose-03             # optional
+//!     weight: 1.0             # optional, > 0
+//! ```
+//!
+//! Poses use the YAML pose form of `geometry::yaml` (metres, radians). Unknown keys are refused so
+//! typos never pass. Reading is two steps: serde (through `serde_path_to_error`) reads the shape,
+//! then every pose is validated; every error names the file, the YAML path
+//! (`samples[3].T_camera_target.quaternion`) and the problem. Writing is atomic. This module
+//! also owns [`FileError`], shared with the result file (`result.rs`).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::atomic_file::write_atomic;
+use crate::geometry::{PoseError, PoseYaml};
+use crate::solve::{PosePair, Setup};
+
+/// What went wrong reading or writing a dataset or result file.
+#[derive(Debug, thiserror::Error)]
+pub enum FileError {
+    /// The file could not be read.
+    #[error("{}: cannot read", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file could not be written.
+    #[error("{}: cannot write", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The YAML does not have the expected shape (unknown key, wrong type, missing key...).
+    // The serde error is part of the message (it is the problem itself, with no further cause),
+    // so it is not also a `#[source]`: `{:#}` chains would print it twice.
+    #[error("{}: {yaml_path}: {problem}", path.display())]
+    Shape {
+        /// The file.
+        path: PathBuf,
+        /// YAML path of the problem (`.` for the document root).
+        yaml_path: String,
+        /// What serde found.
+        problem: serde_yaml_ng::Error,
+    },
+    /// A pose with a bad value.
+    #[error("{}: {problem}", path.display())]
+    Pose {
+        /// The file.
+        path: PathBuf,
+        /// The pose problem, with its YAML path (in the message, so not a `#[source]`).
+        problem: PoseError,
+    },
+    /// Any other bad value.
+    #[error("{}: {yaml_path}: {problem}", path.display())]
+    Value {
+        /// The file.
+        path: PathBuf,
+        /// YAML path of the value.
+        yaml_path: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// Serialising failed (should not happen for valid data).
+    #[error("{}: cannot serialise", path.display())]
+    Serialise {
+        /// The file.
+        path: PathBuf,
+        /// The serde error.
+        #[source]
+        source: serde_yaml_ng::Error,
+    },
+}
+
+/// Reads a YAML file into `T`, naming the YAML path of any shape error.
+pub(crate) fn read_yaml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, FileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| FileError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_yaml(&text, path)
+}
+
+/// Parses YAML text into `T`; `path` is only used in errors.
+pub(crate) fn parse_yaml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+) -> Result<T, FileError> {
+    let deserializer = serde_yaml_ng::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(deserializer).map_err(|e| {
+        let yaml_path = e.path().to_string();
+        FileError::Shape {
+            path: path.to_path_buf(),
+            yaml_path,
+            problem: e.into_inner(),
+        }
+    })
+}
+
+/// Serialises `value` and writes it atomically.
+pub(crate) fn write_yaml<T: Serialize>(value: &T, path: &Path) -> Result<(), FileError> {
+    let text = serde_yaml_ng::to_string(value).map_err(|source| FileError::Serialise {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    write_atomic(path, text.as_bytes()).map_err(|source| FileError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// One sample as written in the file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SampleYaml {
+    /// Optional name of the sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Optional weight (> 0, default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weight: Option<f64>,
+    /// The robot's flange pose in its base.
+    #[serde(rename = "T_base_flange")]
+    pub base_from_flange: PoseYaml,
+    /// The target's pose in the camera.
+    #[serde(rename = "T_camera_target")]
+    pub camera_from_target: PoseYaml,
+}
+
+/// The dataset file as written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetYaml {
+    /// `eye_in_hand` or `eye_to_hand`.
+    pub setup: Setup,
+    /// The pose pairs.
+    pub samples: Vec<SampleYaml>,
+}
+
+/// A validated dataset: the setup and its pose pairs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// The cell layout.
+    pub setup: Setup,
+    /// The samples, in file order.
+    pub pairs: Vec<PosePair>,
+}
+
+impl Dataset {
+    /// Reads and validates a dataset file.
+    pub fn load(path: &Path) -> Result<Dataset, FileError> {
+        let raw: DatasetYaml = read_yaml(path)?;
+        Dataset::from_yaml(&raw, path)
+    }
+
+    /// Parses and validates dataset text; `path` is only used in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Dataset, FileError> {
+        let raw: DatasetYaml = parse_yaml(text, path)?;
+        Dataset::from_yaml(&raw, path)
+    }
+
+    /// Validates the raw form.
+    pub fn from_yaml(raw: &DatasetYaml, path: &Path) -> Result<Dataset, FileError> {
+        let pose_error = |problem| FileError::Pose {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let pairs = raw
+            .samples
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let weight = s.weight.unwrap_or(1.0);
+                if !(weight.is_finite() && weight > 0.0) {
+                    return Err(FileError::Value {
+                        path: path.to_path_buf(),
+                        yaml_path: format!("samples[{i}].weight"),
+                        problem: format!("weight {weight} must be a positive finite number"),
+                    });
+                }
+                Ok(PosePair {
+                    base_from_flange: s
+                        .base_from_flange
+                        .to_pose(&format!("samples[{i}].T_base_flange"))
+                        .map_err(pose_error)?,
+                    camera_from_target: s
+                        .camera_from_target
+                        .to_pose(&format!("samples[{i}].T_camera_target"))
+                        .map_err(pose_error)?,
+                    weight,
+                    id: s.id.clone(),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Dataset {
+            setup: raw.setup,
+            pairs,
+        })
+    }
+
+    /// The compact file form (translation + quaternion per pose; weight only when not 1).
+    pub fn to_yaml(&self) -> DatasetYaml {
+        DatasetYaml {
+            setup: self.setup,
+            samples: self
+                .pairs
+                .iter()
+                .map(|p| SampleYaml {
+                    id: p.id.clone(),
+                    weight: (p.weight != 1.0).then_some(p.weight),
+                    base_from_flange: PoseYaml::from_pose(&p.base_from_flange),
+                    camera_from_target: PoseYaml::from_pose(&p.camera_from_target),
+                })
+                .collect(),
+        }
+    }
+
+    /// Writes the dataset atomically in the compact form, which [`Dataset::load`] reads back.
+    pub fn save(&self, path: &Path) -> Result<(), FileError> {
+        write_yaml(&self.to_yaml(), path)
+    }
+
+    /// The pose pairs for the solver.
+    pub fn to_pairs(&self) -> Vec<PosePair> {
+        self.pairs.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn save_and_load_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.yaml");
+        let pose = |k: f64| {
+            Pose::from_parts(
+                Translation3::new(0.1 * k, -0.2, 0.3),
+                UnitQuaternion::from_euler_angles(0.1 * k, -0.4, 2.0),
+            )
+        };
+        let dataset = Dataset {
+            setup: Setup::EyeToHand,
+            pairs: (0..3)
+                .map(|k| PosePair {
+                    base_from_flange: pose(k as f64),
+                    camera_from_target: pose(-(k as f64)),
+                    weight: if k == 1 { 2.5 } else { 1.0 },
+                    id: (k == 2).then(|| "last".to_string()),
+                })
+                .collect(),
+        };
+        dataset.save(&path).unwrap();
+        let back = Dataset::load(&path).unwrap();
+        assert_eq!(back.setup, Setup::EyeToHand);
+        assert_eq!(back.pairs.len(), 3);
+        for (a, b) in back.pairs.iter().zip(&dataset.pairs) {
+            assert!(
+                a.base_from_flange
+                    .rotation
+                    .angle_to(&b.base_from_flange.rotation)
+                    < 1e-15
+            );
+            assert!(
+                (a.camera_from_target.translation.vector - b.camera_from_target.translation.vector)
+                    .norm()
+                    < 1e-15
+            );
+            assert_eq!(a.weight, b.weight);
+            assert_eq!(a.id, b.id);
+        }
+    }
+}

@@ -1,0 +1,286 @@
+//! The result file of a solve: the two unknowns under their frame names, their uncertainty, the
+//! residuals (summary and per sample), the outliers and how the solver got there.
+//!
+//! ```yaml
+//! setup: eye_in_hand
+//! T_flange_camera: {translation: [..], quaternion: {w, x, y, z}, rotation_vector: [..]}
+//! T_base_target:   {translation: [..], quaternion: {..}, rotation_vector: [..]}
+//! uncertainty: {T_flange_camera: {rotation_deg: .., translation_mm: .., ...}, T_base_target: {..}, variance_factor: .., covariance: [[..] x 12]}
+//! residuals: {rotation_rms_deg: .., rotation_max_deg: .., translation_rms_mm: .., translation_max_mm: .., samples: [..]}
+//! outliers: [..]
+//! solver: {method: refined, iterations: .., converged: true, restarts: 0, ...}
+//! warnings: [..]
+//! ```
+//!
+//! (eye_to_hand uses `T_base_camera` and `T_flange_target`.) Metres and radians in poses; deg
+//! and mm where the key says so. Written atomically; read back (by `export` and `verify`) with
+//! the same validation as every pose file. Depends on `solve`, `geometry` and `dataset`'s I/O.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::{read_yaml, write_yaml, FileError};
+use crate::geometry::{Pose, PoseRecord};
+use crate::solve::{Calibration, Method, Phase, PosePair, PoseSigma, Setup};
+
+/// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(non_snake_case)]
+pub struct UncertaintyYaml {
+    /// eye_in_hand camera mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_flange_camera: Option<PoseSigma>,
+    /// eye_in_hand target mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_base_target: Option<PoseSigma>,
+    /// eye_to_hand camera mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_base_camera: Option<PoseSigma>,
+    /// eye_to_hand target mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_flange_target: Option<PoseSigma>,
+    /// The a-posteriori variance factor the covariance was scaled by.
+    pub variance_factor: f64,
+    /// 12x12 covariance: camera mount [rotation rad, translation m], target mount [same].
+    pub covariance: Vec<Vec<f64>>,
+}
+
+/// Residuals of one sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SampleResidualYaml {
+    /// Index of the sample in the dataset.
+    pub index: usize,
+    /// Its id, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Rotation residual, degrees (absent for a dropped sample).
+    pub rotation_deg: Option<f64>,
+    /// Translation residual, mm (absent for a dropped sample).
+    pub translation_mm: Option<f64>,
+    /// Whitened residual norm, sigmas (absent for a dropped sample).
+    pub normalised: Option<f64>,
+    /// Flagged as an outlier.
+    pub outlier: bool,
+    /// Left out of the final solve.
+    pub dropped: bool,
+}
+
+/// Residuals section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResidualsYaml {
+    /// RMS rotation residual, degrees.
+    pub rotation_rms_deg: f64,
+    /// Largest rotation residual, degrees.
+    pub rotation_max_deg: f64,
+    /// RMS translation residual, mm.
+    pub translation_rms_mm: f64,
+    /// Largest translation residual, mm.
+    pub translation_max_mm: f64,
+    /// Per sample.
+    pub samples: Vec<SampleResidualYaml>,
+}
+
+/// Solver section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverYaml {
+    /// `iterative`, `closed_form` or `refined`.
+    pub method: Method,
+    /// Iterations (iterative) plus LM evaluations (refined).
+    pub iterations: usize,
+    /// Every stage met its tolerance.
+    pub converged: bool,
+    /// Restarts of the iterative method after a stall.
+    pub restarts: usize,
+    /// Per-iteration rotation updates of the iterative method, rad.
+    #[serde(default)]
+    pub rotation_trace_rad: Vec<f64>,
+    /// Per-iteration translation updates of the iterative method, m.
+    #[serde(default)]
+    pub translation_trace_m: Vec<f64>,
+    /// Cost at each refinement evaluation (½ Σ whitened r²).
+    #[serde(default)]
+    pub refine_cost_trace: Vec<f64>,
+}
+
+/// The whole result file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(non_snake_case)]
+pub struct ResultFile {
+    /// The layout solved.
+    pub setup: Setup,
+    /// eye_in_hand camera mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_flange_camera: Option<PoseRecord>,
+    /// eye_in_hand target mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_base_target: Option<PoseRecord>,
+    /// eye_to_hand camera mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_base_camera: Option<PoseRecord>,
+    /// eye_to_hand target mount.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub T_flange_target: Option<PoseRecord>,
+    /// Uncertainty of both unknowns (refined method).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintyYaml>,
+    /// Residuals.
+    pub residuals: ResidualsYaml,
+    /// Indices of samples flagged as outliers.
+    pub outliers: Vec<usize>,
+    /// How the solver got there.
+    pub solver: SolverYaml,
+    /// Messages for people.
+    #[serde(default)]
+    pub warnings: Vec<String>,
+}
+
+/// A result read back: the setup and the two unknowns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolvedMounts {
+    /// The layout.
+    pub setup: Setup,
+    /// eye_in_hand `T_flange_camera`, eye_to_hand `T_base_camera`.
+    pub camera_mount: Pose,
+    /// eye_in_hand `T_base_target`, eye_to_hand `T_flange_target`.
+    pub target_mount: Pose,
+}
+
+impl ResultFile {
+    /// The file form of a calibration; `pairs` are the samples it was solved from (for ids).
+    pub fn from_calibration(calibration: &Calibration, pairs: &[PosePair]) -> ResultFile {
+        let camera = Some(PoseRecord::from_pose(&calibration.camera_mount));
+        let target = Some(PoseRecord::from_pose(&calibration.target_mount));
+        let eye_in_hand = calibration.setup == Setup::EyeInHand;
+        let uncertainty = calibration.uncertainty.as_ref().map(|u| {
+            let (cam, tgt) = (Some(u.camera_mount), Some(u.target_mount));
+            UncertaintyYaml {
+                T_flange_camera: if eye_in_hand { cam } else { None },
+                T_base_target: if eye_in_hand { tgt } else { None },
+                T_base_camera: if eye_in_hand { None } else { cam },
+                T_flange_target: if eye_in_hand { None } else { tgt },
+                variance_factor: u.variance_factor,
+                covariance: u
+                    .covariance
+                    .row_iter()
+                    .map(|r| r.iter().copied().collect())
+                    .collect(),
+            }
+        });
+        let r = &calibration.residuals;
+        let finite = |v: f64| v.is_finite().then_some(v);
+        let samples = (0..r.rotation_deg.len())
+            .map(|i| SampleResidualYaml {
+                index: i,
+                id: pairs.get(i).and_then(|p| p.id.clone()),
+                rotation_deg: finite(r.rotation_deg[i]),
+                translation_mm: finite(r.translation_mm[i]),
+                normalised: finite(r.normalised[i]),
+                outlier: calibration.outliers.contains(&i),
+                dropped: calibration.dropped.contains(&i),
+            })
+            .collect();
+        let trace = |phase| {
+            calibration
+                .solver
+                .trace
+                .iter()
+                .filter(|s| s.phase == phase)
+                .map(|s| s.update)
+                .collect()
+        };
+        ResultFile {
+            setup: calibration.setup,
+            T_flange_camera: if eye_in_hand { camera.clone() } else { None },
+            T_base_target: if eye_in_hand { target.clone() } else { None },
+            T_base_camera: if eye_in_hand { None } else { camera },
+            T_flange_target: if eye_in_hand { None } else { target },
+            uncertainty,
+            residuals: ResidualsYaml {
+                rotation_rms_deg: r.rotation_rms_deg,
+                rotation_max_deg: r.rotation_max_deg,
+                translation_rms_mm: r.translation_rms_mm,
+                translation_max_mm: r.translation_max_mm,
+                samples,
+            },
+            outliers: calibration.outliers.clone(),
+            solver: SolverYaml {
+                method: calibration.solver.method,
+                iterations: calibration.solver.iterations,
+                converged: calibration.solver.converged,
+                restarts: calibration.solver.restarts,
+                rotation_trace_rad: trace(Phase::Rotation),
+                translation_trace_m: trace(Phase::Translation),
+                refine_cost_trace: trace(Phase::Refine),
+            },
+            warnings: calibration.warnings.clone(),
+        }
+    }
+
+    /// Writes the result atomically.
+    pub fn save(&self, path: &Path) -> Result<(), FileError> {
+        write_yaml(self, path)
+    }
+
+    /// Reads a result file.
+    pub fn load(path: &Path) -> Result<ResultFile, FileError> {
+        read_yaml(path)
+    }
+
+    /// The setup and both unknowns, checked: the setup's two keys present, the other two absent,
+    /// every pose valid.
+    pub fn mounts(&self, path: &Path) -> Result<SolvedMounts, FileError> {
+        let (camera_key, target_key) = self.setup.unknown_names();
+        let (camera, target, wrong) = match self.setup {
+            Setup::EyeInHand => (
+                &self.T_flange_camera,
+                &self.T_base_target,
+                [
+                    ("T_base_camera", &self.T_base_camera),
+                    ("T_flange_target", &self.T_flange_target),
+                ],
+            ),
+            Setup::EyeToHand => (
+                &self.T_base_camera,
+                &self.T_flange_target,
+                [
+                    ("T_flange_camera", &self.T_flange_camera),
+                    ("T_base_target", &self.T_base_target),
+                ],
+            ),
+        };
+        if let Some((key, _)) = wrong.iter().find(|(_, v)| v.is_some()) {
+            return Err(FileError::Value {
+                path: path.to_path_buf(),
+                yaml_path: key.to_string(),
+                problem: format!("not an unknown of setup {}", self.setup),
+            });
+        }
+        let get = |record: &Option<PoseRecord>, key: &str| -> Result<Pose, FileError> {
+            let record = record.as_ref().ok_or_else(|| FileError::Value {
+                path: path.to_path_buf(),
+                yaml_path: key.to_string(),
+                problem: format!("missing (required for setup {})", self.setup),
+            })?;
+            record.to_pose(key).map_err(|problem| FileError::Pose {
+                path: path.to_path_buf(),
+                problem,
+            })
+        };
+        Ok(SolvedMounts {
+            setup: self.setup,
+            camera_mount: get(camera, camera_key)?,
+            target_mount: get(target, target_key)?,
+        })
+    }
+
+    /// Reads a result file and returns its setup and both unknowns.
+    pub fn load_mounts(path: &Path) -> Result<SolvedMounts, FileError> {
+        ResultFile::load(path)?.mounts(path)
+    }
+}

@@ -1,0 +1,428 @@
+//! Joint weighted nonlinear least squares over both unknowns of `A = X·B·Y`.
+//!
+//! Residual of sample i (6 numbers, camera frame): rotation `Log(R_pred · R_measᵀ) / σ_r` and
+//! translation `(t_pred − t_meas) / σ_t`, times `sqrt(weight_i)`, with `pred = X·B_i·Y`. Under
+//! Gaussian noise on `T_camera_target` with those per-axis sigmas this is the maximum-likelihood
+//! estimate. Parameters are a local perturbation of the start on SO(3)×R³ per unknown
+//! (`R_X ← exp(φ_X)·R_X`, `t_X ← t_X + ρ_X`; `R_Y ← R_Y·exp(φ_Y)`, `t_Y ← t_Y + ρ_Y`) with an
+//! analytic Jacobian; the `levenberg-marquardt` crate minimises, then the problem is
+//! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses
+//! (Huber, Cauchy) work by iteratively reweighted least squares on each sample's whitened norm.
+
+use std::cell::RefCell;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use nalgebra::{DVector, Dyn, Matrix3, Owned, SMatrix, Translation3, UnitQuaternion, Vector3, U12};
+
+use super::{Axby, AxbyData, PoseSigma, RobustLoss, SolveError, SolveOptions, Uncertainty};
+use crate::geometry::{rotvec, Pose};
+
+/// Parameter count: φ_X, ρ_X, φ_Y, ρ_Y.
+const PARAMS: usize = 12;
+/// IRLS rounds for robust losses.
+const MAX_IRLS_ROUNDS: usize = 20;
+
+/// What the refinement produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refined {
+    /// The unknowns at the optimum.
+    pub solution: Axby,
+    /// Covariance of [φ_X, ρ_X, φ_Y, ρ_Y] (X left, Y right perturbation), scaled by the
+    /// variance factor; `None` when not asked for or singular.
+    pub covariance: Option<SMatrix<f64, 12, 12>>,
+    /// `max(1, χ²/dof)`.
+    pub variance_factor: f64,
+    /// Residual evaluations spent by LM.
+    pub evaluations: usize,
+    /// LM met its tolerance.
+    pub converged: bool,
+    /// Cost (½ Σ r²) at each residual evaluation, for plots.
+    pub trace: Vec<f64>,
+    /// Robust weight of each sample (1 without a robust loss).
+    pub robust_weights: Vec<f64>,
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// Inverse of the left Jacobian of SO(3) at `phi`.
+fn left_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = phi.norm();
+    let k = skew(phi);
+    let coefficient = if theta < 1e-6 {
+        1.0 / 12.0 + theta * theta / 720.0
+    } else {
+        let half = 0.5 * theta;
+        (1.0 - half * half.cos() / half.sin()) / (theta * theta)
+    };
+    Matrix3::identity() - 0.5 * k + coefficient * k * k
+}
+
+struct Problem<'a> {
+    data: &'a AxbyData,
+    x0: Axby,
+    delta: DVector<f64>,
+    /// sqrt(weight_i · robust_i) per sample.
+    scale: Vec<f64>,
+    inv_sigma_r: f64,
+    inv_sigma_t: f64,
+    trace: RefCell<Vec<f64>>,
+}
+
+impl Problem<'_> {
+    fn current(&self) -> Axby {
+        let d = &self.delta;
+        let phi_x = Vector3::new(d[0], d[1], d[2]);
+        let rho_x = Vector3::new(d[3], d[4], d[5]);
+        let phi_y = Vector3::new(d[6], d[7], d[8]);
+        let rho_y = Vector3::new(d[9], d[10], d[11]);
+        let x = Pose::from_parts(
+            Translation3::from(self.x0.x.translation.vector + rho_x),
+            UnitQuaternion::from_scaled_axis(phi_x) * self.x0.x.rotation,
+        );
+        let y = Pose::from_parts(
+            Translation3::from(self.x0.y.translation.vector + rho_y),
+            self.x0.y.rotation * UnitQuaternion::from_scaled_axis(phi_y),
+        );
+        Axby { x, y }
+    }
+
+    /// Unscaled residual (rotation rad, translation m) of sample i.
+    fn raw_residual(s: &Axby, a: &Pose, b: &Pose) -> (Vector3<f64>, Vector3<f64>, Pose) {
+        let predicted = s.x * b * s.y;
+        let r = rotvec(&(predicted.rotation * a.rotation.inverse()));
+        let t = predicted.translation.vector - a.translation.vector;
+        (r, t, predicted)
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, U12> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, U12>;
+    type ParameterStorage = Owned<f64, U12>;
+
+    fn set_params(&mut self, x: &nalgebra::SVector<f64, 12>) {
+        self.delta.copy_from(x);
+    }
+
+    fn params(&self) -> nalgebra::SVector<f64, 12> {
+        nalgebra::SVector::<f64, 12>::from_column_slice(self.delta.as_slice())
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let s = self.current();
+        let n = self.data.len();
+        let mut out = DVector::zeros(6 * n);
+        for i in 0..n {
+            let (r, t, _) = Self::raw_residual(&s, &self.data.a[i], &self.data.b[i]);
+            let k = self.scale[i];
+            out.fixed_rows_mut::<3>(6 * i)
+                .copy_from(&(r * (k * self.inv_sigma_r)));
+            out.fixed_rows_mut::<3>(6 * i + 3)
+                .copy_from(&(t * (k * self.inv_sigma_t)));
+        }
+        self.trace.borrow_mut().push(0.5 * out.norm_squared());
+        Some(out)
+    }
+
+    fn jacobian(&self) -> Option<nalgebra::OMatrix<f64, Dyn, U12>> {
+        let s = self.current();
+        let n = self.data.len();
+        let mut j = nalgebra::OMatrix::<f64, Dyn, U12>::zeros(6 * n);
+        let rx = s.x.rotation.to_rotation_matrix().into_inner();
+        for i in 0..n {
+            let b = &self.data.b[i];
+            let (r, _, predicted) = Self::raw_residual(&s, &self.data.a[i], b);
+            let j_inv = left_jacobian_inverse(&r);
+            let r_pred = predicted.rotation.to_rotation_matrix().into_inner();
+            let kr = self.scale[i] * self.inv_sigma_r;
+            let kt = self.scale[i] * self.inv_sigma_t;
+            let lever = predicted.translation.vector - s.x.translation.vector;
+            let rxb = rx * b.rotation.to_rotation_matrix().into_inner();
+            // Rotation rows: d/dφ_X = J⁻¹, d/dφ_Y = J⁻¹·R_pred; translations do not move them.
+            j.fixed_view_mut::<3, 3>(6 * i, 0).copy_from(&(j_inv * kr));
+            j.fixed_view_mut::<3, 3>(6 * i, 6)
+                .copy_from(&(j_inv * r_pred * kr));
+            // Translation rows: d/dφ_X = −[R_X (R_B t_Y + t_B)]×, d/dρ_X = I, d/dρ_Y = R_X R_B.
+            j.fixed_view_mut::<3, 3>(6 * i + 3, 0)
+                .copy_from(&(-skew(&lever) * kt));
+            j.fixed_view_mut::<3, 3>(6 * i + 3, 3)
+                .copy_from(&(Matrix3::identity() * kt));
+            j.fixed_view_mut::<3, 3>(6 * i + 3, 9)
+                .copy_from(&(rxb * kt));
+        }
+        Some(j)
+    }
+}
+
+/// Whitened residual norm of each sample (sigmas, 6 dof), ignoring weights.
+fn whitened_norms(data: &AxbyData, s: &Axby, options: &SolveOptions) -> Vec<f64> {
+    (0..data.len())
+        .map(|i| {
+            let (r, t, _) = Problem::raw_residual(s, &data.a[i], &data.b[i]);
+            ((r / options.noise.rotation_sigma_rad).norm_squared()
+                + (t / options.noise.translation_sigma_m).norm_squared())
+            .sqrt()
+        })
+        .collect()
+}
+
+fn robust_weight(loss: RobustLoss, e: f64) -> f64 {
+    match loss {
+        RobustLoss::None => 1.0,
+        RobustLoss::Huber(k) => {
+            if e <= k {
+                1.0
+            } else {
+                k / e
+            }
+        }
+        RobustLoss::Cauchy(k) => 1.0 / (1.0 + (e / k) * (e / k)),
+    }
+}
+
+struct Run {
+    solution: Axby,
+    evaluations: usize,
+    converged: bool,
+    trace: Vec<f64>,
+}
+
+fn minimise(
+    data: &AxbyData,
+    start: &Axby,
+    scale: &[f64],
+    options: &SolveOptions,
+) -> Result<Run, SolveError> {
+    let problem = Problem {
+        data,
+        x0: *start,
+        delta: DVector::zeros(PARAMS),
+        scale: scale.to_vec(),
+        inv_sigma_r: 1.0 / options.noise.rotation_sigma_rad,
+        inv_sigma_t: 1.0 / options.noise.translation_sigma_m,
+        trace: RefCell::new(Vec::new()),
+    };
+    let (problem, report) = LevenbergMarquardt::new().minimize(problem);
+    let converged = match report.termination {
+        TerminationReason::Numerical(what) | TerminationReason::User(what) => {
+            return Err(SolveError::RefinementFailed(what))
+        }
+        TerminationReason::WrongDimensions(what) => return Err(SolveError::RefinementFailed(what)),
+        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
+            return Err(SolveError::RefinementFailed("empty problem"))
+        }
+        // The requested tolerance is below what floating point can show: at the optimum.
+        TerminationReason::NoImprovementPossible(_) => true,
+        TerminationReason::LostPatience => false,
+        TerminationReason::ResidualsZero
+        | TerminationReason::Orthogonal
+        | TerminationReason::Converged { .. } => true,
+    };
+    let solution = problem.current();
+    Ok(Run {
+        solution,
+        evaluations: report.number_of_evaluations,
+        converged,
+        trace: problem.trace.into_inner(),
+    })
+}
+
+/// Refines a start by weighted (optionally robust) nonlinear least squares; computes the
+/// covariance at the optimum when `options.covariance` is set.
+pub fn refine(
+    data: &AxbyData,
+    start: &Axby,
+    options: &SolveOptions,
+) -> Result<Refined, SolveError> {
+    let n = data.len();
+    let mut robust = vec![1.0; n];
+    let scale_of = |robust: &[f64]| -> Vec<f64> {
+        data.weights
+            .iter()
+            .zip(robust)
+            .map(|(w, r)| (w * r).sqrt())
+            .collect()
+    };
+    let mut run = minimise(data, start, &scale_of(&robust), options)?;
+    let mut evaluations = run.evaluations;
+    let mut trace = std::mem::take(&mut run.trace);
+    if options.robust != RobustLoss::None {
+        for _ in 0..MAX_IRLS_ROUNDS {
+            let norms = whitened_norms(data, &run.solution, options);
+            let new: Vec<f64> = norms
+                .iter()
+                .map(|&e| robust_weight(options.robust, e))
+                .collect();
+            let change = new
+                .iter()
+                .zip(&robust)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            robust = new;
+            run = minimise(data, &run.solution, &scale_of(&robust), options)?;
+            evaluations += run.evaluations;
+            trace.append(&mut run.trace);
+            if change < 1e-6 {
+                break;
+            }
+        }
+    }
+    // Re-linearise at the optimum: a second, short run whose Jacobian at δ = 0 is exact.
+    let mut polish = minimise(data, &run.solution, &scale_of(&robust), options)?;
+    evaluations += polish.evaluations;
+    trace.append(&mut polish.trace);
+    let solution = polish.solution;
+    let converged = run.converged && polish.converged;
+
+    let scale = scale_of(&robust);
+    let problem = Problem {
+        data,
+        x0: solution,
+        delta: DVector::zeros(PARAMS),
+        scale: scale.clone(),
+        inv_sigma_r: 1.0 / options.noise.rotation_sigma_rad,
+        inv_sigma_t: 1.0 / options.noise.translation_sigma_m,
+        trace: RefCell::new(Vec::new()),
+    };
+    let residuals = problem
+        .residuals()
+        .ok_or(SolveError::RefinementFailed("residuals"))?;
+    let dof = (6 * n).saturating_sub(PARAMS);
+    let chi2 = residuals.norm_squared();
+    let variance_factor = if dof > 0 {
+        (chi2 / dof as f64).max(1.0)
+    } else {
+        1.0
+    };
+    let covariance = if options.covariance {
+        let j = problem
+            .jacobian()
+            .ok_or(SolveError::RefinementFailed("jacobian"))?;
+        let jtj: SMatrix<f64, 12, 12> = (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into();
+        jtj.try_inverse().map(|inv| inv * variance_factor)
+    } else {
+        None
+    };
+    Ok(Refined {
+        solution,
+        covariance,
+        variance_factor,
+        evaluations,
+        converged,
+        trace,
+        robust_weights: robust,
+    })
+}
+
+fn pose_sigma(cov: &SMatrix<f64, 6, 6>) -> PoseSigma {
+    let axis = |i: usize| cov[(i, i)].max(0.0).sqrt();
+    PoseSigma {
+        rotation_deg: (cov[(0, 0)] + cov[(1, 1)] + cov[(2, 2)])
+            .max(0.0)
+            .sqrt()
+            .to_degrees(),
+        translation_mm: (cov[(3, 3)] + cov[(4, 4)] + cov[(5, 5)]).max(0.0).sqrt() * 1e3,
+        rotation_axes_deg: [
+            axis(0).to_degrees(),
+            axis(1).to_degrees(),
+            axis(2).to_degrees(),
+        ],
+        translation_axes_mm: [axis(3) * 1e3, axis(4) * 1e3, axis(5) * 1e3],
+    }
+}
+
+/// Maps the parameter covariance to the reported unknowns: camera mount `inv(X)` and target
+/// mount `Y`, each `T_a_b` perturbed as `R ← exp(δθ)·R`, `t ← t + δt` in frame `a`.
+pub fn mount_uncertainty(
+    solution: &Axby,
+    covariance: &SMatrix<f64, 12, 12>,
+    variance_factor: f64,
+) -> Uncertainty {
+    let rx_t = solution
+        .x
+        .rotation
+        .to_rotation_matrix()
+        .into_inner()
+        .transpose();
+    let tx = solution.x.translation.vector;
+    let ry = solution.y.rotation.to_rotation_matrix().into_inner();
+    let mut g = SMatrix::<f64, 12, 12>::zeros();
+    // inv(X): δθ = −R_Xᵀ φ_X; δt = −R_Xᵀ [t_X]× φ_X − R_Xᵀ ρ_X.
+    g.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-rx_t));
+    g.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(-rx_t * skew(&tx)));
+    g.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-rx_t));
+    // Y (right perturbation): δθ = R_Y φ_Y; δt = ρ_Y.
+    g.fixed_view_mut::<3, 3>(6, 6).copy_from(&ry);
+    g.fixed_view_mut::<3, 3>(9, 9)
+        .copy_from(&Matrix3::identity());
+    let mapped = g * covariance * g.transpose();
+    Uncertainty {
+        covariance: mapped,
+        camera_mount: pose_sigma(&mapped.fixed_view::<6, 6>(0, 0).into()),
+        target_mount: pose_sigma(&mapped.fixed_view::<6, 6>(6, 6).into()),
+        variance_factor,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn analytic_jacobian_matches_finite_differences() {
+        let pose = |t: [f64; 3], r: [f64; 3]| {
+            Pose::from_parts(
+                Translation3::new(t[0], t[1], t[2]),
+                UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
+            )
+        };
+        let x = pose([0.1, -0.05, 0.2], [0.3, -0.2, 1.0]);
+        let y = pose([0.5, 0.2, -0.1], [-1.2, 0.4, 0.3]);
+        let bs = [
+            pose([0.3, 0.1, 0.4], [0.4, 0.1, -0.2]),
+            pose([-0.2, 0.3, 0.5], [-0.3, 0.6, 0.2]),
+            pose([0.1, -0.4, 0.3], [0.1, -0.2, 0.9]),
+        ];
+        // Measurements off the model so the residuals (and J⁻¹ of them) are not trivial.
+        let noise = pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]);
+        let data = AxbyData {
+            a: bs.iter().map(|b| x * b * y * noise).collect(),
+            b: bs.to_vec(),
+            weights: vec![1.0, 2.0, 0.5],
+        };
+        let problem = Problem {
+            data: &data,
+            x0: Axby { x, y },
+            delta: DVector::zeros(PARAMS),
+            scale: data.weights.iter().map(|w| w.sqrt()).collect(),
+            inv_sigma_r: 100.0,
+            inv_sigma_t: 1000.0,
+            trace: RefCell::new(Vec::new()),
+        };
+        let analytic = problem.jacobian().unwrap();
+        let h = 1e-7;
+        let mut p = Problem {
+            data: &data,
+            x0: Axby { x, y },
+            delta: DVector::zeros(PARAMS),
+            scale: problem.scale.clone(),
+            inv_sigma_r: 100.0,
+            inv_sigma_t: 1000.0,
+            trace: RefCell::new(Vec::new()),
+        };
+        for k in 0..PARAMS {
+            p.delta = DVector::zeros(PARAMS);
+            p.delta[k] = h;
+            let plus = p.residuals().unwrap();
+            p.delta[k] = -h;
+            let minus = p.residuals().unwrap();
+            let numeric = (plus - minus) / (2.0 * h);
+            let err = (numeric - analytic.column(k)).amax();
+            // Residuals are O(1e3) per unit parameter; central differences are good to ~1e-5.
+            assert!(err < 1e-4, "column {k}: max error {err}");
+        }
+    }
+}
