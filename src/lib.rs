@@ -4,5 +4,7 @@
 #![warn(missing_docs)]
 
 pub mod atomic_file;
+pub mod camera;
 pub mod geometry;
 pub mod robot;
+pub mod target;
