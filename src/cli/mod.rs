@@ -1,5 +1,8 @@
 //! Subcommands. Each file turns its arguments into library configuration, then calls the library.
 
+mod detect;
+mod target;
+
 use clap::{Parser, Subcommand};
 
 /// Hand-eye and base-world calibration for robot cells.
@@ -11,9 +14,17 @@ pub struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
-enum Command {}
+enum Command {
+    /// Detect the board in images and estimate T_camera_target.
+    Detect(detect::DetectArgs),
+    /// Board utilities (printable boards).
+    Target(target::TargetArgs),
+}
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {}
+    match cli.command {
+        Command::Detect(args) => detect::run(args),
+        Command::Target(args) => target::run(args),
+    }
 }

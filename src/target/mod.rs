@@ -8,10 +8,13 @@
 //! integers) in images. Depends on `geometry` and `camera::model`; never on robots, sessions
 //! or the CLI.
 
+pub mod annotate;
 pub mod board;
 pub mod detect;
+pub mod draw;
 pub mod family;
 pub mod pnp;
+pub mod print;
 
 use std::path::PathBuf;
 
