@@ -1,7 +1,13 @@
-//! The camera contract: [`Camera`] and its error, plus the camera model (`model`: pinhole +
-//! distortion, intrinsics files) and the frame renderer (`render`). Backends live in `camera/`:
-//! the simulated camera (`sim`), an image folder (`files`), and USB/UVC through nokhwa (`uvc`,
-//! behind the `uvc` feature). The session sees only the trait.
+//! Cameras: the [`Camera`] contract and its error; the intrinsic model shared by detection, pose
+//! estimation and simulation (`model`); the frame simulator that renders a board through that
+//! model (`render`); and the backends: the simulated camera (`sim`). The session sees only the
+//! trait.
+//!
+//! Frames: `camera` is the optical frame (x right, y down, z forward, as OpenCV and ROS
+//! `*_optical_frame`). Pixels follow OpenCV's convention for the whole project: pixel
+//! centres sit at integer coordinates, pixel `(u, v)` covers `[u - 0.5, u + 0.5)`.
+//! Units: metres for points, pixels for image coordinates. This module depends on
+//! `geometry` and `target` (for the board the renderer draws), never on robots or sessions.
 
 pub mod model;
 pub mod render;

@@ -4,8 +4,14 @@
 #![warn(missing_docs)]
 
 pub mod atomic_file;
+pub mod camera;
+pub mod cell;
+pub mod config;
 pub mod dataset;
 pub mod geometry;
+pub mod plan;
 pub mod result;
 pub mod robot;
+pub mod session;
 pub mod solve;
+pub mod target;

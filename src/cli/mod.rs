@@ -1,6 +1,11 @@
 //! Subcommands. Each file turns its arguments into library configuration, then calls the library.
 
+mod detect;
+mod plan;
+mod replay;
+mod run;
 mod solve;
+mod target;
 
 use clap::{Parser, Subcommand};
 
@@ -14,13 +19,28 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Calibrate a cell: move through the plan, record, solve.
+    Run(run::RunArgs),
+    /// Generate or check pose plans (nothing moves).
+    Plan(plan::PlanArgs),
     /// Solve a dataset file for both unknowns and write the result YAML.
     Solve(solve::SolveArgs),
+    /// Re-detect and re-solve a recorded session offline.
+    Replay(replay::ReplayArgs),
+    /// Detect the board in images and estimate T_camera_target.
+    Detect(detect::DetectArgs),
+    /// Board utilities (printable boards).
+    Target(target::TargetArgs),
 }
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Plan(args) => plan::run(args),
         Command::Solve(args) => solve::run(args),
+        Command::Replay(args) => replay::run(args),
+        Command::Detect(args) => detect::run(args),
+        Command::Target(args) => target::run(args),
     }
 }

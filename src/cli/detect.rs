@@ -1,0 +1,165 @@
+//! `handeye detect`: finds the board in image files and prints, per image, the tags found, the
+//! reprojection RMS and `T_camera_target`; optionally writes the results as YAML and annotated
+//! PNGs.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use serde::Serialize;
+
+use handeye::atomic_file::write_atomic;
+use handeye::camera::model::CameraModel;
+use handeye::geometry::PoseRecord;
+use handeye::target::annotate::annotate;
+use handeye::target::detect::load_gray_image;
+use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+
+/// Detect the board and estimate `T_camera_target` in each image.
+#[derive(Debug, Args)]
+pub struct DetectArgs {
+    /// Board YAML (Kalibr aprilgrid form).
+    #[arg(long)]
+    target: PathBuf,
+    /// Intrinsics: ROS/OpenCV camera_info YAML or Kalibr camchain YAML.
+    #[arg(long)]
+    intrinsics: PathBuf,
+    /// Image files (PNG).
+    #[arg(required = true)]
+    images: Vec<PathBuf>,
+    /// Write the per-image results here (YAML).
+    #[arg(short = 'o', long)]
+    output: Option<PathBuf>,
+    /// Write annotated PNGs (corners, ids, axes) into this folder.
+    #[arg(long)]
+    annotate: Option<PathBuf>,
+    /// Quad decimation of the detector (1 = full resolution).
+    #[arg(long, default_value_t = 2.0)]
+    decimation: f32,
+    /// Detector threads.
+    #[arg(long, default_value_t = 2)]
+    threads: u8,
+    /// Highest accepted hamming distance (0-2).
+    #[arg(long, default_value_t = 1)]
+    max_hamming: u32,
+}
+
+/// One image's result as written to the output YAML.
+#[derive(Debug, Serialize)]
+struct ImageResult {
+    image: String,
+    found: bool,
+    tag_ids: Vec<u32>,
+    rejected_ids: Vec<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rms_px: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    corners_used: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ambiguity: Option<f64>,
+    #[serde(rename = "T_camera_target", skip_serializing_if = "Option::is_none")]
+    camera_from_target: Option<PoseRecord>,
+}
+
+/// Runs `handeye detect`.
+pub fn run(args: DetectArgs) -> anyhow::Result<()> {
+    let board = Board::load(&args.target)?;
+    let camera = CameraModel::load(&args.intrinsics)?;
+    let options = DetectorOptions {
+        decimation: args.decimation,
+        threads: args.threads,
+        max_hamming: args.max_hamming,
+        ..DetectorOptions::default()
+    };
+    let detector = TagDetector::spawn(&board, options)?;
+    if let Some(dir) = &args.annotate {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the annotation folder {}", dir.display()))?;
+    }
+    let mut results = Vec::new();
+    let mut found_count = 0;
+    for path in &args.images {
+        let image = load_gray_image(path)?;
+        let detection = detector
+            .detect(&image)
+            .with_context(|| format!("detecting tags in {}", path.display()))?;
+        let pose = estimate_board_pose(&board, &camera, &detection);
+        let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
+        let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
+        println!("{}:", path.display());
+        println!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
+        let mut result = ImageResult {
+            image: path.display().to_string(),
+            found: false,
+            tag_ids,
+            rejected_ids,
+            error: None,
+            rms_px: None,
+            corners_used: None,
+            ambiguity: None,
+            camera_from_target: None,
+        };
+        match &pose {
+            Ok(pose) => {
+                found_count += 1;
+                let record = PoseRecord::from_pose(&pose.camera_from_target);
+                println!(
+                    "  reprojection RMS {:.3} px over {} corners{}",
+                    pose.rms_px,
+                    pose.corners_used,
+                    if pose.is_ambiguous() {
+                        format!(
+                            " (AMBIGUOUS lone tag, ratio {:.2})",
+                            pose.ambiguity.unwrap_or(0.0)
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+                let yaml = serde_yaml_ng::to_string(&record)?;
+                println!("  T_camera_target:");
+                for line in yaml.lines() {
+                    println!("    {line}");
+                }
+                result.found = true;
+                result.rms_px = Some(pose.rms_px);
+                result.corners_used = Some(pose.corners_used);
+                result.ambiguity = pose.ambiguity;
+                result.camera_from_target = Some(record);
+            }
+            Err(error) => {
+                println!("  board not found: {error}");
+                result.error = Some(error.to_string());
+            }
+        }
+        if let Some(dir) = &args.annotate {
+            let annotated = annotate(&image, &board, &camera, &detection, pose.as_ref().ok());
+            let name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "image".to_string());
+            let out = dir.join(format!("{name}-annotated.png"));
+            let mut bytes = Vec::new();
+            annotated
+                .write_to(
+                    &mut std::io::Cursor::new(&mut bytes),
+                    image::ImageFormat::Png,
+                )
+                .with_context(|| format!("encoding {}", out.display()))?;
+            write_atomic(&out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+        }
+        results.push(result);
+    }
+    if let Some(output) = &args.output {
+        let yaml = serde_yaml_ng::to_string(&results)?;
+        write_atomic(output, yaml.as_bytes())
+            .with_context(|| format!("writing {}", output.display()))?;
+    }
+    println!(
+        "board found in {found_count} of {} images",
+        args.images.len()
+    );
+    Ok(())
+}

@@ -1,0 +1,413 @@
+//! AprilTag detection of a board's tags, on a dedicated thread.
+//!
+//! The C detector (`apriltag::Detector`) is not `Send`, so [`TagDetector::spawn`] builds it on
+//! its own thread and [`TagDetector::detect`] sends each image over a channel and gets plain
+//! data back; the handle is `Send + Sync`. Detections are filtered against the board: ids not
+//! on the board, ids seen twice (both copies dropped) and hamming distances above the
+//! threshold are rejected and reported.
+//!
+//! Pixel convention: the C library puts pixel centres at `i + 0.5`; this project (OpenCV, ROS,
+//! Kalibr) puts them at integers. The conversion (subtract 0.5 px) happens here, in
+//! [`to_project_pixels`], and nowhere else. Depends on `target::board`, `target::family`.
+
+use std::path::Path;
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+
+use apriltag::{Detector, Image};
+use apriltag_sys as sys;
+use image::GrayImage;
+use nalgebra::{Point2, Point3};
+
+use super::board::Board;
+use super::family::TagFamily;
+use super::TargetError;
+
+/// Detector settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectorOptions {
+    /// Quad decimation: 2 halves the resolution of the quad search (corners are still refined
+    /// at full resolution); as accurate as 1 on these tag sizes and ~4x faster.
+    pub decimation: f32,
+    /// Worker threads inside the C detector.
+    pub threads: u8,
+    /// Gaussian blur sigma applied before the quad search (0 = none), px.
+    pub quad_sigma: f32,
+    /// Highest accepted hamming distance (bit errors corrected); 0-2.
+    pub max_hamming: u32,
+}
+
+impl Default for DetectorOptions {
+    fn default() -> Self {
+        DetectorOptions {
+            decimation: 2.0,
+            threads: 2,
+            quad_sigma: 0.0,
+            max_hamming: 1,
+        }
+    }
+}
+
+/// One accepted tag in an image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TagObservation {
+    /// Tag id (on the board).
+    pub id: u32,
+    /// Bits corrected while decoding.
+    pub hamming: u32,
+    /// The detector's decision margin (higher is more confident).
+    pub decision_margin: f32,
+    /// Border-square corners, px, project convention (centres at integers), in the order of
+    /// [`Board::tag_corners_in_target`].
+    pub corners_px: [Point2<f64>; 4],
+}
+
+/// Why a detection was not used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RejectReason {
+    /// The id is not on the board.
+    NotOnBoard,
+    /// The id was detected more than once.
+    Duplicate,
+    /// Too many corrected bits.
+    Hamming,
+}
+
+/// A detection that was dropped, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RejectedTag {
+    /// The decoded id.
+    pub id: u32,
+    /// Bits corrected.
+    pub hamming: u32,
+    /// Why it was dropped.
+    pub reason: RejectReason,
+}
+
+/// The board's tags found in one image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardDetection {
+    /// Accepted tags, by id.
+    pub tags: Vec<TagObservation>,
+    /// Rejected detections.
+    pub rejected: Vec<RejectedTag>,
+    /// Width of the image searched, px.
+    pub image_width: u32,
+    /// Height of the image searched, px.
+    pub image_height: u32,
+}
+
+impl BoardDetection {
+    /// `(point_in_target, pixel)` pairs for every accepted corner, tag by tag in corner order.
+    pub fn correspondences(&self, board: &Board) -> Vec<(Point3<f64>, Point2<f64>)> {
+        self.tags
+            .iter()
+            .filter_map(|tag| Some((board.tag_corners_in_target(tag.id)?, tag.corners_px)))
+            .flat_map(|(points, pixels)| points.into_iter().zip(pixels))
+            .collect()
+    }
+}
+
+/// A raw detection as it leaves the detector thread.
+struct RawDetection {
+    id: u32,
+    hamming: u32,
+    decision_margin: f32,
+    corners_px: [Point2<f64>; 4],
+}
+
+type Job = (GrayImage, mpsc::Sender<Vec<RawDetection>>);
+
+/// A handle to an AprilTag detector living on its own thread.
+pub struct TagDetector {
+    jobs: Option<mpsc::Sender<Job>>,
+    thread: Option<JoinHandle<()>>,
+    board: Board,
+    options: DetectorOptions,
+}
+
+impl std::fmt::Debug for TagDetector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TagDetector")
+            .field("family", &self.board.family())
+            .field("options", &self.options)
+            .finish()
+    }
+}
+
+impl TagDetector {
+    /// Starts a detector for `board`'s family and border on a new thread.
+    pub fn spawn(board: &Board, options: DetectorOptions) -> Result<Self, TargetError> {
+        if !(options.decimation.is_finite() && options.decimation >= 1.0) {
+            return Err(TargetError::Detector {
+                reason: format!("decimation must be ≥ 1, found {}", options.decimation),
+            });
+        }
+        if options.max_hamming > 2 {
+            return Err(TargetError::Detector {
+                reason: format!(
+                    "max_hamming must be 0, 1 or 2, found {}",
+                    options.max_hamming
+                ),
+            });
+        }
+        let (jobs, receiver) = mpsc::channel::<Job>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let family = board.family();
+        let border_bits = board.border_bits();
+        let thread_options = options.clone();
+        let thread = std::thread::Builder::new()
+            .name("apriltag".to_string())
+            .spawn(move || detector_thread(family, border_bits, thread_options, receiver, ready_tx))
+            .map_err(|error| TargetError::Detector {
+                reason: format!("cannot start the detector thread: {error}"),
+            })?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(TagDetector {
+                jobs: Some(jobs),
+                thread: Some(thread),
+                board: board.clone(),
+                options,
+            }),
+            Ok(Err(reason)) => Err(TargetError::Detector { reason }),
+            Err(_) => Err(TargetError::DetectorStopped),
+        }
+    }
+
+    /// Detects the board's tags in a grey image (blocks until the detector thread answers).
+    pub fn detect(&self, image: &GrayImage) -> Result<BoardDetection, TargetError> {
+        let (reply_tx, reply_rx) = mpsc::channel();
+        self.jobs
+            .as_ref()
+            .ok_or(TargetError::DetectorStopped)?
+            .send((image.clone(), reply_tx))
+            .map_err(|_| TargetError::DetectorStopped)?;
+        let raw = reply_rx.recv().map_err(|_| TargetError::DetectorStopped)?;
+        Ok(filter(
+            &self.board,
+            &self.options,
+            raw,
+            image.width(),
+            image.height(),
+        ))
+    }
+
+    /// The board this detector looks for.
+    pub fn board(&self) -> &Board {
+        &self.board
+    }
+}
+
+impl Drop for TagDetector {
+    fn drop(&mut self) {
+        // Closing the channel ends the thread's loop; join so the C detector is freed.
+        self.jobs.take();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn filter(
+    board: &Board,
+    options: &DetectorOptions,
+    raw: Vec<RawDetection>,
+    image_width: u32,
+    image_height: u32,
+) -> BoardDetection {
+    let mut tags = Vec::new();
+    let mut rejected = Vec::new();
+    let mut counts = std::collections::HashMap::new();
+    for detection in &raw {
+        *counts.entry(detection.id).or_insert(0usize) += 1;
+    }
+    for detection in raw {
+        let reason = if board.tag(detection.id).is_none() {
+            Some(RejectReason::NotOnBoard)
+        } else if detection.hamming > options.max_hamming {
+            Some(RejectReason::Hamming)
+        } else if counts[&detection.id] > 1 {
+            // Two tags with one id means a reflection or a second board: neither is trustworthy.
+            Some(RejectReason::Duplicate)
+        } else {
+            None
+        };
+        match reason {
+            Some(reason) => rejected.push(RejectedTag {
+                id: detection.id,
+                hamming: detection.hamming,
+                reason,
+            }),
+            None => tags.push(TagObservation {
+                id: detection.id,
+                hamming: detection.hamming,
+                decision_margin: detection.decision_margin,
+                corners_px: detection.corners_px,
+            }),
+        }
+    }
+    tags.sort_by_key(|t| t.id);
+    BoardDetection {
+        tags,
+        rejected,
+        image_width,
+        image_height,
+    }
+}
+
+/// The one place the AprilTag library's pixel convention (centres at `i + 0.5`) becomes the
+/// project's (centres at integers).
+fn to_project_pixels(corners: [[f64; 2]; 4]) -> [Point2<f64>; 4] {
+    corners.map(|[x, y]| Point2::new(x - 0.5, y - 0.5))
+}
+
+/// Owns the C family struct the detector points at; frees it after the detector.
+struct OwnedFamily {
+    family: TagFamily,
+    ptr: *mut sys::apriltag_family_t,
+}
+
+impl OwnedFamily {
+    fn create(family: TagFamily, border_bits: u32) -> Result<Self, String> {
+        // SAFETY: the create functions return a fresh heap family or NULL (checked below).
+        let ptr = unsafe {
+            match family {
+                TagFamily::Tag36h11 => sys::tag36h11_create(),
+                TagFamily::TagStandard41h12 => sys::tagStandard41h12_create(),
+            }
+        };
+        if ptr.is_null() {
+            return Err(format!("cannot allocate the {} family", family.name()));
+        }
+        let owned = OwnedFamily { family, ptr };
+        match border_bits {
+            1 => {}
+            2 => {
+                // SAFETY: ptr is a valid family we own exclusively; bit_x / bit_y hold nbits
+                // entries. Kalibr's layout has the same codes with a border one cell wider on
+                // each side: the border square grows by 2 cells and the data moves in by 1.
+                unsafe {
+                    let f = &mut *owned.ptr;
+                    if f.reversed_border {
+                        return Err(format!("{} has no 2-cell-border layout", family.name()));
+                    }
+                    f.width_at_border += 2;
+                    f.total_width += 2;
+                    for i in 0..f.nbits as usize {
+                        *f.bit_x.add(i) = (*f.bit_x.add(i)).wrapping_add(1);
+                        *f.bit_y.add(i) = (*f.bit_y.add(i)).wrapping_add(1);
+                    }
+                }
+            }
+            other => return Err(format!("border_bits must be 1 or 2, found {other}")),
+        }
+        Ok(owned)
+    }
+}
+
+impl Drop for OwnedFamily {
+    fn drop(&mut self) {
+        // SAFETY: ptr came from the matching create function and is freed exactly once, after
+        // the detector that referenced it was destroyed (see detector_thread's drop order).
+        unsafe {
+            match self.family {
+                TagFamily::Tag36h11 => sys::tag36h11_destroy(self.ptr),
+                TagFamily::TagStandard41h12 => sys::tagStandard41h12_destroy(self.ptr),
+            }
+        }
+    }
+}
+
+fn build_detector(family: &OwnedFamily, options: &DetectorOptions) -> Result<Detector, String> {
+    // SAFETY: apriltag_detector_create returns a fresh detector or NULL (checked); adding the
+    // family stores the pointer, which outlives the detector (dropped after it). Detector
+    // takes ownership of the detector pointer and destroys it on drop.
+    let mut detector = unsafe {
+        let raw = sys::apriltag_detector_create();
+        if raw.is_null() {
+            return Err("apriltag_detector_create failed".to_string());
+        }
+        // The quick-decode table grows steeply with corrected bits; 2 covers max_hamming ≤ 2.
+        sys::apriltag_detector_add_family_bits(raw, family.ptr, options.max_hamming.max(1) as i32);
+        Detector::from_raw(raw)
+    };
+    detector.set_decimation(options.decimation);
+    detector.set_thread_number(options.threads.max(1));
+    detector.set_sigma(options.quad_sigma);
+    detector.set_refine_edges(true);
+    Ok(detector)
+}
+
+fn detector_thread(
+    family: TagFamily,
+    border_bits: u32,
+    options: DetectorOptions,
+    jobs: mpsc::Receiver<Job>,
+    ready: mpsc::Sender<Result<(), String>>,
+) {
+    let owned_family = match OwnedFamily::create(family, border_bits) {
+        Ok(f) => f,
+        Err(reason) => {
+            let _ = ready.send(Err(reason));
+            return;
+        }
+    };
+    let mut detector = match build_detector(&owned_family, &options) {
+        Ok(d) => d,
+        Err(reason) => {
+            let _ = ready.send(Err(reason));
+            return;
+        }
+    };
+    let _ = ready.send(Ok(()));
+    while let Ok((image, reply)) = jobs.recv() {
+        let detections = detect_once(&mut detector, &image);
+        let _ = reply.send(detections);
+    }
+    drop(detector);
+    drop(owned_family);
+}
+
+fn detect_once(detector: &mut Detector, image: &GrayImage) -> Vec<RawDetection> {
+    let (width, height) = (image.width() as usize, image.height() as usize);
+    if width == 0 || height == 0 {
+        return Vec::new();
+    }
+    let Ok(mut buffer) = Image::zeros_with_alignment(width, height, 96) else {
+        return Vec::new();
+    };
+    let stride = buffer.stride();
+    let data = buffer.as_slice_mut();
+    for (y, row) in image.as_raw().chunks_exact(width).enumerate() {
+        data[y * stride..y * stride + width].copy_from_slice(row);
+    }
+    detector
+        .detect(&buffer)
+        .into_iter()
+        .map(|d| RawDetection {
+            id: d.id() as u32,
+            hamming: d.hamming() as u32,
+            decision_margin: d.decision_margin(),
+            corners_px: to_project_pixels(d.corners()),
+        })
+        .collect()
+}
+
+/// Reads an image file as 8-bit grey (colour is converted by luma).
+pub fn load_gray_image(path: &Path) -> Result<GrayImage, TargetError> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|source| TargetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .with_guessed_format()
+        .map_err(|source| TargetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let decoded = reader.decode().map_err(|source| TargetError::Image {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(decoded.into_luma8())
+}

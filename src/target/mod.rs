@@ -1,0 +1,119 @@
+//! The calibration target: board specification (`board`), the AprilTag family tables it is
+//! printed from (`family`), tag detection on a dedicated thread (`detect`) and the board pose
+//! `T_camera_target` by PnP with lens distortion (`pnp`).
+//!
+//! Frames: `target` is the board frame (origin at the outer bottom-left corner of tag 0's
+//! black square, x along rows of tags, y up, z out of the printed face); `camera` is the
+//! optical frame. Units: metres in the target frame, pixels (OpenCV convention: centres at
+//! integers) in images. Depends on `geometry` and `camera::model`; never on robots, sessions
+//! or the CLI.
+
+pub mod annotate;
+pub mod board;
+pub mod detect;
+pub mod draw;
+pub mod family;
+pub mod pnp;
+pub mod print;
+
+use std::path::PathBuf;
+
+pub use board::{Board, BoardExtent, BoardTag};
+pub use detect::{BoardDetection, DetectorOptions, RejectedTag, TagDetector, TagObservation};
+pub use family::TagFamily;
+pub use pnp::{estimate_board_pose, reproject, BoardPose};
+
+use crate::camera::model::CameraModelError;
+
+/// Everything that can go wrong between a board file, an image and `T_camera_target`.
+#[derive(Debug, thiserror::Error)]
+pub enum TargetError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O failure.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The board YAML does not parse (syntax, unknown key, wrong type).
+    #[error("board file {path}: at `{key}`: {source}")]
+    BoardYaml {
+        /// The file.
+        path: PathBuf,
+        /// The YAML path where parsing failed.
+        key: String,
+        /// The parser's error.
+        #[source]
+        source: serde_yaml_ng::Error,
+    },
+    /// A board value is out of range.
+    #[error("board file {path}: `{key}` must be {expected}, found {found}")]
+    BadBoard {
+        /// The file (or `<inline>`).
+        path: PathBuf,
+        /// The key.
+        key: String,
+        /// What was expected.
+        expected: String,
+        /// What was found.
+        found: String,
+    },
+    /// An image file could not be read or decoded.
+    #[error("image {path}: cannot read or decode: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's error.
+        #[source]
+        source: image::ImageError,
+    },
+    /// The AprilTag detector could not be created.
+    #[error("AprilTag detector: {reason}")]
+    Detector {
+        /// Why.
+        reason: String,
+    },
+    /// The detector thread is gone (it panicked or was shut down).
+    #[error("AprilTag detector thread stopped unexpectedly")]
+    DetectorStopped,
+    /// The image size disagrees with the intrinsics.
+    #[error(
+        "image is {image_width}x{image_height} px but the intrinsics are for \
+         {camera_width}x{camera_height} px"
+    )]
+    ImageSizeMismatch {
+        /// Image width, px.
+        image_width: u32,
+        /// Image height, px.
+        image_height: u32,
+        /// Intrinsics width, px.
+        camera_width: u32,
+        /// Intrinsics height, px.
+        camera_height: u32,
+    },
+    /// No tag of the board was found in the image.
+    #[error("no tag of the board found in the image ({rejected} detections rejected)")]
+    NoTagsFound {
+        /// How many detections were rejected (wrong id, duplicate, hamming).
+        rejected: usize,
+    },
+    /// Too few usable corners for a pose.
+    #[error("board pose needs at least {required} corners, only {actual} usable")]
+    NotEnoughCorners {
+        /// Minimum.
+        required: usize,
+        /// Available.
+        actual: usize,
+    },
+    /// The pose estimate failed numerically.
+    #[error("board pose estimation failed: {reason}")]
+    PoseFailed {
+        /// Why.
+        reason: &'static str,
+    },
+    /// The intrinsics file is unusable.
+    #[error(transparent)]
+    Camera(#[from] CameraModelError),
+}
