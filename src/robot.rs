@@ -6,6 +6,7 @@
 //! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
 
 pub mod kinematics;
+pub mod sim;
 
 use std::time::Duration;
 
