@@ -7,6 +7,8 @@
 
 pub mod kinematics;
 pub mod sim;
+#[cfg(feature = "ur-rtde")]
+pub mod ur;
 
 use std::time::Duration;
 

@@ -233,6 +233,11 @@ impl Arm {
     /// is and the control program stops, as on a real controller.
     pub(crate) fn raise_stop(&mut self, now: Instant, emergency: bool) {
         self.advance(now);
+        self.halt(emergency);
+    }
+
+    /// Halts the arm where it is and stops the program with a safety stop.
+    fn halt(&mut self, emergency: bool) {
         self.motion = None;
         self.pending_done = false;
         self.program_running = false;
@@ -299,7 +304,7 @@ impl Arm {
             if fraction >= stop_at {
                 self.set_path_position(&motion.path, stop_at);
                 self.protective_stop_fired = true;
-                self.raise_stop(now, false);
+                self.halt(false);
                 return;
             }
         }
