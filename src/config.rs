@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::geometry::{PoseError, PoseYaml};
 use crate::plan::{CellTransforms, GenerateSpec};
 use crate::robot::{MotionLimits, WorkspaceBox};
-use crate::solve::Setup;
+use crate::solve::{Method, NoiseModel, Setup, SolveOptions};
 
 /// Ceilings on the configurable motion limits: calibration moves near people never need more.
 pub const MAX_LINEAR_SPEED: f64 = 0.5;
@@ -222,7 +222,7 @@ pub struct DetectorConfig {
     pub decimate: f32,
     /// Detector threads.
     #[serde(default = "default_threads")]
-    pub threads: usize,
+    pub threads: u8,
     /// Largest accepted number of corrected bits.
     #[serde(default)]
     pub max_hamming: u32,
@@ -231,7 +231,7 @@ pub struct DetectorConfig {
 fn default_decimate() -> f32 {
     2.0
 }
-fn default_threads() -> usize {
+fn default_threads() -> u8 {
     2
 }
 
@@ -270,6 +270,25 @@ fn default_translation_sigma_mm() -> f64 {
 }
 fn yes() -> bool {
     true
+}
+
+impl SolverConfig {
+    /// The solver options these settings mean.
+    pub fn to_options(&self) -> SolveOptions {
+        SolveOptions {
+            method: match self.method.as_str() {
+                "iterative" => Method::Iterative,
+                "closed-form" => Method::ClosedForm,
+                _ => Method::Refined,
+            },
+            noise: NoiseModel {
+                rotation_sigma_rad: self.rotation_sigma_deg.to_radians(),
+                translation_sigma_m: self.translation_sigma_mm * 1e-3,
+            },
+            drop_outliers: self.drop_outliers,
+            ..SolveOptions::default()
+        }
+    }
 }
 
 impl Default for SolverConfig {

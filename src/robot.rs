@@ -6,6 +6,9 @@
 //! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
 
 pub mod kinematics;
+pub mod sim;
+#[cfg(feature = "ur-rtde")]
+pub mod ur;
 
 use std::time::Duration;
 

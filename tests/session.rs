@@ -100,8 +100,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         prepared.config.session.max_reprojection_rms_px,
     )
     .unwrap();
-    let pairs = dataset.pairs().unwrap();
-    let again = handeye::solve::solve(dataset.setup, &pairs, &prepared.config.solver.to_options()).unwrap();
+    let again = handeye::solve::solve(dataset.setup, &dataset.pairs, &prepared.config.solver.to_options()).unwrap();
     for ((key, a), (_, b)) in again.unknowns().iter().zip(solved.calibration.unknowns().iter()) {
         let (mm, deg) = errors(a, b);
         assert!(mm < 1e-6 && deg < 1e-6, "replay of {key} differs by {mm} mm, {deg}°");
@@ -167,7 +166,7 @@ fn protective_stop_keeps_the_data_and_resume_finishes() {
     assert_eq!(outcome.visited_now, 7);
     assert_eq!(outcome.accepted, (0..12).collect::<Vec<_>>());
     let dataset = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
-    assert_eq!(dataset.samples.len(), 12);
+    assert_eq!(dataset.pairs.len(), 12);
 }
 
 #[test]

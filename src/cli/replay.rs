@@ -7,6 +7,7 @@ use clap::Args;
 
 use handeye::cell;
 use handeye::session::{replay, SessionFolder};
+use handeye::result::ResultFile;
 use handeye::solve;
 
 /// Re-detect the board in a session's frames and solve again offline.
@@ -42,14 +43,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let pairs = dataset.pairs()?;
-    let calibration = solve::solve(dataset.setup, &pairs, &prepared.config.solver.to_options())?;
+    let calibration = solve::solve(dataset.setup, &dataset.pairs, &prepared.config.solver.to_options())?;
     let output = args.output.unwrap_or_else(|| folder.root().join("replay-result.yaml"));
-    handeye::result::write_result(&output, &calibration, &pairs)?;
+    ResultFile::from_calibration(&calibration, &dataset.pairs).save(&output)?;
     println!("{}", calibration.summary());
     if folder.result_path().is_file() {
-        let recorded = handeye::result::read_result(&folder.result_path())?;
-        for ((key, now), (_, then)) in calibration.unknowns().iter().zip(recorded.unknowns().iter()) {
+        let recorded = ResultFile::load_mounts(&folder.result_path())?;
+        let then = [recorded.camera_mount, recorded.target_mount];
+        for ((key, now), then) in calibration.unknowns().iter().zip(then.iter()) {
             println!(
                 "{key}: replay differs from the recorded result by {:.4} mm, {:.5}°",
                 (now.translation.vector - then.translation.vector).norm() * 1e3,

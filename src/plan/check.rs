@@ -8,7 +8,7 @@ use std::fmt;
 use nalgebra::Point3;
 
 use crate::camera::model::CameraModel;
-use crate::geometry::{rotvec, Pose};
+use crate::geometry::Pose;
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, MotionLimits, WorkspaceBox};
 use crate::target::Board;
@@ -83,8 +83,8 @@ impl PlanReport {
 
 /// Checks every pose of `plan` and the plan as a whole.
 pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
-    let board_points = ctx.board.all_corners_in_target();
-    let centre = ctx.board.centre_in_target();
+    let board_points: Vec<Point3<f64>> = ctx.board.tags().iter().flat_map(|t| t.corners_in_target).collect();
+    let centre = board_centre(ctx.board);
     let mut previous = ctx.start_joints;
     let mut poses = Vec::with_capacity(plan.waypoints.len());
     for (index, waypoint) in plan.waypoints.iter().enumerate() {
@@ -131,6 +131,12 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         plan_problems.push(e.to_string());
     }
     PlanReport { poses, plan_problems }
+}
+
+/// The middle of the board's outline, in the target frame (the point look-at views aim at).
+pub fn board_centre(board: &Board) -> Point3<f64> {
+    let extent = board.extent();
+    Point3::new((extent.min.x + extent.max.x) / 2.0, (extent.min.y + extent.max.y) / 2.0, 0.0)
 }
 
 /// The first point of a straight joint-space move that leaves the box, as a message.
@@ -182,16 +188,22 @@ fn board_margin(camera: &CameraModel, camera_from_target: &Pose, points: &[Point
 
 impl fmt::Display for PlanReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{:>4}  {:>24}  {:>9}  {:>9}  {:>7}  status", "pose", "flange xyz (m)", "dist (m)", "margin px", "move s")?;
+        writeln!(
+            f,
+            "{:>4}  {:>24}  {:>35}  {:>8}  {:>9}  {:>6}  status",
+            "pose", "flange xyz (m)", "joints (deg)", "dist (m)", "margin px", "move s"
+        )?;
         for p in &self.poses {
             let t = p.base_from_flange.translation.vector;
-            let rv = rotvec(&p.base_from_flange.rotation);
-            let _ = rv;
             let status = if p.problems.is_empty() { "ok".to_string() } else { p.problems.join("; ") };
+            let joints = match p.joints {
+                Some(q) => q.iter().map(|v| format!("{:.0}", v.to_degrees())).collect::<Vec<_>>().join(", "),
+                None => "-".into(),
+            };
             writeln!(
                 f,
-                "{:>4}  [{:>6.3}, {:>6.3}, {:>6.3}]  {:>9.3}  {:>9.0}  {:>7.2}  {}",
-                p.index, t.x, t.y, t.z, p.distance_m, p.image_margin_px, p.move_time_s, status
+                "{:>4}  [{:>6.3}, {:>6.3}, {:>6.3}]  {:>35}  {:>8.3}  {:>9.0}  {:>6.2}  {}",
+                p.index, t.x, t.y, t.z, joints, p.distance_m, p.image_margin_px, p.move_time_s, status
             )?;
         }
         for problem in &self.plan_problems {

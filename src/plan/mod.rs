@@ -261,8 +261,7 @@ impl CellTransforms {
 
     /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
     pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
-        self.setup
-            .predict_camera_from_target(&self.camera_mount, &self.target_mount, base_from_flange)
+        crate::solve::predict(self.setup, &self.camera_mount, &self.target_mount, base_from_flange)
     }
 
     /// Turns a waypoint into a flange pose (joint waypoints go through forward kinematics).

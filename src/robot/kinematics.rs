@@ -49,7 +49,16 @@ pub struct UrModel {
 /// UR's twist angles, the same for every arm of the family.
 const UR_ALPHA: [f64; 6] = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
 /// Default joint limits: ±2π on every joint, as the controller ships.
-const UR_LIMITS: [(f64, f64); 6] = [(-TAU, TAU); 6];
+// e-Series ranges (Universal Robots' published limits, as in ur_description): ±360° on every
+// joint except the elbow, which its cabling limits to ±180°.
+const UR_LIMITS: [(f64, f64); 6] = [
+    (-TAU, TAU),
+    (-TAU, TAU),
+    (-PI, PI),
+    (-TAU, TAU),
+    (-TAU, TAU),
+    (-TAU, TAU),
+];
 
 impl UrModel {
     /// The UR5e (Universal Robots' published DH parameters).

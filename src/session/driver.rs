@@ -9,10 +9,10 @@ use std::time::{Duration, Instant};
 
 use crate::camera::model::CameraModel;
 use crate::camera::{Camera, Frame};
-use crate::dataset::{Dataset, Sample};
+use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
 use crate::robot::{Joints, MotionLimits, Robot};
-use crate::solve::Setup;
+use crate::solve::{PosePair, Setup};
 use crate::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 
 use super::folder::{PoseVisit, SessionFolder};
@@ -110,145 +110,143 @@ pub fn run_session(
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
     let worker = spawn_worker(&setup, camera.model().clone(), previous, job_rx, result_tx)?;
 
-    let mut outcome = SessionOutcome::default();
-    let mut attempts: BTreeMap<usize, usize> = failed_before.iter().map(|i| (*i, 1)).collect();
-    let mut in_flight = 0usize;
-    let mut run_error: Option<SessionError> = None;
-
-    let mut handle = |result: JobResult,
-                      pending_retries: &mut Vec<usize>,
-                      outcome: &mut SessionOutcome,
-                      attempts: &mut BTreeMap<usize, usize>,
-                      run_error: &mut Option<SessionError>| {
-        let i = result.plan_index;
-        match result.visit {
-            Ok(visit) => {
-                let tries = attempts.entry(i).or_insert(0);
-                *tries += 1;
-                let will_retry = visit.rejected.is_some() && *tries < 2;
-                if visit.rejected.is_none() {
-                    outcome.accepted.push(i);
-                } else if will_retry {
-                    pending_retries.push(i);
-                } else {
-                    outcome.skipped.push((i, visit.rejected.clone().unwrap_or_default()));
-                }
-                on_event(SessionEvent::Recorded {
-                    plan_index: i,
-                    reprojection_rms_px: visit.reprojection_rms_px,
-                    tags: visit.tags,
-                    rejected: visit.rejected.clone(),
-                    will_retry,
-                });
-            }
-            Err(e) => {
-                run_error.get_or_insert(e);
-            }
-        }
+    let mut state = RunState {
+        outcome: SessionOutcome::default(),
+        attempts: failed_before.iter().map(|i| (*i, 1)).collect(),
+        retries: Vec::new(),
+        in_flight: 0,
+        error: None,
+        recorded_before: accepted.len(),
     };
 
-    let recorded = |outcome: &SessionOutcome| accepted.len() + outcome.accepted.len() + outcome.skipped.len();
     'passes: while !pending.is_empty() {
-        let mut retries = Vec::new();
         for &plan_index in &pending {
-            if run_error.is_some() {
+            if state.error.is_some() {
                 break 'passes;
             }
             if setup.stop.load(Ordering::SeqCst) {
                 let _ = robot.stop();
-                run_error = Some(SessionError::Interrupted {
+                state.drain(&result_rx, on_event);
+                state.error = Some(SessionError::Interrupted {
                     plan_index,
-                    recorded: recorded(&outcome),
+                    recorded: state.recorded(),
                     folder: setup.folder.root().to_path_buf(),
                 });
                 break 'passes;
             }
             on_event(SessionEvent::Moving { plan_index });
-            let (_, joints) = &setup.plan[plan_index];
-            let captured = robot
-                .move_joints(joints, &setup.limits)
-                .and_then(|()| {
-                    std::thread::sleep(setup.settle);
-                    Ok(Instant::now())
-                })
-                .map_err(|e| (true, e.into()))
-                .and_then(|settled| {
-                    camera.grab(settled).map_err(|e| (false, ErrorSource::Camera(e)))
-                })
-                .and_then(|frame| {
-                    robot
-                        .base_from_flange()
-                        .map(|pose| (frame, pose))
-                        .map_err(|e| (true, e.into()))
-                });
-            match captured {
+            match capture(robot, camera, &setup, plan_index) {
                 Ok((frame, base_from_flange)) => {
-                    outcome.visited_now += 1;
-                    in_flight += 1;
+                    state.outcome.visited_now += 1;
+                    state.in_flight += 1;
                     job_tx
                         .send(Job { plan_index, frame, base_from_flange })
                         .map_err(|_| SessionError::Detection("the detection thread stopped".into()))?;
                 }
-                Err((_, source)) => {
+                Err(source) => {
+                    // Stop first, then let the worker finish what it has so the count is true.
                     let _ = robot.stop();
-                    // Let the worker finish what it has, so the count below is true.
-                    while in_flight > 0 {
-                        match result_rx.recv() {
-                            Ok(r) => {
-                                in_flight -= 1;
-                                handle(r, &mut retries, &mut outcome, &mut attempts, &mut run_error);
-                            }
-                            Err(_) => break,
-                        }
-                    }
+                    state.drain(&result_rx, on_event);
                     let folder = setup.folder.root().to_path_buf();
-                    let recorded = recorded(&outcome);
-                    run_error = Some(match source {
+                    let recorded = state.recorded();
+                    state.error = Some(match source {
                         ErrorSource::Robot(source) => SessionError::Robot { plan_index, recorded, folder, source },
                         ErrorSource::Camera(source) => SessionError::Camera { plan_index, recorded, folder, source },
                     });
                     break 'passes;
                 }
             }
-            while let Ok(r) = result_rx.try_recv() {
-                in_flight -= 1;
-                handle(r, &mut retries, &mut outcome, &mut attempts, &mut run_error);
+            while let Ok(result) = result_rx.try_recv() {
+                state.handle(result, on_event);
             }
         }
-        // Every result must be in before deciding on retries.
-        while in_flight > 0 {
-            match result_rx.recv() {
-                Ok(r) => {
-                    in_flight -= 1;
-                    handle(r, &mut retries, &mut outcome, &mut attempts, &mut run_error);
-                }
-                Err(_) => break,
-            }
-        }
-        pending = retries;
+        // Every result of this pass must be in before deciding on retries.
+        state.drain(&result_rx, on_event);
+        pending = std::mem::take(&mut state.retries);
     }
     drop(job_tx);
-    while in_flight > 0 {
-        match result_rx.recv() {
-            Ok(r) => {
-                in_flight -= 1;
-                let mut ignored = Vec::new();
-                handle(r, &mut ignored, &mut outcome, &mut attempts, &mut run_error);
-            }
-            Err(_) => break,
-        }
-    }
+    state.drain(&result_rx, on_event);
     let worker_result = worker.join();
-    if let Some(e) = run_error {
+    if let Some(e) = state.error {
         return Err(e);
     }
     if worker_result.is_err() {
         return Err(SessionError::Detection("the detection thread panicked".into()));
     }
+    let mut outcome = state.outcome;
     outcome.accepted.extend(accepted);
     outcome.accepted.sort_unstable();
     outcome.accepted.dedup();
     Ok(outcome)
+}
+
+/// Book-keeping of a run in progress.
+struct RunState {
+    outcome: SessionOutcome,
+    attempts: BTreeMap<usize, usize>,
+    retries: Vec<usize>,
+    in_flight: usize,
+    error: Option<SessionError>,
+    recorded_before: usize,
+}
+
+impl RunState {
+    fn recorded(&self) -> usize {
+        self.recorded_before + self.outcome.accepted.len() + self.outcome.skipped.len()
+    }
+
+    fn handle(&mut self, result: JobResult, on_event: &mut dyn FnMut(SessionEvent)) {
+        self.in_flight -= 1;
+        let i = result.plan_index;
+        let visit = match result.visit {
+            Ok(visit) => visit,
+            Err(e) => {
+                self.error.get_or_insert(e);
+                return;
+            }
+        };
+        let tries = self.attempts.entry(i).or_insert(0);
+        *tries += 1;
+        let will_retry = visit.rejected.is_some() && *tries < 2;
+        match &visit.rejected {
+            None => self.outcome.accepted.push(i),
+            Some(_) if will_retry => self.retries.push(i),
+            Some(why) => self.outcome.skipped.push((i, why.clone())),
+        }
+        on_event(SessionEvent::Recorded {
+            plan_index: i,
+            reprojection_rms_px: visit.reprojection_rms_px,
+            tags: visit.tags,
+            rejected: visit.rejected,
+            will_retry,
+        });
+    }
+
+    /// Waits for every job in flight.
+    fn drain(&mut self, results: &mpsc::Receiver<JobResult>, on_event: &mut dyn FnMut(SessionEvent)) {
+        while self.in_flight > 0 {
+            match results.recv() {
+                Ok(result) => self.handle(result, on_event),
+                Err(_) => break,
+            }
+        }
+    }
+}
+
+/// Move, settle, grab a fresh frame, read the measured flange pose.
+fn capture(
+    robot: &mut dyn Robot,
+    camera: &mut dyn Camera,
+    setup: &SessionSetup,
+    plan_index: usize,
+) -> Result<(Frame, Pose), ErrorSource> {
+    let (_, joints) = &setup.plan[plan_index];
+    robot.move_joints(joints, &setup.limits)?;
+    std::thread::sleep(setup.settle);
+    let settled = Instant::now();
+    let frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+    let base_from_flange = robot.base_from_flange()?;
+    Ok((frame, base_from_flange))
 }
 
 enum ErrorSource {
@@ -275,24 +273,20 @@ fn spawn_worker(
     let folder = setup.folder.clone();
     let session_setup = setup.setup;
     let max_rms = setup.max_reprojection_rms_px;
-    let mut samples: BTreeMap<usize, Sample> = previous
-        .iter()
-        .filter_map(|v| {
-            let camera_from_target = v.camera_from_target.as_ref()?;
-            Some((v.plan_index, sample_of(v.plan_index, &v.base_from_flange, camera_from_target)))
-        })
-        .collect();
+    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
+    for visit in &previous {
+        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&folder.root().join("poses"))? {
+            samples.insert(visit.plan_index, sample_of(visit.plan_index, base_from_flange, camera_from_target));
+        }
+    }
     Ok(std::thread::Builder::new()
         .name("detection".into())
         .spawn(move || {
             for job in jobs {
                 let visit = process(&job, &detector, &board, &camera_model, &folder, max_rms).and_then(|visit| {
-                    if let Some(camera_from_target) = &visit.camera_from_target {
-                        samples.insert(
-                            visit.plan_index,
-                            sample_of(visit.plan_index, &visit.base_from_flange, camera_from_target),
-                        );
-                        let dataset = Dataset { setup: session_setup, samples: samples.values().cloned().collect() };
+                    if let (base_from_flange, Some(camera_from_target)) = visit.poses(&folder.root().join("poses"))? {
+                        samples.insert(visit.plan_index, sample_of(visit.plan_index, base_from_flange, camera_from_target));
+                        let dataset = Dataset { setup: session_setup, pairs: samples.values().cloned().collect() };
                         dataset.save(&folder.samples_path()).map_err(|e| SessionError::Detection(e.to_string()))?;
                     }
                     Ok(visit)
@@ -305,13 +299,9 @@ fn spawn_worker(
         .expect("spawn the detection thread"))
 }
 
-fn sample_of(plan_index: usize, base_from_flange: &PoseYaml, camera_from_target: &PoseYaml) -> Sample {
-    Sample {
-        id: Some(format!("pose-{plan_index:03}")),
-        weight: None,
-        base_from_flange: base_from_flange.clone(),
-        camera_from_target: camera_from_target.clone(),
-    }
+/// The solver sample of a plan pose; its id ties it to the frame and record files.
+pub(crate) fn sample_of(plan_index: usize, base_from_flange: Pose, camera_from_target: Pose) -> PosePair {
+    PosePair { id: Some(format!("pose-{plan_index:03}")), ..PosePair::new(base_from_flange, camera_from_target) }
 }
 
 fn process(

@@ -2,10 +2,10 @@
 //! check a result, or to re-run with other detector or solver settings.
 
 use crate::camera::model::CameraModel;
-use crate::dataset::{Dataset, Sample};
+use crate::dataset::Dataset;
 use crate::target::{Board, DetectorOptions, TagDetector};
 
-use super::driver::measure;
+use super::driver::{measure, sample_of};
 use super::{PoseVisit, SessionError, SessionFolder};
 
 /// Re-detects every saved frame of `folder` and returns the dataset the frames give now, with the
@@ -35,15 +35,10 @@ pub fn redetect(
             max_rms,
             PoseVisit::new(recorded.plan_index, &base_from_flange, recorded.frame.clone()),
         );
-        if let Some(camera_from_target) = &visit.camera_from_target {
-            samples.push(Sample {
-                id: Some(format!("pose-{:03}", visit.plan_index)),
-                weight: None,
-                base_from_flange: visit.base_from_flange.clone(),
-                camera_from_target: camera_from_target.clone(),
-            });
+        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&frame_path)? {
+            samples.push(sample_of(visit.plan_index, base_from_flange, camera_from_target));
         }
         visits.push(visit);
     }
-    Ok((Dataset { setup: manifest.setup, samples }, visits))
+    Ok((Dataset { setup: manifest.setup, pairs: samples }, visits))
 }

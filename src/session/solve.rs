@@ -3,6 +3,7 @@
 
 use crate::config::CellConfig;
 use crate::dataset::Dataset;
+use crate::result::ResultFile;
 use crate::geometry::Pose;
 use crate::plan::CellTransforms;
 use crate::solve::{self, Calibration};
@@ -21,9 +22,10 @@ pub struct SolvedSession {
 pub fn solve_folder(folder: &SessionFolder, config: &CellConfig) -> Result<SolvedSession, SessionError> {
     let dataset = Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
     let options = config.solver.to_options();
-    let pairs = dataset.pairs().map_err(|e| SessionError::Solve(e.to_string()))?;
-    let calibration = solve::solve(dataset.setup, &pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
-    crate::result::write_result(&folder.result_path(), &calibration, &pairs)
+    let calibration =
+        solve::solve(dataset.setup, &dataset.pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
+    ResultFile::from_calibration(&calibration, &dataset.pairs)
+        .save(&folder.result_path())
         .map_err(|e| SessionError::Solve(e.to_string()))?;
     let summary = calibration.summary();
     Ok(SolvedSession { calibration, summary })

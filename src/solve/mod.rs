@@ -731,3 +731,54 @@ fn solve_subset(
         warnings,
     })
 }
+
+impl Calibration {
+    /// A short summary for a terminal: solver run, both unknowns with their 1-sigma, residuals,
+    /// outliers and warnings.
+    pub fn summary(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::new();
+        let s = &self.solver;
+        let _ = writeln!(
+            out,
+            "setup {}, method {} ({} iterations, {}converged, {} restarts)",
+            self.setup,
+            s.method.name(),
+            s.iterations,
+            if s.converged { "" } else { "NOT " },
+            s.restarts
+        );
+        let sigmas = self.uncertainty.as_ref().map(|u| [u.camera_mount, u.target_mount]);
+        for (k, (name, pose)) in self.unknowns().iter().enumerate() {
+            let t = pose.translation.vector * 1e3;
+            let rv = crate::geometry::rotvec(&pose.rotation);
+            let _ = writeln!(
+                out,
+                "{name}: translation [{:.2}, {:.2}, {:.2}] mm, rotation_vector [{:.5}, {:.5}, {:.5}] rad ({:.3}°)",
+                t.x,
+                t.y,
+                t.z,
+                rv.x,
+                rv.y,
+                rv.z,
+                rv.norm().to_degrees()
+            );
+            if let Some(sigma) = sigmas {
+                let _ = writeln!(out, "    1-sigma {:.4}°, {:.3} mm", sigma[k].rotation_deg, sigma[k].translation_mm);
+            }
+        }
+        let r = &self.residuals;
+        let _ = write!(
+            out,
+            "residuals: rotation RMS {:.4}° (max {:.4}°), translation RMS {:.3} mm (max {:.3} mm)",
+            r.rotation_rms_deg, r.rotation_max_deg, r.translation_rms_mm, r.translation_max_mm
+        );
+        if !self.outliers.is_empty() {
+            let _ = write!(out, "\noutliers (sample indices): {:?}", self.outliers);
+        }
+        for warning in &self.warnings {
+            let _ = write!(out, "\nwarning: {warning}");
+        }
+        out
+    }
+}

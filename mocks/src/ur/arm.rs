@@ -1,0 +1,586 @@
+//! The mock controller's arm and program state, shared by every connection: joint positions,
+//! motion interpolation, the RTDE registers, and an emulation of the command loop of ur_rtde's
+//! control script (`rtde_control.script`). State advances lazily: every reader or writer calls
+//! [`Arm::advance`] with the current time first, so no thread ticks while nobody is connected.
+//!
+//! Frames: `T_base_flange` from the kinematics; the TCP pose the controller reports is
+//! `T_base_tcp = T_base_flange * T_flange_tcp`. Metres, radians, rotation vectors on the wire.
+
+use std::time::{Duration, Instant};
+
+use handeye::geometry::{pose_from_rotvec, rotvec, Pose};
+use handeye::robot::kinematics::UrModel;
+use handeye::robot::Joints;
+use nalgebra::{Isometry3, Translation3, Vector3};
+
+use super::MockFaults;
+
+/// Number of general-purpose RTDE registers of each kind (0..47, upper range included).
+pub(crate) const REGISTERS: usize = 48;
+
+/// `runtime_state` values (ur_rtde's RuntimeState).
+pub(crate) const RUNTIME_STOPPED: u32 = 1;
+/// The control program is running.
+pub(crate) const RUNTIME_PLAYING: u32 = 2;
+
+/// `safety_status_bits`: normal mode.
+const SAFETY_NORMAL: u32 = 1 << 0;
+/// `safety_status_bits`: protective stop.
+pub(crate) const SAFETY_PROTECTIVE_STOP: u32 = 1 << 2;
+/// `safety_status_bits`: emergency stop (any source).
+pub(crate) const SAFETY_EMERGENCY_STOP: u32 = 1 << 7;
+/// `safety_status_bits`: stopped due to safety.
+const SAFETY_STOPPED_DUE_TO_SAFETY: u32 = 1 << 10;
+
+/// Control-script handshake values in `output_int_register_0`.
+const SCRIPT_READY: i32 = 1;
+const SCRIPT_DONE: i32 = 2;
+
+/// Rotation rate (rad/s) of a linear move that only turns the tool: UR's movel speed is a
+/// translation speed, so the mock needs some rate for pure rotations.
+const LINEAR_MOVE_ROTATION_SPEED: f64 = std::f64::consts::FRAC_PI_2;
+
+/// Command ids of ur_rtde 1.6.5 (`RTDE::RobotCommand::Type`) that the mock understands.
+mod cmd {
+    pub const MOVEJ: i32 = 1;
+    pub const MOVEJ_IK: i32 = 2;
+    pub const MOVEL: i32 = 3;
+    pub const MOVEL_FK: i32 = 4;
+    pub const SET_TCP: i32 = 29;
+    pub const STOPL: i32 = 33;
+    pub const STOPJ: i32 = 34;
+    pub const GET_TCP_OFFSET: i32 = 40;
+    pub const GET_FORWARD_KINEMATICS_DEFAULT: i32 = 43;
+    pub const GET_ACTUAL_TOOL_FLANGE_POSE: i32 = 58;
+    pub const STOP_SCRIPT: i32 = 255;
+    /// Commands the script runs and then signals "ready" instead of "done".
+    pub const REALTIME: [i32; 16] = [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71];
+}
+
+#[derive(Debug, Clone, Copy)]
+enum MotionPath {
+    Joint { from: Joints, to: Joints },
+    Linear { from: Pose, to: Pose },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    path: MotionPath,
+    started: Instant,
+    duration: Duration,
+    /// The stall fault: the arm never leaves the start.
+    stalled: bool,
+    /// Fraction of the path at which an injected protective stop halts the arm.
+    protective_stop_at: Option<f64>,
+    asynchronous: bool,
+}
+
+/// The arm and controller state of one mock.
+#[derive(Debug)]
+pub(crate) struct Arm {
+    model: UrModel,
+    flange_from_tcp: Pose,
+    instant_moves: bool,
+    faults: MockFaults,
+    epoch: Instant,
+    joints: Joints,
+    motion: Option<Motion>,
+    moves_started: usize,
+    moves_completed: usize,
+    program_running: bool,
+    executing_cmd: bool,
+    /// A synchronous command (a move) whose "done" the script has not signalled yet.
+    pending_done: bool,
+    pub(crate) in_int: [i32; REGISTERS],
+    pub(crate) in_double: [f64; REGISTERS],
+    out_int: [i32; REGISTERS],
+    out_double: [f64; REGISTERS],
+    /// 0, or 24 when the client uses the upper register range.
+    reg_offset: usize,
+    safety_bits: u32,
+    async_op_id: i32,
+    async_wr_count: i32,
+    protective_stop_fired: bool,
+    scripts_received: usize,
+}
+
+/// A consistent snapshot for one outgoing data package.
+#[derive(Debug, Clone)]
+pub(crate) struct Snapshot {
+    pub timestamp: f64,
+    pub joints: Joints,
+    pub target_joints: Joints,
+    pub tcp_pose: [f64; 6],
+    pub target_tcp_pose: [f64; 6],
+    pub joint_speeds: Joints,
+    pub runtime_state: u32,
+    pub robot_status_bits: u32,
+    pub safety_status_bits: u32,
+    pub safety_mode: i32,
+    pub out_int: [i32; REGISTERS],
+    pub out_double: [f64; REGISTERS],
+}
+
+/// `[x, y, z, rx, ry, rz]` of a pose, the UR wire form.
+pub(crate) fn to_ur_vector(pose: &Pose) -> [f64; 6] {
+    let t = pose.translation.vector;
+    let r = rotvec(&pose.rotation);
+    [t.x, t.y, t.z, r.x, r.y, r.z]
+}
+
+/// The pose of a UR `[x, y, z, rx, ry, rz]` vector.
+pub(crate) fn from_ur_vector(v: &[f64]) -> Pose {
+    pose_from_rotvec(
+        Vector3::new(v[0], v[1], v[2]),
+        Vector3::new(v[3], v[4], v[5]),
+    )
+}
+
+impl Arm {
+    pub(crate) fn new(
+        model: UrModel,
+        start: Joints,
+        flange_from_tcp: Pose,
+        instant_moves: bool,
+        faults: MockFaults,
+    ) -> Self {
+        Arm {
+            model,
+            flange_from_tcp,
+            instant_moves,
+            faults,
+            epoch: Instant::now(),
+            joints: start,
+            motion: None,
+            moves_started: 0,
+            moves_completed: 0,
+            program_running: false,
+            executing_cmd: false,
+            pending_done: false,
+            in_int: [0; REGISTERS],
+            in_double: [0.0; REGISTERS],
+            out_int: [0; REGISTERS],
+            out_double: [0.0; REGISTERS],
+            reg_offset: 0,
+            safety_bits: SAFETY_NORMAL,
+            async_op_id: 0,
+            async_wr_count: 0,
+            protective_stop_fired: false,
+            scripts_received: 0,
+        }
+    }
+
+    pub(crate) fn joints(&self) -> Joints {
+        self.joints
+    }
+
+    pub(crate) fn base_from_flange(&self) -> Pose {
+        self.model.forward(&self.joints)
+    }
+
+    pub(crate) fn base_from_tcp(&self) -> Pose {
+        self.base_from_flange() * self.flange_from_tcp
+    }
+
+    pub(crate) fn moves_completed(&self) -> usize {
+        self.moves_completed
+    }
+
+    pub(crate) fn moves_started(&self) -> usize {
+        self.moves_started
+    }
+
+    pub(crate) fn program_running(&self) -> bool {
+        self.program_running
+    }
+
+    pub(crate) fn scripts_received(&self) -> usize {
+        self.scripts_received
+    }
+
+    pub(crate) fn is_moving(&self) -> bool {
+        self.motion.is_some()
+    }
+
+    pub(crate) fn set_register_offset(&mut self, offset: usize) {
+        self.reg_offset = offset;
+    }
+
+    /// Whether the "drop the connection" fault has fired.
+    pub(crate) fn connection_dropped(&self) -> bool {
+        self.faults
+            .drop_connection_after_moves
+            .is_some_and(|k| self.moves_completed >= k)
+    }
+
+    /// Whether the "stop streaming" fault has fired.
+    pub(crate) fn streaming_stopped(&self) -> bool {
+        self.faults
+            .stop_streaming_after_moves
+            .is_some_and(|k| self.moves_completed >= k)
+    }
+
+    /// Whether a protective or emergency stop is active.
+    pub(crate) fn safety_stopped(&self) -> bool {
+        self.safety_bits & (SAFETY_PROTECTIVE_STOP | SAFETY_EMERGENCY_STOP) != 0
+    }
+
+    pub(crate) fn safety_bits(&self) -> u32 {
+        self.safety_bits
+    }
+
+    /// Raises a protective stop (or, with `emergency`, an emergency stop): the arm halts where it
+    /// is and the control program stops, as on a real controller.
+    pub(crate) fn raise_stop(&mut self, now: Instant, emergency: bool) {
+        self.advance(now);
+        self.halt(emergency);
+    }
+
+    /// Halts the arm where it is and stops the program with a safety stop.
+    fn halt(&mut self, emergency: bool) {
+        self.motion = None;
+        self.pending_done = false;
+        self.program_running = false;
+        self.executing_cmd = false;
+        self.safety_bits = SAFETY_STOPPED_DUE_TO_SAFETY
+            | if emergency {
+                SAFETY_EMERGENCY_STOP
+            } else {
+                SAFETY_PROTECTIVE_STOP
+            };
+    }
+
+    /// Clears protective and emergency stops (the dashboard's "unlock protective stop", or a
+    /// person at the pendant). The program stays stopped until a script is uploaded again.
+    pub(crate) fn clear_stops(&mut self) {
+        self.safety_bits = SAFETY_NORMAL;
+    }
+
+    /// A complete control program arrived on the script port: start it, as the controller runs a
+    /// program sent to the secondary/real-time interface.
+    pub(crate) fn start_program(&mut self, now: Instant) {
+        self.advance(now);
+        self.scripts_received += 1;
+        if self.safety_stopped() {
+            return; // a stopped controller refuses to run programs
+        }
+        self.program_running = true;
+        self.executing_cmd = false;
+        self.pending_done = false;
+        self.motion = None;
+        self.write_async_progress(-1);
+        self.out_int[self.reg_offset] = SCRIPT_READY;
+    }
+
+    /// The dashboard's "stop": stops the program and any motion.
+    pub(crate) fn stop_program(&mut self, now: Instant) {
+        self.advance(now);
+        self.motion = None;
+        self.pending_done = false;
+        self.program_running = false;
+        self.executing_cmd = false;
+    }
+
+    /// Brings the state up to `now`: moves the arm along its path, finishes moves, then runs one
+    /// iteration of the control script's command loop.
+    pub(crate) fn advance(&mut self, now: Instant) {
+        self.step_motion(now);
+        self.step_script(now);
+    }
+
+    fn step_motion(&mut self, now: Instant) {
+        let Some(motion) = self.motion else { return };
+        if motion.stalled {
+            return;
+        }
+        let fraction = if motion.duration.is_zero() {
+            1.0
+        } else {
+            (now.saturating_duration_since(motion.started).as_secs_f64()
+                / motion.duration.as_secs_f64())
+            .min(1.0)
+        };
+        if let Some(stop_at) = motion.protective_stop_at {
+            if fraction >= stop_at {
+                self.set_path_position(&motion.path, stop_at);
+                self.protective_stop_fired = true;
+                self.halt(false);
+                return;
+            }
+        }
+        self.set_path_position(&motion.path, fraction);
+        if fraction >= 1.0 {
+            self.motion = None;
+            self.moves_completed += 1;
+            if motion.asynchronous {
+                self.write_async_progress(-1);
+            } else if self.pending_done {
+                self.pending_done = false;
+                self.out_int[self.reg_offset] = SCRIPT_DONE;
+            }
+        } else if motion.asynchronous {
+            self.write_async_progress((fraction * 1000.0) as i32);
+        }
+    }
+
+    /// Puts the arm at `fraction` of `path`.
+    fn set_path_position(&mut self, path: &MotionPath, fraction: f64) {
+        match *path {
+            MotionPath::Joint { from, to } => {
+                self.joints = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * fraction);
+            }
+            MotionPath::Linear { from, to } => {
+                let pose = Isometry3::from_parts(
+                    Translation3::from(
+                        from.translation
+                            .vector
+                            .lerp(&to.translation.vector, fraction),
+                    ),
+                    from.rotation.slerp(&to.rotation, fraction),
+                );
+                // Stay on the branch the arm is on: nearest solution to the current joints.
+                if let Some(q) = self.model.inverse_nearest(&pose, &self.joints) {
+                    self.joints = q;
+                }
+            }
+        }
+    }
+
+    fn step_script(&mut self, now: Instant) {
+        if !self.program_running || self.pending_done {
+            return;
+        }
+        let off = self.reg_offset;
+        let command = self.in_int[off];
+        if cmd::REALTIME.contains(&command) {
+            self.process(command, now);
+            self.out_int[off] = SCRIPT_READY;
+        } else if command == 0 {
+            self.executing_cmd = false;
+            self.out_int[off] = SCRIPT_READY;
+        } else if !self.executing_cmd {
+            self.executing_cmd = true;
+            match self.process(command, now) {
+                Outcome::Done => self.out_int[off] = SCRIPT_DONE,
+                Outcome::Pending => self.pending_done = true,
+                Outcome::Exit => {
+                    self.program_running = false;
+                    self.executing_cmd = false;
+                    self.motion = None;
+                }
+            }
+        }
+    }
+
+    fn input_vector6(&self, first: usize) -> [f64; 6] {
+        std::array::from_fn(|i| self.in_double[self.reg_offset + first + i])
+    }
+
+    fn write_output_vector6(&mut self, first: usize, v: &[f64; 6]) {
+        for (i, x) in v.iter().enumerate() {
+            self.out_double[self.reg_offset + first + i] = *x;
+        }
+    }
+
+    /// The async progress register, in the control script's bit layout.
+    fn write_async_progress(&mut self, value: i32) {
+        self.async_wr_count = (self.async_wr_count + 1) % 128;
+        if value == 0 {
+            self.async_op_id = (self.async_op_id + 1) % 128;
+        }
+        let mut reg = self.async_wr_count * 65536 + self.async_op_id * 16_777_216;
+        if value >= 0 {
+            reg += value.min(32767) + 32768;
+        }
+        self.out_int[self.reg_offset + 2] = reg;
+    }
+
+    fn process(&mut self, command: i32, now: Instant) -> Outcome {
+        let asynchronous = self.in_int[self.reg_offset + 1] == 1;
+        match command {
+            cmd::MOVEJ | cmd::MOVEJ_IK | cmd::MOVEL | cmd::MOVEL_FK => {
+                let speed = self.in_double[self.reg_offset + 6];
+                let target = self.input_vector6(0);
+                let path = match command {
+                    cmd::MOVEJ => MotionPath::Joint {
+                        from: self.joints,
+                        to: target,
+                    },
+                    cmd::MOVEJ_IK => {
+                        let flange = from_ur_vector(&target) * self.flange_from_tcp.inverse();
+                        match self.model.inverse_nearest(&flange, &self.joints) {
+                            Some(to) => MotionPath::Joint {
+                                from: self.joints,
+                                to,
+                            },
+                            None => return self.script_error(now, "movej_ik: no IK solution"),
+                        }
+                    }
+                    cmd::MOVEL => MotionPath::Linear {
+                        from: self.base_from_flange(),
+                        to: from_ur_vector(&target) * self.flange_from_tcp.inverse(),
+                    },
+                    _ => MotionPath::Linear {
+                        from: self.base_from_flange(),
+                        to: self.model.forward(&target),
+                    },
+                };
+                if let MotionPath::Linear { to, .. } = path {
+                    if self.model.inverse_nearest(&to, &self.joints).is_none() {
+                        return self.script_error(now, "movel: target not reachable");
+                    }
+                }
+                self.start_motion(path, speed, now, asynchronous)
+            }
+            cmd::STOPL | cmd::STOPJ => {
+                // Deceleration is not modelled: the arm halts where it is.
+                self.step_motion(now);
+                if self.motion.take().is_some_and(|m| m.asynchronous) {
+                    self.write_async_progress(-1);
+                }
+                Outcome::Done
+            }
+            cmd::SET_TCP => {
+                self.flange_from_tcp = from_ur_vector(&self.input_vector6(0));
+                Outcome::Done
+            }
+            cmd::GET_TCP_OFFSET => {
+                let v = to_ur_vector(&self.flange_from_tcp);
+                self.write_output_vector6(0, &v);
+                Outcome::Done
+            }
+            cmd::GET_FORWARD_KINEMATICS_DEFAULT => {
+                let v = to_ur_vector(&self.base_from_tcp());
+                self.write_output_vector6(0, &v);
+                Outcome::Done
+            }
+            cmd::GET_ACTUAL_TOOL_FLANGE_POSE => {
+                let v = to_ur_vector(&self.base_from_flange());
+                self.write_output_vector6(0, &v);
+                Outcome::Done
+            }
+            cmd::STOP_SCRIPT => Outcome::Exit,
+            // Anything else (I/O, payload, watchdog, ...) has no effect on the mock arm.
+            _ => Outcome::Done,
+        }
+    }
+
+    /// A runtime error in the control script ends the program, as on the controller.
+    fn script_error(&mut self, _now: Instant, message: &str) -> Outcome {
+        eprintln!("mock-ur: control script error: {message}; program stopped");
+        Outcome::Exit
+    }
+
+    fn start_motion(
+        &mut self,
+        path: MotionPath,
+        speed: f64,
+        now: Instant,
+        asynchronous: bool,
+    ) -> Outcome {
+        let index = self.moves_started;
+        self.moves_started += 1;
+        let duration = if self.instant_moves || !(speed.is_finite() && speed > 0.0) {
+            Duration::ZERO
+        } else {
+            let seconds = match path {
+                MotionPath::Joint { from, to } => {
+                    from.iter()
+                        .zip(&to)
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0, f64::max)
+                        / speed
+                }
+                MotionPath::Linear { from, to } => {
+                    let distance = (to.translation.vector - from.translation.vector).norm();
+                    let angle = from.rotation.angle_to(&to.rotation);
+                    (distance / speed).max(angle / LINEAR_MOVE_ROTATION_SPEED)
+                }
+            };
+            Duration::from_secs_f64(seconds)
+        };
+        let protective_stop_at = match self.faults.protective_stop_after_moves {
+            Some(k) if !self.protective_stop_fired && self.moves_completed >= k => Some(0.5),
+            _ => None,
+        };
+        self.motion = Some(Motion {
+            path,
+            started: now,
+            duration,
+            stalled: self.faults.stall_move == Some(index),
+            protective_stop_at,
+            asynchronous,
+        });
+        if asynchronous {
+            self.write_async_progress(0);
+            Outcome::Done
+        } else {
+            Outcome::Pending
+        }
+    }
+
+    /// The state for one data package.
+    pub(crate) fn snapshot(&mut self, now: Instant) -> Snapshot {
+        self.advance(now);
+        let target_joints = match self.motion {
+            Some(Motion {
+                path: MotionPath::Joint { to, .. },
+                ..
+            }) => to,
+            _ => self.joints,
+        };
+        let target_tcp = match self.motion {
+            Some(Motion {
+                path: MotionPath::Linear { to, .. },
+                ..
+            }) => to * self.flange_from_tcp,
+            _ => self.model.forward(&target_joints) * self.flange_from_tcp,
+        };
+        let joint_speeds = match self.motion {
+            Some(Motion {
+                path: MotionPath::Joint { from, to },
+                duration,
+                stalled: false,
+                ..
+            }) if !duration.is_zero() => {
+                std::array::from_fn(|i| (to[i] - from[i]) / duration.as_secs_f64())
+            }
+            _ => [0.0; 6],
+        };
+        let safety_mode = if self.safety_bits & SAFETY_EMERGENCY_STOP != 0 {
+            7 // ROBOT_EMERGENCY_STOP
+        } else if self.safety_bits & SAFETY_PROTECTIVE_STOP != 0 {
+            3 // PROTECTIVE_STOP
+        } else {
+            1 // NORMAL
+        };
+        Snapshot {
+            timestamp: now.saturating_duration_since(self.epoch).as_secs_f64(),
+            joints: self.joints,
+            target_joints,
+            tcp_pose: to_ur_vector(&self.base_from_tcp()),
+            target_tcp_pose: to_ur_vector(&target_tcp),
+            joint_speeds,
+            runtime_state: if self.program_running {
+                RUNTIME_PLAYING
+            } else {
+                RUNTIME_STOPPED
+            },
+            // Power on, brakes released; bit 1 = program running.
+            robot_status_bits: 1 | if self.program_running { 2 } else { 0 },
+            safety_status_bits: self.safety_bits,
+            safety_mode,
+            out_int: self.out_int,
+            out_double: self.out_double,
+        }
+    }
+}
+
+enum Outcome {
+    /// The command finished: signal done.
+    Done,
+    /// A synchronous move started: signal done when it arrives.
+    Pending,
+    /// Stop the program (stopScript, or a script runtime error).
+    Exit,
+}

@@ -1,0 +1,57 @@
+//! One script-port connection (TCP 30003): receives URScript programs. A complete
+//! `def ...():` ... `end` program starts the emulated control program; bytes are otherwise
+//! ignored (the real port also streams robot state, which ur_rtde does not read).
+
+use std::io::{ErrorKind, Read};
+use std::net::TcpStream;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use super::Shared;
+
+/// Whether `text` holds a complete program: a `def` line and a final `end` line.
+pub(crate) fn is_complete_program(text: &str) -> bool {
+    let trimmed = text.trim_end();
+    trimmed.trim_start().starts_with("def ")
+        && trimmed.lines().last().is_some_and(|l| l.trim() == "end")
+}
+
+/// Serves one script client until it disconnects, or the mock stops or drops it.
+pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
+    if stream
+        .set_read_timeout(Some(Duration::from_millis(20)))
+        .is_err()
+    {
+        return;
+    }
+    let mut buffer: Vec<u8> = Vec::new();
+    let mut chunk = [0u8; 16384];
+    loop {
+        if shared.stop.load(Ordering::Relaxed) || shared.arm().connection_dropped() {
+            return;
+        }
+        match stream.read(&mut chunk) {
+            Ok(0) => return,
+            Ok(n) => buffer.extend_from_slice(&chunk[..n]),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => continue,
+            Err(_) => return,
+        }
+        if is_complete_program(&String::from_utf8_lossy(&buffer)) {
+            buffer.clear();
+            shared.arm().start_program(Instant::now());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detects_complete_programs_only() {
+        assert!(is_complete_program("def rtde_control():\n  sync()\nend\n"));
+        assert!(!is_complete_program("def rtde_control():\n  sync()\n"));
+        assert!(!is_complete_program("textmsg(\"hi\")\n"));
+    }
+}

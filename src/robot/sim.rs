@@ -1,0 +1,533 @@
+//! The simulated UR arm: a [`Robot`] backed by [`UrModel`] kinematics, for dry runs, the
+//! simulated cell and tests. It moves instantly or in a fixed time, reports its pose with
+//! repeatability noise, and can inject the faults a real cell shows (protective stop, emergency
+//! stop, lost connection).
+//!
+//! Which pose is "true": a move puts the arm exactly on the commanded target (the joints the
+//! inverse kinematics chose); that exact flange pose is [`SimRobot::true_base_from_flange`] and
+//! is what a simulated camera must render from. What the arm *reports*
+//! ([`Robot::base_from_flange`]) is that true pose perturbed by the repeatability noise, drawn
+//! once per move and held while the arm stands still (a real controller's reading of a standing
+//! arm does not jitter from read to read). Joint positions are reported exactly.
+//!
+//! Frames: `T_base_flange`; metres, radians, [`Duration`]. Depends on `robot` and `geometry` only.
+
+use std::time::Duration;
+
+use nalgebra::Vector3;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+use super::kinematics::UrModel;
+use super::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use crate::geometry::{pose_from_rotvec, Pose};
+
+/// Faults the simulated arm injects, counted in completed moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SimFaults {
+    /// After this many completed moves the next move raises a protective stop (the arm stays
+    /// where it was) until [`SimRobot::clear_stop`] is called.
+    pub protective_stop_after_moves: Option<usize>,
+    /// After this many completed moves the next move raises an emergency stop, as above.
+    pub emergency_stop_after_moves: Option<usize>,
+    /// After this many completed moves every later call fails with a lost connection.
+    pub connection_lost_after_moves: Option<usize>,
+}
+
+/// How the simulated arm behaves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimRobotOptions {
+    /// Wall time every move takes; zero makes moves instant.
+    pub move_duration: Duration,
+    /// Standard deviation of the reported flange position per axis, m (UR5e: about 1e-5).
+    pub repeatability_m: f64,
+    /// Standard deviation of the reported flange rotation per rotation-vector axis, rad.
+    pub repeatability_rad: f64,
+    /// Seed of the noise generator, so runs repeat exactly.
+    pub seed: u64,
+    /// Injected faults.
+    pub faults: SimFaults,
+}
+
+impl Default for SimRobotOptions {
+    /// Instant, noise-free moves, no faults.
+    fn default() -> Self {
+        SimRobotOptions {
+            move_duration: Duration::ZERO,
+            repeatability_m: 0.0,
+            repeatability_rad: 0.0,
+            seed: 0,
+            faults: SimFaults::default(),
+        }
+    }
+}
+
+/// Why a simulated arm could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SimRobotError {
+    /// A noise level is negative or not finite.
+    #[error("sim robot option {name} = {value} {unit} must be finite and >= 0")]
+    BadNoise {
+        /// Option name.
+        name: &'static str,
+        /// Offending value.
+        value: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
+    /// The start joints are outside the model's joint limits.
+    #[error("sim robot start joint {index} = {value_deg:.3} deg is outside the {model} joint limits [{min_deg:.1}, {max_deg:.1}] deg")]
+    StartOutsideLimits {
+        /// Model name.
+        model: String,
+        /// Joint index (0 = base).
+        index: usize,
+        /// Value, degrees.
+        value_deg: f64,
+        /// Lower limit, degrees.
+        min_deg: f64,
+        /// Upper limit, degrees.
+        max_deg: f64,
+    },
+}
+
+/// The latched fault state of the simulated controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Latched {
+    None,
+    ProtectiveStop,
+    EmergencyStop,
+    Disconnected,
+}
+
+/// A simulated UR arm; see the module docs for which pose is true and which is reported.
+#[derive(Debug)]
+pub struct SimRobot {
+    model: UrModel,
+    options: SimRobotOptions,
+    joints: Joints,
+    true_pose: Pose,
+    reported_pose: Pose,
+    rng: StdRng,
+    moves_completed: usize,
+    latched: Latched,
+    position_noise: Normal<f64>,
+    rotation_noise: Normal<f64>,
+}
+
+impl SimRobot {
+    /// A simulated arm of `model` standing at `start` (rad). Fails on negative or non-finite
+    /// noise levels and on start joints outside the limits.
+    pub fn new(
+        model: UrModel,
+        start: Joints,
+        options: SimRobotOptions,
+    ) -> Result<Self, SimRobotError> {
+        let noise = |name, value: f64, unit| {
+            if value.is_finite() && value >= 0.0 {
+                Normal::new(0.0, value).map_err(|_| SimRobotError::BadNoise { name, value, unit })
+            } else {
+                Err(SimRobotError::BadNoise { name, value, unit })
+            }
+        };
+        let position_noise = noise("repeatability_m", options.repeatability_m, "m")?;
+        let rotation_noise = noise("repeatability_rad", options.repeatability_rad, "rad")?;
+        if let Some(index) = (0..6).find(|&i| {
+            let (lo, hi) = model.joint_limits[i];
+            !(start[i].is_finite() && start[i] >= lo && start[i] <= hi)
+        }) {
+            return Err(SimRobotError::StartOutsideLimits {
+                model: model.name.clone(),
+                index,
+                value_deg: start[index].to_degrees(),
+                min_deg: model.joint_limits[index].0.to_degrees(),
+                max_deg: model.joint_limits[index].1.to_degrees(),
+            });
+        }
+        let true_pose = model.forward(&start);
+        Ok(SimRobot {
+            rng: StdRng::seed_from_u64(options.seed),
+            model,
+            options,
+            joints: start,
+            true_pose,
+            // Standing at the start the reading is exact until the first move draws noise.
+            reported_pose: true_pose,
+            moves_completed: 0,
+            latched: Latched::None,
+            position_noise,
+            rotation_noise,
+        })
+    }
+
+    /// The arm's exact flange pose `T_base_flange` (what a simulated camera renders from).
+    pub fn true_base_from_flange(&self) -> Pose {
+        self.true_pose
+    }
+
+    /// The kinematic model.
+    pub fn model(&self) -> &UrModel {
+        &self.model
+    }
+
+    /// How many moves have completed.
+    pub fn moves_completed(&self) -> usize {
+        self.moves_completed
+    }
+
+    /// Clears a protective or emergency stop (what a person does on the teach pendant), and
+    /// disarms the fault that raised it so the run can resume. A lost connection stays lost.
+    pub fn clear_stop(&mut self) {
+        match self.latched {
+            Latched::ProtectiveStop => {
+                self.latched = Latched::None;
+                self.options.faults.protective_stop_after_moves = None;
+            }
+            Latched::EmergencyStop => {
+                self.latched = Latched::None;
+                self.options.faults.emergency_stop_after_moves = None;
+            }
+            Latched::None | Latched::Disconnected => {}
+        }
+    }
+
+    /// Fails if a fault is latched.
+    fn check_latched(&self) -> Result<(), RobotError> {
+        match self.latched {
+            Latched::None => Ok(()),
+            Latched::ProtectiveStop => Err(RobotError::ProtectiveStop),
+            Latched::EmergencyStop => Err(RobotError::EmergencyStop),
+            Latched::Disconnected => Err(RobotError::ConnectionLost(
+                "simulated connection drop (fault injection)".to_string(),
+            )),
+        }
+    }
+
+    /// Latches a fault whose move count has been reached, before a move starts.
+    fn arm_faults(&mut self) -> Result<(), RobotError> {
+        let due = |k: Option<usize>| k.is_some_and(|k| self.moves_completed >= k);
+        if due(self.options.faults.connection_lost_after_moves) {
+            self.latched = Latched::Disconnected;
+        } else if due(self.options.faults.emergency_stop_after_moves) {
+            self.latched = Latched::EmergencyStop;
+        } else if due(self.options.faults.protective_stop_after_moves) {
+            self.latched = Latched::ProtectiveStop;
+        }
+        self.check_latched()
+    }
+
+    /// Completes a move to `joints`: waits the move time, then updates the true and reported
+    /// poses.
+    fn finish_move(&mut self, joints: Joints) {
+        if !self.options.move_duration.is_zero() {
+            std::thread::sleep(self.options.move_duration);
+        }
+        self.joints = joints;
+        self.true_pose = self.model.forward(&joints);
+        let dp = Vector3::from_fn(|_, _| self.position_noise.sample(&mut self.rng));
+        let dr = Vector3::from_fn(|_, _| self.rotation_noise.sample(&mut self.rng));
+        // Noise in the flange frame: the reading is off by a small rigid motion at the flange.
+        self.reported_pose = self.true_pose * pose_from_rotvec(dp, dr);
+        self.moves_completed += 1;
+    }
+}
+
+/// Rejects speed and acceleration caps that are not finite and positive.
+fn check_limits(limits: &MotionLimits) -> Result<(), RobotError> {
+    let fields = [
+        ("linear_speed", limits.linear_speed, "m/s"),
+        ("linear_acceleration", limits.linear_acceleration, "m/s^2"),
+        ("joint_speed", limits.joint_speed, "rad/s"),
+        ("joint_acceleration", limits.joint_acceleration, "rad/s^2"),
+    ];
+    for (name, value, unit) in fields {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(RobotError::Backend(
+                format!("motion limit {name} = {value} {unit} must be finite and > 0").into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl Robot for SimRobot {
+    fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
+        self.check_latched_connection()?;
+        Ok(self.reported_pose)
+    }
+
+    fn joint_positions(&mut self) -> Result<Joints, RobotError> {
+        self.check_latched_connection()?;
+        Ok(self.joints)
+    }
+
+    fn move_linear(
+        &mut self,
+        base_from_flange: &Pose,
+        limits: &MotionLimits,
+    ) -> Result<(), RobotError> {
+        check_limits(limits)?;
+        self.arm_faults()?;
+        let joints = self
+            .model
+            .inverse_nearest(base_from_flange, &self.joints)
+            .ok_or_else(|| {
+                let p = base_from_flange.translation.vector;
+                RobotError::Unreachable(format!(
+                    "{}: no inverse-kinematics solution within the joint limits for flange position [{:.4}, {:.4}, {:.4}] m",
+                    self.model.name, p.x, p.y, p.z
+                ))
+            })?;
+        self.finish_move(joints);
+        Ok(())
+    }
+
+    fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
+        check_limits(limits)?;
+        self.arm_faults()?;
+        if let Some(i) = (0..6).find(|&i| {
+            let (lo, hi) = self.model.joint_limits[i];
+            !(joints[i].is_finite() && joints[i] >= lo && joints[i] <= hi)
+        }) {
+            let (lo, hi) = self.model.joint_limits[i];
+            return Err(RobotError::Unreachable(format!(
+                "{}: joint {i} target {:.3} deg is outside its limits [{:.1}, {:.1}] deg",
+                self.model.name,
+                joints[i].to_degrees(),
+                lo.to_degrees(),
+                hi.to_degrees()
+            )));
+        }
+        self.finish_move(*joints);
+        Ok(())
+    }
+
+    fn stop(&mut self) -> Result<(), RobotError> {
+        // Moves complete atomically, so the arm is never moving when this runs.
+        self.check_latched_connection()
+    }
+
+    fn status(&mut self) -> Result<RobotStatus, RobotError> {
+        self.check_latched_connection()?;
+        Ok(match self.latched {
+            Latched::ProtectiveStop => RobotStatus::ProtectiveStop,
+            Latched::EmergencyStop => RobotStatus::EmergencyStop,
+            Latched::None | Latched::Disconnected => RobotStatus::Ready,
+        })
+    }
+}
+
+impl SimRobot {
+    /// Fails only if the connection is (simulated as) lost; stops still allow reading state.
+    fn check_latched_connection(&self) -> Result<(), RobotError> {
+        if self.latched == Latched::Disconnected {
+            self.check_latched()
+        } else {
+            Ok(())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::translation_distance;
+
+    const HOME: Joints = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+
+    fn sim(options: SimRobotOptions) -> SimRobot {
+        SimRobot::new(UrModel::ur5e(), HOME, options).unwrap()
+    }
+
+    #[test]
+    fn linear_move_reaches_target_exactly_without_noise() {
+        let mut robot = sim(SimRobotOptions::default());
+        let target = UrModel::ur5e().forward(&[0.5, -1.0, 1.2, -0.9, 1.3, 0.2]);
+        robot
+            .move_linear(&target, &MotionLimits::default())
+            .unwrap();
+        let reported = robot.base_from_flange().unwrap();
+        assert!(translation_distance(&reported, &target) < 1e-9);
+        assert!(reported.rotation.angle_to(&target.rotation) < 1e-9);
+        // The chosen branch is the one nearest the start, i.e. the generating configuration.
+        let q = robot.joint_positions().unwrap();
+        let expected = [0.5, -1.0, 1.2, -0.9, 1.3, 0.2];
+        assert!(q.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-9));
+        assert_eq!(robot.moves_completed(), 1);
+    }
+
+    #[test]
+    fn reported_pose_jitters_with_the_configured_spread_and_true_pose_does_not() {
+        let options = SimRobotOptions {
+            repeatability_m: 1e-4,
+            repeatability_rad: 1e-3,
+            seed: 42,
+            ..Default::default()
+        };
+        let mut robot = sim(options);
+        let target = robot.true_base_from_flange();
+        let n = 400;
+        let (mut sq_m, mut sq_rad) = (0.0, 0.0);
+        for _ in 0..n {
+            robot
+                .move_linear(&target, &MotionLimits::default())
+                .unwrap();
+            let truth = robot.true_base_from_flange();
+            assert!(translation_distance(&truth, &target) < 1e-9);
+            let reported = robot.base_from_flange().unwrap();
+            // Held still: a second reading is identical.
+            assert_eq!(reported, robot.base_from_flange().unwrap());
+            sq_m += translation_distance(&reported, &truth).powi(2);
+            sq_rad += reported.rotation.angle_to(&truth.rotation).powi(2);
+        }
+        // E[|d|²] = 3σ² for three independent axes; 400 draws put the RMS within ~5 %.
+        let rms_m = (sq_m / n as f64 / 3.0).sqrt();
+        let rms_rad = (sq_rad / n as f64 / 3.0).sqrt();
+        assert!((rms_m - 1e-4).abs() < 1e-5, "position rms {rms_m}");
+        assert!((rms_rad - 1e-3).abs() < 1e-4, "rotation rms {rms_rad}");
+    }
+
+    #[test]
+    fn same_seed_repeats_exactly() {
+        let options = SimRobotOptions {
+            repeatability_m: 1e-4,
+            repeatability_rad: 1e-3,
+            seed: 9,
+            ..Default::default()
+        };
+        let (mut a, mut b) = (sim(options), sim(options));
+        let target = a.true_base_from_flange();
+        a.move_linear(&target, &MotionLimits::default()).unwrap();
+        b.move_linear(&target, &MotionLimits::default()).unwrap();
+        assert_eq!(a.base_from_flange().unwrap(), b.base_from_flange().unwrap());
+    }
+
+    #[test]
+    fn unreachable_target_is_an_error_and_the_arm_stays() {
+        let mut robot = sim(SimRobotOptions::default());
+        let before = robot.joint_positions().unwrap();
+        let far = Pose::translation(3.0, 0.0, 0.5);
+        let err = robot
+            .move_linear(&far, &MotionLimits::default())
+            .unwrap_err();
+        assert!(
+            matches!(err, RobotError::Unreachable(ref m) if m.contains("3.0000")),
+            "{err}"
+        );
+        assert_eq!(robot.joint_positions().unwrap(), before);
+        let err = robot
+            .move_joints(&[0.0, 0.0, 7.0, 0.0, 0.0, 0.0], &MotionLimits::default())
+            .unwrap_err();
+        assert!(
+            matches!(err, RobotError::Unreachable(ref m) if m.contains("joint 2")),
+            "{err}"
+        );
+        let bad = MotionLimits {
+            linear_speed: f64::NAN,
+            ..Default::default()
+        };
+        assert!(matches!(
+            robot.move_joints(&HOME, &bad),
+            Err(RobotError::Backend(_))
+        ));
+    }
+
+    #[test]
+    fn protective_stop_after_k_moves_then_clear_resumes() {
+        let options = SimRobotOptions {
+            faults: SimFaults {
+                protective_stop_after_moves: Some(2),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut robot = sim(options);
+        let limits = MotionLimits::default();
+        robot.move_joints(&HOME, &limits).unwrap();
+        robot.move_joints(&HOME, &limits).unwrap();
+        assert!(matches!(
+            robot.move_joints(&HOME, &limits),
+            Err(RobotError::ProtectiveStop)
+        ));
+        assert_eq!(robot.status().unwrap(), RobotStatus::ProtectiveStop);
+        // State can still be read while stopped.
+        assert!(robot.base_from_flange().is_ok());
+        assert!(matches!(
+            robot.move_joints(&HOME, &limits),
+            Err(RobotError::ProtectiveStop)
+        ));
+        robot.clear_stop();
+        assert_eq!(robot.status().unwrap(), RobotStatus::Ready);
+        robot.move_joints(&HOME, &limits).unwrap();
+        assert_eq!(robot.moves_completed(), 3);
+    }
+
+    #[test]
+    fn emergency_stop_and_connection_loss_are_reported() {
+        let mut robot = sim(SimRobotOptions {
+            faults: SimFaults {
+                emergency_stop_after_moves: Some(0),
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let limits = MotionLimits::default();
+        assert!(matches!(
+            robot.move_joints(&HOME, &limits),
+            Err(RobotError::EmergencyStop)
+        ));
+        assert_eq!(robot.status().unwrap(), RobotStatus::EmergencyStop);
+
+        let mut robot = sim(SimRobotOptions {
+            faults: SimFaults {
+                connection_lost_after_moves: Some(1),
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        robot.move_joints(&HOME, &limits).unwrap();
+        assert!(matches!(
+            robot.move_joints(&HOME, &limits),
+            Err(RobotError::ConnectionLost(_))
+        ));
+        assert!(matches!(
+            robot.base_from_flange(),
+            Err(RobotError::ConnectionLost(_))
+        ));
+        robot.clear_stop();
+        assert!(robot.status().is_err());
+    }
+
+    #[test]
+    fn move_duration_is_waited() {
+        let mut robot = sim(SimRobotOptions {
+            move_duration: Duration::from_millis(30),
+            ..Default::default()
+        });
+        let t = std::time::Instant::now();
+        robot.move_joints(&HOME, &MotionLimits::default()).unwrap();
+        assert!(t.elapsed() >= Duration::from_millis(30));
+    }
+
+    #[test]
+    fn bad_options_are_clear_errors() {
+        let err = SimRobot::new(
+            UrModel::ur5e(),
+            HOME,
+            SimRobotOptions {
+                repeatability_m: -1.0,
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("repeatability_m = -1 m"), "{err}");
+        let err = SimRobot::new(
+            UrModel::ur5e(),
+            [0.0, 0.0, 0.0, 0.0, 0.0, 10.0],
+            SimRobotOptions::default(),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("joint 5"), "{err}");
+    }
+}
