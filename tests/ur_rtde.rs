@@ -242,16 +242,19 @@ fn dropped_connection_is_a_clean_error() {
         let mut robot = UrRobot::connect(robot_config(&mock)).expect("connects");
         let start = robot.base_from_flange().unwrap();
         let rot = UnitQuaternion::identity();
-        robot
-            .move_linear(&nudged(&start, 0.01, 0.0, rot), &fast())
-            .unwrap_or(());
+        // The drop comes right as the first move completes, so the move itself (its read-back)
+        // or the next call sees it.
         let t0 = Instant::now();
-        let err = robot
-            .move_linear(&nudged(&start, 0.0, 0.0, rot), &fast())
-            .and_then(|()| robot.base_from_flange().map(|_| ()))
-            .unwrap_err();
+        let err = match robot.move_linear(&nudged(&start, 0.01, 0.0, rot), &fast()) {
+            Err(e) => e,
+            Ok(()) => robot
+                .move_linear(&nudged(&start, 0.0, 0.0, rot), &fast())
+                .and_then(|()| robot.base_from_flange().map(|_| ()))
+                .unwrap_err(),
+        };
         assert!(matches!(err, RobotError::ConnectionLost(_)), "{err}");
         assert!(t0.elapsed() < Duration::from_secs(10));
+        assert_eq!(mock.moves_completed(), 1);
         // Later calls fail fast with the same kind of error.
         assert!(matches!(robot.status(), Err(RobotError::ConnectionLost(_))));
         drop(robot);
@@ -350,4 +353,22 @@ fn connecting_to_a_silent_controller_times_out() {
         assert!(t0.elapsed() < Duration::from_millis(2500));
         mock.shutdown();
     });
+}
+
+#[test]
+fn works_across_controller_versions() {
+    // CB3 (125 Hz), a late e-Series (upper register set) and PolyScope X (no dashboard).
+    for (last, version) in [(41u8, "3.15.0"), (42, "5.23.0"), (43, "10.11.0")] {
+        within(Duration::from_secs(60), move || {
+            let mock = start_mock(last, |c| c.controller_version = version.parse().unwrap());
+            let mut robot = UrRobot::connect(robot_config(&mock)).expect(version);
+            let start = robot.base_from_flange().unwrap();
+            let target = nudged(&start, 0.0, 0.02, UnitQuaternion::identity());
+            robot.move_linear(&target, &fast()).expect(version);
+            let reached = robot.base_from_flange().unwrap();
+            assert!(translation_distance(&reached, &target) < 1e-6, "{version}");
+            drop(robot);
+            mock.shutdown();
+        });
+    }
 }

@@ -637,22 +637,14 @@ mod tests {
 
     #[test]
     fn bad_limits_are_clear_errors() {
-        let err = check_limit("linear_speed", -0.1, "m/s").unwrap_err();
-        assert!(err
-            .source_message()
-            .contains("linear_speed = -0.1 m/s must be finite and > 0"));
-    }
-
-    trait SourceMessage {
-        fn source_message(&self) -> String;
-    }
-
-    impl SourceMessage for RobotError {
-        fn source_message(&self) -> String {
-            match self {
-                RobotError::Backend(e) => e.to_string(),
-                other => other.to_string(),
-            }
+        match check_limit("linear_speed", -0.1, "m/s") {
+            Err(RobotError::Backend(e)) => assert_eq!(
+                e.to_string(),
+                "motion limit linear_speed = -0.1 m/s must be finite and > 0"
+            ),
+            other => panic!("expected a backend error, got {other:?}"),
         }
+        assert!(check_limit("joint_speed", f64::NAN, "rad/s").is_err());
+        assert_eq!(check_limit("joint_speed", 0.5, "rad/s").unwrap(), 0.5);
     }
 }

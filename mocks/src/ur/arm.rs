@@ -413,7 +413,7 @@ impl Arm {
                                 from: self.joints,
                                 to,
                             },
-                            None => return self.script_error(now, "movej_ik: no IK solution"),
+                            None => return self.script_error("movej_ik: no IK solution"),
                         }
                     }
                     cmd::MOVEL => MotionPath::Linear {
@@ -427,7 +427,7 @@ impl Arm {
                 };
                 if let MotionPath::Linear { to, .. } = path {
                     if self.model.inverse_nearest(&to, &self.joints).is_none() {
-                        return self.script_error(now, "movel: target not reachable");
+                        return self.script_error("movel: target not reachable");
                     }
                 }
                 self.start_motion(path, speed, now, asynchronous)
@@ -466,7 +466,7 @@ impl Arm {
     }
 
     /// A runtime error in the control script ends the program, as on the controller.
-    fn script_error(&mut self, _now: Instant, message: &str) -> Outcome {
+    fn script_error(&mut self, message: &str) -> Outcome {
         eprintln!("mock-ur: control script error: {message}; program stopped");
         Outcome::Exit
     }
