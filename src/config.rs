@@ -237,7 +237,11 @@ fn default_threads() -> u8 {
 
 impl Default for DetectorConfig {
     fn default() -> Self {
-        DetectorConfig { decimate: default_decimate(), threads: default_threads(), max_hamming: 0 }
+        DetectorConfig {
+            decimate: default_decimate(),
+            threads: default_threads(),
+            max_hamming: 0,
+        }
     }
 }
 
@@ -406,15 +410,20 @@ impl CellConfig {
     /// Parses config YAML; relative paths resolve against `file`'s folder.
     pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
         let deserializer = serde_yaml_ng::Deserializer::from_str(text);
-        let raw: RawConfig = serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            ConfigError::Shape {
+        let raw: RawConfig =
+            serde_path_to_error::deserialize(deserializer).map_err(|e| ConfigError::Shape {
                 file: file.to_path_buf(),
                 path: e.path().to_string(),
                 message: e.inner().to_string(),
-            }
-        })?;
+            })?;
         let folder = file.parent().unwrap_or(Path::new("."));
-        let resolve = |p: &Path| if p.is_absolute() { p.to_path_buf() } else { folder.join(p) };
+        let resolve = |p: &Path| {
+            if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                folder.join(p)
+            }
+        };
         let value_error = |key: &str, problem: String| ConfigError::Value {
             file: file.to_path_buf(),
             key: key.to_string(),
@@ -436,18 +445,31 @@ impl CellConfig {
             }
             let get = |key: &str| {
                 let pose = map.get(key).ok_or_else(|| {
-                    value_error(section, format!("missing `{key}` (expected `{camera_key}` and `{target_key}`)"))
+                    value_error(
+                        section,
+                        format!("missing `{key}` (expected `{camera_key}` and `{target_key}`)"),
+                    )
                 })?;
-                pose.to_pose(&format!("{section}.{key}")).map_err(|source| ConfigError::Pose {
-                    file: file.to_path_buf(),
-                    source,
-                })
+                pose.to_pose(&format!("{section}.{key}"))
+                    .map_err(|source| ConfigError::Pose {
+                        file: file.to_path_buf(),
+                        source,
+                    })
             };
-            Ok(CellTransforms { setup: raw.setup, camera_mount: get(camera_key)?, target_mount: get(target_key)? })
+            Ok(CellTransforms {
+                setup: raw.setup,
+                camera_mount: get(camera_key)?,
+                target_mount: get(target_key)?,
+            })
         };
         let nominal = transforms("nominal", &raw.nominal)?;
-        let simulation = raw.simulation.as_ref().map(|m| transforms("simulation", m)).transpose()?;
-        let uses_sim = matches!(raw.robot, RobotConfig::Sim { .. }) || matches!(raw.camera, CameraConfig::Sim { .. });
+        let simulation = raw
+            .simulation
+            .as_ref()
+            .map(|m| transforms("simulation", m))
+            .transpose()?;
+        let uses_sim = matches!(raw.robot, RobotConfig::Sim { .. })
+            || matches!(raw.camera, CameraConfig::Sim { .. });
         if uses_sim && simulation.is_none() {
             return Err(value_error(
                 "simulation",
@@ -455,30 +477,78 @@ impl CellConfig {
             ));
         }
 
-        if let RobotConfig::Sim { model, move_duration_s, repeatability_mm, repeatability_deg, .. } = &raw.robot {
+        if let RobotConfig::Sim {
+            model,
+            move_duration_s,
+            repeatability_mm,
+            repeatability_deg,
+            ..
+        } = &raw.robot
+        {
             check_model(model).map_err(|p| value_error("robot.model", p))?;
-            for (key, v) in [("robot.move_duration_s", *move_duration_s), ("robot.repeatability_mm", *repeatability_mm), ("robot.repeatability_deg", *repeatability_deg)] {
+            for (key, v) in [
+                ("robot.move_duration_s", *move_duration_s),
+                ("robot.repeatability_mm", *repeatability_mm),
+                ("robot.repeatability_deg", *repeatability_deg),
+            ] {
                 if !(v.is_finite() && v >= 0.0) {
-                    return Err(value_error(key, format!("expected a non-negative number, got {v}")));
+                    return Err(value_error(
+                        key,
+                        format!("expected a non-negative number, got {v}"),
+                    ));
                 }
             }
         }
-        if let RobotConfig::Ur { model, connect_timeout_s, host } = &raw.robot {
+        if let RobotConfig::Ur {
+            model,
+            connect_timeout_s,
+            host,
+        } = &raw.robot
+        {
             check_model(model).map_err(|p| value_error("robot.model", p))?;
             if host.trim().is_empty() {
-                return Err(value_error("robot.host", "expected the controller's IP address or host name".into()));
+                return Err(value_error(
+                    "robot.host",
+                    "expected the controller's IP address or host name".into(),
+                ));
             }
-            if !(connect_timeout_s.is_finite() && *connect_timeout_s > 0.0 && *connect_timeout_s <= 120.0) {
-                return Err(value_error("robot.connect_timeout_s", format!("expected seconds in (0, 120], got {connect_timeout_s}")));
+            if !(connect_timeout_s.is_finite()
+                && *connect_timeout_s > 0.0
+                && *connect_timeout_s <= 120.0)
+            {
+                return Err(value_error(
+                    "robot.connect_timeout_s",
+                    format!("expected seconds in (0, 120], got {connect_timeout_s}"),
+                ));
             }
         }
 
         let l = raw.limits;
         for (key, v, ceiling, unit) in [
-            ("limits.linear_speed", l.linear_speed, MAX_LINEAR_SPEED, "m/s"),
-            ("limits.linear_acceleration", l.linear_acceleration, MAX_LINEAR_ACCELERATION, "m/s²"),
-            ("limits.joint_speed_deg", l.joint_speed_deg, MAX_JOINT_SPEED_DEG, "°/s"),
-            ("limits.joint_acceleration_deg", l.joint_acceleration_deg, MAX_JOINT_ACCELERATION_DEG, "°/s²"),
+            (
+                "limits.linear_speed",
+                l.linear_speed,
+                MAX_LINEAR_SPEED,
+                "m/s",
+            ),
+            (
+                "limits.linear_acceleration",
+                l.linear_acceleration,
+                MAX_LINEAR_ACCELERATION,
+                "m/s²",
+            ),
+            (
+                "limits.joint_speed_deg",
+                l.joint_speed_deg,
+                MAX_JOINT_SPEED_DEG,
+                "°/s",
+            ),
+            (
+                "limits.joint_acceleration_deg",
+                l.joint_acceleration_deg,
+                MAX_JOINT_ACCELERATION_DEG,
+                "°/s²",
+            ),
         ] {
             if !(v.is_finite() && v > 0.0 && v <= ceiling) {
                 return Err(value_error(key, format!("expected a value in (0, {ceiling}] {unit} (the calibration safety ceiling), got {v}")));
@@ -493,40 +563,95 @@ impl CellConfig {
 
         let w = raw.workspace;
         if !(0..3).all(|i| w.min[i].is_finite() && w.max[i].is_finite() && w.min[i] < w.max[i]) {
-            return Err(value_error("workspace", format!("expected min < max on every axis, got min {:?}, max {:?}", w.min, w.max)));
+            return Err(value_error(
+                "workspace",
+                format!(
+                    "expected min < max on every axis, got min {:?}, max {:?}",
+                    w.min, w.max
+                ),
+            ));
         }
-        let workspace = WorkspaceBox { min: Vector3::from(w.min), max: Vector3::from(w.max) };
+        let workspace = WorkspaceBox {
+            min: Vector3::from(w.min),
+            max: Vector3::from(w.max),
+        };
 
         let mut plan = raw.plan.clone();
         match (&plan.file, &plan.generate) {
             (Some(_), None) => {}
-            (None, Some(spec)) => spec.validate().map_err(|p| value_error("plan.generate", p))?,
-            _ => return Err(value_error("plan", "expected exactly one of `file` (a scripted plan) and `generate`".into())),
+            (None, Some(spec)) => spec
+                .validate()
+                .map_err(|p| value_error("plan.generate", p))?,
+            _ => {
+                return Err(value_error(
+                    "plan",
+                    "expected exactly one of `file` (a scripted plan) and `generate`".into(),
+                ))
+            }
         }
         plan.file = plan.file.as_deref().map(resolve);
 
         let camera = match raw.camera {
-            CameraConfig::Files { folder } => CameraConfig::Files { folder: resolve(&folder) },
-            CameraConfig::Sim { noise_sigma, blur_sigma_px, seed, hide_board_in_grabs } => {
-                if !(noise_sigma.is_finite() && noise_sigma >= 0.0 && blur_sigma_px.is_finite() && blur_sigma_px >= 0.0) {
-                    return Err(value_error("camera", "noise_sigma and blur_sigma_px must be non-negative numbers".into()));
+            CameraConfig::Files { folder } => CameraConfig::Files {
+                folder: resolve(&folder),
+            },
+            CameraConfig::Sim {
+                noise_sigma,
+                blur_sigma_px,
+                seed,
+                hide_board_in_grabs,
+            } => {
+                if !(noise_sigma.is_finite()
+                    && noise_sigma >= 0.0
+                    && blur_sigma_px.is_finite()
+                    && blur_sigma_px >= 0.0)
+                {
+                    return Err(value_error(
+                        "camera",
+                        "noise_sigma and blur_sigma_px must be non-negative numbers".into(),
+                    ));
                 }
-                CameraConfig::Sim { noise_sigma, blur_sigma_px, seed, hide_board_in_grabs }
+                CameraConfig::Sim {
+                    noise_sigma,
+                    blur_sigma_px,
+                    seed,
+                    hide_board_in_grabs,
+                }
             }
         };
         if !(raw.detector.decimate >= 1.0 && raw.detector.threads >= 1) {
-            return Err(value_error("detector", "decimate must be >= 1 and threads >= 1".into()));
+            return Err(value_error(
+                "detector",
+                "decimate must be >= 1 and threads >= 1".into(),
+            ));
         }
         let s = raw.session;
-        if !(s.settle_s.is_finite() && s.settle_s >= 0.0 && s.max_reprojection_rms_px > 0.0 && s.image_margin_px >= 0.0) {
-            return Err(value_error("session", "settle_s >= 0, max_reprojection_rms_px > 0 and image_margin_px >= 0 expected".into()));
+        if !(s.settle_s.is_finite()
+            && s.settle_s >= 0.0
+            && s.max_reprojection_rms_px > 0.0
+            && s.image_margin_px >= 0.0)
+        {
+            return Err(value_error(
+                "session",
+                "settle_s >= 0, max_reprojection_rms_px > 0 and image_margin_px >= 0 expected"
+                    .into(),
+            ));
         }
         let sv = &raw.solver;
         if !["refined", "iterative", "closed-form"].contains(&sv.method.as_str()) {
-            return Err(value_error("solver.method", format!("expected refined, iterative or closed-form, got `{}`", sv.method)));
+            return Err(value_error(
+                "solver.method",
+                format!(
+                    "expected refined, iterative or closed-form, got `{}`",
+                    sv.method
+                ),
+            ));
         }
         if !(sv.rotation_sigma_deg > 0.0 && sv.translation_sigma_mm > 0.0) {
-            return Err(value_error("solver", "rotation_sigma_deg and translation_sigma_mm must be positive".into()));
+            return Err(value_error(
+                "solver",
+                "rotation_sigma_deg and translation_sigma_mm must be positive".into(),
+            ));
         }
 
         Ok(CellConfig {

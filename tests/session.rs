@@ -8,7 +8,9 @@ use std::sync::Arc;
 use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
 use handeye::plan::CellTransforms;
-use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup};
+use handeye::session::{
+    self, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup,
+};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -20,8 +22,14 @@ fn config_variant(dir: &Path, base: &str, edits: &[(&str, &str)]) -> PathBuf {
     let configs = repo().join("configs");
     let mut text = std::fs::read_to_string(configs.join(base)).unwrap();
     for key in ["target: ", "intrinsics: "] {
-        text = text.replace(&format!("{key}targets/"), &format!("{key}{}/targets/", configs.display()));
-        text = text.replace(&format!("{key}cameras/"), &format!("{key}{}/cameras/", configs.display()));
+        text = text.replace(
+            &format!("{key}targets/"),
+            &format!("{key}{}/targets/", configs.display()),
+        );
+        text = text.replace(
+            &format!("{key}cameras/"),
+            &format!("{key}{}/cameras/", configs.display()),
+        );
     }
     for (from, to) in edits {
         assert!(text.contains(from), "config {base} has no {from:?}");
@@ -49,7 +57,12 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
         detector: prepared.detector_options(),
         stop: Arc::new(AtomicBool::new(false)),
     };
-    session::run_session(setup, hardware.robot.as_mut(), hardware.camera.as_mut(), &mut |_e: SessionEvent| {})
+    session::run_session(
+        setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_e: SessionEvent| {},
+    )
 }
 
 fn errors(estimate: &Pose, truth: &Pose) -> (f64, f64) {
@@ -61,10 +74,16 @@ fn errors(estimate: &Pose, truth: &Pose) -> (f64, f64) {
 
 fn assert_recovers_truth(solved: &session::SolvedSession, truth: &CellTransforms) {
     let [(camera_key, camera_mount), (target_key, target_mount)] = solved.calibration.unknowns();
-    for (key, estimate, truth) in [(camera_key, camera_mount, truth.camera_mount), (target_key, target_mount, truth.target_mount)] {
+    for (key, estimate, truth) in [
+        (camera_key, camera_mount, truth.camera_mount),
+        (target_key, target_mount, truth.target_mount),
+    ] {
         let (mm, deg) = errors(&estimate, &truth);
         eprintln!("{key}: {mm:.3} mm, {deg:.4} deg from the truth");
-        assert!(mm < 0.5 && deg < 0.05, "{key}: {mm:.3} mm, {deg:.4}° (limits 0.5 mm, 0.05°)");
+        assert!(
+            mm < 0.5 && deg < 0.05,
+            "{key}: {mm:.3} mm, {deg:.4}° (limits 0.5 mm, 0.05°)"
+        );
     }
 }
 
@@ -73,7 +92,12 @@ fn full_run(config: &Path, out: &Path) -> (PreparedCell, SessionFolder, session:
     assert!(prepared.report.ok(), "{}", prepared.report);
     let folder = SessionFolder::create(out).unwrap();
     let outcome = run(&prepared, &folder).unwrap();
-    assert_eq!(outcome.accepted.len(), prepared.plan.waypoints.len(), "skipped: {:?}", outcome.skipped);
+    assert_eq!(
+        outcome.accepted.len(),
+        prepared.plan.waypoints.len(),
+        "skipped: {:?}",
+        outcome.skipped
+    );
     let solved = session::solve_folder(&folder, &prepared.config).unwrap();
     (prepared, folder, solved)
 }
@@ -100,10 +124,22 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         prepared.config.session.max_reprojection_rms_px,
     )
     .unwrap();
-    let again = handeye::solve::solve(dataset.setup, &dataset.pairs, &prepared.config.solver.to_options()).unwrap();
-    for ((key, a), (_, b)) in again.unknowns().iter().zip(solved.calibration.unknowns().iter()) {
+    let again = handeye::solve::solve(
+        dataset.setup,
+        &dataset.pairs,
+        &prepared.config.solver.to_options(),
+    )
+    .unwrap();
+    for ((key, a), (_, b)) in again
+        .unknowns()
+        .iter()
+        .zip(solved.calibration.unknowns().iter())
+    {
         let (mm, deg) = errors(a, b);
-        assert!(mm < 1e-6 && deg < 1e-6, "replay of {key} differs by {mm} mm, {deg}°");
+        assert!(
+            mm < 1e-6 && deg < 1e-6,
+            "replay of {key} differs by {mm} mm, {deg}°"
+        );
     }
 }
 
@@ -124,19 +160,32 @@ fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
     let config = config_variant(
         dir.path(),
         "sim-cell.yaml",
-        &[("count: 20", "count: 14"), ("seed: 11", "seed: 11\n  hide_board_in_grabs: [3, 8, 14]")],
+        &[
+            ("count: 20", "count: 14"),
+            ("seed: 11", "seed: 11\n  hide_board_in_grabs: [3, 8, 14]"),
+        ],
     );
     let prepared = cell::prepare(&config).unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     let outcome = run(&prepared, &folder).unwrap();
-    assert_eq!(outcome.skipped.iter().map(|(i, _)| *i).collect::<Vec<_>>(), vec![3]);
-    assert!(outcome.skipped[0].1.to_lowercase().contains("no tag") || outcome.skipped[0].1.to_lowercase().contains("not found"),
-        "reason: {}", outcome.skipped[0].1);
+    assert_eq!(
+        outcome.skipped.iter().map(|(i, _)| *i).collect::<Vec<_>>(),
+        vec![3]
+    );
+    assert!(
+        outcome.skipped[0].1.to_lowercase().contains("no tag")
+            || outcome.skipped[0].1.to_lowercase().contains("not found"),
+        "reason: {}",
+        outcome.skipped[0].1
+    );
     assert_eq!(outcome.accepted.len(), 13);
     assert!(outcome.accepted.contains(&8));
     let solved = session::solve_folder(&folder, &prepared.config).unwrap();
     let [(_, camera_mount), _] = solved.calibration.unknowns();
-    let (mm, deg) = errors(&camera_mount, &prepared.config.simulation.unwrap().camera_mount);
+    let (mm, deg) = errors(
+        &camera_mount,
+        &prepared.config.simulation.unwrap().camera_mount,
+    );
     assert!(mm < 1.0 && deg < 0.1, "{mm} mm {deg}°");
 }
 
@@ -146,7 +195,10 @@ fn protective_stop_keeps_the_data_and_resume_finishes() {
     let config = config_variant(
         dir.path(),
         "sim-cell.yaml",
-        &[("count: 20", "count: 12"), ("seed: 7", "seed: 7\n  protective_stop_after_moves: 5")],
+        &[
+            ("count: 20", "count: 12"),
+            ("seed: 7", "seed: 7\n  protective_stop_after_moves: 5"),
+        ],
     );
     let prepared = cell::prepare(&config).unwrap();
     let out = dir.path().join("s");
@@ -176,7 +228,9 @@ fn a_plan_rotating_about_one_axis_is_refused_before_any_motion() {
     // Six views straight above the board, differing only by roll about the optical axis.
     let mut text = String::from("waypoints:\n");
     for roll in [-25, -15, -5, 5, 15, 25] {
-        text += &format!("  - look_at: {{distance: 0.6, azimuth_deg: 0, elevation_deg: 90, roll_deg: {roll}}}\n");
+        text += &format!(
+            "  - look_at: {{distance: 0.6, azimuth_deg: 0, elevation_deg: 90, roll_deg: {roll}}}\n"
+        );
     }
     std::fs::write(&plan, text).unwrap();
     let config = config_variant(
@@ -211,9 +265,18 @@ fn an_unreachable_pose_is_reported_with_its_index() {
         &[("generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}", &format!("file: {}", plan.display()))],
     );
     let prepared = cell::prepare(&config).unwrap();
-    let bad: Vec<usize> = prepared.report.poses.iter().filter(|p| !p.problems.is_empty()).map(|p| p.index).collect();
+    let bad: Vec<usize> = prepared
+        .report
+        .poses
+        .iter()
+        .filter(|p| !p.problems.is_empty())
+        .map(|p| p.index)
+        .collect();
     assert_eq!(bad, vec![2], "{}", prepared.report);
-    assert!(prepared.report.poses[2].problems.iter().any(|p| p.contains("unreachable")));
+    assert!(prepared.report.poses[2]
+        .problems
+        .iter()
+        .any(|p| p.contains("unreachable")));
 }
 
 #[test]
@@ -222,10 +285,22 @@ fn malformed_configs_name_file_key_and_expectation() {
     let cases: &[(&[(&str, &str)], &str)] = &[
         (&[("setup: eye_in_hand", "setup: eye_on_hand")], "setup"),
         (&[("noise_sigma: 2.0", "noise_sigm: 2.0")], "noise_sigm"),
-        (&[("linear_speed: 0.25", "linear_speed: 3.0")], "limits.linear_speed"),
+        (
+            &[("linear_speed: 0.25", "linear_speed: 3.0")],
+            "limits.linear_speed",
+        ),
         (&[("model: ur10e", "model: ur3")], "robot.model"),
-        (&[("min: [-1.0, -1.0, 0.05]", "min: [-1.0, 2.0, 0.05]")], "workspace"),
-        (&[("T_base_target: {translation: [0.5, -0.15, 0.0], rotation_vector: [0.0, 0.0, 0.3]}", "T_base_target: {translation: [0.5, -0.15], rotation_vector: [0.0, 0.0, 0.3]}")], "nominal.T_base_target.translation: expected 3 numbers"),
+        (
+            &[("min: [-1.0, -1.0, 0.05]", "min: [-1.0, 2.0, 0.05]")],
+            "workspace",
+        ),
+        (
+            &[(
+                "T_base_target: {translation: [0.5, -0.15, 0.0], rotation_vector: [0.0, 0.0, 0.3]}",
+                "T_base_target: {translation: [0.5, -0.15], rotation_vector: [0.0, 0.0, 0.3]}",
+            )],
+            "nominal.T_base_target.translation: expected 3 numbers",
+        ),
         (&[("count: 20", "count: 2")], "plan.generate"),
     ];
     for (edits, expected) in cases {

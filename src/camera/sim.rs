@@ -64,11 +64,21 @@ impl Camera for SimCamera {
             // The board is behind the camera: the frame shows only the background.
             Pose::translation(0.0, 0.0, -10.0)
         } else {
-            self.truth.camera_from_target(&(self.true_base_from_flange)())
+            self.truth
+                .camera_from_target(&(self.true_base_from_flange)())
         };
-        let image = render(&self.board, &self.model, &camera_from_target, &self.options, &mut self.rng);
+        let image = render(
+            &self.board,
+            &self.model,
+            &camera_from_target,
+            &self.options,
+            &mut self.rng,
+        );
         // Rendering happens after the request, so the frame is never older than `not_before`.
-        Ok(Frame { image, captured_at: Instant::now() })
+        Ok(Frame {
+            image,
+            captured_at: Instant::now(),
+        })
     }
 
     fn model(&self) -> &CameraModel {

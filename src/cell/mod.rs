@@ -22,10 +22,10 @@ use crate::target::{Board, DetectorOptions};
 pub enum CellError {
     /// The config is wrong.
     #[error(transparent)]
-    Config(#[from] ConfigError),
+    Config(Box<ConfigError>),
     /// The plan file is wrong.
     #[error(transparent)]
-    Plan(#[from] PlanError),
+    Plan(Box<PlanError>),
     /// The board file is wrong.
     #[error("board {file}")]
     Board {
@@ -33,7 +33,7 @@ pub enum CellError {
         file: std::path::PathBuf,
         /// What is wrong.
         #[source]
-        source: crate::target::TargetError,
+        source: Box<crate::target::TargetError>,
     },
     /// The intrinsics file is wrong.
     #[error("intrinsics {file}")]
@@ -42,7 +42,7 @@ pub enum CellError {
         file: std::path::PathBuf,
         /// What is wrong.
         #[source]
-        source: crate::camera::model::CameraModelError,
+        source: Box<crate::camera::model::CameraModelError>,
     },
     /// A backend could not be opened.
     #[error("{0}")]
@@ -77,18 +77,29 @@ pub struct PreparedCell {
 
 /// Loads everything a config names and checks the plan. Nothing moves.
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
-    let config = CellConfig::load(config_file)?;
-    let board = Board::load(&config.target).map_err(|source| CellError::Board { file: config.target.clone(), source })?;
-    let camera_model = CameraModel::load(&config.intrinsics)
-        .map_err(|source| CellError::Intrinsics { file: config.intrinsics.clone(), source })?;
-    let arm = UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
+    let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+    let board = Board::load(&config.target).map_err(|source| CellError::Board {
+        file: config.target.clone(),
+        source: Box::new(source),
+    })?;
+    let camera_model =
+        CameraModel::load(&config.intrinsics).map_err(|source| CellError::Intrinsics {
+            file: config.intrinsics.clone(),
+            source: Box::new(source),
+        })?;
+    let arm =
+        UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
     let start_joints = match &config.robot {
-        RobotConfig::Sim { start_joints_deg, .. } => start_joints_deg.map(f64::to_radians),
+        RobotConfig::Sim {
+            start_joints_deg, ..
+        } => start_joints_deg.map(f64::to_radians),
         RobotConfig::Ur { .. } => crate::config::default_start_joints(),
     };
     let plan = match (&config.plan.file, &config.plan.generate) {
-        (Some(file), _) => Plan::load(file)?,
-        (None, Some(spec)) => Plan { waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect() },
+        (Some(file), _) => Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?,
+        (None, Some(spec)) => Plan {
+            waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect(),
+        },
         (None, None) => unreachable!("the config requires a plan source"),
     };
     let report = check_plan(
@@ -104,7 +115,15 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
             margin_px: config.session.image_margin_px,
         },
     );
-    Ok(PreparedCell { config, board, camera_model, arm, start_joints, plan, report })
+    Ok(PreparedCell {
+        config,
+        board,
+        camera_model,
+        arm,
+        start_joints,
+        plan,
+        report,
+    })
 }
 
 impl PreparedCell {
@@ -116,17 +135,26 @@ impl PreparedCell {
     /// Detector settings from the config.
     pub fn detector_options(&self) -> DetectorOptions {
         let d = self.config.detector;
-        DetectorOptions { decimation: d.decimate, threads: d.threads, max_hamming: d.max_hamming, ..DetectorOptions::default() }
+        DetectorOptions {
+            decimation: d.decimate,
+            threads: d.threads,
+            max_hamming: d.max_hamming,
+            ..DetectorOptions::default()
+        }
     }
 
     /// The session manifest for a validated plan.
     pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
         SessionManifest {
-            config: std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone()),
+            config: std::fs::canonicalize(&self.config.file)
+                .unwrap_or_else(|_| self.config.file.clone()),
             setup: self.config.setup,
             plan: plan
                 .iter()
-                .map(|(pose, q)| PlannedPose { base_from_flange: PoseYaml::from_pose(pose), joints_deg: q.map(f64::to_degrees) })
+                .map(|(pose, q)| PlannedPose {
+                    base_from_flange: PoseYaml::from_pose(pose),
+                    joints_deg: q.map(f64::to_degrees),
+                })
                 .collect(),
         }
     }
@@ -136,7 +164,7 @@ impl PreparedCell {
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.config.simulation.expect("validated: sim backends have ground truth");
-                let (robot, camera) = sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model.clone(), self.board.clone())?;
+                let (robot, camera) = sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (robot, camera) => Err(CellError::Backend(format!(

@@ -22,7 +22,9 @@ pub struct SharedSimRobot(Arc<Mutex<SimRobot>>);
 impl SharedSimRobot {
     fn arm(&self) -> MutexGuard<'_, SimRobot> {
         // A panic while holding the lock cannot leave the arm half-moved: moves are atomic.
-        self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        self.0
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 }
 
@@ -33,7 +35,11 @@ impl Robot for SharedSimRobot {
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {
         self.arm().joint_positions()
     }
-    fn move_linear(&mut self, base_from_flange: &Pose, limits: &MotionLimits) -> Result<(), RobotError> {
+    fn move_linear(
+        &mut self,
+        base_from_flange: &Pose,
+        limits: &MotionLimits,
+    ) -> Result<(), RobotError> {
         self.arm().move_linear(base_from_flange, limits)
     }
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
@@ -56,28 +62,63 @@ pub fn open(
     camera_model: CameraModel,
     board: Board,
 ) -> Result<(SharedSimRobot, SimCamera), CellError> {
-    let RobotConfig::Sim { move_duration_s, repeatability_mm, repeatability_deg, protective_stop_after_moves, seed, .. } =
-        &config.robot
+    let RobotConfig::Sim {
+        move_duration_s,
+        repeatability_mm,
+        repeatability_deg,
+        protective_stop_after_moves,
+        seed,
+        ..
+    } = &config.robot
     else {
-        return Err(CellError::Backend("the simulated cell needs `robot: {backend: sim}`".into()));
+        return Err(CellError::Backend(
+            "the simulated cell needs `robot: {backend: sim}`".into(),
+        ));
     };
-    let CameraConfig::Sim { noise_sigma, blur_sigma_px, seed: camera_seed, hide_board_in_grabs } = &config.camera else {
-        return Err(CellError::Backend("the simulated cell needs `camera: {backend: sim}`".into()));
+    let CameraConfig::Sim {
+        noise_sigma,
+        blur_sigma_px,
+        seed: camera_seed,
+        hide_board_in_grabs,
+    } = &config.camera
+    else {
+        return Err(CellError::Backend(
+            "the simulated cell needs `camera: {backend: sim}`".into(),
+        ));
     };
     let options = SimRobotOptions {
         move_duration: std::time::Duration::from_secs_f64(*move_duration_s),
         repeatability_m: repeatability_mm * 1e-3,
         repeatability_rad: repeatability_deg.to_radians(),
         seed: *seed,
-        faults: SimFaults { protective_stop_after_moves: *protective_stop_after_moves, ..SimFaults::default() },
+        faults: SimFaults {
+            protective_stop_after_moves: *protective_stop_after_moves,
+            ..SimFaults::default()
+        },
     };
-    let robot = SimRobot::new(arm, start, options).map_err(|e| CellError::Backend(e.to_string()))?;
+    let robot =
+        SimRobot::new(arm, start, options).map_err(|e| CellError::Backend(e.to_string()))?;
     let shared = Arc::new(Mutex::new(robot));
     let camera_arm = shared.clone();
     let true_pose = Box::new(move || {
-        camera_arm.lock().unwrap_or_else(|p| p.into_inner()).true_base_from_flange()
+        camera_arm
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .true_base_from_flange()
     });
-    let render = RenderOptions { noise_sigma: *noise_sigma, blur_sigma_px: *blur_sigma_px, ..RenderOptions::default() };
-    let camera = SimCamera::new(camera_model, board, truth, true_pose, render, *camera_seed, hide_board_in_grabs.iter().copied().collect());
+    let render = RenderOptions {
+        noise_sigma: *noise_sigma,
+        blur_sigma_px: *blur_sigma_px,
+        ..RenderOptions::default()
+    };
+    let camera = SimCamera::new(
+        camera_model,
+        board,
+        truth,
+        true_pose,
+        render,
+        *camera_seed,
+        hide_board_in_grabs.iter().copied().collect(),
+    );
     Ok((SharedSimRobot(shared), camera))
 }

@@ -53,18 +53,38 @@ enum PlanCommand {
 /// Runs `handeye plan`.
 pub fn run(args: PlanArgs) -> anyhow::Result<()> {
     match args.command {
-        PlanCommand::Generate { count, near, far, max_tilt_deg, max_roll_deg, seed, output } => {
-            let spec = GenerateSpec { count, distance: [near, far], max_tilt_deg, max_roll_deg, seed };
+        PlanCommand::Generate {
+            count,
+            near,
+            far,
+            max_tilt_deg,
+            max_roll_deg,
+            seed,
+            output,
+        } => {
+            let spec = GenerateSpec {
+                count,
+                distance: [near, far],
+                max_tilt_deg,
+                max_roll_deg,
+                seed,
+            };
             if let Err(problem) = spec.validate() {
                 bail!("{problem}");
             }
-            let plan = Plan { waypoints: generate(&spec).into_iter().map(Waypoint::LookAt).collect() };
+            let plan = Plan {
+                waypoints: generate(&spec).into_iter().map(Waypoint::LookAt).collect(),
+            };
             plan.save(&output)?;
-            println!("wrote {count} look-at views to {}; check them with `handeye plan check`", output.display());
+            println!(
+                "wrote {count} look-at views to {}; check them with `handeye plan check`",
+                output.display()
+            );
             Ok(())
         }
         PlanCommand::Check { config } => {
-            let prepared = cell::prepare(&config).with_context(|| format!("preparing {}", config.display()))?;
+            let prepared = cell::prepare(&config)
+                .with_context(|| format!("preparing {}", config.display()))?;
             println!("{}", prepared.report);
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");

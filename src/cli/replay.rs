@@ -6,8 +6,8 @@ use anyhow::Context;
 use clap::Args;
 
 use handeye::cell;
-use handeye::session::{replay, SessionFolder};
 use handeye::result::ResultFile;
+use handeye::session::{replay, SessionFolder};
 use handeye::solve;
 
 /// Re-detect the board in a session's frames and solve again offline.
@@ -28,7 +28,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let prepared = cell::prepare(&config_path).with_context(|| format!("reading {}", config_path.display()))?;
+    let prepared = cell::prepare(&config_path)
+        .with_context(|| format!("reading {}", config_path.display()))?;
     let (dataset, visits) = replay::redetect(
         &folder,
         &prepared.board,
@@ -38,13 +39,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     )?;
     for v in &visits {
         match (&v.rejected, v.reprojection_rms_px) {
-            (None, Some(rms)) => println!("pose {:>3}: {} tags, board RMS {rms:.3} px", v.plan_index, v.tags),
+            (None, Some(rms)) => println!(
+                "pose {:>3}: {} tags, board RMS {rms:.3} px",
+                v.plan_index, v.tags
+            ),
             (Some(why), _) => println!("pose {:>3}: skipped: {why}", v.plan_index),
             _ => {}
         }
     }
-    let calibration = solve::solve(dataset.setup, &dataset.pairs, &prepared.config.solver.to_options())?;
-    let output = args.output.unwrap_or_else(|| folder.root().join("replay-result.yaml"));
+    let calibration = solve::solve(
+        dataset.setup,
+        &dataset.pairs,
+        &prepared.config.solver.to_options(),
+    )?;
+    let output = args
+        .output
+        .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
     ResultFile::from_calibration(&calibration, &dataset.pairs).save(&output)?;
     println!("{}", calibration.summary());
     if folder.result_path().is_file() {
@@ -59,7 +69,10 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(truth) = &prepared.config.simulation {
-        let solved = handeye::session::SolvedSession { calibration, summary: String::new() };
+        let solved = handeye::session::SolvedSession {
+            calibration,
+            summary: String::new(),
+        };
         println!("{}", solved.compare_with_truth(truth));
     }
     println!("wrote {}", output.display());

@@ -40,7 +40,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         }
         None => (None, args.config.clone().expect("clap requires --config")),
     };
-    let prepared = cell::prepare(&config_path).with_context(|| format!("preparing the cell from {}", config_path.display()))?;
+    let prepared = cell::prepare(&config_path)
+        .with_context(|| format!("preparing the cell from {}", config_path.display()))?;
     println!("{}", prepared.report);
     let Some(plan) = prepared.report.validated() else {
         bail!("the plan failed its checks (see the table above); nothing was moved");
@@ -70,7 +71,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         });
     }
 
-    let mut hardware = prepared.open_hardware().context("opening the robot and camera")?;
+    let mut hardware = prepared
+        .open_hardware()
+        .context("opening the robot and camera")?;
     let setup = SessionSetup {
         folder: folder.clone(),
         setup: prepared.config.setup,
@@ -84,11 +87,23 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     };
     let bar = progress_bar(plan.len() as u64);
     let mut on_event = |event: SessionEvent| match event {
-        SessionEvent::Moving { plan_index } => bar.set_message(format!("moving to pose {plan_index}")),
-        SessionEvent::Recorded { plan_index, reprojection_rms_px, tags, rejected, will_retry } => {
+        SessionEvent::Moving { plan_index } => {
+            bar.set_message(format!("moving to pose {plan_index}"))
+        }
+        SessionEvent::Recorded {
+            plan_index,
+            reprojection_rms_px,
+            tags,
+            rejected,
+            will_retry,
+        } => {
             let line = match (&rejected, reprojection_rms_px) {
-                (None, Some(rms)) => format!("pose {plan_index:>3}: ok, {tags} tags, board RMS {rms:.3} px"),
-                (Some(why), _) if will_retry => format!("pose {plan_index:>3}: {why}; will retry once"),
+                (None, Some(rms)) => {
+                    format!("pose {plan_index:>3}: ok, {tags} tags, board RMS {rms:.3} px")
+                }
+                (Some(why), _) if will_retry => {
+                    format!("pose {plan_index:>3}: {why}; will retry once")
+                }
                 (Some(why), _) => format!("pose {plan_index:>3}: skipped: {why}"),
                 (None, None) => format!("pose {plan_index:>3}: ok"),
             };
@@ -98,13 +113,23 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             }
         }
     };
-    let outcome = session::run_session(setup, hardware.robot.as_mut(), hardware.camera.as_mut(), &mut on_event);
+    let outcome = session::run_session(
+        setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut on_event,
+    );
     bar.finish_and_clear();
     let outcome = outcome?;
     if !outcome.skipped.is_empty() {
         println!(
             "skipped poses: {}",
-            outcome.skipped.iter().map(|(i, why)| format!("{i} ({why})")).collect::<Vec<_>>().join(", ")
+            outcome
+                .skipped
+                .iter()
+                .map(|(i, why)| format!("{i} ({why})"))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     let result = session::solve_folder(&folder, &prepared.config)?;

@@ -77,13 +77,21 @@ impl PlanReport {
         if !self.ok() {
             return None;
         }
-        self.poses.iter().map(|p| p.joints.map(|q| (p.base_from_flange, q))).collect()
+        self.poses
+            .iter()
+            .map(|p| p.joints.map(|q| (p.base_from_flange, q)))
+            .collect()
     }
 }
 
 /// Checks every pose of `plan` and the plan as a whole.
 pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
-    let board_points: Vec<Point3<f64>> = ctx.board.tags().iter().flat_map(|t| t.corners_in_target).collect();
+    let board_points: Vec<Point3<f64>> = ctx
+        .board
+        .tags()
+        .iter()
+        .flat_map(|t| t.corners_in_target)
+        .collect();
     let centre = board_centre(ctx.board);
     let mut previous = ctx.start_joints;
     let mut poses = Vec::with_capacity(plan.waypoints.len());
@@ -97,7 +105,8 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         };
         let mut move_time_s = 0.0;
         match joints {
-            None => problems.push("unreachable: no inverse-kinematics solution inside the joint limits".into()),
+            None => problems
+                .push("unreachable: no inverse-kinematics solution inside the joint limits".into()),
             Some(q) => {
                 if let Some(outside) = path_leaves_box(ctx.arm, &previous, &q, ctx.workspace) {
                     problems.push(outside);
@@ -108,7 +117,10 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         }
         if !ctx.workspace.contains(&base_from_flange) {
             let p = base_from_flange.translation.vector;
-            problems.push(format!("flange at [{:.3}, {:.3}, {:.3}] m is outside the workspace box", p.x, p.y, p.z));
+            problems.push(format!(
+                "flange at [{:.3}, {:.3}, {:.3}] m is outside the workspace box",
+                p.x, p.y, p.z
+            ));
         }
         let camera_from_target = ctx.cell.camera_from_target(&base_from_flange);
         let distance_m = (camera_from_target * centre).coords.norm();
@@ -123,24 +135,44 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
                 )
             });
         }
-        poses.push(PoseCheck { index, base_from_flange, joints, distance_m, image_margin_px, move_time_s, problems });
+        poses.push(PoseCheck {
+            index,
+            base_from_flange,
+            joints,
+            distance_m,
+            image_margin_px,
+            move_time_s,
+            problems,
+        });
     }
     let flange_poses: Vec<Pose> = poses.iter().map(|p| p.base_from_flange).collect();
     let mut plan_problems = Vec::new();
     if let Err(e) = crate::solve::check_rotation_diversity(&flange_poses) {
         plan_problems.push(e.to_string());
     }
-    PlanReport { poses, plan_problems }
+    PlanReport {
+        poses,
+        plan_problems,
+    }
 }
 
 /// The middle of the board's outline, in the target frame (the point look-at views aim at).
 pub fn board_centre(board: &Board) -> Point3<f64> {
     let extent = board.extent();
-    Point3::new((extent.min.x + extent.max.x) / 2.0, (extent.min.y + extent.max.y) / 2.0, 0.0)
+    Point3::new(
+        (extent.min.x + extent.max.x) / 2.0,
+        (extent.min.y + extent.max.y) / 2.0,
+        0.0,
+    )
 }
 
 /// The first point of a straight joint-space move that leaves the box, as a message.
-fn path_leaves_box(arm: &UrModel, from: &Joints, to: &Joints, workspace: &WorkspaceBox) -> Option<String> {
+fn path_leaves_box(
+    arm: &UrModel,
+    from: &Joints,
+    to: &Joints,
+    workspace: &WorkspaceBox,
+) -> Option<String> {
     (0..=PATH_SAMPLES).find_map(|k| {
         let s = k as f64 / PATH_SAMPLES as f64;
         let mut q = [0.0; 6];
@@ -163,7 +195,11 @@ fn path_leaves_box(arm: &UrModel, from: &Joints, to: &Joints, workspace: &Worksp
 
 /// Duration of a synchronised joint move with a trapezoidal speed profile at the limits.
 fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
-    let travel = from.iter().zip(to).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let travel = from
+        .iter()
+        .zip(to)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
     let (v, a) = (limits.joint_speed, limits.joint_acceleration);
     if travel <= v * v / a {
         2.0 * (travel / a).sqrt()
@@ -181,7 +217,10 @@ fn board_margin(camera: &CameraModel, camera_from_target: &Pose, points: &[Point
         .map(|p| match camera.project(&(camera_from_target * p)) {
             None => f64::NEG_INFINITY,
             // Pixel centres are integers: the image spans [-0.5, w - 0.5].
-            Some(px) => (px.x + 0.5).min(w - 0.5 - px.x).min(px.y + 0.5).min(h - 0.5 - px.y),
+            Some(px) => (px.x + 0.5)
+                .min(w - 0.5 - px.x)
+                .min(px.y + 0.5)
+                .min(h - 0.5 - px.y),
         })
         .fold(f64::INFINITY, f64::min)
 }
@@ -195,15 +234,31 @@ impl fmt::Display for PlanReport {
         )?;
         for p in &self.poses {
             let t = p.base_from_flange.translation.vector;
-            let status = if p.problems.is_empty() { "ok".to_string() } else { p.problems.join("; ") };
+            let status = if p.problems.is_empty() {
+                "ok".to_string()
+            } else {
+                p.problems.join("; ")
+            };
             let joints = match p.joints {
-                Some(q) => q.iter().map(|v| format!("{:.0}", v.to_degrees())).collect::<Vec<_>>().join(", "),
+                Some(q) => q
+                    .iter()
+                    .map(|v| format!("{:.0}", v.to_degrees()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 None => "-".into(),
             };
             writeln!(
                 f,
                 "{:>4}  [{:>6.3}, {:>6.3}, {:>6.3}]  {:>35}  {:>8.3}  {:>9.0}  {:>6.2}  {}",
-                p.index, t.x, t.y, t.z, joints, p.distance_m, p.image_margin_px, p.move_time_s, status
+                p.index,
+                t.x,
+                t.y,
+                t.z,
+                joints,
+                p.distance_m,
+                p.image_margin_px,
+                p.move_time_s,
+                status
             )?;
         }
         for problem in &self.plan_problems {
@@ -216,7 +271,11 @@ impl fmt::Display for PlanReport {
             self.poses.len(),
             self.poses.iter().filter(|p| !p.problems.is_empty()).count(),
             total,
-            if self.ok() { "plan OK" } else { "plan REJECTED" }
+            if self.ok() {
+                "plan OK"
+            } else {
+                "plan REJECTED"
+            }
         )
     }
 }

@@ -40,7 +40,10 @@ impl GenerateSpec {
     /// Checks the numbers describe a plan one can generate.
     pub fn validate(&self) -> Result<(), String> {
         if self.count < 3 {
-            return Err(format!("count: at least 3 views are needed, got {}", self.count));
+            return Err(format!(
+                "count: at least 3 views are needed, got {}",
+                self.count
+            ));
         }
         let [near, far] = self.distance;
         if !(near.is_finite() && far.is_finite() && near > 0.0 && far >= near) {
@@ -49,10 +52,16 @@ impl GenerateSpec {
             ));
         }
         if !(self.max_tilt_deg > 0.0 && self.max_tilt_deg < 80.0) {
-            return Err(format!("max_tilt_deg: expected a value in (0, 80), got {}", self.max_tilt_deg));
+            return Err(format!(
+                "max_tilt_deg: expected a value in (0, 80), got {}",
+                self.max_tilt_deg
+            ));
         }
         if !(self.max_roll_deg >= 0.0 && self.max_roll_deg <= 180.0) {
-            return Err(format!("max_roll_deg: expected a value in [0, 180], got {}", self.max_roll_deg));
+            return Err(format!(
+                "max_roll_deg: expected a value in [0, 180], got {}",
+                self.max_roll_deg
+            ));
         }
         Ok(())
     }
@@ -91,7 +100,13 @@ mod tests {
 
     #[test]
     fn views_stay_inside_the_spec() {
-        let spec = GenerateSpec { count: 40, distance: [0.45, 0.7], max_tilt_deg: 35.0, max_roll_deg: 30.0, seed: 3 };
+        let spec = GenerateSpec {
+            count: 40,
+            distance: [0.45, 0.7],
+            max_tilt_deg: 35.0,
+            max_roll_deg: 30.0,
+            seed: 3,
+        };
         spec.validate().unwrap();
         let views = generate(&spec);
         assert_eq!(views.len(), 40);
@@ -104,14 +119,37 @@ mod tests {
         // Spread: both large and small tilts, both roll signs.
         assert!(views.iter().any(|v| 90.0 - v.elevation_deg > 28.0));
         assert!(views.iter().any(|v| 90.0 - v.elevation_deg < 8.0));
-        assert!(views.iter().any(|v| v.roll_deg > 10.0) && views.iter().any(|v| v.roll_deg < -10.0));
+        assert!(
+            views.iter().any(|v| v.roll_deg > 10.0) && views.iter().any(|v| v.roll_deg < -10.0)
+        );
     }
 
     #[test]
     fn bad_specs_are_refused() {
-        let good = GenerateSpec { count: 10, distance: [0.4, 0.6], max_tilt_deg: 30.0, max_roll_deg: 20.0, seed: 0 };
-        assert!(GenerateSpec { count: 2, ..good }.validate().unwrap_err().contains("count"));
-        assert!(GenerateSpec { distance: [0.6, 0.4], ..good }.validate().unwrap_err().contains("distance"));
-        assert!(GenerateSpec { max_tilt_deg: 90.0, ..good }.validate().unwrap_err().contains("max_tilt_deg"));
+        let good = GenerateSpec {
+            count: 10,
+            distance: [0.4, 0.6],
+            max_tilt_deg: 30.0,
+            max_roll_deg: 20.0,
+            seed: 0,
+        };
+        assert!(GenerateSpec { count: 2, ..good }
+            .validate()
+            .unwrap_err()
+            .contains("count"));
+        assert!(GenerateSpec {
+            distance: [0.6, 0.4],
+            ..good
+        }
+        .validate()
+        .unwrap_err()
+        .contains("distance"));
+        assert!(GenerateSpec {
+            max_tilt_deg: 90.0,
+            ..good
+        }
+        .validate()
+        .unwrap_err()
+        .contains("max_tilt_deg"));
     }
 }

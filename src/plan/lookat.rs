@@ -30,7 +30,10 @@ impl LookAt {
     /// The camera pose in the board frame, `T_target_camera`, looking at `board_centre`
     /// (a point in the target frame).
     pub fn target_from_camera(&self, board_centre: &Point3<f64>) -> Pose {
-        let (az, el) = (self.azimuth_deg.to_radians(), self.elevation_deg.to_radians());
+        let (az, el) = (
+            self.azimuth_deg.to_radians(),
+            self.elevation_deg.to_radians(),
+        );
         let direction = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
         let camera_position = board_centre + direction * self.distance;
         let z_axis = -direction;
@@ -42,7 +45,8 @@ impl LookAt {
         };
         let y_axis = -(board_up - z_axis * board_up.dot(&z_axis)).normalize();
         let x_axis = y_axis.cross(&z_axis);
-        let looking = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x_axis, y_axis, z_axis]));
+        let looking =
+            Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x_axis, y_axis, z_axis]));
         let rolled = UnitQuaternion::from_rotation_matrix(&looking)
             * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.roll_deg.to_radians());
         Pose::from_parts(Translation3::from(camera_position.coords), rolled)
@@ -51,11 +55,19 @@ impl LookAt {
     /// Checks the numbers make a view: a positive finite distance and finite angles, elevation in (0, 90].
     pub fn validate(&self) -> Result<(), String> {
         if !(self.distance.is_finite() && self.distance > 0.0) {
-            return Err(format!("distance must be a positive number of metres, got {}", self.distance));
+            return Err(format!(
+                "distance must be a positive number of metres, got {}",
+                self.distance
+            ));
         }
-        for (name, v) in [("azimuth_deg", self.azimuth_deg), ("roll_deg", self.roll_deg)] {
+        for (name, v) in [
+            ("azimuth_deg", self.azimuth_deg),
+            ("roll_deg", self.roll_deg),
+        ] {
             if !v.is_finite() {
-                return Err(format!("{name} must be a finite number of degrees, got {v}"));
+                return Err(format!(
+                    "{name} must be a finite number of degrees, got {v}"
+                ));
             }
         }
         if !(self.elevation_deg > 0.0 && self.elevation_deg <= 90.0) {
@@ -75,7 +87,12 @@ mod tests {
     #[test]
     fn straight_above_sees_the_board_upright_at_the_distance() {
         let centre = Point3::new(0.1, 0.2, 0.0);
-        let view = LookAt { distance: 0.6, azimuth_deg: 0.0, elevation_deg: 90.0, roll_deg: 0.0 };
+        let view = LookAt {
+            distance: 0.6,
+            azimuth_deg: 0.0,
+            elevation_deg: 90.0,
+            roll_deg: 0.0,
+        };
         let target_from_camera = view.target_from_camera(&centre);
         let camera_from_target = target_from_camera.inverse();
         let centre_in_camera = camera_from_target * centre;
@@ -90,15 +107,28 @@ mod tests {
     #[test]
     fn every_view_looks_at_the_centre() {
         let centre = Point3::new(0.14, 0.14, 0.0);
-        for (az, el, roll) in [(0.0, 60.0, 0.0), (135.0, 45.0, 20.0), (-90.0, 75.0, -30.0), (90.0, 30.0, 0.0)] {
-            let view = LookAt { distance: 0.5, azimuth_deg: az, elevation_deg: el, roll_deg: roll };
+        for (az, el, roll) in [
+            (0.0, 60.0, 0.0),
+            (135.0, 45.0, 20.0),
+            (-90.0, 75.0, -30.0),
+            (90.0, 30.0, 0.0),
+        ] {
+            let view = LookAt {
+                distance: 0.5,
+                azimuth_deg: az,
+                elevation_deg: el,
+                roll_deg: roll,
+            };
             let camera_from_target = view.target_from_camera(&centre).inverse();
             let c = camera_from_target * centre;
             assert!(c.x.abs() < 1e-12 && c.y.abs() < 1e-12 && (c.z - 0.5).abs() < 1e-12);
             // Tilt between optical axis and board normal is 90° − elevation.
             let normal_in_camera = camera_from_target.rotation * Vector3::z();
             let tilt = (-normal_in_camera.z).acos().to_degrees();
-            assert!((tilt - (90.0 - el)).abs() < 1e-9, "az {az} el {el}: tilt {tilt}");
+            assert!(
+                (tilt - (90.0 - el)).abs() < 1e-9,
+                "az {az} el {el}: tilt {tilt}"
+            );
         }
     }
 }

@@ -108,7 +108,11 @@ struct PlanFile {
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct WaypointYaml {
-    #[serde(rename = "T_base_flange", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "T_base_flange",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     base_from_flange: Option<PoseYaml>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     joints_deg: Option<Vec<f64>>,
@@ -129,13 +133,12 @@ impl Plan {
     /// Parses plan YAML; `file` is used in messages only.
     pub fn parse(text: &str, file: &Path) -> Result<Plan, PlanError> {
         let deserializer = serde_yaml_ng::Deserializer::from_str(text);
-        let raw: PlanFile = serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            PlanError::Shape {
+        let raw: PlanFile =
+            serde_path_to_error::deserialize(deserializer).map_err(|e| PlanError::Shape {
                 file: file.to_path_buf(),
                 path: e.path().to_string(),
                 message: e.inner().to_string(),
-            }
-        })?;
+            })?;
         if raw.waypoints.is_empty() {
             return Err(PlanError::Empty(file.to_path_buf()));
         }
@@ -151,14 +154,16 @@ impl Plan {
     /// Writes the plan as YAML (atomically).
     pub fn save(&self, file: &Path) -> Result<(), PlanError> {
         let raw = PlanFile {
-            waypoints: self.waypoints.iter().map(WaypointYaml::from_waypoint).collect(),
+            waypoints: self
+                .waypoints
+                .iter()
+                .map(WaypointYaml::from_waypoint)
+                .collect(),
         };
         let text = serde_yaml_ng::to_string(&raw).expect("plan serialises");
-        crate::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| {
-            PlanError::Write {
-                file: file.to_path_buf(),
-                source,
-            }
+        crate::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| PlanError::Write {
+            file: file.to_path_buf(),
+            source,
         })
     }
 }
@@ -209,7 +214,8 @@ impl WaypointYaml {
             return Ok(Waypoint::Joints(q));
         }
         let view = self.look_at.expect("one key is present");
-        view.validate().map_err(|m| problem(format!("look_at: {m}")))?;
+        view.validate()
+            .map_err(|m| problem(format!("look_at: {m}")))?;
         Ok(Waypoint::LookAt(view))
     }
 
@@ -261,7 +267,12 @@ impl CellTransforms {
 
     /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
     pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
-        crate::solve::predict(self.setup, &self.camera_mount, &self.target_mount, base_from_flange)
+        crate::solve::predict(
+            self.setup,
+            &self.camera_mount,
+            &self.target_mount,
+            base_from_flange,
+        )
     }
 
     /// Turns a waypoint into a flange pose (joint waypoints go through forward kinematics).
@@ -344,7 +355,12 @@ mod tests {
     #[test]
     fn views_become_flange_poses_that_show_the_same_view_in_both_setups() {
         let centre = Point3::new(0.14, 0.14, 0.0);
-        let view = LookAt { distance: 0.55, azimuth_deg: 40.0, elevation_deg: 65.0, roll_deg: 15.0 };
+        let view = LookAt {
+            distance: 0.55,
+            azimuth_deg: 40.0,
+            elevation_deg: 65.0,
+            roll_deg: 15.0,
+        };
         let target_from_camera = view.target_from_camera(&centre);
         for setup in [Setup::EyeInHand, Setup::EyeToHand] {
             let cell = CellTransforms {

@@ -104,11 +104,13 @@ pub fn run_session(
             failed_before.insert(visit.plan_index);
         }
     }
-    let mut pending: Vec<usize> = (0..setup.plan.len()).filter(|i| !accepted.contains(i)).collect();
+    let mut pending: Vec<usize> = (0..setup.plan.len())
+        .filter(|i| !accepted.contains(i))
+        .collect();
 
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
-    let worker = spawn_worker(&setup, camera.model().clone(), previous, job_rx, result_tx)?;
+    let worker = spawn_worker(&setup, *camera.model(), previous, job_rx, result_tx)?;
 
     let mut state = RunState {
         outcome: SessionOutcome::default(),
@@ -140,8 +142,14 @@ pub fn run_session(
                     state.outcome.visited_now += 1;
                     state.in_flight += 1;
                     job_tx
-                        .send(Job { plan_index, frame, base_from_flange })
-                        .map_err(|_| SessionError::Detection("the detection thread stopped".into()))?;
+                        .send(Job {
+                            plan_index,
+                            frame,
+                            base_from_flange,
+                        })
+                        .map_err(|_| {
+                            SessionError::Detection("the detection thread stopped".into())
+                        })?;
                 }
                 Err(source) => {
                     // Stop first, then let the worker finish what it has so the count is true.
@@ -150,8 +158,18 @@ pub fn run_session(
                     let folder = setup.folder.root().to_path_buf();
                     let recorded = state.recorded();
                     state.error = Some(match source {
-                        ErrorSource::Robot(source) => SessionError::Robot { plan_index, recorded, folder, source },
-                        ErrorSource::Camera(source) => SessionError::Camera { plan_index, recorded, folder, source },
+                        ErrorSource::Robot(source) => SessionError::Robot {
+                            plan_index,
+                            recorded,
+                            folder,
+                            source,
+                        },
+                        ErrorSource::Camera(source) => SessionError::Camera {
+                            plan_index,
+                            recorded,
+                            folder,
+                            source,
+                        },
                     });
                     break 'passes;
                 }
@@ -171,7 +189,9 @@ pub fn run_session(
         return Err(e);
     }
     if worker_result.is_err() {
-        return Err(SessionError::Detection("the detection thread panicked".into()));
+        return Err(SessionError::Detection(
+            "the detection thread panicked".into(),
+        ));
     }
     let mut outcome = state.outcome;
     outcome.accepted.extend(accepted);
@@ -223,7 +243,11 @@ impl RunState {
     }
 
     /// Waits for every job in flight.
-    fn drain(&mut self, results: &mpsc::Receiver<JobResult>, on_event: &mut dyn FnMut(SessionEvent)) {
+    fn drain(
+        &mut self,
+        results: &mpsc::Receiver<JobResult>,
+        on_event: &mut dyn FnMut(SessionEvent),
+    ) {
         while self.in_flight > 0 {
             match results.recv() {
                 Ok(result) => self.handle(result, on_event),
@@ -275,23 +299,45 @@ fn spawn_worker(
     let max_rms = setup.max_reprojection_rms_px;
     let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
     for visit in &previous {
-        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&folder.root().join("poses"))? {
-            samples.insert(visit.plan_index, sample_of(visit.plan_index, base_from_flange, camera_from_target));
+        if let (base_from_flange, Some(camera_from_target)) =
+            visit.poses(&folder.root().join("poses"))?
+        {
+            samples.insert(
+                visit.plan_index,
+                sample_of(visit.plan_index, base_from_flange, camera_from_target),
+            );
         }
     }
     Ok(std::thread::Builder::new()
         .name("detection".into())
         .spawn(move || {
             for job in jobs {
-                let visit = process(&job, &detector, &board, &camera_model, &folder, max_rms).and_then(|visit| {
-                    if let (base_from_flange, Some(camera_from_target)) = visit.poses(&folder.root().join("poses"))? {
-                        samples.insert(visit.plan_index, sample_of(visit.plan_index, base_from_flange, camera_from_target));
-                        let dataset = Dataset { setup: session_setup, pairs: samples.values().cloned().collect() };
-                        dataset.save(&folder.samples_path()).map_err(|e| SessionError::Detection(e.to_string()))?;
-                    }
-                    Ok(visit)
-                });
-                if results.send(JobResult { plan_index: job.plan_index, visit }).is_err() {
+                let visit = process(&job, &detector, &board, &camera_model, &folder, max_rms)
+                    .and_then(|visit| {
+                        if let (base_from_flange, Some(camera_from_target)) =
+                            visit.poses(&folder.root().join("poses"))?
+                        {
+                            samples.insert(
+                                visit.plan_index,
+                                sample_of(visit.plan_index, base_from_flange, camera_from_target),
+                            );
+                            let dataset = Dataset {
+                                setup: session_setup,
+                                pairs: samples.values().cloned().collect(),
+                            };
+                            dataset
+                                .save(&folder.samples_path())
+                                .map_err(|e| SessionError::Detection(e.to_string()))?;
+                        }
+                        Ok(visit)
+                    });
+                if results
+                    .send(JobResult {
+                        plan_index: job.plan_index,
+                        visit,
+                    })
+                    .is_err()
+                {
                     return;
                 }
             }
@@ -300,8 +346,15 @@ fn spawn_worker(
 }
 
 /// The solver sample of a plan pose; its id ties it to the frame and record files.
-pub(crate) fn sample_of(plan_index: usize, base_from_flange: Pose, camera_from_target: Pose) -> PosePair {
-    PosePair { id: Some(format!("pose-{plan_index:03}")), ..PosePair::new(base_from_flange, camera_from_target) }
+pub(crate) fn sample_of(
+    plan_index: usize,
+    base_from_flange: Pose,
+    camera_from_target: Pose,
+) -> PosePair {
+    PosePair {
+        id: Some(format!("pose-{plan_index:03}")),
+        ..PosePair::new(base_from_flange, camera_from_target)
+    }
 }
 
 fn process(
@@ -317,7 +370,9 @@ fn process(
     job.frame
         .image
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(|e| SessionError::Detection(format!("cannot encode frame {}: {e}", frame_name.display())))?;
+        .map_err(|e| {
+            SessionError::Detection(format!("cannot encode frame {}: {e}", frame_name.display()))
+        })?;
     folder.write_file(&frame_name, &png)?;
 
     let visit = measure(
@@ -348,7 +403,12 @@ pub(crate) fn measure(
             visit.corners_px = detection
                 .tags
                 .iter()
-                .flat_map(|t| t.corners_px.iter().enumerate().map(move |(k, c)| [t.id as f64, k as f64, c.x, c.y]))
+                .flat_map(|t| {
+                    t.corners_px
+                        .iter()
+                        .enumerate()
+                        .map(move |(k, c)| [t.id as f64, k as f64, c.x, c.y])
+                })
                 .collect();
             match estimate_board_pose(board, camera_model, &detection) {
                 Err(e) => visit.rejected = Some(e.to_string()),
@@ -361,7 +421,8 @@ pub(crate) fn measure(
                             board_pose.rms_px, max_rms
                         ));
                     } else {
-                        visit.camera_from_target = Some(PoseYaml::from_pose(&board_pose.camera_from_target));
+                        visit.camera_from_target =
+                            Some(PoseYaml::from_pose(&board_pose.camera_from_target));
                     }
                 }
             }

@@ -55,7 +55,11 @@ pub struct PoseVisit {
     /// The frame, relative to the session folder.
     pub frame: PathBuf,
     /// Board pose in the camera, when the board was found and accepted.
-    #[serde(rename = "T_camera_target", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "T_camera_target",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub camera_from_target: Option<PoseYaml>,
     /// Board reprojection RMS, px.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -80,7 +84,11 @@ pub struct SessionFolder {
 impl SessionFolder {
     /// Creates a new session folder (it must not exist yet, or be empty).
     pub fn create(root: &Path) -> Result<SessionFolder, SessionError> {
-        if root.exists() && std::fs::read_dir(root).map(|mut d| d.next().is_some()).unwrap_or(true) {
+        if root.exists()
+            && std::fs::read_dir(root)
+                .map(|mut d| d.next().is_some())
+                .unwrap_or(true)
+        {
             return Err(SessionError::FolderExists(root.to_path_buf()));
         }
         for sub in ["poses", "frames"] {
@@ -89,7 +97,9 @@ impl SessionFolder {
                 source,
             })?;
         }
-        Ok(SessionFolder { root: root.to_path_buf() })
+        Ok(SessionFolder {
+            root: root.to_path_buf(),
+        })
     }
 
     /// Opens an existing session folder.
@@ -97,7 +107,9 @@ impl SessionFolder {
         if !root.join("session.yaml").is_file() {
             return Err(SessionError::NotASession(root.to_path_buf()));
         }
-        Ok(SessionFolder { root: root.to_path_buf() })
+        Ok(SessionFolder {
+            root: root.to_path_buf(),
+        })
     }
 
     /// The folder.
@@ -152,10 +164,18 @@ impl SessionFolder {
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| p.extension().is_some_and(|e| e == "yaml"))
                 .collect(),
-            Err(source) => return Err(SessionError::Io { path: folder, source }),
+            Err(source) => {
+                return Err(SessionError::Io {
+                    path: folder,
+                    source,
+                })
+            }
         };
         files.sort();
-        let mut visits: Vec<PoseVisit> = files.iter().map(|f| self.read_yaml(f)).collect::<Result<_, _>>()?;
+        let mut visits: Vec<PoseVisit> = files
+            .iter()
+            .map(|f| self.read_yaml(f))
+            .collect::<Result<_, _>>()?;
         visits.sort_by_key(|v| v.plan_index);
         Ok(visits)
     }
@@ -205,8 +225,14 @@ impl PoseVisit {
 
     /// The measured robot pose and, when accepted, the board pose.
     pub fn poses(&self, file: &Path) -> Result<(Pose, Option<Pose>), SessionError> {
-        let wrap = |source: PoseError| SessionError::Pose { file: file.to_path_buf(), source };
-        let base_from_flange = self.base_from_flange.to_pose("T_base_flange").map_err(wrap)?;
+        let wrap = |source: PoseError| SessionError::Pose {
+            file: file.to_path_buf(),
+            source,
+        };
+        let base_from_flange = self
+            .base_from_flange
+            .to_pose("T_base_flange")
+            .map_err(wrap)?;
         let camera_from_target = self
             .camera_from_target
             .as_ref()

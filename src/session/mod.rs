@@ -26,7 +26,9 @@ use crate::robot::RobotError;
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
     /// The output folder already holds something.
-    #[error("session folder {0} already exists and is not empty; choose another --out or --resume it")]
+    #[error(
+        "session folder {0} already exists and is not empty; choose another --out or --resume it"
+    )]
     FolderExists(PathBuf),
     /// `--resume` was given a folder that is not a session.
     #[error("{0} is not a session folder (no session.yaml)")]

@@ -18,13 +18,16 @@ pub fn redetect(
     max_rms: f64,
 ) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
     let manifest = folder.read_manifest()?;
-    let detector = TagDetector::spawn(board, detector).map_err(|e| SessionError::Detection(e.to_string()))?;
+    let detector =
+        TagDetector::spawn(board, detector).map_err(|e| SessionError::Detection(e.to_string()))?;
     let mut samples = Vec::new();
     let mut visits = Vec::new();
     for recorded in folder.read_visits()? {
         let frame_path = folder.root().join(&recorded.frame);
         let image = image::open(&frame_path)
-            .map_err(|e| SessionError::Detection(format!("cannot read frame {}: {e}", frame_path.display())))?
+            .map_err(|e| {
+                SessionError::Detection(format!("cannot read frame {}: {e}", frame_path.display()))
+            })?
             .into_luma8();
         let (base_from_flange, _) = recorded.poses(&frame_path)?;
         let visit = measure(
@@ -33,12 +36,26 @@ pub fn redetect(
             camera_model,
             &image,
             max_rms,
-            PoseVisit::new(recorded.plan_index, &base_from_flange, recorded.frame.clone()),
+            PoseVisit::new(
+                recorded.plan_index,
+                &base_from_flange,
+                recorded.frame.clone(),
+            ),
         );
         if let (base_from_flange, Some(camera_from_target)) = visit.poses(&frame_path)? {
-            samples.push(sample_of(visit.plan_index, base_from_flange, camera_from_target));
+            samples.push(sample_of(
+                visit.plan_index,
+                base_from_flange,
+                camera_from_target,
+            ));
         }
         visits.push(visit);
     }
-    Ok((Dataset { setup: manifest.setup, pairs: samples }, visits))
+    Ok((
+        Dataset {
+            setup: manifest.setup,
+            pairs: samples,
+        },
+        visits,
+    ))
 }

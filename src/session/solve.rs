@@ -3,9 +3,9 @@
 
 use crate::config::CellConfig;
 use crate::dataset::Dataset;
-use crate::result::ResultFile;
 use crate::geometry::Pose;
 use crate::plan::CellTransforms;
+use crate::result::ResultFile;
 use crate::solve::{self, Calibration};
 
 use super::{SessionError, SessionFolder};
@@ -19,16 +19,23 @@ pub struct SolvedSession {
 }
 
 /// Solves the folder's `samples.yaml` with the config's solver settings and writes `result.yaml`.
-pub fn solve_folder(folder: &SessionFolder, config: &CellConfig) -> Result<SolvedSession, SessionError> {
-    let dataset = Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
+pub fn solve_folder(
+    folder: &SessionFolder,
+    config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    let dataset =
+        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
     let options = config.solver.to_options();
-    let calibration =
-        solve::solve(dataset.setup, &dataset.pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
+        .map_err(|e| SessionError::Solve(e.to_string()))?;
     ResultFile::from_calibration(&calibration, &dataset.pairs)
         .save(&folder.result_path())
         .map_err(|e| SessionError::Solve(e.to_string()))?;
     let summary = calibration.summary();
-    Ok(SolvedSession { calibration, summary })
+    Ok(SolvedSession {
+        calibration,
+        summary,
+    })
 }
 
 impl SolvedSession {

@@ -748,7 +748,10 @@ impl Calibration {
             if s.converged { "" } else { "NOT " },
             s.restarts
         );
-        let sigmas = self.uncertainty.as_ref().map(|u| [u.camera_mount, u.target_mount]);
+        let sigmas = self
+            .uncertainty
+            .as_ref()
+            .map(|u| [u.camera_mount, u.target_mount]);
         for (k, (name, pose)) in self.unknowns().iter().enumerate() {
             let t = pose.translation.vector * 1e3;
             let rv = crate::geometry::rotvec(&pose.rotation);
@@ -764,7 +767,11 @@ impl Calibration {
                 rv.norm().to_degrees()
             );
             if let Some(sigma) = sigmas {
-                let _ = writeln!(out, "    1-sigma {:.4}°, {:.3} mm", sigma[k].rotation_deg, sigma[k].translation_mm);
+                let _ = writeln!(
+                    out,
+                    "    1-sigma {:.4}°, {:.3} mm",
+                    sigma[k].rotation_deg, sigma[k].translation_mm
+                );
             }
         }
         let r = &self.residuals;
