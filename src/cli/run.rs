@@ -10,6 +10,8 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use handeye::cell::{self, PreparedCell};
+use handeye::geometry::Pose;
+use handeye::robot::Joints;
 use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
@@ -40,18 +42,35 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         }
         None => (None, args.config.clone().expect("clap requires --config")),
     };
-    let prepared = cell::prepare(&config_path)
+    let mut prepared = cell::prepare(&config_path)
         .with_context(|| format!("preparing the cell from {}", config_path.display()))?;
     println!("{}", prepared.report);
-    let Some(plan) = prepared.report.validated() else {
+    if !prepared.report.ok() {
         bail!("the plan failed its checks (see the table above); nothing was moved");
-    };
-    if !prepared.is_simulated() && !args.yes {
-        confirm(&prepared, plan.len())?;
     }
+    let poses = prepared.plan.waypoints.len();
+    if !prepared.is_simulated() && !args.yes {
+        confirm(&prepared, poses)?;
+    }
+    let mut hardware = prepared
+        .open_hardware()
+        .context("opening the robot and camera")?;
+    // The plan was checked from an assumed start; check it again from where the arm really is
+    // before the first move.
+    let start = hardware
+        .robot
+        .joint_positions()
+        .context("reading the arm's joint positions")?;
+    let plan = match prepared.recheck_from(start) {
+        Ok(plan) => plan,
+        Err(report) => bail!("from the arm's actual position the plan fails its checks; nothing was moved:\n{report}"),
+    };
 
     let folder = match folder {
-        Some(folder) => folder,
+        Some(folder) => {
+            same_plan_as_recorded(&folder, &plan)?;
+            folder
+        }
         None => {
             let out = args.out.clone().unwrap_or_else(default_session_dir);
             let folder = SessionFolder::create(&out)?;
@@ -85,7 +104,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         detector: prepared.detector_options(),
         stop,
     };
-    let bar = progress_bar(plan.len() as u64);
+    let bar = progress_bar(poses as u64);
     let mut on_event = |event: SessionEvent| match event {
         SessionEvent::Moving { plan_index } => {
             bar.set_message(format!("moving to pose {plan_index}"))
@@ -138,6 +157,34 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         println!("{}", result.compare_with_truth(truth));
     }
     println!("session folder: {}", folder.root().display());
+    Ok(())
+}
+
+/// A resumed session must visit the poses it was started with: the config may not have changed.
+fn same_plan_as_recorded(folder: &SessionFolder, plan: &[(Pose, Joints)]) -> anyhow::Result<()> {
+    let manifest = folder.read_manifest()?;
+    let same = manifest.plan.len() == plan.len()
+        && manifest
+            .plan
+            .iter()
+            .zip(plan)
+            .enumerate()
+            .all(|(i, (recorded, (pose, _)))| {
+                recorded
+                    .base_from_flange
+                    .to_pose(&format!("plan[{i}]"))
+                    .map(|r| {
+                        r.rotation.angle_to(&pose.rotation) < 1e-9
+                            && (r.translation.vector - pose.translation.vector).norm() < 1e-9
+                    })
+                    .unwrap_or(false)
+            });
+    if !same {
+        bail!(
+            "the plan from the config differs from the one {} was started with; resume with the same config, or start a new session",
+            folder.root().display()
+        );
+    }
     Ok(())
 }
 
