@@ -345,3 +345,90 @@ fn tags_not_on_the_board_are_rejected() {
     assert_eq!(ids, vec![20, 21, 22, 23]);
     assert_eq!(detection.rejected.len(), 32);
 }
+
+#[test]
+fn cli_detect_and_target_render_work_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = board_6x6();
+    let camera = radtan_camera();
+    let mut rng = StdRng::seed_from_u64(21);
+    let truth = random_view(&board, &camera, &mut rng, 0.55, 0.65, 30.0);
+    let frame = render(&board, &camera, &truth, &RenderOptions::default(), &mut rng);
+    let frame_path = dir.path().join("frame.png");
+    frame.save(&frame_path).unwrap();
+    let intrinsics = dir.path().join("camera.yaml");
+    camera.save_camera_info(&intrinsics).unwrap();
+    let corrupt = dir.path().join("corrupt.png");
+    std::fs::write(&corrupt, b"not an image").unwrap();
+    let results = dir.path().join("poses.yaml");
+    let annotated = dir.path().join("annotated");
+    let exe = env!("CARGO_BIN_EXE_handeye");
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&intrinsics)
+        .arg(&frame_path)
+        .arg("-o")
+        .arg(&results)
+        .arg("--annotate")
+        .arg(&annotated)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("tags found (36)") && stdout.contains("T_camera_target"),
+        "{stdout}"
+    );
+    assert!(annotated.join("frame-annotated.png").is_file());
+    let written: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(&results).unwrap()).unwrap();
+    let translation: Vec<f64> = written[0]["T_camera_target"]["translation"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let error = (Vector3::from_vec(translation) - truth.translation.vector).norm();
+    assert!(error < 0.001, "written T_camera_target off by {error} m");
+
+    // A corrupt image fails the command with the file named.
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&intrinsics)
+        .arg(&corrupt)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("corrupt.png"));
+
+    // Printable boards: SVG written, unknown extension refused.
+    let svg = dir.path().join("board.svg");
+    let status = std::process::Command::new(exe)
+        .args(["target", "render", "--target"])
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("-o")
+        .arg(&svg)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+    let output = std::process::Command::new(exe)
+        .args(["target", "render", "--target"])
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("-o")
+        .arg(dir.path().join("board.bmp"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains(".png or .svg"));
+}

@@ -411,3 +411,58 @@ pub fn load_gray_image(path: &Path) -> Result<GrayImage, TargetError> {
     })?;
     Ok(decoded.into_luma8())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn raw(id: u32, hamming: u32) -> RawDetection {
+        RawDetection {
+            id,
+            hamming,
+            decision_margin: 50.0,
+            corners_px: [Point2::origin(); 4],
+        }
+    }
+
+    #[test]
+    fn filter_rejects_foreign_ids_duplicates_and_high_hamming() {
+        let board = Board::aprilgrid(2, 2, 0.04, 0.25, TagFamily::Tag36h11, 4, 1).unwrap();
+        let options = DetectorOptions::default();
+        let detections = vec![
+            raw(5, 0),
+            raw(3, 0),
+            raw(6, 0),
+            raw(6, 0),
+            raw(7, 2),
+            raw(4, 1),
+        ];
+        let result = filter(&board, &options, detections, 640, 480);
+        let ids: Vec<u32> = result.tags.iter().map(|t| t.id).collect();
+        assert_eq!(ids, vec![4, 5]);
+        let reasons: Vec<(u32, RejectReason)> =
+            result.rejected.iter().map(|r| (r.id, r.reason)).collect();
+        assert_eq!(
+            reasons,
+            vec![
+                (3, RejectReason::NotOnBoard),
+                (6, RejectReason::Duplicate),
+                (6, RejectReason::Duplicate),
+                (7, RejectReason::Hamming),
+            ]
+        );
+    }
+
+    #[test]
+    fn library_corners_move_half_a_pixel_to_the_project_convention() {
+        let corners = to_project_pixels([[10.5, 20.5], [11.0, 20.5], [11.0, 21.0], [10.5, 21.0]]);
+        assert_eq!(corners[0], Point2::new(10.0, 20.0));
+        assert_eq!(corners[2], Point2::new(10.5, 20.5));
+    }
+
+    #[test]
+    fn detector_handle_is_send_and_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<TagDetector>();
+    }
+}
