@@ -411,6 +411,31 @@ fn cli_detect_and_target_render_work_end_to_end() {
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("corrupt.png"));
 
+    // Intrinsics for another image size stop the run with both sizes named.
+    let small = dir.path().join("small.yaml");
+    CameraModel {
+        width: 640,
+        height: 480,
+        ..camera
+    }
+    .save_camera_info(&small)
+    .unwrap();
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&small)
+        .arg(&frame_path)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("1280x720") && stderr.contains("640x480"),
+        "{stderr}"
+    );
+
     // Printable boards: SVG written, unknown extension refused.
     let svg = dir.path().join("board.svg");
     let status = std::process::Command::new(exe)
