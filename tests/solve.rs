@@ -576,3 +576,48 @@ fn moveit_real_eye_to_hand_data_matches_expected_camera_pose() {
         );
     }
 }
+
+#[test]
+fn closed_form_warm_start_reaches_the_same_answer_in_fewer_iterations() {
+    let mut c = cell(Setup::EyeToHand, 12, 51);
+    add_gaussian(&mut c, 0.2f64.to_radians(), 1e-3, 52);
+    let data = AxbyData::new(c.setup, &c.pairs);
+    let cold = iterative::solve_axby_with_restarts(&data, &IterativeOptions::default()).unwrap();
+    let warm_options = IterativeOptions {
+        warm_start: true,
+        ..IterativeOptions::default()
+    };
+    let warm = iterative::solve_axby_with_restarts(&data, &warm_options).unwrap();
+    assert!(cold.converged && warm.converged);
+    assert!(warm.rotation_iterations < cold.rotation_iterations);
+    // Same fixed point of the alternation, to well below the tolerance-limited accuracy.
+    assert!(warm.solution.y.rotation.angle_to(&cold.solution.y.rotation) < 1e-9);
+    assert!(
+        (warm.solution.x.translation.vector - cold.solution.x.translation.vector).norm() < 1e-9
+    );
+}
+
+#[test]
+fn sample_weights_scale_the_fit() {
+    let mut c = cell(Setup::EyeInHand, 10, 61);
+    add_gaussian(&mut c, 0.2f64.to_radians(), 1e-3, 62);
+    let base = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
+    // Uniform weights change nothing.
+    let mut doubled = c.pairs.clone();
+    for p in &mut doubled {
+        p.weight = 2.0;
+    }
+    let same = solve::solve(c.setup, &doubled, &SolveOptions::default()).unwrap();
+    assert!(errors(&same.camera_mount, &base.camera_mount).0 < 1e-9);
+    assert!(errors(&same.camera_mount, &base.camera_mount).1 < 1e-9);
+    // A sample with a large error and a tiny weight acts as if it were left out.
+    let mut corrupted = c.pairs.clone();
+    corrupted[3].camera_from_target.translation.vector.z += 0.05;
+    corrupted[3].weight = 1e-6;
+    let tiny = solve::solve(c.setup, &corrupted, &SolveOptions::default()).unwrap();
+    let mut without = c.pairs.clone();
+    without.remove(3);
+    let left_out = solve::solve(c.setup, &without, &SolveOptions::default()).unwrap();
+    let shift = errors(&tiny.camera_mount, &left_out.camera_mount).1;
+    assert!(shift < 1e-6, "shift {shift:e} m");
+}
