@@ -28,6 +28,12 @@ pub const STALL_SPREAD: f64 = 0.9;
 /// at a wrong fixed point (the 180° case with robot rotations in a narrow cone keeps the
 /// per-sample estimates in agreement while all of them are wrong), and other starts are tried.
 pub const STALL_RESIDUAL_DEG: f64 = 5.0;
+/// A converged run whose rotation residual RMS exceeds `CROSS_CHECK_FACTOR` times the closed
+/// form's plus [`CROSS_CHECK_MARGIN_DEG`] is taken for a stall at a wrong fixed point.
+pub const CROSS_CHECK_FACTOR: f64 = 2.0;
+/// Absolute margin of the closed-form cross-check, degrees (keeps noise-free data, where both
+/// residuals are ~1e-12°, from triggering it).
+pub const CROSS_CHECK_MARGIN_DEG: f64 = 0.01;
 
 /// Options of the iterative method.
 #[derive(Debug, Clone, PartialEq)]
@@ -349,19 +355,35 @@ pub fn solve_axby_with_restarts(
         .iter()
         .map(|b| b.rotation.into_inner().conjugate())
         .collect();
-    let first = if options.warm_start {
-        closed_form::solve_axby(data)?.y.rotation
-    } else {
-        options.start.unwrap_or_else(UnitQuaternion::identity)
+    // The closed form is the cross-check: a run that fits clearly worse than it has settled on
+    // a wrong fixed point (the s ≈ 0 case keeps per-sample estimates in agreement when the
+    // robot's rotations lie in a narrow cone) and is restarted — from the closed form first.
+    let closed = closed_form::solve_axby(data).ok();
+    let closed_residual = closed
+        .as_ref()
+        .map(|c| rotation_rms_deg(&qa, &qb_conj, &c.x.rotation, &c.y.rotation));
+    let first = match (&closed, options.warm_start) {
+        (Some(c), true) => c.y.rotation,
+        (None, true) => closed_form::solve_axby(data)?.y.rotation,
+        (_, false) => options.start.unwrap_or_else(UnitQuaternion::identity),
     };
     let mut starts = vec![first];
-    starts.extend(restart_guesses().into_iter().take(options.max_restarts));
+    starts.extend(closed.as_ref().map(|c| c.y.rotation));
+    starts.extend(restart_guesses());
+    starts.truncate(options.max_restarts + 1);
     let mut spent = 0;
     let mut best: Option<(f64, usize, RotationRun)> = None;
     for (restarts, start) in starts.into_iter().enumerate() {
         let run = rotations(&qa, &qb_conj, &data.weights, start, options);
         let residual = rotation_rms_deg(&qa, &qb_conj, &run.qx, &run.qy);
-        let stalled = run.spread < STALL_SPREAD || residual > STALL_RESIDUAL_DEG;
+        let worse_than_closed_form = closed_residual
+            .is_some_and(|c| residual > CROSS_CHECK_FACTOR * c + CROSS_CHECK_MARGIN_DEG);
+        // A run that hit the iteration cap (very slow linear convergence, e.g. on nearly
+        // degenerate motion) also moves on: the closed-form start is much closer.
+        let stalled = !run.converged
+            || run.spread < STALL_SPREAD
+            || residual > STALL_RESIDUAL_DEG
+            || worse_than_closed_form;
         if !stalled {
             return Ok(finish(data, run, restarts, spent, options));
         }
