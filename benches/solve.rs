@@ -95,6 +95,11 @@ fn bench(c: &mut Criterion) {
                 })
             },
         );
+        group.bench_with_input(
+            BenchmarkId::new("iterative_with_closed_form_cross_check", n),
+            &axby,
+            |b, d| b.iter(|| iterative::solve_axby_with_restarts(black_box(d), &options).unwrap()),
+        );
         let default = SolveOptions::default();
         group.bench_with_input(BenchmarkId::new("default_pipeline", n), &data, |b, d| {
             b.iter(|| solve::solve(Setup::EyeInHand, black_box(d), &default).unwrap())

@@ -183,9 +183,13 @@ fn paper_experiment_one_degree_noise() {
             assert!(out.converged, "N={n} seed {seed} did not converge");
             let base_world_error = out.solution.y.rotation.angle_to(&c.target_mount.rotation);
             eprintln!(
-                "N={n} seed {seed}: base-world rotation error {:.3}°",
-                base_world_error.to_degrees()
+                "N={n} seed {seed}: base-world rotation error {:.3}°, {} restarts, {} iterations",
+                base_world_error.to_degrees(),
+                out.restarts,
+                out.rotation_iterations
             );
+            // The paper's identity start converges by itself, without a restart.
+            assert_eq!(out.restarts, 0, "N={n} seed {seed} needed a restart");
             if n >= 5 {
                 assert!(
                     base_world_error.to_degrees() < 1.0,
