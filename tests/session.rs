@@ -313,3 +313,17 @@ fn malformed_configs_name_file_key_and_expectation() {
         assert!(message.contains(expected), "{edits:?}: {message}");
     }
 }
+
+#[test]
+fn the_shipped_scripted_plan_passes_its_checks_in_the_demo_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = repo().join("configs/plans/look-at-12.yaml");
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}", &format!("file: {}", plan.display()))],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    assert_eq!(prepared.plan.waypoints.len(), 12);
+    assert!(prepared.report.ok(), "{}", prepared.report);
+}
