@@ -12,28 +12,25 @@ use std::time::{Duration, Instant};
 
 use criterion::Criterion;
 use handeye::cell;
-use handeye::session::{self, SessionFolder, SessionSetup};
+use handeye::session::{self, SessionFolder};
+
+#[path = "../tests/util/mod.rs"]
+mod util;
 
 fn config(dir: &Path, count: usize, move_duration_s: f64) -> PathBuf {
-    let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
-    let text = std::fs::read_to_string(configs.join("sim-cell.yaml"))
-        .unwrap()
-        .replace(
-            "target: targets/",
-            &format!("target: {}/targets/", configs.display()),
-        )
-        .replace(
-            "intrinsics: cameras/",
-            &format!("intrinsics: {}/cameras/", configs.display()),
-        )
-        .replace("count: 20", &format!("count: {count}"))
-        .replace(
-            "move_duration_s: 0.0",
-            &format!("move_duration_s: {move_duration_s}"),
-        );
-    let path = dir.join(format!("cell-{count}-{move_duration_s}.yaml"));
-    std::fs::write(&path, text).unwrap();
-    path
+    let (count_line, duration) = (
+        format!("count: {count}"),
+        format!("move_duration_s: {move_duration_s}"),
+    );
+    util::config_variant(
+        dir,
+        "sim-cell.yaml",
+        &format!("cell-{count}-{move_duration_s}.yaml"),
+        &[
+            ("count: 20", &count_line),
+            ("move_duration_s: 0.0", &duration),
+        ],
+    )
 }
 
 /// One whole calibration, as `handeye run` does it: prepare, run, solve.
@@ -43,17 +40,7 @@ fn calibrate(config: &Path, out: &Path) {
     let folder = SessionFolder::create(out).unwrap();
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan,
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop: Arc::new(AtomicBool::new(false)),
-    };
+    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     session::run_session(
         setup,
         hardware.robot.as_mut(),

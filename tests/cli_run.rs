@@ -12,27 +12,20 @@ fn handeye() -> Command {
     Command::new(env!("CARGO_BIN_EXE_handeye"))
 }
 
-/// The demo config with absolute paths, a 10-pose plan and `move_duration_s` seconds per move.
+mod util;
+
+/// The demo config with a 10-pose plan and `move_duration_s` seconds per move.
 fn slow_config(dir: &Path, move_duration_s: f64) -> PathBuf {
-    let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
-    let text = std::fs::read_to_string(configs.join("sim-cell.yaml"))
-        .unwrap()
-        .replace(
-            "target: targets/",
-            &format!("target: {}/targets/", configs.display()),
-        )
-        .replace(
-            "intrinsics: cameras/",
-            &format!("intrinsics: {}/cameras/", configs.display()),
-        )
-        .replace("count: 20", "count: 10")
-        .replace(
-            "move_duration_s: 0.0",
-            &format!("move_duration_s: {move_duration_s}"),
-        );
-    let path = dir.join("cell.yaml");
-    std::fs::write(&path, text).unwrap();
-    path
+    let duration = format!("move_duration_s: {move_duration_s}");
+    util::config_variant(
+        dir,
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[
+            ("count: 20", "count: 10"),
+            ("move_duration_s: 0.0", &duration),
+        ],
+    )
 }
 
 #[test]

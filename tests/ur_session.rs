@@ -12,7 +12,7 @@ use std::time::Duration;
 use handeye::cell;
 use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::robot::kinematics::UrModel;
-use handeye::session::{self, SessionError, SessionFolder, SessionOutcome, SessionSetup};
+use handeye::session::{self, SessionError, SessionFolder, SessionOutcome};
 use mocks::{MockFaults, MockUr, MockUrConfig};
 use nalgebra::Vector3;
 
@@ -29,23 +29,16 @@ fn with_timeout<T: Send + 'static>(
     rx.recv_timeout(limit).expect("test timed out")
 }
 
+mod util;
+
 fn config_for(dir: &Path, host: &str, count: usize) -> PathBuf {
-    let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
-    let text = std::fs::read_to_string(configs.join("sim-cell-ur-mock.yaml"))
-        .unwrap()
-        .replace(
-            "target: targets/",
-            &format!("target: {}/targets/", configs.display()),
-        )
-        .replace(
-            "intrinsics: cameras/",
-            &format!("intrinsics: {}/cameras/", configs.display()),
-        )
-        .replace("host: 127.0.0.1", &format!("host: {host}"))
-        .replace("count: 20", &format!("count: {count}"));
-    let path = dir.join("cell.yaml");
-    std::fs::write(&path, text).unwrap();
-    path
+    let (host, count) = (format!("host: {host}"), format!("count: {count}"));
+    util::config_variant(
+        dir,
+        "sim-cell-ur-mock.yaml",
+        "cell.yaml",
+        &[("host: 127.0.0.1", &host), ("count: 20", &count)],
+    )
 }
 
 fn start_mock(address: &str, flange_from_tcp: Pose, faults: MockFaults) -> MockUr {
@@ -81,17 +74,7 @@ fn run(
     if folder.read_manifest().is_err() {
         folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     }
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan,
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop: Arc::new(AtomicBool::new(false)),
-    };
+    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     let outcome = session::run_session(
         setup,
         hardware.robot.as_mut(),
@@ -181,7 +164,7 @@ fn lost_connection_stops_cleanly_and_keeps_samples() {
         let error = outcome.unwrap_err();
         assert!(matches!(error, SessionError::Robot { .. }), "{error}");
         let kept = folder.read_visits().unwrap().len();
-        assert!(kept >= 2 && kept <= 3, "kept {kept}");
+        assert!((2..=3).contains(&kept), "kept {kept}");
         mock.shutdown();
 
         // The cable is back (a fresh controller at the same place): resume completes.

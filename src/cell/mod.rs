@@ -7,6 +7,8 @@ pub mod sim;
 use sim::SharedRobot;
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 use crate::camera::model::CameraModel;
 use crate::camera::Camera;
@@ -16,7 +18,7 @@ use crate::plan::check::{check_plan, CheckContext, PlanReport};
 use crate::plan::{generate, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
-use crate::session::{PlannedPose, SessionManifest};
+use crate::session::{PlannedPose, SessionFolder, SessionManifest, SessionSetup};
 use crate::target::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -232,6 +234,26 @@ impl PreparedCell {
         Err(CellError::Backend(
             "this build has no Universal Robots driver: build with `--features ur-rtde` (see README)".into(),
         ))
+    }
+
+    /// What the session loop needs to run this cell's validated `plan` into `folder`.
+    pub fn session_setup(
+        &self,
+        folder: SessionFolder,
+        plan: Vec<(Pose, Joints)>,
+        stop: Arc<AtomicBool>,
+    ) -> SessionSetup {
+        SessionSetup {
+            folder,
+            setup: self.config.setup,
+            plan,
+            limits: self.config.limits,
+            settle: self.config.settle(),
+            max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
+            board: self.board.clone(),
+            detector: self.detector_options(),
+            stop,
+        }
     }
 
     /// Checks the plan again from where the arm really stands (a real arm's start is only known

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
 use handeye::robot::Joints;
-use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
+use handeye::session::{self, SessionEvent, SessionFolder};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -93,17 +93,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut hardware = prepared
         .open_hardware()
         .context("opening the robot and camera")?;
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan: plan.clone(),
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop,
-    };
+    let setup = prepared.session_setup(folder.clone(), plan, stop);
     let bar = progress_bar(poses as u64);
     let mut on_event = |event: SessionEvent| match event {
         SessionEvent::Moving { plan_index } => {
