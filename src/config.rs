@@ -108,6 +108,13 @@ pub enum RobotConfig {
         #[serde(default = "default_connect_timeout_s")]
         connect_timeout_s: f64,
     },
+    /// Replays the flange poses a real arm measured during a recording made elsewhere
+    /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
+    /// the config has no `plan` source, and nothing moves.
+    Recorded {
+        /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
+        poses: PathBuf,
+    },
 }
 
 fn default_model() -> String {
@@ -131,6 +138,8 @@ impl RobotConfig {
     pub fn model(&self) -> &str {
         match self {
             RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model,
+            // A recorded arm is never planned with kinematics; any valid name will do.
+            RobotConfig::Recorded { .. } => "ur5e",
         }
     }
 }
@@ -202,7 +211,7 @@ pub struct WorkspaceConfig {
 }
 
 /// Where the plan comes from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanConfig {
     /// A scripted plan file.
@@ -352,6 +361,7 @@ struct RawConfig {
     nominal: BTreeMap<String, PoseYaml>,
     #[serde(default)]
     simulation: Option<BTreeMap<String, PoseYaml>>,
+    #[serde(default)]
     plan: PlanConfig,
     #[serde(default)]
     limits: LimitsConfig,
@@ -577,7 +587,15 @@ impl CellConfig {
         };
 
         let mut plan = raw.plan.clone();
+        let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
         match (&plan.file, &plan.generate) {
+            (None, None) if recorded => {}
+            _ if recorded => {
+                return Err(value_error(
+                    "plan",
+                    "a recorded robot's plan is its recorded poses: leave out `plan`".into(),
+                ))
+            }
             (Some(_), None) => {}
             (None, Some(spec)) => spec
                 .validate()
@@ -590,6 +608,12 @@ impl CellConfig {
             }
         }
         plan.file = plan.file.as_deref().map(resolve);
+        let robot = match raw.robot {
+            RobotConfig::Recorded { poses } => RobotConfig::Recorded {
+                poses: resolve(&poses),
+            },
+            other => other,
+        };
 
         let camera = match raw.camera {
             CameraConfig::Files { folder } => CameraConfig::Files {
@@ -659,7 +683,7 @@ impl CellConfig {
             setup: raw.setup,
             target: resolve(&raw.target),
             intrinsics: resolve(&raw.intrinsics),
-            robot: raw.robot,
+            robot,
             camera,
             nominal,
             simulation,

@@ -2,6 +2,7 @@
 //! checked, and — only when asked — the robot and camera backends the config names opened.
 //! This is the one place that maps config backends to implementations.
 
+pub mod recorded;
 pub mod sim;
 
 use std::path::Path;
@@ -93,8 +94,22 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         RobotConfig::Sim {
             start_joints_deg, ..
         } => start_joints_deg.map(f64::to_radians),
-        RobotConfig::Ur { .. } => crate::config::default_start_joints(),
+        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } => {
+            crate::config::default_start_joints()
+        }
     };
+    if let RobotConfig::Recorded { .. } = config.robot {
+        let (plan, report) = recorded::plan(&config, &camera_model, &board)?;
+        return Ok(PreparedCell {
+            config,
+            board,
+            camera_model,
+            arm,
+            start_joints,
+            plan,
+            report,
+        });
+    }
     let plan = match (&config.plan.file, &config.plan.generate) {
         (Some(file), _) => Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?,
         (None, Some(spec)) => Plan {
@@ -127,9 +142,12 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
 }
 
 impl PreparedCell {
-    /// Whether both backends are simulated (no real hardware moves).
+    /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
-        matches!(self.config.robot, RobotConfig::Sim { .. })
+        matches!(
+            self.config.robot,
+            RobotConfig::Sim { .. } | RobotConfig::Recorded { .. }
+        )
     }
 
     /// Detector settings from the config.
@@ -167,6 +185,12 @@ impl PreparedCell {
                 let (robot, camera) = sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
+            (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
+                let plan = self.report.validated().ok_or_else(|| {
+                    CellError::Backend("the recorded poses failed their checks".into())
+                })?;
+                recorded::open(&self.config, &plan, self.camera_model)
+            }
             (robot, camera) => Err(CellError::Backend(format!(
                 "the combination robot backend `{}` with camera backend `{}` is not available in this build",
                 robot_name(robot),
@@ -180,6 +204,7 @@ fn robot_name(r: &RobotConfig) -> &'static str {
     match r {
         RobotConfig::Sim { .. } => "sim",
         RobotConfig::Ur { .. } => "ur",
+        RobotConfig::Recorded { .. } => "recorded",
     }
 }
 
