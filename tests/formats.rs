@@ -876,3 +876,47 @@ fn visp_frame_without_the_board_is_an_error_naming_the_image() {
     );
     assert!(e.contains("arm_image-1.png") && e.contains("64x48"), "{e}");
 }
+
+#[test]
+fn recorded_robot_config_takes_its_plan_from_the_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let poses: Vec<Pose> = (0..4)
+        .map(|k| {
+            let k = k as f64;
+            pose_from_rotvec(
+                Vector3::new(0.5, 0.1 * k, 0.4),
+                Vector3::new(3.0, 0.3 * k.sin(), 0.2 * k),
+            )
+        })
+        .collect();
+    save_recorded_poses(&poses, &dir.path().join("poses.yaml")).unwrap();
+    let base = format!(
+        "setup: eye_in_hand\ntarget: {}\nintrinsics: {}\nrobot: {{backend: recorded, poses: poses.yaml}}\ncamera: {{backend: files, folder: frames}}\nnominal:\n  T_flange_camera: {{translation: [0, 0, 0.05], rotation_vector: [0, 0, 0]}}\n  T_base_target: {{translation: [0.5, 0, 0], rotation_vector: [3.1, 0, 0]}}\nworkspace: {{min: [-1, -1, -1], max: [1, 1, 1]}}\n",
+        repo().join("configs/targets/single-tag36h11-id10.yaml").display(),
+        repo().join("tests/data/visp_franka_camera_info.yaml").display(),
+    );
+    let path = dir.path().join("cell.yaml");
+    std::fs::write(&path, &base).unwrap();
+    let prepared = cell::prepare(&path).unwrap();
+    let plan = prepared.report.validated().unwrap();
+    assert_eq!(plan.len(), 4);
+    for (k, (pose, _)) in plan.iter().enumerate() {
+        assert_same(pose, &poses[k], "recorded plan pose");
+    }
+    // No frame folder: opening says which folder.
+    let e = match prepared.open_hardware() {
+        Ok(_) => panic!("no frames folder"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("frames"), "{e}");
+    // A plan source next to a recorded robot is refused.
+    std::fs::write(&path, format!("{base}plan: {{file: plan.yaml}}\n")).unwrap();
+    let e = match cell::prepare(&path) {
+        Ok(_) => panic!("plan with a recorded robot"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains("cell.yaml") && e.contains("leave out `plan`"),
+        "{e}"
+    );
+}

@@ -85,6 +85,11 @@ pub mod uvc {
 
     const MISSING: &str = "this handeye build lacks USB camera support: rebuild with `cargo build --release --features uvc` (needs libclang-dev)";
 
+    /// Fails: this build has no USB camera support.
+    pub fn ensure_available() -> anyhow::Result<()> {
+        anyhow::bail!(MISSING)
+    }
+
     /// `camera list`.
     pub fn list() -> anyhow::Result<()> {
         anyhow::bail!(MISSING)
@@ -112,6 +117,11 @@ pub mod uvc {
     use handeye::camera::decode::PixelFormat;
     use handeye::camera::model::CameraModel;
     use handeye::camera::uvc::{list_cameras, UvcCamera, UvcDevice, UvcOptions};
+
+    /// This build has USB camera support.
+    pub fn ensure_available() -> anyhow::Result<()> {
+        Ok(())
+    }
 
     /// `camera list`.
     pub fn list() -> anyhow::Result<()> {

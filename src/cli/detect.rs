@@ -72,6 +72,9 @@ struct ImageResult {
 
 /// Runs `handeye detect`.
 pub fn run(args: DetectArgs) -> anyhow::Result<()> {
+    if args.live {
+        super::camera::uvc::ensure_available()?;
+    }
     let board = Board::load(&args.target)?;
     let camera = CameraModel::load(&args.intrinsics)?;
     let options = DetectorOptions {
