@@ -168,6 +168,55 @@ pub enum CameraConfig {
         /// The folder.
         folder: PathBuf,
     },
+    /// A USB/UVC camera (needs the `uvc` build feature).
+    Uvc {
+        /// Camera index (`/dev/video<N>`) or (part of) its name.
+        #[serde(default = "default_uvc_device")]
+        device: String,
+        /// Requested width, px.
+        #[serde(default = "default_uvc_width")]
+        width: u32,
+        /// Requested height, px.
+        #[serde(default = "default_uvc_height")]
+        height: u32,
+        /// Requested pixel format: `mjpeg`, `yuyv` or `gray`.
+        #[serde(default = "default_uvc_pixel_format")]
+        pixel_format: String,
+        /// Requested frame rate, frames/s.
+        #[serde(default = "default_uvc_fps")]
+        fps: u32,
+        /// Fixed exposure, µs (auto exposure off).
+        #[serde(default)]
+        exposure_us: Option<u32>,
+        /// Fixed gain, camera units (auto gain off).
+        #[serde(default)]
+        gain: Option<i64>,
+        /// Fixed focus, camera units (autofocus is turned off whenever the camera allows).
+        #[serde(default)]
+        focus: Option<i64>,
+        /// Frames dropped after the arm settles (the driver's queue depth).
+        #[serde(default = "default_uvc_stale_frames")]
+        stale_frames: usize,
+    },
+}
+
+fn default_uvc_device() -> String {
+    "0".into()
+}
+fn default_uvc_width() -> u32 {
+    1280
+}
+fn default_uvc_height() -> u32 {
+    720
+}
+fn default_uvc_pixel_format() -> String {
+    "mjpeg".into()
+}
+fn default_uvc_fps() -> u32 {
+    30
+}
+fn default_uvc_stale_frames() -> usize {
+    4
 }
 
 fn default_noise() -> f64 {
@@ -619,6 +668,27 @@ impl CellConfig {
             CameraConfig::Files { folder } => CameraConfig::Files {
                 folder: resolve(&folder),
             },
+            CameraConfig::Uvc {
+                ref pixel_format,
+                width,
+                height,
+                fps,
+                ..
+            } => {
+                if !["mjpeg", "yuyv", "gray"].contains(&pixel_format.as_str()) {
+                    return Err(value_error(
+                        "camera.pixel_format",
+                        format!("expected mjpeg, yuyv or gray, got `{pixel_format}`"),
+                    ));
+                }
+                if width == 0 || height == 0 || fps == 0 {
+                    return Err(value_error(
+                        "camera",
+                        format!("width, height and fps must be positive, got {width}x{height} px at {fps} frames/s"),
+                    ));
+                }
+                raw.camera.clone()
+            }
             CameraConfig::Sim {
                 noise_sigma,
                 blur_sigma_px,

@@ -920,3 +920,38 @@ fn recorded_robot_config_takes_its_plan_from_the_poses() {
         "{e}"
     );
 }
+
+#[test]
+fn uvc_camera_config_is_validated_and_needs_the_feature() {
+    let text = |pixel_format: &str| {
+        format!(
+            "setup: eye_in_hand\ntarget: t.yaml\nintrinsics: c.yaml\nrobot: {{backend: ur, host: 10.0.0.2}}\ncamera: {{backend: uvc, device: '0', width: 640, height: 480, pixel_format: {pixel_format}, exposure_us: 8000, focus: 0}}\nnominal:\n  T_flange_camera: {{translation: [0, 0, 0.05], rotation_vector: [0, 0, 0]}}\n  T_base_target: {{translation: [0.5, 0, 0], rotation_vector: [3.1, 0, 0]}}\nplan: {{file: plan.yaml}}\nworkspace: {{min: [-1, -1, -1], max: [1, 1, 1]}}\n"
+        )
+    };
+    let config = handeye::config::CellConfig::parse(&text("yuyv"), Path::new("cell.yaml")).unwrap();
+    assert!(matches!(
+        &config.camera,
+        handeye::config::CameraConfig::Uvc {
+            width: 640,
+            height: 480,
+            stale_frames: 4,
+            ..
+        }
+    ));
+    let e = handeye::config::CellConfig::parse(&text("h264"), Path::new("cell.yaml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cell.yaml: camera.pixel_format") && e.contains("h264"),
+        "{e}"
+    );
+    let model = CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
+    let opened = cell::uvc::open_camera(&config.camera, model);
+    if cfg!(feature = "uvc") {
+        // No camera exists on build machines: opening must fail cleanly, not panic.
+        assert!(opened.is_err());
+    } else {
+        let e = opened.err().unwrap().to_string();
+        assert!(e.contains("`uvc` feature"), "{e}");
+    }
+}

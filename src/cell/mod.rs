@@ -4,6 +4,7 @@
 
 pub mod recorded;
 pub mod sim;
+pub mod uvc;
 
 use std::path::Path;
 
@@ -212,5 +213,6 @@ fn camera_name(c: &CameraConfig) -> &'static str {
     match c {
         CameraConfig::Sim { .. } => "sim",
         CameraConfig::Files { .. } => "files",
+        CameraConfig::Uvc { .. } => "uvc",
     }
 }
