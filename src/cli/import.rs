@@ -93,6 +93,10 @@ struct VispArgs {
     /// Where to write the recorded T_base_flange poses (default: <output stem>-poses.yaml).
     #[arg(long)]
     poses_out: Option<PathBuf>,
+    /// Also write a cell config that replays the folder as a session (robot backend `recorded`,
+    /// camera backend `files`): `handeye run --config <it>`.
+    #[arg(long)]
+    cell_out: Option<PathBuf>,
     /// Skip images where the board is not found instead of failing.
     #[arg(long)]
     skip_unfound: bool,
@@ -158,6 +162,81 @@ fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+    std::fs::canonicalize(path).with_context(|| format!("resolving {}", path.display()))
+}
+
+/// A recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
+/// order) are exactly the imported images, since the folder camera serves every image in it.
+fn write_cell(
+    cell_out: &Path,
+    folder: &Path,
+    target: &Path,
+    camera_info: &Path,
+    poses: &Path,
+    imported: &handeye::formats::import::VispImport,
+) -> anyhow::Result<()> {
+    let frames = handeye::camera::files::list_frames(folder)?;
+    let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();
+    anyhow::ensure!(
+        frames.iter().collect::<Vec<_>>() == paired,
+        "{}: the folder's images in natural order are not exactly the paired ViSP images, so a folder camera would pair them wrongly; no cell config written",
+        folder.display()
+    );
+    let setup = imported.dataset.setup;
+    // Nominal transforms from a quick solve (they only feed the plan report of a recorded cell).
+    let (camera_key, target_key) = setup.unknown_names();
+    let (camera_mount, target_mount) = match handeye::solve::solve(
+        setup,
+        &imported.dataset.pairs,
+        &handeye::solve::SolveOptions::default(),
+    ) {
+        Ok(c) => (c.camera_mount, c.target_mount),
+        Err(_) => (
+            handeye::geometry::Pose::identity(),
+            handeye::geometry::Pose::identity(),
+        ),
+    };
+    let pose = |p: &handeye::geometry::Pose| {
+        let t = p.translation.vector;
+        let r = handeye::geometry::rotvec(&p.rotation);
+        format!(
+            "{{translation: [{}, {}, {}], rotation_vector: [{}, {}, {}]}}",
+            t.x, t.y, t.z, r.x, r.y, r.z
+        )
+    };
+    // The workspace box is not used by a recorded robot; it spans the recorded poses ± 0.5 m.
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for f in &imported.frames {
+        let t = f.base_from_flange.translation.vector;
+        for k in 0..3 {
+            lo[k] = lo[k].min(t[k] - 0.5);
+            hi[k] = hi[k].max(t[k] + 0.5);
+        }
+    }
+    let text = format!(
+        "# Replays the ViSP folder {folder} as a session: handeye run --config <this file>\n\
+         setup: {setup}\n\
+         target: {target}\n\
+         intrinsics: {camera_info}\n\
+         robot: {{backend: recorded, poses: {poses}}}\n\
+         camera: {{backend: files, folder: {folder}}}\n\
+         nominal:\n  {camera_key}: {camera_mount}\n  {target_key}: {target_mount}\n\
+         workspace: {{min: {lo:?}, max: {hi:?}}}\n\
+         detector: {{decimate: 1}}\n",
+        folder = absolute(folder)?.display(),
+        target = absolute(target)?.display(),
+        camera_info = absolute(camera_info)?.display(),
+        poses = absolute(poses)?.display(),
+        camera_mount = pose(&camera_mount),
+        target_mount = pose(&target_mount),
+    );
+    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+        .with_context(|| format!("writing {}", cell_out.display()))?;
+    println!("wrote a recorded-cell config to {}", cell_out.display());
+    Ok(())
+}
+
 /// Runs `handeye import`.
 pub fn run(args: ImportArgs) -> anyhow::Result<()> {
     match args.format {
@@ -214,7 +293,11 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
                 "wrote the recorded T_base_flange poses to {}",
                 poses_out.display()
             );
-            save(&imported.dataset, &a.common.output)
+            save(&imported.dataset, &a.common.output)?;
+            if let Some(cell_out) = &a.cell_out {
+                write_cell(cell_out, &a.folder, &a.target, &info, &poses_out, &imported)?;
+            }
+            Ok(())
         }
         ImportFormat::Moveit(a) => {
             let pairs = import_moveit_json(&a.file)?;
