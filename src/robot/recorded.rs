@@ -11,7 +11,8 @@
 //! ```
 //! Poses use the YAML pose form of `geometry::yaml`. A recorded arm has no joints: the plan of a
 //! recorded cell is the recorded poses themselves and its "joints" are [`plan_joints`]`(i)`, which
-//! carry the pose number in joint 0 so a move (or a retry) to plan pose `i` reports pose `i`.
+//! carry the pose number in joint 0 (as `i` degrees, so plan tables and session manifests show
+//! the pose number) so a move (or a retry) to plan pose `i` reports pose `i`.
 //! Depends on `robot` and `geometry` only.
 
 use std::path::{Path, PathBuf};
@@ -116,9 +117,17 @@ pub fn save_recorded_poses(poses: &[Pose], path: &Path) -> Result<(), RecordedEr
     })
 }
 
-/// The plan "joints" of recorded pose `index`: the index in joint 0, zeros elsewhere.
+/// The plan "joints" of recorded pose `index`: `index` degrees in joint 0, zeros elsewhere.
 pub fn plan_joints(index: usize) -> Joints {
-    [index as f64, 0.0, 0.0, 0.0, 0.0, 0.0]
+    [(index as f64).to_radians(), 0.0, 0.0, 0.0, 0.0, 0.0]
+}
+
+/// The recorded pose a [`plan_joints`] value names, if it names one.
+fn pose_index(joints: &Joints) -> Option<usize> {
+    let degrees = joints[0].to_degrees();
+    let index = degrees.round();
+    (index >= 0.0 && (degrees - index).abs() < 1e-6 && joints[1..].iter().all(|q| *q == 0.0))
+        .then_some(index as usize)
 }
 
 /// A robot that reports recorded flange poses.
@@ -178,19 +187,16 @@ impl Robot for RecordedRobot {
     }
 
     fn move_joints(&mut self, joints: &Joints, _limits: &MotionLimits) -> Result<(), RobotError> {
-        let index = joints[0];
-        let valid = index >= 0.0
-            && index.fract() == 0.0
-            && (index as usize) < self.poses.len()
-            && joints[1..].iter().all(|q| *q == 0.0);
-        if !valid {
-            return Err(RobotError::Unreachable(format!(
-                "the recorded robot holds {} poses; joints {joints:?} do not name one (expected [i, 0, 0, 0, 0, 0])",
+        match pose_index(joints).filter(|i| *i < self.poses.len()) {
+            Some(index) => {
+                self.current = Some(index);
+                Ok(())
+            }
+            None => Err(RobotError::Unreachable(format!(
+                "the recorded robot holds {} poses; joints {joints:?} rad do not name one (expected [i°, 0, 0, 0, 0, 0])",
                 self.poses.len()
-            )));
+            ))),
         }
-        self.current = Some(index as usize);
-        Ok(())
     }
 
     fn stop(&mut self) -> Result<(), RobotError> {
