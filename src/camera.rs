@@ -1,6 +1,7 @@
 //! Cameras: the [`Camera`] contract and its error; the intrinsic model shared by detection, pose
 //! estimation and simulation (`model`); the frame simulator that renders a board through that
-//! model (`render`); and the backends: the simulated camera (`sim`). The session sees only the
+//! model (`render`); and the backends: the simulated camera (`sim`), the image folder
+//! (`files`) and USB/UVC cameras (`uvc`, behind the `uvc` feature). The session sees only the
 //! trait.
 //!
 //! Frames: `camera` is the optical frame (x right, y down, z forward, as OpenCV and ROS
@@ -9,9 +10,13 @@
 //! Units: metres for points, pixels for image coordinates. This module depends on
 //! `geometry` and `target` (for the board the renderer draws), never on robots or sessions.
 
+pub mod decode;
+pub mod files;
 pub mod model;
 pub mod render;
 pub mod sim;
+#[cfg(feature = "uvc")]
+pub mod uvc;
 
 use std::time::Instant;
 
@@ -40,6 +45,16 @@ pub enum CameraError {
     /// A frame source ran out (an image folder with fewer frames than plan poses).
     #[error("no more frames: {0}")]
     Exhausted(String),
+    /// An image folder holds fewer frames than the plan has poses.
+    #[error("the frame folder {} holds {frames} frames but the plan needs {poses} poses (frame i is plan pose i, in natural file-name order)", folder.display())]
+    TooFewFrames {
+        /// The folder.
+        folder: std::path::PathBuf,
+        /// Image files in it.
+        frames: usize,
+        /// Poses that need a frame.
+        poses: usize,
+    },
     /// A frame could not be read or decoded.
     #[error("cannot read frame {path}: {reason}")]
     Frame {

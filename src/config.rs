@@ -108,6 +108,13 @@ pub enum RobotConfig {
         #[serde(default = "default_connect_timeout_s")]
         connect_timeout_s: f64,
     },
+    /// Replays the flange poses a real arm measured during a recording made elsewhere
+    /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
+    /// the config has no `plan` source, and nothing moves.
+    Recorded {
+        /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
+        poses: PathBuf,
+    },
 }
 
 fn default_model() -> String {
@@ -131,6 +138,8 @@ impl RobotConfig {
     pub fn model(&self) -> &str {
         match self {
             RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model,
+            // A recorded arm is never planned with kinematics; any valid name will do.
+            RobotConfig::Recorded { .. } => "ur5e",
         }
     }
 }
@@ -159,6 +168,55 @@ pub enum CameraConfig {
         /// The folder.
         folder: PathBuf,
     },
+    /// A USB/UVC camera (needs the `uvc` build feature).
+    Uvc {
+        /// Camera index (`/dev/video<N>`) or (part of) its name.
+        #[serde(default = "default_uvc_device")]
+        device: String,
+        /// Requested width, px.
+        #[serde(default = "default_uvc_width")]
+        width: u32,
+        /// Requested height, px.
+        #[serde(default = "default_uvc_height")]
+        height: u32,
+        /// Requested pixel format: `mjpeg`, `yuyv` or `gray`.
+        #[serde(default = "default_uvc_pixel_format")]
+        pixel_format: String,
+        /// Requested frame rate, frames/s.
+        #[serde(default = "default_uvc_fps")]
+        fps: u32,
+        /// Fixed exposure, µs (auto exposure off).
+        #[serde(default)]
+        exposure_us: Option<u32>,
+        /// Fixed gain, camera units (auto gain off).
+        #[serde(default)]
+        gain: Option<i64>,
+        /// Fixed focus, camera units (autofocus is turned off whenever the camera allows).
+        #[serde(default)]
+        focus: Option<i64>,
+        /// Frames dropped after the arm settles (the driver's queue depth).
+        #[serde(default = "default_uvc_stale_frames")]
+        stale_frames: usize,
+    },
+}
+
+fn default_uvc_device() -> String {
+    "0".into()
+}
+fn default_uvc_width() -> u32 {
+    1280
+}
+fn default_uvc_height() -> u32 {
+    720
+}
+fn default_uvc_pixel_format() -> String {
+    "mjpeg".into()
+}
+fn default_uvc_fps() -> u32 {
+    30
+}
+fn default_uvc_stale_frames() -> usize {
+    4
 }
 
 fn default_noise() -> f64 {
@@ -202,7 +260,7 @@ pub struct WorkspaceConfig {
 }
 
 /// Where the plan comes from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanConfig {
     /// A scripted plan file.
@@ -352,6 +410,7 @@ struct RawConfig {
     nominal: BTreeMap<String, PoseYaml>,
     #[serde(default)]
     simulation: Option<BTreeMap<String, PoseYaml>>,
+    #[serde(default)]
     plan: PlanConfig,
     #[serde(default)]
     limits: LimitsConfig,
@@ -577,7 +636,15 @@ impl CellConfig {
         };
 
         let mut plan = raw.plan.clone();
+        let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
         match (&plan.file, &plan.generate) {
+            (None, None) if recorded => {}
+            _ if recorded => {
+                return Err(value_error(
+                    "plan",
+                    "a recorded robot's plan is its recorded poses: leave out `plan`".into(),
+                ))
+            }
             (Some(_), None) => {}
             (None, Some(spec)) => spec
                 .validate()
@@ -590,11 +657,38 @@ impl CellConfig {
             }
         }
         plan.file = plan.file.as_deref().map(resolve);
+        let robot = match raw.robot {
+            RobotConfig::Recorded { poses } => RobotConfig::Recorded {
+                poses: resolve(&poses),
+            },
+            other => other,
+        };
 
         let camera = match raw.camera {
             CameraConfig::Files { folder } => CameraConfig::Files {
                 folder: resolve(&folder),
             },
+            CameraConfig::Uvc {
+                ref pixel_format,
+                width,
+                height,
+                fps,
+                ..
+            } => {
+                if !["mjpeg", "yuyv", "gray"].contains(&pixel_format.as_str()) {
+                    return Err(value_error(
+                        "camera.pixel_format",
+                        format!("expected mjpeg, yuyv or gray, got `{pixel_format}`"),
+                    ));
+                }
+                if width == 0 || height == 0 || fps == 0 {
+                    return Err(value_error(
+                        "camera",
+                        format!("width, height and fps must be positive, got {width}x{height} px at {fps} frames/s"),
+                    ));
+                }
+                raw.camera.clone()
+            }
             CameraConfig::Sim {
                 noise_sigma,
                 blur_sigma_px,
@@ -659,7 +753,7 @@ impl CellConfig {
             setup: raw.setup,
             target: resolve(&raw.target),
             intrinsics: resolve(&raw.intrinsics),
-            robot: raw.robot,
+            robot,
             camera,
             nominal,
             simulation,

@@ -8,6 +8,7 @@ pub mod camera;
 pub mod cell;
 pub mod config;
 pub mod dataset;
+pub mod formats;
 pub mod geometry;
 pub mod plan;
 pub mod result;

@@ -1,11 +1,13 @@
 //! The robot arm contract: [`Robot`] and its error. Backends live in `robot/` (the simulated arm,
-//! and the Universal Robots arm through ur_rtde behind the `ur-rtde` feature); the session sees
+//! the recorded arm that replays measured poses, and the Universal Robots arm through ur_rtde
+//! behind the `ur-rtde` feature); the session sees
 //! only this trait.
 //!
 //! Frames: every pose here is `T_base_flange` (the tool flange, tool0, with no TCP offset) in the
 //! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
 
 pub mod kinematics;
+pub mod recorded;
 pub mod sim;
 #[cfg(feature = "ur-rtde")]
 pub mod ur;

@@ -2,7 +2,9 @@
 //! checked, and — only when asked — the robot and camera backends the config names opened.
 //! This is the one place that maps config backends to implementations.
 
+pub mod recorded;
 pub mod sim;
+pub mod uvc;
 
 use sim::SharedRobot;
 
@@ -100,8 +102,22 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         RobotConfig::Sim {
             start_joints_deg, ..
         } => start_joints_deg.map(f64::to_radians),
-        RobotConfig::Ur { .. } => crate::config::default_start_joints(),
+        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } => {
+            crate::config::default_start_joints()
+        }
     };
+    if let RobotConfig::Recorded { .. } = config.robot {
+        let (plan, report) = recorded::plan(&config, &camera_model, &board)?;
+        return Ok(PreparedCell {
+            config,
+            board,
+            camera_model,
+            arm,
+            start_joints,
+            plan,
+            report,
+        });
+    }
     let plan = match (&config.plan.file, &config.plan.generate) {
         (Some(file), _) => Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?,
         (None, Some(spec)) => Plan {
@@ -109,28 +125,20 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         },
         (None, None) => unreachable!("the config requires a plan source"),
     };
-    let report = check_plan(
-        &plan,
-        &CheckContext {
-            arm: &arm,
-            start_joints,
-            cell: &config.nominal,
-            workspace: &config.workspace,
-            limits: &config.limits,
-            camera: &camera_model,
-            board: &board,
-            margin_px: config.session.image_margin_px,
-        },
-    );
-    Ok(PreparedCell {
+    let mut prepared = PreparedCell {
         config,
         board,
         camera_model,
         arm,
         start_joints,
         plan,
-        report,
-    })
+        report: PlanReport {
+            poses: Vec::new(),
+            plan_problems: Vec::new(),
+        },
+    };
+    prepared.report = prepared.check();
+    Ok(prepared)
 }
 
 impl PreparedCell {
@@ -150,9 +158,12 @@ impl PreparedCell {
         )
     }
 
-    /// Whether both backends are simulated (no real hardware moves).
+    /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
-        matches!(self.config.robot, RobotConfig::Sim { .. })
+        matches!(
+            self.config.robot,
+            RobotConfig::Sim { .. } | RobotConfig::Recorded { .. }
+        )
     }
 
     /// Detector settings from the config.
@@ -199,6 +210,12 @@ impl PreparedCell {
                 let flange = Box::new(move || reported.last_base_from_flange());
                 let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+            }
+            (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
+                let plan = self.report.validated().ok_or_else(|| {
+                    CellError::Backend("the recorded poses failed their checks".into())
+                })?;
+                recorded::open(&self.config, &plan, self.camera_model)
             }
             (robot, camera) => Err(CellError::Backend(format!(
                 "the combination robot backend `{}` with camera backend `{}` is not available in this build",
@@ -262,8 +279,11 @@ impl PreparedCell {
         &mut self,
         start_joints: Joints,
     ) -> Result<Vec<(Pose, Joints)>, &PlanReport> {
-        self.start_joints = start_joints;
-        self.report = self.check();
+        // Recorded poses were taken already: there is no arm to move and nothing to re-check.
+        if !matches!(self.config.robot, RobotConfig::Recorded { .. }) {
+            self.start_joints = start_joints;
+            self.report = self.check();
+        }
         self.report.validated().ok_or(&self.report)
     }
 }
@@ -272,6 +292,7 @@ fn robot_name(r: &RobotConfig) -> &'static str {
     match r {
         RobotConfig::Sim { .. } => "sim",
         RobotConfig::Ur { .. } => "ur",
+        RobotConfig::Recorded { .. } => "recorded",
     }
 }
 
@@ -279,5 +300,6 @@ fn camera_name(c: &CameraConfig) -> &'static str {
     match c {
         CameraConfig::Sim { .. } => "sim",
         CameraConfig::Files { .. } => "files",
+        CameraConfig::Uvc { .. } => "uvc",
     }
 }

@@ -1,6 +1,7 @@
 //! `handeye detect`: finds the board in image files and prints, per image, the tags found, the
 //! reprojection RMS and `T_camera_target`; optionally writes the results as YAML and annotated
-//! PNGs.
+//! PNGs. With `--camera N --live` (the `uvc` build feature) it reads a USB camera instead and
+//! prints the board pose continuously, to aim the camera.
 
 use std::path::PathBuf;
 
@@ -25,8 +26,14 @@ pub struct DetectArgs {
     #[arg(long)]
     intrinsics: PathBuf,
     /// Image files (PNG).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "live")]
     images: Vec<PathBuf>,
+    /// Read the camera (--camera) continuously and print the board pose until Ctrl-C.
+    #[arg(long, requires = "camera", conflicts_with = "images")]
+    live: bool,
+    /// The live camera and stream (with --live).
+    #[command(flatten)]
+    stream: super::camera::StreamArgs,
     /// Write the per-image results here (YAML).
     #[arg(short = 'o', long)]
     output: Option<PathBuf>,
@@ -65,6 +72,9 @@ struct ImageResult {
 
 /// Runs `handeye detect`.
 pub fn run(args: DetectArgs) -> anyhow::Result<()> {
+    if args.live {
+        super::camera::uvc::ensure_available()?;
+    }
     let board = Board::load(&args.target)?;
     let camera = CameraModel::load(&args.intrinsics)?;
     let options = DetectorOptions {
@@ -74,6 +84,9 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         ..DetectorOptions::default()
     };
     let detector = TagDetector::spawn(&board, options)?;
+    if args.live {
+        return live(&args, &board, &camera, &detector);
+    }
     if let Some(dir) = &args.annotate {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the annotation folder {}", dir.display()))?;
@@ -172,4 +185,30 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         args.images.len()
     );
     Ok(())
+}
+
+/// `detect --camera N --live`: one line per frame with the board pose, until interrupted.
+fn live(
+    args: &DetectArgs,
+    board: &Board,
+    camera_model: &CameraModel,
+    detector: &TagDetector,
+) -> anyhow::Result<()> {
+    let mut camera = super::camera::uvc::open(&args.stream, Some(*camera_model))?;
+    println!("live detection: Ctrl-C to stop");
+    loop {
+        let frame = camera.grab(std::time::Instant::now())?;
+        let detection = detector.detect(&frame.image)?;
+        match estimate_board_pose(board, camera_model, &detection) {
+            Ok(pose) => {
+                let t = pose.camera_from_target.translation.vector;
+                let r = handeye::geometry::rotvec(&pose.camera_from_target.rotation);
+                println!(
+                    "T_camera_target: t [{:+.4}, {:+.4}, {:+.4}] m, rotvec [{:+.4}, {:+.4}, {:+.4}] rad, {} tags, RMS {:.2} px, distance {:.3} m",
+                    t.x, t.y, t.z, r.x, r.y, r.z, pose.tags_used, pose.rms_px, t.norm()
+                );
+            }
+            Err(e) => println!("board not found ({} tags seen): {e}", detection.tags.len()),
+        }
+    }
 }

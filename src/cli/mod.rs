@@ -1,6 +1,9 @@
 //! Subcommands. Each file turns its arguments into library configuration, then calls the library.
 
+mod camera;
 mod detect;
+mod export;
+mod import;
 mod plan;
 mod replay;
 mod run;
@@ -31,6 +34,12 @@ enum Command {
     Detect(detect::DetectArgs),
     /// Board utilities (printable boards).
     Target(target::TargetArgs),
+    /// Import ViSP, MoveIt Calibration or CSV data as a dataset file.
+    Import(import::ImportArgs),
+    /// Export a result as ROS 2, URDF, UR, JSON or OpenCV text.
+    Export(export::ExportArgs),
+    /// USB/UVC cameras: list them, snap a frame (needs the `uvc` build feature).
+    Camera(camera::CameraArgs),
 }
 
 /// Runs one parsed command line.
@@ -42,5 +51,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Replay(args) => replay::run(args),
         Command::Detect(args) => detect::run(args),
         Command::Target(args) => target::run(args),
+        Command::Import(args) => import::run(args),
+        Command::Export(args) => export::run(args),
+        Command::Camera(args) => camera::run(args),
     }
 }

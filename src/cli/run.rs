@@ -90,9 +90,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         });
     }
 
-    let mut hardware = prepared
-        .open_hardware()
-        .context("opening the robot and camera")?;
     let setup = prepared.session_setup(folder.clone(), plan, stop);
     let bar = progress_bar(poses as u64);
     let mut on_event = |event: SessionEvent| match event {

@@ -1,0 +1,147 @@
+//! A recorded cell: the recorded robot (`robot: {backend: recorded}`) replaying measured flange
+//! poses, with the image-folder camera (`camera: {backend: files}`) serving the frame taken at
+//! each. The plan is the recorded poses in file order; frame `i` (natural file-name order) goes
+//! with pose `i`. Nothing is checked for reach or joint limits: a real arm already visited these
+//! poses. Only the rotation diversity the solver needs is checked before running.
+
+use crate::camera::files::{FilesCamera, FrameSelector};
+use crate::camera::model::CameraModel;
+use crate::config::{CameraConfig, CellConfig, RobotConfig};
+use crate::geometry::Pose;
+use crate::plan::check::{PlanReport, PoseCheck};
+use crate::plan::{Plan, Waypoint};
+use crate::robot::recorded::{load_recorded_poses, plan_joints, RecordedRobot};
+use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use crate::solve::check_rotation_diversity;
+use crate::target::Board;
+
+use super::{CellError, Hardware};
+
+/// The plan of a recorded cell and its report (distances and image margins under the nominal
+/// transforms, for information only).
+pub fn plan(
+    config: &CellConfig,
+    camera: &CameraModel,
+    board: &Board,
+) -> Result<(Plan, PlanReport), CellError> {
+    let RobotConfig::Recorded { poses } = &config.robot else {
+        return Err(CellError::Backend(
+            "a recorded plan needs `robot: {backend: recorded}`".into(),
+        ));
+    };
+    let recorded = load_recorded_poses(poses).map_err(|e| CellError::Backend(e.to_string()))?;
+    let checks = recorded
+        .iter()
+        .enumerate()
+        .map(|(index, base_from_flange)| {
+            let camera_from_target = config.nominal.camera_from_target(base_from_flange);
+            PoseCheck {
+                index,
+                base_from_flange: *base_from_flange,
+                joints: Some(plan_joints(index)),
+                distance_m: camera_from_target.translation.vector.norm(),
+                image_margin_px: image_margin(camera, board, &camera_from_target),
+                move_time_s: 0.0,
+                problems: Vec::new(),
+            }
+        })
+        .collect();
+    let plan_problems = match check_rotation_diversity(&recorded) {
+        Ok(()) => Vec::new(),
+        Err(e) => vec![format!("recorded poses {}: {e}", poses.display())],
+    };
+    Ok((
+        Plan {
+            waypoints: recorded.into_iter().map(Waypoint::FlangePose).collect(),
+        },
+        PlanReport {
+            poses: checks,
+            plan_problems,
+        },
+    ))
+}
+
+/// Smallest distance from a projected board corner to the image border, px (negative = outside).
+fn image_margin(camera: &CameraModel, board: &Board, camera_from_target: &Pose) -> f64 {
+    let (w, h) = (camera.width as f64 - 1.0, camera.height as f64 - 1.0);
+    board
+        .tags()
+        .iter()
+        .flat_map(|t| t.corners_in_target)
+        .map(|p| match camera.project(&(camera_from_target * p)) {
+            Some(px) => px.x.min(px.y).min(w - px.x).min(h - px.y),
+            None => f64::NEG_INFINITY,
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Opens the recorded robot and the image-folder camera; the folder must hold a frame for every
+/// pose of `plan`.
+pub fn open(
+    config: &CellConfig,
+    plan: &[(Pose, Joints)],
+    camera_model: CameraModel,
+) -> Result<Hardware, CellError> {
+    let (RobotConfig::Recorded { poses }, CameraConfig::Files { folder }) =
+        (&config.robot, &config.camera)
+    else {
+        return Err(CellError::Backend(
+            "a recorded cell needs `robot: {backend: recorded}` and `camera: {backend: files}`"
+                .into(),
+        ));
+    };
+    let recorded = load_recorded_poses(poses).map_err(|e| CellError::Backend(e.to_string()))?;
+    let selector = FrameSelector::default();
+    let camera = FilesCamera::open(folder, camera_model)
+        .map_err(|e| CellError::Backend(e.to_string()))?
+        .with_selector(selector.clone());
+    camera
+        .require_frames(plan.len().max(recorded.len()))
+        .map_err(|e| CellError::Backend(e.to_string()))?;
+    Ok(Hardware {
+        robot: Box::new(SelectingRobot {
+            robot: RecordedRobot::new(recorded),
+            selector,
+        }),
+        camera: Box::new(camera),
+    })
+}
+
+/// The recorded robot, telling the folder camera which pose it is at after every move.
+struct SelectingRobot {
+    robot: RecordedRobot,
+    selector: FrameSelector,
+}
+
+impl SelectingRobot {
+    fn sync(&self) {
+        if let Some(i) = self.robot.current() {
+            self.selector.select(i);
+        }
+    }
+}
+
+impl Robot for SelectingRobot {
+    fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
+        self.robot.base_from_flange()
+    }
+    fn joint_positions(&mut self) -> Result<Joints, RobotError> {
+        self.robot.joint_positions()
+    }
+    fn move_linear(&mut self, pose: &Pose, limits: &MotionLimits) -> Result<(), RobotError> {
+        self.robot.move_linear(pose, limits)?;
+        self.sync();
+        Ok(())
+    }
+    fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
+        self.robot.move_joints(joints, limits)?;
+        self.sync();
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), RobotError> {
+        self.robot.stop()
+    }
+    fn status(&mut self) -> Result<RobotStatus, RobotError> {
+        self.robot.status()
+    }
+}

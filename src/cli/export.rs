@@ -1,0 +1,92 @@
+//! `handeye export <result.yaml> --format ros2|urdf|ur|json|opencv`: the two solved unknowns in
+//! the forms other tools read (`handeye::formats::export`), printed or written atomically.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+
+use handeye::atomic_file::write_atomic;
+use handeye::formats::{export, ExportFormat, FrameIds};
+use handeye::result::ResultFile;
+
+/// Export form on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum FormatArg {
+    /// ROS 2 static_transform_publisher commands + a launch snippet.
+    Ros2,
+    /// URDF fixed <joint> snippets (origin xyz + rpy).
+    Urdf,
+    /// UR pose literals p[x, y, z, rx, ry, rz].
+    Ur,
+    /// JSON (translation, quaternion xyzw, rotation vector, 4x4 matrix).
+    Json,
+    /// OpenCV FileStorage YAML with 4x4 matrices.
+    Opencv,
+}
+
+/// Export a result file's two transforms. Every form holds T_parent_child (points in the child
+/// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
+/// eye_to_hand T_base_camera and T_flange_target.
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// The result YAML written by `handeye solve` or `handeye run`.
+    result: PathBuf,
+    /// The output form.
+    #[arg(long, value_enum)]
+    format: FormatArg,
+    /// Write here instead of printing.
+    #[arg(short = 'o', long)]
+    output: Option<PathBuf>,
+    /// Frame id of the robot base (the frame T_base_flange is reported in).
+    #[arg(long, default_value = "base")]
+    base_frame: String,
+    /// Frame id of the flange.
+    #[arg(long, default_value = "tool0")]
+    flange_frame: String,
+    /// Frame id of the camera's optical frame (x right, y down, z forward).
+    #[arg(long, default_value = "camera_optical_frame")]
+    camera_frame: String,
+    /// Frame id of the board.
+    #[arg(long, default_value = "calibration_target")]
+    target_frame: String,
+}
+
+/// Runs `handeye export`.
+pub fn run(args: ExportArgs) -> anyhow::Result<()> {
+    let mounts = ResultFile::load_mounts(&args.result)?;
+    let ids = FrameIds {
+        base: args.base_frame,
+        flange: args.flange_frame,
+        camera: args.camera_frame,
+        target: args.target_frame,
+    };
+    for (flag, id) in [
+        ("--base-frame", &ids.base),
+        ("--flange-frame", &ids.flange),
+        ("--camera-frame", &ids.camera),
+        ("--target-frame", &ids.target),
+    ] {
+        anyhow::ensure!(
+            !id.is_empty() && !id.contains(|c: char| c.is_whitespace() || "'\"<>&".contains(c)),
+            "{flag} `{id}`: a frame id must be non-empty without spaces, quotes or <>&"
+        );
+    }
+    let format = match args.format {
+        FormatArg::Ros2 => ExportFormat::Ros2,
+        FormatArg::Urdf => ExportFormat::Urdf,
+        FormatArg::Ur => ExportFormat::Ur,
+        FormatArg::Json => ExportFormat::Json,
+        FormatArg::Opencv => ExportFormat::Opencv,
+    };
+    let text = export(&mounts, format, &ids);
+    match &args.output {
+        Some(path) => {
+            write_atomic(path, text.as_bytes())
+                .with_context(|| format!("writing {}", path.display()))?;
+            println!("wrote {} to {}", format.name(), path.display());
+        }
+        None => print!("{text}"),
+    }
+    Ok(())
+}

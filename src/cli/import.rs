@@ -1,0 +1,333 @@
+//! `handeye import <format> ... -o dataset.yaml`: other tools' hand-eye data into our dataset
+//! form (`T_base_flange`, `T_camera_target` pairs). The library does the reading
+//! (`handeye::formats::import`); this file maps arguments and prints what was found.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Args, Subcommand, ValueEnum};
+
+use handeye::camera::model::CameraModel;
+use handeye::dataset::Dataset;
+use handeye::formats::import::{
+    import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
+    CsvPoseForm, VispOptions,
+};
+use handeye::robot::recorded::save_recorded_poses;
+use handeye::solve::Setup;
+use handeye::target::{Board, DetectorOptions};
+
+/// The cell layout on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SetupArg {
+    /// Camera on the flange, target fixed.
+    #[value(name = "eye_in_hand", alias = "eye-in-hand")]
+    EyeInHand,
+    /// Camera fixed, target on the flange.
+    #[value(name = "eye_to_hand", alias = "eye-to-hand")]
+    EyeToHand,
+}
+
+impl From<SetupArg> for Setup {
+    fn from(s: SetupArg) -> Setup {
+        match s {
+            SetupArg::EyeInHand => Setup::EyeInHand,
+            SetupArg::EyeToHand => Setup::EyeToHand,
+        }
+    }
+}
+
+/// Import other tools' data as a dataset file (T_base_flange, T_camera_target pairs).
+#[derive(Debug, Args)]
+pub struct ImportArgs {
+    #[command(subcommand)]
+    format: ImportFormat,
+}
+
+#[derive(Debug, Subcommand)]
+enum ImportFormat {
+    /// ViSP hand-eye data: `*_pose_rPe_<N>.yaml` + `*image-<N>.png` + vpXmlParserCamera XML.
+    ///
+    /// `*_pose_rPe_<N>.yaml` holds T_base_flange (ViSP's rMe: the end-effector in the robot base)
+    /// as [tx, ty, tz, θux, θuy, θuz] (m, axis-angle rad). T_camera_target is measured by
+    /// detecting the board (--target) in each image with the folder's intrinsics. Also writes the
+    /// intrinsics as camera_info YAML and the poses as a recorded-poses file, so the folder can run
+    /// as a session (robot backend `recorded`, camera backend `files`).
+    Visp(VispArgs),
+    /// MoveIt Calibration pose-sample JSON: [[T_base_flange, T_camera_target], ...] as 4x4
+    /// row-major matrices in metres (effector_wrt_world, object_wrt_sensor).
+    Moveit(MoveitArgs),
+    /// Plain CSV: a pose is `tx,ty,tz,qx,qy,qz,qw` (--form quaternion) or UR's `x,y,z,rx,ry,rz`
+    /// (--form rotvec, rotation vector rad); metres unless --mm.
+    ///
+    /// One file: each row holds T_base_flange then T_camera_target (14 or 12 numbers). Two files
+    /// (--camera-poses): FILE holds T_base_flange per row, the camera file T_camera_target per
+    /// row, paired by row order. `#` lines and blank lines are skipped; a first row without
+    /// numbers is a header.
+    Csv(CsvArgs),
+}
+
+#[derive(Debug, Args)]
+struct Common {
+    /// The cell layout the data comes from (the sources do not say).
+    #[arg(long, value_enum)]
+    setup: SetupArg,
+    /// Write the dataset here.
+    #[arg(short = 'o', long)]
+    output: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct VispArgs {
+    /// The ViSP data folder.
+    folder: PathBuf,
+    /// Board YAML the images show (e.g. configs/targets/single-tag36h11-id10.yaml).
+    #[arg(long)]
+    target: PathBuf,
+    /// Intrinsics (camera_info or Kalibr YAML) instead of the folder's XML.
+    #[arg(long)]
+    intrinsics: Option<PathBuf>,
+    /// Where to write the intrinsics as camera_info YAML (default: <output stem>-camera.yaml).
+    #[arg(long)]
+    camera_info_out: Option<PathBuf>,
+    /// Where to write the recorded T_base_flange poses (default: <output stem>-poses.yaml).
+    #[arg(long)]
+    poses_out: Option<PathBuf>,
+    /// Also write a cell config that replays the folder as a session (robot backend `recorded`,
+    /// camera backend `files`): `handeye run --config <it>`.
+    #[arg(long)]
+    cell_out: Option<PathBuf>,
+    /// Skip images where the board is not found instead of failing.
+    #[arg(long)]
+    skip_unfound: bool,
+    /// Quad decimation of the detector (1 = full resolution).
+    #[arg(long, default_value_t = 1.0)]
+    decimation: f32,
+    #[command(flatten)]
+    common: Common,
+}
+
+#[derive(Debug, Args)]
+struct MoveitArgs {
+    /// The pose-sample JSON file.
+    file: PathBuf,
+    #[command(flatten)]
+    common: Common,
+}
+
+/// CSV pose form on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum FormArg {
+    /// tx,ty,tz,qx,qy,qz,qw
+    Quaternion,
+    /// x,y,z,rx,ry,rz (UR)
+    Rotvec,
+}
+
+#[derive(Debug, Args)]
+struct CsvArgs {
+    /// The CSV file (both poses per row, or T_base_flange only with --camera-poses).
+    file: PathBuf,
+    /// A second CSV holding T_camera_target per row, paired with FILE by row order.
+    #[arg(long)]
+    camera_poses: Option<PathBuf>,
+    /// How each pose is written.
+    #[arg(long, value_enum)]
+    form: FormArg,
+    /// Translations are in millimetres.
+    #[arg(long)]
+    mm: bool,
+    #[command(flatten)]
+    common: Common,
+}
+
+fn sibling(output: &Path, suffix: &str) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "dataset".into());
+    output.with_file_name(format!("{stem}-{suffix}.yaml"))
+}
+
+fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
+    dataset
+        .save(output)
+        .with_context(|| format!("writing {}", output.display()))?;
+    println!(
+        "wrote {} samples ({}) to {}",
+        dataset.pairs.len(),
+        dataset.setup,
+        output.display()
+    );
+    Ok(())
+}
+
+fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+    std::fs::canonicalize(path).with_context(|| format!("resolving {}", path.display()))
+}
+
+/// A recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
+/// order) are exactly the imported images, since the folder camera serves every image in it.
+fn write_cell(
+    cell_out: &Path,
+    folder: &Path,
+    target: &Path,
+    camera_info: &Path,
+    poses: &Path,
+    imported: &handeye::formats::import::VispImport,
+) -> anyhow::Result<()> {
+    let frames = handeye::camera::files::list_frames(folder)?;
+    let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();
+    anyhow::ensure!(
+        frames.iter().collect::<Vec<_>>() == paired,
+        "{}: the folder's images in natural order are not exactly the paired ViSP images, so a folder camera would pair them wrongly; no cell config written",
+        folder.display()
+    );
+    let setup = imported.dataset.setup;
+    // Nominal transforms from a quick solve (they only feed the plan report of a recorded cell).
+    let (camera_key, target_key) = setup.unknown_names();
+    let (camera_mount, target_mount) = match handeye::solve::solve(
+        setup,
+        &imported.dataset.pairs,
+        &handeye::solve::SolveOptions::default(),
+    ) {
+        Ok(c) => (c.camera_mount, c.target_mount),
+        Err(_) => (
+            handeye::geometry::Pose::identity(),
+            handeye::geometry::Pose::identity(),
+        ),
+    };
+    let pose = |p: &handeye::geometry::Pose| {
+        let t = p.translation.vector;
+        let r = handeye::geometry::rotvec(&p.rotation);
+        format!(
+            "{{translation: [{}, {}, {}], rotation_vector: [{}, {}, {}]}}",
+            t.x, t.y, t.z, r.x, r.y, r.z
+        )
+    };
+    // The workspace box is not used by a recorded robot; it spans the recorded poses ± 0.5 m.
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for f in &imported.frames {
+        let t = f.base_from_flange.translation.vector;
+        for k in 0..3 {
+            lo[k] = lo[k].min(t[k] - 0.5);
+            hi[k] = hi[k].max(t[k] + 0.5);
+        }
+    }
+    let text = format!(
+        "# Replays the ViSP folder {folder} as a session: handeye run --config <this file>\n\
+         setup: {setup}\n\
+         target: {target}\n\
+         intrinsics: {camera_info}\n\
+         robot: {{backend: recorded, poses: {poses}}}\n\
+         camera: {{backend: files, folder: {folder}}}\n\
+         nominal:\n  {camera_key}: {camera_mount}\n  {target_key}: {target_mount}\n\
+         workspace: {{min: {lo:?}, max: {hi:?}}}\n\
+         detector: {{decimate: 1}}\n",
+        folder = absolute(folder)?.display(),
+        target = absolute(target)?.display(),
+        camera_info = absolute(camera_info)?.display(),
+        poses = absolute(poses)?.display(),
+        camera_mount = pose(&camera_mount),
+        target_mount = pose(&target_mount),
+    );
+    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+        .with_context(|| format!("writing {}", cell_out.display()))?;
+    println!("wrote a recorded-cell config to {}", cell_out.display());
+    Ok(())
+}
+
+/// Runs `handeye import`.
+pub fn run(args: ImportArgs) -> anyhow::Result<()> {
+    match args.format {
+        ImportFormat::Visp(a) => {
+            let board = Board::load(&a.target)?;
+            let camera = a.intrinsics.as_deref().map(CameraModel::load).transpose()?;
+            anyhow::ensure!(
+                a.decimation >= 1.0,
+                "--decimation {} must be >= 1",
+                a.decimation
+            );
+            let options = VispOptions {
+                setup: a.common.setup.into(),
+                board,
+                camera,
+                detector: DetectorOptions {
+                    decimation: a.decimation,
+                    ..DetectorOptions::default()
+                },
+                skip_unfound: a.skip_unfound,
+            };
+            let imported = import_visp(&a.folder, &options)
+                .with_context(|| format!("importing ViSP data from {}", a.folder.display()))?;
+            for f in &imported.frames {
+                match (&f.skipped, f.rms_px) {
+                    (Some(why), _) => println!("{}: skipped: {why}", f.files.image.display()),
+                    (None, Some(rms)) => println!(
+                        "{}: board RMS {rms:.3} px{}",
+                        f.files.image.display(),
+                        match f.ambiguity {
+                            Some(r) if r > handeye::target::pnp::AMBIGUITY_WARN_RATIO =>
+                                format!(" (AMBIGUOUS lone tag, ratio {r:.2})"),
+                            _ => String::new(),
+                        }
+                    ),
+                    (None, None) => {}
+                }
+            }
+            let info = a
+                .camera_info_out
+                .unwrap_or_else(|| sibling(&a.common.output, "camera"));
+            imported
+                .camera
+                .save_camera_info(&info)
+                .with_context(|| format!("writing {}", info.display()))?;
+            println!("wrote the intrinsics to {}", info.display());
+            let poses_out = a
+                .poses_out
+                .unwrap_or_else(|| sibling(&a.common.output, "poses"));
+            let poses: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
+            save_recorded_poses(&poses, &poses_out)
+                .with_context(|| format!("writing {}", poses_out.display()))?;
+            println!(
+                "wrote the recorded T_base_flange poses to {}",
+                poses_out.display()
+            );
+            save(&imported.dataset, &a.common.output)?;
+            if let Some(cell_out) = &a.cell_out {
+                write_cell(cell_out, &a.folder, &a.target, &info, &poses_out, &imported)?;
+            }
+            Ok(())
+        }
+        ImportFormat::Moveit(a) => {
+            let pairs = import_moveit_json(&a.file)?;
+            save(
+                &Dataset {
+                    setup: a.common.setup.into(),
+                    pairs,
+                },
+                &a.common.output,
+            )
+        }
+        ImportFormat::Csv(a) => {
+            let options = CsvOptions {
+                form: match a.form {
+                    FormArg::Quaternion => CsvPoseForm::Quaternion,
+                    FormArg::Rotvec => CsvPoseForm::RotationVector,
+                },
+                millimetres: a.mm,
+            };
+            let pairs = match &a.camera_poses {
+                Some(camera) => import_csv_two_files(&a.file, camera, &options)?,
+                None => import_csv_pairs(&a.file, &options)?,
+            };
+            save(
+                &Dataset {
+                    setup: a.common.setup.into(),
+                    pairs,
+                },
+                &a.common.output,
+            )
+        }
+    }
+}
