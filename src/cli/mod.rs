@@ -3,9 +3,11 @@
 mod detect;
 mod plan;
 mod replay;
+mod report;
 mod run;
 mod solve;
 mod target;
+mod verify;
 
 use clap::{Parser, Subcommand};
 
@@ -31,6 +33,10 @@ enum Command {
     Detect(detect::DetectArgs),
     /// Board utilities (printable boards).
     Target(target::TargetArgs),
+    /// Write the HTML calibration report of a solved session.
+    Report(report::ReportArgs),
+    /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
+    Verify(verify::VerifyArgs),
 }
 
 /// Runs one parsed command line.
@@ -42,5 +48,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Replay(args) => replay::run(args),
         Command::Detect(args) => detect::run(args),
         Command::Target(args) => target::run(args),
+        Command::Report(args) => report::run(args),
+        Command::Verify(args) => verify::run(args),
     }
 }

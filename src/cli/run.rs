@@ -137,6 +137,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(truth) = &prepared.config.simulation {
         println!("{}", result.compare_with_truth(truth));
     }
+    match handeye::report::session::write_session_report(
+        &folder,
+        Some(&prepared.config),
+        result.calibration.clone(),
+    ) {
+        Ok(path) => println!("report: {}", path.display()),
+        // The calibration is saved; a report problem must not hide it.
+        Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
+    }
     println!("session folder: {}", folder.root().display());
     Ok(())
 }
