@@ -10,6 +10,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use handeye::cell::{self, PreparedCell};
+use handeye::geometry::Pose;
+use handeye::plan::nbv::AdaptivePlanner;
+use handeye::robot::Joints;
 use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
@@ -43,8 +46,22 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let prepared = cell::prepare(&config_path)
         .with_context(|| format!("preparing the cell from {}", config_path.display()))?;
     println!("{}", prepared.report);
-    let Some(plan) = prepared.report.validated() else {
-        bail!("the plan failed its checks (see the table above); nothing was moved");
+    let adaptive = prepared.config.plan.adaptive;
+    if adaptive && args.resume.is_some() {
+        bail!("--resume is not supported for adaptive plans: start a new run (the recorded session can still be replayed)");
+    }
+    let plan = if adaptive {
+        // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
+        let candidates = adaptive_candidates(&prepared);
+        if candidates.is_empty() {
+            bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
+        }
+        candidates
+    } else {
+        let Some(plan) = prepared.report.validated() else {
+            bail!("the plan failed its checks (see the table above); nothing was moved");
+        };
+        plan
     };
     if !prepared.is_simulated() && !args.yes {
         confirm(&prepared, plan.len())?;
@@ -55,7 +72,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         None => {
             let out = args.out.clone().unwrap_or_else(default_session_dir);
             let folder = SessionFolder::create(&out)?;
-            folder.write_manifest(&prepared.manifest(&plan))?;
+            if !adaptive {
+                folder.write_manifest(&prepared.manifest(&plan))?;
+            }
             folder
         }
     };
@@ -113,13 +132,49 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             }
         }
     };
-    let outcome = session::run_session(
-        setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut on_event,
-    );
+    let mut adaptive_note = None;
+    let outcome = if adaptive {
+        let mut planner = AdaptivePlanner::new(
+            prepared.config.setup,
+            prepared.config.nominal.camera_mount,
+            prepared.config.nominal.target_mount,
+            plan.clone(),
+            prepared.config.solver.to_options(),
+            prepared.config.plan.target_uncertainty_mm,
+            plan.len(),
+        );
+        let outcome = session::run_adaptive_session(
+            setup,
+            prepared.manifest(&[]).config,
+            &mut planner,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        adaptive_note = Some(format!(
+            "adaptive plan: {} of {} candidate poses used; target 1-sigma {:.3} mm {}",
+            planner.log.iter().filter(|s| s.chose.is_some()).count(),
+            plan.len(),
+            prepared.config.plan.target_uncertainty_mm,
+            match planner.log.last().and_then(|s| s.solved_sigma_mm) {
+                Some(s) if planner.reached_target() => format!("reached ({s:.3} mm)"),
+                Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
+                None => "NOT reached (no solve)".into(),
+            }
+        ));
+        outcome
+    } else {
+        session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        )
+    };
     bar.finish_and_clear();
+    if let Some(note) = adaptive_note {
+        println!("{note}");
+    }
     let outcome = outcome?;
     if !outcome.skipped.is_empty() {
         println!(
@@ -148,6 +203,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     }
     println!("session folder: {}", folder.root().display());
     Ok(())
+}
+
+/// The plan's poses that pass every check, as candidates for the adaptive planner.
+fn adaptive_candidates(prepared: &PreparedCell) -> Vec<(Pose, Joints)> {
+    prepared
+        .report
+        .poses
+        .iter()
+        .filter(|p| p.problems.is_empty())
+        .filter_map(|p| p.joints.map(|q| (p.base_from_flange, q)))
+        .collect()
 }
 
 fn default_session_dir() -> PathBuf {

@@ -312,6 +312,37 @@ pub fn refine(
     })
 }
 
+/// Fisher information `JᵀJ` (12x12, whitened by `noise`, in the refinement's parameters
+/// [φ_X, ρ_X, φ_Y, ρ_Y]) that one more sample at `B` would add at the solution `solution`.
+///
+/// Evaluated at zero residual (the measurement is predicted as `X·B·Y`), which is where the
+/// Gauss-Newton covariance of a future solve is linearised. Summed over samples and inverted it
+/// predicts the covariance before the samples are taken: the basis of next-best-pose planning.
+pub fn sample_information(
+    solution: &Axby,
+    b: &Pose,
+    noise: &super::NoiseModel,
+) -> SMatrix<f64, 12, 12> {
+    let data = AxbyData {
+        a: vec![solution.x * b * solution.y],
+        b: vec![*b],
+        weights: vec![1.0],
+    };
+    let problem = Problem {
+        data: &data,
+        x0: *solution,
+        delta: DVector::zeros(PARAMS),
+        scale: vec![1.0],
+        inv_sigma_r: 1.0 / noise.rotation_sigma_rad,
+        inv_sigma_t: 1.0 / noise.translation_sigma_m,
+        trace: RefCell::new(Vec::new()),
+    };
+    let j = problem
+        .jacobian()
+        .expect("the analytic Jacobian always exists");
+    (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into()
+}
+
 /// Residual degrees of freedom from which `χ²/dof` is trusted as the noise level.
 ///
 /// Below it (fewer than 8 samples) the estimate of the noise is itself too noisy, so the factor
