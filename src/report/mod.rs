@@ -214,7 +214,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     );
     let _ = write!(
         html,
-        "<section id=\"rotation-axes\"><h2>Relative rotation axes</h2>\n<p>Axes of the relative flange rotations between every two samples (flange frame of the first sample), on the unit sphere seen from +z and from −z; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
+        "<section id=\"rotation-axes\"><h2>Relative rotation axes</h2>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
         diversity.off_axis_deg
     );
     figure(
@@ -402,9 +402,9 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
 pub fn plain_warnings(input: &ReportInput) -> Vec<String> {
     let mut out = Vec::new();
     let n = input.pairs.len();
-    if n < 10 {
+    if n < 8 {
         out.push(format!(
-            "Only {n} poses: the uncertainty estimate itself is shaky below about 10 and a single bad pose can pull the answer; record 15–20."
+            "Only {n} poses: below 8 the noise level cannot be estimated from the residuals (the uncertainty assumes the configured noise) and a single bad pose can pull the answer; record 12–20."
         ));
     }
     let diversity = rotation_diversity(
