@@ -236,3 +236,107 @@ fn report_renders_in_headless_chromium_without_console_messages() {
     let _ = std::fs::copy(&shot, &keep);
     eprintln!("screenshot: {}", keep.display());
 }
+
+/// result.yaml read back as a calibration writes the same file again (what `handeye report`
+/// shows is what the solve wrote).
+#[test]
+fn result_file_round_trips_through_a_calibration() {
+    let (_dir, path) = report();
+    let folder = path.parent().unwrap();
+    let result_path = folder.join("result.yaml");
+    let result = ResultFile::load(&result_path).unwrap();
+    let calibration = result.to_calibration(&result_path).unwrap();
+    let pairs = handeye::dataset::Dataset::load(&folder.join("samples.yaml"))
+        .unwrap()
+        .pairs;
+    let again = ResultFile::from_calibration(&calibration, &pairs);
+    assert_eq!(again.residuals, result.residuals);
+    assert_eq!(again.uncertainty, result.uncertainty);
+    assert_eq!(again.solver, result.solver);
+    assert_eq!(again.outliers, result.outliers);
+    let (a, b) = (
+        again.T_flange_camera.unwrap().translation,
+        result.T_flange_camera.unwrap().translation,
+    );
+    for k in 0..3 {
+        assert!((a[k] - b[k]).abs() < 1e-12);
+    }
+}
+
+/// Two answers side by side (here the refined and the iterative method on pose-space data with
+/// no frames): both in the transforms section and in the bar legends, each plot still once.
+#[test]
+fn two_answers_are_shown_side_by_side() {
+    use handeye::geometry::pose_from_rotvec;
+    use handeye::report::{render_html, ReportAnswer, ReportInput};
+    use handeye::solve::{Method, NoiseModel, PosePair, Setup, SolveOptions};
+    use nalgebra::Vector3;
+
+    let camera_mount =
+        pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+    let target_mount = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
+    let pairs: Vec<PosePair> = (0..12)
+        .map(|k| {
+            let a = k as f64;
+            let view = pose_from_rotvec(
+                Vector3::new(0.05 * (a * 0.7).sin(), 0.05 * (a * 1.3).cos(), 0.6),
+                Vector3::new(
+                    std::f64::consts::PI + 0.4 * (a * 0.9).sin(),
+                    0.4 * (a * 1.7).cos(),
+                    0.5 * (a * 0.5).sin(),
+                ),
+            );
+            let noise = pose_from_rotvec(
+                Vector3::new(1e-4 * (a * 3.1).sin(), 1e-4 * (a * 2.3).cos(), 0.0),
+                Vector3::new(1e-4 * (a * 1.9).sin(), 0.0, 1e-4 * (a * 0.3).cos()),
+            );
+            PosePair::new(
+                target_mount * view.inverse() * camera_mount.inverse(),
+                noise * view,
+            )
+        })
+        .collect();
+    let answer = |method: Method, label: &str| {
+        let options = SolveOptions {
+            method,
+            ..SolveOptions::default()
+        };
+        ReportAnswer {
+            label: label.into(),
+            calibration: handeye::solve::solve(Setup::EyeInHand, &pairs, &options).unwrap(),
+            reprojection_px: vec![None; pairs.len()],
+        }
+    };
+    let input = ReportInput {
+        title: "two answers".into(),
+        setup: Setup::EyeInHand,
+        pairs: pairs.clone(),
+        answers: vec![
+            answer(Method::Refined, "answer-one"),
+            answer(Method::Iterative, "answer-two"),
+        ],
+        thumbnails: Vec::new(),
+        noise: NoiseModel::default(),
+        holdout: None,
+    };
+    let html = render_html(&input).unwrap();
+    assert_eq!(count(&html, "class=\"answer\" data-answer="), 2);
+    for label in ["answer-one", "answer-two"] {
+        assert!(
+            count(&html, label) >= 4,
+            "{label} in headings and the three bar legends"
+        );
+    }
+    for kind in PLOT_KINDS {
+        assert_eq!(count(&html, &format!("data-kind=\"{kind}\"")), 1, "{kind}");
+    }
+    // Only the refined answer has a covariance; the iterative one says so instead of a number.
+    assert_eq!(
+        count(
+            &html,
+            "data-key=\"uncertainty.T_flange_camera.translation_mm\""
+        ),
+        1
+    );
+    assert!(html.contains("no uncertainty"));
+}

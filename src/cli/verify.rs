@@ -33,6 +33,9 @@ pub struct VerifyArgs {
     /// Where to record the holdout session (default: sessions/verify-<time>).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Move a real robot without asking (holdout on a real cell).
+    #[arg(long)]
+    yes: bool,
     /// Leave-one-out cross-validation of a session folder's samples.
     #[arg(long, conflicts_with = "dataset")]
     session: Option<PathBuf>,
@@ -67,8 +70,8 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 .unwrap_or(0);
             PathBuf::from(format!("sessions/verify-{now}"))
         });
-        if !prepared.is_simulated() {
-            bail!("holdout verification moves the robot; on a real cell run it from `handeye run` with a holdout plan (not wired for real hardware in this build)");
+        if !prepared.is_simulated() && !args.yes {
+            bail!("holdout verification moves the real robot through {} generated poses: check the plan with `handeye plan check` and pass --yes", spec.count);
         }
         let folder = SessionFolder::create(&out)?;
         let v = verify::holdout(
