@@ -90,6 +90,43 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
         candidates.len()
     );
 
+    // Poses the adaptive plan needs to reach the 1-sigma of random plans of several sizes
+    // (one noise draw each; the figures are printed for the record).
+    for n in [8usize, 12, 16, 20] {
+        let mut rng = StdRng::seed_from_u64(7);
+        let pairs: Vec<PosePair> = random[..n]
+            .iter()
+            .map(|(p, _)| measure(&truth, p, &mut rng))
+            .collect();
+        let Ok(c) = solve::solve(truth.setup, &pairs, &options) else {
+            continue;
+        };
+        let u = c.uncertainty.as_ref().expect("covariance");
+        let target_mm = u
+            .camera_mount
+            .translation_mm
+            .max(u.target_mount.translation_mm);
+        let mut planner = AdaptivePlanner::new(
+            truth.setup,
+            prepared.config.nominal.camera_mount,
+            prepared.config.nominal.target_mount,
+            candidates.clone(),
+            options.clone(),
+            target_mm,
+            40,
+        );
+        let mut samples = Vec::new();
+        while let Some((pose, _)) = planner.next(&samples) {
+            samples.push(measure(&truth, &pose, &mut rng));
+        }
+        eprintln!(
+            "random {n:>2} poses: 1-sigma {target_mm:.4} mm, true error {:.4} mm; adaptive reaches that 1-sigma with {} poses{}",
+            true_error_mm(&c, &truth),
+            samples.len(),
+            if planner.reached_target() { "" } else { " (NOT reached)" }
+        );
+    }
+
     let trials: usize = 12;
     let (mut random_sq, mut adaptive_sq, mut poses_used) = (0.0, 0.0, 0usize);
     let mut reached = 0;
@@ -144,4 +181,71 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
         adaptive_rms <= 1.3 * random_rms,
         "adaptive true error {adaptive_rms:.4} mm vs random {random_rms:.4} mm"
     );
+}
+
+/// The adaptive plan end to end in the rendered sim cell, through the session driver: it stops
+/// once the solved 1-sigma reaches the target, with fewer poses than the candidates, and the
+/// session folder is a normal one (manifest lists exactly the visited poses).
+#[test]
+fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
+    use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
+    use std::sync::atomic::AtomicBool;
+    use std::sync::Arc;
+
+    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
+    let prepared = cell::prepare(&config).unwrap();
+    let truth = prepared.config.simulation.unwrap();
+    let candidates = prepared.report.validated().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+    let target_mm = 0.1;
+    let mut planner = AdaptivePlanner::new(
+        truth.setup,
+        prepared.config.nominal.camera_mount,
+        prepared.config.nominal.target_mount,
+        candidates.clone(),
+        prepared.config.solver.to_options(),
+        target_mm,
+        candidates.len(),
+    );
+    let mut hardware = prepared.open_hardware().unwrap();
+    let setup = SessionSetup {
+        folder: folder.clone(),
+        setup: prepared.config.setup,
+        plan: Vec::new(),
+        limits: prepared.config.limits,
+        settle: prepared.config.settle(),
+        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
+        board: prepared.board.clone(),
+        detector: prepared.detector_options(),
+        stop: Arc::new(AtomicBool::new(false)),
+    };
+    let outcome = session::run_adaptive_session(
+        setup,
+        config.clone(),
+        &mut planner,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_e: SessionEvent| {},
+    )
+    .unwrap();
+    assert!(planner.reached_target(), "{:?}", planner.log);
+    let used = outcome.accepted.len();
+    eprintln!(
+        "rendered sim cell: adaptive reached {target_mm} mm with {used} of {} poses",
+        candidates.len()
+    );
+    assert!(used < candidates.len(), "{used} poses");
+    assert_eq!(folder.read_manifest().unwrap().plan.len(), used);
+    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let c = &solved.calibration;
+    let error = true_error_mm(c, &truth);
+    let sigma = c.uncertainty.as_ref().unwrap();
+    let sigma = sigma
+        .camera_mount
+        .translation_mm
+        .max(sigma.target_mount.translation_mm);
+    assert!(sigma <= target_mm, "solved 1-sigma {sigma:.3} mm");
+    // The true error of the worst unknown within 3 sigma of a 3-dof error (≈ 3·σ_total).
+    assert!(error < 3.0 * target_mm, "true error {error:.3} mm");
 }
