@@ -16,7 +16,7 @@ use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::plan::check::{check_plan, CheckContext};
 use crate::plan::{generate::generate, GenerateSpec, Plan, Waypoint};
-use crate::session::{self, SessionError, SessionEvent, SessionFolder, SessionSetup};
+use crate::session::{self, SessionError, SessionEvent, SessionFolder};
 use crate::solve::{self, PosePair, Setup, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
@@ -268,17 +268,7 @@ pub fn holdout(
     let mut hardware = prepared
         .open_hardware()
         .map_err(|e| VerifyError::Session(Box::new(SessionError::Detection(e.to_string()))))?;
-    let session_setup = SessionSetup {
-        folder: folder.clone(),
-        setup,
-        plan: validated,
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop: Default::default(),
-    };
+    let session_setup = prepared.session_setup(folder.clone(), validated, Default::default());
     session::run_session(
         session_setup,
         hardware.robot.as_mut(),

@@ -188,7 +188,7 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
 /// session folder is a normal one (manifest lists exactly the visited poses).
 #[test]
 fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
-    use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
+    use handeye::session::{self, SessionEvent, SessionFolder};
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
@@ -209,17 +209,8 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
         candidates.len(),
     );
     let mut hardware = prepared.open_hardware().unwrap();
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan: Vec::new(),
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop: Arc::new(AtomicBool::new(false)),
-    };
+    let setup =
+        prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
     let outcome = session::run_adaptive_session(
         setup,
         config.clone(),

@@ -11,7 +11,7 @@ use handeye::cell;
 use handeye::report::session::write_session_report;
 use handeye::report::{PLOT_KINDS, SECTIONS};
 use handeye::result::ResultFile;
-use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
+use handeye::session::{self, SessionEvent, SessionFolder};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -41,17 +41,7 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
         folder.write_manifest(&prepared.manifest(&plan)).unwrap();
         let mut hardware = prepared.open_hardware().unwrap();
-        let setup = SessionSetup {
-            folder: folder.clone(),
-            setup: prepared.config.setup,
-            plan,
-            limits: prepared.config.limits,
-            settle: prepared.config.settle(),
-            max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-            board: prepared.board.clone(),
-            detector: prepared.detector_options(),
-            stop: Arc::new(AtomicBool::new(false)),
-        };
+        let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
         session::run_session(
             setup,
             hardware.robot.as_mut(),

@@ -8,36 +8,14 @@ use std::sync::Arc;
 use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
 use handeye::plan::CellTransforms;
-use handeye::session::{
-    self, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup,
-};
+use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod util;
 
-/// A copy of a repo config in `dir` with its relative paths made absolute and `edits`
-/// (pairs of text to replace) applied.
+use util::repo;
+
 fn config_variant(dir: &Path, base: &str, edits: &[(&str, &str)]) -> PathBuf {
-    let configs = repo().join("configs");
-    let mut text = std::fs::read_to_string(configs.join(base)).unwrap();
-    for key in ["target: ", "intrinsics: "] {
-        text = text.replace(
-            &format!("{key}targets/"),
-            &format!("{key}{}/targets/", configs.display()),
-        );
-        text = text.replace(
-            &format!("{key}cameras/"),
-            &format!("{key}{}/cameras/", configs.display()),
-        );
-    }
-    for (from, to) in edits {
-        assert!(text.contains(from), "config {base} has no {from:?}");
-        text = text.replace(from, to);
-    }
-    let path = dir.join(base);
-    std::fs::write(&path, text).unwrap();
-    path
+    util::config_variant(dir, base, base, edits)
 }
 
 fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome, SessionError> {
@@ -46,17 +24,7 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
         folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     }
     let mut hardware = prepared.open_hardware().unwrap();
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan,
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop: Arc::new(AtomicBool::new(false)),
-    };
+    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     session::run_session(
         setup,
         hardware.robot.as_mut(),
@@ -312,4 +280,18 @@ fn malformed_configs_name_file_key_and_expectation() {
         assert!(message.contains("sim-cell.yaml"), "{message}");
         assert!(message.contains(expected), "{edits:?}: {message}");
     }
+}
+
+#[test]
+fn the_shipped_scripted_plan_passes_its_checks_in_the_demo_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = repo().join("configs/plans/look-at-12.yaml");
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[("generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}", &format!("file: {}", plan.display()))],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    assert_eq!(prepared.plan.waypoints.len(), 12);
+    assert!(prepared.report.ok(), "{}", prepared.report);
 }

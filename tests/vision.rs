@@ -173,7 +173,7 @@ fn check_rendered_frames(camera: CameraModel, seed: u64) {
     // Accuracy at 0.6 m: median over several poses.
     let mut rotation_errors = Vec::new();
     let mut translation_errors = Vec::new();
-    for _ in 0..5 {
+    for _ in 0..9 {
         let truth = random_view(&board, &camera, &mut rng, 0.55, 0.65, 50.0);
         let result = run_frame(&board, &camera, &detector, &truth, &mut rng);
         assert_eq!(result.tags_found, 36);
@@ -344,4 +344,139 @@ fn tags_not_on_the_board_are_rejected() {
     let ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
     assert_eq!(ids, vec![20, 21, 22, 23]);
     assert_eq!(detection.rejected.len(), 32);
+}
+
+#[test]
+fn cli_detect_and_target_render_work_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = board_6x6();
+    let camera = radtan_camera();
+    let mut rng = StdRng::seed_from_u64(21);
+    let truth = random_view(&board, &camera, &mut rng, 0.55, 0.65, 30.0);
+    let frame = render(&board, &camera, &truth, &RenderOptions::default(), &mut rng);
+    let frame_path = dir.path().join("frame.png");
+    frame.save(&frame_path).unwrap();
+    let intrinsics = dir.path().join("camera.yaml");
+    camera.save_camera_info(&intrinsics).unwrap();
+    let corrupt = dir.path().join("corrupt.png");
+    std::fs::write(&corrupt, b"not an image").unwrap();
+    let results = dir.path().join("poses.yaml");
+    let annotated = dir.path().join("annotated");
+    let exe = env!("CARGO_BIN_EXE_handeye");
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&intrinsics)
+        .arg(&frame_path)
+        .arg("-o")
+        .arg(&results)
+        .arg("--annotate")
+        .arg(&annotated)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("tags found (36)") && stdout.contains("T_camera_target"),
+        "{stdout}"
+    );
+    assert!(annotated.join("frame-annotated.png").is_file());
+    let written: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(&results).unwrap()).unwrap();
+    let translation: Vec<f64> = written[0]["T_camera_target"]["translation"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let error = (Vector3::from_vec(translation) - truth.translation.vector).norm();
+    assert!(error < 0.001, "written T_camera_target off by {error} m");
+
+    // A corrupt image fails the command with the file named.
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&intrinsics)
+        .arg(&corrupt)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("corrupt.png"));
+
+    // Intrinsics for another image size stop the run with both sizes named.
+    let small = dir.path().join("small.yaml");
+    CameraModel {
+        width: 640,
+        height: 480,
+        ..camera
+    }
+    .save_camera_info(&small)
+    .unwrap();
+    let output = std::process::Command::new(exe)
+        .arg("detect")
+        .arg("--target")
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(&small)
+        .arg(&frame_path)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("1280x720") && stderr.contains("640x480"),
+        "{stderr}"
+    );
+
+    // Printable boards: SVG written, unknown extension refused.
+    let svg = dir.path().join("board.svg");
+    let status = std::process::Command::new(exe)
+        .args(["target", "render", "--target"])
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("-o")
+        .arg(&svg)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+    let output = std::process::Command::new(exe)
+        .args(["target", "render", "--target"])
+        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("-o")
+        .arg(dir.path().join("board.bmp"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains(".png or .svg"));
+}
+
+#[test]
+fn tag_standard_41h12_board_renders_and_is_detected() {
+    let board = Board::from_yaml_str(
+        "target_type: aprilgrid\ntagCols: 3\ntagRows: 2\ntagSize: 0.04\ntagSpacing: 1.0\n\
+         family: tagStandard41h12\nfirst_id: 100\nborder_bits: 1\n",
+        Path::new("41h12.yaml"),
+    )
+    .unwrap();
+    let camera = radtan_camera();
+    let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
+    let mut rng = StdRng::seed_from_u64(41);
+    for _ in 0..2 {
+        let truth = random_view(&board, &camera, &mut rng, 0.45, 0.6, 35.0);
+        let result = run_frame(&board, &camera, &detector, &truth, &mut rng);
+        assert_eq!(result.tags_found, 6);
+        let rms = (result.corner_squared_errors.iter().sum::<f64>()
+            / result.corner_squared_errors.len() as f64)
+            .sqrt();
+        assert!(rms < 0.15, "corner RMS {rms} px");
+        assert!(result.rotation_error_deg < 0.1 && result.translation_error_m < 0.001);
+    }
 }

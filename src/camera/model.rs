@@ -148,23 +148,38 @@ impl Distortion {
         }
     }
 
-    /// The 2x2 Jacobian of [`Distortion::distort`] at `xn`.
-    ///
-    /// Central differences with a 1e-7 step: the maps are smooth polynomials/arctangents
-    /// of order ≤ 9, so the error (~1e-12 relative) is far below pixel noise, and one
-    /// code path serves every model.
+    /// The 2x2 Jacobian of [`Distortion::distort`] at `xn` (analytic).
     pub fn jacobian(&self, xn: Vector2<f64>) -> Matrix2<f64> {
-        if matches!(self, Distortion::None) {
-            return Matrix2::identity();
+        match *self {
+            Distortion::None => Matrix2::identity(),
+            Distortion::RadTan { k1, k2, p1, p2, k3 } => {
+                let (x, y) = (xn.x, xn.y);
+                let r2 = x * x + y * y;
+                let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+                let d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+                let cross = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y;
+                Matrix2::new(
+                    radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x,
+                    cross,
+                    cross,
+                    radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x,
+                )
+            }
+            Distortion::Equidistant { k1, k2, k3, k4 } => {
+                let r = xn.norm();
+                if r < 1e-9 {
+                    return Matrix2::identity();
+                }
+                let theta = r.atan();
+                let t2 = theta * theta;
+                let theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))));
+                let d_theta_d =
+                    1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+                let scale = theta_d / r;
+                let d_scale = (d_theta_d / (1.0 + r * r) * r - theta_d) / (r * r);
+                Matrix2::identity() * scale + (xn * xn.transpose()) * (d_scale / r)
+            }
         }
-        let h = 1e-7;
-        let dx = (self.distort(xn + Vector2::new(h, 0.0))
-            - self.distort(xn - Vector2::new(h, 0.0)))
-            / (2.0 * h);
-        let dy = (self.distort(xn + Vector2::new(0.0, h))
-            - self.distort(xn - Vector2::new(0.0, h)))
-            / (2.0 * h);
-        Matrix2::from_columns(&[dx, dy])
     }
 
     /// Inverts the distortion by Gauss-Newton from the distorted point; `None` if it does
@@ -606,6 +621,28 @@ mod tests {
                     let back = model.project(&Point3::from(ray * 0.7)).unwrap();
                     assert!((back - pixel).norm() < 1e-9, "{model:?} {pixel} -> {back}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn distortion_jacobian_matches_central_differences() {
+        for model in models() {
+            for xn in [
+                Vector2::new(0.31, -0.22),
+                Vector2::new(-0.6, 0.35),
+                Vector2::new(1e-4, 2e-4),
+            ] {
+                let h = 1e-6;
+                let d = &model.distortion;
+                let dx = (d.distort(xn + Vector2::new(h, 0.0))
+                    - d.distort(xn - Vector2::new(h, 0.0)))
+                    / (2.0 * h);
+                let dy = (d.distort(xn + Vector2::new(0.0, h))
+                    - d.distort(xn - Vector2::new(0.0, h)))
+                    / (2.0 * h);
+                let numeric = Matrix2::from_columns(&[dx, dy]);
+                assert!((numeric - d.jacobian(xn)).norm() < 1e-8, "{d:?} at {xn}");
             }
         }
     }

@@ -4,7 +4,11 @@
 
 pub mod sim;
 
+use sim::SharedRobot;
+
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 use crate::camera::model::CameraModel;
 use crate::camera::Camera;
@@ -14,7 +18,7 @@ use crate::plan::check::{check_plan, CheckContext, PlanReport};
 use crate::plan::{generate, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
-use crate::session::{PlannedPose, SessionManifest};
+use crate::session::{PlannedPose, SessionFolder, SessionManifest, SessionSetup};
 use crate::target::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -47,6 +51,9 @@ pub enum CellError {
     /// A backend could not be opened.
     #[error("{0}")]
     Backend(String),
+    /// The robot could not be reached.
+    #[error("opening the robot")]
+    Robot(#[source] Box<crate::robot::RobotError>),
 }
 
 /// The robot and camera of a cell, opened.
@@ -127,6 +134,22 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
 }
 
 impl PreparedCell {
+    fn check(&self) -> PlanReport {
+        check_plan(
+            &self.plan,
+            &CheckContext {
+                arm: &self.arm,
+                start_joints: self.start_joints,
+                cell: &self.config.nominal,
+                workspace: &self.config.workspace,
+                limits: &self.config.limits,
+                camera: &self.camera_model,
+                board: &self.board,
+                margin_px: self.config.session.image_margin_px,
+            },
+        )
+    }
+
     /// Whether both backends are simulated (no real hardware moves).
     pub fn is_simulated(&self) -> bool {
         matches!(self.config.robot, RobotConfig::Sim { .. })
@@ -159,12 +182,22 @@ impl PreparedCell {
         }
     }
 
-    /// Opens the robot and camera the config names.
+    /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)
+    /// arm renders from the pose the arm reports.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.config.simulation.expect("validated: sim backends have ground truth");
-                let (robot, camera) = sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
+                let (robot, camera) =
+                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
+                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+            }
+            (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
+                let truth = self.config.simulation.expect("validated: sim backends have ground truth");
+                let robot = SharedRobot::new(self.open_ur()?);
+                let reported = robot.clone();
+                let flange = Box::new(move || reported.last_base_from_flange());
+                let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (robot, camera) => Err(CellError::Backend(format!(
@@ -173,6 +206,65 @@ impl PreparedCell {
                 camera_name(camera)
             ))),
         }
+    }
+
+    /// Connects to the Universal Robots controller the config names.
+    #[cfg(feature = "ur-rtde")]
+    fn open_ur(&self) -> Result<Box<dyn Robot>, CellError> {
+        let RobotConfig::Ur {
+            host,
+            connect_timeout_s,
+            ..
+        } = &self.config.robot
+        else {
+            unreachable!("called for ur backends only")
+        };
+        let mut ur = crate::robot::ur::UrRobotConfig::new(host.clone());
+        ur.connect_timeout = std::time::Duration::from_secs_f64(*connect_timeout_s);
+        ur.workspace = Some(self.config.workspace);
+        ur.model = Some(self.arm.clone());
+        let robot =
+            crate::robot::ur::UrRobot::connect(ur).map_err(|e| CellError::Robot(Box::new(e)))?;
+        Ok(Box::new(robot))
+    }
+
+    /// Without the `ur-rtde` feature there is no UR driver in the binary.
+    #[cfg(not(feature = "ur-rtde"))]
+    fn open_ur(&self) -> Result<Box<dyn Robot>, CellError> {
+        Err(CellError::Backend(
+            "this build has no Universal Robots driver: build with `--features ur-rtde` (see README)".into(),
+        ))
+    }
+
+    /// What the session loop needs to run this cell's validated `plan` into `folder`.
+    pub fn session_setup(
+        &self,
+        folder: SessionFolder,
+        plan: Vec<(Pose, Joints)>,
+        stop: Arc<AtomicBool>,
+    ) -> SessionSetup {
+        SessionSetup {
+            folder,
+            setup: self.config.setup,
+            plan,
+            limits: self.config.limits,
+            settle: self.config.settle(),
+            max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
+            board: self.board.clone(),
+            detector: self.detector_options(),
+            stop,
+        }
+    }
+
+    /// Checks the plan again from where the arm really stands (a real arm's start is only known
+    /// once connected); returns the validated plan or the report that rejects it.
+    pub fn recheck_from(
+        &mut self,
+        start_joints: Joints,
+    ) -> Result<Vec<(Pose, Joints)>, &PlanReport> {
+        self.start_joints = start_joints;
+        self.report = self.check();
+        self.report.validated().ok_or(&self.report)
     }
 }
 

@@ -13,7 +13,7 @@ use handeye::camera::model::CameraModel;
 use handeye::geometry::PoseRecord;
 use handeye::target::annotate::annotate;
 use handeye::target::detect::load_gray_image;
-use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]
@@ -129,9 +129,19 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
                 result.ambiguity = pose.ambiguity;
                 result.camera_from_target = Some(record);
             }
-            Err(error) => {
+            // No board in this frame is a result worth reporting; anything else (image size
+            // disagreeing with the intrinsics, ...) is a setup mistake that stops the run.
+            Err(
+                error @ (TargetError::NoTagsFound { .. }
+                | TargetError::NotEnoughCorners { .. }
+                | TargetError::PoseFailed { .. }),
+            ) => {
                 println!("  board not found: {error}");
                 result.error = Some(error.to_string());
+            }
+            Err(error) => {
+                return Err(anyhow::anyhow!("{error}"))
+                    .with_context(|| format!("estimating the board pose in {}", path.display()));
             }
         }
         if let Some(dir) = &args.annotate {

@@ -13,7 +13,7 @@ use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
 use handeye::plan::nbv::AdaptivePlanner;
 use handeye::robot::Joints;
-use handeye::session::{self, SessionEvent, SessionFolder, SessionSetup};
+use handeye::session::{self, SessionEvent, SessionFolder};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -43,35 +43,56 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         }
         None => (None, args.config.clone().expect("clap requires --config")),
     };
-    let prepared = cell::prepare(&config_path)
+    let mut prepared = cell::prepare(&config_path)
         .with_context(|| format!("preparing the cell from {}", config_path.display()))?;
     println!("{}", prepared.report);
+    // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
     let adaptive = prepared.config.plan.adaptive;
     if adaptive && args.resume.is_some() {
         bail!("--resume is not supported for adaptive plans: start a new run (the recorded session can still be replayed)");
     }
+    if adaptive && adaptive_candidates(&prepared).is_empty() {
+        bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
+    }
+    if !adaptive && !prepared.report.ok() {
+        bail!("the plan failed its checks (see the table above); nothing was moved");
+    }
+    let poses = prepared.plan.waypoints.len();
+    if !prepared.is_simulated() && !args.yes {
+        confirm(&prepared, poses)?;
+    }
+    let mut hardware = prepared
+        .open_hardware()
+        .context("opening the robot and camera")?;
+    // The plan was checked from an assumed start; check it again from where the arm really is
+    // before the first move.
+    let start = hardware
+        .robot
+        .joint_positions()
+        .context("reading the arm's joint positions")?;
     let plan = if adaptive {
-        // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
+        let _ = prepared.recheck_from(start);
         let candidates = adaptive_candidates(&prepared);
         if candidates.is_empty() {
-            bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
+            bail!("from the arm's actual position no pose of the plan passes its checks; nothing was moved:\n{}", prepared.report);
         }
         candidates
     } else {
-        let Some(plan) = prepared.report.validated() else {
-            bail!("the plan failed its checks (see the table above); nothing was moved");
-        };
-        plan
+        match prepared.recheck_from(start) {
+            Ok(plan) => plan,
+            Err(report) => bail!("from the arm's actual position the plan fails its checks; nothing was moved:\n{report}"),
+        }
     };
-    if !prepared.is_simulated() && !args.yes {
-        confirm(&prepared, plan.len())?;
-    }
 
     let folder = match folder {
-        Some(folder) => folder,
+        Some(folder) => {
+            same_plan_as_recorded(&folder, &plan)?;
+            folder
+        }
         None => {
             let out = args.out.clone().unwrap_or_else(default_session_dir);
             let folder = SessionFolder::create(&out)?;
+            // An adaptive session writes its manifest as the plan grows.
             if !adaptive {
                 folder.write_manifest(&prepared.manifest(&plan))?;
             }
@@ -93,18 +114,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut hardware = prepared
         .open_hardware()
         .context("opening the robot and camera")?;
-    let setup = SessionSetup {
-        folder: folder.clone(),
-        setup: prepared.config.setup,
-        plan: plan.clone(),
-        limits: prepared.config.limits,
-        settle: prepared.config.settle(),
-        max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-        board: prepared.board.clone(),
-        detector: prepared.detector_options(),
-        stop,
-    };
-    let bar = progress_bar(plan.len() as u64);
+    let setup = prepared.session_setup(folder.clone(), plan.clone(), stop);
+    let bar = progress_bar(poses as u64);
     let mut on_event = |event: SessionEvent| match event {
         SessionEvent::Moving { plan_index } => {
             bar.set_message(format!("moving to pose {plan_index}"))
@@ -202,6 +213,34 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
     }
     println!("session folder: {}", folder.root().display());
+    Ok(())
+}
+
+/// A resumed session must visit the poses it was started with: the config may not have changed.
+fn same_plan_as_recorded(folder: &SessionFolder, plan: &[(Pose, Joints)]) -> anyhow::Result<()> {
+    let manifest = folder.read_manifest()?;
+    let same = manifest.plan.len() == plan.len()
+        && manifest
+            .plan
+            .iter()
+            .zip(plan)
+            .enumerate()
+            .all(|(i, (recorded, (pose, _)))| {
+                recorded
+                    .base_from_flange
+                    .to_pose(&format!("plan[{i}]"))
+                    .map(|r| {
+                        r.rotation.angle_to(&pose.rotation) < 1e-9
+                            && (r.translation.vector - pose.translation.vector).norm() < 1e-9
+                    })
+                    .unwrap_or(false)
+            });
+    if !same {
+        bail!(
+            "the plan from the config differs from the one {} was started with; resume with the same config, or start a new session",
+            folder.root().display()
+        );
+    }
     Ok(())
 }
 

@@ -98,21 +98,6 @@ impl SolveArgs {
     }
 }
 
-fn format_pose(pose: &handeye::geometry::Pose) -> String {
-    let t = pose.translation.vector * 1e3;
-    let rv = handeye::geometry::rotvec(&pose.rotation);
-    format!(
-        "translation [{:.2}, {:.2}, {:.2}] mm, rotation_vector [{:.5}, {:.5}, {:.5}] rad ({:.3}°)",
-        t.x,
-        t.y,
-        t.z,
-        rv.x,
-        rv.y,
-        rv.z,
-        rv.norm().to_degrees()
-    )
-}
-
 /// Runs `handeye solve`.
 pub fn run(args: SolveArgs) -> anyhow::Result<()> {
     let options = args.options()?;
@@ -120,43 +105,8 @@ pub fn run(args: SolveArgs) -> anyhow::Result<()> {
     let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
         .with_context(|| format!("solving {}", args.samples.display()))?;
 
-    println!(
-        "{} samples, setup {}, method {} ({} iterations, {}converged, {} restarts)",
-        dataset.pairs.len(),
-        calibration.setup,
-        calibration.solver.method.name(),
-        calibration.solver.iterations,
-        if calibration.solver.converged {
-            ""
-        } else {
-            "NOT "
-        },
-        calibration.solver.restarts
-    );
-    let sigmas = calibration
-        .uncertainty
-        .as_ref()
-        .map(|u| [u.camera_mount, u.target_mount]);
-    for (k, (name, pose)) in calibration.unknowns().iter().enumerate() {
-        println!("{name}: {}", format_pose(pose));
-        if let Some(s) = sigmas {
-            println!(
-                "    1-sigma {:.3}°, {:.3} mm",
-                s[k].rotation_deg, s[k].translation_mm
-            );
-        }
-    }
-    let r = &calibration.residuals;
-    println!(
-        "residuals: rotation RMS {:.3}° (max {:.3}°), translation RMS {:.3} mm (max {:.3} mm)",
-        r.rotation_rms_deg, r.rotation_max_deg, r.translation_rms_mm, r.translation_max_mm
-    );
-    if !calibration.outliers.is_empty() {
-        println!("outliers: {:?}", calibration.outliers);
-    }
-    for warning in &calibration.warnings {
-        eprintln!("warning: {warning}");
-    }
+    println!("{} samples", dataset.pairs.len());
+    println!("{}", calibration.summary());
     if let Some(output) = &args.output {
         ResultFile::from_calibration(&calibration, &dataset.pairs).save(output)?;
         println!("wrote {}", output.display());

@@ -276,6 +276,17 @@ mod tests {
             }
             other => panic!("expected Coaxial, got {other:?}"),
         }
+        let translations_only: Vec<Pose> = (0..5)
+            .map(|k| {
+                Pose::from_parts(
+                    Translation3::new(0.1 * k as f64, 0.0, 0.5),
+                    UnitQuaternion::identity(),
+                )
+            })
+            .collect();
+        let e = check_rotation_diversity(&translations_only).unwrap_err();
+        assert!(matches!(e, SolveError::TooLittleRotation { .. }), "{e}");
+        assert!(e.to_string().contains("span only 0.00°"), "{e}");
         assert!(matches!(
             check_rotation_diversity(&poses[..2]),
             Err(SolveError::TooFewSamples { found: 2, .. })

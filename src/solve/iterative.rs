@@ -16,7 +16,7 @@
 //! Per-iteration work is quaternion products only; the translation averages are linear in the
 //! estimate, so their sums are formed once and each iteration costs O(1). Units: rad, m.
 
-use nalgebra::{Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3, Vector4};
 
 use super::{closed_form, Axby, AxbyData, Method, Phase, SolveError, SolverReport, TraceStep};
 use crate::geometry::Pose;
@@ -28,6 +28,12 @@ pub const STALL_SPREAD: f64 = 0.9;
 /// at a wrong fixed point (the 180° case with robot rotations in a narrow cone keeps the
 /// per-sample estimates in agreement while all of them are wrong), and other starts are tried.
 pub const STALL_RESIDUAL_DEG: f64 = 5.0;
+/// A converged run whose rotation residual RMS exceeds `CROSS_CHECK_FACTOR` times the closed
+/// form's plus [`CROSS_CHECK_MARGIN_DEG`] is taken for a stall at a wrong fixed point.
+pub const CROSS_CHECK_FACTOR: f64 = 2.0;
+/// Absolute margin of the closed-form cross-check, degrees (keeps noise-free data, where both
+/// residuals are ~1e-12°, from triggering it).
+pub const CROSS_CHECK_MARGIN_DEG: f64 = 0.01;
 
 /// Options of the iterative method.
 #[derive(Debug, Clone, PartialEq)]
@@ -111,26 +117,59 @@ fn angle(a: &Quaternion<f64>, b: &Quaternion<f64>) -> f64 {
     2.0 * d.imag().norm().atan2(d.w.abs())
 }
 
-/// Weighted, sign-aligned, normalised mean; returns the mean and the spread.
-fn average(
-    estimates: impl Iterator<Item = (f64, Quaternion<f64>)>,
-    reference: Option<&Quaternion<f64>>,
-) -> (Quaternion<f64>, f64) {
-    let mut sum = Quaternion::new(0.0, 0.0, 0.0, 0.0);
-    let mut total = 0.0;
-    let mut reference = reference.copied();
-    for (w, q) in estimates {
-        let r = *reference.get_or_insert(q);
-        let aligned = if r.coords.dot(&q.coords) < 0.0 { -q } else { q };
-        sum += aligned * w;
-        total += w;
+/// The per-sample estimate maps of one half-step as 4x4 matrices on quaternion coordinates,
+/// weights folded in: `w_i · (R_A,i · R_Y⁻¹ · R_B,i⁻¹)` is `maps[i] · coords(q_Y)` and likewise for
+/// the Y half-step. The products are linear in the other unknown's quaternion, so building them
+/// once makes each estimate 16 multiply-adds; the iterates are exactly the paper's.
+struct EstimateMaps {
+    maps: Vec<Matrix4<f64>>,
+    total_weight: f64,
+}
+
+impl EstimateMaps {
+    fn new(
+        weights: &[f64],
+        count: usize,
+        product: impl Fn(usize, &Quaternion<f64>) -> Quaternion<f64>,
+    ) -> Self {
+        let maps = (0..count)
+            .map(|i| {
+                let mut m = Matrix4::zeros();
+                for k in 0..4 {
+                    let basis = Quaternion::from_vector(Vector4::ith(k, 1.0));
+                    m.set_column(k, &(product(i, &basis).coords * weights[i]));
+                }
+                m
+            })
+            .collect();
+        EstimateMaps {
+            maps,
+            total_weight: weights.iter().sum(),
+        }
     }
-    let norm = sum.norm();
-    if norm <= f64::MIN_POSITIVE {
-        // The paper's degenerate bisection: opposite quaternions average to the identity.
-        return (Quaternion::identity(), 0.0);
+
+    /// Weighted, sign-aligned, normalised mean of the estimates from `q`; returns the mean and
+    /// the spread (norm of the weighted mean, 1 when all estimates agree). Signs are aligned to
+    /// `reference`, or to the first estimate when there is none.
+    fn average(&self, q: &Vector4<f64>, reference: Option<&Vector4<f64>>) -> (Vector4<f64>, f64) {
+        let mut sum = Vector4::zeros();
+        let mut reference = reference.copied();
+        for m in &self.maps {
+            let estimate = m * q;
+            let r = *reference.get_or_insert(estimate);
+            if r.dot(&estimate) < 0.0 {
+                sum -= estimate;
+            } else {
+                sum += estimate;
+            }
+        }
+        let norm = sum.norm();
+        if norm <= f64::MIN_POSITIVE {
+            // The paper's degenerate bisection: opposite quaternions average to the identity.
+            return (Quaternion::identity().coords, 0.0);
+        }
+        (sum / norm, norm / self.total_weight)
     }
-    (sum / norm, norm / total)
 }
 
 fn rotations(
@@ -140,32 +179,23 @@ fn rotations(
     start: UnitQuaternion<f64>,
     options: &IterativeOptions,
 ) -> RotationRun {
-    let mut qy = start.into_inner();
-    let mut qx: Option<Quaternion<f64>> = None;
+    let n = qa.len();
+    // X from Y: R_X,i = R_A,i · R_Y⁻¹ · R_B,i⁻¹.
+    let x_maps = EstimateMaps::new(weights, n, |i, qy| qa[i] * qy.conjugate() * qb_conj[i]);
+    // Y from X: R_Y,i = R_B,i⁻¹ · R_X⁻¹ · R_A,i.
+    let y_maps = EstimateMaps::new(weights, n, |i, qx| qb_conj[i] * qx.conjugate() * qa[i]);
+    let as_quaternion = |v: &Vector4<f64>| Quaternion::from_vector(*v);
+    let mut qy = start.into_inner().coords;
+    let mut qx: Option<Vector4<f64>> = None;
     let mut trace = Vec::new();
     let mut spread = 0.0;
     for iteration in 1..=options.max_rotation_iterations {
-        // X from Y: R_X,i = R_A,i · R_Y⁻¹ · R_B,i⁻¹.
-        let qy_conj = qy.conjugate();
-        let (new_x, spread_x) = average(
-            qa.iter()
-                .zip(qb_conj)
-                .zip(weights)
-                .map(|((a, b), &w)| (w, a * qy_conj * b)),
-            qx.as_ref(),
-        );
-        // Y from X: R_Y,i = R_B,i⁻¹ · R_X⁻¹ · R_A,i.
-        let qx_conj = new_x.conjugate();
-        let (new_y, spread_y) = average(
-            qa.iter()
-                .zip(qb_conj)
-                .zip(weights)
-                .map(|((a, b), &w)| (w, b * qx_conj * a)),
-            Some(&qy),
-        );
+        let (new_x, spread_x) = x_maps.average(&qy, qx.as_ref());
+        let (new_y, spread_y) = y_maps.average(&new_x, Some(&qy));
+        let update_y = angle(&as_quaternion(&qy), &as_quaternion(&new_y));
         let update = match &qx {
-            Some(old_x) => angle(old_x, &new_x).max(angle(&qy, &new_y)),
-            None => angle(&qy, &new_y),
+            Some(old_x) => angle(&as_quaternion(old_x), &as_quaternion(&new_x)).max(update_y),
+            None => update_y,
         };
         qx = Some(new_x);
         qy = new_y;
@@ -176,8 +206,8 @@ fn rotations(
         });
         if update < options.rotation_tolerance_rad {
             return RotationRun {
-                qx: UnitQuaternion::new_normalize(new_x),
-                qy: UnitQuaternion::new_normalize(qy),
+                qx: UnitQuaternion::new_normalize(as_quaternion(&new_x)),
+                qy: UnitQuaternion::new_normalize(as_quaternion(&qy)),
                 iterations: iteration,
                 converged: spread >= STALL_SPREAD,
                 spread,
@@ -186,8 +216,11 @@ fn rotations(
         }
     }
     RotationRun {
-        qx: UnitQuaternion::new_normalize(qx.unwrap_or_else(Quaternion::identity)),
-        qy: UnitQuaternion::new_normalize(qy),
+        qx: UnitQuaternion::new_normalize(
+            qx.map(|v| as_quaternion(&v))
+                .unwrap_or_else(Quaternion::identity),
+        ),
+        qy: UnitQuaternion::new_normalize(as_quaternion(&qy)),
         iterations: options.max_rotation_iterations,
         converged: false,
         spread,
@@ -322,19 +355,35 @@ pub fn solve_axby_with_restarts(
         .iter()
         .map(|b| b.rotation.into_inner().conjugate())
         .collect();
-    let first = if options.warm_start {
-        closed_form::solve_axby(data)?.y.rotation
-    } else {
-        options.start.unwrap_or_else(UnitQuaternion::identity)
+    // The closed form is the cross-check: a run that fits clearly worse than it has settled on
+    // a wrong fixed point (the s ≈ 0 case keeps per-sample estimates in agreement when the
+    // robot's rotations lie in a narrow cone) and is restarted — from the closed form first.
+    let closed = closed_form::solve_axby(data).ok();
+    let closed_residual = closed
+        .as_ref()
+        .map(|c| rotation_rms_deg(&qa, &qb_conj, &c.x.rotation, &c.y.rotation));
+    let first = match (&closed, options.warm_start) {
+        (Some(c), true) => c.y.rotation,
+        (None, true) => closed_form::solve_axby(data)?.y.rotation,
+        (_, false) => options.start.unwrap_or_else(UnitQuaternion::identity),
     };
     let mut starts = vec![first];
-    starts.extend(restart_guesses().into_iter().take(options.max_restarts));
+    starts.extend(closed.as_ref().map(|c| c.y.rotation));
+    starts.extend(restart_guesses());
+    starts.truncate(options.max_restarts + 1);
     let mut spent = 0;
     let mut best: Option<(f64, usize, RotationRun)> = None;
     for (restarts, start) in starts.into_iter().enumerate() {
         let run = rotations(&qa, &qb_conj, &data.weights, start, options);
         let residual = rotation_rms_deg(&qa, &qb_conj, &run.qx, &run.qy);
-        let stalled = run.spread < STALL_SPREAD || residual > STALL_RESIDUAL_DEG;
+        let worse_than_closed_form = closed_residual
+            .is_some_and(|c| residual > CROSS_CHECK_FACTOR * c + CROSS_CHECK_MARGIN_DEG);
+        // A run that hit the iteration cap (very slow linear convergence, e.g. on nearly
+        // degenerate motion) also moves on: the closed-form start is much closer.
+        let stalled = !run.converged
+            || run.spread < STALL_SPREAD
+            || residual > STALL_RESIDUAL_DEG
+            || worse_than_closed_form;
         if !stalled {
             return Ok(finish(data, run, restarts, spent, options));
         }

@@ -599,6 +599,9 @@ pub fn solve(
     Ok(calibration)
 }
 
+/// Coarsest tolerance (rad, and m) of the iterative start of the refined method.
+const REFINE_START_TOLERANCE: f64 = 1e-8;
+
 type Solved = (Axby, SolverReport, Option<Uncertainty>);
 
 fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, SolveError> {
@@ -620,7 +623,19 @@ fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, Solve
             (out.solution, report, None)
         }
         Method::Refined => {
-            let start = iterative::solve_axby_with_restarts(data, &options.iterative)?;
+            // LM polishes the start, so the alternation need not run to machine precision.
+            let start_options = IterativeOptions {
+                rotation_tolerance_rad: options
+                    .iterative
+                    .rotation_tolerance_rad
+                    .max(REFINE_START_TOLERANCE),
+                translation_tolerance_m: options
+                    .iterative
+                    .translation_tolerance_m
+                    .max(REFINE_START_TOLERANCE),
+                ..options.iterative.clone()
+            };
+            let start = iterative::solve_axby_with_restarts(data, &start_options)?;
             let mut report = start.report(Method::Refined);
             let refined = refine::refine(data, &start.solution, options)?;
             report.iterations += refined.evaluations;

@@ -269,13 +269,11 @@ pub fn refine(
             }
         }
     }
-    // Re-linearise at the optimum: a second, short run whose Jacobian at δ = 0 is exact.
-    let mut polish = minimise(data, &run.solution, &scale_of(&robust), options)?;
-    evaluations += polish.evaluations;
-    trace.append(&mut polish.trace);
-    let solution = polish.solution;
-    let converged = run.converged && polish.converged;
-
+    // LM's Jacobian is the left-perturbation Jacobian at the current point; it differs from the
+    // derivative in δ by an invertible factor, so the stationary point is the same. The
+    // covariance below is computed with δ = 0 at the optimum, where it is exact.
+    let solution = run.solution;
+    let converged = run.converged;
     let scale = scale_of(&robust);
     let problem = Problem {
         data,

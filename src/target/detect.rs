@@ -116,7 +116,7 @@ struct RawDetection {
     corners_px: [Point2<f64>; 4],
 }
 
-type Job = (GrayImage, mpsc::Sender<Vec<RawDetection>>);
+type Job = (GrayImage, mpsc::Sender<Result<Vec<RawDetection>, String>>);
 
 /// A handle to an AprilTag detector living on its own thread.
 pub struct TagDetector {
@@ -182,7 +182,10 @@ impl TagDetector {
             .ok_or(TargetError::DetectorStopped)?
             .send((image.clone(), reply_tx))
             .map_err(|_| TargetError::DetectorStopped)?;
-        let raw = reply_rx.recv().map_err(|_| TargetError::DetectorStopped)?;
+        let raw = reply_rx
+            .recv()
+            .map_err(|_| TargetError::DetectorStopped)?
+            .map_err(|reason| TargetError::Detector { reason })?;
         Ok(filter(
             &self.board,
             &self.options,
@@ -368,20 +371,19 @@ fn detector_thread(
     drop(owned_family);
 }
 
-fn detect_once(detector: &mut Detector, image: &GrayImage) -> Vec<RawDetection> {
+fn detect_once(detector: &mut Detector, image: &GrayImage) -> Result<Vec<RawDetection>, String> {
     let (width, height) = (image.width() as usize, image.height() as usize);
     if width == 0 || height == 0 {
-        return Vec::new();
+        return Err(format!("empty image ({width}x{height} px)"));
     }
-    let Ok(mut buffer) = Image::zeros_with_alignment(width, height, 96) else {
-        return Vec::new();
-    };
+    let mut buffer = Image::zeros_with_alignment(width, height, 96)
+        .map_err(|error| format!("cannot allocate a {width}x{height} detector image: {error}"))?;
     let stride = buffer.stride();
     let data = buffer.as_slice_mut();
     for (y, row) in image.as_raw().chunks_exact(width).enumerate() {
         data[y * stride..y * stride + width].copy_from_slice(row);
     }
-    detector
+    Ok(detector
         .detect(&buffer)
         .into_iter()
         .map(|d| RawDetection {
@@ -390,7 +392,7 @@ fn detect_once(detector: &mut Detector, image: &GrayImage) -> Vec<RawDetection> 
             decision_margin: d.decision_margin(),
             corners_px: to_project_pixels(d.corners()),
         })
-        .collect()
+        .collect())
 }
 
 /// Reads an image file as 8-bit grey (colour is converted by luma).
@@ -410,4 +412,69 @@ pub fn load_gray_image(path: &Path) -> Result<GrayImage, TargetError> {
         source,
     })?;
     Ok(decoded.into_luma8())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn raw(id: u32, hamming: u32) -> RawDetection {
+        RawDetection {
+            id,
+            hamming,
+            decision_margin: 50.0,
+            corners_px: [Point2::origin(); 4],
+        }
+    }
+
+    #[test]
+    fn filter_rejects_foreign_ids_duplicates_and_high_hamming() {
+        let board = Board::aprilgrid(2, 2, 0.04, 0.25, TagFamily::Tag36h11, 4, 1).unwrap();
+        let options = DetectorOptions::default();
+        let detections = vec![
+            raw(5, 0),
+            raw(3, 0),
+            raw(6, 0),
+            raw(6, 0),
+            raw(7, 2),
+            raw(4, 1),
+        ];
+        let result = filter(&board, &options, detections, 640, 480);
+        let ids: Vec<u32> = result.tags.iter().map(|t| t.id).collect();
+        assert_eq!(ids, vec![4, 5]);
+        let reasons: Vec<(u32, RejectReason)> =
+            result.rejected.iter().map(|r| (r.id, r.reason)).collect();
+        assert_eq!(
+            reasons,
+            vec![
+                (3, RejectReason::NotOnBoard),
+                (6, RejectReason::Duplicate),
+                (6, RejectReason::Duplicate),
+                (7, RejectReason::Hamming),
+            ]
+        );
+    }
+
+    #[test]
+    fn library_corners_move_half_a_pixel_to_the_project_convention() {
+        let corners = to_project_pixels([[10.5, 20.5], [11.0, 20.5], [11.0, 21.0], [10.5, 21.0]]);
+        assert_eq!(corners[0], Point2::new(10.0, 20.0));
+        assert_eq!(corners[2], Point2::new(10.5, 20.5));
+    }
+
+    #[test]
+    fn empty_image_is_a_clear_error_and_the_detector_survives_it() {
+        let board = Board::aprilgrid(1, 1, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
+        let error = detector.detect(&GrayImage::new(0, 0)).unwrap_err();
+        assert!(error.to_string().contains("empty image"), "{error}");
+        let blank = GrayImage::from_pixel(64, 48, image::Luma([128]));
+        assert!(detector.detect(&blank).unwrap().tags.is_empty());
+    }
+
+    #[test]
+    fn detector_handle_is_send_and_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<TagDetector>();
+    }
 }

@@ -76,6 +76,16 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
     let px_per_m = dpi / 0.0254;
     let width = (page.width * px_per_m).ceil() as u32;
     let height = (page.height * px_per_m).ceil() as u32;
+    // A 1 m board at 1200 dpi would need 2 GB: refuse instead of exhausting memory.
+    const MAX_PIXELS: u64 = 400_000_000;
+    if width as u64 * height as u64 > MAX_PIXELS {
+        return Err(TargetError::BadBoard {
+            path: "<print>".into(),
+            key: "dpi".to_string(),
+            expected: format!("a resolution giving at most {MAX_PIXELS} pixels for this board"),
+            found: format!("{dpi} dpi ({width}x{height} px); use SVG for large boards"),
+        });
+    }
     let extent = board.extent();
     let mut image = GrayImage::from_pixel(width, height, Luma([255]));
     let board_rows = (page.board_height * px_per_m).round() as u32;

@@ -1,0 +1,90 @@
+//! Speed of the vision chain, release build: rendering, detection and PnP separately on
+//! 1280x720 and 1920x1080 rendered frames of the 6x6 board. Floors on the 2-core machine:
+//! PnP with refinement for a 6x6 board ≤ 1 ms; detection + PnP at 1280x720 ≤ 40 ms;
+//! rendering a 1280x720 frame ≤ 150 ms.
+
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Duration;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use handeye::camera::model::{CameraModel, Distortion};
+use handeye::camera::render::{render, RenderOptions};
+use handeye::geometry::Pose;
+use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+
+fn camera(width: u32, height: u32) -> CameraModel {
+    let f = 0.71 * width as f64;
+    CameraModel {
+        width,
+        height,
+        fx: f,
+        fy: f,
+        cx: (width as f64 - 1.0) / 2.0 + 1.3,
+        cy: (height as f64 - 1.0) / 2.0 - 0.8,
+        distortion: Distortion::RadTan {
+            k1: -0.12,
+            k2: 0.08,
+            p1: 0.0006,
+            p2: -0.0004,
+            k3: -0.02,
+        },
+    }
+}
+
+/// The board centred 0.6 m in front, tilted 30°.
+fn view(board: &Board) -> Pose {
+    let e = board.extent();
+    let centre = Vector3::new((e.min.x + e.max.x) / 2.0, (e.min.y + e.max.y) / 2.0, 0.0);
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        * UnitQuaternion::from_scaled_axis(Vector3::new(0.6, 0.8, 0.0) * 30f64.to_radians());
+    Pose::from_parts(
+        Translation3::from(Vector3::new(0.02, -0.01, 0.6) - rotation * centre),
+        rotation,
+    )
+}
+
+fn bench(c: &mut Criterion) {
+    let board = Board::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/targets/aprilgrid-6x6.yaml"),
+    )
+    .unwrap();
+    let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
+    let pose = view(&board);
+    let options = RenderOptions {
+        blur_sigma_px: 0.6,
+        ..RenderOptions::default()
+    };
+    let mut group = c.benchmark_group("vision");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(4));
+    for (width, height) in [(1280, 720), (1920, 1080)] {
+        let camera = camera(width, height);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+        group.bench_function(format!("render_{width}x{height}"), |b| {
+            b.iter(|| render(&board, &camera, black_box(&pose), &options, &mut rng))
+        });
+        let image = render(&board, &camera, &pose, &options, &mut rng);
+        let detection = detector.detect(&image).unwrap();
+        assert_eq!(detection.tags.len(), 36, "bench frame must show every tag");
+        group.bench_function(format!("detect_{width}x{height}"), |b| {
+            b.iter(|| detector.detect(black_box(&image)).unwrap())
+        });
+        group.bench_function(format!("pnp_6x6_{width}x{height}"), |b| {
+            b.iter(|| estimate_board_pose(&board, &camera, black_box(&detection)).unwrap())
+        });
+        group.bench_function(format!("detect_and_pnp_{width}x{height}"), |b| {
+            b.iter(|| {
+                let detection = detector.detect(black_box(&image)).unwrap();
+                estimate_board_pose(&board, &camera, &detection).unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Runs every test, after installing what a fresh machine lacks: a C/C++ toolchain, ur_rtde 1.6.5
+# built from source into a cached prefix (for the `ur-rtde` driver and its tests against the mock
+# controller), and the ur_rtde Python wheel (the independent client the mock is tested with).
+# Safe to run again: every step skips work already done.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_apt=()
+command -v cc >/dev/null || need_apt+=(build-essential)
+command -v pkg-config >/dev/null || need_apt+=(pkg-config)
+# Headless Chromium for the report's real-browser test (tests/report.rs).
+command -v chromium >/dev/null || need_apt+=(chromium)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  apt-get update -q
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${need_apt[@]}"
+fi
+
+export UR_RTDE_PREFIX="${UR_RTDE_PREFIX:-/opt/ur_rtde-1.6.5}"
+bash scripts/install-ur-rtde.sh
+
+if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
+  python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
+fi
+
+cargo test --workspace --features handeye/ur-rtde "$@"
