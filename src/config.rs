@@ -269,6 +269,17 @@ pub struct PlanConfig {
     /// Generate views on a cap around the board.
     #[serde(default)]
     pub generate: Option<GenerateSpec>,
+    /// Choose poses one at a time (next-best pose) from the plan's poses as candidates, and
+    /// stop when the solved uncertainty reaches `target_uncertainty_mm`.
+    #[serde(default)]
+    pub adaptive: bool,
+    /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns, mm.
+    #[serde(default = "default_target_uncertainty_mm")]
+    pub target_uncertainty_mm: f64,
+}
+
+fn default_target_uncertainty_mm() -> f64 {
+    0.5
 }
 
 /// Detector settings.
@@ -655,6 +666,15 @@ impl CellConfig {
                     "expected exactly one of `file` (a scripted plan) and `generate`".into(),
                 ))
             }
+        }
+        if !(plan.target_uncertainty_mm.is_finite() && plan.target_uncertainty_mm > 0.0) {
+            return Err(value_error(
+                "plan.target_uncertainty_mm",
+                format!(
+                    "expected a positive number of mm, got {}",
+                    plan.target_uncertainty_mm
+                ),
+            ));
         }
         plan.file = plan.file.as_deref().map(resolve);
         let robot = match raw.robot {

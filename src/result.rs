@@ -22,7 +22,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::{read_yaml, write_yaml, FileError};
 use crate::geometry::{Pose, PoseRecord};
-use crate::solve::{Calibration, Method, Phase, PosePair, PoseSigma, Setup};
+use crate::solve::{
+    Calibration, Method, Phase, PosePair, PoseSigma, Residuals, Setup, SolverReport, TraceStep,
+    Uncertainty,
+};
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -282,5 +285,94 @@ impl ResultFile {
     /// Reads a result file and returns its setup and both unknowns.
     pub fn load_mounts(path: &Path) -> Result<SolvedMounts, FileError> {
         ResultFile::load(path)?.mounts(path)
+    }
+
+    /// The calibration as written: both unknowns, the uncertainty (covariance and sigmas),
+    /// per-sample residuals (NaN for a dropped sample), outliers, the solver run and warnings;
+    /// for tools that show a result (the report) without solving again. The iteration trace
+    /// comes back grouped by phase (rotation, translation, refine), as the file stores it.
+    pub fn to_calibration(&self, path: &Path) -> Result<Calibration, FileError> {
+        let mounts = self.mounts(path)?;
+        let uncertainty = match &self.uncertainty {
+            None => None,
+            Some(u) => {
+                let bad = |problem: String| FileError::Value {
+                    path: path.to_path_buf(),
+                    yaml_path: "uncertainty.covariance".into(),
+                    problem,
+                };
+                if u.covariance.len() != 12 || u.covariance.iter().any(|r| r.len() != 12) {
+                    return Err(bad("must be a 12x12 matrix".into()));
+                }
+                let covariance =
+                    nalgebra::SMatrix::<f64, 12, 12>::from_fn(|r, c| u.covariance[r][c]);
+                if covariance.iter().any(|v| !v.is_finite()) {
+                    return Err(bad("contains a non-finite value".into()));
+                }
+                let (camera_key, target_key) = self.setup.unknown_names();
+                let sigma = |key: &str| -> Result<PoseSigma, FileError> {
+                    let found = match key {
+                        "T_flange_camera" => u.T_flange_camera,
+                        "T_base_target" => u.T_base_target,
+                        "T_base_camera" => u.T_base_camera,
+                        _ => u.T_flange_target,
+                    };
+                    found.ok_or_else(|| FileError::Value {
+                        path: path.to_path_buf(),
+                        yaml_path: format!("uncertainty.{key}"),
+                        problem: format!("missing (required for setup {})", self.setup),
+                    })
+                };
+                Some(Uncertainty {
+                    covariance,
+                    camera_mount: sigma(camera_key)?,
+                    target_mount: sigma(target_key)?,
+                    variance_factor: u.variance_factor,
+                })
+            }
+        };
+        let r = &self.residuals;
+        let nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
+        let residuals = Residuals {
+            rotation_deg: r.samples.iter().map(|s| nan(s.rotation_deg)).collect(),
+            translation_mm: r.samples.iter().map(|s| nan(s.translation_mm)).collect(),
+            normalised: r.samples.iter().map(|s| nan(s.normalised)).collect(),
+            rotation_rms_deg: r.rotation_rms_deg,
+            rotation_max_deg: r.rotation_max_deg,
+            translation_rms_mm: r.translation_rms_mm,
+            translation_max_mm: r.translation_max_mm,
+        };
+        let s = &self.solver;
+        let steps = |phase: Phase, values: &[f64]| {
+            values
+                .iter()
+                .map(move |&update| TraceStep { phase, update })
+                .collect::<Vec<_>>()
+        };
+        let mut trace = steps(Phase::Rotation, &s.rotation_trace_rad);
+        trace.extend(steps(Phase::Translation, &s.translation_trace_m));
+        trace.extend(steps(Phase::Refine, &s.refine_cost_trace));
+        Ok(Calibration {
+            setup: self.setup,
+            camera_mount: mounts.camera_mount,
+            target_mount: mounts.target_mount,
+            uncertainty,
+            residuals,
+            outliers: self.outliers.clone(),
+            dropped: r
+                .samples
+                .iter()
+                .filter(|s| s.dropped)
+                .map(|s| s.index)
+                .collect(),
+            solver: SolverReport {
+                method: s.method,
+                iterations: s.iterations,
+                converged: s.converged,
+                restarts: s.restarts,
+                trace,
+            },
+            warnings: self.warnings.clone(),
+        })
     }
 }

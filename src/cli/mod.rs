@@ -6,9 +6,11 @@ mod export;
 mod import;
 mod plan;
 mod replay;
+mod report;
 mod run;
 mod solve;
 mod target;
+mod verify;
 
 use clap::{Parser, Subcommand};
 
@@ -40,6 +42,10 @@ enum Command {
     Export(export::ExportArgs),
     /// USB/UVC cameras: list them, snap a frame (needs the `uvc` build feature).
     Camera(camera::CameraArgs),
+    /// Write the HTML calibration report of a solved session.
+    Report(report::ReportArgs),
+    /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
+    Verify(verify::VerifyArgs),
 }
 
 /// Runs one parsed command line.
@@ -54,5 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Import(args) => import::run(args),
         Command::Export(args) => export::run(args),
         Command::Camera(args) => camera::run(args),
+        Command::Report(args) => report::run(args),
+        Command::Verify(args) => verify::run(args),
     }
 }

@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
+use handeye::plan::nbv::AdaptivePlanner;
 use handeye::robot::Joints;
 use handeye::session::{self, SessionEvent, SessionFolder};
 
@@ -45,7 +46,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut prepared = cell::prepare(&config_path)
         .with_context(|| format!("preparing the cell from {}", config_path.display()))?;
     println!("{}", prepared.report);
-    if !prepared.report.ok() {
+    // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
+    let adaptive = prepared.config.plan.adaptive;
+    if adaptive && args.resume.is_some() {
+        bail!("--resume is not supported for adaptive plans: start a new run (the recorded session can still be replayed)");
+    }
+    if adaptive && adaptive_candidates(&prepared).is_empty() {
+        bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
+    }
+    if !adaptive && !prepared.report.ok() {
         bail!("the plan failed its checks (see the table above); nothing was moved");
     }
     let poses = prepared.plan.waypoints.len();
@@ -61,9 +70,18 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .robot
         .joint_positions()
         .context("reading the arm's joint positions")?;
-    let plan = match prepared.recheck_from(start) {
-        Ok(plan) => plan,
-        Err(report) => bail!("from the arm's actual position the plan fails its checks; nothing was moved:\n{report}"),
+    let plan = if adaptive {
+        let _ = prepared.recheck_from(start);
+        let candidates = adaptive_candidates(&prepared);
+        if candidates.is_empty() {
+            bail!("from the arm's actual position no pose of the plan passes its checks; nothing was moved:\n{}", prepared.report);
+        }
+        candidates
+    } else {
+        match prepared.recheck_from(start) {
+            Ok(plan) => plan,
+            Err(report) => bail!("from the arm's actual position the plan fails its checks; nothing was moved:\n{report}"),
+        }
     };
 
     let folder = match folder {
@@ -74,7 +92,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         None => {
             let out = args.out.clone().unwrap_or_else(default_session_dir);
             let folder = SessionFolder::create(&out)?;
-            folder.write_manifest(&prepared.manifest(&plan))?;
+            // An adaptive session writes its manifest as the plan grows.
+            if !adaptive {
+                folder.write_manifest(&prepared.manifest(&plan))?;
+            }
             folder
         }
     };
@@ -90,7 +111,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         });
     }
 
-    let setup = prepared.session_setup(folder.clone(), plan, stop);
+    let setup = prepared.session_setup(folder.clone(), plan.clone(), stop);
     let bar = progress_bar(poses as u64);
     let mut on_event = |event: SessionEvent| match event {
         SessionEvent::Moving { plan_index } => {
@@ -119,13 +140,49 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             }
         }
     };
-    let outcome = session::run_session(
-        setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut on_event,
-    );
+    let mut adaptive_note = None;
+    let outcome = if adaptive {
+        let mut planner = AdaptivePlanner::new(
+            prepared.config.setup,
+            prepared.config.nominal.camera_mount,
+            prepared.config.nominal.target_mount,
+            plan.clone(),
+            prepared.config.solver.to_options(),
+            prepared.config.plan.target_uncertainty_mm,
+            plan.len(),
+        );
+        let outcome = session::run_adaptive_session(
+            setup,
+            prepared.manifest(&[]).config,
+            &mut planner,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        adaptive_note = Some(format!(
+            "adaptive plan: {} of {} candidate poses used; target 1-sigma {:.3} mm {}",
+            planner.log.iter().filter(|s| s.chose.is_some()).count(),
+            plan.len(),
+            prepared.config.plan.target_uncertainty_mm,
+            match planner.log.last().and_then(|s| s.solved_sigma_mm) {
+                Some(s) if planner.reached_target() => format!("reached ({s:.3} mm)"),
+                Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
+                None => "NOT reached (no solve)".into(),
+            }
+        ));
+        outcome
+    } else {
+        session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        )
+    };
     bar.finish_and_clear();
+    if let Some(note) = adaptive_note {
+        println!("{note}");
+    }
     let outcome = outcome?;
     if !outcome.skipped.is_empty() {
         println!(
@@ -142,6 +199,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     println!("{}", result.summary);
     if let Some(truth) = &prepared.config.simulation {
         println!("{}", result.compare_with_truth(truth));
+    }
+    match handeye::report::session::write_session_report(
+        &folder,
+        Some(&prepared.config),
+        result.calibration.clone(),
+    ) {
+        Ok(path) => println!("report: {}", path.display()),
+        // The calibration is saved; a report problem must not hide it.
+        Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
     }
     println!("session folder: {}", folder.root().display());
     Ok(())
@@ -173,6 +239,17 @@ fn same_plan_as_recorded(folder: &SessionFolder, plan: &[(Pose, Joints)]) -> any
         );
     }
     Ok(())
+}
+
+/// The plan's poses that pass every check, as candidates for the adaptive planner.
+fn adaptive_candidates(prepared: &PreparedCell) -> Vec<(Pose, Joints)> {
+    prepared
+        .report
+        .poses
+        .iter()
+        .filter(|p| p.problems.is_empty())
+        .filter_map(|p| p.joints.map(|q| (p.base_from_flange, q)))
+        .collect()
 }
 
 fn default_session_dir() -> PathBuf {

@@ -10,6 +10,7 @@
 pub mod check;
 pub mod generate;
 pub mod lookat;
+pub mod nbv;
 
 use std::path::{Path, PathBuf};
 

@@ -7,6 +7,7 @@
 //! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
 //! already moving to the next pose.
 
+pub mod adaptive;
 pub mod driver;
 pub mod folder;
 pub mod replay;
@@ -14,6 +15,7 @@ pub mod solve;
 
 use std::path::PathBuf;
 
+pub use adaptive::{run_adaptive_session, PlanSource};
 pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
 pub use folder::{PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use solve::{solve_folder, SolvedSession};

@@ -245,8 +245,9 @@ pub struct Uncertainty {
     pub camera_mount: PoseSigma,
     /// 1-sigma of the target mount (`T_base_target` or `T_flange_target`).
     pub target_mount: PoseSigma,
-    /// A-posteriori variance factor `χ²/dof` the covariance was scaled by (1 if the noise model
-    /// is right; clamped below at 1 so a lucky fit never claims more certainty than the model).
+    /// A-posteriori variance factor `χ²/dof` the covariance was scaled by (≈ 1 if the noise
+    /// model is right; floored at 1 only with fewer than 8 samples, see
+    /// [`refine::variance_factor`]).
     pub variance_factor: f64,
 }
 

@@ -30,7 +30,7 @@ pub struct Refined {
     /// Covariance of [φ_X, ρ_X, φ_Y, ρ_Y] (X left, Y right perturbation), scaled by the
     /// variance factor; `None` when not asked for or singular.
     pub covariance: Option<SMatrix<f64, 12, 12>>,
-    /// `max(1, χ²/dof)`.
+    /// `χ²/dof`, see [`variance_factor`].
     pub variance_factor: f64,
     /// Residual evaluations spent by LM.
     pub evaluations: usize,
@@ -289,11 +289,7 @@ pub fn refine(
         .ok_or(SolveError::RefinementFailed("residuals"))?;
     let dof = (6 * n).saturating_sub(PARAMS);
     let chi2 = residuals.norm_squared();
-    let variance_factor = if dof > 0 {
-        (chi2 / dof as f64).max(1.0)
-    } else {
-        1.0
-    };
+    let variance_factor = variance_factor(chi2, dof);
     let covariance = if options.covariance {
         let j = problem
             .jacobian()
@@ -312,6 +308,63 @@ pub fn refine(
         trace,
         robust_weights: robust,
     })
+}
+
+/// Fisher information `JᵀJ` (12x12, whitened by `noise`, in the refinement's parameters
+/// [φ_X, ρ_X, φ_Y, ρ_Y]) that one more sample at `B` would add at the solution `solution`.
+///
+/// Evaluated at zero residual (the measurement is predicted as `X·B·Y`), which is where the
+/// Gauss-Newton covariance of a future solve is linearised. Summed over samples and inverted it
+/// predicts the covariance before the samples are taken: the basis of next-best-pose planning.
+pub fn sample_information(
+    solution: &Axby,
+    b: &Pose,
+    noise: &super::NoiseModel,
+) -> SMatrix<f64, 12, 12> {
+    let data = AxbyData {
+        a: vec![solution.x * b * solution.y],
+        b: vec![*b],
+        weights: vec![1.0],
+    };
+    let problem = Problem {
+        data: &data,
+        x0: *solution,
+        delta: DVector::zeros(PARAMS),
+        scale: vec![1.0],
+        inv_sigma_r: 1.0 / noise.rotation_sigma_rad,
+        inv_sigma_t: 1.0 / noise.translation_sigma_m,
+        trace: RefCell::new(Vec::new()),
+    };
+    let j = problem
+        .jacobian()
+        .expect("the analytic Jacobian always exists");
+    (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into()
+}
+
+/// Residual degrees of freedom from which `χ²/dof` is trusted as the noise level.
+///
+/// Below it (fewer than 8 samples) the estimate of the noise is itself too noisy, so the factor
+/// is floored at 1: a lucky fit of a few samples must not claim more certainty than the model.
+pub const MIN_DOF_FOR_VARIANCE_FACTOR: usize = 36;
+
+/// A-posteriori variance factor `χ²/dof`. With enough residual degrees of freedom it is used as
+/// is, in both directions: when the real noise is smaller than the configured [`NoiseModel`]
+/// (typical: the defaults are conservative) the covariance shrinks to match, so the reported
+/// 1-sigma stays a 1-sigma (the Monte Carlo test in `tests/uncertainty.rs` checks the coverage
+/// both with a matched and with a 4× too pessimistic noise model).
+///
+/// [`NoiseModel`]: super::NoiseModel
+pub fn variance_factor(chi2: f64, dof: usize) -> f64 {
+    if dof == 0 || !chi2.is_finite() {
+        return 1.0;
+    }
+    let factor = chi2 / dof as f64;
+    if dof >= MIN_DOF_FOR_VARIANCE_FACTOR {
+        // Exact data (χ² = 0) must still give a usable covariance.
+        factor.max(1e-12)
+    } else {
+        factor.max(1.0)
+    }
 }
 
 fn pose_sigma(cov: &SMatrix<f64, 6, 6>) -> PoseSigma {

@@ -1,0 +1,48 @@
+//! `handeye report`: the HTML report of a solved session (`<session>/report.html`).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use handeye::config::CellConfig;
+use handeye::report::session::write_session_report;
+use handeye::result::ResultFile;
+use handeye::session::SessionFolder;
+
+/// Write the calibration report of a solved session folder.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The session folder (with result.yaml).
+    session: PathBuf,
+    /// The cell config (default: the one the session was recorded with), for the board and
+    /// intrinsics that draw the thumbnails.
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+/// Runs `handeye report`.
+pub fn run(args: ReportArgs) -> anyhow::Result<()> {
+    let folder = SessionFolder::open(&args.session)?;
+    let manifest = folder.read_manifest()?;
+    let config_path = args.config.unwrap_or(manifest.config);
+    let config = match CellConfig::load(&config_path) {
+        Ok(config) => Some(config),
+        Err(e) => {
+            eprintln!("warning: {e}; the report will have no thumbnails or reprojection errors");
+            None
+        }
+    };
+    let result_path = folder.result_path();
+    let calibration = ResultFile::load(&result_path)
+        .and_then(|r| r.to_calibration(&result_path))
+        .with_context(|| {
+            format!(
+                "reading {} (solve the session first: `handeye replay`)",
+                result_path.display()
+            )
+        })?;
+    let path = write_session_report(&folder, config.as_ref(), calibration)?;
+    println!("report: {}", path.display());
+    Ok(())
+}

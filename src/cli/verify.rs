@@ -1,0 +1,108 @@
+//! `handeye verify`: check a calibration against observations it was not solved from — a
+//! holdout run on the cell (`--config` + `--result`) or leave-one-out on recorded data
+//! (`--session` or `--dataset`).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use clap::Args;
+
+use handeye::atomic_file::write_atomic;
+use handeye::cell;
+use handeye::dataset::Dataset;
+use handeye::plan::GenerateSpec;
+use handeye::result::ResultFile;
+use handeye::session::{SessionEvent, SessionFolder};
+use handeye::verify;
+
+/// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
+#[derive(Debug, Args)]
+pub struct VerifyArgs {
+    /// The cell config: move the cell to fresh generated poses (needs --result).
+    #[arg(long, requires = "result", conflicts_with_all = ["session", "dataset"])]
+    config: Option<PathBuf>,
+    /// The result.yaml to verify (with --config).
+    #[arg(long)]
+    result: Option<PathBuf>,
+    /// Number of holdout poses.
+    #[arg(long, default_value_t = 8)]
+    poses: usize,
+    /// Seed of the holdout views (default: the plan's seed + 1000, so they differ from the solve's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Where to record the holdout session (default: sessions/verify-<time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Move a real robot without asking (holdout on a real cell).
+    #[arg(long)]
+    yes: bool,
+    /// Leave-one-out cross-validation of a session folder's samples.
+    #[arg(long, conflicts_with = "dataset")]
+    session: Option<PathBuf>,
+    /// Leave-one-out cross-validation of a dataset file (its setup is in the file).
+    #[arg(long)]
+    dataset: Option<PathBuf>,
+}
+
+/// Runs `handeye verify`.
+pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
+    if let Some(config) = &args.config {
+        let result = args.result.as_ref().expect("clap requires --result");
+        let mounts = ResultFile::load_mounts(result)?;
+        let prepared = cell::prepare(config)
+            .with_context(|| format!("preparing the cell from {}", config.display()))?;
+        let base = prepared.config.plan.generate.unwrap_or(GenerateSpec {
+            count: args.poses,
+            distance: [0.4, 0.7],
+            max_tilt_deg: 30.0,
+            max_roll_deg: 20.0,
+            seed: 0,
+        });
+        let spec = GenerateSpec {
+            count: args.poses,
+            seed: args.seed.unwrap_or(base.seed + 1000),
+            ..base
+        };
+        let out = args.out.clone().unwrap_or_else(|| {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0);
+            PathBuf::from(format!("sessions/verify-{now}"))
+        });
+        if !prepared.is_simulated() && !args.yes {
+            bail!("holdout verification moves the real robot through {} generated poses: check the plan with `handeye plan check` and pass --yes", spec.count);
+        }
+        let folder = SessionFolder::create(&out)?;
+        let v = verify::holdout(
+            &prepared,
+            mounts.setup,
+            &mounts.camera_mount,
+            &mounts.target_mount,
+            &spec,
+            &folder,
+            &mut |_e: SessionEvent| {},
+        )?;
+        println!("{}", v.table());
+        let text = serde_yaml_ng::to_string(&v)?;
+        write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
+        println!("holdout session: {}", out.display());
+        return Ok(());
+    }
+    let (setup, pairs, options) = if let Some(dir) = &args.session {
+        let folder = SessionFolder::open(dir)?;
+        let dataset = Dataset::load(&folder.samples_path())?;
+        let options = handeye::config::CellConfig::load(&folder.read_manifest()?.config)
+            .map(|c| c.solver.to_options())
+            .unwrap_or_default();
+        (dataset.setup, dataset.pairs, options)
+    } else if let Some(file) = &args.dataset {
+        let dataset = Dataset::load(file)?;
+        (dataset.setup, dataset.pairs, Default::default())
+    } else {
+        bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
+    };
+    let v = verify::leave_one_out(setup, &pairs, &options)?;
+    println!("{}", v.table());
+    Ok(())
+}

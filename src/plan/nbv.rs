@@ -1,0 +1,285 @@
+//! Next-best pose: choose, from a set of checked candidate poses (reachable, board visible), the
+//! one whose sample would most reduce the predicted uncertainty of the calibration.
+//!
+//! The prediction is the Gauss-Newton covariance of the refinement: each sample at robot pose
+//! `B` adds `JᵀJ` (see [`crate::solve::refine::sample_information`]) to the information of the
+//! samples so far; inverted and scaled by the variance factor of the latest solve, it is the
+//! covariance the solver would report. The score of a candidate is the predicted
+//! `σ²` summed over both unknowns, translation (mm²) plus rotation seen at a lever arm of
+//! [`ROTATION_LEVER_M`] (a rotation error of one unknown moves a point that far away by
+//! `lever · angle`). Units: metres and radians inside, mm in the target and the score. Depends
+//! on `solve` and `geometry` only; the session drives it through its plan-source trait.
+
+use nalgebra::SMatrix;
+
+use crate::geometry::Pose;
+use crate::robot::Joints;
+use crate::solve::refine::{mount_uncertainty, sample_information};
+use crate::solve::{self, Axby, Calibration, PosePair, Setup, SolveOptions};
+
+/// Lever arm at which a rotation uncertainty is weighed against a translation one, m.
+pub const ROTATION_LEVER_M: f64 = 0.5;
+
+/// Prior information per parameter (1/rad², 1/m² in whitened units) so the sum is invertible
+/// before the problem is observable; tiny next to one sample's information.
+const PRIOR: f64 = 1e-6;
+
+/// Predicted 1-sigma of both unknowns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Predicted {
+    /// Camera mount: total translation 1-sigma, mm.
+    pub camera_translation_mm: f64,
+    /// Target mount: total translation 1-sigma, mm.
+    pub target_translation_mm: f64,
+    /// Camera mount: total rotation 1-sigma, degrees.
+    pub camera_rotation_deg: f64,
+    /// Target mount: total rotation 1-sigma, degrees.
+    pub target_rotation_deg: f64,
+    /// The score minimised (mm²).
+    pub score: f64,
+}
+
+impl Predicted {
+    /// The larger translation 1-sigma of the two unknowns, mm (what the stop rule compares).
+    pub fn worst_translation_mm(&self) -> f64 {
+        self.camera_translation_mm.max(self.target_translation_mm)
+    }
+}
+
+fn x_from_b(setup: Setup, base_from_flange: &Pose) -> Pose {
+    match setup {
+        Setup::EyeInHand => base_from_flange.inverse(),
+        Setup::EyeToHand => *base_from_flange,
+    }
+}
+
+/// Information of samples at these robot poses, at the estimate (camera mount, target mount).
+pub fn information(
+    setup: Setup,
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    base_from_flange: &[Pose],
+    options: &SolveOptions,
+) -> SMatrix<f64, 12, 12> {
+    let solution = Axby::from_mounts(camera_mount, target_mount);
+    let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
+    for pose in base_from_flange {
+        h += sample_information(&solution, &x_from_b(setup, pose), &options.noise);
+    }
+    h
+}
+
+/// The covariance predicted from an information matrix, mapped to the unknowns and scored.
+pub fn predict(
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    information: &SMatrix<f64, 12, 12>,
+    variance_factor: f64,
+) -> Option<Predicted> {
+    let solution = Axby::from_mounts(camera_mount, target_mount);
+    let covariance = information.try_inverse()? * variance_factor;
+    let u = mount_uncertainty(&solution, &covariance, variance_factor);
+    let lever_mm = ROTATION_LEVER_M * 1e3;
+    let rot = |deg: f64| (deg.to_radians() * lever_mm).powi(2);
+    let score = u.camera_mount.translation_mm.powi(2)
+        + u.target_mount.translation_mm.powi(2)
+        + rot(u.camera_mount.rotation_deg)
+        + rot(u.target_mount.rotation_deg);
+    Some(Predicted {
+        camera_translation_mm: u.camera_mount.translation_mm,
+        target_translation_mm: u.target_mount.translation_mm,
+        camera_rotation_deg: u.camera_mount.rotation_deg,
+        target_rotation_deg: u.target_mount.rotation_deg,
+        score,
+    })
+}
+
+/// The candidate (index into `candidates`, skipping `used`) that minimises the predicted score
+/// after adding it to `taken`, with its prediction.
+#[allow(clippy::too_many_arguments)]
+pub fn next_best(
+    setup: Setup,
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    taken: &[Pose],
+    candidates: &[Pose],
+    used: &[bool],
+    options: &SolveOptions,
+    variance_factor: f64,
+) -> Option<(usize, Predicted)> {
+    let solution = Axby::from_mounts(camera_mount, target_mount);
+    let h = information(setup, camera_mount, target_mount, taken, options);
+    candidates
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
+        .filter_map(|(i, c)| {
+            let added = h + sample_information(&solution, &x_from_b(setup, c), &options.noise);
+            predict(camera_mount, target_mount, &added, variance_factor).map(|p| (i, p))
+        })
+        .min_by(|a, b| a.1.score.total_cmp(&b.1.score))
+}
+
+/// One decision of the adaptive planner, for logs and reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveStep {
+    /// Samples accepted when the decision was made.
+    pub samples: usize,
+    /// The 1-sigma of the latest solve (worst translation, mm), if one was made.
+    pub solved_sigma_mm: Option<f64>,
+    /// The candidate chosen (index into the candidate set), or `None` when the planner stopped.
+    pub chose: Option<usize>,
+    /// Predicted worst translation 1-sigma after that candidate, mm.
+    pub predicted_sigma_mm: Option<f64>,
+}
+
+/// Greedy next-best-pose planner over a fixed candidate set, with a stop rule.
+#[derive(Debug, Clone)]
+pub struct AdaptivePlanner {
+    setup: Setup,
+    estimate: (Pose, Pose),
+    candidates: Vec<(Pose, Joints)>,
+    used: Vec<bool>,
+    options: SolveOptions,
+    target_uncertainty_mm: f64,
+    min_samples: usize,
+    max_samples: usize,
+    variance_factor: f64,
+    /// Decisions so far.
+    pub log: Vec<AdaptiveStep>,
+    /// The latest calibration solved on the way (the one that met the target, when it did).
+    pub latest: Option<Calibration>,
+}
+
+impl AdaptivePlanner {
+    /// Samples before the planner starts solving: below this the variance factor is floored
+    /// and the estimate is poor, so the nominal cell is used to plan.
+    pub const DEFAULT_MIN_SAMPLES: usize = 6;
+
+    /// A planner over checked `candidates` (target flange pose and joints), starting from the
+    /// nominal unknowns; stops when the worst translation 1-sigma of a solve is at most
+    /// `target_uncertainty_mm`, or after `max_samples` samples, or when candidates run out.
+    pub fn new(
+        setup: Setup,
+        nominal_camera_mount: Pose,
+        nominal_target_mount: Pose,
+        candidates: Vec<(Pose, Joints)>,
+        options: SolveOptions,
+        target_uncertainty_mm: f64,
+        max_samples: usize,
+    ) -> Self {
+        let used = vec![false; candidates.len()];
+        AdaptivePlanner {
+            setup,
+            estimate: (nominal_camera_mount, nominal_target_mount),
+            candidates,
+            used,
+            options,
+            target_uncertainty_mm,
+            min_samples: Self::DEFAULT_MIN_SAMPLES,
+            max_samples,
+            variance_factor: 1.0,
+            log: Vec::new(),
+            latest: None,
+        }
+    }
+
+    /// The next pose to visit given the samples accepted so far, or `None` to stop.
+    pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
+        let mut solved_sigma_mm = None;
+        if samples.len() >= self.min_samples {
+            if let Ok(c) = solve::solve(self.setup, samples, &self.options) {
+                self.estimate = (c.camera_mount, c.target_mount);
+                if let Some(u) = &c.uncertainty {
+                    self.variance_factor = u.variance_factor;
+                    let sigma = u
+                        .camera_mount
+                        .translation_mm
+                        .max(u.target_mount.translation_mm);
+                    solved_sigma_mm = Some(sigma);
+                }
+                self.latest = Some(c);
+            }
+        }
+        let done = solved_sigma_mm.is_some_and(|s| s <= self.target_uncertainty_mm)
+            || samples.len() >= self.max_samples;
+        let choice = if done {
+            None
+        } else {
+            let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+            let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
+            next_best(
+                self.setup,
+                &self.estimate.0,
+                &self.estimate.1,
+                &taken,
+                &poses,
+                &self.used,
+                &self.options,
+                self.variance_factor,
+            )
+        };
+        self.log.push(AdaptiveStep {
+            samples: samples.len(),
+            solved_sigma_mm,
+            chose: choice.map(|c| c.0),
+            predicted_sigma_mm: choice.map(|c| c.1.worst_translation_mm()),
+        });
+        let (index, _) = choice?;
+        self.used[index] = true;
+        Some(self.candidates[index])
+    }
+
+    /// Whether the last solve met the target uncertainty.
+    pub fn reached_target(&self) -> bool {
+        self.log
+            .last()
+            .and_then(|s| s.solved_sigma_mm)
+            .is_some_and(|s| s <= self.target_uncertainty_mm)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_rotvec;
+    use nalgebra::Vector3;
+
+    /// Poses rotated about one axis only leave the problem unobservable; the planner must then
+    /// prefer a candidate that rotates about another axis.
+    #[test]
+    fn prefers_a_rotation_about_a_new_axis() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        let about_z = |deg: f64| {
+            pose_from_rotvec(
+                Vector3::new(0.5, 0.0, 0.5),
+                Vector3::new(0.0, 0.0, deg.to_radians()),
+            ) * pose_from_rotvec(
+                Vector3::zeros(),
+                Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+            )
+        };
+        let taken = [about_z(0.0), about_z(20.0), about_z(-20.0), about_z(40.0)];
+        let tilted = pose_from_rotvec(Vector3::new(0.5, 0.0, 0.5), Vector3::new(0.5, 0.0, 0.0))
+            * pose_from_rotvec(
+                Vector3::zeros(),
+                Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+            );
+        let candidates = [about_z(60.0), tilted, about_z(-40.0)];
+        let options = SolveOptions::default();
+        let (best, _) = next_best(
+            Setup::EyeInHand,
+            &camera_mount,
+            &target_mount,
+            &taken,
+            &candidates,
+            &[false; 3],
+            &options,
+            1.0,
+        )
+        .unwrap();
+        assert_eq!(best, 1, "the tilted pose adds the missing rotation axis");
+    }
+}

@@ -1,0 +1,537 @@
+//! The calibration report: one self-contained HTML page (inline SVG plots and inline PNG
+//! thumbnails, no script, no network) that answers "is this calibration any good?".
+//!
+//! Owns the report's input ([`ReportInput`], with a list of [`ReportAnswer`]s shown side by side,
+//! e.g. the pose-space and a reprojection-space answer), the HTML layout and the plain-language
+//! warnings; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
+//! gathers the input from a session folder (frames, detected corners). Frames follow the crate
+//! convention (`T_a_b` maps points of frame `b` into frame `a`); numbers are shown in metres /
+//! radians where a file holds them and in mm / degrees where a person reads them. Depends on
+//! `solve`, `geometry`, `target`, `camera` and `session` (for the folder layout); nothing
+//! depends on it but the CLI.
+//!
+//! Every section and every plot carries a stable `id` / `data-kind`, and every number that
+//! `result.yaml` also holds carries a `data-key`, so tests can check the page's structure and
+//! values without parsing prose.
+
+pub mod plots;
+pub mod session;
+
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+
+use crate::atomic_file::write_atomic;
+use crate::geometry::{rotvec, to_matrix4_rows, Pose};
+use crate::solve::{rotation_diversity, Calibration, NoiseModel, PosePair, Setup};
+
+/// One answer (a calibration of the same samples) to show.
+#[derive(Debug, Clone)]
+pub struct ReportAnswer {
+    /// Short name shown in headings and legends (`pose-space`, `reprojection`, ...).
+    pub label: String,
+    /// The calibration.
+    pub calibration: Calibration,
+    /// Per sample (indexed like [`ReportInput::pairs`]): RMS distance, px, between the detected
+    /// board corners and the board reprojected at the `T_camera_target` this answer predicts;
+    /// `None` where the corners are unknown.
+    pub reprojection_px: Vec<Option<f64>>,
+}
+
+/// A frame thumbnail with detected corners and the reprojected board drawn on it.
+#[derive(Debug, Clone)]
+pub struct FrameThumbnail {
+    /// Sample index (into [`ReportInput::pairs`]).
+    pub sample: usize,
+    /// Caption (sample id and plan index).
+    pub caption: String,
+    /// The PNG bytes.
+    pub png: Vec<u8>,
+}
+
+/// Leave-one-out figures to show beside the answers (see `verify::leave_one_out`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HoldoutSummary {
+    /// What was held out (e.g. `leave-one-out over 20 samples`).
+    pub description: String,
+    /// RMS rotation error of the held-out predictions, degrees.
+    pub rotation_rms_deg: f64,
+    /// RMS translation error of the held-out predictions at the target, mm.
+    pub translation_rms_mm: f64,
+}
+
+/// Everything the report shows.
+#[derive(Debug, Clone)]
+pub struct ReportInput {
+    /// Page title (e.g. the session folder).
+    pub title: String,
+    /// The cell layout.
+    pub setup: Setup,
+    /// The samples the answers were solved from.
+    pub pairs: Vec<PosePair>,
+    /// The answers, first one primary (thumbnails reproject with it).
+    pub answers: Vec<ReportAnswer>,
+    /// Frame thumbnails (may be empty for a plain dataset).
+    pub thumbnails: Vec<FrameThumbnail>,
+    /// The noise model the solver was told (for the "large residual" warning).
+    pub noise: NoiseModel,
+    /// Held-out prediction errors, when computed.
+    pub holdout: Option<HoldoutSummary>,
+}
+
+/// Why the report could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Nothing to show.
+    #[error("the report needs at least one answer and one sample")]
+    Empty,
+    /// A plot could not be drawn.
+    #[error("drawing the {kind} plot failed: {message}")]
+    Plot {
+        /// Which plot.
+        kind: &'static str,
+        /// The plotting error.
+        message: String,
+    },
+    /// A session file could not be read.
+    #[error("reading the session for the report failed")]
+    Session(#[source] Box<crate::session::SessionError>),
+    /// A frame could not be read or encoded.
+    #[error("{}: cannot make a thumbnail: {message}", path.display())]
+    Frame {
+        /// The frame file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The report file could not be written.
+    #[error("{}: cannot write the report", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// The plot kinds, one figure each (`data-kind` in the page).
+pub const PLOT_KINDS: [&str; 6] = [
+    "residual-rotation",
+    "residual-translation",
+    "residual-reprojection",
+    "rotation-axes",
+    "poses-3d",
+    "convergence",
+];
+
+/// The section ids, in page order.
+pub const SECTIONS: [&str; 7] = [
+    "warnings",
+    "transforms",
+    "residuals",
+    "rotation-axes",
+    "poses-3d",
+    "frames",
+    "convergence",
+];
+
+/// Renders the page.
+pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
+    if input.answers.is_empty() || input.pairs.is_empty() {
+        return Err(ReportError::Empty);
+    }
+    let mut html = String::new();
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>{}</style></head><body>\n<h1>Calibration report: {}</h1>\n<p class=\"meta\">setup <b>{}</b>, {} samples, answers: {}</p>\n",
+        escape(&input.title),
+        CSS,
+        escape(&input.title),
+        input.setup,
+        input.pairs.len(),
+        input
+            .answers
+            .iter()
+            .map(|a| escape(&a.label))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+
+    // Warnings first: the reader should see them before the numbers.
+    let warnings = plain_warnings(input);
+    html.push_str("<section id=\"warnings\"><h2>Warnings</h2>\n");
+    if warnings.is_empty() {
+        html.push_str("<p class=\"ok\">No warnings: enough poses, good rotation spread, residuals as expected.</p>\n");
+    } else {
+        html.push_str("<ul>\n");
+        for w in &warnings {
+            let _ = writeln!(html, "<li class=\"warning\">{}</li>", escape(w));
+        }
+        html.push_str("</ul>\n");
+    }
+    html.push_str("</section>\n");
+
+    html.push_str("<section id=\"transforms\"><h2>Transforms</h2>\n<div class=\"answers\">\n");
+    for (k, answer) in input.answers.iter().enumerate() {
+        transforms_section(&mut html, k, answer);
+    }
+    html.push_str("</div>\n");
+    if let Some(h) = &input.holdout {
+        let _ = writeln!(
+            html,
+            "<p class=\"holdout\">Held-out check ({}): predicted T_camera_target off by RMS <span data-key=\"holdout.rotation_rms_deg\">{:.4}</span>° and <span data-key=\"holdout.translation_rms_mm\">{:.3}</span> mm at the target.</p>",
+            escape(&h.description),
+            h.rotation_rms_deg,
+            h.translation_rms_mm
+        );
+    }
+    html.push_str("</section>\n");
+
+    html.push_str("<section id=\"residuals\"><h2>Per-pose residuals</h2>\n<p>Measured against predicted T_camera_target for every sample; red bars are flagged outliers, grey bars were dropped from the final solve.</p>\n");
+    figure(
+        &mut html,
+        "residual-rotation",
+        &plots::residual_bars(input, plots::ResidualKind::Rotation)?,
+    );
+    figure(
+        &mut html,
+        "residual-translation",
+        &plots::residual_bars(input, plots::ResidualKind::Translation)?,
+    );
+    figure(
+        &mut html,
+        "residual-reprojection",
+        &plots::residual_bars(input, plots::ResidualKind::Reprojection)?,
+    );
+    html.push_str("</section>\n");
+
+    let diversity = rotation_diversity(
+        &input
+            .pairs
+            .iter()
+            .map(|p| p.base_from_flange)
+            .collect::<Vec<_>>(),
+    );
+    let _ = write!(
+        html,
+        "<section id=\"rotation-axes\"><h2>Relative rotation axes</h2>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
+        diversity.off_axis_deg
+    );
+    figure(
+        &mut html,
+        "rotation-axes",
+        &plots::rotation_axes(&input.pairs)?,
+    );
+    html.push_str("</section>\n");
+
+    html.push_str("<section id=\"poses-3d\"><h2>Cell sketch</h2>\n<p>Robot base (large triad at the origin), the target and the camera at every sample, as the primary answer puts them; axes x red, y green, z blue.</p>\n");
+    figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
+    html.push_str("</section>\n");
+
+    html.push_str("<section id=\"frames\"><h2>Frames</h2>\n");
+    if input.thumbnails.is_empty() {
+        html.push_str("<p>No frames recorded with these samples.</p>\n");
+    } else {
+        let _ = writeln!(
+            html,
+            "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines).</p>\n<div class=\"thumbs\">",
+            escape(&input.answers[0].label)
+        );
+        for t in &input.thumbnails {
+            let _ = writeln!(
+                html,
+                "<figure class=\"thumb\"><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
+                escape(&t.caption),
+                base64(&t.png),
+                escape(&t.caption)
+            );
+        }
+        html.push_str("</div>\n");
+    }
+    html.push_str("</section>\n");
+
+    html.push_str("<section id=\"convergence\"><h2>Solver convergence</h2>\n<p>Update size per iteration of the iterative method (rotation rad, translation m) and the refinement cost per evaluation, log scale.</p>\n");
+    figure(&mut html, "convergence", &plots::convergence(input)?);
+    html.push_str("</section>\n</body></html>\n");
+    Ok(html)
+}
+
+/// Renders the page and writes it atomically to `path`.
+pub fn write_report(path: &Path, input: &ReportInput) -> Result<(), ReportError> {
+    let html = render_html(input)?;
+    write_atomic(path, html.as_bytes()).map_err(|source| ReportError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn figure(html: &mut String, kind: &str, svg: &str) {
+    let _ = writeln!(
+        html,
+        "<figure class=\"plot\" data-kind=\"{kind}\">{svg}</figure>"
+    );
+}
+
+fn transforms_section(html: &mut String, k: usize, answer: &ReportAnswer) {
+    let c = &answer.calibration;
+    let _ = writeln!(
+        html,
+        "<div class=\"answer\" data-answer=\"{k}\"><h3>{}</h3><p>method {}, {} iterations, {}converged</p>",
+        escape(&answer.label),
+        c.solver.method.name(),
+        c.solver.iterations,
+        if c.solver.converged { "" } else { "NOT " }
+    );
+    let sigmas = c
+        .uncertainty
+        .as_ref()
+        .map(|u| [u.camera_mount, u.target_mount]);
+    for (i, (name, pose)) in c.unknowns().iter().enumerate() {
+        let _ = writeln!(html, "<h4>{name}</h4>");
+        match sigmas {
+            Some(s) => {
+                let s = s[i];
+                let _ = writeln!(
+                    html,
+                    "<p class=\"sigma\">1-sigma: <span data-key=\"uncertainty.{name}.rotation_deg\">{:.4}</span>° (x {:.4}, y {:.4}, z {:.4}), <span data-key=\"uncertainty.{name}.translation_mm\">{:.3}</span> mm (x {:.3}, y {:.3}, z {:.3})</p>",
+                    s.rotation_deg,
+                    s.rotation_axes_deg[0],
+                    s.rotation_axes_deg[1],
+                    s.rotation_axes_deg[2],
+                    s.translation_mm,
+                    s.translation_axes_mm[0],
+                    s.translation_axes_mm[1],
+                    s.translation_axes_mm[2]
+                );
+            }
+            None => {
+                html.push_str("<p class=\"sigma\">no uncertainty (only the refined method computes one)</p>\n");
+            }
+        }
+        html.push_str("<table class=\"forms\">\n");
+        for (form, value, key) in export_forms(pose) {
+            let key_attr = key
+                .map(|key| format!(" data-key=\"{name}.{key}\""))
+                .unwrap_or_default();
+            let _ = writeln!(
+                html,
+                "<tr><th>{form}</th><td><code{key_attr}>{}</code></td></tr>",
+                escape(&value)
+            );
+        }
+        html.push_str("</table>\n");
+    }
+    let r = &c.residuals;
+    let _ = writeln!(
+        html,
+        "<p>residuals: rotation RMS <span data-key=\"residuals.rotation_rms_deg\">{:.4}</span>°, translation RMS <span data-key=\"residuals.translation_rms_mm\">{:.3}</span> mm; outliers {:?}</p></div>",
+        r.rotation_rms_deg, r.translation_rms_mm, c.outliers
+    );
+}
+
+/// Every export form of a pose `T_a_b`, as (name, text, key of the `result.yaml` field it shows).
+///
+/// Translation and quaternion are printed with 9 decimals so they read back exactly enough to
+/// be compared with the file. The UR form is `p[x, y, z, rx, ry, rz]` in metres and radians (a
+/// URScript pose literal), the matrix row-major.
+pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static str>)> {
+    let t = pose.translation.vector;
+    let q = pose.rotation.quaternion();
+    // w ≥ 0, as the YAML writes it.
+    let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
+    let rv = rotvec(&pose.rotation);
+    let m = to_matrix4_rows(pose);
+    let (roll, pitch, yaw) = pose.rotation.euler_angles();
+    let matrix = m
+        .iter()
+        .map(|r| format!("[{:.9}, {:.9}, {:.9}, {:.9}]", r[0], r[1], r[2], r[3]))
+        .collect::<Vec<_>>()
+        .join("\n");
+    vec![
+        (
+            "translation (m)",
+            format!("[{:.9}, {:.9}, {:.9}]", t.x, t.y, t.z),
+            Some("translation"),
+        ),
+        (
+            "quaternion (w, x, y, z)",
+            format!(
+                "{{w: {:.9}, x: {:.9}, y: {:.9}, z: {:.9}}}",
+                sign * q.w,
+                sign * q.i,
+                sign * q.j,
+                sign * q.k
+            ),
+            Some("quaternion"),
+        ),
+        (
+            "rotation vector (rad)",
+            format!(
+                "[{:.9}, {:.9}, {:.9}] ({:.4}°)",
+                rv.x,
+                rv.y,
+                rv.z,
+                rv.norm().to_degrees()
+            ),
+            Some("rotation_vector"),
+        ),
+        (
+            "roll-pitch-yaw (fixed x-y-z, deg)",
+            format!(
+                "[{:.5}, {:.5}, {:.5}]",
+                roll.to_degrees(),
+                pitch.to_degrees(),
+                yaw.to_degrees()
+            ),
+            None,
+        ),
+        ("4x4 matrix", matrix, None),
+        (
+            "UR pose (URScript)",
+            format!(
+                "p[{:.6}, {:.6}, {:.6}, {:.6}, {:.6}, {:.6}]",
+                t.x, t.y, t.z, rv.x, rv.y, rv.z
+            ),
+            None,
+        ),
+    ]
+}
+
+/// Plain-language warnings: the solver's own, plus too few poses, poor rotation spread, large
+/// residuals and a likely convention error, each saying what to do.
+pub fn plain_warnings(input: &ReportInput) -> Vec<String> {
+    let mut out = Vec::new();
+    let n = input.pairs.len();
+    if n < 8 {
+        out.push(format!(
+            "Only {n} poses: below 8 the noise level cannot be estimated from the residuals (the uncertainty assumes the configured noise) and a single bad pose can pull the answer; record 12–20."
+        ));
+    }
+    let diversity = rotation_diversity(
+        &input
+            .pairs
+            .iter()
+            .map(|p| p.base_from_flange)
+            .collect::<Vec<_>>(),
+    );
+    if diversity.off_axis_deg < 20.0 {
+        out.push(format!(
+            "Poor rotation spread: the flange rotations are mostly about one axis (only {:.1}° off it). Add poses tilted 20–40° about two other flange axes.",
+            diversity.off_axis_deg
+        ));
+    }
+    for answer in &input.answers {
+        let c = &answer.calibration;
+        let label = &answer.label;
+        let r = &c.residuals;
+        let expected_rot_deg = input.noise.rotation_sigma_rad.to_degrees() * 3f64.sqrt();
+        let expected_t_mm = input.noise.translation_sigma_m * 1e3 * 3f64.sqrt();
+        if r.rotation_rms_deg > 1.0 {
+            out.push(format!(
+                "{label}: rotation residual RMS {:.2}° is far beyond any detection noise: this is usually a convention error (T_flange_base given as T_base_flange, T_target_camera as T_camera_target, Euler angles read as a rotation vector, mm read as m, or the wrong setup). Check the input conventions before anything else.",
+                r.rotation_rms_deg
+            ));
+        } else if r.rotation_rms_deg > 3.0 * expected_rot_deg
+            || r.translation_rms_mm > 3.0 * expected_t_mm
+        {
+            out.push(format!(
+                "{label}: residuals (RMS {:.3}°, {:.2} mm) are more than 3× what the noise model expects ({:.3}°, {:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic.",
+                r.rotation_rms_deg, r.translation_rms_mm, expected_rot_deg, expected_t_mm
+            ));
+        }
+        for w in &c.warnings {
+            out.push(format!("{label}: {w}"));
+        }
+    }
+    out
+}
+
+/// HTML text escaping.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for ch in text.chars() {
+        match ch {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// Standard base64 (RFC 4648, with padding) for inline images.
+pub fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let v = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for i in 0..4 {
+            if i <= chunk.len() {
+                out.push(ALPHABET[((v >> (18 - 6 * i)) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+const CSS: &str =
+    "body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}\
+h2{border-bottom:1px solid #ccc;margin-top:1.6em}.answers{display:flex;flex-wrap:wrap;gap:1.5em}\
+.answer{flex:1 1 420px}table.forms{border-collapse:collapse;font-size:90%}\
+table.forms th{text-align:left;padding:2px 8px;vertical-align:top;font-weight:normal;color:#555}\
+table.forms code{white-space:pre}.warning{color:#a40000}.ok{color:#060}\
+figure.plot{margin:0.5em 0}figure.plot svg{max-width:100%;height:auto}\
+.thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%}\
+figure.thumb img{width:240px;display:block}";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (input, expected) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(input.as_bytes()), expected, "input {input:?}");
+        }
+    }
+
+    #[test]
+    fn escape_neutralises_markup() {
+        assert_eq!(
+            escape("<a href=\"x\">&'"),
+            "&lt;a href=&quot;x&quot;&gt;&amp;&#39;"
+        );
+    }
+
+    #[test]
+    fn ur_form_is_translation_then_rotation_vector() {
+        let pose = crate::geometry::pose_from_rotvec(
+            nalgebra::Vector3::new(0.1, -0.2, 0.3),
+            nalgebra::Vector3::new(0.0, 0.0, 0.5),
+        );
+        let forms = export_forms(&pose);
+        let ur = forms.iter().find(|f| f.0.starts_with("UR")).unwrap();
+        assert_eq!(
+            ur.1,
+            "p[0.100000, -0.200000, 0.300000, 0.000000, 0.000000, 0.500000]"
+        );
+    }
+}

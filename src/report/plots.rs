@@ -1,0 +1,422 @@
+//! The report's plots, drawn with `plotters`' SVG backend into strings that are inlined in the
+//! page. Each function returns one `<svg>` element. Units as in the axis captions (deg, mm, px;
+//! the cell sketch in metres, base frame).
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::{ReportError, ReportInput};
+use crate::geometry::{rotvec, Pose};
+use crate::solve::{Phase, PosePair, Setup};
+
+const WIDTH: u32 = 900;
+const HEIGHT: u32 = 300;
+/// Colours of the answers, in order (blue, orange, teal, purple).
+const ANSWER_COLOURS: [RGBColor; 4] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(23, 190, 207),
+    RGBColor(148, 103, 189),
+];
+const OUTLIER: RGBColor = RGBColor(214, 39, 40);
+
+fn plot_error<E: std::fmt::Display>(kind: &'static str) -> impl Fn(E) -> ReportError {
+    move |e| ReportError::Plot {
+        kind,
+        message: e.to_string(),
+    }
+}
+
+/// Which per-sample residual a bar chart shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResidualKind {
+    /// Rotation residual, degrees.
+    Rotation,
+    /// Translation residual, mm.
+    Translation,
+    /// Board reprojection RMS at the predicted `T_camera_target`, px.
+    Reprojection,
+}
+
+impl ResidualKind {
+    fn kind(self) -> &'static str {
+        match self {
+            ResidualKind::Rotation => "residual-rotation",
+            ResidualKind::Translation => "residual-translation",
+            ResidualKind::Reprojection => "residual-reprojection",
+        }
+    }
+    fn caption(self) -> &'static str {
+        match self {
+            ResidualKind::Rotation => "rotation residual per sample (deg)",
+            ResidualKind::Translation => "translation residual per sample (mm)",
+            ResidualKind::Reprojection => {
+                "board reprojection RMS at the predicted T_camera_target (px)"
+            }
+        }
+    }
+}
+
+/// Grouped bars: one group per sample, one bar per answer; outliers red.
+pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String, ReportError> {
+    let kind = which.kind();
+    let err = plot_error(kind);
+    let n = input.pairs.len();
+    let values: Vec<Vec<Option<f64>>> = input
+        .answers
+        .iter()
+        .map(|a| {
+            (0..n)
+                .map(|i| {
+                    let v = match which {
+                        ResidualKind::Rotation => a.calibration.residuals.rotation_deg.get(i),
+                        ResidualKind::Translation => a.calibration.residuals.translation_mm.get(i),
+                        ResidualKind::Reprojection => {
+                            a.reprojection_px.get(i).and_then(|v| v.as_ref())
+                        }
+                    };
+                    v.copied().filter(|v| v.is_finite())
+                })
+                .collect()
+        })
+        .collect();
+    let top = values
+        .iter()
+        .flatten()
+        .flatten()
+        .fold(0.0f64, |m, &v| m.max(v));
+    let top = if top > 0.0 { top * 1.1 } else { 1.0 };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
+        root.fill(&WHITE).map_err(&err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(which.caption(), ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..top)
+            .map_err(&err)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_desc("sample")
+            .x_labels(n.min(25))
+            .x_label_formatter(&|x| format!("{:.0}", x))
+            .draw()
+            .map_err(&err)?;
+        let answers = input.answers.len().max(1) as f64;
+        let width = 0.8 / answers;
+        for (k, answer) in input.answers.iter().enumerate() {
+            let colour = ANSWER_COLOURS[k % ANSWER_COLOURS.len()];
+            let bars = values[k].iter().enumerate().filter_map(|(i, v)| {
+                let v = (*v)?;
+                let x0 = i as f64 - 0.4 + k as f64 * width;
+                let fill = if answer.calibration.outliers.contains(&i) {
+                    OUTLIER
+                } else {
+                    colour
+                };
+                Some(Rectangle::new(
+                    [(x0, 0.0), (x0 + width * 0.9, v)],
+                    fill.filled(),
+                ))
+            });
+            chart
+                .draw_series(bars)
+                .map_err(&err)?
+                .label(answer.label.clone())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled())
+                });
+            // Dropped samples have no residual: a grey tick on the axis says so.
+            let dropped = answer.calibration.dropped.iter().map(|&i| {
+                let x0 = i as f64 - 0.4 + k as f64 * width;
+                Rectangle::new(
+                    [(x0, 0.0), (x0 + width * 0.9, top * 0.03)],
+                    RGBColor(150, 150, 150).filled(),
+                )
+            });
+            chart.draw_series(dropped).map_err(&err)?;
+        }
+        if values.iter().flatten().all(|v| v.is_none()) {
+            root.draw_text(
+                "no detected corners recorded for these samples",
+                &("sans-serif", 14).into_font().color(&BLACK),
+                (WIDTH as i32 / 2 - 160, HEIGHT as i32 / 2),
+            )
+            .map_err(&err)?;
+        }
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(-10.0, -1.0), (-9.0, -1.0)],
+                OUTLIER.filled(),
+            )))
+            .map_err(&err)?
+            .label("outlier")
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], OUTLIER.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(&err)?;
+        root.present().map_err(&err)?;
+    }
+    Ok(svg)
+}
+
+/// Axes of the relative rotation between every two samples (`R_j·R_iᵀ`, base frame), an axis
+/// and its opposite folded together (z ≥ 0); two orthographic views of the unit sphere.
+pub fn rotation_axes(pairs: &[PosePair]) -> Result<String, ReportError> {
+    let kind = "rotation-axes";
+    let err = plot_error(kind);
+    let mut axes: Vec<([f64; 3], f64)> = Vec::new();
+    for i in 0..pairs.len() {
+        for j in (i + 1)..pairs.len() {
+            let r =
+                pairs[j].base_from_flange.rotation * pairs[i].base_from_flange.rotation.inverse();
+            let v = rotvec(&r);
+            let angle = v.norm();
+            if angle < 1e-3 {
+                continue;
+            }
+            let mut a = v / angle;
+            if a.z < 0.0 {
+                a = -a;
+            }
+            axes.push(([a.x, a.y, a.z], angle.to_degrees()));
+        }
+    }
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, 440)).into_drawing_area();
+        root.fill(&WHITE).map_err(&err)?;
+        let root = root
+            .titled(
+                "relative rotation axes (unit sphere, base frame; marker size ~ angle)",
+                ("sans-serif", 16),
+            )
+            .map_err(&err)?;
+        let panels = root.split_evenly((1, 2));
+        let views: [(&str, usize, usize); 2] = [
+            ("seen from +z (x right, y up)", 0, 1),
+            ("seen from +x (y right, z up)", 1, 2),
+        ];
+        for (panel, (title, u, v)) in panels.iter().zip(views) {
+            sphere_view(panel, title, &axes, u, v).map_err(&err)?;
+        }
+        root.present().map_err(&err)?;
+    }
+    Ok(svg)
+}
+
+type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+type PlotResult = Result<(), DrawingAreaErrorKind<std::io::Error>>;
+
+fn sphere_view(
+    panel: &Area<'_>,
+    title: &str,
+    axes: &[([f64; 3], f64)],
+    u: usize,
+    v: usize,
+) -> PlotResult {
+    let mut chart = ChartBuilder::on(panel)
+        .caption(title, ("sans-serif", 13))
+        .margin(10)
+        .build_cartesian_2d(-1.1f64..1.1, -1.1f64..1.1)?;
+    let circle = (0..=120).map(|k| {
+        let t = k as f64 / 120.0 * std::f64::consts::TAU;
+        (t.cos(), t.sin())
+    });
+    chart.draw_series(LineSeries::new(circle, BLACK.stroke_width(1)))?;
+    for (a, b) in [((-1.0, 0.0), (1.0, 0.0)), ((0.0, -1.0), (0.0, 1.0))] {
+        chart.draw_series(LineSeries::new([a, b], RGBColor(200, 200, 200)))?;
+    }
+    let max_angle = axes.iter().map(|a| a.1).fold(1.0f64, f64::max);
+    chart.draw_series(axes.iter().map(|(a, angle)| {
+        let size = 2.0 + 5.0 * angle / max_angle;
+        Circle::new(
+            (a[u], a[v]),
+            size.round() as i32,
+            ANSWER_COLOURS[0].mix(0.5).filled(),
+        )
+    }))?;
+    Ok(())
+}
+
+/// A perspective sketch of the cell: base at the origin, the target, and the camera at every
+/// sample, as the primary answer places them (metres, base frame).
+pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
+    let kind = "poses-3d";
+    let err = plot_error(kind);
+    let c = &input.answers[0].calibration;
+    let mut cameras: Vec<Pose> = Vec::new();
+    let mut targets: Vec<Pose> = Vec::new();
+    let mut flanges: Vec<Pose> = Vec::new();
+    for p in &input.pairs {
+        flanges.push(p.base_from_flange);
+        match input.setup {
+            Setup::EyeInHand => cameras.push(p.base_from_flange * c.camera_mount),
+            Setup::EyeToHand => targets.push(p.base_from_flange * c.target_mount),
+        }
+    }
+    match input.setup {
+        Setup::EyeInHand => targets.push(c.target_mount),
+        Setup::EyeToHand => cameras.push(c.camera_mount),
+    }
+    let all: Vec<[f64; 3]> = cameras
+        .iter()
+        .chain(&targets)
+        .chain(&flanges)
+        .map(|p| {
+            let t = p.translation.vector;
+            [t.x, t.y, t.z]
+        })
+        .chain(std::iter::once([0.0, 0.0, 0.0]))
+        .collect();
+    let lo = |k: usize| all.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
+    let hi = |k: usize| all.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
+    let span = (0..3).map(|k| hi(k) - lo(k)).fold(0.1f64, f64::max);
+    let pad = 0.15 * span;
+    let range = |k: usize| {
+        let mid = 0.5 * (lo(k) + hi(k));
+        (mid - 0.5 * span - pad)..(mid + 0.5 * span + pad)
+    };
+    let triad = span * 0.08;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, 600)).into_drawing_area();
+        root.fill(&WHITE).map_err(&err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "cell sketch: base, target and camera poses (m, base frame)",
+                ("sans-serif", 16),
+            )
+            .margin(10)
+            // plotters' 3D y axis is vertical: map base (x, y, z) to chart (x, z, y).
+            .build_cartesian_3d(range(0), range(2), range(1))
+            .map_err(&err)?;
+        chart.with_projection(|mut p| {
+            p.pitch = 0.5;
+            p.yaw = 0.7;
+            p.scale = 0.85;
+            p.into_matrix()
+        });
+        chart
+            .configure_axes()
+            .x_labels(5)
+            .y_labels(5)
+            .z_labels(5)
+            .draw()
+            .map_err(&err)?;
+        let colours = [RED, GREEN, BLUE];
+        let draw_triad =
+            |chart: &mut ChartContext<'_, _, _>, pose: &Pose, length: f64, width: u32| {
+                let o = pose.translation.vector;
+                for (k, colour) in colours.iter().enumerate() {
+                    let end = pose * nalgebra::Point3::from(nalgebra::Vector3::ith(k, length));
+                    chart.draw_series(LineSeries::new(
+                        [(o.x, o.z, o.y), (end.x, end.z, end.y)],
+                        colour.stroke_width(width),
+                    ))?;
+                }
+                Ok::<(), DrawingAreaErrorKind<std::io::Error>>(())
+            };
+        draw_triad(&mut chart, &Pose::identity(), 2.0 * triad, 3).map_err(&err)?;
+        for t in &targets {
+            draw_triad(&mut chart, t, 1.5 * triad, 3).map_err(&err)?;
+        }
+        for cam in &cameras {
+            draw_triad(&mut chart, cam, triad, 1).map_err(&err)?;
+        }
+        let flange_points = flanges.iter().map(|p| {
+            let o = p.translation.vector;
+            Circle::new((o.x, o.z, o.y), 2, BLACK.filled())
+        });
+        chart.draw_series(flange_points).map_err(&err)?;
+        root.present().map_err(&err)?;
+    }
+    Ok(svg)
+}
+
+/// Update size per iteration of the iterative method (rotation rad, translation m) and the
+/// refinement cost per evaluation, on a log scale; one line per phase of the primary answer.
+pub fn convergence(input: &ReportInput) -> Result<String, ReportError> {
+    let kind = "convergence";
+    let err = plot_error(kind);
+    let trace = &input.answers[0].calibration.solver.trace;
+    let series = |phase: Phase| -> Vec<(f64, f64)> {
+        trace
+            .iter()
+            .filter(|s| s.phase == phase)
+            .enumerate()
+            .filter(|(_, s)| s.update > 0.0 && s.update.is_finite())
+            .map(|(i, s)| (i as f64, s.update))
+            .collect()
+    };
+    let lines = [
+        ("iterative: rotation update (rad)", series(Phase::Rotation)),
+        (
+            "iterative: translation update (m)",
+            series(Phase::Translation),
+        ),
+        ("refine: cost ½Σr²", series(Phase::Refine)),
+    ];
+    let points = lines.iter().flat_map(|l| l.1.iter());
+    let (mut lo, mut hi, mut len) = (f64::INFINITY, f64::NEG_INFINITY, 1.0f64);
+    for &(x, y) in points {
+        lo = lo.min(y);
+        hi = hi.max(y);
+        len = len.max(x + 1.0);
+    }
+    if !lo.is_finite() {
+        (lo, hi) = (1e-12, 1.0);
+    }
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
+        root.fill(&WHITE).map_err(&err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "solver convergence ({}, {} iterations)",
+                    input.answers[0].calibration.solver.method.name(),
+                    input.answers[0].calibration.solver.iterations
+                ),
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0f64..len, ((lo * 0.5)..(hi * 2.0)).log_scale())
+            .map_err(&err)?;
+        chart
+            .configure_mesh()
+            .x_desc("iteration / evaluation")
+            .y_label_formatter(&|y| format!("{y:.0e}"))
+            .draw()
+            .map_err(&err)?;
+        for (k, (label, points)) in lines.iter().enumerate() {
+            let colour = ANSWER_COLOURS[k % ANSWER_COLOURS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    points.iter().copied(),
+                    colour.stroke_width(2),
+                ))
+                .map_err(&err)?
+                .label(*label)
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 16, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(&err)?;
+        root.present().map_err(&err)?;
+    }
+    Ok(svg)
+}

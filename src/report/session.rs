@@ -1,0 +1,229 @@
+//! Gathers a report's input from a session folder: the samples (`samples.yaml`), the recorded
+//! visits (frames and detected corners, `poses/NNN.yaml`), and — with the board and the camera
+//! model — per-sample reprojection errors at the predicted `T_camera_target` and annotated
+//! thumbnails. Pixels follow the OpenCV convention (origin at the top-left pixel's centre).
+
+use std::collections::HashMap;
+use std::io::Cursor;
+
+use image::{imageops, ImageFormat, Rgb, RgbImage};
+use nalgebra::Point2;
+
+use super::{FrameThumbnail, ReportAnswer, ReportError, ReportInput};
+use crate::camera::model::CameraModel;
+use crate::dataset::Dataset;
+use crate::geometry::Pose;
+use crate::session::{PoseVisit, SessionError, SessionFolder};
+use crate::solve::{Calibration, NoiseModel};
+use crate::target::{draw, Board};
+
+/// Width of a frame thumbnail, px.
+pub const THUMBNAIL_WIDTH: u32 = 320;
+
+/// The board and lens a session was recorded with (needed for reprojection and thumbnails).
+#[derive(Debug, Clone, Copy)]
+pub struct Optics<'a> {
+    /// The board.
+    pub board: &'a Board,
+    /// The camera's intrinsics and distortion.
+    pub camera: &'a CameraModel,
+}
+
+/// Builds the report input of a session for one or more answers (label, calibration).
+///
+/// Without `optics` the page has no thumbnails and no reprojection bars (everything else is
+/// there). Samples are matched to visits by their id `pose-NNN`.
+pub fn from_session(
+    folder: &SessionFolder,
+    answers: Vec<(String, Calibration)>,
+    optics: Option<Optics<'_>>,
+    noise: NoiseModel,
+) -> Result<ReportInput, ReportError> {
+    let dataset = Dataset::load(&folder.samples_path())
+        .map_err(|e| ReportError::Session(Box::new(SessionError::Solve(e.to_string()))))?;
+    let visits = folder
+        .read_visits()
+        .map_err(|e| ReportError::Session(Box::new(e)))?;
+    let by_id: HashMap<String, &PoseVisit> = visits
+        .iter()
+        .map(|v| (format!("pose-{:03}", v.plan_index), v))
+        .collect();
+    let sample_visits: Vec<Option<&PoseVisit>> = dataset
+        .pairs
+        .iter()
+        .map(|p| p.id.as_ref().and_then(|id| by_id.get(id).copied()))
+        .collect();
+
+    let answers: Vec<ReportAnswer> = answers
+        .into_iter()
+        .map(|(label, calibration)| {
+            let reprojection_px = dataset
+                .pairs
+                .iter()
+                .zip(&sample_visits)
+                .map(|(pair, visit)| {
+                    let (optics, visit) = (optics?, (*visit)?);
+                    let predicted = calibration.predict_camera_from_target(&pair.base_from_flange);
+                    reprojection_rms(optics, &predicted, &visit.corners_px)
+                })
+                .collect();
+            ReportAnswer {
+                label,
+                calibration,
+                reprojection_px,
+            }
+        })
+        .collect();
+
+    let mut thumbnails = Vec::new();
+    if let (Some(optics), Some(primary)) = (optics, answers.first()) {
+        for (sample, (pair, visit)) in dataset.pairs.iter().zip(&sample_visits).enumerate() {
+            let Some(visit) = visit else { continue };
+            let predicted = primary
+                .calibration
+                .predict_camera_from_target(&pair.base_from_flange);
+            let path = folder.root().join(&visit.frame);
+            let png = thumbnail(&path, optics, &predicted, &visit.corners_px)?;
+            thumbnails.push(FrameThumbnail {
+                sample,
+                caption: format!(
+                    "sample {sample} ({}), board RMS {}",
+                    pair.id.as_deref().unwrap_or("?"),
+                    visit
+                        .reprojection_rms_px
+                        .map(|r| format!("{r:.3} px"))
+                        .unwrap_or_else(|| "-".into())
+                ),
+                png,
+            });
+        }
+    }
+    Ok(ReportInput {
+        title: folder.root().display().to_string(),
+        setup: dataset.setup,
+        pairs: dataset.pairs,
+        answers,
+        thumbnails,
+        noise,
+        holdout: None,
+    })
+}
+
+/// RMS pixel distance between detected corners `[tag id, corner, u, v]` and the board's corners
+/// projected at `camera_from_target`; `None` when no corner can be compared.
+pub fn reprojection_rms(
+    optics: Optics<'_>,
+    camera_from_target: &Pose,
+    corners_px: &[[f64; 4]],
+) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for c in corners_px {
+        let (id, corner) = (c[0] as u32, c[1] as usize);
+        let Some(points) = optics.board.tag_corners_in_target(id) else {
+            continue;
+        };
+        let Some(point) = points.get(corner) else {
+            continue;
+        };
+        let Some(pixel) = optics.camera.project(&(camera_from_target * point)) else {
+            continue;
+        };
+        sum += (pixel - Point2::new(c[2], c[3])).norm_squared();
+        count += 1;
+    }
+    (count > 0).then(|| (sum / count as f64).sqrt())
+}
+
+fn thumbnail(
+    path: &std::path::Path,
+    optics: Optics<'_>,
+    camera_from_target: &Pose,
+    corners_px: &[[f64; 4]],
+) -> Result<Vec<u8>, ReportError> {
+    let frame_error = |message: String| ReportError::Frame {
+        path: path.to_path_buf(),
+        message,
+    };
+    let grey = image::open(path)
+        .map_err(|e| frame_error(e.to_string()))?
+        .to_luma8();
+    let scale = f64::from(THUMBNAIL_WIDTH) / f64::from(grey.width().max(1));
+    let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
+    let small = imageops::resize(
+        &grey,
+        THUMBNAIL_WIDTH,
+        height,
+        imageops::FilterType::Triangle,
+    );
+    let mut out = RgbImage::from_fn(small.width(), small.height(), |x, y| {
+        let v = small.get_pixel(x, y)[0];
+        Rgb([v, v, v])
+    });
+    // Pixel centres: OpenCV pixel u maps to thumbnail (u + 0.5)·s − 0.5.
+    let to_thumb =
+        |p: Point2<f64>| Point2::new((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
+    let magenta = Rgb([255, 0, 255]);
+    for tag in optics.board.tags() {
+        let Some(points) = optics.board.tag_corners_in_target(tag.id) else {
+            continue;
+        };
+        let pixels: Vec<Option<Point2<f64>>> = points
+            .iter()
+            .map(|p| {
+                optics
+                    .camera
+                    .project(&(camera_from_target * p))
+                    .map(to_thumb)
+            })
+            .collect();
+        for k in 0..4 {
+            if let (Some(a), Some(b)) = (pixels[k], pixels[(k + 1) % 4]) {
+                draw::line(&mut out, a, b, 1, magenta);
+            }
+        }
+    }
+    for c in corners_px {
+        draw::cross(
+            &mut out,
+            to_thumb(Point2::new(c[2], c[3])),
+            3.0,
+            Rgb([0, 230, 0]),
+        );
+    }
+    let mut bytes = Vec::new();
+    image::DynamicImage::ImageRgb8(out)
+        .write_to(&mut Cursor::new(&mut bytes), ImageFormat::Png)
+        .map_err(|e| frame_error(e.to_string()))?;
+    Ok(bytes)
+}
+
+/// Writes `<session>/report.html` for a solved session: the calibration as the single answer,
+/// thumbnails and reprojection bars when the cell's board and intrinsics load, and a
+/// leave-one-out check. Returns the path written.
+pub fn write_session_report(
+    folder: &SessionFolder,
+    config: Option<&crate::config::CellConfig>,
+    calibration: Calibration,
+) -> Result<std::path::PathBuf, ReportError> {
+    let options = config.map(|c| c.solver.to_options()).unwrap_or_default();
+    // The optics are optional: a session moved to another machine still gets a report.
+    let board = config.and_then(|c| Board::load(&c.target).ok());
+    let camera = config.and_then(|c| CameraModel::load(&c.intrinsics).ok());
+    let optics = match (&board, &camera) {
+        (Some(board), Some(camera)) => Some(Optics { board, camera }),
+        _ => None,
+    };
+    let label = format!("pose-space ({})", calibration.solver.method.name());
+    let mut input = from_session(folder, vec![(label, calibration)], optics, options.noise)?;
+    if let Ok(v) = crate::verify::leave_one_out(input.setup, &input.pairs, &options) {
+        input.holdout = Some(super::HoldoutSummary {
+            description: format!("leave-one-out over {} samples", v.summary.poses),
+            rotation_rms_deg: v.summary.rotation_rms_deg,
+            translation_rms_mm: v.summary.translation_rms_mm,
+        });
+    }
+    let path = folder.root().join("report.html");
+    super::write_report(&path, &input)?;
+    Ok(path)
+}

@@ -1,0 +1,91 @@
+//! Adaptive sessions: the plan is not fixed up front but asked for one pose at a time from a
+//! [`PlanSource`] that sees the samples accepted so far (e.g. the next-best-pose planner,
+//! `plan::nbv::AdaptivePlanner`). Each pose is visited with the ordinary driver
+//! ([`run_session`]), so records, retries, faults and the folder layout are the same as for a
+//! fixed plan; the manifest grows with the plan, so `replay` and `report` work unchanged.
+//!
+//! A pose whose board pose was rejected is dropped from the plan and its index reused by the
+//! next pose (which then gets one attempt instead of two: the driver counts the earlier
+//! failure); the source decides what to try next.
+
+use crate::camera::Camera;
+use crate::dataset::Dataset;
+use crate::geometry::Pose;
+use crate::plan::nbv::AdaptivePlanner;
+use crate::robot::{Joints, Robot};
+use crate::solve::PosePair;
+
+use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
+use super::{PlannedPose, SessionManifest};
+use crate::geometry::PoseYaml;
+
+/// Yields the next pose of a session from the samples accepted so far.
+pub trait PlanSource {
+    /// The next flange pose and the joints that reach it, or `None` to end the session.
+    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)>;
+}
+
+impl PlanSource for AdaptivePlanner {
+    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
+        self.next(samples)
+    }
+}
+
+/// Runs a session whose poses come from `source`, one at a time. `setup.plan` is ignored (the
+/// source is the plan); `manifest_config` is the config path written into the manifest.
+pub fn run_adaptive_session(
+    setup: SessionSetup,
+    manifest_config: std::path::PathBuf,
+    source: &mut dyn PlanSource,
+    robot: &mut dyn Robot,
+    camera: &mut dyn Camera,
+    on_event: &mut dyn FnMut(SessionEvent),
+) -> Result<SessionOutcome, SessionError> {
+    let mut plan: Vec<(Pose, Joints)> = Vec::new();
+    let mut outcome = SessionOutcome::default();
+    loop {
+        let samples = if setup.folder.samples_path().is_file() {
+            Dataset::load(&setup.folder.samples_path())
+                .map_err(|e| SessionError::Solve(e.to_string()))?
+                .pairs
+        } else {
+            Vec::new()
+        };
+        let Some(next) = source.next_pose(&samples) else {
+            break;
+        };
+        plan.push(next);
+        setup.folder.write_manifest(&SessionManifest {
+            config: manifest_config.clone(),
+            setup: setup.setup,
+            plan: plan
+                .iter()
+                .map(|(pose, q)| PlannedPose {
+                    base_from_flange: PoseYaml::from_pose(pose),
+                    joints_deg: q.map(f64::to_degrees),
+                })
+                .collect(),
+        })?;
+        let step = SessionSetup {
+            folder: setup.folder.clone(),
+            setup: setup.setup,
+            plan: plan.clone(),
+            limits: setup.limits,
+            settle: setup.settle,
+            max_reprojection_rms_px: setup.max_reprojection_rms_px,
+            board: setup.board.clone(),
+            detector: setup.detector.clone(),
+            stop: setup.stop.clone(),
+        };
+        let index = plan.len() - 1;
+        let step_outcome = run_session(step, robot, camera, on_event)?;
+        outcome.visited_now += step_outcome.visited_now;
+        outcome.skipped.extend(step_outcome.skipped.iter().cloned());
+        if step_outcome.accepted.contains(&index) {
+            outcome.accepted.push(index);
+        } else {
+            plan.pop();
+        }
+    }
+    Ok(outcome)
+}

@@ -1,0 +1,143 @@
+//! `verify` in the simulated cell: holdout poses recorded with rendered frames, compared with
+//! the prediction of a result; its errors must agree with the known error of that result
+//! against the simulator's truth. And leave-one-out on a dataset finds a corrupted sample.
+
+use std::path::PathBuf;
+
+use handeye::cell;
+use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::plan::GenerateSpec;
+use handeye::session::{SessionEvent, SessionFolder};
+use handeye::solve::{self, PosePair, Setup, SolveOptions};
+use handeye::verify;
+use nalgebra::Vector3;
+
+fn holdout(
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    dir: &std::path::Path,
+) -> verify::Verification {
+    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
+    let prepared = cell::prepare(&config).unwrap();
+    let spec = GenerateSpec {
+        count: 6,
+        seed: 4242,
+        ..prepared.config.plan.generate.unwrap()
+    };
+    let folder = SessionFolder::create(dir).unwrap();
+    verify::holdout(
+        &prepared,
+        Setup::EyeInHand,
+        camera_mount,
+        target_mount,
+        &spec,
+        &folder,
+        &mut |_e: SessionEvent| {},
+    )
+    .unwrap()
+}
+
+#[test]
+fn holdout_errors_agree_with_the_known_error_of_the_result() {
+    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
+    let truth = cell::prepare(&config).unwrap().config.simulation.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+
+    // The true transforms: what is left is the measurement noise of a rendered board pose.
+    let exact = holdout(
+        &truth.camera_mount,
+        &truth.target_mount,
+        &dir.path().join("exact"),
+    );
+    eprintln!("{}", exact.table());
+    assert!(
+        exact.summary.poses >= 5,
+        "{} holdout poses",
+        exact.summary.poses
+    );
+    assert!(
+        exact.summary.translation_rms_mm < 0.3 && exact.summary.rotation_rms_deg < 0.03,
+        "with the true transforms: {:?}",
+        exact.summary
+    );
+
+    // A result that is 2 mm and 0.3° off in T_flange_camera: each pose's error must be what that
+    // known error predicts (camera of the true cell vs the wrong one), up to the noise above.
+    let wrong_camera = truth.camera_mount
+        * pose_from_rotvec(
+            Vector3::new(0.002, 0.0, 0.0),
+            Vector3::new(0.3f64.to_radians(), 0.0, 0.0),
+        );
+    let off = holdout(&wrong_camera, &truth.target_mount, &dir.path().join("off"));
+    eprintln!("{}", off.table());
+    let samples = handeye::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
+    for (e, pair) in off.poses.iter().zip(&samples.pairs) {
+        let with_truth = truth.camera_from_target(&pair.base_from_flange);
+        let with_result = solve::predict(
+            Setup::EyeInHand,
+            &wrong_camera,
+            &truth.target_mount,
+            &pair.base_from_flange,
+        );
+        let expected_mm =
+            (with_result.translation.vector - with_truth.translation.vector).norm() * 1e3;
+        let expected_deg = with_result
+            .rotation
+            .angle_to(&with_truth.rotation)
+            .to_degrees();
+        assert!(
+            (e.translation_mm - expected_mm).abs() < 0.3,
+            "pose {}: verify {:.3} mm, known error {:.3} mm",
+            e.index,
+            e.translation_mm,
+            expected_mm
+        );
+        assert!(
+            (e.rotation_deg - expected_deg).abs() < 0.03,
+            "pose {}: verify {:.4}°, known error {:.4}°",
+            e.index,
+            e.rotation_deg,
+            expected_deg
+        );
+        assert!(
+            expected_mm > 1.0,
+            "the perturbation must show: {expected_mm} mm"
+        );
+    }
+}
+
+#[test]
+fn leave_one_out_points_at_a_corrupted_sample() {
+    let camera_mount = pose_from_rotvec(
+        Vector3::new(0.03, -0.07, 0.04),
+        Vector3::new(0.02, -0.01, 1.56),
+    );
+    let target_mount = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
+    let mut pairs = Vec::new();
+    for k in 0..12 {
+        let a = k as f64;
+        let view = pose_from_rotvec(
+            Vector3::new(0.05 * (a * 0.7).sin(), 0.05 * (a * 1.3).cos(), 0.6),
+            Vector3::new(
+                std::f64::consts::PI + 0.4 * (a * 0.9).sin(),
+                0.4 * (a * 1.7).cos(),
+                0.5 * (a * 0.5).sin(),
+            ),
+        );
+        // T_base_flange = T_base_target · T_target_camera · T_camera_flange
+        let robot = target_mount * view.inverse() * camera_mount.inverse();
+        pairs.push(PosePair::new(robot, view));
+    }
+    // Sample 5's board pose is off by 5 mm (e.g. a bad detection).
+    pairs[5].camera_from_target.translation.vector += Vector3::new(0.005, 0.0, 0.0);
+    let options = SolveOptions::default();
+    let v = verify::leave_one_out(Setup::EyeInHand, &pairs, &options).unwrap();
+    let worst = v
+        .poses
+        .iter()
+        .max_by(|a, b| a.translation_mm.total_cmp(&b.translation_mm))
+        .unwrap();
+    assert_eq!(worst.index, 5, "{}", v.table());
+    // Predicted from the 11 clean samples, sample 5 is off by the full 5 mm.
+    assert!((worst.translation_mm - 5.0).abs() < 0.05, "{}", v.table());
+}
