@@ -260,7 +260,7 @@ pub struct WorkspaceConfig {
 }
 
 /// Where the plan comes from.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanConfig {
     /// A scripted plan file.
@@ -280,6 +280,18 @@ pub struct PlanConfig {
 
 fn default_target_uncertainty_mm() -> f64 {
     0.5
+}
+
+impl Default for PlanConfig {
+    /// No plan source (a recorded robot's poses are its plan), not adaptive.
+    fn default() -> Self {
+        PlanConfig {
+            file: None,
+            generate: None,
+            adaptive: false,
+            target_uncertainty_mm: default_target_uncertainty_mm(),
+        }
+    }
 }
 
 /// Detector settings.
