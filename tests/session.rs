@@ -295,3 +295,23 @@ fn the_shipped_scripted_plan_passes_its_checks_in_the_demo_cell() {
     assert_eq!(prepared.plan.waypoints.len(), 12);
     assert!(prepared.report.ok(), "{}", prepared.report);
 }
+
+#[test]
+fn every_shipped_cell_config_loads_and_its_plan_passes_its_checks() {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(repo().join("configs")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "yaml") {
+            let prepared =
+                cell::prepare(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+            assert!(
+                prepared.report.ok(),
+                "{}:\n{}",
+                path.display(),
+                prepared.report
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 4, "only {checked} configs found");
+}

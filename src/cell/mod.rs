@@ -211,6 +211,12 @@ impl PreparedCell {
                 let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
+            (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {
+                // The real cell: open the camera first, so a missing camera never leaves a
+                // connected arm behind.
+                let camera = uvc::open_camera(&self.config.camera, self.camera_model)?;
+                Ok(Hardware { robot: self.open_ur()?, camera })
+            }
             (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
