@@ -14,9 +14,7 @@ use rand_distr::{Distribution, Normal};
 
 use handeye::camera::model::CameraModel;
 use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::solve::{
-    refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior, Setup,
-};
+use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior, Setup};
 use handeye::target::Board;
 
 fn repo() -> PathBuf {
@@ -34,15 +32,15 @@ fn frames(camera: &CameraModel, flange_from_camera: &Pose, base_from_target: &Po
             let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
             let distance = rng.random_range(0.55..0.7);
             let position = centre
-                + Vector3::new(tilt.sin() * azimuth.cos(), tilt.sin() * azimuth.sin(), tilt.cos())
-                    * distance;
+                + Vector3::new(
+                    tilt.sin() * azimuth.cos(),
+                    tilt.sin() * azimuth.sin(),
+                    tilt.cos(),
+                ) * distance;
             let z = (centre - position).normalize();
             let x = (Vector3::x() - z * z.x).normalize();
-            let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
-                x,
-                z.cross(&x),
-                z,
-            ]));
+            let rotation =
+                Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, z.cross(&x), z]));
             let target_from_camera = Pose::from_parts(
                 Translation3::from(position),
                 UnitQuaternion::from_rotation_matrix(&rotation),
@@ -85,8 +83,14 @@ fn reprojection(c: &mut Criterion) {
         Vector3::new(0.012, -0.018, 0.297),
     );
     let frames = frames(&camera, &flange_from_camera, &base_from_target);
-    assert_eq!(frames.iter().map(|f| f.corners.len()).sum::<usize>(), 20 * 144);
-    let off = pose_from_rotvec(Vector3::new(0.001, -0.0005, 0.0005), Vector3::new(0.0017, 0.0, -0.001));
+    assert_eq!(
+        frames.iter().map(|f| f.corners.len()).sum::<usize>(),
+        20 * 144
+    );
+    let off = pose_from_rotvec(
+        Vector3::new(0.001, -0.0005, 0.0005),
+        Vector3::new(0.0017, 0.0, -0.001),
+    );
     let start_camera = flange_from_camera * off;
     let start_target = base_from_target * off;
     let mut start_model = camera;

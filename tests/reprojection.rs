@@ -57,7 +57,11 @@ fn view(rng: &mut StdRng, max_tilt_deg: f64, fronto_parallel: bool) -> Pose {
     let distance = rng.random_range(0.45..0.65);
     let roll = rng.random_range(-0.4..0.4);
     let (position, look_at) = if fronto_parallel {
-        let shift = Vector3::new(rng.random_range(-0.1..0.1), rng.random_range(-0.06..0.06), 0.0);
+        let shift = Vector3::new(
+            rng.random_range(-0.1..0.1),
+            rng.random_range(-0.06..0.06),
+            0.0,
+        );
         (centre + shift + Vector3::z() * distance, centre + shift)
     } else {
         let tilt = rng.random_range(0.3..1.0) * max_tilt_deg.to_radians();
@@ -77,9 +81,9 @@ fn view(rng: &mut StdRng, max_tilt_deg: f64, fronto_parallel: bool) -> Pose {
     };
     let x = (reference - z * z.dot(&reference)).normalize();
     let y = z.cross(&x);
-    let target_from_camera_rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
-        x, y, z,
-    ])) * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
+    let target_from_camera_rotation =
+        Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]))
+            * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
     let target_from_camera = Pose::from_parts(
         Translation3::from(position),
         UnitQuaternion::from_rotation_matrix(&target_from_camera_rotation),
@@ -225,7 +229,10 @@ fn reprojection_answer_is_closer_to_the_truth_than_the_pose_space_answer() {
         assert!(reprojection.converged);
     }
     let ratio = reprojection_sum / pose_sum;
-    eprintln!("error ratio reprojection / pose space over {} seeds: {ratio:.3}", seeds.len());
+    eprintln!(
+        "error ratio reprojection / pose space over {} seeds: {ratio:.3}",
+        seeds.len()
+    );
     // Stated margin: at least 25 % closer to the truth on average over the seeds.
     assert!(ratio < 0.75, "ratio {ratio:.3}");
 }
@@ -356,7 +363,12 @@ fn a_frame_with_a_wrong_robot_pose_is_flagged() {
         &ReprojectionOptions::default(),
     )
     .unwrap();
-    assert_eq!(result.outlier_frames, vec![4], "{:?}", result.errors.frame_rms_px);
+    assert_eq!(
+        result.outlier_frames,
+        vec![4],
+        "{:?}",
+        result.errors.frame_rms_px
+    );
     assert!(result.warnings.iter().any(|w| w.contains("pose-004")));
 }
 
@@ -380,7 +392,10 @@ fn bad_input_is_a_clear_error() {
         &ReprojectionOptions::default(),
     )
     .unwrap_err();
-    assert!(matches!(error, SolveError::TooFewSamples { found: 2, .. }), "{error}");
+    assert!(
+        matches!(error, SolveError::TooFewSamples { found: 2, .. }),
+        "{error}"
+    );
     let mut frames = s.frames.clone();
     frames[1].corners[0].pixel.x = f64::NAN;
     let error = refine_reprojection(

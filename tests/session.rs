@@ -115,8 +115,13 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         assert!(folder.root().join(format!("poses/{i:03}.yaml")).is_file());
     }
 
-    // Replay re-detects the saved frames and reproduces the result.
-    let (dataset, _) = session::replay::redetect(
+    eprintln!(
+        "{}\n{}",
+        solved.summary,
+        solved.compare_with_truth(prepared.config.simulation.as_ref().unwrap())
+    );
+    // Replay re-detects the saved frames and reproduces the result (both answers).
+    let (dataset, visits) = session::replay::redetect(
         &folder,
         &prepared.board,
         &prepared.camera_model,
@@ -130,11 +135,28 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         &prepared.config.solver.to_options(),
     )
     .unwrap();
-    for ((key, a), (_, b)) in again
+    let again_both = session::solve_session(
+        dataset.setup,
+        &dataset.pairs,
+        &visits,
+        Some((&prepared.board, &prepared.camera_model)),
+        &prepared.config,
+    )
+    .unwrap();
+    assert!(again_both.reprojection.is_some());
+    let pairs = again
         .unknowns()
-        .iter()
-        .zip(solved.calibration.unknowns().iter())
-    {
+        .into_iter()
+        .zip(solved.pose_space.unknowns())
+        .chain(
+            again_both
+                .calibration
+                .unknowns()
+                .into_iter()
+                .zip(solved.calibration.unknowns()),
+        );
+    for ((key, a), (_, b)) in pairs {
+        let (a, b) = (&a, &b);
         let (mm, deg) = errors(a, b);
         assert!(
             mm < 1e-6 && deg < 1e-6,

@@ -6,9 +6,9 @@ use anyhow::Context;
 use clap::Args;
 
 use handeye::cell;
+use handeye::config::SolveSpace;
 use handeye::result::ResultFile;
-use handeye::session::{replay, SessionFolder};
-use handeye::solve;
+use handeye::session::{self, replay, SessionFolder};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]
@@ -47,16 +47,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let calibration = solve::solve(
+    // Both answers (pose space and, by default, reprojection space) side by side.
+    let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
+        .then_some((&prepared.board, &prepared.camera_model));
+    let solved = session::solve_session(
         dataset.setup,
         &dataset.pairs,
-        &prepared.config.solver.to_options(),
+        &visits,
+        vision,
+        &prepared.config,
     )?;
+    let calibration = &solved.calibration;
     let output = args
         .output
         .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
-    ResultFile::from_calibration(&calibration, &dataset.pairs).save(&output)?;
-    println!("{}", calibration.summary());
+    ResultFile::from_calibration(calibration, &dataset.pairs).save(&output)?;
+    println!("{}", solved.summary);
     if folder.result_path().is_file() {
         let recorded = ResultFile::load_mounts(&folder.result_path())?;
         let then = [recorded.camera_mount, recorded.target_mount];
@@ -69,10 +75,6 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(truth) = &prepared.config.simulation {
-        let solved = handeye::session::SolvedSession {
-            calibration,
-            summary: String::new(),
-        };
         println!("{}", solved.compare_with_truth(truth));
     }
     println!("wrote {}", output.display());

@@ -1,58 +1,339 @@
-//! Solving a session folder: `samples.yaml` in, `result.yaml` out, with a summary for people and,
-//! in the simulated cell, the error against the ground truth.
+//! Solving a session folder: `samples.yaml` and the recorded corners (`poses/NNN.yaml`) in,
+//! `result.yaml` out, with a summary for people that shows the pose-space and the
+//! reprojection-space answers side by side and, in the simulated cell, the error against the
+//! ground truth.
 
-use crate::config::CellConfig;
+use std::fmt::Write;
+
+use nalgebra::Point2;
+
+use crate::camera::model::CameraModel;
+use crate::config::{CellConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::plan::CellTransforms;
 use crate::result::ResultFile;
-use crate::solve::{self, Calibration};
+use crate::solve::{
+    self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame, PosePair,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, Setup,
+};
+use crate::target::Board;
 
-use super::{SessionError, SessionFolder};
+use super::{PoseVisit, SessionError, SessionFolder};
 
 /// A solved session.
 pub struct SolvedSession {
-    /// The calibration.
+    /// The final calibration (the reprojection-space answer when it was computed).
     pub calibration: Calibration,
+    /// The pose-space answer (also the start of the reprojection refinement).
+    pub pose_space: Calibration,
+    /// The reprojection-space answer, when the space is `reprojection` and frames had corners.
+    pub reprojection: Option<ReprojectionCalibration>,
+    /// The pose-space answer's reprojection errors on the same frames (same order as
+    /// `reprojection.errors`), for the side-by-side comparison.
+    pub pose_space_errors: Option<ReprojectionErrors>,
+    /// Ids (`pose-NNN`) of the frames the reprojection refinement used, in its order.
+    pub frame_ids: Vec<String>,
     /// A short human summary.
     pub summary: String,
 }
 
-/// Solves the folder's `samples.yaml` with the config's solver settings and writes `result.yaml`.
+/// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
 pub fn solve_folder(
     folder: &SessionFolder,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
-    let dataset =
-        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
-    let options = config.solver.to_options();
-    let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
-        .map_err(|e| SessionError::Solve(e.to_string()))?;
-    ResultFile::from_calibration(&calibration, &dataset.pairs)
+    solve_folder_in(folder, config, config.solver.space)
+}
+
+/// Solves the folder in the given space and writes `result.yaml`.
+pub fn solve_folder_in(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    space: SolveSpace,
+) -> Result<SolvedSession, SessionError> {
+    let (solved, dataset) = load_and_solve(folder, config, space)?;
+    ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
         .save(&folder.result_path())
         .map_err(|e| SessionError::Solve(e.to_string()))?;
-    let summary = calibration.summary();
-    Ok(SolvedSession {
-        calibration,
-        summary,
-    })
+    Ok(solved)
+}
+
+/// Reads the folder's samples and visits (and, for the reprojection space, the config's board
+/// and intrinsics) and solves; writes nothing. Returns the dataset the answer was solved from.
+pub fn load_and_solve(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let dataset =
+        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let visits = folder.read_visits()?;
+    let (board, camera) = if space == SolveSpace::Reprojection {
+        let board = Board::load(&config.target)
+            .map_err(|e| SessionError::Solve(format!("board {}: {e}", config.target.display())))?;
+        let camera = CameraModel::load(&config.intrinsics).map_err(|e| {
+            SessionError::Solve(format!("intrinsics {}: {e}", config.intrinsics.display()))
+        })?;
+        (Some(board), Some(camera))
+    } else {
+        (None, None)
+    };
+    let solved = solve_session(
+        dataset.setup,
+        &dataset.pairs,
+        &visits,
+        board.as_ref().zip(camera.as_ref()),
+        config,
+    )?;
+    Ok((solved, dataset))
+}
+
+/// The reprojection refinement's frames from recorded visits: every accepted visit (one with a
+/// board pose) with its corners mapped to board points; corners of tags not on the board are
+/// skipped. Ids are `pose-NNN` like the samples'.
+pub fn frames_from_visits(
+    visits: &[PoseVisit],
+    board: &Board,
+) -> Result<Vec<(String, Frame)>, SessionError> {
+    let mut frames = Vec::new();
+    for visit in visits {
+        if visit.camera_from_target.is_none() || visit.corners_px.is_empty() {
+            continue;
+        }
+        let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
+        let (base_from_flange, _) = visit.poses(&file)?;
+        let mut corners = Vec::with_capacity(visit.corners_px.len());
+        for (k, &[id, index, u, v]) in visit.corners_px.iter().enumerate() {
+            let valid_id = id >= 0.0 && id.fract() == 0.0 && id <= f64::from(u32::MAX);
+            let valid_index = (0.0..4.0).contains(&index) && index.fract() == 0.0;
+            if !(valid_id && valid_index && u.is_finite() && v.is_finite()) {
+                return Err(SessionError::Record {
+                    file,
+                    path: format!("corners_px[{k}]"),
+                    message: format!(
+                        "expected [tag id, corner index 0..3, u px, v px], got [{id}, {index}, {u}, {v}]"
+                    ),
+                });
+            }
+            if let Some(points) = board.tag_corners_in_target(id as u32) {
+                corners.push(Corner {
+                    point_in_target: points[index as usize],
+                    pixel: Point2::new(u, v),
+                });
+            }
+        }
+        let id = format!("pose-{:03}", visit.plan_index);
+        frames.push((
+            id.clone(),
+            Frame {
+                base_from_flange,
+                corners,
+                id: Some(id),
+            },
+        ));
+    }
+    Ok(frames)
+}
+
+/// Solves pose pairs and, when `vision` (board and intrinsics) is given and the config's space is
+/// reprojection, refines over the visits' corners; no I/O.
+pub fn solve_session(
+    setup: Setup,
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    vision: Option<(&Board, &CameraModel)>,
+    config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    let options = config.solver.to_options();
+    let pose_space =
+        solve::solve(setup, pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let mut solved = SolvedSession {
+        calibration: pose_space.clone(),
+        pose_space,
+        reprojection: None,
+        pose_space_errors: None,
+        frame_ids: Vec::new(),
+        summary: String::new(),
+    };
+    let mut notes = Vec::new();
+    if let Some((board, camera)) = vision {
+        // Frames the pose-space solve dropped as outliers stay out here too.
+        let dropped: Vec<&str> = solved
+            .pose_space
+            .dropped
+            .iter()
+            .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
+            .collect();
+        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board)?
+            .into_iter()
+            .filter(|(id, _)| !dropped.contains(&id.as_str()))
+            .unzip();
+        if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
+            let ropts = ReprojectionOptions {
+                pixel_sigma_px: config.solver.pixel_sigma_px,
+                robot_prior: config.solver.robot_corrections.then(|| {
+                    let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
+                    RobotPrior {
+                        translation_sigma_m,
+                        rotation_sigma_rad,
+                    }
+                }),
+                ..ReprojectionOptions::default()
+            };
+            let p = &solved.pose_space;
+            let reprojection = refine_reprojection(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+                &ropts,
+            )
+            .map_err(|e| SessionError::Solve(format!("reprojection refinement: {e}")))?;
+            solved.pose_space_errors = Some(reprojection_errors(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+            ));
+            solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
+            solved.reprojection = Some(reprojection);
+            solved.frame_ids = ids;
+        } else {
+            notes.push(
+                "fewer than 3 frames with recorded corners: pose-space answer only".to_string(),
+            );
+        }
+    }
+    solved.summary = solved.describe(&notes);
+    Ok(solved)
+}
+
+fn pose_line(pose: &Pose) -> String {
+    let t = pose.translation.vector * 1e3;
+    let rv = crate::geometry::rotvec(&pose.rotation);
+    format!(
+        "[{:.2}, {:.2}, {:.2}] mm, rotvec [{:.5}, {:.5}, {:.5}] rad",
+        t.x, t.y, t.z, rv.x, rv.y, rv.z
+    )
 }
 
 impl SolvedSession {
-    /// The error of each unknown against the simulator's truth, one line each.
+    fn describe(&self, notes: &[String]) -> String {
+        let Some(reprojection) = &self.reprojection else {
+            let mut out = self.pose_space.summary();
+            for note in notes {
+                let _ = write!(out, "\nnote: {note}");
+            }
+            return out;
+        };
+        let pose_errors = self
+            .pose_space_errors
+            .as_ref()
+            .expect("set with the reprojection answer");
+        let mut out = self.calibration.summary();
+        let p = &self.pose_space;
+        let c = &self.calibration;
+        let _ = writeln!(out, "\n\nboth answers side by side:");
+        let _ = writeln!(
+            out,
+            "{:<34} {:>14} {:>14}",
+            "", "pose space", "reprojection"
+        );
+        let row = |out: &mut String, name: &str, a: f64, b: f64, unit: &str| {
+            let _ = writeln!(out, "{name:<34} {a:>11.4} {unit:<2} {b:>11.4} {unit:<2}");
+        };
+        row(
+            &mut out,
+            "reprojection RMS",
+            pose_errors.rms_px,
+            reprojection.errors.rms_px,
+            "px",
+        );
+        row(
+            &mut out,
+            "reprojection max",
+            pose_errors.max_px,
+            reprojection.errors.max_px,
+            "px",
+        );
+        row(
+            &mut out,
+            "board pose rotation RMS",
+            p.residuals.rotation_rms_deg,
+            c.residuals.rotation_rms_deg,
+            "°",
+        );
+        row(
+            &mut out,
+            "board pose translation RMS",
+            p.residuals.translation_rms_mm,
+            c.residuals.translation_rms_mm,
+            "mm",
+        );
+        for ((key, a), (_, b)) in p.unknowns().iter().zip(c.unknowns().iter()) {
+            let _ = writeln!(out, "{key} pose space:   {}", pose_line(a));
+            let _ = writeln!(out, "{key} reprojection: {}", pose_line(b));
+            let _ = writeln!(
+                out,
+                "    the two differ by {:.3} mm, {:.4}°",
+                (a.translation.vector - b.translation.vector).norm() * 1e3,
+                a.rotation.angle_to(&b.rotation).to_degrees()
+            );
+        }
+        let _ = writeln!(
+            out,
+            "per-frame reprojection RMS, px (pose space / reprojection):"
+        );
+        let cells: Vec<String> = self
+            .frame_ids
+            .iter()
+            .zip(pose_errors.frame_rms_px.iter())
+            .zip(reprojection.errors.frame_rms_px.iter())
+            .enumerate()
+            .map(|(i, ((id, a), b))| {
+                let flag = if reprojection.outlier_frames.contains(&i) {
+                    " !"
+                } else {
+                    ""
+                };
+                format!("{id} {a:.3}/{b:.3}{flag}")
+            })
+            .collect();
+        for chunk in cells.chunks(4) {
+            let _ = writeln!(out, "  {}", chunk.join("   "));
+        }
+        for note in notes {
+            let _ = writeln!(out, "note: {note}");
+        }
+        out.trim_end().to_string()
+    }
+
+    /// The error of each unknown against the simulator's truth, one line each (both answers
+    /// when the reprojection refinement ran).
     pub fn compare_with_truth(&self, truth: &CellTransforms) -> String {
-        let [(camera_key, camera_mount), (target_key, target_mount)] = self.calibration.unknowns();
-        let line = |key: &str, estimate: &Pose, truth: &Pose| {
+        let line = |label: &str, key: &str, estimate: &Pose, truth: &Pose| {
             format!(
-                "  {key}: error {:.3} mm, {:.4}° against the simulator's ground truth",
+                "  {key}{label}: error {:.3} mm, {:.4}° against the simulator's ground truth",
                 (estimate.translation.vector - truth.translation.vector).norm() * 1e3,
                 estimate.rotation.angle_to(&truth.rotation).to_degrees()
             )
         };
-        format!(
-            "ground truth check:\n{}\n{}",
-            line(camera_key, &camera_mount, &truth.camera_mount),
-            line(target_key, &target_mount, &truth.target_mount)
-        )
+        let mut lines = vec!["ground truth check:".to_string()];
+        let mut answers = vec![("", &self.calibration)];
+        if self.reprojection.is_some() {
+            answers = vec![
+                (" (pose space)", &self.pose_space),
+                (" (reprojection)", &self.calibration),
+            ];
+        }
+        for (label, calibration) in answers {
+            let [(camera_key, camera_mount), (target_key, target_mount)] = calibration.unknowns();
+            lines.push(line(label, camera_key, &camera_mount, &truth.camera_mount));
+            lines.push(line(label, target_key, &target_mount, &truth.target_mount));
+        }
+        lines.join("\n")
     }
 }

@@ -10,7 +10,9 @@
 
 use nalgebra::{DMatrix, Matrix3, Point2, SMatrix, Translation3, Vector3};
 
-use super::reprojection::{refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions};
+use super::reprojection::{
+    refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions,
+};
 use super::{solve, Calibration, PosePair, Setup, SolveError, SolveOptions};
 use crate::camera::model::{CameraModel, Distortion};
 use crate::geometry::{rotation_from_matrix, Pose};
@@ -43,7 +45,11 @@ pub fn homography(plane: &[(f64, f64)], pixels: &[Point2<f64>]) -> Option<Matrix
             .map(|p| ((p.0 - mx).powi(2) + (p.1 - my).powi(2)).sqrt())
             .sum::<f64>()
             / n as f64;
-        let s = if d > 0.0 { std::f64::consts::SQRT_2 / d } else { 1.0 };
+        let s = if d > 0.0 {
+            std::f64::consts::SQRT_2 / d
+        } else {
+            1.0
+        };
         Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
     };
     let tp = normaliser(&mut plane.iter().copied());
@@ -53,28 +59,10 @@ pub fn homography(plane: &[(f64, f64)], pixels: &[Point2<f64>]) -> Option<Matrix
         let a = tp * Vector3::new(q.0, q.1, 1.0);
         let b = ti * Vector3::new(p.x, p.y, 1.0);
         let (x, y, u, v) = (a.x, a.y, b.x, b.y);
-        let r1 = SMatrix::<f64, 1, 9>::from_row_slice(&[
-            -x,
-            -y,
-            -1.0,
-            0.0,
-            0.0,
-            0.0,
-            u * x,
-            u * y,
-            u,
-        ]);
-        let r2 = SMatrix::<f64, 1, 9>::from_row_slice(&[
-            0.0,
-            0.0,
-            0.0,
-            -x,
-            -y,
-            -1.0,
-            v * x,
-            v * y,
-            v,
-        ]);
+        let r1 =
+            SMatrix::<f64, 1, 9>::from_row_slice(&[-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u]);
+        let r2 =
+            SMatrix::<f64, 1, 9>::from_row_slice(&[0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v]);
         ata += r1.transpose() * r1 + r2.transpose() * r2;
     }
     let eigen = ata.symmetric_eigen();
@@ -91,11 +79,11 @@ pub fn homography(plane: &[(f64, f64)], pixels: &[Point2<f64>]) -> Option<Matrix
     hm.iter().all(|v| v.is_finite()).then_some(hm)
 }
 
+/// Board-plane points (target `x`, `y`, m) and their pixels.
+type PlanePoints = (Vec<(f64, f64)>, Vec<Point2<f64>>);
+
 /// The board plane and pixels of a frame; errors when a corner is off the `z = 0` plane.
-fn plane_points(
-    index: usize,
-    frame: &Frame,
-) -> Result<(Vec<(f64, f64)>, Vec<Point2<f64>>), SolveError> {
+fn plane_points(index: usize, frame: &Frame) -> Result<PlanePoints, SolveError> {
     let mut plane = Vec::with_capacity(frame.corners.len());
     let mut pixels = Vec::with_capacity(frame.corners.len());
     for c in &frame.corners {
@@ -217,7 +205,11 @@ pub fn zhang_intrinsics(
         .collect();
     let degenerate = |tilts: &[f64]| SolveError::DegenerateIntrinsics {
         frames: homographies.len(),
-        min_tilt_deg: tilts.iter().copied().fold(f64::INFINITY, f64::min).min(90.0),
+        min_tilt_deg: tilts
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min)
+            .min(90.0),
         max_tilt_deg: tilts.iter().copied().fold(0.0, f64::max),
         coverage_percent,
     };
@@ -257,7 +249,7 @@ pub fn zhang_intrinsics(
     let second_smallest = svd.singular_values[order[order.len() - 2]];
     let tilt_spread = tilts.iter().copied().fold(0.0, f64::max)
         - tilts.iter().copied().fold(f64::INFINITY, f64::min);
-    if !(largest > 0.0) || second_smallest / largest < DEGENERACY_RATIO {
+    if largest.is_nan() || largest <= 0.0 || second_smallest / largest < DEGENERACY_RATIO {
         return Err(degenerate(&tilts));
     }
     if tilt_spread < MIN_TILT_SPREAD_DEG && tilts.iter().all(|t| *t < 10.0) {
@@ -324,7 +316,8 @@ pub fn calibrate_from_scratch(
             continue;
         }
         let (plane, pixels) = plane_points(index, frame)?;
-        let Some(pose) = homography(&plane, &pixels).and_then(|h| pose_from_homography(&h, &initial))
+        let Some(pose) =
+            homography(&plane, &pixels).and_then(|h| pose_from_homography(&h, &initial))
         else {
             continue;
         };

@@ -27,7 +27,9 @@ use nalgebra::{
 
 use super::diagnostics::flag_outliers;
 use super::refine::mount_uncertainty;
-use super::{Axby, RobustLoss, Setup, SolveError, Uncertainty};
+use super::{
+    Axby, AxbyData, Calibration, NoiseModel, PosePair, RobustLoss, Setup, SolveError, Uncertainty,
+};
 use crate::camera::model::{CameraModel, Distortion};
 use crate::geometry::Pose;
 
@@ -149,6 +151,46 @@ impl ReprojectionCalibration {
     pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
         let (camera, target) = self.setup.unknown_names();
         [(camera, self.camera_mount), (target, self.target_mount)]
+    }
+
+    /// This answer in the shape of a pose-space [`Calibration`] (so result files, summaries and
+    /// truth checks take either): the unknowns and covariance from here, the pose-space residuals
+    /// of these unknowns against the measured `pairs`, the outlier flags, solver report and
+    /// warnings of `pose_space` (the start), with this refinement's warnings first.
+    pub fn to_calibration(
+        &self,
+        pose_space: &Calibration,
+        pairs: &[PosePair],
+        noise: &NoiseModel,
+    ) -> Calibration {
+        let data = AxbyData::new(self.setup, pairs);
+        let residuals = super::diagnostics::residuals(
+            &data,
+            &Axby::from_mounts(&self.camera_mount, &self.target_mount),
+            noise,
+        );
+        let mut solver = pose_space.solver.clone();
+        solver.iterations += self.evaluations;
+        solver.converged &= self.converged;
+        let mut warnings = vec![format!(
+            "refined in reprojection space over {} corners: RMS {:.3} px (max {:.3} px)",
+            self.errors.corner_px.iter().map(Vec::len).sum::<usize>(),
+            self.errors.rms_px,
+            self.errors.max_px
+        )];
+        warnings.extend(self.warnings.iter().cloned());
+        warnings.extend(pose_space.warnings.iter().cloned());
+        Calibration {
+            setup: self.setup,
+            camera_mount: self.camera_mount,
+            target_mount: self.target_mount,
+            uncertainty: self.uncertainty.clone(),
+            residuals,
+            outliers: pose_space.outliers.clone(),
+            dropped: pose_space.dropped.clone(),
+            solver,
+            warnings,
+        }
     }
 }
 
@@ -489,14 +531,8 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
                 let pc = s.axby.x * w; // in the camera
                 let z = pc.z.max(1e-6);
                 let xn = Vector2::new(pc.x / z, pc.y / z);
-                let d_norm = Matrix2x3::new(
-                    1.0 / z,
-                    0.0,
-                    -pc.x / (z * z),
-                    0.0,
-                    1.0 / z,
-                    -pc.y / (z * z),
-                );
+                let d_norm =
+                    Matrix2x3::new(1.0 / z, 0.0, -pc.x / (z * z), 0.0, 1.0 / z, -pc.y / (z * z));
                 let d_dist = camera.distortion.jacobian(xn);
                 let k = self.weights[f][c].sqrt() * self.inv_sigma_px;
                 let d_pix = focal * d_dist * d_norm * k; // 2x3 d pixel / d point_in_camera
@@ -507,8 +543,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
                 j.fixed_view_mut::<2, 3>(row, 3).copy_from(&d_pix);
                 j.fixed_view_mut::<2, 3>(row, 6)
                     .copy_from(&(d_pix * d_phi_y_base * skew(&p)));
-                j.fixed_view_mut::<2, 3>(row, 9)
-                    .copy_from(&(d_pix * rxrb));
+                j.fixed_view_mut::<2, 3>(row, 9).copy_from(&(d_pix * rxrb));
                 if layout.intrinsics > 0 || layout.distortion > 0 {
                     let xd = camera.distortion.distort(xn);
                     if layout.intrinsics > 0 {
@@ -661,12 +696,10 @@ fn validate(
         if !super::pose_is_finite(&frame.base_from_flange) {
             return Err(bad(super::SampleProblem::NotFinite("T_base_flange")));
         }
-        if frame
-            .corners
-            .iter()
-            .any(|c| !(c.point_in_target.iter().all(|v| v.is_finite())
-                && c.pixel.iter().all(|v| v.is_finite())))
-        {
+        if frame.corners.iter().any(|c| {
+            !(c.point_in_target.iter().all(|v| v.is_finite())
+                && c.pixel.iter().all(|v| v.is_finite()))
+        }) {
             return Err(bad(super::SampleProblem::NotFinite("a board corner")));
         }
     }
