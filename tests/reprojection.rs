@@ -409,3 +409,104 @@ fn bad_input_is_a_clear_error() {
     .unwrap_err();
     assert!(error.to_string().contains("sample 1"), "{error}");
 }
+
+/// `franka_pose_rPe_N.yaml`: `T_base_flange` as `[tx, ty, tz, θux, θuy, θuz]` (m, rad).
+fn visp_robot_pose(path: &std::path::Path) -> Pose {
+    let value: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let v: Vec<f64> = value["data"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .map(|row| row[0].as_f64().unwrap())
+        .collect();
+    pose_from_rotvec(
+        Vector3::new(v[0], v[1], v[2]),
+        Vector3::new(v[3], v[4], v[5]),
+    )
+}
+
+#[test]
+fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
+    use handeye::target::pnp::estimate_board_pose;
+    use handeye::target::{detect::load_gray_image, DetectorOptions, TagDetector};
+    let folder = repo().join("../shared/datasets/visp_franka_data-eye-to-hand");
+    if !folder.is_dir() {
+        eprintln!("SKIP: {} is absent", folder.display());
+        return;
+    }
+    let board = Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml")).unwrap();
+    let camera =
+        CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
+    let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
+    let mut frames = Vec::new();
+    let mut pairs = Vec::new();
+    for n in 1..=8 {
+        let image = load_gray_image(&folder.join(format!("franka_image-{n}.png"))).unwrap();
+        let detection = detector.detect(&image).unwrap();
+        let pose = estimate_board_pose(&board, &camera, &detection).unwrap();
+        let robot = visp_robot_pose(&folder.join(format!("franka_pose_rPe_{n}.yaml")));
+        let id = format!("franka-{n}");
+        let mut pair = PosePair::new(robot, pose.camera_from_target);
+        pair.id = Some(id.clone());
+        pairs.push(pair);
+        frames.push(Frame {
+            base_from_flange: robot,
+            corners: detection
+                .correspondences(&board)
+                .into_iter()
+                .map(|(point_in_target, pixel)| Corner {
+                    point_in_target,
+                    pixel,
+                })
+                .collect(),
+            id: Some(id),
+        });
+    }
+    // Real data with a lone small tag: noise levels as the default solver settings assume.
+    let pose = solve::solve(Setup::EyeToHand, &pairs, &SolveOptions::default()).unwrap();
+    let reprojection = refine_reprojection(
+        Setup::EyeToHand,
+        &frames,
+        &camera,
+        &pose.camera_mount,
+        &pose.target_mount,
+        &ReprojectionOptions::default(),
+    )
+    .unwrap();
+    let before = reprojection_errors(
+        Setup::EyeToHand,
+        &frames,
+        &camera,
+        &pose.camera_mount,
+        &pose.target_mount,
+    );
+    for (n, (a, b)) in before
+        .frame_rms_px
+        .iter()
+        .zip(&reprojection.errors.frame_rms_px)
+        .enumerate()
+    {
+        eprintln!(
+            "franka-{}: reprojection RMS pose space {a:.3} px, reprojection space {b:.3} px",
+            n + 1
+        );
+    }
+    eprintln!(
+        "overall: pose space {:.3} px (max {:.3}), reprojection space {:.3} px (max {:.3})",
+        before.rms_px, before.max_px, reprojection.errors.rms_px, reprojection.errors.max_px
+    );
+    assert_eq!(reprojection.errors.frame_rms_px.len(), 8);
+    assert!(reprojection
+        .errors
+        .frame_rms_px
+        .iter()
+        .all(|v| v.is_finite()));
+    // The refinement starts at the pose-space answer and minimises this very error.
+    assert!(
+        reprojection.errors.rms_px <= before.rms_px * (1.0 + 1e-9),
+        "reprojection {:.4} px vs pose space {:.4} px",
+        reprojection.errors.rms_px,
+        before.rms_px
+    );
+}
