@@ -364,6 +364,92 @@ pub fn calibrate_from_scratch(
     Ok((pose_space, joint))
 }
 
+/// Tilt (degrees) from which a view counts as tilted for intrinsics.
+pub const TILTED_VIEW_DEG: f64 = 15.0;
+/// Share of the image's 4x4 cells the board corners must reach over all views, percent.
+pub const MIN_IMAGE_COVERAGE_PERCENT: f64 = 50.0;
+
+/// How well a set of views constrains the intrinsics: tilt variety and image coverage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntrinsicsCoverage {
+    /// Views tilted by at least [`TILTED_VIEW_DEG`].
+    pub tilted_views: usize,
+    /// Largest angle between the tilt directions (in the image plane) of two tilted views,
+    /// folded to 0..90°; near 0 means all tilts are about one axis.
+    pub tilt_direction_spread_deg: f64,
+    /// Largest tilt of any view, degrees.
+    pub max_tilt_deg: f64,
+    /// Share of the image's 4x4 cells reached by some board corner, percent.
+    pub coverage_percent: f64,
+}
+
+impl IntrinsicsCoverage {
+    /// Measures views given as `T_camera_target` with the board corners' pixels in each.
+    pub fn measure(
+        camera_from_target: &[Pose],
+        pixels: &[Vec<Point2<f64>>],
+        width: u32,
+        height: u32,
+    ) -> IntrinsicsCoverage {
+        let mut directions = Vec::new();
+        let mut max_tilt_deg: f64 = 0.0;
+        for pose in camera_from_target {
+            let normal = pose.rotation * Vector3::z();
+            let tilt = tilt_deg(pose);
+            max_tilt_deg = max_tilt_deg.max(tilt);
+            if tilt >= TILTED_VIEW_DEG {
+                directions.push(normal.y.atan2(normal.x));
+            }
+        }
+        let mut spread: f64 = 0.0;
+        for (i, a) in directions.iter().enumerate() {
+            for b in &directions[i + 1..] {
+                // Tilt axes are lines: fold the angle between directions to 0..90°.
+                let d = (a - b).rem_euclid(std::f64::consts::PI);
+                spread = spread.max(d.min(std::f64::consts::PI - d).to_degrees());
+            }
+        }
+        let mut cells = [[false; 4]; 4];
+        let (w, h) = (f64::from(width.max(1)), f64::from(height.max(1)));
+        for p in pixels.iter().flatten() {
+            let (cx, cy) = ((p.x + 0.5) / w * 4.0, (p.y + 0.5) / h * 4.0);
+            if (0.0..4.0).contains(&cx) && (0.0..4.0).contains(&cy) {
+                cells[cy as usize][cx as usize] = true;
+            }
+        }
+        let reached = cells.iter().flatten().filter(|c| **c).count();
+        IntrinsicsCoverage {
+            tilted_views: directions.len(),
+            tilt_direction_spread_deg: spread,
+            max_tilt_deg,
+            coverage_percent: 100.0 * reached as f64 / 16.0,
+        }
+    }
+
+    /// What is missing for the intrinsics to be estimated from these views, if anything.
+    pub fn problem(&self) -> Option<String> {
+        let mut missing = Vec::new();
+        if self.tilted_views < 2 || self.tilt_direction_spread_deg < 30.0 {
+            missing.push(format!(
+                "tilt variety ({} views tilted by ≥ {TILTED_VIEW_DEG:.0}°, largest tilt {:.1}°, tilt axes {:.0}° apart; add views with the board tilted by 20–45° about two different axes)",
+                self.tilted_views, self.max_tilt_deg, self.tilt_direction_spread_deg
+            ));
+        }
+        if self.coverage_percent < MIN_IMAGE_COVERAGE_PERCENT {
+            missing.push(format!(
+                "image coverage (board corners reach {:.0} % of the image's 4x4 cells, need {MIN_IMAGE_COVERAGE_PERCENT:.0} %; add views with the board near the image corners and edges)",
+                self.coverage_percent
+            ));
+        }
+        (!missing.is_empty()).then(|| {
+            format!(
+                "these views do not constrain the camera intrinsics: {}",
+                missing.join("; ")
+            )
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -418,5 +504,56 @@ mod tests {
         // Noise-free: the decomposition is exact to numerical precision.
         assert!((pose.translation.vector - truth.translation.vector).norm() < 1e-9);
         assert!(pose.rotation.angle_to(&truth.rotation) < 1e-9);
+    }
+
+    #[test]
+    fn coverage_says_what_a_set_of_views_lacks_for_intrinsics() {
+        let view = |rotvec: [f64; 3]| {
+            crate::geometry::pose_from_rotvec(Vector3::new(0.0, 0.0, 0.6), Vector3::from(rotvec))
+        };
+        // Corners spread over the whole 1280x720 image.
+        let spread: Vec<Point2<f64>> = (0..8)
+            .flat_map(|i| {
+                (0..8).map(move |j| Point2::new(80.0 + 160.0 * i as f64, 45.0 + 90.0 * j as f64))
+            })
+            .collect();
+        let centre: Vec<Point2<f64>> = spread
+            .iter()
+            .map(|p| Point2::new(560.0 + p.x / 8.0, 300.0 + p.y / 8.0))
+            .collect();
+        // Fronto-parallel views, corners only near the centre: both things are missing.
+        let flat = [
+            view([0.0, 0.0, 0.3]),
+            view([0.0, 0.0, -0.2]),
+            view([0.0, 0.0, 1.0]),
+        ];
+        let c = IntrinsicsCoverage::measure(
+            &flat,
+            &[centre.clone(), centre.clone(), centre],
+            1280,
+            720,
+        );
+        assert_eq!(c.tilted_views, 0);
+        let problem = c.problem().unwrap();
+        assert!(
+            problem.contains("tilt variety") && problem.contains("image coverage"),
+            "{problem}"
+        );
+        // Tilted by 30° about x and about y, corners across the image: constrained.
+        let tilted = [
+            view([0.52, 0.0, 0.0]),
+            view([0.0, 0.52, 0.0]),
+            view([0.0, 0.0, 0.0]),
+        ];
+        let c = IntrinsicsCoverage::measure(
+            &tilted,
+            &[spread.clone(), spread.clone(), spread],
+            1280,
+            720,
+        );
+        assert_eq!(c.tilted_views, 2);
+        assert!((c.tilt_direction_spread_deg - 90.0).abs() < 1e-6, "{c:?}");
+        assert_eq!(c.coverage_percent, 100.0);
+        assert!(c.problem().is_none(), "{c:?}");
     }
 }
