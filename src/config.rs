@@ -153,6 +153,10 @@ pub enum CameraConfig {
         /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
         #[serde(default)]
         hide_board_in_grabs: Vec<usize>,
+        /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
+        /// when the cell has no `intrinsics` (they are then estimated from the run).
+        #[serde(default)]
+        intrinsics: Option<PathBuf>,
     },
     /// Frames from an image folder, in plan order.
     Files {
@@ -384,7 +388,8 @@ impl Default for SessionConfig {
 struct RawConfig {
     setup: Setup,
     target: PathBuf,
-    intrinsics: PathBuf,
+    #[serde(default)]
+    intrinsics: Option<PathBuf>,
     robot: RobotConfig,
     camera: CameraConfig,
     nominal: BTreeMap<String, PoseYaml>,
@@ -411,8 +416,9 @@ pub struct CellConfig {
     pub setup: Setup,
     /// Board spec file.
     pub target: PathBuf,
-    /// Camera intrinsics file (camera_info YAML or Kalibr camchain).
-    pub intrinsics: PathBuf,
+    /// Camera intrinsics file (camera_info YAML or Kalibr camchain); `None`: estimate them from
+    /// the run's board corners (Zhang's closed form, then the joint reprojection refinement).
+    pub intrinsics: Option<PathBuf>,
     /// The arm.
     pub robot: RobotConfig,
     /// The camera.
@@ -638,7 +644,14 @@ impl CellConfig {
                 blur_sigma_px,
                 seed,
                 hide_board_in_grabs,
+                intrinsics,
             } => {
+                if raw.intrinsics.is_none() && intrinsics.is_none() {
+                    return Err(value_error(
+                        "camera.intrinsics",
+                        "the cell has no `intrinsics` (they will be estimated), so the sim camera needs its lens: `camera: {backend: sim, intrinsics: <camera_info.yaml>}`".into(),
+                    ));
+                }
                 if !(noise_sigma.is_finite()
                     && noise_sigma >= 0.0
                     && blur_sigma_px.is_finite()
@@ -654,6 +667,7 @@ impl CellConfig {
                     blur_sigma_px,
                     seed,
                     hide_board_in_grabs,
+                    intrinsics: intrinsics.as_deref().map(resolve),
                 }
             }
         };
@@ -705,7 +719,7 @@ impl CellConfig {
             file: file.to_path_buf(),
             setup: raw.setup,
             target: resolve(&raw.target),
-            intrinsics: resolve(&raw.intrinsics),
+            intrinsics: raw.intrinsics.as_deref().map(resolve),
             robot: raw.robot,
             camera,
             nominal,
@@ -717,6 +731,18 @@ impl CellConfig {
             solver: raw.solver,
             session: raw.session,
         })
+    }
+
+    /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
+    pub fn sim_lens(&self) -> Option<&Path> {
+        match &self.camera {
+            CameraConfig::Sim {
+                intrinsics: Some(lens),
+                ..
+            } => Some(lens),
+            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
+            CameraConfig::Files { .. } => None,
+        }
     }
 
     /// The robot's per-axis repeatability as (m, rad): the sim's configured noise, or the UR

@@ -241,7 +241,7 @@ fn reprojection_answer_is_closer_to_the_truth_than_the_pose_space_answer() {
 fn intrinsics_from_scratch_recover_the_camera_and_the_cell() {
     let s = scenario(21, 20, 0.2, (0.0, 0.0), false);
     let truth_camera = sim_camera();
-    let (pose, joint) = calibrate_from_scratch(
+    let scratch = calibrate_from_scratch(
         Setup::EyeInHand,
         &s.frames,
         truth_camera.width,
@@ -250,6 +250,7 @@ fn intrinsics_from_scratch_recover_the_camera_and_the_cell() {
         &ReprojectionOptions::default(),
     )
     .unwrap();
+    let (pose, joint) = (scratch.pose_space, scratch.joint);
     let c = joint.camera;
     eprintln!(
         "fx {:.3} fy {:.3} cx {:.3} cy {:.3} dist {:?}; RMS {:.4} px; pose-space start {:?}",

@@ -56,6 +56,7 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
         board: prepared.board.clone(),
         detector: prepared.detector_options(),
         stop: Arc::new(AtomicBool::new(false)),
+        estimate_intrinsics: !prepared.intrinsics_known,
     };
     session::run_session(
         setup,

@@ -63,8 +63,11 @@ pub struct PreparedCell {
     pub config: CellConfig,
     /// The board.
     pub board: Board,
-    /// The intrinsics.
+    /// The intrinsics (without configured intrinsics: the sim camera's lens, for planning and
+    /// rendering only — the run estimates the intrinsics).
     pub camera_model: CameraModel,
+    /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
+    pub intrinsics_known: bool,
     /// The arm's kinematics.
     pub arm: UrModel,
     /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
@@ -82,11 +85,22 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         file: config.target.clone(),
         source: Box::new(source),
     })?;
-    let camera_model =
-        CameraModel::load(&config.intrinsics).map_err(|source| CellError::Intrinsics {
-            file: config.intrinsics.clone(),
-            source: Box::new(source),
-        })?;
+    // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
+    // the run then records corners only and the intrinsics are estimated afterwards.
+    let intrinsics_known = config.intrinsics.is_some();
+    let model_file = match (&config.intrinsics, config.sim_lens()) {
+        (Some(file), _) => file.clone(),
+        (None, Some(lens)) => lens.to_path_buf(),
+        (None, None) => {
+            return Err(CellError::Backend(
+                "the config has no `intrinsics`: estimating them is available with the sim camera only (give `intrinsics:` for this camera)".into(),
+            ))
+        }
+    };
+    let camera_model = CameraModel::load(&model_file).map_err(|source| CellError::Intrinsics {
+        file: model_file.clone(),
+        source: Box::new(source),
+    })?;
     let arm =
         UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
     let start_joints = match &config.robot {
@@ -102,7 +116,7 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         },
         (None, None) => unreachable!("the config requires a plan source"),
     };
-    let report = check_plan(
+    let mut report = check_plan(
         &plan,
         &CheckContext {
             arm: &arm,
@@ -115,10 +129,20 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
             margin_px: config.session.image_margin_px,
         },
     );
+    if !intrinsics_known {
+        // The intrinsics come from this very run: a plan that cannot give them is refused.
+        let (blocking, notes): (Vec<String>, Vec<String>) = report
+            .notes
+            .drain(..)
+            .partition(|n| n.starts_with("these views do not constrain"));
+        report.plan_problems.extend(blocking);
+        report.notes = notes;
+    }
     Ok(PreparedCell {
         config,
         board,
         camera_model,
+        intrinsics_known,
         arm,
         start_joints,
         plan,

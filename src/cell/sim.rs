@@ -80,6 +80,7 @@ pub fn open(
         blur_sigma_px,
         seed: camera_seed,
         hide_board_in_grabs,
+        ..
     } = &config.camera
     else {
         return Err(CellError::Backend(

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
+use handeye::camera::model::CameraModel;
 use handeye::cell;
 use handeye::config::SolveSpace;
 use handeye::result::ResultFile;
@@ -30,10 +31,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let config_path = args.config.clone().unwrap_or(manifest.config);
     let prepared = cell::prepare(&config_path)
         .with_context(|| format!("reading {}", config_path.display()))?;
+    // A cell without configured intrinsics replays with the ones its run estimated.
+    let camera_model = if prepared.intrinsics_known {
+        prepared.camera_model
+    } else {
+        let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
+        CameraModel::load(&file).with_context(|| {
+            format!(
+                "the config has no intrinsics and the session has no estimated {}: solve the session first",
+                file.display()
+            )
+        })?
+    };
     let (dataset, visits) = replay::redetect(
         &folder,
         &prepared.board,
-        &prepared.camera_model,
+        &camera_model,
         prepared.detector_options(),
         prepared.config.session.max_reprojection_rms_px,
     )?;
@@ -49,7 +62,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     // Both answers (pose space and, by default, reprojection space) side by side.
     let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
-        .then_some((&prepared.board, &prepared.camera_model));
+        .then_some((&prepared.board, &camera_model));
     let solved = session::solve_session(
         dataset.setup,
         &dataset.pairs,

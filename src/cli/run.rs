@@ -84,6 +84,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         board: prepared.board.clone(),
         detector: prepared.detector_options(),
         stop,
+        estimate_intrinsics: !prepared.intrinsics_known,
     };
     let bar = progress_bar(plan.len() as u64);
     let mut on_event = |event: SessionEvent| match event {

@@ -34,6 +34,9 @@ pub struct SolvedSession {
     pub pose_space_errors: Option<ReprojectionErrors>,
     /// Ids (`pose-NNN`) of the frames the reprojection refinement used, in its order.
     pub frame_ids: Vec<String>,
+    /// The intrinsics estimated from the run (config without `intrinsics`), also written to the
+    /// session's `camera_info.yaml`.
+    pub estimated_camera: Option<CameraModel>,
     /// A short human summary.
     pub summary: String,
 }
@@ -61,21 +64,29 @@ pub fn solve_folder_in(
 
 /// Reads the folder's samples and visits (and, for the reprojection space, the config's board
 /// and intrinsics) and solves; writes nothing. Returns the dataset the answer was solved from.
+///
+/// When the config has no intrinsics they are estimated from the recorded corners (whatever
+/// `space` says: without intrinsics there are no board poses to solve in pose space alone).
 pub fn load_and_solve(
     folder: &SessionFolder,
     config: &CellConfig,
     space: SolveSpace,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
+    let board = || {
+        Board::load(&config.target)
+            .map_err(|e| SessionError::Solve(format!("board {}: {e}", config.target.display())))
+    };
+    let Some(intrinsics) = &config.intrinsics else {
+        return solve_from_scratch(folder, config, &board()?);
+    };
     let dataset =
         Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
     let visits = folder.read_visits()?;
     let (board, camera) = if space == SolveSpace::Reprojection {
-        let board = Board::load(&config.target)
-            .map_err(|e| SessionError::Solve(format!("board {}: {e}", config.target.display())))?;
-        let camera = CameraModel::load(&config.intrinsics).map_err(|e| {
-            SessionError::Solve(format!("intrinsics {}: {e}", config.intrinsics.display()))
+        let camera = CameraModel::load(intrinsics).map_err(|e| {
+            SessionError::Solve(format!("intrinsics {}: {e}", intrinsics.display()))
         })?;
-        (Some(board), Some(camera))
+        (Some(board()?), Some(camera))
     } else {
         (None, None)
     };
@@ -89,16 +100,121 @@ pub fn load_and_solve(
     Ok((solved, dataset))
 }
 
+/// File the estimated intrinsics are written to, in the session folder.
+pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
+
+fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
+    ReprojectionOptions {
+        pixel_sigma_px: config.solver.pixel_sigma_px,
+        robot_prior: config.solver.robot_corrections.then(|| {
+            let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
+            RobotPrior {
+                translation_sigma_m,
+                rotation_sigma_rad,
+            }
+        }),
+        ..ReprojectionOptions::default()
+    }
+}
+
+/// No intrinsics in the config: Zhang's closed form from the recorded corners, then the joint
+/// refinement; writes `camera_info.yaml` into the session.
+fn solve_from_scratch(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    board: &Board,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let manifest = folder.read_manifest()?;
+    let visits = folder.read_visits()?;
+    let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(&visits, board, false)?
+        .into_iter()
+        .unzip();
+    let first = visits
+        .iter()
+        .find(|v| !v.corners_px.is_empty())
+        .ok_or_else(|| SessionError::Solve("no frame of the session shows the board".into()))?;
+    let frame_path = folder.root().join(&first.frame);
+    let (width, height) = image::image_dimensions(&frame_path).map_err(|e| {
+        SessionError::Solve(format!(
+            "cannot read the size of {}: {e}",
+            frame_path.display()
+        ))
+    })?;
+    let options = config.solver.to_options();
+    let scratch = crate::solve::intrinsics::calibrate_from_scratch(
+        manifest.setup,
+        &frames,
+        width,
+        height,
+        &options,
+        &reprojection_options(config),
+    )
+    .map_err(|e| SessionError::Solve(format!("estimating the intrinsics: {e}")))?;
+    let camera_info = folder.root().join(CAMERA_INFO_FILE);
+    scratch
+        .joint
+        .camera
+        .save_camera_info(&camera_info)
+        .map_err(|e| SessionError::Solve(e.to_string()))?;
+    let p = &scratch.pose_space;
+    let pose_space_errors = reprojection_errors(
+        manifest.setup,
+        &frames,
+        &scratch.initial,
+        &p.camera_mount,
+        &p.target_mount,
+    );
+    let calibration = scratch
+        .joint
+        .to_calibration(p, &scratch.pairs, &options.noise);
+    let mut solved = SolvedSession {
+        calibration,
+        pose_space: scratch.pose_space.clone(),
+        reprojection: Some(scratch.joint.clone()),
+        pose_space_errors: Some(pose_space_errors),
+        frame_ids: ids,
+        estimated_camera: Some(scratch.joint.camera),
+        summary: String::new(),
+    };
+    let c = &scratch.joint.camera;
+    let i = &scratch.initial;
+    let mut notes = vec![format!(
+        "intrinsics estimated from {} frames (pose-space column: Zhang's closed form fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, no distortion): fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, {} {:?}; written to {}",
+        frames.len(),
+        i.fx, i.fy, i.cx, i.cy,
+        c.fx, c.fy, c.cx, c.cy,
+        "plumb_bob", c.distortion_coefficients(),
+        camera_info.display()
+    )];
+    if let Some(sigma) = scratch.joint.intrinsics_sigma_px {
+        notes.push(format!(
+            "intrinsics 1-sigma: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px",
+            sigma[0], sigma[1], sigma[2], sigma[3]
+        ));
+    }
+    solved.summary = solved.describe(&notes);
+    Ok((
+        solved,
+        Dataset {
+            setup: manifest.setup,
+            pairs: scratch.pairs,
+        },
+    ))
+}
+
 /// The reprojection refinement's frames from recorded visits: every accepted visit (one with a
-/// board pose) with its corners mapped to board points; corners of tags not on the board are
-/// skipped. Ids are `pose-NNN` like the samples'.
+/// board pose, or any visit with corners when `require_pose` is false) with its corners mapped to
+/// board points; corners of tags not on the board are skipped. Ids are `pose-NNN` like the
+/// samples'.
 pub fn frames_from_visits(
     visits: &[PoseVisit],
     board: &Board,
+    require_pose: bool,
 ) -> Result<Vec<(String, Frame)>, SessionError> {
     let mut frames = Vec::new();
     for visit in visits {
-        if visit.camera_from_target.is_none() || visit.corners_px.is_empty() {
+        let accepted = visit.camera_from_target.is_some() || !require_pose;
+        if !accepted || visit.corners_px.is_empty() {
             continue;
         }
         let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
@@ -154,6 +270,7 @@ pub fn solve_session(
         reprojection: None,
         pose_space_errors: None,
         frame_ids: Vec::new(),
+        estimated_camera: None,
         summary: String::new(),
     };
     let mut notes = Vec::new();
@@ -165,22 +282,12 @@ pub fn solve_session(
             .iter()
             .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
             .collect();
-        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board)?
+        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board, true)?
             .into_iter()
             .filter(|(id, _)| !dropped.contains(&id.as_str()))
             .unzip();
         if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
-            let ropts = ReprojectionOptions {
-                pixel_sigma_px: config.solver.pixel_sigma_px,
-                robot_prior: config.solver.robot_corrections.then(|| {
-                    let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
-                    RobotPrior {
-                        translation_sigma_m,
-                        rotation_sigma_rad,
-                    }
-                }),
-                ..ReprojectionOptions::default()
-            };
+            let ropts = reprojection_options(config);
             let p = &solved.pose_space;
             let reprojection = refine_reprojection(
                 setup,

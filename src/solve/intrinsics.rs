@@ -299,7 +299,8 @@ pub fn zhang_intrinsics(
 /// the homographies, the pose-space solve on those, then the joint reprojection refinement with
 /// intrinsics and `plumb_bob` distortion free (robot corrections as `options` say).
 ///
-/// Returns the pose-space answer (on the closed-form intrinsics) and the joint answer.
+/// Returns the closed-form camera, the board-pose pairs it gives, the pose-space answer on them
+/// and the joint answer.
 pub fn calibrate_from_scratch(
     setup: Setup,
     frames: &[Frame],
@@ -307,7 +308,7 @@ pub fn calibrate_from_scratch(
     height: u32,
     pose_options: &SolveOptions,
     options: &ReprojectionOptions,
-) -> Result<(Calibration, ReprojectionCalibration), SolveError> {
+) -> Result<FromScratch, SolveError> {
     let initial = zhang_intrinsics(frames, width, height)?;
     let mut pairs = Vec::new();
     let mut used = Vec::new();
@@ -361,7 +362,26 @@ pub fn calibrate_from_scratch(
             ..options.clone()
         },
     )?;
-    Ok((pose_space, joint))
+    Ok(FromScratch {
+        initial,
+        pairs,
+        pose_space,
+        joint,
+    })
+}
+
+/// What [`calibrate_from_scratch`] found.
+#[derive(Debug, Clone)]
+pub struct FromScratch {
+    /// Zhang's closed-form camera (no distortion).
+    pub initial: CameraModel,
+    /// Board poses from the homographies with the closed-form camera, paired with the robot poses
+    /// (frames with too few corners left out).
+    pub pairs: Vec<PosePair>,
+    /// The pose-space answer on those pairs.
+    pub pose_space: Calibration,
+    /// The joint reprojection answer with intrinsics and distortion fitted.
+    pub joint: ReprojectionCalibration,
 }
 
 /// Tilt (degrees) from which a view counts as tilted for intrinsics.
