@@ -513,7 +513,43 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         let s = self.state();
         let layout = self.layout;
+        let n_global = layout.robot_offset();
         let mut j = DMatrix::zeros(self.rows(), layout.len());
+        self.corner_jacobians(&s, |f, c, global, robot| {
+            let row = self.row_offsets[f] + 2 * c;
+            j.view_mut((row, 0), (2, n_global)).copy_from(global);
+            if layout.robot > 0 {
+                j.fixed_view_mut::<2, 6>(row, layout.robot_offset() + 6 * f)
+                    .copy_from(robot);
+            }
+        });
+        if let Some(prior) = self.prior {
+            for f in 0..self.frames.len() {
+                let row = self.corner_rows + 6 * f;
+                let o = layout.robot_offset() + 6 * f;
+                for i in 0..3 {
+                    j[(row + i, o + i)] = 1.0 / prior.rotation_sigma_rad;
+                    j[(row + 3 + i, o + 3 + i)] = 1.0 / prior.translation_sigma_m;
+                }
+            }
+        }
+        Some(j)
+    }
+}
+
+impl Problem<'_> {
+    /// Visits each corner's two (weighted) Jacobian rows: the global columns (pose, intrinsics,
+    /// distortion: 2 x `robot_offset`) and the 2 x 6 block of its frame's robot correction
+    /// (zero without a prior). Every corner touches only these columns: the block structure the
+    /// normal equations exploit.
+    fn corner_jacobians(
+        &self,
+        s: &State,
+        mut visit: impl FnMut(usize, usize, &DMatrix<f64>, &SMatrix<f64, 2, 6>),
+    ) {
+        let layout = self.layout;
+        let mut global = DMatrix::zeros(2, layout.robot_offset());
+        let mut robot = SMatrix::<f64, 2, 6>::zeros();
         let rx = s.axby.x.rotation.to_rotation_matrix().into_inner();
         let ry = s.axby.y.rotation.to_rotation_matrix().into_inner();
         let camera = &s.camera;
@@ -523,7 +559,6 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
             let rb = b.rotation.to_rotation_matrix().into_inner();
             let rxrb = rx * rb;
             let d_phi_y_base = -(rxrb * ry);
-            let row0 = self.row_offsets[f];
             for (c, corner) in frame.corners.iter().enumerate() {
                 let p = corner.point_in_target.coords;
                 let q = s.axby.y * corner.point_in_target; // in Y's parent frame
@@ -536,56 +571,158 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
                 let d_dist = camera.distortion.jacobian(xn);
                 let k = self.weights[f][c].sqrt() * self.inv_sigma_px;
                 let d_pix = focal * d_dist * d_norm * k; // 2x3 d pixel / d point_in_camera
-                let row = row0 + 2 * c;
                 let rxw = pc.coords - s.axby.x.translation.vector;
-                j.fixed_view_mut::<2, 3>(row, 0)
+                global
+                    .fixed_view_mut::<2, 3>(0, 0)
                     .copy_from(&(d_pix * (-skew(&rxw))));
-                j.fixed_view_mut::<2, 3>(row, 3).copy_from(&d_pix);
-                j.fixed_view_mut::<2, 3>(row, 6)
+                global.fixed_view_mut::<2, 3>(0, 3).copy_from(&d_pix);
+                global
+                    .fixed_view_mut::<2, 3>(0, 6)
                     .copy_from(&(d_pix * d_phi_y_base * skew(&p)));
-                j.fixed_view_mut::<2, 3>(row, 9).copy_from(&(d_pix * rxrb));
+                global
+                    .fixed_view_mut::<2, 3>(0, 9)
+                    .copy_from(&(d_pix * rxrb));
                 if layout.intrinsics > 0 || layout.distortion > 0 {
                     let xd = camera.distortion.distort(xn);
                     if layout.intrinsics > 0 {
                         let o = layout.intrinsics_offset();
-                        j[(row, o)] = xd.x * k;
-                        j[(row + 1, o + 1)] = xd.y * k;
-                        j[(row, o + 2)] = k;
-                        j[(row + 1, o + 3)] = k;
+                        global[(0, o)] = xd.x * k;
+                        global[(1, o)] = 0.0;
+                        global[(0, o + 1)] = 0.0;
+                        global[(1, o + 1)] = xd.y * k;
+                        global[(0, o + 2)] = k;
+                        global[(1, o + 2)] = 0.0;
+                        global[(0, o + 3)] = 0.0;
+                        global[(1, o + 3)] = k;
                     }
                     if layout.distortion > 0 {
                         let o = layout.distortion_offset();
                         let dc = distortion_coefficient_jacobian(&camera.distortion, xn);
                         for i in 0..layout.distortion {
-                            j[(row, o + i)] = camera.fx * dc[(0, i)] * k;
-                            j[(row + 1, o + i)] = camera.fy * dc[(1, i)] * k;
+                            global[(0, o + i)] = camera.fx * dc[(0, i)] * k;
+                            global[(1, o + i)] = camera.fy * dc[(1, i)] * k;
                         }
                     }
                 }
                 if layout.robot > 0 {
-                    let o = layout.robot_offset() + 6 * f;
                     // First order in the (tiny) correction itself; exact at zero correction.
                     let (d_phi, d_rho) = match self.setup {
                         Setup::EyeToHand => (-(rb * skew(&q.coords)), Matrix3::identity()),
                         Setup::EyeInHand => (skew(&w.coords), -rb),
                     };
-                    j.fixed_view_mut::<2, 3>(row, o)
+                    robot
+                        .fixed_view_mut::<2, 3>(0, 0)
                         .copy_from(&(d_pix * rx * d_phi));
-                    j.fixed_view_mut::<2, 3>(row, o + 3)
+                    robot
+                        .fixed_view_mut::<2, 3>(0, 3)
                         .copy_from(&(d_pix * rx * d_rho));
                 }
+                visit(f, c, &global, &robot);
             }
-            if let Some(prior) = self.prior {
+        }
+    }
+
+    /// The normal equations `JᵀJ` and `Jᵀr` at the current parameters, accumulated corner by
+    /// corner from the block structure (never forming the tall Jacobian), and `‖r‖²`.
+    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        let r = self.residuals()?;
+        let s = self.state();
+        let layout = self.layout;
+        let n = layout.len();
+        let n_global = layout.robot_offset();
+        let mut h = DMatrix::zeros(n, n);
+        let mut g = DVector::zeros(n);
+        self.corner_jacobians(&s, |f, c, global, robot| {
+            let row = self.row_offsets[f] + 2 * c;
+            let res = Vector2::new(r[row], r[row + 1]);
+            let gt = global.transpose();
+            let mut hgg = h.view_mut((0, 0), (n_global, n_global));
+            hgg += &gt * global;
+            let mut gg = g.rows_mut(0, n_global);
+            gg += &gt * res;
+            if layout.robot > 0 {
+                let o = layout.robot_offset() + 6 * f;
+                let cross = &gt * robot;
+                let mut hgf = h.view_mut((0, o), (n_global, 6));
+                hgf += &cross;
+                let mut hfg = h.view_mut((o, 0), (6, n_global));
+                hfg += cross.transpose();
+                let mut hff = h.fixed_view_mut::<6, 6>(o, o);
+                hff += robot.transpose() * robot;
+                let mut gf = g.fixed_rows_mut::<6>(o);
+                gf += robot.transpose() * res;
+            }
+        });
+        if let Some(prior) = self.prior {
+            for f in 0..self.frames.len() {
                 let row = self.corner_rows + 6 * f;
                 let o = layout.robot_offset() + 6 * f;
-                for i in 0..3 {
-                    j[(row + i, o + i)] = 1.0 / prior.rotation_sigma_rad;
-                    j[(row + 3 + i, o + 3 + i)] = 1.0 / prior.translation_sigma_m;
+                for i in 0..6 {
+                    let inv = if i < 3 {
+                        1.0 / prior.rotation_sigma_rad
+                    } else {
+                        1.0 / prior.translation_sigma_m
+                    };
+                    h[(o + i, o + i)] += inv * inv;
+                    g[o + i] += inv * r[row + i];
                 }
             }
         }
-        Some(j)
+        Some((h, g, r.norm_squared()))
     }
+}
+
+/// Most iterations of the block-structured LM.
+const MAX_NORMAL_ITERATIONS: usize = 100;
+
+/// Levenberg-Marquardt on the block-structured normal equations (Marquardt's diagonal scaling),
+/// for the problem with per-pose robot corrections: 12 + 9 + 6·frames parameters would make
+/// the crate's dense QR of the tall Jacobian ~50x slower than this.
+fn run_normal_lm(mut problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool), SolveError> {
+    let mut lambda = 1e-4;
+    let mut evaluations = 0;
+    for _ in 0..MAX_NORMAL_ITERATIONS {
+        let (h, g, cost) = problem
+            .normal_equations()
+            .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
+        evaluations += 1;
+        let mut accepted = false;
+        for _ in 0..12 {
+            let mut a = h.clone();
+            for i in 0..a.nrows() {
+                a[(i, i)] += lambda * h[(i, i)].max(1e-12);
+            }
+            let Some(cholesky) = a.cholesky() else {
+                lambda *= 10.0;
+                continue;
+            };
+            let step = -cholesky.solve(&g);
+            let saved = problem.params.clone();
+            problem.params += &step;
+            evaluations += 1;
+            match problem.residuals().map(|r| r.norm_squared()) {
+                Some(new_cost) if new_cost <= cost => {
+                    lambda = (lambda * 0.3).max(1e-12);
+                    reanchor(&mut problem);
+                    accepted = true;
+                    let relative = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
+                    if relative < 1e-12 {
+                        return Ok((problem, evaluations, true));
+                    }
+                    break;
+                }
+                _ => {
+                    problem.params = saved;
+                    lambda *= 10.0;
+                }
+            }
+        }
+        if !accepted {
+            // No step lowers the cost at any damping: at the minimum to machine precision.
+            return Ok((problem, evaluations, true));
+        }
+    }
+    Ok((problem, evaluations, false))
 }
 
 fn robust_weight(loss: RobustLoss, e: f64) -> f64 {
@@ -714,6 +851,9 @@ fn validate(
 }
 
 fn run_lm(problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool), SolveError> {
+    if problem.layout.robot > 0 {
+        return run_normal_lm(problem);
+    }
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(50)
         .minimize(problem);
@@ -821,10 +961,9 @@ pub fn refine_reprojection(
     let mut intrinsics_sigma_px = None;
     let mut warnings = Vec::new();
     if options.covariance {
-        let j = problem
-            .jacobian()
-            .ok_or(SolveError::RefinementFailed("jacobian"))?;
-        let jtj = j.transpose() * &j;
+        let (jtj, _, _) = problem
+            .normal_equations()
+            .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
         match jtj.cholesky() {
             Some(chol) => {
                 let cov = chol.inverse() * variance_factor;
@@ -1039,6 +1178,52 @@ mod tests {
                 // Central differences of smooth maps: relative error ~1e-6 at worst.
                 assert!(err < 1e-4, "{setup}: column {k}: relative error {err}");
             }
+        }
+    }
+
+    #[test]
+    fn block_normal_equations_match_the_dense_jacobian() {
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let frames = frames(setup);
+            let options = ReprojectionOptions {
+                refine_intrinsics: true,
+                refine_distortion: true,
+                robot_prior: Some(RobotPrior {
+                    translation_sigma_m: 1e-4,
+                    rotation_sigma_rad: 1e-4,
+                }),
+                ..ReprojectionOptions::default()
+            };
+            let mut problem = Problem::new(
+                setup,
+                &frames,
+                Axby::from_mounts(
+                    &pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
+                    &pose([0.5, -0.15, 0.0], [0.01, 0.02, 0.3]),
+                ),
+                camera(),
+                &options,
+            );
+            // Non-zero corrections so the prior's gradient is tested too.
+            let o = problem.layout.robot_offset();
+            problem.params[o + 1] = 2e-5;
+            problem.params[o + 10] = -3e-5;
+            problem.weights[2][5] = 0.5;
+            let j = problem.jacobian().unwrap();
+            let r = problem.residuals().unwrap();
+            let (h, g, cost) = problem.normal_equations().unwrap();
+            let dense_h = j.transpose() * &j;
+            let dense_g = j.transpose() * &r;
+            // Same sums in another order: agreement to rounding, relative to the largest entry.
+            assert!(
+                (&h - &dense_h).amax() <= 1e-9 * dense_h.amax(),
+                "{setup}: JᵀJ"
+            );
+            assert!(
+                (&g - &dense_g).amax() <= 1e-9 * dense_g.amax(),
+                "{setup}: Jᵀr"
+            );
+            assert!((cost - r.norm_squared()).abs() <= 1e-12 * cost);
         }
     }
 }
