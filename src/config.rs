@@ -272,8 +272,10 @@ pub struct SolverConfig {
     /// 1-sigma corner detection noise for the reprojection refinement, px.
     #[serde(default = "default_pixel_sigma_px")]
     pub pixel_sigma_px: f64,
-    /// Also fit a small correction of every robot pose, held by the robot's repeatability.
-    #[serde(default)]
+    /// Also fit a small correction of every robot pose, held by the robot's repeatability
+    /// (default on: with sub-pixel corners a frame's many corners see a 0.002° robot error, so
+    /// treating robot poses as exact over-trusts them).
+    #[serde(default = "yes")]
     pub robot_corrections: bool,
 }
 
@@ -343,7 +345,7 @@ impl Default for SolverConfig {
             drop_outliers: true,
             space: SolveSpace::default(),
             pixel_sigma_px: default_pixel_sigma_px(),
-            robot_corrections: false,
+            robot_corrections: true,
         }
     }
 }
