@@ -391,4 +391,11 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(rms < 0.12, "reprojection RMS {rms:.4} px");
     assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
     assert!(folder.result_path().is_file());
+    let summary: session::solve::ReprojectionSummary = serde_yaml_ng::from_str(
+        &std::fs::read_to_string(folder.root().join("reprojection.yaml")).unwrap(),
+    )
+    .unwrap();
+    assert!(summary.intrinsics_estimated);
+    assert_eq!(summary.frames.len(), prepared.plan.waypoints.len());
+    assert!(summary.reprojection_rms_px <= summary.pose_space_rms_px);
 }

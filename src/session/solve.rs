@@ -6,6 +6,7 @@
 use std::fmt::Write;
 
 use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
 
 use crate::camera::model::CameraModel;
 use crate::config::{CellConfig, SolveSpace};
@@ -59,6 +60,10 @@ pub fn solve_folder_in(
     ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
         .save(&folder.result_path())
         .map_err(|e| SessionError::Solve(e.to_string()))?;
+    if let Some(summary) = solved.reprojection_summary() {
+        let text = serde_yaml_ng::to_string(&summary).expect("the summary serialises");
+        folder.write_file(std::path::Path::new(REPROJECTION_FILE), text.as_bytes())?;
+    }
     Ok(solved)
 }
 
@@ -102,6 +107,46 @@ pub fn load_and_solve(
 
 /// File the estimated intrinsics are written to, in the session folder.
 pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
+/// File with both answers' reprojection errors per frame, in the session folder.
+pub const REPROJECTION_FILE: &str = "reprojection.yaml";
+
+/// Both answers' reprojection errors, per frame and overall (written as `reprojection.yaml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReprojectionSummary {
+    /// RMS over all corners of the pose-space answer, px.
+    pub pose_space_rms_px: f64,
+    /// RMS over all corners of the reprojection-space answer, px.
+    pub reprojection_rms_px: f64,
+    /// Largest corner error of the pose-space answer, px.
+    pub pose_space_max_px: f64,
+    /// Largest corner error of the reprojection-space answer, px.
+    pub reprojection_max_px: f64,
+    /// Corners used.
+    pub corners: usize,
+    /// Corners flagged as outliers by the reprojection refinement.
+    pub outlier_corners: usize,
+    /// Whether per-pose robot corrections were fitted.
+    pub robot_corrections: bool,
+    /// Whether the intrinsics were estimated by this solve.
+    pub intrinsics_estimated: bool,
+    /// Per frame.
+    pub frames: Vec<FrameRms>,
+}
+
+/// One frame's reprojection RMS under both answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameRms {
+    /// `pose-NNN`.
+    pub id: String,
+    /// Under the pose-space answer, px.
+    pub pose_space_rms_px: f64,
+    /// Under the reprojection-space answer, px.
+    pub reprojection_rms_px: f64,
+    /// Flagged as an outlier frame by the reprojection refinement.
+    pub outlier: bool,
+}
 
 fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
     ReprojectionOptions {
@@ -349,6 +394,33 @@ fn pose_line(pose: &Pose) -> String {
 }
 
 impl SolvedSession {
+    /// Both answers' reprojection errors, when the reprojection refinement ran.
+    pub fn reprojection_summary(&self) -> Option<ReprojectionSummary> {
+        let r = self.reprojection.as_ref()?;
+        let p = self.pose_space_errors.as_ref()?;
+        Some(ReprojectionSummary {
+            pose_space_rms_px: p.rms_px,
+            reprojection_rms_px: r.errors.rms_px,
+            pose_space_max_px: p.max_px,
+            reprojection_max_px: r.errors.max_px,
+            corners: r.errors.corner_px.iter().map(Vec::len).sum(),
+            outlier_corners: r.outlier_corners.len(),
+            robot_corrections: !r.corrected_base_from_flange.is_empty(),
+            intrinsics_estimated: self.estimated_camera.is_some(),
+            frames: self
+                .frame_ids
+                .iter()
+                .enumerate()
+                .map(|(i, id)| FrameRms {
+                    id: id.clone(),
+                    pose_space_rms_px: p.frame_rms_px[i],
+                    reprojection_rms_px: r.errors.frame_rms_px[i],
+                    outlier: r.outlier_frames.contains(&i),
+                })
+                .collect(),
+        })
+    }
+
     fn describe(&self, notes: &[String]) -> String {
         let Some(reprojection) = &self.reprojection else {
             let mut out = self.pose_space.summary();
