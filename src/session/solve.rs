@@ -68,7 +68,8 @@ pub fn solve_folder_in(
 }
 
 /// Reads the folder's samples and visits (and, for the reprojection space, the config's board
-/// and intrinsics) and solves; writes nothing. Returns the dataset the answer was solved from.
+/// and intrinsics) and solves; writes nothing, except `camera_info.yaml` when the intrinsics are
+/// estimated. Returns the dataset the answer was solved from.
 ///
 /// When the config has no intrinsics they are estimated from the recorded corners (whatever
 /// `space` says: without intrinsics there are no board poses to solve in pose space alone).
