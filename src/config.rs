@@ -162,6 +162,10 @@ pub enum CameraConfig {
         /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
         #[serde(default)]
         hide_board_in_grabs: Vec<usize>,
+        /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
+        /// when the cell has no `intrinsics` (they are then estimated from the run).
+        #[serde(default)]
+        intrinsics: Option<PathBuf>,
     },
     /// Frames from an image folder, in plan order.
     Files {
@@ -342,6 +346,43 @@ pub struct SolverConfig {
     /// Drop flagged outliers and solve again.
     #[serde(default = "yes")]
     pub drop_outliers: bool,
+    /// `reprojection` (default: refine over every detected corner when frames have corners) or
+    /// `pose` (the pose-space answer only).
+    #[serde(default)]
+    pub space: SolveSpace,
+    /// 1-sigma corner detection noise for the reprojection refinement, px.
+    #[serde(default = "default_pixel_sigma_px")]
+    pub pixel_sigma_px: f64,
+    /// Also fit a small correction of every robot pose, held by the robot's repeatability
+    /// (default on: with sub-pixel corners a frame's many corners see a 0.002° robot error, so
+    /// treating robot poses as exact over-trusts them).
+    #[serde(default = "yes")]
+    pub robot_corrections: bool,
+}
+
+/// Where the final answer is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolveSpace {
+    /// Pose space: one `T_camera_target` per frame, the `A = X·B·Y` solver.
+    Pose,
+    /// Reprojection space: every detected corner, started from the pose-space answer.
+    #[default]
+    Reprojection,
+}
+
+impl SolveSpace {
+    /// The YAML / CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveSpace::Pose => "pose",
+            SolveSpace::Reprojection => "reprojection",
+        }
+    }
+}
+
+fn default_pixel_sigma_px() -> f64 {
+    0.3
 }
 
 fn default_method() -> String {
@@ -383,6 +424,9 @@ impl Default for SolverConfig {
             rotation_sigma_deg: default_rotation_sigma_deg(),
             translation_sigma_mm: default_translation_sigma_mm(),
             drop_outliers: true,
+            space: SolveSpace::default(),
+            pixel_sigma_px: default_pixel_sigma_px(),
+            robot_corrections: true,
         }
     }
 }
@@ -427,7 +471,8 @@ impl Default for SessionConfig {
 struct RawConfig {
     setup: Setup,
     target: PathBuf,
-    intrinsics: PathBuf,
+    #[serde(default)]
+    intrinsics: Option<PathBuf>,
     robot: RobotConfig,
     camera: CameraConfig,
     nominal: BTreeMap<String, PoseYaml>,
@@ -455,8 +500,9 @@ pub struct CellConfig {
     pub setup: Setup,
     /// Board spec file.
     pub target: PathBuf,
-    /// Camera intrinsics file (camera_info YAML or Kalibr camchain).
-    pub intrinsics: PathBuf,
+    /// Camera intrinsics file (camera_info YAML or Kalibr camchain); `None`: estimate them from
+    /// the run's board corners (Zhang's closed form, then the joint reprojection refinement).
+    pub intrinsics: Option<PathBuf>,
     /// The arm.
     pub robot: RobotConfig,
     /// The camera.
@@ -726,7 +772,14 @@ impl CellConfig {
                 blur_sigma_px,
                 seed,
                 hide_board_in_grabs,
+                intrinsics,
             } => {
+                if raw.intrinsics.is_none() && intrinsics.is_none() {
+                    return Err(value_error(
+                        "camera.intrinsics",
+                        "the cell has no `intrinsics` (they will be estimated), so the sim camera needs its lens: `camera: {backend: sim, intrinsics: <camera_info.yaml>}`".into(),
+                    ));
+                }
                 if !(noise_sigma.is_finite()
                     && noise_sigma >= 0.0
                     && blur_sigma_px.is_finite()
@@ -742,6 +795,7 @@ impl CellConfig {
                     blur_sigma_px,
                     seed,
                     hide_board_in_grabs,
+                    intrinsics: intrinsics.as_deref().map(resolve),
                 }
             }
         };
@@ -779,12 +833,21 @@ impl CellConfig {
                 "rotation_sigma_deg and translation_sigma_mm must be positive".into(),
             ));
         }
+        if !(sv.pixel_sigma_px.is_finite() && sv.pixel_sigma_px > 0.0) {
+            return Err(value_error(
+                "solver.pixel_sigma_px",
+                format!(
+                    "expected a positive noise level in px, got {}",
+                    sv.pixel_sigma_px
+                ),
+            ));
+        }
 
         Ok(CellConfig {
             file: file.to_path_buf(),
             setup: raw.setup,
             target: resolve(&raw.target),
-            intrinsics: resolve(&raw.intrinsics),
+            intrinsics: raw.intrinsics.as_deref().map(resolve),
             robot,
             camera,
             nominal,
@@ -796,6 +859,33 @@ impl CellConfig {
             solver: raw.solver,
             session: raw.session,
         })
+    }
+
+    /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
+    pub fn sim_lens(&self) -> Option<&Path> {
+        match &self.camera {
+            CameraConfig::Sim {
+                intrinsics: Some(lens),
+                ..
+            } => Some(lens),
+            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
+            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } => None,
+        }
+    }
+
+    /// The robot's per-axis repeatability as (m, rad): the sim's configured noise, or the UR
+    /// e-series spec (±0.03 mm at 3 sigma for the UR5e, 0.002° as a conservative rotation).
+    pub fn robot_repeatability(&self) -> (f64, f64) {
+        match &self.robot {
+            RobotConfig::Sim {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } if *repeatability_mm > 0.0 && *repeatability_deg > 0.0 => {
+                (repeatability_mm * 1e-3, repeatability_deg.to_radians())
+            }
+            _ => (1e-5, 0.002f64.to_radians()),
+        }
     }
 
     /// The settle time as a duration.

@@ -22,7 +22,7 @@ use handeye::formats::import::{
 use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::result::{ResultFile, SolvedMounts};
 use handeye::robot::recorded::save_recorded_poses;
-use handeye::session::{self, SessionFolder, SessionSetup};
+use handeye::session::{self, SessionFolder};
 use handeye::solve::{self, Calibration, NoiseModel, PosePair, Setup, SolveOptions};
 use handeye::target::{Board, DetectorOptions};
 
@@ -200,17 +200,7 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     let outcome = session::run_session(
-        SessionSetup {
-            folder: folder.clone(),
-            setup: prepared.config.setup,
-            plan,
-            limits: prepared.config.limits,
-            settle: prepared.config.settle(),
-            max_reprojection_rms_px: prepared.config.session.max_reprojection_rms_px,
-            board: prepared.board.clone(),
-            detector: prepared.detector_options(),
-            stop: Arc::new(AtomicBool::new(false)),
-        },
+        prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false))),
         hardware.robot.as_mut(),
         hardware.camera.as_mut(),
         &mut |_| {},

@@ -50,8 +50,12 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
         )
         .unwrap();
         let solved = session::solve_folder(&folder, &prepared.config).unwrap();
-        let path =
-            write_session_report(&folder, Some(&prepared.config), solved.calibration).unwrap();
+        let path = write_session_report(
+            &folder,
+            Some(&prepared.config),
+            vec![("result".into(), solved.calibration)],
+        )
+        .unwrap();
         (dir, path)
     })
 }

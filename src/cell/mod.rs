@@ -72,8 +72,11 @@ pub struct PreparedCell {
     pub config: CellConfig,
     /// The board.
     pub board: Board,
-    /// The intrinsics.
+    /// The intrinsics (without configured intrinsics: the sim camera's lens, for planning and
+    /// rendering only — the run estimates the intrinsics).
     pub camera_model: CameraModel,
+    /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
+    pub intrinsics_known: bool,
     /// The arm's kinematics.
     pub arm: UrModel,
     /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
@@ -91,11 +94,22 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         file: config.target.clone(),
         source: Box::new(source),
     })?;
-    let camera_model =
-        CameraModel::load(&config.intrinsics).map_err(|source| CellError::Intrinsics {
-            file: config.intrinsics.clone(),
-            source: Box::new(source),
-        })?;
+    // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
+    // the run then records corners only and the intrinsics are estimated afterwards.
+    let intrinsics_known = config.intrinsics.is_some();
+    let model_file = match (&config.intrinsics, config.sim_lens()) {
+        (Some(file), _) => file.clone(),
+        (None, Some(lens)) => lens.to_path_buf(),
+        (None, None) => {
+            return Err(CellError::Backend(
+                "the config has no `intrinsics`: estimating them is available with the sim camera only (give `intrinsics:` for this camera)".into(),
+            ))
+        }
+    };
+    let camera_model = CameraModel::load(&model_file).map_err(|source| CellError::Intrinsics {
+        file: model_file.clone(),
+        source: Box::new(source),
+    })?;
     let arm =
         UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
     let start_joints = match &config.robot {
@@ -112,6 +126,7 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
             config,
             board,
             camera_model,
+            intrinsics_known,
             arm,
             start_joints,
             plan,
@@ -129,12 +144,14 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         config,
         board,
         camera_model,
+        intrinsics_known,
         arm,
         start_joints,
         plan,
         report: PlanReport {
             poses: Vec::new(),
             plan_problems: Vec::new(),
+            notes: Vec::new(),
         },
     };
     prepared.report = prepared.check();
@@ -143,7 +160,7 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
 
 impl PreparedCell {
     fn check(&self) -> PlanReport {
-        check_plan(
+        let mut report = check_plan(
             &self.plan,
             &CheckContext {
                 arm: &self.arm,
@@ -155,7 +172,17 @@ impl PreparedCell {
                 board: &self.board,
                 margin_px: self.config.session.image_margin_px,
             },
-        )
+        );
+        if !self.intrinsics_known {
+            // The intrinsics come from this very run: a plan that cannot give them is refused.
+            let (blocking, notes): (Vec<String>, Vec<String>) = report
+                .notes
+                .drain(..)
+                .partition(|n| n.starts_with("these views do not constrain"));
+            report.plan_problems.extend(blocking);
+            report.notes = notes;
+        }
+        report
     }
 
     /// Whether no real hardware moves (simulated or recorded robot).
@@ -276,6 +303,7 @@ impl PreparedCell {
             board: self.board.clone(),
             detector: self.detector_options(),
             stop,
+            estimate_intrinsics: !self.intrinsics_known,
         }
     }
 

@@ -57,6 +57,7 @@ pub fn plan(
         PlanReport {
             poses: checks,
             plan_problems,
+            notes: Vec::new(),
         },
     ))
 }

@@ -114,6 +114,7 @@ pub fn camera(
         blur_sigma_px,
         seed,
         hide_board_in_grabs,
+        ..
     } = &config.camera
     else {
         return Err(CellError::Backend(

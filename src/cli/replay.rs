@@ -5,10 +5,11 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
+use handeye::camera::model::CameraModel;
 use handeye::cell;
+use handeye::config::SolveSpace;
 use handeye::result::ResultFile;
-use handeye::session::{replay, SessionFolder};
-use handeye::solve;
+use handeye::session::{self, replay, SessionFolder};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]
@@ -30,10 +31,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let config_path = args.config.clone().unwrap_or(manifest.config);
     let prepared = cell::prepare(&config_path)
         .with_context(|| format!("reading {}", config_path.display()))?;
+    // A cell without configured intrinsics replays with the ones its run estimated.
+    let camera_model = if prepared.intrinsics_known {
+        prepared.camera_model
+    } else {
+        let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
+        CameraModel::load(&file).with_context(|| {
+            format!(
+                "the config has no intrinsics and the session has no estimated {}: solve the session first",
+                file.display()
+            )
+        })?
+    };
     let (dataset, visits) = replay::redetect(
         &folder,
         &prepared.board,
-        &prepared.camera_model,
+        &camera_model,
         prepared.detector_options(),
         prepared.config.session.max_reprojection_rms_px,
     )?;
@@ -47,16 +60,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let calibration = solve::solve(
+    // Both answers (pose space and, by default, reprojection space) side by side.
+    let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
+        .then_some((&prepared.board, &camera_model));
+    let solved = session::solve_session(
         dataset.setup,
         &dataset.pairs,
-        &prepared.config.solver.to_options(),
+        &visits,
+        vision,
+        &prepared.config,
     )?;
+    let calibration = &solved.calibration;
     let output = args
         .output
         .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
-    ResultFile::from_calibration(&calibration, &dataset.pairs).save(&output)?;
-    println!("{}", calibration.summary());
+    ResultFile::from_calibration(calibration, &dataset.pairs).save(&output)?;
+    println!("{}", solved.summary);
     if folder.result_path().is_file() {
         let recorded = ResultFile::load_mounts(&folder.result_path())?;
         let then = [recorded.camera_mount, recorded.target_mount];
@@ -69,10 +88,6 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(truth) = &prepared.config.simulation {
-        let solved = handeye::session::SolvedSession {
-            calibration,
-            summary: String::new(),
-        };
         println!("{}", solved.compare_with_truth(truth));
     }
     println!("wrote {}", output.display());

@@ -42,7 +42,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
                 result_path.display()
             )
         })?;
-    let path = write_session_report(&folder, config.as_ref(), calibration)?;
+    let label = format!("result.yaml ({})", calibration.solver.method.name());
+    let path = write_session_report(&folder, config.as_ref(), vec![(label, calibration)])?;
     println!("report: {}", path.display());
     Ok(())
 }

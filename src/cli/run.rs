@@ -48,6 +48,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     println!("{}", prepared.report);
     // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
     let adaptive = prepared.config.plan.adaptive;
+    if adaptive && !prepared.intrinsics_known {
+        bail!("an adaptive plan needs the camera intrinsics (it chooses poses from board poses as they come): give `intrinsics:` or use a fixed plan");
+    }
     if adaptive && args.resume.is_some() {
         bail!("--resume is not supported for adaptive plans: start a new run (the recorded session can still be replayed)");
     }
@@ -200,11 +203,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(truth) = &prepared.config.simulation {
         println!("{}", result.compare_with_truth(truth));
     }
-    match handeye::report::session::write_session_report(
-        &folder,
-        Some(&prepared.config),
-        result.calibration.clone(),
-    ) {
+    let mut answers = Vec::new();
+    if result.reprojection.is_some() {
+        answers.push(("reprojection space".to_string(), result.calibration.clone()));
+    }
+    answers.push(("pose space".to_string(), result.pose_space.clone()));
+    match handeye::report::session::write_session_report(&folder, Some(&prepared.config), answers) {
         Ok(path) => println!("report: {}", path.display()),
         // The calibration is saved; a report problem must not hide it.
         Err(e) => eprintln!("warning: the report could not be written: {e:#}"),

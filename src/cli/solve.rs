@@ -6,8 +6,10 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
+use handeye::config::{CellConfig, SolveSpace};
 use handeye::dataset::Dataset;
 use handeye::result::ResultFile;
+use handeye::session::{self, SessionFolder};
 use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
 
 /// Estimator choice on the command line.
@@ -32,11 +34,27 @@ pub enum RobustArg {
     Cauchy,
 }
 
+/// Solve space on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SpaceArg {
+    /// One board pose per frame, the `A = X·B·Y` solver.
+    Pose,
+    /// Every detected corner of every frame (needs a session folder), from the pose-space answer.
+    Reprojection,
+}
+
 /// Arguments of `handeye solve`.
 #[derive(Debug, Args)]
 pub struct SolveArgs {
-    /// Dataset file (setup + samples of T_base_flange and T_camera_target).
+    /// Dataset file (setup + samples of T_base_flange and T_camera_target), or a session folder.
     samples: PathBuf,
+    /// Session folder only: solve in this space (default: the session config's `solver.space`).
+    /// The pose-space options below apply to dataset files; a session uses its config's solver.
+    #[arg(long, value_enum)]
+    space: Option<SpaceArg>,
+    /// Session folder only: use this cell config instead of the one the session was run with.
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Write the result YAML here.
     #[arg(short, long)]
     output: Option<PathBuf>,
@@ -98,8 +116,43 @@ impl SolveArgs {
     }
 }
 
+/// `handeye solve <session>`: both answers side by side; writes `-o` or `<session>/result-<space>.yaml`.
+fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
+    let folder = SessionFolder::open(&args.samples)?;
+    let manifest = folder.read_manifest()?;
+    let config_path = args.config.clone().unwrap_or(manifest.config);
+    let config = CellConfig::load(&config_path)
+        .with_context(|| format!("reading {}", config_path.display()))?;
+    let space = match args.space {
+        Some(SpaceArg::Pose) => SolveSpace::Pose,
+        Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
+        None => config.solver.space,
+    };
+    let (solved, dataset) = session::load_and_solve(&folder, &config, space)
+        .with_context(|| format!("solving session {}", args.samples.display()))?;
+    println!("{}", solved.summary);
+    if let Some(truth) = &config.simulation {
+        println!("{}", solved.compare_with_truth(truth));
+    }
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
+    ResultFile::from_calibration(&solved.calibration, &dataset.pairs).save(&output)?;
+    println!("wrote {}", output.display());
+    Ok(())
+}
+
 /// Runs `handeye solve`.
 pub fn run(args: SolveArgs) -> anyhow::Result<()> {
+    if args.samples.is_dir() {
+        return run_session(&args);
+    }
+    anyhow::ensure!(
+        args.space != Some(SpaceArg::Reprojection),
+        "--space reprojection needs a session folder (the corners are recorded in <session>/poses/NNN.yaml); {} is a dataset file",
+        args.samples.display()
+    );
     let options = args.options()?;
     let dataset = Dataset::load(&args.samples)?;
     let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)

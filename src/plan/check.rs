@@ -64,6 +64,9 @@ pub struct PlanReport {
     pub poses: Vec<PoseCheck>,
     /// Problems of the plan as a whole (rotation diversity).
     pub plan_problems: Vec<String>,
+    /// Things to know that do not stop the plan (e.g. whether it could also estimate the
+    /// intrinsics: tilt variety and image coverage).
+    pub notes: Vec<String>,
 }
 
 impl PlanReport {
@@ -95,6 +98,8 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     let centre = board_centre(ctx.board);
     let mut previous = ctx.start_joints;
     let mut poses = Vec::with_capacity(plan.waypoints.len());
+    let mut views = Vec::with_capacity(plan.waypoints.len());
+    let mut view_pixels = Vec::with_capacity(plan.waypoints.len());
     for (index, waypoint) in plan.waypoints.iter().enumerate() {
         let base_from_flange = ctx.cell.resolve(waypoint, &centre, |q| ctx.arm.forward(q));
         let mut problems = Vec::new();
@@ -125,6 +130,13 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         let camera_from_target = ctx.cell.camera_from_target(&base_from_flange);
         let distance_m = (camera_from_target * centre).coords.norm();
         let image_margin_px = board_margin(ctx.camera, &camera_from_target, &board_points);
+        views.push(camera_from_target);
+        view_pixels.push(
+            board_points
+                .iter()
+                .filter_map(|p| ctx.camera.project(&(camera_from_target * p)))
+                .collect::<Vec<_>>(),
+        );
         if image_margin_px < ctx.margin_px {
             problems.push(if image_margin_px == f64::NEG_INFINITY {
                 "board is behind the camera".to_string()
@@ -150,9 +162,25 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     if let Err(e) = crate::solve::check_rotation_diversity(&flange_poses) {
         plan_problems.push(e.to_string());
     }
+    let coverage = crate::solve::intrinsics::IntrinsicsCoverage::measure(
+        &views,
+        &view_pixels,
+        ctx.camera.width,
+        ctx.camera.height,
+    );
+    let notes = match coverage.problem() {
+        Some(problem) => vec![format!(
+            "{problem} (fine when the intrinsics are known; needed when the config has none)"
+        )],
+        None => vec![format!(
+            "the views also constrain the camera intrinsics ({} tilted views, tilt axes {:.0}° apart, {:.0} % image coverage)",
+            coverage.tilted_views, coverage.tilt_direction_spread_deg, coverage.coverage_percent
+        )],
+    };
     PlanReport {
         poses,
         plan_problems,
+        notes,
     }
 }
 
@@ -263,6 +291,9 @@ impl fmt::Display for PlanReport {
         }
         for problem in &self.plan_problems {
             writeln!(f, "plan: {problem}")?;
+        }
+        for note in &self.notes {
+            writeln!(f, "note: {note}")?;
         }
         let total: f64 = self.poses.iter().map(|p| p.move_time_s).sum();
         write!(

@@ -198,24 +198,27 @@ fn thumbnail(
     Ok(bytes)
 }
 
-/// Writes `<session>/report.html` for a solved session: the calibration as the single answer,
-/// thumbnails and reprojection bars when the cell's board and intrinsics load, and a
-/// leave-one-out check. Returns the path written.
+/// Writes `<session>/report.html` for a solved session: the answers side by side (labelled;
+/// e.g. reprojection-space and pose-space), thumbnails and reprojection bars when the cell's
+/// board and intrinsics load, and a leave-one-out check. Returns the path written.
 pub fn write_session_report(
     folder: &SessionFolder,
     config: Option<&crate::config::CellConfig>,
-    calibration: Calibration,
+    answers: Vec<(String, Calibration)>,
 ) -> Result<std::path::PathBuf, ReportError> {
     let options = config.map(|c| c.solver.to_options()).unwrap_or_default();
     // The optics are optional: a session moved to another machine still gets a report.
     let board = config.and_then(|c| Board::load(&c.target).ok());
-    let camera = config.and_then(|c| CameraModel::load(&c.intrinsics).ok());
+    // Intrinsics from the config, else the ones a from-scratch run estimated into the session.
+    let camera_file = config
+        .and_then(|c| c.intrinsics.clone())
+        .or_else(|| Some(folder.root().join("camera_info.yaml")).filter(|p| p.is_file()));
+    let camera = camera_file.and_then(|file| CameraModel::load(&file).ok());
     let optics = match (&board, &camera) {
         (Some(board), Some(camera)) => Some(Optics { board, camera }),
         _ => None,
     };
-    let label = format!("pose-space ({})", calibration.solver.method.name());
-    let mut input = from_session(folder, vec![(label, calibration)], optics, options.noise)?;
+    let mut input = from_session(folder, answers, optics, options.noise)?;
     if let Ok(v) = crate::verify::leave_one_out(input.setup, &input.pairs, &options) {
         input.holdout = Some(super::HoldoutSummary {
             description: format!("leave-one-out over {} samples", v.summary.poses),

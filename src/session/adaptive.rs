@@ -76,6 +76,7 @@ pub fn run_adaptive_session(
             board: setup.board.clone(),
             detector: setup.detector.clone(),
             stop: setup.stop.clone(),
+            estimate_intrinsics: setup.estimate_intrinsics,
         };
         let index = plan.len() - 1;
         let step_outcome = run_session(step, robot, camera, on_event)?;

@@ -38,6 +38,9 @@ pub struct SessionSetup {
     pub detector: DetectorOptions,
     /// Set (e.g. by Ctrl-C) to stop the arm after the current move and end the run cleanly.
     pub stop: Arc<AtomicBool>,
+    /// The intrinsics are not known yet: record the detected corners only (no board pose, which
+    /// needs intrinsics); they are estimated from all frames after the run.
+    pub estimate_intrinsics: bool,
 }
 
 /// Something that happened, for progress displays.
@@ -98,7 +101,9 @@ pub fn run_session(
     let mut accepted: BTreeSet<usize> = BTreeSet::new();
     let mut failed_before: BTreeSet<usize> = BTreeSet::new();
     for visit in &previous {
-        if visit.camera_from_target.is_some() {
+        let corners_only =
+            setup.estimate_intrinsics && visit.rejected.is_none() && !visit.corners_px.is_empty();
+        if visit.camera_from_target.is_some() || corners_only {
             accepted.insert(visit.plan_index);
         } else {
             failed_before.insert(visit.plan_index);
@@ -110,7 +115,8 @@ pub fn run_session(
 
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
-    let worker = spawn_worker(&setup, *camera.model(), previous, job_rx, result_tx)?;
+    let camera_model = (!setup.estimate_intrinsics).then(|| *camera.model());
+    let worker = spawn_worker(&setup, camera_model, previous, job_rx, result_tx)?;
 
     let mut state = RunState {
         outcome: SessionOutcome::default(),
@@ -286,7 +292,7 @@ impl From<crate::robot::RobotError> for ErrorSource {
 
 fn spawn_worker(
     setup: &SessionSetup,
-    camera_model: CameraModel,
+    camera_model: Option<CameraModel>,
     previous: Vec<PoseVisit>,
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
@@ -312,25 +318,32 @@ fn spawn_worker(
         .name("detection".into())
         .spawn(move || {
             for job in jobs {
-                let visit = process(&job, &detector, &board, &camera_model, &folder, max_rms)
-                    .and_then(|visit| {
-                        if let (base_from_flange, Some(camera_from_target)) =
-                            visit.poses(&folder.root().join("poses"))?
-                        {
-                            samples.insert(
-                                visit.plan_index,
-                                sample_of(visit.plan_index, base_from_flange, camera_from_target),
-                            );
-                            let dataset = Dataset {
-                                setup: session_setup,
-                                pairs: samples.values().cloned().collect(),
-                            };
-                            dataset
-                                .save(&folder.samples_path())
-                                .map_err(|e| SessionError::Detection(e.to_string()))?;
-                        }
-                        Ok(visit)
-                    });
+                let visit = process(
+                    &job,
+                    &detector,
+                    &board,
+                    camera_model.as_ref(),
+                    &folder,
+                    max_rms,
+                )
+                .and_then(|visit| {
+                    if let (base_from_flange, Some(camera_from_target)) =
+                        visit.poses(&folder.root().join("poses"))?
+                    {
+                        samples.insert(
+                            visit.plan_index,
+                            sample_of(visit.plan_index, base_from_flange, camera_from_target),
+                        );
+                        let dataset = Dataset {
+                            setup: session_setup,
+                            pairs: samples.values().cloned().collect(),
+                        };
+                        dataset
+                            .save(&folder.samples_path())
+                            .map_err(|e| SessionError::Detection(e.to_string()))?;
+                    }
+                    Ok(visit)
+                });
                 if results
                     .send(JobResult {
                         plan_index: job.plan_index,
@@ -361,7 +374,7 @@ fn process(
     job: &Job,
     detector: &TagDetector,
     board: &Board,
-    camera_model: &CameraModel,
+    camera_model: Option<&CameraModel>,
     folder: &SessionFolder,
     max_rms: f64,
 ) -> Result<PoseVisit, SessionError> {
@@ -388,11 +401,12 @@ fn process(
 }
 
 /// Detects the board in `image`, estimates its pose and fills the detection fields of `visit`
-/// (a rejection reason instead of a pose when the board is missing or fits badly).
+/// (a rejection reason instead of a pose when the board is missing or fits badly). Without a
+/// camera model (intrinsics still unknown) only the corners are recorded.
 pub(crate) fn measure(
     detector: &TagDetector,
     board: &Board,
-    camera_model: &CameraModel,
+    camera_model: Option<&CameraModel>,
     image: &image::GrayImage,
     max_rms: f64,
     mut visit: PoseVisit,
@@ -410,6 +424,17 @@ pub(crate) fn measure(
                         .map(move |(k, c)| [t.id as f64, k as f64, c.x, c.y])
                 })
                 .collect();
+            let Some(camera_model) = camera_model else {
+                visit.tags = detection
+                    .tags
+                    .iter()
+                    .filter(|t| board.tag(t.id).is_some())
+                    .count();
+                if visit.tags == 0 {
+                    visit.rejected = Some("no tag of the board detected".to_string());
+                }
+                return visit;
+            };
             match estimate_board_pose(board, camera_model, &detection) {
                 Err(e) => visit.rejected = Some(e.to_string()),
                 Ok(board_pose) => {

@@ -18,7 +18,7 @@ use std::path::PathBuf;
 pub use adaptive::{run_adaptive_session, PlanSource};
 pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
 pub use folder::{PlannedPose, PoseVisit, SessionFolder, SessionManifest};
-pub use solve::{solve_folder, SolvedSession};
+pub use solve::{load_and_solve, solve_folder, solve_folder_in, solve_session, SolvedSession};
 
 use crate::camera::CameraError;
 use crate::geometry::PoseError;

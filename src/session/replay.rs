@@ -33,7 +33,7 @@ pub fn redetect(
         let visit = measure(
             &detector,
             board,
-            camera_model,
+            Some(camera_model),
             &image,
             max_rms,
             PoseVisit::new(

@@ -1,58 +1,540 @@
-//! Solving a session folder: `samples.yaml` in, `result.yaml` out, with a summary for people and,
-//! in the simulated cell, the error against the ground truth.
+//! Solving a session folder: `samples.yaml` and the recorded corners (`poses/NNN.yaml`) in,
+//! `result.yaml` out, with a summary for people that shows the pose-space and the
+//! reprojection-space answers side by side and, in the simulated cell, the error against the
+//! ground truth.
 
-use crate::config::CellConfig;
+use std::fmt::Write;
+
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::model::CameraModel;
+use crate::config::{CellConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::plan::CellTransforms;
 use crate::result::ResultFile;
-use crate::solve::{self, Calibration};
+use crate::solve::{
+    self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame, PosePair,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, Setup,
+};
+use crate::target::Board;
 
-use super::{SessionError, SessionFolder};
+use super::{PoseVisit, SessionError, SessionFolder};
 
 /// A solved session.
 pub struct SolvedSession {
-    /// The calibration.
+    /// The final calibration (the reprojection-space answer when it was computed).
     pub calibration: Calibration,
+    /// The pose-space answer (also the start of the reprojection refinement).
+    pub pose_space: Calibration,
+    /// The reprojection-space answer, when the space is `reprojection` and frames had corners.
+    pub reprojection: Option<ReprojectionCalibration>,
+    /// The pose-space answer's reprojection errors on the same frames (same order as
+    /// `reprojection.errors`), for the side-by-side comparison.
+    pub pose_space_errors: Option<ReprojectionErrors>,
+    /// Ids (`pose-NNN`) of the frames the reprojection refinement used, in its order.
+    pub frame_ids: Vec<String>,
+    /// The intrinsics estimated from the run (config without `intrinsics`), also written to the
+    /// session's `camera_info.yaml`.
+    pub estimated_camera: Option<CameraModel>,
     /// A short human summary.
     pub summary: String,
 }
 
-/// Solves the folder's `samples.yaml` with the config's solver settings and writes `result.yaml`.
+/// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
 pub fn solve_folder(
     folder: &SessionFolder,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
-    let dataset =
-        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
-    let options = config.solver.to_options();
-    let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
-        .map_err(|e| SessionError::Solve(e.to_string()))?;
-    ResultFile::from_calibration(&calibration, &dataset.pairs)
+    solve_folder_in(folder, config, config.solver.space)
+}
+
+/// Solves the folder in the given space and writes `result.yaml`.
+pub fn solve_folder_in(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    space: SolveSpace,
+) -> Result<SolvedSession, SessionError> {
+    let (solved, dataset) = load_and_solve(folder, config, space)?;
+    ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
         .save(&folder.result_path())
         .map_err(|e| SessionError::Solve(e.to_string()))?;
-    let summary = calibration.summary();
-    Ok(SolvedSession {
+    if let Some(summary) = solved.reprojection_summary() {
+        let text = serde_yaml_ng::to_string(&summary).expect("the summary serialises");
+        folder.write_file(std::path::Path::new(REPROJECTION_FILE), text.as_bytes())?;
+    }
+    Ok(solved)
+}
+
+/// Reads the folder's samples and visits (and, for the reprojection space, the config's board
+/// and intrinsics) and solves; writes nothing, except `camera_info.yaml` when the intrinsics are
+/// estimated. Returns the dataset the answer was solved from.
+///
+/// When the config has no intrinsics they are estimated from the recorded corners (whatever
+/// `space` says: without intrinsics there are no board poses to solve in pose space alone).
+pub fn load_and_solve(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let board = || {
+        Board::load(&config.target)
+            .map_err(|e| SessionError::Solve(format!("board {}: {e}", config.target.display())))
+    };
+    let Some(intrinsics) = &config.intrinsics else {
+        return solve_from_scratch(folder, config, &board()?);
+    };
+    let dataset =
+        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let visits = folder.read_visits()?;
+    let (board, camera) = if space == SolveSpace::Reprojection {
+        let camera = CameraModel::load(intrinsics).map_err(|e| {
+            SessionError::Solve(format!("intrinsics {}: {e}", intrinsics.display()))
+        })?;
+        (Some(board()?), Some(camera))
+    } else {
+        (None, None)
+    };
+    let solved = solve_session(
+        dataset.setup,
+        &dataset.pairs,
+        &visits,
+        board.as_ref().zip(camera.as_ref()),
+        config,
+    )?;
+    Ok((solved, dataset))
+}
+
+/// File the estimated intrinsics are written to, in the session folder.
+pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
+/// File with both answers' reprojection errors per frame, in the session folder.
+pub const REPROJECTION_FILE: &str = "reprojection.yaml";
+
+/// Both answers' reprojection errors, per frame and overall (written as `reprojection.yaml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReprojectionSummary {
+    /// RMS over all corners of the pose-space answer, px.
+    pub pose_space_rms_px: f64,
+    /// RMS over all corners of the reprojection-space answer, px.
+    pub reprojection_rms_px: f64,
+    /// Largest corner error of the pose-space answer, px.
+    pub pose_space_max_px: f64,
+    /// Largest corner error of the reprojection-space answer, px.
+    pub reprojection_max_px: f64,
+    /// Corners used.
+    pub corners: usize,
+    /// Corners flagged as outliers by the reprojection refinement.
+    pub outlier_corners: usize,
+    /// Whether per-pose robot corrections were fitted.
+    pub robot_corrections: bool,
+    /// Whether the intrinsics were estimated by this solve.
+    pub intrinsics_estimated: bool,
+    /// Per frame.
+    pub frames: Vec<FrameRms>,
+}
+
+/// One frame's reprojection RMS under both answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameRms {
+    /// `pose-NNN`.
+    pub id: String,
+    /// Under the pose-space answer, px.
+    pub pose_space_rms_px: f64,
+    /// Under the reprojection-space answer, px.
+    pub reprojection_rms_px: f64,
+    /// Flagged as an outlier frame by the reprojection refinement.
+    pub outlier: bool,
+}
+
+fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
+    ReprojectionOptions {
+        pixel_sigma_px: config.solver.pixel_sigma_px,
+        robot_prior: config.solver.robot_corrections.then(|| {
+            let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
+            RobotPrior {
+                translation_sigma_m,
+                rotation_sigma_rad,
+            }
+        }),
+        ..ReprojectionOptions::default()
+    }
+}
+
+/// No intrinsics in the config: Zhang's closed form from the recorded corners, then the joint
+/// refinement; writes `camera_info.yaml` into the session.
+fn solve_from_scratch(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    board: &Board,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let manifest = folder.read_manifest()?;
+    let visits = folder.read_visits()?;
+    let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(&visits, board, false)?
+        .into_iter()
+        .unzip();
+    let first = visits
+        .iter()
+        .find(|v| !v.corners_px.is_empty())
+        .ok_or_else(|| SessionError::Solve("no frame of the session shows the board".into()))?;
+    let frame_path = folder.root().join(&first.frame);
+    let (width, height) = image::image_dimensions(&frame_path).map_err(|e| {
+        SessionError::Solve(format!(
+            "cannot read the size of {}: {e}",
+            frame_path.display()
+        ))
+    })?;
+    let options = config.solver.to_options();
+    let scratch = crate::solve::intrinsics::calibrate_from_scratch(
+        manifest.setup,
+        &frames,
+        width,
+        height,
+        &options,
+        &reprojection_options(config),
+    )
+    .map_err(|e| SessionError::Solve(format!("estimating the intrinsics: {e}")))?;
+    let camera_info = folder.root().join(CAMERA_INFO_FILE);
+    scratch
+        .joint
+        .camera
+        .save_camera_info(&camera_info)
+        .map_err(|e| SessionError::Solve(e.to_string()))?;
+    // The fair comparison: board poses again by PnP with the estimated intrinsics, the pose-space
+    // solve on those, and the reprojection answer's residuals against the same poses.
+    let camera = scratch.joint.camera;
+    let mut pairs = Vec::with_capacity(frames.len());
+    for (id, frame) in ids.iter().zip(&frames) {
+        let correspondences: Vec<_> = frame
+            .corners
+            .iter()
+            .map(|c| (c.point_in_target, c.pixel))
+            .collect();
+        let tags = correspondences.len() / 4;
+        if let Ok(pose) =
+            crate::target::pnp::estimate_pose_from_points(&camera, &correspondences, tags.max(2))
+        {
+            let mut pair = PosePair::new(frame.base_from_flange, pose.camera_from_target);
+            pair.id = Some(id.clone());
+            pairs.push(pair);
+        }
+    }
+    let pose_space = solve::solve(manifest.setup, &pairs, &options).map_err(|e| {
+        SessionError::Solve(format!("pose space with the estimated intrinsics: {e}"))
+    })?;
+    let pose_space_errors = reprojection_errors(
+        manifest.setup,
+        &frames,
+        &camera,
+        &pose_space.camera_mount,
+        &pose_space.target_mount,
+    );
+    let calibration = scratch
+        .joint
+        .to_calibration(&pose_space, &pairs, &options.noise);
+    let mut solved = SolvedSession {
         calibration,
-        summary,
-    })
+        pose_space,
+        reprojection: Some(scratch.joint.clone()),
+        pose_space_errors: Some(pose_space_errors),
+        frame_ids: ids,
+        estimated_camera: Some(camera),
+        summary: String::new(),
+    };
+    let c = &scratch.joint.camera;
+    let i = &scratch.initial;
+    let mut notes = vec![format!(
+        "intrinsics estimated from {} frames (Zhang's closed form fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, no distortion; then jointly refined; the pose-space column uses the refined ones): fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, {} {:?}; written to {}",
+        frames.len(),
+        i.fx, i.fy, i.cx, i.cy,
+        c.fx, c.fy, c.cx, c.cy,
+        "plumb_bob", c.distortion_coefficients(),
+        camera_info.display()
+    )];
+    if let Some(sigma) = scratch.joint.intrinsics_sigma_px {
+        notes.push(format!(
+            "intrinsics 1-sigma: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px",
+            sigma[0], sigma[1], sigma[2], sigma[3]
+        ));
+    }
+    solved.summary = solved.describe(&notes);
+    Ok((
+        solved,
+        Dataset {
+            setup: manifest.setup,
+            pairs,
+        },
+    ))
+}
+
+/// The reprojection refinement's frames from recorded visits: every accepted visit (one with a
+/// board pose, or any visit with corners when `require_pose` is false) with its corners mapped to
+/// board points; corners of tags not on the board are skipped. Ids are `pose-NNN` like the
+/// samples'.
+pub fn frames_from_visits(
+    visits: &[PoseVisit],
+    board: &Board,
+    require_pose: bool,
+) -> Result<Vec<(String, Frame)>, SessionError> {
+    let mut frames = Vec::new();
+    for visit in visits {
+        let accepted = visit.camera_from_target.is_some() || !require_pose;
+        if !accepted || visit.corners_px.is_empty() {
+            continue;
+        }
+        let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
+        let (base_from_flange, _) = visit.poses(&file)?;
+        let mut corners = Vec::with_capacity(visit.corners_px.len());
+        for (k, &[id, index, u, v]) in visit.corners_px.iter().enumerate() {
+            let valid_id = id >= 0.0 && id.fract() == 0.0 && id <= f64::from(u32::MAX);
+            let valid_index = (0.0..4.0).contains(&index) && index.fract() == 0.0;
+            if !(valid_id && valid_index && u.is_finite() && v.is_finite()) {
+                return Err(SessionError::Record {
+                    file,
+                    path: format!("corners_px[{k}]"),
+                    message: format!(
+                        "expected [tag id, corner index 0..3, u px, v px], got [{id}, {index}, {u}, {v}]"
+                    ),
+                });
+            }
+            if let Some(points) = board.tag_corners_in_target(id as u32) {
+                corners.push(Corner {
+                    point_in_target: points[index as usize],
+                    pixel: Point2::new(u, v),
+                });
+            }
+        }
+        let id = format!("pose-{:03}", visit.plan_index);
+        frames.push((
+            id.clone(),
+            Frame {
+                base_from_flange,
+                corners,
+                id: Some(id),
+            },
+        ));
+    }
+    Ok(frames)
+}
+
+/// Solves pose pairs and, when `vision` (board and intrinsics) is given and the config's space is
+/// reprojection, refines over the visits' corners; no I/O.
+pub fn solve_session(
+    setup: Setup,
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    vision: Option<(&Board, &CameraModel)>,
+    config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    let options = config.solver.to_options();
+    let pose_space =
+        solve::solve(setup, pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let mut solved = SolvedSession {
+        calibration: pose_space.clone(),
+        pose_space,
+        reprojection: None,
+        pose_space_errors: None,
+        frame_ids: Vec::new(),
+        estimated_camera: None,
+        summary: String::new(),
+    };
+    let mut notes = Vec::new();
+    if let Some((board, camera)) = vision {
+        // Frames the pose-space solve dropped as outliers stay out here too.
+        let dropped: Vec<&str> = solved
+            .pose_space
+            .dropped
+            .iter()
+            .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
+            .collect();
+        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board, true)?
+            .into_iter()
+            .filter(|(id, _)| !dropped.contains(&id.as_str()))
+            .unzip();
+        if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
+            let ropts = reprojection_options(config);
+            let p = &solved.pose_space;
+            let reprojection = refine_reprojection(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+                &ropts,
+            )
+            .map_err(|e| SessionError::Solve(format!("reprojection refinement: {e}")))?;
+            solved.pose_space_errors = Some(reprojection_errors(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+            ));
+            solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
+            solved.reprojection = Some(reprojection);
+            solved.frame_ids = ids;
+        } else {
+            notes.push(
+                "fewer than 3 frames with recorded corners: pose-space answer only".to_string(),
+            );
+        }
+    }
+    solved.summary = solved.describe(&notes);
+    Ok(solved)
+}
+
+fn pose_line(pose: &Pose) -> String {
+    let t = pose.translation.vector * 1e3;
+    let rv = crate::geometry::rotvec(&pose.rotation);
+    format!(
+        "[{:.2}, {:.2}, {:.2}] mm, rotvec [{:.5}, {:.5}, {:.5}] rad",
+        t.x, t.y, t.z, rv.x, rv.y, rv.z
+    )
 }
 
 impl SolvedSession {
-    /// The error of each unknown against the simulator's truth, one line each.
+    /// Both answers' reprojection errors, when the reprojection refinement ran.
+    pub fn reprojection_summary(&self) -> Option<ReprojectionSummary> {
+        let r = self.reprojection.as_ref()?;
+        let p = self.pose_space_errors.as_ref()?;
+        Some(ReprojectionSummary {
+            pose_space_rms_px: p.rms_px,
+            reprojection_rms_px: r.errors.rms_px,
+            pose_space_max_px: p.max_px,
+            reprojection_max_px: r.errors.max_px,
+            corners: r.errors.corner_px.iter().map(Vec::len).sum(),
+            outlier_corners: r.outlier_corners.len(),
+            robot_corrections: !r.corrected_base_from_flange.is_empty(),
+            intrinsics_estimated: self.estimated_camera.is_some(),
+            frames: self
+                .frame_ids
+                .iter()
+                .enumerate()
+                .map(|(i, id)| FrameRms {
+                    id: id.clone(),
+                    pose_space_rms_px: p.frame_rms_px[i],
+                    reprojection_rms_px: r.errors.frame_rms_px[i],
+                    outlier: r.outlier_frames.contains(&i),
+                })
+                .collect(),
+        })
+    }
+
+    fn describe(&self, notes: &[String]) -> String {
+        let Some(reprojection) = &self.reprojection else {
+            let mut out = self.pose_space.summary();
+            for note in notes {
+                let _ = write!(out, "\nnote: {note}");
+            }
+            return out;
+        };
+        let pose_errors = self
+            .pose_space_errors
+            .as_ref()
+            .expect("set with the reprojection answer");
+        let mut out = self.calibration.summary();
+        let p = &self.pose_space;
+        let c = &self.calibration;
+        let _ = writeln!(out, "\n\nboth answers side by side:");
+        let _ = writeln!(
+            out,
+            "{:<34} {:>14} {:>14}",
+            "", "pose space", "reprojection"
+        );
+        let row = |out: &mut String, name: &str, a: f64, b: f64, unit: &str| {
+            let _ = writeln!(out, "{name:<34} {a:>11.4} {unit:<2} {b:>11.4} {unit:<2}");
+        };
+        row(
+            &mut out,
+            "reprojection RMS",
+            pose_errors.rms_px,
+            reprojection.errors.rms_px,
+            "px",
+        );
+        row(
+            &mut out,
+            "reprojection max",
+            pose_errors.max_px,
+            reprojection.errors.max_px,
+            "px",
+        );
+        row(
+            &mut out,
+            "board pose rotation RMS",
+            p.residuals.rotation_rms_deg,
+            c.residuals.rotation_rms_deg,
+            "°",
+        );
+        row(
+            &mut out,
+            "board pose translation RMS",
+            p.residuals.translation_rms_mm,
+            c.residuals.translation_rms_mm,
+            "mm",
+        );
+        for ((key, a), (_, b)) in p.unknowns().iter().zip(c.unknowns().iter()) {
+            let _ = writeln!(out, "{key} pose space:   {}", pose_line(a));
+            let _ = writeln!(out, "{key} reprojection: {}", pose_line(b));
+            let _ = writeln!(
+                out,
+                "    the two differ by {:.3} mm, {:.4}°",
+                (a.translation.vector - b.translation.vector).norm() * 1e3,
+                a.rotation.angle_to(&b.rotation).to_degrees()
+            );
+        }
+        let _ = writeln!(
+            out,
+            "per-frame reprojection RMS, px (pose space / reprojection):"
+        );
+        let cells: Vec<String> = self
+            .frame_ids
+            .iter()
+            .zip(pose_errors.frame_rms_px.iter())
+            .zip(reprojection.errors.frame_rms_px.iter())
+            .enumerate()
+            .map(|(i, ((id, a), b))| {
+                let flag = if reprojection.outlier_frames.contains(&i) {
+                    " !"
+                } else {
+                    ""
+                };
+                format!("{id} {a:.3}/{b:.3}{flag}")
+            })
+            .collect();
+        for chunk in cells.chunks(4) {
+            let _ = writeln!(out, "  {}", chunk.join("   "));
+        }
+        for note in notes {
+            let _ = writeln!(out, "note: {note}");
+        }
+        out.trim_end().to_string()
+    }
+
+    /// The error of each unknown against the simulator's truth, one line each (both answers
+    /// when the reprojection refinement ran).
     pub fn compare_with_truth(&self, truth: &CellTransforms) -> String {
-        let [(camera_key, camera_mount), (target_key, target_mount)] = self.calibration.unknowns();
-        let line = |key: &str, estimate: &Pose, truth: &Pose| {
+        let line = |label: &str, key: &str, estimate: &Pose, truth: &Pose| {
             format!(
-                "  {key}: error {:.3} mm, {:.4}° against the simulator's ground truth",
+                "  {key}{label}: error {:.3} mm, {:.4}° against the simulator's ground truth",
                 (estimate.translation.vector - truth.translation.vector).norm() * 1e3,
                 estimate.rotation.angle_to(&truth.rotation).to_degrees()
             )
         };
-        format!(
-            "ground truth check:\n{}\n{}",
-            line(camera_key, &camera_mount, &truth.camera_mount),
-            line(target_key, &target_mount, &truth.target_mount)
-        )
+        let mut lines = vec!["ground truth check:".to_string()];
+        let mut answers = vec![("", &self.calibration)];
+        if self.reprojection.is_some() {
+            answers = vec![
+                (" (pose space)", &self.pose_space),
+                (" (reprojection)", &self.calibration),
+            ];
+        }
+        for (label, calibration) in answers {
+            let [(camera_key, camera_mount), (target_key, target_mount)] = calibration.unknowns();
+            lines.push(line(label, camera_key, &camera_mount, &truth.camera_mount));
+            lines.push(line(label, target_key, &target_mount, &truth.target_mount));
+        }
+        lines.join("\n")
     }
 }

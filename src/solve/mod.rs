@@ -15,8 +15,10 @@
 
 pub mod closed_form;
 pub mod diagnostics;
+pub mod intrinsics;
 pub mod iterative;
 pub mod refine;
+pub mod reprojection;
 
 use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
@@ -25,6 +27,10 @@ use crate::geometry::Pose;
 
 pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDiversity};
 pub use iterative::{IterativeOptions, IterativeOutcome};
+pub use reprojection::{
+    refine_reprojection, reprojection_errors, Corner, Frame, ReprojectionCalibration,
+    ReprojectionErrors, ReprojectionOptions, RobotPrior,
+};
 
 /// Which of the two cell layouts the data comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -490,6 +496,21 @@ pub enum SolveError {
     /// The closed form found no usable rotation.
     #[error("closed form failed: {0}")]
     ClosedFormFailed(&'static str),
+    /// The frames do not determine the camera intrinsics (e.g. all boards seen fronto-parallel).
+    #[error("the frames do not constrain the camera intrinsics: {frames} frames, board tilt to the image plane {min_tilt_deg:.1}°..{max_tilt_deg:.1}°, board corners cover {coverage_percent:.0} % of the image: add frames with the board tilted by 20–45° about two different axes (left/right and up/down), and frames where the board reaches the image corners")]
+    DegenerateIntrinsics {
+        /// Frames with enough corners.
+        frames: usize,
+        /// Smallest board tilt against the image plane over the frames, degrees (estimated).
+        min_tilt_deg: f64,
+        /// Largest board tilt, degrees (estimated).
+        max_tilt_deg: f64,
+        /// Share of the image's bounding box covered by corners of all frames, percent.
+        coverage_percent: f64,
+    },
+    /// The intrinsics could not be estimated from the board views.
+    #[error("intrinsics estimation failed: {0}")]
+    IntrinsicsFailed(String),
 }
 
 /// What is wrong with one sample.

@@ -1,0 +1,157 @@
+//! Speed of the reprojection-space refinement at the floor: 20 frames of the 6x6
+//! AprilGrid (144 corners each, 2880 in all), eye-in-hand, intrinsics and distortion free, started
+//! from a pose-space-like answer (1 mm / 0.1° off) and intrinsics 1 % off. Target: ≤ 200 ms.
+//! Also the same with intrinsics fixed, and with per-pose robot corrections on.
+
+use std::hint::black_box;
+use std::path::PathBuf;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nalgebra::{Matrix3, Point2, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+use handeye::camera::model::CameraModel;
+use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior, Setup};
+use handeye::target::Board;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn frames(camera: &CameraModel, flange_from_camera: &Pose, base_from_target: &Pose) -> Vec<Frame> {
+    let board = Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
+    let mut rng = StdRng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.2).unwrap();
+    let centre = Vector3::new(0.145, 0.145, 0.0);
+    (0..20)
+        .map(|_| {
+            let tilt = rng.random_range(0.1..0.5f64);
+            let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
+            let distance = rng.random_range(0.55..0.7);
+            let position = centre
+                + Vector3::new(
+                    tilt.sin() * azimuth.cos(),
+                    tilt.sin() * azimuth.sin(),
+                    tilt.cos(),
+                ) * distance;
+            let z = (centre - position).normalize();
+            let x = (Vector3::x() - z * z.x).normalize();
+            let rotation =
+                Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, z.cross(&x), z]));
+            let target_from_camera = Pose::from_parts(
+                Translation3::from(position),
+                UnitQuaternion::from_rotation_matrix(&rotation),
+            );
+            let camera_from_target = target_from_camera.inverse();
+            let corners = board
+                .tags()
+                .iter()
+                .flat_map(|t| board.tag_corners_in_target(t.id).unwrap())
+                .map(|p| {
+                    let px = camera.project(&(camera_from_target * p)).unwrap();
+                    Corner {
+                        point_in_target: p,
+                        pixel: Point2::new(
+                            px.x + noise.sample(&mut rng),
+                            px.y + noise.sample(&mut rng),
+                        ),
+                    }
+                })
+                .collect();
+            Frame {
+                base_from_flange: base_from_target
+                    * target_from_camera
+                    * flange_from_camera.inverse(),
+                corners,
+                id: None,
+            }
+        })
+        .collect()
+}
+
+fn reprojection(c: &mut Criterion) {
+    let camera = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    let flange_from_camera = pose_from_rotvec(
+        Vector3::new(0.0312, -0.0694, 0.0447),
+        Vector3::new(0.021, -0.016, 1.561),
+    );
+    let base_from_target = pose_from_rotvec(
+        Vector3::new(0.5034, -0.1467, 0.0021),
+        Vector3::new(0.012, -0.018, 0.297),
+    );
+    let frames = frames(&camera, &flange_from_camera, &base_from_target);
+    assert_eq!(
+        frames.iter().map(|f| f.corners.len()).sum::<usize>(),
+        20 * 144
+    );
+    let off = pose_from_rotvec(
+        Vector3::new(0.001, -0.0005, 0.0005),
+        Vector3::new(0.0017, 0.0, -0.001),
+    );
+    let start_camera = flange_from_camera * off;
+    let start_target = base_from_target * off;
+    let mut start_model = camera;
+    start_model.fx *= 1.01;
+    start_model.fy *= 0.99;
+    start_model.cx += 3.0;
+    start_model.cy -= 3.0;
+    let free = ReprojectionOptions {
+        refine_intrinsics: true,
+        refine_distortion: true,
+        ..ReprojectionOptions::default()
+    };
+    let mut group = c.benchmark_group("reprojection");
+    group.sample_size(20);
+    group.bench_function("20 frames 6x6, intrinsics + distortion free", |b| {
+        b.iter(|| {
+            refine_reprojection(
+                Setup::EyeInHand,
+                black_box(&frames),
+                &start_model,
+                &start_camera,
+                &start_target,
+                &free,
+            )
+            .unwrap()
+        })
+    });
+    group.bench_function("20 frames 6x6, intrinsics fixed", |b| {
+        b.iter(|| {
+            refine_reprojection(
+                Setup::EyeInHand,
+                black_box(&frames),
+                &camera,
+                &start_camera,
+                &start_target,
+                &ReprojectionOptions::default(),
+            )
+            .unwrap()
+        })
+    });
+    group.bench_function("20 frames 6x6, intrinsics free + robot corrections", |b| {
+        b.iter(|| {
+            refine_reprojection(
+                Setup::EyeInHand,
+                black_box(&frames),
+                &start_model,
+                &start_camera,
+                &start_target,
+                &ReprojectionOptions {
+                    robot_prior: Some(RobotPrior {
+                        translation_sigma_m: 2e-5,
+                        rotation_sigma_rad: 0.002f64.to_radians(),
+                    }),
+                    ..free.clone()
+                },
+            )
+            .unwrap()
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, reprojection);
+criterion_main!(benches);
