@@ -364,10 +364,14 @@ pub struct SolverConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SolveSpace {
-    /// Pose space: one `T_camera_target` per frame, the `A = X·B·Y` solver.
-    Pose,
-    /// Reprojection space: every detected corner, started from the pose-space answer.
+    /// Pose space: one `T_camera_target` per frame, the `A = X·B·Y` solver. The default: on the
+    /// rendered simulated cell it is as close to the truth as the reprojection answer or closer
+    /// (0.05–0.08 mm vs 0.04–0.11 mm over four seeds), so it stays the default until the pixel
+    /// fit is shown better there.
     #[default]
+    Pose,
+    /// Reprojection space: every detected corner, started from the pose-space answer (always
+    /// used when the intrinsics are estimated by the run).
     Reprojection,
 }
 

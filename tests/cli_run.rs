@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use handeye::dataset::Dataset;
 use handeye::result::ResultFile;
-use handeye::solve;
 
 fn handeye() -> Command {
     Command::new(env!("CARGO_BIN_EXE_handeye"))
@@ -97,7 +96,10 @@ fn killed_mid_run_resumes_from_the_last_sample_and_matches_a_solve_of_the_same_d
     // The final result equals an uninterrupted solve of the same data.
     let result = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
     let config = handeye::config::CellConfig::load(&config).unwrap();
-    let direct = solve::solve(dataset.setup, &dataset.pairs, &config.solver.to_options()).unwrap();
+    let folder = handeye::session::SessionFolder::open(&session).unwrap();
+    let (direct, _) =
+        handeye::session::load_and_solve(&folder, &config, config.solver.space).unwrap();
+    let direct = direct.calibration;
     assert!(
         (result.camera_mount.translation.vector - direct.camera_mount.translation.vector).norm()
             < 1e-12
