@@ -112,17 +112,27 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
     )
     .unwrap();
     assert!(again_both.reprojection.is_some());
+    // The replayed pose-space answer equals the run's; so does the reprojection answer when the
+    // run's solve space computed one.
+    let reprojection_pairs = solved.reprojection.is_some().then(|| {
+        again_both
+            .calibration
+            .unknowns()
+            .into_iter()
+            .zip(solved.calibration.unknowns())
+    });
     let pairs = again
         .unknowns()
         .into_iter()
         .zip(solved.pose_space.unknowns())
         .chain(
             again_both
-                .calibration
+                .pose_space
                 .unknowns()
                 .into_iter()
-                .zip(solved.calibration.unknowns()),
-        );
+                .zip(solved.pose_space.unknowns()),
+        )
+        .chain(reprojection_pairs.into_iter().flatten());
     for ((key, a), (_, b)) in pairs {
         let (a, b) = (&a, &b);
         let (mm, deg) = errors(a, b);
