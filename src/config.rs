@@ -12,6 +12,7 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::dataset::{parse_yaml, FileError};
 use crate::geometry::{PoseError, PoseYaml};
 use crate::plan::{CellTransforms, GenerateSpec};
 use crate::robot::{MotionLimits, WorkspaceBox};
@@ -29,25 +30,10 @@ pub const MAX_JOINT_ACCELERATION_DEG: f64 = 180.0;
 /// A config problem: the file, the key (YAML path) and what was expected.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("cannot read config {file}")]
-    Read {
-        /// The config file.
-        file: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A key is unknown, missing, or of the wrong type.
-    #[error("{file}: {path}: {message}")]
-    Shape {
-        /// The config file.
-        file: PathBuf,
-        /// YAML path of the problem (`.` for the document).
-        path: String,
-        /// What serde said.
-        message: String,
-    },
+    /// The file could not be read, or its YAML does not have the config's shape (unknown or
+    /// missing key, wrong type): the message names the file and the YAML path.
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A value is out of range or inconsistent.
     #[error("{file}: {key}: {problem}")]
     Value {
@@ -532,8 +518,8 @@ pub struct CellConfig {
 impl CellConfig {
     /// Reads and validates a cell config.
     pub fn load(file: &Path) -> Result<CellConfig, ConfigError> {
-        let text = std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
-            file: file.to_path_buf(),
+        let text = std::fs::read_to_string(file).map_err(|source| FileError::Read {
+            path: file.to_path_buf(),
             source,
         })?;
         Self::parse(&text, file)
@@ -541,13 +527,7 @@ impl CellConfig {
 
     /// Parses config YAML; relative paths resolve against `file`'s folder.
     pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
-        let deserializer = serde_yaml_ng::Deserializer::from_str(text);
-        let raw: RawConfig =
-            serde_path_to_error::deserialize(deserializer).map_err(|e| ConfigError::Shape {
-                file: file.to_path_buf(),
-                path: e.path().to_string(),
-                message: e.inner().to_string(),
-            })?;
+        let raw: RawConfig = parse_yaml(text, file)?;
         let folder = file.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| {
             if p.is_absolute() {

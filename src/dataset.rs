@@ -23,7 +23,8 @@ use crate::atomic_file::write_atomic;
 use crate::geometry::{PoseError, PoseYaml};
 use crate::solve::{PosePair, Setup};
 
-/// What went wrong reading or writing a dataset or result file.
+/// What went wrong reading or writing one of the tool's YAML files (dataset, result, cell
+/// config, plan, session records): the message names the file and the YAML path.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
     /// The file could not be read.

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+use crate::dataset::{parse_yaml, FileError};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
 use crate::solve::Setup;
@@ -45,25 +46,9 @@ pub struct Plan {
 /// Why a plan could not be read or is not safe to run.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
-    /// The plan file could not be read.
-    #[error("cannot read plan {file}")]
-    Read {
-        /// The plan file.
-        file: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// The plan file's YAML does not have the plan's shape.
-    #[error("{file}: {path}: {message}")]
-    Shape {
-        /// The plan file.
-        file: PathBuf,
-        /// YAML path of the problem.
-        path: String,
-        /// What serde said.
-        message: String,
-    },
+    /// The plan file could not be read, or its YAML does not have the plan's shape.
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A waypoint's values are wrong.
     #[error("{file}: {path}: {problem}")]
     Waypoint {
@@ -124,8 +109,8 @@ struct WaypointYaml {
 impl Plan {
     /// Reads a scripted plan from YAML, naming file and YAML path in every error.
     pub fn load(file: &Path) -> Result<Plan, PlanError> {
-        let text = std::fs::read_to_string(file).map_err(|source| PlanError::Read {
-            file: file.to_path_buf(),
+        let text = std::fs::read_to_string(file).map_err(|source| FileError::Read {
+            path: file.to_path_buf(),
             source,
         })?;
         Self::parse(&text, file)
@@ -133,13 +118,7 @@ impl Plan {
 
     /// Parses plan YAML; `file` is used in messages only.
     pub fn parse(text: &str, file: &Path) -> Result<Plan, PlanError> {
-        let deserializer = serde_yaml_ng::Deserializer::from_str(text);
-        let raw: PlanFile =
-            serde_path_to_error::deserialize(deserializer).map_err(|e| PlanError::Shape {
-                file: file.to_path_buf(),
-                path: e.path().to_string(),
-                message: e.inner().to_string(),
-            })?;
+        let raw: PlanFile = parse_yaml(text, file)?;
         if raw.waypoints.is_empty() {
             return Err(PlanError::Empty(file.to_path_buf()));
         }

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::atomic_file::write_atomic;
+use crate::dataset::{read_yaml, write_yaml};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::solve::Setup;
 
@@ -187,24 +188,11 @@ impl SessionFolder {
     }
 
     fn write_yaml<T: Serialize>(&self, path: &Path, value: &T) -> Result<(), SessionError> {
-        let text = serde_yaml_ng::to_string(value).expect("session records serialise");
-        write_atomic(path, text.as_bytes()).map_err(|source| SessionError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        Ok(write_yaml(value, path)?)
     }
 
     fn read_yaml<T: for<'de> Deserialize<'de>>(&self, path: &Path) -> Result<T, SessionError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let deserializer = serde_yaml_ng::Deserializer::from_str(&text);
-        serde_path_to_error::deserialize(deserializer).map_err(|e| SessionError::Record {
-            file: path.to_path_buf(),
-            path: e.path().to_string(),
-            message: e.inner().to_string(),
-        })
+        Ok(read_yaml(path)?)
     }
 }
 

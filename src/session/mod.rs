@@ -44,6 +44,9 @@ pub enum SessionError {
         #[source]
         source: std::io::Error,
     },
+    /// A session record could not be read or written, or does not have its shape.
+    #[error(transparent)]
+    File(#[from] crate::dataset::FileError),
     /// A session record is malformed.
     #[error("{file}: {path}: {message}")]
     Record {
