@@ -14,7 +14,6 @@ use serde::{Deserialize, Serialize};
 use crate::cell::PreparedCell;
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
-use crate::plan::check::{check_plan, CheckContext};
 use crate::plan::{generate::generate, GenerateSpec, Plan, Waypoint};
 use crate::session::{self, SessionError, SessionEvent, SessionFolder};
 use crate::solve::{self, PosePair, Setup, SolveError, SolveOptions};
@@ -235,19 +234,7 @@ pub fn holdout(
     let plan = Plan {
         waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect(),
     };
-    let report = check_plan(
-        &plan,
-        &CheckContext {
-            arm: &prepared.arm,
-            start_joints: prepared.start_joints,
-            cell: &prepared.config.nominal,
-            workspace: &prepared.config.workspace,
-            limits: &prepared.config.limits,
-            camera: &prepared.camera_model,
-            board: &prepared.board,
-            margin_px: prepared.config.session.image_margin_px,
-        },
-    );
+    let report = prepared.check_plan(&plan);
     // A verification needs only usable views: drop the ones that fail instead of refusing all.
     let validated: Vec<_> = report
         .poses

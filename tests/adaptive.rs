@@ -12,7 +12,6 @@ use std::path::PathBuf;
 
 use handeye::cell;
 use handeye::geometry::Pose;
-use handeye::plan::check::{check_plan, CheckContext};
 use handeye::plan::nbv::AdaptivePlanner;
 use handeye::plan::{generate, CellTransforms, GenerateSpec, Plan, Waypoint};
 use handeye::robot::Joints;
@@ -65,19 +64,7 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
     let plan = Plan {
         waypoints: generate(&spec).into_iter().map(Waypoint::LookAt).collect(),
     };
-    let report = check_plan(
-        &plan,
-        &CheckContext {
-            arm: &prepared.arm,
-            start_joints: prepared.start_joints,
-            cell: &prepared.config.nominal,
-            workspace: &prepared.config.workspace,
-            limits: &prepared.config.limits,
-            camera: &prepared.camera_model,
-            board: &prepared.board,
-            margin_px: prepared.config.session.image_margin_px,
-        },
-    );
+    let report = prepared.check_plan(&plan);
     let candidates: Vec<(Pose, Joints)> = report
         .poses
         .iter()

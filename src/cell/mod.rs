@@ -159,9 +159,11 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
 }
 
 impl PreparedCell {
-    fn check(&self) -> PlanReport {
-        let mut report = check_plan(
-            &self.plan,
+    /// Checks any plan against this cell (reach, limits, box, board in view, rotation spread)
+    /// from the arm's current start joints.
+    pub fn check_plan(&self, plan: &Plan) -> PlanReport {
+        check_plan(
+            plan,
             &CheckContext {
                 arm: &self.arm,
                 start_joints: self.start_joints,
@@ -172,7 +174,11 @@ impl PreparedCell {
                 board: &self.board,
                 margin_px: self.config.session.image_margin_px,
             },
-        );
+        )
+    }
+
+    fn check(&self) -> PlanReport {
+        let mut report = self.check_plan(&self.plan);
         if !self.intrinsics_known {
             // The intrinsics come from this very run: a plan that cannot give them is refused.
             let (blocking, notes): (Vec<String>, Vec<String>) = report

@@ -205,21 +205,7 @@ fn minimise(
         trace: RefCell::new(Vec::new()),
     };
     let (problem, report) = LevenbergMarquardt::new().minimize(problem);
-    let converged = match report.termination {
-        TerminationReason::Numerical(what) | TerminationReason::User(what) => {
-            return Err(SolveError::RefinementFailed(what))
-        }
-        TerminationReason::WrongDimensions(what) => return Err(SolveError::RefinementFailed(what)),
-        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
-            return Err(SolveError::RefinementFailed("empty problem"))
-        }
-        // The requested tolerance is below what floating point can show: at the optimum.
-        TerminationReason::NoImprovementPossible(_) => true,
-        TerminationReason::LostPatience => false,
-        TerminationReason::ResidualsZero
-        | TerminationReason::Orthogonal
-        | TerminationReason::Converged { .. } => true,
-    };
+    let converged = converged(&report.termination)?;
     let solution = problem.current();
     Ok(Run {
         solution,
@@ -415,6 +401,25 @@ pub fn mount_uncertainty(
         camera_mount: pose_sigma(&mapped.fixed_view::<6, 6>(0, 0).into()),
         target_mount: pose_sigma(&mapped.fixed_view::<6, 6>(6, 6).into()),
         variance_factor,
+    }
+}
+
+/// What an LM run's termination means: `Ok(true)` at the optimum, `Ok(false)` out of patience,
+/// an error when the problem itself was broken.
+pub(crate) fn converged(termination: &TerminationReason) -> Result<bool, SolveError> {
+    match termination {
+        TerminationReason::Numerical(what)
+        | TerminationReason::User(what)
+        | TerminationReason::WrongDimensions(what) => Err(SolveError::RefinementFailed(what)),
+        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
+            Err(SolveError::RefinementFailed("empty problem"))
+        }
+        // The requested tolerance is below what floating point can show: at the optimum.
+        TerminationReason::NoImprovementPossible(_) => Ok(true),
+        TerminationReason::LostPatience => Ok(false),
+        TerminationReason::ResidualsZero
+        | TerminationReason::Orthogonal
+        | TerminationReason::Converged { .. } => Ok(true),
     }
 }
 

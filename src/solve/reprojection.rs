@@ -21,7 +21,7 @@
 //!
 //! Pure: no I/O, no clocks. Depends on `geometry`, the camera model type and nalgebra only.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
     DMatrix, DVector, Dyn, Matrix2, Matrix2x3, Matrix3, Owned, Point2, Point3, SMatrix,
     Translation3, UnitQuaternion, Vector2, Vector3,
@@ -859,20 +859,7 @@ fn run_lm(problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool), SolveError
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(50)
         .minimize(problem);
-    let converged = match report.termination {
-        TerminationReason::Numerical(what) | TerminationReason::User(what) => {
-            return Err(SolveError::RefinementFailed(what))
-        }
-        TerminationReason::WrongDimensions(what) => return Err(SolveError::RefinementFailed(what)),
-        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
-            return Err(SolveError::RefinementFailed("empty problem"))
-        }
-        TerminationReason::NoImprovementPossible(_) => true,
-        TerminationReason::LostPatience => false,
-        TerminationReason::ResidualsZero
-        | TerminationReason::Orthogonal
-        | TerminationReason::Converged { .. } => true,
-    };
+    let converged = super::refine::converged(&report.termination)?;
     Ok((problem, report.number_of_evaluations, converged))
 }
 
