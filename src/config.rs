@@ -12,7 +12,7 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{parse_yaml, FileError};
+use crate::dataset::{parse_yaml, read_text, FileError};
 use crate::geometry::{PoseError, PoseYaml};
 use crate::plan::{CellTransforms, GenerateSpec};
 use crate::robot::{MotionLimits, WorkspaceBox};
@@ -518,11 +518,7 @@ pub struct CellConfig {
 impl CellConfig {
     /// Reads and validates a cell config.
     pub fn load(file: &Path) -> Result<CellConfig, ConfigError> {
-        let text = std::fs::read_to_string(file).map_err(|source| FileError::Read {
-            path: file.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&text, file)
+        Self::parse(&read_text(file)?, file)
     }
 
     /// Parses config YAML; relative paths resolve against `file`'s folder.

@@ -88,11 +88,15 @@ pub enum FileError {
 
 /// Reads a YAML file into `T`, naming the YAML path of any shape error.
 pub(crate) fn read_yaml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, FileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| FileError::Read {
+    parse_yaml(&read_text(path)?, path)
+}
+
+/// Reads a text file, naming it in the error.
+pub(crate) fn read_text(path: &Path) -> Result<String, FileError> {
+    std::fs::read_to_string(path).map_err(|source| FileError::Read {
         path: path.to_path_buf(),
         source,
-    })?;
-    parse_yaml(&text, path)
+    })
 }
 
 /// Parses YAML text into `T`; `path` is only used in errors.

@@ -23,8 +23,8 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::{read_yaml, write_yaml, FileError};
 use crate::geometry::{Pose, PoseRecord};
 use crate::solve::{
-    Calibration, Method, Phase, PosePair, PoseSigma, Residuals, Setup, SolverReport, TraceStep,
-    Uncertainty,
+    Calibration, CellTransforms, Method, Phase, PosePair, PoseSigma, Residuals, Setup,
+    SolverReport, TraceStep, Uncertainty,
 };
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
@@ -143,17 +143,6 @@ pub struct ResultFile {
     pub warnings: Vec<String>,
 }
 
-/// A result read back: the setup and the two unknowns.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SolvedMounts {
-    /// The layout.
-    pub setup: Setup,
-    /// eye_in_hand `T_flange_camera`, eye_to_hand `T_base_camera`.
-    pub camera_mount: Pose,
-    /// eye_in_hand `T_base_target`, eye_to_hand `T_flange_target`.
-    pub target_mount: Pose,
-}
-
 impl ResultFile {
     /// The file form of a calibration; `pairs` are the samples it was solved from (for ids).
     pub fn from_calibration(calibration: &Calibration, pairs: &[PosePair]) -> ResultFile {
@@ -237,7 +226,7 @@ impl ResultFile {
 
     /// The setup and both unknowns, checked: the setup's two keys present, the other two absent,
     /// every pose valid.
-    pub fn mounts(&self, path: &Path) -> Result<SolvedMounts, FileError> {
+    pub fn mounts(&self, path: &Path) -> Result<CellTransforms, FileError> {
         let (camera_key, target_key) = self.setup.unknown_names();
         let (camera, target, wrong) = match self.setup {
             Setup::EyeInHand => (
@@ -275,7 +264,7 @@ impl ResultFile {
                 problem,
             })
         };
-        Ok(SolvedMounts {
+        Ok(CellTransforms {
             setup: self.setup,
             camera_mount: get(camera, camera_key)?,
             target_mount: get(target, target_key)?,
@@ -283,7 +272,7 @@ impl ResultFile {
     }
 
     /// Reads a result file and returns its setup and both unknowns.
-    pub fn load_mounts(path: &Path) -> Result<SolvedMounts, FileError> {
+    pub fn load_mounts(path: &Path) -> Result<CellTransforms, FileError> {
         ResultFile::load(path)?.mounts(path)
     }
 

@@ -20,9 +20,10 @@ use handeye::formats::import::{
     read_visp_pose, scan_visp_folder, CsvOptions, CsvPoseForm, ImportError, VispOptions,
 };
 use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::result::{ResultFile, SolvedMounts};
+use handeye::result::ResultFile;
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::session::{self, SessionFolder};
+use handeye::solve::CellTransforms;
 use handeye::solve::{self, Calibration, NoiseModel, PosePair, Setup, SolveOptions};
 use handeye::target::{Board, DetectorOptions};
 
@@ -320,8 +321,8 @@ fn moveit_json_imports_and_solves_to_moveits_expected_camera_pose() {
 // ------------------------------------------------------------------------------------------
 // Exporters, parsed back
 
-fn mounts(setup: Setup) -> SolvedMounts {
-    SolvedMounts {
+fn mounts(setup: Setup) -> CellTransforms {
+    CellTransforms {
         setup,
         camera_mount: Pose::from_parts(
             Translation3::new(0.6591, -0.2493, 0.8302),
@@ -527,7 +528,7 @@ fn exports_match_hand_checked_fixtures() {
         Translation3::new(0.1, 0.2, 0.3),
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
     );
-    let m = SolvedMounts {
+    let m = CellTransforms {
         setup: Setup::EyeInHand,
         camera_mount: quarter,
         target_mount: Pose::identity(),

@@ -427,3 +427,36 @@ fn accept_loop(listener: TcpListener, shared: Arc<Shared>, serve: Server) {
         let _ = c.join();
     }
 }
+
+/// What one poll of a client socket brought.
+pub(crate) enum Poll {
+    /// New bytes were appended to the buffer.
+    Data,
+    /// Nothing arrived within the socket's read timeout.
+    Idle,
+    /// The client left, the mock is stopping, or the dropped-connection fault is active.
+    Closed,
+}
+
+/// Reads what a client sent into `buffer` (through `chunk`): the one read loop step shared by the
+/// RTDE, dashboard and script servers.
+pub(crate) fn poll_client(
+    stream: &mut std::net::TcpStream,
+    shared: &Shared,
+    buffer: &mut Vec<u8>,
+    chunk: &mut [u8],
+) -> Poll {
+    use std::io::{ErrorKind, Read};
+    if shared.stop.load(std::sync::atomic::Ordering::Relaxed) || shared.arm().connection_dropped() {
+        return Poll::Closed;
+    }
+    match stream.read(chunk) {
+        Ok(0) => Poll::Closed,
+        Ok(n) => {
+            buffer.extend_from_slice(&chunk[..n]);
+            Poll::Data
+        }
+        Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => Poll::Idle,
+        Err(_) => Poll::Closed,
+    }
+}

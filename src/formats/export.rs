@@ -13,14 +13,14 @@
 //! joint from parent link to child link). Numbers are printed with Rust's shortest round-trip
 //! formatting, so nothing is lost to printing. The camera frame is the optical frame (x right,
 //! y down, z forward): name its ROS id accordingly (`*_optical_frame`).
-//! Depends on `geometry`, `solve::Setup` and `result::SolvedMounts` only; writes no files.
+//! Depends on `geometry`, `solve::Setup` and `solve::CellTransforms` only; writes no files.
 
 use std::fmt::Write as _;
 
 use serde_json::json;
 
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::result::SolvedMounts;
+use crate::solve::CellTransforms;
 use crate::solve::Setup;
 
 /// An export form.
@@ -101,7 +101,7 @@ pub struct NamedTransform {
 }
 
 /// The two unknowns of a solved cell with their frame ids: camera mount first, target mount second.
-pub fn named_transforms(mounts: &SolvedMounts, ids: &FrameIds) -> [NamedTransform; 2] {
+pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [NamedTransform; 2] {
     let (camera_key, target_key) = mounts.setup.unknown_names();
     let (camera_parent, target_parent) = match mounts.setup {
         Setup::EyeInHand => (&ids.flange, &ids.base),
@@ -124,7 +124,7 @@ pub fn named_transforms(mounts: &SolvedMounts, ids: &FrameIds) -> [NamedTransfor
 }
 
 /// The text of `mounts` in `format`.
-pub fn export(mounts: &SolvedMounts, format: ExportFormat, ids: &FrameIds) -> String {
+pub fn export(mounts: &CellTransforms, format: ExportFormat, ids: &FrameIds) -> String {
     let transforms = named_transforms(mounts, ids);
     match format {
         ExportFormat::Ros2 => ros2(mounts.setup, &transforms),
@@ -281,8 +281,8 @@ mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
-    fn mounts(setup: Setup) -> SolvedMounts {
-        SolvedMounts {
+    fn mounts(setup: Setup) -> CellTransforms {
+        CellTransforms {
             setup,
             camera_mount: Pose::from_parts(
                 Translation3::new(0.05, -0.02, 0.11),

@@ -37,11 +37,6 @@ pub fn rotvec(rotation: &UnitQuaternion<f64>) -> Vector3<f64> {
     q.scaled_axis()
 }
 
-/// The rotation angle between two rotations, in radians, in [0, π].
-pub fn rotation_angle_between(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
-    a.angle_to(b)
-}
-
 /// The translation distance between two poses' origins, in metres.
 pub fn translation_distance(a: &Pose, b: &Pose) -> f64 {
     (a.translation.vector - b.translation.vector).norm()

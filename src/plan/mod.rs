@@ -17,10 +17,12 @@ use std::path::{Path, PathBuf};
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{parse_yaml, FileError};
+use crate::dataset::{parse_yaml, read_text, FileError};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
 use crate::solve::Setup;
+
+pub use crate::solve::CellTransforms;
 
 pub use generate::{generate, GenerateSpec};
 pub use lookat::LookAt;
@@ -109,11 +111,7 @@ struct WaypointYaml {
 impl Plan {
     /// Reads a scripted plan from YAML, naming file and YAML path in every error.
     pub fn load(file: &Path) -> Result<Plan, PlanError> {
-        let text = std::fs::read_to_string(file).map_err(|source| FileError::Read {
-            path: file.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&text, file)
+        Self::parse(&read_text(file)?, file)
     }
 
     /// Parses plan YAML; `file` is used in messages only.
@@ -217,19 +215,6 @@ impl WaypointYaml {
     }
 }
 
-/// The cell's two fixed transforms as far as they are known before calibrating (nominal values
-/// from a drawing or a tape measure, or the simulator's truth), used to turn views into flange
-/// poses and to predict what the camera will see.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CellTransforms {
-    /// Which setup the cell is.
-    pub setup: Setup,
-    /// eye_in_hand: `T_flange_camera`; eye_to_hand: `T_base_camera`.
-    pub camera_mount: Pose,
-    /// eye_in_hand: `T_base_target`; eye_to_hand: `T_flange_target`.
-    pub target_mount: Pose,
-}
-
 impl CellTransforms {
     /// The flange pose that puts the camera at `target_from_camera` relative to the board.
     pub fn base_from_flange_for_view(&self, target_from_camera: &Pose) -> Pose {
@@ -243,16 +228,6 @@ impl CellTransforms {
                 self.camera_mount * target_from_camera.inverse() * self.target_mount.inverse()
             }
         }
-    }
-
-    /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
-    pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
-        crate::solve::predict(
-            self.setup,
-            &self.camera_mount,
-            &self.target_mount,
-            base_from_flange,
-        )
     }
 
     /// Turns a waypoint into a flange pose (joint waypoints go through forward kinematics).

@@ -158,6 +158,18 @@ pub enum RobustLoss {
     Cauchy(f64),
 }
 
+impl RobustLoss {
+    /// The iteratively-reweighted-least-squares weight of a residual of `e` sigmas.
+    pub fn weight(self, e: f64) -> f64 {
+        match self {
+            RobustLoss::None => 1.0,
+            RobustLoss::Huber(k) if e <= k => 1.0,
+            RobustLoss::Huber(k) => k / e,
+            RobustLoss::Cauchy(k) => 1.0 / (1.0 + (e / k) * (e / k)),
+        }
+    }
+}
+
 /// Everything [`solve`] can be told.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolveOptions {
@@ -331,18 +343,52 @@ impl Calibration {
 
     /// Both unknowns with their YAML keys, camera mount first.
     pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
-        let (camera, target) = self.setup.unknown_names();
-        [(camera, self.camera_mount), (target, self.target_mount)]
+        self.transforms().unknowns()
+    }
+
+    /// The two solved transforms, named by setup.
+    pub fn transforms(&self) -> CellTransforms {
+        CellTransforms {
+            setup: self.setup,
+            camera_mount: self.camera_mount,
+            target_mount: self.target_mount,
+        }
     }
 
     /// The `T_camera_target` this calibration predicts for a robot pose `T_base_flange`.
     pub fn predict_camera_from_target(&self, base_from_flange: &Pose) -> Pose {
+        self.transforms().camera_from_target(base_from_flange)
+    }
+}
+
+/// The cell's two fixed transforms, named by setup: as known before calibrating (nominal, from a
+/// drawing or a tape measure), as simulated (ground truth), or as solved and read back from a
+/// result file. Plans turn views into flange poses with them (see `plan`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellTransforms {
+    /// Which setup the cell is.
+    pub setup: Setup,
+    /// eye_in_hand: `T_flange_camera`; eye_to_hand: `T_base_camera`.
+    pub camera_mount: Pose,
+    /// eye_in_hand: `T_base_target`; eye_to_hand: `T_flange_target`.
+    pub target_mount: Pose,
+}
+
+impl CellTransforms {
+    /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
+    pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
         predict(
             self.setup,
             &self.camera_mount,
             &self.target_mount,
             base_from_flange,
         )
+    }
+
+    /// Both transforms with their YAML keys, camera mount first.
+    pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
+        let (camera, target) = self.setup.unknown_names();
+        [(camera, self.camera_mount), (target, self.target_mount)]
     }
 }
 

@@ -168,20 +168,6 @@ fn whitened_norms(data: &AxbyData, s: &Axby, options: &SolveOptions) -> Vec<f64>
         .collect()
 }
 
-fn robust_weight(loss: RobustLoss, e: f64) -> f64 {
-    match loss {
-        RobustLoss::None => 1.0,
-        RobustLoss::Huber(k) => {
-            if e <= k {
-                1.0
-            } else {
-                k / e
-            }
-        }
-        RobustLoss::Cauchy(k) => 1.0 / (1.0 + (e / k) * (e / k)),
-    }
-}
-
 struct Run {
     solution: Axby,
     evaluations: usize,
@@ -237,10 +223,7 @@ pub fn refine(
     if options.robust != RobustLoss::None {
         for _ in 0..MAX_IRLS_ROUNDS {
             let norms = whitened_norms(data, &run.solution, options);
-            let new: Vec<f64> = norms
-                .iter()
-                .map(|&e| robust_weight(options.robust, e))
-                .collect();
+            let new: Vec<f64> = norms.iter().map(|&e| options.robust.weight(e)).collect();
             let change = new
                 .iter()
                 .zip(&robust)

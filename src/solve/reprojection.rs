@@ -727,20 +727,6 @@ fn run_normal_lm(mut problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool),
     Ok((problem, evaluations, false))
 }
 
-fn robust_weight(loss: RobustLoss, e: f64) -> f64 {
-    match loss {
-        RobustLoss::None => 1.0,
-        RobustLoss::Huber(k) => {
-            if e <= k {
-                1.0
-            } else {
-                k / e
-            }
-        }
-        RobustLoss::Cauchy(k) => 1.0 / (1.0 + (e / k) * (e / k)),
-    }
-}
-
 fn rms(values: impl Iterator<Item = f64>) -> f64 {
     let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
     if n == 0 {
@@ -909,7 +895,7 @@ pub fn refine_reprojection(
                 .iter()
                 .map(|f| {
                     f.iter()
-                        .map(|e| robust_weight(options.robust, e.norm() * problem.inv_sigma_px))
+                        .map(|e| options.robust.weight(e.norm() * problem.inv_sigma_px))
                         .collect()
                 })
                 .collect();

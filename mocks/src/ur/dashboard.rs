@@ -2,14 +2,13 @@
 //! queries ur_rtde sends on connect (PolyScope version, serial number, remote control) and the
 //! common commands a person or a driver uses (stop, play, safety status, unlock protective stop).
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::Write;
 use std::net::TcpStream;
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::arm::{SAFETY_EMERGENCY_STOP, SAFETY_PROTECTIVE_STOP};
-use super::Shared;
+use super::{poll_client, Poll, Shared};
 
 /// The reply to one dashboard command line; `None` closes the connection ("quit").
 fn reply(shared: &Shared, line: &str) -> Option<String> {
@@ -98,14 +97,10 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
     let mut buffer: Vec<u8> = Vec::new();
     let mut chunk = [0u8; 1024];
     loop {
-        if shared.stop.load(Ordering::Relaxed) || shared.arm().connection_dropped() {
-            return;
-        }
-        match stream.read(&mut chunk) {
-            Ok(0) => return,
-            Ok(n) => buffer.extend_from_slice(&chunk[..n]),
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => continue,
-            Err(_) => return,
+        match poll_client(&mut stream, &shared, &mut buffer, &mut chunk) {
+            Poll::Closed => return,
+            Poll::Idle => continue,
+            Poll::Data => {}
         }
         while let Some(end) = buffer.iter().position(|&b| b == b'\n') {
             let line = String::from_utf8_lossy(&buffer[..end]).to_string();

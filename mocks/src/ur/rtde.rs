@@ -5,14 +5,13 @@
 //! big-endian. Output fields are encoded with the sizes ur_rtde decodes them with (its own type
 //! table, not the types we announce), so the table below must match it exactly.
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::Write;
 use std::net::TcpStream;
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::arm::{Snapshot, REGISTERS};
-use super::Shared;
+use super::{poll_client, Poll, Shared};
 
 const REQUEST_PROTOCOL_VERSION: u8 = b'V';
 const GET_URCONTROL_VERSION: u8 = b'v';
@@ -227,14 +226,9 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
     let mut inputs: Vec<(u8, Vec<(String, FieldType)>)> = Vec::new();
     let mut started = false;
     loop {
-        if shared.stop.load(Ordering::Relaxed) || shared.arm().connection_dropped() {
-            return; // dropping the stream closes the socket
-        }
-        match stream.read(&mut chunk) {
-            Ok(0) => return,
-            Ok(n) => buffer.extend_from_slice(&chunk[..n]),
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
-            Err(_) => return,
+        // Returning drops the stream, which closes the socket; an idle poll still streams.
+        if let Poll::Closed = poll_client(&mut stream, &shared, &mut buffer, &mut chunk) {
+            return;
         }
         while buffer.len() >= 3 {
             let size = u16::from_be_bytes([buffer[0], buffer[1]]) as usize;

@@ -2,13 +2,11 @@
 //! `def ...():` ... `end` program starts the emulated control program; bytes are otherwise
 //! ignored (the real port also streams robot state, which ur_rtde does not read).
 
-use std::io::{ErrorKind, Read};
 use std::net::TcpStream;
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use super::Shared;
+use super::{poll_client, Poll, Shared};
 
 /// Whether `text` holds a complete program: a `def` line and a final `end` line.
 pub(crate) fn is_complete_program(text: &str) -> bool {
@@ -28,14 +26,10 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
     let mut buffer: Vec<u8> = Vec::new();
     let mut chunk = [0u8; 16384];
     loop {
-        if shared.stop.load(Ordering::Relaxed) || shared.arm().connection_dropped() {
-            return;
-        }
-        match stream.read(&mut chunk) {
-            Ok(0) => return,
-            Ok(n) => buffer.extend_from_slice(&chunk[..n]),
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => continue,
-            Err(_) => return,
+        match poll_client(&mut stream, &shared, &mut buffer, &mut chunk) {
+            Poll::Closed => return,
+            Poll::Idle => continue,
+            Poll::Data => {}
         }
         if is_complete_program(&String::from_utf8_lossy(&buffer)) {
             buffer.clear();
