@@ -15,7 +15,7 @@ use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::solve::intrinsics::{calibrate_from_scratch, zhang_intrinsics};
 use handeye::solve::{
     self, refine_reprojection, reprojection_errors, Corner, Frame, NoiseModel, PosePair,
-    ReprojectionOptions, RobotPrior, Setup, SolveError, SolveOptions,
+    ReprojectionCalibration, ReprojectionOptions, RobotPrior, Setup, SolveError, SolveOptions,
 };
 use handeye::target::pnp::estimate_pose_from_points;
 use handeye::target::Board;
@@ -345,6 +345,74 @@ fn robot_corrections_absorb_repeatability_error() {
     for (mm, deg) in errors(&corrected.camera_mount, &corrected.target_mount) {
         assert!(mm < 1.0 && deg < 0.1, "{mm:.3} mm, {deg:.4}°");
     }
+}
+
+/// Variance component estimation: started 5x off on every sigma, the fit finds the corner noise
+/// and the robot's repeatability the frames were made with, and weighs by them.
+#[test]
+fn noise_estimation_recovers_the_pixel_noise_and_the_robot_repeatability() {
+    let (pixel_sigma, robot_sigma) = (0.15, (0.05e-3, 0.005f64.to_radians()));
+    let camera = sim_camera();
+    let mut wrong_sum = 0.0;
+    let mut estimated_sum = 0.0;
+    for seed in 30..34 {
+        let s = scenario(seed, 20, pixel_sigma, robot_sigma, false);
+        let pose = solve::solve(Setup::EyeInHand, &s.pairs, &pose_options()).unwrap();
+        let wrong = ReprojectionOptions {
+            pixel_sigma_px: pixel_sigma * 5.0,
+            robot_prior: Some(RobotPrior {
+                translation_sigma_m: robot_sigma.0 / 5.0,
+                rotation_sigma_rad: robot_sigma.1 / 5.0,
+            }),
+            ..ReprojectionOptions::default()
+        };
+        let refine = |options: &ReprojectionOptions| {
+            refine_reprojection(
+                Setup::EyeInHand,
+                &s.frames,
+                &camera,
+                &pose.camera_mount,
+                &pose.target_mount,
+                options,
+            )
+            .unwrap()
+        };
+        let fixed = refine(&wrong);
+        let estimated = refine(&ReprojectionOptions {
+            estimate_noise: true,
+            ..wrong.clone()
+        });
+        let prior = estimated.robot_prior.unwrap();
+        eprintln!(
+            "seed {seed}: estimated {:.4} px, {:.4} mm, {:.5}° (truth {pixel_sigma} px, {} mm, {}°)",
+            estimated.pixel_sigma_px,
+            prior.translation_sigma_m * 1e3,
+            prior.rotation_sigma_rad.to_degrees(),
+            robot_sigma.0 * 1e3,
+            robot_sigma.1.to_degrees()
+        );
+        assert!((estimated.pixel_sigma_px / pixel_sigma - 1.0).abs() < 0.1);
+        for ratio in [
+            prior.translation_sigma_m / robot_sigma.0,
+            prior.rotation_sigma_rad / robot_sigma.1,
+        ] {
+            assert!(
+                (0.6..1.6).contains(&ratio),
+                "robot sigma {ratio:.2}x the truth"
+            );
+        }
+        assert!(estimated.converged);
+        let total = |c: &ReprojectionCalibration| -> f64 {
+            errors(&c.camera_mount, &c.target_mount)
+                .iter()
+                .map(|e| e.0)
+                .sum()
+        };
+        wrong_sum += total(&fixed);
+        estimated_sum += total(&estimated);
+    }
+    eprintln!("summed translation error: wrong fixed sigmas {wrong_sum:.4} mm, estimated {estimated_sum:.4} mm");
+    assert!(estimated_sum < wrong_sum);
 }
 
 #[test]

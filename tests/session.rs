@@ -411,55 +411,98 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(summary.reprojection_rms_px <= summary.pose_space_rms_px);
 }
 
-/// Issue 8's comparison on rendered frames: where the corner noise dominates (an exact arm, a
-/// noisy sensor) the fit over every corner is closer to the truth than the pose-space answer on
-/// the same frames. (Where the arm's repeatability dominates, both are level: that floor is the
-/// robot's, which no solve space can average away.)
-#[test]
-fn reprojection_space_beats_pose_space_on_the_same_rendered_frames_when_pixels_dominate() {
-    let mut pose_space_mm = 0.0;
-    let mut reprojection_mm = 0.0;
-    for seed in 1..=4u64 {
+/// Summed errors of both unknowns against the truth over seeded runs of the demo cell with the
+/// given config edits, on the same frames: `[pose space, reprojection]` × `(mm, °)`.
+fn both_spaces_over_seeds(
+    seeds: std::ops::RangeInclusive<u64>,
+    edits: &[(&str, &str)],
+) -> [(f64, f64); 2] {
+    let mut sums = [(0.0, 0.0); 2];
+    for seed in seeds {
         let dir = tempfile::tempdir().unwrap();
         let (camera_seed, robot_seed, plan_seed) = (
             format!("seed: {}", 10 + seed),
             format!("seed: {}", 20 + seed),
             format!("seed: {seed}}}"),
         );
-        let config = config_variant(
-            dir.path(),
-            "sim-cell.yaml",
-            &[
-                ("count: 20", "count: 14"),
-                ("repeatability_mm: 0.02", "repeatability_mm: 0.0"),
-                ("repeatability_deg: 0.002", "repeatability_deg: 0.0"),
-                ("noise_sigma: 2.0", "noise_sigma: 8.0"),
-                ("seed: 11", &camera_seed),
-                ("seed: 7", &robot_seed),
-                ("seed: 1}", &plan_seed),
-                (
-                    "space: pose}",
-                    "space: reprojection, pixel_sigma_px: 0.15, robot_corrections: false}",
-                ),
-            ],
-        );
+        let mut all = vec![
+            ("seed: 11", camera_seed.as_str()),
+            ("seed: 7", robot_seed.as_str()),
+            ("seed: 1}", plan_seed.as_str()),
+        ];
+        all.extend_from_slice(edits);
+        let config = config_variant(dir.path(), "sim-cell.yaml", &all);
         let prepared = cell::prepare(&config).unwrap();
+        assert_eq!(
+            prepared.config.solver.space,
+            handeye::config::SolveSpace::Reprojection
+        );
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
         run(&prepared, &folder).unwrap();
         let solved = session::solve_folder(&folder, &prepared.config).unwrap();
         assert!(solved.reprojection.is_some());
         let truth = prepared.config.simulation.unwrap();
-        let total = |c: &handeye::solve::Calibration| {
-            errors(&c.camera_mount, &truth.camera_mount).0
-                + errors(&c.target_mount, &truth.target_mount).0
-        };
-        pose_space_mm += total(&solved.pose_space);
-        reprojection_mm += total(&solved.calibration);
+        for (sum, answer) in sums
+            .iter_mut()
+            .zip([&solved.pose_space, &solved.calibration])
+        {
+            for (estimate, truth) in [
+                (answer.camera_mount, truth.camera_mount),
+                (answer.target_mount, truth.target_mount),
+            ] {
+                let (mm, deg) = errors(&estimate, &truth);
+                sum.0 += mm;
+                sum.1 += deg;
+            }
+        }
     }
-    let ratio = reprojection_mm / pose_space_mm;
-    eprintln!("summed translation error over 4 seeds: pose space {pose_space_mm:.3} mm, reprojection {reprojection_mm:.3} mm, ratio {ratio:.2}");
+    sums
+}
+
+/// Issue 8's comparison on rendered frames, the demo cell as shipped (the default solve space,
+/// the noise estimated from the residuals): the arm's repeatability (0.02 mm, 0.002°) dominates
+/// the corner noise, and the fit over every corner, weighing each robot pose by what the
+/// residuals show, is still closer to the truth than the pose-space answer on the same frames.
+/// Measured 0.88x translation and 0.82x rotation over these 16 seeds (per seed 0.55x-1.38x: it
+/// takes many runs to see); with the pixel noise fixed at 0.3 px instead it was 1.27x / 1.15x.
+#[test]
+fn reprojection_space_beats_pose_space_in_the_demo_cell() {
+    let [pose, reprojection] = both_spaces_over_seeds(1..=16, &[]);
+    let ratio = (reprojection.0 / pose.0, reprojection.1 / pose.1);
+    eprintln!(
+        "demo cell, 16 seeds, summed errors of both unknowns: pose space {:.3} mm {:.4}°, reprojection {:.3} mm {:.4}°, ratio {:.3} / {:.3}",
+        pose.0, pose.1, reprojection.0, reprojection.1, ratio.0, ratio.1
+    );
     assert!(
-        ratio < 0.75,
-        "reprojection / pose-space error ratio {ratio:.2} (margin: < 0.75)"
+        ratio.0 < 0.95 && ratio.1 < 0.95,
+        "reprojection / pose-space error ratio {:.3} mm, {:.3}° (margin: < 0.95 each)",
+        ratio.0,
+        ratio.1
+    );
+}
+
+/// The same where the corner noise dominates (an exact arm, a noisy sensor, 14 poses): measured
+/// 0.50x translation, 0.64x rotation over these 4 seeds.
+#[test]
+fn reprojection_space_beats_pose_space_on_the_same_rendered_frames_when_pixels_dominate() {
+    let [pose, reprojection] = both_spaces_over_seeds(
+        1..=4,
+        &[
+            ("count: 20", "count: 14"),
+            ("repeatability_mm: 0.02", "repeatability_mm: 0.0"),
+            ("repeatability_deg: 0.002", "repeatability_deg: 0.0"),
+            ("noise_sigma: 2.0", "noise_sigma: 8.0"),
+        ],
+    );
+    let ratio = (reprojection.0 / pose.0, reprojection.1 / pose.1);
+    eprintln!(
+        "pixel noise dominating, 4 seeds: pose space {:.3} mm {:.4}°, reprojection {:.3} mm {:.4}°, ratio {:.3} / {:.3}",
+        pose.0, pose.1, reprojection.0, reprojection.1, ratio.0, ratio.1
+    );
+    assert!(
+        ratio.0 < 0.75 && ratio.1 < 0.9,
+        "reprojection / pose-space error ratio {:.3} mm, {:.3}° (margin: < 0.75, < 0.9)",
+        ratio.0,
+        ratio.1
     );
 }

@@ -152,6 +152,7 @@ pub struct FrameRms {
 fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
     ReprojectionOptions {
         pixel_sigma_px: config.solver.pixel_sigma_px,
+        estimate_noise: config.solver.estimate_noise,
         robot_prior: config.solver.robot_corrections.then(|| {
             let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
             RobotPrior {
@@ -372,6 +373,7 @@ pub fn solve_session(
                 &p.camera_mount,
                 &p.target_mount,
             ));
+            notes.push(noise_note(&reprojection, &ropts));
             solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
             solved.reprojection = Some(reprojection);
             solved.frame_ids = ids;
@@ -383,6 +385,27 @@ pub fn solve_session(
     }
     solved.summary = solved.describe(&notes);
     Ok(solved)
+}
+
+/// What the corners and robot poses were weighted with, and where the numbers came from.
+fn noise_note(reprojection: &ReprojectionCalibration, options: &ReprojectionOptions) -> String {
+    let origin = if options.estimate_noise {
+        "estimated from the residuals"
+    } else {
+        "as configured"
+    };
+    let robot = match reprojection.robot_prior {
+        Some(prior) => format!(
+            ", robot repeatability {:.4} mm / {:.5}° (1-sigma per axis)",
+            prior.translation_sigma_m * 1e3,
+            prior.rotation_sigma_rad.to_degrees()
+        ),
+        None => ", robot poses taken as exact".to_string(),
+    };
+    format!(
+        "weights {origin}: corner noise {:.3} px{robot}",
+        reprojection.pixel_sigma_px
+    )
 }
 
 fn pose_line(pose: &Pose) -> String {

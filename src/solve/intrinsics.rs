@@ -347,6 +347,7 @@ pub fn calibrate_from_scratch(
             robot_prior: None,
             robust: super::RobustLoss::None,
             covariance: false,
+            estimate_noise: false,
             ..options.clone()
         },
     )?;

@@ -85,6 +85,10 @@ pub struct ReprojectionOptions {
     pub covariance: bool,
     /// Most reweighting rounds of the robust loss.
     pub max_robust_rounds: usize,
+    /// Estimate the pixel noise and the robot's repeatability from the residuals (variance
+    /// component estimation), starting from `pixel_sigma_px` and `robot_prior`: the weights of
+    /// corners against robot poses then follow the data, not a guess.
+    pub estimate_noise: bool,
 }
 
 impl Default for ReprojectionOptions {
@@ -100,6 +104,7 @@ impl Default for ReprojectionOptions {
             outlier_floor_px: 2.0,
             covariance: true,
             max_robust_rounds: 5,
+            estimate_noise: false,
         }
     }
 }
@@ -134,6 +139,12 @@ pub struct ReprojectionCalibration {
     pub uncertainty: Option<Uncertainty>,
     /// 1-sigma of `fx fy cx cy`, px (when the intrinsics were fitted).
     pub intrinsics_sigma_px: Option<[f64; 4]>,
+    /// The corner noise the answer was weighted with, px: estimated from the residuals when
+    /// `estimate_noise` was set, the given one otherwise.
+    pub pixel_sigma_px: f64,
+    /// The robot repeatability the corrections were held by (estimated or given; `None`
+    /// without corrections).
+    pub robot_prior: Option<RobotPrior>,
     /// Reprojection errors at the optimum.
     pub errors: ReprojectionErrors,
     /// Frames whose RMS is far above the rest (indices into the input).
@@ -859,6 +870,143 @@ fn reanchor(problem: &mut Problem<'_>) {
     }
 }
 
+/// LM, then rounds of robust reweighting (each followed by LM) until the weights settle.
+fn fit<'a>(
+    problem: Problem<'a>,
+    options: &ReprojectionOptions,
+) -> Result<(Problem<'a>, usize, bool), SolveError> {
+    let (mut problem, mut evaluations, mut converged) = run_lm(problem)?;
+    if options.robust == RobustLoss::None {
+        return Ok((problem, evaluations, converged));
+    }
+    for _ in 0..options.max_robust_rounds {
+        let changed = reweight(&mut problem, options.robust);
+        if changed < 1e-3 {
+            break;
+        }
+        reanchor(&mut problem);
+        let (p, e, c) = run_lm(problem)?;
+        problem = p;
+        evaluations += e;
+        converged &= c;
+    }
+    Ok((problem, evaluations, converged))
+}
+
+/// Sets every corner's robust weight from its current error; returns the largest change.
+fn reweight(problem: &mut Problem<'_>, robust: RobustLoss) -> f64 {
+    let s = problem.state();
+    let new: Vec<Vec<f64>> = problem
+        .pixel_errors(&s)
+        .iter()
+        .map(|f| {
+            f.iter()
+                .map(|e| robust.weight(e.norm() * problem.inv_sigma_px))
+                .collect()
+        })
+        .collect();
+    let change = new
+        .iter()
+        .flatten()
+        .zip(problem.weights.iter().flatten())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    problem.weights = new;
+    change
+}
+
+/// Most rounds of noise estimation (each a full refit).
+const MAX_NOISE_ROUNDS: usize = 10;
+/// Noise estimation stops when no sigma changes by more than this fraction (a weight 3 % off
+/// moves the answer far less than its uncertainty).
+const NOISE_TOLERANCE: f64 = 0.03;
+/// The estimated robot repeatability stays within these multiples of the configured one: the
+/// configured value is what the user knows about the arm, and a robot group that the pixels
+/// explain completely (an exact arm) would otherwise drive its sigma towards zero.
+const ROBOT_SIGMA_RANGE: (f64, f64) = (0.1, 100.0);
+/// The estimated pixel noise stays within these bounds, px.
+const PIXEL_SIGMA_RANGE: (f64, f64) = (0.005, 20.0);
+
+/// One round of variance component estimation (Förstner): per group of observations (corner
+/// pixels; the robot prior), sigma² ← sigma² · (weighted residual sum of
+/// squares) / (redundancy), where a group's redundancy is its observation count minus its share
+/// `tr(N⁻¹·N_group)` of the parameters.
+struct NoiseEstimate {
+    pixel_sigma_px: f64,
+    robot: Option<RobotPrior>,
+}
+
+fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
+    let (normal, _, _) = problem.normal_equations()?;
+    let covariance = normal.cholesky()?.inverse();
+    let residuals = problem.residuals()?;
+    let n_params = problem.layout.len() as f64;
+    let pixel_sum = residuals.rows(0, problem.corner_rows).norm_squared();
+    let scale = |sigma: f64, sum: f64, redundancy: f64| {
+        (redundancy >= 1.0).then(|| sigma * (sum / redundancy).sqrt())
+    };
+    let mut robot = None;
+    let mut prior_share = 0.0;
+    if let Some(prior) = problem.prior {
+        // One scale for the whole prior: the ratio of rotation to translation repeatability
+        // stays as configured (pixels barely tell a small flange rotation from a shift).
+        let mut sum = 0.0;
+        for f in 0..problem.frames.len() {
+            let row = problem.corner_rows + 6 * f;
+            let o = problem.layout.robot_offset() + 6 * f;
+            for i in 0..6 {
+                let sigma = if i < 3 {
+                    prior.rotation_sigma_rad
+                } else {
+                    prior.translation_sigma_m
+                };
+                prior_share += covariance[(o + i, o + i)] / (sigma * sigma);
+                sum += residuals[row + i] * residuals[row + i];
+            }
+        }
+        let count = 6.0 * problem.frames.len() as f64;
+        robot = scale(1.0, sum, count - prior_share).map(|k| RobotPrior {
+            rotation_sigma_rad: prior.rotation_sigma_rad * k,
+            translation_sigma_m: prior.translation_sigma_m * k,
+        });
+    }
+    let pixel_redundancy = problem.corner_rows as f64 - (n_params - prior_share);
+    let pixel_sigma_px = scale(1.0 / problem.inv_sigma_px, pixel_sum, pixel_redundancy)?;
+    Some(NoiseEstimate {
+        pixel_sigma_px,
+        robot,
+    })
+}
+
+impl NoiseEstimate {
+    /// Sets the estimate (within the allowed ranges) into the problem; returns the largest
+    /// relative change of a sigma.
+    fn apply(&self, problem: &mut Problem<'_>, options: &ReprojectionOptions) -> f64 {
+        let relative = |new: f64, old: f64| ((new - old) / old).abs();
+        let pixel = self
+            .pixel_sigma_px
+            .clamp(PIXEL_SIGMA_RANGE.0, PIXEL_SIGMA_RANGE.1);
+        let mut change = relative(pixel, 1.0 / problem.inv_sigma_px);
+        problem.inv_sigma_px = 1.0 / pixel;
+        if let (Some(estimate), Some(given), Some(current)) =
+            (self.robot, options.robot_prior, problem.prior.as_mut())
+        {
+            let bounded = |value: f64, given: f64| {
+                value.clamp(given * ROBOT_SIGMA_RANGE.0, given * ROBOT_SIGMA_RANGE.1)
+            };
+            let rotation = bounded(estimate.rotation_sigma_rad, given.rotation_sigma_rad);
+            let translation = bounded(estimate.translation_sigma_m, given.translation_sigma_m);
+            change = change
+                .max(relative(rotation, current.rotation_sigma_rad))
+                .max(relative(translation, current.translation_sigma_m));
+            current.rotation_sigma_rad = rotation;
+            current.translation_sigma_m = translation;
+        }
+        reanchor(problem);
+        change
+    }
+}
+
 /// Minimises the reprojection error of every corner of every frame, starting from the
 /// pose-space answer (`start_camera_mount`, `start_target_mount`) and the camera model `camera`.
 ///
@@ -886,34 +1034,52 @@ pub fn refine_reprojection(
     }
     let start = Axby::from_mounts(start_camera_mount, start_target_mount);
     let problem = Problem::new(setup, frames, start, camera0, options);
-    let (mut problem, mut evaluations, mut converged) = run_lm(problem)?;
-    if options.robust != RobustLoss::None {
-        for _ in 0..options.max_robust_rounds {
-            let s = problem.state();
-            let errors = problem.pixel_errors(&s);
-            let new: Vec<Vec<f64>> = errors
-                .iter()
-                .map(|f| {
-                    f.iter()
-                        .map(|e| options.robust.weight(e.norm() * problem.inv_sigma_px))
-                        .collect()
-                })
-                .collect();
-            let change = new
-                .iter()
-                .flatten()
-                .zip(problem.weights.iter().flatten())
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            if change < 1e-3 {
+    let (mut problem, mut evaluations, mut converged) = fit(problem, options)?;
+    let mut noise_notes = Vec::new();
+    if options.estimate_noise {
+        for _ in 0..MAX_NOISE_ROUNDS {
+            let Some(estimate) = estimate_noise(&problem) else {
+                noise_notes.push(
+                    "the noise could not be estimated from the residuals (too few corners or a singular problem): the configured noise is used".to_string(),
+                );
                 break;
+            };
+            let change = estimate.apply(&mut problem, options);
+            // One LM per round (robust weights following the new sigma), not a full fit: the
+            // sigmas and the parameters converge together, and a final fit settles both.
+            if options.robust != RobustLoss::None {
+                reweight(&mut problem, options.robust);
             }
-            problem.weights = new;
-            reanchor(&mut problem);
             let (p, e, c) = run_lm(problem)?;
             problem = p;
             evaluations += e;
             converged &= c;
+            if change < NOISE_TOLERANCE {
+                break;
+            }
+        }
+        let (p, e, c) = fit(problem, options)?;
+        problem = p;
+        evaluations += e;
+        converged &= c;
+        if let (Some(given), Some(used)) = (options.robot_prior, problem.prior) {
+            let at_bound = |a: f64, b: f64| {
+                let ratio = a / b;
+                ratio <= ROBOT_SIGMA_RANGE.0 * 1.0001 || ratio >= ROBOT_SIGMA_RANGE.1 * 0.9999
+            };
+            if at_bound(used.translation_sigma_m, given.translation_sigma_m)
+                || at_bound(used.rotation_sigma_rad, given.rotation_sigma_rad)
+            {
+                noise_notes.push(format!(
+                    "the robot repeatability the residuals show ({:.4} mm, {:.5}°) is at the bound of {}x-{}x the configured one ({:.4} mm, {:.5}°): check the configured repeatability",
+                    used.translation_sigma_m * 1e3,
+                    used.rotation_sigma_rad.to_degrees(),
+                    ROBOT_SIGMA_RANGE.0,
+                    ROBOT_SIGMA_RANGE.1,
+                    given.translation_sigma_m * 1e3,
+                    given.rotation_sigma_rad.to_degrees(),
+                ));
+            }
         }
     }
     reanchor(&mut problem);
@@ -934,7 +1100,7 @@ pub fn refine_reprojection(
     };
     let mut uncertainty = None;
     let mut intrinsics_sigma_px = None;
-    let mut warnings = Vec::new();
+    let mut warnings = noise_notes;
     if options.covariance {
         let (jtj, _, _) = problem
             .normal_equations()
@@ -1035,6 +1201,8 @@ pub fn refine_reprojection(
         corrected_base_from_flange,
         uncertainty,
         intrinsics_sigma_px,
+        pixel_sigma_px: 1.0 / problem.inv_sigma_px,
+        robot_prior: problem.prior,
         errors,
         outlier_frames,
         outlier_corners,
