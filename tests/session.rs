@@ -366,6 +366,19 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     );
     let prepared = cell::prepare(&config).unwrap();
     assert!(!prepared.intrinsics_known);
+    // The generated views push the board across the image for the intrinsics; the same plan
+    // with the intrinsics known keeps the board centred.
+    let coverage = |report: &handeye::plan::check::PlanReport| {
+        report.intrinsics.as_ref().unwrap().coverage_percent
+    };
+    let centred = cell::prepare(&repo().join("configs/sim-cell.yaml")).unwrap();
+    eprintln!(
+        "image coverage: {:.0} % spread, {:.0} % centred",
+        coverage(&prepared.report),
+        coverage(&centred.report)
+    );
+    assert!(coverage(&prepared.report) >= 90.0);
+    assert!(coverage(&prepared.report) > coverage(&centred.report));
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     let outcome = run(&prepared, &folder).unwrap();
     assert_eq!(outcome.accepted.len(), prepared.plan.waypoints.len());

@@ -17,7 +17,8 @@ use crate::camera::Camera;
 use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
 use crate::geometry::{Pose, PoseYaml};
 use crate::plan::check::{check_plan, CheckContext, PlanReport};
-use crate::plan::{generate, Plan, PlanError, Waypoint};
+use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
+use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
 use crate::session::{PlannedPose, SessionFolder, SessionManifest, SessionSetup};
@@ -133,12 +134,9 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
             report,
         });
     }
-    let plan = match (&config.plan.file, &config.plan.generate) {
-        (Some(file), _) => Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?,
-        (None, Some(spec)) => Plan {
-            waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect(),
-        },
-        (None, None) => unreachable!("the config requires a plan source"),
+    let scripted = match &config.plan.file {
+        Some(file) => Some(Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?),
+        None => None,
     };
     let mut prepared = PreparedCell {
         config,
@@ -147,12 +145,26 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         intrinsics_known,
         arm,
         start_joints,
-        plan,
+        plan: Plan {
+            waypoints: Vec::new(),
+        },
         report: PlanReport {
             poses: Vec::new(),
             plan_problems: Vec::new(),
             notes: Vec::new(),
+            intrinsics: None,
         },
+    };
+    prepared.plan = match (scripted, &prepared.config.plan.generate) {
+        (Some(plan), _) => plan,
+        (None, Some(spec)) => Plan {
+            waypoints: prepared
+                .generate_views(spec)
+                .into_iter()
+                .map(Waypoint::LookAt)
+                .collect(),
+        },
+        (None, None) => unreachable!("the config requires a plan source"),
     };
     prepared.report = prepared.check();
     Ok(prepared)
@@ -175,6 +187,26 @@ impl PreparedCell {
                 margin_px: self.config.session.image_margin_px,
             },
         )
+    }
+
+    /// Generated views for this cell: the spec's cap, with the board pushed across this
+    /// camera's image by the spec's `image_spread` (default: enough for estimating the
+    /// intrinsics when the config has none, centred otherwise).
+    pub fn generate_views(&self, spec: &GenerateSpec) -> Vec<LookAt> {
+        let mut views = generate(spec);
+        let spread = spec.image_spread.unwrap_or(if self.intrinsics_known {
+            0.0
+        } else {
+            IMAGE_SPREAD_FOR_INTRINSICS
+        });
+        spread_across_image(
+            &mut views,
+            spread,
+            &self.camera_model,
+            &self.board,
+            self.config.session.image_margin_px,
+        );
+        views
     }
 
     fn check(&self) -> PlanReport {

@@ -8,7 +8,7 @@ use crate::camera::files::{FilesCamera, FrameSelector};
 use crate::camera::model::CameraModel;
 use crate::config::{CameraConfig, CellConfig, RobotConfig};
 use crate::geometry::Pose;
-use crate::plan::check::{PlanReport, PoseCheck};
+use crate::plan::check::{board_margin, board_points, PlanReport, PoseCheck};
 use crate::plan::{Plan, Waypoint};
 use crate::robot::recorded::{load_recorded_poses, plan_joints, RecordedRobot};
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
@@ -30,6 +30,7 @@ pub fn plan(
         ));
     };
     let recorded = load_recorded_poses(poses).map_err(|e| CellError::Backend(e.to_string()))?;
+    let points = board_points(board);
     let checks = recorded
         .iter()
         .enumerate()
@@ -40,7 +41,7 @@ pub fn plan(
                 base_from_flange: *base_from_flange,
                 joints: Some(plan_joints(index)),
                 distance_m: camera_from_target.translation.vector.norm(),
-                image_margin_px: image_margin(camera, board, &camera_from_target),
+                image_margin_px: board_margin(camera, &camera_from_target, &points),
                 move_time_s: 0.0,
                 problems: Vec::new(),
             }
@@ -58,22 +59,9 @@ pub fn plan(
             poses: checks,
             plan_problems,
             notes: Vec::new(),
+            intrinsics: None,
         },
     ))
-}
-
-/// Smallest distance from a projected board corner to the image border, px (negative = outside).
-fn image_margin(camera: &CameraModel, board: &Board, camera_from_target: &Pose) -> f64 {
-    let (w, h) = (camera.width as f64 - 1.0, camera.height as f64 - 1.0);
-    board
-        .tags()
-        .iter()
-        .flat_map(|t| t.corners_in_target)
-        .map(|p| match camera.project(&(camera_from_target * p)) {
-            Some(px) => px.x.min(px.y).min(w - px.x).min(h - px.y),
-            None => f64::NEG_INFINITY,
-        })
-        .fold(f64::INFINITY, f64::min)
 }
 
 /// Opens the recorded robot and the image-folder camera; the folder must hold a frame for every

@@ -37,6 +37,14 @@ enum PlanCommand {
         /// Jitter seed.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Fit the views to this cell's camera and board: push the board across the image by
+        /// `--image-spread` (default: 0.8 when the config has no intrinsics, 0 otherwise).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Share (0–1) of the room between the centred board and the image border the views
+        /// push the board towards (needs --config).
+        #[arg(long, requires = "config")]
+        image_spread: Option<f64>,
         /// Where to write the plan.
         #[arg(short, long)]
         output: PathBuf,
@@ -60,6 +68,8 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
             max_tilt_deg,
             max_roll_deg,
             seed,
+            config,
+            image_spread,
             output,
         } => {
             let spec = GenerateSpec {
@@ -68,12 +78,19 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
                 max_tilt_deg,
                 max_roll_deg,
                 seed,
+                image_spread,
             };
             if let Err(problem) = spec.validate() {
                 bail!("{problem}");
             }
+            let views = match &config {
+                Some(config) => cell::prepare(config)
+                    .with_context(|| format!("preparing {}", config.display()))?
+                    .generate_views(&spec),
+                None => generate(&spec),
+            };
             let plan = Plan {
-                waypoints: generate(&spec).into_iter().map(Waypoint::LookAt).collect(),
+                waypoints: views.into_iter().map(Waypoint::LookAt).collect(),
             };
             plan.save(&output)?;
             println!(

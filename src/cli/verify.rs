@@ -57,6 +57,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
             max_tilt_deg: 30.0,
             max_roll_deg: 20.0,
             seed: 0,
+            image_spread: None,
         });
         let spec = GenerateSpec {
             count: args.poses,

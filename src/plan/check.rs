@@ -67,6 +67,8 @@ pub struct PlanReport {
     /// Things to know that do not stop the plan (e.g. whether it could also estimate the
     /// intrinsics: tilt variety and image coverage).
     pub notes: Vec<String>,
+    /// How well the views constrain the camera intrinsics (`None` when not measured).
+    pub intrinsics: Option<crate::solve::intrinsics::IntrinsicsCoverage>,
 }
 
 impl PlanReport {
@@ -89,12 +91,7 @@ impl PlanReport {
 
 /// Checks every pose of `plan` and the plan as a whole.
 pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
-    let board_points: Vec<Point3<f64>> = ctx
-        .board
-        .tags()
-        .iter()
-        .flat_map(|t| t.corners_in_target)
-        .collect();
+    let board_points = board_points(ctx.board);
     let centre = board_centre(ctx.board);
     let mut previous = ctx.start_joints;
     let mut poses = Vec::with_capacity(plan.waypoints.len());
@@ -181,6 +178,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         poses,
         plan_problems,
         notes,
+        intrinsics: Some(coverage),
     }
 }
 
@@ -236,9 +234,22 @@ fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
     }
 }
 
+/// Every tag corner of the board, in the target frame.
+pub(crate) fn board_points(board: &Board) -> Vec<Point3<f64>> {
+    board
+        .tags()
+        .iter()
+        .flat_map(|t| t.corners_in_target)
+        .collect()
+}
+
 /// Smallest distance from any board point's projection to the image border (px); −∞ if a point
 /// is behind the camera.
-fn board_margin(camera: &CameraModel, camera_from_target: &Pose, points: &[Point3<f64>]) -> f64 {
+pub(crate) fn board_margin(
+    camera: &CameraModel,
+    camera_from_target: &Pose,
+    points: &[Point3<f64>],
+) -> f64 {
     let (w, h) = (camera.width as f64, camera.height as f64);
     points
         .iter()

@@ -9,6 +9,8 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::LookAt;
+use crate::camera::model::CameraModel;
+use crate::target::Board;
 
 /// How to generate a plan.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -27,6 +29,12 @@ pub struct GenerateSpec {
     /// Seed of the jitter.
     #[serde(default)]
     pub seed: u64,
+    /// How far the views push the board across the image: the share (0–1) of the room between
+    /// the centred board and the image border (less the session's image margin), along
+    /// directions that go round the image. Default: 0.8 when the cell config has no intrinsics
+    /// (estimating them needs corners all over the image), 0 otherwise (a centred board).
+    #[serde(default)]
+    pub image_spread: Option<f64>,
 }
 
 fn default_max_tilt_deg() -> f64 {
@@ -63,7 +71,64 @@ impl GenerateSpec {
                 self.max_roll_deg
             ));
         }
+        if let Some(spread) = self.image_spread {
+            if !(0.0..=1.0).contains(&spread) {
+                return Err(format!(
+                    "image_spread: expected a share of the room in [0, 1], got {spread}"
+                ));
+            }
+        }
         Ok(())
+    }
+}
+
+/// Default `image_spread` when the intrinsics are to be estimated from the run.
+pub const IMAGE_SPREAD_FOR_INTRINSICS: f64 = 0.8;
+
+/// Turns each view so the board appears off-centre (`LookAt::board_in_image_deg`): view `i`
+/// along the image direction `i` golden angles round, by `spread` of the largest offset that
+/// keeps every board corner `margin_px` inside the image. A view whose centred board is already
+/// too close to the border stays centred.
+pub fn spread_across_image(
+    views: &mut [LookAt],
+    spread: f64,
+    camera: &CameraModel,
+    board: &Board,
+    margin_px: f64,
+) {
+    if spread <= 0.0 {
+        return;
+    }
+    let points = super::check::board_points(board);
+    let centre = super::check::board_centre(board);
+    let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    for (i, view) in views.iter_mut().enumerate() {
+        let direction = i as f64 * golden_angle + std::f64::consts::FRAC_PI_4;
+        let at = |degrees: f64| LookAt {
+            board_in_image_deg: [direction.cos() * degrees, direction.sin() * degrees],
+            ..*view
+        };
+        let fits = |degrees: f64| {
+            let camera_from_target = at(degrees).target_from_camera(&centre).inverse();
+            super::check::board_margin(camera, &camera_from_target, &points) >= margin_px
+        };
+        if !fits(0.0) {
+            continue;
+        }
+        // The margin shrinks as the board moves out: bisect for the largest offset that fits.
+        let (mut inside, mut outside) = (0.0, 59.0);
+        if fits(outside) {
+            inside = outside;
+        }
+        for _ in 0..40 {
+            let middle = 0.5 * (inside + outside);
+            if fits(middle) {
+                inside = middle;
+            } else {
+                outside = middle;
+            }
+        }
+        *view = at(spread * inside);
     }
 }
 
@@ -89,6 +154,7 @@ pub fn generate(spec: &GenerateSpec) -> Vec<LookAt> {
                 azimuth_deg: azimuth,
                 elevation_deg: 90.0 - tilt,
                 roll_deg: roll,
+                board_in_image_deg: [0.0, 0.0],
             }
         })
         .collect()
@@ -106,6 +172,7 @@ mod tests {
             max_tilt_deg: 35.0,
             max_roll_deg: 30.0,
             seed: 3,
+            image_spread: None,
         };
         spec.validate().unwrap();
         let views = generate(&spec);
@@ -132,6 +199,7 @@ mod tests {
             max_tilt_deg: 30.0,
             max_roll_deg: 20.0,
             seed: 0,
+            image_spread: None,
         };
         assert!(GenerateSpec { count: 2, ..good }
             .validate()

@@ -24,6 +24,15 @@ pub struct LookAt {
     /// Rotation of the camera about its optical axis, degrees.
     #[serde(default)]
     pub roll_deg: f64,
+    /// Where the board centre appears, degrees right (+) and down (+) of the optical axis
+    /// (`[0, 0]`, the default: centred). Off-centre views put board corners across the image,
+    /// which estimating the intrinsics (the distortion above all) needs.
+    #[serde(default, skip_serializing_if = "is_centred")]
+    pub board_in_image_deg: [f64; 2],
+}
+
+fn is_centred(offset: &[f64; 2]) -> bool {
+    *offset == [0.0, 0.0]
 }
 
 impl LookAt {
@@ -49,7 +58,16 @@ impl LookAt {
             Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x_axis, y_axis, z_axis]));
         let rolled = UnitQuaternion::from_rotation_matrix(&looking)
             * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.roll_deg.to_radians());
-        Pose::from_parts(Translation3::from(camera_position.coords), rolled)
+        // Turn the camera so the centre appears at `board_in_image_deg`: `aside` takes the
+        // optical axis to that direction, and the camera turns by its inverse.
+        let [right, down] = self.board_in_image_deg.map(f64::to_radians);
+        let seen_at = Vector3::new(right.tan(), down.tan(), 1.0);
+        let aside = UnitQuaternion::rotation_between(&Vector3::z(), &seen_at)
+            .unwrap_or_else(UnitQuaternion::identity);
+        Pose::from_parts(
+            Translation3::from(camera_position.coords),
+            rolled * aside.inverse(),
+        )
     }
 
     /// Checks the numbers make a view: a positive finite distance and finite angles, elevation in (0, 90].
@@ -69,6 +87,16 @@ impl LookAt {
                     "{name} must be a finite number of degrees, got {v}"
                 ));
             }
+        }
+        if !self
+            .board_in_image_deg
+            .iter()
+            .all(|v| v.is_finite() && v.abs() < 60.0)
+        {
+            return Err(format!(
+                "board_in_image_deg must be two angles within ±60°, got {:?}",
+                self.board_in_image_deg
+            ));
         }
         if !(self.elevation_deg > 0.0 && self.elevation_deg <= 90.0) {
             return Err(format!(
@@ -92,6 +120,7 @@ mod tests {
             azimuth_deg: 0.0,
             elevation_deg: 90.0,
             roll_deg: 0.0,
+            board_in_image_deg: [0.0, 0.0],
         };
         let target_from_camera = view.target_from_camera(&centre);
         let camera_from_target = target_from_camera.inverse();
@@ -102,6 +131,40 @@ mod tests {
         let y_in_camera = camera_from_target.rotation * Vector3::y();
         assert!((x_in_camera - Vector3::x()).norm() < 1e-12);
         assert!((y_in_camera + Vector3::y()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn an_offset_view_sees_the_centre_where_asked() {
+        let centre = Point3::new(0.14, 0.14, 0.0);
+        for (right, down) in [(15.0, 0.0), (0.0, -10.0), (-20.0, 12.0)] {
+            let view = LookAt {
+                distance: 0.6,
+                azimuth_deg: 30.0,
+                elevation_deg: 70.0,
+                roll_deg: 10.0,
+                board_in_image_deg: [right, down],
+            };
+            view.validate().unwrap();
+            let target_from_camera = view.target_from_camera(&centre);
+            let c = target_from_camera.inverse() * centre;
+            assert!((c.x / c.z - f64::tan(right.to_radians())).abs() < 1e-12);
+            assert!((c.y / c.z - f64::tan(down.to_radians())).abs() < 1e-12);
+            // Same camera position as the centred view: only the camera turned.
+            let centred = LookAt {
+                board_in_image_deg: [0.0, 0.0],
+                ..view
+            };
+            let p = centred.target_from_camera(&centre).translation.vector;
+            assert!((target_from_camera.translation.vector - p).norm() < 1e-12);
+        }
+        let bad = LookAt {
+            distance: 0.6,
+            azimuth_deg: 0.0,
+            elevation_deg: 90.0,
+            roll_deg: 0.0,
+            board_in_image_deg: [75.0, 0.0],
+        };
+        assert!(bad.validate().unwrap_err().contains("board_in_image_deg"));
     }
 
     #[test]
@@ -118,6 +181,7 @@ mod tests {
                 azimuth_deg: az,
                 elevation_deg: el,
                 roll_deg: roll,
+                board_in_image_deg: [0.0, 0.0],
             };
             let camera_from_target = view.target_from_camera(&centre).inverse();
             let c = camera_from_target * centre;

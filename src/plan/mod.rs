@@ -315,6 +315,7 @@ mod tests {
             azimuth_deg: 40.0,
             elevation_deg: 65.0,
             roll_deg: 15.0,
+            board_in_image_deg: [0.0, 0.0],
         };
         let target_from_camera = view.target_from_camera(&centre);
         for setup in [Setup::EyeInHand, Setup::EyeToHand] {

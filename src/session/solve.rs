@@ -131,6 +131,13 @@ pub struct ReprojectionSummary {
     pub robot_corrections: bool,
     /// Whether the intrinsics were estimated by this solve.
     pub intrinsics_estimated: bool,
+    /// The corner noise the reprojection answer was weighted with, px.
+    pub pixel_sigma_px: f64,
+    /// The robot repeatability it was weighted with, mm and degrees per axis (absent when the
+    /// robot poses were taken as exact).
+    pub robot_repeatability: Option<[f64; 2]>,
+    /// Whether those two were estimated from the residuals (else as configured).
+    pub noise_estimated: bool,
     /// Per frame.
     pub frames: Vec<FrameRms>,
 }
@@ -373,7 +380,6 @@ pub fn solve_session(
                 &p.camera_mount,
                 &p.target_mount,
             ));
-            notes.push(noise_note(&reprojection, &ropts));
             solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
             solved.reprojection = Some(reprojection);
             solved.frame_ids = ids;
@@ -385,27 +391,6 @@ pub fn solve_session(
     }
     solved.summary = solved.describe(&notes);
     Ok(solved)
-}
-
-/// What the corners and robot poses were weighted with, and where the numbers came from.
-fn noise_note(reprojection: &ReprojectionCalibration, options: &ReprojectionOptions) -> String {
-    let origin = if options.estimate_noise {
-        "estimated from the residuals"
-    } else {
-        "as configured"
-    };
-    let robot = match reprojection.robot_prior {
-        Some(prior) => format!(
-            ", robot repeatability {:.4} mm / {:.5}° (1-sigma per axis)",
-            prior.translation_sigma_m * 1e3,
-            prior.rotation_sigma_rad.to_degrees()
-        ),
-        None => ", robot poses taken as exact".to_string(),
-    };
-    format!(
-        "weights {origin}: corner noise {:.3} px{robot}",
-        reprojection.pixel_sigma_px
-    )
 }
 
 fn pose_line(pose: &Pose) -> String {
@@ -431,6 +416,14 @@ impl SolvedSession {
             outlier_corners: r.outlier_corners.len(),
             robot_corrections: !r.corrected_base_from_flange.is_empty(),
             intrinsics_estimated: self.estimated_camera.is_some(),
+            pixel_sigma_px: r.pixel_sigma_px,
+            robot_repeatability: r.robot_prior.map(|p| {
+                [
+                    p.translation_sigma_m * 1e3,
+                    p.rotation_sigma_rad.to_degrees(),
+                ]
+            }),
+            noise_estimated: r.noise_estimated,
             frames: self
                 .frame_ids
                 .iter()

@@ -145,6 +145,8 @@ pub struct ReprojectionCalibration {
     /// The robot repeatability the corrections were held by (estimated or given; `None`
     /// without corrections).
     pub robot_prior: Option<RobotPrior>,
+    /// Whether `pixel_sigma_px` and `robot_prior` were estimated from the residuals.
+    pub noise_estimated: bool,
     /// Reprojection errors at the optimum.
     pub errors: ReprojectionErrors,
     /// Frames whose RMS is far above the rest (indices into the input).
@@ -164,6 +166,27 @@ impl ReprojectionCalibration {
     pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
         let (camera, target) = self.setup.unknown_names();
         [(camera, self.camera_mount), (target, self.target_mount)]
+    }
+
+    /// What corners and robot poses were weighted with, and where the numbers came from.
+    pub fn weights(&self) -> String {
+        let origin = if self.noise_estimated {
+            "estimated from the residuals"
+        } else {
+            "as configured"
+        };
+        let robot = match self.robot_prior {
+            Some(prior) => format!(
+                ", robot repeatability {:.4} mm / {:.5}° (1-sigma per axis)",
+                prior.translation_sigma_m * 1e3,
+                prior.rotation_sigma_rad.to_degrees()
+            ),
+            None => ", robot poses taken as exact".to_string(),
+        };
+        format!(
+            "weights {origin}: corner noise {:.3} px{robot}",
+            self.pixel_sigma_px
+        )
     }
 
     /// This answer in the shape of a pose-space [`Calibration`] (so result files, summaries and
@@ -186,10 +209,11 @@ impl ReprojectionCalibration {
         solver.iterations += self.evaluations;
         solver.converged &= self.converged;
         let mut warnings = vec![format!(
-            "refined in reprojection space over {} corners: RMS {:.3} px (max {:.3} px)",
+            "refined in reprojection space over {} corners: RMS {:.3} px (max {:.3} px); {}",
             self.errors.corner_px.iter().map(Vec::len).sum::<usize>(),
             self.errors.rms_px,
-            self.errors.max_px
+            self.errors.max_px,
+            self.weights()
         )];
         warnings.extend(self.warnings.iter().cloned());
         warnings.extend(pose_space.warnings.iter().cloned());
@@ -1203,6 +1227,7 @@ pub fn refine_reprojection(
         intrinsics_sigma_px,
         pixel_sigma_px: 1.0 / problem.inv_sigma_px,
         robot_prior: problem.prior,
+        noise_estimated: options.estimate_noise,
         errors,
         outlier_frames,
         outlier_corners,
