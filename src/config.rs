@@ -93,6 +93,14 @@ pub enum RobotConfig {
         /// Give up connecting after this long, s.
         #[serde(default = "default_connect_timeout_s")]
         connect_timeout_s: f64,
+        /// How far the reported flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.03: the UR e-Series repeatability; the reprojection solve starts from it
+        /// and estimates the real figure from the residuals).
+        #[serde(default)]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.003).
+        #[serde(default)]
+        repeatability_deg: Option<f64>,
     },
     /// Replays the flange poses a real arm measured during a recording made elsewhere
     /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
@@ -100,6 +108,14 @@ pub enum RobotConfig {
     Recorded {
         /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
         poses: PathBuf,
+        /// How far a recorded flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.1: an arm of unknown make; the reprojection solve starts from it and
+        /// estimates the real figure from the residuals).
+        #[serde(default)]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.01).
+        #[serde(default)]
+        repeatability_deg: Option<f64>,
     },
 }
 
@@ -362,7 +378,7 @@ pub enum SolveSpace {
     /// answer, with the corner noise and the robot's repeatability estimated from the residuals
     /// (`estimate_noise`). In the rendered simulated cell it is closer to the truth than the
     /// pose-space answer on the same frames (0.88x the translation error, 0.82x the rotation
-    /// error over 16 seeds, robot repeatability dominating; 0.50x / 0.64x with pixel noise dominating).
+    /// error over 16 seeds, robot repeatability dominating; 0.50x / 0.63x with pixel noise dominating).
     /// Always used when the intrinsics are estimated by the run.
     #[default]
     Reprojection,
@@ -616,9 +632,35 @@ impl CellConfig {
             }
         }
         if let RobotConfig::Ur {
+            repeatability_mm,
+            repeatability_deg,
+            ..
+        }
+        | RobotConfig::Recorded {
+            repeatability_mm,
+            repeatability_deg,
+            ..
+        } = &raw.robot
+        {
+            for (key, value) in [
+                ("robot.repeatability_mm", repeatability_mm),
+                ("robot.repeatability_deg", repeatability_deg),
+            ] {
+                if let Some(v) = value {
+                    if !(v.is_finite() && *v > 0.0) {
+                        return Err(value_error(
+                            key,
+                            format!("expected a positive number, got {v}"),
+                        ));
+                    }
+                }
+            }
+        }
+        if let RobotConfig::Ur {
             model,
             connect_timeout_s,
             host,
+            ..
         } = &raw.robot
         {
             check_model(model).map_err(|p| value_error("robot.model", p))?;
@@ -724,8 +766,14 @@ impl CellConfig {
         }
         plan.file = plan.file.as_deref().map(resolve);
         let robot = match raw.robot {
-            RobotConfig::Recorded { poses } => RobotConfig::Recorded {
+            RobotConfig::Recorded {
+                poses,
+                repeatability_mm,
+                repeatability_deg,
+            } => RobotConfig::Recorded {
                 poses: resolve(&poses),
+                repeatability_mm,
+                repeatability_deg,
             },
             other => other,
         };
@@ -861,19 +909,38 @@ impl CellConfig {
         }
     }
 
-    /// The robot's per-axis repeatability as (m, rad): the sim's configured noise, or the UR
-    /// e-series spec (±0.03 mm at 3 sigma for the UR5e, 0.002° as a conservative rotation).
+    /// How far the robot's reported flange pose may be from the true one, 1-sigma per axis, as
+    /// (m, rad): the sim's configured noise (0.01 mm / 0.001° when it has none), the configured
+    /// or default figure of a UR (0.03 mm / 0.003°) or a recorded arm (0.1 mm / 0.01°). The
+    /// reprojection solve starts its noise estimate here.
     pub fn robot_repeatability(&self) -> (f64, f64) {
-        match &self.robot {
+        let (mm, deg) = match &self.robot {
             RobotConfig::Sim {
                 repeatability_mm,
                 repeatability_deg,
                 ..
             } if *repeatability_mm > 0.0 && *repeatability_deg > 0.0 => {
-                (repeatability_mm * 1e-3, repeatability_deg.to_radians())
+                (*repeatability_mm, *repeatability_deg)
             }
-            _ => (1e-5, 0.002f64.to_radians()),
-        }
+            RobotConfig::Sim { .. } => (0.01, 0.001),
+            RobotConfig::Ur {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => (
+                repeatability_mm.unwrap_or(0.03),
+                repeatability_deg.unwrap_or(0.003),
+            ),
+            RobotConfig::Recorded {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => (
+                repeatability_mm.unwrap_or(0.1),
+                repeatability_deg.unwrap_or(0.01),
+            ),
+        };
+        (mm * 1e-3, deg.to_radians())
     }
 
     /// The settle time as a duration.

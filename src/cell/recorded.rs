@@ -24,7 +24,7 @@ pub fn plan(
     camera: &CameraModel,
     board: &Board,
 ) -> Result<(Plan, PlanReport), CellError> {
-    let RobotConfig::Recorded { poses } = &config.robot else {
+    let RobotConfig::Recorded { poses, .. } = &config.robot else {
         return Err(CellError::Backend(
             "a recorded plan needs `robot: {backend: recorded}`".into(),
         ));
@@ -71,7 +71,7 @@ pub fn open(
     plan: &[(Pose, Joints)],
     camera_model: CameraModel,
 ) -> Result<Hardware, CellError> {
-    let (RobotConfig::Recorded { poses }, CameraConfig::Files { folder }) =
+    let (RobotConfig::Recorded { poses, .. }, CameraConfig::Files { folder }) =
         (&config.robot, &config.camera)
     else {
         return Err(CellError::Backend(

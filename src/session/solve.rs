@@ -117,8 +117,12 @@ pub const REPROJECTION_FILE: &str = "reprojection.yaml";
 pub struct ReprojectionSummary {
     /// RMS over all corners of the pose-space answer, px.
     pub pose_space_rms_px: f64,
-    /// RMS over all corners of the reprojection-space answer, px.
+    /// RMS over all corners of the reprojection-space answer, px (both answers with the robot
+    /// poses as recorded).
     pub reprojection_rms_px: f64,
+    /// RMS over all corners of the reprojection-space answer with its corrected robot poses
+    /// (when corrections were fitted), px: the fit's own residual.
+    pub corrected_rms_px: Option<f64>,
     /// Largest corner error of the pose-space answer, px.
     pub pose_space_max_px: f64,
     /// Largest corner error of the reprojection-space answer, px.
@@ -150,8 +154,10 @@ pub struct FrameRms {
     pub id: String,
     /// Under the pose-space answer, px.
     pub pose_space_rms_px: f64,
-    /// Under the reprojection-space answer, px.
+    /// Under the reprojection-space answer, robot pose as recorded, px.
     pub reprojection_rms_px: f64,
+    /// Under the reprojection-space answer with its corrected robot pose, px.
+    pub corrected_rms_px: Option<f64>,
     /// Flagged as an outlier frame by the reprojection refinement.
     pub outlier: bool,
 }
@@ -407,14 +413,16 @@ impl SolvedSession {
     pub fn reprojection_summary(&self) -> Option<ReprojectionSummary> {
         let r = self.reprojection.as_ref()?;
         let p = self.pose_space_errors.as_ref()?;
+        let corrected = !r.corrected_base_from_flange.is_empty();
         Some(ReprojectionSummary {
             pose_space_rms_px: p.rms_px,
-            reprojection_rms_px: r.errors.rms_px,
+            reprojection_rms_px: r.recorded_pose_errors.rms_px,
+            corrected_rms_px: corrected.then_some(r.errors.rms_px),
             pose_space_max_px: p.max_px,
-            reprojection_max_px: r.errors.max_px,
+            reprojection_max_px: r.recorded_pose_errors.max_px,
             corners: r.errors.corner_px.iter().map(Vec::len).sum(),
             outlier_corners: r.outlier_corners.len(),
-            robot_corrections: !r.corrected_base_from_flange.is_empty(),
+            robot_corrections: corrected,
             intrinsics_estimated: self.estimated_camera.is_some(),
             pixel_sigma_px: r.pixel_sigma_px,
             robot_repeatability: r.robot_prior.map(|p| {
@@ -431,7 +439,8 @@ impl SolvedSession {
                 .map(|(i, id)| FrameRms {
                     id: id.clone(),
                     pose_space_rms_px: p.frame_rms_px[i],
-                    reprojection_rms_px: r.errors.frame_rms_px[i],
+                    reprojection_rms_px: r.recorded_pose_errors.frame_rms_px[i],
+                    corrected_rms_px: corrected.then_some(r.errors.frame_rms_px[i]),
                     outlier: r.outlier_frames.contains(&i),
                 })
                 .collect(),
@@ -462,20 +471,29 @@ impl SolvedSession {
         let row = |out: &mut String, name: &str, a: f64, b: f64, unit: &str| {
             let _ = writeln!(out, "{name:<34} {a:>11.4} {unit:<2} {b:>11.4} {unit:<2}");
         };
+        let recorded = &reprojection.recorded_pose_errors;
+        let corrected = !reprojection.corrected_base_from_flange.is_empty();
         row(
             &mut out,
             "reprojection RMS",
             pose_errors.rms_px,
-            reprojection.errors.rms_px,
+            recorded.rms_px,
             "px",
         );
         row(
             &mut out,
             "reprojection max",
             pose_errors.max_px,
-            reprojection.errors.max_px,
+            recorded.max_px,
             "px",
         );
+        if corrected {
+            let _ = writeln!(
+                out,
+                "{:<34} {:>14} {:>11.4} px",
+                "  with corrected robot poses", "", reprojection.errors.rms_px
+            );
+        }
         row(
             &mut out,
             "board pose rotation RMS",
@@ -502,24 +520,33 @@ impl SolvedSession {
         }
         let _ = writeln!(
             out,
-            "per-frame reprojection RMS, px (pose space / reprojection):"
+            "per-frame reprojection RMS, px (pose space / reprojection{}):",
+            if corrected {
+                " / reprojection with corrected robot poses"
+            } else {
+                ""
+            }
         );
         let cells: Vec<String> = self
             .frame_ids
             .iter()
-            .zip(pose_errors.frame_rms_px.iter())
-            .zip(reprojection.errors.frame_rms_px.iter())
             .enumerate()
-            .map(|(i, ((id, a), b))| {
+            .map(|(i, id)| {
                 let flag = if reprojection.outlier_frames.contains(&i) {
                     " !"
                 } else {
                     ""
                 };
-                format!("{id} {a:.3}/{b:.3}{flag}")
+                let (a, b) = (pose_errors.frame_rms_px[i], recorded.frame_rms_px[i]);
+                if corrected {
+                    let c = reprojection.errors.frame_rms_px[i];
+                    format!("{id} {a:.3}/{b:.3}/{c:.3}{flag}")
+                } else {
+                    format!("{id} {a:.3}/{b:.3}{flag}")
+                }
             })
             .collect();
-        for chunk in cells.chunks(4) {
+        for chunk in cells.chunks(if corrected { 3 } else { 4 }) {
             let _ = writeln!(out, "  {}", chunk.join("   "));
         }
         for note in notes {

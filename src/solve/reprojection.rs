@@ -147,8 +147,12 @@ pub struct ReprojectionCalibration {
     pub robot_prior: Option<RobotPrior>,
     /// Whether `pixel_sigma_px` and `robot_prior` were estimated from the residuals.
     pub noise_estimated: bool,
-    /// Reprojection errors at the optimum.
+    /// Reprojection errors at the optimum (with the corrected robot poses, when fitted).
     pub errors: ReprojectionErrors,
+    /// Reprojection errors of the same answer with the robot poses as recorded: the figure to
+    /// compare with another answer evaluated on the recorded poses (equals `errors` without
+    /// robot corrections).
+    pub recorded_pose_errors: ReprojectionErrors,
     /// Frames whose RMS is far above the rest (indices into the input).
     pub outlier_frames: Vec<usize>,
     /// Corners far above the rest: (frame index, corner index).
@@ -1217,6 +1221,11 @@ pub fn refine_reprojection(
         Vec::new()
     };
     let (camera_mount, target_mount) = s.axby.to_mounts();
+    let recorded_pose_errors = if problem.layout.robot > 0 {
+        reprojection_errors(setup, frames, &s.camera, &camera_mount, &target_mount)
+    } else {
+        errors.clone()
+    };
     Ok(ReprojectionCalibration {
         setup,
         camera_mount,
@@ -1229,6 +1238,7 @@ pub fn refine_reprojection(
         robot_prior: problem.prior,
         noise_estimated: options.estimate_noise,
         errors,
+        recorded_pose_errors,
         outlier_frames,
         outlier_corners,
         evaluations,
