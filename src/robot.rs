@@ -12,6 +12,8 @@ pub mod sim;
 #[cfg(feature = "ur-rtde")]
 pub mod ur;
 
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Duration;
 
 use nalgebra::Vector3;
@@ -116,6 +118,9 @@ pub enum RobotError {
     /// A move did not finish in time.
     #[error("move did not finish within {0:?}; the arm was stopped")]
     MoveTimeout(Duration),
+    /// The interrupt flag was set during the move: the arm was stopped where it was.
+    #[error("the move was stopped on request; the arm decelerated and stands where it stopped")]
+    Interrupted,
     /// Anything else the backend reports.
     #[error("robot backend error")]
     Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
@@ -139,6 +144,11 @@ pub trait Robot: Send {
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError>;
     /// Stops any motion now (decelerating within the controller's limits).
     fn stop(&mut self) -> Result<(), RobotError>;
+    /// A flag that, once set (by Ctrl-C, say), stops a move in progress — the arm decelerates
+    /// where it is — and makes that move return [`RobotError::Interrupted`]. Moves started
+    /// while it is set return that at once, without moving. Backends whose moves take no time
+    /// may ignore it.
+    fn set_interrupt(&mut self, _flag: Arc<AtomicBool>) {}
     /// The controller's safety and readiness state.
     fn status(&mut self) -> Result<RobotStatus, RobotError>;
 }

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+use std::time::Duration;
 
 use handeye::cell::{self, PreparedCell};
 use handeye::geometry::Pose;
@@ -219,6 +220,68 @@ fn protective_stop_keeps_the_data_and_resume_finishes() {
     assert_eq!(outcome.accepted, (0..12).collect::<Vec<_>>());
     let dataset = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(dataset.pairs.len(), 12);
+}
+
+/// Ctrl-C during a move stops the arm there and then (not at the end of the move), keeps every
+/// sample, and the run resumes.
+#[test]
+fn a_stop_request_ends_the_move_in_progress_and_resume_finishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[
+            ("count: 20", "count: 8"),
+            ("move_duration_s: 0.0", "move_duration_s: 1.0"),
+        ],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    let out = dir.path().join("s");
+    let folder = SessionFolder::create(&out).unwrap();
+    let plan = prepared.report.validated().unwrap();
+    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    let mut hardware = prepared.open_hardware().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let setup = prepared.session_setup(folder.clone(), plan, stop.clone());
+    // Ctrl-C 0.4 s into the third move (moves take 1 s each).
+    let mut pressed_at = None;
+    let error = session::run_session(
+        setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |e: SessionEvent| {
+            if let SessionEvent::Moving { plan_index: 2 } = e {
+                let stop = stop.clone();
+                pressed_at = Some(std::time::Instant::now() + Duration::from_millis(400));
+                std::thread::spawn(move || {
+                    std::thread::sleep(Duration::from_millis(400));
+                    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+                });
+            }
+        },
+    )
+    .unwrap_err();
+    let reaction = pressed_at.unwrap().elapsed();
+    assert!(
+        matches!(error, SessionError::Interrupted { plan_index: 2, .. }),
+        "{error}"
+    );
+    // The 1 s move was cut short: the run ended well before the move's remaining 0.6 s.
+    assert!(
+        reaction < Duration::from_millis(400),
+        "{reaction:?} after Ctrl-C"
+    );
+    assert_eq!(
+        folder.read_visits().unwrap().len(),
+        2,
+        "the two poses before are kept"
+    );
+
+    let config = config_variant(dir.path(), "sim-cell.yaml", &[("count: 20", "count: 8")]);
+    let prepared = cell::prepare(&config).unwrap();
+    let outcome = run(&prepared, &SessionFolder::open(&out).unwrap()).unwrap();
+    assert_eq!(outcome.visited_now, 6);
+    assert_eq!(outcome.accepted, (0..8).collect::<Vec<_>>());
 }
 
 #[test]

@@ -180,6 +180,57 @@ fn protective_stop_mid_move_is_reported_and_clearing_it_resumes() {
     });
 }
 
+/// Ctrl-C during a move: the driver tells the controller to stop (stopL) and the arm stands
+/// part-way, instead of finishing the move first.
+#[test]
+fn an_interrupt_stops_the_arm_mid_move() {
+    within(Duration::from_secs(60), || {
+        let mock = start_mock(41, |_| {});
+        let mut robot = UrRobot::connect(robot_config(&mock)).expect("connects");
+        let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        robot.set_interrupt(flag.clone());
+        let start = robot.base_from_flange().unwrap();
+        // 20 cm at 0.1 m/s: about 2 s of motion.
+        let slow = MotionLimits {
+            linear_speed: 0.1,
+            ..fast()
+        };
+        let target = nudged(&start, 0.0, 0.2, UnitQuaternion::identity());
+        let setter = {
+            let flag = flag.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(500));
+                flag.store(true, std::sync::atomic::Ordering::SeqCst);
+            })
+        };
+        let t0 = Instant::now();
+        let err = robot.move_linear(&target, &slow).unwrap_err();
+        setter.join().unwrap();
+        assert!(matches!(err, RobotError::Interrupted), "{err}");
+        assert!(
+            t0.elapsed() < Duration::from_millis(1500),
+            "{:?}",
+            t0.elapsed()
+        );
+        assert!(!mock.is_moving(), "the arm was stopped");
+        let stopped = robot.base_from_flange().unwrap();
+        let travelled = translation_distance(&stopped, &start);
+        assert!(
+            travelled > 0.01 && translation_distance(&stopped, &target) > 0.05,
+            "stopped {travelled:.3} m from the start"
+        );
+        // While the flag is set nothing is sent.
+        let started = mock.moves_started();
+        assert!(matches!(
+            robot.move_linear(&start, &fast()),
+            Err(RobotError::Interrupted)
+        ));
+        assert_eq!(mock.moves_started(), started);
+        drop(robot);
+        mock.shutdown();
+    });
+}
+
 #[test]
 fn emergency_stop_is_reported() {
     within(Duration::from_secs(60), || {

@@ -1,6 +1,7 @@
 //! The simulated cell: a simulated arm and a simulated camera sharing one world, so the camera
 //! renders from the arm's true pose while the arm reports a noisy one.
 
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use crate::camera::model::CameraModel;
@@ -21,7 +22,8 @@ pub struct SharedSimRobot(Arc<Mutex<SimRobot>>);
 
 impl SharedSimRobot {
     fn arm(&self) -> MutexGuard<'_, SimRobot> {
-        // A panic while holding the lock cannot leave the arm half-moved: moves are atomic.
+        // A panic while holding the lock cannot leave the arm half-moved: a move updates the
+        // arm's state in one step when it ends (arrived or interrupted).
         self.0
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner())
@@ -47,6 +49,9 @@ impl Robot for SharedSimRobot {
     }
     fn stop(&mut self) -> Result<(), RobotError> {
         self.arm().stop()
+    }
+    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.arm().set_interrupt(flag);
     }
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
         self.arm().status()
@@ -190,6 +195,9 @@ impl Robot for SharedRobot {
     }
     fn stop(&mut self) -> Result<(), RobotError> {
         self.robot().stop()
+    }
+    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.robot().set_interrupt(flag);
     }
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
         self.robot().status()

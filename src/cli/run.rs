@@ -105,12 +105,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
-        // A second Ctrl-C while the arm is finishing its move leaves the default behaviour to the OS.
+        // The first Ctrl-C stops the arm where it is (a move in progress decelerates) and ends the
+        // run cleanly; a second one, should that hang, exits at once.
         let _ = ctrlc::set_handler(move || {
             if stop.swap(true, Ordering::SeqCst) {
                 std::process::exit(130);
             }
-            eprintln!("\nstopping after the current move; every recorded sample is kept");
+            eprintln!("\nstopping the arm now; every recorded sample is kept");
         });
     }
 

@@ -12,7 +12,9 @@
 //!
 //! Frames: `T_base_flange`; metres, radians, [`Duration`]. Depends on `robot` and `geometry` only.
 
-use std::time::Duration;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
 use rand::rngs::StdRng;
@@ -114,6 +116,7 @@ pub struct SimRobot {
     latched: Latched,
     position_noise: Normal<f64>,
     rotation_noise: Normal<f64>,
+    interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl SimRobot {
@@ -158,6 +161,7 @@ impl SimRobot {
             latched: Latched::None,
             position_noise,
             rotation_noise,
+            interrupt: None,
         })
     }
 
@@ -218,20 +222,51 @@ impl SimRobot {
     }
 
     /// Completes a move to `joints`: waits the move time, then updates the true and reported
-    /// poses.
-    fn finish_move(&mut self, joints: Joints) {
-        if !self.options.move_duration.is_zero() {
-            std::thread::sleep(self.options.move_duration);
+    /// poses. When the interrupt flag is set part-way the arm stops where it is by then (on the
+    /// joint-space line between start and target) and the move returns
+    /// [`RobotError::Interrupted`].
+    fn finish_move(&mut self, joints: Joints) -> Result<(), RobotError> {
+        let duration = self.options.move_duration;
+        let started = Instant::now();
+        while !duration.is_zero() {
+            let elapsed = started.elapsed();
+            if elapsed >= duration {
+                break;
+            }
+            if self.interrupted() {
+                let done = elapsed.as_secs_f64() / duration.as_secs_f64();
+                let from = self.joints;
+                self.arrive(std::array::from_fn(|i| {
+                    from[i] + (joints[i] - from[i]) * done
+                }));
+                return Err(RobotError::Interrupted);
+            }
+            std::thread::sleep((duration - elapsed).min(INTERRUPT_POLL));
         }
+        self.arrive(joints);
+        self.moves_completed += 1;
+        Ok(())
+    }
+
+    /// The arm stands at `joints`: the true pose follows, the reading draws new noise.
+    fn arrive(&mut self, joints: Joints) {
         self.joints = joints;
         self.true_pose = self.model.forward(&joints);
         let dp = Vector3::from_fn(|_, _| self.position_noise.sample(&mut self.rng));
         let dr = Vector3::from_fn(|_, _| self.rotation_noise.sample(&mut self.rng));
         // Noise in the flange frame: the reading is off by a small rigid motion at the flange.
         self.reported_pose = self.true_pose * pose_from_rotvec(dp, dr);
-        self.moves_completed += 1;
+    }
+
+    fn interrupted(&self) -> bool {
+        self.interrupt
+            .as_ref()
+            .is_some_and(|flag| flag.load(Ordering::SeqCst))
     }
 }
+
+/// How often a move in progress looks at the interrupt flag.
+const INTERRUPT_POLL: Duration = Duration::from_millis(10);
 
 /// Rejects speed and acceleration caps that are not finite and positive.
 fn check_limits(limits: &MotionLimits) -> Result<(), RobotError> {
@@ -279,8 +314,10 @@ impl Robot for SimRobot {
                     self.model.name, p.x, p.y, p.z
                 ))
             })?;
-        self.finish_move(joints);
-        Ok(())
+        if self.interrupted() {
+            return Err(RobotError::Interrupted);
+        }
+        self.finish_move(joints)
     }
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
@@ -299,13 +336,19 @@ impl Robot for SimRobot {
                 hi.to_degrees()
             )));
         }
-        self.finish_move(*joints);
-        Ok(())
+        if self.interrupted() {
+            return Err(RobotError::Interrupted);
+        }
+        self.finish_move(*joints)
     }
 
     fn stop(&mut self) -> Result<(), RobotError> {
-        // Moves complete atomically, so the arm is never moving when this runs.
+        // A move ends (arrived or interrupted) before the call returns: nothing moves now.
         self.check_latched_connection()
+    }
+
+    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
     }
 
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
@@ -401,6 +444,50 @@ mod tests {
         a.move_linear(&target, &MotionLimits::default()).unwrap();
         b.move_linear(&target, &MotionLimits::default()).unwrap();
         assert_eq!(a.base_from_flange().unwrap(), b.base_from_flange().unwrap());
+    }
+
+    #[test]
+    fn an_interrupt_stops_a_move_part_way() {
+        let mut robot = sim(SimRobotOptions {
+            move_duration: Duration::from_secs(2),
+            ..Default::default()
+        });
+        let flag = Arc::new(AtomicBool::new(false));
+        robot.set_interrupt(flag.clone());
+        let start = robot.joint_positions().unwrap();
+        let target = [0.6, -1.0, 1.2, -0.6, 1.3, 0.2];
+        let setter = {
+            let flag = flag.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(300));
+                flag.store(true, Ordering::SeqCst);
+            })
+        };
+        let t0 = Instant::now();
+        let err = robot
+            .move_joints(&target, &MotionLimits::default())
+            .unwrap_err();
+        setter.join().unwrap();
+        assert!(matches!(err, RobotError::Interrupted), "{err}");
+        assert!(t0.elapsed() < Duration::from_secs(1), "{:?}", t0.elapsed());
+        // Stopped part-way along, not at either end; the reading follows the arm.
+        let stopped = robot.joint_positions().unwrap();
+        for i in 0..6 {
+            if target[i] != start[i] {
+                let done = (stopped[i] - start[i]) / (target[i] - start[i]);
+                assert!(done > 0.05 && done < 0.5, "joint {i}: {done:.3} of the way");
+            }
+        }
+        assert_eq!(
+            robot.base_from_flange().unwrap(),
+            robot.true_base_from_flange()
+        );
+        // While the flag stays set nothing moves.
+        assert!(matches!(
+            robot.move_joints(&target, &MotionLimits::default()),
+            Err(RobotError::Interrupted)
+        ));
+        assert_eq!(robot.joint_positions().unwrap(), stopped);
     }
 
     #[test]

@@ -22,7 +22,9 @@ mod ffi;
 
 use std::ffi::{c_char, c_int, CString};
 use std::ptr::NonNull;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
@@ -229,6 +231,8 @@ pub struct UrRobot {
     broken: Option<String>,
     last_timestamp: f64,
     last_timestamp_change: Instant,
+    /// Set by someone else (Ctrl-C) to stop a move in progress.
+    interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl std::fmt::Debug for UrRobot {
@@ -312,6 +316,7 @@ impl UrRobot {
             broken: None,
             last_timestamp: f64::NAN,
             last_timestamp_change: Instant::now(),
+            interrupt: None,
         };
         if robot.config.flange_from_tcp.is_none() {
             let v = robot.call("getTCPOffset", |h| {
@@ -477,7 +482,13 @@ impl UrRobot {
         }
     }
 
-    /// Sends one asynchronous move and watches it to the end.
+    fn interrupted(&self) -> bool {
+        self.interrupt
+            .as_ref()
+            .is_some_and(|flag| flag.load(Ordering::SeqCst))
+    }
+
+    /// Sends one asynchronous move and watches it to the end (or to the interrupt flag).
     fn run_move(
         &mut self,
         kind: MoveKind,
@@ -489,6 +500,9 @@ impl UrRobot {
             MoveKind::Linear => "moveL",
             MoveKind::Joint => "moveJ",
         };
+        if self.interrupted() {
+            return Err(RobotError::Interrupted);
+        }
         let before = self.ensure_program()?;
         let op_before = (before.async_status >> 24) & 0x7F;
         let sent = self.call(call, move |h| {
@@ -525,6 +539,10 @@ impl UrRobot {
             let op = (s.async_status >> 24) & 0x7F;
             if op != op_before && s.async_status & ASYNC_RUNNING == 0 {
                 break s.receive_timestamp;
+            }
+            if self.interrupted() {
+                self.stop()?;
+                return Err(RobotError::Interrupted);
             }
             if Instant::now() > deadline {
                 let _ = self.stop();
@@ -593,6 +611,10 @@ impl Robot for UrRobot {
             self.check_workspace(&flange)?;
         }
         self.run_move(MoveKind::Joint, *joints, speed, acceleration)
+    }
+
+    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
     }
 
     fn stop(&mut self) -> Result<(), RobotError> {

@@ -36,7 +36,8 @@ pub struct SessionSetup {
     pub board: Board,
     /// Detector settings.
     pub detector: DetectorOptions,
-    /// Set (e.g. by Ctrl-C) to stop the arm after the current move and end the run cleanly.
+    /// Set (e.g. by Ctrl-C) to stop the arm — a move in progress decelerates where it is — and
+    /// end the run cleanly.
     pub stop: Arc<AtomicBool>,
     /// The intrinsics are not known yet: record the detected corners only (no board pose, which
     /// needs intrinsics); they are estimated from all frames after the run.
@@ -113,6 +114,8 @@ pub fn run_session(
         .filter(|i| !accepted.contains(i))
         .collect();
 
+    // A stop request ends a move in progress, not only the run after it.
+    robot.set_interrupt(setup.stop.clone());
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
     let camera_model = (!setup.estimate_intrinsics).then(|| *camera.model());
@@ -164,6 +167,13 @@ pub fn run_session(
                     let folder = setup.folder.root().to_path_buf();
                     let recorded = state.recorded();
                     state.error = Some(match source {
+                        ErrorSource::Robot(crate::robot::RobotError::Interrupted) => {
+                            SessionError::Interrupted {
+                                plan_index,
+                                recorded,
+                                folder,
+                            }
+                        }
                         ErrorSource::Robot(source) => SessionError::Robot {
                             plan_index,
                             recorded,
