@@ -284,6 +284,52 @@ fn a_stop_request_ends_the_move_in_progress_and_resume_finishes() {
     assert_eq!(outcome.accepted, (0..8).collect::<Vec<_>>());
 }
 
+/// The plan check saw the moves in plan order from the assumed start; each move is checked again
+/// from where the arm really stands right before it is sent. An arm left (say, after a stop and
+/// some jogging) where the straight joint move to the next pose would sweep the flange out of
+/// the workspace box: the move is refused, nothing moves, the folder is kept for a resume.
+#[test]
+fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_sent() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(dir.path(), "sim-cell.yaml", &[("count: 20", "count: 6")]);
+    let prepared = cell::prepare(&config).unwrap();
+    let plan = prepared.report.validated().unwrap();
+    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    let mut hardware = prepared.open_hardware().unwrap();
+    // Shoulder lowered: the flange hangs below the table top (the box starts at z = 5 cm).
+    let jogged = [0.0, 0.6, 0.0, 0.0, 0.0, 0.0];
+    let flange = prepared.arm.forward(&jogged).translation.vector;
+    assert!(flange.z < 0.05, "{flange:?}");
+    hardware
+        .robot
+        .move_joints(&jogged, &prepared.config.limits)
+        .unwrap();
+    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
+    let error = session::run_session(
+        setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let message = error.to_string();
+    assert!(
+        matches!(error, SessionError::UnsafeMove { plan_index: 0, .. }),
+        "{message}"
+    );
+    assert!(
+        message.contains("workspace box") && message.contains("--resume"),
+        "{message}"
+    );
+    assert_eq!(
+        hardware.robot.joint_positions().unwrap(),
+        jogged,
+        "nothing moved"
+    );
+    assert!(folder.read_visits().unwrap().is_empty());
+}
+
 #[test]
 fn a_plan_rotating_about_one_axis_is_refused_before_any_motion() {
     let dir = tempfile::tempdir().unwrap();

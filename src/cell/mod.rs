@@ -16,6 +16,7 @@ use crate::camera::model::CameraModel;
 use crate::camera::Camera;
 use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
 use crate::geometry::{Pose, PoseYaml};
+use crate::plan::check::MoveCheck;
 use crate::plan::check::{check_plan, CheckContext, PlanReport};
 use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
@@ -342,6 +343,12 @@ impl PreparedCell {
             detector: self.detector_options(),
             stop,
             estimate_intrinsics: !self.intrinsics_known,
+            move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
+                MoveCheck {
+                    arm: self.arm.clone(),
+                    workspace: self.config.workspace,
+                }
+            }),
         }
     }
 

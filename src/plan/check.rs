@@ -192,6 +192,24 @@ pub fn board_centre(board: &Board) -> Point3<f64> {
     )
 }
 
+/// What every move of a run is checked against right before it is sent: the plan check saw the
+/// moves in plan order, but a resumed run, a retry or an adaptive plan moves in another order,
+/// and after a stop the arm may stand anywhere.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MoveCheck {
+    /// The arm's kinematics.
+    pub arm: UrModel,
+    /// The box the flange must stay in along the whole joint move.
+    pub workspace: WorkspaceBox,
+}
+
+impl MoveCheck {
+    /// Why the straight joint move `from` → `to` is not safe, if it is not.
+    pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
+        path_leaves_box(&self.arm, from, to, &self.workspace)
+    }
+}
+
 /// The first point of a straight joint-space move that leaves the box, as a message.
 fn path_leaves_box(
     arm: &UrModel,

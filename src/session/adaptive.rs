@@ -77,6 +77,7 @@ pub fn run_adaptive_session(
             detector: setup.detector.clone(),
             stop: setup.stop.clone(),
             estimate_intrinsics: setup.estimate_intrinsics,
+            move_check: setup.move_check.clone(),
         };
         let index = plan.len() - 1;
         let step_outcome = run_session(step, robot, camera, on_event)?;

@@ -11,6 +11,7 @@ use crate::camera::model::CameraModel;
 use crate::camera::{Camera, Frame};
 use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
+use crate::plan::check::MoveCheck;
 use crate::robot::{Joints, MotionLimits, Robot};
 use crate::solve::{PosePair, Setup};
 use crate::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
@@ -42,6 +43,9 @@ pub struct SessionSetup {
     /// The intrinsics are not known yet: record the detected corners only (no board pose, which
     /// needs intrinsics); they are estimated from all frames after the run.
     pub estimate_intrinsics: bool,
+    /// Every move is checked from the arm's actual joints before it is sent (`None`: nothing
+    /// moves, e.g. a recorded robot).
+    pub move_check: Option<MoveCheck>,
 }
 
 /// Something that happened, for progress displays.
@@ -180,6 +184,12 @@ pub fn run_session(
                             folder,
                             source,
                         },
+                        ErrorSource::UnsafeMove(problem) => SessionError::UnsafeMove {
+                            plan_index,
+                            recorded,
+                            folder,
+                            problem,
+                        },
                         ErrorSource::Camera(source) => SessionError::Camera {
                             plan_index,
                             recorded,
@@ -281,6 +291,12 @@ fn capture(
     plan_index: usize,
 ) -> Result<(Frame, Pose), ErrorSource> {
     let (_, joints) = &setup.plan[plan_index];
+    if let Some(check) = &setup.move_check {
+        let from = robot.joint_positions()?;
+        if let Some(problem) = check.problem(&from, joints) {
+            return Err(ErrorSource::UnsafeMove(problem));
+        }
+    }
     robot.move_joints(joints, &setup.limits)?;
     std::thread::sleep(setup.settle);
     let settled = Instant::now();
@@ -292,6 +308,8 @@ fn capture(
 enum ErrorSource {
     Robot(crate::robot::RobotError),
     Camera(crate::camera::CameraError),
+    /// The move was refused before it was sent.
+    UnsafeMove(String),
 }
 
 impl From<crate::robot::RobotError> for ErrorSource {

@@ -92,6 +92,19 @@ pub enum SessionError {
         #[source]
         source: CameraError,
     },
+    /// The next move, from where the arm actually stands, would leave the workspace box: it was
+    /// not sent; every sample so far is kept.
+    #[error("the move to plan pose {plan_index} was not sent: from the arm's current joints {problem} ({recorded} poses recorded); jog the arm back near the plan's poses, then resume with `handeye run --resume {folder}`")]
+    UnsafeMove {
+        /// The pose it would have moved to.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// Where the move leaves the box.
+        problem: String,
+    },
     /// Interrupted by the user; the arm was stopped and every sample so far is kept.
     #[error("interrupted at plan pose {plan_index} ({recorded} poses recorded); the arm was stopped; resume with `handeye run --resume {folder}`")]
     Interrupted {
