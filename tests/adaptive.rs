@@ -19,6 +19,8 @@ use handeye::solve::{self, PosePair};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
+
+mod util;
 use rand_distr::{Distribution, Normal};
 
 fn measure(truth: &CellTransforms, base_from_flange: &Pose, rng: &mut StdRng) -> PosePair {
@@ -186,15 +188,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     let target_mm = 0.1;
-    let mut planner = AdaptivePlanner::new(
-        truth.setup,
-        prepared.config.nominal.camera_mount,
-        prepared.config.nominal.target_mount,
-        candidates.clone(),
-        prepared.config.solver.to_options(),
-        target_mm,
-        candidates.len(),
-    );
+    let mut planner = planner(&prepared, target_mm);
     let mut hardware = prepared.open_hardware().unwrap();
     let setup =
         prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
@@ -226,4 +220,79 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     assert!(sigma <= target_mm, "solved 1-sigma {sigma:.3} mm");
     // The true error of the worst unknown within 3 sigma of a 3-dof error (≈ 3·σ_total).
     assert!(error < 3.0 * target_mm, "true error {error:.3} mm");
+}
+
+/// The next-best-pose planner over a prepared cell's checked plan.
+fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
+    let candidates = prepared.report.validated().unwrap();
+    AdaptivePlanner::new(
+        prepared.config.setup,
+        prepared.config.nominal.camera_mount,
+        prepared.config.nominal.target_mount,
+        candidates.clone(),
+        prepared.config.solver.to_options(),
+        target_mm,
+        candidates.len(),
+    )
+}
+
+/// An adaptive session stopped by a protective stop resumes: the manifest's poses are kept, none
+/// is visited twice, and the planner goes on from the samples on disk to its target.
+#[test]
+fn a_stopped_adaptive_session_resumes_to_its_target() {
+    use handeye::session::{self, SessionError, SessionEvent, SessionFolder};
+    use std::sync::atomic::AtomicBool;
+    use std::sync::Arc;
+
+    let dir = tempfile::tempdir().unwrap();
+    let faulty = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "faulty.yaml",
+        &[("seed: 7", "seed: 7\n  protective_stop_after_moves: 4")],
+    );
+    let clean = util::config_variant(dir.path(), "sim-cell.yaml", "clean.yaml", &[]);
+    let target_mm = 0.1;
+    let run = |config: &std::path::Path, folder: &SessionFolder| {
+        let prepared = cell::prepare(config).unwrap();
+        let mut planner = planner(&prepared, target_mm);
+        let mut hardware = prepared.open_hardware().unwrap();
+        let setup =
+            prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
+        let outcome = session::run_adaptive_session(
+            setup,
+            config.to_path_buf(),
+            &mut planner,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut |_e: SessionEvent| {},
+        );
+        (outcome, planner)
+    };
+    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+    let (stopped, _) = run(&faulty, &folder);
+    assert!(
+        matches!(stopped, Err(SessionError::Robot { .. })),
+        "{stopped:?}"
+    );
+    let before = folder.read_manifest().unwrap().plan.len();
+    assert_eq!(folder.read_visits().unwrap().len(), 4);
+
+    let (outcome, planner) = run(&clean, &SessionFolder::open(folder.root()).unwrap());
+    let outcome = outcome.unwrap();
+    assert!(planner.reached_target(), "{:?}", planner.log);
+    let manifest = folder.read_manifest().unwrap();
+    assert!(manifest.plan.len() > before);
+    assert_eq!(
+        outcome.accepted,
+        (0..manifest.plan.len()).collect::<Vec<_>>()
+    );
+    // No pose chosen twice.
+    for (i, a) in manifest.plan.iter().enumerate() {
+        for b in &manifest.plan[i + 1..] {
+            assert_ne!(a.joints_deg, b.joints_deg);
+        }
+    }
+    let samples = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    assert_eq!(samples.pairs.len(), manifest.plan.len());
 }

@@ -51,9 +51,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if adaptive && !prepared.intrinsics_known {
         bail!("an adaptive plan needs the camera intrinsics (it chooses poses from board poses as they come): give `intrinsics:` or use a fixed plan");
     }
-    if adaptive && args.resume.is_some() {
-        bail!("--resume is not supported for adaptive plans: start a new run (the recorded session can still be replayed)");
-    }
     if adaptive && adaptive_candidates(&prepared).is_empty() {
         bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
     }
@@ -89,7 +86,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
     let folder = match folder {
         Some(folder) => {
-            same_plan_as_recorded(&folder, &plan)?;
+            // An adaptive session's plan is what it chose so far: it continues from there.
+            if !adaptive {
+                same_plan_as_recorded(&folder, &plan)?;
+            }
             folder
         }
         None => {
@@ -163,10 +163,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             hardware.camera.as_mut(),
             &mut on_event,
         );
+        let in_session = folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0);
         adaptive_note = Some(format!(
-            "adaptive plan: {} of {} candidate poses used; target 1-sigma {:.3} mm {}",
-            planner.log.iter().filter(|s| s.chose.is_some()).count(),
+            "adaptive plan: {in_session} of {} candidate poses in the session ({} chosen in this run); target 1-sigma {:.3} mm {}",
             plan.len(),
+            planner.log.iter().filter(|s| s.chose.is_some()).count(),
             prepared.config.plan.target_uncertainty_mm,
             match planner.log.last().and_then(|s| s.solved_sigma_mm) {
                 Some(s) if planner.reached_target() => format!("reached ({s:.3} mm)"),

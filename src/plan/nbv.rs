@@ -230,6 +230,17 @@ impl AdaptivePlanner {
         Some(self.candidates[index])
     }
 
+    /// Marks the candidates at these flange poses (within 1 mm and 0.1°) as taken: a resumed
+    /// session's poses are not chosen again.
+    pub fn mark_visited(&mut self, poses: &[Pose]) {
+        for (used, (candidate, _)) in self.used.iter_mut().zip(&self.candidates) {
+            *used |= poses.iter().any(|p| {
+                (p.translation.vector - candidate.translation.vector).norm() < 1e-3
+                    && p.rotation.angle_to(&candidate.rotation) < 0.1f64.to_radians()
+            });
+        }
+    }
+
     /// Whether the last solve met the target uncertainty.
     pub fn reached_target(&self) -> bool {
         self.log

@@ -7,6 +7,10 @@
 //! A pose whose board pose was rejected is dropped from the plan and its index reused by the
 //! next pose (which then gets one attempt instead of two: the driver counts the earlier
 //! failure); the source decides what to try next.
+//!
+//! A stopped adaptive session resumes like a fixed one: the manifest's poses are finished first
+//! (the last may not have been reached), the source is told every pose already visited, and it
+//! goes on choosing from the samples on disk.
 
 use crate::camera::Camera;
 use crate::dataset::Dataset;
@@ -23,11 +27,17 @@ use crate::geometry::PoseYaml;
 pub trait PlanSource {
     /// The next flange pose and the joints that reach it, or `None` to end the session.
     fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)>;
+    /// Flange poses a resumed session visited already (planned or measured): not to be chosen
+    /// again.
+    fn visited(&mut self, poses: &[Pose]);
 }
 
 impl PlanSource for AdaptivePlanner {
     fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
         self.next(samples)
+    }
+    fn visited(&mut self, poses: &[Pose]) {
+        self.mark_visited(poses);
     }
 }
 
@@ -41,20 +51,32 @@ pub fn run_adaptive_session(
     camera: &mut dyn Camera,
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
-    let mut plan: Vec<(Pose, Joints)> = Vec::new();
+    // A resumed session: the manifest lists the poses chosen so far (the last one may not have
+    // been reached); none of them, nor any pose visited and rejected, is chosen again.
+    let mut plan = recorded_plan(&setup)?;
+    let mut seen: Vec<Pose> = plan.iter().map(|(pose, _)| *pose).collect();
+    for visit in setup.folder.read_visits()? {
+        let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
+        seen.push(visit.poses(&file)?.0);
+    }
+    source.visited(&seen);
     let mut outcome = SessionOutcome::default();
+    let mut finish_recorded = !plan.is_empty();
     loop {
-        let samples = if setup.folder.samples_path().is_file() {
-            Dataset::load(&setup.folder.samples_path())
-                .map_err(|e| SessionError::Solve(e.to_string()))?
-                .pairs
-        } else {
-            Vec::new()
-        };
-        let Some(next) = source.next_pose(&samples) else {
-            break;
-        };
-        plan.push(next);
+        if !finish_recorded {
+            let samples = if setup.folder.samples_path().is_file() {
+                Dataset::load(&setup.folder.samples_path())
+                    .map_err(|e| SessionError::Solve(e.to_string()))?
+                    .pairs
+            } else {
+                Vec::new()
+            };
+            let Some(next) = source.next_pose(&samples) else {
+                break;
+            };
+            plan.push(next);
+        }
+        finish_recorded = false;
         setup.folder.write_manifest(&SessionManifest {
             config: manifest_config.clone(),
             setup: setup.setup,
@@ -84,10 +106,34 @@ pub fn run_adaptive_session(
         outcome.visited_now += step_outcome.visited_now;
         outcome.skipped.extend(step_outcome.skipped.iter().cloned());
         if step_outcome.accepted.contains(&index) {
-            outcome.accepted.push(index);
+            outcome.accepted = step_outcome.accepted;
         } else {
             plan.pop();
         }
     }
     Ok(outcome)
+}
+
+/// The poses (and joints) a resumed adaptive session's manifest holds; empty for a new one.
+fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>, SessionError> {
+    if !setup.folder.manifest_path().is_file() {
+        return Ok(Vec::new());
+    }
+    let manifest = setup.folder.read_manifest()?;
+    let file = setup.folder.manifest_path();
+    manifest
+        .plan
+        .iter()
+        .enumerate()
+        .map(|(i, planned)| {
+            let pose = planned
+                .base_from_flange
+                .to_pose(&format!("plan[{i}].base_from_flange"))
+                .map_err(|source| SessionError::Pose {
+                    file: file.clone(),
+                    source,
+                })?;
+            Ok((pose, planned.joints_deg.map(f64::to_radians)))
+        })
+        .collect()
 }
