@@ -664,3 +664,59 @@ fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
         before.rms_px
     );
 }
+
+/// With robot corrections on (the default), a frame whose recorded robot pose is far off would
+/// be absorbed by its own correction, raise the estimated repeatability for every frame and pull
+/// the answer: it is flagged instead, its correction runs free (it leaves the hand-eye fit) and
+/// the answer and the estimated repeatability stay those of the other frames.
+#[test]
+fn a_far_off_robot_pose_is_flagged_and_left_out_with_corrections_on() {
+    let robot_sigma = (0.02e-3, 0.002f64.to_radians());
+    let mut s = scenario(9, 12, 0.1, robot_sigma, false);
+    let recorded_error = 0.003;
+    s.frames[4].base_from_flange =
+        pose_from_rotvec(Vector3::new(recorded_error, 0.0, 0.0), Vector3::zeros())
+            * s.frames[4].base_from_flange;
+    let (c, t) = truth();
+    let result = refine_reprojection(
+        Setup::EyeInHand,
+        &s.frames,
+        &sim_camera(),
+        &c,
+        &t,
+        &ReprojectionOptions {
+            robot_prior: Some(RobotPrior {
+                translation_sigma_m: robot_sigma.0,
+                rotation_sigma_rad: robot_sigma.1,
+            }),
+            estimate_noise: true,
+            ..ReprojectionOptions::default()
+        },
+    )
+    .unwrap();
+    let prior = result.robot_prior.unwrap();
+    let errors = errors(&result.camera_mount, &result.target_mount);
+    eprintln!(
+        "flagged {:?}; estimated repeatability {:.4} mm; errors {errors:?}",
+        result.outlier_frames,
+        prior.translation_sigma_m * 1e3
+    );
+    assert_eq!(result.outlier_frames, vec![4]);
+    assert!(result
+        .warnings
+        .iter()
+        .any(|w| w.contains("pose-004") && w.contains("robot-pose correction")));
+    let ratio = prior.translation_sigma_m / robot_sigma.0;
+    assert!(
+        (0.6..1.6).contains(&ratio),
+        "repeatability {ratio:.2}x the truth"
+    );
+    // Its free correction finds the 3 mm the recorded pose is off.
+    let found = (result.corrected_base_from_flange[4].translation.vector
+        - s.frames[4].base_from_flange.translation.vector)
+        .norm();
+    assert!((found - recorded_error).abs() < 1e-4, "{found}");
+    for (mm, deg) in errors {
+        assert!(mm < 0.15 && deg < 0.01, "{mm:.3} mm, {deg:.4}°");
+    }
+}

@@ -374,6 +374,10 @@ struct Problem<'a> {
     params: DVector<f64>,
     /// Per frame, per corner: robust weight (sqrt applied when used).
     weights: Vec<Vec<f64>>,
+    /// Per frame: 1, or 0 for a frame whose recorded robot pose is far off (its correction then
+    /// runs free, so it neither drags the others' corrections along nor the estimated
+    /// repeatability up).
+    prior_weights: Vec<f64>,
     inv_sigma_px: f64,
     prior: Option<RobotPrior>,
     /// Rows of each frame's first corner.
@@ -435,6 +439,7 @@ impl Problem<'_> {
             camera0,
             params,
             weights: frames.iter().map(|f| vec![1.0; f.corners.len()]).collect(),
+            prior_weights: vec![1.0; frames.len()],
             inv_sigma_px: 1.0 / options.pixel_sigma_px,
             prior: options.robot_prior,
             row_offsets,
@@ -542,9 +547,10 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         if let Some(prior) = self.prior {
             for (f, (phi, rho)) in s.corrections.iter().enumerate() {
                 let row = self.corner_rows + 6 * f;
+                let k = self.prior_weights[f].sqrt();
                 for i in 0..3 {
-                    out[row + i] = phi[i] / prior.rotation_sigma_rad;
-                    out[row + 3 + i] = rho[i] / prior.translation_sigma_m;
+                    out[row + i] = k * phi[i] / prior.rotation_sigma_rad;
+                    out[row + 3 + i] = k * rho[i] / prior.translation_sigma_m;
                 }
             }
         }
@@ -568,9 +574,10 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
             for f in 0..self.frames.len() {
                 let row = self.corner_rows + 6 * f;
                 let o = layout.robot_offset() + 6 * f;
+                let k = self.prior_weights[f].sqrt();
                 for i in 0..3 {
-                    j[(row + i, o + i)] = 1.0 / prior.rotation_sigma_rad;
-                    j[(row + 3 + i, o + 3 + i)] = 1.0 / prior.translation_sigma_m;
+                    j[(row + i, o + i)] = k / prior.rotation_sigma_rad;
+                    j[(row + 3 + i, o + 3 + i)] = k / prior.translation_sigma_m;
                 }
             }
         }
@@ -698,11 +705,12 @@ impl Problem<'_> {
             for f in 0..self.frames.len() {
                 let row = self.corner_rows + 6 * f;
                 let o = layout.robot_offset() + 6 * f;
+                let k = self.prior_weights[f].sqrt();
                 for i in 0..6 {
-                    let inv = if i < 3 {
-                        1.0 / prior.rotation_sigma_rad
+                    let inv = k / if i < 3 {
+                        prior.rotation_sigma_rad
                     } else {
-                        1.0 / prior.translation_sigma_m
+                        prior.translation_sigma_m
                     };
                     h[(o + i, o + i)] += inv * inv;
                     g[o + i] += inv * r[row + i];
@@ -908,7 +916,7 @@ fn fit<'a>(
         return Ok((problem, evaluations, converged));
     }
     for _ in 0..options.max_robust_rounds {
-        let changed = reweight(&mut problem, options.robust);
+        let changed = reweight(&mut problem, options);
         if changed < 1e-3 {
             break;
         }
@@ -921,9 +929,20 @@ fn fit<'a>(
     Ok((problem, evaluations, converged))
 }
 
-/// Sets every corner's robust weight from its current error; returns the largest change.
-fn reweight(problem: &mut Problem<'_>, robust: RobustLoss) -> f64 {
+/// Sets every corner's robust weight from its current error, and frees the robot correction of
+/// frames whose correction stands far out (see [`robot_outliers`]); returns the largest change.
+fn reweight(problem: &mut Problem<'_>, options: &ReprojectionOptions) -> f64 {
+    let robust = options.robust;
     let s = problem.state();
+    let mut change: f64 = 0.0;
+    if let Some(prior) = problem.prior {
+        let flagged = robot_outliers(&s, &prior, options.outlier_mad_factor);
+        for (f, weight) in problem.prior_weights.iter_mut().enumerate() {
+            let new = if flagged.contains(&f) { 0.0 } else { 1.0 };
+            change = change.max((new - *weight).abs());
+            *weight = new;
+        }
+    }
     let new: Vec<Vec<f64>> = problem
         .pixel_errors(&s)
         .iter()
@@ -938,10 +957,31 @@ fn reweight(problem: &mut Problem<'_>, robust: RobustLoss) -> f64 {
         .flatten()
         .zip(problem.weights.iter().flatten())
         .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
+        .fold(change, f64::max);
     problem.weights = new;
     change
 }
+
+/// Frames whose robot correction, in prior sigmas, stands out from the others' (median + MAD
+/// rule) and exceeds [`ROBOT_OUTLIER_SIGMAS`].
+fn robot_outliers(s: &State, prior: &RobotPrior, mad_factor: f64) -> Vec<usize> {
+    let sizes: Vec<f64> = (0..s.corrections.len())
+        .map(|f| correction_sigmas(s, f, prior))
+        .collect();
+    flag_outliers(&sizes, mad_factor, ROBOT_OUTLIER_SIGMAS)
+}
+
+/// Size of frame `f`'s robot correction in prior sigmas (the norm of the whitened 6-vector).
+fn correction_sigmas(s: &State, f: usize, prior: &RobotPrior) -> f64 {
+    let (phi, rho) = s.corrections[f];
+    ((phi / prior.rotation_sigma_rad).norm_squared()
+        + (rho / prior.translation_sigma_m).norm_squared())
+    .sqrt()
+}
+
+/// A frame's robot correction is flagged beyond this many prior sigmas (6-dof norm; the 99.9 %
+/// point of a 6-dof Gaussian is 4.7) when it also stands out from the other frames'.
+const ROBOT_OUTLIER_SIGMAS: f64 = 5.0;
 
 /// Most rounds of noise estimation (each a full refit).
 const MAX_NOISE_ROUNDS: usize = 10;
@@ -977,8 +1017,10 @@ fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
     let mut prior_share = 0.0;
     if let Some(prior) = problem.prior {
         // One scale for the whole prior: the ratio of rotation to translation repeatability
-        // stays as configured (pixels barely tell a small flange rotation from a shift).
+        // stays as configured (pixels barely tell a small flange rotation from a shift). Frames
+        // whose correction runs free (weight 0) are not observations of it.
         let mut sum = 0.0;
+        let mut count = 0.0;
         for f in 0..problem.frames.len() {
             let row = problem.corner_rows + 6 * f;
             let o = problem.layout.robot_offset() + 6 * f;
@@ -988,11 +1030,12 @@ fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
                 } else {
                     prior.translation_sigma_m
                 };
-                prior_share += covariance[(o + i, o + i)] / (sigma * sigma);
+                prior_share +=
+                    problem.prior_weights[f] * covariance[(o + i, o + i)] / (sigma * sigma);
+                count += problem.prior_weights[f];
                 sum += residuals[row + i] * residuals[row + i];
             }
         }
-        let count = 6.0 * problem.frames.len() as f64;
         robot = scale(1.0, sum, count - prior_share).map(|k| RobotPrior {
             rotation_sigma_rad: prior.rotation_sigma_rad * k,
             translation_sigma_m: prior.translation_sigma_m * k,
@@ -1076,7 +1119,7 @@ pub fn refine_reprojection(
             // One LM per round (robust weights following the new sigma), not a full fit: the
             // sigmas and the parameters converge together, and a final fit settles both.
             if options.robust != RobustLoss::None {
-                reweight(&mut problem, options.robust);
+                reweight(&mut problem, options);
             }
             let (p, e, c) = run_lm(problem)?;
             problem = p;
@@ -1156,11 +1199,34 @@ pub fn refine_reprojection(
         .iter()
         .map(|v| if v.is_finite() { *v } else { 0.0 })
         .collect();
-    let outlier_frames = flag_outliers(
+    let pixel_outliers = flag_outliers(
         &frame_values,
         options.outlier_mad_factor,
         options.outlier_floor_px,
     );
+    let mut outlier_frames = pixel_outliers.clone();
+    // A frame whose recorded robot pose is far off shows in its correction, not its pixels (the
+    // correction absorbs it): flag those too.
+    let mut robot_outlier_notes = Vec::new();
+    if let Some(prior) = problem.prior {
+        for f in (0..frames.len()).filter(|&f| problem.prior_weights[f] == 0.0) {
+            let (phi, rho) = s.corrections[f];
+            robot_outlier_notes.push(format!(
+                "{f}{} ({:.3} mm, {:.4}°: {:.0}x the repeatability the other frames show)",
+                frames[f]
+                    .id
+                    .as_ref()
+                    .map(|id| format!(" ({id})"))
+                    .unwrap_or_default(),
+                rho.norm() * 1e3,
+                phi.norm().to_degrees(),
+                correction_sigmas(&s, f, &prior) / 6f64.sqrt()
+            ));
+            outlier_frames.push(f);
+        }
+        outlier_frames.sort_unstable();
+        outlier_frames.dedup();
+    }
     let all_corners: Vec<f64> = errors.corner_px.iter().flatten().copied().collect();
     let flagged: Vec<usize> = flag_outliers(
         &all_corners,
@@ -1180,8 +1246,8 @@ pub fn refine_reprojection(
             outlier_corners.push((f, index - starts[f]));
         }
     }
-    if !outlier_frames.is_empty() {
-        let described: Vec<String> = outlier_frames
+    if !pixel_outliers.is_empty() {
+        let described: Vec<String> = pixel_outliers
             .iter()
             .map(|&i| match &frames[i].id {
                 Some(id) => format!("{i} ({id}, {:.2} px)", errors.frame_rms_px[i]),
@@ -1190,8 +1256,15 @@ pub fn refine_reprojection(
             .collect();
         warnings.push(format!(
             "{} frame(s) reproject far worse than the rest: {} (check detection and robot pose of those frames)",
-            outlier_frames.len(),
+            pixel_outliers.len(),
             described.join(", ")
+        ));
+    }
+    if !robot_outlier_notes.is_empty() {
+        warnings.push(format!(
+            "{} frame(s) needed a robot-pose correction far beyond the others: {} (check the robot pose recorded for those frames; they were left out of the hand-eye fit)",
+            robot_outlier_notes.len(),
+            robot_outlier_notes.join(", ")
         ));
     }
     if !outlier_corners.is_empty() {
