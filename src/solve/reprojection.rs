@@ -13,11 +13,16 @@
 //! as the pose-space refinement so [`super::refine::mount_uncertainty`] maps the covariance;
 //! then `fx fy cx cy` (px) and the distortion coefficients when free; then per frame a robot
 //! correction `T_base_flange ← (R·exp(φ), t + ρ)` held by a Gaussian prior from the robot's
-//! repeatability. Analytic Jacobian; each corner row touches at most 12 + 9 global columns and
-//! the 6 columns of its own frame's correction. Without corrections the Jacobian is at most 21
-//! columns wide and the `levenberg-marquardt` crate minimises it with its dense QR; with them
-//! (12 + 9 + 6·frames columns) a Levenberg-Marquardt on the normal equations accumulated block
-//! by block replaces it (the dense QR was ~50x slower) — see `benches/reprojection.rs`.
+//! repeatability. With the robust loss on, a frame whose correction stands far out from the
+//! others' (its recorded robot pose is off) gets its prior dropped: its correction runs free and
+//! it leaves the fit of the two unknowns. Optionally the corner noise and the repeatability are
+//! estimated from the residuals (variance component estimation).
+//!
+//! Analytic Jacobian; each corner row touches at most 12 + 9 global columns and the 6 columns of
+//! its own frame's correction. Without corrections the Jacobian is at most 21 columns wide and
+//! the `levenberg-marquardt` crate minimises it with its dense QR; with them (12 + 9 + 6·frames
+//! columns) a Levenberg-Marquardt on the normal equations accumulated block by block replaces it
+//! (the dense QR was ~50x slower) — see `benches/reprojection.rs`.
 //!
 //! Pure: no I/O, no clocks. Depends on `geometry`, the camera model type and nalgebra only.
 
