@@ -12,11 +12,11 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{parse_yaml, read_text, FileError};
 use crate::geometry::{PoseError, PoseYaml};
 use crate::plan::{CellTransforms, GenerateSpec};
 use crate::robot::{MotionLimits, WorkspaceBox};
 use crate::solve::{Method, NoiseModel, Setup, SolveOptions};
+use crate::yaml_file::{parse_yaml, read_text, FileError};
 
 /// Ceilings on the configurable motion limits: calibration moves near people never need more.
 pub const MAX_LINEAR_SPEED: f64 = 0.5;

@@ -18,3 +18,4 @@ pub mod session;
 pub mod solve;
 pub mod target;
 pub mod verify;
+pub mod yaml_file;

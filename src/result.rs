@@ -20,12 +20,12 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{read_yaml, write_yaml, FileError};
 use crate::geometry::{Pose, PoseRecord};
 use crate::solve::{
     Calibration, CellTransforms, Method, Phase, PosePair, PoseSigma, Residuals, Setup,
     SolverReport, TraceStep, Uncertainty,
 };
+use crate::yaml_file::{read_yaml, write_yaml, FileError};
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

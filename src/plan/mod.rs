@@ -17,10 +17,10 @@ use std::path::{Path, PathBuf};
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{parse_yaml, read_text, FileError};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
 use crate::solve::Setup;
+use crate::yaml_file::{parse_yaml, read_text, FileError};
 
 pub use crate::solve::CellTransforms;
 

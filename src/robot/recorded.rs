@@ -13,14 +13,15 @@
 //! recorded cell is the recorded poses themselves and its "joints" are [`plan_joints`]`(i)`, which
 //! carry the pose number in joint 0 (as `i` degrees, so plan tables and session manifests show
 //! the pose number) so a move (or a retry) to plan pose `i` reports pose `i`.
-//! Depends on `robot` and `geometry` only.
+//! Depends on `robot`, `geometry` and `yaml_file` only.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use crate::atomic_file::write_atomic;
-use crate::geometry::{Pose, PoseError, PoseYaml};
+use crate::geometry::{Pose, PoseYaml};
+use crate::yaml_file::{read_yaml, FileError};
 
 use super::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
@@ -33,60 +34,14 @@ pub struct RecordedPosesYaml {
     pub base_from_flange: Vec<PoseYaml>,
 }
 
-/// Why a recorded-poses file could not be used.
-#[derive(Debug, thiserror::Error)]
-pub enum RecordedError {
-    /// The file could not be read or written.
-    #[error("{}: cannot access", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// The YAML does not have the expected shape.
-    #[error("{}: {yaml_path}: {problem}", path.display())]
-    Shape {
-        /// The file.
-        path: PathBuf,
-        /// YAML path of the problem.
-        yaml_path: String,
-        /// What serde found.
-        problem: String,
-    },
-    /// A pose is malformed.
-    #[error("{}: {problem}", path.display())]
-    Pose {
-        /// The file.
-        path: PathBuf,
-        /// The pose problem with its YAML path.
-        problem: PoseError,
-    },
-    /// The file holds no pose.
-    #[error("{}: T_base_flange: no poses", path.display())]
-    Empty {
-        /// The file.
-        path: PathBuf,
-    },
-}
-
 /// Reads a recorded-poses file.
-pub fn load_recorded_poses(path: &Path) -> Result<Vec<Pose>, RecordedError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RecordedError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let deserializer = serde_yaml_ng::Deserializer::from_str(&text);
-    let raw: RecordedPosesYaml =
-        serde_path_to_error::deserialize(deserializer).map_err(|e| RecordedError::Shape {
-            path: path.to_path_buf(),
-            yaml_path: e.path().to_string(),
-            problem: e.inner().to_string(),
-        })?;
+pub fn load_recorded_poses(path: &Path) -> Result<Vec<Pose>, FileError> {
+    let raw: RecordedPosesYaml = read_yaml(path)?;
     if raw.base_from_flange.is_empty() {
-        return Err(RecordedError::Empty {
+        return Err(FileError::Value {
             path: path.to_path_buf(),
+            yaml_path: "T_base_flange".into(),
+            problem: "no poses".into(),
         });
     }
     raw.base_from_flange
@@ -94,7 +49,7 @@ pub fn load_recorded_poses(path: &Path) -> Result<Vec<Pose>, RecordedError> {
         .enumerate()
         .map(|(i, p)| {
             p.to_pose(&format!("T_base_flange[{i}]"))
-                .map_err(|problem| RecordedError::Pose {
+                .map_err(|problem| FileError::Pose {
                     path: path.to_path_buf(),
                     problem,
                 })
@@ -102,8 +57,8 @@ pub fn load_recorded_poses(path: &Path) -> Result<Vec<Pose>, RecordedError> {
         .collect()
 }
 
-/// Writes a recorded-poses file (atomically).
-pub fn save_recorded_poses(poses: &[Pose], path: &Path) -> Result<(), RecordedError> {
+/// Writes a recorded-poses file (atomically), with a comment saying what it holds.
+pub fn save_recorded_poses(poses: &[Pose], path: &Path) -> Result<(), FileError> {
     let raw = RecordedPosesYaml {
         base_from_flange: poses.iter().map(PoseYaml::from_pose).collect(),
     };
@@ -111,7 +66,7 @@ pub fn save_recorded_poses(poses: &[Pose], path: &Path) -> Result<(), RecordedEr
         "# T_base_flange as the robot measured it at each frame, in frame order (m, rad)\n{}",
         serde_yaml_ng::to_string(&raw).expect("poses serialise")
     );
-    write_atomic(path, text.as_bytes()).map_err(|source| RecordedError::Io {
+    write_atomic(path, text.as_bytes()).map_err(|source| FileError::Write {
         path: path.to_path_buf(),
         source,
     })

@@ -50,6 +50,8 @@ const STOP_DECELERATION: f64 = 1.0;
 /// Controller time the receive interface must advance past a move's end before the pose is
 /// read back, so the reading is from after the move (two 500 Hz cycles plus margin).
 const FRESH_AFTER_MOVE_S: f64 = 0.01;
+/// Wait before sending a refused first command again after the control script (re)started.
+const RESTART_SETTLE: Duration = Duration::from_millis(100);
 /// Capacity of the shim's error-message buffer.
 const ERR_LEN: usize = 512;
 
@@ -245,6 +247,7 @@ impl std::fmt::Debug for UrRobot {
     }
 }
 
+#[derive(Debug, Clone, Copy)]
 enum MoveKind {
     Linear,
     Joint,
@@ -435,7 +438,7 @@ impl UrRobot {
 
     /// Makes sure the control script runs (it stops after a protective stop is cleared, or when
     /// someone pressed stop on the pendant), re-uploading it if needed.
-    fn ensure_program(&mut self) -> Result<ffi::UrrtdeState, RobotError> {
+    fn ensure_program(&mut self) -> Result<(ffi::UrrtdeState, bool), RobotError> {
         let s = self.state()?;
         if let Some(e) = Self::safety_error(s.safety_status_bits) {
             return Err(e);
@@ -455,7 +458,7 @@ impl UrRobot {
                     return Err(e);
                 }
                 if s.runtime_state == RUNTIME_PLAYING {
-                    return Ok(s);
+                    return Ok((s, true));
                 }
                 if Instant::now() > deadline {
                     return Err(backend(UrError::ProgramStopped {
@@ -465,7 +468,7 @@ impl UrRobot {
                 std::thread::sleep(POLL_PERIOD);
             }
         }
-        Ok(s)
+        Ok((s, false))
     }
 
     fn check_workspace(&self, base_from_flange: &Pose) -> Result<(), RobotError> {
@@ -480,6 +483,35 @@ impl UrRobot {
             }
             _ => Ok(()),
         }
+    }
+
+    /// Sends one asynchronous move; the inner error is ur_rtde's refusal.
+    fn send_move(
+        &mut self,
+        kind: MoveKind,
+        target: [f64; 6],
+        speed: f64,
+        acceleration: f64,
+    ) -> Result<Result<(), RawError>, RobotError> {
+        let call = match kind {
+            MoveKind::Linear => "moveL",
+            MoveKind::Joint => "moveJ",
+        };
+        self.call(call, move |h| {
+            let ptr = h.ptr();
+            let result = raw_call(|err, len| match kind {
+                // SAFETY: `ptr` is the live handle owned by this worker; `target` holds the 6
+                // values the shim reads.
+                MoveKind::Linear => unsafe {
+                    ffi::urrtde_move_l(ptr, target.as_ptr(), speed, acceleration, 1, err, len)
+                },
+                // SAFETY: as above.
+                MoveKind::Joint => unsafe {
+                    ffi::urrtde_move_j(ptr, target.as_ptr(), speed, acceleration, 1, err, len)
+                },
+            });
+            Ok(result)
+        })
     }
 
     fn interrupted(&self) -> bool {
@@ -503,23 +535,24 @@ impl UrRobot {
         if self.interrupted() {
             return Err(RobotError::Interrupted);
         }
-        let before = self.ensure_program()?;
+        let (before, restarted) = self.ensure_program()?;
         let op_before = (before.async_status >> 24) & 0x7F;
-        let sent = self.call(call, move |h| {
-            let ptr = h.ptr();
-            let result = raw_call(|err, len| match kind {
-                // SAFETY: `ptr` is the live handle owned by this worker; `target` holds the 6
-                // values the shim reads.
-                MoveKind::Linear => unsafe {
-                    ffi::urrtde_move_l(ptr, target.as_ptr(), speed, acceleration, 1, err, len)
-                },
-                // SAFETY: as above.
-                MoveKind::Joint => unsafe {
-                    ffi::urrtde_move_j(ptr, target.as_ptr(), speed, acceleration, 1, err, len)
-                },
-            });
-            Ok(result)
-        })?;
+        let mut sent = self.send_move(kind, target, speed, acceleration)?;
+        if sent.is_err() && restarted {
+            // The first command after the control script was (re)started can be refused while
+            // the script settles. If the move did not start and no stop is active, send it again
+            // once.
+            std::thread::sleep(RESTART_SETTLE);
+            let after = self.last_timestamp + FRESH_AFTER_MOVE_S;
+            let s = self.wait_fresh(Some(after))?;
+            let started =
+                (s.async_status >> 24) & 0x7F != op_before || s.async_status & ASYNC_RUNNING != 0;
+            if started {
+                sent = Ok(());
+            } else if Self::safety_error(s.safety_status_bits).is_none() {
+                sent = self.send_move(kind, target, speed, acceleration)?;
+            }
+        }
         if let Err(e) = sent {
             // ur_rtde returns false when a stop is active: report the stop, not "refused". The
             // control connection may have seen it before the receive one: read newer data.

@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::atomic_file::write_atomic;
-use crate::dataset::{read_yaml, write_yaml};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::solve::Setup;
+use crate::yaml_file::{read_yaml, write_yaml};
 
 use super::SessionError;
 

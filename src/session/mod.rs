@@ -46,7 +46,7 @@ pub enum SessionError {
     },
     /// A session record could not be read or written, or does not have its shape.
     #[error(transparent)]
-    File(#[from] crate::dataset::FileError),
+    File(#[from] crate::yaml_file::FileError),
     /// A session record is malformed.
     #[error("{file}: {path}: {message}")]
     Record {
