@@ -46,13 +46,6 @@ impl Predicted {
     }
 }
 
-fn x_from_b(setup: Setup, base_from_flange: &Pose) -> Pose {
-    match setup {
-        Setup::EyeInHand => base_from_flange.inverse(),
-        Setup::EyeToHand => *base_from_flange,
-    }
-}
-
 /// Information of samples at these robot poses, at the estimate (camera mount, target mount).
 pub fn information(
     setup: Setup,
@@ -64,7 +57,7 @@ pub fn information(
     let solution = Axby::from_mounts(camera_mount, target_mount);
     let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
     for pose in base_from_flange {
-        h += sample_information(&solution, &x_from_b(setup, pose), &options.noise);
+        h += sample_information(&solution, &setup.chain_b(pose), &options.noise);
     }
     h
 }
@@ -114,7 +107,7 @@ pub fn next_best(
         .enumerate()
         .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
         .filter_map(|(i, c)| {
-            let added = h + sample_information(&solution, &x_from_b(setup, c), &options.noise);
+            let added = h + sample_information(&solution, &setup.chain_b(c), &options.noise);
             predict(camera_mount, target_mount, &added, variance_factor).map(|p| (i, p))
         })
         .min_by(|a, b| a.1.score.total_cmp(&b.1.score))

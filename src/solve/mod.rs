@@ -66,6 +66,15 @@ impl Setup {
             Setup::EyeToHand => ("T_base_camera", "T_flange_target"),
         }
     }
+
+    /// `B` of `A = X·B·Y` for a robot pose: eye-in-hand `inv(T_base_flange)`, eye-to-hand
+    /// `T_base_flange`.
+    pub fn chain_b(self, base_from_flange: &Pose) -> Pose {
+        match self {
+            Setup::EyeInHand => base_from_flange.inverse(),
+            Setup::EyeToHand => *base_from_flange,
+        }
+    }
 }
 
 impl std::fmt::Display for Setup {
@@ -331,16 +340,6 @@ pub struct Calibration {
 }
 
 impl Calibration {
-    /// The camera's mount: eye_in_hand `T_flange_camera`, eye_to_hand `T_base_camera`.
-    pub fn camera_mount(&self) -> Pose {
-        self.camera_mount
-    }
-
-    /// The target's mount: eye_in_hand `T_base_target`, eye_to_hand `T_flange_target`.
-    pub fn target_mount(&self) -> Pose {
-        self.target_mount
-    }
-
     /// Both unknowns with their YAML keys, camera mount first.
     pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
         self.transforms().unknowns()
@@ -399,10 +398,7 @@ pub fn predict(
     target_mount: &Pose,
     base_from_flange: &Pose,
 ) -> Pose {
-    match setup {
-        Setup::EyeInHand => camera_mount.inverse() * base_from_flange.inverse() * target_mount,
-        Setup::EyeToHand => camera_mount.inverse() * base_from_flange * target_mount,
-    }
+    camera_mount.inverse() * setup.chain_b(base_from_flange) * target_mount
 }
 
 /// The `A = X·B·Y` form of a data set, shared by both setups.
@@ -423,10 +419,7 @@ impl AxbyData {
             a: pairs.iter().map(|p| p.camera_from_target).collect(),
             b: pairs
                 .iter()
-                .map(|p| match setup {
-                    Setup::EyeInHand => p.base_from_flange.inverse(),
-                    Setup::EyeToHand => p.base_from_flange,
-                })
+                .map(|p| setup.chain_b(&p.base_from_flange))
                 .collect(),
             weights: pairs.iter().map(|p| p.weight).collect(),
         }

@@ -42,14 +42,10 @@ pub struct Refined {
     pub robust_weights: Vec<f64>,
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 /// Inverse of the left Jacobian of SO(3) at `phi`.
 fn left_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
     let theta = phi.norm();
-    let k = skew(phi);
+    let k = phi.cross_matrix();
     let coefficient = if theta < 1e-6 {
         1.0 / 12.0 + theta * theta / 720.0
     } else {
@@ -146,7 +142,7 @@ impl LeastSquaresProblem<f64, Dyn, U12> for Problem<'_> {
                 .copy_from(&(j_inv * r_pred * kr));
             // Translation rows: d/dφ_X = −[R_X (R_B t_Y + t_B)]×, d/dρ_X = I, d/dρ_Y = R_X R_B.
             j.fixed_view_mut::<3, 3>(6 * i + 3, 0)
-                .copy_from(&(-skew(&lever) * kt));
+                .copy_from(&(-lever.cross_matrix() * kt));
             j.fixed_view_mut::<3, 3>(6 * i + 3, 3)
                 .copy_from(&(Matrix3::identity() * kt));
             j.fixed_view_mut::<3, 3>(6 * i + 3, 9)
@@ -372,7 +368,7 @@ pub fn mount_uncertainty(
     // inv(X): δθ = −R_Xᵀ φ_X; δt = −R_Xᵀ [t_X]× φ_X − R_Xᵀ ρ_X.
     g.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-rx_t));
     g.fixed_view_mut::<3, 3>(3, 0)
-        .copy_from(&(-rx_t * skew(&tx)));
+        .copy_from(&(-rx_t * tx.cross_matrix()));
     g.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-rx_t));
     // Y (right perturbation): δθ = R_Y φ_Y; δt = ρ_Y.
     g.fixed_view_mut::<3, 3>(6, 6).copy_from(&ry);

@@ -35,7 +35,8 @@ use nalgebra::{
 use super::diagnostics::flag_outliers;
 use super::refine::mount_uncertainty;
 use super::{
-    Axby, AxbyData, Calibration, NoiseModel, PosePair, RobustLoss, Setup, SolveError, Uncertainty,
+    Axby, AxbyData, Calibration, CellTransforms, NoiseModel, PosePair, RobustLoss, Setup,
+    SolveError, Uncertainty,
 };
 use crate::camera::model::{CameraModel, Distortion};
 use crate::geometry::Pose;
@@ -173,8 +174,12 @@ pub struct ReprojectionCalibration {
 impl ReprojectionCalibration {
     /// Both unknowns with their YAML keys, camera mount first.
     pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
-        let (camera, target) = self.setup.unknown_names();
-        [(camera, self.camera_mount), (target, self.target_mount)]
+        CellTransforms {
+            setup: self.setup,
+            camera_mount: self.camera_mount,
+            target_mount: self.target_mount,
+        }
+        .unknowns()
     }
 
     /// What corners and robot poses were weighted with, and where the numbers came from.
@@ -237,18 +242,6 @@ impl ReprojectionCalibration {
             solver,
             warnings,
         }
-    }
-}
-
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
-/// `B_f` of the chain for a robot pose.
-fn chain_b(setup: Setup, base_from_flange: &Pose) -> Pose {
-    match setup {
-        Setup::EyeInHand => base_from_flange.inverse(),
-        Setup::EyeToHand => *base_from_flange,
     }
 }
 
@@ -491,7 +484,7 @@ impl Problem<'_> {
                 );
                 corrections.push((phi, rho));
             }
-            b.push(chain_b(self.setup, &robot));
+            b.push(self.setup.chain_b(&robot));
         }
         State {
             axby: Axby { x, y },
@@ -627,11 +620,11 @@ impl Problem<'_> {
                 let rxw = pc.coords - s.axby.x.translation.vector;
                 global
                     .fixed_view_mut::<2, 3>(0, 0)
-                    .copy_from(&(d_pix * (-skew(&rxw))));
+                    .copy_from(&(d_pix * (-rxw.cross_matrix())));
                 global.fixed_view_mut::<2, 3>(0, 3).copy_from(&d_pix);
                 global
                     .fixed_view_mut::<2, 3>(0, 6)
-                    .copy_from(&(d_pix * d_phi_y_base * skew(&p)));
+                    .copy_from(&(d_pix * d_phi_y_base * p.cross_matrix()));
                 global
                     .fixed_view_mut::<2, 3>(0, 9)
                     .copy_from(&(d_pix * rxrb));
@@ -660,8 +653,8 @@ impl Problem<'_> {
                 if layout.robot > 0 {
                     // First order in the (tiny) correction itself; exact at zero correction.
                     let (d_phi, d_rho) = match self.setup {
-                        Setup::EyeToHand => (-(rb * skew(&q.coords)), Matrix3::identity()),
-                        Setup::EyeInHand => (skew(&w.coords), -rb),
+                        Setup::EyeToHand => (-(rb * q.coords.cross_matrix()), Matrix3::identity()),
+                        Setup::EyeInHand => (w.coords.cross_matrix(), -rb),
                     };
                     robot
                         .fixed_view_mut::<2, 3>(0, 0)

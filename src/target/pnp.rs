@@ -271,14 +271,10 @@ fn pose_from_params(start_rotation: &UnitQuaternion<f64>, params: &Vector6<f64>)
     )
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 /// Left Jacobian of SO(3): d(exp(ω)·x)/dω = -[exp(ω)·x]× · J_l(ω).
 fn left_jacobian(omega: &Vector3<f64>) -> Matrix3<f64> {
     let theta = omega.norm();
-    let k = skew(omega);
+    let k = omega.cross_matrix();
     if theta < 1e-8 {
         return Matrix3::identity() + 0.5 * k;
     }
@@ -322,7 +318,7 @@ impl LeastSquaresProblem<f64, Dyn, U6> for Reprojection<'_> {
             let (_, d_pixel) = self
                 .camera
                 .project_with_jacobian(&Point3::from(rotated + pose.translation.vector))?;
-            let d_rotation = d_pixel * (-skew(&rotated) * jl);
+            let d_rotation = d_pixel * (-rotated.cross_matrix() * jl);
             for row in 0..2 {
                 for col in 0..3 {
                     jacobian[(2 * i + row, col)] = d_rotation[(row, col)];
