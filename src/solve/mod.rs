@@ -273,8 +273,8 @@ pub struct Uncertainty {
     /// 1-sigma of the target mount (`T_base_target` or `T_flange_target`).
     pub target_mount: PoseSigma,
     /// A-posteriori variance factor `χ²/dof` the covariance was scaled by (≈ 1 if the noise
-    /// model is right; floored at 1 only with fewer than 8 samples, see
-    /// [`refine::variance_factor`]).
+    /// model is right; floored at 1 only with fewer than 36 residual degrees of freedom, i.e.
+    /// 8 pose samples, see [`refine::variance_factor`]).
     pub variance_factor: f64,
 }
 

@@ -146,12 +146,13 @@ pub struct ReprojectionCalibration {
     /// 1-sigma of `fx fy cx cy`, px (when the intrinsics were fitted).
     pub intrinsics_sigma_px: Option<[f64; 4]>,
     /// The corner noise the answer was weighted with, px: estimated from the residuals when
-    /// `estimate_noise` was set, the given one otherwise.
+    /// `estimate_noise` was set and an estimate could be made, the given one otherwise.
     pub pixel_sigma_px: f64,
     /// The robot repeatability the corrections were held by (estimated or given; `None`
     /// without corrections).
     pub robot_prior: Option<RobotPrior>,
-    /// Whether `pixel_sigma_px` and `robot_prior` were estimated from the residuals.
+    /// Whether `pixel_sigma_px` and `robot_prior` were estimated from the residuals (false when
+    /// `estimate_noise` was set but no estimate could be made).
     pub noise_estimated: bool,
     /// Reprojection errors at the optimum (with the corrected robot poses, when fitted).
     pub errors: ReprojectionErrors,
@@ -1105,15 +1106,21 @@ pub fn refine_reprojection(
     let problem = Problem::new(setup, frames, start, camera0, options);
     let (mut problem, mut evaluations, mut converged) = fit(problem, options)?;
     let mut noise_notes = Vec::new();
+    // Only true once an estimate was applied: without one the configured noise stands.
+    let mut noise_estimated = false;
     if options.estimate_noise {
         for _ in 0..MAX_NOISE_ROUNDS {
             let Some(estimate) = estimate_noise(&problem) else {
-                noise_notes.push(
-                    "the noise could not be estimated from the residuals (too few corners or a singular problem): the configured noise is used".to_string(),
-                );
+                // After an applied round its estimate stands; only say otherwise when none did.
+                if !noise_estimated {
+                    noise_notes.push(
+                        "the noise could not be estimated from the residuals (too few corners or a singular problem): the configured noise is used".to_string(),
+                    );
+                }
                 break;
             };
             let change = estimate.apply(&mut problem, options);
+            noise_estimated = true;
             // One LM per round (robust weights following the new sigma), not a full fit: the
             // sigmas and the parameters converge together, and a final fit settles both.
             if options.robust != RobustLoss::None {
@@ -1156,17 +1163,14 @@ pub fn refine_reprojection(
     let pixel_errors = problem.pixel_errors(&s);
     let errors = errors_from(&pixel_errors);
 
-    // Covariance at the optimum: (JᵀJ)⁻¹ scaled by max(1, χ²/dof), marginals of the blocks.
+    // Covariance at the optimum: (JᵀJ)⁻¹ scaled by the same variance factor as the pose-space
+    // solve (χ²/dof, floored at 1 only with few degrees of freedom), marginals of the blocks.
     let residuals = problem
         .residuals()
         .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
     let n_params = problem.layout.len();
     let dof = residuals.len().saturating_sub(n_params);
-    let variance_factor = if dof > 0 {
-        (residuals.norm_squared() / dof as f64).max(1.0)
-    } else {
-        1.0
-    };
+    let variance_factor = super::refine::variance_factor(residuals.norm_squared(), dof);
     let mut uncertainty = None;
     let mut intrinsics_sigma_px = None;
     let mut warnings = noise_notes;
@@ -1260,7 +1264,7 @@ pub fn refine_reprojection(
     }
     if !robot_outlier_notes.is_empty() {
         warnings.push(format!(
-            "{} frame(s) needed a robot-pose correction far beyond the others: {} (check the robot pose recorded for those frames; they were left out of the hand-eye fit)",
+            "{} frame(s) needed a robot-pose correction far beyond the others: {} (their recorded robot pose and their detections disagree with the other frames; check both; they were left out of the hand-eye fit)",
             robot_outlier_notes.len(),
             robot_outlier_notes.join(", ")
         ));
@@ -1307,7 +1311,7 @@ pub fn refine_reprojection(
         intrinsics_sigma_px,
         pixel_sigma_px: 1.0 / problem.inv_sigma_px,
         robot_prior: problem.prior,
-        noise_estimated: options.estimate_noise,
+        noise_estimated,
         errors,
         recorded_pose_errors,
         outlier_frames,
