@@ -168,6 +168,20 @@ pub enum RobustLoss {
 }
 
 impl RobustLoss {
+    /// Checks the loss's scale is a positive finite number; the names are the option keys of
+    /// the Huber and Cauchy scales in the caller's configuration.
+    pub(super) fn validate(
+        self,
+        huber_name: &'static str,
+        cauchy_name: &'static str,
+    ) -> Result<(), SolveError> {
+        match self {
+            RobustLoss::Huber(k) => require_positive(huber_name, k),
+            RobustLoss::Cauchy(k) => require_positive(cauchy_name, k),
+            RobustLoss::None => Ok(()),
+        }
+    }
+
     /// The iteratively-reweighted-least-squares weight of a residual of `e` sigmas.
     pub fn weight(self, e: f64) -> f64 {
         match self {
@@ -585,36 +599,34 @@ fn validate(pairs: &[PosePair], options: &SolveOptions) -> Result<(), SolveError
             return Err(bad(SampleProblem::BadWeight(p.weight)));
         }
     }
-    let positive = |name, value: f64| {
-        if value.is_finite() && value > 0.0 {
-            Ok(())
-        } else {
-            Err(SolveError::InvalidOption {
-                name,
-                value,
-                expected: "must be a positive finite number",
-            })
-        }
-    };
-    positive("noise.rotation_sigma_rad", options.noise.rotation_sigma_rad)?;
-    positive(
+    require_positive("noise.rotation_sigma_rad", options.noise.rotation_sigma_rad)?;
+    require_positive(
         "noise.translation_sigma_m",
         options.noise.translation_sigma_m,
     )?;
-    match options.robust {
-        RobustLoss::Huber(k) => positive("robust.huber", k)?,
-        RobustLoss::Cauchy(k) => positive("robust.cauchy", k)?,
-        RobustLoss::None => {}
-    }
-    positive(
+    options.robust.validate("robust.huber", "robust.cauchy")?;
+    require_positive(
         "iterative.rotation_tolerance_rad",
         options.iterative.rotation_tolerance_rad,
     )?;
-    positive(
+    require_positive(
         "iterative.translation_tolerance_m",
         options.iterative.translation_tolerance_m,
     )?;
     Ok(())
+}
+
+/// An option that must be a positive finite number, named `name` in the error.
+pub(super) fn require_positive(name: &'static str, value: f64) -> Result<(), SolveError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(SolveError::InvalidOption {
+            name,
+            value,
+            expected: "must be a positive finite number",
+        })
+    }
 }
 
 /// Solves for both unknowns of a cell from its pose pairs.

@@ -34,6 +34,7 @@ use nalgebra::{
 
 use super::diagnostics::flag_outliers;
 use super::refine::mount_uncertainty;
+use super::require_positive;
 use super::{
     Axby, AxbyData, Calibration, CellTransforms, NoiseModel, PosePair, RobustLoss, Setup,
     SolveError, Uncertainty,
@@ -819,36 +820,23 @@ fn validate(
     camera: &CameraModel,
     options: &ReprojectionOptions,
 ) -> Result<(), SolveError> {
-    let positive = |name, value: f64| {
-        if value.is_finite() && value > 0.0 {
-            Ok(())
-        } else {
-            Err(SolveError::InvalidOption {
-                name,
-                value,
-                expected: "must be a positive finite number",
-            })
-        }
-    };
-    positive("reprojection.pixel_sigma_px", options.pixel_sigma_px)?;
-    positive("reprojection.outlier_floor_px", options.outlier_floor_px)?;
-    match options.robust {
-        RobustLoss::Huber(k) => positive("reprojection.robust.huber", k)?,
-        RobustLoss::Cauchy(k) => positive("reprojection.robust.cauchy", k)?,
-        RobustLoss::None => {}
-    }
+    require_positive("reprojection.pixel_sigma_px", options.pixel_sigma_px)?;
+    require_positive("reprojection.outlier_floor_px", options.outlier_floor_px)?;
+    options
+        .robust
+        .validate("reprojection.robust.huber", "reprojection.robust.cauchy")?;
     if let Some(prior) = options.robot_prior {
-        positive(
+        require_positive(
             "reprojection.robot_prior.translation_sigma_m",
             prior.translation_sigma_m,
         )?;
-        positive(
+        require_positive(
             "reprojection.robot_prior.rotation_sigma_rad",
             prior.rotation_sigma_rad,
         )?;
     }
-    positive("camera.fx", camera.fx)?;
-    positive("camera.fy", camera.fy)?;
+    require_positive("camera.fx", camera.fx)?;
+    require_positive("camera.fy", camera.fy)?;
     for (name, value) in [("camera.cx", camera.cx), ("camera.cy", camera.cy)] {
         if !value.is_finite() {
             return Err(SolveError::InvalidOption {
