@@ -75,16 +75,12 @@ pub struct IterativeOutcome {
     pub solution: Axby,
     /// Rotation iterations of the successful start.
     pub rotation_iterations: usize,
-    /// Rotation iterations spent on all starts, including stalled ones.
-    pub total_rotation_iterations: usize,
     /// Translation iterations.
     pub translation_iterations: usize,
     /// Both alternations met their tolerance without a stall.
     pub converged: bool,
     /// Restarts after a stall or non-convergence.
     pub restarts: usize,
-    /// Smaller of the last X and Y spreads (1 = per-sample estimates all agree).
-    pub spread: f64,
     /// Per-iteration updates of the successful start (rotation, then translation).
     pub trace: Vec<TraceStep>,
 }
@@ -316,14 +312,13 @@ pub fn solve_axby_from(
         .map(|b| b.rotation.into_inner().conjugate())
         .collect();
     let run = rotations(&qa, &qb_conj, &data.weights, start, options);
-    finish(data, run, 0, 0, options)
+    finish(data, run, 0, options)
 }
 
 fn finish(
     data: &AxbyData,
     run: RotationRun,
     restarts: usize,
-    earlier_iterations: usize,
     options: &IterativeOptions,
 ) -> IterativeOutcome {
     let mut trace = run.trace;
@@ -334,11 +329,9 @@ fn finish(
             y: Pose::from_parts(Translation3::from(ty), run.qy),
         },
         rotation_iterations: run.iterations,
-        total_rotation_iterations: earlier_iterations + run.iterations,
         translation_iterations: t_iterations,
         converged: run.converged && t_converged,
         restarts,
-        spread: run.spread,
         trace,
     }
 }
@@ -385,7 +378,7 @@ pub fn solve_axby_with_restarts(
             || residual > STALL_RESIDUAL_DEG
             || worse_than_closed_form;
         if !stalled {
-            return Ok(finish(data, run, restarts, spent, options));
+            return Ok(finish(data, run, restarts, options));
         }
         tracing::debug!(
             restarts,
@@ -403,8 +396,7 @@ pub fn solve_axby_with_restarts(
         // No start gave a consistent answer (mislabelled or wild data): return the best-fitting
         // one, flagged as not converged, so the residuals and convention check can speak.
         run.converged = false;
-        spent -= run.iterations;
-        return Ok(finish(data, run, restarts, spent, options));
+        return Ok(finish(data, run, restarts, options));
     }
     Err(SolveError::NoConvergence {
         restarts: options.max_restarts,

@@ -38,8 +38,6 @@ pub struct Refined {
     pub converged: bool,
     /// Cost (½ Σ r²) at each residual evaluation, for plots.
     pub trace: Vec<f64>,
-    /// Robust weight of each sample (1 without a robust loss).
-    pub robust_weights: Vec<f64>,
 }
 
 /// Inverse of the left Jacobian of SO(3) at `phi`.
@@ -271,7 +269,6 @@ pub fn refine(
         evaluations,
         converged,
         trace,
-        robust_weights: robust,
     })
 }
 
