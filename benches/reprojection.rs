@@ -6,7 +6,6 @@
 //! corners carry 0.2 px noise, the robot poses the demo cell's repeatability.
 
 use std::hint::black_box;
-use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Matrix3, Point2, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -19,9 +18,9 @@ use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior, Setup};
 use handeye::target::Board;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+#[path = "../tests/util/mod.rs"]
+mod util;
+use util::repo;
 
 fn frames(camera: &CameraModel, flange_from_camera: &Pose, base_from_target: &Pose) -> Vec<Frame> {
     let board = Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap();

@@ -8,8 +8,6 @@
 //! the simulator's truth, and the adaptive stop rule is given the 1-sigma the 20-pose random
 //! solve reports, so both aim at the same target.
 
-use std::path::PathBuf;
-
 use handeye::cell;
 use handeye::geometry::Pose;
 use handeye::plan::nbv::AdaptivePlanner;
@@ -20,8 +18,10 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
-mod util;
 use rand_distr::{Distribution, Normal};
+
+mod util;
+use util::{pose_error_mm_deg, repo};
 
 fn measure(truth: &CellTransforms, base_from_flange: &Pose, rng: &mut StdRng) -> PosePair {
     let nr = Normal::new(0.0, 0.01f64.to_radians()).unwrap();
@@ -37,13 +37,13 @@ fn measure(truth: &CellTransforms, base_from_flange: &Pose, rng: &mut StdRng) ->
 }
 
 fn true_error_mm(c: &solve::Calibration, truth: &CellTransforms) -> f64 {
-    let e = |a: &Pose, b: &Pose| (a.translation.vector - b.translation.vector).norm() * 1e3;
+    let e = |a: &Pose, b: &Pose| pose_error_mm_deg(a, b).0;
     e(&c.camera_mount, &truth.camera_mount).max(e(&c.target_mount, &truth.target_mount))
 }
 
 #[test]
 fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
-    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
+    let config = repo().join("configs/sim-cell.yaml");
     let prepared = cell::prepare(&config).expect("the sim cell config prepares");
     let truth = prepared
         .config
@@ -78,43 +78,6 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
         "{} usable candidates",
         candidates.len()
     );
-
-    // Poses the adaptive plan needs to reach the 1-sigma of random plans of several sizes
-    // (one noise draw each; the figures are printed for the record).
-    for n in [8usize, 12, 16, 20] {
-        let mut rng = StdRng::seed_from_u64(7);
-        let pairs: Vec<PosePair> = random[..n]
-            .iter()
-            .map(|(p, _)| measure(&truth, p, &mut rng))
-            .collect();
-        let Ok(c) = solve::solve(truth.setup, &pairs, &options) else {
-            continue;
-        };
-        let u = c.uncertainty.as_ref().expect("covariance");
-        let target_mm = u
-            .camera_mount
-            .translation_mm
-            .max(u.target_mount.translation_mm);
-        let mut planner = AdaptivePlanner::new(
-            truth.setup,
-            prepared.config.nominal.camera_mount,
-            prepared.config.nominal.target_mount,
-            candidates.clone(),
-            options.clone(),
-            target_mm,
-            40,
-        );
-        let mut samples = Vec::new();
-        while let Some((pose, _)) = planner.next(&samples) {
-            samples.push(measure(&truth, &pose, &mut rng));
-        }
-        eprintln!(
-            "random {n:>2} poses: 1-sigma {target_mm:.4} mm, true error {:.4} mm; adaptive reaches that 1-sigma with {} poses{}",
-            true_error_mm(&c, &truth),
-            samples.len(),
-            if planner.reached_target() { "" } else { " (NOT reached)" }
-        );
-    }
 
     let trials: usize = 12;
     let (mut random_sq, mut adaptive_sq, mut poses_used) = (0.0, 0.0, 0usize);
@@ -181,7 +144,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
-    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
+    let config = repo().join("configs/sim-cell.yaml");
     let prepared = cell::prepare(&config).unwrap();
     let truth = prepared.config.simulation.unwrap();
     let candidates = prepared.report.validated().unwrap();

@@ -120,11 +120,15 @@ fn killed_mid_run_resumes_from_the_last_sample_and_matches_a_solve_of_the_same_d
 #[test]
 fn run_refuses_a_bad_config_before_anything_moves_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let config = slow_config(dir.path(), 0.0);
-    let text = std::fs::read_to_string(&config)
-        .unwrap()
-        .replace("max_tilt_deg: 30", "max_tilt_deg: 95");
-    std::fs::write(&config, text).unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[
+            ("count: 20", "count: 10"),
+            ("max_tilt_deg: 30", "max_tilt_deg: 95"),
+        ],
+    );
     let session = dir.path().join("session");
     let output = handeye()
         .args(["run", "--config"])

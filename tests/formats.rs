@@ -3,8 +3,7 @@
 //! parsed back, and bad input of every kind as a clear error naming the file and row.
 //!
 //! The data sets live in `../shared/datasets` beside the crate (see its README); tests that
-//! need them print why and return when it is absent. `HANDEYE_DATASETS` points elsewhere (a
-//! worktree whose parent has no `shared/`).
+//! need them print why and return when it is absent (`util::dataset`).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -26,35 +25,13 @@ use handeye::session::{self, SessionFolder};
 use handeye::solve::CellTransforms;
 use handeye::solve::{self, Calibration, NoiseModel, PosePair, Setup, SolveOptions};
 use handeye::target::{Board, DetectorOptions};
+use handeye::verify::leave_one_out;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// A data set folder, or `None` (with the reason printed) when it is absent.
-fn dataset(name: &str) -> Option<PathBuf> {
-    let root = std::env::var_os("HANDEYE_DATASETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join("../shared/datasets"));
-    let path = root.join(name);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!("SKIP: {} is absent", path.display());
-        None
-    }
-}
+mod util;
+use util::{dataset, pose_error_mm_deg, repo};
 
 fn tag_board() -> Board {
     Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml")).unwrap()
-}
-
-/// Rotation error (deg) and translation error (mm) between two poses.
-fn errors(a: &Pose, b: &Pose) -> (f64, f64) {
-    (
-        a.rotation.angle_to(&b.rotation).to_degrees(),
-        (a.translation.vector - b.translation.vector).norm() * 1e3,
-    )
 }
 
 /// Solver settings for a lone 48 mm tag seen from ~0.6 m: its pose is good to a few tenths of
@@ -67,23 +44,6 @@ fn visp_solve_options() -> SolveOptions {
         },
         ..SolveOptions::default()
     }
-}
-
-/// Leave-one-out: solve without sample i, predict its `T_camera_target`; (deg, mm) per sample.
-fn leave_one_out(setup: Setup, pairs: &[PosePair], options: &SolveOptions) -> Vec<(f64, f64)> {
-    (0..pairs.len())
-        .map(|i| {
-            let rest: Vec<PosePair> = pairs
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| *k != i)
-                .map(|(_, p)| p.clone())
-                .collect();
-            let cal = solve::solve(setup, &rest, options).unwrap();
-            let predicted = cal.predict_camera_from_target(&pairs[i].base_from_flange);
-            errors(&predicted, &pairs[i].camera_from_target)
-        })
-        .collect()
 }
 
 #[test]
@@ -136,14 +96,9 @@ fn visp_eye_to_hand_imports_detects_and_solves_with_small_residuals() {
         "{camera_in_base:?}"
     );
 
-    let loo = leave_one_out(Setup::EyeToHand, &imported.dataset.pairs, &options);
-    let n = loo.len() as f64;
-    let rot_rms = (loo.iter().map(|e| e.0 * e.0).sum::<f64>() / n).sqrt();
-    let trans_rms = (loo.iter().map(|e| e.1 * e.1).sum::<f64>() / n).sqrt();
-    for (i, (deg, mm)) in loo.iter().enumerate() {
-        eprintln!("leave-one-out sample {i}: {deg:.3}°, {mm:.2} mm");
-    }
-    eprintln!("leave-one-out prediction error: RMS {rot_rms:.3}°, {trans_rms:.2} mm");
+    let loo = leave_one_out(Setup::EyeToHand, &imported.dataset.pairs, &options).unwrap();
+    eprintln!("{}", loo.table());
+    let (rot_rms, trans_rms) = (loo.summary.rotation_rms_deg, loo.summary.translation_rms_mm);
     // Seven poses predict the eighth to a few degrees and about a centimetre.
     assert!(
         rot_rms < 5.0 && trans_rms < 20.0,
@@ -233,7 +188,7 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
             (a.camera_mount, b.camera_mount),
             (a.target_mount, b.target_mount),
         ] {
-            let (deg, mm) = errors(&x, &y);
+            let (mm, deg) = pose_error_mm_deg(&x, &y);
             // The session stores poses in YAML (shortest round-trip floats): the same answer to
             // far below any physical meaning.
             assert!(deg < 1e-6 && mm < 1e-6, "{deg}° {mm} mm apart");
@@ -619,7 +574,7 @@ fn export_reads_a_saved_result_file() {
     let json = export(&loaded, ExportFormat::Json, &FrameIds::default());
     let (_, _, camera, _) = parse_json(&json, "T_base_camera");
     assert_same(&camera, &cal.camera_mount, "json from the result file");
-    let (deg, mm) = errors(&camera, &truth.camera_mount);
+    let (mm, deg) = pose_error_mm_deg(&camera, &truth.camera_mount);
     assert!(
         deg < 1e-6 && mm < 1e-6,
         "exact data solved to {deg}°, {mm} mm"

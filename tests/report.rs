@@ -13,9 +13,8 @@ use handeye::report::{PLOT_KINDS, SECTIONS};
 use handeye::result::ResultFile;
 use handeye::session::{self, SessionEvent, SessionFolder};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod util;
+use util::repo;
 
 /// A 10-pose sim-cell session, solved and reported once for all tests of this file.
 fn report() -> &'static (tempfile::TempDir, PathBuf) {

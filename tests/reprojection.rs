@@ -3,8 +3,6 @@
 //! repeatability error, the same frames solved in pose space (PnP per frame, then the refined
 //! `A = X·B·Y` solver) and in reprojection space.
 
-use std::path::PathBuf;
-
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -20,9 +18,8 @@ use handeye::solve::{
 use handeye::target::pnp::estimate_pose_from_points;
 use handeye::target::Board;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod util;
+use util::{dataset, pose_error_mm_deg, repo};
 
 fn board() -> Board {
     Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap()
@@ -179,13 +176,10 @@ fn scenario(
 /// Errors of (camera mount, target mount) against the truth: (mm, degrees) each.
 fn errors(camera_mount: &Pose, target_mount: &Pose) -> [(f64, f64); 2] {
     let (c, t) = truth();
-    let e = |a: &Pose, b: &Pose| {
-        (
-            (a.translation.vector - b.translation.vector).norm() * 1e3,
-            a.rotation.angle_to(&b.rotation).to_degrees(),
-        )
-    };
-    [e(camera_mount, &c), e(target_mount, &t)]
+    [
+        pose_error_mm_deg(camera_mount, &c),
+        pose_error_mm_deg(target_mount, &t),
+    ]
 }
 
 /// The config's default pose-space solver (`solver:` defaults in the cell config).
@@ -344,8 +338,16 @@ fn robot_corrections_absorb_repeatability_error() {
         errors(&corrected.camera_mount, &corrected.target_mount)
     );
     assert_eq!(corrected.corrected_base_from_flange.len(), s.frames.len());
-    // The corrections explain the robot error: pixel RMS drops towards the noise level.
-    assert!(corrected.errors.rms_px < plain.errors.rms_px);
+    // More parameters always fit the pixels better; what matters is the unknowns: the plain
+    // solve pushes the robot error into them (~5 + 2 mm here), the corrected one keeps them
+    // near the truth (~0.4 + 0.4 mm). Stated margin: at least 3x closer in summed translation.
+    let summed_mm = |e: [(f64, f64); 2]| e[0].0 + e[1].0;
+    let plain_mm = summed_mm(errors(&plain.camera_mount, &plain.target_mount));
+    let corrected_mm = summed_mm(errors(&corrected.camera_mount, &corrected.target_mount));
+    assert!(
+        3.0 * corrected_mm < plain_mm,
+        "corrected {corrected_mm:.3} mm vs plain {plain_mm:.3} mm (summed translation error)"
+    );
     for (mm, deg) in errors(&corrected.camera_mount, &corrected.target_mount) {
         assert!(mm < 1.0 && deg < 0.1, "{mm:.3} mm, {deg:.4}°");
     }
@@ -492,7 +494,7 @@ fn reprojection_sigma_covers_the_true_error() {
             100.0 * p3
         );
         assert!(
-            (p1 - 0.683).abs() < 0.06,
+            (p1 - 0.683).abs() < 0.05,
             "{name}: {:.1} % within 1 sigma",
             100.0 * p1
         );
@@ -564,31 +566,13 @@ fn bad_input_is_a_clear_error() {
     assert!(error.to_string().contains("sample 1"), "{error}");
 }
 
-/// `franka_pose_rPe_N.yaml`: `T_base_flange` as `[tx, ty, tz, θux, θuy, θuz]` (m, rad).
-fn visp_robot_pose(path: &std::path::Path) -> Pose {
-    let value: serde_yaml_ng::Value =
-        serde_yaml_ng::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let v: Vec<f64> = value["data"]
-        .as_sequence()
-        .unwrap()
-        .iter()
-        .map(|row| row[0].as_f64().unwrap())
-        .collect();
-    pose_from_rotvec(
-        Vector3::new(v[0], v[1], v[2]),
-        Vector3::new(v[3], v[4], v[5]),
-    )
-}
-
 #[test]
 fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
     use handeye::target::pnp::estimate_board_pose;
     use handeye::target::{detect::load_gray_image, DetectorOptions, TagDetector};
-    let folder = repo().join("../shared/datasets/visp_franka_data-eye-to-hand");
-    if !folder.is_dir() {
-        eprintln!("SKIP: {} is absent", folder.display());
+    let Some(folder) = dataset("visp_franka_data-eye-to-hand") else {
         return;
-    }
+    };
     let board = Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml")).unwrap();
     let camera =
         CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
@@ -599,7 +583,10 @@ fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
         let image = load_gray_image(&folder.join(format!("franka_image-{n}.png"))).unwrap();
         let detection = detector.detect(&image).unwrap();
         let pose = estimate_board_pose(&board, &camera, &detection).unwrap();
-        let robot = visp_robot_pose(&folder.join(format!("franka_pose_rPe_{n}.yaml")));
+        let robot = handeye::formats::import::read_visp_pose(
+            &folder.join(format!("franka_pose_rPe_{n}.yaml")),
+        )
+        .unwrap();
         let id = format!("franka-{n}");
         let mut pair = PosePair::new(robot, pose.camera_from_target);
         pair.id = Some(id.clone());

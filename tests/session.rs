@@ -7,13 +7,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use handeye::cell::{self, PreparedCell};
-use handeye::geometry::Pose;
 use handeye::plan::CellTransforms;
 use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
 
 mod util;
 
-use util::repo;
+use util::{pose_error_mm_deg, repo};
 
 fn config_variant(dir: &Path, base: &str, edits: &[(&str, &str)]) -> PathBuf {
     util::config_variant(dir, base, base, edits)
@@ -34,20 +33,13 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
     )
 }
 
-fn errors(estimate: &Pose, truth: &Pose) -> (f64, f64) {
-    (
-        (estimate.translation.vector - truth.translation.vector).norm() * 1e3,
-        estimate.rotation.angle_to(&truth.rotation).to_degrees(),
-    )
-}
-
 fn assert_recovers_truth(solved: &session::SolvedSession, truth: &CellTransforms) {
     let [(camera_key, camera_mount), (target_key, target_mount)] = solved.calibration.unknowns();
     for (key, estimate, truth) in [
         (camera_key, camera_mount, truth.camera_mount),
         (target_key, target_mount, truth.target_mount),
     ] {
-        let (mm, deg) = errors(&estimate, &truth);
+        let (mm, deg) = pose_error_mm_deg(&estimate, &truth);
         eprintln!("{key}: {mm:.3} mm, {deg:.4} deg from the truth");
         assert!(
             mm < 0.5 && deg < 0.05,
@@ -136,7 +128,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         .chain(reprojection_pairs.into_iter().flatten());
     for ((key, a), (_, b)) in pairs {
         let (a, b) = (&a, &b);
-        let (mm, deg) = errors(a, b);
+        let (mm, deg) = pose_error_mm_deg(a, b);
         assert!(
             mm < 1e-6 && deg < 1e-6,
             "replay of {key} differs by {mm} mm, {deg}°"
@@ -183,7 +175,7 @@ fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
     assert!(outcome.accepted.contains(&8));
     let solved = session::solve_folder(&folder, &prepared.config).unwrap();
     let [(_, camera_mount), _] = solved.calibration.unknowns();
-    let (mm, deg) = errors(
+    let (mm, deg) = pose_error_mm_deg(
         &camera_mount,
         &prepared.config.simulation.unwrap().camera_mount,
     );
@@ -461,19 +453,8 @@ fn every_shipped_cell_config_loads_and_its_plan_passes_its_checks() {
 fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     let dir = tempfile::tempdir().unwrap();
     let lens = repo().join("configs/cameras/sim-1280x720.yaml");
-    let lens_line = format!("intrinsics: {}\n", lens.display());
-    let config = config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        &[
-            (lens_line.as_str(), ""),
-            (
-                "seed: 11",
-                &format!("seed: 11\n  intrinsics: {}", lens.display()),
-            ),
-        ],
-    );
-    let prepared = cell::prepare(&config).unwrap();
+    // The shipped config: sim-cell.yaml with the lens moved from `intrinsics` to the simulator.
+    let prepared = cell::prepare(&repo().join("configs/sim-cell-no-intrinsics.yaml")).unwrap();
     assert!(!prepared.intrinsics_known);
     // The generated views push the board across the image for the intrinsics; the same plan
     // with the intrinsics known keeps the board centred.
@@ -581,7 +562,7 @@ fn both_spaces_over_seeds(
                 (answer.camera_mount, truth.camera_mount),
                 (answer.target_mount, truth.target_mount),
             ] {
-                let (mm, deg) = errors(&estimate, &truth);
+                let (mm, deg) = pose_error_mm_deg(&estimate, &truth);
                 sum.0 += mm;
                 sum.1 += deg;
             }

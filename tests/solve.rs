@@ -12,6 +12,9 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
 
+mod util;
+use util::dataset;
+
 fn random_axis(rng: &mut StdRng) -> Vector3<f64> {
     let v: [f64; 3] = UnitSphere.sample(rng);
     Vector3::from(v)
@@ -582,12 +585,10 @@ fn eigen_euler_xyz(r: &Matrix3<f64>) -> [f64; 3] {
 
 #[test]
 fn moveit_real_eye_to_hand_data_matches_expected_camera_pose() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/datasets/moveit_calibration_eye_to_hand/pose_samples.json");
-    if !path.exists() {
-        eprintln!("SKIP: {} is absent", path.display());
+    let Some(folder) = dataset("moveit_calibration_eye_to_hand") else {
         return;
-    }
+    };
+    let path = folder.join("pose_samples.json");
     let pairs = read_moveit(&path);
     assert_eq!(pairs.len(), 50);
     let cal = solve::solve(Setup::EyeToHand, &pairs, &SolveOptions::default()).unwrap();

@@ -85,8 +85,7 @@ fn run(
 }
 
 fn assert_close(estimate: &Pose, truth: &Pose, what: &str) {
-    let mm = (estimate.translation.vector - truth.translation.vector).norm() * 1e3;
-    let deg = estimate.rotation.angle_to(&truth.rotation).to_degrees();
+    let (mm, deg) = util::pose_error_mm_deg(estimate, truth);
     eprintln!("{what}: {mm:.3} mm, {deg:.4}°");
     assert!(mm < 0.5 && deg < 0.05, "{what}: {mm:.3} mm, {deg:.4}°");
 }
@@ -179,11 +178,16 @@ fn lost_connection_stops_cleanly_and_keeps_samples() {
 fn connecting_where_nothing_listens_fails_within_the_timeout() {
     with_timeout(Duration::from_secs(30), || {
         let dir = tempfile::tempdir().unwrap();
-        let config = config_for(dir.path(), "127.0.0.74", 6);
-        let text = std::fs::read_to_string(&config)
-            .unwrap()
-            .replace("connect_timeout_s: 5", "connect_timeout_s: 2");
-        std::fs::write(&config, text).unwrap();
+        let config = util::config_variant(
+            dir.path(),
+            "sim-cell-ur-mock.yaml",
+            "cell.yaml",
+            &[
+                ("host: 127.0.0.1", "host: 127.0.0.74"),
+                ("count: 20", "count: 6"),
+                ("connect_timeout_s: 5", "connect_timeout_s: 2"),
+            ],
+        );
         let prepared = cell::prepare(&config).unwrap();
         let started = std::time::Instant::now();
         let error = match prepared.open_hardware() {

@@ -1,7 +1,7 @@
 //! Vision chain end to end: rendered frames with known truth through detection and PnP, the
 //! real ViSP eye-to-hand frames, and bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use handeye::camera::model::{CameraModel, Distortion};
 use handeye::camera::render::{render, RenderOptions};
@@ -14,12 +14,11 @@ use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-fn crate_path(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(relative)
-}
+mod util;
+use util::{dataset, repo};
 
 fn board_6x6() -> Board {
-    Board::load(&crate_path("configs/targets/aprilgrid-6x6.yaml")).unwrap()
+    Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap()
 }
 
 fn radtan_camera() -> CameraModel {
@@ -212,13 +211,12 @@ fn rendered_frames_equidistant_meet_detection_and_pose_floors() {
 
 #[test]
 fn visp_eye_to_hand_frames_find_tag_10_in_all_eight() {
-    let folder = crate_path("../shared/datasets/visp_franka_data-eye-to-hand");
-    if !folder.is_dir() {
-        eprintln!("SKIP: {} is absent", folder.display());
+    let Some(folder) = dataset("visp_franka_data-eye-to-hand") else {
         return;
-    }
-    let board = Board::load(&crate_path("configs/targets/single-tag36h11-id10.yaml")).unwrap();
-    let camera = CameraModel::load(&crate_path("tests/data/visp_franka_camera_info.yaml")).unwrap();
+    };
+    let board = Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml")).unwrap();
+    let camera =
+        CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
     let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
     for n in 1..=8 {
         let image = load_gray_image(&folder.join(format!("franka_image-{n}.png"))).unwrap();
@@ -256,13 +254,13 @@ fn corrupt_and_missing_images_are_clear_errors() {
 #[test]
 fn wrong_intrinsics_file_is_a_clear_error() {
     // A board file is not intrinsics.
-    let error = CameraModel::load(&crate_path("configs/targets/aprilgrid-6x6.yaml")).unwrap_err();
+    let error = CameraModel::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap_err();
     let message = error.to_string();
     assert!(
         message.contains("aprilgrid-6x6.yaml") && message.contains("camera_matrix"),
         "{message}"
     );
-    let error = CameraModel::load(&crate_path("tests/data/no-such-camera.yaml")).unwrap_err();
+    let error = CameraModel::load(&repo().join("tests/data/no-such-camera.yaml")).unwrap_err();
     assert!(error.to_string().contains("no-such-camera.yaml"), "{error}");
 }
 
@@ -366,7 +364,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     let output = std::process::Command::new(exe)
         .arg("detect")
         .arg("--target")
-        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&intrinsics)
         .arg(&frame_path)
@@ -402,7 +400,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     let output = std::process::Command::new(exe)
         .arg("detect")
         .arg("--target")
-        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&intrinsics)
         .arg(&corrupt)
@@ -423,7 +421,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     let output = std::process::Command::new(exe)
         .arg("detect")
         .arg("--target")
-        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&small)
         .arg(&frame_path)
@@ -440,7 +438,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     let svg = dir.path().join("board.svg");
     let status = std::process::Command::new(exe)
         .args(["target", "render", "--target"])
-        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("-o")
         .arg(&svg)
         .status()
@@ -449,7 +447,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
     let output = std::process::Command::new(exe)
         .args(["target", "render", "--target"])
-        .arg(crate_path("configs/targets/aprilgrid-6x6.yaml"))
+        .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("-o")
         .arg(dir.path().join("board.bmp"))
         .output()

@@ -5,9 +5,35 @@
 
 use std::path::{Path, PathBuf};
 
+use handeye::geometry::{translation_distance, Pose};
+
 /// The crate root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A public data set folder, or `None` (with the reason printed) when it is absent. The data
+/// sets live in `../shared/datasets` beside the crate; `HANDEYE_DATASETS` points elsewhere (a
+/// worktree whose parent has no `shared/`).
+pub fn dataset(name: &str) -> Option<PathBuf> {
+    let root = std::env::var_os("HANDEYE_DATASETS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("../shared/datasets"));
+    let path = root.join(name);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!("SKIP: {} is absent", path.display());
+        None
+    }
+}
+
+/// How far `a` is from `b`: translation (mm) and rotation angle (degrees).
+pub fn pose_error_mm_deg(a: &Pose, b: &Pose) -> (f64, f64) {
+    (
+        translation_distance(a, b) * 1e3,
+        a.rotation.angle_to(&b.rotation).to_degrees(),
+    )
 }
 
 /// A copy of `configs/<base>` written to `dir/<name>`, with the board and intrinsics paths made
