@@ -119,16 +119,6 @@ pub enum UrError {
         /// The call.
         call: &'static str,
     },
-    /// A motion limit is not finite and positive.
-    #[error("motion limit {name} = {value} {unit} must be finite and > 0")]
-    BadLimit {
-        /// Field of `MotionLimits`.
-        name: &'static str,
-        /// Value.
-        value: f64,
-        /// Unit.
-        unit: &'static str,
-    },
     /// A target holds NaN or infinity.
     #[error("{what} target is not finite")]
     NonFinite {
@@ -213,14 +203,6 @@ fn from_ur_vector(v: &[f64; 6]) -> Pose {
         Vector3::new(v[0], v[1], v[2]),
         Vector3::new(v[3], v[4], v[5]),
     )
-}
-
-fn check_limit(name: &'static str, value: f64, unit: &'static str) -> Result<f64, RobotError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(value)
-    } else {
-        Err(backend(UrError::BadLimit { name, value, unit }))
-    }
 }
 
 /// A connected Universal Robots arm. Dropping it disconnects (on the worker thread, without
@@ -623,19 +605,22 @@ impl Robot for UrRobot {
         base_from_flange: &Pose,
         limits: &MotionLimits,
     ) -> Result<(), RobotError> {
-        let speed = check_limit("linear_speed", limits.linear_speed, "m/s")?;
-        let acceleration = check_limit("linear_acceleration", limits.linear_acceleration, "m/s^2")?;
+        limits.check()?;
         let target = to_ur_vector(&(base_from_flange * self.flange_from_tcp));
         if !target.iter().all(|v| v.is_finite()) {
             return Err(backend(UrError::NonFinite { what: "moveL" }));
         }
         self.check_workspace(base_from_flange)?;
-        self.run_move(MoveKind::Linear, target, speed, acceleration)
+        self.run_move(
+            MoveKind::Linear,
+            target,
+            limits.linear_speed,
+            limits.linear_acceleration,
+        )
     }
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
-        let speed = check_limit("joint_speed", limits.joint_speed, "rad/s")?;
-        let acceleration = check_limit("joint_acceleration", limits.joint_acceleration, "rad/s^2")?;
+        limits.check()?;
         if !joints.iter().all(|v| v.is_finite()) {
             return Err(backend(UrError::NonFinite { what: "moveJ" }));
         }
@@ -643,7 +628,12 @@ impl Robot for UrRobot {
             let flange = model.forward(joints);
             self.check_workspace(&flange)?;
         }
-        self.run_move(MoveKind::Joint, *joints, speed, acceleration)
+        self.run_move(
+            MoveKind::Joint,
+            *joints,
+            limits.joint_speed,
+            limits.joint_acceleration,
+        )
     }
 
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
@@ -688,18 +678,5 @@ mod tests {
             assert!(back.rotation.angle_to(&pose.rotation) < 1e-12, "{angle}");
             assert!(rotvec(&back.rotation).norm() <= PI + 1e-12);
         }
-    }
-
-    #[test]
-    fn bad_limits_are_clear_errors() {
-        match check_limit("linear_speed", -0.1, "m/s") {
-            Err(RobotError::Backend(e)) => assert_eq!(
-                e.to_string(),
-                "motion limit linear_speed = -0.1 m/s must be finite and > 0"
-            ),
-            other => panic!("expected a backend error, got {other:?}"),
-        }
-        assert!(check_limit("joint_speed", f64::NAN, "rad/s").is_err());
-        assert_eq!(check_limit("joint_speed", 0.5, "rad/s").unwrap(), 0.5);
     }
 }
