@@ -170,11 +170,6 @@ impl SimRobot {
         self.true_pose
     }
 
-    /// The kinematic model.
-    pub fn model(&self) -> &UrModel {
-        &self.model
-    }
-
     /// How many moves have completed.
     pub fn moves_completed(&self) -> usize {
         self.moves_completed
