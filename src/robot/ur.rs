@@ -43,6 +43,12 @@ const SAFETY_EMERGENCY_STOP: u32 = (1 << 5) | (1 << 6) | (1 << 7);
 const ROBOT_MODE_RUNNING: i32 = 7;
 /// Async progress register: bit 15 = an async operation runs; bits 24..30 = its id.
 const ASYNC_RUNNING: u32 = 0x8000;
+
+/// The id of the latest async operation in the async progress register (bits 24..30); it
+/// changes when a new move starts.
+fn async_op_id(async_status: u32) -> u32 {
+    (async_status >> 24) & 0x7F
+}
 /// How often a move is polled.
 const POLL_PERIOD: Duration = Duration::from_millis(4);
 /// Deceleration for stops, m/s² (stopL): firm but within what the controller allows.
@@ -233,6 +239,16 @@ impl std::fmt::Debug for UrRobot {
 enum MoveKind {
     Linear,
     Joint,
+}
+
+impl MoveKind {
+    /// The ur_rtde call that runs this move, for errors.
+    fn call(self) -> &'static str {
+        match self {
+            MoveKind::Linear => "moveL",
+            MoveKind::Joint => "moveJ",
+        }
+    }
 }
 
 impl UrRobot {
@@ -475,10 +491,7 @@ impl UrRobot {
         speed: f64,
         acceleration: f64,
     ) -> Result<Result<(), RawError>, RobotError> {
-        let call = match kind {
-            MoveKind::Linear => "moveL",
-            MoveKind::Joint => "moveJ",
-        };
+        let call = kind.call();
         self.call(call, move |h| {
             let ptr = h.ptr();
             let result = raw_call(|err, len| match kind {
@@ -510,15 +523,12 @@ impl UrRobot {
         speed: f64,
         acceleration: f64,
     ) -> Result<(), RobotError> {
-        let call = match kind {
-            MoveKind::Linear => "moveL",
-            MoveKind::Joint => "moveJ",
-        };
+        let call = kind.call();
         if self.interrupted() {
             return Err(RobotError::Interrupted);
         }
         let (before, restarted) = self.ensure_program()?;
-        let op_before = (before.async_status >> 24) & 0x7F;
+        let op_before = async_op_id(before.async_status);
         let mut sent = self.send_move(kind, target, speed, acceleration)?;
         if sent.is_err() && restarted {
             // The first command after the control script was (re)started can be refused while
@@ -528,7 +538,7 @@ impl UrRobot {
             let after = self.last_timestamp + FRESH_AFTER_MOVE_S;
             let s = self.wait_fresh(Some(after))?;
             let started =
-                (s.async_status >> 24) & 0x7F != op_before || s.async_status & ASYNC_RUNNING != 0;
+                async_op_id(s.async_status) != op_before || s.async_status & ASYNC_RUNNING != 0;
             if started {
                 sent = Ok(());
             } else if Self::safety_error(s.safety_status_bits).is_none() {
@@ -551,7 +561,7 @@ impl UrRobot {
             if s.runtime_state != RUNTIME_PLAYING {
                 return Err(backend(UrError::ProgramStopped { call }));
             }
-            let op = (s.async_status >> 24) & 0x7F;
+            let op = async_op_id(s.async_status);
             if op != op_before && s.async_status & ASYNC_RUNNING == 0 {
                 break s.receive_timestamp;
             }
