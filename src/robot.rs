@@ -49,6 +49,26 @@ impl Default for MotionLimits {
     }
 }
 
+impl MotionLimits {
+    /// Rejects caps that are not finite and positive, naming the field, its value and unit.
+    pub fn check(&self) -> Result<(), RobotError> {
+        let fields = [
+            ("linear_speed", self.linear_speed, "m/s"),
+            ("linear_acceleration", self.linear_acceleration, "m/s^2"),
+            ("joint_speed", self.joint_speed, "rad/s"),
+            ("joint_acceleration", self.joint_acceleration, "rad/s^2"),
+        ];
+        for (name, value, unit) in fields {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(RobotError::Backend(
+                    format!("motion limit {name} = {value} {unit} must be finite and > 0").into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// An axis-aligned box in the base frame that the flange origin must stay inside, in metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WorkspaceBox {
@@ -151,4 +171,35 @@ pub trait Robot: Send {
     fn set_interrupt(&mut self, _flag: Arc<AtomicBool>) {}
     /// The controller's safety and readiness state.
     fn status(&mut self) -> Result<RobotStatus, RobotError>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_limits_are_clear_errors() {
+        let negative = MotionLimits {
+            linear_speed: -0.1,
+            ..MotionLimits::default()
+        };
+        match negative.check() {
+            Err(RobotError::Backend(e)) => assert_eq!(
+                e.to_string(),
+                "motion limit linear_speed = -0.1 m/s must be finite and > 0"
+            ),
+            other => panic!("expected a backend error, got {other:?}"),
+        }
+        let nan = MotionLimits {
+            joint_acceleration: f64::NAN,
+            ..MotionLimits::default()
+        };
+        assert!(nan.check().is_err());
+        let zero = MotionLimits {
+            joint_speed: 0.0,
+            ..MotionLimits::default()
+        };
+        assert!(zero.check().is_err());
+        assert!(MotionLimits::default().check().is_ok());
+    }
 }

@@ -6,7 +6,7 @@ pub mod recorded;
 pub mod sim;
 pub mod uvc;
 
-use sim::SharedRobot;
+use sim::Shared;
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -271,9 +271,8 @@ impl PreparedCell {
             }
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.config.simulation.expect("validated: sim backends have ground truth");
-                let robot = SharedRobot::new(self.open_ur()?);
-                let reported = robot.clone();
-                let flange = Box::new(move || reported.last_base_from_flange());
+                let robot = self.open_ur()?;
+                let flange = robot.reported_flange();
                 let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
@@ -281,7 +280,7 @@ impl PreparedCell {
                 // The real cell: open the camera first, so a missing camera never leaves a
                 // connected arm behind.
                 let camera = uvc::open_camera(&self.config.camera, self.camera_model)?;
-                Ok(Hardware { robot: self.open_ur()?, camera })
+                Ok(Hardware { robot: Box::new(self.open_ur()?), camera })
             }
             (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
                 let plan = self.report.validated().ok_or_else(|| {
@@ -297,9 +296,10 @@ impl PreparedCell {
         }
     }
 
-    /// Connects to the Universal Robots controller the config names.
+    /// Connects to the Universal Robots controller the config names; shared, so a simulated
+    /// camera can follow the pose it reports.
     #[cfg(feature = "ur-rtde")]
-    fn open_ur(&self) -> Result<Box<dyn Robot>, CellError> {
+    fn open_ur(&self) -> Result<Shared<dyn Robot>, CellError> {
         let RobotConfig::Ur {
             host,
             connect_timeout_s,
@@ -314,12 +314,12 @@ impl PreparedCell {
         ur.model = Some(self.arm.clone());
         let robot =
             crate::robot::ur::UrRobot::connect(ur).map_err(|e| CellError::Robot(Box::new(e)))?;
-        Ok(Box::new(robot))
+        Ok(Shared::new_dyn(robot))
     }
 
     /// Without the `ur-rtde` feature there is no UR driver in the binary.
     #[cfg(not(feature = "ur-rtde"))]
-    fn open_ur(&self) -> Result<Box<dyn Robot>, CellError> {
+    fn open_ur(&self) -> Result<Shared<dyn Robot>, CellError> {
         Err(CellError::Backend(
             "this build has no Universal Robots driver: build with `--features ur-rtde` (see README)".into(),
         ))

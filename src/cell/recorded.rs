@@ -71,7 +71,7 @@ pub fn open(
     plan: &[(Pose, Joints)],
     camera_model: CameraModel,
 ) -> Result<Hardware, CellError> {
-    let (RobotConfig::Recorded { poses, .. }, CameraConfig::Files { folder }) =
+    let (RobotConfig::Recorded { .. }, CameraConfig::Files { folder }) =
         (&config.robot, &config.camera)
     else {
         return Err(CellError::Backend(
@@ -79,17 +79,17 @@ pub fn open(
                 .into(),
         ));
     };
-    let recorded = load_recorded_poses(poses).map_err(|e| CellError::Backend(e.to_string()))?;
     let selector = FrameSelector::default();
     let camera = FilesCamera::open(folder, camera_model)
         .map_err(|e| CellError::Backend(e.to_string()))?
         .with_selector(selector.clone());
     camera
-        .require_frames(plan.len().max(recorded.len()))
+        .require_frames(plan.len())
         .map_err(|e| CellError::Backend(e.to_string()))?;
     Ok(Hardware {
         robot: Box::new(SelectingRobot {
-            robot: RecordedRobot::new(recorded),
+            // The validated plan of a recorded cell is the recorded poses, in file order.
+            robot: RecordedRobot::new(plan.iter().map(|(pose, _)| *pose).collect()),
             selector,
         }),
         camera: Box::new(camera),

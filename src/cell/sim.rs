@@ -1,6 +1,7 @@
 //! The simulated cell: a simulated arm and a simulated camera sharing one world, so the camera
 //! renders from the arm's true pose while the arm reports a noisy one.
 
+use std::cell::Cell;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -17,11 +18,26 @@ use crate::target::Board;
 
 use super::CellError;
 
-/// A simulated arm shared with the simulated camera.
-pub struct SharedSimRobot(Arc<Mutex<SimRobot>>);
+/// An arm behind a mutex, shared between the session (which drives it) and a simulated camera
+/// (which renders from its pose).
+pub struct Shared<R: Robot + ?Sized>(Arc<Mutex<R>>);
 
-impl SharedSimRobot {
-    fn arm(&self) -> MutexGuard<'_, SimRobot> {
+impl<R: Robot + ?Sized> Clone for Shared<R> {
+    fn clone(&self) -> Self {
+        Shared(self.0.clone())
+    }
+}
+
+impl<R: Robot> Shared<R> {
+    /// Shares `robot`.
+    pub fn new(robot: R) -> Self {
+        Shared(Arc::new(Mutex::new(robot)))
+    }
+}
+
+impl<R: Robot + ?Sized> Shared<R> {
+    /// The arm, for as long as the guard lives; a move in progress holds it until the move ends.
+    pub fn lock(&self) -> MutexGuard<'_, R> {
         // A panic while holding the lock cannot leave the arm half-moved: a move updates the
         // arm's state in one step when it ends (arrived or interrupted).
         self.0
@@ -30,31 +46,52 @@ impl SharedSimRobot {
     }
 }
 
-impl Robot for SharedSimRobot {
+impl Shared<dyn Robot> {
+    /// Shares `robot` as an arm of a type chosen at run time.
+    pub fn new_dyn<R: Robot + 'static>(robot: R) -> Self {
+        Shared(Arc::new(Mutex::new(robot)))
+    }
+
+    /// A flange pose for a simulated camera next to this arm: the pose the arm reports now, or
+    /// the last one it reported if it cannot answer (identity before its first answer). A mock
+    /// controller reports its exact pose.
+    pub fn reported_flange(&self) -> TrueFlangePose {
+        let robot = self.clone();
+        let last = Cell::new(None);
+        Box::new(move || {
+            if let Ok(now) = robot.lock().base_from_flange() {
+                last.set(Some(now));
+            }
+            last.get().unwrap_or_else(Pose::identity)
+        })
+    }
+}
+
+impl<R: Robot + ?Sized> Robot for Shared<R> {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
-        self.arm().base_from_flange()
+        self.lock().base_from_flange()
     }
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {
-        self.arm().joint_positions()
+        self.lock().joint_positions()
     }
     fn move_linear(
         &mut self,
         base_from_flange: &Pose,
         limits: &MotionLimits,
     ) -> Result<(), RobotError> {
-        self.arm().move_linear(base_from_flange, limits)
+        self.lock().move_linear(base_from_flange, limits)
     }
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
-        self.arm().move_joints(joints, limits)
+        self.lock().move_joints(joints, limits)
     }
     fn stop(&mut self) -> Result<(), RobotError> {
-        self.arm().stop()
+        self.lock().stop()
     }
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
-        self.arm().set_interrupt(flag);
+        self.lock().set_interrupt(flag);
     }
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
-        self.arm().status()
+        self.lock().status()
     }
 }
 
@@ -66,7 +103,7 @@ pub fn open(
     start: Joints,
     camera_model: CameraModel,
     board: Board,
-) -> Result<(SharedSimRobot, SimCamera), CellError> {
+) -> Result<(Shared<SimRobot>, SimCamera), CellError> {
     let RobotConfig::Sim {
         move_duration_s,
         repeatability_mm,
@@ -92,16 +129,11 @@ pub fn open(
     };
     let robot =
         SimRobot::new(arm, start, options).map_err(|e| CellError::Backend(e.to_string()))?;
-    let shared = Arc::new(Mutex::new(robot));
-    let camera_arm = shared.clone();
-    let true_pose = Box::new(move || {
-        camera_arm
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .true_base_from_flange()
-    });
+    let robot = Shared::new(robot);
+    let camera_arm = robot.clone();
+    let true_pose = Box::new(move || camera_arm.lock().true_base_from_flange());
     Ok((
-        SharedSimRobot(shared),
+        robot,
         camera(config, truth, true_pose, camera_model, board)?,
     ))
 }
@@ -140,66 +172,4 @@ pub fn camera(
         *seed,
         hide_board_in_grabs.iter().copied().collect(),
     ))
-}
-
-/// Any arm shared with a simulated camera that renders from the pose the arm last reported
-/// (a mock controller reports its exact pose).
-#[derive(Clone)]
-pub struct SharedRobot {
-    robot: Arc<Mutex<Box<dyn Robot>>>,
-    last: Arc<Mutex<Option<Pose>>>,
-}
-
-impl SharedRobot {
-    /// Shares `robot`.
-    pub fn new(robot: Box<dyn Robot>) -> Self {
-        SharedRobot {
-            robot: Arc::new(Mutex::new(robot)),
-            last: Arc::new(Mutex::new(None)),
-        }
-    }
-
-    fn robot(&self) -> MutexGuard<'_, Box<dyn Robot>> {
-        self.robot
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner())
-    }
-
-    /// The flange pose the arm reports now, or the last one it reported if it cannot answer.
-    pub fn last_base_from_flange(&self) -> Pose {
-        let now = self.robot().base_from_flange().ok();
-        let mut last = self.last.lock().unwrap_or_else(|p| p.into_inner());
-        if now.is_some() {
-            *last = now;
-        }
-        last.unwrap_or_else(Pose::identity)
-    }
-}
-
-impl Robot for SharedRobot {
-    fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
-        self.robot().base_from_flange()
-    }
-    fn joint_positions(&mut self) -> Result<Joints, RobotError> {
-        self.robot().joint_positions()
-    }
-    fn move_linear(
-        &mut self,
-        base_from_flange: &Pose,
-        limits: &MotionLimits,
-    ) -> Result<(), RobotError> {
-        self.robot().move_linear(base_from_flange, limits)
-    }
-    fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
-        self.robot().move_joints(joints, limits)
-    }
-    fn stop(&mut self) -> Result<(), RobotError> {
-        self.robot().stop()
-    }
-    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
-        self.robot().set_interrupt(flag);
-    }
-    fn status(&mut self) -> Result<RobotStatus, RobotError> {
-        self.robot().status()
-    }
 }

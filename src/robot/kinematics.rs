@@ -15,7 +15,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::geometry::Pose;
+use crate::geometry::{translation_distance, Pose};
 use crate::robot::Joints;
 
 /// Largest flange position error (m) of an inverse solution, checked by forward kinematics;
@@ -41,14 +41,14 @@ pub struct UrModel {
     pub a: [f64; 6],
     /// DH link twists `α_i`, rad.
     pub alpha: [f64; 6],
-    /// Joint limits `(min, max)` per joint, rad. UR arms allow ±2π on every joint by default;
-    /// a cell may narrow them.
+    /// Joint limits `(min, max)` per joint, rad. UR e-Series arms allow ±2π on every joint but
+    /// the elbow (±π) by default; a cell may narrow them.
     pub joint_limits: [(f64, f64); 6],
 }
 
 /// UR's twist angles, the same for every arm of the family.
 const UR_ALPHA: [f64; 6] = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
-/// Default joint limits: ±2π on every joint, as the controller ships.
+/// Default joint limits: ±2π on every joint but the elbow (±π), as the controller ships.
 // e-Series ranges (Universal Robots' published limits, as in ur_description): ±360° on every
 // joint except the elbow, which its cabling limits to ±180°.
 const UR_LIMITS: [(f64, f64); 6] = [
@@ -266,7 +266,7 @@ impl UrModel {
     /// Whether `q` puts the flange on `target` within the solution tolerances.
     fn reaches(&self, q: &Joints, target: &Pose) -> bool {
         let fk = self.forward(q);
-        (fk.translation.vector - target.translation.vector).norm() < SOLUTION_POSITION_TOLERANCE
+        translation_distance(&fk, target) < SOLUTION_POSITION_TOLERANCE
             && fk.rotation.angle_to(&target.rotation) < SOLUTION_ROTATION_TOLERANCE
     }
 }

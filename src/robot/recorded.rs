@@ -20,7 +20,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::atomic_file::write_atomic;
-use crate::geometry::{Pose, PoseYaml};
+use crate::geometry::{translation_distance, Pose, PoseYaml};
 use crate::yaml_file::{read_yaml, FileError};
 
 use super::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
@@ -127,7 +127,7 @@ impl Robot for RecordedRobot {
     ) -> Result<(), RobotError> {
         // Only a recorded pose can be "reached": the one with the same pose (to 1 µm / 1 µrad).
         let index = self.poses.iter().position(|p| {
-            (p.translation.vector - base_from_flange.translation.vector).norm() < 1e-6
+            translation_distance(p, base_from_flange) < 1e-6
                 && p.rotation.angle_to(&base_from_flange.rotation) < 1e-6
         });
         match index {

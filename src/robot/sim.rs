@@ -170,11 +170,6 @@ impl SimRobot {
         self.true_pose
     }
 
-    /// The kinematic model.
-    pub fn model(&self) -> &UrModel {
-        &self.model
-    }
-
     /// How many moves have completed.
     pub fn moves_completed(&self) -> usize {
         self.moves_completed
@@ -268,24 +263,6 @@ impl SimRobot {
 /// How often a move in progress looks at the interrupt flag.
 const INTERRUPT_POLL: Duration = Duration::from_millis(10);
 
-/// Rejects speed and acceleration caps that are not finite and positive.
-fn check_limits(limits: &MotionLimits) -> Result<(), RobotError> {
-    let fields = [
-        ("linear_speed", limits.linear_speed, "m/s"),
-        ("linear_acceleration", limits.linear_acceleration, "m/s^2"),
-        ("joint_speed", limits.joint_speed, "rad/s"),
-        ("joint_acceleration", limits.joint_acceleration, "rad/s^2"),
-    ];
-    for (name, value, unit) in fields {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(RobotError::Backend(
-                format!("motion limit {name} = {value} {unit} must be finite and > 0").into(),
-            ));
-        }
-    }
-    Ok(())
-}
-
 impl Robot for SimRobot {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
         self.check_latched_connection()?;
@@ -302,7 +279,7 @@ impl Robot for SimRobot {
         base_from_flange: &Pose,
         limits: &MotionLimits,
     ) -> Result<(), RobotError> {
-        check_limits(limits)?;
+        limits.check()?;
         self.arm_faults()?;
         let joints = self
             .model
@@ -321,7 +298,7 @@ impl Robot for SimRobot {
     }
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
-        check_limits(limits)?;
+        limits.check()?;
         self.arm_faults()?;
         if let Some(i) = (0..6).find(|&i| {
             let (lo, hi) = self.model.joint_limits[i];

@@ -43,6 +43,12 @@ const SAFETY_EMERGENCY_STOP: u32 = (1 << 5) | (1 << 6) | (1 << 7);
 const ROBOT_MODE_RUNNING: i32 = 7;
 /// Async progress register: bit 15 = an async operation runs; bits 24..30 = its id.
 const ASYNC_RUNNING: u32 = 0x8000;
+
+/// The id of the latest async operation in the async progress register (bits 24..30); it
+/// changes when a new move starts.
+fn async_op_id(async_status: u32) -> u32 {
+    (async_status >> 24) & 0x7F
+}
 /// How often a move is polled.
 const POLL_PERIOD: Duration = Duration::from_millis(4);
 /// Deceleration for stops, m/s² (stopL): firm but within what the controller allows.
@@ -118,16 +124,6 @@ pub enum UrError {
     ProgramStopped {
         /// The call.
         call: &'static str,
-    },
-    /// A motion limit is not finite and positive.
-    #[error("motion limit {name} = {value} {unit} must be finite and > 0")]
-    BadLimit {
-        /// Field of `MotionLimits`.
-        name: &'static str,
-        /// Value.
-        value: f64,
-        /// Unit.
-        unit: &'static str,
     },
     /// A target holds NaN or infinity.
     #[error("{what} target is not finite")]
@@ -215,14 +211,6 @@ fn from_ur_vector(v: &[f64; 6]) -> Pose {
     )
 }
 
-fn check_limit(name: &'static str, value: f64, unit: &'static str) -> Result<f64, RobotError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(value)
-    } else {
-        Err(backend(UrError::BadLimit { name, value, unit }))
-    }
-}
-
 /// A connected Universal Robots arm. Dropping it disconnects (on the worker thread, without
 /// blocking the caller).
 pub struct UrRobot {
@@ -251,6 +239,16 @@ impl std::fmt::Debug for UrRobot {
 enum MoveKind {
     Linear,
     Joint,
+}
+
+impl MoveKind {
+    /// The ur_rtde call that runs this move, for errors.
+    fn call(self) -> &'static str {
+        match self {
+            MoveKind::Linear => "moveL",
+            MoveKind::Joint => "moveJ",
+        }
+    }
 }
 
 impl UrRobot {
@@ -493,10 +491,7 @@ impl UrRobot {
         speed: f64,
         acceleration: f64,
     ) -> Result<Result<(), RawError>, RobotError> {
-        let call = match kind {
-            MoveKind::Linear => "moveL",
-            MoveKind::Joint => "moveJ",
-        };
+        let call = kind.call();
         self.call(call, move |h| {
             let ptr = h.ptr();
             let result = raw_call(|err, len| match kind {
@@ -528,15 +523,12 @@ impl UrRobot {
         speed: f64,
         acceleration: f64,
     ) -> Result<(), RobotError> {
-        let call = match kind {
-            MoveKind::Linear => "moveL",
-            MoveKind::Joint => "moveJ",
-        };
+        let call = kind.call();
         if self.interrupted() {
             return Err(RobotError::Interrupted);
         }
         let (before, restarted) = self.ensure_program()?;
-        let op_before = (before.async_status >> 24) & 0x7F;
+        let op_before = async_op_id(before.async_status);
         let mut sent = self.send_move(kind, target, speed, acceleration)?;
         if sent.is_err() && restarted {
             // The first command after the control script was (re)started can be refused while
@@ -546,7 +538,7 @@ impl UrRobot {
             let after = self.last_timestamp + FRESH_AFTER_MOVE_S;
             let s = self.wait_fresh(Some(after))?;
             let started =
-                (s.async_status >> 24) & 0x7F != op_before || s.async_status & ASYNC_RUNNING != 0;
+                async_op_id(s.async_status) != op_before || s.async_status & ASYNC_RUNNING != 0;
             if started {
                 sent = Ok(());
             } else if Self::safety_error(s.safety_status_bits).is_none() {
@@ -569,7 +561,7 @@ impl UrRobot {
             if s.runtime_state != RUNTIME_PLAYING {
                 return Err(backend(UrError::ProgramStopped { call }));
             }
-            let op = (s.async_status >> 24) & 0x7F;
+            let op = async_op_id(s.async_status);
             if op != op_before && s.async_status & ASYNC_RUNNING == 0 {
                 break s.receive_timestamp;
             }
@@ -623,19 +615,22 @@ impl Robot for UrRobot {
         base_from_flange: &Pose,
         limits: &MotionLimits,
     ) -> Result<(), RobotError> {
-        let speed = check_limit("linear_speed", limits.linear_speed, "m/s")?;
-        let acceleration = check_limit("linear_acceleration", limits.linear_acceleration, "m/s^2")?;
+        limits.check()?;
         let target = to_ur_vector(&(base_from_flange * self.flange_from_tcp));
         if !target.iter().all(|v| v.is_finite()) {
             return Err(backend(UrError::NonFinite { what: "moveL" }));
         }
         self.check_workspace(base_from_flange)?;
-        self.run_move(MoveKind::Linear, target, speed, acceleration)
+        self.run_move(
+            MoveKind::Linear,
+            target,
+            limits.linear_speed,
+            limits.linear_acceleration,
+        )
     }
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
-        let speed = check_limit("joint_speed", limits.joint_speed, "rad/s")?;
-        let acceleration = check_limit("joint_acceleration", limits.joint_acceleration, "rad/s^2")?;
+        limits.check()?;
         if !joints.iter().all(|v| v.is_finite()) {
             return Err(backend(UrError::NonFinite { what: "moveJ" }));
         }
@@ -643,7 +638,12 @@ impl Robot for UrRobot {
             let flange = model.forward(joints);
             self.check_workspace(&flange)?;
         }
-        self.run_move(MoveKind::Joint, *joints, speed, acceleration)
+        self.run_move(
+            MoveKind::Joint,
+            *joints,
+            limits.joint_speed,
+            limits.joint_acceleration,
+        )
     }
 
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
@@ -688,18 +688,5 @@ mod tests {
             assert!(back.rotation.angle_to(&pose.rotation) < 1e-12, "{angle}");
             assert!(rotvec(&back.rotation).norm() <= PI + 1e-12);
         }
-    }
-
-    #[test]
-    fn bad_limits_are_clear_errors() {
-        match check_limit("linear_speed", -0.1, "m/s") {
-            Err(RobotError::Backend(e)) => assert_eq!(
-                e.to_string(),
-                "motion limit linear_speed = -0.1 m/s must be finite and > 0"
-            ),
-            other => panic!("expected a backend error, got {other:?}"),
-        }
-        assert!(check_limit("joint_speed", f64::NAN, "rad/s").is_err());
-        assert_eq!(check_limit("joint_speed", 0.5, "rad/s").unwrap(), 0.5);
     }
 }

@@ -122,22 +122,6 @@ int urrtde_stop_l(urrtde_handle *h, double deceleration, char *err, size_t err_l
   });
 }
 
-int urrtde_stop_j(urrtde_handle *h, double deceleration, char *err, size_t err_len) noexcept {
-  return guarded("stopJ", err, err_len, [&]() -> int {
-    URRTDE_CHECK_HANDLE("stopJ");
-    h->control->stopJ(deceleration, false);
-    return URRTDE_OK;
-  });
-}
-
-int urrtde_stop_script(urrtde_handle *h, char *err, size_t err_len) noexcept {
-  return guarded("stopScript", err, err_len, [&]() -> int {
-    URRTDE_CHECK_HANDLE("stopScript");
-    h->control->stopScript();
-    return URRTDE_OK;
-  });
-}
-
 int urrtde_reupload_script(urrtde_handle *h, char *err, size_t err_len) noexcept {
   return guarded("reuploadScript", err, err_len, [&]() -> int {
     URRTDE_CHECK_HANDLE("reuploadScript");
