@@ -135,11 +135,6 @@ impl Dataset {
     pub fn save(&self, path: &Path) -> Result<(), FileError> {
         write_yaml(&self.to_yaml(), path)
     }
-
-    /// The pose pairs for the solver.
-    pub fn to_pairs(&self) -> Vec<PosePair> {
-        self.pairs.clone()
-    }
 }
 
 #[cfg(test)]

@@ -9,12 +9,16 @@
 //! target origin in the camera frame). Depends on `solve`, `plan`, `cell` and `session` (the
 //! holdout run records a normal session folder, so it can be replayed and reported).
 
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
-use crate::cell::PreparedCell;
+use crate::cell::{Hardware, PreparedCell};
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
-use crate::plan::{generate::generate, GenerateSpec, Plan, Waypoint};
+use crate::plan::{CellTransforms, GenerateSpec, Plan, Waypoint};
+use crate::robot::RobotError;
 use crate::session::{self, SessionError, SessionEvent, SessionFolder};
 use crate::solve::{self, PosePair, Setup, SolveError, SolveOptions};
 
@@ -96,9 +100,9 @@ pub enum VerifyError {
     /// The holdout session failed.
     #[error("the verification session failed")]
     Session(#[source] Box<SessionError>),
-    /// The holdout session's samples could not be read.
-    #[error("reading the verification samples failed: {0}")]
-    Samples(String),
+    /// The arm's joint positions could not be read before the first move.
+    #[error("reading the arm's joint positions failed")]
+    Robot(#[source] RobotError),
 }
 
 fn summarise(errors: &[PoseError]) -> ErrorSummary {
@@ -213,38 +217,46 @@ pub fn leave_one_out(
 }
 
 /// Holdout verification on the cell: generates `spec` views (a seed the calibration did not
-/// use), keeps those that pass the plan checks, records them as a session in `folder` and
-/// compares each measured `T_camera_target` with the prediction of the given unknowns.
+/// use), checks them from the arm's actual joints (read from `hardware` before anything moves),
+/// keeps those that pass, records them as a session in `folder` and compares each measured
+/// `T_camera_target` with the prediction of `calibration`. Setting `stop` stops the arm and ends
+/// the session cleanly, as in a calibration run.
 pub fn holdout(
-    prepared: &PreparedCell,
-    setup: Setup,
-    camera_mount: &Pose,
-    target_mount: &Pose,
+    prepared: &mut PreparedCell,
+    hardware: &mut Hardware,
+    calibration: &CellTransforms,
     spec: &GenerateSpec,
     folder: &SessionFolder,
+    stop: Arc<AtomicBool>,
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<Verification, VerifyError> {
-    if setup != prepared.config.setup {
+    if calibration.setup != prepared.config.setup {
         return Err(VerifyError::SetupMismatch {
-            result: setup,
+            result: calibration.setup,
             cell: prepared.config.setup,
         });
     }
     spec.validate().map_err(VerifyError::Plan)?;
     let plan = Plan {
-        waypoints: generate(spec).into_iter().map(Waypoint::LookAt).collect(),
+        waypoints: prepared
+            .generate_views(spec)
+            .into_iter()
+            .map(Waypoint::LookAt)
+            .collect(),
     };
-    let report = prepared.check_plan(&plan);
-    // A verification needs only usable views: drop the ones that fail instead of refusing all.
-    let validated: Vec<_> = report
-        .poses
-        .iter()
-        .filter(|p| p.problems.is_empty())
-        .filter_map(|p| p.joints.map(|q| (p.base_from_flange, q)))
-        .collect();
+    // The cell was prepared from an assumed start: the first move starts where the arm really
+    // is. (The config plan's own re-check result does not matter here, only its new start.)
+    let start = hardware
+        .robot
+        .joint_positions()
+        .map_err(VerifyError::Robot)?;
+    let _ = prepared.recheck_from(start);
+    // A verification needs only usable views: drop the ones that fail instead of refusing all
+    // (every move is checked again from the arm's actual joints before it is sent).
+    let validated = prepared.check_plan(&plan).passing();
     if validated.is_empty() {
         return Err(VerifyError::Plan(format!(
-            "none of the {} generated views is reachable and shows the board",
+            "from the arm's actual position none of the {} generated views is reachable and shows the board; nothing was moved",
             spec.count
         )));
     }
@@ -252,10 +264,7 @@ pub fn holdout(
     folder
         .write_manifest(&prepared.manifest(&validated))
         .map_err(session_error)?;
-    let mut hardware = prepared
-        .open_hardware()
-        .map_err(|e| VerifyError::Session(Box::new(SessionError::Detection(e.to_string()))))?;
-    let session_setup = prepared.session_setup(folder.clone(), validated, Default::default());
+    let session_setup = prepared.session_setup(folder.clone(), validated, stop);
     session::run_session(
         session_setup,
         hardware.robot.as_mut(),
@@ -264,8 +273,13 @@ pub fn holdout(
     )
     .map_err(session_error)?;
     let dataset =
-        Dataset::load(&folder.samples_path()).map_err(|e| VerifyError::Samples(e.to_string()))?;
-    Ok(compare(setup, camera_mount, target_mount, &dataset.pairs))
+        Dataset::load(&folder.samples_path()).map_err(|e| session_error(SessionError::File(e)))?;
+    Ok(compare(
+        calibration.setup,
+        &calibration.camera_mount,
+        &calibration.target_mount,
+        &dataset.pairs,
+    ))
 }
 
 impl Verification {

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use handeye::cell;
 use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::plan::GenerateSpec;
+use handeye::plan::{CellTransforms, GenerateSpec};
 use handeye::session::{SessionEvent, SessionFolder};
 use handeye::solve::{self, PosePair, Setup, SolveOptions};
 use handeye::verify;
@@ -18,20 +18,26 @@ fn holdout(
     dir: &std::path::Path,
 ) -> verify::Verification {
     let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
-    let prepared = cell::prepare(&config).unwrap();
+    let mut prepared = cell::prepare(&config).unwrap();
     let spec = GenerateSpec {
         count: 6,
         seed: 4242,
         ..prepared.config.plan.generate.unwrap()
     };
     let folder = SessionFolder::create(dir).unwrap();
+    let mut hardware = prepared.open_hardware().unwrap();
+    let calibration = CellTransforms {
+        setup: Setup::EyeInHand,
+        camera_mount: *camera_mount,
+        target_mount: *target_mount,
+    };
     verify::holdout(
-        &prepared,
-        Setup::EyeInHand,
-        camera_mount,
-        target_mount,
+        &mut prepared,
+        &mut hardware,
+        &calibration,
         &spec,
         &folder,
+        Default::default(),
         &mut |_e: SessionEvent| {},
     )
     .unwrap()

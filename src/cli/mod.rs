@@ -12,6 +12,7 @@ mod solve;
 mod target;
 mod verify;
 
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 /// Hand-eye and base-world calibration for robot cells.
@@ -63,4 +64,58 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Report(args) => report::run(args),
         Command::Verify(args) => verify::run(args),
     }
+}
+
+/// Asks on the terminal before a real robot moves through `poses` poses; refuses when no one
+/// can answer (no terminal: `--yes` is the explicit way to run unattended).
+fn confirm_motion(prepared: &handeye::cell::PreparedCell, poses: usize) -> anyhow::Result<()> {
+    use std::io::{BufRead, IsTerminal, Write};
+    if !std::io::stdin().is_terminal() {
+        anyhow::bail!(
+            "a real robot is about to move and no one can confirm: pass --yes to run unattended"
+        );
+    }
+    print!(
+        "About to move the real robot through {poses} poses at up to {:.2} m/s and {:.0} °/s. Type `yes` to start: ",
+        prepared.config.limits.linear_speed,
+        prepared.config.limits.joint_speed.to_degrees()
+    );
+    std::io::stdout().flush()?;
+    let mut line = String::new();
+    std::io::stdin().lock().read_line(&mut line)?;
+    if line.trim() != "yes" {
+        anyhow::bail!("not confirmed; nothing was moved");
+    }
+    Ok(())
+}
+
+/// Refuses to start unless the controller reports it can move: a protective or emergency stop
+/// or a controller not running programs would fail the first move anyway, less clearly.
+fn ensure_robot_ready(robot: &mut dyn handeye::robot::Robot) -> anyhow::Result<()> {
+    use handeye::robot::RobotStatus;
+    let status = robot
+        .status()
+        .context("reading the robot's safety status")?;
+    match status {
+        RobotStatus::Ready => Ok(()),
+        RobotStatus::ProtectiveStop => anyhow::bail!("the robot is in a protective stop: clear it on the teach pendant, then start again; nothing was moved"),
+        RobotStatus::EmergencyStop => anyhow::bail!("the robot's emergency stop is active: release it and power the arm on, then start again; nothing was moved"),
+        RobotStatus::NotReady => anyhow::bail!("the robot is not ready to run programs (powered off, brakes on or in local mode): make it ready on the teach pendant, then start again; nothing was moved"),
+    }
+}
+
+/// A stop flag set by Ctrl-C, for the session loop. The first Ctrl-C stops the arm where it is
+/// (a move in progress decelerates) and ends the run cleanly; a second one, should that hang,
+/// exits at once.
+fn stop_on_ctrl_c() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!("\nstopping the arm now; every recorded sample is kept");
+    });
+    stop
 }

@@ -1,15 +1,12 @@
 //! `handeye run`: validate the plan, drive the cell, record, solve, report.
 
-use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use handeye::cell::{self, PreparedCell};
+use handeye::cell;
 use handeye::geometry::Pose;
 use handeye::plan::nbv::AdaptivePlanner;
 use handeye::robot::Joints;
@@ -51,7 +48,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if adaptive && !prepared.intrinsics_known {
         bail!("an adaptive plan needs the camera intrinsics (it chooses poses from board poses as they come): give `intrinsics:` or use a fixed plan");
     }
-    if adaptive && adaptive_candidates(&prepared).is_empty() {
+    if adaptive && prepared.report.passing().is_empty() {
         bail!("no pose of the plan passes its checks (see the table above); nothing was moved");
     }
     if !adaptive && !prepared.report.ok() {
@@ -59,11 +56,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     }
     let poses = prepared.plan.waypoints.len();
     if !prepared.is_simulated() && !args.yes {
-        confirm(&prepared, poses)?;
+        super::confirm_motion(&prepared, poses)?;
     }
     let mut hardware = prepared
         .open_hardware()
         .context("opening the robot and camera")?;
+    super::ensure_robot_ready(hardware.robot.as_mut())?;
     // The plan was checked from an assumed start; check it again from where the arm really is
     // before the first move.
     let start = hardware
@@ -72,7 +70,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .context("reading the arm's joint positions")?;
     let plan = if adaptive {
         let _ = prepared.recheck_from(start);
-        let candidates = adaptive_candidates(&prepared);
+        let candidates = prepared.report.passing();
         if candidates.is_empty() {
             bail!("from the arm's actual position no pose of the plan passes its checks; nothing was moved:\n{}", prepared.report);
         }
@@ -102,18 +100,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             folder
         }
     };
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // The first Ctrl-C stops the arm where it is (a move in progress decelerates) and ends the
-        // run cleanly; a second one, should that hang, exits at once.
-        let _ = ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-            eprintln!("\nstopping the arm now; every recorded sample is kept");
-        });
-    }
+    let stop = super::stop_on_ctrl_c();
 
     let setup = prepared.session_setup(folder.clone(), plan.clone(), stop);
     let bar = progress_bar(poses as u64);
@@ -247,41 +234,12 @@ fn same_plan_as_recorded(folder: &SessionFolder, plan: &[(Pose, Joints)]) -> any
     Ok(())
 }
 
-/// The plan's poses that pass every check, as candidates for the adaptive planner.
-fn adaptive_candidates(prepared: &PreparedCell) -> Vec<(Pose, Joints)> {
-    prepared
-        .report
-        .poses
-        .iter()
-        .filter(|p| p.problems.is_empty())
-        .filter_map(|p| p.joints.map(|q| (p.base_from_flange, q)))
-        .collect()
-}
-
 fn default_session_dir() -> PathBuf {
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
         .unwrap_or(0);
     PathBuf::from(format!("sessions/session-{now}"))
-}
-
-fn confirm(prepared: &PreparedCell, poses: usize) -> anyhow::Result<()> {
-    if !std::io::stdin().is_terminal() {
-        bail!("a real robot is about to move and no one can confirm: pass --yes to run unattended");
-    }
-    print!(
-        "About to move the real robot through {poses} poses at up to {:.2} m/s and {:.0} °/s. Type `yes` to start: ",
-        prepared.config.limits.linear_speed,
-        prepared.config.limits.joint_speed.to_degrees()
-    );
-    std::io::stdout().flush()?;
-    let mut line = String::new();
-    std::io::stdin().lock().read_line(&mut line)?;
-    if line.trim() != "yes" {
-        bail!("not confirmed; nothing was moved");
-    }
-    Ok(())
 }
 
 fn progress_bar(len: u64) -> ProgressBar {

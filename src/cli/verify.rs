@@ -33,7 +33,7 @@ pub struct VerifyArgs {
     /// Where to record the holdout session (default: sessions/verify-<time>).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Move a real robot without asking (holdout on a real cell).
+    /// Do not ask for confirmation before moving a real robot (holdout on a real cell).
     #[arg(long)]
     yes: bool,
     /// Leave-one-out cross-validation of a session folder's samples.
@@ -49,7 +49,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
         let mounts = ResultFile::load_mounts(result)?;
-        let prepared = cell::prepare(config)
+        let mut prepared = cell::prepare(config)
             .with_context(|| format!("preparing the cell from {}", config.display()))?;
         let base = prepared.config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
@@ -72,16 +72,21 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
             PathBuf::from(format!("sessions/verify-{now}"))
         });
         if !prepared.is_simulated() && !args.yes {
-            bail!("holdout verification moves the real robot through {} generated poses: check the plan with `handeye plan check` and pass --yes", spec.count);
+            super::confirm_motion(&prepared, spec.count)?;
         }
         let folder = SessionFolder::create(&out)?;
+        let mut hardware = prepared
+            .open_hardware()
+            .context("opening the robot and camera")?;
+        super::ensure_robot_ready(hardware.robot.as_mut())?;
+        let stop = super::stop_on_ctrl_c();
         let v = verify::holdout(
-            &prepared,
-            mounts.setup,
-            &mounts.camera_mount,
-            &mounts.target_mount,
+            &mut prepared,
+            &mut hardware,
+            &mounts,
             &spec,
             &folder,
+            stop,
             &mut |_e: SessionEvent| {},
         )?;
         println!("{}", v.table());

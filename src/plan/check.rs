@@ -87,6 +87,17 @@ impl PlanReport {
             .map(|p| p.joints.map(|q| (p.base_from_flange, q)))
             .collect()
     }
+
+    /// The poses that pass every check, as (flange pose, joints) pairs, in plan order: for
+    /// uses that skip a failing pose instead of refusing the plan (adaptive candidates,
+    /// verification views).
+    pub fn passing(&self) -> Vec<(Pose, Joints)> {
+        self.poses
+            .iter()
+            .filter(|p| p.problems.is_empty())
+            .filter_map(|p| p.joints.map(|q| (p.base_from_flange, q)))
+            .collect()
+    }
 }
 
 /// Checks every pose of `plan` and the plan as a whole.

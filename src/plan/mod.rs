@@ -73,9 +73,6 @@ pub enum PlanError {
     /// The plan has no waypoints.
     #[error("{0}: the plan has no waypoints (expected a list under `waypoints`)")]
     Empty(PathBuf),
-    /// Validation failed; the report says which poses and why.
-    #[error("the plan failed its checks:\n{0}")]
-    Rejected(String),
     /// Writing the plan failed.
     #[error("cannot write plan {file}")]
     Write {

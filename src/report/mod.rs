@@ -332,13 +332,12 @@ fn transforms_section(html: &mut String, k: usize, answer: &ReportAnswer) {
 /// Every export form of a pose `T_a_b`, as (name, text, key of the `result.yaml` field it shows).
 ///
 /// Translation and quaternion are printed with 9 decimals so they read back exactly enough to
-/// be compared with the file. The UR form is `p[x, y, z, rx, ry, rz]` in metres and radians (a
-/// URScript pose literal), the matrix row-major.
+/// be compared with the file. The UR form is the one `handeye export --format ur` writes
+/// (`p[x, y, z, rx, ry, rz]`, metres and radians), the matrix row-major.
 pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static str>)> {
     let t = pose.translation.vector;
-    let q = pose.rotation.quaternion();
     // w ≥ 0, as the YAML writes it.
-    let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
+    let q = crate::geometry::yaml::QuaternionYaml::from(&pose.rotation);
     let rv = rotvec(&pose.rotation);
     let m = to_matrix4_rows(pose);
     let (roll, pitch, yaw) = pose.rotation.euler_angles();
@@ -357,10 +356,7 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
             "quaternion (w, x, y, z)",
             format!(
                 "{{w: {:.9}, x: {:.9}, y: {:.9}, z: {:.9}}}",
-                sign * q.w,
-                sign * q.i,
-                sign * q.j,
-                sign * q.k
+                q.w, q.x, q.y, q.z
             ),
             Some("quaternion"),
         ),
@@ -388,10 +384,7 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
         ("4x4 matrix", matrix, None),
         (
             "UR pose (URScript)",
-            format!(
-                "p[{:.6}, {:.6}, {:.6}, {:.6}, {:.6}, {:.6}]",
-                t.x, t.y, t.z, rv.x, rv.y, rv.z
-            ),
+            crate::formats::export::ur_pose_literal(pose),
             None,
         ),
     ]
@@ -529,9 +522,18 @@ mod tests {
         );
         let forms = export_forms(&pose);
         let ur = forms.iter().find(|f| f.0.starts_with("UR")).unwrap();
-        assert_eq!(
-            ur.1,
-            "p[0.100000, -0.200000, 0.300000, 0.000000, 0.000000, 0.500000]"
-        );
+        // Full precision (the export's literal): the numbers read back to the pose within 1e-12.
+        let values: Vec<f64> =
+            ur.1.strip_prefix("p[")
+                .and_then(|s| s.strip_suffix(']'))
+                .unwrap_or_else(|| panic!("not a UR pose literal: {}", ur.1))
+                .split(", ")
+                .map(|v| v.parse().unwrap())
+                .collect();
+        let expected = [0.1, -0.2, 0.3, 0.0, 0.0, 0.5];
+        assert_eq!(values.len(), 6, "{}", ur.1);
+        for (v, e) in values.iter().zip(expected) {
+            assert!((v - e).abs() < 1e-12, "{} vs {expected:?}", ur.1);
+        }
     }
 }

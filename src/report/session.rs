@@ -40,7 +40,7 @@ pub fn from_session(
     noise: NoiseModel,
 ) -> Result<ReportInput, ReportError> {
     let dataset = Dataset::load(&folder.samples_path())
-        .map_err(|e| ReportError::Session(Box::new(SessionError::Solve(e.to_string()))))?;
+        .map_err(|e| ReportError::Session(Box::new(SessionError::File(e))))?;
     let visits = folder
         .read_visits()
         .map_err(|e| ReportError::Session(Box::new(e)))?;

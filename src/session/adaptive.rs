@@ -19,9 +19,8 @@ use crate::plan::nbv::AdaptivePlanner;
 use crate::robot::{Joints, Robot};
 use crate::solve::PosePair;
 
+use super::SessionManifest;
 use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
-use super::{PlannedPose, SessionManifest};
-use crate::geometry::PoseYaml;
 
 /// Yields the next pose of a session from the samples accepted so far.
 pub trait PlanSource {
@@ -65,9 +64,7 @@ pub fn run_adaptive_session(
     loop {
         if !finish_recorded {
             let samples = if setup.folder.samples_path().is_file() {
-                Dataset::load(&setup.folder.samples_path())
-                    .map_err(|e| SessionError::Solve(e.to_string()))?
-                    .pairs
+                Dataset::load(&setup.folder.samples_path())?.pairs
             } else {
                 Vec::new()
             };
@@ -77,29 +74,14 @@ pub fn run_adaptive_session(
             plan.push(next);
         }
         finish_recorded = false;
-        setup.folder.write_manifest(&SessionManifest {
-            config: manifest_config.clone(),
-            setup: setup.setup,
-            plan: plan
-                .iter()
-                .map(|(pose, q)| PlannedPose {
-                    base_from_flange: PoseYaml::from_pose(pose),
-                    joints_deg: q.map(f64::to_degrees),
-                })
-                .collect(),
-        })?;
+        setup.folder.write_manifest(&SessionManifest::new(
+            manifest_config.clone(),
+            setup.setup,
+            &plan,
+        ))?;
         let step = SessionSetup {
-            folder: setup.folder.clone(),
-            setup: setup.setup,
             plan: plan.clone(),
-            limits: setup.limits,
-            settle: setup.settle,
-            max_reprojection_rms_px: setup.max_reprojection_rms_px,
-            board: setup.board.clone(),
-            detector: setup.detector.clone(),
-            stop: setup.stop.clone(),
-            estimate_intrinsics: setup.estimate_intrinsics,
-            move_check: setup.move_check.clone(),
+            ..setup.clone()
         };
         let index = plan.len() - 1;
         let step_outcome = run_session(step, robot, camera, on_event)?;
@@ -128,7 +110,7 @@ fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>, SessionErr
         .map(|(i, planned)| {
             let pose = planned
                 .base_from_flange
-                .to_pose(&format!("plan[{i}].base_from_flange"))
+                .to_pose(&format!("plan[{i}].T_base_flange"))
                 .map_err(|source| SessionError::Pose {
                     file: file.clone(),
                     source,

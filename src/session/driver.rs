@@ -20,6 +20,7 @@ use super::folder::{PoseVisit, SessionFolder};
 use super::SessionError;
 
 /// Everything the loop needs besides the hardware.
+#[derive(Clone)]
 pub struct SessionSetup {
     /// Where records go (created or opened for resume).
     pub folder: SessionFolder,
@@ -366,9 +367,7 @@ fn spawn_worker(
                             setup: session_setup,
                             pairs: samples.values().cloned().collect(),
                         };
-                        dataset
-                            .save(&folder.samples_path())
-                            .map_err(|e| SessionError::Detection(e.to_string()))?;
+                        dataset.save(&folder.samples_path())?;
                     }
                     Ok(visit)
                 });

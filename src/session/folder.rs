@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::atomic_file::write_atomic;
 use crate::geometry::{Pose, PoseError, PoseYaml};
+use crate::robot::Joints;
 use crate::solve::Setup;
 use crate::yaml_file::{read_yaml, write_yaml};
 
@@ -31,6 +32,23 @@ pub struct SessionManifest {
     pub setup: Setup,
     /// The validated plan, in visiting order.
     pub plan: Vec<PlannedPose>,
+}
+
+impl SessionManifest {
+    /// The manifest of a session of `config` (path) visiting `plan` (flange pose, joints).
+    pub fn new(config: PathBuf, setup: Setup, plan: &[(Pose, Joints)]) -> SessionManifest {
+        SessionManifest {
+            config,
+            setup,
+            plan: plan
+                .iter()
+                .map(|(pose, q)| PlannedPose {
+                    base_from_flange: PoseYaml::from_pose(pose),
+                    joints_deg: q.map(f64::to_degrees),
+                })
+                .collect(),
+        }
+    }
 }
 
 /// One validated plan pose: where the flange goes and the joints that reach it.

@@ -58,11 +58,9 @@ pub fn solve_folder_in(
 ) -> Result<SolvedSession, SessionError> {
     let (solved, dataset) = load_and_solve(folder, config, space)?;
     ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
-        .save(&folder.result_path())
-        .map_err(|e| SessionError::Solve(e.to_string()))?;
+        .save(&folder.result_path())?;
     if let Some(summary) = solved.reprojection_summary() {
-        let text = serde_yaml_ng::to_string(&summary).expect("the summary serialises");
-        folder.write_file(std::path::Path::new(REPROJECTION_FILE), text.as_bytes())?;
+        crate::yaml_file::write_yaml(&summary, &folder.root().join(REPROJECTION_FILE))?;
     }
     Ok(solved)
 }
@@ -85,8 +83,7 @@ pub fn load_and_solve(
     let Some(intrinsics) = &config.intrinsics else {
         return solve_from_scratch(folder, config, &board()?);
     };
-    let dataset =
-        Dataset::load(&folder.samples_path()).map_err(|e| SessionError::Solve(e.to_string()))?;
+    let dataset = Dataset::load(&folder.samples_path())?;
     let visits = folder.read_visits()?;
     let (board, camera) = if space == SolveSpace::Reprojection {
         let camera = CameraModel::load(intrinsics).map_err(|e| {
