@@ -15,14 +15,14 @@ use std::sync::Arc;
 use crate::camera::model::CameraModel;
 use crate::camera::Camera;
 use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
-use crate::geometry::{Pose, PoseYaml};
+use crate::geometry::Pose;
 use crate::plan::check::MoveCheck;
 use crate::plan::check::{check_plan, CheckContext, PlanReport};
 use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
-use crate::session::{PlannedPose, SessionFolder, SessionManifest, SessionSetup};
+use crate::session::{SessionFolder, SessionManifest, SessionSetup};
 use crate::target::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -245,18 +245,12 @@ impl PreparedCell {
 
     /// The session manifest for a validated plan.
     pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
-        SessionManifest {
-            config: std::fs::canonicalize(&self.config.file)
-                .unwrap_or_else(|_| self.config.file.clone()),
-            setup: self.config.setup,
-            plan: plan
-                .iter()
-                .map(|(pose, q)| PlannedPose {
-                    base_from_flange: PoseYaml::from_pose(pose),
-                    joints_deg: q.map(f64::to_degrees),
-                })
-                .collect(),
-        }
+        SessionManifest::new(self.config_path(), self.config.setup, plan)
+    }
+
+    /// The config file as a session manifest records it (absolute when it can be).
+    pub fn config_path(&self) -> std::path::PathBuf {
+        std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
     }
 
     /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)

@@ -144,7 +144,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         );
         let outcome = session::run_adaptive_session(
             setup,
-            prepared.manifest(&[]).config,
+            prepared.config_path(),
             &mut planner,
             hardware.robot.as_mut(),
             hardware.camera.as_mut(),
