@@ -56,6 +56,45 @@ impl Default for RenderOptions {
     }
 }
 
+/// Every pixel's undistorted ray through its centre. It depends on the lens only, and
+/// undistorting is about half of a render's work, so a camera that renders many frames
+/// ([`super::sim::SimCamera`]) computes it once.
+pub struct PixelRays {
+    /// Row-major, `None` where the lens model cannot be inverted.
+    rays: Vec<Option<PixelRay>>,
+}
+
+impl PixelRays {
+    /// The rays of every pixel of `camera`'s image.
+    pub fn new(camera: &CameraModel) -> Self {
+        let (width, height) = (camera.width as usize, camera.height as usize);
+        let mut rays = Vec::with_capacity(width * height);
+        for v in 0..height {
+            let mut warm: Option<Vector2<f64>> = None;
+            for u in 0..width {
+                let xd = Vector2::new(
+                    (u as f64 - camera.cx) / camera.fx,
+                    (v as f64 - camera.cy) / camera.fy,
+                );
+                let ray =
+                    undistort_warm(&camera.distortion, xd, warm).map(|(xn, jacobian_inverse)| {
+                        PixelRay {
+                            xn,
+                            jacobian_inverse,
+                        }
+                    });
+                // Predict the next pixel's solution along the row: Newton then starts ~1e-7
+                // away.
+                warm = ray
+                    .as_ref()
+                    .map(|r| r.xn + r.jacobian_inverse * Vector2::new(1.0 / camera.fx, 0.0));
+                rays.push(ray);
+            }
+        }
+        PixelRays { rays }
+    }
+}
+
 /// Renders `board` seen by `camera` at `camera_from_target`.
 pub fn render(
     board: &Board,
@@ -64,7 +103,27 @@ pub fn render(
     options: &RenderOptions,
     rng: &mut impl Rng,
 ) -> GrayImage {
+    render_with_rays(
+        board,
+        camera,
+        &PixelRays::new(camera),
+        camera_from_target,
+        options,
+        rng,
+    )
+}
+
+/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`).
+pub fn render_with_rays(
+    board: &Board,
+    camera: &CameraModel,
+    rays: &PixelRays,
+    camera_from_target: &Pose,
+    options: &RenderOptions,
+    rng: &mut impl Rng,
+) -> GrayImage {
     let (width, height) = (camera.width as usize, camera.height as usize);
+    assert_eq!(rays.rays.len(), width * height, "rays of another camera");
     if width == 0 || height == 0 {
         return GrayImage::new(camera.width, camera.height);
     }
@@ -84,6 +143,7 @@ pub fn render(
     std::thread::scope(|scope| {
         for (chunk_index, chunk) in radiance.chunks_mut(rows_per_chunk * width).enumerate() {
             let first_row = chunk_index * rows_per_chunk;
+            let chunk_rays = &rays.rays[first_row * width..first_row * width + chunk.len()];
             scope.spawn(move || {
                 render_rows(
                     board,
@@ -93,6 +153,7 @@ pub fn render(
                     options,
                     first_row,
                     width,
+                    chunk_rays,
                     chunk,
                 );
             });
@@ -175,12 +236,12 @@ fn render_rows(
     options: &RenderOptions,
     first_row: usize,
     width: usize,
+    block_rays: &[Option<PixelRay>],
     block: &mut [f32],
 ) {
     let s = options.supersample.max(1);
     let offsets: Vec<f64> = (0..s).map(|i| (i as f64 + 0.5) / s as f64 - 0.5).collect();
     let samples = (s * s) as f64;
-    let mut rays: Vec<Option<PixelRay>> = vec![None; width];
     let mut top: Vec<Hit> = vec![None; width + 1];
     let mut bottom: Vec<Hit> = vec![None; width + 1];
     let mut have_top = false;
@@ -193,23 +254,7 @@ fn render_rows(
             }
             continue;
         };
-        let mut warm: Option<Vector2<f64>> = None;
-        for (u, ray) in rays.iter_mut().enumerate() {
-            let xd = Vector2::new(
-                (u as f64 - camera.cx) / camera.fx,
-                (v as f64 - camera.cy) / camera.fy,
-            );
-            *ray = undistort_warm(&camera.distortion, xd, warm).map(|(xn, jacobian_inverse)| {
-                PixelRay {
-                    xn,
-                    jacobian_inverse,
-                }
-            });
-            // Predict the next pixel's solution along the row: Newton then starts ~1e-7 away.
-            warm = ray
-                .as_ref()
-                .map(|r| r.xn + r.jacobian_inverse * Vector2::new(1.0 / camera.fx, 0.0));
-        }
+        let rays = &block_rays[k * width..(k + 1) * width];
         let corner = |c: usize, dy: f64| -> Hit {
             let (pixel, dx) = if c < width {
                 (c, -0.5)

@@ -9,11 +9,11 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 
 use crate::geometry::Pose;
-use crate::plan::CellTransforms;
+use crate::solve::CellTransforms;
 use crate::target::Board;
 
 use super::model::CameraModel;
-use super::render::{render, RenderOptions};
+use super::render::{render_with_rays, PixelRays, RenderOptions};
 use super::{Camera, CameraError, Frame};
 
 /// Where the simulated camera learns the arm's true flange pose `T_base_flange`.
@@ -29,6 +29,8 @@ pub struct SimCamera {
     rng: StdRng,
     hidden_grabs: BTreeSet<usize>,
     grabs: usize,
+    /// The lens's pixel rays, computed at the first grab and reused by every frame.
+    rays: Option<PixelRays>,
 }
 
 impl SimCamera {
@@ -52,6 +54,7 @@ impl SimCamera {
             rng: StdRng::seed_from_u64(seed),
             hidden_grabs,
             grabs: 0,
+            rays: None,
         }
     }
 }
@@ -67,9 +70,12 @@ impl Camera for SimCamera {
             self.truth
                 .camera_from_target(&(self.true_base_from_flange)())
         };
-        let image = render(
+        let model = &self.model;
+        let rays = self.rays.get_or_insert_with(|| PixelRays::new(model));
+        let image = render_with_rays(
             &self.board,
             &self.model,
+            rays,
             &camera_from_target,
             &self.options,
             &mut self.rng,
