@@ -13,10 +13,11 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior, Setup};
-use handeye::target::Board;
+use handeye::setup::Setup;
+use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior};
+use handeye::vision::Board;
 
 #[path = "../tests/util/mod.rs"]
 mod util;

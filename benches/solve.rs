@@ -7,9 +7,8 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use handeye::geometry::Pose;
-use handeye::solve::{
-    self, iterative, predict, AxbyData, IterativeOptions, PosePair, Setup, SolveOptions,
-};
+use handeye::setup::{predict, PosePair, Setup};
+use handeye::solve::{self, iterative, AxbyData, IterativeOptions, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

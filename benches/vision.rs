@@ -8,10 +8,10 @@ use std::path::Path;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use handeye::camera::model::{CameraModel, Distortion};
 use handeye::camera::render::{render, RenderOptions};
+use handeye::camera_model::{CameraModel, Distortion};
 use handeye::geometry::Pose;
-use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 

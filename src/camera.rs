@@ -1,18 +1,17 @@
-//! Cameras: the [`Camera`] contract and its error; the intrinsic model shared by detection, pose
-//! estimation and simulation (`model`); the frame simulator that renders a board through that
-//! model (`render`); and the backends: the simulated camera (`sim`), the image folder
-//! (`files`) and USB/UVC cameras (`uvc`, behind the `uvc` feature). The session sees only the
-//! trait.
+//! Cameras: the [`Camera`] contract and its error; the frame simulator that renders a board
+//! through the intrinsic model (`render`); and the backends: the simulated camera (`sim`), the
+//! image folder (`files`) and USB/UVC cameras (`uvc`, behind the `uvc` feature). The session
+//! sees only the trait.
 //!
 //! Frames: `camera` is the optical frame (x right, y down, z forward, as OpenCV and ROS
 //! `*_optical_frame`). Pixels follow OpenCV's convention for the whole project: pixel
 //! centres sit at integer coordinates, pixel `(u, v)` covers `[u - 0.5, u + 0.5)`.
-//! Units: metres for points, pixels for image coordinates. This module depends on
-//! `geometry` and `target` (for the board the renderer draws), never on robots or sessions.
+//! Units: metres for points, pixels for image coordinates. The intrinsic model lives on the
+//! ground floor (`camera_model`). This module depends on the ground floor and `vision` (for
+//! the board the renderer draws), never on robots or sessions.
 
 pub mod decode;
 pub mod files;
-pub mod model;
 pub mod render;
 pub mod sim;
 #[cfg(feature = "uvc")]
@@ -22,7 +21,7 @@ use std::time::Instant;
 
 use image::GrayImage;
 
-use model::CameraModel;
+use crate::camera_model::CameraModel;
 
 /// One grabbed frame.
 #[derive(Debug, Clone)]

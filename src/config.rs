@@ -13,9 +13,11 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{PoseError, PoseYaml};
-use crate::plan::{CellTransforms, GenerateSpec};
+use crate::plan::GenerateSpec;
 use crate::robot::{MotionLimits, WorkspaceBox};
-use crate::solve::{Method, NoiseModel, Setup, SolveOptions};
+use crate::setup::CellTransforms;
+use crate::setup::Setup;
+use crate::solve::{Method, NoiseModel, SolveOptions};
 use crate::yaml_file::{parse_yaml, read_text, FileError};
 
 /// Ceilings on the configurable motion limits: calibration moves near people never need more.

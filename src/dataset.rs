@@ -20,7 +20,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::PoseYaml;
-use crate::solve::{PosePair, Setup};
+use crate::setup::{PosePair, Setup};
 
 pub use crate::yaml_file::FileError;
 use crate::yaml_file::{parse_yaml, read_yaml, write_yaml};

@@ -5,6 +5,7 @@
 
 pub mod atomic_file;
 pub mod camera;
+pub mod camera_model;
 pub mod cell;
 pub mod config;
 pub mod dataset;
@@ -15,7 +16,8 @@ pub mod report;
 pub mod result;
 pub mod robot;
 pub mod session;
+pub mod setup;
 pub mod solve;
-pub mod target;
 pub mod verify;
+pub mod vision;
 pub mod yaml_file;

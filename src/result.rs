@@ -21,9 +21,9 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose, PoseRecord};
+use crate::setup::{CellTransforms, PosePair, Setup};
 use crate::solve::{
-    Calibration, CellTransforms, Method, Phase, PosePair, PoseSigma, Residuals, Setup,
-    SolverReport, TraceStep, Uncertainty,
+    Calibration, Method, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
 };
 use crate::yaml_file::{read_yaml, write_yaml, FileError};
 

@@ -1,7 +1,7 @@
 //! Verification of a calibration against observations it was not solved from.
 //!
 //! Two ways: a holdout run ([`holdout`]: the cell moves to a freshly generated set of poses, the
-//! camera measures `T_camera_target`, and the calibration predicts it with [`solve::predict`])
+//! camera measures `T_camera_target`, and the calibration predicts it with [`setup::predict`])
 //! and offline leave-one-out cross-validation on any dataset or session ([`leave_one_out`]: each
 //! sample is predicted by a solve of all the others). Both report, per pose and summarised, the
 //! rotation error (degrees, the angle between predicted and measured rotation) and the
@@ -17,10 +17,12 @@ use serde::{Deserialize, Serialize};
 use crate::cell::{Hardware, PreparedCell};
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
-use crate::plan::{CellTransforms, GenerateSpec, Plan, Waypoint};
+use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::robot::RobotError;
 use crate::session::{self, SessionError, SessionEvent, SessionFolder};
-use crate::solve::{self, PosePair, Setup, SolveError, SolveOptions};
+use crate::setup::CellTransforms;
+use crate::setup::{self, PosePair, Setup};
+use crate::solve::{self, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -160,7 +162,7 @@ pub fn compare(
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let predicted = solve::predict(setup, camera_mount, target_mount, &p.base_from_flange);
+            let predicted = setup::predict(setup, camera_mount, target_mount, &p.base_from_flange);
             prediction_error(i, p.id.clone(), &predicted, &p.camera_from_target)
         })
         .collect();
@@ -326,7 +328,7 @@ mod tests {
         let target_mount =
             pose_from_rotvec(Vector3::new(0.5, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.3));
         let robot = pose_from_rotvec(Vector3::new(0.4, -0.1, 0.6), Vector3::new(3.1, 0.1, 0.0));
-        let truth = solve::predict(Setup::EyeInHand, &camera_mount, &target_mount, &robot);
+        let truth = setup::predict(Setup::EyeInHand, &camera_mount, &target_mount, &robot);
         // The measurement is the truth moved 2 mm along the camera x axis and turned 0.5° about z.
         let measured = pose_from_rotvec(
             Vector3::new(0.002, 0.0, 0.0),

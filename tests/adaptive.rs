@@ -11,9 +11,11 @@
 use handeye::cell;
 use handeye::geometry::Pose;
 use handeye::plan::nbv::AdaptivePlanner;
-use handeye::plan::{generate, CellTransforms, GenerateSpec, Plan, Waypoint};
+use handeye::plan::{generate, GenerateSpec, Plan, Waypoint};
 use handeye::robot::Joints;
-use handeye::solve::{self, PosePair};
+use handeye::setup::CellTransforms;
+use handeye::setup::PosePair;
+use handeye::solve;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::SeedableRng;

@@ -7,7 +7,7 @@ use std::process::Command;
 use handeye::dataset::{Dataset, FileError};
 use handeye::geometry::{Pose, PoseYaml};
 use handeye::result::ResultFile;
-use handeye::solve::{predict, Setup};
+use handeye::setup::{predict, Setup};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// A valid eye-in-hand dataset text of 6 noise-free samples with diverse rotations, and its truth.

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::cell;
 use handeye::formats::export::{export, ExportFormat, FrameIds};
 use handeye::formats::import::{
@@ -22,10 +22,11 @@ use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::result::ResultFile;
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::session::{self, SessionFolder};
-use handeye::solve::CellTransforms;
-use handeye::solve::{self, Calibration, NoiseModel, PosePair, Setup, SolveOptions};
-use handeye::target::{Board, DetectorOptions};
+
+use handeye::setup::{self, CellTransforms, PosePair, Setup};
+use handeye::solve::{self, Calibration, NoiseModel, SolveOptions};
 use handeye::verify::leave_one_out;
+use handeye::vision::{Board, DetectorOptions};
 
 mod util;
 use util::{dataset, pose_error_mm_deg, repo};
@@ -555,7 +556,7 @@ fn export_reads_a_saved_result_file() {
             );
             PosePair::new(
                 base_from_flange,
-                solve::predict(
+                setup::predict(
                     Setup::EyeToHand,
                     &truth.camera_mount,
                     &truth.target_mount,

@@ -262,7 +262,8 @@ fn result_file_round_trips_through_a_calibration() {
 fn two_answers_are_shown_side_by_side() {
     use handeye::geometry::pose_from_rotvec;
     use handeye::report::{render_html, ReportAnswer, ReportInput};
-    use handeye::solve::{Method, NoiseModel, PosePair, Setup, SolveOptions};
+    use handeye::setup::{PosePair, Setup};
+    use handeye::solve::{Method, NoiseModel, SolveOptions};
     use nalgebra::Vector3;
 
     let camera_mount =

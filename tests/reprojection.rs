@@ -8,15 +8,16 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::setup::{PosePair, Setup};
 use handeye::solve::intrinsics::{calibrate_from_scratch, zhang_intrinsics};
 use handeye::solve::{
-    self, refine_reprojection, reprojection_errors, Corner, Frame, NoiseModel, PosePair,
-    ReprojectionCalibration, ReprojectionOptions, RobotPrior, Setup, SolveError, SolveOptions,
+    self, refine_reprojection, reprojection_errors, Corner, Frame, NoiseModel,
+    ReprojectionCalibration, ReprojectionOptions, RobotPrior, SolveError, SolveOptions,
 };
-use handeye::target::pnp::estimate_pose_from_points;
-use handeye::target::Board;
+use handeye::vision::pnp::estimate_pose_from_points;
+use handeye::vision::Board;
 
 mod util;
 use util::{dataset, pose_error_mm_deg, repo};
@@ -568,8 +569,8 @@ fn bad_input_is_a_clear_error() {
 
 #[test]
 fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
-    use handeye::target::pnp::estimate_board_pose;
-    use handeye::target::{detect::load_gray_image, DetectorOptions, TagDetector};
+    use handeye::vision::pnp::estimate_board_pose;
+    use handeye::vision::{detect::load_gray_image, DetectorOptions, TagDetector};
     let Some(folder) = dataset("visp_franka_data-eye-to-hand") else {
         return;
     };

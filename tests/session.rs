@@ -7,8 +7,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use handeye::cell::{self, PreparedCell};
-use handeye::plan::CellTransforms;
 use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
+use handeye::setup::CellTransforms;
 
 mod util;
 
@@ -483,9 +483,9 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
         solved.summary,
         solved.compare_with_truth(prepared.config.simulation.as_ref().unwrap())
     );
-    let truth_camera = handeye::camera::model::CameraModel::load(&lens).unwrap();
+    let truth_camera = handeye::camera_model::CameraModel::load(&lens).unwrap();
     let written =
-        handeye::camera::model::CameraModel::load(&folder.root().join("camera_info.yaml")).unwrap();
+        handeye::camera_model::CameraModel::load(&folder.root().join("camera_info.yaml")).unwrap();
     let estimated = solved.estimated_camera.unwrap();
     for (name, found, written, truth) in [
         ("fx", estimated.fx, written.fx, truth_camera.fx),

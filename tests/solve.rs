@@ -3,9 +3,10 @@
 //! eye-to-hand data.
 
 use handeye::geometry::Pose;
+use handeye::setup::{predict, PosePair, Setup};
 use handeye::solve::{
-    self, closed_form, iterative, predict, AxbyData, IterativeOptions, Method, NoiseModel,
-    PosePair, RobustLoss, Setup, SolveError, SolveOptions,
+    self, closed_form, iterative, AxbyData, IterativeOptions, Method, NoiseModel, RobustLoss,
+    SolveError, SolveOptions,
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;

@@ -8,7 +8,8 @@
 //! covariance is right, so it falls within 1 sigma 68.3 % and within 3 sigma 99.73 % of the time.
 
 use handeye::geometry::{rotvec, Pose};
-use handeye::solve::{self, NoiseModel, PosePair, Setup, SolveOptions};
+use handeye::setup::{PosePair, Setup};
+use handeye::solve::{self, NoiseModel, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

@@ -6,9 +6,11 @@ use std::path::PathBuf;
 
 use handeye::cell;
 use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::plan::{CellTransforms, GenerateSpec};
+use handeye::plan::GenerateSpec;
 use handeye::session::{SessionEvent, SessionFolder};
-use handeye::solve::{self, PosePair, Setup, SolveOptions};
+use handeye::setup::CellTransforms;
+use handeye::setup::{self, PosePair, Setup};
+use handeye::solve::SolveOptions;
 use handeye::verify;
 use nalgebra::Vector3;
 
@@ -79,7 +81,7 @@ fn holdout_errors_agree_with_the_known_error_of_the_result() {
     let samples = handeye::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
     for (e, pair) in off.poses.iter().zip(&samples.pairs) {
         let with_truth = truth.camera_from_target(&pair.base_from_flange);
-        let with_result = solve::predict(
+        let with_result = setup::predict(
             Setup::EyeInHand,
             &wrong_camera,
             &truth.target_mount,

@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
-use handeye::camera::model::{CameraModel, Distortion};
 use handeye::camera::render::{render, RenderOptions};
+use handeye::camera_model::{CameraModel, Distortion};
 use handeye::geometry::Pose;
-use handeye::target::detect::load_gray_image;
-use handeye::target::{
+use handeye::vision::detect::load_gray_image;
+use handeye::vision::{
     estimate_board_pose, reproject, Board, DetectorOptions, TagDetector, TargetError,
 };
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -332,7 +332,7 @@ fn tags_not_on_the_board_are_rejected() {
         2,
         0.04,
         0.25,
-        handeye::target::TagFamily::Tag36h11,
+        handeye::vision::TagFamily::Tag36h11,
         20,
         2,
     )

@@ -16,8 +16,8 @@ use std::sync::atomic::{AtomicUsize, Ordering as AtomicOrdering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::model::CameraModel;
 use super::{Camera, CameraError, Frame};
+use crate::camera_model::CameraModel;
 
 /// Image file extensions the folder camera serves (lower case).
 pub const FRAME_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
@@ -212,7 +212,7 @@ impl Camera for FilesCamera {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::model::Distortion;
+    use crate::camera_model::Distortion;
 
     #[test]
     fn natural_order_sorts_numbers_by_value() {

@@ -8,7 +8,7 @@
 //! pixel (error far below 1e-4 px). Then exposure, optional Gaussian blur and Gaussian sensor
 //! noise (seeded by the caller's RNG). Pixel convention: OpenCV's, pixel `(u, v)` covers
 //! `[u - 0.5, u + 0.5) x [v - 0.5, v + 0.5)`. Rows are rendered on all cores with scoped std
-//! threads. Depends on `camera::model`, `target::board` and `geometry`.
+//! threads. Depends on `camera_model`, `vision::board` and `geometry`.
 
 use image::GrayImage;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
@@ -16,9 +16,9 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use super::model::{CameraModel, Distortion};
+use crate::camera_model::{CameraModel, Distortion};
 use crate::geometry::Pose;
-use crate::target::Board;
+use crate::vision::Board;
 
 /// What the simulated sensor adds to the ideal image. Grey levels are 0-255.
 #[derive(Debug, Clone, PartialEq)]
@@ -440,7 +440,7 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
 mod tests {
     use super::*;
     use crate::geometry::pose_from_rotvec;
-    use crate::target::TagFamily;
+    use crate::vision::TagFamily;
     use nalgebra::Point3;
 
     #[test]

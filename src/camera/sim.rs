@@ -9,12 +9,12 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 
 use crate::geometry::Pose;
-use crate::solve::CellTransforms;
-use crate::target::Board;
+use crate::setup::CellTransforms;
+use crate::vision::Board;
 
-use super::model::CameraModel;
 use super::render::{render_with_rays, PixelRays, RenderOptions};
 use super::{Camera, CameraError, Frame};
+use crate::camera_model::CameraModel;
 
 /// Where the simulated camera learns the arm's true flange pose `T_base_flange`.
 pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;

@@ -25,8 +25,8 @@ use nokhwa::utils::{
 };
 
 use super::decode::{to_gray, PixelFormat};
-use super::model::CameraModel;
 use super::{Camera, CameraError, Frame};
+use crate::camera_model::CameraModel;
 
 /// V4L2 control ids (linux/v4l2-controls.h) nokhwa has no name for.
 mod v4l2 {
@@ -217,7 +217,7 @@ impl UvcCamera {
             fy: width as f64,
             cx: (width as f64 - 1.0) / 2.0,
             cy: (height as f64 - 1.0) / 2.0,
-            distortion: super::model::Distortion::None,
+            distortion: crate::camera_model::Distortion::None,
         });
         if (width, height) != (model.width, model.height) {
             return Err(CameraError::Open(format!(

@@ -12,8 +12,8 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::camera::model::CameraModel;
 use crate::camera::Camera;
+use crate::camera_model::CameraModel;
 use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
 use crate::geometry::Pose;
 use crate::plan::check::MoveCheck;
@@ -23,7 +23,7 @@ use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
 use crate::session::{SessionFolder, SessionManifest, SessionSetup};
-use crate::target::{Board, DetectorOptions};
+use crate::vision::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
 #[derive(Debug, thiserror::Error)]
@@ -41,7 +41,7 @@ pub enum CellError {
         file: std::path::PathBuf,
         /// What is wrong.
         #[source]
-        source: Box<crate::target::TargetError>,
+        source: Box<crate::vision::TargetError>,
     },
     /// The intrinsics file is wrong.
     #[error("intrinsics {file}")]
@@ -50,7 +50,7 @@ pub enum CellError {
         file: std::path::PathBuf,
         /// What is wrong.
         #[source]
-        source: Box<crate::camera::model::CameraModelError>,
+        source: Box<crate::camera_model::CameraModelError>,
     },
     /// A backend could not be opened.
     #[error("{0}")]

@@ -5,7 +5,7 @@
 //! poses. Only the rotation diversity the solver needs is checked before running.
 
 use crate::camera::files::{FilesCamera, FrameSelector};
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::config::{CameraConfig, CellConfig, RobotConfig};
 use crate::geometry::Pose;
 use crate::plan::check::{board_margin, board_points, PlanReport, PoseCheck};
@@ -13,7 +13,7 @@ use crate::plan::{Plan, Waypoint};
 use crate::robot::recorded::{load_recorded_poses, plan_joints, RecordedRobot};
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::solve::check_rotation_diversity;
-use crate::target::Board;
+use crate::vision::Board;
 
 use super::{CellError, Hardware};
 

@@ -5,16 +5,16 @@ use std::cell::Cell;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use crate::camera::model::CameraModel;
 use crate::camera::render::RenderOptions;
 use crate::camera::sim::{SimCamera, TrueFlangePose};
+use crate::camera_model::CameraModel;
 use crate::config::{CameraConfig, CellConfig, RobotConfig};
 use crate::geometry::Pose;
-use crate::plan::CellTransforms;
 use crate::robot::kinematics::UrModel;
 use crate::robot::sim::{SimFaults, SimRobot, SimRobotOptions};
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
-use crate::target::Board;
+use crate::setup::CellTransforms;
+use crate::vision::Board;
 
 use super::CellError;
 

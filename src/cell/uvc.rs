@@ -2,8 +2,8 @@
 //! feature; without it, a clear error says the build lacks it. The session sees the `Camera`
 //! trait either way.
 
-use crate::camera::model::CameraModel;
 use crate::camera::Camera;
+use crate::camera_model::CameraModel;
 use crate::config::CameraConfig;
 
 use super::CellError;

@@ -81,7 +81,7 @@ pub fn run(args: CameraArgs) -> anyhow::Result<()> {
 pub mod uvc {
     //! Stand-ins when the build lacks the `uvc` feature.
     use super::StreamArgs;
-    use handeye::camera::model::CameraModel;
+    use handeye::camera_model::CameraModel;
 
     const MISSING: &str = "this handeye build lacks USB camera support: rebuild with `cargo build --release --features uvc` (needs libclang-dev)";
 
@@ -115,8 +115,8 @@ pub mod uvc {
     use super::{PixelFormatArg, StreamArgs};
     use handeye::atomic_file::write_atomic;
     use handeye::camera::decode::PixelFormat;
-    use handeye::camera::model::CameraModel;
     use handeye::camera::uvc::{list_cameras, UvcCamera, UvcDevice, UvcOptions};
+    use handeye::camera_model::CameraModel;
 
     /// This build has USB camera support.
     pub fn ensure_available() -> anyhow::Result<()> {

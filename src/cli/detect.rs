@@ -10,11 +10,11 @@ use clap::Args;
 use serde::Serialize;
 
 use handeye::atomic_file::write_atomic;
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::geometry::PoseRecord;
-use handeye::target::annotate::annotate;
-use handeye::target::detect::load_gray_image;
-use handeye::target::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
+use handeye::vision::annotate::annotate;
+use handeye::vision::detect::load_gray_image;
+use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]

@@ -7,15 +7,15 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::dataset::Dataset;
 use handeye::formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
 use handeye::robot::recorded::save_recorded_poses;
-use handeye::solve::Setup;
-use handeye::target::{Board, DetectorOptions};
+use handeye::setup::Setup;
+use handeye::vision::{Board, DetectorOptions};
 
 /// The cell layout on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -267,7 +267,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
                         "{}: board RMS {rms:.3} px{}",
                         f.files.image.display(),
                         match f.ambiguity {
-                            Some(r) if r > handeye::target::pnp::AMBIGUITY_WARN_RATIO =>
+                            Some(r) if r > handeye::vision::pnp::AMBIGUITY_WARN_RATIO =>
                                 format!(" (AMBIGUOUS lone tag, ratio {r:.2})"),
                             _ => String::new(),
                         }

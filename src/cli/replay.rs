@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::camera::model::CameraModel;
+use handeye::camera_model::CameraModel;
 use handeye::cell;
 use handeye::config::SolveSpace;
 use handeye::result::ResultFile;

@@ -7,8 +7,8 @@ use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 
 use handeye::atomic_file::write_atomic;
-use handeye::target::print::{board_png, board_svg};
-use handeye::target::Board;
+use handeye::vision::print::{board_png, board_svg};
+use handeye::vision::Board;
 
 /// Board utilities.
 #[derive(Debug, Args)]

@@ -13,15 +13,15 @@
 //! joint from parent link to child link). Numbers are printed with Rust's shortest round-trip
 //! formatting, so nothing is lost to printing. The camera frame is the optical frame (x right,
 //! y down, z forward): name its ROS id accordingly (`*_optical_frame`).
-//! Depends on `geometry`, `solve::Setup` and `solve::CellTransforms` only; writes no files.
+//! Depends on `geometry`, `setup::Setup` and `setup::CellTransforms` only; writes no files.
 
 use std::fmt::Write as _;
 
 use serde_json::json;
 
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::solve::CellTransforms;
-use crate::solve::Setup;
+use crate::setup::CellTransforms;
+use crate::setup::Setup;
 
 /// An export form.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -21,7 +21,7 @@
 //!   row with no numeric field is a header. Any other row must have exactly the expected number
 //!   of finite numbers, or the import fails naming the file and line.
 //!
-//! Depends on `geometry`, `solve`, `camera::model`, `target` (ViSP detection) and
+//! Depends on `geometry`, `solve`, `camera_model`, `target` (ViSP detection) and
 //! `robot::recorded` (the recorded-poses form); writes no files itself except through the
 //! callers' save functions.
 
@@ -29,11 +29,11 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use crate::camera::model::{CameraModel, Distortion};
+use crate::camera_model::{CameraModel, Distortion};
 use crate::dataset::Dataset;
 use crate::geometry::{pose_from_rotvec, rotation_from_matrix, Pose};
-use crate::solve::{PosePair, Setup};
-use crate::target::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
+use crate::setup::{PosePair, Setup};
+use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
 
 /// Tolerance on the orthonormality of an imported rotation matrix (Frobenius norm).
 pub const MATRIX_TOLERANCE: f64 = 1e-6;
@@ -381,7 +381,7 @@ pub struct VispFrame {
     pub camera_from_target: Option<Pose>,
     /// Board reprojection RMS, px.
     pub rms_px: Option<f64>,
-    /// Lone-tag ambiguity ratio (see `target::pnp`).
+    /// Lone-tag ambiguity ratio (see `vision::pnp`).
     pub ambiguity: Option<f64>,
     /// Why the board was not found, when skipped.
     pub skipped: Option<String>,
@@ -418,7 +418,7 @@ pub fn import_visp(folder: &Path, options: &VispOptions) -> Result<VispImport, I
     let mut pairs = Vec::new();
     for files in found.samples {
         let base_from_flange = read_visp_pose(&files.pose_file)?;
-        let image = crate::target::detect::load_gray_image(&files.image)
+        let image = crate::vision::detect::load_gray_image(&files.image)
             .map_err(|e| ImportError::Target(Box::new(e)))?;
         if (image.width(), image.height()) != (camera.width, camera.height) {
             return Err(ImportError::Value {

@@ -1,7 +1,7 @@
 //! Data in and results out in other tools' forms: importers (ViSP, MoveIt Calibration, CSV) that
 //! produce our pose pairs, and exporters (ROS 2, URDF, UR, JSON, OpenCV) of a solved result.
 //! Each importer's module docs state which transform its source holds and in which direction.
-//! Sits beside `session`: it uses `geometry`, `solve`, `dataset`, `result`, `camera::model` and
+//! Sits beside `session`: it uses `geometry`, `solve`, `dataset`, `result`, `camera_model` and
 //! `target` (to detect boards in imported images), never a hardware backend.
 
 pub mod export;

@@ -7,13 +7,14 @@ use std::fmt;
 
 use nalgebra::Point3;
 
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::geometry::Pose;
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, MotionLimits, WorkspaceBox};
-use crate::target::Board;
+use crate::vision::Board;
 
-use super::{CellTransforms, Plan};
+use super::Plan;
+use crate::setup::CellTransforms;
 
 /// Points checked along each joint move (the path in joint space is a straight line).
 const PATH_SAMPLES: usize = 16;

@@ -9,8 +9,8 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::LookAt;
-use crate::camera::model::CameraModel;
-use crate::target::Board;
+use crate::camera_model::CameraModel;
+use crate::vision::Board;
 
 /// How to generate a plan.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -19,10 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
-use crate::solve::Setup;
+use crate::setup::{CellTransforms, Setup};
 use crate::yaml_file::{parse_yaml, read_text, FileError};
-
-pub use crate::solve::CellTransforms;
 
 pub use generate::{generate, GenerateSpec};
 pub use lookat::LookAt;

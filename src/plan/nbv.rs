@@ -14,8 +14,9 @@ use nalgebra::SMatrix;
 
 use crate::geometry::Pose;
 use crate::robot::Joints;
+use crate::setup::{PosePair, Setup};
 use crate::solve::refine::{mount_uncertainty, sample_information};
-use crate::solve::{self, Axby, Calibration, PosePair, Setup, SolveOptions};
+use crate::solve::{self, Axby, Calibration, SolveOptions};
 
 /// Lever arm at which a rotation uncertainty is weighed against a translation one, m.
 pub const ROTATION_LEVER_M: f64 = 0.5;

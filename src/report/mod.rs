@@ -22,7 +22,8 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic_file::write_atomic;
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::solve::{rotation_diversity, Calibration, NoiseModel, PosePair, Setup};
+use crate::setup::{PosePair, Setup};
+use crate::solve::{rotation_diversity, Calibration, NoiseModel};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]

@@ -7,7 +7,8 @@ use plotters::prelude::*;
 
 use super::{ReportError, ReportInput};
 use crate::geometry::{rotvec, Pose};
-use crate::solve::{Phase, PosePair, Setup};
+use crate::setup::{PosePair, Setup};
+use crate::solve::Phase;
 
 const WIDTH: u32 = 900;
 const HEIGHT: u32 = 300;

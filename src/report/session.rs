@@ -10,12 +10,12 @@ use image::{imageops, ImageFormat, Rgb, RgbImage};
 use nalgebra::Point2;
 
 use super::{FrameThumbnail, ReportAnswer, ReportError, ReportInput};
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use crate::solve::{Calibration, NoiseModel};
-use crate::target::{draw, Board};
+use crate::vision::{draw, Board};
 
 /// Width of a frame thumbnail, px.
 pub const THUMBNAIL_WIDTH: u32 = 320;

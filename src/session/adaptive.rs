@@ -17,7 +17,7 @@ use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::plan::nbv::AdaptivePlanner;
 use crate::robot::{Joints, Robot};
-use crate::solve::PosePair;
+use crate::setup::PosePair;
 
 use super::SessionManifest;
 use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};

@@ -7,14 +7,14 @@ use std::sync::mpsc;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::camera::model::CameraModel;
 use crate::camera::{Camera, Frame};
+use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
 use crate::plan::check::MoveCheck;
 use crate::robot::{Joints, MotionLimits, Robot};
-use crate::solve::{PosePair, Setup};
-use crate::target::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use crate::setup::{PosePair, Setup};
+use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 
 use super::folder::{PoseVisit, SessionFolder};
 use super::SessionError;

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::atomic_file::write_atomic;
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
-use crate::solve::Setup;
+use crate::setup::Setup;
 use crate::yaml_file::{read_yaml, write_yaml};
 
 use super::SessionError;

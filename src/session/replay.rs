@@ -1,9 +1,9 @@
 //! Replay: detect the board again in a session's saved frames and solve again, offline — to
 //! check a result, or to re-run with other detector or solver settings.
 
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
-use crate::target::{Board, DetectorOptions, TagDetector};
+use crate::vision::{Board, DetectorOptions, TagDetector};
 
 use super::driver::{measure, sample_of};
 use super::{PoseVisit, SessionError, SessionFolder};

@@ -8,17 +8,18 @@ use std::fmt::Write;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::config::{CellConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
-use crate::plan::CellTransforms;
 use crate::result::ResultFile;
+use crate::setup::CellTransforms;
+use crate::setup::{PosePair, Setup};
 use crate::solve::{
-    self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame, PosePair,
-    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, Setup,
+    self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
-use crate::target::Board;
+use crate::vision::Board;
 
 use super::{PoseVisit, SessionError, SessionFolder};
 
@@ -225,7 +226,7 @@ fn solve_from_scratch(
             .collect();
         let tags = correspondences.len() / 4;
         if let Ok(pose) =
-            crate::target::pnp::estimate_pose_from_points(&camera, &correspondences, tags.max(2))
+            crate::vision::pnp::estimate_pose_from_points(&camera, &correspondences, tags.max(2))
         {
             let mut pair = PosePair::new(frame.base_from_flange, pose.camera_from_target);
             pair.id = Some(id.clone());

@@ -12,8 +12,9 @@
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
-use super::{closed_form, Axby, AxbyData, NoiseModel, PosePair, Residuals, Setup, SolveError};
+use super::{closed_form, Axby, AxbyData, NoiseModel, Residuals, SolveError};
 use crate::geometry::{rotvec, Pose};
+use crate::setup::{PosePair, Setup};
 
 /// Fewest samples the problem needs.
 pub const MIN_SAMPLES: usize = 3;

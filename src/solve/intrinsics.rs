@@ -13,9 +13,10 @@ use nalgebra::{DMatrix, Matrix3, Point2, SMatrix, Translation3, Vector3};
 use super::reprojection::{
     refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions,
 };
-use super::{solve, Calibration, PosePair, Setup, SolveError, SolveOptions};
-use crate::camera::model::{CameraModel, Distortion};
+use super::{solve, Calibration, SolveError, SolveOptions};
+use crate::camera_model::{CameraModel, Distortion};
 use crate::geometry::{rotation_from_matrix, Pose};
+use crate::setup::{PosePair, Setup};
 
 /// Fewest corners a frame needs to give a homography.
 pub const MIN_CORNERS_PER_FRAME: usize = 8;

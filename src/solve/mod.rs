@@ -11,7 +11,8 @@
 //! Every method ([`iterative`], [`closed_form`], [`refine`]) works on [`AxbyData`] only, so the
 //! two setups share one code path. Units are metres and radians inside; residuals and
 //! uncertainties are reported in mm and degrees for people. Pure functions: no I/O, no clocks;
-//! depends only on `geometry` and nalgebra.
+//! depends only on the ground floor (`geometry`, `setup`, `camera_model`) and nalgebra, as
+//! `tests/layers.rs` checks.
 
 pub mod closed_form;
 pub mod diagnostics;
@@ -24,6 +25,7 @@ use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::Pose;
+use crate::setup::{CellTransforms, PosePair, Setup};
 
 pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDiversity};
 pub use iterative::{IterativeOptions, IterativeOutcome};
@@ -31,82 +33,6 @@ pub use reprojection::{
     refine_reprojection, reprojection_errors, Corner, Frame, ReprojectionCalibration,
     ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
-
-/// Which of the two cell layouts the data comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Setup {
-    /// Camera on the flange, target fixed in the cell: unknowns `T_flange_camera`, `T_base_target`.
-    EyeInHand,
-    /// Camera fixed in the cell, target on the flange: unknowns `T_base_camera`, `T_flange_target`.
-    EyeToHand,
-}
-
-impl Setup {
-    /// The YAML name (`eye_in_hand` / `eye_to_hand`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Setup::EyeInHand => "eye_in_hand",
-            Setup::EyeToHand => "eye_to_hand",
-        }
-    }
-
-    /// The other setup.
-    pub fn other(self) -> Setup {
-        match self {
-            Setup::EyeInHand => Setup::EyeToHand,
-            Setup::EyeToHand => Setup::EyeInHand,
-        }
-    }
-
-    /// YAML keys of the two unknowns: (camera mount, target mount).
-    pub fn unknown_names(self) -> (&'static str, &'static str) {
-        match self {
-            Setup::EyeInHand => ("T_flange_camera", "T_base_target"),
-            Setup::EyeToHand => ("T_base_camera", "T_flange_target"),
-        }
-    }
-
-    /// `B` of `A = X·B·Y` for a robot pose: eye-in-hand `inv(T_base_flange)`, eye-to-hand
-    /// `T_base_flange`.
-    pub fn chain_b(self, base_from_flange: &Pose) -> Pose {
-        match self {
-            Setup::EyeInHand => base_from_flange.inverse(),
-            Setup::EyeToHand => *base_from_flange,
-        }
-    }
-}
-
-impl std::fmt::Display for Setup {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// One observation: where the robot said the flange was, and where the camera saw the target.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PosePair {
-    /// `T_base_flange` as the robot reports it.
-    pub base_from_flange: Pose,
-    /// `T_camera_target` as pose estimation (PnP) reports it.
-    pub camera_from_target: Pose,
-    /// Relative weight of this sample (> 0, 1 by default); multiplies its squared residuals.
-    pub weight: f64,
-    /// Optional name of the sample, carried into messages.
-    pub id: Option<String>,
-}
-
-impl PosePair {
-    /// A pair with weight 1 and no id.
-    pub fn new(base_from_flange: Pose, camera_from_target: Pose) -> Self {
-        PosePair {
-            base_from_flange,
-            camera_from_target,
-            weight: 1.0,
-            id: None,
-        }
-    }
-}
 
 /// Measurement noise of `T_camera_target`: standard deviation per axis of the rotation error
 /// (rad, a small rotation vector in the camera frame) and of the translation error (m, camera frame).
@@ -372,47 +298,6 @@ impl Calibration {
     pub fn predict_camera_from_target(&self, base_from_flange: &Pose) -> Pose {
         self.transforms().camera_from_target(base_from_flange)
     }
-}
-
-/// The cell's two fixed transforms, named by setup: as known before calibrating (nominal, from a
-/// drawing or a tape measure), as simulated (ground truth), or as solved and read back from a
-/// result file. Plans turn views into flange poses with them (see `plan`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CellTransforms {
-    /// Which setup the cell is.
-    pub setup: Setup,
-    /// eye_in_hand: `T_flange_camera`; eye_to_hand: `T_base_camera`.
-    pub camera_mount: Pose,
-    /// eye_in_hand: `T_base_target`; eye_to_hand: `T_flange_target`.
-    pub target_mount: Pose,
-}
-
-impl CellTransforms {
-    /// The board pose the camera sees, `T_camera_target`, with the flange at `base_from_flange`.
-    pub fn camera_from_target(&self, base_from_flange: &Pose) -> Pose {
-        predict(
-            self.setup,
-            &self.camera_mount,
-            &self.target_mount,
-            base_from_flange,
-        )
-    }
-
-    /// Both transforms with their YAML keys, camera mount first.
-    pub fn unknowns(&self) -> [(&'static str, Pose); 2] {
-        let (camera, target) = self.setup.unknown_names();
-        [(camera, self.camera_mount), (target, self.target_mount)]
-    }
-}
-
-/// `T_camera_target` predicted from the two unknowns and a robot pose, for either setup.
-pub fn predict(
-    setup: Setup,
-    camera_mount: &Pose,
-    target_mount: &Pose,
-    base_from_flange: &Pose,
-) -> Pose {
-    camera_mount.inverse() * setup.chain_b(base_from_flange) * target_mount
 }
 
 /// The `A = X·B·Y` form of a data set, shared by both setups.

@@ -35,12 +35,10 @@ use nalgebra::{
 use super::diagnostics::flag_outliers;
 use super::refine::mount_uncertainty;
 use super::require_positive;
-use super::{
-    Axby, AxbyData, Calibration, CellTransforms, NoiseModel, PosePair, RobustLoss, Setup,
-    SolveError, Uncertainty,
-};
-use crate::camera::model::{CameraModel, Distortion};
+use super::{Axby, AxbyData, Calibration, NoiseModel, RobustLoss, SolveError, Uncertainty};
+use crate::camera_model::{CameraModel, Distortion};
 use crate::geometry::Pose;
+use crate::setup::{CellTransforms, PosePair, Setup};
 
 /// One detected board corner: where it is on the board and where the camera saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,7 +8,7 @@
 //!
 //! Pixel convention: the C library puts pixel centres at `i + 0.5`; this project (OpenCV, ROS,
 //! Kalibr) puts them at integers. The conversion (subtract 0.5 px) happens here, in
-//! [`to_project_pixels`], and nowhere else. Depends on `target::board`, `target::family`.
+//! [`to_project_pixels`], and nowhere else. Depends on `vision::board`, `vision::family`.
 
 use std::path::Path;
 use std::sync::mpsc;

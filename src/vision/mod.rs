@@ -5,7 +5,7 @@
 //! Frames: `target` is the board frame (origin at the outer bottom-left corner of tag 0's
 //! black square, x along rows of tags, y up, z out of the printed face); `camera` is the
 //! optical frame. Units: metres in the target frame, pixels (OpenCV convention: centres at
-//! integers) in images. Depends on `geometry` and `camera::model`; never on robots, sessions
+//! integers) in images. Depends on `geometry` and `camera_model`; never on robots, sessions
 //! or the CLI.
 
 pub mod annotate;
@@ -23,7 +23,7 @@ pub use detect::{BoardDetection, DetectorOptions, RejectedTag, TagDetector, TagO
 pub use family::TagFamily;
 pub use pnp::{estimate_board_pose, reproject, BoardPose};
 
-use crate::camera::model::CameraModelError;
+use crate::camera_model::CameraModelError;
 
 /// Everything that can go wrong between a board file, an image and `T_camera_target`.
 #[derive(Debug, thiserror::Error)]

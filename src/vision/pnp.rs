@@ -7,8 +7,8 @@
 //! parametrisation, order `[ωx, ωy, ωz, tx, ty, tz]` (rad², m²), scaled by the residual
 //! variance. A lone tag (one square) has two planar poses that explain the corners almost
 //! equally well when seen near head-on; both are refined and the better kept, and
-//! `ambiguity` reports the ratio of the two RMS errors. Depends on `camera::model`,
-//! `target::board`, `target::detect`, `geometry`.
+//! `ambiguity` reports the ratio of the two RMS errors. Depends on `camera_model`,
+//! `vision::board`, `vision::detect`, `geometry`.
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
@@ -19,7 +19,7 @@ use nalgebra::{
 use super::board::Board;
 use super::detect::BoardDetection;
 use super::TargetError;
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 use crate::geometry::Pose;
 
 /// Ratio of best to second-best RMS above which a lone tag's pose counts as ambiguous.
@@ -425,9 +425,9 @@ fn summarise(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::model::Distortion;
+    use crate::camera_model::Distortion;
     use crate::geometry::pose_from_rotvec;
-    use crate::target::TagFamily;
+    use crate::vision::TagFamily;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 

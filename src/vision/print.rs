@@ -4,7 +4,7 @@
 //!
 //! Page layout (metres): the board's sheet extent (tags plus white margin) on top, a 25 mm
 //! strip below it for the scale bar and the parameters; the page is widened when the text is
-//! wider than the board. Depends on `target::board` and `target::draw`.
+//! wider than the board. Depends on `vision::board` and `vision::draw`.
 
 use image::{GrayImage, ImageEncoder, Luma};
 
@@ -326,7 +326,7 @@ pub fn board_svg(board: &Board) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::target::TagFamily;
+    use crate::vision::TagFamily;
 
     #[test]
     fn png_is_true_scale_and_carries_its_resolution() {

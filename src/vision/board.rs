@@ -7,7 +7,7 @@
 //! bottom-left corner at `(col, row) · pitch`, `pitch = tagSize · (1 + tagSpacing)`. Tags are
 //! printed upright (the tag image's top row towards +y). Corner order follows the AprilTag
 //! library: bottom-left, bottom-right, top-right, top-left (counter-clockwise seen from +z).
-//! Units: metres. Depends on `target::family` only.
+//! Units: metres. Depends on `vision::family` only.
 
 use std::path::{Path, PathBuf};
 

@@ -7,7 +7,8 @@
 //! ROS `camera_info` and Kalibr intrinsics assume, so files load without any offset.
 //! Distortion models: `RadTan` is OpenCV's `plumb_bob` (k1 k2 p1 p2 k3, Kalibr `radtan`),
 //! `Equidistant` is OpenCV's fisheye model (k1..k4 on the angle, Kalibr `equidistant`).
-//! Depends on `atomic_file` only; knows nothing of boards, detectors or robots.
+//! Part of the ground floor (see `tests/layers.rs`): depends on `atomic_file` only; knows
+//! nothing of boards, detectors or robots.
 
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! Annotated frames for people: detected tag outlines, corners (corner 0 marked), ids, the
 //! board's axes at `T_camera_target` (x red, y green, z blue, drawn through the lens model)
-//! and the reprojection RMS. Depends on `target::{board, detect, pnp, draw}` and
-//! `camera::model`.
+//! and the reprojection RMS. Depends on `vision::{board, detect, pnp, draw}` and
+//! `camera_model`.
 
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
@@ -10,7 +10,7 @@ use super::board::Board;
 use super::detect::BoardDetection;
 use super::draw;
 use super::pnp::BoardPose;
-use crate::camera::model::CameraModel;
+use crate::camera_model::CameraModel;
 
 /// Draws the detection (and the pose, if any) over a colour copy of the frame.
 pub fn annotate(
