@@ -1,0 +1,152 @@
+//! What [`solve`](super::solve) is asked to do: the estimator ([`Method`]), the measurement
+//! noise model that weights samples ([`NoiseModel`]), the robust loss ([`RobustLoss`]) and the
+//! options that bundle them ([`SolveOptions`]). Plain data; depends on nothing above `solve`.
+
+use serde::{Deserialize, Serialize};
+
+use super::{IterativeOptions, SolveError};
+
+/// Measurement noise of `T_camera_target`: standard deviation per axis of the rotation error
+/// (rad, a small rotation vector in the camera frame) and of the translation error (m, camera frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseModel {
+    /// Per-axis standard deviation of the rotation error, rad.
+    pub rotation_sigma_rad: f64,
+    /// Per-axis standard deviation of the translation error, m.
+    pub translation_sigma_m: f64,
+}
+
+impl Default for NoiseModel {
+    /// 0.2° and 1 mm: a typical AprilTag board pose at working distance.
+    fn default() -> Self {
+        NoiseModel {
+            rotation_sigma_rad: 0.2f64.to_radians(),
+            translation_sigma_m: 1e-3,
+        }
+    }
+}
+
+/// Which estimator [`solve`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The paper: alternating quaternion averaging for rotations, then translations.
+    Iterative,
+    /// Shah (2013) Kronecker/SVD closed form written for `A = X·B·Y`.
+    ClosedForm,
+    /// Joint weighted nonlinear least squares on both unknowns, started from the iterative answer.
+    #[default]
+    Refined,
+}
+
+impl Method {
+    /// The YAML / CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Iterative => "iterative",
+            Method::ClosedForm => "closed_form",
+            Method::Refined => "refined",
+        }
+    }
+}
+
+/// Robust loss of the refinement, applied to each sample's whitened residual norm. The scale is in
+/// sigmas of the [`NoiseModel`].
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RobustLoss {
+    /// Plain least squares (the maximum-likelihood estimate under Gaussian noise).
+    #[default]
+    None,
+    /// Huber loss with this threshold (sigmas).
+    Huber(f64),
+    /// Cauchy loss with this scale (sigmas).
+    Cauchy(f64),
+}
+
+impl RobustLoss {
+    /// Checks the loss's scale is a positive finite number; the names are the option keys of
+    /// the Huber and Cauchy scales in the caller's configuration.
+    pub(super) fn validate(
+        self,
+        huber_name: &'static str,
+        cauchy_name: &'static str,
+    ) -> Result<(), SolveError> {
+        match self {
+            RobustLoss::Huber(k) => require_positive(huber_name, k),
+            RobustLoss::Cauchy(k) => require_positive(cauchy_name, k),
+            RobustLoss::None => Ok(()),
+        }
+    }
+
+    /// The iteratively-reweighted-least-squares weight of a residual of `e` sigmas.
+    pub fn weight(self, e: f64) -> f64 {
+        match self {
+            RobustLoss::None => 1.0,
+            RobustLoss::Huber(k) if e <= k => 1.0,
+            RobustLoss::Huber(k) => k / e,
+            RobustLoss::Cauchy(k) => 1.0 / (1.0 + (e / k) * (e / k)),
+        }
+    }
+}
+
+/// Everything [`solve`] can be told.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolveOptions {
+    /// The estimator (default [`Method::Refined`]).
+    pub method: Method,
+    /// Noise of `T_camera_target`, used to weight and whiten residuals.
+    pub noise: NoiseModel,
+    /// Robust loss of the refinement.
+    pub robust: RobustLoss,
+    /// Drop the samples flagged as outliers and solve again.
+    pub drop_outliers: bool,
+    /// Outlier threshold: a sample is flagged when its normalised residual exceeds
+    /// `median + outlier_mad_factor · 1.4826 · MAD` and [`SolveOptions::outlier_floor_sigma`].
+    pub outlier_mad_factor: f64,
+    /// Normalised residual (sigmas, 6 dof) below which a sample is never an outlier.
+    pub outlier_floor_sigma: f64,
+    /// Options of the iterative method (also the start of the refinement).
+    pub iterative: IterativeOptions,
+    /// Compute the covariance of the unknowns (refined method only).
+    pub covariance: bool,
+    /// Warn when a 1-sigma rotation uncertainty exceeds this, degrees.
+    pub warn_rotation_sigma_deg: f64,
+    /// Warn when a 1-sigma translation uncertainty exceeds this, mm.
+    pub warn_translation_sigma_mm: f64,
+    /// Check whether the data fits far better under another convention (inverted poses, other setup).
+    pub check_conventions: bool,
+}
+
+impl Default for SolveOptions {
+    fn default() -> Self {
+        SolveOptions {
+            method: Method::Refined,
+            noise: NoiseModel::default(),
+            robust: RobustLoss::None,
+            drop_outliers: false,
+            outlier_mad_factor: 5.0,
+            // sqrt of the 99.9 % quantile of chi-square with 6 dof (22.46).
+            outlier_floor_sigma: 4.74,
+            iterative: IterativeOptions::default(),
+            covariance: true,
+            warn_rotation_sigma_deg: 0.5,
+            warn_translation_sigma_mm: 5.0,
+            check_conventions: true,
+        }
+    }
+}
+
+/// An option that must be a positive finite number, named `name` in the error.
+pub(super) fn require_positive(name: &'static str, value: f64) -> Result<(), SolveError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(SolveError::InvalidOption {
+            name,
+            value,
+            expected: "must be a positive finite number",
+        })
+    }
+}
