@@ -11,6 +11,7 @@ pub mod config;
 pub mod dataset;
 pub mod formats;
 pub mod geometry;
+pub mod notice;
 pub mod plan;
 pub mod report;
 pub mod result;

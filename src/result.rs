@@ -21,6 +21,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::{Pose, PoseRecord};
+use crate::notice::Notice;
 use crate::setup::{CellTransforms, PosePair, Setup};
 use crate::solve::{
     Calibration, Method, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
@@ -138,9 +139,10 @@ pub struct ResultFile {
     pub outliers: Vec<usize>,
     /// How the solver got there.
     pub solver: SolverYaml,
-    /// Messages for people.
-    #[serde(default)]
-    pub warnings: Vec<String>,
+    /// Messages for people, each with its severity (older files' plain strings read as
+    /// warnings).
+    #[serde(default, deserialize_with = "crate::notice::deserialize_notices")]
+    pub warnings: Vec<Notice>,
 }
 
 impl ResultFile {

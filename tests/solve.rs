@@ -3,6 +3,7 @@
 //! eye-to-hand data.
 
 use handeye::geometry::Pose;
+use handeye::notice::{NoticeKind, Severity};
 use handeye::setup::{predict, PosePair, Setup};
 use handeye::solve::{
     self, closed_form, iterative, AxbyData, IterativeOptions, Method, NoiseModel, RobustLoss,
@@ -478,7 +479,10 @@ fn planted_outliers_are_flagged_and_dropped() {
             * c.pairs[13].camera_from_target.rotation;
     let cal = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
     assert_eq!(cal.outliers, planted.to_vec());
-    assert!(cal.warnings.iter().any(|w| w.contains("outliers")));
+    assert!(cal
+        .warnings
+        .iter()
+        .any(|w| w.kind == NoticeKind::Outliers && w.severity == Severity::Warning));
     let opts = SolveOptions {
         drop_outliers: true,
         ..SolveOptions::default()
@@ -691,7 +695,8 @@ fn poorly_determined_unknowns_are_warned_about() {
     assert!(
         cal.warnings
             .iter()
-            .any(|w| w.contains("T_flange_camera is poorly determined")),
+            .any(|w| w.kind == NoticeKind::PoorlyDetermined
+                && w.message.contains("T_flange_camera is poorly determined")),
         "{:?}",
         cal.warnings
     );

@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic_file::write_atomic;
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
+use crate::notice::{Notice, NoticeKind};
 use crate::setup::{PosePair, Setup};
 use crate::solve::{rotation_diversity, Calibration, NoiseModel};
 
@@ -159,14 +160,29 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     );
 
     // Warnings first: the reader should see them before the numbers.
-    let warnings = plain_warnings(input);
+    // Information (how the answer was made) is listed apart, never in the warnings box.
+    let notices = notices(input);
+    let (attention, info): (Vec<&Notice>, Vec<&Notice>) =
+        notices.iter().partition(|n| n.needs_attention());
     html.push_str("<section id=\"warnings\"><h2>Warnings</h2>\n");
-    if warnings.is_empty() {
+    if attention.is_empty() {
         html.push_str("<p class=\"ok\">No warnings: enough poses, good rotation spread, residuals as expected.</p>\n");
     } else {
         html.push_str("<ul>\n");
-        for w in &warnings {
-            let _ = writeln!(html, "<li class=\"warning\">{}</li>", escape(w));
+        for n in &attention {
+            let _ = writeln!(
+                html,
+                "<li class=\"{}\">{}</li>",
+                n.severity.label(),
+                escape(&n.message)
+            );
+        }
+        html.push_str("</ul>\n");
+    }
+    if !info.is_empty() {
+        html.push_str("<h3>Notes</h3>\n<ul>\n");
+        for n in &info {
+            let _ = writeln!(html, "<li class=\"info\">{}</li>", escape(&n.message));
         }
         html.push_str("</ul>\n");
     }
@@ -391,15 +407,15 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
     ]
 }
 
-/// Plain-language warnings: the solver's own, plus too few poses, poor rotation spread, large
+/// Plain-language notices: the solver's own, plus too few poses, poor rotation spread, large
 /// residuals and a likely convention error, each saying what to do.
-pub fn plain_warnings(input: &ReportInput) -> Vec<String> {
+pub fn notices(input: &ReportInput) -> Vec<Notice> {
     let mut out = Vec::new();
     let n = input.pairs.len();
     if n < 8 {
-        out.push(format!(
+        out.push(Notice::warning(NoticeKind::FewPoses, format!(
             "Only {n} poses: below 8 the noise level cannot be estimated from the residuals (the uncertainty assumes the configured noise) and a single bad pose can pull the answer; record 12–20."
-        ));
+        )));
     }
     let diversity = rotation_diversity(
         &input
@@ -409,10 +425,10 @@ pub fn plain_warnings(input: &ReportInput) -> Vec<String> {
             .collect::<Vec<_>>(),
     );
     if diversity.off_axis_deg < 20.0 {
-        out.push(format!(
+        out.push(Notice::warning(NoticeKind::PoorRotationSpread, format!(
             "Poor rotation spread: the flange rotations are mostly about one axis (only {:.1}° off it). Add poses tilted 20–40° about two other flange axes.",
             diversity.off_axis_deg
-        ));
+        )));
     }
     for answer in &input.answers {
         let c = &answer.calibration;
@@ -421,21 +437,19 @@ pub fn plain_warnings(input: &ReportInput) -> Vec<String> {
         let expected_rot_deg = input.noise.rotation_sigma_rad.to_degrees() * 3f64.sqrt();
         let expected_t_mm = input.noise.translation_sigma_m * 1e3 * 3f64.sqrt();
         if r.rotation_rms_deg > 1.0 {
-            out.push(format!(
+            out.push(Notice::warning(NoticeKind::LikelyConventionError, format!(
                 "{label}: rotation residual RMS {:.2}° is far beyond any detection noise: this is usually a convention error (T_flange_base given as T_base_flange, T_target_camera as T_camera_target, Euler angles read as a rotation vector, mm read as m, or the wrong setup). Check the input conventions before anything else.",
                 r.rotation_rms_deg
-            ));
+            )));
         } else if r.rotation_rms_deg > 3.0 * expected_rot_deg
             || r.translation_rms_mm > 3.0 * expected_t_mm
         {
-            out.push(format!(
+            out.push(Notice::warning(NoticeKind::LargeResiduals, format!(
                 "{label}: residuals (RMS {:.3}°, {:.2} mm) are more than 3× what the noise model expects ({:.3}°, {:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic.",
                 r.rotation_rms_deg, r.translation_rms_mm, expected_rot_deg, expected_t_mm
-            ));
+            )));
         }
-        for w in &c.warnings {
-            out.push(format!("{label}: {w}"));
-        }
+        out.extend(c.warnings.iter().map(|w| w.prefixed(label)));
     }
     out
 }
@@ -483,7 +497,7 @@ const CSS: &str =
 h2{border-bottom:1px solid #ccc;margin-top:1.6em}.answers{display:flex;flex-wrap:wrap;gap:1.5em}\
 .answer{flex:1 1 420px}table.forms{border-collapse:collapse;font-size:90%}\
 table.forms th{text-align:left;padding:2px 8px;vertical-align:top;font-weight:normal;color:#555}\
-table.forms code{white-space:pre}.warning{color:#a40000}.ok{color:#060}\
+table.forms code{white-space:pre}.warning,.error{color:#a40000}.info{color:#333}.ok{color:#060}\
 figure.plot{margin:0.5em 0}figure.plot svg{max-width:100%;height:auto}\
 .thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%}\
 figure.thumb img{width:240px;display:block}";

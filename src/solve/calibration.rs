@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Method;
 use crate::geometry::Pose;
+use crate::notice::Notice;
 use crate::setup::{CellTransforms, Setup};
 
 /// Residuals of the solution against each sample's measured `T_camera_target`.
@@ -119,7 +120,7 @@ pub struct Calibration {
     /// How the solver got there.
     pub solver: SolverReport,
     /// Things a person should know (large uncertainty, flagged outliers, ...).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Notice>,
 }
 
 impl Calibration {
@@ -194,8 +195,8 @@ impl Calibration {
         if !self.outliers.is_empty() {
             let _ = write!(out, "\noutliers (sample indices): {:?}", self.outliers);
         }
-        for warning in &self.warnings {
-            let _ = write!(out, "\nwarning: {warning}");
+        for notice in &self.warnings {
+            let _ = write!(out, "\n{notice}");
         }
         out
     }

@@ -28,6 +28,7 @@ pub mod refine;
 pub mod reprojection;
 
 use crate::geometry::Pose;
+use crate::notice::{Notice, NoticeKind};
 use crate::setup::{PosePair, Setup};
 
 pub use calibration::{
@@ -164,11 +165,14 @@ pub fn solve(
         let mut again = solve_subset(setup, pairs, &keep, options)?;
         again.warnings.insert(
             0,
-            format!(
-                "dropped {} outlier sample(s) {:?} and solved again with {}",
-                dropped.len(),
-                dropped,
-                keep.len()
+            Notice::warning(
+                NoticeKind::DroppedOutliers,
+                format!(
+                    "dropped {} outlier sample(s) {:?} and solved again with {}",
+                    dropped.len(),
+                    dropped,
+                    keep.len()
+                ),
             ),
         );
         // Report both the original flags and anything still flagged among the kept samples.
@@ -288,11 +292,11 @@ fn solve_subset(
                 None => i.to_string(),
             })
             .collect();
-        warnings.push(format!(
+        warnings.push(Notice::warning(NoticeKind::Outliers, format!(
             "{} sample(s) look like outliers: {} (residuals far above the rest; check detection and robot pose of those samples)",
             outliers.len(),
             described.join(", ")
-        ));
+        )));
     }
     if let Some(u) = &uncertainty {
         let (camera_name, target_name) = setup.unknown_names();
@@ -303,20 +307,23 @@ fn solve_subset(
             if sigma.rotation_deg > options.warn_rotation_sigma_deg
                 || sigma.translation_mm > options.warn_translation_sigma_mm
             {
-                warnings.push(format!(
+                warnings.push(Notice::warning(NoticeKind::PoorlyDetermined, format!(
                     "{name} is poorly determined: 1-sigma {:.3}° and {:.2} mm (limits {:.3}° / {:.2} mm): add poses with larger, more varied rotations",
                     sigma.rotation_deg,
                     sigma.translation_mm,
                     options.warn_rotation_sigma_deg,
                     options.warn_translation_sigma_mm
-                ));
+                )));
             }
         }
     }
     if !report.converged {
-        warnings.push(format!(
-            "the {} method did not meet its tolerance; the answer may be inaccurate",
-            report.method.name()
+        warnings.push(Notice::warning(
+            NoticeKind::NotConverged,
+            format!(
+                "the {} method did not meet its tolerance; the answer may be inaccurate",
+                report.method.name()
+            ),
         ));
     }
     Ok(Calibration {

@@ -222,14 +222,22 @@ impl ReprojectionCalibration {
         let mut solver = pose_space.solver.clone();
         solver.iterations += self.evaluations;
         solver.converged &= self.converged;
-        let mut warnings = vec![format!(
-            "refined in reprojection space over {} corners: RMS {:.3} px (max {:.3} px); {}",
-            self.errors.corner_px.iter().map(Vec::len).sum::<usize>(),
-            self.errors.rms_px,
-            self.errors.max_px,
-            self.weights()
+        let mut warnings = vec![crate::notice::Notice::info(
+            crate::notice::NoticeKind::ReprojectionRefined,
+            format!(
+                "refined in reprojection space over {} corners: RMS {:.3} px (max {:.3} px); {}",
+                self.errors.corner_px.iter().map(Vec::len).sum::<usize>(),
+                self.errors.rms_px,
+                self.errors.max_px,
+                self.weights()
+            ),
         )];
-        warnings.extend(self.warnings.iter().cloned());
+        // Until the refinement's own messages are typed, they read as warnings.
+        warnings.extend(
+            self.warnings.iter().map(|w| {
+                crate::notice::Notice::warning(crate::notice::NoticeKind::Other, w.clone())
+            }),
+        );
         warnings.extend(pose_space.warnings.iter().cloned());
         Calibration {
             setup: self.setup,
