@@ -125,3 +125,95 @@ pub fn predict(
 ) -> Pose {
     camera_mount.inverse() * setup.chain_b(base_from_flange) * target_mount
 }
+
+/// One detected board corner: which corner of the board it is and where it was seen.
+///
+/// Board-agnostic identity: for an aprilgrid `tag_id` is the tag and `corner` its corner
+/// (0 bottom-left, 1 bottom-right, 2 top-right, 3 top-left, counter-clockwise seen from +z).
+/// Pixels follow OpenCV's convention (pixel centres at integers). In files it is the compact
+/// list `[tag id, corner, u, v]` — read and written here only, so every reader validates it the
+/// same way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CornerObservation {
+    /// The tag (aprilgrid) the corner belongs to.
+    pub tag_id: u32,
+    /// Which corner of the tag, 0..=3.
+    pub corner: u8,
+    /// Where it was seen, px.
+    pub pixel: nalgebra::Point2<f64>,
+}
+
+impl Serialize for CornerObservation {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        [
+            f64::from(self.tag_id),
+            f64::from(self.corner),
+            self.pixel.x,
+            self.pixel.y,
+        ]
+        .serialize(serializer)
+    }
+}
+
+impl<'de> Deserialize<'de> for CornerObservation {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let [id, corner, u, v] = <[f64; 4]>::deserialize(deserializer)?;
+        let whole = |x: f64, max: f64| x >= 0.0 && x.fract() == 0.0 && x <= max;
+        if !whole(id, f64::from(u32::MAX))
+            || !whole(corner, 3.0)
+            || !u.is_finite()
+            || !v.is_finite()
+        {
+            return Err(D::Error::custom(format_args!(
+                "expected [tag id, corner 0..3, u px, v px] with a whole tag id, a whole corner \
+                 index and finite pixels, found [{id}, {corner}, {u}, {v}]"
+            )));
+        }
+        Ok(CornerObservation {
+            tag_id: id as u32,
+            corner: corner as u8,
+            pixel: nalgebra::Point2::new(u, v),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_corner_reads_back_as_written_in_the_compact_form() {
+        let corner = CornerObservation {
+            tag_id: 17,
+            corner: 3,
+            pixel: nalgebra::Point2::new(640.25, 359.5),
+        };
+        let text = serde_yaml_ng::to_string(&corner).unwrap();
+        assert_eq!(
+            serde_yaml_ng::from_str::<Vec<f64>>(&text).unwrap(),
+            vec![17.0, 3.0, 640.25, 359.5]
+        );
+        assert_eq!(
+            serde_yaml_ng::from_str::<CornerObservation>(&text).unwrap(),
+            corner
+        );
+    }
+
+    #[test]
+    fn a_malformed_corner_is_refused_with_what_was_expected() {
+        for bad in [
+            "[1.5, 0, 1, 2]",
+            "[-1, 0, 1, 2]",
+            "[1, 4, 1, 2]",
+            "[1, 0, .nan, 2]",
+            "[1, 0, 1]",
+        ] {
+            let err = serde_yaml_ng::from_str::<CornerObservation>(bad).unwrap_err();
+            assert!(
+                err.to_string().contains("expected") || err.to_string().contains("length"),
+                "{bad}: {err}"
+            );
+        }
+    }
+}
