@@ -22,7 +22,11 @@ use crate::robot::Joints;
 use crate::setup::{CellTransforms, Setup};
 use crate::yaml_file::{parse_yaml, read_text, FileError};
 
-pub use generate::{generate, GenerateSpec};
+pub use generate::{generate, GenerateSpec, GenerateSpecError};
+
+/// The most poses a plan may have (scripted or generated): a thorough calibration takes tens;
+/// more is a typo, and every pose is checked, planned and (in the sim) rendered.
+pub const MAX_PLAN_POSES: usize = 1000;
 pub use lookat::LookAt;
 
 /// One place to take a frame.
@@ -60,17 +64,28 @@ pub enum PlanError {
         problem: String,
     },
     /// A flange pose in the plan is malformed.
-    #[error("{file}: {source}")]
+    // The pose problem is the message itself, so it is not also a `#[source]` (a `{:#}` chain
+    // would print it twice).
+    #[error("{}: {problem}", file.display())]
     Pose {
         /// The plan file.
         file: PathBuf,
         /// The pose problem, with its YAML path.
-        #[source]
-        source: PoseError,
+        problem: PoseError,
     },
     /// The plan has no waypoints.
     #[error("{0}: the plan has no waypoints (expected a list under `waypoints`)")]
     Empty(PathBuf),
+    /// The plan has more waypoints than [`MAX_PLAN_POSES`].
+    #[error("{}: waypoints: expected at most {max} waypoints, found {found}", file.display())]
+    TooLarge {
+        /// The plan file.
+        file: PathBuf,
+        /// How many it has.
+        found: usize,
+        /// The limit.
+        max: usize,
+    },
     /// Writing the plan failed.
     #[error("cannot write plan {file}")]
     Write {
@@ -114,6 +129,13 @@ impl Plan {
         let raw: PlanFile = parse_yaml(text, file)?;
         if raw.waypoints.is_empty() {
             return Err(PlanError::Empty(file.to_path_buf()));
+        }
+        if raw.waypoints.len() > MAX_PLAN_POSES {
+            return Err(PlanError::TooLarge {
+                file: file.to_path_buf(),
+                found: raw.waypoints.len(),
+                max: MAX_PLAN_POSES,
+            });
         }
         let waypoints = raw
             .waypoints
@@ -164,9 +186,9 @@ impl WaypointYaml {
         if let Some(pose) = &self.base_from_flange {
             let pose = pose
                 .to_pose(&format!("{path}.T_base_flange"))
-                .map_err(|source| PlanError::Pose {
+                .map_err(|problem| PlanError::Pose {
                     file: file.to_path_buf(),
-                    source,
+                    problem,
                 })?;
             return Ok(Waypoint::FlangePose(pose));
         }
@@ -300,6 +322,28 @@ mod tests {
             };
             assert!(message.contains(expected), "{text:?} gave {message:?}");
         }
+    }
+
+    #[test]
+    fn plans_larger_than_the_limit_are_refused() {
+        let waypoints = |n: usize| {
+            let mut text = String::from("waypoints:\n");
+            for _ in 0..n {
+                text.push_str("- {joints_deg: [0, -90, 90, -90, -90, 0]}\n");
+            }
+            text
+        };
+        assert_eq!(
+            parse(&waypoints(MAX_PLAN_POSES)).unwrap().waypoints.len(),
+            MAX_PLAN_POSES
+        );
+        let message = parse(&waypoints(MAX_PLAN_POSES + 1))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            message,
+            "plan.yaml: waypoints: expected at most 1000 waypoints, found 1001"
+        );
     }
 
     #[test]
