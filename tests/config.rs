@@ -670,3 +670,41 @@ fn errors_inside_backend_sections_name_the_key() {
         }
     }
 }
+
+/// #12: `handeye import visp --cell-out` wrote its config with `format!`; now through serde,
+/// and the written config loads as a recorded cell.
+#[test]
+fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
+    let Some(visp) = util::dataset("visp_franka_data-eye-to-hand") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cell = dir.path().join("cell.yaml");
+    let output = handeye()
+        .args(["import", "visp"])
+        .arg(&visp)
+        .arg("--target")
+        .arg(util::repo().join("configs/targets/single-tag36h11-id10.yaml"))
+        .args(["--setup", "eye_to_hand", "-o"])
+        .arg(dir.path().join("data.yaml"))
+        .arg("--cell-out")
+        .arg(&cell)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let text = std::fs::read_to_string(&cell).unwrap();
+    assert!(text.starts_with("# Replays the ViSP folder "), "{text}");
+    assert!(text.contains("joint_speed_deg: 30.0\n"), "{text}");
+    let config = CellConfig::load(&cell).unwrap_or_else(|e| panic!("{e:#}"));
+    assert!(matches!(config.robot, RobotConfig::Recorded { .. }));
+    assert!(matches!(
+        config.camera,
+        handeye::config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
+    ));
+    assert_eq!(config.detector.decimate, 1.0);
+    assert!(config.plan.file.is_none() && config.plan.generate.is_none());
+}

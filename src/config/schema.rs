@@ -294,8 +294,9 @@ impl Default for LimitsConfig {
         LimitsConfig {
             linear_speed: l.linear_speed,
             linear_acceleration: l.linear_acceleration,
-            joint_speed_deg: l.joint_speed.to_degrees(),
-            joint_acceleration_deg: l.joint_acceleration.to_degrees(),
+            // Rounded to 1e-9 °/s: a written config reads 30, not 29.999999999999996.
+            joint_speed_deg: (l.joint_speed.to_degrees() * 1e9).round() / 1e9,
+            joint_acceleration_deg: (l.joint_acceleration.to_degrees() * 1e9).round() / 1e9,
         }
     }
 }
