@@ -199,8 +199,15 @@ impl WaypointYaml {
                     joints.len()
                 )));
             }
-            if let Some(bad) = joints.iter().find(|v| !v.is_finite()) {
-                return Err(problem(format!("joints_deg: value is not finite ({bad})")));
+            // UR joints turn ±360°; anything else is a typo or radians mistaken for degrees.
+            if let Some((i, bad)) = joints
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
+            {
+                return Err(problem(format!(
+                    "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
+                )));
             }
             let mut q = [0.0; 6];
             for (dst, src) in q.iter_mut().zip(joints) {
@@ -311,6 +318,7 @@ mod tests {
             ("waypoints:\n- {look_at: {distance: -1, azimuth_deg: 0, elevation_deg: 80}}", "distance must be a positive"),
             ("waypoints:\n- {joints_deg: [0,0,0,0,0,0], look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 80}}", "exactly one of"),
             ("waypoints:\n- {}\n", "found 0"),
+            ("waypoints:\n- {joints_deg: [0, -90, 90, -90, 7200, 0]}", "plan.yaml: waypoints[0]: joints_deg[4]: expected a value in [-360, 360] °, found 7200"),
             ("waypoints:\n- {T_base_flange: {translation: [0, 0], rotation_vector: [0, 0, 0]}}", "waypoints[0].T_base_flange.translation: expected 3 numbers"),
             ("waypoints:\n- {look_at: {distance: 0.5, azimuth: 0, elevation_deg: 80}}", "waypoints[0].look_at"),
             ("waypoint: []", "unknown field `waypoint`"),
