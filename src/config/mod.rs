@@ -153,37 +153,18 @@ impl CellConfig {
         let resolve = |p: &Path| folder.join(p);
         let mut plan = raw.plan;
         plan.file = plan.file.as_deref().map(resolve);
-        let robot = match raw.robot {
-            RobotConfig::Recorded {
-                poses,
-                repeatability_mm,
-                repeatability_deg,
-            } => RobotConfig::Recorded {
-                poses: resolve(&poses),
-                repeatability_mm,
-                repeatability_deg,
-            },
-            other => other,
-        };
-        let camera = match raw.camera {
-            CameraConfig::Files { folder } => CameraConfig::Files {
-                folder: resolve(&folder),
-            },
-            CameraConfig::Sim {
-                noise_sigma,
-                blur_sigma_px,
-                seed,
-                hide_board_in_grabs,
-                intrinsics,
-            } => CameraConfig::Sim {
-                noise_sigma,
-                blur_sigma_px,
-                seed,
-                hide_board_in_grabs,
-                intrinsics: intrinsics.as_deref().map(resolve),
-            },
-            uvc @ CameraConfig::Uvc { .. } => uvc,
-        };
+        let mut robot = raw.robot;
+        if let RobotConfig::Recorded { poses, .. } = &mut robot {
+            *poses = resolve(poses);
+        }
+        let mut camera = raw.camera;
+        match &mut camera {
+            CameraConfig::Files { folder } => *folder = resolve(folder),
+            CameraConfig::Sim { intrinsics, .. } => {
+                *intrinsics = intrinsics.as_deref().map(resolve);
+            }
+            CameraConfig::Uvc { .. } => {}
+        }
         Ok(CellConfig {
             file: file.to_path_buf(),
             setup: raw.setup,
