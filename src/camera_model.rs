@@ -391,8 +391,10 @@ impl Reader<'_> {
     }
 
     fn bad(&self, key: &str, expected: &str, found: &Value) -> CameraModelError {
-        let found = serde_yaml_ng::to_string(found)
-            .map(|s| s.trim().to_string())
+        // Flow style (`[800.0]`), never block style: `- 800.0` reads as a negative number.
+        // JSON is flow-style YAML; a mapping with non-string keys falls back to YAML.
+        let found = serde_json::to_string(found)
+            .or_else(|_| serde_yaml_ng::to_string(found).map(|s| s.trim().to_string()))
             .unwrap_or_else(|_| "?".to_string());
         CameraModelError::BadValue {
             path: self.path.to_path_buf(),

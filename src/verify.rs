@@ -238,7 +238,8 @@ pub fn holdout(
             cell: prepared.config.setup,
         });
     }
-    spec.validate().map_err(VerifyError::Plan)?;
+    spec.validate()
+        .map_err(|e| VerifyError::Plan(e.to_string()))?;
     let plan = Plan {
         waypoints: prepared
             .generate_views(spec)

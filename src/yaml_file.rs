@@ -36,7 +36,7 @@ pub enum FileError {
     /// The YAML does not have the expected shape (unknown key, wrong type, missing key...).
     // The serde error is part of the message (it is the problem itself, with no further cause),
     // so it is not also a `#[source]`: `{:#}` chains would print it twice.
-    #[error("{}: {yaml_path}: {problem}", path.display())]
+    #[error("{}: {}", path.display(), shape_message(.yaml_path, .problem))]
     Shape {
         /// The file.
         path: PathBuf,
@@ -72,6 +72,16 @@ pub enum FileError {
         #[source]
         source: serde_yaml_ng::Error,
     },
+}
+
+/// `<yaml path>: <problem>`, the path once: serde_yaml_ng already starts some messages with it.
+fn shape_message(yaml_path: &str, problem: &serde_yaml_ng::Error) -> String {
+    let problem = problem.to_string();
+    if problem.starts_with(&format!("{yaml_path}: ")) {
+        problem
+    } else {
+        format!("{yaml_path}: {problem}")
+    }
 }
 
 /// Reads a YAML file into `T`, naming the YAML path of any shape error.

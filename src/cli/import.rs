@@ -2,17 +2,23 @@
 //! form (`T_base_flange`, `T_camera_target` pairs). The library does the reading
 //! (`handeye::formats::import`); this file maps arguments and prints what was found.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
 use handeye::camera_model::CameraModel;
+use handeye::config::{
+    CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig, SessionConfig,
+    SolverConfig, WorkspaceConfig,
+};
 use handeye::dataset::Dataset;
 use handeye::formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
+use handeye::geometry::PoseYaml;
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::setup::Setup;
 use handeye::vision::{Board, DetectorOptions};
@@ -197,14 +203,6 @@ fn write_cell(
             handeye::geometry::Pose::identity(),
         ),
     };
-    let pose = |p: &handeye::geometry::Pose| {
-        let t = p.translation.vector;
-        let r = handeye::geometry::rotvec(&p.rotation);
-        format!(
-            "{{translation: [{}, {}, {}], rotation_vector: [{}, {}, {}]}}",
-            t.x, t.y, t.z, r.x, r.y, r.z
-        )
-    };
     // The workspace box is not used by a recorded robot; it spans the recorded poses ± 0.5 m.
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
     for f in &imported.frames {
@@ -214,24 +212,42 @@ fn write_cell(
             hi[k] = hi[k].max(t[k] + 0.5);
         }
     }
-    let text = format!(
-        "# Replays the ViSP folder {folder} as a session: handeye run --config <this file>\n\
-         setup: {setup}\n\
-         target: {target}\n\
-         intrinsics: {camera_info}\n\
-         robot: {{backend: recorded, poses: {poses}}}\n\
-         camera: {{backend: files, folder: {folder}}}\n\
-         nominal:\n  {camera_key}: {camera_mount}\n  {target_key}: {target_mount}\n\
-         workspace: {{min: {lo:?}, max: {hi:?}}}\n\
-         detector: {{decimate: 1}}\n",
-        folder = absolute(folder)?.display(),
-        target = absolute(target)?.display(),
-        camera_info = absolute(camera_info)?.display(),
-        poses = absolute(poses)?.display(),
-        camera_mount = pose(&camera_mount),
-        target_mount = pose(&target_mount),
-    );
-    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+    let folder = absolute(folder)?;
+    let config = ConfigFile {
+        setup,
+        target: absolute(target)?,
+        intrinsics: Some(absolute(camera_info)?),
+        robot: RobotConfig::Recorded {
+            poses: absolute(poses)?,
+            repeatability_mm: None,
+            repeatability_deg: None,
+        },
+        camera: CameraConfig::Files {
+            folder: folder.clone(),
+        },
+        nominal: BTreeMap::from([
+            (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
+            (target_key.to_string(), PoseYaml::from_pose(&target_mount)),
+        ]),
+        simulation: None,
+        plan: PlanConfig::default(),
+        limits: LimitsConfig::default(),
+        workspace: WorkspaceConfig { min: lo, max: hi },
+        detector: DetectorConfig {
+            decimate: 1.0,
+            ..DetectorConfig::default()
+        },
+        solver: SolverConfig::default(),
+        session: SessionConfig::default(),
+    };
+    config
+        .save(
+            cell_out,
+            &format!(
+                "Replays the ViSP folder {} as a session: handeye run --config <this file>",
+                folder.display()
+            ),
+        )
         .with_context(|| format!("writing {}", cell_out.display()))?;
     println!("wrote a recorded-cell config to {}", cell_out.display());
     Ok(())

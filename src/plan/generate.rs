@@ -44,38 +44,85 @@ fn default_max_roll_deg() -> f64 {
     30.0
 }
 
+/// Largest camera-to-board distance a generated plan may ask for, m.
+pub const MAX_DISTANCE_M: f64 = 10.0;
+
+/// A generated-plan spec value out of range: the field, the value and what is accepted.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: expected {expected}, found {found}")]
+pub struct GenerateSpecError {
+    /// The spec's key (`count`, `distance`, ...).
+    pub field: &'static str,
+    /// The value as written.
+    pub found: String,
+    /// What is accepted.
+    pub expected: String,
+}
+
+/// A number as a person reads it (`1e300`, not three hundred digits).
+fn show(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 impl GenerateSpec {
-    /// Checks the numbers describe a plan one can generate.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.count < 3 {
-            return Err(format!(
-                "count: at least 3 views are needed, got {}",
-                self.count
-            ));
+    /// Checks the numbers describe a plan one can generate, and one of a sane size (at most
+    /// [`MAX_PLAN_POSES`](super::MAX_PLAN_POSES) views).
+    pub fn validate(&self) -> Result<(), GenerateSpecError> {
+        let bad = |field, found: String, expected: String| {
+            Err(GenerateSpecError {
+                field,
+                found,
+                expected,
+            })
+        };
+        if !(3..=super::MAX_PLAN_POSES).contains(&self.count) {
+            return bad(
+                "count",
+                self.count.to_string(),
+                format!(
+                    "a number of views in [3, {}] (3 is the fewest that fix both unknowns)",
+                    super::MAX_PLAN_POSES
+                ),
+            );
         }
         let [near, far] = self.distance;
-        if !(near.is_finite() && far.is_finite() && near > 0.0 && far >= near) {
-            return Err(format!(
-                "distance: expected [near, far] in metres with 0 < near <= far, got [{near}, {far}]"
-            ));
+        if !(near.is_finite()
+            && far.is_finite()
+            && near > 0.0
+            && far >= near
+            && far <= MAX_DISTANCE_M)
+        {
+            return bad(
+                "distance",
+                format!("[{}, {}]", show(near), show(far)),
+                format!("[near, far] in metres with 0 < near <= far <= {MAX_DISTANCE_M}"),
+            );
         }
         if !(self.max_tilt_deg > 0.0 && self.max_tilt_deg < 80.0) {
-            return Err(format!(
-                "max_tilt_deg: expected a value in (0, 80), got {}",
-                self.max_tilt_deg
-            ));
+            return bad(
+                "max_tilt_deg",
+                show(self.max_tilt_deg),
+                "a value in (0, 80) °".into(),
+            );
         }
         if !(self.max_roll_deg >= 0.0 && self.max_roll_deg <= 180.0) {
-            return Err(format!(
-                "max_roll_deg: expected a value in [0, 180], got {}",
-                self.max_roll_deg
-            ));
+            return bad(
+                "max_roll_deg",
+                show(self.max_roll_deg),
+                "a value in [0, 180] °".into(),
+            );
         }
         if let Some(spread) = self.image_spread {
             if !(0.0..=1.0).contains(&spread) {
-                return Err(format!(
-                    "image_spread: expected a share of the room in [0, 1], got {spread}"
-                ));
+                return bad(
+                    "image_spread",
+                    show(spread),
+                    "a share of the room in [0, 1]".into(),
+                );
             }
         }
         Ok(())
@@ -201,23 +248,38 @@ mod tests {
             seed: 0,
             image_spread: None,
         };
-        assert!(GenerateSpec { count: 2, ..good }
-            .validate()
-            .unwrap_err()
-            .contains("count"));
-        assert!(GenerateSpec {
-            distance: [0.6, 0.4],
+        good.validate().unwrap();
+        let field = |spec: GenerateSpec| spec.validate().unwrap_err().field;
+        assert_eq!(field(GenerateSpec { count: 2, ..good }), "count");
+        let huge = GenerateSpec {
+            count: 100_000_000,
             ..good
         }
         .validate()
-        .unwrap_err()
-        .contains("distance"));
-        assert!(GenerateSpec {
-            max_tilt_deg: 90.0,
+        .unwrap_err();
+        assert_eq!(huge.field, "count");
+        assert_eq!(huge.found, "100000000");
+        assert!(huge.expected.contains("[3, 1000]"), "{huge}");
+        let far = GenerateSpec {
+            distance: [0.4, 1e300],
             ..good
         }
         .validate()
-        .unwrap_err()
-        .contains("max_tilt_deg"));
+        .unwrap_err();
+        assert_eq!(far.found, "[0.4, 1e300]", "{far}");
+        assert_eq!(
+            field(GenerateSpec {
+                distance: [0.6, 0.4],
+                ..good
+            }),
+            "distance"
+        );
+        assert_eq!(
+            field(GenerateSpec {
+                max_tilt_deg: 90.0,
+                ..good
+            }),
+            "max_tilt_deg"
+        );
     }
 }

@@ -22,7 +22,11 @@ use crate::robot::Joints;
 use crate::setup::{CellTransforms, Setup};
 use crate::yaml_file::{parse_yaml, read_text, FileError};
 
-pub use generate::{generate, GenerateSpec};
+pub use generate::{generate, GenerateSpec, GenerateSpecError};
+
+/// The most poses a plan may have (scripted or generated): a thorough calibration takes tens;
+/// more is a typo, and every pose is checked, planned and (in the sim) rendered.
+pub const MAX_PLAN_POSES: usize = 1000;
 pub use lookat::LookAt;
 
 /// One place to take a frame.
@@ -60,17 +64,28 @@ pub enum PlanError {
         problem: String,
     },
     /// A flange pose in the plan is malformed.
-    #[error("{file}: {source}")]
+    // The pose problem is the message itself, so it is not also a `#[source]` (a `{:#}` chain
+    // would print it twice).
+    #[error("{}: {problem}", file.display())]
     Pose {
         /// The plan file.
         file: PathBuf,
         /// The pose problem, with its YAML path.
-        #[source]
-        source: PoseError,
+        problem: PoseError,
     },
     /// The plan has no waypoints.
     #[error("{0}: the plan has no waypoints (expected a list under `waypoints`)")]
     Empty(PathBuf),
+    /// The plan has more waypoints than [`MAX_PLAN_POSES`].
+    #[error("{}: waypoints: expected at most {max} waypoints, found {found}", file.display())]
+    TooLarge {
+        /// The plan file.
+        file: PathBuf,
+        /// How many it has.
+        found: usize,
+        /// The limit.
+        max: usize,
+    },
     /// Writing the plan failed.
     #[error("cannot write plan {file}")]
     Write {
@@ -114,6 +129,13 @@ impl Plan {
         let raw: PlanFile = parse_yaml(text, file)?;
         if raw.waypoints.is_empty() {
             return Err(PlanError::Empty(file.to_path_buf()));
+        }
+        if raw.waypoints.len() > MAX_PLAN_POSES {
+            return Err(PlanError::TooLarge {
+                file: file.to_path_buf(),
+                found: raw.waypoints.len(),
+                max: MAX_PLAN_POSES,
+            });
         }
         let waypoints = raw
             .waypoints
@@ -164,9 +186,9 @@ impl WaypointYaml {
         if let Some(pose) = &self.base_from_flange {
             let pose = pose
                 .to_pose(&format!("{path}.T_base_flange"))
-                .map_err(|source| PlanError::Pose {
+                .map_err(|problem| PlanError::Pose {
                     file: file.to_path_buf(),
-                    source,
+                    problem,
                 })?;
             return Ok(Waypoint::FlangePose(pose));
         }
@@ -177,8 +199,15 @@ impl WaypointYaml {
                     joints.len()
                 )));
             }
-            if let Some(bad) = joints.iter().find(|v| !v.is_finite()) {
-                return Err(problem(format!("joints_deg: value is not finite ({bad})")));
+            // UR joints turn ±360°; anything else is a typo or radians mistaken for degrees.
+            if let Some((i, bad)) = joints
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
+            {
+                return Err(problem(format!(
+                    "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
+                )));
             }
             let mut q = [0.0; 6];
             for (dst, src) in q.iter_mut().zip(joints) {
@@ -289,6 +318,7 @@ mod tests {
             ("waypoints:\n- {look_at: {distance: -1, azimuth_deg: 0, elevation_deg: 80}}", "distance must be a positive"),
             ("waypoints:\n- {joints_deg: [0,0,0,0,0,0], look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 80}}", "exactly one of"),
             ("waypoints:\n- {}\n", "found 0"),
+            ("waypoints:\n- {joints_deg: [0, -90, 90, -90, 7200, 0]}", "plan.yaml: waypoints[0]: joints_deg[4]: expected a value in [-360, 360] °, found 7200"),
             ("waypoints:\n- {T_base_flange: {translation: [0, 0], rotation_vector: [0, 0, 0]}}", "waypoints[0].T_base_flange.translation: expected 3 numbers"),
             ("waypoints:\n- {look_at: {distance: 0.5, azimuth: 0, elevation_deg: 80}}", "waypoints[0].look_at"),
             ("waypoint: []", "unknown field `waypoint`"),
@@ -300,6 +330,28 @@ mod tests {
             };
             assert!(message.contains(expected), "{text:?} gave {message:?}");
         }
+    }
+
+    #[test]
+    fn plans_larger_than_the_limit_are_refused() {
+        let waypoints = |n: usize| {
+            let mut text = String::from("waypoints:\n");
+            for _ in 0..n {
+                text.push_str("- {joints_deg: [0, -90, 90, -90, -90, 0]}\n");
+            }
+            text
+        };
+        assert_eq!(
+            parse(&waypoints(MAX_PLAN_POSES)).unwrap().waypoints.len(),
+            MAX_PLAN_POSES
+        );
+        let message = parse(&waypoints(MAX_PLAN_POSES + 1))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            message,
+            "plan.yaml: waypoints: expected at most 1000 waypoints, found 1001"
+        );
     }
 
     #[test]

@@ -48,6 +48,59 @@ impl Default for DetectorOptions {
     }
 }
 
+/// A detector option out of range: the field, the value and what is accepted.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: expected {expected}, found {found}")]
+pub struct DetectorOptionsError {
+    /// The option (`decimation`, `threads`, `quad_sigma`, `max_hamming`).
+    pub field: &'static str,
+    /// The value given.
+    pub found: String,
+    /// What is accepted.
+    pub expected: String,
+}
+
+impl DetectorOptions {
+    /// Accepted `decimation`: beyond 8 the quad search misses all but huge tags.
+    pub const DECIMATION: std::ops::RangeInclusive<f32> = 1.0..=8.0;
+    /// Accepted `threads`.
+    pub const THREADS: std::ops::RangeInclusive<u8> = 1..=64;
+    /// Accepted `quad_sigma`, px: a stronger blur erases the tags and slows every frame.
+    pub const QUAD_SIGMA: std::ops::RangeInclusive<f32> = 0.0..=10.0;
+    /// Accepted `max_hamming`: the decode table for 3 or more corrected bits takes gigabytes,
+    /// and they accept false tags.
+    pub const MAX_HAMMING: std::ops::RangeInclusive<u32> = 0..=2;
+
+    /// Checks every option against its accepted range.
+    pub fn validate(&self) -> Result<(), DetectorOptionsError> {
+        fn bad<T: std::fmt::Display>(
+            field: &'static str,
+            found: T,
+            range: &std::ops::RangeInclusive<T>,
+        ) -> Result<(), DetectorOptionsError> {
+            Err(DetectorOptionsError {
+                field,
+                found: found.to_string(),
+                expected: format!("a value in [{}, {}]", range.start(), range.end()),
+            })
+        }
+        // `contains` is false for NaN, so a NaN is refused too.
+        if !Self::DECIMATION.contains(&self.decimation) {
+            return bad("decimation", self.decimation, &Self::DECIMATION);
+        }
+        if !Self::THREADS.contains(&self.threads) {
+            return bad("threads", self.threads, &Self::THREADS);
+        }
+        if !Self::QUAD_SIGMA.contains(&self.quad_sigma) {
+            return bad("quad_sigma", self.quad_sigma, &Self::QUAD_SIGMA);
+        }
+        if !Self::MAX_HAMMING.contains(&self.max_hamming) {
+            return bad("max_hamming", self.max_hamming, &Self::MAX_HAMMING);
+        }
+        Ok(())
+    }
+}
+
 /// One accepted tag in an image.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TagObservation {
@@ -138,19 +191,11 @@ impl std::fmt::Debug for TagDetector {
 impl TagDetector {
     /// Starts a detector for `board`'s family and border on a new thread.
     pub fn spawn(board: &Board, options: DetectorOptions) -> Result<Self, TargetError> {
-        if !(options.decimation.is_finite() && options.decimation >= 1.0) {
-            return Err(TargetError::Detector {
-                reason: format!("decimation must be ≥ 1, found {}", options.decimation),
-            });
-        }
-        if options.max_hamming > 2 {
-            return Err(TargetError::Detector {
-                reason: format!(
-                    "max_hamming must be 0, 1 or 2, found {}",
-                    options.max_hamming
-                ),
-            });
-        }
+        options
+            .validate()
+            .map_err(|problem| TargetError::Detector {
+                reason: problem.to_string(),
+            })?;
         let (jobs, receiver) = mpsc::channel::<Job>();
         let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
         let family = board.family();
@@ -470,6 +515,55 @@ mod tests {
         assert!(error.to_string().contains("empty image"), "{error}");
         let blank = GrayImage::from_pixel(64, 48, image::Luma([128]));
         assert!(detector.detect(&blank).unwrap().tags.is_empty());
+    }
+
+    #[test]
+    fn options_out_of_range_are_refused_naming_the_option() {
+        let board = Board::aprilgrid(1, 1, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let default = DetectorOptions::default();
+        default.validate().unwrap();
+        let cases = [
+            (
+                DetectorOptions {
+                    decimation: 100.0,
+                    ..default.clone()
+                },
+                "decimation: expected a value in [1, 8], found 100",
+            ),
+            (
+                DetectorOptions {
+                    decimation: f32::NAN,
+                    ..default.clone()
+                },
+                "decimation: expected a value in [1, 8], found NaN",
+            ),
+            (
+                DetectorOptions {
+                    threads: 0,
+                    ..default.clone()
+                },
+                "threads: expected a value in [1, 64], found 0",
+            ),
+            (
+                DetectorOptions {
+                    quad_sigma: 1e6,
+                    ..default.clone()
+                },
+                "quad_sigma: expected a value in [0, 10], found 1000000",
+            ),
+            (
+                DetectorOptions {
+                    max_hamming: 5,
+                    ..default.clone()
+                },
+                "max_hamming: expected a value in [0, 2], found 5",
+            ),
+        ];
+        for (options, expected) in cases {
+            assert_eq!(options.validate().unwrap_err().to_string(), expected);
+            let error = TagDetector::spawn(&board, options).unwrap_err().to_string();
+            assert!(error.ends_with(expected), "{error}");
+        }
     }
 
     #[test]

@@ -1,0 +1,567 @@
+//! The cell config's shape as written in YAML: serde structs and enums, every closed set of
+//! strings a typed enum, every section `deny_unknown_fields`. Reading one checks only the shape
+//! (keys, types, enum names); numbers and cross-field rules are checked by `config::validate`.
+//! [`ConfigFile`] also serialises, so tools write configs through serde (see
+//! [`ConfigFile::save`]). Depends on `plan` (the generated-plan spec), `setup` and `geometry`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::PoseYaml;
+use crate::plan::GenerateSpec;
+use crate::robot::MotionLimits;
+use crate::setup::Setup;
+use crate::solve::Method;
+
+/// A whole cell config file as written (paths as written, nothing checked but the shape).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a mapping of config keys (setup, target, robot, camera, nominal, workspace, ...)"
+)]
+pub struct ConfigFile {
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// Board spec file (relative to the config's folder).
+    pub target: PathBuf,
+    /// Camera intrinsics file; absent: estimated from the run (sim camera only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intrinsics: Option<PathBuf>,
+    /// The arm.
+    pub robot: RobotConfig,
+    /// The camera.
+    pub camera: CameraConfig,
+    /// The cell's transforms as known before calibrating (`T_flange_camera`/`T_base_target` or
+    /// `T_base_camera`/`T_flange_target`).
+    pub nominal: BTreeMap<String, PoseYaml>,
+    /// The simulator's ground truth, same keys as `nominal` (sim backends only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<BTreeMap<String, PoseYaml>>,
+    /// Where the plan comes from.
+    #[serde(default)]
+    pub plan: PlanConfig,
+    /// Motion limits.
+    #[serde(default)]
+    pub limits: LimitsConfig,
+    /// The box the flange origin must stay in, base frame.
+    pub workspace: WorkspaceConfig,
+    /// Detector settings.
+    #[serde(default)]
+    pub detector: DetectorConfig,
+    /// Solver settings.
+    #[serde(default)]
+    pub solver: SolverConfig,
+    /// Session settings.
+    #[serde(default)]
+    pub session: SessionConfig,
+}
+
+/// The arm models whose kinematics the tool knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmModel {
+    /// Universal Robots UR5e.
+    #[default]
+    Ur5e,
+    /// Universal Robots UR10e.
+    Ur10e,
+}
+
+impl ArmModel {
+    /// The YAML name (`ur5e`), as `robot::kinematics::UrModel::by_name` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ArmModel::Ur5e => "ur5e",
+            ArmModel::Ur10e => "ur10e",
+        }
+    }
+}
+
+/// Which arm drives the cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "backend",
+    rename_all = "snake_case",
+    deny_unknown_fields,
+    expecting = "a mapping with `backend: sim`, `backend: ur` or `backend: recorded`"
+)]
+pub enum RobotConfig {
+    /// The simulated UR arm.
+    Sim {
+        /// `ur5e` or `ur10e`.
+        #[serde(default)]
+        model: ArmModel,
+        /// Where the arm starts, degrees.
+        #[serde(default = "default_start_joints_deg")]
+        start_joints_deg: [f64; 6],
+        /// Time each move takes, s (0 = instant).
+        #[serde(default)]
+        move_duration_s: f64,
+        /// 1-sigma position noise on the reported flange pose, mm.
+        #[serde(default)]
+        repeatability_mm: f64,
+        /// 1-sigma rotation noise on the reported flange pose, degrees.
+        #[serde(default)]
+        repeatability_deg: f64,
+        /// Raise a protective stop after this many moves (fault injection for tests).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        protective_stop_after_moves: Option<usize>,
+        /// Noise seed.
+        #[serde(default)]
+        seed: u64,
+    },
+    /// A Universal Robots controller through ur_rtde (needs the `ur-rtde` feature).
+    Ur {
+        /// Controller address.
+        host: String,
+        /// `ur5e` or `ur10e`: used to check reachability before moving.
+        #[serde(default)]
+        model: ArmModel,
+        /// Give up connecting after this long, s.
+        #[serde(default = "default_connect_timeout_s")]
+        connect_timeout_s: f64,
+        /// How far the reported flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.03: the UR e-Series repeatability; the reprojection solve starts from it
+        /// and estimates the real figure from the residuals).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.003).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_deg: Option<f64>,
+    },
+    /// Replays the flange poses a real arm measured during a recording made elsewhere
+    /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
+    /// the config has no `plan` source, and nothing moves.
+    Recorded {
+        /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
+        poses: PathBuf,
+        /// How far a recorded flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.1: an arm of unknown make; the reprojection solve starts from it and
+        /// estimates the real figure from the residuals).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.01).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_deg: Option<f64>,
+    },
+}
+
+pub(super) fn default_start_joints_deg() -> [f64; 6] {
+    [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]
+}
+fn default_connect_timeout_s() -> f64 {
+    5.0
+}
+
+impl RobotConfig {
+    /// The arm model name, for kinematics checks.
+    pub fn model(&self) -> &'static str {
+        match self {
+            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model.name(),
+            // A recorded arm is never planned with kinematics; any valid name will do.
+            RobotConfig::Recorded { .. } => ArmModel::Ur5e.name(),
+        }
+    }
+}
+
+/// The pixel formats a USB camera can be asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelFormatName {
+    /// Motion JPEG (most USB cameras at full resolution).
+    #[default]
+    Mjpeg,
+    /// Packed YUV 4:2:2.
+    Yuyv,
+    /// 8-bit grey.
+    Gray,
+}
+
+impl PixelFormatName {
+    /// The YAML name (`mjpeg`, `yuyv`, `gray`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PixelFormatName::Mjpeg => "mjpeg",
+            PixelFormatName::Yuyv => "yuyv",
+            PixelFormatName::Gray => "gray",
+        }
+    }
+}
+
+/// Which camera takes the frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "backend",
+    rename_all = "snake_case",
+    deny_unknown_fields,
+    expecting = "a mapping with `backend: sim`, `backend: files` or `backend: uvc`"
+)]
+pub enum CameraConfig {
+    /// Frames rendered from the simulated cell's true chain.
+    Sim {
+        /// Sensor noise, grey levels (1-sigma).
+        #[serde(default = "default_noise")]
+        noise_sigma: f64,
+        /// Optical blur, pixels (1-sigma of a Gaussian), 0 = none.
+        #[serde(default)]
+        blur_sigma_px: f64,
+        /// Render seed.
+        #[serde(default)]
+        seed: u64,
+        /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        hide_board_in_grabs: Vec<usize>,
+        /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
+        /// when the cell has no `intrinsics` (they are then estimated from the run).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        intrinsics: Option<PathBuf>,
+    },
+    /// Frames from an image folder, in plan order.
+    Files {
+        /// The folder.
+        folder: PathBuf,
+    },
+    /// A USB/UVC camera (needs the `uvc` build feature).
+    Uvc {
+        /// Camera index (`/dev/video<N>`) or (part of) its name.
+        #[serde(default = "default_uvc_device")]
+        device: String,
+        /// Requested width, px.
+        #[serde(default = "default_uvc_width")]
+        width: u32,
+        /// Requested height, px.
+        #[serde(default = "default_uvc_height")]
+        height: u32,
+        /// Requested pixel format: `mjpeg`, `yuyv` or `gray`.
+        #[serde(default)]
+        pixel_format: PixelFormatName,
+        /// Requested frame rate, frames/s.
+        #[serde(default = "default_uvc_fps")]
+        fps: u32,
+        /// Fixed exposure, µs (auto exposure off).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exposure_us: Option<u32>,
+        /// Fixed gain, camera units (auto gain off).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        gain: Option<i64>,
+        /// Fixed focus, camera units (autofocus is turned off whenever the camera allows).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        focus: Option<i64>,
+        /// Frames dropped after the arm settles (the driver's queue depth).
+        #[serde(default = "default_uvc_stale_frames")]
+        stale_frames: usize,
+    },
+}
+
+fn default_uvc_device() -> String {
+    "0".into()
+}
+fn default_uvc_width() -> u32 {
+    1280
+}
+fn default_uvc_height() -> u32 {
+    720
+}
+fn default_uvc_fps() -> u32 {
+    30
+}
+fn default_uvc_stale_frames() -> usize {
+    4
+}
+fn default_noise() -> f64 {
+    2.0
+}
+
+/// Motion limits as written (degrees for joints).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitsConfig {
+    /// m/s.
+    pub linear_speed: f64,
+    /// m/s².
+    pub linear_acceleration: f64,
+    /// °/s.
+    pub joint_speed_deg: f64,
+    /// °/s².
+    pub joint_acceleration_deg: f64,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        let l = MotionLimits::default();
+        LimitsConfig {
+            linear_speed: l.linear_speed,
+            linear_acceleration: l.linear_acceleration,
+            // Rounded to 1e-9 °/s: a written config reads 30, not 29.999999999999996.
+            joint_speed_deg: (l.joint_speed.to_degrees() * 1e9).round() / 1e9,
+            joint_acceleration_deg: (l.joint_acceleration.to_degrees() * 1e9).round() / 1e9,
+        }
+    }
+}
+
+/// The workspace box as written, m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkspaceConfig {
+    /// Lower corner, m.
+    pub min: [f64; 3],
+    /// Upper corner, m.
+    pub max: [f64; 3],
+}
+
+/// Where the plan comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanConfig {
+    /// A scripted plan file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// Generate views on a cap around the board.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generate: Option<GenerateSpec>,
+    /// Choose poses one at a time (next-best pose) from the plan's poses as candidates, and
+    /// stop when the solved uncertainty reaches `target_uncertainty_mm`.
+    #[serde(default)]
+    pub adaptive: bool,
+    /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns, mm.
+    #[serde(default = "default_target_uncertainty_mm")]
+    pub target_uncertainty_mm: f64,
+}
+
+fn default_target_uncertainty_mm() -> f64 {
+    0.5
+}
+
+impl Default for PlanConfig {
+    /// No plan source (a recorded robot's poses are its plan), not adaptive.
+    fn default() -> Self {
+        PlanConfig {
+            file: None,
+            generate: None,
+            adaptive: false,
+            target_uncertainty_mm: default_target_uncertainty_mm(),
+        }
+    }
+}
+
+/// Detector settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectorConfig {
+    /// Image decimation before quad detection (1 = full resolution).
+    #[serde(default = "default_decimate")]
+    pub decimate: f32,
+    /// Detector threads.
+    #[serde(default = "default_threads")]
+    pub threads: u8,
+    /// Largest accepted number of corrected bits.
+    #[serde(default)]
+    pub max_hamming: u32,
+}
+
+fn default_decimate() -> f32 {
+    2.0
+}
+fn default_threads() -> u8 {
+    2
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        DetectorConfig {
+            decimate: default_decimate(),
+            threads: default_threads(),
+            max_hamming: 0,
+        }
+    }
+}
+
+/// The solver a config asks for (the YAML names; `closed_form` is also accepted for
+/// `closed-form`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverMethod {
+    /// Joint weighted nonlinear least squares, started from the iterative answer (default).
+    #[default]
+    Refined,
+    /// The paper's alternating quaternion averaging.
+    Iterative,
+    /// Shah's Kronecker/SVD closed form.
+    #[serde(alias = "closed_form")]
+    ClosedForm,
+}
+
+impl From<SolverMethod> for Method {
+    fn from(m: SolverMethod) -> Method {
+        match m {
+            SolverMethod::Refined => Method::Refined,
+            SolverMethod::Iterative => Method::Iterative,
+            SolverMethod::ClosedForm => Method::ClosedForm,
+        }
+    }
+}
+
+/// Solver settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    /// `refined` (default), `iterative` or `closed-form`.
+    #[serde(default)]
+    pub method: SolverMethod,
+    /// Expected rotation noise of a board pose, degrees (1-sigma).
+    #[serde(default = "default_rotation_sigma_deg")]
+    pub rotation_sigma_deg: f64,
+    /// Expected translation noise of a board pose, mm (1-sigma).
+    #[serde(default = "default_translation_sigma_mm")]
+    pub translation_sigma_mm: f64,
+    /// Drop flagged outliers and solve again.
+    #[serde(default = "yes")]
+    pub drop_outliers: bool,
+    /// `reprojection` (default: refine over every detected corner when frames have corners) or
+    /// `pose` (the pose-space answer only).
+    #[serde(default)]
+    pub space: SolveSpace,
+    /// 1-sigma corner detection noise for the reprojection refinement, px.
+    #[serde(default = "default_pixel_sigma_px")]
+    pub pixel_sigma_px: f64,
+    /// Also fit a small correction of every robot pose, held by the robot's repeatability
+    /// (default on: with sub-pixel corners a frame's many corners see a 0.002° robot error, so
+    /// treating robot poses as exact over-trusts them).
+    #[serde(default = "yes")]
+    pub robot_corrections: bool,
+    /// Estimate the corner noise and the robot's repeatability from the reprojection residuals
+    /// (variance component estimation), starting from `pixel_sigma_px` and the robot's
+    /// `repeatability_*`; `false` weights with those values as given.
+    #[serde(default = "yes")]
+    pub estimate_noise: bool,
+}
+
+/// Where the final answer is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolveSpace {
+    /// Pose space: one `T_camera_target` per frame, the `A = X·B·Y` solver (also the start of
+    /// the reprojection refinement, and the only answer when no frame has recorded corners).
+    Pose,
+    /// Reprojection space, the default: every detected corner, started from the pose-space
+    /// answer, with the corner noise and the robot's repeatability estimated from the residuals
+    /// (`estimate_noise`). In the rendered simulated cell it is closer to the truth than the
+    /// pose-space answer on the same frames (0.88x the translation error, 0.82x the rotation
+    /// error over 16 seeds, robot repeatability dominating; 0.50x / 0.63x with pixel noise dominating).
+    /// Always used when the intrinsics are estimated by the run.
+    #[default]
+    Reprojection,
+}
+
+impl SolveSpace {
+    /// The YAML / CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveSpace::Pose => "pose",
+            SolveSpace::Reprojection => "reprojection",
+        }
+    }
+}
+
+fn default_pixel_sigma_px() -> f64 {
+    0.3
+}
+fn default_rotation_sigma_deg() -> f64 {
+    0.05
+}
+fn default_translation_sigma_mm() -> f64 {
+    0.3
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            method: SolverMethod::default(),
+            rotation_sigma_deg: default_rotation_sigma_deg(),
+            translation_sigma_mm: default_translation_sigma_mm(),
+            drop_outliers: true,
+            space: SolveSpace::default(),
+            pixel_sigma_px: default_pixel_sigma_px(),
+            robot_corrections: true,
+            estimate_noise: true,
+        }
+    }
+}
+
+/// Session settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionConfig {
+    /// Wait after the arm stops before grabbing, s (lets vibrations die down).
+    #[serde(default = "default_settle_s")]
+    pub settle_s: f64,
+    /// Largest accepted board reprojection RMS, px; a worse frame is retried, then skipped.
+    #[serde(default = "default_max_rms_px")]
+    pub max_reprojection_rms_px: f64,
+    /// Margin kept between the board and the image border when checking a plan, px.
+    #[serde(default = "default_margin_px")]
+    pub image_margin_px: f64,
+}
+
+fn default_settle_s() -> f64 {
+    0.2
+}
+fn default_max_rms_px() -> f64 {
+    1.0
+}
+fn default_margin_px() -> f64 {
+    20.0
+}
+
+impl Default for SessionConfig {
+    fn default() -> Self {
+        SessionConfig {
+            settle_s: default_settle_s(),
+            max_reprojection_rms_px: default_max_rms_px(),
+            image_margin_px: default_margin_px(),
+        }
+    }
+}
+
+/// For a shape error serde placed at a whole `backend:`-tagged section (`robot`, `camera`): the
+/// YAML path of the key at fault (`camera.pixel_format`) and its error, found by reading the
+/// section one key at a time with the same backend. `None` when the section is not one of
+/// those, or the fault is the backend itself or a missing key (then the section is the right
+/// place).
+pub(super) fn pinpoint_tagged(
+    document: &serde_yaml_ng::Value,
+    section: &str,
+) -> Option<(String, serde_yaml_ng::Error)> {
+    use serde_yaml_ng::{Mapping, Value};
+    let read: fn(Value) -> Option<serde_yaml_ng::Error> = match section {
+        "robot" => |v| serde_yaml_ng::from_value::<RobotConfig>(v).err(),
+        "camera" => |v| serde_yaml_ng::from_value::<CameraConfig>(v).err(),
+        _ => return None,
+    };
+    let fields = document.get(section)?.as_mapping()?;
+    let backend = fields.get("backend")?;
+    let only = |entry: Option<(&Value, &Value)>| {
+        let mut m = Mapping::new();
+        m.insert("backend".into(), backend.clone());
+        if let Some((k, v)) = entry {
+            m.insert(k.clone(), v.clone());
+        }
+        // Errors about a key come while reading it; a missing required key only at the end.
+        read(Value::Mapping(m)).filter(|e| !e.to_string().starts_with("missing field"))
+    };
+    if only(None).is_some() {
+        return None;
+    }
+    fields
+        .iter()
+        .filter(|(k, _)| k.as_str() != Some("backend"))
+        .find_map(|(k, v)| {
+            let error = only(Some((k, v)))?;
+            Some((format!("{section}.{}", k.as_str()?), error))
+        })
+}

@@ -1,0 +1,560 @@
+//! Validation of a cell config's values: the accepted range of every numeric key (the constants
+//! below, documented in the README) and the cross-field rules (the setup's transform names, one
+//! plan source, ground truth for the sim backends). Runs at load, before any folder is created or
+//! anything moves; every error names the file, the YAML key path, the value and what is
+//! accepted. Works on the shapes of `config::schema`; depends on `plan` and `vision` for the
+//! bounds they own (plan size, detector options).
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::Path;
+use std::time::Duration;
+
+use nalgebra::Vector3;
+
+use super::schema::{CameraConfig, ConfigFile, RobotConfig};
+use super::ConfigError;
+use crate::geometry::PoseYaml;
+use crate::robot::{MotionLimits, WorkspaceBox};
+use crate::setup::{CellTransforms, Setup};
+use crate::vision::DetectorOptions;
+
+/// The accepted values of one numeric key: an interval with its unit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Range {
+    /// Lower end.
+    pub min: f64,
+    /// Upper end.
+    pub max: f64,
+    /// Whether `min` itself is refused (`(min, …`).
+    pub min_open: bool,
+    /// Whether `max` itself is refused (`…, max)`).
+    pub max_open: bool,
+    /// Unit as a person reads it (`s`, `mm`, `°/s`), empty for a plain count or ratio.
+    pub unit: &'static str,
+}
+
+impl Range {
+    /// `[min, max]`.
+    pub const fn closed(min: f64, max: f64, unit: &'static str) -> Range {
+        Range {
+            min,
+            max,
+            min_open: false,
+            max_open: false,
+            unit,
+        }
+    }
+
+    /// `(min, max]`: for values that must be positive.
+    pub const fn above(min: f64, max: f64, unit: &'static str) -> Range {
+        Range {
+            min,
+            max,
+            min_open: true,
+            max_open: false,
+            unit,
+        }
+    }
+
+    /// Whether `v` is a finite number inside the range.
+    pub fn contains(&self, v: f64) -> bool {
+        v.is_finite()
+            && (if self.min_open {
+                v > self.min
+            } else {
+                v >= self.min
+            })
+            && (if self.max_open {
+                v < self.max
+            } else {
+                v <= self.max
+            })
+    }
+}
+
+impl fmt::Display for Range {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}{}, {}{}",
+            if self.min_open { "(" } else { "[" },
+            show(self.min),
+            show(self.max),
+            if self.max_open { ")" } else { "]" },
+        )?;
+        if !self.unit.is_empty() {
+            write!(f, " {}", self.unit)?;
+        }
+        Ok(())
+    }
+}
+
+/// A number as a person reads it: plain for everyday magnitudes, with an exponent otherwise
+/// (`1e300`, not three hundred digits).
+pub fn show(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+// The bounds. Generous: they refuse only what no real cell means (a typo, a unit mix-up, a value
+// that would hang or exhaust the machine), never an unusual but real setup.
+
+/// `robot.start_joints_deg[i]` (sim), degrees: UR joints turn ±360°.
+pub const START_JOINT_DEG: Range = Range::closed(-360.0, 360.0, "°");
+/// `robot.move_duration_s` (sim), s.
+pub const MOVE_DURATION_S: Range = Range::closed(0.0, 60.0, "s");
+/// `robot.repeatability_mm` of the sim (0 = exact poses), mm.
+pub const SIM_REPEATABILITY_MM: Range = Range::closed(0.0, 10.0, "mm");
+/// `robot.repeatability_deg` of the sim (0 = exact poses), degrees.
+pub const SIM_REPEATABILITY_DEG: Range = Range::closed(0.0, 5.0, "°");
+/// `robot.repeatability_mm` of a real or recorded arm (it seeds a noise estimate: positive), mm.
+pub const REPEATABILITY_MM: Range = Range::above(0.0, 10.0, "mm");
+/// `robot.repeatability_deg` of a real or recorded arm, degrees.
+pub const REPEATABILITY_DEG: Range = Range::above(0.0, 5.0, "°");
+/// `robot.protective_stop_after_moves` (sim fault injection), moves.
+pub const PROTECTIVE_STOP_AFTER_MOVES: Range = Range::closed(0.0, 1e6, "moves");
+/// `robot.connect_timeout_s`, s.
+pub const CONNECT_TIMEOUT_S: Range = Range::above(0.0, 120.0, "s");
+/// `camera.noise_sigma` (sim), grey levels.
+pub const NOISE_SIGMA: Range = Range::closed(0.0, 64.0, "grey levels");
+/// `camera.blur_sigma_px` (sim), px: more is a lens out of focus, and rendering slows with it.
+pub const BLUR_SIGMA_PX: Range = Range::closed(0.0, 10.0, "px");
+/// `camera.hide_board_in_grabs[i]` (sim fault injection), grab numbers.
+pub const HIDDEN_GRAB: Range = Range::closed(0.0, 1e6, "");
+/// `camera.width` and `camera.height` (uvc), px.
+pub const IMAGE_SIDE_PX: Range = Range::closed(1.0, 16384.0, "px");
+/// `camera.fps` (uvc), frames/s.
+pub const FPS: Range = Range::closed(1.0, 1000.0, "frames/s");
+/// `camera.exposure_us` (uvc), µs.
+pub const EXPOSURE_US: Range = Range::closed(1.0, 10e6, "µs");
+/// `camera.gain` and `camera.focus` (uvc), camera units.
+pub const CAMERA_CONTROL: Range = Range::closed(-1e6, 1e6, "camera units");
+/// `camera.stale_frames` (uvc), frames.
+pub const STALE_FRAMES: Range = Range::closed(0.0, 100.0, "frames");
+/// Ceiling on `limits.linear_speed`, m/s: calibration moves near people never need more.
+pub const MAX_LINEAR_SPEED: f64 = 0.5;
+/// Ceiling on `limits.linear_acceleration`, m/s².
+pub const MAX_LINEAR_ACCELERATION: f64 = 2.0;
+/// Ceiling on `limits.joint_speed_deg`, °/s.
+pub const MAX_JOINT_SPEED_DEG: f64 = 90.0;
+/// Ceiling on `limits.joint_acceleration_deg`, °/s².
+pub const MAX_JOINT_ACCELERATION_DEG: f64 = 180.0;
+/// `limits.linear_speed`, m/s.
+pub const LINEAR_SPEED: Range = Range::above(0.0, MAX_LINEAR_SPEED, "m/s");
+/// `limits.linear_acceleration`, m/s².
+pub const LINEAR_ACCELERATION: Range = Range::above(0.0, MAX_LINEAR_ACCELERATION, "m/s²");
+/// `limits.joint_speed_deg`, °/s.
+pub const JOINT_SPEED_DEG: Range = Range::above(0.0, MAX_JOINT_SPEED_DEG, "°/s");
+/// `limits.joint_acceleration_deg`, °/s².
+pub const JOINT_ACCELERATION_DEG: Range = Range::above(0.0, MAX_JOINT_ACCELERATION_DEG, "°/s²");
+/// `workspace.min[i]` and `workspace.max[i]`, m (base frame).
+pub const WORKSPACE_M: Range = Range::closed(-10.0, 10.0, "m");
+/// `plan.target_uncertainty_mm`, mm.
+pub const TARGET_UNCERTAINTY_MM: Range = Range::above(0.0, 100.0, "mm");
+/// `solver.rotation_sigma_deg`, degrees.
+pub const ROTATION_SIGMA_DEG: Range = Range::above(0.0, 10.0, "°");
+/// `solver.translation_sigma_mm`, mm.
+pub const TRANSLATION_SIGMA_MM: Range = Range::above(0.0, 100.0, "mm");
+/// `solver.pixel_sigma_px`, px.
+pub const PIXEL_SIGMA_PX: Range = Range::above(0.0, 10.0, "px");
+/// `session.settle_s`, s.
+pub const SETTLE_S: Range = Range::closed(0.0, 60.0, "s");
+/// `session.max_reprojection_rms_px`, px.
+pub const MAX_REPROJECTION_RMS_PX: Range = Range::above(0.0, 100.0, "px");
+/// `session.image_margin_px`, px.
+pub const IMAGE_MARGIN_PX: Range = Range::closed(0.0, 1000.0, "px");
+
+/// What validation produces besides the checked shape: the values converted to the units and
+/// types the rest of the tool uses.
+pub(super) struct Checked {
+    pub nominal: CellTransforms,
+    pub simulation: Option<CellTransforms>,
+    pub limits: MotionLimits,
+    pub workspace: WorkspaceBox,
+    pub settle: Duration,
+}
+
+/// Checks every value of `raw` (read from `file`).
+pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigError> {
+    let v = Validator { file };
+    v.robot(&raw.robot)?;
+    v.camera(raw)?;
+    let limits = v.limits(raw)?;
+    let workspace = v.workspace(raw)?;
+    v.plan(raw)?;
+    v.detector(raw)?;
+    v.solver(raw)?;
+    let settle = v.session(raw)?;
+    let nominal = v.transforms(raw.setup, "nominal", &raw.nominal)?;
+    let simulation = raw
+        .simulation
+        .as_ref()
+        .map(|m| v.transforms(raw.setup, "simulation", m))
+        .transpose()?;
+    let uses_sim = matches!(raw.robot, RobotConfig::Sim { .. })
+        || matches!(raw.camera, CameraConfig::Sim { .. });
+    if uses_sim && simulation.is_none() {
+        let (camera_key, target_key) = raw.setup.unknown_names();
+        return Err(v.inconsistent(
+            "simulation",
+            format!("the sim backends need the ground truth: `simulation: {{{camera_key}: ..., {target_key}: ...}}`"),
+        ));
+    }
+    Ok(Checked {
+        nominal,
+        simulation,
+        limits,
+        workspace,
+        settle,
+    })
+}
+
+struct Validator<'a> {
+    file: &'a Path,
+}
+
+impl Validator<'_> {
+    /// `value` at `key` must lie in `range`.
+    fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
+        if range.contains(value) {
+            Ok(value)
+        } else {
+            Err(ConfigError::OutOfRange {
+                file: self.file.to_path_buf(),
+                key: key.to_string(),
+                found: show(value),
+                expected: format!("a value in {range}"),
+            })
+        }
+    }
+
+    /// An integer at `key` must lie in `range` (shown as an integer).
+    fn integer(&self, key: &str, value: i128, range: Range) -> Result<(), ConfigError> {
+        // Every bound is far below 2^53, so the comparison in f64 is exact where it matters.
+        if range.contains(value as f64) {
+            Ok(())
+        } else {
+            Err(ConfigError::OutOfRange {
+                file: self.file.to_path_buf(),
+                key: key.to_string(),
+                found: value.to_string(),
+                expected: format!("a value in {range}"),
+            })
+        }
+    }
+
+    fn inconsistent(&self, key: &str, problem: String) -> ConfigError {
+        ConfigError::Inconsistent {
+            file: self.file.to_path_buf(),
+            key: key.to_string(),
+            problem,
+        }
+    }
+
+    fn robot(&self, robot: &RobotConfig) -> Result<(), ConfigError> {
+        match robot {
+            RobotConfig::Sim {
+                start_joints_deg,
+                move_duration_s,
+                repeatability_mm,
+                repeatability_deg,
+                protective_stop_after_moves,
+                ..
+            } => {
+                for (i, q) in start_joints_deg.iter().enumerate() {
+                    self.number(&format!("robot.start_joints_deg[{i}]"), *q, START_JOINT_DEG)?;
+                }
+                self.number("robot.move_duration_s", *move_duration_s, MOVE_DURATION_S)?;
+                self.number(
+                    "robot.repeatability_mm",
+                    *repeatability_mm,
+                    SIM_REPEATABILITY_MM,
+                )?;
+                self.number(
+                    "robot.repeatability_deg",
+                    *repeatability_deg,
+                    SIM_REPEATABILITY_DEG,
+                )?;
+                if let Some(n) = protective_stop_after_moves {
+                    self.integer(
+                        "robot.protective_stop_after_moves",
+                        *n as i128,
+                        PROTECTIVE_STOP_AFTER_MOVES,
+                    )?;
+                }
+            }
+            RobotConfig::Ur {
+                host,
+                connect_timeout_s,
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => {
+                if host.trim().is_empty() {
+                    return Err(self.inconsistent(
+                        "robot.host",
+                        "expected the controller's IP address or host name, found an empty string"
+                            .into(),
+                    ));
+                }
+                self.number(
+                    "robot.connect_timeout_s",
+                    *connect_timeout_s,
+                    CONNECT_TIMEOUT_S,
+                )?;
+                self.repeatability(*repeatability_mm, *repeatability_deg)?;
+            }
+            RobotConfig::Recorded {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => self.repeatability(*repeatability_mm, *repeatability_deg)?,
+        }
+        Ok(())
+    }
+
+    fn repeatability(&self, mm: Option<f64>, deg: Option<f64>) -> Result<(), ConfigError> {
+        if let Some(mm) = mm {
+            self.number("robot.repeatability_mm", mm, REPEATABILITY_MM)?;
+        }
+        if let Some(deg) = deg {
+            self.number("robot.repeatability_deg", deg, REPEATABILITY_DEG)?;
+        }
+        Ok(())
+    }
+
+    fn camera(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
+        match &raw.camera {
+            CameraConfig::Sim {
+                noise_sigma,
+                blur_sigma_px,
+                hide_board_in_grabs,
+                intrinsics,
+                ..
+            } => {
+                self.number("camera.noise_sigma", *noise_sigma, NOISE_SIGMA)?;
+                self.number("camera.blur_sigma_px", *blur_sigma_px, BLUR_SIGMA_PX)?;
+                for (i, grab) in hide_board_in_grabs.iter().enumerate() {
+                    self.integer(
+                        &format!("camera.hide_board_in_grabs[{i}]"),
+                        *grab as i128,
+                        HIDDEN_GRAB,
+                    )?;
+                }
+                if raw.intrinsics.is_none() && intrinsics.is_none() {
+                    return Err(self.inconsistent(
+                        "camera.intrinsics",
+                        "the cell has no `intrinsics` (they will be estimated), so the sim camera needs its lens: `camera: {backend: sim, intrinsics: <camera_info.yaml>}`".into(),
+                    ));
+                }
+            }
+            CameraConfig::Files { .. } => {}
+            CameraConfig::Uvc {
+                device,
+                width,
+                height,
+                fps,
+                exposure_us,
+                gain,
+                focus,
+                stale_frames,
+                ..
+            } => {
+                if device.trim().is_empty() {
+                    return Err(self.inconsistent(
+                        "camera.device",
+                        "expected a /dev/video index or (part of) the camera's name, found an empty string".into(),
+                    ));
+                }
+                self.integer("camera.width", i128::from(*width), IMAGE_SIDE_PX)?;
+                self.integer("camera.height", i128::from(*height), IMAGE_SIDE_PX)?;
+                self.integer("camera.fps", i128::from(*fps), FPS)?;
+                if let Some(us) = exposure_us {
+                    self.integer("camera.exposure_us", i128::from(*us), EXPOSURE_US)?;
+                }
+                if let Some(gain) = gain {
+                    self.integer("camera.gain", i128::from(*gain), CAMERA_CONTROL)?;
+                }
+                if let Some(focus) = focus {
+                    self.integer("camera.focus", i128::from(*focus), CAMERA_CONTROL)?;
+                }
+                self.integer("camera.stale_frames", *stale_frames as i128, STALE_FRAMES)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn limits(&self, raw: &ConfigFile) -> Result<MotionLimits, ConfigError> {
+        let l = raw.limits;
+        Ok(MotionLimits {
+            linear_speed: self.number("limits.linear_speed", l.linear_speed, LINEAR_SPEED)?,
+            linear_acceleration: self.number(
+                "limits.linear_acceleration",
+                l.linear_acceleration,
+                LINEAR_ACCELERATION,
+            )?,
+            joint_speed: self
+                .number("limits.joint_speed_deg", l.joint_speed_deg, JOINT_SPEED_DEG)?
+                .to_radians(),
+            joint_acceleration: self
+                .number(
+                    "limits.joint_acceleration_deg",
+                    l.joint_acceleration_deg,
+                    JOINT_ACCELERATION_DEG,
+                )?
+                .to_radians(),
+        })
+    }
+
+    fn workspace(&self, raw: &ConfigFile) -> Result<WorkspaceBox, ConfigError> {
+        let w = raw.workspace;
+        for i in 0..3 {
+            self.number(&format!("workspace.min[{i}]"), w.min[i], WORKSPACE_M)?;
+            self.number(&format!("workspace.max[{i}]"), w.max[i], WORKSPACE_M)?;
+        }
+        if let Some(axis) = (0..3).find(|&i| w.min[i] >= w.max[i]) {
+            return Err(self.inconsistent(
+                "workspace",
+                format!(
+                    "expected min < max on every axis, found min[{axis}] = {} >= max[{axis}] = {}",
+                    show(w.min[axis]),
+                    show(w.max[axis])
+                ),
+            ));
+        }
+        Ok(WorkspaceBox {
+            min: Vector3::from(w.min),
+            max: Vector3::from(w.max),
+        })
+    }
+
+    fn plan(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
+        let plan = &raw.plan;
+        let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
+        match (&plan.file, &plan.generate) {
+            (None, None) if recorded => {}
+            _ if recorded => {
+                return Err(self.inconsistent(
+                    "plan",
+                    "a recorded robot's plan is its recorded poses: leave out `plan`".into(),
+                ))
+            }
+            (Some(_), None) => {}
+            (None, Some(spec)) => spec.validate().map_err(|e| ConfigError::OutOfRange {
+                file: self.file.to_path_buf(),
+                key: format!("plan.generate.{}", e.field),
+                found: e.found,
+                expected: e.expected,
+            })?,
+            _ => {
+                return Err(self.inconsistent(
+                    "plan",
+                    "expected exactly one of `file` (a scripted plan) and `generate`".into(),
+                ))
+            }
+        }
+        self.number(
+            "plan.target_uncertainty_mm",
+            plan.target_uncertainty_mm,
+            TARGET_UNCERTAINTY_MM,
+        )?;
+        Ok(())
+    }
+
+    fn detector(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
+        let d = raw.detector;
+        let options = DetectorOptions {
+            decimation: d.decimate,
+            threads: d.threads,
+            max_hamming: d.max_hamming,
+            ..DetectorOptions::default()
+        };
+        options.validate().map_err(|e| ConfigError::OutOfRange {
+            file: self.file.to_path_buf(),
+            // The config's key for the detector's `decimation`.
+            key: match e.field {
+                "decimation" => "detector.decimate".to_string(),
+                field => format!("detector.{field}"),
+            },
+            found: e.found,
+            expected: e.expected,
+        })
+    }
+
+    fn solver(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
+        let s = &raw.solver;
+        self.number(
+            "solver.rotation_sigma_deg",
+            s.rotation_sigma_deg,
+            ROTATION_SIGMA_DEG,
+        )?;
+        self.number(
+            "solver.translation_sigma_mm",
+            s.translation_sigma_mm,
+            TRANSLATION_SIGMA_MM,
+        )?;
+        self.number("solver.pixel_sigma_px", s.pixel_sigma_px, PIXEL_SIGMA_PX)?;
+        Ok(())
+    }
+
+    fn session(&self, raw: &ConfigFile) -> Result<Duration, ConfigError> {
+        let s = raw.session;
+        let settle_s = self.number("session.settle_s", s.settle_s, SETTLE_S)?;
+        self.number(
+            "session.max_reprojection_rms_px",
+            s.max_reprojection_rms_px,
+            MAX_REPROJECTION_RMS_PX,
+        )?;
+        self.number(
+            "session.image_margin_px",
+            s.image_margin_px,
+            IMAGE_MARGIN_PX,
+        )?;
+        // In range, so the conversion cannot fail; checked all the same.
+        Duration::try_from_secs_f64(settle_s).map_err(|_| ConfigError::OutOfRange {
+            file: self.file.to_path_buf(),
+            key: "session.settle_s".into(),
+            found: show(settle_s),
+            expected: format!("a value in {SETTLE_S}"),
+        })
+    }
+
+    /// The setup's two transforms from `section` (`nominal` or `simulation`).
+    fn transforms(
+        &self,
+        setup: Setup,
+        section: &str,
+        map: &BTreeMap<String, PoseYaml>,
+    ) -> Result<CellTransforms, ConfigError> {
+        let (camera_key, target_key) = setup.unknown_names();
+        let setup_name = setup.name();
+        if let Some(key) = map.keys().find(|k| *k != camera_key && *k != target_key) {
+            return Err(self.inconsistent(
+                &format!("{section}.{key}"),
+                format!("unknown transform for setup {setup_name}: expected `{camera_key}` and `{target_key}`"),
+            ));
+        }
+        let get = |key: &str| {
+            let pose = map.get(key).ok_or_else(|| {
+                self.inconsistent(
+                    section,
+                    format!("missing `{key}` (setup {setup_name} expects `{camera_key}` and `{target_key}`)"),
+                )
+            })?;
+            pose.to_pose(&format!("{section}.{key}"))
+                .map_err(|problem| ConfigError::Pose {
+                    file: self.file.to_path_buf(),
+                    problem,
+                })
+        };
+        Ok(CellTransforms {
+            setup,
+            camera_mount: get(camera_key)?,
+            target_mount: get(target_key)?,
+        })
+    }
+}
