@@ -12,6 +12,7 @@ const FLOOR: &[&str] = &[
     "geometry",
     "camera_model",
     "setup",
+    "notice",
     "atomic_file",
     "yaml_file",
 ];
@@ -23,6 +24,7 @@ fn allowed() -> BTreeMap<&'static str, &'static [&'static str]> {
         ("geometry", &[][..]),
         ("camera_model", &[][..]),
         ("setup", &[][..]),
+        ("notice", &[][..]),
         ("atomic_file", &[][..]),
         ("yaml_file", &[][..]),
         // Pure maths: the floor only.
