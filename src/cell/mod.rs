@@ -1,6 +1,7 @@
 //! A cell made ready to run: the config read, the board and intrinsics loaded, the plan built and
 //! checked, and — only when asked — the robot and camera backends the config names opened.
-//! This is the one place that maps config backends to implementations.
+//! This is the one place that maps config backends to implementations. `run` drives a prepared
+//! cell through a whole calibration run (what `handeye run` does).
 
 pub mod recorded;
 pub mod run;

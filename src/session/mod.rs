@@ -6,6 +6,10 @@
 //! the settle instant → read the measured `T_base_flange` → hand the frame to the detection
 //! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
 //! already moving to the next pose.
+//!
+//! The folder is a write-ahead log (a pose is committed by its record; `samples.yaml` is rebuilt
+//! from the records on every start and resume), locked by the process running it (`lock`), and
+//! records the sha256 of its input files so a resume can refuse changed inputs (`inputs`).
 
 pub mod adaptive;
 pub mod driver;
@@ -36,8 +40,8 @@ pub enum SessionError {
         "session folder {0} already exists and is not empty; choose another --out or --resume it"
     )]
     FolderExists(PathBuf),
-    /// `--resume` was given a folder that is not a session.
-    #[error("{} is not a session folder (no session.yaml); a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`", .0.display(), .0.display())]
+    /// `--resume` (or a reader) was given a folder that is not a session.
+    #[error("{} is not a session folder (no session.yaml){}", .0.display(), not_a_session_hint(.0))]
     NotASession(PathBuf),
     /// Another live process runs or resumes the session in this folder.
     #[error("session folder {} is in use by {} (lock file {}/.lock): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.display())]
@@ -194,4 +198,17 @@ fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
         ));
     }
     parts.join("; ")
+}
+
+/// For a folder a run left before writing `session.yaml` (it has `poses/` or `frames/`): how to
+/// start again.
+fn not_a_session_hint(root: &std::path::Path) -> String {
+    if root.join("poses").is_dir() || root.join("frames").is_dir() {
+        format!(
+            "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`",
+            root.display()
+        )
+    } else {
+        String::new()
+    }
 }
