@@ -618,3 +618,233 @@ fn reprojection_space_beats_pose_space_on_the_same_rendered_frames_when_pixels_d
         ratio.1
     );
 }
+
+/// Prints nothing; refuses motion of a real arm (none here).
+struct Quiet;
+
+impl cell::run::RunObserver for Quiet {
+    fn plan_checked(&mut self, _cell: &PreparedCell) {}
+    fn confirm_motion(
+        &mut self,
+        _cell: &PreparedCell,
+        _poses: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        Err("no one to confirm".into())
+    }
+    fn note(&mut self, message: &str) {
+        eprintln!("note: {message}");
+    }
+    fn session_started(&mut self, _poses: usize) {}
+    fn event(&mut self, _event: SessionEvent) {}
+    fn session_ended(&mut self) {}
+}
+
+fn library_run(
+    config: Option<&Path>,
+    target: cell::run::SessionTarget,
+) -> Result<cell::run::CellRun, cell::run::RunError> {
+    cell::run::run(
+        &cell::run::RunRequest {
+            config: config.map(Path::to_path_buf),
+            target,
+            motion_confirmed: false,
+            accept_changed: false,
+            stop: Arc::new(AtomicBool::new(false)),
+        },
+        &mut Quiet,
+    )
+}
+
+fn copy_session(from: &Path, to: &Path) {
+    for sub in ["", "poses", "frames"] {
+        std::fs::create_dir_all(to.join(sub)).unwrap();
+        for entry in std::fs::read_dir(from.join(sub)).unwrap() {
+            let entry = entry.unwrap();
+            if entry.path().is_file() && entry.file_name() != ".lock" {
+                std::fs::copy(entry.path(), to.join(sub).join(entry.file_name())).unwrap();
+            }
+        }
+    }
+}
+
+fn sample_ids(folder: &Path) -> Vec<String> {
+    handeye::dataset::Dataset::load(&folder.join("samples.yaml"))
+        .unwrap()
+        .pairs
+        .iter()
+        .map(|p| p.id.clone().unwrap())
+        .collect()
+}
+
+/// Issue #13 item 8: a resume checks the committed records — a phantom plan index, a second
+/// record of one pose and an invalid rotation are refused naming the record file (not the
+/// frame); a sample without a pose record is dropped when the resume rebuilds `samples.yaml`
+/// (and a solve before that says the two disagree).
+#[test]
+fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(dir.path(), "sim-cell.yaml", &[("count: 20", "count: 6")]);
+    let original = dir.path().join("s");
+    let done = library_run(
+        Some(&config),
+        cell::run::SessionTarget::New(original.clone()),
+    )
+    .unwrap();
+    drop(done);
+    let all: Vec<String> = (0..6).map(|i| format!("pose-{i:03}")).collect();
+    assert_eq!(sample_ids(&original), all);
+    let resume = |name: &str| {
+        library_run(
+            None,
+            cell::run::SessionTarget::Resume(dir.path().join(name)),
+        )
+        .err()
+        .map(|e| format!("{:#}", anyhow::Error::from(e)))
+    };
+
+    // A phantom record: plan index 999 of a 6-pose plan.
+    copy_session(&original, &dir.path().join("phantom"));
+    let text = std::fs::read_to_string(original.join("poses/003.yaml")).unwrap();
+    std::fs::write(
+        dir.path().join("phantom/poses/999.yaml"),
+        text.replace("plan_index: 3", "plan_index: 999"),
+    )
+    .unwrap();
+    let message = resume("phantom").expect("a phantom record is refused");
+    assert!(
+        message.contains("poses/999.yaml")
+            && message.contains("plan_index")
+            && message.contains("not a pose of the session's plan"),
+        "{message}"
+    );
+
+    // A duplicate: pose 3's record also under pose 4's name.
+    copy_session(&original, &dir.path().join("duplicate"));
+    std::fs::write(dir.path().join("duplicate/poses/004.yaml"), &text).unwrap();
+    let message = resume("duplicate").expect("a duplicate record is refused");
+    assert!(
+        message.contains("poses/004.yaml")
+            && message.contains("does not match the record's file name"),
+        "{message}"
+    );
+
+    // A zero quaternion in pose 5's record is blamed on that record.
+    copy_session(&original, &dir.path().join("zero"));
+    let record = dir.path().join("zero/poses/005.yaml");
+    let mut yaml: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    let pose = yaml
+        .get_mut("T_base_flange")
+        .unwrap()
+        .as_mapping_mut()
+        .unwrap();
+    pose.remove("rotation_vector");
+    pose.insert(
+        "quaternion".into(),
+        serde_yaml_ng::from_str("{w: 0.0, x: 0.0, y: 0.0, z: 0.0}").unwrap(),
+    );
+    std::fs::write(&record, serde_yaml_ng::to_string(&yaml).unwrap()).unwrap();
+    let message = resume("zero").expect("a zero quaternion is refused");
+    assert!(
+        message.contains("poses/005.yaml") && message.contains("quaternion"),
+        "{message}"
+    );
+    assert!(!message.contains("frames/005.png"), "{message}");
+    let prepared = cell::prepare(&config).unwrap();
+    let replay = session::replay::redetect(
+        &SessionFolder::open(&dir.path().join("zero")).unwrap(),
+        &prepared.board,
+        &prepared.camera_model,
+        prepared.detector_options(),
+        1.0,
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(replay.contains("poses/005.yaml"), "{replay}");
+
+    // A sample without a pose record: the record of pose 5 is gone, samples.yaml still has it.
+    let orphan = dir.path().join("orphan");
+    copy_session(&original, &orphan);
+    std::fs::remove_file(orphan.join("poses/005.yaml")).unwrap();
+    let message = session::solve_folder(&SessionFolder::open(&orphan).unwrap(), &prepared.config)
+        .err()
+        .expect("samples.yaml and the records disagree")
+        .to_string();
+    assert!(
+        message.contains("pose-005") && message.contains("--resume"),
+        "{message}"
+    );
+    // The resume revisits pose 5 and the samples hold every pose once.
+    let resumed = library_run(None, cell::run::SessionTarget::Resume(orphan.clone())).unwrap();
+    assert_eq!(resumed.outcome.visited_now, 1);
+    assert_eq!(sample_ids(&orphan), all);
+}
+
+/// Issue #13 item 8: when every pose is rejected the run says so, with the reasons, instead of
+/// "samples.yaml: cannot read: No such file".
+#[test]
+fn every_pose_rejected_says_so_instead_of_a_missing_samples_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        &[
+            ("count: 20", "count: 6"),
+            (
+                "seed: 11",
+                "seed: 11\n  hide_board_in_grabs: [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]",
+            ),
+        ],
+    );
+    let error = library_run(
+        Some(&config),
+        cell::run::SessionTarget::New(dir.path().join("s")),
+    )
+    .err()
+    .expect("nothing to solve");
+    let message = error.to_string();
+    assert!(
+        matches!(
+            error,
+            cell::run::RunError::Session(SessionError::NoSamples { visited: 6, .. })
+        ),
+        "{message}"
+    );
+    assert!(
+        message.contains("every one rejected") && message.contains("pose 0: "),
+        "{message}"
+    );
+    assert!(!message.contains("cannot read"), "{message}");
+}
+
+/// Issue #13 item 2, in one process: a folder a run holds cannot be created or resumed again
+/// until that run lets go.
+#[test]
+fn a_session_folder_in_use_is_locked_until_released() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("s");
+    let first = SessionFolder::create(&root).unwrap();
+    assert!(first.is_locked());
+    let pid = std::process::id().to_string();
+    for error in [
+        SessionFolder::create(&root).unwrap_err(),
+        SessionFolder::resume(&root).unwrap_err(),
+    ] {
+        let message = error.to_string();
+        assert!(matches!(error, SessionError::Locked { .. }), "{message}");
+        assert!(message.contains(&pid), "{message}");
+    }
+    let clone = first.clone();
+    drop(first);
+    assert!(
+        matches!(
+            SessionFolder::create(&root),
+            Err(SessionError::Locked { .. })
+        ),
+        "a clone keeps the lock"
+    );
+    drop(clone);
+    // Released: a new run may use the (still empty) folder.
+    SessionFolder::create(&root).unwrap();
+}

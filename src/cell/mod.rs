@@ -1,8 +1,10 @@
 //! A cell made ready to run: the config read, the board and intrinsics loaded, the plan built and
 //! checked, and — only when asked — the robot and camera backends the config names opened.
-//! This is the one place that maps config backends to implementations.
+//! This is the one place that maps config backends to implementations. `run` drives a prepared
+//! cell through a whole calibration run (what `handeye run` does).
 
 pub mod recorded;
+pub mod run;
 pub mod sim;
 pub mod uvc;
 
@@ -22,7 +24,7 @@ use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
-use crate::session::{SessionFolder, SessionManifest, SessionSetup};
+use crate::session::{InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup};
 use crate::vision::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -246,6 +248,28 @@ impl PreparedCell {
     /// The session manifest for a validated plan.
     pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
         SessionManifest::new(self.config_path(), self.config.setup, plan)
+    }
+
+    /// The files this cell was prepared from, each with the sha256 of its bytes: the config,
+    /// the board, the intrinsics, the plan file and recorded robot poses (those the config has).
+    pub fn inputs(&self) -> Result<Vec<InputFile>, SessionError> {
+        let mut files = vec![
+            ("config", self.config.file.clone()),
+            ("target", self.config.target.clone()),
+        ];
+        if let Some(file) = &self.config.intrinsics {
+            files.push(("intrinsics", file.clone()));
+        }
+        if let Some(file) = &self.config.plan.file {
+            files.push(("plan", file.clone()));
+        }
+        if let RobotConfig::Recorded { poses, .. } = &self.config.robot {
+            files.push(("robot.poses", poses.clone()));
+        }
+        files
+            .iter()
+            .map(|(role, file)| InputFile::hash(role, file))
+            .collect()
     }
 
     /// The config file as a session manifest records it (absolute when it can be).

@@ -12,7 +12,6 @@ mod solve;
 mod target;
 mod verify;
 
-use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 /// Hand-eye and base-world calibration for robot cells.
@@ -89,33 +88,29 @@ fn confirm_motion(prepared: &handeye::cell::PreparedCell, poses: usize) -> anyho
     Ok(())
 }
 
-/// Refuses to start unless the controller reports it can move: a protective or emergency stop
-/// or a controller not running programs would fail the first move anyway, less clearly.
+/// Refuses to start unless the controller reports it can move (see
+/// [`handeye::cell::run::ensure_robot_ready`]).
 fn ensure_robot_ready(robot: &mut dyn handeye::robot::Robot) -> anyhow::Result<()> {
-    use handeye::robot::RobotStatus;
-    let status = robot
-        .status()
-        .context("reading the robot's safety status")?;
-    match status {
-        RobotStatus::Ready => Ok(()),
-        RobotStatus::ProtectiveStop => anyhow::bail!("the robot is in a protective stop: clear it on the teach pendant, then start again; nothing was moved"),
-        RobotStatus::EmergencyStop => anyhow::bail!("the robot's emergency stop is active: release it and power the arm on, then start again; nothing was moved"),
-        RobotStatus::NotReady => anyhow::bail!("the robot is not ready to run programs (powered off, brakes on or in local mode): make it ready on the teach pendant, then start again; nothing was moved"),
-    }
+    Ok(handeye::cell::run::ensure_robot_ready(robot)?)
 }
 
-/// A stop flag set by Ctrl-C, for the session loop. The first Ctrl-C stops the arm where it is
-/// (a move in progress decelerates) and ends the run cleanly; a second one, should that hang,
-/// exits at once.
+/// A stop flag set by Ctrl-C, SIGTERM or SIGHUP, for the session loop.
 fn stop_on_ctrl_c() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
-    use std::sync::atomic::{AtomicBool, Ordering};
-    let stop = std::sync::Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    stop_on_signals(stop.clone());
+    stop
+}
+
+/// Makes Ctrl-C, SIGTERM and SIGHUP set `stop`: the first one stops the arm where it is (a move
+/// in progress decelerates) and ends the run cleanly with every sample kept; a second one,
+/// should that hang, exits at once. (A service manager's SIGTERM and a closed terminal's SIGHUP
+/// take the same path as Ctrl-C: killing the process mid-move would leave the arm moving.)
+fn stop_on_signals(stop: std::sync::Arc<std::sync::atomic::AtomicBool>) {
+    use std::sync::atomic::Ordering;
     let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
+        if stop.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
         eprintln!("\nstopping the arm now; every recorded sample is kept");
     });
-    stop
 }

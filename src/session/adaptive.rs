@@ -53,9 +53,18 @@ pub fn run_adaptive_session(
     // A resumed session: the manifest lists the poses chosen so far (the last one may not have
     // been reached); none of them, nor any pose visited and rejected, is chosen again.
     let mut plan = recorded_plan(&setup)?;
+    // The input hashes written when the session was created stay with every manifest rewrite.
+    let inputs = if setup.folder.manifest_path().is_file() {
+        setup.folder.read_manifest()?.inputs
+    } else {
+        Vec::new()
+    };
     let mut seen: Vec<Pose> = plan.iter().map(|(pose, _)| *pose).collect();
     for visit in setup.folder.read_visits()? {
-        let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
+        let file = setup
+            .folder
+            .root()
+            .join(super::SessionFolder::visit_name(visit.plan_index));
         seen.push(visit.poses(&file)?.0);
     }
     source.visited(&seen);
@@ -74,11 +83,10 @@ pub fn run_adaptive_session(
             plan.push(next);
         }
         finish_recorded = false;
-        setup.folder.write_manifest(&SessionManifest::new(
-            manifest_config.clone(),
-            setup.setup,
-            &plan,
-        ))?;
+        setup.folder.write_manifest(
+            &SessionManifest::new(manifest_config.clone(), setup.setup, &plan)
+                .with_inputs(inputs.clone()),
+        )?;
         let step = SessionSetup {
             plan: plan.clone(),
             ..setup.clone()

@@ -1,5 +1,15 @@
 //! The run loop: the arm and camera on the calling thread, detection and recording on a worker
 //! thread, so the vision work for pose i happens while the arm moves to pose i+1.
+//!
+//! Per pose the worker writes, in this order: the frame, the pose record (the commit point), then
+//! `samples.yaml` (derived from the records). A run or resume first rebuilds `samples.yaml` from
+//! the committed records, so a crash between any two writes loses nothing and doubles nothing.
+//!
+//! Test hook: the environment variable `HANDEYE_FAULT=<fault>:<plan index>` makes the worker
+//! fail on purpose at that pose — `abort-after-frame`, `abort-after-record` and
+//! `abort-after-samples` abort the process right after that write (as a crash would);
+//! `full-disk-at-record` fails the record write as a full disk does. The crash-consistency
+//! tests use it; nothing sets it otherwise.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -104,6 +114,22 @@ pub fn run_session(
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
     let previous = setup.folder.read_visits()?;
+    if let Some(phantom) = previous.iter().find(|v| v.plan_index >= setup.plan.len()) {
+        return Err(SessionError::Record {
+            file: setup
+                .folder
+                .root()
+                .join(SessionFolder::visit_name(phantom.plan_index)),
+            path: "plan_index".into(),
+            message: format!(
+                "{} is not a pose of the plan ({} poses)",
+                phantom.plan_index,
+                setup.plan.len()
+            ),
+        });
+    }
+    // The records are the log; samples.yaml is rebuilt from them before anything moves.
+    let samples = rebuild_samples(&setup.folder, setup.setup, &previous)?;
     let mut accepted: BTreeSet<usize> = BTreeSet::new();
     let mut failed_before: BTreeSet<usize> = BTreeSet::new();
     for visit in &previous {
@@ -124,7 +150,7 @@ pub fn run_session(
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
     let camera_model = (!setup.estimate_intrinsics).then(|| *camera.model());
-    let worker = spawn_worker(&setup, camera_model, previous, job_rx, result_tx)?;
+    let worker = spawn_worker(&setup, camera_model, samples, job_rx, result_tx)?;
 
     let mut state = RunState {
         outcome: SessionOutcome::default(),
@@ -133,6 +159,7 @@ pub fn run_session(
         in_flight: 0,
         error: None,
         recorded_before: accepted.len(),
+        folder: setup.folder.root().to_path_buf(),
     };
 
     'passes: while !pending.is_empty() {
@@ -235,6 +262,7 @@ struct RunState {
     in_flight: usize,
     error: Option<SessionError>,
     recorded_before: usize,
+    folder: std::path::PathBuf,
 }
 
 impl RunState {
@@ -248,7 +276,14 @@ impl RunState {
         let visit = match result.visit {
             Ok(visit) => visit,
             Err(e) => {
-                self.error.get_or_insert(e);
+                // The pose was not committed (a full disk, say): the run stops with the hint.
+                let recorded = self.recorded();
+                self.error.get_or_insert(SessionError::RecordFailed {
+                    plan_index: i,
+                    recorded,
+                    folder: self.folder.clone(),
+                    source: Box::new(e),
+                });
                 return;
             }
         };
@@ -319,10 +354,74 @@ impl From<crate::robot::RobotError> for ErrorSource {
     }
 }
 
+/// Rebuilds `samples.yaml` from the committed records `visits` (every accepted pose once, in
+/// plan order; a sample without a record dropped) and returns the samples by plan index. Without
+/// any accepted record a stale samples file is removed.
+pub(crate) fn rebuild_samples(
+    folder: &SessionFolder,
+    setup: Setup,
+    visits: &[PoseVisit],
+) -> Result<BTreeMap<usize, PosePair>, SessionError> {
+    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
+    for visit in visits {
+        let file = folder
+            .root()
+            .join(SessionFolder::visit_name(visit.plan_index));
+        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&file)? {
+            samples.insert(
+                visit.plan_index,
+                sample_of(visit.plan_index, base_from_flange, camera_from_target),
+            );
+        }
+    }
+    let path = folder.samples_path();
+    if !samples.is_empty() {
+        Dataset {
+            setup,
+            pairs: samples.values().cloned().collect(),
+        }
+        .save(&path)?;
+    } else if path.is_file() {
+        std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
+    }
+    Ok(samples)
+}
+
+/// A failure injected on purpose by the `HANDEYE_FAULT` test hook (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Fault {
+    AbortAfterFrame(usize),
+    AbortAfterRecord(usize),
+    AbortAfterSamples(usize),
+    FullDiskAtRecord(usize),
+}
+
+impl Fault {
+    fn from_env() -> Option<Fault> {
+        let value = std::env::var("HANDEYE_FAULT").ok()?;
+        let (kind, index) = value.split_once(':')?;
+        let index: usize = index.trim().parse().ok()?;
+        match kind.trim() {
+            "abort-after-frame" => Some(Fault::AbortAfterFrame(index)),
+            "abort-after-record" => Some(Fault::AbortAfterRecord(index)),
+            "abort-after-samples" => Some(Fault::AbortAfterSamples(index)),
+            "full-disk-at-record" => Some(Fault::FullDiskAtRecord(index)),
+            _ => None,
+        }
+    }
+
+    /// Aborts the process when `fault` is `this` (a crash: no destructor, no cleanup).
+    fn abort_if(fault: Option<Fault>, this: Fault) {
+        if fault == Some(this) {
+            std::process::abort();
+        }
+    }
+}
+
 fn spawn_worker(
     setup: &SessionSetup,
     camera_model: Option<CameraModel>,
-    previous: Vec<PoseVisit>,
+    mut samples: BTreeMap<usize, PosePair>,
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<std::thread::JoinHandle<()>, SessionError> {
@@ -332,18 +431,8 @@ fn spawn_worker(
     let folder = setup.folder.clone();
     let session_setup = setup.setup;
     let max_rms = setup.max_reprojection_rms_px;
-    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
-    for visit in &previous {
-        if let (base_from_flange, Some(camera_from_target)) =
-            visit.poses(&folder.root().join("poses"))?
-        {
-            samples.insert(
-                visit.plan_index,
-                sample_of(visit.plan_index, base_from_flange, camera_from_target),
-            );
-        }
-    }
-    Ok(std::thread::Builder::new()
+    let fault = Fault::from_env();
+    std::thread::Builder::new()
         .name("detection".into())
         .spawn(move || {
             for job in jobs {
@@ -354,11 +443,13 @@ fn spawn_worker(
                     camera_model.as_ref(),
                     &folder,
                     max_rms,
+                    fault,
                 )
                 .and_then(|visit| {
-                    if let (base_from_flange, Some(camera_from_target)) =
-                        visit.poses(&folder.root().join("poses"))?
-                    {
+                    let file = folder
+                        .root()
+                        .join(SessionFolder::visit_name(visit.plan_index));
+                    if let (base_from_flange, Some(camera_from_target)) = visit.poses(&file)? {
                         samples.insert(
                             visit.plan_index,
                             sample_of(visit.plan_index, base_from_flange, camera_from_target),
@@ -368,6 +459,7 @@ fn spawn_worker(
                             pairs: samples.values().cloned().collect(),
                         };
                         dataset.save(&folder.samples_path())?;
+                        Fault::abort_if(fault, Fault::AbortAfterSamples(visit.plan_index));
                     }
                     Ok(visit)
                 });
@@ -382,7 +474,7 @@ fn spawn_worker(
                 }
             }
         })
-        .expect("spawn the detection thread"))
+        .map_err(|e| SessionError::Detection(format!("cannot start the detection thread: {e}")))
 }
 
 /// The solver sample of a plan pose; its id ties it to the frame and record files.
@@ -404,6 +496,7 @@ fn process(
     camera_model: Option<&CameraModel>,
     folder: &SessionFolder,
     max_rms: f64,
+    fault: Option<Fault>,
 ) -> Result<PoseVisit, SessionError> {
     let frame_name = SessionFolder::frame_name(job.plan_index);
     let mut png = Vec::new();
@@ -414,6 +507,7 @@ fn process(
             SessionError::Detection(format!("cannot encode frame {}: {e}", frame_name.display()))
         })?;
     folder.write_file(&frame_name, &png)?;
+    Fault::abort_if(fault, Fault::AbortAfterFrame(job.plan_index));
 
     let visit = measure(
         detector,
@@ -423,7 +517,19 @@ fn process(
         max_rms,
         PoseVisit::new(job.plan_index, &job.base_from_flange, frame_name),
     );
+    if fault == Some(Fault::FullDiskAtRecord(job.plan_index)) {
+        return Err(SessionError::Io {
+            path: folder
+                .root()
+                .join(SessionFolder::visit_name(job.plan_index)),
+            source: std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                "no space left on device (injected by HANDEYE_FAULT)",
+            ),
+        });
+    }
     folder.write_visit(&visit)?;
+    Fault::abort_if(fault, Fault::AbortAfterRecord(job.plan_index));
     Ok(visit)
 }
 

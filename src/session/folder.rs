@@ -2,15 +2,30 @@
 //!
 //! ```text
 //! <session>/
-//!   session.yaml        what was run: config file, setup, the resolved plan (joints and poses)
+//!   .lock               the PID of the process running the session (see `lock`)
+//!   session.yaml        what was run: config file, setup, the resolved plan (joints and poses),
+//!                       the sha256 of every input file
 //!   poses/007.yaml      one record per visited plan pose: measured T_base_flange, detection, board pose
 //!   frames/007.png      the frame grabbed at that pose
 //!   samples.yaml        the solver's dataset (only poses whose board pose was accepted), id "pose-007"
 //!   result.yaml         the calibration, when solved
 //! ```
 //! Every file is written with [`write_atomic`], so a reader never sees half a file.
+//!
+//! The folder is a small write-ahead log. A pose is committed by its record `poses/NNN.yaml`
+//! (written after its frame); `samples.yaml` is derived data, rewritten after each accepted
+//! pose and rebuilt from the committed records whenever a run starts or resumes, so a crash
+//! between a record and the samples file (or a full disk then) loses nothing and doubles
+//! nothing. Records are checked when read: the file name, the `plan_index` inside it and the
+//! plan in `session.yaml` must agree, and each pose must be a valid rigid transform.
+//!
+//! Creating or resuming a session takes the folder's lock and removes the temporary files a
+//! killed writer left behind. Depends on `dataset`, `geometry`, `robot` (joint type) and the
+//! ground floor.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -20,6 +35,8 @@ use crate::robot::Joints;
 use crate::setup::Setup;
 use crate::yaml_file::{read_yaml, write_yaml};
 
+use super::inputs::InputFile;
+use super::lock::{SessionLock, LOCK_FILE};
 use super::SessionError;
 
 /// What the session is running, written once at the start; `--resume` reads it back.
@@ -32,6 +49,10 @@ pub struct SessionManifest {
     pub setup: Setup,
     /// The validated plan, in visiting order.
     pub plan: Vec<PlannedPose>,
+    /// The input files (config, board, intrinsics, plan) with the sha256 of their bytes; a
+    /// resume refuses changed inputs. Absent in sessions recorded before hashes were kept.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<InputFile>,
 }
 
 impl SessionManifest {
@@ -47,7 +68,14 @@ impl SessionManifest {
                     joints_deg: q.map(f64::to_degrees),
                 })
                 .collect(),
+            inputs: Vec::new(),
         }
+    }
+
+    /// The same manifest recording `inputs` (see [`InputFile`]).
+    pub fn with_inputs(mut self, inputs: Vec<InputFile>) -> SessionManifest {
+        self.inputs = inputs;
+        self
     }
 }
 
@@ -94,20 +122,30 @@ pub struct PoseVisit {
     pub rejected: Option<String>,
 }
 
-/// Paths of one session folder.
+/// Paths of one session folder, and — when created or resumed for a run — its lock, held until
+/// the last clone is dropped.
 #[derive(Debug, Clone)]
 pub struct SessionFolder {
     root: PathBuf,
+    lock: Option<Arc<SessionLock>>,
+    notes: Vec<String>,
 }
 
 impl SessionFolder {
-    /// Creates a new session folder (it must not exist yet, or be empty).
+    /// Creates a new session folder and takes its lock. The folder may exist when it holds
+    /// nothing of a session: empty, or what a run killed before writing `session.yaml` left
+    /// (its lock, empty `poses/` and `frames/`, temporary files).
     pub fn create(root: &Path) -> Result<SessionFolder, SessionError> {
-        if root.exists()
-            && std::fs::read_dir(root)
-                .map(|mut d| d.next().is_some())
-                .unwrap_or(true)
-        {
+        if holds_a_session(root)? {
+            return Err(SessionError::FolderExists(root.to_path_buf()));
+        }
+        std::fs::create_dir_all(root).map_err(|source| SessionError::Io {
+            path: root.to_path_buf(),
+            source,
+        })?;
+        let folder = SessionFolder::locked(root)?;
+        // Another run may have started in it between the first look and the lock.
+        if holds_a_session(root)? {
             return Err(SessionError::FolderExists(root.to_path_buf()));
         }
         for sub in ["poses", "frames"] {
@@ -116,19 +154,68 @@ impl SessionFolder {
                 source,
             })?;
         }
-        Ok(SessionFolder {
-            root: root.to_path_buf(),
-        })
+        Ok(folder)
     }
 
-    /// Opens an existing session folder.
+    /// Opens an existing session folder to read it (no lock).
     pub fn open(root: &Path) -> Result<SessionFolder, SessionError> {
         if !root.join("session.yaml").is_file() {
             return Err(SessionError::NotASession(root.to_path_buf()));
         }
         Ok(SessionFolder {
             root: root.to_path_buf(),
+            lock: None,
+            notes: Vec::new(),
         })
+    }
+
+    /// Opens an existing session folder to continue it: takes its lock (refused while another
+    /// process holds it; taken over, with a note, from a process that died) and removes the
+    /// temporary files a killed run left behind.
+    pub fn resume(root: &Path) -> Result<SessionFolder, SessionError> {
+        if !root.is_dir() {
+            return Err(SessionError::NotASession(root.to_path_buf()));
+        }
+        let folder = SessionFolder::locked(root)?;
+        if !root.join("session.yaml").is_file() {
+            return Err(SessionError::NotASession(root.to_path_buf()));
+        }
+        Ok(folder)
+    }
+
+    fn locked(root: &Path) -> Result<SessionFolder, SessionError> {
+        let lock = SessionLock::acquire(root)?;
+        let mut notes = Vec::new();
+        if let Some(pid) = lock.stale_owner() {
+            notes.push(format!(
+                "{}: took over the lock of process {pid}, which ended without releasing it",
+                lock.path().display()
+            ));
+        }
+        let (count, bytes) = remove_temp_files(root)?;
+        if count > 0 {
+            notes.push(format!(
+                "{}: removed {count} unfinished temporary file(s) ({:.0} kB) a killed run left behind",
+                root.display(),
+                bytes as f64 / 1000.0
+            ));
+        }
+        Ok(SessionFolder {
+            root: root.to_path_buf(),
+            lock: Some(Arc::new(lock)),
+            notes,
+        })
+    }
+
+    /// What taking the folder over involved (a stale lock taken over, temporary files removed),
+    /// for people to read.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
+    /// Whether this handle holds the folder's lock.
+    pub fn is_locked(&self) -> bool {
+        self.lock.is_some()
     }
 
     /// The folder.
@@ -156,8 +243,13 @@ impl SessionFolder {
         PathBuf::from(format!("frames/{plan_index:03}.png"))
     }
 
+    /// Record file of a plan pose, relative to the session folder.
+    pub fn visit_name(plan_index: usize) -> PathBuf {
+        PathBuf::from(format!("poses/{plan_index:03}.yaml"))
+    }
+
     fn visit_path(&self, plan_index: usize) -> PathBuf {
-        self.root.join(format!("poses/{plan_index:03}.yaml"))
+        self.root.join(Self::visit_name(plan_index))
     }
 
     /// Writes the manifest.
@@ -175,8 +267,15 @@ impl SessionFolder {
         self.write_yaml(&self.visit_path(visit.plan_index), visit)
     }
 
-    /// All recorded visits, in plan order.
+    /// All committed visits, in plan order, each checked: its file name, its `plan_index` and
+    /// the plan in `session.yaml` (when there is one) agree, no plan pose has two records, its
+    /// poses are valid transforms and its frame is on disk. An error names the record file.
     pub fn read_visits(&self) -> Result<Vec<PoseVisit>, SessionError> {
+        let plan_len = if self.manifest_path().is_file() {
+            Some(self.read_manifest()?.plan.len())
+        } else {
+            None
+        };
         let folder = self.root.join("poses");
         let mut files: Vec<PathBuf> = match std::fs::read_dir(&folder) {
             Ok(entries) => entries
@@ -191,12 +290,49 @@ impl SessionFolder {
             }
         };
         files.sort();
-        let mut visits: Vec<PoseVisit> = files
-            .iter()
-            .map(|f| self.read_yaml(f))
-            .collect::<Result<_, _>>()?;
-        visits.sort_by_key(|v| v.plan_index);
-        Ok(visits)
+        let mut visits: BTreeMap<usize, (PathBuf, PoseVisit)> = BTreeMap::new();
+        for file in files {
+            let record = |message: String| SessionError::Record {
+                file: file.clone(),
+                path: "plan_index".into(),
+                message,
+            };
+            let visit: PoseVisit = self.read_yaml(&file)?;
+            let named = file
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .and_then(|s| s.parse::<usize>().ok());
+            if named != Some(visit.plan_index) {
+                return Err(record(format!(
+                    "{} does not match the record's file name (poses/NNN.yaml holds plan pose NNN)",
+                    visit.plan_index
+                )));
+            }
+            if let Some(len) = plan_len.filter(|len| visit.plan_index >= *len) {
+                return Err(record(format!(
+                    "{} is not a pose of the session's plan (session.yaml lists {len} poses, 0 to {})",
+                    visit.plan_index,
+                    len.saturating_sub(1)
+                )));
+            }
+            visit.poses(&file)?;
+            if !self.root.join(&visit.frame).is_file() {
+                return Err(SessionError::Record {
+                    file: file.clone(),
+                    path: "frame".into(),
+                    message: format!("{} is not in the session folder", visit.frame.display()),
+                });
+            }
+            if let Some((other, _)) = visits.get(&visit.plan_index) {
+                return Err(record(format!(
+                    "{} is recorded twice, also in {}",
+                    visit.plan_index,
+                    other.display()
+                )));
+            }
+            visits.insert(visit.plan_index, (file, visit));
+        }
+        Ok(visits.into_values().map(|(_, v)| v).collect())
     }
 
     /// Writes bytes atomically under the session folder.
@@ -212,6 +348,67 @@ impl SessionFolder {
     fn read_yaml<T: for<'de> Deserialize<'de>>(&self, path: &Path) -> Result<T, SessionError> {
         Ok(read_yaml(path)?)
     }
+}
+
+/// Whether `root` holds anything of a session: anything but its lock file, temporary files and
+/// empty `poses/` and `frames/` folders (what a run killed before `session.yaml` leaves).
+fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
+    let entries = match std::fs::read_dir(root) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        // Not a folder (or unreadable): creating a session in it is refused.
+        Err(_) => return Ok(true),
+    };
+    for entry in entries {
+        let entry = entry.map_err(|source| SessionError::Io {
+            path: root.to_path_buf(),
+            source,
+        })?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name == LOCK_FILE || is_temp_name(&name) {
+            continue;
+        }
+        let path = entry.path();
+        let empty_sub = (name == "poses" || name == "frames")
+            && path.is_dir()
+            && std::fs::read_dir(&path).is_ok_and(|mut d| {
+                d.all(|e| e.is_ok_and(|e| is_temp_name(&e.file_name().to_string_lossy())))
+            });
+        if !empty_sub {
+            return Ok(true);
+        }
+    }
+    Ok(false)
+}
+
+/// Names of the temporary files [`write_atomic`] writes before renaming them into place.
+fn is_temp_name(name: &str) -> bool {
+    name.starts_with(".tmp")
+}
+
+/// Removes the temporary files a killed writer left in the session folder, `poses/` and
+/// `frames/`; returns how many and their bytes. Only called with the lock held, so no live
+/// writer of this session owns them.
+fn remove_temp_files(root: &Path) -> Result<(usize, u64), SessionError> {
+    let mut count = 0;
+    let mut bytes = 0;
+    for dir in [root.to_path_buf(), root.join("poses"), root.join("frames")] {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            if !is_temp_name(&entry.file_name().to_string_lossy()) {
+                continue;
+            }
+            let path = entry.path();
+            let size = entry.metadata().map(|m| m.len()).unwrap_or(0);
+            std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
+            count += 1;
+            bytes += size;
+        }
+    }
+    Ok((count, bytes))
 }
 
 impl PoseVisit {

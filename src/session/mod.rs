@@ -6,10 +6,16 @@
 //! the settle instant → read the measured `T_base_flange` → hand the frame to the detection
 //! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
 //! already moving to the next pose.
+//!
+//! The folder is a write-ahead log (a pose is committed by its record; `samples.yaml` is rebuilt
+//! from the records on every start and resume), locked by the process running it (`lock`), and
+//! records the sha256 of its input files so a resume can refuse changed inputs (`inputs`).
 
 pub mod adaptive;
 pub mod driver;
 pub mod folder;
+pub mod inputs;
+pub mod lock;
 pub mod replay;
 pub mod solve;
 
@@ -18,6 +24,8 @@ use std::path::PathBuf;
 pub use adaptive::{run_adaptive_session, PlanSource};
 pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
 pub use folder::{PlannedPose, PoseVisit, SessionFolder, SessionManifest};
+pub use inputs::{changed_inputs, InputChange, InputFile};
+pub use lock::SessionLock;
 pub use solve::{load_and_solve, solve_folder, solve_folder_in, solve_session, SolvedSession};
 
 use crate::camera::CameraError;
@@ -32,9 +40,61 @@ pub enum SessionError {
         "session folder {0} already exists and is not empty; choose another --out or --resume it"
     )]
     FolderExists(PathBuf),
-    /// `--resume` was given a folder that is not a session.
-    #[error("{0} is not a session folder (no session.yaml)")]
+    /// `--resume` (or a reader) was given a folder that is not a session.
+    #[error("{} is not a session folder (no session.yaml){}", .0.display(), not_a_session_hint(.0))]
     NotASession(PathBuf),
+    /// Another live process runs or resumes the session in this folder.
+    #[error("session folder {} is in use by {} (lock file {}/.lock): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.display())]
+    Locked {
+        /// The session folder.
+        folder: PathBuf,
+        /// The PID the lock file names, when it names one.
+        owner: Option<u32>,
+    },
+    /// Input files changed since the session was recorded; resuming would mix two cells.
+    #[error("the input files of {} changed since the session was recorded:\n{}\nresuming would mix samples taken with different inputs: restore the files, start a new session, or resume with --accept-changed", folder.display(), changes.iter().map(|c| format!("  - {c}")).collect::<Vec<_>>().join("\n"))]
+    InputsChanged {
+        /// The session folder.
+        folder: PathBuf,
+        /// Each changed input.
+        changes: Vec<InputChange>,
+    },
+    /// A pose's frame, record or the samples file could not be written (a full disk, say);
+    /// every pose committed before is kept.
+    #[error("could not record plan pose {plan_index} ({recorded} poses recorded and kept); fix the cause (free disk space, say), then resume with `handeye run --resume {}`", folder.display())]
+    RecordFailed {
+        /// The pose being recorded.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The write that failed.
+        #[source]
+        source: Box<SessionError>,
+    },
+    /// No visited pose gave a sample, so there is nothing to solve.
+    #[error("no pose of session {} gave a sample: {visited} pose(s) visited, every one rejected ({reasons}); check that the board is in view and the detector settings, then start a new session", folder.display())]
+    NoSamples {
+        /// The session folder.
+        folder: PathBuf,
+        /// Poses visited.
+        visited: usize,
+        /// The first rejections, `pose N: why`.
+        reasons: String,
+    },
+    /// `samples.yaml` does not hold exactly the accepted pose records.
+    #[error("{}: disagrees with the pose records in poses/: {} (a run killed between a record and this file); `handeye run --resume {}` rebuilds it from the records", file.display(), describe_disagreement(missing, extra), folder.display())]
+    SamplesDisagree {
+        /// `samples.yaml`.
+        file: PathBuf,
+        /// The session folder.
+        folder: PathBuf,
+        /// Accepted records without a sample (sample ids).
+        missing: Vec<String>,
+        /// Samples without an accepted record (sample ids).
+        extra: Vec<String>,
+    },
     /// A file could not be read or written.
     #[error("cannot access {path}")]
     Io {
@@ -121,4 +181,34 @@ pub enum SessionError {
     /// The detection thread failed.
     #[error("detection failed: {0}")]
     Detection(String),
+}
+
+fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
+    let mut parts = Vec::new();
+    if !missing.is_empty() {
+        parts.push(format!(
+            "accepted record(s) without a sample: {}",
+            missing.join(", ")
+        ));
+    }
+    if !extra.is_empty() {
+        parts.push(format!(
+            "sample(s) without an accepted record: {}",
+            extra.join(", ")
+        ));
+    }
+    parts.join("; ")
+}
+
+/// For a folder a run left before writing `session.yaml` (it has `poses/` or `frames/`): how to
+/// start again.
+fn not_a_session_hint(root: &std::path::Path) -> String {
+    if root.join("poses").is_dir() || root.join("frames").is_dir() {
+        format!(
+            "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`",
+            root.display()
+        )
+    } else {
+        String::new()
+    }
 }

@@ -29,7 +29,10 @@ pub fn redetect(
                 SessionError::Detection(format!("cannot read frame {}: {e}", frame_path.display()))
             })?
             .into_luma8();
-        let (base_from_flange, _) = recorded.poses(&frame_path)?;
+        let record_path = folder
+            .root()
+            .join(SessionFolder::visit_name(recorded.plan_index));
+        let (base_from_flange, _) = recorded.poses(&record_path)?;
         let visit = measure(
             &detector,
             board,
@@ -42,7 +45,7 @@ pub fn redetect(
                 recorded.frame.clone(),
             ),
         );
-        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&frame_path)? {
+        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&record_path)? {
             samples.push(sample_of(
                 visit.plan_index,
                 base_from_flange,

@@ -84,8 +84,8 @@ pub fn load_and_solve(
     let Some(intrinsics) = &config.intrinsics else {
         return solve_from_scratch(folder, config, &board()?);
     };
-    let dataset = Dataset::load(&folder.samples_path())?;
     let visits = folder.read_visits()?;
+    let dataset = committed_samples(folder, &visits)?;
     let (board, camera) = if space == SolveSpace::Reprojection {
         let camera = CameraModel::load(intrinsics).map_err(|e| {
             SessionError::Solve(format!("intrinsics {}: {e}", intrinsics.display()))
@@ -102,6 +102,83 @@ pub fn load_and_solve(
         config,
     )?;
     Ok((solved, dataset))
+}
+
+/// The folder's `samples.yaml`, checked against the committed records: it must hold exactly the
+/// accepted poses (the pose-space answer and the pixel fit then use the same frames). No accepted
+/// pose at all is its own error, with the rejections.
+fn committed_samples(
+    folder: &SessionFolder,
+    visits: &[PoseVisit],
+) -> Result<Dataset, SessionError> {
+    let accepted: Vec<String> = visits
+        .iter()
+        .filter(|v| v.camera_from_target.is_some())
+        .map(|v| format!("pose-{:03}", v.plan_index))
+        .collect();
+    if accepted.is_empty() {
+        let reasons = visits
+            .iter()
+            .take(3)
+            .map(|v| {
+                format!(
+                    "pose {}: {}",
+                    v.plan_index,
+                    v.rejected.as_deref().unwrap_or("no board pose")
+                )
+            })
+            .chain((visits.len() > 3).then(|| "...".to_string()))
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(SessionError::NoSamples {
+            folder: folder.root().to_path_buf(),
+            visited: visits.len(),
+            reasons: if reasons.is_empty() {
+                "no pose was visited".into()
+            } else {
+                reasons
+            },
+        });
+    }
+    let path = folder.samples_path();
+    let dataset = if path.is_file() {
+        Dataset::load(&path)?
+    } else {
+        Dataset {
+            setup: folder.read_manifest()?.setup,
+            pairs: Vec::new(),
+        }
+    };
+    let ids: Vec<String> = dataset
+        .pairs
+        .iter()
+        .map(|p| p.id.clone().unwrap_or_default())
+        .collect();
+    let missing: Vec<String> = accepted
+        .iter()
+        .filter(|id| !ids.contains(id))
+        .cloned()
+        .collect();
+    let mut extra: Vec<String> = ids
+        .iter()
+        .filter(|id| !accepted.contains(id))
+        .cloned()
+        .collect();
+    let mut seen = std::collections::BTreeSet::new();
+    extra.extend(
+        ids.iter()
+            .filter(|id| !seen.insert(*id))
+            .map(|id| format!("{id} (twice)")),
+    );
+    if !missing.is_empty() || !extra.is_empty() {
+        return Err(SessionError::SamplesDisagree {
+            file: path,
+            folder: folder.root().to_path_buf(),
+            missing,
+            extra,
+        });
+    }
+    Ok(dataset)
 }
 
 /// File the estimated intrinsics are written to, in the session folder.

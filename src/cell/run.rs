@@ -1,0 +1,390 @@
+//! Running a cell end to end — the library side of `handeye run`: prepare the cell from its
+//! config (or from a session's, to resume), refuse a plan that fails its checks, ask before a
+//! real arm moves, open the hardware, refuse an arm that is not ready, check the plan again from
+//! where the arm really stands, create (or lock and check) the session folder, drive the fixed or
+//! adaptive plan, and solve. The CLI parses arguments, calls [`run`], and prints; tests call
+//! the same function.
+//!
+//! On resume the session's recorded input hashes must match the files as they are now (unless
+//! the caller accepts the change), and a fixed plan must be the one the session was started
+//! with. Depends on `session`, `plan`, `robot` and the ground floor.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use crate::geometry::Pose;
+use crate::plan::nbv::AdaptivePlanner;
+use crate::robot::{Joints, Robot, RobotError, RobotStatus};
+use crate::session::{
+    self, changed_inputs, SessionError, SessionEvent, SessionFolder, SessionOutcome, SolvedSession,
+};
+
+use super::{prepare, CellError, PreparedCell};
+
+/// Where the run's records go.
+#[derive(Debug, Clone)]
+pub enum SessionTarget {
+    /// A new session folder (it may exist if it holds nothing of a session).
+    New(PathBuf),
+    /// Continue the session in this folder.
+    Resume(PathBuf),
+}
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct RunRequest {
+    /// The cell config: required for a new session; on resume it overrides the config the
+    /// session recorded.
+    pub config: Option<PathBuf>,
+    /// New session or resume.
+    pub target: SessionTarget,
+    /// The person confirmed already that a real arm may move (`--yes`).
+    pub motion_confirmed: bool,
+    /// Resume even though input files changed since the session was recorded.
+    pub accept_changed: bool,
+    /// Set (by Ctrl-C, SIGTERM, SIGHUP) to stop the arm and end the run with every sample kept.
+    pub stop: Arc<AtomicBool>,
+}
+
+/// Told what happens during a run (the CLI prints it).
+pub trait RunObserver {
+    /// The cell is prepared and its plan checked (called before the run refuses a failing plan).
+    fn plan_checked(&mut self, cell: &PreparedCell);
+    /// A real arm is about to move through `poses` poses: return an error to refuse.
+    fn confirm_motion(
+        &mut self,
+        cell: &PreparedCell,
+        poses: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
+    /// Something a person should know (a stale lock taken over, changed inputs accepted...).
+    fn note(&mut self, message: &str);
+    /// The session loop starts, for up to `poses` poses.
+    fn session_started(&mut self, poses: usize);
+    /// Progress of the session loop.
+    fn event(&mut self, event: SessionEvent);
+    /// The session loop ended (well or not); solving follows when it ended well.
+    fn session_ended(&mut self);
+}
+
+/// A finished run: the cell, its session folder, what the loop did, and the solution.
+pub struct CellRun {
+    /// The prepared cell.
+    pub cell: PreparedCell,
+    /// The session folder (still locked until this is dropped).
+    pub folder: SessionFolder,
+    /// What the loop did.
+    pub outcome: SessionOutcome,
+    /// The solved session (`result.yaml` is written).
+    pub solved: SolvedSession,
+    /// For an adaptive plan: how it went.
+    pub adaptive: Option<AdaptiveSummary>,
+}
+
+/// How an adaptive plan went.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveSummary {
+    /// Poses in the session's plan now.
+    pub in_session: usize,
+    /// Candidate poses that passed their checks.
+    pub candidates: usize,
+    /// Poses chosen in this run.
+    pub chosen_now: usize,
+    /// The target 1-sigma uncertainty, mm.
+    pub target_uncertainty_mm: f64,
+    /// The last solved 1-sigma uncertainty, mm, if a solve happened.
+    pub solved_sigma_mm: Option<f64>,
+    /// Whether the target was reached.
+    pub reached: bool,
+}
+
+impl std::fmt::Display for AdaptiveSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "adaptive plan: {} of {} candidate poses in the session ({} chosen in this run); target 1-sigma {:.3} mm {}",
+            self.in_session,
+            self.candidates,
+            self.chosen_now,
+            self.target_uncertainty_mm,
+            match self.solved_sigma_mm {
+                Some(s) if self.reached => format!("reached ({s:.3} mm)"),
+                Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
+                None => "NOT reached (no solve)".into(),
+            }
+        )
+    }
+}
+
+/// Why a run did not happen or did not finish.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A new session needs a config.
+    #[error("a new session needs a cell config (--config)")]
+    NoConfig,
+    /// The cell could not be prepared from its config.
+    #[error("preparing the cell from {}", config.display())]
+    Prepare {
+        /// The config file.
+        config: PathBuf,
+        /// What went wrong.
+        #[source]
+        source: CellError,
+    },
+    /// An adaptive plan without intrinsics.
+    #[error("an adaptive plan needs the camera intrinsics (it chooses poses from board poses as they come): give `intrinsics:` or use a fixed plan")]
+    AdaptiveNeedsIntrinsics,
+    /// No candidate of an adaptive plan passes its checks.
+    #[error("no pose of the plan passes its checks (see the table above); nothing was moved")]
+    NoPassingPose,
+    /// A fixed plan fails its checks.
+    #[error("the plan failed its checks (see the table above); nothing was moved")]
+    PlanFailed,
+    /// The person did not confirm motion.
+    #[error(transparent)]
+    NotConfirmed(Box<dyn std::error::Error + Send + Sync>),
+    /// The robot or camera could not be opened.
+    #[error("opening the robot and camera")]
+    Hardware(#[source] CellError),
+    /// The robot could not be asked.
+    #[error("reading the robot's safety status")]
+    Status(#[source] RobotError),
+    /// The robot is in a protective stop.
+    #[error("the robot is in a protective stop: clear it on the teach pendant, then start again; nothing was moved")]
+    ProtectiveStop,
+    /// The robot's emergency stop is active.
+    #[error("the robot's emergency stop is active: release it and power the arm on, then start again; nothing was moved")]
+    EmergencyStop,
+    /// The robot cannot run programs.
+    #[error("the robot is not ready to run programs (powered off, brakes on or in local mode): make it ready on the teach pendant, then start again; nothing was moved")]
+    NotReady,
+    /// The joints could not be read.
+    #[error("reading the arm's joint positions")]
+    Joints(#[source] RobotError),
+    /// From the arm's real position no adaptive candidate passes.
+    #[error("from the arm's actual position no pose of the plan passes its checks; nothing was moved:\n{report}")]
+    NoPassingPoseFromArm {
+        /// The plan check, as a table.
+        report: String,
+    },
+    /// From the arm's real position the fixed plan fails.
+    #[error(
+        "from the arm's actual position the plan fails its checks; nothing was moved:\n{report}"
+    )]
+    PlanFailsFromArm {
+        /// The plan check, as a table.
+        report: String,
+    },
+    /// A resumed fixed plan differs from the recorded one.
+    #[error("the plan from the config differs from the one {} was started with; resume with the same config, or start a new session", folder.display())]
+    PlanChanged {
+        /// The session folder.
+        folder: PathBuf,
+    },
+    /// The session failed (its message says how to resume when samples are kept).
+    #[error(transparent)]
+    Session(#[from] SessionError),
+}
+
+/// Refuses to start unless the controller reports it can move: a protective or emergency stop
+/// or a controller not running programs would fail the first move anyway, less clearly.
+pub fn ensure_robot_ready(robot: &mut dyn Robot) -> Result<(), RunError> {
+    match robot.status().map_err(RunError::Status)? {
+        RobotStatus::Ready => Ok(()),
+        RobotStatus::ProtectiveStop => Err(RunError::ProtectiveStop),
+        RobotStatus::EmergencyStop => Err(RunError::EmergencyStop),
+        RobotStatus::NotReady => Err(RunError::NotReady),
+    }
+}
+
+/// Runs (or resumes) a calibration of a cell, as `handeye run` does, and solves it.
+pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellRun, RunError> {
+    // A resume locks its folder first: a second resume of the same folder stops here.
+    let (resumed, config_path) = match &request.target {
+        SessionTarget::Resume(dir) => {
+            let folder = SessionFolder::resume(dir)?;
+            let manifest = folder.read_manifest()?;
+            let config = request.config.clone().unwrap_or(manifest.config.clone());
+            (Some((folder, manifest)), config)
+        }
+        SessionTarget::New(_) => (None, request.config.clone().ok_or(RunError::NoConfig)?),
+    };
+    let mut cell = prepare(&config_path).map_err(|source| RunError::Prepare {
+        config: config_path.clone(),
+        source,
+    })?;
+    observer.plan_checked(&cell);
+    if let Some((folder, _)) = &resumed {
+        for note in folder.notes() {
+            observer.note(note);
+        }
+    }
+    let inputs = cell.inputs()?;
+    if let Some((folder, manifest)) = &resumed {
+        if manifest.inputs.is_empty() {
+            observer.note(&format!(
+                "{}: records no input hashes (an older session): changes to the config, board, intrinsics or plan since it was recorded cannot be detected",
+                folder.manifest_path().display()
+            ));
+        } else {
+            let changes = changed_inputs(&manifest.inputs, &inputs);
+            if !changes.is_empty() && !request.accept_changed {
+                return Err(SessionError::InputsChanged {
+                    folder: folder.root().to_path_buf(),
+                    changes,
+                }
+                .into());
+            }
+            for change in &changes {
+                observer.note(&format!(
+                    "input changed, accepted (--accept-changed): {change}"
+                ));
+            }
+        }
+    }
+
+    // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
+    let adaptive = cell.config.plan.adaptive;
+    if adaptive && !cell.intrinsics_known {
+        return Err(RunError::AdaptiveNeedsIntrinsics);
+    }
+    if adaptive && cell.report.passing().is_empty() {
+        return Err(RunError::NoPassingPose);
+    }
+    if !adaptive && !cell.report.ok() {
+        return Err(RunError::PlanFailed);
+    }
+    let poses = cell.plan.waypoints.len();
+    if !cell.is_simulated() && !request.motion_confirmed {
+        observer
+            .confirm_motion(&cell, poses)
+            .map_err(RunError::NotConfirmed)?;
+    }
+    let mut hardware = cell.open_hardware().map_err(RunError::Hardware)?;
+    ensure_robot_ready(hardware.robot.as_mut())?;
+    // The plan was checked from an assumed start; check it again from where the arm really is
+    // before the first move.
+    let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
+    let plan = if adaptive {
+        let _ = cell.recheck_from(start);
+        let candidates = cell.report.passing();
+        if candidates.is_empty() {
+            return Err(RunError::NoPassingPoseFromArm {
+                report: cell.report.to_string(),
+            });
+        }
+        candidates
+    } else {
+        match cell.recheck_from(start) {
+            Ok(plan) => plan,
+            Err(report) => {
+                return Err(RunError::PlanFailsFromArm {
+                    report: report.to_string(),
+                })
+            }
+        }
+    };
+
+    let folder = match resumed {
+        Some((folder, mut manifest)) => {
+            // An adaptive session's plan is what it chose so far: it continues from there.
+            if !adaptive && !same_plan(&manifest, &plan) {
+                return Err(RunError::PlanChanged {
+                    folder: folder.root().to_path_buf(),
+                });
+            }
+            if !manifest.inputs.is_empty() && manifest.inputs != inputs {
+                // Accepted changes: the next resume compares against the files used now.
+                manifest.inputs = inputs;
+                folder.write_manifest(&manifest)?;
+            }
+            folder
+        }
+        None => {
+            let SessionTarget::New(out) = &request.target else {
+                unreachable!("a resume has its folder")
+            };
+            let folder = SessionFolder::create(out)?;
+            for note in folder.notes() {
+                observer.note(note);
+            }
+            // An adaptive session's manifest starts empty and grows with the plan.
+            let recorded: &[(Pose, Joints)] = if adaptive { &[] } else { &plan };
+            folder.write_manifest(&cell.manifest(recorded).with_inputs(inputs))?;
+            folder
+        }
+    };
+
+    let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
+    observer.session_started(poses);
+    let mut on_event = |event: SessionEvent| observer.event(event);
+    let (outcome, adaptive_summary) = if adaptive {
+        let mut planner = AdaptivePlanner::new(
+            cell.config.setup,
+            cell.config.nominal.camera_mount,
+            cell.config.nominal.target_mount,
+            plan.clone(),
+            cell.config.solver.to_options(),
+            cell.config.plan.target_uncertainty_mm,
+            plan.len(),
+        );
+        let outcome = session::run_adaptive_session(
+            setup,
+            cell.config_path(),
+            &mut planner,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        let summary = AdaptiveSummary {
+            in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
+            candidates: plan.len(),
+            chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
+            target_uncertainty_mm: cell.config.plan.target_uncertainty_mm,
+            solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
+            reached: planner.reached_target(),
+        };
+        (outcome, Some(summary))
+    } else {
+        let outcome = session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        (outcome, None)
+    };
+    observer.session_ended();
+    if let Some(summary) = &adaptive_summary {
+        observer.note(&summary.to_string());
+    }
+    let outcome = outcome?;
+    let solved = session::solve_folder(&folder, &cell.config)?;
+    Ok(CellRun {
+        cell,
+        folder,
+        outcome,
+        solved,
+        adaptive: adaptive_summary,
+    })
+}
+
+/// Whether a resumed session's recorded plan is `plan` (same flange poses, in order).
+fn same_plan(manifest: &session::SessionManifest, plan: &[(Pose, Joints)]) -> bool {
+    manifest.plan.len() == plan.len()
+        && manifest
+            .plan
+            .iter()
+            .zip(plan)
+            .enumerate()
+            .all(|(i, (recorded, (pose, _)))| {
+                recorded
+                    .base_from_flange
+                    .to_pose(&format!("plan[{i}]"))
+                    .map(|r| {
+                        r.rotation.angle_to(&pose.rotation) < 1e-9
+                            && (r.translation.vector - pose.translation.vector).norm() < 1e-9
+                    })
+                    .unwrap_or(false)
+            })
+}
