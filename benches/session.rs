@@ -48,7 +48,7 @@ fn calibrate(config: &Path, out: &Path) {
         &mut |_| {},
     )
     .unwrap();
-    session::solve_folder(&folder, &prepared.config).unwrap();
+    session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
 }
 
 fn peak_rss_mb() -> f64 {

@@ -174,7 +174,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     );
     assert!(used < candidates.len(), "{used} poses");
     assert_eq!(folder.read_manifest().unwrap().plan.len(), used);
-    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     let c = &solved.calibration;
     let error = true_error_mm(c, &truth);
     let sigma = c.uncertainty.as_ref().unwrap();

@@ -97,8 +97,9 @@ fn killed_mid_run_resumes_from_the_last_sample_and_matches_a_solve_of_the_same_d
     let result = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
     let config = handeye::config::CellConfig::load(&config).unwrap();
     let folder = handeye::session::SessionFolder::open(&session).unwrap();
-    let (direct, _) =
-        handeye::session::load_and_solve(&folder, &config, config.solver.space).unwrap();
+    let space = config.solver.space;
+    let inputs = handeye::session::SolveInputs::load(config).unwrap();
+    let (direct, _) = handeye::session::load_and_solve(&folder, &inputs, space).unwrap();
     let direct = direct.calibration;
     assert!(
         (result.camera_mount.translation.vector - direct.camera_mount.translation.vector).norm()

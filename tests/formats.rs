@@ -164,7 +164,7 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
     )
     .unwrap();
     assert_eq!(outcome.accepted, (0..8).collect::<Vec<_>>());
-    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
 
     // The import path with the same detector and solver settings.
     let imported = import_visp(

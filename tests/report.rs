@@ -48,7 +48,7 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
             &mut |_e: SessionEvent| {},
         )
         .unwrap();
-        let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         let path = write_session_report(
             &folder,
             Some(&prepared.config),

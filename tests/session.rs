@@ -59,7 +59,7 @@ fn full_run(config: &Path, out: &Path) -> (PreparedCell, SessionFolder, session:
         "skipped: {:?}",
         outcome.skipped
     );
-    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     (prepared, folder, solved)
 }
 
@@ -173,7 +173,7 @@ fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
     );
     assert_eq!(outcome.accepted.len(), 13);
     assert!(outcome.accepted.contains(&8));
-    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     let [(_, camera_mount), _] = solved.calibration.unknowns();
     let (mm, deg) = pose_error_mm_deg(
         &camera_mount,
@@ -477,7 +477,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(visits
         .iter()
         .all(|v| v.camera_from_target.is_none() && !v.corners_px.is_empty()));
-    let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     eprintln!(
         "{}\n{}",
         solved.summary,
@@ -551,7 +551,7 @@ fn both_spaces_over_seeds(
         );
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
         run(&prepared, &folder).unwrap();
-        let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         assert!(solved.reprojection.is_some());
         let truth = prepared.config.simulation.unwrap();
         for (sum, answer) in sums
@@ -767,10 +767,13 @@ fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
     let orphan = dir.path().join("orphan");
     copy_session(&original, &orphan);
     std::fs::remove_file(orphan.join("poses/005.yaml")).unwrap();
-    let message = session::solve_folder(&SessionFolder::open(&orphan).unwrap(), &prepared.config)
-        .err()
-        .expect("samples.yaml and the records disagree")
-        .to_string();
+    let message = session::solve_folder(
+        &SessionFolder::open(&orphan).unwrap(),
+        &prepared.solve_inputs(),
+    )
+    .err()
+    .expect("samples.yaml and the records disagree")
+    .to_string();
     assert!(
         message.contains("pose-005") && message.contains("--resume"),
         "{message}"

@@ -103,7 +103,7 @@ fn full_run_through_ur_rtde_recovers_the_truth_with_a_tcp_offset_set() {
         let (prepared, outcome) = run(&config, &folder);
         let outcome = outcome.unwrap();
         assert_eq!(outcome.accepted.len(), 12, "skipped {:?}", outcome.skipped);
-        let solved = session::solve_folder(&folder, &prepared.config).unwrap();
+        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         let truth = prepared.config.simulation.unwrap();
         let [(camera_key, camera_mount), (target_key, target_mount)] =
             solved.calibration.unknowns();

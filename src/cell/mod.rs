@@ -24,7 +24,9 @@ use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
 use crate::robot::{Joints, Robot};
-use crate::session::{InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup};
+use crate::session::{
+    InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup, SolveInputs,
+};
 use crate::vision::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -248,6 +250,16 @@ impl PreparedCell {
     /// The session manifest for a validated plan.
     pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
         SessionManifest::new(self.config_path(), self.config.setup, plan)
+    }
+
+    /// What the session solve needs, as this cell loaded it: the board and (when the config
+    /// gives them) the intrinsics, so nothing is loaded twice.
+    pub fn solve_inputs(&self) -> SolveInputs {
+        SolveInputs {
+            config: self.config.clone(),
+            board: self.board.clone(),
+            camera: self.intrinsics_known.then(|| self.camera_model.clone()),
+        }
     }
 
     /// The files this cell was prepared from, each with the sha256 of its bytes: the config,

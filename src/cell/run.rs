@@ -359,7 +359,7 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
         observer.note(&summary.to_string());
     }
     let outcome = outcome?;
-    let solved = session::solve_folder(&folder, &cell.config)?;
+    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
     Ok(CellRun {
         cell,
         folder,

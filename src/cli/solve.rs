@@ -128,8 +128,10 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
         None => config.solver.space,
     };
-    let (solved, dataset) = session::load_and_solve(&folder, &config, space)
+    let inputs = session::SolveInputs::load(config)?;
+    let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
         .with_context(|| format!("solving session {}", args.samples.display()))?;
+    let config = &inputs.config;
     println!("{}", solved.summary);
     if let Some(truth) = &config.simulation {
         println!("{}", solved.compare_with_truth(truth));

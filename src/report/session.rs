@@ -14,6 +14,7 @@ use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::session::{PoseVisit, SessionError, SessionFolder};
+use crate::setup::CornerObservation;
 use crate::solve::{Calibration, NoiseModel};
 use crate::vision::{draw, Board};
 
@@ -109,27 +110,24 @@ pub fn from_session(
     })
 }
 
-/// RMS pixel distance between detected corners `[tag id, corner, u, v]` and the board's corners
-/// projected at `camera_from_target`; `None` when no corner can be compared.
+/// RMS pixel distance between detected corners and the board's corners projected at
+/// `camera_from_target`; `None` when no corner can be compared.
 pub fn reprojection_rms(
     optics: Optics<'_>,
     camera_from_target: &Pose,
-    corners_px: &[[f64; 4]],
+    corners_px: &[CornerObservation],
 ) -> Option<f64> {
     let mut sum = 0.0;
     let mut count = 0usize;
     for c in corners_px {
-        let (id, corner) = (c[0] as u32, c[1] as usize);
-        let Some(points) = optics.board.tag_corners_in_target(id) else {
+        let Some(points) = optics.board.tag_corners_in_target(c.tag_id) else {
             continue;
         };
-        let Some(point) = points.get(corner) else {
-            continue;
-        };
+        let point = points[usize::from(c.corner)];
         let Some(pixel) = optics.camera.project(&(camera_from_target * point)) else {
             continue;
         };
-        sum += (pixel - Point2::new(c[2], c[3])).norm_squared();
+        sum += (pixel - c.pixel).norm_squared();
         count += 1;
     }
     (count > 0).then(|| (sum / count as f64).sqrt())
@@ -139,7 +137,7 @@ fn thumbnail(
     path: &std::path::Path,
     optics: Optics<'_>,
     camera_from_target: &Pose,
-    corners_px: &[[f64; 4]],
+    corners_px: &[CornerObservation],
 ) -> Result<Vec<u8>, ReportError> {
     let frame_error = |message: String| ReportError::Frame {
         path: path.to_path_buf(),
@@ -184,12 +182,7 @@ fn thumbnail(
         }
     }
     for c in corners_px {
-        draw::cross(
-            &mut out,
-            to_thumb(Point2::new(c[2], c[3])),
-            3.0,
-            Rgb([0, 230, 0]),
-        );
+        draw::cross(&mut out, to_thumb(c.pixel), 3.0, Rgb([0, 230, 0]));
     }
     let mut bytes = Vec::new();
     image::DynamicImage::ImageRgb8(out)

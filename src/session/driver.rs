@@ -23,7 +23,7 @@ use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
 use crate::plan::check::MoveCheck;
 use crate::robot::{Joints, MotionLimits, Robot};
-use crate::setup::{PosePair, Setup};
+use crate::setup::{CornerObservation, PosePair, Setup};
 use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 
 use super::folder::{PoseVisit, SessionFolder};
@@ -188,9 +188,7 @@ pub fn run_session(
                             frame,
                             base_from_flange,
                         })
-                        .map_err(|_| {
-                            SessionError::Detection("the detection thread stopped".into())
-                        })?;
+                        .map_err(|_| SessionError::DetectionThread("stopped"))?;
                 }
                 Err(source) => {
                     // Stop first, then let the worker finish what it has so the count is true.
@@ -243,9 +241,7 @@ pub fn run_session(
         return Err(e);
     }
     if worker_result.is_err() {
-        return Err(SessionError::Detection(
-            "the detection thread panicked".into(),
-        ));
+        return Err(SessionError::DetectionThread("panicked"));
     }
     let mut outcome = state.outcome;
     outcome.accepted.extend(accepted);
@@ -425,8 +421,8 @@ fn spawn_worker(
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<std::thread::JoinHandle<()>, SessionError> {
-    let detector = TagDetector::spawn(&setup.board, setup.detector.clone())
-        .map_err(|e| SessionError::Detection(e.to_string()))?;
+    let detector =
+        TagDetector::spawn(&setup.board, setup.detector.clone()).map_err(SessionError::Detector)?;
     let board = setup.board.clone();
     let folder = setup.folder.clone();
     let session_setup = setup.setup;
@@ -474,7 +470,7 @@ fn spawn_worker(
                 }
             }
         })
-        .map_err(|e| SessionError::Detection(format!("cannot start the detection thread: {e}")))
+        .map_err(SessionError::DetectionThreadSpawn)
 }
 
 /// The solver sample of a plan pose; its id ties it to the frame and record files.
@@ -503,8 +499,9 @@ fn process(
     job.frame
         .image
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(|e| {
-            SessionError::Detection(format!("cannot encode frame {}: {e}", frame_name.display()))
+        .map_err(|source| SessionError::Frame {
+            path: frame_name.clone(),
+            source,
         })?;
     folder.write_file(&frame_name, &png)?;
     Fault::abort_if(fault, Fault::AbortAfterFrame(job.plan_index));
@@ -551,10 +548,13 @@ pub(crate) fn measure(
                 .tags
                 .iter()
                 .flat_map(|t| {
-                    t.corners_px
-                        .iter()
-                        .enumerate()
-                        .map(move |(k, c)| [t.id as f64, k as f64, c.x, c.y])
+                    (0u8..)
+                        .zip(&t.corners_px)
+                        .map(move |(corner, c)| CornerObservation {
+                            tag_id: t.id,
+                            corner,
+                            pixel: *c,
+                        })
                 })
                 .collect();
             let Some(camera_model) = camera_model else {

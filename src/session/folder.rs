@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 use crate::atomic_file::write_atomic;
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
-use crate::setup::Setup;
+use crate::setup::{CornerObservation, Setup};
 use crate::yaml_file::{read_yaml, write_yaml};
 
 use super::inputs::InputFile;
@@ -114,9 +114,10 @@ pub struct PoseVisit {
     /// Tags used for the board pose.
     #[serde(default)]
     pub tags: usize,
-    /// Detected corners: `[tag id, corner index, u, v]` in pixels (OpenCV convention).
+    /// Detected corners, each `[tag id, corner index, u, v]` in the file (pixels, OpenCV
+    /// convention); checked when read.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub corners_px: Vec<[f64; 4]>,
+    pub corners_px: Vec<CornerObservation>,
     /// Why the pose gave no sample, if it did not.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rejected: Option<String>,

@@ -26,11 +26,16 @@ pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
 pub use folder::{PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;
-pub use solve::{load_and_solve, solve_folder, solve_folder_in, solve_session, SolvedSession};
+pub use solve::{
+    load_and_solve, solve_folder, solve_folder_in, solve_session, SolveInputs, SolvedSession,
+};
 
 use crate::camera::CameraError;
+use crate::camera_model::CameraModelError;
 use crate::geometry::PoseError;
 use crate::robot::RobotError;
+use crate::solve::SolveError;
+use crate::vision::TargetError;
 
 /// Why a session stopped or could not run.
 #[derive(Debug, thiserror::Error)]
@@ -175,12 +180,57 @@ pub enum SessionError {
         /// The session folder.
         folder: PathBuf,
     },
-    /// Solving the recorded samples failed.
-    #[error("solving the session failed: {0}")]
-    Solve(String),
-    /// The detection thread failed.
-    #[error("detection failed: {0}")]
-    Detection(String),
+    /// Solving the recorded samples failed at one stage.
+    #[error("solving the session failed ({stage})")]
+    Solve {
+        /// Which step: `pose space`, `reprojection refinement`, `estimating the intrinsics`, …
+        stage: &'static str,
+        /// Why.
+        #[source]
+        source: SolveError,
+    },
+    /// No recorded frame shows the board, so the intrinsics cannot be estimated.
+    #[error("no frame of session {} shows the board: there is nothing to estimate the intrinsics from; check that the board is in view, then start a new session", folder.display())]
+    NoBoardSeen {
+        /// The session folder.
+        folder: PathBuf,
+    },
+    /// A frame image could not be read, decoded or encoded.
+    #[error("frame {}", path.display())]
+    Frame {
+        /// The frame file.
+        path: PathBuf,
+        /// The image error.
+        #[source]
+        source: image::ImageError,
+    },
+    /// The board file of the solve inputs could not be loaded.
+    #[error("board {}", file.display())]
+    Board {
+        /// The board file.
+        file: PathBuf,
+        /// Why.
+        #[source]
+        source: TargetError,
+    },
+    /// The intrinsics file could not be loaded or written.
+    #[error("intrinsics {}", file.display())]
+    Intrinsics {
+        /// The intrinsics file.
+        file: PathBuf,
+        /// Why.
+        #[source]
+        source: CameraModelError,
+    },
+    /// The board detector could not start or failed on a frame.
+    #[error("the board detector failed")]
+    Detector(#[source] TargetError),
+    /// The detection thread could not start.
+    #[error("cannot start the detection thread")]
+    DetectionThreadSpawn(#[source] std::io::Error),
+    /// The detection thread ended before the run did.
+    #[error("the detection thread {0}")]
+    DetectionThread(&'static str),
 }
 
 fn describe_disagreement(missing: &[String], extra: &[String]) -> String {

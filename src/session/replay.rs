@@ -18,15 +18,15 @@ pub fn redetect(
     max_rms: f64,
 ) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
     let manifest = folder.read_manifest()?;
-    let detector =
-        TagDetector::spawn(board, detector).map_err(|e| SessionError::Detection(e.to_string()))?;
+    let detector = TagDetector::spawn(board, detector).map_err(SessionError::Detector)?;
     let mut samples = Vec::new();
     let mut visits = Vec::new();
     for recorded in folder.read_visits()? {
         let frame_path = folder.root().join(&recorded.frame);
         let image = image::open(&frame_path)
-            .map_err(|e| {
-                SessionError::Detection(format!("cannot read frame {}: {e}", frame_path.display()))
+            .map_err(|source| SessionError::Frame {
+                path: frame_path.clone(),
+                source,
             })?
             .into_luma8();
         let record_path = folder

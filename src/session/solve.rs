@@ -5,7 +5,6 @@
 
 use std::fmt::Write;
 
-use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
 use crate::camera_model::CameraModel;
@@ -43,21 +42,60 @@ pub struct SolvedSession {
     pub summary: String,
 }
 
+/// What solving a session needs besides its folder: the board and the intrinsics, loaded once
+/// (by the prepared cell, see `cell::PreparedCell::solve_inputs`, or by [`SolveInputs::load`]),
+/// and the config's solver settings.
+#[derive(Debug, Clone)]
+pub struct SolveInputs {
+    /// The cell config: solver settings and the robot's repeatability.
+    pub config: CellConfig,
+    /// The board the frames show.
+    pub board: Board,
+    /// The intrinsics; `None` when the config has none and they are estimated from the corners.
+    pub camera: Option<CameraModel>,
+}
+
+impl SolveInputs {
+    /// Loads the board and the intrinsics (when the config names them) of `config`.
+    pub fn load(config: CellConfig) -> Result<SolveInputs, SessionError> {
+        let board = Board::load(&config.target).map_err(|source| SessionError::Board {
+            file: config.target.clone(),
+            source,
+        })?;
+        let camera = match &config.intrinsics {
+            Some(file) => {
+                Some(
+                    CameraModel::load(file).map_err(|source| SessionError::Intrinsics {
+                        file: file.clone(),
+                        source,
+                    })?,
+                )
+            }
+            None => None,
+        };
+        Ok(SolveInputs {
+            config,
+            board,
+            camera,
+        })
+    }
+}
+
 /// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
 pub fn solve_folder(
     folder: &SessionFolder,
-    config: &CellConfig,
+    inputs: &SolveInputs,
 ) -> Result<SolvedSession, SessionError> {
-    solve_folder_in(folder, config, config.solver.space)
+    solve_folder_in(folder, inputs, inputs.config.solver.space)
 }
 
 /// Solves the folder in the given space and writes `result.yaml`.
 pub fn solve_folder_in(
     folder: &SessionFolder,
-    config: &CellConfig,
+    inputs: &SolveInputs,
     space: SolveSpace,
 ) -> Result<SolvedSession, SessionError> {
-    let (solved, dataset) = load_and_solve(folder, config, space)?;
+    let (solved, dataset) = load_and_solve(folder, inputs, space)?;
     ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
         .save(&folder.result_path())?;
     if let Some(summary) = solved.reprojection_summary() {
@@ -66,41 +104,25 @@ pub fn solve_folder_in(
     Ok(solved)
 }
 
-/// Reads the folder's samples and visits (and, for the reprojection space, the config's board
-/// and intrinsics) and solves; writes nothing, except `camera_info.yaml` when the intrinsics are
+/// Reads the folder's samples and visits and solves (in the reprojection space with the inputs'
+/// board and intrinsics); writes nothing, except `camera_info.yaml` when the intrinsics are
 /// estimated. Returns the dataset the answer was solved from.
 ///
 /// When the config has no intrinsics they are estimated from the recorded corners (whatever
 /// `space` says: without intrinsics there are no board poses to solve in pose space alone).
 pub fn load_and_solve(
     folder: &SessionFolder,
-    config: &CellConfig,
+    inputs: &SolveInputs,
     space: SolveSpace,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
-    let board = || {
-        Board::load(&config.target)
-            .map_err(|e| SessionError::Solve(format!("board {}: {e}", config.target.display())))
-    };
-    let Some(intrinsics) = &config.intrinsics else {
-        return solve_from_scratch(folder, config, &board()?);
+    let config = &inputs.config;
+    let Some(camera) = &inputs.camera else {
+        return solve_from_scratch(folder, config, &inputs.board);
     };
     let visits = folder.read_visits()?;
     let dataset = committed_samples(folder, &visits)?;
-    let (board, camera) = if space == SolveSpace::Reprojection {
-        let camera = CameraModel::load(intrinsics).map_err(|e| {
-            SessionError::Solve(format!("intrinsics {}: {e}", intrinsics.display()))
-        })?;
-        (Some(board()?), Some(camera))
-    } else {
-        (None, None)
-    };
-    let solved = solve_session(
-        dataset.setup,
-        &dataset.pairs,
-        &visits,
-        board.as_ref().zip(camera.as_ref()),
-        config,
-    )?;
+    let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
+    let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
     Ok((solved, dataset))
 }
 
@@ -267,14 +289,15 @@ fn solve_from_scratch(
     let first = visits
         .iter()
         .find(|v| !v.corners_px.is_empty())
-        .ok_or_else(|| SessionError::Solve("no frame of the session shows the board".into()))?;
+        .ok_or_else(|| SessionError::NoBoardSeen {
+            folder: folder.root().to_path_buf(),
+        })?;
     let frame_path = folder.root().join(&first.frame);
-    let (width, height) = image::image_dimensions(&frame_path).map_err(|e| {
-        SessionError::Solve(format!(
-            "cannot read the size of {}: {e}",
-            frame_path.display()
-        ))
-    })?;
+    let (width, height) =
+        image::image_dimensions(&frame_path).map_err(|source| SessionError::Frame {
+            path: frame_path.clone(),
+            source,
+        })?;
     let options = config.solver.to_options();
     let scratch = crate::solve::intrinsics::calibrate_from_scratch(
         manifest.setup,
@@ -284,13 +307,19 @@ fn solve_from_scratch(
         &options,
         &reprojection_options(config),
     )
-    .map_err(|e| SessionError::Solve(format!("estimating the intrinsics: {e}")))?;
+    .map_err(|source| SessionError::Solve {
+        stage: "estimating the intrinsics",
+        source,
+    })?;
     let camera_info = folder.root().join(CAMERA_INFO_FILE);
     scratch
         .joint
         .camera
         .save_camera_info(&camera_info)
-        .map_err(|e| SessionError::Solve(e.to_string()))?;
+        .map_err(|source| SessionError::Intrinsics {
+            file: camera_info.clone(),
+            source,
+        })?;
     // The fair comparison: board poses again by PnP with the estimated intrinsics, the pose-space
     // solve on those, and the reprojection answer's residuals against the same poses.
     let camera = scratch.joint.camera;
@@ -310,9 +339,11 @@ fn solve_from_scratch(
             pairs.push(pair);
         }
     }
-    let pose_space = solve::solve(manifest.setup, &pairs, &options).map_err(|e| {
-        SessionError::Solve(format!("pose space with the estimated intrinsics: {e}"))
-    })?;
+    let pose_space =
+        solve::solve(manifest.setup, &pairs, &options).map_err(|source| SessionError::Solve {
+            stage: "pose space with the estimated intrinsics",
+            source,
+        })?;
     let pose_space_errors = reprojection_errors(
         manifest.setup,
         &frames,
@@ -373,28 +404,20 @@ pub fn frames_from_visits(
         if !accepted || visit.corners_px.is_empty() {
             continue;
         }
-        let file = std::path::PathBuf::from(format!("poses/{:03}.yaml", visit.plan_index));
-        let (base_from_flange, _) = visit.poses(&file)?;
-        let mut corners = Vec::with_capacity(visit.corners_px.len());
-        for (k, &[id, index, u, v]) in visit.corners_px.iter().enumerate() {
-            let valid_id = id >= 0.0 && id.fract() == 0.0 && id <= f64::from(u32::MAX);
-            let valid_index = (0.0..4.0).contains(&index) && index.fract() == 0.0;
-            if !(valid_id && valid_index && u.is_finite() && v.is_finite()) {
-                return Err(SessionError::Record {
-                    file,
-                    path: format!("corners_px[{k}]"),
-                    message: format!(
-                        "expected [tag id, corner index 0..3, u px, v px], got [{id}, {index}, {u}, {v}]"
-                    ),
-                });
-            }
-            if let Some(points) = board.tag_corners_in_target(id as u32) {
-                corners.push(Corner {
-                    point_in_target: points[index as usize],
-                    pixel: Point2::new(u, v),
-                });
-            }
-        }
+        let (base_from_flange, _) = visit.poses(&SessionFolder::visit_name(visit.plan_index))?;
+        // Corners were checked when the record was read; a tag the board does not have (a
+        // stray detection of another family member) is skipped.
+        let corners = visit
+            .corners_px
+            .iter()
+            .filter_map(|c| {
+                let points = board.tag_corners_in_target(c.tag_id)?;
+                Some(Corner {
+                    point_in_target: points[usize::from(c.corner)],
+                    pixel: c.pixel,
+                })
+            })
+            .collect();
         let id = format!("pose-{:03}", visit.plan_index);
         frames.push((
             id.clone(),
@@ -419,7 +442,10 @@ pub fn solve_session(
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();
     let pose_space =
-        solve::solve(setup, pairs, &options).map_err(|e| SessionError::Solve(e.to_string()))?;
+        solve::solve(setup, pairs, &options).map_err(|source| SessionError::Solve {
+            stage: "pose space",
+            source,
+        })?;
     let mut solved = SolvedSession {
         calibration: pose_space.clone(),
         pose_space,
@@ -453,7 +479,10 @@ pub fn solve_session(
                 &p.target_mount,
                 &ropts,
             )
-            .map_err(|e| SessionError::Solve(format!("reprojection refinement: {e}")))?;
+            .map_err(|source| SessionError::Solve {
+                stage: "reprojection refinement",
+                source,
+            })?;
             solved.pose_space_errors = Some(reprojection_errors(
                 setup,
                 &frames,
