@@ -18,6 +18,7 @@ pub mod closed_form;
 pub mod diagnostics;
 pub mod intrinsics;
 pub mod iterative;
+mod lm;
 pub mod refine;
 pub mod reprojection;
 

@@ -22,7 +22,8 @@
 //! its own frame's correction. Without corrections the Jacobian is at most 21 columns wide and
 //! the `levenberg-marquardt` crate minimises it with its dense QR; with them (12 + 9 + 6·frames
 //! columns) a Levenberg-Marquardt on the normal equations accumulated block by block replaces it
-//! (the dense QR was ~50x slower) — see `benches/reprojection.rs`.
+//! (the dense QR was ~50x slower) — see `benches/reprojection.rs`. Both drivers live in
+//! `solve::lm`, shared with the pose-space refinement.
 //!
 //! Pure: no I/O, no clocks. Depends on `geometry`, the camera model type and nalgebra only.
 
@@ -33,6 +34,7 @@ use nalgebra::{
 };
 
 use super::diagnostics::flag_outliers;
+use super::lm::{minimize_dense, minimize_normal, NormalEquations};
 use super::refine::mount_uncertainty;
 use super::require_positive;
 use super::{Axby, AxbyData, Calibration, NoiseModel, RobustLoss, SolveError, Uncertainty};
@@ -719,57 +721,24 @@ impl Problem<'_> {
     }
 }
 
-/// Most iterations of the block-structured LM.
-const MAX_NORMAL_ITERATIONS: usize = 100;
-
-/// Levenberg-Marquardt on the block-structured normal equations (Marquardt's diagonal scaling),
-/// for the problem with per-pose robot corrections: 12 + 9 + 6·frames parameters would make
-/// the crate's dense QR of the tall Jacobian ~50x slower than this.
-fn run_normal_lm(mut problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool), SolveError> {
-    let mut lambda = 1e-4;
-    let mut evaluations = 0;
-    for _ in 0..MAX_NORMAL_ITERATIONS {
-        let (h, g, cost) = problem
-            .normal_equations()
-            .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
-        evaluations += 1;
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut a = h.clone();
-            for i in 0..a.nrows() {
-                a[(i, i)] += lambda * h[(i, i)].max(1e-12);
-            }
-            let Some(cholesky) = a.cholesky() else {
-                lambda *= 10.0;
-                continue;
-            };
-            let step = -cholesky.solve(&g);
-            let saved = problem.params.clone();
-            problem.params += &step;
-            evaluations += 1;
-            match problem.residuals().map(|r| r.norm_squared()) {
-                Some(new_cost) if new_cost <= cost => {
-                    lambda = (lambda * 0.3).max(1e-12);
-                    reanchor(&mut problem);
-                    accepted = true;
-                    let relative = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
-                    if relative < 1e-12 {
-                        return Ok((problem, evaluations, true));
-                    }
-                    break;
-                }
-                _ => {
-                    problem.params = saved;
-                    lambda *= 10.0;
-                }
-            }
-        }
-        if !accepted {
-            // No step lowers the cost at any damping: at the minimum to machine precision.
-            return Ok((problem, evaluations, true));
-        }
+/// The block-structured solver's view: normal equations built corner by corner, re-anchored
+/// after every accepted step.
+impl NormalEquations for Problem<'_> {
+    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        Problem::normal_equations(self)
     }
-    Ok((problem, evaluations, false))
+
+    fn cost(&self) -> Option<f64> {
+        self.residuals().map(|r| r.norm_squared())
+    }
+
+    fn params_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.params
+    }
+
+    fn accepted(&mut self) {
+        reanchor(self);
+    }
 }
 
 fn rms(values: impl Iterator<Item = f64>) -> f64 {
@@ -872,13 +841,12 @@ fn validate(
 
 fn run_lm(problem: Problem<'_>) -> Result<(Problem<'_>, usize, bool), SolveError> {
     if problem.layout.robot > 0 {
-        return run_normal_lm(problem);
+        let mut problem = problem;
+        let outcome = minimize_normal(&mut problem)?;
+        return Ok((problem, outcome.evaluations, outcome.converged));
     }
-    let (problem, report) = LevenbergMarquardt::new()
-        .with_patience(50)
-        .minimize(problem);
-    let converged = super::refine::converged(&report.termination)?;
-    Ok((problem, report.number_of_evaluations, converged))
+    let (problem, outcome) = minimize_dense(&LevenbergMarquardt::new().with_patience(50), problem)?;
+    Ok((problem, outcome.evaluations, outcome.converged))
 }
 
 /// Re-anchors the pose perturbation at the current state so the next Jacobian is exact there.
