@@ -39,6 +39,14 @@ pub(crate) struct Outcome {
     pub converged: bool,
 }
 
+impl Outcome {
+    /// Adds a later run's cost; converged only if both runs were.
+    pub fn absorb(&mut self, later: Outcome) {
+        self.evaluations += later.evaluations;
+        self.converged &= later.converged;
+    }
+}
+
 /// Runs the `levenberg-marquardt` crate's `solver` on `problem`; returns the problem at the
 /// optimum with what it cost.
 ///
