@@ -7,12 +7,15 @@
 //! ROS `camera_info` and Kalibr intrinsics assume, so files load without any offset.
 //! Distortion models: `RadTan` is OpenCV's `plumb_bob` (k1 k2 p1 p2 k3, Kalibr `radtan`),
 //! `Equidistant` is OpenCV's fisheye model (k1..k4 on the angle, Kalibr `equidistant`).
+//! For optimisers (the reprojection-space refinement) it also owns the parameter packing of the
+//! intrinsics and distortion coefficients, their Jacobians, and a projection that never fails
+//! ([`CameraModel::linearise`]): the one implementation every solver uses.
 //! Part of the ground floor (see `tests/layers.rs`): depends on `atomic_file` only; knows
 //! nothing of boards, detectors or robots.
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix2x3, Matrix2x4, Matrix2xX, Point2, Point3, Vector2, Vector3};
 use serde_yaml_ng::Value;
 
 use crate::atomic_file::write_atomic;
@@ -203,9 +206,171 @@ impl Distortion {
         }
         ((self.distort(xn) - xd).norm() < 1e-9).then_some(xn)
     }
+
+    /// How many coefficients the model has as optimisation parameters: 0 (`None`), 5
+    /// (`RadTan`: k1 k2 p1 p2 k3) or 4 (`Equidistant`: k1..k4).
+    pub fn coefficient_count(&self) -> usize {
+        match self {
+            Distortion::None => 0,
+            Distortion::RadTan { .. } => 5,
+            Distortion::Equidistant { .. } => 4,
+        }
+    }
+
+    /// The coefficients as optimisation parameters, in the order of
+    /// [`Distortion::coefficient_count`] (empty for `None`; unlike
+    /// [`CameraModel::distortion_coefficients`], which writes five zeros for a file).
+    pub fn coefficients(&self) -> Vec<f64> {
+        match *self {
+            Distortion::None => Vec::new(),
+            Distortion::RadTan { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
+            Distortion::Equidistant { k1, k2, k3, k4 } => vec![k1, k2, k3, k4],
+        }
+    }
+
+    /// The same model with the coefficients `c` (order of [`Distortion::coefficients`]);
+    /// `None` when `c` does not hold exactly [`Distortion::coefficient_count`] numbers.
+    pub fn with_coefficients(&self, c: &[f64]) -> Option<Distortion> {
+        if c.len() != self.coefficient_count() {
+            return None;
+        }
+        Some(match self {
+            Distortion::None => Distortion::None,
+            Distortion::RadTan { .. } => Distortion::RadTan {
+                k1: c[0],
+                k2: c[1],
+                p1: c[2],
+                p2: c[3],
+                k3: c[4],
+            },
+            Distortion::Equidistant { .. } => Distortion::Equidistant {
+                k1: c[0],
+                k2: c[1],
+                k3: c[2],
+                k4: c[3],
+            },
+        })
+    }
+
+    /// The 2 x [`Distortion::coefficient_count`] Jacobian of [`Distortion::distort`] at `xn`
+    /// with respect to the coefficients (analytic; the distortion is linear in them, so it does
+    /// not depend on their values).
+    pub fn coefficient_jacobian(&self, xn: Vector2<f64>) -> Matrix2xX<f64> {
+        match *self {
+            Distortion::None => Matrix2xX::zeros(0),
+            Distortion::RadTan { .. } => {
+                let (x, y) = (xn.x, xn.y);
+                let r2 = x * x + y * y;
+                let r4 = r2 * r2;
+                Matrix2xX::from_row_slice(&[
+                    x * r2,
+                    x * r4,
+                    2.0 * x * y,
+                    r2 + 2.0 * x * x,
+                    x * r4 * r2,
+                    y * r2,
+                    y * r4,
+                    r2 + 2.0 * y * y,
+                    2.0 * x * y,
+                    y * r4 * r2,
+                ])
+            }
+            Distortion::Equidistant { .. } => {
+                // θd is linear in the coefficients: d/dk_i = xn/r · θ^(2i+3).
+                let r = xn.norm();
+                let mut j = Matrix2xX::zeros(4);
+                if r > 1e-12 {
+                    let theta = r.atan();
+                    let mut power = theta * theta * theta;
+                    for i in 0..4 {
+                        let column = xn * (power / r);
+                        j[(0, i)] = column.x;
+                        j[(1, i)] = column.y;
+                        power *= theta * theta;
+                    }
+                }
+                j
+            }
+        }
+    }
+}
+
+/// One point through the camera model, linearised: what an optimiser needs per observation.
+/// Made by [`CameraModel::linearise`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Linearised {
+    /// Undistorted normalised coordinates `(x/z, y/z)` (depth clamped, see
+    /// [`CameraModel::MIN_DEPTH_M`]).
+    pub normalised: Vector2<f64>,
+    /// Distorted normalised coordinates.
+    pub distorted: Vector2<f64>,
+    /// The pixel (OpenCV convention).
+    pub pixel: Point2<f64>,
+    /// The 2x3 Jacobian d(pixel)/d(point_in_camera), px/m.
+    pub d_pixel_d_point: Matrix2x3<f64>,
+}
+
+impl Linearised {
+    /// The 2x4 Jacobian d(pixel)/d(`fx fy cx cy`), the order of [`CameraModel::intrinsics`].
+    pub fn d_pixel_d_intrinsics(&self) -> Matrix2x4<f64> {
+        let xd = self.distorted;
+        Matrix2x4::new(xd.x, 0.0, 1.0, 0.0, 0.0, xd.y, 0.0, 1.0)
+    }
 }
 
 impl CameraModel {
+    /// Depth (m) at which [`CameraModel::project_clamped`] and [`CameraModel::linearise`] clamp
+    /// points at or behind the camera.
+    pub const MIN_DEPTH_M: f64 = 1e-6;
+
+    /// The pinhole intrinsics as optimisation parameters: `[fx, fy, cx, cy]`, px.
+    pub fn intrinsics(&self) -> [f64; 4] {
+        [self.fx, self.fy, self.cx, self.cy]
+    }
+
+    /// Sets the pinhole intrinsics from `[fx, fy, cx, cy]`, px (the order of
+    /// [`CameraModel::intrinsics`]).
+    pub fn set_intrinsics(&mut self, [fx, fy, cx, cy]: [f64; 4]) {
+        (self.fx, self.fy, self.cx, self.cy) = (fx, fy, cx, cy);
+    }
+
+    /// Projection for optimisers that never fails: a point at or behind the camera is pushed to
+    /// the depth [`CameraModel::MIN_DEPTH_M`], so it lands far off and a step that moves a point
+    /// there is rejected instead of aborting the solve. Equals [`CameraModel::project`] for
+    /// points in front of that depth.
+    pub fn project_clamped(&self, point_in_camera: &Point3<f64>) -> Point2<f64> {
+        let z = point_in_camera.z.max(Self::MIN_DEPTH_M);
+        let xn = Vector2::new(point_in_camera.x / z, point_in_camera.y / z);
+        self.pixel_from_normalised(self.distortion.distort(xn))
+    }
+
+    /// [`CameraModel::project_clamped`] with the Jacobian d(pixel)/d(point_in_camera) and the
+    /// intermediate coordinates the intrinsics and coefficient Jacobians need
+    /// ([`Linearised::d_pixel_d_intrinsics`], [`CameraModel::d_pixel_d_coefficients`]).
+    pub fn linearise(&self, point_in_camera: &Point3<f64>) -> Linearised {
+        let (x, y) = (point_in_camera.x, point_in_camera.y);
+        let z = point_in_camera.z.max(Self::MIN_DEPTH_M);
+        let normalised = Vector2::new(x / z, y / z);
+        let distorted = self.distortion.distort(normalised);
+        let d_normalised = Matrix2x3::new(1.0 / z, 0.0, -x / (z * z), 0.0, 1.0 / z, -y / (z * z));
+        let focal = Matrix2::new(self.fx, 0.0, 0.0, self.fy);
+        Linearised {
+            normalised,
+            distorted,
+            pixel: self.pixel_from_normalised(distorted),
+            d_pixel_d_point: focal * self.distortion.jacobian(normalised) * d_normalised,
+        }
+    }
+
+    /// The 2 x [`Distortion::coefficient_count`] Jacobian d(pixel)/d(distortion coefficients)
+    /// at the undistorted normalised coordinates `normalised`.
+    pub fn d_pixel_d_coefficients(&self, normalised: Vector2<f64>) -> Matrix2xX<f64> {
+        let mut j = self.distortion.coefficient_jacobian(normalised);
+        j.row_mut(0).scale_mut(self.fx);
+        j.row_mut(1).scale_mut(self.fy);
+        j
+    }
+
     /// Projects a point in the camera frame (m) to a pixel; `None` for points at or behind
     /// the camera's centre plane (z ≤ 0).
     pub fn project(&self, point_in_camera: &Point3<f64>) -> Option<Point2<f64>> {
@@ -671,6 +836,103 @@ mod tests {
                 let column = j.column(axis);
                 assert!((numeric - column).norm() < 1e-6 * j.norm(), "axis {axis}");
             }
+        }
+    }
+
+    #[test]
+    fn coefficient_packing_round_trips_and_refuses_a_wrong_count() {
+        for model in models() {
+            let d = model.distortion;
+            let c = d.coefficients();
+            assert_eq!(c.len(), d.coefficient_count());
+            assert_eq!(d.with_coefficients(&c), Some(d));
+            assert_eq!(d.with_coefficients(&c[1..]), None);
+            let shifted: Vec<f64> = c.iter().map(|v| v + 0.5).collect();
+            assert_eq!(
+                d.with_coefficients(&shifted).map(|e| e.coefficients()),
+                Some(shifted)
+            );
+        }
+        assert_eq!(Distortion::None.coefficients(), Vec::<f64>::new());
+        assert_eq!(
+            Distortion::None.with_coefficients(&[]),
+            Some(Distortion::None)
+        );
+        let mut model = models()[0];
+        model.set_intrinsics([1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(model.intrinsics(), [1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(
+            (model.fx, model.fy, model.cx, model.cy),
+            (1.0, 2.0, 3.0, 4.0)
+        );
+    }
+
+    #[test]
+    fn coefficient_and_intrinsics_jacobians_match_central_differences() {
+        for model in models() {
+            for p in [
+                Point3::new(0.12, -0.08, 0.6),
+                Point3::new(-0.3, 0.2, 0.5),
+                Point3::new(1e-5, -2e-5, 0.7),
+            ] {
+                let lin = model.linearise(&p);
+                let xn = lin.normalised;
+                let analytic = model.d_pixel_d_coefficients(xn);
+                let c = model.distortion.coefficients();
+                assert_eq!(analytic.ncols(), c.len());
+                let h = 1e-6;
+                for i in 0..c.len() {
+                    let at = |delta: f64| {
+                        let mut moved = c.clone();
+                        moved[i] += delta;
+                        CameraModel {
+                            distortion: model.distortion.with_coefficients(&moved).unwrap(),
+                            ..model
+                        }
+                        .project_clamped(&p)
+                    };
+                    let numeric = (at(h) - at(-h)) / (2.0 * h);
+                    let column = analytic.column(i);
+                    // Pixels move ~1e2..1e3 px per unit coefficient: 1e-6 px is rounding.
+                    assert!(
+                        (numeric - column).norm() < 1e-6 * column.norm().max(1.0),
+                        "{:?} coefficient {i}: {numeric} vs {column}",
+                        model.distortion
+                    );
+                }
+                let analytic = lin.d_pixel_d_intrinsics();
+                for i in 0..4 {
+                    let at = |delta: f64| {
+                        let mut moved = model;
+                        let mut k = model.intrinsics();
+                        k[i] += delta;
+                        moved.set_intrinsics(k);
+                        moved.project_clamped(&p)
+                    };
+                    let numeric = (at(h) - at(-h)) / (2.0 * h);
+                    let column = analytic.column(i);
+                    assert!((numeric - column).norm() < 1e-6, "intrinsic {i}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn linearise_agrees_with_project_in_front_and_stays_finite_behind() {
+        for model in models() {
+            let p = Point3::new(0.12, -0.08, 0.6);
+            let (pixel, jacobian) = model.project_with_jacobian(&p).unwrap();
+            let lin = model.linearise(&p);
+            assert_eq!(lin.pixel, pixel);
+            assert_eq!(model.project_clamped(&p), pixel);
+            assert!((lin.d_pixel_d_point - jacobian).norm() <= 1e-12 * jacobian.norm());
+            assert_eq!(lin.distorted, model.distortion.distort(lin.normalised));
+            // Behind the camera, where `project` refuses: finite numbers, so an optimiser can
+            // evaluate and reject the step.
+            let behind = model.linearise(&Point3::new(0.1, 0.1, -0.5));
+            assert!(model.project(&Point3::new(0.1, 0.1, -0.5)).is_none());
+            assert!(behind.pixel.coords.iter().all(|v| v.is_finite()));
+            assert!(behind.d_pixel_d_point.iter().all(|v| v.is_finite()));
         }
     }
 

@@ -10,6 +10,7 @@ use rand_distr::{Distribution, Normal};
 
 use handeye::camera_model::CameraModel;
 use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::notice::NoticeKind;
 use handeye::setup::{PosePair, Setup};
 use handeye::solve::intrinsics::{calibrate_from_scratch, zhang_intrinsics};
 use handeye::solve::{
@@ -526,7 +527,10 @@ fn a_frame_with_a_wrong_robot_pose_is_flagged() {
         "{:?}",
         result.errors.frame_rms_px
     );
-    assert!(result.warnings.iter().any(|w| w.contains("pose-004")));
+    assert!(result
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("pose-004")));
 }
 
 #[test]
@@ -693,7 +697,7 @@ fn a_far_off_robot_pose_is_flagged_and_left_out_with_corrections_on() {
     assert!(result
         .warnings
         .iter()
-        .any(|w| w.contains("pose-004") && w.contains("robot-pose correction")));
+        .any(|w| w.kind == NoticeKind::RobotPoseOutliers && w.message.contains("pose-004")));
     let ratio = prior.translation_sigma_m / robot_sigma.0;
     assert!(
         (0.6..1.6).contains(&ratio),

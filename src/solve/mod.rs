@@ -23,6 +23,7 @@ pub mod diagnostics;
 pub mod error;
 pub mod intrinsics;
 pub mod iterative;
+mod lm;
 pub mod options;
 pub mod refine;
 pub mod reprojection;

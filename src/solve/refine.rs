@@ -5,15 +5,20 @@
 //! Gaussian noise on `T_camera_target` with those per-axis sigmas this is the maximum-likelihood
 //! estimate. Parameters are a local perturbation of the start on SO(3)×R³ per unknown
 //! (`R_X ← exp(φ_X)·R_X`, `t_X ← t_X + ρ_X`; `R_Y ← R_Y·exp(φ_Y)`, `t_Y ← t_Y + ρ_Y`) with an
-//! analytic Jacobian; the `levenberg-marquardt` crate minimises, then the problem is
-//! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses
-//! (Huber, Cauchy) work by iteratively reweighted least squares on each sample's whitened norm.
+//! analytic Jacobian (`perturbed` is that parametrisation, shared with the reprojection-space
+//! refinement); the `levenberg-marquardt` crate minimises (through `solve::lm`, shared with the
+//! reprojection-space refinement), then the problem is re-linearised at the optimum so the
+//! covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
+//! reweighted least squares on each sample's whitened norm.
 
 use std::cell::RefCell;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::{DVector, Dyn, Matrix3, Owned, SMatrix, Translation3, UnitQuaternion, Vector3, U12};
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{
+    DVector, Dyn, Matrix3, Owned, SMatrix, SVector, Translation3, UnitQuaternion, Vector3, U12,
+};
 
+use super::lm::minimize_dense;
 use super::{Axby, AxbyData, PoseSigma, RobustLoss, SolveError, SolveOptions, Uncertainty};
 use crate::geometry::{rotvec, Pose};
 
@@ -38,6 +43,28 @@ pub struct Refined {
     pub converged: bool,
     /// Cost (½ Σ r²) at each residual evaluation, for plots.
     pub trace: Vec<f64>,
+}
+
+/// The unknowns `start` moved by the local perturbation `delta = [φ_X, ρ_X, φ_Y, ρ_Y]`:
+/// `R_X ← exp(φ_X)·R_X`, `t_X ← t_X + ρ_X`; `R_Y ← R_Y·exp(φ_Y)`, `t_Y ← t_Y + ρ_Y`.
+///
+/// The parametrisation of both refinements (pose space and reprojection space), so their
+/// covariances map to the mounts through the one [`mount_uncertainty`].
+pub(crate) fn perturbed(start: &Axby, delta: &SVector<f64, PARAMS>) -> Axby {
+    let d = delta;
+    let phi_x = Vector3::new(d[0], d[1], d[2]);
+    let rho_x = Vector3::new(d[3], d[4], d[5]);
+    let phi_y = Vector3::new(d[6], d[7], d[8]);
+    let rho_y = Vector3::new(d[9], d[10], d[11]);
+    let x = Pose::from_parts(
+        Translation3::from(start.x.translation.vector + rho_x),
+        UnitQuaternion::from_scaled_axis(phi_x) * start.x.rotation,
+    );
+    let y = Pose::from_parts(
+        Translation3::from(start.y.translation.vector + rho_y),
+        start.y.rotation * UnitQuaternion::from_scaled_axis(phi_y),
+    );
+    Axby { x, y }
 }
 
 /// Inverse of the left Jacobian of SO(3) at `phi`.
@@ -66,20 +93,7 @@ struct Problem<'a> {
 
 impl Problem<'_> {
     fn current(&self) -> Axby {
-        let d = &self.delta;
-        let phi_x = Vector3::new(d[0], d[1], d[2]);
-        let rho_x = Vector3::new(d[3], d[4], d[5]);
-        let phi_y = Vector3::new(d[6], d[7], d[8]);
-        let rho_y = Vector3::new(d[9], d[10], d[11]);
-        let x = Pose::from_parts(
-            Translation3::from(self.x0.x.translation.vector + rho_x),
-            UnitQuaternion::from_scaled_axis(phi_x) * self.x0.x.rotation,
-        );
-        let y = Pose::from_parts(
-            Translation3::from(self.x0.y.translation.vector + rho_y),
-            self.x0.y.rotation * UnitQuaternion::from_scaled_axis(phi_y),
-        );
-        Axby { x, y }
+        perturbed(&self.x0, &self.delta.fixed_rows::<PARAMS>(0).into_owned())
     }
 
     /// Unscaled residual (rotation rad, translation m) of sample i.
@@ -184,13 +198,12 @@ fn minimise(
         inv_sigma_t: 1.0 / options.noise.translation_sigma_m,
         trace: RefCell::new(Vec::new()),
     };
-    let (problem, report) = LevenbergMarquardt::new().minimize(problem);
-    let converged = converged(&report.termination)?;
+    let (problem, outcome) = minimize_dense(&LevenbergMarquardt::new(), problem)?;
     let solution = problem.current();
     Ok(Run {
         solution,
-        evaluations: report.number_of_evaluations,
-        converged,
+        evaluations: outcome.evaluations,
+        converged: outcome.converged,
         trace: problem.trace.into_inner(),
     })
 }
@@ -377,25 +390,6 @@ pub fn mount_uncertainty(
         camera_mount: pose_sigma(&mapped.fixed_view::<6, 6>(0, 0).into()),
         target_mount: pose_sigma(&mapped.fixed_view::<6, 6>(6, 6).into()),
         variance_factor,
-    }
-}
-
-/// What an LM run's termination means: `Ok(true)` at the optimum, `Ok(false)` out of patience,
-/// an error when the problem itself was broken.
-pub(crate) fn converged(termination: &TerminationReason) -> Result<bool, SolveError> {
-    match termination {
-        TerminationReason::Numerical(what)
-        | TerminationReason::User(what)
-        | TerminationReason::WrongDimensions(what) => Err(SolveError::RefinementFailed(what)),
-        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
-            Err(SolveError::RefinementFailed("empty problem"))
-        }
-        // The requested tolerance is below what floating point can show: at the optimum.
-        TerminationReason::NoImprovementPossible(_) => Ok(true),
-        TerminationReason::LostPatience => Ok(false),
-        TerminationReason::ResidualsZero
-        | TerminationReason::Orthogonal
-        | TerminationReason::Converged { .. } => Ok(true),
     }
 }
 
