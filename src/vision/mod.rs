@@ -13,6 +13,7 @@ pub mod board;
 pub mod detect;
 pub mod draw;
 pub mod family;
+mod ffi;
 pub mod pnp;
 pub mod print;
 
@@ -74,6 +75,22 @@ pub enum TargetError {
     Detector {
         /// Why.
         reason: String,
+    },
+    /// The image is too small for the AprilTag detector at its decimation: the C code would
+    /// read outside its buffers.
+    #[error(
+        "image {width}x{height} px is too small for the AprilTag detector at decimation \
+         {decimation}: each side must be at least {min_side_px} px"
+    )]
+    ImageTooSmall {
+        /// Image width, px.
+        width: u32,
+        /// Image height, px.
+        height: u32,
+        /// The detector's decimation.
+        decimation: f32,
+        /// Smallest accepted side at this decimation, px.
+        min_side_px: u32,
     },
     /// The detector thread is gone (it panicked or was shut down).
     #[error("AprilTag detector thread stopped unexpectedly")]
