@@ -84,9 +84,9 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         Some(path) => {
             write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;
-            println!("wrote {} to {}", format.name(), path.display());
+            outln!("wrote {} to {}", format.name(), path.display());
         }
-        None => print!("{text}"),
+        None => out!("{text}"),
     }
     Ok(())
 }

@@ -153,7 +153,7 @@ fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
     dataset
         .save(output)
         .with_context(|| format!("writing {}", output.display()))?;
-    println!(
+    outln!(
         "wrote {} samples ({}) to {}",
         dataset.pairs.len(),
         dataset.setup,
@@ -233,7 +233,7 @@ fn write_cell(
     );
     handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
         .with_context(|| format!("writing {}", cell_out.display()))?;
-    println!("wrote a recorded-cell config to {}", cell_out.display());
+    outln!("wrote a recorded-cell config to {}", cell_out.display());
     Ok(())
 }
 
@@ -262,8 +262,8 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("importing ViSP data from {}", a.folder.display()))?;
             for f in &imported.frames {
                 match (&f.skipped, f.rms_px) {
-                    (Some(why), _) => println!("{}: skipped: {why}", f.files.image.display()),
-                    (None, Some(rms)) => println!(
+                    (Some(why), _) => outln!("{}: skipped: {why}", f.files.image.display()),
+                    (None, Some(rms)) => outln!(
                         "{}: board RMS {rms:.3} px{}",
                         f.files.image.display(),
                         match f.ambiguity {
@@ -282,14 +282,14 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
                 .camera
                 .save_camera_info(&info)
                 .with_context(|| format!("writing {}", info.display()))?;
-            println!("wrote the intrinsics to {}", info.display());
+            outln!("wrote the intrinsics to {}", info.display());
             let poses_out = a
                 .poses_out
                 .unwrap_or_else(|| sibling(&a.common.output, "poses"));
             let poses: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
             save_recorded_poses(&poses, &poses_out)
                 .with_context(|| format!("writing {}", poses_out.display()))?;
-            println!(
+            outln!(
                 "wrote the recorded T_base_flange poses to {}",
                 poses_out.display()
             );

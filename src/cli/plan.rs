@@ -93,7 +93,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
                 waypoints: views.into_iter().map(Waypoint::LookAt).collect(),
             };
             plan.save(&output)?;
-            println!(
+            outln!(
                 "wrote {count} look-at views to {}; check them with `handeye plan check`",
                 output.display()
             );
@@ -102,7 +102,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
         PlanCommand::Check { config } => {
             let prepared = cell::prepare(&config)
                 .with_context(|| format!("preparing {}", config.display()))?;
-            println!("{}", prepared.report);
+            outln!("{}", prepared.report);
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");
             }

@@ -44,6 +44,6 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         })?;
     let label = format!("result.yaml ({})", calibration.solver.method.name());
     let path = write_session_report(&folder, config.as_ref(), vec![(label, calibration)])?;
-    println!("report: {}", path.display());
+    outln!("report: {}", path.display());
     Ok(())
 }

@@ -130,16 +130,16 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     };
     let (solved, dataset) = session::load_and_solve(&folder, &config, space)
         .with_context(|| format!("solving session {}", args.samples.display()))?;
-    println!("{}", solved.summary);
+    outln!("{}", solved.summary);
     if let Some(truth) = &config.simulation {
-        println!("{}", solved.compare_with_truth(truth));
+        outln!("{}", solved.compare_with_truth(truth));
     }
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
     ResultFile::from_calibration(&solved.calibration, &dataset.pairs).save(&output)?;
-    println!("wrote {}", output.display());
+    outln!("wrote {}", output.display());
     Ok(())
 }
 
@@ -158,11 +158,11 @@ pub fn run(args: SolveArgs) -> anyhow::Result<()> {
     let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
         .with_context(|| format!("solving {}", args.samples.display()))?;
 
-    println!("{} samples", dataset.pairs.len());
-    println!("{}", calibration.summary());
+    outln!("{} samples", dataset.pairs.len());
+    outln!("{}", calibration.summary());
     if let Some(output) = &args.output {
         ResultFile::from_calibration(&calibration, &dataset.pairs).save(output)?;
-        println!("wrote {}", output.display());
+        outln!("wrote {}", output.display());
     }
     Ok(())
 }

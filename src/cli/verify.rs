@@ -89,10 +89,10 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
             stop,
             &mut |_e: SessionEvent| {},
         )?;
-        println!("{}", v.table());
+        outln!("{}", v.table());
         let text = serde_yaml_ng::to_string(&v)?;
         write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
-        println!("holdout session: {}", out.display());
+        outln!("holdout session: {}", out.display());
         return Ok(());
     }
     let (setup, pairs, options) = if let Some(dir) = &args.session {
@@ -109,6 +109,6 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
     let v = verify::leave_one_out(setup, &pairs, &options)?;
-    println!("{}", v.table());
+    outln!("{}", v.table());
     Ok(())
 }
