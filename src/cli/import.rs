@@ -162,20 +162,73 @@ fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+/// The canonical form of an existing path.
+fn canonical(path: &Path) -> anyhow::Result<PathBuf> {
     std::fs::canonicalize(path).with_context(|| format!("resolving {}", path.display()))
 }
 
-/// A recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
+/// The absolute form of a path that may not exist yet (an output about to be written).
+fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(path).with_context(|| format!("resolving {}", path.display()))
+}
+
+/// The files one import writes. Until [`Outputs::commit`], dropping it (an error on the way)
+/// removes every file it created, so a failed import leaves no partial outputs behind. (A file
+/// that existed before is replaced atomically by each writer and cannot be restored; it is kept.)
+#[derive(Default)]
+struct Outputs {
+    created: Vec<PathBuf>,
+    committed: bool,
+}
+
+impl Outputs {
+    /// Runs `write`, which writes `path`, and remembers `path` if it is new.
+    fn write(
+        &mut self,
+        path: &Path,
+        write: impl FnOnce() -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let existed = path.exists();
+        let result = write();
+        if !existed && path.exists() {
+            self.created.push(path.to_path_buf());
+        }
+        result
+    }
+
+    /// Keeps every file written.
+    fn commit(mut self) {
+        self.committed = true;
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        if self.committed {
+            return;
+        }
+        for path in &self.created {
+            match std::fs::remove_file(path) {
+                Ok(()) => tracing::warn!("removed {} (the import failed)", path.display()),
+                Err(e) => tracing::warn!(
+                    "the import failed and {} could not be removed: {e}",
+                    path.display()
+                ),
+            }
+        }
+    }
+}
+
+/// The recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
 /// order) are exactly the imported images, since the folder camera serves every image in it.
-fn write_cell(
-    cell_out: &Path,
+/// Built before anything is written, so a refusal leaves no files behind.
+fn cell_text(
     folder: &Path,
     target: &Path,
     camera_info: &Path,
     poses: &Path,
     imported: &handeye::formats::import::VispImport,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<String> {
     let frames = handeye::camera::files::list_frames(folder)?;
     let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();
     anyhow::ensure!(
@@ -224,17 +277,14 @@ fn write_cell(
          nominal:\n  {camera_key}: {camera_mount}\n  {target_key}: {target_mount}\n\
          workspace: {{min: {lo:?}, max: {hi:?}}}\n\
          detector: {{decimate: 1}}\n",
-        folder = absolute(folder)?.display(),
-        target = absolute(target)?.display(),
+        folder = canonical(folder)?.display(),
+        target = canonical(target)?.display(),
         camera_info = absolute(camera_info)?.display(),
         poses = absolute(poses)?.display(),
         camera_mount = pose(&camera_mount),
         target_mount = pose(&target_mount),
     );
-    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
-        .with_context(|| format!("writing {}", cell_out.display()))?;
-    outln!("wrote a recorded-cell config to {}", cell_out.display());
-    Ok(())
+    Ok(text)
 }
 
 /// Runs `handeye import`.
@@ -278,25 +328,45 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             let info = a
                 .camera_info_out
                 .unwrap_or_else(|| sibling(&a.common.output, "camera"));
-            imported
-                .camera
-                .save_camera_info(&info)
-                .with_context(|| format!("writing {}", info.display()))?;
-            outln!("wrote the intrinsics to {}", info.display());
             let poses_out = a
                 .poses_out
                 .unwrap_or_else(|| sibling(&a.common.output, "poses"));
+            // Everything that can be refused is decided before the first file is written.
+            let cell = match &a.cell_out {
+                Some(cell_out) => Some((
+                    cell_out,
+                    cell_text(&a.folder, &a.target, &info, &poses_out, &imported)?,
+                )),
+                None => None,
+            };
+            let mut outputs = Outputs::default();
+            outputs.write(&info, || {
+                imported
+                    .camera
+                    .save_camera_info(&info)
+                    .with_context(|| format!("writing {}", info.display()))
+            })?;
+            outln!("wrote the intrinsics to {}", info.display());
             let poses: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
-            save_recorded_poses(&poses, &poses_out)
-                .with_context(|| format!("writing {}", poses_out.display()))?;
+            outputs.write(&poses_out, || {
+                save_recorded_poses(&poses, &poses_out)
+                    .with_context(|| format!("writing {}", poses_out.display()))
+            })?;
             outln!(
                 "wrote the recorded T_base_flange poses to {}",
                 poses_out.display()
             );
-            save(&imported.dataset, &a.common.output)?;
-            if let Some(cell_out) = &a.cell_out {
-                write_cell(cell_out, &a.folder, &a.target, &info, &poses_out, &imported)?;
+            outputs.write(&a.common.output, || {
+                save(&imported.dataset, &a.common.output)
+            })?;
+            if let Some((cell_out, text)) = cell {
+                outputs.write(cell_out, || {
+                    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+                        .with_context(|| format!("writing {}", cell_out.display()))
+                })?;
+                outln!("wrote a recorded-cell config to {}", cell_out.display());
             }
+            outputs.commit();
             Ok(())
         }
         ImportFormat::Moveit(a) => {
