@@ -150,9 +150,8 @@ fn sibling(output: &Path, suffix: &str) -> PathBuf {
 }
 
 fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
-    dataset
-        .save(output)
-        .with_context(|| format!("writing {}", output.display()))?;
+    // The error names the file.
+    dataset.save(output)?;
     outln!(
         "wrote {} samples ({}) to {}",
         dataset.pairs.len(),
@@ -341,17 +340,12 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             };
             let mut outputs = Outputs::default();
             outputs.write(&info, || {
-                imported
-                    .camera
-                    .save_camera_info(&info)
-                    .with_context(|| format!("writing {}", info.display()))
+                // The errors of these writers name their file.
+                Ok(imported.camera.save_camera_info(&info)?)
             })?;
             outln!("wrote the intrinsics to {}", info.display());
             let poses: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
-            outputs.write(&poses_out, || {
-                save_recorded_poses(&poses, &poses_out)
-                    .with_context(|| format!("writing {}", poses_out.display()))
-            })?;
+            outputs.write(&poses_out, || Ok(save_recorded_poses(&poses, &poses_out)?))?;
             outln!(
                 "wrote the recorded T_base_flange poses to {}",
                 poses_out.display()

@@ -85,7 +85,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
             }
             let views = match &config {
                 Some(config) => cell::prepare(config)
-                    .with_context(|| format!("preparing {}", config.display()))?
+                    .context("preparing the cell")?
                     .generate_views(&spec),
                 None => generate(&spec),
             };
@@ -100,8 +100,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
             Ok(())
         }
         PlanCommand::Check { config } => {
-            let prepared = cell::prepare(&config)
-                .with_context(|| format!("preparing {}", config.display()))?;
+            let prepared = cell::prepare(&config).context("preparing the cell")?;
             outln!("{}", prepared.report);
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");

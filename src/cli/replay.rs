@@ -29,19 +29,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let prepared = cell::prepare(&config_path)
-        .with_context(|| format!("reading {}", config_path.display()))?;
+    let prepared = cell::prepare(&config_path).context("preparing the cell")?;
     // A cell without configured intrinsics replays with the ones its run estimated.
     let camera_model = if prepared.intrinsics_known {
         prepared.camera_model
     } else {
         let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
-        CameraModel::load(&file).with_context(|| {
-            format!(
-                "the config has no intrinsics and the session has no estimated {}: solve the session first",
-                file.display()
-            )
-        })?
+        CameraModel::load(&file).context(
+            "the config has no intrinsics and the session has no estimated ones: solve the session first",
+        )?
     };
     let (dataset, visits) = replay::redetect(
         &folder,

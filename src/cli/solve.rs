@@ -121,8 +121,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.samples)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let config = CellConfig::load(&config_path)
-        .with_context(|| format!("reading {}", config_path.display()))?;
+    let config = CellConfig::load(&config_path).context("reading the cell config")?;
     let space = match args.space {
         Some(SpaceArg::Pose) => SolveSpace::Pose,
         Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,

@@ -49,8 +49,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
         let mounts = ResultFile::load_mounts(result)?;
-        let mut prepared = cell::prepare(config)
-            .with_context(|| format!("preparing the cell from {}", config.display()))?;
+        let mut prepared = cell::prepare(config).context("preparing the cell")?;
         let base = prepared.config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],

@@ -30,7 +30,7 @@ use crate::camera_model::CameraModelError;
 #[derive(Debug, thiserror::Error)]
 pub enum TargetError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot read")]
     Io {
         /// The file.
         path: PathBuf,
@@ -39,15 +39,16 @@ pub enum TargetError {
         source: std::io::Error,
     },
     /// The board YAML does not parse (syntax, unknown key, wrong type).
-    #[error("board file {path}: at `{key}`: {source}")]
+    // The serde error is the problem itself (no further cause), so it is in the message and
+    // not also a `#[source]`: `{:#}` chains would print it twice.
+    #[error("board file {path}: at `{key}`: {problem}")]
     BoardYaml {
         /// The file.
         path: PathBuf,
         /// The YAML path where parsing failed.
         key: String,
-        /// The parser's error.
-        #[source]
-        source: serde_yaml_ng::Error,
+        /// The parser's error (in the message, so not a `#[source]`).
+        problem: serde_yaml_ng::Error,
     },
     /// A board value is out of range.
     #[error("board file {path}: `{key}` must be {expected}, found {found}")]
@@ -62,7 +63,7 @@ pub enum TargetError {
         found: String,
     },
     /// An image file could not be read or decoded.
-    #[error("image {path}: cannot read or decode: {source}")]
+    #[error("image {path}: cannot read or decode")]
     Image {
         /// The file.
         path: PathBuf,
