@@ -40,7 +40,7 @@ pub struct DetectArgs {
     /// Write annotated PNGs (corners, ids, axes) into this folder.
     #[arg(long)]
     annotate: Option<PathBuf>,
-    /// Quad decimation of the detector (1 = full resolution).
+    /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 2.0)]
     decimation: f32,
     /// Detector threads.

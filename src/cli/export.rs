@@ -27,7 +27,8 @@ enum FormatArg {
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
 /// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
-/// eye_to_hand T_base_camera and T_flange_target.
+/// eye_to_hand T_base_camera and T_flange_target. Frame ids follow ROS naming: ASCII letters,
+/// digits, `_` and `/` (no leading `/`, no part starting with a digit).
 #[derive(Debug, Args)]
 pub struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.

@@ -100,7 +100,7 @@ struct VispArgs {
     /// Skip images where the board is not found instead of failing.
     #[arg(long)]
     skip_unfound: bool,
-    /// Quad decimation of the detector (1 = full resolution).
+    /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 1.0)]
     decimation: f32,
     #[command(flatten)]

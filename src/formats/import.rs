@@ -21,6 +21,10 @@
 //!   row with no numeric field is a header. Any other row must have exactly the expected number
 //!   of finite numbers, or the import fails naming the file and line.
 //!
+//! Every translation read is checked by `geometry::check_translation` (finite, within
+//! `MAX_TRANSLATION_M` of the origin), the same rule the YAML pose form applies. The ViSP XML is
+//! parsed as XML (comments are not values); the MoveIt JSON must be one array and nothing more.
+//!
 //! Depends on `geometry`, `solve`, `camera_model`, `target` (ViSP detection) and
 //! `robot::recorded` (the recorded-poses form); writes no files itself except through the
 //! callers' save functions.
