@@ -666,3 +666,38 @@ fn issue13_failed_import_visp_cell_out_leaves_no_partial_outputs() {
         ]
     );
 }
+
+#[test]
+fn issue13_replay_of_a_session_with_a_1x1_frame_skips_that_frame_and_solves() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 8")],
+    );
+    let session = dir.path().join("session");
+    let (code, stderr) = stderr_of(
+        handeye()
+            .args(["run", "--config"])
+            .arg(&config)
+            .arg("--out")
+            .arg(&session),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    // The frame of pose 2 becomes a single pixel (it used to crash the C detector).
+    GrayImage::from_pixel(1, 1, image::Luma([0]))
+        .save(session.join("frames/002.png"))
+        .unwrap();
+    let output = handeye().arg("replay").arg(&session).output().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.contains("pose   2") && l.contains("1x1 px is too small")),
+        "{stdout}"
+    );
+    assert!(session.join("replay-result.yaml").exists());
+}
