@@ -74,7 +74,7 @@ pub struct CameraModel {
 #[derive(Debug, thiserror::Error)]
 pub enum CameraModelError {
     /// The file could not be read or written.
-    #[error("intrinsics file {path}: {source}")]
+    #[error("intrinsics file {path}: cannot read or write")]
     Io {
         /// The file.
         path: PathBuf,
@@ -83,13 +83,14 @@ pub enum CameraModelError {
         source: std::io::Error,
     },
     /// The file is not YAML.
-    #[error("intrinsics file {path}: not valid YAML: {source}")]
+    // The parser's error is the problem itself (no further cause): in the message, not also a
+    // `#[source]`, so `{:#}` chains print it once.
+    #[error("intrinsics file {path}: not valid YAML: {problem}")]
     Yaml {
         /// The file.
         path: PathBuf,
         /// The parser's error.
-        #[source]
-        source: serde_yaml_ng::Error,
+        problem: serde_yaml_ng::Error,
     },
     /// The YAML is neither a `camera_info` file nor a Kalibr camchain.
     #[error(
@@ -478,9 +479,9 @@ impl CameraModel {
     /// Parses intrinsics YAML text; `path` only names the source in errors.
     pub fn from_yaml_str(text: &str, path: &Path) -> Result<Self, CameraModelError> {
         let value: Value =
-            serde_yaml_ng::from_str(text).map_err(|source| CameraModelError::Yaml {
+            serde_yaml_ng::from_str(text).map_err(|problem| CameraModelError::Yaml {
                 path: path.to_path_buf(),
-                source,
+                problem,
             })?;
         let reader = Reader { path };
         let model = if value.get("camera_matrix").is_some() {

@@ -468,13 +468,13 @@ fn every_export_format_parses_back_to_the_same_transforms() {
             ),
         ];
 
-        let ros = parse_ros2(&export(&m, ExportFormat::Ros2, &ids));
-        let ros_text = export(&m, ExportFormat::Ros2, &ids);
+        let ros = parse_ros2(&export(&m, ExportFormat::Ros2, &ids).unwrap());
+        let ros_text = export(&m, ExportFormat::Ros2, &ids).unwrap();
         assert!(ros_text.contains("def generate_launch_description():"));
-        let urdf = parse_urdf(&export(&m, ExportFormat::Urdf, &ids));
-        let ur = parse_ur(&export(&m, ExportFormat::Ur, &ids));
-        let json = export(&m, ExportFormat::Json, &ids);
-        let opencv = export(&m, ExportFormat::Opencv, &ids);
+        let urdf = parse_urdf(&export(&m, ExportFormat::Urdf, &ids).unwrap());
+        let ur = parse_ur(&export(&m, ExportFormat::Ur, &ids).unwrap());
+        let json = export(&m, ExportFormat::Json, &ids).unwrap();
+        let opencv = export(&m, ExportFormat::Opencv, &ids).unwrap();
         assert_eq!((ros.len(), urdf.len(), ur.len()), (2, 2, 2));
         for (k, (key, parent, child, pose)) in expected.iter().enumerate() {
             assert_eq!((ros[k].0.as_str(), ros[k].1.as_str()), (*parent, *child));
@@ -510,12 +510,12 @@ fn exports_match_hand_checked_fixtures() {
         camera: "cam".into(),
         target: "board".into(),
     };
-    let ur = export(&m, ExportFormat::Ur, &ids);
+    let ur = export(&m, ExportFormat::Ur, &ids).unwrap();
     assert!(
         ur.contains("set_tcp(p[0.1, 0.2, 0.3, 0, 0, 1.5707963267948966])"),
         "{ur}"
     );
-    let ros = export(&m, ExportFormat::Ros2, &ids);
+    let ros = export(&m, ExportFormat::Ros2, &ids).unwrap();
     let words: Vec<&str> = ros
         .lines()
         .find(|l| l.starts_with("ros2 "))
@@ -528,14 +528,14 @@ fn exports_match_hand_checked_fixtures() {
         ros.contains("--frame-id flange --child-frame-id cam"),
         "{ros}"
     );
-    let urdf = export(&m, ExportFormat::Urdf, &ids);
+    let urdf = export(&m, ExportFormat::Urdf, &ids).unwrap();
     let rpy: Vec<f64> = attribute(&urdf[urdf.find("<origin").unwrap()..], "rpy")
         .split_whitespace()
         .map(|v| v.parse().unwrap())
         .collect();
     assert!(rpy[0].abs() < 1e-15 && rpy[1].abs() < 1e-15);
     assert!((rpy[2] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
-    let opencv = export(&m, ExportFormat::Opencv, &ids);
+    let opencv = export(&m, ExportFormat::Opencv, &ids).unwrap();
     let back = parse_opencv(&opencv, "T_flange_camera").to_homogeneous();
     let expected = Matrix4::new(
         0.0, -1.0, 0.0, 0.1, 1.0, 0.0, 0.0, 0.2, 0.0, 0.0, 1.0, 0.3, 0.0, 0.0, 0.0, 1.0,
@@ -572,7 +572,7 @@ fn export_reads_a_saved_result_file() {
         .save(&path)
         .unwrap();
     let loaded = ResultFile::load_mounts(&path).unwrap();
-    let json = export(&loaded, ExportFormat::Json, &FrameIds::default());
+    let json = export(&loaded, ExportFormat::Json, &FrameIds::default()).unwrap();
     let (_, _, camera, _) = parse_json(&json, "T_base_camera");
     assert_same(&camera, &cal.camera_mount, "json from the result file");
     let (mm, deg) = pose_error_mm_deg(&camera, &truth.camera_mount);

@@ -166,7 +166,7 @@ impl Default for MockUrConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum MockUrError {
     /// A port could not be bound.
-    #[error("mock UR: cannot bind the {service} port {address}: {source}")]
+    #[error("mock UR: cannot bind the {service} port {address}")]
     Bind {
         /// Which service (rtde, dashboard, script).
         service: &'static str,

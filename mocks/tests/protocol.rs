@@ -166,3 +166,70 @@ fn dropped_connection_fault_closes_and_refuses() {
     // Closed at once: the read sees end of stream (or a reset), never data.
     assert!(matches!(s.read(&mut buf), Ok(0) | Err(_)));
 }
+
+#[test]
+fn issue13_dashboard_line_without_end_is_answered_and_dropped_not_buffered_forever() {
+    let m = mock(MockUrConfig::default());
+    let s = TcpStream::connect(m.dashboard_addr()).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+    let mut reader = BufReader::new(s.try_clone().unwrap());
+    let mut writer = s;
+    let mut welcome = String::new();
+    reader.read_line(&mut welcome).unwrap();
+    // 64 kB and no newline: the mock answers once and closes (it used to keep every byte).
+    let junk = vec![b'x'; 64 * 1024];
+    let _ = writer.write_all(&junk);
+    let mut line = String::new();
+    reader.read_line(&mut line).unwrap();
+    assert_eq!(
+        line.trim(),
+        "could not understand: command longer than 4096 bytes"
+    );
+    let mut rest = Vec::new();
+    // End of stream (or a reset when unread junk was still in flight): never more data.
+    assert!(
+        matches!(reader.read_to_end(&mut rest), Ok(0) | Err(_)),
+        "{rest:?}"
+    );
+    // The mock still serves new clients.
+    let s = TcpStream::connect(m.dashboard_addr()).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+    let mut welcome = String::new();
+    BufReader::new(s).read_line(&mut welcome).unwrap();
+    assert!(welcome.starts_with("Connected"));
+}
+
+#[test]
+fn issue13_script_port_drops_a_client_that_never_completes_a_program() {
+    let m = mock(MockUrConfig::default());
+    let mut s = TcpStream::connect(m.script_addr()).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    s.set_write_timeout(Some(Duration::from_secs(5))).unwrap();
+    // 2 MiB of a program that never ends: past the 1 MiB limit the mock closes the socket, so
+    // writing fails (reset or broken pipe) or a read sees the end of the stream.
+    let block = b"def p():\n"
+        .iter()
+        .copied()
+        .chain(std::iter::repeat_n(b'#', 64 * 1024 - 9))
+        .collect::<Vec<u8>>();
+    let mut refused = false;
+    for _ in 0..32 {
+        if s.write_all(&block).is_err() {
+            refused = true;
+            break;
+        }
+    }
+    if !refused {
+        let mut buf = [0u8; 16];
+        refused = match s.read(&mut buf) {
+            Ok(n) => n == 0,
+            // A timeout means the mock is still holding the connection open.
+            Err(e) => !matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ),
+        };
+    }
+    assert!(refused, "the script port kept buffering past its limit");
+    assert_eq!(m.scripts_received(), 0);
+}

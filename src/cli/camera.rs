@@ -127,10 +127,10 @@ pub mod uvc {
     pub fn list() -> anyhow::Result<()> {
         let cameras = list_cameras()?;
         if cameras.is_empty() {
-            println!("no cameras found");
+            outln!("no cameras found");
         }
         for c in cameras {
-            println!("{}: {} ({})", c.index, c.name, c.description);
+            outln!("{}: {} ({})", c.index, c.name, c.description);
         }
         Ok(())
     }
@@ -174,7 +174,7 @@ pub mod uvc {
             .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
             .context("encoding the frame")?;
         write_atomic(output, &png).with_context(|| format!("writing {}", output.display()))?;
-        println!(
+        outln!(
             "wrote a {}x{} grey frame to {}",
             image.width(),
             image.height(),

@@ -40,7 +40,7 @@ pub struct DetectArgs {
     /// Write annotated PNGs (corners, ids, axes) into this folder.
     #[arg(long)]
     annotate: Option<PathBuf>,
-    /// Quad decimation of the detector (1 = full resolution).
+    /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 2.0)]
     decimation: f32,
     /// Detector threads.
@@ -101,8 +101,8 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         let pose = estimate_board_pose(&board, &camera, &detection);
         let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
         let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
-        println!("{}:", path.display());
-        println!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
+        outln!("{}:", path.display());
+        outln!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
         let mut result = ImageResult {
             image: path.display().to_string(),
             found: false,
@@ -118,7 +118,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
             Ok(pose) => {
                 found_count += 1;
                 let record = PoseRecord::from_pose(&pose.camera_from_target);
-                println!(
+                outln!(
                     "  reprojection RMS {:.3} px over {} corners{}",
                     pose.rms_px,
                     pose.corners_used,
@@ -132,9 +132,9 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
                     }
                 );
                 let yaml = serde_yaml_ng::to_string(&record)?;
-                println!("  T_camera_target:");
+                outln!("  T_camera_target:");
                 for line in yaml.lines() {
-                    println!("    {line}");
+                    outln!("    {line}");
                 }
                 result.found = true;
                 result.rms_px = Some(pose.rms_px);
@@ -149,7 +149,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
                 | TargetError::NotEnoughCorners { .. }
                 | TargetError::PoseFailed { .. }),
             ) => {
-                println!("  board not found: {error}");
+                outln!("  board not found: {error}");
                 result.error = Some(error.to_string());
             }
             Err(error) => {
@@ -180,7 +180,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         write_atomic(output, yaml.as_bytes())
             .with_context(|| format!("writing {}", output.display()))?;
     }
-    println!(
+    outln!(
         "board found in {found_count} of {} images",
         args.images.len()
     );
@@ -195,7 +195,7 @@ fn live(
     detector: &TagDetector,
 ) -> anyhow::Result<()> {
     let mut camera = super::camera::uvc::open(&args.stream, Some(*camera_model))?;
-    println!("live detection: Ctrl-C to stop");
+    outln!("live detection: Ctrl-C to stop");
     loop {
         let frame = camera.grab(std::time::Instant::now())?;
         let detection = detector.detect(&frame.image)?;
@@ -203,12 +203,12 @@ fn live(
             Ok(pose) => {
                 let t = pose.camera_from_target.translation.vector;
                 let r = handeye::geometry::rotvec(&pose.camera_from_target.rotation);
-                println!(
+                outln!(
                     "T_camera_target: t [{:+.4}, {:+.4}, {:+.4}] m, rotvec [{:+.4}, {:+.4}, {:+.4}] rad, {} tags, RMS {:.2} px, distance {:.3} m",
                     t.x, t.y, t.z, r.x, r.y, r.z, pose.tags_used, pose.rms_px, t.norm()
                 );
             }
-            Err(e) => println!("board not found ({} tags seen): {e}", detection.tags.len()),
+            Err(e) => outln!("board not found ({} tags seen): {e}", detection.tags.len()),
         }
     }
 }

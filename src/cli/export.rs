@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic;
-use handeye::formats::{export, ExportFormat, FrameIds};
+use handeye::formats::{export, validate_frame_id, ExportFormat, FrameIds};
 use handeye::result::ResultFile;
 
 /// Export form on the command line.
@@ -27,7 +27,8 @@ enum FormatArg {
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
 /// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
-/// eye_to_hand T_base_camera and T_flange_target.
+/// eye_to_hand T_base_camera and T_flange_target. Frame ids follow ROS naming: ASCII letters,
+/// digits, `_` and `/` (no leading `/`, no part starting with a digit).
 #[derive(Debug, Args)]
 pub struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
@@ -54,23 +55,20 @@ pub struct ExportArgs {
 
 /// Runs `handeye export`.
 pub fn run(args: ExportArgs) -> anyhow::Result<()> {
-    let mounts = ResultFile::load_mounts(&args.result)?;
     let ids = FrameIds {
         base: args.base_frame,
         flange: args.flange_frame,
         camera: args.camera_frame,
         target: args.target_frame,
     };
+    // Checked before anything is read or written, with the flag in the message.
     for (flag, id) in [
         ("--base-frame", &ids.base),
         ("--flange-frame", &ids.flange),
         ("--camera-frame", &ids.camera),
         ("--target-frame", &ids.target),
     ] {
-        anyhow::ensure!(
-            !id.is_empty() && !id.contains(|c: char| c.is_whitespace() || "'\"<>&".contains(c)),
-            "{flag} `{id}`: a frame id must be non-empty without spaces, quotes or <>&"
-        );
+        validate_frame_id(id).with_context(|| format!("{flag} {id:?} is not a ROS frame id"))?;
     }
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
@@ -79,14 +77,16 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         FormatArg::Json => ExportFormat::Json,
         FormatArg::Opencv => ExportFormat::Opencv,
     };
-    let text = export(&mounts, format, &ids);
+    let mounts = ResultFile::load_mounts(&args.result)?;
+    let text = export(&mounts, format, &ids)
+        .with_context(|| format!("exporting {}", args.result.display()))?;
     match &args.output {
         Some(path) => {
             write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;
-            println!("wrote {} to {}", format.name(), path.display());
+            outln!("wrote {} to {}", format.name(), path.display());
         }
-        None => print!("{text}"),
+        None => out!("{text}"),
     }
     Ok(())
 }

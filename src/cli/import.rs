@@ -10,8 +10,8 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use handeye::camera_model::CameraModel;
 use handeye::config::{
-    CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig, SessionConfig,
-    SolverConfig, WorkspaceConfig,
+    CameraConfig, CellConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig,
+    SessionConfig, SolverConfig, WorkspaceConfig,
 };
 use handeye::dataset::Dataset;
 use handeye::formats::import::{
@@ -106,7 +106,7 @@ struct VispArgs {
     /// Skip images where the board is not found instead of failing.
     #[arg(long)]
     skip_unfound: bool,
-    /// Quad decimation of the detector (1 = full resolution).
+    /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 1.0)]
     decimation: f32,
     #[command(flatten)]
@@ -156,10 +156,9 @@ fn sibling(output: &Path, suffix: &str) -> PathBuf {
 }
 
 fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
-    dataset
-        .save(output)
-        .with_context(|| format!("writing {}", output.display()))?;
-    println!(
+    // The error names the file.
+    dataset.save(output)?;
+    outln!(
         "wrote {} samples ({}) to {}",
         dataset.pairs.len(),
         dataset.setup,
@@ -168,20 +167,74 @@ fn save(dataset: &Dataset, output: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+/// The canonical form of an existing path.
+fn canonical(path: &Path) -> anyhow::Result<PathBuf> {
     std::fs::canonicalize(path).with_context(|| format!("resolving {}", path.display()))
 }
 
-/// A recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
+/// The absolute form of a path that may not exist yet (an output about to be written).
+fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(path).with_context(|| format!("resolving {}", path.display()))
+}
+
+/// The files one import writes. Until [`Outputs::commit`], dropping it (an error on the way)
+/// removes every file it created, so a failed import leaves no partial outputs behind. (A file
+/// that existed before is replaced atomically by each writer and cannot be restored; it is kept.)
+#[derive(Default)]
+struct Outputs {
+    created: Vec<PathBuf>,
+    committed: bool,
+}
+
+impl Outputs {
+    /// Runs `write`, which writes `path`, and remembers `path` if it is new.
+    fn write(
+        &mut self,
+        path: &Path,
+        write: impl FnOnce() -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let existed = path.exists();
+        let result = write();
+        if !existed && path.exists() {
+            self.created.push(path.to_path_buf());
+        }
+        result
+    }
+
+    /// Keeps every file written.
+    fn commit(mut self) {
+        self.committed = true;
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        if self.committed {
+            return;
+        }
+        for path in &self.created {
+            match std::fs::remove_file(path) {
+                Ok(()) => tracing::warn!("removed {} (the import failed)", path.display()),
+                Err(e) => tracing::warn!(
+                    "the import failed and {} could not be removed: {e}",
+                    path.display()
+                ),
+            }
+        }
+    }
+}
+
+/// The recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
 /// order) are exactly the imported images, since the folder camera serves every image in it.
-fn write_cell(
+/// Built before anything is written, so a refusal leaves no files behind.
+fn cell_text(
     cell_out: &Path,
     folder: &Path,
     target: &Path,
     camera_info: &Path,
     poses: &Path,
     imported: &handeye::formats::import::VispImport,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<String> {
     let frames = handeye::camera::files::list_frames(folder)?;
     let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();
     anyhow::ensure!(
@@ -212,10 +265,10 @@ fn write_cell(
             hi[k] = hi[k].max(t[k] + 0.5);
         }
     }
-    let folder = absolute(folder)?;
+    let folder = canonical(folder)?;
     let config = ConfigFile {
         setup,
-        target: absolute(target)?,
+        target: canonical(target)?,
         intrinsics: Some(absolute(camera_info)?),
         robot: RobotConfig::Recorded {
             poses: absolute(poses)?,
@@ -240,17 +293,19 @@ fn write_cell(
         solver: SolverConfig::default(),
         session: SessionConfig::default(),
     };
-    config
-        .save(
-            cell_out,
-            &format!(
-                "Replays the ViSP folder {} as a session: handeye run --config <this file>",
-                folder.display()
-            ),
+    let header = format!(
+        "Replays the ViSP folder {} as a session: handeye run --config <this file>",
+        folder.display()
+    );
+    // Checked to load back as a valid cell config before anything is written.
+    let text = config.to_yaml(&header, cell_out)?;
+    CellConfig::parse(&text, cell_out).with_context(|| {
+        format!(
+            "{}: the cell config built for the import",
+            cell_out.display()
         )
-        .with_context(|| format!("writing {}", cell_out.display()))?;
-    println!("wrote a recorded-cell config to {}", cell_out.display());
-    Ok(())
+    })?;
+    Ok(text)
 }
 
 /// Runs `handeye import`.
@@ -278,8 +333,8 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("importing ViSP data from {}", a.folder.display()))?;
             for f in &imported.frames {
                 match (&f.skipped, f.rms_px) {
-                    (Some(why), _) => println!("{}: skipped: {why}", f.files.image.display()),
-                    (None, Some(rms)) => println!(
+                    (Some(why), _) => outln!("{}: skipped: {why}", f.files.image.display()),
+                    (None, Some(rms)) => outln!(
                         "{}: board RMS {rms:.3} px{}",
                         f.files.image.display(),
                         match f.ambiguity {
@@ -294,25 +349,40 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             let info = a
                 .camera_info_out
                 .unwrap_or_else(|| sibling(&a.common.output, "camera"));
-            imported
-                .camera
-                .save_camera_info(&info)
-                .with_context(|| format!("writing {}", info.display()))?;
-            println!("wrote the intrinsics to {}", info.display());
             let poses_out = a
                 .poses_out
                 .unwrap_or_else(|| sibling(&a.common.output, "poses"));
+            // Everything that can be refused is decided before the first file is written.
+            let cell = match &a.cell_out {
+                Some(cell_out) => Some((
+                    cell_out,
+                    cell_text(cell_out, &a.folder, &a.target, &info, &poses_out, &imported)?,
+                )),
+                None => None,
+            };
+            let mut outputs = Outputs::default();
+            outputs.write(&info, || {
+                // The errors of these writers name their file.
+                Ok(imported.camera.save_camera_info(&info)?)
+            })?;
+            outln!("wrote the intrinsics to {}", info.display());
             let poses: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
-            save_recorded_poses(&poses, &poses_out)
-                .with_context(|| format!("writing {}", poses_out.display()))?;
-            println!(
+            outputs.write(&poses_out, || Ok(save_recorded_poses(&poses, &poses_out)?))?;
+            outln!(
                 "wrote the recorded T_base_flange poses to {}",
                 poses_out.display()
             );
-            save(&imported.dataset, &a.common.output)?;
-            if let Some(cell_out) = &a.cell_out {
-                write_cell(cell_out, &a.folder, &a.target, &info, &poses_out, &imported)?;
+            outputs.write(&a.common.output, || {
+                save(&imported.dataset, &a.common.output)
+            })?;
+            if let Some((cell_out, text)) = cell {
+                outputs.write(cell_out, || {
+                    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+                        .with_context(|| format!("writing {}", cell_out.display()))
+                })?;
+                outln!("wrote a recorded-cell config to {}", cell_out.display());
             }
+            outputs.commit();
             Ok(())
         }
         ImportFormat::Moveit(a) => {

@@ -1,5 +1,8 @@
 //! Subcommands. Each file turns its arguments into library configuration, then calls the library.
 
+#[macro_use]
+pub(crate) mod out;
+
 mod camera;
 mod detect;
 mod export;
@@ -68,18 +71,18 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 /// Asks on the terminal before a real robot moves through `poses` poses; refuses when no one
 /// can answer (no terminal: `--yes` is the explicit way to run unattended).
 fn confirm_motion(prepared: &handeye::cell::PreparedCell, poses: usize) -> anyhow::Result<()> {
-    use std::io::{BufRead, IsTerminal, Write};
+    use std::io::{BufRead, IsTerminal};
     if !std::io::stdin().is_terminal() {
         anyhow::bail!(
             "a real robot is about to move and no one can confirm: pass --yes to run unattended"
         );
     }
-    print!(
+    out!(
         "About to move the real robot through {poses} poses at up to {:.2} m/s and {:.0} °/s. Type `yes` to start: ",
         prepared.config.limits.linear_speed,
         prepared.config.limits.joint_speed.to_degrees()
     );
-    std::io::stdout().flush()?;
+    out::flush();
     let mut line = String::new();
     std::io::stdin().lock().read_line(&mut line)?;
     if line.trim() != "yes" {

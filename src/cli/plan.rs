@@ -85,7 +85,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
             }
             let views = match &config {
                 Some(config) => cell::prepare(config)
-                    .with_context(|| format!("preparing {}", config.display()))?
+                    .context("preparing the cell")?
                     .generate_views(&spec),
                 None => generate(&spec),
             };
@@ -93,16 +93,15 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
                 waypoints: views.into_iter().map(Waypoint::LookAt).collect(),
             };
             plan.save(&output)?;
-            println!(
+            outln!(
                 "wrote {count} look-at views to {}; check them with `handeye plan check`",
                 output.display()
             );
             Ok(())
         }
         PlanCommand::Check { config } => {
-            let prepared = cell::prepare(&config)
-                .with_context(|| format!("preparing {}", config.display()))?;
-            println!("{}", prepared.report);
+            let prepared = cell::prepare(&config).context("preparing the cell")?;
+            outln!("{}", prepared.report);
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");
             }

@@ -29,19 +29,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let prepared = cell::prepare(&config_path)
-        .with_context(|| format!("reading {}", config_path.display()))?;
+    let prepared = cell::prepare(&config_path).context("preparing the cell")?;
     // A cell without configured intrinsics replays with the ones its run estimated.
     let camera_model = if prepared.intrinsics_known {
         prepared.camera_model
     } else {
         let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
-        CameraModel::load(&file).with_context(|| {
-            format!(
-                "the config has no intrinsics and the session has no estimated {}: solve the session first",
-                file.display()
-            )
-        })?
+        CameraModel::load(&file).context(
+            "the config has no intrinsics and the session has no estimated ones: solve the session first",
+        )?
     };
     let (dataset, visits) = replay::redetect(
         &folder,
@@ -52,11 +48,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     )?;
     for v in &visits {
         match (&v.rejected, v.reprojection_rms_px) {
-            (None, Some(rms)) => println!(
+            (None, Some(rms)) => outln!(
                 "pose {:>3}: {} tags, board RMS {rms:.3} px",
-                v.plan_index, v.tags
+                v.plan_index,
+                v.tags
             ),
-            (Some(why), _) => println!("pose {:>3}: skipped: {why}", v.plan_index),
+            (Some(why), _) => outln!("pose {:>3}: skipped: {why}", v.plan_index),
             _ => {}
         }
     }
@@ -75,12 +72,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .output
         .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
     ResultFile::from_calibration(calibration, &dataset.pairs).save(&output)?;
-    println!("{}", solved.summary);
+    outln!("{}", solved.summary);
     if folder.result_path().is_file() {
         let recorded = ResultFile::load_mounts(&folder.result_path())?;
         let then = [recorded.camera_mount, recorded.target_mount];
         for ((key, now), then) in calibration.unknowns().iter().zip(then.iter()) {
-            println!(
+            outln!(
                 "{key}: replay differs from the recorded result by {:.4} mm, {:.5}°",
                 (now.translation.vector - then.translation.vector).norm() * 1e3,
                 now.rotation.angle_to(&then.rotation).to_degrees()
@@ -88,8 +85,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(truth) = &prepared.config.simulation {
-        println!("{}", solved.compare_with_truth(truth));
+        outln!("{}", solved.compare_with_truth(truth));
     }
-    println!("wrote {}", output.display());
+    outln!("wrote {}", output.display());
     Ok(())
 }

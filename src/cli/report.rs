@@ -36,14 +36,9 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let result_path = folder.result_path();
     let calibration = ResultFile::load(&result_path)
         .and_then(|r| r.to_calibration(&result_path))
-        .with_context(|| {
-            format!(
-                "reading {} (solve the session first: `handeye replay`)",
-                result_path.display()
-            )
-        })?;
+        .context("no usable result (solve the session first: `handeye replay`)")?;
     let label = format!("result.yaml ({})", calibration.solver.method.name());
     let path = write_session_report(&folder, config.as_ref(), vec![(label, calibration)])?;
-    println!("report: {}", path.display());
+    outln!("report: {}", path.display());
     Ok(())
 }

@@ -50,7 +50,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut printer = Printer { bar: None, stop };
     let done = cell::run::run(&request, &mut printer)?;
     if !done.outcome.skipped.is_empty() {
-        println!(
+        outln!(
             "skipped poses: {}",
             done.outcome
                 .skipped
@@ -61,9 +61,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         );
     }
     let result = &done.solved;
-    println!("{}", result.summary);
+    outln!("{}", result.summary);
     if let Some(truth) = &done.cell.config.simulation {
-        println!("{}", result.compare_with_truth(truth));
+        outln!("{}", result.compare_with_truth(truth));
     }
     let mut answers = Vec::new();
     if result.reprojection.is_some() {
@@ -75,11 +75,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         Some(&done.cell.config),
         answers,
     ) {
-        Ok(path) => println!("report: {}", path.display()),
+        Ok(path) => outln!("report: {}", path.display()),
         // The calibration is saved; a report problem must not hide it.
         Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
     }
-    println!("session folder: {}", done.folder.root().display());
+    outln!("session folder: {}", done.folder.root().display());
     Ok(())
 }
 
@@ -91,7 +91,7 @@ struct Printer {
 
 impl RunObserver for Printer {
     fn plan_checked(&mut self, cell: &PreparedCell) {
-        println!("{}", cell.report);
+        outln!("{}", cell.report);
     }
 
     fn confirm_motion(

@@ -121,8 +121,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.samples)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let config = CellConfig::load(&config_path)
-        .with_context(|| format!("reading {}", config_path.display()))?;
+    let config = CellConfig::load(&config_path).context("reading the cell config")?;
     let space = match args.space {
         Some(SpaceArg::Pose) => SolveSpace::Pose,
         Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
@@ -132,16 +131,16 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
         .with_context(|| format!("solving session {}", args.samples.display()))?;
     let config = &inputs.config;
-    println!("{}", solved.summary);
+    outln!("{}", solved.summary);
     if let Some(truth) = &config.simulation {
-        println!("{}", solved.compare_with_truth(truth));
+        outln!("{}", solved.compare_with_truth(truth));
     }
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
     ResultFile::from_calibration(&solved.calibration, &dataset.pairs).save(&output)?;
-    println!("wrote {}", output.display());
+    outln!("wrote {}", output.display());
     Ok(())
 }
 
@@ -160,11 +159,11 @@ pub fn run(args: SolveArgs) -> anyhow::Result<()> {
     let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
         .with_context(|| format!("solving {}", args.samples.display()))?;
 
-    println!("{} samples", dataset.pairs.len());
-    println!("{}", calibration.summary());
+    outln!("{} samples", dataset.pairs.len());
+    outln!("{}", calibration.summary());
     if let Some(output) = &args.output {
         ResultFile::from_calibration(&calibration, &dataset.pairs).save(output)?;
-        println!("wrote {}", output.display());
+        outln!("wrote {}", output.display());
     }
     Ok(())
 }

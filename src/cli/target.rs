@@ -65,7 +65,7 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             };
             write_atomic(&output, &bytes)
                 .with_context(|| format!("writing {}", output.display()))?;
-            println!("wrote {}", output.display());
+            outln!("wrote {}", output.display());
             Ok(())
         }
     }

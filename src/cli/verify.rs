@@ -49,8 +49,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
         let mounts = ResultFile::load_mounts(result)?;
-        let mut prepared = cell::prepare(config)
-            .with_context(|| format!("preparing the cell from {}", config.display()))?;
+        let mut prepared = cell::prepare(config).context("preparing the cell")?;
         let base = prepared.config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -89,10 +88,10 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
             stop,
             &mut |_e: SessionEvent| {},
         )?;
-        println!("{}", v.table());
+        outln!("{}", v.table());
         let text = serde_yaml_ng::to_string(&v)?;
         write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
-        println!("holdout session: {}", out.display());
+        outln!("holdout session: {}", out.display());
         return Ok(());
     }
     let (setup, pairs, options) = if let Some(dir) = &args.session {
@@ -109,6 +108,6 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
     let v = verify::leave_one_out(setup, &pairs, &options)?;
-    println!("{}", v.table());
+    outln!("{}", v.table());
     Ok(())
 }

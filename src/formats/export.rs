@@ -13,15 +13,109 @@
 //! joint from parent link to child link). Numbers are printed with Rust's shortest round-trip
 //! formatting, so nothing is lost to printing. The camera frame is the optical frame (x right,
 //! y down, z forward): name its ROS id accordingly (`*_optical_frame`).
+//!
+//! Refusals: frame ids must follow ROS's naming rules ([`validate_frame_id`]: they are pasted
+//! into shell command lines, Python, XML and URScript), and every ROS 2 command line is
+//! shell-quoted anyway (`shlex`). A transform that is not finite or lies farther than
+//! `geometry::MAX_TRANSLATION_M` from its parent is refused rather than exported.
 //! Depends on `geometry`, `setup::Setup` and `setup::CellTransforms` only; writes no files.
 
 use std::fmt::Write as _;
 
 use serde_json::json;
 
-use crate::geometry::{rotvec, to_matrix4_rows, Pose};
+use crate::geometry::{check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem};
 use crate::setup::CellTransforms;
 use crate::setup::Setup;
+
+/// Why a result cannot be exported.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// A frame id that is not a valid ROS frame id.
+    #[error("{role} frame id {id:?}: {problem}")]
+    FrameId {
+        /// Which frame (`base`, `flange`, `camera`, `target`).
+        role: &'static str,
+        /// The id as given.
+        id: String,
+        /// Which rule it breaks.
+        problem: FrameIdProblem,
+    },
+    /// A transform with an implausible translation (in the message, so not a `#[source]`).
+    #[error("{key}: translation {problem}: refusing to export it")]
+    Translation {
+        /// `T_a_b` of the transform.
+        key: &'static str,
+        /// What is wrong.
+        problem: TranslationProblem,
+    },
+    /// A transform whose rotation is not a finite unit quaternion.
+    #[error("{key}: rotation quaternion (x, y, z, w) {quaternion:?} is not a finite unit quaternion: refusing to export it")]
+    Rotation {
+        /// `T_a_b` of the transform.
+        key: &'static str,
+        /// The quaternion as found.
+        quaternion: [f64; 4],
+    },
+}
+
+/// The ROS naming rules a frame id breaks ([`validate_frame_id`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FrameIdProblem {
+    /// Empty.
+    #[error("a frame id must not be empty")]
+    Empty,
+    /// Longer than [`MAX_FRAME_ID_LEN`].
+    #[error("longer than {MAX_FRAME_ID_LEN} characters")]
+    TooLong,
+    /// A character other than ASCII letters, digits, `_` and `/`.
+    #[error(
+        "character {0:?} is not allowed (ROS frame ids use ASCII letters, digits, `_` and `/`)"
+    )]
+    Character(char),
+    /// Starts with `/` (tf2 refuses a leading slash).
+    #[error("must not start with `/` (tf2 frame ids are relative)")]
+    LeadingSlash,
+    /// Ends with `/`, or holds `//`.
+    #[error("must not end with `/` or contain `//`")]
+    EmptySegment,
+    /// A `/`-separated part starts with a digit.
+    #[error("each `/`-separated part must start with a letter or `_`, not a digit")]
+    LeadingDigit,
+}
+
+/// Longest accepted frame id.
+pub const MAX_FRAME_ID_LEN: usize = 256;
+
+/// Checks a frame id against ROS's naming rules (ROS 2 names and tf2 frame ids): ASCII letters,
+/// digits, `_` and `/`; no leading `/`, no empty `/`-separated part, no part starting with a
+/// digit. Ids that pass are also safe, unquoted, in a shell word, a Python or XML string and
+/// (with `/` replaced) a URScript name.
+pub fn validate_frame_id(id: &str) -> Result<(), FrameIdProblem> {
+    if id.is_empty() {
+        return Err(FrameIdProblem::Empty);
+    }
+    if id.len() > MAX_FRAME_ID_LEN {
+        return Err(FrameIdProblem::TooLong);
+    }
+    if let Some(c) = id
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '/'))
+    {
+        return Err(FrameIdProblem::Character(c));
+    }
+    if id.starts_with('/') {
+        return Err(FrameIdProblem::LeadingSlash);
+    }
+    for part in id.split('/') {
+        match part.chars().next() {
+            None => return Err(FrameIdProblem::EmptySegment),
+            Some(c) if c.is_ascii_digit() => return Err(FrameIdProblem::LeadingDigit),
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
 
 /// An export form.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -71,6 +165,25 @@ pub struct FrameIds {
     pub camera: String,
     /// The board frame.
     pub target: String,
+}
+
+impl FrameIds {
+    /// Checks every id with [`validate_frame_id`].
+    pub fn validate(&self) -> Result<(), ExportError> {
+        for (role, id) in [
+            ("base", &self.base),
+            ("flange", &self.flange),
+            ("camera", &self.camera),
+            ("target", &self.target),
+        ] {
+            validate_frame_id(id).map_err(|problem| ExportError::FrameId {
+                role,
+                id: id.clone(),
+                problem,
+            })?;
+        }
+        Ok(())
+    }
 }
 
 impl Default for FrameIds {
@@ -123,16 +236,52 @@ pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [NamedTransf
     ]
 }
 
-/// The text of `mounts` in `format`.
-pub fn export(mounts: &CellTransforms, format: ExportFormat, ids: &FrameIds) -> String {
+/// The text of `mounts` in `format`, after checking the frame ids ([`FrameIds::validate`]) and
+/// that both transforms are finite and within `geometry::MAX_TRANSLATION_M`.
+pub fn export(
+    mounts: &CellTransforms,
+    format: ExportFormat,
+    ids: &FrameIds,
+) -> Result<String, ExportError> {
+    ids.validate()?;
     let transforms = named_transforms(mounts, ids);
-    match format {
+    for t in &transforms {
+        check_translation(&t.parent_from_child.translation.vector).map_err(|problem| {
+            ExportError::Translation {
+                key: t.key,
+                problem,
+            }
+        })?;
+        let q = t.parent_from_child.rotation.into_inner();
+        if !(q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6) {
+            return Err(ExportError::Rotation {
+                key: t.key,
+                quaternion: [q.i, q.j, q.k, q.w],
+            });
+        }
+    }
+    Ok(match format {
         ExportFormat::Ros2 => ros2(mounts.setup, &transforms),
         ExportFormat::Urdf => urdf(mounts.setup, &transforms),
         ExportFormat::Ur => ur(mounts.setup, &transforms),
         ExportFormat::Json => json_text(mounts.setup, &transforms),
         ExportFormat::Opencv => opencv(mounts.setup, &transforms),
-    }
+    })
+}
+
+/// One POSIX shell command line, each word quoted where the shell would otherwise interpret
+/// it (validated frame ids and numbers never need it; the quoting is a second guard).
+fn shell_line(words: &[String]) -> String {
+    words
+        .iter()
+        .map(|w| match shlex::try_quote(w) {
+            Ok(quoted) => quoted.into_owned(),
+            // Only a NUL byte cannot be quoted, and validated ids and numbers hold none; an
+            // empty word keeps the line visibly broken rather than silently shorter.
+            Err(_) => "''".to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
@@ -145,11 +294,27 @@ fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
             t.parent_from_child.translation.vector,
             t.parent_from_child.rotation,
         );
-        let _ = writeln!(
-            out,
-            "# {}\nros2 run tf2_ros static_transform_publisher --x {} --y {} --z {} --qx {} --qy {} --qz {} --qw {} --frame-id {} --child-frame-id {}",
-            t.key, p.x, p.y, p.z, q.i, q.j, q.k, q.w, t.parent, t.child
-        );
+        let mut words: Vec<String> = ["ros2", "run", "tf2_ros", "static_transform_publisher"]
+            .iter()
+            .map(|w| w.to_string())
+            .collect();
+        for (flag, value) in [
+            ("--x", p.x),
+            ("--y", p.y),
+            ("--z", p.z),
+            ("--qx", q.i),
+            ("--qy", q.j),
+            ("--qz", q.k),
+            ("--qw", q.w),
+        ] {
+            words.push(flag.to_string());
+            words.push(value.to_string());
+        }
+        for (flag, id) in [("--frame-id", &t.parent), ("--child-frame-id", &t.child)] {
+            words.push(flag.to_string());
+            words.push(id.clone());
+        }
+        let _ = writeln!(out, "# {}\n{}", t.key, shell_line(&words));
     }
     out.push_str(
         "\n# Launch snippet (Python launch file):\n\
@@ -216,7 +381,10 @@ fn ur(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
             let _ = writeln!(
                 out,
                 "# {}: a pose in the robot base frame (e.g. a plane or point feature):\n{}_{} = {literal}",
-                t.key, t.parent, t.child
+                t.key,
+                // URScript names take no `/`.
+                t.parent.replace('/', "_"),
+                t.child.replace('/', "_")
             );
         }
     }
@@ -325,7 +493,7 @@ mod tests {
             (target.key, target.parent.as_str()),
             ("T_flange_target", "tool0")
         );
-        let ur_text = export(&mounts(Setup::EyeToHand), ExportFormat::Ur, &ids);
+        let ur_text = export(&mounts(Setup::EyeToHand), ExportFormat::Ur, &ids).unwrap();
         assert!(ur_text.contains("set_tcp(p["), "{ur_text}");
         assert!(
             ur_text.contains("base_camera_optical_frame = p["),

@@ -21,6 +21,10 @@
 //!   row with no numeric field is a header. Any other row must have exactly the expected number
 //!   of finite numbers, or the import fails naming the file and line.
 //!
+//! Every translation read is checked by `geometry::check_translation` (finite, within
+//! `MAX_TRANSLATION_M` of the origin), the same rule the YAML pose form applies. The ViSP XML is
+//! parsed as XML (comments are not values); the MoveIt JSON must be one array and nothing more.
+//!
 //! Depends on `geometry`, `solve`, `camera_model`, `target` (ViSP detection) and
 //! `robot::recorded` (the recorded-poses form); writes no files itself except through the
 //! callers' save functions.
@@ -31,7 +35,9 @@ use nalgebra::{Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::camera_model::{CameraModel, Distortion};
 use crate::dataset::Dataset;
-use crate::geometry::{pose_from_rotvec, rotation_from_matrix, Pose};
+use crate::geometry::{
+    check_translation, pose_from_rotvec, rotation_from_matrix, Pose, TranslationProblem,
+};
 use crate::setup::{PosePair, Setup};
 use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
 
@@ -84,6 +90,16 @@ pub enum ImportError {
         /// What is wrong.
         problem: String,
     },
+    /// A translation no robot cell has (`geometry::check_translation`, shared by every loader).
+    #[error("{}: {location}: translation {problem}", path.display())]
+    Translation {
+        /// The file.
+        path: PathBuf,
+        /// Which sample and pose (`sample 3 (T_base_flange)`, `line 7, T_camera_target`).
+        location: String,
+        /// What is wrong (in the message, so not a `#[source]`).
+        problem: TranslationProblem,
+    },
     /// A folder lacks what the import needs.
     #[error("{}: {problem}", folder.display())]
     Folder {
@@ -105,6 +121,20 @@ pub enum ImportError {
     /// An image could not be read, or the detector failed to start.
     #[error("detection")]
     Target(#[source] Box<TargetError>),
+}
+
+/// A loaded translation (m), checked by the one rule every loader shares.
+fn checked_translation(
+    t: Vector3<f64>,
+    path: &Path,
+    location: &str,
+) -> Result<Vector3<f64>, ImportError> {
+    check_translation(&t).map_err(|problem| ImportError::Translation {
+        path: path.to_path_buf(),
+        location: location.to_string(),
+        problem,
+    })?;
+    Ok(t)
 }
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
@@ -152,33 +182,55 @@ pub fn read_visp_pose(path: &Path) -> Result<Pose, ImportError> {
             problem: format!("{} is not a finite number", values[i]),
         });
     }
-    Ok(pose_from_rotvec(
+    let translation = checked_translation(
         Vector3::new(values[0], values[1], values[2]),
+        path,
+        "data[0..3] (T_base_flange)",
+    )?;
+    Ok(pose_from_rotvec(
+        translation,
         Vector3::new(values[3], values[4], values[5]),
     ))
 }
 
-/// The text between `<tag>` and `</tag>` (first occurrence), trimmed.
-fn xml_element<'a>(text: &'a str, tag: &str) -> Option<&'a str> {
-    let open = format!("<{tag}>");
-    let close = format!("</{tag}>");
-    let start = text.find(&open)? + open.len();
-    let end = start + text[start..].find(&close)?;
-    Some(text[start..end].trim())
+/// The first child element of `node` named `tag`.
+fn xml_child<'a, 'input>(
+    node: roxmltree::Node<'a, 'input>,
+    tag: &str,
+) -> Option<roxmltree::Node<'a, 'input>> {
+    node.children()
+        .find(|n| n.is_element() && n.tag_name().name() == tag)
+}
+
+/// The trimmed text of `node`'s child element `tag` (comments and CDATA handled by the XML
+/// parser: a commented-out value is not a value).
+fn xml_text(node: roxmltree::Node<'_, '_>, tag: &str) -> Option<String> {
+    let child = xml_child(node, tag)?;
+    let text: String = child
+        .children()
+        .filter(|n| n.is_text())
+        .filter_map(|n| n.text())
+        .collect();
+    Some(text.trim().to_string())
 }
 
 /// Reads ViSP `vpXmlParserCamera` intrinsics. With several `<model>` entries the one with
-/// distortion (`perspectiveProjWithDistortion`) is used; its `kud` becomes radial `k1`.
+/// distortion (`perspectiveProjWithDistortion`) is used; its `kud` becomes radial `k1`. The
+/// file is parsed as XML (`roxmltree`), so comments, CDATA and entities mean what they mean.
 pub fn read_visp_camera_xml(path: &Path) -> Result<CameraModel, ImportError> {
     let text = read_text(path)?;
-    let format = |problem: &str| ImportError::Format {
+    let format = |problem: String| ImportError::Format {
         path: path.to_path_buf(),
         expected: "ViSP vpXmlParserCamera XML",
-        problem: problem.to_string(),
+        problem,
     };
-    let camera = xml_element(&text, "camera").ok_or_else(|| format("no <camera> element"))?;
-    let number = |scope: &str, tag: &str| -> Result<f64, ImportError> {
-        let raw = xml_element(scope, tag).ok_or_else(|| ImportError::Value {
+    let document = roxmltree::Document::parse(&text).map_err(|e| format(e.to_string()))?;
+    let camera = document
+        .descendants()
+        .find(|n| n.is_element() && n.tag_name().name() == "camera")
+        .ok_or_else(|| format("no <camera> element".into()))?;
+    let number = |scope: roxmltree::Node<'_, '_>, tag: &str| -> Result<f64, ImportError> {
+        let raw = xml_text(scope, tag).ok_or_else(|| ImportError::Value {
             path: path.to_path_buf(),
             location: format!("<{tag}>"),
             problem: "missing".into(),
@@ -192,19 +244,19 @@ pub fn read_visp_camera_xml(path: &Path) -> Result<CameraModel, ImportError> {
                 problem: format!("`{raw}` is not a finite number"),
             })
     };
-    let mut models = Vec::new();
-    let mut rest = camera;
-    while let Some(model) = xml_element(rest, "model") {
-        models.push(model);
-        let after = rest.find("</model>").map(|i| i + "</model>".len());
-        rest = &rest[after.unwrap_or(rest.len())..];
-    }
-    let chosen = models
+    let models: Vec<roxmltree::Node<'_, '_>> = camera
+        .children()
+        .filter(|n| n.is_element() && n.tag_name().name() == "model")
+        .collect();
+    let with_distortion = |m: &roxmltree::Node<'_, '_>| {
+        xml_text(*m, "type").as_deref() == Some("perspectiveProjWithDistortion")
+    };
+    let chosen = *models
         .iter()
-        .find(|m| xml_element(m, "type") == Some("perspectiveProjWithDistortion"))
+        .find(|m| with_distortion(m))
         .or_else(|| models.first())
-        .ok_or_else(|| format("no <model> element inside <camera>"))?;
-    let distortion = if xml_element(chosen, "type") == Some("perspectiveProjWithDistortion") {
+        .ok_or_else(|| format("no <model> element inside <camera>".into()))?;
+    let distortion = if with_distortion(&chosen) {
         let k1 = number(chosen, "kud")?;
         if k1 == 0.0 {
             Distortion::None
@@ -509,10 +561,8 @@ pub fn pose_from_matrix4(
             r.determinant()
         ))
     })?;
-    Ok(Pose::from_parts(
-        Translation3::new(m[0][3], m[1][3], m[2][3]),
-        rotation,
-    ))
+    let translation = checked_translation(Vector3::new(m[0][3], m[1][3], m[2][3]), path, location)?;
+    Ok(Pose::from_parts(Translation3::from(translation), rotation))
 }
 
 /// Reads MoveIt Calibration's pose-sample JSON: `[[T_base_flange, T_camera_target], ...]`, 4x4
@@ -526,6 +576,13 @@ pub fn import_moveit_json(path: &Path) -> Result<Vec<PosePair>, ImportError> {
             expected: "MoveIt Calibration pose-sample JSON ([[T_base_flange 4x4, T_camera_target 4x4], ...])",
             problem: format!("at {}: {}", e.path(), e.inner()),
         })?;
+    // The whole input must be that one array: trailing text means a truncated copy, two files
+    // pasted together or a different format, never something to ignore.
+    deserializer.end().map_err(|e| ImportError::Format {
+        path: path.to_path_buf(),
+        expected: "MoveIt Calibration pose-sample JSON (one array and nothing after it)",
+        problem: format!("text after the array: {e}"),
+    })?;
     if samples.is_empty() {
         return Err(ImportError::Format {
             path: path.to_path_buf(),
@@ -659,7 +716,11 @@ fn csv_pose(
     which: &str,
 ) -> Result<Pose, ImportError> {
     let scale = if options.millimetres { 1e-3 } else { 1.0 };
-    let t = Vector3::new(values[0], values[1], values[2]) * scale;
+    let t = checked_translation(
+        Vector3::new(values[0], values[1], values[2]) * scale,
+        path,
+        &format!("line {line}, {which}"),
+    )?;
     match options.form {
         CsvPoseForm::RotationVector => Ok(pose_from_rotvec(
             t,

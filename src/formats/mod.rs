@@ -7,5 +7,5 @@
 pub mod export;
 pub mod import;
 
-pub use export::{export, ExportFormat, FrameIds};
+pub use export::{export, validate_frame_id, ExportError, ExportFormat, FrameIds};
 pub use import::ImportError;

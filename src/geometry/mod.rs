@@ -57,6 +57,60 @@ pub fn rotation_from_matrix(m: &Matrix3<f64>, tol: f64) -> Option<UnitQuaternion
     ))
 }
 
+/// Largest accepted distance of any loaded or exported translation from its frame's origin, m.
+/// A robot cell spans a few metres; 100 m leaves room for gantries and mobile bases while a
+/// value in millimetres read as metres (500 mm → 500 m), a sign-bit typo or a `1e300` is
+/// refused before it reaches the solver (where it would give a 1e298 mm answer and NaN
+/// covariances).
+pub const MAX_TRANSLATION_M: f64 = 100.0;
+
+/// Why a translation is not plausible for a robot cell.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum TranslationProblem {
+    /// NaN or infinity in a component.
+    #[error("value is not finite ({0})")]
+    NotFinite(f64),
+    /// Farther from the origin than [`MAX_TRANSLATION_M`].
+    #[error(
+        "[{}, {}, {}] m lies {} m from the origin, beyond the {MAX_TRANSLATION_M} m a robot \
+         cell spans (millimetres given as metres?)",
+        readable(.value[0]), readable(.value[1]), readable(.value[2]), readable(*.norm)
+    )]
+    TooFar {
+        /// The translation, m.
+        value: [f64; 3],
+        /// Its length, m.
+        norm: f64,
+    },
+}
+
+/// A number for a message: plain when moderate, in exponent form when huge or tiny (Rust's
+/// `{}` would print all 301 digits of `1e300`).
+fn readable(v: f64) -> String {
+    if v == 0.0 || (1e-4..1e6).contains(&v.abs()) || !v.is_finite() {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// The one check every loader applies to a translation (m): finite, and within
+/// [`MAX_TRANSLATION_M`] of the origin. Callers add the file, sample and field to the error.
+pub fn check_translation(t: &Vector3<f64>) -> Result<(), TranslationProblem> {
+    if let Some(bad) = t.iter().find(|v| !v.is_finite()) {
+        return Err(TranslationProblem::NotFinite(*bad));
+    }
+    // hypot does not overflow where `t.norm()` squares 1e300 to infinity.
+    let norm = t.x.hypot(t.y).hypot(t.z);
+    if norm > MAX_TRANSLATION_M {
+        return Err(TranslationProblem::TooFar {
+            value: [t.x, t.y, t.z],
+            norm,
+        });
+    }
+    Ok(())
+}
+
 /// The 4x4 homogeneous matrix of a pose (row-major nested arrays, as written in files).
 pub fn to_matrix4_rows(pose: &Pose) -> [[f64; 4]; 4] {
     let m = pose.to_homogeneous();
@@ -73,6 +127,26 @@ pub fn to_matrix4_rows(pose: &Pose) -> [[f64; 4]; 4] {
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    #[test]
+    fn translations_beyond_a_robot_cell_are_refused() {
+        assert!(check_translation(&Vector3::new(0.5, -1.2, 99.0)).is_ok());
+        let far = check_translation(&Vector3::new(1e300, 0.0, 0.0)).unwrap_err();
+        assert!(matches!(far, TranslationProblem::TooFar { norm, .. } if norm == 1e300));
+        assert_eq!(
+            far.to_string(),
+            "[1e300, 0, 0] m lies 1e300 m from the origin, beyond the 100 m a robot cell spans \
+             (millimetres given as metres?)"
+        );
+        assert!(check_translation(&Vector3::new(1e200, -1e200, 0.0)).is_err());
+        assert_eq!(
+            check_translation(&Vector3::new(0.0, f64::NAN, 0.0))
+                .unwrap_err()
+                .to_string(),
+            "value is not finite (NaN)"
+        );
+        assert!(check_translation(&Vector3::new(0.0, 0.0, 100.001)).is_err());
+    }
 
     #[test]
     fn rotvec_round_trips_near_180_degrees() {

@@ -9,7 +9,7 @@
 use nalgebra::{Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{rotation_from_matrix, rotvec, Pose};
+use super::{check_translation, rotation_from_matrix, rotvec, Pose, TranslationProblem};
 
 /// Largest accepted deviation of a quaternion's norm from 1 before it is called wrong
 /// (not silently renormalised).
@@ -102,6 +102,9 @@ pub enum PoseProblem {
     /// NaN or infinity.
     #[error("value is not finite ({0})")]
     NotFinite(f64),
+    /// A translation no robot cell has (see [`super::MAX_TRANSLATION_M`]).
+    #[error("{0}")]
+    Translation(TranslationProblem),
     /// A quaternion whose norm is off by more than [`QUATERNION_NORM_TOLERANCE`].
     #[error("quaternion norm is {0:.9}, expected 1 within {QUATERNION_NORM_TOLERANCE:e} (not renormalised: check the values and the component names w, x, y, z)")]
     QuaternionNorm(f64),
@@ -144,6 +147,14 @@ fn vector3(values: &[f64], path: &str, field: &str) -> Result<Vector3<f64>, Pose
     Ok(Vector3::new(values[0], values[1], values[2]))
 }
 
+/// A `translation` field: three numbers, checked by [`check_translation`].
+fn translation(values: &[f64], path: &str) -> Result<Vector3<f64>, PoseError> {
+    let t = vector3(values, path, "translation")?;
+    check_translation(&t)
+        .map_err(|problem| err(path, "translation", PoseProblem::Translation(problem)))?;
+    Ok(t)
+}
+
 fn finite(values: &[f64], path: &str, field: &str) -> Result<(), PoseError> {
     match values.iter().find(|v| !v.is_finite()) {
         Some(bad) => Err(err(path, field, PoseProblem::NotFinite(*bad))),
@@ -165,7 +176,7 @@ impl PoseYaml {
     /// Validates and converts to a pose; `path` is this pose's YAML path, used in errors.
     pub fn to_pose(&self, path: &str) -> Result<Pose, PoseError> {
         let translation = match &self.translation {
-            Some(t) => vector3(t, path, "translation")?,
+            Some(t) => translation(t, path)?,
             None => return Err(err(path, "", PoseProblem::MissingTranslation)),
         };
         let given: Vec<&str> = [
@@ -273,7 +284,7 @@ impl PoseRecord {
 
     /// Reads the pose back, checking that both rotation forms agree.
     pub fn to_pose(&self, path: &str) -> Result<Pose, PoseError> {
-        let translation = vector3(&self.translation, path, "translation")?;
+        let translation = translation(&self.translation, path)?;
         let rotation = unit_quaternion(&self.quaternion, path)?;
         let from_rotvec = UnitQuaternion::from_scaled_axis(vector3(
             &self.rotation_vector,
@@ -318,6 +329,8 @@ mod tests {
             ("translation: [0, 0]\nrotation_vector: [0, 0, 0]", "samples[3].T_camera_target.translation: expected 3 numbers, found 2"),
             ("translation: [0, .nan, 0]\nrotation_vector: [0, 0, 0]", "translation: value is not finite"),
             ("translation: [0, 0, 0]\nrotation_vector: [0, .inf, 0]", "rotation_vector: value is not finite"),
+            // Issue #13.7: a huge finite translation.
+            ("translation: [1e300, 0, 0]\nrotation_vector: [0, 0, 0]", "samples[3].T_camera_target.translation: [1e300, 0, 0] m lies 1e300 m from the origin, beyond the 100 m"),
             ("translation: [0, 0, 0]\nquaternion: {w: 1, x: 0.01, y: 0, z: 0}", "samples[3].T_camera_target.quaternion: quaternion norm is 1.000049999"),
             ("translation: [0, 0, 0]\nmatrix: [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]", "matrix: not a rotation matrix"),
             ("translation: [0, 0, 0]\nmatrix: [[1, 0, 0], [0, 1, 0]]", "matrix: expected 3 numbers, found 2"),

@@ -552,17 +552,14 @@ impl SolvedSession {
     }
 
     fn describe(&self, notes: &[String]) -> String {
-        let Some(reprojection) = &self.reprojection else {
+        let (Some(reprojection), Some(pose_errors)) = (&self.reprojection, &self.pose_space_errors)
+        else {
             let mut out = self.pose_space.summary();
             for note in notes {
                 let _ = write!(out, "\nnote: {note}");
             }
             return out;
         };
-        let pose_errors = self
-            .pose_space_errors
-            .as_ref()
-            .expect("set with the reprojection answer");
         let mut out = self.calibration.summary();
         let p = &self.pose_space;
         let c = &self.calibration;

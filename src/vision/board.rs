@@ -99,7 +99,7 @@ impl Board {
             TargetError::BoardYaml {
                 path: path.to_path_buf(),
                 key: error.path().to_string(),
-                source: error.into_inner(),
+                problem: error.into_inner(),
             }
         })?;
         if file.target_type != "aprilgrid" {

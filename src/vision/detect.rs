@@ -8,20 +8,28 @@
 //!
 //! Pixel convention: the C library puts pixel centres at `i + 0.5`; this project (OpenCV, ROS,
 //! Kalibr) puts them at integers. The conversion (subtract 0.5 px) happens here, in
-//! [`to_project_pixels`], and nowhere else. Depends on `vision::board`, `vision::family`.
+//! [`to_project_pixels`], and nowhere else. The C calls themselves are in `vision::ffi`, which
+//! also refuses images too small for the detector. Depends on `vision::board`,
+//! `vision::family`, `vision::ffi`.
 
 use std::path::Path;
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 
-use apriltag::{Detector, Image};
-use apriltag_sys as sys;
 use image::GrayImage;
 use nalgebra::{Point2, Point3};
 
 use super::board::Board;
 use super::family::TagFamily;
+use super::ffi;
 use super::TargetError;
+
+/// Largest accepted quad decimation: beyond it the quad search sees a thumbnail in which no
+/// tag a camera can resolve survives (and the C code truncates the factor to an `int`).
+pub const MAX_DECIMATION: f32 = 16.0;
+/// Largest accepted `|quad_sigma|`, px: the blur kernel (4σ wide) must stay far narrower than
+/// any image the detector accepts.
+pub const MAX_QUAD_SIGMA: f32 = 4.0;
 
 /// Detector settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,12 +69,13 @@ pub struct DetectorOptionsError {
 }
 
 impl DetectorOptions {
-    /// Accepted `decimation`: beyond 8 the quad search misses all but huge tags.
-    pub const DECIMATION: std::ops::RangeInclusive<f32> = 1.0..=8.0;
+    /// Accepted `decimation` (see [`MAX_DECIMATION`]).
+    pub const DECIMATION: std::ops::RangeInclusive<f32> = 1.0..=MAX_DECIMATION;
     /// Accepted `threads`.
     pub const THREADS: std::ops::RangeInclusive<u8> = 1..=64;
-    /// Accepted `quad_sigma`, px: a stronger blur erases the tags and slows every frame.
-    pub const QUAD_SIGMA: std::ops::RangeInclusive<f32> = 0.0..=10.0;
+    /// Accepted `quad_sigma`, px (negative sharpens; see [`MAX_QUAD_SIGMA`]): a stronger blur
+    /// erases the tags, and its kernel must stay far narrower than any accepted image.
+    pub const QUAD_SIGMA: std::ops::RangeInclusive<f32> = -MAX_QUAD_SIGMA..=MAX_QUAD_SIGMA;
     /// Accepted `max_hamming`: the decode table for 3 or more corrected bits takes gigabytes,
     /// and they accept false tags.
     pub const MAX_HAMMING: std::ops::RangeInclusive<u32> = 0..=2;
@@ -169,7 +178,10 @@ struct RawDetection {
     corners_px: [Point2<f64>; 4],
 }
 
-type Job = (GrayImage, mpsc::Sender<Result<Vec<RawDetection>, String>>);
+type Job = (
+    GrayImage,
+    mpsc::Sender<Result<Vec<RawDetection>, TargetError>>,
+);
 
 /// A handle to an AprilTag detector living on its own thread.
 pub struct TagDetector {
@@ -220,7 +232,18 @@ impl TagDetector {
     }
 
     /// Detects the board's tags in a grey image (blocks until the detector thread answers).
+    ///
+    /// An image too small for the detector at this decimation (see
+    /// [`TargetError::ImageTooSmall`]) is refused before it reaches the C code, and the detector
+    /// stays usable.
     pub fn detect(&self, image: &GrayImage) -> Result<BoardDetection, TargetError> {
+        // Checked here for an early answer, and again on the detector thread before the C call.
+        ffi::check_image_size(
+            image.width(),
+            image.height(),
+            self.options.decimation,
+            self.options.quad_sigma,
+        )?;
         let (reply_tx, reply_rx) = mpsc::channel();
         self.jobs
             .as_ref()
@@ -229,8 +252,7 @@ impl TagDetector {
             .map_err(|_| TargetError::DetectorStopped)?;
         let raw = reply_rx
             .recv()
-            .map_err(|_| TargetError::DetectorStopped)?
-            .map_err(|reason| TargetError::Detector { reason })?;
+            .map_err(|_| TargetError::DetectorStopped)??;
         Ok(filter(
             &self.board,
             &self.options,
@@ -309,83 +331,6 @@ fn to_project_pixels(corners: [[f64; 2]; 4]) -> [Point2<f64>; 4] {
     corners.map(|[x, y]| Point2::new(x - 0.5, y - 0.5))
 }
 
-/// Owns the C family struct the detector points at; frees it after the detector.
-struct OwnedFamily {
-    family: TagFamily,
-    ptr: *mut sys::apriltag_family_t,
-}
-
-impl OwnedFamily {
-    fn create(family: TagFamily, border_bits: u32) -> Result<Self, String> {
-        // SAFETY: the create functions return a fresh heap family or NULL (checked below).
-        let ptr = unsafe {
-            match family {
-                TagFamily::Tag36h11 => sys::tag36h11_create(),
-                TagFamily::TagStandard41h12 => sys::tagStandard41h12_create(),
-            }
-        };
-        if ptr.is_null() {
-            return Err(format!("cannot allocate the {} family", family.name()));
-        }
-        let owned = OwnedFamily { family, ptr };
-        match border_bits {
-            1 => {}
-            2 => {
-                // SAFETY: ptr is a valid family we own exclusively; bit_x / bit_y hold nbits
-                // entries. Kalibr's layout has the same codes with a border one cell wider on
-                // each side: the border square grows by 2 cells and the data moves in by 1.
-                unsafe {
-                    let f = &mut *owned.ptr;
-                    if f.reversed_border {
-                        return Err(format!("{} has no 2-cell-border layout", family.name()));
-                    }
-                    f.width_at_border += 2;
-                    f.total_width += 2;
-                    for i in 0..f.nbits as usize {
-                        *f.bit_x.add(i) = (*f.bit_x.add(i)).wrapping_add(1);
-                        *f.bit_y.add(i) = (*f.bit_y.add(i)).wrapping_add(1);
-                    }
-                }
-            }
-            other => return Err(format!("border_bits must be 1 or 2, found {other}")),
-        }
-        Ok(owned)
-    }
-}
-
-impl Drop for OwnedFamily {
-    fn drop(&mut self) {
-        // SAFETY: ptr came from the matching create function and is freed exactly once, after
-        // the detector that referenced it was destroyed (see detector_thread's drop order).
-        unsafe {
-            match self.family {
-                TagFamily::Tag36h11 => sys::tag36h11_destroy(self.ptr),
-                TagFamily::TagStandard41h12 => sys::tagStandard41h12_destroy(self.ptr),
-            }
-        }
-    }
-}
-
-fn build_detector(family: &OwnedFamily, options: &DetectorOptions) -> Result<Detector, String> {
-    // SAFETY: apriltag_detector_create returns a fresh detector or NULL (checked); adding the
-    // family stores the pointer, which outlives the detector (dropped after it). Detector
-    // takes ownership of the detector pointer and destroys it on drop.
-    let mut detector = unsafe {
-        let raw = sys::apriltag_detector_create();
-        if raw.is_null() {
-            return Err("apriltag_detector_create failed".to_string());
-        }
-        // The quick-decode table grows steeply with corrected bits; 2 covers max_hamming ≤ 2.
-        sys::apriltag_detector_add_family_bits(raw, family.ptr, options.max_hamming.max(1) as i32);
-        Detector::from_raw(raw)
-    };
-    detector.set_decimation(options.decimation);
-    detector.set_thread_number(options.threads.max(1));
-    detector.set_sigma(options.quad_sigma);
-    detector.set_refine_edges(true);
-    Ok(detector)
-}
-
 fn detector_thread(
     family: TagFamily,
     border_bits: u32,
@@ -393,14 +338,15 @@ fn detector_thread(
     jobs: mpsc::Receiver<Job>,
     ready: mpsc::Sender<Result<(), String>>,
 ) {
-    let owned_family = match OwnedFamily::create(family, border_bits) {
-        Ok(f) => f,
-        Err(reason) => {
-            let _ = ready.send(Err(reason));
-            return;
-        }
+    let raw_options = ffi::RawOptions {
+        decimation: options.decimation,
+        threads: options.threads,
+        quad_sigma: options.quad_sigma,
+        max_hamming: options.max_hamming,
     };
-    let mut detector = match build_detector(&owned_family, &options) {
+    let mut detector = match ffi::OwnedFamily::create(family, border_bits)
+        .and_then(|family| ffi::DetectorHandle::new(family, &raw_options))
+    {
         Ok(d) => d,
         Err(reason) => {
             let _ = ready.send(Err(reason));
@@ -409,35 +355,18 @@ fn detector_thread(
     };
     let _ = ready.send(Ok(()));
     while let Ok((image, reply)) = jobs.recv() {
-        let detections = detect_once(&mut detector, &image);
+        let detections = detector.detect(&image).map(|tags| {
+            tags.into_iter()
+                .map(|t| RawDetection {
+                    id: t.id,
+                    hamming: t.hamming,
+                    decision_margin: t.decision_margin,
+                    corners_px: to_project_pixels(t.corners),
+                })
+                .collect()
+        });
         let _ = reply.send(detections);
     }
-    drop(detector);
-    drop(owned_family);
-}
-
-fn detect_once(detector: &mut Detector, image: &GrayImage) -> Result<Vec<RawDetection>, String> {
-    let (width, height) = (image.width() as usize, image.height() as usize);
-    if width == 0 || height == 0 {
-        return Err(format!("empty image ({width}x{height} px)"));
-    }
-    let mut buffer = Image::zeros_with_alignment(width, height, 96)
-        .map_err(|error| format!("cannot allocate a {width}x{height} detector image: {error}"))?;
-    let stride = buffer.stride();
-    let data = buffer.as_slice_mut();
-    for (y, row) in image.as_raw().chunks_exact(width).enumerate() {
-        data[y * stride..y * stride + width].copy_from_slice(row);
-    }
-    Ok(detector
-        .detect(&buffer)
-        .into_iter()
-        .map(|d| RawDetection {
-            id: d.id() as u32,
-            hamming: d.hamming() as u32,
-            decision_margin: d.decision_margin(),
-            corners_px: to_project_pixels(d.corners()),
-        })
-        .collect())
 }
 
 /// Reads an image file as 8-bit grey (colour is converted by luma).
@@ -512,7 +441,7 @@ mod tests {
         let board = Board::aprilgrid(1, 1, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
         let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
         let error = detector.detect(&GrayImage::new(0, 0)).unwrap_err();
-        assert!(error.to_string().contains("empty image"), "{error}");
+        assert!(error.to_string().contains("0x0 px is too small"), "{error}");
         let blank = GrayImage::from_pixel(64, 48, image::Luma([128]));
         assert!(detector.detect(&blank).unwrap().tags.is_empty());
     }

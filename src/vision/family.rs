@@ -3,12 +3,11 @@
 //!
 //! The layout is in tag cells, rows from the top of the printed tag (image order). The
 //! `width_at_border` square is the one the detector's corners outline and whose edge is the
-//! board's `tagSize`. This module (with `detect`) is where the FFI lives; every `unsafe` block
-//! carries its SAFETY note. Depends on nothing else of ours.
+//! board's `tagSize`. The tables are read through `vision::ffi` (the one module with `unsafe`
+//! code). Depends on nothing else of ours.
 
 use std::sync::OnceLock;
 
-use apriltag_sys as sys;
 use serde::Deserialize;
 
 /// The tag families a board may use.
@@ -52,27 +51,11 @@ impl TagFamily {
     fn standard_layout(self) -> &'static FamilyLayout {
         static TAG36H11: OnceLock<FamilyLayout> = OnceLock::new();
         static TAG41H12: OnceLock<FamilyLayout> = OnceLock::new();
-        match self {
-            TagFamily::Tag36h11 => TAG36H11.get_or_init(|| {
-                // SAFETY: tag36h11_create returns a fresh heap family (or NULL, checked in
-                // read_family); we read it and free it with the matching destroy exactly once.
-                unsafe {
-                    let family = sys::tag36h11_create();
-                    let layout = read_family(family);
-                    sys::tag36h11_destroy(family);
-                    layout
-                }
-            }),
-            TagFamily::TagStandard41h12 => TAG41H12.get_or_init(|| {
-                // SAFETY: as above, for tagStandard41h12.
-                unsafe {
-                    let family = sys::tagStandard41h12_create();
-                    let layout = read_family(family);
-                    sys::tagStandard41h12_destroy(family);
-                    layout
-                }
-            }),
-        }
+        let cell = match self {
+            TagFamily::Tag36h11 => &TAG36H11,
+            TagFamily::TagStandard41h12 => &TAG41H12,
+        };
+        cell.get_or_init(|| super::ffi::standard_layout(self))
     }
 }
 
@@ -126,37 +109,6 @@ impl FamilyLayout {
             }
         }
         Some(cells)
-    }
-}
-
-/// Copies a C family table into Rust data.
-///
-/// # Safety
-/// `family` must be NULL or point to a valid, initialised `apriltag_family_t`.
-unsafe fn read_family(family: *const sys::apriltag_family_t) -> FamilyLayout {
-    // The bundled C tables are static data; a NULL here means allocation failed at start-up.
-    assert!(!family.is_null(), "AprilTag family allocation failed");
-    // SAFETY: non-null and valid per the contract; the arrays hold ncodes / nbits entries.
-    let f = unsafe { &*family };
-    let codes = unsafe { std::slice::from_raw_parts(f.codes, f.ncodes as usize) }.to_vec();
-    // bit_x / bit_y are declared unsigned but hold small negative numbers (-2) for families
-    // with data outside the border: reinterpret as i32.
-    let bit_x = unsafe { std::slice::from_raw_parts(f.bit_x, f.nbits as usize) }
-        .iter()
-        .map(|&v| v as i32)
-        .collect();
-    let bit_y = unsafe { std::slice::from_raw_parts(f.bit_y, f.nbits as usize) }
-        .iter()
-        .map(|&v| v as i32)
-        .collect();
-    FamilyLayout {
-        codes,
-        nbits: f.nbits,
-        bit_x,
-        bit_y,
-        width_at_border: f.width_at_border,
-        total_width: f.total_width,
-        reversed_border: f.reversed_border,
     }
 }
 

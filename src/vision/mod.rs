@@ -13,6 +13,7 @@ pub mod board;
 pub mod detect;
 pub mod draw;
 pub mod family;
+mod ffi;
 pub mod pnp;
 pub mod print;
 
@@ -29,7 +30,7 @@ use crate::camera_model::CameraModelError;
 #[derive(Debug, thiserror::Error)]
 pub enum TargetError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot read")]
     Io {
         /// The file.
         path: PathBuf,
@@ -38,15 +39,16 @@ pub enum TargetError {
         source: std::io::Error,
     },
     /// The board YAML does not parse (syntax, unknown key, wrong type).
-    #[error("board file {path}: at `{key}`: {source}")]
+    // The serde error is the problem itself (no further cause), so it is in the message and
+    // not also a `#[source]`: `{:#}` chains would print it twice.
+    #[error("board file {path}: at `{key}`: {problem}")]
     BoardYaml {
         /// The file.
         path: PathBuf,
         /// The YAML path where parsing failed.
         key: String,
-        /// The parser's error.
-        #[source]
-        source: serde_yaml_ng::Error,
+        /// The parser's error (in the message, so not a `#[source]`).
+        problem: serde_yaml_ng::Error,
     },
     /// A board value is out of range.
     #[error("board file {path}: `{key}` must be {expected}, found {found}")]
@@ -61,7 +63,7 @@ pub enum TargetError {
         found: String,
     },
     /// An image file could not be read or decoded.
-    #[error("image {path}: cannot read or decode: {source}")]
+    #[error("image {path}: cannot read or decode")]
     Image {
         /// The file.
         path: PathBuf,
@@ -74,6 +76,22 @@ pub enum TargetError {
     Detector {
         /// Why.
         reason: String,
+    },
+    /// The image is too small for the AprilTag detector at its decimation: the C code would
+    /// read outside its buffers.
+    #[error(
+        "image {width}x{height} px is too small for the AprilTag detector at decimation \
+         {decimation}: each side must be at least {min_side_px} px"
+    )]
+    ImageTooSmall {
+        /// Image width, px.
+        width: u32,
+        /// Image height, px.
+        height: u32,
+        /// The detector's decimation.
+        decimation: f32,
+        /// Smallest accepted side at this decimation, px.
+        min_side_px: u32,
     },
     /// The detector thread is gone (it panicked or was shut down).
     #[error("AprilTag detector thread stopped unexpectedly")]

@@ -40,6 +40,13 @@ const SCRIPT_DONE: i32 = 2;
 /// translation speed, so the mock needs some rate for pure rotations.
 const LINEAR_MOVE_ROTATION_SPEED: f64 = std::f64::consts::FRAC_PI_2;
 
+/// Fastest speed a move may ask for (rad/s for moveJ, m/s for moveL): well above a UR's
+/// 3.14 rad/s and 3 m/s, so only nonsense is refused.
+const MAX_MOVE_SPEED: f64 = 10.0;
+/// Longest move the mock accepts, s: a slower one (speed 1e-300) is a client bug, refused with a
+/// script error rather than interpolated for centuries (or overflowing `Duration`).
+const MAX_MOVE_DURATION_S: f64 = 3600.0;
+
 /// Command ids of ur_rtde 1.6.5 (`RTDE::RobotCommand::Type`) that the mock understands.
 mod cmd {
     pub const MOVEJ: i32 = 1;
@@ -478,27 +485,38 @@ impl Arm {
         now: Instant,
         asynchronous: bool,
     ) -> Outcome {
+        // As the controller does with a bad argument: a runtime error that ends the program
+        // (the client sees the program stop), never a panic in the connection thread.
+        if !(speed.is_finite() && speed > 0.0 && speed <= MAX_MOVE_SPEED) {
+            return self.script_error(&format!(
+                "move speed {speed:e} is outside (0, {MAX_MOVE_SPEED}]"
+            ));
+        }
+        let seconds = match path {
+            MotionPath::Joint { from, to } => {
+                from.iter()
+                    .zip(&to)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max)
+                    / speed
+            }
+            MotionPath::Linear { from, to } => {
+                let distance = (to.translation.vector - from.translation.vector).norm();
+                let angle = from.rotation.angle_to(&to.rotation);
+                (distance / speed).max(angle / LINEAR_MOVE_ROTATION_SPEED)
+            }
+        };
+        let duration = match Duration::try_from_secs_f64(seconds) {
+            _ if self.instant_moves => Duration::ZERO,
+            Ok(d) if seconds <= MAX_MOVE_DURATION_S => d,
+            _ => {
+                return self.script_error(&format!(
+                    "a move at speed {speed:e} would take {seconds:e} s (more than {MAX_MOVE_DURATION_S} s)"
+                ))
+            }
+        };
         let index = self.moves_started;
         self.moves_started += 1;
-        let duration = if self.instant_moves || !(speed.is_finite() && speed > 0.0) {
-            Duration::ZERO
-        } else {
-            let seconds = match path {
-                MotionPath::Joint { from, to } => {
-                    from.iter()
-                        .zip(&to)
-                        .map(|(a, b)| (a - b).abs())
-                        .fold(0.0, f64::max)
-                        / speed
-                }
-                MotionPath::Linear { from, to } => {
-                    let distance = (to.translation.vector - from.translation.vector).norm();
-                    let angle = from.rotation.angle_to(&to.rotation);
-                    (distance / speed).max(angle / LINEAR_MOVE_ROTATION_SPEED)
-                }
-            };
-            Duration::from_secs_f64(seconds)
-        };
         let protective_stop_at = match self.faults.protective_stop_after_moves {
             Some(k) if !self.protective_stop_fired && self.moves_completed >= k => Some(0.5),
             _ => None,
@@ -583,4 +601,44 @@ enum Outcome {
     Pending,
     /// Stop the program (stopScript, or a script runtime error).
     Exit,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An arm running the control program with a moveJ to `target` at `speed` in the registers.
+    fn arm_with_movej(speed: f64, target: Joints) -> (Arm, Instant) {
+        let model = UrModel::ur5e();
+        let start = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0];
+        let mut arm = Arm::new(model, start, Pose::identity(), false, MockFaults::default());
+        let now = Instant::now();
+        arm.start_program(now);
+        arm.in_int[0] = cmd::MOVEJ;
+        arm.in_double[..6].copy_from_slice(&target);
+        arm.in_double[6] = speed;
+        (arm, now)
+    }
+
+    #[test]
+    fn issue13_absurd_move_speeds_end_the_program_instead_of_panicking() {
+        let target = [0.5, -1.2, 1.4, -1.5, -1.5, 0.3];
+        for speed in [1e-300, 0.0, -1.0, f64::NAN, f64::INFINITY, 1e6] {
+            let (mut arm, now) = arm_with_movej(speed, target);
+            arm.advance(now); // the command is read here; 1e-300 used to panic in Duration
+            assert!(
+                !arm.program_running(),
+                "speed {speed}: program still running"
+            );
+            assert!(!arm.is_moving(), "speed {speed}: moving");
+            assert_eq!(arm.moves_started(), 0, "speed {speed}");
+        }
+        // A sane speed still moves, and a huge joint target at a sane speed is refused too.
+        let (mut arm, now) = arm_with_movej(1.0, target);
+        arm.advance(now);
+        assert!(arm.program_running() && arm.is_moving());
+        let (mut arm, now) = arm_with_movej(1.0, [1e300, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        arm.advance(now);
+        assert!(!arm.program_running());
+    }
 }

@@ -1,6 +1,7 @@
 //! One dashboard-server connection (TCP 29999): a line protocol ("\n"-terminated). Answers the
 //! queries ur_rtde sends on connect (PolyScope version, serial number, remote control) and the
 //! common commands a person or a driver uses (stop, play, safety status, unlock protective stop).
+//! A line longer than [`MAX_LINE_BYTES`] ends the connection.
 
 use std::io::Write;
 use std::net::TcpStream;
@@ -9,6 +10,11 @@ use std::time::{Duration, Instant};
 
 use super::arm::{SAFETY_EMERGENCY_STOP, SAFETY_PROTECTIVE_STOP};
 use super::{poll_client, Poll, Shared};
+
+/// Longest command line the mock buffers, bytes (the longest real command is under 100 bytes). A
+/// client that sends more without a newline is answered once and disconnected, so the buffer
+/// stays bounded.
+pub(crate) const MAX_LINE_BYTES: usize = 4096;
 
 /// The reply to one dashboard command line; `None` closes the connection ("quit").
 fn reply(shared: &Shared, line: &str) -> Option<String> {
@@ -101,6 +107,13 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
             Poll::Closed => return,
             Poll::Idle => continue,
             Poll::Data => {}
+        }
+        if buffer.len() > MAX_LINE_BYTES && !buffer[..=MAX_LINE_BYTES].contains(&b'\n') {
+            let _ = stream.write_all(
+                format!("could not understand: command longer than {MAX_LINE_BYTES} bytes\n")
+                    .as_bytes(),
+            );
+            return;
         }
         while let Some(end) = buffer.iter().position(|&b| b == b'\n') {
             let line = String::from_utf8_lossy(&buffer[..end]).to_string();

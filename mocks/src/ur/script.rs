@@ -1,12 +1,17 @@
 //! One script-port connection (TCP 30003): receives URScript programs. A complete
 //! `def ...():` ... `end` program starts the emulated control program; bytes are otherwise
-//! ignored (the real port also streams robot state, which ur_rtde does not read).
+//! ignored (the real port also streams robot state, which ur_rtde does not read). More than
+//! [`MAX_PROGRAM_BYTES`] without a complete program ends the connection, so the buffer stays
+//! bounded.
 
 use std::net::TcpStream;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::{poll_client, Poll, Shared};
+
+/// Largest program the mock buffers, bytes (ur_rtde's control script is about 60 kB).
+pub(crate) const MAX_PROGRAM_BYTES: usize = 1 << 20;
 
 /// Whether `text` holds a complete program: a `def` line and a final `end` line.
 pub(crate) fn is_complete_program(text: &str) -> bool {
@@ -34,6 +39,12 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
         if is_complete_program(&String::from_utf8_lossy(&buffer)) {
             buffer.clear();
             shared.arm().start_program(Instant::now());
+        } else if buffer.len() > MAX_PROGRAM_BYTES {
+            eprintln!(
+                "mock-ur: script port: {} bytes without a complete program (limit {MAX_PROGRAM_BYTES}); connection closed",
+                buffer.len()
+            );
+            return;
         }
     }
 }
