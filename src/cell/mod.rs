@@ -39,7 +39,7 @@ pub enum CellError {
     #[error(transparent)]
     Plan(Box<PlanError>),
     /// The board file is wrong.
-    #[error("board {file}")]
+    #[error("loading the board")]
     Board {
         /// The board file.
         file: std::path::PathBuf,
@@ -48,7 +48,7 @@ pub enum CellError {
         source: Box<crate::vision::TargetError>,
     },
     /// The intrinsics file is wrong.
-    #[error("intrinsics {file}")]
+    #[error("loading the intrinsics")]
     Intrinsics {
         /// The intrinsics file.
         file: std::path::PathBuf,

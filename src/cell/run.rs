@@ -123,7 +123,7 @@ pub enum RunError {
     #[error("a new session needs a cell config (--config)")]
     NoConfig,
     /// The cell could not be prepared from its config.
-    #[error("preparing the cell from {}", config.display())]
+    #[error("preparing the cell")]
     Prepare {
         /// The config file.
         config: PathBuf,

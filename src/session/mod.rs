@@ -205,7 +205,7 @@ pub enum SessionError {
         source: image::ImageError,
     },
     /// The board file of the solve inputs could not be loaded.
-    #[error("board {}", file.display())]
+    #[error("loading the board")]
     Board {
         /// The board file.
         file: PathBuf,
@@ -214,7 +214,7 @@ pub enum SessionError {
         source: TargetError,
     },
     /// The intrinsics file could not be loaded or written.
-    #[error("intrinsics {}", file.display())]
+    #[error("reading or writing the intrinsics")]
     Intrinsics {
         /// The intrinsics file.
         file: PathBuf,
