@@ -27,6 +27,7 @@ use crate::robot::{Joints, Robot};
 use crate::session::{
     InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup, SolveInputs,
 };
+use crate::setup::CellTransforms;
 use crate::vision::{Board, DetectorOptions};
 
 /// Why a cell could not be prepared or opened.
@@ -116,8 +117,12 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         file: model_file.clone(),
         source: Box::new(source),
     })?;
-    let arm =
-        UrModel::by_name(config.robot.model()).expect("model names are validated with the config");
+    let arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
+        CellError::Backend(format!(
+            "robot.model: no kinematics for `{}`",
+            config.robot.model()
+        ))
+    })?;
     let start_joints = match &config.robot {
         RobotConfig::Sim {
             start_joints_deg, ..
@@ -169,7 +174,11 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
                 .map(Waypoint::LookAt)
                 .collect(),
         },
-        (None, None) => unreachable!("the config requires a plan source"),
+        (None, None) => {
+            return Err(CellError::Backend(
+                "plan: the config gives neither a plan file nor `generate:`".into(),
+            ))
+        }
     };
     prepared.report = prepared.check();
     Ok(prepared)
@@ -289,18 +298,28 @@ impl PreparedCell {
         std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
     }
 
+    /// The simulator's ground truth, which the simulated backends render from.
+    fn sim_truth(&self) -> Result<CellTransforms, CellError> {
+        self.config.simulation.ok_or_else(|| {
+            CellError::Backend(
+                "a simulated backend needs `simulation:` (the cell's true transforms) in the config"
+                    .into(),
+            )
+        })
+    }
+
     /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)
     /// arm renders from the pose the arm reports.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
-                let truth = self.config.simulation.expect("validated: sim backends have ground truth");
+                let truth = self.sim_truth()?;
                 let (robot, camera) =
                     sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
-                let truth = self.config.simulation.expect("validated: sim backends have ground truth");
+                let truth = self.sim_truth()?;
                 let robot = self.open_ur()?;
                 let flange = robot.reported_flange();
                 let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
@@ -336,7 +355,7 @@ impl PreparedCell {
             ..
         } = &self.config.robot
         else {
-            unreachable!("called for ur backends only")
+            return Err(CellError::Backend("the robot backend is not `ur`".into()));
         };
         let mut ur = crate::robot::ur::UrRobotConfig::new(host.clone());
         ur.connect_timeout = std::time::Duration::from_secs_f64(*connect_timeout_s);

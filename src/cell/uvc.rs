@@ -45,7 +45,7 @@ fn open(config: &CameraConfig, model: CameraModel) -> Result<Box<dyn Camera>, Ce
         stale_frames,
     } = config
     else {
-        unreachable!("checked by open_camera");
+        return Err(CellError::Backend("the camera backend is not `uvc`".into()));
     };
     let options = UvcOptions {
         device: match device.parse::<u32>() {

@@ -215,7 +215,11 @@ impl WaypointYaml {
             }
             return Ok(Waypoint::Joints(q));
         }
-        let view = self.look_at.expect("one key is present");
+        let Some(view) = self.look_at else {
+            return Err(problem(
+                "expected exactly one of `joints_deg` or `look_at`".to_string(),
+            ));
+        };
         view.validate()
             .map_err(|m| problem(format!("look_at: {m}")))?;
         Ok(Waypoint::LookAt(view))
