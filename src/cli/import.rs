@@ -239,6 +239,7 @@ fn write_cell(
         },
         solver: SolverConfig::default(),
         session: SessionConfig::default(),
+        verdict: Default::default(),
     };
     config
         .save(
