@@ -697,3 +697,48 @@ pub fn assess_result(
         Err(error) => Verdict::refused(error, pairs.len(), accuracy),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_are_one_and_three_times_the_accuracy() {
+        assert_eq!(band(1.0, 1.0), Level::Good);
+        assert_eq!(band(1.01, 1.0), Level::Check);
+        assert_eq!(band(3.0, 1.0), Level::Check);
+        assert_eq!(band(3.01, 1.0), Level::Redo);
+        assert_eq!(band(f64::NAN, 1.0), Level::Redo);
+        assert!(Level::Redo > Level::Check && Level::Check > Level::Good);
+    }
+
+    #[test]
+    fn the_worst_finding_decides_and_the_rest_follow_in_check_order() {
+        let finding = |level, basis, reason: &str| Finding {
+            level,
+            basis,
+            reason: reason.into(),
+            next_action: format!("fix {reason}"),
+        };
+        let v = decide(
+            vec![
+                finding(Level::Check, Basis::Outliers, "outliers"),
+                finding(Level::Redo, Basis::HeldOutError, "held-out"),
+                finding(Level::Check, Basis::FewPoses, "few"),
+            ],
+            Figures::default(),
+            Accuracy::default(),
+        );
+        assert_eq!((v.level, v.basis), (Level::Redo, Basis::HeldOutError));
+        assert_eq!(v.next_action, "fix held-out");
+        assert_eq!(
+            v.terminal_lines(),
+            "verdict: REDO — held-out\nnext: fix held-out\nalso (CHECK): outliers\nalso (CHECK): few"
+        );
+        let good = decide(Vec::new(), Figures::default(), Accuracy::default());
+        assert_eq!(
+            (good.level, good.basis),
+            (Level::Good, Basis::WithinAccuracy)
+        );
+    }
+}

@@ -81,6 +81,10 @@ fn report_opens_with_the_verdict_card_before_the_warnings_and_the_sim_ends_good(
     let level = &html[at..at + html[at..].find('<').unwrap()];
     let card_html = &html[card..warnings];
     assert_eq!(level, "GOOD", "{card_html}");
+    assert!(
+        card_html.contains("held-out error (RMS over 10 poses"),
+        "{card_html}"
+    );
     assert!(card_html.contains("Next: use the result"), "{card_html}");
 }
 
