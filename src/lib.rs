@@ -19,6 +19,7 @@ pub mod robot;
 pub mod session;
 pub mod setup;
 pub mod solve;
+pub mod verdict;
 pub mod verify;
 pub mod vision;
 pub mod yaml_file;

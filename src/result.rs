@@ -3,6 +3,7 @@
 //!
 //! ```yaml
 //! setup: eye_in_hand
+//! verdict: {level: good, basis: .., reason: "..", next_action: "..", accuracy: {..}, figures: {..}}
 //! T_flange_camera: {translation: [..], quaternion: {w, x, y, z}, rotation_vector: [..]}
 //! T_base_target:   {translation: [..], quaternion: {..}, rotation_vector: [..]}
 //! uncertainty: {T_flange_camera: {rotation_deg: .., translation_mm: .., ...}, T_base_target: {..}, variance_factor: .., covariance: [[..] x 12]}
@@ -12,9 +13,11 @@
 //! warnings: [..]
 //! ```
 //!
-//! (eye_to_hand uses `T_base_camera` and `T_flange_target`.) Metres and radians in poses; deg
+//! (eye_to_hand uses `T_base_camera` and `T_flange_target`.) The verdict comes first, where a
+//! person reads first; files written before it existed (no `verdict:`) still read. Metres and radians in poses; deg
 //! and mm where the key says so. Written atomically; read back (by `export` and `verify`) with
-//! the same validation as every pose file. Depends on `solve`, `geometry` and `dataset`'s I/O.
+//! the same validation as every pose file. Depends on `solve`, `verdict`, `geometry` and
+//! `dataset`'s I/O.
 
 use std::path::Path;
 
@@ -26,6 +29,7 @@ use crate::setup::{CellTransforms, PosePair, Setup};
 use crate::solve::{
     Calibration, Method, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
 };
+use crate::verdict::Verdict;
 use crate::yaml_file::{read_yaml, write_yaml, FileError};
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
@@ -118,6 +122,10 @@ pub struct SolverYaml {
 pub struct ResultFile {
     /// The layout solved.
     pub setup: Setup,
+    /// GOOD / CHECK / REDO with its reason and next action (absent in files written before
+    /// verdicts existed, or when no verdict was computed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
     /// eye_in_hand camera mount.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub T_flange_camera: Option<PoseRecord>,
@@ -146,7 +154,15 @@ pub struct ResultFile {
 }
 
 impl ResultFile {
-    /// The file form of a calibration; `pairs` are the samples it was solved from (for ids).
+    /// The same file with `verdict` (see `verdict::assess_solved`), written as its first key
+    /// after `setup`.
+    pub fn with_verdict(mut self, verdict: Verdict) -> ResultFile {
+        self.verdict = Some(verdict);
+        self
+    }
+
+    /// The file form of a calibration (without a verdict: add one with
+    /// [`ResultFile::with_verdict`]); `pairs` are the samples it was solved from (for ids).
     pub fn from_calibration(calibration: &Calibration, pairs: &[PosePair]) -> ResultFile {
         let camera = Some(PoseRecord::from_pose(&calibration.camera_mount));
         let target = Some(PoseRecord::from_pose(&calibration.target_mount));
@@ -190,6 +206,7 @@ impl ResultFile {
         };
         ResultFile {
             setup: calibration.setup,
+            verdict: None,
             T_flange_camera: if eye_in_hand { camera.clone() } else { None },
             T_base_target: if eye_in_hand { target.clone() } else { None },
             T_base_camera: if eye_in_hand { None } else { camera },

@@ -15,6 +15,7 @@ const FLOOR: &[&str] = &[
     "notice",
     "atomic_file",
     "yaml_file",
+    "notice",
 ];
 
 /// Top-level module → the modules (besides the ground floor and itself) it may name.
@@ -27,36 +28,43 @@ fn allowed() -> BTreeMap<&'static str, &'static [&'static str]> {
         ("notice", &[][..]),
         ("atomic_file", &[][..]),
         ("yaml_file", &[][..]),
+        ("notice", &[][..]),
         // Pure maths: the floor only.
         ("solve", &[][..]),
+        // The verdict on an answer: judged from the solver's figures (and held-out solves).
+        ("verdict", &["solve"][..]),
         // Hardware and vision: the floor; the camera simulator renders boards.
         ("vision", &[][..]),
         ("robot", &[][..]),
         ("camera", &["vision"][..]),
         // Data and plans.
         ("dataset", &[][..]),
-        ("result", &["solve"][..]),
+        ("result", &["solve", "verdict"][..]),
         ("plan", &["solve", "robot", "camera", "vision"][..]),
-        ("config", &["plan", "robot", "solve", "vision"][..]),
+        (
+            "config",
+            &["plan", "robot", "solve", "vision", "verdict"][..],
+        ),
         // The run.
         (
             "session",
             &[
                 "solve", "vision", "camera", "robot", "plan", "dataset", "result", "config",
+                "verdict",
             ][..],
         ),
         (
             "cell",
             &[
                 "solve", "vision", "camera", "robot", "plan", "dataset", "result", "config",
-                "session",
+                "verdict", "session",
             ][..],
         ),
         (
             "verify",
             &[
                 "solve", "vision", "camera", "robot", "plan", "dataset", "result", "config",
-                "session", "cell",
+                "verdict", "session", "cell",
             ][..],
         ),
         // Outputs and file formats.
@@ -65,7 +73,7 @@ fn allowed() -> BTreeMap<&'static str, &'static [&'static str]> {
             "report",
             &[
                 "solve", "vision", "camera", "robot", "plan", "dataset", "result", "config",
-                "session", "cell", "verify", "formats",
+                "verdict", "session", "cell", "verify", "formats",
             ][..],
         ),
     ])

@@ -59,6 +59,35 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
     })
 }
 
+/// Issue #14: the page opens with the verdict card (before the warnings), and the simulated
+/// cell's verdict is GOOD — the same verdict `verdict::assess_solved` gives the result.
+#[test]
+fn report_opens_with_the_verdict_card_before_the_warnings_and_the_sim_ends_good() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let card = html
+        .find("<section id=\"verdict\"")
+        .expect("a verdict card");
+    let warnings = html
+        .find("<section id=\"warnings\"")
+        .expect("a warnings section");
+    assert!(card < warnings, "the verdict card comes first");
+    assert!(
+        card < html.find("<section").unwrap() + 1,
+        "nothing but the title before the verdict card"
+    );
+    let level_marker = "data-key=\"verdict.level\">";
+    let at = html.find(level_marker).unwrap() + level_marker.len();
+    let level = &html[at..at + html[at..].find('<').unwrap()];
+    let card_html = &html[card..warnings];
+    assert_eq!(level, "GOOD", "{card_html}");
+    assert!(
+        card_html.contains("held-out error (RMS over 10 poses"),
+        "{card_html}"
+    );
+    assert!(card_html.contains("Next: use the result"), "{card_html}");
+}
+
 fn count(haystack: &str, needle: &str) -> usize {
     haystack.matches(needle).count()
 }
@@ -312,6 +341,7 @@ fn two_answers_are_shown_side_by_side() {
         thumbnails: Vec::new(),
         noise: NoiseModel::default(),
         holdout: None,
+        verdict: None,
     };
     let html = render_html(&input).unwrap();
     assert_eq!(count(&html, "class=\"answer\" data-answer="), 2);

@@ -292,6 +292,7 @@ fn cell_text(
         },
         solver: SolverConfig::default(),
         session: SessionConfig::default(),
+        verdict: Default::default(),
     };
     let header = format!(
         "Replays the ViSP folder {} as a session: handeye run --config <this file>",

@@ -23,7 +23,8 @@ use crate::yaml_file::{parse_yaml, read_text, FileError};
 
 pub use schema::{
     ArmModel, CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName, PlanConfig,
-    RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, WorkspaceConfig,
+    RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, VerdictConfig,
+    WorkspaceConfig,
 };
 pub use validate::{
     Range, MAX_JOINT_ACCELERATION_DEG, MAX_JOINT_SPEED_DEG, MAX_LINEAR_ACCELERATION,
@@ -135,6 +136,8 @@ pub struct CellConfig {
     pub solver: SolverConfig,
     /// Session settings.
     pub session: SessionConfig,
+    /// The accuracy the verdict judges against.
+    pub verdict: VerdictConfig,
     /// `session.settle_s`, checked and converted.
     settle: Duration,
 }
@@ -180,6 +183,7 @@ impl CellConfig {
             detector: raw.detector,
             solver: raw.solver,
             session: raw.session,
+            verdict: raw.verdict,
             settle: checked.settle,
         })
     }

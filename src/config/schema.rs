@@ -2,7 +2,8 @@
 //! strings a typed enum, every section `deny_unknown_fields`. Reading one checks only the shape
 //! (keys, types, enum names); numbers and cross-field rules are checked by `config::validate`.
 //! [`ConfigFile`] also serialises, so tools write configs through serde (see
-//! [`ConfigFile::save`]). Depends on `plan` (the generated-plan spec), `setup` and `geometry`.
+//! [`ConfigFile::save`]). Depends on `plan` (the generated-plan spec), `setup`, `geometry` and
+//! `verdict` (the accuracy type).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -14,6 +15,7 @@ use crate::plan::GenerateSpec;
 use crate::robot::MotionLimits;
 use crate::setup::Setup;
 use crate::solve::Method;
+use crate::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
 
 /// A whole cell config file as written (paths as written, nothing checked but the shape).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -56,6 +58,9 @@ pub struct ConfigFile {
     /// Session settings.
     #[serde(default)]
     pub session: SessionConfig,
+    /// The accuracy the GOOD / CHECK / REDO verdict judges against.
+    #[serde(default)]
+    pub verdict: VerdictConfig,
 }
 
 /// The arm models whose kinematics the tool knows.
@@ -524,6 +529,46 @@ impl Default for SessionConfig {
             settle_s: default_settle_s(),
             max_reprojection_rms_px: default_max_rms_px(),
             image_margin_px: default_margin_px(),
+        }
+    }
+}
+
+/// The accuracy the user wants of both transforms: the verdict is GOOD when the held-out error
+/// and the 1-sigma of both transforms are within it, CHECK up to 3× it, REDO above (see
+/// `verdict`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VerdictConfig {
+    /// Translation, mm (default 1.0).
+    #[serde(default = "default_accuracy_mm")]
+    pub accuracy_mm: f64,
+    /// Rotation, degrees (default 0.1: about 1 mm at 0.6 m).
+    #[serde(default = "default_accuracy_deg")]
+    pub accuracy_deg: f64,
+}
+
+fn default_accuracy_mm() -> f64 {
+    DEFAULT_ACCURACY_MM
+}
+fn default_accuracy_deg() -> f64 {
+    DEFAULT_ACCURACY_DEG
+}
+
+impl Default for VerdictConfig {
+    fn default() -> Self {
+        VerdictConfig {
+            accuracy_mm: DEFAULT_ACCURACY_MM,
+            accuracy_deg: DEFAULT_ACCURACY_DEG,
+        }
+    }
+}
+
+impl VerdictConfig {
+    /// The accuracy these settings ask for.
+    pub fn accuracy(&self) -> Accuracy {
+        Accuracy {
+            translation_mm: self.accuracy_mm,
+            rotation_deg: self.accuracy_deg,
         }
     }
 }

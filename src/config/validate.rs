@@ -161,6 +161,10 @@ pub const ROTATION_SIGMA_DEG: Range = Range::above(0.0, 10.0, "°");
 pub const TRANSLATION_SIGMA_MM: Range = Range::above(0.0, 100.0, "mm");
 /// `solver.pixel_sigma_px`, px.
 pub const PIXEL_SIGMA_PX: Range = Range::above(0.0, 10.0, "px");
+/// `verdict.accuracy_mm`, mm.
+pub const ACCURACY_MM: Range = Range::above(0.0, 1000.0, "mm");
+/// `verdict.accuracy_deg`, degrees.
+pub const ACCURACY_DEG: Range = Range::above(0.0, 45.0, "°");
 /// `session.settle_s`, s.
 pub const SETTLE_S: Range = Range::closed(0.0, 60.0, "s");
 /// `session.max_reprojection_rms_px`, px.
@@ -188,6 +192,12 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
     v.plan(raw)?;
     v.detector(raw)?;
     v.solver(raw)?;
+    v.number("verdict.accuracy_mm", raw.verdict.accuracy_mm, ACCURACY_MM)?;
+    v.number(
+        "verdict.accuracy_deg",
+        raw.verdict.accuracy_deg,
+        ACCURACY_DEG,
+    )?;
     let settle = v.session(raw)?;
     let nominal = v.transforms(raw.setup, "nominal", &raw.nominal)?;
     let simulation = raw

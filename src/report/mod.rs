@@ -2,8 +2,9 @@
 //! thumbnails, no script, no network) that answers "is this calibration any good?".
 //!
 //! Owns the report's input ([`ReportInput`], with a list of [`ReportAnswer`]s shown side by side,
-//! e.g. the pose-space and a reprojection-space answer), the HTML layout and the plain-language
-//! warnings; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
+//! e.g. the pose-space and a reprojection-space answer), the HTML layout with the verdict card
+//! first (GOOD / CHECK / REDO, made by `verdict`, the same as the terminal and `result.yaml`
+//! show) and the plain-language warnings (their health checks also from `verdict`); the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
 //! gathers the input from a session folder (frames, detected corners). Frames follow the crate
 //! convention (`T_a_b` maps points of frame `b` into frame `a`); numbers are shown in metres /
 //! radians where a file holds them and in mm / degrees where a person reads them. Depends on
@@ -22,9 +23,10 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic_file::write_atomic;
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::notice::{Notice, NoticeKind};
+use crate::notice::Notice;
 use crate::setup::{PosePair, Setup};
 use crate::solve::{rotation_diversity, Calibration, NoiseModel};
+use crate::verdict::{self, Verdict};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]
@@ -78,6 +80,46 @@ pub struct ReportInput {
     pub noise: NoiseModel,
     /// Held-out prediction errors, when computed.
     pub holdout: Option<HoldoutSummary>,
+    /// The verdict on the primary answer (the one `result.yaml` holds); `None`: the page judges
+    /// the primary answer itself with [`verdict::assess`], the held-out figures of
+    /// [`ReportInput::holdout`] and the default accuracy.
+    pub verdict: Option<Verdict>,
+}
+
+impl ReportInput {
+    /// The verdict the page shows: [`ReportInput::verdict`], else one made from the input.
+    pub fn verdict(&self) -> Option<Verdict> {
+        if let Some(v) = &self.verdict {
+            return Some(v.clone());
+        }
+        let primary = self.answers.first()?;
+        let held_out = self
+            .holdout
+            .as_ref()
+            .map(|h| verdict::HeldOut {
+                poses: self.pairs.len(),
+                translation_rms_mm: h.translation_rms_mm,
+                rotation_rms_deg: h.rotation_rms_deg,
+                working_distance_mm: working_distance_mm(&self.pairs),
+            })
+            .ok_or_else(|| "not computed for this page".to_string());
+        Some(verdict::assess(&verdict::Evidence {
+            calibration: &primary.calibration,
+            pairs: &self.pairs,
+            noise: &self.noise,
+            held_out: &held_out,
+            accuracy: verdict::Accuracy::default(),
+        }))
+    }
+}
+
+fn working_distance_mm(pairs: &[PosePair]) -> f64 {
+    let mut d: Vec<f64> = pairs
+        .iter()
+        .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Why the report could not be made.
@@ -127,7 +169,8 @@ pub const PLOT_KINDS: [&str; 6] = [
 ];
 
 /// The section ids, in page order.
-pub const SECTIONS: [&str; 7] = [
+pub const SECTIONS: [&str; 8] = [
+    "verdict",
     "warnings",
     "transforms",
     "residuals",
@@ -159,7 +202,12 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
             .join(", ")
     );
 
-    // Warnings first: the reader should see them before the numbers.
+    // The verdict first: GOOD / CHECK / REDO, the reason that decided it and what to do next.
+    if let Some(v) = input.verdict() {
+        verdict_card(&mut html, &v);
+    }
+
+    // Then the warnings: the reader should see them before the numbers.
     // Information (how the answer was made) is listed apart, never in the warnings box.
     let notices = notices(input);
     let (attention, info): (Vec<&Notice>, Vec<&Notice>) =
@@ -280,6 +328,64 @@ pub fn write_report(path: &Path, input: &ReportInput) -> Result<(), ReportError>
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// The verdict card: level, reason, next action, the accuracy asked for, the figures, and any
+/// further findings.
+fn verdict_card(html: &mut String, v: &Verdict) {
+    let level = v.level.word();
+    let class = level.to_ascii_lowercase();
+    let _ = writeln!(
+        html,
+        "<section id=\"verdict\" class=\"verdict {class}\"><h2>Verdict: <span data-key=\"verdict.level\">{level}</span></h2>\n<p class=\"reason\">{}</p>\n<p class=\"next\">Next: {}</p>",
+        escape(&v.reason),
+        escape(&v.next_action)
+    );
+    let f = &v.figures;
+    let mut rows = vec![format!(
+        "accuracy asked for: {} mm, {}°",
+        v.accuracy.translation_mm, v.accuracy.rotation_deg
+    )];
+    if let Some(h) = f.held_out {
+        rows.push(format!(
+            "held-out error (RMS over {} poses, target at ~{:.0} mm): {:.3} mm, {:.4}°",
+            h.poses, h.working_distance_mm, h.translation_rms_mm, h.rotation_rms_deg
+        ));
+    }
+    if let (Some(t), Some(r)) = (f.sigma_translation_mm, f.sigma_rotation_deg) {
+        rows.push(format!(
+            "largest 1-sigma of the two transforms: {t:.3} mm, {r:.4}°"
+        ));
+    }
+    if let (Some(r), Some(t)) = (f.residual_rotation_rms_deg, f.residual_translation_rms_mm) {
+        rows.push(format!("residual RMS: {r:.4}°, {t:.3} mm"));
+    }
+    if let Some(off) = f.rotation_off_axis_deg {
+        rows.push(format!(
+            "{} poses; largest rotation off the main axis {off:.1}°",
+            f.poses
+        ));
+    }
+    html.push_str("<ul class=\"figures\">\n");
+    for row in rows {
+        let _ = writeln!(html, "<li>{}</li>", escape(&row));
+    }
+    html.push_str("</ul>\n");
+    if !v.also.is_empty() {
+        html.push_str("<h3>Also</h3>\n<ul>\n");
+        for finding in &v.also {
+            let _ = writeln!(
+                html,
+                "<li class=\"{}\">{}: {} Next: {}</li>",
+                finding.level.word().to_ascii_lowercase(),
+                finding.level.word(),
+                escape(&finding.reason),
+                escape(&finding.next_action)
+            );
+        }
+        html.push_str("</ul>\n");
+    }
+    html.push_str("</section>\n");
 }
 
 fn figure(html: &mut String, kind: &str, svg: &str) {
@@ -407,47 +513,17 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
     ]
 }
 
-/// Plain-language notices: the solver's own, plus too few poses, poor rotation spread, large
-/// residuals and a likely convention error, each saying what to do.
+/// Plain-language notices: the solver's own, plus too few poses, poor rotation spread, and per
+/// answer a likely convention error or residuals beyond the noise model, each saying what to do.
+/// The health checks are `verdict`'s ([`verdict::coverage_notices`],
+/// [`verdict::residual_notice`]): the same the verdict, the terminal and the result file use.
 pub fn notices(input: &ReportInput) -> Vec<Notice> {
-    let mut out = Vec::new();
-    let n = input.pairs.len();
-    if n < 8 {
-        out.push(Notice::warning(NoticeKind::FewPoses, format!(
-            "Only {n} poses: below 8 the noise level cannot be estimated from the residuals (the uncertainty assumes the configured noise) and a single bad pose can pull the answer; record 12–20."
-        )));
-    }
-    let diversity = rotation_diversity(
-        &input
-            .pairs
-            .iter()
-            .map(|p| p.base_from_flange)
-            .collect::<Vec<_>>(),
-    );
-    if diversity.off_axis_deg < 20.0 {
-        out.push(Notice::warning(NoticeKind::PoorRotationSpread, format!(
-            "Poor rotation spread: the flange rotations are mostly about one axis (only {:.1}° off it). Add poses tilted 20–40° about two other flange axes.",
-            diversity.off_axis_deg
-        )));
-    }
+    let mut out = verdict::coverage_notices(&input.pairs);
     for answer in &input.answers {
         let c = &answer.calibration;
         let label = &answer.label;
-        let r = &c.residuals;
-        let expected_rot_deg = input.noise.rotation_sigma_rad.to_degrees() * 3f64.sqrt();
-        let expected_t_mm = input.noise.translation_sigma_m * 1e3 * 3f64.sqrt();
-        if r.rotation_rms_deg > 1.0 {
-            out.push(Notice::warning(NoticeKind::LikelyConventionError, format!(
-                "{label}: rotation residual RMS {:.2}° is far beyond any detection noise: this is usually a convention error (T_flange_base given as T_base_flange, T_target_camera as T_camera_target, Euler angles read as a rotation vector, mm read as m, or the wrong setup). Check the input conventions before anything else.",
-                r.rotation_rms_deg
-            )));
-        } else if r.rotation_rms_deg > 3.0 * expected_rot_deg
-            || r.translation_rms_mm > 3.0 * expected_t_mm
-        {
-            out.push(Notice::warning(NoticeKind::LargeResiduals, format!(
-                "{label}: residuals (RMS {:.3}°, {:.2} mm) are more than 3× what the noise model expects ({:.3}°, {:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic.",
-                r.rotation_rms_deg, r.translation_rms_mm, expected_rot_deg, expected_t_mm
-            )));
+        if let Some(n) = verdict::residual_notice(c, &input.pairs, &input.noise) {
+            out.push(n.prefixed(label));
         }
         out.extend(c.warnings.iter().map(|w| w.prefixed(label)));
     }
@@ -497,7 +573,10 @@ const CSS: &str =
 h2{border-bottom:1px solid #ccc;margin-top:1.6em}.answers{display:flex;flex-wrap:wrap;gap:1.5em}\
 .answer{flex:1 1 420px}table.forms{border-collapse:collapse;font-size:90%}\
 table.forms th{text-align:left;padding:2px 8px;vertical-align:top;font-weight:normal;color:#555}\
-table.forms code{white-space:pre}.warning,.error{color:#a40000}.info{color:#333}.ok{color:#060}\
+table.forms code{white-space:pre}.warning,.error{color:#a40000}\
+section.verdict{border:2px solid #888;padding:0 1em;margin-top:1em}section.verdict.good{border-color:#060}\
+section.verdict.check{border-color:#b60}section.verdict.redo{border-color:#a40000}\
+section.verdict h2{border:none}li.check{color:#b60}li.redo{color:#a40000}.info{color:#333}.ok{color:#060}\
 figure.plot{margin:0.5em 0}figure.plot svg{max-width:100%;height:auto}\
 .thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%}\
 figure.thumb img{width:240px;display:block}";

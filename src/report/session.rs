@@ -107,6 +107,7 @@ pub fn from_session(
         thumbnails,
         noise,
         holdout: None,
+        verdict: None,
     })
 }
 
@@ -193,7 +194,9 @@ fn thumbnail(
 
 /// Writes `<session>/report.html` for a solved session: the answers side by side (labelled;
 /// e.g. reprojection-space and pose-space), thumbnails and reprojection bars when the cell's
-/// board and intrinsics load, and a leave-one-out check. Returns the path written.
+/// board and intrinsics load, a leave-one-out check and the verdict on the first answer
+/// (`verdict::assess_solved`'s, against the config's `verdict` accuracy). Returns the path
+/// written.
 pub fn write_session_report(
     folder: &SessionFolder,
     config: Option<&crate::config::CellConfig>,
@@ -212,12 +215,33 @@ pub fn write_session_report(
         _ => None,
     };
     let mut input = from_session(folder, answers, optics, options.noise)?;
-    if let Ok(v) = crate::verify::leave_one_out(input.setup, &input.pairs, &options) {
-        input.holdout = Some(super::HoldoutSummary {
-            description: format!("leave-one-out over {} samples", v.summary.poses),
-            rotation_rms_deg: v.summary.rotation_rms_deg,
-            translation_rms_mm: v.summary.translation_rms_mm,
-        });
+    // The held-out figures and the verdict of the primary answer, made exactly as for
+    // `result.yaml` (same function, options and accuracy), so page and file agree.
+    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
+    if let Some(primary) = input.answers.first() {
+        let held_out = crate::verdict::held_out(
+            input.setup,
+            &input.pairs,
+            &options,
+            &primary.calibration.outliers,
+        );
+        if let Ok(h) = &held_out {
+            input.holdout = Some(super::HoldoutSummary {
+                description: format!(
+                    "leave-one-out over {} samples (flagged outliers not counted)",
+                    h.poses
+                ),
+                rotation_rms_deg: h.rotation_rms_deg,
+                translation_rms_mm: h.translation_rms_mm,
+            });
+        }
+        input.verdict = Some(crate::verdict::assess(&crate::verdict::Evidence {
+            calibration: &primary.calibration,
+            pairs: &input.pairs,
+            noise: &options.noise,
+            held_out: &held_out,
+            accuracy,
+        }));
     }
     let path = folder.root().join("report.html");
     super::write_report(&path, &input)?;
