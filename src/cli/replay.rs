@@ -71,7 +71,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let output = args
         .output
         .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
-    ResultFile::from_calibration(calibration, &dataset.pairs).save(&output)?;
+    solved.result_file(&dataset.pairs).save(&output)?;
     outln!("{}", solved.summary);
     if folder.result_path().is_file() {
         let recorded = ResultFile::load_mounts(&folder.result_path())?;

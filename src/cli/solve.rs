@@ -139,7 +139,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
-    ResultFile::from_calibration(&solved.calibration, &dataset.pairs).save(&output)?;
+    solved.result_file(&dataset.pairs).save(&output)?;
     outln!("wrote {}", output.display());
     Ok(())
 }
@@ -156,13 +156,23 @@ pub fn run(args: SolveArgs) -> anyhow::Result<()> {
     );
     let options = args.options()?;
     let dataset = Dataset::load(&args.samples)?;
-    let calibration = solve::solve(dataset.setup, &dataset.pairs, &options)
-        .with_context(|| format!("solving {}", args.samples.display()))?;
+    let result = solve::solve(dataset.setup, &dataset.pairs, &options);
+    // The verdict comes first, also when the solve is refused (REDO, with the reason).
+    let verdict = handeye::verdict::assess_result(
+        result.as_ref(),
+        &dataset.pairs,
+        &options,
+        Default::default(),
+    );
+    outln!("{}", verdict.terminal_lines());
+    let calibration = result.with_context(|| format!("solving {}", args.samples.display()))?;
 
     outln!("{} samples", dataset.pairs.len());
     outln!("{}", calibration.summary());
     if let Some(output) = &args.output {
-        ResultFile::from_calibration(&calibration, &dataset.pairs).save(output)?;
+        ResultFile::from_calibration(&calibration, &dataset.pairs)
+            .with_verdict(verdict)
+            .save(output)?;
         outln!("wrote {}", output.display());
     }
     Ok(())

@@ -18,6 +18,7 @@ use crate::solve::{
     self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
     ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
+use crate::verdict::{self, Verdict};
 use crate::vision::Board;
 
 use super::{PoseVisit, SessionError, SessionFolder};
@@ -40,6 +41,8 @@ pub struct SolvedSession {
     pub estimated_camera: Option<CameraModel>,
     /// A short human summary.
     pub summary: String,
+    /// GOOD / CHECK / REDO and why, from the same figures the result file and report show.
+    pub verdict: Option<Verdict>,
 }
 
 /// What solving a session needs besides its folder: the board and the intrinsics, loaded once
@@ -81,6 +84,18 @@ impl SolveInputs {
     }
 }
 
+impl SolvedSession {
+    /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
+    /// with its verdict first.
+    pub fn result_file(&self, pairs: &[PosePair]) -> ResultFile {
+        let file = ResultFile::from_calibration(&self.calibration, pairs);
+        match &self.verdict {
+            Some(verdict) => file.with_verdict(verdict.clone()),
+            None => file,
+        }
+    }
+}
+
 /// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
 pub fn solve_folder(
     folder: &SessionFolder,
@@ -96,7 +111,8 @@ pub fn solve_folder_in(
     space: SolveSpace,
 ) -> Result<SolvedSession, SessionError> {
     let (solved, dataset) = load_and_solve(folder, inputs, space)?;
-    ResultFile::from_calibration(&solved.calibration, &dataset.pairs)
+    solved
+        .result_file(&dataset.pairs)
         .save(&folder.result_path())?;
     if let Some(summary) = solved.reprojection_summary() {
         crate::yaml_file::write_yaml(&summary, &folder.root().join(REPROJECTION_FILE))?;
@@ -362,6 +378,7 @@ fn solve_from_scratch(
         frame_ids: ids,
         estimated_camera: Some(camera),
         summary: String::new(),
+        verdict: None,
     };
     let c = &scratch.joint.camera;
     let i = &scratch.initial;
@@ -379,7 +396,14 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
-    solved.summary = solved.describe(&notes);
+    let verdict = verdict::assess_solved(
+        &solved.calibration,
+        &pairs,
+        &options,
+        config.verdict.accuracy(),
+    );
+    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(&notes));
+    solved.verdict = Some(verdict);
     Ok((
         solved,
         Dataset {
@@ -454,6 +478,7 @@ pub fn solve_session(
         frame_ids: Vec::new(),
         estimated_camera: None,
         summary: String::new(),
+        verdict: None,
     };
     let mut notes = Vec::new();
     if let Some((board, camera)) = vision {
@@ -499,7 +524,14 @@ pub fn solve_session(
             );
         }
     }
-    solved.summary = solved.describe(&notes);
+    let verdict = verdict::assess_solved(
+        &solved.calibration,
+        pairs,
+        &options,
+        config.verdict.accuracy(),
+    );
+    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(&notes));
+    solved.verdict = Some(verdict);
     Ok(solved)
 }
 
