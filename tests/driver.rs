@@ -148,7 +148,12 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
         settle: Duration::ZERO,
         max_reprojection_rms_px: 1.0,
         board: board(),
-        detector: DetectorOptions::default(),
+        // One detector thread: with more, the AprilTag C worker pool races now and then (see
+        // tests/fuzz.rs, `crash_detector_worker_pool_race`); the driver does not care.
+        detector: DetectorOptions {
+            threads: 1,
+            ..DetectorOptions::default()
+        },
         stop,
         estimate_intrinsics: false,
         move_check: None,
