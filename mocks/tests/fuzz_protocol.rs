@@ -520,14 +520,27 @@ fn fuzz_rtde(target: &str, timed: bool, cases: u32, budget: Duration) {
     let start = Instant::now();
     let budget = budget.mul_f64(scale());
     let result = runner(target, cases).run(
-        &(any::<bool>(), vec(rtde_message(timed), 1..24), 1usize..4),
-        |(program, messages, pieces)| {
+        &(
+            any::<bool>(),
+            any::<bool>(),
+            vec(rtde_message(timed), 1..24),
+            1usize..4,
+        ),
+        |(program, control_prefix, messages, pieces)| {
             if start.elapsed() > budget {
                 over.fetch_add(1, Ordering::Relaxed);
                 return Ok(());
             }
             executed.fetch_add(1, Ordering::Relaxed);
-            let bytes = encode(&messages);
+            // Half the cases set up the control recipe (id 1) and start first, as ur_rtde does,
+            // so that their commands reach the arm.
+            let mut all = Vec::new();
+            if control_prefix {
+                all.push(RtdeMessage::ControlInputs { upper: false });
+                all.push(RtdeMessage::Start);
+            }
+            all.extend(messages);
+            let bytes = encode(&all);
             check_case(target, &bytes, || {
                 if program {
                     start_program(&m)?;
