@@ -129,7 +129,7 @@ fn recorded_cell(dir: &Path, visp: &Path, frames: &Path) -> PathBuf {
            T_base_camera: {{translation: [0.95, -0.05, 0.48], rotation_vector: [-1.1, -1.1, 1.3]}}\n  \
            T_flange_target: {{translation: [0.02, -0.03, -0.08], rotation_vector: [1.2, 1.2, 1.2]}}\n\
          workspace: {{min: [-1.5, -1.5, -0.5], max: [1.5, 1.5, 1.5]}}\n\
-         detector: {{decimate: 1, threads: 2, max_hamming: 0}}\n\
+         detector: {{decimate: 1, threads: 1, max_hamming: 0}}\n\
          solver: {{method: refined, rotation_sigma_deg: 0.5, translation_sigma_mm: 2.0, drop_outliers: false}}\n\
          session: {{settle_s: 0.0, max_reprojection_rms_px: 1.0}}\n",
         board = repo()

@@ -13,13 +13,11 @@
 //! runs are reproducible).
 //!
 //! A panicking input is written to `$CARGO_TARGET_TMPDIR/fuzz-crashes/` and the target fails;
-//! keep such inputs in `tests/fuzz-corpus/crashes/` with an `#[ignore]`d test below until the bug
-//! is fixed. Known bugs excluded for now (fixes are being merged): images smaller than 16x16 in
-//! the detector (segfault), and `session.settle_s` values too large for a `Duration`. Found here
-//! and excluded likewise: the AprilTag C library's worker pool (apriltag-sys 0.3) races when a
-//! detector with `threads > 1` is created and used, and now and then crashes the process
-//! (about once in a few thousand ViSP imports, whatever the input), so the detector targets run
-//! with one detector thread; `crash_detector_worker_pool_race` reproduces it.
+//! keep such inputs in `tests/fuzz-corpus/crashes/` with a regression test below. Found here: the
+//! AprilTag C library's worker pool (apriltag-sys 0.3) races when a detector with `threads > 1`
+//! is created and used, and now and then crashed the process (about once in a few thousand ViSP
+//! imports, whatever the input); more than one detector thread is now refused
+//! (`crash_detector_worker_pool_race_more_threads_are_refused`).
 //!
 //! Seeds: the repo's `configs/` and `tests/data/` files, session records from a 6-pose run of
 //! `configs/sim-cell.yaml` (trimmed), and small hand-written files for the other formats; the PNG
@@ -62,13 +60,13 @@ fn detector_options() -> DetectorOptions {
     }
 }
 
-/// Images smaller than this (either side) are not given to the detector: the AprilTag C library
-/// crashes on 1x1 and 2000x1 images (known bug, fix in progress).
-const MIN_DETECTOR_SIDE: u32 = 16;
+/// The smallest image side mutations make. Every size reaches the detector: images too small for
+/// it are refused with an error before the C code sees them (#13 item 4).
+const MIN_DETECTOR_SIDE: u32 = 1;
 
-/// `session.settle_s` above this is not turned into a `Duration` (known panic on `1e300`, fix in
-/// progress); the config is still parsed and validated.
-const MAX_SETTLE_S_CHECKED: f64 = 1e9;
+/// `session.settle_s` up to this is turned into a `Duration` after loading: all of them (the
+/// 1e300 panic is fixed by the config's bounds, #13 item 5).
+const MAX_SETTLE_S_CHECKED: f64 = f64::INFINITY;
 
 /// Values a token is swapped for: numbers at and beyond `f64` limits, non-numbers, empty and
 /// null, wrong types, YAML syntax that changes the document's shape.
@@ -943,13 +941,11 @@ fn crash_input(name: &str) -> PathBuf {
 }
 
 #[test]
-#[ignore = "known bug (fix in progress): the AprilTag detector crashes the process on a 1x1 image"]
 fn crash_detector_on_a_1x1_image() {
     detect_without_crash(&crash_input("detector-1x1.png"));
 }
 
 #[test]
-#[ignore = "known bug (fix in progress): the AprilTag detector crashes the process on a 2000x1 image"]
 fn crash_detector_on_a_2000x1_image() {
     detect_without_crash(&crash_input("detector-2000x1.png"));
 }
@@ -964,15 +960,14 @@ fn detect_without_crash(path: &Path) {
     }
 }
 
-/// Imports the corpus's (valid) ViSP folder over and over with two detector threads: each import
-/// creates, uses and destroys an AprilTag detector. The C library's worker pool (apriltag-sys
-/// 0.3.0, `common/workerpool.c`) adds tasks without its mutex while freshly started workers may
-/// already be reading the task array, and a worker keeps a pointer into that array after
-/// unlocking: now and then a worker runs a freed task and the process dies with SIGSEGV (seen
-/// after 1,200 to 3,500 imports; upstream fixed the pool in AprilRobotics/apriltag PR #339).
+/// Found by fuzzing: importing the corpus's (valid) ViSP folder over and over with two detector
+/// threads crashed the process now and then (SIGSEGV after 1,200 to 3,500 imports). The C
+/// library's worker pool (apriltag-sys 0.3.0, `common/workerpool.c`) adds tasks without its mutex
+/// while freshly started workers may already read the task array, and a worker keeps a pointer
+/// into that array after unlocking (upstream fixed it in AprilRobotics/apriltag PR #339). The
+/// fix here: more than one detector thread is refused, with the reason, wherever options enter.
 #[test]
-#[ignore = "found by fuzzing: SIGSEGV in the AprilTag worker pool with detector threads > 1 (a race, not an input); crashes the test process"]
-fn crash_detector_worker_pool_race() {
+fn crash_detector_worker_pool_race_more_threads_are_refused() {
     let folder = corpus().join("visp_folder");
     let options = VispOptions {
         setup: handeye::setup::Setup::EyeToHand,
@@ -984,14 +979,23 @@ fn crash_detector_worker_pool_race() {
         },
         skip_unfound: false,
     };
-    for _ in 0..20_000 {
-        let imported = import_visp(&folder, &options).unwrap();
-        assert_eq!(imported.dataset.pairs.len(), 2);
-    }
+    let message = import_visp(&folder, &options).unwrap_err().to_string();
+    assert!(
+        message.contains("threads") && message.contains("worker pool"),
+        "{message}"
+    );
+    let board = Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
+    let refused = TagDetector::spawn(
+        &board,
+        DetectorOptions {
+            threads: 2,
+            ..DetectorOptions::default()
+        },
+    );
+    assert!(refused.is_err(), "two detector threads must be refused");
 }
 
 #[test]
-#[ignore = "known bug (fix in progress): `session.settle_s: 1e300` passes validation and then panics in CellConfig::settle (Duration::from_secs_f64)"]
 fn crash_config_settle_1e300() {
     let path = crash_input("config-settle-1e300.yaml");
     let result = catch_unwind(|| match CellConfig::load(&path) {

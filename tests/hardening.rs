@@ -122,7 +122,7 @@ fn issue13_absurd_decimation_is_refused_at_spawn() {
         assert!(
             error
                 .to_string()
-                .contains("decimation must be between 1 and 16"),
+                .contains("decimation: expected a value in [1, 16]"),
             "{decimation}: {error}"
         );
     }
@@ -162,7 +162,7 @@ fn issue13_detect_cli_with_huge_decimation_or_a_1x1_image_fails_cleanly() {
     let (code, stderr) = run(&["--decimation", "1000000"]);
     assert_eq!(code, Some(1), "{stderr}");
     assert!(
-        stderr.contains("decimation must be between 1 and 16, found 1000000"),
+        stderr.contains("decimation: expected a value in [1, 16], found 1000000"),
         "{stderr}"
     );
     let (code, stderr) = run(&[]);

@@ -2,7 +2,7 @@
 //! RTDE client streams). Each test replays one on a timed mock with its control program running
 //! and asserts that no connection thread panicked and that the mock answers both on that
 //! connection (the stream ends with a protocol-version request) and on a fresh one. They are
-//! `#[ignore]`d until the fixes are merged; enable each then.
+//! each now a regression test (the fixes are in `mocks/src/ur/`).
 
 use std::io::{Read, Write};
 use std::net::{Ipv4Addr, Shutdown, SocketAddr, TcpStream};
@@ -108,25 +108,21 @@ fn replay(name: &str) {
 }
 
 #[test]
-#[ignore = "known bug (fix in progress): moveJ at speed 1e-300 panics in Duration::from_secs_f64 (mocks/src/ur/arm.rs start_motion)"]
 fn crash_movej_at_speed_1e_300() {
     replay("mock-rtde-movej-speed-1e-300.bin");
 }
 
 #[test]
-#[ignore = "found by fuzzing: moveJ to a joint target of 1e300 rad (or ±inf) at 1 rad/s panics in Duration::from_secs_f64 (mocks/src/ur/arm.rs start_motion); same overflow as the speed bug, check the fix covers it"]
 fn crash_movej_to_a_1e300_joint_target() {
     replay("mock-rtde-movej-target-1e300.bin");
 }
 
 #[test]
-#[ignore = "found by fuzzing: the 256th output recipe on one RTDE connection overflows the u8 recipe id (`outputs.len() as u8 + 1`, mocks/src/ur/rtde.rs) and panics in debug builds"]
 fn crash_256_output_recipes_on_one_connection() {
     replay("mock-rtde-256-output-recipes.bin");
 }
 
 #[test]
-#[ignore = "found by fuzzing: the 256th input recipe on one RTDE connection overflows the u8 recipe id (`inputs.len() as u8 + 1`, mocks/src/ur/rtde.rs) and panics in debug builds"]
 fn crash_256_input_recipes_on_one_connection() {
     replay("mock-rtde-256-input-recipes.bin");
 }

@@ -267,7 +267,7 @@ impl PreparedCell {
         SolveInputs {
             config: self.config.clone(),
             board: self.board.clone(),
-            camera: self.intrinsics_known.then(|| self.camera_model.clone()),
+            camera: self.intrinsics_known.then_some(self.camera_model),
         }
     }
 

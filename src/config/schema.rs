@@ -370,7 +370,7 @@ fn default_decimate() -> f32 {
     2.0
 }
 fn default_threads() -> u8 {
-    2
+    1
 }
 
 impl Default for DetectorConfig {

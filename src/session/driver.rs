@@ -421,8 +421,8 @@ fn spawn_worker(
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<std::thread::JoinHandle<()>, SessionError> {
-    let detector =
-        TagDetector::spawn(&setup.board, setup.detector.clone()).map_err(SessionError::Detector)?;
+    let detector = TagDetector::spawn(&setup.board, setup.detector.clone())
+        .map_err(|e| SessionError::Detector(Box::new(e)))?;
     let board = setup.board.clone();
     let folder = setup.folder.clone();
     let session_setup = setup.setup;
@@ -501,7 +501,7 @@ fn process(
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .map_err(|source| SessionError::Frame {
             path: frame_name.clone(),
-            source,
+            source: Box::new(source),
         })?;
     folder.write_file(&frame_name, &png)?;
     Fault::abort_if(fault, Fault::AbortAfterFrame(job.plan_index));

@@ -187,7 +187,7 @@ pub enum SessionError {
         stage: &'static str,
         /// Why.
         #[source]
-        source: SolveError,
+        source: Box<SolveError>,
     },
     /// No recorded frame shows the board, so the intrinsics cannot be estimated.
     #[error("no frame of session {} shows the board: there is nothing to estimate the intrinsics from; check that the board is in view, then start a new session", folder.display())]
@@ -202,7 +202,7 @@ pub enum SessionError {
         path: PathBuf,
         /// The image error.
         #[source]
-        source: image::ImageError,
+        source: Box<image::ImageError>,
     },
     /// The board file of the solve inputs could not be loaded.
     #[error("loading the board")]
@@ -211,7 +211,7 @@ pub enum SessionError {
         file: PathBuf,
         /// Why.
         #[source]
-        source: TargetError,
+        source: Box<TargetError>,
     },
     /// The intrinsics file could not be loaded or written.
     #[error("reading or writing the intrinsics")]
@@ -220,11 +220,11 @@ pub enum SessionError {
         file: PathBuf,
         /// Why.
         #[source]
-        source: CameraModelError,
+        source: Box<CameraModelError>,
     },
     /// The board detector could not start or failed on a frame.
     #[error("the board detector failed")]
-    Detector(#[source] TargetError),
+    Detector(#[source] Box<TargetError>),
     /// The detection thread could not start.
     #[error("cannot start the detection thread")]
     DetectionThreadSpawn(#[source] std::io::Error),

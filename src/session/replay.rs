@@ -18,7 +18,8 @@ pub fn redetect(
     max_rms: f64,
 ) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
     let manifest = folder.read_manifest()?;
-    let detector = TagDetector::spawn(board, detector).map_err(SessionError::Detector)?;
+    let detector =
+        TagDetector::spawn(board, detector).map_err(|e| SessionError::Detector(Box::new(e)))?;
     let mut samples = Vec::new();
     let mut visits = Vec::new();
     for recorded in folder.read_visits()? {
@@ -26,7 +27,7 @@ pub fn redetect(
         let image = image::open(&frame_path)
             .map_err(|source| SessionError::Frame {
                 path: frame_path.clone(),
-                source,
+                source: Box::new(source),
             })?
             .into_luma8();
         let record_path = folder

@@ -66,14 +66,14 @@ impl SolveInputs {
     pub fn load(config: CellConfig) -> Result<SolveInputs, SessionError> {
         let board = Board::load(&config.target).map_err(|source| SessionError::Board {
             file: config.target.clone(),
-            source,
+            source: Box::new(source),
         })?;
         let camera = match &config.intrinsics {
             Some(file) => {
                 Some(
                     CameraModel::load(file).map_err(|source| SessionError::Intrinsics {
                         file: file.clone(),
-                        source,
+                        source: Box::new(source),
                     })?,
                 )
             }
@@ -264,7 +264,7 @@ fn solve_from_scratch(
     let (width, height) =
         image::image_dimensions(&frame_path).map_err(|source| SessionError::Frame {
             path: frame_path.clone(),
-            source,
+            source: Box::new(source),
         })?;
     let options = config.solver.to_options();
     let scratch = crate::solve::intrinsics::calibrate_from_scratch(
@@ -277,7 +277,7 @@ fn solve_from_scratch(
     )
     .map_err(|source| SessionError::Solve {
         stage: "estimating the intrinsics",
-        source,
+        source: Box::new(source),
     })?;
     let camera_info = folder.root().join(CAMERA_INFO_FILE);
     scratch
@@ -286,7 +286,7 @@ fn solve_from_scratch(
         .save_camera_info(&camera_info)
         .map_err(|source| SessionError::Intrinsics {
             file: camera_info.clone(),
-            source,
+            source: Box::new(source),
         })?;
     // The fair comparison: board poses again by PnP with the estimated intrinsics, the pose-space
     // solve on those, and the reprojection answer's residuals against the same poses.
@@ -310,7 +310,7 @@ fn solve_from_scratch(
     let pose_space =
         solve::solve(manifest.setup, &pairs, &options).map_err(|source| SessionError::Solve {
             stage: "pose space with the estimated intrinsics",
-            source,
+            source: Box::new(source),
         })?;
     let pose_space_errors = reprojection_errors(
         manifest.setup,
@@ -420,7 +420,7 @@ pub fn solve_session(
     let pose_space =
         solve::solve(setup, pairs, &options).map_err(|source| SessionError::Solve {
             stage: "pose space",
-            source,
+            source: Box::new(source),
         })?;
     let mut solved = SolvedSession {
         calibration: pose_space.clone(),
@@ -458,7 +458,7 @@ pub fn solve_session(
             )
             .map_err(|source| SessionError::Solve {
                 stage: "reprojection refinement",
-                source,
+                source: Box::new(source),
             })?;
             solved.pose_space_errors = Some(reprojection_errors(
                 setup,

@@ -49,7 +49,7 @@ impl Default for DetectorOptions {
     fn default() -> Self {
         DetectorOptions {
             decimation: 2.0,
-            threads: 2,
+            threads: 1,
             quad_sigma: 0.0,
             max_hamming: 1,
         }
@@ -71,8 +71,12 @@ pub struct DetectorOptionsError {
 impl DetectorOptions {
     /// Accepted `decimation` (see [`MAX_DECIMATION`]).
     pub const DECIMATION: std::ops::RangeInclusive<f32> = 1.0..=MAX_DECIMATION;
-    /// Accepted `threads`.
-    pub const THREADS: std::ops::RangeInclusive<u8> = 1..=64;
+    /// Accepted `threads`: one. The AprilTag C library this build links (apriltag-sys 0.3)
+    /// predates upstream's fix of a race in its worker pool (AprilRobotics/apriltag PR #339):
+    /// with more threads the detector can crash the whole process — seen about once in a few
+    /// thousand frames (`tests/fuzz.rs`, `crash_detector_worker_pool_race`). Detection already
+    /// runs on its own thread, overlapping the arm's moves.
+    pub const THREADS: std::ops::RangeInclusive<u8> = 1..=1;
     /// Accepted `quad_sigma`, px (negative sharpens; see [`MAX_QUAD_SIGMA`]): a stronger blur
     /// erases the tags, and its kernel must stay far narrower than any accepted image.
     pub const QUAD_SIGMA: std::ops::RangeInclusive<f32> = -MAX_QUAD_SIGMA..=MAX_QUAD_SIGMA;
@@ -98,7 +102,11 @@ impl DetectorOptions {
             return bad("decimation", self.decimation, &Self::DECIMATION);
         }
         if !Self::THREADS.contains(&self.threads) {
-            return bad("threads", self.threads, &Self::THREADS);
+            return Err(DetectorOptionsError {
+                field: "threads",
+                found: self.threads.to_string(),
+                expected: "1 (more threads can crash the AprilTag library this build links: a race in its worker pool)".to_string(),
+            });
         }
         if !Self::QUAD_SIGMA.contains(&self.quad_sigma) {
             return bad("quad_sigma", self.quad_sigma, &Self::QUAD_SIGMA);
@@ -457,28 +465,28 @@ mod tests {
                     decimation: 100.0,
                     ..default.clone()
                 },
-                "decimation: expected a value in [1, 8], found 100",
+                "decimation: expected a value in [1, 16], found 100",
             ),
             (
                 DetectorOptions {
                     decimation: f32::NAN,
                     ..default.clone()
                 },
-                "decimation: expected a value in [1, 8], found NaN",
+                "decimation: expected a value in [1, 16], found NaN",
             ),
             (
                 DetectorOptions {
                     threads: 0,
                     ..default.clone()
                 },
-                "threads: expected a value in [1, 64], found 0",
+                "threads: expected 1 (more threads can crash the AprilTag library this build links: a race in its worker pool), found 0",
             ),
             (
                 DetectorOptions {
                     quad_sigma: 1e6,
                     ..default.clone()
                 },
-                "quad_sigma: expected a value in [0, 10], found 1000000",
+                "quad_sigma: expected a value in [-4, 4], found 1000000",
             ),
             (
                 DetectorOptions {

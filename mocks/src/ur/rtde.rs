@@ -266,10 +266,12 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
                         .iter()
                         .map(|(_, t)| t.map_or("NOT_FOUND", FieldType::name))
                         .collect();
-                    let id = outputs.len() as u8 + 1;
+                    // Recipe ids are one byte: past 255 recipes on a connection the setup fails
+                    // (id 0, nothing stored) instead of wrapping onto an earlier recipe.
+                    let id = u8::try_from(outputs.len() + 1).unwrap_or(0);
                     let mut p = vec![id];
                     p.extend_from_slice(types.join(",").as_bytes());
-                    if fields.iter().all(|(_, t)| t.is_some()) {
+                    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
                         let hz = if frequency.is_finite() {
                             frequency.clamp(1.0, 500.0)
                         } else {
@@ -295,7 +297,8 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
                         .map(|n| (n.to_string(), input_type(n)))
                         .collect();
                     // ur_rtde hard-codes recipe ids 1, 2, 3, ... in setup order, per connection.
-                    let id = inputs.len() as u8 + 1;
+                    // One byte, as for the outputs: past 255 recipes the setup fails (id 0).
+                    let id = u8::try_from(inputs.len() + 1).unwrap_or(0);
                     if fields
                         .iter()
                         .any(|(n, _)| register_index(n, "input_int_register_") == Some(24))
@@ -308,7 +311,7 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
                         .collect();
                     let mut p = vec![id];
                     p.extend_from_slice(types.join(",").as_bytes());
-                    if fields.iter().all(|(_, t)| t.is_some()) {
+                    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
                         inputs.push((
                             id,
                             fields
