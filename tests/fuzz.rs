@@ -979,7 +979,14 @@ fn crash_detector_worker_pool_race_more_threads_are_refused() {
         },
         skip_unfound: false,
     };
-    let message = import_visp(&folder, &options).unwrap_err().to_string();
+    let error = import_visp(&folder, &options).unwrap_err();
+    // The whole chain, as the CLI prints it.
+    let mut message = error.to_string();
+    let mut source = std::error::Error::source(&error);
+    while let Some(cause) = source {
+        message.push_str(&format!(": {cause}"));
+        source = cause.source();
+    }
     assert!(
         message.contains("threads") && message.contains("worker pool"),
         "{message}"

@@ -43,8 +43,8 @@ pub struct DetectArgs {
     /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 2.0)]
     decimation: f32,
-    /// Detector threads.
-    #[arg(long, default_value_t = 2)]
+    /// Detector threads: 1 (the AprilTag C library this build links races with more).
+    #[arg(long, default_value_t = 1)]
     threads: u8,
     /// Highest accepted hamming distance (0-2).
     #[arg(long, default_value_t = 1)]
