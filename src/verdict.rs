@@ -36,7 +36,7 @@ use std::fmt::Write;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::Pose;
+use crate::geometry::{rms, Pose};
 use crate::notice::{Notice, NoticeKind, Severity};
 use crate::setup::{PosePair, Setup};
 use crate::solve::{
@@ -274,15 +274,6 @@ pub struct Evidence<'a> {
     pub accuracy: Accuracy,
 }
 
-fn rms(values: impl Iterator<Item = f64>) -> f64 {
-    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        (sum / n as f64).sqrt()
-    }
-}
-
 fn median(mut values: Vec<f64>) -> f64 {
     values.sort_by(f64::total_cmp);
     let n = values.len();
@@ -310,22 +301,11 @@ pub fn held_out(
             "only {n} samples: a held-out check needs at least {MIN_HELD_OUT_SAMPLES}"
         ));
     }
-    let fold_options = SolveOptions {
-        covariance: false,
-        check_conventions: false,
-        ..options.clone()
-    };
     let count = n.min(MAX_HELD_OUT);
     let mut errors = Vec::with_capacity(count);
     for k in 0..count {
         let left_out = k * n / count;
-        let rest: Vec<PosePair> = pairs
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| *i != left_out)
-            .map(|(_, p)| p.clone())
-            .collect();
-        let c = solve::solve(setup, &rest, &fold_options).map_err(|e| {
+        let predicted = solve::predict_left_out(setup, pairs, options, left_out).map_err(|e| {
             format!(
                 "solving without sample {left_out} failed ({e}): the answer hangs on that one pose"
             )
@@ -334,7 +314,6 @@ pub fn held_out(
             continue;
         }
         let measured: &Pose = &pairs[left_out].camera_from_target;
-        let predicted = c.predict_camera_from_target(&pairs[left_out].base_from_flange);
         errors.push((
             (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
             predicted.rotation.angle_to(&measured.rotation).to_degrees(),

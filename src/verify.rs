@@ -187,23 +187,10 @@ pub fn leave_one_out(
             required: REQUIRED,
         });
     }
-    let fold_options = SolveOptions {
-        covariance: false,
-        check_conventions: false,
-        ..options.clone()
-    };
     let mut poses = Vec::with_capacity(pairs.len());
-    for left_out in 0..pairs.len() {
-        let rest: Vec<PosePair> = pairs
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| *i != left_out)
-            .map(|(_, p)| p.clone())
-            .collect();
-        let c = solve::solve(setup, &rest, &fold_options)
+    for (left_out, p) in pairs.iter().enumerate() {
+        let predicted = solve::predict_left_out(setup, pairs, options, left_out)
             .map_err(|source| VerifyError::Fold { left_out, source })?;
-        let p = &pairs[left_out];
-        let predicted = c.predict_camera_from_target(&p.base_from_flange);
         poses.push(prediction_error(
             left_out,
             p.id.clone(),

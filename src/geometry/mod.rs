@@ -123,6 +123,16 @@ pub fn to_matrix4_rows(pose: &Pose) -> [[f64; 4]; 4] {
     rows
 }
 
+/// Root mean square of `values`; NaN when there are none (nothing to summarise is not zero).
+pub fn rms(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        (sum / n as f64).sqrt()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -360,14 +360,8 @@ pub(crate) fn rebuild_samples(
 ) -> Result<BTreeMap<usize, PosePair>, SessionError> {
     let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
     for visit in visits {
-        let file = folder
-            .root()
-            .join(SessionFolder::visit_name(visit.plan_index));
-        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&file)? {
-            samples.insert(
-                visit.plan_index,
-                sample_of(visit.plan_index, base_from_flange, camera_from_target),
-            );
+        if let Some(sample) = accepted_sample(folder, visit)? {
+            samples.insert(visit.plan_index, sample);
         }
     }
     let path = folder.samples_path();
@@ -442,14 +436,8 @@ fn spawn_worker(
                     fault,
                 )
                 .and_then(|visit| {
-                    let file = folder
-                        .root()
-                        .join(SessionFolder::visit_name(visit.plan_index));
-                    if let (base_from_flange, Some(camera_from_target)) = visit.poses(&file)? {
-                        samples.insert(
-                            visit.plan_index,
-                            sample_of(visit.plan_index, base_from_flange, camera_from_target),
-                        );
+                    if let Some(sample) = accepted_sample(&folder, &visit)? {
+                        samples.insert(visit.plan_index, sample);
                         let dataset = Dataset {
                             setup: session_setup,
                             pairs: samples.values().cloned().collect(),
@@ -474,6 +462,24 @@ fn spawn_worker(
 }
 
 /// The solver sample of a plan pose; its id ties it to the frame and record files.
+/// The sample a committed record gives, when its board pose was accepted.
+fn accepted_sample(
+    folder: &SessionFolder,
+    visit: &PoseVisit,
+) -> Result<Option<PosePair>, SessionError> {
+    let file = folder
+        .root()
+        .join(SessionFolder::visit_name(visit.plan_index));
+    Ok(match visit.poses(&file)? {
+        (base_from_flange, Some(camera_from_target)) => Some(sample_of(
+            visit.plan_index,
+            base_from_flange,
+            camera_from_target,
+        )),
+        (_, None) => None,
+    })
+}
+
 pub(crate) fn sample_of(
     plan_index: usize,
     base_from_flange: Pose,

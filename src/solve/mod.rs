@@ -339,3 +339,26 @@ fn solve_subset(
         warnings,
     })
 }
+
+/// `T_camera_target` of sample `left_out` as a solve of all the other samples predicts it
+/// (covariance and convention checks off in the fold: only the estimate matters there).
+pub fn predict_left_out(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    left_out: usize,
+) -> Result<Pose, SolveError> {
+    let fold_options = SolveOptions {
+        covariance: false,
+        check_conventions: false,
+        ..options.clone()
+    };
+    let rest: Vec<PosePair> = pairs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != left_out)
+        .map(|(_, p)| p.clone())
+        .collect();
+    let c = solve(setup, &rest, &fold_options)?;
+    Ok(c.predict_camera_from_target(&pairs[left_out].base_from_flange))
+}

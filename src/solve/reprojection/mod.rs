@@ -47,7 +47,7 @@ use super::refine::mount_uncertainty;
 use super::require_positive;
 use super::{Axby, AxbyData, Calibration, NoiseModel, RobustLoss, SolveError, Uncertainty};
 use crate::camera_model::{CameraModel, Distortion};
-use crate::geometry::Pose;
+use crate::geometry::{rms, Pose};
 use crate::notice::Notice;
 use crate::setup::{CellTransforms, PosePair, Setup};
 use problem::{reanchor, Problem};
@@ -232,15 +232,6 @@ impl ReprojectionCalibration {
             solver,
             warnings,
         }
-    }
-}
-
-fn rms(values: impl Iterator<Item = f64>) -> f64 {
-    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        (sum / n as f64).sqrt()
     }
 }
 
