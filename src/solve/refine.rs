@@ -249,6 +249,44 @@ pub(super) fn group_redundancy(
     Some(groups)
 }
 
+/// Whitened residual norm (sigmas, 6 dof) of every sample of `data` at `solution`, the fit of
+/// the samples with `in_fit`: a sample in the fit is whitened by the noise alone, one left out
+/// by the noise plus the uncertainty of its prediction, `I + J_i·N⁻¹·J_iᵀ` (whitened, `N` the
+/// information of the fitted samples), so a sample is tested for what a fit without it can
+/// predict. Weights scale the fit's information, not a sample's own test. `None` when `N` is
+/// singular.
+pub(super) fn test_norms(
+    data: &AxbyData,
+    solution: &Axby,
+    noise: &NoiseModel,
+    in_fit: &[bool],
+) -> Option<Vec<f64>> {
+    let problem = Problem::new(data, *solution, vec![1.0; data.len()], noise);
+    let residuals = problem.residuals()?;
+    let j = problem.jacobian()?;
+    let mut normal = SMatrix::<f64, 12, 12>::zeros();
+    for i in (0..data.len()).filter(|&i| in_fit[i]) {
+        let ji = j.fixed_view::<6, 12>(6 * i, 0);
+        normal += ji.transpose() * ji * data.weights[i];
+    }
+    let inverse = normal.cholesky()?.inverse();
+    Some(
+        (0..data.len())
+            .map(|i| {
+                let e = residuals.fixed_rows::<6>(6 * i).into_owned();
+                if in_fit[i] {
+                    return e.norm();
+                }
+                let ji = j.fixed_view::<6, 12>(6 * i, 0);
+                let spread = SMatrix::<f64, 6, 6>::identity() + ji * inverse * ji.transpose();
+                spread
+                    .cholesky()
+                    .map_or(e.norm(), |c| e.dot(&c.solve(&e)).max(0.0).sqrt())
+            })
+            .collect(),
+    )
+}
+
 /// Refines a start by weighted (optionally robust) nonlinear least squares, with the noise
 /// model estimated from the residuals as `options.estimate_noise` asks; computes the
 /// covariance at the optimum when `options.covariance` is set.

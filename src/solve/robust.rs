@@ -7,7 +7,8 @@
 //!    [`diagnostics::flag_outliers`]) are set aside and the chosen method (with its noise
 //!    estimate) fits the rest.
 //! 3. Every sample is tested against that fit, whitened by the estimated noise, with the same
-//!    rule as the diagnostics' outlier flags; the fit is repeated on the samples that pass until
+//!    rule as the diagnostics' outlier flags (a sample left out whitened by the noise plus the
+//!    uncertainty of its prediction); the fit is repeated on the samples that pass until
 //!    the set is stable. A sample set aside by the start but consistent with the fit comes back,
 //!    so a clean data set ends with every sample and exactly the plain fit.
 //!
@@ -18,6 +19,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 
 use super::diagnostics::{self, check_rotation_diversity, MIN_SAMPLES};
+use super::refine::test_norms;
 use super::{closed_form, solve_subset, Axby, AxbyData, Calibration, SolveError, SolveOptions};
 use crate::notice::{Notice, NoticeKind};
 use crate::setup::{PosePair, Setup};
@@ -35,6 +37,12 @@ const MAX_ROUNDS: usize = 6;
 /// Median of the chi distribution with 3 degrees of freedom: median residual norm of a group
 /// (3 axes) over its per-axis sigma.
 const CHI3_MEDIAN: f64 = 1.5382;
+/// Whitened residual (sigmas, 6 dof) a sample must exceed to be left out of the final fit
+/// (beside the robust `median + k·MAD` rule). Higher than the flagging floor (4.74, the 99.9 %
+/// quantile): χ² with 6 dof exceeds 36 with probability 1e-6, so a clean set keeps every sample
+/// even when its noise, estimated from the other samples, comes out 25 % low (as it can with
+/// 8–10 samples); a sample that can pull the answer is far above it.
+const EXCLUDE_FLOOR_SIGMA: f64 = 6.0;
 /// Seed of the consensus draws (any fixed value: the answer must not change between runs).
 const SEED: u64 = 0x4845_5945; // "HEYE"
 
@@ -137,11 +145,16 @@ pub(super) fn solve_robust(
             .map(|p| p.model())
             .unwrap_or(options.noise);
         let solution = Axby::from_mounts(&calibration.camera_mount, &calibration.target_mount);
-        let residuals = diagnostics::residuals(&data, &solution, &noise);
+        let mut residuals = diagnostics::residuals(&data, &solution, &noise);
+        // Samples left out are tested against what the fit can predict for them.
+        let in_fit: Vec<bool> = all.iter().map(|i| keep.contains(i)).collect();
+        if let Some(norms) = test_norms(&data, &solution, &noise, &in_fit) {
+            residuals.normalised = norms;
+        }
         let flagged = diagnostics::flag_outliers(
             &residuals.normalised,
             options.outlier_mad_factor,
-            options.outlier_floor_sigma,
+            exclude_floor(options),
         );
         let next: Vec<usize> = all
             .iter()
@@ -184,7 +197,7 @@ pub(super) fn solve_robust(
                 format!(
                     "{name} left out of the final fit: its T_camera_target is {:.3}° and {:.2} mm \
                      from the prediction of the fit of the other {} samples, {:.1} sigmas of the \
-                     estimated noise (outlier above {:.1}); check its detection and robot pose",
+                     estimated noise and the prediction's uncertainty (outlier above {:.1}); check its detection and robot pose",
                     residuals.rotation_deg[i],
                     residuals.translation_mm[i],
                     kept.len(),
@@ -210,5 +223,10 @@ fn outlier_threshold(normalised: &[f64], options: &SolveOptions) -> f64 {
     let med = median(normalised);
     let deviations: Vec<f64> = normalised.iter().map(|v| (v - med).abs()).collect();
     let mad = median(&deviations);
-    (med + options.outlier_mad_factor * 1.4826 * mad).max(options.outlier_floor_sigma)
+    (med + options.outlier_mad_factor * 1.4826 * mad).max(exclude_floor(options))
+}
+
+/// The floor of the exclusion test, sigmas.
+fn exclude_floor(options: &SolveOptions) -> f64 {
+    options.outlier_floor_sigma.max(EXCLUDE_FLOOR_SIGMA)
 }
