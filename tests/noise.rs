@@ -486,3 +486,25 @@ fn reported_sigma_describes_the_true_error_under_every_noise_case() {
     }
     assert!(outside.is_empty(), "outside 0.75–1.25: {outside:?}");
 }
+
+#[test]
+fn result_file_holds_the_noise_used_and_reads_it_back() {
+    let mut c = cell(11);
+    Noise::gaussian(0.5, 2.0).apply(&mut c.pairs, 11);
+    let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("result.yaml");
+    handeye::result::ResultFile::from_calibration(&found, &c.pairs)
+        .save(&path)
+        .unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        text.contains("noise:") && text.contains("rotation: estimated"),
+        "{text}"
+    );
+    let back = handeye::result::ResultFile::load(&path)
+        .unwrap()
+        .to_calibration(&path)
+        .unwrap();
+    assert_eq!(back.noise, found.noise);
+}

@@ -12,7 +12,9 @@
 //! this file maps both setups onto `A = X·B·Y` and runs the pipeline.
 //!
 //! Every method ([`iterative`], [`closed_form`], [`refine`]) works on [`AxbyData`] only, so the
-//! two setups share one code path. Units are metres and radians inside; residuals and
+//! two setups share one code path. Around the method: the board-pose noise estimated from the
+//! residuals ([`noise`]) and, by default, a robust consensus start with outliers left out of the
+//! final fit (`robust`). Units are metres and radians inside; residuals and
 //! uncertainties are reported in mm and degrees for people. Pure functions: no I/O, no clocks;
 //! depends only on the ground floor (`geometry`, `setup`, `camera_model`) and nalgebra, as
 //! `tests/layers.rs` checks.
