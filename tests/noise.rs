@@ -346,8 +346,8 @@ fn gross_outliers_are_left_out_named_and_the_answer_matches_ml_on_the_inliers() 
             ..SolveOptions::default()
         };
         let pulled = solve::solve(Setup::EyeInHand, &c.pairs, &every).unwrap();
-        for k in 0..4 {
-            kept[k].push(errors(&pulled, &c)[k]);
+        for (list, e) in kept.iter_mut().zip(errors(&pulled, &c)) {
+            list.push(e);
         }
         for (k, (f, m)) in errors(&found, &c)
             .into_iter()
