@@ -7,6 +7,7 @@
 //! T_flange_camera: {translation: [..], quaternion: {w, x, y, z}, rotation_vector: [..]}
 //! T_base_target:   {translation: [..], quaternion: {..}, rotation_vector: [..]}
 //! uncertainty: {T_flange_camera: {rotation_deg: .., translation_mm: .., ...}, T_base_target: {..}, variance_factor: .., covariance: [[..] x 12]}
+//! noise: {rotation_sigma_deg: .., translation_sigma_mm: .., rotation: estimated, translation: estimated, rounds: ..}
 //! residuals: {rotation_rms_deg: .., rotation_max_deg: .., translation_rms_mm: .., translation_max_mm: .., samples: [..]}
 //! outliers: [..]
 //! solver: {method: refined, iterations: .., converged: true, restarts: 0, ...}
@@ -27,7 +28,8 @@ use crate::geometry::{Pose, PoseRecord};
 use crate::notice::Notice;
 use crate::setup::{CellTransforms, PosePair, Setup};
 use crate::solve::{
-    Calibration, Method, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
+    Calibration, Method, Phase, PoseNoise, PoseSigma, Residuals, SolverReport, TraceStep,
+    Uncertainty,
 };
 use crate::verdict::Verdict;
 use crate::yaml_file::{read_yaml, write_yaml, FileError};
@@ -141,6 +143,11 @@ pub struct ResultFile {
     /// Uncertainty of both unknowns (refined method).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintyYaml>,
+    /// The board-pose noise (per-axis 1-sigma of `T_camera_target`) the pose-space fit used,
+    /// estimated from the residuals or given, and where each came from (absent for an answer
+    /// fitted in reprojection space, and in older files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<PoseNoise>,
     /// Residuals.
     pub residuals: ResidualsYaml,
     /// Indices of samples flagged as outliers.
@@ -212,6 +219,7 @@ impl ResultFile {
             T_base_camera: if eye_in_hand { None } else { camera },
             T_flange_target: if eye_in_hand { None } else { target },
             uncertainty,
+            noise: calibration.noise,
             residuals: ResidualsYaml {
                 rotation_rms_deg: r.rotation_rms_deg,
                 rotation_max_deg: r.rotation_max_deg,
@@ -366,6 +374,7 @@ impl ResultFile {
             target_mount: mounts.target_mount,
             uncertainty,
             residuals,
+            noise: self.noise,
             outliers: self.outliers.clone(),
             dropped: r
                 .samples

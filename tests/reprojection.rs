@@ -233,8 +233,10 @@ fn reprojection_answer_is_closer_to_the_truth_than_the_pose_space_answer() {
         "error ratio reprojection / pose space over {} seeds: {ratio:.3}",
         seeds.len()
     );
-    // Stated margin: at least 25 % closer to the truth on average over the seeds.
-    assert!(ratio < 0.75, "ratio {ratio:.3}");
+    // Stated margin: at least 15 % closer to the truth on average over the seeds. (Measured
+    // 0.780; it was 0.686 against the pose-space answer with fixed noise, before the pose space
+    // estimated its noise from the residuals and got 12 % closer to the truth here itself.)
+    assert!(ratio < 0.85, "ratio {ratio:.3}");
 }
 
 #[test]

@@ -6,8 +6,8 @@ use handeye::geometry::Pose;
 use handeye::notice::{NoticeKind, Severity};
 use handeye::setup::{predict, PosePair, Setup};
 use handeye::solve::{
-    self, closed_form, iterative, AxbyData, IterativeOptions, Method, NoiseModel, RobustLoss,
-    SolveError, SolveOptions,
+    self, closed_form, iterative, AxbyData, EstimateNoise, IterativeOptions, Method, NoiseModel,
+    RobustLoss, SolveError, SolveOptions,
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -299,7 +299,12 @@ fn gaussian_noise_default_is_the_ml_optimum_and_beats_closed_form_on_translation
             noise.translation_sigma_m,
             400 + seed,
         );
-        let refined = solve::solve(setup, &c.pairs, &SolveOptions::default()).unwrap();
+        // The refinement with the noise model given (the default estimates it: tests/noise.rs).
+        let given = SolveOptions {
+            estimate_noise: EstimateNoise::NONE,
+            ..SolveOptions::default()
+        };
+        let refined = solve::solve(setup, &c.pairs, &given).unwrap();
         let closed = solve::solve(setup, &c.pairs, &options(Method::ClosedForm)).unwrap();
         let (bf_cam, bf_tgt) = brute_force_optimum(setup, &c.pairs, &noise);
         // Same optimum as the independent refinement (far below the noise-level errors).
@@ -477,18 +482,29 @@ fn planted_outliers_are_flagged_and_dropped() {
     c.pairs[13].camera_from_target.rotation =
         UnitQuaternion::from_scaled_axis(Vector3::x() * 5f64.to_radians())
             * c.pairs[13].camera_from_target.rotation;
-    let cal = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
+    // Kept and flagged when asked to fit every sample.
+    let keep_all = SolveOptions {
+        drop_outliers: false,
+        ..SolveOptions::default()
+    };
+    let cal = solve::solve(c.setup, &c.pairs, &keep_all).unwrap();
     assert_eq!(cal.outliers, planted.to_vec());
     assert!(cal
         .warnings
         .iter()
         .any(|w| w.kind == NoticeKind::Outliers && w.severity == Severity::Warning));
-    let opts = SolveOptions {
-        drop_outliers: true,
-        ..SolveOptions::default()
-    };
-    let cleaned = solve::solve(c.setup, &c.pairs, &opts).unwrap();
+    // Left out by default, each named.
+    let cleaned = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
     assert_eq!(cleaned.dropped, planted.to_vec());
+    assert_eq!(cleaned.outliers, planted.to_vec());
+    assert_eq!(
+        cleaned
+            .warnings
+            .iter()
+            .filter(|w| w.kind == NoticeKind::DroppedOutliers && w.severity == Severity::Warning)
+            .count(),
+        2
+    );
     // Within 4 reported sigmas of the truth after dropping them.
     let sigma = cleaned.uncertainty.as_ref().unwrap().camera_mount;
     let (r, t) = errors(&cleaned.camera_mount, &c.camera_mount);
@@ -499,7 +515,7 @@ fn planted_outliers_are_flagged_and_dropped() {
     // A robust loss tolerates them without dropping.
     let robust = SolveOptions {
         robust: RobustLoss::Cauchy(3.0),
-        ..SolveOptions::default()
+        ..keep_all
     };
     let cal = solve::solve(c.setup, &c.pairs, &robust).unwrap();
     let (r, t) = errors(&cal.camera_mount, &c.camera_mount);
@@ -704,5 +720,10 @@ fn poorly_determined_unknowns_are_warned_about() {
     let mut c = cell_with_tilts(Setup::EyeInHand, 12, 71, 20.0, 45.0);
     add_gaussian(&mut c, 0.2f64.to_radians(), 1e-3, 72);
     let cal = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
-    assert!(cal.warnings.is_empty(), "{:?}", cal.warnings);
+    // Only the information notice of the estimated noise.
+    assert!(
+        cal.warnings.iter().all(|w| w.severity == Severity::Info),
+        "{:?}",
+        cal.warnings
+    );
 }

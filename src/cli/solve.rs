@@ -10,7 +10,7 @@ use handeye::config::{CellConfig, SolveSpace};
 use handeye::dataset::Dataset;
 use handeye::result::ResultFile;
 use handeye::session::{self, SessionFolder};
-use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
+use handeye::solve::{self, EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions};
 
 /// Estimator choice on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -61,21 +61,27 @@ pub struct SolveArgs {
     /// Estimator.
     #[arg(long, value_enum, default_value_t = MethodArg::Refined)]
     method: MethodArg,
-    /// Per-axis rotation noise of T_camera_target, degrees.
-    #[arg(long, default_value_t = 0.2)]
-    rotation_sigma_deg: f64,
-    /// Per-axis translation noise of T_camera_target, mm.
-    #[arg(long, default_value_t = 1.0)]
-    translation_sigma_mm: f64,
+    /// Per-axis rotation noise of T_camera_target, degrees: used as given (default: estimated
+    /// from the residuals, starting from 0.2°).
+    #[arg(long)]
+    rotation_sigma_deg: Option<f64>,
+    /// Per-axis translation noise of T_camera_target, mm: used as given (default: estimated
+    /// from the residuals, starting from 1 mm).
+    #[arg(long)]
+    translation_sigma_mm: Option<f64>,
     /// Robust loss of the refinement.
     #[arg(long, value_enum, default_value_t = RobustArg::None)]
     robust: RobustArg,
     /// Scale of the robust loss, in sigmas.
     #[arg(long, default_value_t = 3.0)]
     robust_scale: f64,
-    /// Drop samples flagged as outliers and solve again.
-    #[arg(long)]
+    /// Drop samples whose residual is an outlier against the fit of the rest (the default; kept
+    /// for old command lines).
+    #[arg(long, conflicts_with = "keep_outliers")]
     drop_outliers: bool,
+    /// Fit every sample, only flag outliers (the default leaves them out, each named).
+    #[arg(long)]
+    keep_outliers: bool,
     /// Start the iterative method from the closed form instead of the identity.
     #[arg(long)]
     warm_start: bool,
@@ -83,9 +89,16 @@ pub struct SolveArgs {
 
 impl SolveArgs {
     fn options(&self) -> anyhow::Result<SolveOptions> {
+        let start = NoiseModel::default();
         for (name, value) in [
-            ("--rotation-sigma-deg", self.rotation_sigma_deg),
-            ("--translation-sigma-mm", self.translation_sigma_mm),
+            (
+                "--rotation-sigma-deg",
+                self.rotation_sigma_deg.unwrap_or(0.2),
+            ),
+            (
+                "--translation-sigma-mm",
+                self.translation_sigma_mm.unwrap_or(1.0),
+            ),
             ("--robust-scale", self.robust_scale),
         ] {
             anyhow::ensure!(
@@ -100,15 +113,23 @@ impl SolveArgs {
                 MethodArg::Refined => Method::Refined,
             },
             noise: NoiseModel {
-                rotation_sigma_rad: self.rotation_sigma_deg.to_radians(),
-                translation_sigma_m: self.translation_sigma_mm * 1e-3,
+                rotation_sigma_rad: self
+                    .rotation_sigma_deg
+                    .map_or(start.rotation_sigma_rad, f64::to_radians),
+                translation_sigma_m: self
+                    .translation_sigma_mm
+                    .map_or(start.translation_sigma_m, |mm| mm * 1e-3),
+            },
+            estimate_noise: EstimateNoise {
+                rotation: self.rotation_sigma_deg.is_none(),
+                translation: self.translation_sigma_mm.is_none(),
             },
             robust: match self.robust {
                 RobustArg::None => RobustLoss::None,
                 RobustArg::Huber => RobustLoss::Huber(self.robust_scale),
                 RobustArg::Cauchy => RobustLoss::Cauchy(self.robust_scale),
             },
-            drop_outliers: self.drop_outliers,
+            drop_outliers: !self.keep_outliers,
             ..SolveOptions::default()
         };
         options.iterative.warm_start = self.warm_start;

@@ -415,13 +415,19 @@ pub struct SolverConfig {
     /// `refined` (default), `iterative` or `closed-form`.
     #[serde(default)]
     pub method: SolverMethod,
-    /// Expected rotation noise of a board pose, degrees (1-sigma).
-    #[serde(default = "default_rotation_sigma_deg")]
-    pub rotation_sigma_deg: f64,
-    /// Expected translation noise of a board pose, mm (1-sigma).
-    #[serde(default = "default_translation_sigma_mm")]
-    pub translation_sigma_mm: f64,
-    /// Drop flagged outliers and solve again.
+    /// Rotation noise of a board pose `T_camera_target`, degrees (1-sigma per axis). Given: the
+    /// pose-space fit uses it as is; absent (the default): estimated from the residuals
+    /// (variance component estimation, starting from 0.2°), unless `estimate_noise` is false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_sigma_deg: Option<f64>,
+    /// Translation noise of a board pose, mm (1-sigma per axis). Given: used as is; absent (the
+    /// default): estimated from the residuals (starting from 1 mm), unless `estimate_noise` is
+    /// false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation_sigma_mm: Option<f64>,
+    /// Robust pose-space fit (default): a consensus start, samples whose residual is an outlier
+    /// against the fit of the rest left out of the final fit (each named in a warning); a clean
+    /// data set keeps every sample. `false`: fit every sample, only flag outliers.
     #[serde(default = "yes")]
     pub drop_outliers: bool,
     /// `reprojection` (default: refine over every detected corner when frames have corners) or
@@ -436,9 +442,10 @@ pub struct SolverConfig {
     /// treating robot poses as exact over-trusts them).
     #[serde(default = "yes")]
     pub robot_corrections: bool,
-    /// Estimate the corner noise and the robot's repeatability from the reprojection residuals
-    /// (variance component estimation), starting from `pixel_sigma_px` and the robot's
-    /// `repeatability_*`; `false` weights with those values as given.
+    /// Estimate the noise from the residuals (variance component estimation): the board-pose
+    /// sigmas not given above in the pose-space fit, and the corner noise and the robot's
+    /// repeatability in the reprojection fit, starting from `pixel_sigma_px` and the robot's
+    /// `repeatability_*`; `false` weights with the values as given (defaults where absent).
     #[serde(default = "yes")]
     pub estimate_noise: bool,
 }
@@ -473,12 +480,6 @@ impl SolveSpace {
 fn default_pixel_sigma_px() -> f64 {
     0.3
 }
-fn default_rotation_sigma_deg() -> f64 {
-    0.05
-}
-fn default_translation_sigma_mm() -> f64 {
-    0.3
-}
 fn yes() -> bool {
     true
 }
@@ -487,8 +488,8 @@ impl Default for SolverConfig {
     fn default() -> Self {
         SolverConfig {
             method: SolverMethod::default(),
-            rotation_sigma_deg: default_rotation_sigma_deg(),
-            translation_sigma_mm: default_translation_sigma_mm(),
+            rotation_sigma_deg: None,
+            translation_sigma_mm: None,
             drop_outliers: true,
             space: SolveSpace::default(),
             pixel_sigma_px: default_pixel_sigma_px(),

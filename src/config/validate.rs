@@ -497,16 +497,12 @@ impl Validator<'_> {
 
     fn solver(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
         let s = &raw.solver;
-        self.number(
-            "solver.rotation_sigma_deg",
-            s.rotation_sigma_deg,
-            ROTATION_SIGMA_DEG,
-        )?;
-        self.number(
-            "solver.translation_sigma_mm",
-            s.translation_sigma_mm,
-            TRANSLATION_SIGMA_MM,
-        )?;
+        if let Some(sigma) = s.rotation_sigma_deg {
+            self.number("solver.rotation_sigma_deg", sigma, ROTATION_SIGMA_DEG)?;
+        }
+        if let Some(sigma) = s.translation_sigma_mm {
+            self.number("solver.translation_sigma_mm", sigma, TRANSLATION_SIGMA_MM)?;
+        }
         self.number("solver.pixel_sigma_px", s.pixel_sigma_px, PIXEL_SIGMA_PX)?;
         Ok(())
     }

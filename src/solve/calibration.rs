@@ -5,7 +5,7 @@
 use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::Method;
+use super::{Method, NoiseModel};
 use crate::geometry::Pose;
 use crate::notice::Notice;
 use crate::setup::{CellTransforms, Setup};
@@ -43,6 +43,60 @@ pub struct PoseSigma {
     pub rotation_axes_deg: [f64; 3],
     /// Per-axis 1-sigma translation along x, y, z of frame `a`, mm.
     pub translation_axes_mm: [f64; 3],
+}
+
+/// Where a sigma of [`PoseNoise`] came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseSource {
+    /// Estimated from the residuals (variance component estimation).
+    Estimated,
+    /// Estimated, but the estimate fell outside the allowed range and was clamped to it.
+    AtBound,
+    /// Given explicitly (command line or config): used as is.
+    Given,
+    /// Not estimated: too few samples (fewer than 8) to trust an estimate; the starting value
+    /// was used.
+    TooFewSamples,
+}
+
+impl NoiseSource {
+    /// The YAML name.
+    pub fn name(self) -> &'static str {
+        match self {
+            NoiseSource::Estimated => "estimated",
+            NoiseSource::AtBound => "at_bound",
+            NoiseSource::Given => "given",
+            NoiseSource::TooFewSamples => "too_few_samples",
+        }
+    }
+}
+
+/// The noise of `T_camera_target` the answer's weights, normalised residuals and covariance
+/// used: per-axis 1-sigma, estimated from the residuals or given.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseNoise {
+    /// Per-axis rotation sigma, degrees.
+    pub rotation_sigma_deg: f64,
+    /// Per-axis translation sigma, mm.
+    pub translation_sigma_mm: f64,
+    /// Where the rotation sigma came from.
+    pub rotation: NoiseSource,
+    /// Where the translation sigma came from.
+    pub translation: NoiseSource,
+    /// Rounds of estimation (each a refit for the refined method).
+    pub rounds: usize,
+}
+
+impl PoseNoise {
+    /// As the solver's noise model (rad, m).
+    pub fn model(&self) -> NoiseModel {
+        NoiseModel {
+            rotation_sigma_rad: self.rotation_sigma_deg.to_radians(),
+            translation_sigma_m: self.translation_sigma_mm * 1e-3,
+        }
+    }
 }
 
 /// Covariance of both unknowns at the optimum.
@@ -111,8 +165,12 @@ pub struct Calibration {
     pub target_mount: Pose,
     /// Covariance of both unknowns (refined method with covariance on).
     pub uncertainty: Option<Uncertainty>,
-    /// Residuals of the samples used in the final solve, indexed like the input.
+    /// Residuals of the samples used in the final solve, indexed like the input; `normalised`
+    /// in sigmas of [`Calibration::noise`].
     pub residuals: Residuals,
+    /// The noise of `T_camera_target` the pose-space fit used (estimated or given); `None` for
+    /// an answer fitted elsewhere (reprojection space) or read from a file without it.
+    pub noise: Option<PoseNoise>,
     /// Indices (into the input) of samples flagged as outliers.
     pub outliers: Vec<usize>,
     /// Indices (into the input) of samples left out of the final solve (dropped outliers).
@@ -185,6 +243,16 @@ impl Calibration {
                     sigma[k].rotation_deg, sigma[k].translation_mm
                 );
             }
+        }
+        if let Some(noise) = &self.noise {
+            let _ = writeln!(
+                out,
+                "board-pose noise: {:.4}° ({}), {:.3} mm ({}) per axis",
+                noise.rotation_sigma_deg,
+                noise.rotation.name(),
+                noise.translation_sigma_mm,
+                noise.translation.name()
+            );
         }
         let r = &self.residuals;
         let _ = write!(

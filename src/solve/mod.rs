@@ -12,7 +12,9 @@
 //! this file maps both setups onto `A = X·B·Y` and runs the pipeline.
 //!
 //! Every method ([`iterative`], [`closed_form`], [`refine`]) works on [`AxbyData`] only, so the
-//! two setups share one code path. Units are metres and radians inside; residuals and
+//! two setups share one code path. Around the method: the board-pose noise estimated from the
+//! residuals ([`noise`]) and, by default, a robust consensus start with outliers left out of the
+//! final fit (`robust`). Units are metres and radians inside; residuals and
 //! uncertainties are reported in mm and degrees for people. Pure functions: no I/O, no clocks;
 //! depends only on the ground floor (`geometry`, `setup`, `camera_model`) and nalgebra, as
 //! `tests/layers.rs` checks.
@@ -24,22 +26,25 @@ pub mod error;
 pub mod intrinsics;
 pub mod iterative;
 mod lm;
+pub mod noise;
 pub mod options;
 pub mod refine;
 pub mod reprojection;
+mod robust;
 
 use crate::geometry::Pose;
 use crate::notice::{Notice, NoticeKind};
 use crate::setup::{PosePair, Setup};
 
 pub use calibration::{
-    Calibration, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
+    Calibration, NoiseSource, Phase, PoseNoise, PoseSigma, Residuals, SolverReport, TraceStep,
+    Uncertainty,
 };
 pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDiversity};
 pub use error::{SampleProblem, SolveError};
 pub use iterative::{IterativeOptions, IterativeOutcome};
 use options::require_positive;
-pub use options::{Method, NoiseModel, RobustLoss, SolveOptions};
+pub use options::{EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions};
 pub use reprojection::{
     refine_reprojection, reprojection_errors, Corner, Frame, ReprojectionCalibration,
     ReprojectionErrors, ReprojectionOptions, RobotPrior,
@@ -146,52 +151,30 @@ fn validate(pairs: &[PosePair], options: &SolveOptions) -> Result<(), SolveError
 /// Solves for both unknowns of a cell from its pose pairs.
 ///
 /// Checks the input (finite values, weights, at least 3 samples with rotations about two
-/// axes), runs the chosen method, computes residuals and outlier flags, optionally drops the
-/// outliers and solves again, and checks the convention when the fit is poor.
+/// axes), then, robust by default ([`SolveOptions::drop_outliers`]): a consensus start over
+/// small subsets, the chosen method on the samples consistent with it, every sample whose
+/// residual is an outlier against that fit left out (and named) and the fit repeated until the
+/// set is stable; a clean data set keeps every sample. The board-pose noise is estimated from
+/// the residuals along the way ([`SolveOptions::estimate_noise`]). Without `drop_outliers`: one
+/// fit of every sample with outliers flagged. Checks the convention when the fit is poor.
 pub fn solve(
     setup: Setup,
     pairs: &[PosePair],
     options: &SolveOptions,
 ) -> Result<Calibration, SolveError> {
     validate(pairs, options)?;
-    let all: Vec<usize> = (0..pairs.len()).collect();
-    let mut calibration = solve_subset(setup, pairs, &all, options)?;
-    if options.drop_outliers && !calibration.outliers.is_empty() {
-        let dropped = calibration.outliers.clone();
-        let keep: Vec<usize> = all
-            .iter()
-            .copied()
-            .filter(|i| !dropped.contains(i))
-            .collect();
-        let mut again = solve_subset(setup, pairs, &keep, options)?;
-        again.warnings.insert(
-            0,
-            Notice::warning(
-                NoticeKind::DroppedOutliers,
-                format!(
-                    "dropped {} outlier sample(s) {:?} and solved again with {}",
-                    dropped.len(),
-                    dropped,
-                    keep.len()
-                ),
-            ),
-        );
-        // Report both the original flags and anything still flagged among the kept samples.
-        let mut outliers = dropped.clone();
-        outliers.extend(again.outliers.iter().copied());
-        outliers.sort_unstable();
-        outliers.dedup();
-        again.outliers = outliers;
-        again.dropped = dropped;
-        calibration = again;
+    if options.drop_outliers {
+        robust::solve_robust(setup, pairs, options)
+    } else {
+        let all: Vec<usize> = (0..pairs.len()).collect();
+        solve_subset(setup, pairs, &all, options)
     }
-    Ok(calibration)
 }
 
 /// Coarsest tolerance (rad, and m) of the iterative start of the refined method.
 const REFINE_START_TOLERANCE: f64 = 1e-8;
 
-type Solved = (Axby, SolverReport, Option<Uncertainty>);
+type Solved = (Axby, SolverReport, Option<Uncertainty>, PoseNoise);
 
 fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, SolveError> {
     Ok(match options.method {
@@ -204,12 +187,13 @@ fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, Solve
                 restarts: 0,
                 trace: Vec::new(),
             };
-            (s, report, None)
+            (s, report, None, noise::estimate_at(data, &s, options))
         }
         Method::Iterative => {
             let out = iterative::solve_axby_with_restarts(data, &options.iterative)?;
             let report = out.report(Method::Iterative);
-            (out.solution, report, None)
+            let noise = noise::estimate_at(data, &out.solution, options);
+            (out.solution, report, None, noise)
         }
         Method::Refined => {
             // LM polishes the start, so the alternation need not run to machine precision.
@@ -238,11 +222,13 @@ fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, Solve
             let uncertainty = refined.covariance.map(|cov| {
                 refine::mount_uncertainty(&refined.solution, &cov, refined.variance_factor)
             });
-            (refined.solution, report, uncertainty)
+            (refined.solution, report, uncertainty, refined.noise)
         }
     })
 }
 
+/// The chosen method on the samples `keep` of `pairs`, with residuals (indexed like `pairs`),
+/// outlier flags among them and the notices.
 fn solve_subset(
     setup: Setup,
     pairs: &[PosePair],
@@ -256,7 +242,7 @@ fn solve_subset(
 
     let mut warnings = Vec::new();
     let solved = solve_method(&data, options);
-    let (solution, report, uncertainty) = match solved {
+    let (solution, report, uncertainty, noise) = match solved {
         Ok(s) => s,
         Err(error) => {
             // A solver that cannot even converge on mislabelled data: say what is mislabelled.
@@ -268,7 +254,9 @@ fn solve_subset(
     };
 
     let (camera_mount, target_mount) = solution.to_mounts();
-    let sub_residuals = diagnostics::residuals(&data, &solution, &options.noise);
+    // Normalised by the noise the fit used; the convention check keeps the expected noise (an
+    // estimate would follow mislabelled data up).
+    let sub_residuals = diagnostics::residuals(&data, &solution, &noise.model());
     if options.check_conventions {
         diagnostics::check_convention(
             setup,
@@ -299,6 +287,7 @@ fn solve_subset(
             described.join(", ")
         )));
     }
+    warnings.push(noise_notice(&noise, options, used.len()));
     if let Some(u) = &uncertainty {
         let (camera_name, target_name) = setup.unknown_names();
         for (name, sigma) in [
@@ -333,6 +322,7 @@ fn solve_subset(
         target_mount,
         uncertainty,
         residuals,
+        noise: Some(noise),
         outliers,
         dropped: Vec::new(),
         solver: report,
@@ -361,4 +351,59 @@ pub fn predict_left_out(
         .collect();
     let c = solve(setup, &rest, &fold_options)?;
     Ok(c.predict_camera_from_target(&pairs[left_out].base_from_flange))
+}
+
+/// The [`NoticeKind::NoiseEstimate`] notice: the board-pose noise the fit used and where it came
+/// from (a warning when an estimate hit its bound).
+fn noise_notice(noise: &PoseNoise, options: &SolveOptions, samples: usize) -> Notice {
+    let start = format!(
+        "{:.3}° / {:.2} mm",
+        options.noise.rotation_sigma_rad.to_degrees(),
+        options.noise.translation_sigma_m * 1e3
+    );
+    let figures = format!(
+        "rotation {:.4}° ({}), translation {:.3} mm ({}) per axis",
+        noise.rotation_sigma_deg,
+        noise.rotation.name(),
+        noise.translation_sigma_mm,
+        noise.translation.name()
+    );
+    let sources = [noise.rotation, noise.translation];
+    if sources.contains(&NoiseSource::AtBound) {
+        Notice::warning(
+            NoticeKind::NoiseEstimate,
+            format!(
+                "board-pose noise from the residuals: {figures}; an estimate reached its bound \
+                 (rotation {:.4}°–{:.1}°, translation {:.3}–{:.0} mm): the samples fit unusually \
+                 well or badly, check them",
+                noise::ROTATION_SIGMA_RANGE_RAD.0.to_degrees(),
+                noise::ROTATION_SIGMA_RANGE_RAD.1.to_degrees(),
+                noise::TRANSLATION_SIGMA_RANGE_M.0 * 1e3,
+                noise::TRANSLATION_SIGMA_RANGE_M.1 * 1e3
+            ),
+        )
+    } else if sources.contains(&NoiseSource::TooFewSamples) {
+        Notice::info(
+            NoticeKind::NoiseEstimate,
+            format!(
+                "board-pose noise not estimated from {samples} sample(s) (8 or more needed): \
+                 {figures}, the configured {start}"
+            ),
+        )
+    } else if sources.contains(&NoiseSource::Estimated) {
+        Notice::info(
+            NoticeKind::NoiseEstimate,
+            format!(
+                "board-pose noise estimated from the residuals of {samples} samples in {} \
+                 round(s), starting from {start}: {figures}; weights, normalised residuals and \
+                 1-sigma use it",
+                noise.rounds
+            ),
+        )
+    } else {
+        Notice::info(
+            NoticeKind::NoiseEstimate,
+            format!("board-pose noise as given: {figures}"),
+        )
+    }
 }

@@ -27,6 +27,41 @@ impl Default for NoiseModel {
     }
 }
 
+/// Which groups of the [`NoiseModel`] [`solve`](super::solve) estimates from the residuals
+/// (variance component estimation, see [`super::noise`]); a group not estimated is used as
+/// given. The default estimates both: explicit sigmas (command line, config) switch a group off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EstimateNoise {
+    /// Estimate the rotation sigma of `T_camera_target`.
+    pub rotation: bool,
+    /// Estimate the translation sigma of `T_camera_target`.
+    pub translation: bool,
+}
+
+impl EstimateNoise {
+    /// Estimate both sigmas (the default).
+    pub const BOTH: EstimateNoise = EstimateNoise {
+        rotation: true,
+        translation: true,
+    };
+    /// Use the [`NoiseModel`] as given.
+    pub const NONE: EstimateNoise = EstimateNoise {
+        rotation: false,
+        translation: false,
+    };
+
+    /// True when at least one sigma is estimated.
+    pub fn any(self) -> bool {
+        self.rotation || self.translation
+    }
+}
+
+impl Default for EstimateNoise {
+    fn default() -> Self {
+        EstimateNoise::BOTH
+    }
+}
+
 /// Which estimator [`solve`] runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -96,11 +131,19 @@ impl RobustLoss {
 pub struct SolveOptions {
     /// The estimator (default [`Method::Refined`]).
     pub method: Method,
-    /// Noise of `T_camera_target`, used to weight and whiten residuals.
+    /// Noise of `T_camera_target`, used to weight and whiten residuals: the starting value of
+    /// the groups in [`SolveOptions::estimate_noise`], the value used for the others. Also the
+    /// expected noise the convention check compares the fit against.
     pub noise: NoiseModel,
+    /// Which sigmas of [`SolveOptions::noise`] are estimated from the residuals (default both).
+    pub estimate_noise: EstimateNoise,
     /// Robust loss of the refinement.
     pub robust: RobustLoss,
-    /// Drop the samples flagged as outliers and solve again.
+    /// Robust by default: start from a consensus over small subsets, leave out of the final fit
+    /// every sample whose residual is an outlier against the fit of the rest (each named in a
+    /// [`DroppedOutliers`](crate::notice::NoticeKind::DroppedOutliers) notice), and fit the
+    /// inliers; a clean data set keeps every sample and gives the plain fit. `false`: one fit of
+    /// every sample, outliers only flagged.
     pub drop_outliers: bool,
     /// Outlier threshold: a sample is flagged when its normalised residual exceeds
     /// `median + outlier_mad_factor · 1.4826 · MAD` and [`SolveOptions::outlier_floor_sigma`].
@@ -124,8 +167,9 @@ impl Default for SolveOptions {
         SolveOptions {
             method: Method::Refined,
             noise: NoiseModel::default(),
+            estimate_noise: EstimateNoise::BOTH,
             robust: RobustLoss::None,
-            drop_outliers: false,
+            drop_outliers: true,
             outlier_mad_factor: 5.0,
             // sqrt of the 99.9 % quantile of chi-square with 6 dof (22.46).
             outlier_floor_sigma: 4.74,

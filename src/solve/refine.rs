@@ -9,7 +9,9 @@
 //! refinement); the `levenberg-marquardt` crate minimises (through `solve::lm`, shared with the
 //! reprojection-space refinement), then the problem is re-linearised at the optimum so the
 //! covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
-//! reweighted least squares on each sample's whitened norm.
+//! reweighted least squares on each sample's whitened norm. The sigmas themselves are
+//! estimated from the residuals, alternated with the fit (see [`super::noise`]), unless
+//! [`SolveOptions::estimate_noise`] says they are given.
 
 use std::cell::RefCell;
 
@@ -19,7 +21,11 @@ use nalgebra::{
 };
 
 use super::lm::minimize_dense;
-use super::{Axby, AxbyData, PoseSigma, RobustLoss, SolveError, SolveOptions, Uncertainty};
+use super::noise;
+use super::{
+    Axby, AxbyData, NoiseModel, PoseNoise, PoseSigma, RobustLoss, SolveError, SolveOptions,
+    Uncertainty,
+};
 use crate::geometry::{rotvec, Pose};
 
 /// Parameter count: φ_X, ρ_X, φ_Y, ρ_Y.
@@ -43,6 +49,8 @@ pub struct Refined {
     pub converged: bool,
     /// Cost (½ Σ r²) at each residual evaluation, for plots.
     pub trace: Vec<f64>,
+    /// The noise model the fit ended with (estimated or given) and how it was found.
+    pub noise: PoseNoise,
 }
 
 /// The unknowns `start` moved by the local perturbation `delta = [φ_X, ρ_X, φ_Y, ρ_Y]`:
@@ -91,7 +99,19 @@ struct Problem<'a> {
     trace: RefCell<Vec<f64>>,
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    fn new(data: &'a AxbyData, x0: Axby, scale: Vec<f64>, noise: &NoiseModel) -> Self {
+        Problem {
+            data,
+            x0,
+            delta: DVector::zeros(PARAMS),
+            scale,
+            inv_sigma_r: 1.0 / noise.rotation_sigma_rad,
+            inv_sigma_t: 1.0 / noise.translation_sigma_m,
+            trace: RefCell::new(Vec::new()),
+        }
+    }
+
     fn current(&self) -> Axby {
         perturbed(&self.x0, &self.delta.fixed_rows::<PARAMS>(0).into_owned())
     }
@@ -165,12 +185,12 @@ impl LeastSquaresProblem<f64, Dyn, U12> for Problem<'_> {
 }
 
 /// Whitened residual norm of each sample (sigmas, 6 dof), ignoring weights.
-fn whitened_norms(data: &AxbyData, s: &Axby, options: &SolveOptions) -> Vec<f64> {
+fn whitened_norms(data: &AxbyData, s: &Axby, noise: &NoiseModel) -> Vec<f64> {
     (0..data.len())
         .map(|i| {
             let (r, t, _) = Problem::raw_residual(s, &data.a[i], &data.b[i]);
-            ((r / options.noise.rotation_sigma_rad).norm_squared()
-                + (t / options.noise.translation_sigma_m).norm_squared())
+            ((r / noise.rotation_sigma_rad).norm_squared()
+                + (t / noise.translation_sigma_m).norm_squared())
             .sqrt()
         })
         .collect()
@@ -187,17 +207,9 @@ fn minimise(
     data: &AxbyData,
     start: &Axby,
     scale: &[f64],
-    options: &SolveOptions,
+    noise: &NoiseModel,
 ) -> Result<Run, SolveError> {
-    let problem = Problem {
-        data,
-        x0: *start,
-        delta: DVector::zeros(PARAMS),
-        scale: scale.to_vec(),
-        inv_sigma_r: 1.0 / options.noise.rotation_sigma_rad,
-        inv_sigma_t: 1.0 / options.noise.translation_sigma_m,
-        trace: RefCell::new(Vec::new()),
-    };
+    let problem = Problem::new(data, *start, scale.to_vec(), noise);
     let (problem, outcome) = minimize_dense(&LevenbergMarquardt::new(), problem)?;
     let solution = problem.current();
     Ok(Run {
@@ -208,7 +220,75 @@ fn minimise(
     })
 }
 
-/// Refines a start by weighted (optionally robust) nonlinear least squares; computes the
+/// Per group of residual rows (rotation, translation) of the whitened problem at `solution`:
+/// the weighted sum of squared residuals and the group's redundancy, its row count minus its
+/// share `tr(N⁻¹·N_group)` of the 12 parameters (`N = JᵀJ`). `None` when `N` is singular.
+///
+/// The two numbers of variance component estimation (Förstner): `σ² ← σ²·sum/redundancy`.
+pub(super) fn group_redundancy(
+    data: &AxbyData,
+    solution: &Axby,
+    scale: &[f64],
+    noise: &NoiseModel,
+) -> Option<[(f64, f64); 2]> {
+    let problem = Problem::new(data, *solution, scale.to_vec(), noise);
+    let residuals = problem.residuals()?;
+    let j = problem.jacobian()?;
+    let normal: SMatrix<f64, 12, 12> = (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into();
+    let inverse = normal.cholesky()?.inverse();
+    let mut groups = [(0.0, 0.0); 2];
+    for row in 0..j.nrows() {
+        let group = &mut groups[usize::from(row % 6 >= 3)];
+        let jr = j.row(row).transpose();
+        group.0 += residuals[row] * residuals[row];
+        // Rows of zero weight are no observations.
+        if scale[row / 6] > 0.0 {
+            group.1 += 1.0 - (jr.transpose() * inverse * jr)[(0, 0)];
+        }
+    }
+    Some(groups)
+}
+
+/// Whitened residual norm (sigmas, 6 dof) of every sample of `data` at `solution`, the fit of
+/// the samples with `in_fit`: a sample in the fit is whitened by the noise alone, one left out
+/// by the noise plus the uncertainty of its prediction, `I + J_i·N⁻¹·J_iᵀ` (whitened, `N` the
+/// information of the fitted samples), so a sample is tested for what a fit without it can
+/// predict. Weights scale the fit's information, not a sample's own test. `None` when `N` is
+/// singular.
+pub(super) fn test_norms(
+    data: &AxbyData,
+    solution: &Axby,
+    noise: &NoiseModel,
+    in_fit: &[bool],
+) -> Option<Vec<f64>> {
+    let problem = Problem::new(data, *solution, vec![1.0; data.len()], noise);
+    let residuals = problem.residuals()?;
+    let j = problem.jacobian()?;
+    let mut normal = SMatrix::<f64, 12, 12>::zeros();
+    for i in (0..data.len()).filter(|&i| in_fit[i]) {
+        let ji = j.fixed_view::<6, 12>(6 * i, 0);
+        normal += ji.transpose() * ji * data.weights[i];
+    }
+    let inverse = normal.cholesky()?.inverse();
+    Some(
+        (0..data.len())
+            .map(|i| {
+                let e = residuals.fixed_rows::<6>(6 * i).into_owned();
+                if in_fit[i] {
+                    return e.norm();
+                }
+                let ji = j.fixed_view::<6, 12>(6 * i, 0);
+                let spread = SMatrix::<f64, 6, 6>::identity() + ji * inverse * ji.transpose();
+                spread
+                    .cholesky()
+                    .map_or(e.norm(), |c| e.dot(&c.solve(&e)).max(0.0).sqrt())
+            })
+            .collect(),
+    )
+}
+
+/// Refines a start by weighted (optionally robust) nonlinear least squares, with the noise
+/// model estimated from the residuals as `options.estimate_noise` asks; computes the
 /// covariance at the optimum when `options.covariance` is set.
 pub fn refine(
     data: &AxbyData,
@@ -224,23 +304,31 @@ pub fn refine(
             .map(|(w, r)| (w * r).sqrt())
             .collect()
     };
-    let mut run = minimise(data, start, &scale_of(&robust), options)?;
+    let mut estimator = noise::Estimator::new(data.len(), options);
+    let mut noise = estimator.noise();
+    let mut run = minimise(data, start, &scale_of(&robust), &noise)?;
     let mut evaluations = run.evaluations;
     let mut trace = std::mem::take(&mut run.trace);
-    if options.robust != RobustLoss::None {
+    let robust_loss = options.robust != RobustLoss::None;
+    if robust_loss || estimator.active() {
         for _ in 0..MAX_IRLS_ROUNDS {
-            let norms = whitened_norms(data, &run.solution, options);
-            let new: Vec<f64> = norms.iter().map(|&e| options.robust.weight(e)).collect();
-            let change = new
-                .iter()
-                .zip(&robust)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            robust = new;
-            run = minimise(data, &run.solution, &scale_of(&robust), options)?;
+            let mut change = 0.0;
+            if robust_loss {
+                let norms = whitened_norms(data, &run.solution, &noise);
+                let new: Vec<f64> = norms.iter().map(|&e| options.robust.weight(e)).collect();
+                change = new
+                    .iter()
+                    .zip(&robust)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                robust = new;
+            }
+            let noise_settled = estimator.step(data, &run.solution, &scale_of(&robust));
+            noise = estimator.noise();
+            run = minimise(data, &run.solution, &scale_of(&robust), &noise)?;
             evaluations += run.evaluations;
             trace.append(&mut run.trace);
-            if change < 1e-6 {
+            if change < 1e-6 && noise_settled {
                 break;
             }
         }
@@ -251,15 +339,7 @@ pub fn refine(
     let solution = run.solution;
     let converged = run.converged;
     let scale = scale_of(&robust);
-    let problem = Problem {
-        data,
-        x0: solution,
-        delta: DVector::zeros(PARAMS),
-        scale: scale.clone(),
-        inv_sigma_r: 1.0 / options.noise.rotation_sigma_rad,
-        inv_sigma_t: 1.0 / options.noise.translation_sigma_m,
-        trace: RefCell::new(Vec::new()),
-    };
+    let problem = Problem::new(data, solution, scale.clone(), &noise);
     let residuals = problem
         .residuals()
         .ok_or(SolveError::RefinementFailed("residuals"))?;
@@ -282,6 +362,7 @@ pub fn refine(
         evaluations,
         converged,
         trace,
+        noise: estimator.outcome(),
     })
 }
 
@@ -301,15 +382,7 @@ pub fn sample_information(
         b: vec![*b],
         weights: vec![1.0],
     };
-    let problem = Problem {
-        data: &data,
-        x0: *solution,
-        delta: DVector::zeros(PARAMS),
-        scale: vec![1.0],
-        inv_sigma_r: 1.0 / noise.rotation_sigma_rad,
-        inv_sigma_t: 1.0 / noise.translation_sigma_m,
-        trace: RefCell::new(Vec::new()),
-    };
+    let problem = Problem::new(&data, *solution, vec![1.0], noise);
     let j = problem
         .jacobian()
         .expect("the analytic Jacobian always exists");

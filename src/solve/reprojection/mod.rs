@@ -227,6 +227,7 @@ impl ReprojectionCalibration {
             target_mount: self.target_mount,
             uncertainty: self.uncertainty.clone(),
             residuals,
+            noise: None,
             outliers: pose_space.outliers.clone(),
             dropped: pose_space.dropped.clone(),
             solver,
