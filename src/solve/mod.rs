@@ -19,6 +19,7 @@
 
 pub mod calibration;
 pub mod closed_form;
+pub mod compare;
 pub mod diagnostics;
 pub mod error;
 pub mod intrinsics;
@@ -195,17 +196,6 @@ type Solved = (Axby, SolverReport, Option<Uncertainty>);
 
 fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, SolveError> {
     Ok(match options.method {
-        Method::ClosedForm => {
-            let s = closed_form::solve_axby(data)?;
-            let report = SolverReport {
-                method: Method::ClosedForm,
-                iterations: 0,
-                converged: true,
-                restarts: 0,
-                trace: Vec::new(),
-            };
-            (s, report, None)
-        }
         Method::Iterative => {
             let out = iterative::solve_axby_with_restarts(data, &options.iterative)?;
             let report = out.report(Method::Iterative);
@@ -239,6 +229,17 @@ fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, Solve
                 refine::mount_uncertainty(&refined.solution, &cov, refined.variance_factor)
             });
             (refined.solution, report, uncertainty)
+        }
+        closed => {
+            let s = closed_form::solve(closed, data)?;
+            let report = SolverReport {
+                method: closed,
+                iterations: 0,
+                converged: true,
+                restarts: 0,
+                trace: Vec::new(),
+            };
+            (s, report, None)
         }
     })
 }
