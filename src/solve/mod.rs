@@ -37,7 +37,7 @@ pub use calibration::{
     Calibration, Phase, PoseSigma, Residuals, SolverReport, TraceStep, Uncertainty,
 };
 pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDiversity};
-pub use error::{SampleProblem, SolveError};
+pub use error::{SampleProblem, SolveError, UnitsProblem};
 pub use iterative::{IterativeOptions, IterativeOutcome};
 use options::require_positive;
 pub use options::{Method, NoiseModel, RobustLoss, SolveOptions};
@@ -146,15 +146,22 @@ fn validate(pairs: &[PosePair], options: &SolveOptions) -> Result<(), SolveError
 
 /// Solves for both unknowns of a cell from its pose pairs.
 ///
-/// Checks the input (finite values, weights, at least 3 samples with rotations about two
-/// axes), runs the chosen method, computes residuals and outlier flags, optionally drops the
-/// outliers and solves again, and checks the convention when the fit is poor.
+/// Checks the input (finite values, weights, translations consistent with metres, at least 3
+/// samples with rotations about two axes), runs the chosen method, computes residuals and outlier flags, optionally drops the
+/// outliers and solves again, checks the convention when the fit is poor, and flags an answer
+/// whose unknowns look swapped ([`diagnostics::check_mounts`]). `check_conventions: false` also
+/// turns off the units and swapped-answer checks.
 pub fn solve(
     setup: Setup,
     pairs: &[PosePair],
     options: &SolveOptions,
 ) -> Result<Calibration, SolveError> {
     validate(pairs, options)?;
+    if options.check_conventions {
+        // Units before anything else: a solve of millimetres as metres "succeeds" with advice
+        // about pose variety.
+        diagnostics::check_units(setup, pairs)?;
+    }
     let all: Vec<usize> = (0..pairs.len()).collect();
     let mut calibration = solve_subset(setup, pairs, &all, options)?;
     if options.drop_outliers && !calibration.outliers.is_empty() {
@@ -185,6 +192,11 @@ pub fn solve(
         again.outliers = outliers;
         again.dropped = dropped;
         calibration = again;
+    }
+    if options.check_conventions {
+        calibration
+            .warnings
+            .extend(diagnostics::check_mounts(&calibration));
     }
     Ok(calibration)
 }

@@ -162,7 +162,8 @@ pub struct SolveOptions {
     pub warn_rotation_sigma_deg: f64,
     /// Warn when a 1-sigma translation uncertainty exceeds this, mm.
     pub warn_translation_sigma_mm: f64,
-    /// Check whether the data fits far better under another convention (inverted poses, other setup).
+    /// Check whether the data fits far better under another convention (inverted poses, other
+    /// setup), refuse translations inconsistent with metres, and flag swapped-looking answers.
     pub check_conventions: bool,
 }
 
