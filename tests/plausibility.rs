@@ -141,13 +141,7 @@ fn robot_poses_in_millimetres_are_refused_naming_millimetres() {
         let setup = c.truth.setup;
         let (problem, text) = units_problem(setup, &scaled(&c.pairs, 1000.0, 1.0));
         assert!(
-            matches!(
-                problem,
-                UnitsProblem::FlangeTooFar {
-                    unit: "millimetres",
-                    ..
-                }
-            ),
+            matches!(&problem, UnitsProblem::FlangeTooFar { unit, .. } if unit == "millimetres"),
             "{name}: {problem:?}"
         );
         assert!(
@@ -202,17 +196,29 @@ fn unit_mistakes_within_the_size_limits_are_caught_by_the_scale_fit() {
 }
 
 #[test]
+fn robot_poses_in_centimetres_name_every_unit_that_fits() {
+    // Flange 0.4–1 m from the base: ×100 could be centimetres, or (0.9–2.5 m) inches.
+    let c = sim_cell("sim-cell.yaml", 7);
+    let (problem, text) = units_problem(c.truth.setup, &scaled(&c.pairs, 100.0, 1.0));
+    match &problem {
+        UnitsProblem::FlangeTooFar { unit, median_m, .. } => {
+            eprintln!("median {median_m} m: {unit}");
+            assert!(
+                unit.contains("centimetres") && !unit.contains("millimetres"),
+                "{unit}"
+            )
+        }
+        other => panic!("expected FlangeTooFar, got {other:?}"),
+    }
+    assert!(text.contains("give T_base_flange in metres"), "{text}");
+}
+
+#[test]
 fn camera_poses_in_millimetres_are_refused_naming_the_board_size() {
     let c = sim_cell("sim-cell.yaml", 6);
     let (problem, text) = units_problem(c.truth.setup, &scaled(&c.pairs, 1.0, 1000.0));
     assert!(
-        matches!(
-            problem,
-            UnitsProblem::TargetTooFar {
-                unit: "millimetres",
-                ..
-            }
-        ),
+        matches!(&problem, UnitsProblem::TargetTooFar { unit, .. } if unit == "millimetres"),
         "{problem:?}"
     );
     assert!(text.contains("board size"), "{text}");

@@ -120,7 +120,7 @@ impl Comparison {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "{:<20} {:<55} {:<55} {:>17} {:>17} {:>17}",
+            "{:<20} {:<55} {:<55} {:>18} {:>18} {:>18}",
             "method",
             format!("{camera} t (mm) / rotation vector (°)"),
             format!("{target} t (mm) / rotation vector (°)"),

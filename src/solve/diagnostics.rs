@@ -254,6 +254,10 @@ pub const MAX_FLANGE_DISTANCE_M: f64 = 20.0;
 /// A board farther than this from the camera (median, m) cannot be detected well enough to
 /// calibrate with.
 pub const MAX_TARGET_DISTANCE_M: f64 = 10.0;
+/// Median flange distances from the base (m) of real arms, to name a unit mistake.
+const PLAUSIBLE_FLANGE_M: (f64, f64) = (0.15, 2.5);
+/// Median board distances from the camera (m) of real calibrations, to name a unit mistake.
+const PLAUSIBLE_TARGET_M: (f64, f64) = (0.1, 3.0);
 /// Robot/camera translation scale (either way) beyond which the units are called inconsistent.
 /// Unit mistakes are factors of 25.4 (inches), 100 (cm) or 1000 (mm); a consistent cell fits
 /// with a factor within a few percent of 1.
@@ -267,20 +271,23 @@ fn median_norm(translations: impl Iterator<Item = Vector3<f64>>) -> f64 {
     median(&mut norms)
 }
 
-/// The unit (of millimetres, centimetres and inches) that brings `distance_m` nearest to the
-/// `typical_m` of a cell.
-fn likely_unit(distance_m: f64, typical_m: f64) -> &'static str {
-    [
+/// The units (of millimetres, centimetres and inches) that bring `distance_m` into the
+/// `plausible_m` range of a cell, as words ("millimetres", "centimetres or inches").
+fn likely_units(distance_m: f64, plausible_m: (f64, f64)) -> String {
+    let fitting: Vec<&str> = [
         ("millimetres", 1e-3),
         ("centimetres", 1e-2),
         ("inches", 0.0254),
     ]
     .into_iter()
-    .min_by(|a, b| {
-        let off = |f: f64| (distance_m * f / typical_m).ln().abs();
-        off(a.1).total_cmp(&off(b.1))
-    })
-    .map_or("millimetres", |(name, _)| name)
+    .filter(|(_, f)| (plausible_m.0..=plausible_m.1).contains(&(distance_m * f)))
+    .map(|(name, _)| name)
+    .collect();
+    if fitting.is_empty() {
+        "a unit other than metres".to_string()
+    } else {
+        fitting.join(" or ")
+    }
 }
 
 /// The unit whose size in metres is `1/factor` (within 15 %): 1000 → millimetres, 100 →
@@ -396,7 +403,7 @@ pub fn check_units(setup: Setup, pairs: &[PosePair]) -> Result<(), SolveError> {
             median_m: flange,
             samples: pairs.len(),
             limit_m: MAX_FLANGE_DISTANCE_M,
-            unit: likely_unit(flange, 0.8),
+            unit: likely_units(flange, PLAUSIBLE_FLANGE_M),
         });
     }
     let target = median_norm(
@@ -409,7 +416,7 @@ pub fn check_units(setup: Setup, pairs: &[PosePair]) -> Result<(), SolveError> {
             median_m: target,
             samples: pairs.len(),
             limit_m: MAX_TARGET_DISTANCE_M,
-            unit: likely_unit(target, 0.6),
+            unit: likely_units(target, PLAUSIBLE_TARGET_M),
         });
     }
     if pairs.len() < MIN_SAMPLES {

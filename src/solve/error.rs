@@ -114,8 +114,9 @@ pub enum UnitsProblem {
         samples: usize,
         /// The limit, m.
         limit_m: f64,
-        /// The unit that makes the distances plausible (`millimetres`, ...).
-        unit: &'static str,
+        /// The units that make the distances plausible (`millimetres`, `centimetres or
+        /// inches`, ...).
+        unit: String,
     },
     /// The target is farther from the camera than any board can be detected.
     #[error("T_camera_target puts the target {median_m:.1} m from the camera (median over {samples} samples; a calibration board is seen within {limit_m} m): the camera translations look like {unit} — give the board size (tag or square edge) in metres so that T_camera_target is in metres")]
@@ -126,8 +127,8 @@ pub enum UnitsProblem {
         samples: usize,
         /// The limit, m.
         limit_m: f64,
-        /// The unit that makes the distances plausible.
-        unit: &'static str,
+        /// The units that make the distances plausible.
+        unit: String,
     },
     /// Robot and camera translations disagree in scale: the data fit when the robot's
     /// translations are multiplied by `scale`.
