@@ -3,6 +3,9 @@
 //! agreement with each other and with the paper's method on noisy data, a clear error on
 //! degenerate motion; and `solve --compare`'s library function.
 
+use std::process::Command;
+
+use handeye::dataset::Dataset;
 use handeye::geometry::Pose;
 use handeye::setup::{predict, PosePair, Setup};
 use handeye::solve::{self, closed_form, AxbyData, Method, SolveError, SolveOptions};
@@ -139,9 +142,10 @@ fn every_closed_form_is_exact_on_noise_free_data_in_both_setups() {
 
 #[test]
 fn closed_forms_agree_with_each_other_and_the_paper_on_noisy_data() {
-    // 0.1° and 0.5 mm on the board pose, 20 poses: every method within 1° and 10 mm of the
-    // truth and within 1° / 10 mm of the refined answer (measured spreads are a few tenths of
-    // that; the AX = XB methods lose some accuracy by working on motions).
+    // 0.1° and 0.5 mm on the board pose, 20 poses: every method within 0.4° and 6 mm of the
+    // truth and of the refined answer. Measured (seeded): at most 0.18° and 3.3 mm from the
+    // truth (Tsai, eye-to-hand; the AX = XB methods lose a little by working on motions and
+    // averaging Y), so the bound is about twice the worst case.
     for setup in [Setup::EyeInHand, Setup::EyeToHand] {
         let mut c = cell(setup, 20, 11);
         add_noise(&mut c, 0.1f64.to_radians(), 0.5e-3, 12);
@@ -169,8 +173,14 @@ fn closed_forms_agree_with_each_other_and_the_paper_on_noisy_data() {
                 ),
             ] {
                 let (t, r) = error(&got, &truth);
+                eprintln!(
+                    "{setup} {:<12} {what}: {:.3} mm, {:.4}° from the truth",
+                    method.name(),
+                    t * 1e3,
+                    r.to_degrees()
+                );
                 assert!(
-                    t < 10e-3 && r < 1f64.to_radians(),
+                    t < 6e-3 && r < 0.4f64.to_radians(),
                     "{} {setup}: {what} {:.2} mm, {:.3}° from the truth",
                     method.name(),
                     t * 1e3,
@@ -178,7 +188,7 @@ fn closed_forms_agree_with_each_other_and_the_paper_on_noisy_data() {
                 );
                 let (t, r) = error(&got, &reference);
                 assert!(
-                    t < 10e-3 && r < 1f64.to_radians(),
+                    t < 6e-3 && r < 0.4f64.to_radians(),
                     "{} {setup}: {what} {:.2} mm, {:.3}° from the refined answer",
                     method.name(),
                     t * 1e3,
@@ -264,4 +274,53 @@ fn compare_lists_every_method_with_its_distance_to_the_default() {
         assert!(table.contains(method.label()), "{table}");
     }
     assert!(table.contains("T_base_camera"), "{table}");
+}
+
+#[test]
+fn solve_cli_takes_every_method_and_prints_the_comparison_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = cell(Setup::EyeInHand, 12, 31);
+    add_noise(&mut c, 0.1f64.to_radians(), 0.5e-3, 32);
+    let file = dir.path().join("samples.yaml");
+    Dataset {
+        setup: c.setup,
+        pairs: c.pairs.clone(),
+    }
+    .save(&file)
+    .unwrap();
+    let solve = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_handeye"))
+            .arg("solve")
+            .arg(&file)
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    for name in [
+        "tsai",
+        "park",
+        "horaud",
+        "andreff",
+        "daniilidis",
+        "shah",
+        "li",
+    ] {
+        let stdout = solve(&["--method", name]);
+        let expected = if name == "shah" { "closed_form" } else { name };
+        assert!(
+            stdout.contains(&format!("method {expected} ")),
+            "{name}: {stdout}"
+        );
+    }
+    let stdout = solve(&["--compare", "--method", "iterative"]);
+    for method in Method::ALL {
+        assert!(stdout.contains(method.label()), "{stdout}");
+    }
+    assert!(stdout.contains("reference (iterative)"), "{stdout}");
 }

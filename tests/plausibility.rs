@@ -3,7 +3,10 @@
 //! and none of it fires on real cells: the MoveIt and ViSP sets in `../shared/datasets` (skipped
 //! with a printed reason when absent) and the sim cells of `configs/`.
 
+use std::process::Command;
+
 use handeye::config::CellConfig;
+use handeye::dataset::Dataset;
 use handeye::formats::import::{import_moveit_json, import_visp, VispOptions};
 use handeye::geometry::Pose;
 use handeye::notice::NoticeKind;
@@ -243,6 +246,41 @@ fn issue_19_millimetre_robot_poses_no_longer_solve() {
     // With them (the default) it is refused, saying millimetres.
     let e = solve::solve(c.truth.setup, &mm, &SolveOptions::default()).unwrap_err();
     assert!(e.to_string().contains("millimetres"), "{e}");
+}
+
+#[test]
+fn solve_cli_exits_non_zero_on_robot_inches_and_flags_both_inverted() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = sim_cell("sim-cell.yaml", 8);
+    let run = |pairs: Vec<PosePair>, name: &str| {
+        let file = dir.path().join(name);
+        Dataset {
+            setup: c.truth.setup,
+            pairs,
+        }
+        .save(&file)
+        .unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_handeye"))
+            .arg("solve")
+            .arg(&file)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).to_string(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    // Inches pass the loaders' 100 m limit; the solver refuses them.
+    let (code, _, stderr) = run(scaled(&c.pairs, 1.0 / 0.0254, 1.0), "inches.yaml");
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains("not in metres") && stderr.contains("inches"),
+        "{stderr}"
+    );
+    let (code, stdout, stderr) = run(both_inverted(&c.pairs), "inverted.yaml");
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stdout.contains("both inputs inverted"), "{stdout}");
 }
 
 // ------------------------------------------------------------------------------------------
