@@ -362,27 +362,28 @@ pub fn unit_scale(data: &AxbyData) -> Option<UnitScale> {
             .rows_mut(rows, 3)
             .copy_from(&((a.translation.vector - rx * b.translation.vector) * sw));
     }
-    let residual_rms =
-        |m: &DMatrix<f64>, r: &DVector<f64>| -> Option<(DVector<f64>, f64, DMatrix<f64>)> {
-            let normal = m.transpose() * m;
-            let inverse = normal.clone().try_inverse()?;
-            let x = &inverse * (m.transpose() * r);
-            let rss = (r - m * &x).norm_squared();
-            Some((x, rss, inverse))
-        };
-    let (x, rss, inverse) = residual_rms(&m, &r)?;
+    // Least squares by the normal equations (7 columns of comparable size): the solution, the
+    // residual sum of squares and the inverse normal matrix (for the standard error).
+    let fit = |m: &DMatrix<f64>, r: &DVector<f64>| -> Option<(DVector<f64>, f64, DMatrix<f64>)> {
+        let normal = m.transpose() * m;
+        let inverse = normal.clone().try_inverse()?;
+        let x = &inverse * (m.transpose() * r);
+        let rss = (r - m * &x).norm_squared();
+        Some((x, rss, inverse))
+    };
+    let (x, rss, inverse) = fit(&m, &r)?;
     // With the scale fixed at 1: only t_X and t_Y are free.
     let m_fixed = m.columns(0, 6).into_owned();
-    let (_, rss_fixed, _) = residual_rms(&m_fixed, &fixed)?;
+    let (_, rss_fixed, _) = fit(&m_fixed, &fixed)?;
     let dof = (3 * n).saturating_sub(7).max(1) as f64;
-    let total: f64 = data.weights.iter().sum::<f64>() / n as f64;
+    let total_weight: f64 = data.weights.iter().sum();
     let scale = x[6] / spread;
     let sigma = (rss / dof * inverse[(6, 6)]).sqrt() / spread;
     Some(UnitScale {
         scale,
         sigma,
-        scaled_rms_m: (rss / (n as f64 * total)).sqrt(),
-        given_rms_m: (rss_fixed / (n as f64 * total)).sqrt(),
+        scaled_rms_m: (rss / total_weight).sqrt(),
+        given_rms_m: (rss_fixed / total_weight).sqrt(),
         rotation_rms_deg,
     })
 }
@@ -504,6 +505,10 @@ pub fn check_mounts(calibration: &Calibration) -> Option<Notice> {
     ))
 }
 
+/// How far (m) a nominal transform may be from the truth for [`check_against_nominal`]: a
+/// drawing or a tape measure is good to a few centimetres.
+pub const NOMINAL_TOLERANCE_M: f64 = 0.15;
+
 /// Compares an answer with the cell's nominal (expected) transforms: when the answer is far
 /// from them (either unknown more than `tolerance_m` away) but its two unknowns swapped (what
 /// both inputs inverted give) are close to them, warns that both inputs look inverted.
@@ -542,6 +547,23 @@ pub fn check_against_nominal(
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn unit_mistakes_are_named_by_factor_and_by_size() {
+        assert_eq!(unit_of_factor(1000.0), Some("millimetres"));
+        assert_eq!(unit_of_factor(100.4), Some("centimetres"));
+        assert_eq!(unit_of_factor(39.4), Some("inches"));
+        assert_eq!(unit_of_factor(10.0), None);
+        assert_eq!(likely_units(500.0, PLAUSIBLE_FLANGE_M), "millimetres");
+        assert_eq!(
+            likely_units(36.2, PLAUSIBLE_FLANGE_M),
+            "centimetres or inches"
+        );
+        assert_eq!(
+            likely_units(1e7, PLAUSIBLE_FLANGE_M),
+            "a unit other than metres"
+        );
+    }
 
     #[test]
     fn outlier_flags_need_both_robust_and_absolute_excess() {

@@ -74,7 +74,9 @@ pub fn solve(motions: &[Motion]) -> Result<Pose, SolveError> {
     let eigen = SymmetricEigen::new(normal);
     let mut order: Vec<usize> = (0..8).collect();
     order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));
-    if !(eigen.eigenvalues[order[2]] > eigen.eigenvalues[order[7]] * 1e-12) {
+    let third = eigen.eigenvalues[order[2]];
+    let well_posed = third > eigen.eigenvalues[order[7]] * 1e-12 && third.is_finite();
+    if !well_posed {
         return Err(SolveError::ClosedFormFailed(
             "Daniilidis: the solution space is more than two-dimensional (robot rotations all about one axis)",
         ));
