@@ -147,10 +147,11 @@ fn validate(pairs: &[PosePair], options: &SolveOptions) -> Result<(), SolveError
 /// Solves for both unknowns of a cell from its pose pairs.
 ///
 /// Checks the input (finite values, weights, translations consistent with metres, at least 3
-/// samples with rotations about two axes), runs the chosen method, computes residuals and outlier flags, optionally drops the
-/// outliers and solves again, checks the convention when the fit is poor, and flags an answer
-/// whose unknowns look swapped ([`diagnostics::check_mounts`]). `check_conventions: false` also
-/// turns off the units and swapped-answer checks.
+/// samples with rotations about two axes), runs the chosen method, computes residuals and
+/// outlier flags, optionally drops the outliers and solves again, checks the convention when
+/// the fit is poor, and flags an answer whose unknowns look swapped
+/// ([`diagnostics::check_mounts`]). `check_conventions: false` also turns off the units and
+/// swapped-answer checks.
 pub fn solve(
     setup: Setup,
     pairs: &[PosePair],
@@ -208,6 +209,23 @@ type Solved = (Axby, SolverReport, Option<Uncertainty>);
 
 fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, SolveError> {
     Ok(match options.method {
+        closed @ (Method::ClosedForm
+        | Method::Tsai
+        | Method::Park
+        | Method::Horaud
+        | Method::Andreff
+        | Method::Daniilidis
+        | Method::Li) => {
+            let s = closed_form::solve(closed, data)?;
+            let report = SolverReport {
+                method: closed,
+                iterations: 0,
+                converged: true,
+                restarts: 0,
+                trace: Vec::new(),
+            };
+            (s, report, None)
+        }
         Method::Iterative => {
             let out = iterative::solve_axby_with_restarts(data, &options.iterative)?;
             let report = out.report(Method::Iterative);
@@ -241,17 +259,6 @@ fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, Solve
                 refine::mount_uncertainty(&refined.solution, &cov, refined.variance_factor)
             });
             (refined.solution, report, uncertainty)
-        }
-        closed => {
-            let s = closed_form::solve(closed, data)?;
-            let report = SolverReport {
-                method: closed,
-                iterations: 0,
-                converged: true,
-                restarts: 0,
-                trace: Vec::new(),
-            };
-            (s, report, None)
         }
     })
 }
