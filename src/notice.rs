@@ -69,6 +69,9 @@ pub enum NoticeKind {
     LikelyConventionError,
     /// Residuals larger than the noise model expects.
     LargeResiduals,
+    /// A solved transform no real cell has (a camera far from the flange it is mounted on, the
+    /// two unknowns swapped as when both input poses are inverted).
+    ImplausibleTransform,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

@@ -1,5 +1,7 @@
-//! `handeye solve <samples.yaml> [-o result.yaml] [--method ...]`: solves a dataset file, prints a
-//! short summary, and writes the result file atomically (nothing is written on any error).
+//! `handeye solve <samples.yaml> [-o result.yaml] [--method ...] [--compare]`: solves a dataset
+//! file (or a session folder), prints a short summary, and writes the result file atomically
+//! (nothing is written on any error). `--compare` also prints every method's answer, residuals
+//! and distance to the chosen method's answer in one table (`solve::compare`).
 
 use std::path::PathBuf;
 
@@ -17,10 +19,39 @@ use handeye::solve::{self, EstimateNoise, Method, NoiseModel, RobustLoss, SolveO
 pub enum MethodArg {
     /// The paper's iterative quaternion-averaging method.
     Iterative,
-    /// Shah's closed form.
+    /// Shah's Kronecker closed form (AX = ZB; also `shah`).
+    #[value(alias = "shah")]
     ClosedForm,
     /// Weighted nonlinear least squares from the iterative answer (default).
     Refined,
+    /// Tsai–Lenz closed form (AX = XB on relative motions).
+    Tsai,
+    /// Park–Martin closed form (AX = XB on relative motions).
+    Park,
+    /// Horaud–Dornaika quaternion closed form (AX = XB on relative motions).
+    Horaud,
+    /// Andreff's linear Kronecker form (AX = XB on relative motions).
+    Andreff,
+    /// Daniilidis' dual-quaternion closed form (AX = XB on relative motions).
+    Daniilidis,
+    /// Li's Kronecker form of AX = ZB (rotations and translations at once).
+    Li,
+}
+
+impl MethodArg {
+    fn method(self) -> Method {
+        match self {
+            MethodArg::Iterative => Method::Iterative,
+            MethodArg::ClosedForm => Method::ClosedForm,
+            MethodArg::Refined => Method::Refined,
+            MethodArg::Tsai => Method::Tsai,
+            MethodArg::Park => Method::Park,
+            MethodArg::Horaud => Method::Horaud,
+            MethodArg::Andreff => Method::Andreff,
+            MethodArg::Daniilidis => Method::Daniilidis,
+            MethodArg::Li => Method::Li,
+        }
+    }
 }
 
 /// Robust loss on the command line.
@@ -85,6 +116,10 @@ pub struct SolveArgs {
     /// Start the iterative method from the closed form instead of the identity.
     #[arg(long)]
     warm_start: bool,
+    /// Also solve with every method and print their answers, residuals and distances to the
+    /// chosen method's answer in one table (pose space).
+    #[arg(long)]
+    compare: bool,
 }
 
 impl SolveArgs {
@@ -107,11 +142,7 @@ impl SolveArgs {
             );
         }
         let mut options = SolveOptions {
-            method: match self.method {
-                MethodArg::Iterative => Method::Iterative,
-                MethodArg::ClosedForm => Method::ClosedForm,
-                MethodArg::Refined => Method::Refined,
-            },
+            method: self.method.method(),
             noise: NoiseModel {
                 rotation_sigma_rad: self
                     .rotation_sigma_deg
@@ -156,6 +187,19 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     if let Some(truth) = &config.simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
+    if let Some(notice) = solve::diagnostics::check_against_nominal(
+        &solved.calibration,
+        &config.nominal,
+        solve::diagnostics::NOMINAL_TOLERANCE_M,
+    ) {
+        outln!("{}: {}", notice.severity, notice.message);
+    }
+    if args.compare {
+        let comparison =
+            solve::compare::compare(dataset.setup, &dataset.pairs, &config.solver.to_options())
+                .with_context(|| format!("comparing methods on {}", args.samples.display()))?;
+        outln!("{}", comparison.table());
+    }
     let output = args
         .output
         .clone()
@@ -190,6 +234,11 @@ pub fn run(args: SolveArgs) -> anyhow::Result<()> {
 
     outln!("{} samples", dataset.pairs.len());
     outln!("{}", calibration.summary());
+    if args.compare {
+        let comparison = solve::compare::compare(dataset.setup, &dataset.pairs, &options)
+            .with_context(|| format!("comparing methods on {}", args.samples.display()))?;
+        outln!("{}", comparison.table());
+    }
     if let Some(output) = &args.output {
         ResultFile::from_calibration(&calibration, &dataset.pairs)
             .with_verdict(verdict)

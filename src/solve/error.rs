@@ -64,6 +64,13 @@ pub enum SolveError {
         /// Rotation residual RMS with the robot poses inverted, degrees.
         alternative_rms_deg: f64,
     },
+    /// The translations are inconsistent with metres (robot vs camera scale, or an impossible
+    /// cell size): most likely one side is in millimetres.
+    #[error("the translations are not in metres: {problem}")]
+    ImplausibleUnits {
+        /// What is inconsistent, and the likely unit mistake.
+        problem: UnitsProblem,
+    },
     /// The iterative method found no finite answer from any start.
     #[error("the iterative method found no usable answer after {restarts} restarts ({iterations} iterations)")]
     NoConvergence {
@@ -93,6 +100,51 @@ pub enum SolveError {
     /// The intrinsics could not be estimated from the board views.
     #[error("intrinsics estimation failed: {0}")]
     IntrinsicsFailed(String),
+}
+
+/// Which translations look like they are not in metres, and by how much.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UnitsProblem {
+    /// The flange is farther from the robot base than any robot reaches.
+    #[error("T_base_flange puts the flange {median_m:.1} m from the robot base (median over {samples} samples; a flange is within {limit_m} m of its base): the robot translations look like {unit} — give T_base_flange in metres")]
+    FlangeTooFar {
+        /// Median distance of the flange from the base as given, m.
+        median_m: f64,
+        /// Samples.
+        samples: usize,
+        /// The limit, m.
+        limit_m: f64,
+        /// The units that make the distances plausible (`millimetres`, `centimetres or
+        /// inches`, ...).
+        unit: String,
+    },
+    /// The target is farther from the camera than any board can be detected.
+    #[error("T_camera_target puts the target {median_m:.1} m from the camera (median over {samples} samples; a calibration board is seen within {limit_m} m): the camera translations look like {unit} — give the board size (tag or square edge) in metres so that T_camera_target is in metres")]
+    TargetTooFar {
+        /// Median distance of the target from the camera as given, m.
+        median_m: f64,
+        /// Samples.
+        samples: usize,
+        /// The limit, m.
+        limit_m: f64,
+        /// The units that make the distances plausible.
+        unit: String,
+    },
+    /// Robot and camera translations disagree in scale: the data fit when the robot's
+    /// translations are multiplied by `scale`.
+    #[error("robot and camera translations disagree in scale: the data fit with the T_base_flange translations multiplied by {scale:.4} (±{sigma:.4}), translation residual RMS {scaled_rms_mm:.2} mm, against {given_rms_mm:.1} mm as given: {explanation}")]
+    ScaleMismatch {
+        /// Factor on the robot translations that fits the data (1 for consistent units).
+        scale: f64,
+        /// Its standard error.
+        sigma: f64,
+        /// Translation residual RMS with the fitted factor, mm (camera units read as m).
+        scaled_rms_mm: f64,
+        /// Translation residual RMS with the data as given, mm.
+        given_rms_mm: f64,
+        /// The likely mistake, in words.
+        explanation: String,
+    },
 }
 
 /// What is wrong with one sample.

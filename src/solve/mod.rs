@@ -21,6 +21,7 @@
 
 pub mod calibration;
 pub mod closed_form;
+pub mod compare;
 pub mod diagnostics;
 pub mod error;
 pub mod intrinsics;
@@ -41,7 +42,7 @@ pub use calibration::{
     Uncertainty,
 };
 pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDiversity};
-pub use error::{SampleProblem, SolveError};
+pub use error::{SampleProblem, SolveError, UnitsProblem};
 pub use iterative::{IterativeOptions, IterativeOutcome};
 use options::require_positive;
 pub use options::{EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions};
@@ -150,25 +151,39 @@ fn validate(pairs: &[PosePair], options: &SolveOptions) -> Result<(), SolveError
 
 /// Solves for both unknowns of a cell from its pose pairs.
 ///
-/// Checks the input (finite values, weights, at least 3 samples with rotations about two
-/// axes), then, robust by default ([`SolveOptions::drop_outliers`]): a consensus start over
-/// small subsets, the chosen method on the samples consistent with it, every sample whose
-/// residual is an outlier against that fit left out (and named) and the fit repeated until the
-/// set is stable; a clean data set keeps every sample. The board-pose noise is estimated from
-/// the residuals along the way ([`SolveOptions::estimate_noise`]). Without `drop_outliers`: one
-/// fit of every sample with outliers flagged. Checks the convention when the fit is poor.
+/// Checks the input (finite values, weights, translations consistent with metres, at least 3
+/// samples with rotations about two axes), then, robust by default
+/// ([`SolveOptions::drop_outliers`]): a consensus start over small subsets, the chosen method on
+/// the samples consistent with it, every sample whose residual is an outlier against that fit
+/// left out (and named) and the fit repeated until the set is stable; a clean data set keeps
+/// every sample. The board-pose noise is estimated from the residuals along the way
+/// ([`SolveOptions::estimate_noise`]). Without `drop_outliers`: one fit of every sample with
+/// outliers flagged. Checks the convention when the fit is poor, and flags an answer whose
+/// unknowns look swapped ([`diagnostics::check_mounts`]). `check_conventions: false` also turns
+/// off the units and swapped-answer checks.
 pub fn solve(
     setup: Setup,
     pairs: &[PosePair],
     options: &SolveOptions,
 ) -> Result<Calibration, SolveError> {
     validate(pairs, options)?;
-    if options.drop_outliers {
-        robust::solve_robust(setup, pairs, options)
+    if options.check_conventions {
+        // Units before anything else: a solve of millimetres as metres "succeeds" with advice
+        // about pose variety.
+        diagnostics::check_units(setup, pairs)?;
+    }
+    let mut calibration = if options.drop_outliers {
+        robust::solve_robust(setup, pairs, options)?
     } else {
         let all: Vec<usize> = (0..pairs.len()).collect();
-        solve_subset(setup, pairs, &all, options)
+        solve_subset(setup, pairs, &all, options)?
+    };
+    if options.check_conventions {
+        calibration
+            .warnings
+            .extend(diagnostics::check_mounts(&calibration));
     }
+    Ok(calibration)
 }
 
 /// Coarsest tolerance (rad, and m) of the iterative start of the refined method.
@@ -178,10 +193,16 @@ type Solved = (Axby, SolverReport, Option<Uncertainty>, PoseNoise);
 
 fn solve_method(data: &AxbyData, options: &SolveOptions) -> Result<Solved, SolveError> {
     Ok(match options.method {
-        Method::ClosedForm => {
-            let s = closed_form::solve_axby(data)?;
+        closed @ (Method::ClosedForm
+        | Method::Tsai
+        | Method::Park
+        | Method::Horaud
+        | Method::Andreff
+        | Method::Daniilidis
+        | Method::Li) => {
+            let s = closed_form::solve(closed, data)?;
             let report = SolverReport {
-                method: Method::ClosedForm,
+                method: closed,
                 iterations: 0,
                 converged: true,
                 restarts: 0,

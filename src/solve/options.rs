@@ -68,20 +68,67 @@ impl Default for EstimateNoise {
 pub enum Method {
     /// The paper: alternating quaternion averaging for rotations, then translations.
     Iterative,
-    /// Shah (2013) Kronecker/SVD closed form written for `A = X·B·Y`.
+    /// Shah (2013) Kronecker/SVD closed form written for `A = X·B·Y` (AX = ZB family).
+    #[serde(alias = "shah")]
     ClosedForm,
     /// Joint weighted nonlinear least squares on both unknowns, started from the iterative answer.
     #[default]
     Refined,
+    /// Tsai and Lenz (1989), AX = XB on relative motions; `Y` averaged afterwards.
+    Tsai,
+    /// Park and Martin (1994), AX = XB on relative motions; `Y` averaged afterwards.
+    Park,
+    /// Horaud and Dornaika (1995), linear quaternion form of AX = XB; `Y` averaged afterwards.
+    Horaud,
+    /// Andreff, Horaud and Espiau (2001), linear Kronecker form of AX = XB; `Y` averaged afterwards.
+    Andreff,
+    /// Daniilidis (1999), dual quaternions for AX = XB; `Y` averaged afterwards.
+    Daniilidis,
+    /// Li, Wang and Wu (2010), Kronecker form of AX = ZB with rotations and translations at once.
+    Li,
 }
 
 impl Method {
+    /// Every method, the paper's first, then the refined default, then the closed forms.
+    pub const ALL: [Method; 9] = [
+        Method::Iterative,
+        Method::Refined,
+        Method::Tsai,
+        Method::Park,
+        Method::Horaud,
+        Method::Andreff,
+        Method::Daniilidis,
+        Method::ClosedForm,
+        Method::Li,
+    ];
+
     /// The YAML / CLI name.
     pub fn name(self) -> &'static str {
         match self {
             Method::Iterative => "iterative",
             Method::ClosedForm => "closed_form",
             Method::Refined => "refined",
+            Method::Tsai => "tsai",
+            Method::Park => "park",
+            Method::Horaud => "horaud",
+            Method::Andreff => "andreff",
+            Method::Daniilidis => "daniilidis",
+            Method::Li => "li",
+        }
+    }
+
+    /// True for the closed forms (every method but the iterative and the refined one).
+    pub fn is_closed_form(self) -> bool {
+        !matches!(self, Method::Iterative | Method::Refined)
+    }
+
+    /// The paper behind a closed form, for tables (`closed_form` is Shah's).
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Iterative => "iterative (Hirsh)",
+            Method::Refined => "refined",
+            Method::ClosedForm => "shah (closed_form)",
+            other => other.name(),
         }
     }
 }
@@ -158,7 +205,8 @@ pub struct SolveOptions {
     pub warn_rotation_sigma_deg: f64,
     /// Warn when a 1-sigma translation uncertainty exceeds this, mm.
     pub warn_translation_sigma_mm: f64,
-    /// Check whether the data fits far better under another convention (inverted poses, other setup).
+    /// Check whether the data fits far better under another convention (inverted poses, other
+    /// setup), refuse translations inconsistent with metres, and flag swapped-looking answers.
     pub check_conventions: bool,
 }
 

@@ -1,48 +1,34 @@
-//! Closed-form robot-world/hand-eye solution after Shah (2013), "Solving the robot-world/hand-eye
-//! calibration problem using the Kronecker product", written for `A = X·B·Y`.
+//! Shah (2013), "Solving the robot-world/hand-eye calibration problem using the Kronecker
+//! product", written for `A = X·B·Y` (the AX = ZB family: both unknowns at once).
 //!
 //! Rotations: `R_X R_B,i = R_A,i R_Yᵀ` is linear in `vec(R_X)` and `vec(R_Yᵀ)`:
 //! `(R_B,iᵀ ⊗ I₃) vec(R_X) − (I₃ ⊗ R_A,i) vec(R_Yᵀ) = 0`. The stacked (weighted) system's null
 //! vector, scaled to `det R_X = 1` and projected onto SO(3), gives both rotations. Translations
 //! then solve the linear least squares `t_X + R_X R_B,i t_Y = t_A,i − R_X t_B,i`.
-//! Used as a warm start, a cross-check and for the convention diagnosis. Units: rad, m.
+//! Also the warm start of the iterative method, and the rotation fit of the convention and
+//! units checks (rotations are unit-free). Units: rad, m.
 
-use nalgebra::{
-    Matrix3, Rotation3, SMatrix, SVector, SymmetricEigen, Translation3, UnitQuaternion, Vector3,
-};
+use nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Translation3, UnitQuaternion, Vector3};
 
-use super::{Axby, AxbyData, SolveError};
+use super::{kron, project_to_rotation};
 use crate::geometry::Pose;
-
-/// The closest rotation (Frobenius norm) to a 3x3 matrix.
-fn project_to_rotation(m: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
-    let svd = m.svd(true, true);
-    let u = svd.u?;
-    let v_t = svd.v_t?;
-    let mut d = Matrix3::identity();
-    if (u * v_t).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = u * d * v_t;
-    Some(UnitQuaternion::from_rotation_matrix(
-        &Rotation3::from_matrix_unchecked(r),
-    ))
-}
-
-/// Kronecker product of two 3x3 matrices.
-fn kron(a: &Matrix3<f64>, b: &Matrix3<f64>) -> SMatrix<f64, 9, 9> {
-    let mut k = SMatrix::<f64, 9, 9>::zeros();
-    for i in 0..3 {
-        for j in 0..3 {
-            k.fixed_view_mut::<3, 3>(3 * i, 3 * j)
-                .copy_from(&(b * a[(i, j)]));
-        }
-    }
-    k
-}
+use crate::solve::{Axby, AxbyData, SolveError};
 
 /// Solves `A_i = X·B_i·Y` in closed form.
 pub fn solve_axby(data: &AxbyData) -> Result<Axby, SolveError> {
+    let (qx, qy) = rotations(data)?;
+    let (tx, ty) = translations(data, &qx)?;
+    Ok(Axby {
+        x: Pose::from_parts(Translation3::from(tx), qx),
+        y: Pose::from_parts(Translation3::from(ty), qy),
+    })
+}
+
+/// The rotations `(R_X, R_Y)` of `A_i = X·B_i·Y` from the Kronecker null vector. They depend on
+/// the rotations of the data only, so they are right whatever unit the translations are in.
+pub fn rotations(
+    data: &AxbyData,
+) -> Result<(UnitQuaternion<f64>, UnitQuaternion<f64>), SolveError> {
     let identity = Matrix3::identity();
     // Normal matrix of the stacked Kronecker system: its eigenvector of the smallest eigenvalue
     // is the least-squares null vector (18x18, cheap for any N).
@@ -74,11 +60,7 @@ pub fn solve_axby(data: &AxbyData) -> Result<Axby, SolveError> {
         .ok_or(SolveError::ClosedFormFailed("SVD of the X rotation failed"))?;
     let qy = project_to_rotation(&(ry_t * scale).transpose())
         .ok_or(SolveError::ClosedFormFailed("SVD of the Y rotation failed"))?;
-    let (tx, ty) = translations(data, &qx)?;
-    Ok(Axby {
-        x: Pose::from_parts(Translation3::from(tx), qx),
-        y: Pose::from_parts(Translation3::from(ty), qy),
-    })
+    Ok((qx, qy))
 }
 
 /// Linear least squares for both translations given `R_X`.
