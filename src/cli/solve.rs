@@ -187,13 +187,6 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     if let Some(truth) = &config.simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
-    if let Some(notice) = solve::diagnostics::check_against_nominal(
-        &solved.calibration,
-        &config.nominal,
-        solve::diagnostics::NOMINAL_TOLERANCE_M,
-    ) {
-        outln!("{}: {}", notice.severity, notice.message);
-    }
     if args.compare {
         let comparison =
             solve::compare::compare(dataset.setup, &dataset.pairs, &config.solver.to_options())

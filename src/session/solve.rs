@@ -348,6 +348,16 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
+    // An answer far from the config's nominal transforms (swapped unknowns, say) is flagged where
+    // the result file, the report and the verdict all see it.
+    solved
+        .calibration
+        .warnings
+        .extend(solve::diagnostics::check_against_nominal(
+            &solved.calibration,
+            &config.nominal,
+            solve::diagnostics::NOMINAL_TOLERANCE_M,
+        ));
     let verdict = verdict::assess_solved(
         &solved.calibration,
         &pairs,
@@ -476,6 +486,16 @@ pub fn solve_session(
             );
         }
     }
+    // An answer far from the config's nominal transforms (swapped unknowns, say) is flagged where
+    // the result file, the report and the verdict all see it.
+    solved
+        .calibration
+        .warnings
+        .extend(solve::diagnostics::check_against_nominal(
+            &solved.calibration,
+            &config.nominal,
+            solve::diagnostics::NOMINAL_TOLERANCE_M,
+        ));
     let verdict = verdict::assess_solved(
         &solved.calibration,
         pairs,
