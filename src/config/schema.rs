@@ -63,23 +63,45 @@ pub struct ConfigFile {
     pub verdict: VerdictConfig,
 }
 
-/// The arm models whose kinematics the tool knows.
+/// The arm models whose kinematics the tool knows (Universal Robots' published DH parameters,
+/// `robot::kinematics`). An unknown name is refused listing these.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ArmModel {
+    /// Universal Robots UR3 (CB3).
+    Ur3,
+    /// Universal Robots UR5 (CB3).
+    Ur5,
+    /// Universal Robots UR10 (CB3).
+    Ur10,
+    /// Universal Robots UR3e.
+    Ur3e,
     /// Universal Robots UR5e.
     #[default]
     Ur5e,
     /// Universal Robots UR10e.
     Ur10e,
+    /// Universal Robots UR16e.
+    Ur16e,
+    /// Universal Robots UR20.
+    Ur20,
+    /// Universal Robots UR30.
+    Ur30,
 }
 
 impl ArmModel {
     /// The YAML name (`ur5e`), as `robot::kinematics::UrModel::by_name` takes it.
     pub fn name(self) -> &'static str {
         match self {
+            ArmModel::Ur3 => "ur3",
+            ArmModel::Ur5 => "ur5",
+            ArmModel::Ur10 => "ur10",
+            ArmModel::Ur3e => "ur3e",
             ArmModel::Ur5e => "ur5e",
             ArmModel::Ur10e => "ur10e",
+            ArmModel::Ur16e => "ur16e",
+            ArmModel::Ur20 => "ur20",
+            ArmModel::Ur30 => "ur30",
         }
     }
 }
@@ -95,7 +117,7 @@ impl ArmModel {
 pub enum RobotConfig {
     /// The simulated UR arm.
     Sim {
-        /// `ur5e` or `ur10e`.
+        /// The arm model (`ur5e` by default; see [`ArmModel`]).
         #[serde(default)]
         model: ArmModel,
         /// Where the arm starts, degrees.
@@ -121,7 +143,8 @@ pub enum RobotConfig {
     Ur {
         /// Controller address.
         host: String,
-        /// `ur5e` or `ur10e`: used to check reachability before moving.
+        /// The arm model (`ur5e` by default; see [`ArmModel`]): used to check reachability before
+        /// moving.
         #[serde(default)]
         model: ArmModel,
         /// Give up connecting after this long, s.

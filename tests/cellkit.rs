@@ -1,0 +1,182 @@
+//! A first real cell without guessing (issue #14, item 3): every Universal Robots model the
+//! config accepts, from its published kinematics; joint ranges per joint, applied by the planner
+//! and the plan check.
+
+use std::f64::consts::PI;
+
+use nalgebra::{Matrix4, Vector3};
+
+use handeye::config::{CellConfig, RobotConfig};
+use handeye::robot::kinematics::UrModel;
+
+#[allow(dead_code)]
+mod util;
+
+/// UR's published `[d1, a2, a3, d4, d5, d6]` per model, typed in again here from Universal
+/// Robots' "DH Parameters for calculations of kinematics and dynamics" page (and the CB3
+/// manual's appendix, `ur_description` for UR16e/UR30), so a typo in the library's table fails.
+const TABLE: [(&str, [f64; 6]); 9] = [
+    (
+        "ur3",
+        [0.1519, -0.24365, -0.21325, 0.11235, 0.08535, 0.0819],
+    ),
+    (
+        "ur5",
+        [0.089159, -0.425, -0.39225, 0.10915, 0.09465, 0.0823],
+    ),
+    ("ur10", [0.1273, -0.612, -0.5723, 0.163941, 0.1157, 0.0922]),
+    (
+        "ur3e",
+        [0.15185, -0.24355, -0.2132, 0.13105, 0.08535, 0.0921],
+    ),
+    ("ur5e", [0.1625, -0.425, -0.3922, 0.1333, 0.0997, 0.0996]),
+    (
+        "ur10e",
+        [0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655],
+    ),
+    ("ur16e", [0.1807, -0.4784, -0.36, 0.17415, 0.11985, 0.11655]),
+    ("ur20", [0.2363, -0.862, -0.7287, 0.201, 0.1593, 0.1543]),
+    ("ur30", [0.2363, -0.637, -0.5037, 0.201, 0.1593, 0.1543]),
+];
+
+/// The standard DH link matrix `Rz(θ)·Tz(d)·Tx(a)·Rx(α)`, written out as the textbook does.
+fn dh(theta: f64, d: f64, a: f64, alpha: f64) -> Matrix4<f64> {
+    let (st, ct) = theta.sin_cos();
+    let (sa, ca) = alpha.sin_cos();
+    Matrix4::new(
+        ct,
+        -st * ca,
+        st * sa,
+        a * ct, //
+        st,
+        ct * ca,
+        -ct * sa,
+        a * st, //
+        0.0,
+        sa,
+        ca,
+        d, //
+        0.0,
+        0.0,
+        0.0,
+        1.0,
+    )
+}
+
+/// The flange pose by a direct product of the six DH matrices of the published table.
+fn dh_chain(p: &[f64; 6], q: &[f64; 6]) -> Matrix4<f64> {
+    let [d1, a2, a3, d4, d5, d6] = *p;
+    let d = [d1, 0.0, 0.0, d4, d5, d6];
+    let a = [0.0, a2, a3, 0.0, 0.0, 0.0];
+    let alpha = [PI / 2.0, 0.0, 0.0, PI / 2.0, -PI / 2.0, 0.0];
+    (0..6).fold(Matrix4::identity(), |t, i| {
+        t * dh(q[i], d[i], a[i], alpha[i])
+    })
+}
+
+const JOINT_VECTORS: [[f64; 6]; 4] = [
+    [0.0; 6],
+    [0.3, -1.2, 1.4, -0.8, 1.1, 0.4],
+    [-2.1, -0.4, -1.9, 2.5, -0.7, 3.0],
+    [1.0, -2.0, 0.5, -1.5, 2.2, -1.1],
+];
+
+#[test]
+fn every_model_matches_its_published_dh_chain() {
+    assert_eq!(
+        UrModel::NAMES.to_vec(),
+        TABLE.iter().map(|(n, _)| *n).collect::<Vec<_>>()
+    );
+    for (name, params) in TABLE {
+        let model = UrModel::by_name(name).unwrap();
+        for q in JOINT_VECTORS {
+            let expected = dh_chain(&params, &q);
+            let got = model.forward(&q).to_homogeneous();
+            assert!(
+                (got - expected).abs().max() < 1e-12,
+                "{name} at {q:?}: {got} vs {expected}"
+            );
+        }
+        // Stretched out at zero joints the flange is a2 + a3 along x: the arm's published reach
+        // figures are that plus the wrist (so a swapped a2/d4 would show here too).
+        let home = model.forward(&[0.0; 6]).translation.vector;
+        let expected = Vector3::new(
+            params[1] + params[2],
+            -(params[3] + params[5]),
+            params[0] - params[4],
+        );
+        assert!((home - expected).norm() < 1e-12, "{name}: {home:?}");
+    }
+}
+
+#[test]
+fn every_model_inverts_its_own_forward_kinematics() {
+    for name in UrModel::NAMES {
+        let model = UrModel::by_name(name).unwrap();
+        for q in &JOINT_VECTORS[1..] {
+            let pose = model.forward(q);
+            let all = model.inverse(&pose);
+            assert!(
+                !all.is_empty() && all.len() <= 8,
+                "{name}: {} solutions",
+                all.len()
+            );
+            for s in &all {
+                let fk = model.forward(s);
+                assert!(
+                    (fk.translation.vector - pose.translation.vector).norm() < 1e-9,
+                    "{name}"
+                );
+                assert!(fk.rotation.angle_to(&pose.rotation) < 1e-9, "{name}");
+            }
+            let near = model.inverse_nearest(&pose, q).unwrap();
+            let err = near
+                .iter()
+                .zip(q)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-9, "{name}: {near:?} vs {q:?}");
+        }
+    }
+}
+
+fn sim_with_model(dir: &std::path::Path, model: &str) -> std::path::PathBuf {
+    util::config_variant(
+        dir,
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("model: ur10e", &format!("model: {model}"))],
+    )
+}
+
+#[test]
+fn every_model_name_is_accepted_in_the_config() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in UrModel::NAMES {
+        let config = CellConfig::load(&sim_with_model(dir.path(), name)).unwrap();
+        assert!(matches!(config.robot, RobotConfig::Sim { .. }));
+        assert_eq!(config.robot.model(), name);
+        assert_eq!(UrModel::by_name(config.robot.model()).unwrap().name, name);
+    }
+}
+
+#[test]
+fn an_unknown_model_is_refused_listing_the_accepted_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = sim_with_model(dir.path(), "ur7e");
+    let message = match CellConfig::load(&path) {
+        Ok(_) => panic!("ur7e loaded"),
+        Err(e) => format!("{:#}", anyhow::Error::new(e)),
+    };
+    assert!(message.contains(&path.display().to_string()), "{message}");
+    assert!(
+        message.contains("robot.model") && message.contains("ur7e"),
+        "{message}"
+    );
+    for name in UrModel::NAMES {
+        assert!(
+            message.contains(&format!("`{name}`")),
+            "{name} not listed: {message}"
+        );
+    }
+}
