@@ -6,8 +6,13 @@ use std::f64::consts::PI;
 
 use nalgebra::{Matrix4, Vector3};
 
+use std::path::{Path, PathBuf};
+
+use handeye::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
 use handeye::config::{CellConfig, RobotConfig};
+use handeye::plan::{Plan, Waypoint};
 use handeye::robot::kinematics::UrModel;
+use handeye::setup::Setup;
 
 #[allow(dead_code)]
 mod util;
@@ -140,7 +145,7 @@ fn every_model_inverts_its_own_forward_kinematics() {
     }
 }
 
-fn sim_with_model(dir: &std::path::Path, model: &str) -> std::path::PathBuf {
+fn sim_with_model(dir: &Path, model: &str) -> PathBuf {
     util::config_variant(
         dir,
         "sim-cell.yaml",
@@ -179,4 +184,195 @@ fn an_unknown_model_is_refused_listing_the_accepted_ones() {
             "{name} not listed: {message}"
         );
     }
+}
+
+/// The demo sim cell with `robot.joint_ranges_deg: ranges` (YAML flow text).
+fn sim_with_ranges(dir: &Path, ranges: &str) -> PathBuf {
+    let start = "start_joints_deg: [0, -90, 90, -90, -90, 0]";
+    util::config_variant(
+        dir,
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(start, &format!("{start}\n  joint_ranges_deg: {ranges}"))],
+    )
+}
+
+fn inside(q: &[f64; 6], ranges: &[[f64; 2]; 6]) -> bool {
+    q.iter()
+        .zip(ranges)
+        .all(|(v, [lo, hi])| (lo..=hi).contains(&&v.to_degrees()))
+}
+
+/// The generated plan of the demo cell puts wrist 3 on both sides of zero; with wrist 3 held to
+/// [0, 360]° the IK picks another solution for those: the same views, all inside.
+#[test]
+fn a_generated_plan_stays_inside_a_restricted_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let free = handeye::cell::prepare(&util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "free.yaml",
+        &[],
+    ))
+    .unwrap();
+    let ranges = [
+        [-360.0, 360.0],
+        [-360.0, 360.0],
+        [-180.0, 180.0],
+        [-360.0, 360.0],
+        [-360.0, 360.0],
+        [0.0, 360.0],
+    ];
+    let free_joints: Vec<_> = free
+        .report
+        .validated()
+        .expect("the demo plan passes")
+        .into_iter()
+        .map(|(_, q)| q)
+        .collect();
+    assert!(
+        free_joints.iter().any(|q| !inside(q, &ranges)),
+        "the unrestricted plan already keeps wrist 3 >= 0: this test would prove nothing"
+    );
+
+    let path = sim_with_ranges(
+        dir.path(),
+        "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [0, 360]]",
+    );
+    let cell = handeye::cell::prepare(&path).unwrap();
+    let validated = cell.report.validated().unwrap_or_else(|| {
+        panic!(
+            "{:#?}",
+            cell.report
+                .poses
+                .iter()
+                .map(|p| &p.problems)
+                .collect::<Vec<_>>()
+        )
+    });
+    assert_eq!(validated.len(), free_joints.len());
+    for (pose, q) in &validated {
+        assert!(inside(q, &ranges), "{q:?} leaves the ranges");
+        // The same flange pose (so the same view), reached by another joint solution where the
+        // free one turned wrist 3 below zero.
+        assert!(
+            (cell.arm.forward(q).to_homogeneous() - pose.to_homogeneous())
+                .abs()
+                .max()
+                < 1e-9
+        );
+    }
+}
+
+/// A range so tight that some generated views cannot be reached: those are refused naming the
+/// joint, its value and the key; the rest stay inside.
+#[test]
+fn views_outside_a_tight_range_are_refused_naming_the_joint() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = sim_with_ranges(
+        dir.path(),
+        "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-20, 20]]",
+    );
+    let cell = handeye::cell::prepare(&path).unwrap();
+    let ranges = cell.config.robot.joint_ranges_deg(cell.config.setup);
+    let mut refused = 0;
+    for p in &cell.report.poses {
+        match p.joints {
+            Some(q) => assert!(inside(&q, &ranges), "{q:?}"),
+            None => {
+                refused += 1;
+                let message = p.problems.join("; ");
+                assert!(
+                    message.contains("reachable only with joint 6 (wrist 3) at ")
+                        && message
+                            .contains("outside its range [-20, 20]° (robot.joint_ranges_deg[5])"),
+                    "{message}"
+                );
+            }
+        }
+    }
+    assert!(refused > 0, "no generated view needed wrist 3 beyond ±20°");
+    assert!(!cell.report.ok());
+}
+
+/// The template plan swung wrist 3 to 280°: a scripted joint waypoint like that is
+/// refused under the flange-camera defaults, naming the joint and its value.
+#[test]
+fn a_scripted_pose_outside_the_range_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let flange = FLANGE_CAMERA_JOINT_RANGES_DEG
+        .map(|[lo, hi]| format!("[{lo}, {hi}]"))
+        .join(", ");
+    let path = sim_with_ranges(dir.path(), &format!("[{flange}]"));
+    let cell = handeye::cell::prepare(&path).unwrap();
+    let plan = Plan {
+        waypoints: vec![
+            Waypoint::Joints([0.0, -90.0, 90.0, -90.0, -90.0, 170.0].map(f64::to_radians)),
+            Waypoint::Joints([0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians)),
+        ],
+    };
+    let report = cell.check_plan(&plan);
+    assert!(report.poses[0].joints.is_some());
+    assert!(!report.poses[0]
+        .problems
+        .iter()
+        .any(|p| p.contains("joint range")));
+    assert_eq!(report.poses[1].joints, None);
+    assert_eq!(
+        report.poses[1].problems[0],
+        "outside the joint ranges: its joints put joint 6 (wrist 3) at 280.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[5])"
+    );
+    assert!(report.validated().is_none());
+}
+
+#[test]
+fn a_real_flange_camera_gets_cable_friendly_ranges_by_default() {
+    let ur = |setup| {
+        let robot: RobotConfig =
+            serde_yaml_ng::from_str("{backend: ur, host: 192.168.1.10, model: ur5e}").unwrap();
+        robot.joint_ranges_deg(setup)
+    };
+    assert_eq!(ur(Setup::EyeInHand), FLANGE_CAMERA_JOINT_RANGES_DEG);
+    assert_eq!(ur(Setup::EyeToHand), ARM_JOINT_RANGES_DEG);
+    assert_eq!(FLANGE_CAMERA_JOINT_RANGES_DEG[5], [-180.0, 180.0]);
+    // The arm's own ranges are the kinematics' limits.
+    let arm = UrModel::ur5e();
+    for (deg, rad) in ARM_JOINT_RANGES_DEG.iter().zip(arm.joint_limits) {
+        assert_eq!((deg[0].to_radians(), deg[1].to_radians()), rad);
+    }
+}
+
+fn load_error(path: &Path) -> String {
+    match CellConfig::load(path) {
+        Ok(_) => panic!("{} loaded", path.display()),
+        Err(e) => format!("{:#}", anyhow::Error::new(e)),
+    }
+}
+
+#[test]
+fn bad_joint_ranges_are_refused_at_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [90, -90]]",
+            "robot.joint_ranges_deg[5]: wrist 3 range [90, -90] °: expected min < max",
+        ),
+        (
+            "[[-360, 360], [-360, 360], [-200, 180], [-360, 360], [-360, 360], [-180, 180]]",
+            "robot.joint_ranges_deg[2][0]: expected a value in [-180, 180] °, found -200",
+        ),
+        (
+            "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [10, 180]]",
+            "robot.start_joints_deg[5]: expected a value inside the wrist 3 joint range [10, 180] ° (robot.joint_ranges_deg[5]), found 0",
+        ),
+    ];
+    for (ranges, expected) in cases {
+        let path = sim_with_ranges(dir.path(), ranges);
+        let message = load_error(&path);
+        assert!(message.contains(expected), "{message}");
+        assert!(message.contains(&path.display().to_string()), "{message}");
+    }
+    // Five pairs instead of six is a shape error at the key.
+    let path = sim_with_ranges(dir.path(), "[[-1, 1], [-1, 1], [-1, 1], [-1, 1], [-1, 1]]");
+    assert!(load_error(&path).contains("robot"), "{}", load_error(&path));
 }

@@ -123,6 +123,11 @@ pub enum RobotConfig {
         /// Where the arm starts, degrees.
         #[serde(default = "default_start_joints_deg")]
         start_joints_deg: [f64; 6],
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
         /// Time each move takes, s (0 = instant).
         #[serde(default)]
         move_duration_s: f64,
@@ -147,6 +152,11 @@ pub enum RobotConfig {
         /// moving.
         #[serde(default)]
         model: ArmModel,
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
         /// Give up connecting after this long, s.
         #[serde(default = "default_connect_timeout_s")]
         connect_timeout_s: f64,
@@ -183,7 +193,61 @@ fn default_connect_timeout_s() -> f64 {
     5.0
 }
 
+pub use crate::robot::kinematics::JOINT_NAMES;
+
+/// The arm's own joint ranges, degrees: ±360° on every joint but the elbow (±180°), as
+/// `robot::kinematics` plans every model.
+pub const ARM_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+];
+
+/// Default joint ranges for a real arm with the camera on its flange (eye-in-hand), degrees.
+/// The camera cable is dressed along the arm with the joints near zero; it tolerates half a turn
+/// either way at the base and the three wrist joints, not the controller's two full turns (a
+/// plan that swings wrist 3 to 280° winds the cable round the flange). ±180° still leaves every
+/// orientation reachable: each of these joints keeps exactly one representative of its angle.
+/// Shoulder and elbow do not twist the cable and keep the arm's ranges.
+pub const FLANGE_CAMERA_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+];
+
 impl RobotConfig {
+    /// The joint ranges in force, `[min, max]` degrees, base to wrist 3: the config's
+    /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real
+    /// arm (`backend: ur`) carrying the camera (`setup: eye_in_hand`), and the arm's own
+    /// [`ARM_JOINT_RANGES_DEG`] for everything else (eye-to-hand has no cable on the flange; the
+    /// simulator has no cable at all).
+    pub fn joint_ranges_deg(&self, setup: Setup) -> [[f64; 2]; 6] {
+        match self {
+            RobotConfig::Sim {
+                joint_ranges_deg: Some(r),
+                ..
+            }
+            | RobotConfig::Ur {
+                joint_ranges_deg: Some(r),
+                ..
+            } => *r,
+            RobotConfig::Ur { .. } if setup == Setup::EyeInHand => FLANGE_CAMERA_JOINT_RANGES_DEG,
+            _ => ARM_JOINT_RANGES_DEG,
+        }
+    }
+
+    /// [`RobotConfig::joint_ranges_deg`] in radians, as `UrModel::joint_limits` takes them.
+    pub fn joint_limits(&self, setup: Setup) -> [(f64, f64); 6] {
+        self.joint_ranges_deg(setup)
+            .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
+    }
+
     /// The arm model name, for kinematics checks.
     pub fn model(&self) -> &'static str {
         match self {

@@ -46,6 +46,9 @@ pub struct UrModel {
     pub joint_limits: [(f64, f64); 6],
 }
 
+/// The joint names, base to wrist 3, as messages and the README use them.
+pub const JOINT_NAMES: [&str; 6] = ["base", "shoulder", "elbow", "wrist 1", "wrist 2", "wrist 3"];
+
 /// UR's twist angles, the same for every arm of the family.
 const UR_ALPHA: [f64; 6] = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
 /// Default joint limits: ±2π on every joint but the elbow (±π), as the controller ships.
@@ -152,6 +155,24 @@ impl UrModel {
             .iter()
             .zip(self.joint_limits.iter())
             .all(|(q, (lo, hi))| q.is_finite() && *q >= *lo && *q <= *hi)
+    }
+
+    /// The first joint of `joints` outside its limit (0-based index and its value, rad), if any;
+    /// a non-finite value counts as outside.
+    pub fn outside_limits(&self, joints: &Joints) -> Option<(usize, f64)> {
+        joints
+            .iter()
+            .zip(self.joint_limits.iter())
+            .position(|(q, (lo, hi))| !(q.is_finite() && *q >= *lo && *q <= *hi))
+            .map(|i| (i, joints[i]))
+    }
+
+    /// This model with the arm's own joint limits (whatever a cell narrowed them to).
+    pub fn with_arm_limits(&self) -> Self {
+        UrModel {
+            joint_limits: UR_LIMITS,
+            ..self.clone()
+        }
     }
 
     /// All inverse-kinematics solutions for `base_from_flange` that lie inside the joint limits.
