@@ -376,3 +376,27 @@ fn bad_joint_ranges_are_refused_at_load() {
     let path = sim_with_ranges(dir.path(), "[[-1, 1], [-1, 1], [-1, 1], [-1, 1], [-1, 1]]");
     assert!(load_error(&path).contains("robot"), "{}", load_error(&path));
 }
+
+/// A resumed or adaptive run moves in another order than the check saw: every move is held to
+/// the ranges right before it is sent, and moving back in from outside is allowed.
+#[test]
+fn every_move_is_held_to_the_ranges() {
+    let mut arm = UrModel::ur5e();
+    arm.joint_limits =
+        FLANGE_CAMERA_JOINT_RANGES_DEG.map(|[lo, hi]| (lo.to_radians(), hi.to_radians()));
+    let check = handeye::plan::check::MoveCheck {
+        arm,
+        workspace: handeye::robot::WorkspaceBox {
+            min: Vector3::new(-2.0, -2.0, -2.0),
+            max: Vector3::new(2.0, 2.0, 2.0),
+        },
+    };
+    let home = [0.0, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians);
+    let wound = [0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians);
+    assert_eq!(check.problem(&home, &home), None);
+    assert_eq!(
+        check.problem(&home, &wound).as_deref(),
+        Some("the move puts joint 6 (wrist 3) at 280.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[5])")
+    );
+    assert_eq!(check.problem(&wound, &home), None);
+}

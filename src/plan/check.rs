@@ -241,8 +241,22 @@ pub struct MoveCheck {
 }
 
 impl MoveCheck {
-    /// Why the straight joint move `from` → `to` is not safe, if it is not.
+    /// Why the straight joint move `from` → `to` is not safe, if it is not: `to` outside the
+    /// arm's joint ranges (the cell's `robot.joint_ranges_deg`), or the path leaving the box.
+    /// `from` may lie outside the ranges (the arm stands where it was left): moving back in is
+    /// allowed.
     pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
+        if let Some((i, value)) = self.arm.outside_limits(to) {
+            let (lo, hi) = self.arm.joint_limits[i];
+            return Some(format!(
+                "the move puts joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
+                i + 1,
+                JOINT_NAMES[i],
+                value.to_degrees(),
+                lo.to_degrees(),
+                hi.to_degrees()
+            ));
+        }
         path_leaves_box(&self.arm, from, to, &self.workspace)
     }
 }
