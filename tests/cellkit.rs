@@ -1,6 +1,6 @@
 //! A first real cell without guessing (issue #14, item 3): every Universal Robots model the
 //! config accepts, from its published kinematics; joint ranges per joint, applied by the planner
-//! and the plan check.
+//! and the plan check; a board fitted to a sheet of paper and written as a PDF.
 
 use std::f64::consts::PI;
 
@@ -13,6 +13,8 @@ use handeye::config::{CellConfig, RobotConfig};
 use handeye::plan::{Plan, Waypoint};
 use handeye::robot::kinematics::UrModel;
 use handeye::setup::Setup;
+use handeye::vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
+use handeye::vision::{Board, DetectorOptions, TagDetector, TagFamily};
 
 #[allow(dead_code)]
 mod util;
@@ -399,4 +401,204 @@ fn every_move_is_held_to_the_ranges() {
         Some("the move puts joint 6 (wrist 3) at 280.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[5])")
     );
     assert_eq!(check.problem(&wound, &home), None);
+}
+
+// ---- printing the board ----------------------------------------------------------------
+
+const PT_PER_MM: f64 = 72.0 / 25.4;
+
+fn six_by_six() -> Board {
+    Board::load(&util::repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap()
+}
+
+/// The numbers of the PDF's `/MediaBox [x0 y0 x1 y1]`, pt.
+fn media_box(pdf: &str) -> [f64; 4] {
+    let at = pdf.find("/MediaBox [").expect("no MediaBox") + "/MediaBox [".len();
+    let end = at + pdf[at..].find(']').unwrap();
+    let v: Vec<f64> = pdf[at..end]
+        .split_whitespace()
+        .map(|t| t.parse().unwrap())
+        .collect();
+    v.try_into().unwrap()
+}
+
+/// Every `x y w h re` rectangle of the (uncompressed) content stream, pt.
+fn rectangles(pdf: &str) -> Vec<[f64; 4]> {
+    let tokens: Vec<&str> = pdf.split_whitespace().collect();
+    tokens
+        .windows(5)
+        .filter(|w| w[4] == "re")
+        .map(|w| std::array::from_fn(|i| w[i].parse().unwrap()))
+        .collect()
+}
+
+/// #14: the 6x6 board (310 x 335 mm with its caption strip) fits no A4 sheet at its size; fitted,
+/// its tags shrink to fill the printable area, the PDF page is the sheet, every black cell lies
+/// inside the margins, and the widest black run (a tag's top border row) is the reported tag size.
+#[test]
+fn a_board_fitted_to_a4_fills_the_sheet_inside_the_margin() {
+    let board = six_by_six();
+    let extent = board.extent();
+    let (w, h) = (extent.max.x - extent.min.x, extent.max.y - extent.min.y);
+    assert!(
+        w > 0.19 && h > 0.19,
+        "the issue's board fits A4 as it is: {w} x {h} m"
+    );
+
+    let fitted = fit_to_paper(&board, Paper::A4, 0.010).unwrap();
+    assert!(!fitted.sheet.landscape);
+    let tag = fitted.board.tag_size();
+    assert!(tag < board.tag_size() && tag > 0.02, "{tag}");
+    // Whole tenths of a millimetre, and the largest such size: 0.1 mm more no longer fits.
+    assert_eq!((tag * 1e4).round() / 1e4, tag);
+    let fe = fitted.board.extent();
+    let fw = fe.max.x - fe.min.x;
+    assert!(
+        fw <= 0.190 + 1e-12 && fw * (tag + 1e-4) / tag > 0.190,
+        "{fw}"
+    );
+    assert_eq!(
+        (
+            fitted.board.cols(),
+            fitted.board.rows(),
+            fitted.board.tag_spacing()
+        ),
+        (board.cols(), board.rows(), board.tag_spacing())
+    );
+
+    let pdf = board_pdf(&fitted.board, Some(&fitted.sheet)).unwrap();
+    assert!(pdf.starts_with(b"%PDF-"));
+    let text = String::from_utf8_lossy(&pdf);
+    let [x0, y0, x1, y1] = media_box(&text);
+    assert_eq!((x0, y0), (0.0, 0.0));
+    assert!((x1 - 210.0 * PT_PER_MM).abs() < 0.01 && (y1 - 297.0 * PT_PER_MM).abs() < 0.01);
+    let margin = 10.0 * PT_PER_MM;
+    let rects = rectangles(&text);
+    assert!(rects.len() > 36 * 10, "{} rectangles", rects.len());
+    for [x, y, w, h] in &rects {
+        assert!(
+            *x >= margin - 1e-3
+                && *y >= margin - 1e-3
+                && x + w <= x1 - margin + 1e-3
+                && y + h <= y1 - margin + 1e-3,
+            "rectangle {x} {y} {w} {h} leaves the printable area"
+        );
+    }
+    // The scale bar's blocks and outline are 2 mm tall; every other rectangle is a run of cells.
+    let bar = 2.0 * PT_PER_MM;
+    let widest = rects
+        .iter()
+        .filter(|r| (r[3] - bar).abs() > 1e-3)
+        .map(|r| r[2])
+        .fold(0.0, f64::max);
+    assert!(
+        (widest - tag * 1000.0 * PT_PER_MM).abs() < 1e-3,
+        "{widest} pt vs tag {tag} m"
+    );
+    assert!(
+        text.contains(&format!("tagSize {tag} m")),
+        "the caption names the tag size"
+    );
+    assert!(text.contains("print at actual size"));
+}
+
+#[test]
+fn larger_paper_gives_larger_tags_and_a_small_board_is_scaled_up() {
+    let board = six_by_six();
+    let a4 = fit_to_paper(&board, Paper::A4, 0.01)
+        .unwrap()
+        .board
+        .tag_size();
+    let letter = fit_to_paper(&board, Paper::Letter, 0.01)
+        .unwrap()
+        .board
+        .tag_size();
+    let a3 = fit_to_paper(&board, Paper::A3, 0.01)
+        .unwrap()
+        .board
+        .tag_size();
+    assert!(a4 < letter && letter < a3, "{a4} {letter} {a3}");
+    // A wide 6x2 board goes landscape.
+    let wide = Board::aprilgrid(6, 2, 0.01, 0.25, TagFamily::Tag36h11, 0, 2).unwrap();
+    let fitted = fit_to_paper(&wide, Paper::A4, 0.01).unwrap();
+    assert!(fitted.sheet.landscape && fitted.board.tag_size() > 0.03);
+    // Margins out of range and boards that would need tiny tags are refused.
+    let e = fit_to_paper(&board, Paper::A4, 0.2)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("margin-mm") && e.contains("[0, 50] mm") && e.contains("200 mm"),
+        "{e}"
+    );
+    let many = Board::aprilgrid(24, 24, 0.02, 0.25, TagFamily::Tag36h11, 0, 2).unwrap();
+    let e = fit_to_paper(&many, Paper::A4, 0.05)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("24x24 tags on A4") && e.contains("at least 5 mm"),
+        "{e}"
+    );
+    // A board that does not fit the sheet is refused by the PDF writer, not clipped.
+    let sheet = fit_to_paper(&board, Paper::A4, 0.01).unwrap().sheet;
+    assert!(board_pdf(&board, Some(&sheet)).is_err());
+}
+
+#[test]
+fn the_fitted_board_file_keeps_everything_but_the_tag_size() {
+    let path = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
+    let original = std::fs::read_to_string(&path).unwrap();
+    let fitted = fit_to_paper(&six_by_six(), Paper::Letter, 0.008).unwrap();
+    let yaml = fitted_board_yaml(&original, &path, &fitted.board).unwrap();
+    let changed: Vec<(&str, &str)> = original
+        .lines()
+        .zip(yaml.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(
+        changed,
+        vec![(
+            "tagSize: 0.04",
+            &*format!("tagSize: {}", fitted.board.tag_size())
+        )]
+    );
+    let back = Board::from_yaml_str(&yaml, &path).unwrap();
+    assert_eq!(back.tag_size(), fitted.board.tag_size());
+}
+
+/// With poppler's `pdftoppm` on the machine, the fitted PDF is rasterised at 150 dpi and the
+/// detector finds all 36 tags on it (skipped, saying so, without it).
+#[test]
+fn the_pdf_renders_and_its_tags_are_detected() {
+    let dir = tempfile::tempdir().unwrap();
+    let fitted = fit_to_paper(&six_by_six(), Paper::A4, 0.01).unwrap();
+    let file = dir.path().join("board.pdf");
+    std::fs::write(
+        &file,
+        board_pdf(&fitted.board, Some(&fitted.sheet)).unwrap(),
+    )
+    .unwrap();
+    let rendered = std::process::Command::new("pdftoppm")
+        .args(["-r", "150", "-gray", "-png", "-singlefile"])
+        .arg(&file)
+        .arg(dir.path().join("page"))
+        .output();
+    match rendered {
+        Ok(out) if out.status.success() => {}
+        Ok(out) => panic!(
+            "pdftoppm refused the PDF: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ),
+        Err(e) => {
+            eprintln!("pdftoppm not available ({e}): rendering check skipped");
+            return;
+        }
+    }
+    let image = image::open(dir.path().join("page.png"))
+        .unwrap()
+        .into_luma8();
+    // A4 at 150 dpi: 1240.2 x 1753.9 px, rounded either way.
+    assert!(image.width().abs_diff(1240) <= 1 && image.height().abs_diff(1754) <= 1);
+    let detector = TagDetector::spawn(&fitted.board, DetectorOptions::default()).unwrap();
+    let detection = detector.detect(&image).unwrap();
+    assert_eq!(detection.tags.len(), 36);
 }
