@@ -1,6 +1,7 @@
 //! A first real cell without guessing (issue #14, item 3): every Universal Robots model the
 //! config accepts, from its published kinematics; joint ranges per joint, applied by the planner
-//! and the plan check; a board fitted to a sheet of paper and written as a PDF.
+//! and the plan check; a board fitted to a sheet of paper and written as a PDF; templates for a
+//! real UR with a USB camera in both setups.
 
 use std::f64::consts::PI;
 
@@ -601,4 +602,114 @@ fn the_pdf_renders_and_its_tags_are_detected() {
     let detector = TagDetector::spawn(&fitted.board, DetectorOptions::default()).unwrap();
     let detection = detector.detect(&image).unwrap();
     assert_eq!(detection.tags.len(), 36);
+}
+
+// ---- templates for a real cell ---------------------------------------------------------------
+
+const TEMPLATES: [&str; 2] = [
+    "ur-usb-camera-eye-in-hand.yaml",
+    "ur-usb-camera-eye-to-hand.yaml",
+];
+
+/// Both templates load, name a real arm and a USB camera, and no longer point at the simulated
+/// camera's intrinsics (#14): their lens file is a placeholder that says so.
+#[test]
+fn the_templates_load_without_the_simulated_lens() {
+    for (name, setup) in TEMPLATES.iter().zip([Setup::EyeInHand, Setup::EyeToHand]) {
+        let path = util::repo().join("configs").join(name);
+        let config = CellConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        assert_eq!(config.setup, setup, "{name}");
+        assert!(matches!(config.robot, RobotConfig::Ur { .. }), "{name}");
+        assert!(
+            matches!(config.camera, handeye::config::CameraConfig::Uvc { .. }),
+            "{name}"
+        );
+        let lens = config.intrinsics.as_ref().expect("a lens file");
+        assert!(
+            !lens.ends_with("sim-1280x720.yaml"),
+            "{name} uses the sim camera's lens"
+        );
+        let text = std::fs::read_to_string(lens).unwrap();
+        assert!(
+            text.starts_with("# CHANGE: PLACEHOLDER, NOT YOUR CAMERA."),
+            "{}",
+            lens.display()
+        );
+        handeye::camera_model::CameraModel::load(lens).unwrap();
+    }
+}
+
+/// Every value a user must change is marked `# CHANGE:`, on its line or in the comment block
+/// right above it.
+#[test]
+fn every_value_to_change_is_marked() {
+    let must_change = [
+        "target:",
+        "intrinsics:",
+        "host:",
+        "model:",
+        "device:",
+        "width:",
+        "exposure_us:",
+        "focus:",
+        "workspace:",
+    ];
+    let per_setup: [&[&str]; 2] = [
+        &["T_flange_camera:", "T_base_target:", "joint_ranges_deg:"],
+        &["T_base_camera:", "T_flange_target:"],
+    ];
+    for (name, extra) in TEMPLATES.iter().zip(per_setup) {
+        let text = std::fs::read_to_string(util::repo().join("configs").join(name)).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        for key in must_change.iter().chain(extra) {
+            let at = lines
+                .iter()
+                .position(|l| l.trim_start().starts_with(key))
+                .unwrap_or_else(|| panic!("{name}: no `{key}`"));
+            let marked = lines[at].contains("# CHANGE:")
+                || lines[..at]
+                    .iter()
+                    .rev()
+                    .take_while(|l| l.trim_start().starts_with('#'))
+                    .any(|l| l.contains("CHANGE:"));
+            assert!(marked, "{name}: `{key}` is not marked `# CHANGE:`");
+        }
+    }
+}
+
+/// The templates' generated plans pass the plan check as shipped (reach, box, board in view),
+/// the eye-in-hand one inside the cable-friendly ranges of a flange camera.
+#[test]
+fn the_template_plans_pass_the_check() {
+    for name in TEMPLATES {
+        let cell = handeye::cell::prepare(&util::repo().join("configs").join(name)).unwrap();
+        let problems: Vec<_> = cell.report.poses.iter().flat_map(|p| &p.problems).collect();
+        assert!(
+            cell.report.ok(),
+            "{name}: {problems:?} {:?}",
+            cell.report.plan_problems
+        );
+        let ranges = cell.config.robot.joint_ranges_deg(cell.config.setup);
+        for (_, q) in cell.report.validated().unwrap() {
+            assert!(inside(&q, &ranges), "{name}: {q:?}");
+        }
+    }
+    let in_hand = CellConfig::load(&util::repo().join("configs").join(TEMPLATES[0])).unwrap();
+    assert_eq!(
+        in_hand.robot.joint_ranges_deg(in_hand.setup),
+        FLANGE_CAMERA_JOINT_RANGES_DEG
+    );
+}
+
+/// The A4 board the templates use is what `--paper a4` makes of the 6x6 grid, and fitting it
+/// again changes nothing.
+#[test]
+fn the_a4_board_is_the_fitted_6x6_grid() {
+    let a4 = Board::load(&util::repo().join("configs/targets/aprilgrid-6x6-a4.yaml")).unwrap();
+    let fitted = fit_to_paper(&six_by_six(), Paper::A4, 0.01).unwrap();
+    assert_eq!(a4.tag_size(), fitted.board.tag_size());
+    assert_eq!(
+        fit_to_paper(&a4, Paper::A4, 0.01).unwrap().board.tag_size(),
+        a4.tag_size()
+    );
 }
