@@ -17,7 +17,6 @@ use handeye::setup::Setup;
 use handeye::vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
 use handeye::vision::{Board, DetectorOptions, TagDetector, TagFamily};
 
-#[allow(dead_code)]
 mod util;
 
 /// UR's published `[d1, a2, a3, d4, d5, d6]` per model, typed in again here from Universal
@@ -712,4 +711,59 @@ fn the_a4_board_is_the_fitted_6x6_grid() {
         fit_to_paper(&a4, Paper::A4, 0.01).unwrap().board.tag_size(),
         a4.tag_size()
     );
+}
+
+/// The command line: `--paper` writes the PDF, says the tag size to enter, and refuses a PNG.
+#[test]
+fn target_render_with_paper_reports_the_tag_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
+    let run = |output: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_handeye"))
+            .args([
+                "target",
+                "render",
+                "--paper",
+                "letter",
+                "--margin-mm",
+                "5",
+                "--target",
+            ])
+            .arg(&board)
+            .arg("-o")
+            .arg(dir.path().join(output))
+            .output()
+            .unwrap()
+    };
+    let ok = run("board.pdf");
+    let stdout = String::from_utf8_lossy(&ok.stdout);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let fitted = fit_to_paper(&six_by_six(), Paper::Letter, 0.005).unwrap();
+    let tag = fitted.board.tag_size();
+    assert!(
+        stdout.contains(&format!(
+            "tagSize: {tag} m (the board file says 0.04 m): enter `tagSize: {tag}` in"
+        )),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("fitted to Letter portrait (216 x 279 mm, 5 mm margins)"),
+        "{stdout}"
+    );
+    let pdf = std::fs::read(dir.path().join("board.pdf")).unwrap();
+    let [_, _, w, h] = media_box(&String::from_utf8_lossy(&pdf));
+    assert!(
+        (w - 612.0).abs() < 0.01 && (h - 792.0).abs() < 0.01,
+        "{w} x {h} pt"
+    );
+    let refused = run("board.png");
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("--paper writes the sheet as a PDF page")
+    );
+    assert!(!dir.path().join("board.png").exists());
 }

@@ -51,8 +51,8 @@ enum TargetCommand {
         /// Output file; the extension (.pdf, .png or .svg) picks the format.
         #[arg(short = 'o', long)]
         output: PathBuf,
-        /// Scale the tags to fill this sheet (a PDF's page is then the sheet) and print the
-        /// `tagSize` to enter in the board file.
+        /// Scale the tags to fill this sheet and print the `tagSize` to enter in the board
+        /// file (PDF output: the page is the sheet).
         #[arg(long, value_enum)]
         paper: Option<PaperArg>,
         /// Blank margin the printer leaves on every side of the sheet, mm (with --paper).
@@ -91,6 +91,14 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
                 bail!(
                     "output {} must end in .pdf, .png or .svg, found extension `{extension}`",
                     output.display()
+                );
+            }
+            if paper.is_some() && extension != "pdf" {
+                // The PDF's page is the sheet; a PNG or SVG page is the board with a caption
+                // that may be wider than the sheet.
+                bail!(
+                    "--paper writes the sheet as a PDF page: use -o {}.pdf",
+                    output.with_extension("").display()
                 );
             }
             if show_frame && extension != "png" {
