@@ -1,6 +1,7 @@
 //! Validation of a cell config's values: the accepted range of every numeric key (the constants
 //! below, documented in the README) and the cross-field rules (the setup's transform names, one
-//! plan source, ground truth for the sim backends). Runs at load, before any folder is created or
+//! plan source, ground truth for the sim backends, joint ranges inside the arm's and a sim arm's
+//! start inside them). Runs at load, before any folder is created or
 //! anything moves; every error names the file, the YAML key path, the value and what is
 //! accepted. Works on the shapes of `config::schema`; depends on `plan` and `vision` for the
 //! bounds they own (plan size, detector options).
