@@ -482,8 +482,8 @@ pub fn fit_to_paper(
         });
     }
     let (w0, h0) = extent_size(board);
-    let mut best: Option<(f64, Sheet)> = None;
-    for landscape in [false, true] {
+    // The largest tag size (floored to the step) each orientation allows.
+    let candidate = |landscape: bool| {
         let sheet = Sheet {
             paper,
             landscape,
@@ -493,18 +493,14 @@ pub fn fit_to_paper(
         // The extent is linear in the tag size (the white margin is counted in cells).
         let scale = (pw / w0).min((ph - PDF_STRIP_M) / h0);
         let tag = (board.tag_size() * scale / TAG_STEP_M).floor() * TAG_STEP_M;
-        if best.is_none_or(|(b, _)| tag > b + TAG_STEP_M / 2.0) {
-            best = Some((tag, sheet));
-        }
-    }
-    let (mut tag, sheet) = best.unwrap_or((
-        0.0,
-        Sheet {
-            paper,
-            landscape: false,
-            margin_m,
-        },
-    ));
+        (tag, sheet)
+    };
+    let (portrait, landscape) = (candidate(false), candidate(true));
+    let (mut tag, sheet) = if landscape.0 > portrait.0 + TAG_STEP_M / 2.0 {
+        landscape
+    } else {
+        portrait
+    };
     // Round-off can put the floored size a hair over the edge: step down until it fits.
     while tag >= MIN_FITTED_TAG_M {
         // Whole tenths of a millimetre, written without binary noise (0.0426, not 0.042600000000000006).
