@@ -535,7 +535,7 @@ fn every_numeric_key_is_bounded() {
     ];
     for (base, cases) in [
         ("sim-cell.yaml", &sim[..]),
-        ("ur5e-usb-camera.yaml", &real[..]),
+        ("ur-usb-camera-eye-in-hand.yaml", &real[..]),
     ] {
         for (from, to, key, value, range) in cases {
             let config = util::config_variant(dir.path(), base, "cell.yaml", &[(from, to)]);
@@ -637,21 +637,21 @@ fn errors_inside_backend_sections_name_the_key() {
             &["unknown field"],
         ),
         (
-            "ur5e-usb-camera.yaml",
+            "ur-usb-camera-eye-in-hand.yaml",
             "pixel_format: mjpeg",
             "pixel_format: h264",
             "camera.pixel_format",
             &["`h264`", "`mjpeg`", "`yuyv`", "`gray`"],
         ),
         (
-            "ur5e-usb-camera.yaml",
+            "ur-usb-camera-eye-in-hand.yaml",
             "  host: 192.168.1.10",
             "  hots: 192.168.1.10",
             "robot.hots",
             &["unknown field `hots`", "`host`"],
         ),
         (
-            "ur5e-usb-camera.yaml",
+            "ur-usb-camera-eye-in-hand.yaml",
             "  host: 192.168.1.10 ",
             "",
             "robot",

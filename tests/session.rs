@@ -390,7 +390,7 @@ fn malformed_configs_name_file_key_and_expectation() {
             &[("linear_speed: 0.25", "linear_speed: 3.0")],
             "limits.linear_speed",
         ),
-        (&[("model: ur10e", "model: ur3")], "robot.model"),
+        (&[("model: ur10e", "model: ur7")], "robot.model"),
         (
             &[("min: [-1.0, -1.0, 0.05]", "min: [-1.0, 2.0, 0.05]")],
             "workspace",

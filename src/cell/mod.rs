@@ -117,12 +117,15 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
         file: model_file.clone(),
         source: Box::new(source),
     })?;
-    let arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
+    let mut arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
         CellError::Backend(format!(
             "robot.model: no kinematics for `{}`",
             config.robot.model()
         ))
     })?;
+    // The cell's joint ranges (robot.joint_ranges_deg, or the defaults) bind the IK choice, the
+    // plan check, every move check and the backends.
+    arm.joint_limits = config.robot.joint_limits(config.setup);
     let start_joints = match &config.robot {
         RobotConfig::Sim {
             start_joints_deg, ..

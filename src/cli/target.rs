@@ -1,14 +1,38 @@
-//! `handeye target render`: writes a printable board (PNG at a given dpi, or SVG in mm) at
-//! true scale with a scale bar and its parameters in the margin.
+//! `handeye target render`: writes a printable board (PNG at a given dpi, SVG in mm, or a vector
+//! PDF) at true scale with a scale bar and its parameters in the margin; `--paper` fits the
+//! tags to a sheet first and says the tag size to enter in the board file.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use clap::{Args, Subcommand};
+use clap::{Args, Subcommand, ValueEnum};
 
 use handeye::atomic_file::write_atomic;
-use handeye::vision::print::{board_png, board_svg};
+use handeye::vision::print::{
+    board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, Paper,
+};
 use handeye::vision::Board;
+
+/// `--paper` values.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum PaperArg {
+    /// ISO A4, 210 x 297 mm.
+    A4,
+    /// US Letter, 8.5 x 11 in.
+    Letter,
+    /// ISO A3, 297 x 420 mm.
+    A3,
+}
+
+impl From<PaperArg> for Paper {
+    fn from(p: PaperArg) -> Paper {
+        match p {
+            PaperArg::A4 => Paper::A4,
+            PaperArg::Letter => Paper::Letter,
+            PaperArg::A3 => Paper::A3,
+        }
+    }
+}
 
 /// Board utilities.
 #[derive(Debug, Args)]
@@ -19,14 +43,25 @@ pub struct TargetArgs {
 
 #[derive(Debug, Subcommand)]
 enum TargetCommand {
-    /// Write a printable board (.png or .svg) at true scale.
+    /// Write a printable board (.pdf, .png or .svg) at true scale.
     Render {
         /// Board YAML (Kalibr aprilgrid form).
         #[arg(long)]
         target: PathBuf,
-        /// Output file; the extension (.png or .svg) picks the format.
+        /// Output file; the extension (.pdf, .png or .svg) picks the format.
         #[arg(short = 'o', long)]
         output: PathBuf,
+        /// Scale the tags to fill this sheet and print the `tagSize` to enter in the board
+        /// file (PDF output: the page is the sheet).
+        #[arg(long, value_enum)]
+        paper: Option<PaperArg>,
+        /// Blank margin the printer leaves on every side of the sheet, mm (with --paper).
+        #[arg(long, default_value_t = 10.0, requires = "paper")]
+        margin_mm: f64,
+        /// With --paper: also write the board file with the fitted `tagSize` here (use it as the
+        /// config's `target`).
+        #[arg(long, requires = "paper")]
+        board_out: Option<PathBuf>,
         /// Resolution of a PNG, dots per inch.
         #[arg(long, default_value_t = 300.0)]
         dpi: f64,
@@ -42,30 +77,90 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
         TargetCommand::Render {
             target,
             output,
+            paper,
+            margin_mm,
+            board_out,
             dpi,
             show_frame,
         } => {
-            let board = Board::load(&target)?;
             let extension = output
                 .extension()
                 .map(|e| e.to_string_lossy().to_ascii_lowercase())
                 .unwrap_or_default();
-            let bytes = match extension.as_str() {
-                "png" => board_png(&board, dpi, show_frame)?,
-                "svg" => {
-                    if show_frame {
-                        bail!("--show-frame is only available for PNG output");
-                    }
-                    board_svg(&board).into_bytes()
-                }
-                _ => bail!(
-                    "output {} must end in .png or .svg, found extension `{extension}`",
+            if !matches!(extension.as_str(), "pdf" | "png" | "svg") {
+                bail!(
+                    "output {} must end in .pdf, .png or .svg, found extension `{extension}`",
                     output.display()
-                ),
+                );
+            }
+            if paper.is_some() && extension != "pdf" {
+                // The PDF's page is the sheet; a PNG or SVG page is the board with a caption
+                // that may be wider than the sheet.
+                bail!(
+                    "--paper writes the sheet as a PDF page: use -o {}.pdf",
+                    output.with_extension("").display()
+                );
+            }
+            if show_frame && extension != "png" {
+                bail!("--show-frame is only available for PNG output");
+            }
+            let original = Board::load(&target)?;
+            let fitted = match paper {
+                Some(paper) => Some(fit_to_paper(&original, paper.into(), margin_mm / 1000.0)?),
+                None => None,
             };
+            let board = fitted.as_ref().map_or(&original, |f| &f.board);
+            let bytes = match extension.as_str() {
+                "png" => board_png(board, dpi, show_frame)?,
+                "svg" => board_svg(board).into_bytes(),
+                _ => board_pdf(board, fitted.as_ref().map(|f| &f.sheet))?,
+            };
+            if let (Some(fitted), Some(board_out)) = (&fitted, &board_out) {
+                let text = std::fs::read_to_string(&target)
+                    .with_context(|| format!("reading {}", target.display()))?;
+                let yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                write_atomic(board_out, yaml.as_bytes())
+                    .with_context(|| format!("writing {}", board_out.display()))?;
+            }
             write_atomic(&output, &bytes)
                 .with_context(|| format!("writing {}", output.display()))?;
             outln!("wrote {}", output.display());
+            if let Some(fitted) = &fitted {
+                let (w, h) = fitted.sheet.size_m();
+                let extent = fitted.board.extent();
+                outln!(
+                    "fitted to {} {} ({:.0} x {:.0} mm, {} mm margins): board {:.1} x {:.1} mm",
+                    fitted.sheet.paper.name(),
+                    if fitted.sheet.landscape {
+                        "landscape"
+                    } else {
+                        "portrait"
+                    },
+                    w * 1000.0,
+                    h * 1000.0,
+                    margin_mm,
+                    (extent.max.x - extent.min.x) * 1000.0,
+                    (extent.max.y - extent.min.y) * 1000.0,
+                );
+                match &board_out {
+                    Some(board_out) => outln!(
+                        "tagSize: {} m (the board file says {} m): wrote {} with it; use it as the config's `target`",
+                        fitted.board.tag_size(),
+                        original.tag_size(),
+                        board_out.display()
+                    ),
+                    None => outln!(
+                        "tagSize: {} m (the board file says {} m): enter `tagSize: {}` in {}",
+                        fitted.board.tag_size(),
+                        original.tag_size(),
+                        fitted.board.tag_size(),
+                        target.display()
+                    ),
+                }
+                outln!(
+                    "print at actual size (100 %, not 'fit to page'), then measure the scale bar"
+                );
+            }
             Ok(())
         }
     }

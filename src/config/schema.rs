@@ -63,23 +63,45 @@ pub struct ConfigFile {
     pub verdict: VerdictConfig,
 }
 
-/// The arm models whose kinematics the tool knows.
+/// The arm models whose kinematics the tool knows (Universal Robots' published DH parameters,
+/// `robot::kinematics`). An unknown name is refused listing these.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ArmModel {
+    /// Universal Robots UR3 (CB3).
+    Ur3,
+    /// Universal Robots UR5 (CB3).
+    Ur5,
+    /// Universal Robots UR10 (CB3).
+    Ur10,
+    /// Universal Robots UR3e.
+    Ur3e,
     /// Universal Robots UR5e.
     #[default]
     Ur5e,
     /// Universal Robots UR10e.
     Ur10e,
+    /// Universal Robots UR16e.
+    Ur16e,
+    /// Universal Robots UR20.
+    Ur20,
+    /// Universal Robots UR30.
+    Ur30,
 }
 
 impl ArmModel {
     /// The YAML name (`ur5e`), as `robot::kinematics::UrModel::by_name` takes it.
     pub fn name(self) -> &'static str {
         match self {
+            ArmModel::Ur3 => "ur3",
+            ArmModel::Ur5 => "ur5",
+            ArmModel::Ur10 => "ur10",
+            ArmModel::Ur3e => "ur3e",
             ArmModel::Ur5e => "ur5e",
             ArmModel::Ur10e => "ur10e",
+            ArmModel::Ur16e => "ur16e",
+            ArmModel::Ur20 => "ur20",
+            ArmModel::Ur30 => "ur30",
         }
     }
 }
@@ -95,12 +117,17 @@ impl ArmModel {
 pub enum RobotConfig {
     /// The simulated UR arm.
     Sim {
-        /// `ur5e` or `ur10e`.
+        /// The arm model (`ur5e` by default; see [`ArmModel`]).
         #[serde(default)]
         model: ArmModel,
         /// Where the arm starts, degrees.
         #[serde(default = "default_start_joints_deg")]
         start_joints_deg: [f64; 6],
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
         /// Time each move takes, s (0 = instant).
         #[serde(default)]
         move_duration_s: f64,
@@ -121,9 +148,15 @@ pub enum RobotConfig {
     Ur {
         /// Controller address.
         host: String,
-        /// `ur5e` or `ur10e`: used to check reachability before moving.
+        /// The arm model (`ur5e` by default; see [`ArmModel`]): used to check reachability before
+        /// moving.
         #[serde(default)]
         model: ArmModel,
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
         /// Give up connecting after this long, s.
         #[serde(default = "default_connect_timeout_s")]
         connect_timeout_s: f64,
@@ -160,7 +193,61 @@ fn default_connect_timeout_s() -> f64 {
     5.0
 }
 
+pub use crate::robot::kinematics::JOINT_NAMES;
+
+/// The arm's own joint ranges, degrees: ±360° on every joint but the elbow (±180°), as
+/// `robot::kinematics` plans every model.
+pub const ARM_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+];
+
+/// Default joint ranges for a real arm with the camera on its flange (eye-in-hand), degrees.
+/// The camera cable is dressed along the arm with the joints near zero; it tolerates half a turn
+/// either way at the base and the three wrist joints, not the controller's two full turns (a
+/// plan that swings wrist 3 to 280° winds the cable round the flange). ±180° still leaves every
+/// orientation reachable: each of these joints keeps exactly one representative of its angle.
+/// Shoulder and elbow do not twist the cable and keep the arm's ranges.
+pub const FLANGE_CAMERA_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+];
+
 impl RobotConfig {
+    /// The joint ranges in force, `[min, max]` degrees, base to wrist 3: the config's
+    /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real
+    /// arm (`backend: ur`) carrying the camera (`setup: eye_in_hand`), and the arm's own
+    /// [`ARM_JOINT_RANGES_DEG`] for everything else (eye-to-hand has no cable on the flange; the
+    /// simulator has no cable at all).
+    pub fn joint_ranges_deg(&self, setup: Setup) -> [[f64; 2]; 6] {
+        match self {
+            RobotConfig::Sim {
+                joint_ranges_deg: Some(r),
+                ..
+            }
+            | RobotConfig::Ur {
+                joint_ranges_deg: Some(r),
+                ..
+            } => *r,
+            RobotConfig::Ur { .. } if setup == Setup::EyeInHand => FLANGE_CAMERA_JOINT_RANGES_DEG,
+            _ => ARM_JOINT_RANGES_DEG,
+        }
+    }
+
+    /// [`RobotConfig::joint_ranges_deg`] in radians, as `UrModel::joint_limits` takes them.
+    pub fn joint_limits(&self, setup: Setup) -> [(f64, f64); 6] {
+        self.joint_ranges_deg(setup)
+            .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
+    }
+
     /// The arm model name, for kinematics checks.
     pub fn model(&self) -> &'static str {
         match self {

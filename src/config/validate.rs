@@ -1,6 +1,7 @@
 //! Validation of a cell config's values: the accepted range of every numeric key (the constants
 //! below, documented in the README) and the cross-field rules (the setup's transform names, one
-//! plan source, ground truth for the sim backends). Runs at load, before any folder is created or
+//! plan source, ground truth for the sim backends, joint ranges inside the arm's and a sim arm's
+//! start inside them). Runs at load, before any folder is created or
 //! anything moves; every error names the file, the YAML key path, the value and what is
 //! accepted. Works on the shapes of `config::schema`; depends on `plan` and `vision` for the
 //! bounds they own (plan size, detector options).
@@ -12,7 +13,7 @@ use std::time::Duration;
 
 use nalgebra::Vector3;
 
-use super::schema::{CameraConfig, ConfigFile, RobotConfig};
+use super::schema::{CameraConfig, ConfigFile, RobotConfig, ARM_JOINT_RANGES_DEG, JOINT_NAMES};
 use super::ConfigError;
 use crate::geometry::PoseYaml;
 use crate::robot::{MotionLimits, WorkspaceBox};
@@ -186,6 +187,7 @@ pub(super) struct Checked {
 pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigError> {
     let v = Validator { file };
     v.robot(&raw.robot)?;
+    v.joint_ranges(&raw.robot, raw.setup)?;
     v.camera(raw)?;
     let limits = v.limits(raw)?;
     let workspace = v.workspace(raw)?;
@@ -323,6 +325,62 @@ impl Validator<'_> {
                 repeatability_deg,
                 ..
             } => self.repeatability(*repeatability_mm, *repeatability_deg)?,
+        }
+        Ok(())
+    }
+
+    /// `robot.joint_ranges_deg`: per joint `[min, max]` inside the arm's own range with
+    /// `min < max`; a sim arm's `start_joints_deg` inside the ranges in force.
+    fn joint_ranges(&self, robot: &RobotConfig, setup: Setup) -> Result<(), ConfigError> {
+        let given = match robot {
+            RobotConfig::Sim {
+                joint_ranges_deg, ..
+            }
+            | RobotConfig::Ur {
+                joint_ranges_deg, ..
+            } => joint_ranges_deg,
+            RobotConfig::Recorded { .. } => &None,
+        };
+        if let Some(ranges) = given {
+            for (i, ([lo, hi], [arm_lo, arm_hi])) in
+                ranges.iter().zip(ARM_JOINT_RANGES_DEG).enumerate()
+            {
+                let arm = Range::closed(arm_lo, arm_hi, "°");
+                self.number(&format!("robot.joint_ranges_deg[{i}][0]"), *lo, arm)?;
+                self.number(&format!("robot.joint_ranges_deg[{i}][1]"), *hi, arm)?;
+                if lo >= hi {
+                    return Err(self.inconsistent(
+                        &format!("robot.joint_ranges_deg[{i}]"),
+                        format!(
+                            "{} range [{}, {}] °: expected min < max",
+                            JOINT_NAMES[i],
+                            show(*lo),
+                            show(*hi)
+                        ),
+                    ));
+                }
+            }
+        }
+        if let RobotConfig::Sim {
+            start_joints_deg, ..
+        } = robot
+        {
+            let ranges = robot.joint_ranges_deg(setup);
+            for (i, (q, [lo, hi])) in start_joints_deg.iter().zip(ranges).enumerate() {
+                if *q < lo || *q > hi {
+                    return Err(ConfigError::OutOfRange {
+                        file: self.file.to_path_buf(),
+                        key: format!("robot.start_joints_deg[{i}]"),
+                        found: show(*q),
+                        expected: format!(
+                            "a value inside the {} joint range [{}, {}] ° (robot.joint_ranges_deg[{i}])",
+                            JOINT_NAMES[i],
+                            show(lo),
+                            show(hi)
+                        ),
+                    });
+                }
+            }
         }
         Ok(())
     }

@@ -9,11 +9,11 @@ use nalgebra::Point3;
 
 use crate::camera_model::CameraModel;
 use crate::geometry::Pose;
-use crate::robot::kinematics::UrModel;
+use crate::robot::kinematics::{UrModel, JOINT_NAMES};
 use crate::robot::{Joints, MotionLimits, WorkspaceBox};
 use crate::vision::Board;
 
-use super::Plan;
+use super::{Plan, Waypoint};
 use crate::setup::CellTransforms;
 
 /// Points checked along each joint move (the path in joint space is a straight line).
@@ -119,8 +119,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         };
         let mut move_time_s = 0.0;
         match joints {
-            None => problems
-                .push("unreachable: no inverse-kinematics solution inside the joint limits".into()),
+            None => problems.push(unreachable(ctx.arm, waypoint, &base_from_flange, &previous)),
             Some(q) => {
                 if let Some(outside) = path_leaves_box(ctx.arm, &previous, &q, ctx.workspace) {
                     problems.push(outside);
@@ -194,6 +193,32 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     }
 }
 
+/// Why a waypoint has no joint solution: the joint that leaves its range and its value when the
+/// arm could reach the pose with its own limits (or the scripted joints break a range), else
+/// plain unreachability.
+fn unreachable(arm: &UrModel, waypoint: &Waypoint, pose: &Pose, previous: &Joints) -> String {
+    let nearest = match waypoint {
+        Waypoint::Joints(q) => Some(*q),
+        _ => arm.with_arm_limits().inverse_nearest(pose, previous),
+    };
+    let Some((i, value)) = nearest.and_then(|q| arm.outside_limits(&q)) else {
+        return "unreachable: no inverse-kinematics solution inside the joint limits".into();
+    };
+    let (lo, hi) = arm.joint_limits[i];
+    let how = match waypoint {
+        Waypoint::Joints(_) => "its joints put",
+        _ => "reachable only with",
+    };
+    format!(
+        "outside the joint ranges: {how} joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
+        i + 1,
+        JOINT_NAMES[i],
+        value.to_degrees(),
+        lo.to_degrees(),
+        hi.to_degrees()
+    )
+}
+
 /// The middle of the board's outline, in the target frame (the point look-at views aim at).
 pub fn board_centre(board: &Board) -> Point3<f64> {
     let extent = board.extent();
@@ -216,8 +241,22 @@ pub struct MoveCheck {
 }
 
 impl MoveCheck {
-    /// Why the straight joint move `from` → `to` is not safe, if it is not.
+    /// Why the straight joint move `from` → `to` is not safe, if it is not: `to` outside the
+    /// arm's joint ranges (the cell's `robot.joint_ranges_deg`), or the path leaving the box.
+    /// `from` may lie outside the ranges (the arm stands where it was left): moving back in is
+    /// allowed.
     pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
+        if let Some((i, value)) = self.arm.outside_limits(to) {
+            let (lo, hi) = self.arm.joint_limits[i];
+            return Some(format!(
+                "the move puts joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
+                i + 1,
+                JOINT_NAMES[i],
+                value.to_degrees(),
+                lo.to_degrees(),
+                hi.to_degrees()
+            ));
+        }
         path_leaves_box(&self.arm, from, to, &self.workspace)
     }
 }

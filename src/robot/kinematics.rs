@@ -1,4 +1,4 @@
-//! Kinematics of Universal Robots e-Series arms: standard Denavit–Hartenberg parameters as
+//! Kinematics of Universal Robots arms: standard Denavit–Hartenberg parameters as
 //! published by Universal Robots, forward kinematics to the flange (`tool0`, no TCP offset) and
 //! the closed-form inverse kinematics with all (up to 8) solutions, plus joint limits.
 //!
@@ -8,8 +8,8 @@
 //! `T_{i-1}_{i} = Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)`.
 //!
 //! The inverse assumes the UR structure (`a_1 = a_4 = a_5 = a_6 = 0`, `d_2 = d_3 = 0`,
-//! `α = [π/2, 0, 0, π/2, −π/2, 0]`, three parallel middle joints); [`UrModel::ur5e`] and
-//! [`UrModel::ur10e`] satisfy it. This module depends only on `geometry` and the `Joints` type.
+//! `α = [π/2, 0, 0, π/2, −π/2, 0]`, three parallel middle joints); every model here (CB3
+//! UR3/UR5/UR10, e-Series UR3e/UR5e/UR10e/UR16e, UR20, UR30) satisfies it. This module depends only on `geometry` and the `Joints` type.
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -41,16 +41,19 @@ pub struct UrModel {
     pub a: [f64; 6],
     /// DH link twists `α_i`, rad.
     pub alpha: [f64; 6],
-    /// Joint limits `(min, max)` per joint, rad. UR e-Series arms allow ±2π on every joint but
-    /// the elbow (±π) by default; a cell may narrow them.
+    /// Joint limits `(min, max)` per joint, rad. Every model here is planned with ±2π on every
+    /// joint but the elbow (±π); a cell narrows them with `robot.joint_ranges_deg`.
     pub joint_limits: [(f64, f64); 6],
 }
+
+/// The joint names, base to wrist 3, as messages and the README use them.
+pub const JOINT_NAMES: [&str; 6] = ["base", "shoulder", "elbow", "wrist 1", "wrist 2", "wrist 3"];
 
 /// UR's twist angles, the same for every arm of the family.
 const UR_ALPHA: [f64; 6] = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
 /// Default joint limits: ±2π on every joint but the elbow (±π), as the controller ships.
-// e-Series ranges (Universal Robots' published limits, as in ur_description): ±360° on every
-// joint except the elbow, which its cabling limits to ±180°.
+// Universal Robots' published ranges are ±360° on every joint (the UR3/UR3e wrist 3 turns
+// without end); ur_description keeps the elbow within ±180°, as its own links collide beyond.
 const UR_LIMITS: [(f64, f64); 6] = [
     (-TAU, TAU),
     (-TAU, TAU),
@@ -60,36 +63,74 @@ const UR_LIMITS: [(f64, f64); 6] = [
     (-TAU, TAU),
 ];
 
+/// The published DH parameters of one arm: `[d1, a2, a3, d4, d5, d6]`, m (every other `a`/`d`
+/// is zero on a UR).
+struct Published {
+    name: &'static str,
+    d1: f64,
+    a2: f64,
+    a3: f64,
+    d4: f64,
+    d5: f64,
+    d6: f64,
+}
+
+/// Every arm the tool knows, as Universal Robots publishes it: "DH Parameters for calculations of
+/// kinematics and dynamics"
+/// (<https://www.universal-robots.com/articles/ur/application-installation/dh-parameters-for-calculations-of-kinematics-and-dynamics/>).
+/// Checked against that page for the e-Series and the UR20, against the CB3 manual's appendix
+/// ("Robot DH Parameter", the CB3 values matching its latest UR5 series 3 table) and against
+/// Universal Robots' `ur_description` kinematics for the UR16e and UR30. The UR30 also matches
+/// its datasheet reach (1300 mm ≈ a2 + a3 + d5).
+#[rustfmt::skip] // one arm a line, as the published table reads
+const PUBLISHED: [Published; 9] = [
+    // CB3 series.
+    Published { name: "ur3", d1: 0.1519, a2: -0.24365, a3: -0.21325, d4: 0.11235, d5: 0.08535, d6: 0.0819 },
+    Published { name: "ur5", d1: 0.089159, a2: -0.425, a3: -0.39225, d4: 0.10915, d5: 0.09465, d6: 0.0823 },
+    Published { name: "ur10", d1: 0.1273, a2: -0.612, a3: -0.5723, d4: 0.163941, d5: 0.1157, d6: 0.0922 },
+    // e-Series.
+    Published { name: "ur3e", d1: 0.15185, a2: -0.24355, a3: -0.2132, d4: 0.13105, d5: 0.08535, d6: 0.0921 },
+    Published { name: "ur5e", d1: 0.1625, a2: -0.425, a3: -0.3922, d4: 0.1333, d5: 0.0997, d6: 0.0996 },
+    Published { name: "ur10e", d1: 0.1807, a2: -0.6127, a3: -0.57155, d4: 0.17415, d5: 0.11985, d6: 0.11655 },
+    Published { name: "ur16e", d1: 0.1807, a2: -0.4784, a3: -0.36, d4: 0.17415, d5: 0.11985, d6: 0.11655 },
+    // UR20 / UR30.
+    Published { name: "ur20", d1: 0.2363, a2: -0.862, a3: -0.7287, d4: 0.201, d5: 0.1593, d6: 0.1543 },
+    Published { name: "ur30", d1: 0.2363, a2: -0.637, a3: -0.5037, d4: 0.201, d5: 0.1593, d6: 0.1543 },
+];
+
 impl UrModel {
-    /// The UR5e (Universal Robots' published DH parameters).
-    pub fn ur5e() -> Self {
+    /// The names [`UrModel::by_name`] accepts, lower case, CB3 first, then e-Series, UR20, UR30.
+    pub const NAMES: [&'static str; 9] = [
+        "ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e", "ur20", "ur30",
+    ];
+
+    fn from_published(p: &Published) -> Self {
         UrModel {
-            name: "ur5e".to_string(),
-            d: [0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996],
-            a: [0.0, -0.425, -0.3922, 0.0, 0.0, 0.0],
+            name: p.name.to_string(),
+            d: [p.d1, 0.0, 0.0, p.d4, p.d5, p.d6],
+            a: [0.0, p.a2, p.a3, 0.0, 0.0, 0.0],
             alpha: UR_ALPHA,
             joint_limits: UR_LIMITS,
         }
+    }
+
+    /// The UR5e (Universal Robots' published DH parameters).
+    pub fn ur5e() -> Self {
+        Self::from_published(&PUBLISHED[4])
     }
 
     /// The UR10e (Universal Robots' published DH parameters).
     pub fn ur10e() -> Self {
-        UrModel {
-            name: "ur10e".to_string(),
-            d: [0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655],
-            a: [0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0],
-            alpha: UR_ALPHA,
-            joint_limits: UR_LIMITS,
-        }
+        Self::from_published(&PUBLISHED[5])
     }
 
-    /// The model called `name` (`ur5e`, `ur10e`; case-insensitive), if known.
+    /// The model called `name` (one of [`UrModel::NAMES`]; case-insensitive), if known.
     pub fn by_name(name: &str) -> Option<Self> {
-        match name.trim().to_ascii_lowercase().as_str() {
-            "ur5e" => Some(Self::ur5e()),
-            "ur10e" => Some(Self::ur10e()),
-            _ => None,
-        }
+        let wanted = name.trim().to_ascii_lowercase();
+        PUBLISHED
+            .iter()
+            .find(|p| p.name == wanted)
+            .map(Self::from_published)
     }
 
     /// The transform of DH link `i` (0-based) at joint angle `theta`: `T_{i}_{i+1}` in 0-based
@@ -114,6 +155,24 @@ impl UrModel {
             .iter()
             .zip(self.joint_limits.iter())
             .all(|(q, (lo, hi))| q.is_finite() && *q >= *lo && *q <= *hi)
+    }
+
+    /// The first joint of `joints` outside its limit (0-based index and its value, rad), if any;
+    /// a non-finite value counts as outside.
+    pub fn outside_limits(&self, joints: &Joints) -> Option<(usize, f64)> {
+        joints
+            .iter()
+            .zip(self.joint_limits.iter())
+            .position(|(q, (lo, hi))| !(q.is_finite() && *q >= *lo && *q <= *hi))
+            .map(|i| (i, joints[i]))
+    }
+
+    /// This model with the arm's own joint limits (whatever a cell narrowed them to).
+    pub fn with_arm_limits(&self) -> Self {
+        UrModel {
+            joint_limits: UR_LIMITS,
+            ..self.clone()
+        }
     }
 
     /// All inverse-kinematics solutions for `base_from_flange` that lie inside the joint limits.
@@ -433,6 +492,12 @@ mod tests {
     fn by_name_is_case_insensitive() {
         assert_eq!(UrModel::by_name("UR10e"), Some(UrModel::ur10e()));
         assert_eq!(UrModel::by_name(" ur5e "), Some(UrModel::ur5e()));
-        assert_eq!(UrModel::by_name("ur3"), None);
+        assert_eq!(UrModel::by_name("ur7"), None);
+        for name in UrModel::NAMES {
+            assert_eq!(
+                UrModel::by_name(name).map(|m| m.name),
+                Some(name.to_string())
+            );
+        }
     }
 }

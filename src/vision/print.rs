@@ -1,6 +1,8 @@
 //! Printable boards at true scale: a PNG (with its resolution in the pHYs chunk, so printing at
-//! 100 % keeps every cell's size) or an SVG in millimetres, each with a scale bar and the
-//! board's parameters printed in the bottom margin. Measure the scale bar after printing.
+//! 100 % keeps every cell's size), an SVG in millimetres or a vector PDF (through `pdf-writer`),
+//! each with a scale bar and the board's parameters printed in the bottom margin. Measure the
+//! scale bar after printing. [`fit_to_paper`] scales a board's tags to fill an A4, Letter or A3
+//! sheet inside a printer's margin; the PDF then takes the sheet as its page.
 //!
 //! Page layout (metres): the board's sheet extent (tags plus white margin) on top, a 25 mm
 //! strip below it for the scale bar and the parameters; the page is widened when the text is
@@ -255,32 +257,25 @@ fn crc32(bytes: &[u8]) -> u32 {
     !crc
 }
 
-/// The printable board as an SVG document in millimetres (black cells as merged rectangles).
-pub fn board_svg(board: &Board) -> String {
-    let page = Page::new(board, None);
-    let mm = |m: f64| m * 1000.0;
+/// The board's black cells merged into horizontal runs, each `[left, top, width, height]` in
+/// metres from the top-left corner of the board's sheet extent, y pointing down (page order).
+/// Each cell's centre is sampled: the board's reflectance is the single source of truth.
+fn black_runs(board: &Board) -> Vec<[f64; 4]> {
     let extent = board.extent();
     let layout = board.layout();
     let n = layout.total_width as usize;
     let cell = board.cell_size();
     let margin = layout.margin_cells() as f64;
-    let mut svg = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.3}mm\" height=\"{h:.3}mm\" \
-         viewBox=\"0 0 {w:.4} {h:.4}\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<g fill=\"black\">\n",
-        w = mm(page.width),
-        h = mm(page.height)
-    );
+    let mut runs = Vec::new();
     for tag in board.tags() {
         let x0 = tag.corners_in_target[0].x - margin * cell;
         let top = tag.corners_in_target[0].y - margin * cell + n as f64 * cell;
-        // Sample each cell's centre: the board's reflectance is the single source of truth.
         for r in 0..n {
             let y_centre = top - (r as f64 + 0.5) * cell;
+            let black =
+                |c: usize| board.is_white_at(x0 + (c as f64 + 0.5) * cell, y_centre) == Some(false);
             let mut c = 0;
             while c < n {
-                let black = |c: usize| {
-                    board.is_white_at(x0 + (c as f64 + 0.5) * cell, y_centre) == Some(false)
-                };
                 if !black(c) {
                     c += 1;
                     continue;
@@ -289,15 +284,36 @@ pub fn board_svg(board: &Board) -> String {
                 while c < n && black(c) {
                     c += 1;
                 }
-                svg.push_str(&format!(
-                    "<rect x=\"{:.4}\" y=\"{:.4}\" width=\"{:.4}\" height=\"{:.4}\"/>\n",
-                    mm(page.board_left + x0 + start as f64 * cell - extent.min.x),
-                    mm(extent.max.y - (top - r as f64 * cell)),
-                    mm((c - start) as f64 * cell),
-                    mm(cell)
-                ));
+                runs.push([
+                    x0 + start as f64 * cell - extent.min.x,
+                    extent.max.y - (top - r as f64 * cell),
+                    (c - start) as f64 * cell,
+                    cell,
+                ]);
             }
         }
+    }
+    runs
+}
+
+/// The printable board as an SVG document in millimetres (black cells as merged rectangles).
+pub fn board_svg(board: &Board) -> String {
+    let page = Page::new(board, None);
+    let mm = |m: f64| m * 1000.0;
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.3}mm\" height=\"{h:.3}mm\" \
+         viewBox=\"0 0 {w:.4} {h:.4}\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<g fill=\"black\">\n",
+        w = mm(page.width),
+        h = mm(page.height)
+    );
+    for [left, top, width, height] in black_runs(board) {
+        svg.push_str(&format!(
+            "<rect x=\"{:.4}\" y=\"{:.4}\" width=\"{:.4}\" height=\"{:.4}\"/>\n",
+            mm(page.board_left + left),
+            mm(top),
+            mm(width),
+            mm(height)
+        ));
     }
     let bar_x = mm(page.board_left + 0.005);
     let bar_y = mm(page.board_height + 0.004);
@@ -321,6 +337,358 @@ pub fn board_svg(board: &Board) -> String {
         page.caption
     ));
     svg
+}
+
+/// A sheet of paper a board can be fitted to and printed on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Paper {
+    /// ISO A4, 210 × 297 mm.
+    A4,
+    /// US Letter, 8.5 × 11 in (215.9 × 279.4 mm).
+    Letter,
+    /// ISO A3, 297 × 420 mm.
+    A3,
+}
+
+impl Paper {
+    /// Width and height in portrait, m.
+    pub fn portrait_m(self) -> (f64, f64) {
+        match self {
+            Paper::A4 => (0.210, 0.297),
+            Paper::Letter => (0.2159, 0.2794),
+            Paper::A3 => (0.297, 0.420),
+        }
+    }
+
+    /// The name as a person writes it (`A4`, `Letter`, `A3`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Paper::A4 => "A4",
+            Paper::Letter => "Letter",
+            Paper::A3 => "A3",
+        }
+    }
+}
+
+/// A sheet in one orientation with the margin a printer leaves blank.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sheet {
+    /// The paper.
+    pub paper: Paper,
+    /// Long side horizontal.
+    pub landscape: bool,
+    /// Blank margin on every side, m.
+    pub margin_m: f64,
+}
+
+impl Sheet {
+    /// Width and height as placed, m.
+    pub fn size_m(&self) -> (f64, f64) {
+        let (w, h) = self.paper.portrait_m();
+        if self.landscape {
+            (h, w)
+        } else {
+            (w, h)
+        }
+    }
+
+    /// Width and height of the printable area (inside the margins), m.
+    pub fn printable_m(&self) -> (f64, f64) {
+        let (w, h) = self.size_m();
+        (w - 2.0 * self.margin_m, h - 2.0 * self.margin_m)
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} {}, margin {} mm",
+            self.paper.name(),
+            if self.landscape {
+                "landscape"
+            } else {
+                "portrait"
+            },
+            (self.margin_m * 1000.0 * 10.0).round() / 10.0
+        )
+    }
+}
+
+/// Accepted `--margin-mm`, mm: printers leave 3-6 mm blank; more than 50 mm wastes the sheet.
+pub const MARGIN_MM: (f64, f64) = (0.0, 50.0);
+/// The smallest tag a fitted board may get, m: below 5 mm a 300 dpi printer draws a cell of a
+/// 36h11 tag (10 cells across with Kalibr's border) with fewer than 6 dots.
+pub const MIN_FITTED_TAG_M: f64 = 0.005;
+/// Fitted tag sizes are rounded down to this step, m (0.1 mm), so the number entered in the
+/// board file is short and the board still fits.
+const TAG_STEP_M: f64 = 1e-4;
+/// Height of the strip under the board on a PDF page (scale bar and two caption lines), m.
+const PDF_STRIP_M: f64 = 0.02;
+/// Caption font size on a PDF page, pt (Courier: every glyph 0.6 em wide).
+const PDF_FONT_PT: f64 = 7.0;
+/// PostScript points per metre.
+const PT_PER_M: f64 = 72.0 / 0.0254;
+
+/// A board scaled to fill a sheet's printable area.
+#[derive(Debug, Clone)]
+pub struct FittedBoard {
+    /// The board at its fitted tag size (everything else as the original).
+    pub board: Board,
+    /// The sheet and orientation it was fitted to.
+    pub sheet: Sheet,
+}
+
+/// The same grid as `board` with tag size `tag_size` (m).
+fn resized(board: &Board, tag_size: f64) -> Result<Board, TargetError> {
+    Board::aprilgrid(
+        board.cols(),
+        board.rows(),
+        tag_size,
+        board.tag_spacing(),
+        board.family(),
+        board.first_id(),
+        board.border_bits(),
+    )
+}
+
+/// The board's sheet extent (tags plus white margin), width and height, m.
+fn extent_size(board: &Board) -> (f64, f64) {
+    let e = board.extent();
+    (e.max.x - e.min.x, e.max.y - e.min.y)
+}
+
+/// Whether `board` with the PDF strip under it fits the printable area of `sheet`.
+fn fits(board: &Board, sheet: &Sheet) -> bool {
+    let (w, h) = extent_size(board);
+    let (pw, ph) = sheet.printable_m();
+    w <= pw + 1e-12 && h + PDF_STRIP_M <= ph + 1e-12
+}
+
+/// Scales `board` (its tag size; the grid, spacing and family stay) to the largest size, in
+/// steps of 0.1 mm, whose sheet extent plus the caption strip fits the printable area of
+/// `paper` with `margin_m` on every side, in whichever orientation gives the larger tags
+/// (portrait on a tie). Refused when the margin is outside [`MARGIN_MM`] or the tags would be
+/// smaller than [`MIN_FITTED_TAG_M`].
+pub fn fit_to_paper(
+    board: &Board,
+    paper: Paper,
+    margin_m: f64,
+) -> Result<FittedBoard, TargetError> {
+    let margin_mm = margin_m * 1000.0;
+    if !(margin_mm.is_finite() && margin_mm >= MARGIN_MM.0 && margin_mm <= MARGIN_MM.1) {
+        return Err(TargetError::BadBoard {
+            path: "<print>".into(),
+            key: "margin-mm".into(),
+            expected: format!("a margin in [{}, {}] mm", MARGIN_MM.0, MARGIN_MM.1),
+            found: format!("{margin_mm} mm"),
+        });
+    }
+    let (w0, h0) = extent_size(board);
+    // The largest tag size (floored to the step) each orientation allows.
+    let candidate = |landscape: bool| {
+        let sheet = Sheet {
+            paper,
+            landscape,
+            margin_m,
+        };
+        let (pw, ph) = sheet.printable_m();
+        // The extent is linear in the tag size (the white margin is counted in cells).
+        let scale = (pw / w0).min((ph - PDF_STRIP_M) / h0);
+        let tag = (board.tag_size() * scale / TAG_STEP_M).floor() * TAG_STEP_M;
+        (tag, sheet)
+    };
+    let (portrait, landscape) = (candidate(false), candidate(true));
+    let (mut tag, sheet) = if landscape.0 > portrait.0 + TAG_STEP_M / 2.0 {
+        landscape
+    } else {
+        portrait
+    };
+    // Round-off can put the floored size a hair over the edge: step down until it fits.
+    while tag >= MIN_FITTED_TAG_M {
+        // Whole tenths of a millimetre, written without binary noise (0.0426, not 0.042600000000000006).
+        let clean = (tag * 1e4).round() / 1e4;
+        let fitted = resized(board, clean)?;
+        if fits(&fitted, &sheet) {
+            return Ok(FittedBoard {
+                board: fitted,
+                sheet,
+            });
+        }
+        tag -= TAG_STEP_M;
+    }
+    Err(TargetError::BadBoard {
+        path: "<print>".into(),
+        key: "paper".into(),
+        expected: format!(
+            "a sheet giving tags of at least {} mm (use larger paper, a smaller margin or fewer tags)",
+            MIN_FITTED_TAG_M * 1000.0
+        ),
+        found: format!(
+            "{}x{} tags on {}: {:.1} mm tags",
+            board.cols(),
+            board.rows(),
+            sheet.describe(),
+            tag.max(0.0) * 1000.0
+        ),
+    })
+}
+
+/// The printable board as a one-page vector PDF. With `sheet` the page is that sheet, the board
+/// centred in its printable area (refused if it does not fit: fit it with [`fit_to_paper`]);
+/// without, the page is the board's extent plus the strip. Under the board: a 100 mm (or
+/// 50 mm) scale bar to measure after printing, and the board's parameters in Courier, with the
+/// reminder to print at actual size.
+pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, TargetError> {
+    use pdf_writer::{Content, Name, Pdf, Rect, Ref, Str};
+
+    let (bw, bh) = extent_size(board);
+    let caption = format!(
+        "aprilgrid {}x{} {} tagSize {} m tagSpacing {} first_id {} border_bits {}",
+        board.cols(),
+        board.rows(),
+        board.family().name(),
+        board.tag_size(),
+        board.tag_spacing(),
+        board.first_id(),
+        board.border_bits()
+    );
+    let note = match sheet {
+        Some(s) => format!(
+            "{}: print at actual size (100 %), not 'fit to page'",
+            s.describe()
+        ),
+        None => "print at actual size (100 %), not 'fit to page'".to_string(),
+    };
+    let char_m = 0.6 * PDF_FONT_PT / PT_PER_M;
+    let text_w = caption.len().max(note.len()) as f64 * char_m;
+    // Page size and the board's top-left corner on it, m from the page's top-left.
+    let (page_w, page_h, left, top) = match sheet {
+        Some(s) => {
+            if !fits(board, s) || text_w > s.printable_m().0 + 1e-12 {
+                return Err(TargetError::BadBoard {
+                    path: "<print>".into(),
+                    key: "tagSize".into(),
+                    expected: format!("a board that fits {} (fit it to the paper)", s.describe()),
+                    found: format!("{:.0} x {:.0} mm", bw * 1000.0, bh * 1000.0),
+                });
+            }
+            let (w, h) = s.size_m();
+            let block_h = bh + PDF_STRIP_M;
+            (w, h, (w - bw) / 2.0, (h - block_h) / 2.0)
+        }
+        None => {
+            let w = bw.max(text_w + 0.01);
+            (w, bh + PDF_STRIP_M, (w - bw) / 2.0, 0.0)
+        }
+    };
+    // PDF user space: points, origin bottom-left, y up.
+    let pt = |m: f64| (m * PT_PER_M) as f32;
+    let y_pt = |from_top_m: f64| pt(page_h - from_top_m);
+
+    let mut content = Content::new();
+    content.set_fill_gray(0.0);
+    for [x, y, w, h] in black_runs(board) {
+        content.rect(pt(left + x), y_pt(top + y + h), pt(w), pt(h));
+    }
+    content.fill_nonzero();
+    let scale_bar: f64 = if bw >= 0.12 { 0.1 } else { 0.05 };
+    let (bar_x, bar_top, bar_h) = (left + 0.005, top + bh + 0.004, 0.002);
+    let blocks = (scale_bar / 0.01).round() as usize;
+    for k in (0..blocks).step_by(2) {
+        content.rect(
+            pt(bar_x + 0.01 * k as f64),
+            y_pt(bar_top + bar_h),
+            pt(0.01),
+            pt(bar_h),
+        );
+    }
+    content.fill_nonzero();
+    content.set_stroke_gray(0.0);
+    content.set_line_width(0.5);
+    content.rect(pt(bar_x), y_pt(bar_top + bar_h), pt(scale_bar), pt(bar_h));
+    content.stroke();
+    // Captions start with the board, or further left (centred) when wider than it.
+    let text_x = left.min((page_w - text_w) / 2.0).max(0.0);
+    let font = Name(b"F1");
+    let lines = [
+        (
+            bar_x + scale_bar + 0.003,
+            bar_top + bar_h,
+            format!("{} mm", (scale_bar * 1000.0).round()),
+        ),
+        (text_x, bar_top + 0.0075, caption),
+        (text_x, bar_top + 0.0115, note),
+    ];
+    for (x, baseline, text) in &lines {
+        content.begin_text();
+        content.set_font(font, PDF_FONT_PT as f32);
+        content.next_line(pt(*x), y_pt(*baseline));
+        content.show(Str(text.as_bytes()));
+        content.end_text();
+    }
+    let content = content.finish();
+
+    let (catalog, tree, page, font_id, content_id) = (
+        Ref::new(1),
+        Ref::new(2),
+        Ref::new(3),
+        Ref::new(4),
+        Ref::new(5),
+    );
+    let mut pdf = Pdf::new();
+    pdf.catalog(catalog).pages(tree);
+    pdf.pages(tree).kids([page]).count(1);
+    {
+        let mut p = pdf.page(page);
+        p.parent(tree)
+            .media_box(Rect::new(0.0, 0.0, pt(page_w), pt(page_h)))
+            .contents(content_id);
+        p.resources().fonts().pair(font, font_id);
+    }
+    pdf.type1_font(font_id).base_font(Name(b"Courier"));
+    pdf.stream(content_id, &content);
+    Ok(pdf.finish())
+}
+
+/// The board file `original` (its YAML text, from `path`) with `tagSize` set to the fitted
+/// board's, every other line and comment kept; checked by reading it back. Refused when the
+/// file has no `tagSize:` line of its own (a flow mapping, say): then enter the size by hand.
+pub fn fitted_board_yaml(
+    original: &str,
+    path: &std::path::Path,
+    fitted: &Board,
+) -> Result<String, TargetError> {
+    let mut replaced = 0;
+    let text: Vec<String> = original
+        .lines()
+        .map(|line| {
+            if line.starts_with("tagSize:") {
+                replaced += 1;
+                let comment = line.find(" #").map(|i| &line[i..]).unwrap_or("");
+                format!("tagSize: {}{comment}", fitted.tag_size())
+            } else {
+                line.to_string()
+            }
+        })
+        .collect();
+    if replaced != 1 {
+        return Err(TargetError::BadBoard {
+            path: path.to_path_buf(),
+            key: "tagSize".into(),
+            expected: "exactly one top-level `tagSize:` line to rewrite".into(),
+            found: format!("{replaced}"),
+        });
+    }
+    let mut out = text.join("\n");
+    out.push('\n');
+    let back = Board::from_yaml_str(&out, path)?;
+    if back.tag_size() != fitted.tag_size() || back.cols() != fitted.cols() {
+        return Err(TargetError::BadBoard {
+            path: path.to_path_buf(),
+            key: "tagSize".into(),
+            expected: format!("{} m after rewriting", fitted.tag_size()),
+            found: format!("{} m", back.tag_size()),
+        });
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
