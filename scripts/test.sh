@@ -11,6 +11,9 @@ command -v cc >/dev/null || need_apt+=(build-essential)
 command -v pkg-config >/dev/null || need_apt+=(pkg-config)
 # Headless Chromium for the report's real-browser test (tests/report.rs).
 command -v chromium >/dev/null || need_apt+=(chromium)
+# Poppler's pdftoppm renders the printable board PDF so the detector can read it back
+# (tests/cellkit.rs): an independent PDF reader, not ours.
+command -v pdftoppm >/dev/null || need_apt+=(poppler-utils)
 if [ ${#need_apt[@]} -gt 0 ]; then
   apt-get update -q
   DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${need_apt[@]}"
