@@ -124,6 +124,13 @@ pub(super) fn solve_robust(
 ) -> Result<Calibration, SolveError> {
     let n = pairs.len();
     let all: Vec<usize> = (0..n).collect();
+    // The plain fit first: when it flags nothing, no sample stands out from its own noise
+    // estimate and this is the answer (exactly the ML fit of all). Only a flagged set pays for
+    // the consensus start below (most of this function's time).
+    let plain = solve_subset(setup, pairs, &all, options)?;
+    if plain.outliers.is_empty() {
+        return Ok(plain);
+    }
     let data = AxbyData::new(setup, pairs);
     let mut keep = consensus_inliers(setup, pairs, options)
         .filter(|k| k.len() >= min_kept(n))
