@@ -12,7 +12,7 @@ use handeye::config::{CellConfig, SolveSpace};
 use handeye::dataset::Dataset;
 use handeye::result::ResultFile;
 use handeye::session::{self, SessionFolder};
-use handeye::solve::{self, EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions};
+use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
 
 /// Estimator choice on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -124,7 +124,6 @@ pub struct SolveArgs {
 
 impl SolveArgs {
     fn options(&self) -> anyhow::Result<SolveOptions> {
-        let start = NoiseModel::default();
         for (name, value) in [
             (
                 "--rotation-sigma-deg",
@@ -141,20 +140,15 @@ impl SolveArgs {
                 "{name} = {value}: must be a positive number"
             );
         }
+        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
+            self.rotation_sigma_deg,
+            self.translation_sigma_mm,
+            true,
+        );
         let mut options = SolveOptions {
             method: self.method.method(),
-            noise: NoiseModel {
-                rotation_sigma_rad: self
-                    .rotation_sigma_deg
-                    .map_or(start.rotation_sigma_rad, f64::to_radians),
-                translation_sigma_m: self
-                    .translation_sigma_mm
-                    .map_or(start.translation_sigma_m, |mm| mm * 1e-3),
-            },
-            estimate_noise: EstimateNoise {
-                rotation: self.rotation_sigma_deg.is_none(),
-                translation: self.translation_sigma_mm.is_none(),
-            },
+            noise,
+            estimate_noise,
             robust: match self.robust {
                 RobustArg::None => RobustLoss::None,
                 RobustArg::Huber => RobustLoss::Huber(self.robust_scale),

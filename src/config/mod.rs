@@ -18,7 +18,7 @@ use std::time::Duration;
 use crate::geometry::PoseError;
 use crate::robot::{MotionLimits, WorkspaceBox};
 use crate::setup::{CellTransforms, Setup};
-use crate::solve::{EstimateNoise, NoiseModel, SolveOptions};
+use crate::solve::{NoiseModel, SolveOptions};
 use crate::yaml_file::{parse_yaml, read_text, FileError};
 
 pub use schema::{
@@ -94,21 +94,15 @@ impl SolverConfig {
     /// estimated from the residuals (from the solver's default start) unless `estimate_noise`
     /// is off.
     pub fn to_options(&self) -> SolveOptions {
-        let start = NoiseModel::default();
+        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
+            self.rotation_sigma_deg,
+            self.translation_sigma_mm,
+            self.estimate_noise,
+        );
         SolveOptions {
             method: self.method.into(),
-            noise: NoiseModel {
-                rotation_sigma_rad: self
-                    .rotation_sigma_deg
-                    .map_or(start.rotation_sigma_rad, f64::to_radians),
-                translation_sigma_m: self
-                    .translation_sigma_mm
-                    .map_or(start.translation_sigma_m, |mm| mm * 1e-3),
-            },
-            estimate_noise: EstimateNoise {
-                rotation: self.estimate_noise && self.rotation_sigma_deg.is_none(),
-                translation: self.estimate_noise && self.translation_sigma_mm.is_none(),
-            },
+            noise,
+            estimate_noise,
             drop_outliers: self.drop_outliers,
             ..SolveOptions::default()
         }

@@ -19,7 +19,7 @@ use crate::result::ResultFile;
 use crate::setup::{PosePair, Setup};
 use crate::solve::{
     self, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
-    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, SolveOptions,
 };
 use crate::verdict::{self, Verdict};
 use crate::vision::Board;
@@ -348,24 +348,7 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
-    // An answer far from the config's nominal transforms (swapped unknowns, say) is flagged where
-    // the result file, the report and the verdict all see it.
-    solved
-        .calibration
-        .warnings
-        .extend(solve::diagnostics::check_against_nominal(
-            &solved.calibration,
-            &config.nominal,
-            solve::diagnostics::NOMINAL_TOLERANCE_M,
-        ));
-    let verdict = verdict::assess_solved(
-        &solved.calibration,
-        &pairs,
-        &options,
-        config.verdict.accuracy(),
-    );
-    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(&notes));
-    solved.verdict = Some(verdict);
+    conclude(&mut solved, &pairs, &options, config, &notes);
     Ok((
         solved,
         Dataset {
@@ -415,6 +398,34 @@ pub fn frames_from_visits(
         ));
     }
     Ok(frames)
+}
+
+/// The last step of both solve paths: the check against the config's nominal transforms (an
+/// answer far from them — swapped unknowns, say — is flagged where the result file, the report
+/// and the verdict all see it), the verdict, and the summary that opens with it.
+fn conclude(
+    solved: &mut SolvedSession,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    config: &CellConfig,
+    notes: &[String],
+) {
+    solved
+        .calibration
+        .warnings
+        .extend(solve::diagnostics::check_against_nominal(
+            &solved.calibration,
+            &config.nominal,
+            solve::diagnostics::NOMINAL_TOLERANCE_M,
+        ));
+    let verdict = verdict::assess_solved(
+        &solved.calibration,
+        pairs,
+        options,
+        config.verdict.accuracy(),
+    );
+    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(notes));
+    solved.verdict = Some(verdict);
 }
 
 /// Solves pose pairs and, when `vision` (board and intrinsics) is given and the config's space is
@@ -486,23 +497,6 @@ pub fn solve_session(
             );
         }
     }
-    // An answer far from the config's nominal transforms (swapped unknowns, say) is flagged where
-    // the result file, the report and the verdict all see it.
-    solved
-        .calibration
-        .warnings
-        .extend(solve::diagnostics::check_against_nominal(
-            &solved.calibration,
-            &config.nominal,
-            solve::diagnostics::NOMINAL_TOLERANCE_M,
-        ));
-    let verdict = verdict::assess_solved(
-        &solved.calibration,
-        pairs,
-        &options,
-        config.verdict.accuracy(),
-    );
-    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(&notes));
-    solved.verdict = Some(verdict);
+    conclude(&mut solved, pairs, &options, config, &notes);
     Ok(solved)
 }

@@ -38,6 +38,31 @@ pub struct EstimateNoise {
     pub translation: bool,
 }
 
+impl NoiseModel {
+    /// The board-pose noise from optional explicit sigmas (degrees, millimetres): a given group
+    /// is used as is and not estimated; a missing one starts from the default and is estimated
+    /// when `estimate` is true. One rule for the command line and the config.
+    pub fn given_or_estimated(
+        rotation_sigma_deg: Option<f64>,
+        translation_sigma_mm: Option<f64>,
+        estimate: bool,
+    ) -> (NoiseModel, EstimateNoise) {
+        let start = NoiseModel::default();
+        (
+            NoiseModel {
+                rotation_sigma_rad: rotation_sigma_deg
+                    .map_or(start.rotation_sigma_rad, f64::to_radians),
+                translation_sigma_m: translation_sigma_mm
+                    .map_or(start.translation_sigma_m, |mm| mm * 1e-3),
+            },
+            EstimateNoise {
+                rotation: estimate && rotation_sigma_deg.is_none(),
+                translation: estimate && translation_sigma_mm.is_none(),
+            },
+        )
+    }
+}
+
 impl EstimateNoise {
     /// Estimate both sigmas (the default).
     pub const BOTH: EstimateNoise = EstimateNoise {
