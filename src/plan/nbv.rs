@@ -184,6 +184,11 @@ impl AdaptivePlanner {
         if samples.len() >= self.min_samples {
             if let Ok(c) = solve::solve(self.setup, samples, &self.options) {
                 self.estimate = (c.camera_mount, c.target_mount);
+                // Predict the next views with the noise the fit used (estimated from the
+                // samples unless given): the variance factor is relative to it.
+                if let Some(noise) = &c.noise {
+                    self.options.noise = noise.model();
+                }
                 if let Some(u) = &c.uncertainty {
                     self.variance_factor = u.variance_factor;
                     let sigma = u
