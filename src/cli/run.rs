@@ -77,7 +77,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     ) {
         Ok(path) => outln!("report: {}", path.display()),
         // The calibration is saved; a report problem must not hide it.
-        Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
+        Err(e) => eprintln!(
+            "warning: the report could not be written: {:#}",
+            anyhow::Error::from(e)
+        ),
     }
     outln!("session folder: {}", done.folder.root().display());
     Ok(())

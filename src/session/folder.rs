@@ -8,6 +8,8 @@
 //!   poses/007.yaml      one record per visited plan pose: measured T_base_flange, detection, board pose
 //!   frames/007.png      the frame grabbed at that pose
 //!   samples.yaml        the solver's dataset (only poses whose board pose was accepted), id "pose-007"
+//!                       (without intrinsics: written by the solve, board poses by PnP with the
+//!                       estimated camera_info.yaml)
 //!   result.yaml         the calibration, when solved
 //! ```
 //! Every file is written with [`write_atomic`], so a reader never sees half a file.
