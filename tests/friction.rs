@@ -47,3 +47,25 @@ fn the_no_intrinsics_demo_writes_its_report() {
         "the report lacks the last sample"
     );
 }
+
+#[test]
+fn piped_output_has_one_line_per_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 6")],
+    );
+    let out = run_session(&config, &dir.path().join("session"));
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    // Output captured here is a pipe, as with `| tee log`: the bar is hidden, the lines are not.
+    for pose in 0..6 {
+        let prefix = format!("pose {pose:>3}: ok, ");
+        assert!(
+            stdout.lines().any(|l| l.starts_with(&prefix)),
+            "no line for pose {pose} in:\n{stdout}"
+        );
+    }
+}

@@ -1,6 +1,7 @@
 //! `handeye run`: turns the arguments into a [`RunRequest`], calls [`cell::run::run`] (validate the
 //! plan, drive the cell, record, solve), prints its progress and the result, writes the report.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -47,7 +48,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         accept_changed: args.accept_changed,
         stop: stop.clone(),
     };
-    let mut printer = Printer { bar: None, stop };
+    let mut printer = Printer {
+        bar: None,
+        stop,
+        plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
+    };
     let done = cell::run::run(&request, &mut printer)?;
     if !done.outcome.skipped.is_empty() {
         outln!(
@@ -86,10 +91,23 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Prints the run's progress on the terminal.
+/// Prints the run's progress: a bar with the per-pose lines above it on a terminal; one plain
+/// line per pose on stdout when the output goes to a pipe or file (where indicatif hides the bar
+/// and everything printed through it).
 struct Printer {
     bar: Option<ProgressBar>,
     stop: Arc<AtomicBool>,
+    /// stdout or stderr is not a terminal: plain lines, no bar.
+    plain: bool,
+}
+
+impl Printer {
+    fn line(&self, line: String) {
+        match &self.bar {
+            Some(bar) => bar.println(line),
+            None => outln!("{line}"),
+        }
+    }
 }
 
 impl RunObserver for Printer {
@@ -115,14 +133,19 @@ impl RunObserver for Printer {
     fn session_started(&mut self, poses: usize) {
         // From here on Ctrl-C, SIGTERM and SIGHUP stop the arm and keep the samples.
         super::stop_on_signals(self.stop.clone());
-        self.bar = Some(progress_bar(poses as u64));
+        if self.plain {
+            outln!("session: up to {poses} poses");
+        } else {
+            self.bar = Some(progress_bar(poses as u64));
+        }
     }
 
     fn event(&mut self, event: SessionEvent) {
-        let Some(bar) = &self.bar else { return };
         match event {
             SessionEvent::Moving { plan_index } => {
-                bar.set_message(format!("moving to pose {plan_index}"))
+                if let Some(bar) = &self.bar {
+                    bar.set_message(format!("moving to pose {plan_index}"))
+                }
             }
             SessionEvent::Recorded {
                 plan_index,
@@ -141,8 +164,8 @@ impl RunObserver for Printer {
                     (Some(why), _) => format!("pose {plan_index:>3}: skipped: {why}"),
                     (None, None) => format!("pose {plan_index:>3}: ok"),
                 };
-                bar.println(line);
-                if !will_retry {
+                self.line(line);
+                if let (Some(bar), false) = (&self.bar, will_retry) {
                     bar.inc(1);
                 }
             }
