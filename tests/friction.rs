@@ -69,3 +69,37 @@ fn piped_output_has_one_line_per_pose() {
         );
     }
 }
+
+#[test]
+fn detect_exits_2_with_a_message_when_no_image_shows_the_board() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut images = Vec::new();
+    for (name, grey) in [("blank.png", 180u8), ("dark.png", 20)] {
+        let path = dir.path().join(name);
+        image::GrayImage::from_pixel(1280, 720, image::Luma([grey]))
+            .save(&path)
+            .unwrap();
+        images.push(path);
+    }
+    let results = dir.path().join("detections.yaml");
+    let out = handeye()
+        .arg("detect")
+        .args(&images)
+        .arg("--target")
+        .arg(util::repo().join("configs/targets/aprilgrid-6x6.yaml"))
+        .arg("--intrinsics")
+        .arg(util::repo().join("configs/cameras/sim-1280x720.yaml"))
+        .arg("-o")
+        .arg(&results)
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("aprilgrid-6x6.yaml") && stderr.contains("none of the 2 images"),
+        "{stderr}"
+    );
+    // The per-image results are still written (each says why).
+    let written = std::fs::read_to_string(&results).unwrap();
+    assert_eq!(written.matches("found: false").count(), 2, "{written}");
+}
