@@ -103,3 +103,84 @@ fn detect_exits_2_with_a_message_when_no_image_shows_the_board() {
     let written = std::fs::read_to_string(&results).unwrap();
     assert_eq!(written.matches("found: false").count(), 2, "{written}");
 }
+
+#[test]
+fn default_session_names_are_utc_date_times_without_collisions() {
+    use handeye::session::dated_session_path;
+    use std::time::{Duration, UNIX_EPOCH};
+    let dir = tempfile::tempdir().unwrap();
+    let at = |secs: u64| UNIX_EPOCH + Duration::from_secs(secs);
+    for (secs, name) in [
+        (0, "1970-01-01_00-00-00"),
+        (951_782_400, "2000-02-29_00-00-00"),
+        (1_709_251_199, "2024-02-29_23-59-59"),
+        (1_796_147_425, "2026-12-01_17-50-25"),
+        (4_107_542_399, "2100-02-28_23-59-59"),
+    ] {
+        assert_eq!(
+            dated_session_path(dir.path(), at(secs)),
+            dir.path().join(name)
+        );
+    }
+    // Two runs started in the same second get their own folders.
+    let first = dated_session_path(dir.path(), at(1_796_147_425));
+    std::fs::create_dir(&first).unwrap();
+    let second = dated_session_path(dir.path(), at(1_796_147_425));
+    assert_eq!(second, dir.path().join("2026-12-01_17-50-25-2"));
+    std::fs::create_dir(&second).unwrap();
+    assert_eq!(
+        dated_session_path(dir.path(), at(1_796_147_425)),
+        dir.path().join("2026-12-01_17-50-25-3")
+    );
+}
+
+#[test]
+fn run_without_out_names_the_session_by_its_start_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 4")],
+    );
+    let before = std::time::SystemTime::now();
+    let out = handeye()
+        .args(["run", "--config"])
+        .arg(&config)
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let sessions: Vec<_> = std::fs::read_dir(dir.path().join("sessions"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    // The name is the start time (UTC), to the second: between the names of the times before
+    // and after the run, and of their form.
+    let name_at = |t| {
+        handeye::session::dated_session_path(Path::new(""), t)
+            .to_string_lossy()
+            .into_owned()
+    };
+    let (earliest, latest) = (name_at(before), name_at(std::time::SystemTime::now()));
+    assert_eq!(sessions.len(), 1, "{sessions:?}");
+    let name = &sessions[0];
+    let form = name.chars().zip("dddd-dd-dd_dd-dd-dd".chars());
+    assert!(
+        name.len() == 19
+            && form
+                .clone()
+                .all(|(c, f)| if f == 'd' { c.is_ascii_digit() } else { c == f }),
+        "{name}"
+    );
+    assert!(
+        earliest <= *name && *name <= latest,
+        "{name} not in [{earliest}, {latest}]"
+    );
+    assert!(dir
+        .path()
+        .join("sessions")
+        .join(&sessions[0])
+        .join("result.yaml")
+        .is_file());
+}

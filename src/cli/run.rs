@@ -19,7 +19,8 @@ pub struct RunArgs {
     /// The cell config (robot, camera, board, plan, limits).
     #[arg(long, required_unless_present = "resume")]
     config: Option<PathBuf>,
-    /// Where to write the session folder (default: sessions/<date-time>).
+    /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS, the start time
+    /// in UTC; `-2`, `-3`, ... appended if that folder exists).
     #[arg(long, conflicts_with = "resume")]
     out: Option<PathBuf>,
     /// Continue an interrupted session in this folder.
@@ -180,11 +181,10 @@ impl RunObserver for Printer {
 }
 
 fn default_session_dir() -> PathBuf {
-    let now = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    PathBuf::from(format!("sessions/session-{now}"))
+    handeye::session::dated_session_path(
+        std::path::Path::new("sessions"),
+        std::time::SystemTime::now(),
+    )
 }
 
 fn progress_bar(len: u64) -> ProgressBar {
