@@ -184,3 +184,34 @@ fn run_without_out_names_the_session_by_its_start_time() {
         .join("result.yaml")
         .is_file());
 }
+
+#[cfg(unix)]
+#[test]
+fn session_files_have_normal_modes() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 4")],
+    );
+    let session = dir.path().join("session");
+    let out = run_session(&config, &session);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    // What a plain File::create gives in this process (0o666 less the umask, which the test
+    // binary shares with the handeye it started).
+    let plain = dir.path().join("plain");
+    std::fs::File::create(&plain).unwrap();
+    for file in [
+        "session.yaml",
+        "samples.yaml",
+        "result.yaml",
+        "report.html",
+        "poses/000.yaml",
+        "frames/000.png",
+    ] {
+        assert_eq!(mode(&session.join(file)), mode(&plain), "{file}");
+    }
+}
