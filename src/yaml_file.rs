@@ -63,6 +63,19 @@ pub enum FileError {
         /// What is wrong.
         problem: String,
     },
+    /// The file is another of the tool's files than the one expected (a result given where a
+    /// dataset belongs, say).
+    #[error("this is a {found} ({}), not a {expected}: {hint}", path.display())]
+    WrongKind {
+        /// The file.
+        path: PathBuf,
+        /// What the file is (`result file`).
+        found: &'static str,
+        /// What was expected (`dataset`).
+        expected: &'static str,
+        /// What to give instead.
+        hint: &'static str,
+    },
     /// Serialising failed (should not happen for valid data).
     #[error("{}: cannot serialise", path.display())]
     Serialise {

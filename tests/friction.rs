@@ -215,3 +215,39 @@ fn session_files_have_normal_modes() {
         assert_eq!(mode(&session.join(file)), mode(&plain), "{file}");
     }
 }
+
+#[test]
+fn solve_of_a_result_file_says_it_is_a_result_not_a_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 4")],
+    );
+    let session = dir.path().join("session");
+    assert!(run_session(&config, &session).status.success());
+    let result = session.join("result.yaml");
+    let out = handeye().arg("solve").arg(&result).output().unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let expected = format!(
+        "this is a result file ({}), not a dataset: give the session folder or its samples.yaml",
+        result.display()
+    );
+    assert!(stderr.contains(&expected), "{stderr}");
+    // The session's samples.yaml is still read as a dataset, and a config is named as one.
+    assert!(handeye()
+        .arg("solve")
+        .arg(session.join("samples.yaml"))
+        .output()
+        .unwrap()
+        .status
+        .success());
+    let out = handeye().arg("solve").arg(&config).output().unwrap();
+    assert!(
+        text(&out.stderr).contains("this is a cell config"),
+        "{}",
+        text(&out.stderr)
+    );
+}
