@@ -251,3 +251,38 @@ fn solve_of_a_result_file_says_it_is_a_result_not_a_dataset() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn run_ends_by_saying_where_everything_is_and_what_to_do_next() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 8")],
+    );
+    let session = dir.path().join("my session");
+    let out = run_session(&config, &session);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    let last: Vec<&str> = stdout.lines().rev().take(4).collect();
+    let result = session.join("result.yaml");
+    let expected = [
+        format!(
+            "next: handeye export '{}' --format ros2|urdf|ur|json|opencv",
+            result.display()
+        ),
+        format!("report:  {}", session.join("report.html").display()),
+        format!("result:  {}", result.display()),
+        format!("session: {}", session.display()),
+    ];
+    assert_eq!(last, expected, "{stdout}");
+    assert!(result.is_file() && session.join("report.html").is_file());
+    // The printed command works as printed (the quoted path is one word).
+    let export = expected[0]
+        .trim_start_matches("next: ")
+        .replace("ros2|urdf|ur|json|opencv", "json");
+    let words = shlex::split(&export).unwrap();
+    let out = handeye().args(&words[1..]).output().unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+}

@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye::cell::{self, PreparedCell};
 use handeye::session::SessionEvent;
+use handeye::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -76,20 +77,61 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         answers.push(("reprojection space".to_string(), result.calibration.clone()));
     }
     answers.push(("pose space".to_string(), result.pose_space.clone()));
-    match handeye::report::session::write_session_report(
+    let report = match handeye::report::session::write_session_report(
         &done.folder,
         Some(&done.cell.config),
         answers,
     ) {
-        Ok(path) => outln!("report: {}", path.display()),
+        Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.
-        Err(e) => eprintln!(
-            "warning: the report could not be written: {:#}",
-            anyhow::Error::from(e)
-        ),
+        Err(e) => {
+            eprintln!(
+                "warning: the report could not be written: {:#}",
+                anyhow::Error::from(e)
+            );
+            None
+        }
+    };
+    let result_path = done.folder.result_path();
+    outln!();
+    outln!("session: {}", done.folder.root().display());
+    outln!("result:  {}", result_path.display());
+    if let Some(report) = &report {
+        outln!("report:  {}", report.display());
     }
-    outln!("session folder: {}", done.folder.root().display());
+    outln!("{}", next_step(result.verdict.as_ref(), &result_path));
     Ok(())
+}
+
+/// The last line after a run: the export command, or what the verdict says to do first.
+fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
+    let export = format!(
+        "handeye export {} --format ros2|urdf|ur|json|opencv",
+        shell_word(result)
+    );
+    match verdict {
+        Some(v) if v.level == Level::Redo => format!(
+            "next: {} (the verdict is {}; do not export this result)",
+            v.next_action,
+            v.level.word()
+        ),
+        Some(v) if v.level == Level::Check => format!(
+            "next: {} (the verdict is {}), then: {export}",
+            v.next_action,
+            v.level.word()
+        ),
+        _ => format!("next: {export}"),
+    }
+}
+
+/// `path` as one POSIX shell word (quoted by `shlex` where the shell would interpret it).
+fn shell_word(path: &std::path::Path) -> String {
+    let text = path.to_string_lossy();
+    match shlex::try_quote(&text) {
+        Ok(word) => word.into_owned(),
+        // Only a NUL byte cannot be quoted, and a path holds none.
+        Err(_) => text.into_owned(),
+    }
 }
 
 /// Prints the run's progress: a bar with the per-pose lines above it on a terminal; one plain
