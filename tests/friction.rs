@@ -286,3 +286,83 @@ fn run_ends_by_saying_where_everything_is_and_what_to_do_next() {
     let out = handeye().args(&words[1..]).output().unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
+
+/// A word that looks like a Rust type name (`PoseYaml`, `EyeInHand`).
+fn rust_names(message: &str) -> Vec<&str> {
+    message
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| {
+            let mut chars = w.chars();
+            chars.next().is_some_and(|c| c.is_ascii_uppercase())
+                && w.chars().skip(1).any(|c| c.is_ascii_lowercase())
+                && w.chars().skip(1).any(|c| c.is_ascii_uppercase())
+        })
+        .collect()
+}
+
+#[test]
+fn file_shape_errors_name_yaml_forms_not_rust_types() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, body: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, body).unwrap();
+        path
+    };
+    let list = write("list.yaml", "[1, 2]\n");
+    let bad_pose = write(
+        "pose.yaml",
+        "setup: eye_in_hand\nsamples:\n  - T_base_flange: 5\n    T_camera_target: {translation: [0, 0, 0], rotation_vector: [0, 0, 0]}\n",
+    );
+    let bad_result = write("result.yaml", "setup: eye_in_hand\nT_flange_camera: 3\n");
+    let intrinsics = util::repo().join("configs/cameras/sim-1280x720.yaml");
+    let cases: Vec<(Vec<std::ffi::OsString>, &str)> = vec![
+        (
+            vec!["solve".into(), list.clone().into()],
+            "expected a dataset mapping",
+        ),
+        (
+            vec!["solve".into(), bad_pose.into()],
+            "samples[0].T_base_flange: invalid type: integer `5`, expected a pose mapping",
+        ),
+        (
+            vec![
+                "export".into(),
+                list.clone().into(),
+                "--format".into(),
+                "ur".into(),
+            ],
+            "expected a result mapping",
+        ),
+        (
+            vec![
+                "export".into(),
+                bad_result.into(),
+                "--format".into(),
+                "ur".into(),
+            ],
+            "T_flange_camera: invalid type: integer `3`, expected a pose mapping",
+        ),
+        (
+            vec![
+                "detect".into(),
+                "--target".into(),
+                list.into(),
+                "--intrinsics".into(),
+                intrinsics.into(),
+                "x.png".into(),
+            ],
+            "expected a board mapping",
+        ),
+    ];
+    for (args, expected) in cases {
+        let out = handeye().args(&args).output().unwrap();
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert_eq!(
+            rust_names(&stderr),
+            Vec::<&str>::new(),
+            "{args:?}: {stderr}"
+        );
+    }
+}
