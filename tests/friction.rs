@@ -118,19 +118,24 @@ fn default_session_names_are_utc_date_times_without_collisions() {
         (4_107_542_399, "2100-02-28_23-59-59"),
     ] {
         assert_eq!(
-            dated_session_path(dir.path(), at(secs)),
+            dated_session_path(dir.path(), "", at(secs)),
             dir.path().join(name)
         );
     }
     // Two runs started in the same second get their own folders.
-    let first = dated_session_path(dir.path(), at(1_796_147_425));
+    let first = dated_session_path(dir.path(), "", at(1_796_147_425));
     std::fs::create_dir(&first).unwrap();
-    let second = dated_session_path(dir.path(), at(1_796_147_425));
+    let second = dated_session_path(dir.path(), "", at(1_796_147_425));
     assert_eq!(second, dir.path().join("2026-12-01_17-50-25-2"));
     std::fs::create_dir(&second).unwrap();
     assert_eq!(
-        dated_session_path(dir.path(), at(1_796_147_425)),
+        dated_session_path(dir.path(), "", at(1_796_147_425)),
         dir.path().join("2026-12-01_17-50-25-3")
+    );
+    // `verify` records its holdout sessions beside them, prefixed.
+    assert_eq!(
+        dated_session_path(dir.path(), "verify-", at(1_796_147_425)),
+        dir.path().join("verify-2026-12-01_17-50-25")
     );
 }
 
@@ -158,7 +163,7 @@ fn run_without_out_names_the_session_by_its_start_time() {
     // The name is the start time (UTC), to the second: between the names of the times before
     // and after the run, and of their form.
     let name_at = |t| {
-        handeye::session::dated_session_path(Path::new(""), t)
+        handeye::session::dated_session_path(Path::new(""), "", t)
             .to_string_lossy()
             .into_owned()
     };

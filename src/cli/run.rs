@@ -225,6 +225,7 @@ impl RunObserver for Printer {
 fn default_session_dir() -> PathBuf {
     handeye::session::dated_session_path(
         std::path::Path::new("sessions"),
+        "",
         std::time::SystemTime::now(),
     )
 }

@@ -134,14 +134,14 @@ pub struct SessionFolder {
     notes: Vec<String>,
 }
 
-/// A new session folder's default path: `parent/YYYY-MM-DD_HH-MM-SS` of `now` in UTC, with `-2`,
-/// `-3`, ... appended when a folder of that name exists already.
-pub fn dated_session_path(parent: &Path, now: std::time::SystemTime) -> PathBuf {
+/// A new session folder's default path: `parent/<prefix>YYYY-MM-DD_HH-MM-SS` of `now` in UTC,
+/// with `-2`, `-3`, ... appended when a folder of that name exists already.
+pub fn dated_session_path(parent: &Path, prefix: &str, now: std::time::SystemTime) -> PathBuf {
     let secs = now
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
         .unwrap_or(0);
-    let name = utc_date_time(secs);
+    let name = format!("{prefix}{}", utc_date_time(secs));
     let first = parent.join(&name);
     if !first.exists() {
         return first;
