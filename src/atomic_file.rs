@@ -1,17 +1,29 @@
 //! Whole-or-nothing file writes: content goes to a temporary file in the destination's folder,
 //! is flushed to disk, then renamed over the destination, so a crash or an error never leaves a
-//! half-written file behind.
+//! half-written file behind. The file ends with the mode a plain `File::create` gives it: a new
+//! file `0o666` less the umask, a replaced file keeps its mode (a temporary file alone would be
+//! `0o600`). Depends on nothing of ours.
 
 use std::io::Write;
 use std::path::Path;
 
-/// Writes `contents` to `path` atomically (temp file in the same folder, fsync, rename).
+/// Writes `contents` to `path` atomically (temp file in the same folder, fsync, rename), with the
+/// mode `File::create` would leave (see the module docs).
 pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let mut temp = tempfile::NamedTempFile::new_in(folder)?;
+    let mut builder = tempfile::Builder::new();
+    // The kernel applies the umask to the mode asked for at creation, as for `File::create`.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let mut temp = builder.tempfile_in(folder)?;
+    if let Ok(existing) = std::fs::metadata(path) {
+        if existing.is_file() {
+            temp.as_file().set_permissions(existing.permissions())?;
+        }
+    }
     temp.write_all(contents)?;
     temp.as_file().sync_all()?;
     temp.persist(path).map_err(|e| e.error)?;
@@ -30,6 +42,26 @@ mod tests {
         write_atomic(&path, b"second").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"second");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn new_files_get_the_umask_mode_and_replaced_files_keep_theirs() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        // What a plain File::create gives here (0o666 less this process's umask).
+        let plain = dir.path().join("plain");
+        std::fs::File::create(&plain).unwrap();
+        let new = dir.path().join("new.yaml");
+        write_atomic(&new, b"x").unwrap();
+        assert_eq!(mode(&new), mode(&plain));
+        // A file someone made group-writable (or private) keeps that mode when rewritten.
+        for kept in [0o664, 0o600, 0o640] {
+            std::fs::set_permissions(&new, std::fs::Permissions::from_mode(kept)).unwrap();
+            write_atomic(&new, b"y").unwrap();
+            assert_eq!(mode(&new), kept);
+        }
     }
 
     #[test]

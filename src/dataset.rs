@@ -23,7 +23,7 @@ use crate::geometry::PoseYaml;
 use crate::setup::{PosePair, Setup};
 
 pub use crate::yaml_file::FileError;
-use crate::yaml_file::{parse_yaml, read_yaml, write_yaml};
+use crate::yaml_file::{parse_yaml, read_text, write_yaml};
 
 /// One sample as written in the file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -65,13 +65,16 @@ pub struct Dataset {
 impl Dataset {
     /// Reads and validates a dataset file.
     pub fn load(path: &Path) -> Result<Dataset, FileError> {
-        let raw: DatasetYaml = read_yaml(path)?;
-        Dataset::from_yaml(&raw, path)
+        Dataset::parse(&read_text(path)?, path)
     }
 
-    /// Parses and validates dataset text; `path` is only used in errors.
+    /// Parses and validates dataset text; `path` is only used in errors. Another of the tool's
+    /// files (a result, a cell config) is named as such rather than reported as a shape error.
     pub fn parse(text: &str, path: &Path) -> Result<Dataset, FileError> {
-        let raw: DatasetYaml = parse_yaml(text, path)?;
+        let raw: DatasetYaml = parse_yaml(text, path).map_err(|e| match e {
+            FileError::Shape { .. } => other_kind(text, path).unwrap_or(e),
+            e => e,
+        })?;
         Dataset::from_yaml(&raw, path)
     }
 
@@ -135,6 +138,35 @@ impl Dataset {
     pub fn save(&self, path: &Path) -> Result<(), FileError> {
         write_yaml(&self.to_yaml(), path)
     }
+}
+
+/// The kind of tool file `text` is when it is not a dataset but has the top-level keys of a result
+/// file or a cell config; `None` otherwise (the shape error stands).
+fn other_kind(text: &str, path: &Path) -> Option<FileError> {
+    let value: serde_yaml_ng::Value = serde_yaml_ng::from_str(text).ok()?;
+    let map = value.as_mapping()?;
+    let has = |key: &str| map.contains_key(key);
+    if has("samples") {
+        return None;
+    }
+    let (found, hint) = if ["T_flange_camera", "T_base_camera"].iter().any(|k| has(k))
+        && (has("residuals") || has("solver"))
+    {
+        ("result file", "give the session folder or its samples.yaml")
+    } else if has("robot") && has("camera") && has("target") {
+        (
+            "cell config",
+            "give the session folder or its samples.yaml (record one with `handeye run --config`)",
+        )
+    } else {
+        return None;
+    };
+    Some(FileError::WrongKind {
+        path: path.to_path_buf(),
+        found,
+        expected: "dataset",
+        hint,
+    })
 }
 
 #[cfg(test)]

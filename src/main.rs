@@ -22,7 +22,11 @@ fn main() -> ExitCode {
         Err(error) => {
             // Not eprintln!: with stderr closed too, the exit code is all that is left to say.
             let _ = writeln!(std::io::stderr(), "error: {error:#}");
-            ExitCode::FAILURE
+            if error.downcast_ref::<cli::NothingFound>().is_some() {
+                ExitCode::from(cli::NothingFound::EXIT_CODE)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

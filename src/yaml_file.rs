@@ -63,6 +63,19 @@ pub enum FileError {
         /// What is wrong.
         problem: String,
     },
+    /// The file is another of the tool's files than the one expected (a result given where a
+    /// dataset belongs, say).
+    #[error("this is a {found} ({}), not a {expected}: {hint}", path.display())]
+    WrongKind {
+        /// The file.
+        path: PathBuf,
+        /// What the file is (`result file`).
+        found: &'static str,
+        /// What was expected (`dataset`).
+        expected: &'static str,
+        /// What to give instead.
+        hint: &'static str,
+    },
     /// Serialising failed (should not happen for valid data).
     #[error("{}: cannot serialise", path.display())]
     Serialise {
@@ -76,11 +89,50 @@ pub enum FileError {
 
 /// `<yaml path>: <problem>`, the path once: serde_yaml_ng already starts some messages with it.
 fn shape_message(yaml_path: &str, problem: &serde_yaml_ng::Error) -> String {
-    let problem = problem.to_string();
+    let problem = plain_parser_message(problem);
     if problem.starts_with(&format!("{yaml_path}: ")) {
         problem
     } else {
         format!("{yaml_path}: {problem}")
+    }
+}
+
+/// The parser's message with the Rust type names serde puts in it (`expected struct PoseYaml`)
+/// replaced by what the YAML should hold (`expected a pose mapping (...)`).
+pub(crate) fn plain_parser_message(problem: &serde_yaml_ng::Error) -> String {
+    let mut text = problem.to_string();
+    for kind in [
+        "expected tuple struct ",
+        "expected struct ",
+        "expected enum ",
+    ] {
+        while let Some(at) = text.find(kind) {
+            let name_start = at + kind.len();
+            let name_len = text[name_start..]
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(text.len() - name_start);
+            let name = &text[name_start..name_start + name_len];
+            let words = yaml_words(name, kind == "expected enum ");
+            text.replace_range(at..name_start + name_len, &format!("expected {words}"));
+        }
+    }
+    text
+}
+
+/// What a type of ours looks like in YAML, for error messages.
+fn yaml_words(type_name: &str, is_enum: bool) -> &'static str {
+    match type_name {
+        "PoseYaml" | "PoseRecord" => {
+            "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z} or rotation_vector: [rx, ry, rz] rad)"
+        }
+        "QuaternionYaml" => "a quaternion mapping {w, x, y, z}",
+        "DatasetYaml" => "a dataset mapping (setup: eye_in_hand or eye_to_hand, samples: [...])",
+        "ResultFile" => "a result mapping (setup, the two transforms, residuals, solver, ...)",
+        "BoardFile" => {
+            "a board mapping (Kalibr aprilgrid keys: target_type, tagCols, tagRows, tagSize, tagSpacing)"
+        }
+        _ if is_enum => "one of the listed names",
+        _ => "a mapping of keys",
     }
 }
 

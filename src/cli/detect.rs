@@ -184,6 +184,14 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         "board found in {found_count} of {} images",
         args.images.len()
     );
+    if found_count == 0 {
+        return Err(super::NothingFound(format!(
+            "the board ({}) was found in none of the {} images: check the target file matches the printed board (family, size, first id) and that the board is in view and in focus",
+            args.target.display(),
+            args.images.len()
+        ))
+        .into());
+    }
     Ok(())
 }
 

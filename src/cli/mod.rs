@@ -51,6 +51,17 @@ enum Command {
     Verify(verify::VerifyArgs),
 }
 
+/// A command ran correctly but found nothing to work with (no board in any image): `main` exits
+/// with code 2 for it, so scripts can tell "nothing found" from a failure (1).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct NothingFound(pub String);
+
+impl NothingFound {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 2;
+}
+
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {

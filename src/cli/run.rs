@@ -1,6 +1,7 @@
 //! `handeye run`: turns the arguments into a [`RunRequest`], calls [`cell::run::run`] (validate the
 //! plan, drive the cell, record, solve), prints its progress and the result, writes the report.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -11,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye::cell::{self, PreparedCell};
 use handeye::session::SessionEvent;
+use handeye::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -18,7 +20,8 @@ pub struct RunArgs {
     /// The cell config (robot, camera, board, plan, limits).
     #[arg(long, required_unless_present = "resume")]
     config: Option<PathBuf>,
-    /// Where to write the session folder (default: sessions/<date-time>).
+    /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS, the start time
+    /// in UTC; `-2`, `-3`, ... appended if that folder exists).
     #[arg(long, conflicts_with = "resume")]
     out: Option<PathBuf>,
     /// Continue an interrupted session in this folder.
@@ -47,7 +50,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         accept_changed: args.accept_changed,
         stop: stop.clone(),
     };
-    let mut printer = Printer { bar: None, stop };
+    let mut printer = Printer {
+        bar: None,
+        stop,
+        plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
+    };
     let done = cell::run::run(&request, &mut printer)?;
     if !done.outcome.skipped.is_empty() {
         outln!(
@@ -70,23 +77,80 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         answers.push(("reprojection space".to_string(), result.calibration.clone()));
     }
     answers.push(("pose space".to_string(), result.pose_space.clone()));
-    match handeye::report::session::write_session_report(
+    let report = match handeye::report::session::write_session_report(
         &done.folder,
         Some(&done.cell.config),
         answers,
     ) {
-        Ok(path) => outln!("report: {}", path.display()),
+        Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.
-        Err(e) => eprintln!("warning: the report could not be written: {e:#}"),
+        Err(e) => {
+            eprintln!(
+                "warning: the report could not be written: {:#}",
+                anyhow::Error::from(e)
+            );
+            None
+        }
+    };
+    let result_path = done.folder.result_path();
+    outln!();
+    outln!("session: {}", done.folder.root().display());
+    outln!("result:  {}", result_path.display());
+    if let Some(report) = &report {
+        outln!("report:  {}", report.display());
     }
-    outln!("session folder: {}", done.folder.root().display());
+    outln!("{}", next_step(result.verdict.as_ref(), &result_path));
     Ok(())
 }
 
-/// Prints the run's progress on the terminal.
+/// The last line after a run: the export command, or what the verdict says to do first.
+fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
+    let export = format!(
+        "handeye export {} --format ros2|urdf|ur|json|opencv",
+        shell_word(result)
+    );
+    match verdict {
+        Some(v) if v.level == Level::Redo => format!(
+            "next: {} (the verdict is {}; do not export this result)",
+            v.next_action,
+            v.level.word()
+        ),
+        Some(v) if v.level == Level::Check => format!(
+            "next: {} (the verdict is {}), then: {export}",
+            v.next_action,
+            v.level.word()
+        ),
+        _ => format!("next: {export}"),
+    }
+}
+
+/// `path` as one POSIX shell word (quoted by `shlex` where the shell would interpret it).
+fn shell_word(path: &std::path::Path) -> String {
+    let text = path.to_string_lossy();
+    match shlex::try_quote(&text) {
+        Ok(word) => word.into_owned(),
+        // Only a NUL byte cannot be quoted, and a path holds none.
+        Err(_) => text.into_owned(),
+    }
+}
+
+/// Prints the run's progress: a bar with the per-pose lines above it on a terminal; one plain
+/// line per pose on stdout when the output goes to a pipe or file (where indicatif hides the bar
+/// and everything printed through it).
 struct Printer {
     bar: Option<ProgressBar>,
     stop: Arc<AtomicBool>,
+    /// stdout or stderr is not a terminal: plain lines, no bar.
+    plain: bool,
+}
+
+impl Printer {
+    fn line(&self, line: String) {
+        match &self.bar {
+            Some(bar) => bar.println(line),
+            None => outln!("{line}"),
+        }
+    }
 }
 
 impl RunObserver for Printer {
@@ -112,14 +176,19 @@ impl RunObserver for Printer {
     fn session_started(&mut self, poses: usize) {
         // From here on Ctrl-C, SIGTERM and SIGHUP stop the arm and keep the samples.
         super::stop_on_signals(self.stop.clone());
-        self.bar = Some(progress_bar(poses as u64));
+        if self.plain {
+            outln!("session: up to {poses} poses");
+        } else {
+            self.bar = Some(progress_bar(poses as u64));
+        }
     }
 
     fn event(&mut self, event: SessionEvent) {
-        let Some(bar) = &self.bar else { return };
         match event {
             SessionEvent::Moving { plan_index } => {
-                bar.set_message(format!("moving to pose {plan_index}"))
+                if let Some(bar) = &self.bar {
+                    bar.set_message(format!("moving to pose {plan_index}"))
+                }
             }
             SessionEvent::Recorded {
                 plan_index,
@@ -138,8 +207,8 @@ impl RunObserver for Printer {
                     (Some(why), _) => format!("pose {plan_index:>3}: skipped: {why}"),
                     (None, None) => format!("pose {plan_index:>3}: ok"),
                 };
-                bar.println(line);
-                if !will_retry {
+                self.line(line);
+                if let (Some(bar), false) = (&self.bar, will_retry) {
                     bar.inc(1);
                 }
             }
@@ -154,11 +223,11 @@ impl RunObserver for Printer {
 }
 
 fn default_session_dir() -> PathBuf {
-    let now = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    PathBuf::from(format!("sessions/session-{now}"))
+    handeye::session::dated_session_path(
+        std::path::Path::new("sessions"),
+        "",
+        std::time::SystemTime::now(),
+    )
 }
 
 fn progress_bar(len: u64) -> ProgressBar {

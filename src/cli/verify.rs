@@ -30,7 +30,7 @@ pub struct VerifyArgs {
     /// Seed of the holdout views (default: the plan's seed + 1000, so they differ from the solve's).
     #[arg(long)]
     seed: Option<u64>,
-    /// Where to record the holdout session (default: sessions/verify-<time>).
+    /// Where to record the holdout session (default: sessions/verify-YYYY-MM-DD_HH-MM-SS, UTC).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Do not ask for confirmation before moving a real robot (holdout on a real cell).
@@ -64,11 +64,11 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
             ..base
         };
         let out = args.out.clone().unwrap_or_else(|| {
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0);
-            PathBuf::from(format!("sessions/verify-{now}"))
+            handeye::session::dated_session_path(
+                std::path::Path::new("sessions"),
+                "verify-",
+                std::time::SystemTime::now(),
+            )
         });
         if !prepared.is_simulated() && !args.yes {
             super::confirm_motion(&prepared, spec.count)?;

@@ -124,8 +124,9 @@ pub fn solve_folder_in(
 }
 
 /// Reads the folder's samples and visits and solves (in the reprojection space with the inputs'
-/// board and intrinsics); writes nothing, except `camera_info.yaml` when the intrinsics are
-/// estimated. Returns the dataset the answer was solved from.
+/// board and intrinsics); writes nothing, except `camera_info.yaml` and `samples.yaml` (the board
+/// poses by PnP with those intrinsics) when the intrinsics are estimated. Returns the dataset the
+/// answer was solved from.
 ///
 /// When the config has no intrinsics they are estimated from the recorded corners (whatever
 /// `space` says: without intrinsics there are no board poses to solve in pose space alone).
@@ -243,7 +244,8 @@ fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
 }
 
 /// No intrinsics in the config: Zhang's closed form from the recorded corners, then the joint
-/// refinement; writes `camera_info.yaml` into the session.
+/// refinement; writes `camera_info.yaml` and the samples it solved from (`samples.yaml`) into the
+/// session.
 fn solve_from_scratch(
     folder: &SessionFolder,
     config: &CellConfig,
@@ -349,13 +351,15 @@ fn solve_from_scratch(
         ));
     }
     conclude(&mut solved, &pairs, &options, config, &notes);
-    Ok((
-        solved,
-        Dataset {
-            setup: manifest.setup,
-            pairs,
-        },
-    ))
+    // The board poses just estimated are this session's samples: `samples.yaml` (which the
+    // report, `verify` and `solve <session>` read) holds them, consistent with
+    // `camera_info.yaml`. The run records none without intrinsics.
+    let dataset = Dataset {
+        setup: manifest.setup,
+        pairs,
+    };
+    dataset.save(&folder.samples_path())?;
+    Ok((solved, dataset))
 }
 
 /// The reprojection refinement's frames from recorded visits: every accepted visit (one with a

@@ -41,7 +41,7 @@ pub enum TargetError {
     /// The board YAML does not parse (syntax, unknown key, wrong type).
     // The serde error is the problem itself (no further cause), so it is in the message and
     // not also a `#[source]`: `{:#}` chains would print it twice.
-    #[error("board file {path}: at `{key}`: {problem}")]
+    #[error("board file {path}: at `{key}`: {}", crate::yaml_file::plain_parser_message(.problem))]
     BoardYaml {
         /// The file.
         path: PathBuf,
