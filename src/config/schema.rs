@@ -4,6 +4,10 @@
 //! [`ConfigFile`] also serialises, so tools write configs through serde (see
 //! [`ConfigFile::save`]). Depends on `plan` (the generated-plan spec), `setup`, `geometry` and
 //! `verdict` (the accuracy type).
+//!
+//! Why one file of ~700 lines: it is the whole YAML surface of a cell, section by section, with
+//! each key's doc beside its field; a reader looking up a key should find every one in one
+//! place, in the order of the shipped configs.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

@@ -5,6 +5,9 @@
 //! anything moves; every error names the file, the YAML key path, the value and what is
 //! accepted. Works on the shapes of `config::schema`; depends on `plan` and `vision` for the
 //! bounds they own (plan size, detector options).
+//!
+//! Why one file of ~620 lines: every accepted range sits next to the check that applies it, in
+//! the order of the schema, so the README's range table and this file can be read side by side.
 
 use std::collections::BTreeMap;
 use std::fmt;
