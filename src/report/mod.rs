@@ -4,29 +4,35 @@
 //! Owns the report's input ([`ReportInput`], with a list of [`ReportAnswer`]s shown side by side,
 //! e.g. the pose-space and a reprojection-space answer), the HTML layout with the verdict card
 //! first (GOOD / CHECK / REDO, made by `verdict`, the same as the terminal and `result.yaml`
-//! show) and the plain-language warnings (their health checks also from `verdict`); the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
+//! show) and the plain-language warnings (their health checks also from `verdict`). The verdict
+//! card, the per-answer transforms and their export forms ([`export_forms`]) are written by
+//! `sections.rs`; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
 //! gathers the input from a session folder (frames, detected corners). Frames follow the crate
 //! convention (`T_a_b` maps points of frame `b` into frame `a`); numbers are shown in metres /
 //! radians where a file holds them and in mm / degrees where a person reads them. Depends on
-//! `solve`, `geometry`, `target`, `camera` and `session` (for the folder layout); nothing
-//! depends on it but the CLI.
+//! `solve`, `verdict`, `formats`, `vision`, `config`, `dataset`, `session` (for the folder
+//! layout) and the ground floor (`geometry`, `setup`, `camera_model`, `notice`, `atomic_file`);
+//! nothing depends on it but the CLI.
 //!
 //! Every section and every plot carries a stable `id` / `data-kind`, and every number that
 //! `result.yaml` also holds carries a `data-key`, so tests can check the page's structure and
 //! values without parsing prose.
 
 pub mod plots;
+mod sections;
 pub mod session;
 
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
 use crate::atomic_file::write_atomic;
-use crate::geometry::{rotvec, to_matrix4_rows, Pose};
 use crate::notice::Notice;
 use crate::setup::{PosePair, Setup};
 use crate::solve::{rotation_diversity, Calibration, NoiseModel};
 use crate::verdict::{self, Verdict};
+
+pub use sections::export_forms;
+use sections::{figure, transforms_section, verdict_card};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]
@@ -330,189 +336,6 @@ pub fn write_report(path: &Path, input: &ReportInput) -> Result<(), ReportError>
     })
 }
 
-/// The verdict card: level, reason, next action, the accuracy asked for, the figures, and any
-/// further findings.
-fn verdict_card(html: &mut String, v: &Verdict) {
-    let level = v.level.word();
-    let class = level.to_ascii_lowercase();
-    let _ = writeln!(
-        html,
-        "<section id=\"verdict\" class=\"verdict {class}\"><h2>Verdict: <span data-key=\"verdict.level\">{level}</span></h2>\n<p class=\"reason\">{}</p>\n<p class=\"next\">Next: {}</p>",
-        escape(&v.reason),
-        escape(&v.next_action)
-    );
-    let f = &v.figures;
-    let mut rows = vec![format!(
-        "accuracy asked for: {} mm, {}°",
-        v.accuracy.translation_mm, v.accuracy.rotation_deg
-    )];
-    if let Some(h) = f.held_out {
-        rows.push(format!(
-            "held-out error (RMS over {} poses, target at ~{:.0} mm): {:.3} mm, {:.4}°",
-            h.poses, h.working_distance_mm, h.translation_rms_mm, h.rotation_rms_deg
-        ));
-    }
-    if let (Some(t), Some(r)) = (f.sigma_translation_mm, f.sigma_rotation_deg) {
-        rows.push(format!(
-            "largest 1-sigma of the two transforms: {t:.3} mm, {r:.4}°"
-        ));
-    }
-    if let (Some(r), Some(t)) = (f.residual_rotation_rms_deg, f.residual_translation_rms_mm) {
-        rows.push(format!("residual RMS: {r:.4}°, {t:.3} mm"));
-    }
-    if let Some(off) = f.rotation_off_axis_deg {
-        rows.push(format!(
-            "{} poses; largest rotation off the main axis {off:.1}°",
-            f.poses
-        ));
-    }
-    html.push_str("<ul class=\"figures\">\n");
-    for row in rows {
-        let _ = writeln!(html, "<li>{}</li>", escape(&row));
-    }
-    html.push_str("</ul>\n");
-    if !v.also.is_empty() {
-        html.push_str("<h3>Also</h3>\n<ul>\n");
-        for finding in &v.also {
-            let _ = writeln!(
-                html,
-                "<li class=\"{}\">{}: {} Next: {}</li>",
-                finding.level.word().to_ascii_lowercase(),
-                finding.level.word(),
-                escape(&finding.reason),
-                escape(&finding.next_action)
-            );
-        }
-        html.push_str("</ul>\n");
-    }
-    html.push_str("</section>\n");
-}
-
-fn figure(html: &mut String, kind: &str, svg: &str) {
-    let _ = writeln!(
-        html,
-        "<figure class=\"plot\" data-kind=\"{kind}\">{svg}</figure>"
-    );
-}
-
-fn transforms_section(html: &mut String, k: usize, answer: &ReportAnswer) {
-    let c = &answer.calibration;
-    let _ = writeln!(
-        html,
-        "<div class=\"answer\" data-answer=\"{k}\"><h3>{}</h3><p>method {}, {} iterations, {}converged</p>",
-        escape(&answer.label),
-        c.solver.method.name(),
-        c.solver.iterations,
-        if c.solver.converged { "" } else { "NOT " }
-    );
-    let sigmas = c
-        .uncertainty
-        .as_ref()
-        .map(|u| [u.camera_mount, u.target_mount]);
-    for (i, (name, pose)) in c.unknowns().iter().enumerate() {
-        let _ = writeln!(html, "<h4>{name}</h4>");
-        match sigmas {
-            Some(s) => {
-                let s = s[i];
-                let _ = writeln!(
-                    html,
-                    "<p class=\"sigma\">1-sigma: <span data-key=\"uncertainty.{name}.rotation_deg\">{:.4}</span>° (x {:.4}, y {:.4}, z {:.4}), <span data-key=\"uncertainty.{name}.translation_mm\">{:.3}</span> mm (x {:.3}, y {:.3}, z {:.3})</p>",
-                    s.rotation_deg,
-                    s.rotation_axes_deg[0],
-                    s.rotation_axes_deg[1],
-                    s.rotation_axes_deg[2],
-                    s.translation_mm,
-                    s.translation_axes_mm[0],
-                    s.translation_axes_mm[1],
-                    s.translation_axes_mm[2]
-                );
-            }
-            None => {
-                html.push_str("<p class=\"sigma\">no uncertainty (only the refined method computes one)</p>\n");
-            }
-        }
-        html.push_str("<table class=\"forms\">\n");
-        for (form, value, key) in export_forms(pose) {
-            let key_attr = key
-                .map(|key| format!(" data-key=\"{name}.{key}\""))
-                .unwrap_or_default();
-            let _ = writeln!(
-                html,
-                "<tr><th>{form}</th><td><code{key_attr}>{}</code></td></tr>",
-                escape(&value)
-            );
-        }
-        html.push_str("</table>\n");
-    }
-    let r = &c.residuals;
-    let _ = writeln!(
-        html,
-        "<p>residuals: rotation RMS <span data-key=\"residuals.rotation_rms_deg\">{:.4}</span>°, translation RMS <span data-key=\"residuals.translation_rms_mm\">{:.3}</span> mm; outliers {:?}</p></div>",
-        r.rotation_rms_deg, r.translation_rms_mm, c.outliers
-    );
-}
-
-/// Every export form of a pose `T_a_b`, as (name, text, key of the `result.yaml` field it shows).
-///
-/// Translation and quaternion are printed with 9 decimals so they read back exactly enough to
-/// be compared with the file. The UR form is the one `handeye export --format ur` writes
-/// (`p[x, y, z, rx, ry, rz]`, metres and radians), the matrix row-major.
-pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static str>)> {
-    let t = pose.translation.vector;
-    // w ≥ 0, as the YAML writes it.
-    let q = crate::geometry::yaml::QuaternionYaml::from(&pose.rotation);
-    let rv = rotvec(&pose.rotation);
-    let m = to_matrix4_rows(pose);
-    let (roll, pitch, yaw) = pose.rotation.euler_angles();
-    let matrix = m
-        .iter()
-        .map(|r| format!("[{:.9}, {:.9}, {:.9}, {:.9}]", r[0], r[1], r[2], r[3]))
-        .collect::<Vec<_>>()
-        .join("\n");
-    vec![
-        (
-            "translation (m)",
-            format!("[{:.9}, {:.9}, {:.9}]", t.x, t.y, t.z),
-            Some("translation"),
-        ),
-        (
-            "quaternion (w, x, y, z)",
-            format!(
-                "{{w: {:.9}, x: {:.9}, y: {:.9}, z: {:.9}}}",
-                q.w, q.x, q.y, q.z
-            ),
-            Some("quaternion"),
-        ),
-        (
-            "rotation vector (rad)",
-            format!(
-                "[{:.9}, {:.9}, {:.9}] ({:.4}°)",
-                rv.x,
-                rv.y,
-                rv.z,
-                rv.norm().to_degrees()
-            ),
-            Some("rotation_vector"),
-        ),
-        (
-            "roll-pitch-yaw (fixed x-y-z, deg)",
-            format!(
-                "[{:.5}, {:.5}, {:.5}]",
-                roll.to_degrees(),
-                pitch.to_degrees(),
-                yaw.to_degrees()
-            ),
-            None,
-        ),
-        ("4x4 matrix", matrix, None),
-        (
-            "UR pose (URScript)",
-            crate::formats::export::ur_pose_literal(pose),
-            None,
-        ),
-    ]
-}
-
 /// Plain-language notices: the solver's own, plus too few poses, poor rotation spread, and per
 /// answer a likely convention error or residuals beyond the noise model, each saying what to do.
 /// The health checks are `verdict`'s ([`verdict::coverage_notices`],
@@ -606,28 +429,5 @@ mod tests {
             escape("<a href=\"x\">&'"),
             "&lt;a href=&quot;x&quot;&gt;&amp;&#39;"
         );
-    }
-
-    #[test]
-    fn ur_form_is_translation_then_rotation_vector() {
-        let pose = crate::geometry::pose_from_rotvec(
-            nalgebra::Vector3::new(0.1, -0.2, 0.3),
-            nalgebra::Vector3::new(0.0, 0.0, 0.5),
-        );
-        let forms = export_forms(&pose);
-        let ur = forms.iter().find(|f| f.0.starts_with("UR")).unwrap();
-        // Full precision (the export's literal): the numbers read back to the pose within 1e-12.
-        let values: Vec<f64> =
-            ur.1.strip_prefix("p[")
-                .and_then(|s| s.strip_suffix(']'))
-                .unwrap_or_else(|| panic!("not a UR pose literal: {}", ur.1))
-                .split(", ")
-                .map(|v| v.parse().unwrap())
-                .collect();
-        let expected = [0.1, -0.2, 0.3, 0.0, 0.0, 0.5];
-        assert_eq!(values.len(), 6, "{}", ur.1);
-        for (v, e) in values.iter().zip(expected) {
-            assert!((v - e).abs() < 1e-12, "{} vs {expected:?}", ur.1);
-        }
     }
 }

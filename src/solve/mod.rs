@@ -29,6 +29,7 @@ pub mod iterative;
 mod lm;
 pub mod noise;
 pub mod options;
+pub mod plausibility;
 pub mod refine;
 pub mod reprojection;
 mod robust;

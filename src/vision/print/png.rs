@@ -1,0 +1,246 @@
+//! The PNG writer: the printable board as an 8-bit grey raster at a chosen resolution, its
+//! pixels per metre stored in a pHYs chunk so printing at 100 % keeps the true scale, with an
+//! optional overlay of the board frame for documentation.
+//!
+//! Depends on the page geometry of its parent ([`print`](super)), `vision::board`,
+//! `vision::draw` and the `image` crate.
+
+use image::{GrayImage, ImageEncoder, Luma};
+
+use super::super::board::Board;
+use super::super::draw;
+use super::super::TargetError;
+use super::{Page, FONT_PIXEL_M};
+
+/// Renders the printable board as an 8-bit grey PNG at `dpi` (50-1200), encoded, with its
+/// resolution stored so printers keep the true scale. `show_frame` overlays the board frame
+/// for documentation (grey axes x and y from the origin, tag ids under the tags, and tag
+/// 0's corner numbers); leave it off for a board to print.
+pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, TargetError> {
+    if !(50.0..=1200.0).contains(&dpi) {
+        return Err(TargetError::BadBoard {
+            path: "<print>".into(),
+            key: "dpi".to_string(),
+            expected: "between 50 and 1200".to_string(),
+            found: dpi.to_string(),
+        });
+    }
+    let page = Page::new(board, Some(dpi));
+    let px_per_m = dpi / 0.0254;
+    let width = (page.width * px_per_m).ceil() as u32;
+    let height = (page.height * px_per_m).ceil() as u32;
+    // A 1 m board at 1200 dpi would need 2 GB: refuse instead of exhausting memory.
+    const MAX_PIXELS: u64 = 400_000_000;
+    if width as u64 * height as u64 > MAX_PIXELS {
+        return Err(TargetError::BadBoard {
+            path: "<print>".into(),
+            key: "dpi".to_string(),
+            expected: format!("a resolution giving at most {MAX_PIXELS} pixels for this board"),
+            found: format!("{dpi} dpi ({width}x{height} px); use SVG for large boards"),
+        });
+    }
+    let extent = board.extent();
+    let mut image = GrayImage::from_pixel(width, height, Luma([255]));
+    let board_rows = (page.board_height * px_per_m).round() as u32;
+    for j in 0..board_rows.min(height) {
+        let y = extent.max.y - (j as f64 + 0.5) / px_per_m;
+        for i in 0..width {
+            let x = extent.min.x + (i as f64 + 0.5) / px_per_m - page.board_left;
+            if board.is_white_at(x, y) == Some(false) {
+                image.put_pixel(i, j, Luma([0]));
+            }
+        }
+    }
+    // Scale bar: alternating 10 mm blocks with an outline, 2 mm tall.
+    let to_px = |m: f64| (m * px_per_m).round() as i64;
+    let bar_x = to_px(page.board_left + 0.005);
+    let bar_y = to_px(page.board_height + 0.004);
+    let bar_h = to_px(0.002);
+    let blocks = (page.scale_bar / 0.01).round() as i64;
+    for k in 0..blocks {
+        let x0 = bar_x + to_px(k as f64 * 0.01);
+        let x1 = bar_x + to_px((k + 1) as f64 * 0.01);
+        if k % 2 == 0 {
+            draw::fill_rect(&mut image, x0, bar_y, x1 - x0, bar_h, Luma([0]));
+        }
+    }
+    let outline = 1.max(to_px(0.0002));
+    let bar_w = to_px(page.scale_bar);
+    draw::fill_rect(&mut image, bar_x, bar_y, bar_w, outline, Luma([0]));
+    draw::fill_rect(
+        &mut image,
+        bar_x,
+        bar_y + bar_h - outline,
+        bar_w,
+        outline,
+        Luma([0]),
+    );
+    draw::fill_rect(
+        &mut image,
+        bar_x + bar_w - outline,
+        bar_y,
+        outline,
+        bar_h,
+        Luma([0]),
+    );
+    let scale = 1.max(to_px(FONT_PIXEL_M)) as u32;
+    let label = format!("{} mm", (page.scale_bar * 1000.0).round());
+    draw::text(
+        &mut image,
+        bar_x + bar_w + to_px(0.003),
+        bar_y,
+        scale,
+        &label,
+        Luma([0]),
+    );
+    draw::text(
+        &mut image,
+        to_px(0.005),
+        bar_y + to_px(0.008),
+        scale,
+        &page.caption,
+        Luma([0]),
+    );
+    if show_frame {
+        draw_frame(&mut image, board, &page, px_per_m);
+    }
+    let mut encoded = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut encoded)
+        .write_image(image.as_raw(), width, height, image::ExtendedColorType::L8)
+        .map_err(|source| TargetError::Image {
+            path: "<board.png>".into(),
+            source,
+        })?;
+    Ok(with_png_resolution(encoded, px_per_m.round() as u32))
+}
+
+/// Overlays the board frame: x and y axes from the origin, ids, tag 0's corner order.
+fn draw_frame(image: &mut GrayImage, board: &Board, page: &Page, px_per_m: f64) {
+    let extent = board.extent();
+    let pixel = |x: f64, y: f64| {
+        nalgebra::Point2::new(
+            (x - extent.min.x + page.board_left) * px_per_m - 0.5,
+            (extent.max.y - y) * px_per_m - 0.5,
+        )
+    };
+    let grey = Luma([128]);
+    let thickness = (0.0008 * px_per_m).round().max(1.0) as u32;
+    let scale = ((0.0004 * px_per_m).round() as u32).max(1);
+    let length = board.pitch() * 0.8 + board.tag_size() * 0.2;
+    let glyph = 5.0 * scale as f64;
+    for (end, label) in [((length, 0.0), "X"), ((0.0, length), "Y")] {
+        let tip = pixel(end.0, end.1);
+        draw::line(image, pixel(0.0, 0.0), tip, thickness, grey);
+        let (dx, dy) = if label == "X" {
+            (glyph * 0.6, -glyph * 0.5)
+        } else {
+            (-glyph * 0.3, -glyph * 1.6)
+        };
+        draw::text(
+            image,
+            (tip.x + dx) as i64,
+            (tip.y + dy) as i64,
+            scale,
+            label,
+            grey,
+        );
+    }
+    let gap = board.tag_spacing() * board.tag_size();
+    for tag in board.tags() {
+        let c = tag.corners_in_target[0];
+        let at = pixel(c.x, c.y - gap * 0.25);
+        draw::text(
+            image,
+            at.x as i64 + 2,
+            at.y as i64,
+            scale,
+            &format!("ID {}", tag.id),
+            grey,
+        );
+    }
+    if let Some(tag) = board.tags().first() {
+        let offset = gap * 0.35;
+        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        for (k, (corner, (sx, sy))) in tag.corners_in_target.iter().zip(signs).enumerate() {
+            let at = pixel(corner.x + sx * offset, corner.y + sy * offset);
+            draw::text(
+                image,
+                (at.x - glyph * 0.3) as i64,
+                (at.y - glyph * 0.5) as i64,
+                scale,
+                &k.to_string(),
+                grey,
+            );
+        }
+    }
+}
+
+/// Inserts a pHYs chunk (pixels per metre) right after the PNG header chunk.
+fn with_png_resolution(png: Vec<u8>, px_per_m: u32) -> Vec<u8> {
+    // 8-byte signature + IHDR (4 length + 4 type + 13 data + 4 CRC).
+    const AFTER_IHDR: usize = 8 + 25;
+    let mut chunk_body = b"pHYs".to_vec();
+    chunk_body.extend_from_slice(&px_per_m.to_be_bytes());
+    chunk_body.extend_from_slice(&px_per_m.to_be_bytes());
+    chunk_body.push(1); // unit: metre
+    let mut out = Vec::with_capacity(png.len() + 21);
+    out.extend_from_slice(&png[..AFTER_IHDR]);
+    out.extend_from_slice(&9u32.to_be_bytes());
+    out.extend_from_slice(&chunk_body);
+    out.extend_from_slice(&crc32(&chunk_body).to_be_bytes());
+    out.extend_from_slice(&png[AFTER_IHDR..]);
+    out
+}
+
+/// CRC-32 (IEEE, reflected, as PNG specifies), bitwise: a handful of bytes per file.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for &byte in bytes {
+        crc ^= byte as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::TagFamily;
+
+    #[test]
+    fn png_is_true_scale_and_carries_its_resolution() {
+        let board = Board::aprilgrid(2, 2, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let png = board_png(&board, 254.0, false).unwrap();
+        // 254 dpi = 10 000 px/m: the pHYs chunk says so.
+        let at = png.windows(4).position(|w| w == b"pHYs").unwrap();
+        assert_eq!(&png[at + 4..at + 8], &10_000u32.to_be_bytes());
+        let image = image::load_from_memory(&png).unwrap().into_luma8();
+        // Sheet 0.09 m + 2 x 0.01 m margin wide = 1100 px; height adds the 25 mm strip.
+        assert_eq!(image.height(), 1100 + 250);
+        // Row 105 crosses the top border row of tags 2 and 3: two black runs of 0.04 m
+        // (400 px) separated by the 0.01 m gap (100 px).
+        let row: Vec<bool> = (0..image.width())
+            .map(|x| image.get_pixel(x, 105)[0] == 0)
+            .collect();
+        let mut runs = Vec::new();
+        let mut x = 0;
+        while x < row.len() {
+            let start = x;
+            while x < row.len() && row[x] == row[start] {
+                x += 1;
+            }
+            runs.push((row[start], x - start));
+        }
+        let black: Vec<usize> = runs.iter().filter(|r| r.0).map(|r| r.1).collect();
+        assert_eq!(black, vec![400, 400], "{runs:?}");
+        let gap = runs.iter().position(|r| r.0).unwrap() + 1;
+        assert_eq!(runs[gap], (false, 100));
+        assert_eq!(crc32(b"IEND"), 0xAE42_6082);
+    }
+}
