@@ -15,7 +15,6 @@ const FLOOR: &[&str] = &[
     "notice",
     "atomic_file",
     "yaml_file",
-    "notice",
 ];
 
 /// Top-level module → the modules (besides the ground floor and itself) it may name.
@@ -28,7 +27,6 @@ fn allowed() -> BTreeMap<&'static str, &'static [&'static str]> {
         ("notice", &[][..]),
         ("atomic_file", &[][..]),
         ("yaml_file", &[][..]),
-        ("notice", &[][..]),
         // Pure maths: the floor only.
         ("solve", &[][..]),
         // The verdict on an answer: judged from the solver's figures (and held-out solves).
