@@ -371,3 +371,34 @@ fn file_shape_errors_name_yaml_forms_not_rust_types() {
         );
     }
 }
+
+/// Found while fixing the others: `replay` of an eye-in-hand session with the eye-to-hand config
+/// solved the frames as the other layout and printed metre-sized errors, exit 0. Now refused.
+#[test]
+fn replay_with_a_config_of_the_other_setup_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("count: 20", "count: 5")],
+    );
+    let session = dir.path().join("session");
+    let out = run_session(&config, &session);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let other = util::repo().join("configs/sim-cell-eye-to-hand.yaml");
+    let replay = handeye()
+        .arg("replay")
+        .arg(&session)
+        .arg("--config")
+        .arg(&other)
+        .output()
+        .unwrap();
+    let stderr = text(&replay.stderr);
+    assert_eq!(replay.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("recorded as eye_in_hand") && stderr.contains("eye_to_hand cell"),
+        "{stderr}"
+    );
+    assert!(!session.join("replay-result.yaml").exists());
+}

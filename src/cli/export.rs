@@ -39,7 +39,9 @@ pub struct ExportArgs {
     /// Write here instead of printing.
     #[arg(short = 'o', long)]
     output: Option<PathBuf>,
-    /// Frame id of the robot base (the frame T_base_flange is reported in).
+    /// Frame id of the robot base (the frame T_base_flange is reported in). `base_link` (the
+    /// UR ROS driver's, `base` turned 180° about z) exports the base-side transform turned to
+    /// match.
     #[arg(long, default_value = "base")]
     base_frame: String,
     /// Frame id of the flange.
@@ -77,6 +79,12 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         FormatArg::Json => ExportFormat::Json,
         FormatArg::Opencv => ExportFormat::Opencv,
     };
+    if handeye::formats::export::is_ur_base_link(&ids.base) {
+        eprintln!(
+            "note: {} is the UR ROS driver's base_link (base turned 180° about z): the base-side transform is exported in it",
+            ids.base
+        );
+    }
     let mounts = ResultFile::load_mounts(&args.result)?;
     let text = export(&mounts, format, &ids)
         .with_context(|| format!("exporting {}", args.result.display()))?;

@@ -28,8 +28,18 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
-    let config_path = args.config.clone().unwrap_or(manifest.config);
+    let config_path = args.config.clone().unwrap_or_else(|| manifest.config.clone());
     let prepared = cell::prepare(&config_path).context("preparing the cell")?;
+    // The frames were taken in the session's layout: solving them as the other one gives an
+    // answer of the wrong unknowns (a camera "on the flange" metres away).
+    anyhow::ensure!(
+        prepared.config.setup == manifest.setup,
+        "session {} was recorded as {}, but {} describes a {} cell: replay it with the config it was recorded with",
+        folder.root().display(),
+        manifest.setup,
+        config_path.display(),
+        prepared.config.setup
+    );
     // A cell without configured intrinsics replays with the ones its run estimated.
     let camera_model = if prepared.intrinsics_known {
         prepared.camera_model

@@ -213,25 +213,63 @@ pub struct NamedTransform {
     pub parent_from_child: Pose,
 }
 
-/// The two unknowns of a solved cell with their frame ids: camera mount first, target mount second.
+/// True when a base frame id names the UR ROS driver's `base_link` (also under a prefix, e.g.
+/// `ur/base_link`): that frame is the controller's `base` turned 180° about z.
+pub fn is_ur_base_link(base_id: &str) -> bool {
+    base_id.rsplit('/').next() == Some("base_link")
+}
+
+/// `T_base_link_base` of the UR ROS driver: `base_link` is `base` turned 180° about z (the
+/// controller reports `T_base_flange` in `base`, so a transform exported under `base_link` must
+/// be turned too, or it lands on the wrong side of the robot).
+pub fn ur_base_link_from_base() -> Pose {
+    Pose::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_axis_angle(
+            &nalgebra::Vector3::z_axis(),
+            std::f64::consts::PI,
+        ),
+    )
+}
+
+/// The two unknowns of a solved cell with their frame ids: camera mount first, target mount
+/// second. A transform whose parent is the robot base is expressed in the frame the base id names:
+/// under the UR ROS driver's `base_link` ([`is_ur_base_link`]) it is turned 180° about z.
 pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [NamedTransform; 2] {
     let (camera_key, target_key) = mounts.setup.unknown_names();
-    let (camera_parent, target_parent) = match mounts.setup {
-        Setup::EyeInHand => (&ids.flange, &ids.base),
-        Setup::EyeToHand => (&ids.base, &ids.flange),
+    let in_base_frame = |pose: Pose| {
+        if is_ur_base_link(&ids.base) {
+            ur_base_link_from_base() * pose
+        } else {
+            pose
+        }
+    };
+    let (camera_parent, target_parent, camera_mount, target_mount) = match mounts.setup {
+        Setup::EyeInHand => (
+            &ids.flange,
+            &ids.base,
+            mounts.camera_mount,
+            in_base_frame(mounts.target_mount),
+        ),
+        Setup::EyeToHand => (
+            &ids.base,
+            &ids.flange,
+            in_base_frame(mounts.camera_mount),
+            mounts.target_mount,
+        ),
     };
     [
         NamedTransform {
             key: camera_key,
             parent: camera_parent.clone(),
             child: ids.camera.clone(),
-            parent_from_child: mounts.camera_mount,
+            parent_from_child: camera_mount,
         },
         NamedTransform {
             key: target_key,
             parent: target_parent.clone(),
             child: ids.target.clone(),
-            parent_from_child: mounts.target_mount,
+            parent_from_child: target_mount,
         },
     ]
 }
@@ -470,6 +508,39 @@ mod tests {
             UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.5)),
         );
         assert_eq!(ur_pose_literal(&pose), "p[0.1, 0.2, 0.3, 0, 0, 0.5]");
+    }
+
+    #[test]
+    fn ur_base_link_exports_turn_the_base_side_transform_half_a_turn_about_z() {
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let m = mounts(setup);
+            let plain = named_transforms(&m, &FrameIds::default());
+            let ids = FrameIds {
+                base: "base_link".into(),
+                ..FrameIds::default()
+            };
+            let linked = named_transforms(&m, &ids);
+            for (p, l) in plain.iter().zip(&linked) {
+                if p.parent == "base" {
+                    assert_eq!(l.parent, "base_link");
+                    // A point of the child frame: x and y flip sign, z stays (180° about z).
+                    let point = nalgebra::Point3::new(0.1, 0.2, 0.3);
+                    let in_base = p.parent_from_child * point;
+                    let in_base_link = l.parent_from_child * point;
+                    assert!((in_base_link.x + in_base.x).abs() < 1e-12);
+                    assert!((in_base_link.y + in_base.y).abs() < 1e-12);
+                    assert!((in_base_link.z - in_base.z).abs() < 1e-12);
+                } else {
+                    assert_eq!(
+                        l.parent_from_child, p.parent_from_child,
+                        "flange side unchanged"
+                    );
+                }
+            }
+        }
+        assert!(is_ur_base_link("ur/base_link"));
+        assert!(!is_ur_base_link("base"));
+        assert!(!is_ur_base_link("base_link_inertia"));
     }
 
     #[test]
