@@ -28,7 +28,10 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
-    let config_path = args.config.clone().unwrap_or_else(|| manifest.config.clone());
+    let config_path = args
+        .config
+        .clone()
+        .unwrap_or_else(|| manifest.config.clone());
     let prepared = cell::prepare(&config_path).context("preparing the cell")?;
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
