@@ -48,7 +48,9 @@ use crate::solve::SolveError;
 pub mod evidence;
 pub mod rules;
 
-pub use evidence::{assess_result, assess_solved, coverage_notices, held_out, residual_notice};
+pub use evidence::{
+    assess_result, assess_solved, coverage_notices, held_out, residual_notice, working_distance_mm,
+};
 pub use rules::{assess, Evidence};
 
 /// Default accuracy the user wants for translation, mm.

@@ -106,7 +106,7 @@ impl ReportInput {
                 poses: self.pairs.len(),
                 translation_rms_mm: h.translation_rms_mm,
                 rotation_rms_deg: h.rotation_rms_deg,
-                working_distance_mm: working_distance_mm(&self.pairs),
+                working_distance_mm: verdict::working_distance_mm(&self.pairs),
             })
             .ok_or_else(|| "not computed for this page".to_string());
         Some(verdict::assess(&verdict::Evidence {
@@ -117,15 +117,6 @@ impl ReportInput {
             accuracy: verdict::Accuracy::default(),
         }))
     }
-}
-
-fn working_distance_mm(pairs: &[PosePair]) -> f64 {
-    let mut d: Vec<f64> = pairs
-        .iter()
-        .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
-        .collect();
-    d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Why the report could not be made.

@@ -170,7 +170,8 @@ pub fn scatter_residuals(sub: &Residuals, keep: &[usize], total: usize) -> Resid
     }
 }
 
-pub(super) fn median(values: &mut [f64]) -> f64 {
+/// Median of `values` (sorted in place); 0 when there are none.
+pub fn median(values: &mut [f64]) -> f64 {
     values.sort_by(f64::total_cmp);
     let n = values.len();
     if n == 0 {

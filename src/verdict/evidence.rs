@@ -19,14 +19,13 @@ use super::{
     RESIDUAL_FACTOR,
 };
 
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    match n {
-        0 => f64::NAN,
-        _ if n % 2 == 1 => values[n / 2],
-        _ => 0.5 * (values[n / 2 - 1] + values[n / 2]),
-    }
+/// Median camera-to-target distance of `pairs`, mm: where a held-out error is measured.
+pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
+    let mut d: Vec<f64> = pairs
+        .iter()
+        .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
+        .collect();
+    diagnostics::median(&mut d)
 }
 
 /// Held-out (leave-one-out) errors: each sample (at most [`MAX_HELD_OUT`], evenly spaced) is
@@ -71,12 +70,7 @@ pub fn held_out(
         poses: errors.len(),
         translation_rms_mm: rms(errors.iter().map(|e| e.0)),
         rotation_rms_deg: rms(errors.iter().map(|e| e.1)),
-        working_distance_mm: median(
-            pairs
-                .iter()
-                .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
-                .collect(),
-        ),
+        working_distance_mm: working_distance_mm(pairs),
     })
 }
 
