@@ -219,13 +219,9 @@ pub fn write_session_report(
     // `result.yaml` (same function, options and accuracy), so page and file agree.
     let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
     if let Some(primary) = input.answers.first() {
-        let held_out = crate::verdict::held_out(
-            input.setup,
-            &input.pairs,
-            &options,
-            &primary.calibration.outliers,
-        );
-        if let Ok(h) = &held_out {
+        let verdict =
+            crate::verdict::assess_solved(&primary.calibration, &input.pairs, &options, accuracy);
+        if let Some(h) = &verdict.figures.held_out {
             input.holdout = Some(super::HoldoutSummary {
                 description: format!(
                     "leave-one-out over {} samples (flagged outliers not counted)",
@@ -235,13 +231,7 @@ pub fn write_session_report(
                 translation_rms_mm: h.translation_rms_mm,
             });
         }
-        input.verdict = Some(crate::verdict::assess(&crate::verdict::Evidence {
-            calibration: &primary.calibration,
-            pairs: &input.pairs,
-            noise: &options.noise,
-            held_out: &held_out,
-            accuracy,
-        }));
+        input.verdict = Some(verdict);
     }
     let path = folder.root().join("report.html");
     super::write_report(&path, &input)?;
