@@ -238,12 +238,7 @@ impl Validator<'_> {
         if range.contains(value) {
             Ok(value)
         } else {
-            Err(ConfigError::OutOfRange {
-                file: self.file.to_path_buf(),
-                key: key.to_string(),
-                found: show(value),
-                expected: format!("a value in {range}"),
-            })
+            Err(self.out_of_range(key, show(value), range))
         }
     }
 
@@ -253,12 +248,16 @@ impl Validator<'_> {
         if range.contains(value as f64) {
             Ok(())
         } else {
-            Err(ConfigError::OutOfRange {
-                file: self.file.to_path_buf(),
-                key: key.to_string(),
-                found: value.to_string(),
-                expected: format!("a value in {range}"),
-            })
+            Err(self.out_of_range(key, value.to_string(), range))
+        }
+    }
+
+    fn out_of_range(&self, key: &str, found: String, range: Range) -> ConfigError {
+        ConfigError::OutOfRange {
+            file: self.file.to_path_buf(),
+            key: key.to_string(),
+            found,
+            expected: format!("a value in {range}"),
         }
     }
 
@@ -582,12 +581,8 @@ impl Validator<'_> {
             IMAGE_MARGIN_PX,
         )?;
         // In range, so the conversion cannot fail; checked all the same.
-        Duration::try_from_secs_f64(settle_s).map_err(|_| ConfigError::OutOfRange {
-            file: self.file.to_path_buf(),
-            key: "session.settle_s".into(),
-            found: show(settle_s),
-            expected: format!("a value in {SETTLE_S}"),
-        })
+        Duration::try_from_secs_f64(settle_s)
+            .map_err(|_| self.out_of_range("session.settle_s", show(settle_s), SETTLE_S))
     }
 
     /// The setup's two transforms from `section` (`nominal` or `simulation`).
