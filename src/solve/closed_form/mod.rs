@@ -194,11 +194,6 @@ pub(crate) fn kron(a: &Matrix3<f64>, b: &Matrix3<f64>) -> SMatrix<f64, 9, 9> {
     k
 }
 
-/// The cross-product matrix `[v]×`.
-pub(crate) fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    v.cross_matrix()
-}
-
 /// Least squares `min |M·x − r|` by SVD (rank-revealing; `None` when rank-deficient).
 pub(crate) fn least_squares(m: DMatrix<f64>, r: DVector<f64>) -> Option<DVector<f64>> {
     let columns = m.ncols();
