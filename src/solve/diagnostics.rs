@@ -17,7 +17,7 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::{closed_form, Axby, AxbyData, NoiseModel, Residuals, SolveError};
-use crate::geometry::{rotvec, Pose};
+use crate::geometry::{rms, rotvec, Pose};
 use crate::setup::{PosePair, Setup};
 
 pub use super::plausibility::{
@@ -114,13 +114,6 @@ pub fn check_rotation_diversity(base_from_flange: &[Pose]) -> Result<(), SolveEr
     Ok(())
 }
 
-fn rms(values: &[f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt()
-}
-
 /// Residuals of every sample of `data` against a solution.
 pub fn residuals(data: &AxbyData, solution: &Axby, noise: &NoiseModel) -> Residuals {
     let mut rotation_deg = Vec::with_capacity(data.len());
@@ -139,9 +132,9 @@ pub fn residuals(data: &AxbyData, solution: &Axby, noise: &NoiseModel) -> Residu
         );
     }
     Residuals {
-        rotation_rms_deg: rms(&rotation_deg),
+        rotation_rms_deg: rms(rotation_deg.iter().copied()),
         rotation_max_deg: rotation_deg.iter().copied().fold(0.0, f64::max),
-        translation_rms_mm: rms(&translation_mm),
+        translation_rms_mm: rms(translation_mm.iter().copied()),
         translation_max_mm: translation_mm.iter().copied().fold(0.0, f64::max),
         rotation_deg,
         translation_mm,
@@ -170,27 +163,30 @@ pub fn scatter_residuals(sub: &Residuals, keep: &[usize], total: usize) -> Resid
     }
 }
 
-/// Median of `values` (sorted in place); 0 when there are none.
-pub fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n == 0 {
-        0.0
-    } else if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
+/// Median of a copy of `values` (0 when there are none).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
     }
+}
+
+/// The outlier threshold of [`flag_outliers`], sigmas:
+/// `max(median + mad_factor · 1.4826 · MAD, floor_sigma)`.
+pub(super) fn outlier_threshold(normalised: &[f64], mad_factor: f64, floor_sigma: f64) -> f64 {
+    let med = median(normalised);
+    let deviations: Vec<f64> = normalised.iter().map(|v| (v - med).abs()).collect();
+    let mad = median(&deviations);
+    (med + mad_factor * 1.4826 * mad).max(floor_sigma)
 }
 
 /// Indices of samples whose whitened residual norm exceeds both
 /// `median + mad_factor · 1.4826 · MAD` and `floor_sigma`.
 pub fn flag_outliers(normalised: &[f64], mad_factor: f64, floor_sigma: f64) -> Vec<usize> {
-    let mut sorted = normalised.to_vec();
-    let med = median(&mut sorted);
-    let mut deviations: Vec<f64> = normalised.iter().map(|v| (v - med).abs()).collect();
-    let mad = median(&mut deviations);
-    let threshold = (med + mad_factor * 1.4826 * mad).max(floor_sigma);
+    let threshold = outlier_threshold(normalised, mad_factor, floor_sigma);
     normalised
         .iter()
         .enumerate()

@@ -39,8 +39,8 @@ pub const MAX_UNIT_SCALE: f64 = 3.0;
 const UNIT_SCALE_ROTATION_FIT_DEG: f64 = 5.0;
 
 fn median_norm(translations: impl Iterator<Item = Vector3<f64>>) -> f64 {
-    let mut norms: Vec<f64> = translations.map(|t| t.norm()).collect();
-    median(&mut norms)
+    let norms: Vec<f64> = translations.map(|t| t.norm()).collect();
+    median(&norms)
 }
 
 /// The units (of millimetres, centimetres and inches) that bring `distance_m` into the

@@ -18,7 +18,7 @@
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
-use super::diagnostics::{self, check_rotation_diversity, MIN_SAMPLES};
+use super::diagnostics::{self, check_rotation_diversity, median, MIN_SAMPLES};
 use super::refine::test_norms;
 use super::{closed_form, solve_subset, Axby, AxbyData, Calibration, SolveError, SolveOptions};
 use crate::notice::{Notice, NoticeKind};
@@ -45,17 +45,6 @@ const CHI3_MEDIAN: f64 = 1.5382;
 const EXCLUDE_FLOOR_SIGMA: f64 = 6.0;
 /// Seed of the consensus draws (any fixed value: the answer must not change between runs).
 const SEED: u64 = 0x4845_5945; // "HEYE"
-
-/// Median of a copy of `values`.
-fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => v[n / 2],
-        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
-}
 
 /// The samples consistent with a least-median-of-squares consensus start, or `None` when there
 /// are too few samples for one or no subset gives an answer.
@@ -191,7 +180,11 @@ pub(super) fn solve_robust(
     if dropped.is_empty() {
         return Ok(calibration);
     }
-    let threshold = outlier_threshold(&residuals.normalised, options);
+    let threshold = diagnostics::outlier_threshold(
+        &residuals.normalised,
+        options.outlier_mad_factor,
+        exclude_floor(options),
+    );
     let mut notices: Vec<Notice> = dropped
         .iter()
         .map(|&i| {
@@ -223,14 +216,6 @@ pub(super) fn solve_robust(
     calibration.outliers = outliers;
     calibration.dropped = dropped;
     Ok(calibration)
-}
-
-/// The threshold [`diagnostics::flag_outliers`] applied, sigmas.
-fn outlier_threshold(normalised: &[f64], options: &SolveOptions) -> f64 {
-    let med = median(normalised);
-    let deviations: Vec<f64> = normalised.iter().map(|v| (v - med).abs()).collect();
-    let mad = median(&deviations);
-    (med + options.outlier_mad_factor * 1.4826 * mad).max(exclude_floor(options))
 }
 
 /// The floor of the exclusion test, sigmas.

@@ -21,11 +21,11 @@ use super::{
 
 /// Median camera-to-target distance of `pairs`, mm: where a held-out error is measured.
 pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
-    let mut d: Vec<f64> = pairs
+    let distances: Vec<f64> = pairs
         .iter()
         .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
         .collect();
-    diagnostics::median(&mut d)
+    diagnostics::median(&distances)
 }
 
 /// Held-out (leave-one-out) errors: each sample (at most [`MAX_HELD_OUT`], evenly spaced) is

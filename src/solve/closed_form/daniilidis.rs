@@ -14,7 +14,7 @@ use nalgebra::{
     Quaternion, SMatrix, SVector, SymmetricEigen, Translation3, UnitQuaternion, Vector3,
 };
 
-use super::{skew, Motion};
+use super::Motion;
 use crate::geometry::Pose;
 use crate::solve::SolveError;
 
@@ -62,12 +62,14 @@ pub fn solve(motions: &[Motion]) -> Result<Pose, SolveError> {
         let (b, b_d) = (vector_part(&br), vector_part(&bd));
         let mut s = SMatrix::<f64, 6, 8>::zeros();
         s.fixed_view_mut::<3, 1>(0, 0).copy_from(&(a - b));
-        s.fixed_view_mut::<3, 3>(0, 1).copy_from(&skew(&(a + b)));
+        s.fixed_view_mut::<3, 3>(0, 1)
+            .copy_from(&(a + b).cross_matrix());
         s.fixed_view_mut::<3, 1>(3, 0).copy_from(&(a_d - b_d));
         s.fixed_view_mut::<3, 3>(3, 1)
-            .copy_from(&skew(&(a_d + b_d)));
+            .copy_from(&(a_d + b_d).cross_matrix());
         s.fixed_view_mut::<3, 1>(3, 4).copy_from(&(a - b));
-        s.fixed_view_mut::<3, 3>(3, 5).copy_from(&skew(&(a + b)));
+        s.fixed_view_mut::<3, 3>(3, 5)
+            .copy_from(&(a + b).cross_matrix());
         normal += s.transpose() * s * m.weight;
     }
     // Right singular vectors of the stack = eigenvectors of its normal matrix.

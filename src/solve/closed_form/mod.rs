@@ -44,8 +44,9 @@ pub const MIN_MOTION_ANGLE_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// Solves `A_i = X·B_i·Y` with the closed form `method`. [`Method::Iterative`] and
 /// [`Method::Refined`] are not closed forms and give [`SolveError::ClosedFormFailed`].
 pub fn solve(method: Method, data: &AxbyData) -> Result<Axby, SolveError> {
-    let ax_xb = |x: Result<Pose, SolveError>| -> Result<Axby, SolveError> {
-        let x = x?;
+    // The AX = XB methods: `X` from the relative motions, then `Y` from `X`.
+    let ax_xb = |solve_x: fn(&[Motion]) -> Result<Pose, SolveError>| {
+        let x = solve_x(&relative_motions(data)?)?;
         Ok(Axby {
             x,
             y: y_from_x(data, &x)?,
@@ -54,11 +55,11 @@ pub fn solve(method: Method, data: &AxbyData) -> Result<Axby, SolveError> {
     match method {
         Method::ClosedForm => solve_axby(data),
         Method::Li => li::solve(data),
-        Method::Tsai => ax_xb(tsai::solve(&relative_motions(data)?)),
-        Method::Park => ax_xb(park::solve(&relative_motions(data)?)),
-        Method::Horaud => ax_xb(horaud::solve(&relative_motions(data)?)),
-        Method::Andreff => ax_xb(andreff::solve(&relative_motions(data)?)),
-        Method::Daniilidis => ax_xb(daniilidis::solve(&relative_motions(data)?)),
+        Method::Tsai => ax_xb(tsai::solve),
+        Method::Park => ax_xb(park::solve),
+        Method::Horaud => ax_xb(horaud::solve),
+        Method::Andreff => ax_xb(andreff::solve),
+        Method::Daniilidis => ax_xb(daniilidis::solve),
         Method::Iterative | Method::Refined => Err(SolveError::ClosedFormFailed(
             "the iterative and refined methods are not closed forms",
         )),
@@ -192,11 +193,6 @@ pub(crate) fn kron(a: &Matrix3<f64>, b: &Matrix3<f64>) -> SMatrix<f64, 9, 9> {
         }
     }
     k
-}
-
-/// The cross-product matrix `[v]×`.
-pub(crate) fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    v.cross_matrix()
 }
 
 /// Least squares `min |M·x − r|` by SVD (rank-revealing; `None` when rank-deficient).

@@ -11,7 +11,7 @@
 
 use nalgebra::{Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use super::{ax_xb_translation, skew, Motion};
+use super::{ax_xb_translation, Motion};
 use crate::geometry::{rotvec, Pose};
 use crate::solve::SolveError;
 
@@ -32,7 +32,7 @@ pub fn solve(motions: &[Motion]) -> Result<Pose, SolveError> {
     for m in motions {
         let pa = modified_rodrigues(&m.a.rotation);
         let pb = modified_rodrigues(&m.b.rotation);
-        let lhs = skew(&(pa + pb));
+        let lhs = (pa + pb).cross_matrix();
         normal += lhs.transpose() * lhs * m.weight;
         rhs += lhs.transpose() * (pb - pa) * m.weight;
     }
