@@ -116,10 +116,7 @@ pub fn run_session(
     let previous = setup.folder.read_visits()?;
     if let Some(phantom) = previous.iter().find(|v| v.plan_index >= setup.plan.len()) {
         return Err(SessionError::Record {
-            file: setup
-                .folder
-                .root()
-                .join(SessionFolder::visit_name(phantom.plan_index)),
+            file: setup.folder.visit_path(phantom.plan_index),
             path: "plan_index".into(),
             message: format!(
                 "{} is not a pose of the plan ({} poses)",
@@ -465,10 +462,7 @@ fn accepted_sample(
     folder: &SessionFolder,
     visit: &PoseVisit,
 ) -> Result<Option<PosePair>, SessionError> {
-    let file = folder
-        .root()
-        .join(SessionFolder::visit_name(visit.plan_index));
-    Ok(match visit.poses(&file)? {
+    Ok(match visit.poses(&folder.visit_path(visit.plan_index))? {
         (base_from_flange, Some(camera_from_target)) => Some(sample_of(
             visit.plan_index,
             base_from_flange,
@@ -520,9 +514,7 @@ fn process(
     );
     if fault.at("full-disk-at-record", job.plan_index) {
         return Err(SessionError::Io {
-            path: folder
-                .root()
-                .join(SessionFolder::visit_name(job.plan_index)),
+            path: folder.visit_path(job.plan_index),
             source: std::io::Error::new(
                 std::io::ErrorKind::StorageFull,
                 "no space left on device (injected by HANDEYE_FAULT)",

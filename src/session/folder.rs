@@ -301,7 +301,8 @@ impl SessionFolder {
         PathBuf::from(format!("poses/{plan_index:03}.yaml"))
     }
 
-    fn visit_path(&self, plan_index: usize) -> PathBuf {
+    /// Record file of a plan pose in this folder.
+    pub fn visit_path(&self, plan_index: usize) -> PathBuf {
         self.root.join(Self::visit_name(plan_index))
     }
 
