@@ -2,10 +2,20 @@
 //! is flushed to disk, then renamed over the destination, so a crash or an error never leaves a
 //! half-written file behind. The file ends with the mode a plain `File::create` gives it: a new
 //! file `0o666` less the umask, a replaced file keeps its mode (a temporary file alone would be
-//! `0o600`). Depends on nothing of ours.
+//! `0o600`). The temporary files' names start with [`TEMP_PREFIX`], so a folder's owner can find
+//! and remove the ones a killed writer left ([`is_temp_name`]). Depends on nothing of ours.
 
 use std::io::Write;
 use std::path::Path;
+
+/// How the name of every temporary file [`write_atomic`] writes starts.
+pub const TEMP_PREFIX: &str = ".tmp";
+
+/// Whether a file name is one of [`write_atomic`]'s temporary files (left behind only when the
+/// writing process was killed between creating and renaming it).
+pub fn is_temp_name(name: &str) -> bool {
+    name.starts_with(TEMP_PREFIX)
+}
 
 /// Writes `contents` to `path` atomically (temp file in the same folder, fsync, rename), with the
 /// mode `File::create` would leave (see the module docs).
@@ -15,6 +25,7 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
         _ => Path::new("."),
     };
     let mut builder = tempfile::Builder::new();
+    builder.prefix(TEMP_PREFIX);
     // The kernel applies the umask to the mode asked for at creation, as for `File::create`.
     #[cfg(unix)]
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));

@@ -102,12 +102,6 @@ fn confirm_motion(prepared: &handeye::cell::PreparedCell, poses: usize) -> anyho
     Ok(())
 }
 
-/// Refuses to start unless the controller reports it can move (see
-/// [`handeye::cell::run::ensure_robot_ready`]).
-fn ensure_robot_ready(robot: &mut dyn handeye::robot::Robot) -> anyhow::Result<()> {
-    Ok(handeye::cell::run::ensure_robot_ready(robot)?)
-}
-
 /// A stop flag set by Ctrl-C, SIGTERM or SIGHUP, for the session loop.
 fn stop_on_ctrl_c() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));

@@ -61,11 +61,7 @@ pub fn run_adaptive_session(
     };
     let mut seen: Vec<Pose> = plan.iter().map(|(pose, _)| *pose).collect();
     for visit in setup.folder.read_visits()? {
-        let file = setup
-            .folder
-            .root()
-            .join(super::SessionFolder::visit_name(visit.plan_index));
-        seen.push(visit.poses(&file)?.0);
+        seen.push(visit.poses(&setup.folder.visit_path(visit.plan_index))?.0);
     }
     source.visited(&seen);
     let mut outcome = SessionOutcome::default();

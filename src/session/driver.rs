@@ -9,7 +9,7 @@
 //! fail on purpose at that pose — `abort-after-frame`, `abort-after-record` and
 //! `abort-after-samples` abort the process right after that write (as a crash would);
 //! `full-disk-at-record` fails the record write as a full disk does. The crash-consistency
-//! tests use it; nothing sets it otherwise.
+//! tests (`tests/crash.rs`) set it; it is not a user option and nothing else sets it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -116,10 +116,7 @@ pub fn run_session(
     let previous = setup.folder.read_visits()?;
     if let Some(phantom) = previous.iter().find(|v| v.plan_index >= setup.plan.len()) {
         return Err(SessionError::Record {
-            file: setup
-                .folder
-                .root()
-                .join(SessionFolder::visit_name(phantom.plan_index)),
+            file: setup.folder.visit_path(phantom.plan_index),
             path: "plan_index".into(),
             message: format!(
                 "{} is not a pose of the plan ({} poses)",
@@ -377,32 +374,30 @@ pub(crate) fn rebuild_samples(
     Ok(samples)
 }
 
-/// A failure injected on purpose by the `HANDEYE_FAULT` test hook (see the module docs).
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Fault {
-    AbortAfterFrame(usize),
-    AbortAfterRecord(usize),
-    AbortAfterSamples(usize),
-    FullDiskAtRecord(usize),
-}
+/// The `HANDEYE_FAULT=<fault>:<plan index>` test hook (see the module docs): the fault and the
+/// plan index it names, when the variable is set.
+#[derive(Debug)]
+struct Fault(Option<(String, usize)>);
 
 impl Fault {
-    fn from_env() -> Option<Fault> {
-        let value = std::env::var("HANDEYE_FAULT").ok()?;
-        let (kind, index) = value.split_once(':')?;
-        let index: usize = index.trim().parse().ok()?;
-        match kind.trim() {
-            "abort-after-frame" => Some(Fault::AbortAfterFrame(index)),
-            "abort-after-record" => Some(Fault::AbortAfterRecord(index)),
-            "abort-after-samples" => Some(Fault::AbortAfterSamples(index)),
-            "full-disk-at-record" => Some(Fault::FullDiskAtRecord(index)),
-            _ => None,
-        }
+    fn from_env() -> Fault {
+        let value = std::env::var("HANDEYE_FAULT").unwrap_or_default();
+        Fault(
+            value
+                .split_once(':')
+                .and_then(|(kind, index)| Some((kind.to_string(), index.parse().ok()?))),
+        )
     }
 
-    /// Aborts the process when `fault` is `this` (a crash: no destructor, no cleanup).
-    fn abort_if(fault: Option<Fault>, this: Fault) {
-        if fault == Some(this) {
+    /// Whether the hook asks for `kind` at `plan_index`.
+    fn at(&self, kind: &str, plan_index: usize) -> bool {
+        matches!(&self.0, Some((k, i)) if k == kind && *i == plan_index)
+    }
+
+    /// Aborts the process (a crash: no destructor, no cleanup) when the hook asks for `kind` at
+    /// `plan_index`.
+    fn abort_at(&self, kind: &str, plan_index: usize) {
+        if self.at(kind, plan_index) {
             std::process::abort();
         }
     }
@@ -433,7 +428,7 @@ fn spawn_worker(
                     camera_model.as_ref(),
                     &folder,
                     max_rms,
-                    fault,
+                    &fault,
                 )
                 .and_then(|visit| {
                     if let Some(sample) = accepted_sample(&folder, &visit)? {
@@ -443,7 +438,7 @@ fn spawn_worker(
                             pairs: samples.values().cloned().collect(),
                         };
                         dataset.save(&folder.samples_path())?;
-                        Fault::abort_if(fault, Fault::AbortAfterSamples(visit.plan_index));
+                        fault.abort_at("abort-after-samples", visit.plan_index);
                     }
                     Ok(visit)
                 });
@@ -467,10 +462,7 @@ fn accepted_sample(
     folder: &SessionFolder,
     visit: &PoseVisit,
 ) -> Result<Option<PosePair>, SessionError> {
-    let file = folder
-        .root()
-        .join(SessionFolder::visit_name(visit.plan_index));
-    Ok(match visit.poses(&file)? {
+    Ok(match visit.poses(&folder.visit_path(visit.plan_index))? {
         (base_from_flange, Some(camera_from_target)) => Some(sample_of(
             visit.plan_index,
             base_from_flange,
@@ -498,7 +490,7 @@ fn process(
     camera_model: Option<&CameraModel>,
     folder: &SessionFolder,
     max_rms: f64,
-    fault: Option<Fault>,
+    fault: &Fault,
 ) -> Result<PoseVisit, SessionError> {
     let frame_name = SessionFolder::frame_name(job.plan_index);
     let mut png = Vec::new();
@@ -510,7 +502,7 @@ fn process(
             source: Box::new(source),
         })?;
     folder.write_file(&frame_name, &png)?;
-    Fault::abort_if(fault, Fault::AbortAfterFrame(job.plan_index));
+    fault.abort_at("abort-after-frame", job.plan_index);
 
     let visit = measure(
         detector,
@@ -520,11 +512,9 @@ fn process(
         max_rms,
         PoseVisit::new(job.plan_index, &job.base_from_flange, frame_name),
     );
-    if fault == Some(Fault::FullDiskAtRecord(job.plan_index)) {
+    if fault.at("full-disk-at-record", job.plan_index) {
         return Err(SessionError::Io {
-            path: folder
-                .root()
-                .join(SessionFolder::visit_name(job.plan_index)),
+            path: folder.visit_path(job.plan_index),
             source: std::io::Error::new(
                 std::io::ErrorKind::StorageFull,
                 "no space left on device (injected by HANDEYE_FAULT)",
@@ -532,7 +522,7 @@ fn process(
         });
     }
     folder.write_visit(&visit)?;
-    Fault::abort_if(fault, Fault::AbortAfterRecord(job.plan_index));
+    fault.abort_at("abort-after-record", job.plan_index);
     Ok(visit)
 }
 

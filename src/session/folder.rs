@@ -31,7 +31,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use crate::atomic_file::write_atomic;
+use crate::atomic_file::{is_temp_name, write_atomic};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
 use crate::setup::{CornerObservation, Setup};
@@ -301,7 +301,8 @@ impl SessionFolder {
         PathBuf::from(format!("poses/{plan_index:03}.yaml"))
     }
 
-    fn visit_path(&self, plan_index: usize) -> PathBuf {
+    /// Record file of a plan pose in this folder.
+    pub fn visit_path(&self, plan_index: usize) -> PathBuf {
         self.root.join(Self::visit_name(plan_index))
     }
 
@@ -433,11 +434,6 @@ fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
         }
     }
     Ok(false)
-}
-
-/// Names of the temporary files [`write_atomic`] writes before renaming them into place.
-fn is_temp_name(name: &str) -> bool {
-    name.starts_with(".tmp")
 }
 
 /// Removes the temporary files a killed writer left in the session folder, `poses/` and

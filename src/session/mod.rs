@@ -49,7 +49,7 @@ pub enum SessionError {
     #[error("{} is not a session folder (no session.yaml){}", .0.display(), not_a_session_hint(.0))]
     NotASession(PathBuf),
     /// Another live process runs or resumes the session in this folder.
-    #[error("session folder {} is in use by {} (lock file {}/.lock): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.display())]
+    #[error("session folder {} is in use by {} (lock file {}): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.join(lock::LOCK_FILE).display())]
     Locked {
         /// The session folder.
         folder: PathBuf,

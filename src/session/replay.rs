@@ -30,9 +30,7 @@ pub fn redetect(
                 source: Box::new(source),
             })?
             .into_luma8();
-        let record_path = folder
-            .root()
-            .join(SessionFolder::visit_name(recorded.plan_index));
+        let record_path = folder.visit_path(recorded.plan_index);
         let (base_from_flange, _) = recorded.poses(&record_path)?;
         let visit = measure(
             &detector,
