@@ -137,11 +137,13 @@ pub struct SessionFolder {
 /// A new session folder's default path: `parent/<prefix>YYYY-MM-DD_HH-MM-SS` of `now` in UTC,
 /// with `-2`, `-3`, ... appended when a folder of that name exists already.
 pub fn dated_session_path(parent: &Path, prefix: &str, now: std::time::SystemTime) -> PathBuf {
-    let secs = now
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let name = format!("{prefix}{}", utc_date_time(secs));
+    // humantime's RFC 3339 form `YYYY-MM-DDTHH:MM:SSZ`, made safe for a folder name.
+    let stamp = humantime::format_rfc3339_seconds(now)
+        .to_string()
+        .trim_end_matches('Z')
+        .replace('T', "_")
+        .replace(':', "-");
+    let name = format!("{prefix}{stamp}");
     let first = parent.join(&name);
     if !first.exists() {
         return first;
@@ -150,38 +152,6 @@ pub fn dated_session_path(parent: &Path, prefix: &str, now: std::time::SystemTim
         .map(|n| parent.join(format!("{name}-{n}")))
         .find(|p| !p.exists())
         .unwrap_or(first)
-}
-
-/// `YYYY-MM-DD_HH-MM-SS` (UTC) of a Unix time in seconds.
-fn utc_date_time(unix_secs: u64) -> String {
-    let (days, secs) = (unix_secs / 86_400, unix_secs % 86_400);
-    let (year, month, day) = civil_from_days(days);
-    format!(
-        "{year:04}-{month:02}-{day:02}_{:02}-{:02}-{:02}",
-        secs / 3600,
-        secs / 60 % 60,
-        secs % 60
-    )
-}
-
-/// The proleptic Gregorian date of a day count since 1970-01-01: counted in 400-year eras (each
-/// 146 097 days) of years starting on 1 March, so the leap day ends the year.
-fn civil_from_days(days: u64) -> (u64, u64, u64) {
-    let shifted = days + 719_468; // days from 0000-03-01 to 1970-01-01
-    let era = shifted / 146_097;
-    let day_of_era = shifted % 146_097;
-    let year_of_era =
-        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
-    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
-    let month_from_march = (5 * day_of_year + 2) / 153;
-    let day = day_of_year - (153 * month_from_march + 2) / 5 + 1;
-    let month = if month_from_march < 10 {
-        month_from_march + 3
-    } else {
-        month_from_march - 9
-    };
-    let year = era * 400 + year_of_era + u64::from(month <= 2);
-    (year, month, day)
 }
 
 impl SessionFolder {
