@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic;
-use handeye::formats::{export, validate_frame_id, ExportFormat, FrameIds};
+use handeye::formats::{export, ExportError, ExportFormat, FrameIds};
 use handeye::result::ResultFile;
 
 /// Export form on the command line.
@@ -64,14 +64,13 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         target: args.target_frame,
     };
     // Checked before anything is read or written, with the flag in the message.
-    for (flag, id) in [
-        ("--base-frame", &ids.base),
-        ("--flange-frame", &ids.flange),
-        ("--camera-frame", &ids.camera),
-        ("--target-frame", &ids.target),
-    ] {
-        validate_frame_id(id).with_context(|| format!("{flag} {id:?} is not a ROS frame id"))?;
-    }
+    ids.validate().map_err(|e| {
+        let flag = match &e {
+            ExportError::FrameId { role, .. } => format!("--{role}-frame"),
+            _ => "a frame flag".to_string(),
+        };
+        anyhow::Error::new(e).context(format!("{flag} is not a ROS frame id"))
+    })?;
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
         FormatArg::Urdf => ExportFormat::Urdf,

@@ -124,17 +124,15 @@ pub struct SolveArgs {
 
 impl SolveArgs {
     fn options(&self) -> anyhow::Result<SolveOptions> {
+        // Only the values given are checked (an absent sigma is estimated).
         for (name, value) in [
-            (
-                "--rotation-sigma-deg",
-                self.rotation_sigma_deg.unwrap_or(0.2),
-            ),
-            (
-                "--translation-sigma-mm",
-                self.translation_sigma_mm.unwrap_or(1.0),
-            ),
-            ("--robust-scale", self.robust_scale),
-        ] {
+            ("--rotation-sigma-deg", self.rotation_sigma_deg),
+            ("--translation-sigma-mm", self.translation_sigma_mm),
+            ("--robust-scale", Some(self.robust_scale)),
+        ]
+        .into_iter()
+        .filter_map(|(name, value)| Some((name, value?)))
+        {
             anyhow::ensure!(
                 value.is_finite() && value > 0.0,
                 "{name} = {value}: must be a positive number"

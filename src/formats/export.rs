@@ -310,16 +310,9 @@ pub fn export(
 /// One POSIX shell command line, each word quoted where the shell would otherwise interpret
 /// it (validated frame ids and numbers never need it; the quoting is a second guard).
 fn shell_line(words: &[String]) -> String {
-    words
-        .iter()
-        .map(|w| match shlex::try_quote(w) {
-            Ok(quoted) => quoted.into_owned(),
-            // Only a NUL byte cannot be quoted, and validated ids and numbers hold none; an
-            // empty word keeps the line visibly broken rather than silently shorter.
-            Err(_) => "''".to_string(),
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
+    // Only a NUL byte cannot be quoted, and validated ids and numbers hold none; an empty
+    // line is visibly broken rather than silently shorter.
+    shlex::try_join(words.iter().map(String::as_str)).unwrap_or_default()
 }
 
 fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {

@@ -86,7 +86,7 @@ pub enum TranslationProblem {
 
 /// A number for a message: plain when moderate, in exponent form when huge or tiny (Rust's
 /// `{}` would print all 301 digits of `1e300`).
-fn readable(v: f64) -> String {
+pub fn readable(v: f64) -> String {
     if v == 0.0 || (1e-4..1e6).contains(&v.abs()) || !v.is_finite() {
         format!("{v}")
     } else {

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::LookAt;
 use crate::camera_model::CameraModel;
+use crate::geometry::readable;
 use crate::vision::Board;
 
 /// How to generate a plan.
@@ -59,15 +60,6 @@ pub struct GenerateSpecError {
     pub expected: String,
 }
 
-/// A number as a person reads it (`1e300`, not three hundred digits).
-fn show(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
-    }
-}
-
 impl GenerateSpec {
     /// Checks the numbers describe a plan one can generate, and one of a sane size (at most
     /// [`MAX_PLAN_POSES`](super::MAX_PLAN_POSES) views).
@@ -98,21 +90,21 @@ impl GenerateSpec {
         {
             return bad(
                 "distance",
-                format!("[{}, {}]", show(near), show(far)),
+                format!("[{}, {}]", readable(near), readable(far)),
                 format!("[near, far] in metres with 0 < near <= far <= {MAX_DISTANCE_M}"),
             );
         }
         if !(self.max_tilt_deg > 0.0 && self.max_tilt_deg < 80.0) {
             return bad(
                 "max_tilt_deg",
-                show(self.max_tilt_deg),
+                readable(self.max_tilt_deg),
                 "a value in (0, 80) °".into(),
             );
         }
         if !(self.max_roll_deg >= 0.0 && self.max_roll_deg <= 180.0) {
             return bad(
                 "max_roll_deg",
-                show(self.max_roll_deg),
+                readable(self.max_roll_deg),
                 "a value in [0, 180] °".into(),
             );
         }
@@ -120,7 +112,7 @@ impl GenerateSpec {
             if !(0.0..=1.0).contains(&spread) {
                 return bad(
                     "image_spread",
-                    show(spread),
+                    readable(spread),
                     "a share of the room in [0, 1]".into(),
                 );
             }
