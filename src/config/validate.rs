@@ -18,7 +18,7 @@ use nalgebra::Vector3;
 
 use super::schema::{CameraConfig, ConfigFile, RobotConfig, ARM_JOINT_RANGES_DEG, JOINT_NAMES};
 use super::ConfigError;
-use crate::geometry::PoseYaml;
+use crate::geometry::{readable, PoseYaml};
 use crate::robot::{MotionLimits, WorkspaceBox};
 use crate::setup::{CellTransforms, Setup};
 use crate::vision::DetectorOptions;
@@ -83,24 +83,14 @@ impl fmt::Display for Range {
             f,
             "{}{}, {}{}",
             if self.min_open { "(" } else { "[" },
-            show(self.min),
-            show(self.max),
+            readable(self.min),
+            readable(self.max),
             if self.max_open { ")" } else { "]" },
         )?;
         if !self.unit.is_empty() {
             write!(f, " {}", self.unit)?;
         }
         Ok(())
-    }
-}
-
-/// A number as a person reads it: plain for everyday magnitudes, with an exponent otherwise
-/// (`1e300`, not three hundred digits).
-pub fn show(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
     }
 }
 
@@ -238,7 +228,7 @@ impl Validator<'_> {
         if range.contains(value) {
             Ok(value)
         } else {
-            Err(self.out_of_range(key, show(value), range))
+            Err(self.out_of_range(key, readable(value), range))
         }
     }
 
@@ -356,8 +346,8 @@ impl Validator<'_> {
                         format!(
                             "{} range [{}, {}] °: expected min < max",
                             JOINT_NAMES[i],
-                            show(*lo),
-                            show(*hi)
+                            readable(*lo),
+                            readable(*hi)
                         ),
                     ));
                 }
@@ -373,12 +363,12 @@ impl Validator<'_> {
                     return Err(ConfigError::OutOfRange {
                         file: self.file.to_path_buf(),
                         key: format!("robot.start_joints_deg[{i}]"),
-                        found: show(*q),
+                        found: readable(*q),
                         expected: format!(
                             "a value inside the {} joint range [{}, {}] ° (robot.joint_ranges_deg[{i}])",
                             JOINT_NAMES[i],
-                            show(lo),
-                            show(hi)
+                            readable(lo),
+                            readable(hi)
                         ),
                     });
                 }
@@ -491,8 +481,8 @@ impl Validator<'_> {
                 "workspace",
                 format!(
                     "expected min < max on every axis, found min[{axis}] = {} >= max[{axis}] = {}",
-                    show(w.min[axis]),
-                    show(w.max[axis])
+                    readable(w.min[axis]),
+                    readable(w.max[axis])
                 ),
             ));
         }
@@ -582,7 +572,7 @@ impl Validator<'_> {
         )?;
         // In range, so the conversion cannot fail; checked all the same.
         Duration::try_from_secs_f64(settle_s)
-            .map_err(|_| self.out_of_range("session.settle_s", show(settle_s), SETTLE_S))
+            .map_err(|_| self.out_of_range("session.settle_s", readable(settle_s), SETTLE_S))
     }
 
     /// The setup's two transforms from `section` (`nominal` or `simulation`).
