@@ -2,13 +2,11 @@
 //! binary, as a person runs it, and checks the fix.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 mod util;
 
-fn handeye() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_handeye"))
-}
+use util::handeye;
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
@@ -23,6 +21,14 @@ fn run_session(config: &Path, session: &Path) -> Output {
         .arg(session)
         .output()
         .unwrap()
+}
+
+/// [`run_session`] that must succeed; its stdout.
+fn run_session_ok(config: &Path, session: &Path) -> String {
+    let out = run_session(config, session);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    stdout
 }
 
 #[test]
@@ -51,15 +57,8 @@ fn the_no_intrinsics_demo_writes_its_report() {
 #[test]
 fn piped_output_has_one_line_per_pose() {
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 6")],
-    );
-    let out = run_session(&config, &dir.path().join("session"));
-    let stdout = text(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    let config = util::sim_cell(dir.path(), 6);
+    let stdout = run_session_ok(&config, &dir.path().join("session"));
     // Output captured here is a pipe, as with `| tee log`: the bar is hidden, the lines are not.
     for pose in 0..6 {
         let prefix = format!("pose {pose:>3}: ok, ");
@@ -142,12 +141,7 @@ fn default_session_names_are_utc_date_times_without_collisions() {
 #[test]
 fn run_without_out_names_the_session_by_its_start_time() {
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 4")],
-    );
+    let config = util::sim_cell(dir.path(), 4);
     let before = std::time::SystemTime::now();
     let out = handeye()
         .args(["run", "--config"])
@@ -195,15 +189,9 @@ fn run_without_out_names_the_session_by_its_start_time() {
 fn session_files_have_normal_modes() {
     use std::os::unix::fs::PermissionsExt;
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 4")],
-    );
+    let config = util::sim_cell(dir.path(), 4);
     let session = dir.path().join("session");
-    let out = run_session(&config, &session);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    run_session_ok(&config, &session);
     let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
     // What a plain File::create gives in this process (0o666 less the umask, which the test
     // binary shares with the handeye it started).
@@ -224,14 +212,9 @@ fn session_files_have_normal_modes() {
 #[test]
 fn solve_of_a_result_file_says_it_is_a_result_not_a_dataset() {
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 4")],
-    );
+    let config = util::sim_cell(dir.path(), 4);
     let session = dir.path().join("session");
-    assert!(run_session(&config, &session).status.success());
+    run_session_ok(&config, &session);
     let result = session.join("result.yaml");
     let out = handeye().arg("solve").arg(&result).output().unwrap();
     let stderr = text(&out.stderr);
@@ -260,16 +243,9 @@ fn solve_of_a_result_file_says_it_is_a_result_not_a_dataset() {
 #[test]
 fn run_ends_by_saying_where_everything_is_and_what_to_do_next() {
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 8")],
-    );
+    let config = util::sim_cell(dir.path(), 8);
     let session = dir.path().join("my session");
-    let out = run_session(&config, &session);
-    let stdout = text(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    let stdout = run_session_ok(&config, &session);
     let last: Vec<&str> = stdout.lines().rev().take(4).collect();
     let result = session.join("result.yaml");
     let expected = [
@@ -377,15 +353,9 @@ fn file_shape_errors_name_yaml_forms_not_rust_types() {
 #[test]
 fn replay_with_a_config_of_the_other_setup_is_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[("count: 20", "count: 5")],
-    );
+    let config = util::sim_cell(dir.path(), 5);
     let session = dir.path().join("session");
-    let out = run_session(&config, &session);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    run_session_ok(&config, &session);
     let other = util::repo().join("configs/sim-cell-eye-to-hand.yaml");
     let replay = handeye()
         .arg("replay")

@@ -5,13 +5,15 @@
 //! each now a regression test (the fixes are in `mocks/src/ur/`).
 
 use std::io::{Read, Write};
-use std::net::{Ipv4Addr, Shutdown, SocketAddr, TcpStream};
+use std::net::{Shutdown, SocketAddr, TcpStream};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, Once};
 use std::time::{Duration, Instant};
 
-use mocks::{MockUr, MockUrConfig, MockUrPorts};
+use mocks::MockUrConfig;
+
+mod common;
 
 static PANICS: AtomicUsize = AtomicUsize::new(0);
 static HOOK: Once = Once::new();
@@ -72,16 +74,7 @@ fn replay(name: &str) {
             default(info);
         }));
     });
-    let m = MockUr::start(MockUrConfig {
-        address: Ipv4Addr::LOCALHOST.into(),
-        ports: MockUrPorts {
-            rtde: 0,
-            dashboard: 0,
-            script: 0,
-        },
-        ..MockUrConfig::default()
-    })
-    .unwrap();
+    let m = common::loopback_mock(MockUrConfig::default());
     exchange(m.script_addr(), b"def rtde_control():\n  sync()\nend\n");
     let deadline = Instant::now() + Duration::from_secs(2);
     while !m.program_running() && Instant::now() < deadline {

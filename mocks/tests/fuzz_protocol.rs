@@ -12,25 +12,28 @@
 //! gets programs and garbage. The seed stream `tests/fuzz-corpus/mock_rtde/` (a ur_rtde-like
 //! handshake that starts a move) is also replayed with byte mutations.
 //!
-//! Known bug excluded (fix in progress): a timed move whose duration (distance / speed) does not
-//! fit a `Duration` panics (moveJ at speed 1e-300, or to a joint target of 1e300 or ±inf); the
-//! timed mock therefore only gets finite numbers in [-7, 7] (at least 1e-3 from zero, or 0, or
-//! -1), the instant-move mock gets any number (NaN, infinities, extremes). Known crashes are
-//! replayed by `fuzz_crashes.rs`. Each target prints its executions and time;
+//! The timed mock only gets finite numbers in [-7, 7] (at least 1e-3 from zero, or 0, or -1), so
+//! its moves end within a case; the instant-move mock gets any number (NaN, infinities,
+//! extremes). Inputs that crashed the mock (a timed move whose duration did not fit a
+//! `Duration`, 256 recipes on one connection) are replayed by `fuzz_crashes.rs`. Each target prints its executions and time;
 //! `HANDEYE_FUZZ_SCALE` multiplies cases and budget, `HANDEYE_FUZZ_SEED` changes the generator
 //! seed.
 
 use std::io::{Read, Write};
-use std::net::{Ipv4Addr, Shutdown, SocketAddr, TcpStream};
+use std::net::{Shutdown, SocketAddr, TcpStream};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, Once};
 use std::time::{Duration, Instant};
 
-use mocks::{MockFaults, MockUr, MockUrConfig, MockUrPorts};
+use mocks::{MockFaults, MockUr, MockUrConfig};
 use proptest::collection::vec;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRunner};
+
+mod common;
+
+use common::loopback_mock;
 
 static PANICS: AtomicUsize = AtomicUsize::new(0);
 static PANIC_MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
@@ -60,13 +63,7 @@ fn count_panics() {
 }
 
 fn mock(instant_moves: bool) -> MockUr {
-    MockUr::start(MockUrConfig {
-        address: Ipv4Addr::LOCALHOST.into(),
-        ports: MockUrPorts {
-            rtde: 0,
-            dashboard: 0,
-            script: 0,
-        },
+    loopback_mock(MockUrConfig {
         instant_moves,
         faults: MockFaults {
             // Exercise the stop path too: the fourth move of the instant mock halts half-way.
@@ -75,7 +72,6 @@ fn mock(instant_moves: bool) -> MockUr {
         },
         ..MockUrConfig::default()
     })
-    .expect("mock starts")
 }
 
 const OUTPUT_NAMES: &[&str] = &[
@@ -494,13 +490,39 @@ fn check_case(
     )))
 }
 
-fn report(target: &str, executed: usize, start: Instant, budget_skipped: usize, cases: u32) {
+/// Runs up to `cases` cases of `inputs` (both scaled), each through `case`, until `budget` (also
+/// scaled) is spent; prints the executions and fails on a failing case or when none ran.
+fn run_target<S: Strategy>(
+    target: &str,
+    cases: u32,
+    budget: Duration,
+    inputs: &S,
+    case: impl Fn(S::Value) -> Result<(), TestCaseError>,
+) {
+    let executed = AtomicUsize::new(0);
+    let over = AtomicUsize::new(0);
+    let start = Instant::now();
+    let budget = budget.mul_f64(scale());
+    let result = runner(target, cases).run(inputs, |value| {
+        if start.elapsed() > budget {
+            over.fetch_add(1, Ordering::Relaxed);
+            return Ok(());
+        }
+        executed.fetch_add(1, Ordering::Relaxed);
+        case(value)
+    });
+    let executed = executed.load(Ordering::Relaxed);
     let elapsed = start.elapsed().as_secs_f64();
     eprintln!(
-        "fuzz {target:<22} {executed:>5} executions in {elapsed:>6.2} s ({:>4.0}/s); {budget_skipped} of {} cases not run (budget)",
+        "fuzz {target:<22} {executed:>5} executions in {elapsed:>6.2} s ({:>4.0}/s); {} of {} cases not run (budget)",
         executed as f64 / elapsed.max(1e-9),
+        over.load(Ordering::Relaxed),
         ((cases as f64) * scale()).ceil()
     );
+    if let Err(e) = result {
+        panic!("{target}: {e}");
+    }
+    assert!(executed > 0, "{target}: nothing ran");
 }
 
 /// Clears a protective stop (as the operator would on the dashboard) and starts the emulated
@@ -515,11 +537,10 @@ fn fuzz_rtde(target: &str, timed: bool, cases: u32, budget: Duration) {
     let _one_at_a_time = serial();
     count_panics();
     let m = mock(!timed);
-    let executed = AtomicUsize::new(0);
-    let over = AtomicUsize::new(0);
-    let start = Instant::now();
-    let budget = budget.mul_f64(scale());
-    let result = runner(target, cases).run(
+    run_target(
+        target,
+        cases,
+        budget,
         &(
             any::<bool>(),
             any::<bool>(),
@@ -527,11 +548,6 @@ fn fuzz_rtde(target: &str, timed: bool, cases: u32, budget: Duration) {
             1usize..4,
         ),
         |(program, control_prefix, messages, pieces)| {
-            if start.elapsed() > budget {
-                over.fetch_add(1, Ordering::Relaxed);
-                return Ok(());
-            }
-            executed.fetch_add(1, Ordering::Relaxed);
             // Half the cases set up the control recipe (id 1) and start first, as ur_rtde does,
             // so that their commands reach the arm.
             let mut all = Vec::new();
@@ -549,22 +565,12 @@ fn fuzz_rtde(target: &str, timed: bool, cases: u32, budget: Duration) {
             })
         },
     );
-    report(
-        target,
-        executed.load(Ordering::Relaxed),
-        start,
-        over.load(Ordering::Relaxed),
-        cases,
-    );
     eprintln!(
         "fuzz {target:<22} reached the arm: {} moves started, {} completed, {} programs received",
         m.moves_started(),
         m.moves_completed(),
         m.scripts_received()
     );
-    if let Err(e) = result {
-        panic!("{target}: {e}");
-    }
     // Still serving after everything: a fresh client gets the protocol-version answer.
     assert!(exchange(m.rtde_addr(), &packet(b'V', &2u16.to_be_bytes()), 1).is_ok());
 }
@@ -593,20 +599,13 @@ fn fuzz_rtde_seed_stream_mutations() {
     assert!(!seeds.is_empty());
     let m = mock(true);
     let target = "rtde-seed-mutations";
-    let executed = AtomicUsize::new(0);
-    let over = AtomicUsize::new(0);
-    let start = Instant::now();
-    let budget = Duration::from_secs(4).mul_f64(scale());
-    let cases = 600;
     let edits = vec((any::<u32>(), any::<u8>(), 0u8..3), 1..6);
-    let result = runner(target, cases).run(
+    run_target(
+        target,
+        600,
+        Duration::from_secs(4),
         &(0..seeds.len(), edits, 1usize..4),
         |(index, edits, pieces)| {
-            if start.elapsed() > budget {
-                over.fetch_add(1, Ordering::Relaxed);
-                return Ok(());
-            }
-            executed.fetch_add(1, Ordering::Relaxed);
             let mut bytes = seeds[index].clone();
             for (at, value, op) in edits {
                 if bytes.is_empty() {
@@ -625,21 +624,11 @@ fn fuzz_rtde_seed_stream_mutations() {
             })
         },
     );
-    report(
-        target,
-        executed.load(Ordering::Relaxed),
-        start,
-        over.load(Ordering::Relaxed),
-        cases,
-    );
     eprintln!(
         "fuzz {target:<22} reached the arm: {} moves started, {} completed",
         m.moves_started(),
         m.moves_completed(),
     );
-    if let Err(e) = result {
-        panic!("{target}: {e}");
-    }
 }
 
 const DASHBOARD_LINES: &[&str] = &[
@@ -691,12 +680,10 @@ fn fuzz_dashboard_lines() {
     count_panics();
     let m = mock(true);
     let target = "dashboard";
-    let executed = AtomicUsize::new(0);
-    let over = AtomicUsize::new(0);
-    let start = Instant::now();
-    let budget = Duration::from_secs(4).mul_f64(scale());
-    let cases = 600;
-    let result = runner(target, cases).run(
+    run_target(
+        target,
+        600,
+        Duration::from_secs(4),
         &(
             vec(dashboard_line(), 1..20),
             any::<bool>(),
@@ -704,11 +691,6 @@ fn fuzz_dashboard_lines() {
             1usize..4,
         ),
         |(lines, crlf, final_newline, pieces)| {
-            if start.elapsed() > budget {
-                over.fetch_add(1, Ordering::Relaxed);
-                return Ok(());
-            }
-            executed.fetch_add(1, Ordering::Relaxed);
             let mut bytes = Vec::new();
             for (i, line) in lines.iter().enumerate() {
                 match line {
@@ -728,16 +710,6 @@ fn fuzz_dashboard_lines() {
             })
         },
     );
-    report(
-        target,
-        executed.load(Ordering::Relaxed),
-        start,
-        over.load(Ordering::Relaxed),
-        cases,
-    );
-    if let Err(e) = result {
-        panic!("{target}: {e}");
-    }
 }
 
 #[test]
@@ -746,11 +718,6 @@ fn fuzz_script_port() {
     count_panics();
     let m = mock(true);
     let target = "script";
-    let executed = AtomicUsize::new(0);
-    let over = AtomicUsize::new(0);
-    let start = Instant::now();
-    let budget = Duration::from_secs(3).mul_f64(scale());
-    let cases = 400;
     let program = prop_oneof![
         3 => (".{0,20}", vec(".{0,40}", 0..10), any::<bool>()).prop_map(|(name, body, end)| {
             let mut s = format!("def {name}():\n");
@@ -768,22 +735,11 @@ fn fuzz_script_port() {
         1 => Just(b"end\n".to_vec()),
         1 => Just(b"def\nend".to_vec()),
     ];
-    let result = runner(target, cases).run(&(program, 1usize..4), |(bytes, pieces)| {
-        if start.elapsed() > budget {
-            over.fetch_add(1, Ordering::Relaxed);
-            return Ok(());
-        }
-        executed.fetch_add(1, Ordering::Relaxed);
-        check_case(target, &bytes, || exchange(m.script_addr(), &bytes, pieces))
-    });
-    report(
+    run_target(
         target,
-        executed.load(Ordering::Relaxed),
-        start,
-        over.load(Ordering::Relaxed),
-        cases,
+        400,
+        Duration::from_secs(3),
+        &(program, 1usize..4),
+        |(bytes, pieces)| check_case(target, &bytes, || exchange(m.script_addr(), &bytes, pieces)),
     );
-    if let Err(e) = result {
-        panic!("{target}: {e}");
-    }
 }

@@ -3,25 +3,16 @@
 //! command handshake, and the injected faults. Every mock binds port 0 on 127.0.0.1.
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{Ipv4Addr, SocketAddr, TcpStream};
+use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
 use handeye::geometry::{pose_from_rotvec, rotvec};
-use mocks::{MockFaults, MockUr, MockUrConfig, MockUrPorts};
+use mocks::{MockFaults, MockUrConfig};
 use nalgebra::Vector3;
 
-fn mock(config: MockUrConfig) -> MockUr {
-    MockUr::start(MockUrConfig {
-        address: Ipv4Addr::LOCALHOST.into(),
-        ports: MockUrPorts {
-            rtde: 0,
-            dashboard: 0,
-            script: 0,
-        },
-        ..config
-    })
-    .expect("mock starts")
-}
+mod common;
+
+use common::loopback_mock as mock;
 
 struct Rtde(TcpStream);
 

@@ -4,12 +4,18 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use handeye::geometry::{translation_distance, Pose};
 
 /// The crate root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The `handeye` binary of this build, as a command to add arguments to.
+pub fn handeye() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_handeye"))
 }
 
 /// A public data set folder, or `None` (with the reason printed) when it is absent. The data
@@ -56,4 +62,11 @@ pub fn config_variant(dir: &Path, base: &str, name: &str, edits: &[(&str, &str)]
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// `configs/sim-cell.yaml` with a plan of `poses` poses instead of 20, written to
+/// `dir/cell.yaml`.
+pub fn sim_cell(dir: &Path, poses: usize) -> PathBuf {
+    let count = format!("count: {poses}");
+    config_variant(dir, "sim-cell.yaml", "cell.yaml", &[("count: 20", &count)])
 }
