@@ -1,6 +1,8 @@
 //! The calibration report of a simulated session: its structure (every section, one plot per
-//! kind, a thumbnail per sample, numbers equal to result.yaml) and, when Debian's `chromium`
-//! is installed, a real-browser check (no console messages, the screenshot shows the plots).
+//! kind, a frame per sample, numbers equal to result.yaml, the "use it" snippets equal to
+//! `handeye export`'s, the per-pose table, named axes and legends beside the data) and, when
+//! Debian's `chromium` is installed, a real-browser check (the verdict card first, no console
+//! messages, screenshots at desktop and laptop sizes that show the card and the plots).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -125,13 +127,28 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
             "plot {kind}"
         );
     }
-    // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere.
+    // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere: one
+    // inline script (copy buttons, sorting, the frame overlay), no URL but the SVG namespace.
     assert_eq!(count(&html, "<figure class=\"plot\""), PLOT_KINDS.len());
     assert_eq!(count(&html, "<svg"), PLOT_KINDS.len());
     assert!(!html.contains("http://") || count(&html, "http://") == count(&html, "xmlns"));
-    assert!(!html.contains("https://") && !html.contains("<script"));
-    // A thumbnail for each of the 10 samples.
-    assert_eq!(count(&html, "src=\"data:image/png;base64,"), 10);
+    assert!(!html.contains("https://"));
+    assert_eq!(count(&html, "<script"), 1);
+    assert_eq!(count(&html, "<script>"), 1, "the script is inline, no src");
+    assert!(!html.contains("<link") && !html.contains("@import"));
+    // A frame for each of the 10 samples, as an inline JPEG that decodes, wider than the grid
+    // shows it (a click shows it full size).
+    assert_eq!(count(&html, "src=\"data:image/jpeg;base64,"), 10);
+    let at = html.find("data:image/jpeg;base64,").unwrap() + "data:image/jpeg;base64,".len();
+    let encoded = &html[at..at + html[at..].find('"').unwrap()];
+    use base64::Engine as _;
+    let frame = image::load_from_memory(
+        &base64::engine::general_purpose::STANDARD
+            .decode(encoded)
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(frame.width() >= 640, "frame {} px wide", frame.width());
 
     // The numbers equal result.yaml's (printed with 9 decimals for poses, 3–4 for sigmas).
     let result_path = path.parent().unwrap().join("result.yaml");
@@ -189,6 +206,186 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     );
 }
 
+/// The page reads in the order a person needs it: the verdict card as the first thing in
+/// `<main>`, then "use it", the evidence, the details (SECTIONS is that order).
+#[test]
+fn report_reads_verdict_then_use_then_evidence_then_details() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let main = html.find("<main>").expect("a <main>") + "<main>".len();
+    assert!(
+        html[main..]
+            .trim_start()
+            .starts_with("<section id=\"verdict\""),
+        "{}",
+        &html[main..main + 200]
+    );
+    let at = |needle: &str| {
+        html.find(needle)
+            .unwrap_or_else(|| panic!("no {needle} in the page"))
+    };
+    let positions: Vec<usize> = SECTIONS
+        .iter()
+        .map(|id| at(&format!("<section id=\"{id}\"")))
+        .collect();
+    assert!(
+        positions.windows(2).all(|w| w[0] < w[1]),
+        "sections out of order: {SECTIONS:?} at {positions:?}"
+    );
+    let (evidence, details) = (at(">Evidence</h2>"), at(">Details</h2>"));
+    assert!(positions[1] < evidence && evidence < positions[2]);
+    assert!(positions[7] < details && details < positions[8]);
+}
+
+/// HTML text unescaping (the inverse of `report::escape`).
+fn unescape(text: &str) -> String {
+    text.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&#39;", "'")
+        .replace("&amp;", "&")
+}
+
+/// "Use it" shows, for ROS 2, URDF, UR and OpenCV, exactly what `handeye export` prints for
+/// the session's result.yaml, each with a copy button that copies that block.
+#[test]
+fn use_it_snippets_are_what_handeye_export_prints() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let result = path.parent().unwrap().join("result.yaml");
+    let section = &html[html.find("<section id=\"use\"").unwrap()..];
+    let section = &section[..section.find("</section>").unwrap()];
+    for format in ["ros2", "urdf", "ur", "opencv"] {
+        let out = util::handeye()
+            .arg("export")
+            .arg(&result)
+            .args(["--format", format])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let printed = String::from_utf8(out.stdout).unwrap();
+        let open = format!("<pre id=\"export-{format}\">");
+        let start = section
+            .find(&open)
+            .unwrap_or_else(|| panic!("no {format} snippet"))
+            + open.len();
+        let shown = unescape(&section[start..start + section[start..].find("</pre>").unwrap()]);
+        assert_eq!(shown, printed, "{format}");
+        assert_eq!(
+            count(
+                section,
+                &format!("<button type=\"button\" class=\"copy\" data-target=\"export-{format}\">")
+            ),
+            1,
+            "{format} copy button"
+        );
+    }
+}
+
+/// The per-pose table: one row per sample, the primary answer's residuals (result.yaml's), worst
+/// translation first; the headings the script sorts by carry their type.
+#[test]
+fn per_pose_table_lists_every_sample_worst_translation_first() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let result_path = path.parent().unwrap().join("result.yaml");
+    let residuals = ResultFile::load(&result_path)
+        .unwrap()
+        .to_calibration(&result_path)
+        .unwrap()
+        .residuals;
+    let table = &html[html
+        .find("<table class=\"sortable\" id=\"pose-table\">")
+        .unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    assert_eq!(count(table, "<th data-type=\"number\""), 5, "{table}");
+    let mut samples = Vec::new();
+    let mut translations = Vec::new();
+    for row in table.split("<tr class=\"").skip(1) {
+        let values: Vec<&str> = row
+            .split("data-value=\"")
+            .skip(1)
+            .map(|v| &v[..v.find('"').unwrap()])
+            .collect();
+        // sample, rotation, translation, normalised, reprojection
+        assert_eq!(values.len(), 5, "{row}");
+        let sample: usize = values[0].parse().unwrap();
+        let translation: f64 = values[2].parse().unwrap();
+        let expected = residuals.translation_mm[sample];
+        assert!(
+            (translation - expected).abs() < 1e-9,
+            "sample {sample}: {translation} vs result.yaml {expected}"
+        );
+        let rotation: f64 = values[1].parse().unwrap();
+        assert!((rotation - residuals.rotation_deg[sample]).abs() < 1e-9);
+        let reprojection: f64 = values[4].parse().unwrap();
+        assert!(
+            reprojection > 0.0 && reprojection < 5.0,
+            "{reprojection} px"
+        );
+        samples.push(sample);
+        translations.push(translation);
+    }
+    let mut sorted = samples.clone();
+    sorted.sort();
+    assert_eq!(sorted, (0..10).collect::<Vec<_>>());
+    assert!(
+        translations.windows(2).all(|w| w[0] >= w[1]),
+        "{translations:?}"
+    );
+}
+
+/// The `x` of the SVG `<text>` whose content is `label`, in the figure of `kind`.
+fn text_x(html: &str, kind: &str, label: &str) -> f64 {
+    let figure = &html[html.find(&format!("data-kind=\"{kind}\"")).unwrap()..];
+    // plotters writes each text on its own line.
+    let figure = figure[..figure.find("</figure>").unwrap()]
+        .replace(">\n", ">")
+        .replace("\n</text>", "</text>");
+    let end = figure
+        .find(&format!(">{label}</text>"))
+        .unwrap_or_else(|| panic!("{kind}: no text {label:?}"));
+    let open = figure[..end].rfind("<text").unwrap();
+    let x = &figure[open..end];
+    let x = &x[x.find("x=\"").unwrap() + 3..];
+    x[..x.find('"').unwrap()].parse().unwrap()
+}
+
+/// Issue #14: the residual charts had no y-axis names and the legend hid bars. Every axis is
+/// named, and every legend sits in a column right of the plot area (x beyond the data).
+#[test]
+fn plot_axes_are_named_and_legends_sit_beside_the_data() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    for (kind, axis) in [
+        ("residual-rotation", "rotation residual (deg)"),
+        ("residual-translation", "translation residual (mm)"),
+        ("residual-reprojection", "reprojection RMS (px)"),
+    ] {
+        assert!(text_x(&html, kind, "sample") > 0.0);
+        assert!(text_x(&html, kind, axis).is_finite());
+        // The plot is 900 px wide, its legend column the last 190.
+        assert!(text_x(&html, kind, "flagged outlier") > 710.0, "{kind}");
+        assert!(text_x(&html, kind, "result") > 710.0, "{kind}");
+    }
+    for label in [
+        "flange at each sample",
+        "x axis of a frame",
+        "board (medium)",
+    ] {
+        assert!(text_x(&html, "poses-3d", label) > 670.0, "{label}");
+    }
+    for name in ["base x (m)", "base y (m)", "base z (m), up"] {
+        text_x(&html, "poses-3d", name);
+    }
+    assert!(text_x(&html, "convergence", "refine cost ½Σr²") > 650.0);
+    assert!(text_x(&html, "convergence", "step within each phase") > 0.0);
+}
+
 fn chromium() -> Option<PathBuf> {
     ["chromium", "chromium-browser"].iter().find_map(|name| {
         let found = Command::new("which").arg(name).output().ok()?;
@@ -215,6 +412,22 @@ fn headless(browser: &Path, args: &[&str], page: &Path) -> std::process::Output 
         .expect("chromium runs")
 }
 
+/// The console lines chromium logged for the page (`--enable-logging=stderr`).
+fn console_lines(out: &std::process::Output) -> Vec<String> {
+    String::from_utf8_lossy(&out.stderr)
+        .lines()
+        .filter(|l| l.contains("CONSOLE"))
+        .map(str::to_string)
+        .collect()
+}
+
+/// Pixels of the GOOD card's background (#e8f5ec) in the top `rows` of a screenshot.
+fn good_card_pixels(shot: &image::RgbImage, rows: u32) -> usize {
+    shot.enumerate_pixels()
+        .filter(|(_, y, p)| *y < rows && p.0 == [232, 245, 236])
+        .count()
+}
+
 #[test]
 fn report_renders_in_headless_chromium_without_console_messages() {
     let Some(browser) = chromium() else {
@@ -222,22 +435,81 @@ fn report_renders_in_headless_chromium_without_console_messages() {
         return;
     };
     let (dir, path) = report();
+
+    // The check can fail: a page whose script logs an error shows a console line.
+    let control = dir.path().join("control.html");
+    std::fs::write(
+        &control,
+        "<!DOCTYPE html><html><body><script>console.error('control message')</script></body></html>",
+    )
+    .unwrap();
+    let out = headless(&browser, &["--dump-dom"], &control);
+    assert!(
+        console_lines(&out)
+            .iter()
+            .any(|l| l.contains("control message")),
+        "chromium's console logging did not show the control page's error:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // The DOM after the script ran: the verdict card is still the first thing in <main>, the
+    // overlay is hidden, and the script threw nothing (no console line).
+    let out = headless(&browser, &["--dump-dom"], path);
+    let console = console_lines(&out);
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    assert!(out.status.success());
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let main = dom.find("<main>").expect("a <main> in the DOM") + "<main>".len();
+    assert!(
+        dom[main..]
+            .trim_start()
+            .starts_with("<section id=\"verdict\""),
+        "{}",
+        &dom[main..main + 200]
+    );
+    assert!(dom.contains("<div id=\"overlay\" hidden=\"\""));
+
+    // A desktop and a laptop screen: the GOOD verdict card is on screen without scrolling.
+    // HANDEYE_UPDATE_SCREENSHOTS=1 keeps them as docs/report-desktop.png and
+    // docs/report-laptop.png (the README shows them).
+    for (name, width, height) in [("desktop", 1440u32, 900u32), ("laptop", 1366, 768)] {
+        let shot = dir.path().join(format!("report-{name}.png"));
+        let out = headless(
+            &browser,
+            &[
+                &format!("--window-size={width},{height}"),
+                &format!("--screenshot={}", shot.display()),
+            ],
+            path,
+        );
+        let console = console_lines(&out);
+        assert!(console.is_empty(), "{name}: console messages: {console:#?}");
+        let image = image::open(&shot).unwrap().to_rgb8();
+        assert_eq!((image.width(), image.height()), (width, height), "{name}");
+        let card = good_card_pixels(&image, height / 2);
+        assert!(
+            card > 100_000,
+            "{name}: only {card} px of the GOOD card in the top half of the screen"
+        );
+        if std::env::var_os("HANDEYE_UPDATE_SCREENSHOTS").is_some() {
+            let keep = repo().join("docs").join(format!("report-{name}.png"));
+            std::fs::copy(&shot, &keep).unwrap();
+            eprintln!("kept {}", keep.display());
+        }
+    }
+
+    // The whole page: the plots are drawn (count pixels of the plots' bar/marker blue).
     let shot = dir.path().join("report.png");
     let out = headless(
         &browser,
         &[
-            "--window-size=1280,6000",
+            "--window-size=1280,9000",
             &format!("--screenshot={}", shot.display()),
         ],
         path,
     );
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    // The page has no script: any console line is a broken resource or markup the browser rejected.
-    let console: Vec<&str> = stderr.lines().filter(|l| l.contains("CONSOLE")).collect();
+    let console = console_lines(&out);
     assert!(console.is_empty(), "console messages: {console:#?}");
-    assert!(out.status.success(), "chromium failed: {stderr}");
-
-    // The screenshot shows the plots: count pixels of the plots' bar/marker blue.
     let image = image::open(&shot).unwrap().to_rgb8();
     assert_eq!(image.width(), 1280);
     let blue = image

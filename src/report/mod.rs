@@ -1,12 +1,16 @@
-//! The calibration report: one self-contained HTML page (inline SVG plots and inline PNG
-//! thumbnails, no script, no network) that answers "is this calibration any good?".
+//! The calibration report: one self-contained HTML page (inline SVG plots, inline frames, one
+//! small inline script, nothing loaded from elsewhere) that answers "is this calibration any
+//! good, and how do I use it?".
 //!
 //! Owns the report's input ([`ReportInput`], with a list of [`ReportAnswer`]s shown side by side,
-//! e.g. the pose-space and a reprojection-space answer), the HTML layout with the verdict card
-//! first (GOOD / CHECK / REDO, made by `verdict`, the same as the terminal and `result.yaml`
-//! show) and the plain-language warnings (their health checks also from `verdict`). The verdict
-//! card, the per-answer transforms and their export forms ([`export_forms`]) are written by
-//! `sections.rs`; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
+//! e.g. the pose-space and a reprojection-space answer) and the page layout, in the order a
+//! person reads it: the verdict card (GOOD / CHECK / REDO, made by `verdict`, the same as the
+//! terminal and `result.yaml` show); "use it" (the primary answer as `handeye export` writes it
+//! for ROS 2, URDF, UR and OpenCV, with copy buttons); the evidence (findings — health checks
+//! also from `verdict` —, residual plots, a per-pose table that sorts on a click, frames that
+//! open full size, the cell sketch, rotation axes); the details (every number of every answer,
+//! solver convergence). The verdict card, the "use it" snippets, the per-answer transforms and
+//! their forms ([`export_forms`]) are written by `sections.rs`; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
 //! gathers the input from a session folder (frames, detected corners). Frames follow the crate
 //! convention (`T_a_b` maps points of frame `b` into frame `a`); numbers are shown in metres /
 //! radians where a file holds them and in mm / degrees where a person reads them. Depends on
@@ -31,8 +35,9 @@ use crate::setup::{PosePair, Setup};
 use crate::solve::{rotation_diversity, Calibration, NoiseModel};
 use crate::verdict::{self, Verdict};
 
+use base64::prelude::{Engine as _, BASE64_STANDARD};
 pub use sections::export_forms;
-use sections::{figure, transforms_section, verdict_card};
+use sections::{figure, transforms_section, use_section, verdict_card};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]
@@ -47,15 +52,18 @@ pub struct ReportAnswer {
     pub reprojection_px: Vec<Option<f64>>,
 }
 
-/// A frame thumbnail with detected corners and the reprojected board drawn on it.
+/// A frame with detected corners and the reprojected board drawn on it: shown small in the
+/// page's grid and full size in an overlay on a click.
 #[derive(Debug, Clone)]
 pub struct FrameThumbnail {
     /// Sample index (into [`ReportInput::pairs`]).
     pub sample: usize,
     /// Caption (sample id and plan index).
     pub caption: String,
-    /// The PNG bytes.
-    pub png: Vec<u8>,
+    /// The encoded image.
+    pub bytes: Vec<u8>,
+    /// Its media type (`image/jpeg`, `image/png`).
+    pub mime: &'static str,
 }
 
 /// Leave-one-out figures to show beside the answers (see `verify::leave_one_out`).
@@ -165,15 +173,19 @@ pub const PLOT_KINDS: [&str; 6] = [
     "convergence",
 ];
 
-/// The section ids, in page order.
-pub const SECTIONS: [&str; 8] = [
+/// The section ids, in page order: the verdict card; "use it" (export snippets); the evidence
+/// (findings, residual plots, per-pose table, frames, cell sketch, rotation axes); the details
+/// (full numbers of every answer, solver convergence).
+pub const SECTIONS: [&str; 10] = [
     "verdict",
+    "use",
     "warnings",
-    "transforms",
     "residuals",
-    "rotation-axes",
-    "poses-3d",
+    "per-pose",
     "frames",
+    "poses-3d",
+    "rotation-axes",
+    "transforms",
     "convergence",
 ];
 
@@ -185,7 +197,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     let mut html = String::new();
     let _ = write!(
         html,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>{}</style></head><body>\n<h1>Calibration report: {}</h1>\n<p class=\"meta\">setup <b>{}</b>, {} samples, answers: {}</p>\n",
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{}</title>\n<style>{}</style></head><body>\n<header><h1>Calibration report</h1>\n<p class=\"meta\"><span class=\"title\">{}</span> · setup <b>{}</b> · {} samples · answers: {}</p></header>\n<main>\n",
         escape(&input.title),
         CSS,
         escape(&input.title),
@@ -199,17 +211,22 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
             .join(", ")
     );
 
-    // The verdict first: GOOD / CHECK / REDO, the reason that decided it and what to do next.
-    if let Some(v) = input.verdict() {
-        verdict_card(&mut html, &v);
+    // 1. The verdict first: GOOD / CHECK / REDO, the reason that decided it and what to do next.
+    let verdict = input.verdict();
+    if let Some(v) = &verdict {
+        verdict_card(&mut html, v);
     }
 
-    // Then the warnings: the reader should see them before the numbers.
-    // Information (how the answer was made) is listed apart, never in the warnings box.
+    // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
+    use_section(&mut html, &input.answers[0], verdict.as_ref());
+
+    // 3. The evidence.
+    html.push_str("<h2 class=\"part\">Evidence</h2>\n");
+    // Information (how the answer was made) is listed apart, never in the warnings list.
     let notices = notices(input);
     let (attention, info): (Vec<&Notice>, Vec<&Notice>) =
         notices.iter().partition(|n| n.needs_attention());
-    html.push_str("<section id=\"warnings\"><h2>Warnings</h2>\n");
+    html.push_str("<section id=\"warnings\"><h3>Findings</h3>\n");
     if attention.is_empty() {
         html.push_str("<p class=\"ok\">No warnings: enough poses, good rotation spread, residuals as expected.</p>\n");
     } else {
@@ -225,7 +242,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
         html.push_str("</ul>\n");
     }
     if !info.is_empty() {
-        html.push_str("<h3>Notes</h3>\n<ul>\n");
+        html.push_str("<h4>Notes</h4>\n<ul>\n");
         for n in &info {
             let _ = writeln!(html, "<li class=\"info\">{}</li>", escape(&n.message));
         }
@@ -233,7 +250,48 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     }
     html.push_str("</section>\n");
 
-    html.push_str("<section id=\"transforms\"><h2>Transforms</h2>\n<div class=\"answers\">\n");
+    html.push_str("<section id=\"residuals\"><h3>Per-pose residuals</h3>\n<p>Measured against predicted T_camera_target for every sample. Red bars are flagged outliers; a grey stub marks a sample dropped from the final solve.</p>\n");
+    for which in [
+        plots::ResidualKind::Rotation,
+        plots::ResidualKind::Translation,
+        plots::ResidualKind::Reprojection,
+    ] {
+        figure(
+            &mut html,
+            which.kind(),
+            &plots::residual_bars(input, which)?,
+        );
+    }
+    html.push_str("</section>\n");
+
+    per_pose_table(&mut html, input);
+    frames_section(&mut html, input);
+
+    html.push_str("<section id=\"poses-3d\"><h3>Cell sketch</h3>\n<p>Where the primary answer puts the robot base, the board and the camera at every sample (base frame, metres; axis names on the frame). Each triad shows a frame's axes: x red, y green, z blue.</p>\n");
+    figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
+    html.push_str("</section>\n");
+
+    let diversity = rotation_diversity(
+        &input
+            .pairs
+            .iter()
+            .map(|p| p.base_from_flange)
+            .collect::<Vec<_>>(),
+    );
+    let _ = write!(
+        html,
+        "<section id=\"rotation-axes\"><h3>Relative rotation axes</h3>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
+        diversity.off_axis_deg
+    );
+    figure(
+        &mut html,
+        "rotation-axes",
+        &plots::rotation_axes(&input.pairs)?,
+    );
+    html.push_str("</section>\n");
+
+    // 4. The details: every number.
+    html.push_str("<h2 class=\"part\">Details</h2>\n<section id=\"transforms\"><h3>Transforms (full numbers)</h3>\n<div class=\"answers\">\n");
     for (k, answer) in input.answers.iter().enumerate() {
         transforms_section(&mut html, k, answer);
     }
@@ -249,73 +307,92 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     }
     html.push_str("</section>\n");
 
-    html.push_str("<section id=\"residuals\"><h2>Per-pose residuals</h2>\n<p>Measured against predicted T_camera_target for every sample; red bars are flagged outliers, grey bars were dropped from the final solve.</p>\n");
-    figure(
-        &mut html,
-        "residual-rotation",
-        &plots::residual_bars(input, plots::ResidualKind::Rotation)?,
-    );
-    figure(
-        &mut html,
-        "residual-translation",
-        &plots::residual_bars(input, plots::ResidualKind::Translation)?,
-    );
-    figure(
-        &mut html,
-        "residual-reprojection",
-        &plots::residual_bars(input, plots::ResidualKind::Reprojection)?,
-    );
-    html.push_str("</section>\n");
+    html.push_str("<section id=\"convergence\"><h3>Solver convergence</h3>\n<p>Update size per step of each phase of the iterative method (rotation rad, translation m) and the refinement cost per evaluation, log scale.</p>\n");
+    figure(&mut html, "convergence", &plots::convergence(input)?);
+    html.push_str("</section>\n</main>\n");
+    html.push_str(OVERLAY);
+    let _ = write!(html, "<script>{SCRIPT}</script>\n</body></html>\n");
+    Ok(html)
+}
 
-    let diversity = rotation_diversity(
-        &input
-            .pairs
-            .iter()
-            .map(|p| p.base_from_flange)
-            .collect::<Vec<_>>(),
-    );
-    let _ = write!(
+/// Status of a sample in the primary answer: `dropped`, `outlier` or `ok`.
+fn sample_status(calibration: &Calibration, sample: usize) -> &'static str {
+    if calibration.dropped.contains(&sample) {
+        "dropped"
+    } else if calibration.outliers.contains(&sample) {
+        "outlier"
+    } else {
+        "ok"
+    }
+}
+
+/// The per-pose table of the primary answer, worst translation residual first; every column
+/// sorts on a click (inline script), numbers by value.
+fn per_pose_table(html: &mut String, input: &ReportInput) {
+    let primary = &input.answers[0];
+    let c = &primary.calibration;
+    let value = |v: Option<&f64>| v.copied().filter(|v| v.is_finite());
+    let mut order: Vec<usize> = (0..input.pairs.len()).collect();
+    order.sort_by(|&a, &b| {
+        let key = |i: usize| value(c.residuals.translation_mm.get(i)).unwrap_or(f64::NEG_INFINITY);
+        key(b).total_cmp(&key(a))
+    });
+    let _ = writeln!(
         html,
-        "<section id=\"rotation-axes\"><h2>Relative rotation axes</h2>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
-        diversity.off_axis_deg
+        "<section id=\"per-pose\"><h3>Per pose</h3>\n<p>Residuals of <b>{}</b> per sample, worst translation first. Click a column heading to sort by it (again to reverse); click <i>frame</i> to see the frame full size.</p>\n<div class=\"table-wrap\"><table class=\"sortable\" id=\"pose-table\">\n<thead><tr><th data-type=\"number\" aria-sort=\"none\">sample</th><th data-type=\"text\" aria-sort=\"none\">id</th><th data-type=\"text\" aria-sort=\"none\">status</th><th data-type=\"number\" aria-sort=\"none\">rotation (°)</th><th data-type=\"number\" aria-sort=\"descending\">translation (mm)</th><th data-type=\"number\" aria-sort=\"none\">normalised (σ)</th><th data-type=\"number\" aria-sort=\"none\">reprojection (px)</th><th>frame</th></tr></thead>\n<tbody>",
+        escape(&primary.label)
     );
-    figure(
-        &mut html,
-        "rotation-axes",
-        &plots::rotation_axes(&input.pairs)?,
-    );
-    html.push_str("</section>\n");
+    let cell = |v: Option<f64>, decimals: usize| match v {
+        Some(v) => format!("<td data-value=\"{v}\">{v:.decimals$}</td>"),
+        None => "<td data-value=\"\">–</td>".to_string(),
+    };
+    for i in order {
+        let status = sample_status(c, i);
+        let frame = if input.thumbnails.iter().any(|t| t.sample == i) {
+            format!(
+                "<a href=\"#frame-{i}\" class=\"open-frame\" data-frame=\"frame-{i}\">frame</a>"
+            )
+        } else {
+            "–".to_string()
+        };
+        let _ = writeln!(
+            html,
+            "<tr class=\"{status}\" data-sample=\"{i}\"><td data-value=\"{i}\">{i}</td><td>{}</td><td>{status}</td>{}{}{}{}<td>{frame}</td></tr>",
+            escape(input.pairs[i].id.as_deref().unwrap_or("–")),
+            cell(value(c.residuals.rotation_deg.get(i)), 4),
+            cell(value(c.residuals.translation_mm.get(i)), 3),
+            cell(value(c.residuals.normalised.get(i)), 2),
+            cell(primary.reprojection_px.get(i).copied().flatten().filter(|v| v.is_finite()), 3),
+        );
+    }
+    html.push_str("</tbody></table></div>\n</section>\n");
+}
 
-    html.push_str("<section id=\"poses-3d\"><h2>Cell sketch</h2>\n<p>Robot base (large triad at the origin), the target and the camera at every sample, as the primary answer puts them; axes x red, y green, z blue.</p>\n");
-    figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
-    html.push_str("</section>\n");
-
-    html.push_str("<section id=\"frames\"><h2>Frames</h2>\n");
+/// The frames with detections, small in a grid; a click shows one full size in an overlay.
+fn frames_section(html: &mut String, input: &ReportInput) {
+    html.push_str("<section id=\"frames\"><h3>Frames</h3>\n");
     if input.thumbnails.is_empty() {
         html.push_str("<p>No frames recorded with these samples.</p>\n");
     } else {
         let _ = writeln!(
             html,
-            "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines).</p>\n<div class=\"thumbs\">",
+            "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>\n<div class=\"thumbs\">",
             escape(&input.answers[0].label)
         );
         for t in &input.thumbnails {
             let _ = writeln!(
                 html,
-                "<figure class=\"thumb\"><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
+                "<figure class=\"thumb\" id=\"frame-{}\"><img class=\"frame\" alt=\"{}\" src=\"data:{};base64,{}\"><figcaption>{}</figcaption></figure>",
+                t.sample,
                 escape(&t.caption),
-                base64(&t.png),
+                t.mime,
+                BASE64_STANDARD.encode(&t.bytes),
                 escape(&t.caption)
             );
         }
         html.push_str("</div>\n");
     }
     html.push_str("</section>\n");
-
-    html.push_str("<section id=\"convergence\"><h2>Solver convergence</h2>\n<p>Update size per iteration of the iterative method (rotation rad, translation m) and the refinement cost per evaluation, log scale.</p>\n");
-    figure(&mut html, "convergence", &plots::convergence(input)?);
-    html.push_str("</section>\n</body></html>\n");
-    Ok(html)
 }
 
 /// Renders the page and writes it atomically to `path`.
@@ -360,59 +437,136 @@ pub fn escape(text: &str) -> String {
     out
 }
 
-/// Standard base64 (RFC 4648, with padding) for inline images.
-pub fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            chunk.get(1).copied().unwrap_or(0),
-            chunk.get(2).copied().unwrap_or(0),
-        ];
-        let v = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for i in 0..4 {
-            if i <= chunk.len() {
-                out.push(ALPHABET[((v >> (18 - 6 * i)) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
-const CSS: &str =
-    "body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}\
-h2{border-bottom:1px solid #ccc;margin-top:1.6em}.answers{display:flex;flex-wrap:wrap;gap:1.5em}\
-.answer{flex:1 1 420px}table.forms{border-collapse:collapse;font-size:90%}\
+const CSS: &str = "\
+*{box-sizing:border-box}\
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1200px;margin:0 auto;padding:0.5em 1.2em 3em;color:#1d1d1f;line-height:1.45}\
+header h1{font-size:1.5em;margin:0.4em 0 0}.meta{color:#555;margin:0.2em 0 0.8em;overflow-wrap:anywhere}\
+h2.part{font-size:1.35em;border-bottom:2px solid #ccc;margin-top:1.8em;padding-bottom:0.15em}\
+h3{font-size:1.12em;margin:1.3em 0 0.4em}\
+section.verdict{border:2px solid #888;border-radius:8px;padding:0.2em 1.2em 0.6em;margin-top:0.5em;background:#f6f6f6}\
+section.verdict.good{border-color:#1e7e34;background:#e8f5ec}\
+section.verdict.check{border-color:#b35c00;background:#fff3e0}\
+section.verdict.redo{border-color:#b00020;background:#fdecee}\
+section.verdict h2{font-size:1.6em;margin:0.4em 0 0.2em;border:none}\
+.verdict .reason{font-size:1.1em;margin:0.2em 0}.verdict .next{font-weight:600;margin:0.3em 0}\
+.verdict ul.figures{margin:0.4em 0;padding-left:1.2em;color:#333}\
+.warning,.error,li.redo{color:#a40000}li.check{color:#8a4600}.info{color:#333}.ok{color:#1e7e34}\
+.frames-note{color:#444}.caution{font-weight:600;color:#a40000}\
+.snippets{display:grid;grid-template-columns:repeat(auto-fit,minmax(520px,1fr));gap:0.8em}\
+.snippet{border:1px solid #ccd;border-radius:6px;background:#fafbfc;min-width:0}\
+.snippet-head{display:flex;justify-content:space-between;align-items:center;padding:0.35em 0.7em;border-bottom:1px solid #ccd}\
+.snippet-head h4{margin:0;font-size:0.98em}\
+button.copy{font:inherit;font-size:0.9em;padding:0.15em 0.8em;border:1px solid #889;border-radius:4px;background:#fff;cursor:pointer}\
+button.copy:hover{background:#eef}\
+.snippet pre{margin:0;padding:0.5em 0.7em;overflow:auto;max-height:15em;font-size:0.8em}\
+.answers{display:flex;flex-wrap:wrap;gap:1.5em}.answer{flex:1 1 420px;min-width:0}\
+table.forms{border-collapse:collapse;font-size:90%}\
 table.forms th{text-align:left;padding:2px 8px;vertical-align:top;font-weight:normal;color:#555}\
-table.forms code{white-space:pre}.warning,.error{color:#a40000}\
-section.verdict{border:2px solid #888;padding:0 1em;margin-top:1em}section.verdict.good{border-color:#060}\
-section.verdict.check{border-color:#b60}section.verdict.redo{border-color:#a40000}\
-section.verdict h2{border:none}li.check{color:#b60}li.redo{color:#a40000}.info{color:#333}.ok{color:#060}\
-figure.plot{margin:0.5em 0}figure.plot svg{max-width:100%;height:auto}\
-.thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%}\
-figure.thumb img{width:240px;display:block}";
+table.forms code{white-space:pre}.answer .forms-wrap{overflow-x:auto}\
+figure.plot{margin:0.5em 0}figure.plot svg{max-width:100%;height:auto;display:block}\
+.table-wrap{max-height:28em;overflow:auto;border:1px solid #ddd}\
+table.sortable{border-collapse:collapse;width:100%;font-size:0.92em}\
+table.sortable th{position:sticky;top:0;background:#eef0f3;text-align:right;padding:4px 8px;white-space:nowrap}\
+table.sortable th[data-type]{cursor:pointer}table.sortable th[data-type]:hover{background:#dde2ea}\
+table.sortable th[aria-sort=ascending]::after{content:' \\25B2'}table.sortable th[aria-sort=descending]::after{content:' \\25BC'}\
+table.sortable td{text-align:right;padding:2px 8px;border-top:1px solid #eee;font-variant-numeric:tabular-nums}\
+table.sortable tr.ok td{color:inherit}table.sortable tr.outlier td{color:#a40000}table.sortable tr.dropped td{color:#888}\
+.thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%;width:240px}\
+figure.thumb img{width:240px;display:block;cursor:zoom-in;border:1px solid #ccc}\
+#overlay{position:fixed;inset:0;background:rgba(0,0,0,0.85);display:flex;flex-direction:column;align-items:center;justify-content:center;z-index:10;cursor:zoom-out}\
+#overlay[hidden]{display:none}#overlay img{max-width:96vw;max-height:88vh;background:#fff}\
+#overlay p{color:#fff;margin:0.4em}\
+@media (max-width:700px){.snippets{grid-template-columns:1fr}}";
+
+/// The full-size frame overlay (filled and shown by [`SCRIPT`]).
+const OVERLAY: &str = "<div id=\"overlay\" hidden role=\"dialog\" aria-label=\"frame, full size\"><img alt=\"\"><p></p></div>\n";
+
+/// The page's only script: copy buttons, table sorting, the frame overlay. No network, no
+/// storage; the page reads fine without it.
+const SCRIPT: &str = r#"
+(function () {
+  function copyText(text, done) {
+    if (navigator.clipboard && window.isSecureContext) {
+      navigator.clipboard.writeText(text).then(done, function () { fallback(text, done); });
+    } else {
+      fallback(text, done);
+    }
+  }
+  function fallback(text, done) {
+    var area = document.createElement('textarea');
+    area.value = text;
+    document.body.appendChild(area);
+    area.select();
+    try { document.execCommand('copy'); done(); } catch (e) { /* nothing to copy to */ }
+    area.remove();
+  }
+  document.querySelectorAll('button.copy').forEach(function (button) {
+    button.addEventListener('click', function () {
+      var source = document.getElementById(button.dataset.target);
+      copyText(source.textContent, function () {
+        button.textContent = 'Copied';
+        setTimeout(function () { button.textContent = 'Copy'; }, 1500);
+      });
+    });
+  });
+  document.querySelectorAll('table.sortable').forEach(function (table) {
+    var heads = table.querySelectorAll('th');
+    heads.forEach(function (th, column) {
+      if (!th.dataset.type) { return; }
+      th.addEventListener('click', function () {
+        var descending = th.getAttribute('aria-sort') !== 'descending';
+        heads.forEach(function (other) { if (other.dataset.type) { other.setAttribute('aria-sort', 'none'); } });
+        th.setAttribute('aria-sort', descending ? 'descending' : 'ascending');
+        var body = table.tBodies[0];
+        var rows = Array.prototype.slice.call(body.rows);
+        var key = function (row) {
+          var cell = row.cells[column];
+          if (th.dataset.type === 'number') {
+            var v = parseFloat(cell.dataset.value);
+            return isNaN(v) ? null : v;
+          }
+          return cell.textContent;
+        };
+        rows.sort(function (a, b) {
+          var x = key(a), y = key(b);
+          if (x === null) { return y === null ? 0 : 1; }
+          if (y === null) { return -1; }
+          var order = x < y ? -1 : (x > y ? 1 : 0);
+          return descending ? -order : order;
+        });
+        rows.forEach(function (row) { body.appendChild(row); });
+      });
+    });
+  });
+  var overlay = document.getElementById('overlay');
+  var big = overlay.querySelector('img');
+  var caption = overlay.querySelector('p');
+  function show(figure) {
+    var img = figure.querySelector('img');
+    big.src = img.src;
+    big.alt = img.alt;
+    caption.textContent = figure.querySelector('figcaption').textContent;
+    overlay.hidden = false;
+  }
+  document.querySelectorAll('figure.thumb').forEach(function (figure) {
+    figure.querySelector('img').addEventListener('click', function () { show(figure); });
+  });
+  document.querySelectorAll('a.open-frame').forEach(function (link) {
+    link.addEventListener('click', function (event) {
+      var figure = document.getElementById(link.dataset.frame);
+      if (figure) { event.preventDefault(); show(figure); }
+    });
+  });
+  overlay.addEventListener('click', function () { overlay.hidden = true; });
+  document.addEventListener('keydown', function (event) {
+    if (event.key === 'Escape') { overlay.hidden = true; }
+  });
+})();
+"#;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn base64_matches_rfc4648_vectors() {
-        for (input, expected) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            assert_eq!(base64(input.as_bytes()), expected, "input {input:?}");
-        }
-    }
 
     #[test]
     fn escape_neutralises_markup() {

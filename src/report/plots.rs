@@ -4,6 +4,7 @@
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{ReportError, ReportInput};
 use crate::geometry::{rotvec, Pose};
@@ -40,7 +41,8 @@ pub enum ResidualKind {
 }
 
 impl ResidualKind {
-    fn kind(self) -> &'static str {
+    /// The plot's `data-kind` in the page.
+    pub fn kind(self) -> &'static str {
         match self {
             ResidualKind::Rotation => "residual-rotation",
             ResidualKind::Translation => "residual-translation",
@@ -56,6 +58,55 @@ impl ResidualKind {
             }
         }
     }
+    fn y_desc(self) -> &'static str {
+        match self {
+            ResidualKind::Rotation => "rotation residual (deg)",
+            ResidualKind::Translation => "translation residual (mm)",
+            ResidualKind::Reprojection => "reprojection RMS (px)",
+        }
+    }
+}
+
+/// Width of the legend column right of a plot, px: legends never cover data.
+const LEGEND_WIDTH: u32 = 190;
+const GREY: RGBColor = RGBColor(150, 150, 150);
+
+/// A legend entry's mark.
+enum Mark {
+    /// A filled square.
+    Square(RGBColor),
+    /// A line.
+    Line(RGBColor, u32),
+    /// A filled dot.
+    Dot(RGBColor),
+}
+
+/// Draws a legend (mark and label per entry) into `area`, the column beside a plot.
+fn legend(area: &Area<'_>, title: &str, entries: &[(Mark, String)]) -> PlotResult {
+    // (plotters' SVG text comes out at about 0.8 of the size asked for.)
+    let font = ("sans-serif", 16).into_font().color(&BLACK);
+    let mut y = 34;
+    area.draw(&Text::new(
+        title.to_string(),
+        (8, y - 14),
+        ("sans-serif", 16)
+            .into_font()
+            .style(FontStyle::Bold)
+            .color(&BLACK),
+    ))?;
+    for (mark, label) in entries {
+        match mark {
+            Mark::Square(c) => area.draw(&Rectangle::new([(8, y), (20, y + 12)], c.filled()))?,
+            Mark::Line(c, w) => area.draw(&PathElement::new(
+                [(6, y + 6), (22, y + 6)],
+                c.stroke_width(*w),
+            ))?,
+            Mark::Dot(c) => area.draw(&Circle::new((14, y + 6), 3, c.filled()))?,
+        }
+        area.draw(&Text::new(label.clone(), (28, y), font.clone()))?;
+        y += 22;
+    }
+    Ok(())
 }
 
 /// Grouped bars: one group per sample, one bar per answer; outliers red.
@@ -91,17 +142,21 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
         root.fill(&WHITE).map_err(&err)?;
+        let (root, key) = root.split_horizontally(WIDTH - LEGEND_WIDTH);
         let mut chart = ChartBuilder::on(&root)
             .caption(which.caption(), ("sans-serif", 16))
             .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(55)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
             .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..top)
             .map_err(&err)?;
         chart
             .configure_mesh()
             .disable_x_mesh()
             .x_desc("sample")
+            .y_desc(which.y_desc())
+            .label_style(("sans-serif", 16))
+            .axis_desc_style(("sans-serif", 17))
             .x_labels(n.min(25))
             .x_label_formatter(&|x| format!("{:.0}", x))
             .draw()
@@ -123,20 +178,11 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
                     fill.filled(),
                 ))
             });
-            chart
-                .draw_series(bars)
-                .map_err(&err)?
-                .label(answer.label.clone())
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled())
-                });
-            // Dropped samples have no residual: a grey tick on the axis says so.
+            chart.draw_series(bars).map_err(&err)?;
+            // Dropped samples have no residual in the fit: a grey stub on the axis says so.
             let dropped = answer.calibration.dropped.iter().map(|&i| {
                 let x0 = i as f64 - 0.4 + k as f64 * width;
-                Rectangle::new(
-                    [(x0, 0.0), (x0 + width * 0.9, top * 0.03)],
-                    RGBColor(150, 150, 150).filled(),
-                )
+                Rectangle::new([(x0, 0.0), (x0 + width * 0.9, top * 0.03)], GREY.filled())
             });
             chart.draw_series(dropped).map_err(&err)?;
         }
@@ -144,24 +190,30 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
             root.draw_text(
                 "no detected corners recorded for these samples",
                 &("sans-serif", 14).into_font().color(&BLACK),
-                (WIDTH as i32 / 2 - 160, HEIGHT as i32 / 2),
+                ((WIDTH - LEGEND_WIDTH) as i32 / 2 - 160, HEIGHT as i32 / 2),
             )
             .map_err(&err)?;
         }
-        chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(-10.0, -1.0), (-9.0, -1.0)],
-                OUTLIER.filled(),
-            )))
-            .map_err(&err)?
-            .label("outlier")
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], OUTLIER.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(&err)?;
+        let mut entries: Vec<(Mark, String)> = input
+            .answers
+            .iter()
+            .enumerate()
+            .map(|(k, a)| {
+                (
+                    Mark::Square(ANSWER_COLOURS[k % ANSWER_COLOURS.len()]),
+                    a.label.clone(),
+                )
+            })
+            .collect();
+        entries.push((Mark::Square(OUTLIER), "flagged outlier".into()));
+        if input
+            .answers
+            .iter()
+            .any(|a| !a.calibration.dropped.is_empty())
+        {
+            entries.push((Mark::Square(GREY), "dropped from the fit".into()));
+        }
+        legend(&key, "answer", &entries).map_err(&err)?;
         root.present().map_err(&err)?;
     }
     Ok(svg)
@@ -289,9 +341,10 @@ pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH, 600)).into_drawing_area();
         root.fill(&WHITE).map_err(&err)?;
+        let (root, key) = root.split_horizontally(WIDTH - LEGEND_WIDTH - 40);
         let mut chart = ChartBuilder::on(&root)
             .caption(
-                "cell sketch: base, target and camera poses (m, base frame)",
+                "cell sketch: base, board and camera (base frame, m)",
                 ("sans-serif", 16),
             )
             .margin(10)
@@ -306,10 +359,34 @@ pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
         });
         chart
             .configure_axes()
+            .label_style(("sans-serif", 15))
             .x_labels(5)
             .y_labels(5)
             .z_labels(5)
             .draw()
+            .map_err(&err)?;
+        // Axis names beside the edges that carry each axis' ticks, beyond the tick labels (with
+        // this view: base x along the front-left edge, base y along the front-right edge, base z
+        // up the left edge; chart y is base z, chart z is base y).
+        let (x, y, z) = (range(0), range(2), range(1));
+        let (x_mid, z_mid) = (0.5 * (x.start + x.end), 0.5 * (z.start + z.end));
+        let (x_out, z_out) = (0.22 * (x.end - x.start), 0.22 * (z.end - z.start));
+        let axis_font = ("sans-serif", 18)
+            .into_font()
+            .style(FontStyle::Bold)
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Center));
+        let names = [
+            ("base x (m)", (x_mid, y.start, z.end + z_out)),
+            ("base y (m)", (x.end + x_out, y.start, z_mid)),
+            ("base z (m), up", (x.start, y.end, z.end)),
+        ];
+        chart
+            .draw_series(
+                names
+                    .iter()
+                    .map(|(name, at)| Text::new(name.to_string(), *at, axis_font.clone())),
+            )
             .map_err(&err)?;
         let colours = [RED, GREEN, BLUE];
         let draw_triad =
@@ -324,7 +401,7 @@ pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
                 }
                 Ok::<(), DrawingAreaErrorKind<std::io::Error>>(())
             };
-        draw_triad(&mut chart, &Pose::identity(), 2.0 * triad, 3).map_err(&err)?;
+        draw_triad(&mut chart, &Pose::identity(), 2.0 * triad, 4).map_err(&err)?;
         for t in &targets {
             draw_triad(&mut chart, t, 1.5 * triad, 3).map_err(&err)?;
         }
@@ -333,9 +410,40 @@ pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
         }
         let flange_points = flanges.iter().map(|p| {
             let o = p.translation.vector;
-            Circle::new((o.x, o.z, o.y), 2, BLACK.filled())
+            Circle::new((o.x, o.z, o.y), 3, BLACK.filled())
         });
         chart.draw_series(flange_points).map_err(&err)?;
+        // Name the single frames beside their origins.
+        let label_font = ("sans-serif", 17).into_font().color(&BLACK);
+        let mut names: Vec<(&str, Pose)> = vec![("base", Pose::identity())];
+        match input.setup {
+            Setup::EyeInHand => names.extend(targets.first().map(|t| ("board", *t))),
+            Setup::EyeToHand => names.extend(cameras.first().map(|c| ("camera", *c))),
+        }
+        chart
+            .draw_series(names.iter().map(|(name, pose)| {
+                let o = pose.translation.vector;
+                Text::new(name.to_string(), (o.x, o.z, o.y), label_font.clone())
+            }))
+            .map_err(&err)?;
+        let (many, one) = match input.setup {
+            Setup::EyeInHand => ("camera at each sample (small)", "board (medium)"),
+            Setup::EyeToHand => ("board at each sample (medium)", "camera (small)"),
+        };
+        legend(
+            &key,
+            "frames",
+            &[
+                (Mark::Line(BLACK, 4), "robot base (large)".into()),
+                (Mark::Line(BLACK, 3), one.into()),
+                (Mark::Line(BLACK, 1), many.into()),
+                (Mark::Dot(BLACK), "flange at each sample".into()),
+                (Mark::Line(RED, 2), "x axis of a frame".into()),
+                (Mark::Line(GREEN, 2), "y axis of a frame".into()),
+                (Mark::Line(BLUE, 2), "z axis of a frame".into()),
+            ],
+        )
+        .map_err(&err)?;
         root.present().map_err(&err)?;
     }
     Ok(svg)
@@ -357,12 +465,9 @@ pub fn convergence(input: &ReportInput) -> Result<String, ReportError> {
             .collect()
     };
     let lines = [
-        ("iterative: rotation update (rad)", series(Phase::Rotation)),
-        (
-            "iterative: translation update (m)",
-            series(Phase::Translation),
-        ),
-        ("refine: cost ½Σr²", series(Phase::Refine)),
+        ("rotation update (rad)", series(Phase::Rotation)),
+        ("translation update (m)", series(Phase::Translation)),
+        ("refine cost ½Σr²", series(Phase::Refine)),
     ];
     let points = lines.iter().flat_map(|l| l.1.iter());
     let (mut lo, mut hi, mut len) = (f64::INFINITY, f64::NEG_INFINITY, 1.0f64);
@@ -374,49 +479,59 @@ pub fn convergence(input: &ReportInput) -> Result<String, ReportError> {
     if !lo.is_finite() {
         (lo, hi) = (1e-12, 1.0);
     }
+    let steps: Vec<usize> = lines.iter().map(|l| l.1.len()).collect();
+    let solver = &input.answers[0].calibration.solver;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
         root.fill(&WHITE).map_err(&err)?;
+        let (root, key) = root.split_horizontally(WIDTH - LEGEND_WIDTH - 60);
         let mut chart = ChartBuilder::on(&root)
             .caption(
                 format!(
-                    "solver convergence ({}, {} iterations)",
-                    input.answers[0].calibration.solver.method.name(),
-                    input.answers[0].calibration.solver.iterations
+                    "solver convergence ({}, {} iterations: {} rotation, {} translation, {} refine steps)",
+                    solver.method.name(),
+                    solver.iterations,
+                    steps[0],
+                    steps[1],
+                    steps[2]
                 ),
-                ("sans-serif", 16),
+                ("sans-serif", 15),
             )
             .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
+            .x_label_area_size(40)
+            .y_label_area_size(75)
             .build_cartesian_2d(0f64..len, ((lo * 0.5)..(hi * 2.0)).log_scale())
             .map_err(&err)?;
         chart
             .configure_mesh()
-            .x_desc("iteration / evaluation")
+            .x_desc("step within each phase")
+            .y_desc("update size / cost (log)")
+            .label_style(("sans-serif", 16))
+            .axis_desc_style(("sans-serif", 17))
             .y_label_formatter(&|y| format!("{y:.0e}"))
             .draw()
             .map_err(&err)?;
-        for (k, (label, points)) in lines.iter().enumerate() {
+        for (k, (_, points)) in lines.iter().enumerate() {
             let colour = ANSWER_COLOURS[k % ANSWER_COLOURS.len()];
             chart
                 .draw_series(LineSeries::new(
                     points.iter().copied(),
                     colour.stroke_width(2),
                 ))
-                .map_err(&err)?
-                .label(*label)
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 16, y)], colour.stroke_width(2))
-                });
+                .map_err(&err)?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(&err)?;
+        let entries: Vec<(Mark, String)> = lines
+            .iter()
+            .enumerate()
+            .map(|(k, (label, _))| {
+                (
+                    Mark::Line(ANSWER_COLOURS[k % ANSWER_COLOURS.len()], 2),
+                    label.to_string(),
+                )
+            })
+            .collect();
+        legend(&key, "phase", &entries).map_err(&err)?;
         root.present().map_err(&err)?;
     }
     Ok(svg)

@@ -1,17 +1,84 @@
 //! The report's per-answer sections: the verdict card (level, reason, next action, figures,
-//! further findings), the transforms of each answer with their 1-sigma and every export form
+//! further findings), "use it" (the export snippets with copy buttons), the transforms of each answer with their 1-sigma and every export form
 //! ([`export_forms`]), and the `<figure>` wrapper of a plot. Each writes HTML into the page that
 //! [`render_html`](super::render_html) builds.
 //!
 //! Depends on `verdict` (the card's content), `solve` (through [`ReportAnswer`]), `geometry`
-//! (the pose forms), `formats` (the UR literal) and the HTML escaping of its parent
+//! (the pose forms), `formats` (the exporters and the UR literal) and the HTML escaping of its parent
 //! [`report`](super).
 
 use std::fmt::Write;
 
 use super::{escape, ReportAnswer};
+use crate::formats::export::{export, ExportFormat, FrameIds};
+use crate::geometry::yaml::PoseRecord;
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::verdict::Verdict;
+use crate::verdict::{Level, Verdict};
+
+/// The forms "use it" shows, with their headings: what `handeye export --format <name>` writes.
+const USE_FORMS: [(ExportFormat, &str); 4] = [
+    (
+        ExportFormat::Ros2,
+        "ROS 2: static_transform_publisher (commands and a launch snippet)",
+    ),
+    (ExportFormat::Urdf, "URDF: fixed joints"),
+    (
+        ExportFormat::Ur,
+        "UR: TCP offset and base-frame pose (URScript)",
+    ),
+    (
+        ExportFormat::Opencv,
+        "OpenCV: FileStorage YAML (4x4 matrices)",
+    ),
+];
+
+/// "Use it": the primary answer in every form of [`USE_FORMS`], each the exact text
+/// `handeye export` writes with the default frame ids, in a `<pre>` with a copy button. A REDO
+/// verdict puts a caution above them; an answer the exporter refuses shows why instead.
+pub(super) fn use_section(html: &mut String, answer: &ReportAnswer, verdict: Option<&Verdict>) {
+    let ids = FrameIds::default();
+    let _ = writeln!(
+        html,
+        "<section id=\"use\"><h2>Use it</h2>\n<p>The transforms of <b>{}</b>, as <code>handeye export result.yaml --format …</code> writes them, with the frame ids <code>{}</code> (robot base), <code>{}</code> (flange), <code>{}</code> (camera optical frame: x right, y down, z forward) and <code>{}</code> (board). For other ids, or the UR ROS driver's <code>base_link</code> (<code>base</code> turned 180° about z), run <code>handeye export</code> with <code>--base-frame</code>, <code>--camera-frame</code>, …</p>",
+        escape(&answer.label),
+        ids.base,
+        ids.flange,
+        ids.camera,
+        ids.target
+    );
+    if verdict.is_some_and(|v| v.level == Level::Redo) {
+        html.push_str("<p class=\"caution\">The verdict is REDO: do not put these numbers on the cell; record again as the verdict says.</p>\n");
+    }
+    html.push_str("<div class=\"snippets\">\n");
+    // The transforms as result.yaml holds them (quaternion w ≥ 0, read back), so the page shows
+    // the very text `handeye export result.yaml` prints.
+    let mut mounts = answer.calibration.transforms();
+    for pose in [&mut mounts.camera_mount, &mut mounts.target_mount] {
+        if let Ok(read_back) = PoseRecord::from_pose(pose).to_pose("") {
+            *pose = read_back;
+        }
+    }
+    for (format, heading) in USE_FORMS {
+        let name = format.name();
+        match export(&mounts, format, &ids) {
+            Ok(text) => {
+                let _ = writeln!(
+                    html,
+                    "<div class=\"snippet\" data-format=\"{name}\"><div class=\"snippet-head\"><h4>{heading}</h4><button type=\"button\" class=\"copy\" data-target=\"export-{name}\">Copy</button></div><pre id=\"export-{name}\">{}</pre></div>",
+                    escape(&text)
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    html,
+                    "<div class=\"snippet\" data-format=\"{name}\"><div class=\"snippet-head\"><h4>{heading}</h4></div><p class=\"error\">not exported: {}</p></div>",
+                    escape(&e.to_string())
+                );
+            }
+        }
+    }
+    html.push_str("</div>\n</section>\n");
+}
 
 /// The verdict card: level, reason, next action, the accuracy asked for, the figures, and any
 /// further findings.
@@ -114,7 +181,7 @@ pub(super) fn transforms_section(html: &mut String, k: usize, answer: &ReportAns
                 html.push_str("<p class=\"sigma\">no uncertainty (only the refined method computes one)</p>\n");
             }
         }
-        html.push_str("<table class=\"forms\">\n");
+        html.push_str("<div class=\"forms-wrap\"><table class=\"forms\">\n");
         for (form, value, key) in export_forms(pose) {
             let key_attr = key
                 .map(|key| format!(" data-key=\"{name}.{key}\""))
@@ -125,7 +192,7 @@ pub(super) fn transforms_section(html: &mut String, k: usize, answer: &ReportAns
                 escape(&value)
             );
         }
-        html.push_str("</table>\n");
+        html.push_str("</table></div>\n");
     }
     let r = &c.residuals;
     let _ = writeln!(

@@ -6,7 +6,8 @@
 use std::collections::HashMap;
 use std::io::Cursor;
 
-use image::{imageops, ImageFormat, Rgb, RgbImage};
+use image::codecs::jpeg::JpegEncoder;
+use image::{imageops, Rgb, RgbImage};
 use nalgebra::Point2;
 
 use super::{FrameThumbnail, ReportAnswer, ReportError, ReportInput};
@@ -18,8 +19,11 @@ use crate::setup::CornerObservation;
 use crate::solve::{Calibration, NoiseModel};
 use crate::vision::{draw, Board};
 
-/// Width of a frame thumbnail, px.
-pub const THUMBNAIL_WIDTH: u32 = 320;
+/// Largest width of a frame in the report, px: the grid shows it small, a click full size.
+/// Narrower frames keep their size.
+pub const FRAME_WIDTH: u32 = 960;
+/// JPEG quality of the frames in the report (a page of 20 frames stays a few MB).
+const FRAME_JPEG_QUALITY: u8 = 80;
 
 /// The board and lens a session was recorded with (needed for reprojection and thumbnails).
 #[derive(Debug, Clone, Copy)]
@@ -84,7 +88,7 @@ pub fn from_session(
                 .calibration
                 .predict_camera_from_target(&pair.base_from_flange);
             let path = folder.root().join(&visit.frame);
-            let png = thumbnail(&path, optics, &predicted, &visit.corners_px)?;
+            let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
             thumbnails.push(FrameThumbnail {
                 sample,
                 caption: format!(
@@ -95,7 +99,8 @@ pub fn from_session(
                         .map(|r| format!("{r:.3} px"))
                         .unwrap_or_else(|| "-".into())
                 ),
-                png,
+                bytes,
+                mime: "image/jpeg",
             });
         }
     }
@@ -134,7 +139,9 @@ pub fn reprojection_rms(
     (count > 0).then(|| (sum / count as f64).sqrt())
 }
 
-fn thumbnail(
+/// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at `camera_from_target`
+/// (magenta outlines) and the detected corners (green crosses), as JPEG.
+fn annotated_frame(
     path: &std::path::Path,
     optics: Optics<'_>,
     camera_from_target: &Pose,
@@ -147,14 +154,12 @@ fn thumbnail(
     let grey = image::open(path)
         .map_err(|e| frame_error(e.to_string()))?
         .to_luma8();
-    let scale = f64::from(THUMBNAIL_WIDTH) / f64::from(grey.width().max(1));
+    let width = grey.width().clamp(1, FRAME_WIDTH);
+    let scale = f64::from(width) / f64::from(grey.width().max(1));
     let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
-    let small = imageops::resize(
-        &grey,
-        THUMBNAIL_WIDTH,
-        height,
-        imageops::FilterType::Triangle,
-    );
+    let small = imageops::resize(&grey, width, height, imageops::FilterType::Triangle);
+    // Lines and crosses readable at full size and in the small grid alike.
+    let stroke = if width >= 640 { 2 } else { 1 };
     let mut out = RgbImage::from_fn(small.width(), small.height(), |x, y| {
         let v = small.get_pixel(x, y)[0];
         Rgb([v, v, v])
@@ -178,16 +183,21 @@ fn thumbnail(
             .collect();
         for k in 0..4 {
             if let (Some(a), Some(b)) = (pixels[k], pixels[(k + 1) % 4]) {
-                draw::line(&mut out, a, b, 1, magenta);
+                draw::line(&mut out, a, b, stroke, magenta);
             }
         }
     }
     for c in corners_px {
-        draw::cross(&mut out, to_thumb(c.pixel), 3.0, Rgb([0, 230, 0]));
+        draw::cross(
+            &mut out,
+            to_thumb(c.pixel),
+            2.0 + 2.0 * f64::from(stroke),
+            Rgb([0, 230, 0]),
+        );
     }
     let mut bytes = Vec::new();
-    image::DynamicImage::ImageRgb8(out)
-        .write_to(&mut Cursor::new(&mut bytes), ImageFormat::Png)
+    JpegEncoder::new_with_quality(&mut Cursor::new(&mut bytes), FRAME_JPEG_QUALITY)
+        .encode_image(&out)
         .map_err(|e| frame_error(e.to_string()))?;
     Ok(bytes)
 }
