@@ -1,5 +1,6 @@
 //! Reading and writing the tool's YAML files: one reader (serde through `serde_path_to_error`, so
-//! every shape error names the YAML path), one atomic writer, and the one error type they share
+//! every shape error names the YAML path, located at the key's own line by [`key_line`] where
+//! the parser's location is missing or wrong), one atomic writer, and the one error type they share
 //! ([`FileError`]: the message names the file, the YAML path and the problem). Used by datasets,
 //! results, cell configs, plans, session records and recorded robot poses. Depends on
 //! `atomic_file` and `geometry` only.
@@ -36,7 +37,7 @@ pub enum FileError {
     /// The YAML does not have the expected shape (unknown key, wrong type, missing key...).
     // The serde error is part of the message (it is the problem itself, with no further cause),
     // so it is not also a `#[source]`: `{:#}` chains would print it twice.
-    #[error("{}: {}", path.display(), shape_message(.yaml_path, .problem))]
+    #[error("{}: {}", path.display(), shape_message(.yaml_path, .problem, *.line))]
     Shape {
         /// The file.
         path: PathBuf,
@@ -44,6 +45,10 @@ pub enum FileError {
         yaml_path: String,
         /// What serde found.
         problem: serde_yaml_ng::Error,
+        /// The 1-based line of the key `yaml_path` names, when the parser's own location is
+        /// missing or points elsewhere (an enclosing section read as a whole); `None`: the
+        /// parser's location stands.
+        line: Option<usize>,
     },
     /// A pose with a bad value.
     #[error("{}: {problem}", path.display())]
@@ -87,14 +92,114 @@ pub enum FileError {
     },
 }
 
-/// `<yaml path>: <problem>`, the path once: serde_yaml_ng already starts some messages with it.
-fn shape_message(yaml_path: &str, problem: &serde_yaml_ng::Error) -> String {
-    let problem = plain_parser_message(problem);
-    if problem.starts_with(&format!("{yaml_path}: ")) {
-        problem
-    } else {
-        format!("{yaml_path}: {problem}")
+/// `<yaml path>: <problem>[ at line N]`, the path once: serde_yaml_ng starts some messages with
+/// the path (or the enclosing section's path), which is dropped. With `line`, the parser's own
+/// location (`at line L column C`) is replaced by the key's line.
+fn shape_message(yaml_path: &str, problem: &serde_yaml_ng::Error, line: Option<usize>) -> String {
+    let mut problem = plain_parser_message(problem);
+    if let Some((prefix, rest)) = problem.split_once(": ") {
+        let is_path_prefix = yaml_path == prefix
+            || yaml_path.starts_with(&format!("{prefix}."))
+            || yaml_path.starts_with(&format!("{prefix}["));
+        if is_path_prefix {
+            problem = rest.to_string();
+        }
     }
+    if let Some(line) = line {
+        if let Some(at) = problem.rfind(" at line ") {
+            problem.truncate(at);
+        }
+        problem = format!("{problem} at line {line}");
+    }
+    format!("{yaml_path}: {problem}")
+}
+
+/// The shape error of `text` (the file at `path`) at `yaml_path`: with the key's own line when
+/// the parser's location is missing or before the key (a section read as a whole).
+pub(crate) fn shape_error(
+    text: &str,
+    path: &Path,
+    yaml_path: String,
+    problem: serde_yaml_ng::Error,
+) -> FileError {
+    let key = key_line(text, &yaml_path);
+    let line = match (problem.location(), key) {
+        (Some(location), Some(key)) if location.line() >= key => None,
+        (_, key) => key,
+    };
+    FileError::Shape {
+        path: path.to_path_buf(),
+        yaml_path,
+        problem,
+        line,
+    }
+}
+
+/// The 1-based line of the key a YAML path (`camera.noise_sigma`, `samples[3].T_base_flange`)
+/// names in `text`, found by indentation (block style) or on the line (flow style); `None`
+/// when a key is not found (an index past the end of a list gives the list's line). A reading
+/// aid for messages, not a parser: comments are skipped, quoted keys are not looked for.
+pub(crate) fn key_line(text: &str, yaml_path: &str) -> Option<usize> {
+    let lines: Vec<&str> = text.lines().collect();
+    let indent = |line: &str| line.len() - line.trim_start().len();
+    let is_content = |line: &str| {
+        let t = line.trim_start();
+        !t.is_empty() && !t.starts_with('#')
+    };
+    // The lines after `at` that belong to a node starting in column `column` of line `at`.
+    let block_end = |at: usize, column: usize| {
+        (at + 1..lines.len())
+            .find(|&i| is_content(lines[i]) && indent(lines[i]) <= column)
+            .unwrap_or(lines.len())
+    };
+    // The column of `key` as a mapping key in `line`.
+    let key_column = |line: &str, key: &str| -> Option<usize> {
+        if !is_content(line) {
+            return None;
+        }
+        let body = line.trim_start();
+        let body = body.strip_prefix("- ").map(str::trim_start).unwrap_or(body);
+        let start = line.len() - body.len();
+        if body.starts_with(&format!("{key}:")) {
+            return Some(start);
+        }
+        ["{", ", ", ",", "{ "].iter().find_map(|before| {
+            line.find(&format!("{before}{key}:"))
+                .map(|at| at + before.len())
+        })
+    };
+    let (mut start, mut end) = (0, lines.len());
+    let mut found = None;
+    for part in yaml_path.split('.') {
+        let (key, indices) = part.split_at(part.find('[').unwrap_or(part.len()));
+        if !key.is_empty() {
+            let (at, column) =
+                (start..end).find_map(|i| key_column(lines[i], key).map(|c| (i, c)))?;
+            found = Some(at);
+            (start, end) = (at, block_end(at, column));
+        }
+        for index in indices
+            .split(['[', ']'])
+            .filter_map(|i| i.parse::<usize>().ok())
+        {
+            let items: Vec<usize> = (start + 1..end)
+                .filter(|&i| lines[i].trim_start().starts_with('-'))
+                .collect();
+            let Some(item_indent) = items.iter().map(|&i| indent(lines[i])).min() else {
+                return found.map(|at| at + 1);
+            };
+            let Some(&item) = items
+                .iter()
+                .filter(|&&i| indent(lines[i]) == item_indent)
+                .nth(index)
+            else {
+                return found.map(|at| at + 1);
+            };
+            found = Some(item);
+            (start, end) = (item, block_end(item, item_indent));
+        }
+    }
+    found.map(|at| at + 1)
 }
 
 /// The parser's message with the Rust type names serde puts in it (`expected struct PoseYaml`)
@@ -115,6 +220,20 @@ pub(crate) fn plain_parser_message(problem: &serde_yaml_ng::Error) -> String {
             let words = yaml_words(name, kind == "expected enum ");
             text.replace_range(at..name_start + name_len, &format!("expected {words}"));
         }
+    }
+    // Rust's number types, as the YAML should hold them.
+    for (rust, yaml) in [
+        ("usize", "a whole number ≥ 0"),
+        ("u64", "a whole number ≥ 0"),
+        ("u32", "a whole number ≥ 0"),
+        ("u16", "a whole number ≥ 0"),
+        ("u8", "a whole number ≥ 0"),
+        ("i64", "a whole number"),
+        ("i32", "a whole number"),
+        ("f64", "a number"),
+        ("f32", "a number"),
+    ] {
+        text = text.replace(&format!("expected {rust}"), &format!("expected {yaml}"));
     }
     text
 }
@@ -157,11 +276,7 @@ pub(crate) fn parse_yaml<T: serde::de::DeserializeOwned>(
     let deserializer = serde_yaml_ng::Deserializer::from_str(text);
     serde_path_to_error::deserialize(deserializer).map_err(|e| {
         let yaml_path = e.path().to_string();
-        FileError::Shape {
-            path: path.to_path_buf(),
-            yaml_path,
-            problem: e.into_inner(),
-        }
+        shape_error(text, path, yaml_path, e.into_inner())
     })
 }
 
@@ -175,4 +290,51 @@ pub(crate) fn write_yaml<T: Serialize>(value: &T, path: &Path) -> Result<(), Fil
         path: path.to_path_buf(),
         source,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::key_line;
+
+    const TEXT: &str = "\
+# a comment naming seed: 1
+setup: eye_in_hand
+robot:
+  backend: sim
+  seed: 7
+camera:
+  backend: sim
+
+  # noise_sigma: commented out
+  noise_sigma: 2.0
+  seed: 11
+plan:
+  generate: {count: 20, seed: 1}
+samples:
+  - a: 1
+    b: 2
+  - a: 3
+    b:
+      c: 4
+";
+
+    #[test]
+    fn key_line_follows_the_path_through_blocks_flow_mappings_and_lists() {
+        for (path, line) in [
+            ("setup", Some(2)),
+            ("robot.seed", Some(5)),
+            ("camera.seed", Some(11)),
+            ("camera.noise_sigma", Some(10)),
+            ("plan.generate.seed", Some(13)),
+            ("samples[0].b", Some(16)),
+            ("samples[1].a", Some(17)),
+            ("samples[1].b.c", Some(19)),
+            // Not there: the deepest key found, or nothing.
+            ("camera.missing", None),
+            ("nowhere", None),
+            ("samples[7].a", Some(14)),
+        ] {
+            assert_eq!(key_line(TEXT, path), line, "{path}");
+        }
+    }
 }

@@ -372,3 +372,199 @@ fn replay_with_a_config_of_the_other_setup_is_refused() {
     );
     assert!(!session.join("replay-result.yaml").exists());
 }
+
+/// `handeye plan check --config <config>`: (exit code, stdout, stderr).
+fn plan_check(config: &Path) -> (Option<i32>, String, String) {
+    let out = handeye()
+        .args(["plan", "check", "--config"])
+        .arg(config)
+        .output()
+        .unwrap();
+    (out.status.code(), text(&out.stdout), text(&out.stderr))
+}
+
+/// Issue #14, units: a nominal position in millimetres gave 20 lines of "unreachable … outside
+/// the workspace box" (the camera 86 m from the flange) without naming the key. Now one message
+/// names the key, says "looks like millimetres" and gives the value in metres; nothing is
+/// planned. Both mounts, both sections where a mount is read (`nominal`, `simulation`).
+#[test]
+fn nominal_positions_in_millimetres_are_one_message_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "T_flange_camera: {translation: [0.03, -0.07, 0.04]",
+            "T_flange_camera: {translation: [30, -70, 40]",
+            "nominal.T_flange_camera.translation: [30, -70, 40] looks like millimetres",
+            "write [0.03, -0.07, 0.04]",
+        ),
+        (
+            "T_base_target: {translation: [0.5, -0.15, 0.0]",
+            "T_base_target: {translation: [500, -150, 0]",
+            "nominal.T_base_target.translation: [500, -150, 0] looks like millimetres",
+            "write [0.5, -0.15, 0]",
+        ),
+        (
+            "T_flange_camera: {translation: [0.0312, -0.0694, 0.0447]",
+            "T_flange_camera: {translation: [31.2, -69.4, 44.7]",
+            "simulation.T_flange_camera.translation: [31.2, -69.4, 44.7] looks like millimetres",
+            "write [0.0312, -0.0694, 0.0447]",
+        ),
+    ];
+    for (from, to, named, metres) in cases {
+        let config = util::config_variant(dir.path(), "sim-cell.yaml", "cell.yaml", &[(from, to)]);
+        let (code, stdout, stderr) = plan_check(&config);
+        assert_eq!(code, Some(1), "{to}: {stdout}\n{stderr}");
+        assert!(
+            stderr.contains(named) && stderr.contains(metres),
+            "{stderr}"
+        );
+        assert!(stderr.contains("the config takes metres"), "{stderr}");
+        assert_eq!(stderr.trim().lines().count(), 1, "one message: {stderr}");
+        assert!(
+            !stdout.contains("unreachable") && !stderr.contains("unreachable"),
+            "{stdout}"
+        );
+    }
+    // Metres stay accepted, however far the board: a 5 m base offset is a (large) cell.
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(
+            "T_base_target: {translation: [0.5, -0.15, 0.0]",
+            "T_base_target: {translation: [5.0, -0.15, 0.0]",
+        )],
+    );
+    let (_, stdout, stderr) = plan_check(&config);
+    assert!(!stderr.contains("millimetres"), "{stdout}\n{stderr}");
+}
+
+/// Issue #14, units: a workspace box in millimetres was refused on its first number without
+/// showing the box. Now the message prints the box, says millimetres and gives it in metres; a
+/// single wild number in a box of metres is still named by its own key.
+#[test]
+fn a_workspace_box_in_millimetres_is_printed_and_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(
+            "workspace: {min: [-1.0, -1.0, 0.05], max: [1.2, 1.0, 1.3]}",
+            "workspace: {min: [-1000, -1000, 50], max: [1200, 1000, 1300]}",
+        )],
+    );
+    let (code, stdout, stderr) = plan_check(&config);
+    assert_eq!(code, Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains(
+            "workspace: the box min [-1000, -1000, 50], max [1200, 1000, 1300] looks like millimetres"
+        ) && stderr.contains("write min: [-1, -1, 0.05], max: [1.2, 1, 1.3]"),
+        "{stderr}"
+    );
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("max: [1.2, 1.0, 1.3]", "max: [1.2, 1000, 1.3]")],
+    );
+    let (_, _, stderr) = plan_check(&config);
+    assert!(
+        stderr.contains("workspace.max[1]: expected a value in [-10, 10] m, found 1000")
+            && !stderr.contains("millimetres"),
+        "{stderr}"
+    );
+}
+
+/// The 1-based line of the first line of `path` that contains `needle`.
+fn line_of(path: &Path, needle: &str) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .position(|l| l.contains(needle))
+        .unwrap_or_else(|| panic!("no {needle:?} in {}", path.display()))
+        + 1
+}
+
+/// Issue #14: nested config keys were reported at the wrong line (`camera: unknown field
+/// noise_sigm … at line 5` when it was line 20), some messages repeated their prefix
+/// (`solver.metod: solver: unknown field`), and a 5-element joint list was blamed on `robot`.
+/// Each now names the full key once, at the key's own line; Rust type names stay out.
+#[test]
+fn nested_config_keys_are_named_once_at_their_own_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, &str, &str, &str); 5] = [
+        (
+            "  noise_sigma: 2.0",
+            "  noise_sigm: 2.0",
+            "noise_sigm:",
+            "camera.noise_sigm: unknown field `noise_sigm`, expected one of `noise_sigma`",
+        ),
+        (
+            "start_joints_deg: [0, -90, 90, -90, -90, 0]",
+            "start_joints_deg: [0, -90, 90, -90, -90]",
+            "start_joints_deg:",
+            "robot.start_joints_deg: invalid length 5, expected an array of length 6",
+        ),
+        (
+            "  model: ur10e",
+            "  model: ur10e\n  joint_ranges_deg: [[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360]]",
+            "joint_ranges_deg:",
+            "robot.joint_ranges_deg: invalid length 5, expected an array of length 6",
+        ),
+        (
+            "  seed: 11",
+            "  seed: -11",
+            "seed: -11",
+            "camera.seed: invalid value: integer `-11`, expected a whole number ≥ 0",
+        ),
+        (
+            "method: refined",
+            "metod: refined",
+            "metod:",
+            "solver.metod: unknown field `metod`, expected one of `method`",
+        ),
+    ];
+    for (from, to, key, expected) in cases {
+        let config = util::config_variant(dir.path(), "sim-cell.yaml", "cell.yaml", &[(from, to)]);
+        let line = line_of(&config, key);
+        let (code, _, stderr) = plan_check(&config);
+        assert_eq!(code, Some(1), "{stderr}");
+        assert!(stderr.contains(expected), "{stderr}");
+        assert!(
+            stderr.contains(&format!(" at line {line}")),
+            "{key} is on line {line}: {stderr}"
+        );
+        assert_eq!(stderr.matches(" at line ").count(), 1, "{stderr}");
+        let (section, _) = expected.split_once('.').unwrap();
+        assert!(!stderr.contains(&format!(": {section}: ")), "{stderr}");
+        assert_eq!(rust_names(&stderr), Vec::<&str>::new(), "{stderr}");
+        for rust in ["usize", "u64", "f64"] {
+            assert!(!stderr.contains(rust), "{stderr}");
+        }
+    }
+}
+
+/// The same for a dataset: a misspelt key deep in a list is located at its own line.
+#[test]
+fn dataset_keys_in_lists_are_located_at_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("samples.yaml");
+    let pose = "{translation: [0, 0, 0.5], rotation_vector: [0, 0, 0]}";
+    std::fs::write(
+        &path,
+        format!(
+            "setup: eye_in_hand\nsamples:\n  - T_base_flange: {pose}\n    T_camera_target: {pose}\n  # a comment\n  - T_base_flange: {pose}\n    T_camera_target:\n      translation: [0, 0, 0.5]\n      rotaton_vector: [0, 0, 0]\n"
+        ),
+    )
+    .unwrap();
+    let out = handeye().arg("solve").arg(&path).output().unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr
+            .contains("samples[1].T_camera_target.rotaton_vector: unknown field `rotaton_vector`")
+            && stderr.contains(" at line 9 "),
+        "{stderr}"
+    );
+}

@@ -19,7 +19,7 @@ use crate::geometry::PoseError;
 use crate::robot::{MotionLimits, WorkspaceBox};
 use crate::setup::{CellTransforms, Setup};
 use crate::solve::{NoiseModel, SolveOptions};
-use crate::yaml_file::{parse_yaml, read_text, FileError};
+use crate::yaml_file::{parse_yaml, read_text, shape_error, FileError};
 
 pub use schema::{
     ArmModel, CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName, PlanConfig,
@@ -67,6 +67,21 @@ pub enum ConfigError {
         key: String,
         /// What is wrong and what was expected.
         problem: String,
+    },
+    /// Lengths that look like millimetres where the config takes metres (a nominal position,
+    /// a workspace box): one message naming the key, instead of every pose failing later.
+    #[error("{}: {key}: {found} looks like millimetres: {why}; the config takes metres: write {metres}", file.display())]
+    Millimetres {
+        /// The config file.
+        file: PathBuf,
+        /// YAML path of the value (`nominal.T_base_target.translation`, `workspace`).
+        key: String,
+        /// The value as written.
+        found: String,
+        /// Why it cannot be metres (`as metres it puts the camera 86.0 m from the flange, ...`).
+        why: String,
+        /// The value divided by 1000.
+        metres: String,
     },
     /// A pose is malformed.
     // The pose problem is the message itself (with its YAML path), so it is not also a
@@ -276,18 +291,23 @@ impl ConfigFile {
                 path,
                 yaml_path,
                 problem,
-            }) => {
-                let (yaml_path, problem) = document
-                    .as_ref()
-                    .and_then(|d| schema::pinpoint_tagged(d, &yaml_path))
-                    .unwrap_or((yaml_path, problem));
-                Err(FileError::Shape {
+                line,
+            }) => match document
+                .as_ref()
+                .and_then(|d| schema::pinpoint_tagged(d, &yaml_path))
+            {
+                // Read again from the section alone, the error has no location: the key's line.
+                Some((yaml_path, problem)) => {
+                    Err(shape_error(text, &path, yaml_path, problem).into())
+                }
+                None => Err(FileError::Shape {
                     path,
                     yaml_path,
                     problem,
+                    line,
                 }
-                .into())
-            }
+                .into()),
+            },
             Err(other) => Err(other.into()),
         }
     }

@@ -147,6 +147,23 @@ pub const JOINT_SPEED_DEG: Range = Range::above(0.0, MAX_JOINT_SPEED_DEG, "°/s"
 pub const JOINT_ACCELERATION_DEG: Range = Range::above(0.0, MAX_JOINT_ACCELERATION_DEG, "°/s²");
 /// `workspace.min[i]` and `workspace.max[i]`, m (base frame).
 pub const WORKSPACE_M: Range = Range::closed(-10.0, 10.0, "m");
+/// Farthest a flange-mounted camera or board sits from the flange, m: farther, its nominal or
+/// simulated offset is taken for millimetres written as metres.
+pub const MAX_FLANGE_OFFSET_M: f64 = 2.0;
+/// Farthest a base-mounted board or camera sits from the robot base, m (the workspace bound).
+pub const MAX_BASE_OFFSET_M: f64 = 10.0;
+
+/// A length written in mm, in metres (rounded to the nanometre, so 44.7 reads 0.0447).
+fn mm_to_m(mm: f64) -> f64 {
+    (mm * 1e6).round() / 1e9
+}
+
+/// `[a, b, c]` with readable numbers.
+fn triple(v: &[f64]) -> String {
+    let parts: Vec<String> = v.iter().map(|x| readable(*x)).collect();
+    format!("[{}]", parts.join(", "))
+}
+
 /// `plan.target_uncertainty_mm`, mm.
 pub const TARGET_UNCERTAINTY_MM: Range = Range::above(0.0, 100.0, "mm");
 /// `solver.rotation_sigma_deg`, degrees.
@@ -472,6 +489,24 @@ impl Validator<'_> {
 
     fn workspace(&self, raw: &ConfigFile) -> Result<WorkspaceBox, ConfigError> {
         let w = raw.workspace;
+        // A box in mm: some value out of range as written, all in range divided by 1000, and
+        // every side longer than 20 (m as written: no cell spans that; 20 mm in mm). One wild
+        // value in a box of metres is a typo, named by the range check below.
+        let values = w.min.iter().chain(&w.max);
+        let outside = values.clone().any(|v| !WORKSPACE_M.contains(*v));
+        let long_sides = (0..3).all(|i| w.max[i] - w.min[i] > 20.0);
+        if outside && long_sides && values.clone().all(|v| WORKSPACE_M.contains(v / 1000.0)) {
+            let metres = |v: [f64; 3]| triple(&v.map(mm_to_m));
+            return Err(ConfigError::Millimetres {
+                file: self.file.to_path_buf(),
+                key: "workspace".into(),
+                found: format!("the box min {}, max {}", triple(&w.min), triple(&w.max)),
+                why: format!(
+                    "as metres the box would reach beyond the {WORKSPACE_M} the workspace keys accept (base frame)"
+                ),
+                metres: format!("min: {}, max: {}", metres(w.min), metres(w.max)),
+            });
+        }
         for i in 0..3 {
             self.number(&format!("workspace.min[{i}]"), w.min[i], WORKSPACE_M)?;
             self.number(&format!("workspace.max[{i}]"), w.max[i], WORKSPACE_M)?;
@@ -575,6 +610,52 @@ impl Validator<'_> {
             .map_err(|_| self.out_of_range("session.settle_s", readable(settle_s), SETTLE_S))
     }
 
+    /// A mount's translation farther than any real mount sits ([`MAX_FLANGE_OFFSET_M`] from the
+    /// flange, [`MAX_BASE_OFFSET_M`] from the base) but plausible once divided by 1000 is
+    /// millimetres written as metres: one message naming the key.
+    fn offset_in_metres(
+        &self,
+        setup: Setup,
+        section: &str,
+        key: &str,
+        pose: &PoseYaml,
+    ) -> Result<(), ConfigError> {
+        let Some(t) = pose.translation.as_deref().filter(|t| t.len() == 3) else {
+            return Ok(());
+        };
+        let norm = t.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (camera_key, _) = setup.unknown_names();
+        let on_flange = (key == camera_key) == (setup == Setup::EyeInHand);
+        let what = if key == camera_key { "camera" } else { "board" };
+        let (limit, why) = if on_flange {
+            (
+                MAX_FLANGE_OFFSET_M,
+                format!(
+                    "as metres it puts the {what} {norm:.1} m from the flange, where a flange-mounted {what} sits within {} m",
+                    readable(MAX_FLANGE_OFFSET_M)
+                ),
+            )
+        } else {
+            (
+                MAX_BASE_OFFSET_M,
+                format!(
+                    "as metres it puts the {what} {norm:.1} m from the robot base, where a {what} in the cell sits within {} m",
+                    readable(MAX_BASE_OFFSET_M)
+                ),
+            )
+        };
+        if norm.is_finite() && norm > limit && norm / 1000.0 <= limit {
+            return Err(ConfigError::Millimetres {
+                file: self.file.to_path_buf(),
+                key: format!("{section}.{key}.translation"),
+                found: triple(t),
+                why,
+                metres: triple(&t.iter().map(|v| mm_to_m(*v)).collect::<Vec<_>>()),
+            });
+        }
+        Ok(())
+    }
+
     /// The setup's two transforms from `section` (`nominal` or `simulation`).
     fn transforms(
         &self,
@@ -597,6 +678,7 @@ impl Validator<'_> {
                     format!("missing `{key}` (setup {setup_name} expects `{camera_key}` and `{target_key}`)"),
                 )
             })?;
+            self.offset_in_metres(setup, section, key, pose)?;
             pose.to_pose(&format!("{section}.{key}"))
                 .map_err(|problem| ConfigError::Pose {
                     file: self.file.to_path_buf(),
