@@ -425,6 +425,20 @@ fn nominal_positions_in_millimetres_are_one_message_naming_the_key() {
             "{stdout}"
         );
     }
+    // A generated plan's view distances in mm: named the same way.
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[("distance: [0.55, 0.75]", "distance: [550, 750]")],
+    );
+    let (code, stdout, stderr) = plan_check(&config);
+    assert_eq!(code, Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("plan.generate.distance: [550, 750] looks like millimetres")
+            && stderr.contains("write [0.55, 0.75]"),
+        "{stderr}"
+    );
     // Metres stay accepted, however far the board: a 5 m base offset is a (large) cell.
     let config = util::config_variant(
         dir.path(),

@@ -539,12 +539,30 @@ impl Validator<'_> {
                 ))
             }
             (Some(_), None) => {}
-            (None, Some(spec)) => spec.validate().map_err(|e| ConfigError::OutOfRange {
-                file: self.file.to_path_buf(),
-                key: format!("plan.generate.{}", e.field),
-                found: e.found,
-                expected: e.expected,
-            })?,
+            (None, Some(spec)) => {
+                // Views at hundreds of metres: the distances were written in mm.
+                let [near, far] = spec.distance;
+                let limit = crate::plan::generate::MAX_DISTANCE_M;
+                if near > 0.0 && far > limit && far / 1000.0 <= limit {
+                    return Err(ConfigError::Millimetres {
+                        file: self.file.to_path_buf(),
+                        key: "plan.generate.distance".into(),
+                        found: format!("[{}, {}]", readable(near), readable(far)),
+                        why: format!(
+                            "as metres the camera would view the board from up to {} m, where a generated plan's views lie within {} m",
+                            readable(far),
+                            readable(limit)
+                        ),
+                        metres: format!("[{}, {}]", readable(mm_to_m(near)), readable(mm_to_m(far))),
+                    });
+                }
+                spec.validate().map_err(|e| ConfigError::OutOfRange {
+                    file: self.file.to_path_buf(),
+                    key: format!("plan.generate.{}", e.field),
+                    found: e.found,
+                    expected: e.expected,
+                })?
+            }
             _ => {
                 return Err(self.inconsistent(
                     "plan",
