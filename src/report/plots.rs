@@ -426,17 +426,24 @@ pub fn poses_3d(input: &ReportInput) -> Result<String, ReportError> {
                 Text::new(name.to_string(), (o.x, o.z, o.y), label_font.clone())
             }))
             .map_err(&err)?;
-        let (many, one) = match input.setup {
-            Setup::EyeInHand => ("camera at each sample (small)", "board (medium)"),
-            Setup::EyeToHand => ("board at each sample (medium)", "camera (small)"),
+        // The marks as drawn: the board's triads are 3 px wide, the camera's 1 px.
+        let (first, second) = match input.setup {
+            Setup::EyeInHand => (
+                (Mark::Line(BLACK, 3), "board"),
+                (Mark::Line(BLACK, 1), "camera at each sample"),
+            ),
+            Setup::EyeToHand => (
+                (Mark::Line(BLACK, 1), "camera"),
+                (Mark::Line(BLACK, 3), "board at each sample"),
+            ),
         };
         legend(
             &key,
             "frames",
             &[
-                (Mark::Line(BLACK, 4), "robot base (large)".into()),
-                (Mark::Line(BLACK, 3), one.into()),
-                (Mark::Line(BLACK, 1), many.into()),
+                (Mark::Line(BLACK, 4), "robot base".into()),
+                (first.0, first.1.into()),
+                (second.0, second.1.into()),
                 (Mark::Dot(BLACK), "flange at each sample".into()),
                 (Mark::Line(RED, 2), "x axis of a frame".into()),
                 (Mark::Line(GREEN, 2), "y axis of a frame".into()),
