@@ -375,7 +375,7 @@ fn plot_axes_are_named_and_legends_sit_beside_the_data() {
     for label in [
         "flange at each sample",
         "x axis of a frame",
-        "board (medium)",
+        "camera at each sample",
     ] {
         assert!(text_x(&html, "poses-3d", label) > 670.0, "{label}");
     }
