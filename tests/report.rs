@@ -531,6 +531,108 @@ fn report_renders_in_headless_chromium_without_console_messages() {
     eprintln!("screenshot: {}", keep.display());
 }
 
+/// Drives the page's script in Chromium: clicks the rotation heading twice, a frame, the
+/// overlay and a copy button, and records what happened in the DOM (`data-driven`).
+const DRIVER: &str = r#"<script>
+(function () {
+  var table = document.getElementById('pose-table');
+  var order = function () {
+    return Array.prototype.map.call(table.tBodies[0].rows, function (r) { return Number(r.dataset.sample); });
+  };
+  var out = {};
+  var heading = table.tHead.rows[0].cells[3];
+  heading.click();
+  out.first = order();
+  out.firstSort = heading.getAttribute('aria-sort');
+  heading.click();
+  out.second = order();
+  out.secondSort = heading.getAttribute('aria-sort');
+  var thumb = document.querySelector('figure.thumb img');
+  thumb.click();
+  var overlay = document.getElementById('overlay');
+  out.overlayShown = !overlay.hidden;
+  out.overlaySameImage = overlay.querySelector('img').src === thumb.src;
+  overlay.click();
+  out.overlayClosed = overlay.hidden;
+  var button = document.querySelector('button.copy');
+  button.click();
+  setTimeout(function () {
+    out.copyButton = button.textContent;
+    document.body.setAttribute('data-driven', JSON.stringify(out));
+  }, 300);
+})();
+</script>"#;
+
+/// The script works in a real browser: a click on "rotation" sorts the table by it, worst
+/// first, a second click reverses it; a frame opens full size in the overlay and closes on a
+/// click; a copy button copies (says "Copied"); no console message.
+#[test]
+fn report_script_sorts_opens_frames_and_copies_in_chromium() {
+    let Some(browser) = chromium() else {
+        eprintln!("SKIP: chromium is not installed (`apt-get install chromium`; .ci/run does it)");
+        return;
+    };
+    let (dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let driven = dir.path().join("driven.html");
+    std::fs::write(
+        &driven,
+        html.replace("</body>", &format!("{DRIVER}</body>")),
+    )
+    .unwrap();
+    let out = headless(
+        &browser,
+        &["--virtual-time-budget=3000", "--dump-dom"],
+        &driven,
+    );
+    let console = console_lines(&out);
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let marker = "data-driven=\"";
+    let start = dom.find(marker).expect("the driver ran") + marker.len();
+    let json = unescape(&dom[start..start + dom[start..].find('"').unwrap()]);
+    let driven: serde_json::Value = serde_json::from_str(&json).unwrap();
+
+    // The rotation residual per sample, from the page's table.
+    let table = &html[html.find("id=\"pose-table\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    let mut rotation = std::collections::HashMap::new();
+    for row in table.split("<tr class=\"").skip(1) {
+        let values: Vec<f64> = row
+            .split("data-value=\"")
+            .skip(1)
+            .take(2)
+            .map(|v| v[..v.find('"').unwrap()].parse().unwrap())
+            .collect();
+        rotation.insert(values[0] as u64, values[1]);
+    }
+    let order = |key: &str| -> Vec<u64> {
+        driven[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect()
+    };
+    let (first, second) = (order("first"), order("second"));
+    assert_eq!(first.len(), 10);
+    let values = |order: &[u64]| order.iter().map(|s| rotation[s]).collect::<Vec<f64>>();
+    assert!(
+        values(&first).windows(2).all(|w| w[0] >= w[1]),
+        "first click: worst rotation first: {first:?}"
+    );
+    assert!(
+        values(&second).windows(2).all(|w| w[0] <= w[1]),
+        "second click: reversed: {second:?}"
+    );
+    assert_eq!(driven["firstSort"], "descending");
+    assert_eq!(driven["secondSort"], "ascending");
+    assert_eq!(driven["overlayShown"], true);
+    assert_eq!(driven["overlaySameImage"], true);
+    assert_eq!(driven["overlayClosed"], true);
+    assert_eq!(driven["copyButton"], "Copied");
+}
+
 /// result.yaml read back as a calibration writes the same file again (what `handeye report`
 /// shows is what the solve wrote).
 #[test]
