@@ -718,6 +718,8 @@ fn two_answers_are_shown_side_by_side() {
         verdict: None,
     };
     let html = render_html(&input).unwrap();
+    // A GOOD page has no caution above the snippets.
+    assert!(!html.contains("class=\"caution\""));
     assert_eq!(count(&html, "class=\"answer\" data-answer="), 2);
     for label in ["answer-one", "answer-two"] {
         assert!(
@@ -737,4 +739,26 @@ fn two_answers_are_shown_side_by_side() {
         1
     );
     assert!(html.contains("no uncertainty"));
+
+    // A REDO verdict (here: a solve refused for too few poses) opens the page and puts a
+    // caution above the snippets; the snippets are still there to inspect.
+    let refused = handeye::solve::solve(Setup::EyeInHand, &pairs[..2], &SolveOptions::default())
+        .expect_err("two poses are too few");
+    let redo = ReportInput {
+        verdict: Some(handeye::verdict::Verdict::refused(
+            &refused,
+            2,
+            handeye::verdict::Accuracy::default(),
+        )),
+        ..input
+    };
+    let html = render_html(&redo).unwrap();
+    let level = "data-key=\"verdict.level\">";
+    let at = html.find(level).unwrap() + level.len();
+    assert!(html[at..].starts_with("REDO<"), "{}", &html[at..at + 20]);
+    assert!(html.contains("<section id=\"verdict\" class=\"verdict redo\">"));
+    let use_it = &html[html.find("<section id=\"use\"").unwrap()..];
+    let caution = use_it.find("class=\"caution\"").expect("a caution");
+    assert!(caution < use_it.find("<div class=\"snippets\">").unwrap());
+    assert_eq!(count(use_it, "<pre id=\"export-"), 4);
 }
