@@ -10,8 +10,9 @@
 //! also from `verdict` —, residual plots, a per-pose table that sorts on a click, frames that
 //! open full size, the cell sketch, rotation axes); the details (every number of every answer,
 //! solver convergence). The verdict card, the "use it" snippets, the per-answer transforms and
-//! their forms ([`export_forms`]) are written by `sections.rs`; the plots are drawn with `plotters`' SVG backend in [`plots`], and [`session`]
-//! gathers the input from a session folder (frames, detected corners). Frames follow the crate
+//! their forms ([`export_forms`]) are written by `sections.rs`; the plots are drawn with
+//! `plotters`' SVG backend in [`plots`] (axes named, legends in a column beside the data), and
+//! [`session`] gathers the input from a session folder (frames, detected corners). Frames follow the crate
 //! convention (`T_a_b` maps points of frame `b` into frame `a`); numbers are shown in metres /
 //! radians where a file holds them and in mm / degrees where a person reads them. Depends on
 //! `solve`, `verdict`, `formats`, `vision`, `config`, `dataset`, `session` (for the folder
@@ -86,9 +87,10 @@ pub struct ReportInput {
     pub setup: Setup,
     /// The samples the answers were solved from.
     pub pairs: Vec<PosePair>,
-    /// The answers, first one primary (thumbnails reproject with it).
+    /// The answers, first one primary (the frames reproject with it).
     pub answers: Vec<ReportAnswer>,
-    /// Frame thumbnails (may be empty for a plain dataset).
+    /// The annotated frames, shown small and full size on a click (may be empty for a plain
+    /// dataset).
     pub thumbnails: Vec<FrameThumbnail>,
     /// The noise model the solver was told (for the "large residual" warning).
     pub noise: NoiseModel,
@@ -145,7 +147,7 @@ pub enum ReportError {
     #[error("reading the session for the report failed")]
     Session(#[source] Box<crate::session::SessionError>),
     /// A frame could not be read or encoded.
-    #[error("{}: cannot make a thumbnail: {message}", path.display())]
+    #[error("{}: cannot draw the frame for the report: {message}", path.display())]
     Frame {
         /// The frame file.
         path: PathBuf,

@@ -1,7 +1,8 @@
 //! Gathers a report's input from a session folder: the samples (`samples.yaml`), the recorded
 //! visits (frames and detected corners, `poses/NNN.yaml`), and — with the board and the camera
 //! model — per-sample reprojection errors at the predicted `T_camera_target` and annotated
-//! thumbnails. Pixels follow the OpenCV convention (origin at the top-left pixel's centre).
+//! frames (JPEG, at most [`FRAME_WIDTH`] wide). Pixels follow the OpenCV convention (origin at
+//! the top-left pixel's centre).
 
 use std::collections::HashMap;
 use std::io::Cursor;
@@ -36,7 +37,7 @@ pub struct Optics<'a> {
 
 /// Builds the report input of a session for one or more answers (label, calibration).
 ///
-/// Without `optics` the page has no thumbnails and no reprojection bars (everything else is
+/// Without `optics` the page has no frames and no reprojection bars (everything else is
 /// there). Samples are matched to visits by their id `pose-NNN`.
 pub fn from_session(
     folder: &SessionFolder,
@@ -164,7 +165,7 @@ fn annotated_frame(
         let v = small.get_pixel(x, y)[0];
         Rgb([v, v, v])
     });
-    // Pixel centres: OpenCV pixel u maps to thumbnail (u + 0.5)·s − 0.5.
+    // Pixel centres: OpenCV pixel u maps to (u + 0.5)·s − 0.5 in the scaled frame.
     let to_thumb =
         |p: Point2<f64>| Point2::new((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
     let magenta = Rgb([255, 0, 255]);
@@ -203,7 +204,7 @@ fn annotated_frame(
 }
 
 /// Writes `<session>/report.html` for a solved session: the answers side by side (labelled;
-/// e.g. reprojection-space and pose-space), thumbnails and reprojection bars when the cell's
+/// e.g. reprojection-space and pose-space), annotated frames and reprojection bars when the cell's
 /// board and intrinsics load, a leave-one-out check and the verdict on the first answer
 /// (`verdict::assess_solved`'s, against the config's `verdict` accuracy). Returns the path
 /// written.
