@@ -1,5 +1,5 @@
 //! Reading and writing the tool's YAML files: one reader (serde through `serde_path_to_error`, so
-//! every shape error names the YAML path, located at the key's own line by [`key_line`] where
+//! every shape error names the YAML path, located at the key's own line by `key_line` where
 //! the parser's location is missing or wrong), one atomic writer, and the one error type they share
 //! ([`FileError`]: the message names the file, the YAML path and the problem). Used by datasets,
 //! results, cell configs, plans, session records and recorded robot poses. Depends on
