@@ -582,3 +582,67 @@ fn dataset_keys_in_lists_are_located_at_their_line() {
         "{stderr}"
     );
 }
+
+/// Issue #14, units: a scripted plan whose look-at distances are in millimetres gave one
+/// "unreachable … outside the workspace box" line per pose. Now the plan check says once that
+/// they look like millimetres, naming the first waypoint's key and the value in metres.
+#[test]
+fn plan_file_distances_in_millimetres_are_one_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let shipped =
+        std::fs::read_to_string(util::repo().join("configs/plans/look-at-12.yaml")).unwrap();
+    let mut first = None;
+    let in_mm: String = shipped
+        .lines()
+        .map(|line| match line.trim_start().strip_prefix("distance: ") {
+            Some(metres) => {
+                let mm = metres.parse::<f64>().unwrap() * 1000.0;
+                first.get_or_insert(mm);
+                line.replace(metres, &mm.to_string())
+            }
+            None => line.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let plan = dir.path().join("plan-mm.yaml");
+    std::fs::write(&plan, in_mm).unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(
+            "  generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+            &format!("  file: {}", plan.display()),
+        )],
+    );
+    let (code, stdout, stderr) = plan_check(&config);
+    assert_eq!(code, Some(1), "{stdout}\n{stderr}");
+    let first = first.unwrap();
+    let expected = format!("waypoints[0].look_at.distance: {first} looks like millimetres");
+    assert_eq!(
+        stdout.matches("looks like millimetres").count(),
+        1,
+        "{stdout}"
+    );
+    assert!(stdout.contains(&expected), "{stdout}");
+    assert!(
+        stdout.contains("plan files take metres: write 0."),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("unreachable"), "{stdout}");
+    // The shipped plan, in metres, passes.
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(
+            "  generate: {count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+            &format!(
+                "  file: {}",
+                util::repo().join("configs/plans/look-at-12.yaml").display()
+            ),
+        )],
+    );
+    let (code, stdout, stderr) = plan_check(&config);
+    assert_eq!(code, Some(0), "{stdout}\n{stderr}");
+}

@@ -103,6 +103,16 @@ impl PlanReport {
 
 /// Checks every pose of `plan` and the plan as a whole.
 pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
+    // Units first: look-at distances in mm put every view hundreds of metres out, and each pose
+    // would fail on its own ("unreachable", "outside the workspace box"): one message instead.
+    if let Some(problem) = distances_in_millimetres(plan) {
+        return PlanReport {
+            poses: Vec::new(),
+            plan_problems: vec![problem],
+            notes: Vec::new(),
+            intrinsics: None,
+        };
+    }
     let board_points = board_points(ctx.board);
     let centre = board_centre(ctx.board);
     let mut previous = ctx.start_joints;
@@ -191,6 +201,33 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         notes,
         intrinsics: Some(coverage),
     }
+}
+
+/// When every look-at distance of the plan lies beyond the generator's limit
+/// (`plan::generate::MAX_DISTANCE_M`) but within it divided by 1000, the plan was written in
+/// millimetres: the message names the first such waypoint's key and the value in metres.
+fn distances_in_millimetres(plan: &Plan) -> Option<String> {
+    let limit = super::generate::MAX_DISTANCE_M;
+    let distances: Vec<(usize, f64)> = plan
+        .waypoints
+        .iter()
+        .enumerate()
+        .filter_map(|(i, w)| match w {
+            Waypoint::LookAt(view) => Some((i, view.distance)),
+            _ => None,
+        })
+        .collect();
+    let &(first, distance) = distances.first()?;
+    distances
+        .iter()
+        .all(|(_, d)| *d > limit && *d / 1000.0 <= limit)
+        .then(|| {
+            format!(
+                "waypoints[{first}].look_at.distance: {distance} looks like millimetres (as do all {} look-at distances): as metres the camera would view the board from {distance} m, where views lie within {limit} m; plan files take metres: write {}",
+                distances.len(),
+                (distance * 1e6).round() / 1e9
+            )
+        })
 }
 
 /// Why a waypoint has no joint solution: the joint that leaves its range and its value when the
