@@ -132,7 +132,8 @@ fn sample_rows(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> Rows {
 }
 
 /// The whitened problem's normal equations at one point, split by group of rows.
-struct Normal {
+#[derive(Clone, Copy)]
+pub(super) struct Normal {
     /// `J_rᵀJ_r` of the rotation rows.
     rotation: SMatrix<f64, 12, 12>,
     /// `J_tᵀJ_t` of the translation rows.
@@ -258,6 +259,8 @@ struct Fit<'a> {
     noise: NoiseModel,
     /// Cost (½ Σ r²) at each evaluation.
     trace: RefCell<Vec<f64>>,
+    /// The normal equations of the last linearisation (the noise estimate reuses them).
+    last: RefCell<Option<Normal>>,
 }
 
 impl Fit<'_> {
@@ -275,6 +278,7 @@ impl NormalEquations for Fit<'_> {
             return None;
         }
         let h = normal.information();
+        *self.last.borrow_mut() = Some(normal);
         Some((
             DMatrix::from_column_slice(PARAMS, PARAMS, h.as_slice()),
             DVector::from_column_slice(normal.gradient.as_slice()),
@@ -312,6 +316,9 @@ fn whitened_norms(data: &AxbyData, s: &Axby, noise: &NoiseModel) -> Vec<f64> {
 
 struct Run {
     solution: Axby,
+    /// The normal equations where the minimiser last linearised: at the solution but for the
+    /// last accepted step, which is below the convergence tolerance.
+    last: Option<Normal>,
     evaluations: usize,
     converged: bool,
     trace: Vec<f64>,
@@ -330,10 +337,12 @@ fn minimise(
         scale,
         noise: *noise,
         trace: RefCell::new(Vec::new()),
+        last: RefCell::new(None),
     };
     let outcome = minimize_normal(&mut fit)?;
     Ok(Run {
         solution: fit.current(),
+        last: fit.last.into_inner(),
         evaluations: outcome.evaluations,
         converged: outcome.converged,
         trace: fit.trace.into_inner(),
@@ -351,7 +360,11 @@ pub(super) fn group_redundancy(
     scale: &[f64],
     noise: &NoiseModel,
 ) -> Option<[(f64, f64); 2]> {
-    let normal = normal_equations(data, solution, scale, noise);
+    groups_of(&normal_equations(data, solution, scale, noise), scale)
+}
+
+/// [`group_redundancy`] from normal equations already built (with `scale`).
+pub(super) fn groups_of(normal: &Normal, scale: &[f64]) -> Option<[(f64, f64); 2]> {
     let inverse = normal.information().cholesky()?.inverse();
     // Rows of zero weight are no observations (and their Jacobian rows are zero).
     let rows = 3.0 * scale.iter().filter(|&&k| k > 0.0).count() as f64;
@@ -435,9 +448,15 @@ pub fn refine(
                     .fold(0.0, f64::max);
                 robust = new;
             }
-            let noise_settled = estimator.step(data, &run.solution, &scale_of(&robust));
+            let scale = scale_of(&robust);
+            // Without a robust loss the weights did not change since the last minimisation:
+            // its final normal equations are those of the solution (to below its tolerance).
+            let noise_settled = match (&run.last, robust_loss) {
+                (Some(normal), false) => estimator.step_with(groups_of(normal, &scale)),
+                _ => estimator.step(data, &run.solution, &scale),
+            };
             noise = estimator.noise();
-            run = minimise(data, &run.solution, &scale_of(&robust), &noise)?;
+            run = minimise(data, &run.solution, &scale, &noise)?;
             evaluations += run.evaluations;
             trace.append(&mut run.trace);
             if change < 1e-6 && noise_settled {
