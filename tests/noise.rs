@@ -447,10 +447,8 @@ fn add_robot_noise(pairs: &mut [PosePair], rotation: f64, translation: f64, seed
     for p in pairs {
         let dr = Vector3::from_fn(|_, _| nr.sample(&mut rng));
         let dt = Vector3::from_fn(|_, _| nt.sample(&mut rng));
-        p.base_from_flange *= Pose::from_parts(
-            Translation3::from(dt),
-            UnitQuaternion::from_scaled_axis(dr),
-        );
+        p.base_from_flange *=
+            Pose::from_parts(Translation3::from(dt), UnitQuaternion::from_scaled_axis(dr));
     }
 }
 
@@ -505,7 +503,8 @@ fn honesty(case: &McCase, first_seed: u64, sets: u64) -> [Honesty; 4] {
         .enumerate()
         {
             // The covariance's perturbation: R_est = exp(δθ)·R_true, t_est = t_true + δt.
-            let d_theta = handeye::geometry::rotvec(&(estimate.rotation * truth.rotation.inverse()));
+            let d_theta =
+                handeye::geometry::rotvec(&(estimate.rotation * truth.rotation.inverse()));
             let d_t = estimate.translation.vector - truth.translation.vector;
             for (kind, error) in [d_theta, d_t].into_iter().enumerate() {
                 let h = &mut out[2 * k + kind];
@@ -587,9 +586,7 @@ fn reported_sigma_covers_the_true_error_per_axis_under_every_noise_case() {
                 100.0 * h.p3(),
                 h.axes
             );
-            if !(0.8..=1.25).contains(&h.ratio())
-                || (h.p1() - 0.683).abs() > 0.05
-                || h.p3() < 0.985
+            if !(0.8..=1.25).contains(&h.ratio()) || (h.p1() - 0.683).abs() > 0.05 || h.p3() < 0.985
             {
                 outside.push(format!(
                     "{}: {name}: ratio {:.3}, 1 sigma {:.1} %, 3 sigma {:.1} %",
@@ -628,4 +625,3 @@ fn result_file_holds_the_noise_used_and_reads_it_back() {
         .unwrap();
     assert_eq!(back.noise, found.noise);
 }
-

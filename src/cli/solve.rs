@@ -9,8 +9,8 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::config::{validate, CellConfig, SolveSpace};
-use handeye::geometry::readable;
 use handeye::dataset::Dataset;
+use handeye::geometry::readable;
 use handeye::result::ResultFile;
 use handeye::session::{self, SessionFolder};
 use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};

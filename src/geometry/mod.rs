@@ -220,7 +220,9 @@ mod tests {
         assert!(p.angle_to(&truth) < 2e-3, "{}", p.angle_to(&truth));
         // A reflection (det −1) gives the nearest proper rotation, not a reflection.
         let reflected = r * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
-        let q = project_to_rotation(&reflected).unwrap().to_rotation_matrix();
+        let q = project_to_rotation(&reflected)
+            .unwrap()
+            .to_rotation_matrix();
         assert!((q.matrix().determinant() - 1.0).abs() < 1e-12);
         let mut bad = r;
         bad[(2, 2)] = f64::NAN;

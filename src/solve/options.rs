@@ -131,8 +131,10 @@ impl Method {
 
     /// Other accepted spellings: `closed-form` (the config's and CLI's older spelling) and
     /// `shah` (the paper) for [`Method::ClosedForm`].
-    pub const ALIASES: [(&'static str, Method); 2] =
-        [("closed-form", Method::ClosedForm), ("shah", Method::ClosedForm)];
+    pub const ALIASES: [(&'static str, Method); 2] = [
+        ("closed-form", Method::ClosedForm),
+        ("shah", Method::ClosedForm),
+    ];
 
     /// Every accepted name: the name of each of [`Method::ALL`], then the aliases.
     pub const NAMES: [&'static str; 11] = {

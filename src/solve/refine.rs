@@ -15,7 +15,9 @@
 
 use std::cell::RefCell;
 
-use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    DMatrix, DVector, Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3,
+};
 
 use super::lm::{minimize_normal, NormalEquations};
 use super::noise;
@@ -117,7 +119,9 @@ fn sample_rows(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> Rows {
     let j_inv = left_jacobian_inverse(&r);
     let r_pred = predicted.rotation.to_rotation_matrix().into_inner();
     let lever = predicted.translation.vector - s.x.translation.vector;
-    let rxb = (s.x.rotation * b.rotation).to_rotation_matrix().into_inner();
+    let rxb = (s.x.rotation * b.rotation)
+        .to_rotation_matrix()
+        .into_inner();
     // Rotation rows: d/dφ_X = J⁻¹, d/dφ_Y = J⁻¹·R_pred; translations do not move them.
     j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(j_inv * kr));
     j.fixed_view_mut::<3, 3>(0, 6)
@@ -180,7 +184,10 @@ fn normal_equations(data: &AxbyData, s: &Axby, scale: &[f64], noise: &NoiseModel
         let a_block = left_jacobian_inverse(&r) * kr;
         let b_block = a_block * predicted.rotation.to_rotation_matrix().into_inner();
         let c_block = -(predicted.translation.vector - s.x.translation.vector).cross_matrix() * kt;
-        let d_block = (s.x.rotation * b.rotation).to_rotation_matrix().into_inner() * kt;
+        let d_block = (s.x.rotation * b.rotation)
+            .to_rotation_matrix()
+            .into_inner()
+            * kt;
         r00 += a_block.tr_mul(&a_block);
         r02 += a_block.tr_mul(&b_block);
         r22 += b_block.tr_mul(&b_block);
@@ -265,7 +272,10 @@ struct Fit<'a> {
 
 impl Fit<'_> {
     fn current(&self) -> Axby {
-        perturbed(&self.anchor, &self.delta.fixed_rows::<PARAMS>(0).into_owned())
+        perturbed(
+            &self.anchor,
+            &self.delta.fixed_rows::<PARAMS>(0).into_owned(),
+        )
     }
 }
 
@@ -387,7 +397,10 @@ pub(super) fn test_norms(
     noise: &NoiseModel,
     in_fit: &[bool],
 ) -> Option<Vec<f64>> {
-    let (kr, kt) = (1.0 / noise.rotation_sigma_rad, 1.0 / noise.translation_sigma_m);
+    let (kr, kt) = (
+        1.0 / noise.rotation_sigma_rad,
+        1.0 / noise.translation_sigma_m,
+    );
     let rows: Vec<Rows> = (0..data.len())
         .map(|i| sample_rows(solution, &data.a[i], &data.b[i], kr, kt))
         .collect();

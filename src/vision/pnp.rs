@@ -12,8 +12,8 @@
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
-    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3,
-    SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6, U6,
+    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3, SymmetricEigen,
+    Translation3, UnitQuaternion, Vector3, Vector6, U6,
 };
 
 use super::board::Board;

@@ -30,8 +30,8 @@ pub mod tsai;
 pub use shah::{rotations, solve_axby, translations};
 
 use nalgebra::{
-    DMatrix, DVector, Matrix3, Matrix4, SMatrix, SymmetricEigen, Translation3,
-    UnitQuaternion, Vector3, Vector4,
+    DMatrix, DVector, Matrix3, Matrix4, SMatrix, SymmetricEigen, Translation3, UnitQuaternion,
+    Vector3, Vector4,
 };
 
 use super::{Axby, AxbyData, Method, SolveError};
