@@ -6,9 +6,11 @@
 //! estimate. Parameters are a local perturbation of the start on SO(3)×R³ per unknown
 //! (`R_X ← exp(φ_X)·R_X`, `t_X ← t_X + ρ_X`; `R_Y ← R_Y·exp(φ_Y)`, `t_Y ← t_Y + ρ_Y`) with an
 //! analytic Jacobian (`perturbed` is that parametrisation, shared with the reprojection-space
-//! refinement); the `levenberg-marquardt` crate minimises (through `solve::lm`, shared with the
-//! reprojection-space refinement), then the problem is re-linearised at the optimum so the
-//! covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
+//! refinement). Levenberg-Marquardt on the 12x12 normal equations (`solve::lm::minimize_normal`,
+//! shared with the reprojection-space refinement) minimises, re-anchoring the perturbation at
+//! every accepted step; the normal equations are summed per sample by 3x3 blocks, no tall
+//! Jacobian is formed (the speed of the default pipeline: `benches/solve.rs`). The problem is
+//! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
 //! reweighted least squares on each sample's whitened norm. The sigmas themselves are
 //! estimated from the residuals, alternated with the fit (see [`super::noise`]), unless
 //! [`SolveOptions::estimate_noise`] says they are given.
@@ -640,13 +642,13 @@ mod tests {
         let (mut rotation, mut translation) = (SMatrix::<f64, 12, 12>::zeros(), SMatrix::zeros());
         let mut gradient = SVector::<f64, 12>::zeros();
         let mut squares = 0.0;
-        for i in 0..3 {
+        for ((a, b), k) in data.a.iter().zip(&data.b).zip(&scale) {
             let (e, j) = sample_rows(
                 &s,
-                &data.a[i],
-                &data.b[i],
-                scale[i] / noise.rotation_sigma_rad,
-                scale[i] / noise.translation_sigma_m,
+                a,
+                b,
+                k / noise.rotation_sigma_rad,
+                k / noise.translation_sigma_m,
             );
             let (jr, jt) = (j.fixed_rows::<3>(0), j.fixed_rows::<3>(3));
             rotation += jr.tr_mul(&jr);
