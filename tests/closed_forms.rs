@@ -324,3 +324,89 @@ fn solve_cli_takes_every_method_and_prints_the_comparison_table() {
     }
     assert!(stdout.contains("reference (iterative)"), "{stdout}");
 }
+
+/// #19 leftovers: `solver.method` in a config takes the same names as `--method` (one list,
+/// `Method::NAMES`), each to the same method, and a misspelling lists them all.
+#[test]
+fn config_solver_method_takes_every_cli_name() {
+    for name in Method::NAMES {
+        let config: handeye::config::SolverConfig =
+            serde_yaml_ng::from_str(&format!("method: {name}")).unwrap();
+        assert_eq!(Some(config.method), Method::from_name(name), "{name}");
+        assert_eq!(config.to_options().method, config.method, "{name}");
+        assert_eq!(name.parse::<Method>(), Ok(config.method), "{name}");
+    }
+    for method in Method::ALL {
+        let config: handeye::config::SolverConfig =
+            serde_yaml_ng::from_str(&format!("method: {}", method.name())).unwrap();
+        assert_eq!(config.method, method);
+        // Written back under its own name.
+        let text = serde_yaml_ng::to_string(&config).unwrap();
+        assert!(
+            text.contains(&format!("method: {}", method.name())),
+            "{text}"
+        );
+    }
+    let shah: handeye::config::SolverConfig = serde_yaml_ng::from_str("method: shah").unwrap();
+    assert_eq!(shah.method, Method::ClosedForm);
+    let error = serde_yaml_ng::from_str::<handeye::config::SolverConfig>("method: tsia")
+        .unwrap_err()
+        .to_string();
+    for name in Method::NAMES {
+        assert!(error.contains(&format!("`{name}`")), "{name}: {error}");
+    }
+    assert!("tsia"
+        .parse::<Method>()
+        .unwrap_err()
+        .contains("`daniilidis`"));
+}
+
+/// #19 leftovers: `handeye solve --rotation-sigma-deg` / `--translation-sigma-mm` take the
+/// ranges of the config's `solver.rotation_sigma_deg` / `translation_sigma_mm`, (0, 10] ° and
+/// (0, 100] mm, and say so; values inside are used.
+#[test]
+fn solve_cli_sigmas_take_the_config_ranges() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = cell(Setup::EyeInHand, 12, 41);
+    add_noise(&mut c, 0.1f64.to_radians(), 0.5e-3, 42);
+    let file = dir.path().join("samples.yaml");
+    Dataset {
+        setup: c.setup,
+        pairs: c.pairs.clone(),
+    }
+    .save(&file)
+    .unwrap();
+    let solve = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_handeye"))
+            .arg("solve")
+            .arg(&file)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    for (args, expected) in [
+        (["--rotation-sigma-deg", "20"], "(0, 10] °"),
+        (["--rotation-sigma-deg", "0"], "(0, 10] °"),
+        (["--translation-sigma-mm", "150"], "(0, 100] mm"),
+        (["--translation-sigma-mm", "0"], "(0, 100] mm"),
+    ] {
+        let out = solve(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} accepted");
+        assert!(
+            stderr.contains(args[0]) && stderr.contains(args[1]) && stderr.contains(expected),
+            "{args:?}: {stderr}"
+        );
+    }
+    for args in [
+        ["--rotation-sigma-deg", "10"],
+        ["--translation-sigma-mm", "100"],
+    ] {
+        let out = solve(&args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

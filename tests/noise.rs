@@ -436,59 +436,172 @@ fn too_few_samples_keep_the_configured_noise() {
     assert!((used.rotation_sigma_deg - 0.2).abs() < 1e-12, "{used:?}");
 }
 
-/// RMS true error over RMS reported 1-sigma (total rotation, total translation) of both
-/// unknowns over `seeds` seeded sets.
-fn coverage(noise: Noise, first_seed: u64, seeds: u64) -> [f64; 4] {
-    let mut error2 = [0.0; 4];
-    let mut sigma2 = [0.0; 4];
-    for seed in first_seed..first_seed + seeds {
-        let mut c = cell(seed);
-        noise.apply(&mut c.pairs, seed);
-        let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
-        let u = found.uncertainty.as_ref().unwrap();
-        let e = errors(&found, &c);
-        let s = [
-            u.camera_mount.rotation_deg.to_radians(),
-            u.camera_mount.translation_mm * 1e-3,
-            u.target_mount.rotation_deg.to_radians(),
-            u.target_mount.translation_mm * 1e-3,
-        ];
-        for k in 0..4 {
-            error2[k] += e[k] * e[k];
-            sigma2[k] += s[k] * s[k];
-        }
+/// Flange-pose noise of the robot: per-axis rotation (rad) and translation (m) in the flange
+/// frame, `T_base_flange ← T_base_flange · exp(δ)`.
+fn add_robot_noise(pairs: &mut [PosePair], rotation: f64, translation: f64, seed: u64) {
+    let mut rng = StdRng::seed_from_u64(seed ^ 0x0b07);
+    let (nr, nt) = (
+        Normal::new(0.0, rotation).unwrap(),
+        Normal::new(0.0, translation).unwrap(),
+    );
+    for p in pairs {
+        let dr = Vector3::from_fn(|_, _| nr.sample(&mut rng));
+        let dt = Vector3::from_fn(|_, _| nt.sample(&mut rng));
+        p.base_from_flange *=
+            Pose::from_parts(Translation3::from(dt), UnitQuaternion::from_scaled_axis(dr));
     }
-    std::array::from_fn(|k| (error2[k] / sigma2[k]).sqrt())
 }
 
-#[test]
-fn reported_sigma_describes_the_true_error_under_every_noise_case() {
-    let cases = [
-        ("1°/0.5 mm", Noise::gaussian(1.0, 0.5)),
-        ("0.05°/3 mm", Noise::gaussian(0.05, 3.0)),
-        ("0.2°/1 mm", Noise::gaussian(0.2, 1.0)),
-        (
-            "uniform 1°/2 mm",
-            Noise::Uniform {
-                rotation: 1f64.to_radians(),
-                translation: 2e-3,
-            },
-        ),
-    ];
-    // The issue asks 0.8–1.25; measured (60 seeds each) every figure is within 0.75–1.25
-    // (the lowest, T_flange_camera translation at 1°/0.5 mm, is 0.78: slightly conservative).
-    // With 60 seeds the ratio itself scatters by about ±0.05.
-    let mut outside = Vec::new();
-    for (k, (label, noise)) in cases.into_iter().enumerate() {
-        let ratios = coverage(noise, 1000 + 100 * k as u64, 60);
-        for (figure, ratio) in FIGURES.iter().zip(ratios) {
-            eprintln!("{label}: {figure}: RMS error / RMS 1-sigma {ratio:.3}");
-            if !(0.75..=1.25).contains(&ratio) {
-                outside.push(format!("{label}: {figure}: {ratio:.3}"));
+/// One noise case of the Monte Carlo: board-pose noise, optional robot noise (deg, mm).
+struct McCase {
+    label: &'static str,
+    board: Noise,
+    robot: Option<(f64, f64)>,
+}
+
+/// Per unknown (camera mount, target mount) and kind (rotation, translation): the true error
+/// against the reported covariance over many seeded sets.
+#[derive(Default, Clone)]
+struct Honesty {
+    /// Σ squared total error and Σ reported total variance (the issue's RMS / RMS figure).
+    error2: f64,
+    sigma2: f64,
+    /// Per-axis z-scores within 1 and 3 sigma, and their count.
+    within_1: usize,
+    within_3: usize,
+    axes: usize,
+}
+
+impl Honesty {
+    fn ratio(&self) -> f64 {
+        (self.error2 / self.sigma2).sqrt()
+    }
+    fn p1(&self) -> f64 {
+        self.within_1 as f64 / self.axes as f64
+    }
+    fn p3(&self) -> f64 {
+        self.within_3 as f64 / self.axes as f64
+    }
+}
+
+/// Runs `sets` seeded sets of `case` with the default solve; returns the four figures.
+fn honesty(case: &McCase, first_seed: u64, sets: u64) -> [Honesty; 4] {
+    let mut out: [Honesty; 4] = Default::default();
+    for seed in first_seed..first_seed + sets {
+        let mut c = cell(seed);
+        case.board.apply(&mut c.pairs, seed);
+        if let Some((deg, mm)) = case.robot {
+            add_robot_noise(&mut c.pairs, deg.to_radians(), mm * 1e-3, seed);
+        }
+        let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
+        let u = found.uncertainty.as_ref().unwrap();
+        for (k, (estimate, truth)) in [
+            (found.camera_mount, c.camera_mount),
+            (found.target_mount, c.target_mount),
+        ]
+        .iter()
+        .enumerate()
+        {
+            // The covariance's perturbation: R_est = exp(δθ)·R_true, t_est = t_true + δt.
+            let d_theta =
+                handeye::geometry::rotvec(&(estimate.rotation * truth.rotation.inverse()));
+            let d_t = estimate.translation.vector - truth.translation.vector;
+            for (kind, error) in [d_theta, d_t].into_iter().enumerate() {
+                let h = &mut out[2 * k + kind];
+                for axis in 0..3 {
+                    let r = 6 * k + 3 * kind + axis;
+                    let variance = u.covariance[(r, r)];
+                    let z = (error[axis] / variance.sqrt()).abs();
+                    h.within_1 += usize::from(z <= 1.0);
+                    h.within_3 += usize::from(z <= 3.0);
+                    h.axes += 1;
+                    h.error2 += error[axis] * error[axis];
+                    h.sigma2 += variance;
+                }
             }
         }
     }
-    assert!(outside.is_empty(), "outside 0.75–1.25: {outside:?}");
+    out
+}
+
+fn mc_cases() -> [McCase; 5] {
+    [
+        McCase {
+            label: "0.2°/1 mm",
+            board: Noise::gaussian(0.2, 1.0),
+            robot: None,
+        },
+        McCase {
+            label: "1°/0.5 mm",
+            board: Noise::gaussian(1.0, 0.5),
+            robot: None,
+        },
+        McCase {
+            label: "0.05°/3 mm",
+            board: Noise::gaussian(0.05, 3.0),
+            robot: None,
+        },
+        McCase {
+            label: "uniform 1°/2 mm",
+            board: Noise::Uniform {
+                rotation: 1f64.to_radians(),
+                translation: 2e-3,
+            },
+            robot: None,
+        },
+        McCase {
+            label: "0.2°/1 mm + robot 0.05°/0.2 mm",
+            board: Noise::gaussian(0.2, 1.0),
+            robot: Some((0.05, 0.2)),
+        },
+    ]
+}
+
+/// Issue #19: the reported 1-sigma describes the true error under every noise case: per
+/// unknown RMS error / RMS 1-sigma within 0.8–1.25, and per-axis coverage 68 ± 5 % within
+/// 1 sigma, ≥ 98.5 % within 3 sigma.
+///
+/// 300 sets per case (900 axis samples per figure; the binomial standard error of a 68 % rate
+/// is 1.6 %, more with the axes of one set correlated): about a second in CI, so always on.
+/// `HANDEYE_LONG_MC=1` runs 2000 sets per case with the same margins, for the figures.
+///
+/// The earlier check of this (60 sets per case, RMS ratio only) saw 0.78 for the
+/// T_flange_camera translation at 1°/0.5 mm. That was its seeds, not the estimator: the same
+/// case over the next five blocks of 60 seeds gives 0.98, 1.03, 1.06, 1.01 and 0.98 (1 sigma
+/// 65–71 %), and 0.98 over the 300 sets here; 60 sets are too few for a ±20 % margin on the
+/// worst of 16 figures.
+#[test]
+fn reported_sigma_covers_the_true_error_per_axis_under_every_noise_case() {
+    let long = std::env::var("HANDEYE_LONG_MC").is_ok_and(|v| v == "1");
+    let sets = if long { 2000 } else { 300 };
+    let mut outside = Vec::new();
+    for (k, case) in mc_cases().iter().enumerate() {
+        let figures = honesty(case, 5000 + 10_000 * k as u64, sets);
+        for (name, h) in FIGURES.iter().zip(&figures) {
+            eprintln!(
+                "{}: {name}: RMS error / RMS 1-sigma {:.3}, within 1 sigma {:.1} %, within 3 sigma {:.1} % ({} axis samples)",
+                case.label,
+                h.ratio(),
+                100.0 * h.p1(),
+                100.0 * h.p3(),
+                h.axes
+            );
+            if !(0.8..=1.25).contains(&h.ratio()) || (h.p1() - 0.683).abs() > 0.05 || h.p3() < 0.985
+            {
+                outside.push(format!(
+                    "{}: {name}: ratio {:.3}, 1 sigma {:.1} %, 3 sigma {:.1} %",
+                    case.label,
+                    h.ratio(),
+                    100.0 * h.p1(),
+                    100.0 * h.p3()
+                ));
+            }
+        }
+    }
+    assert!(
+        outside.is_empty(),
+        "outside ratio 0.8–1.25, 1 sigma 68.3 ± 5 %, 3 sigma ≥ 98.5 %: {outside:?}"
+    );
 }
 
 #[test]

@@ -8,50 +8,27 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye::config::{CellConfig, SolveSpace};
+use handeye::config::{validate, CellConfig, SolveSpace};
 use handeye::dataset::Dataset;
+use handeye::geometry::readable;
 use handeye::result::ResultFile;
 use handeye::session::{self, SessionFolder};
 use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
 
-/// Estimator choice on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// The paper's iterative quaternion-averaging method.
-    Iterative,
-    /// Shah's Kronecker closed form (AX = ZB; also `shah`).
-    #[value(alias = "shah")]
-    ClosedForm,
-    /// Weighted nonlinear least squares from the iterative answer (default).
-    Refined,
-    /// Tsai–Lenz closed form (AX = XB on relative motions).
-    Tsai,
-    /// Park–Martin closed form (AX = XB on relative motions).
-    Park,
-    /// Horaud–Dornaika quaternion closed form (AX = XB on relative motions).
-    Horaud,
-    /// Andreff's linear Kronecker form (AX = XB on relative motions).
-    Andreff,
-    /// Daniilidis' dual-quaternion closed form (AX = XB on relative motions).
-    Daniilidis,
-    /// Li's Kronecker form of AX = ZB (rotations and translations at once).
-    Li,
-}
-
-impl MethodArg {
-    fn method(self) -> Method {
-        match self {
-            MethodArg::Iterative => Method::Iterative,
-            MethodArg::ClosedForm => Method::ClosedForm,
-            MethodArg::Refined => Method::Refined,
-            MethodArg::Tsai => Method::Tsai,
-            MethodArg::Park => Method::Park,
-            MethodArg::Horaud => Method::Horaud,
-            MethodArg::Andreff => Method::Andreff,
-            MethodArg::Daniilidis => Method::Daniilidis,
-            MethodArg::Li => Method::Li,
-        }
-    }
+/// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
+/// `solver.method` takes), each with its one-line summary in `--help`.
+fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let values = Method::ALL.map(|m| {
+        let aliases = Method::ALIASES
+            .iter()
+            .filter(move |(_, target)| *target == m)
+            .map(|(alias, _)| *alias);
+        PossibleValue::new(m.name())
+            .help(m.summary())
+            .aliases(aliases)
+    });
+    PossibleValuesParser::new(values).try_map(|name| name.parse::<Method>())
 }
 
 /// Robust loss on the command line.
@@ -90,8 +67,8 @@ pub struct SolveArgs {
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Estimator.
-    #[arg(long, value_enum, default_value_t = MethodArg::Refined)]
-    method: MethodArg,
+    #[arg(long, value_parser = method_parser(), default_value = Method::Refined.name())]
+    method: Method,
     /// Per-axis rotation noise of T_camera_target, degrees: used as given (default: estimated
     /// from the residuals, starting from 0.2°).
     #[arg(long)]
@@ -124,19 +101,35 @@ pub struct SolveArgs {
 
 impl SolveArgs {
     fn options(&self) -> anyhow::Result<SolveOptions> {
-        // Only the values given are checked (an absent sigma is estimated).
-        for (name, value) in [
-            ("--rotation-sigma-deg", self.rotation_sigma_deg),
-            ("--translation-sigma-mm", self.translation_sigma_mm),
-            ("--robust-scale", Some(self.robust_scale)),
+        // Only the values given are checked (an absent sigma is estimated); the sigmas against
+        // the ranges the config's `solver.rotation_sigma_deg` / `translation_sigma_mm` take.
+        for (name, value, range) in [
+            (
+                "--rotation-sigma-deg",
+                self.rotation_sigma_deg,
+                Some(validate::ROTATION_SIGMA_DEG),
+            ),
+            (
+                "--translation-sigma-mm",
+                self.translation_sigma_mm,
+                Some(validate::TRANSLATION_SIGMA_MM),
+            ),
+            ("--robust-scale", Some(self.robust_scale), None),
         ]
         .into_iter()
-        .filter_map(|(name, value)| Some((name, value?)))
+        .filter_map(|(name, value, range)| Some((name, value?, range)))
         {
-            anyhow::ensure!(
-                value.is_finite() && value > 0.0,
-                "{name} = {value}: must be a positive number"
-            );
+            match range {
+                Some(range) => anyhow::ensure!(
+                    range.contains(value),
+                    "{name} = {}: must be a value in {range}",
+                    readable(value)
+                ),
+                None => anyhow::ensure!(
+                    value.is_finite() && value > 0.0,
+                    "{name} = {value}: must be a positive number"
+                ),
+            }
         }
         let (noise, estimate_noise) = NoiseModel::given_or_estimated(
             self.rotation_sigma_deg,
@@ -144,7 +137,7 @@ impl SolveArgs {
             true,
         );
         let mut options = SolveOptions {
-            method: self.method.method(),
+            method: self.method,
             noise,
             estimate_noise,
             robust: match self.robust {

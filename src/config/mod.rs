@@ -115,7 +115,7 @@ impl SolverConfig {
             self.estimate_noise,
         );
         SolveOptions {
-            method: self.method.into(),
+            method: self.method,
             noise,
             estimate_noise,
             drop_outliers: self.drop_outliers,

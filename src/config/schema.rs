@@ -474,38 +474,18 @@ impl Default for DetectorConfig {
     }
 }
 
-/// The solver a config asks for (the YAML names; `closed_form` is also accepted for
-/// `closed-form`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SolverMethod {
-    /// Joint weighted nonlinear least squares, started from the iterative answer (default).
-    #[default]
-    Refined,
-    /// The paper's alternating quaternion averaging.
-    Iterative,
-    /// Shah's Kronecker/SVD closed form.
-    #[serde(alias = "closed_form")]
-    ClosedForm,
-}
-
-impl From<SolverMethod> for Method {
-    fn from(m: SolverMethod) -> Method {
-        match m {
-            SolverMethod::Refined => Method::Refined,
-            SolverMethod::Iterative => Method::Iterative,
-            SolverMethod::ClosedForm => Method::ClosedForm,
-        }
-    }
-}
+/// The solver a config asks for: the solver's own [`Method`], read and written by the one list
+/// of names ([`Method::NAMES`]) that `--method` takes too.
+pub type SolverMethod = Method;
 
 /// Solver settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SolverConfig {
-    /// `refined` (default), `iterative` or `closed-form`.
+    /// `refined` (default), `iterative`, a closed form (`tsai`, `park`, `horaud`, `andreff`,
+    /// `daniilidis`, `closed_form` (also `closed-form`, `shah`), `li`): [`Method::NAMES`].
     #[serde(default)]
-    pub method: SolverMethod,
+    pub method: Method,
     /// Rotation noise of a board pose `T_camera_target`, degrees (1-sigma per axis). Given: the
     /// pose-space fit uses it as is; absent (the default): estimated from the residuals
     /// (variance component estimation, starting from 0.2°), unless `estimate_noise` is false.
@@ -578,7 +558,7 @@ fn yes() -> bool {
 impl Default for SolverConfig {
     fn default() -> Self {
         SolverConfig {
-            method: SolverMethod::default(),
+            method: Method::default(),
             rotation_sigma_deg: None,
             translation_sigma_mm: None,
             drop_outliers: true,

@@ -57,6 +57,31 @@ pub fn rotation_from_matrix(m: &Matrix3<f64>, tol: f64) -> Option<UnitQuaternion
     ))
 }
 
+/// The rotation closest (Frobenius norm) to a 3x3 matrix: the orthogonal polar factor by SVD,
+/// `U·diag(1, 1, det(U·Vᵀ))·Vᵀ`, so a reflection becomes the nearest proper rotation.
+///
+/// For matrices that are rotations only up to noise (a homography's columns, a least-squares
+/// solution reshaped). `None` when the matrix is not finite or the SVD fails.
+pub fn project_to_rotation(m: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let svd = m.svd(true, true);
+    let u = svd.u?;
+    let v_t = svd.v_t?;
+    let mut d = Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = u * d * v_t;
+    if !r.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(r),
+    ))
+}
+
 /// Largest accepted distance of any loaded or exported translation from its frame's origin, m.
 /// A robot cell spans a few metres; 100 m leaves room for gantries and mobile bases while a
 /// value in millimetres read as metres (500 mm → 500 m), a sign-bit typo or a `1e300` is
@@ -174,6 +199,34 @@ mod tests {
         let q = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.5));
         let flipped = UnitQuaternion::new_unchecked(-q.into_inner());
         assert!((rotvec(&flipped) - Vector3::new(0.0, 0.0, 0.5)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn projection_recovers_a_rotation_from_a_noisy_or_reflected_matrix() {
+        let truth = UnitQuaternion::from_scaled_axis(Vector3::new(0.4, -1.1, 2.0));
+        let r = truth.to_rotation_matrix().into_inner();
+        // A rotation is its own projection; a uniform scale does not move it.
+        assert!(project_to_rotation(&r).unwrap().angle_to(&truth) < 1e-12);
+        assert!(project_to_rotation(&(r * 2.5)).unwrap().angle_to(&truth) < 1e-12);
+        // A small symmetric disturbance (no rotation part) leaves the rotation in place to
+        // first order; the result is a proper rotation whatever the input.
+        let mut noisy = r;
+        noisy[(0, 1)] += 1e-3;
+        noisy[(1, 0)] += 1e-3;
+        let p = project_to_rotation(&noisy).unwrap();
+        let m = p.to_rotation_matrix().into_inner();
+        assert!((m.transpose() * m - Matrix3::identity()).norm() < 1e-12);
+        assert!((m.determinant() - 1.0).abs() < 1e-12);
+        assert!(p.angle_to(&truth) < 2e-3, "{}", p.angle_to(&truth));
+        // A reflection (det −1) gives the nearest proper rotation, not a reflection.
+        let reflected = r * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+        let q = project_to_rotation(&reflected)
+            .unwrap()
+            .to_rotation_matrix();
+        assert!((q.matrix().determinant() - 1.0).abs() < 1e-12);
+        let mut bad = r;
+        bad[(2, 2)] = f64::NAN;
+        assert!(project_to_rotation(&bad).is_none());
     }
 
     #[test]

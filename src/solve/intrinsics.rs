@@ -15,7 +15,7 @@ use super::reprojection::{
 };
 use super::{solve, Calibration, SolveError, SolveOptions};
 use crate::camera_model::{CameraModel, Distortion};
-use crate::geometry::{rotation_from_matrix, Pose};
+use crate::geometry::{project_to_rotation, Pose};
 use crate::setup::{PosePair, Setup};
 
 /// Fewest corners a frame needs to give a homography.
@@ -121,16 +121,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, camera: &CameraModel) -> Option<Po
     let r2 = c2 * lambda;
     let r3 = r1.cross(&r2);
     let approx = Matrix3::from_columns(&[r1, r2, r3]);
-    // Nearest rotation (polar decomposition by SVD).
-    let svd = approx.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut r = u * vt;
-    if r.determinant() < 0.0 {
-        let mut u2 = u;
-        u2.column_mut(2).neg_mut();
-        r = u2 * vt;
-    }
-    let rotation = rotation_from_matrix(&r, 1e-6)?;
+    let rotation = project_to_rotation(&approx)?;
     Some(Pose::from_parts(Translation3::from(c3 * lambda), rotation))
 }
 

@@ -66,7 +66,16 @@ impl Estimator {
         if !self.active() || self.rounds >= MAX_NOISE_ROUNDS {
             return true;
         }
-        let Some(groups) = group_redundancy(data, solution, scale, &self.noise) else {
+        self.step_with(group_redundancy(data, solution, scale, &self.noise))
+    }
+
+    /// [`Estimator::step`] from the groups' sums and redundancies already computed at the
+    /// current noise (`None`: singular normal equations, nothing to estimate from).
+    pub(super) fn step_with(&mut self, groups: Option<[(f64, f64); 2]>) -> bool {
+        if !self.active() || self.rounds >= MAX_NOISE_ROUNDS {
+            return true;
+        }
+        let Some(groups) = groups else {
             return true;
         };
         self.rounds += 1;

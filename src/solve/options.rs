@@ -88,13 +88,15 @@ impl Default for EstimateNoise {
 }
 
 /// Which estimator [`solve`] runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+///
+/// One list of names for the config (`solver.method`), the CLI (`--method`) and the result
+/// file: [`Method::name`] of each of [`Method::ALL`], plus [`Method::ALIASES`]; (de)serialized
+/// through them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
     /// The paper: alternating quaternion averaging for rotations, then translations.
     Iterative,
     /// Shah (2013) Kronecker/SVD closed form written for `A = X·B·Y` (AX = ZB family).
-    #[serde(alias = "shah")]
     ClosedForm,
     /// Joint weighted nonlinear least squares on both unknowns, started from the iterative answer.
     #[default]
@@ -127,8 +129,61 @@ impl Method {
         Method::Li,
     ];
 
+    /// Other accepted spellings: `closed-form` (the config's and CLI's older spelling) and
+    /// `shah` (the paper) for [`Method::ClosedForm`].
+    pub const ALIASES: [(&'static str, Method); 2] = [
+        ("closed-form", Method::ClosedForm),
+        ("shah", Method::ClosedForm),
+    ];
+
+    /// Every accepted name: the name of each of [`Method::ALL`], then the aliases.
+    pub const NAMES: [&'static str; 11] = {
+        let mut names = [""; 11];
+        let mut i = 0;
+        while i < Method::ALL.len() {
+            names[i] = Method::ALL[i].name();
+            i += 1;
+        }
+        let mut k = 0;
+        while k < Method::ALIASES.len() {
+            names[Method::ALL.len() + k] = Method::ALIASES[k].0;
+            k += 1;
+        }
+        names
+    };
+
+    /// The method of a name or alias (exact spelling), `None` for anything else.
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .or_else(|| {
+                Method::ALIASES
+                    .into_iter()
+                    .find(|(alias, _)| *alias == name)
+                    .map(|(_, m)| m)
+            })
+    }
+
+    /// One line on what the method is, for `--help`.
+    pub fn summary(self) -> &'static str {
+        match self {
+            Method::Iterative => "the paper's iterative quaternion-averaging method",
+            Method::ClosedForm => "Shah's Kronecker closed form (AX = ZB)",
+            Method::Refined => {
+                "weighted nonlinear least squares from the iterative answer (default)"
+            }
+            Method::Tsai => "Tsai–Lenz closed form (AX = XB on relative motions)",
+            Method::Park => "Park–Martin closed form (AX = XB on relative motions)",
+            Method::Horaud => "Horaud–Dornaika quaternion closed form (AX = XB)",
+            Method::Andreff => "Andreff's linear Kronecker form (AX = XB)",
+            Method::Daniilidis => "Daniilidis' dual-quaternion closed form (AX = XB)",
+            Method::Li => "Li's Kronecker form of AX = ZB (rotations and translations at once)",
+        }
+    }
+
     /// The YAML / CLI name.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Method::Iterative => "iterative",
             Method::ClosedForm => "closed_form",
@@ -155,6 +210,34 @@ impl Method {
             Method::ClosedForm => "shah (closed_form)",
             other => other.name(),
         }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    /// [`Method::from_name`], with the accepted names in the error.
+    fn from_str(name: &str) -> Result<Method, String> {
+        Method::from_name(name).ok_or_else(|| {
+            format!(
+                "unknown method `{name}`, expected one of {}",
+                Method::NAMES.map(|n| format!("`{n}`")).join(", ")
+            )
+        })
+    }
+}
+
+impl Serialize for Method {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Method {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Method, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        Method::from_name(&name)
+            .ok_or_else(|| serde::de::Error::unknown_variant(&name, &Method::NAMES))
     }
 }
 

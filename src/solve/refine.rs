@@ -6,21 +6,22 @@
 //! estimate. Parameters are a local perturbation of the start on SO(3)×R³ per unknown
 //! (`R_X ← exp(φ_X)·R_X`, `t_X ← t_X + ρ_X`; `R_Y ← R_Y·exp(φ_Y)`, `t_Y ← t_Y + ρ_Y`) with an
 //! analytic Jacobian (`perturbed` is that parametrisation, shared with the reprojection-space
-//! refinement); the `levenberg-marquardt` crate minimises (through `solve::lm`, shared with the
-//! reprojection-space refinement), then the problem is re-linearised at the optimum so the
-//! covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
+//! refinement). Levenberg-Marquardt on the 12x12 normal equations (`solve::lm::minimize_normal`,
+//! shared with the reprojection-space refinement) minimises, re-anchoring the perturbation at
+//! every accepted step; the normal equations are summed per sample by 3x3 blocks, no tall
+//! Jacobian is formed (the speed of the default pipeline: `benches/solve.rs`). The problem is
+//! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
 //! reweighted least squares on each sample's whitened norm. The sigmas themselves are
 //! estimated from the residuals, alternated with the fit (see [`super::noise`]), unless
 //! [`SolveOptions::estimate_noise`] says they are given.
 
 use std::cell::RefCell;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
-    DVector, Dyn, Matrix3, Owned, SMatrix, SVector, Translation3, UnitQuaternion, Vector3, U12,
+    DMatrix, DVector, Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3,
 };
 
-use super::lm::minimize_dense;
+use super::lm::{minimize_normal, NormalEquations};
 use super::noise;
 use super::{
     Axby, AxbyData, NoiseModel, PoseNoise, PoseSigma, RobustLoss, SolveError, SolveOptions,
@@ -88,99 +89,228 @@ fn left_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() - 0.5 * k + coefficient * k * k
 }
 
-struct Problem<'a> {
+/// Residual rows (6: rotation then translation) and their Jacobian (6x12) of one sample.
+type Rows = (SVector<f64, 6>, SMatrix<f64, 6, 12>);
+
+/// Unscaled residual (rotation rad, translation m) of a sample `(a, b)` at `s`, and `X·B·Y`.
+fn raw_residual(s: &Axby, a: &Pose, b: &Pose) -> (Vector3<f64>, Vector3<f64>, Pose) {
+    let predicted = s.x * b * s.y;
+    let r = rotvec(&(predicted.rotation * a.rotation.inverse()));
+    let t = predicted.translation.vector - a.translation.vector;
+    (r, t, predicted)
+}
+
+/// Whitened residual of a sample, rotation rows times `kr` (= scale/σ_r), translation rows
+/// times `kt` (= scale/σ_t).
+fn sample_residual(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> SVector<f64, 6> {
+    let (r, t, _) = raw_residual(s, a, b);
+    let mut out = SVector::<f64, 6>::zeros();
+    out.fixed_rows_mut::<3>(0).copy_from(&(r * kr));
+    out.fixed_rows_mut::<3>(3).copy_from(&(t * kt));
+    out
+}
+
+/// [`sample_residual`] and its analytic Jacobian in the parameters [φ_X, ρ_X, φ_Y, ρ_Y] at
+/// `δ = 0` (the perturbation of [`perturbed`] around `s`).
+fn sample_rows(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> Rows {
+    let (r, t, predicted) = raw_residual(s, a, b);
+    let mut e = SVector::<f64, 6>::zeros();
+    e.fixed_rows_mut::<3>(0).copy_from(&(r * kr));
+    e.fixed_rows_mut::<3>(3).copy_from(&(t * kt));
+    let mut j = SMatrix::<f64, 6, 12>::zeros();
+    let j_inv = left_jacobian_inverse(&r);
+    let r_pred = predicted.rotation.to_rotation_matrix().into_inner();
+    let lever = predicted.translation.vector - s.x.translation.vector;
+    let rxb = (s.x.rotation * b.rotation)
+        .to_rotation_matrix()
+        .into_inner();
+    // Rotation rows: d/dφ_X = J⁻¹, d/dφ_Y = J⁻¹·R_pred; translations do not move them.
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(j_inv * kr));
+    j.fixed_view_mut::<3, 3>(0, 6)
+        .copy_from(&(j_inv * r_pred * kr));
+    // Translation rows: d/dφ_X = −[R_X (R_B t_Y + t_B)]×, d/dρ_X = I, d/dρ_Y = R_X R_B.
+    j.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(-lever.cross_matrix() * kt));
+    j.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(Matrix3::identity() * kt));
+    j.fixed_view_mut::<3, 3>(3, 9).copy_from(&(rxb * kt));
+    (e, j)
+}
+
+/// The whitened problem's normal equations at one point, split by group of rows.
+#[derive(Clone, Copy)]
+pub(super) struct Normal {
+    /// `J_rᵀJ_r` of the rotation rows.
+    rotation: SMatrix<f64, 12, 12>,
+    /// `J_tᵀJ_t` of the translation rows.
+    translation: SMatrix<f64, 12, 12>,
+    /// `Jᵀr`.
+    gradient: SVector<f64, 12>,
+    /// `Σ r²` of the rotation rows and of the translation rows.
+    squares: [f64; 2],
+}
+
+impl Normal {
+    /// `JᵀJ`.
+    fn information(&self) -> SMatrix<f64, 12, 12> {
+        self.rotation + self.translation
+    }
+
+    /// `‖r‖²`.
+    fn cost(&self) -> f64 {
+        self.squares[0] + self.squares[1]
+    }
+}
+
+/// The normal equations of the fit of `data` at `s`, samples scaled by `scale`
+/// (sqrt(weight·robust weight)) and whitened by `noise`.
+///
+/// Σ `J_iᵀJ_i` of [`sample_rows`], accumulated by its 3x3 blocks: of the 6x12 Jacobian of a
+/// sample, the rotation rows are `[A 0 B 0]` and the translation rows `[C k·I 0 D]` (`D` a
+/// rotation times `k`), so most of the products are known zeros or `k²·I` (4x fewer operations
+/// than the dense product; the unit test checks the two agree).
+fn normal_equations(data: &AxbyData, s: &Axby, scale: &[f64], noise: &NoiseModel) -> Normal {
+    let zero = Matrix3::zeros();
+    // Rotation rows: blocks (φX,φX), (φX,φY), (φY,φY).
+    let (mut r00, mut r02, mut r22) = (zero, zero, zero);
+    // Translation rows: (φX,φX), (φX,ρX), (φX,ρY), (ρX,ρY), and Σk² for (ρX,ρX), (ρY,ρY).
+    let (mut t00, mut t01, mut t03, mut t13) = (zero, zero, zero, zero);
+    let mut kt2 = 0.0;
+    let mut g = [Vector3::zeros(); 4];
+    let mut squares = [0.0; 2];
+    for (i, (a, b)) in data.a.iter().zip(&data.b).enumerate() {
+        let kr = scale[i] / noise.rotation_sigma_rad;
+        let kt = scale[i] / noise.translation_sigma_m;
+        let (r, t, predicted) = raw_residual(s, a, b);
+        let (er, et) = (r * kr, t * kt);
+        let a_block = left_jacobian_inverse(&r) * kr;
+        let b_block = a_block * predicted.rotation.to_rotation_matrix().into_inner();
+        let c_block = -(predicted.translation.vector - s.x.translation.vector).cross_matrix() * kt;
+        let d_block = (s.x.rotation * b.rotation)
+            .to_rotation_matrix()
+            .into_inner()
+            * kt;
+        r00 += a_block.tr_mul(&a_block);
+        r02 += a_block.tr_mul(&b_block);
+        r22 += b_block.tr_mul(&b_block);
+        t00 += c_block.tr_mul(&c_block);
+        t01 += c_block.transpose() * kt;
+        t03 += c_block.tr_mul(&d_block);
+        t13 += d_block * kt;
+        kt2 += kt * kt;
+        g[0] += a_block.tr_mul(&er) + c_block.tr_mul(&et);
+        g[1] += et * kt;
+        g[2] += b_block.tr_mul(&er);
+        g[3] += d_block.tr_mul(&et);
+        squares[0] += er.norm_squared();
+        squares[1] += et.norm_squared();
+    }
+    let symmetric = |blocks: &[(usize, usize, Matrix3<f64>)]| {
+        let mut m = SMatrix::<f64, 12, 12>::zeros();
+        for &(row, col, block) in blocks {
+            m.fixed_view_mut::<3, 3>(3 * row, 3 * col).copy_from(&block);
+            if row != col {
+                m.fixed_view_mut::<3, 3>(3 * col, 3 * row)
+                    .copy_from(&block.transpose());
+            }
+        }
+        m
+    };
+    let identity = Matrix3::identity() * kt2;
+    let mut gradient = SVector::<f64, 12>::zeros();
+    for (k, part) in g.iter().enumerate() {
+        gradient.fixed_rows_mut::<3>(3 * k).copy_from(part);
+    }
+    Normal {
+        rotation: symmetric(&[(0, 0, r00), (0, 2, r02), (2, 2, r22)]),
+        translation: symmetric(&[
+            (0, 0, t00),
+            (0, 1, t01),
+            (0, 3, t03),
+            (1, 1, identity),
+            (1, 3, t13),
+            (3, 3, identity),
+        ]),
+        gradient,
+        squares,
+    }
+}
+
+/// `‖r‖²` of the fit of `data` at `s` (see [`normal_equations`]).
+fn cost(data: &AxbyData, s: &Axby, scale: &[f64], noise: &NoiseModel) -> f64 {
+    data.a
+        .iter()
+        .zip(&data.b)
+        .zip(scale)
+        .map(|((a, b), k)| {
+            sample_residual(
+                s,
+                a,
+                b,
+                k / noise.rotation_sigma_rad,
+                k / noise.translation_sigma_m,
+            )
+            .norm_squared()
+        })
+        .sum()
+}
+
+/// The weighted fit for [`minimize_normal`]: parameters are the perturbation `δ` of
+/// [`perturbed`] around an anchor that moves to every accepted point, so each linearisation is
+/// at `δ = 0`, where the analytic Jacobian is exact. Stack-sized 12x12 normal equations built
+/// per sample: no tall Jacobian is formed.
+struct Fit<'a> {
     data: &'a AxbyData,
-    x0: Axby,
+    anchor: Axby,
     delta: DVector<f64>,
     /// sqrt(weight_i · robust_i) per sample.
-    scale: Vec<f64>,
-    inv_sigma_r: f64,
-    inv_sigma_t: f64,
+    scale: &'a [f64],
+    noise: NoiseModel,
+    /// Cost (½ Σ r²) at each evaluation.
     trace: RefCell<Vec<f64>>,
+    /// The normal equations of the last linearisation (the noise estimate reuses them).
+    last: RefCell<Option<Normal>>,
 }
 
-impl<'a> Problem<'a> {
-    fn new(data: &'a AxbyData, x0: Axby, scale: Vec<f64>, noise: &NoiseModel) -> Self {
-        Problem {
-            data,
-            x0,
-            delta: DVector::zeros(PARAMS),
-            scale,
-            inv_sigma_r: 1.0 / noise.rotation_sigma_rad,
-            inv_sigma_t: 1.0 / noise.translation_sigma_m,
-            trace: RefCell::new(Vec::new()),
-        }
-    }
-
+impl Fit<'_> {
     fn current(&self) -> Axby {
-        perturbed(&self.x0, &self.delta.fixed_rows::<PARAMS>(0).into_owned())
-    }
-
-    /// Unscaled residual (rotation rad, translation m) of sample i.
-    fn raw_residual(s: &Axby, a: &Pose, b: &Pose) -> (Vector3<f64>, Vector3<f64>, Pose) {
-        let predicted = s.x * b * s.y;
-        let r = rotvec(&(predicted.rotation * a.rotation.inverse()));
-        let t = predicted.translation.vector - a.translation.vector;
-        (r, t, predicted)
+        perturbed(
+            &self.anchor,
+            &self.delta.fixed_rows::<PARAMS>(0).into_owned(),
+        )
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, U12> for Problem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, U12>;
-    type ParameterStorage = Owned<f64, U12>;
-
-    fn set_params(&mut self, x: &nalgebra::SVector<f64, 12>) {
-        self.delta.copy_from(x);
-    }
-
-    fn params(&self) -> nalgebra::SVector<f64, 12> {
-        nalgebra::SVector::<f64, 12>::from_column_slice(self.delta.as_slice())
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        let s = self.current();
-        let n = self.data.len();
-        let mut out = DVector::zeros(6 * n);
-        for i in 0..n {
-            let (r, t, _) = Self::raw_residual(&s, &self.data.a[i], &self.data.b[i]);
-            let k = self.scale[i];
-            out.fixed_rows_mut::<3>(6 * i)
-                .copy_from(&(r * (k * self.inv_sigma_r)));
-            out.fixed_rows_mut::<3>(6 * i + 3)
-                .copy_from(&(t * (k * self.inv_sigma_t)));
+impl NormalEquations for Fit<'_> {
+    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        let normal = normal_equations(self.data, &self.current(), self.scale, &self.noise);
+        let cost = normal.cost();
+        self.trace.borrow_mut().push(0.5 * cost);
+        if !cost.is_finite() {
+            return None;
         }
-        self.trace.borrow_mut().push(0.5 * out.norm_squared());
-        Some(out)
+        let h = normal.information();
+        *self.last.borrow_mut() = Some(normal);
+        Some((
+            DMatrix::from_column_slice(PARAMS, PARAMS, h.as_slice()),
+            DVector::from_column_slice(normal.gradient.as_slice()),
+            cost,
+        ))
     }
 
-    fn jacobian(&self) -> Option<nalgebra::OMatrix<f64, Dyn, U12>> {
-        let s = self.current();
-        let n = self.data.len();
-        let mut j = nalgebra::OMatrix::<f64, Dyn, U12>::zeros(6 * n);
-        let rx = s.x.rotation.to_rotation_matrix().into_inner();
-        for i in 0..n {
-            let b = &self.data.b[i];
-            let (r, _, predicted) = Self::raw_residual(&s, &self.data.a[i], b);
-            let j_inv = left_jacobian_inverse(&r);
-            let r_pred = predicted.rotation.to_rotation_matrix().into_inner();
-            let kr = self.scale[i] * self.inv_sigma_r;
-            let kt = self.scale[i] * self.inv_sigma_t;
-            let lever = predicted.translation.vector - s.x.translation.vector;
-            let rxb = rx * b.rotation.to_rotation_matrix().into_inner();
-            // Rotation rows: d/dφ_X = J⁻¹, d/dφ_Y = J⁻¹·R_pred; translations do not move them.
-            j.fixed_view_mut::<3, 3>(6 * i, 0).copy_from(&(j_inv * kr));
-            j.fixed_view_mut::<3, 3>(6 * i, 6)
-                .copy_from(&(j_inv * r_pred * kr));
-            // Translation rows: d/dφ_X = −[R_X (R_B t_Y + t_B)]×, d/dρ_X = I, d/dρ_Y = R_X R_B.
-            j.fixed_view_mut::<3, 3>(6 * i + 3, 0)
-                .copy_from(&(-lever.cross_matrix() * kt));
-            j.fixed_view_mut::<3, 3>(6 * i + 3, 3)
-                .copy_from(&(Matrix3::identity() * kt));
-            j.fixed_view_mut::<3, 3>(6 * i + 3, 9)
-                .copy_from(&(rxb * kt));
-        }
-        Some(j)
+    fn cost(&self) -> Option<f64> {
+        let cost = cost(self.data, &self.current(), self.scale, &self.noise);
+        self.trace.borrow_mut().push(0.5 * cost);
+        cost.is_finite().then_some(cost)
+    }
+
+    fn params_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.delta
+    }
+
+    fn accepted(&mut self) {
+        self.anchor = self.current();
+        self.delta.fill(0.0);
     }
 }
 
@@ -188,7 +318,7 @@ impl LeastSquaresProblem<f64, Dyn, U12> for Problem<'_> {
 fn whitened_norms(data: &AxbyData, s: &Axby, noise: &NoiseModel) -> Vec<f64> {
     (0..data.len())
         .map(|i| {
-            let (r, t, _) = Problem::raw_residual(s, &data.a[i], &data.b[i]);
+            let (r, t, _) = raw_residual(s, &data.a[i], &data.b[i]);
             ((r / noise.rotation_sigma_rad).norm_squared()
                 + (t / noise.translation_sigma_m).norm_squared())
             .sqrt()
@@ -198,6 +328,9 @@ fn whitened_norms(data: &AxbyData, s: &Axby, noise: &NoiseModel) -> Vec<f64> {
 
 struct Run {
     solution: Axby,
+    /// The normal equations where the minimiser last linearised: at the solution but for the
+    /// last accepted step, which is below the convergence tolerance.
+    last: Option<Normal>,
     evaluations: usize,
     converged: bool,
     trace: Vec<f64>,
@@ -209,14 +342,22 @@ fn minimise(
     scale: &[f64],
     noise: &NoiseModel,
 ) -> Result<Run, SolveError> {
-    let problem = Problem::new(data, *start, scale.to_vec(), noise);
-    let (problem, outcome) = minimize_dense(&LevenbergMarquardt::new(), problem)?;
-    let solution = problem.current();
+    let mut fit = Fit {
+        data,
+        anchor: *start,
+        delta: DVector::zeros(PARAMS),
+        scale,
+        noise: *noise,
+        trace: RefCell::new(Vec::new()),
+        last: RefCell::new(None),
+    };
+    let outcome = minimize_normal(&mut fit)?;
     Ok(Run {
-        solution,
+        solution: fit.current(),
+        last: fit.last.into_inner(),
         evaluations: outcome.evaluations,
         converged: outcome.converged,
-        trace: problem.trace.into_inner(),
+        trace: fit.trace.into_inner(),
     })
 }
 
@@ -231,22 +372,19 @@ pub(super) fn group_redundancy(
     scale: &[f64],
     noise: &NoiseModel,
 ) -> Option<[(f64, f64); 2]> {
-    let problem = Problem::new(data, *solution, scale.to_vec(), noise);
-    let residuals = problem.residuals()?;
-    let j = problem.jacobian()?;
-    let normal: SMatrix<f64, 12, 12> = (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into();
-    let inverse = normal.cholesky()?.inverse();
-    let mut groups = [(0.0, 0.0); 2];
-    for row in 0..j.nrows() {
-        let group = &mut groups[usize::from(row % 6 >= 3)];
-        let jr = j.row(row).transpose();
-        group.0 += residuals[row] * residuals[row];
-        // Rows of zero weight are no observations.
-        if scale[row / 6] > 0.0 {
-            group.1 += 1.0 - (jr.transpose() * inverse * jr)[(0, 0)];
-        }
-    }
-    Some(groups)
+    groups_of(&normal_equations(data, solution, scale, noise), scale)
+}
+
+/// [`group_redundancy`] from normal equations already built (with `scale`).
+pub(super) fn groups_of(normal: &Normal, scale: &[f64]) -> Option<[(f64, f64); 2]> {
+    let inverse = normal.information().cholesky()?.inverse();
+    // Rows of zero weight are no observations (and their Jacobian rows are zero).
+    let rows = 3.0 * scale.iter().filter(|&&k| k > 0.0).count() as f64;
+    let share = |group: &SMatrix<f64, 12, 12>| inverse.component_mul(group).sum();
+    Some([
+        (normal.squares[0], rows - share(&normal.rotation)),
+        (normal.squares[1], rows - share(&normal.translation)),
+    ])
 }
 
 /// Whitened residual norm (sigmas, 6 dof) of every sample of `data` at `solution`, the fit of
@@ -261,27 +399,29 @@ pub(super) fn test_norms(
     noise: &NoiseModel,
     in_fit: &[bool],
 ) -> Option<Vec<f64>> {
-    let problem = Problem::new(data, *solution, vec![1.0; data.len()], noise);
-    let residuals = problem.residuals()?;
-    let j = problem.jacobian()?;
+    let (kr, kt) = (
+        1.0 / noise.rotation_sigma_rad,
+        1.0 / noise.translation_sigma_m,
+    );
+    let rows: Vec<Rows> = (0..data.len())
+        .map(|i| sample_rows(solution, &data.a[i], &data.b[i], kr, kt))
+        .collect();
     let mut normal = SMatrix::<f64, 12, 12>::zeros();
-    for i in (0..data.len()).filter(|&i| in_fit[i]) {
-        let ji = j.fixed_view::<6, 12>(6 * i, 0);
-        normal += ji.transpose() * ji * data.weights[i];
+    for (i, (_, ji)) in rows.iter().enumerate().filter(|(i, _)| in_fit[*i]) {
+        normal += ji.tr_mul(ji) * data.weights[i];
     }
     let inverse = normal.cholesky()?.inverse();
     Some(
-        (0..data.len())
-            .map(|i| {
-                let e = residuals.fixed_rows::<6>(6 * i).into_owned();
+        rows.iter()
+            .enumerate()
+            .map(|(i, (e, ji))| {
                 if in_fit[i] {
                     return e.norm();
                 }
-                let ji = j.fixed_view::<6, 12>(6 * i, 0);
                 let spread = SMatrix::<f64, 6, 6>::identity() + ji * inverse * ji.transpose();
                 spread
                     .cholesky()
-                    .map_or(e.norm(), |c| e.dot(&c.solve(&e)).max(0.0).sqrt())
+                    .map_or(e.norm(), |c| e.dot(&c.solve(e)).max(0.0).sqrt())
             })
             .collect(),
     )
@@ -323,9 +463,15 @@ pub fn refine(
                     .fold(0.0, f64::max);
                 robust = new;
             }
-            let noise_settled = estimator.step(data, &run.solution, &scale_of(&robust));
+            let scale = scale_of(&robust);
+            // Without a robust loss the weights did not change since the last minimisation:
+            // its final normal equations are those of the solution (to below its tolerance).
+            let noise_settled = match (&run.last, robust_loss) {
+                (Some(normal), false) => estimator.step_with(groups_of(normal, &scale)),
+                _ => estimator.step(data, &run.solution, &scale),
+            };
             noise = estimator.noise();
-            run = minimise(data, &run.solution, &scale_of(&robust), &noise)?;
+            run = minimise(data, &run.solution, &scale, &noise)?;
             evaluations += run.evaluations;
             trace.append(&mut run.trace);
             if change < 1e-6 && noise_settled {
@@ -339,19 +485,18 @@ pub fn refine(
     let solution = run.solution;
     let converged = run.converged;
     let scale = scale_of(&robust);
-    let problem = Problem::new(data, solution, scale.clone(), &noise);
-    let residuals = problem
-        .residuals()
-        .ok_or(SolveError::RefinementFailed("residuals"))?;
+    let normal = normal_equations(data, &solution, &scale, &noise);
+    let chi2 = normal.cost();
+    if !chi2.is_finite() {
+        return Err(SolveError::RefinementFailed("residuals"));
+    }
     let dof = (6 * n).saturating_sub(PARAMS);
-    let chi2 = residuals.norm_squared();
     let variance_factor = variance_factor(chi2, dof);
     let covariance = if options.covariance {
-        let j = problem
-            .jacobian()
-            .ok_or(SolveError::RefinementFailed("jacobian"))?;
-        let jtj: SMatrix<f64, 12, 12> = (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into();
-        jtj.try_inverse().map(|inv| inv * variance_factor)
+        normal
+            .information()
+            .try_inverse()
+            .map(|inv| inv * variance_factor)
     } else {
         None
     };
@@ -382,11 +527,7 @@ pub fn sample_information(
         b: vec![*b],
         weights: vec![1.0],
     };
-    let problem = Problem::new(&data, *solution, vec![1.0], noise);
-    let j = problem
-        .jacobian()
-        .expect("the analytic Jacobian always exists");
-    (j.transpose() * &j).fixed_view::<12, 12>(0, 0).into()
+    normal_equations(&data, solution, &[1.0], noise).information()
 }
 
 /// Residual degrees of freedom from which `χ²/dof` is trusted as the noise level.
@@ -471,6 +612,59 @@ mod tests {
     use super::*;
 
     #[test]
+    fn blockwise_normal_equations_equal_the_dense_product() {
+        let pose = |t: [f64; 3], r: [f64; 3]| {
+            Pose::from_parts(
+                Translation3::new(t[0], t[1], t[2]),
+                UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
+            )
+        };
+        let x = pose([0.1, -0.05, 0.2], [0.3, -0.2, 1.0]);
+        let y = pose([0.5, 0.2, -0.1], [-1.2, 0.4, 0.3]);
+        let bs = [
+            pose([0.3, 0.1, 0.4], [0.4, 0.1, -0.2]),
+            pose([-0.2, 0.3, 0.5], [-0.3, 0.6, 0.2]),
+            pose([0.1, -0.4, 0.3], [0.1, -0.2, 0.9]),
+        ];
+        let off = pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]);
+        let data = AxbyData {
+            a: bs.iter().map(|b| x * b * y * off).collect(),
+            b: bs.to_vec(),
+            weights: vec![1.0, 2.0, 0.5],
+        };
+        let scale: Vec<f64> = data.weights.iter().map(|w| w.sqrt()).collect();
+        let noise = NoiseModel {
+            rotation_sigma_rad: 0.01,
+            translation_sigma_m: 0.002,
+        };
+        let s = Axby { x, y };
+        let normal = normal_equations(&data, &s, &scale, &noise);
+        let (mut rotation, mut translation) = (SMatrix::<f64, 12, 12>::zeros(), SMatrix::zeros());
+        let mut gradient = SVector::<f64, 12>::zeros();
+        let mut squares = 0.0;
+        for ((a, b), k) in data.a.iter().zip(&data.b).zip(&scale) {
+            let (e, j) = sample_rows(
+                &s,
+                a,
+                b,
+                k / noise.rotation_sigma_rad,
+                k / noise.translation_sigma_m,
+            );
+            let (jr, jt) = (j.fixed_rows::<3>(0), j.fixed_rows::<3>(3));
+            rotation += jr.tr_mul(&jr);
+            translation += jt.tr_mul(&jt);
+            gradient += j.tr_mul(&e);
+            squares += e.norm_squared();
+        }
+        let size = translation.amax();
+        assert!((normal.rotation - rotation).amax() < 1e-12 * size);
+        assert!((normal.translation - translation).amax() < 1e-12 * size);
+        assert!((normal.gradient - gradient).amax() < 1e-12 * gradient.amax());
+        assert!((normal.cost() - squares).abs() < 1e-12 * squares);
+        assert!((normal.cost() - cost(&data, &s, &scale, &noise)).abs() < 1e-12 * squares);
+    }
+
+    #[test]
     fn analytic_jacobian_matches_finite_differences() {
         let pose = |t: [f64; 3], r: [f64; 3]| {
             Pose::from_parts(
@@ -487,41 +681,25 @@ mod tests {
         ];
         // Measurements off the model so the residuals (and J⁻¹ of them) are not trivial.
         let noise = pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]);
-        let data = AxbyData {
-            a: bs.iter().map(|b| x * b * y * noise).collect(),
-            b: bs.to_vec(),
-            weights: vec![1.0, 2.0, 0.5],
-        };
-        let problem = Problem {
-            data: &data,
-            x0: Axby { x, y },
-            delta: DVector::zeros(PARAMS),
-            scale: data.weights.iter().map(|w| w.sqrt()).collect(),
-            inv_sigma_r: 100.0,
-            inv_sigma_t: 1000.0,
-            trace: RefCell::new(Vec::new()),
-        };
-        let analytic = problem.jacobian().unwrap();
+        let a: Vec<Pose> = bs.iter().map(|b| x * b * y * noise).collect();
+        let start = Axby { x, y };
         let h = 1e-7;
-        let mut p = Problem {
-            data: &data,
-            x0: Axby { x, y },
-            delta: DVector::zeros(PARAMS),
-            scale: problem.scale.clone(),
-            inv_sigma_r: 100.0,
-            inv_sigma_t: 1000.0,
-            trace: RefCell::new(Vec::new()),
-        };
-        for k in 0..PARAMS {
-            p.delta = DVector::zeros(PARAMS);
-            p.delta[k] = h;
-            let plus = p.residuals().unwrap();
-            p.delta[k] = -h;
-            let minus = p.residuals().unwrap();
-            let numeric = (plus - minus) / (2.0 * h);
-            let err = (numeric - analytic.column(k)).amax();
-            // Residuals are O(1e3) per unit parameter; central differences are good to ~1e-5.
-            assert!(err < 1e-4, "column {k}: max error {err}");
+        for (i, (a, b)) in a.iter().zip(&bs).enumerate() {
+            let k = [1.0f64, 2.0, 0.5][i].sqrt();
+            let (kr, kt) = (100.0 * k, 1000.0 * k);
+            let (e, analytic) = sample_rows(&start, a, b, kr, kt);
+            assert!((e - sample_residual(&start, a, b, kr, kt)).amax() < 1e-12);
+            for p in 0..PARAMS {
+                let mut delta = SVector::<f64, PARAMS>::zeros();
+                delta[p] = h;
+                let plus = sample_residual(&perturbed(&start, &delta), a, b, kr, kt);
+                delta[p] = -h;
+                let minus = sample_residual(&perturbed(&start, &delta), a, b, kr, kt);
+                let numeric = (plus - minus) / (2.0 * h);
+                let err = (numeric - analytic.column(p)).amax();
+                // Residuals are O(1e3) per unit parameter; central differences are good to ~1e-5.
+                assert!(err < 1e-4, "sample {i}, column {p}: max error {err}");
+            }
         }
     }
 }

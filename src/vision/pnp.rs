@@ -12,15 +12,15 @@
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
-    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3, Rotation3,
-    SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6, U6,
+    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3, SymmetricEigen,
+    Translation3, UnitQuaternion, Vector3, Vector6, U6,
 };
 
 use super::board::Board;
 use super::detect::BoardDetection;
 use super::TargetError;
 use crate::camera_model::CameraModel;
-use crate::geometry::Pose;
+use crate::geometry::{project_to_rotation, Pose};
 
 /// Ratio of best to second-best RMS above which a lone tag's pose counts as ambiguous.
 pub const AMBIGUITY_WARN_RATIO: f64 = 0.6;
@@ -212,21 +212,12 @@ fn planar_pose_from_homography(points: &[(Point3<f64>, Point2<f64>)]) -> Result<
     let r2: Vector3<f64> = homography.column(1).into();
     let t: Vector3<f64> = homography.column(2).into();
     let approx = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
-    let svd = approx.svd(true, true);
-    let (u, v_t) = (svd.u.unwrap(), svd.v_t.unwrap());
-    let mut rotation = u * v_t;
-    if rotation.determinant() < 0.0 {
-        rotation = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0)) * v_t;
-    }
-    if !rotation.iter().chain(t.iter()).all(|v| v.is_finite()) {
-        return Err(TargetError::PoseFailed {
+    let rotation = project_to_rotation(&approx)
+        .filter(|_| t.iter().all(|v| v.is_finite()))
+        .ok_or(TargetError::PoseFailed {
             reason: "non-finite homography decomposition",
-        });
-    }
-    Ok(Pose::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
-    ))
+        })?;
+    Ok(Pose::from_parts(Translation3::from(t), rotation))
 }
 
 /// The other planar solution: the board normal reflected about the line of sight to the

@@ -12,7 +12,8 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Translation3};
 
-use super::{kron, least_squares, project_to_rotation};
+use super::{kron, least_squares};
+use crate::geometry::project_to_rotation;
 use crate::geometry::Pose;
 use crate::solve::{Axby, AxbyData, SolveError};
 

@@ -30,12 +30,12 @@ pub mod tsai;
 pub use shah::{rotations, solve_axby, translations};
 
 use nalgebra::{
-    DMatrix, DVector, Matrix3, Matrix4, Rotation3, SMatrix, SymmetricEigen, Translation3,
-    UnitQuaternion, Vector3, Vector4,
+    DMatrix, DVector, Matrix3, Matrix4, SMatrix, SymmetricEigen, Translation3, UnitQuaternion,
+    Vector3, Vector4,
 };
 
 use super::{Axby, AxbyData, Method, SolveError};
-use crate::geometry::Pose;
+use crate::geometry::{project_to_rotation, Pose};
 
 /// Relative motions rotating less than this (rad, 0.5°) carry no information on `X` and are
 /// left out of the AX = XB methods.
@@ -155,21 +155,6 @@ pub fn ax_xb_translation(
         .ok_or(SolveError::ClosedFormFailed(
             "the translation system is singular (robot rotations all about one axis)",
         ))
-}
-
-/// The closest rotation (Frobenius norm) to a 3x3 matrix.
-pub(crate) fn project_to_rotation(m: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
-    let svd = m.svd(true, true);
-    let u = svd.u?;
-    let v_t = svd.v_t?;
-    let mut d = Matrix3::identity();
-    if (u * v_t).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = u * d * v_t;
-    Some(UnitQuaternion::from_rotation_matrix(
-        &Rotation3::from_matrix_unchecked(r),
-    ))
 }
 
 /// A 3x3 matrix that is a rotation up to an unknown scale (a null vector reshaped): scaled to

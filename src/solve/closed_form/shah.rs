@@ -8,9 +8,10 @@
 //! Also the warm start of the iterative method, and the rotation fit of the convention and
 //! units checks (rotations are unit-free). Units: rad, m.
 
-use nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
-use super::{kron, project_to_rotation};
+use super::kron;
+use crate::geometry::project_to_rotation;
 use crate::geometry::Pose;
 use crate::solve::{Axby, AxbyData, SolveError};
 
@@ -29,31 +30,38 @@ pub fn solve_axby(data: &AxbyData) -> Result<Axby, SolveError> {
 pub fn rotations(
     data: &AxbyData,
 ) -> Result<(UnitQuaternion<f64>, UnitQuaternion<f64>), SolveError> {
-    let identity = Matrix3::identity();
-    // Normal matrix of the stacked Kronecker system: its eigenvector of the smallest eigenvalue
-    // is the least-squares null vector (18x18, cheap for any N).
-    let mut normal = SMatrix::<f64, 18, 18>::zeros();
+    // Normal matrix of the stacked Kronecker system, sample i contributing
+    // `K_iᵀK_i` with `K_i = [R_B,iᵀ ⊗ I₃, −I₃ ⊗ R_A,i]`: since `(R_B ⊗ I)(R_Bᵀ ⊗ I) = I` and
+    // `(I ⊗ R_A)ᵀ(I ⊗ R_A) = I`, it is `w·[[I, −M_i], [−M_iᵀ, I]]` with `M_i = R_B,i ⊗ R_A,i`.
+    // Its eigenvector of the smallest eigenvalue (`W − σ₁` for `M = Σ w_i M_i`, `W = Σ w_i`)
+    // is `[u₁; v₁]` of M's largest singular value: one 9x9 SVD instead of an 18x18 eigen
+    // problem of the stacked normal matrix.
+    let mut m = SMatrix::<f64, 9, 9>::zeros();
     for ((a, b), &w) in data.a.iter().zip(&data.b).zip(&data.weights) {
         let ra = a.rotation.to_rotation_matrix().into_inner();
         let rb = b.rotation.to_rotation_matrix().into_inner();
-        let mut k = SMatrix::<f64, 9, 18>::zeros();
-        k.fixed_view_mut::<9, 9>(0, 0)
-            .copy_from(&kron(&rb.transpose(), &identity));
-        k.fixed_view_mut::<9, 9>(0, 9)
-            .copy_from(&(-kron(&identity, &ra)));
-        normal += k.transpose() * k * w;
+        m += kron(&rb, &ra) * w;
     }
-    let eigen = SymmetricEigen::new(normal);
-    let smallest = eigen.eigenvalues.imin();
-    let v: SVector<f64, 18> = eigen.eigenvectors.column(smallest).into_owned();
+    let degenerate = SolveError::ClosedFormFailed(
+        "the rotation null vector is degenerate (robot rotations not diverse enough)",
+    );
+    let svd = m.svd(true, true);
+    let largest = svd.singular_values.imax();
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Err(degenerate);
+    };
+    // The unit eigenvector, as the 18x18 form gave it (the degeneracy test reads its scale).
+    let mut v = SVector::<f64, 18>::zeros();
+    v.fixed_rows_mut::<9>(0)
+        .copy_from(&(u.column(largest) * std::f64::consts::FRAC_1_SQRT_2));
+    v.fixed_rows_mut::<9>(9)
+        .copy_from(&(v_t.row(largest).transpose() * std::f64::consts::FRAC_1_SQRT_2));
     // Column-major reshape (vec stacks columns).
     let rx = Matrix3::from_column_slice(&v.as_slice()[0..9]);
     let ry_t = Matrix3::from_column_slice(&v.as_slice()[9..18]);
     let det = rx.determinant();
     if !det.is_finite() || det.abs() < 1e-12 {
-        return Err(SolveError::ClosedFormFailed(
-            "the rotation null vector is degenerate (robot rotations not diverse enough)",
-        ));
+        return Err(degenerate);
     }
     let scale = det.signum() / det.abs().cbrt();
     let qx = project_to_rotation(&(rx * scale))
