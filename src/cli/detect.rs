@@ -14,7 +14,7 @@ use handeye::camera_model::CameraModel;
 use handeye::geometry::PoseRecord;
 use handeye::vision::annotate::annotate;
 use handeye::vision::detect::load_gray_image;
-use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
+use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector, TargetError};
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]
@@ -75,7 +75,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
     if args.live {
         super::camera::uvc::ensure_available()?;
     }
-    let board = Board::load(&args.target)?;
+    let board = Target::load(&args.target)?;
     let camera = CameraModel::load(&args.intrinsics)?;
     let options = DetectorOptions {
         decimation: args.decimation,
@@ -83,7 +83,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         max_hamming: args.max_hamming,
         ..DetectorOptions::default()
     };
-    let detector = TagDetector::spawn(&board, options)?;
+    let detector = TargetDetector::spawn(&board, options)?;
     if args.live {
         return live(&args, &board, &camera, &detector);
     }
@@ -198,9 +198,9 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
 /// `detect --camera N --live`: one line per frame with the board pose, until interrupted.
 fn live(
     args: &DetectArgs,
-    board: &Board,
+    board: &Target,
     camera_model: &CameraModel,
-    detector: &TagDetector,
+    detector: &TargetDetector,
 ) -> anyhow::Result<()> {
     let mut camera = super::camera::uvc::open(&args.stream, Some(*camera_model))?;
     outln!("live detection: Ctrl-C to stop");
