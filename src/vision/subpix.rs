@@ -135,25 +135,15 @@ fn gradient(image: &GrayImage, x: f64, y: f64) -> Vector2<f64> {
 mod tests {
     use super::*;
 
-    /// An anti-aliased X-corner at `(cx, cy)` (16x16 supersampled).
+    /// A blurred X-corner at `(cx, cy)`, edges rotated 20° off the pixel axes (a smooth
+    /// step of about a pixel, like a lens's blur).
     fn x_corner(cx: f64, cy: f64) -> GrayImage {
+        let (c, s) = (20f64.to_radians().cos(), 20f64.to_radians().sin());
         GrayImage::from_fn(40, 40, |u, v| {
-            let mut sum = 0.0f64;
-            for j in 0..16 {
-                for i in 0..16 {
-                    let x = u as f64 - 0.5 + (i as f64 + 0.5) / 16.0 - cx;
-                    let y = v as f64 - 0.5 + (j as f64 + 0.5) / 16.0 - cy;
-                    // Rotated by 20° so the edges are not pixel-aligned.
-                    let (c, s) = (20f64.to_radians().cos(), 20f64.to_radians().sin());
-                    let (xr, yr) = (c * x + s * y, -s * x + c * y);
-                    sum += if (xr > 0.0) == (yr > 0.0) {
-                        200.0
-                    } else {
-                        30.0
-                    };
-                }
-            }
-            image::Luma([(sum / 256.0).round() as u8])
+            let (x, y) = (u as f64 - cx, v as f64 - cy);
+            let (xr, yr) = (c * x + s * y, -s * x + c * y);
+            let value = 115.0 + 85.0 * (xr / 0.8).tanh() * (yr / 0.8).tanh();
+            image::Luma([value.round() as u8])
         })
     }
 
