@@ -396,3 +396,107 @@ fn visp_eye_in_hand_chessboard_set_is_detected_in_every_frame_and_solved() {
         r.translation_max_mm
     );
 }
+
+/// Our printed reflectance of a ChArUco board (what the simulated camera renders) is OpenCV's:
+/// `generateImage`'s pixels agree with `Target::is_white_at` (marker bit order, marker
+/// placement, square colours).
+#[test]
+fn charuco_reflectance_matches_opencv_generate_image() {
+    let Some((dir, json)) = frames() else {
+        return;
+    };
+    let section = &json["charuco"];
+    let b = &section["board"];
+    let board = board_from_yaml(&format!(
+        "target_type: charuco\nsquaresX: {}\nsquaresY: {}\nsquareLength: {}\n\
+         markerLength: {}\ndictionary: {}\n",
+        b["squaresX"],
+        b["squaresY"],
+        b["squareLength"],
+        b["markerLength"],
+        b["dictionary"].as_str().unwrap()
+    ));
+    let info = &section["board_image"];
+    let image = image::open(dir.join(info["file"].as_str().unwrap()))
+        .unwrap()
+        .into_luma8();
+    let margin = info["margin_px"].as_f64().unwrap();
+    let square = b["squareLength"].as_f64().unwrap();
+    let ppm = info["px_per_square"].as_f64().unwrap() / square;
+    let height = b["squaresY"].as_f64().unwrap() * square;
+    let (mut agree, mut total) = (0usize, 0usize);
+    for (u, v, pixel) in image.enumerate_pixels() {
+        // OpenCV's board frame: y down from the top-left corner; ours: y up from bottom-left.
+        let x = (u as f64 + 0.5 - margin) / ppm;
+        let y = height - (v as f64 + 0.5 - margin) / ppm;
+        let ours = board.is_white_at(x, y).unwrap_or(true);
+        total += 1;
+        if ours == (pixel[0] > 127) {
+            agree += 1;
+        }
+    }
+    let share = agree as f64 / total as f64;
+    println!(
+        "ChArUco reflectance agrees with generateImage on {:.3} % of pixels",
+        100.0 * share
+    );
+    assert!(share > 0.995, "only {:.3} % of pixels agree", 100.0 * share);
+}
+
+/// The simulated camera renders ChArUco boards and chessboards that the detector reads back
+/// at the pose they were rendered at.
+#[test]
+fn simulated_camera_renders_each_board_readably() {
+    use handeye::camera::render::{render, RenderOptions};
+    use rand::SeedableRng;
+    let camera = CameraModel {
+        width: 1280,
+        height: 720,
+        fx: 900.0,
+        fy: 900.0,
+        cx: 640.5,
+        cy: 359.2,
+        distortion: Distortion::RadTan {
+            k1: -0.1,
+            k2: 0.05,
+            p1: 0.0005,
+            p2: -0.0003,
+            k3: 0.0,
+        },
+    };
+    for (file, count) in [
+        ("configs/targets/charuco-9x6-5x5.yaml", 40),
+        ("configs/targets/checkerboard-10x7.yaml", 54),
+    ] {
+        let board = Target::load(&util::repo().join(file)).unwrap();
+        let e = board.extent();
+        let centre =
+            nalgebra::Vector3::new((e.min.x + e.max.x) / 2.0, (e.min.y + e.max.y) / 2.0, 0.0);
+        // Camera looking at the printed face (target z towards the camera), tilted 25°.
+        let rotation =
+            UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), std::f64::consts::PI)
+                * UnitQuaternion::from_scaled_axis(
+                    nalgebra::Vector3::new(0.6, 0.8, 0.0) * 25f64.to_radians(),
+                );
+        let truth = Pose::from_parts(
+            Translation3::from(nalgebra::Vector3::new(0.01, -0.02, 0.55) - rotation * centre),
+            rotation,
+        );
+        let options = RenderOptions {
+            blur_sigma_px: 0.6,
+            ..RenderOptions::default()
+        };
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let image = render(&board, &camera, &truth, &options, &mut rng);
+        let detector = TargetDetector::spawn(&board, DetectorOptions::default()).unwrap();
+        let detection = detector.detect(&image).unwrap();
+        assert_eq!(detection.points.len(), count, "{file}");
+        let pose = estimate_board_pose(&board, &camera, &detection).unwrap();
+        let (mm, deg) = util::pose_error_mm_deg(&pose.camera_from_target, &truth);
+        println!(
+            "{file}: {count} corners, pose error {mm:.3} mm / {deg:.4}°, RMS {:.3} px",
+            pose.rms_px
+        );
+        assert!(mm < 0.5 && deg < 0.05, "{file}: {mm:.3} mm / {deg:.4}°");
+    }
+}

@@ -11,7 +11,7 @@ use handeye::atomic_file::write_atomic;
 use handeye::vision::print::{
     board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, Paper,
 };
-use handeye::vision::Board;
+use handeye::vision::Target;
 
 /// `--paper` values.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -104,7 +104,16 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             if show_frame && extension != "png" {
                 bail!("--show-frame is only available for PNG output");
             }
-            let original = Board::load(&target)?;
+            let original = match Target::load(&target)? {
+                Target::Aprilgrid(board) => board,
+                other => bail!(
+                    "{}: `target render` draws aprilgrids only so far, not a {}; print a \
+                     ChArUco board with OpenCV (cv2.aruco.CharucoBoard(...).generateImage) and \
+                     a chessboard from any chessboard generator, then measure the squares",
+                    target.display(),
+                    other.describe()
+                ),
+            };
             let fitted = match paper {
                 Some(paper) => Some(fit_to_paper(&original, paper.into(), margin_mm / 1000.0)?),
                 None => None,

@@ -10,6 +10,7 @@ cornerSubPix) and solves solvePnP, and the script writes its figures for tests/b
 
     OUT/frames.json   camera, boards, ground-truth poses, visible corner ids and OpenCV's results
     OUT/charuco_NN.png, OUT/chessboard_NN.png
+    OUT/charuco_board.png  the board as generateImage draws it (for the renderer's test)
 
 Poses are `T_camera_board` in OpenCV's board frame (origin at the board's top-left chessboard
 corner, x right, y down on the print, z into the board). Relative camera motion between two
@@ -148,6 +149,7 @@ def charuco_frames(out, rays, rng):
     margin = PX_PER_SQUARE
     size = (c["squaresX"] * PX_PER_SQUARE + 2 * margin, c["squaresY"] * PX_PER_SQUARE + 2 * margin)
     board_img = board.generateImage(size, marginSize=margin, borderBits=1)
+    cv2.imwrite(str(out / "charuco_board.png"), board_img)
     ppm = PX_PER_SQUARE / c["squareLength"]
     corners3d = board.getChessboardCorners()  # id -> (x, y, 0), OpenCV board frame
     sq = c["squareLength"]
@@ -191,6 +193,8 @@ def charuco_frames(out, rays, rng):
         i += 1
     rot, trans, pairs = relative_motion_errors(truth, estimates)
     return dict(board=c, frames=frames,
+                board_image=dict(file="charuco_board.png", margin_px=margin,
+                                 px_per_square=PX_PER_SQUARE),
                 opencv=dict(detector="CharucoDetector + solvePnP", median_rot_deg=rot,
                             median_trans_mm=trans, pairs=pairs,
                             found_visible=sum(f["opencv_found_visible"] for f in frames),
