@@ -227,7 +227,7 @@ fn parse<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T, T
 #[derive(Debug)]
 pub enum TargetDetector {
     /// AprilTags.
-    Tags(TagDetector),
+    Tags(Box<TagDetector>),
     /// ChArUco corners.
     Charuco(Box<CharucoCornerDetector>),
     /// Chessboard corners.
@@ -241,7 +241,9 @@ impl TargetDetector {
         options: DetectorOptions,
     ) -> Result<Self, TargetError> {
         Ok(match &*target.as_target() {
-            Target::Aprilgrid(board) => TargetDetector::Tags(TagDetector::spawn(board, options)?),
+            Target::Aprilgrid(board) => {
+                TargetDetector::Tags(Box::new(TagDetector::spawn(board, options)?))
+            }
             Target::Charuco(board) => TargetDetector::Charuco(Box::new(board.detector()?)),
             Target::Checkerboard(board) => TargetDetector::Checkerboard(board.clone()),
         })
