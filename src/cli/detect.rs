@@ -124,16 +124,14 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
             }
         };
         let corner_ids: Vec<u32> = detection.points.iter().map(|(id, _)| *id).collect();
-        if board.aprilgrid().is_none() {
-            outln!("{}:", path.display());
-            outln!("  corners found ({}): {:?}", corner_ids.len(), corner_ids);
-        }
         let pose = estimate_board_pose(&board, &camera, &detection);
         let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
         let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
         outln!("{}:", path.display());
         if board.aprilgrid().is_some() {
             outln!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
+        } else {
+            outln!("  corners found ({}): {:?}", corner_ids.len(), corner_ids);
         }
         let mut result = ImageResult {
             image: path.display().to_string(),

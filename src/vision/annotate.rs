@@ -85,9 +85,12 @@ pub fn annotate(
                 previous = pixel;
             }
         }
+        let tags = match board.aprilgrid() {
+            Some(_) => format!("tags {} ", pose.tags_used),
+            None => String::new(),
+        };
         let summary = format!(
-            "tags {} corners {} rms {:.3} px{}",
-            pose.tags_used,
+            "{tags}corners {} rms {:.3} px{}",
             pose.corners_used,
             pose.rms_px,
             if pose.is_ambiguous() {
