@@ -558,3 +558,61 @@ fn sim_cell_sessions_with_charuco_and_chessboard_recover_the_truth() {
         }
     }
 }
+
+/// Intrinsics from scratch with a ChArUco board: the simulated cell without intrinsics records
+/// corners only, and the solve estimates the lens (within 0.2 % or 0.5 px, the aprilgrid cell's
+/// bar) and the cell from the corners' board points.
+#[test]
+fn intrinsics_from_scratch_with_a_charuco_board() {
+    use handeye::cell;
+    use handeye::session::{self, SessionEvent, SessionFolder};
+    use std::sync::atomic::AtomicBool;
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell-no-intrinsics.yaml",
+        "cell.yaml",
+        &[("aprilgrid-6x6.yaml", "charuco-9x6-5x5.yaml")],
+    );
+    let prepared = cell::prepare(&config).unwrap();
+    assert!(!prepared.intrinsics_known);
+    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+    let plan = prepared.report.validated().expect("plan passes its checks");
+    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    let mut hardware = prepared.open_hardware().unwrap();
+    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
+    let outcome = session::run_session(
+        setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_e: SessionEvent| {},
+    )
+    .unwrap();
+    assert_eq!(outcome.accepted.len(), prepared.plan.waypoints.len());
+    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let truth = handeye::camera_model::CameraModel::load(
+        &util::repo().join("configs/cameras/sim-1280x720.yaml"),
+    )
+    .unwrap();
+    let estimated = solved.estimated_camera.unwrap();
+    for (name, found, truth) in [
+        ("fx", estimated.fx, truth.fx),
+        ("fy", estimated.fy, truth.fy),
+        ("cx", estimated.cx, truth.cx),
+        ("cy", estimated.cy, truth.cy),
+    ] {
+        println!("{name}: {found:.3} px, truth {truth:.3} px");
+        assert!(
+            (found - truth).abs() <= (0.002 * truth).max(0.5),
+            "{name}: {found:.3} px, truth {truth:.3} px"
+        );
+    }
+    let sim = prepared.config.simulation.as_ref().unwrap();
+    let [(ck, cm), (tk, tm)] = solved.calibration.unknowns();
+    for (key, estimate, truth) in [(ck, cm, sim.camera_mount), (tk, tm, sim.target_mount)] {
+        let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);
+        println!("{key} {mm:.3} mm, {deg:.4}° from the truth");
+        assert!(mm < 0.5 && deg < 0.05, "{key} {mm:.3} mm, {deg:.4}°");
+    }
+}
