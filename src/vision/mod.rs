@@ -4,11 +4,13 @@
 //! (`charuco`), plain chessboards (`chessboard`), sub-pixel X-corner refinement (`subpix`) and
 //! the board pose `T_camera_target` by PnP with lens distortion (`pnp`).
 //!
-//! Frames: `target` is the board frame (origin at the outer bottom-left corner of tag 0's
-//! black square, x along rows of tags, y up, z out of the printed face); `camera` is the
-//! optical frame. Units: metres in the target frame, pixels (OpenCV convention: centres at
-//! integers) in images. Depends on `geometry` and `camera_model`; never on robots, sessions
-//! or the CLI.
+//! Frames: `target` is the board frame, x to the right and y up as printed, z out of the
+//! printed face; its origin is the outer bottom-left corner of tag 0's black square (aprilgrid),
+//! the bottom-left outer corner of the squares (ChArUco) or the bottom-left inner corner
+//! (chessboard). `camera` is the optical frame. Units: metres in the target frame, pixels
+//! (OpenCV convention: centres at integers) in images. Depends on `geometry`, `camera_model`
+//! and `setup` (the recorded corner); never on robots, sessions or the CLI. ChArUco marker
+//! decoding and chessboard grid labelling come from the `calib-targets-*` crates.
 
 pub mod annotate;
 pub mod board;
