@@ -616,3 +616,58 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
         assert!(mm < 0.5 && deg < 0.05, "{key} {mm:.3} mm, {deg:.4}°");
     }
 }
+
+/// `target render` of a ChArUco board and a chessboard: a true-scale PNG (pHYs) that the
+/// detector reads back with every corner where the board file puts it, and SVG/PDF pages with
+/// the scale bar and the keys.
+#[test]
+fn target_render_writes_readable_true_scale_charuco_and_chessboards() {
+    let dir = tempfile::tempdir().unwrap();
+    for (file, count) in [
+        ("configs/targets/charuco-9x6-5x5.yaml", 40),
+        ("configs/targets/checkerboard-10x7.yaml", 54),
+    ] {
+        let yaml = util::repo().join(file);
+        for ext in ["png", "svg", "pdf"] {
+            let out = dir.path().join(format!("board.{ext}"));
+            let status = util::handeye()
+                .args(["target", "render", "--dpi", "150", "--target"])
+                .arg(&yaml)
+                .arg("-o")
+                .arg(&out)
+                .status()
+                .unwrap();
+            assert!(status.success(), "{file} -> {ext}");
+        }
+        let svg = std::fs::read_to_string(dir.path().join("board.svg")).unwrap();
+        assert!(
+            svg.contains("100 mm")
+                && (svg.contains("squareLength") || svg.contains("SpacingMeters"))
+        );
+        let pdf = std::fs::read(dir.path().join("board.pdf")).unwrap();
+        assert!(pdf.starts_with(b"%PDF"));
+        let image = image::open(dir.path().join("board.png"))
+            .unwrap()
+            .into_luma8();
+        let board = Target::load(&yaml).unwrap();
+        let detector = TargetDetector::spawn(&board, DetectorOptions::default()).unwrap();
+        let detection = detector.detect(&image).unwrap();
+        assert_eq!(detection.points.len(), count, "{file}");
+        // True scale: page pixel = (x - extent.min.x) * ppm, from the top of the extent.
+        let ppm = 150.0 / 0.0254;
+        let e = board.extent();
+        let page_width = image.width() as f64 / ppm;
+        let left = (page_width - (e.max.x - e.min.x)) / 2.0;
+        for (id, pixel) in &detection.points {
+            let p = board.point(*id, 0).unwrap();
+            let u = (left + p.x - e.min.x) * ppm - 0.5;
+            let v = (e.max.y - p.y) * ppm - 0.5;
+            let error = ((pixel.x - u).powi(2) + (pixel.y - v).powi(2)).sqrt();
+            // Edges are snapped to whole pixels: up to half a pixel each way.
+            assert!(
+                error < 0.75,
+                "{file}: corner {id} at {pixel}, expected ({u:.2}, {v:.2})"
+            );
+        }
+    }
+}

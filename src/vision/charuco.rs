@@ -205,6 +205,11 @@ impl Charuco {
         self.marker_length
     }
 
+    /// Cells across a marker: its bits plus the one-cell black border.
+    pub fn marker_cells(&self) -> u32 {
+        self.dictionary.marker_size() as u32 + 2
+    }
+
     /// The dictionary's OpenCV name.
     pub fn dictionary_name(&self) -> &'static str {
         self.dictionary.name()

@@ -22,6 +22,7 @@ pub mod family;
 mod ffi;
 pub mod pnp;
 pub mod print;
+pub mod print_target;
 pub mod subpix;
 pub mod target;
 
