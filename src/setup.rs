@@ -130,14 +130,17 @@ pub fn predict(
 ///
 /// Board-agnostic identity: for an aprilgrid `tag_id` is the tag and `corner` its corner
 /// (0 bottom-left, 1 bottom-right, 2 top-right, 3 top-left, counter-clockwise seen from +z).
+/// For a ChArUco board `tag_id` is OpenCV's ChArUco corner id, for a chessboard the inner
+/// corner's index (row-major from the top-left inner corner as printed), and `corner` is 0
+/// (see `vision::target`).
 /// Pixels follow OpenCV's convention (pixel centres at integers). In files it is the compact
 /// list `[tag id, corner, u, v]` — read and written here only, so every reader validates it the
 /// same way.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CornerObservation {
-    /// The tag (aprilgrid) the corner belongs to.
+    /// The tag (aprilgrid) the corner belongs to; the corner id (ChArUco, chessboard).
     pub tag_id: u32,
-    /// Which corner of the tag, 0..=3.
+    /// Which corner of the tag, 0..=3 (aprilgrid); 0 (ChArUco, chessboard).
     pub corner: u8,
     /// Where it was seen, px.
     pub pixel: nalgebra::Point2<f64>,

@@ -147,7 +147,7 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
         limits: MotionLimits::default(),
         settle: Duration::ZERO,
         max_reprojection_rms_px: 1.0,
-        board: board(),
+        board: board().into(),
         // One detector thread: with more, the AprilTag C worker pool races now and then (see
         // tests/fuzz.rs, `crash_detector_worker_pool_race`); the driver does not care.
         detector: DetectorOptions {

@@ -56,7 +56,7 @@ fn visp_eye_to_hand_imports_detects_and_solves_with_small_residuals() {
         &folder,
         &VispOptions {
             setup: Setup::EyeToHand,
-            board: tag_board(),
+            board: tag_board().into(),
             camera: None,
             detector: DetectorOptions::default(),
             skip_unfound: false,
@@ -789,7 +789,7 @@ fn visp_frame_without_the_board_is_an_error_naming_the_image() {
     }
     let options = VispOptions {
         setup: Setup::EyeInHand,
-        board: tag_board(),
+        board: tag_board().into(),
         camera: None,
         detector: DetectorOptions::default(),
         skip_unfound: false,

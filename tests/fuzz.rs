@@ -809,7 +809,7 @@ fn fuzz_visp_folder_import() {
             }
             let options = VispOptions {
                 setup: handeye::setup::Setup::EyeToHand,
-                board: board.clone(),
+                board: board.clone().into(),
                 camera: None,
                 detector: detector_options(),
                 skip_unfound: bytes.len() % 2 == 0,
@@ -957,7 +957,9 @@ fn crash_detector_worker_pool_race_more_threads_are_refused() {
     let folder = corpus().join("visp_folder");
     let options = VispOptions {
         setup: handeye::setup::Setup::EyeToHand,
-        board: Board::load(&repo().join("configs/targets/aprilgrid-2x2-example.yaml")).unwrap(),
+        board: Board::load(&repo().join("configs/targets/aprilgrid-2x2-example.yaml"))
+            .unwrap()
+            .into(),
         camera: None,
         detector: DetectorOptions {
             threads: 2,

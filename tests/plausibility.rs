@@ -45,7 +45,7 @@ fn sim_cell(name: &'static str, seed: u64) -> SimCell {
     let config = CellConfig::load(&repo().join("configs").join(name)).unwrap();
     let truth = config.simulation.unwrap();
     let board = Board::load(&config.target).unwrap();
-    let centre = board_centre(&board);
+    let centre = board_centre(&board.clone().into());
     let spec = config.plan.generate.as_ref().unwrap();
     let mut rng = StdRng::seed_from_u64(seed);
     let rotation = Normal::new(0.0, 0.2f64.to_radians()).unwrap();
@@ -356,7 +356,9 @@ fn visp_real_data_passes_the_checks() {
         &folder,
         &VispOptions {
             setup: Setup::EyeToHand,
-            board: Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml")).unwrap(),
+            board: Board::load(&repo().join("configs/targets/single-tag36h11-id10.yaml"))
+                .unwrap()
+                .into(),
             camera: None,
             detector: DetectorOptions::default(),
             skip_unfound: false,

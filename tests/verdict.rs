@@ -258,7 +258,7 @@ fn visp_eye_to_hand_ends_with_a_true_reason_and_no_convention_false_alarm() {
         &folder,
         &VispOptions {
             setup: Setup::EyeToHand,
-            board,
+            board: board.into(),
             camera: None,
             detector: DetectorOptions::default(),
             skip_unfound: false,

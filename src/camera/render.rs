@@ -1,5 +1,5 @@
 //! The camera simulator: renders the grey frame a camera with a given [`CameraModel`] sees of a
-//! [`Board`] at `T_camera_target`.
+//! [`Target`] (aprilgrid, ChArUco or chessboard) at `T_camera_target`.
 //!
 //! Rendering is inverse-mapped: every pixel's ray is undistorted exactly (Gauss-Newton,
 //! warm-started from the neighbouring pixel) and intersected with the board plane through the
@@ -8,7 +8,7 @@
 //! pixel (error far below 1e-4 px). Then exposure, optional Gaussian blur and Gaussian sensor
 //! noise (seeded by the caller's RNG). Pixel convention: OpenCV's, pixel `(u, v)` covers
 //! `[u - 0.5, u + 0.5) x [v - 0.5, v + 0.5)`. Rows are rendered on all cores with scoped std
-//! threads. Depends on `camera_model`, `vision::board` and `geometry`.
+//! threads. Depends on `camera_model`, `vision::target` and `geometry`.
 
 use image::GrayImage;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
@@ -18,7 +18,8 @@ use rand_distr::{Distribution, Normal};
 
 use crate::camera_model::{CameraModel, Distortion};
 use crate::geometry::Pose;
-use crate::vision::Board;
+use crate::vision::target::AsTarget;
+use crate::vision::Target;
 
 /// What the simulated sensor adds to the ideal image. Grey levels are 0-255.
 #[derive(Debug, Clone, PartialEq)]
@@ -97,7 +98,7 @@ impl PixelRays {
 
 /// Renders `board` seen by `camera` at `camera_from_target`.
 pub fn render(
-    board: &Board,
+    board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
     camera_from_target: &Pose,
     options: &RenderOptions,
@@ -115,13 +116,15 @@ pub fn render(
 
 /// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`).
 pub fn render_with_rays(
-    board: &Board,
+    board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
     rays: &PixelRays,
     camera_from_target: &Pose,
     options: &RenderOptions,
     rng: &mut impl Rng,
 ) -> GrayImage {
+    let board = board.as_target();
+    let board: &Target = &board;
     let (width, height) = (camera.width as usize, camera.height as usize);
     assert_eq!(rays.rays.len(), width * height, "rays of another camera");
     if width == 0 || height == 0 {
@@ -204,7 +207,7 @@ struct PixelRay {
 
 /// Casts the ray through `(dx, dy)` px from the pixel centre onto the board plane.
 fn cast(
-    board: &Board,
+    board: &Target,
     camera: &CameraModel,
     plane_from_camera: &Matrix3<f64>,
     ray: &PixelRay,
@@ -229,7 +232,7 @@ fn cast(
 /// than a pixel can hide between the corners.
 #[allow(clippy::too_many_arguments)]
 fn render_rows(
-    board: &Board,
+    board: &Target,
     camera: &CameraModel,
     plane_from_camera: Option<&Matrix3<f64>>,
     background: &Background,
@@ -445,7 +448,10 @@ mod tests {
 
     #[test]
     fn fronto_parallel_render_puts_black_and_white_where_the_board_projects() {
-        let board = Board::aprilgrid(1, 1, 0.08, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let board: Target =
+            crate::vision::Board::aprilgrid(1, 1, 0.08, 0.25, TagFamily::Tag36h11, 0, 1)
+                .unwrap()
+                .into();
         let camera = CameraModel {
             width: 320,
             height: 240,

@@ -10,7 +10,7 @@ use rand::SeedableRng;
 
 use crate::geometry::Pose;
 use crate::setup::CellTransforms;
-use crate::vision::Board;
+use crate::vision::Target;
 
 use super::render::{render_with_rays, PixelRays, RenderOptions};
 use super::{Camera, CameraError, Frame};
@@ -22,7 +22,7 @@ pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;
 /// A camera that renders the board as the simulated cell truly is.
 pub struct SimCamera {
     model: CameraModel,
-    board: Board,
+    board: Target,
     truth: CellTransforms,
     true_base_from_flange: TrueFlangePose,
     options: RenderOptions,
@@ -38,7 +38,7 @@ impl SimCamera {
     /// the view of the board (fault injection).
     pub fn new(
         model: CameraModel,
-        board: Board,
+        board: Target,
         truth: CellTransforms,
         true_base_from_flange: TrueFlangePose,
         options: RenderOptions,

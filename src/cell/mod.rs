@@ -28,7 +28,7 @@ use crate::session::{
     InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup, SolveInputs,
 };
 use crate::setup::CellTransforms;
-use crate::vision::{Board, DetectorOptions};
+use crate::vision::{DetectorOptions, Target};
 
 /// Why a cell could not be prepared or opened.
 #[derive(Debug, thiserror::Error)]
@@ -78,7 +78,7 @@ pub struct PreparedCell {
     /// The config.
     pub config: CellConfig,
     /// The board.
-    pub board: Board,
+    pub board: Target,
     /// The intrinsics (without configured intrinsics: the sim camera's lens, for planning and
     /// rendering only — the run estimates the intrinsics).
     pub camera_model: CameraModel,
@@ -97,7 +97,7 @@ pub struct PreparedCell {
 /// Loads everything a config names and checks the plan. Nothing moves.
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
-    let board = Board::load(&config.target).map_err(|source| CellError::Board {
+    let board = Target::load(&config.target).map_err(|source| CellError::Board {
         file: config.target.clone(),
         source: Box::new(source),
     })?;

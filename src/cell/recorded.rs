@@ -13,7 +13,7 @@ use crate::plan::{Plan, Waypoint};
 use crate::robot::recorded::{load_recorded_poses, plan_joints, RecordedRobot};
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::solve::check_rotation_diversity;
-use crate::vision::Board;
+use crate::vision::Target;
 
 use super::{CellError, Hardware};
 
@@ -22,7 +22,7 @@ use super::{CellError, Hardware};
 pub fn plan(
     config: &CellConfig,
     camera: &CameraModel,
-    board: &Board,
+    board: &Target,
 ) -> Result<(Plan, PlanReport), CellError> {
     let RobotConfig::Recorded { poses, .. } = &config.robot else {
         return Err(CellError::Backend(

@@ -14,7 +14,7 @@ use crate::robot::kinematics::UrModel;
 use crate::robot::sim::{SimFaults, SimRobot, SimRobotOptions};
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::setup::CellTransforms;
-use crate::vision::Board;
+use crate::vision::Target;
 
 use super::CellError;
 
@@ -102,7 +102,7 @@ pub fn open(
     arm: UrModel,
     start: Joints,
     camera_model: CameraModel,
-    board: Board,
+    board: Target,
 ) -> Result<(Shared<SimRobot>, SimCamera), CellError> {
     let RobotConfig::Sim {
         move_duration_s,
@@ -144,7 +144,7 @@ pub fn camera(
     truth: CellTransforms,
     flange: TrueFlangePose,
     camera_model: CameraModel,
-    board: Board,
+    board: Target,
 ) -> Result<SimCamera, CellError> {
     let CameraConfig::Sim {
         noise_sigma,

@@ -14,12 +14,12 @@ use handeye::camera_model::CameraModel;
 use handeye::geometry::PoseRecord;
 use handeye::vision::annotate::annotate;
 use handeye::vision::detect::load_gray_image;
-use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TargetError};
+use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector, TargetError};
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]
 pub struct DetectArgs {
-    /// Board YAML (Kalibr aprilgrid form).
+    /// Board YAML: `target_type: aprilgrid` (Kalibr), `charuco` (OpenCV) or `checkerboard`.
     #[arg(long)]
     target: PathBuf,
     /// Intrinsics: ROS/OpenCV camera_info YAML or Kalibr camchain YAML.
@@ -57,6 +57,9 @@ struct ImageResult {
     image: String,
     found: bool,
     tag_ids: Vec<u32>,
+    /// ChArUco / chessboard corner ids (empty for an aprilgrid).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    corner_ids: Vec<u32>,
     rejected_ids: Vec<u32>,
     #[serde(skip_serializing_if = "Option::is_none")]
     error: Option<String>,
@@ -75,7 +78,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
     if args.live {
         super::camera::uvc::ensure_available()?;
     }
-    let board = Board::load(&args.target)?;
+    let board = Target::load(&args.target)?;
     let camera = CameraModel::load(&args.intrinsics)?;
     let options = DetectorOptions {
         decimation: args.decimation,
@@ -83,7 +86,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         max_hamming: args.max_hamming,
         ..DetectorOptions::default()
     };
-    let detector = TagDetector::spawn(&board, options)?;
+    let detector = TargetDetector::spawn(&board, options)?;
     if args.live {
         return live(&args, &board, &camera, &detector);
     }
@@ -95,18 +98,46 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
     let mut found_count = 0;
     for path in &args.images {
         let image = load_gray_image(path)?;
-        let detection = detector
-            .detect(&image)
-            .with_context(|| format!("detecting tags in {}", path.display()))?;
+        let detection = match detector.detect(&image) {
+            Ok(detection) => detection,
+            // A ChArUco board or chessboard not in view: reported like an aprilgrid without tags.
+            Err(TargetError::BoardNotFound { board, reason }) => {
+                outln!("{}:", path.display());
+                outln!("  board not found: {board}: {reason}");
+                results.push(ImageResult {
+                    image: path.display().to_string(),
+                    found: false,
+                    tag_ids: Vec::new(),
+                    corner_ids: Vec::new(),
+                    rejected_ids: Vec::new(),
+                    error: Some(format!("{board} not found in the image: {reason}")),
+                    rms_px: None,
+                    corners_used: None,
+                    ambiguity: None,
+                    camera_from_target: None,
+                });
+                continue;
+            }
+            Err(error) => {
+                return Err(error)
+                    .with_context(|| format!("detecting the board in {}", path.display()))
+            }
+        };
+        let corner_ids: Vec<u32> = detection.points.iter().map(|(id, _)| *id).collect();
         let pose = estimate_board_pose(&board, &camera, &detection);
         let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
         let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
         outln!("{}:", path.display());
-        outln!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
+        if board.aprilgrid().is_some() {
+            outln!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
+        } else {
+            outln!("  corners found ({}): {:?}", corner_ids.len(), corner_ids);
+        }
         let mut result = ImageResult {
             image: path.display().to_string(),
             found: false,
             tag_ids,
+            corner_ids,
             rejected_ids,
             error: None,
             rms_px: None,
@@ -186,8 +217,9 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
     );
     if found_count == 0 {
         return Err(super::NothingFound(format!(
-            "the board ({}) was found in none of the {} images: check the target file matches the printed board (family, size, first id) and that the board is in view and in focus",
+            "the board ({}: {}) was found in none of the {} images: check the target file matches the printed board (kind, size, family or dictionary, first id) and that the board is in view and in focus",
             args.target.display(),
+            board.describe(),
             args.images.len()
         ))
         .into());
@@ -198,15 +230,22 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
 /// `detect --camera N --live`: one line per frame with the board pose, until interrupted.
 fn live(
     args: &DetectArgs,
-    board: &Board,
+    board: &Target,
     camera_model: &CameraModel,
-    detector: &TagDetector,
+    detector: &TargetDetector,
 ) -> anyhow::Result<()> {
     let mut camera = super::camera::uvc::open(&args.stream, Some(*camera_model))?;
     outln!("live detection: Ctrl-C to stop");
     loop {
         let frame = camera.grab(std::time::Instant::now())?;
-        let detection = detector.detect(&frame.image)?;
+        let detection = match detector.detect(&frame.image) {
+            Ok(detection) => detection,
+            Err(e @ TargetError::BoardNotFound { .. }) => {
+                outln!("board not found: {e}");
+                continue;
+            }
+            Err(e) => return Err(e.into()),
+        };
         match estimate_board_pose(board, camera_model, &detection) {
             Ok(pose) => {
                 let t = pose.camera_from_target.translation.vector;
@@ -216,7 +255,10 @@ fn live(
                     t.x, t.y, t.z, r.x, r.y, r.z, pose.tags_used, pose.rms_px, t.norm()
                 );
             }
-            Err(e) => outln!("board not found ({} tags seen): {e}", detection.tags.len()),
+            Err(e) => outln!(
+                "board not found ({} tags or corners seen): {e}",
+                detection.feature_count()
+            ),
         }
     }
 }

@@ -21,7 +21,7 @@ use handeye::formats::import::{
 use handeye::geometry::PoseYaml;
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::setup::Setup;
-use handeye::vision::{Board, DetectorOptions};
+use handeye::vision::{DetectorOptions, Target};
 
 /// The cell layout on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -313,7 +313,7 @@ fn cell_text(
 pub fn run(args: ImportArgs) -> anyhow::Result<()> {
     match args.format {
         ImportFormat::Visp(a) => {
-            let board = Board::load(&a.target)?;
+            let board = Target::load(&a.target)?;
             let camera = a.intrinsics.as_deref().map(CameraModel::load).transpose()?;
             anyhow::ensure!(
                 a.decimation >= 1.0,

@@ -11,7 +11,8 @@ use handeye::atomic_file::write_atomic;
 use handeye::vision::print::{
     board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, Paper,
 };
-use handeye::vision::Board;
+use handeye::vision::print_target::{target_pdf, target_png, target_svg};
+use handeye::vision::Target;
 
 /// `--paper` values.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -45,7 +46,7 @@ pub struct TargetArgs {
 enum TargetCommand {
     /// Write a printable board (.pdf, .png or .svg) at true scale.
     Render {
-        /// Board YAML (Kalibr aprilgrid form).
+        /// Board YAML: aprilgrid (Kalibr), charuco (OpenCV) or checkerboard.
         #[arg(long)]
         target: PathBuf,
         /// Output file; the extension (.pdf, .png or .svg) picks the format.
@@ -104,7 +105,29 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             if show_frame && extension != "png" {
                 bail!("--show-frame is only available for PNG output");
             }
-            let original = Board::load(&target)?;
+            let original = match Target::load(&target)? {
+                Target::Aprilgrid(board) => board,
+                other => {
+                    // ChArUco boards and chessboards: true scale, no paper fitting or overlay.
+                    if paper.is_some() || show_frame {
+                        bail!(
+                            "--paper and --show-frame are for aprilgrids; {} is a {}",
+                            target.display(),
+                            other.describe()
+                        );
+                    }
+                    let bytes = match extension.as_str() {
+                        "png" => target_png(&other, dpi)?,
+                        "svg" => target_svg(&other).into_bytes(),
+                        _ => target_pdf(&other),
+                    };
+                    write_atomic(&output, &bytes)
+                        .with_context(|| format!("writing {}", output.display()))?;
+                    outln!("wrote {}", output.display());
+                    outln!("print at actual size (100 %, not 'fit to page'), then measure the scale bar");
+                    return Ok(());
+                }
+            };
             let fitted = match paper {
                 Some(paper) => Some(fit_to_paper(&original, paper.into(), margin_mm / 1000.0)?),
                 None => None,

@@ -11,7 +11,7 @@ use crate::camera_model::CameraModel;
 use crate::geometry::Pose;
 use crate::robot::kinematics::{UrModel, JOINT_NAMES};
 use crate::robot::{Joints, MotionLimits, WorkspaceBox};
-use crate::vision::Board;
+use crate::vision::Target;
 
 use super::{Plan, Waypoint};
 use crate::setup::CellTransforms;
@@ -34,7 +34,7 @@ pub struct CheckContext<'a> {
     /// Camera intrinsics.
     pub camera: &'a CameraModel,
     /// The board.
-    pub board: &'a Board,
+    pub board: &'a Target,
     /// Margin between the board and the image border, px.
     pub margin_px: f64,
 }
@@ -257,7 +257,7 @@ fn unreachable(arm: &UrModel, waypoint: &Waypoint, pose: &Pose, previous: &Joint
 }
 
 /// The middle of the board's outline, in the target frame (the point look-at views aim at).
-pub fn board_centre(board: &Board) -> Point3<f64> {
+pub fn board_centre(board: &Target) -> Point3<f64> {
     let extent = board.extent();
     Point3::new(
         (extent.min.x + extent.max.x) / 2.0,
@@ -340,13 +340,9 @@ fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
     }
 }
 
-/// Every tag corner of the board, in the target frame.
-pub(crate) fn board_points(board: &Board) -> Vec<Point3<f64>> {
-    board
-        .tags()
-        .iter()
-        .flat_map(|t| t.corners_in_target)
-        .collect()
+/// Every corner of the board (tag corners of an aprilgrid), in the target frame.
+pub(crate) fn board_points(board: &Target) -> Vec<Point3<f64>> {
+    board.points().into_iter().map(|(_, _, p)| p).collect()
 }
 
 /// Smallest distance from any board point's projection to the image border (px); −∞ if a point

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::LookAt;
 use crate::camera_model::CameraModel;
 use crate::geometry::readable;
-use crate::vision::Board;
+use crate::vision::Target;
 
 /// How to generate a plan.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -132,7 +132,7 @@ pub fn spread_across_image(
     views: &mut [LookAt],
     spread: f64,
     camera: &CameraModel,
-    board: &Board,
+    board: &Target,
     margin_px: f64,
 ) {
     if spread <= 0.0 {

@@ -18,7 +18,7 @@ use crate::geometry::Pose;
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use crate::setup::CornerObservation;
 use crate::solve::{Calibration, NoiseModel};
-use crate::vision::{draw, Board};
+use crate::vision::{draw, Target};
 
 /// Largest width of a frame in the report, px: the grid shows it small, a click full size.
 /// Narrower frames keep their size.
@@ -30,7 +30,7 @@ const FRAME_JPEG_QUALITY: u8 = 80;
 #[derive(Debug, Clone, Copy)]
 pub struct Optics<'a> {
     /// The board.
-    pub board: &'a Board,
+    pub board: &'a Target,
     /// The camera's intrinsics and distortion.
     pub camera: &'a CameraModel,
 }
@@ -127,10 +127,9 @@ pub fn reprojection_rms(
     let mut sum = 0.0;
     let mut count = 0usize;
     for c in corners_px {
-        let Some(points) = optics.board.tag_corners_in_target(c.tag_id) else {
+        let Some(point) = optics.board.observation_point(c) else {
             continue;
         };
-        let point = points[usize::from(c.corner)];
         let Some(pixel) = optics.camera.project(&(camera_from_target * point)) else {
             continue;
         };
@@ -169,10 +168,17 @@ fn annotated_frame(
     let to_thumb =
         |p: Point2<f64>| Point2::new((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
     let magenta = Rgb([255, 0, 255]);
-    for tag in optics.board.tags() {
-        let Some(points) = optics.board.tag_corners_in_target(tag.id) else {
-            continue;
-        };
+    // Chessboard corners (ChArUco, chessboard): a small magenta mark at each predicted corner.
+    if optics.board.aprilgrid().is_none() {
+        for (_, _, p) in optics.board.points() {
+            if let Some(pixel) = optics.camera.project(&(camera_from_target * p)) {
+                draw::cross(&mut out, to_thumb(pixel), 2.0, magenta);
+            }
+        }
+    }
+    let tags = optics.board.aprilgrid().map(|b| b.tags()).unwrap_or(&[]);
+    for tag in tags {
+        let points = tag.corners_in_target;
         let pixels: Vec<Option<Point2<f64>>> = points
             .iter()
             .map(|p| {
@@ -215,7 +221,7 @@ pub fn write_session_report(
 ) -> Result<std::path::PathBuf, ReportError> {
     let options = config.map(|c| c.solver.to_options()).unwrap_or_default();
     // The optics are optional: a session moved to another machine still gets a report.
-    let board = config.and_then(|c| Board::load(&c.target).ok());
+    let board = config.and_then(|c| Target::load(&c.target).ok());
     // Intrinsics from the config, else the ones a from-scratch run estimated into the session.
     let camera_file = config
         .and_then(|c| c.intrinsics.clone())

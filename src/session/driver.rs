@@ -23,8 +23,8 @@ use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
 use crate::plan::check::MoveCheck;
 use crate::robot::{Joints, MotionLimits, Robot};
-use crate::setup::{CornerObservation, PosePair, Setup};
-use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use crate::setup::{PosePair, Setup};
+use crate::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 use super::folder::{PoseVisit, SessionFolder};
 use super::SessionError;
@@ -45,7 +45,7 @@ pub struct SessionSetup {
     /// Frames whose board reprojection RMS exceeds this are rejected.
     pub max_reprojection_rms_px: f64,
     /// The board.
-    pub board: Board,
+    pub board: Target,
     /// Detector settings.
     pub detector: DetectorOptions,
     /// Set (e.g. by Ctrl-C) to stop the arm — a move in progress decelerates where it is — and
@@ -410,7 +410,7 @@ fn spawn_worker(
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<std::thread::JoinHandle<()>, SessionError> {
-    let detector = TagDetector::spawn(&setup.board, setup.detector.clone())
+    let detector = TargetDetector::spawn(&setup.board, setup.detector.clone())
         .map_err(|e| SessionError::Detector(Box::new(e)))?;
     let board = setup.board.clone();
     let folder = setup.folder.clone();
@@ -485,8 +485,8 @@ pub(crate) fn sample_of(
 
 fn process(
     job: &Job,
-    detector: &TagDetector,
-    board: &Board,
+    detector: &TargetDetector,
+    board: &Target,
     camera_model: Option<&CameraModel>,
     folder: &SessionFolder,
     max_rms: f64,
@@ -530,8 +530,8 @@ fn process(
 /// (a rejection reason instead of a pose when the board is missing or fits badly). Without a
 /// camera model (intrinsics still unknown) only the corners are recorded.
 pub(crate) fn measure(
-    detector: &TagDetector,
-    board: &Board,
+    detector: &TargetDetector,
+    board: &Target,
     camera_model: Option<&CameraModel>,
     image: &image::GrayImage,
     max_rms: f64,
@@ -540,25 +540,16 @@ pub(crate) fn measure(
     match detector.detect(image) {
         Err(e) => visit.rejected = Some(e.to_string()),
         Ok(detection) => {
-            visit.corners_px = detection
-                .tags
-                .iter()
-                .flat_map(|t| {
-                    (0u8..)
-                        .zip(&t.corners_px)
-                        .map(move |(corner, c)| CornerObservation {
-                            tag_id: t.id,
-                            corner,
-                            pixel: *c,
-                        })
-                })
-                .collect();
+            visit.corners_px = detection.observations();
             let Some(camera_model) = camera_model else {
-                visit.tags = detection
-                    .tags
-                    .iter()
-                    .filter(|t| board.tag(t.id).is_some())
-                    .count();
+                visit.tags = match board.aprilgrid() {
+                    Some(grid) => detection
+                        .tags
+                        .iter()
+                        .filter(|t| grid.tag(t.id).is_some())
+                        .count(),
+                    None => detection.points.len(),
+                };
                 if visit.tags == 0 {
                     visit.rejected = Some("no tag of the board detected".to_string());
                 }

@@ -3,7 +3,7 @@
 
 use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
-use crate::vision::{Board, DetectorOptions, TagDetector};
+use crate::vision::{DetectorOptions, Target, TargetDetector};
 
 use super::driver::{measure, sample_of};
 use super::{PoseVisit, SessionError, SessionFolder};
@@ -12,14 +12,14 @@ use super::{PoseVisit, SessionError, SessionFolder};
 /// visits as re-measured (in plan order).
 pub fn redetect(
     folder: &SessionFolder,
-    board: &Board,
+    board: &Target,
     camera_model: &CameraModel,
     detector: DetectorOptions,
     max_rms: f64,
 ) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
     let manifest = folder.read_manifest()?;
     let detector =
-        TagDetector::spawn(board, detector).map_err(|e| SessionError::Detector(Box::new(e)))?;
+        TargetDetector::spawn(board, detector).map_err(|e| SessionError::Detector(Box::new(e)))?;
     let mut samples = Vec::new();
     let mut visits = Vec::new();
     for recorded in folder.read_visits()? {

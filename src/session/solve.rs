@@ -22,7 +22,7 @@ use crate::solve::{
     ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, SolveOptions,
 };
 use crate::verdict::{self, Verdict};
-use crate::vision::Board;
+use crate::vision::Target;
 
 use super::{PoseVisit, SessionError, SessionFolder};
 
@@ -56,7 +56,7 @@ pub struct SolveInputs {
     /// The cell config: solver settings and the robot's repeatability.
     pub config: CellConfig,
     /// The board the frames show.
-    pub board: Board,
+    pub board: Target,
     /// The intrinsics; `None` when the config has none and they are estimated from the corners.
     pub camera: Option<CameraModel>,
 }
@@ -64,7 +64,7 @@ pub struct SolveInputs {
 impl SolveInputs {
     /// Loads the board and the intrinsics (when the config names them) of `config`.
     pub fn load(config: CellConfig) -> Result<SolveInputs, SessionError> {
-        let board = Board::load(&config.target).map_err(|source| SessionError::Board {
+        let board = Target::load(&config.target).map_err(|source| SessionError::Board {
             file: config.target.clone(),
             source: Box::new(source),
         })?;
@@ -249,7 +249,7 @@ fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
 fn solve_from_scratch(
     folder: &SessionFolder,
     config: &CellConfig,
-    board: &Board,
+    board: &Target,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let manifest = folder.read_manifest()?;
     let visits = folder.read_visits()?;
@@ -368,7 +368,7 @@ fn solve_from_scratch(
 /// samples'.
 pub fn frames_from_visits(
     visits: &[PoseVisit],
-    board: &Board,
+    board: &Target,
     require_pose: bool,
 ) -> Result<Vec<(String, Frame)>, SessionError> {
     let mut frames = Vec::new();
@@ -384,9 +384,8 @@ pub fn frames_from_visits(
             .corners_px
             .iter()
             .filter_map(|c| {
-                let points = board.tag_corners_in_target(c.tag_id)?;
                 Some(Corner {
-                    point_in_target: points[usize::from(c.corner)],
+                    point_in_target: board.observation_point(c)?,
                     pixel: c.pixel,
                 })
             })
@@ -438,7 +437,7 @@ pub fn solve_session(
     setup: Setup,
     pairs: &[PosePair],
     visits: &[PoseVisit],
-    vision: Option<(&Board, &CameraModel)>,
+    vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();

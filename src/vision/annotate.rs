@@ -1,21 +1,22 @@
 //! Annotated frames for people: detected tag outlines, corners (corner 0 marked), ids, the
 //! board's axes at `T_camera_target` (x red, y green, z blue, drawn through the lens model)
-//! and the reprojection RMS. Depends on `vision::{board, detect, pnp, draw}` and
+//! and the reprojection RMS; for ChArUco boards and chessboards the labelled corners (corner 0
+//! red). Depends on `vision::{target, detect, pnp, draw}` and
 //! `camera_model`.
 
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
 
-use super::board::Board;
 use super::detect::BoardDetection;
 use super::draw;
 use super::pnp::BoardPose;
+use super::target::Target;
 use crate::camera_model::CameraModel;
 
 /// Draws the detection (and the pose, if any) over a colour copy of the frame.
 pub fn annotate(
     image: &GrayImage,
-    board: &Board,
+    board: &Target,
     camera: &CameraModel,
     detection: &BoardDetection,
     pose: Option<&BoardPose>,
@@ -52,9 +53,21 @@ pub fn annotate(
             Rgb([0, 160, 255]),
         );
     }
+    for (id, pixel) in &detection.points {
+        let colour = if *id == 0 {
+            Rgb([255, 0, 0])
+        } else {
+            Rgb([0, 220, 0])
+        };
+        draw::cross(&mut out, *pixel, 4.0, colour);
+    }
     let text_scale = 1 + image.width() / 400;
     if let Some(pose) = pose {
-        let length = (3.0 * board.tag_size()).min(board.pitch() * board.cols().max(2) as f64);
+        let e = board.extent();
+        let length = match board.aprilgrid() {
+            Some(b) => (3.0 * b.tag_size()).min(b.pitch() * b.cols().max(2) as f64),
+            None => 0.4 * (e.max.x - e.min.x).min(e.max.y - e.min.y),
+        };
         let axes = [
             (Point3::new(length, 0.0, 0.0), Rgb([255, 0, 0])),
             (Point3::new(0.0, length, 0.0), Rgb([0, 255, 0])),
@@ -72,9 +85,12 @@ pub fn annotate(
                 previous = pixel;
             }
         }
+        let tags = match board.aprilgrid() {
+            Some(_) => format!("tags {} ", pose.tags_used),
+            None => String::new(),
+        };
         let summary = format!(
-            "tags {} corners {} rms {:.3} px{}",
-            pose.tags_used,
+            "{tags}corners {} rms {:.3} px{}",
             pose.corners_used,
             pose.rms_px,
             if pose.is_ambiguous() {
@@ -85,7 +101,7 @@ pub fn annotate(
         );
         draw::text(&mut out, 8, 8, text_scale, &summary, Rgb([255, 255, 0]));
     } else {
-        let summary = format!("tags {} - no pose", detection.tags.len());
+        let summary = format!("features {} - no pose", detection.feature_count());
         draw::text(&mut out, 8, 8, text_scale, &summary, Rgb([255, 80, 80]));
     }
     out

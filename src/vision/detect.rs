@@ -23,6 +23,7 @@ use super::board::Board;
 use super::family::TagFamily;
 use super::ffi;
 use super::TargetError;
+use crate::setup::CornerObservation;
 
 /// Largest accepted quad decimation: beyond it the quad search sees a thumbnail in which no
 /// tag a camera can resolve survives (and the C code truncates the factor to an `int`).
@@ -161,6 +162,9 @@ pub struct BoardDetection {
     pub tags: Vec<TagObservation>,
     /// Rejected detections.
     pub rejected: Vec<RejectedTag>,
+    /// Labelled chessboard corners `(corner id, pixel)` of a ChArUco board or a chessboard,
+    /// by id (empty for an aprilgrid, whose corners are in `tags`).
+    pub points: Vec<(u32, Point2<f64>)>,
     /// Width of the image searched, px.
     pub image_width: u32,
     /// Height of the image searched, px.
@@ -168,6 +172,31 @@ pub struct BoardDetection {
 }
 
 impl BoardDetection {
+    /// Every detected corner as recorded: `[tag id, corner, u, v]` for an aprilgrid's tags,
+    /// `[corner id, 0, u, v]` for ChArUco and chessboard corners.
+    pub fn observations(&self) -> Vec<CornerObservation> {
+        let tags = self.tags.iter().flat_map(|t| {
+            (0u8..)
+                .zip(&t.corners_px)
+                .map(move |(corner, c)| CornerObservation {
+                    tag_id: t.id,
+                    corner,
+                    pixel: *c,
+                })
+        });
+        let points = self.points.iter().map(|(id, pixel)| CornerObservation {
+            tag_id: *id,
+            corner: 0,
+            pixel: *pixel,
+        });
+        tags.chain(points).collect()
+    }
+
+    /// Tags (aprilgrid) or corners (ChArUco, chessboard) found.
+    pub fn feature_count(&self) -> usize {
+        self.tags.len() + self.points.len()
+    }
+
     /// `(point_in_target, pixel)` pairs for every accepted corner, tag by tag in corner order.
     pub fn correspondences(&self, board: &Board) -> Vec<(Point3<f64>, Point2<f64>)> {
         self.tags
@@ -328,6 +357,7 @@ fn filter(
     BoardDetection {
         tags,
         rejected,
+        points: Vec::new(),
         image_width,
         image_height,
     }

@@ -1,21 +1,30 @@
-//! The calibration target: board specification (`board`), the AprilTag family tables it is
-//! printed from (`family`), tag detection on a dedicated thread (`detect`) and the board pose
-//! `T_camera_target` by PnP with lens distortion (`pnp`).
+//! The calibration target: the board of any kind (`target`: aprilgrid, ChArUco or chessboard,
+//! and its detector), the aprilgrid specification (`board`), the AprilTag family tables it is
+//! printed from (`family`), tag detection on a dedicated thread (`detect`), ChArUco boards
+//! (`charuco`), plain chessboards (`chessboard`), sub-pixel X-corner refinement (`subpix`) and
+//! the board pose `T_camera_target` by PnP with lens distortion (`pnp`).
 //!
-//! Frames: `target` is the board frame (origin at the outer bottom-left corner of tag 0's
-//! black square, x along rows of tags, y up, z out of the printed face); `camera` is the
-//! optical frame. Units: metres in the target frame, pixels (OpenCV convention: centres at
-//! integers) in images. Depends on `geometry` and `camera_model`; never on robots, sessions
-//! or the CLI.
+//! Frames: `target` is the board frame, x to the right and y up as printed, z out of the
+//! printed face; its origin is the outer bottom-left corner of tag 0's black square (aprilgrid),
+//! the bottom-left outer corner of the squares (ChArUco) or the bottom-left inner corner
+//! (chessboard). `camera` is the optical frame. Units: metres in the target frame, pixels
+//! (OpenCV convention: centres at integers) in images. Depends on `geometry`, `camera_model`
+//! and `setup` (the recorded corner); never on robots, sessions or the CLI. ChArUco marker
+//! decoding and chessboard grid labelling come from the `calib-targets-*` crates.
 
 pub mod annotate;
 pub mod board;
+pub mod charuco;
+pub mod chessboard;
 pub mod detect;
 pub mod draw;
 pub mod family;
 mod ffi;
 pub mod pnp;
 pub mod print;
+pub mod print_target;
+pub mod subpix;
+pub mod target;
 
 use std::path::PathBuf;
 
@@ -23,6 +32,7 @@ pub use board::{Board, BoardExtent, BoardTag};
 pub use detect::{BoardDetection, DetectorOptions, RejectedTag, TagDetector, TagObservation};
 pub use family::TagFamily;
 pub use pnp::{estimate_board_pose, reproject, BoardPose};
+pub use target::{Target, TargetDetector};
 
 use crate::camera_model::CameraModelError;
 
@@ -116,6 +126,14 @@ pub enum TargetError {
     NoTagsFound {
         /// How many detections were rejected (wrong id, duplicate, hamming).
         rejected: usize,
+    },
+    /// A ChArUco board or chessboard was not found (or not completely enough to be labelled).
+    #[error("{board} not found in the image: {reason}")]
+    BoardNotFound {
+        /// The board, in a few words.
+        board: String,
+        /// What the detector saw.
+        reason: String,
     },
     /// Too few usable corners for a pose.
     #[error("board pose needs at least {required} corners, only {actual} usable")]

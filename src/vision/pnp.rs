@@ -18,6 +18,7 @@ use nalgebra::{
 
 use super::board::Board;
 use super::detect::BoardDetection;
+use super::target::AsTarget;
 use super::TargetError;
 use crate::camera_model::CameraModel;
 use crate::geometry::{project_to_rotation, Pose};
@@ -54,10 +55,11 @@ impl BoardPose {
 
 /// Estimates `T_camera_target` from a detection of `board` by a camera with `camera`'s intrinsics.
 pub fn estimate_board_pose(
-    board: &Board,
+    board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
     detection: &BoardDetection,
 ) -> Result<BoardPose, TargetError> {
+    let board = board.as_target();
     if (detection.image_width, detection.image_height) != (camera.width, camera.height) {
         return Err(TargetError::ImageSizeMismatch {
             image_width: detection.image_width,
@@ -66,17 +68,21 @@ pub fn estimate_board_pose(
             camera_height: camera.height,
         });
     }
-    if detection.tags.is_empty() {
+    if detection.feature_count() == 0 {
         return Err(TargetError::NoTagsFound {
             rejected: detection.rejected.len(),
         });
     }
-    let correspondences = detection.correspondences(board);
-    let tags_used = detection
-        .tags
-        .iter()
-        .filter(|t| board.tag(t.id).is_some())
-        .count();
+    let correspondences = board.correspondences(detection);
+    // Tags of an aprilgrid; corners of a ChArUco board or chessboard (never a lone tag).
+    let tags_used = match board.aprilgrid() {
+        Some(grid) => detection
+            .tags
+            .iter()
+            .filter(|t| grid.tag(t.id).is_some())
+            .count(),
+        None => correspondences.len().max(2),
+    };
     estimate_pose_from_points(camera, &correspondences, tags_used)
 }
 

@@ -19,7 +19,7 @@ use crate::camera_model::{CameraModel, Distortion};
 use crate::dataset::Dataset;
 use crate::geometry::{pose_from_rotvec, Pose};
 use crate::setup::{PosePair, Setup};
-use crate::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use crate::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -287,7 +287,7 @@ pub struct VispOptions {
     /// Eye-in-hand or eye-to-hand (ViSP's files do not say).
     pub setup: Setup,
     /// The board the images show.
-    pub board: Board,
+    pub board: Target,
     /// Intrinsics to use instead of the folder's XML.
     pub camera: Option<CameraModel>,
     /// Detector settings.
@@ -338,7 +338,7 @@ pub fn import_visp(folder: &Path, options: &VispOptions) -> Result<VispImport, I
             })
         }
     };
-    let detector = TagDetector::spawn(&options.board, options.detector.clone())
+    let detector = TargetDetector::spawn(&options.board, options.detector.clone())
         .map_err(|e| ImportError::Target(Box::new(e)))?;
     let mut frames = Vec::new();
     let mut pairs = Vec::new();
