@@ -116,7 +116,7 @@ fn summarise(errors: &[PoseError]) -> ErrorSummary {
         let mut sorted = values.clone();
         sorted.sort_by(f64::total_cmp);
         let mid = sorted.len() / 2;
-        let median = if sorted.len() % 2 == 0 {
+        let median = if sorted.len().is_multiple_of(2) {
             0.5 * (sorted[mid - 1] + sorted[mid])
         } else {
             sorted[mid]

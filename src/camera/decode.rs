@@ -121,7 +121,7 @@ pub fn to_gray(
 
 /// YUYV 4:2:2 to grey: the Y bytes (every other byte) are the luma.
 pub fn yuyv_to_gray(width: u32, height: u32, data: &[u8]) -> Result<GrayImage, DecodeError> {
-    if width % 2 != 0 {
+    if !width.is_multiple_of(2) {
         return Err(DecodeError::OddWidth(width));
     }
     check_length(PixelFormat::Yuyv, width, height, 2, data)?;

@@ -144,7 +144,7 @@ impl Charuco {
                 dictionary.to_string(),
             );
         };
-        if legacy_pattern && squares_y % 2 == 0 {
+        if legacy_pattern && squares_y.is_multiple_of(2) {
             return err(
                 "legacyPattern",
                 "false for a board with an even squaresY: OpenCV's legacy pattern (before 4.6) \

@@ -75,7 +75,7 @@ impl Checkerboard {
                 format!("{cols}x{rows}"),
             ));
         }
-        if (cols + rows) % 2 == 0 {
+        if (cols + rows).is_multiple_of(2) {
             return Err((
                 "targetCols x targetRows".into(),
                 format!(
