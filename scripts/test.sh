@@ -26,4 +26,7 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
+# --- console (issue #15): Playwright drives the Debian chromium above in tests/console.rs (no browser download).
+python3 -c "import playwright.sync_api" 2>/dev/null || python3 -m pip install -q playwright
+
 cargo test --workspace --features handeye/ur-rtde "$@"
