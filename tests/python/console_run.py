@@ -52,7 +52,8 @@ with sync_playwright() as p:
         ["run", "--resume", str(session), "--console", "127.0.0.1:0", "--console-wait"], work
     )
     try:
-        page.goto(resume.url())
+        url = resume.url()
+        page.goto(url)
         page.wait_for_function(
             "['GOOD','CHECK','REDO'].includes(document.getElementById('verdict').textContent)",
             timeout=180000,
@@ -62,7 +63,7 @@ with sync_playwright() as p:
         # Every pose captured: those kept from before the stop and those taken now.
         assert page.evaluate(js_count("#plan tr[data-state=captured]")) == POSES
         assert page.is_visible("#report")
-        report = page.request.get(resume.url() + "report")
+        report = page.request.get(url + "report")
         assert report.ok and "<html" in report.text().lower()
         if shots:
             page.screenshot(path=str(shots / "console-verdict.png"))
