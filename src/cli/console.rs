@@ -21,25 +21,25 @@ use handeye::session::SolvedSession;
 pub struct ConsoleArgs {
     /// The cell config; its plan's poses (if any) are only suggested, never driven.
     #[arg(long, required_unless_present = "resume")]
-    config: Option<PathBuf>,
+    pub(super) config: Option<PathBuf>,
     /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS).
     #[arg(long, conflicts_with = "resume")]
-    out: Option<PathBuf>,
+    pub(super) out: Option<PathBuf>,
     /// Continue a hand-guided session in this folder.
     #[arg(long)]
-    resume: Option<PathBuf>,
+    pub(super) resume: Option<PathBuf>,
     /// The console's address (port 0 picks a free one); the URL is printed.
     #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
-    addr: SocketAddr,
+    pub(super) addr: SocketAddr,
     /// Allow an address beyond this machine (anyone who reaches it can move the arm).
     #[arg(long)]
-    public: bool,
+    pub(super) public: bool,
     /// Do not ask before the first move of a real arm to a suggested view.
     #[arg(long)]
-    yes: bool,
+    pub(super) yes: bool,
     /// After the session, keep serving the page until Enter (or Ctrl-C).
     #[arg(long)]
-    wait: bool,
+    pub(super) wait: bool,
 }
 
 /// Runs `handeye console`.

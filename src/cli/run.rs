@@ -49,6 +49,25 @@ pub struct RunArgs {
 
 /// Runs `handeye run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    // `plan: {manual: true}`: a person chooses the views on the console (as `handeye console`).
+    let manual = match (&args.resume, &args.config) {
+        (None, Some(config)) => handeye::config::CellConfig::load(config)
+            .map(|c| c.plan.manual)
+            .unwrap_or(false),
+        _ => false,
+    };
+    if manual {
+        outln!("plan.manual: hand-guided capture on the console (as `handeye console`)");
+        return super::console::run(super::console::ConsoleArgs {
+            config: args.config,
+            out: args.out,
+            resume: None,
+            addr: args.console.unwrap_or(std::net::SocketAddr::from(([127, 0, 0, 1], 8765))),
+            public: args.console_public,
+            yes: args.yes,
+            wait: args.console_wait,
+        });
+    }
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),

@@ -212,6 +212,21 @@ pub enum ConsoleEvent {
     },
 }
 
+impl ConsoleEvent {
+    /// For an event that states the whole of something (the estimate, the coverage, where the
+    /// arm stands, the suggestion), its kind: a newer one makes the older one worthless.
+    pub fn snapshot(&self) -> Option<&'static str> {
+        match self {
+            ConsoleEvent::Estimate { .. } => Some("estimate"),
+            ConsoleEvent::Coverage { .. } => Some("coverage"),
+            ConsoleEvent::Arm { .. } => Some("arm"),
+            ConsoleEvent::Suggestion { .. } => Some("suggestion"),
+            ConsoleEvent::Moving { .. } => Some("moving"),
+            _ => None,
+        }
+    }
+}
+
 /// What a page asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(tag = "cmd", rename_all = "snake_case")]

@@ -87,7 +87,8 @@ pub enum ConsoleError {
 /// What the server and the run share.
 pub(crate) struct Hub {
     events: tokio::sync::broadcast::Sender<Arc<str>>,
-    history: Mutex<VecDeque<Arc<str>>>,
+    /// Events kept for late pages, each with its snapshot kind (see [`ConsoleEvent::snapshot`]).
+    history: Mutex<VecDeque<(Option<&'static str>, Arc<str>)>>,
     frame: tokio::sync::watch::Sender<Option<axum::body::Bytes>>,
     stop: Arc<AtomicBool>,
     commands: Mutex<mpsc::Sender<Command>>,
@@ -95,7 +96,7 @@ pub(crate) struct Hub {
 }
 
 impl Hub {
-    fn history(&self) -> MutexGuard<'_, VecDeque<Arc<str>>> {
+    fn history(&self) -> MutexGuard<'_, VecDeque<(Option<&'static str>, Arc<str>)>> {
         // A panic elsewhere while holding it leaves plain data: keep serving.
         self.history.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -104,15 +105,23 @@ impl Hub {
     /// event is missed or doubled).
     pub(crate) fn subscribe(&self) -> (Vec<Arc<str>>, tokio::sync::broadcast::Receiver<Arc<str>>) {
         let history = self.history();
-        (history.iter().cloned().collect(), self.events.subscribe())
+        (
+            history.iter().map(|(_, text)| text.clone()).collect(),
+            self.events.subscribe(),
+        )
     }
 
-    fn publish(&self, text: Arc<str>) {
+    fn publish(&self, snapshot: Option<&'static str>, text: Arc<str>) {
         let mut history = self.history();
+        // A snapshot (the estimate, the coverage, ...) replaces the one before: a late page
+        // needs only the newest, and the history stays small however long the run.
+        if snapshot.is_some() {
+            history.retain(|(kind, _)| *kind != snapshot);
+        }
         if history.len() == HISTORY {
             history.pop_front();
         }
-        history.push_back(text.clone());
+        history.push_back((snapshot, text.clone()));
         // No page connected is fine.
         let _ = self.events.send(text);
     }
@@ -265,7 +274,7 @@ impl Publisher {
     /// Sends an event to every page (and keeps it for pages that connect later).
     pub fn publish(&self, event: &ConsoleEvent) {
         match serde_json::to_string(event) {
-            Ok(text) => self.0.publish(text.into()),
+            Ok(text) => self.0.publish(event.snapshot(), text.into()),
             Err(e) => tracing::warn!("console event not serialisable: {e}"),
         }
     }

@@ -672,7 +672,7 @@ impl Robot for UrRobot {
         // Teach mode is a command of the control script: it has to run.
         self.ensure_program()?;
         let call = if on { "teachMode" } else { "endTeachMode" };
-        self.call(call, |h| {
+        self.call(call, move |h| {
             let ptr = h.ptr();
             // SAFETY: `ptr` is the live handle owned by this worker.
             raw_call(|err, len| unsafe { ffi::urrtde_teach_mode(ptr, i32::from(on), err, len) })
