@@ -93,7 +93,9 @@ fn a_page_gets_the_history_live_events_and_frames_and_stop_sets_the_flag() {
         runtime.block_on(async {
             use futures_util::{SinkExt, StreamExt};
             use tokio_tungstenite::tungstenite::Message;
-            let (mut ws, _) = tokio_tungstenite::connect_async(&url).await.expect("connects");
+            let (mut ws, _) = tokio_tungstenite::connect_async(&url)
+                .await
+                .expect("connects");
             let mut texts = Vec::new();
             let mut binaries = Vec::new();
             // History first (the note), the current frame.
@@ -133,7 +135,10 @@ fn a_page_gets_the_history_live_events_and_frames_and_stop_sets_the_flag() {
                 tokio::time::sleep(Duration::from_millis(10)).await;
             }
         });
-        assert!(stop.load(Ordering::SeqCst), "STOP did not set the stop flag");
+        assert!(
+            stop.load(Ordering::SeqCst),
+            "STOP did not set the stop flag"
+        );
         assert_eq!(
             console.next_command(Duration::from_secs(5)),
             Some(handeye::console::Command::Stop)
@@ -326,9 +331,15 @@ fn freedrive_switches_through_ur_rtde_on_the_mock_controller() {
             assert!((r - p).abs() < 1e-6, "read {read:?}, left at {pushed:?}");
         }
         robot.set_freedrive(false).expect("endTeachMode");
-        assert!(!mock.in_teach_mode(), "the controller is still in teach mode");
+        assert!(
+            !mock.in_teach_mode(),
+            "the controller is still in teach mode"
+        );
         let mut again = pushed;
         again[0] += 0.1;
-        assert!(!mock.hand_guide(again), "the arm followed a hand after freedrive off");
+        assert!(
+            !mock.hand_guide(again),
+            "the arm followed a hand after freedrive off"
+        );
     });
 }

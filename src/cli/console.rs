@@ -114,7 +114,11 @@ fn terminal_commands(console: &Console) {
 }
 
 /// Starts the console and prints its URL (loudly, when it serves beyond this machine).
-pub(super) fn start(addr: SocketAddr, public: bool, stop: Arc<AtomicBool>) -> anyhow::Result<Console> {
+pub(super) fn start(
+    addr: SocketAddr,
+    public: bool,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<Console> {
     let console = Console::start(
         &ConsoleOptions {
             addr,
@@ -161,11 +165,14 @@ pub(super) fn finished(
     linger(console, wait);
 }
 
-/// With `wait`, serves the page until Enter (or Ctrl-C, or no page is left connected);
-/// otherwise gives connected pages a moment to receive the last events.
+/// With `wait`, serves the page until Enter (or Ctrl-C); otherwise lets connected pages receive
+/// the last events first.
 fn linger(console: &Console, wait: bool) {
     if wait {
-        outln!("console: still serving {} — press Enter to quit", console.url());
+        outln!(
+            "console: still serving {} — press Enter to quit",
+            console.url()
+        );
         let (tx, rx) = std::sync::mpsc::channel();
         let _ = std::thread::Builder::new().spawn(move || {
             let mut line = String::new();
@@ -173,7 +180,11 @@ fn linger(console: &Console, wait: bool) {
             let _ = tx.send(());
         });
         let _ = rx.recv();
-    } else if console.clients() > 0 {
-        std::thread::sleep(Duration::from_millis(500));
+    } else {
+        console.drain(Duration::from_secs(1));
+        // The connections have the last events; a moment to write them before the server goes.
+        if console.clients() > 0 {
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 }

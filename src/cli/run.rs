@@ -62,7 +62,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             config: args.config,
             out: args.out,
             resume: None,
-            addr: args.console.unwrap_or(std::net::SocketAddr::from(([127, 0, 0, 1], 8765))),
+            addr: args
+                .console
+                .unwrap_or(std::net::SocketAddr::from(([127, 0, 0, 1], 8765))),
             public: args.console_public,
             yes: args.yes,
             wait: args.console_wait,
@@ -81,7 +83,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         stop: stop.clone(),
     };
     let console = match args.console {
-        Some(addr) => Some(super::console::start(addr, args.console_public, stop.clone())?),
+        Some(addr) => Some(super::console::start(
+            addr,
+            args.console_public,
+            stop.clone(),
+        )?),
         None => None,
     };
     let mut printer = Printer::new(stop);

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{mpsc, Arc};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
@@ -25,6 +26,10 @@ use crate::vision::{draw, Board};
 use super::events::{ConsoleEvent, PoseView, SigmaView};
 use super::Publisher;
 
+/// At most one frame per this: a person watching needs no more, and the run keeps the CPU.
+const FRAME_EVERY: Duration = Duration::from_millis(1000);
+/// At most one running estimate per this.
+const SOLVE_EVERY: Duration = Duration::from_millis(1000);
 /// Width of the frames sent to the page, px (larger frames are scaled down).
 const FRAME_WIDTH: u32 = 640;
 /// JPEG quality of those frames.
@@ -68,10 +73,68 @@ impl Analyst {
         let thread = std::thread::Builder::new()
             .name("console-analysis".into())
             .spawn(move || {
+                lower_priority();
                 let mut state = State::new(cell, root);
-                while let Ok(job) = rx.recv() {
-                    let batch: Vec<Job> = std::iter::once(job).chain(rx.try_iter()).collect();
-                    state.batch(batch, &publisher);
+                let mut pending_frame: Option<FrameSource> = None;
+                let mut pending_solve = false;
+                let mut last_frame: Option<Instant> = None;
+                let mut last_solve: Option<Instant> = None;
+                loop {
+                    let due = |last: Option<Instant>, every: Duration| {
+                        last.map_or(Duration::ZERO, |t| every.saturating_sub(t.elapsed()))
+                    };
+                    let wait = match (pending_frame.is_some(), pending_solve) {
+                        (false, false) => Duration::from_secs(3600),
+                        (frame, solve) => {
+                            let f = if frame {
+                                due(last_frame, FRAME_EVERY)
+                            } else {
+                                Duration::MAX
+                            };
+                            let s = if solve {
+                                due(last_solve, SOLVE_EVERY)
+                            } else {
+                                Duration::MAX
+                            };
+                            f.min(s)
+                        }
+                    };
+                    let ended = match rx.recv_timeout(wait) {
+                        Ok(job) => {
+                            let batch: Vec<Job> =
+                                std::iter::once(job).chain(rx.try_iter()).collect();
+                            let (changed, newest) = state.ingest(batch);
+                            if changed {
+                                state.publish_coverage(&publisher);
+                                pending_solve = true;
+                            }
+                            if newest.is_some() {
+                                pending_frame = newest;
+                            }
+                            false
+                        }
+                        Err(mpsc::RecvTimeoutError::Timeout) => false,
+                        Err(mpsc::RecvTimeoutError::Disconnected) => true,
+                    };
+                    // Rate limits keep this best-effort work small next to the run's; at the end
+                    // whatever is pending is done at once.
+                    if pending_solve && (ended || due(last_solve, SOLVE_EVERY).is_zero()) {
+                        state.solve(&publisher);
+                        pending_solve = false;
+                        last_solve = Some(Instant::now());
+                    }
+                    if pending_frame.is_some() && (ended || due(last_frame, FRAME_EVERY).is_zero())
+                    {
+                        if let Some(jpeg) =
+                            pending_frame.take().and_then(|f| state.render_source(f))
+                        {
+                            publisher.set_frame(jpeg);
+                        }
+                        last_frame = Some(Instant::now());
+                    }
+                    if ended {
+                        break;
+                    }
                 }
             });
         match thread {
@@ -115,6 +178,31 @@ enum FrameSource {
     Image(Arc<GrayImage>, Pose),
 }
 
+/// `image` averaged over `factor`×`factor` blocks into a `w`×`h` image.
+fn box_downscale(image: &GrayImage, factor: u32, w: u32, h: u32) -> GrayImage {
+    let area = factor * factor;
+    GrayImage::from_fn(w, h, |x, y| {
+        let mut sum = 0u32;
+        for dy in 0..factor {
+            for dx in 0..factor {
+                sum += image.get_pixel(x * factor + dx, y * factor + dy)[0] as u32;
+            }
+        }
+        image::Luma([(sum / area) as u8])
+    })
+}
+
+/// Makes the calling thread yield the CPU to the run's threads (Linux: per-thread nice 10); the
+/// console's work is best-effort.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority with `who` 0 changes only the calling thread's nice value; it takes no
+    // pointers, and a failure (returned, not signalled) just leaves the priority as it was.
+    unsafe {
+        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, 10);
+    }
+}
+
 struct Sample {
     base_from_flange: Pose,
     camera_from_target: Option<Pose>,
@@ -143,7 +231,8 @@ impl State {
         }
     }
 
-    fn batch(&mut self, batch: Vec<Job>, publisher: &Publisher) {
+    /// Takes in a batch of jobs: whether the accepted samples changed, and the newest frame.
+    fn ingest(&mut self, batch: Vec<Job>) -> (bool, Option<FrameSource>) {
         let mut changed = false;
         let mut newest: Option<FrameSource> = None;
         for job in batch {
@@ -180,29 +269,30 @@ impl State {
                 }
             }
         }
-        if changed {
-            self.solve(publisher);
-            publisher.publish(&ConsoleEvent::Coverage {
-                cells: self.cells,
-                axes: self.axes.clone(),
-                distance_m: self.distance,
-            });
-        }
-        let jpeg = match newest {
-            None => None,
-            Some(FrameSource::Image(image, base_from_flange)) => {
+        (changed, newest)
+    }
+
+    fn publish_coverage(&self, publisher: &Publisher) {
+        publisher.publish(&ConsoleEvent::Coverage {
+            cells: self.cells,
+            axes: self.axes.clone(),
+            distance_m: self.distance,
+        });
+    }
+
+    /// The JPEG of a frame to show.
+    fn render_source(&self, source: FrameSource) -> Option<Vec<u8>> {
+        match source {
+            FrameSource::Image(image, base_from_flange) => {
                 self.render(&image, &base_from_flange, &[])
             }
-            Some(FrameSource::File(path, base_from_flange, corners)) => match image::open(&path) {
+            FrameSource::File(path, base_from_flange, corners) => match image::open(&path) {
                 Ok(decoded) => self.render(&decoded.to_luma8(), &base_from_flange, &corners),
                 Err(e) => {
                     tracing::warn!("console: frame {}: {e}", path.display());
                     None
                 }
             },
-        };
-        if let Some(jpeg) = jpeg {
-            publisher.set_frame(jpeg);
         }
     }
 
@@ -290,13 +380,15 @@ impl State {
         if image.width() == 0 || image.height() == 0 {
             return None;
         }
-        let scale = (FRAME_WIDTH as f64 / image.width() as f64).min(1.0);
+        // Scale down by a whole factor with a box average: cheap, and sharp enough to look at.
+        let factor = image.width().div_ceil(FRAME_WIDTH).max(1);
+        let scale = 1.0 / factor as f64;
         let (w, h) = (
-            ((image.width() as f64 * scale).round() as u32).max(1),
-            ((image.height() as f64 * scale).round() as u32).max(1),
+            (image.width() / factor).max(1),
+            (image.height() / factor).max(1),
         );
-        let small = if scale < 1.0 {
-            image::imageops::resize(image, w, h, image::imageops::FilterType::Triangle)
+        let small = if factor > 1 {
+            box_downscale(image, factor, w, h)
         } else {
             image.clone()
         };
@@ -312,7 +404,12 @@ impl State {
             base_from_flange,
         );
         for c in corners {
-            draw::cross(&mut out, Point2::new(c.x * scale, c.y * scale), 3.0, Rgb([0, 230, 0]));
+            draw::cross(
+                &mut out,
+                Point2::new(c.x * scale, c.y * scale),
+                3.0,
+                Rgb([0, 230, 0]),
+            );
         }
         let image_scale = image.width() as f64 / self.cell.model.width.max(1) as f64;
         for tag in self.cell.board.tags() {

@@ -107,7 +107,11 @@ pub fn run_manual(
         let mut control = ConsoleControl {
             console,
             observer: &mut *observer,
-            analyst: Analyst::start(view.clone(), folder.root().to_path_buf(), console.publisher()),
+            analyst: Analyst::start(
+                view.clone(),
+                folder.root().to_path_buf(),
+                console.publisher(),
+            ),
             view,
             cell: &cell,
             freedrive: false,
@@ -253,7 +257,12 @@ fn board_centre_px(view: &CellView, base_from_flange: &Pose) -> Option<[f64; 2]>
     let extent = view.board.extent();
     let mid = nalgebra::center(&extent.min, &extent.max);
     let centre = nalgebra::Point3::new(mid.x, mid.y, 0.0);
-    let camera_from_target = predict(view.setup, &view.nominal.0, &view.nominal.1, base_from_flange);
+    let camera_from_target = predict(
+        view.setup,
+        &view.nominal.0,
+        &view.nominal.1,
+        base_from_flange,
+    );
     view.model
         .project(&(camera_from_target * centre))
         .map(|p| [p.x, p.y])

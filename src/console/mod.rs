@@ -14,10 +14,10 @@
 //! ([`ConsoleOptions::allow_remote`]); STOP sets the run's stop flag — the very flag Ctrl-C sets.
 //! Depends on `cell`, `session`, `plan`, `robot`, `vision`, `solve`, `verdict` and the floor.
 
+mod analysis;
 pub mod events;
 pub mod manual;
 pub mod observer;
-mod analysis;
 mod server;
 
 use std::collections::VecDeque;
@@ -71,7 +71,9 @@ pub enum ConsoleError {
         addr: SocketAddr,
     },
     /// The address could not be bound.
-    #[error("console address {addr}: cannot listen there (in use? choose another with --console ADDR)")]
+    #[error(
+        "console address {addr}: cannot listen there (in use? choose another with --console ADDR)"
+    )]
     Bind {
         /// The address asked for.
         addr: SocketAddr,
@@ -141,7 +143,10 @@ impl Hub {
     }
 
     pub(crate) fn report(&self) -> Option<PathBuf> {
-        self.report.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.report
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 }
 
@@ -166,7 +171,9 @@ impl Console {
                 addr: options.addr,
                 source,
             })?;
-        listener.set_nonblocking(true).map_err(ConsoleError::Start)?;
+        listener
+            .set_nonblocking(true)
+            .map_err(ConsoleError::Start)?;
         let addr = listener.local_addr().map_err(ConsoleError::Start)?;
         let (commands_tx, commands_rx) = mpsc::channel();
         let hub = Arc::new(Hub {
@@ -251,6 +258,15 @@ impl Console {
     /// A sender that feeds the same command queue (the terminal's Enter, say).
     pub fn command_sender(&self) -> CommandSender {
         CommandSender(self.hub.clone())
+    }
+
+    /// Waits up to `timeout` until every connected page has taken every event published so far
+    /// (taken by its connection, which then writes it to the socket).
+    pub fn drain(&self, timeout: Duration) {
+        let deadline = std::time::Instant::now() + timeout;
+        while !self.hub.events.is_empty() && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
 
     /// Waits up to `timeout` for a page to connect.

@@ -58,8 +58,16 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
         setup: cell.config.setup,
         board: cell.board.clone(),
         model: cell.camera_model,
-        options: cell.config.solver.to_options(),
-        nominal: (cell.config.nominal.camera_mount, cell.config.nominal.target_mount),
+        // The running estimate skips the outlier loop (a person watches it converge; the solve
+        // at the end is the real one, with every check).
+        options: crate::solve::SolveOptions {
+            drop_outliers: false,
+            ..cell.config.solver.to_options()
+        },
+        nominal: (
+            cell.config.nominal.camera_mount,
+            cell.config.nominal.target_mount,
+        ),
     };
     (event, view)
 }

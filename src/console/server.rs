@@ -58,7 +58,11 @@ async fn page() -> Html<&'static str> {
 
 async fn report(State(hub): State<Arc<Hub>>) -> Response {
     let Some(path) = hub.report() else {
-        return (StatusCode::NOT_FOUND, "no report yet: it is written when the run ends").into_response();
+        return (
+            StatusCode::NOT_FOUND,
+            "no report yet: it is written when the run ends",
+        )
+            .into_response();
     };
     // File reads block: off the runtime's thread.
     let read = {
@@ -84,7 +88,11 @@ async fn socket(upgrade: WebSocketUpgrade, State(hub): State<Arc<Hub>>) -> Respo
 async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
     let (history, mut events) = hub.subscribe();
     for text in history {
-        if socket.send(Message::Text(text.as_ref().into())).await.is_err() {
+        if socket
+            .send(Message::Text(text.as_ref().into()))
+            .await
+            .is_err()
+        {
             return;
         }
     }

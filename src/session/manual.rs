@@ -23,7 +23,9 @@ use crate::plan::nbv::AdaptivePlanner;
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
 use super::adaptive::recorded_plan;
-use super::{run_session, SessionError, SessionEvent, SessionManifest, SessionOutcome, SessionSetup};
+use super::{
+    run_session, SessionError, SessionEvent, SessionManifest, SessionOutcome, SessionSetup,
+};
 
 /// What a person asks for during a manual session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -219,7 +221,11 @@ pub fn run_manual_session(
         })
         .map(|v| v.plan_index)
         .collect();
-    while plan.len().checked_sub(1).is_some_and(|last| !accepted.contains(&last)) {
+    while plan
+        .len()
+        .checked_sub(1)
+        .is_some_and(|last| !accepted.contains(&last))
+    {
         plan.pop();
     }
     let mut outcome = SessionOutcome::default();
