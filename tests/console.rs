@@ -343,3 +343,28 @@ fn freedrive_switches_through_ur_rtde_on_the_mock_controller() {
         );
     });
 }
+
+#[test]
+fn plan_manual_is_read_and_refused_together_with_adaptive() {
+    let dir = tempfile::tempdir().unwrap();
+    let manual = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "manual.yaml",
+        &[("plan:\n", "plan:\n  manual: true\n")],
+    );
+    let config = handeye::config::CellConfig::load(&manual).expect("a manual plan loads");
+    assert!(config.plan.manual && !config.plan.adaptive);
+    let both = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "both.yaml",
+        &[("plan:\n", "plan:\n  manual: true\n  adaptive: true\n")],
+    );
+    let e = handeye::config::CellConfig::load(&both).expect_err("manual and adaptive refused");
+    let message = format!("{e:#}");
+    assert!(
+        message.contains("plan.manual") && message.contains("adaptive"),
+        "{message}"
+    );
+}
