@@ -368,3 +368,91 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
         "{message}"
     );
 }
+
+/// Freedrive from the page on a UR arm (the real driver, ur_rtde, against the mock controller):
+/// on, the arm pushed by hand to a view, a capture there, off; and the confirmation the page
+/// asks for before the real arm's first move.
+#[cfg(feature = "ur-rtde")]
+#[test]
+fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
+    use std::io::{BufRead, BufReader, Write};
+    if let Err(why) = browser_tools() {
+        eprintln!("SKIP: {why}");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mock = mocks::MockUr::start(mocks::MockUrConfig {
+        address: "127.0.0.62".parse().unwrap(),
+        model: handeye::robot::kinematics::UrModel::ur10e(),
+        start_joints: [
+            0.0,
+            -90f64.to_radians(),
+            90f64.to_radians(),
+            -90f64.to_radians(),
+            -90f64.to_radians(),
+            0.0,
+        ],
+        instant_moves: true,
+        ..mocks::MockUrConfig::default()
+    })
+    .expect("mock starts");
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell-ur-mock.yaml",
+        "cell.yaml",
+        &[("host: 127.0.0.1", "host: 127.0.0.62")],
+    );
+    let scripts = util::repo().join("tests/python");
+    let mut child = Command::new("python3")
+        .arg(scripts.join("console_freedrive.py"))
+        .arg(&config)
+        .arg(dir.path())
+        .env("HANDEYE_BIN", env!("CARGO_BIN_EXE_handeye"))
+        .env("PYTHONPATH", &scripts)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("python3 runs");
+    let mut stdin = child.stdin.take().unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut joints = None;
+    let mut seen_on = false;
+    let mut seen_off = false;
+    let mut ok = false;
+    while let Some(Ok(line)) = lines.next() {
+        eprintln!("{line}");
+        if let Some(rest) = line.strip_prefix("JOINTS ") {
+            let deg: Vec<f64> = rest
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
+            joints = Some(std::array::from_fn::<f64, 6, _>(|i| deg[i].to_radians()));
+        } else if line == "FREEDRIVE_ON" {
+            assert!(
+                mock.in_teach_mode(),
+                "the page's freedrive did not reach the controller"
+            );
+            // The person pushes the arm to the suggested view (rounded to 0.1° on the page).
+            assert!(mock.hand_guide(joints.expect("joints first")));
+            seen_on = true;
+            writeln!(stdin, "MOVED").unwrap();
+        } else if line == "FREEDRIVE_OFF" {
+            assert!(
+                !mock.in_teach_mode(),
+                "freedrive still on after the page switched it off"
+            );
+            seen_off = true;
+        } else if line == "console_freedrive: ok" {
+            ok = true;
+        }
+    }
+    let status = child.wait().unwrap();
+    assert!(
+        status.success() && ok && seen_on && seen_off,
+        "console_freedrive.py failed"
+    );
+    // The capture recorded where the hand left the arm.
+    let record = std::fs::read_to_string(dir.path().join("fd/poses/000.yaml")).unwrap();
+    assert!(record.contains("T_base_flange"), "{record}");
+    mock.shutdown();
+}
