@@ -26,10 +26,11 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
-# ---- boards helper: numpy + OpenCV for tests/boards.rs (tests/python/boards_opencv.py renders
+# numpy + OpenCV for tests/boards.rs (tests/python/boards_opencv.py renders
 # ChArUco/chessboard frames with OpenCV and computes OpenCV's figures). The test falls back to a
 # venv of its own when this install is refused (PEP 668).
 python3 -c "import cv2, numpy" 2>/dev/null || python3 -m pip install -q numpy "opencv-python-headless<5" || true
-# ---- end boards helper
+# Playwright drives the Debian chromium above in tests/console.rs (no browser download).
+python3 -c "import playwright.sync_api" 2>/dev/null || python3 -m pip install -q playwright
 
 cargo test --workspace --features handeye/ur-rtde "$@"

@@ -8,6 +8,7 @@ pub mod camera;
 pub mod camera_model;
 pub mod cell;
 pub mod config;
+pub mod console;
 pub mod dataset;
 pub mod formats;
 pub mod geometry;

@@ -171,6 +171,14 @@ pub trait Robot: Send {
     fn set_interrupt(&mut self, _flag: Arc<AtomicBool>) {}
     /// The controller's safety and readiness state.
     fn status(&mut self) -> Result<RobotStatus, RobotError>;
+    /// Freedrive (UR teach mode) on or off: while on, a person can move the arm by hand, and
+    /// the arm holds where it is let go; off, it holds its position under control again. Backends
+    /// without it say so.
+    fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
+        Err(RobotError::Backend(
+            "freedrive is not available with this robot backend (only a real UR arm has it)".into(),
+        ))
+    }
 }
 
 #[cfg(test)]

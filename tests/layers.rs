@@ -74,6 +74,14 @@ fn allowed() -> BTreeMap<&'static str, &'static [&'static str]> {
                 "verdict", "session", "cell", "verify", "formats",
             ][..],
         ),
+        // The live browser console: renders a run's events; runs manual sessions of a cell.
+        (
+            "console",
+            &[
+                "solve", "vision", "camera", "robot", "plan", "dataset", "result", "config",
+                "verdict", "session", "cell", "report",
+            ][..],
+        ),
     ])
 }
 

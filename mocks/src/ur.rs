@@ -340,6 +340,21 @@ impl MockUr {
         arm.moves_completed()
     }
 
+    /// Whether freedrive (ur_rtde's teachMode) is on.
+    pub fn in_teach_mode(&self) -> bool {
+        let mut arm = self.shared.arm();
+        arm.advance(Instant::now());
+        arm.teach_mode()
+    }
+
+    /// A person pushes the arm to `joints` (radians), as in freedrive: the arm follows only
+    /// while teach mode is on. Returns whether it moved.
+    pub fn hand_guide(&self, joints: Joints) -> bool {
+        let mut arm = self.shared.arm();
+        arm.advance(Instant::now());
+        arm.hand_guide(joints)
+    }
+
     /// Moves started so far (including stalled or interrupted ones).
     pub fn moves_started(&self) -> usize {
         self.shared.arm().moves_started()

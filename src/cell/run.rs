@@ -59,6 +59,9 @@ pub trait RunObserver {
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
     /// Something a person should know (a stale lock taken over, changed inputs accepted...).
     fn note(&mut self, message: &str);
+    /// The session folder is ready and `plan` (for an adaptive plan: its candidates) validated
+    /// from where the arm stands; called once, before the first move.
+    fn session_folder(&mut self, _folder: &SessionFolder, _plan: &[(Pose, Joints)]) {}
     /// The session loop starts, for up to `poses` poses.
     fn session_started(&mut self, poses: usize);
     /// Progress of the session loop.
@@ -316,6 +319,7 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     };
 
     let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
+    observer.session_folder(&folder, &plan);
     observer.session_started(poses);
     let mut on_event = |event: SessionEvent| observer.event(event);
     let (outcome, adaptive_summary) = if adaptive {

@@ -93,6 +93,9 @@ impl<R: Robot + ?Sized> Robot for Shared<R> {
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
         self.lock().status()
     }
+    fn set_freedrive(&mut self, on: bool) -> Result<(), RobotError> {
+        self.lock().set_freedrive(on)
+    }
 }
 
 /// Builds the simulated arm and camera a config describes.

@@ -4,6 +4,7 @@
 pub(crate) mod out;
 
 mod camera;
+mod console;
 mod detect;
 mod export;
 mod import;
@@ -49,6 +50,8 @@ enum Command {
     Report(report::ReportArgs),
     /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
     Verify(verify::VerifyArgs),
+    /// Capture by hand on the live browser console (freedrive, suggested views), then solve.
+    Console(console::ConsoleArgs),
 }
 
 /// A command ran correctly but found nothing to work with (no board in any image): `main` exits
@@ -76,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Camera(args) => camera::run(args),
         Command::Report(args) => report::run(args),
         Command::Verify(args) => verify::run(args),
+        Command::Console(args) => console::run(args),
     }
 }
 

@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye::cell::{self, PreparedCell};
+use handeye::console::ConsoleObserver;
 use handeye::session::SessionEvent;
 use handeye::verdict::{Level, Verdict};
 
@@ -34,10 +35,41 @@ pub struct RunArgs {
     /// Do not ask for confirmation before moving a real robot.
     #[arg(long)]
     yes: bool,
+    /// Serve the live console (frames, plan, coverage, estimate, STOP) on ADDR (default
+    /// 127.0.0.1:8765; port 0 picks a free one); the URL is printed.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye::console::DEFAULT_ADDR)]
+    console: Option<std::net::SocketAddr>,
+    /// Allow --console on an address beyond this machine (anyone who reaches it can stop the run).
+    #[arg(long, requires = "console")]
+    console_public: bool,
+    /// After the run, keep serving the console until Enter (or Ctrl-C) so the page can be read.
+    #[arg(long, requires = "console")]
+    console_wait: bool,
 }
 
 /// Runs `handeye run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    // `plan: {manual: true}`: a person chooses the views on the console (as `handeye console`).
+    let manual = match (&args.resume, &args.config) {
+        (None, Some(config)) => handeye::config::CellConfig::load(config)
+            .map(|c| c.plan.manual)
+            .unwrap_or(false),
+        _ => false,
+    };
+    if manual {
+        outln!("plan.manual: hand-guided capture on the console (as `handeye console`)");
+        return super::console::run(super::console::ConsoleArgs {
+            config: args.config,
+            out: args.out,
+            resume: None,
+            addr: args
+                .console
+                .unwrap_or(std::net::SocketAddr::from(([127, 0, 0, 1], 8765))),
+            public: args.console_public,
+            yes: args.yes,
+            wait: args.console_wait,
+        });
+    }
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),
@@ -50,12 +82,41 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         accept_changed: args.accept_changed,
         stop: stop.clone(),
     };
-    let mut printer = Printer {
-        bar: None,
-        stop,
-        plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
+    let console = match args.console {
+        Some(addr) => Some(super::console::start(
+            addr,
+            args.console_public,
+            stop.clone(),
+        )?),
+        None => None,
     };
-    let done = cell::run::run(&request, &mut printer)?;
+    let mut printer = Printer::new(stop);
+    let done = match &console {
+        Some(console) => {
+            let mut observer = ConsoleObserver::new(&mut printer, console);
+            let done = cell::run::run(&request, &mut observer);
+            observer.flush();
+            match done {
+                Ok(done) => done,
+                Err(e) => {
+                    let e = anyhow::Error::from(e);
+                    super::console::failed(console, &e, args.console_wait);
+                    return Err(e);
+                }
+            }
+        }
+        None => cell::run::run(&request, &mut printer)?,
+    };
+    let (report, next) = finish_run(&done)?;
+    if let Some(console) = &console {
+        super::console::finished(console, &done.solved, report, next, args.console_wait);
+    }
+    Ok(())
+}
+
+/// Prints a finished run's result, writes its report; returns the report's path (when it could
+/// be written) and the next step, printed last.
+pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<PathBuf>, String)> {
     if !done.outcome.skipped.is_empty() {
         outln!(
             "skipped poses: {}",
@@ -99,10 +160,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(report) = &report {
         outln!("report:  {}", report.display());
     }
-    outln!("{}", next_step(result.verdict.as_ref(), &result_path));
-    Ok(())
+    let next = next_step(result.verdict.as_ref(), &result_path);
+    outln!("{next}");
+    Ok((report, next))
 }
-
 /// The last line after a run: the export command, or what the verdict says to do first.
 fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
     let export = format!(
@@ -137,7 +198,7 @@ fn shell_word(path: &std::path::Path) -> String {
 /// Prints the run's progress: a bar with the per-pose lines above it on a terminal; one plain
 /// line per pose on stdout when the output goes to a pipe or file (where indicatif hides the bar
 /// and everything printed through it).
-struct Printer {
+pub(super) struct Printer {
     bar: Option<ProgressBar>,
     stop: Arc<AtomicBool>,
     /// stdout or stderr is not a terminal: plain lines, no bar.
@@ -145,6 +206,15 @@ struct Printer {
 }
 
 impl Printer {
+    /// A printer; from the session's start Ctrl-C, SIGTERM and SIGHUP set `stop`.
+    pub(super) fn new(stop: Arc<AtomicBool>) -> Printer {
+        Printer {
+            bar: None,
+            stop,
+            plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
+        }
+    }
+
     fn line(&self, line: String) {
         match &self.bar {
             Some(bar) => bar.println(line),

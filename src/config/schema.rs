@@ -421,6 +421,10 @@ pub struct PlanConfig {
     /// stop when the solved uncertainty reaches `target_uncertainty_mm`.
     #[serde(default)]
     pub adaptive: bool,
+    /// Hand-guided capture (`handeye console`): nothing drives the arm; a person captures where
+    /// it stands, and the plan's poses (`file` or `generate`) are only suggested.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub manual: bool,
     /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns, mm.
     #[serde(default = "default_target_uncertainty_mm")]
     pub target_uncertainty_mm: f64,
@@ -437,6 +441,7 @@ impl Default for PlanConfig {
             file: None,
             generate: None,
             adaptive: false,
+            manual: false,
             target_uncertainty_mm: default_target_uncertainty_mm(),
         }
     }

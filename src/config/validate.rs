@@ -530,6 +530,16 @@ impl Validator<'_> {
     fn plan(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
         let plan = &raw.plan;
         let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
+        if plan.manual && (recorded || plan.adaptive) {
+            return Err(self.inconsistent(
+                "plan.manual",
+                if recorded {
+                    "a recorded robot cannot be hand-guided: leave out `plan`".into()
+                } else {
+                    "expected one of `manual` (a person chooses the views) and `adaptive` (the planner does)".into()
+                },
+            ));
+        }
         match (&plan.file, &plan.generate) {
             (None, None) if recorded => {}
             _ if recorded => {

@@ -668,6 +668,18 @@ impl Robot for UrRobot {
         })
     }
 
+    fn set_freedrive(&mut self, on: bool) -> Result<(), RobotError> {
+        // Teach mode is a command of the control script: it has to run.
+        self.ensure_program()?;
+        let call = if on { "teachMode" } else { "endTeachMode" };
+        self.call(call, move |h| {
+            let ptr = h.ptr();
+            // SAFETY: `ptr` is the live handle owned by this worker.
+            raw_call(|err, len| unsafe { ffi::urrtde_teach_mode(ptr, i32::from(on), err, len) })
+                .map_err(|e| call_error(call, e))
+        })
+    }
+
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
         let s = self.wait_fresh(None)?;
         Ok(match Self::safety_error(s.safety_status_bits) {

@@ -101,7 +101,7 @@ pub fn run_adaptive_session(
 }
 
 /// The poses (and joints) a resumed adaptive session's manifest holds; empty for a new one.
-fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>, SessionError> {
+pub(super) fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>, SessionError> {
     if !setup.folder.manifest_path().is_file() {
         return Ok(Vec::new());
     }

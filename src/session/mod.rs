@@ -16,6 +16,7 @@ pub mod driver;
 pub mod folder;
 pub mod inputs;
 pub mod lock;
+pub mod manual;
 pub mod replay;
 pub mod solve;
 
@@ -26,6 +27,7 @@ pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;
+pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
     load_and_solve, solve_folder, solve_folder_in, solve_session, SolveInputs, SolvedSession,
 };

@@ -53,6 +53,8 @@ mod cmd {
     pub const MOVEJ_IK: i32 = 2;
     pub const MOVEL: i32 = 3;
     pub const MOVEL_FK: i32 = 4;
+    pub const TEACH_MODE: i32 = 18;
+    pub const END_TEACH_MODE: i32 = 19;
     pub const SET_TCP: i32 = 29;
     pub const STOPL: i32 = 33;
     pub const STOPJ: i32 = 34;
@@ -94,6 +96,8 @@ pub(crate) struct Arm {
     motion: Option<Motion>,
     moves_started: usize,
     moves_completed: usize,
+    /// Freedrive (teach mode) is on: the arm follows a hand ([`Arm::hand_guide`]).
+    teach_mode: bool,
     program_running: bool,
     executing_cmd: bool,
     /// A synchronous command (a move) whose "done" the script has not signalled yet.
@@ -161,6 +165,7 @@ impl Arm {
             motion: None,
             moves_started: 0,
             moves_completed: 0,
+            teach_mode: false,
             program_running: false,
             executing_cmd: false,
             pending_done: false,
@@ -187,6 +192,21 @@ impl Arm {
 
     pub(crate) fn base_from_tcp(&self) -> Pose {
         self.base_from_flange() * self.flange_from_tcp
+    }
+
+    /// Whether freedrive (teach mode) is on.
+    pub(crate) fn teach_mode(&self) -> bool {
+        self.teach_mode
+    }
+
+    /// A person pushes the arm to `joints`: it follows only in freedrive, and only when no move
+    /// runs. Returns whether it moved.
+    pub(crate) fn hand_guide(&mut self, joints: Joints) -> bool {
+        if !self.teach_mode || self.motion.is_some() {
+            return false;
+        }
+        self.joints = joints;
+        true
     }
 
     pub(crate) fn moves_completed(&self) -> usize {
@@ -286,6 +306,8 @@ impl Arm {
         self.pending_done = false;
         self.program_running = false;
         self.executing_cmd = false;
+        // Freedrive is a command of the program: it ends with it.
+        self.teach_mode = false;
     }
 
     /// Brings the state up to `now`: moves the arm along its path, finishes moves, then runs one
@@ -372,6 +394,7 @@ impl Arm {
                 Outcome::Pending => self.pending_done = true,
                 Outcome::Exit => {
                     self.program_running = false;
+                    self.teach_mode = false;
                     self.executing_cmd = false;
                     self.motion = None;
                 }
@@ -464,6 +487,14 @@ impl Arm {
             cmd::GET_ACTUAL_TOOL_FLANGE_POSE => {
                 let v = to_ur_vector(&self.base_from_flange());
                 self.write_output_vector6(0, &v);
+                Outcome::Done
+            }
+            cmd::TEACH_MODE => {
+                self.teach_mode = true;
+                Outcome::Done
+            }
+            cmd::END_TEACH_MODE => {
+                self.teach_mode = false;
                 Outcome::Done
             }
             cmd::STOP_SCRIPT => Outcome::Exit,

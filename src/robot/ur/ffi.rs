@@ -61,6 +61,12 @@ extern "C" {
         err: *mut c_char,
         err_len: usize,
     ) -> c_int;
+    pub fn urrtde_teach_mode(
+        h: *mut UrrtdeHandle,
+        on: i32,
+        err: *mut c_char,
+        err_len: usize,
+    ) -> c_int;
     pub fn urrtde_reupload_script(h: *mut UrrtdeHandle, err: *mut c_char, err_len: usize) -> c_int;
     pub fn urrtde_get_actual_tcp_pose(
         h: *mut UrrtdeHandle,

@@ -122,6 +122,20 @@ int urrtde_stop_l(urrtde_handle *h, double deceleration, char *err, size_t err_l
   });
 }
 
+int urrtde_teach_mode(urrtde_handle *h, int32_t on, char *err, size_t err_len) noexcept {
+  const char *call = on ? "teachMode" : "endTeachMode";
+  return guarded(call, err, err_len, [&]() -> int {
+    URRTDE_CHECK_HANDLE(call);
+    const bool done = on ? h->control->teachMode() : h->control->endTeachMode();
+    if (!done) {
+      set_error(err, err_len, on ? "teachMode: the controller did not enter freedrive"
+                                 : "endTeachMode: the controller did not leave freedrive");
+      return URRTDE_REFUSED;
+    }
+    return URRTDE_OK;
+  });
+}
+
 int urrtde_reupload_script(urrtde_handle *h, char *err, size_t err_len) noexcept {
   return guarded("reuploadScript", err, err_len, [&]() -> int {
     URRTDE_CHECK_HANDLE("reuploadScript");

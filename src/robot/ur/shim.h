@@ -54,6 +54,8 @@ int urrtde_move_l(urrtde_handle *h, const double pose[6], double speed, double a
 int urrtde_move_j(urrtde_handle *h, const double q[6], double speed, double acceleration,
                   int32_t asynchronous, char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_stop_l(urrtde_handle *h, double deceleration, char *err, size_t err_len) URRTDE_NOEXCEPT;
+/* Freedrive: teachMode() when `on`, endTeachMode() otherwise. */
+int urrtde_teach_mode(urrtde_handle *h, int32_t on, char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_reupload_script(urrtde_handle *h, char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_actual_tcp_pose(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_actual_q(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;

@@ -1,0 +1,190 @@
+//! `handeye console`: a hand-guided session of a cell on the live console (capture where the arm
+//! stands, freedrive, go to the suggested view, finish and solve); also the console start-up and
+//! ending that `handeye run --console` shares.
+
+use std::io::{BufRead, IsTerminal};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use clap::Args;
+
+use handeye::cell::run::SessionTarget;
+use handeye::console::manual::{run_manual, ManualRequest};
+use handeye::console::{Command, Console, ConsoleEvent, ConsoleOptions};
+use handeye::session::SolvedSession;
+
+/// Capture by hand: jog or hand-guide the arm, capture on the console page (or Enter here).
+#[derive(Debug, Args)]
+pub struct ConsoleArgs {
+    /// The cell config; its plan's poses (if any) are only suggested, never driven.
+    #[arg(long, required_unless_present = "resume")]
+    pub(super) config: Option<PathBuf>,
+    /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS).
+    #[arg(long, conflicts_with = "resume")]
+    pub(super) out: Option<PathBuf>,
+    /// Continue a hand-guided session in this folder.
+    #[arg(long)]
+    pub(super) resume: Option<PathBuf>,
+    /// The console's address (port 0 picks a free one); the URL is printed.
+    #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
+    pub(super) addr: SocketAddr,
+    /// Allow an address beyond this machine (anyone who reaches it can move the arm).
+    #[arg(long)]
+    pub(super) public: bool,
+    /// Do not ask before the first move of a real arm to a suggested view.
+    #[arg(long)]
+    pub(super) yes: bool,
+    /// After the session, keep serving the page until Enter (or Ctrl-C).
+    #[arg(long)]
+    pub(super) wait: bool,
+}
+
+/// Runs `handeye console`.
+pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
+    let target = match &args.resume {
+        Some(dir) => SessionTarget::Resume(dir.clone()),
+        None => SessionTarget::New(args.out.clone().unwrap_or_else(|| {
+            handeye::session::dated_session_path(
+                std::path::Path::new("sessions"),
+                "",
+                std::time::SystemTime::now(),
+            )
+        })),
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    super::stop_on_signals(stop.clone());
+    let console = start(args.addr, args.public, stop.clone())?;
+    terminal_commands(&console);
+    let request = ManualRequest {
+        config: args.config.clone(),
+        target,
+        motion_confirmed: args.yes,
+        stop,
+    };
+    let mut printer = super::run::Printer::new(stop_flag(&console));
+    let done = match run_manual(&request, &console, &mut printer) {
+        Ok(done) => done,
+        Err(e) => {
+            let e = anyhow::Error::from(e);
+            failed(&console, &e, args.wait);
+            return Err(e);
+        }
+    };
+    let (report, next) = super::run::finish_run(&done)?;
+    finished(&console, &done.solved, report, next, args.wait);
+    Ok(())
+}
+
+fn stop_flag(console: &Console) -> Arc<AtomicBool> {
+    console.stop_flag()
+}
+
+/// The terminal's keys for a manual session: Enter captures, `f`/`F` switch freedrive on/off,
+/// `g` goes to the suggestion, `q` finishes.
+fn terminal_commands(console: &Console) {
+    if !std::io::stdin().is_terminal() {
+        return;
+    }
+    outln!("keys: Enter = capture, f = freedrive on, F = freedrive off, g = go to the suggested view, q = finish and solve");
+    let sender = console.command_sender();
+    // Reading stdin blocks: a thread of its own, left to end with the process.
+    let _ = std::thread::Builder::new()
+        .name("terminal".into())
+        .spawn(move || {
+            for line in std::io::stdin().lock().lines() {
+                let Ok(line) = line else { break };
+                let command = match line.trim() {
+                    "" => Command::Capture,
+                    "f" => Command::Freedrive { on: true },
+                    "F" => Command::Freedrive { on: false },
+                    "g" => Command::GoToSuggestion,
+                    "q" => Command::Finish,
+                    "yes" => Command::Confirm,
+                    other => {
+                        eprintln!("unknown key {other:?}: Enter, f, F, g or q");
+                        continue;
+                    }
+                };
+                sender.send(command);
+            }
+        });
+}
+
+/// Starts the console and prints its URL (loudly, when it serves beyond this machine).
+pub(super) fn start(
+    addr: SocketAddr,
+    public: bool,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<Console> {
+    let console = Console::start(
+        &ConsoleOptions {
+            addr,
+            allow_remote: public,
+        },
+        stop,
+    )?;
+    if console.is_remote() {
+        eprintln!(
+            "WARNING: the console serves on {} — beyond this machine. Anyone who can reach it can STOP the run and, in a manual session, move the arm.",
+            console.addr()
+        );
+    }
+    outln!("console: {}", console.url());
+    Ok(console)
+}
+
+/// Tells the page the run failed (with its causes), then ends as [`linger`] says.
+pub(super) fn failed(console: &Console, error: &anyhow::Error, wait: bool) {
+    console.publish(&ConsoleEvent::Failed {
+        message: format!("{error:#}"),
+    });
+    linger(console, wait);
+}
+
+/// Tells the page the verdict and where the report is, then ends as [`linger`] says.
+pub(super) fn finished(
+    console: &Console,
+    solved: &SolvedSession,
+    report: Option<PathBuf>,
+    next: String,
+    wait: bool,
+) {
+    let has_report = report.is_some();
+    if let Some(path) = report {
+        console.set_report(path);
+    }
+    console.publish(&ConsoleEvent::Finished {
+        verdict: solved.verdict.as_ref().map(|v| v.level.word().to_string()),
+        summary: solved.summary.clone(),
+        next,
+        report: has_report,
+    });
+    linger(console, wait);
+}
+
+/// With `wait`, serves the page until Enter (or Ctrl-C); otherwise lets connected pages receive
+/// the last events first.
+fn linger(console: &Console, wait: bool) {
+    if wait {
+        outln!(
+            "console: still serving {} — press Enter to quit",
+            console.url()
+        );
+        let (tx, rx) = std::sync::mpsc::channel();
+        let _ = std::thread::Builder::new().spawn(move || {
+            let mut line = String::new();
+            let _ = std::io::stdin().lock().read_line(&mut line);
+            let _ = tx.send(());
+        });
+        let _ = rx.recv();
+    } else {
+        console.drain(Duration::from_secs(1));
+        // The connections have the last events; a moment to write them before the server goes.
+        if console.clients() > 0 {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}

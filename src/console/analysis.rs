@@ -1,0 +1,433 @@
+//! The console's analysis thread: after each recorded pose it reads the pose's record and frame
+//! back from the session folder (the run never waits for it), keeps the coverage (corners over a
+//! 4x4 grid of the image, relative-rotation axes, board distances), solves the running estimate
+//! in pose space with its 1-sigma, and renders the latest frame — detected corners in green, the
+//! board reprojected at the current estimate in red — as a downscaled JPEG.
+//!
+//! Jobs queue on a channel and are coalesced: when the run is ahead, one batch updates the
+//! coverage for every pose in it and renders only the newest frame.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use image::{GrayImage, Rgb, RgbImage};
+use nalgebra::{Point2, Point3};
+
+use crate::camera_model::CameraModel;
+use crate::geometry::Pose;
+use crate::session::PoseVisit;
+use crate::setup::{predict, PosePair, Setup};
+use crate::solve::{solve, SolveOptions};
+use crate::vision::{draw, Board};
+
+use super::events::{ConsoleEvent, PoseView, SigmaView};
+use super::Publisher;
+
+/// At most one frame per this: a person watching needs no more, and the run keeps the CPU.
+const FRAME_EVERY: Duration = Duration::from_millis(1000);
+/// At most one running estimate per this.
+const SOLVE_EVERY: Duration = Duration::from_millis(1000);
+/// Width of the frames sent to the page, px (larger frames are scaled down).
+const FRAME_WIDTH: u32 = 640;
+/// JPEG quality of those frames.
+const JPEG_QUALITY: u8 = 70;
+/// Relative-rotation axes kept for the sphere view (the newest).
+const MAX_AXES: usize = 400;
+/// Earlier poses each new pose is paired with for the axes.
+const AXIS_PAIRS: usize = 24;
+/// Smaller relative rotations have no meaningful axis.
+const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
+
+/// What the analysis needs to know of the cell.
+#[derive(Clone)]
+pub(crate) struct CellView {
+    pub setup: Setup,
+    pub board: Board,
+    pub model: CameraModel,
+    pub options: SolveOptions,
+    /// The nominal mounts: the reprojection before the first estimate.
+    pub nominal: (Pose, Pose),
+}
+
+/// Work for the thread.
+pub(crate) enum Job {
+    /// A pose record was written.
+    Recorded(usize),
+    /// A live view (manual sessions): the frame and the flange pose it was taken at.
+    Preview(Arc<GrayImage>, Pose),
+}
+
+/// The thread and the way to it. Dropping it lets the thread finish its queue and joins it.
+pub(crate) struct Analyst {
+    jobs: Option<mpsc::Sender<Job>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Analyst {
+    /// Starts the thread for the session folder at `root`.
+    pub fn start(cell: CellView, root: PathBuf, publisher: Publisher) -> Analyst {
+        let (jobs, rx) = mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("console-analysis".into())
+            .spawn(move || {
+                lower_priority();
+                let mut state = State::new(cell, root);
+                let mut pending_frame: Option<FrameSource> = None;
+                let mut pending_solve = false;
+                let mut last_frame: Option<Instant> = None;
+                let mut last_solve: Option<Instant> = None;
+                loop {
+                    let due = |last: Option<Instant>, every: Duration| {
+                        last.map_or(Duration::ZERO, |t| every.saturating_sub(t.elapsed()))
+                    };
+                    let wait = match (pending_frame.is_some(), pending_solve) {
+                        (false, false) => Duration::from_secs(3600),
+                        (frame, solve) => {
+                            let f = if frame {
+                                due(last_frame, FRAME_EVERY)
+                            } else {
+                                Duration::MAX
+                            };
+                            let s = if solve {
+                                due(last_solve, SOLVE_EVERY)
+                            } else {
+                                Duration::MAX
+                            };
+                            f.min(s)
+                        }
+                    };
+                    let ended = match rx.recv_timeout(wait) {
+                        Ok(job) => {
+                            let batch: Vec<Job> =
+                                std::iter::once(job).chain(rx.try_iter()).collect();
+                            let (changed, newest) = state.ingest(batch);
+                            if changed {
+                                state.publish_coverage(&publisher);
+                                pending_solve = true;
+                            }
+                            if newest.is_some() {
+                                pending_frame = newest;
+                            }
+                            false
+                        }
+                        Err(mpsc::RecvTimeoutError::Timeout) => false,
+                        Err(mpsc::RecvTimeoutError::Disconnected) => true,
+                    };
+                    // Rate limits keep this best-effort work small next to the run's; at the end
+                    // whatever is pending is done at once.
+                    if pending_solve && (ended || due(last_solve, SOLVE_EVERY).is_zero()) {
+                        state.solve(&publisher);
+                        pending_solve = false;
+                        last_solve = Some(Instant::now());
+                    }
+                    if pending_frame.is_some() && (ended || due(last_frame, FRAME_EVERY).is_zero())
+                    {
+                        if let Some(jpeg) =
+                            pending_frame.take().and_then(|f| state.render_source(f))
+                        {
+                            publisher.set_frame(jpeg);
+                        }
+                        last_frame = Some(Instant::now());
+                    }
+                    if ended {
+                        break;
+                    }
+                }
+            });
+        match thread {
+            Ok(thread) => Analyst {
+                jobs: Some(jobs),
+                thread: Some(thread),
+            },
+            Err(e) => {
+                // The run goes on without live frames.
+                tracing::warn!("console: no analysis thread: {e}");
+                Analyst {
+                    jobs: None,
+                    thread: None,
+                }
+            }
+        }
+    }
+
+    /// Queues a job (never blocks).
+    pub fn send(&self, job: Job) {
+        if let Some(jobs) = &self.jobs {
+            let _ = jobs.send(job);
+        }
+    }
+}
+
+impl Drop for Analyst {
+    fn drop(&mut self) {
+        self.jobs.take();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// The frame to show next.
+enum FrameSource {
+    /// A recorded frame on disk, its flange pose and its detected corners.
+    File(PathBuf, Pose, Vec<Point2<f64>>),
+    /// A live view and its flange pose.
+    Image(Arc<GrayImage>, Pose),
+}
+
+/// `image` averaged over `factor`×`factor` blocks into a `w`×`h` image.
+fn box_downscale(image: &GrayImage, factor: u32, w: u32, h: u32) -> GrayImage {
+    let area = factor * factor;
+    GrayImage::from_fn(w, h, |x, y| {
+        let mut sum = 0u32;
+        for dy in 0..factor {
+            for dx in 0..factor {
+                sum += image.get_pixel(x * factor + dx, y * factor + dy)[0] as u32;
+            }
+        }
+        image::Luma([(sum / area) as u8])
+    })
+}
+
+/// Makes the calling thread yield the CPU to the run's threads (Linux: per-thread nice 10); the
+/// console's work is best-effort.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority with `who` 0 changes only the calling thread's nice value; it takes no
+    // pointers, and a failure (returned, not signalled) just leaves the priority as it was.
+    unsafe {
+        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, 10);
+    }
+}
+
+struct Sample {
+    base_from_flange: Pose,
+    camera_from_target: Option<Pose>,
+}
+
+struct State {
+    cell: CellView,
+    root: PathBuf,
+    accepted: BTreeMap<usize, Sample>,
+    cells: [u32; 16],
+    axes: Vec<[f64; 3]>,
+    distance: Option<[f64; 2]>,
+    estimate: Option<(Pose, Pose)>,
+}
+
+impl State {
+    fn new(cell: CellView, root: PathBuf) -> State {
+        State {
+            cell,
+            root,
+            accepted: BTreeMap::new(),
+            cells: [0; 16],
+            axes: Vec::new(),
+            distance: None,
+            estimate: None,
+        }
+    }
+
+    /// Takes in a batch of jobs: whether the accepted samples changed, and the newest frame.
+    fn ingest(&mut self, batch: Vec<Job>) -> (bool, Option<FrameSource>) {
+        let mut changed = false;
+        let mut newest: Option<FrameSource> = None;
+        for job in batch {
+            match job {
+                Job::Recorded(index) => {
+                    let file = self
+                        .root
+                        .join(crate::session::SessionFolder::visit_name(index));
+                    let visit: PoseVisit = match crate::yaml_file::read_yaml(&file) {
+                        Ok(visit) => visit,
+                        Err(e) => {
+                            tracing::warn!("console: {e}");
+                            continue;
+                        }
+                    };
+                    let Ok((base_from_flange, camera_from_target)) = visit.poses(&file) else {
+                        continue;
+                    };
+                    let corners: Vec<Point2<f64>> =
+                        visit.corners_px.iter().map(|c| c.pixel).collect();
+                    if visit.rejected.is_none() {
+                        self.add(index, &corners, base_from_flange, camera_from_target);
+                        changed = true;
+                    }
+                    // Decoding a frame costs more than the rest: only the newest is read.
+                    newest = Some(FrameSource::File(
+                        self.root.join(&visit.frame),
+                        base_from_flange,
+                        corners,
+                    ));
+                }
+                Job::Preview(image, base_from_flange) => {
+                    newest = Some(FrameSource::Image(image, base_from_flange));
+                }
+            }
+        }
+        (changed, newest)
+    }
+
+    fn publish_coverage(&self, publisher: &Publisher) {
+        publisher.publish(&ConsoleEvent::Coverage {
+            cells: self.cells,
+            axes: self.axes.clone(),
+            distance_m: self.distance,
+        });
+    }
+
+    /// The JPEG of a frame to show.
+    fn render_source(&self, source: FrameSource) -> Option<Vec<u8>> {
+        match source {
+            FrameSource::Image(image, base_from_flange) => {
+                self.render(&image, &base_from_flange, &[])
+            }
+            FrameSource::File(path, base_from_flange, corners) => match image::open(&path) {
+                Ok(decoded) => self.render(&decoded.to_luma8(), &base_from_flange, &corners),
+                Err(e) => {
+                    tracing::warn!("console: frame {}: {e}", path.display());
+                    None
+                }
+            },
+        }
+    }
+
+    fn add(
+        &mut self,
+        index: usize,
+        corners: &[Point2<f64>],
+        base_from_flange: Pose,
+        camera_from_target: Option<Pose>,
+    ) {
+        let (w, h) = (self.cell.model.width as f64, self.cell.model.height as f64);
+        for c in corners {
+            let col = ((c.x / w * 4.0).floor() as i64).clamp(0, 3) as usize;
+            let row = ((c.y / h * 4.0).floor() as i64).clamp(0, 3) as usize;
+            self.cells[row * 4 + col] += 1;
+        }
+        for earlier in self.accepted.values().rev().take(AXIS_PAIRS) {
+            let relative = earlier.base_from_flange.rotation.inverse() * base_from_flange.rotation;
+            if let Some((axis, angle)) = relative.axis_angle() {
+                if angle > MIN_AXIS_ANGLE_RAD {
+                    // Expressed in the base frame; an axis and its opposite are the same motion.
+                    let a = earlier.base_from_flange.rotation * axis.into_inner();
+                    let a = if a.z < 0.0 { -a } else { a };
+                    self.axes.push([a.x, a.y, a.z]);
+                }
+            }
+        }
+        if self.axes.len() > MAX_AXES {
+            let excess = self.axes.len() - MAX_AXES;
+            self.axes.drain(..excess);
+        }
+        if let Some(c) = &camera_from_target {
+            let d = c.translation.vector.norm();
+            self.distance = Some(match self.distance {
+                Some([lo, hi]) => [lo.min(d), hi.max(d)],
+                None => [d, d],
+            });
+        }
+        self.accepted.insert(
+            index,
+            Sample {
+                base_from_flange,
+                camera_from_target,
+            },
+        );
+    }
+
+    fn solve(&mut self, publisher: &Publisher) {
+        let pairs: Vec<PosePair> = self
+            .accepted
+            .values()
+            .filter_map(|s| {
+                s.camera_from_target
+                    .map(|c| PosePair::new(s.base_from_flange, c))
+            })
+            .collect();
+        if pairs.len() < 3 {
+            return;
+        }
+        let Ok(calibration) = solve(self.cell.setup, &pairs, &self.cell.options) else {
+            return;
+        };
+        self.estimate = Some((calibration.camera_mount, calibration.target_mount));
+        publisher.publish(&ConsoleEvent::Estimate {
+            samples: pairs.len(),
+            camera_mount: PoseView::of(&calibration.camera_mount),
+            target_mount: PoseView::of(&calibration.target_mount),
+            sigma: calibration.uncertainty.as_ref().map(|u| SigmaView {
+                camera_mount_mm: u.camera_mount.translation_mm,
+                camera_mount_deg: u.camera_mount.rotation_deg,
+                target_mount_mm: u.target_mount.translation_mm,
+                target_mount_deg: u.target_mount.rotation_deg,
+            }),
+        });
+    }
+
+    /// The frame, scaled down, with the detected corners and the board as the current estimate
+    /// (or the nominal cell, before one) predicts it.
+    fn render(
+        &self,
+        image: &GrayImage,
+        base_from_flange: &Pose,
+        corners: &[Point2<f64>],
+    ) -> Option<Vec<u8>> {
+        if image.width() == 0 || image.height() == 0 {
+            return None;
+        }
+        // Scale down by a whole factor with a box average: cheap, and sharp enough to look at.
+        let factor = image.width().div_ceil(FRAME_WIDTH).max(1);
+        let scale = 1.0 / factor as f64;
+        let (w, h) = (
+            (image.width() / factor).max(1),
+            (image.height() / factor).max(1),
+        );
+        let small = if factor > 1 {
+            box_downscale(image, factor, w, h)
+        } else {
+            image.clone()
+        };
+        let mut out = RgbImage::from_fn(w, h, |x, y| {
+            let v = small.get_pixel(x, y)[0];
+            Rgb([v, v, v])
+        });
+        let (camera_mount, target_mount) = self.estimate.unwrap_or(self.cell.nominal);
+        let camera_from_target = predict(
+            self.cell.setup,
+            &camera_mount,
+            &target_mount,
+            base_from_flange,
+        );
+        for c in corners {
+            draw::cross(
+                &mut out,
+                Point2::new(c.x * scale, c.y * scale),
+                3.0,
+                Rgb([0, 230, 0]),
+            );
+        }
+        let image_scale = image.width() as f64 / self.cell.model.width.max(1) as f64;
+        for tag in self.cell.board.tags() {
+            let Some(points) = self.cell.board.tag_corners_in_target(tag.id) else {
+                continue;
+            };
+            for p in points {
+                let in_camera: Point3<f64> = camera_from_target * p;
+                if let Some(px) = self.cell.model.project(&in_camera) {
+                    let at = Point2::new(px.x * image_scale * scale, px.y * image_scale * scale);
+                    draw::cross(&mut out, at, 2.0, Rgb([255, 40, 40]));
+                }
+            }
+        }
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY)
+            .encode_image(&out)
+            .ok()?;
+        Some(jpeg)
+    }
+}

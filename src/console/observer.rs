@@ -1,0 +1,231 @@
+//! The console's [`RunObserver`]: it passes every call on to the observer it wraps (the
+//! terminal's, unchanged) and publishes the same progress as typed events; recorded poses go to
+//! the analysis thread for frames, coverage and the running estimate. Nothing here blocks the
+//! run except the motion confirmation, which waits for the person by design.
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use crate::cell::run::RunObserver;
+use crate::cell::PreparedCell;
+use crate::geometry::Pose;
+use crate::robot::Joints;
+use crate::session::{SessionEvent, SessionFolder};
+
+use super::analysis::{Analyst, CellView, Job};
+use super::events::{joints_deg, Command, ConsoleEvent, PlannedView, PoseState, PoseView};
+use super::Console;
+
+/// Publishes a run's progress on a console, and passes it on to `inner`.
+pub struct ConsoleObserver<'a> {
+    inner: &'a mut dyn RunObserver,
+    console: &'a Console,
+    cell: Option<CellView>,
+    analyst: Option<Analyst>,
+    plan: Vec<Joints>,
+}
+
+impl<'a> ConsoleObserver<'a> {
+    /// Wraps `inner` (which still prints to the terminal).
+    pub fn new(inner: &'a mut dyn RunObserver, console: &'a Console) -> Self {
+        ConsoleObserver {
+            inner,
+            console,
+            cell: None,
+            analyst: None,
+            plan: Vec::new(),
+        }
+    }
+
+    /// Waits for the analysis of every recorded pose to be published.
+    pub fn flush(&mut self) {
+        self.analyst.take();
+    }
+}
+
+/// What the console shows of a cell, published when the cell is ready.
+pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, CellView) {
+    let (a, b) = cell.config.setup.unknown_names();
+    let event = ConsoleEvent::Cell {
+        config: cell.config.file.display().to_string(),
+        setup: cell.config.setup.name().to_string(),
+        unknowns: [a.to_string(), b.to_string()],
+        simulated: cell.is_simulated(),
+        manual,
+        image: [cell.camera_model.width, cell.camera_model.height],
+    };
+    let view = CellView {
+        setup: cell.config.setup,
+        board: cell.board.clone(),
+        model: cell.camera_model,
+        // The running estimate skips the outlier loop (a person watches it converge; the solve
+        // at the end is the real one, with every check).
+        options: crate::solve::SolveOptions {
+            drop_outliers: false,
+            ..cell.config.solver.to_options()
+        },
+        nominal: (
+            cell.config.nominal.camera_mount,
+            cell.config.nominal.target_mount,
+        ),
+    };
+    (event, view)
+}
+
+/// The plan table's rows.
+pub(crate) fn plan_event(plan: &[(Pose, Joints)]) -> ConsoleEvent {
+    ConsoleEvent::Plan {
+        poses: plan
+            .iter()
+            .enumerate()
+            .map(|(index, (pose, joints))| PlannedView {
+                index,
+                flange: PoseView::of(pose),
+                joints_deg: joints_deg(joints),
+            })
+            .collect(),
+    }
+}
+
+/// Waits for a page (or the terminal, through the same queue) to confirm motion; STOP or the
+/// stop flag refuse.
+pub(crate) fn wait_for_confirmation(
+    console: &Console,
+    poses: usize,
+    linear_speed: f64,
+    joint_speed_deg: f64,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    console.publish(&ConsoleEvent::ConfirmMotion {
+        poses,
+        linear_speed,
+        joint_speed_deg,
+    });
+    let stop = console.stop_flag();
+    loop {
+        if stop.load(Ordering::SeqCst) {
+            return Err("stopped before the first move; nothing was moved".into());
+        }
+        match console.next_command(Duration::from_millis(200)) {
+            Some(Command::Confirm) => {
+                console.publish(&ConsoleEvent::Confirmed);
+                return Ok(());
+            }
+            Some(Command::Decline) | Some(Command::Stop) => {
+                return Err("motion not confirmed on the console; nothing was moved".into())
+            }
+            _ => {}
+        }
+    }
+}
+
+impl RunObserver for ConsoleObserver<'_> {
+    fn plan_checked(&mut self, cell: &PreparedCell) {
+        self.inner.plan_checked(cell);
+        let (event, view) = cell_events(cell, false);
+        self.console.publish(&event);
+        self.cell = Some(view);
+    }
+
+    fn confirm_motion(
+        &mut self,
+        cell: &PreparedCell,
+        poses: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.inner.note(&format!(
+            "confirm the motion of the real arm on the console page {} (or stop with Ctrl-C)",
+            self.console.url()
+        ));
+        wait_for_confirmation(
+            self.console,
+            poses,
+            cell.config.limits.linear_speed,
+            cell.config.limits.joint_speed.to_degrees(),
+        )
+    }
+
+    fn note(&mut self, message: &str) {
+        self.inner.note(message);
+        self.console.publish(&ConsoleEvent::Note {
+            message: message.to_string(),
+        });
+    }
+
+    fn session_folder(&mut self, folder: &SessionFolder, plan: &[(Pose, Joints)]) {
+        self.inner.session_folder(folder, plan);
+        self.plan = plan.iter().map(|(_, j)| *j).collect();
+        self.console.publish(&ConsoleEvent::Session {
+            folder: folder.root().display().to_string(),
+        });
+        self.console.publish(&plan_event(plan));
+        if let Some(cell) = self.cell.clone() {
+            self.analyst = Some(Analyst::start(
+                cell,
+                folder.root().to_path_buf(),
+                self.console.publisher(),
+            ));
+        }
+        // A resumed session: the poses recorded before show as they ended.
+        for visit in folder.read_visits().unwrap_or_default() {
+            let state = if visit.rejected.is_none() {
+                PoseState::Captured
+            } else {
+                PoseState::Rejected
+            };
+            self.console.publish(&ConsoleEvent::Pose {
+                plan_index: visit.plan_index,
+                state,
+                why: visit.rejected.clone(),
+                rms_px: visit.reprojection_rms_px,
+                tags: visit.tags,
+            });
+            if let Some(analyst) = &self.analyst {
+                analyst.send(Job::Recorded(visit.plan_index));
+            }
+        }
+    }
+
+    fn session_started(&mut self, poses: usize) {
+        self.inner.session_started(poses);
+        self.console.publish(&ConsoleEvent::Started { poses });
+    }
+
+    fn event(&mut self, event: SessionEvent) {
+        match &event {
+            SessionEvent::Moving { plan_index } => {
+                self.console.publish(&ConsoleEvent::Moving {
+                    plan_index: *plan_index,
+                    joints_deg: self.plan.get(*plan_index).map(joints_deg),
+                });
+            }
+            SessionEvent::Recorded {
+                plan_index,
+                reprojection_rms_px,
+                tags,
+                rejected,
+                will_retry,
+            } => {
+                let state = match (rejected, will_retry) {
+                    (None, _) => PoseState::Captured,
+                    (Some(_), true) => PoseState::Retry,
+                    (Some(_), false) => PoseState::Rejected,
+                };
+                self.console.publish(&ConsoleEvent::Pose {
+                    plan_index: *plan_index,
+                    state,
+                    why: rejected.clone(),
+                    rms_px: *reprojection_rms_px,
+                    tags: *tags,
+                });
+                if let Some(analyst) = &self.analyst {
+                    analyst.send(Job::Recorded(*plan_index));
+                }
+            }
+        }
+        self.inner.event(event);
+    }
+
+    fn session_ended(&mut self) {
+        self.inner.session_ended();
+        self.console.publish(&ConsoleEvent::Ended);
+    }
+}
