@@ -21,7 +21,7 @@ use crate::geometry::Pose;
 use crate::session::PoseVisit;
 use crate::setup::{predict, PosePair, Setup};
 use crate::solve::{solve, SolveOptions};
-use crate::vision::{draw, Board};
+use crate::vision::{draw, Target};
 
 use super::events::{ConsoleEvent, PoseView, SigmaView};
 use super::Publisher;
@@ -45,7 +45,7 @@ const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
 #[derive(Clone)]
 pub(crate) struct CellView {
     pub setup: Setup,
-    pub board: Board,
+    pub board: Target,
     pub model: CameraModel,
     pub options: SolveOptions,
     /// The nominal mounts: the reprojection before the first estimate.
@@ -412,16 +412,11 @@ impl State {
             );
         }
         let image_scale = image.width() as f64 / self.cell.model.width.max(1) as f64;
-        for tag in self.cell.board.tags() {
-            let Some(points) = self.cell.board.tag_corners_in_target(tag.id) else {
-                continue;
-            };
-            for p in points {
-                let in_camera: Point3<f64> = camera_from_target * p;
-                if let Some(px) = self.cell.model.project(&in_camera) {
-                    let at = Point2::new(px.x * image_scale * scale, px.y * image_scale * scale);
-                    draw::cross(&mut out, at, 2.0, Rgb([255, 40, 40]));
-                }
+        for (_, _, p) in self.cell.board.points() {
+            let in_camera: Point3<f64> = camera_from_target * p;
+            if let Some(px) = self.cell.model.project(&in_camera) {
+                let at = Point2::new(px.x * image_scale * scale, px.y * image_scale * scale);
+                draw::cross(&mut out, at, 2.0, Rgb([255, 40, 40]));
             }
         }
         let mut jpeg = Vec::new();
