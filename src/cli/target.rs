@@ -68,6 +68,10 @@ enum TargetCommand {
         /// Overlay the board frame (axes, ids, corner order) for documentation; not for printing.
         #[arg(long)]
         show_frame: bool,
+        /// Leave out Kalibr's corner squares (drawn by default, as `kalibr_create_target_pdf`
+        /// draws them: a black square of side tagSpacing·tagSize at every tag corner).
+        #[arg(long)]
+        no_corner_squares: bool,
     },
 }
 
@@ -82,6 +86,7 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             board_out,
             dpi,
             show_frame,
+            no_corner_squares,
         } => {
             let extension = output
                 .extension()
@@ -104,7 +109,10 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             if show_frame && extension != "png" {
                 bail!("--show-frame is only available for PNG output");
             }
-            let original = Board::load(&target)?;
+            let mut original = Board::load(&target)?;
+            if no_corner_squares {
+                original = original.with_corner_squares(false)?;
+            }
             let fitted = match paper {
                 Some(paper) => Some(fit_to_paper(&original, paper.into(), margin_mm / 1000.0)?),
                 None => None,
@@ -118,7 +126,10 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             if let (Some(fitted), Some(board_out)) = (&fitted, &board_out) {
                 let text = std::fs::read_to_string(&target)
                     .with_context(|| format!("reading {}", target.display()))?;
-                let yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                let mut yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                if no_corner_squares && !yaml.lines().any(|l| l.starts_with("corner_squares:")) {
+                    yaml.push_str("corner_squares: false # printed with --no-corner-squares\n");
+                }
                 write_atomic(board_out, yaml.as_bytes())
                     .with_context(|| format!("writing {}", board_out.display()))?;
             }

@@ -1,6 +1,7 @@
 //! The calibration target: board specification (`board`), the AprilTag family tables it is
-//! printed from (`family`), tag detection on a dedicated thread (`detect`) and the board pose
-//! `T_camera_target` by PnP with lens distortion (`pnp`).
+//! printed from (`family`), tag detection on a dedicated thread (`detect`), sub-pixel X-corner
+//! (saddle point) refinement (`xcorner`) and the board pose `T_camera_target` by PnP with lens
+//! distortion (`pnp`).
 //!
 //! Frames: `target` is the board frame (origin at the outer bottom-left corner of tag 0's
 //! black square, x along rows of tags, y up, z out of the printed face); `camera` is the
@@ -16,6 +17,7 @@ pub mod family;
 mod ffi;
 pub mod pnp;
 pub mod print;
+pub mod xcorner;
 
 use std::path::PathBuf;
 
