@@ -91,7 +91,11 @@ fn set_up_python() -> Option<PathBuf> {
             .arg(&venv)
             .status()
             .expect("python3 -m venv");
-        assert!(status.success(), "python3 -m venv {} failed", venv.display());
+        assert!(
+            status.success(),
+            "python3 -m venv {} failed",
+            venv.display()
+        );
         let status = Command::new(&python)
             .args([
                 "-m",

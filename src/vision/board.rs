@@ -486,7 +486,10 @@ mod tests {
         assert!(!off.corner_squares());
         assert!(off.corner_square_origins().is_empty());
         let error = Board::from_yaml_str(
-            &format!("{KALIBR}family: tagStandard41h12\nborder_bits: 1\ncorner_squares: true\n"),
+            &format!(
+                "{}family: tagStandard41h12\nborder_bits: 1\ncorner_squares: true\n",
+                KALIBR.replace("0.3", "1.0")
+            ),
             path,
         )
         .unwrap_err();
@@ -510,8 +513,15 @@ mod tests {
         assert_eq!(board.is_white_at(-0.01, 0.04), Some(true));
         // Tag cells are the same with and without the squares.
         for k in 0..400 {
-            let (x, y) = ((k % 20) as f64 * 0.004 + 0.002, (k / 20) as f64 * 0.004 + 0.002);
-            assert_eq!(board.is_white_at(x, y), plain.is_white_at(x, y), "({x}, {y})");
+            let (x, y) = (
+                (k % 20) as f64 * 0.004 + 0.002,
+                (k / 20) as f64 * 0.004 + 0.002,
+            );
+            assert_eq!(
+                board.is_white_at(x, y),
+                plain.is_white_at(x, y),
+                "({x}, {y})"
+            );
         }
     }
 
