@@ -292,3 +292,83 @@ fn the_same_board_without_corner_squares_is_still_found_and_beats_opencv() {
     let c = compare(&board, &dir);
     check("the board without corner squares", &board, &c);
 }
+
+/// The board file's `target render` PNG (with the corner squares, as Kalibr prints) read back:
+/// every tag found, each corner where the page geometry puts it (known scale, y down; only the
+/// page offset is unknown) to 0.1 px, though the image is pixel-sharp (no camera blur). With
+/// `--no-corner-squares` the squares are gone.
+#[test]
+fn our_target_render_with_corner_squares_is_detected_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = repo().join("configs/targets/aprilgrid-6x6.yaml");
+    let board = Board::load(&target).unwrap();
+    assert!(
+        board.corner_squares(),
+        "Kalibr files default to the squares"
+    );
+    // 254 dpi = 10 px/mm: every edge of this board (4 cm tags, 1 cm gaps) falls on a pixel
+    // boundary, so the page geometry is exact in the image.
+    let dpi = 254.0;
+    let px_per_m = dpi / 0.0254;
+    let render = |name: &str, extra: &[&str]| {
+        let png = dir.path().join(name);
+        let output = util::handeye()
+            .args(["target", "render", "--target"])
+            .arg(&target)
+            .arg("-o")
+            .arg(&png)
+            .args(["--dpi", "254"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "{output:?}");
+        load_gray_image(&png).unwrap()
+    };
+    let image = render("board.png", &[]);
+    let detector = TagDetector::spawn(&board, DetectorOptions::default()).unwrap();
+    let detection = detector.detect(&image).unwrap();
+    assert_eq!(detection.tags.len(), 36, "{:?}", detection.rejected);
+    // Page pixel of a target point, up to the page offset: x right, y down, centres at integers.
+    let page = |p: &nalgebra::Point3<f64>| Point2::new(p.x * px_per_m, -p.y * px_per_m);
+    let pairs: Vec<(Point2<f64>, Point2<f64>)> = detection
+        .tags
+        .iter()
+        .flat_map(|tag| {
+            let points = board.tag_corners_in_target(tag.id).unwrap();
+            points.map(|p| page(&p)).into_iter().zip(tag.corners_px)
+        })
+        .collect();
+    let offset = pairs
+        .iter()
+        .map(|(model, found)| found - model)
+        .sum::<nalgebra::Vector2<f64>>()
+        / pairs.len() as f64;
+    let worst = pairs
+        .iter()
+        .map(|(model, found)| (found - (model + offset)).norm())
+        .fold(0.0, f64::max);
+    eprintln!("target render PNG at {dpi} dpi: 36/36 tags, worst corner off by {worst:.4} px");
+    assert!(
+        worst < 0.1,
+        "worst corner {worst} px from the page geometry"
+    );
+
+    // The pixel at the middle of the square between tags 0, 1, 6 and 7 is black with the
+    // squares and white without.
+    let square = board.corner_square_origins()[8];
+    let g = board.corner_square_size();
+    let middle = page(&nalgebra::Point3::new(
+        square.x + g / 2.0,
+        square.y + g / 2.0,
+        0.0,
+    )) + offset;
+    let at = |image: &image::GrayImage| {
+        image.get_pixel(middle.x.round() as u32, middle.y.round() as u32)[0]
+    };
+    assert_eq!(at(&image), 0);
+    let plain = render("plain.png", &["--no-corner-squares"]);
+    assert_eq!(at(&plain), 255);
+    let plain_board = board.clone().with_corner_squares(false).unwrap();
+    let detector = TagDetector::spawn(&plain_board, DetectorOptions::default()).unwrap();
+    assert_eq!(detector.detect(&plain).unwrap().tags.len(), 36);
+}

@@ -512,7 +512,7 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
             }
         }
     }
-    let mut out = image.clone();
+    let mut out = binomial_blur(image);
     let buffer: &mut [u8] = &mut out;
     for y in 0..h {
         for x in 0..w {
@@ -524,6 +524,34 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
             let v = &mut buffer[y * w + x];
             let t = (*v as u32 - l) * 255 / r;
             *v = (l + r * curve[t as usize] / 255) as u8;
+        }
+    }
+    out
+}
+
+/// The frame smoothed by the 3x3 binomial kernel (`[1 2 1]/4` each way, sigma ≈ 0.7 px),
+/// edge pixels repeated. A pixel-sharp frame (a board file rendered straight to an image)
+/// has X-junctions exactly on pixel corners, where the quad search fails on some tags; a
+/// camera's own blur is at least this much anyway.
+fn binomial_blur(image: &GrayImage) -> GrayImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let raw = image.as_raw();
+    let mut rows = vec![0u16; w * h];
+    for y in 0..h {
+        let row = &raw[y * w..(y + 1) * w];
+        for x in 0..w {
+            let left = row[x.saturating_sub(1)] as u16;
+            let right = row[(x + 1).min(w - 1)] as u16;
+            rows[y * w + x] = left + 2 * row[x] as u16 + right;
+        }
+    }
+    let mut out = image.clone();
+    let buffer: &mut [u8] = &mut out;
+    for y in 0..h {
+        let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+        for x in 0..w {
+            let sum = rows[up * w + x] + 2 * rows[y * w + x] + rows[down * w + x];
+            buffer[y * w + x] = ((sum + 8) / 16) as u8;
         }
     }
     out
