@@ -26,4 +26,12 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
+# --- kalibr: numpy and OpenCV for the independent Kalibr-board renderer and OpenCV baseline
+# (tests/python/kalibr_render.py, run by tests/kalibr_print.rs; without them there the test
+# builds its own venv under the target dir).
+if ! python3 -c "import numpy, cv2; cv2.aruco.ArucoDetector" 2>/dev/null; then
+  python3 -m pip install -q numpy "opencv-python-headless<5"
+fi
+# --- end kalibr
+
 cargo test --workspace --features handeye/ur-rtde "$@"

@@ -5,9 +5,9 @@
 //! same frames; the same board without the squares; and our own `target render` output read
 //! back.
 //!
-//! The Python side needs numpy and opencv-python-headless (< 5): installed into a venv under
-//! the build's temporary directory on first use. Without python3 the tests say so and skip;
-//! CI has it (scripts/test.sh).
+//! The Python side needs numpy and opencv-python-headless (< 5): python3's own when it has
+//! them (scripts/test.sh installs them), otherwise installed into a venv under the build's
+//! temporary directory on first use. Without python3 the tests say so and skip; CI has it.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -77,14 +77,18 @@ fn set_up_python() -> Option<PathBuf> {
         eprintln!("SKIP: python3 is absent (CI has it: scripts/test.sh)");
         return None;
     }
-    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("kalibr-venv");
-    let python = venv.join("bin/python");
     let ready = |python: &Path| {
         Command::new(python)
             .args(["-c", "import numpy, cv2; cv2.aruco.ArucoDetector"])
             .output()
             .is_ok_and(|o| o.status.success())
     };
+    // scripts/test.sh installs the packages for python3 itself; otherwise a venv of our own.
+    if ready(Path::new("python3")) {
+        return Some(PathBuf::from("python3"));
+    }
+    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("kalibr-venv");
+    let python = venv.join("bin/python");
     if !ready(&python) {
         let status = Command::new("python3")
             .args(["-m", "venv"])
