@@ -33,7 +33,7 @@ pub fn refine_saddle(
     initial: Point2<f64>,
     half_window: u32,
 ) -> Option<Point2<f64>> {
-    if !(2..=20).contains(&half_window) || !(initial.x.is_finite() && initial.y.is_finite()) {
+    if !((2..=20).contains(&half_window) && initial.x.is_finite() && initial.y.is_finite()) {
         return None;
     }
     let r = half_window as i64;
@@ -70,7 +70,8 @@ pub fn refine_saddle(
         let (a, b, c, d, e) = (q[0], q[1], q[2], q[3], q[4]);
         // Stationary point of the quadric: [2a b; b 2c]·s = -[d; e]; a saddle needs det < 0.
         let det = 4.0 * a * c - b * b;
-        if !(det < 0.0) {
+        // (NaN fails the test too.)
+        if det.is_nan() || det >= 0.0 {
             return None;
         }
         let step = Point2::new((-2.0 * c * d + b * e) / det, (b * d - 2.0 * a * e) / det);
