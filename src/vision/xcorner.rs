@@ -46,9 +46,14 @@ pub fn refine_saddle(
     let sigma_smooth = half_window as f64 / 2.0;
     let pad = (3.0 * sigma_smooth).ceil() as i64;
     let mut p = initial;
+    // The smoothed patch around the pixel nearest the estimate, kept while that pixel stays.
+    let mut cached: Option<((i64, i64), Patch)> = None;
     for _ in 0..MAX_ITERATIONS {
         let (cx, cy) = (p.x.round() as i64, p.y.round() as i64);
-        let patch = Patch::smoothed(image, cx, cy, r, pad, sigma_smooth)?;
+        let patch = match cached {
+            Some((at, patch)) if at == (cx, cy) => patch,
+            _ => Patch::smoothed(image, cx, cy, r, pad, sigma_smooth)?,
+        };
         let mut normal = Matrix6::<f64>::zeros();
         let mut rhs = Vector6::<f64>::zeros();
         for dy in -r..=r {
@@ -66,6 +71,7 @@ pub fn refine_saddle(
                 rhs += w * patch.at(dx, dy) * basis;
             }
         }
+        cached = Some(((cx, cy), patch));
         let q = normal.cholesky()?.solve(&rhs);
         let (a, b, c, d, e) = (q[0], q[1], q[2], q[3], q[4]);
         // Stationary point of the quadric: [2a b; b 2c]·s = -[d; e]; a saddle needs det < 0.
