@@ -69,6 +69,10 @@ enum TargetCommand {
         /// Overlay the board frame (axes, ids, corner order) for documentation; not for printing.
         #[arg(long)]
         show_frame: bool,
+        /// Leave out Kalibr's corner squares (drawn by default, as `kalibr_create_target_pdf`
+        /// draws them: a black square of side tagSpacing·tagSize at every tag corner).
+        #[arg(long)]
+        no_corner_squares: bool,
     },
 }
 
@@ -83,6 +87,7 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             board_out,
             dpi,
             show_frame,
+            no_corner_squares,
         } => {
             let extension = output
                 .extension()
@@ -106,12 +111,15 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
                 bail!("--show-frame is only available for PNG output");
             }
             let original = match Target::load(&target)? {
+                Target::Aprilgrid(board) if no_corner_squares => {
+                    board.with_corner_squares(false)?
+                }
                 Target::Aprilgrid(board) => board,
                 other => {
                     // ChArUco boards and chessboards: true scale, no paper fitting or overlay.
-                    if paper.is_some() || show_frame {
+                    if paper.is_some() || show_frame || no_corner_squares {
                         bail!(
-                            "--paper and --show-frame are for aprilgrids; {} is a {}",
+                            "--paper, --show-frame and --no-corner-squares are for aprilgrids; {} is a {}",
                             target.display(),
                             other.describe()
                         );
@@ -141,7 +149,10 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             if let (Some(fitted), Some(board_out)) = (&fitted, &board_out) {
                 let text = std::fs::read_to_string(&target)
                     .with_context(|| format!("reading {}", target.display()))?;
-                let yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                let mut yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                if no_corner_squares && !yaml.lines().any(|l| l.starts_with("corner_squares:")) {
+                    yaml.push_str("corner_squares: false # printed with --no-corner-squares\n");
+                }
                 write_atomic(board_out, yaml.as_bytes())
                     .with_context(|| format!("writing {}", board_out.display()))?;
             }

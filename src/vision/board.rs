@@ -7,6 +7,8 @@
 //! bottom-left corner at `(col, row) · pitch`, `pitch = tagSize · (1 + tagSpacing)`. Tags are
 //! printed upright (the tag image's top row towards +y). Corner order follows the AprilTag
 //! library: bottom-left, bottom-right, top-right, top-left (counter-clockwise seen from +z).
+//! Kalibr's corner squares (key `corner_squares`, default `true` like `kalibr_create_target_pdf`)
+//! fill the gap at every tag corner, so each tag corner is an X-junction.
 //! Units: metres. Depends on `vision::family` only.
 
 use std::path::{Path, PathBuf};
@@ -37,6 +39,10 @@ struct BoardFile {
     /// Kalibr prints 2-cell borders and its files carry no border key, so 2 is the default.
     #[serde(default = "kalibr_border_bits")]
     border_bits: u32,
+    /// Kalibr's PDF draws a black square of side `tagSpacing·tagSize` at every tag corner and
+    /// its files carry no key for it, so the squares are there unless a file says `false`.
+    #[serde(default)]
+    corner_squares: Option<bool>,
 }
 
 fn kalibr_border_bits() -> u32 {
@@ -77,6 +83,7 @@ pub struct Board {
     first_id: u32,
     border_bits: u32,
     layout: FamilyLayout,
+    corner_squares: bool,
     tags: Vec<BoardTag>,
     bitmaps: Vec<Vec<bool>>,
     extent: BoardExtent,
@@ -114,6 +121,10 @@ impl Board {
             file.first_id,
             file.border_bits,
         )
+        .and_then(|board| match file.corner_squares {
+            Some(on) => board.with_corner_squares(on),
+            None => Ok(board),
+        })
         .map_err(|error| match error {
             TargetError::BadBoard {
                 key,
@@ -131,7 +142,9 @@ impl Board {
     }
 
     /// Builds and validates a grid: `tag_size` (m) is the border square's edge, `tag_spacing`
-    /// the gap between tags as a fraction of `tag_size`.
+    /// the gap between tags as a fraction of `tag_size`. Printed as Kalibr prints it: with the
+    /// corner squares (see [`Board::with_corner_squares`]), except for a reversed-border family,
+    /// whose data ring they would cover.
     pub fn aprilgrid(
         cols: u32,
         rows: u32,
@@ -244,11 +257,73 @@ impl Board {
             family,
             first_id,
             border_bits,
+            corner_squares: !layout.reversed_border,
             layout,
             tags,
             bitmaps,
             extent,
         })
+    }
+
+    /// The same board with (`true`) or without Kalibr's corner squares: black squares of side
+    /// `tagSpacing·tagSize` in the gaps at every tag corner (the outer corners of the grid
+    /// too), touching the tags' black squares corner to corner so neighbouring tags meet in
+    /// X-junctions, as `kalibr_create_target_pdf` draws them. Refused for a reversed-border
+    /// family (the squares would cover its outer data ring).
+    pub fn with_corner_squares(mut self, on: bool) -> Result<Self, TargetError> {
+        if on && self.layout.reversed_border {
+            return Err(bad(
+                Path::new("<inline>"),
+                "corner_squares",
+                &format!(
+                    "false for {} (its data ring lies where the squares go)",
+                    self.family.name()
+                ),
+                "true",
+            ));
+        }
+        self.corner_squares = on;
+        Ok(self)
+    }
+
+    /// Whether Kalibr's corner squares are printed (see [`Board::with_corner_squares`]).
+    pub fn corner_squares(&self) -> bool {
+        self.corner_squares
+    }
+
+    /// Edge of a corner square, m (`tagSpacing·tagSize`, the gap between tags).
+    pub fn corner_square_size(&self) -> f64 {
+        self.tag_spacing * self.tag_size
+    }
+
+    /// The corner squares' bottom-left corners in the target frame (m), row by row from the
+    /// bottom: `(tagCols + 1)·(tagRows + 1)` of them, or none when they are not printed.
+    /// Each square spans `[x, x + corner_square_size()) x [y, y + corner_square_size())`.
+    pub fn corner_square_origins(&self) -> Vec<Point2<f64>> {
+        if !self.corner_squares {
+            return Vec::new();
+        }
+        let (pitch, g) = (self.pitch(), self.corner_square_size());
+        (0..=self.rows)
+            .flat_map(|r| {
+                (0..=self.cols)
+                    .map(move |c| Point2::new(c as f64 * pitch - g, r as f64 * pitch - g))
+            })
+            .collect()
+    }
+
+    /// Whether the point (target frame, m) lies on a corner square.
+    fn on_corner_square(&self, x: f64, y: f64) -> bool {
+        if !self.corner_squares {
+            return false;
+        }
+        let (pitch, g) = (self.pitch(), self.corner_square_size());
+        // Square (c, r) spans [c·pitch - g, c·pitch) along x, c in 0..=cols; likewise y.
+        let inside = |v: f64, count: u32| {
+            let k = ((v + g) / pitch).floor();
+            k >= 0.0 && k <= count as f64 && v + g - k * pitch < g
+        };
+        inside(x, self.cols) && inside(y, self.rows)
     }
 
     /// Border-square corners of tag `id` in the target frame (m), AprilTag order.
@@ -323,11 +398,15 @@ impl Board {
     }
 
     /// Printed reflectance at a point of the board plane (target frame, m): `Some(true)` white
-    /// paper or white cell, `Some(false)` black, `None` off the sheet.
+    /// paper or white cell, `Some(false)` black (a tag's black cell or a corner square), `None`
+    /// off the sheet.
     pub fn is_white_at(&self, x: f64, y: f64) -> Option<bool> {
         let e = &self.extent;
         if !(x >= e.min.x && x < e.max.x && y >= e.min.y && y < e.max.y) {
             return None;
+        }
+        if self.on_corner_square(x, y) {
+            return Some(false);
         }
         let pitch = self.pitch();
         let cell = self.cell_size();
@@ -395,6 +474,55 @@ mod tests {
         assert!(error.to_string().contains("family"), "{error}");
         let error = Board::from_yaml_str(&format!("{KALIBR}first_id: 560\n"), path).unwrap_err();
         assert!(error.to_string().contains("first_id"), "{error}");
+    }
+
+    #[test]
+    fn kalibr_files_have_corner_squares_unless_the_key_says_no() {
+        let path = Path::new("k.yaml");
+        let board = Board::from_yaml_str(KALIBR, path).unwrap();
+        assert!(board.corner_squares());
+        assert_eq!(board.corner_square_origins().len(), 49);
+        let off = Board::from_yaml_str(&format!("{KALIBR}corner_squares: false\n"), path).unwrap();
+        assert!(!off.corner_squares());
+        assert!(off.corner_square_origins().is_empty());
+        let error = Board::from_yaml_str(
+            &format!(
+                "{}family: tagStandard41h12\nborder_bits: 1\ncorner_squares: true\n",
+                KALIBR.replace("0.3", "1.0")
+            ),
+            path,
+        )
+        .unwrap_err();
+        assert!(error.to_string().contains("corner_squares"), "{error}");
+        assert!(error.to_string().contains("k.yaml"), "{error}");
+    }
+
+    #[test]
+    fn corner_squares_fill_the_gap_at_every_tag_corner_and_nowhere_else() {
+        // tag 0.08 m, gap 0.02 m, pitch 0.1 m.
+        let board = Board::aprilgrid(2, 2, 0.08, 0.25, TagFamily::Tag36h11, 0, 2).unwrap();
+        let plain = board.clone().with_corner_squares(false).unwrap();
+        // Between the four tags: x, y in [0.08, 0.1).
+        assert_eq!(board.is_white_at(0.09, 0.09), Some(false));
+        assert_eq!(plain.is_white_at(0.09, 0.09), Some(true));
+        // Outer corners of the grid: below-left of tag 0 and above-right of tag 3.
+        assert_eq!(board.is_white_at(-0.019, -0.001), Some(false));
+        assert_eq!(board.is_white_at(0.199, 0.181), Some(false));
+        // The gap beside a tag edge (not at a corner) stays white.
+        assert_eq!(board.is_white_at(0.09, 0.04), Some(true));
+        assert_eq!(board.is_white_at(-0.01, 0.04), Some(true));
+        // Tag cells are the same with and without the squares.
+        for k in 0..400 {
+            let (x, y) = (
+                (k % 20) as f64 * 0.004 + 0.002,
+                (k / 20) as f64 * 0.004 + 0.002,
+            );
+            assert_eq!(
+                board.is_white_at(x, y),
+                plain.is_white_at(x, y),
+                "({x}, {y})"
+            );
+        }
     }
 
     #[test]

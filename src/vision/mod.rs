@@ -1,7 +1,8 @@
 //! The calibration target: the board of any kind (`target`: aprilgrid, ChArUco or chessboard,
 //! and its detector), the aprilgrid specification (`board`), the AprilTag family tables it is
 //! printed from (`family`), tag detection on a dedicated thread (`detect`), ChArUco boards
-//! (`charuco`), plain chessboards (`chessboard`), sub-pixel X-corner refinement (`subpix`) and
+//! (`charuco`), plain chessboards (`chessboard`), sub-pixel corner refinement for ChArUco and chessboard corners (`subpix`), saddle-point
+//! refinement of the X-junctions of Kalibr's corner squares (`xcorner`) and
 //! the board pose `T_camera_target` by PnP with lens distortion (`pnp`).
 //!
 //! Frames: `target` is the board frame, x to the right and y up as printed, z out of the
@@ -25,6 +26,7 @@ pub mod print;
 pub mod print_target;
 pub mod subpix;
 pub mod target;
+pub mod xcorner;
 
 use std::path::PathBuf;
 

@@ -60,6 +60,9 @@ impl Page {
             board.first_id(),
             board.border_bits()
         );
+        if !board.corner_squares() {
+            caption.push_str(" corner_squares false");
+        }
         if let Some(dpi) = dpi {
             caption.push_str(&format!(" - {dpi} dpi, print at 100 %"));
         }
@@ -78,7 +81,8 @@ impl Page {
 }
 /// The board's black cells merged into horizontal runs, each `[left, top, width, height]` in
 /// metres from the top-left corner of the board's sheet extent, y pointing down (page order).
-/// Each cell's centre is sampled: the board's reflectance is the single source of truth.
+/// Each cell's centre is sampled: the board's reflectance is the single source of truth. Kalibr's
+/// corner squares, when printed, follow as one square each.
 fn black_runs(board: &Board) -> Vec<[f64; 4]> {
     let extent = board.extent();
     let layout = board.layout();
@@ -111,6 +115,10 @@ fn black_runs(board: &Board) -> Vec<[f64; 4]> {
                 ]);
             }
         }
+    }
+    let g = board.corner_square_size();
+    for origin in board.corner_square_origins() {
+        runs.push([origin.x - extent.min.x, extent.max.y - (origin.y + g), g, g]);
     }
     runs
 }

@@ -110,7 +110,8 @@ fn resized(board: &Board, tag_size: f64) -> Result<Board, TargetError> {
         board.family(),
         board.first_id(),
         board.border_bits(),
-    )
+    )?
+    .with_corner_squares(board.corner_squares())
 }
 
 /// The board's sheet extent (tags plus white margin), width and height, m.

@@ -24,7 +24,7 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
     use pdf_writer::{Content, Name, Pdf, Rect, Ref, Str};
 
     let (bw, bh) = extent_size(board);
-    let caption = format!(
+    let mut caption = format!(
         "aprilgrid {}x{} {} tagSize {} m tagSpacing {} first_id {} border_bits {}",
         board.cols(),
         board.rows(),
@@ -34,6 +34,9 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
         board.first_id(),
         board.border_bits()
     );
+    if !board.corner_squares() {
+        caption.push_str(" corner_squares false");
+    }
     let note = match sheet {
         Some(s) => format!(
             "{}: print at actual size (100 %), not 'fit to page'",

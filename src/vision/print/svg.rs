@@ -61,5 +61,13 @@ mod tests {
         assert!(svg.contains("height=\"135.000mm\""), "{}", &svg[..200]);
         assert!(svg.contains("tagSize 0.04 m"));
         assert!(svg.matches("<rect").count() > 4 * 10);
+        // Kalibr's corner squares: one rectangle each, 3x3 for a 2x2 grid, and each tag's four
+        // outer-ring corner cells, which lie on a square, turn black too (4 x 4).
+        let plain = board_svg(&board.clone().with_corner_squares(false).unwrap());
+        assert_eq!(
+            svg.matches("<rect").count() - plain.matches("<rect").count(),
+            9 + 16
+        );
+        assert!(plain.contains("corner_squares false"));
     }
 }
