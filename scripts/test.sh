@@ -26,4 +26,12 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
+# --- ROS 2 bag import (tests/bag_import.rs): bags are written by the pure-Python `rosbags` package,
+# installed into the venv the test looks for (it creates the same venv itself when missing).
+bag_venv="${CARGO_TARGET_DIR:-target}/tmp/bag-venv"
+if ! "$bag_venv/bin/python" -c "import rosbags, numpy" 2>/dev/null; then
+  python3 -m venv "$bag_venv" && "$bag_venv/bin/pip" install -q rosbags numpy
+fi
+# ---
+
 cargo test --workspace --features handeye/ur-rtde "$@"
