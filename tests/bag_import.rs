@@ -442,7 +442,16 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
         return;
     };
     let out = dir.path().join("session");
-    let run = import(&bag, &out, &["--time-offset", "0.030"]);
+    let run = import(
+        &bag,
+        &out,
+        &[
+            "--time-offset",
+            "0.030",
+            "--camera-info",
+            "/camera/camera_info",
+        ],
+    );
     let log = text(&run);
     println!("{log}");
     assert!(run.status.success(), "{log}");
