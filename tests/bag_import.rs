@@ -100,6 +100,11 @@ fn camera() -> CameraModel {
 
 /// Flange poses that look at the board from `n` directions (eye-in-hand under [`truth`]).
 fn views(n: usize, board: &Board) -> Vec<Pose> {
+    views_seen_at(n, board, |_| [0.0, 0.0])
+}
+
+/// [`views`] with the board centre seen at `seen_at(i)` degrees off the optical axis.
+fn views_seen_at(n: usize, board: &Board, seen_at: impl Fn(usize) -> [f64; 2]) -> Vec<Pose> {
     let (flange_from_camera, base_from_target) = truth();
     let corners: Vec<Point3<f64>> = board
         .tags()
@@ -116,7 +121,7 @@ fn views(n: usize, board: &Board) -> Vec<Pose> {
                 azimuth_deg: 360.0 * i as f64 / n as f64,
                 elevation_deg: 62.0 + 8.0 * ((i % 4) as f64),
                 roll_deg: -20.0 + 13.0 * ((i % 4) as f64),
-                board_in_image_deg: [0.0, 0.0],
+                board_in_image_deg: seen_at(i),
             };
             base_from_target * look.target_from_camera(&centre) * flange_from_camera.inverse()
         })
@@ -387,6 +392,7 @@ fn text(out: &std::process::Output) -> String {
     )
 }
 
+/// Both transforms within the sim cell's tolerances (0.5 mm, 0.05°) of the ground truth.
 fn assert_calibrated(session: &Path) {
     let (flange_from_camera, base_from_target) = truth();
     let result = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
@@ -539,6 +545,59 @@ fn continuous_sqlite_compressed_images_recover_the_clock_offset() {
     assert_calibrated(&out);
 }
 
+#[test]
+fn without_camera_info_the_intrinsics_are_estimated() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    // Off-centre views put board corners across the image, which the lens estimate needs.
+    let trajectory = StopAndGo {
+        views: views_seen_at(20, &board, |i| {
+            let a = i as f64 * 2.4;
+            [12.0 * a.cos(), 9.0 * a.sin()]
+        }),
+        stay: 0.6,
+        travel: 0.6,
+    };
+    let period = trajectory.stay + trajectory.travel;
+    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let Some(bag) = make_bag(
+        dir.path(),
+        "no-info",
+        &BagSpec {
+            storage: "mcap",
+            image_kind: "png",
+            trajectory: &trajectory,
+            fps: 10.0,
+            tf_hz: 100.0,
+            offset_s: 0.0,
+            camera_info: false,
+            render: &standing,
+        },
+    ) else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let run = import(&bag, &out, &[]);
+    let log = text(&run);
+    println!("{log}");
+    assert!(run.status.success(), "{log}");
+    assert!(log.contains("20 samples accepted"), "{log}");
+    let estimated = CameraModel::load(&out.join("camera_info.yaml")).unwrap();
+    let truth = camera();
+    for (name, got, want) in [
+        ("fx", estimated.fx, truth.fx),
+        ("fy", estimated.fy, truth.fy),
+        ("cx", estimated.cx, truth.cx),
+        ("cy", estimated.cy, truth.cy),
+    ] {
+        assert!(
+            (got - want).abs() < 1.0,
+            "{name} {got:.2} px, true {want:.2} px"
+        );
+    }
+    assert_calibrated(&out);
+}
+
 /// A small stop-and-go bag for the failure tests.
 fn small_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
     let board = Board::load(&board_path()).unwrap();
@@ -584,6 +643,7 @@ fn bad_bags_fail_clearly_and_write_nothing() {
             .output()
             .unwrap();
         let log = text(&run);
+        println!("{storage}: {log}");
         assert!(!run.status.success());
         assert!(
             log.contains("`tool_flange`") && log.contains("wrist_3_link"),
@@ -602,6 +662,7 @@ fn bad_bags_fail_clearly_and_write_nothing() {
             .output()
             .unwrap();
         let log = text(&run);
+        println!("{storage}: {log}");
         assert!(!run.status.success());
         assert!(
             log.contains("/camera/color/image_raw")
@@ -628,6 +689,7 @@ fn bad_bags_fail_clearly_and_write_nothing() {
         std::fs::create_dir_all(&out).unwrap();
         let run = import(&cut, &out, &[]);
         let log = text(&run);
+        println!("{storage}: {log}");
         assert!(!run.status.success());
         assert!(
             log.contains(&*cut_file.file_name().unwrap().to_string_lossy())

@@ -321,8 +321,7 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
             out.display()
         );
     }
-    let imported = import_bag(&a.bag, &options)
-        .with_context(|| format!("importing the ROS 2 bag {}", a.bag.display()))?;
+    let imported = import_bag(&a.bag, &options).context("importing a ROS 2 bag")?;
     let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
     for s in &imported.skipped {
         *kinds.entry(s.reason.kind()).or_default() += 1;

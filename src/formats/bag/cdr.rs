@@ -363,7 +363,10 @@ pub(crate) mod tests {
         }
     }
 
-    pub(crate) fn tf_message(items: &[(i64, &str, &str, [f64; 3], [f64; 4])]) -> Vec<u8> {
+    /// One transform of a test TFMessage: stamp, parent, child, translation, quaternion xyzw.
+    pub(crate) type TestTransform<'a> = (i64, &'a str, &'a str, [f64; 3], [f64; 4]);
+
+    pub(crate) fn tf_message(items: &[TestTransform<'_>]) -> Vec<u8> {
         let mut w = Writer::new();
         w.u32(items.len() as u32);
         for (stamp, parent, child, t, q) in items {

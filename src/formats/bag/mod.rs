@@ -103,7 +103,7 @@ pub enum BagError {
         path: PathBuf,
         /// What is missing.
         #[source]
-        source: TfError,
+        source: Box<TfError>,
     },
     /// The camera_info cannot become our camera model.
     #[error("{}: topic `{topic}`: {problem}", path.display())]
@@ -305,7 +305,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         .check_chain(&options.base_frame, &options.flange_frame)
         .map_err(|source| BagError::Tf {
             path: path.to_path_buf(),
-            source,
+            source: Box::new(source),
         })?;
     let camera = match (&info_topic, infos.first()) {
         (Some(t), None) => {
