@@ -228,6 +228,62 @@ fn main() {
         .sum();
     println!("bag: {} ({:.2} GB)", bag.display(), size as f64 / 1e9);
     let board = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
+    // The split, once: the library's part (read, TF, selection, decoding) and the whole command.
+    let options = handeye::formats::bag::BagOptions {
+        base_frame: "base".into(),
+        flange_frame: "tool0".into(),
+        image_topic: "/camera/image_raw".into(),
+        camera_info_topic: Some("/camera/camera_info".into()),
+        tf_topics: vec!["/tf".into(), "/tf_static".into()],
+        tf_static_topics: vec!["/tf_static".into()],
+        select: Default::default(),
+        setup: handeye::setup::Setup::EyeInHand,
+        board: Board::load(&board).unwrap(),
+        detector: Default::default(),
+    };
+    let started = std::time::Instant::now();
+    let imported = handeye::formats::bag::import_bag(&bag, &options).unwrap();
+    println!(
+        "library import_bag: {:.2} s ({} samples of {} images)",
+        started.elapsed().as_secs_f64(),
+        imported.samples.len(),
+        imported.images
+    );
+    drop(imported);
+    let started = std::time::Instant::now();
+    // Under GNU time when it is there: CPU seconds tell more than wall time on a shared machine.
+    let mut once = if Path::new("/usr/bin/time").exists() {
+        let mut c = Command::new("/usr/bin/time");
+        c.args([
+            "-f",
+            "GNU time: %e s wall, %U s user, %S s system, %M kB peak RSS",
+        ])
+        .arg(env!("CARGO_BIN_EXE_handeye"));
+        c
+    } else {
+        Command::new(env!("CARGO_BIN_EXE_handeye"))
+    };
+    let o = once
+        .args(["import", "bag"])
+        .arg(&bag)
+        .args([
+            "--image",
+            "/camera/image_raw",
+            "--camera-info",
+            "/camera/camera_info",
+            "--board",
+        ])
+        .arg(&board)
+        .arg("-o")
+        .arg(dir.path().join("session-once"))
+        .output()
+        .unwrap();
+    println!(
+        "whole command once: {:.2} s\n{}{}",
+        started.elapsed().as_secs_f64(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
     let mut run = 0;
     let mut criterion = Criterion::default().configure_from_args().sample_size(10);
     criterion.bench_function(

@@ -550,7 +550,14 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
         outcome.accepted.len(),
         outcome.skipped.len()
     );
-    outln!("{}", solved.summary.trim_end());
+    // The solve ran in the staging folder; name the session where it is now.
+    outln!(
+        "{}",
+        solved
+            .summary
+            .trim_end()
+            .replace(&*stage.to_string_lossy(), &*out.to_string_lossy())
+    );
     outln!(
         "next: handeye report {0}   (or: handeye solve {0} --space reprojection, handeye replay {0})",
         out.display()

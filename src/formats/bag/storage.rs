@@ -39,15 +39,16 @@ pub struct TopicInfo {
     pub count: usize,
 }
 
-/// One message read from a bag.
+/// One message read from a bag: borrowed from the MCAP file's bytes where its chunk is not
+/// compressed (no copy of gigabytes of images), owned otherwise.
 #[derive(Debug, Clone)]
-pub struct BagMessage {
+pub struct BagMessage<'a> {
     /// Its topic.
     pub topic: String,
     /// When the recorder received it, ns.
     pub log_time_ns: i64,
     /// The serialised (CDR) message.
-    pub data: Vec<u8>,
+    pub data: std::borrow::Cow<'a, [u8]>,
 }
 
 /// An opened bag: its storage files and format.
@@ -154,7 +155,7 @@ impl Bag {
     }
 
     /// Every message on `topics`, in receive-time order.
-    pub fn read(&self, topics: &[String]) -> Result<Vec<BagMessage>, BagError> {
+    pub fn read(&self, topics: &[String]) -> Result<Vec<BagMessage<'_>>, BagError> {
         let mut out = Vec::new();
         for (i, file) in self.files.iter().enumerate() {
             match self.format {
@@ -273,11 +274,11 @@ fn mcap_topics(file: &Path, bytes: &[u8]) -> Result<Vec<TopicInfo>, BagError> {
     Ok(topics)
 }
 
-fn mcap_read(
+fn mcap_read<'a>(
     file: &Path,
-    bytes: &[u8],
+    bytes: &'a [u8],
     topics: &[String],
-    out: &mut Vec<BagMessage>,
+    out: &mut Vec<BagMessage<'a>>,
 ) -> Result<(), BagError> {
     for message in mcap::MessageStream::new(bytes).map_err(|e| mcap_error(file, e))? {
         let message = message.map_err(|e| mcap_error(file, e))?;
@@ -296,7 +297,7 @@ fn mcap_read(
         out.push(BagMessage {
             topic: message.channel.topic.clone(),
             log_time_ns: i64::try_from(message.log_time).unwrap_or(i64::MAX),
-            data: message.data.into_owned(),
+            data: message.data,
         });
     }
     Ok(())
@@ -418,7 +419,7 @@ fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Res
             out.push(BagMessage {
                 topic: name.clone(),
                 log_time_ns,
-                data,
+                data: std::borrow::Cow::Owned(data),
             });
         }
     }
