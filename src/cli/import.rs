@@ -556,7 +556,7 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
         solved
             .summary
             .trim_end()
-            .replace(&*stage.to_string_lossy(), &*out.to_string_lossy())
+            .replace(&*stage.to_string_lossy(), &out.to_string_lossy())
     );
     outln!(
         "next: handeye report {0}   (or: handeye solve {0} --space reprojection, handeye replay {0})",
