@@ -26,11 +26,17 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
-# numpy + OpenCV for tests/boards.rs (tests/python/boards_opencv.py renders
-# ChArUco/chessboard frames with OpenCV and computes OpenCV's figures). The test falls back to a
+# numpy + OpenCV for tests/boards.rs and tests/kalibr_print.rs (tests/python/*.py render
+# ChArUco/chessboard/Kalibr-aprilgrid frames independently of us and compute OpenCV's figures). The test falls back to a
 # venv of its own when this install is refused (PEP 668).
 python3 -c "import cv2, numpy" 2>/dev/null || python3 -m pip install -q numpy "opencv-python-headless<5" || true
 # Playwright drives the Debian chromium above in tests/console.rs (no browser download).
 python3 -c "import playwright.sync_api" 2>/dev/null || python3 -m pip install -q playwright
+# ROS 2 bag import (tests/bag_import.rs): bags are written by the pure-Python `rosbags` package,
+# installed into the venv the test looks for (it creates the same venv itself when missing).
+bag_venv="${CARGO_TARGET_DIR:-target}/tmp/bag-venv"
+if ! "$bag_venv/bin/python" -c "import rosbags, numpy" 2>/dev/null; then
+  python3 -m venv "$bag_venv" && "$bag_venv/bin/pip" install -q rosbags numpy
+fi
 
 cargo test --workspace --features handeye/ur-rtde "$@"

@@ -104,19 +104,24 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
     // the run then records corners only and the intrinsics are estimated afterwards.
     let intrinsics_known = config.intrinsics.is_some();
-    let model_file = match (&config.intrinsics, config.sim_lens()) {
-        (Some(file), _) => file.clone(),
-        (None, Some(lens)) => lens.to_path_buf(),
-        (None, None) => {
+    let model_file = match (&config.intrinsics, config.sim_lens(), &config.robot, &config.camera) {
+        (Some(file), ..) => Some(file.clone()),
+        (None, Some(lens), ..) => Some(lens.to_path_buf()),
+        // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
+        (None, None, RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => None,
+        (None, None, ..) => {
             return Err(CellError::Backend(
-                "the config has no `intrinsics`: estimating them is available with the sim camera only (give `intrinsics:` for this camera)".into(),
+                "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
             ))
         }
     };
-    let camera_model = CameraModel::load(&model_file).map_err(|source| CellError::Intrinsics {
-        file: model_file.clone(),
-        source: Box::new(source),
-    })?;
+    let camera_model = match &model_file {
+        Some(file) => CameraModel::load(file).map_err(|source| CellError::Intrinsics {
+            file: file.clone(),
+            source: Box::new(source),
+        })?,
+        None => recorded::provisional_model(&config)?,
+    };
     let mut arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
         CellError::Backend(format!(
             "robot.model: no kinematics for `{}`",

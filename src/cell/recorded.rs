@@ -64,6 +64,35 @@ pub fn plan(
     ))
 }
 
+/// A recorded cell without intrinsics (they are estimated from the recorded corners after the
+/// run): a lens of the first frame's size (focal length = the larger side, centred, no
+/// distortion), used only for the plan report's information-only margins and the folder camera's
+/// frame-size check.
+pub fn provisional_model(config: &CellConfig) -> Result<CameraModel, CellError> {
+    let CameraConfig::Files { folder } = &config.camera else {
+        return Err(CellError::Backend(
+            "a recorded cell needs `camera: {backend: files}`".into(),
+        ));
+    };
+    let frames =
+        crate::camera::files::list_frames(folder).map_err(|e| CellError::Backend(e.to_string()))?;
+    let first = frames.first().ok_or_else(|| {
+        CellError::Backend(format!("{}: no frames in the folder", folder.display()))
+    })?;
+    let (width, height) = image::image_dimensions(first)
+        .map_err(|e| CellError::Backend(format!("{}: {e}", first.display())))?;
+    let focal = f64::from(width.max(height));
+    Ok(CameraModel {
+        width,
+        height,
+        fx: focal,
+        fy: focal,
+        cx: (f64::from(width) - 1.0) / 2.0,
+        cy: (f64::from(height) - 1.0) / 2.0,
+        distortion: crate::camera_model::Distortion::None,
+    })
+}
+
 /// Opens the recorded robot and the image-folder camera; the folder must hold a frame for every
 /// pose of `plan`.
 pub fn open(

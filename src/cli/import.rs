@@ -14,6 +14,7 @@ use handeye::config::{
     SessionConfig, SolverConfig, WorkspaceConfig,
 };
 use handeye::dataset::Dataset;
+use handeye::formats::bag::{import_bag, BagOptions};
 use handeye::formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
@@ -71,6 +72,16 @@ enum ImportFormat {
     /// row, paired by row order. `#` lines and blank lines are skipped; a first row without
     /// numbers is a header.
     Csv(CsvArgs),
+    /// A ROS 2 bag (MCAP or sqlite3 .db3): /tf + /tf_static, images and camera_info into a
+    /// session folder (see docs/ros2-bags.md).
+    ///
+    /// T_base_flange is chained from --base to --flange in the TF tree at each image stamp
+    /// (interpolated, never extrapolated). Stop-and-go (default): the sharpest frame of each
+    /// interval where the flange stood still. --continuous: a frame every --spacing seconds,
+    /// with the camera-to-robot clock offset given (--time-offset S) or estimated (auto). The
+    /// frames and poses are run as a recorded cell into -o, an ordinary session folder (replay,
+    /// report, verify, solve work on it); nothing is left behind if the import fails.
+    Bag(BagArgs),
 }
 
 #[derive(Debug, Args)]
@@ -145,6 +156,413 @@ struct CsvArgs {
     mm: bool,
     #[command(flatten)]
     common: Common,
+}
+
+#[derive(Debug, Args)]
+struct BagArgs {
+    /// The bag: a folder with metadata.yaml, or one .mcap / .db3 file.
+    bag: PathBuf,
+    /// The robot base frame in the TF tree.
+    #[arg(long, default_value = "base")]
+    base: String,
+    /// The flange frame in the TF tree.
+    #[arg(long, default_value = "tool0")]
+    flange: String,
+    /// The image topic (sensor_msgs/Image or sensor_msgs/CompressedImage).
+    #[arg(long)]
+    image: String,
+    /// The camera_info topic (plumb_bob); without it the intrinsics are estimated from the
+    /// frames.
+    #[arg(long)]
+    camera_info: Option<String>,
+    /// Board YAML the images show (e.g. configs/targets/single-tag36h11-id10.yaml).
+    #[arg(long, alias = "target")]
+    board: PathBuf,
+    /// The cell layout (a bag does not say).
+    #[arg(long, value_enum, default_value = "eye_in_hand")]
+    setup: SetupArg,
+    /// The arm moved continuously: take a frame every --spacing seconds instead of the
+    /// sharpest frame of each stop.
+    #[arg(long)]
+    continuous: bool,
+    /// Continuous mode: seconds between samples (0.01 to 60).
+    #[arg(long, default_value_t = 0.5)]
+    spacing: f64,
+    /// Camera clock minus robot clock, seconds (-5 to 5), or `auto` to estimate it (needs
+    /// --continuous and --camera-info).
+    #[arg(long, default_value = "0")]
+    time_offset: String,
+    /// `--time-offset auto`: search range ± seconds (0.001 to 5).
+    #[arg(long, default_value_t = 0.2)]
+    max_offset: f64,
+    /// Stop-and-go: the flange must stay still this long around a frame, seconds (0.01 to 10).
+    #[arg(long, default_value_t = 0.2)]
+    still_window: f64,
+    /// Stop-and-go: largest speed still counted as standing, mm/s (0.001 to 1000).
+    #[arg(long, default_value_t = 2.0)]
+    max_speed_mm_s: f64,
+    /// Stop-and-go: largest rotation speed still counted as standing, deg/s (0.001 to 100).
+    #[arg(long, default_value_t = 0.2)]
+    max_speed_deg_s: f64,
+    /// Largest spacing of two TF messages to interpolate between, ms (0.1 to 10000).
+    #[arg(long, default_value_t = 100.0)]
+    max_tf_gap_ms: f64,
+    /// Quad decimation of the detector (1 = full resolution, at most 16).
+    #[arg(long, default_value_t = 1.0)]
+    decimation: f32,
+    /// The session folder to create (must not exist, or be empty).
+    #[arg(short = 'o', long)]
+    output: PathBuf,
+}
+
+/// `value` within `[lo, hi]`, or an error naming the option.
+fn in_range(option: &str, value: f64, lo: f64, hi: f64) -> anyhow::Result<f64> {
+    anyhow::ensure!(
+        value.is_finite() && (lo..=hi).contains(&value),
+        "{option} {value}: expected a number from {lo} to {hi}"
+    );
+    Ok(value)
+}
+
+fn bag_options(a: &BagArgs) -> anyhow::Result<BagOptions> {
+    use handeye::formats::bag::{Motion, OffsetChoice, SelectOptions};
+    anyhow::ensure!(
+        (1.0..=16.0).contains(&a.decimation),
+        "--decimation {}: expected 1 to 16",
+        a.decimation
+    );
+    let offset = match a.time_offset.trim() {
+        "auto" => OffsetChoice::Estimate {
+            max_s: in_range("--max-offset", a.max_offset, 0.001, 5.0)?,
+        },
+        text => {
+            let s: f64 = text.parse().map_err(|_| {
+                anyhow::anyhow!("--time-offset `{text}`: expected seconds (e.g. 0.035) or `auto`")
+            })?;
+            OffsetChoice::Fixed(in_range("--time-offset", s, -5.0, 5.0)?)
+        }
+    };
+    let board = Target::load(&a.board)?;
+    Ok(BagOptions {
+        base_frame: a.base.clone(),
+        flange_frame: a.flange.clone(),
+        image_topic: a.image.clone(),
+        camera_info_topic: a.camera_info.clone(),
+        tf_topics: vec!["/tf".into(), "/tf_static".into()],
+        tf_static_topics: vec!["/tf_static".into()],
+        select: SelectOptions {
+            motion: if a.continuous {
+                Motion::Continuous {
+                    spacing_s: in_range("--spacing", a.spacing, 0.01, 60.0)?,
+                }
+            } else {
+                Motion::StopAndGo
+            },
+            window_s: in_range("--still-window", a.still_window, 0.01, 10.0)?,
+            max_speed_m_s: in_range("--max-speed-mm-s", a.max_speed_mm_s, 0.001, 1000.0)? * 1e-3,
+            max_speed_rad_s: in_range("--max-speed-deg-s", a.max_speed_deg_s, 0.001, 100.0)?
+                .to_radians(),
+            max_tf_gap_s: in_range("--max-tf-gap-ms", a.max_tf_gap_ms, 0.1, 10_000.0)? * 1e-3,
+            offset,
+        },
+        setup: a.setup.into(),
+        board,
+        detector: DetectorOptions {
+            decimation: a.decimation,
+            ..DetectorOptions::default()
+        },
+    })
+}
+
+/// What `import bag` records about itself in `<session>/import/bag-import.yaml`.
+#[derive(serde::Serialize)]
+struct BagImportRecord {
+    bag: PathBuf,
+    format: String,
+    image_topic: String,
+    images: usize,
+    time_offset_s: f64,
+    time_offset_estimated: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    time_offset_residual_mm: Option<f64>,
+    samples: Vec<BagSampleRecord>,
+    skipped: Vec<BagSkipRecord>,
+}
+
+#[derive(serde::Serialize)]
+struct BagSampleRecord {
+    frame: String,
+    image_stamp_s: f64,
+    robot_stamp_s: f64,
+    sharpness: f64,
+}
+
+#[derive(serde::Serialize)]
+struct BagSkipRecord {
+    image_stamp_s: f64,
+    reason: String,
+}
+
+/// Runs `import bag`: reads the bag, then runs its frames as a recorded cell into a staging
+/// folder next to the output and renames it into place when everything succeeded.
+fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
+    use handeye::session::{self, SessionFolder, SessionManifest};
+    let options = bag_options(&a)?;
+    let out = absolute(&a.output)?;
+    if out.exists() {
+        let empty = out.is_dir()
+            && std::fs::read_dir(&out)
+                .with_context(|| format!("reading {}", out.display()))?
+                .next()
+                .is_none();
+        anyhow::ensure!(
+            empty,
+            "{}: exists already; give a new session folder",
+            out.display()
+        );
+    }
+    let imported = import_bag(&a.bag, &options).context("importing a ROS 2 bag")?;
+    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
+    for s in &imported.skipped {
+        *kinds.entry(s.reason.kind()).or_default() += 1;
+    }
+    outln!(
+        "{} ({}): {} images on {}; {} frames taken; skipped: {}",
+        a.bag.display(),
+        imported.format,
+        imported.images,
+        a.image,
+        imported.samples.len(),
+        if kinds.is_empty() {
+            "none".to_string()
+        } else {
+            kinds
+                .iter()
+                .map(|(k, n)| format!("{n} {k}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    );
+    for s in imported
+        .skipped
+        .iter()
+        .filter(|s| s.reason.kind() == "tf gap")
+        .take(3)
+    {
+        outln!("  frame at {:.3} s: {}", s.stamp_ns as f64 * 1e-9, s.reason);
+    }
+    let o = &imported.offset;
+    if o.estimated {
+        outln!(
+            "camera-to-robot clock offset: {:+.2} ms (estimated from {} frames with the board; board position RMS {:.3} mm)",
+            o.offset_s * 1e3,
+            o.frames_used,
+            o.residual_mm.unwrap_or(f64::NAN)
+        );
+    } else if o.offset_s != 0.0 {
+        outln!(
+            "camera-to-robot clock offset: {:+.2} ms (given)",
+            o.offset_s * 1e3
+        );
+    }
+    anyhow::ensure!(
+        imported.samples.len() >= 3,
+        "{}: only {} usable frames (a calibration needs at least 3 views): {}",
+        a.bag.display(),
+        imported.samples.len(),
+        if a.continuous {
+            "check --image, the TF frames and --spacing"
+        } else {
+            "did the arm stop at each view? (--max-speed-mm-s, --still-window; or --continuous)"
+        }
+    );
+
+    // Stage everything next to the output; dropped (removed) on any error.
+    let parent = out
+        .parent()
+        .ok_or_else(|| anyhow::anyhow!("{}: has no parent folder", out.display()))?;
+    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
+    let staging = tempfile::Builder::new()
+        .prefix(&format!(".{name}.importing-"))
+        .tempdir_in(parent)
+        .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
+    let stage = staging.path().to_path_buf();
+    let folder = SessionFolder::create(&stage)?;
+    let import_dir = stage.join("import");
+    let images_dir = import_dir.join("images");
+    std::fs::create_dir_all(&images_dir)
+        .with_context(|| format!("creating {}", images_dir.display()))?;
+    let mut samples = Vec::new();
+    for (i, s) in imported.samples.iter().enumerate() {
+        let file = images_dir.join(format!("{i:03}.png"));
+        s.image
+            .save(&file)
+            .with_context(|| format!("writing {}", file.display()))?;
+        samples.push(BagSampleRecord {
+            frame: format!("import/images/{i:03}.png"),
+            image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
+            robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
+            sharpness: s.sharpness,
+        });
+    }
+    let poses: Vec<_> = imported
+        .samples
+        .iter()
+        .map(|s| s.base_from_flange)
+        .collect();
+    save_recorded_poses(&poses, &import_dir.join("poses.yaml"))?;
+    if let Some(camera) = &imported.camera {
+        camera.save_camera_info(&import_dir.join("camera_info.yaml"))?;
+    }
+    std::fs::copy(&a.board, import_dir.join("target.yaml"))
+        .with_context(|| format!("copying {}", a.board.display()))?;
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in &poses {
+        let t = p.translation.vector;
+        for k in 0..3 {
+            lo[k] = lo[k].min(t[k] - 0.5);
+            hi[k] = hi[k].max(t[k] + 0.5);
+        }
+    }
+    let setup: Setup = a.setup.into();
+    let (camera_key, target_key) = setup.unknown_names();
+    let identity = PoseYaml::from_pose(&handeye::geometry::Pose::identity());
+    let config = ConfigFile {
+        setup,
+        target: PathBuf::from("target.yaml"),
+        intrinsics: imported
+            .camera
+            .is_some()
+            .then(|| PathBuf::from("camera_info.yaml")),
+        robot: RobotConfig::Recorded {
+            poses: PathBuf::from("poses.yaml"),
+            repeatability_mm: None,
+            repeatability_deg: None,
+        },
+        camera: CameraConfig::Files {
+            folder: PathBuf::from("images"),
+        },
+        // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
+        nominal: BTreeMap::from([
+            (camera_key.to_string(), identity.clone()),
+            (target_key.to_string(), identity),
+        ]),
+        simulation: None,
+        plan: PlanConfig::default(),
+        limits: LimitsConfig::default(),
+        workspace: WorkspaceConfig { min: lo, max: hi },
+        detector: DetectorConfig {
+            decimate: a.decimation,
+            ..DetectorConfig::default()
+        },
+        solver: SolverConfig::default(),
+        session: SessionConfig {
+            settle_s: 0.0,
+            ..SessionConfig::default()
+        },
+        verdict: Default::default(),
+    };
+    let config_file = import_dir.join("cell.yaml");
+    config.save(
+        &config_file,
+        &format!(
+            "The recorded cell of the ROS 2 bag {} (written by `handeye import bag`)",
+            absolute(&a.bag)?.display()
+        ),
+    )?;
+    let mut cell = handeye::cell::prepare(&config_file).context("preparing the recorded cell")?;
+    if !cell.report.ok() {
+        anyhow::bail!(
+            "the frames taken from {} cannot calibrate:\n{}",
+            a.bag.display(),
+            cell.report
+        );
+    }
+    let start = cell.start_joints;
+    let plan = cell
+        .recheck_from(start)
+        .map_err(|report| anyhow::anyhow!("the recorded plan fails its checks:\n{report}"))?;
+    // The manifest names the files where they will be once the staging folder is renamed.
+    let final_path = |p: &Path| match p.strip_prefix(&stage) {
+        Ok(rel) => out.join(rel),
+        Err(_) => p.to_path_buf(),
+    };
+    let mut inputs = cell.inputs()?;
+    for input in &mut inputs {
+        input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
+    }
+    folder.write_manifest(
+        &SessionManifest::new(out.join("import").join("cell.yaml"), setup, &plan)
+            .with_inputs(inputs),
+    )?;
+    let mut hardware = cell.open_hardware().context("opening the recorded cell")?;
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let session_setup = cell.session_setup(folder.clone(), plan, stop);
+    let outcome = session::run_session(
+        session_setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_| {},
+    )?;
+    for (index, why) in &outcome.skipped {
+        outln!(
+            "  frame {index:03} ({:.3} s): board not found or rejected: {why}",
+            imported.samples[*index].image_stamp_ns as f64 * 1e-9
+        );
+    }
+    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
+    let record = BagImportRecord {
+        bag: absolute(&a.bag)?,
+        format: imported.format.to_string(),
+        image_topic: a.image.clone(),
+        images: imported.images,
+        time_offset_s: o.offset_s,
+        time_offset_estimated: o.estimated,
+        time_offset_residual_mm: o.residual_mm,
+        samples,
+        skipped: imported
+            .skipped
+            .iter()
+            .map(|s| BagSkipRecord {
+                image_stamp_s: s.stamp_ns as f64 * 1e-9,
+                reason: s.reason.to_string(),
+            })
+            .collect(),
+    };
+    let record_file = import_dir.join("bag-import.yaml");
+    let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
+    handeye::atomic_file::write_atomic(&record_file, text.as_bytes())
+        .with_context(|| format!("writing {}", record_file.display()))?;
+    drop(hardware);
+    drop(folder);
+    let staged = staging.keep();
+    if let Err(e) = std::fs::rename(&staged, &out) {
+        let _ = std::fs::remove_dir_all(&staged);
+        return Err(e).with_context(|| format!("moving the session into {}", out.display()));
+    }
+    outln!(
+        "session {}: {} samples accepted, {} skipped (board not found or rejected)",
+        out.display(),
+        outcome.accepted.len(),
+        outcome.skipped.len()
+    );
+    // The solve ran in the staging folder; name the session where it is now.
+    outln!(
+        "{}",
+        solved
+            .summary
+            .trim_end()
+            .replace(&*stage.to_string_lossy(), &out.to_string_lossy())
+    );
+    outln!(
+        "next: handeye report {0}   (or: handeye solve {0} --space reprojection, handeye replay {0})",
+        out.display()
+    );
+    Ok(())
 }
 
 fn sibling(output: &Path, suffix: &str) -> PathBuf {
@@ -386,6 +804,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             outputs.commit();
             Ok(())
         }
+        ImportFormat::Bag(a) => import_bag_session(a),
         ImportFormat::Moveit(a) => {
             let pairs = import_moveit_json(&a.file)?;
             save(

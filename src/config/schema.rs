@@ -32,7 +32,7 @@ pub struct ConfigFile {
     pub setup: Setup,
     /// Board spec file (relative to the config's folder).
     pub target: PathBuf,
-    /// Camera intrinsics file; absent: estimated from the run (sim camera only).
+    /// Camera intrinsics file; absent: estimated from the run (sim camera or recorded frames).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intrinsics: Option<PathBuf>,
     /// The arm.

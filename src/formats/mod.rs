@@ -4,6 +4,7 @@
 //! Sits beside `session`: it uses `geometry`, `solve`, `dataset`, `result`, `camera_model` and
 //! `target` (to detect boards in imported images), never a hardware backend.
 
+pub mod bag;
 pub mod export;
 pub mod import;
 

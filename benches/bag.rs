@@ -1,0 +1,323 @@
+//! Importing a 60 s ROS 2 bag with 30 fps 1280x720 `mono8` images (1.7 GB of pixels, MCAP
+//! without chunk compression, as rosbag2 writes by default) and 125 Hz TF: the whole
+//! `handeye import bag` command — reading, TF chaining, stationary detection and sharpness over
+//! every standing frame, then the recorded-cell session (detection of the 20 chosen frames) and
+//! the solve. Target: ≤ 10 s.
+//!
+//! The bag is written here with the `mcap` crate into a temporary folder (the integration tests
+//! use bags from the independent `rosbags` writer; this only needs the size). Frames while the arm
+//! moves are a blank image: they are rejected as moving before being decoded, as real ones would
+//! be.
+//!
+//! `cargo bench --bench bag -- --warm-up-time 1 --measurement-time 3`
+
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::Path;
+use std::process::Command;
+
+use criterion::Criterion;
+use nalgebra::{Point3, Vector3};
+use rand::SeedableRng;
+
+use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
+use handeye::camera_model::CameraModel;
+use handeye::formats::bag::tf::interpolate;
+use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::plan::lookat::LookAt;
+use handeye::vision::{Board, Target};
+
+#[path = "../tests/util/mod.rs"]
+mod util;
+
+/// Little-endian CDR (after the 4-byte encapsulation header).
+struct Cdr(Vec<u8>);
+
+impl Cdr {
+    fn new() -> Self {
+        Cdr(vec![0, 1, 0, 0])
+    }
+    fn align(&mut self, n: usize) {
+        while !(self.0.len() - 4).is_multiple_of(n) {
+            self.0.push(0);
+        }
+    }
+    fn u32(&mut self, v: u32) {
+        self.align(4);
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.align(8);
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn string(&mut self, s: &str) {
+        self.u32(s.len() as u32 + 1);
+        self.0.extend_from_slice(s.as_bytes());
+        self.0.push(0);
+    }
+    fn header(&mut self, ns: i64, frame: &str) {
+        self.u32((ns / 1_000_000_000) as u32);
+        self.u32((ns % 1_000_000_000) as u32);
+        self.string(frame);
+    }
+    fn pose(&mut self, p: &Pose) {
+        let (t, q) = (p.translation.vector, p.rotation.coords);
+        for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
+            self.f64(v);
+        }
+    }
+}
+
+fn write_bag(dir: &Path) -> std::path::PathBuf {
+    let repo = util::repo();
+    let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
+    let camera = CameraModel::load(&repo.join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    let flange_from_camera = pose_from_rotvec(
+        Vector3::new(0.0312, -0.0694, 0.0447),
+        Vector3::new(0.021, -0.016, 1.561),
+    );
+    let base_from_target = pose_from_rotvec(
+        Vector3::new(0.5034, -0.1467, 0.0021),
+        Vector3::new(0.012, -0.018, 0.297),
+    );
+    let centre = Point3::new(0.145, 0.145, 0.0);
+    let n = 20;
+    let views: Vec<Pose> = (0..n)
+        .map(|i| {
+            let look = LookAt {
+                distance: 0.6 + 0.05 * ((i % 3) as f64),
+                azimuth_deg: 360.0 * i as f64 / n as f64,
+                elevation_deg: 62.0 + 8.0 * ((i % 4) as f64),
+                roll_deg: -20.0 + 13.0 * ((i % 4) as f64),
+                board_in_image_deg: [0.0, 0.0],
+            };
+            base_from_target * look.target_from_camera(&centre) * flange_from_camera.inverse()
+        })
+        .collect();
+    let rays = PixelRays::new(&camera);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let frames: Vec<Vec<u8>> = views
+        .iter()
+        .map(|flange| {
+            let camera_from_target = (flange * flange_from_camera).inverse() * base_from_target;
+            render_with_rays(
+                &board,
+                &camera,
+                &rays,
+                &camera_from_target,
+                &RenderOptions::default(),
+                &mut rng,
+            )
+            .into_raw()
+        })
+        .collect();
+    let blank = vec![110u8; (camera.width * camera.height) as usize];
+    let (stay, travel) = (1.55, 1.5);
+    let at = |t: f64| -> (Pose, Option<usize>) {
+        let period = stay + travel;
+        let k = ((t / period).floor() as usize).min(n - 1);
+        let within = t - k as f64 * period;
+        if within <= stay || k + 1 >= n {
+            return (views[k], Some(k));
+        }
+        let s = (within - stay) / travel;
+        (
+            interpolate(&views[k], &views[k + 1], s * s * (3.0 - 2.0 * s)),
+            None,
+        )
+    };
+
+    let bag = dir.join("bag");
+    std::fs::create_dir_all(&bag).unwrap();
+    std::fs::write(
+        bag.join("metadata.yaml"),
+        "rosbag2_bagfile_information: {}\n",
+    )
+    .unwrap();
+    let file = std::fs::File::create(bag.join("bag_0.mcap")).unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .compression(None)
+        .profile("ros2")
+        .create(BufWriter::new(file))
+        .unwrap();
+    let mut channel = |topic: &str, ty: &str| {
+        let schema = w.add_schema(ty, "ros2msg", b"").unwrap();
+        w.add_channel(schema, topic, "cdr", &BTreeMap::new())
+            .unwrap()
+    };
+    let tf = channel("/tf", "tf2_msgs/msg/TFMessage");
+    let image = channel("/camera/image_raw", "sensor_msgs/msg/Image");
+    let info = channel("/camera/camera_info", "sensor_msgs/msg/CameraInfo");
+    let start: i64 = 1_700_000_000_000_000_000;
+    let mut events: Vec<(i64, u16, Vec<u8>)> = Vec::new();
+    let duration = 60.0;
+    for k in 0..=(duration * 125.0) as i64 {
+        let t = k as f64 / 125.0;
+        let mut m = Cdr::new();
+        m.u32(1);
+        m.header(start + (t * 1e9).round() as i64, "base");
+        m.string("tool0");
+        m.pose(&at(t).0);
+        events.push((start + (t * 1e9).round() as i64, tf, m.0));
+    }
+    let mut m = Cdr::new();
+    m.header(start, "camera");
+    m.u32(camera.height);
+    m.u32(camera.width);
+    m.string("plumb_bob");
+    let d = camera.distortion_coefficients();
+    m.u32(5);
+    for i in 0..5 {
+        m.f64(d.get(i).copied().unwrap_or(0.0));
+    }
+    for v in [
+        camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
+    ] {
+        m.f64(v);
+    }
+    for _ in 0..21 {
+        m.f64(0.0);
+    }
+    for _ in 0..6 {
+        m.u32(0);
+    }
+    m.0.push(0);
+    events.push((start, info, m.0));
+    for i in 0..(duration * 30.0) as i64 {
+        let t = i as f64 / 30.0;
+        let stamp = start + (t * 1e9).round() as i64;
+        let pixels = match at(t).1 {
+            Some(k) => &frames[k],
+            None => &blank,
+        };
+        let mut m = Cdr::new();
+        m.header(stamp, "camera");
+        m.u32(camera.height);
+        m.u32(camera.width);
+        m.string("mono8");
+        m.0.push(0);
+        m.u32(camera.width);
+        m.u32(pixels.len() as u32);
+        m.0.extend_from_slice(pixels);
+        events.push((stamp + 2_000_000, image, m.0));
+    }
+    events.sort_by_key(|e| e.0);
+    for (seq, (time, channel_id, data)) in events.into_iter().enumerate() {
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id,
+                sequence: seq as u32,
+                log_time: time as u64,
+                publish_time: time as u64,
+            },
+            &data,
+        )
+        .unwrap();
+    }
+    w.finish().unwrap();
+    bag
+}
+
+fn main() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path());
+    let size: u64 = std::fs::read_dir(&bag)
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.metadata().map(|m| m.len()).unwrap_or(0))
+        .sum();
+    println!("bag: {} ({:.2} GB)", bag.display(), size as f64 / 1e9);
+    let board = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
+    // The split, once: the library's part (read, TF, selection, decoding) and the whole command.
+    let options = handeye::formats::bag::BagOptions {
+        base_frame: "base".into(),
+        flange_frame: "tool0".into(),
+        image_topic: "/camera/image_raw".into(),
+        camera_info_topic: Some("/camera/camera_info".into()),
+        tf_topics: vec!["/tf".into(), "/tf_static".into()],
+        tf_static_topics: vec!["/tf_static".into()],
+        select: Default::default(),
+        setup: handeye::setup::Setup::EyeInHand,
+        board: Target::load(&board).unwrap(),
+        detector: Default::default(),
+    };
+    let started = std::time::Instant::now();
+    let imported = handeye::formats::bag::import_bag(&bag, &options).unwrap();
+    println!(
+        "library import_bag: {:.2} s ({} samples of {} images)",
+        started.elapsed().as_secs_f64(),
+        imported.samples.len(),
+        imported.images
+    );
+    drop(imported);
+    let started = std::time::Instant::now();
+    // Under GNU time when it is there: CPU seconds tell more than wall time on a shared machine.
+    let mut once = if Path::new("/usr/bin/time").exists() {
+        let mut c = Command::new("/usr/bin/time");
+        c.args([
+            "-f",
+            "GNU time: %e s wall, %U s user, %S s system, %M kB peak RSS",
+        ])
+        .arg(env!("CARGO_BIN_EXE_handeye"));
+        c
+    } else {
+        Command::new(env!("CARGO_BIN_EXE_handeye"))
+    };
+    let o = once
+        .args(["import", "bag"])
+        .arg(&bag)
+        .args([
+            "--image",
+            "/camera/image_raw",
+            "--camera-info",
+            "/camera/camera_info",
+            "--board",
+        ])
+        .arg(&board)
+        .arg("-o")
+        .arg(dir.path().join("session-once"))
+        .output()
+        .unwrap();
+    println!(
+        "whole command once: {:.2} s\n{}{}",
+        started.elapsed().as_secs_f64(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let mut run = 0;
+    let mut criterion = Criterion::default().configure_from_args().sample_size(10);
+    criterion.bench_function(
+        "import bag: 60 s, 30 fps 1280x720 mono8, to a solved session",
+        |b| {
+            b.iter(|| {
+                run += 1;
+                let out = dir.path().join(format!("session-{run}"));
+                let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
+                    .args(["import", "bag"])
+                    .arg(&bag)
+                    .args([
+                        "--base",
+                        "base",
+                        "--flange",
+                        "tool0",
+                        "--image",
+                        "/camera/image_raw",
+                    ])
+                    .args(["--camera-info", "/camera/camera_info", "--board"])
+                    .arg(&board)
+                    .arg("-o")
+                    .arg(&out)
+                    .output()
+                    .unwrap();
+                assert!(
+                    o.status.success(),
+                    "{}{}",
+                    String::from_utf8_lossy(&o.stdout),
+                    String::from_utf8_lossy(&o.stderr)
+                );
+                std::fs::remove_dir_all(&out).unwrap();
+            })
+        },
+    );
+    criterion.final_summary();
+}

@@ -1,0 +1,450 @@
+//! ROS 2 bags in, calibration samples out: `handeye import bag`.
+//!
+//! Reads both rosbag2 storage formats (MCAP, sqlite3 `.db3`) without a ROS installation, decodes
+//! `tf2_msgs/TFMessage`, `sensor_msgs/Image`, `sensor_msgs/CompressedImage` and
+//! `sensor_msgs/CameraInfo` with a small CDR reader, chains the TF tree from the base to the
+//! flange at each image stamp, and picks the frames to calibrate from: the sharpest frame of each
+//! interval where the arm stood still (stop-and-go), or frames at a fixed spacing while it moved
+//! (continuous, with the camera-to-robot clock offset given or estimated from the data). Every
+//! frame not taken is reported with why (moving, TF gap, ...).
+//!
+//! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
+//! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
+//! nothing.
+//!
+//! Submodules: `storage` (the two storage formats), `cdr` (message decoding), `tf` (the TF
+//! buffer), `image` (pixel encodings to grey), `select` (stationary intervals, sharpness, the
+//! clock offset). Depends on `geometry`, `setup`, `camera_model`, `solve` (the offset estimate)
+//! and `vision` (board detection for the offset estimate).
+
+pub mod cdr;
+pub mod image;
+pub mod select;
+pub mod storage;
+pub mod tf;
+
+use std::path::{Path, PathBuf};
+
+use ::image::GrayImage;
+
+use crate::camera_model::CameraModel;
+use crate::geometry::Pose;
+use crate::setup::Setup;
+use crate::vision::{DetectorOptions, Target};
+
+pub use cdr::CdrError;
+pub use select::{Motion, OffsetChoice, OffsetEstimate, SelectOptions, Skip, SkipReason};
+pub use storage::{BagFormat, TopicInfo};
+pub use tf::TfError;
+
+/// Why a bag could not be imported. Every message names the bag and the topic, frame or field.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// A file of the bag could not be read.
+    #[error("{}: cannot read", path.display())]
+    Read {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not a bag, or a damaged one.
+    #[error("{}: {problem}", path.display())]
+    Storage {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A topic asked for is not in the bag.
+    #[error("{}: no topic `{topic}` ({role}); the bag has: {}", path.display(), list(available))]
+    NoTopic {
+        /// The bag.
+        path: PathBuf,
+        /// The topic asked for.
+        topic: String,
+        /// What it was asked for (`--image`, `--camera-info`, TF).
+        role: &'static str,
+        /// The topics present, with their types.
+        available: Vec<String>,
+    },
+    /// A topic has a type this import cannot read in that role.
+    #[error("{}: topic `{topic}` is a {found}, expected {expected}", path.display())]
+    TopicType {
+        /// The bag.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// Its type.
+        found: String,
+        /// The types accepted.
+        expected: &'static str,
+    },
+    /// A message could not be decoded.
+    #[error("{}: topic `{topic}`, message {index} (stamp {stamp_ns} ns)", path.display())]
+    Message {
+        /// The bag.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// 0-based index among the topic's messages.
+        index: usize,
+        /// The bag's receive time of the message, ns.
+        stamp_ns: i64,
+        /// What was wrong.
+        #[source]
+        source: MessageError,
+    },
+    /// The TF tree cannot give `T_base_flange` at all (a frame is missing or not connected).
+    #[error("{}: TF", path.display())]
+    Tf {
+        /// The bag.
+        path: PathBuf,
+        /// What is missing.
+        #[source]
+        source: Box<TfError>,
+    },
+    /// The camera_info cannot become our camera model.
+    #[error("{}: topic `{topic}`: {problem}", path.display())]
+    CameraInfo {
+        /// The bag.
+        path: PathBuf,
+        /// The camera_info topic.
+        topic: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// No frame could be used.
+    #[error("{}: {problem}", path.display())]
+    NothingUsable {
+        /// The bag.
+        path: PathBuf,
+        /// Why, with the counts of skipped frames.
+        problem: String,
+    },
+    /// The clock offset could not be estimated.
+    #[error("{}: estimating the camera-to-robot clock offset: {problem}", path.display())]
+    Offset {
+        /// The bag.
+        path: PathBuf,
+        /// Why.
+        problem: String,
+    },
+}
+
+/// What was wrong with one message.
+#[derive(Debug, thiserror::Error)]
+pub enum MessageError {
+    /// Malformed CDR.
+    #[error(transparent)]
+    Cdr(#[from] CdrError),
+    /// Pixels that cannot be turned into a grey image.
+    #[error("{0}")]
+    Pixels(String),
+}
+
+fn list(items: &[String]) -> String {
+    if items.is_empty() {
+        "no topics".into()
+    } else {
+        items.join(", ")
+    }
+}
+
+/// How to import a bag.
+#[derive(Debug, Clone)]
+pub struct BagOptions {
+    /// The robot base frame (`base`, or `base_link`).
+    pub base_frame: String,
+    /// The flange frame (`tool0`, or `flange`).
+    pub flange_frame: String,
+    /// The image topic (`sensor_msgs/Image` or `sensor_msgs/CompressedImage`).
+    pub image_topic: String,
+    /// The camera_info topic; `None`: none (the intrinsics are estimated later).
+    pub camera_info_topic: Option<String>,
+    /// The TF topics (`/tf`, `/tf_static`).
+    pub tf_topics: Vec<String>,
+    /// The TF topics that hold static transforms.
+    pub tf_static_topics: Vec<String>,
+    /// Which frames to take and how.
+    pub select: SelectOptions,
+    /// Eye-in-hand or eye-to-hand (for the offset estimate's hand-eye solve).
+    pub setup: Setup,
+    /// The board (for the offset estimate).
+    pub board: Target,
+    /// Detector settings (for the offset estimate).
+    pub detector: DetectorOptions,
+}
+
+/// One frame chosen for calibration.
+#[derive(Debug, Clone)]
+pub struct BagSample {
+    /// The image's header stamp (camera clock), ns.
+    pub image_stamp_ns: i64,
+    /// The same instant on the robot (TF) clock, ns: `image_stamp_ns - offset`.
+    pub robot_stamp_ns: i64,
+    /// `T_base_flange` at `robot_stamp_ns`, interpolated.
+    pub base_from_flange: Pose,
+    /// The image, 8-bit grey.
+    pub image: GrayImage,
+    /// Variance of the Laplacian (higher is sharper).
+    pub sharpness: f64,
+}
+
+/// A bag imported.
+#[derive(Debug, Clone)]
+pub struct BagImport {
+    /// Which storage format it was.
+    pub format: BagFormat,
+    /// The chosen frames, in stamp order.
+    pub samples: Vec<BagSample>,
+    /// Every frame not chosen, with why.
+    pub skipped: Vec<Skip>,
+    /// Images on the image topic.
+    pub images: usize,
+    /// Intrinsics from camera_info, when a topic was given.
+    pub camera: Option<CameraModel>,
+    /// The camera-to-robot clock offset used (s), and how it was found.
+    pub offset: OffsetEstimate,
+}
+
+/// Reads a bag and picks the frames to calibrate from (see the module docs).
+pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
+    let bag = storage::Bag::open(path)?;
+    let mut wanted: Vec<String> = options.tf_topics.clone();
+    wanted.push(options.image_topic.clone());
+    if let Some(info) = &options.camera_info_topic {
+        wanted.push(info.clone());
+    }
+    let topics = bag.topics()?;
+    let find = |topic: &str, role: &'static str| -> Result<TopicInfo, BagError> {
+        topics
+            .iter()
+            .find(|t| t.name == topic)
+            .cloned()
+            .ok_or_else(|| BagError::NoTopic {
+                path: path.to_path_buf(),
+                topic: topic.to_string(),
+                role,
+                available: topics
+                    .iter()
+                    .map(|t| format!("{} ({}, {} messages)", t.name, t.type_name, t.count))
+                    .collect(),
+            })
+    };
+    let image_topic = find(&options.image_topic, "--image")?;
+    let compressed = match image_topic.type_name.as_str() {
+        "sensor_msgs/msg/Image" => false,
+        "sensor_msgs/msg/CompressedImage" => true,
+        other => {
+            return Err(BagError::TopicType {
+                path: path.to_path_buf(),
+                topic: image_topic.name.clone(),
+                found: other.to_string(),
+                expected: "sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage",
+            })
+        }
+    };
+    let info_topic = options
+        .camera_info_topic
+        .as_deref()
+        .map(|t| find(t, "--camera-info"))
+        .transpose()?;
+    if let Some(info) = &info_topic {
+        expect_type(path, info, "sensor_msgs/msg/CameraInfo")?;
+    }
+    // TF topics: at least one must exist; a missing /tf_static is normal (it may be in /tf).
+    let tf_present: Vec<&TopicInfo> = options
+        .tf_topics
+        .iter()
+        .filter_map(|name| topics.iter().find(|t| &t.name == name))
+        .collect();
+    if tf_present.is_empty() {
+        find(
+            options.tf_topics.first().map_or("/tf", |s| s.as_str()),
+            "TF",
+        )?;
+    }
+    for t in &tf_present {
+        expect_type(path, t, "tf2_msgs/msg/TFMessage")?;
+    }
+
+    let messages = bag.read(&wanted)?;
+    let mut buffer = tf::TfBuffer::default();
+    let mut images = Vec::new();
+    let mut infos = Vec::new();
+    let mut per_topic: std::collections::HashMap<&str, usize> = Default::default();
+    for m in &messages {
+        let index = {
+            let n = per_topic.entry(m.topic.as_str()).or_default();
+            *n += 1;
+            *n - 1
+        };
+        let wrap = |source: MessageError| BagError::Message {
+            path: path.to_path_buf(),
+            topic: m.topic.clone(),
+            index,
+            stamp_ns: m.log_time_ns,
+            source,
+        };
+        if m.topic == options.image_topic {
+            images.push((m, index));
+        } else if Some(&m.topic) == options.camera_info_topic.as_ref() {
+            infos.push(cdr::decode_camera_info(&m.data).map_err(|e| wrap(e.into()))?);
+        } else {
+            let is_static = options.tf_static_topics.contains(&m.topic);
+            for t in cdr::decode_tf_message(&m.data).map_err(|e| wrap(e.into()))? {
+                buffer.add(t, is_static);
+            }
+        }
+    }
+    buffer.finish();
+    // The frames must be in the tree and connected before any frame is looked at.
+    buffer
+        .check_chain(&options.base_frame, &options.flange_frame)
+        .map_err(|source| BagError::Tf {
+            path: path.to_path_buf(),
+            source: Box::new(source),
+        })?;
+    let camera = match (&info_topic, infos.first()) {
+        (Some(t), None) => {
+            return Err(BagError::CameraInfo {
+                path: path.to_path_buf(),
+                topic: t.name.clone(),
+                problem: "no message".into(),
+            })
+        }
+        (Some(t), Some(info)) => {
+            Some(
+                camera_from_info(info).map_err(|problem| BagError::CameraInfo {
+                    path: path.to_path_buf(),
+                    topic: t.name.clone(),
+                    problem,
+                })?,
+            )
+        }
+        (None, _) => None,
+    };
+    let decoded = images
+        .iter()
+        .map(|(m, index)| {
+            let header = if compressed {
+                cdr::decode_compressed_image(&m.data).map(|c| c.stamp_ns)
+            } else {
+                cdr::decode_image(&m.data).map(|c| c.stamp_ns)
+            };
+            header
+                .map(|stamp| select::ImageRef {
+                    stamp_ns: stamp,
+                    data: &m.data,
+                    compressed,
+                })
+                .map_err(|e| BagError::Message {
+                    path: path.to_path_buf(),
+                    topic: m.topic.clone(),
+                    index: *index,
+                    stamp_ns: m.log_time_ns,
+                    source: e.into(),
+                })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let selected = select::select(path, &decoded, &buffer, camera.as_ref(), options)?;
+    if let (Some(camera), Some(first)) = (&camera, selected.samples.first()) {
+        if (first.image.width(), first.image.height()) != (camera.width, camera.height) {
+            return Err(BagError::CameraInfo {
+                path: path.to_path_buf(),
+                topic: info_topic.map(|t| t.name).unwrap_or_default(),
+                problem: format!(
+                    "{}x{} px, but the images on `{}` are {}x{} px",
+                    camera.width,
+                    camera.height,
+                    options.image_topic,
+                    first.image.width(),
+                    first.image.height()
+                ),
+            });
+        }
+    }
+    Ok(BagImport {
+        format: bag.format(),
+        samples: selected.samples,
+        skipped: selected.skipped,
+        images: decoded.len(),
+        camera,
+        offset: selected.offset,
+    })
+}
+
+fn expect_type(path: &Path, topic: &TopicInfo, expected: &'static str) -> Result<(), BagError> {
+    if topic.type_name == expected {
+        Ok(())
+    } else {
+        Err(BagError::TopicType {
+            path: path.to_path_buf(),
+            topic: topic.name.clone(),
+            found: topic.type_name.clone(),
+            expected,
+        })
+    }
+}
+
+/// Our camera model from a `sensor_msgs/CameraInfo` (`plumb_bob` or no distortion; binning and
+/// ROI must be off, since the images would then not be the calibrated size).
+pub fn camera_from_info(info: &cdr::CameraInfo) -> Result<CameraModel, String> {
+    use crate::camera_model::Distortion;
+    let binned = |b: u32| b > 1;
+    if binned(info.binning.0) || binned(info.binning.1) {
+        return Err(format!(
+            "binning {}x{} is not supported (calibrate at full resolution)",
+            info.binning.0, info.binning.1
+        ));
+    }
+    if info.roi[2] != 0
+        && info.roi[3] != 0
+        && (info.roi[2], info.roi[3]) != (info.height, info.width)
+    {
+        return Err(format!(
+            "a region of interest ({}x{} at {}, {}) is not supported",
+            info.roi[3], info.roi[2], info.roi[0], info.roi[1]
+        ));
+    }
+    let distortion = match (info.distortion_model.as_str(), info.d.as_slice()) {
+        (_, []) => Distortion::None,
+        ("plumb_bob", d) if d.len() == 5 || d.len() == 4 => Distortion::RadTan {
+            k1: d[0],
+            k2: d[1],
+            p1: d[2],
+            p2: d[3],
+            k3: d.get(4).copied().unwrap_or(0.0),
+        },
+        ("plumb_bob", d) => {
+            return Err(format!(
+                "distortion_model plumb_bob with {} coefficients, expected 5 (k1, k2, p1, p2, k3)",
+                d.len()
+            ))
+        }
+        (other, _) => {
+            return Err(format!(
+                "distortion_model `{other}` is not supported (only plumb_bob); give the intrinsics without --camera-info so they are estimated"
+            ))
+        }
+    };
+    let k = info.k;
+    let model = CameraModel {
+        width: info.width,
+        height: info.height,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        distortion,
+    };
+    if k[1] != 0.0 {
+        return Err(format!("skew K[0][1] = {} is not supported", k[1]));
+    }
+    model
+        .validate(Path::new("camera_info"))
+        .map_err(|e| format!("K {:?}, D {:?}: {e}", k, info.d))?;
+    Ok(model)
+}

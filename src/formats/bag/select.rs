@@ -1,0 +1,468 @@
+//! Which frames of the image stream become samples, and at which robot time.
+//!
+//! The camera and the robot stamp with different clocks: `offset = camera stamp − robot stamp`
+//! of the same instant, so an image stamped `t` was taken when TF says `t − offset`.
+//!
+//! * Stop-and-go: a frame is *stationary* when, over `window` around its robot time, the flange
+//!   moved slower than both speed thresholds (`T_base_flange` at `t − w/2`, `t`, `t + w/2`).
+//!   Consecutive stationary frames form an interval; its sharpest frame (variance of the
+//!   Laplacian) is the sample, the others are reported as not the sharpest.
+//! * Continuous: every frame at least `spacing` after the previous sample is a sample. The
+//!   offset matters there (the flange moves), so it can be estimated: the board is detected in
+//!   those frames with the camera_info intrinsics, and the offset is the one whose pose pairs fit
+//!   a hand-eye calibration best (closed-form solve, residual of the predicted board positions),
+//!   found on a 5 ms grid over `±max` and refined by golden-section search to 0.05 ms.
+//!
+//! Frames whose TF lookup fails (a TF gap, or outside the TF stream) are skipped with the reason.
+
+use std::path::Path;
+
+use ::image::GrayImage;
+
+use crate::camera_model::CameraModel;
+use crate::geometry::Pose;
+use crate::setup::PosePair;
+use crate::solve::{solve, Method, SolveOptions};
+use crate::vision::{estimate_board_pose, TargetDetector};
+
+use super::cdr;
+use super::image::{compressed_to_gray, raw_to_gray, sharpness};
+use super::tf::TfBuffer;
+use super::{BagError, BagOptions, BagSample};
+
+/// How the arm moved while the bag was recorded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Motion {
+    /// It stopped at each view: one sample per stationary interval.
+    StopAndGo,
+    /// It moved continuously: one sample every `spacing_s` seconds.
+    Continuous {
+        /// Seconds between samples.
+        spacing_s: f64,
+    },
+}
+
+/// The camera-to-robot clock offset: given, or estimated from the data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum OffsetChoice {
+    /// A known offset, s (camera stamp − robot stamp).
+    Fixed(f64),
+    /// Estimated within `±max_s` (continuous motion and intrinsics needed).
+    Estimate {
+        /// The search range, s.
+        max_s: f64,
+    },
+}
+
+/// How frames are chosen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SelectOptions {
+    /// Stop-and-go or continuous.
+    pub motion: Motion,
+    /// The window over which a frame must be still, s.
+    pub window_s: f64,
+    /// Largest flange speed still counted as standing, m/s.
+    pub max_speed_m_s: f64,
+    /// Largest flange rotation speed still counted as standing, rad/s.
+    pub max_speed_rad_s: f64,
+    /// Largest spacing of two TF samples to interpolate between, s.
+    pub max_tf_gap_s: f64,
+    /// The clock offset.
+    pub offset: OffsetChoice,
+}
+
+impl Default for SelectOptions {
+    fn default() -> Self {
+        SelectOptions {
+            motion: Motion::StopAndGo,
+            window_s: 0.2,
+            max_speed_m_s: 0.002,
+            max_speed_rad_s: 0.2f64.to_radians(),
+            max_tf_gap_s: 0.1,
+            offset: OffsetChoice::Fixed(0.0),
+        }
+    }
+}
+
+/// Why a frame was not taken.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SkipReason {
+    /// The flange moved (speeds over the window).
+    Moving {
+        /// mm/s.
+        speed_mm_s: f64,
+        /// deg/s.
+        speed_deg_s: f64,
+    },
+    /// The TF chain could not be looked up at its time.
+    TfGap(String),
+    /// Stationary, but another frame of its interval is sharper.
+    NotSharpest,
+    /// Continuous mode: too close to the previous sample.
+    BetweenSamples,
+}
+
+impl std::fmt::Display for SkipReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SkipReason::Moving {
+                speed_mm_s,
+                speed_deg_s,
+            } => write!(f, "moving ({speed_mm_s:.2} mm/s, {speed_deg_s:.3} deg/s)"),
+            SkipReason::TfGap(why) => write!(f, "{why}"),
+            SkipReason::NotSharpest => f.write_str("not the sharpest of its stationary interval"),
+            SkipReason::BetweenSamples => f.write_str("between samples"),
+        }
+    }
+}
+
+impl SkipReason {
+    /// A short name for counting (`moving`, `tf gap`, ...).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SkipReason::Moving { .. } => "moving",
+            SkipReason::TfGap(_) => "tf gap",
+            SkipReason::NotSharpest => "not sharpest",
+            SkipReason::BetweenSamples => "between samples",
+        }
+    }
+}
+
+/// A frame not taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skip {
+    /// Its header stamp (camera clock), ns.
+    pub stamp_ns: i64,
+    /// Why.
+    pub reason: SkipReason,
+}
+
+/// The offset used.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OffsetEstimate {
+    /// camera stamp − robot stamp, s.
+    pub offset_s: f64,
+    /// Whether it was estimated (else given).
+    pub estimated: bool,
+    /// Frames with a board pose the estimate used.
+    pub frames_used: usize,
+    /// RMS of the predicted board positions at the offset, mm (estimate only).
+    pub residual_mm: Option<f64>,
+}
+
+/// An image message not decoded yet.
+pub(crate) struct ImageRef<'a> {
+    pub(crate) stamp_ns: i64,
+    pub(crate) data: &'a [u8],
+    pub(crate) compressed: bool,
+}
+
+pub(crate) struct Selected {
+    pub(crate) samples: Vec<BagSample>,
+    pub(crate) skipped: Vec<Skip>,
+    pub(crate) offset: OffsetEstimate,
+}
+
+fn decode(
+    path: &Path,
+    topic: &str,
+    index: usize,
+    image: &ImageRef<'_>,
+) -> Result<GrayImage, BagError> {
+    let wrap = |source: super::MessageError| BagError::Message {
+        path: path.to_path_buf(),
+        topic: topic.to_string(),
+        index,
+        stamp_ns: image.stamp_ns,
+        source,
+    };
+    if image.compressed {
+        let c = cdr::decode_compressed_image(image.data).map_err(|e| wrap(e.into()))?;
+        compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
+    } else {
+        let r = cdr::decode_image(image.data).map_err(|e| wrap(e.into()))?;
+        raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
+    }
+}
+
+fn seconds_to_ns(s: f64) -> i64 {
+    (s * 1e9).round() as i64
+}
+
+/// Picks the frames (see the module docs).
+pub(crate) fn select(
+    path: &Path,
+    images: &[ImageRef<'_>],
+    tf: &TfBuffer,
+    camera: Option<&CameraModel>,
+    options: &BagOptions,
+) -> Result<Selected, BagError> {
+    let o = &options.select;
+    let mut tf = tf.clone();
+    tf.set_max_gap_ns(seconds_to_ns(o.max_tf_gap_s));
+    let mut order: Vec<usize> = (0..images.len()).collect();
+    order.sort_by_key(|&i| images[i].stamp_ns);
+    let lookup = |robot_ns: i64| tf.lookup(&options.base_frame, &options.flange_frame, robot_ns);
+    let topic = options.image_topic.as_str();
+
+    let offset = match (o.offset, o.motion) {
+        (OffsetChoice::Fixed(s), _) => OffsetEstimate {
+            offset_s: s,
+            estimated: false,
+            frames_used: 0,
+            residual_mm: None,
+        },
+        (OffsetChoice::Estimate { .. }, Motion::StopAndGo) => {
+            return Err(BagError::Offset {
+                path: path.to_path_buf(),
+                problem: "needs continuous motion (--continuous): frames taken while the arm stands still do not depend on the offset".into(),
+            })
+        }
+        (OffsetChoice::Estimate { max_s }, Motion::Continuous { spacing_s }) => {
+            let camera = camera.ok_or_else(|| BagError::Offset {
+                path: path.to_path_buf(),
+                problem: "needs the intrinsics (--camera-info) to measure board poses".into(),
+            })?;
+            estimate_offset(path, images, &order, &tf, camera, options, spacing_s, max_s)?
+        }
+    };
+    let offset_ns = seconds_to_ns(offset.offset_s);
+    let mut samples = Vec::new();
+    let mut skipped = Vec::new();
+    match o.motion {
+        Motion::Continuous { spacing_s } => {
+            let spacing = seconds_to_ns(spacing_s);
+            let mut last: Option<i64> = None;
+            for &i in &order {
+                let image = &images[i];
+                if last.is_some_and(|l| image.stamp_ns - l < spacing) {
+                    skipped.push(Skip {
+                        stamp_ns: image.stamp_ns,
+                        reason: SkipReason::BetweenSamples,
+                    });
+                    continue;
+                }
+                let robot = image.stamp_ns - offset_ns;
+                match lookup(robot) {
+                    Ok(base_from_flange) => {
+                        let gray = decode(path, topic, i, image)?;
+                        last = Some(image.stamp_ns);
+                        samples.push(BagSample {
+                            image_stamp_ns: image.stamp_ns,
+                            robot_stamp_ns: robot,
+                            base_from_flange,
+                            sharpness: sharpness(&gray),
+                            image: gray,
+                        });
+                    }
+                    Err(e) => skipped.push(Skip {
+                        stamp_ns: image.stamp_ns,
+                        reason: SkipReason::TfGap(e.to_string()),
+                    }),
+                }
+            }
+        }
+        Motion::StopAndGo => {
+            let half = seconds_to_ns(o.window_s / 2.0);
+            let h = o.window_s / 2.0;
+            // Each frame: Some(pose) when stationary; intervals are runs of stationary frames.
+            let mut interval: Vec<(usize, Pose)> = Vec::new();
+            let close = |interval: &mut Vec<(usize, Pose)>,
+                         samples: &mut Vec<BagSample>,
+                         skipped: &mut Vec<Skip>|
+             -> Result<(), BagError> {
+                let mut best: Option<BagSample> = None;
+                for (i, pose) in interval.drain(..) {
+                    let image = &images[i];
+                    let gray = decode(path, topic, i, image)?;
+                    let candidate = BagSample {
+                        image_stamp_ns: image.stamp_ns,
+                        robot_stamp_ns: image.stamp_ns - offset_ns,
+                        base_from_flange: pose,
+                        sharpness: sharpness(&gray),
+                        image: gray,
+                    };
+                    match &best {
+                        Some(b) if b.sharpness >= candidate.sharpness => skipped.push(Skip {
+                            stamp_ns: candidate.image_stamp_ns,
+                            reason: SkipReason::NotSharpest,
+                        }),
+                        _ => {
+                            if let Some(b) = best.replace(candidate) {
+                                skipped.push(Skip {
+                                    stamp_ns: b.image_stamp_ns,
+                                    reason: SkipReason::NotSharpest,
+                                });
+                            }
+                        }
+                    }
+                }
+                samples.extend(best);
+                Ok(())
+            };
+            for &i in &order {
+                let image = &images[i];
+                let robot = image.stamp_ns - offset_ns;
+                let poses = lookup(robot - half)
+                    .and_then(|a| Ok((a, lookup(robot)?, lookup(robot + half)?)));
+                let reason = match poses {
+                    Err(e) => SkipReason::TfGap(e.to_string()),
+                    Ok((a, b, c)) => {
+                        let v = (a.translation.vector - b.translation.vector)
+                            .norm()
+                            .max((b.translation.vector - c.translation.vector).norm())
+                            / h;
+                        let w = a
+                            .rotation
+                            .angle_to(&b.rotation)
+                            .max(b.rotation.angle_to(&c.rotation))
+                            / h;
+                        if v <= o.max_speed_m_s && w <= o.max_speed_rad_s {
+                            interval.push((i, b));
+                            continue;
+                        }
+                        SkipReason::Moving {
+                            speed_mm_s: v * 1e3,
+                            speed_deg_s: w.to_degrees(),
+                        }
+                    }
+                };
+                close(&mut interval, &mut samples, &mut skipped)?;
+                skipped.push(Skip {
+                    stamp_ns: image.stamp_ns,
+                    reason,
+                });
+            }
+            close(&mut interval, &mut samples, &mut skipped)?;
+        }
+    }
+    skipped.sort_by_key(|s| s.stamp_ns);
+    samples.sort_by_key(|s| s.image_stamp_ns);
+    Ok(Selected {
+        samples,
+        skipped,
+        offset,
+    })
+}
+
+/// The offset whose pose pairs fit a hand-eye calibration best (module docs).
+#[allow(clippy::too_many_arguments)]
+fn estimate_offset(
+    path: &Path,
+    images: &[ImageRef<'_>],
+    order: &[usize],
+    tf: &TfBuffer,
+    camera: &CameraModel,
+    options: &BagOptions,
+    spacing_s: f64,
+    max_s: f64,
+) -> Result<OffsetEstimate, BagError> {
+    let fail = |problem: String| BagError::Offset {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let detector = TargetDetector::spawn(&options.board, options.detector.clone())
+        .map_err(|e| fail(format!("starting the detector: {e}")))?;
+    let max_ns = seconds_to_ns(max_s);
+    let spacing = seconds_to_ns(spacing_s);
+    let lookup = |ns: i64| tf.lookup(&options.base_frame, &options.flange_frame, ns);
+    // Frames whose TF is there for every offset tried, with their board pose.
+    let mut measured: Vec<(i64, Pose)> = Vec::new();
+    let mut last: Option<i64> = None;
+    for &i in order {
+        let image = &images[i];
+        if last.is_some_and(|l| image.stamp_ns - l < spacing) {
+            continue;
+        }
+        if lookup(image.stamp_ns - max_ns).is_err() || lookup(image.stamp_ns + max_ns).is_err() {
+            continue;
+        }
+        last = Some(image.stamp_ns);
+        let gray = decode(path, &options.image_topic, i, image)?;
+        if let Ok(pose) = detector
+            .detect(&gray)
+            .and_then(|d| estimate_board_pose(&options.board, camera, &d))
+        {
+            measured.push((image.stamp_ns, pose.camera_from_target));
+        }
+    }
+    if measured.len() < 6 {
+        return Err(fail(format!(
+            "only {} frames with the board and TF within ±{max_s} s; at least 6 are needed",
+            measured.len()
+        )));
+    }
+    let solve_options = SolveOptions {
+        method: Method::ClosedForm,
+        drop_outliers: false,
+        covariance: false,
+        check_conventions: false,
+        ..SolveOptions::default()
+    };
+    // Mean squared miss of the predicted board positions (m²) at an offset (s).
+    let cost = |offset_s: f64| -> f64 {
+        let offset = seconds_to_ns(offset_s);
+        let pairs: Option<Vec<PosePair>> = measured
+            .iter()
+            .map(|(stamp, camera_from_target)| {
+                lookup(stamp - offset)
+                    .ok()
+                    .map(|a| PosePair::new(a, *camera_from_target))
+            })
+            .collect();
+        let Some(pairs) = pairs else {
+            return f64::INFINITY;
+        };
+        match solve(options.setup, &pairs, &solve_options) {
+            Ok(c) => {
+                pairs
+                    .iter()
+                    .map(|p| {
+                        let predicted = c.predict_camera_from_target(&p.base_from_flange);
+                        (predicted.translation.vector - p.camera_from_target.translation.vector)
+                            .norm_squared()
+                    })
+                    .sum::<f64>()
+                    / pairs.len() as f64
+            }
+            Err(_) => f64::INFINITY,
+        }
+    };
+    let step = 0.005;
+    let n = (max_s / step).ceil() as i64;
+    let (mut best, mut best_cost) = (0.0, f64::INFINITY);
+    for k in -n..=n {
+        let s = (k as f64 * step).clamp(-max_s, max_s);
+        let c = cost(s);
+        if c < best_cost {
+            (best, best_cost) = (s, c);
+        }
+    }
+    if !best_cost.is_finite() {
+        return Err(fail("no offset in the range gives a hand-eye solve".into()));
+    }
+    // Golden-section refinement around the best grid point.
+    let (mut a, mut b) = ((best - step).max(-max_s), (best + step).min(max_s));
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
+    let (mut f1, mut f2) = (cost(x1), cost(x2));
+    while b - a > 5e-5 {
+        if f1 < f2 {
+            (b, x2, f2) = (x2, x1, f1);
+            x1 = b - g * (b - a);
+            f1 = cost(x1);
+        } else {
+            (a, x1, f1) = (x1, x2, f2);
+            x2 = a + g * (b - a);
+            f2 = cost(x2);
+        }
+    }
+    let offset_s = (a + b) / 2.0;
+    let residual = cost(offset_s);
+    Ok(OffsetEstimate {
+        offset_s,
+        estimated: true,
+        frames_used: measured.len(),
+        residual_mm: Some(residual.sqrt() * 1e3),
+    })
+}

@@ -1,0 +1,427 @@
+//! The two rosbag2 storage formats: MCAP (`mcap` crate) and sqlite3 `.db3` (`rusqlite`). A bag
+//! is a folder holding `metadata.yaml` and its storage files, or one storage file given directly;
+//! the format follows from the files' extension (and, for a file of another name, its first
+//! bytes). Only the topics asked for are read; messages come back in receive-time order.
+//!
+//! A damaged file is refused with its name: an MCAP file that ends early (no footer, or a record
+//! cut short) and an SQLite file shorter than its header says.
+
+use std::path::{Path, PathBuf};
+
+use super::BagError;
+
+/// Which storage a bag uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BagFormat {
+    /// MCAP (`.mcap`), the default since ROS 2 Iron.
+    Mcap,
+    /// sqlite3 (`.db3`), the default before.
+    Sqlite3,
+}
+
+impl std::fmt::Display for BagFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BagFormat::Mcap => "mcap",
+            BagFormat::Sqlite3 => "sqlite3",
+        })
+    }
+}
+
+/// A topic of a bag.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicInfo {
+    /// `/tf`, `/camera/image_raw`, ...
+    pub name: String,
+    /// `tf2_msgs/msg/TFMessage`, ...
+    pub type_name: String,
+    /// Messages on it.
+    pub count: usize,
+}
+
+/// One message read from a bag: borrowed from the MCAP file's bytes where its chunk is not
+/// compressed (no copy of gigabytes of images), owned otherwise.
+#[derive(Debug, Clone)]
+pub struct BagMessage<'a> {
+    /// Its topic.
+    pub topic: String,
+    /// When the recorder received it, ns.
+    pub log_time_ns: i64,
+    /// The serialised (CDR) message.
+    pub data: std::borrow::Cow<'a, [u8]>,
+}
+
+/// An opened bag: its storage files and format.
+#[derive(Debug)]
+pub struct Bag {
+    files: Vec<PathBuf>,
+    format: BagFormat,
+    /// The MCAP files' bytes, read once (empty for sqlite3).
+    mcap: Vec<Vec<u8>>,
+}
+
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+
+impl Bag {
+    /// Opens a bag folder (with `metadata.yaml`) or a single `.mcap`/`.db3` file.
+    pub fn open(path: &Path) -> Result<Bag, BagError> {
+        let storage = |problem: String| BagError::Storage {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let meta = std::fs::metadata(path).map_err(|source| BagError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let files = if meta.is_dir() {
+            if !path.join("metadata.yaml").is_file() {
+                return Err(storage(
+                    "a folder without metadata.yaml is not a rosbag2 bag".into(),
+                ));
+            }
+            let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+                .map_err(|source| BagError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })?
+                .filter_map(Result::ok)
+                .map(|e| e.path())
+                .filter(|p| {
+                    matches!(
+                        p.extension().and_then(|e| e.to_str()),
+                        Some("mcap" | "db3" | "zstd")
+                    )
+                })
+                .collect();
+            files.sort_by(|a, b| {
+                crate::camera::files::natural_cmp(&a.to_string_lossy(), &b.to_string_lossy())
+            });
+            if files.is_empty() {
+                return Err(storage(
+                    "no .mcap or .db3 storage file in the bag folder".into(),
+                ));
+            }
+            files
+        } else {
+            vec![path.to_path_buf()]
+        };
+        let mut format = None;
+        for file in &files {
+            let this = file_format(file)?;
+            if format.is_some_and(|f| f != this) {
+                return Err(storage("the bag mixes MCAP and sqlite3 files".into()));
+            }
+            format = Some(this);
+        }
+        let format = format.ok_or_else(|| storage("no storage file".into()))?;
+        let mut mcap = Vec::new();
+        if format == BagFormat::Mcap {
+            for file in &files {
+                let bytes = read_file(file)?;
+                mcap_check_complete(file, &bytes)?;
+                mcap.push(bytes);
+            }
+        }
+        Ok(Bag {
+            files,
+            format,
+            mcap,
+        })
+    }
+
+    /// The storage format.
+    pub fn format(&self) -> BagFormat {
+        self.format
+    }
+
+    /// The topics with their types and message counts, in name order.
+    pub fn topics(&self) -> Result<Vec<TopicInfo>, BagError> {
+        let mut all: Vec<TopicInfo> = Vec::new();
+        for (i, file) in self.files.iter().enumerate() {
+            let found = match self.format {
+                BagFormat::Mcap => mcap_topics(file, &self.mcap[i])?,
+                BagFormat::Sqlite3 => sqlite_topics(file)?,
+            };
+            for t in found {
+                match all.iter_mut().find(|a| a.name == t.name) {
+                    Some(a) => a.count += t.count,
+                    None => all.push(t),
+                }
+            }
+        }
+        all.sort_by(|a, b| a.name.cmp(&b.name));
+        Ok(all)
+    }
+
+    /// Every message on `topics`, in receive-time order.
+    pub fn read(&self, topics: &[String]) -> Result<Vec<BagMessage<'_>>, BagError> {
+        let mut out = Vec::new();
+        for (i, file) in self.files.iter().enumerate() {
+            match self.format {
+                BagFormat::Mcap => mcap_read(file, &self.mcap[i], topics, &mut out)?,
+                BagFormat::Sqlite3 => sqlite_read(file, topics, &mut out)?,
+            }
+        }
+        out.sort_by_key(|m| m.log_time_ns);
+        Ok(out)
+    }
+}
+
+fn file_format(file: &Path) -> Result<BagFormat, BagError> {
+    let storage = |problem: String| BagError::Storage {
+        path: file.to_path_buf(),
+        problem,
+    };
+    match file.extension().and_then(|e| e.to_str()) {
+        Some("zstd") => {
+            return Err(storage(
+                "a file-compressed bag: decompress it first (`ros2 bag convert`)".into(),
+            ))
+        }
+        Some("mcap") => return Ok(BagFormat::Mcap),
+        Some("db3") => return Ok(BagFormat::Sqlite3),
+        _ => {}
+    }
+    use std::io::Read;
+    let mut head = [0u8; 16];
+    let n = std::fs::File::open(file)
+        .and_then(|mut f| f.read(&mut head))
+        .map_err(|source| BagError::Read {
+            path: file.to_path_buf(),
+            source,
+        })?;
+    if head[..n].starts_with(MCAP_MAGIC) {
+        Ok(BagFormat::Mcap)
+    } else if head[..n].starts_with(SQLITE_MAGIC) {
+        Ok(BagFormat::Sqlite3)
+    } else {
+        Err(storage(
+            "neither an MCAP nor an sqlite3 file (a rosbag2 bag is a folder with metadata.yaml, or its .mcap/.db3 file)".into(),
+        ))
+    }
+}
+
+fn read_file(file: &Path) -> Result<Vec<u8>, BagError> {
+    std::fs::read(file).map_err(|source| BagError::Read {
+        path: file.to_path_buf(),
+        source,
+    })
+}
+
+fn mcap_error(file: &Path, e: mcap::McapError) -> BagError {
+    BagError::Storage {
+        path: file.to_path_buf(),
+        problem: format!("damaged or truncated MCAP file: {e}"),
+    }
+}
+
+fn mcap_check_complete(file: &Path, bytes: &[u8]) -> Result<(), BagError> {
+    if bytes.len() < 2 * MCAP_MAGIC.len() || !bytes.ends_with(MCAP_MAGIC) {
+        return Err(BagError::Storage {
+            path: file.to_path_buf(),
+            problem: format!(
+                "truncated MCAP file: {} bytes without the closing magic (the recording did not finish or the copy is cut short)",
+                bytes.len()
+            ),
+        });
+    }
+    Ok(())
+}
+
+fn mcap_type(channel: &mcap::Channel<'_>) -> String {
+    channel
+        .schema
+        .as_ref()
+        .map(|s| s.name.clone())
+        .unwrap_or_else(|| "(no schema)".into())
+}
+
+fn mcap_topics(file: &Path, bytes: &[u8]) -> Result<Vec<TopicInfo>, BagError> {
+    let mut topics: Vec<TopicInfo> = Vec::new();
+    // The summary section lists channels and counts without reading every message.
+    if let Ok(Some(summary)) = mcap::Summary::read(bytes) {
+        let counts = summary
+            .stats
+            .as_ref()
+            .map(|s| s.channel_message_counts.clone());
+        for (id, channel) in &summary.channels {
+            topics.push(TopicInfo {
+                name: channel.topic.clone(),
+                type_name: mcap_type(channel),
+                count: counts
+                    .as_ref()
+                    .and_then(|c| c.get(id).copied())
+                    .unwrap_or(0) as usize,
+            });
+        }
+        if counts.is_some() {
+            return Ok(topics);
+        }
+        topics.clear();
+    }
+    for message in mcap::MessageStream::new(bytes).map_err(|e| mcap_error(file, e))? {
+        let message = message.map_err(|e| mcap_error(file, e))?;
+        match topics.iter_mut().find(|t| t.name == message.channel.topic) {
+            Some(t) => t.count += 1,
+            None => topics.push(TopicInfo {
+                name: message.channel.topic.clone(),
+                type_name: mcap_type(&message.channel),
+                count: 1,
+            }),
+        }
+    }
+    Ok(topics)
+}
+
+fn mcap_read<'a>(
+    file: &Path,
+    bytes: &'a [u8],
+    topics: &[String],
+    out: &mut Vec<BagMessage<'a>>,
+) -> Result<(), BagError> {
+    for message in mcap::MessageStream::new(bytes).map_err(|e| mcap_error(file, e))? {
+        let message = message.map_err(|e| mcap_error(file, e))?;
+        if !topics.contains(&message.channel.topic) {
+            continue;
+        }
+        if message.channel.message_encoding != "cdr" {
+            return Err(BagError::Storage {
+                path: file.to_path_buf(),
+                problem: format!(
+                    "topic `{}` is encoded as `{}`, expected cdr",
+                    message.channel.topic, message.channel.message_encoding
+                ),
+            });
+        }
+        out.push(BagMessage {
+            topic: message.channel.topic.clone(),
+            log_time_ns: i64::try_from(message.log_time).unwrap_or(i64::MAX),
+            data: message.data,
+        });
+    }
+    Ok(())
+}
+
+fn sqlite_error(file: &Path, e: rusqlite::Error) -> BagError {
+    BagError::Storage {
+        path: file.to_path_buf(),
+        problem: format!("damaged sqlite3 bag: {e}"),
+    }
+}
+
+/// Opens a `.db3` read-only after checking its length against the page count in its header
+/// (a truncated copy otherwise reads as a bag with fewer messages).
+fn sqlite_open(file: &Path) -> Result<rusqlite::Connection, BagError> {
+    let bytes_len = std::fs::metadata(file)
+        .map_err(|source| BagError::Read {
+            path: file.to_path_buf(),
+            source,
+        })?
+        .len();
+    let mut header = [0u8; 100];
+    {
+        use std::io::Read;
+        let n = std::fs::File::open(file)
+            .and_then(|mut f| f.read(&mut header))
+            .map_err(|source| BagError::Read {
+                path: file.to_path_buf(),
+                source,
+            })?;
+        if n < 100 || !header.starts_with(SQLITE_MAGIC) {
+            return Err(BagError::Storage {
+                path: file.to_path_buf(),
+                problem: format!("not an sqlite3 file ({n} bytes of header)"),
+            });
+        }
+    }
+    let page_size = match u16::from_be_bytes([header[16], header[17]]) {
+        1 => 65536u64,
+        p => u64::from(p),
+    };
+    let pages = u64::from(u32::from_be_bytes([
+        header[28], header[29], header[30], header[31],
+    ]));
+    let counter = &header[24..28];
+    let valid_for = &header[92..96];
+    if pages > 0 && counter == valid_for && bytes_len < pages * page_size {
+        return Err(BagError::Storage {
+            path: file.to_path_buf(),
+            problem: format!(
+                "truncated sqlite3 file: {bytes_len} bytes, its header says {pages} pages of {page_size} bytes"
+            ),
+        });
+    }
+    rusqlite::Connection::open_with_flags(
+        file,
+        rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
+    )
+    .map_err(|e| sqlite_error(file, e))
+}
+
+fn sqlite_topics(file: &Path) -> Result<Vec<TopicInfo>, BagError> {
+    let db = sqlite_open(file)?;
+    let mut statement = db
+        .prepare(
+            "SELECT t.name, t.type, (SELECT COUNT(*) FROM messages m WHERE m.topic_id = t.id) FROM topics t",
+        )
+        .map_err(|e| sqlite_error(file, e))?;
+    let rows = statement
+        .query_map([], |row| {
+            Ok(TopicInfo {
+                name: row.get(0)?,
+                type_name: row.get(1)?,
+                count: row.get::<_, i64>(2)? as usize,
+            })
+        })
+        .map_err(|e| sqlite_error(file, e))?;
+    rows.collect::<Result<Vec<_>, _>>()
+        .map_err(|e| sqlite_error(file, e))
+}
+
+fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Result<(), BagError> {
+    let db = sqlite_open(file)?;
+    let mut ids: Vec<(i64, String, String)> = Vec::new();
+    {
+        let mut statement = db
+            .prepare("SELECT id, name, serialization_format FROM topics")
+            .map_err(|e| sqlite_error(file, e))?;
+        let rows = statement
+            .query_map([], |row| Ok((row.get(0)?, row.get(1)?, row.get(2)?)))
+            .map_err(|e| sqlite_error(file, e))?;
+        for row in rows {
+            let (id, name, format): (i64, String, String) =
+                row.map_err(|e| sqlite_error(file, e))?;
+            if topics.contains(&name) {
+                if format != "cdr" {
+                    return Err(BagError::Storage {
+                        path: file.to_path_buf(),
+                        problem: format!(
+                            "topic `{name}` is serialised as `{format}`, expected cdr"
+                        ),
+                    });
+                }
+                ids.push((id, name, format));
+            }
+        }
+    }
+    let mut statement = db
+        .prepare("SELECT timestamp, data FROM messages WHERE topic_id = ?1 ORDER BY timestamp")
+        .map_err(|e| sqlite_error(file, e))?;
+    for (id, name, _) in ids {
+        let rows = statement
+            .query_map([id], |row| {
+                Ok((row.get::<_, i64>(0)?, row.get::<_, Vec<u8>>(1)?))
+            })
+            .map_err(|e| sqlite_error(file, e))?;
+        for row in rows {
+            let (log_time_ns, data) = row.map_err(|e| sqlite_error(file, e))?;
+            out.push(BagMessage {
+                topic: name.clone(),
+                log_time_ns,
+                data: std::borrow::Cow::Owned(data),
+            });
+        }
+    }
+    Ok(())
+}
