@@ -334,3 +334,164 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
     assert!(done.adaptive.is_none());
     assert_eq!(done.outcome.accepted.len(), 20);
 }
+
+/// The same through the real UR driver (ur_rtde via FFI) against the mock UR controller, whose
+/// arm moves on trapezoidal profiles and rings down after each move. Needs `--features ur-rtde`.
+#[cfg(feature = "ur-rtde")]
+mod through_ur_rtde {
+    use super::*;
+    use std::net::IpAddr;
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    use handeye::robot::kinematics::UrModel;
+    use handeye::robot::sim::Ringing;
+    use mocks::{MockUr, MockUrConfig};
+
+    fn with_timeout<T: Send + 'static>(
+        limit: Duration,
+        body: impl FnOnce() -> T + Send + 'static,
+    ) -> T {
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(body());
+        });
+        rx.recv_timeout(limit).expect("test timed out")
+    }
+
+    fn start_mock(address: &str) -> MockUr {
+        MockUr::start(MockUrConfig {
+            address: address.parse::<IpAddr>().unwrap(),
+            model: UrModel::ur10e(),
+            start_joints: [0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians),
+            trapezoidal_moves: true,
+            ringing: Some(Ringing {
+                amplitude_rad: 0.1f64.to_radians(),
+                frequency_hz: 8.0,
+                decay_s: 0.12,
+            }),
+            ..MockUrConfig::default()
+        })
+        .expect("mock starts")
+    }
+
+    /// `configs/sim-cell-ur-mock.yaml` at `host`, with faster limits and edits.
+    fn config(dir: &Path, name: &str, host: &str, edits: &[(&str, &str)]) -> PathBuf {
+        let host = format!("host: {host}");
+        let mut all = vec![
+            ("host: 127.0.0.1", host.as_str()),
+            (
+                "joint_speed_deg: 60, joint_acceleration_deg: 120",
+                "joint_speed_deg: 90, joint_acceleration_deg: 180",
+            ),
+        ];
+        all.extend_from_slice(edits);
+        util::config_variant(dir, "sim-cell-ur-mock.yaml", name, &all)
+    }
+
+    /// A camera that reads the mock's joint speeds right before and right after each exposure
+    /// (the simulated camera exposes at once when the time asked for has come).
+    struct ProbingCamera<P: Fn() -> Joints + Send> {
+        inner: Box<dyn Camera>,
+        probe: P,
+        fastest: Arc<Mutex<Vec<f64>>>,
+    }
+
+    impl<P: Fn() -> Joints + Send> Camera for ProbingCamera<P> {
+        fn grab(&mut self, not_before: Instant) -> Result<Frame, CameraError> {
+            let now = Instant::now();
+            if not_before > now {
+                std::thread::sleep(not_before - now);
+            }
+            let top = |q: Joints| q.iter().fold(0.0f64, |m, v| m.max(v.abs())).to_degrees();
+            let before = top((self.probe)());
+            let frame = self.inner.grab(not_before)?;
+            let after = top((self.probe)());
+            self.fastest.lock().unwrap().push(before.max(after));
+            Ok(frame)
+        }
+        fn model(&self) -> &CameraModel {
+            self.inner.model()
+        }
+    }
+
+    /// Runs a fixed 5-pose plan through ur_rtde; the fastest joint speed around each exposure
+    /// (°/s) and the settle threshold (°/s, 0 when off).
+    fn fastest_around_exposures(mock: &MockUr, config: &Path) -> (Vec<f64>, f64) {
+        let mut prepared = cell::prepare(config).unwrap();
+        let mut hardware = prepared.open_hardware().expect("connects to the mock");
+        let start = hardware.robot.joint_positions().unwrap();
+        let plan = prepared.recheck_from(start).expect("plan valid");
+        let dir = tempfile::tempdir().unwrap();
+        let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
+        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+        let fastest = Arc::new(Mutex::new(Vec::new()));
+        let mut camera = ProbingCamera {
+            inner: hardware.camera,
+            probe: mock.speed_probe(),
+            fastest: fastest.clone(),
+        };
+        let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
+        let threshold = setup
+            .settle_by_speed
+            .map_or(0.0, |s| s.max_joint_speed.to_degrees());
+        let outcome =
+            session::run_session(setup, hardware.robot.as_mut(), &mut camera, &mut |_| {}).unwrap();
+        assert_eq!(outcome.accepted.len(), 5, "{:?}", outcome.skipped);
+        let fastest = fastest.lock().unwrap().clone();
+        (fastest, threshold)
+    }
+
+    #[test]
+    fn settling_by_measured_actual_qd_never_captures_a_moving_arm() {
+        with_timeout(Duration::from_secs(240), || {
+            let mock = start_mock("127.0.0.161");
+            let dir = tempfile::tempdir().unwrap();
+            let fixed = [
+                ("count: 20", "count: 5"),
+                ("plan:\n", "plan:\n  adaptive: false\n"),
+            ];
+            let measured = config(dir.path(), "measured.yaml", "127.0.0.161", &fixed);
+            let (fastest, threshold) = fastest_around_exposures(&mock, &measured);
+            eprintln!("ur_rtde, settled by actual_qd: fastest joint around each exposure {fastest:.3?} °/s");
+            assert!(threshold > 0.0);
+            assert!(fastest.iter().all(|v| *v < threshold), "{fastest:?}");
+
+            let mut edits = fixed.to_vec();
+            edits.push((
+                "session: {settle_s: 0.0,",
+                "session: {settle_s: 0.0, settle_speed_deg_s: 0,",
+            ));
+            let unsettled = config(dir.path(), "unsettled.yaml", "127.0.0.161", &edits);
+            let (fastest, _) = fastest_around_exposures(&mock, &unsettled);
+            eprintln!("ur_rtde, no settling: fastest joint around each exposure {fastest:.3?} °/s");
+            assert!(
+                fastest.iter().filter(|v| **v >= 0.5).count() >= 2,
+                "{fastest:?}"
+            );
+            mock.shutdown();
+        });
+    }
+
+    #[test]
+    fn the_adaptive_default_stops_at_the_target_through_ur_rtde() {
+        with_timeout(Duration::from_secs(300), || {
+            let mock = start_mock("127.0.0.162");
+            let dir = tempfile::tempdir().unwrap();
+            let cell = config(dir.path(), "cell.yaml", "127.0.0.162", &[]);
+            let done = run(&cell, &dir.path().join("s"));
+            let summary = done.adaptive.clone().expect("adaptive by default");
+            eprintln!("{summary}\n{}", done.arm_time);
+            assert!(summary.reached, "{summary}");
+            assert!(
+                summary.in_session >= 8 && summary.in_session < 20,
+                "{summary}"
+            );
+            assert!(sigma_mm(&done) <= 1.0);
+            // Every pose the session holds was a move of the mock, and the arm time was spent.
+            assert_eq!(mock.moves_completed(), summary.in_session);
+            assert!(done.arm_time.moving_s > 0.5 && done.arm_time.saved_s() > 0.0);
+            mock.shutdown();
+        });
+    }
+}

@@ -398,7 +398,12 @@ impl Robot for SimRobot {
 
     fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
         self.check_latched_connection()?;
-        Ok(Some(self.joint_state_at(Instant::now()).1))
+        // An arm whose moves are instant and that stops dead has no motion to measure: like a
+        // backend without speed readings, it leaves settling to the fixed wait.
+        let still = self.options.move_duration.is_zero()
+            && !self.options.move_at_limits
+            && self.options.ringing.is_none();
+        Ok((!still).then(|| self.joint_state_at(Instant::now()).1))
     }
 
     fn move_linear(
