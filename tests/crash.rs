@@ -43,6 +43,8 @@ fn cell(dir: &Path, move_duration_s: f64) -> PathBuf {
             ("count: 20", &format!("count: {POSES}")),
             ("move_duration_s: 0.0", &duration),
             (&original, &copy),
+            // Every pose of the plan (generated plans are adaptive by default).
+            ("plan:\n", "plan:\n  adaptive: false\n"),
         ],
     )
 }
