@@ -39,11 +39,19 @@ fn the_reordered_plan_visits_the_same_poses_inside_the_ranges_and_the_box() {
     for (count, seed) in [(20, 1), (30, 5)] {
         let generate = format!("count: {count}, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: {seed}");
         let from = "count: 20, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1";
-        let ordered = sim_cell(dir.path(), "ordered.yaml", &[(from, &generate)]);
+        // Fixed plans (a generated plan is adaptive by default).
+        let ordered = sim_cell(
+            dir.path(),
+            "ordered.yaml",
+            &[(from, &generate), ("plan:\n", "plan:\n  adaptive: false\n")],
+        );
         let scripted = sim_cell(
             dir.path(),
             "scripted.yaml",
-            &[(from, &generate), ("plan:\n", "plan:\n  reorder: false\n")],
+            &[
+                (from, &generate),
+                ("plan:\n", "plan:\n  adaptive: false\n  reorder: false\n"),
+            ],
         );
         let ordered = cell::prepare(&ordered).unwrap();
         let scripted = cell::prepare(&scripted).unwrap();

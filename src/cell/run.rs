@@ -397,10 +397,12 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     observer.session_started(poses);
     let mut on_event = |event: SessionEvent| observer.event(event);
     let (outcome, adaptive_summary) = if adaptive {
+        // A generated plan's `count` is the most poses it takes (it chooses from more).
         let max_poses = cell
             .config
             .plan
             .max_poses
+            .or(cell.config.plan.generate.map(|g| g.count))
             .unwrap_or(plan.len())
             .min(plan.len());
         let mut planner = AdaptivePlanner::new(
@@ -500,18 +502,26 @@ fn good_enough(cell: &PreparedCell) -> StopCheck {
     }))
 }
 
-/// The run's arm time against the full plan in its given order.
+/// The run's arm time against the full plan in its given order (for an adaptive generated plan:
+/// the `count` views a fixed plan would have visited, checked from where the arm started).
 fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
-    let full: Vec<&crate::plan::check::PoseCheck> = cell
-        .report
+    let fixed_plan = match cell.config.plan.generate {
+        Some(spec) if cell.config.adaptive() && spec.count < cell.plan.waypoints.len() => {
+            Some(cell.check_plan(&crate::plan::Plan {
+                waypoints: cell.plan.waypoints[..spec.count].to_vec(),
+            }))
+        }
+        _ => None,
+    };
+    let report = fixed_plan.as_ref().unwrap_or(&cell.report);
+    let full: Vec<&crate::plan::check::PoseCheck> = report
         .poses
         .iter()
         .filter(|p| p.problems.is_empty())
         .collect();
-    let given_moves_s = cell
-        .report
+    let given_moves_s = report
         .given_order_move_time_s
-        .unwrap_or_else(|| cell.report.total_move_time_s());
+        .unwrap_or_else(|| report.total_move_time_s());
     let settle_per_pose = if outcome.visited_now > 0 {
         outcome.settling_s / outcome.visited_now as f64
     } else {
