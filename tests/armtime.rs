@@ -279,6 +279,19 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
     // The arm-time figures are kept in the session for the report.
     let kept = std::fs::read_to_string(done.folder.root().join(cell_run::ArmTime::FILE)).unwrap();
     assert!(kept.contains("full_plan_estimate_s"), "{kept}");
+    assert!(done.arm_time.saved_s() > 0.0, "{}", done.arm_time);
+    // ... and the report shows them.
+    let page = handeye::report::session::write_session_report(
+        &done.folder,
+        Some(&done.cell.config),
+        vec![("answer".into(), done.solved.calibration.clone())],
+    )
+    .unwrap();
+    let html = std::fs::read_to_string(page).unwrap();
+    assert!(
+        html.contains("data-key=\"arm_time.saved_s\""),
+        "no arm time in the report"
+    );
 
     // A tighter target needs more poses than the minimum, and stops as soon as it is met.
     let target = 0.08;

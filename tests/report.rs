@@ -342,6 +342,7 @@ fn two_answers_are_shown_side_by_side() {
         noise: NoiseModel::default(),
         holdout: None,
         verdict: None,
+        arm_time: None,
     };
     let html = render_html(&input).unwrap();
     assert_eq!(count(&html, "class=\"answer\" data-answer="), 2);

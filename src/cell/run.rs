@@ -124,6 +124,12 @@ impl ArmTime {
 
     /// The file in a session folder that keeps it (written after the run, read by the report).
     pub const FILE: &'static str = "arm_time.yaml";
+
+    /// The arm time a session folder at `root` kept, if it kept one that reads.
+    pub fn load(root: &std::path::Path) -> Option<ArmTime> {
+        let text = std::fs::read_to_string(root.join(Self::FILE)).ok()?;
+        serde_yaml_ng::from_str(&text).ok()
+    }
 }
 
 impl std::fmt::Display for ArmTime {
