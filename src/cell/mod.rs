@@ -30,9 +30,6 @@ use crate::session::{
 use crate::setup::CellTransforms;
 use crate::vision::{Board, DetectorOptions};
 
-/// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
-pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
-
 /// Why a cell could not be prepared or opened.
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
@@ -174,27 +171,13 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     };
     prepared.plan = match (scripted, &prepared.config.plan.generate) {
         (Some(plan), _) => plan,
-        (None, Some(spec)) => {
-            let mut views = prepared.generate_views(spec);
-            if prepared.config.adaptive() {
-                // An adaptive plan takes at most `count` poses, chosen from more candidates on
-                // the same cap: the `count` views a fixed plan would visit, then more of them
-                // (another seed), so near and informative poses are there to choose.
-                let extra = GenerateSpec {
-                    count: (spec.count * ADAPTIVE_EXTRA_CANDIDATES).min(
-                        crate::plan::MAX_PLAN_POSES - spec.count.min(crate::plan::MAX_PLAN_POSES),
-                    ),
-                    seed: spec.seed.wrapping_add(1),
-                    ..*spec
-                };
-                if extra.count > 0 {
-                    views.extend(prepared.generate_views(&extra));
-                }
-            }
-            Plan {
-                waypoints: views.into_iter().map(Waypoint::LookAt).collect(),
-            }
-        }
+        (None, Some(spec)) => Plan {
+            waypoints: prepared
+                .generate_views(spec)
+                .into_iter()
+                .map(Waypoint::LookAt)
+                .collect(),
+        },
         (None, None) => {
             return Err(CellError::Backend(
                 "plan: the config gives neither a plan file nor `generate:`".into(),

@@ -345,7 +345,7 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
     let mut plan = if adaptive {
         let _ = cell.recheck_from(start);
-        let candidates = cell.report.passing();
+        let candidates = adaptive_candidates(&cell);
         if candidates.is_empty() {
             return Err(RunError::NoPassingPoseFromArm {
                 report: cell.report.to_string(),
@@ -508,18 +508,40 @@ fn good_enough(cell: &PreparedCell) -> StopCheck {
     }))
 }
 
-/// The run's arm time against the full plan in its given order (for an adaptive generated plan:
-/// the `count` views a fixed plan would have visited, checked from where the arm started).
-fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
-    let fixed_plan = match cell.config.plan.generate {
-        Some(spec) if cell.config.adaptive() && spec.count < cell.plan.waypoints.len() => {
-            Some(cell.check_plan(&crate::plan::Plan {
-                waypoints: cell.plan.waypoints[..spec.count].to_vec(),
-            }))
+/// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
+pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
+
+/// The candidates of an adaptive plan, checked from where the arm stands: the plan's poses that
+/// pass their checks and, for a generated plan (which then takes at most `count` poses), more
+/// views on the same cap (another seed, [`ADAPTIVE_EXTRA_CANDIDATES`] × `count`), so near and
+/// informative poses are there to choose.
+fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
+    let mut candidates = cell.report.passing();
+    if let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) {
+        let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
+            .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
+        if count > 0 {
+            let extra = crate::plan::GenerateSpec {
+                count,
+                seed: spec.seed.wrapping_add(1),
+                ..spec
+            };
+            let views = crate::plan::Plan {
+                waypoints: cell
+                    .generate_views(&extra)
+                    .into_iter()
+                    .map(crate::plan::Waypoint::LookAt)
+                    .collect(),
+            };
+            candidates.extend(cell.check_plan(&views).passing());
         }
-        _ => None,
-    };
-    let report = fixed_plan.as_ref().unwrap_or(&cell.report);
+    }
+    candidates
+}
+
+/// The run's arm time against the full plan in its given order.
+fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
+    let report = &cell.report;
     let full: Vec<&crate::plan::check::PoseCheck> = report
         .poses
         .iter()
