@@ -407,6 +407,7 @@ impl PreparedCell {
             limits: self.config.limits,
             settle: self.config.settle(),
             settle_by_speed: self.config.settle_by_speed(),
+            reorder: self.config.plan.reorder,
             max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
             board: self.board.clone(),
             detector: self.detector_options(),

@@ -65,6 +65,10 @@ pub struct SessionSetup {
     /// Every move is checked from the arm's actual joints before it is sent (`None`: nothing
     /// moves, e.g. a recorded robot).
     pub move_check: Option<MoveCheck>,
+    /// When a resumed run or a retry pass starts, visit the poses left in the order of least
+    /// move time from where the arm stands (every move allowed by `move_check`), instead of plan
+    /// order; `false` keeps plan order (a scripted order).
+    pub reorder: bool,
 }
 
 /// How often the joint speeds are read while settling (a UR streams them at 500 Hz).
@@ -181,7 +185,14 @@ pub fn run_session(
         folder: setup.folder.root().to_path_buf(),
     };
 
+    let mut first_pass = accepted.is_empty() && failed_before.is_empty();
     'passes: while !pending.is_empty() {
+        // A fresh plan runs in its (checked) order; what is left after a stop or for retries is
+        // visited from where the arm stands now.
+        if !first_pass {
+            order_for_travel(robot, &setup, &mut pending);
+        }
+        first_pass = false;
         for &plan_index in &pending {
             if state.error.is_some() {
                 break 'passes;
@@ -334,6 +345,29 @@ impl RunState {
             }
         }
     }
+}
+
+/// Puts `pending` plan indices in the order of least move time from the arm's current joints
+/// (each move allowed by the setup's move check), when the setup asks for it and the arm's
+/// joints can be read; else leaves them as they are.
+fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut Vec<usize>) {
+    let Some(check) = setup.move_check.as_ref().filter(|_| setup.reorder) else {
+        return;
+    };
+    if pending.len() < 2 {
+        return;
+    }
+    let Ok(from) = robot.joint_positions() else {
+        return;
+    };
+    let joints: Vec<Joints> = pending.iter().map(|&i| setup.plan[i].1).collect();
+    let order = crate::plan::order::order_for_travel(&from, &joints, |a, b| {
+        check
+            .problem(a, b)
+            .is_none()
+            .then(|| setup.limits.joint_move_time(a, b))
+    });
+    *pending = order.iter().map(|&k| pending[k]).collect();
 }
 
 /// Where the arm time of one pose went, s.
