@@ -161,7 +161,11 @@ pub fn next_best_per_second(
 /// A caller's judgement whether a solve is good enough to stop (say, its held-out error and the
 /// rotation spread of the samples), asked only once the solved 1-sigma meets the target.
 #[derive(Clone)]
-pub struct StopCheck(pub Arc<dyn Fn(&[PosePair], &Calibration) -> bool + Send + Sync>);
+pub struct StopCheck(pub Arc<StopCheckFn>);
+
+/// The judgement of a [`StopCheck`]: the samples and the solve that met the target in, whether
+/// to stop out.
+pub type StopCheckFn = dyn Fn(&[PosePair], &Calibration) -> bool + Send + Sync;
 
 impl std::fmt::Debug for StopCheck {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
