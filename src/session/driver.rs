@@ -65,9 +65,9 @@ pub struct SessionSetup {
     /// Every move is checked from the arm's actual joints before it is sent (`None`: nothing
     /// moves, e.g. a recorded robot).
     pub move_check: Option<MoveCheck>,
-    /// When a resumed run or a retry pass starts, visit the poses left in the order of least
-    /// move time from where the arm stands (every move allowed by `move_check`), instead of plan
-    /// order; `false` keeps plan order (a scripted order).
+    /// When a resumed run starts, visit the poses left in the order of least move time from
+    /// where the arm stands (every move allowed by `move_check`), instead of plan order; `false`
+    /// keeps plan order (a scripted order).
     pub reorder: bool,
 }
 
@@ -185,14 +185,12 @@ pub fn run_session(
         folder: setup.folder.root().to_path_buf(),
     };
 
-    let mut first_pass = accepted.is_empty() && failed_before.is_empty();
+    // A fresh plan runs in its (checked) order; what a resumed run has left is visited in travel
+    // order from where the arm stands now. Retries follow each pass in plan order.
+    if !(accepted.is_empty() && failed_before.is_empty()) {
+        order_for_travel(robot, &setup, &mut pending);
+    }
     'passes: while !pending.is_empty() {
-        // A fresh plan runs in its (checked) order; what is left after a stop or for retries is
-        // visited from where the arm stands now.
-        if !first_pass {
-            order_for_travel(robot, &setup, &mut pending);
-        }
-        first_pass = false;
         for &plan_index in &pending {
             if state.error.is_some() {
                 break 'passes;
