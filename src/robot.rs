@@ -67,6 +67,66 @@ impl MotionLimits {
         }
         Ok(())
     }
+
+    /// Duration of a joint move `from` → `to` as a UR controller runs a `moveJ` at these
+    /// limits, s: the joints move in sync, so the joint with the longest travel sets the time,
+    /// on a trapezoidal speed profile (accelerate at `joint_acceleration` to `joint_speed`, cruise,
+    /// decelerate; a triangle when the travel is too short to reach the speed).
+    pub fn joint_move_time(&self, from: &Joints, to: &Joints) -> f64 {
+        let travel = from
+            .iter()
+            .zip(to)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        trapezoid_time(travel, self.joint_speed, self.joint_acceleration)
+    }
+}
+
+/// Time to travel `distance` from rest to rest at most at `speed` with `acceleration`, s.
+pub fn trapezoid_time(distance: f64, speed: f64, acceleration: f64) -> f64 {
+    let (d, v, a) = (distance.abs(), speed, acceleration);
+    if d <= v * v / a {
+        2.0 * (d / a).sqrt()
+    } else {
+        d / v + v / a
+    }
+}
+
+/// Position (fraction of `distance` covered) and speed (units of `distance` per s) at `t`
+/// seconds into a rest-to-rest trapezoidal move taking [`trapezoid_time`]; the profile of the
+/// leading joint, which every other joint of a synchronised move follows scaled.
+pub fn trapezoid_at(distance: f64, speed: f64, acceleration: f64, t: f64) -> (f64, f64) {
+    let d = distance.abs();
+    if d == 0.0 {
+        return (1.0, 0.0);
+    }
+    let total = trapezoid_time(d, speed, acceleration);
+    let t = t.clamp(0.0, total);
+    // Peak speed reached: `speed`, or less on a triangle.
+    let peak = speed.min((d * acceleration).sqrt());
+    let ramp = peak / acceleration;
+    let (s, v) = if t < ramp {
+        (0.5 * acceleration * t * t, acceleration * t)
+    } else if t <= total - ramp {
+        (0.5 * peak * ramp + peak * (t - ramp), peak)
+    } else {
+        let left = total - t;
+        (d - 0.5 * acceleration * left * left, acceleration * left)
+    };
+    ((s / d).clamp(0.0, 1.0), v)
+}
+
+/// When the arm counts as standing still: every reported joint speed below `max_joint_speed`
+/// for at least `window` without a break.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SettleBySpeed {
+    /// Largest joint speed of an arm at rest, rad/s.
+    pub max_joint_speed: f64,
+    /// How long the speeds must stay below it (longer than half a period of the arm's ringing,
+    /// so a zero crossing of the oscillation does not count as rest).
+    pub window: Duration,
+    /// An arm still moving this long after a move ends the run with an error.
+    pub timeout: Duration,
 }
 
 /// An axis-aligned box in the base frame that the flange origin must stay inside, in metres.
@@ -178,6 +238,13 @@ pub trait Robot: Send {
         Err(RobotError::Backend(
             "freedrive is not available with this robot backend (only a real UR arm has it)".into(),
         ))
+    }
+    /// The joint speeds the controller measures now, rad/s (RTDE `actual_qd` on a UR), or
+    /// `None` when this backend measures none (nothing moves, e.g. a recorded arm): the session
+    /// then settles by its fixed wait only. An arm that has just arrived still moves a little
+    /// (it rings down); the session waits for these speeds to stay low before it captures.
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        Ok(None)
     }
 }
 

@@ -23,6 +23,8 @@ fn slow_config(dir: &Path, move_duration_s: f64) -> PathBuf {
         &[
             ("count: 20", "count: 10"),
             ("move_duration_s: 0.0", &duration),
+            // Every pose of the plan (generated plans are adaptive by default).
+            ("plan:\n", "plan:\n  adaptive: false\n"),
         ],
     )
 }

@@ -43,6 +43,11 @@ fn cell(dir: &Path, move_duration_s: f64) -> PathBuf {
             ("count: 20", &format!("count: {POSES}")),
             ("move_duration_s: 0.0", &duration),
             (&original, &copy),
+            // Every pose of the plan (generated plans are adaptive by default), in the given
+            // order: a resumed sim arm starts again at its start joints (a real arm stands
+            // where it stopped), from where the end of a travel-ordered tour may lie beyond a
+            // straight move inside the box.
+            ("plan:\n", "plan:\n  adaptive: false\n  reorder: false\n"),
         ],
     )
 }

@@ -146,6 +146,8 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
             .collect(),
         limits: MotionLimits::default(),
         settle: Duration::ZERO,
+        settle_by_speed: None,
+        reorder: false,
         max_reprojection_rms_px: 1.0,
         board: board().into(),
         // One detector thread: with more, the AprilTag C worker pool races now and then (see

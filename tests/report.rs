@@ -716,6 +716,7 @@ fn two_answers_are_shown_side_by_side() {
         noise: NoiseModel::default(),
         holdout: None,
         verdict: None,
+        arm_time: None,
     };
     let html = render_html(&input).unwrap();
     // A GOOD page has no caution above the snippets.

@@ -798,6 +798,8 @@ fn every_pose_rejected_says_so_instead_of_a_missing_samples_file() {
                 "seed: 11",
                 "seed: 11\n  hide_board_in_grabs: [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]",
             ),
+            // Every pose of the plan (generated plans are adaptive by default).
+            ("plan:\n", "plan:\n  adaptive: false\n"),
         ],
     );
     let error = library_run(

@@ -329,6 +329,7 @@ fn visp_eye_to_hand_ends_with_a_true_reason_and_no_convention_false_alarm() {
             noise,
             holdout: None,
             verdict: None,
+            arm_time: None,
         };
         let found = notices(&input);
         assert!(

@@ -138,6 +138,12 @@ pub struct MockUrConfig {
     pub flange_from_tcp: Pose,
     /// Moves finish at once instead of taking distance / speed.
     pub instant_moves: bool,
+    /// Joint moves follow the trapezoidal profile of the commanded speed and acceleration (as a
+    /// UR's `moveJ`) instead of running at constant speed.
+    pub trapezoidal_moves: bool,
+    /// After each joint move the arm rings down (`actual_q` and `actual_qd` show a decaying
+    /// oscillation); `None`: it stops dead.
+    pub ringing: Option<handeye::robot::sim::Ringing>,
     /// Injected faults.
     pub faults: MockFaults,
     /// What "get serial number" answers (digits only, as ur_rtde checks).
@@ -156,6 +162,8 @@ impl Default for MockUrConfig {
             controller_version: ControllerVersion::default(),
             flange_from_tcp: Pose::identity(),
             instant_moves: false,
+            trapezoidal_moves: false,
+            ringing: None,
             faults: MockFaults::default(),
             serial_number: "20235500001".to_string(),
         }
@@ -260,7 +268,8 @@ impl MockUr {
             config.flange_from_tcp,
             config.instant_moves,
             config.faults,
-        );
+        )
+        .with_motion_model(config.trapezoidal_moves, config.ringing);
         let shared = Arc::new(Shared {
             config,
             stop: AtomicBool::new(false),
@@ -317,6 +326,18 @@ impl MockUr {
         let mut arm = self.shared.arm();
         arm.advance(Instant::now());
         arm.joints()
+    }
+
+    /// Current joint speeds, rad/s (what the controller streams as actual_qd).
+    pub fn joint_speeds(&self) -> Joints {
+        self.shared.arm().snapshot(Instant::now()).joint_speeds
+    }
+
+    /// A probe that reads the current joint speeds (rad/s) from another thread, for as long as
+    /// the mock runs.
+    pub fn speed_probe(&self) -> impl Fn() -> Joints + Send + Sync + 'static {
+        let shared = self.shared.clone();
+        move || shared.arm().snapshot(Instant::now()).joint_speeds
     }
 
     /// Current flange pose `T_base_flange` (exact).

@@ -1,6 +1,8 @@
 //! The simulated camera: renders each frame from the TRUE chain of the simulated cell (true flange
 //! pose, true hand-eye and base-world), so the solver, which sees only the rendered frames and
-//! the robot's noisy reported poses, has something real to recover.
+//! the robot's noisy reported poses, has something real to recover. Each frame's `captured_at`
+//! is its exposure start: the moment whose flange pose it shows (a frame exposed while the arm
+//! still rings down shows the arm off its resting pose).
 
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -60,7 +62,14 @@ impl SimCamera {
 }
 
 impl Camera for SimCamera {
-    fn grab(&mut self, _not_before: Instant) -> Result<Frame, CameraError> {
+    fn grab(&mut self, not_before: Instant) -> Result<Frame, CameraError> {
+        // A free-running camera's next exposure starts no earlier than asked; the exposure is
+        // taken as instantaneous, at the arm's pose at that moment.
+        let now = Instant::now();
+        if not_before > now {
+            std::thread::sleep(not_before - now);
+        }
+        let exposure_start = Instant::now();
         let grab = self.grabs;
         self.grabs += 1;
         let camera_from_target = if self.hidden_grabs.contains(&grab) {
@@ -80,10 +89,11 @@ impl Camera for SimCamera {
             &self.options,
             &mut self.rng,
         );
-        // Rendering happens after the request, so the frame is never older than `not_before`.
+        // The frame reports when its exposure started (it shows the arm as it stood then),
+        // never before `not_before`.
         Ok(Frame {
             image,
-            captured_at: Instant::now(),
+            captured_at: exposure_start,
         })
     }
 

@@ -19,7 +19,7 @@ use crate::camera_model::CameraModel;
 use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
 use crate::geometry::Pose;
 use crate::plan::check::MoveCheck;
-use crate::plan::check::{check_plan, CheckContext, PlanReport};
+use crate::plan::check::{check_plan, check_plan_ordered, CheckContext, PlanReport};
 use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::robot::kinematics::UrModel;
@@ -171,6 +171,7 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
             plan_problems: Vec::new(),
             notes: Vec::new(),
             intrinsics: None,
+            given_order_move_time_s: None,
         },
     };
     prepared.plan = match (scripted, &prepared.config.plan.generate) {
@@ -231,8 +232,23 @@ impl PreparedCell {
         views
     }
 
+    /// The plan check of the order that will run (the order of least move time unless
+    /// `plan.reorder` is false).
     fn check(&self) -> PlanReport {
-        let mut report = self.check_plan(&self.plan);
+        let mut report = check_plan_ordered(
+            &self.plan,
+            &CheckContext {
+                arm: &self.arm,
+                start_joints: self.start_joints,
+                cell: &self.config.nominal,
+                workspace: &self.config.workspace,
+                limits: &self.config.limits,
+                camera: &self.camera_model,
+                board: &self.board,
+                margin_px: self.config.session.image_margin_px,
+            },
+            self.config.plan.reorder,
+        );
         if !self.intrinsics_known {
             // The intrinsics come from this very run: a plan that cannot give them is refused.
             let (blocking, notes): (Vec<String>, Vec<String>) = report
@@ -395,6 +411,8 @@ impl PreparedCell {
             plan,
             limits: self.config.limits,
             settle: self.config.settle(),
+            settle_by_speed: self.config.settle_by_speed(),
+            reorder: self.config.plan.reorder,
             max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
             board: self.board.clone(),
             detector: self.detector_options(),

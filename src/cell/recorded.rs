@@ -60,6 +60,7 @@ pub fn plan(
             plan_problems,
             notes: Vec::new(),
             intrinsics: None,
+            given_order_move_time_s: None,
         },
     ))
 }

@@ -7,18 +7,29 @@
 //!
 //! On resume the session's recorded input hashes must match the files as they are now (unless
 //! the caller accepts the change), and a fixed plan must be the one the session was started
-//! with. Depends on `session`, `plan`, `robot` and the ground floor.
+//! with (or the same poses in the order the session recorded: a plan ordered for travel time
+//! from where the arm stood then).
+//!
+//! Arm time: a generated plan runs adaptively by default (next-best pose weighed by move time,
+//! stopping when the result is good enough: the solved 1-sigma at the target, the held-out error
+//! within the verdict's accuracy, the rotations spread, at least `plan.min_poses` poses); a
+//! fixed plan runs in the order of least move time. [`ArmTime`] says what the run spent and
+//! what the full plan in its given order would have cost.
+//!
+//! Depends on `session`, `plan`, `robot`, `solve`, `verdict` and the ground floor.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::geometry::Pose;
-use crate::plan::nbv::AdaptivePlanner;
+use crate::plan::nbv::{AdaptivePlanner, StopCheck};
 use crate::robot::{Joints, Robot, RobotError, RobotStatus};
 use crate::session::{
     self, changed_inputs, SessionError, SessionEvent, SessionFolder, SessionOutcome, SolvedSession,
 };
+use crate::setup::PosePair;
+use crate::solve::Calibration;
 
 use super::{prepare, CellError, PreparedCell};
 
@@ -82,6 +93,68 @@ pub struct CellRun {
     pub solved: SolvedSession,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
+    /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
+    /// a person moved the arm, and there is no plan to compare with).
+    pub arm_time: Option<ArmTime>,
+}
+
+/// The arm time of a run (the time the cell is out of production for the arm's sake: moving
+/// and settling), and an estimate of what the full plan in its given order would have taken.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ArmTime {
+    /// Poses visited in this run.
+    pub poses: usize,
+    /// Time in moves, s (measured).
+    pub moving_s: f64,
+    /// Time settling after moves until the frame's exposure, s (measured).
+    pub settling_s: f64,
+    /// Poses of the full plan (every pose that passes its checks).
+    pub full_plan_poses: usize,
+    /// The full plan in its given order: its moves at the configured limits plus this run's
+    /// mean settling per pose for each of its poses, s (an estimate).
+    pub full_plan_estimate_s: f64,
+}
+
+impl ArmTime {
+    /// Moving plus settling, s.
+    pub fn spent_s(&self) -> f64 {
+        self.moving_s + self.settling_s
+    }
+
+    /// Estimated arm time saved against the full plan in its given order, s (negative: lost).
+    pub fn saved_s(&self) -> f64 {
+        self.full_plan_estimate_s - self.spent_s()
+    }
+
+    /// The file in a session folder that keeps it (written after the run, read by the report).
+    pub const FILE: &'static str = "arm_time.yaml";
+
+    /// The arm time a session folder at `root` kept, if it kept one that reads.
+    pub fn load(root: &std::path::Path) -> Option<ArmTime> {
+        let text = std::fs::read_to_string(root.join(Self::FILE)).ok()?;
+        serde_yaml_ng::from_str(&text).ok()
+    }
+}
+
+impl std::fmt::Display for ArmTime {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "arm time: {:.1} s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so {:.1} s saved ({:.0} %)",
+            self.spent_s(),
+            self.poses,
+            self.moving_s,
+            self.settling_s,
+            self.full_plan_poses,
+            self.full_plan_estimate_s,
+            self.saved_s(),
+            if self.full_plan_estimate_s > 0.0 {
+                100.0 * self.saved_s() / self.full_plan_estimate_s
+            } else {
+                0.0
+            }
+        )
+    }
 }
 
 /// How an adaptive plan went.
@@ -95,6 +168,8 @@ pub struct AdaptiveSummary {
     pub chosen_now: usize,
     /// The target 1-sigma uncertainty, mm.
     pub target_uncertainty_mm: f64,
+    /// The most poses the plan may take.
+    pub max_poses: usize,
     /// The last solved 1-sigma uncertainty, mm, if a solve happened.
     pub solved_sigma_mm: Option<f64>,
     /// Whether the target was reached.
@@ -112,6 +187,10 @@ impl std::fmt::Display for AdaptiveSummary {
             self.target_uncertainty_mm,
             match self.solved_sigma_mm {
                 Some(s) if self.reached => format!("reached ({s:.3} mm)"),
+                Some(s) if self.in_session >= self.max_poses => format!(
+                    "NOT reached ({s:.3} mm): stopped at plan.max_poses = {}",
+                    self.max_poses
+                ),
                 Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
                 None => "NOT reached (no solve)".into(),
             }
@@ -247,7 +326,7 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     }
 
     // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
-    let adaptive = cell.config.plan.adaptive;
+    let adaptive = cell.config.adaptive();
     if adaptive && !cell.intrinsics_known {
         return Err(RunError::AdaptiveNeedsIntrinsics);
     }
@@ -268,9 +347,9 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     // The plan was checked from an assumed start; check it again from where the arm really is
     // before the first move.
     let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
-    let plan = if adaptive {
+    let mut plan = if adaptive {
         let _ = cell.recheck_from(start);
-        let candidates = cell.report.passing();
+        let candidates = adaptive_candidates(&cell);
         if candidates.is_empty() {
             return Err(RunError::NoPassingPoseFromArm {
                 report: cell.report.to_string(),
@@ -290,11 +369,17 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
 
     let folder = match resumed {
         Some((folder, mut manifest)) => {
-            // An adaptive session's plan is what it chose so far: it continues from there.
+            // An adaptive session's plan is what it chose so far: it continues from there. A
+            // fixed plan ordered for travel time from where the arm stood then keeps that order.
             if !adaptive && !same_plan(&manifest, &plan) {
-                return Err(RunError::PlanChanged {
-                    folder: folder.root().to_path_buf(),
-                });
+                match recorded_order(&manifest, &plan) {
+                    Some(recorded) => plan = recorded,
+                    None => {
+                        return Err(RunError::PlanChanged {
+                            folder: folder.root().to_path_buf(),
+                        })
+                    }
+                }
             }
             if !manifest.inputs.is_empty() && manifest.inputs != inputs {
                 // Accepted changes: the next resume compares against the files used now.
@@ -323,15 +408,26 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     observer.session_started(poses);
     let mut on_event = |event: SessionEvent| observer.event(event);
     let (outcome, adaptive_summary) = if adaptive {
+        // A generated plan's `count` is the most poses it takes (it chooses from more).
+        let max_poses = cell
+            .config
+            .plan
+            .max_poses
+            .or(cell.config.plan.generate.map(|g| g.count))
+            .unwrap_or(plan.len())
+            .min(plan.len());
         let mut planner = AdaptivePlanner::new(
             cell.config.setup,
             cell.config.nominal.camera_mount,
             cell.config.nominal.target_mount,
             plan.clone(),
             cell.config.solver.to_options(),
-            cell.config.plan.target_uncertainty_mm,
-            plan.len(),
-        );
+            cell.config.adaptive_target_mm(),
+            max_poses,
+        )
+        .with_min_poses(cell.config.plan.min_poses)
+        .with_motion(cell.config.limits, start, per_pose_s(&cell))
+        .with_stop_check(good_enough(&cell));
         let outcome = session::run_adaptive_session(
             setup,
             cell.config_path(),
@@ -344,7 +440,8 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
             in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
             candidates: plan.len(),
             chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
-            target_uncertainty_mm: cell.config.plan.target_uncertainty_mm,
+            target_uncertainty_mm: cell.config.adaptive_target_mm(),
+            max_poses,
             solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
             reached: planner.reached_target(),
         };
@@ -363,6 +460,14 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
         observer.note(&summary.to_string());
     }
     let outcome = outcome?;
+    let arm_time = arm_time(&cell, &outcome);
+    observer.note(&arm_time.to_string());
+    // Kept beside the result for the report; a failure to write it loses only this figure.
+    if let Ok(text) = serde_yaml_ng::to_string(&arm_time) {
+        if let Err(e) = folder.write_file(std::path::Path::new(ArmTime::FILE), text.as_bytes()) {
+            observer.note(&format!("the arm time could not be kept: {e}"));
+        }
+    }
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
     Ok(CellRun {
         cell,
@@ -370,7 +475,129 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
         outcome,
         solved,
         adaptive: adaptive_summary,
+        arm_time: Some(arm_time),
     })
+}
+
+/// What one pose costs besides its move, s, for weighing candidates by arm time: the fixed
+/// settle, the settle window when settling by measurement, and a little for the frame.
+fn per_pose_s(cell: &PreparedCell) -> f64 {
+    let s = &cell.config.session;
+    let window = if s.settle_speed_deg_s > 0.0 {
+        s.settle_window_s
+    } else {
+        0.0
+    };
+    s.settle_s + window + 0.05
+}
+
+/// The adaptive stop check besides the 1-sigma: the rotations spread well (the verdict's rule)
+/// and the held-out error is within the verdict's accuracy — what the verdict would call GOOD.
+fn good_enough(cell: &PreparedCell) -> StopCheck {
+    let setup = cell.config.setup;
+    let options = cell.config.solver.to_options();
+    let accuracy = cell.config.verdict.accuracy();
+    StopCheck(Arc::new(move |samples: &[PosePair], c: &Calibration| {
+        let robot: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+        if crate::solve::rotation_diversity(&robot).off_axis_deg < crate::verdict::GOOD_OFF_AXIS_DEG
+        {
+            return false;
+        }
+        match crate::verdict::held_out(setup, samples, &options, &c.outliers) {
+            Ok(h) => {
+                h.translation_rms_mm <= accuracy.translation_mm
+                    && h.rotation_rms_deg <= accuracy.rotation_deg
+            }
+            Err(_) => false,
+        }
+    }))
+}
+
+/// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
+pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
+
+/// The candidates of an adaptive plan, checked from where the arm stands: the plan's poses that
+/// pass their checks and, for a generated plan (which then takes at most `count` poses), more
+/// views on the same cap (another seed, [`ADAPTIVE_EXTRA_CANDIDATES`] × `count`), so near and
+/// informative poses are there to choose.
+fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
+    let mut candidates = cell.report.passing();
+    if let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) {
+        let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
+            .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
+        if count > 0 {
+            let extra = crate::plan::GenerateSpec {
+                count,
+                seed: spec.seed.wrapping_add(1),
+                ..spec
+            };
+            let views = crate::plan::Plan {
+                waypoints: cell
+                    .generate_views(&extra)
+                    .into_iter()
+                    .map(crate::plan::Waypoint::LookAt)
+                    .collect(),
+            };
+            candidates.extend(cell.check_plan(&views).passing());
+        }
+    }
+    candidates
+}
+
+/// The run's arm time against the full plan in its given order.
+fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
+    let report = &cell.report;
+    let full: Vec<&crate::plan::check::PoseCheck> = report
+        .poses
+        .iter()
+        .filter(|p| p.problems.is_empty())
+        .collect();
+    let given_moves_s = report
+        .given_order_move_time_s
+        .unwrap_or_else(|| report.total_move_time_s());
+    let settle_per_pose = if outcome.visited_now > 0 {
+        outcome.settling_s / outcome.visited_now as f64
+    } else {
+        0.0
+    };
+    ArmTime {
+        poses: outcome.visited_now,
+        moving_s: outcome.moving_s,
+        settling_s: outcome.settling_s,
+        full_plan_poses: full.len(),
+        full_plan_estimate_s: given_moves_s + settle_per_pose * full.len() as f64,
+    }
+}
+
+/// A resumed fixed plan whose poses are `plan`'s in another order (a plan ordered for travel
+/// time from where the arm stood when the session started): the recorded order, with the joints
+/// of today's check. `None` when the poses differ.
+fn recorded_order(
+    manifest: &session::SessionManifest,
+    plan: &[(Pose, Joints)],
+) -> Option<Vec<(Pose, Joints)>> {
+    if manifest.plan.len() != plan.len() {
+        return None;
+    }
+    let mut used = vec![false; plan.len()];
+    manifest
+        .plan
+        .iter()
+        .enumerate()
+        .map(|(i, recorded)| {
+            let r = recorded
+                .base_from_flange
+                .to_pose(&format!("plan[{i}]"))
+                .ok()?;
+            let k = (0..plan.len()).find(|&k| {
+                !used[k]
+                    && r.rotation.angle_to(&plan[k].0.rotation) < 1e-9
+                    && (r.translation.vector - plan[k].0.translation.vector).norm() < 1e-9
+            })?;
+            used[k] = true;
+            Some(plan[k])
+        })
+        .collect()
 }
 
 /// Whether a resumed session's recorded plan is `plan` (same flange poses, in order).

@@ -96,6 +96,9 @@ impl<R: Robot + ?Sized> Robot for Shared<R> {
     fn set_freedrive(&mut self, on: bool) -> Result<(), RobotError> {
         self.lock().set_freedrive(on)
     }
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        self.lock().joint_speeds()
+    }
 }
 
 /// Builds the simulated arm and camera a config describes.
@@ -113,6 +116,10 @@ pub fn open(
         repeatability_deg,
         protective_stop_after_moves,
         seed,
+        move_at_limits,
+        ringing_deg,
+        ringing_hz,
+        ringing_decay_s,
         ..
     } = &config.robot
     else {
@@ -122,6 +129,12 @@ pub fn open(
     };
     let options = SimRobotOptions {
         move_duration: std::time::Duration::from_secs_f64(*move_duration_s),
+        move_at_limits: *move_at_limits,
+        ringing: (*ringing_deg > 0.0).then(|| crate::robot::sim::Ringing {
+            amplitude_rad: ringing_deg.to_radians(),
+            frequency_hz: *ringing_hz,
+            decay_s: *ringing_decay_s,
+        }),
         repeatability_m: repeatability_mm * 1e-3,
         repeatability_rad: repeatability_deg.to_radians(),
         seed: *seed,

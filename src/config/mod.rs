@@ -258,6 +258,35 @@ impl CellConfig {
     pub fn settle(&self) -> Duration {
         self.settle
     }
+
+    /// Settling by measured joint speeds (`session.settle_speed_deg_s`, `settle_window_s`,
+    /// `settle_timeout_s`), or `None` when `settle_speed_deg_s` is 0 (the fixed wait only).
+    pub fn settle_by_speed(&self) -> Option<crate::robot::SettleBySpeed> {
+        let s = &self.session;
+        (s.settle_speed_deg_s > 0.0).then(|| crate::robot::SettleBySpeed {
+            max_joint_speed: s.settle_speed_deg_s.to_radians(),
+            window: Duration::from_secs_f64(s.settle_window_s),
+            timeout: Duration::from_secs_f64(s.settle_timeout_s),
+        })
+    }
+
+    /// Whether the run chooses poses adaptively: `plan.adaptive` when given, else for a
+    /// generated plan with known intrinsics (an adaptive plan needs board poses as they come).
+    pub fn adaptive(&self) -> bool {
+        self.plan.adaptive.unwrap_or(
+            self.plan.generate.is_some()
+                && self.intrinsics.is_some()
+                && !matches!(self.robot, RobotConfig::Recorded { .. }),
+        )
+    }
+
+    /// The adaptive stop target, mm: `plan.target_uncertainty_mm`, else the verdict's
+    /// `accuracy_mm` (the run stops when the verdict's translation test would pass).
+    pub fn adaptive_target_mm(&self) -> f64 {
+        self.plan
+            .target_uncertainty_mm
+            .unwrap_or(self.verdict.accuracy_mm)
+    }
 }
 
 impl ConfigFile {

@@ -132,9 +132,23 @@ pub enum RobotConfig {
         /// Absent: see [`RobotConfig::joint_ranges_deg`].
         #[serde(default, skip_serializing_if = "Option::is_none")]
         joint_ranges_deg: Option<[[f64; 2]; 6]>,
-        /// Time each move takes, s (0 = instant).
+        /// Time each move takes, s (0 = instant); ignored with `move_at_limits`.
         #[serde(default)]
         move_duration_s: f64,
+        /// Moves take the time a UR `moveJ` takes at the configured joint limits (trapezoidal
+        /// profile) instead of `move_duration_s`.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        move_at_limits: bool,
+        /// After each move the arm rings down: a joint oscillation of this amplitude (leading
+        /// joint), degrees, decaying with `ringing_decay_s` (0 = the arm stops dead).
+        #[serde(default, skip_serializing_if = "is_zero")]
+        ringing_deg: f64,
+        /// Ringing frequency, Hz.
+        #[serde(default = "default_ringing_hz")]
+        ringing_hz: f64,
+        /// Ringing decay time constant, s.
+        #[serde(default = "default_ringing_decay_s")]
+        ringing_decay_s: f64,
         /// 1-sigma position noise on the reported flange pose, mm.
         #[serde(default)]
         repeatability_mm: f64,
@@ -188,6 +202,16 @@ pub enum RobotConfig {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         repeatability_deg: Option<f64>,
     },
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+fn default_ringing_hz() -> f64 {
+    8.0
+}
+fn default_ringing_decay_s() -> f64 {
+    0.15
 }
 
 pub(super) fn default_start_joints_deg() -> [f64; 6] {
@@ -417,32 +441,53 @@ pub struct PlanConfig {
     /// Generate views on a cap around the board.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub generate: Option<GenerateSpec>,
-    /// Choose poses one at a time (next-best pose) from the plan's poses as candidates, and
-    /// stop when the solved uncertainty reaches `target_uncertainty_mm`.
-    #[serde(default)]
-    pub adaptive: bool,
+    /// Choose poses one at a time (next-best pose, weighed by the move time to reach each)
+    /// from the plan's poses as candidates, and stop as soon as the result is good enough (see
+    /// `target_uncertainty_mm`). Absent: adaptive for a generated plan when the intrinsics are
+    /// given, fixed otherwise (`false` runs every pose of the plan, today's behaviour).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive: Option<bool>,
     /// Hand-guided capture (`handeye console`): nothing drives the arm; a person captures where
     /// it stands, and the plan's poses (`file` or `generate`) are only suggested.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub manual: bool,
-    /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns, mm.
-    #[serde(default = "default_target_uncertainty_mm")]
-    pub target_uncertainty_mm: f64,
+    /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns and the held-out
+    /// error must be at most this, mm. Absent: the verdict's `accuracy_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_uncertainty_mm: Option<f64>,
+    /// Adaptive: never stop before this many accepted poses.
+    #[serde(default = "default_min_poses")]
+    pub min_poses: usize,
+    /// Adaptive: stop after this many accepted poses even if the target is not reached.
+    /// Absent: every candidate may be used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_poses: Option<usize>,
+    /// Visit a fixed plan's poses in the order of least total move time (from where the arm
+    /// stands, every move checked against the joint ranges and the workspace box); `false`
+    /// keeps the scripted order.
+    #[serde(default = "default_reorder")]
+    pub reorder: bool,
 }
 
-fn default_target_uncertainty_mm() -> f64 {
-    0.5
+fn default_min_poses() -> usize {
+    8
+}
+fn default_reorder() -> bool {
+    true
 }
 
 impl Default for PlanConfig {
-    /// No plan source (a recorded robot's poses are its plan), not adaptive.
+    /// No plan source (a recorded robot's poses are its plan), adaptive by its rule.
     fn default() -> Self {
         PlanConfig {
             file: None,
             generate: None,
-            adaptive: false,
+            adaptive: None,
             manual: false,
-            target_uncertainty_mm: default_target_uncertainty_mm(),
+            target_uncertainty_mm: None,
+            min_poses: default_min_poses(),
+            max_poses: None,
+            reorder: default_reorder(),
         }
     }
 }
@@ -579,9 +624,20 @@ impl Default for SolverConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionConfig {
-    /// Wait after the arm stops before grabbing, s (lets vibrations die down).
+    /// Fixed wait after the arm stops before grabbing, s; with `settle_speed_deg_s` the minimum
+    /// before the speeds are watched.
     #[serde(default = "default_settle_s")]
     pub settle_s: f64,
+    /// Settle by measurement: capture once every joint speed the arm reports has stayed below
+    /// this for `settle_window_s`, °/s (0 = the fixed `settle_s` only).
+    #[serde(default = "default_settle_speed_deg_s")]
+    pub settle_speed_deg_s: f64,
+    /// How long the joint speeds must stay below `settle_speed_deg_s`, s.
+    #[serde(default = "default_settle_window_s")]
+    pub settle_window_s: f64,
+    /// An arm that has not settled this long after a move stops the run, s.
+    #[serde(default = "default_settle_timeout_s")]
+    pub settle_timeout_s: f64,
     /// Largest accepted board reprojection RMS, px; a worse frame is retried, then skipped.
     #[serde(default = "default_max_rms_px")]
     pub max_reprojection_rms_px: f64,
@@ -591,7 +647,16 @@ pub struct SessionConfig {
 }
 
 fn default_settle_s() -> f64 {
-    0.2
+    0.0
+}
+fn default_settle_speed_deg_s() -> f64 {
+    0.5
+}
+fn default_settle_window_s() -> f64 {
+    0.1
+}
+fn default_settle_timeout_s() -> f64 {
+    5.0
 }
 fn default_max_rms_px() -> f64 {
     1.0
@@ -604,6 +669,9 @@ impl Default for SessionConfig {
     fn default() -> Self {
         SessionConfig {
             settle_s: default_settle_s(),
+            settle_speed_deg_s: default_settle_speed_deg_s(),
+            settle_window_s: default_settle_window_s(),
+            settle_timeout_s: default_settle_timeout_s(),
             max_reprojection_rms_px: default_max_rms_px(),
             image_margin_px: default_margin_px(),
         }

@@ -178,6 +178,20 @@ pub const ACCURACY_MM: Range = Range::above(0.0, 1000.0, "mm");
 pub const ACCURACY_DEG: Range = Range::above(0.0, 45.0, "°");
 /// `session.settle_s`, s.
 pub const SETTLE_S: Range = Range::closed(0.0, 60.0, "s");
+/// `session.settle_speed_deg_s`, °/s (0 = off).
+pub const SETTLE_SPEED_DEG_S: Range = Range::closed(0.0, 30.0, "°/s");
+/// `session.settle_window_s`, s.
+pub const SETTLE_WINDOW_S: Range = Range::closed(0.0, 5.0, "s");
+/// `session.settle_timeout_s`, s.
+pub const SETTLE_TIMEOUT_S: Range = Range::above(0.0, 600.0, "s");
+/// `plan.min_poses` and `plan.max_poses`.
+pub const PLAN_POSES: Range = Range::closed(3.0, 1000.0, "poses");
+/// `robot.ringing_deg` (sim), degrees.
+pub const RINGING_DEG: Range = Range::closed(0.0, 5.0, "°");
+/// `robot.ringing_hz` (sim), Hz.
+pub const RINGING_HZ: Range = Range::above(0.0, 200.0, "Hz");
+/// `robot.ringing_decay_s` (sim), s.
+pub const RINGING_DECAY_S: Range = Range::above(0.0, 10.0, "s");
 /// `session.max_reprojection_rms_px`, px.
 pub const MAX_REPROJECTION_RMS_PX: Range = Range::above(0.0, 100.0, "px");
 /// `session.image_margin_px`, px.
@@ -284,12 +298,18 @@ impl Validator<'_> {
                 repeatability_mm,
                 repeatability_deg,
                 protective_stop_after_moves,
+                ringing_deg,
+                ringing_hz,
+                ringing_decay_s,
                 ..
             } => {
                 for (i, q) in start_joints_deg.iter().enumerate() {
                     self.number(&format!("robot.start_joints_deg[{i}]"), *q, START_JOINT_DEG)?;
                 }
                 self.number("robot.move_duration_s", *move_duration_s, MOVE_DURATION_S)?;
+                self.number("robot.ringing_deg", *ringing_deg, RINGING_DEG)?;
+                self.number("robot.ringing_hz", *ringing_hz, RINGING_HZ)?;
+                self.number("robot.ringing_decay_s", *ringing_decay_s, RINGING_DECAY_S)?;
                 self.number(
                     "robot.repeatability_mm",
                     *repeatability_mm,
@@ -530,7 +550,7 @@ impl Validator<'_> {
     fn plan(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
         let plan = &raw.plan;
         let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
-        if plan.manual && (recorded || plan.adaptive) {
+        if plan.manual && (recorded || plan.adaptive == Some(true)) {
             return Err(self.inconsistent(
                 "plan.manual",
                 if recorded {
@@ -580,11 +600,28 @@ impl Validator<'_> {
                 ))
             }
         }
-        self.number(
-            "plan.target_uncertainty_mm",
-            plan.target_uncertainty_mm,
-            TARGET_UNCERTAINTY_MM,
-        )?;
+        if let Some(target) = plan.target_uncertainty_mm {
+            self.number("plan.target_uncertainty_mm", target, TARGET_UNCERTAINTY_MM)?;
+        }
+        self.integer("plan.min_poses", plan.min_poses as i128, PLAN_POSES)?;
+        if let Some(max) = plan.max_poses {
+            self.integer("plan.max_poses", max as i128, PLAN_POSES)?;
+            if max < plan.min_poses {
+                return Err(self.inconsistent(
+                    "plan.max_poses",
+                    format!(
+                        "expected at least plan.min_poses ({}), found {max}",
+                        plan.min_poses
+                    ),
+                ));
+            }
+        }
+        if plan.adaptive == Some(true) && plan.file.is_none() && plan.generate.is_none() {
+            return Err(self.inconsistent(
+                "plan.adaptive",
+                "an adaptive plan chooses from the plan's poses: give `file` or `generate`".into(),
+            ));
+        }
         Ok(())
     }
 
@@ -623,6 +660,21 @@ impl Validator<'_> {
     fn session(&self, raw: &ConfigFile) -> Result<Duration, ConfigError> {
         let s = raw.session;
         let settle_s = self.number("session.settle_s", s.settle_s, SETTLE_S)?;
+        self.number(
+            "session.settle_speed_deg_s",
+            s.settle_speed_deg_s,
+            SETTLE_SPEED_DEG_S,
+        )?;
+        self.number(
+            "session.settle_window_s",
+            s.settle_window_s,
+            SETTLE_WINDOW_S,
+        )?;
+        self.number(
+            "session.settle_timeout_s",
+            s.settle_timeout_s,
+            SETTLE_TIMEOUT_S,
+        )?;
         self.number(
             "session.max_reprojection_rms_px",
             s.max_reprojection_rms_px,

@@ -136,6 +136,7 @@ pub fn run_manual(
         outcome,
         solved,
         adaptive: None,
+        arm_time: None,
     })
 }
 

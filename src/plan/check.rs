@@ -2,6 +2,8 @@
 //! move whose whole path keeps the flange inside the workspace box, the whole board inside the
 //! image with a margin at the expected target position, enough rotation diversity for the solver
 //! (the solver's own observability rule), and move times at the configured speed limits.
+//! [`check_plan_ordered`] also puts the poses in the order of least total move time
+//! ([`super::order`]) when that order passes the same checks.
 
 use std::fmt;
 
@@ -70,9 +72,21 @@ pub struct PlanReport {
     pub notes: Vec<String>,
     /// How well the views constrain the camera intrinsics (`None` when not measured).
     pub intrinsics: Option<crate::solve::intrinsics::IntrinsicsCoverage>,
+    /// When the poses were put in the order of least move time: the total move time of the
+    /// plan in its given order, s (the report's own poses are in the order that runs, each
+    /// with its plan index).
+    pub given_order_move_time_s: Option<f64>,
 }
 
 impl PlanReport {
+    /// Total move time of the poses in the report's order at the configured limits, s.
+    pub fn total_move_time_s(&self) -> f64 {
+        // fold from +0.0: `sum` of no poses is -0.0, printed "-0.0 s".
+        self.poses
+            .iter()
+            .fold(0.0, |total, p| total + p.move_time_s)
+    }
+
     /// Whether the plan may run.
     pub fn ok(&self) -> bool {
         self.plan_problems.is_empty() && self.poses.iter().all(|p| p.problems.is_empty())
@@ -111,6 +125,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
             plan_problems: vec![problem],
             notes: Vec::new(),
             intrinsics: None,
+            given_order_move_time_s: None,
         };
     }
     let board_points = board_points(ctx.board);
@@ -200,6 +215,59 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         plan_problems,
         notes,
         intrinsics: Some(coverage),
+        given_order_move_time_s: None,
+    }
+}
+
+/// Checks `plan` as [`check_plan`] does and, when `reorder`, also in the order of least total
+/// move time from the start joints (every move of that order checked against the joint ranges
+/// and the workspace box); returns the report of the order that will run: the reordered one
+/// when it passes every check the given order passes and saves time, else the given order.
+/// Either way `given_order_move_time_s` holds the given order's move time when `reorder`.
+pub fn check_plan_ordered(plan: &Plan, ctx: &CheckContext, reorder: bool) -> PlanReport {
+    let mut given = check_plan(plan, ctx);
+    if !reorder {
+        return given;
+    }
+    let given_time = given.total_move_time_s();
+    given.given_order_move_time_s = Some(given_time);
+    let Some(joints) = given
+        .poses
+        .iter()
+        .map(|p| p.joints)
+        .collect::<Option<Vec<Joints>>>()
+    else {
+        // An unreachable pose: the plan fails anyway (or, adaptive, is chosen from freely).
+        return given;
+    };
+    let mover = MoveCheck {
+        arm: ctx.arm.clone(),
+        workspace: *ctx.workspace,
+    };
+    let order = super::order::order_for_travel(&ctx.start_joints, &joints, |a, b| {
+        mover
+            .problem(a, b)
+            .is_none()
+            .then(|| ctx.limits.joint_move_time(a, b))
+    });
+    if order.iter().enumerate().all(|(k, &i)| k == i) {
+        return given;
+    }
+    let reordered_plan = Plan {
+        waypoints: order.iter().map(|&i| plan.waypoints[i].clone()).collect(),
+    };
+    let mut reordered = check_plan(&reordered_plan, ctx);
+    for (check, &i) in reordered.poses.iter_mut().zip(&order) {
+        check.index = i;
+    }
+    let failing = |r: &PlanReport| r.poses.iter().filter(|p| !p.problems.is_empty()).count();
+    let no_worse = failing(&reordered) <= failing(&given)
+        && reordered.plan_problems.len() <= given.plan_problems.len();
+    if no_worse && reordered.total_move_time_s() < given_time {
+        reordered.given_order_move_time_s = Some(given_time);
+        reordered
+    } else {
+        given
     }
 }
 
@@ -327,17 +395,7 @@ fn path_leaves_box(
 
 /// Duration of a synchronised joint move with a trapezoidal speed profile at the limits.
 fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
-    let travel = from
-        .iter()
-        .zip(to)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
-    let (v, a) = (limits.joint_speed, limits.joint_acceleration);
-    if travel <= v * v / a {
-        2.0 * (travel / a).sqrt()
-    } else {
-        travel / v + v / a
-    }
+    limits.joint_move_time(from, to)
 }
 
 /// Every corner of the board (tag corners of an aprilgrid), in the target frame.
@@ -408,13 +466,18 @@ impl fmt::Display for PlanReport {
         for note in &self.notes {
             writeln!(f, "note: {note}")?;
         }
-        let total: f64 = self.poses.iter().map(|p| p.move_time_s).sum();
+        let total = self.total_move_time_s();
+        let given = match self.given_order_move_time_s {
+            Some(given) => format!(" ({given:.1} s in the given order)"),
+            None => " at the configured limits".to_string(),
+        };
         write!(
             f,
-            "{} poses, {} with problems; total move time {:.1} s at the configured limits — {}",
+            "{} poses, {} with problems; total move time {:.1} s{} — {}",
             self.poses.len(),
             self.poses.iter().filter(|p| !p.problems.is_empty()).count(),
             total,
+            given,
             if self.ok() {
                 "plan OK"
             } else {

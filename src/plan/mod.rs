@@ -11,6 +11,7 @@ pub mod check;
 pub mod generate;
 pub mod lookat;
 pub mod nbv;
+pub mod order;
 
 use std::path::{Path, PathBuf};
 

@@ -7,13 +7,25 @@
 //! covariance the solver would report. The score of a candidate is the predicted
 //! `σ²` summed over both unknowns, translation (mm²) plus rotation seen at a lever arm of
 //! [`ROTATION_LEVER_M`] (a rotation error of one unknown moves a point that far away by
-//! `lever · angle`). Units: metres and radians inside, mm in the target and the score. Depends
-//! on `solve` and `geometry` only; the session drives it through its plan-source trait.
+//! `lever · angle`). Units: metres and radians inside, mm in the target and the score.
+//!
+//! Arm time: with [`AdaptivePlanner::with_motion`] the planner knows where the arm stands and
+//! picks the candidate that buys the most certainty per second of arm time —
+//! `ln(score now / score after) / (move time + per-pose time)`, the move timed at the limits
+//! ([`MotionLimits::joint_move_time`]) — instead of the best score alone; a near pose that
+//! helps almost as much wins over a far one. Stopping: the solved 1-sigma must reach the target
+//! after at least `min_poses` samples, and a caller's check (held-out error, rotation spread)
+//! must agree ([`AdaptivePlanner::with_stop_check`]).
+//!
+//! Depends on `solve`, `robot` (joints, limits) and `geometry` only; the session drives it
+//! through its plan-source trait.
+
+use std::sync::Arc;
 
 use nalgebra::SMatrix;
 
 use crate::geometry::Pose;
-use crate::robot::Joints;
+use crate::robot::{Joints, MotionLimits};
 use crate::setup::{PosePair, Setup};
 use crate::solve::refine::{mount_uncertainty, sample_information};
 use crate::solve::{self, Axby, Calibration, SolveOptions};
@@ -114,6 +126,61 @@ pub fn next_best(
         .min_by(|a, b| a.1.score.total_cmp(&b.1.score))
 }
 
+/// Like [`next_best`], but the candidate that reduces the predicted score the most per second of
+/// arm time: `ln(score now / score after) / seconds(i)`, with `seconds(i)` the time to move to
+/// candidate `i` and take its frame (> 0).
+#[allow(clippy::too_many_arguments)]
+pub fn next_best_per_second(
+    setup: Setup,
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    taken: &[Pose],
+    candidates: &[Pose],
+    used: &[bool],
+    options: &SolveOptions,
+    variance_factor: f64,
+    seconds: &dyn Fn(usize) -> f64,
+) -> Option<(usize, Predicted)> {
+    let solution = Axby::from_mounts(camera_mount, target_mount);
+    let h = information(setup, camera_mount, target_mount, taken, options);
+    let now = predict(camera_mount, target_mount, &h, variance_factor)?.score;
+    candidates
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
+        .filter_map(|(i, c)| {
+            let added = h + sample_information(&solution, &setup.chain_b(c), &options.noise);
+            let p = predict(camera_mount, target_mount, &added, variance_factor)?;
+            let gain = (now / p.score).ln();
+            Some((i, p, gain / seconds(i).max(1e-3)))
+        })
+        .max_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(i, p, _)| (i, p))
+}
+
+/// A caller's judgement whether a solve is good enough to stop (say, its held-out error and the
+/// rotation spread of the samples), asked only once the solved 1-sigma meets the target.
+#[derive(Clone)]
+pub struct StopCheck(pub Arc<StopCheckFn>);
+
+/// The judgement of a [`StopCheck`]: the samples and the solve that met the target in, whether
+/// to stop out.
+pub type StopCheckFn = dyn Fn(&[PosePair], &Calibration) -> bool + Send + Sync;
+
+impl std::fmt::Debug for StopCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StopCheck")
+    }
+}
+
+/// Where the arm stands and what its time costs, for [`AdaptivePlanner::with_motion`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Motion {
+    limits: MotionLimits,
+    at: Joints,
+    per_pose_s: f64,
+}
+
 /// One decision of the adaptive planner, for logs and reports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdaptiveStep {
@@ -137,12 +204,18 @@ pub struct AdaptivePlanner {
     options: SolveOptions,
     target_uncertainty_mm: f64,
     min_samples: usize,
+    min_stop: usize,
     max_samples: usize,
     variance_factor: f64,
+    motion: Option<Motion>,
+    stop_check: Option<StopCheck>,
+    /// How many times the caller's stop check said no.
+    pub stop_check_refused: usize,
     /// Decisions so far.
     pub log: Vec<AdaptiveStep>,
     /// The latest calibration solved on the way (the one that met the target, when it did).
     pub latest: Option<Calibration>,
+    reached: bool,
 }
 
 impl AdaptivePlanner {
@@ -171,11 +244,41 @@ impl AdaptivePlanner {
             options,
             target_uncertainty_mm,
             min_samples: Self::DEFAULT_MIN_SAMPLES,
+            min_stop: 0,
             max_samples,
             variance_factor: 1.0,
+            motion: None,
+            stop_check: None,
+            stop_check_refused: 0,
             log: Vec::new(),
             latest: None,
+            reached: false,
         }
+    }
+
+    /// Weighs candidates by arm time: the arm stands at `start` and moves at `limits`; every
+    /// pose also costs `per_pose_s` (settling, the frame).
+    pub fn with_motion(mut self, limits: MotionLimits, start: Joints, per_pose_s: f64) -> Self {
+        self.motion = Some(Motion {
+            limits,
+            at: start,
+            per_pose_s: per_pose_s.max(0.0),
+        });
+        self
+    }
+
+    /// Never stops on the target before `min_poses` samples are accepted (the maximum still
+    /// applies).
+    pub fn with_min_poses(mut self, min_poses: usize) -> Self {
+        self.min_stop = min_poses;
+        self
+    }
+
+    /// Stops on the target only when `check` also agrees (asked with the samples and the solve
+    /// that met the target).
+    pub fn with_stop_check(mut self, check: StopCheck) -> Self {
+        self.stop_check = Some(check);
+        self
     }
 
     /// The next pose to visit given the samples accepted so far, or `None` to stop.
@@ -200,23 +303,54 @@ impl AdaptivePlanner {
                 self.latest = Some(c);
             }
         }
-        let done = solved_sigma_mm.is_some_and(|s| s <= self.target_uncertainty_mm)
-            || samples.len() >= self.max_samples;
+        let met = solved_sigma_mm.is_some_and(|s| s <= self.target_uncertainty_mm)
+            && samples.len() >= self.min_stop;
+        let good = met
+            && match (&self.stop_check, &self.latest) {
+                (Some(check), Some(c)) => {
+                    let ok = (check.0)(samples, c);
+                    if !ok {
+                        self.stop_check_refused += 1;
+                    }
+                    ok
+                }
+                _ => true,
+            };
+        self.reached = good;
+        let done = good || samples.len() >= self.max_samples;
         let choice = if done {
             None
         } else {
             let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
             let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
-            next_best(
-                self.setup,
-                &self.estimate.0,
-                &self.estimate.1,
-                &taken,
-                &poses,
-                &self.used,
-                &self.options,
-                self.variance_factor,
-            )
+            match self.motion {
+                Some(m) => {
+                    let joints: Vec<Joints> = self.candidates.iter().map(|c| c.1).collect();
+                    let seconds =
+                        |i: usize| m.limits.joint_move_time(&m.at, &joints[i]) + m.per_pose_s;
+                    next_best_per_second(
+                        self.setup,
+                        &self.estimate.0,
+                        &self.estimate.1,
+                        &taken,
+                        &poses,
+                        &self.used,
+                        &self.options,
+                        self.variance_factor,
+                        &seconds,
+                    )
+                }
+                None => next_best(
+                    self.setup,
+                    &self.estimate.0,
+                    &self.estimate.1,
+                    &taken,
+                    &poses,
+                    &self.used,
+                    &self.options,
+                    self.variance_factor,
+                ),
+            }
         };
         self.log.push(AdaptiveStep {
             samples: samples.len(),
@@ -226,6 +360,9 @@ impl AdaptivePlanner {
         });
         let (index, _) = choice?;
         self.used[index] = true;
+        if let Some(m) = &mut self.motion {
+            m.at = self.candidates[index].1;
+        }
         Some(self.candidates[index])
     }
 
@@ -240,12 +377,10 @@ impl AdaptivePlanner {
         }
     }
 
-    /// Whether the last solve met the target uncertainty.
+    /// Whether the planner stopped because the result was good enough: the last solve met the
+    /// target uncertainty (after the minimum pose count, with the stop check's agreement).
     pub fn reached_target(&self) -> bool {
-        self.log
-            .last()
-            .and_then(|s| s.solved_sigma_mm)
-            .is_some_and(|s| s <= self.target_uncertainty_mm)
+        self.reached
     }
 }
 

@@ -100,6 +100,8 @@ pub struct ReportInput {
     /// the primary answer itself with [`verdict::assess`], the held-out figures of
     /// [`ReportInput::holdout`] and the default accuracy.
     pub verdict: Option<Verdict>,
+    /// The run's arm time (spent, and saved against the full plan), when the session kept it.
+    pub arm_time: Option<crate::cell::run::ArmTime>,
 }
 
 impl ReportInput {
@@ -305,6 +307,19 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
             escape(&h.description),
             h.rotation_rms_deg,
             h.translation_rms_mm
+        );
+    }
+    if let Some(a) = &input.arm_time {
+        let _ = writeln!(
+            html,
+            "<p class=\"armtime\">Arm time: <span data-key=\"arm_time.spent_s\">{:.1}</span> s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so <span data-key=\"arm_time.saved_s\">{:.1}</span> s saved.</p>",
+            a.spent_s(),
+            a.poses,
+            a.moving_s,
+            a.settling_s,
+            a.full_plan_poses,
+            a.full_plan_estimate_s,
+            a.saved_s()
         );
     }
     html.push_str("</section>\n");

@@ -114,6 +114,7 @@ pub fn from_session(
         noise,
         holdout: None,
         verdict: None,
+        arm_time: None,
     })
 }
 
@@ -232,6 +233,7 @@ pub fn write_session_report(
         _ => None,
     };
     let mut input = from_session(folder, answers, optics, options.noise)?;
+    input.arm_time = crate::cell::run::ArmTime::load(folder.root());
     // The held-out figures and the verdict of the primary answer, made exactly as for
     // `result.yaml` (same function, options and accuracy), so page and file agree.
     let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();

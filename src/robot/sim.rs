@@ -1,7 +1,13 @@
 //! The simulated UR arm: a [`Robot`] backed by [`UrModel`] kinematics, for dry runs, the
-//! simulated cell and tests. It moves instantly or in a fixed time, reports its pose with
-//! repeatability noise, and can inject the faults a real cell shows (protective stop, emergency
-//! stop, lost connection).
+//! simulated cell and tests. It moves instantly, in a fixed time, or in the time a UR's `moveJ`
+//! takes at the move's limits (trapezoidal profile of the leading joint); after arriving it can
+//! ring down (a decaying joint oscillation, so the joint speeds it reports are not zero right
+//! after a move); it reports its pose with repeatability noise, and can inject the faults a real
+//! cell shows (protective stop, emergency stop, lost connection).
+//!
+//! Motion is a function of time: every move is kept as a record (start, profile, target,
+//! ringing), so the joints and joint speeds at any instant — now, or when a frame was exposed —
+//! follow from the records ([`SimRobot::joint_state_at`]).
 //!
 //! Which pose is "true": a move puts the arm exactly on the commanded target (the joints the
 //! inverse kinematics chose); that exact flange pose is [`SimRobot::true_base_from_flange`] and
@@ -22,7 +28,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::kinematics::UrModel;
-use super::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use super::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::geometry::{pose_from_rotvec, Pose};
 
 /// Faults the simulated arm injects, counted in completed moves.
@@ -37,11 +43,29 @@ pub struct SimFaults {
     pub connection_lost_after_moves: Option<usize>,
 }
 
+/// The decaying oscillation of a joint after the arm arrives: joint `i` swings by
+/// `amplitude_rad · (travel_i / leading travel) · e^(−t/decay_s) · sin(2π·frequency_hz·t)`
+/// about its target, `t` seconds after arrival.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ringing {
+    /// Amplitude of the leading joint right after arrival, rad.
+    pub amplitude_rad: f64,
+    /// Oscillation frequency, Hz.
+    pub frequency_hz: f64,
+    /// Decay time constant, s.
+    pub decay_s: f64,
+}
+
 /// How the simulated arm behaves.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimRobotOptions {
-    /// Wall time every move takes; zero makes moves instant.
+    /// Wall time every move takes; zero makes moves instant (unless `move_at_limits`).
     pub move_duration: Duration,
+    /// Moves take the time a UR `moveJ` takes at the move's joint speed and acceleration limits
+    /// (trapezoidal profile, [`MotionLimits::joint_move_time`]) instead of `move_duration`.
+    pub move_at_limits: bool,
+    /// Ringing after arrival (`None`: the arm stops dead).
+    pub ringing: Option<Ringing>,
     /// Standard deviation of the reported flange position per axis, m (UR5e: about 1e-5).
     pub repeatability_m: f64,
     /// Standard deviation of the reported flange rotation per rotation-vector axis, rad.
@@ -57,6 +81,8 @@ impl Default for SimRobotOptions {
     fn default() -> Self {
         SimRobotOptions {
             move_duration: Duration::ZERO,
+            move_at_limits: false,
+            ringing: None,
             repeatability_m: 0.0,
             repeatability_rad: 0.0,
             seed: 0,
@@ -103,12 +129,28 @@ enum Latched {
     Disconnected,
 }
 
+/// One move as it happened (or is happening), for the joint state at any instant.
+#[derive(Debug, Clone, Copy)]
+struct MotionRecord {
+    started: Instant,
+    from: Joints,
+    to: Joints,
+    /// Travel time, s.
+    duration_s: f64,
+    /// `(speed, acceleration)` of a trapezoidal profile; `None`: constant speed.
+    profile: Option<(f64, f64)>,
+    /// Ringing amplitude per joint after arrival, rad.
+    ringing: Joints,
+}
+
 /// A simulated UR arm; see the module docs for which pose is true and which is reported.
 #[derive(Debug)]
 pub struct SimRobot {
     model: UrModel,
     options: SimRobotOptions,
+    /// The commanded joints (where the arm comes to rest).
     joints: Joints,
+    history: Vec<MotionRecord>,
     true_pose: Pose,
     reported_pose: Pose,
     rng: StdRng,
@@ -154,6 +196,7 @@ impl SimRobot {
             model,
             options,
             joints: start,
+            history: Vec::new(),
             true_pose,
             // Standing at the start the reading is exact until the first move draws noise.
             reported_pose: true_pose,
@@ -165,9 +208,49 @@ impl SimRobot {
         })
     }
 
-    /// The arm's exact flange pose `T_base_flange` (what a simulated camera renders from).
+    /// The arm's exact flange pose `T_base_flange` now (what a simulated camera renders from):
+    /// the pose at rest, or where the arm is on its way or while it rings down.
     pub fn true_base_from_flange(&self) -> Pose {
-        self.true_pose
+        match self.options.ringing {
+            None => self.true_pose,
+            Some(_) => self.model.forward(&self.joint_state_at(Instant::now()).0),
+        }
+    }
+
+    /// The true joint positions (rad) and speeds (rad/s) at instant `t`: standing, moving, or
+    /// ringing down after a move.
+    pub fn joint_state_at(&self, t: Instant) -> (Joints, Joints) {
+        let Some(record) = self.history.iter().rev().find(|r| r.started <= t) else {
+            // Before the first move (or a moment before it started): standing at the start.
+            let q = self.history.first().map_or(self.joints, |r| r.from);
+            return (q, [0.0; 6]);
+        };
+        let dt = t.duration_since(record.started).as_secs_f64();
+        let delta: Joints = std::array::from_fn(|i| record.to[i] - record.from[i]);
+        let lead = delta.iter().map(|d| d.abs()).fold(0.0, f64::max);
+        if dt < record.duration_s && lead > 0.0 {
+            let (fraction, lead_speed) = match record.profile {
+                Some((v, a)) => trapezoid_at(lead, v, a, dt),
+                None => (dt / record.duration_s, lead / record.duration_s),
+            };
+            return (
+                std::array::from_fn(|i| record.from[i] + delta[i] * fraction),
+                std::array::from_fn(|i| delta[i] / lead * lead_speed),
+            );
+        }
+        let Some(ringing) = self.options.ringing else {
+            return (record.to, [0.0; 6]);
+        };
+        let t = dt - record.duration_s;
+        let w = 2.0 * std::f64::consts::PI * ringing.frequency_hz;
+        let envelope = (-t / ringing.decay_s).exp();
+        let (sin, cos) = (w * t).sin_cos();
+        (
+            std::array::from_fn(|i| record.to[i] + record.ringing[i] * envelope * sin),
+            std::array::from_fn(|i| {
+                record.ringing[i] * envelope * (w * cos - sin / ringing.decay_s)
+            }),
+        )
     }
 
     /// How many moves have completed.
@@ -220,20 +303,56 @@ impl SimRobot {
     /// poses. When the interrupt flag is set part-way the arm stops where it is by then (on the
     /// joint-space line between start and target) and the move returns
     /// [`RobotError::Interrupted`].
-    fn finish_move(&mut self, joints: Joints) -> Result<(), RobotError> {
-        let duration = self.options.move_duration;
+    fn finish_move(&mut self, joints: Joints, limits: &MotionLimits) -> Result<(), RobotError> {
+        let from = self.joint_state_at(Instant::now()).0;
+        let (duration_s, profile) = if self.options.move_at_limits {
+            (
+                limits.joint_move_time(&from, &joints),
+                Some((limits.joint_speed, limits.joint_acceleration)),
+            )
+        } else {
+            (self.options.move_duration.as_secs_f64(), None)
+        };
+        let lead = from
+            .iter()
+            .zip(&joints)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let amplitude = self.options.ringing.map_or(0.0, |r| r.amplitude_rad);
         let started = Instant::now();
+        self.history.push(MotionRecord {
+            started,
+            from,
+            to: joints,
+            duration_s,
+            profile,
+            ringing: std::array::from_fn(|i| {
+                if lead > 0.0 {
+                    amplitude * (joints[i] - from[i]) / lead
+                } else {
+                    0.0
+                }
+            }),
+        });
+        let duration = Duration::from_secs_f64(duration_s);
         while !duration.is_zero() {
             let elapsed = started.elapsed();
             if elapsed >= duration {
                 break;
             }
             if self.interrupted() {
-                let done = elapsed.as_secs_f64() / duration.as_secs_f64();
-                let from = self.joints;
-                self.arrive(std::array::from_fn(|i| {
-                    from[i] + (joints[i] - from[i]) * done
-                }));
+                let now = Instant::now();
+                let stopped = self.joint_state_at(now).0;
+                // The arm stops where it is (the sim decelerates at once) and stands there.
+                self.history.push(MotionRecord {
+                    started: now,
+                    from: stopped,
+                    to: stopped,
+                    duration_s: 0.0,
+                    profile: None,
+                    ringing: [0.0; 6],
+                });
+                self.arrive(stopped);
                 return Err(RobotError::Interrupted);
             }
             std::thread::sleep((duration - elapsed).min(INTERRUPT_POLL));
@@ -271,7 +390,20 @@ impl Robot for SimRobot {
 
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {
         self.check_latched_connection()?;
-        Ok(self.joints)
+        Ok(match self.options.ringing {
+            None => self.joints,
+            Some(_) => self.joint_state_at(Instant::now()).0,
+        })
+    }
+
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        self.check_latched_connection()?;
+        // An arm whose moves are instant and that stops dead has no motion to measure: like a
+        // backend without speed readings, it leaves settling to the fixed wait.
+        let still = self.options.move_duration.is_zero()
+            && !self.options.move_at_limits
+            && self.options.ringing.is_none();
+        Ok((!still).then(|| self.joint_state_at(Instant::now()).1))
     }
 
     fn move_linear(
@@ -294,7 +426,7 @@ impl Robot for SimRobot {
         if self.interrupted() {
             return Err(RobotError::Interrupted);
         }
-        self.finish_move(joints)
+        self.finish_move(joints, limits)
     }
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
@@ -316,7 +448,7 @@ impl Robot for SimRobot {
         if self.interrupted() {
             return Err(RobotError::Interrupted);
         }
-        self.finish_move(*joints)
+        self.finish_move(*joints, limits)
     }
 
     fn stop(&mut self) -> Result<(), RobotError> {
@@ -572,6 +704,58 @@ mod tests {
         let t = std::time::Instant::now();
         robot.move_joints(&HOME, &MotionLimits::default()).unwrap();
         assert!(t.elapsed() >= Duration::from_millis(30));
+    }
+
+    #[test]
+    fn moves_at_limits_take_the_trapezoid_time_and_then_ring_down() {
+        let limits = MotionLimits {
+            joint_speed: 2.0,
+            joint_acceleration: 8.0,
+            ..MotionLimits::default()
+        };
+        let ringing = Ringing {
+            amplitude_rad: 0.2f64.to_radians(),
+            frequency_hz: 8.0,
+            decay_s: 0.1,
+        };
+        let mut robot = sim(SimRobotOptions {
+            move_at_limits: true,
+            ringing: Some(ringing),
+            ..Default::default()
+        });
+        let mut target = HOME;
+        target[0] += 0.8;
+        target[2] -= 0.4;
+        let expected = limits.joint_move_time(&HOME, &target);
+        let t0 = Instant::now();
+        robot.move_joints(&target, &limits).unwrap();
+        let took = t0.elapsed().as_secs_f64();
+        assert!(
+            took >= expected && took < expected + 0.05,
+            "{took} s vs {expected} s"
+        );
+        // Right after arrival the joints still move; the lead joint the most, the others in
+        // proportion to their travel, the untouched ones not at all.
+        let arrived = Instant::now();
+        let (_, speeds) = robot.joint_state_at(arrived);
+        let omega = 2.0 * std::f64::consts::PI * ringing.frequency_hz;
+        assert!(
+            speeds[0].abs() > 0.5 * ringing.amplitude_rad * omega,
+            "{speeds:?}"
+        );
+        assert!((speeds[2] + 0.5 * speeds[0]).abs() < 1e-12, "{speeds:?}");
+        assert_eq!(speeds[1], 0.0);
+        let reported = robot.joint_speeds().unwrap().unwrap();
+        assert!(reported[0].abs() > 0.0);
+        // A second later the ringing is gone (e^-10) and the arm stands on its target.
+        let (q, speeds) = robot.joint_state_at(arrived + Duration::from_secs(1));
+        assert!(speeds.iter().all(|v| v.abs() < 1e-5), "{speeds:?}");
+        assert!(q.iter().zip(&target).all(|(a, b)| (a - b).abs() < 1e-6));
+        // Half-way through the move the lead joint runs at the speed limit.
+        let mid = t0 + Duration::from_secs_f64(expected / 2.0);
+        let (q, speeds) = robot.joint_state_at(mid);
+        assert!((speeds[0] - limits.joint_speed).abs() < 1e-9, "{speeds:?}");
+        assert!((q[0] - (HOME[0] + 0.4)).abs() < 1e-3, "{q:?}");
     }
 
     #[test]

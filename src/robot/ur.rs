@@ -615,6 +615,20 @@ impl Robot for UrRobot {
         })
     }
 
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        self.wait_fresh(None)?;
+        self.call("getActualQd", |h| {
+            let mut out = [0.0; 6];
+            let ptr = h.ptr();
+            // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for 6.
+            raw_call(|err, len| unsafe {
+                ffi::urrtde_get_actual_qd(ptr, out.as_mut_ptr(), err, len)
+            })
+            .map(|()| Some(out))
+            .map_err(|e| call_error("getActualQd", e))
+        })
+    }
+
     fn move_linear(
         &mut self,
         base_from_flange: &Pose,

@@ -90,6 +90,8 @@ pub fn run_adaptive_session(
         let index = plan.len() - 1;
         let step_outcome = run_session(step, robot, camera, on_event)?;
         outcome.visited_now += step_outcome.visited_now;
+        outcome.moving_s += step_outcome.moving_s;
+        outcome.settling_s += step_outcome.settling_s;
         outcome.skipped.extend(step_outcome.skipped.iter().cloned());
         if step_outcome.accepted.contains(&index) {
             outcome.accepted = step_outcome.accepted;

@@ -1,6 +1,11 @@
 //! The run loop: the arm and camera on the calling thread, detection and recording on a worker
 //! thread, so the vision work for pose i happens while the arm moves to pose i+1.
 //!
+//! Settling: after each move the loop waits the fixed `settle` time, then — when the setup asks
+//! for it and the arm reports joint speeds — until every joint speed has stayed below a threshold
+//! for a short window; the frame it then grabs was exposed no earlier than the start of that
+//! quiet window (checked on the frame's `captured_at`), so no frame shows a ringing arm.
+//!
 //! Per pose the worker writes, in this order: the frame, the pose record (the commit point), then
 //! `samples.yaml` (derived from the records). A run or resume first rebuilds `samples.yaml` from
 //! the committed records, so a crash between any two writes loses nothing and doubles nothing.
@@ -22,7 +27,7 @@ use crate::camera_model::CameraModel;
 use crate::dataset::Dataset;
 use crate::geometry::{Pose, PoseYaml};
 use crate::plan::check::MoveCheck;
-use crate::robot::{Joints, MotionLimits, Robot};
+use crate::robot::{Joints, MotionLimits, Robot, SettleBySpeed};
 use crate::setup::{PosePair, Setup};
 use crate::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
@@ -40,8 +45,11 @@ pub struct SessionSetup {
     pub plan: Vec<(Pose, Joints)>,
     /// Speed and acceleration caps for every move.
     pub limits: MotionLimits,
-    /// Wait after each move before grabbing.
+    /// Wait after each move before grabbing (the minimum when `settle_by_speed` is given).
     pub settle: Duration,
+    /// Settle by measurement: after `settle`, wait for the arm's joint speeds to stay low.
+    /// `None`: the fixed wait only.
+    pub settle_by_speed: Option<SettleBySpeed>,
     /// Frames whose board reprojection RMS exceeds this are rejected.
     pub max_reprojection_rms_px: f64,
     /// The board.
@@ -57,7 +65,14 @@ pub struct SessionSetup {
     /// Every move is checked from the arm's actual joints before it is sent (`None`: nothing
     /// moves, e.g. a recorded robot).
     pub move_check: Option<MoveCheck>,
+    /// When a resumed run starts, visit the poses left in the order of least move time from
+    /// where the arm stands (every move allowed by `move_check`), instead of plan order; `false`
+    /// keeps plan order (a scripted order).
+    pub reorder: bool,
 }
+
+/// How often the joint speeds are read while settling (a UR streams them at 500 Hz).
+const SETTLE_POLL: Duration = Duration::from_millis(4);
 
 /// Something that happened, for progress displays.
 #[derive(Debug, Clone)]
@@ -91,6 +106,17 @@ pub struct SessionOutcome {
     pub skipped: Vec<(usize, String)>,
     /// Poses visited in this run (not counting those recorded before a resume).
     pub visited_now: usize,
+    /// Arm time of this run spent in moves, s (wall time of the move calls).
+    pub moving_s: f64,
+    /// Arm time of this run spent settling after moves before the frame was exposed, s.
+    pub settling_s: f64,
+}
+
+impl SessionOutcome {
+    /// Arm time of this run: moving plus settling, s.
+    pub fn arm_time_s(&self) -> f64 {
+        self.moving_s + self.settling_s
+    }
 }
 
 struct Job {
@@ -159,6 +185,11 @@ pub fn run_session(
         folder: setup.folder.root().to_path_buf(),
     };
 
+    // A fresh plan runs in its (checked) order; what a resumed run has left is visited in travel
+    // order from where the arm stands now. Retries follow each pass in plan order.
+    if !(accepted.is_empty() && failed_before.is_empty()) {
+        order_for_travel(robot, &setup, &mut pending);
+    }
     'passes: while !pending.is_empty() {
         for &plan_index in &pending {
             if state.error.is_some() {
@@ -176,8 +207,10 @@ pub fn run_session(
             }
             on_event(SessionEvent::Moving { plan_index });
             match capture(robot, camera, &setup, plan_index) {
-                Ok((frame, base_from_flange)) => {
+                Ok((frame, base_from_flange, timing)) => {
                     state.outcome.visited_now += 1;
+                    state.outcome.moving_s += timing.moving_s;
+                    state.outcome.settling_s += timing.settling_s;
                     state.in_flight += 1;
                     job_tx
                         .send(Job {
@@ -312,13 +345,42 @@ impl RunState {
     }
 }
 
+/// Puts `pending` plan indices in the order of least move time from the arm's current joints
+/// (each move allowed by the setup's move check), when the setup asks for it and the arm's
+/// joints can be read; else leaves them as they are.
+fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut Vec<usize>) {
+    let Some(check) = setup.move_check.as_ref().filter(|_| setup.reorder) else {
+        return;
+    };
+    if pending.len() < 2 {
+        return;
+    }
+    let Ok(from) = robot.joint_positions() else {
+        return;
+    };
+    let joints: Vec<Joints> = pending.iter().map(|&i| setup.plan[i].1).collect();
+    let order = crate::plan::order::order_for_travel(&from, &joints, |a, b| {
+        check
+            .problem(a, b)
+            .is_none()
+            .then(|| setup.limits.joint_move_time(a, b))
+    });
+    *pending = order.iter().map(|&k| pending[k]).collect();
+}
+
+/// Where the arm time of one pose went, s.
+struct PoseTiming {
+    moving_s: f64,
+    settling_s: f64,
+}
+
 /// Move, settle, grab a fresh frame, read the measured flange pose.
 fn capture(
     robot: &mut dyn Robot,
     camera: &mut dyn Camera,
     setup: &SessionSetup,
     plan_index: usize,
-) -> Result<(Frame, Pose), ErrorSource> {
+) -> Result<(Frame, Pose, PoseTiming), ErrorSource> {
     let (_, joints) = &setup.plan[plan_index];
     if let Some(check) = &setup.move_check {
         let from = robot.joint_positions()?;
@@ -326,12 +388,84 @@ fn capture(
             return Err(ErrorSource::UnsafeMove(problem));
         }
     }
+    let started = Instant::now();
     robot.move_joints(joints, &setup.limits)?;
+    let arrived = Instant::now();
     std::thread::sleep(setup.settle);
-    let settled = Instant::now();
-    let frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+    let settled = match &setup.settle_by_speed {
+        Some(rule) => wait_until_still(robot, rule, arrived, &setup.stop)?,
+        None => Instant::now(),
+    };
+    let mut frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+    // A camera that hands out a frame exposed before the arm stood still breaks its contract;
+    // never use such a frame (grab again, a few times).
+    for _ in 0..3 {
+        if frame.captured_at >= settled {
+            break;
+        }
+        frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+    }
+    if frame.captured_at < settled {
+        return Err(ErrorSource::Camera(crate::camera::CameraError::Backend(
+            "the camera returned only frames exposed before the arm stood still (its frames' exposure times are earlier than the time asked for)".into(),
+        )));
+    }
     let base_from_flange = robot.base_from_flange()?;
-    Ok((frame, base_from_flange))
+    let timing = PoseTiming {
+        moving_s: arrived.duration_since(started).as_secs_f64(),
+        settling_s: frame
+            .captured_at
+            .saturating_duration_since(arrived)
+            .as_secs_f64(),
+    };
+    Ok((frame, base_from_flange, timing))
+}
+
+/// Waits until every joint speed the arm reports has stayed below the rule's threshold for the
+/// rule's window; returns the start of that quiet window (a frame exposed from then on shows the
+/// arm at rest). Returns at once when the arm reports no speeds. Fails when the arm is still
+/// moving `timeout` after `arrived`, or when a stop is requested.
+fn wait_until_still(
+    robot: &mut dyn Robot,
+    rule: &SettleBySpeed,
+    arrived: Instant,
+    stop: &AtomicBool,
+) -> Result<Instant, ErrorSource> {
+    let mut quiet_since: Option<Instant> = None;
+    let mut fastest = 0.0f64;
+    loop {
+        let Some(speeds) = robot.joint_speeds()? else {
+            return Ok(Instant::now());
+        };
+        // Taken after the reading: the reading shows the arm no later than this.
+        let now = Instant::now();
+        let top = speeds.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if top.is_nan() || top >= rule.max_joint_speed {
+            quiet_since = None;
+            fastest = if top.is_nan() { f64::INFINITY } else { top };
+        } else {
+            let since = *quiet_since.get_or_insert(now);
+            if now.duration_since(since) >= rule.window {
+                return Ok(since);
+            }
+        }
+        if stop.load(Ordering::SeqCst) {
+            return Err(ErrorSource::Robot(crate::robot::RobotError::Interrupted));
+        }
+        if now.duration_since(arrived) > rule.timeout {
+            return Err(ErrorSource::Robot(crate::robot::RobotError::Backend(
+                format!(
+                    "the arm did not settle: {:.1} s after the move a joint still moved at {:.2}°/s (session.settle_speed_deg_s = {:.2}°/s for session.settle_window_s = {:.2} s)",
+                    rule.timeout.as_secs_f64(),
+                    fastest.to_degrees(),
+                    rule.max_joint_speed.to_degrees(),
+                    rule.window.as_secs_f64()
+                )
+                .into(),
+            )));
+        }
+        std::thread::sleep(SETTLE_POLL);
+    }
 }
 
 enum ErrorSource {

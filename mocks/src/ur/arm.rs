@@ -3,6 +3,12 @@
 //! control script (`rtde_control.script`). State advances lazily: every reader or writer calls
 //! [`Arm::advance`] with the current time first, so no thread ticks while nobody is connected.
 //!
+//! Motion: a joint move runs at constant speed, or — with `trapezoidal_moves` — on the
+//! trapezoidal profile a UR's `moveJ` follows at the commanded speed and acceleration. With
+//! `ringing` the arm rings down after a joint move (a decaying joint oscillation): the move is
+//! reported done on arrival while `actual_q` / `actual_qd` still show the arm swinging, as a real
+//! arm's do for a moment.
+//!
 //! Frames: `T_base_flange` from the kinematics; the TCP pose the controller reports is
 //! `T_base_tcp = T_base_flange * T_flange_tcp`. Metres, radians, rotation vectors on the wire.
 
@@ -10,7 +16,8 @@ use std::time::{Duration, Instant};
 
 use handeye::geometry::{pose_from_rotvec, rotvec, Pose};
 use handeye::robot::kinematics::UrModel;
-use handeye::robot::Joints;
+use handeye::robot::sim::Ringing;
+use handeye::robot::{trapezoid_at, trapezoid_time, Joints};
 use nalgebra::{Isometry3, Translation3, Vector3};
 
 use super::MockFaults;
@@ -82,6 +89,17 @@ struct Motion {
     /// Fraction of the path at which an injected protective stop halts the arm.
     protective_stop_at: Option<f64>,
     asynchronous: bool,
+    /// `(speed, acceleration)` of a trapezoidal joint move; `None`: constant speed.
+    profile: Option<(f64, f64)>,
+}
+
+/// The arm ringing down after a joint move.
+#[derive(Debug, Clone, Copy)]
+struct RingDown {
+    arrived: Instant,
+    to: Joints,
+    /// Amplitude per joint, rad.
+    amplitude: Joints,
 }
 
 /// The arm and controller state of one mock.
@@ -90,6 +108,9 @@ pub(crate) struct Arm {
     model: UrModel,
     flange_from_tcp: Pose,
     instant_moves: bool,
+    trapezoidal_moves: bool,
+    ringing: Option<Ringing>,
+    ring: Option<RingDown>,
     faults: MockFaults,
     epoch: Instant,
     joints: Joints,
@@ -132,6 +153,14 @@ pub(crate) struct Snapshot {
     pub out_double: [f64; REGISTERS],
 }
 
+/// The largest joint travel of a joint move, rad.
+fn lead_travel(from: &Joints, to: &Joints) -> f64 {
+    from.iter()
+        .zip(to)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max)
+}
+
 /// `[x, y, z, rx, ry, rz]` of a pose, the UR wire form.
 pub(crate) fn to_ur_vector(pose: &Pose) -> [f64; 6] {
     let t = pose.translation.vector;
@@ -159,6 +188,9 @@ impl Arm {
             model,
             flange_from_tcp,
             instant_moves,
+            trapezoidal_moves: false,
+            ringing: None,
+            ring: None,
             faults,
             epoch: Instant::now(),
             joints: start,
@@ -180,6 +212,14 @@ impl Arm {
             protective_stop_fired: false,
             scripts_received: 0,
         }
+    }
+
+    /// Joint moves on the trapezoidal profile of the commanded speed and acceleration, and the
+    /// ring-down after a joint move (see the module docs).
+    pub(crate) fn with_motion_model(mut self, trapezoidal: bool, ringing: Option<Ringing>) -> Self {
+        self.trapezoidal_moves = trapezoidal;
+        self.ringing = ringing;
+        self
     }
 
     pub(crate) fn joints(&self) -> Joints {
@@ -266,6 +306,7 @@ impl Arm {
     /// Halts the arm where it is and stops the program with a safety stop.
     fn halt(&mut self, emergency: bool) {
         self.motion = None;
+        self.ring = None;
         self.pending_done = false;
         self.program_running = false;
         self.executing_cmd = false;
@@ -318,16 +359,23 @@ impl Arm {
     }
 
     fn step_motion(&mut self, now: Instant) {
-        let Some(motion) = self.motion else { return };
+        let Some(motion) = self.motion else {
+            self.step_ringing(now);
+            return;
+        };
         if motion.stalled {
             return;
         }
-        let fraction = if motion.duration.is_zero() {
+        let elapsed = now.saturating_duration_since(motion.started).as_secs_f64();
+        let fraction = if motion.duration.is_zero() || elapsed >= motion.duration.as_secs_f64() {
             1.0
         } else {
-            (now.saturating_duration_since(motion.started).as_secs_f64()
-                / motion.duration.as_secs_f64())
-            .min(1.0)
+            match (motion.profile, motion.path) {
+                (Some((v, a)), MotionPath::Joint { from, to }) => {
+                    trapezoid_at(lead_travel(&from, &to), v, a, elapsed).0
+                }
+                _ => (elapsed / motion.duration.as_secs_f64()).min(1.0),
+            }
         };
         if let Some(stop_at) = motion.protective_stop_at {
             if fraction >= stop_at {
@@ -341,6 +389,19 @@ impl Arm {
         if fraction >= 1.0 {
             self.motion = None;
             self.moves_completed += 1;
+            if let (Some(ringing), MotionPath::Joint { from, to }) = (self.ringing, motion.path) {
+                let lead = lead_travel(&from, &to);
+                if lead > 0.0 {
+                    self.ring = Some(RingDown {
+                        arrived: motion.started + motion.duration,
+                        to,
+                        amplitude: std::array::from_fn(|i| {
+                            ringing.amplitude_rad * (to[i] - from[i]) / lead
+                        }),
+                    });
+                    self.step_ringing(now);
+                }
+            }
             if motion.asynchronous {
                 self.write_async_progress(-1);
             } else if self.pending_done {
@@ -349,6 +410,40 @@ impl Arm {
             }
         } else if motion.asynchronous {
             self.write_async_progress((fraction * 1000.0) as i32);
+        }
+    }
+
+    /// The ring-down offset (rad) and speed (rad/s) of every joint at `now`, or `None` when
+    /// the arm does not ring (any more).
+    fn ringing_at(&self, now: Instant) -> Option<(Joints, Joints)> {
+        let (ring, ringing) = (self.ring?, self.ringing?);
+        let t = now.saturating_duration_since(ring.arrived).as_secs_f64();
+        let w = 2.0 * std::f64::consts::PI * ringing.frequency_hz;
+        let envelope = (-t / ringing.decay_s).exp();
+        let (sin, cos) = (w * t).sin_cos();
+        Some((
+            std::array::from_fn(|i| ring.amplitude[i] * envelope * sin),
+            std::array::from_fn(|i| {
+                ring.amplitude[i] * envelope * (w * cos - sin / ringing.decay_s)
+            }),
+        ))
+    }
+
+    /// Puts a ringing arm where the oscillation has it now; ends the ringing once it is below
+    /// a micro-radian.
+    fn step_ringing(&mut self, now: Instant) {
+        let Some(ring) = self.ring else { return };
+        let Some((offset, _)) = self.ringing_at(now) else {
+            return;
+        };
+        self.joints = std::array::from_fn(|i| ring.to[i] + offset[i]);
+        let t = now.saturating_duration_since(ring.arrived).as_secs_f64();
+        if self
+            .ringing
+            .is_some_and(|r| (-t / r.decay_s).exp() * r.amplitude_rad < 1e-6)
+        {
+            self.joints = ring.to;
+            self.ring = None;
         }
     }
 
@@ -523,14 +618,17 @@ impl Arm {
                 "move speed {speed:e} is outside (0, {MAX_MOVE_SPEED}]"
             ));
         }
+        let acceleration = self.in_double[self.reg_offset + 7];
+        let profile = (self.trapezoidal_moves
+            && matches!(path, MotionPath::Joint { .. })
+            && acceleration.is_finite()
+            && acceleration > 0.0)
+            .then_some((speed, acceleration));
         let seconds = match path {
-            MotionPath::Joint { from, to } => {
-                from.iter()
-                    .zip(&to)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max)
-                    / speed
-            }
+            MotionPath::Joint { from, to } => match profile {
+                Some((v, a)) => trapezoid_time(lead_travel(&from, &to), v, a),
+                None => lead_travel(&from, &to) / speed,
+            },
             MotionPath::Linear { from, to } => {
                 let distance = (to.translation.vector - from.translation.vector).norm();
                 let angle = from.rotation.angle_to(&to.rotation);
@@ -552,6 +650,8 @@ impl Arm {
             Some(k) if !self.protective_stop_fired && self.moves_completed >= k => Some(0.5),
             _ => None,
         };
+        // A new move starts from where the ringing arm is.
+        self.ring = None;
         self.motion = Some(Motion {
             path,
             started: now,
@@ -559,6 +659,7 @@ impl Arm {
             stalled: self.faults.stall_move == Some(index),
             protective_stop_at,
             asynchronous,
+            profile: profile.filter(|_| !self.instant_moves),
         });
         if asynchronous {
             self.write_async_progress(0);
@@ -590,10 +691,19 @@ impl Arm {
                 path: MotionPath::Joint { from, to },
                 duration,
                 stalled: false,
+                profile,
+                started,
                 ..
-            }) if !duration.is_zero() => {
-                std::array::from_fn(|i| (to[i] - from[i]) / duration.as_secs_f64())
-            }
+            }) if !duration.is_zero() => match profile {
+                Some((v, a)) => {
+                    let lead = lead_travel(&from, &to);
+                    let t = now.saturating_duration_since(started).as_secs_f64();
+                    let (_, lead_speed) = trapezoid_at(lead, v, a, t);
+                    std::array::from_fn(|i| (to[i] - from[i]) / lead * lead_speed)
+                }
+                None => std::array::from_fn(|i| (to[i] - from[i]) / duration.as_secs_f64()),
+            },
+            None => self.ringing_at(now).map_or([0.0; 6], |(_, speeds)| speeds),
             _ => [0.0; 6],
         };
         let safety_mode = if self.safety_bits & SAFETY_EMERGENCY_STOP != 0 {

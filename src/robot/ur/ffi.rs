@@ -80,6 +80,12 @@ extern "C" {
         err: *mut c_char,
         err_len: usize,
     ) -> c_int;
+    pub fn urrtde_get_actual_qd(
+        h: *mut UrrtdeHandle,
+        out: *mut f64,
+        err: *mut c_char,
+        err_len: usize,
+    ) -> c_int;
     pub fn urrtde_get_tcp_offset(
         h: *mut UrrtdeHandle,
         out: *mut f64,

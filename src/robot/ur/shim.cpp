@@ -161,6 +161,13 @@ int urrtde_get_actual_q(urrtde_handle *h, double out[6], char *err, size_t err_l
   });
 }
 
+int urrtde_get_actual_qd(urrtde_handle *h, double out[6], char *err, size_t err_len) noexcept {
+  return guarded("getActualQd", err, err_len, [&]() -> int {
+    URRTDE_CHECK_HANDLE("getActualQd");
+    return copy6(h->receive->getActualQd(), out, "getActualQd", err, err_len);
+  });
+}
+
 int urrtde_get_tcp_offset(urrtde_handle *h, double out[6], char *err, size_t err_len) noexcept {
   return guarded("getTCPOffset", err, err_len, [&]() -> int {
     URRTDE_CHECK_HANDLE("getTCPOffset");

@@ -59,6 +59,8 @@ int urrtde_teach_mode(urrtde_handle *h, int32_t on, char *err, size_t err_len) U
 int urrtde_reupload_script(urrtde_handle *h, char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_actual_tcp_pose(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_actual_q(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;
+/* Joint speeds as the controller measures them (RTDE actual_qd), rad/s. */
+int urrtde_get_actual_qd(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_tcp_offset(urrtde_handle *h, double out[6], char *err, size_t err_len) URRTDE_NOEXCEPT;
 int urrtde_get_state(urrtde_handle *h, urrtde_state *out, char *err, size_t err_len) URRTDE_NOEXCEPT;
 
