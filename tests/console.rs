@@ -251,6 +251,9 @@ fn sim_config(dir: &Path, count: usize, move_duration_s: f64) -> PathBuf {
         "sim-cell.yaml",
         "cell.yaml",
         &[
+            // A fixed plan: the page's plan table lists every pose (a generated plan is adaptive
+            // by default, choosing from more candidates than it visits).
+            ("plan:\n", "plan:\n  adaptive: false\n"),
             ("count: 20", &format!("count: {count}")),
             (
                 "move_duration_s: 0.0",
