@@ -518,8 +518,10 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
         summary.corrected_rms_px.unwrap()
     );
     // On the recorded robot poses the two answers are level (the arm's noise, not the answer,
-    // sets that figure: 0.0905 vs 0.0906 px); with the poses corrected the fit is below both.
-    assert!(summary.reprojection_rms_px <= 1.05 * summary.pose_space_rms_px);
+    // sets that figure: 0.0905 vs 0.0906 px with edge-fitted corners; 0.0593 vs 0.0623 px with
+    // the saddle-point corners of Kalibr's corner squares, where the fit trades a little of it for
+    // the robot poses' weights); with the poses corrected the fit is below both.
+    assert!(summary.reprojection_rms_px <= 1.10 * summary.pose_space_rms_px);
     assert!(summary.corrected_rms_px.unwrap() < summary.pose_space_rms_px);
 }
 
@@ -571,26 +573,33 @@ fn both_spaces_over_seeds(
     sums
 }
 
-/// Issue 8's comparison on rendered frames, the demo cell as shipped (the default solve space,
-/// the noise estimated from the residuals): the arm's repeatability (0.02 mm, 0.002°) dominates
-/// the corner noise, and the fit over every corner, weighing each robot pose by what the
-/// residuals show, is still closer to the truth than the pose-space answer on the same frames.
-/// Measured 0.88x translation and 0.82x rotation over these 16 seeds (per seed 0.55x-1.38x: it
-/// takes many runs to see); with the pixel noise fixed at 0.3 px instead it was 1.27x / 1.15x.
+/// Issue 8's comparison on rendered frames, the demo cell (the default solve space, the noise
+/// estimated from the residuals), on the same frames: the fit over every corner, weighing each
+/// robot pose by what the residuals show, is closer to the truth than the pose-space answer.
+/// With the board printed without Kalibr's corner squares (edge-fitted corners, the regime issue
+/// 8 measured: 0.88x translation, 0.82x rotation over these 16 seeds, per seed 0.55x-1.38x) it
+/// must win by 5 %; with the squares (saddle-point corners, about 4x less corner noise, so the
+/// arm's repeatability dominates both answers) the two come close in translation — measured
+/// 0.966x / 0.775x — and the reprojection answer must still be no worse.
 #[test]
 fn reprojection_space_beats_pose_space_in_the_demo_cell() {
-    let [pose, reprojection] = both_spaces_over_seeds(1..=16, &[]);
-    let ratio = (reprojection.0 / pose.0, reprojection.1 / pose.1);
-    eprintln!(
-        "demo cell, 16 seeds, summed errors of both unknowns: pose space {:.3} mm {:.4}°, reprojection {:.3} mm {:.4}°, ratio {:.3} / {:.3}",
-        pose.0, pose.1, reprojection.0, reprojection.1, ratio.0, ratio.1
-    );
-    assert!(
-        ratio.0 < 0.95 && ratio.1 < 0.95,
-        "reprojection / pose-space error ratio {:.3} mm, {:.3}° (margin: < 0.95 each)",
-        ratio.0,
-        ratio.1
-    );
+    for (board, margin) in [
+        ("aprilgrid-6x6-no-corner-squares.yaml", 0.95),
+        ("aprilgrid-6x6.yaml", 1.0),
+    ] {
+        let [pose, reprojection] = both_spaces_over_seeds(1..=16, &[("aprilgrid-6x6.yaml", board)]);
+        let ratio = (reprojection.0 / pose.0, reprojection.1 / pose.1);
+        eprintln!(
+            "demo cell ({board}), 16 seeds, summed errors of both unknowns: pose space {:.3} mm {:.4}°, reprojection {:.3} mm {:.4}°, ratio {:.3} / {:.3}",
+            pose.0, pose.1, reprojection.0, reprojection.1, ratio.0, ratio.1
+        );
+        assert!(
+            ratio.0 < margin && ratio.1 < margin,
+            "{board}: reprojection / pose-space error ratio {:.3} mm, {:.3}° (margin: < {margin} each)",
+            ratio.0,
+            ratio.1
+        );
+    }
 }
 
 /// The same where the corner noise dominates (an exact arm, a noisy sensor, 14 poses): measured
