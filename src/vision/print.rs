@@ -27,6 +27,7 @@ pub use paper::{
     fit_to_paper, fitted_board_yaml, FittedBoard, Paper, Sheet, MARGIN_MM, MIN_FITTED_TAG_M,
 };
 pub use pdf::board_pdf;
+pub(crate) use pdf::one_page_pdf;
 pub use png::board_png;
 pub use svg::board_svg;
 

@@ -180,7 +180,7 @@ pub fn target_svg(target: &Target) -> String {
 
 /// The printable board as a one-page vector PDF (the page is the board plus the strip).
 pub fn target_pdf(target: &Target) -> Vec<u8> {
-    use pdf_writer::{Content, Name, Pdf, Rect, Ref, Str};
+    use pdf_writer::{Content, Name, Str};
     let (w, h, bw, bh, bar) = page(target);
     let left = (w - bw) / 2.0;
     let pt = |m: f64| (m * PT_PER_M) as f32;
@@ -225,26 +225,7 @@ pub fn target_pdf(target: &Target) -> Vec<u8> {
         content.end_text();
     }
     let content = content.finish();
-    let (catalog, tree, page_id, font_id, content_id) = (
-        Ref::new(1),
-        Ref::new(2),
-        Ref::new(3),
-        Ref::new(4),
-        Ref::new(5),
-    );
-    let mut pdf = Pdf::new();
-    pdf.catalog(catalog).pages(tree);
-    pdf.pages(tree).kids([page_id]).count(1);
-    {
-        let mut p = pdf.page(page_id);
-        p.parent(tree)
-            .media_box(Rect::new(0.0, 0.0, pt(w), pt(h)))
-            .contents(content_id);
-        p.resources().fonts().pair(font, font_id);
-    }
-    pdf.type1_font(font_id).base_font(Name(b"Courier"));
-    pdf.stream(content_id, &content);
-    pdf.finish()
+    super::print::one_page_pdf(content, font, pt(w), pt(h))
 }
 
 /// The printable board as a PNG at `dpi` (pixels per metre in its pHYs chunk).

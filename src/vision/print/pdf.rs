@@ -21,7 +21,7 @@ const PT_PER_M: f64 = 72.0 / 0.0254;
 /// 50 mm) scale bar to measure after printing, and the board's parameters in Courier, with the
 /// reminder to print at actual size.
 pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, TargetError> {
-    use pdf_writer::{Content, Name, Pdf, Rect, Ref, Str};
+    use pdf_writer::{Content, Name, Str};
 
     let (bw, bh) = extent_size(board);
     let mut caption = format!(
@@ -113,6 +113,18 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
     }
     let content = content.finish();
 
+    Ok(one_page_pdf(content, font, pt(page_w), pt(page_h)))
+}
+
+/// A one-page PDF of `content` (drawn with the Courier font resource `font`) on a page of
+/// `width_pt` x `height_pt` points: the document structure every printable board shares.
+pub(crate) fn one_page_pdf(
+    content: pdf_writer::Buf,
+    font: pdf_writer::Name,
+    width_pt: f32,
+    height_pt: f32,
+) -> Vec<u8> {
+    use pdf_writer::{Name, Pdf, Rect, Ref};
     let (catalog, tree, page, font_id, content_id) = (
         Ref::new(1),
         Ref::new(2),
@@ -126,11 +138,11 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
     {
         let mut p = pdf.page(page);
         p.parent(tree)
-            .media_box(Rect::new(0.0, 0.0, pt(page_w), pt(page_h)))
+            .media_box(Rect::new(0.0, 0.0, width_pt, height_pt))
             .contents(content_id);
         p.resources().fonts().pair(font, font_id);
     }
     pdf.type1_font(font_id).base_font(Name(b"Courier"));
     pdf.stream(content_id, &content);
-    Ok(pdf.finish())
+    pdf.finish()
 }
