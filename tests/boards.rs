@@ -24,60 +24,12 @@ use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetect
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion};
 use serde_json::Value;
 
-/// A Python with numpy and OpenCV, or `None` (reason printed) without `python3`.
-fn python() -> Option<PathBuf> {
-    let has_cv2 = |python: &Path| {
-        Command::new(python)
-            .args(["-c", "import cv2, numpy"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    let system = PathBuf::from("python3");
-    if Command::new(&system).arg("--version").output().is_err() {
-        eprintln!("SKIP: python3 is absent, OpenCV comparison not run");
-        return None;
-    }
-    if has_cv2(&system) {
-        return Some(system);
-    }
-    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("boards-venv");
-    let venv_python = venv.join("bin/python");
-    if !has_cv2(&venv_python) {
-        let status = Command::new(&system)
-            .args(["-m", "venv"])
-            .arg(&venv)
-            .status()
-            .expect("python3 -m venv");
-        assert!(
-            status.success(),
-            "python3 -m venv {} failed",
-            venv.display()
-        );
-        let status = Command::new(&venv_python)
-            .args([
-                "-m",
-                "pip",
-                "install",
-                "--quiet",
-                "numpy",
-                "opencv-python-headless<5",
-            ])
-            .status()
-            .expect("pip install");
-        assert!(
-            status.success(),
-            "pip install numpy opencv-python-headless failed"
-        );
-    }
-    Some(venv_python)
-}
-
 /// The frames and OpenCV's figures (rendered once per test binary).
 fn frames() -> Option<&'static (PathBuf, Value)> {
     static FRAMES: OnceLock<Option<(PathBuf, Value)>> = OnceLock::new();
     FRAMES
         .get_or_init(|| {
-            let python = python()?;
+            let python = util::python_with_opencv()?;
             let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("boards-opencv");
             let script = util::repo().join("tests/python/boards_opencv.py");
             let json_path = out.join("frames.json");

@@ -65,61 +65,6 @@ fn spec(corner_squares: bool, seed: u64) -> String {
     )
 }
 
-/// The venv's python with numpy and OpenCV, or `None` (reason printed) without python3. Set up
-/// once per test binary (the tests run in parallel).
-fn python() -> Option<PathBuf> {
-    static PYTHON: std::sync::OnceLock<Option<PathBuf>> = std::sync::OnceLock::new();
-    PYTHON.get_or_init(set_up_python).clone()
-}
-
-fn set_up_python() -> Option<PathBuf> {
-    if Command::new("python3").arg("--version").output().is_err() {
-        eprintln!("SKIP: python3 is absent (CI has it: scripts/test.sh)");
-        return None;
-    }
-    let ready = |python: &Path| {
-        Command::new(python)
-            .args(["-c", "import numpy, cv2; cv2.aruco.ArucoDetector"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    // scripts/test.sh installs the packages for python3 itself; otherwise a venv of our own.
-    if ready(Path::new("python3")) {
-        return Some(PathBuf::from("python3"));
-    }
-    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("kalibr-venv");
-    let python = venv.join("bin/python");
-    if !ready(&python) {
-        let status = Command::new("python3")
-            .args(["-m", "venv"])
-            .arg(&venv)
-            .status()
-            .expect("python3 -m venv");
-        assert!(
-            status.success(),
-            "python3 -m venv {} failed",
-            venv.display()
-        );
-        let status = Command::new(&python)
-            .args([
-                "-m",
-                "pip",
-                "install",
-                "--quiet",
-                "numpy",
-                "opencv-python-headless<5",
-            ])
-            .status()
-            .expect("pip");
-        assert!(
-            status.success() && ready(&python),
-            "pip install numpy opencv-python-headless<5 into {} failed",
-            venv.display()
-        );
-    }
-    Some(python)
-}
-
 /// Renders the frames of `spec` (cached by the spec's and the script's content).
 fn frames(python: &Path, spec: &str) -> PathBuf {
     let script = repo().join("tests/python/kalibr_render.py");
@@ -281,7 +226,9 @@ fn check(name: &str, board: &Board, c: &Comparison) {
 
 #[test]
 fn kalibr_print_with_corner_squares_is_found_and_beats_opencv() {
-    let Some(python) = python() else { return };
+    let Some(python) = util::python_with_opencv() else {
+        return;
+    };
     let board = board(true);
     let dir = frames(&python, &spec(true, 7));
     let c = compare(&board, &dir);
@@ -290,7 +237,9 @@ fn kalibr_print_with_corner_squares_is_found_and_beats_opencv() {
 
 #[test]
 fn the_same_board_without_corner_squares_is_still_found_and_beats_opencv() {
-    let Some(python) = python() else { return };
+    let Some(python) = util::python_with_opencv() else {
+        return;
+    };
     let board = board(false);
     let dir = frames(&python, &spec(false, 7));
     let c = compare(&board, &dir);

@@ -70,3 +70,52 @@ pub fn sim_cell(dir: &Path, poses: usize) -> PathBuf {
     let count = format!("count: {poses}");
     config_variant(dir, "sim-cell.yaml", "cell.yaml", &[("count: 20", &count)])
 }
+
+/// A Python with numpy and OpenCV (`opencv-python-headless<5`, with the ArUco module) for the
+/// tests that compare against OpenCV or render with it, or `None` (reason printed) without
+/// `python3`. scripts/test.sh installs the packages for python3 itself; otherwise a venv of the
+/// test binary's own is made under its temp dir. Set up once per test binary (tests run in
+/// parallel).
+pub fn python_with_opencv() -> Option<PathBuf> {
+    static PYTHON: std::sync::OnceLock<Option<PathBuf>> = std::sync::OnceLock::new();
+    PYTHON
+        .get_or_init(|| {
+            if Command::new("python3").arg("--version").output().is_err() {
+                eprintln!("SKIP: python3 is absent, the OpenCV comparison is not run (CI has it: scripts/test.sh)");
+                return None;
+            }
+            let ready = |python: &Path| {
+                Command::new(python)
+                    .args(["-c", "import numpy, cv2; cv2.aruco.ArucoDetector"])
+                    .output()
+                    .is_ok_and(|o| o.status.success())
+            };
+            if ready(Path::new("python3")) {
+                return Some(PathBuf::from("python3"));
+            }
+            let temp = option_env!("CARGO_TARGET_TMPDIR")
+                .map(PathBuf::from)
+                .unwrap_or_else(std::env::temp_dir);
+            let venv = temp.join("opencv-venv");
+            let python = venv.join("bin/python");
+            if !ready(&python) {
+                let status = Command::new("python3")
+                    .args(["-m", "venv"])
+                    .arg(&venv)
+                    .status()
+                    .expect("python3 -m venv");
+                assert!(status.success(), "python3 -m venv {} failed", venv.display());
+                let status = Command::new(&python)
+                    .args(["-m", "pip", "install", "--quiet", "numpy", "opencv-python-headless<5"])
+                    .status()
+                    .expect("pip");
+                assert!(
+                    status.success() && ready(&python),
+                    "pip install numpy opencv-python-headless<5 into {} failed",
+                    venv.display()
+                );
+            }
+            Some(python)
+        })
+        .clone()
+}
