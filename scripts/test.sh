@@ -39,4 +39,7 @@ if ! "$bag_venv/bin/python" -c "import rosbags, numpy" 2>/dev/null; then
   python3 -m venv "$bag_venv" && "$bag_venv/bin/pip" install -q rosbags numpy
 fi
 
+# Everything the comparison tests need is installed above: a test that would skip for a missing
+# tool (python3, chromium) fails instead (tests/util/mod.rs `skip`).
+export HANDEYE_REQUIRE_TOOLS=1
 cargo test --workspace --features handeye/ur-rtde "$@"

@@ -33,9 +33,7 @@ fn python() -> Option<PathBuf> {
     PYTHON
         .get_or_init(|| {
             if Command::new("python3").arg("--version").output().is_err() {
-                eprintln!(
-                    "SKIP: python3 is absent (the bags are written by the `rosbags` package)"
-                );
+                util::skip("python3 is absent (the bags are written by the `rosbags` package)");
                 return None;
             }
             let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("bag-venv");

@@ -266,7 +266,7 @@ fn sim_config(dir: &Path, count: usize, move_duration_s: f64) -> PathBuf {
 #[test]
 fn browser_sees_a_run_live_stops_it_part_way_and_the_resume_completes() {
     if let Err(why) = browser_tools() {
-        eprintln!("SKIP: {why}");
+        util::skip(&why.to_string());
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -284,7 +284,7 @@ fn browser_sees_a_run_live_stops_it_part_way_and_the_resume_completes() {
 #[test]
 fn browser_drives_a_hand_guided_session_to_a_good_verdict() {
     if let Err(why) = browser_tools() {
-        eprintln!("SKIP: {why}");
+        util::skip(&why.to_string());
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -380,7 +380,7 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
 fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
     use std::io::{BufRead, BufReader, Write};
     if let Err(why) = browser_tools() {
-        eprintln!("SKIP: {why}");
+        util::skip(&why.to_string());
         return;
     }
     let dir = tempfile::tempdir().unwrap();

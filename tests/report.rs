@@ -431,7 +431,7 @@ fn good_card_pixels(shot: &image::RgbImage, rows: u32) -> usize {
 #[test]
 fn report_renders_in_headless_chromium_without_console_messages() {
     let Some(browser) = chromium() else {
-        eprintln!("SKIP: chromium is not installed (`apt-get install chromium`; .ci/run does it)");
+        util::skip("chromium is not installed (`apt-get install chromium`; .ci/run does it)");
         return;
     };
     let (dir, path) = report();
@@ -569,7 +569,7 @@ const DRIVER: &str = r#"<script>
 #[test]
 fn report_script_sorts_opens_frames_and_copies_in_chromium() {
     let Some(browser) = chromium() else {
-        eprintln!("SKIP: chromium is not installed (`apt-get install chromium`; .ci/run does it)");
+        util::skip("chromium is not installed (`apt-get install chromium`; .ci/run does it)");
         return;
     };
     let (dir, path) = report();

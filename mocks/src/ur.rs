@@ -328,11 +328,6 @@ impl MockUr {
         arm.joints()
     }
 
-    /// Current joint speeds, rad/s (what the controller streams as actual_qd).
-    pub fn joint_speeds(&self) -> Joints {
-        self.shared.arm().snapshot(Instant::now()).joint_speeds
-    }
-
     /// A probe that reads the current joint speeds (rad/s) from another thread, for as long as
     /// the mock runs.
     pub fn speed_probe(&self) -> impl Fn() -> Joints + Send + Sync + 'static {

@@ -46,13 +46,11 @@ pub struct ConsoleArgs {
 pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
-        None => SessionTarget::New(args.out.clone().unwrap_or_else(|| {
-            handeye::session::dated_session_path(
-                std::path::Path::new("sessions"),
-                "",
-                std::time::SystemTime::now(),
-            )
-        })),
+        None => SessionTarget::New(
+            args.out
+                .clone()
+                .unwrap_or_else(super::run::default_session_dir),
+        ),
     };
     let stop = Arc::new(AtomicBool::new(false));
     super::stop_on_signals(stop.clone());
@@ -64,7 +62,7 @@ pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
         motion_confirmed: args.yes,
         stop,
     };
-    let mut printer = super::run::Printer::new(stop_flag(&console));
+    let mut printer = super::run::Printer::new(request.stop.clone());
     let done = match run_manual(&request, &console, &mut printer) {
         Ok(done) => done,
         Err(e) => {
@@ -76,10 +74,6 @@ pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
     let (report, next) = super::run::finish_run(&done)?;
     finished(&console, &done.solved, report, next, args.wait);
     Ok(())
-}
-
-fn stop_flag(console: &Console) -> Arc<AtomicBool> {
-    console.stop_flag()
 }
 
 /// The terminal's keys for a manual session: Enter captures, `f`/`F` switch freedrive on/off,

@@ -101,16 +101,16 @@ pub fn run(args: DetectArgs) -> anyhow::Result<()> {
         let detection = match detector.detect(&image) {
             Ok(detection) => detection,
             // A ChArUco board or chessboard not in view: reported like an aprilgrid without tags.
-            Err(TargetError::BoardNotFound { board, reason }) => {
+            Err(e @ TargetError::BoardNotFound { .. }) => {
                 outln!("{}:", path.display());
-                outln!("  board not found: {board}: {reason}");
+                outln!("  {e}");
                 results.push(ImageResult {
                     image: path.display().to_string(),
                     found: false,
                     tag_ids: Vec::new(),
                     corner_ids: Vec::new(),
                     rejected_ids: Vec::new(),
-                    error: Some(format!("{board} not found in the image: {reason}")),
+                    error: Some(e.to_string()),
                     rms_px: None,
                     corners_used: None,
                     ambiguity: None,

@@ -62,9 +62,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             config: args.config,
             out: args.out,
             resume: None,
-            addr: args
-                .console
-                .unwrap_or(std::net::SocketAddr::from(([127, 0, 0, 1], 8765))),
+            addr: match args.console {
+                Some(addr) => addr,
+                None => handeye::console::DEFAULT_ADDR.parse()?,
+            },
             public: args.console_public,
             yes: args.yes,
             wait: args.console_wait,
@@ -292,7 +293,7 @@ impl RunObserver for Printer {
     }
 }
 
-fn default_session_dir() -> PathBuf {
+pub(super) fn default_session_dir() -> PathBuf {
     handeye::session::dated_session_path(
         std::path::Path::new("sessions"),
         "",

@@ -149,7 +149,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
                 if let Some(outside) = path_leaves_box(ctx.arm, &previous, &q, ctx.workspace) {
                     problems.push(outside);
                 }
-                move_time_s = joint_move_time(&previous, &q, ctx.limits);
+                move_time_s = ctx.limits.joint_move_time(&previous, &q);
                 previous = q;
             }
         }
@@ -391,11 +391,6 @@ fn path_leaves_box(
             )
         })
     })
-}
-
-/// Duration of a synchronised joint move with a trapezoidal speed profile at the limits.
-fn joint_move_time(from: &Joints, to: &Joints, limits: &MotionLimits) -> f64 {
-    limits.joint_move_time(from, to)
 }
 
 /// Every corner of the board (tag corners of an aprilgrid), in the target frame.

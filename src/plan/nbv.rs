@@ -113,17 +113,18 @@ pub fn next_best(
     options: &SolveOptions,
     variance_factor: f64,
 ) -> Option<(usize, Predicted)> {
-    let solution = Axby::from_mounts(camera_mount, target_mount);
-    let h = information(setup, camera_mount, target_mount, taken, options);
-    candidates
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
-        .filter_map(|(i, c)| {
-            let added = h + sample_information(&solution, &setup.chain_b(c), &options.noise);
-            predict(camera_mount, target_mount, &added, variance_factor).map(|p| (i, p))
-        })
-        .min_by(|a, b| a.1.score.total_cmp(&b.1.score))
+    // Least predicted score after = largest ln(score now / score after) at equal cost.
+    next_best_per_second(
+        setup,
+        camera_mount,
+        target_mount,
+        taken,
+        candidates,
+        used,
+        options,
+        variance_factor,
+        &|_| 1.0,
+    )
 }
 
 /// Like [`next_best`], but the candidate that reduces the predicted score the most per second of

@@ -611,22 +611,30 @@ pub fn mount_uncertainty(
 mod tests {
     use super::*;
 
-    #[test]
-    fn blockwise_normal_equations_equal_the_dense_product() {
+    /// `X`, `Y`, three `B`s and a pose that puts each `A = X·B·Y·off` off the model, so the
+    /// residuals (and J⁻¹ of them) are not trivial.
+    fn off_model_fixture() -> (Pose, Pose, [Pose; 3], Pose) {
         let pose = |t: [f64; 3], r: [f64; 3]| {
             Pose::from_parts(
                 Translation3::new(t[0], t[1], t[2]),
                 UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
             )
         };
-        let x = pose([0.1, -0.05, 0.2], [0.3, -0.2, 1.0]);
-        let y = pose([0.5, 0.2, -0.1], [-1.2, 0.4, 0.3]);
-        let bs = [
-            pose([0.3, 0.1, 0.4], [0.4, 0.1, -0.2]),
-            pose([-0.2, 0.3, 0.5], [-0.3, 0.6, 0.2]),
-            pose([0.1, -0.4, 0.3], [0.1, -0.2, 0.9]),
-        ];
-        let off = pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]);
+        (
+            pose([0.1, -0.05, 0.2], [0.3, -0.2, 1.0]),
+            pose([0.5, 0.2, -0.1], [-1.2, 0.4, 0.3]),
+            [
+                pose([0.3, 0.1, 0.4], [0.4, 0.1, -0.2]),
+                pose([-0.2, 0.3, 0.5], [-0.3, 0.6, 0.2]),
+                pose([0.1, -0.4, 0.3], [0.1, -0.2, 0.9]),
+            ],
+            pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]),
+        )
+    }
+
+    #[test]
+    fn blockwise_normal_equations_equal_the_dense_product() {
+        let (x, y, bs, off) = off_model_fixture();
         let data = AxbyData {
             a: bs.iter().map(|b| x * b * y * off).collect(),
             b: bs.to_vec(),
@@ -666,21 +674,7 @@ mod tests {
 
     #[test]
     fn analytic_jacobian_matches_finite_differences() {
-        let pose = |t: [f64; 3], r: [f64; 3]| {
-            Pose::from_parts(
-                Translation3::new(t[0], t[1], t[2]),
-                UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
-            )
-        };
-        let x = pose([0.1, -0.05, 0.2], [0.3, -0.2, 1.0]);
-        let y = pose([0.5, 0.2, -0.1], [-1.2, 0.4, 0.3]);
-        let bs = [
-            pose([0.3, 0.1, 0.4], [0.4, 0.1, -0.2]),
-            pose([-0.2, 0.3, 0.5], [-0.3, 0.6, 0.2]),
-            pose([0.1, -0.4, 0.3], [0.1, -0.2, 0.9]),
-        ];
-        // Measurements off the model so the residuals (and J⁻¹ of them) are not trivial.
-        let noise = pose([0.01, -0.02, 0.005], [0.05, -0.03, 0.02]);
+        let (x, y, bs, noise) = off_model_fixture();
         let a: Vec<Pose> = bs.iter().map(|b| x * b * y * noise).collect();
         let start = Axby { x, y };
         let h = 1e-7;

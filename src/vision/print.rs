@@ -46,24 +46,28 @@ struct Page {
     caption: String,
 }
 
+/// The board's keys as the one caption line every printed form carries.
+fn caption(board: &Board) -> String {
+    let mut caption = format!(
+        "aprilgrid {}x{} {} tagSize {} m tagSpacing {} first_id {} border_bits {}",
+        board.cols(),
+        board.rows(),
+        board.family().name(),
+        board.tag_size(),
+        board.tag_spacing(),
+        board.first_id(),
+        board.border_bits()
+    );
+    if !board.corner_squares() {
+        caption.push_str(" corner_squares false");
+    }
+    caption
+}
+
 impl Page {
     fn new(board: &Board, dpi: Option<f64>) -> Self {
-        let extent = board.extent();
-        let board_width = extent.max.x - extent.min.x;
-        let board_height = extent.max.y - extent.min.y;
-        let mut caption = format!(
-            "aprilgrid {}x{} {} tagSize {} m tagSpacing {} first_id {} border_bits {}",
-            board.cols(),
-            board.rows(),
-            board.family().name(),
-            board.tag_size(),
-            board.tag_spacing(),
-            board.first_id(),
-            board.border_bits()
-        );
-        if !board.corner_squares() {
-            caption.push_str(" corner_squares false");
-        }
+        let (board_width, board_height) = paper::extent_size(board);
+        let mut caption = caption(board);
         if let Some(dpi) = dpi {
             caption.push_str(&format!(" - {dpi} dpi, print at 100 %"));
         }

@@ -159,14 +159,6 @@ impl Target {
         }
     }
 
-    /// Points per "feature" (4 for an aprilgrid tag, 1 for a chessboard corner).
-    pub fn points_per_feature(&self) -> usize {
-        match self {
-            Target::Aprilgrid(_) => 4,
-            _ => 1,
-        }
-    }
-
     /// The printed sheet's rectangle (m): the squares plus a white margin of half a square.
     pub fn extent(&self) -> BoardExtent {
         match self {

@@ -81,7 +81,7 @@ pub fn python_with_opencv() -> Option<PathBuf> {
     PYTHON
         .get_or_init(|| {
             if Command::new("python3").arg("--version").output().is_err() {
-                eprintln!("SKIP: python3 is absent, the OpenCV comparison is not run (CI has it: scripts/test.sh)");
+                skip("python3 is absent, the OpenCV comparison is not run (CI has it: scripts/test.sh)");
                 return None;
             }
             let ready = |python: &Path| {
@@ -118,4 +118,15 @@ pub fn python_with_opencv() -> Option<PathBuf> {
             Some(python)
         })
         .clone()
+}
+
+/// Reports a test skipped for a missing tool (python3, chromium). Under `scripts/test.sh`, which
+/// installs every such tool and sets `HANDEYE_REQUIRE_TOOLS=1`, a skip is a failure instead: a CI
+/// run must not pass green without having compared against the independent implementation.
+pub fn skip(why: &str) {
+    assert!(
+        std::env::var_os("HANDEYE_REQUIRE_TOOLS").is_none(),
+        "HANDEYE_REQUIRE_TOOLS is set but the test would skip: {why}"
+    );
+    eprintln!("SKIP: {why}");
 }

@@ -24,19 +24,7 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
     use pdf_writer::{Content, Name, Str};
 
     let (bw, bh) = extent_size(board);
-    let mut caption = format!(
-        "aprilgrid {}x{} {} tagSize {} m tagSpacing {} first_id {} border_bits {}",
-        board.cols(),
-        board.rows(),
-        board.family().name(),
-        board.tag_size(),
-        board.tag_spacing(),
-        board.first_id(),
-        board.border_bits()
-    );
-    if !board.corner_squares() {
-        caption.push_str(" corner_squares false");
-    }
+    let caption = super::caption(board);
     let note = match sheet {
         Some(s) => format!(
             "{}: print at actual size (100 %), not 'fit to page'",
