@@ -29,6 +29,7 @@ pub use paper::{
 pub use pdf::board_pdf;
 pub(crate) use pdf::one_page_pdf;
 pub use png::board_png;
+pub(crate) use png::encode_png;
 pub use svg::board_svg;
 
 /// Height of the margin strip under the board, m.

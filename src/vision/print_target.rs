@@ -287,27 +287,5 @@ pub fn target_png(target: &Target, dpi: f64) -> Result<Vec<u8>, TargetError> {
         &format!("{dpi} dpi, print at 100 %"),
         Luma([0]),
     );
-    let mut encoded = Vec::new();
-    let result = (|| -> Result<(), png::EncodingError> {
-        let mut encoder = png::Encoder::new(&mut encoded, image.width(), image.height());
-        encoder.set_color(png::ColorType::Grayscale);
-        encoder.set_depth(png::BitDepth::Eight);
-        let ppm = px_per_m.round() as u32;
-        encoder.set_pixel_dims(Some(png::PixelDimensions {
-            xppu: ppm,
-            yppu: ppm,
-            unit: png::Unit::Meter,
-        }));
-        let mut writer = encoder.write_header()?;
-        writer.write_image_data(image.as_raw())?;
-        writer.finish()
-    })();
-    result.map_err(|source| TargetError::Image {
-        path: "<board.png>".into(),
-        source: image::ImageError::Encoding(image::error::EncodingError::new(
-            image::ImageFormat::Png.into(),
-            source,
-        )),
-    })?;
-    Ok(encoded)
+    super::print::encode_png(&image, px_per_m.round() as u32)
 }

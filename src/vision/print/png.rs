@@ -104,7 +104,15 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
     if show_frame {
         draw_frame(&mut image, board, &page, px_per_m);
     }
-    encode_png(&image, px_per_m.round() as u32).map_err(|source| TargetError::Image {
+    encode_png(&image, px_per_m.round() as u32)
+}
+
+/// Encodes a grey image as PNG with its pixels per metre in the pHYs chunk (the `image`
+/// crate's encoder cannot write that chunk; the `png` crate it uses can).
+/// A printable board image as PNG with its resolution (`px_per_m`) in the pHYs chunk, so a
+/// printer or viewer knows its true size.
+pub(crate) fn encode_png(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, TargetError> {
+    encode_png_with_size(image, px_per_m).map_err(|source| TargetError::Image {
         path: "<board.png>".into(),
         source: image::ImageError::Encoding(image::error::EncodingError::new(
             image::ImageFormat::Png.into(),
@@ -113,9 +121,7 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
     })
 }
 
-/// Encodes a grey image as PNG with its pixels per metre in the pHYs chunk (the `image`
-/// crate's encoder cannot write that chunk; the `png` crate it uses can).
-fn encode_png(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, png::EncodingError> {
+fn encode_png_with_size(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, png::EncodingError> {
     let mut encoded = Vec::new();
     let mut encoder = png::Encoder::new(&mut encoded, image.width(), image.height());
     encoder.set_color(png::ColorType::Grayscale);
