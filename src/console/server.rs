@@ -84,15 +84,24 @@ async fn socket(upgrade: WebSocketUpgrade, State(hub): State<Arc<Hub>>) -> Respo
     upgrade.on_upgrade(move |socket| client(socket, hub))
 }
 
+/// How long one message may wait for a page's socket to take it: a page that stops reading fills
+/// the socket buffers and would hold its task (and its lag) forever; it is dropped instead, and
+/// reconnects with the history.
+const SEND_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Sends one message; `false` when the page is gone or did not take it within [`SEND_TIMEOUT`].
+async fn send(socket: &mut WebSocket, message: Message) -> bool {
+    matches!(
+        tokio::time::timeout(SEND_TIMEOUT, socket.send(message)).await,
+        Ok(Ok(()))
+    )
+}
+
 /// One page: history first, then events, frames and commands until either side goes.
 async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
     let (history, mut events) = hub.subscribe();
     for text in history {
-        if socket
-            .send(Message::Text(text.as_ref().into()))
-            .await
-            .is_err()
-        {
+        if !send(&mut socket, Message::Text(text.as_ref().into())).await {
             return;
         }
     }
@@ -103,13 +112,13 @@ async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
         tokio::select! {
             event = events.recv() => match event {
                 Ok(text) => {
-                    if socket.send(Message::Text(text.as_ref().into())).await.is_err() {
+                    if !send(&mut socket, Message::Text(text.as_ref().into())).await {
                         return;
                     }
                 }
                 // Too slow a page is dropped rather than waited for; it reconnects.
                 Err(RecvError::Lagged(_)) => {
-                    let _ = socket.send(Message::Close(None)).await;
+                    send(&mut socket, Message::Close(None)).await;
                     return;
                 }
                 Err(RecvError::Closed) => return,
@@ -120,7 +129,7 @@ async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
                 }
                 let frame = frames.borrow_and_update().clone();
                 if let Some(jpeg) = frame {
-                    if socket.send(Message::Binary(jpeg)).await.is_err() {
+                    if !send(&mut socket, Message::Binary(jpeg)).await {
                         return;
                     }
                 }
