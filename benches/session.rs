@@ -17,9 +17,9 @@ use std::time::{Duration, Instant};
 
 use criterion::Criterion;
 use handeye::cell;
-use handeye::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
+use handeye::cell::run::{CellRun, RunObserver};
 use handeye::dataset::Dataset;
-use handeye::session::{self, SessionEvent, SessionFolder};
+use handeye::session::{self, SessionFolder};
 
 #[path = "../tests/util/mod.rs"]
 mod util;
@@ -72,7 +72,6 @@ fn peak_rss_mb() -> f64 {
 struct StartClock(Option<Instant>);
 
 impl RunObserver for StartClock {
-    fn plan_checked(&mut self, _: &cell::PreparedCell) {}
     fn confirm_motion(
         &mut self,
         _: &cell::PreparedCell,
@@ -80,29 +79,16 @@ impl RunObserver for StartClock {
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         Ok(())
     }
-    fn note(&mut self, _: &str) {}
     fn session_started(&mut self, _: usize) {
         self.0 = Some(Instant::now());
     }
-    fn event(&mut self, _: SessionEvent) {}
-    fn session_ended(&mut self) {}
 }
 
 /// `handeye run` of `config` into `out`: the run and the time from its first move to the
 /// result, s.
 fn timed_run(config: &Path, out: &Path) -> (CellRun, f64) {
     let mut clock = StartClock(None);
-    let done = cell::run::run(
-        &RunRequest {
-            config: Some(config.to_path_buf()),
-            target: SessionTarget::New(out.to_path_buf()),
-            motion_confirmed: true,
-            accept_changed: false,
-            stop: Arc::new(AtomicBool::new(false)),
-        },
-        &mut clock,
-    )
-    .unwrap();
+    let done = cell::run::run(&util::new_run(config, out), &mut clock).unwrap();
     let started = clock.0.expect("the session started");
     (done, started.elapsed().as_secs_f64())
 }

@@ -11,7 +11,7 @@
 //! residuals: {rotation_rms_deg: .., rotation_max_deg: .., translation_rms_mm: .., translation_max_mm: .., samples: [..]}
 //! outliers: [..]
 //! solver: {method: refined, iterations: .., converged: true, restarts: 0, ...}
-//! warnings: [..]
+//! notices: [..]
 //! ```
 //!
 //! (eye_to_hand uses `T_base_camera` and `T_flange_target`.) The verdict comes first, where a
@@ -156,8 +156,13 @@ pub struct ResultFile {
     pub solver: SolverYaml,
     /// Messages for people, each with its severity (older files' plain strings read as
     /// warnings).
-    #[serde(default, deserialize_with = "crate::notice::deserialize_notices")]
-    pub warnings: Vec<Notice>,
+    /// (Key `notices`; files written before it was renamed say `warnings`.)
+    #[serde(
+        default,
+        alias = "warnings",
+        deserialize_with = "crate::notice::deserialize_notices"
+    )]
+    pub notices: Vec<Notice>,
 }
 
 impl ResultFile {
@@ -237,7 +242,7 @@ impl ResultFile {
                 translation_trace_m: trace(Phase::Translation),
                 refine_cost_trace: trace(Phase::Refine),
             },
-            warnings: calibration.warnings.clone(),
+            notices: calibration.notices.clone(),
         }
     }
 
@@ -389,7 +394,7 @@ impl ResultFile {
                 restarts: s.restarts,
                 trace,
             },
-            warnings: self.warnings.clone(),
+            notices: self.notices.clone(),
         })
     }
 }

@@ -73,13 +73,21 @@ impl MotionLimits {
     /// on a trapezoidal speed profile (accelerate at `joint_acceleration` to `joint_speed`, cruise,
     /// decelerate; a triangle when the travel is too short to reach the speed).
     pub fn joint_move_time(&self, from: &Joints, to: &Joints) -> f64 {
-        let travel = from
-            .iter()
-            .zip(to)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        trapezoid_time(travel, self.joint_speed, self.joint_acceleration)
+        trapezoid_time(
+            leading_travel(from, to),
+            self.joint_speed,
+            self.joint_acceleration,
+        )
     }
+}
+
+/// The travel of the joint that moves furthest from `from` to `to`, rad: the one that sets a
+/// synchronised joint move's time and profile.
+pub fn leading_travel(from: &Joints, to: &Joints) -> f64 {
+    from.iter()
+        .zip(to)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max)
 }
 
 /// Time to travel `distance` from rest to rest at most at `speed` with `acceleration`, s.

@@ -10,13 +10,13 @@ use std::time::Instant;
 
 use handeye::camera::{Camera, CameraError, Frame};
 use handeye::camera_model::CameraModel;
-use handeye::cell::run::{self as cell_run, RunObserver, RunRequest, SessionTarget};
-use handeye::cell::{self, PreparedCell};
+use handeye::cell;
+use handeye::cell::run as cell_run;
 use handeye::geometry::Pose;
 use handeye::plan::check::MoveCheck;
 use handeye::robot::sim::SimRobot;
 use handeye::robot::Joints;
-use handeye::session::{self, SessionEvent, SessionFolder};
+use handeye::session::{self, SessionFolder};
 
 mod util;
 
@@ -215,39 +215,6 @@ fn settling_by_measurement_never_captures_a_frame_exposed_while_the_arm_moved() 
     );
 }
 
-struct Quiet;
-
-impl RunObserver for Quiet {
-    fn plan_checked(&mut self, _: &PreparedCell) {}
-    fn confirm_motion(
-        &mut self,
-        _: &PreparedCell,
-        _: usize,
-    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        Ok(())
-    }
-    fn note(&mut self, message: &str) {
-        eprintln!("note: {message}");
-    }
-    fn session_started(&mut self, _: usize) {}
-    fn event(&mut self, _: SessionEvent) {}
-    fn session_ended(&mut self) {}
-}
-
-fn run(config: &Path, out: &Path) -> cell_run::CellRun {
-    cell_run::run(
-        &RunRequest {
-            config: Some(config.to_path_buf()),
-            target: SessionTarget::New(out.to_path_buf()),
-            motion_confirmed: true,
-            accept_changed: false,
-            stop: Arc::new(AtomicBool::new(false)),
-        },
-        &mut Quiet,
-    )
-    .unwrap()
-}
-
 /// The worst translation 1-sigma of the two unknowns of a solved run, mm.
 fn sigma_mm(run: &cell_run::CellRun) -> f64 {
     let u = run
@@ -267,7 +234,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
     // The shipped demo: a generated plan with known intrinsics is adaptive without saying so;
     // its target is the verdict's accuracy (1 mm), reached early, so the minimum decides.
     let demo = sim_cell(dir.path(), "demo.yaml", &[]);
-    let done = run(&demo, &dir.path().join("demo"));
+    let done = util::run_cell(&demo, &dir.path().join("demo"));
     let summary = done.adaptive.clone().expect("adaptive by default");
     eprintln!(
         "{summary}\n{}",
@@ -323,7 +290,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
             "plan:\n  target_uncertainty_mm: 0.08\n  min_poses: 6\n",
         )],
     );
-    let done = run(&tight, &dir.path().join("tight"));
+    let done = util::run_cell(&tight, &dir.path().join("tight"));
     let summary = done.adaptive.clone().unwrap();
     eprintln!("{summary}");
     assert!(summary.reached, "{summary}");
@@ -340,7 +307,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
         "minimum.yaml",
         &[("plan:\n", "plan:\n  min_poses: 12\n")],
     );
-    let done = run(&minimum, &dir.path().join("minimum"));
+    let done = util::run_cell(&minimum, &dir.path().join("minimum"));
     let summary = done.adaptive.clone().unwrap();
     assert!(summary.reached, "{summary}");
     assert_eq!(summary.in_session, 12, "{summary}");
@@ -354,7 +321,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
             "plan:\n  target_uncertainty_mm: 0.0001\n  max_poses: 9\n",
         )],
     );
-    let done = run(&unreachable, &dir.path().join("max"));
+    let done = util::run_cell(&unreachable, &dir.path().join("max"));
     let summary = done.adaptive.clone().unwrap();
     assert!(!summary.reached, "{summary}");
     assert_eq!(summary.in_session, 9);
@@ -371,7 +338,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
         "fixed.yaml",
         &[("plan:\n", "plan:\n  adaptive: false\n")],
     );
-    let done = run(&fixed, &dir.path().join("fixed"));
+    let done = util::run_cell(&fixed, &dir.path().join("fixed"));
     assert!(done.adaptive.is_none());
     assert_eq!(done.outcome.accepted.len(), 20);
 }
@@ -520,7 +487,7 @@ mod through_ur_rtde {
             let mock = start_mock("127.0.0.162");
             let dir = tempfile::tempdir().unwrap();
             let cell = config(dir.path(), "cell.yaml", "127.0.0.162", &[]);
-            let done = run(&cell, &dir.path().join("s"));
+            let done = util::run_cell(&cell, &dir.path().join("s"));
             let summary = done.adaptive.clone().expect("adaptive by default");
             eprintln!(
                 "{summary}\n{}",

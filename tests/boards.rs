@@ -20,6 +20,7 @@ use std::sync::OnceLock;
 
 use handeye::camera_model::{CameraModel, Distortion};
 use handeye::geometry::Pose;
+use handeye::vision::print::size_keys;
 use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion};
 use serde_json::Value;
@@ -458,48 +459,34 @@ fn simulated_camera_renders_each_board_readably() {
 /// truth recovered as closely as the aprilgrid cell's test demands (0.5 mm, 0.05°).
 #[test]
 fn sim_cell_sessions_with_charuco_and_chessboard_recover_the_truth() {
-    use handeye::cell;
-    use handeye::session::{self, SessionEvent, SessionFolder};
-    use std::sync::atomic::AtomicBool;
-    use std::sync::Arc;
     for board in ["charuco-9x6-5x5.yaml", "checkerboard-10x7.yaml"] {
         let dir = tempfile::tempdir().unwrap();
         let config = util::config_variant(
             dir.path(),
             "sim-cell.yaml",
             "cell.yaml",
-            &[("aprilgrid-6x6.yaml", board), ("count: 20", "count: 12")],
+            &[
+                ("aprilgrid-6x6.yaml", board),
+                ("count: 20", "count: 12"),
+                ("plan:\n", "plan:\n  adaptive: false\n"),
+            ],
         );
-        let prepared = cell::prepare(&config).unwrap();
-        assert!(prepared.report.ok(), "{}", prepared.report);
-        let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-        let plan = prepared.report.validated().expect("plan passes its checks");
-        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
-        let mut hardware = prepared.open_hardware().unwrap();
-        let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-        let outcome = session::run_session(
-            setup,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut |_e: SessionEvent| {},
-        )
-        .unwrap();
+        let done = util::run_cell(&config, &dir.path().join("s"));
         assert_eq!(
-            outcome.accepted.len(),
-            prepared.plan.waypoints.len(),
+            done.outcome.accepted.len(),
+            done.cell.plan.waypoints.len(),
             "{board}: skipped {:?}",
-            outcome.skipped
+            done.outcome.skipped
         );
         // The records carry the corners as [id, 0, u, v].
-        let record = std::fs::read_to_string(folder.root().join("poses/000.yaml")).unwrap();
+        let record = std::fs::read_to_string(done.folder.root().join("poses/000.yaml")).unwrap();
         assert!(record.contains("corners_px"), "{record}");
-        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         assert!(
-            solved.reprojection.is_some(),
+            done.solved.reprojection.is_some(),
             "{board}: no reprojection answer"
         );
-        let truth = prepared.config.simulation.as_ref().unwrap();
-        let [(ck, cm), (tk, tm)] = solved.calibration.unknowns();
+        let truth = done.cell.config.simulation.as_ref().unwrap();
+        let [(ck, cm), (tk, tm)] = done.solved.calibration.unknowns();
         for (key, estimate, truth) in [(ck, cm, truth.camera_mount), (tk, tm, truth.target_mount)] {
             let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);
             println!("{board}: {key} {mm:.3} mm, {deg:.4}° from the truth");
@@ -516,10 +503,6 @@ fn sim_cell_sessions_with_charuco_and_chessboard_recover_the_truth() {
 /// bar) and the cell from the corners' board points.
 #[test]
 fn intrinsics_from_scratch_with_a_charuco_board() {
-    use handeye::cell;
-    use handeye::session::{self, SessionEvent, SessionFolder};
-    use std::sync::atomic::AtomicBool;
-    use std::sync::Arc;
     let dir = tempfile::tempdir().unwrap();
     let config = util::config_variant(
         dir.path(),
@@ -527,22 +510,10 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
         "cell.yaml",
         &[("aprilgrid-6x6.yaml", "charuco-9x6-5x5.yaml")],
     );
-    let prepared = cell::prepare(&config).unwrap();
-    assert!(!prepared.intrinsics_known);
-    let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-    let plan = prepared.report.validated().expect("plan passes its checks");
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
-    let mut hardware = prepared.open_hardware().unwrap();
-    let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-    let outcome = session::run_session(
-        setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut |_e: SessionEvent| {},
-    )
-    .unwrap();
-    assert_eq!(outcome.accepted.len(), prepared.plan.waypoints.len());
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let done = util::run_cell(&config, &dir.path().join("s"));
+    assert!(!done.cell.intrinsics_known);
+    assert_eq!(done.outcome.accepted.len(), done.cell.plan.waypoints.len());
+    let solved = &done.solved;
     let truth = handeye::camera_model::CameraModel::load(
         &util::repo().join("configs/cameras/sim-1280x720.yaml"),
     )
@@ -560,7 +531,7 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
             "{name}: {found:.3} px, truth {truth:.3} px"
         );
     }
-    let sim = prepared.config.simulation.as_ref().unwrap();
+    let sim = done.cell.config.simulation.as_ref().unwrap();
     let [(ck, cm), (tk, tm)] = solved.calibration.unknowns();
     for (key, estimate, truth) in [(ck, cm, sim.camera_mount), (tk, tm, sim.target_mount)] {
         let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);
@@ -569,57 +540,159 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
     }
 }
 
+/// Runs `handeye target render` with `args`, asserting it succeeds.
+fn render(args: &[&std::ffi::OsStr]) {
+    let output = util::handeye()
+        .args(["target", "render"])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "target render {args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Renders `yaml` as PNG (150 dpi), SVG and PDF into `dir`, and checks that the PNG is read
+/// back with all `count` corners where the board file puts them at true scale.
+fn check_true_scale_render(yaml: &Path, count: usize, dir: &Path) {
+    for ext in ["png", "svg", "pdf"] {
+        let out = dir.join(format!("board.{ext}"));
+        render(&[
+            "--dpi".as_ref(),
+            "150".as_ref(),
+            "--target".as_ref(),
+            yaml.as_os_str(),
+            "-o".as_ref(),
+            out.as_os_str(),
+        ]);
+    }
+    let svg = std::fs::read_to_string(dir.join("board.svg")).unwrap();
+    assert!(
+        svg.contains("100 mm") && (svg.contains("squareLength") || svg.contains("SpacingMeters"))
+    );
+    let pdf = std::fs::read(dir.join("board.pdf")).unwrap();
+    assert!(pdf.starts_with(b"%PDF"));
+    let image = image::open(dir.join("board.png")).unwrap().into_luma8();
+    let board = Target::load(yaml).unwrap();
+    let detector = TargetDetector::spawn(&board, DetectorOptions::default()).unwrap();
+    let detection = detector.detect(&image).unwrap();
+    assert_eq!(detection.points.len(), count, "{}", yaml.display());
+    // True scale: page pixel = (x - extent.min.x) * ppm, from the top of the extent.
+    let ppm = 150.0 / 0.0254;
+    let e = board.extent();
+    // The board is centred in the raster on a whole pixel.
+    let left = ((image.width() as f64 - (e.max.x - e.min.x) * ppm) / 2.0).round() / ppm;
+    for (id, pixel) in &detection.points {
+        let p = board.point(*id, 0).unwrap();
+        let u = (left + p.x - e.min.x) * ppm - 0.5;
+        let v = (e.max.y - p.y) * ppm - 0.5;
+        let error = ((pixel.x - u).powi(2) + (pixel.y - v).powi(2)).sqrt();
+        // Edges are snapped to whole pixels: up to half a pixel each way.
+        assert!(
+            error < 0.75,
+            "{}: corner {id} at {pixel}, expected ({u:.2}, {v:.2})",
+            yaml.display()
+        );
+    }
+}
+
+const RENDERED_BOARDS: [(&str, usize); 2] = [
+    ("configs/targets/charuco-9x6-5x5.yaml", 40),
+    ("configs/targets/checkerboard-10x7.yaml", 54),
+];
+
 /// `target render` of a ChArUco board and a chessboard: a true-scale PNG (pHYs) that the
 /// detector reads back with every corner where the board file puts it, and SVG/PDF pages with
 /// the scale bar and the keys.
 #[test]
 fn target_render_writes_readable_true_scale_charuco_and_chessboards() {
     let dir = tempfile::tempdir().unwrap();
-    for (file, count) in [
-        ("configs/targets/charuco-9x6-5x5.yaml", 40),
-        ("configs/targets/checkerboard-10x7.yaml", 54),
-    ] {
+    for (file, count) in RENDERED_BOARDS {
+        check_true_scale_render(&util::repo().join(file), count, dir.path());
+    }
+}
+
+/// `target render --paper a4 --board-out` of a ChArUco board and a chessboard: the page is the
+/// sheet, the board is scaled to fill it with its size keys rewritten together (the marker
+/// keeps its ratio to the square), the written board file prints true to scale, `--show-frame`
+/// overlays the frame, and `--no-corner-squares` (an aprilgrid option) is refused.
+#[test]
+fn target_render_fits_charuco_and_chessboards_to_paper() {
+    let dir = tempfile::tempdir().unwrap();
+    for (file, count) in RENDERED_BOARDS {
         let yaml = util::repo().join(file);
-        for ext in ["png", "svg", "pdf"] {
-            let out = dir.path().join(format!("board.{ext}"));
-            let status = util::handeye()
-                .args(["target", "render", "--dpi", "150", "--target"])
-                .arg(&yaml)
-                .arg("-o")
-                .arg(&out)
-                .status()
-                .unwrap();
-            assert!(status.success(), "{file} -> {ext}");
-        }
-        let svg = std::fs::read_to_string(dir.path().join("board.svg")).unwrap();
+        let (fitted_yaml, pdf) = (dir.path().join("fitted.yaml"), dir.path().join("a4.pdf"));
+        render(&[
+            "--paper".as_ref(),
+            "a4".as_ref(),
+            "--target".as_ref(),
+            yaml.as_os_str(),
+            "-o".as_ref(),
+            pdf.as_os_str(),
+            "--board-out".as_ref(),
+            fitted_yaml.as_os_str(),
+        ]);
+        let pdf = String::from_utf8_lossy(&std::fs::read(&pdf).unwrap()).into_owned();
+        // A4 in points: 595.28 x 841.89, either way round.
         assert!(
-            svg.contains("100 mm")
-                && (svg.contains("squareLength") || svg.contains("SpacingMeters"))
+            pdf.contains("/MediaBox [0 0 595.2756 841.8898]")
+                || pdf.contains("/MediaBox [0 0 841.8898 595.2756]"),
+            "{file}: page is not A4"
         );
-        let pdf = std::fs::read(dir.path().join("board.pdf")).unwrap();
-        assert!(pdf.starts_with(b"%PDF"));
-        let image = image::open(dir.path().join("board.png"))
-            .unwrap()
-            .into_luma8();
-        let board = Target::load(&yaml).unwrap();
-        let detector = TargetDetector::spawn(&board, DetectorOptions::default()).unwrap();
-        let detection = detector.detect(&image).unwrap();
-        assert_eq!(detection.points.len(), count, "{file}");
-        // True scale: page pixel = (x - extent.min.x) * ppm, from the top of the extent.
-        let ppm = 150.0 / 0.0254;
-        let e = board.extent();
-        let page_width = image.width() as f64 / ppm;
-        let left = (page_width - (e.max.x - e.min.x)) / 2.0;
-        for (id, pixel) in &detection.points {
-            let p = board.point(*id, 0).unwrap();
-            let u = (left + p.x - e.min.x) * ppm - 0.5;
-            let v = (e.max.y - p.y) * ppm - 0.5;
-            let error = ((pixel.x - u).powi(2) + (pixel.y - v).powi(2)).sqrt();
-            // Edges are snapped to whole pixels: up to half a pixel each way.
-            assert!(
-                error < 0.75,
-                "{file}: corner {id} at {pixel}, expected ({u:.2}, {v:.2})"
-            );
+        let (original, fitted) = (
+            Target::load(&yaml).unwrap(),
+            Target::load(&fitted_yaml).unwrap(),
+        );
+        let (before, after) = (size_keys(&original), size_keys(&fitted));
+        let grown = after[0].1 / before[0].1;
+        // The second key keeps its ratio to the first within the 0.01 mm rounding.
+        assert!(
+            (after[1].1 - before[1].1 * grown).abs() <= 0.5e-5 + 1e-12,
+            "{file}: {before:?} -> {after:?}"
+        );
+        // The fitted board and its 20 mm strip fill the printable width or height (10 mm
+        // margins) to within one 0.1 mm step of the first key.
+        let e = fitted.extent();
+        let (w, h) = (e.max.x - e.min.x, e.max.y - e.min.y + 0.02);
+        let fills =
+            |(pw, ph): (f64, f64)| (w <= pw + 1e-9 && h <= ph + 1e-9).then(|| (w / pw).max(h / ph));
+        let fill = fills((0.190, 0.277)).or(fills((0.277, 0.190)));
+        assert!(
+            fill.is_some_and(|f| f > 0.97),
+            "{file}: {w} x {h} m does not fit or fill A4 ({fill:?})"
+        );
+        check_true_scale_render(&fitted_yaml, count, dir.path());
+
+        let (plain, framed) = (dir.path().join("plain.png"), dir.path().join("framed.png"));
+        for (out, extra) in [(&plain, None), (&framed, Some("--show-frame"))] {
+            let mut args = vec![
+                "--dpi".as_ref(),
+                "100".as_ref(),
+                "--target".as_ref(),
+                yaml.as_os_str(),
+                "-o".as_ref(),
+                out.as_os_str(),
+            ];
+            args.extend(extra.map(std::ffi::OsStr::new));
+            render(&args);
         }
+        let grey = |path: &Path| {
+            let image = image::open(path).unwrap().into_luma8();
+            image.pixels().filter(|p| p[0] == 128).count()
+        };
+        assert_eq!(grey(&plain), 0, "{file}: a print has no grey overlay");
+        assert!(grey(&framed) > 100, "{file}: --show-frame drew no frame");
+        let refused = util::handeye()
+            .args(["target", "render", "--no-corner-squares", "--target"])
+            .arg(&yaml)
+            .arg("-o")
+            .arg(dir.path().join("x.png"))
+            .output()
+            .unwrap();
+        assert!(!refused.status.success());
+        assert!(String::from_utf8_lossy(&refused.stderr)
+            .contains("--no-corner-squares is for aprilgrids"));
     }
 }

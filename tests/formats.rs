@@ -571,6 +571,15 @@ fn export_reads_a_saved_result_file() {
     ResultFile::from_calibration(&cal, &pairs)
         .save(&path)
         .unwrap();
+    // Messages are kept under `notices:`; a file from before the key's rename (`warnings:`)
+    // still reads them.
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\nnotices:") && !text.contains("\nwarnings:"));
+    let written = ResultFile::load(&path).unwrap().notices;
+    assert!(!written.is_empty(), "the solve's notices are written");
+    let old = dir.path().join("old.yaml");
+    std::fs::write(&old, text.replace("\nnotices:", "\nwarnings:")).unwrap();
+    assert_eq!(ResultFile::load(&old).unwrap().notices, written);
     let loaded = ResultFile::load_mounts(&path).unwrap();
     let json = export(&loaded, ExportFormat::Json, &FrameIds::default()).unwrap();
     let (_, _, camera, _) = parse_json(&json, "T_base_camera");

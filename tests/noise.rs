@@ -324,7 +324,7 @@ fn gross_outliers_are_left_out_named_and_the_answer_matches_ml_on_the_inliers() 
         let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
         assert_eq!(found.dropped, planted, "seed {seed}");
         for &i in &planted {
-            let named = found.warnings.iter().any(|w| {
+            let named = found.notices.iter().any(|w| {
                 w.kind == NoticeKind::DroppedOutliers
                     && w.severity == Severity::Warning
                     && w.message.contains(&format!("sample {i} "))
@@ -333,7 +333,7 @@ fn gross_outliers_are_left_out_named_and_the_answer_matches_ml_on_the_inliers() 
             assert!(
                 named,
                 "seed {seed}: sample {i} not named: {:?}",
-                found.warnings
+                found.notices
             );
         }
         let inliers: Vec<PosePair> = (0..SAMPLES)
@@ -389,7 +389,7 @@ fn estimated_noise_is_reported_and_close_to_the_truth() {
         "{estimate:?}"
     );
     assert!(found
-        .warnings
+        .notices
         .iter()
         .any(|w| w.kind == NoticeKind::NoiseEstimate && w.severity == Severity::Info));
     // χ²/dof at the estimated noise is 1 by construction.

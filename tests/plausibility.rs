@@ -126,11 +126,11 @@ fn assert_plausible(what: &str, setup: Setup, pairs: &[PosePair], options: &Solv
     check_units(setup, pairs).unwrap_or_else(|e| panic!("{what}: {e}"));
     let cal = solve::solve(setup, pairs, options).unwrap_or_else(|e| panic!("{what}: {e}"));
     assert!(
-        !cal.warnings
+        !cal.notices
             .iter()
             .any(|w| w.kind == NoticeKind::ImplausibleTransform),
         "{what}: {:?}",
-        cal.warnings
+        cal.notices
     );
 }
 
@@ -309,10 +309,10 @@ fn both_inverted_inputs_are_flagged_and_recognised_against_the_nominal_cell() {
         );
         // ... and flagged as such.
         let flag = cal
-            .warnings
+            .notices
             .iter()
             .find(|w| w.kind == NoticeKind::ImplausibleTransform)
-            .unwrap_or_else(|| panic!("{name}: not flagged: {:?}", cal.warnings));
+            .unwrap_or_else(|| panic!("{name}: not flagged: {:?}", cal.notices));
         assert!(
             flag.message.contains("both inputs inverted"),
             "{}",

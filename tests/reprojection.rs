@@ -530,7 +530,7 @@ fn a_frame_with_a_wrong_robot_pose_is_flagged() {
         result.errors.frame_rms_px
     );
     assert!(result
-        .warnings
+        .notices
         .iter()
         .any(|w| w.message.contains("pose-004")));
 }
@@ -697,7 +697,7 @@ fn a_far_off_robot_pose_is_flagged_and_left_out_with_corrections_on() {
     );
     assert_eq!(result.outlier_frames, vec![4]);
     assert!(result
-        .warnings
+        .notices
         .iter()
         .any(|w| w.kind == NoticeKind::RobotPoseOutliers && w.message.contains("pose-004")));
     let ratio = prior.translation_sigma_m / robot_sigma.0;

@@ -628,26 +628,6 @@ fn reprojection_space_beats_pose_space_on_the_same_rendered_frames_when_pixels_d
     );
 }
 
-/// Prints nothing; refuses motion of a real arm (none here).
-struct Quiet;
-
-impl cell::run::RunObserver for Quiet {
-    fn plan_checked(&mut self, _cell: &PreparedCell) {}
-    fn confirm_motion(
-        &mut self,
-        _cell: &PreparedCell,
-        _poses: usize,
-    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        Err("no one to confirm".into())
-    }
-    fn note(&mut self, message: &str) {
-        eprintln!("note: {message}");
-    }
-    fn session_started(&mut self, _poses: usize) {}
-    fn event(&mut self, _event: SessionEvent) {}
-    fn session_ended(&mut self) {}
-}
-
 fn library_run(
     config: Option<&Path>,
     target: cell::run::SessionTarget,
@@ -660,7 +640,7 @@ fn library_run(
             accept_changed: false,
             stop: Arc::new(AtomicBool::new(false)),
         },
-        &mut Quiet,
+        &mut util::QuietObserver,
     )
 }
 

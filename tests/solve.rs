@@ -490,7 +490,7 @@ fn planted_outliers_are_flagged_and_dropped() {
     let cal = solve::solve(c.setup, &c.pairs, &keep_all).unwrap();
     assert_eq!(cal.outliers, planted.to_vec());
     assert!(cal
-        .warnings
+        .notices
         .iter()
         .any(|w| w.kind == NoticeKind::Outliers && w.severity == Severity::Warning));
     // Left out by default, each named.
@@ -499,7 +499,7 @@ fn planted_outliers_are_flagged_and_dropped() {
     assert_eq!(cleaned.outliers, planted.to_vec());
     assert_eq!(
         cleaned
-            .warnings
+            .notices
             .iter()
             .filter(|w| w.kind == NoticeKind::DroppedOutliers && w.severity == Severity::Warning)
             .count(),
@@ -709,12 +709,12 @@ fn poorly_determined_unknowns_are_warned_about() {
     let u = cal.uncertainty.as_ref().unwrap();
     assert!(u.camera_mount.rotation_deg > 0.5, "{u:?}");
     assert!(
-        cal.warnings
+        cal.notices
             .iter()
             .any(|w| w.kind == NoticeKind::PoorlyDetermined
                 && w.message.contains("T_flange_camera is poorly determined")),
         "{:?}",
-        cal.warnings
+        cal.notices
     );
     // The same cell with wide tilts and more poses is not warned about.
     let mut c = cell_with_tilts(Setup::EyeInHand, 12, 71, 20.0, 45.0);
@@ -722,8 +722,8 @@ fn poorly_determined_unknowns_are_warned_about() {
     let cal = solve::solve(c.setup, &c.pairs, &SolveOptions::default()).unwrap();
     // Only the information notice of the estimated noise.
     assert!(
-        cal.warnings.iter().all(|w| w.severity == Severity::Info),
+        cal.notices.iter().all(|w| w.severity == Severity::Info),
         "{:?}",
-        cal.warnings
+        cal.notices
     );
 }

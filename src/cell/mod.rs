@@ -194,22 +194,24 @@ pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
 }
 
 impl PreparedCell {
+    /// What a plan is checked against: this cell from the arm's current start joints.
+    fn check_context(&self) -> CheckContext<'_> {
+        CheckContext {
+            arm: &self.arm,
+            start_joints: self.start_joints,
+            cell: &self.config.nominal,
+            workspace: &self.config.workspace,
+            limits: &self.config.limits,
+            camera: &self.camera_model,
+            board: &self.board,
+            margin_px: self.config.session.image_margin_px,
+        }
+    }
+
     /// Checks any plan against this cell (reach, limits, box, board in view, rotation spread)
     /// from the arm's current start joints.
     pub fn check_plan(&self, plan: &Plan) -> PlanReport {
-        check_plan(
-            plan,
-            &CheckContext {
-                arm: &self.arm,
-                start_joints: self.start_joints,
-                cell: &self.config.nominal,
-                workspace: &self.config.workspace,
-                limits: &self.config.limits,
-                camera: &self.camera_model,
-                board: &self.board,
-                margin_px: self.config.session.image_margin_px,
-            },
-        )
+        check_plan(plan, &self.check_context())
     }
 
     /// Generated views for this cell: the spec's cap, with the board pushed across this
@@ -235,20 +237,8 @@ impl PreparedCell {
     /// The plan check of the order that will run (the order of least move time unless
     /// `plan.reorder` is false).
     fn check(&self) -> PlanReport {
-        let mut report = check_plan_ordered(
-            &self.plan,
-            &CheckContext {
-                arm: &self.arm,
-                start_joints: self.start_joints,
-                cell: &self.config.nominal,
-                workspace: &self.config.workspace,
-                limits: &self.config.limits,
-                camera: &self.camera_model,
-                board: &self.board,
-                margin_px: self.config.session.image_margin_px,
-            },
-            self.config.plan.reorder,
-        );
+        let mut report =
+            check_plan_ordered(&self.plan, &self.check_context(), self.config.plan.reorder);
         if !self.intrinsics_known {
             // The intrinsics come from this very run: a plan that cannot give them is refused.
             let (blocking, notes): (Vec<String>, Vec<String>) = report

@@ -42,7 +42,7 @@ pub enum SessionTarget {
     Resume(PathBuf),
 }
 
-/// What to run.
+/// What to run: a planned run ([`run`]) or a hand-guided one (`console::manual::run_manual`).
 #[derive(Debug, Clone)]
 pub struct RunRequest {
     /// The cell config: required for a new session; on resume it overrides the config the
@@ -50,7 +50,8 @@ pub struct RunRequest {
     pub config: Option<PathBuf>,
     /// New session or resume.
     pub target: SessionTarget,
-    /// The person confirmed already that a real arm may move (`--yes`).
+    /// The person confirmed already that a real arm may move (`--yes`): to the plan's poses,
+    /// or to the views a hand-guided session suggests.
     pub motion_confirmed: bool,
     /// Resume even though input files changed since the session was recorded.
     pub accept_changed: bool,
@@ -61,24 +62,25 @@ pub struct RunRequest {
 /// Told what happens during a run (the CLI prints it).
 pub trait RunObserver {
     /// The cell is prepared and its plan checked (called before the run refuses a failing plan).
-    fn plan_checked(&mut self, cell: &PreparedCell);
-    /// A real arm is about to move through `poses` poses: return an error to refuse.
+    fn plan_checked(&mut self, _cell: &PreparedCell) {}
+    /// A real arm is about to move through `poses` poses: return an error to refuse. (No
+    /// default: every observer decides for itself whether a real arm may move.)
     fn confirm_motion(
         &mut self,
         cell: &PreparedCell,
         poses: usize,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
     /// Something a person should know (a stale lock taken over, changed inputs accepted...).
-    fn note(&mut self, message: &str);
+    fn note(&mut self, _message: &str) {}
     /// The session folder is ready and `plan` (for an adaptive plan: its candidates) validated
     /// from where the arm stands; called once, before the first move.
     fn session_folder(&mut self, _folder: &SessionFolder, _plan: &[(Pose, Joints)]) {}
     /// The session loop starts, for up to `poses` poses.
-    fn session_started(&mut self, poses: usize);
+    fn session_started(&mut self, _poses: usize) {}
     /// Progress of the session loop.
-    fn event(&mut self, event: SessionEvent);
+    fn event(&mut self, _event: SessionEvent) {}
     /// The session loop ended (well or not); solving follows when it ended well.
-    fn session_ended(&mut self);
+    fn session_ended(&mut self) {}
 }
 
 /// A finished run: the cell, its session folder, what the loop did, and the solution.
@@ -279,51 +281,129 @@ pub fn ensure_robot_ready(robot: &mut dyn Robot) -> Result<(), RunError> {
     }
 }
 
-/// Runs (or resumes) a calibration of a cell, as `handeye run` does, and solves it.
-pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellRun, RunError> {
-    // A resume locks its folder first: a second resume of the same folder stops here.
+/// The resume check of every session kind (planned, adaptive, hand-guided): refuses, naming
+/// each changed file, when the input files (`inputs`, hashed now) differ from those `manifest`
+/// recorded, unless `accept_changed` (then each change is noted and `manifest` takes the files
+/// used now, which the next resume compares against). Returns whether `manifest` changed (the
+/// caller writes it).
+fn check_resumed_inputs(
+    folder: &SessionFolder,
+    manifest: &mut session::SessionManifest,
+    inputs: &[session::InputFile],
+    accept_changed: bool,
+    observer: &mut dyn RunObserver,
+) -> Result<bool, RunError> {
+    if manifest.inputs.is_empty() {
+        observer.note(&format!(
+            "{}: records no input hashes (an older session): changes to the config, board, intrinsics or plan since it was recorded cannot be detected",
+            folder.manifest_path().display()
+        ));
+        return Ok(false);
+    }
+    let changes = changed_inputs(&manifest.inputs, inputs);
+    if !changes.is_empty() && !accept_changed {
+        return Err(SessionError::InputsChanged {
+            folder: folder.root().to_path_buf(),
+            changes,
+        }
+        .into());
+    }
+    for change in &changes {
+        observer.note(&format!(
+            "input changed, accepted (--accept-changed): {change}"
+        ));
+    }
+    if manifest.inputs == inputs {
+        return Ok(false);
+    }
+    manifest.inputs = inputs.to_vec();
+    Ok(true)
+}
+
+/// A session a run continues.
+#[derive(Debug)]
+pub struct ResumedSession {
+    /// Its folder, locked for this run.
+    pub folder: SessionFolder,
+    /// Its manifest, with the input files of this run when changes were accepted.
+    pub manifest: session::SessionManifest,
+    /// Whether `manifest` took accepted input changes not written to the folder yet.
+    pub inputs_changed: bool,
+}
+
+/// A run opened: the cell prepared and its plan checked, the input files it uses, and for a
+/// resume the session it continues.
+pub struct OpenedRun {
+    /// For a resume, the session continued.
+    pub resumed: Option<ResumedSession>,
+    /// The cell, prepared.
+    pub cell: PreparedCell,
+    /// The run's input files, hashed now.
+    pub inputs: Vec<session::InputFile>,
+}
+
+/// The start of every run, planned or hand-guided: for a resume, its session folder (locked
+/// first, so a second resume of the same folder stops here; its notes told to `observer`) and
+/// manifest; the cell of the request's config (a resume's own config unless the request names
+/// one), prepared, its plan checked and shown to `observer`; for a resume, the check that its
+/// input files did not change since it was recorded (refused, naming each, unless
+/// `accept_changed`), before the arm or camera is opened.
+pub fn open_run(
+    request: &RunRequest,
+    observer: &mut dyn RunObserver,
+) -> Result<OpenedRun, RunError> {
     let (resumed, config_path) = match &request.target {
         SessionTarget::Resume(dir) => {
             let folder = SessionFolder::resume(dir)?;
             let manifest = folder.read_manifest()?;
-            let config = request.config.clone().unwrap_or(manifest.config.clone());
+            let config = request
+                .config
+                .clone()
+                .unwrap_or_else(|| manifest.config.clone());
             (Some((folder, manifest)), config)
         }
         SessionTarget::New(_) => (None, request.config.clone().ok_or(RunError::NoConfig)?),
     };
-    let mut cell = prepare(&config_path).map_err(|source| RunError::Prepare {
+    let cell = prepare(&config_path).map_err(|source| RunError::Prepare {
         config: config_path.clone(),
         source,
     })?;
     observer.plan_checked(&cell);
-    if let Some((folder, _)) = &resumed {
-        for note in folder.notes() {
-            observer.note(note);
-        }
-    }
     let inputs = cell.inputs()?;
-    if let Some((folder, manifest)) = &resumed {
-        if manifest.inputs.is_empty() {
-            observer.note(&format!(
-                "{}: records no input hashes (an older session): changes to the config, board, intrinsics or plan since it was recorded cannot be detected",
-                folder.manifest_path().display()
-            ));
-        } else {
-            let changes = changed_inputs(&manifest.inputs, &inputs);
-            if !changes.is_empty() && !request.accept_changed {
-                return Err(SessionError::InputsChanged {
-                    folder: folder.root().to_path_buf(),
-                    changes,
-                }
-                .into());
+    let resumed = match resumed {
+        Some((folder, mut manifest)) => {
+            for note in folder.notes() {
+                observer.note(note);
             }
-            for change in &changes {
-                observer.note(&format!(
-                    "input changed, accepted (--accept-changed): {change}"
-                ));
-            }
+            let inputs_changed = check_resumed_inputs(
+                &folder,
+                &mut manifest,
+                &inputs,
+                request.accept_changed,
+                observer,
+            )?;
+            Some(ResumedSession {
+                folder,
+                manifest,
+                inputs_changed,
+            })
         }
-    }
+        None => None,
+    };
+    Ok(OpenedRun {
+        resumed,
+        cell,
+        inputs,
+    })
+}
+
+/// Runs (or resumes) a calibration of a cell, as `handeye run` does, and solves it.
+pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellRun, RunError> {
+    let OpenedRun {
+        resumed,
+        mut cell,
+        inputs,
+    } = open_run(request, observer)?;
 
     // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
     let adaptive = cell.config.adaptive();
@@ -368,7 +448,11 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
     };
 
     let folder = match resumed {
-        Some((folder, mut manifest)) => {
+        Some(ResumedSession {
+            folder,
+            manifest,
+            inputs_changed,
+        }) => {
             // An adaptive session's plan is what it chose so far: it continues from there. A
             // fixed plan ordered for travel time from where the arm stood then keeps that order.
             if !adaptive && !same_plan(&manifest, &plan) {
@@ -381,9 +465,7 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
                     }
                 }
             }
-            if !manifest.inputs.is_empty() && manifest.inputs != inputs {
-                // Accepted changes: the next resume compares against the files used now.
-                manifest.inputs = inputs;
+            if inputs_changed {
                 folder.write_manifest(&manifest)?;
             }
             folder

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use clap::Args;
 
-use handeye::cell::run::SessionTarget;
-use handeye::console::manual::{run_manual, ManualRequest};
+use handeye::cell::run::{RunRequest, SessionTarget};
+use handeye::console::manual::run_manual;
 use handeye::console::{Command, Console, ConsoleEvent, ConsoleOptions};
 use handeye::session::SolvedSession;
 
@@ -28,6 +28,10 @@ pub struct ConsoleArgs {
     /// Continue a hand-guided session in this folder.
     #[arg(long)]
     pub(super) resume: Option<PathBuf>,
+    /// Resume even though the config, board or intrinsics changed since the session was
+    /// recorded (each change is listed).
+    #[arg(long, requires = "resume")]
+    pub(super) accept_changed: bool,
     /// The console's address (port 0 picks a free one); the URL is printed.
     #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
     pub(super) addr: SocketAddr,
@@ -56,10 +60,11 @@ pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
     super::stop_on_signals(stop.clone());
     let console = start(args.addr, args.public, stop.clone())?;
     terminal_commands(&console);
-    let request = ManualRequest {
+    let request = RunRequest {
         config: args.config.clone(),
         target,
         motion_confirmed: args.yes,
+        accept_changed: args.accept_changed,
         stop,
     };
     let mut printer = super::run::Printer::new(request.stop.clone());
@@ -175,10 +180,7 @@ fn linger(console: &Console, wait: bool) {
         });
         let _ = rx.recv();
     } else {
-        console.drain(Duration::from_secs(1));
-        // The connections have the last events; a moment to write them before the server goes.
-        if console.clients() > 0 {
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        // The pages get the last events, then the connections close (at once with no page).
+        console.close(Duration::from_secs(1));
     }
 }

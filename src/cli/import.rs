@@ -420,52 +420,24 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
     }
     std::fs::copy(&a.board, import_dir.join("target.yaml"))
         .with_context(|| format!("copying {}", a.board.display()))?;
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in &poses {
-        let t = p.translation.vector;
-        for k in 0..3 {
-            lo[k] = lo[k].min(t[k] - 0.5);
-            hi[k] = hi[k].max(t[k] + 0.5);
-        }
-    }
     let setup: Setup = a.setup.into();
-    let (camera_key, target_key) = setup.unknown_names();
-    let identity = PoseYaml::from_pose(&handeye::geometry::Pose::identity());
-    let config = ConfigFile {
+    let identity = handeye::geometry::Pose::identity();
+    let config = recorded_cell(
         setup,
-        target: PathBuf::from("target.yaml"),
-        intrinsics: imported
-            .camera
-            .is_some()
-            .then(|| PathBuf::from("camera_info.yaml")),
-        robot: RobotConfig::Recorded {
+        RecordedFiles {
+            target: PathBuf::from("target.yaml"),
+            intrinsics: imported
+                .camera
+                .is_some()
+                .then(|| PathBuf::from("camera_info.yaml")),
             poses: PathBuf::from("poses.yaml"),
-            repeatability_mm: None,
-            repeatability_deg: None,
-        },
-        camera: CameraConfig::Files {
-            folder: PathBuf::from("images"),
+            images: PathBuf::from("images"),
         },
         // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
-        nominal: BTreeMap::from([
-            (camera_key.to_string(), identity.clone()),
-            (target_key.to_string(), identity),
-        ]),
-        simulation: None,
-        plan: PlanConfig::default(),
-        limits: LimitsConfig::default(),
-        workspace: WorkspaceConfig { min: lo, max: hi },
-        detector: DetectorConfig {
-            decimate: a.decimation,
-            ..DetectorConfig::default()
-        },
-        solver: SolverConfig::default(),
-        session: SessionConfig {
-            settle_s: 0.0,
-            ..SessionConfig::default()
-        },
-        verdict: Default::default(),
-    };
+        (identity, identity),
+        &poses,
+        a.decimation,
+    );
     let config_file = import_dir.join("cell.yaml");
     config.save(
         &config_file,
@@ -642,6 +614,67 @@ impl Drop for Outputs {
     }
 }
 
+/// Where a recorded cell's files are (relative paths are read from the config's folder).
+struct RecordedFiles {
+    target: PathBuf,
+    intrinsics: Option<PathBuf>,
+    poses: PathBuf,
+    images: PathBuf,
+}
+
+/// The config of a recorded cell that replays imported frames: the flange poses
+/// `base_from_flange` (as in `files.poses`) with the images of a folder camera. `nominal` (camera mount, target mount) only feeds the
+/// plan report; the workspace box, which a recorded robot does not use, spans the recorded
+/// flange positions ± 0.5 m; nothing moves, so nothing settles.
+fn recorded_cell(
+    setup: Setup,
+    files: RecordedFiles,
+    (camera_mount, target_mount): (handeye::geometry::Pose, handeye::geometry::Pose),
+    base_from_flange: &[handeye::geometry::Pose],
+    decimate: f32,
+) -> ConfigFile {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in base_from_flange {
+        let t = p.translation.vector;
+        for k in 0..3 {
+            lo[k] = lo[k].min(t[k] - 0.5);
+            hi[k] = hi[k].max(t[k] + 0.5);
+        }
+    }
+    let (camera_key, target_key) = setup.unknown_names();
+    ConfigFile {
+        setup,
+        target: files.target,
+        intrinsics: files.intrinsics,
+        robot: RobotConfig::Recorded {
+            poses: files.poses,
+            repeatability_mm: None,
+            repeatability_deg: None,
+        },
+        camera: CameraConfig::Files {
+            folder: files.images,
+        },
+        nominal: BTreeMap::from([
+            (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
+            (target_key.to_string(), PoseYaml::from_pose(&target_mount)),
+        ]),
+        simulation: None,
+        plan: PlanConfig::default(),
+        limits: LimitsConfig::default(),
+        workspace: WorkspaceConfig { min: lo, max: hi },
+        detector: DetectorConfig {
+            decimate,
+            ..DetectorConfig::default()
+        },
+        solver: SolverConfig::default(),
+        session: SessionConfig {
+            settle_s: 0.0,
+            ..SessionConfig::default()
+        },
+        verdict: Default::default(),
+    }
+}
+
 /// The recorded-cell config for an imported ViSP folder: only when the folder's frames (natural
 /// order) are exactly the imported images, since the folder camera serves every image in it.
 /// Built before anything is written, so a refusal leaves no files behind.
@@ -662,7 +695,6 @@ fn cell_text(
     );
     let setup = imported.dataset.setup;
     // Nominal transforms from a quick solve (they only feed the plan report of a recorded cell).
-    let (camera_key, target_key) = setup.unknown_names();
     let (camera_mount, target_mount) = match handeye::solve::solve(
         setup,
         &imported.dataset.pairs,
@@ -674,44 +706,20 @@ fn cell_text(
             handeye::geometry::Pose::identity(),
         ),
     };
-    // The workspace box is not used by a recorded robot; it spans the recorded poses ± 0.5 m.
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for f in &imported.frames {
-        let t = f.base_from_flange.translation.vector;
-        for k in 0..3 {
-            lo[k] = lo[k].min(t[k] - 0.5);
-            hi[k] = hi[k].max(t[k] + 0.5);
-        }
-    }
     let folder = canonical(folder)?;
-    let config = ConfigFile {
+    let base_from_flange: Vec<_> = imported.frames.iter().map(|f| f.base_from_flange).collect();
+    let config = recorded_cell(
         setup,
-        target: canonical(target)?,
-        intrinsics: Some(absolute(camera_info)?),
-        robot: RobotConfig::Recorded {
+        RecordedFiles {
+            target: canonical(target)?,
+            intrinsics: Some(absolute(camera_info)?),
             poses: absolute(poses)?,
-            repeatability_mm: None,
-            repeatability_deg: None,
+            images: folder.clone(),
         },
-        camera: CameraConfig::Files {
-            folder: folder.clone(),
-        },
-        nominal: BTreeMap::from([
-            (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
-            (target_key.to_string(), PoseYaml::from_pose(&target_mount)),
-        ]),
-        simulation: None,
-        plan: PlanConfig::default(),
-        limits: LimitsConfig::default(),
-        workspace: WorkspaceConfig { min: lo, max: hi },
-        detector: DetectorConfig {
-            decimate: 1.0,
-            ..DetectorConfig::default()
-        },
-        solver: SolverConfig::default(),
-        session: SessionConfig::default(),
-        verdict: Default::default(),
-    };
+        (camera_mount, target_mount),
+        &base_from_flange,
+        1.0,
+    );
     let header = format!(
         "Replays the ViSP folder {} as a session: handeye run --config <this file>",
         folder.display()

@@ -49,19 +49,15 @@ pub struct RunArgs {
 
 /// Runs `handeye run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    // `plan: {manual: true}`: a person chooses the views on the console (as `handeye console`).
-    let manual = match (&args.resume, &args.config) {
-        (None, Some(config)) => handeye::config::CellConfig::load(config)
-            .map(|c| c.plan.manual)
-            .unwrap_or(false),
-        _ => false,
-    };
-    if manual {
-        outln!("plan.manual: hand-guided capture on the console (as `handeye console`)");
+    // A hand-guided session — `plan: {manual: true}` for a new one, a session `handeye console`
+    // recorded for a resume — goes on by hand on the console (as `handeye console`).
+    if let Some(why) = hand_guided(&args) {
+        outln!("{why}: hand-guided capture on the console (as `handeye console`)");
         return super::console::run(super::console::ConsoleArgs {
             config: args.config,
             out: args.out,
-            resume: None,
+            resume: args.resume,
+            accept_changed: args.accept_changed,
             addr: match args.console {
                 Some(addr) => addr,
                 None => handeye::console::DEFAULT_ADDR.parse()?,
@@ -113,6 +109,33 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         super::console::finished(console, &done.solved, report, next, args.console_wait);
     }
     Ok(())
+}
+
+/// Why the run is hand-guided (`Some`): a new run's config says `plan.manual`; a resumed session
+/// was recorded by hand (its manifest says so, or its config says `plan.manual`).
+fn hand_guided(args: &RunArgs) -> Option<&'static str> {
+    let manual_config = |config: &std::path::Path| {
+        // A config that does not load is reported by the run itself.
+        handeye::config::CellConfig::load(config).is_ok_and(|c| c.plan.manual)
+    };
+    match (&args.resume, &args.config) {
+        (None, Some(config)) => manual_config(config).then_some("plan.manual"),
+        (Some(dir), config) => {
+            // A folder that is not a session is reported by the resume itself.
+            let Ok(manifest) = handeye::session::SessionFolder::open(dir)
+                .and_then(|folder| folder.read_manifest())
+            else {
+                return None;
+            };
+            if manifest.manual {
+                Some("a hand-guided session")
+            } else {
+                manual_config(config.as_deref().unwrap_or(manifest.config.as_path()))
+                    .then_some("plan.manual")
+            }
+        }
+        (None, None) => None,
+    }
 }
 
 /// Prints a finished run's result, writes its report; returns the report's path (when it could
@@ -267,6 +290,7 @@ impl RunObserver for Printer {
                 tags,
                 rejected,
                 will_retry,
+                ..
             } => {
                 let line = match (&rejected, reprojection_rms_px) {
                     (None, Some(rms)) => {

@@ -9,9 +9,8 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use handeye::atomic_file::write_atomic;
 use handeye::vision::print::{
-    board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, Paper,
+    board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, size_keys, Paper,
 };
-use handeye::vision::print_target::{target_pdf, target_png, target_svg};
 use handeye::vision::Target;
 
 /// `--paper` values.
@@ -52,14 +51,15 @@ enum TargetCommand {
         /// Output file; the extension (.pdf, .png or .svg) picks the format.
         #[arg(short = 'o', long)]
         output: PathBuf,
-        /// Scale the tags to fill this sheet and print the `tagSize` to enter in the board
-        /// file (PDF output: the page is the sheet).
+        /// Scale the board to fill this sheet and print the sizes to enter in the board file
+        /// (`tagSize`; `squareLength`/`markerLength`; the spacings) (PDF output: the page is
+        /// the sheet).
         #[arg(long, value_enum)]
         paper: Option<PaperArg>,
         /// Blank margin the printer leaves on every side of the sheet, mm (with --paper).
         #[arg(long, default_value_t = 10.0, requires = "paper")]
         margin_mm: f64,
-        /// With --paper: also write the board file with the fitted `tagSize` here (use it as the
+        /// With --paper: also write the board file with the fitted sizes here (use it as the
         /// config's `target`).
         #[arg(long, requires = "paper")]
         board_out: Option<PathBuf>,
@@ -112,29 +112,14 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
             }
             let original = match Target::load(&target)? {
                 Target::Aprilgrid(board) if no_corner_squares => {
-                    board.with_corner_squares(false)?
+                    Target::Aprilgrid(board.with_corner_squares(false)?)
                 }
-                Target::Aprilgrid(board) => board,
-                other => {
-                    // ChArUco boards and chessboards: true scale, no paper fitting or overlay.
-                    if paper.is_some() || show_frame || no_corner_squares {
-                        bail!(
-                            "--paper, --show-frame and --no-corner-squares are for aprilgrids; {} is a {}",
-                            target.display(),
-                            other.describe()
-                        );
-                    }
-                    let bytes = match extension.as_str() {
-                        "png" => target_png(&other, dpi)?,
-                        "svg" => target_svg(&other).into_bytes(),
-                        _ => target_pdf(&other),
-                    };
-                    write_atomic(&output, &bytes)
-                        .with_context(|| format!("writing {}", output.display()))?;
-                    outln!("wrote {}", output.display());
-                    outln!("print at actual size (100 %, not 'fit to page'), then measure the scale bar");
-                    return Ok(());
-                }
+                other if no_corner_squares => bail!(
+                    "--no-corner-squares is for aprilgrids (Kalibr's corner squares); {} is a {}",
+                    target.display(),
+                    other.describe()
+                ),
+                other => other,
             };
             let fitted = match paper {
                 Some(paper) => Some(fit_to_paper(&original, paper.into(), margin_mm / 1000.0)?),
@@ -176,18 +161,22 @@ pub fn run(args: TargetArgs) -> anyhow::Result<()> {
                     (extent.max.x - extent.min.x) * 1000.0,
                     (extent.max.y - extent.min.y) * 1000.0,
                 );
+                // `tagSize: 0.0265 m` (fitted) / `0.04 m` (the file) / `` `tagSize: 0.0265` ``.
+                let (now, was) = (size_keys(&fitted.board), size_keys(&original));
+                let join = |sizes: &[(&str, f64)], form: fn(&str, f64) -> String| {
+                    let parts: Vec<String> = sizes.iter().map(|&(k, v)| form(k, v)).collect();
+                    parts.join(", ")
+                };
+                let fitted_sizes = join(&now, |k, v| format!("{k}: {v} m"));
+                let file_sizes = join(&was, |_, v| format!("{v} m"));
+                let to_enter = join(&now, |k, v| format!("`{k}: {v}`"));
                 match &board_out {
                     Some(board_out) => outln!(
-                        "tagSize: {} m (the board file says {} m): wrote {} with it; use it as the config's `target`",
-                        fitted.board.tag_size(),
-                        original.tag_size(),
+                        "{fitted_sizes} (the board file says {file_sizes}): wrote {} with it; use it as the config's `target`",
                         board_out.display()
                     ),
                     None => outln!(
-                        "tagSize: {} m (the board file says {} m): enter `tagSize: {}` in {}",
-                        fitted.board.tag_size(),
-                        original.tag_size(),
-                        fitted.board.tag_size(),
+                        "{fitted_sizes} (the board file says {file_sizes}): enter {to_enter} in {}",
                         target.display()
                     ),
                 }

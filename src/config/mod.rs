@@ -312,33 +312,25 @@ impl ConfigFile {
                 });
             }
         }
-        match parse_yaml(text, file) {
-            Ok(config) => Ok(config),
-            // serde reads a `backend:`-tagged section as a whole, so its errors name only the
-            // section: find the key.
-            Err(FileError::Shape {
-                path,
-                yaml_path,
-                problem,
-                line,
-            }) => match document
+        let error = match parse_yaml(text, file) {
+            Ok(config) => return Ok(config),
+            Err(error) => error,
+        };
+        // serde reads a `backend:`-tagged section as a whole, so its errors name only the
+        // section: find the key. Read again from the section alone, the error has no location:
+        // the key's line.
+        if let FileError::Shape {
+            path, yaml_path, ..
+        } = &error
+        {
+            if let Some((yaml_path, problem)) = document
                 .as_ref()
-                .and_then(|d| schema::pinpoint_tagged(d, &yaml_path))
+                .and_then(|d| schema::pinpoint_tagged(d, yaml_path))
             {
-                // Read again from the section alone, the error has no location: the key's line.
-                Some((yaml_path, problem)) => {
-                    Err(shape_error(text, &path, yaml_path, problem).into())
-                }
-                None => Err(FileError::Shape {
-                    path,
-                    yaml_path,
-                    problem,
-                    line,
-                }
-                .into()),
-            },
-            Err(other) => Err(other.into()),
+                return Err(shape_error(text, path, yaml_path, problem).into());
+            }
         }
+        Err(error.into())
     }
 
     /// The config as YAML, each line of `header` as a leading comment. `file` is used in

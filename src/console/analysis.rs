@@ -9,7 +9,7 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::{mpsc, Arc};
+use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -17,8 +17,9 @@ use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
 
 use crate::camera_model::CameraModel;
-use crate::geometry::Pose;
-use crate::session::PoseVisit;
+use crate::geometry::{relative_rotation_axis, Pose};
+use crate::session::manual::MIN_AXIS_ANGLE_RAD;
+use crate::session::{PoseVisit, SharedFrame};
 use crate::setup::{predict, PosePair, Setup};
 use crate::solve::{solve, SolveOptions};
 use crate::vision::{draw, Target};
@@ -38,8 +39,6 @@ const JPEG_QUALITY: u8 = 70;
 const MAX_AXES: usize = 400;
 /// Earlier poses each new pose is paired with for the axes.
 const AXIS_PAIRS: usize = 24;
-/// Smaller relative rotations have no meaningful axis.
-const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
 
 /// What the analysis needs to know of the cell.
 #[derive(Clone)]
@@ -60,9 +59,15 @@ pub(crate) enum Job {
     Preview(Arc<GrayImage>, Pose),
 }
 
+/// The newest recorded frame as the run took it, by plan index: rendered from memory rather than
+/// decoded back from its PNG (the costly part). One slot, so frames never pile up in a queue
+/// when the thread falls behind.
+type FrameSlot = Arc<Mutex<Option<(usize, Arc<GrayImage>)>>>;
+
 /// The thread and the way to it. Dropping it lets the thread finish its queue and joins it.
 pub(crate) struct Analyst {
     jobs: Option<mpsc::Sender<Job>>,
+    latest: FrameSlot,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -70,11 +75,13 @@ impl Analyst {
     /// Starts the thread for the session folder at `root`.
     pub fn start(cell: CellView, root: PathBuf, publisher: Publisher) -> Analyst {
         let (jobs, rx) = mpsc::channel();
+        let latest = FrameSlot::default();
+        let slot = latest.clone();
         let thread = std::thread::Builder::new()
             .name("console-analysis".into())
             .spawn(move || {
                 lower_priority();
-                let mut state = State::new(cell, root);
+                let mut state = State::new(cell, root, slot);
                 let mut pending_frame: Option<FrameSource> = None;
                 let mut pending_solve = false;
                 let mut last_frame: Option<Instant> = None;
@@ -123,6 +130,11 @@ impl Analyst {
                         pending_solve = false;
                         last_solve = Some(Instant::now());
                     }
+                    // A frame for nobody is not rendered (decoding and encoding are the
+                    // costly part); a page that connects later gets the next one.
+                    if !publisher.watched() {
+                        pending_frame = None;
+                    }
                     if pending_frame.is_some() && (ended || due(last_frame, FRAME_EVERY).is_zero())
                     {
                         if let Some(jpeg) =
@@ -140,6 +152,7 @@ impl Analyst {
         match thread {
             Ok(thread) => Analyst {
                 jobs: Some(jobs),
+                latest,
                 thread: Some(thread),
             },
             Err(e) => {
@@ -147,10 +160,17 @@ impl Analyst {
                 tracing::warn!("console: no analysis thread: {e}");
                 Analyst {
                     jobs: None,
+                    latest,
                     thread: None,
                 }
             }
         }
+    }
+
+    /// A pose was recorded, with the frame as taken.
+    pub fn recorded(&self, index: usize, frame: &SharedFrame) {
+        *self.latest.lock().unwrap_or_else(|e| e.into_inner()) = Some((index, frame.0.clone()));
+        self.send(Job::Recorded(index));
     }
 
     /// Queues a job (never blocks).
@@ -172,8 +192,8 @@ impl Drop for Analyst {
 
 /// The frame to show next.
 enum FrameSource {
-    /// A recorded frame on disk, its flange pose and its detected corners.
-    File(PathBuf, Pose, Vec<Point2<f64>>),
+    /// A recorded frame (plan index, file), its flange pose and its detected corners.
+    File(usize, PathBuf, Pose, Vec<Point2<f64>>),
     /// A live view and its flange pose.
     Image(Arc<GrayImage>, Pose),
 }
@@ -192,14 +212,17 @@ fn box_downscale(image: &GrayImage, factor: u32, w: u32, h: u32) -> GrayImage {
     })
 }
 
-/// Makes the calling thread yield the CPU to the run's threads (Linux: per-thread nice 10); the
-/// console's work is best-effort.
+/// Makes the calling thread yield the CPU to the run's threads (Linux: its nice value 10 above
+/// the process's, so it stays below the run's however the process was started); the console's
+/// work is best-effort.
 fn lower_priority() {
     #[cfg(target_os = "linux")]
-    // SAFETY: setpriority with `who` 0 changes only the calling thread's nice value; it takes no
-    // pointers, and a failure (returned, not signalled) just leaves the priority as it was.
+    // SAFETY: getpriority and setpriority with `who` 0 read and change only the calling thread's
+    // nice value; they take no pointers, and a failure (returned, not signalled) just leaves the
+    // priority as it was.
     unsafe {
-        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, 10);
+        let now = libc::getpriority(libc::PRIO_PROCESS, 0);
+        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (now + 10).clamp(10, 19));
     }
 }
 
@@ -211,6 +234,7 @@ struct Sample {
 struct State {
     cell: CellView,
     root: PathBuf,
+    latest: FrameSlot,
     accepted: BTreeMap<usize, Sample>,
     cells: [u32; 16],
     axes: Vec<[f64; 3]>,
@@ -219,10 +243,11 @@ struct State {
 }
 
 impl State {
-    fn new(cell: CellView, root: PathBuf) -> State {
+    fn new(cell: CellView, root: PathBuf, latest: FrameSlot) -> State {
         State {
             cell,
             root,
+            latest,
             accepted: BTreeMap::new(),
             cells: [0; 16],
             axes: Vec::new(),
@@ -259,6 +284,7 @@ impl State {
                     }
                     // Decoding a frame costs more than the rest: only the newest is read.
                     newest = Some(FrameSource::File(
+                        index,
                         self.root.join(&visit.frame),
                         base_from_flange,
                         corners,
@@ -286,13 +312,25 @@ impl State {
             FrameSource::Image(image, base_from_flange) => {
                 self.render(&image, &base_from_flange, &[])
             }
-            FrameSource::File(path, base_from_flange, corners) => match image::open(&path) {
-                Ok(decoded) => self.render(&decoded.to_luma8(), &base_from_flange, &corners),
-                Err(e) => {
-                    tracing::warn!("console: frame {}: {e}", path.display());
-                    None
+            FrameSource::File(index, path, base_from_flange, corners) => {
+                let shared = self
+                    .latest
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .as_ref()
+                    .and_then(|(i, image)| (*i == index).then(|| image.clone()));
+                if let Some(image) = shared {
+                    return self.render(&image, &base_from_flange, &corners);
                 }
-            },
+                // A pose recorded before a resume: read back from its file.
+                match image::open(&path) {
+                    Ok(decoded) => self.render(&decoded.to_luma8(), &base_from_flange, &corners),
+                    Err(e) => {
+                        tracing::warn!("console: frame {}: {e}", path.display());
+                        None
+                    }
+                }
+            }
         }
     }
 
@@ -310,14 +348,12 @@ impl State {
             self.cells[row * 4 + col] += 1;
         }
         for earlier in self.accepted.values().rev().take(AXIS_PAIRS) {
-            let relative = earlier.base_from_flange.rotation.inverse() * base_from_flange.rotation;
-            if let Some((axis, angle)) = relative.axis_angle() {
-                if angle > MIN_AXIS_ANGLE_RAD {
-                    // Expressed in the base frame; an axis and its opposite are the same motion.
-                    let a = earlier.base_from_flange.rotation * axis.into_inner();
-                    let a = if a.z < 0.0 { -a } else { a };
-                    self.axes.push([a.x, a.y, a.z]);
-                }
+            if let Some((axis, _)) = relative_rotation_axis(
+                &earlier.base_from_flange.rotation,
+                &base_from_flange.rotation,
+                MIN_AXIS_ANGLE_RAD,
+            ) {
+                self.axes.push(axis.into());
             }
         }
         if self.axes.len() > MAX_AXES {

@@ -49,6 +49,17 @@ pub enum PoseState {
     Rejected,
 }
 
+impl PoseState {
+    /// The state a visit ended in: accepted, or rejected with or without a retry to follow.
+    pub fn visited(rejected: bool, will_retry: bool) -> PoseState {
+        match (rejected, will_retry) {
+            (false, _) => PoseState::Captured,
+            (true, true) => PoseState::Retry,
+            (true, false) => PoseState::Rejected,
+        }
+    }
+}
+
 /// One plan pose, for the plan table.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlannedView {

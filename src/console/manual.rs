@@ -3,60 +3,60 @@
 //! its checked poses are the views the next-best-pose planner suggests. The session is an
 //! ordinary session folder: it resumes, replays and reports like any other.
 
-use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::cell::run::{ensure_robot_ready, CellRun, RunError, RunObserver, SessionTarget};
-use crate::cell::{prepare, PreparedCell};
+use crate::cell::run::{
+    ensure_robot_ready, open_run, CellRun, OpenedRun, ResumedSession, RunError, RunObserver,
+    RunRequest, SessionTarget,
+};
+use crate::cell::PreparedCell;
 use crate::geometry::Pose;
 use crate::plan::nbv::AdaptivePlanner;
 use crate::session::{
     self, run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions,
-    SessionEvent, SessionFolder,
+    SessionFolder,
 };
 use crate::setup::predict;
 
 use super::analysis::{Analyst, CellView, Job};
-use super::events::{joints_deg, Command, ConsoleEvent, PoseState, PoseView};
-use super::observer::{cell_events, plan_event, wait_for_confirmation};
+use super::events::{joints_deg, Command, ConsoleEvent, PoseView};
+use super::observer::{
+    cell_events, plan_event, publish_recorded, show_recorded, wait_for_confirmation,
+};
 use super::Console;
 
-/// What to run.
-#[derive(Debug, Clone)]
-pub struct ManualRequest {
-    /// The cell config (for a resume: the session's when `None`).
-    pub config: Option<PathBuf>,
-    /// New session or resume.
-    pub target: SessionTarget,
-    /// The person confirmed already that a real arm may move to suggested views (`--yes`).
-    pub motion_confirmed: bool,
-    /// Set by STOP, Ctrl-C, SIGTERM: freedrive off, the arm stopped, the samples kept.
-    pub stop: Arc<AtomicBool>,
-}
-
 /// Runs a hand-guided session of a cell on `console` until the page (or terminal) finishes it,
-/// then solves it. `observer` hears what the terminal prints (notes, per-capture lines).
+/// then solves it, as [`run`](crate::cell::run::run) does a planned one. `observer` hears what
+/// the terminal prints (notes, per-capture lines).
 pub fn run_manual(
-    request: &ManualRequest,
+    request: &RunRequest,
     console: &Console,
     observer: &mut dyn RunObserver,
 ) -> Result<CellRun, RunError> {
-    let (resumed, config_path) = match &request.target {
-        SessionTarget::Resume(dir) => {
-            let folder = SessionFolder::resume(dir)?;
-            let manifest = folder.read_manifest()?;
-            let config = request.config.clone().unwrap_or(manifest.config.clone());
-            (Some(folder), config)
+    // A resume's input check is the very one a planned resume makes, before the arm or camera
+    // is opened.
+    let OpenedRun {
+        resumed,
+        mut cell,
+        inputs,
+    } = open_run(request, observer)?;
+    let resumed = match resumed {
+        Some(ResumedSession {
+            folder,
+            mut manifest,
+            inputs_changed,
+        }) => {
+            // A session a planned resume handed over (an older one without the mark) is marked
+            // hand-guided.
+            if inputs_changed || !manifest.manual {
+                manifest.manual = true;
+                folder.write_manifest(&manifest)?;
+            }
+            Some(folder)
         }
-        SessionTarget::New(_) => (None, request.config.clone().ok_or(RunError::NoConfig)?),
+        None => None,
     };
-    let mut cell = prepare(&config_path).map_err(|source| RunError::Prepare {
-        config: config_path.clone(),
-        source,
-    })?;
-    observer.plan_checked(&cell);
     let (event, view) = cell_events(&cell, true);
     console.publish(&event);
     let mut hardware = cell.open_hardware().map_err(RunError::Hardware)?;
@@ -72,13 +72,13 @@ pub fn run_manual(
                 unreachable!("a resume has its folder")
             };
             let folder = SessionFolder::create(out)?;
-            folder.write_manifest(&cell.manifest(&[]).with_inputs(cell.inputs()?))?;
+            for note in folder.notes() {
+                observer.note(note);
+            }
+            folder.write_manifest(&cell.manifest(&[]).with_inputs(inputs).hand_guided())?;
             folder
         }
     };
-    for note in folder.notes() {
-        observer.note(note);
-    }
     console.publish(&ConsoleEvent::Session {
         folder: folder.root().display().to_string(),
     });
@@ -116,6 +116,7 @@ pub fn run_manual(
             cell: &cell,
             freedrive: false,
         };
+        show_recorded(console, &folder, Some(&control.analyst));
         run_manual_session(
             setup,
             cell.config_path(),
@@ -203,6 +204,7 @@ impl ManualControl for ConsoleControl<'_> {
             ManualEvent::Suggestion {
                 pose,
                 joints,
+                axis,
                 predicted_sigma_mm,
                 solved_sigma_mm,
             } => {
@@ -214,7 +216,7 @@ impl ManualControl for ConsoleControl<'_> {
                     flange: PoseView::of(&pose),
                     joints_deg: joints_deg(&joints),
                     board_px: board_centre_px(&self.view, &pose),
-                    axis: None,
+                    axis,
                     predicted_sigma_mm,
                 });
             }
@@ -223,29 +225,7 @@ impl ManualControl for ConsoleControl<'_> {
                 self.console.publish(&ConsoleEvent::Check { ok, message });
             }
             ManualEvent::Session(event) => {
-                match &event {
-                    SessionEvent::Moving { .. } => {}
-                    SessionEvent::Recorded {
-                        plan_index,
-                        reprojection_rms_px,
-                        tags,
-                        rejected,
-                        will_retry,
-                    } => {
-                        self.console.publish(&ConsoleEvent::Pose {
-                            plan_index: *plan_index,
-                            state: match (rejected, will_retry) {
-                                (None, _) => PoseState::Captured,
-                                (Some(_), true) => PoseState::Retry,
-                                (Some(_), false) => PoseState::Rejected,
-                            },
-                            why: rejected.clone(),
-                            rms_px: *reprojection_rms_px,
-                            tags: *tags,
-                        });
-                        self.analyst.send(Job::Recorded(*plan_index));
-                    }
-                }
+                publish_recorded(self.console, Some(&self.analyst), &event);
                 self.observer.event(event);
             }
         }

@@ -92,12 +92,19 @@ pub(crate) struct Hub {
     /// Events kept for late pages, each with its snapshot kind (see [`ConsoleEvent::snapshot`]).
     history: Mutex<VecDeque<(Option<&'static str>, Arc<str>)>>,
     frame: tokio::sync::watch::Sender<Option<axum::body::Bytes>>,
+    /// Set when the run is over: each page gets what is queued for it, then a Close.
+    closing: tokio::sync::watch::Sender<bool>,
     stop: Arc<AtomicBool>,
     commands: Mutex<mpsc::Sender<Command>>,
     report: Mutex<Option<PathBuf>>,
 }
 
 impl Hub {
+    /// How many pages are connected.
+    fn clients(&self) -> usize {
+        self.events.receiver_count()
+    }
+
     fn history(&self) -> MutexGuard<'_, VecDeque<(Option<&'static str>, Arc<str>)>> {
         // A panic elsewhere while holding it leaves plain data: keep serving.
         self.history.lock().unwrap_or_else(|e| e.into_inner())
@@ -142,6 +149,10 @@ impl Hub {
         self.frame.subscribe()
     }
 
+    pub(crate) fn closing(&self) -> tokio::sync::watch::Receiver<bool> {
+        self.closing.subscribe()
+    }
+
     pub(crate) fn report(&self) -> Option<PathBuf> {
         self.report
             .lock()
@@ -180,6 +191,7 @@ impl Console {
             events: tokio::sync::broadcast::channel(LAG).0,
             history: Mutex::new(VecDeque::new()),
             frame: tokio::sync::watch::channel(None).0,
+            closing: tokio::sync::watch::channel(false).0,
             stop,
             commands: Mutex::new(commands_tx),
             report: Mutex::new(None),
@@ -246,7 +258,7 @@ impl Console {
 
     /// Pages connected now.
     pub fn clients(&self) -> usize {
-        self.hub.events.receiver_count()
+        self.hub.clients()
     }
 
     /// The next command from a page, waiting up to `timeout`.
@@ -260,12 +272,14 @@ impl Console {
         CommandSender(self.hub.clone())
     }
 
-    /// Waits up to `timeout` until every connected page has taken every event published so far
-    /// (taken by its connection, which then writes it to the socket).
-    pub fn drain(&self, timeout: Duration) {
+    /// Ends the pages' connections: each gets every event published so far and the latest
+    /// frame, then a Close; returns when all have (at once with no page), or after `timeout`.
+    /// Publishing after this reaches no page.
+    pub fn close(&self, timeout: Duration) {
+        self.hub.closing.send_replace(true);
         let deadline = std::time::Instant::now() + timeout;
-        while !self.hub.events.is_empty() && std::time::Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(5));
+        while self.clients() > 0 && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(2));
         }
     }
 
@@ -276,7 +290,7 @@ impl Console {
             if std::time::Instant::now() >= deadline {
                 return false;
             }
-            std::thread::sleep(Duration::from_millis(20));
+            std::thread::sleep(Duration::from_millis(2));
         }
         true
     }
@@ -298,6 +312,11 @@ impl Publisher {
     /// Replaces the latest frame (a JPEG).
     pub fn set_frame(&self, jpeg: Vec<u8>) {
         self.0.frame.send_replace(Some(jpeg.into()));
+    }
+
+    /// Whether a page is connected (frames for nobody are not worth rendering).
+    pub fn watched(&self) -> bool {
+        self.0.clients() > 0
     }
 }
 

@@ -164,24 +164,7 @@ impl RunObserver for ConsoleObserver<'_> {
                 self.console.publisher(),
             ));
         }
-        // A resumed session: the poses recorded before show as they ended.
-        for visit in folder.read_visits().unwrap_or_default() {
-            let state = if visit.rejected.is_none() {
-                PoseState::Captured
-            } else {
-                PoseState::Rejected
-            };
-            self.console.publish(&ConsoleEvent::Pose {
-                plan_index: visit.plan_index,
-                state,
-                why: visit.rejected.clone(),
-                rms_px: visit.reprojection_rms_px,
-                tags: visit.tags,
-            });
-            if let Some(analyst) = &self.analyst {
-                analyst.send(Job::Recorded(visit.plan_index));
-            }
-        }
+        show_recorded(self.console, folder, self.analyst.as_ref());
     }
 
     fn session_started(&mut self, poses: usize) {
@@ -197,28 +180,8 @@ impl RunObserver for ConsoleObserver<'_> {
                     joints_deg: self.plan.get(*plan_index).map(joints_deg),
                 });
             }
-            SessionEvent::Recorded {
-                plan_index,
-                reprojection_rms_px,
-                tags,
-                rejected,
-                will_retry,
-            } => {
-                let state = match (rejected, will_retry) {
-                    (None, _) => PoseState::Captured,
-                    (Some(_), true) => PoseState::Retry,
-                    (Some(_), false) => PoseState::Rejected,
-                };
-                self.console.publish(&ConsoleEvent::Pose {
-                    plan_index: *plan_index,
-                    state,
-                    why: rejected.clone(),
-                    rms_px: *reprojection_rms_px,
-                    tags: *tags,
-                });
-                if let Some(analyst) = &self.analyst {
-                    analyst.send(Job::Recorded(*plan_index));
-                }
+            SessionEvent::Recorded { .. } => {
+                publish_recorded(self.console, self.analyst.as_ref(), &event)
             }
         }
         self.inner.event(event);
@@ -227,5 +190,49 @@ impl RunObserver for ConsoleObserver<'_> {
     fn session_ended(&mut self) {
         self.inner.session_ended();
         self.console.publish(&ConsoleEvent::Ended);
+    }
+}
+
+/// A recorded pose (`SessionEvent::Recorded`) as the page shows it: its state in the plan
+/// table, and its frame handed to the analysis thread. Other events are ignored.
+pub(super) fn publish_recorded(console: &Console, analyst: Option<&Analyst>, event: &SessionEvent) {
+    let SessionEvent::Recorded {
+        plan_index,
+        reprojection_rms_px,
+        tags,
+        rejected,
+        will_retry,
+        frame,
+    } = event
+    else {
+        return;
+    };
+    console.publish(&ConsoleEvent::Pose {
+        plan_index: *plan_index,
+        state: PoseState::visited(rejected.is_some(), *will_retry),
+        why: rejected.clone(),
+        rms_px: *reprojection_rms_px,
+        tags: *tags,
+    });
+    if let Some(analyst) = analyst {
+        analyst.recorded(*plan_index, frame);
+    }
+}
+
+/// A resumed session: the poses recorded before show as they ended, and count in the coverage
+/// and the running estimate.
+pub(super) fn show_recorded(console: &Console, folder: &SessionFolder, analyst: Option<&Analyst>) {
+    for visit in folder.read_visits().unwrap_or_default() {
+        console.publish(&ConsoleEvent::Pose {
+            plan_index: visit.plan_index,
+            // A recorded visit is final: its retry, if any, is a visit of its own.
+            state: PoseState::visited(visit.rejected.is_some(), false),
+            why: visit.rejected.clone(),
+            rms_px: visit.reprojection_rms_px,
+            tags: visit.tags,
+        });
+        if let Some(analyst) = analyst {
+            analyst.send(Job::Recorded(visit.plan_index));
+        }
     }
 }

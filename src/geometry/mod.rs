@@ -5,6 +5,7 @@
 //! `base_from_camera = base_from_flange * flange_from_camera`.
 //! Units are metres and radians. This module depends on nothing else of ours.
 
+pub mod homography;
 pub mod yaml;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -55,6 +56,22 @@ pub fn rotation_from_matrix(m: &Matrix3<f64>, tol: f64) -> Option<UnitQuaternion
     Some(UnitQuaternion::from_rotation_matrix(
         &Rotation3::from_matrix_unchecked(*m),
     ))
+}
+
+/// The axis of the rotation from `earlier` to `later` (`later·earlierᵀ`, in the frame both are
+/// given in), folded onto the upper hemisphere (an axis and its opposite are the same motion),
+/// with its angle, rad; `None` when the angle is at most `min_angle_rad` (no meaningful axis).
+pub fn relative_rotation_axis(
+    earlier: &UnitQuaternion<f64>,
+    later: &UnitQuaternion<f64>,
+    min_angle_rad: f64,
+) -> Option<(Vector3<f64>, f64)> {
+    let (axis, angle) = (later * earlier.inverse()).axis_angle()?;
+    if angle <= min_angle_rad {
+        return None;
+    }
+    let axis = axis.into_inner();
+    Some((if axis.z < 0.0 { -axis } else { axis }, angle))
 }
 
 /// The rotation closest (Frobenius norm) to a 3x3 matrix: the orthogonal polar factor by SVD,

@@ -245,10 +245,7 @@ pub fn check_plan_ordered(plan: &Plan, ctx: &CheckContext, reorder: bool) -> Pla
         workspace: *ctx.workspace,
     };
     let order = super::order::order_for_travel(&ctx.start_joints, &joints, |a, b| {
-        mover
-            .problem(a, b)
-            .is_none()
-            .then(|| ctx.limits.joint_move_time(a, b))
+        mover.safe_move_time(a, b, ctx.limits)
     });
     if order.iter().enumerate().all(|(k, &i)| k == i) {
         return given;
@@ -309,13 +306,21 @@ fn unreachable(arm: &UrModel, waypoint: &Waypoint, pose: &Pose, previous: &Joint
     let Some((i, value)) = nearest.and_then(|q| arm.outside_limits(&q)) else {
         return "unreachable: no inverse-kinematics solution inside the joint limits".into();
     };
-    let (lo, hi) = arm.joint_limits[i];
     let how = match waypoint {
         Waypoint::Joints(_) => "its joints put",
         _ => "reachable only with",
     };
     format!(
-        "outside the joint ranges: {how} joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
+        "outside the joint ranges: {how} {}",
+        joint_outside(arm, i, value)
+    )
+}
+
+/// `joint 2 (shoulder) at -190.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[1])`.
+fn joint_outside(arm: &UrModel, i: usize, value: f64) -> String {
+    let (lo, hi) = arm.joint_limits[i];
+    format!(
+        "joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
         i + 1,
         JOINT_NAMES[i],
         value.to_degrees(),
@@ -352,17 +357,20 @@ impl MoveCheck {
     /// allowed.
     pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
         if let Some((i, value)) = self.arm.outside_limits(to) {
-            let (lo, hi) = self.arm.joint_limits[i];
             return Some(format!(
-                "the move puts joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
-                i + 1,
-                JOINT_NAMES[i],
-                value.to_degrees(),
-                lo.to_degrees(),
-                hi.to_degrees()
+                "the move puts {}",
+                joint_outside(&self.arm, i, value)
             ));
         }
         path_leaves_box(&self.arm, from, to, &self.workspace)
+    }
+
+    /// The time of the joint move `from` → `to` at `limits` (s) when it is safe, `None` when
+    /// [`Self::problem`] finds it is not: the cost the travel-time order minimises.
+    pub fn safe_move_time(&self, from: &Joints, to: &Joints, limits: &MotionLimits) -> Option<f64> {
+        self.problem(from, to)
+            .is_none()
+            .then(|| limits.joint_move_time(from, to))
     }
 }
 

@@ -59,104 +59,84 @@ impl Predicted {
     }
 }
 
-/// Information of samples at these robot poses, at the estimate (camera mount, target mount).
-pub fn information(
-    setup: Setup,
-    camera_mount: &Pose,
-    target_mount: &Pose,
-    base_from_flange: &[Pose],
-    options: &SolveOptions,
-) -> SMatrix<f64, 12, 12> {
-    let solution = Axby::from_mounts(camera_mount, target_mount);
-    let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
-    for pose in base_from_flange {
-        h += sample_information(&solution, &setup.chain_b(pose), &options.noise);
+/// What the predictions are made at: the cell's setup, the current estimate of both unknowns,
+/// the solver's options (its noise model) and the variance factor of the latest solve.
+#[derive(Debug, Clone)]
+pub struct PredictionModel {
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// The camera mount estimate.
+    pub camera_mount: Pose,
+    /// The target mount estimate.
+    pub target_mount: Pose,
+    /// The solver's options; their noise model weighs each sample.
+    pub options: SolveOptions,
+    /// The variance factor of the latest solve (1 before any).
+    pub variance_factor: f64,
+}
+
+impl PredictionModel {
+    fn solution(&self) -> Axby {
+        Axby::from_mounts(&self.camera_mount, &self.target_mount)
     }
-    h
-}
 
-/// The covariance predicted from an information matrix, mapped to the unknowns and scored.
-pub fn predict(
-    camera_mount: &Pose,
-    target_mount: &Pose,
-    information: &SMatrix<f64, 12, 12>,
-    variance_factor: f64,
-) -> Option<Predicted> {
-    let solution = Axby::from_mounts(camera_mount, target_mount);
-    let covariance = information.try_inverse()? * variance_factor;
-    let u = mount_uncertainty(&solution, &covariance, variance_factor);
-    let lever_mm = ROTATION_LEVER_M * 1e3;
-    let rot = |deg: f64| (deg.to_radians() * lever_mm).powi(2);
-    let score = u.camera_mount.translation_mm.powi(2)
-        + u.target_mount.translation_mm.powi(2)
-        + rot(u.camera_mount.rotation_deg)
-        + rot(u.target_mount.rotation_deg);
-    Some(Predicted {
-        camera_translation_mm: u.camera_mount.translation_mm,
-        target_translation_mm: u.target_mount.translation_mm,
-        camera_rotation_deg: u.camera_mount.rotation_deg,
-        target_rotation_deg: u.target_mount.rotation_deg,
-        score,
-    })
-}
+    /// Information of samples at these robot poses.
+    fn information(&self, base_from_flange: &[Pose]) -> SMatrix<f64, 12, 12> {
+        let solution = self.solution();
+        let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
+        for pose in base_from_flange {
+            h += sample_information(&solution, &self.setup.chain_b(pose), &self.options.noise);
+        }
+        h
+    }
 
-/// The candidate (index into `candidates`, skipping `used`) that minimises the predicted score
-/// after adding it to `taken`, with its prediction.
-#[allow(clippy::too_many_arguments)]
-pub fn next_best(
-    setup: Setup,
-    camera_mount: &Pose,
-    target_mount: &Pose,
-    taken: &[Pose],
-    candidates: &[Pose],
-    used: &[bool],
-    options: &SolveOptions,
-    variance_factor: f64,
-) -> Option<(usize, Predicted)> {
-    // Least predicted score after = largest ln(score now / score after) at equal cost.
-    next_best_per_second(
-        setup,
-        camera_mount,
-        target_mount,
-        taken,
-        candidates,
-        used,
-        options,
-        variance_factor,
-        &|_| 1.0,
-    )
-}
-
-/// Like [`next_best`], but the candidate that reduces the predicted score the most per second of
-/// arm time: `ln(score now / score after) / seconds(i)`, with `seconds(i)` the time to move to
-/// candidate `i` and take its frame (> 0).
-#[allow(clippy::too_many_arguments)]
-pub fn next_best_per_second(
-    setup: Setup,
-    camera_mount: &Pose,
-    target_mount: &Pose,
-    taken: &[Pose],
-    candidates: &[Pose],
-    used: &[bool],
-    options: &SolveOptions,
-    variance_factor: f64,
-    seconds: &dyn Fn(usize) -> f64,
-) -> Option<(usize, Predicted)> {
-    let solution = Axby::from_mounts(camera_mount, target_mount);
-    let h = information(setup, camera_mount, target_mount, taken, options);
-    let now = predict(camera_mount, target_mount, &h, variance_factor)?.score;
-    candidates
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
-        .filter_map(|(i, c)| {
-            let added = h + sample_information(&solution, &setup.chain_b(c), &options.noise);
-            let p = predict(camera_mount, target_mount, &added, variance_factor)?;
-            let gain = (now / p.score).ln();
-            Some((i, p, gain / seconds(i).max(1e-3)))
+    /// The covariance predicted from an information matrix, mapped to the unknowns and scored.
+    fn predict(&self, information: &SMatrix<f64, 12, 12>) -> Option<Predicted> {
+        let covariance = information.try_inverse()? * self.variance_factor;
+        let u = mount_uncertainty(&self.solution(), &covariance, self.variance_factor);
+        let lever_mm = ROTATION_LEVER_M * 1e3;
+        let rot = |deg: f64| (deg.to_radians() * lever_mm).powi(2);
+        let score = u.camera_mount.translation_mm.powi(2)
+            + u.target_mount.translation_mm.powi(2)
+            + rot(u.camera_mount.rotation_deg)
+            + rot(u.target_mount.rotation_deg);
+        Some(Predicted {
+            camera_translation_mm: u.camera_mount.translation_mm,
+            target_translation_mm: u.target_mount.translation_mm,
+            camera_rotation_deg: u.camera_mount.rotation_deg,
+            target_rotation_deg: u.target_mount.rotation_deg,
+            score,
         })
-        .max_by(|a, b| a.2.total_cmp(&b.2))
-        .map(|(i, p, _)| (i, p))
+    }
+
+    /// The candidate (index into `candidates`, skipping `used`) that reduces the predicted score
+    /// the most per second of arm time when added to `taken`, with its prediction:
+    /// `ln(score now / score after) / seconds(i)`, with `seconds(i)` the time to move to
+    /// candidate `i` and take its frame (> 0). At equal cost, the least score after.
+    pub fn next_best_per_second(
+        &self,
+        taken: &[Pose],
+        candidates: &[Pose],
+        used: &[bool],
+        seconds: &dyn Fn(usize) -> f64,
+    ) -> Option<(usize, Predicted)> {
+        let solution = self.solution();
+        let h = self.information(taken);
+        let now = self.predict(&h)?.score;
+        candidates
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
+            .filter_map(|(i, c)| {
+                let added =
+                    h + sample_information(&solution, &self.setup.chain_b(c), &self.options.noise);
+                let p = self.predict(&added)?;
+                let gain = (now / p.score).ln();
+                Some((i, p, gain / seconds(i).max(1e-3)))
+            })
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|(i, p, _)| (i, p))
+    }
 }
 
 /// A caller's judgement whether a solve is good enough to stop (say, its held-out error and the
@@ -198,16 +178,14 @@ pub struct AdaptiveStep {
 /// Greedy next-best-pose planner over a fixed candidate set, with a stop rule.
 #[derive(Debug, Clone)]
 pub struct AdaptivePlanner {
-    setup: Setup,
-    estimate: (Pose, Pose),
+    /// The nominal cell until enough samples are solved, then the latest solve.
+    model: PredictionModel,
     candidates: Vec<(Pose, Joints)>,
     used: Vec<bool>,
-    options: SolveOptions,
     target_uncertainty_mm: f64,
     min_samples: usize,
     min_stop: usize,
     max_samples: usize,
-    variance_factor: f64,
     motion: Option<Motion>,
     stop_check: Option<StopCheck>,
     /// How many times the caller's stop check said no.
@@ -238,16 +216,19 @@ impl AdaptivePlanner {
     ) -> Self {
         let used = vec![false; candidates.len()];
         AdaptivePlanner {
-            setup,
-            estimate: (nominal_camera_mount, nominal_target_mount),
+            model: PredictionModel {
+                setup,
+                camera_mount: nominal_camera_mount,
+                target_mount: nominal_target_mount,
+                options,
+                variance_factor: 1.0,
+            },
             candidates,
             used,
-            options,
             target_uncertainty_mm,
             min_samples: Self::DEFAULT_MIN_SAMPLES,
             min_stop: 0,
             max_samples,
-            variance_factor: 1.0,
             motion: None,
             stop_check: None,
             stop_check_refused: 0,
@@ -286,15 +267,17 @@ impl AdaptivePlanner {
     pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
         let mut solved_sigma_mm = None;
         if samples.len() >= self.min_samples {
-            if let Ok(c) = solve::solve(self.setup, samples, &self.options) {
-                self.estimate = (c.camera_mount, c.target_mount);
+            let model = &mut self.model;
+            if let Ok(c) = solve::solve(model.setup, samples, &model.options) {
+                model.camera_mount = c.camera_mount;
+                model.target_mount = c.target_mount;
                 // Predict the next views with the noise the fit used (estimated from the
                 // samples unless given): the variance factor is relative to it.
                 if let Some(noise) = &c.noise {
-                    self.options.noise = noise.model();
+                    model.options.noise = noise.model();
                 }
                 if let Some(u) = &c.uncertainty {
-                    self.variance_factor = u.variance_factor;
+                    model.variance_factor = u.variance_factor;
                     let sigma = u
                         .camera_mount
                         .translation_mm
@@ -324,34 +307,14 @@ impl AdaptivePlanner {
         } else {
             let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
             let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
-            match self.motion {
-                Some(m) => {
-                    let joints: Vec<Joints> = self.candidates.iter().map(|c| c.1).collect();
-                    let seconds =
-                        |i: usize| m.limits.joint_move_time(&m.at, &joints[i]) + m.per_pose_s;
-                    next_best_per_second(
-                        self.setup,
-                        &self.estimate.0,
-                        &self.estimate.1,
-                        &taken,
-                        &poses,
-                        &self.used,
-                        &self.options,
-                        self.variance_factor,
-                        &seconds,
-                    )
-                }
-                None => next_best(
-                    self.setup,
-                    &self.estimate.0,
-                    &self.estimate.1,
-                    &taken,
-                    &poses,
-                    &self.used,
-                    &self.options,
-                    self.variance_factor,
-                ),
-            }
+            let joints: Vec<Joints> = self.candidates.iter().map(|c| c.1).collect();
+            // Without a motion model every candidate costs the same: the least score after wins.
+            let seconds = |i: usize| match &self.motion {
+                Some(m) => m.limits.joint_move_time(&m.at, &joints[i]) + m.per_pose_s,
+                None => 1.0,
+            };
+            self.model
+                .next_best_per_second(&taken, &poses, &self.used, &seconds)
         };
         self.log.push(AdaptiveStep {
             samples: samples.len(),
@@ -414,18 +377,16 @@ mod tests {
                 Vector3::new(std::f64::consts::PI, 0.0, 0.0),
             );
         let candidates = [about_z(60.0), tilted, about_z(-40.0)];
-        let options = SolveOptions::default();
-        let (best, _) = next_best(
-            Setup::EyeInHand,
-            &camera_mount,
-            &target_mount,
-            &taken,
-            &candidates,
-            &[false; 3],
-            &options,
-            1.0,
-        )
-        .unwrap();
+        let model = PredictionModel {
+            setup: Setup::EyeInHand,
+            camera_mount,
+            target_mount,
+            options: SolveOptions::default(),
+            variance_factor: 1.0,
+        };
+        let (best, _) = model
+            .next_best_per_second(&taken, &candidates, &[false; 3], &|_| 1.0)
+            .unwrap();
         assert_eq!(best, 1, "the tilted pose adds the missing rotation axis");
     }
 }

@@ -433,7 +433,7 @@ pub fn notices(input: &ReportInput) -> Vec<Notice> {
         if let Some(n) = verdict::residual_notice(c, &input.pairs, &input.noise) {
             out.push(n.prefixed(label));
         }
-        out.extend(c.warnings.iter().map(|w| w.prefixed(label)));
+        out.extend(c.notices.iter().map(|w| w.prefixed(label)));
     }
     out
 }

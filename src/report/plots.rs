@@ -7,7 +7,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{ReportError, ReportInput};
-use crate::geometry::{rotvec, Pose};
+use crate::geometry::{relative_rotation_axis, Pose};
 use crate::setup::{PosePair, Setup};
 use crate::solve::Phase;
 
@@ -227,18 +227,13 @@ pub fn rotation_axes(pairs: &[PosePair]) -> Result<String, ReportError> {
     let mut axes: Vec<([f64; 3], f64)> = Vec::new();
     for i in 0..pairs.len() {
         for j in (i + 1)..pairs.len() {
-            let r =
-                pairs[j].base_from_flange.rotation * pairs[i].base_from_flange.rotation.inverse();
-            let v = rotvec(&r);
-            let angle = v.norm();
-            if angle < 1e-3 {
-                continue;
+            if let Some((axis, angle)) = relative_rotation_axis(
+                &pairs[i].base_from_flange.rotation,
+                &pairs[j].base_from_flange.rotation,
+                1e-3,
+            ) {
+                axes.push((axis.into(), angle.to_degrees()));
             }
-            let mut a = v / angle;
-            if a.z < 0.0 {
-                a = -a;
-            }
-            axes.push(([a.x, a.y, a.z], angle.to_degrees()));
         }
     }
     let mut svg = String::new();

@@ -18,6 +18,7 @@
 //!
 //! Frames: `T_base_flange`; metres, radians, [`Duration`]. Depends on `robot` and `geometry` only.
 
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -28,7 +29,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::kinematics::UrModel;
-use super::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use super::{leading_travel, trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::geometry::{pose_from_rotvec, Pose};
 
 /// Faults the simulated arm injects, counted in completed moves.
@@ -150,7 +151,8 @@ pub struct SimRobot {
     options: SimRobotOptions,
     /// The commanded joints (where the arm comes to rest).
     joints: Joints,
-    history: Vec<MotionRecord>,
+    /// The latest motions, oldest first (at most [`HISTORY_LEN`]).
+    history: VecDeque<MotionRecord>,
     true_pose: Pose,
     reported_pose: Pose,
     rng: StdRng,
@@ -196,7 +198,7 @@ impl SimRobot {
             model,
             options,
             joints: start,
-            history: Vec::new(),
+            history: VecDeque::with_capacity(HISTORY_LEN),
             true_pose,
             // Standing at the start the reading is exact until the first move draws noise.
             reported_pose: true_pose,
@@ -222,12 +224,12 @@ impl SimRobot {
     pub fn joint_state_at(&self, t: Instant) -> (Joints, Joints) {
         let Some(record) = self.history.iter().rev().find(|r| r.started <= t) else {
             // Before the first move (or a moment before it started): standing at the start.
-            let q = self.history.first().map_or(self.joints, |r| r.from);
+            let q = self.history.front().map_or(self.joints, |r| r.from);
             return (q, [0.0; 6]);
         };
         let dt = t.duration_since(record.started).as_secs_f64();
         let delta: Joints = std::array::from_fn(|i| record.to[i] - record.from[i]);
-        let lead = delta.iter().map(|d| d.abs()).fold(0.0, f64::max);
+        let lead = leading_travel(&record.from, &record.to);
         if dt < record.duration_s && lead > 0.0 {
             let (fraction, lead_speed) = match record.profile {
                 Some((v, a)) => trapezoid_at(lead, v, a, dt),
@@ -251,6 +253,15 @@ impl SimRobot {
                 record.ringing[i] * envelope * (w * cos - sin / ringing.decay_s)
             }),
         )
+    }
+
+    /// Keeps `record` as the latest motion. Only the last [`HISTORY_LEN`] are kept: the state
+    /// is asked for now or a moment ago, so a long run's memory stays flat.
+    fn record(&mut self, record: MotionRecord) {
+        if self.history.len() == HISTORY_LEN {
+            self.history.pop_front();
+        }
+        self.history.push_back(record);
     }
 
     /// How many moves have completed.
@@ -313,14 +324,10 @@ impl SimRobot {
         } else {
             (self.options.move_duration.as_secs_f64(), None)
         };
-        let lead = from
-            .iter()
-            .zip(&joints)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let lead = leading_travel(&from, &joints);
         let amplitude = self.options.ringing.map_or(0.0, |r| r.amplitude_rad);
         let started = Instant::now();
-        self.history.push(MotionRecord {
+        self.record(MotionRecord {
             started,
             from,
             to: joints,
@@ -344,7 +351,7 @@ impl SimRobot {
                 let now = Instant::now();
                 let stopped = self.joint_state_at(now).0;
                 // The arm stops where it is (the sim decelerates at once) and stands there.
-                self.history.push(MotionRecord {
+                self.record(MotionRecord {
                     started: now,
                     from: stopped,
                     to: stopped,
@@ -381,6 +388,9 @@ impl SimRobot {
 
 /// How often a move in progress looks at the interrupt flag.
 const INTERRUPT_POLL: Duration = Duration::from_millis(10);
+/// How many motions the sim keeps to answer where the arm was at an instant: the moves whose
+/// ringing may still matter, and then some.
+const HISTORY_LEN: usize = 8;
 
 impl Robot for SimRobot {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {

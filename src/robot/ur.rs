@@ -166,6 +166,10 @@ fn raw_call(f: impl FnOnce(*mut c_char, usize) -> c_int) -> Result<(), RawError>
     Err(RawError { code, message })
 }
 
+/// A shim getter that writes six doubles (a pose vector or joint values).
+type SixGetter =
+    unsafe extern "C" fn(*mut ffi::UrrtdeHandle, *mut f64, *mut c_char, usize) -> c_int;
+
 /// The ur_rtde handle, owned by the worker thread.
 struct Handle(NonNull<ffi::UrrtdeHandle>);
 
@@ -257,6 +261,19 @@ impl MoveKind {
 }
 
 impl UrRobot {
+    /// Calls `get`, the shim's getter for ur_rtde's `name`, which writes six doubles.
+    fn read_six(&mut self, name: &'static str, get: SixGetter) -> Result<[f64; 6], RobotError> {
+        self.call(name, move |h| {
+            let mut out = [0.0; 6];
+            let ptr = h.ptr();
+            // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for the six
+            // doubles every getter of this type writes.
+            raw_call(|err, len| unsafe { get(ptr, out.as_mut_ptr(), err, len) })
+                .map(|()| out)
+                .map_err(|e| call_error(name, e))
+        })
+    }
+
     /// Connects to the controller at `config.host` within `config.connect_timeout`, uploads
     /// ur_rtde's control script, and reads the TCP offset (unless the config gives it).
     pub fn connect(config: UrRobotConfig) -> Result<UrRobot, RobotError> {
@@ -325,16 +342,7 @@ impl UrRobot {
             interrupt: None,
         };
         if robot.config.flange_from_tcp.is_none() {
-            let v = robot.call("getTCPOffset", |h| {
-                let mut out = [0.0; 6];
-                let ptr = h.ptr();
-                // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for 6.
-                raw_call(|err, len| unsafe {
-                    ffi::urrtde_get_tcp_offset(ptr, out.as_mut_ptr(), err, len)
-                })
-                .map(|()| out)
-                .map_err(|e| call_error("getTCPOffset", e))
-            })?;
+            let v = robot.read_six("getTCPOffset", ffi::urrtde_get_tcp_offset)?;
             if !v.iter().all(|x| x.is_finite()) {
                 return Err(backend(UrError::Call {
                     call: "getTCPOffset",
@@ -588,45 +596,19 @@ impl UrRobot {
 impl Robot for UrRobot {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
         self.wait_fresh(None)?;
-        let v = self.call("getActualTCPPose", |h| {
-            let mut out = [0.0; 6];
-            let ptr = h.ptr();
-            // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for 6.
-            raw_call(|err, len| unsafe {
-                ffi::urrtde_get_actual_tcp_pose(ptr, out.as_mut_ptr(), err, len)
-            })
-            .map(|()| out)
-            .map_err(|e| call_error("getActualTCPPose", e))
-        })?;
+        let v = self.read_six("getActualTCPPose", ffi::urrtde_get_actual_tcp_pose)?;
         Ok(from_ur_vector(&v) * self.flange_from_tcp.inverse())
     }
 
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {
         self.wait_fresh(None)?;
-        self.call("getActualQ", |h| {
-            let mut out = [0.0; 6];
-            let ptr = h.ptr();
-            // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for 6.
-            raw_call(|err, len| unsafe {
-                ffi::urrtde_get_actual_q(ptr, out.as_mut_ptr(), err, len)
-            })
-            .map(|()| out)
-            .map_err(|e| call_error("getActualQ", e))
-        })
+        self.read_six("getActualQ", ffi::urrtde_get_actual_q)
     }
 
     fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
         self.wait_fresh(None)?;
-        self.call("getActualQd", |h| {
-            let mut out = [0.0; 6];
-            let ptr = h.ptr();
-            // SAFETY: `ptr` is the live handle owned by this worker; `out` has room for 6.
-            raw_call(|err, len| unsafe {
-                ffi::urrtde_get_actual_qd(ptr, out.as_mut_ptr(), err, len)
-            })
-            .map(|()| Some(out))
-            .map_err(|e| call_error("getActualQd", e))
-        })
+        self.read_six("getActualQd", ffi::urrtde_get_actual_qd)
+            .map(Some)
     }
 
     fn move_linear(

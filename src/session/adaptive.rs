@@ -52,63 +52,114 @@ pub fn run_adaptive_session(
 ) -> Result<SessionOutcome, SessionError> {
     // A resumed session: the manifest lists the poses chosen so far (the last one may not have
     // been reached); none of them, nor any pose visited and rejected, is chosen again.
-    let mut plan = recorded_plan(&setup)?;
-    // The input hashes written when the session was created stay with every manifest rewrite.
-    let inputs = if setup.folder.manifest_path().is_file() {
-        setup.folder.read_manifest()?.inputs
-    } else {
-        Vec::new()
-    };
-    let mut seen: Vec<Pose> = plan.iter().map(|(pose, _)| *pose).collect();
+    let mut plan = GrowingPlan::open(&setup, manifest_config)?;
+    let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
     for visit in setup.folder.read_visits()? {
         seen.push(visit.poses(&setup.folder.visit_path(visit.plan_index))?.0);
     }
     source.visited(&seen);
     let mut outcome = SessionOutcome::default();
-    let mut finish_recorded = !plan.is_empty();
+    // The last recorded pose is finished first.
+    let mut next = plan.poses.pop();
     loop {
-        if !finish_recorded {
+        if next.is_none() {
             let samples = if setup.folder.samples_path().is_file() {
                 Dataset::load(&setup.folder.samples_path())?.pairs
             } else {
                 Vec::new()
             };
-            let Some(next) = source.next_pose(&samples) else {
-                break;
-            };
-            plan.push(next);
+            next = source.next_pose(&samples);
         }
-        finish_recorded = false;
-        setup.folder.write_manifest(
-            &SessionManifest::new(manifest_config.clone(), setup.setup, &plan)
-                .with_inputs(inputs.clone()),
-        )?;
+        let Some(pose) = next.take() else {
+            break;
+        };
+        plan.visit(&setup, pose, robot, camera, on_event, &mut outcome)?;
+    }
+    Ok(outcome)
+}
+
+/// The plan of a session that grows one pose at a time (adaptive and hand-guided sessions):
+/// each pose is added to the manifest, visited with the ordinary driver on the plan so far, and
+/// kept if its sample was accepted, dropped (its index reused by the next) if not.
+pub(super) struct GrowingPlan {
+    /// The poses so far (flange pose, joints).
+    pub poses: Vec<(Pose, Joints)>,
+    manifest_config: std::path::PathBuf,
+    /// The input hashes written when the session was created: kept with every manifest rewrite.
+    inputs: Vec<super::InputFile>,
+    /// A hand-guided session (kept with every manifest rewrite).
+    manual: bool,
+}
+
+impl GrowingPlan {
+    /// The plan the session's manifest holds so far, with its input hashes and its hand-guided
+    /// mark (the caller wrote the manifest when it created the session); empty without one.
+    pub fn open(
+        setup: &SessionSetup,
+        manifest_config: std::path::PathBuf,
+    ) -> Result<GrowingPlan, SessionError> {
+        let path = setup.folder.manifest_path();
+        let (poses, inputs, manual) = if path.is_file() {
+            let manifest = setup.folder.read_manifest()?;
+            (
+                recorded_plan(&manifest, &path)?,
+                manifest.inputs,
+                manifest.manual,
+            )
+        } else {
+            (Vec::new(), Vec::new(), false)
+        };
+        Ok(GrowingPlan {
+            poses,
+            manifest_config,
+            inputs,
+            manual,
+        })
+    }
+
+    /// Adds `pose` to the manifest and visits it with the ordinary driver (on `setup` with the
+    /// plan so far), folding what happened into `outcome`; whether its sample was accepted
+    /// (otherwise it is dropped from the plan again).
+    pub fn visit(
+        &mut self,
+        setup: &SessionSetup,
+        pose: (Pose, Joints),
+        robot: &mut dyn Robot,
+        camera: &mut dyn Camera,
+        on_event: &mut dyn FnMut(SessionEvent),
+        outcome: &mut SessionOutcome,
+    ) -> Result<bool, SessionError> {
+        self.poses.push(pose);
+        let mut manifest =
+            SessionManifest::new(self.manifest_config.clone(), setup.setup, &self.poses)
+                .with_inputs(self.inputs.clone());
+        manifest.manual = self.manual;
+        setup.folder.write_manifest(&manifest)?;
         let step = SessionSetup {
-            plan: plan.clone(),
+            plan: self.poses.clone(),
             ..setup.clone()
         };
-        let index = plan.len() - 1;
+        let index = self.poses.len() - 1;
         let step_outcome = run_session(step, robot, camera, on_event)?;
         outcome.visited_now += step_outcome.visited_now;
         outcome.moving_s += step_outcome.moving_s;
         outcome.settling_s += step_outcome.settling_s;
         outcome.skipped.extend(step_outcome.skipped.iter().cloned());
-        if step_outcome.accepted.contains(&index) {
+        let accepted = step_outcome.accepted.contains(&index);
+        if accepted {
             outcome.accepted = step_outcome.accepted;
         } else {
-            plan.pop();
+            self.poses.pop();
         }
+        Ok(accepted)
     }
-    Ok(outcome)
 }
 
-/// The poses (and joints) a resumed adaptive session's manifest holds; empty for a new one.
-pub(super) fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>, SessionError> {
-    if !setup.folder.manifest_path().is_file() {
-        return Ok(Vec::new());
-    }
-    let manifest = setup.folder.read_manifest()?;
-    let file = setup.folder.manifest_path();
+/// The poses (and joints) a growing session's manifest (read from `file`) holds.
+fn recorded_plan(
+    manifest: &SessionManifest,
+    file: &std::path::Path,
+) -> Result<Vec<(Pose, Joints)>, SessionError> {
     manifest
         .plan
         .iter()
@@ -118,7 +169,7 @@ pub(super) fn recorded_plan(setup: &SessionSetup) -> Result<Vec<(Pose, Joints)>,
                 .base_from_flange
                 .to_pose(&format!("plan[{i}].T_base_flange"))
                 .map_err(|source| SessionError::Pose {
-                    file: file.clone(),
+                    file: file.to_path_buf(),
                     source,
                 })?;
             Ok((pose, planned.joints_deg.map(f64::to_radians)))

@@ -94,7 +94,20 @@ pub enum SessionEvent {
         rejected: Option<String>,
         /// Whether a retry will follow.
         will_retry: bool,
+        /// The frame as taken (the one written to the session folder), shared without a copy,
+        /// for live displays: they need not read it back from disk.
+        frame: SharedFrame,
     },
+}
+
+/// A recorded frame shared without a copy; its `Debug` shows only its size.
+#[derive(Clone)]
+pub struct SharedFrame(pub Arc<image::GrayImage>);
+
+impl std::fmt::Debug for SharedFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SharedFrame({}x{})", self.0.width(), self.0.height())
+    }
 }
 
 /// How a completed session went.
@@ -128,6 +141,7 @@ struct Job {
 struct JobResult {
     plan_index: usize,
     visit: Result<PoseVisit, SessionError>,
+    image: Arc<image::GrayImage>,
 }
 
 /// Runs (or resumes) a session: visits every plan pose without an accepted record, retries a
@@ -327,6 +341,7 @@ impl RunState {
             tags: visit.tags,
             rejected: visit.rejected,
             will_retry,
+            frame: SharedFrame(result.image),
         });
     }
 
@@ -360,10 +375,7 @@ fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut V
     };
     let joints: Vec<Joints> = pending.iter().map(|&i| setup.plan[i].1).collect();
     let order = crate::plan::order::order_for_travel(&from, &joints, |a, b| {
-        check
-            .problem(a, b)
-            .is_none()
-            .then(|| setup.limits.joint_move_time(a, b))
+        check.safe_move_time(a, b, &setup.limits)
     });
     *pending = order.iter().map(|&k| pending[k]).collect();
 }
@@ -580,6 +592,7 @@ fn spawn_worker(
                     .send(JobResult {
                         plan_index: job.plan_index,
                         visit,
+                        image: Arc::new(job.frame.image),
                     })
                     .is_err()
                 {

@@ -55,6 +55,10 @@ pub struct SessionManifest {
     /// resume refuses changed inputs. Absent in sessions recorded before hashes were kept.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub inputs: Vec<InputFile>,
+    /// A hand-guided session (`handeye console`, `plan: manual`): its plan is the captures so
+    /// far, and a resume continues it by hand.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub manual: bool,
 }
 
 impl SessionManifest {
@@ -71,12 +75,19 @@ impl SessionManifest {
                 })
                 .collect(),
             inputs: Vec::new(),
+            manual: false,
         }
     }
 
     /// The same manifest recording `inputs` (see [`InputFile`]).
     pub fn with_inputs(mut self, inputs: Vec<InputFile>) -> SessionManifest {
         self.inputs = inputs;
+        self
+    }
+
+    /// The same manifest marked as a hand-guided session.
+    pub fn hand_guided(mut self) -> SessionManifest {
+        self.manual = true;
         self
     }
 }

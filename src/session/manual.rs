@@ -18,14 +18,13 @@ use image::GrayImage;
 
 use crate::camera::Camera;
 use crate::dataset::Dataset;
-use crate::geometry::{translation_distance, Pose};
+use crate::geometry::{relative_rotation_axis, translation_distance, Pose};
 use crate::plan::nbv::AdaptivePlanner;
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use crate::vision::sharpness::sharpness;
 
-use super::adaptive::recorded_plan;
-use super::{
-    run_session, SessionError, SessionEvent, SessionManifest, SessionOutcome, SessionSetup,
-};
+use super::adaptive::GrowingPlan;
+use super::{SessionError, SessionEvent, SessionOutcome, SessionSetup};
 
 /// What a person asks for during a manual session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,6 +64,10 @@ pub enum ManualEvent<'a> {
         pose: Pose,
         /// The joints that reach it.
         joints: Joints,
+        /// The relative-rotation axis it adds (unit, base frame, upper hemisphere): from the
+        /// accepted view nearest in rotation (of those at least [`MIN_AXIS_ANGLE_RAD`] away);
+        /// `None` before the first capture.
+        axis: Option<[f64; 3]>,
         /// Predicted worst translation 1-sigma after it, mm.
         predicted_sigma_mm: Option<f64>,
         /// The solved worst translation 1-sigma so far, mm.
@@ -124,43 +127,23 @@ impl Default for ManualOptions {
 /// resolution).
 pub const DEFAULT_MIN_SHARPNESS: f64 = 0.5;
 
-/// A frame's sharpness: the mean square of the 4-neighbour Laplacian over the mean square of the
-/// gradient, at half resolution (halving averages sensor noise away). The ratio does not depend
-/// on the contrast or on how much of the image the board fills, only on how steep its edges
-/// are; a frame without edges scores 0.
-pub fn sharpness(image: &GrayImage) -> f64 {
-    let (w, h) = (image.width() / 2, image.height() / 2);
-    if w < 3 || h < 3 {
-        return 0.0;
-    }
-    let half = |x: u32, y: u32| -> f64 {
-        let (x, y) = (2 * x, 2 * y);
-        (image.get_pixel(x, y)[0] as f64
-            + image.get_pixel(x + 1, y)[0] as f64
-            + image.get_pixel(x, y + 1)[0] as f64
-            + image.get_pixel(x + 1, y + 1)[0] as f64)
-            / 4.0
-    };
-    let small: Vec<f64> = (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .map(|(x, y)| half(x, y))
-        .collect();
-    let at = |x: u32, y: u32| small[(y * w + x) as usize];
-    let mut laplacian = 0.0;
-    let mut gradient = 0.0;
-    for y in 1..h - 1 {
-        for x in 1..w - 1 {
-            let c = at(x, y);
-            let l = at(x - 1, y) + at(x + 1, y) + at(x, y - 1) + at(x, y + 1) - 4.0 * c;
-            let (dx, dy) = (at(x + 1, y) - c, at(x, y + 1) - c);
-            laplacian += l * l;
-            gradient += dx * dx + dy * dy;
-        }
-    }
-    if gradient <= f64::EPSILON {
-        return 0.0;
-    }
-    laplacian / gradient
+/// Smaller relative rotations have no meaningful axis.
+pub const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
+
+/// The axis a view at `base_from_flange` adds: relative to the accepted view nearest in rotation that is
+/// far enough away to have one.
+fn added_axis(accepted: &[(Pose, Joints)], base_from_flange: &Pose) -> Option<[f64; 3]> {
+    accepted
+        .iter()
+        .filter_map(|(earlier, _)| {
+            relative_rotation_axis(
+                &earlier.rotation,
+                &base_from_flange.rotation,
+                MIN_AXIS_ANGLE_RAD,
+            )
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(axis, _)| axis.into())
 }
 
 /// The arm where it stands: a move to the joints it was just read at is a no-op, so the driver
@@ -194,7 +177,9 @@ impl Robot for StandStill<'_> {
 /// Runs (or resumes) a hand-guided session until the person finishes it or the stop flag is
 /// set (then the arm is stopped, freedrive switched off and the error says how to resume).
 /// `setup.plan` is ignored: the captures are the plan. `suggester`'s candidates are the views it
-/// suggests.
+/// suggests. The session folder's manifest, marked hand-guided
+/// ([`SessionManifest::hand_guided`](super::SessionManifest::hand_guided)), is the caller's to
+/// write first: every capture keeps its mark.
 pub fn run_manual_session(
     setup: SessionSetup,
     manifest_config: PathBuf,
@@ -204,14 +189,9 @@ pub fn run_manual_session(
     camera: &mut dyn Camera,
     control: &mut dyn ManualControl,
 ) -> Result<SessionOutcome, SessionError> {
-    let mut plan = recorded_plan(&setup)?;
-    let inputs = if setup.folder.manifest_path().is_file() {
-        setup.folder.read_manifest()?.inputs
-    } else {
-        Vec::new()
-    };
+    let mut growing = GrowingPlan::open(&setup, manifest_config)?;
     if let Some(planner) = suggester.as_deref_mut() {
-        let seen: Vec<Pose> = plan.iter().map(|(pose, _)| *pose).collect();
+        let seen: Vec<Pose> = growing.poses.iter().map(|(pose, _)| *pose).collect();
         planner.mark_visited(&seen);
     }
     // The recorded plan's poses were all accepted except perhaps the last (refused, or a stop
@@ -226,32 +206,33 @@ pub fn run_manual_session(
         })
         .map(|v| v.plan_index)
         .collect();
-    while plan
+    while growing
+        .poses
         .len()
         .checked_sub(1)
         .is_some_and(|last| !accepted.contains(&last))
     {
-        plan.pop();
+        growing.poses.pop();
     }
     let mut outcome = SessionOutcome::default();
     robot.set_interrupt(setup.stop.clone());
     let mut freedrive = false;
     let mut confirmed = !options.real_arm;
-    let mut suggestion = suggest(&setup, suggester.as_deref_mut(), control)?;
+    let mut suggestion = suggest(&setup, &growing.poses, suggester.as_deref_mut(), control)?;
     let mut last_live: Option<Instant> = None;
     let result = loop {
         if setup.stop.load(Ordering::SeqCst) {
             let _ = robot.stop();
             break Err(SessionError::Interrupted {
-                plan_index: plan.len(),
-                recorded: plan.len(),
+                plan_index: growing.poses.len(),
+                recorded: growing.poses.len(),
                 folder: setup.folder.root().to_path_buf(),
             });
         }
         if last_live.is_none_or(|t| t.elapsed() >= options.live_every) {
             last_live = Some(Instant::now());
             if let Err(e) = live_view(robot, camera, freedrive, control) {
-                break Err(e.into_session(&setup, plan.len()));
+                break Err(e.into_session(&setup, growing.poses.len()));
             }
         }
         let Some(command) = control.next_command(Duration::from_millis(100)) else {
@@ -293,14 +274,16 @@ pub fn run_manual_session(
                 }
                 if freedrive {
                     if let Err(e) = robot.set_freedrive(false) {
-                        break Err(ArmFault::Robot(e).into_session(&setup, plan.len()));
+                        break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()));
                     }
                     freedrive = false;
                 }
                 if let Some(check) = &setup.move_check {
                     let from = match robot.joint_positions() {
                         Ok(j) => j,
-                        Err(e) => break Err(ArmFault::Robot(e).into_session(&setup, plan.len())),
+                        Err(e) => {
+                            break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()))
+                        }
                     };
                     if let Some(problem) = check.problem(&from, &joints) {
                         control.event(ManualEvent::Check {
@@ -318,7 +301,9 @@ pub fn run_manual_session(
                             message: "at the suggested view".into(),
                         });
                     }
-                    Err(e) => break Err(ArmFault::Robot(e).into_session(&setup, plan.len())),
+                    Err(e) => {
+                        break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()))
+                    }
                 }
             }
             ManualCommand::Capture => {
@@ -326,27 +311,24 @@ pub fn run_manual_session(
                 if freedrive {
                     // The arm must hold still for the sample.
                     if let Err(e) = robot.set_freedrive(false) {
-                        break Err(ArmFault::Robot(e).into_session(&setup, plan.len()));
+                        break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()));
                     }
                     freedrive = false;
                 }
                 match capture(
                     &setup,
-                    &manifest_config,
-                    &inputs,
                     options,
-                    &mut plan,
+                    &mut growing,
+                    &mut outcome,
                     robot,
                     camera,
                     control,
                 ) {
-                    Ok(Some(step)) => {
-                        outcome.visited_now += step.visited_now;
-                        outcome.skipped.extend(step.skipped);
-                        outcome.accepted = step.accepted;
-                        suggestion = suggest(&setup, suggester.as_deref_mut(), control)?;
+                    Ok(true) => {
+                        suggestion =
+                            suggest(&setup, &growing.poses, suggester.as_deref_mut(), control)?;
                     }
-                    Ok(None) => {}
+                    Ok(false) => {}
                     Err(e) => break Err(e),
                 }
                 if was_freedrive && robot.set_freedrive(true).is_ok() {
@@ -360,7 +342,7 @@ pub fn run_manual_session(
         let _ = robot.set_freedrive(false);
     }
     result?;
-    outcome.accepted = (0..plan.len()).collect();
+    outcome.accepted = (0..growing.poses.len()).collect();
     Ok(outcome)
 }
 
@@ -420,6 +402,7 @@ fn live_view(
 /// The planner's next view from the samples on disk, told to `control`.
 fn suggest(
     setup: &SessionSetup,
+    accepted: &[(Pose, Joints)],
     suggester: Option<&mut AdaptivePlanner>,
     control: &mut dyn ManualControl,
 ) -> Result<Option<(Pose, Joints)>, SessionError> {
@@ -437,6 +420,7 @@ fn suggest(
         control.event(ManualEvent::Suggestion {
             pose,
             joints,
+            axis: added_axis(accepted, &pose),
             predicted_sigma_mm: step.and_then(|s| s.predicted_sigma_mm),
             solved_sigma_mm: step.and_then(|s| s.solved_sigma_mm),
         });
@@ -444,46 +428,50 @@ fn suggest(
     Ok(next)
 }
 
-/// One capture: the immediate checks, then a sample with the driver. `Some(outcome)` when a
-/// sample was taken (accepted or not), `None` when a check refused it.
-#[allow(clippy::too_many_arguments)]
+/// One capture: the immediate checks, then a sample with the driver (folded into `outcome`).
+/// Whether a sample was taken (accepted or not; the person hears which), `false` when a check
+/// refused the capture.
 fn capture(
     setup: &SessionSetup,
-    manifest_config: &std::path::Path,
-    inputs: &[super::InputFile],
     options: &ManualOptions,
-    plan: &mut Vec<(Pose, Joints)>,
+    plan: &mut GrowingPlan,
+    outcome: &mut SessionOutcome,
     robot: &mut dyn Robot,
     camera: &mut dyn Camera,
     control: &mut dyn ManualControl,
-) -> Result<Option<SessionOutcome>, SessionError> {
+) -> Result<bool, SessionError> {
     std::thread::sleep(setup.settle);
     let here = robot
         .joint_positions()
         .and_then(|j| Ok((robot.base_from_flange()?, j)));
     let (base_from_flange, joints) = match here {
         Ok(here) => here,
-        Err(e) => return Err(ArmFault::Robot(e).into_session(setup, plan.len())),
+        Err(e) => return Err(ArmFault::Robot(e).into_session(setup, plan.poses.len())),
     };
-    if let Some((i, (pose, _))) = plan.iter().enumerate().find(|(_, (pose, _))| {
-        translation_distance(pose, &base_from_flange) < options.min_translation_m
-            && pose.rotation.angle_to(&base_from_flange.rotation) < options.min_rotation_rad
-    }) {
+    if let Some((i, (earlier_base_from_flange, _))) =
+        plan.poses.iter().enumerate().find(|(_, (earlier, _))| {
+            translation_distance(earlier, &base_from_flange) < options.min_translation_m
+                && earlier.rotation.angle_to(&base_from_flange.rotation) < options.min_rotation_rad
+        })
+    {
         control.event(ManualEvent::Check {
             ok: false,
             message: format!(
                 "too close to capture {i} ({:.1} mm, {:.2}° away; at least {:.0} mm or {:.1}° needed): move the arm to a new view",
-                translation_distance(pose, &base_from_flange) * 1000.0,
-                pose.rotation.angle_to(&base_from_flange.rotation).to_degrees(),
+                translation_distance(earlier_base_from_flange, &base_from_flange) * 1000.0,
+                earlier_base_from_flange
+                    .rotation
+                    .angle_to(&base_from_flange.rotation)
+                    .to_degrees(),
                 options.min_translation_m * 1000.0,
                 options.min_rotation_rad.to_degrees()
             ),
         });
-        return Ok(None);
+        return Ok(false);
     }
     let frame = match camera.grab(Instant::now()) {
         Ok(frame) => frame,
-        Err(e) => return Err(ArmFault::Camera(e).into_session(setup, plan.len())),
+        Err(e) => return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len())),
     };
     let sharp = sharpness(&frame.image);
     if sharp < options.min_sharpness {
@@ -494,33 +482,34 @@ fn capture(
                 options.min_sharpness
             ),
         });
-        return Ok(None);
+        return Ok(false);
     }
-    plan.push((base_from_flange, joints));
-    setup.folder.write_manifest(
-        &SessionManifest::new(manifest_config.to_path_buf(), setup.setup, plan)
-            .with_inputs(inputs.to_vec()),
-    )?;
-    let index = plan.len() - 1;
+    let index = plan.poses.len();
+    // The arm stands there: the driver's "move" is a no-op, and there is nothing to check.
     let step = SessionSetup {
-        plan: plan.clone(),
         move_check: None,
         ..setup.clone()
     };
     let mut last_rejection = None;
-    let outcome = run_session(step, &mut StandStill(robot), camera, &mut |event| {
-        if let SessionEvent::Recorded { rejected, .. } = &event {
-            last_rejection.clone_from(rejected);
-        }
-        control.event(ManualEvent::Session(event));
-    })?;
-    if outcome.accepted.contains(&index) {
+    let accepted = plan.visit(
+        &step,
+        (base_from_flange, joints),
+        &mut StandStill(robot),
+        camera,
+        &mut |event| {
+            if let SessionEvent::Recorded { rejected, .. } = &event {
+                last_rejection.clone_from(rejected);
+            }
+            control.event(ManualEvent::Session(event));
+        },
+        outcome,
+    )?;
+    if accepted {
         control.event(ManualEvent::Check {
             ok: true,
             message: format!("capture {index} accepted (sharpness {sharp:.2})"),
         });
     } else {
-        plan.pop();
         control.event(ManualEvent::Check {
             ok: false,
             message: format!(
@@ -529,7 +518,7 @@ fn capture(
             ),
         });
     }
-    Ok(Some(outcome))
+    Ok(true)
 }
 
 #[cfg(test)]
@@ -537,27 +526,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_blurred_frame_is_less_sharp_than_a_sharp_one() {
-        // A checkerboard of 8 px squares, then the same smoothed with a box filter.
-        // A checkerboard of 16 px squares, sharp, slightly and badly blurred, at two contrasts.
+    fn the_threshold_passes_slight_blur_and_refuses_strong_blur() {
+        // The measure's own properties are tested with it (vision::sharpness); here only where
+        // the capture check draws the line, at high and low contrast.
         for (dark, light) in [(30u8, 220u8), (100, 140)] {
-            let sharp = GrayImage::from_fn(256, 256, |x, y| {
-                image::Luma([if (x / 16 + y / 16) % 2 == 0 {
-                    dark
-                } else {
-                    light
-                }])
-            });
-            let slight = image::imageops::blur(&sharp, 0.7);
-            let blurred = image::imageops::blur(&sharp, 5.0);
-            let (s, t, b) = (sharpness(&sharp), sharpness(&slight), sharpness(&blurred));
-            assert!(s > t && t > b, "{s} {t} {b}");
+            let sharp = crate::vision::sharpness::tests::board(dark, light);
+            let slight = sharpness(&image::imageops::blur(&sharp, 0.7));
+            let blurred = sharpness(&image::imageops::blur(&sharp, 5.0));
             assert!(
-                t > DEFAULT_MIN_SHARPNESS,
-                "slightly blurred board scores {t}"
+                slight > DEFAULT_MIN_SHARPNESS,
+                "slightly blurred board scores {slight}"
             );
-            assert!(b < DEFAULT_MIN_SHARPNESS, "blurred board scores {b}");
+            assert!(
+                blurred < DEFAULT_MIN_SHARPNESS,
+                "blurred board scores {blurred}"
+            );
         }
-        assert_eq!(sharpness(&GrayImage::new(64, 64)), 0.0);
     }
 }

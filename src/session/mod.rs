@@ -23,7 +23,7 @@ pub mod solve;
 use std::path::PathBuf;
 
 pub use adaptive::{run_adaptive_session, PlanSource};
-pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
+pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup, SharedFrame};
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;

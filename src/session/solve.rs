@@ -415,7 +415,7 @@ fn conclude(
 ) {
     solved
         .calibration
-        .warnings
+        .notices
         .extend(solve::diagnostics::check_against_nominal(
             &solved.calibration,
             &config.nominal,

@@ -178,7 +178,7 @@ pub struct Calibration {
     /// How the solver got there.
     pub solver: SolverReport,
     /// Things a person should know (large uncertainty, flagged outliers, ...).
-    pub warnings: Vec<Notice>,
+    pub notices: Vec<Notice>,
 }
 
 impl Calibration {
@@ -263,7 +263,7 @@ impl Calibration {
         if !self.outliers.is_empty() {
             let _ = write!(out, "\noutliers (sample indices): {:?}", self.outliers);
         }
-        for notice in &self.warnings {
+        for notice in &self.notices {
             let _ = write!(out, "\n{notice}");
         }
         out

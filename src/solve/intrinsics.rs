@@ -8,14 +8,15 @@
 //! is well conditioned. The closed form ignores distortion; the joint refinement then fits it.
 //! Pure: no I/O. Depends on `geometry`, the camera model type and nalgebra only.
 
-use nalgebra::{DMatrix, Matrix3, Point2, SMatrix, Translation3, Vector3};
+use nalgebra::{DMatrix, Matrix3, Point2, Vector3};
 
 use super::reprojection::{
     refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions,
 };
 use super::{solve, Calibration, SolveError, SolveOptions};
 use crate::camera_model::{CameraModel, Distortion};
-use crate::geometry::{project_to_rotation, Pose};
+use crate::geometry::homography::{self, homography};
+use crate::geometry::Pose;
 use crate::setup::{PosePair, Setup};
 
 /// Fewest corners a frame needs to give a homography.
@@ -28,57 +29,6 @@ pub const MIN_FRAMES: usize = 3;
 const DEGENERACY_RATIO: f64 = 1e-4;
 /// Tilt spread (largest − smallest, degrees) below which the views are too alike.
 const MIN_TILT_SPREAD_DEG: f64 = 5.0;
-
-/// The homography from the board plane (target `x`, `y` in m) to pixels, by the normalised DLT;
-/// `None` with fewer than 4 corners or a degenerate point set.
-pub fn homography(plane: &[(f64, f64)], pixels: &[Point2<f64>]) -> Option<Matrix3<f64>> {
-    let n = plane.len();
-    if n < 4 || pixels.len() != n {
-        return None;
-    }
-    // Hartley normalisation of both point sets.
-    let normaliser = |pts: &mut dyn Iterator<Item = (f64, f64)>| {
-        let v: Vec<(f64, f64)> = pts.collect();
-        let (mx, my) = v.iter().fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
-        let (mx, my) = (mx / n as f64, my / n as f64);
-        let d = v
-            .iter()
-            .map(|p| ((p.0 - mx).powi(2) + (p.1 - my).powi(2)).sqrt())
-            .sum::<f64>()
-            / n as f64;
-        let s = if d > 0.0 {
-            std::f64::consts::SQRT_2 / d
-        } else {
-            1.0
-        };
-        Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
-    };
-    let tp = normaliser(&mut plane.iter().copied());
-    let ti = normaliser(&mut pixels.iter().map(|p| (p.x, p.y)));
-    let mut ata = SMatrix::<f64, 9, 9>::zeros();
-    for (q, p) in plane.iter().zip(pixels) {
-        let a = tp * Vector3::new(q.0, q.1, 1.0);
-        let b = ti * Vector3::new(p.x, p.y, 1.0);
-        let (x, y, u, v) = (a.x, a.y, b.x, b.y);
-        let r1 =
-            SMatrix::<f64, 1, 9>::from_row_slice(&[-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u]);
-        let r2 =
-            SMatrix::<f64, 1, 9>::from_row_slice(&[0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v]);
-        ata += r1.transpose() * r1 + r2.transpose() * r2;
-    }
-    let eigen = ata.symmetric_eigen();
-    let (k, _) = eigen
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))?;
-    let h = eigen.eigenvectors.column(k);
-    let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
-    let hm = ti.try_inverse()? * hn * tp;
-    let scale = hm[(2, 2)];
-    let hm = if scale.abs() > 1e-12 { hm / scale } else { hm };
-    hm.iter().all(|v| v.is_finite()).then_some(hm)
-}
 
 /// Board-plane points (target `x`, `y`, m) and their pixels.
 type PlanePoints = (Vec<(f64, f64)>, Vec<Point2<f64>>);
@@ -106,23 +56,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, camera: &CameraModel) -> Option<Po
     let k = Matrix3::new(
         camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
     );
-    let m = k.try_inverse()? * h;
-    let (c1, c2, c3) = (
-        m.column(0).into_owned(),
-        m.column(1).into_owned(),
-        m.column(2).into_owned(),
-    );
-    let mut lambda = 2.0 / (c1.norm() + c2.norm());
-    // The board is in front of the camera.
-    if c3.z * lambda < 0.0 {
-        lambda = -lambda;
-    }
-    let r1 = c1 * lambda;
-    let r2 = c2 * lambda;
-    let r3 = r1.cross(&r2);
-    let approx = Matrix3::from_columns(&[r1, r2, r3]);
-    let rotation = project_to_rotation(&approx)?;
-    Some(Pose::from_parts(Translation3::from(c3 * lambda), rotation))
+    homography::pose_from_homography(h, &k)
 }
 
 fn tilt_deg(pose: &Pose) -> f64 {
@@ -467,28 +401,6 @@ impl IntrinsicsCoverage {
 mod tests {
     use super::*;
     use nalgebra::Point3;
-
-    #[test]
-    fn homography_maps_plane_points_to_their_pixels() {
-        let h_true = Matrix3::new(700.0, 30.0, 600.0, -20.0, 650.0, 300.0, 0.1, -0.2, 1.0);
-        let plane: Vec<(f64, f64)> = (0..5)
-            .flat_map(|i| (0..4).map(move |j| (0.05 * i as f64, 0.05 * j as f64)))
-            .collect();
-        let pixels: Vec<Point2<f64>> = plane
-            .iter()
-            .map(|&(x, y)| {
-                let p = h_true * Vector3::new(x, y, 1.0);
-                Point2::new(p.x / p.z, p.y / p.z)
-            })
-            .collect();
-        let h = homography(&plane, &pixels).unwrap();
-        for (q, p) in plane.iter().zip(&pixels) {
-            let m = h * Vector3::new(q.0, q.1, 1.0);
-            // Exact data: the DLT reproduces every pixel to numerical precision.
-            assert!((Point2::new(m.x / m.z, m.y / m.z) - p).norm() < 1e-8);
-        }
-        assert!(homography(&plane[..3], &pixels[..3]).is_none());
-    }
 
     #[test]
     fn pose_from_homography_recovers_a_tilted_board() {

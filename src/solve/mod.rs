@@ -181,7 +181,7 @@ pub fn solve(
     };
     if options.check_conventions {
         calibration
-            .warnings
+            .notices
             .extend(diagnostics::check_mounts(&calibration));
     }
     Ok(calibration)
@@ -265,7 +265,7 @@ fn solve_subset(
     check_rotation_diversity(&robot)?;
     let data = AxbyData::new(setup, &used);
 
-    let mut warnings = Vec::new();
+    let mut notices = Vec::new();
     let solved = solve_method(&data, options);
     let (solution, report, uncertainty, noise) = match solved {
         Ok(s) => s,
@@ -306,13 +306,13 @@ fn solve_subset(
                 None => i.to_string(),
             })
             .collect();
-        warnings.push(Notice::warning(NoticeKind::Outliers, format!(
+        notices.push(Notice::warning(NoticeKind::Outliers, format!(
             "{} sample(s) look like outliers: {} (residuals far above the rest; check detection and robot pose of those samples)",
             outliers.len(),
             described.join(", ")
         )));
     }
-    warnings.push(noise_notice(&noise, options, used.len()));
+    notices.push(noise_notice(&noise, options, used.len()));
     if let Some(u) = &uncertainty {
         let (camera_name, target_name) = setup.unknown_names();
         for (name, sigma) in [
@@ -322,7 +322,7 @@ fn solve_subset(
             if sigma.rotation_deg > options.warn_rotation_sigma_deg
                 || sigma.translation_mm > options.warn_translation_sigma_mm
             {
-                warnings.push(Notice::warning(NoticeKind::PoorlyDetermined, format!(
+                notices.push(Notice::warning(NoticeKind::PoorlyDetermined, format!(
                     "{name} is poorly determined: 1-sigma {:.3}° and {:.2} mm (limits {:.3}° / {:.2} mm): add poses with larger, more varied rotations",
                     sigma.rotation_deg,
                     sigma.translation_mm,
@@ -333,7 +333,7 @@ fn solve_subset(
         }
     }
     if !report.converged {
-        warnings.push(Notice::warning(
+        notices.push(Notice::warning(
             NoticeKind::NotConverged,
             format!(
                 "the {} method did not meet its tolerance; the answer may be inaccurate",
@@ -351,7 +351,7 @@ fn solve_subset(
         outliers,
         dropped: Vec::new(),
         solver: report,
-        warnings,
+        notices,
     })
 }
 

@@ -207,8 +207,8 @@ pub(super) fn solve_robust(
             )
         })
         .collect();
-    notices.append(&mut calibration.warnings);
-    calibration.warnings = notices;
+    notices.append(&mut calibration.notices);
+    calibration.notices = notices;
     let mut outliers = dropped.clone();
     outliers.extend(calibration.outliers.iter().copied());
     outliers.sort_unstable();

@@ -194,7 +194,7 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     }
 
     // The solver's own warnings and errors not judged above.
-    for notice in &c.warnings {
+    for notice in &c.notices {
         let covered = matches!(
             notice.kind,
             NoticeKind::Outliers

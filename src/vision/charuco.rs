@@ -22,8 +22,11 @@ use calib_targets_charuco::{
     CharucoParams, Dictionary,
 };
 
-use super::subpix;
 use super::TargetError;
+use rayon::prelude::*;
+
+use super::{subpix, xcorner};
+use crate::geometry::homography::homography;
 
 /// The crate's ChESS strength floor for grid corners (its ChArUco default is 33): 20 keeps
 /// the corners of a board seen at 0.8 m under 35° of tilt.
@@ -205,6 +208,12 @@ impl Charuco {
         self.marker_length
     }
 
+    /// The white gap between a chessboard corner and the nearest marker, as a share of the
+    /// square's side: a corner's refinement window and X-junction ring stay inside it.
+    fn gap_ratio(&self) -> f64 {
+        (self.square_length - self.marker_length) / (2.0 * self.square_length)
+    }
+
     /// Cells across a marker: its bits plus the one-cell black border.
     pub fn marker_cells(&self) -> u32 {
         self.dictionary.marker_size() as u32 + 2
@@ -285,6 +294,7 @@ impl Charuco {
         );
         let mut params = CharucoParams::for_board(spec);
         params.chessboard.min_corner_strength = MIN_CORNER_STRENGTH;
+        params.chess = super::chessboard::corner_search();
         let detector = CharucoDetector::new(params).map_err(|e| TargetError::Detector {
             reason: format!("ChArUco board: {e}"),
         })?;
@@ -305,52 +315,6 @@ impl Charuco {
             self.dictionary.name()
         )
     }
-}
-
-/// Homography (DLT, Hartley-normalised) taking board-plane points to pixels.
-fn homography(pairs: &[(Point2<f64>, Point2<f64>)]) -> Option<nalgebra::Matrix3<f64>> {
-    use nalgebra::{DMatrix, Matrix3};
-    if pairs.len() < 4 {
-        return None;
-    }
-    let normaliser = |points: &mut dyn Iterator<Item = Point2<f64>>| -> Matrix3<f64> {
-        let points: Vec<Point2<f64>> = points.collect();
-        let n = points.len() as f64;
-        let mean = points
-            .iter()
-            .fold(nalgebra::Vector2::zeros(), |a, p| a + p.coords)
-            / n;
-        let spread = points.iter().map(|p| (p.coords - mean).norm()).sum::<f64>() / n;
-        let s = if spread > 0.0 {
-            std::f64::consts::SQRT_2 / spread
-        } else {
-            1.0
-        };
-        Matrix3::new(s, 0.0, -s * mean.x, 0.0, s, -s * mean.y, 0.0, 0.0, 1.0)
-    };
-    let tb = normaliser(&mut pairs.iter().map(|(b, _)| *b));
-    let ti = normaliser(&mut pairs.iter().map(|(_, i)| *i));
-    let mut a = DMatrix::<f64>::zeros(2 * pairs.len(), 9);
-    for (k, (b, i)) in pairs.iter().enumerate() {
-        let b = tb.transform_point(b);
-        let i = ti.transform_point(i);
-        let (x, y, u, v) = (b.x, b.y, i.x, i.y);
-        let r0 = [-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u];
-        let r1 = [0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v];
-        for c in 0..9 {
-            a[(2 * k, c)] = r0[c];
-            a[(2 * k + 1, c)] = r1[c];
-        }
-    }
-    let svd = (a.transpose() * &a).symmetric_eigen();
-    let (index, _) = svd
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|x, y| x.1.total_cmp(y.1))?;
-    let h = svd.eigenvectors.column(index);
-    let h = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
-    Some(ti.try_inverse()? * h * tb)
 }
 
 /// A ChArUco detector for one board.
@@ -408,11 +372,11 @@ impl CharucoCornerDetector {
         }
         // The window must stay inside the white gap between the corner and the markers: a
         // marker's border is an edge that does not pass through the corner.
-        let gap = (self.board.square_length - self.board.marker_length) / 2.0;
-        let ratio = gap / self.board.square_length;
+        let gap = self.board.gap_ratio();
         let by_id: std::collections::HashMap<u32, Point2<f64>> = corners.iter().copied().collect();
         let per_row = self.board.squares_x - 1;
-        for (id, pixel) in corners.iter_mut() {
+        // Each corner on its own: in parallel, on the pool the corner search ran on.
+        corners.par_iter_mut().for_each(|(id, pixel)| {
             let neighbours = [
                 id.checked_sub(1).filter(|_| *id % per_row != 0),
                 Some(*id + 1).filter(|n| n % per_row != 0),
@@ -432,22 +396,22 @@ impl CharucoCornerDetector {
                 step(neighbours[0], neighbours[1]),
                 step(neighbours[2], neighbours[3]),
             ) else {
-                continue;
+                return;
             };
             let Some(to_squares) = nalgebra::Matrix2::from_columns(&[along, down]).try_inverse()
             else {
-                continue;
+                return;
             };
             let square_px = along.norm().min(down.norm());
             let half = subpix::window_for_square(square_px);
             let mask = subpix::GridMask {
                 to_squares,
-                band: 0.55 * ratio,
+                band: 0.55 * gap,
             };
             if let Some(refined) = subpix::refine_masked(image, *pixel, half, Some(mask)) {
                 *pixel = refined;
             }
-        }
+        });
         Ok(corners)
     }
 }
@@ -462,6 +426,7 @@ impl CharucoCornerDetector {
             return false;
         }
         let s = self.board.square_length;
+        let gap = self.board.gap_ratio();
         let plane = |id: u32| -> Option<Point2<f64>> {
             let p = self.board.corner(id)?;
             Some(Point2::new(p.x / s, p.y / s))
@@ -484,8 +449,9 @@ impl CharucoCornerDetector {
             if nearest.first().is_none_or(|n| (n.0 - b).norm() > 2.01) {
                 continue;
             }
-            let local: Vec<_> = nearest.into_iter().copied().collect();
-            let Some(h) = homography(&local) else {
+            let plane_points: Vec<(f64, f64)> = nearest.iter().map(|(b, _)| (b.x, b.y)).collect();
+            let pixels: Vec<Point2<f64>> = nearest.iter().map(|(_, px)| *px).collect();
+            let Some(h) = homography(&plane_points, &pixels) else {
                 continue;
             };
             let project = |p: Point2<f64>| -> Option<Point2<f64>> {
@@ -508,7 +474,6 @@ impl CharucoCornerDetector {
             else {
                 continue;
             };
-            let gap = (s - self.board.marker_length) / (2.0 * s);
             let mask = subpix::GridMask {
                 to_squares,
                 band: 0.55 * gap,
@@ -516,7 +481,12 @@ impl CharucoCornerDetector {
             let half = subpix::window_for_square(square_px);
             if let Some(found) = subpix::refine_masked(image, predicted, half, Some(mask)) {
                 if (found - predicted).norm() < 0.1 * square_px
-                    && is_x_corner(image, found, along, down, 0.6 * gap)
+                    && xcorner::is_x_junction(
+                        image,
+                        found,
+                        X_CORNER_RING * gap * square_px,
+                        X_CORNER_CONTRAST,
+                    )
                 {
                     added.push((id, found));
                 }
@@ -529,27 +499,12 @@ impl CharucoCornerDetector {
     }
 }
 
-/// True when the four squares around `p` (steps `along`, `down` to the next corners) alternate
-/// dark and light with a clear contrast, sampled `offset` squares diagonally from the corner.
-fn is_x_corner(
-    image: &GrayImage,
-    p: Point2<f64>,
-    along: nalgebra::Vector2<f64>,
-    down: nalgebra::Vector2<f64>,
-    offset: f64,
-) -> bool {
-    let at = |a: f64, d: f64| subpix::grey_at(image, p + (along * a + down * d) * offset);
-    let (Some(q1), Some(q2), Some(q3), Some(q4)) =
-        (at(1.0, 1.0), at(-1.0, 1.0), at(-1.0, -1.0), at(1.0, -1.0))
-    else {
-        return false;
-    };
-    // Diagonal quadrants alike, neighbouring ones different.
-    let low = (q1.min(q3), q2.min(q4));
-    let high = (q1.max(q3), q2.max(q4));
-    let contrast = 20.0;
-    (low.0 > high.1 + contrast) || (low.1 > high.0 + contrast)
-}
+/// Radius of the ring on which a completed corner must look like an X-junction, in units of
+/// the white gap between a corner and the markers (times the square's pixel size): 0.85 of the
+/// gap keeps every ring sample inside the four squares' corner regions, clear of the markers.
+const X_CORNER_RING: f64 = 0.85;
+/// Smallest grey-level difference between the light and dark squares around a completed corner.
+const X_CORNER_CONTRAST: f64 = 20.0;
 
 #[cfg(test)]
 mod tests {

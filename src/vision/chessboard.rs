@@ -20,6 +20,8 @@
 use image::GrayImage;
 use nalgebra::{Point2, Point3};
 
+use rayon::prelude::*;
+
 use super::subpix;
 use super::TargetError;
 
@@ -177,10 +179,7 @@ impl Checkerboard {
             height: image.height() as usize,
             data: image.as_raw(),
         };
-        let frame = calib_targets_chessboard::detect_corner_frame(
-            &view,
-            &calib_targets_chessboard::default_chess_config(),
-        );
+        let frame = calib_targets_chessboard::detect_corner_frame(&view, &corner_search());
         let params = calib_targets_chessboard::ChessboardParams::default();
         let detector = calib_targets_chessboard::ChessboardDetector::new(params).map_err(|e| {
             TargetError::Detector {
@@ -292,12 +291,16 @@ impl Checkerboard {
                     .min(spacing(*p, corners[below as usize].1))
             })
             .collect();
-        for ((_, pixel), cell) in corners.iter_mut().zip(cell_px) {
-            let half = subpix::window_for_square(cell);
-            if let Some(refined) = subpix::refine(image, *pixel, half) {
-                *pixel = refined;
-            }
-        }
+        // Each corner on its own: in parallel, on the pool the corner search ran on.
+        corners
+            .par_iter_mut()
+            .zip(cell_px.par_iter())
+            .for_each(|((_, pixel), &cell)| {
+                let half = subpix::window_for_square(cell);
+                if let Some(refined) = subpix::refine(image, *pixel, half) {
+                    *pixel = refined;
+                }
+            });
         Ok(corners)
     }
 
@@ -309,6 +312,31 @@ impl Checkerboard {
         )
     }
 }
+
+/// The ChESS corner search of the `calib-targets` crates (ChArUco and chessboards), coarse to
+/// fine: the ChESS response — most of the detection time at full resolution — is computed on a
+/// half-resolution copy, and each corner found there is located again in the full frame within
+/// [`PYRAMID_REFINE_RADIUS`] px of the copy (2x that in the frame). The corners are refined to
+/// sub-pixel precision by `vision::subpix` afterwards either way. Two levels, not the crate's
+/// three: at a quarter of the resolution the bench's ChArUco board (squares ~50 px across in
+/// the 1280x720 frame) is no longer found.
+pub(crate) fn corner_search() -> calib_targets_chessboard::DetectorConfig {
+    let mut config = calib_targets_chessboard::default_chess_config();
+    config.multiscale = chess_corners::MultiscaleConfig::pyramid(
+        PYRAMID_LEVELS,
+        PYRAMID_MIN_SIDE_PX,
+        PYRAMID_REFINE_RADIUS,
+    );
+    config
+}
+
+/// Levels of the corner search's pyramid (full resolution and half).
+const PYRAMID_LEVELS: u8 = 2;
+/// The pyramid stops before a level whose shorter side would be under this, px (the crate's
+/// default): a small image is searched at full resolution.
+const PYRAMID_MIN_SIDE_PX: usize = 128;
+/// Search radius around each coarse corner, coarse px (the crate's default).
+const PYRAMID_REFINE_RADIUS: u32 = 3;
 
 /// Mean grey level in a 5x5 window around `centre`, `None` outside the image.
 pub(crate) fn mean_around(image: &GrayImage, centre: Point2<f64>) -> Option<f64> {

@@ -10,7 +10,11 @@
 //! steps on the detector thread: the quad search sees a tone-remapped copy of the frame in
 //! which tags and squares do not merge ([`separate_x_junctions`]), and each tag corner is then
 //! refined to the X-junction's saddle point on the original frame (`vision::xcorner`), which is
-//! more precise than the detector's edge fit.
+//! more precise than the detector's edge fit. Boards without the squares are searched, decoded
+//! and edge-fitted on the frame smoothed by the 5-tap binomial kernel ([`binomial_blur`] twice):
+//! sensor noise otherwise breaks the quad search's threshold image into hundreds of small
+//! clusters, each fitted and rejected in turn (most of the detection time), and a symmetric blur
+//! does not move a straight edge.
 //!
 //! Pixel convention: the C library puts pixel centres at `i + 0.5`; this project (OpenCV, ROS,
 //! Kalibr) puts them at integers. The conversion (subtract 0.5 px) happens here, in
@@ -47,7 +51,9 @@ pub struct DetectorOptions {
     pub decimation: f32,
     /// Worker threads inside the C detector.
     pub threads: u8,
-    /// Gaussian blur sigma applied before the quad search (0 = none), px.
+    /// Extra Gaussian blur sigma of the C detector's quad search (0 = none, negative sharpens),
+    /// px. It adds to the fixed pre-filter every frame gets first (a 5-tap binomial twice for
+    /// boards without corner squares, the X-junction separation for Kalibr's squares).
     pub quad_sigma: f32,
     /// Highest accepted hamming distance (bit errors corrected); 0-2.
     pub max_hamming: u32,
@@ -415,7 +421,7 @@ fn detector_thread(
     while let Ok((image, reply)) = jobs.recv() {
         let searched = match &x_junctions {
             Some(_) => separate_x_junctions(&image),
-            None => image.clone(),
+            None => binomial_blur(&binomial_blur(&image)),
         };
         let detections = detector.detect(&searched).map(|tags| {
             tags.into_iter()
@@ -546,18 +552,33 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
             }
         }
     }
+    // Each tile's remap: its `lo`, its range and the range's reciprocal (`(n·m) >> 24` is
+    // `n / range` exactly for every n < 2^16 the remap divides).
+    let remaps: Vec<(u32, u32, u64)> = lo
+        .iter()
+        .zip(&hi)
+        .map(|(&l, &h)| {
+            let r = (h - l) as u32;
+            (
+                l as u32,
+                r,
+                if r == 0 { 0 } else { (1 << 24) / r as u64 + 1 },
+            )
+        })
+        .collect();
     let mut out = binomial_blur(image);
     let buffer: &mut [u8] = &mut out;
-    for y in 0..h {
-        for x in 0..w {
-            let k = (y / TILE) * tw + x / TILE;
-            let (l, r) = (lo[k] as u32, hi[k] as u32 - lo[k] as u32);
+    for (y, row) in buffer.chunks_exact_mut(w).enumerate() {
+        let tiles = &remaps[(y / TILE) * tw..][..tw];
+        for (chunk, &(l, r, m)) in row.chunks_mut(TILE).zip(tiles) {
             if r < MIN_SEPARATION_RANGE {
                 continue;
             }
-            let v = &mut buffer[y * w + x];
-            let t = (*v as u32 - l) * 255 / r;
-            *v = (l + r * curve[t as usize] / 255) as u8;
+            for v in chunk {
+                // The smoothed pixel lies inside its 3x3 tile neighbourhood's range.
+                let t = (((*v as u32 - l) * 255) as u64 * m) >> 24;
+                *v = (l + r * curve[t as usize] / 255) as u8;
+            }
         }
     }
     out
@@ -566,26 +587,43 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
 /// The frame smoothed by the 3x3 binomial kernel (`[1 2 1]/4` each way, sigma ≈ 0.7 px),
 /// edge pixels repeated. A pixel-sharp frame (a board file rendered straight to an image)
 /// has X-junctions exactly on pixel corners, where the quad search fails on some tags; a
-/// camera's own blur is at least this much anyway.
+/// camera's own blur is at least this much anyway. Applied twice (`[1 4 6 4 1]/16`, sigma ≈ 1
+/// px) to a frame of a board without corner squares, before the AprilTag detector: measured on
+/// the Kalibr-style frames of tests/kalibr_print.rs (no squares), the corner error drops from
+/// 0.062 to 0.050 px and the detection takes a third of the instructions.
 fn binomial_blur(image: &GrayImage) -> GrayImage {
     let (w, h) = (image.width() as usize, image.height() as usize);
     let raw = image.as_raw();
+    // Rows: [1 2 1] with the edge pixels repeated.
     let mut rows = vec![0u16; w * h];
-    for y in 0..h {
-        let row = &raw[y * w..(y + 1) * w];
-        for x in 0..w {
-            let left = row[x.saturating_sub(1)] as u16;
-            let right = row[(x + 1).min(w - 1)] as u16;
-            rows[y * w + x] = left + 2 * row[x] as u16 + right;
+    for (src, dst) in raw.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
+        if w < 2 {
+            dst[0] = 4 * src[0] as u16;
+            continue;
+        }
+        dst[0] = 3 * src[0] as u16 + src[1] as u16;
+        dst[w - 1] = 3 * src[w - 1] as u16 + src[w - 2] as u16;
+        for (((d, &l), &c), &r) in dst[1..w - 1]
+            .iter_mut()
+            .zip(&src[..w - 2])
+            .zip(&src[1..w - 1])
+            .zip(&src[2..])
+        {
+            *d = l as u16 + 2 * c as u16 + r as u16;
         }
     }
+    // Columns, over whole rows at a time.
     let mut out = image.clone();
     let buffer: &mut [u8] = &mut out;
-    for y in 0..h {
+    for (y, dst) in buffer.chunks_exact_mut(w).enumerate() {
         let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
-        for x in 0..w {
-            let sum = rows[up * w + x] + 2 * rows[y * w + x] + rows[down * w + x];
-            buffer[y * w + x] = ((sum + 8) / 16) as u8;
+        let (up, mid, down) = (
+            &rows[up * w..][..w],
+            &rows[y * w..][..w],
+            &rows[down * w..][..w],
+        );
+        for (((d, &a), &b), &c) in dst.iter_mut().zip(up).zip(mid).zip(down) {
+            *d = ((a + 2 * b + c + 8) / 16) as u8;
         }
     }
     out

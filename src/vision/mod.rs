@@ -1,9 +1,10 @@
 //! The calibration target: the board of any kind (`target`: aprilgrid, ChArUco or chessboard,
 //! and its detector), the aprilgrid specification (`board`), the AprilTag family tables it is
 //! printed from (`family`), tag detection on a dedicated thread (`detect`), ChArUco boards
-//! (`charuco`), plain chessboards (`chessboard`), sub-pixel corner refinement for ChArUco and chessboard corners (`subpix`), saddle-point
-//! refinement of the X-junctions of Kalibr's corner squares (`xcorner`) and
-//! the board pose `T_camera_target` by PnP with lens distortion (`pnp`).
+//! (`charuco`), plain chessboards (`chessboard`), sub-pixel corner refinement for ChArUco and
+//! chessboard corners (`subpix`), saddle-point refinement of the X-junctions of Kalibr's corner
+//! squares (`xcorner`), a frame's sharpness (`sharpness`), printable boards (`print`) and the
+//! board pose `T_camera_target` by PnP with lens distortion (`pnp`).
 //!
 //! Frames: `target` is the board frame, x to the right and y up as printed, z out of the
 //! printed face; its origin is the outer bottom-left corner of tag 0's black square (aprilgrid),
@@ -23,12 +24,12 @@ pub mod family;
 mod ffi;
 pub mod pnp;
 pub mod print;
-pub mod print_target;
+pub mod sharpness;
 pub mod subpix;
 pub mod target;
 pub mod xcorner;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub use board::{Board, BoardExtent, BoardTag};
 pub use detect::{BoardDetection, DetectorOptions, RejectedTag, TagDetector, TagObservation};
@@ -154,4 +155,17 @@ pub enum TargetError {
     /// The intrinsics file is unusable.
     #[error(transparent)]
     Camera(#[from] CameraModelError),
+}
+
+impl TargetError {
+    /// Turns a board builder's `(key, expected, found)` into [`TargetError::BadBoard`] naming
+    /// the board's source `path` (a file, or `<print>`).
+    pub(crate) fn bad_board(path: &Path) -> impl Fn((String, String, String)) -> TargetError + '_ {
+        move |(key, expected, found)| TargetError::BadBoard {
+            path: path.to_path_buf(),
+            key,
+            expected,
+            found,
+        }
+    }
 }

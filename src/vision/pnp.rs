@@ -12,8 +12,8 @@
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
-    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3, SymmetricEigen,
-    Translation3, UnitQuaternion, Vector3, Vector6, U6,
+    storage::Owned, Dyn, Matrix3, Matrix6, OMatrix, OVector, Point2, Point3, Translation3,
+    UnitQuaternion, Vector3, Vector6, U6,
 };
 
 use super::board::Board;
@@ -21,7 +21,8 @@ use super::detect::BoardDetection;
 use super::target::AsTarget;
 use super::TargetError;
 use crate::camera_model::CameraModel;
-use crate::geometry::{project_to_rotation, Pose};
+use crate::geometry::homography::{homography, pose_from_homography};
+use crate::geometry::Pose;
 
 /// Ratio of best to second-best RMS above which a lone tag's pose counts as ambiguous.
 pub const AMBIGUITY_WARN_RATIO: f64 = 0.6;
@@ -156,74 +157,15 @@ pub fn reproject(
         .collect()
 }
 
-/// DLT homography from board-plane points to normalised image points (Hartley-normalised),
-/// decomposed into a rotation and translation.
+/// The board pose from the homography of board-plane points to normalised image points.
 fn planar_pose_from_homography(points: &[(Point3<f64>, Point2<f64>)]) -> Result<Pose, TargetError> {
-    let normaliser = |pts: &mut dyn Iterator<Item = (f64, f64)>| {
-        let pts: Vec<(f64, f64)> = pts.collect();
-        let n = pts.len() as f64;
-        let (mx, my) = pts
-            .iter()
-            .fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));
-        let spread = pts
-            .iter()
-            .map(|p| ((p.0 - mx).powi(2) + (p.1 - my).powi(2)).sqrt())
-            .sum::<f64>()
-            / n;
-        let s = if spread > 0.0 {
-            std::f64::consts::SQRT_2 / spread
-        } else {
-            1.0
-        };
-        Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
-    };
-    let t_board = normaliser(&mut points.iter().map(|(p, _)| (p.x, p.y)));
-    let t_image = normaliser(&mut points.iter().map(|(_, q)| (q.x, q.y)));
-    let mut ata = OMatrix::<f64, nalgebra::U9, nalgebra::U9>::zeros();
-    for (p, q) in points {
-        let a = t_board * Vector3::new(p.x, p.y, 1.0);
-        let b = t_image * Vector3::new(q.x, q.y, 1.0);
-        let rows = [
-            [a.x, a.y, 1.0, 0.0, 0.0, 0.0, -b.x * a.x, -b.x * a.y, -b.x],
-            [0.0, 0.0, 0.0, a.x, a.y, 1.0, -b.y * a.x, -b.y * a.y, -b.y],
-        ];
-        for row in rows {
-            for i in 0..9 {
-                for j in 0..9 {
-                    ata[(i, j)] += row[i] * row[j];
-                }
-            }
-        }
-    }
-    let eigen = SymmetricEigen::new(ata);
-    let smallest = eigen.eigenvalues.imin();
-    let h = eigen.eigenvectors.column(smallest);
-    let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
-    let t_image_inverse = t_image.try_inverse().ok_or(TargetError::PoseFailed {
-        reason: "degenerate image points",
-    })?;
-    let mut homography = t_image_inverse * hn * t_board;
-    let scale = 2.0 / (homography.column(0).norm() + homography.column(1).norm());
-    if !scale.is_finite() {
-        return Err(TargetError::PoseFailed {
-            reason: "degenerate homography (collinear corners?)",
-        });
-    }
-    homography *= scale;
-    // The board must lie in front of the camera.
-    if homography[(2, 2)] < 0.0 {
-        homography = -homography;
-    }
-    let r1: Vector3<f64> = homography.column(0).into();
-    let r2: Vector3<f64> = homography.column(1).into();
-    let t: Vector3<f64> = homography.column(2).into();
-    let approx = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
-    let rotation = project_to_rotation(&approx)
-        .filter(|_| t.iter().all(|v| v.is_finite()))
+    let (plane, image): (Vec<(f64, f64)>, Vec<Point2<f64>>) =
+        points.iter().map(|(p, q)| ((p.x, p.y), *q)).unzip();
+    homography(&plane, &image)
+        .and_then(|h| pose_from_homography(&h, &Matrix3::identity()))
         .ok_or(TargetError::PoseFailed {
-            reason: "non-finite homography decomposition",
-        })?;
-    Ok(Pose::from_parts(Translation3::from(t), rotation))
+            reason: "degenerate homography (collinear corners?)",
+        })
 }
 
 /// The other planar solution: the board normal reflected about the line of sight to the

@@ -79,12 +79,7 @@ impl Target {
     /// Parses board YAML text; `path` names the source in errors.
     pub fn from_yaml_str(text: &str, path: &Path) -> Result<Self, TargetError> {
         let kind: Kind = serde_yaml_ng::from_str(text).unwrap_or(Kind { target_type: None });
-        let bad = |(key, expected, found): (String, String, String)| TargetError::BadBoard {
-            path: path.to_path_buf(),
-            key,
-            expected,
-            found,
-        };
+        let bad = TargetError::bad_board(path);
         match kind.target_type.as_deref() {
             Some("charuco") => Ok(Target::Charuco(
                 parse::<CharucoFile>(text, path)?.build().map_err(bad)?,

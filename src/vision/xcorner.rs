@@ -11,10 +11,12 @@
 //! checks that a point looks like an X-junction at all (four alternating sectors on a ring).
 //!
 //! Pixel convention: the project's (OpenCV's), pixel `(u, v)` has its centre at integer
-//! coordinates. Depends on nothing else of ours (the `image` and `nalgebra` crates only).
+//! coordinates. Depends on `vision::subpix` (the bilinear sampler) and nothing else of ours.
 
 use image::GrayImage;
 use nalgebra::{Matrix6, Point2, Vector6};
+
+use super::subpix;
 
 /// Steps taken at most by [`refine_saddle`].
 const MAX_ITERATIONS: usize = 20;
@@ -46,32 +48,54 @@ pub fn refine_saddle(
     let sigma_smooth = half_window as f64 / 2.0;
     let pad = (3.0 * sigma_smooth).ceil() as i64;
     let mut p = initial;
-    // The smoothed patch around the pixel nearest the estimate, kept while that pixel stays.
-    let mut cached: Option<((i64, i64), Patch)> = None;
+    // The smoothed image around the estimate, PATCH_SLACK px wider than the window each way:
+    // the estimate usually moves a pixel or two, and the patch is computed again only when
+    // the window leaves it (a smoothed pixel does not depend on the patch it is part of).
+    let mut cached: Option<Patch> = None;
     for _ in 0..MAX_ITERATIONS {
         let (cx, cy) = (p.x.round() as i64, p.y.round() as i64);
-        let patch = match cached {
-            Some((at, patch)) if at == (cx, cy) => patch,
-            _ => Patch::smoothed(image, cx, cy, r, pad, sigma_smooth)?,
+        // The window and its smoothing margin must lie inside the image.
+        let outer = r + pad;
+        if cx - outer < 0
+            || cy - outer < 0
+            || cx + outer >= image.width() as i64
+            || cy + outer >= image.height() as i64
+        {
+            return None;
+        }
+        let patch = match cached.take() {
+            Some(patch) if patch.covers(cx, cy, r) => patch,
+            _ => Patch::smoothed(image, cx, cy, r, PATCH_SLACK, pad, sigma_smooth),
         };
-        let mut normal = Matrix6::<f64>::zeros();
-        let mut rhs = Vector6::<f64>::zeros();
-        for dy in -r..=r {
-            for dx in -r..=r {
-                // Offsets from the current estimate.
-                let x = (cx + dx) as f64 - p.x;
-                let y = (cy + dy) as f64 - p.y;
+        // Offsets from the current estimate of the patch's columns and rows, and their
+        // Gaussian factors (the weight is separable but for the taper).
+        let inv_two_var = 1.0 / (2.0 * sigma_weight * sigma_weight);
+        let offsets = |c: i64, at: f64| -> Vec<(f64, f64)> {
+            (-r..=r)
+                .map(|d| {
+                    let t = (c + d) as f64 - at;
+                    (t, (-t * t * inv_two_var).exp())
+                })
+                .collect()
+        };
+        let (columns, rows) = (offsets(cx, p.x), offsets(cy, p.y));
+        // The normal equations of the fit in the basis (x², xy, y², x, y, 1) need only the
+        // weighted moments Σ w·xⁱ·yʲ (i + j ≤ 4) and Σ w·v·xⁱ·yʲ (i + j ≤ 2).
+        let mut m = Moments::default();
+        for (dy, &(y, gy)) in (-r..).zip(&rows) {
+            for (dx, &(x, gx)) in (-r..).zip(&columns) {
                 // A Gaussian tapered to zero at `reach`: the window is round and has no edge,
                 // so the pixels it takes in are balanced about the estimate.
                 let d2 = x * x + y * y;
-                let taper = (1.0 - d2 / (reach * reach)).max(0.0);
-                let w = (-d2 / (2.0 * sigma_weight * sigma_weight)).exp() * taper * taper;
-                let basis = Vector6::new(x * x, x * y, y * y, x, y, 1.0);
-                normal += w * basis * basis.transpose();
-                rhs += w * patch.at(dx, dy) * basis;
+                let taper = 1.0 - d2 / (reach * reach);
+                if taper <= 0.0 {
+                    continue;
+                }
+                m.add(x, y, gx * gy * taper * taper, patch.at(cx + dx, cy + dy));
             }
         }
-        cached = Some(((cx, cy), patch));
+        cached = Some(patch);
+        let (normal, rhs) = m.normal_equations();
         let q = normal.cholesky()?.solve(&rhs);
         let (a, b, c, d, e) = (q[0], q[1], q[2], q[3], q[4]);
         // Stationary point of the quadric: [2a b; b 2c]·s = -[d; e]; a saddle needs det < 0.
@@ -95,6 +119,42 @@ pub fn refine_saddle(
     None
 }
 
+/// Weighted moments of the pixels of a quadric fit: `w[i][j] = Σ w·xⁱ·yʲ` (i + j ≤ 4) and
+/// `v[i][j] = Σ w·value·xⁱ·yʲ` (i + j ≤ 2).
+#[derive(Default)]
+struct Moments {
+    w: [[f64; 5]; 5],
+    v: [[f64; 3]; 3],
+}
+
+impl Moments {
+    fn add(&mut self, x: f64, y: f64, weight: f64, value: f64) {
+        let mut wx = weight;
+        for i in 0..5 {
+            let mut wxy = wx;
+            for j in 0..5 - i {
+                self.w[i][j] += wxy;
+                if i + j <= 2 {
+                    self.v[i][j] += wxy * value;
+                }
+                wxy *= y;
+            }
+            wx *= x;
+        }
+    }
+
+    /// The normal matrix and right-hand side of the fit in the basis (x², xy, y², x, y, 1).
+    fn normal_equations(&self) -> (Matrix6<f64>, Vector6<f64>) {
+        const POWERS: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
+        let normal = Matrix6::from_fn(|a, b| {
+            let ((ia, ja), (ib, jb)) = (POWERS[a], POWERS[b]);
+            self.w[ia + ib][ja + jb]
+        });
+        let rhs = Vector6::from_fn(|a, _| self.v[POWERS[a].0][POWERS[a].1]);
+        (normal, rhs)
+    }
+}
+
 /// Whether `at` (px) looks like an X-junction on a ring of `radius` px: going round it, the
 /// intensity (bilinear) crosses its mean exactly four times, opposite sectors agree, and the
 /// two bright and two dark sectors differ by at least `min_contrast` grey levels. A plain
@@ -104,10 +164,9 @@ pub fn is_x_junction(image: &GrayImage, at: Point2<f64>, radius: f64, min_contra
     let mut ring = [0.0; SAMPLES];
     for (k, value) in ring.iter_mut().enumerate() {
         let angle = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
-        match bilinear(
+        match subpix::grey_at(
             image,
-            at.x + radius * angle.cos(),
-            at.y + radius * angle.sin(),
+            Point2::new(at.x + radius * angle.cos(), at.y + radius * angle.sin()),
         ) {
             Some(v) => *value = v,
             None => return false,
@@ -133,81 +192,85 @@ pub fn is_x_junction(image: &GrayImage, at: Point2<f64>, radius: f64, min_contra
     contrast >= min_contrast && asymmetry < 0.25 * contrast
 }
 
-/// Bilinear intensity at `(x, y)` (pixel centres at integers), `None` outside the image.
-fn bilinear(image: &GrayImage, x: f64, y: f64) -> Option<f64> {
-    let (x0, y0) = (x.floor(), y.floor());
-    if x0 < 0.0 || y0 < 0.0 || x0 + 1.0 >= image.width() as f64 || y0 + 1.0 >= image.height() as f64
-    {
-        return None;
-    }
-    let (fx, fy) = (x - x0, y - y0);
-    let (i, j) = (x0 as u32, y0 as u32);
-    let v = |u: u32, w: u32| image.get_pixel(u, w)[0] as f64;
-    Some(
-        (1.0 - fy) * ((1.0 - fx) * v(i, j) + fx * v(i + 1, j))
-            + fy * ((1.0 - fx) * v(i, j + 1) + fx * v(i + 1, j + 1)),
-    )
-}
+/// Extra smoothed pixels a patch holds on each side of the fit window.
+const PATCH_SLACK: i64 = 2;
 
-/// A Gaussian-smoothed square patch of half-size `r` around `(cx, cy)`.
+/// The Gaussian-smoothed image over a rectangle of pixels (image coordinates).
 struct Patch {
-    r: i64,
+    x0: i64,
+    y0: i64,
+    x1: i64,
+    y1: i64,
     values: Vec<f64>,
 }
 
 impl Patch {
-    /// `None` when the patch and its smoothing margin `pad` leave the image.
+    /// The smoothed image over the square of half-size `r` around `(cx, cy)`, widened by
+    /// `slack` pixels each way as far as the image allows with the smoothing margin `pad`. The
+    /// caller checks that the square itself with its margin lies inside the image.
     fn smoothed(
         image: &GrayImage,
         cx: i64,
         cy: i64,
         r: i64,
+        slack: i64,
         pad: i64,
         sigma: f64,
-    ) -> Option<Patch> {
-        let outer = r + pad;
-        if cx - outer < 0
-            || cy - outer < 0
-            || cx + outer >= image.width() as i64
-            || cy + outer >= image.height() as i64
-        {
-            return None;
-        }
+    ) -> Patch {
+        let (w, h) = (image.width() as i64, image.height() as i64);
+        let x0 = (cx - r - slack).max(pad);
+        let y0 = (cy - r - slack).max(pad);
+        let x1 = (cx + r + slack).min(w - 1 - pad);
+        let y1 = (cy + r + slack).min(h - 1 - pad);
         let kernel: Vec<f64> = (-pad..=pad)
             .map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp())
             .collect();
         let total: f64 = kernel.iter().sum();
         let kernel: Vec<f64> = kernel.iter().map(|k| k / total).collect();
-        let raw = |dx: i64, dy: i64| image.get_pixel((cx + dx) as u32, (cy + dy) as u32)[0] as f64;
-        // Rows first (over the padded height), then columns.
-        let rows_side = (2 * outer + 1) as usize;
-        let side = (2 * r + 1) as usize;
-        let mut horizontal = vec![0.0; rows_side * side];
-        for (row, dy) in (-outer..=outer).enumerate() {
-            for (col, dx) in (-r..=r).enumerate() {
-                horizontal[row * side + col] = kernel
-                    .iter()
-                    .zip(-pad..=pad)
-                    .map(|(k, o)| k * raw(dx + o, dy))
-                    .sum();
+        let raw = image.as_raw();
+        let (cols, rows) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
+        let taps = kernel.len();
+        // Rows first (over the padded height), then columns; each sum runs over the kernel
+        // from its first tap.
+        let mut horizontal = vec![0.0; (rows + taps - 1) * cols];
+        for (row, y) in (y0 - pad..=y1 + pad).enumerate() {
+            let line = &raw[(y * w + x0 - pad) as usize..][..cols + taps - 1];
+            for (col, out) in horizontal[row * cols..][..cols].iter_mut().enumerate() {
+                let mut sum = 0.0;
+                for (k, &v) in kernel.iter().zip(&line[col..col + taps]) {
+                    sum += k * f64::from(v);
+                }
+                *out = sum;
             }
         }
-        let mut values = vec![0.0; side * side];
-        for row in 0..side {
-            for col in 0..side {
-                values[row * side + col] = kernel
-                    .iter()
-                    .enumerate()
-                    .map(|(o, k)| k * horizontal[(row + o) * side + col])
-                    .sum();
+        let mut values = vec![0.0; rows * cols];
+        for row in 0..rows {
+            for col in 0..cols {
+                let mut sum = 0.0;
+                for (o, k) in kernel.iter().enumerate() {
+                    sum += k * horizontal[(row + o) * cols + col];
+                }
+                values[row * cols + col] = sum;
             }
         }
-        Some(Patch { r, values })
+        Patch {
+            x0,
+            y0,
+            x1,
+            y1,
+            values,
+        }
     }
 
-    fn at(&self, dx: i64, dy: i64) -> f64 {
-        let side = 2 * self.r + 1;
-        self.values[((dy + self.r) * side + dx + self.r) as usize]
+    /// Whether the square of half-size `r` around `(cx, cy)` lies inside the patch.
+    fn covers(&self, cx: i64, cy: i64, r: i64) -> bool {
+        cx - r >= self.x0 && cy - r >= self.y0 && cx + r <= self.x1 && cy + r <= self.y1
+    }
+
+    /// The smoothed value at pixel `(x, y)` (inside the patch).
+    fn at(&self, x: i64, y: i64) -> f64 {
+        let cols = self.x1 - self.x0 + 1;
+        self.values[((y - self.y0) * cols + x - self.x0) as usize]
     }
 }
 

@@ -35,7 +35,8 @@ class Handeye:
         )
         self.lines = []
         self._queue = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def _read(self):
         for line in self.proc.stdout:
@@ -54,7 +55,11 @@ class Handeye:
                 return m.group(1)
 
     def wait(self, timeout=180):
-        return self.proc.wait(timeout=timeout)
+        """The exit code, once the process has ended and everything it printed is read (the
+        reader may still be behind when the process exits)."""
+        code = self.proc.wait(timeout=timeout)
+        self._reader.join(timeout=30)
+        return code
 
     def enter(self):
         """Presses Enter on its stdin (ends a `--console-wait` / `--wait` linger)."""

@@ -42,8 +42,25 @@ with sync_playwright() as p:
         page.wait_for_function("+document.getElementById('frame').dataset.count >= 1", timeout=60000)
         accepted = 0
         refused_close = False
+        axis_seen = False
         while accepted < captures:
             page.wait_for_function("document.getElementById('suggestion').textContent !== ''", timeout=60000)
+            if accepted >= 1 and not axis_seen:
+                # After a capture the suggestion's rotation axis is a target on the sphere view:
+                # an orange ring drawn on the canvas where the axis lands.
+                page.wait_for_function("document.getElementById('axes').dataset.target !== ''", timeout=60000)
+                x, y = map(float, page.eval_on_selector("#axes", "c => c.dataset.target").split(","))
+                assert 0 <= x <= 150 and 0 <= y <= 150, (x, y)
+                orange = page.evaluate(
+                    """([x, y]) => { const d = document.getElementById('axes').getContext('2d')
+                         .getImageData(Math.round(x) - 10, Math.round(y) - 10, 21, 21).data;
+                       let n = 0; for (let i = 0; i < d.length; i += 4)
+                         if (d[i] > 150 && d[i + 1] > 100 && d[i + 1] < 190 && d[i + 2] < 90) n++;
+                       return n; }""",
+                    [x, y],
+                )
+                assert orange >= 10, f"no target drawn at the suggested axis ({x}, {y}): {orange} orange pixels"
+                axis_seen = True
             n = log_count(page)
             page.click("#goto")
             wait_log(page, n, "at the suggested view|not sent|no suggestion")
@@ -58,6 +75,7 @@ with sync_playwright() as p:
                     page.click("#capture")
                     assert "too close" in wait_log(page, n, r"accepted|refused|too close|blurred")
                     refused_close = True
+        assert axis_seen or captures < 2
         assert page.evaluate(js_count("#plan tr[data-state=captured]")) == captures
         page.wait_for_function("document.getElementById('estimate').dataset.samples >= 3", timeout=60000)
         if shots:

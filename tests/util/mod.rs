@@ -1,4 +1,4 @@
-//! Shared by the integration tests and the session benchmark: copies of the repo's cell configs
+//! Shared by the integration tests and the benchmarks: copies of the repo's cell configs
 //! with their relative paths made absolute and a few keys edited.
 
 #![allow(dead_code)]
@@ -6,6 +6,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use handeye::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
+use handeye::cell::PreparedCell;
 use handeye::geometry::{translation_distance, Pose};
 
 /// The crate root.
@@ -19,19 +24,50 @@ pub fn handeye() -> Command {
 }
 
 /// A public data set folder, or `None` (with the reason printed) when it is absent. The data
-/// sets live in `../shared/datasets` beside the crate; `HANDEYE_DATASETS` points elsewhere (a
-/// worktree whose parent has no `shared/`).
+/// sets live in `../shared/datasets` beside the crate; a clone made elsewhere from a local
+/// checkout (CI clones main into a scratch folder) finds them beside that checkout, its
+/// `origin`; `HANDEYE_DATASETS` points anywhere else.
 pub fn dataset(name: &str) -> Option<PathBuf> {
-    let root = std::env::var_os("HANDEYE_DATASETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join("../shared/datasets"));
-    let path = root.join(name);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!("SKIP: {} is absent", path.display());
-        None
+    let roots: Vec<PathBuf> = match std::env::var_os("HANDEYE_DATASETS") {
+        Some(root) => vec![PathBuf::from(root)],
+        None => std::iter::once(repo())
+            .chain(local_origin())
+            .map(|checkout| checkout.join("../shared/datasets"))
+            .collect(),
+    };
+    if let Some(path) = roots
+        .iter()
+        .map(|root| root.join(name))
+        .find(|p| p.exists())
+    {
+        return Some(path);
     }
+    let tried: Vec<String> = roots
+        .iter()
+        .map(|root| root.join(name).display().to_string())
+        .collect();
+    say_skip(&format!("data set absent (looked in {})", tried.join(", ")));
+    None
+}
+
+/// The checkout this crate was cloned from, when its `origin` is a folder on this machine.
+fn local_origin() -> Option<PathBuf> {
+    let output = Command::new("git")
+        .arg("-C")
+        .arg(repo())
+        .args(["remote", "get-url", "origin"])
+        .output()
+        .ok()?;
+    let url = String::from_utf8(output.stdout).ok()?;
+    let path = PathBuf::from(url.trim().trim_start_matches("file://"));
+    (output.status.success() && path.is_dir()).then_some(path)
+}
+
+/// Prints why a test skips where a passing run shows it too: straight to stderr, past the test
+/// harness's capture (which keeps `eprintln!` of a passing test out of the log).
+fn say_skip(why: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "SKIP: {why}");
 }
 
 /// How far `a` is from `b`: translation (mm) and rotation angle (degrees).
@@ -128,5 +164,41 @@ pub fn skip(why: &str) {
         std::env::var_os("HANDEYE_REQUIRE_TOOLS").is_none(),
         "HANDEYE_REQUIRE_TOOLS is set but the test would skip: {why}"
     );
-    eprintln!("SKIP: {why}");
+    say_skip(why);
+}
+
+/// Prints the run's notes to stderr and nothing else; refuses to move a real arm (a run that
+/// needs a person's confirmation is not what a test means to run).
+pub struct QuietObserver;
+
+impl RunObserver for QuietObserver {
+    fn confirm_motion(
+        &mut self,
+        _: &PreparedCell,
+        _: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        Err("no one to confirm".into())
+    }
+    fn note(&mut self, message: &str) {
+        eprintln!("note: {message}");
+    }
+}
+
+/// `handeye run --yes` of the cell `config` into the new session folder `out` (a mock
+/// controller's arm moves without asking).
+pub fn new_run(config: &Path, out: &Path) -> RunRequest {
+    RunRequest {
+        config: Some(config.to_path_buf()),
+        target: SessionTarget::New(out.to_path_buf()),
+        motion_confirmed: true,
+        accept_changed: false,
+        stop: Arc::new(AtomicBool::new(false)),
+    }
+}
+
+/// A new session of the cell `config` run into `out` in-process and solved, as `handeye run
+/// --yes` does.
+pub fn run_cell(config: &Path, out: &Path) -> CellRun {
+    handeye::cell::run::run(&new_run(config, out), &mut QuietObserver)
+        .unwrap_or_else(|e| panic!("run of {}: {e}", config.display()))
 }

@@ -109,39 +109,6 @@ pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, Stri
     Ok(decoded.to_luma8())
 }
 
-/// Variance of the Laplacian (4-neighbour), higher is sharper: evaluated at every other pixel of
-/// every other row (the full-resolution Laplacian, a quarter of the positions: the same
-/// statistic at a quarter of the cost, which matters over hundreds of standing 720p frames).
-pub fn sharpness(image: &GrayImage) -> f64 {
-    let (w, h) = (image.width() as usize, image.height() as usize);
-    if w < 3 || h < 3 {
-        return 0.0;
-    }
-    let p = image.as_raw();
-    let (mut sum, mut sum2, mut n) = (0f64, 0f64, 0f64);
-    for y in (1..h - 1).step_by(2) {
-        let mut row_sum = 0i64;
-        let mut row_sum2 = 0i64;
-        let mut count = 0usize;
-        for x in (1..w - 1).step_by(2) {
-            let i = y * w + x;
-            let l = 4 * i32::from(p[i])
-                - i32::from(p[i - 1])
-                - i32::from(p[i + 1])
-                - i32::from(p[i - w])
-                - i32::from(p[i + w]);
-            row_sum += i64::from(l);
-            row_sum2 += i64::from(l * l);
-            count += 1;
-        }
-        sum += row_sum as f64;
-        sum2 += row_sum2 as f64;
-        n += count as f64;
-    }
-    let mean = sum / n;
-    sum2 / n - mean * mean
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -176,14 +143,5 @@ mod tests {
         assert!(e.contains("yuv422"), "{e}");
         let e = raw_to_gray(&raw("mono8", 4, 4, 4, &[0; 10])).unwrap_err();
         assert!(e.contains("needs 16 bytes"), "{e}");
-    }
-
-    #[test]
-    fn sharper_images_score_higher() {
-        let edge = GrayImage::from_fn(20, 20, |x, _| image::Luma([if x < 10 { 0 } else { 200 }]));
-        let soft = GrayImage::from_fn(20, 20, |x, _| {
-            image::Luma([(x as f64 / 19.0 * 200.0) as u8])
-        });
-        assert!(sharpness(&edge) > 10.0 * sharpness(&soft));
     }
 }

@@ -188,7 +188,8 @@ pub struct BagSample {
     pub base_from_flange: Pose,
     /// The image, 8-bit grey.
     pub image: GrayImage,
-    /// Variance of the Laplacian (higher is sharper).
+    /// [`crate::vision::sharpness`]: Laplacian over gradient energy, about 2 for sharp edges,
+    /// lower with blur.
     pub sharpness: f64,
 }
 

@@ -26,9 +26,10 @@ use crate::solve::{solve, Method, SolveOptions};
 use crate::vision::{estimate_board_pose, TargetDetector};
 
 use super::cdr;
-use super::image::{compressed_to_gray, raw_to_gray, sharpness};
+use super::image::{compressed_to_gray, raw_to_gray};
 use super::tf::TfBuffer;
 use super::{BagError, BagOptions, BagSample};
+use crate::vision::sharpness::sharpness;
 
 /// How the arm moved while the bag was recorded.
 #[derive(Debug, Clone, Copy, PartialEq)]

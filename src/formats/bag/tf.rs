@@ -69,32 +69,22 @@ pub struct TfBuffer {
 impl TfBuffer {
     /// Adds one transform (from `/tf_static` when `is_static`).
     pub fn add(&mut self, t: TransformStamped, is_static: bool) {
-        let entry = self.edges.entry(t.child.clone()).or_insert_with(|| {
-            (
-                t.parent.clone(),
-                if is_static {
+        let sample = (t.stamp_ns, t.parent_from_child);
+        match self.edges.get_mut(&t.child) {
+            // One more sample of a known dynamic edge.
+            Some((parent, Edge::Dynamic(samples))) if *parent == t.parent && !is_static => {
+                samples.push(sample);
+            }
+            // A new child, a static value (the latest wins), a child re-parented (the latest
+            // parent wins, as in tf2) or turned static or dynamic: the edge starts again.
+            _ => {
+                let edge = if is_static {
                     Edge::Static(t.parent_from_child)
                 } else {
-                    Edge::Dynamic(Vec::new())
-                },
-            )
-        });
-        // A child re-parented later: the latest parent wins (as in tf2).
-        if entry.0 != t.parent {
-            *entry = (
-                t.parent.clone(),
-                if is_static {
-                    Edge::Static(t.parent_from_child)
-                } else {
-                    Edge::Dynamic(Vec::new())
-                },
-            );
-        }
-        match (&mut entry.1, is_static) {
-            (Edge::Static(p), true) => *p = t.parent_from_child,
-            (Edge::Dynamic(samples), false) => samples.push((t.stamp_ns, t.parent_from_child)),
-            (edge, true) => *edge = Edge::Static(t.parent_from_child),
-            (edge, false) => *edge = Edge::Dynamic(vec![(t.stamp_ns, t.parent_from_child)]),
+                    Edge::Dynamic(vec![sample])
+                };
+                self.edges.insert(t.child, (t.parent, edge));
+            }
         }
     }
 
@@ -151,6 +141,16 @@ impl TfBuffer {
 
     /// Checks that both frames exist and are connected (at no particular time).
     pub fn check_chain(&self, target: &str, source: &str) -> Result<(), TfError> {
+        self.connected_paths(target, source).map(|_| ())
+    }
+
+    /// The paths from `target` and from `source` up to their root, checked to end at the same
+    /// root.
+    fn connected_paths(
+        &self,
+        target: &str,
+        source: &str,
+    ) -> Result<(Vec<String>, Vec<String>), TfError> {
         let a = self.path_to_root(target)?;
         let b = self.path_to_root(source)?;
         let (ra, rb) = (self.root_of(&a, target), self.root_of(&b, source));
@@ -162,14 +162,12 @@ impl TfBuffer {
                 to_root: rb,
             });
         }
-        Ok(())
+        Ok((a, b))
     }
 
     /// `target_from_source` at `stamp_ns` (e.g. `T_base_flange` for `("base", "tool0")`).
     pub fn lookup(&self, target: &str, source: &str, stamp_ns: i64) -> Result<Pose, TfError> {
-        self.check_chain(target, source)?;
-        let a = self.path_to_root(target)?;
-        let b = self.path_to_root(source)?;
+        let (a, b) = self.connected_paths(target, source)?;
         // Drop the common part above the lowest common ancestor.
         let common = a
             .iter()

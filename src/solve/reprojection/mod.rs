@@ -180,7 +180,7 @@ pub struct ReprojectionCalibration {
     /// LM met its tolerance in every round.
     pub converged: bool,
     /// Things a person should know, each with its severity.
-    pub warnings: Vec<Notice>,
+    pub notices: Vec<Notice>,
 }
 
 impl ReprojectionCalibration {
@@ -218,9 +218,9 @@ impl ReprojectionCalibration {
         let mut solver = pose_space.solver.clone();
         solver.iterations += self.evaluations;
         solver.converged &= self.converged;
-        let mut warnings = vec![messages::summary(self)];
-        warnings.extend(self.warnings.iter().cloned());
-        warnings.extend(pose_space.warnings.iter().cloned());
+        let mut notices = vec![messages::summary(self)];
+        notices.extend(self.notices.iter().cloned());
+        notices.extend(pose_space.notices.iter().cloned());
         Calibration {
             setup: self.setup,
             camera_mount: self.camera_mount,
@@ -231,7 +231,7 @@ impl ReprojectionCalibration {
             outliers: pose_space.outliers.clone(),
             dropped: pose_space.dropped.clone(),
             solver,
-            warnings,
+            notices,
         }
     }
 }
@@ -386,14 +386,14 @@ pub fn refine_reprojection(
     let start = Axby::from_mounts(start_camera_mount, start_target_mount);
     let problem = Problem::new(setup, frames, start, camera0, options);
     let (mut problem, mut spent) = fit(problem, options)?;
-    let mut warnings = Vec::new();
+    let mut notices = Vec::new();
     // Without estimation the configured noise stands.
     let mut noise_estimated = false;
     if options.estimate_noise {
         let (p, report) = noise::estimate_and_refit(problem, options, &mut spent)?;
         problem = p;
         noise_estimated = report.estimated;
-        warnings.extend(messages::noise_notes(&report));
+        notices.extend(messages::noise_notes(&report));
     }
     reanchor(&mut problem);
     let s = problem.state();
@@ -425,14 +425,14 @@ pub fn refine_reprojection(
                         Some([0, 1, 2, 3].map(|i| cov[(o + i, o + i)].max(0.0).sqrt()));
                 }
             }
-            None => warnings.push(messages::singular()),
+            None => notices.push(messages::singular()),
         }
     }
 
     let flags = outliers::flag(&problem, &s, &errors, options);
-    warnings.extend(messages::outlier_warnings(frames, &errors, &flags));
+    notices.extend(messages::outlier_warnings(frames, &errors, &flags));
     if !spent.converged {
-        warnings.push(messages::not_converged());
+        notices.push(messages::not_converged());
     }
     let corrected_base_from_flange = if problem.layout.robot > 0 {
         frames
@@ -471,6 +471,6 @@ pub fn refine_reprojection(
         outlier_corners: flags.corners,
         evaluations: spent.evaluations,
         converged: spent.converged,
-        warnings,
+        notices,
     })
 }

@@ -2,12 +2,12 @@
 //! own extent or centred on a sheet of paper, with the scale bar and the board's parameters in
 //! Courier under it.
 //!
-//! Depends on the black runs of its parent ([`print`](super)), the sheets and fit check of
-//! `print/paper.rs`, `vision::board` and `vision::TargetError`.
+//! Depends on the black rectangles of its parent ([`print`](super)), the sheets and fit check
+//! of `print/paper.rs`, `vision::target` and `vision::TargetError`.
 
-use super::super::board::Board;
+use super::super::target::AsTarget;
 use super::super::TargetError;
-use super::black_runs;
+use super::black_rects;
 use super::paper::{extent_size, fits, Sheet, PDF_STRIP_M};
 
 /// Caption font size on a PDF page, pt (Courier: every glyph 0.6 em wide).
@@ -15,16 +15,20 @@ const PDF_FONT_PT: f64 = 7.0;
 /// PostScript points per metre.
 const PT_PER_M: f64 = 72.0 / 0.0254;
 
-/// The printable board as a one-page vector PDF. With `sheet` the page is that sheet, the board
+/// The printable board (any `target_type`) as a one-page vector PDF. With `sheet` the page is that sheet, the board
 /// centred in its printable area (refused if it does not fit: fit it with [`fit_to_paper`]);
 /// without, the page is the board's extent plus the strip. Under the board: a 100 mm (or
 /// 50 mm) scale bar to measure after printing, and the board's parameters in Courier, with the
 /// reminder to print at actual size.
-pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, TargetError> {
+pub fn board_pdf(
+    target: &(impl AsTarget + ?Sized),
+    sheet: Option<&Sheet>,
+) -> Result<Vec<u8>, TargetError> {
     use pdf_writer::{Content, Name, Str};
 
-    let (bw, bh) = extent_size(board);
-    let caption = super::caption(board);
+    let target = target.as_target();
+    let (bw, bh) = extent_size(&target);
+    let caption = super::caption(&target);
     let note = match sheet {
         Some(s) => format!(
             "{}: print at actual size (100 %), not 'fit to page'",
@@ -37,10 +41,10 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
     // Page size and the board's top-left corner on it, m from the page's top-left.
     let (page_w, page_h, left, top) = match sheet {
         Some(s) => {
-            if !fits(board, s) || text_w > s.printable_m().0 + 1e-12 {
+            if !fits(&target, s) || text_w > s.printable_m().0 + 1e-12 {
                 return Err(TargetError::BadBoard {
                     path: "<print>".into(),
-                    key: "tagSize".into(),
+                    key: super::paper::size_keys(&target)[0].0.into(),
                     expected: format!("a board that fits {} (fit it to the paper)", s.describe()),
                     found: format!("{:.0} x {:.0} mm", bw * 1000.0, bh * 1000.0),
                 });
@@ -60,7 +64,7 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
 
     let mut content = Content::new();
     content.set_fill_gray(0.0);
-    for [x, y, w, h] in black_runs(board) {
+    for [x, y, w, h] in black_rects(&target) {
         content.rect(pt(left + x), y_pt(top + y + h), pt(w), pt(h));
     }
     content.fill_nonzero();
@@ -106,7 +110,7 @@ pub fn board_pdf(board: &Board, sheet: Option<&Sheet>) -> Result<Vec<u8>, Target
 
 /// A one-page PDF of `content` (drawn with the Courier font resource `font`) on a page of
 /// `width_pt` x `height_pt` points: the document structure every printable board shares.
-pub(crate) fn one_page_pdf(
+fn one_page_pdf(
     content: pdf_writer::Buf,
     font: pdf_writer::Name,
     width_pt: f32,

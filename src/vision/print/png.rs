@@ -2,21 +2,28 @@
 //! pixels per metre stored in a pHYs chunk so printing at 100 % keeps the true scale, with an
 //! optional overlay of the board frame for documentation.
 //!
-//! Depends on the page geometry of its parent ([`print`](super)), `vision::board`,
+//! Depends on the page geometry of its parent ([`print`](super)), `vision::target`,
 //! `vision::draw`, the `image` crate and (for the pHYs chunk) the `png` crate.
 
 use image::{GrayImage, Luma};
 
-use super::super::board::Board;
 use super::super::draw;
+use super::super::target::{AsTarget, Target};
 use super::super::TargetError;
 use super::{Page, FONT_PIXEL_M};
 
-/// Renders the printable board as an 8-bit grey PNG at `dpi` (50-1200), encoded, with its
-/// resolution stored so printers keep the true scale. `show_frame` overlays the board frame
-/// for documentation (grey axes x and y from the origin, tag ids under the tags, and tag
-/// 0's corner numbers); leave it off for a board to print.
-pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, TargetError> {
+/// Renders the printable board (any `target_type`) as an 8-bit grey PNG at `dpi` (50-1200),
+/// encoded, with its resolution stored so printers keep the true scale. `show_frame` overlays
+/// the board frame for documentation (grey axes x and y from the origin; an aprilgrid's tag ids
+/// under the tags and tag 0's corner numbers; a ChArUco board's or chessboard's corner ids);
+/// leave it off for a board to print.
+pub fn board_png(
+    target: &(impl AsTarget + ?Sized),
+    dpi: f64,
+    show_frame: bool,
+) -> Result<Vec<u8>, TargetError> {
+    let target = target.as_target();
+    let target: &Target = &target;
     if !(50.0..=1200.0).contains(&dpi) {
         return Err(TargetError::BadBoard {
             path: "<print>".into(),
@@ -25,7 +32,7 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
             found: dpi.to_string(),
         });
     }
-    let page = Page::new(board, Some(dpi));
+    let mut page = Page::new(target, Some(dpi));
     let px_per_m = dpi / 0.0254;
     let width = (page.width * px_per_m).ceil() as u32;
     let height = (page.height * px_per_m).ceil() as u32;
@@ -39,14 +46,18 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
             found: format!("{dpi} dpi ({width}x{height} px); use SVG for large boards"),
         });
     }
-    let extent = board.extent();
+    // Centre the board in the raster on a whole pixel, so its edges stay on pixel boundaries
+    // where the board's cells allow and its place follows from the image width alone.
+    let board_px = super::paper::extent_size(target).0 * px_per_m;
+    page.board_left = ((width as f64 - board_px) / 2.0).round() / px_per_m;
+    let extent = target.extent();
     let mut image = GrayImage::from_pixel(width, height, Luma([255]));
     let board_rows = (page.board_height * px_per_m).round() as u32;
     for j in 0..board_rows.min(height) {
         let y = extent.max.y - (j as f64 + 0.5) / px_per_m;
         for i in 0..width {
             let x = extent.min.x + (i as f64 + 0.5) / px_per_m - page.board_left;
-            if board.is_white_at(x, y) == Some(false) {
+            if target.is_white_at(x, y) == Some(false) {
                 image.put_pixel(i, j, Luma([0]));
             }
         }
@@ -102,7 +113,7 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
         Luma([0]),
     );
     if show_frame {
-        draw_frame(&mut image, board, &page, px_per_m);
+        draw_frame(&mut image, target, &page, px_per_m);
     }
     encode_png(&image, px_per_m.round() as u32)
 }
@@ -111,7 +122,7 @@ pub fn board_png(board: &Board, dpi: f64, show_frame: bool) -> Result<Vec<u8>, T
 /// crate's encoder cannot write that chunk; the `png` crate it uses can).
 /// A printable board image as PNG with its resolution (`px_per_m`) in the pHYs chunk, so a
 /// printer or viewer knows its true size.
-pub(crate) fn encode_png(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, TargetError> {
+fn encode_png(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, TargetError> {
     encode_png_with_size(image, px_per_m).map_err(|source| TargetError::Image {
         path: "<board.png>".into(),
         source: image::ImageError::Encoding(image::error::EncodingError::new(
@@ -137,9 +148,10 @@ fn encode_png_with_size(image: &GrayImage, px_per_m: u32) -> Result<Vec<u8>, png
     Ok(encoded)
 }
 
-/// Overlays the board frame: x and y axes from the origin, ids, tag 0's corner order.
-fn draw_frame(image: &mut GrayImage, board: &Board, page: &Page, px_per_m: f64) {
-    let extent = board.extent();
+/// Overlays the board frame: x and y axes from the origin, and the ids the recorded corners
+/// carry (an aprilgrid's tag ids and tag 0's corner order; ChArUco and chessboard corner ids).
+fn draw_frame(image: &mut GrayImage, target: &Target, page: &Page, px_per_m: f64) {
+    let extent = target.extent();
     let pixel = |x: f64, y: f64| {
         nalgebra::Point2::new(
             (x - extent.min.x + page.board_left) * px_per_m - 0.5,
@@ -149,36 +161,45 @@ fn draw_frame(image: &mut GrayImage, board: &Board, page: &Page, px_per_m: f64) 
     let grey = Luma([128]);
     let thickness = (0.0008 * px_per_m).round().max(1.0) as u32;
     let scale = ((0.0004 * px_per_m).round() as u32).max(1);
-    let length = board.pitch() * 0.8 + board.tag_size() * 0.2;
     let glyph = 5.0 * scale as f64;
-    for (end, label) in [((length, 0.0), "X"), ((0.0, length), "Y")] {
+    let label = |image: &mut GrayImage, at: nalgebra::Point2<f64>, text: &str| {
+        draw::text(image, at.x as i64, at.y as i64, scale, text, grey);
+    };
+    let length = match target {
+        Target::Aprilgrid(board) => board.pitch() * 0.8 + board.tag_size() * 0.2,
+        Target::Charuco(c) => c.square_length() * 1.5,
+        Target::Checkerboard(c) => c.col_spacing().min(c.row_spacing()) * 1.5,
+    };
+    for (end, name) in [((length, 0.0), "X"), ((0.0, length), "Y")] {
         let tip = pixel(end.0, end.1);
         draw::line(image, pixel(0.0, 0.0), tip, thickness, grey);
-        let (dx, dy) = if label == "X" {
+        let (dx, dy) = if name == "X" {
             (glyph * 0.6, -glyph * 0.5)
         } else {
             (-glyph * 0.3, -glyph * 1.6)
         };
-        draw::text(
-            image,
-            (tip.x + dx) as i64,
-            (tip.y + dy) as i64,
-            scale,
-            label,
-            grey,
-        );
+        label(image, nalgebra::Point2::new(tip.x + dx, tip.y + dy), name);
     }
+    let Target::Aprilgrid(board) = target else {
+        // ChArUco / chessboard: each corner's id just above and right of it.
+        for (id, _, point) in target.points() {
+            let at = pixel(point.x, point.y);
+            label(
+                image,
+                nalgebra::Point2::new(at.x + glyph * 0.4, at.y - glyph * 1.4),
+                &id.to_string(),
+            );
+        }
+        return;
+    };
     let gap = board.tag_spacing() * board.tag_size();
     for tag in board.tags() {
         let c = tag.corners_in_target[0];
         let at = pixel(c.x, c.y - gap * 0.25);
-        draw::text(
+        label(
             image,
-            at.x as i64 + 2,
-            at.y as i64,
-            scale,
+            nalgebra::Point2::new(at.x + 2.0, at.y),
             &format!("ID {}", tag.id),
-            grey,
         );
     }
     if let Some(tag) = board.tags().first() {
@@ -186,13 +207,10 @@ fn draw_frame(image: &mut GrayImage, board: &Board, page: &Page, px_per_m: f64) 
         let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
         for (k, (corner, (sx, sy))) in tag.corners_in_target.iter().zip(signs).enumerate() {
             let at = pixel(corner.x + sx * offset, corner.y + sy * offset);
-            draw::text(
+            label(
                 image,
-                (at.x - glyph * 0.3) as i64,
-                (at.y - glyph * 0.5) as i64,
-                scale,
+                nalgebra::Point2::new(at.x - glyph * 0.3, at.y - glyph * 0.5),
                 &k.to_string(),
-                grey,
             );
         }
     }
@@ -205,7 +223,8 @@ mod tests {
 
     #[test]
     fn png_is_true_scale_and_carries_its_resolution() {
-        let board = Board::aprilgrid(2, 2, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let board =
+            crate::vision::Board::aprilgrid(2, 2, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
         let png = board_png(&board, 254.0, false).unwrap();
         // 254 dpi = 10 000 px/m: the pHYs chunk says so.
         let at = png.windows(4).position(|w| w == b"pHYs").unwrap();

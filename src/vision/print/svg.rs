@@ -1,14 +1,16 @@
 //! The SVG writer: the printable board as an SVG document in millimetres, black cells as merged
 //! rectangles, with the scale bar and the board's parameters under it.
 //!
-//! Depends on the page geometry of its parent ([`print`](super)) and `vision::board`.
+//! Depends on the page geometry of its parent ([`print`](super)) and `vision::target`.
 
-use super::super::board::Board;
-use super::{black_runs, Page};
+use super::super::target::AsTarget;
+use super::{black_rects, Page};
 
-/// The printable board as an SVG document in millimetres (black cells as merged rectangles).
-pub fn board_svg(board: &Board) -> String {
-    let page = Page::new(board, None);
+/// The printable board (any `target_type`) as an SVG document in millimetres (black cells as
+/// merged rectangles).
+pub fn board_svg(target: &(impl AsTarget + ?Sized)) -> String {
+    let target = target.as_target();
+    let page = Page::new(&target, None);
     let mm = |m: f64| m * 1000.0;
     let mut svg = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.3}mm\" height=\"{h:.3}mm\" \
@@ -16,7 +18,7 @@ pub fn board_svg(board: &Board) -> String {
         w = mm(page.width),
         h = mm(page.height)
     );
-    for [left, top, width, height] in black_runs(board) {
+    for [left, top, width, height] in black_rects(&target) {
         svg.push_str(&format!(
             "<rect x=\"{:.4}\" y=\"{:.4}\" width=\"{:.4}\" height=\"{:.4}\"/>\n",
             mm(page.board_left + left),
@@ -52,7 +54,7 @@ pub fn board_svg(board: &Board) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::TagFamily;
+    use crate::vision::{Board, TagFamily};
 
     #[test]
     fn svg_has_millimetre_page_and_every_tag() {
