@@ -128,6 +128,12 @@ impl ArmTime {
         self.full_plan_estimate_s - self.spent_s()
     }
 
+    /// Whether arm time was measured: a simulated arm that moves instantly
+    /// (`robot.move_duration_s: 0`) spends none, and then nothing was saved either.
+    pub fn measured(&self) -> bool {
+        self.poses == 0 || self.spent_s() > 0.0
+    }
+
     /// The file in a session folder that keeps it (written after the run, read by the report).
     pub const FILE: &'static str = "arm_time.yaml";
 
@@ -140,6 +146,13 @@ impl ArmTime {
 
 impl std::fmt::Display for ArmTime {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if !self.measured() {
+            return write!(
+                f,
+                "arm time: not measured, the {} moves took no time (a simulated arm with robot.move_duration_s: 0); the full {}-pose plan in its given order takes about {:.1} s at the configured limits",
+                self.poses, self.full_plan_poses, self.full_plan_estimate_s
+            );
+        }
         write!(
             f,
             "arm time: {:.1} s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so {:.1} s saved ({:.0} %)",
@@ -700,4 +713,33 @@ fn same_plan(manifest: &session::SessionManifest, plan: &[(Pose, Joints)]) -> bo
                     })
                     .unwrap_or(false)
             })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ArmTime;
+
+    #[test]
+    fn instant_moves_claim_no_saving() {
+        let instant = ArmTime {
+            poses: 8,
+            moving_s: 0.0,
+            settling_s: 0.0,
+            full_plan_poses: 20,
+            full_plan_estimate_s: 28.6,
+        };
+        let text = instant.to_string();
+        assert!(!instant.measured());
+        assert!(
+            text.contains("not measured") && !text.contains("saved"),
+            "{text}"
+        );
+        let real = ArmTime {
+            moving_s: 9.0,
+            settling_s: 1.0,
+            ..instant
+        };
+        assert!(real.measured());
+        assert!(real.to_string().contains("18.6 s saved"), "{real}");
+    }
 }

@@ -309,7 +309,13 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
             h.translation_rms_mm
         );
     }
-    if let Some(a) = &input.arm_time {
+    if let Some(a) = input.arm_time.as_ref().filter(|a| !a.measured()) {
+        let _ = writeln!(
+            html,
+            "<p class=\"armtime\">{}.</p>",
+            escape(&a.to_string().replacen("arm time", "Arm time", 1))
+        );
+    } else if let Some(a) = &input.arm_time {
         let _ = writeln!(
             html,
             "<p class=\"armtime\">Arm time: <span data-key=\"arm_time.spent_s\">{:.1}</span> s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so <span data-key=\"arm_time.saved_s\">{:.1}</span> s saved.</p>",
