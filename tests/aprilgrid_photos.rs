@@ -1,5 +1,7 @@
-//! Real photographs of printed Kalibr aprilgrids (TUM-VI and EuRoC calibration frames, phone
-//! photos of grids on a monitor; `../shared/datasets/aprilgrid_photos`, see its README):
+//! Real photographs of printed Kalibr aprilgrids: the calibration frames the `aprilgrid` crate
+//! tests with (powei-lin/aprilgrid-rs, `tests/data/*.png` and `data/*.png`: TUM-VI and EuRoC
+//! frames, phone photos of grids on a monitor), read from `../shared/datasets/aprilgrid_photos`
+//! (or `$HANDEYE_DATASETS/aprilgrid_photos`) under their own file names:
 //! handeye must find at least 95 % of the tags in view, never fewer than OpenCV's ArUco detector
 //! (set up for Kalibr's 2-cell border) on any frame, and every tag it reports must sit where
 //! its grid neighbours say it should (a misread id would not).

@@ -162,8 +162,29 @@ fn draw_frame(image: &mut GrayImage, target: &Target, page: &Page, px_per_m: f64
     let thickness = (0.0008 * px_per_m).round().max(1.0) as u32;
     let scale = ((0.0004 * px_per_m).round() as u32).max(1);
     let glyph = 5.0 * scale as f64;
+    // Labels stay readable on white paper and on black squares alike (Kalibr's corner squares
+    // sit where tag 0's corner numbers go): dark grey over light pixels, light grey over dark.
     let label = |image: &mut GrayImage, at: nalgebra::Point2<f64>, text: &str| {
-        draw::text(image, at.x as i64, at.y as i64, scale, text, grey);
+        let mut mask = GrayImage::new(draw::text_width(text, scale), 5 * scale);
+        draw::text(&mut mask, 0, 0, scale, text, Luma([255]));
+        let (x0, y0) = (at.x as i64, at.y as i64);
+        for (mx, my, m) in mask.enumerate_pixels() {
+            let (x, y) = (x0 + mx as i64, y0 + my as i64);
+            if m[0] == 0
+                || x < 0
+                || y < 0
+                || x >= image.width() as i64
+                || y >= image.height() as i64
+            {
+                continue;
+            }
+            let under = image.get_pixel(x as u32, y as u32)[0];
+            image.put_pixel(
+                x as u32,
+                y as u32,
+                Luma([if under < 128 { 190 } else { 90 }]),
+            );
+        }
     };
     let length = match target {
         Target::Aprilgrid(board) => board.pitch() * 0.8 + board.tag_size() * 0.2,
