@@ -55,6 +55,8 @@ pub(super) fn serve(
             _ = shutdown => {}
         }
     });
+    // A report read still under way (a blocking task) must not hold the process's exit.
+    runtime.shutdown_timeout(Duration::from_secs(1));
 }
 
 async fn page() -> Html<&'static str> {
