@@ -17,8 +17,7 @@ use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
 
 use crate::camera_model::CameraModel;
-use crate::geometry::{relative_rotation_axis, Pose};
-use crate::session::manual::MIN_AXIS_ANGLE_RAD;
+use crate::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
 use crate::session::{PoseVisit, SharedFrame};
 use crate::setup::{predict, PosePair, Setup};
 use crate::solve::{solve, SolveOptions};

@@ -58,6 +58,10 @@ pub fn rotation_from_matrix(m: &Matrix3<f64>, tol: f64) -> Option<UnitQuaternion
     ))
 }
 
+/// Relative rotations smaller than this (2°) have no meaningful axis: the coverage views and
+/// the hand-guided suggestions leave them out.
+pub const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
+
 /// The axis of the rotation from `earlier` to `later` (`later·earlierᵀ`, in the frame both are
 /// given in), folded onto the upper hemisphere (an axis and its opposite are the same motion),
 /// with its angle, rad; `None` when the angle is at most `min_angle_rad` (no meaningful axis).

@@ -18,7 +18,7 @@ use image::GrayImage;
 
 use crate::camera::Camera;
 use crate::dataset::Dataset;
-use crate::geometry::{relative_rotation_axis, translation_distance, Pose};
+use crate::geometry::{relative_rotation_axis, translation_distance, Pose, MIN_AXIS_ANGLE_RAD};
 use crate::plan::nbv::AdaptivePlanner;
 use crate::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use crate::vision::sharpness::sharpness;
@@ -65,7 +65,8 @@ pub enum ManualEvent<'a> {
         /// The joints that reach it.
         joints: Joints,
         /// The relative-rotation axis it adds (unit, base frame, upper hemisphere): from the
-        /// accepted view nearest in rotation (of those at least [`MIN_AXIS_ANGLE_RAD`] away);
+        /// accepted view nearest in rotation (of those at least
+        /// [`MIN_AXIS_ANGLE_RAD`](crate::geometry::MIN_AXIS_ANGLE_RAD) away);
         /// `None` before the first capture.
         axis: Option<[f64; 3]>,
         /// Predicted worst translation 1-sigma after it, mm.
@@ -126,9 +127,6 @@ impl Default for ManualOptions {
 /// sigma s (at half resolution) about 1/(2·s²): 0.5 refuses blur beyond about 2 px (full
 /// resolution).
 pub const DEFAULT_MIN_SHARPNESS: f64 = 0.5;
-
-/// Smaller relative rotations have no meaningful axis.
-pub const MIN_AXIS_ANGLE_RAD: f64 = 0.035;
 
 /// The axis a view at `base_from_flange` adds: relative to the accepted view nearest in rotation that is
 /// far enough away to have one.

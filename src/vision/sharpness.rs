@@ -57,7 +57,6 @@ pub fn sharpness(image: &GrayImage) -> f64 {
 pub(crate) mod tests {
     use super::*;
 
-    /// A checkerboard of 16 px squares.
     /// A checkerboard of 16 px squares at the contrast `dark`/`light`.
     pub(crate) fn board(dark: u8, light: u8) -> GrayImage {
         GrayImage::from_fn(256, 256, |x, y| {
