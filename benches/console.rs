@@ -47,7 +47,9 @@ fn client(url: String, client_cpu_us: Arc<AtomicU64>) -> std::thread::JoinHandle
             .build()
             .unwrap();
         let messages = runtime.block_on(async {
-            let (mut ws, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+            let (mut ws, _) = tokio_tungstenite::connect_async(util::console_socket(&url))
+                .await
+                .unwrap();
             let mut n = 0;
             while let Some(Ok(_)) = ws.next().await {
                 n += 1;
@@ -76,7 +78,7 @@ fn with_console(config: &Path, out: PathBuf, client_cpu_us: &Arc<AtomicU64>) -> 
         request.stop.clone(),
     )
     .unwrap();
-    let page = client(format!("ws://{}/ws", console.addr()), client_cpu_us.clone());
+    let page = client(console.url(), client_cpu_us.clone());
     assert!(console.wait_for_client(Duration::from_secs(10)));
     let mut quiet = util::QuietObserver;
     let mut observer = ConsoleObserver::new(&mut quiet, &console);

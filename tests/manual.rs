@@ -8,105 +8,14 @@
 
 mod util;
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::process::Stdio;
 
 use futures_util::{SinkExt, StreamExt};
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
 
-/// How long any one step may take (debug build on a loaded 2-core machine).
-const STEP: Duration = Duration::from_secs(60);
-
-/// A `handeye` process serving the console; its stdout and stderr collected.
-struct Live {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-    output: Vec<String>,
-}
-
-impl Live {
-    fn start(args: &[&str], cwd: &Path) -> Live {
-        let mut child = util::handeye()
-            .args(args)
-            .current_dir(cwd)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("handeye starts");
-        let (tx, lines) = mpsc::channel();
-        let stdout = child.stdout.take().expect("piped");
-        let stderr = child.stderr.take().expect("piped");
-        for stream in [
-            Box::new(stdout) as Box<dyn std::io::Read + Send>,
-            Box::new(stderr),
-        ] {
-            let tx = tx.clone();
-            std::thread::spawn(move || {
-                for line in BufReader::new(stream).lines().map_while(Result::ok) {
-                    let _ = tx.send(line);
-                }
-            });
-        }
-        Live {
-            child,
-            lines,
-            output: Vec::new(),
-        }
-    }
-
-    /// The console URL it prints.
-    fn url(&mut self) -> String {
-        let deadline = Instant::now() + STEP;
-        while let Ok(line) = self.lines.recv_timeout(deadline - Instant::now()) {
-            self.output.push(line.clone());
-            if let Some(url) = line.strip_prefix("console: ") {
-                return url.trim().to_string();
-            }
-        }
-        panic!(
-            "no console URL within {STEP:?}:\n{}",
-            self.output.join("\n")
-        );
-    }
-
-    /// Waits for the process to end: its success and everything it printed.
-    fn finish(mut self) -> (bool, String) {
-        let deadline = Instant::now() + STEP;
-        let status = loop {
-            if let Some(status) = self.child.try_wait().expect("waits") {
-                break status;
-            }
-            if Instant::now() >= deadline {
-                let _ = self.child.kill();
-                while let Ok(line) = self.lines.recv_timeout(Duration::from_secs(5)) {
-                    self.output.push(line);
-                }
-                panic!(
-                    "handeye did not end within {STEP:?}:\n{}",
-                    self.output.join("\n")
-                );
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        };
-        // The readers end with the pipes.
-        while let Ok(line) = self.lines.recv_timeout(Duration::from_secs(5)) {
-            self.output.push(line);
-        }
-        (status.success(), self.output.join("\n"))
-    }
-}
-
-impl Drop for Live {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+use util::live::{Live, STEP};
 
 type Ws =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
@@ -118,8 +27,7 @@ struct Page {
 
 impl Page {
     async fn open(url: &str) -> Page {
-        let ws_url = format!("{}ws", url.replace("http://", "ws://"));
-        let (ws, _) = tokio_tungstenite::connect_async(&ws_url)
+        let (ws, _) = tokio_tungstenite::connect_async(util::console_socket(url))
             .await
             .expect("the console accepts a WebSocket");
         Page { ws }

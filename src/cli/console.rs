@@ -35,7 +35,8 @@ pub struct ConsoleArgs {
     /// The console's address (port 0 picks a free one); the URL is printed.
     #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
     pub(super) addr: SocketAddr,
-    /// Allow an address beyond this machine (anyone who reaches it can move the arm).
+    /// Allow an address beyond this machine (anyone who reaches it with the printed URL, whose
+    /// secret it checks, can move the arm).
     #[arg(long)]
     pub(super) public: bool,
     /// Do not ask before the first move of a real arm to a suggested view.
@@ -127,10 +128,11 @@ pub(super) fn start(
     )?;
     if console.is_remote() {
         eprintln!(
-            "WARNING: the console serves on {} — beyond this machine. Anyone who can reach it can STOP the run and, in a manual session, move the arm.",
+            "WARNING: the console serves on {} — beyond this machine. It asks every request for the secret in the URL below: anyone who has that URL can STOP the run and, in a manual session, move the arm. Share it only with the people at the cell.",
             console.addr()
         );
     }
+    // The URL carries the secret the page needs (a new one at every start).
     outln!("console: {}", console.url());
     Ok(console)
 }

@@ -39,7 +39,8 @@ pub struct RunArgs {
     /// 127.0.0.1:8765; port 0 picks a free one); the URL is printed.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye::console::DEFAULT_ADDR)]
     console: Option<std::net::SocketAddr>,
-    /// Allow --console on an address beyond this machine (anyone who reaches it can stop the run).
+    /// Allow --console on an address beyond this machine (anyone who reaches it with the printed
+    /// URL, whose secret it checks, can stop the run).
     #[arg(long, requires = "console")]
     console_public: bool,
     /// After the run, keep serving the console until Enter (or Ctrl-C) so the page can be read.

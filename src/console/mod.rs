@@ -11,11 +11,14 @@
 //! `watch` channel that only ever holds the latest.
 //!
 //! The console serves on a loopback address unless the caller asks for more explicitly
-//! ([`ConsoleOptions::allow_remote`]); STOP sets the run's stop flag — the very flag Ctrl-C sets.
+//! ([`ConsoleOptions::allow_remote`]), and only to requests that name it as their Host, come
+//! from its own page and carry the secret made for this start ([`gate`]); STOP sets the run's
+//! stop flag — the very flag Ctrl-C sets.
 //! Depends on `cell`, `session`, `plan`, `robot`, `vision`, `solve`, `verdict` and the floor.
 
 mod analysis;
 pub mod events;
+mod gate;
 pub mod manual;
 pub mod observer;
 mod server;
@@ -23,7 +26,7 @@ mod server;
 use std::collections::VecDeque;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -48,7 +51,8 @@ pub struct ConsoleOptions {
     /// The address to listen on (port 0: any free port).
     pub addr: SocketAddr,
     /// Serve on a non-loopback address (the page has a STOP button and, for a manual session,
-    /// buttons that move the arm: anyone who can reach it can use them).
+    /// buttons that move the arm: anyone who can reach it and has the URL with its secret can
+    /// use them).
     pub allow_remote: bool,
 }
 
@@ -65,7 +69,7 @@ impl Default for ConsoleOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum ConsoleError {
     /// A non-loopback address without the explicit permission.
-    #[error("console address {addr}: not a loopback address; the console serves only this machine (127.0.0.1, ::1) unless asked: pass --console-public to serve it on {addr} (anyone who reaches it can stop or move the arm)")]
+    #[error("console address {addr}: not a loopback address; the console serves only this machine (127.0.0.1, ::1) unless asked: pass --console-public to serve it on {addr} (anyone who reaches it with the printed URL, secret included, can stop or move the arm)")]
     NotLoopback {
         /// The address asked for.
         addr: SocketAddr,
@@ -97,9 +101,57 @@ pub(crate) struct Hub {
     stop: Arc<AtomicBool>,
     commands: Mutex<mpsc::Sender<Command>>,
     report: Mutex<Option<PathBuf>>,
+    /// Host, Origin and secret checks.
+    gate: gate::Gate,
+    /// Pages (WebSockets) connected or being connected.
+    pages: AtomicUsize,
+    /// Requests refused by the gate (logged in full for the first few only).
+    refusals: AtomicUsize,
+    /// Accepts that failed on our side (out of descriptors, say).
+    accept_failures: AtomicUsize,
+}
+
+/// A page's place among the [`server::MAX_PAGES`]; given back when dropped.
+pub(crate) struct Seat(Arc<Hub>);
+
+impl Drop for Seat {
+    fn drop(&mut self) {
+        self.0.pages.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Whether the `n`-th of a repeated message is logged: the first few, then every thousandth,
+/// so a flood of refused requests cannot flood the terminal.
+fn log_nth(n: usize) -> bool {
+    n <= 5 || n.is_multiple_of(1000)
 }
 
 impl Hub {
+    /// A seat for one more page, unless [`server::MAX_PAGES`] are taken.
+    pub(crate) fn take_seat(self: &Arc<Self>) -> Option<Seat> {
+        let taken = self.pages.fetch_add(1, Ordering::SeqCst);
+        let seat = Seat(self.clone());
+        (taken < server::MAX_PAGES).then_some(seat)
+    }
+
+    /// Notes a request the gate refused.
+    fn refused(&self, refusal: &gate::Refusal) {
+        let n = self.refusals.fetch_add(1, Ordering::Relaxed) + 1;
+        if log_nth(n) {
+            tracing::warn!("console: {refusal} ({n} refused so far)");
+        }
+    }
+
+    /// Notes an accept that failed for a reason of ours.
+    fn accept_failed(&self, error: &std::io::Error) {
+        let n = self.accept_failures.fetch_add(1, Ordering::Relaxed) + 1;
+        if log_nth(n) {
+            tracing::warn!(
+                "console: cannot accept a connection ({error}; {n} so far): the run goes on"
+            );
+        }
+    }
+
     /// How many pages are connected.
     fn clients(&self) -> usize {
         self.events.receiver_count()
@@ -195,6 +247,10 @@ impl Console {
             stop,
             commands: Mutex::new(commands_tx),
             report: Mutex::new(None),
+            gate: gate::Gate::new(addr, options.allow_remote),
+            pages: AtomicUsize::new(0),
+            refusals: AtomicUsize::new(0),
+            accept_failures: AtomicUsize::new(0),
         });
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_io()
@@ -221,9 +277,20 @@ impl Console {
         self.addr
     }
 
-    /// The page's URL.
+    /// The page's URL, with the secret every request must carry.
     pub fn url(&self) -> String {
-        format!("http://{}/", self.addr)
+        format!(
+            "http://{}/?{}={}",
+            self.addr,
+            gate::TOKEN_PARAM,
+            self.hub.gate.token()
+        )
+    }
+
+    /// The secret of this start (in [`Console::url`]; a page passes it on its WebSocket as
+    /// `/ws?token=…`).
+    pub fn token(&self) -> &str {
+        self.hub.gate.token()
     }
 
     /// Whether the console serves beyond this machine.

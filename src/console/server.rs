@@ -2,21 +2,28 @@
 //! (`/report`), on the console's own current-thread runtime. Each page gets the event history,
 //! then live events and the latest frame; a page that falls [`super::LAG`] events behind is
 //! disconnected (it reconnects and catches up) so it can never hold the run back.
+//!
+//! Every request passes the [`Gate`](super::gate::Gate) (Host, Origin, the secret) first. The
+//! server holds at most [`MAX_CONNECTIONS`] connections and [`MAX_PAGES`] pages at a time, gives
+//! a request [`HEADER_TIMEOUT`] to send its headers and a page's message at most
+//! [`MAX_COMMAND_BYTES`]: however many connections a client opens, the run keeps its file
+//! descriptors (further connections wait in the kernel's accept queue).
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use axum::body::Bytes;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::State;
-use axum::http::StatusCode;
+use axum::extract::{Request, State};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::middleware::{self, Next};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use tokio::sync::broadcast::error::RecvError;
-use tokio::sync::watch;
+use tokio::sync::{watch, Semaphore};
 
 use super::events::Command;
 use super::Hub;
@@ -24,13 +31,33 @@ use super::Hub;
 /// The page: one self-contained HTML file (styles and script inline, no external requests).
 const PAGE: &str = include_str!("page.html");
 
+/// Connections open at once (pages, page loads, report reads, and whatever else connects).
+pub(super) const MAX_CONNECTIONS: usize = 64;
+
+/// Pages (WebSockets) connected at once.
+pub(super) const MAX_PAGES: usize = 16;
+
+/// The largest message a page may send: commands are a few dozen bytes.
+pub(super) const MAX_COMMAND_BYTES: usize = 4096;
+
+/// Messages that are no command a page may send before it is dropped.
+const MAX_BAD_MESSAGES: usize = 16;
+
+/// How long a connection may take to send a request's headers (a client that opens connections
+/// and sends nothing gives its slot back after this).
+const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Pause after a failed accept that is not the client's doing (out of file descriptors: the
+/// connections closing meanwhile give some back).
+const ACCEPT_BACKOFF: Duration = Duration::from_millis(50);
+
 /// Serves until `shutdown` fires (or its sender is dropped); then the runtime and every
 /// connection go with it.
 pub(super) fn serve(
     runtime: tokio::runtime::Runtime,
     listener: std::net::TcpListener,
     hub: Arc<Hub>,
-    shutdown: tokio::sync::oneshot::Receiver<()>,
+    mut shutdown: tokio::sync::oneshot::Receiver<()>,
 ) {
     runtime.block_on(async move {
         let listener = match tokio::net::TcpListener::from_std(listener) {
@@ -44,19 +71,84 @@ pub(super) fn serve(
             .route("/", get(page))
             .route("/ws", get(socket))
             .route("/report", get(report))
-            .with_state(hub);
-        let server = std::future::IntoFuture::into_future(axum::serve(listener, app));
-        tokio::select! {
-            result = server => {
-                if let Err(e) = result {
-                    tracing::error!("console: server stopped: {e}");
-                }
-            }
-            _ = shutdown => {}
+            .layer(middleware::from_fn_with_state(hub.clone(), gate))
+            .with_state(hub.clone());
+        let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+        loop {
+            // A free slot first: until one is, connections wait in the kernel's queue and take
+            // no descriptor of ours.
+            let slot = tokio::select! {
+                slot = slots.clone().acquire_owned() => match slot {
+                    Ok(slot) => slot,
+                    Err(_) => break,
+                },
+                _ = &mut shutdown => break,
+            };
+            let stream = tokio::select! {
+                accepted = listener.accept() => match accepted {
+                    Ok((stream, _)) => stream,
+                    Err(e) => {
+                        hub.accept_failed(&e);
+                        tokio::time::sleep(ACCEPT_BACKOFF).await;
+                        continue;
+                    }
+                },
+                _ = &mut shutdown => break,
+            };
+            let app = app.clone();
+            tokio::spawn(async move {
+                let _slot = slot;
+                let mut http = hyper::server::conn::http1::Builder::new();
+                // The deadline also runs while a kept-alive connection waits for its next
+                // request, so an idle one gives its slot back too.
+                http.timer(hyper_util::rt::TokioTimer::new())
+                    .header_read_timeout(HEADER_TIMEOUT);
+                let connection = http
+                    .serve_connection(
+                        hyper_util::rt::TokioIo::new(stream),
+                        hyper_util::service::TowerToHyperService::new(app),
+                    )
+                    .with_upgrades();
+                // A client that goes away mid-request is its own business.
+                let _ = connection.await;
+            });
         }
     });
     // A report read still under way (a blocking task) must not hold the process's exit.
     runtime.shutdown_timeout(Duration::from_secs(1));
+}
+
+/// Every request passes here first: Host, Origin and the secret ([`super::gate`]); what passes
+/// gets headers that keep the page out of caches, frames and Referer lines (its URL holds the
+/// secret).
+async fn gate(State(hub): State<Arc<Hub>>, request: Request, next: Next) -> Response {
+    let headers = request.headers();
+    let text = |name| {
+        headers
+            .get(name)
+            .map(|value: &HeaderValue| value.to_str().unwrap_or("(not text)"))
+    };
+    let verdict = hub.gate.check(
+        text(header::HOST),
+        text(header::ORIGIN),
+        request.uri().query(),
+        headers.contains_key(header::UPGRADE),
+    );
+    if let Err(refusal) = verdict {
+        hub.refused(&refusal);
+        return (refusal.status(), refusal.to_string()).into_response();
+    }
+    let mut response = next.run(request).await;
+    let headers = response.headers_mut();
+    for (name, value) in [
+        (header::CACHE_CONTROL, "no-store"),
+        (header::REFERRER_POLICY, "no-referrer"),
+        (header::X_FRAME_OPTIONS, "DENY"),
+        (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+    ] {
+        headers.insert(name, HeaderValue::from_static(value));
+    }
+    response
 }
 
 async fn page() -> Html<&'static str> {
@@ -88,7 +180,20 @@ async fn report(State(hub): State<Arc<Hub>>) -> Response {
 }
 
 async fn socket(upgrade: WebSocketUpgrade, State(hub): State<Arc<Hub>>) -> Response {
-    upgrade.on_upgrade(move |socket| client(socket, hub))
+    let Some(seat) = hub.take_seat() else {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("{MAX_PAGES} pages are open on this console already: close one"),
+        )
+            .into_response();
+    };
+    upgrade
+        .max_message_size(MAX_COMMAND_BYTES)
+        .max_frame_size(MAX_COMMAND_BYTES)
+        .on_upgrade(move |socket| async move {
+            let _seat = seat;
+            client(socket, hub).await
+        })
 }
 
 /// How long one message may wait for a page's socket to take it: a page that stops reading fills
@@ -127,13 +232,36 @@ async fn client(socket: WebSocket, hub: Arc<Hub>) {
 }
 
 /// The page's commands, until it goes. (A Close from the page is answered by the next read,
-/// which then ends the stream.)
+/// which then ends the stream.) The first message that is no command is logged, shortened; a
+/// page that sends [`MAX_BAD_MESSAGES`] of them, or one larger than [`MAX_COMMAND_BYTES`] (the
+/// socket ends with an error), is dropped.
 async fn read_commands(mut stream: SplitStream<WebSocket>, hub: Arc<Hub>) {
+    let mut bad = 0;
     while let Some(Ok(message)) = stream.next().await {
-        if let Message::Text(text) = message {
-            match serde_json::from_str::<Command>(text.as_str()) {
-                Ok(command) => hub.command(command),
-                Err(e) => tracing::warn!("console: unknown command {text:?}: {e}"),
+        let text = match message {
+            Message::Text(text) => text,
+            Message::Binary(_) => "(binary message)".into(),
+            // Ping, pong and close are the socket's own.
+            _ => continue,
+        };
+        match serde_json::from_str::<Command>(text.as_str()) {
+            Ok(command) => hub.command(command),
+            Err(e) => {
+                bad += 1;
+                if bad == 1 {
+                    // Both shortened: serde's message quotes what it could not read.
+                    tracing::warn!(
+                        "console: a page sent what is no command ({}): {}; further ones from this page are not logged",
+                        super::gate::shortened(text.as_str()),
+                        super::gate::shortened(&e.to_string())
+                    );
+                }
+                if bad == MAX_BAD_MESSAGES {
+                    tracing::warn!(
+                        "console: dropped a page that sent {MAX_BAD_MESSAGES} messages that are no command"
+                    );
+                    return;
+                }
             }
         }
     }

@@ -7,6 +7,7 @@ Usage: console_run.py CONFIG WORKDIR [SCREENSHOT_DIR]   (HANDEYE_BIN names the b
 import os
 import pathlib
 import sys
+from urllib.parse import urljoin
 
 from console_common import Handeye, js_count, launch, sync_playwright
 
@@ -63,8 +64,11 @@ with sync_playwright() as p:
         # Every pose captured: those kept from before the stop and those taken now.
         assert page.evaluate(js_count("#plan tr[data-state=captured]")) == POSES
         assert page.is_visible("#report")
-        report = page.request.get(url + "report")
+        # The page's own report link carries the console's secret; without it the report is
+        # refused.
+        report = page.request.get(urljoin(url, page.get_attribute("#report", "href")))
         assert report.ok and "<html" in report.text().lower()
+        assert page.request.get(urljoin(url, "/report")).status == 401
         if shots:
             page.screenshot(path=str(shots / "console-verdict.png"))
         resume.enter()

@@ -13,6 +13,8 @@ use handeye::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
 use handeye::cell::PreparedCell;
 use handeye::geometry::{translation_distance, Pose};
 
+pub mod live;
+
 /// The crate root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -201,4 +203,23 @@ pub fn new_run(config: &Path, out: &Path) -> RunRequest {
 pub fn run_cell(config: &Path, out: &Path) -> CellRun {
     handeye::cell::run::run(&new_run(config, out), &mut QuietObserver)
         .unwrap_or_else(|e| panic!("run of {}: {e}", config.display()))
+}
+
+/// The WebSocket request a console's own page makes, from the URL the console printed
+/// (`http://ADDR/?token=SECRET`): `/ws` with the secret, and the page's Origin.
+pub fn console_socket(url: &str) -> tokio_tungstenite::tungstenite::handshake::client::Request {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let rest = url
+        .strip_prefix("http://")
+        .unwrap_or_else(|| panic!("not an http:// console URL: {url}"));
+    let (authority, query) = rest
+        .split_once("/?")
+        .unwrap_or_else(|| panic!("the console URL carries no secret: {url}"));
+    let mut request = format!("ws://{authority}/ws?{query}")
+        .into_client_request()
+        .unwrap();
+    request
+        .headers_mut()
+        .insert("Origin", format!("http://{authority}").parse().unwrap());
+    request
 }
