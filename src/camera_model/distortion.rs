@@ -339,9 +339,11 @@ impl Distortion {
                             expected: "a tangential distortion that keeps the image one-to-one"
                                 .to_string(),
                             problem: format!(
-                                "the model folds over at {:.0} px from the principal point, \
-                                 inside the image",
-                                px(self.distort(xn).norm())
+                                "the map stops being one-to-one for rays {:.0} px (undistorted) \
+                                 from the principal point, before the image's farthest corner \
+                                 ({:.0} px away)",
+                                px(r),
+                                px(corner_radius)
                             ),
                         });
                     }
