@@ -45,7 +45,9 @@ pub fn is_temp_name(name: &str) -> bool {
 /// Whether `name` has the form `.<name>.<random><TEMP_SUFFIX>` of [`write_atomic`]'s temporary
 /// files.
 fn is_locked_temp_name(name: &str) -> bool {
-    name.starts_with('.') && name.ends_with(TEMP_SUFFIX) && name.len() > 2 + RANDOM_LEN + TEMP_SUFFIX.len()
+    name.starts_with('.')
+        && name.ends_with(TEMP_SUFFIX)
+        && name.len() > 2 + RANDOM_LEN + TEMP_SUFFIX.len()
 }
 
 /// The start of the names of the temporary files of `destination` (`.<name>.`).
@@ -198,7 +200,10 @@ fn locked_temp_file(folder: &Path, destination: &Path) -> std::io::Result<tempfi
     let mut last_error = None;
     for _ in 0..8 {
         let mut builder = tempfile::Builder::new();
-        builder.prefix(&prefix).suffix(TEMP_SUFFIX).rand_bytes(RANDOM_LEN);
+        builder
+            .prefix(&prefix)
+            .suffix(TEMP_SUFFIX)
+            .rand_bytes(RANDOM_LEN);
         // The kernel applies the umask to the mode asked for at creation, as for `File::create`.
         #[cfg(unix)]
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));

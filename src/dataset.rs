@@ -5,7 +5,7 @@
 //! samples:
 //!   - T_base_flange:   {translation: [..], quaternion: {w: .., x: .., y: .., z: ..}}
 //!     T_camera_target: {translation: [..], rotation_vector: [..]}
-//!     id: pose-03             # optional
+//!     id: pose-03             # optional; text (quote a number: "7"), unique in the file
 //!     weight: 1.0             # optional, > 0
 //! ```
 //!

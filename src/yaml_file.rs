@@ -282,6 +282,15 @@ pub(crate) fn read_text(path: &Path) -> Result<String, FileError> {
     })
 }
 
+/// `source` (an error of opening `path`), or, when `path` runs into a symbolic link loop, an
+/// error saying `symlink loop at <link>`: for errors that carry an `io::Error` as their cause.
+pub fn name_symlink_loop(path: &Path, source: std::io::Error) -> std::io::Error {
+    match symlink_loop(path) {
+        Some(at) => std::io::Error::other(format!("symlink loop at {}", at.display())),
+        None => source,
+    }
+}
+
 /// Where `path` runs into a symbolic link loop: the shortest leading part of it (a folder above
 /// it or the path itself) whose resolution the system gives up on (`ELOOP`); `None` when the
 /// path has no loop. For messages that would otherwise say "not found" or "not a file" of a
@@ -289,9 +298,7 @@ pub(crate) fn read_text(path: &Path) -> Result<String, FileError> {
 pub fn symlink_loop(path: &Path) -> Option<PathBuf> {
     #[cfg(unix)]
     {
-        let loops = |p: &Path| {
-            matches!(std::fs::metadata(p), Err(e) if e.raw_os_error() == Some(libc::ELOOP))
-        };
+        let loops = |p: &Path| matches!(std::fs::metadata(p), Err(e) if e.raw_os_error() == Some(libc::ELOOP));
         if !loops(path) {
             return None;
         }

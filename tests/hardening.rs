@@ -734,7 +734,11 @@ fn dataset_with_ids(dir: &Path, ids: &[&str]) -> PathBuf {
     let samples = write_dataset(dir);
     let mut text = std::fs::read_to_string(&samples).unwrap();
     for id in ids {
-        text = text.replacen("- T_base_flange:", &format!("- id: {id}\n  T_base_flange:"), 1);
+        text = text.replacen(
+            "- T_base_flange:",
+            &format!("- id: {id}\n  T_base_flange:"),
+            1,
+        );
     }
     std::fs::write(&samples, text).unwrap();
     samples
@@ -932,7 +936,10 @@ fn issue25_absurd_distortion_is_refused_by_every_intrinsics_source() {
         .validate(Path::new("camera_info"))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("distortion k1") && e.contains("10000000000.0"), "{e}");
+    assert!(
+        e.contains("distortion k1") && e.contains("10000000000.0"),
+        "{e}"
+    );
     // A model that folds over inside the image (strong barrel k1 alone): refused, saying where.
     let path = write(
         dir.path(),
@@ -1072,7 +1079,9 @@ fn issue25_camera_info_rows_and_cols_must_agree_with_the_data() {
         ),
     ));
     assert!(
-        e.contains("matrix-data.yaml") && e.contains("camera_matrix.data") && e.contains("9 numbers"),
+        e.contains("matrix-data.yaml")
+            && e.contains("camera_matrix.data")
+            && e.contains("9 numbers"),
         "{e}"
     );
 }
@@ -1112,7 +1121,11 @@ fn issue25_garbage_intrinsics_say_what_the_file_is_not() {
         ("docs.yaml", "a: 1\n---\nb: 2\n", "several YAML documents"),
         ("text.yaml", "just some notes\n", "a line of text"),
         ("keys.yaml", "fx: 800\nfy: 800\n", "the keys fx, fy"),
-        ("broken.yaml", "a: [1, 2\n", "not a ROS camera_info or Kalibr camchain YAML"),
+        (
+            "broken.yaml",
+            "a: [1, 2\n",
+            "not a ROS camera_info or Kalibr camchain YAML",
+        ),
     ] {
         let e = load_error(&write(dir.path(), name, text));
         assert!(
@@ -1157,6 +1170,19 @@ fn issue25_symlink_loops_are_named_as_such() {
         e.contains(&format!("symlink loop at {}", a.display())),
         "{e}"
     );
+    // A board file and a ViSP folder behind the loop.
+    let e = Board::load(&a).unwrap_err();
+    assert!(
+        format!("{:#}", anyhow::Error::new(e))
+            .contains(&format!("symlink loop at {}", a.display())),
+        "board"
+    );
+    let e = handeye::formats::import::scan_visp_folder(&a).unwrap_err();
+    assert!(
+        format!("{:#}", anyhow::Error::new(e))
+            .contains(&format!("symlink loop at {}", a.display())),
+        "visp folder"
+    );
     // A session folder that is a loop.
     let (code, stderr) = stderr_of(handeye().arg("replay").arg(&a));
     assert_eq!(code, Some(1), "{stderr}");
@@ -1176,9 +1202,19 @@ fn issue25_export_removes_killed_runs_temp_files_and_spares_a_locked_one() {
     let suffix = handeye::atomic_file::TEMP_SUFFIX;
     let killed: Vec<PathBuf> = ["K1lled", "K2lled"]
         .iter()
-        .map(|r| write(dir.path(), &format!(".tf.launch.{r}{suffix}"), "half an export"))
+        .map(|r| {
+            write(
+                dir.path(),
+                &format!(".tf.launch.{r}{suffix}"),
+                "half an export",
+            )
+        })
         .collect();
-    let live = write(dir.path(), &format!(".tf.launch.L1veXX{suffix}"), "being written");
+    let live = write(
+        dir.path(),
+        &format!(".tf.launch.L1veXX{suffix}"),
+        "being written",
+    );
     let holder = std::fs::File::open(&live).unwrap();
     FileExt::try_lock(&holder).unwrap();
     let (code, stderr) = stderr_of(
@@ -1211,9 +1247,11 @@ fn issue25_export_removes_killed_runs_temp_files_and_spares_a_locked_one() {
     assert_eq!(code, Some(0), "{stderr}");
     assert!(!live.exists() && stderr.contains("removed"), "{stderr}");
     assert!(
-        std::fs::read_dir(dir.path())
+        std::fs::read_dir(dir.path()).unwrap().all(|e| !e
             .unwrap()
-            .all(|e| !e.unwrap().file_name().to_string_lossy().ends_with(suffix)),
+            .file_name()
+            .to_string_lossy()
+            .ends_with(suffix)),
         "no temporary file left"
     );
 }

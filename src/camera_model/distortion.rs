@@ -250,7 +250,9 @@ impl Distortion {
         // (name, value, power of the radius the term multiplies in the scale r_d / r)
         let radial: Vec<(&'static str, f64, i32)> = match *self {
             Distortion::None => return Ok(()),
-            Distortion::RadTan { k1, k2, k3, .. } => vec![("k1", k1, 2), ("k2", k2, 4), ("k3", k3, 6)],
+            Distortion::RadTan { k1, k2, k3, .. } => {
+                vec![("k1", k1, 2), ("k2", k2, 4), ("k3", k3, 6)]
+            }
             Distortion::Equidistant { k1, k2, k3, k4 } => {
                 vec![("k1", k1, 2), ("k2", k2, 4), ("k3", k3, 6), ("k4", k4, 8)]
             }
@@ -266,7 +268,11 @@ impl Distortion {
             radial
                 .iter()
                 .copied()
-                .max_by(|a, b| (a.1 * r.powi(a.2)).abs().total_cmp(&(b.1 * r.powi(b.2)).abs()))
+                .max_by(|a, b| {
+                    (a.1 * r.powi(a.2))
+                        .abs()
+                        .total_cmp(&(b.1 * r.powi(b.2)).abs())
+                })
                 .map(|(name, value, _)| (name, value))
                 .unwrap_or(("k1", 0.0))
         };
@@ -281,7 +287,8 @@ impl Distortion {
                     .map(|(_, k, p)| f64::from(p + 1) * k * r.powi(*p))
                     .sum::<f64>();
             let distorted = r * scale;
-            if !(scale.is_finite() && (1.0 / MAX_RADIAL_SCALE..=MAX_RADIAL_SCALE).contains(&scale)) {
+            if !(scale.is_finite() && (1.0 / MAX_RADIAL_SCALE..=MAX_RADIAL_SCALE).contains(&scale))
+            {
                 let (coefficient, value) = blame(r);
                 return Err(DistortionProblem {
                     coefficient,

@@ -45,9 +45,7 @@ pub enum CameraModelError {
     /// The file is not YAML text at all (binary bytes, several documents, broken syntax).
     // The parser's error is the problem itself (no further cause): in the message, not also a
     // `#[source]`, so `{:#}` chains print it once.
-    #[error(
-        "intrinsics file {path}: not a ROS camera_info or Kalibr camchain YAML: {problem}"
-    )]
+    #[error("intrinsics file {path}: not a ROS camera_info or Kalibr camchain YAML: {problem}")]
     NotYaml {
         /// The file.
         path: PathBuf,
@@ -175,7 +173,10 @@ impl CameraModel {
                 bad(
                     &format!("distortion {}", p.coefficient),
                     &p.expected,
-                    format!("{:?} ({}; coefficients {coefficients:?})", p.value, p.problem),
+                    format!(
+                        "{:?} ({}; coefficients {coefficients:?})",
+                        p.value, p.problem
+                    ),
                 )
             })
     }
@@ -243,7 +244,8 @@ impl CameraModel {
             .collect();
         let has_camera_info = value.get("camera_matrix").is_some();
         let has_kalibr = value.get("cam0").is_some();
-        if (has_camera_info && !kalibr_keys.is_empty()) || (has_kalibr && !camera_info_keys.is_empty())
+        if (has_camera_info && !kalibr_keys.is_empty())
+            || (has_kalibr && !camera_info_keys.is_empty())
         {
             return Err(CameraModelError::Ambiguous {
                 path: path.to_path_buf(),

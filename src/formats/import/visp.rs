@@ -206,7 +206,7 @@ pub struct VispFolder {
 pub fn scan_visp_folder(folder: &Path) -> Result<VispFolder, ImportError> {
     let entries = std::fs::read_dir(folder).map_err(|source| ImportError::Read {
         path: folder.to_path_buf(),
-        source,
+        source: crate::yaml_file::name_symlink_loop(folder, source),
     })?;
     let mut poses = Vec::new();
     let mut images = Vec::new();
