@@ -5,7 +5,7 @@
 //! samples:
 //!   - T_base_flange:   {translation: [..], quaternion: {w: .., x: .., y: .., z: ..}}
 //!     T_camera_target: {translation: [..], rotation_vector: [..]}
-//!     id: pose-03             # optional
+//!     id: pose-03             # optional; text (quote a number: "7"), unique in the file
 //!     weight: 1.0             # optional, > 0
 //! ```
 //!
@@ -29,8 +29,14 @@ use crate::yaml_file::{parse_yaml, read_text, write_yaml};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SampleYaml {
-    /// Optional name of the sample.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Optional name of the sample: text (`pose-03`, or a quoted `"7"`), unique in the file. A
+    /// bare number is refused: YAML would read `7`, `07` and `7.0` as one number, so ids written
+    /// as numbers silently lose what tells them apart.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "sample_id"
+    )]
     pub id: Option<String>,
     /// Optional weight (> 0, default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -41,6 +47,31 @@ pub struct SampleYaml {
     /// The target's pose in the camera.
     #[serde(rename = "T_camera_target")]
     pub camera_from_target: PoseYaml,
+}
+
+/// Reads a sample id: a string (or null); a number, boolean, list or mapping is refused with a
+/// hint to quote it.
+fn sample_id<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D::Error> {
+    struct Id;
+    impl<'de> serde::de::Visitor<'de> for Id {
+        type Value = Option<String>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str(
+                "a sample name in text (`id: pose-03`; quote a number to keep it as written: \
+                 `id: \"7\"`)",
+            )
+        }
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+            Ok(Some(v.to_string()))
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> Result<Self::Value, E> {
+            Ok(None)
+        }
+        fn visit_none<E: serde::de::Error>(self) -> Result<Self::Value, E> {
+            Ok(None)
+        }
+    }
+    d.deserialize_any(Id)
 }
 
 /// The dataset file as written.
@@ -84,6 +115,20 @@ impl Dataset {
             path: path.to_path_buf(),
             problem,
         };
+        let mut seen: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+        for (i, s) in raw.samples.iter().enumerate() {
+            let Some(id) = s.id.as_deref() else { continue };
+            if let Some(first) = seen.insert(id, i) {
+                return Err(FileError::Value {
+                    path: path.to_path_buf(),
+                    yaml_path: format!("samples[{i}].id"),
+                    problem: format!(
+                        "id `{id}` is already the id of samples[{first}]: every sample's id must \
+                         be unique (the report and the residuals name samples by it)"
+                    ),
+                });
+            }
+        }
         let pairs = raw
             .samples
             .iter()

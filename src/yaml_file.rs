@@ -25,6 +25,14 @@ pub enum FileError {
         #[source]
         source: std::io::Error,
     },
+    /// The file's path does not resolve: a symbolic link in it leads back to itself.
+    #[error("{}: cannot read: symlink loop at {}", path.display(), at.display())]
+    SymlinkLoop {
+        /// The file.
+        path: PathBuf,
+        /// The link (the file itself or a folder above it) where resolving goes round in circles.
+        at: PathBuf,
+    },
     /// The file could not be written.
     #[error("{}: cannot write", path.display())]
     Write {
@@ -260,12 +268,54 @@ pub(crate) fn read_yaml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T
     parse_yaml(&read_text(path)?, path)
 }
 
-/// Reads a text file, naming it in the error.
+/// Reads a text file, naming it in the error (and the link that loops, when one does).
 pub(crate) fn read_text(path: &Path) -> Result<String, FileError> {
-    std::fs::read_to_string(path).map_err(|source| FileError::Read {
-        path: path.to_path_buf(),
-        source,
+    std::fs::read_to_string(path).map_err(|source| match symlink_loop(path) {
+        Some(at) => FileError::SymlinkLoop {
+            path: path.to_path_buf(),
+            at,
+        },
+        None => FileError::Read {
+            path: path.to_path_buf(),
+            source,
+        },
     })
+}
+
+/// `source` (an error of opening `path`), or, when `path` runs into a symbolic link loop, an
+/// error saying `symlink loop at <link>`: for errors that carry an `io::Error` as their cause.
+pub fn name_symlink_loop(path: &Path, source: std::io::Error) -> std::io::Error {
+    match symlink_loop(path) {
+        Some(at) => std::io::Error::other(format!("symlink loop at {}", at.display())),
+        None => source,
+    }
+}
+
+/// Where `path` runs into a symbolic link loop: the shortest leading part of it (a folder above
+/// it or the path itself) whose resolution the system gives up on (`ELOOP`); `None` when the
+/// path has no loop. For messages that would otherwise say "not found" or "not a file" of a
+/// path that is a link going round in circles.
+pub fn symlink_loop(path: &Path) -> Option<PathBuf> {
+    #[cfg(unix)]
+    {
+        let loops = |p: &Path| matches!(std::fs::metadata(p), Err(e) if e.raw_os_error() == Some(libc::ELOOP));
+        if !loops(path) {
+            return None;
+        }
+        let mut prefix = PathBuf::new();
+        for part in path.components() {
+            prefix.push(part);
+            if loops(&prefix) {
+                return Some(prefix);
+            }
+        }
+        Some(path.to_path_buf())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        None
+    }
 }
 
 /// Parses YAML text into `T`; `path` is only used in errors.

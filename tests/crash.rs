@@ -207,7 +207,7 @@ fn sigkill_mid_run_then_resume_cleans_temp_files_and_has_every_pose_once() {
         for entry in std::fs::read_dir(session.join(dir)).unwrap() {
             let name = entry.unwrap().file_name();
             assert!(
-                !name.to_string_lossy().starts_with(".tmp"),
+                !handeye::atomic_file::is_temp_name(&name.to_string_lossy()),
                 "{dir}/{name:?} left behind"
             );
         }

@@ -211,6 +211,156 @@ impl Distortion {
     }
 }
 
+/// How far the radial distortion may scale a radius inside the image (`r_d / r`, either way):
+/// real lenses stay well within (a strong barrel lens about 0.5 at its corners); a model past it
+/// is a typo or a fit gone wrong, and projects the board to nonsense.
+pub const MAX_RADIAL_SCALE: f64 = 10.0;
+
+/// How many radii the check of [`Distortion::check_over_image`] walks from the centre out.
+const RADIAL_CHECK_STEPS: usize = 4000;
+
+/// Why a distortion model is not a lens over its image: the coefficient most to blame, its
+/// value and what goes wrong (see [`Distortion::check_over_image`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DistortionProblem {
+    /// The coefficient's name (`k1`, `p2`...).
+    pub coefficient: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// What a lens needs (for "must be ...").
+    pub expected: String,
+    /// What this model does instead, with where (px from the principal point).
+    pub problem: String,
+}
+
+impl Distortion {
+    /// Checks that the model is a lens over an image whose farthest corner lies at the distorted
+    /// normalised radius `corner_radius` (pixel distance over the focal length): walking out from
+    /// the centre to that corner, the distorted radius keeps growing (the model does not fold
+    /// over, so every pixel has one direction), it scales the radius by no more than
+    /// [`MAX_RADIAL_SCALE`] either way, and the whole map stays locally one-to-one (a positive
+    /// Jacobian determinant, which the tangential terms could break). `focal_px` only turns radii
+    /// into pixels for the message. An equidistant model is walked in the ray angle θ up to 90°:
+    /// the corners of a fisheye image past that are outside its image circle.
+    pub fn check_over_image(
+        &self,
+        corner_radius: f64,
+        focal_px: f64,
+    ) -> Result<(), DistortionProblem> {
+        // (name, value, power of the radius the term multiplies in the scale r_d / r)
+        let radial: Vec<(&'static str, f64, i32)> = match *self {
+            Distortion::None => return Ok(()),
+            Distortion::RadTan { k1, k2, k3, .. } => {
+                vec![("k1", k1, 2), ("k2", k2, 4), ("k3", k3, 6)]
+            }
+            Distortion::Equidistant { k1, k2, k3, k4 } => {
+                vec![("k1", k1, 2), ("k2", k2, 4), ("k3", k3, 6), ("k4", k4, 8)]
+            }
+        };
+        let is_fisheye = matches!(self, Distortion::Equidistant { .. });
+        // Radius (RadTan: r = |xn|; equidistant: θ) at which the walk gives up: the scale bound
+        // means the corner is reached by MAX_RADIAL_SCALE · corner_radius.
+        let mut end = MAX_RADIAL_SCALE * corner_radius;
+        if is_fisheye {
+            end = end.min(std::f64::consts::FRAC_PI_2);
+        }
+        let blame = |r: f64| {
+            radial
+                .iter()
+                .copied()
+                .max_by(|a, b| {
+                    (a.1 * r.powi(a.2))
+                        .abs()
+                        .total_cmp(&(b.1 * r.powi(b.2)).abs())
+                })
+                .map(|(name, value, _)| (name, value))
+                .unwrap_or(("k1", 0.0))
+        };
+        let px = |distorted: f64| distorted * focal_px;
+        let mut reached = 0.0;
+        for step in 1..=RADIAL_CHECK_STEPS {
+            let r = end * step as f64 / RADIAL_CHECK_STEPS as f64;
+            let scale = 1.0 + radial.iter().map(|(_, k, p)| k * r.powi(*p)).sum::<f64>();
+            let slope = 1.0
+                + radial
+                    .iter()
+                    .map(|(_, k, p)| f64::from(p + 1) * k * r.powi(*p))
+                    .sum::<f64>();
+            let distorted = r * scale;
+            if !(scale.is_finite() && (1.0 / MAX_RADIAL_SCALE..=MAX_RADIAL_SCALE).contains(&scale))
+            {
+                let (coefficient, value) = blame(r);
+                return Err(DistortionProblem {
+                    coefficient,
+                    value,
+                    expected: format!(
+                        "a lens distortion that scales a radius inside the image by {:.1}x to \
+                         {MAX_RADIAL_SCALE}x",
+                        1.0 / MAX_RADIAL_SCALE
+                    ),
+                    problem: format!(
+                        "it scales the radius by {scale:.3e}x at {:.0} px from the principal \
+                         point (the image's farthest corner is {:.0} px away)",
+                        px(r),
+                        px(corner_radius)
+                    ),
+                });
+            }
+            if slope <= 0.0 {
+                let (coefficient, value) = blame(r);
+                return Err(DistortionProblem {
+                    coefficient,
+                    value,
+                    expected: "a radial distortion that keeps growing out to the image's \
+                               corners (one direction per pixel)"
+                        .to_string(),
+                    problem: format!(
+                        "the model folds over at {:.0} px from the principal point, inside the \
+                         image (its farthest corner is {:.0} px away): pixels beyond map back \
+                         inwards",
+                        px(distorted),
+                        px(corner_radius)
+                    ),
+                });
+            }
+            reached = r;
+            if distorted >= corner_radius {
+                break;
+            }
+        }
+        if let Distortion::RadTan { p1, p2, .. } = *self {
+            for direction in 0..16 {
+                let angle = f64::from(direction) * std::f64::consts::PI / 8.0;
+                for step in 1..=64 {
+                    let r = reached * f64::from(step) / 64.0;
+                    let xn = Vector2::new(r * angle.cos(), r * angle.sin());
+                    if self.jacobian(xn).determinant() <= 0.0 {
+                        let (coefficient, value) = if p1.abs() >= p2.abs() {
+                            ("p1", p1)
+                        } else {
+                            ("p2", p2)
+                        };
+                        return Err(DistortionProblem {
+                            coefficient,
+                            value,
+                            expected: "a tangential distortion that keeps the image one-to-one"
+                                .to_string(),
+                            problem: format!(
+                                "the map stops being one-to-one for rays {:.0} px (undistorted) \
+                                 from the principal point, before the image's farthest corner \
+                                 ({:.0} px away)",
+                                px(r),
+                                px(corner_radius)
+                            ),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use nalgebra::{Matrix2, Vector2};

@@ -4,8 +4,8 @@
 //! YAML key, the value found and what was expected.
 //!
 //! Both forms use OpenCV's pixel convention (centres at integers), like [`CameraModel`], so
-//! nothing is shifted on the way in or out. Depends on `atomic_file` (the write) and on the
-//! parent module's types.
+//! nothing is shifted on the way in or out. Depends on `atomic_file` (the write), `yaml_file`
+//! (naming a symlink loop) and on the parent module's types.
 
 use std::path::{Path, PathBuf};
 
@@ -13,6 +13,14 @@ use serde_yaml_ng::Value;
 
 use super::{CameraModel, Distortion};
 use crate::atomic_file::write_atomic;
+use crate::yaml_file::symlink_loop;
+
+/// The smallest focal length [`CameraModel::validate`] accepts, as a fraction of the image's
+/// larger side (a pinhole field of view of about 178°).
+pub const MIN_FOCAL_PER_SIZE: f64 = 0.01;
+/// The largest focal length [`CameraModel::validate`] accepts, in multiples of the image's larger
+/// side (a field of view of about 0.06°): past it a value is a typo, not a lens.
+pub const MAX_FOCAL_PER_SIZE: f64 = 1000.0;
 
 /// Why an intrinsics file could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -26,24 +34,47 @@ pub enum CameraModelError {
         #[source]
         source: std::io::Error,
     },
-    /// The file is not YAML.
-    // The parser's error is the problem itself (no further cause): in the message, not also a
-    // `#[source]`, so `{:#}` chains print it once.
-    #[error("intrinsics file {path}: not valid YAML: {problem}")]
-    Yaml {
+    /// The file's path does not resolve: a symbolic link in it leads back to itself.
+    #[error("intrinsics file {path}: cannot read: symlink loop at {at}")]
+    SymlinkLoop {
         /// The file.
         path: PathBuf,
-        /// The parser's error.
-        problem: serde_yaml_ng::Error,
+        /// The link where resolving goes round in circles.
+        at: PathBuf,
+    },
+    /// The file is not YAML text at all (binary bytes, several documents, broken syntax).
+    // The parser's error is the problem itself (no further cause): in the message, not also a
+    // `#[source]`, so `{:#}` chains print it once.
+    #[error("intrinsics file {path}: not a ROS camera_info or Kalibr camchain YAML: {problem}")]
+    NotYaml {
+        /// The file.
+        path: PathBuf,
+        /// What the file is instead, in words.
+        problem: String,
     },
     /// The YAML is neither a `camera_info` file nor a Kalibr camchain.
     #[error(
-        "intrinsics file {path}: neither a camera_info YAML (needs `camera_matrix`) nor a Kalibr \
-         camchain (needs `cam0`)"
+        "intrinsics file {path}: not a ROS camera_info YAML (needs `camera_matrix`) nor a Kalibr \
+         camchain (needs `cam0`); found {found}"
     )]
     UnknownFormat {
         /// The file.
         path: PathBuf,
+        /// What the document holds (its top-level keys, or its kind).
+        found: String,
+    },
+    /// The file has the keys of both forms, so which numbers are meant is a guess.
+    #[error(
+        "intrinsics file {path}: both a ROS camera_info YAML (keys {camera_info}) and a Kalibr \
+         camchain (keys {kalibr}); keep one form in the file"
+    )]
+    Ambiguous {
+        /// The file.
+        path: PathBuf,
+        /// The `camera_info` keys found.
+        camera_info: String,
+        /// The Kalibr keys found.
+        kalibr: String,
     },
     /// A required key is absent.
     #[error("intrinsics file {path}: missing key `{key}`")]
@@ -68,7 +99,12 @@ pub enum CameraModelError {
 }
 
 impl CameraModel {
-    /// Checks the model's numbers (positive finite focal lengths and size, finite coefficients).
+    /// Checks the model's numbers, the one check every intrinsics source passes through (ROS
+    /// `camera_info` and Kalibr YAML, ViSP XML, a bag's `camera_info` messages): a positive image
+    /// size; focal lengths between [`MIN_FOCAL_PER_SIZE`] and [`MAX_FOCAL_PER_SIZE`] times the
+    /// image's larger side; a principal point inside the image or at most one image size outside
+    /// it; finite distortion coefficients that make a lens over this image (see
+    /// [`Distortion::check_over_image`]). The error names the key, the value and the bound.
     pub fn validate(&self, path: &Path) -> Result<(), CameraModelError> {
         let bad = |key: &str, expected: &str, found: String| CameraModelError::BadValue {
             path: path.to_path_buf(),
@@ -83,14 +119,37 @@ impl CameraModel {
                 format!("{}x{}", self.width, self.height),
             ));
         }
+        let (width, height) = (f64::from(self.width), f64::from(self.height));
+        let side = width.max(height);
+        let (low, high) = (MIN_FOCAL_PER_SIZE * side, MAX_FOCAL_PER_SIZE * side);
         for (key, value) in [("fx", self.fx), ("fy", self.fy)] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(bad(key, "a positive focal length (px)", value.to_string()));
+            if !(value.is_finite() && value >= low && value <= high) {
+                return Err(bad(
+                    key,
+                    &format!(
+                        "a positive focal length within {MIN_FOCAL_PER_SIZE} to \
+                         {MAX_FOCAL_PER_SIZE} times the image's larger side ({low} to {high} px \
+                         for {}x{} px: a field of view between about 178° and 0.06°)",
+                        self.width, self.height
+                    ),
+                    format!("{value:?}"),
+                ));
             }
         }
-        for (key, value) in [("cx", self.cx), ("cy", self.cy)] {
-            if !value.is_finite() {
-                return Err(bad(key, "a finite principal point (px)", value.to_string()));
+        for (key, value, size) in [("cx", self.cx, width), ("cy", self.cy, height)] {
+            if !(value.is_finite() && value >= -size && value <= 2.0 * size) {
+                return Err(bad(
+                    key,
+                    &format!(
+                        "a principal point inside the image or at most one image size outside \
+                         it ({} to {} px for {}x{} px)",
+                        -size,
+                        2.0 * size,
+                        self.width,
+                        self.height
+                    ),
+                    format!("{value:?}"),
+                ));
             }
         }
         let coefficients = self.distortion_coefficients();
@@ -101,7 +160,25 @@ impl CameraModel {
                 format!("{coefficients:?}"),
             ));
         }
-        Ok(())
+        // The farthest image corner (pixel edges, OpenCV convention) in distorted normalised
+        // coordinates: the radius the distortion must stay a lens out to.
+        let corner_radius = [(-0.5, -0.5), (width - 0.5, -0.5), (-0.5, height - 0.5)]
+            .into_iter()
+            .chain([(width - 0.5, height - 0.5)])
+            .map(|(u, v)| ((u - self.cx) / self.fx).hypot((v - self.cy) / self.fy))
+            .fold(0.0, f64::max);
+        self.distortion
+            .check_over_image(corner_radius, self.fx.min(self.fy))
+            .map_err(|p| {
+                bad(
+                    &format!("distortion {}", p.coefficient),
+                    &p.expected,
+                    format!(
+                        "{:?} ({}; coefficients {coefficients:?})",
+                        p.value, p.problem
+                    ),
+                )
+            })
     }
 
     /// The distortion coefficients in file order (`plumb_bob`: k1 k2 p1 p2 k3; `equidistant`: k1..k4).
@@ -116,9 +193,22 @@ impl CameraModel {
     /// Loads intrinsics from a ROS/OpenCV `camera_info` YAML or a Kalibr camchain YAML (its
     /// `cam0`), detected by their keys.
     pub fn load(path: &Path) -> Result<Self, CameraModelError> {
-        let text = std::fs::read_to_string(path).map_err(|source| CameraModelError::Io {
+        let bytes = std::fs::read(path).map_err(|source| match symlink_loop(path) {
+            Some(at) => CameraModelError::SymlinkLoop {
+                path: path.to_path_buf(),
+                at,
+            },
+            None => CameraModelError::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+        })?;
+        let text = String::from_utf8(bytes).map_err(|e| CameraModelError::NotYaml {
             path: path.to_path_buf(),
-            source,
+            problem: format!(
+                "not text (byte {} is not UTF-8): a binary file?",
+                e.utf8_error().valid_up_to()
+            ),
         })?;
         Self::from_yaml_str(&text, path)
     }
@@ -126,18 +216,60 @@ impl CameraModel {
     /// Parses intrinsics YAML text; `path` only names the source in errors.
     pub fn from_yaml_str(text: &str, path: &Path) -> Result<Self, CameraModelError> {
         let value: Value =
-            serde_yaml_ng::from_str(text).map_err(|problem| CameraModelError::Yaml {
+            serde_yaml_ng::from_str(text).map_err(|problem| CameraModelError::NotYaml {
                 path: path.to_path_buf(),
-                problem,
+                problem: yaml_problem(text, &problem),
             })?;
         let reader = Reader { path };
-        let model = if value.get("camera_matrix").is_some() {
+        let keys: Vec<String> = value
+            .as_mapping()
+            .map(|m| {
+                m.keys()
+                    .map(|k| match k.as_str() {
+                        Some(k) => k.to_string(),
+                        None => serde_json::to_string(k).unwrap_or_else(|_| "?".into()),
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let camera_info_keys: Vec<&str> = keys
+            .iter()
+            .map(String::as_str)
+            .filter(|k| CAMERA_INFO_KEYS.contains(k))
+            .collect();
+        let kalibr_keys: Vec<&str> = keys
+            .iter()
+            .map(String::as_str)
+            .filter(|k| is_kalibr_key(k))
+            .collect();
+        let has_camera_info = value.get("camera_matrix").is_some();
+        let has_kalibr = value.get("cam0").is_some();
+        if (has_camera_info && !kalibr_keys.is_empty())
+            || (has_kalibr && !camera_info_keys.is_empty())
+        {
+            return Err(CameraModelError::Ambiguous {
+                path: path.to_path_buf(),
+                camera_info: camera_info_keys.join(", "),
+                kalibr: kalibr_keys.join(", "),
+            });
+        }
+        let model = if has_camera_info {
             reader.camera_info(&value)?
         } else if let Some(cam0) = value.get("cam0") {
             reader.kalibr(cam0)?
         } else {
+            let found = match &value {
+                Value::Mapping(_) if keys.is_empty() => "an empty mapping".to_string(),
+                Value::Mapping(_) => format!("the keys {}", keys.join(", ")),
+                Value::Null => "an empty document".to_string(),
+                Value::Sequence(_) => "a list".to_string(),
+                Value::String(_) => "a line of text".to_string(),
+                Value::Number(_) | Value::Bool(_) => "a single value".to_string(),
+                Value::Tagged(_) => "a tagged value".to_string(),
+            };
             return Err(CameraModelError::UnknownFormat {
                 path: path.to_path_buf(),
+                found,
             });
         };
         model.validate(path)?;
@@ -187,6 +319,42 @@ impl CameraModel {
                 source,
             }
         })
+    }
+}
+
+/// The top-level keys of a ROS `camera_info` YAML (`camera_calibration_parsers`).
+const CAMERA_INFO_KEYS: [&str; 8] = [
+    "image_width",
+    "image_height",
+    "camera_name",
+    "camera_matrix",
+    "distortion_model",
+    "distortion_coefficients",
+    "rectification_matrix",
+    "projection_matrix",
+];
+
+/// Whether `key` is a top-level key of a Kalibr camchain (`cam0`, `cam1`, ...).
+fn is_kalibr_key(key: &str) -> bool {
+    key.strip_prefix("cam")
+        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The YAML parser's complaint about `text` in words a person reading an intrinsics error
+/// follows (what the file is instead).
+fn yaml_problem(text: &str, problem: &serde_yaml_ng::Error) -> String {
+    let message = problem.to_string();
+    if message.contains("more than one document") {
+        let markers = text
+            .lines()
+            .filter(|l| l.starts_with("---") || l.starts_with("..."))
+            .count();
+        format!(
+            "it holds several YAML documents ({markers} `---`/`...` marker line(s)), an \
+             intrinsics file is one mapping of keys"
+        )
+    } else {
+        format!("not YAML of that shape ({message})")
     }
 }
 
@@ -258,18 +426,88 @@ impl Reader<'_> {
         }
     }
 
+    /// Checks an OpenCV matrix node's `rows` and `cols` (when given) against its `data`: the
+    /// shape `shape` (rows, cols) when there is one, and `rows · cols` numbers of data. A
+    /// `distortion_coefficients` node (no fixed shape) is one row.
+    fn matrix_shape(
+        &self,
+        node: &Value,
+        key: &str,
+        shape: Option<(u64, u64)>,
+    ) -> Result<(), CameraModelError> {
+        let data_len = node.get("data").and_then(Value::as_sequence).map(Vec::len);
+        let mut dims = [None, None];
+        for (slot, name) in dims.iter_mut().zip(["rows", "cols"]) {
+            let Some(value) = node.get(name) else {
+                continue;
+            };
+            let full = format!("{key}.{name}");
+            let n = value
+                .as_u64()
+                .ok_or_else(|| self.bad(&full, "a whole number", value))?;
+            let expected = match (shape, name) {
+                (Some((rows, _)), "rows") => Some(rows),
+                (Some((_, cols)), _) => Some(cols),
+                (None, _) => None,
+            };
+            if let Some(expected) = expected.filter(|e| *e != n) {
+                return Err(self.bad(&full, &expected.to_string(), value));
+            }
+            *slot = Some(n);
+        }
+        if let ([Some(rows), Some(cols)], Some(len)) = (dims, data_len) {
+            // A coefficient vector is one row (ROS) or one column (OpenCV).
+            if shape.is_none() && rows.min(cols) != 1 && len > 0 {
+                return Err(self.bad(
+                    &format!("{key}.rows"),
+                    &format!("1 (one row of {len} coefficients; or cols: 1)"),
+                    &node["rows"],
+                ));
+            }
+            if rows * cols != len as u64 {
+                return Err(self.bad(
+                    &format!("{key}.data"),
+                    &format!("{} numbers (rows {rows} x cols {cols})", rows * cols),
+                    &node["data"],
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn camera_info(&self, root: &Value) -> Result<CameraModel, CameraModelError> {
         let width = self.size(self.get(root, "image_width", "image_width")?, "image_width")?;
         let height = self.size(
             self.get(root, "image_height", "image_height")?,
             "image_height",
         )?;
+        // ROS's message form names the size `width`/`height`; a file with both must agree.
+        for (key, size, own) in [
+            ("width", width, "image_width"),
+            ("height", height, "image_height"),
+        ] {
+            if let Some(value) = root.get(key) {
+                if value.as_u64() != Some(u64::from(size)) {
+                    return Err(self.bad(key, &format!("{size}, the file's {own}"), value));
+                }
+            }
+        }
         let matrix = self.get(root, "camera_matrix", "camera_matrix")?;
         let k = self.numbers(
             self.get(matrix, "data", "camera_matrix.data")?,
             "camera_matrix.data",
             &[9],
         )?;
+        self.matrix_shape(matrix, "camera_matrix", Some((3, 3)))?;
+        for (key, shape) in [
+            ("distortion_coefficients", None),
+            ("rectification_matrix", Some((3, 3))),
+            ("projection_matrix", Some((3, 4))),
+        ] {
+            if let Some(node) = root.get(key) {
+                self.matrix_shape(node, key, shape)?;
+            }
+        }
         if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
             return Err(self.bad(
                 "camera_matrix.data",

@@ -16,14 +16,14 @@
 //! * `files`: the ROS/OpenCV `camera_info` and Kalibr camchain YAML forms (load, save,
 //!   validation) and [`CameraModelError`].
 //!
-//! Part of the ground floor (see `tests/layers.rs`): depends on `atomic_file` only (through
-//! `files`); knows nothing of boards, detectors or robots.
+//! Part of the ground floor (see `tests/layers.rs`): depends on `atomic_file` and `yaml_file`
+//! only (through `files`); knows nothing of boards, detectors or robots.
 
 mod distortion;
 mod files;
 
-pub use distortion::Distortion;
-pub use files::CameraModelError;
+pub use distortion::{Distortion, DistortionProblem, MAX_RADIAL_SCALE};
+pub use files::{CameraModelError, MAX_FOCAL_PER_SIZE, MIN_FOCAL_PER_SIZE};
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix2x4, Matrix2xX, Point2, Point3, Vector2, Vector3};
 

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye::atomic_file::write_atomic;
+use handeye::atomic_file::write_atomic_reporting;
 use handeye::formats::{export, ExportError, ExportFormat, FrameIds};
 use handeye::result::ResultFile;
 
@@ -89,8 +89,17 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         .with_context(|| format!("exporting {}", args.result.display()))?;
     match &args.output {
         Some(path) => {
-            write_atomic(path, text.as_bytes())
+            let removed = write_atomic_reporting(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;
+            for r in removed {
+                eprintln!(
+                    "note: removed {} ({} bytes), the unfinished temporary file of an earlier \
+                     export to {} that was killed",
+                    r.path.display(),
+                    r.bytes,
+                    path.display()
+                );
+            }
             outln!("wrote {} to {}", format.name(), path.display());
         }
         None => out!("{text}"),

@@ -22,8 +22,8 @@
 //! plan in `session.yaml` must agree, and each pose must be a valid rigid transform.
 //!
 //! Creating or resuming a session takes the folder's lock and removes the temporary files a
-//! killed writer left behind. Depends on `dataset`, `geometry`, `robot` (joint type) and the
-//! ground floor.
+//! killed writer left behind. Depends on `dataset`, `geometry`, `robot` (joint type), `vision`
+//! (the board a record's corners are checked against) and the ground floor.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -31,11 +31,14 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use crate::atomic_file::{is_temp_name, write_atomic};
+use crate::atomic_file::{
+    is_temp_name, remove_stale_temp_files, write_atomic, RemovedTemp, TempScope,
+};
 use crate::geometry::{Pose, PoseError, PoseYaml};
 use crate::robot::Joints;
 use crate::setup::{CornerObservation, Setup};
-use crate::yaml_file::{read_yaml, write_yaml};
+use crate::vision::Target;
+use crate::yaml_file::{read_yaml, symlink_loop, write_yaml};
 
 use super::inputs::InputFile;
 use super::lock::{SessionLock, LOCK_FILE};
@@ -226,12 +229,25 @@ impl SessionFolder {
                 lock.path().display()
             ));
         }
-        let (count, bytes) = remove_temp_files(root)?;
-        if count > 0 {
+        let removed = remove_temp_files(root);
+        if !removed.is_empty() {
+            let bytes: u64 = removed.iter().map(|r| r.bytes).sum();
+            let names: Vec<String> = removed
+                .iter()
+                .map(|r| {
+                    r.path
+                        .strip_prefix(root)
+                        .unwrap_or(&r.path)
+                        .display()
+                        .to_string()
+                })
+                .collect();
             notes.push(format!(
-                "{}: removed {count} unfinished temporary file(s) ({:.0} kB) a killed run left behind",
+                "{}: removed {} unfinished temporary file(s) ({:.0} kB) a killed run left behind: {}",
                 root.display(),
-                bytes as f64 / 1000.0
+                removed.len(),
+                bytes as f64 / 1000.0,
+                names.join(", ")
             ));
         }
         Ok(SessionFolder {
@@ -351,11 +367,21 @@ impl SessionFolder {
                 )));
             }
             visit.poses(&file)?;
-            if !self.root.join(&visit.frame).is_file() {
+            visit.check_corners_unique(&file)?;
+            let frame = self.root.join(&visit.frame);
+            if !frame.is_file() {
+                let message = match symlink_loop(&frame) {
+                    Some(at) => format!(
+                        "{}: symlink loop at {}",
+                        visit.frame.display(),
+                        at.display()
+                    ),
+                    None => format!("{} is not in the session folder", visit.frame.display()),
+                };
                 return Err(SessionError::Record {
                     file: file.clone(),
                     path: "frame".into(),
-                    message: format!("{} is not in the session folder", visit.frame.display()),
+                    message,
                 });
             }
             if let Some((other, _)) = visits.get(&visit.plan_index) {
@@ -418,27 +444,13 @@ fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
 }
 
 /// Removes the temporary files a killed writer left in the session folder, `poses/` and
-/// `frames/`; returns how many and their bytes. Only called with the lock held, so no live
-/// writer of this session owns them.
-fn remove_temp_files(root: &Path) -> Result<(usize, u64), SessionError> {
-    let mut count = 0;
-    let mut bytes = 0;
-    for dir in [root.to_path_buf(), root.join("poses"), root.join("frames")] {
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            if !is_temp_name(&entry.file_name().to_string_lossy()) {
-                continue;
-            }
-            let path = entry.path();
-            let size = entry.metadata().map(|m| m.len()).unwrap_or(0);
-            std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
-            count += 1;
-            bytes += size;
-        }
-    }
-    Ok((count, bytes))
+/// `frames/` (`atomic_file`'s sweep: only files whose writer's lock is gone); returns them. Called with the session's lock held, so earlier versions' unlocked temporary
+/// files are a killed run's too.
+fn remove_temp_files(root: &Path) -> Vec<RemovedTemp> {
+    [root.to_path_buf(), root.join("poses"), root.join("frames")]
+        .iter()
+        .flat_map(|dir| remove_stale_temp_files(dir, TempScope::OwnedFolder))
+        .collect()
 }
 
 impl PoseVisit {
@@ -454,6 +466,61 @@ impl PoseVisit {
             corners_px: Vec::new(),
             rejected: None,
         }
+    }
+
+    /// Refuses a record that lists one board point twice (`[tag id, corner, ..]` repeated): a
+    /// detection keeps one observation per point (two tags with one id are dropped as a
+    /// reflection or a second board), so a repeat is an edited or foreign record. `file` names
+    /// the record in the error.
+    pub fn check_corners_unique(&self, file: &Path) -> Result<(), SessionError> {
+        let mut seen = std::collections::HashMap::new();
+        for (i, c) in self.corners_px.iter().enumerate() {
+            if let Some(first) = seen.insert((c.tag_id, c.corner), i) {
+                return Err(SessionError::Record {
+                    file: file.to_path_buf(),
+                    path: format!("corners_px[{i}]"),
+                    message: format!(
+                        "tag id {} corner {} is recorded twice in this frame (also \
+                         corners_px[{first}]): one observation per board point",
+                        c.tag_id, c.corner
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses a record with a corner the board does not have (a tag id outside the board's
+    /// range, or a corner index it lacks), naming the id and the board's valid ids: the
+    /// detector records only the board's points, so such a corner means the record belongs to
+    /// another board (or was edited), and dropping it would hide that. `file` names the record.
+    pub fn check_corners_on_board(&self, file: &Path, board: &Target) -> Result<(), SessionError> {
+        for (i, c) in self.corners_px.iter().enumerate() {
+            if board.observation_point(c).is_some() {
+                continue;
+            }
+            let points = board.points();
+            let low = points.iter().map(|p| p.0).min().unwrap_or(0);
+            let high = points.iter().map(|p| p.0).max().unwrap_or(0);
+            let corners = points.iter().map(|p| p.1).max().unwrap_or(0);
+            let what = if board.aprilgrid().is_some() {
+                "tag id"
+            } else {
+                "corner id"
+            };
+            return Err(SessionError::Record {
+                file: file.to_path_buf(),
+                path: format!("corners_px[{i}]"),
+                message: format!(
+                    "{what} {} corner {} is not on the board ({}: {what}s {low} to {high}, \
+                     corners 0 to {corners}); was the session recorded with another board?",
+                    c.tag_id,
+                    c.corner,
+                    board.describe()
+                ),
+            });
+        }
+        Ok(())
     }
 
     /// The measured robot pose and, when accepted, the board pose.

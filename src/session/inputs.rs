@@ -29,7 +29,7 @@ impl InputFile {
     pub fn hash(role: &str, path: &Path) -> Result<InputFile, SessionError> {
         let bytes = std::fs::read(path).map_err(|source| SessionError::Io {
             path: path.to_path_buf(),
-            source,
+            source: crate::yaml_file::name_symlink_loop(path, source),
         })?;
         Ok(InputFile {
             role: role.to_string(),

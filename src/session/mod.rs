@@ -255,7 +255,9 @@ fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
 /// For a folder a run left before writing `session.yaml` (it has `poses/` or `frames/`): how to
 /// start again.
 fn not_a_session_hint(root: &std::path::Path) -> String {
-    if root.join("poses").is_dir() || root.join("frames").is_dir() {
+    if let Some(at) = crate::yaml_file::symlink_loop(&root.join("session.yaml")) {
+        format!(": symlink loop at {}", at.display())
+    } else if root.join("poses").is_dir() || root.join("frames").is_dir() {
         format!(
             "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`",
             root.display()

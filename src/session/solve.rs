@@ -137,9 +137,14 @@ pub fn load_and_solve(
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let config = &inputs.config;
     let Some(camera) = &inputs.camera else {
+        // Every visit with corners goes through `frames_from_visits`, which checks them.
         return solve_from_scratch(folder, config, &inputs.board);
     };
     let visits = folder.read_visits()?;
+    // Checked here too: the pose-space space uses no corners, but the report draws them.
+    for visit in &visits {
+        visit.check_corners_on_board(&folder.visit_path(visit.plan_index), &inputs.board)?;
+    }
     let dataset = committed_samples(folder, &visits)?;
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
     let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
@@ -377,9 +382,11 @@ pub fn frames_from_visits(
         if !accepted || visit.corners_px.is_empty() {
             continue;
         }
-        let (base_from_flange, _) = visit.poses(&SessionFolder::visit_name(visit.plan_index))?;
-        // Corners were checked when the record was read; a tag the board does not have (a
-        // stray detection of another family member) is skipped.
+        let record = SessionFolder::visit_name(visit.plan_index);
+        let (base_from_flange, _) = visit.poses(&record)?;
+        // Corners were checked when the record was read (no point twice); a point the board
+        // does not have is refused, never skipped.
+        visit.check_corners_on_board(&record, board)?;
         let corners = visit
             .corners_px
             .iter()

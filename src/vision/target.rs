@@ -71,7 +71,7 @@ impl Target {
     pub fn load(path: &Path) -> Result<Self, TargetError> {
         let text = std::fs::read_to_string(path).map_err(|source| TargetError::Io {
             path: path.to_path_buf(),
-            source,
+            source: crate::yaml_file::name_symlink_loop(path, source),
         })?;
         Self::from_yaml_str(&text, path)
     }

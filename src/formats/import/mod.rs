@@ -134,6 +134,6 @@ fn checked_translation(
 fn read_text(path: &Path) -> Result<String, ImportError> {
     std::fs::read_to_string(path).map_err(|source| ImportError::Read {
         path: path.to_path_buf(),
-        source,
+        source: crate::yaml_file::name_symlink_loop(path, source),
     })
 }

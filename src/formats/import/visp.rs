@@ -206,7 +206,7 @@ pub struct VispFolder {
 pub fn scan_visp_folder(folder: &Path) -> Result<VispFolder, ImportError> {
     let entries = std::fs::read_dir(folder).map_err(|source| ImportError::Read {
         path: folder.to_path_buf(),
-        source,
+        source: crate::yaml_file::name_symlink_loop(folder, source),
     })?;
     let mut poses = Vec::new();
     let mut images = Vec::new();
@@ -243,6 +243,25 @@ pub fn scan_visp_folder(folder: &Path) -> Result<VispFolder, ImportError> {
         });
     }
     poses.sort();
+    // `_1` and `_01` are one number: two files for it leave which pose belongs to the image a
+    // guess.
+    if let Some(pair) = poses.windows(2).find(|w| w[0].0 == w[1].0) {
+        let name = |p: &PathBuf| {
+            p.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        };
+        return Err(ImportError::Folder {
+            folder: folder.to_path_buf(),
+            problem: format!(
+                "two pose files have the number {}: {} and {}; keep one (`_pose_rPe_<N>` numbers \
+                 must be unique: `1` and `01` are the same number)",
+                pair[0].0,
+                name(&pair[0].1),
+                name(&pair[1].1)
+            ),
+        });
+    }
     let mut samples = Vec::new();
     for (number, pose_file) in poses {
         let matching: Vec<&PathBuf> = images
