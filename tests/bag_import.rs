@@ -1066,3 +1066,134 @@ fn issue25_small_lies_are_imported_with_named_warnings() {
     );
     assert!(log.contains("8 samples accepted"), "{log}");
 }
+
+#[test]
+fn issue25_staging_folders_of_killed_imports_are_removed_and_named_on_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag(dir.path(), "mcap") else {
+        return;
+    };
+    // As `kill -9` leaves them: the staging folder with part of a session in it and its lock
+    // file naming the dead process (the lock itself went with the process); and one an older
+    // version left, without a lock file.
+    let killed = dir.path().join(".refused-session.importing-abc123");
+    std::fs::create_dir_all(killed.join("import/images")).unwrap();
+    std::fs::write(killed.join("import/images/000.png"), b"partial").unwrap();
+    let killed_lock = dir.path().join(".refused-session.importing-abc123.lock");
+    std::fs::write(&killed_lock, "4194999\n").unwrap();
+    let older = dir.path().join(".refused-session.importing-Xy9Z0q");
+    std::fs::create_dir_all(&older).unwrap();
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("removed .refused-session.importing-abc123 left by an import that was killed")
+            && log.contains("removed .refused-session.importing-Xy9Z0q left by an import that was killed"),
+        "{log}"
+    );
+    assert!(!killed.exists() && !killed_lock.exists() && !older.exists());
+}
+
+#[test]
+fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag(dir.path(), "mcap") else {
+        return;
+    };
+    // This process holds a staging folder as a concurrent import does (the lock is per process).
+    let live = handeye::session::Staging::create(dir.path(), "refused-session", "importing")
+        .unwrap();
+    std::fs::write(live.path().join("session.yaml"), "being written").unwrap();
+    let out = dir.path().join("refused-session");
+    let run = import(&bag, &out, &[]);
+    let log = text(&run);
+    println!("{log}");
+    assert_eq!(run.status.code(), Some(1), "{log}");
+    let name = live.path().file_name().unwrap().to_string_lossy().into_owned();
+    assert!(
+        log.contains(&format!(
+            "left {name} alone: an import still running (pid {}) writes into it",
+            std::process::id()
+        )),
+        "{log}"
+    );
+    assert!(live.path().join("session.yaml").exists(), "a live staging folder was touched");
+    drop(live);
+    no_leftovers(dir.path(), &out);
+}
+
+/// A bag of `frames` incompressible 640x480 mono8 frames (300 KB each).
+fn big_bag(dir: &Path, storage: &str, frames: usize) -> Option<PathBuf> {
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(2, &board),
+        stay: frames as f64 / 25.0 / 2.0,
+        travel: 0.5,
+    };
+    make_bag_edited(
+        dir,
+        &format!("big-{storage}"),
+        &BagSpec {
+            storage,
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 25.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: false,
+            render: &|_| false,
+        },
+        |spec| {
+            for image in spec["images"].as_array_mut().unwrap() {
+                image[1] = "random:307200".into();
+            }
+        },
+    )
+}
+
+/// The real binary under `ulimit -v` (KiB) with a bag larger than that allows: exit code 1 and a
+/// clear message, never an abort.
+fn import_limited(bag: &Path, out: &Path, limit_kib: u64) -> std::process::Output {
+    let exe = env!("CARGO_BIN_EXE_handeye");
+    Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v {limit_kib} && exec \"$0\" import bag \"$1\" --base base_link --flange tool0 --image /camera/image_raw --board \"$2\" -o \"$3\""
+        ))
+        .arg(exe)
+        .arg(bag)
+        .arg(board_path())
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn issue25_a_bag_larger_than_the_memory_allowed_fails_clearly_not_with_an_abort() {
+    let dir = tempfile::tempdir().unwrap();
+    for storage in ["mcap", "sqlite3"] {
+        // About 150 MB of frames (the debug binary itself needs under 50 MB).
+        let Some(bag) = big_bag(dir.path(), storage, 500) else {
+            return;
+        };
+        let out = dir.path().join("session");
+        // Limits (address space, KiB): below the bag's size (its buffer cannot be had), and
+        // above it but without room for the rest of the import.
+        for limit_kib in [120 << 10, 300 << 10] {
+            let run = import_limited(&bag, &out, limit_kib);
+            let log = text(&run);
+            println!("{storage}, ulimit -v {limit_kib}: {log}");
+            assert_eq!(
+                run.status.code(),
+                Some(1),
+                "exit code 1, not a signal: {:?}: {log}",
+                run.status
+            );
+            assert!(
+                log.contains(&format!("not enough memory to read {}", bag.display()))
+                    && log.contains(" MB): ")
+                    && log.contains("ulimit -v"),
+                "{log}"
+            );
+            no_leftovers(dir.path(), &out);
+        }
+    }
+}

@@ -39,8 +39,8 @@ pub struct TopicInfo {
     pub count: usize,
 }
 
-/// One message read from a bag: borrowed from the MCAP file's bytes where its chunk is not
-/// compressed (no copy of gigabytes of images), owned otherwise.
+/// One message read from a bag: borrowed where the storage reader lends it, owned otherwise (the
+/// `mcap` crate's reader and the sqlite3 rows copy every message).
 #[derive(Debug, Clone)]
 pub struct BagMessage<'a> {
     /// Its topic.
@@ -106,7 +106,7 @@ fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
         path: file.to_path_buf(),
         bytes,
         problem: format!(
-            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); an MCAP bag is read into memory whole, plus about {} MB for the import: raise the limit, or split the bag (`ros2 bag convert`)",
+            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); the import holds the messages it reads in memory (an MCAP bag: the file and a copy of its messages), plus about {} MB: raise the limit, or split the bag (`ros2 bag convert`)",
             HEADROOM_BYTES >> 20
         ),
     }
@@ -115,6 +115,8 @@ fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
 /// An opened bag: its storage files and format.
 #[derive(Debug)]
 pub struct Bag {
+    /// The bag as given (folder or file).
+    path: PathBuf,
     files: Vec<PathBuf>,
     format: BagFormat,
     /// The MCAP files' bytes, read once (empty for sqlite3).
@@ -183,22 +185,28 @@ impl Bag {
                 mcap_check_complete(file, &bytes)?;
                 mcap.push(bytes);
             }
-            {
-                let total: u64 = mcap.iter().map(|b| b.len() as u64).sum();
-                let mut probe: Vec<u8> = Vec::new();
-                probe.try_reserve_exact(HEADROOM_BYTES).map_err(|_| {
+            // The `mcap` reader copies every message it yields (and its records into a buffer
+            // of its own), with allocations that abort when they fail: room for a copy of the
+            // whole file, plus the rest of the import, is checked here instead.
+            let total: u64 = mcap.iter().map(|b| b.len() as u64).sum();
+            let copies = usize::try_from(total).unwrap_or(usize::MAX);
+            let mut probe: Vec<u8> = Vec::new();
+            probe
+                .try_reserve_exact(copies.saturating_add(HEADROOM_BYTES))
+                .map_err(|_| {
                     out_of_memory(
                         path,
                         total,
                         &format!(
-                            "the bag is in memory, but keeping {} MB free for the import",
+                            "the file is in memory, but keeping {} MB free for the copies the MCAP reader makes of its messages and {} MB for the rest of the import",
+                            total.div_ceil(1 << 20),
                             HEADROOM_BYTES >> 20
                         ),
                     )
                 })?;
-            }
         }
         Ok(Bag {
+            path: path.to_path_buf(),
             files,
             format,
             mcap,
@@ -275,6 +283,23 @@ impl Bag {
             }
         }
         out.sort_by_key(|m| m.log_time_ns);
+        // The messages are in memory; the rest of the import needs room too.
+        let mut probe: Vec<u8> = Vec::new();
+        probe.try_reserve_exact(HEADROOM_BYTES).map_err(|_| {
+            let bytes = self
+                .files
+                .iter()
+                .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
+                .sum();
+            out_of_memory(
+                &self.path,
+                bytes,
+                &format!(
+                    "its messages are in memory, but keeping {} MB free for the rest of the import",
+                    HEADROOM_BYTES >> 20
+                ),
+            )
+        })?;
         Ok(out)
     }
 }
