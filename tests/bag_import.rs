@@ -775,7 +775,10 @@ fn refused(dir: &Path, bag: &Path) -> String {
     let log = text(&run);
     println!("{log}");
     assert_eq!(run.status.code(), Some(1), "{log}");
-    assert!(log.contains(&*bag.to_string_lossy()), "the bag is named: {log}");
+    assert!(
+        log.contains(&*bag.to_string_lossy()),
+        "the bag is named: {log}"
+    );
     no_leftovers(dir, &out);
     log
 }
@@ -785,23 +788,29 @@ fn issue25_tool0_redefined_on_tf_static_is_refused_with_both_values() {
     let dir = tempfile::tempdir().unwrap();
     for storage in ["mcap", "sqlite3"] {
         // A second /tf_static message, 1.5 s in, moves tool0 10 cm along z.
-        let Some(bag) = small_bag_edited(dir.path(), &format!("static-{storage}"), storage, |spec| {
-            let row = tf_row(
-                ROBOT_START_NS.into(),
-                "wrist_3_link",
-                "tool0",
-                [0.0, 0.0, 0.1],
-                Some(ROBOT_START_NS + 3 * S / 2),
-            );
-            spec["tf_static"].as_array_mut().unwrap().push(row);
-        }) else {
+        let Some(bag) =
+            small_bag_edited(dir.path(), &format!("static-{storage}"), storage, |spec| {
+                let row = tf_row(
+                    ROBOT_START_NS.into(),
+                    "wrist_3_link",
+                    "tool0",
+                    [0.0, 0.0, 0.1],
+                    Some(ROBOT_START_NS + 3 * S / 2),
+                );
+                spec["tf_static"].as_array_mut().unwrap().push(row);
+            })
+        else {
             return;
         };
         let log = refused(dir.path(), &bag);
         assert!(
             log.contains("static transform `wrist_3_link` → `tool0` given two values")
-                && log.contains("`/tf_static` message 0 has translation [0.000000, 0.000000, 0.000000]")
-                && log.contains("`/tf_static` message 1 has translation [0.000000, 0.000000, 0.100000]")
+                && log.contains(
+                    "`/tf_static` message 0 has translation [0.000000, 0.000000, 0.000000]"
+                )
+                && log.contains(
+                    "`/tf_static` message 1 has translation [0.000000, 0.000000, 0.100000]"
+                )
                 && log.contains("100.000 mm")
                 && log.contains("on the chain `base_link` → `tool0`"),
             "{log}"
@@ -813,7 +822,13 @@ fn issue25_tool0_redefined_on_tf_static_is_refused_with_both_values() {
 fn issue25_a_frame_with_two_parents_and_a_tf_loop_are_named_not_called_unconnected() {
     let dir = tempfile::tempdir().unwrap();
     let Some(bag) = small_bag_edited(dir.path(), "two-parents", "mcap", |spec| {
-        let row = tf_row(ROBOT_START_NS.into(), "world", "base", [0.0; 3], Some(ROBOT_START_NS + S));
+        let row = tf_row(
+            ROBOT_START_NS.into(),
+            "world",
+            "base",
+            [0.0; 3],
+            Some(ROBOT_START_NS + S),
+        );
         spec["tf_static"].as_array_mut().unwrap().push(row);
     }) else {
         return;
@@ -825,15 +840,22 @@ fn issue25_a_frame_with_two_parents_and_a_tf_loop_are_named_not_called_unconnect
         "{log}"
     );
     let Some(bag) = small_bag_edited(dir.path(), "loop", "mcap", |spec| {
-        let row = tf_row(ROBOT_START_NS.into(), "tool0", "base_link", [0.0; 3], Some(ROBOT_START_NS + S));
+        let row = tf_row(
+            ROBOT_START_NS.into(),
+            "tool0",
+            "base_link",
+            [0.0; 3],
+            Some(ROBOT_START_NS + S),
+        );
         spec["tf_static"].as_array_mut().unwrap().push(row);
     }) else {
         return;
     };
     let log = refused(dir.path(), &bag);
     assert!(
-        log.contains("TF loop: `base` → `shoulder_link` → `wrist_3_link` → `tool0` → `base_link` → `base`")
-            && !log.contains("not connected"),
+        log.contains(
+            "TF loop: `base` → `shoulder_link` → `wrist_3_link` → `tool0` → `base_link` → `base`"
+        ) && !log.contains("not connected"),
         "{log}"
     );
 }
@@ -854,8 +876,9 @@ fn issue25_two_transforms_at_one_stamp_and_a_clock_going_back_are_refused() {
     };
     let log = refused(dir.path(), &bag);
     assert!(
-        log.contains("`/tf`: `shoulder_link` → `wrist_3_link` has 1 stamp(s) with two different transforms")
-            && log.contains("1700000001.000000000 s")
+        log.contains(
+            "`/tf`: `shoulder_link` → `wrist_3_link` has 1 stamp(s) with two different transforms"
+        ) && log.contains("1700000001.000000000 s")
             && log.contains("5.000 mm"),
         "{log}"
     );
@@ -864,7 +887,9 @@ fn issue25_two_transforms_at_one_stamp_and_a_clock_going_back_are_refused() {
         let tf = spec["tf"].as_array_mut().unwrap();
         let last = tf.last().unwrap()[0].as_i64().unwrap();
         let mut late = tf[75].clone();
-        late.as_array_mut().unwrap().push((last + 10_000_000).into());
+        late.as_array_mut()
+            .unwrap()
+            .push((last + 10_000_000).into());
         tf.push(late);
     }) else {
         return;
@@ -872,7 +897,9 @@ fn issue25_two_transforms_at_one_stamp_and_a_clock_going_back_are_refused() {
     let log = refused(dir.path(), &bag);
     assert!(
         log.contains("stamps of `shoulder_link` → `wrist_3_link` go back in time 1 time(s)")
-            && log.contains("`/tf` message 276 is stamped 1700000000.500000000 s after 1700000004.500000000 s"),
+            && log.contains(
+                "`/tf` message 276 is stamped 1700000000.500000000 s after 1700000004.500000000 s"
+            ),
         "{log}"
     );
     // An image stamped 2 s before the one received before it: the camera clock went back.
@@ -905,7 +932,9 @@ fn issue25_nanosec_of_a_second_or_more_is_refused_with_topic_message_and_value()
     let log = refused(dir.path(), &bag);
     assert!(
         log.contains("topic `/tf`, message 150")
-            && log.contains("`transforms[0].header.stamp.nanosec`: 1000000000, expected below 1000000000"),
+            && log.contains(
+                "`transforms[0].header.stamp.nanosec`: 1000000000, expected below 1000000000"
+            ),
         "{log}"
     );
     let Some(bag) = small_bag_edited(dir.path(), "nanosec-image", "sqlite3", |spec| {
@@ -940,7 +969,11 @@ fn edit_db3(bag: &Path, sql: &str) {
         .arg(sql)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
@@ -953,7 +986,9 @@ fn issue25_a_fifth_of_the_rows_pointing_at_an_unknown_topic_is_refused() {
     let log = refused(dir.path(), &bag);
     assert!(
         log.contains("damaged sqlite3 bag")
-            && log.contains("of table `messages` name a topic id that is in no row of table `topics` (ids 77 (")
+            && log.contains(
+                "of table `messages` name a topic id that is in no row of table `topics` (ids 77 ("
+            )
             && log.contains("more than 5 % of the rows lost"),
         "{log}"
     );
@@ -991,7 +1026,10 @@ fn issue25_small_lies_are_imported_with_named_warnings() {
             let tf = spec["tf"].as_array_mut().unwrap();
             // Received after the two messages after it (8 ms apart): a 16 ms step back.
             let stamp = tf[400][0].as_i64().unwrap();
-            tf[400].as_array_mut().unwrap().push((stamp + 20_000_000 + 1).into());
+            tf[400]
+                .as_array_mut()
+                .unwrap()
+                .push((stamp + 20_000_000 + 1).into());
             // The same stamp again, 0.02 mm off.
             let mut twin = tf[600].clone();
             twin[3] = (twin[3].as_f64().unwrap() + 0.000_02).into();
@@ -1041,7 +1079,8 @@ fn issue25_small_lies_are_imported_with_named_warnings() {
         assert!(log.contains(expected), "`{expected}` missing: {log}");
     }
     assert_eq!(
-        log.matches(&format!("warning: {}: ", bag.display())).count(),
+        log.matches(&format!("warning: {}: ", bag.display()))
+            .count(),
         5,
         "{log}"
     );
@@ -1086,7 +1125,9 @@ fn issue25_staging_folders_of_killed_imports_are_removed_and_named_on_the_next_r
     let log = refused(dir.path(), &bag);
     assert!(
         log.contains("removed .refused-session.importing-abc123 left by an import that was killed")
-            && log.contains("removed .refused-session.importing-Xy9Z0q left by an import that was killed"),
+            && log.contains(
+                "removed .refused-session.importing-Xy9Z0q left by an import that was killed"
+            ),
         "{log}"
     );
     assert!(!killed.exists() && !killed_lock.exists() && !older.exists());
@@ -1099,15 +1140,20 @@ fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
         return;
     };
     // This process holds a staging folder as a concurrent import does (the lock is per process).
-    let live = handeye::session::Staging::create(dir.path(), "refused-session", "importing")
-        .unwrap();
+    let live =
+        handeye::session::Staging::create(dir.path(), "refused-session", "importing").unwrap();
     std::fs::write(live.path().join("session.yaml"), "being written").unwrap();
     let out = dir.path().join("refused-session");
     let run = import(&bag, &out, &[]);
     let log = text(&run);
     println!("{log}");
     assert_eq!(run.status.code(), Some(1), "{log}");
-    let name = live.path().file_name().unwrap().to_string_lossy().into_owned();
+    let name = live
+        .path()
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
     assert!(
         log.contains(&format!(
             "left {name} alone: an import still running (pid {}) writes into it",
@@ -1115,7 +1161,10 @@ fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
         )),
         "{log}"
     );
-    assert!(live.path().join("session.yaml").exists(), "a live staging folder was touched");
+    assert!(
+        live.path().join("session.yaml").exists(),
+        "a live staging folder was touched"
+    );
     drop(live);
     no_leftovers(dir.path(), &out);
 }

@@ -335,10 +335,9 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
     if let Some(parent) = out.parent() {
         for leftover in session::remove_abandoned(parent, STAGING_TAG)? {
             match leftover {
-                session::Leftover::Removed(path) => outln!(
-                    "removed {} left by an import that was killed",
-                    leaf(&path)
-                ),
+                session::Leftover::Removed(path) => {
+                    outln!("removed {} left by an import that was killed", leaf(&path))
+                }
                 session::Leftover::InUse(path, pid) => outln!(
                     "left {} alone: an import still running{} writes into it",
                     leaf(&path),

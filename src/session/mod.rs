@@ -28,11 +28,11 @@ pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup, Shared
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;
-pub use staging::{remove_abandoned, Leftover, Staging};
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
     load_and_solve, solve_folder, solve_folder_in, solve_session, SolveInputs, SolvedSession,
 };
+pub use staging::{remove_abandoned, Leftover, Staging};
 
 use crate::camera::CameraError;
 use crate::camera_model::CameraModelError;

@@ -94,8 +94,7 @@ impl Staging {
                 committed: false,
             };
             // The PID, for the message of a cleanup that finds the folder in use.
-            writeln!(&staging.lock, "{}", std::process::id())
-                .map_err(io(&staging.lock_path))?;
+            writeln!(&staging.lock, "{}", std::process::id()).map_err(io(&staging.lock_path))?;
             return Ok(staging);
         }
         Err(SessionError::Io {
@@ -240,7 +239,10 @@ mod tests {
         let old = dir.path().join(".other.importing-XYZ");
         std::fs::create_dir(&old).unwrap();
         let found = remove_abandoned(dir.path(), "importing").unwrap();
-        assert!(found.contains(&Leftover::Removed(killed.clone())), "{found:?}");
+        assert!(
+            found.contains(&Leftover::Removed(killed.clone())),
+            "{found:?}"
+        );
         assert!(found.contains(&Leftover::Removed(old.clone())), "{found:?}");
         assert!(
             found.contains(&Leftover::InUse(

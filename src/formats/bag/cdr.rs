@@ -455,7 +455,10 @@ pub(crate) mod tests {
         w.string("base");
         let e = decode_tf_message(&w.0).unwrap_err();
         assert_eq!(e.field, "transforms[0].header.stamp.nanosec");
-        assert!(e.problem.contains("1500000000, expected below 1000000000"), "{e}");
+        assert!(
+            e.problem.contains("1500000000, expected below 1000000000"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -8,6 +8,12 @@
 //! (continuous, with the camera-to-robot clock offset given or estimated from the data). Every
 //! frame not taken is reported with why (moving, TF gap, ...).
 //!
+//! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
+//! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
+//! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused by
+//! `cdr`), sqlite3 rows of unknown topics. A bag larger than the memory the process may use is an
+//! error ([`BagError::OutOfMemory`]), not an abort. docs/ros2-bags.md has the table.
+//!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
 //! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
 //! nothing.
@@ -184,7 +190,7 @@ pub enum MessageError {
 pub enum BagWarning {
     /// The TF data contradicts itself off the chain `--base` → `--flange`, or too little to
     /// change a pose.
-    Tf(TfWarning),
+    Tf(Box<TfWarning>),
     /// Image stamps going back in time (receive order), by less than the allowed TF gap.
     ImageStampsBack {
         /// The image topic.
@@ -424,7 +430,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
             path: path.to_path_buf(),
             source: Box::new(source),
         })?;
-    warnings.extend(tf_warnings.into_iter().map(BagWarning::Tf));
+    warnings.extend(tf_warnings.into_iter().map(|w| BagWarning::Tf(Box::new(w))));
     let camera = match (&info_topic, infos.first()) {
         (Some(t), None) => {
             return Err(BagError::CameraInfo {

@@ -352,7 +352,13 @@ fn read_file(file: &Path) -> Result<Vec<u8>, BagError> {
     usize::try_from(len)
         .ok()
         .and_then(|n| bytes.try_reserve_exact(n).ok())
-        .ok_or_else(|| out_of_memory(file, len, &format!("allocating {} MB for it", len.div_ceil(1 << 20))))?;
+        .ok_or_else(|| {
+            out_of_memory(
+                file,
+                len,
+                &format!("allocating {} MB for it", len.div_ceil(1 << 20)),
+            )
+        })?;
     f.read_to_end(&mut bytes).map_err(io)?;
     Ok(bytes)
 }
@@ -560,9 +566,7 @@ fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Res
         .map_err(|e| sqlite_error(file, e))?;
     let mut held: u64 = 0;
     for (id, name, _) in ids {
-        let mut rows = statement
-            .query([id])
-            .map_err(|e| sqlite_error(file, e))?;
+        let mut rows = statement.query([id]).map_err(|e| sqlite_error(file, e))?;
         while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
             let log_time_ns: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
             let blob = row

@@ -377,8 +377,8 @@ pub struct TfBuffer {
     max_gap_ns: Option<i64>,
     /// child → every distinct parent given, with its first message.
     parents: BTreeMap<String, Vec<(String, TfSource)>>,
-    /// child → a static conflict (parent, first, second, more).
-    static_conflicts: BTreeMap<String, (String, (Pose, TfSource), (Pose, TfSource), usize)>,
+    /// child → its [`TfIssue::StaticConflict`].
+    static_conflicts: BTreeMap<String, TfIssue>,
     /// (topic, parent, child) → stamps going back.
     back: BTreeMap<(String, String, String), BackSteps>,
     /// Conflicting samples found by [`TfBuffer::finish`].
@@ -428,16 +428,17 @@ impl TfBuffer {
             Some((parent, Edge::Static(value, first), _)) if *parent == t.parent && is_static => {
                 if !same(value, &t.parent_from_child) {
                     match self.static_conflicts.get_mut(&t.child) {
-                        Some(c) => c.3 += 1,
-                        None => {
+                        Some(TfIssue::StaticConflict { more, .. }) => *more += 1,
+                        _ => {
                             self.static_conflicts.insert(
                                 t.child.clone(),
-                                (
-                                    t.parent.clone(),
-                                    (*value, first.clone()),
-                                    (t.parent_from_child, source.clone()),
-                                    0,
-                                ),
+                                TfIssue::StaticConflict {
+                                    parent: t.parent.clone(),
+                                    child: t.child.clone(),
+                                    first: (*value, first.clone()),
+                                    second: (t.parent_from_child, source.clone()),
+                                    more: 0,
+                                },
                             );
                         }
                     }
@@ -481,9 +482,10 @@ impl TfBuffer {
                     differs = true;
                     let (mm, deg) = apart(&first, other);
                     let score = mm / AMBIGUOUS_MM + deg / AMBIGUOUS_DEG;
-                    if worst.as_ref().is_none_or(|w| {
-                        score > w.0 / AMBIGUOUS_MM + w.1 / AMBIGUOUS_DEG
-                    }) {
+                    if worst
+                        .as_ref()
+                        .is_none_or(|w| score > w.0 / AMBIGUOUS_MM + w.1 / AMBIGUOUS_DEG)
+                    {
                         worst = Some((mm, deg, run[0].0, first, *other));
                     }
                 }
@@ -568,9 +570,7 @@ impl TfBuffer {
                     let mut frames: Vec<String> =
                         walk[i..].iter().rev().map(|f| f.to_string()).collect();
                     // Start the loop at its smallest name, so it reads the same from anywhere.
-                    let min = (0..frames.len())
-                        .min_by_key(|&k| &frames[k])
-                        .unwrap_or(0);
+                    let min = (0..frames.len()).min_by_key(|&k| &frames[k]).unwrap_or(0);
                     frames.rotate_left(min);
                     issues.push(TfIssue::Loop { frames });
                     break;
@@ -592,15 +592,7 @@ impl TfBuffer {
                 });
             }
         }
-        for (child, (parent, first, second, more)) in &self.static_conflicts {
-            issues.push(TfIssue::StaticConflict {
-                parent: parent.clone(),
-                child: child.clone(),
-                first: first.clone(),
-                second: second.clone(),
-                more: *more,
-            });
-        }
+        issues.extend(self.static_conflicts.values().cloned());
         issues.extend(self.conflicts.iter().cloned());
         for ((topic, parent, child), b) in &self.back {
             if let Some((largest_ns, at, from_ns, to_ns)) = &b.largest {
@@ -791,22 +783,22 @@ mod tests {
         tf.add(
             stamped(0, "world", "base", pose([1.0, 0.0, 0.0], 0.0)),
             true,
-            TfSource::default()
+            TfSource::default(),
         );
         tf.add(
             stamped(0, "world", "camera", pose([0.0, 2.0, 0.0], 0.5)),
             true,
-            TfSource::default()
+            TfSource::default(),
         );
         tf.add(
             stamped(1_000_000_000, "base", "tool0", pose([0.0, 0.0, 0.0], 0.0)),
             false,
-            TfSource::default()
+            TfSource::default(),
         );
         tf.add(
             stamped(3_000_000_000, "base", "tool0", pose([0.2, 0.0, 0.0], 0.4)),
             false,
-            TfSource::default()
+            TfSource::default(),
         );
         tf.finish();
         let mid = tf.lookup("base", "tool0", 2_000_000_000).unwrap();
@@ -838,8 +830,16 @@ mod tests {
     #[test]
     fn missing_and_unconnected_frames_are_named() {
         let mut tf = TfBuffer::default();
-        tf.add(stamped(0, "base", "shoulder", pose([0.0; 3], 0.0)), false, TfSource::default());
-        tf.add(stamped(0, "flange", "tool0", pose([0.0; 3], 0.0)), true, TfSource::default());
+        tf.add(
+            stamped(0, "base", "shoulder", pose([0.0; 3], 0.0)),
+            false,
+            TfSource::default(),
+        );
+        tf.add(
+            stamped(0, "flange", "tool0", pose([0.0; 3], 0.0)),
+            true,
+            TfSource::default(),
+        );
         tf.finish();
         let e = tf.check_chain("base", "wrist_3").unwrap_err().to_string();
         assert!(e.contains("`wrist_3`") && e.contains("shoulder"), "{e}");
@@ -864,7 +864,12 @@ mod tests {
         );
         for k in 0..=10 {
             tf.add(
-                stamped(k * 1_000_000_000, "base", "wrist", pose([0.5, 0.0, 0.0], 0.0)),
+                stamped(
+                    k * 1_000_000_000,
+                    "base",
+                    "wrist",
+                    pose([0.5, 0.0, 0.0], 0.0),
+                ),
                 false,
                 from("/tf", k as usize),
             );
@@ -889,7 +894,10 @@ mod tests {
             from("/tf_static", 2),
         );
         tf.finish();
-        let e = tf.check("base", "tool0", 100_000_000).unwrap_err().to_string();
+        let e = tf
+            .check("base", "tool0", 100_000_000)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("`wrist` → `tool0`")
                 && e.contains("`/tf_static` message 0")
@@ -911,7 +919,11 @@ mod tests {
         tf.finish();
         let w = tf.check("base", "tool0", 100_000_000).unwrap();
         assert_eq!(w.len(), 1);
-        assert!(!w[0].on_chain && w[0].to_string().contains("not on the chain"), "{}", w[0]);
+        assert!(
+            !w[0].on_chain && w[0].to_string().contains("not on the chain"),
+            "{}",
+            w[0]
+        );
     }
 
     #[test]
@@ -923,7 +935,10 @@ mod tests {
             from("/tf", 11),
         );
         tf.finish();
-        let e = tf.check("base", "tool0", 100_000_000).unwrap_err().to_string();
+        let e = tf
+            .check("base", "tool0", 100_000_000)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("frame `wrist` has two parents: `base` (`/tf` message 0) and `world` (`/tf` message 11)"),
             "{e}"
@@ -935,9 +950,13 @@ mod tests {
             from("/tf_static", 1),
         );
         tf.finish();
-        let e = tf.check("base", "tool0", 100_000_000).unwrap_err().to_string();
+        let e = tf
+            .check("base", "tool0", 100_000_000)
+            .unwrap_err()
+            .to_string();
         assert!(
-            e.contains("TF loop: `base` → `wrist` → `tool0` → `base`") && !e.contains("not connected"),
+            e.contains("TF loop: `base` → `wrist` → `tool0` → `base`")
+                && !e.contains("not connected"),
             "{e}"
         );
     }
@@ -959,7 +978,10 @@ mod tests {
                     assert!(!refused);
                     assert_eq!(w.len(), 2, "{w:?}"); // and the stamp going back to 3 s
                     let text = w[0].to_string();
-                    assert!(text.contains("1 stamp(s) with two different transforms"), "{text}");
+                    assert!(
+                        text.contains("1 stamp(s) with two different transforms"),
+                        "{text}"
+                    );
                 }
                 Err(e) => {
                     assert!(refused, "{e}");
@@ -978,7 +1000,10 @@ mod tests {
         tf.finish();
         let w = tf.check("base", "tool0", 100_000_000).unwrap();
         assert!(
-            w.len() == 1 && w[0].to_string().contains("go back in time 1 time(s), by up to 50.000 ms"),
+            w.len() == 1
+                && w[0]
+                    .to_string()
+                    .contains("go back in time 1 time(s), by up to 50.000 ms"),
             "{w:?}"
         );
         let mut tf = arm();
@@ -988,7 +1013,10 @@ mod tests {
             from("/tf", 11),
         );
         tf.finish();
-        let e = tf.check("base", "tool0", 100_000_000).unwrap_err().to_string();
+        let e = tf
+            .check("base", "tool0", 100_000_000)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("`/tf` message 11 is stamped 8.000000000 s after 10.000000000 s"),
             "{e}"
