@@ -287,6 +287,15 @@ struct BagImportRecord {
     time_offset_residual_mm: Option<f64>,
     samples: Vec<BagSampleRecord>,
     skipped: Vec<BagSkipRecord>,
+    /// What is wrong with the bag but did not stop the import.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    warnings: Vec<BagWarningRecord>,
+}
+
+#[derive(serde::Serialize)]
+struct BagWarningRecord {
+    kind: String,
+    message: String,
 }
 
 #[derive(serde::Serialize)]
@@ -321,7 +330,27 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
             out.display()
         );
     }
+    // Staging folders of imports that were killed (kill -9, a power cut) are removed here; those
+    // of imports still running beside this one are locked and left alone.
+    if let Some(parent) = out.parent() {
+        for leftover in session::remove_abandoned(parent, STAGING_TAG)? {
+            match leftover {
+                session::Leftover::Removed(path) => {
+                    outln!("removed {} left by an import that was killed", leaf(&path))
+                }
+                session::Leftover::InUse(path, pid) => outln!(
+                    "left {} alone: an import still running{} writes into it",
+                    leaf(&path),
+                    pid.map(|p| format!(" (pid {p})")).unwrap_or_default()
+                ),
+            }
+        }
+    }
     let imported = import_bag(&a.bag, &options).context("importing a ROS 2 bag")?;
+    // Said first, so they are read whatever follows (even a refusal for too few frames).
+    for w in &imported.warnings {
+        eprintln!("warning: {}: {w}", a.bag.display());
+    }
     let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
     for s in &imported.skipped {
         *kinds.entry(s.reason.kind()).or_default() += 1;
@@ -386,9 +415,7 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "session".into());
-    let staging = tempfile::Builder::new()
-        .prefix(&format!(".{name}.importing-"))
-        .tempdir_in(parent)
+    let staging = session::Staging::create(parent, &name, STAGING_TAG)
         .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
     let stage = staging.path().to_path_buf();
     let folder = SessionFolder::create(&stage)?;
@@ -504,6 +531,14 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
                 reason: s.reason.to_string(),
             })
             .collect(),
+        warnings: imported
+            .warnings
+            .iter()
+            .map(|w| BagWarningRecord {
+                kind: w.kind().to_string(),
+                message: w.to_string(),
+            })
+            .collect(),
     };
     let record_file = import_dir.join("bag-import.yaml");
     let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
@@ -511,11 +546,9 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", record_file.display()))?;
     drop(hardware);
     drop(folder);
-    let staged = staging.keep();
-    if let Err(e) = std::fs::rename(&staged, &out) {
-        let _ = std::fs::remove_dir_all(&staged);
-        return Err(e).with_context(|| format!("moving the session into {}", out.display()));
-    }
+    staging
+        .commit(&out)
+        .with_context(|| format!("moving the session into {}", out.display()))?;
     outln!(
         "session {}: {} samples accepted, {} skipped (board not found or rejected)",
         out.display(),
@@ -530,11 +563,28 @@ fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
             .trim_end()
             .replace(&*stage.to_string_lossy(), &out.to_string_lossy())
     );
+    if !imported.warnings.is_empty() {
+        outln!(
+            "the bag has {} warning(s) (printed above, recorded in {}): check them before using this answer",
+            imported.warnings.len(),
+            out.join("import/bag-import.yaml").display()
+        );
+    }
     outln!(
         "next: handeye report {0}   (or: handeye solve {0} --space reprojection, handeye replay {0})",
         out.display()
     );
     Ok(())
+}
+
+/// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.
+const STAGING_TAG: &str = "importing";
+
+/// A path's last component, for messages.
+fn leaf(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
 }
 
 fn sibling(output: &Path, suffix: &str) -> PathBuf {

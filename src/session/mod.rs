@@ -19,6 +19,7 @@ pub mod lock;
 pub mod manual;
 pub mod replay;
 pub mod solve;
+pub mod staging;
 
 use std::path::PathBuf;
 
@@ -31,6 +32,7 @@ pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, 
 pub use solve::{
     load_and_solve, solve_folder, solve_folder_in, solve_session, SolveInputs, SolvedSession,
 };
+pub use staging::{remove_abandoned, Leftover, Staging};
 
 use crate::camera::CameraError;
 use crate::camera_model::CameraModelError;

@@ -13,11 +13,17 @@ SPEC.json (paths relative to it):
     width, height
     camera_info: {k: [9], d: [..], distortion_model} or null
     tf: [[stamp_ns, parent, child, tx, ty, tz, qx, qy, qz, qw], ...]   (one TFMessage per stamp)
-    tf_static: [[...same...]]
-    images: [[stamp_ns, file], ...]
+    tf_static: [[...same...]]   (one TFMessage at the start)
+    images: [[stamp_ns, file], ...]   (a third element: its receive time, ns)
+
+A TF row may end with an 11th element, its receive time (ns): rows are then grouped into
+messages by receive time instead (a /tf_static row received later is a second message). A stamp
+may be [sec, nanosec] instead of ns, written as is (a broken writer's nanosec >= 1e9). An image
+file `random:N` is N bytes from os.urandom (mono8 only; for big, incompressible bags).
 """
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -44,14 +50,22 @@ def main() -> None:
     CameraInfo = ts.types['sensor_msgs/msg/CameraInfo']
     RegionOfInterest = ts.types['sensor_msgs/msg/RegionOfInterest']
 
-    def header(stamp_ns: int, frame: str):
-        return Header(stamp=Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000),
-                      frame_id=frame)
+    def ns(stamp) -> int:
+        if isinstance(stamp, list):
+            return int(stamp[0]) * 1_000_000_000 + int(stamp[1])
+        return int(stamp)
+
+    def header(stamp, frame: str):
+        if isinstance(stamp, list):
+            sec, nanosec = int(stamp[0]), int(stamp[1])
+        else:
+            sec, nanosec = int(stamp) // 1_000_000_000, int(stamp) % 1_000_000_000
+        return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame)
 
     def transform(row):
-        stamp, parent, child, tx, ty, tz, qx, qy, qz, qw = row
+        stamp, parent, child, tx, ty, tz, qx, qy, qz, qw = row[:10]
         return TransformStamped(
-            header=header(int(stamp), parent), child_frame_id=child,
+            header=header(stamp, parent), child_frame_id=child,
             transform=Transform(translation=Vector3(x=tx, y=ty, z=tz),
                                 rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)))
 
@@ -60,18 +74,25 @@ def main() -> None:
     width, height = spec['width'], spec['height']
     cache: dict[str, bytes] = {}
     events = []  # (receive time, order, connection key, message builder)
-    by_stamp: dict[int, list] = {}
+    by_receive: dict[int, list] = {}
     for row in spec['tf']:
-        by_stamp.setdefault(int(row[0]), []).append(row)
-    for stamp, rows in by_stamp.items():
-        events.append((stamp, 1, 'tf', rows))
-    for stamp, name in spec['images']:
-        # The recorder receives a frame a little after its stamp; receive order is stamp order.
-        events.append((int(stamp) + 1_000_000, 2, 'image', (int(stamp), name)))
+        receive = int(row[10]) if len(row) > 10 else ns(row[0])
+        by_receive.setdefault(receive, []).append(row)
+    for receive, rows in by_receive.items():
+        events.append((receive, 1, 'tf', rows))
+    for row in spec['images']:
+        stamp, name = row[:2]
+        # The recorder receives a frame a little after its stamp (or when a third element says).
+        receive = int(row[2]) if len(row) > 2 else ns(stamp) + 1_000_000
+        events.append((receive, 2, 'image', (stamp, name)))
     if spec.get('camera_info') is not None:
-        first = min(int(s) for s, _ in spec['images'])
+        first = min(ns(row[0]) for row in spec['images'])
         events.append((first, 0, 'info', first))
     events.sort(key=lambda e: (e[0], e[1]))
+    static_messages: dict[int, list] = {}
+    for row in spec['tf_static']:
+        receive = int(row[10]) if len(row) > 10 else -1
+        static_messages.setdefault(receive, []).append(row)
 
     with Writer(out, version=9, storage_plugin=plugin) as writer:
         tf_conn = writer.add_connection('/tf', TFMessage.__msgtype__, typestore=ts)
@@ -83,9 +104,10 @@ def main() -> None:
             info_conn = writer.add_connection(spec['camera_info_topic'], CameraInfo.__msgtype__,
                                               typestore=ts)
         start = events[0][0] if events else 0
-        if spec['tf_static']:
-            msg = TFMessage(transforms=[transform(r) for r in spec['tf_static']])
-            writer.write(static_conn, start, ts.serialize_cdr(msg, TFMessage.__msgtype__))
+        for receive, rows in sorted(static_messages.items()):
+            msg = TFMessage(transforms=[transform(r) for r in rows])
+            writer.write(static_conn, start if receive < 0 else receive,
+                         ts.serialize_cdr(msg, TFMessage.__msgtype__))
         for receive, _, key, payload in events:
             if key == 'tf':
                 msg = TFMessage(transforms=[transform(r) for r in payload])
@@ -104,9 +126,12 @@ def main() -> None:
                 writer.write(info_conn, receive, ts.serialize_cdr(msg, CameraInfo.__msgtype__))
             else:
                 stamp, name = payload
-                if name not in cache:
-                    cache[name] = (base / name).read_bytes()
-                data = np.frombuffer(cache[name], dtype=np.uint8)
+                if name.startswith('random:'):
+                    data = np.frombuffer(os.urandom(int(name[7:])), dtype=np.uint8)
+                else:
+                    if name not in cache:
+                        cache[name] = (base / name).read_bytes()
+                    data = np.frombuffer(cache[name], dtype=np.uint8)
                 if kind == 'mono8':
                     msg = Image(header=header(stamp, spec['frame_id']), height=height, width=width,
                                 encoding='mono8', is_bigendian=0, step=width, data=data)

@@ -151,6 +151,17 @@ impl<'a> CdrReader<'a> {
     pub fn header(&mut self, field: &str) -> Result<(i64, String), CdrError> {
         let sec = self.i32(&format!("{field}.stamp.sec"))?;
         let nanosec = self.u32(&format!("{field}.stamp.nanosec"))?;
+        // A `builtin_interfaces/Time` keeps the fraction of a second in `nanosec`: a value of a
+        // second or more is a broken writer, and read as is it would move the stamp by whole
+        // seconds (pairing the frame with another pose), so it is refused.
+        if nanosec >= 1_000_000_000 {
+            return Err(CdrError {
+                field: format!("{field}.stamp.nanosec"),
+                problem: format!(
+                    "{nanosec}, expected below 1000000000 (the nanoseconds within second {sec})"
+                ),
+            });
+        }
         let frame = self.string(&format!("{field}.frame_id"))?;
         Ok((i64::from(sec) * 1_000_000_000 + i64::from(nanosec), frame))
     }
@@ -433,6 +444,21 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string()
             .contains("encapsulation"));
+    }
+
+    #[test]
+    fn nanoseconds_of_a_second_or_more_are_refused() {
+        let mut w = Writer::new();
+        w.u32(1);
+        w.u32(12); // sec
+        w.u32(1_500_000_000); // nanosec
+        w.string("base");
+        let e = decode_tf_message(&w.0).unwrap_err();
+        assert_eq!(e.field, "transforms[0].header.stamp.nanosec");
+        assert!(
+            e.problem.contains("1500000000, expected below 1000000000"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -102,10 +102,32 @@ fn bayer_luma(out: &mut [u8], w: usize, h: usize, at: impl Fn(usize, usize) -> u
     }
 }
 
-/// A compressed image (JPEG or PNG) as 8-bit grey.
+/// The largest compressed image decoded, px a side: a camera frame is far below; a header that
+/// claims more is damage (or an attack) and would ask for gigabytes.
+pub const MAX_DECODED_SIDE_PX: u32 = 16384;
+/// The most memory one decode may allocate, bytes (a 16384x16384 RGBA frame would need 1 GB).
+pub const MAX_DECODE_BYTES: u64 = 512 << 20;
+
+/// A compressed image (JPEG or PNG) as 8-bit grey, within [`MAX_DECODED_SIDE_PX`] and
+/// [`MAX_DECODE_BYTES`].
 pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, String> {
-    let decoded = image::load_from_memory(image.data)
-        .map_err(|e| format!("format `{}`: cannot decode: {e}", image.format))?;
+    let fail = |e: image::ImageError| format!("format `{}`: cannot decode: {e}", image.format);
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(image.data))
+        .with_guessed_format()
+        .map_err(|e| fail(e.into()))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_DECODED_SIDE_PX);
+    limits.max_image_height = Some(MAX_DECODED_SIDE_PX);
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
+    reader.limits(limits);
+    let decoded = reader.decode().map_err(|e| match e {
+        image::ImageError::Limits(_) => format!(
+            "format `{}`: {e} (at most {MAX_DECODED_SIDE_PX} px a side and {} MB are decoded)",
+            image.format,
+            MAX_DECODE_BYTES >> 20
+        ),
+        e => fail(e),
+    })?;
     Ok(decoded.to_luma8())
 }
 

@@ -8,6 +8,12 @@
 //! (continuous, with the camera-to-robot clock offset given or estimated from the data). Every
 //! frame not taken is reported with why (moving, TF gap, ...).
 //!
+//! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
+//! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
+//! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused by
+//! `cdr`), sqlite3 rows of unknown topics. A bag larger than the memory the process may use is an
+//! error ([`BagError::OutOfMemory`]), not an abort. docs/ros2-bags.md has the table.
+//!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
 //! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
 //! nothing.
@@ -35,7 +41,7 @@ use crate::vision::{DetectorOptions, Target};
 pub use cdr::CdrError;
 pub use select::{Motion, OffsetChoice, OffsetEstimate, SelectOptions, Skip, SkipReason};
 pub use storage::{BagFormat, TopicInfo};
-pub use tf::TfError;
+pub use tf::{TfError, TfIssue, TfWarning};
 
 /// Why a bag could not be imported. Every message names the bag and the topic, frame or field.
 #[derive(Debug, thiserror::Error)]
@@ -123,6 +129,40 @@ pub enum BagError {
         /// Why, with the counts of skipped frames.
         problem: String,
     },
+    /// Image stamps go back in time by more than the allowed TF gap.
+    #[error(
+        "{}: topic `{topic}`: image stamps go back in time {count} time(s); message {index} is stamped {} after {} ({:.3} ms back, more than the {max_back_ms} ms --max-tf-gap-ms allows): the camera clock went back (a restart, a looped playback), so frames cannot be paired with poses by stamp; expected stamps that only increase (split the bag at message {index})",
+        path.display(),
+        tf::stamp_text(*to_ns),
+        tf::stamp_text(*from_ns),
+        (*from_ns - *to_ns) as f64 * 1e-6
+    )]
+    StampsBack {
+        /// The bag.
+        path: PathBuf,
+        /// The image topic.
+        topic: String,
+        /// Steps back in all.
+        count: usize,
+        /// 0-based index of the message of the largest step back.
+        index: usize,
+        /// The stamp before it, ns.
+        from_ns: i64,
+        /// Its stamp, ns.
+        to_ns: i64,
+        /// The largest step back allowed, ms.
+        max_back_ms: f64,
+    },
+    /// The bag (or a part of it) does not fit in the memory the process may use.
+    #[error("not enough memory to read {} ({} MB): {problem}", path.display(), bytes.div_ceil(1 << 20))]
+    OutOfMemory {
+        /// The file.
+        path: PathBuf,
+        /// Its size, bytes.
+        bytes: u64,
+        /// What could not be allocated, and what to do.
+        problem: String,
+    },
     /// The clock offset could not be estimated.
     #[error("{}: estimating the camera-to-robot clock offset: {problem}", path.display())]
     Offset {
@@ -142,6 +182,67 @@ pub enum MessageError {
     /// Pixels that cannot be turned into a grey image.
     #[error("{0}")]
     Pixels(String),
+}
+
+/// Something wrong with a bag that does not make the poses ambiguous: the bag is imported and
+/// this is reported (printed, and recorded in the session's `import/bag-import.yaml`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum BagWarning {
+    /// The TF data contradicts itself off the chain `--base` → `--flange`, or too little to
+    /// change a pose.
+    Tf(Box<TfWarning>),
+    /// Image stamps going back in time (receive order), by less than the allowed TF gap.
+    ImageStampsBack {
+        /// The image topic.
+        topic: String,
+        /// Steps back in all.
+        count: usize,
+        /// 0-based index of the message of the largest step back.
+        index: usize,
+        /// The stamp before it, ns.
+        from_ns: i64,
+        /// Its stamp, ns.
+        to_ns: i64,
+    },
+    /// sqlite3 rows whose topic id is in no topic: their messages are lost.
+    UnknownTopicRows(storage::UnknownTopicRows),
+}
+
+impl BagWarning {
+    /// A short name for counting and tests.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            BagWarning::Tf(w) => w.issue.kind(),
+            BagWarning::ImageStampsBack { .. } => "image stamps going back",
+            BagWarning::UnknownTopicRows(_) => "rows of unknown topics",
+        }
+    }
+}
+
+impl std::fmt::Display for BagWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BagWarning::Tf(w) => write!(f, "TF: {w}"),
+            BagWarning::ImageStampsBack {
+                topic,
+                count,
+                index,
+                from_ns,
+                to_ns,
+            } => write!(
+                f,
+                "topic `{topic}`: image stamps go back in time {count} time(s), by up to {:.3} ms (message {index} is stamped {} after {}); within the allowed TF gap, so the frames are used in stamp order",
+                (from_ns - to_ns) as f64 * 1e-6,
+                tf::stamp_text(*to_ns),
+                tf::stamp_text(*from_ns)
+            ),
+            BagWarning::UnknownTopicRows(rows) => write!(
+                f,
+                "{rows}; their messages are ignored (at most {:.0} % of the rows may be lost before the bag is refused)",
+                storage::UNKNOWN_TOPIC_ROWS_REFUSED * 100.0
+            ),
+        }
+    }
 }
 
 fn list(items: &[String]) -> String {
@@ -208,6 +309,8 @@ pub struct BagImport {
     pub camera: Option<CameraModel>,
     /// The camera-to-robot clock offset used (s), and how it was found.
     pub offset: OffsetEstimate,
+    /// What is wrong with the bag but did not stop the import.
+    pub warnings: Vec<BagWarning>,
 }
 
 /// Reads a bag and picks the frames to calibrate from (see the module docs).
@@ -271,6 +374,19 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         expect_type(path, t, "tf2_msgs/msg/TFMessage")?;
     }
 
+    let mut warnings = Vec::new();
+    for rows in bag.unknown_topic_rows()? {
+        if rows.fraction() > storage::UNKNOWN_TOPIC_ROWS_REFUSED {
+            return Err(BagError::Storage {
+                path: rows.file.clone(),
+                problem: format!(
+                    "damaged sqlite3 bag: {rows}; more than {:.0} % of the rows lost (they may be the frames or TF the calibration needs); expected every row to name a topic of table `topics`",
+                    storage::UNKNOWN_TOPIC_ROWS_REFUSED * 100.0
+                ),
+            });
+        }
+        warnings.push(BagWarning::UnknownTopicRows(rows));
+    }
     let messages = bag.read(&wanted)?;
     let mut buffer = tf::TfBuffer::default();
     let mut images = Vec::new();
@@ -296,18 +412,25 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         } else {
             let is_static = options.tf_static_topics.contains(&m.topic);
             for t in cdr::decode_tf_message(&m.data).map_err(|e| wrap(e.into()))? {
-                buffer.add(t, is_static);
+                let source = tf::TfSource {
+                    topic: m.topic.clone(),
+                    index,
+                };
+                buffer.add(t, is_static, source);
             }
         }
     }
     buffer.finish();
     // The frames must be in the tree and connected before any frame is looked at.
-    buffer
-        .check_chain(&options.base_frame, &options.flange_frame)
+    // A step back in time larger than the TF gap interpolated across is a clock that went back.
+    let max_back_ns = select::seconds_to_ns(options.select.max_tf_gap_s);
+    let tf_warnings = buffer
+        .check(&options.base_frame, &options.flange_frame, max_back_ns)
         .map_err(|source| BagError::Tf {
             path: path.to_path_buf(),
             source: Box::new(source),
         })?;
+    warnings.extend(tf_warnings.into_iter().map(|w| BagWarning::Tf(Box::new(w))));
     let camera = match (&info_topic, infos.first()) {
         (Some(t), None) => {
             return Err(BagError::CameraInfo {
@@ -350,6 +473,39 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
                 })
         })
         .collect::<Result<Vec<_>, _>>()?;
+    // Image stamps in receive order: a small step back is delivery order (the frames are sorted
+    // by stamp); a large one is a camera clock that went back, and pairing by stamp fails.
+    let mut back: Option<(usize, i64, i64)> = None;
+    let mut back_count = 0;
+    for (k, pair) in decoded.windows(2).enumerate() {
+        let (before, after) = (pair[0].stamp_ns, pair[1].stamp_ns);
+        if after < before {
+            back_count += 1;
+            if back.is_none_or(|(_, f, t)| before - after > f - t) {
+                back = Some((images[k + 1].1, before, after));
+            }
+        }
+    }
+    if let Some((index, from_ns, to_ns)) = back {
+        if from_ns - to_ns > max_back_ns {
+            return Err(BagError::StampsBack {
+                path: path.to_path_buf(),
+                topic: options.image_topic.clone(),
+                count: back_count,
+                index,
+                from_ns,
+                to_ns,
+                max_back_ms: options.select.max_tf_gap_s * 1e3,
+            });
+        }
+        warnings.push(BagWarning::ImageStampsBack {
+            topic: options.image_topic.clone(),
+            count: back_count,
+            index,
+            from_ns,
+            to_ns,
+        });
+    }
     let selected = select::select(path, &decoded, &buffer, camera.as_ref(), options)?;
     if let (Some(camera), Some(first)) = (&camera, selected.samples.first()) {
         if (first.image.width(), first.image.height()) != (camera.width, camera.height) {
@@ -374,6 +530,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         images: decoded.len(),
         camera,
         offset: selected.offset,
+        warnings,
     })
 }
 

@@ -186,7 +186,7 @@ fn decode(
     }
 }
 
-fn seconds_to_ns(s: f64) -> i64 {
+pub(crate) fn seconds_to_ns(s: f64) -> i64 {
     (s * 1e9).round() as i64
 }
 

@@ -39,8 +39,8 @@ pub struct TopicInfo {
     pub count: usize,
 }
 
-/// One message read from a bag: borrowed from the MCAP file's bytes where its chunk is not
-/// compressed (no copy of gigabytes of images), owned otherwise.
+/// One message read from a bag: borrowed where the storage reader lends it, owned otherwise (the
+/// `mcap` crate's reader and the sqlite3 rows copy every message).
 #[derive(Debug, Clone)]
 pub struct BagMessage<'a> {
     /// Its topic.
@@ -51,9 +51,72 @@ pub struct BagMessage<'a> {
     pub data: std::borrow::Cow<'a, [u8]>,
 }
 
+/// Rows of an sqlite3 bag's `messages` table whose `topic_id` is in no row of `topics`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnknownTopicRows {
+    /// The `.db3` file.
+    pub file: PathBuf,
+    /// Those rows.
+    pub rows: usize,
+    /// All rows of `messages`.
+    pub total: usize,
+    /// The unknown topic ids with their row counts, in id order.
+    pub ids: Vec<(i64, usize)>,
+}
+
+/// The share of a file's rows with an unknown topic above which the bag is refused as damaged:
+/// a few orphan rows are what a crash mid-write or a tool that dropped a topic leaves; more mean
+/// `topics` and `messages` disagree, and the lost rows may be the frames or the TF the
+/// calibration needs.
+pub const UNKNOWN_TOPIC_ROWS_REFUSED: f64 = 0.05;
+
+impl UnknownTopicRows {
+    /// `rows / total`.
+    pub fn fraction(&self) -> f64 {
+        self.rows as f64 / self.total.max(1) as f64
+    }
+}
+
+impl std::fmt::Display for UnknownTopicRows {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ids: Vec<String> = self
+            .ids
+            .iter()
+            .map(|(id, n)| format!("{id} ({n} rows)"))
+            .collect();
+        write!(
+            f,
+            "{}: {} of {} rows ({:.1} %) of table `messages` name a topic id that is in no row of table `topics` (ids {})",
+            self.file.display(),
+            self.rows,
+            self.total,
+            self.fraction() * 100.0,
+            ids.join(", ")
+        )
+    }
+}
+
+/// Memory the import needs besides the bag's bytes (decoded frames, the session run): checked
+/// free after the bag is read, so a bag that just fits fails here, clearly, rather than with an
+/// abort later.
+const HEADROOM_BYTES: usize = 256 << 20;
+
+fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
+    BagError::OutOfMemory {
+        path: file.to_path_buf(),
+        bytes,
+        problem: format!(
+            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); the import holds the messages it reads in memory (an MCAP bag: the file and a copy of its messages), plus about {} MB: raise the limit, or split the bag (`ros2 bag convert`)",
+            HEADROOM_BYTES >> 20
+        ),
+    }
+}
+
 /// An opened bag: its storage files and format.
 #[derive(Debug)]
 pub struct Bag {
+    /// The bag as given (folder or file).
+    path: PathBuf,
     files: Vec<PathBuf>,
     format: BagFormat,
     /// The MCAP files' bytes, read once (empty for sqlite3).
@@ -122,8 +185,28 @@ impl Bag {
                 mcap_check_complete(file, &bytes)?;
                 mcap.push(bytes);
             }
+            // The `mcap` reader copies every message it yields (and its records into a buffer
+            // of its own), with allocations that abort when they fail: room for a copy of the
+            // whole file, plus the rest of the import, is checked here instead.
+            let total: u64 = mcap.iter().map(|b| b.len() as u64).sum();
+            let copies = usize::try_from(total).unwrap_or(usize::MAX);
+            let mut probe: Vec<u8> = Vec::new();
+            probe
+                .try_reserve_exact(copies.saturating_add(HEADROOM_BYTES))
+                .map_err(|_| {
+                    out_of_memory(
+                        path,
+                        total,
+                        &format!(
+                            "the file is in memory, but keeping {} MB free for the copies the MCAP reader makes of its messages and {} MB for the rest of the import",
+                            total.div_ceil(1 << 20),
+                            HEADROOM_BYTES >> 20
+                        ),
+                    )
+                })?;
         }
         Ok(Bag {
+            path: path.to_path_buf(),
             files,
             format,
             mcap,
@@ -154,6 +237,42 @@ impl Bag {
         Ok(all)
     }
 
+    /// The rows of each sqlite3 file whose topic is unknown (none for MCAP, whose reader refuses
+    /// a message of an unknown channel as damage).
+    pub fn unknown_topic_rows(&self) -> Result<Vec<UnknownTopicRows>, BagError> {
+        if self.format != BagFormat::Sqlite3 {
+            return Ok(Vec::new());
+        }
+        let mut out = Vec::new();
+        for file in &self.files {
+            let db = sqlite_open(file)?;
+            let total: i64 = db
+                .query_row("SELECT COUNT(*) FROM messages", [], |row| row.get(0))
+                .map_err(|e| sqlite_error(file, e))?;
+            let mut statement = db
+                .prepare(
+                    "SELECT topic_id, COUNT(*) FROM messages WHERE topic_id NOT IN (SELECT id FROM topics) GROUP BY topic_id ORDER BY topic_id",
+                )
+                .map_err(|e| sqlite_error(file, e))?;
+            let ids = statement
+                .query_map([], |row| {
+                    Ok((row.get::<_, i64>(0)?, row.get::<_, i64>(1)? as usize))
+                })
+                .map_err(|e| sqlite_error(file, e))?
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| sqlite_error(file, e))?;
+            if !ids.is_empty() {
+                out.push(UnknownTopicRows {
+                    file: file.clone(),
+                    rows: ids.iter().map(|(_, n)| n).sum(),
+                    total: total as usize,
+                    ids,
+                });
+            }
+        }
+        Ok(out)
+    }
+
     /// Every message on `topics`, in receive-time order.
     pub fn read(&self, topics: &[String]) -> Result<Vec<BagMessage<'_>>, BagError> {
         let mut out = Vec::new();
@@ -164,6 +283,23 @@ impl Bag {
             }
         }
         out.sort_by_key(|m| m.log_time_ns);
+        // The messages are in memory; the rest of the import needs room too.
+        let mut probe: Vec<u8> = Vec::new();
+        probe.try_reserve_exact(HEADROOM_BYTES).map_err(|_| {
+            let bytes = self
+                .files
+                .iter()
+                .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
+                .sum();
+            out_of_memory(
+                &self.path,
+                bytes,
+                &format!(
+                    "its messages are in memory, but keeping {} MB free for the rest of the import",
+                    HEADROOM_BYTES >> 20
+                ),
+            )
+        })?;
         Ok(out)
     }
 }
@@ -202,11 +338,29 @@ fn file_format(file: &Path) -> Result<BagFormat, BagError> {
     }
 }
 
+/// The whole file, its buffer reserved fallibly: a file larger than the memory the process may
+/// use is an error naming it, not an abort.
 fn read_file(file: &Path) -> Result<Vec<u8>, BagError> {
-    std::fs::read(file).map_err(|source| BagError::Read {
+    use std::io::Read;
+    let io = |source| BagError::Read {
         path: file.to_path_buf(),
         source,
-    })
+    };
+    let mut f = std::fs::File::open(file).map_err(io)?;
+    let len = f.metadata().map_err(io)?.len();
+    let mut bytes = Vec::new();
+    usize::try_from(len)
+        .ok()
+        .and_then(|n| bytes.try_reserve_exact(n).ok())
+        .ok_or_else(|| {
+            out_of_memory(
+                file,
+                len,
+                &format!("allocating {} MB for it", len.div_ceil(1 << 20)),
+            )
+        })?;
+    f.read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
 }
 
 fn mcap_error(file: &Path, e: mcap::McapError) -> BagError {
@@ -294,6 +448,8 @@ fn mcap_read<'a>(
                 ),
             });
         }
+        out.try_reserve(1)
+            .map_err(|_| out_of_memory(file, 0, "growing the list of messages"))?;
         out.push(BagMessage {
             topic: message.channel.topic.clone(),
             log_time_ns: i64::try_from(message.log_time).unwrap_or(i64::MAX),
@@ -408,14 +564,33 @@ fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Res
     let mut statement = db
         .prepare("SELECT timestamp, data FROM messages WHERE topic_id = ?1 ORDER BY timestamp")
         .map_err(|e| sqlite_error(file, e))?;
+    let mut held: u64 = 0;
     for (id, name, _) in ids {
-        let rows = statement
-            .query_map([id], |row| {
-                Ok((row.get::<_, i64>(0)?, row.get::<_, Vec<u8>>(1)?))
-            })
-            .map_err(|e| sqlite_error(file, e))?;
-        for row in rows {
-            let (log_time_ns, data) = row.map_err(|e| sqlite_error(file, e))?;
+        let mut rows = statement.query([id]).map_err(|e| sqlite_error(file, e))?;
+        while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
+            let log_time_ns: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
+            let blob = row
+                .get_ref(1)
+                .and_then(|v| v.as_blob().map_err(Into::into))
+                .map_err(|e| sqlite_error(file, e))?;
+            // Copied into a buffer reserved fallibly: rows that do not fit in memory are an
+            // error naming the file, not an abort.
+            let mut data = Vec::new();
+            data.try_reserve_exact(blob.len())
+                .and_then(|()| out.try_reserve(1))
+                .map_err(|_| {
+                    let bytes = std::fs::metadata(file).map_or(0, |m| m.len());
+                    out_of_memory(
+                        file,
+                        bytes,
+                        &format!(
+                            "holding the messages of `{name}` ({} MB read so far)",
+                            held.div_ceil(1 << 20)
+                        ),
+                    )
+                })?;
+            data.extend_from_slice(blob);
+            held += data.len() as u64;
             out.push(BagMessage {
                 topic: name.clone(),
                 log_time_ns,
