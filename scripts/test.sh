@@ -9,10 +9,10 @@ cd "$(dirname "$0")/.."
 need_apt=()
 command -v cc >/dev/null || need_apt+=(build-essential)
 command -v pkg-config >/dev/null || need_apt+=(pkg-config)
-# Headless Chromium for the report's real-browser test (tests/report.rs).
+# Headless Chromium for the report's real-browser test (tests/it/report.rs).
 command -v chromium >/dev/null || need_apt+=(chromium)
 # Poppler's pdftoppm renders the printable board PDF so the detector can read it back
-# (tests/cellkit.rs): an independent PDF reader, not ours.
+# (tests/it/cellkit.rs): an independent PDF reader, not ours.
 command -v pdftoppm >/dev/null || need_apt+=(poppler-utils)
 if [ ${#need_apt[@]} -gt 0 ]; then
   apt-get update -q
@@ -26,13 +26,13 @@ if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
   python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
 fi
 
-# numpy + OpenCV for tests/boards.rs and tests/kalibr_print.rs (tests/python/*.py render
+# numpy + OpenCV for tests/it/boards.rs and tests/it/kalibr_print.rs (tests/python/*.py render
 # ChArUco/chessboard/Kalibr-aprilgrid frames independently of us and compute OpenCV's figures). The test falls back to a
 # venv of its own when this install is refused (PEP 668).
 python3 -c "import cv2, numpy" 2>/dev/null || python3 -m pip install -q numpy "opencv-python-headless<5" || true
-# Playwright drives the Debian chromium above in tests/console.rs (no browser download).
+# Playwright drives the Debian chromium above in tests/it/console.rs (no browser download).
 python3 -c "import playwright.sync_api" 2>/dev/null || python3 -m pip install -q playwright
-# ROS 2 bag import (tests/bag_import.rs): bags are written by the pure-Python `rosbags` package,
+# ROS 2 bag import (tests/it/bag_import.rs): bags are written by the pure-Python `rosbags` package,
 # installed into the venv the test looks for (it creates the same venv itself when missing).
 bag_venv="${CARGO_TARGET_DIR:-target}/tmp/bag-venv"
 if ! "$bag_venv/bin/python" -c "import rosbags, numpy" 2>/dev/null; then

@@ -1,26 +1,21 @@
 //! handeye: hand-eye (camera ↔ flange) and base-world (base ↔ target) calibration for robot
 //! cells. See `DESIGN.md` in the shared folder and the README for the frame convention
-//! (`T_a_b` maps points in frame `b` into frame `a`; `a_from_b` in code) and the layers.
-#![warn(missing_docs)]
+//! (`T_a_b` maps points in frame `b` into frame `a`; `a_from_b` in code), and ARCHITECTURE.md
+//! for the crates and layers.
+//!
+//! This crate is the top of the workspace: the outputs (the live console, the report, the file
+//! formats in and out) and the `handeye` binary. It re-exports the layers below under the module
+//! names the project has always used (`handeye::geometry`, `handeye::solve`, …), so a caller
+//! needs one dependency.
 
-pub mod atomic_file;
-pub mod camera;
-pub mod camera_model;
-pub mod cell;
-pub mod config;
 pub mod console;
-pub mod dataset;
 pub mod formats;
-pub mod geometry;
-pub mod notice;
-pub mod plan;
 pub mod report;
-pub mod result;
-pub mod robot;
-pub mod session;
-pub mod setup;
-pub mod solve;
-pub mod verdict;
-pub mod verify;
-pub mod vision;
-pub mod yaml_file;
+
+pub use handeye_camera as camera;
+pub use handeye_core::{atomic_file, camera_model, geometry, notice, setup, yaml_file};
+pub use handeye_robot as robot;
+pub use handeye_session::{cell, config, dataset, plan, result, session, verify};
+pub use handeye_solve as solve;
+pub use handeye_solve::verdict;
+pub use handeye_vision as vision;

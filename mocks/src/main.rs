@@ -5,8 +5,8 @@ use std::net::IpAddr;
 
 use anyhow::{bail, Context};
 use clap::Parser;
-use handeye::geometry::pose_from_rotvec;
-use handeye::robot::kinematics::UrModel;
+use handeye_core::geometry::pose_from_rotvec;
+use handeye_robot::kinematics::UrModel;
 use mocks::{ControllerVersion, MockFaults, MockUr, MockUrConfig, MockUrPorts};
 use nalgebra::Vector3;
 

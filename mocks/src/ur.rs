@@ -1,6 +1,6 @@
 //! The mock Universal Robots controller: [`MockUr::start`] binds the RTDE (30004), dashboard
 //! (29999) and script (30003) ports on one address, serves every connection on its own thread,
-//! and drives one simulated arm ([`handeye::robot::kinematics::UrModel`]) so the joint positions
+//! and drives one simulated arm ([`handeye_robot::kinematics::UrModel`]) so the joint positions
 //! and the TCP pose it streams always agree. Moves are interpolated at the commanded speed
 //! (joint speed for moveJ, tool speed for moveL) or finish at once.
 //!
@@ -26,9 +26,9 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use handeye::geometry::Pose;
-use handeye::robot::kinematics::UrModel;
-use handeye::robot::Joints;
+use handeye_core::geometry::Pose;
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::Joints;
 
 use arm::Arm;
 
@@ -143,7 +143,7 @@ pub struct MockUrConfig {
     pub trapezoidal_moves: bool,
     /// After each joint move the arm rings down (`actual_q` and `actual_qd` show a decaying
     /// oscillation); `None`: it stops dead.
-    pub ringing: Option<handeye::robot::sim::Ringing>,
+    pub ringing: Option<handeye_robot::sim::Ringing>,
     /// Injected faults.
     pub faults: MockFaults,
     /// What "get serial number" answers (digits only, as ur_rtde checks).
@@ -472,13 +472,13 @@ pub(crate) enum Poll {
 /// Reads what a client sent into `buffer` (through `chunk`): the one read loop step shared by the
 /// RTDE, dashboard and script servers.
 pub(crate) fn poll_client(
-    stream: &mut std::net::TcpStream,
+    stream: &mut TcpStream,
     shared: &Shared,
     buffer: &mut Vec<u8>,
     chunk: &mut [u8],
 ) -> Poll {
     use std::io::{ErrorKind, Read};
-    if shared.stop.load(std::sync::atomic::Ordering::Relaxed) || shared.arm().connection_dropped() {
+    if shared.stop.load(Ordering::Relaxed) || shared.arm().connection_dropped() {
         return Poll::Closed;
     }
     match stream.read(chunk) {

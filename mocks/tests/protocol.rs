@@ -6,7 +6,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
-use handeye::geometry::{pose_from_rotvec, rotvec};
+use handeye_core::geometry::{pose_from_rotvec, rotvec};
 use mocks::{MockFaults, MockUrConfig};
 use nalgebra::Vector3;
 

@@ -78,7 +78,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         FormatArg::Json => ExportFormat::Json,
         FormatArg::Opencv => ExportFormat::Opencv,
     };
-    if handeye::formats::export::is_ur_base_link(&ids.base) {
+    if export::is_ur_base_link(&ids.base) {
         eprintln!(
             "note: {} is the UR ROS driver's base_link (base turned 180° about z): the base-side transform is exported in it",
             ids.base

@@ -2,24 +2,19 @@
 //! form (`T_base_flange`, `T_camera_target` pairs). The library does the reading
 //! (`handeye::formats::import`); this file maps arguments and prints what was found.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
 use handeye::camera_model::CameraModel;
-use handeye::config::{
-    CameraConfig, CellConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig,
-    SessionConfig, SolverConfig, WorkspaceConfig,
-};
+use handeye::config::{recorded_cell, CellConfig, RecordedFiles};
 use handeye::dataset::Dataset;
-use handeye::formats::bag::{import_bag, BagOptions};
+use handeye::formats::bag::{import_bag_session, BagNote, BagOptions, BagSessionRequest};
 use handeye::formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
-use handeye::geometry::PoseYaml;
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::setup::Setup;
 use handeye::vision::{DetectorOptions, Target};
@@ -274,317 +269,38 @@ fn bag_options(a: &BagArgs) -> anyhow::Result<BagOptions> {
     })
 }
 
-/// What `import bag` records about itself in `<session>/import/bag-import.yaml`.
-#[derive(serde::Serialize)]
-struct BagImportRecord {
-    bag: PathBuf,
-    format: String,
-    image_topic: String,
-    images: usize,
-    time_offset_s: f64,
-    time_offset_estimated: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    time_offset_residual_mm: Option<f64>,
-    samples: Vec<BagSampleRecord>,
-    skipped: Vec<BagSkipRecord>,
-    /// What is wrong with the bag but did not stop the import.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    warnings: Vec<BagWarningRecord>,
-}
-
-#[derive(serde::Serialize)]
-struct BagWarningRecord {
-    kind: String,
-    message: String,
-}
-
-#[derive(serde::Serialize)]
-struct BagSampleRecord {
-    frame: String,
-    image_stamp_s: f64,
-    robot_stamp_s: f64,
-    sharpness: f64,
-}
-
-#[derive(serde::Serialize)]
-struct BagSkipRecord {
-    image_stamp_s: f64,
-    reason: String,
-}
-
-/// Runs `import bag`: reads the bag, then runs its frames as a recorded cell into a staging
-/// folder next to the output and renames it into place when everything succeeded.
-fn import_bag_session(a: BagArgs) -> anyhow::Result<()> {
-    use handeye::session::{self, SessionFolder, SessionManifest};
-    let options = bag_options(&a)?;
-    let out = absolute(&a.output)?;
-    if out.exists() {
-        let empty = out.is_dir()
-            && std::fs::read_dir(&out)
-                .with_context(|| format!("reading {}", out.display()))?
-                .next()
-                .is_none();
-        anyhow::ensure!(
-            empty,
-            "{}: exists already; give a new session folder",
-            out.display()
-        );
-    }
-    // Staging folders of imports that were killed (kill -9, a power cut) are removed here; those
-    // of imports still running beside this one are locked and left alone.
-    if let Some(parent) = out.parent() {
-        for leftover in session::remove_abandoned(parent, STAGING_TAG)? {
-            match leftover {
-                session::Leftover::Removed(path) => {
-                    outln!("removed {} left by an import that was killed", leaf(&path))
-                }
-                session::Leftover::InUse(path, pid) => outln!(
-                    "left {} alone: an import still running{} writes into it",
-                    leaf(&path),
-                    pid.map(|p| format!(" (pid {p})")).unwrap_or_default()
-                ),
-            }
-        }
-    }
-    let imported = import_bag(&a.bag, &options).context("importing a ROS 2 bag")?;
-    // Said first, so they are read whatever follows (even a refusal for too few frames).
-    for w in &imported.warnings {
-        eprintln!("warning: {}: {w}", a.bag.display());
-    }
-    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
-    for s in &imported.skipped {
-        *kinds.entry(s.reason.kind()).or_default() += 1;
-    }
-    outln!(
-        "{} ({}): {} images on {}; {} frames taken; skipped: {}",
-        a.bag.display(),
-        imported.format,
-        imported.images,
-        a.image,
-        imported.samples.len(),
-        if kinds.is_empty() {
-            "none".to_string()
-        } else {
-            kinds
-                .iter()
-                .map(|(k, n)| format!("{n} {k}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        }
-    );
-    for s in imported
-        .skipped
-        .iter()
-        .filter(|s| s.reason.kind() == "tf gap")
-        .take(3)
-    {
-        outln!("  frame at {:.3} s: {}", s.stamp_ns as f64 * 1e-9, s.reason);
-    }
-    let o = &imported.offset;
-    if o.estimated {
-        outln!(
-            "camera-to-robot clock offset: {:+.2} ms (estimated from {} frames with the board; board position RMS {:.3} mm)",
-            o.offset_s * 1e3,
-            o.frames_used,
-            o.residual_mm.unwrap_or(f64::NAN)
-        );
-    } else if o.offset_s != 0.0 {
-        outln!(
-            "camera-to-robot clock offset: {:+.2} ms (given)",
-            o.offset_s * 1e3
-        );
-    }
-    anyhow::ensure!(
-        imported.samples.len() >= 3,
-        "{}: only {} usable frames (a calibration needs at least 3 views): {}",
-        a.bag.display(),
-        imported.samples.len(),
-        if a.continuous {
-            "check --image, the TF frames and --spacing"
-        } else {
-            "did the arm stop at each view? (--max-speed-mm-s, --still-window; or --continuous)"
-        }
-    );
-
-    // Stage everything next to the output; dropped (removed) on any error.
-    let parent = out
-        .parent()
-        .ok_or_else(|| anyhow::anyhow!("{}: has no parent folder", out.display()))?;
-    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "session".into());
-    let staging = session::Staging::create(parent, &name, STAGING_TAG)
-        .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
-    let stage = staging.path().to_path_buf();
-    let folder = SessionFolder::create(&stage)?;
-    let import_dir = stage.join("import");
-    let images_dir = import_dir.join("images");
-    std::fs::create_dir_all(&images_dir)
-        .with_context(|| format!("creating {}", images_dir.display()))?;
-    let mut samples = Vec::new();
-    for (i, s) in imported.samples.iter().enumerate() {
-        let file = images_dir.join(format!("{i:03}.png"));
-        s.image
-            .save(&file)
-            .with_context(|| format!("writing {}", file.display()))?;
-        samples.push(BagSampleRecord {
-            frame: format!("import/images/{i:03}.png"),
-            image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
-            robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
-            sharpness: s.sharpness,
-        });
-    }
-    let poses: Vec<_> = imported
-        .samples
-        .iter()
-        .map(|s| s.base_from_flange)
-        .collect();
-    save_recorded_poses(&poses, &import_dir.join("poses.yaml"))?;
-    if let Some(camera) = &imported.camera {
-        camera.save_camera_info(&import_dir.join("camera_info.yaml"))?;
-    }
-    std::fs::copy(&a.board, import_dir.join("target.yaml"))
-        .with_context(|| format!("copying {}", a.board.display()))?;
-    let setup: Setup = a.setup.into();
-    let identity = handeye::geometry::Pose::identity();
-    let config = recorded_cell(
-        setup,
-        RecordedFiles {
-            target: PathBuf::from("target.yaml"),
-            intrinsics: imported
-                .camera
-                .is_some()
-                .then(|| PathBuf::from("camera_info.yaml")),
-            poses: PathBuf::from("poses.yaml"),
-            images: PathBuf::from("images"),
-        },
-        // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
-        (identity, identity),
-        &poses,
-        a.decimation,
-    );
-    let config_file = import_dir.join("cell.yaml");
-    config.save(
-        &config_file,
-        &format!(
-            "The recorded cell of the ROS 2 bag {} (written by `handeye import bag`)",
-            absolute(&a.bag)?.display()
-        ),
-    )?;
-    let mut cell = handeye::cell::prepare(&config_file).context("preparing the recorded cell")?;
-    if !cell.report.ok() {
-        anyhow::bail!(
-            "the frames taken from {} cannot calibrate:\n{}",
-            a.bag.display(),
-            cell.report
-        );
-    }
-    let start = cell.start_joints;
-    let plan = cell
-        .recheck_from(start)
-        .map_err(|report| anyhow::anyhow!("the recorded plan fails its checks:\n{report}"))?;
-    // The manifest names the files where they will be once the staging folder is renamed.
-    let final_path = |p: &Path| match p.strip_prefix(&stage) {
-        Ok(rel) => out.join(rel),
-        Err(_) => p.to_path_buf(),
+/// Runs `import bag`: the library imports the bag into a session; this prints what it says.
+fn import_bag(a: BagArgs) -> anyhow::Result<()> {
+    let request = BagSessionRequest {
+        options: bag_options(&a)?,
+        bag: a.bag,
+        board_file: a.board,
+        decimation: a.decimation,
+        continuous: a.continuous,
+        output: a.output,
     };
-    let mut inputs = cell.inputs()?;
-    for input in &mut inputs {
-        input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
-    }
-    folder.write_manifest(
-        &SessionManifest::new(out.join("import").join("cell.yaml"), setup, &plan)
-            .with_inputs(inputs),
-    )?;
-    let mut hardware = cell.open_hardware().context("opening the recorded cell")?;
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let session_setup = cell.session_setup(folder.clone(), plan, stop);
-    let outcome = session::run_session(
-        session_setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut |_| {},
-    )?;
-    for (index, why) in &outcome.skipped {
-        outln!(
-            "  frame {index:03} ({:.3} s): board not found or rejected: {why}",
-            imported.samples[*index].image_stamp_ns as f64 * 1e-9
-        );
-    }
-    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
-    let record = BagImportRecord {
-        bag: absolute(&a.bag)?,
-        format: imported.format.to_string(),
-        image_topic: a.image.clone(),
-        images: imported.images,
-        time_offset_s: o.offset_s,
-        time_offset_estimated: o.estimated,
-        time_offset_residual_mm: o.residual_mm,
-        samples,
-        skipped: imported
-            .skipped
-            .iter()
-            .map(|s| BagSkipRecord {
-                image_stamp_s: s.stamp_ns as f64 * 1e-9,
-                reason: s.reason.to_string(),
-            })
-            .collect(),
-        warnings: imported
-            .warnings
-            .iter()
-            .map(|w| BagWarningRecord {
-                kind: w.kind().to_string(),
-                message: w.to_string(),
-            })
-            .collect(),
-    };
-    let record_file = import_dir.join("bag-import.yaml");
-    let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
-    handeye::atomic_file::write_atomic(&record_file, text.as_bytes())
-        .with_context(|| format!("writing {}", record_file.display()))?;
-    drop(hardware);
-    drop(folder);
-    staging
-        .commit(&out)
-        .with_context(|| format!("moving the session into {}", out.display()))?;
+    let imported = import_bag_session(&request, &mut |note| match note {
+        BagNote::Line(line) => outln!("{line}"),
+        BagNote::Warning(warning) => eprintln!("warning: {warning}"),
+    })?;
+    let out = imported.folder.display();
     outln!(
-        "session {}: {} samples accepted, {} skipped (board not found or rejected)",
-        out.display(),
-        outcome.accepted.len(),
-        outcome.skipped.len()
+        "session {out}: {} samples accepted, {} skipped (board not found or rejected)",
+        imported.accepted,
+        imported.skipped
     );
-    // The solve ran in the staging folder; name the session where it is now.
-    outln!(
-        "{}",
-        solved
-            .summary
-            .trim_end()
-            .replace(&*stage.to_string_lossy(), &out.to_string_lossy())
-    );
-    if !imported.warnings.is_empty() {
+    outln!("{}", imported.summary);
+    if imported.warnings > 0 {
         outln!(
             "the bag has {} warning(s) (printed above, recorded in {}): check them before using this answer",
-            imported.warnings.len(),
-            out.join("import/bag-import.yaml").display()
+            imported.warnings,
+            imported.folder.join("import/bag-import.yaml").display()
         );
     }
     outln!(
-        "next: handeye report {0}   (or: handeye solve {0} --space reprojection, handeye replay {0})",
-        out.display()
+        "next: handeye report {out}   (or: handeye solve {out} --space reprojection, handeye replay {out})"
     );
     Ok(())
-}
-
-/// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.
-const STAGING_TAG: &str = "importing";
-
-/// A path's last component, for messages.
-fn leaf(path: &Path) -> String {
-    path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| path.display().to_string())
 }
 
 fn sibling(output: &Path, suffix: &str) -> PathBuf {
@@ -661,67 +377,6 @@ impl Drop for Outputs {
                 ),
             }
         }
-    }
-}
-
-/// Where a recorded cell's files are (relative paths are read from the config's folder).
-struct RecordedFiles {
-    target: PathBuf,
-    intrinsics: Option<PathBuf>,
-    poses: PathBuf,
-    images: PathBuf,
-}
-
-/// The config of a recorded cell that replays imported frames: the flange poses
-/// `base_from_flange` (as in `files.poses`) with the images of a folder camera. `nominal` (camera mount, target mount) only feeds the
-/// plan report; the workspace box, which a recorded robot does not use, spans the recorded
-/// flange positions ± 0.5 m; nothing moves, so nothing settles.
-fn recorded_cell(
-    setup: Setup,
-    files: RecordedFiles,
-    (camera_mount, target_mount): (handeye::geometry::Pose, handeye::geometry::Pose),
-    base_from_flange: &[handeye::geometry::Pose],
-    decimate: f32,
-) -> ConfigFile {
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in base_from_flange {
-        let t = p.translation.vector;
-        for k in 0..3 {
-            lo[k] = lo[k].min(t[k] - 0.5);
-            hi[k] = hi[k].max(t[k] + 0.5);
-        }
-    }
-    let (camera_key, target_key) = setup.unknown_names();
-    ConfigFile {
-        setup,
-        target: files.target,
-        intrinsics: files.intrinsics,
-        robot: RobotConfig::Recorded {
-            poses: files.poses,
-            repeatability_mm: None,
-            repeatability_deg: None,
-        },
-        camera: CameraConfig::Files {
-            folder: files.images,
-        },
-        nominal: BTreeMap::from([
-            (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
-            (target_key.to_string(), PoseYaml::from_pose(&target_mount)),
-        ]),
-        simulation: None,
-        plan: PlanConfig::default(),
-        limits: LimitsConfig::default(),
-        workspace: WorkspaceConfig { min: lo, max: hi },
-        detector: DetectorConfig {
-            decimate,
-            ..DetectorConfig::default()
-        },
-        solver: SolverConfig::default(),
-        session: SessionConfig {
-            settle_s: 0.0,
-            ..SessionConfig::default()
-        },
-        verdict: Default::default(),
     }
 }
 
@@ -862,7 +517,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             outputs.commit();
             Ok(())
         }
-        ImportFormat::Bag(a) => import_bag_session(a),
+        ImportFormat::Bag(a) => import_bag(a),
         ImportFormat::Moveit(a) => {
             let pairs = import_moveit_json(&a.file)?;
             save(

@@ -77,7 +77,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
         let mut hardware = prepared
             .open_hardware()
             .context("opening the robot and camera")?;
-        handeye::cell::run::ensure_robot_ready(hardware.robot.as_mut())?;
+        cell::run::ensure_robot_ready(hardware.robot.as_mut())?;
         let stop = super::stop_on_ctrl_c();
         let v = verify::holdout(
             &mut prepared,

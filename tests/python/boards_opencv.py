@@ -6,7 +6,7 @@ Independent of handeye: the ChArUco board image comes from OpenCV's
 warped into 1280x720 camera frames at known poses (0.45-0.8 m, tilted, plumb_bob distortion,
 blur, shading, sensor noise) by exact ray casting with 3x3 supersampling. OpenCV then detects
 the same frames (CharucoDetector; findChessboardCornersSB and findChessboardCorners +
-cornerSubPix) and solves solvePnP, and the script writes its figures for tests/boards.rs:
+cornerSubPix) and solves solvePnP, and the script writes its figures for tests/it/boards.rs:
 
     OUT/frames.json   camera, boards, ground-truth poses, visible corner ids and OpenCV's results
     OUT/charuco_NN.png, OUT/chessboard_NN.png

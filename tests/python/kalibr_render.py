@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent renderer and OpenCV baseline for tests/kalibr_print.rs (numpy + OpenCV only).
+"""Independent renderer and OpenCV baseline for tests/it/kalibr_print.rs (numpy + OpenCV only).
 
 Draws a Kalibr aprilgrid the way `kalibr_create_target_pdf` does (tag36h11, black border two
 cells wide, tag ids row by row from the bottom-left, optional black squares of side

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Packs frames and TF written by tests/bag_import.rs into a ROS 2 bag with `rosbags`.
+"""Packs frames and TF written by tests/it/bag_import.rs into a ROS 2 bag with `rosbags`.
 
 The writer is the pure-Python `rosbags` package (not our code), so the import is tested on bags
 an independent implementation serialised. Usage:

@@ -13,6 +13,7 @@ use handeye::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
 use handeye::cell::PreparedCell;
 use handeye::geometry::{translation_distance, Pose};
 
+pub mod fakes;
 pub mod live;
 
 /// The crate root.

@@ -14,10 +14,10 @@
 
 use std::time::{Duration, Instant};
 
-use handeye::geometry::{pose_from_rotvec, rotvec, Pose};
-use handeye::robot::kinematics::UrModel;
-use handeye::robot::sim::Ringing;
-use handeye::robot::{trapezoid_at, trapezoid_time, Joints};
+use handeye_core::geometry::{pose_from_rotvec, rotvec, Pose};
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::sim::Ringing;
+use handeye_robot::{trapezoid_at, trapezoid_time, Joints};
 use nalgebra::{Isometry3, Translation3, Vector3};
 
 use super::MockFaults;

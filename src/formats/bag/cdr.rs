@@ -341,7 +341,7 @@ pub fn decode_camera_info(message: &[u8]) -> Result<CameraInfo, CdrError> {
 pub(crate) mod tests {
     use super::*;
 
-    /// A little-endian CDR writer for the tests (the real bags in tests/bag_import.rs come from
+    /// A little-endian CDR writer for the tests (the real bags in tests/it/bag_import.rs come from
     /// the `rosbags` Python package).
     pub(crate) struct Writer(pub Vec<u8>);
 

@@ -26,6 +26,7 @@
 pub mod cdr;
 pub mod image;
 pub mod select;
+pub mod session;
 pub mod storage;
 pub mod tf;
 
@@ -40,6 +41,7 @@ use crate::vision::{DetectorOptions, Target};
 
 pub use cdr::CdrError;
 pub use select::{Motion, OffsetChoice, OffsetEstimate, SelectOptions, Skip, SkipReason};
+pub use session::{import_bag_session, BagNote, BagSession, BagSessionRequest};
 pub use storage::{BagFormat, TopicInfo};
 pub use tf::{TfError, TfIssue, TfWarning};
 

@@ -1,0 +1,449 @@
+//! A cell made ready to run: the config read, the board and intrinsics loaded, the plan built and
+//! checked, and — only when asked — the robot and camera backends the config names opened.
+//! This is the one place that maps config backends to implementations. `run` drives a prepared
+//! cell through a whole calibration run (what `handeye run` does).
+
+pub mod recorded;
+pub mod run;
+pub mod sim;
+pub mod uvc;
+
+use sim::Shared;
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
+use crate::plan::check::MoveCheck;
+use crate::plan::check::{check_plan, check_plan_ordered, CheckContext, PlanReport};
+use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
+use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
+use crate::session::{
+    InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup, SolveInputs,
+};
+use handeye_camera::Camera;
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::CellTransforms;
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::{Joints, Robot};
+use handeye_vision::{DetectorOptions, Target};
+
+/// Why a cell could not be prepared or opened.
+#[derive(Debug, thiserror::Error)]
+pub enum CellError {
+    /// The config is wrong.
+    #[error(transparent)]
+    Config(Box<ConfigError>),
+    /// The plan file is wrong.
+    #[error(transparent)]
+    Plan(Box<PlanError>),
+    /// The board file is wrong.
+    #[error("loading the board")]
+    Board {
+        /// The board file.
+        file: std::path::PathBuf,
+        /// What is wrong.
+        #[source]
+        source: Box<handeye_vision::TargetError>,
+    },
+    /// The intrinsics file is wrong.
+    #[error("loading the intrinsics")]
+    Intrinsics {
+        /// The intrinsics file.
+        file: std::path::PathBuf,
+        /// What is wrong.
+        #[source]
+        source: Box<handeye_core::camera_model::CameraModelError>,
+    },
+    /// A backend could not be opened.
+    #[error("{0}")]
+    Backend(String),
+    /// The robot could not be reached.
+    #[error("opening the robot")]
+    Robot(#[source] Box<handeye_robot::RobotError>),
+}
+
+/// The robot and camera of a cell, opened.
+pub struct Hardware {
+    /// The arm.
+    pub robot: Box<dyn Robot>,
+    /// The camera.
+    pub camera: Box<dyn Camera>,
+}
+
+/// A cell whose config, board, intrinsics and plan are loaded and checked.
+pub struct PreparedCell {
+    /// The config.
+    pub config: CellConfig,
+    /// The board.
+    pub board: Target,
+    /// The intrinsics (without configured intrinsics: the sim camera's lens, for planning and
+    /// rendering only — the run estimates the intrinsics).
+    pub camera_model: CameraModel,
+    /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
+    pub intrinsics_known: bool,
+    /// The arm's kinematics.
+    pub arm: UrModel,
+    /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
+    pub start_joints: Joints,
+    /// The plan.
+    pub plan: Plan,
+    /// The plan check.
+    pub report: PlanReport,
+}
+
+/// Loads everything a config names and checks the plan. Nothing moves.
+pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
+    let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+    let board = Target::load(&config.target).map_err(|source| CellError::Board {
+        file: config.target.clone(),
+        source: Box::new(source),
+    })?;
+    // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
+    // the run then records corners only and the intrinsics are estimated afterwards.
+    let intrinsics_known = config.intrinsics.is_some();
+    let model_file = match (&config.intrinsics, config.sim_lens(), &config.robot, &config.camera) {
+        (Some(file), ..) => Some(file.clone()),
+        (None, Some(lens), ..) => Some(lens.to_path_buf()),
+        // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
+        (None, None, RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => None,
+        (None, None, ..) => {
+            return Err(CellError::Backend(
+                "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
+            ))
+        }
+    };
+    let camera_model = match &model_file {
+        Some(file) => CameraModel::load(file).map_err(|source| CellError::Intrinsics {
+            file: file.clone(),
+            source: Box::new(source),
+        })?,
+        None => recorded::provisional_model(&config)?,
+    };
+    let mut arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
+        CellError::Backend(format!(
+            "robot.model: no kinematics for `{}`",
+            config.robot.model()
+        ))
+    })?;
+    // The cell's joint ranges (robot.joint_ranges_deg, or the defaults) bind the IK choice, the
+    // plan check, every move check and the backends.
+    arm.joint_limits = config.robot.joint_limits(config.setup);
+    let start_joints = match &config.robot {
+        RobotConfig::Sim {
+            start_joints_deg, ..
+        } => start_joints_deg.map(f64::to_radians),
+        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } => {
+            crate::config::default_start_joints()
+        }
+    };
+    if let RobotConfig::Recorded { .. } = config.robot {
+        let (plan, report) = recorded::plan(&config, &camera_model, &board)?;
+        return Ok(PreparedCell {
+            config,
+            board,
+            camera_model,
+            intrinsics_known,
+            arm,
+            start_joints,
+            plan,
+            report,
+        });
+    }
+    let scripted = match &config.plan.file {
+        Some(file) => Some(Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?),
+        None => None,
+    };
+    let mut prepared = PreparedCell {
+        config,
+        board,
+        camera_model,
+        intrinsics_known,
+        arm,
+        start_joints,
+        plan: Plan {
+            waypoints: Vec::new(),
+        },
+        report: PlanReport {
+            poses: Vec::new(),
+            plan_problems: Vec::new(),
+            notes: Vec::new(),
+            intrinsics: None,
+            given_order_move_time_s: None,
+        },
+    };
+    prepared.plan = match (scripted, &prepared.config.plan.generate) {
+        (Some(plan), _) => plan,
+        (None, Some(spec)) => Plan {
+            waypoints: prepared
+                .generate_views(spec)
+                .into_iter()
+                .map(Waypoint::LookAt)
+                .collect(),
+        },
+        (None, None) => {
+            return Err(CellError::Backend(
+                "plan: the config gives neither a plan file nor `generate:`".into(),
+            ))
+        }
+    };
+    prepared.report = prepared.check();
+    Ok(prepared)
+}
+
+impl PreparedCell {
+    /// What a plan is checked against: this cell from the arm's current start joints.
+    fn check_context(&self) -> CheckContext<'_> {
+        CheckContext {
+            arm: &self.arm,
+            start_joints: self.start_joints,
+            cell: &self.config.nominal,
+            workspace: &self.config.workspace,
+            limits: &self.config.limits,
+            camera: &self.camera_model,
+            board: &self.board,
+            margin_px: self.config.session.image_margin_px,
+        }
+    }
+
+    /// Checks any plan against this cell (reach, limits, box, board in view, rotation spread)
+    /// from the arm's current start joints.
+    pub fn check_plan(&self, plan: &Plan) -> PlanReport {
+        check_plan(plan, &self.check_context())
+    }
+
+    /// Generated views for this cell: the spec's cap, with the board pushed across this
+    /// camera's image by the spec's `image_spread` (default: enough for estimating the
+    /// intrinsics when the config has none, centred otherwise).
+    pub fn generate_views(&self, spec: &GenerateSpec) -> Vec<LookAt> {
+        let mut views = generate(spec);
+        let spread = spec.image_spread.unwrap_or(if self.intrinsics_known {
+            0.0
+        } else {
+            IMAGE_SPREAD_FOR_INTRINSICS
+        });
+        spread_across_image(
+            &mut views,
+            spread,
+            &self.camera_model,
+            &self.board,
+            self.config.session.image_margin_px,
+        );
+        views
+    }
+
+    /// The plan check of the order that will run (the order of least move time unless
+    /// `plan.reorder` is false).
+    fn check(&self) -> PlanReport {
+        let mut report =
+            check_plan_ordered(&self.plan, &self.check_context(), self.config.plan.reorder);
+        if !self.intrinsics_known {
+            // The intrinsics come from this very run: a plan that cannot give them is refused.
+            let (blocking, notes): (Vec<String>, Vec<String>) = report
+                .notes
+                .drain(..)
+                .partition(|n| n.starts_with("these views do not constrain"));
+            report.plan_problems.extend(blocking);
+            report.notes = notes;
+        }
+        report
+    }
+
+    /// Whether no real hardware moves (simulated or recorded robot).
+    pub fn is_simulated(&self) -> bool {
+        matches!(
+            self.config.robot,
+            RobotConfig::Sim { .. } | RobotConfig::Recorded { .. }
+        )
+    }
+
+    /// Detector settings from the config.
+    pub fn detector_options(&self) -> DetectorOptions {
+        let d = self.config.detector;
+        DetectorOptions {
+            decimation: d.decimate,
+            threads: d.threads,
+            max_hamming: d.max_hamming,
+            ..DetectorOptions::default()
+        }
+    }
+
+    /// The session manifest for a validated plan.
+    pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
+        SessionManifest::new(self.config_path(), self.config.setup, plan)
+    }
+
+    /// What the session solve needs, as this cell loaded it: the board and (when the config
+    /// gives them) the intrinsics, so nothing is loaded twice.
+    pub fn solve_inputs(&self) -> SolveInputs {
+        SolveInputs {
+            config: self.config.clone(),
+            board: self.board.clone(),
+            camera: self.intrinsics_known.then_some(self.camera_model),
+        }
+    }
+
+    /// The files this cell was prepared from, each with the sha256 of its bytes: the config,
+    /// the board, the intrinsics, the plan file and recorded robot poses (those the config has).
+    pub fn inputs(&self) -> Result<Vec<InputFile>, SessionError> {
+        let mut files = vec![
+            ("config", self.config.file.clone()),
+            ("target", self.config.target.clone()),
+        ];
+        if let Some(file) = &self.config.intrinsics {
+            files.push(("intrinsics", file.clone()));
+        }
+        if let Some(file) = &self.config.plan.file {
+            files.push(("plan", file.clone()));
+        }
+        if let RobotConfig::Recorded { poses, .. } = &self.config.robot {
+            files.push(("robot.poses", poses.clone()));
+        }
+        files
+            .iter()
+            .map(|(role, file)| InputFile::hash(role, file))
+            .collect()
+    }
+
+    /// The config file as a session manifest records it (absolute when it can be).
+    pub fn config_path(&self) -> std::path::PathBuf {
+        std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
+    }
+
+    /// The simulator's ground truth, which the simulated backends render from.
+    fn sim_truth(&self) -> Result<CellTransforms, CellError> {
+        self.config.simulation.ok_or_else(|| {
+            CellError::Backend(
+                "a simulated backend needs `simulation:` (the cell's true transforms) in the config"
+                    .into(),
+            )
+        })
+    }
+
+    /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)
+    /// arm renders from the pose the arm reports.
+    pub fn open_hardware(&self) -> Result<Hardware, CellError> {
+        match (&self.config.robot, &self.config.camera) {
+            (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
+                let truth = self.sim_truth()?;
+                let (robot, camera) =
+                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
+                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+            }
+            (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
+                let truth = self.sim_truth()?;
+                let robot = self.open_ur()?;
+                let flange = robot.reported_flange();
+                let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
+                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+            }
+            (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {
+                // The real cell: open the camera first, so a missing camera never leaves a
+                // connected arm behind.
+                let camera = uvc::open_camera(&self.config.camera, self.camera_model)?;
+                Ok(Hardware { robot: Box::new(self.open_ur()?), camera })
+            }
+            (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
+                let plan = self.report.validated().ok_or_else(|| {
+                    CellError::Backend("the recorded poses failed their checks".into())
+                })?;
+                recorded::open(&self.config, &plan, self.camera_model)
+            }
+            (robot, camera) => Err(CellError::Backend(format!(
+                "the combination robot backend `{}` with camera backend `{}` is not available in this build",
+                robot_name(robot),
+                camera_name(camera)
+            ))),
+        }
+    }
+
+    /// Connects to the Universal Robots controller the config names; shared, so a simulated
+    /// camera can follow the pose it reports.
+    #[cfg(feature = "ur-rtde")]
+    fn open_ur(&self) -> Result<Shared<dyn Robot>, CellError> {
+        let RobotConfig::Ur {
+            host,
+            connect_timeout_s,
+            ..
+        } = &self.config.robot
+        else {
+            return Err(CellError::Backend("the robot backend is not `ur`".into()));
+        };
+        let mut ur = handeye_robot::ur::UrRobotConfig::new(host.clone());
+        ur.connect_timeout = std::time::Duration::from_secs_f64(*connect_timeout_s);
+        ur.workspace = Some(self.config.workspace);
+        ur.model = Some(self.arm.clone());
+        let robot =
+            handeye_robot::ur::UrRobot::connect(ur).map_err(|e| CellError::Robot(Box::new(e)))?;
+        Ok(Shared::new_dyn(robot))
+    }
+
+    /// Without the `ur-rtde` feature there is no UR driver in the binary.
+    #[cfg(not(feature = "ur-rtde"))]
+    fn open_ur(&self) -> Result<Shared<dyn Robot>, CellError> {
+        Err(CellError::Backend(
+            "this build has no Universal Robots driver: build with `--features ur-rtde` (see README)".into(),
+        ))
+    }
+
+    /// What the session loop needs to run this cell's validated `plan` into `folder`.
+    pub fn session_setup(
+        &self,
+        folder: SessionFolder,
+        plan: Vec<(Pose, Joints)>,
+        stop: Arc<AtomicBool>,
+    ) -> SessionSetup {
+        SessionSetup {
+            folder,
+            setup: self.config.setup,
+            plan,
+            limits: self.config.limits,
+            settle: self.config.settle(),
+            settle_by_speed: self.config.settle_by_speed(),
+            reorder: self.config.plan.reorder,
+            max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
+            board: self.board.clone(),
+            detector: self.detector_options(),
+            stop,
+            estimate_intrinsics: !self.intrinsics_known,
+            move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
+                MoveCheck {
+                    arm: self.arm.clone(),
+                    workspace: self.config.workspace,
+                }
+            }),
+        }
+    }
+
+    /// Checks the plan again from where the arm really stands (a real arm's start is only known
+    /// once connected); returns the validated plan or the report that rejects it.
+    pub fn recheck_from(
+        &mut self,
+        start_joints: Joints,
+    ) -> Result<Vec<(Pose, Joints)>, &PlanReport> {
+        // Recorded poses were taken already: there is no arm to move and nothing to re-check.
+        if !matches!(self.config.robot, RobotConfig::Recorded { .. }) {
+            self.start_joints = start_joints;
+            self.report = self.check();
+        }
+        self.report.validated().ok_or(&self.report)
+    }
+}
+
+fn robot_name(r: &RobotConfig) -> &'static str {
+    match r {
+        RobotConfig::Sim { .. } => "sim",
+        RobotConfig::Ur { .. } => "ur",
+        RobotConfig::Recorded { .. } => "recorded",
+    }
+}
+
+fn camera_name(c: &CameraConfig) -> &'static str {
+    match c {
+        CameraConfig::Sim { .. } => "sim",
+        CameraConfig::Files { .. } => "files",
+        CameraConfig::Uvc { .. } => "uvc",
+    }
+}

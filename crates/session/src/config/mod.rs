@@ -1,0 +1,362 @@
+//! The cell config: one YAML file that says what the cell is (setup, robot, camera, board), what is
+//! roughly known about it, how to move, and how to solve. Read and validated completely before
+//! anything moves or any folder is created; every error names the file, the key (YAML path), the
+//! value and what is accepted.
+//!
+//! [`schema`] holds the serde shapes (typed enums, unknown keys refused), [`validate`] the
+//! accepted range of every number and the cross-field rules; this module reads a file through
+//! both and resolves its paths. Relative paths inside the file are relative to the file's folder.
+//! Units are SI with the suffix in the key where a person reads (`_deg`, `_mm`, `_s`). Depends
+//! on the ground floor, `plan`, `robot`, `solve` and `vision` (for their types and bounds).
+
+pub mod recorded;
+pub mod schema;
+pub mod validate;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use handeye_core::geometry::PoseError;
+use handeye_core::setup::{CellTransforms, Setup};
+use handeye_core::yaml_file::{parse_yaml, read_text, shape_error, FileError};
+use handeye_robot::{MotionLimits, WorkspaceBox};
+use handeye_solve::{NoiseModel, SolveOptions};
+
+pub use recorded::{recorded_cell, RecordedFiles};
+pub use schema::{
+    ArmModel, CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName, PlanConfig,
+    RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, VerdictConfig,
+    WorkspaceConfig,
+};
+pub use validate::{
+    Range, MAX_JOINT_ACCELERATION_DEG, MAX_JOINT_SPEED_DEG, MAX_LINEAR_ACCELERATION,
+    MAX_LINEAR_SPEED,
+};
+
+/// A config problem: the file, the key (YAML path), the value and what was expected.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read, or its YAML does not have the config's shape (unknown or
+    /// missing key, wrong type, unknown name): the message names the file and the YAML path.
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// The document is not a mapping of config keys (a plain string, a list, an empty file).
+    #[error("{}: expected a mapping of config keys (setup, target, robot, camera, nominal, workspace, ...), found {found}", file.display())]
+    NotAMapping {
+        /// The config file.
+        file: PathBuf,
+        /// What the document is instead (`a string`, `a list`...).
+        found: &'static str,
+    },
+    /// A number outside its accepted range.
+    #[error("{}: {key}: expected {expected}, found {found}", file.display())]
+    OutOfRange {
+        /// The config file.
+        file: PathBuf,
+        /// YAML path of the value (`session.settle_s`).
+        key: String,
+        /// The value as written.
+        found: String,
+        /// What is accepted (`a value in [0, 60] s`).
+        expected: String,
+    },
+    /// A value that contradicts the rest of the config (or names nothing).
+    #[error("{}: {key}: {problem}", file.display())]
+    Inconsistent {
+        /// The config file.
+        file: PathBuf,
+        /// YAML path of the value.
+        key: String,
+        /// What is wrong and what was expected.
+        problem: String,
+    },
+    /// Lengths that look like millimetres where the config takes metres (a nominal position,
+    /// a workspace box): one message naming the key, instead of every pose failing later.
+    #[error("{}: {key}: {found} looks like millimetres: {why}; the config takes metres: write {metres}", file.display())]
+    Millimetres {
+        /// The config file.
+        file: PathBuf,
+        /// YAML path of the value (`nominal.T_base_target.translation`, `workspace`).
+        key: String,
+        /// The value as written.
+        found: String,
+        /// Why it cannot be metres (`as metres it puts the camera 86.0 m from the flange, ...`).
+        why: String,
+        /// The value divided by 1000.
+        metres: String,
+    },
+    /// A pose is malformed.
+    // The pose problem is the message itself (with its YAML path), so it is not also a
+    // `#[source]`: `{:#}` chains would print it twice.
+    #[error("{}: {problem}", file.display())]
+    Pose {
+        /// The config file.
+        file: PathBuf,
+        /// The pose problem with its YAML path.
+        problem: PoseError,
+    },
+    /// A config about to be written does not load back (a bug in the writer).
+    #[error("refusing to write a config that would not load")]
+    Invalid(#[source] Box<ConfigError>),
+}
+
+/// The joints a plan assumes the arm starts from when the config gives none (UR's upright
+/// "home" with the tool pointing down), radians.
+pub fn default_start_joints() -> [f64; 6] {
+    schema::default_start_joints_deg().map(f64::to_radians)
+}
+
+impl SolverConfig {
+    /// The solver options these settings mean: a sigma given is used as is, one absent is
+    /// estimated from the residuals (from the solver's default start) unless `estimate_noise`
+    /// is off.
+    pub fn to_options(&self) -> SolveOptions {
+        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
+            self.rotation_sigma_deg,
+            self.translation_sigma_mm,
+            self.estimate_noise,
+        );
+        SolveOptions {
+            method: self.method,
+            noise,
+            estimate_noise,
+            drop_outliers: self.drop_outliers,
+            ..SolveOptions::default()
+        }
+    }
+}
+
+/// A validated cell config with paths resolved.
+#[derive(Debug, Clone)]
+pub struct CellConfig {
+    /// The file it came from.
+    pub file: PathBuf,
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// Board spec file.
+    pub target: PathBuf,
+    /// Camera intrinsics file (camera_info YAML or Kalibr camchain); `None`: estimate them from
+    /// the run's board corners (Zhang's closed form, then the joint reprojection refinement).
+    pub intrinsics: Option<PathBuf>,
+    /// The arm.
+    pub robot: RobotConfig,
+    /// The camera.
+    pub camera: CameraConfig,
+    /// The cell's transforms as known before calibrating (used to plan).
+    pub nominal: CellTransforms,
+    /// The simulator's ground truth (sim backends only).
+    pub simulation: Option<CellTransforms>,
+    /// Where the plan comes from (file paths resolved).
+    pub plan: PlanConfig,
+    /// Motion limits.
+    pub limits: MotionLimits,
+    /// Workspace box for the flange origin.
+    pub workspace: WorkspaceBox,
+    /// Detector settings.
+    pub detector: DetectorConfig,
+    /// Solver settings.
+    pub solver: SolverConfig,
+    /// Session settings.
+    pub session: SessionConfig,
+    /// The accuracy the verdict judges against.
+    pub verdict: VerdictConfig,
+    /// `session.settle_s`, checked and converted.
+    settle: Duration,
+}
+
+impl CellConfig {
+    /// Reads and validates a cell config.
+    pub fn load(file: &Path) -> Result<CellConfig, ConfigError> {
+        Self::parse(&read_text(file)?, file)
+    }
+
+    /// Parses and validates config YAML; relative paths resolve against `file`'s folder.
+    pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
+        let raw = ConfigFile::parse(text, file)?;
+        let checked = validate::check(&raw, file)?;
+        let folder = file.parent().unwrap_or(Path::new("."));
+        let resolve = |p: &Path| folder.join(p);
+        let mut plan = raw.plan;
+        plan.file = plan.file.as_deref().map(resolve);
+        let mut robot = raw.robot;
+        if let RobotConfig::Recorded { poses, .. } = &mut robot {
+            *poses = resolve(poses);
+        }
+        let mut camera = raw.camera;
+        match &mut camera {
+            CameraConfig::Files { folder } => *folder = resolve(folder),
+            CameraConfig::Sim { intrinsics, .. } => {
+                *intrinsics = intrinsics.as_deref().map(resolve);
+            }
+            CameraConfig::Uvc { .. } => {}
+        }
+        Ok(CellConfig {
+            file: file.to_path_buf(),
+            setup: raw.setup,
+            target: resolve(&raw.target),
+            intrinsics: raw.intrinsics.as_deref().map(resolve),
+            robot,
+            camera,
+            nominal: checked.nominal,
+            simulation: checked.simulation,
+            plan,
+            limits: checked.limits,
+            workspace: checked.workspace,
+            detector: raw.detector,
+            solver: raw.solver,
+            session: raw.session,
+            verdict: raw.verdict,
+            settle: checked.settle,
+        })
+    }
+
+    /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
+    pub fn sim_lens(&self) -> Option<&Path> {
+        match &self.camera {
+            CameraConfig::Sim {
+                intrinsics: Some(lens),
+                ..
+            } => Some(lens),
+            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
+            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } => None,
+        }
+    }
+
+    /// How far the robot's reported flange pose may be from the true one, 1-sigma per axis, as
+    /// (m, rad): the sim's configured noise (0.01 mm / 0.001° when it has none), the configured
+    /// or default figure of a UR (0.03 mm / 0.003°) or a recorded arm (0.1 mm / 0.01°). The
+    /// reprojection solve starts its noise estimate here.
+    pub fn robot_repeatability(&self) -> (f64, f64) {
+        let (mm, deg) = match &self.robot {
+            RobotConfig::Sim {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } if *repeatability_mm > 0.0 && *repeatability_deg > 0.0 => {
+                (*repeatability_mm, *repeatability_deg)
+            }
+            RobotConfig::Sim { .. } => (0.01, 0.001),
+            RobotConfig::Ur {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => (
+                repeatability_mm.unwrap_or(0.03),
+                repeatability_deg.unwrap_or(0.003),
+            ),
+            RobotConfig::Recorded {
+                repeatability_mm,
+                repeatability_deg,
+                ..
+            } => (
+                repeatability_mm.unwrap_or(0.1),
+                repeatability_deg.unwrap_or(0.01),
+            ),
+        };
+        (mm * 1e-3, deg.to_radians())
+    }
+
+    /// The settle time (`session.settle_s`, checked at load) as a duration.
+    pub fn settle(&self) -> Duration {
+        self.settle
+    }
+
+    /// Settling by measured joint speeds (`session.settle_speed_deg_s`, `settle_window_s`,
+    /// `settle_timeout_s`), or `None` when `settle_speed_deg_s` is 0 (the fixed wait only).
+    pub fn settle_by_speed(&self) -> Option<handeye_robot::SettleBySpeed> {
+        let s = &self.session;
+        (s.settle_speed_deg_s > 0.0).then(|| handeye_robot::SettleBySpeed {
+            max_joint_speed: s.settle_speed_deg_s.to_radians(),
+            window: Duration::from_secs_f64(s.settle_window_s),
+            timeout: Duration::from_secs_f64(s.settle_timeout_s),
+        })
+    }
+
+    /// Whether the run chooses poses adaptively: `plan.adaptive` when given, else for a
+    /// generated plan with known intrinsics (an adaptive plan needs board poses as they come).
+    pub fn adaptive(&self) -> bool {
+        self.plan.adaptive.unwrap_or(
+            self.plan.generate.is_some()
+                && self.intrinsics.is_some()
+                && !matches!(self.robot, RobotConfig::Recorded { .. }),
+        )
+    }
+
+    /// The adaptive stop target, mm: `plan.target_uncertainty_mm`, else the verdict's
+    /// `accuracy_mm` (the run stops when the verdict's translation test would pass).
+    pub fn adaptive_target_mm(&self) -> f64 {
+        self.plan
+            .target_uncertainty_mm
+            .unwrap_or(self.verdict.accuracy_mm)
+    }
+}
+
+impl ConfigFile {
+    /// Reads config YAML's shape (no value checks: see [`CellConfig::parse`]); `file` is used in
+    /// messages only.
+    pub fn parse(text: &str, file: &Path) -> Result<ConfigFile, ConfigError> {
+        // A document that is not a mapping gets a sentence, not serde's "invalid type".
+        let document = serde_yaml_ng::from_str::<serde_yaml_ng::Value>(text).ok();
+        if let Some(document) = &document {
+            let found = match document {
+                serde_yaml_ng::Value::Mapping(_) => None,
+                serde_yaml_ng::Value::Null => Some("an empty document"),
+                serde_yaml_ng::Value::Bool(_) => Some("a boolean"),
+                serde_yaml_ng::Value::Number(_) => Some("a number"),
+                serde_yaml_ng::Value::String(_) => Some("a string"),
+                serde_yaml_ng::Value::Sequence(_) => Some("a list"),
+                serde_yaml_ng::Value::Tagged(_) => Some("a tagged value"),
+            };
+            if let Some(found) = found {
+                return Err(ConfigError::NotAMapping {
+                    file: file.to_path_buf(),
+                    found,
+                });
+            }
+        }
+        let error = match parse_yaml(text, file) {
+            Ok(config) => return Ok(config),
+            Err(error) => error,
+        };
+        // serde reads a `backend:`-tagged section as a whole, so its errors name only the
+        // section: find the key. Read again from the section alone, the error has no location:
+        // the key's line.
+        if let FileError::Shape {
+            path, yaml_path, ..
+        } = &error
+        {
+            if let Some((yaml_path, problem)) = document
+                .as_ref()
+                .and_then(|d| schema::pinpoint_tagged(d, yaml_path))
+            {
+                return Err(shape_error(text, path, yaml_path, problem).into());
+            }
+        }
+        Err(error.into())
+    }
+
+    /// The config as YAML, each line of `header` as a leading comment. `file` is used in
+    /// messages only.
+    pub fn to_yaml(&self, header: &str, file: &Path) -> Result<String, ConfigError> {
+        let mut text: String = header.lines().map(|line| format!("# {line}\n")).collect();
+        let body = serde_yaml_ng::to_string(self).map_err(|source| FileError::Serialise {
+            path: file.to_path_buf(),
+            source,
+        })?;
+        text.push_str(&body);
+        Ok(text)
+    }
+
+    /// Writes the config (atomically) after checking that it loads back as a valid config from
+    /// `file` (relative paths resolve against `file`'s folder).
+    pub fn save(&self, file: &Path, header: &str) -> Result<(), ConfigError> {
+        let text = self.to_yaml(header, file)?;
+        CellConfig::parse(&text, file).map_err(|e| ConfigError::Invalid(Box::new(e)))?;
+        handeye_core::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| {
+            ConfigError::File(FileError::Write {
+                path: file.to_path_buf(),
+                source,
+            })
+        })
+    }
+}

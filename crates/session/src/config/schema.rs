@@ -1,0 +1,757 @@
+//! The cell config's shape as written in YAML: serde structs and enums, every closed set of
+//! strings a typed enum, every section `deny_unknown_fields`. Reading one checks only the shape
+//! (keys, types, enum names); numbers and cross-field rules are checked by `config::validate`.
+//! [`ConfigFile`] also serialises, so tools write configs through serde (see
+//! [`ConfigFile::save`]). Depends on `plan` (the generated-plan spec), `setup`, `geometry` and
+//! `verdict` (the accuracy type).
+//!
+//! Why one file of ~700 lines: it is the whole YAML surface of a cell, section by section, with
+//! each key's doc beside its field; a reader looking up a key should find every one in one
+//! place, in the order of the shipped configs.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::plan::GenerateSpec;
+use handeye_core::geometry::PoseYaml;
+use handeye_core::setup::Setup;
+use handeye_robot::MotionLimits;
+use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
+use handeye_solve::Method;
+
+/// A whole cell config file as written (paths as written, nothing checked but the shape).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a mapping of config keys (setup, target, robot, camera, nominal, workspace, ...)"
+)]
+pub struct ConfigFile {
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// Board spec file (relative to the config's folder).
+    pub target: PathBuf,
+    /// Camera intrinsics file; absent: estimated from the run (sim camera or recorded frames).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intrinsics: Option<PathBuf>,
+    /// The arm.
+    pub robot: RobotConfig,
+    /// The camera.
+    pub camera: CameraConfig,
+    /// The cell's transforms as known before calibrating (`T_flange_camera`/`T_base_target` or
+    /// `T_base_camera`/`T_flange_target`).
+    pub nominal: BTreeMap<String, PoseYaml>,
+    /// The simulator's ground truth, same keys as `nominal` (sim backends only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<BTreeMap<String, PoseYaml>>,
+    /// Where the plan comes from.
+    #[serde(default)]
+    pub plan: PlanConfig,
+    /// Motion limits.
+    #[serde(default)]
+    pub limits: LimitsConfig,
+    /// The box the flange origin must stay in, base frame.
+    pub workspace: WorkspaceConfig,
+    /// Detector settings.
+    #[serde(default)]
+    pub detector: DetectorConfig,
+    /// Solver settings.
+    #[serde(default)]
+    pub solver: SolverConfig,
+    /// Session settings.
+    #[serde(default)]
+    pub session: SessionConfig,
+    /// The accuracy the GOOD / CHECK / REDO verdict judges against.
+    #[serde(default)]
+    pub verdict: VerdictConfig,
+}
+
+/// The arm models whose kinematics the tool knows (Universal Robots' published DH parameters,
+/// `robot::kinematics`). An unknown name is refused listing these.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmModel {
+    /// Universal Robots UR3 (CB3).
+    Ur3,
+    /// Universal Robots UR5 (CB3).
+    Ur5,
+    /// Universal Robots UR10 (CB3).
+    Ur10,
+    /// Universal Robots UR3e.
+    Ur3e,
+    /// Universal Robots UR5e.
+    #[default]
+    Ur5e,
+    /// Universal Robots UR10e.
+    Ur10e,
+    /// Universal Robots UR16e.
+    Ur16e,
+    /// Universal Robots UR20.
+    Ur20,
+    /// Universal Robots UR30.
+    Ur30,
+}
+
+impl ArmModel {
+    /// The YAML name (`ur5e`), as `robot::kinematics::UrModel::by_name` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ArmModel::Ur3 => "ur3",
+            ArmModel::Ur5 => "ur5",
+            ArmModel::Ur10 => "ur10",
+            ArmModel::Ur3e => "ur3e",
+            ArmModel::Ur5e => "ur5e",
+            ArmModel::Ur10e => "ur10e",
+            ArmModel::Ur16e => "ur16e",
+            ArmModel::Ur20 => "ur20",
+            ArmModel::Ur30 => "ur30",
+        }
+    }
+}
+
+/// Which arm drives the cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "backend",
+    rename_all = "snake_case",
+    deny_unknown_fields,
+    expecting = "a mapping with `backend: sim`, `backend: ur` or `backend: recorded`"
+)]
+pub enum RobotConfig {
+    /// The simulated UR arm.
+    Sim {
+        /// The arm model (`ur5e` by default; see [`ArmModel`]).
+        #[serde(default)]
+        model: ArmModel,
+        /// Where the arm starts, degrees.
+        #[serde(default = "default_start_joints_deg")]
+        start_joints_deg: [f64; 6],
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
+        /// Time each move takes, s (0 = instant); ignored with `move_at_limits`.
+        #[serde(default)]
+        move_duration_s: f64,
+        /// Moves take the time a UR `moveJ` takes at the configured joint limits (trapezoidal
+        /// profile) instead of `move_duration_s`.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        move_at_limits: bool,
+        /// After each move the arm rings down: a joint oscillation of this amplitude (leading
+        /// joint), degrees, decaying with `ringing_decay_s` (0 = the arm stops dead).
+        #[serde(default, skip_serializing_if = "is_zero")]
+        ringing_deg: f64,
+        /// Ringing frequency, Hz.
+        #[serde(default = "default_ringing_hz")]
+        ringing_hz: f64,
+        /// Ringing decay time constant, s.
+        #[serde(default = "default_ringing_decay_s")]
+        ringing_decay_s: f64,
+        /// 1-sigma position noise on the reported flange pose, mm.
+        #[serde(default)]
+        repeatability_mm: f64,
+        /// 1-sigma rotation noise on the reported flange pose, degrees.
+        #[serde(default)]
+        repeatability_deg: f64,
+        /// Raise a protective stop after this many moves (fault injection for tests).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        protective_stop_after_moves: Option<usize>,
+        /// Noise seed.
+        #[serde(default)]
+        seed: u64,
+    },
+    /// A Universal Robots controller through ur_rtde (needs the `ur-rtde` feature).
+    Ur {
+        /// Controller address.
+        host: String,
+        /// The arm model (`ur5e` by default; see [`ArmModel`]): used to check reachability before
+        /// moving.
+        #[serde(default)]
+        model: ArmModel,
+        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
+        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
+        /// Absent: see [`RobotConfig::joint_ranges_deg`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_ranges_deg: Option<[[f64; 2]; 6]>,
+        /// Give up connecting after this long, s.
+        #[serde(default = "default_connect_timeout_s")]
+        connect_timeout_s: f64,
+        /// How far the reported flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.03: the UR e-Series repeatability; the reprojection solve starts from it
+        /// and estimates the real figure from the residuals).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.003).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_deg: Option<f64>,
+    },
+    /// Replays the flange poses a real arm measured during a recording made elsewhere
+    /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
+    /// the config has no `plan` source, and nothing moves.
+    Recorded {
+        /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
+        poses: PathBuf,
+        /// How far a recorded flange pose may be from the true one, 1-sigma per axis, mm
+        /// (default 0.1: an arm of unknown make; the reprojection solve starts from it and
+        /// estimates the real figure from the residuals).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_mm: Option<f64>,
+        /// The same for rotation, degrees (default 0.01).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        repeatability_deg: Option<f64>,
+    },
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+fn default_ringing_hz() -> f64 {
+    8.0
+}
+fn default_ringing_decay_s() -> f64 {
+    0.15
+}
+
+pub(super) fn default_start_joints_deg() -> [f64; 6] {
+    [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]
+}
+fn default_connect_timeout_s() -> f64 {
+    5.0
+}
+
+pub use handeye_robot::kinematics::JOINT_NAMES;
+
+/// The arm's own joint ranges, degrees: ±360° on every joint but the elbow (±180°), as
+/// `robot::kinematics` plans every model.
+pub const ARM_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+    [-360.0, 360.0],
+];
+
+/// Default joint ranges for a real arm with the camera on its flange (eye-in-hand), degrees.
+/// The camera cable is dressed along the arm with the joints near zero; it tolerates half a turn
+/// either way at the base and the three wrist joints, not the controller's two full turns (a
+/// plan that swings wrist 3 to 280° winds the cable round the flange). ±180° still leaves every
+/// orientation reachable: each of these joints keeps exactly one representative of its angle.
+/// Shoulder and elbow do not twist the cable and keep the arm's ranges.
+pub const FLANGE_CAMERA_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
+    [-180.0, 180.0],
+    [-360.0, 360.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+    [-180.0, 180.0],
+];
+
+impl RobotConfig {
+    /// The joint ranges in force, `[min, max]` degrees, base to wrist 3: the config's
+    /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real
+    /// arm (`backend: ur`) carrying the camera (`setup: eye_in_hand`), and the arm's own
+    /// [`ARM_JOINT_RANGES_DEG`] for everything else (eye-to-hand has no cable on the flange; the
+    /// simulator has no cable at all).
+    pub fn joint_ranges_deg(&self, setup: Setup) -> [[f64; 2]; 6] {
+        match self {
+            RobotConfig::Sim {
+                joint_ranges_deg: Some(r),
+                ..
+            }
+            | RobotConfig::Ur {
+                joint_ranges_deg: Some(r),
+                ..
+            } => *r,
+            RobotConfig::Ur { .. } if setup == Setup::EyeInHand => FLANGE_CAMERA_JOINT_RANGES_DEG,
+            _ => ARM_JOINT_RANGES_DEG,
+        }
+    }
+
+    /// [`RobotConfig::joint_ranges_deg`] in radians, as `UrModel::joint_limits` takes them.
+    pub fn joint_limits(&self, setup: Setup) -> [(f64, f64); 6] {
+        self.joint_ranges_deg(setup)
+            .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
+    }
+
+    /// The arm model name, for kinematics checks.
+    pub fn model(&self) -> &'static str {
+        match self {
+            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model.name(),
+            // A recorded arm is never planned with kinematics; any valid name will do.
+            RobotConfig::Recorded { .. } => ArmModel::Ur5e.name(),
+        }
+    }
+}
+
+/// The pixel formats a USB camera can be asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelFormatName {
+    /// Motion JPEG (most USB cameras at full resolution).
+    #[default]
+    Mjpeg,
+    /// Packed YUV 4:2:2.
+    Yuyv,
+    /// 8-bit grey.
+    Gray,
+}
+
+impl PixelFormatName {
+    /// The YAML name (`mjpeg`, `yuyv`, `gray`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PixelFormatName::Mjpeg => "mjpeg",
+            PixelFormatName::Yuyv => "yuyv",
+            PixelFormatName::Gray => "gray",
+        }
+    }
+}
+
+/// Which camera takes the frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "backend",
+    rename_all = "snake_case",
+    deny_unknown_fields,
+    expecting = "a mapping with `backend: sim`, `backend: files` or `backend: uvc`"
+)]
+pub enum CameraConfig {
+    /// Frames rendered from the simulated cell's true chain.
+    Sim {
+        /// Sensor noise, grey levels (1-sigma).
+        #[serde(default = "default_noise")]
+        noise_sigma: f64,
+        /// Optical blur, pixels (1-sigma of a Gaussian), 0 = none.
+        #[serde(default)]
+        blur_sigma_px: f64,
+        /// Render seed.
+        #[serde(default)]
+        seed: u64,
+        /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        hide_board_in_grabs: Vec<usize>,
+        /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
+        /// when the cell has no `intrinsics` (they are then estimated from the run).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        intrinsics: Option<PathBuf>,
+    },
+    /// Frames from an image folder, in plan order.
+    Files {
+        /// The folder.
+        folder: PathBuf,
+    },
+    /// A USB/UVC camera (needs the `uvc` build feature).
+    Uvc {
+        /// Camera index (`/dev/video<N>`) or (part of) its name.
+        #[serde(default = "default_uvc_device")]
+        device: String,
+        /// Requested width, px.
+        #[serde(default = "default_uvc_width")]
+        width: u32,
+        /// Requested height, px.
+        #[serde(default = "default_uvc_height")]
+        height: u32,
+        /// Requested pixel format: `mjpeg`, `yuyv` or `gray`.
+        #[serde(default)]
+        pixel_format: PixelFormatName,
+        /// Requested frame rate, frames/s.
+        #[serde(default = "default_uvc_fps")]
+        fps: u32,
+        /// Fixed exposure, µs (auto exposure off).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exposure_us: Option<u32>,
+        /// Fixed gain, camera units (auto gain off).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        gain: Option<i64>,
+        /// Fixed focus, camera units (autofocus is turned off whenever the camera allows).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        focus: Option<i64>,
+        /// Frames dropped after the arm settles (the driver's queue depth).
+        #[serde(default = "default_uvc_stale_frames")]
+        stale_frames: usize,
+    },
+}
+
+fn default_uvc_device() -> String {
+    "0".into()
+}
+fn default_uvc_width() -> u32 {
+    1280
+}
+fn default_uvc_height() -> u32 {
+    720
+}
+fn default_uvc_fps() -> u32 {
+    30
+}
+fn default_uvc_stale_frames() -> usize {
+    4
+}
+fn default_noise() -> f64 {
+    2.0
+}
+
+/// Motion limits as written (degrees for joints).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitsConfig {
+    /// m/s.
+    pub linear_speed: f64,
+    /// m/s².
+    pub linear_acceleration: f64,
+    /// °/s.
+    pub joint_speed_deg: f64,
+    /// °/s².
+    pub joint_acceleration_deg: f64,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        let l = MotionLimits::default();
+        LimitsConfig {
+            linear_speed: l.linear_speed,
+            linear_acceleration: l.linear_acceleration,
+            // Rounded to 1e-9 °/s: a written config reads 30, not 29.999999999999996.
+            joint_speed_deg: (l.joint_speed.to_degrees() * 1e9).round() / 1e9,
+            joint_acceleration_deg: (l.joint_acceleration.to_degrees() * 1e9).round() / 1e9,
+        }
+    }
+}
+
+/// The workspace box as written, m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkspaceConfig {
+    /// Lower corner, m.
+    pub min: [f64; 3],
+    /// Upper corner, m.
+    pub max: [f64; 3],
+}
+
+/// Where the plan comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanConfig {
+    /// A scripted plan file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// Generate views on a cap around the board.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generate: Option<GenerateSpec>,
+    /// Choose poses one at a time (next-best pose, weighed by the move time to reach each)
+    /// from the plan's poses as candidates, and stop as soon as the result is good enough (see
+    /// `target_uncertainty_mm`). Absent: adaptive for a generated plan when the intrinsics are
+    /// given, fixed otherwise (`false` runs every pose of the plan, today's behaviour).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive: Option<bool>,
+    /// Hand-guided capture (`handeye console`): nothing drives the arm; a person captures where
+    /// it stands, and the plan's poses (`file` or `generate`) are only suggested.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub manual: bool,
+    /// Adaptive stop rule: the larger translation 1-sigma of the two unknowns and the held-out
+    /// error must be at most this, mm. Absent: the verdict's `accuracy_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_uncertainty_mm: Option<f64>,
+    /// Adaptive: never stop before this many accepted poses.
+    #[serde(default = "default_min_poses")]
+    pub min_poses: usize,
+    /// Adaptive: stop after this many accepted poses even if the target is not reached.
+    /// Absent: every candidate may be used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_poses: Option<usize>,
+    /// Visit a fixed plan's poses in the order of least total move time (from where the arm
+    /// stands, every move checked against the joint ranges and the workspace box); `false`
+    /// keeps the scripted order.
+    #[serde(default = "default_reorder")]
+    pub reorder: bool,
+}
+
+fn default_min_poses() -> usize {
+    8
+}
+fn default_reorder() -> bool {
+    true
+}
+
+impl Default for PlanConfig {
+    /// No plan source (a recorded robot's poses are its plan), adaptive by its rule.
+    fn default() -> Self {
+        PlanConfig {
+            file: None,
+            generate: None,
+            adaptive: None,
+            manual: false,
+            target_uncertainty_mm: None,
+            min_poses: default_min_poses(),
+            max_poses: None,
+            reorder: default_reorder(),
+        }
+    }
+}
+
+/// Detector settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectorConfig {
+    /// Image decimation before quad detection (1 = full resolution).
+    #[serde(default = "default_decimate")]
+    pub decimate: f32,
+    /// Detector threads.
+    #[serde(default = "default_threads")]
+    pub threads: u8,
+    /// Largest accepted number of corrected bits.
+    #[serde(default)]
+    pub max_hamming: u32,
+}
+
+fn default_decimate() -> f32 {
+    2.0
+}
+fn default_threads() -> u8 {
+    1
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        DetectorConfig {
+            decimate: default_decimate(),
+            threads: default_threads(),
+            max_hamming: 0,
+        }
+    }
+}
+
+/// The solver a config asks for: the solver's own [`Method`], read and written by the one list
+/// of names ([`Method::NAMES`]) that `--method` takes too.
+pub type SolverMethod = Method;
+
+/// Solver settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    /// `refined` (default), `iterative`, a closed form (`tsai`, `park`, `horaud`, `andreff`,
+    /// `daniilidis`, `closed_form` (also `closed-form`, `shah`), `li`): [`Method::NAMES`].
+    #[serde(default)]
+    pub method: Method,
+    /// Rotation noise of a board pose `T_camera_target`, degrees (1-sigma per axis). Given: the
+    /// pose-space fit uses it as is; absent (the default): estimated from the residuals
+    /// (variance component estimation, starting from 0.2°), unless `estimate_noise` is false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_sigma_deg: Option<f64>,
+    /// Translation noise of a board pose, mm (1-sigma per axis). Given: used as is; absent (the
+    /// default): estimated from the residuals (starting from 1 mm), unless `estimate_noise` is
+    /// false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation_sigma_mm: Option<f64>,
+    /// Robust pose-space fit (default): a consensus start, samples whose residual is an outlier
+    /// against the fit of the rest left out of the final fit (each named in a warning); a clean
+    /// data set keeps every sample. `false`: fit every sample, only flag outliers.
+    #[serde(default = "yes")]
+    pub drop_outliers: bool,
+    /// `reprojection` (default: refine over every detected corner when frames have corners) or
+    /// `pose` (the pose-space answer only).
+    #[serde(default)]
+    pub space: SolveSpace,
+    /// 1-sigma corner detection noise for the reprojection refinement, px.
+    #[serde(default = "default_pixel_sigma_px")]
+    pub pixel_sigma_px: f64,
+    /// Also fit a small correction of every robot pose, held by the robot's repeatability
+    /// (default on: with sub-pixel corners a frame's many corners see a 0.002° robot error, so
+    /// treating robot poses as exact over-trusts them).
+    #[serde(default = "yes")]
+    pub robot_corrections: bool,
+    /// Estimate the noise from the residuals (variance component estimation): the board-pose
+    /// sigmas not given above in the pose-space fit, and the corner noise and the robot's
+    /// repeatability in the reprojection fit, starting from `pixel_sigma_px` and the robot's
+    /// `repeatability_*`; `false` weights with the values as given (defaults where absent).
+    #[serde(default = "yes")]
+    pub estimate_noise: bool,
+}
+
+/// Where the final answer is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolveSpace {
+    /// Pose space: one `T_camera_target` per frame, the `A = X·B·Y` solver (also the start of
+    /// the reprojection refinement, and the only answer when no frame has recorded corners).
+    Pose,
+    /// Reprojection space, the default: every detected corner, started from the pose-space
+    /// answer, with the corner noise and the robot's repeatability estimated from the residuals
+    /// (`estimate_noise`). In the rendered simulated cell it is closer to the truth than the
+    /// pose-space answer on the same frames (0.88x the translation error, 0.82x the rotation
+    /// error over 16 seeds, robot repeatability dominating; 0.50x / 0.63x with pixel noise dominating).
+    /// Always used when the intrinsics are estimated by the run.
+    #[default]
+    Reprojection,
+}
+
+impl SolveSpace {
+    /// The YAML / CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveSpace::Pose => "pose",
+            SolveSpace::Reprojection => "reprojection",
+        }
+    }
+}
+
+fn default_pixel_sigma_px() -> f64 {
+    0.3
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            method: Method::default(),
+            rotation_sigma_deg: None,
+            translation_sigma_mm: None,
+            drop_outliers: true,
+            space: SolveSpace::default(),
+            pixel_sigma_px: default_pixel_sigma_px(),
+            robot_corrections: true,
+            estimate_noise: true,
+        }
+    }
+}
+
+/// Session settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionConfig {
+    /// Fixed wait after the arm stops before grabbing, s; with `settle_speed_deg_s` the minimum
+    /// before the speeds are watched.
+    #[serde(default = "default_settle_s")]
+    pub settle_s: f64,
+    /// Settle by measurement: capture once every joint speed the arm reports has stayed below
+    /// this for `settle_window_s`, °/s (0 = the fixed `settle_s` only).
+    #[serde(default = "default_settle_speed_deg_s")]
+    pub settle_speed_deg_s: f64,
+    /// How long the joint speeds must stay below `settle_speed_deg_s`, s.
+    #[serde(default = "default_settle_window_s")]
+    pub settle_window_s: f64,
+    /// An arm that has not settled this long after a move stops the run, s.
+    #[serde(default = "default_settle_timeout_s")]
+    pub settle_timeout_s: f64,
+    /// Largest accepted board reprojection RMS, px; a worse frame is retried, then skipped.
+    #[serde(default = "default_max_rms_px")]
+    pub max_reprojection_rms_px: f64,
+    /// Margin kept between the board and the image border when checking a plan, px.
+    #[serde(default = "default_margin_px")]
+    pub image_margin_px: f64,
+}
+
+fn default_settle_s() -> f64 {
+    0.0
+}
+fn default_settle_speed_deg_s() -> f64 {
+    0.5
+}
+fn default_settle_window_s() -> f64 {
+    0.1
+}
+fn default_settle_timeout_s() -> f64 {
+    5.0
+}
+fn default_max_rms_px() -> f64 {
+    1.0
+}
+fn default_margin_px() -> f64 {
+    20.0
+}
+
+impl Default for SessionConfig {
+    fn default() -> Self {
+        SessionConfig {
+            settle_s: default_settle_s(),
+            settle_speed_deg_s: default_settle_speed_deg_s(),
+            settle_window_s: default_settle_window_s(),
+            settle_timeout_s: default_settle_timeout_s(),
+            max_reprojection_rms_px: default_max_rms_px(),
+            image_margin_px: default_margin_px(),
+        }
+    }
+}
+
+/// The accuracy the user wants of both transforms: the verdict is GOOD when the held-out error
+/// and the 1-sigma of both transforms are within it, CHECK up to 3× it, REDO above (see
+/// `verdict`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VerdictConfig {
+    /// Translation, mm (default 1.0).
+    #[serde(default = "default_accuracy_mm")]
+    pub accuracy_mm: f64,
+    /// Rotation, degrees (default 0.1: about 1 mm at 0.6 m).
+    #[serde(default = "default_accuracy_deg")]
+    pub accuracy_deg: f64,
+}
+
+fn default_accuracy_mm() -> f64 {
+    DEFAULT_ACCURACY_MM
+}
+fn default_accuracy_deg() -> f64 {
+    DEFAULT_ACCURACY_DEG
+}
+
+impl Default for VerdictConfig {
+    fn default() -> Self {
+        VerdictConfig {
+            accuracy_mm: DEFAULT_ACCURACY_MM,
+            accuracy_deg: DEFAULT_ACCURACY_DEG,
+        }
+    }
+}
+
+impl VerdictConfig {
+    /// The accuracy these settings ask for.
+    pub fn accuracy(&self) -> Accuracy {
+        Accuracy {
+            translation_mm: self.accuracy_mm,
+            rotation_deg: self.accuracy_deg,
+        }
+    }
+}
+
+/// For a shape error serde placed at a whole `backend:`-tagged section (`robot`, `camera`): the
+/// YAML path of the key at fault (`camera.pixel_format`) and its error, found by reading the
+/// section one key at a time with the same backend. `None` when the section is not one of
+/// those, or the fault is the backend itself or a missing key (then the section is the right
+/// place).
+pub(super) fn pinpoint_tagged(
+    document: &serde_yaml_ng::Value,
+    section: &str,
+) -> Option<(String, serde_yaml_ng::Error)> {
+    use serde_yaml_ng::{Mapping, Value};
+    let read: fn(Value) -> Option<serde_yaml_ng::Error> = match section {
+        "robot" => |v| serde_yaml_ng::from_value::<RobotConfig>(v).err(),
+        "camera" => |v| serde_yaml_ng::from_value::<CameraConfig>(v).err(),
+        _ => return None,
+    };
+    let fields = document.get(section)?.as_mapping()?;
+    let backend = fields.get("backend")?;
+    let only = |entry: Option<(&Value, &Value)>| {
+        let mut m = Mapping::new();
+        m.insert("backend".into(), backend.clone());
+        if let Some((k, v)) = entry {
+            m.insert(k.clone(), v.clone());
+        }
+        // Errors about a key come while reading it; a missing required key only at the end.
+        read(Value::Mapping(m)).filter(|e| !e.to_string().starts_with("missing field"))
+    };
+    if only(None).is_some() {
+        return None;
+    }
+    fields
+        .iter()
+        .filter(|(k, _)| k.as_str() != Some("backend"))
+        .find_map(|(k, v)| {
+            let error = only(Some((k, v)))?;
+            Some((format!("{section}.{}", k.as_str()?), error))
+        })
+}

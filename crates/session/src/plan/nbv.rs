@@ -1,0 +1,392 @@
+//! Next-best pose: choose, from a set of checked candidate poses (reachable, board visible), the
+//! one whose sample would most reduce the predicted uncertainty of the calibration.
+//!
+//! The prediction is the Gauss-Newton covariance of the refinement: each sample at robot pose
+//! `B` adds `JᵀJ` (see [`handeye_solve::refine::sample_information`]) to the information of the
+//! samples so far; inverted and scaled by the variance factor of the latest solve, it is the
+//! covariance the solver would report. The score of a candidate is the predicted
+//! `σ²` summed over both unknowns, translation (mm²) plus rotation seen at a lever arm of
+//! [`ROTATION_LEVER_M`] (a rotation error of one unknown moves a point that far away by
+//! `lever · angle`). Units: metres and radians inside, mm in the target and the score.
+//!
+//! Arm time: with [`AdaptivePlanner::with_motion`] the planner knows where the arm stands and
+//! picks the candidate that buys the most certainty per second of arm time —
+//! `ln(score now / score after) / (move time + per-pose time)`, the move timed at the limits
+//! ([`MotionLimits::joint_move_time`]) — instead of the best score alone; a near pose that
+//! helps almost as much wins over a far one. Stopping: the solved 1-sigma must reach the target
+//! after at least `min_poses` samples, and a caller's check (held-out error, rotation spread)
+//! must agree ([`AdaptivePlanner::with_stop_check`]).
+//!
+//! Depends on `solve`, `robot` (joints, limits) and `geometry` only; the session drives it
+//! through its plan-source trait.
+
+use std::sync::Arc;
+
+use nalgebra::SMatrix;
+
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_robot::{Joints, MotionLimits};
+use handeye_solve::refine::{mount_uncertainty, sample_information};
+use handeye_solve::{self as solve, Axby, Calibration, SolveOptions};
+
+/// Lever arm at which a rotation uncertainty is weighed against a translation one, m.
+pub const ROTATION_LEVER_M: f64 = 0.5;
+
+/// Prior information per parameter (1/rad², 1/m² in whitened units) so the sum is invertible
+/// before the problem is observable; tiny next to one sample's information.
+const PRIOR: f64 = 1e-6;
+
+/// Predicted 1-sigma of both unknowns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Predicted {
+    /// Camera mount: total translation 1-sigma, mm.
+    pub camera_translation_mm: f64,
+    /// Target mount: total translation 1-sigma, mm.
+    pub target_translation_mm: f64,
+    /// Camera mount: total rotation 1-sigma, degrees.
+    pub camera_rotation_deg: f64,
+    /// Target mount: total rotation 1-sigma, degrees.
+    pub target_rotation_deg: f64,
+    /// The score minimised (mm²).
+    pub score: f64,
+}
+
+impl Predicted {
+    /// The larger translation 1-sigma of the two unknowns, mm (what the stop rule compares).
+    pub fn worst_translation_mm(&self) -> f64 {
+        self.camera_translation_mm.max(self.target_translation_mm)
+    }
+}
+
+/// What the predictions are made at: the cell's setup, the current estimate of both unknowns,
+/// the solver's options (its noise model) and the variance factor of the latest solve.
+#[derive(Debug, Clone)]
+pub struct PredictionModel {
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// The camera mount estimate.
+    pub camera_mount: Pose,
+    /// The target mount estimate.
+    pub target_mount: Pose,
+    /// The solver's options; their noise model weighs each sample.
+    pub options: SolveOptions,
+    /// The variance factor of the latest solve (1 before any).
+    pub variance_factor: f64,
+}
+
+impl PredictionModel {
+    fn solution(&self) -> Axby {
+        Axby::from_mounts(&self.camera_mount, &self.target_mount)
+    }
+
+    /// Information of samples at these robot poses.
+    fn information(&self, base_from_flange: &[Pose]) -> SMatrix<f64, 12, 12> {
+        let solution = self.solution();
+        let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
+        for pose in base_from_flange {
+            h += sample_information(&solution, &self.setup.chain_b(pose), &self.options.noise);
+        }
+        h
+    }
+
+    /// The covariance predicted from an information matrix, mapped to the unknowns and scored.
+    fn predict(&self, information: &SMatrix<f64, 12, 12>) -> Option<Predicted> {
+        let covariance = information.try_inverse()? * self.variance_factor;
+        let u = mount_uncertainty(&self.solution(), &covariance, self.variance_factor);
+        let lever_mm = ROTATION_LEVER_M * 1e3;
+        let rot = |deg: f64| (deg.to_radians() * lever_mm).powi(2);
+        let score = u.camera_mount.translation_mm.powi(2)
+            + u.target_mount.translation_mm.powi(2)
+            + rot(u.camera_mount.rotation_deg)
+            + rot(u.target_mount.rotation_deg);
+        Some(Predicted {
+            camera_translation_mm: u.camera_mount.translation_mm,
+            target_translation_mm: u.target_mount.translation_mm,
+            camera_rotation_deg: u.camera_mount.rotation_deg,
+            target_rotation_deg: u.target_mount.rotation_deg,
+            score,
+        })
+    }
+
+    /// The candidate (index into `candidates`, skipping `used`) that reduces the predicted score
+    /// the most per second of arm time when added to `taken`, with its prediction:
+    /// `ln(score now / score after) / seconds(i)`, with `seconds(i)` the time to move to
+    /// candidate `i` and take its frame (> 0). At equal cost, the least score after.
+    pub fn next_best_per_second(
+        &self,
+        taken: &[Pose],
+        candidates: &[Pose],
+        used: &[bool],
+        seconds: &dyn Fn(usize) -> f64,
+    ) -> Option<(usize, Predicted)> {
+        let solution = self.solution();
+        let h = self.information(taken);
+        let now = self.predict(&h)?.score;
+        candidates
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
+            .filter_map(|(i, c)| {
+                let added =
+                    h + sample_information(&solution, &self.setup.chain_b(c), &self.options.noise);
+                let p = self.predict(&added)?;
+                let gain = (now / p.score).ln();
+                Some((i, p, gain / seconds(i).max(1e-3)))
+            })
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|(i, p, _)| (i, p))
+    }
+}
+
+/// A caller's judgement whether a solve is good enough to stop (say, its held-out error and the
+/// rotation spread of the samples), asked only once the solved 1-sigma meets the target.
+#[derive(Clone)]
+pub struct StopCheck(pub Arc<StopCheckFn>);
+
+/// The judgement of a [`StopCheck`]: the samples and the solve that met the target in, whether
+/// to stop out.
+pub type StopCheckFn = dyn Fn(&[PosePair], &Calibration) -> bool + Send + Sync;
+
+impl std::fmt::Debug for StopCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StopCheck")
+    }
+}
+
+/// Where the arm stands and what its time costs, for [`AdaptivePlanner::with_motion`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Motion {
+    limits: MotionLimits,
+    at: Joints,
+    per_pose_s: f64,
+}
+
+/// One decision of the adaptive planner, for logs and reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveStep {
+    /// Samples accepted when the decision was made.
+    pub samples: usize,
+    /// The 1-sigma of the latest solve (worst translation, mm), if one was made.
+    pub solved_sigma_mm: Option<f64>,
+    /// The candidate chosen (index into the candidate set), or `None` when the planner stopped.
+    pub chose: Option<usize>,
+    /// Predicted worst translation 1-sigma after that candidate, mm.
+    pub predicted_sigma_mm: Option<f64>,
+}
+
+/// Greedy next-best-pose planner over a fixed candidate set, with a stop rule.
+#[derive(Debug, Clone)]
+pub struct AdaptivePlanner {
+    /// The nominal cell until enough samples are solved, then the latest solve.
+    model: PredictionModel,
+    candidates: Vec<(Pose, Joints)>,
+    used: Vec<bool>,
+    target_uncertainty_mm: f64,
+    min_samples: usize,
+    min_stop: usize,
+    max_samples: usize,
+    motion: Option<Motion>,
+    stop_check: Option<StopCheck>,
+    /// How many times the caller's stop check said no.
+    pub stop_check_refused: usize,
+    /// Decisions so far.
+    pub log: Vec<AdaptiveStep>,
+    /// The latest calibration solved on the way (the one that met the target, when it did).
+    pub latest: Option<Calibration>,
+    reached: bool,
+}
+
+impl AdaptivePlanner {
+    /// Samples before the planner starts solving: below this the variance factor is floored
+    /// and the estimate is poor, so the nominal cell is used to plan.
+    pub const DEFAULT_MIN_SAMPLES: usize = 6;
+
+    /// A planner over checked `candidates` (target flange pose and joints), starting from the
+    /// nominal unknowns; stops when the worst translation 1-sigma of a solve is at most
+    /// `target_uncertainty_mm`, or after `max_samples` samples, or when candidates run out.
+    pub fn new(
+        setup: Setup,
+        nominal_camera_mount: Pose,
+        nominal_target_mount: Pose,
+        candidates: Vec<(Pose, Joints)>,
+        options: SolveOptions,
+        target_uncertainty_mm: f64,
+        max_samples: usize,
+    ) -> Self {
+        let used = vec![false; candidates.len()];
+        AdaptivePlanner {
+            model: PredictionModel {
+                setup,
+                camera_mount: nominal_camera_mount,
+                target_mount: nominal_target_mount,
+                options,
+                variance_factor: 1.0,
+            },
+            candidates,
+            used,
+            target_uncertainty_mm,
+            min_samples: Self::DEFAULT_MIN_SAMPLES,
+            min_stop: 0,
+            max_samples,
+            motion: None,
+            stop_check: None,
+            stop_check_refused: 0,
+            log: Vec::new(),
+            latest: None,
+            reached: false,
+        }
+    }
+
+    /// Weighs candidates by arm time: the arm stands at `start` and moves at `limits`; every
+    /// pose also costs `per_pose_s` (settling, the frame).
+    pub fn with_motion(mut self, limits: MotionLimits, start: Joints, per_pose_s: f64) -> Self {
+        self.motion = Some(Motion {
+            limits,
+            at: start,
+            per_pose_s: per_pose_s.max(0.0),
+        });
+        self
+    }
+
+    /// Never stops on the target before `min_poses` samples are accepted (the maximum still
+    /// applies).
+    pub fn with_min_poses(mut self, min_poses: usize) -> Self {
+        self.min_stop = min_poses;
+        self
+    }
+
+    /// Stops on the target only when `check` also agrees (asked with the samples and the solve
+    /// that met the target).
+    pub fn with_stop_check(mut self, check: StopCheck) -> Self {
+        self.stop_check = Some(check);
+        self
+    }
+
+    /// The next pose to visit given the samples accepted so far, or `None` to stop.
+    pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
+        let mut solved_sigma_mm = None;
+        if samples.len() >= self.min_samples {
+            let model = &mut self.model;
+            if let Ok(c) = solve::solve(model.setup, samples, &model.options) {
+                model.camera_mount = c.camera_mount;
+                model.target_mount = c.target_mount;
+                // Predict the next views with the noise the fit used (estimated from the
+                // samples unless given): the variance factor is relative to it.
+                if let Some(noise) = &c.noise {
+                    model.options.noise = noise.model();
+                }
+                if let Some(u) = &c.uncertainty {
+                    model.variance_factor = u.variance_factor;
+                    let sigma = u
+                        .camera_mount
+                        .translation_mm
+                        .max(u.target_mount.translation_mm);
+                    solved_sigma_mm = Some(sigma);
+                }
+                self.latest = Some(c);
+            }
+        }
+        let met = solved_sigma_mm.is_some_and(|s| s <= self.target_uncertainty_mm)
+            && samples.len() >= self.min_stop;
+        let good = met
+            && match (&self.stop_check, &self.latest) {
+                (Some(check), Some(c)) => {
+                    let ok = (check.0)(samples, c);
+                    if !ok {
+                        self.stop_check_refused += 1;
+                    }
+                    ok
+                }
+                _ => true,
+            };
+        self.reached = good;
+        let done = good || samples.len() >= self.max_samples;
+        let choice = if done {
+            None
+        } else {
+            let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+            let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
+            let joints: Vec<Joints> = self.candidates.iter().map(|c| c.1).collect();
+            // Without a motion model every candidate costs the same: the least score after wins.
+            let seconds = |i: usize| match &self.motion {
+                Some(m) => m.limits.joint_move_time(&m.at, &joints[i]) + m.per_pose_s,
+                None => 1.0,
+            };
+            self.model
+                .next_best_per_second(&taken, &poses, &self.used, &seconds)
+        };
+        self.log.push(AdaptiveStep {
+            samples: samples.len(),
+            solved_sigma_mm,
+            chose: choice.map(|c| c.0),
+            predicted_sigma_mm: choice.map(|c| c.1.worst_translation_mm()),
+        });
+        let (index, _) = choice?;
+        self.used[index] = true;
+        if let Some(m) = &mut self.motion {
+            m.at = self.candidates[index].1;
+        }
+        Some(self.candidates[index])
+    }
+
+    /// Marks the candidates at these flange poses (within 1 mm and 0.1°) as taken: a resumed
+    /// session's poses are not chosen again.
+    pub fn mark_visited(&mut self, poses: &[Pose]) {
+        for (used, (candidate, _)) in self.used.iter_mut().zip(&self.candidates) {
+            *used |= poses.iter().any(|p| {
+                (p.translation.vector - candidate.translation.vector).norm() < 1e-3
+                    && p.rotation.angle_to(&candidate.rotation) < 0.1f64.to_radians()
+            });
+        }
+    }
+
+    /// Whether the planner stopped because the result was good enough: the last solve met the
+    /// target uncertainty (after the minimum pose count, with the stop check's agreement).
+    pub fn reached_target(&self) -> bool {
+        self.reached
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use nalgebra::Vector3;
+
+    /// Poses rotated about one axis only leave the problem unobservable; the planner must then
+    /// prefer a candidate that rotates about another axis.
+    #[test]
+    fn prefers_a_rotation_about_a_new_axis() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        let about_z = |deg: f64| {
+            pose_from_rotvec(
+                Vector3::new(0.5, 0.0, 0.5),
+                Vector3::new(0.0, 0.0, deg.to_radians()),
+            ) * pose_from_rotvec(
+                Vector3::zeros(),
+                Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+            )
+        };
+        let taken = [about_z(0.0), about_z(20.0), about_z(-20.0), about_z(40.0)];
+        let tilted = pose_from_rotvec(Vector3::new(0.5, 0.0, 0.5), Vector3::new(0.5, 0.0, 0.0))
+            * pose_from_rotvec(
+                Vector3::zeros(),
+                Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+            );
+        let candidates = [about_z(60.0), tilted, about_z(-40.0)];
+        let model = PredictionModel {
+            setup: Setup::EyeInHand,
+            camera_mount,
+            target_mount,
+            options: SolveOptions::default(),
+            variance_factor: 1.0,
+        };
+        let (best, _) = model
+            .next_best_per_second(&taken, &candidates, &[false; 3], &|_| 1.0)
+            .unwrap();
+        assert_eq!(best, 1, "the tilted pose adds the missing rotation axis");
+    }
+}

@@ -1,0 +1,178 @@
+//! Adaptive sessions: the plan is not fixed up front but asked for one pose at a time from a
+//! [`PlanSource`] that sees the samples accepted so far (e.g. the next-best-pose planner,
+//! `plan::nbv::AdaptivePlanner`). Each pose is visited with the ordinary driver
+//! ([`run_session`]), so records, retries, faults and the folder layout are the same as for a
+//! fixed plan; the manifest grows with the plan, so `replay` and `report` work unchanged.
+//!
+//! A pose whose board pose was rejected is dropped from the plan and its index reused by the
+//! next pose (which then gets one attempt instead of two: the driver counts the earlier
+//! failure); the source decides what to try next.
+//!
+//! A stopped adaptive session resumes like a fixed one: the manifest's poses are finished first
+//! (the last may not have been reached), the source is told every pose already visited, and it
+//! goes on choosing from the samples on disk.
+
+use crate::dataset::Dataset;
+use crate::plan::nbv::AdaptivePlanner;
+use handeye_camera::Camera;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::PosePair;
+use handeye_robot::{Joints, Robot};
+
+use super::SessionManifest;
+use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
+
+/// Yields the next pose of a session from the samples accepted so far.
+pub trait PlanSource {
+    /// The next flange pose and the joints that reach it, or `None` to end the session.
+    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)>;
+    /// Flange poses a resumed session visited already (planned or measured): not to be chosen
+    /// again.
+    fn visited(&mut self, poses: &[Pose]);
+}
+
+impl PlanSource for AdaptivePlanner {
+    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
+        self.next(samples)
+    }
+    fn visited(&mut self, poses: &[Pose]) {
+        self.mark_visited(poses);
+    }
+}
+
+/// Runs a session whose poses come from `source`, one at a time. `setup.plan` is ignored (the
+/// source is the plan); `manifest_config` is the config path written into the manifest.
+pub fn run_adaptive_session(
+    setup: SessionSetup,
+    manifest_config: std::path::PathBuf,
+    source: &mut dyn PlanSource,
+    robot: &mut dyn Robot,
+    camera: &mut dyn Camera,
+    on_event: &mut dyn FnMut(SessionEvent),
+) -> Result<SessionOutcome, SessionError> {
+    // A resumed session: the manifest lists the poses chosen so far (the last one may not have
+    // been reached); none of them, nor any pose visited and rejected, is chosen again.
+    let mut plan = GrowingPlan::open(&setup, manifest_config)?;
+    let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
+    for visit in setup.folder.read_visits()? {
+        seen.push(visit.poses(&setup.folder.visit_path(visit.plan_index))?.0);
+    }
+    source.visited(&seen);
+    let mut outcome = SessionOutcome::default();
+    // The last recorded pose is finished first.
+    let mut next = plan.poses.pop();
+    loop {
+        if next.is_none() {
+            let samples = if setup.folder.samples_path().is_file() {
+                Dataset::load(&setup.folder.samples_path())?.pairs
+            } else {
+                Vec::new()
+            };
+            next = source.next_pose(&samples);
+        }
+        let Some(pose) = next.take() else {
+            break;
+        };
+        plan.visit(&setup, pose, robot, camera, on_event, &mut outcome)?;
+    }
+    Ok(outcome)
+}
+
+/// The plan of a session that grows one pose at a time (adaptive and hand-guided sessions):
+/// each pose is added to the manifest, visited with the ordinary driver on the plan so far, and
+/// kept if its sample was accepted, dropped (its index reused by the next) if not.
+pub(super) struct GrowingPlan {
+    /// The poses so far (flange pose, joints).
+    pub poses: Vec<(Pose, Joints)>,
+    manifest_config: std::path::PathBuf,
+    /// The input hashes written when the session was created: kept with every manifest rewrite.
+    inputs: Vec<super::InputFile>,
+    /// A hand-guided session (kept with every manifest rewrite).
+    manual: bool,
+}
+
+impl GrowingPlan {
+    /// The plan the session's manifest holds so far, with its input hashes and its hand-guided
+    /// mark (the caller wrote the manifest when it created the session); empty without one.
+    pub fn open(
+        setup: &SessionSetup,
+        manifest_config: std::path::PathBuf,
+    ) -> Result<GrowingPlan, SessionError> {
+        let path = setup.folder.manifest_path();
+        let (poses, inputs, manual) = if path.is_file() {
+            let manifest = setup.folder.read_manifest()?;
+            (
+                recorded_plan(&manifest, &path)?,
+                manifest.inputs,
+                manifest.manual,
+            )
+        } else {
+            (Vec::new(), Vec::new(), false)
+        };
+        Ok(GrowingPlan {
+            poses,
+            manifest_config,
+            inputs,
+            manual,
+        })
+    }
+
+    /// Adds `pose` to the manifest and visits it with the ordinary driver (on `setup` with the
+    /// plan so far), folding what happened into `outcome`; whether its sample was accepted
+    /// (otherwise it is dropped from the plan again).
+    pub fn visit(
+        &mut self,
+        setup: &SessionSetup,
+        pose: (Pose, Joints),
+        robot: &mut dyn Robot,
+        camera: &mut dyn Camera,
+        on_event: &mut dyn FnMut(SessionEvent),
+        outcome: &mut SessionOutcome,
+    ) -> Result<bool, SessionError> {
+        self.poses.push(pose);
+        let mut manifest =
+            SessionManifest::new(self.manifest_config.clone(), setup.setup, &self.poses)
+                .with_inputs(self.inputs.clone());
+        manifest.manual = self.manual;
+        setup.folder.write_manifest(&manifest)?;
+        let step = SessionSetup {
+            plan: self.poses.clone(),
+            ..setup.clone()
+        };
+        let index = self.poses.len() - 1;
+        let step_outcome = run_session(step, robot, camera, on_event)?;
+        outcome.visited_now += step_outcome.visited_now;
+        outcome.moving_s += step_outcome.moving_s;
+        outcome.settling_s += step_outcome.settling_s;
+        outcome.skipped.extend(step_outcome.skipped.iter().cloned());
+        let accepted = step_outcome.accepted.contains(&index);
+        if accepted {
+            outcome.accepted = step_outcome.accepted;
+        } else {
+            self.poses.pop();
+        }
+        Ok(accepted)
+    }
+}
+
+/// The poses (and joints) a growing session's manifest (read from `file`) holds.
+fn recorded_plan(
+    manifest: &SessionManifest,
+    file: &std::path::Path,
+) -> Result<Vec<(Pose, Joints)>, SessionError> {
+    manifest
+        .plan
+        .iter()
+        .enumerate()
+        .map(|(i, planned)| {
+            let pose = planned
+                .base_from_flange
+                .to_pose(&format!("plan[{i}].T_base_flange"))
+                .map_err(|source| SessionError::Pose {
+                    file: file.to_path_buf(),
+                    source,
+                })?;
+            Ok((pose, planned.joints_deg.map(f64::to_radians)))
+        })
+        .collect()
+}

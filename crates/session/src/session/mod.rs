@@ -1,0 +1,270 @@
+//! The session: drives a validated plan on a robot and a camera, records every sample to disk as
+//! it is taken, then solves. The only layer that knows about time, hardware and disk; it sees the
+//! `Robot` and `Camera` traits, never a backend.
+//!
+//! Per pose: move (joint move to the validated joint solution) → settle → grab a frame newer than
+//! the settle instant → read the measured `T_base_flange` → hand the frame to the detection
+//! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
+//! already moving to the next pose.
+//!
+//! The folder is a write-ahead log (a pose is committed by its record; `samples.yaml` is rebuilt
+//! from the records on every start and resume), locked by the process running it (`lock`), and
+//! records the sha256 of its input files so a resume can refuse changed inputs (`inputs`).
+
+pub mod adaptive;
+pub mod driver;
+pub mod folder;
+pub mod inputs;
+pub mod lock;
+pub mod manual;
+pub mod replay;
+pub mod solve;
+pub mod staging;
+
+use std::path::PathBuf;
+
+pub use adaptive::{run_adaptive_session, PlanSource};
+pub use driver::{run_session, SessionEvent, SessionOutcome, SessionSetup, SharedFrame};
+pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
+pub use inputs::{changed_inputs, InputChange, InputFile};
+pub use lock::SessionLock;
+pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
+pub use solve::{
+    load_and_solve, solve_folder, solve_folder_in, solve_session, SolveInputs, SolvedSession,
+};
+pub use staging::{remove_abandoned, Leftover, Staging};
+
+use handeye_camera::CameraError;
+use handeye_core::camera_model::CameraModelError;
+use handeye_core::geometry::PoseError;
+use handeye_robot::RobotError;
+use handeye_solve::SolveError;
+use handeye_vision::TargetError;
+
+/// Why a session stopped or could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The output folder already holds something.
+    #[error(
+        "session folder {0} already exists and is not empty; choose another --out or --resume it"
+    )]
+    FolderExists(PathBuf),
+    /// `--resume` (or a reader) was given a folder that is not a session.
+    #[error("{} is not a session folder (no session.yaml){}", .0.display(), not_a_session_hint(.0))]
+    NotASession(PathBuf),
+    /// Another live process runs or resumes the session in this folder.
+    #[error("session folder {} is in use by {} (lock file {}): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.join(lock::LOCK_FILE).display())]
+    Locked {
+        /// The session folder.
+        folder: PathBuf,
+        /// The PID the lock file names, when it names one.
+        owner: Option<u32>,
+    },
+    /// Input files changed since the session was recorded; resuming would mix two cells.
+    #[error("the input files of {} changed since the session was recorded:\n{}\nresuming would mix samples taken with different inputs: restore the files, start a new session, or resume with --accept-changed", folder.display(), changes.iter().map(|c| format!("  - {c}")).collect::<Vec<_>>().join("\n"))]
+    InputsChanged {
+        /// The session folder.
+        folder: PathBuf,
+        /// Each changed input.
+        changes: Vec<InputChange>,
+    },
+    /// A pose's frame, record or the samples file could not be written (a full disk, say);
+    /// every pose committed before is kept.
+    #[error("could not record plan pose {plan_index} ({recorded} poses recorded and kept); fix the cause (free disk space, say), then resume with `handeye run --resume {}`", folder.display())]
+    RecordFailed {
+        /// The pose being recorded.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The write that failed.
+        #[source]
+        source: Box<SessionError>,
+    },
+    /// No visited pose gave a sample, so there is nothing to solve.
+    #[error("no pose of session {} gave a sample: {visited} pose(s) visited, every one rejected ({reasons}); check that the board is in view and the detector settings, then start a new session", folder.display())]
+    NoSamples {
+        /// The session folder.
+        folder: PathBuf,
+        /// Poses visited.
+        visited: usize,
+        /// The first rejections, `pose N: why`.
+        reasons: String,
+    },
+    /// `samples.yaml` does not hold exactly the accepted pose records.
+    #[error("{}: disagrees with the pose records in poses/: {} (a run killed between a record and this file); `handeye run --resume {}` rebuilds it from the records", file.display(), describe_disagreement(missing, extra), folder.display())]
+    SamplesDisagree {
+        /// `samples.yaml`.
+        file: PathBuf,
+        /// The session folder.
+        folder: PathBuf,
+        /// Accepted records without a sample (sample ids).
+        missing: Vec<String>,
+        /// Samples without an accepted record (sample ids).
+        extra: Vec<String>,
+    },
+    /// A file could not be read or written.
+    #[error("cannot access {path}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A session record could not be read or written, or does not have its shape.
+    #[error(transparent)]
+    File(#[from] handeye_core::yaml_file::FileError),
+    /// A session record is malformed.
+    #[error("{file}: {path}: {message}")]
+    Record {
+        /// The file.
+        file: PathBuf,
+        /// YAML path.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A pose in a session record is malformed.
+    #[error("{file}: {source}")]
+    Pose {
+        /// The file.
+        file: PathBuf,
+        /// The pose problem.
+        #[source]
+        source: PoseError,
+    },
+    /// The robot stopped the run; every sample so far is kept.
+    #[error("robot stopped the run at plan pose {plan_index} ({recorded} poses recorded); resume with `handeye run --resume {folder}`")]
+    Robot {
+        /// Where it stopped.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The robot error.
+        #[source]
+        source: RobotError,
+    },
+    /// The camera failed; every sample so far is kept.
+    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); resume with `handeye run --resume {folder}`")]
+    Camera {
+        /// Where it failed.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// The camera error.
+        #[source]
+        source: CameraError,
+    },
+    /// The next move, from where the arm actually stands, would leave the workspace box: it was
+    /// not sent; every sample so far is kept.
+    #[error("the move to plan pose {plan_index} was not sent: from the arm's current joints {problem} ({recorded} poses recorded); jog the arm back near the plan's poses, then resume with `handeye run --resume {folder}`")]
+    UnsafeMove {
+        /// The pose it would have moved to.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+        /// Where the move leaves the box.
+        problem: String,
+    },
+    /// Interrupted by the user; the arm was stopped and every sample so far is kept.
+    #[error("interrupted at plan pose {plan_index} ({recorded} poses recorded); the arm was stopped; resume with `handeye run --resume {folder}`")]
+    Interrupted {
+        /// Where it stopped.
+        plan_index: usize,
+        /// Poses recorded so far.
+        recorded: usize,
+        /// The session folder.
+        folder: PathBuf,
+    },
+    /// Solving the recorded samples failed at one stage.
+    #[error("solving the session failed ({stage})")]
+    Solve {
+        /// Which step: `pose space`, `reprojection refinement`, `estimating the intrinsics`, …
+        stage: &'static str,
+        /// Why.
+        #[source]
+        source: Box<SolveError>,
+    },
+    /// No recorded frame shows the board, so the intrinsics cannot be estimated.
+    #[error("no frame of session {} shows the board: there is nothing to estimate the intrinsics from; check that the board is in view, then start a new session", folder.display())]
+    NoBoardSeen {
+        /// The session folder.
+        folder: PathBuf,
+    },
+    /// A frame image could not be read, decoded or encoded.
+    #[error("frame {}", path.display())]
+    Frame {
+        /// The frame file.
+        path: PathBuf,
+        /// The image error.
+        #[source]
+        source: Box<image::ImageError>,
+    },
+    /// The board file of the solve inputs could not be loaded.
+    #[error("loading the board")]
+    Board {
+        /// The board file.
+        file: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<TargetError>,
+    },
+    /// The intrinsics file could not be loaded or written.
+    #[error("reading or writing the intrinsics")]
+    Intrinsics {
+        /// The intrinsics file.
+        file: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<CameraModelError>,
+    },
+    /// The board detector could not start or failed on a frame.
+    #[error("the board detector failed")]
+    Detector(#[source] Box<TargetError>),
+    /// The detection thread could not start.
+    #[error("cannot start the detection thread")]
+    DetectionThreadSpawn(#[source] std::io::Error),
+    /// The detection thread ended before the run did.
+    #[error("the detection thread {0}")]
+    DetectionThread(&'static str),
+}
+
+fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
+    let mut parts = Vec::new();
+    if !missing.is_empty() {
+        parts.push(format!(
+            "accepted record(s) without a sample: {}",
+            missing.join(", ")
+        ));
+    }
+    if !extra.is_empty() {
+        parts.push(format!(
+            "sample(s) without an accepted record: {}",
+            extra.join(", ")
+        ));
+    }
+    parts.join("; ")
+}
+
+/// For a folder a run left before writing `session.yaml` (it has `poses/` or `frames/`): how to
+/// start again.
+fn not_a_session_hint(root: &std::path::Path) -> String {
+    if let Some(at) = handeye_core::yaml_file::symlink_loop(&root.join("session.yaml")) {
+        format!(": symlink loop at {}", at.display())
+    } else if root.join("poses").is_dir() || root.join("frames").is_dir() {
+        format!(
+            "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`",
+            root.display()
+        )
+    } else {
+        String::new()
+    }
+}

@@ -1,0 +1,63 @@
+//! Replay: detect the board again in a session's saved frames and solve again, offline — to
+//! check a result, or to re-run with other detector or solver settings.
+
+use crate::dataset::Dataset;
+use handeye_core::camera_model::CameraModel;
+use handeye_vision::{DetectorOptions, Target, TargetDetector};
+
+use super::driver::{measure, sample_of};
+use super::{PoseVisit, SessionError, SessionFolder};
+
+/// Re-detects every saved frame of `folder` and returns the dataset the frames give now, with the
+/// visits as re-measured (in plan order).
+pub fn redetect(
+    folder: &SessionFolder,
+    board: &Target,
+    camera_model: &CameraModel,
+    detector: DetectorOptions,
+    max_rms: f64,
+) -> Result<(Dataset, Vec<PoseVisit>), SessionError> {
+    let manifest = folder.read_manifest()?;
+    let detector =
+        TargetDetector::spawn(board, detector).map_err(|e| SessionError::Detector(Box::new(e)))?;
+    let mut samples = Vec::new();
+    let mut visits = Vec::new();
+    for recorded in folder.read_visits()? {
+        let frame_path = folder.root().join(&recorded.frame);
+        let image = image::open(&frame_path)
+            .map_err(|source| SessionError::Frame {
+                path: frame_path.clone(),
+                source: Box::new(source),
+            })?
+            .into_luma8();
+        let record_path = folder.visit_path(recorded.plan_index);
+        let (base_from_flange, _) = recorded.poses(&record_path)?;
+        let visit = measure(
+            &detector,
+            board,
+            Some(camera_model),
+            &image,
+            max_rms,
+            PoseVisit::new(
+                recorded.plan_index,
+                &base_from_flange,
+                recorded.frame.clone(),
+            ),
+        );
+        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&record_path)? {
+            samples.push(sample_of(
+                visit.plan_index,
+                base_from_flange,
+                camera_from_target,
+            ));
+        }
+        visits.push(visit);
+    }
+    Ok((
+        Dataset {
+            setup: manifest.setup,
+            pairs: samples,
+        },
+        visits,
+    ))
+}

@@ -1,0 +1,512 @@
+//! Solving a session folder: `samples.yaml` and the recorded corners (`poses/NNN.yaml`) in,
+//! `result.yaml` out (and `reprojection.yaml`, `camera_info.yaml` when they apply): the pose-space
+//! solve, the reprojection-space refinement over the recorded corners, and the intrinsics
+//! estimated from scratch when the config has none.
+//!
+//! The summary for people (both answers side by side, the ground-truth check in the simulated
+//! cell) and the `reprojection.yaml` shape live in `summary`, re-exported here. Depends on
+//! `solve`, `config`, `dataset`, `result`, `vision` and the ground floor; the folder's reading
+//! and writing go through `SessionFolder`.
+
+mod summary;
+
+pub use summary::{FrameRms, ReprojectionSummary};
+
+use crate::config::{CellConfig, SolveSpace};
+use crate::dataset::Dataset;
+use crate::result::ResultFile;
+use handeye_core::camera_model::CameraModel;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::verdict::{self, Verdict};
+use handeye_solve::{
+    self as solve, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, SolveOptions,
+};
+use handeye_vision::Target;
+
+use super::{PoseVisit, SessionError, SessionFolder};
+
+/// A solved session.
+pub struct SolvedSession {
+    /// The final calibration (the reprojection-space answer when it was computed).
+    pub calibration: Calibration,
+    /// The pose-space answer (also the start of the reprojection refinement).
+    pub pose_space: Calibration,
+    /// The reprojection-space answer, when the space is `reprojection` and frames had corners.
+    pub reprojection: Option<ReprojectionCalibration>,
+    /// The pose-space answer's reprojection errors on the same frames (same order as
+    /// `reprojection.errors`), for the side-by-side comparison.
+    pub pose_space_errors: Option<ReprojectionErrors>,
+    /// Ids (`pose-NNN`) of the frames the reprojection refinement used, in its order.
+    pub frame_ids: Vec<String>,
+    /// The intrinsics estimated from the run (config without `intrinsics`), also written to the
+    /// session's `camera_info.yaml`.
+    pub estimated_camera: Option<CameraModel>,
+    /// A short human summary.
+    pub summary: String,
+    /// GOOD / CHECK / REDO and why, from the same figures the result file and report show.
+    pub verdict: Option<Verdict>,
+}
+
+/// What solving a session needs besides its folder: the board and the intrinsics, loaded once
+/// (by the prepared cell, see `cell::PreparedCell::solve_inputs`, or by [`SolveInputs::load`]),
+/// and the config's solver settings.
+#[derive(Debug, Clone)]
+pub struct SolveInputs {
+    /// The cell config: solver settings and the robot's repeatability.
+    pub config: CellConfig,
+    /// The board the frames show.
+    pub board: Target,
+    /// The intrinsics; `None` when the config has none and they are estimated from the corners.
+    pub camera: Option<CameraModel>,
+}
+
+impl SolveInputs {
+    /// Loads the board and the intrinsics (when the config names them) of `config`.
+    pub fn load(config: CellConfig) -> Result<SolveInputs, SessionError> {
+        let board = Target::load(&config.target).map_err(|source| SessionError::Board {
+            file: config.target.clone(),
+            source: Box::new(source),
+        })?;
+        let camera = match &config.intrinsics {
+            Some(file) => {
+                Some(
+                    CameraModel::load(file).map_err(|source| SessionError::Intrinsics {
+                        file: file.clone(),
+                        source: Box::new(source),
+                    })?,
+                )
+            }
+            None => None,
+        };
+        Ok(SolveInputs {
+            config,
+            board,
+            camera,
+        })
+    }
+}
+
+impl SolvedSession {
+    /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
+    /// with its verdict first.
+    pub fn result_file(&self, pairs: &[PosePair]) -> ResultFile {
+        let file = ResultFile::from_calibration(&self.calibration, pairs);
+        match &self.verdict {
+            Some(verdict) => file.with_verdict(verdict.clone()),
+            None => file,
+        }
+    }
+}
+
+/// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
+pub fn solve_folder(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+) -> Result<SolvedSession, SessionError> {
+    solve_folder_in(folder, inputs, inputs.config.solver.space)
+}
+
+/// Solves the folder in the given space and writes `result.yaml`.
+pub fn solve_folder_in(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    space: SolveSpace,
+) -> Result<SolvedSession, SessionError> {
+    let (solved, dataset) = load_and_solve(folder, inputs, space)?;
+    solved
+        .result_file(&dataset.pairs)
+        .save(&folder.result_path())?;
+    if let Some(summary) = solved.reprojection_summary() {
+        handeye_core::yaml_file::write_yaml(&summary, &folder.root().join(REPROJECTION_FILE))?;
+    }
+    Ok(solved)
+}
+
+/// Reads the folder's samples and visits and solves (in the reprojection space with the inputs'
+/// board and intrinsics); writes nothing, except `camera_info.yaml` and `samples.yaml` (the board
+/// poses by PnP with those intrinsics) when the intrinsics are estimated. Returns the dataset the
+/// answer was solved from.
+///
+/// When the config has no intrinsics they are estimated from the recorded corners (whatever
+/// `space` says: without intrinsics there are no board poses to solve in pose space alone).
+pub fn load_and_solve(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let config = &inputs.config;
+    let Some(camera) = &inputs.camera else {
+        // Every visit with corners goes through `frames_from_visits`, which checks them.
+        return solve_from_scratch(folder, config, &inputs.board);
+    };
+    let visits = folder.read_visits()?;
+    // Checked here too: the pose-space space uses no corners, but the report draws them.
+    for visit in &visits {
+        visit.check_corners_on_board(&folder.visit_path(visit.plan_index), &inputs.board)?;
+    }
+    let dataset = committed_samples(folder, &visits)?;
+    let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
+    let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
+    Ok((solved, dataset))
+}
+
+/// The folder's `samples.yaml`, checked against the committed records: it must hold exactly the
+/// accepted poses (the pose-space answer and the pixel fit then use the same frames). No accepted
+/// pose at all is its own error, with the rejections.
+fn committed_samples(
+    folder: &SessionFolder,
+    visits: &[PoseVisit],
+) -> Result<Dataset, SessionError> {
+    let accepted: Vec<String> = visits
+        .iter()
+        .filter(|v| v.camera_from_target.is_some())
+        .map(|v| format!("pose-{:03}", v.plan_index))
+        .collect();
+    if accepted.is_empty() {
+        let reasons = visits
+            .iter()
+            .take(3)
+            .map(|v| {
+                format!(
+                    "pose {}: {}",
+                    v.plan_index,
+                    v.rejected.as_deref().unwrap_or("no board pose")
+                )
+            })
+            .chain((visits.len() > 3).then(|| "...".to_string()))
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(SessionError::NoSamples {
+            folder: folder.root().to_path_buf(),
+            visited: visits.len(),
+            reasons: if reasons.is_empty() {
+                "no pose was visited".into()
+            } else {
+                reasons
+            },
+        });
+    }
+    let path = folder.samples_path();
+    let dataset = if path.is_file() {
+        Dataset::load(&path)?
+    } else {
+        Dataset {
+            setup: folder.read_manifest()?.setup,
+            pairs: Vec::new(),
+        }
+    };
+    let ids: Vec<String> = dataset
+        .pairs
+        .iter()
+        .map(|p| p.id.clone().unwrap_or_default())
+        .collect();
+    let missing: Vec<String> = accepted
+        .iter()
+        .filter(|id| !ids.contains(id))
+        .cloned()
+        .collect();
+    let mut extra: Vec<String> = ids
+        .iter()
+        .filter(|id| !accepted.contains(id))
+        .cloned()
+        .collect();
+    let mut seen = std::collections::BTreeSet::new();
+    extra.extend(
+        ids.iter()
+            .filter(|id| !seen.insert(*id))
+            .map(|id| format!("{id} (twice)")),
+    );
+    if !missing.is_empty() || !extra.is_empty() {
+        return Err(SessionError::SamplesDisagree {
+            file: path,
+            folder: folder.root().to_path_buf(),
+            missing,
+            extra,
+        });
+    }
+    Ok(dataset)
+}
+
+/// File the estimated intrinsics are written to, in the session folder.
+pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
+/// File with both answers' reprojection errors per frame, in the session folder.
+pub const REPROJECTION_FILE: &str = "reprojection.yaml";
+
+fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
+    ReprojectionOptions {
+        pixel_sigma_px: config.solver.pixel_sigma_px,
+        estimate_noise: config.solver.estimate_noise,
+        robot_prior: config.solver.robot_corrections.then(|| {
+            let (translation_sigma_m, rotation_sigma_rad) = config.robot_repeatability();
+            RobotPrior {
+                translation_sigma_m,
+                rotation_sigma_rad,
+            }
+        }),
+        ..ReprojectionOptions::default()
+    }
+}
+
+/// No intrinsics in the config: Zhang's closed form from the recorded corners, then the joint
+/// refinement; writes `camera_info.yaml` and the samples it solved from (`samples.yaml`) into the
+/// session.
+fn solve_from_scratch(
+    folder: &SessionFolder,
+    config: &CellConfig,
+    board: &Target,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let manifest = folder.read_manifest()?;
+    let visits = folder.read_visits()?;
+    let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(&visits, board, false)?
+        .into_iter()
+        .unzip();
+    let first = visits
+        .iter()
+        .find(|v| !v.corners_px.is_empty())
+        .ok_or_else(|| SessionError::NoBoardSeen {
+            folder: folder.root().to_path_buf(),
+        })?;
+    let frame_path = folder.root().join(&first.frame);
+    let (width, height) =
+        image::image_dimensions(&frame_path).map_err(|source| SessionError::Frame {
+            path: frame_path.clone(),
+            source: Box::new(source),
+        })?;
+    let options = config.solver.to_options();
+    let scratch = handeye_solve::intrinsics::calibrate_from_scratch(
+        manifest.setup,
+        &frames,
+        width,
+        height,
+        &options,
+        &reprojection_options(config),
+    )
+    .map_err(|source| SessionError::Solve {
+        stage: "estimating the intrinsics",
+        source: Box::new(source),
+    })?;
+    let camera_info = folder.root().join(CAMERA_INFO_FILE);
+    scratch
+        .joint
+        .camera
+        .save_camera_info(&camera_info)
+        .map_err(|source| SessionError::Intrinsics {
+            file: camera_info.clone(),
+            source: Box::new(source),
+        })?;
+    // The fair comparison: board poses again by PnP with the estimated intrinsics, the pose-space
+    // solve on those, and the reprojection answer's residuals against the same poses.
+    let camera = scratch.joint.camera;
+    let mut pairs = Vec::with_capacity(frames.len());
+    for (id, frame) in ids.iter().zip(&frames) {
+        let correspondences: Vec<_> = frame
+            .corners
+            .iter()
+            .map(|c| (c.point_in_target, c.pixel))
+            .collect();
+        let tags = correspondences.len() / 4;
+        if let Ok(pose) =
+            handeye_vision::pnp::estimate_pose_from_points(&camera, &correspondences, tags.max(2))
+        {
+            let mut pair = PosePair::new(frame.base_from_flange, pose.camera_from_target);
+            pair.id = Some(id.clone());
+            pairs.push(pair);
+        }
+    }
+    let pose_space =
+        solve::solve(manifest.setup, &pairs, &options).map_err(|source| SessionError::Solve {
+            stage: "pose space with the estimated intrinsics",
+            source: Box::new(source),
+        })?;
+    let pose_space_errors = reprojection_errors(
+        manifest.setup,
+        &frames,
+        &camera,
+        &pose_space.camera_mount,
+        &pose_space.target_mount,
+    );
+    let calibration = scratch
+        .joint
+        .to_calibration(&pose_space, &pairs, &options.noise);
+    let mut solved = SolvedSession {
+        calibration,
+        pose_space,
+        reprojection: Some(scratch.joint.clone()),
+        pose_space_errors: Some(pose_space_errors),
+        frame_ids: ids,
+        estimated_camera: Some(camera),
+        summary: String::new(),
+        verdict: None,
+    };
+    let c = &scratch.joint.camera;
+    let i = &scratch.initial;
+    let mut notes = vec![format!(
+        "intrinsics estimated from {} frames (Zhang's closed form fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, no distortion; then jointly refined; the pose-space column uses the refined ones): fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, {} {:?}; written to {}",
+        frames.len(),
+        i.fx, i.fy, i.cx, i.cy,
+        c.fx, c.fy, c.cx, c.cy,
+        "plumb_bob", c.distortion_coefficients(),
+        camera_info.display()
+    )];
+    if let Some(sigma) = scratch.joint.intrinsics_sigma_px {
+        notes.push(format!(
+            "intrinsics 1-sigma: fx {:.3} fy {:.3} cx {:.3} cy {:.3} px",
+            sigma[0], sigma[1], sigma[2], sigma[3]
+        ));
+    }
+    conclude(&mut solved, &pairs, &options, config, &notes);
+    // The board poses just estimated are this session's samples: `samples.yaml` (which the
+    // report, `verify` and `solve <session>` read) holds them, consistent with
+    // `camera_info.yaml`. The run records none without intrinsics.
+    let dataset = Dataset {
+        setup: manifest.setup,
+        pairs,
+    };
+    dataset.save(&folder.samples_path())?;
+    Ok((solved, dataset))
+}
+
+/// The reprojection refinement's frames from recorded visits: every accepted visit (one with a
+/// board pose, or any visit with corners when `require_pose` is false) with its corners mapped to
+/// board points; corners of tags not on the board are skipped. Ids are `pose-NNN` like the
+/// samples'.
+pub fn frames_from_visits(
+    visits: &[PoseVisit],
+    board: &Target,
+    require_pose: bool,
+) -> Result<Vec<(String, Frame)>, SessionError> {
+    let mut frames = Vec::new();
+    for visit in visits {
+        let accepted = visit.camera_from_target.is_some() || !require_pose;
+        if !accepted || visit.corners_px.is_empty() {
+            continue;
+        }
+        let record = SessionFolder::visit_name(visit.plan_index);
+        let (base_from_flange, _) = visit.poses(&record)?;
+        // Corners were checked when the record was read (no point twice); a point the board
+        // does not have is refused, never skipped.
+        visit.check_corners_on_board(&record, board)?;
+        let corners = visit
+            .corners_px
+            .iter()
+            .filter_map(|c| {
+                Some(Corner {
+                    point_in_target: board.observation_point(c)?,
+                    pixel: c.pixel,
+                })
+            })
+            .collect();
+        let id = format!("pose-{:03}", visit.plan_index);
+        frames.push((
+            id.clone(),
+            Frame {
+                base_from_flange,
+                corners,
+                id: Some(id),
+            },
+        ));
+    }
+    Ok(frames)
+}
+
+/// The last step of both solve paths: the check against the config's nominal transforms (an
+/// answer far from them — swapped unknowns, say — is flagged where the result file, the report
+/// and the verdict all see it), the verdict, and the summary that opens with it.
+fn conclude(
+    solved: &mut SolvedSession,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    config: &CellConfig,
+    notes: &[String],
+) {
+    solved
+        .calibration
+        .notices
+        .extend(solve::diagnostics::check_against_nominal(
+            &solved.calibration,
+            &config.nominal,
+            solve::diagnostics::NOMINAL_TOLERANCE_M,
+        ));
+    let verdict = verdict::assess_solved(
+        &solved.calibration,
+        pairs,
+        options,
+        config.verdict.accuracy(),
+    );
+    solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(notes));
+    solved.verdict = Some(verdict);
+}
+
+/// Solves pose pairs and, when `vision` (board and intrinsics) is given and the config's space is
+/// reprojection, refines over the visits' corners; no I/O.
+pub fn solve_session(
+    setup: Setup,
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    vision: Option<(&Target, &CameraModel)>,
+    config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    let options = config.solver.to_options();
+    let pose_space =
+        solve::solve(setup, pairs, &options).map_err(|source| SessionError::Solve {
+            stage: "pose space",
+            source: Box::new(source),
+        })?;
+    let mut solved = SolvedSession {
+        calibration: pose_space.clone(),
+        pose_space,
+        reprojection: None,
+        pose_space_errors: None,
+        frame_ids: Vec::new(),
+        estimated_camera: None,
+        summary: String::new(),
+        verdict: None,
+    };
+    let mut notes = Vec::new();
+    if let Some((board, camera)) = vision {
+        // Frames the pose-space solve dropped as outliers stay out here too.
+        let dropped: Vec<&str> = solved
+            .pose_space
+            .dropped
+            .iter()
+            .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
+            .collect();
+        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board, true)?
+            .into_iter()
+            .filter(|(id, _)| !dropped.contains(&id.as_str()))
+            .unzip();
+        if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
+            let ropts = reprojection_options(config);
+            let p = &solved.pose_space;
+            let reprojection = refine_reprojection(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+                &ropts,
+            )
+            .map_err(|source| SessionError::Solve {
+                stage: "reprojection refinement",
+                source: Box::new(source),
+            })?;
+            solved.pose_space_errors = Some(reprojection_errors(
+                setup,
+                &frames,
+                camera,
+                &p.camera_mount,
+                &p.target_mount,
+            ));
+            solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
+            solved.reprojection = Some(reprojection);
+            solved.frame_ids = ids;
+        } else {
+            notes.push(
+                "fewer than 3 frames with recorded corners: pose-space answer only".to_string(),
+            );
+        }
+    }
+    conclude(&mut solved, pairs, &options, config, &notes);
+    Ok(solved)
+}

@@ -1,0 +1,358 @@
+//! Verification of a calibration against observations it was not solved from.
+//!
+//! Two ways: a holdout run ([`holdout`]: the cell moves to a freshly generated set of poses, the
+//! camera measures `T_camera_target`, and the calibration predicts it with [`setup::predict`])
+//! and offline leave-one-out cross-validation on any dataset or session ([`leave_one_out`]: each
+//! sample is predicted by a solve of all the others). Both report, per pose and summarised, the
+//! rotation error (degrees, the angle between predicted and measured rotation) and the
+//! translation error at the target (mm, the distance between the predicted and the measured
+//! target origin in the camera frame). Depends on `solve`, `plan`, `cell` and `session` (the
+//! holdout run records a normal session folder, so it can be replayed and reported).
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::cell::{Hardware, PreparedCell};
+use crate::dataset::Dataset;
+use crate::plan::{GenerateSpec, Plan, Waypoint};
+use crate::session::{self, SessionError, SessionEvent, SessionFolder};
+use handeye_core::geometry::Pose;
+use handeye_core::setup::CellTransforms;
+use handeye_core::setup::{self, PosePair, Setup};
+use handeye_robot::RobotError;
+use handeye_solve::{self as solve, SolveError, SolveOptions};
+
+/// Prediction error at one pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseError {
+    /// Sample index.
+    pub index: usize,
+    /// Sample id, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Angle between predicted and measured `T_camera_target` rotation, degrees.
+    pub rotation_deg: f64,
+    /// Distance between predicted and measured target origin (camera frame), mm.
+    pub translation_mm: f64,
+}
+
+/// Summary of the prediction errors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErrorSummary {
+    /// Poses compared.
+    pub poses: usize,
+    /// RMS rotation error, degrees.
+    pub rotation_rms_deg: f64,
+    /// Median rotation error, degrees.
+    pub rotation_median_deg: f64,
+    /// Largest rotation error, degrees.
+    pub rotation_max_deg: f64,
+    /// RMS translation error at the target, mm.
+    pub translation_rms_mm: f64,
+    /// Median translation error at the target, mm.
+    pub translation_median_mm: f64,
+    /// Largest translation error at the target, mm.
+    pub translation_max_mm: f64,
+}
+
+/// Per-pose errors and their summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Verification {
+    /// What was compared (`holdout` or `leave-one-out`).
+    pub kind: String,
+    /// Per pose.
+    pub poses: Vec<PoseError>,
+    /// Summary.
+    pub summary: ErrorSummary,
+}
+
+/// Why a verification could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum VerifyError {
+    /// Too few samples for leave-one-out (each fold must still solve).
+    #[error("leave-one-out needs at least {required} samples, got {found}")]
+    TooFewSamples {
+        /// Samples given.
+        found: usize,
+        /// Needed.
+        required: usize,
+    },
+    /// A fold (or the full solve) failed.
+    #[error("solving without sample {left_out} failed")]
+    Fold {
+        /// The left-out sample.
+        left_out: usize,
+        /// Why.
+        #[source]
+        source: SolveError,
+    },
+    /// The verification plan is unusable.
+    #[error("the verification plan failed its checks: {0}")]
+    Plan(String),
+    /// The result is for another setup than the cell.
+    #[error("the result is for {result} but the cell is {cell}")]
+    SetupMismatch {
+        /// Setup of the result.
+        result: Setup,
+        /// Setup of the cell.
+        cell: Setup,
+    },
+    /// The holdout session failed.
+    #[error("the verification session failed")]
+    Session(#[source] Box<SessionError>),
+    /// The arm's joint positions could not be read before the first move.
+    #[error("reading the arm's joint positions failed")]
+    Robot(#[source] RobotError),
+}
+
+fn summarise(errors: &[PoseError]) -> ErrorSummary {
+    let stats = |values: Vec<f64>| -> (f64, f64, f64) {
+        if values.is_empty() {
+            return (f64::NAN, f64::NAN, f64::NAN);
+        }
+        let rms = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        let mid = sorted.len() / 2;
+        let median = if sorted.len().is_multiple_of(2) {
+            0.5 * (sorted[mid - 1] + sorted[mid])
+        } else {
+            sorted[mid]
+        };
+        (rms, median, *sorted.last().expect("non-empty"))
+    };
+    let r = stats(errors.iter().map(|e| e.rotation_deg).collect());
+    let t = stats(errors.iter().map(|e| e.translation_mm).collect());
+    ErrorSummary {
+        poses: errors.len(),
+        rotation_rms_deg: r.0,
+        rotation_median_deg: r.1,
+        rotation_max_deg: r.2,
+        translation_rms_mm: t.0,
+        translation_median_mm: t.1,
+        translation_max_mm: t.2,
+    }
+}
+
+/// The error of a predicted against a measured `T_camera_target`.
+pub fn prediction_error(
+    index: usize,
+    id: Option<String>,
+    predicted: &Pose,
+    measured: &Pose,
+) -> PoseError {
+    PoseError {
+        index,
+        id,
+        rotation_deg: predicted.rotation.angle_to(&measured.rotation).to_degrees(),
+        translation_mm: (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
+    }
+}
+
+/// Compares the calibration's prediction with every measured pair.
+pub fn compare(
+    setup: Setup,
+    camera_mount: &Pose,
+    target_mount: &Pose,
+    pairs: &[PosePair],
+) -> Verification {
+    let poses: Vec<PoseError> = pairs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let predicted = setup::predict(setup, camera_mount, target_mount, &p.base_from_flange);
+            prediction_error(i, p.id.clone(), &predicted, &p.camera_from_target)
+        })
+        .collect();
+    Verification {
+        kind: "holdout".into(),
+        summary: summarise(&poses),
+        poses,
+    }
+}
+
+/// Leave-one-out cross-validation: each sample is predicted by a solve of all the others
+/// (covariance and convention checks off in the folds: only the estimate matters there).
+pub fn leave_one_out(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+) -> Result<Verification, VerifyError> {
+    const REQUIRED: usize = 4;
+    if pairs.len() < REQUIRED {
+        return Err(VerifyError::TooFewSamples {
+            found: pairs.len(),
+            required: REQUIRED,
+        });
+    }
+    let mut poses = Vec::with_capacity(pairs.len());
+    for (left_out, p) in pairs.iter().enumerate() {
+        let predicted = solve::predict_left_out(setup, pairs, options, left_out)
+            .map_err(|source| VerifyError::Fold { left_out, source })?;
+        poses.push(prediction_error(
+            left_out,
+            p.id.clone(),
+            &predicted,
+            &p.camera_from_target,
+        ));
+    }
+    Ok(Verification {
+        kind: "leave-one-out".into(),
+        summary: summarise(&poses),
+        poses,
+    })
+}
+
+/// Holdout verification on the cell: generates `spec` views (a seed the calibration did not
+/// use), checks them from the arm's actual joints (read from `hardware` before anything moves),
+/// keeps those that pass, records them as a session in `folder` and compares each measured
+/// `T_camera_target` with the prediction of `calibration`. Setting `stop` stops the arm and ends
+/// the session cleanly, as in a calibration run.
+pub fn holdout(
+    prepared: &mut PreparedCell,
+    hardware: &mut Hardware,
+    calibration: &CellTransforms,
+    spec: &GenerateSpec,
+    folder: &SessionFolder,
+    stop: Arc<AtomicBool>,
+    on_event: &mut dyn FnMut(SessionEvent),
+) -> Result<Verification, VerifyError> {
+    if calibration.setup != prepared.config.setup {
+        return Err(VerifyError::SetupMismatch {
+            result: calibration.setup,
+            cell: prepared.config.setup,
+        });
+    }
+    spec.validate()
+        .map_err(|e| VerifyError::Plan(e.to_string()))?;
+    let plan = Plan {
+        waypoints: prepared
+            .generate_views(spec)
+            .into_iter()
+            .map(Waypoint::LookAt)
+            .collect(),
+    };
+    // The cell was prepared from an assumed start: the first move starts where the arm really
+    // is. (The config plan's own re-check result does not matter here, only its new start.)
+    let start = hardware
+        .robot
+        .joint_positions()
+        .map_err(VerifyError::Robot)?;
+    let _ = prepared.recheck_from(start);
+    // A verification needs only usable views: drop the ones that fail instead of refusing all
+    // (every move is checked again from the arm's actual joints before it is sent).
+    let validated = prepared.check_plan(&plan).passing();
+    if validated.is_empty() {
+        return Err(VerifyError::Plan(format!(
+            "from the arm's actual position none of the {} generated views is reachable and shows the board; nothing was moved",
+            spec.count
+        )));
+    }
+    let session_error = |e: SessionError| VerifyError::Session(Box::new(e));
+    folder
+        .write_manifest(&prepared.manifest(&validated))
+        .map_err(session_error)?;
+    let session_setup = prepared.session_setup(folder.clone(), validated, stop);
+    session::run_session(
+        session_setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        on_event,
+    )
+    .map_err(session_error)?;
+    let dataset =
+        Dataset::load(&folder.samples_path()).map_err(|e| session_error(SessionError::File(e)))?;
+    Ok(compare(
+        calibration.setup,
+        &calibration.camera_mount,
+        &calibration.target_mount,
+        &dataset.pairs,
+    ))
+}
+
+impl Verification {
+    /// A table for a terminal: one line per pose, then the summary.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut out = format!("{} prediction errors of T_camera_target:\n", self.kind);
+        for p in &self.poses {
+            let _ = writeln!(
+                out,
+                "  {:>3} {:<10} {:>9.4}° {:>9.3} mm",
+                p.index,
+                p.id.as_deref().unwrap_or(""),
+                p.rotation_deg,
+                p.translation_mm
+            );
+        }
+        let s = &self.summary;
+        let _ = write!(
+            out,
+            "{} poses: rotation RMS {:.4}° (median {:.4}°, max {:.4}°), translation at the target RMS {:.3} mm (median {:.3} mm, max {:.3} mm)",
+            s.poses,
+            s.rotation_rms_deg,
+            s.rotation_median_deg,
+            s.rotation_max_deg,
+            s.translation_rms_mm,
+            s.translation_median_mm,
+            s.translation_max_mm
+        );
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn compare_reports_a_known_offset() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount =
+            pose_from_rotvec(Vector3::new(0.5, -0.1, 0.0), Vector3::new(0.0, 0.0, 0.3));
+        let robot = pose_from_rotvec(Vector3::new(0.4, -0.1, 0.6), Vector3::new(3.1, 0.1, 0.0));
+        let truth = setup::predict(Setup::EyeInHand, &camera_mount, &target_mount, &robot);
+        // The measurement is the truth moved 2 mm along the camera x axis and turned 0.5° about z.
+        let measured = pose_from_rotvec(
+            Vector3::new(0.002, 0.0, 0.0),
+            Vector3::new(0.0, 0.0, 0.5f64.to_radians()),
+        ) * truth;
+        let v = compare(
+            Setup::EyeInHand,
+            &camera_mount,
+            &target_mount,
+            &[PosePair::new(robot, measured)],
+        );
+        assert!(
+            (v.summary.rotation_rms_deg - 0.5).abs() < 1e-9,
+            "{:?}",
+            v.summary
+        );
+        // Rotating about the camera z axis also moves the target origin: compute it.
+        let expected = (measured.translation.vector - truth.translation.vector).norm() * 1e3;
+        assert!((v.summary.translation_rms_mm - expected).abs() < 1e-9);
+        assert!(expected > 2.0);
+    }
+
+    #[test]
+    fn leave_one_out_refuses_too_few_samples() {
+        let p = PosePair::new(Pose::identity(), Pose::identity());
+        let e = leave_one_out(
+            Setup::EyeInHand,
+            &[p.clone(), p.clone(), p],
+            &SolveOptions::default(),
+        );
+        assert!(matches!(
+            e,
+            Err(VerifyError::TooFewSamples {
+                found: 3,
+                required: 4
+            })
+        ));
+    }
+}

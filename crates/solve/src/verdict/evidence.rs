@@ -1,0 +1,169 @@
+//! The evidence a verdict is made from: the held-out (leave-one-out) errors ([`held_out`]), the
+//! health notices shared by terminal, result file and report ([`coverage_notices`],
+//! [`residual_notice`]), and the one-call entry points around a solve ([`assess_solved`],
+//! [`assess_result`]) that gather it and hand it to [`assess`](super::assess).
+//!
+//! Depends on `solve` (the solver for the held-out folds, its diagnostics), `notice`, the ground
+//! floor (`setup`, `geometry`) and the types of its parent [`verdict`](super).
+
+use crate::{
+    self as solve, diagnostics, rotation_diversity, Calibration, NoiseModel, SolveError,
+    SolveOptions,
+};
+use handeye_core::geometry::{rms, Pose};
+use handeye_core::notice::{Notice, NoticeKind, Severity};
+use handeye_core::setup::{PosePair, Setup};
+
+use super::rules::{assess, Evidence};
+use super::{
+    Accuracy, HeldOut, Verdict, GOOD_OFF_AXIS_DEG, GOOD_POSES, MAX_HELD_OUT, MIN_HELD_OUT_SAMPLES,
+    RESIDUAL_FACTOR,
+};
+
+/// Median camera-to-target distance of `pairs`, mm: where a held-out error is measured.
+pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
+    let distances: Vec<f64> = pairs
+        .iter()
+        .map(|p| p.camera_from_target.translation.vector.norm() * 1e3)
+        .collect();
+    diagnostics::median(&distances)
+}
+
+/// Held-out (leave-one-out) errors: each sample (at most [`MAX_HELD_OUT`], evenly spaced) is
+/// predicted by a solve of all the others with `options` (covariance and convention checks off
+/// in the folds), and the prediction compared with its measured `T_camera_target`. Samples in
+/// `outliers` are held out like the others but left out of the summary. Fails (with the reason)
+/// for fewer than [`MIN_HELD_OUT_SAMPLES`] samples or when a fold cannot be solved.
+pub fn held_out(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    outliers: &[usize],
+) -> Result<HeldOut, String> {
+    let n = pairs.len();
+    if n < MIN_HELD_OUT_SAMPLES {
+        return Err(format!(
+            "only {n} samples: a held-out check needs at least {MIN_HELD_OUT_SAMPLES}"
+        ));
+    }
+    let count = n.min(MAX_HELD_OUT);
+    let mut errors = Vec::with_capacity(count);
+    for k in 0..count {
+        let left_out = k * n / count;
+        let predicted = solve::predict_left_out(setup, pairs, options, left_out).map_err(|e| {
+            format!(
+                "solving without sample {left_out} failed ({e}): the answer hangs on that one pose"
+            )
+        })?;
+        if outliers.contains(&left_out) {
+            continue;
+        }
+        let measured: &Pose = &pairs[left_out].camera_from_target;
+        errors.push((
+            (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
+            predicted.rotation.angle_to(&measured.rotation).to_degrees(),
+        ));
+    }
+    if errors.is_empty() {
+        return Err("every held-out sample is flagged as an outlier".into());
+    }
+    Ok(HeldOut {
+        poses: errors.len(),
+        translation_rms_mm: rms(errors.iter().map(|e| e.0)),
+        rotation_rms_deg: rms(errors.iter().map(|e| e.1)),
+        working_distance_mm: working_distance_mm(pairs),
+    })
+}
+
+/// Notices about the poses themselves: fewer than [`GOOD_POSES`], or rotations less than
+/// [`GOOD_OFF_AXIS_DEG`] off their dominant axis (warnings; the report shows them, the verdict
+/// turns them into CHECK).
+pub fn coverage_notices(pairs: &[PosePair]) -> Vec<Notice> {
+    let mut out = Vec::new();
+    let n = pairs.len();
+    if n < GOOD_POSES {
+        out.push(Notice::warning(NoticeKind::FewPoses, format!(
+            "only {n} poses: below {GOOD_POSES} the noise level cannot be estimated from the residuals (the uncertainty assumes the configured noise) and a single bad pose can pull the answer; record 12–20"
+        )));
+    }
+    let robot: Vec<Pose> = pairs.iter().map(|p| p.base_from_flange).collect();
+    let diversity = rotation_diversity(&robot);
+    if diversity.off_axis_deg < GOOD_OFF_AXIS_DEG {
+        out.push(Notice::warning(NoticeKind::PoorRotationSpread, format!(
+            "poor rotation spread: the flange rotations are mostly about one axis (only {:.1}° off it, {GOOD_OFF_AXIS_DEG:.0}° wanted); add poses tilted 20–40° about two other flange axes",
+            diversity.off_axis_deg
+        )));
+    }
+    out
+}
+
+/// The residual health of one answer, judged one way everywhere: an `error` notice when the data
+/// fits far better with inverted robot poses (the solver's own convention check,
+/// `solve::diagnostics::check_convention`, thresholds relative to the noise model), else a
+/// warning when the residual RMS is more than [`RESIDUAL_FACTOR`] × what the noise model
+/// expects; `None` when the residuals are as expected.
+pub fn residual_notice(
+    calibration: &Calibration,
+    pairs: &[PosePair],
+    noise: &NoiseModel,
+) -> Option<Notice> {
+    let r = &calibration.residuals;
+    let used: Vec<PosePair> = pairs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !calibration.dropped.contains(i))
+        .map(|(_, p)| p.clone())
+        .collect();
+    if let Err(e @ SolveError::ConventionMismatch { .. }) =
+        diagnostics::check_convention(calibration.setup, &used, Some(r.rotation_rms_deg), noise)
+    {
+        return Some(Notice::new(
+            Severity::Error,
+            NoticeKind::LikelyConventionError,
+            e.to_string(),
+        ));
+    }
+    // Norms of 3-axis noise: √3 σ.
+    let expected_rot_deg = noise.rotation_sigma_rad.to_degrees() * 3f64.sqrt();
+    let expected_t_mm = noise.translation_sigma_m * 1e3 * 3f64.sqrt();
+    if r.rotation_rms_deg > RESIDUAL_FACTOR * expected_rot_deg
+        || r.translation_rms_mm > RESIDUAL_FACTOR * expected_t_mm
+    {
+        return Some(Notice::warning(NoticeKind::LargeResiduals, format!(
+            "residuals (RMS {:.3}°, {:.2} mm) are more than {RESIDUAL_FACTOR}× what the noise model expects ({:.3}°, {:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic",
+            r.rotation_rms_deg, r.translation_rms_mm, expected_rot_deg, expected_t_mm
+        )));
+    }
+    None
+}
+
+/// The one call after a solve: held-out errors with the same options, then [`assess`].
+pub fn assess_solved(
+    calibration: &Calibration,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    accuracy: Accuracy,
+) -> Verdict {
+    let held = held_out(calibration.setup, pairs, options, &calibration.outliers);
+    assess(&Evidence {
+        calibration,
+        pairs,
+        noise: &options.noise,
+        held_out: &held,
+        accuracy,
+    })
+}
+
+/// The one call around a solve: [`assess_solved`] on its answer, or [`Verdict::refused`] when it
+/// was refused.
+pub fn assess_result(
+    result: Result<&Calibration, &SolveError>,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    accuracy: Accuracy,
+) -> Verdict {
+    match result {
+        Ok(calibration) => assess_solved(calibration, pairs, options, accuracy),
+        Err(error) => Verdict::refused(error, pairs.len(), accuracy),
+    }
+}

@@ -1,0 +1,325 @@
+//! The rules of the verdict: [`assess`], a pure function from the [`Evidence`] to a
+//! [`Verdict`] (the thresholds of the parent module doc), and the banding against the accuracy.
+//!
+//! Depends on `solve` (the calibration and noise types, the rotation diversity), `notice`, the
+//! ground floor (`setup`, `geometry`), the residual and coverage notices of
+//! [`evidence`](super::evidence), and the types of its parent [`verdict`](super).
+
+use std::fmt::Write;
+
+use crate::{rotation_diversity, Calibration, NoiseModel};
+use handeye_core::geometry::Pose;
+use handeye_core::notice::{NoticeKind, Severity};
+use handeye_core::setup::PosePair;
+
+use super::evidence::{coverage_notices, residual_notice};
+use super::{Accuracy, Basis, Figures, Finding, HeldOut, Level, Verdict, REDO_FACTOR};
+
+/// Everything [`assess`] judges.
+#[derive(Debug, Clone, Copy)]
+pub struct Evidence<'a> {
+    /// The answer.
+    pub calibration: &'a Calibration,
+    /// The samples it was solved from (indexed like its residuals).
+    pub pairs: &'a [PosePair],
+    /// The noise model the solver was told.
+    pub noise: &'a NoiseModel,
+    /// Held-out errors, or why there are none.
+    pub held_out: &'a Result<HeldOut, String>,
+    /// The accuracy the user wants.
+    pub accuracy: Accuracy,
+}
+
+/// The level of a measured value against its accuracy: GOOD up to 1×, CHECK up to
+/// [`REDO_FACTOR`]×, REDO above (and for a non-finite value).
+fn band(value: f64, accuracy: f64) -> Level {
+    if !value.is_finite() || value > REDO_FACTOR * accuracy {
+        Level::Redo
+    } else if value > accuracy {
+        Level::Check
+    } else {
+        Level::Good
+    }
+}
+
+fn next_for_band(level: Level, what: &str) -> String {
+    match level {
+        Level::Redo => format!("{what}; then solve again"),
+        _ => format!("check whether this accuracy is enough for the task; if not, {what}"),
+    }
+}
+
+/// The verdict: every check of the module doc, worst finding first (ties in the order of
+/// [`Basis`]); GOOD when nothing was found.
+pub fn assess(evidence: &Evidence<'_>) -> Verdict {
+    let c = evidence.calibration;
+    let a = evidence.accuracy;
+    let mut findings: Vec<Finding> = Vec::new();
+    let mut figures = Figures {
+        poses: evidence.pairs.len(),
+        residual_rotation_rms_deg: Some(c.residuals.rotation_rms_deg),
+        residual_translation_rms_mm: Some(c.residuals.translation_rms_mm),
+        outliers: c.outliers.clone(),
+        ..Figures::default()
+    };
+
+    // Residual health, with the convention check.
+    if let Some(notice) = residual_notice(c, evidence.pairs, evidence.noise) {
+        let (level, basis, next) = if notice.kind == NoticeKind::LikelyConventionError {
+            (
+                Level::Redo,
+                Basis::ConventionError,
+                "fix the convention of the input poses and solve again",
+            )
+        } else {
+            (
+                Level::Check,
+                Basis::Residuals,
+                "look at the per-pose residuals: check the robot/camera timing, the board mounting and the noise model",
+            )
+        };
+        findings.push(Finding {
+            level,
+            basis,
+            reason: notice.message,
+            next_action: next.into(),
+        });
+    }
+
+    // Held-out error at the working distance.
+    match evidence.held_out {
+        Ok(h) => {
+            figures.held_out = Some(*h);
+            let level = band(h.translation_rms_mm, a.translation_mm)
+                .max(band(h.rotation_rms_deg, a.rotation_deg));
+            if level > Level::Good {
+                findings.push(Finding {
+                    level,
+                    basis: Basis::HeldOutError,
+                    reason: format!(
+                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses, target at ~{:.0} mm) against the {} mm, {}° asked for",
+                        h.translation_rms_mm,
+                        h.rotation_rms_deg,
+                        h.poses,
+                        h.working_distance_mm,
+                        a.translation_mm,
+                        a.rotation_deg
+                    ),
+                    next_action: next_for_band(
+                        level,
+                        "record more poses with larger, more varied rotations, the board closer and better lit",
+                    ),
+                });
+            }
+        }
+        Err(why) => findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::FewPoses,
+            reason: format!("no held-out check: {why}"),
+            next_action: "record more poses (12–20) so each can be checked against the others"
+                .into(),
+        }),
+    }
+
+    // 1-sigma of both transforms.
+    match &c.uncertainty {
+        Some(u) => {
+            let t = u
+                .camera_mount
+                .translation_mm
+                .max(u.target_mount.translation_mm);
+            let r = u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg);
+            figures.sigma_translation_mm = Some(t);
+            figures.sigma_rotation_deg = Some(r);
+            let level = band(t, a.translation_mm).max(band(r, a.rotation_deg));
+            if level > Level::Good {
+                let (camera_name, target_name) = c.setup.unknown_names();
+                findings.push(Finding {
+                    level,
+                    basis: Basis::Uncertainty,
+                    reason: format!(
+                        "1-sigma up to {t:.2} mm, {r:.3}° ({camera_name}: {:.2} mm, {:.3}°; {target_name}: {:.2} mm, {:.3}°) against the {} mm, {}° asked for",
+                        u.camera_mount.translation_mm,
+                        u.camera_mount.rotation_deg,
+                        u.target_mount.translation_mm,
+                        u.target_mount.rotation_deg,
+                        a.translation_mm,
+                        a.rotation_deg
+                    ),
+                    next_action: next_for_band(
+                        level,
+                        "record more poses with larger, more varied rotations",
+                    ),
+                });
+            }
+        }
+        None => findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::Uncertainty,
+            reason: format!(
+                "no 1-sigma: the {} method computes none",
+                c.solver.method.name()
+            ),
+            next_action: "solve with the refined method to see the uncertainty".into(),
+        }),
+    }
+
+    // Outliers, named.
+    if !c.outliers.is_empty() {
+        let named: Vec<String> = c
+            .outliers
+            .iter()
+            .map(
+                |&i| match evidence.pairs.get(i).and_then(|p| p.id.as_deref()) {
+                    Some(id) => format!("{i} ({id})"),
+                    None => i.to_string(),
+                },
+            )
+            .collect();
+        let dropped = if c.dropped.is_empty() {
+            "still in the solve"
+        } else {
+            "dropped from the solve"
+        };
+        findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::Outliers,
+            reason: format!(
+                "{} sample(s) flagged as outliers ({dropped}): {}",
+                c.outliers.len(),
+                named.join(", ")
+            ),
+            next_action: "look at the detection and the robot pose of those samples; re-record them if they are wrong".into(),
+        });
+    }
+
+    // The solver's own warnings and errors not judged above.
+    for notice in &c.notices {
+        let covered = matches!(
+            notice.kind,
+            NoticeKind::Outliers
+                | NoticeKind::DroppedOutliers
+                | NoticeKind::PoorlyDetermined
+                | NoticeKind::LikelyConventionError
+                | NoticeKind::LargeResiduals
+                | NoticeKind::FewPoses
+                | NoticeKind::PoorRotationSpread
+        );
+        if covered || !notice.needs_attention() {
+            continue;
+        }
+        findings.push(Finding {
+            level: if notice.severity == Severity::Error {
+                Level::Redo
+            } else {
+                Level::Check
+            },
+            basis: Basis::SolverNotice,
+            reason: notice.message.clone(),
+            next_action: "act on the notice, then solve again".into(),
+        });
+    }
+
+    // Coverage.
+    let robot: Vec<Pose> = evidence.pairs.iter().map(|p| p.base_from_flange).collect();
+    figures.rotation_off_axis_deg = Some(rotation_diversity(&robot).off_axis_deg);
+    for notice in coverage_notices(evidence.pairs) {
+        let basis = match notice.kind {
+            NoticeKind::PoorRotationSpread => Basis::RotationSpread,
+            _ => Basis::FewPoses,
+        };
+        findings.push(Finding {
+            level: Level::Check,
+            basis,
+            reason: notice.message,
+            next_action: "add poses as the reason says and solve again".into(),
+        });
+    }
+
+    decide(findings, figures, a)
+}
+
+fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> Verdict {
+    // Stable: among equal levels the order of the checks above (their importance) stays.
+    findings.sort_by_key(|f| std::cmp::Reverse(f.level));
+    if findings.is_empty() {
+        let mut reason = format!(
+            "every figure within the {} mm, {}° asked for",
+            accuracy.translation_mm, accuracy.rotation_deg
+        );
+        if let Some(h) = figures.held_out {
+            let _ = write!(
+                reason,
+                ": held-out error {:.2} mm, {:.3}° over {} poses",
+                h.translation_rms_mm, h.rotation_rms_deg, h.poses
+            );
+        }
+        if let (Some(t), Some(r)) = (figures.sigma_translation_mm, figures.sigma_rotation_deg) {
+            let _ = write!(reason, ", 1-sigma up to {t:.2} mm, {r:.3}°");
+        }
+        return Verdict {
+            level: Level::Good,
+            basis: Basis::WithinAccuracy,
+            reason,
+            next_action: "use the result".into(),
+            accuracy,
+            figures,
+            also: Vec::new(),
+        };
+    }
+    let first = findings.remove(0);
+    Verdict {
+        level: first.level,
+        basis: first.basis,
+        reason: first.reason,
+        next_action: first.next_action,
+        accuracy,
+        figures,
+        also: findings,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_are_one_and_three_times_the_accuracy() {
+        assert_eq!(band(1.0, 1.0), Level::Good);
+        assert_eq!(band(1.01, 1.0), Level::Check);
+        assert_eq!(band(3.0, 1.0), Level::Check);
+        assert_eq!(band(3.01, 1.0), Level::Redo);
+        assert_eq!(band(f64::NAN, 1.0), Level::Redo);
+        assert!(Level::Redo > Level::Check && Level::Check > Level::Good);
+    }
+
+    #[test]
+    fn the_worst_finding_decides_and_the_rest_follow_in_check_order() {
+        let finding = |level, basis, reason: &str| Finding {
+            level,
+            basis,
+            reason: reason.into(),
+            next_action: format!("fix {reason}"),
+        };
+        let v = decide(
+            vec![
+                finding(Level::Check, Basis::Outliers, "outliers"),
+                finding(Level::Redo, Basis::HeldOutError, "held-out"),
+                finding(Level::Check, Basis::FewPoses, "few"),
+            ],
+            Figures::default(),
+            Accuracy::default(),
+        );
+        assert_eq!((v.level, v.basis), (Level::Redo, Basis::HeldOutError));
+        assert_eq!(v.next_action, "fix held-out");
+        assert_eq!(
+            v.terminal_lines(),
+            "verdict: REDO — held-out\nnext: fix held-out\nalso (CHECK): outliers\nalso (CHECK): few"
+        );
+        let good = decide(Vec::new(), Figures::default(), Accuracy::default());
+        assert_eq!(
+            (good.level, good.basis),
+            (Level::Good, Basis::WithinAccuracy)
+        );
+    }
+}

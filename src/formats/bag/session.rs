@@ -1,0 +1,374 @@
+//! A ROS 2 bag imported as a session (`handeye import bag`): the bag read ([`import_bag`]), its
+//! frames written with their flange poses as a recorded cell in a staging folder beside the
+//! output, run through the ordinary session driver and solved there, and the folder renamed into
+//! place only when all of that succeeded; the staging folder of an import that was killed is
+//! removed by the next one. What the import did is recorded in `<session>/import/bag-import.yaml`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use crate::config::{recorded_cell, RecordedFiles};
+use crate::geometry::Pose;
+use crate::robot::recorded::save_recorded_poses;
+use crate::session::{self, SessionFolder, SessionManifest, SolvedSession};
+
+use super::{import_bag, BagOptions};
+
+/// What to import and where.
+#[derive(Debug, Clone)]
+pub struct BagSessionRequest {
+    /// The bag: a folder with metadata.yaml, or one .mcap / .db3 file.
+    pub bag: PathBuf,
+    /// How to read it (frames, topics, the board, the setup).
+    pub options: BagOptions,
+    /// The board file (copied into the session).
+    pub board_file: PathBuf,
+    /// The detector's quad decimation for the session's detection.
+    pub decimation: f32,
+    /// The arm moved continuously (frames every `spacing`), not stop-and-go: only for the advice
+    /// when too few frames are usable.
+    pub continuous: bool,
+    /// The session folder to create (must not exist, or be empty).
+    pub output: PathBuf,
+}
+
+/// What the import tells its caller as it goes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BagNote {
+    /// A line of progress.
+    Line(String),
+    /// Something wrong with the bag that did not stop the import (recorded in the session too).
+    Warning(String),
+}
+
+/// A bag imported into a session, solved.
+pub struct BagSession {
+    /// The session folder, where it is now.
+    pub folder: PathBuf,
+    /// Samples the session driver accepted.
+    pub accepted: usize,
+    /// Frames it skipped (board not found or rejected).
+    pub skipped: usize,
+    /// The bag's warnings (said as [`BagNote::Warning`] and recorded in the session).
+    pub warnings: usize,
+    /// The solve's summary, naming the session where it is now.
+    pub summary: String,
+    /// The solved session.
+    pub solved: SolvedSession,
+}
+
+/// What `import bag` records about itself in `<session>/import/bag-import.yaml`.
+#[derive(serde::Serialize)]
+struct BagImportRecord {
+    bag: PathBuf,
+    format: String,
+    image_topic: String,
+    images: usize,
+    time_offset_s: f64,
+    time_offset_estimated: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    time_offset_residual_mm: Option<f64>,
+    samples: Vec<BagSampleRecord>,
+    skipped: Vec<BagSkipRecord>,
+    /// What is wrong with the bag but did not stop the import.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    warnings: Vec<BagWarningRecord>,
+}
+
+#[derive(serde::Serialize)]
+struct BagWarningRecord {
+    kind: String,
+    message: String,
+}
+
+#[derive(serde::Serialize)]
+struct BagSampleRecord {
+    frame: String,
+    image_stamp_s: f64,
+    robot_stamp_s: f64,
+    sharpness: f64,
+}
+
+#[derive(serde::Serialize)]
+struct BagSkipRecord {
+    image_stamp_s: f64,
+    reason: String,
+}
+
+/// Imports a bag as a session: reads it, then runs its frames as a recorded cell into a staging
+/// folder next to the output and renames it into place when everything succeeded. What it finds
+/// on the way goes to `say` at once (so what was said before a refusal is read).
+pub fn import_bag_session(
+    request: &BagSessionRequest,
+    say: &mut dyn FnMut(BagNote),
+) -> anyhow::Result<BagSession> {
+    let a = request;
+    let options = &request.options;
+    let out = absolute(&a.output)?;
+    if out.exists() {
+        let empty = out.is_dir()
+            && std::fs::read_dir(&out)
+                .with_context(|| format!("reading {}", out.display()))?
+                .next()
+                .is_none();
+        anyhow::ensure!(
+            empty,
+            "{}: exists already; give a new session folder",
+            out.display()
+        );
+    }
+    // Staging folders of imports that were killed (kill -9, a power cut) are removed here; those
+    // of imports still running beside this one are locked and left alone.
+    if let Some(parent) = out.parent() {
+        for leftover in session::remove_abandoned(parent, STAGING_TAG)? {
+            match leftover {
+                session::Leftover::Removed(path) => say(BagNote::Line(format!(
+                    "removed {} left by an import that was killed",
+                    leaf(&path)
+                ))),
+                session::Leftover::InUse(path, pid) => say(BagNote::Line(format!(
+                    "left {} alone: an import still running{} writes into it",
+                    leaf(&path),
+                    pid.map(|p| format!(" (pid {p})")).unwrap_or_default()
+                ))),
+            }
+        }
+    }
+    let imported = import_bag(&a.bag, options).context("importing a ROS 2 bag")?;
+    // Said first, so they are read whatever follows (even a refusal for too few frames).
+    for w in &imported.warnings {
+        say(BagNote::Warning(format!("{}: {w}", a.bag.display())));
+    }
+    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
+    for s in &imported.skipped {
+        *kinds.entry(s.reason.kind()).or_default() += 1;
+    }
+    say(BagNote::Line(format!(
+        "{} ({}): {} images on {}; {} frames taken; skipped: {}",
+        a.bag.display(),
+        imported.format,
+        imported.images,
+        options.image_topic,
+        imported.samples.len(),
+        if kinds.is_empty() {
+            "none".to_string()
+        } else {
+            kinds
+                .iter()
+                .map(|(k, n)| format!("{n} {k}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    )));
+    for s in imported
+        .skipped
+        .iter()
+        .filter(|s| s.reason.kind() == "tf gap")
+        .take(3)
+    {
+        say(BagNote::Line(format!(
+            "  frame at {:.3} s: {}",
+            s.stamp_ns as f64 * 1e-9,
+            s.reason
+        )));
+    }
+    let o = &imported.offset;
+    if o.estimated {
+        say(BagNote::Line(format!(
+            "camera-to-robot clock offset: {:+.2} ms (estimated from {} frames with the board; board position RMS {:.3} mm)",
+            o.offset_s * 1e3,
+            o.frames_used,
+            o.residual_mm.unwrap_or(f64::NAN)
+        )));
+    } else if o.offset_s != 0.0 {
+        say(BagNote::Line(format!(
+            "camera-to-robot clock offset: {:+.2} ms (given)",
+            o.offset_s * 1e3
+        )));
+    }
+    anyhow::ensure!(
+        imported.samples.len() >= 3,
+        "{}: only {} usable frames (a calibration needs at least 3 views): {}",
+        a.bag.display(),
+        imported.samples.len(),
+        if a.continuous {
+            "check --image, the TF frames and --spacing"
+        } else {
+            "did the arm stop at each view? (--max-speed-mm-s, --still-window; or --continuous)"
+        }
+    );
+
+    // Stage everything next to the output; dropped (removed) on any error.
+    let parent = out
+        .parent()
+        .ok_or_else(|| anyhow::anyhow!("{}: has no parent folder", out.display()))?;
+    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
+    let staging = session::Staging::create(parent, &name, STAGING_TAG)
+        .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
+    let stage = staging.path().to_path_buf();
+    let folder = SessionFolder::create(&stage)?;
+    let import_dir = stage.join("import");
+    let images_dir = import_dir.join("images");
+    std::fs::create_dir_all(&images_dir)
+        .with_context(|| format!("creating {}", images_dir.display()))?;
+    let mut samples = Vec::new();
+    for (i, s) in imported.samples.iter().enumerate() {
+        let file = images_dir.join(format!("{i:03}.png"));
+        s.image
+            .save(&file)
+            .with_context(|| format!("writing {}", file.display()))?;
+        samples.push(BagSampleRecord {
+            frame: format!("import/images/{i:03}.png"),
+            image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
+            robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
+            sharpness: s.sharpness,
+        });
+    }
+    let poses: Vec<_> = imported
+        .samples
+        .iter()
+        .map(|s| s.base_from_flange)
+        .collect();
+    save_recorded_poses(&poses, &import_dir.join("poses.yaml"))?;
+    if let Some(camera) = &imported.camera {
+        camera.save_camera_info(&import_dir.join("camera_info.yaml"))?;
+    }
+    std::fs::copy(&a.board_file, import_dir.join("target.yaml"))
+        .with_context(|| format!("copying {}", a.board_file.display()))?;
+    let setup = options.setup;
+    let identity = Pose::identity();
+    let config = recorded_cell(
+        setup,
+        RecordedFiles {
+            target: PathBuf::from("target.yaml"),
+            intrinsics: imported
+                .camera
+                .is_some()
+                .then(|| PathBuf::from("camera_info.yaml")),
+            poses: PathBuf::from("poses.yaml"),
+            images: PathBuf::from("images"),
+        },
+        // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
+        (identity, identity),
+        &poses,
+        a.decimation,
+    );
+    let config_file = import_dir.join("cell.yaml");
+    config.save(
+        &config_file,
+        &format!(
+            "The recorded cell of the ROS 2 bag {} (written by `handeye import bag`)",
+            absolute(&a.bag)?.display()
+        ),
+    )?;
+    let mut cell = crate::cell::prepare(&config_file).context("preparing the recorded cell")?;
+    if !cell.report.ok() {
+        anyhow::bail!(
+            "the frames taken from {} cannot calibrate:\n{}",
+            a.bag.display(),
+            cell.report
+        );
+    }
+    let start = cell.start_joints;
+    let plan = cell
+        .recheck_from(start)
+        .map_err(|report| anyhow::anyhow!("the recorded plan fails its checks:\n{report}"))?;
+    // The manifest names the files where they will be once the staging folder is renamed.
+    let final_path = |p: &Path| match p.strip_prefix(&stage) {
+        Ok(rel) => out.join(rel),
+        Err(_) => p.to_path_buf(),
+    };
+    let mut inputs = cell.inputs()?;
+    for input in &mut inputs {
+        input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
+    }
+    folder.write_manifest(
+        &SessionManifest::new(out.join("import").join("cell.yaml"), setup, &plan)
+            .with_inputs(inputs),
+    )?;
+    let mut hardware = cell.open_hardware().context("opening the recorded cell")?;
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let session_setup = cell.session_setup(folder.clone(), plan, stop);
+    let outcome = session::run_session(
+        session_setup,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut |_| {},
+    )?;
+    for (index, why) in &outcome.skipped {
+        say(BagNote::Line(format!(
+            "  frame {index:03} ({:.3} s): board not found or rejected: {why}",
+            imported.samples[*index].image_stamp_ns as f64 * 1e-9
+        )));
+    }
+    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
+    let record = BagImportRecord {
+        bag: absolute(&a.bag)?,
+        format: imported.format.to_string(),
+        image_topic: options.image_topic.clone(),
+        images: imported.images,
+        time_offset_s: o.offset_s,
+        time_offset_estimated: o.estimated,
+        time_offset_residual_mm: o.residual_mm,
+        samples,
+        skipped: imported
+            .skipped
+            .iter()
+            .map(|s| BagSkipRecord {
+                image_stamp_s: s.stamp_ns as f64 * 1e-9,
+                reason: s.reason.to_string(),
+            })
+            .collect(),
+        warnings: imported
+            .warnings
+            .iter()
+            .map(|w| BagWarningRecord {
+                kind: w.kind().to_string(),
+                message: w.to_string(),
+            })
+            .collect(),
+    };
+    let record_file = import_dir.join("bag-import.yaml");
+    let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
+    crate::atomic_file::write_atomic(&record_file, text.as_bytes())
+        .with_context(|| format!("writing {}", record_file.display()))?;
+    drop(hardware);
+    drop(folder);
+    staging
+        .commit(&out)
+        .with_context(|| format!("moving the session into {}", out.display()))?;
+    // The solve ran in the staging folder; name the session where it is now.
+    let summary = solved
+        .summary
+        .trim_end()
+        .replace(&*stage.to_string_lossy(), &out.to_string_lossy());
+    Ok(BagSession {
+        folder: out,
+        accepted: outcome.accepted.len(),
+        skipped: outcome.skipped.len(),
+        warnings: imported.warnings.len(),
+        summary,
+        solved,
+    })
+}
+
+/// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.
+const STAGING_TAG: &str = "importing";
+
+/// A path's last component, for messages.
+fn leaf(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+/// The absolute form of a path that may not exist yet (an output about to be written).
+fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(path).with_context(|| format!("resolving {}", path.display()))
+}

@@ -1,0 +1,1329 @@
+//! `handeye import bag` on ROS 2 bags written by an independent writer: the pure-Python
+//! `rosbags` package (tests/python/make_bag.py) packs frames rendered by our simulated camera and
+//! the simulated arm's TF, in both storage formats (MCAP and sqlite3). The ground truth is known,
+//! so the calibration is checked against it (0.5 mm / 0.05°, the sim cell's tolerances), and the
+//! camera-to-robot clock offset baked into the image stamps is checked against its estimate (2 ms).
+//! Bad bags (a missing TF frame, a topic that is not there, truncated files) must fail with a
+//! message naming the frame, topic or file, and leave no output behind.
+//!
+//! Needs python3 (skips with a printed reason without it); `rosbags` and `numpy` are installed
+//! into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use nalgebra::{Point3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+
+use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
+use handeye::camera_model::{CameraModel, Distortion};
+use handeye::formats::bag::tf::interpolate;
+use handeye::geometry::{pose_from_rotvec, Pose};
+use handeye::plan::lookat::LookAt;
+use handeye::result::ResultFile;
+use handeye::vision::Board;
+
+use crate::util;
+use util::{handeye, pose_error_mm_deg, repo};
+
+/// The venv's python with rosbags, or `None` (printed) without python3.
+fn python() -> Option<PathBuf> {
+    static PYTHON: OnceLock<Option<PathBuf>> = OnceLock::new();
+    PYTHON
+        .get_or_init(|| {
+            if Command::new("python3").arg("--version").output().is_err() {
+                util::skip("python3 is absent (the bags are written by the `rosbags` package)");
+                return None;
+            }
+            let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("bag-venv");
+            let python = venv.join("bin/python");
+            let ready = Command::new(&python)
+                .args(["-c", "import rosbags, numpy"])
+                .output()
+                .is_ok_and(|o| o.status.success());
+            if !ready {
+                let status = Command::new("python3")
+                    .args(["-m", "venv"])
+                    .arg(&venv)
+                    .status()
+                    .expect("python3 -m venv");
+                assert!(status.success(), "python3 -m venv {}", venv.display());
+                let status = Command::new(venv.join("bin/pip"))
+                    .args(["install", "--quiet", "rosbags", "numpy"])
+                    .status()
+                    .expect("pip");
+                assert!(status.success(), "pip install rosbags numpy (needs PyPI)");
+            }
+            Some(python)
+        })
+        .clone()
+}
+
+/// The simulated cell's ground truth (configs/sim-cell.yaml's `simulation:`).
+fn truth() -> (Pose, Pose) {
+    (
+        pose_from_rotvec(
+            Vector3::new(0.0312, -0.0694, 0.0447),
+            Vector3::new(0.021, -0.016, 1.561),
+        ),
+        pose_from_rotvec(
+            Vector3::new(0.5034, -0.1467, 0.0021),
+            Vector3::new(0.012, -0.018, 0.297),
+        ),
+    )
+}
+
+fn board_path() -> PathBuf {
+    repo().join("configs/targets/aprilgrid-6x6.yaml")
+}
+
+fn camera() -> CameraModel {
+    CameraModel {
+        width: 640,
+        height: 480,
+        fx: 520.0,
+        fy: 521.0,
+        cx: 318.7,
+        cy: 241.2,
+        distortion: Distortion::RadTan {
+            k1: -0.05,
+            k2: 0.01,
+            p1: 0.0,
+            p2: 0.0,
+            k3: 0.0,
+        },
+    }
+}
+
+/// Flange poses that look at the board from `n` directions (eye-in-hand under [`truth`]).
+fn views(n: usize, board: &Board) -> Vec<Pose> {
+    views_seen_at(n, board, |_| [0.0, 0.0])
+}
+
+/// [`views`] with the board centre seen at `seen_at(i)` degrees off the optical axis.
+fn views_seen_at(n: usize, board: &Board, seen_at: impl Fn(usize) -> [f64; 2]) -> Vec<Pose> {
+    let (flange_from_camera, base_from_target) = truth();
+    let corners: Vec<Point3<f64>> = board
+        .tags()
+        .iter()
+        .filter_map(|t| board.tag_corners_in_target(t.id))
+        .flatten()
+        .collect();
+    let centre =
+        Point3::from(corners.iter().map(|p| p.coords).sum::<Vector3<f64>>() / corners.len() as f64);
+    (0..n)
+        .map(|i| {
+            let look = LookAt {
+                distance: 0.55 + 0.1 * ((i % 3) as f64),
+                azimuth_deg: 360.0 * i as f64 / n as f64,
+                elevation_deg: 62.0 + 8.0 * ((i % 4) as f64),
+                roll_deg: -20.0 + 13.0 * ((i % 4) as f64),
+                board_in_image_deg: seen_at(i),
+            };
+            base_from_target * look.target_from_camera(&centre) * flange_from_camera.inverse()
+        })
+        .collect()
+}
+
+/// A trajectory `T_base_flange(t)` (t in seconds of robot time).
+trait Trajectory {
+    fn at(&self, t: f64) -> Pose;
+    fn duration(&self) -> f64;
+}
+
+/// Stands `stay` s at each view, moves `travel` s between them (smooth-step).
+struct StopAndGo {
+    views: Vec<Pose>,
+    stay: f64,
+    travel: f64,
+}
+
+impl Trajectory for StopAndGo {
+    fn at(&self, t: f64) -> Pose {
+        let period = self.stay + self.travel;
+        let k = ((t / period).floor() as usize).min(self.views.len() - 1);
+        let within = t - k as f64 * period;
+        if within <= self.stay || k + 1 >= self.views.len() {
+            return self.views[k];
+        }
+        let s = (within - self.stay) / self.travel;
+        interpolate(&self.views[k], &self.views[k + 1], s * s * (3.0 - 2.0 * s))
+    }
+    fn duration(&self) -> f64 {
+        self.views.len() as f64 * (self.stay + self.travel) - self.travel
+    }
+}
+
+/// Moves through the views without stopping, `segment` s from one to the next, with a smooth
+/// speed profile that never reaches zero inside a segment.
+struct Continuous {
+    views: Vec<Pose>,
+    segment: f64,
+}
+
+impl Trajectory for Continuous {
+    fn at(&self, t: f64) -> Pose {
+        let k = ((t / self.segment).floor() as usize).min(self.views.len() - 2);
+        let s = ((t - k as f64 * self.segment) / self.segment).clamp(0.0, 1.0);
+        // Speed varies (0.5..1.5 of the mean) so the timing is observable from the motion.
+        let eased = s + 0.5 * (std::f64::consts::TAU * s).sin() / std::f64::consts::TAU;
+        interpolate(&self.views[k], &self.views[k + 1], eased)
+    }
+    fn duration(&self) -> f64 {
+        (self.views.len() - 1) as f64 * self.segment
+    }
+}
+
+/// What a bag holds.
+struct BagSpec<'a> {
+    storage: &'a str,
+    /// `mono8` (sensor_msgs/Image) or `png` (CompressedImage).
+    image_kind: &'a str,
+    trajectory: &'a dyn Trajectory,
+    fps: f64,
+    tf_hz: f64,
+    /// Camera stamp − robot stamp, s.
+    offset_s: f64,
+    camera_info: bool,
+    /// Render only frames for which this says true (others reuse a blank frame: they must never
+    /// become samples).
+    render: &'a dyn Fn(f64) -> bool,
+}
+
+const ROBOT_START_NS: i64 = 1_700_000_000_000_000_000;
+
+/// Renders the frames, writes the spec and runs make_bag.py; returns the bag folder.
+fn make_bag(dir: &Path, name: &str, spec: &BagSpec<'_>) -> Option<PathBuf> {
+    make_bag_edited(dir, name, spec, |_| {})
+}
+
+/// [`make_bag`] with the spec edited before make_bag.py writes it (a bag that lies).
+fn make_bag_edited(
+    dir: &Path,
+    name: &str,
+    spec: &BagSpec<'_>,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> Option<PathBuf> {
+    let python = python()?;
+    let board = Board::load(&board_path()).unwrap();
+    let camera = camera();
+    let (flange_from_camera, base_from_target) = truth();
+    let frames = dir.join(format!("{name}-frames"));
+    std::fs::create_dir_all(&frames).unwrap();
+    let rays = PixelRays::new(&camera);
+    let options = RenderOptions {
+        supersample: 2,
+        ..RenderOptions::default()
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let write_frame = |image: &image::GrayImage, file: &Path| {
+        if spec.image_kind == "mono8" {
+            std::fs::write(file, image.as_raw()).unwrap();
+        } else {
+            image
+                .save_with_format(file, image::ImageFormat::Png)
+                .unwrap();
+        }
+    };
+    let ext = if spec.image_kind == "mono8" {
+        "gray"
+    } else {
+        "png"
+    };
+    let blank = image::GrayImage::from_pixel(camera.width, camera.height, image::Luma([110]));
+    write_frame(&blank, &frames.join(format!("blank.{ext}")));
+    let mut images = Vec::new();
+    let mut rendered: Vec<(Pose, String)> = Vec::new();
+    let count = (spec.trajectory.duration() * spec.fps).floor() as usize;
+    for i in 0..=count {
+        let t = i as f64 / spec.fps;
+        let stamp = ROBOT_START_NS + ((t + spec.offset_s) * 1e9).round() as i64;
+        let file = if (spec.render)(t) {
+            let flange = spec.trajectory.at(t);
+            // A standing arm gives the same view: render it once.
+            match rendered
+                .iter()
+                .find(|(p, _)| pose_error_mm_deg(p, &flange).0 < 1e-9)
+            {
+                Some((_, f)) => f.clone(),
+                None => {
+                    let camera_from_target =
+                        (flange * flange_from_camera).inverse() * base_from_target;
+                    let image = render_with_rays(
+                        &board,
+                        &camera,
+                        &rays,
+                        &camera_from_target,
+                        &options,
+                        &mut rng,
+                    );
+                    let f = format!("{i:05}.{ext}");
+                    write_frame(&image, &frames.join(&f));
+                    rendered.push((flange, f.clone()));
+                    f
+                }
+            }
+        } else {
+            format!("blank.{ext}")
+        };
+        images.push(serde_json::json!([stamp, format!("{name}-frames/{file}")]));
+    }
+    let mut tf = Vec::new();
+    // TF covers the images with a margin (the robot driver publishes all along).
+    let tf_count = ((spec.trajectory.duration() + 1.0) * spec.tf_hz) as i64;
+    for k in -(spec.tf_hz as i64)..=tf_count {
+        let t = k as f64 / spec.tf_hz;
+        let p = spec.trajectory.at(t.max(0.0));
+        let stamp = ROBOT_START_NS + (t * 1e9).round() as i64;
+        // base_link -> base -> shoulder_link (static) -> wrist_3_link (moving) -> tool0 (static).
+        let rest = shoulder_static().inverse() * p;
+        let (rt, rq) = (rest.translation.vector, rest.rotation.coords);
+        tf.push(serde_json::json!([
+            stamp,
+            "shoulder_link",
+            "wrist_3_link",
+            rt.x,
+            rt.y,
+            rt.z,
+            rq.x,
+            rq.y,
+            rq.z,
+            rq.w
+        ]));
+    }
+    let s = shoulder_static();
+    let (st, sq) = (s.translation.vector, s.rotation.coords);
+    let tf_static = vec![
+        serde_json::json!([
+            ROBOT_START_NS,
+            "base_link",
+            "base",
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0
+        ]),
+        serde_json::json!([
+            ROBOT_START_NS,
+            "base",
+            "shoulder_link",
+            st.x,
+            st.y,
+            st.z,
+            sq.x,
+            sq.y,
+            sq.z,
+            sq.w
+        ]),
+        serde_json::json!([
+            ROBOT_START_NS,
+            "wrist_3_link",
+            "tool0",
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0
+        ]),
+    ];
+    let k = [
+        camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
+    ];
+    let spec_json = serde_json::json!({
+        "storage": spec.storage,
+        "image_topic": "/camera/image_raw",
+        "camera_info_topic": "/camera/camera_info",
+        "frame_id": "camera_optical_frame",
+        "image_kind": spec.image_kind,
+        "width": camera.width,
+        "height": camera.height,
+        "camera_info": if spec.camera_info {
+            serde_json::json!({"k": k, "d": camera.distortion_coefficients(), "distortion_model": "plumb_bob"})
+        } else {
+            serde_json::Value::Null
+        },
+        "tf": tf,
+        "tf_static": tf_static,
+        "images": images,
+    });
+    let mut spec_json = spec_json;
+    edit(&mut spec_json);
+    let spec_file = dir.join(format!("{name}.json"));
+    std::fs::write(&spec_file, serde_json::to_string(&spec_json).unwrap()).unwrap();
+    let bag = dir.join(name);
+    let out = Command::new(python)
+        .arg(repo().join("tests/python/make_bag.py"))
+        .arg(&spec_file)
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "make_bag.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(bag)
+}
+
+/// `base → shoulder_link`, the static part of the test's TF chain.
+fn shoulder_static() -> Pose {
+    Pose::from_parts(
+        Vector3::new(0.0, 0.0, 0.18).into(),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+    )
+}
+
+fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    handeye()
+        .args(["import", "bag"])
+        .arg(bag)
+        .args(["--base", "base_link", "--flange", "tool0"])
+        .args(["--image", "/camera/image_raw"])
+        .arg("--board")
+        .arg(board_path())
+        .arg("-o")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn text(out: &std::process::Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// Both transforms within the sim cell's tolerances (0.5 mm, 0.05°) of the ground truth.
+fn assert_calibrated(session: &Path) {
+    let (flange_from_camera, base_from_target) = truth();
+    let result = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
+    let (mm, deg) = pose_error_mm_deg(&result.camera_mount, &flange_from_camera);
+    let (mm2, deg2) = pose_error_mm_deg(&result.target_mount, &base_from_target);
+    println!("T_flange_camera off by {mm:.3} mm, {deg:.4} deg; T_base_target off by {mm2:.3} mm, {deg2:.4} deg");
+    assert!(
+        mm < 0.5 && deg < 0.05,
+        "T_flange_camera {mm:.3} mm {deg:.4} deg"
+    );
+    assert!(
+        mm2 < 0.5 && deg2 < 0.05,
+        "T_base_target {mm2:.3} mm {deg2:.4} deg"
+    );
+}
+
+fn no_leftovers(dir: &Path, out: &Path) {
+    assert!(!out.exists(), "{} was written", out.display());
+    no_staging_left(dir);
+}
+
+fn no_staging_left(dir: &Path) {
+    let stray: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().contains(".importing-"))
+        .collect();
+    assert!(stray.is_empty(), "staging left behind: {stray:?}");
+}
+
+#[test]
+fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(16, &board),
+        stay: 0.8,
+        travel: 0.7,
+    };
+    let period = trajectory.stay + trajectory.travel;
+    // Frames while moving are blank: taking one would lose a view (checked below).
+    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let Some(bag) = make_bag(
+        dir.path(),
+        "stop-and-go",
+        &BagSpec {
+            storage: "mcap",
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 15.0,
+            tf_hz: 125.0,
+            offset_s: 0.030,
+            camera_info: true,
+            render: &standing,
+        },
+    ) else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let run = import(
+        &bag,
+        &out,
+        &[
+            "--time-offset",
+            "0.030",
+            "--camera-info",
+            "/camera/camera_info",
+        ],
+    );
+    let log = text(&run);
+    println!("{log}");
+    assert!(run.status.success(), "{log}");
+    assert!(
+        log.contains("(mcap)") && log.contains("16 frames taken"),
+        "{log}"
+    );
+    assert!(
+        log.contains("moving") && log.contains("not sharpest"),
+        "{log}"
+    );
+    assert!(log.contains("16 samples accepted, 0 skipped"), "{log}");
+    assert_calibrated(&out);
+    // It is an ordinary session: the reprojection-space solve and the report work on it.
+    let solve = handeye()
+        .arg("solve")
+        .arg(&out)
+        .args(["--space", "reprojection"])
+        .output()
+        .unwrap();
+    assert!(solve.status.success(), "{}", text(&solve));
+    assert_calibrated(&out);
+    let report = handeye().arg("report").arg(&out).output().unwrap();
+    assert!(report.status.success(), "{}", text(&report));
+    let replay = handeye().arg("replay").arg(&out).output().unwrap();
+    assert!(replay.status.success(), "{}", text(&replay));
+}
+
+/// The import as a library call (what `handeye import bag` is a thin caller of): the notes
+/// arrive as it goes, the session is where it was asked for, and the answer is the truth.
+#[test]
+fn the_library_imports_a_bag_into_a_solved_session() {
+    use handeye::formats::bag::{import_bag_session, BagNote, BagOptions, BagSessionRequest};
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(12, &board),
+        stay: 0.8,
+        travel: 0.7,
+    };
+    let period = trajectory.stay + trajectory.travel;
+    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let Some(bag) = make_bag(
+        dir.path(),
+        "library",
+        &BagSpec {
+            storage: "mcap",
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 15.0,
+            tf_hz: 125.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render: &standing,
+        },
+    ) else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let request = BagSessionRequest {
+        bag: bag.clone(),
+        options: BagOptions {
+            base_frame: "base_link".into(),
+            flange_frame: "tool0".into(),
+            image_topic: "/camera/image_raw".into(),
+            camera_info_topic: Some("/camera/camera_info".into()),
+            tf_topics: vec!["/tf".into(), "/tf_static".into()],
+            tf_static_topics: vec!["/tf_static".into()],
+            select: Default::default(),
+            setup: handeye::setup::Setup::EyeInHand,
+            board: handeye::vision::Target::load(&board_path()).unwrap(),
+            detector: Default::default(),
+        },
+        board_file: board_path(),
+        decimation: 1.0,
+        continuous: false,
+        output: out.clone(),
+    };
+    let mut notes = Vec::new();
+    let imported = import_bag_session(&request, &mut |note| notes.push(note)).unwrap();
+    assert!(
+        notes
+            .iter()
+            .any(|n| matches!(n, BagNote::Line(l) if l.contains("12 frames taken"))),
+        "{notes:#?}"
+    );
+    assert!(
+        !notes.iter().any(|n| matches!(n, BagNote::Warning(_))),
+        "{notes:#?}"
+    );
+    assert_eq!(imported.folder, out);
+    assert_eq!(
+        (imported.accepted, imported.skipped, imported.warnings),
+        (12, 0, 0)
+    );
+    assert!(
+        imported.summary.contains("T_flange_camera") && !imported.summary.contains(".importing-"),
+        "the summary never names the staging folder:\n{}",
+        imported.summary
+    );
+    assert!(out.join("import/bag-import.yaml").is_file());
+    assert_calibrated(&out);
+    no_staging_left(dir.path());
+}
+
+#[test]
+fn continuous_sqlite_compressed_images_recover_the_clock_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = Continuous {
+        views: views(12, &board),
+        segment: 1.6,
+    };
+    let offset = 0.0417;
+    let Some(bag) = make_bag(
+        dir.path(),
+        "continuous",
+        &BagSpec {
+            storage: "sqlite3",
+            image_kind: "png",
+            trajectory: &trajectory,
+            fps: 5.0,
+            tf_hz: 200.0,
+            offset_s: offset,
+            camera_info: true,
+            render: &|_| true,
+        },
+    ) else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let run = import(
+        &bag,
+        &out,
+        &[
+            "--continuous",
+            "--spacing",
+            "0.19",
+            "--time-offset",
+            "auto",
+            "--camera-info",
+            "/camera/camera_info",
+        ],
+    );
+    let log = text(&run);
+    println!("{log}");
+    assert!(run.status.success(), "{log}");
+    assert!(log.contains("(sqlite3)"), "{log}");
+    let record = std::fs::read_to_string(out.join("import/bag-import.yaml")).unwrap();
+    let value: serde_yaml_ng::Value = serde_yaml_ng::from_str(&record).unwrap();
+    let estimated = value["time_offset_s"].as_f64().unwrap();
+    println!(
+        "offset {:.3} ms, true {:.3} ms",
+        estimated * 1e3,
+        offset * 1e3
+    );
+    assert!(
+        (estimated - offset).abs() < 0.002,
+        "offset {estimated} s, true {offset} s"
+    );
+    assert!(value["time_offset_estimated"].as_bool().unwrap());
+    assert_calibrated(&out);
+}
+
+#[test]
+fn without_camera_info_the_intrinsics_are_estimated() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    // Off-centre views put board corners across the image, which the lens estimate needs.
+    let trajectory = StopAndGo {
+        views: views_seen_at(20, &board, |i| {
+            let a = i as f64 * 2.4;
+            [12.0 * a.cos(), 9.0 * a.sin()]
+        }),
+        stay: 0.6,
+        travel: 0.6,
+    };
+    let period = trajectory.stay + trajectory.travel;
+    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let Some(bag) = make_bag(
+        dir.path(),
+        "no-info",
+        &BagSpec {
+            storage: "mcap",
+            image_kind: "png",
+            trajectory: &trajectory,
+            fps: 10.0,
+            tf_hz: 100.0,
+            offset_s: 0.0,
+            camera_info: false,
+            render: &standing,
+        },
+    ) else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let run = import(&bag, &out, &[]);
+    let log = text(&run);
+    println!("{log}");
+    assert!(run.status.success(), "{log}");
+    assert!(log.contains("20 samples accepted"), "{log}");
+    let estimated = CameraModel::load(&out.join("camera_info.yaml")).unwrap();
+    let truth = camera();
+    for (name, got, want) in [
+        ("fx", estimated.fx, truth.fx),
+        ("fy", estimated.fy, truth.fy),
+        ("cx", estimated.cx, truth.cx),
+        ("cy", estimated.cy, truth.cy),
+    ] {
+        assert!(
+            (got - want).abs() < 1.0,
+            "{name} {got:.2} px, true {want:.2} px"
+        );
+    }
+    assert_calibrated(&out);
+}
+
+/// A small stop-and-go bag for the failure tests.
+fn small_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(4, &board),
+        stay: 0.5,
+        travel: 0.5,
+    };
+    make_bag(
+        dir,
+        &format!("small-{storage}"),
+        &BagSpec {
+            storage,
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 5.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render: &|_| false,
+        },
+    )
+}
+
+#[test]
+fn bad_bags_fail_clearly_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    for storage in ["mcap", "sqlite3"] {
+        let Some(bag) = small_bag(dir.path(), storage) else {
+            return;
+        };
+        let out = dir.path().join(format!("out-{storage}"));
+
+        // A frame that is not in the TF tree: named, with the frames that are there.
+        let run = handeye()
+            .args(["import", "bag"])
+            .arg(&bag)
+            .args(["--base", "base_link", "--flange", "tool_flange"])
+            .args(["--image", "/camera/image_raw", "--board"])
+            .arg(board_path())
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let log = text(&run);
+        println!("{storage}: {log}");
+        assert!(!run.status.success());
+        assert!(
+            log.contains("`tool_flange`") && log.contains("wrist_3_link"),
+            "{log}"
+        );
+        no_leftovers(dir.path(), &out);
+
+        // A topic that does not exist: named, with the topics present.
+        let run = handeye()
+            .args(["import", "bag"])
+            .arg(&bag)
+            .args(["--image", "/camera/color/image_raw", "--board"])
+            .arg(board_path())
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let log = text(&run);
+        println!("{storage}: {log}");
+        assert!(!run.status.success());
+        assert!(
+            log.contains("/camera/color/image_raw")
+                && log.contains("/camera/image_raw (sensor_msgs/msg/Image")
+                && log.contains("/tf "),
+            "{log}"
+        );
+        no_leftovers(dir.path(), &out);
+
+        // A truncated storage file: named as truncated or damaged.
+        let file = std::fs::read_dir(&bag)
+            .unwrap()
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "mcap" || e == "db3"))
+            .unwrap();
+        let bytes = std::fs::read(&file).unwrap();
+        let cut = dir.path().join(format!("cut-{storage}"));
+        std::fs::create_dir_all(&cut).unwrap();
+        std::fs::copy(bag.join("metadata.yaml"), cut.join("metadata.yaml")).unwrap();
+        let cut_file = cut.join(file.file_name().unwrap());
+        std::fs::write(&cut_file, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        // An existing empty output folder stays as it was.
+        std::fs::create_dir_all(&out).unwrap();
+        let run = import(&cut, &out, &[]);
+        let log = text(&run);
+        println!("{storage}: {log}");
+        assert!(!run.status.success());
+        assert!(
+            log.contains(&*cut_file.file_name().unwrap().to_string_lossy())
+                && (log.contains("truncated") || log.contains("damaged")),
+            "{log}"
+        );
+        assert!(
+            std::fs::read_dir(&out).unwrap().next().is_none(),
+            "output touched"
+        );
+        std::fs::remove_dir(&out).unwrap();
+        no_leftovers(dir.path(), &out);
+    }
+}
+
+// Issue #25: bags that lie are refused or warned about, never imported silently; a bag larger than
+// the memory allowed fails with a clear error; staging folders of killed imports are cleaned up.
+
+/// [`small_bag`] (blank frames: every import of it that gets past the checks ends with too few
+/// frames) with its spec edited.
+fn small_bag_edited(
+    dir: &Path,
+    name: &str,
+    storage: &str,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> Option<PathBuf> {
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(4, &board),
+        stay: 0.5,
+        travel: 0.5,
+    };
+    make_bag_edited(
+        dir,
+        name,
+        &BagSpec {
+            storage,
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 5.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render: &|_| false,
+        },
+        edit,
+    )
+}
+
+/// A TF row for make_bag.py: identity rotation, translation `t`, received at `receive` (ns) when
+/// given.
+fn tf_row(
+    stamp: serde_json::Value,
+    parent: &str,
+    child: &str,
+    t: [f64; 3],
+    receive: Option<i64>,
+) -> serde_json::Value {
+    let mut row = serde_json::json!([stamp, parent, child, t[0], t[1], t[2], 0.0, 0.0, 0.0, 1.0]);
+    if let Some(r) = receive {
+        row.as_array_mut().unwrap().push(r.into());
+    }
+    row
+}
+
+const S: i64 = 1_000_000_000;
+
+/// Imports `bag`, expects a refusal (exit code 1) naming the bag and leaving nothing behind;
+/// returns the log.
+fn refused(dir: &Path, bag: &Path) -> String {
+    let out = dir.join("refused-session");
+    let run = import(bag, &out, &[]);
+    let log = text(&run);
+    println!("{log}");
+    assert_eq!(run.status.code(), Some(1), "{log}");
+    assert!(
+        log.contains(&*bag.to_string_lossy()),
+        "the bag is named: {log}"
+    );
+    no_leftovers(dir, &out);
+    log
+}
+
+#[test]
+fn issue25_tool0_redefined_on_tf_static_is_refused_with_both_values() {
+    let dir = tempfile::tempdir().unwrap();
+    for storage in ["mcap", "sqlite3"] {
+        // A second /tf_static message, 1.5 s in, moves tool0 10 cm along z.
+        let Some(bag) =
+            small_bag_edited(dir.path(), &format!("static-{storage}"), storage, |spec| {
+                let row = tf_row(
+                    ROBOT_START_NS.into(),
+                    "wrist_3_link",
+                    "tool0",
+                    [0.0, 0.0, 0.1],
+                    Some(ROBOT_START_NS + 3 * S / 2),
+                );
+                spec["tf_static"].as_array_mut().unwrap().push(row);
+            })
+        else {
+            return;
+        };
+        let log = refused(dir.path(), &bag);
+        assert!(
+            log.contains("static transform `wrist_3_link` → `tool0` given two values")
+                && log.contains(
+                    "`/tf_static` message 0 has translation [0.000000, 0.000000, 0.000000]"
+                )
+                && log.contains(
+                    "`/tf_static` message 1 has translation [0.000000, 0.000000, 0.100000]"
+                )
+                && log.contains("100.000 mm")
+                && log.contains("on the chain `base_link` → `tool0`"),
+            "{log}"
+        );
+    }
+}
+
+#[test]
+fn issue25_a_frame_with_two_parents_and_a_tf_loop_are_named_not_called_unconnected() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag_edited(dir.path(), "two-parents", "mcap", |spec| {
+        let row = tf_row(
+            ROBOT_START_NS.into(),
+            "world",
+            "base",
+            [0.0; 3],
+            Some(ROBOT_START_NS + S),
+        );
+        spec["tf_static"].as_array_mut().unwrap().push(row);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("frame `base` has two parents: `base_link` (`/tf_static` message 0) and `world` (`/tf_static` message 1)")
+            && !log.contains("not connected"),
+        "{log}"
+    );
+    let Some(bag) = small_bag_edited(dir.path(), "loop", "mcap", |spec| {
+        let row = tf_row(
+            ROBOT_START_NS.into(),
+            "tool0",
+            "base_link",
+            [0.0; 3],
+            Some(ROBOT_START_NS + S),
+        );
+        spec["tf_static"].as_array_mut().unwrap().push(row);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains(
+            "TF loop: `base` → `shoulder_link` → `wrist_3_link` → `tool0` → `base_link` → `base`"
+        ) && !log.contains("not connected"),
+        "{log}"
+    );
+}
+
+#[test]
+fn issue25_two_transforms_at_one_stamp_and_a_clock_going_back_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    // The moving edge given a second value 5 mm away at one stamp (another publisher).
+    let Some(bag) = small_bag_edited(dir.path(), "conflict", "mcap", |spec| {
+        let tf = spec["tf"].as_array_mut().unwrap();
+        let mut twin = tf[100].clone();
+        twin[5] = (twin[5].as_f64().unwrap() + 0.005).into();
+        let receive = twin[0].as_i64().unwrap() + 1;
+        twin.as_array_mut().unwrap().push(receive.into());
+        tf.push(twin);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains(
+            "`/tf`: `shoulder_link` → `wrist_3_link` has 1 stamp(s) with two different transforms"
+        ) && log.contains("1700000001.000000000 s")
+            && log.contains("5.000 mm"),
+        "{log}"
+    );
+    // A TF message received last but stamped 4 s earlier: the robot clock went back.
+    let Some(bag) = small_bag_edited(dir.path(), "tf-back", "sqlite3", |spec| {
+        let tf = spec["tf"].as_array_mut().unwrap();
+        let last = tf.last().unwrap()[0].as_i64().unwrap();
+        let mut late = tf[75].clone();
+        late.as_array_mut()
+            .unwrap()
+            .push((last + 10_000_000).into());
+        tf.push(late);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("stamps of `shoulder_link` → `wrist_3_link` go back in time 1 time(s)")
+            && log.contains(
+                "`/tf` message 276 is stamped 1700000000.500000000 s after 1700000004.500000000 s"
+            ),
+        "{log}"
+    );
+    // An image stamped 2 s before the one received before it: the camera clock went back.
+    let Some(bag) = small_bag_edited(dir.path(), "image-back", "mcap", |spec| {
+        let images = spec["images"].as_array_mut().unwrap();
+        let stamp = images[10][0].as_i64().unwrap();
+        images[10] = serde_json::json!([stamp - 2 * S, images[10][1], stamp + 1_000_000]);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("topic `/camera/image_raw`: image stamps go back in time 1 time(s); message 10 is stamped 1700000000.000000000 s after 1700000001.800000000 s"),
+        "{log}"
+    );
+}
+
+#[test]
+fn issue25_nanosec_of_a_second_or_more_is_refused_with_topic_message_and_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let split = |ns: i64| serde_json::json!([ns / S - 1, ns % S + S]);
+    let Some(bag) = small_bag_edited(dir.path(), "nanosec-tf", "mcap", |spec| {
+        let tf = spec["tf"].as_array_mut().unwrap();
+        let stamp = tf[150][0].as_i64().unwrap();
+        tf[150][0] = split(stamp);
+        tf[150].as_array_mut().unwrap().push(stamp.into());
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("topic `/tf`, message 150")
+            && log.contains(
+                "`transforms[0].header.stamp.nanosec`: 1000000000, expected below 1000000000"
+            ),
+        "{log}"
+    );
+    let Some(bag) = small_bag_edited(dir.path(), "nanosec-image", "sqlite3", |spec| {
+        let images = spec["images"].as_array_mut().unwrap();
+        let stamp = images[5][0].as_i64().unwrap();
+        images[5][0] = split(stamp);
+    }) else {
+        return;
+    };
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("topic `/camera/image_raw`, message 5")
+            && log.contains("`header.stamp.nanosec`: 1000000000, expected below 1000000000"),
+        "{log}"
+    );
+}
+
+/// Runs one SQL statement on the bag's .db3 with python's sqlite3 (after rosbags wrote it).
+fn edit_db3(bag: &Path, sql: &str) {
+    let db3 = std::fs::read_dir(bag)
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "db3"))
+        .unwrap();
+    let out = Command::new(python().unwrap())
+        .args([
+            "-c",
+            "import sqlite3, sys; db = sqlite3.connect(sys.argv[1]); db.execute(sys.argv[2]); db.commit()",
+        ])
+        .arg(&db3)
+        .arg(sql)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn issue25_a_fifth_of_the_rows_pointing_at_an_unknown_topic_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag(dir.path(), "sqlite3") else {
+        return;
+    };
+    edit_db3(&bag, "UPDATE messages SET topic_id = 77 WHERE id % 5 = 0");
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("damaged sqlite3 bag")
+            && log.contains(
+                "of table `messages` name a topic id that is in no row of table `topics` (ids 77 ("
+            )
+            && log.contains("more than 5 % of the rows lost"),
+        "{log}"
+    );
+}
+
+/// A bag with lies too small to change a pose is imported, and each lie is reported (terminal
+/// and `import/bag-import.yaml`): a few rows of an unknown topic, a TF message and a frame
+/// delivered a little out of order, a repeated TF stamp 0.02 mm off, a camera frame off the
+/// chain given two static values.
+#[test]
+fn issue25_small_lies_are_imported_with_named_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(8, &board),
+        stay: 0.8,
+        travel: 0.7,
+    };
+    let period = trajectory.stay + trajectory.travel;
+    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let Some(bag) = make_bag_edited(
+        dir.path(),
+        "small-lies",
+        &BagSpec {
+            storage: "sqlite3",
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 15.0,
+            tf_hz: 125.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render: &standing,
+        },
+        |spec| {
+            let tf = spec["tf"].as_array_mut().unwrap();
+            // Received after the two messages after it (8 ms apart): a 16 ms step back.
+            let stamp = tf[400][0].as_i64().unwrap();
+            tf[400]
+                .as_array_mut()
+                .unwrap()
+                .push((stamp + 20_000_000 + 1).into());
+            // The same stamp again, 0.02 mm off.
+            let mut twin = tf[600].clone();
+            twin[3] = (twin[3].as_f64().unwrap() + 0.000_02).into();
+            let receive = twin[0].as_i64().unwrap() + 1;
+            twin.as_array_mut().unwrap().push(receive.into());
+            tf.push(twin);
+            // A camera frame nobody uses, given two values.
+            let statics = spec["tf_static"].as_array_mut().unwrap();
+            for (z, at) in [(0.05, ROBOT_START_NS), (0.07, ROBOT_START_NS + S)] {
+                statics.push(tf_row(
+                    ROBOT_START_NS.into(),
+                    "base",
+                    "camera_link",
+                    [0.0, 0.0, z],
+                    Some(at),
+                ));
+            }
+            // A frame received just before the one before it (1/15 s back).
+            let images = spec["images"].as_array_mut().unwrap();
+            let before = images[20][0].as_i64().unwrap();
+            let stamp = images[21][0].as_i64().unwrap();
+            images[21] = serde_json::json!([stamp, images[21][1], before + 500_000]);
+        },
+    ) else {
+        return;
+    };
+    edit_db3(
+        &bag,
+        "UPDATE messages SET topic_id = 78 WHERE id IN (SELECT id FROM messages WHERE topic_id = (SELECT id FROM topics WHERE name = '/tf') LIMIT 2 OFFSET 900)",
+    );
+    let out = dir.path().join("session");
+    let run = import(&bag, &out, &["--camera-info", "/camera/camera_info"]);
+    let log = text(&run);
+    println!("{log}");
+    assert!(run.status.success(), "{log}");
+    for expected in [
+        "rows (0.",
+        "(ids 78 (2 rows))",
+        "stamps of `shoulder_link` → `wrist_3_link` go back in time 1 time(s), by up to 16.000 ms",
+        "has 1 stamp(s) with two different transforms",
+        "0.020 mm",
+        "static transform `base` → `camera_link` given two values",
+        "not on the chain `base_link` → `tool0`",
+        "topic `/camera/image_raw`: image stamps go back in time 1 time(s), by up to 66.667 ms",
+        "the bag has 5 warning(s)",
+    ] {
+        assert!(log.contains(expected), "`{expected}` missing: {log}");
+    }
+    assert_eq!(
+        log.matches(&format!("warning: {}: ", bag.display()))
+            .count(),
+        5,
+        "{log}"
+    );
+    let record = std::fs::read_to_string(out.join("import/bag-import.yaml")).unwrap();
+    let value: serde_yaml_ng::Value = serde_yaml_ng::from_str(&record).unwrap();
+    let kinds: Vec<&str> = value["warnings"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .map(|w| w["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            "rows of unknown topics",
+            "static conflict",
+            "conflicting transforms at one stamp",
+            "stamps going back",
+            "image stamps going back"
+        ],
+        "{record}"
+    );
+    assert!(log.contains("8 samples accepted"), "{log}");
+}
+
+#[test]
+fn issue25_staging_folders_of_killed_imports_are_removed_and_named_on_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag(dir.path(), "mcap") else {
+        return;
+    };
+    // As `kill -9` leaves them: the staging folder with part of a session in it and its lock
+    // file naming the dead process (the lock itself went with the process); and one an older
+    // version left, without a lock file.
+    let killed = dir.path().join(".refused-session.importing-abc123");
+    std::fs::create_dir_all(killed.join("import/images")).unwrap();
+    std::fs::write(killed.join("import/images/000.png"), b"partial").unwrap();
+    let killed_lock = dir.path().join(".refused-session.importing-abc123.lock");
+    std::fs::write(&killed_lock, "4194999\n").unwrap();
+    let older = dir.path().join(".refused-session.importing-Xy9Z0q");
+    std::fs::create_dir_all(&older).unwrap();
+    let log = refused(dir.path(), &bag);
+    assert!(
+        log.contains("removed .refused-session.importing-abc123 left by an import that was killed")
+            && log.contains(
+                "removed .refused-session.importing-Xy9Z0q left by an import that was killed"
+            ),
+        "{log}"
+    );
+    assert!(!killed.exists() && !killed_lock.exists() && !older.exists());
+}
+
+#[test]
+fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = small_bag(dir.path(), "mcap") else {
+        return;
+    };
+    // This process holds a staging folder as a concurrent import does (the lock is per process).
+    let live =
+        handeye::session::Staging::create(dir.path(), "refused-session", "importing").unwrap();
+    std::fs::write(live.path().join("session.yaml"), "being written").unwrap();
+    let out = dir.path().join("refused-session");
+    let run = import(&bag, &out, &[]);
+    let log = text(&run);
+    println!("{log}");
+    assert_eq!(run.status.code(), Some(1), "{log}");
+    let name = live
+        .path()
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    assert!(
+        log.contains(&format!(
+            "left {name} alone: an import still running (pid {}) writes into it",
+            std::process::id()
+        )),
+        "{log}"
+    );
+    assert!(
+        live.path().join("session.yaml").exists(),
+        "a live staging folder was touched"
+    );
+    drop(live);
+    no_leftovers(dir.path(), &out);
+}
+
+/// A bag of `frames` incompressible 640x480 mono8 frames (300 KB each).
+fn big_bag(dir: &Path, storage: &str, frames: usize) -> Option<PathBuf> {
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(2, &board),
+        stay: frames as f64 / 25.0 / 2.0,
+        travel: 0.5,
+    };
+    make_bag_edited(
+        dir,
+        &format!("big-{storage}"),
+        &BagSpec {
+            storage,
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 25.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: false,
+            render: &|_| false,
+        },
+        |spec| {
+            for image in spec["images"].as_array_mut().unwrap() {
+                image[1] = "random:307200".into();
+            }
+        },
+    )
+}
+
+/// The real binary under `ulimit -v` (KiB) with a bag larger than that allows: exit code 1 and a
+/// clear message, never an abort.
+fn import_limited(bag: &Path, out: &Path, limit_kib: u64) -> std::process::Output {
+    let exe = env!("CARGO_BIN_EXE_handeye");
+    Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v {limit_kib} && exec \"$0\" import bag \"$1\" --base base_link --flange tool0 --image /camera/image_raw --board \"$2\" -o \"$3\""
+        ))
+        .arg(exe)
+        .arg(bag)
+        .arg(board_path())
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn issue25_a_bag_larger_than_the_memory_allowed_fails_clearly_not_with_an_abort() {
+    let dir = tempfile::tempdir().unwrap();
+    for storage in ["mcap", "sqlite3"] {
+        // About 150 MB of frames (the debug binary itself needs under 50 MB).
+        let Some(bag) = big_bag(dir.path(), storage, 500) else {
+            return;
+        };
+        let out = dir.path().join("session");
+        // Limits (address space, KiB): below the bag's size (its buffer cannot be had), and
+        // above it but without room for the rest of the import.
+        for limit_kib in [120 << 10, 300 << 10] {
+            let run = import_limited(&bag, &out, limit_kib);
+            let log = text(&run);
+            println!("{storage}, ulimit -v {limit_kib}: {log}");
+            assert_eq!(
+                run.status.code(),
+                Some(1),
+                "exit code 1, not a signal: {:?}: {log}",
+                run.status
+            );
+            assert!(
+                log.contains(&format!("not enough memory to read {}", bag.display()))
+                    && log.contains(" MB): ")
+                    && log.contains("ulimit -v"),
+                "{log}"
+            );
+            no_leftovers(dir.path(), &out);
+        }
+    }
+}

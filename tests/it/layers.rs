@@ -1,0 +1,338 @@
+//! The layer rules of ARCHITECTURE.md. Between crates the compiler enforces them: a crate can
+//! name only its dependencies. What is left to check here:
+//!
+//! - no `Cargo.toml` adds a dependency that reaches up a layer (read from `cargo metadata`, so a
+//!   new member crate must be given its place in [`CRATES`]);
+//! - inside the two crates that hold several layers (`handeye-session` and the top crate in
+//!   `src/`), every module names only the modules below it, whether through `crate::x`,
+//!   `crate::{x, y}` or `super::…` paths that climb to the crate root.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// Each workspace crate and the workspace crates it may depend on (normal and build deps).
+const CRATES: &[(&str, &[&str])] = &[
+    ("handeye-core", &[]),
+    ("handeye-solve", &["handeye-core"]),
+    ("handeye-vision", &["handeye-core"]),
+    ("handeye-robot", &["handeye-core"]),
+    ("handeye-camera", &["handeye-core", "handeye-vision"]),
+    (
+        "handeye-session",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-robot",
+            "handeye-camera",
+        ],
+    ),
+    (
+        "handeye",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-robot",
+            "handeye-camera",
+            "handeye-session",
+        ],
+    ),
+    ("mocks", &["handeye-core", "handeye-robot"]),
+];
+
+#[test]
+fn no_crate_depends_on_a_crate_above_it() {
+    let output = std::process::Command::new(env!("CARGO"))
+        .args([
+            "metadata",
+            "--no-deps",
+            "--format-version",
+            "1",
+            "--offline",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        output.status.success(),
+        "cargo metadata: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let packages = metadata["packages"].as_array().expect("packages");
+    let members: BTreeSet<&str> = packages
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    let rules: BTreeMap<&str, &[&str]> = CRATES.iter().copied().collect();
+    let mut violations = Vec::new();
+    for package in packages {
+        let name = package["name"].as_str().unwrap();
+        let Some(allowed) = rules.get(name) else {
+            violations.push(format!(
+                "crate `{name}` has no layer in tests/it/layers.rs (and ARCHITECTURE.md): add it"
+            ));
+            continue;
+        };
+        for dependency in package["dependencies"].as_array().unwrap() {
+            let dep = dependency["name"].as_str().unwrap();
+            // Tests may use anything (the top crate's tests drive the mock controller).
+            if dependency["kind"] == "dev" || !members.contains(dep) {
+                continue;
+            }
+            if !allowed.contains(&dep) {
+                violations.push(format!(
+                    "crate `{name}` depends on `{dep}`, which its layer may not use"
+                ));
+            }
+        }
+    }
+    assert!(members.len() >= 7, "only {members:?} in the workspace");
+    assert!(
+        violations.is_empty(),
+        "layer rules broken:\n{}",
+        violations.join("\n")
+    );
+}
+
+/// A crate that holds several layers: its folder, the names that come from the crates below it
+/// (always allowed), and each of its top-level modules with the modules of the same crate it
+/// may name.
+struct Ladder {
+    src: &'static str,
+    below: &'static [&'static str],
+    modules: &'static [(&'static str, &'static [&'static str])],
+    /// Files that only declare modules or hold the binary's top.
+    skip: &'static [&'static str],
+}
+
+const LADDERS: &[Ladder] = &[
+    Ladder {
+        src: "crates/session/src",
+        below: &[],
+        modules: &[
+            ("plan", &[]),
+            ("dataset", &[]),
+            ("config", &["plan"]),
+            ("result", &[]),
+            ("session", &["plan", "dataset", "result", "config"]),
+            ("cell", &["plan", "dataset", "result", "config", "session"]),
+            (
+                "verify",
+                &["plan", "dataset", "result", "config", "session", "cell"],
+            ),
+        ],
+        skip: &["lib"],
+    },
+    Ladder {
+        src: "src",
+        // The re-exports of lib.rs: the crates below.
+        below: &[
+            "atomic_file",
+            "camera",
+            "camera_model",
+            "cell",
+            "config",
+            "dataset",
+            "geometry",
+            "notice",
+            "plan",
+            "result",
+            "robot",
+            "session",
+            "setup",
+            "solve",
+            "verdict",
+            "verify",
+            "vision",
+            "yaml_file",
+        ],
+        modules: &[
+            ("formats", &[]),
+            ("report", &["formats"]),
+            ("console", &["formats", "report"]),
+        ],
+        // The binary (main.rs, cli/) is the top: it may use anything.
+        skip: &["lib", "main", "cli"],
+    },
+];
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).expect("the source folder is readable") {
+        let path = entry.expect("directory entry").path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// The module path of a source file (`src/console/server.rs` → `[console, server]`,
+/// `src/console/mod.rs` → `[console]`).
+fn module_path(src: &Path, file: &Path) -> Vec<String> {
+    let rel = file
+        .strip_prefix(src)
+        .expect("file under its source folder");
+    let mut path: Vec<String> = rel
+        .components()
+        .map(|c| {
+            c.as_os_str()
+                .to_string_lossy()
+                .trim_end_matches(".rs")
+                .to_string()
+        })
+        .collect();
+    if path.last().is_some_and(|last| last == "mod") {
+        path.pop();
+    }
+    path
+}
+
+/// The top-level items a group or path names: `{a, b::c, d::{e}}` → a, b, d; `x::y` → x.
+fn first_segments(rest: &str) -> Vec<String> {
+    let Some(group) = rest.strip_prefix('{') else {
+        return vec![first_segment(rest)];
+    };
+    let mut names = Vec::new();
+    let mut depth = 0usize;
+    let mut item = String::new();
+    for ch in group.chars() {
+        match ch {
+            '{' => depth += 1,
+            '}' if depth == 0 => break,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                names.push(first_segment(&item));
+                item.clear();
+                continue;
+            }
+            _ => {}
+        }
+        if depth == 0 {
+            item.push(ch);
+        }
+    }
+    names.push(first_segment(&item));
+    names
+}
+
+fn first_segment(s: &str) -> String {
+    s.trim()
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect()
+}
+
+/// Every top-level module of its crate a file at `module` names: through `crate::…`, or through
+/// `super::` chains that climb to the crate root (`super::super::x` from `a::b`).
+fn named_modules(text: &str, module: &[String]) -> BTreeSet<String> {
+    let code: String = text
+        .lines()
+        .filter(|line| !line.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let mut names = BTreeSet::new();
+    let mut rest = code.as_str();
+    while let Some(at) = rest.find("crate::") {
+        rest = &rest[at + "crate::".len()..];
+        names.extend(first_segments(rest));
+    }
+    let mut rest = code.as_str();
+    while let Some(at) = rest.find("super::") {
+        // Only a path's first `super`: the start of the text or after a non-path character.
+        let starts_path = at == 0
+            || !rest[..at]
+                .chars()
+                .next_back()
+                .is_some_and(|c| c.is_ascii_alphanumeric() || c == '_' || c == ':');
+        rest = &rest[at..];
+        let mut ups = 0;
+        while let Some(after) = rest.strip_prefix("super::") {
+            ups += 1;
+            rest = after;
+        }
+        if starts_path && ups >= module.len() {
+            // At the crate root: the next segment is a top-level module.
+            let segments = first_segments(rest);
+            if ups == module.len() {
+                names.extend(segments);
+            }
+        }
+    }
+    names.remove("");
+    names
+}
+
+#[test]
+fn modules_inside_a_crate_name_only_the_modules_below_them() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut violations = Vec::new();
+    let mut checked = 0;
+    for ladder in LADDERS {
+        let src = root.join(ladder.src);
+        let rules: BTreeMap<&str, &[&str]> = ladder.modules.iter().copied().collect();
+        let own: BTreeSet<&str> = rules
+            .keys()
+            .copied()
+            .chain(ladder.skip.iter().copied())
+            .collect();
+        let mut files = Vec::new();
+        rust_files(&src, &mut files);
+        files.sort();
+        for file in &files {
+            let module = module_path(&src, file);
+            let top = module[0].as_str();
+            if ladder.skip.contains(&top) {
+                continue;
+            }
+            let Some(allowed) = rules.get(top) else {
+                violations.push(format!(
+                    "{}: module `{top}` has no layer in tests/it/layers.rs; add it to the table",
+                    file.display()
+                ));
+                continue;
+            };
+            checked += 1;
+            let text = std::fs::read_to_string(file).expect("readable source");
+            for named in named_modules(&text, &module) {
+                let ok = named == top
+                    || ladder.below.contains(&named.as_str())
+                    || allowed.contains(&named.as_str())
+                    // Not a module of this crate (an item of the root, a glob).
+                    || !own.contains(named.as_str());
+                if !ok {
+                    violations.push(format!(
+                        "{}: `{top}` names `{named}`, which sits above it",
+                        file.display()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(checked > 50, "only {checked} source files checked");
+    assert!(
+        violations.is_empty(),
+        "layer rules broken:\n{}",
+        violations.join("\n")
+    );
+}
+
+#[test]
+fn the_checker_sees_grouped_plain_and_super_paths() {
+    let text = "use crate::{geometry::Pose, session::{a, b}};\n// crate::cli in a comment\nlet x = crate::solve::solve();\nuse super::super::report::Thing;\nuse super::sibling;";
+    let names = named_modules(text, &["console".into(), "server".into()]);
+    assert_eq!(
+        names,
+        BTreeSet::from([
+            "geometry".into(),
+            "session".into(),
+            "solve".into(),
+            "report".into()
+        ])
+    );
+    // From a top-level module's own file, one `super` is the root.
+    let names = named_modules("use super::report::X;", &["console".into()]);
+    assert_eq!(names, BTreeSet::from(["report".into()]));
+}

@@ -1,0 +1,39 @@
+//! handeye's integration tests, one binary (it links handeye once instead of once per file):
+//! one module per area, the shared helpers in `tests/util/`. Run one area with
+//! `cargo test --test it AREA::` (e.g. `cargo test --test it console::`).
+
+#[path = "../util/mod.rs"]
+mod util;
+
+mod adaptive;
+mod aprilgrid_photos;
+mod armtime;
+mod bag_import;
+mod boards;
+mod cellkit;
+mod cli_run;
+mod closed_forms;
+mod config;
+mod console;
+mod crash;
+mod dataset;
+mod driver;
+mod formats;
+mod friction;
+mod fuzz;
+mod hardening;
+mod kalibr_print;
+mod layers;
+mod manual;
+mod noise;
+mod plausibility;
+mod report;
+mod reprojection;
+mod session;
+mod solve;
+mod uncertainty;
+mod ur_rtde;
+mod ur_session;
+mod verdict;
+mod verify;
+mod vision;
