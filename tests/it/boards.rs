@@ -12,6 +12,7 @@
 //! packages).
 
 use crate::util;
+use util::median;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -89,16 +90,6 @@ fn pose(value: &Value) -> Pose {
         Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
         UnitQuaternion::from_rotation_matrix(&rotation),
     )
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
 }
 
 /// Median rotation (deg) and translation (mm) error of the camera's motion over all frame

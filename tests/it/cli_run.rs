@@ -1,17 +1,14 @@
 //! `handeye run` as a person runs it: the binary, a real process, killed mid-run and resumed.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use handeye::dataset::Dataset;
 use handeye::result::ResultFile;
 
-fn handeye() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_handeye"))
-}
-
 use crate::util;
+use util::handeye;
 
 /// The demo config with a 10-pose plan and `move_duration_s` seconds per move.
 fn slow_config(dir: &Path, move_duration_s: f64) -> PathBuf {

@@ -3,15 +3,11 @@
 //! the accepted range — before any session folder exists or anything moves.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use handeye::config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMethod};
 
 use crate::util;
-
-fn handeye() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_handeye"))
-}
+use util::handeye;
 
 /// `handeye run` on `config` with `--out <dir>/session`: it must fail without creating the
 /// session folder; returns its stderr.

@@ -12,12 +12,9 @@ use std::time::{Duration, Instant};
 use handeye::dataset::Dataset;
 
 use crate::util;
+use util::handeye;
 
 const POSES: usize = 8;
-
-fn handeye() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_handeye"))
-}
 
 /// The demo cell with an 8-pose plan, `move_duration_s` per move, and its own copy of the
 /// intrinsics (so a test can edit them).

@@ -3,6 +3,7 @@
 //! case) compare the default against the maximum-likelihood answer computed with the true noise
 //! model (and, with outliers, on the inliers alone).
 
+use crate::util::median;
 use handeye::geometry::Pose;
 use handeye::notice::{NoticeKind, Severity};
 use handeye::setup::{predict, PosePair, Setup};
@@ -181,16 +182,6 @@ fn errors(c: &Calibration, cell: &Cell) -> [f64; 4] {
     let (a, b) = e(&c.camera_mount, &cell.camera_mount);
     let (d, f) = e(&c.target_mount, &cell.target_mount);
     [a, b, d, f]
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 const FIGURES: [&str; 4] = [

@@ -224,3 +224,14 @@ pub fn console_socket(url: &str) -> tokio_tungstenite::tungstenite::handshake::c
         .insert("Origin", format!("http://{authority}").parse().unwrap());
     request
 }
+
+/// The median of `values` (the mean of the middle two for an even count).
+pub fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
