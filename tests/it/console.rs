@@ -10,6 +10,7 @@
 //! `HANDEYE_SCREENSHOTS=<dir>` to keep the screenshots (docs/console-*.png come from there).
 
 use crate::util;
+use util::within;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -19,19 +20,6 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use handeye::console::{Console, ConsoleError, ConsoleEvent, ConsoleOptions};
-
-/// Runs `f` on its own thread and fails the test if it takes longer than `limit`.
-fn within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)));
-    });
-    match rx.recv_timeout(limit) {
-        Ok(Ok(v)) => v,
-        Ok(Err(panic)) => std::panic::resume_unwind(panic),
-        Err(_) => panic!("test did not finish within {limit:?}"),
-    }
-}
 
 fn loopback() -> ConsoleOptions {
     ConsoleOptions {

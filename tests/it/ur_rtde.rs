@@ -4,6 +4,7 @@
 //! address because ur_rtde's ports are fixed.
 #![cfg(feature = "ur-rtde")]
 
+use crate::util::within;
 use std::f64::consts::PI;
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::{Duration, Instant};
@@ -13,19 +14,6 @@ use handeye::robot::ur::{UrRobot, UrRobotConfig};
 use handeye::robot::{MotionLimits, Robot, RobotError, RobotStatus, WorkspaceBox};
 use mocks::{MockFaults, MockUr, MockUrConfig};
 use nalgebra::{UnitQuaternion, Vector3};
-
-/// Runs `f` on its own thread and fails the test if it takes longer than `limit`.
-fn within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)));
-    });
-    match rx.recv_timeout(limit) {
-        Ok(Ok(v)) => v,
-        Ok(Err(panic)) => std::panic::resume_unwind(panic),
-        Err(_) => panic!("test did not finish within {limit:?}"),
-    }
-}
 
 fn addr(last: u8) -> IpAddr {
     IpAddr::V4(Ipv4Addr::new(127, 0, 0, last))

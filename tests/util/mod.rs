@@ -235,3 +235,20 @@ pub fn median(mut values: Vec<f64>) -> f64 {
         0.5 * (values[n / 2 - 1] + values[n / 2])
     }
 }
+
+/// Runs `f` on its own thread and fails the test if it takes longer than `limit` (a hang is a
+/// failure with a message, not a stuck CI run).
+pub fn within<T: Send + 'static>(
+    limit: std::time::Duration,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)));
+    });
+    match rx.recv_timeout(limit) {
+        Ok(Ok(v)) => v,
+        Ok(Err(panic)) => std::panic::resume_unwind(panic),
+        Err(_) => panic!("test did not finish within {limit:?}"),
+    }
+}

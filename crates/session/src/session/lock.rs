@@ -87,7 +87,8 @@ impl Drop for SessionLock {
     }
 }
 
-fn read_pid(file: &mut File) -> Option<u32> {
+/// The pid a lock file holds (written by its owner), if it holds one.
+pub(super) fn read_pid(file: &mut File) -> Option<u32> {
     let mut text = String::new();
     file.seek(SeekFrom::Start(0)).ok()?;
     file.read_to_string(&mut text).ok()?;

@@ -15,11 +15,12 @@
 //! Depends on nothing of the session but its error type.
 
 use std::fs::{File, OpenOptions};
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use fs4::{FileExt, TryLockError};
 
+use super::lock::read_pid;
 use super::SessionError;
 
 /// A staging folder and the lock that holds it; removed on drop unless committed.
@@ -214,13 +215,6 @@ fn remove_dir(path: &Path) -> Result<(), SessionError> {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(path)(e)),
         _ => Ok(()),
     }
-}
-
-fn read_pid(file: &mut File) -> Option<u32> {
-    let mut text = String::new();
-    file.seek(SeekFrom::Start(0)).ok()?;
-    file.read_to_string(&mut text).ok()?;
-    text.trim().parse().ok()
 }
 
 #[cfg(test)]
