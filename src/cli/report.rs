@@ -34,11 +34,19 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         }
     };
     let result_path = folder.result_path();
-    let calibration = ResultFile::load(&result_path)
-        .and_then(|r| r.to_calibration(&result_path))
+    let result = ResultFile::load(&result_path)
+        .context("no usable result (solve the session first: `handeye replay`)")?;
+    let calibration = result
+        .to_calibration(&result_path)
         .context("no usable result (solve the session first: `handeye replay`)")?;
     let label = format!("result.yaml ({})", calibration.solver.method.name());
-    let path = write_session_report(&folder, config.as_ref(), vec![(label, calibration)])?;
+    // The verdict the solve recorded (a result written before verdicts has none: no card).
+    let path = write_session_report(
+        &folder,
+        config.as_ref(),
+        vec![(label, calibration)],
+        result.verdict.clone(),
+    )?;
     outln!("report: {}", path.display());
     Ok(())
 }

@@ -167,6 +167,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         &done.folder,
         Some(&done.cell.config),
         answers,
+        result.verdict.clone(),
     ) {
         Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.

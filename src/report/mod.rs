@@ -96,39 +96,12 @@ pub struct ReportInput {
     pub noise: NoiseModel,
     /// Held-out prediction errors, when computed.
     pub holdout: Option<HoldoutSummary>,
-    /// The verdict on the primary answer (the one `result.yaml` holds); `None`: the page judges
-    /// the primary answer itself with [`verdict::assess`], the held-out figures of
-    /// [`ReportInput::holdout`] and the default accuracy.
+    /// The verdict on the primary answer as the session's solve judged it (the one
+    /// `result.yaml` holds: the page never judges again); `None`: none was recorded, and the
+    /// page shows no verdict card.
     pub verdict: Option<Verdict>,
     /// The run's arm time (spent, and saved against the full plan), when the session kept it.
     pub arm_time: Option<crate::cell::run::ArmTime>,
-}
-
-impl ReportInput {
-    /// The verdict the page shows: [`ReportInput::verdict`], else one made from the input.
-    pub fn verdict(&self) -> Option<Verdict> {
-        if let Some(v) = &self.verdict {
-            return Some(v.clone());
-        }
-        let primary = self.answers.first()?;
-        let held_out = self
-            .holdout
-            .as_ref()
-            .map(|h| verdict::HeldOut {
-                poses: self.pairs.len(),
-                translation_rms_mm: h.translation_rms_mm,
-                rotation_rms_deg: h.rotation_rms_deg,
-                working_distance_mm: verdict::working_distance_mm(&self.pairs),
-            })
-            .ok_or_else(|| "not computed for this page".to_string());
-        Some(verdict::assess(&verdict::Evidence {
-            calibration: &primary.calibration,
-            pairs: &self.pairs,
-            noise: &self.noise,
-            held_out: &held_out,
-            accuracy: verdict::Accuracy::default(),
-        }))
-    }
 }
 
 /// Why the report could not be made.
@@ -216,13 +189,13 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     );
 
     // 1. The verdict first: GOOD / CHECK / REDO, the reason that decided it and what to do next.
-    let verdict = input.verdict();
-    if let Some(v) = &verdict {
+    let verdict = input.verdict.as_ref();
+    if let Some(v) = verdict {
         verdict_card(&mut html, v);
     }
 
     // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
-    use_section(&mut html, &input.answers[0], verdict.as_ref());
+    use_section(&mut html, &input.answers[0], verdict);
 
     // 3. The evidence.
     html.push_str("<h2 class=\"part\">Evidence</h2>\n");

@@ -18,6 +18,7 @@ use crate::geometry::Pose;
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use crate::setup::CornerObservation;
 use crate::solve::{Calibration, NoiseModel};
+use crate::verdict::Verdict;
 use crate::vision::{draw, Target};
 
 /// Largest width of a frame in the report, px: the grid shows it small, a click full size.
@@ -212,13 +213,14 @@ fn annotated_frame(
 
 /// Writes `<session>/report.html` for a solved session: the answers side by side (labelled;
 /// e.g. reprojection-space and pose-space), annotated frames and reprojection bars when the cell's
-/// board and intrinsics load, a leave-one-out check and the verdict on the first answer
-/// (`verdict::assess_solved`'s, against the config's `verdict` accuracy). Returns the path
-/// written.
+/// board and intrinsics load, and `verdict` — the session solve's, with its leave-one-out
+/// figures (the run passes the one it just made, `handeye report` the one `result.yaml` holds:
+/// nothing is judged twice). Returns the path written.
 pub fn write_session_report(
     folder: &SessionFolder,
     config: Option<&crate::config::CellConfig>,
     answers: Vec<(String, Calibration)>,
+    verdict: Option<Verdict>,
 ) -> Result<std::path::PathBuf, ReportError> {
     let options = config.map(|c| c.solver.to_options()).unwrap_or_default();
     // The optics are optional: a session moved to another machine still gets a report.
@@ -234,24 +236,17 @@ pub fn write_session_report(
     };
     let mut input = from_session(folder, answers, optics, options.noise)?;
     input.arm_time = crate::cell::run::ArmTime::load(folder.root());
-    // The held-out figures and the verdict of the primary answer, made exactly as for
-    // `result.yaml` (same function, options and accuracy), so page and file agree.
-    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
-    if let Some(primary) = input.answers.first() {
-        let verdict =
-            crate::verdict::assess_solved(&primary.calibration, &input.pairs, &options, accuracy);
-        if let Some(h) = &verdict.figures.held_out {
-            input.holdout = Some(super::HoldoutSummary {
-                description: format!(
-                    "leave-one-out over {} samples (flagged outliers not counted)",
-                    h.poses
-                ),
-                rotation_rms_deg: h.rotation_rms_deg,
-                translation_rms_mm: h.translation_rms_mm,
-            });
-        }
-        input.verdict = Some(verdict);
+    if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
+        input.holdout = Some(super::HoldoutSummary {
+            description: format!(
+                "leave-one-out over {} samples (flagged outliers not counted)",
+                h.poses
+            ),
+            rotation_rms_deg: h.rotation_rms_deg,
+            translation_rms_mm: h.translation_rms_mm,
+        });
     }
+    input.verdict = verdict;
     let path = folder.root().join("report.html");
     super::write_report(&path, &input)?;
     Ok(path)

@@ -272,6 +272,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
         &done.folder,
         Some(&done.cell.config),
         vec![("answer".into(), done.solved.calibration.clone())],
+        done.solved.verdict.clone(),
     )
     .unwrap();
     let html = std::fs::read_to_string(page).unwrap();

@@ -55,6 +55,7 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
             &folder,
             Some(&prepared.config),
             vec![("result".into(), solved.calibration)],
+            solved.verdict,
         )
         .unwrap();
         (dir, path)

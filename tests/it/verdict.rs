@@ -361,10 +361,12 @@ fn result_file_holds_the_verdict_first_and_old_files_still_read() {
     let keys: Vec<&str> = text
         .lines()
         .filter(|l| !l.starts_with(' ') && !l.starts_with('#') && l.contains(':'))
-        .take(2)
+        .take(3)
         .collect();
-    assert_eq!(keys[0], "setup: eye_in_hand", "{text}");
-    assert_eq!(keys[1], "verdict:", "{text}");
+    // The layout's version, then the setup, then the verdict: what a person reads first.
+    assert_eq!(keys[0], "schema_version: 1", "{text}");
+    assert_eq!(keys[1], "setup: eye_in_hand", "{text}");
+    assert_eq!(keys[2], "verdict:", "{text}");
     let back = ResultFile::load(&path).unwrap();
     assert_eq!(back.verdict.as_ref(), Some(&v));
 

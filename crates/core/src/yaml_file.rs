@@ -385,3 +385,82 @@ samples:
         }
     }
 }
+
+/// The version of the layout of a file handeye writes and reads back (a session's
+/// `session.yaml` and `poses/NNN.yaml`, `samples.yaml` and datasets, `result.yaml`): its
+/// `schema_version:` key. A file without the key was written before versions were kept and has
+/// the layout of version 1; a file of a version newer than this build reads is refused with a
+/// message that says so (rather than misread).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(transparent)]
+pub struct SchemaVersion(u32);
+
+impl SchemaVersion {
+    /// What this build writes, and the newest it reads.
+    pub const CURRENT: SchemaVersion = SchemaVersion(1);
+
+    /// The version of a file without the key (serde `default` of the field).
+    pub fn unversioned() -> SchemaVersion {
+        SchemaVersion(1)
+    }
+
+    /// The number.
+    pub fn get(self) -> u32 {
+        self.0
+    }
+}
+
+impl Default for SchemaVersion {
+    /// What a new file is written with: [`SchemaVersion::CURRENT`].
+    fn default() -> Self {
+        SchemaVersion::CURRENT
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for SchemaVersion {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let version = u32::deserialize(deserializer)?;
+        if version == 0 {
+            return Err(serde::de::Error::custom(
+                "schema_version 0: versions start at 1 (leave the key out for a file of version 1)",
+            ));
+        }
+        if version > SchemaVersion::CURRENT.0 {
+            return Err(serde::de::Error::custom(format!(
+                "schema_version {version}: this file was written by a newer handeye (this build reads schema_version 1 to {}); read it with that version",
+                SchemaVersion::CURRENT.0
+            )));
+        }
+        Ok(SchemaVersion(version))
+    }
+}
+
+#[cfg(test)]
+mod schema_version_tests {
+    use super::SchemaVersion;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[allow(dead_code)]
+    struct File {
+        #[serde(default = "SchemaVersion::unversioned")]
+        schema_version: SchemaVersion,
+    }
+
+    #[test]
+    fn absent_is_version_one_and_newer_or_zero_is_refused() {
+        let read = |text: &str| serde_yaml_ng::from_str::<File>(text);
+        assert_eq!(read("{}").unwrap().schema_version.get(), 1);
+        assert_eq!(
+            read("schema_version: 1").unwrap().schema_version,
+            SchemaVersion::CURRENT
+        );
+        for text in ["schema_version: 2", "schema_version: 0"] {
+            let e = read(text).unwrap_err().to_string();
+            assert!(
+                e.contains("newer handeye") || e.contains("schema_version 0"),
+                "{e}"
+            );
+        }
+        assert!(read("schema_version: one").is_err());
+    }
+}

@@ -23,7 +23,7 @@ use handeye_core::geometry::PoseYaml;
 use handeye_core::setup::{PosePair, Setup};
 
 pub use handeye_core::yaml_file::FileError;
-use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml};
+use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml, SchemaVersion};
 
 /// One sample as written in the file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -78,6 +78,9 @@ fn sample_id<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DatasetYaml {
+    /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).
+    #[serde(default = "SchemaVersion::unversioned")]
+    pub schema_version: SchemaVersion,
     /// `eye_in_hand` or `eye_to_hand`.
     pub setup: Setup,
     /// The pose pairs.
@@ -165,6 +168,7 @@ impl Dataset {
     /// The compact file form (translation + quaternion per pose; weight only when not 1).
     pub fn to_yaml(&self) -> DatasetYaml {
         DatasetYaml {
+            schema_version: SchemaVersion::CURRENT,
             setup: self.setup,
             samples: self
                 .pairs

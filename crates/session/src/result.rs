@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use handeye_core::geometry::{Pose, PoseRecord};
 use handeye_core::notice::Notice;
 use handeye_core::setup::{CellTransforms, PosePair, Setup};
+use handeye_core::yaml_file::SchemaVersion;
 use handeye_core::yaml_file::{read_yaml, write_yaml, FileError};
 use handeye_solve::verdict::Verdict;
 use handeye_solve::{
@@ -122,6 +123,9 @@ pub struct SolverYaml {
 #[serde(deny_unknown_fields)]
 #[allow(non_snake_case)]
 pub struct ResultFile {
+    /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).
+    #[serde(default = "SchemaVersion::unversioned")]
+    pub schema_version: SchemaVersion,
     /// The layout solved.
     pub setup: Setup,
     /// GOOD / CHECK / REDO with its reason and next action (absent in files written before
@@ -217,6 +221,7 @@ impl ResultFile {
                 .collect()
         };
         ResultFile {
+            schema_version: SchemaVersion::CURRENT,
             setup: calibration.setup,
             verdict: None,
             T_flange_camera: if eye_in_hand { camera.clone() } else { None },

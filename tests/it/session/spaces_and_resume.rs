@@ -320,3 +320,81 @@ fn a_session_folder_in_use_is_locked_until_released() {
     // Released: a new run may use the (still empty) folder.
     SessionFolder::create(&root).unwrap();
 }
+
+/// Session, sample and result files carry `schema_version: 1`; files without it (written before)
+/// still load; a file of a newer version is refused, by the library and the binary, with a
+/// message that says so instead of a misreading.
+#[test]
+fn files_carry_a_schema_version_and_a_newer_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::sim_cell(dir.path(), 8);
+    let out = dir.path().join("session");
+    let run = util::run_cell(&config, &out);
+    drop(run);
+    for file in [
+        "session.yaml",
+        "poses/000.yaml",
+        "samples.yaml",
+        "result.yaml",
+    ] {
+        let text = std::fs::read_to_string(out.join(file)).unwrap();
+        assert!(
+            text.lines().any(|l| l == "schema_version: 1"),
+            "{file} holds no schema_version:\n{text}"
+        );
+    }
+    // Without the key (as every file written before it): read as version 1.
+    let unversioned = |file: &str| {
+        let path = out.join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(&path, text.replace("schema_version: 1\n", "")).unwrap();
+    };
+    for file in [
+        "session.yaml",
+        "poses/000.yaml",
+        "samples.yaml",
+        "result.yaml",
+    ] {
+        unversioned(file);
+    }
+    let folder = SessionFolder::open(&out).unwrap();
+    assert_eq!(folder.read_manifest().unwrap().plan.len(), 8);
+    assert!(!folder.read_visits().unwrap().is_empty());
+    handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    handeye::result::ResultFile::load_mounts(&out.join("result.yaml")).unwrap();
+    drop(folder);
+    // A newer version: refused, naming the file and the version.
+    let newer = |file: &str| {
+        let path = out.join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(&path, format!("schema_version: 2\n{text}")).unwrap();
+    };
+    newer("result.yaml");
+    let export = util::handeye()
+        .arg("export")
+        .arg(out.join("result.yaml"))
+        .args(["--format", "json"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&export.stderr);
+    assert!(!export.status.success(), "a newer result was exported");
+    assert!(
+        stderr.contains("result.yaml")
+            && stderr.contains("schema_version 2")
+            && stderr.contains("newer handeye"),
+        "{stderr}"
+    );
+    newer("session.yaml");
+    let resume = util::handeye()
+        .args(["run", "--resume"])
+        .arg(&out)
+        .arg("--yes")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&resume.stderr);
+    assert!(!resume.status.success(), "a newer session was resumed");
+    assert!(
+        stderr.contains("session.yaml") && stderr.contains("schema_version 2"),
+        "{stderr}"
+    );
+}

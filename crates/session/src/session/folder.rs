@@ -42,12 +42,17 @@ use handeye_vision::Target;
 
 use super::inputs::InputFile;
 use super::lock::{SessionLock, LOCK_FILE};
+use handeye_core::yaml_file::SchemaVersion;
+
 use super::SessionError;
 
 /// What the session is running, written once at the start; `--resume` reads it back.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionManifest {
+    /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).
+    #[serde(default = "SchemaVersion::unversioned")]
+    pub schema_version: SchemaVersion,
     /// The cell config the session was started with.
     pub config: PathBuf,
     /// Eye-in-hand or eye-to-hand.
@@ -68,6 +73,7 @@ impl SessionManifest {
     /// The manifest of a session of `config` (path) visiting `plan` (flange pose, joints).
     pub fn new(config: PathBuf, setup: Setup, plan: &[(Pose, Joints)]) -> SessionManifest {
         SessionManifest {
+            schema_version: SchemaVersion::CURRENT,
             config,
             setup,
             plan: plan
@@ -110,6 +116,9 @@ pub struct PlannedPose {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PoseVisit {
+    /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).
+    #[serde(default = "SchemaVersion::unversioned")]
+    pub schema_version: SchemaVersion,
     /// Index in the plan.
     pub plan_index: usize,
     /// The flange pose the robot reported after settling.
@@ -457,6 +466,7 @@ impl PoseVisit {
     /// A visit with the robot pose and frame recorded and nothing measured yet.
     pub fn new(plan_index: usize, base_from_flange: &Pose, frame: PathBuf) -> Self {
         PoseVisit {
+            schema_version: SchemaVersion::CURRENT,
             plan_index,
             base_from_flange: PoseYaml::from_pose(base_from_flange),
             frame,
