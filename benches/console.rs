@@ -82,7 +82,7 @@ fn with_console(config: &Path, out: PathBuf, client_cpu_us: &Arc<AtomicU64>) -> 
     assert!(console.wait_for_client(Duration::from_secs(10)));
     let mut quiet = util::QuietObserver;
     let mut observer = ConsoleObserver::new(&mut quiet, &console);
-    cell::run::run(&request, &mut observer).unwrap();
+    cell::run::run(&request, cell::run::Strategy::Planned, &mut observer).unwrap();
     observer.flush();
     drop(observer);
 

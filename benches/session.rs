@@ -88,7 +88,12 @@ impl RunObserver for StartClock {
 /// result, s.
 fn timed_run(config: &Path, out: &Path) -> (CellRun, f64) {
     let mut clock = StartClock(None);
-    let done = cell::run::run(&util::new_run(config, out), &mut clock).unwrap();
+    let done = cell::run::run(
+        &util::new_run(config, out),
+        cell::run::Strategy::Planned,
+        &mut clock,
+    )
+    .unwrap();
     let started = clock.0.expect("the session started");
     (done, started.elapsed().as_secs_f64())
 }

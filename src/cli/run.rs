@@ -92,7 +92,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let done = match &console {
         Some(console) => {
             let mut observer = ConsoleObserver::new(&mut printer, console);
-            let done = cell::run::run(&request, &mut observer);
+            let done = cell::run::run(&request, cell::run::Strategy::Planned, &mut observer);
             observer.flush();
             match done {
                 Ok(done) => done,
@@ -103,7 +103,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        None => cell::run::run(&request, &mut printer)?,
+        None => cell::run::run(&request, cell::run::Strategy::Planned, &mut printer)?,
     };
     let (report, next) = finish_run(&done)?;
     if let Some(console) = &console {

@@ -6,17 +6,11 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::cell::run::{
-    ensure_robot_ready, open_run, CellRun, OpenedRun, ResumedSession, RunError, RunObserver,
-    RunRequest, SessionTarget,
-};
+use crate::cell::run::{run, CellRun, HandGuide, RunError, RunObserver, RunRequest, Strategy};
 use crate::cell::PreparedCell;
 use crate::geometry::Pose;
-use crate::plan::nbv::AdaptivePlanner;
-use crate::session::{
-    self, run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions,
-    SessionFolder,
-};
+use crate::robot::Joints;
+use crate::session::{ManualCommand, ManualControl, ManualEvent, SessionFolder};
 use crate::setup::predict;
 
 use super::analysis::{Analyst, CellView, Job};
@@ -27,118 +21,73 @@ use super::observer::{
 use super::Console;
 
 /// Runs a hand-guided session of a cell on `console` until the page (or terminal) finishes it,
-/// then solves it, as [`run`](crate::cell::run::run) does a planned one. `observer` hears what
-/// the terminal prints (notes, per-capture lines).
+/// then solves it: the one run ([`run`]) with the console as the person's side. `observer`
+/// hears what the terminal prints (notes, per-capture lines).
 pub fn run_manual(
     request: &RunRequest,
     console: &Console,
     observer: &mut dyn RunObserver,
 ) -> Result<CellRun, RunError> {
-    // A resume's input check is the very one a planned resume makes, before the arm or camera
-    // is opened.
-    let OpenedRun {
-        resumed,
-        mut cell,
-        inputs,
-    } = open_run(request, observer)?;
-    let resumed = match resumed {
-        Some(ResumedSession {
-            folder,
-            mut manifest,
-            inputs_changed,
-        }) => {
-            // A session a planned resume handed over (an older one without the mark) is marked
-            // hand-guided.
-            if inputs_changed || !manifest.manual {
-                manifest.manual = true;
-                folder.write_manifest(&manifest)?;
-            }
-            Some(folder)
-        }
-        None => None,
+    let mut guide = ConsoleGuide {
+        console,
+        view: None,
     };
-    let (event, view) = cell_events(&cell, true);
-    console.publish(&event);
-    let mut hardware = cell.open_hardware().map_err(RunError::Hardware)?;
-    ensure_robot_ready(hardware.robot.as_mut())?;
-    let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
-    // Suggestions come from the plan's poses that pass their checks from where the arm stands.
-    let _ = cell.recheck_from(start);
-    let candidates = cell.report.passing();
-    let folder = match resumed {
-        Some(folder) => folder,
-        None => {
-            let SessionTarget::New(out) = &request.target else {
-                unreachable!("a resume has its folder")
-            };
-            let folder = SessionFolder::create(out)?;
-            for note in folder.notes() {
-                observer.note(note);
-            }
-            folder.write_manifest(&cell.manifest(&[]).with_inputs(inputs).hand_guided())?;
-            folder
-        }
-    };
-    console.publish(&ConsoleEvent::Session {
-        folder: folder.root().display().to_string(),
-    });
-    console.publish(&plan_event(&candidates));
-    let mut planner = (!candidates.is_empty() && cell.intrinsics_known).then(|| {
-        AdaptivePlanner::new(
-            cell.config.setup,
-            cell.config.nominal.camera_mount,
-            cell.config.nominal.target_mount,
-            candidates.clone(),
-            cell.config.solver.to_options(),
-            // Suggestions never stop on their own: the person decides when to finish.
-            0.0,
-            usize::MAX,
-        )
-    });
-    let setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
-    let options = ManualOptions {
-        real_arm: !cell.is_simulated() && !request.motion_confirmed,
-        ..ManualOptions::default()
-    };
-    observer.session_folder(&folder, &[]);
-    observer.session_started(candidates.len());
-    console.publish(&ConsoleEvent::Started { poses: 0 });
-    let outcome = {
-        let mut control = ConsoleControl {
+    run(request, Strategy::HandGuided(&mut guide), observer)
+}
+
+/// The console as the person's side of a hand-guided run: it shows the cell, the suggestions
+/// and every capture, and passes the page's commands on.
+struct ConsoleGuide<'c> {
+    console: &'c Console,
+    /// The cell as the page draws it, once prepared.
+    view: Option<CellView>,
+}
+
+impl HandGuide for ConsoleGuide<'_> {
+    fn prepared(&mut self, cell: &PreparedCell) {
+        let (event, view) = cell_events(cell, true);
+        self.console.publish(&event);
+        self.view = Some(view);
+    }
+
+    fn control<'g>(
+        &'g mut self,
+        cell: &'g PreparedCell,
+        folder: &SessionFolder,
+        suggestions: &[(Pose, Joints)],
+        observer: &'g mut dyn RunObserver,
+    ) -> Box<dyn ManualControl + 'g> {
+        let console = self.console;
+        console.publish(&ConsoleEvent::Session {
+            folder: folder.root().display().to_string(),
+        });
+        console.publish(&plan_event(suggestions));
+        console.publish(&ConsoleEvent::Started { poses: 0 });
+        let view = match &self.view {
+            Some(view) => view.clone(),
+            // `prepared` comes first; should it not, the page is drawn from here.
+            None => cell_events(cell, true).1,
+        };
+        let control = ConsoleControl {
             console,
-            observer: &mut *observer,
+            observer,
             analyst: Analyst::start(
                 view.clone(),
                 folder.root().to_path_buf(),
                 console.publisher(),
             ),
             view,
-            cell: &cell,
+            cell,
             freedrive: false,
         };
-        show_recorded(console, &folder, Some(&control.analyst));
-        run_manual_session(
-            setup,
-            cell.config_path(),
-            planner.as_mut(),
-            &options,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut control,
-        )
-    };
-    observer.session_ended();
-    console.publish(&ConsoleEvent::Ended);
-    let outcome = outcome?;
-    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
-    Ok(CellRun {
-        cell,
-        folder,
-        outcome,
-        solved,
-        adaptive: None,
-        arm_time: None,
-    })
+        // A resume's earlier captures show as captured and count in the coverage.
+        show_recorded(console, folder, Some(&control.analyst));
+        Box::new(control)
+    }
+
+    fn ended(&mut self) {
+        self.console.publish(&ConsoleEvent::Ended);
+    }
 }
 
 /// The console page (and terminal) as the person's side of a manual session.

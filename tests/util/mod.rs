@@ -202,8 +202,12 @@ pub fn new_run(config: &Path, out: &Path) -> RunRequest {
 /// A new session of the cell `config` run into `out` in-process and solved, as `handeye run
 /// --yes` does.
 pub fn run_cell(config: &Path, out: &Path) -> CellRun {
-    handeye::cell::run::run(&new_run(config, out), &mut QuietObserver)
-        .unwrap_or_else(|e| panic!("run of {}: {e}", config.display()))
+    handeye::cell::run::run(
+        &new_run(config, out),
+        handeye::cell::run::Strategy::Planned,
+        &mut QuietObserver,
+    )
+    .unwrap_or_else(|e| panic!("run of {}: {e}", config.display()))
 }
 
 /// The WebSocket request a console's own page makes, from the URL the console printed

@@ -118,6 +118,7 @@ fn library_run(
             accept_changed: false,
             stop: Arc::new(AtomicBool::new(false)),
         },
+        cell::run::Strategy::Planned,
         &mut util::QuietObserver,
     )
 }

@@ -24,7 +24,8 @@ use std::sync::Arc;
 
 use crate::plan::nbv::{AdaptivePlanner, StopCheck};
 use crate::session::{
-    self, changed_inputs, SessionError, SessionEvent, SessionFolder, SessionOutcome, SolvedSession,
+    self, changed_inputs, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder,
+    SessionOutcome, SolvedSession,
 };
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
@@ -410,55 +411,120 @@ pub fn open_run(
     })
 }
 
-/// Runs (or resumes) a calibration of a cell, as `handeye run` does, and solves it.
-pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellRun, RunError> {
+/// How a run chooses and visits its poses: the one thing that differs between kinds of run;
+/// [`run`] does everything else the same way for each.
+pub enum Strategy<'a> {
+    /// The config's plan: fixed (visited in the order of least move time) or adaptive (the
+    /// next-best pose, stopping when good enough).
+    Planned,
+    /// A person chooses the views and says when to capture (the console's hand-guided session);
+    /// the config's plan poses are only suggested. `guide` is the person's side.
+    HandGuided(&'a mut dyn HandGuide),
+}
+
+/// The person's side of a hand-guided run (the console page and terminal): told the stages of
+/// the run, and the [`ManualControl`] the session takes its commands from.
+pub trait HandGuide {
+    /// The cell is prepared and its plan checked; nothing is opened yet.
+    fn prepared(&mut self, _cell: &PreparedCell) {}
+    /// The session folder is ready: the control for the session, which tells `observer` what
+    /// the terminal prints. `suggestions` are the plan poses that pass their checks.
+    fn control<'g>(
+        &'g mut self,
+        cell: &'g PreparedCell,
+        folder: &SessionFolder,
+        suggestions: &[(Pose, Joints)],
+        observer: &'g mut dyn RunObserver,
+    ) -> Box<dyn ManualControl + 'g>;
+    /// The session loop ended (well or not).
+    fn ended(&mut self) {}
+}
+
+/// Runs (or resumes) a calibration of a cell and solves it: `handeye run` (planned), `handeye
+/// console` and a hand-guided resume (hand-guided) all come here. In order: the session folder
+/// locked and checked for changed inputs with the cell prepared ([`open_run`]); the strategy's
+/// checks before anything opens (a real arm's confirmation); the hardware opened and the arm
+/// found ready; the poses checked again from where the arm stands; the folder created (or the
+/// resumed one's plan checked) with its manifest; the session driven; arm time measured; the
+/// session solved (`result.yaml`, the verdict).
+pub fn run(
+    request: &RunRequest,
+    mut strategy: Strategy<'_>,
+    observer: &mut dyn RunObserver,
+) -> Result<CellRun, RunError> {
     let OpenedRun {
-        resumed,
+        mut resumed,
         mut cell,
         inputs,
     } = open_run(request, observer)?;
 
-    // Adaptive: the plan's poses are candidates; the ones that fail their checks are skipped.
-    let adaptive = cell.config.adaptive();
-    if adaptive && !cell.intrinsics_known {
-        return Err(RunError::AdaptiveNeedsIntrinsics);
-    }
-    if adaptive && cell.report.passing().is_empty() {
-        return Err(RunError::NoPassingPose);
-    }
-    if !adaptive && !cell.report.ok() {
-        return Err(RunError::PlanFailed);
-    }
+    let adaptive = match &mut strategy {
+        Strategy::Planned => {
+            // Adaptive: the plan's poses are candidates; the ones that fail their checks are
+            // skipped.
+            let adaptive = cell.config.adaptive();
+            if adaptive && !cell.intrinsics_known {
+                return Err(RunError::AdaptiveNeedsIntrinsics);
+            }
+            if adaptive && cell.report.passing().is_empty() {
+                return Err(RunError::NoPassingPose);
+            }
+            if !adaptive && !cell.report.ok() {
+                return Err(RunError::PlanFailed);
+            }
+            if !cell.is_simulated() && !request.motion_confirmed {
+                observer
+                    .confirm_motion(&cell, cell.plan.waypoints.len())
+                    .map_err(RunError::NotConfirmed)?;
+            }
+            adaptive
+        }
+        Strategy::HandGuided(guide) => {
+            // A session a planned resume handed over (an older one without the mark) is marked
+            // hand-guided.
+            if let Some(resumed) = &mut resumed {
+                if !resumed.manifest.manual {
+                    resumed.manifest.manual = true;
+                    resumed.inputs_changed = true;
+                }
+            }
+            guide.prepared(&cell);
+            false
+        }
+    };
     let poses = cell.plan.waypoints.len();
-    if !cell.is_simulated() && !request.motion_confirmed {
-        observer
-            .confirm_motion(&cell, poses)
-            .map_err(RunError::NotConfirmed)?;
-    }
     let mut hardware = cell.open_hardware().map_err(RunError::Hardware)?;
     ensure_robot_ready(hardware.robot.as_mut())?;
     // The plan was checked from an assumed start; check it again from where the arm really is
     // before the first move.
     let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
-    let mut plan = if adaptive {
-        let _ = cell.recheck_from(start);
-        let candidates = adaptive_candidates(&cell);
-        if candidates.is_empty() {
-            return Err(RunError::NoPassingPoseFromArm {
-                report: cell.report.to_string(),
-            });
+    let mut plan = match &strategy {
+        Strategy::Planned if adaptive => {
+            let _ = cell.recheck_from(start);
+            let candidates = adaptive_candidates(&cell);
+            if candidates.is_empty() {
+                return Err(RunError::NoPassingPoseFromArm {
+                    report: cell.report.to_string(),
+                });
+            }
+            candidates
         }
-        candidates
-    } else {
-        match cell.recheck_from(start) {
+        Strategy::Planned => match cell.recheck_from(start) {
             Ok(plan) => plan,
             Err(report) => {
                 return Err(RunError::PlanFailsFromArm {
                     report: report.to_string(),
                 })
             }
+        },
+        // Suggestions come from the plan's poses that pass their checks from where the arm
+        // stands.
+        Strategy::HandGuided(_) => {
+            let _ = cell.recheck_from(start);
+            cell.report.passing()
         }
     };
+    let planned_fixed = matches!(strategy, Strategy::Planned) && !adaptive;
 
     let folder = match resumed {
         Some(ResumedSession {
@@ -466,9 +532,10 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
             manifest,
             inputs_changed,
         }) => {
-            // An adaptive session's plan is what it chose so far: it continues from there. A
-            // fixed plan ordered for travel time from where the arm stood then keeps that order.
-            if !adaptive && !same_plan(&manifest, &plan) {
+            // An adaptive or hand-guided session's plan is what it chose so far: it continues
+            // from there. A fixed plan ordered for travel time from where the arm stood then
+            // keeps that order.
+            if planned_fixed && !same_plan(&manifest, &plan) {
                 match recorded_order(&manifest, &plan) {
                     Some(recorded) => plan = recorded,
                     None => {
@@ -491,76 +558,88 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
             for note in folder.notes() {
                 observer.note(note);
             }
-            // An adaptive session's manifest starts empty and grows with the plan.
-            let recorded: &[(Pose, Joints)] = if adaptive { &[] } else { &plan };
-            folder.write_manifest(&cell.manifest(recorded).with_inputs(inputs))?;
+            // An adaptive or hand-guided session's manifest starts empty and grows with the
+            // poses it visits.
+            let recorded: &[(Pose, Joints)] = if planned_fixed { &plan } else { &[] };
+            let manifest = cell.manifest(recorded).with_inputs(inputs);
+            let manifest = match strategy {
+                Strategy::HandGuided(_) => manifest.hand_guided(),
+                Strategy::Planned => manifest,
+            };
+            folder.write_manifest(&manifest)?;
             folder
         }
     };
 
-    let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
-    observer.session_folder(&folder, &plan);
-    observer.session_started(poses);
-    let mut on_event = |event: SessionEvent| observer.event(event);
-    let (outcome, adaptive_summary) = if adaptive {
-        // A generated plan's `count` is the most poses it takes (it chooses from more).
-        let max_poses = cell
-            .config
-            .plan
-            .max_poses
-            .or(cell.config.plan.generate.map(|g| g.count))
-            .unwrap_or(plan.len())
-            .min(plan.len());
-        let mut planner = AdaptivePlanner::new(
-            cell.config.setup,
-            cell.config.nominal.camera_mount,
-            cell.config.nominal.target_mount,
-            plan.clone(),
-            cell.config.solver.to_options(),
-            cell.config.adaptive_target_mm(),
-            max_poses,
-        )
-        .with_min_poses(cell.config.plan.min_poses)
-        .with_motion(cell.config.limits, start, per_pose_s(&cell))
-        .with_stop_check(good_enough(&cell));
-        let outcome = session::run_adaptive_session(
-            setup,
-            cell.config_path(),
-            &mut planner,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut on_event,
-        );
-        let summary = AdaptiveSummary {
-            in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
-            candidates: plan.len(),
-            chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
-            target_uncertainty_mm: cell.config.adaptive_target_mm(),
-            max_poses,
-            solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
-            reached: planner.reached_target(),
-        };
-        (outcome, Some(summary))
-    } else {
-        let outcome = session::run_session(
-            setup,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut on_event,
-        );
-        (outcome, None)
+    let (outcome, adaptive_summary) = match &mut strategy {
+        Strategy::Planned => {
+            let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
+            observer.session_folder(&folder, &plan);
+            observer.session_started(poses);
+            let driven = drive_plan(
+                &cell,
+                setup,
+                &plan,
+                start,
+                adaptive,
+                &mut hardware,
+                observer,
+            );
+            observer.session_ended();
+            let (outcome, summary) = driven;
+            if let Some(summary) = &summary {
+                observer.note(&summary.to_string());
+            }
+            (outcome, summary)
+        }
+        Strategy::HandGuided(guide) => {
+            let setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
+            observer.session_folder(&folder, &[]);
+            observer.session_started(plan.len());
+            let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {
+                AdaptivePlanner::new(
+                    cell.config.setup,
+                    cell.config.nominal.camera_mount,
+                    cell.config.nominal.target_mount,
+                    plan.clone(),
+                    cell.config.solver.to_options(),
+                    // Suggestions never stop on their own: the person decides when to finish.
+                    0.0,
+                    usize::MAX,
+                )
+            });
+            let options = ManualOptions {
+                real_arm: !cell.is_simulated() && !request.motion_confirmed,
+                ..ManualOptions::default()
+            };
+            let outcome = {
+                let mut control = guide.control(&cell, &folder, &plan, &mut *observer);
+                session::run_manual_session(
+                    setup,
+                    cell.config_path(),
+                    planner.as_mut(),
+                    &options,
+                    hardware.robot.as_mut(),
+                    hardware.camera.as_mut(),
+                    control.as_mut(),
+                )
+            };
+            observer.session_ended();
+            guide.ended();
+            (outcome, None)
+        }
     };
-    observer.session_ended();
-    if let Some(summary) = &adaptive_summary {
-        observer.note(&summary.to_string());
-    }
     let outcome = outcome?;
-    let arm_time = arm_time(&cell, &outcome);
-    observer.note(&arm_time.to_string());
-    // Kept beside the result for the report; a failure to write it loses only this figure.
-    if let Ok(text) = serde_yaml_ng::to_string(&arm_time) {
-        if let Err(e) = folder.write_file(std::path::Path::new(ArmTime::FILE), text.as_bytes()) {
-            observer.note(&format!("the arm time could not be kept: {e}"));
+    // A person moved a hand-guided arm, and there is no plan to compare with: no arm time.
+    let arm_time = matches!(strategy, Strategy::Planned).then(|| arm_time(&cell, &outcome));
+    if let Some(arm_time) = &arm_time {
+        observer.note(&arm_time.to_string());
+        // Kept beside the result for the report; a failure to write it loses only this figure.
+        if let Ok(text) = serde_yaml_ng::to_string(arm_time) {
+            if let Err(e) = folder.write_file(std::path::Path::new(ArmTime::FILE), text.as_bytes())
+            {
+                observer.note(&format!("the arm time could not be kept: {e}"));
+            }
         }
     }
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
@@ -570,8 +649,73 @@ pub fn run(request: &RunRequest, observer: &mut dyn RunObserver) -> Result<CellR
         outcome,
         solved,
         adaptive: adaptive_summary,
-        arm_time: Some(arm_time),
+        arm_time,
     })
+}
+
+/// Drives the config's plan: adaptively (the next-best pose among `plan`'s candidates, until
+/// good enough) or as the fixed `plan`; the adaptive summary with the outcome.
+fn drive_plan(
+    cell: &PreparedCell,
+    setup: session::SessionSetup,
+    plan: &[(Pose, Joints)],
+    start: Joints,
+    adaptive: bool,
+    hardware: &mut super::Hardware,
+    observer: &mut dyn RunObserver,
+) -> (
+    Result<SessionOutcome, SessionError>,
+    Option<AdaptiveSummary>,
+) {
+    let folder = setup.folder.clone();
+    let mut on_event = |event: SessionEvent| observer.event(event);
+    if !adaptive {
+        let outcome = session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        return (outcome, None);
+    }
+    // A generated plan's `count` is the most poses it takes (it chooses from more).
+    let max_poses = cell
+        .config
+        .plan
+        .max_poses
+        .or(cell.config.plan.generate.map(|g| g.count))
+        .unwrap_or(plan.len())
+        .min(plan.len());
+    let mut planner = AdaptivePlanner::new(
+        cell.config.setup,
+        cell.config.nominal.camera_mount,
+        cell.config.nominal.target_mount,
+        plan.to_vec(),
+        cell.config.solver.to_options(),
+        cell.config.adaptive_target_mm(),
+        max_poses,
+    )
+    .with_min_poses(cell.config.plan.min_poses)
+    .with_motion(cell.config.limits, start, per_pose_s(cell))
+    .with_stop_check(good_enough(cell));
+    let outcome = session::run_adaptive_session(
+        setup,
+        cell.config_path(),
+        &mut planner,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut on_event,
+    );
+    let summary = AdaptiveSummary {
+        in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
+        candidates: plan.len(),
+        chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
+        target_uncertainty_mm: cell.config.adaptive_target_mm(),
+        max_poses,
+        solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
+        reached: planner.reached_target(),
+    };
+    (outcome, Some(summary))
 }
 
 /// What one pose costs besides its move, s, for weighing candidates by arm time: the fixed
