@@ -8,11 +8,13 @@ use anyhow::{bail, Context};
 use clap::Args;
 
 use handeye::atomic_file::write_atomic;
-use handeye::cell;
+use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
+use handeye::cell::PreparedCell;
+use handeye::config::CellConfig;
 use handeye::dataset::Dataset;
 use handeye::plan::GenerateSpec;
 use handeye::result::ResultFile;
-use handeye::session::{SessionEvent, SessionFolder};
+use handeye::session::SessionFolder;
 use handeye::verify;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
@@ -49,8 +51,8 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
         let mounts = ResultFile::load_mounts(result)?;
-        let mut prepared = cell::prepare(config).context("preparing the cell")?;
-        let base = prepared.config.plan.generate.unwrap_or(GenerateSpec {
+        let cell_config = CellConfig::load(config).context("reading the cell config")?;
+        let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
             max_tilt_deg: 30.0,
@@ -70,24 +72,14 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 std::time::SystemTime::now(),
             )
         });
-        if !prepared.is_simulated() && !args.yes {
-            super::confirm_motion(&prepared, spec.count)?;
-        }
-        let folder = SessionFolder::create(&out)?;
-        let mut hardware = prepared
-            .open_hardware()
-            .context("opening the robot and camera")?;
-        cell::run::ensure_robot_ready(hardware.robot.as_mut())?;
-        let stop = super::stop_on_ctrl_c();
-        let v = verify::holdout(
-            &mut prepared,
-            &mut hardware,
-            &mounts,
-            &spec,
-            &folder,
-            stop,
-            &mut |_e: SessionEvent| {},
-        )?;
+        let request = RunRequest {
+            config: Some(config.clone()),
+            target: SessionTarget::New(out.clone()),
+            motion_confirmed: args.yes,
+            accept_changed: false,
+            stop: super::stop_on_ctrl_c(),
+        };
+        let v = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
         outln!("{}", v.table());
         let text = serde_yaml_ng::to_string(&v)?;
         write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
@@ -97,7 +89,7 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     let (setup, pairs, options) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         let dataset = Dataset::load(&folder.samples_path())?;
-        let options = handeye::config::CellConfig::load(&folder.read_manifest()?.config)
+        let options = CellConfig::load(&folder.read_manifest()?.config)
             .map(|c| c.solver.to_options())
             .unwrap_or_default();
         (dataset.setup, dataset.pairs, options)
@@ -110,4 +102,22 @@ pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     let v = verify::leave_one_out(setup, &pairs, &options)?;
     outln!("{}", v.table());
     Ok(())
+}
+
+/// The holdout run's observer: it asks before a real arm moves and passes notes on; the poses
+/// themselves are summarised in the table at the end.
+struct Asker;
+
+impl RunObserver for Asker {
+    fn confirm_motion(
+        &mut self,
+        cell: &PreparedCell,
+        poses: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        super::confirm_motion(cell, poses).map_err(Into::into)
+    }
+
+    fn note(&mut self, message: &str) {
+        eprintln!("note: {message}");
+    }
 }

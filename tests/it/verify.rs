@@ -7,11 +7,12 @@ use std::path::PathBuf;
 use handeye::cell;
 use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::plan::GenerateSpec;
-use handeye::session::{SessionEvent, SessionFolder};
 use handeye::setup::{self, CellTransforms, PosePair, Setup};
 use handeye::solve::SolveOptions;
 use handeye::verify;
 use nalgebra::Vector3;
+
+use crate::util;
 
 fn holdout(
     camera_mount: &Pose,
@@ -19,27 +20,26 @@ fn holdout(
     dir: &std::path::Path,
 ) -> verify::Verification {
     let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
-    let mut prepared = cell::prepare(&config).unwrap();
     let spec = GenerateSpec {
         count: 6,
         seed: 4242,
-        ..prepared.config.plan.generate.unwrap()
+        ..cell::prepare(&config)
+            .unwrap()
+            .config
+            .plan
+            .generate
+            .unwrap()
     };
-    let folder = SessionFolder::create(dir).unwrap();
-    let mut hardware = prepared.open_hardware().unwrap();
     let calibration = CellTransforms {
         setup: Setup::EyeInHand,
         camera_mount: *camera_mount,
         target_mount: *target_mount,
     };
     verify::holdout(
-        &mut prepared,
-        &mut hardware,
+        &util::new_run(&config, dir),
         &calibration,
         &spec,
-        &folder,
-        Default::default(),
-        &mut |_e: SessionEvent| {},
+        &mut util::QuietObserver,
     )
     .unwrap()
 }
@@ -147,4 +147,68 @@ fn leave_one_out_points_at_a_corrupted_sample() {
     assert_eq!(worst.index, 5, "{}", v.table());
     // Predicted from the 11 clean samples, sample 5 is off by the full 5 mm.
     assert!((worst.translation_mm - 5.0).abs() < 0.05, "{}", v.table());
+}
+
+/// `handeye verify --config --result`: a holdout session recorded through the one run, its
+/// table printed and `verify.yaml` written; a result of the other setup refused before the arm
+/// moves.
+#[test]
+fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::sim_cell(dir.path(), 8);
+    let session = dir.path().join("session");
+    let run = util::handeye()
+        .args(["run", "--yes", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let holdout = dir.path().join("holdout");
+    let verify = util::handeye()
+        .args(["verify", "--poses", "4", "--config"])
+        .arg(&config)
+        .arg("--result")
+        .arg(session.join("result.yaml"))
+        .arg("--out")
+        .arg(&holdout)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&verify.stdout);
+    assert!(
+        verify.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&verify.stderr)
+    );
+    assert!(
+        out.contains("translation at the target RMS") && out.contains("holdout session"),
+        "{out}"
+    );
+    assert!(holdout.join("verify.yaml").is_file() && holdout.join("samples.yaml").is_file());
+
+    let other = util::config_variant(dir.path(), "sim-cell-eye-to-hand.yaml", "other.yaml", &[]);
+    let refused = util::handeye()
+        .args(["verify", "--config"])
+        .arg(&other)
+        .arg("--result")
+        .arg(session.join("result.yaml"))
+        .arg("--out")
+        .arg(dir.path().join("refused"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("eye_in_hand") && err.contains("eye_to_hand"),
+        "{err}"
+    );
+    assert!(
+        !dir.path().join("refused").exists(),
+        "nothing is recorded for the wrong setup"
+    );
 }

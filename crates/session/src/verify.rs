@@ -9,19 +9,16 @@
 //! target origin in the camera frame). Depends on `solve`, `plan`, `cell` and `session` (the
 //! holdout run records a normal session folder, so it can be replayed and reported).
 
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-
 use serde::{Deserialize, Serialize};
 
-use crate::cell::{Hardware, PreparedCell};
+use crate::cell::run::{self, RunError, RunObserver, RunRequest, Strategy};
+use crate::config::CellConfig;
 use crate::dataset::Dataset;
-use crate::plan::{GenerateSpec, Plan, Waypoint};
-use crate::session::{self, SessionError, SessionEvent, SessionFolder};
+use crate::plan::GenerateSpec;
+use crate::session::SessionError;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
-use handeye_robot::RobotError;
 use handeye_solve::{self as solve, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
@@ -99,12 +96,12 @@ pub enum VerifyError {
         /// Setup of the cell.
         cell: Setup,
     },
-    /// The holdout session failed.
+    /// The holdout session's records could not be read.
     #[error("the verification session failed")]
     Session(#[source] Box<SessionError>),
-    /// The arm's joint positions could not be read before the first move.
-    #[error("reading the arm's joint positions failed")]
-    Robot(#[source] RobotError),
+    /// The holdout run failed (its message says why, and how to resume when samples are kept).
+    #[error(transparent)]
+    Run(Box<RunError>),
 }
 
 fn summarise(errors: &[PoseError]) -> ErrorSummary {
@@ -205,65 +202,35 @@ pub fn leave_one_out(
     })
 }
 
-/// Holdout verification on the cell: generates `spec` views (a seed the calibration did not
-/// use), checks them from the arm's actual joints (read from `hardware` before anything moves),
-/// keeps those that pass, records them as a session in `folder` and compares each measured
-/// `T_camera_target` with the prediction of `calibration`. Setting `stop` stops the arm and ends
-/// the session cleanly, as in a calibration run.
+/// Holdout verification on the cell: views generated from `spec` (a seed the calibration did not
+/// use) are checked from the arm's actual joints, those that pass are recorded as a session —
+/// the one run ([`run::drive`] with [`Strategy::Holdout`]) into `request`'s folder — and each
+/// measured `T_camera_target` is compared with the prediction of `calibration`. Setting
+/// `request.stop` stops the arm and ends the session cleanly, as in a calibration run.
 pub fn holdout(
-    prepared: &mut PreparedCell,
-    hardware: &mut Hardware,
+    request: &RunRequest,
     calibration: &CellTransforms,
     spec: &GenerateSpec,
-    folder: &SessionFolder,
-    stop: Arc<AtomicBool>,
-    on_event: &mut dyn FnMut(SessionEvent),
+    observer: &mut dyn RunObserver,
 ) -> Result<Verification, VerifyError> {
-    if calibration.setup != prepared.config.setup {
+    // The result must be of the cell's setup: checked before anything opens.
+    let config = request
+        .config
+        .as_deref()
+        .ok_or_else(|| VerifyError::Plan("a holdout check needs the cell config".into()))?;
+    let cell_setup = CellConfig::load(config)
+        .map_err(|e| VerifyError::Plan(e.to_string()))?
+        .setup;
+    if calibration.setup != cell_setup {
         return Err(VerifyError::SetupMismatch {
             result: calibration.setup,
-            cell: prepared.config.setup,
+            cell: cell_setup,
         });
     }
-    spec.validate()
-        .map_err(|e| VerifyError::Plan(e.to_string()))?;
-    let plan = Plan {
-        waypoints: prepared
-            .generate_views(spec)
-            .into_iter()
-            .map(Waypoint::LookAt)
-            .collect(),
-    };
-    // The cell was prepared from an assumed start: the first move starts where the arm really
-    // is. (The config plan's own re-check result does not matter here, only its new start.)
-    let start = hardware
-        .robot
-        .joint_positions()
-        .map_err(VerifyError::Robot)?;
-    let _ = prepared.recheck_from(start);
-    // A verification needs only usable views: drop the ones that fail instead of refusing all
-    // (every move is checked again from the arm's actual joints before it is sent).
-    let validated = prepared.check_plan(&plan).passing();
-    if validated.is_empty() {
-        return Err(VerifyError::Plan(format!(
-            "from the arm's actual position none of the {} generated views is reachable and shows the board; nothing was moved",
-            spec.count
-        )));
-    }
-    let session_error = |e: SessionError| VerifyError::Session(Box::new(e));
-    folder
-        .write_manifest(&prepared.manifest(&validated))
-        .map_err(session_error)?;
-    let session_setup = prepared.session_setup(folder.clone(), validated, stop);
-    session::run_session(
-        session_setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        on_event,
-    )
-    .map_err(session_error)?;
-    let dataset =
-        Dataset::load(&folder.samples_path()).map_err(|e| session_error(SessionError::File(e)))?;
+    let driven = run::drive(request, Strategy::Holdout(*spec), observer)
+        .map_err(|e| VerifyError::Run(Box::new(e)))?;
+    let dataset = Dataset::load(&driven.folder.samples_path())
+        .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
     Ok(compare(
         calibration.setup,
         &calibration.camera_mount,

@@ -23,6 +23,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::plan::nbv::{AdaptivePlanner, StopCheck};
+use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{
     self, changed_inputs, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder,
     SessionOutcome, SolvedSession,
@@ -217,6 +218,9 @@ impl std::fmt::Display for AdaptiveSummary {
 /// Why a run did not happen or did not finish.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
+    /// A holdout check has no usable view (or an unusable request for views).
+    #[error("the verification plan failed its checks: {0}")]
+    Holdout(String),
     /// A new session needs a config.
     #[error("a new session needs a cell config (--config)")]
     NoConfig,
@@ -420,6 +424,10 @@ pub enum Strategy<'a> {
     /// A person chooses the views and says when to capture (the console's hand-guided session);
     /// the config's plan poses are only suggested. `guide` is the person's side.
     HandGuided(&'a mut dyn HandGuide),
+    /// Fresh views generated from `spec` (a seed the calibration did not use), to check a
+    /// result against: the views that fail their checks from where the arm stands are dropped
+    /// (a refusal only when none is left), the rest visited as a fixed plan. `handeye verify`.
+    Holdout(GenerateSpec),
 }
 
 /// The person's side of a hand-guided run (the console page and terminal): told the stages of
@@ -449,9 +457,48 @@ pub trait HandGuide {
 /// session solved (`result.yaml`, the verdict).
 pub fn run(
     request: &RunRequest,
-    mut strategy: Strategy<'_>,
+    strategy: Strategy<'_>,
     observer: &mut dyn RunObserver,
 ) -> Result<CellRun, RunError> {
+    let DrivenRun {
+        cell,
+        folder,
+        outcome,
+        adaptive,
+        arm_time,
+    } = drive(request, strategy, observer)?;
+    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
+    Ok(CellRun {
+        cell,
+        folder,
+        outcome,
+        solved,
+        adaptive,
+        arm_time,
+    })
+}
+
+/// A run driven to its end, not solved yet.
+pub struct DrivenRun {
+    /// The prepared cell.
+    pub cell: PreparedCell,
+    /// The session folder (still locked until this is dropped).
+    pub folder: SessionFolder,
+    /// What the loop did.
+    pub outcome: SessionOutcome,
+    /// For an adaptive plan: how it went.
+    pub adaptive: Option<AdaptiveSummary>,
+    /// Arm time spent, and what the full plan would have cost (planned runs only).
+    pub arm_time: Option<ArmTime>,
+}
+
+/// [`run`] up to the end of the session loop, without the solve: what a holdout check needs
+/// (it compares the recorded board poses with a result instead of solving them).
+pub fn drive(
+    request: &RunRequest,
+    mut strategy: Strategy<'_>,
+    observer: &mut dyn RunObserver,
+) -> Result<DrivenRun, RunError> {
     let OpenedRun {
         mut resumed,
         mut cell,
@@ -478,6 +525,16 @@ pub fn run(
                     .map_err(RunError::NotConfirmed)?;
             }
             adaptive
+        }
+        Strategy::Holdout(spec) => {
+            spec.validate()
+                .map_err(|e| RunError::Holdout(e.to_string()))?;
+            if !cell.is_simulated() && !request.motion_confirmed {
+                observer
+                    .confirm_motion(&cell, spec.count)
+                    .map_err(RunError::NotConfirmed)?;
+            }
+            false
         }
         Strategy::HandGuided(guide) => {
             // A session a planned resume handed over (an older one without the mark) is marked
@@ -517,6 +574,27 @@ pub fn run(
                 })
             }
         },
+        Strategy::Holdout(spec) => {
+            // The cell was prepared from an assumed start: the views are checked from where
+            // the arm is, and only usable ones kept (each move is checked again before it is
+            // sent).
+            let _ = cell.recheck_from(start);
+            let views = Plan {
+                waypoints: cell
+                    .generate_views(spec)
+                    .into_iter()
+                    .map(Waypoint::LookAt)
+                    .collect(),
+            };
+            let passing = cell.check_plan(&views).passing();
+            if passing.is_empty() {
+                return Err(RunError::Holdout(format!(
+                    "from the arm's actual position none of the {} generated views is reachable and shows the board; nothing was moved",
+                    spec.count
+                )));
+            }
+            passing
+        }
         // Suggestions come from the plan's poses that pass their checks from where the arm
         // stands.
         Strategy::HandGuided(_) => {
@@ -524,7 +602,12 @@ pub fn run(
             cell.report.passing()
         }
     };
-    let planned_fixed = matches!(strategy, Strategy::Planned) && !adaptive;
+    // The plan this session records in its manifest and visits as given.
+    let fixed_plan = match strategy {
+        Strategy::Planned => !adaptive,
+        Strategy::Holdout(_) => true,
+        Strategy::HandGuided(_) => false,
+    };
 
     let folder = match resumed {
         Some(ResumedSession {
@@ -535,7 +618,7 @@ pub fn run(
             // An adaptive or hand-guided session's plan is what it chose so far: it continues
             // from there. A fixed plan ordered for travel time from where the arm stood then
             // keeps that order.
-            if planned_fixed && !same_plan(&manifest, &plan) {
+            if fixed_plan && !same_plan(&manifest, &plan) {
                 match recorded_order(&manifest, &plan) {
                     Some(recorded) => plan = recorded,
                     None => {
@@ -560,11 +643,11 @@ pub fn run(
             }
             // An adaptive or hand-guided session's manifest starts empty and grows with the
             // poses it visits.
-            let recorded: &[(Pose, Joints)] = if planned_fixed { &plan } else { &[] };
+            let recorded: &[(Pose, Joints)] = if fixed_plan { &plan } else { &[] };
             let manifest = cell.manifest(recorded).with_inputs(inputs);
             let manifest = match strategy {
                 Strategy::HandGuided(_) => manifest.hand_guided(),
-                Strategy::Planned => manifest,
+                Strategy::Planned | Strategy::Holdout(_) => manifest,
             };
             folder.write_manifest(&manifest)?;
             folder
@@ -572,10 +655,13 @@ pub fn run(
     };
 
     let (outcome, adaptive_summary) = match &mut strategy {
-        Strategy::Planned => {
+        Strategy::Planned | Strategy::Holdout(_) => {
             let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
             observer.session_folder(&folder, &plan);
-            observer.session_started(poses);
+            observer.session_started(match strategy {
+                Strategy::Holdout(_) => plan.len(),
+                _ => poses,
+            });
             let driven = drive_plan(
                 &cell,
                 setup,
@@ -642,12 +728,10 @@ pub fn run(
             }
         }
     }
-    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
-    Ok(CellRun {
+    Ok(DrivenRun {
         cell,
         folder,
         outcome,
-        solved,
         adaptive: adaptive_summary,
         arm_time,
     })
@@ -766,16 +850,16 @@ fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
         let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
             .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
         if count > 0 {
-            let extra = crate::plan::GenerateSpec {
+            let extra = GenerateSpec {
                 count,
                 seed: spec.seed.wrapping_add(1),
                 ..spec
             };
-            let views = crate::plan::Plan {
+            let views = Plan {
                 waypoints: cell
                     .generate_views(&extra)
                     .into_iter()
-                    .map(crate::plan::Waypoint::LookAt)
+                    .map(Waypoint::LookAt)
                     .collect(),
             };
             candidates.extend(cell.check_plan(&views).passing());
