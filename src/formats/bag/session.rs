@@ -12,7 +12,12 @@ use anyhow::Context;
 use crate::config::{recorded_cell, RecordedFiles};
 use crate::geometry::Pose;
 use crate::robot::recorded::save_recorded_poses;
-use crate::session::{self, SessionFolder, SessionManifest, SolvedSession};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use crate::cell::run::{self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
+use crate::cell::PreparedCell;
+use crate::session::{self, SessionFolder, SolvedSession};
 
 use super::{import_bag, BagOptions};
 
@@ -212,6 +217,7 @@ pub fn import_bag_session(
     let staging = session::Staging::create(parent, &name, STAGING_TAG)
         .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
     let stage = staging.path().to_path_buf();
+    // Created (and locked) first: the imported files go into it, then the run records there.
     let folder = SessionFolder::create(&stage)?;
     let import_dir = stage.join("import");
     let images_dir = import_dir.join("images");
@@ -267,47 +273,49 @@ pub fn import_bag_session(
             absolute(&a.bag)?.display()
         ),
     )?;
-    let mut cell = crate::cell::prepare(&config_file).context("preparing the recorded cell")?;
-    if !cell.report.ok() {
-        anyhow::bail!(
+    // The recorded cell goes through the one run, like any session, into the staging folder.
+    let request = RunRequest {
+        config: Some(config_file.clone()),
+        target: SessionTarget::Created(folder),
+        // Nothing moves: a recorded robot serves the bag's poses.
+        motion_confirmed: true,
+        accept_changed: false,
+        stop: Arc::new(AtomicBool::new(false)),
+    };
+    let mut observer = RecordedRun {
+        report: String::new(),
+        say: &mut *say,
+    };
+    let done = match run::run(&request, Strategy::Planned, &mut observer) {
+        Ok(done) => done,
+        Err(RunError::PlanFailed) => anyhow::bail!(
             "the frames taken from {} cannot calibrate:\n{}",
             a.bag.display(),
-            cell.report
-        );
-    }
-    let start = cell.start_joints;
-    let plan = cell
-        .recheck_from(start)
-        .map_err(|report| anyhow::anyhow!("the recorded plan fails its checks:\n{report}"))?;
+            observer.report
+        ),
+        Err(RunError::PlanFailsFromArm { report }) => {
+            anyhow::bail!("the recorded plan fails its checks:\n{report}")
+        }
+        Err(e) => return Err(e.into()),
+    };
     // The manifest names the files where they will be once the staging folder is renamed.
     let final_path = |p: &Path| match p.strip_prefix(&stage) {
         Ok(rel) => out.join(rel),
         Err(_) => p.to_path_buf(),
     };
-    let mut inputs = cell.inputs()?;
-    for input in &mut inputs {
+    let mut manifest = done.folder.read_manifest()?;
+    manifest.config = out.join("import").join("cell.yaml");
+    for input in &mut manifest.inputs {
         input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
     }
-    folder.write_manifest(
-        &SessionManifest::new(out.join("import").join("cell.yaml"), setup, &plan)
-            .with_inputs(inputs),
-    )?;
-    let mut hardware = cell.open_hardware().context("opening the recorded cell")?;
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let session_setup = cell.session_setup(folder.clone(), plan, stop);
-    let outcome = session::run_session(
-        session_setup,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut |_| {},
-    )?;
+    done.folder.write_manifest(&manifest)?;
+    let (outcome, solved) = (done.outcome, done.solved);
     for (index, why) in &outcome.skipped {
         say(BagNote::Line(format!(
             "  frame {index:03} ({:.3} s): board not found or rejected: {why}",
             imported.samples[*index].image_stamp_ns as f64 * 1e-9
         )));
     }
-    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
     let record = BagImportRecord {
         bag: absolute(&a.bag)?,
         format: imported.format.to_string(),
@@ -338,8 +346,9 @@ pub fn import_bag_session(
     let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
     crate::atomic_file::write_atomic(&record_file, text.as_bytes())
         .with_context(|| format!("writing {}", record_file.display()))?;
-    drop(hardware);
-    drop(folder);
+    // The session folder's lock goes with its last handle; then the folder can move.
+    drop(done.folder);
+    drop(request);
     staging
         .commit(&out)
         .with_context(|| format!("moving the session into {}", out.display()))?;
@@ -371,4 +380,30 @@ fn leaf(path: &Path) -> String {
 /// The absolute form of a path that may not exist yet (an output about to be written).
 fn absolute(path: &Path) -> anyhow::Result<PathBuf> {
     std::path::absolute(path).with_context(|| format!("resolving {}", path.display()))
+}
+
+/// The observer of a bag's recorded run: it keeps the plan report (for a refusal) and passes the
+/// run's notes on.
+struct RecordedRun<'s> {
+    report: String,
+    say: &'s mut dyn FnMut(BagNote),
+}
+
+impl RunObserver for RecordedRun<'_> {
+    fn plan_checked(&mut self, cell: &PreparedCell) {
+        self.report = cell.report.to_string();
+    }
+
+    fn confirm_motion(
+        &mut self,
+        _cell: &PreparedCell,
+        _poses: usize,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        // A recorded robot moves nothing.
+        Ok(())
+    }
+
+    fn note(&mut self, message: &str) {
+        (self.say)(BagNote::Line(format!("note: {message}")));
+    }
 }

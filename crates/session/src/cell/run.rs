@@ -22,6 +22,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use crate::config::RobotConfig;
 use crate::plan::nbv::{AdaptivePlanner, StopCheck};
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{
@@ -42,6 +43,9 @@ pub enum SessionTarget {
     New(PathBuf),
     /// Continue the session in this folder.
     Resume(PathBuf),
+    /// A new session in a folder the caller created and holds (locked), with files of its own
+    /// in it: an import's frames and recorded cell, which the run then uses.
+    Created(SessionFolder),
 }
 
 /// What to run: a planned run ([`run`]) or a hand-guided one (`console::manual::run_manual`).
@@ -380,7 +384,9 @@ pub fn open_run(
                 .unwrap_or_else(|| manifest.config.clone());
             (Some((folder, manifest)), config)
         }
-        SessionTarget::New(_) => (None, request.config.clone().ok_or(RunError::NoConfig)?),
+        SessionTarget::New(_) | SessionTarget::Created(_) => {
+            (None, request.config.clone().ok_or(RunError::NoConfig)?)
+        }
     };
     let cell = prepare(&config_path).map_err(|source| RunError::Prepare {
         config: config_path.clone(),
@@ -634,10 +640,11 @@ pub fn drive(
             folder
         }
         None => {
-            let SessionTarget::New(out) = &request.target else {
-                unreachable!("a resume has its folder")
+            let folder = match &request.target {
+                SessionTarget::New(out) => SessionFolder::create(out)?,
+                SessionTarget::Created(folder) => folder.clone(),
+                SessionTarget::Resume(_) => unreachable!("a resume has its folder"),
             };
-            let folder = SessionFolder::create(out)?;
             for note in folder.notes() {
                 observer.note(note);
             }
@@ -716,8 +723,11 @@ pub fn drive(
         }
     };
     let outcome = outcome?;
-    // A person moved a hand-guided arm, and there is no plan to compare with: no arm time.
-    let arm_time = matches!(strategy, Strategy::Planned).then(|| arm_time(&cell, &outcome));
+    // A person moved a hand-guided arm, and there is no plan to compare with; a recorded robot
+    // (frames imported from a bag or a ViSP folder) moved nothing now: no arm time for either.
+    let recorded = matches!(cell.config.robot, RobotConfig::Recorded { .. });
+    let arm_time =
+        (matches!(strategy, Strategy::Planned) && !recorded).then(|| arm_time(&cell, &outcome));
     if let Some(arm_time) = &arm_time {
         observer.note(&arm_time.to_string());
         // Kept beside the result for the report; a failure to write it loses only this figure.
