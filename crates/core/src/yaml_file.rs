@@ -25,6 +25,13 @@ pub enum FileError {
         #[source]
         source: std::io::Error,
     },
+    /// The file is larger than any file of its kind could be (a device, a wrong path, a file
+    /// grown without end): refused before it is read into memory.
+    #[error("{}: cannot read: larger than {} MiB, far beyond any config, plan, record or result file (is it the right file?)", path.display(), MAX_TEXT_BYTES >> 20)]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+    },
     /// The file's path does not resolve: a symbolic link in it leads back to itself.
     #[error("{}: cannot read: symlink loop at {}", path.display(), at.display())]
     SymlinkLoop {
@@ -268,9 +275,17 @@ pub fn read_yaml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, FileE
     parse_yaml(&read_text(path)?, path)
 }
 
-/// Reads a text file, naming it in the error (and the link that loops, when one does).
+/// The largest text file read whole (configs, plans, boards, intrinsics, a session's records,
+/// datasets, results): far above any real one (a 1000-pose session's `samples.yaml` is about
+/// 1 MB) and far below what would exhaust memory.
+pub const MAX_TEXT_BYTES: u64 = 64 << 20;
+
+/// Reads a text file, naming it in the error (and the link that loops, when one does). A file
+/// over [`MAX_TEXT_BYTES`] is refused (also one that never ends, such as `/dev/zero`), never
+/// read until memory runs out.
 pub fn read_text(path: &Path) -> Result<String, FileError> {
-    std::fs::read_to_string(path).map_err(|source| match symlink_loop(path) {
+    use std::io::Read;
+    let failed = |source: std::io::Error| match symlink_loop(path) {
         Some(at) => FileError::SymlinkLoop {
             path: path.to_path_buf(),
             at,
@@ -279,7 +294,18 @@ pub fn read_text(path: &Path) -> Result<String, FileError> {
             path: path.to_path_buf(),
             source,
         },
-    })
+    };
+    let file = std::fs::File::open(path).map_err(failed)?;
+    let mut text = String::new();
+    file.take(MAX_TEXT_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(failed)?;
+    if text.len() as u64 > MAX_TEXT_BYTES {
+        return Err(FileError::TooLarge {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(text)
 }
 
 /// `source` (an error of opening `path`), or, when `path` runs into a symbolic link loop, an
@@ -432,6 +458,26 @@ impl<'de> serde::Deserialize<'de> for SchemaVersion {
             )));
         }
         Ok(SchemaVersion(version))
+    }
+}
+
+#[cfg(test)]
+mod read_tests {
+    use super::*;
+
+    #[test]
+    fn a_file_that_never_ends_is_refused_not_read_until_memory_runs_out() {
+        // /dev/zero: endless NUL bytes (valid UTF-8), as a wrong path to a device would give.
+        let error = read_text(Path::new("/dev/zero")).unwrap_err();
+        assert!(matches!(error, FileError::TooLarge { .. }), "{error}");
+        assert!(error.to_string().contains("/dev/zero"), "{error}");
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let error = read_text(Path::new("/nonexistent/cell.yaml")).unwrap_err();
+        assert!(matches!(error, FileError::Read { .. }));
+        assert!(error.to_string().contains("/nonexistent/cell.yaml"));
     }
 }
 
