@@ -76,7 +76,10 @@ fn sample_id<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D
 
 /// The dataset file as written.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a dataset mapping (setup: eye_in_hand or eye_to_hand, samples: [...])"
+)]
 pub struct DatasetYaml {
     /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).
     #[serde(default = "SchemaVersion::unversioned")]

@@ -120,7 +120,10 @@ pub struct SolverYaml {
 
 /// The whole result file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a result mapping (setup, the two transforms, residuals, solver, ...)"
+)]
 #[allow(non_snake_case)]
 pub struct ResultFile {
     /// The layout version of this file ([`SchemaVersion`]; absent in files written before it).

@@ -21,7 +21,10 @@ use super::TargetError;
 
 /// The board YAML: Kalibr's aprilgrid keys plus ours; anything else is refused.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a board mapping (Kalibr aprilgrid keys: target_type, tagCols, tagRows, tagSize, tagSpacing)"
+)]
 struct BoardFile {
     target_type: String,
     #[serde(rename = "tagCols")]

@@ -19,7 +19,7 @@ use crate::cell::run::{self as run, RunError, RunObserver, RunRequest, SessionTa
 use crate::cell::PreparedCell;
 use crate::session::{self, SessionFolder, SolvedSession};
 
-use super::{import_bag, BagOptions};
+use super::{import_bag, BagOptions, SkipReason};
 
 /// What to import and where.
 #[derive(Debug, Clone)]
@@ -170,7 +170,7 @@ pub fn import_bag_session(
     for s in imported
         .skipped
         .iter()
-        .filter(|s| s.reason.kind() == "tf gap")
+        .filter(|s| matches!(s.reason, SkipReason::TfGap(_)))
         .take(3)
     {
         say(BagNote::Line(format!(

@@ -21,7 +21,7 @@ pub const RECORD_CONSISTENCY_TOLERANCE: f64 = 1e-6;
 
 /// A quaternion with keyed components, so wxyz/xyzw order can never be confused.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, expecting = "a quaternion mapping {w, x, y, z}")]
 pub struct QuaternionYaml {
     /// Scalar part.
     pub w: f64,
@@ -53,7 +53,10 @@ impl From<&UnitQuaternion<f64>> for QuaternionYaml {
 /// A pose as read from YAML, before validation. Lengths are checked by [`PoseYaml::to_pose`]
 /// so the error can name the field.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z} or rotation_vector: [rx, ry, rz] rad)"
+)]
 pub struct PoseYaml {
     /// Translation in metres, `[x, y, z]`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -260,7 +263,10 @@ fn matrix_rotation(rows: &[Vec<f64>], path: &str) -> Result<UnitQuaternion<f64>,
 
 /// A pose as written in results: translation, quaternion and rotation vector together.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z} or rotation_vector: [rx, ry, rz] rad)"
+)]
 pub struct PoseRecord {
     /// Translation in metres.
     pub translation: [f64; 3],
