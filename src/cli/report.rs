@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 
 use handeye::config::CellConfig;
-use handeye::report::session::write_session_report;
+use handeye::report::session::write_folder_report;
 use handeye::result::ResultFile;
 use handeye::session::SessionFolder;
 
@@ -39,14 +39,16 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let calibration = result
         .to_calibration(&result_path)
         .context("no usable result (solve the session first: `handeye replay`)")?;
-    let label = format!("result.yaml ({})", calibration.solver.method.name());
     // The verdict the solve recorded (a result written before verdicts has none: no card).
-    let path = write_session_report(
+    let (path, lacking) = write_folder_report(
         &folder,
         config.as_ref(),
-        vec![(label, calibration)],
+        calibration,
         result.verdict.clone(),
     )?;
+    for why in lacking {
+        eprintln!("warning: {why}");
+    }
     outln!("report: {}", path.display());
     Ok(())
 }

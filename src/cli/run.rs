@@ -158,17 +158,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     if let Some(truth) = &done.cell.config.simulation {
         outln!("{}", result.compare_with_truth(truth));
     }
-    let mut answers = Vec::new();
-    if result.reprojection.is_some() {
-        answers.push(("reprojection space".to_string(), result.calibration.clone()));
-    }
-    answers.push(("pose space".to_string(), result.pose_space.clone()));
-    let report = match handeye::report::session::write_session_report(
-        &done.folder,
-        Some(&done.cell.config),
-        answers,
-        result.verdict.clone(),
-    ) {
+    let report = match handeye::report::session::write_run_report(done) {
         Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.
         Err(e) => {

@@ -13,9 +13,10 @@ use nalgebra::Point2;
 
 use super::{FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use crate::camera_model::CameraModel;
+use crate::cell::run::CellRun;
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
-use crate::session::{PoseVisit, SessionError, SessionFolder};
+use crate::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use crate::setup::CornerObservation;
 use crate::solve::{Calibration, NoiseModel};
 use crate::verdict::Verdict;
@@ -36,36 +37,75 @@ pub struct Optics<'a> {
     pub camera: &'a CameraModel,
 }
 
-/// Builds the report input of a session for one or more answers (label, calibration).
+/// Which answer of a session a report shows (the first one is the primary: the one
+/// `result.yaml` holds, whose verdict the page shows).
+#[derive(Debug, Clone)]
+pub enum Answer {
+    /// The answer refined over every detected corner.
+    ReprojectionSpace(Calibration),
+    /// The answer from one board pose per frame (`A = X·B·Y`).
+    PoseSpace(Calibration),
+    /// The answer `result.yaml` holds (a report made again from a session folder).
+    ResultFile(Calibration),
+}
+
+impl Answer {
+    /// Its calibration.
+    pub fn calibration(&self) -> &Calibration {
+        match self {
+            Answer::ReprojectionSpace(c) | Answer::PoseSpace(c) | Answer::ResultFile(c) => c,
+        }
+    }
+
+    /// The label the page shows.
+    pub fn label(&self) -> String {
+        match self {
+            Answer::ReprojectionSpace(_) => "reprojection space".into(),
+            Answer::PoseSpace(_) => "pose space".into(),
+            Answer::ResultFile(c) => format!("result.yaml ({})", c.solver.method.name()),
+        }
+    }
+
+    /// A solved session's answers: the reprojection-space one first when it was computed, then
+    /// the pose-space one.
+    pub fn of(solved: &SolvedSession) -> Vec<Answer> {
+        let mut answers = Vec::new();
+        if solved.reprojection.is_some() {
+            answers.push(Answer::ReprojectionSpace(solved.calibration.clone()));
+        }
+        answers.push(Answer::PoseSpace(solved.pose_space.clone()));
+        answers
+    }
+}
+
+/// Builds the report input of a session for one or more answers, from what it was solved from
+/// (`evidence`: its samples and records; the frames are read from `folder` to draw them).
 ///
 /// Without `optics` the page has no frames and no reprojection bars (everything else is
 /// there). Samples are matched to visits by their id `pose-NNN`.
 pub fn from_session(
     folder: &SessionFolder,
-    answers: Vec<(String, Calibration)>,
+    evidence: &Evidence,
+    answers: Vec<Answer>,
     optics: Option<Optics<'_>>,
     noise: NoiseModel,
 ) -> Result<ReportInput, ReportError> {
-    let dataset = Dataset::load(&folder.samples_path())
-        .map_err(|e| ReportError::Session(Box::new(SessionError::File(e))))?;
-    let visits = folder
-        .read_visits()
-        .map_err(|e| ReportError::Session(Box::new(e)))?;
-    let by_id: HashMap<String, &PoseVisit> = visits
+    let pairs = &evidence.pairs;
+    let by_id: HashMap<String, &PoseVisit> = evidence
+        .visits
         .iter()
         .map(|v| (format!("pose-{:03}", v.plan_index), v))
         .collect();
-    let sample_visits: Vec<Option<&PoseVisit>> = dataset
-        .pairs
+    let sample_visits: Vec<Option<&PoseVisit>> = pairs
         .iter()
         .map(|p| p.id.as_ref().and_then(|id| by_id.get(id).copied()))
         .collect();
 
     let answers: Vec<ReportAnswer> = answers
         .into_iter()
-        .map(|(label, calibration)| {
-            let reprojection_px = dataset
-                .pairs
+        .map(|answer| {
+            let (label, calibration) = (answer.label(), answer.calibration().clone());
+            let reprojection_px = pairs
                 .iter()
                 .zip(&sample_visits)
                 .map(|(pair, visit)| {
@@ -84,7 +124,7 @@ pub fn from_session(
 
     let mut thumbnails = Vec::new();
     if let (Some(optics), Some(primary)) = (optics, answers.first()) {
-        for (sample, (pair, visit)) in dataset.pairs.iter().zip(&sample_visits).enumerate() {
+        for (sample, (pair, visit)) in pairs.iter().zip(&sample_visits).enumerate() {
             let Some(visit) = visit else { continue };
             let predicted = primary
                 .calibration
@@ -108,8 +148,11 @@ pub fn from_session(
     }
     Ok(ReportInput {
         title: folder.root().display().to_string(),
-        setup: dataset.setup,
-        pairs: dataset.pairs,
+        setup: answers
+            .first()
+            .map(|a| a.calibration.setup)
+            .ok_or(ReportError::Empty)?,
+        pairs: pairs.clone(),
         answers,
         thumbnails,
         noise,
@@ -211,31 +254,100 @@ fn annotated_frame(
     Ok(bytes)
 }
 
-/// Writes `<session>/report.html` for a solved session: the answers side by side (labelled;
-/// e.g. reprojection-space and pose-space), annotated frames and reprojection bars when the cell's
-/// board and intrinsics load, and `verdict` — the session solve's, with its leave-one-out
-/// figures (the run passes the one it just made, `handeye report` the one `result.yaml` holds:
-/// nothing is judged twice). Returns the path written.
-pub fn write_session_report(
+/// Writes `<session>/report.html` for a run that just ended, from what the run holds: its
+/// answers, the samples and records its solve read, the board and lens of its cell, its verdict
+/// and arm time (nothing is read again, nothing judged again). Returns the path written.
+pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
+    let solved = &run.solved;
+    // The intrinsics of the config, else the ones the run estimated.
+    let camera = if run.cell.intrinsics_known {
+        Some(run.cell.camera_model)
+    } else {
+        solved.estimated_camera
+    };
+    let optics = camera.as_ref().map(|camera| Optics {
+        board: &run.cell.board,
+        camera,
+    });
+    write(
+        &run.folder,
+        &solved.evidence,
+        Answer::of(solved),
+        optics,
+        run.cell.config.solver.to_options().noise,
+        solved.verdict.clone(),
+        run.arm_time,
+    )
+}
+
+/// Writes `<session>/report.html` for a session folder solved earlier (`handeye report DIR`):
+/// the folder's records read through the session loader, `answer` and `verdict` from its
+/// `result.yaml`, the board and lens from `config` when it loads. Returns the path written
+/// and what the page lacks and why (a board or intrinsics file that cannot be read: no frames).
+pub fn write_folder_report(
     folder: &SessionFolder,
     config: Option<&crate::config::CellConfig>,
-    answers: Vec<(String, Calibration)>,
+    answer: Calibration,
     verdict: Option<Verdict>,
-) -> Result<std::path::PathBuf, ReportError> {
-    let options = config.map(|c| c.solver.to_options()).unwrap_or_default();
-    // The optics are optional: a session moved to another machine still gets a report.
-    let board = config.and_then(|c| Target::load(&c.target).ok());
+) -> Result<(std::path::PathBuf, Vec<String>), ReportError> {
+    let session_error = |e: SessionError| ReportError::Session(Box::new(e));
+    let evidence = Evidence {
+        pairs: Dataset::load(&folder.samples_path())
+            .map_err(|e| session_error(SessionError::File(e)))?
+            .pairs,
+        visits: folder.read_visits().map_err(session_error)?,
+    };
+    let mut lacking = Vec::new();
+    let board = config.and_then(|c| match Target::load(&c.target) {
+        Ok(board) => Some(board),
+        Err(e) => {
+            lacking.push(format!("no frames or reprojection errors: {e}"));
+            None
+        }
+    });
     // Intrinsics from the config, else the ones a from-scratch run estimated into the session.
     let camera_file = config
         .and_then(|c| c.intrinsics.clone())
         .or_else(|| Some(folder.root().join("camera_info.yaml")).filter(|p| p.is_file()));
-    let camera = camera_file.and_then(|file| CameraModel::load(&file).ok());
+    let camera = camera_file.and_then(|file| match CameraModel::load(&file) {
+        Ok(camera) => Some(camera),
+        Err(e) => {
+            lacking.push(format!("no frames or reprojection errors: {e}"));
+            None
+        }
+    });
     let optics = match (&board, &camera) {
         (Some(board), Some(camera)) => Some(Optics { board, camera }),
         _ => None,
     };
-    let mut input = from_session(folder, answers, optics, options.noise)?;
-    input.arm_time = crate::cell::run::ArmTime::load(folder.root());
+    let noise = config
+        .map(|c| c.solver.to_options().noise)
+        .unwrap_or_default();
+    let path = write(
+        folder,
+        &evidence,
+        vec![Answer::ResultFile(answer)],
+        optics,
+        noise,
+        verdict,
+        crate::cell::run::ArmTime::load(folder.root()),
+    )?;
+    Ok((path, lacking))
+}
+
+/// The page of a session: its input from the evidence and answers, the held-out figures from
+/// the verdict, written to `<session>/report.html`.
+fn write(
+    folder: &SessionFolder,
+    evidence: &Evidence,
+    answers: Vec<Answer>,
+    optics: Option<Optics<'_>>,
+    noise: NoiseModel,
+    verdict: Option<Verdict>,
+    arm_time: Option<crate::cell::run::ArmTime>,
+) -> Result<std::path::PathBuf, ReportError> {
+    let mut input = from_session(folder, evidence, answers, optics, noise)?;
+    input.arm_time = arm_time;
     if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
         input.holdout = Some(super::HoldoutSummary {
             description: format!(

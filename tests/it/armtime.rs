@@ -268,13 +268,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
         done.arm_time.expect("a planned run keeps its arm time")
     );
     // ... and the report shows them.
-    let page = handeye::report::session::write_session_report(
-        &done.folder,
-        Some(&done.cell.config),
-        vec![("answer".into(), done.solved.calibration.clone())],
-        done.solved.verdict.clone(),
-    )
-    .unwrap();
+    let page = handeye::report::session::write_run_report(&done).unwrap();
     let html = std::fs::read_to_string(page).unwrap();
     assert!(
         html.contains("data-key=\"arm_time.saved_s\""),

@@ -6,14 +6,10 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
-use handeye::cell;
-use handeye::report::session::write_session_report;
 use handeye::report::{PLOT_KINDS, SECTIONS};
 use handeye::result::ResultFile;
-use handeye::session::{self, SessionEvent, SessionFolder};
 
 use crate::util;
 use util::repo;
@@ -37,27 +33,13 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
             .replace("generate: {count: 20,", "generate: {count: 10,");
         let config = dir.path().join("sim-cell.yaml");
         std::fs::write(&config, text).unwrap();
-        let prepared = cell::prepare(&config).unwrap();
-        let plan = prepared.report.validated().expect("plan passes its checks");
-        let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
-        let mut hardware = prepared.open_hardware().unwrap();
-        let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-        session::run_session(
-            setup,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut |_e: SessionEvent| {},
-        )
-        .unwrap();
-        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
-        let path = write_session_report(
-            &folder,
-            Some(&prepared.config),
-            vec![("result".into(), solved.calibration)],
-            solved.verdict,
-        )
-        .unwrap();
+        // A fixed plan: the report's samples are the plan's ten poses.
+        let text = std::fs::read_to_string(&config)
+            .unwrap()
+            .replace("plan:\n", "plan:\n  adaptive: false\n");
+        std::fs::write(&config, text).unwrap();
+        let done = util::run_cell(&config, &dir.path().join("s"));
+        let path = handeye::report::session::write_run_report(&done).unwrap();
         (dir, path)
     })
 }
@@ -371,7 +353,9 @@ fn plot_axes_are_named_and_legends_sit_beside_the_data() {
         assert!(text_x(&html, kind, axis).is_finite());
         // The plot is 900 px wide, its legend column the last 190.
         assert!(text_x(&html, kind, "flagged outlier") > 710.0, "{kind}");
-        assert!(text_x(&html, kind, "result") > 710.0, "{kind}");
+        for answer in ["reprojection space", "pose space"] {
+            assert!(text_x(&html, kind, answer) > 710.0, "{kind}: {answer}");
+        }
     }
     for label in [
         "flange at each sample",

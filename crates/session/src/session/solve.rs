@@ -46,6 +46,18 @@ pub struct SolvedSession {
     pub summary: String,
     /// GOOD / CHECK / REDO and why, from the same figures the result file and report show.
     pub verdict: Option<Verdict>,
+    /// What it was solved from, as read once: the report renders these, it reads nothing again.
+    pub evidence: Evidence,
+}
+
+/// What a session was solved from: its samples (`samples.yaml`) and its pose records
+/// (`poses/NNN.yaml`, with the corners and frames), as the solve read them.
+#[derive(Debug, Clone, Default)]
+pub struct Evidence {
+    /// The pose pairs solved, ids `pose-NNN`.
+    pub pairs: Vec<PosePair>,
+    /// Every visited pose's record.
+    pub visits: Vec<PoseVisit>,
 }
 
 /// What solving a session needs besides its folder: the board and the intrinsics, loaded once
@@ -147,7 +159,11 @@ pub fn load_and_solve(
     }
     let dataset = committed_samples(folder, &visits)?;
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
+    let mut solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
+    solved.evidence = Evidence {
+        pairs: dataset.pairs.clone(),
+        visits,
+    };
     Ok((solved, dataset))
 }
 
@@ -338,6 +354,7 @@ fn solve_from_scratch(
         estimated_camera: Some(camera),
         summary: String::new(),
         verdict: None,
+        evidence: Evidence::default(),
     };
     let c = &scratch.joint.camera;
     let i = &scratch.initial;
@@ -364,6 +381,10 @@ fn solve_from_scratch(
         pairs,
     };
     dataset.save(&folder.samples_path())?;
+    solved.evidence = Evidence {
+        pairs: dataset.pairs.clone(),
+        visits,
+    };
     Ok((solved, dataset))
 }
 
@@ -462,6 +483,7 @@ pub fn solve_session(
         estimated_camera: None,
         summary: String::new(),
         verdict: None,
+        evidence: Evidence::default(),
     };
     let mut notes = Vec::new();
     if let Some((board, camera)) = vision {
