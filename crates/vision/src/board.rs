@@ -17,6 +17,7 @@ use nalgebra::{Point2, Point3};
 use serde::Deserialize;
 
 use super::family::{FamilyLayout, TagFamily};
+use super::target::read_board_file;
 use super::TargetError;
 
 /// The board YAML: Kalibr's aprilgrid keys plus ours; anything else is refused.
@@ -95,11 +96,7 @@ pub struct Board {
 impl Board {
     /// Reads a board YAML file.
     pub fn load(path: &Path) -> Result<Self, TargetError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TargetError::Io {
-            path: path.to_path_buf(),
-            source: handeye_core::yaml_file::name_symlink_loop(path, source),
-        })?;
-        Self::from_yaml_str(&text, path)
+        Self::from_yaml_str(&read_board_file(path)?, path)
     }
 
     /// Parses board YAML text; `path` names the source in errors.

@@ -20,6 +20,7 @@ use super::chessboard::{Checkerboard, CheckerboardFile};
 use super::detect::{BoardDetection, DetectorOptions, TagDetector};
 use super::TargetError;
 use handeye_core::setup::CornerObservation;
+use handeye_core::yaml_file::{name_symlink_loop, MAX_TEXT_BYTES};
 
 /// A calibration target.
 #[derive(Debug, Clone)]
@@ -66,14 +67,33 @@ impl From<Board> for Target {
     }
 }
 
+/// A board file's text, with the path (and a symbolic link loop in it) named in the error; a
+/// file larger than any text file handeye reads ([`MAX_TEXT_BYTES`]) is refused, not read.
+pub(crate) fn read_board_file(path: &Path) -> Result<String, TargetError> {
+    use std::io::Read;
+    let io = |source: std::io::Error| TargetError::Io {
+        path: path.to_path_buf(),
+        source: name_symlink_loop(path, source),
+    };
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_TEXT_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > MAX_TEXT_BYTES {
+        return Err(io(std::io::Error::other(format!(
+            "larger than {} MiB: not a board file",
+            MAX_TEXT_BYTES >> 20
+        ))));
+    }
+    Ok(text)
+}
+
 impl Target {
     /// Reads a board YAML file.
     pub fn load(path: &Path) -> Result<Self, TargetError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TargetError::Io {
-            path: path.to_path_buf(),
-            source: handeye_core::yaml_file::name_symlink_loop(path, source),
-        })?;
-        Self::from_yaml_str(&text, path)
+        Self::from_yaml_str(&read_board_file(path)?, path)
     }
 
     /// Parses board YAML text; `path` names the source in errors.
