@@ -714,3 +714,61 @@ fn a_far_off_robot_pose_is_flagged_and_left_out_with_corrections_on() {
         assert!(mm < 0.15 && deg < 0.01, "{mm:.3} mm, {deg:.4}°");
     }
 }
+
+/// Issue #30 (third finding): an arm that repeats better than configured (the mock UR
+/// controller is perfectly repeatable) gets information, not a warning that makes the verdict
+/// CHECK; robot poses that scatter far more than configured still get a warning.
+#[test]
+fn an_arm_better_than_configured_is_information_and_a_far_worse_one_a_warning() {
+    use handeye::notice::Severity;
+    let camera = sim_camera();
+    let robot_notice = |robot_sigma: (f64, f64), configured: (f64, f64)| {
+        let s = scenario(41, 16, 0.1, robot_sigma, false);
+        let pose = solve::solve(Setup::EyeInHand, &s.pairs, &pose_options()).unwrap();
+        let refined = refine_reprojection(
+            Setup::EyeInHand,
+            &s.frames,
+            &camera,
+            &pose.camera_mount,
+            &pose.target_mount,
+            &ReprojectionOptions {
+                estimate_noise: true,
+                robot_prior: Some(RobotPrior {
+                    translation_sigma_m: configured.0,
+                    rotation_sigma_rad: configured.1,
+                }),
+                ..ReprojectionOptions::default()
+            },
+        )
+        .unwrap();
+        let (truth_camera, _) = truth();
+        let (mm, _) = pose_error_mm_deg(&refined.camera_mount, &truth_camera);
+        let notice = refined
+            .notices
+            .iter()
+            .find(|n| n.kind == NoticeKind::NoiseEstimate)
+            .cloned()
+            .unwrap_or_else(|| panic!("no robot-repeatability notice: {:#?}", refined.notices));
+        (notice, mm)
+    };
+    // A perfect arm, configured at a UR's 0.03 mm / 0.003°.
+    let (better, mm) = robot_notice((1e-9, 1e-9), (0.03e-3, 0.003f64.to_radians()));
+    assert_eq!(better.severity, Severity::Info, "{better:?}");
+    assert!(
+        better.message.contains("repeats better than configured"),
+        "{}",
+        better.message
+    );
+    assert!(mm < 0.1, "the answer is good ({mm:.3} mm off)");
+    // Poses scattered by 2 mm / 0.2°, configured at 0.01 mm / 0.001°.
+    let (worse, _) = robot_notice(
+        (2e-3, 0.2f64.to_radians()),
+        (0.01e-3, 0.001f64.to_radians()),
+    );
+    assert_eq!(worse.severity, Severity::Warning, "{worse:?}");
+    assert!(
+        worse.message.contains("check the configured repeatability"),
+        "{}",
+        worse.message
+    );
+}

@@ -349,8 +349,9 @@ pub struct ResumedSession {
     pub folder: SessionFolder,
     /// Its manifest, with the input files of this run when changes were accepted.
     pub manifest: session::SessionManifest,
-    /// Whether `manifest` took accepted input changes not written to the folder yet.
-    pub inputs_changed: bool,
+    /// Whether `manifest` changed (accepted input changes, or the mark of a hand-guided session
+    /// a planned resume handed over) and is not written to the folder yet.
+    pub manifest_changed: bool,
 }
 
 /// A run opened: the cell prepared and its plan checked, the input files it uses, and for a
@@ -399,7 +400,7 @@ pub fn open_run(
             for note in folder.notes() {
                 observer.note(note);
             }
-            let inputs_changed = check_resumed_inputs(
+            let manifest_changed = check_resumed_inputs(
                 &folder,
                 &mut manifest,
                 &inputs,
@@ -409,7 +410,7 @@ pub fn open_run(
             Some(ResumedSession {
                 folder,
                 manifest,
-                inputs_changed,
+                manifest_changed,
             })
         }
         None => None,
@@ -548,7 +549,7 @@ pub fn drive(
             if let Some(resumed) = &mut resumed {
                 if !resumed.manifest.manual {
                     resumed.manifest.manual = true;
-                    resumed.inputs_changed = true;
+                    resumed.manifest_changed = true;
                 }
             }
             guide.prepared(&cell);
@@ -619,7 +620,7 @@ pub fn drive(
         Some(ResumedSession {
             folder,
             manifest,
-            inputs_changed,
+            manifest_changed,
         }) => {
             // An adaptive or hand-guided session's plan is what it chose so far: it continues
             // from there. A fixed plan ordered for travel time from where the arm stood then
@@ -634,7 +635,7 @@ pub fn drive(
                     }
                 }
             }
-            if inputs_changed {
+            if manifest_changed {
                 folder.write_manifest(&manifest)?;
             }
             folder

@@ -53,15 +53,32 @@ pub(super) fn noise_notes(report: &NoiseReport) -> Vec<Notice> {
         ));
     }
     if let Some((used, given)) = report.robot_at_bound {
-        notes.push(Notice::warning(NoticeKind::NoiseEstimate, format!(
-            "the robot repeatability the residuals show ({:.4} mm, {:.5}°) is at the bound of {}x-{}x the configured one ({:.4} mm, {:.5}°): check the configured repeatability",
+        let figures = format!(
+            "({:.4} mm, {:.5}°; configured {:.4} mm, {:.5}°)",
             used.translation_sigma_m * 1e3,
             used.rotation_sigma_rad.to_degrees(),
-            ROBOT_SIGMA_RANGE.0,
-            ROBOT_SIGMA_RANGE.1,
             given.translation_sigma_m * 1e3,
             given.rotation_sigma_rad.to_degrees(),
-        )));
+        );
+        if used.translation_sigma_m < given.translation_sigma_m
+            || used.rotation_sigma_rad < given.rotation_sigma_rad
+        {
+            // An arm that repeats better than its data sheet is no reason to doubt the answer:
+            // its poses are weighed as if a little worse than they are, which costs nothing
+            // measurable. Information, not a warning.
+            notes.push(Notice::info(NoticeKind::NoiseEstimate, format!(
+                "the robot repeats better than configured: its poses agree to {}x the configured repeatability or better {figures}; the estimate stops there, which does not affect the answer (set `robot.repeatability_mm` / `_deg` lower to weigh it as it is)",
+                ROBOT_SIGMA_RANGE.0,
+            )));
+        } else {
+            // Far worse than configured: robot poses off by more than the arm's own repeatability
+            // (a wrong TCP, a loose mount, poses read at the wrong moment) can make the answer
+            // wrong.
+            notes.push(Notice::warning(NoticeKind::NoiseEstimate, format!(
+                "the robot poses scatter {}x the configured repeatability or more {figures}: check the configured repeatability, and that the recorded flange poses are the arm's (TCP, timing, a loose mount)",
+                ROBOT_SIGMA_RANGE.1,
+            )));
+        }
     }
     notes
 }
