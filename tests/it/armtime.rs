@@ -259,20 +259,21 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
     // The arm-time figures are kept in the session for the report.
     let kept = std::fs::read_to_string(done.folder.root().join(cell_run::ArmTime::FILE)).unwrap();
     assert!(kept.contains("full_plan_estimate_s"), "{kept}");
+    // The demo's instant moves measure no arm time, and claim no saving (issue #30).
     assert!(
-        done.arm_time
+        !done
+            .arm_time
             .expect("a planned run keeps its arm time")
-            .saved_s()
-            > 0.0,
+            .measured(),
         "{}",
         done.arm_time.expect("a planned run keeps its arm time")
     );
-    // ... and the report shows them.
+    // ... and the report says so.
     let page = handeye::report::session::write_run_report(&done).unwrap();
     let html = std::fs::read_to_string(page).unwrap();
     assert!(
-        html.contains("data-key=\"arm_time.saved_s\""),
-        "no arm time in the report"
+        html.contains("Arm time: not measured") && !html.contains("data-key=\"arm_time.saved_s\""),
+        "the report claims a saving for instant moves"
     );
 
     // A tighter target needs more poses than the minimum, and stops as soon as it is met.
@@ -510,4 +511,40 @@ mod through_ur_rtde {
             mock.shutdown();
         });
     }
+}
+
+/// Issue #30: the demo cell's instant moves (robot.move_duration_s: 0) measure only the loop's
+/// own milliseconds; the run says arm time was not measured instead of "100 % saved".
+#[test]
+fn the_demo_cells_instant_moves_say_arm_time_was_not_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::sim_cell(dir.path(), 8);
+    let done = util::run_cell(&config, &dir.path().join("session"));
+    let arm_time = done.arm_time.expect("a planned run keeps its arm time");
+    assert!(!arm_time.measured(), "{arm_time}");
+    let text = arm_time.to_string();
+    assert!(
+        text.contains("not measured") && !text.contains("saved"),
+        "{text}"
+    );
+
+    // Moves that take time are measured, and the report shows the saving.
+    let timed = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "timed.yaml",
+        &[
+            ("count: 20", "count: 8"),
+            ("move_duration_s: 0.0", "move_duration_s: 0.05"),
+        ],
+    );
+    let done = util::run_cell(&timed, &dir.path().join("timed"));
+    let arm_time = done.arm_time.expect("a planned run keeps its arm time");
+    assert!(arm_time.measured() && arm_time.moving_s > 0.3, "{arm_time}");
+    let page = handeye::report::session::write_run_report(&done).unwrap();
+    let html = std::fs::read_to_string(page).unwrap();
+    assert!(
+        html.contains("data-key=\"arm_time.saved_s\""),
+        "no arm time in the report"
+    );
 }

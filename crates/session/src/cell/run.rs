@@ -135,9 +135,11 @@ impl ArmTime {
     }
 
     /// Whether arm time was measured: a simulated arm that moves instantly
-    /// (`robot.move_duration_s: 0`) spends none, and then nothing was saved either.
+    /// (`robot.move_duration_s: 0`) spends none — only the microseconds of the loop itself,
+    /// under 10 ms a pose — and then nothing was saved either. (A real arm's move and settle
+    /// take a second or more.)
     pub fn measured(&self) -> bool {
-        self.poses == 0 || self.spent_s() > 0.0
+        self.poses == 0 || self.spent_s() >= 0.01 * self.poses as f64
     }
 
     /// The file in a session folder that keeps it (written after the run, read by the report).
@@ -974,6 +976,13 @@ mod tests {
             text.contains("not measured") && !text.contains("saved"),
             "{text}"
         );
+        // What the demo's instant moves really measure: the loop's own few milliseconds.
+        let loop_only = ArmTime {
+            moving_s: 0.0004,
+            settling_s: 0.0031,
+            ..instant
+        };
+        assert!(!loop_only.measured(), "{loop_only}");
         let real = ArmTime {
             moving_s: 9.0,
             settling_s: 1.0,
