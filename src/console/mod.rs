@@ -41,6 +41,9 @@ pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 /// bounded however long a session runs.
 const HISTORY: usize = 8000;
 
+/// Commands waiting for the run to take them, at most.
+const COMMAND_QUEUE: usize = 64;
+
 /// Events a connected page may fall behind by before it is dropped (it reconnects and catches
 /// up from the history).
 const LAG: usize = 1024;
@@ -99,7 +102,8 @@ pub(crate) struct Hub {
     /// Set when the run is over: each page gets what is queued for it, then a Close.
     closing: tokio::sync::watch::Sender<bool>,
     stop: Arc<AtomicBool>,
-    commands: Mutex<mpsc::Sender<Command>>,
+    /// Bounded: a page that sends commands faster than the run takes them cannot grow it.
+    commands: Mutex<mpsc::SyncSender<Command>>,
     report: Mutex<Option<PathBuf>>,
     /// Host, Origin and secret checks.
     gate: gate::Gate,
@@ -109,6 +113,8 @@ pub(crate) struct Hub {
     refusals: AtomicUsize,
     /// Accepts that failed on our side (out of descriptors, say).
     accept_failures: AtomicUsize,
+    /// Commands dropped because the queue was full.
+    dropped_commands: AtomicUsize,
 }
 
 /// A page's place among the [`server::MAX_PAGES`]; given back when dropped.
@@ -194,7 +200,14 @@ impl Hub {
             self.stop.store(true, Ordering::SeqCst);
         }
         let sender = self.commands.lock().unwrap_or_else(|e| e.into_inner());
-        let _ = sender.send(command);
+        // A full queue means commands arrive faster than a person could mean them: the extra
+        // ones are dropped (STOP has already set the flag above).
+        if let Err(mpsc::TrySendError::Full(command)) = sender.try_send(command) {
+            let n = self.dropped_commands.fetch_add(1, Ordering::Relaxed) + 1;
+            if log_nth(n) {
+                tracing::warn!("console: {command:?} dropped: {COMMAND_QUEUE} commands are waiting for the run ({n} dropped so far)");
+            }
+        }
     }
 
     pub(crate) fn frames(&self) -> tokio::sync::watch::Receiver<Option<axum::body::Bytes>> {
@@ -238,7 +251,7 @@ impl Console {
             .set_nonblocking(true)
             .map_err(ConsoleError::Start)?;
         let addr = listener.local_addr().map_err(ConsoleError::Start)?;
-        let (commands_tx, commands_rx) = mpsc::channel();
+        let (commands_tx, commands_rx) = mpsc::sync_channel(COMMAND_QUEUE);
         let hub = Arc::new(Hub {
             events: tokio::sync::broadcast::channel(LAG).0,
             history: Mutex::new(VecDeque::new()),
@@ -251,6 +264,7 @@ impl Console {
             pages: AtomicUsize::new(0),
             refusals: AtomicUsize::new(0),
             accept_failures: AtomicUsize::new(0),
+            dropped_commands: AtomicUsize::new(0),
         });
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_io()

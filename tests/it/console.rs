@@ -506,3 +506,25 @@ fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
 }
 
 mod security;
+
+/// A page (or terminal) that sends commands faster than the run takes them cannot grow the
+/// queue without bound: what is beyond it is dropped, STOP still sets the flag at once.
+#[test]
+fn the_command_queue_is_bounded_and_stop_still_gets_through() {
+    let stop = Arc::new(AtomicBool::new(false));
+    let console = Console::start(&loopback(), stop.clone()).unwrap();
+    let sender = console.command_sender();
+    for _ in 0..10_000 {
+        sender.send(handeye::console::Command::Capture);
+    }
+    sender.send(handeye::console::Command::Stop);
+    assert!(
+        stop.load(Ordering::SeqCst),
+        "STOP set the flag even with a full queue"
+    );
+    let mut queued = 0;
+    while console.next_command(Duration::from_millis(10)).is_some() {
+        queued += 1;
+    }
+    assert!((1..=64).contains(&queued), "{queued} commands were queued");
+}

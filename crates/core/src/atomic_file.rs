@@ -140,8 +140,9 @@ fn remove_if_unlocked(path: &Path) -> Option<u64> {
     Some(before.len())
 }
 
-/// Whether the open `file` is the file at `path` now.
-fn same_file(file: &File, path: &Path) -> bool {
+/// Whether the open `file` is the file at `path` now (not removed, renamed away or replaced
+/// since it was opened): what a lock on an open file proves about a path.
+pub fn same_file(file: &File, path: &Path) -> bool {
     let (Ok(open), Ok(named)) = (file.metadata(), std::fs::symlink_metadata(path)) else {
         return false;
     };

@@ -20,6 +20,8 @@ use std::path::{Path, PathBuf};
 
 use fs4::{FileExt, TryLockError};
 
+use handeye_core::atomic_file::same_file;
+
 use super::lock::read_pid;
 use super::SessionError;
 
@@ -40,23 +42,6 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SessionError + '_ {
     }
 }
 
-/// Whether `file` is still the file at `path` (not removed or replaced since it was opened).
-fn is_file_at(file: &File, path: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        match (file.metadata(), std::fs::metadata(path)) {
-            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
-            _ => false,
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = file;
-        path.exists()
-    }
-}
-
 impl Staging {
     /// Creates and locks a staging folder `.<name>.<tag>-XXXXXX` in `parent` (which must exist).
     pub fn create(parent: &Path, name: &str, tag: &str) -> Result<Staging, SessionError> {
@@ -72,7 +57,7 @@ impl Staging {
                     source: e.error,
                 })?;
             // A cleanup that took this file before us removed it: start again with a new name.
-            if FileExt::try_lock(&file).is_err() || !is_file_at(&file, &lock_path) {
+            if FileExt::try_lock(&file).is_err() || !same_file(&file, &lock_path) {
                 continue;
             }
             let dir = lock_path.with_extension("");
@@ -174,7 +159,7 @@ pub fn remove_abandoned(parent: &Path, tag: &str) -> Result<Vec<Leftover>, Sessi
         };
         match lock {
             Some(mut file) => match FileExt::try_lock(&file) {
-                Ok(()) if is_file_at(&file, &lock_path) => {
+                Ok(()) if same_file(&file, &lock_path) => {
                     remove_dir(&path)?;
                     let _ = std::fs::remove_file(&lock_path);
                     found.push(Leftover::Removed(path));
@@ -202,7 +187,7 @@ pub fn remove_abandoned(parent: &Path, tag: &str) -> Result<Vec<Leftover>, Sessi
         };
         // Locked: a staging folder being created (its folder comes next), or a process that has
         // just finished with it. Free and still without its folder: a finished one's leftover.
-        if FileExt::try_lock(&file).is_ok() && is_file_at(&file, &lock_path) && !dir.exists() {
+        if FileExt::try_lock(&file).is_ok() && same_file(&file, &lock_path) && !dir.exists() {
             let _ = std::fs::remove_file(&lock_path);
         }
     }
