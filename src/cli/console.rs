@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use clap::Args;
 
-use handeye::cell::run::{RunRequest, SessionTarget};
+use handeye::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
 use handeye::console::manual::run_manual;
 use handeye::console::{Command, Console, ConsoleEvent, ConsoleOptions};
 use handeye::session::SolvedSession;
@@ -60,7 +60,6 @@ pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     super::stop_on_signals(stop.clone());
     let console = start(args.addr, args.public, stop.clone())?;
-    terminal_commands(&console);
     let request = RunRequest {
         config: args.config.clone(),
         target,
@@ -69,16 +68,37 @@ pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
         stop,
     };
     let mut printer = super::run::Printer::new(request.stop.clone());
-    let done = match run_manual(&request, &console, &mut printer) {
-        Ok(done) => done,
+    let opened = match open_run(&request, &mut printer) {
+        Ok(opened) => opened,
         Err(e) => {
             let e = anyhow::Error::from(e);
             failed(&console, &e, args.wait);
             return Err(e);
         }
     };
+    hand_guided(&console, &request, opened, printer, args.wait)
+}
+
+/// A hand-guided session of a run opened already (by `handeye console`, or by `handeye run` of a
+/// hand-guided config or session) on `console`, to its end: the verdict, the report.
+pub(super) fn hand_guided(
+    console: &Console,
+    request: &RunRequest,
+    opened: OpenedRun,
+    mut printer: super::run::Printer,
+    wait: bool,
+) -> anyhow::Result<()> {
+    terminal_commands(console);
+    let done = match run_manual(opened, request, console, &mut printer) {
+        Ok(done) => done,
+        Err(e) => {
+            let e = anyhow::Error::from(e);
+            failed(console, &e, wait);
+            return Err(e);
+        }
+    };
     let (report, next) = super::run::finish_run(&done)?;
-    finished(&console, &done.solved, report, next, args.wait);
+    finished(console, &done.solved, report, next, wait);
     Ok(())
 }
 

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
+use handeye::cell::run::{open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
 use handeye::cell::{self, PreparedCell};
 use handeye::console::ConsoleObserver;
 use handeye::session::SessionEvent;
@@ -50,24 +50,6 @@ pub struct RunArgs {
 
 /// Runs `handeye run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    // A hand-guided session — `plan: {manual: true}` for a new one, a session `handeye console`
-    // recorded for a resume — goes on by hand on the console (as `handeye console`).
-    if let Some(why) = hand_guided(&args) {
-        outln!("{why}: hand-guided capture on the console (as `handeye console`)");
-        return super::console::run(super::console::ConsoleArgs {
-            config: args.config,
-            out: args.out,
-            resume: args.resume,
-            accept_changed: args.accept_changed,
-            addr: match args.console {
-                Some(addr) => addr,
-                None => handeye::console::DEFAULT_ADDR.parse()?,
-            },
-            public: args.console_public,
-            yes: args.yes,
-            wait: args.console_wait,
-        });
-    }
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),
@@ -88,55 +70,42 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         )?),
         None => None,
     };
-    let mut printer = Printer::new(stop);
+    let mut printer = Printer::new(stop.clone());
+    let failed = |console: &Option<handeye::console::Console>, e: RunError| {
+        let e = anyhow::Error::from(e);
+        if let Some(console) = console {
+            super::console::failed(console, &e, args.console_wait);
+        }
+        e
+    };
+    // The plan check is printed; the page is shown the cell when the run's strategy is known.
+    let opened = open_run(&request, &mut printer).map_err(|e| failed(&console, e))?;
+    // A hand-guided session — `plan: {manual: true}` for a new one, a session `handeye console`
+    // recorded for a resume — goes on by hand on the console (as `handeye console`).
+    if let Some(why) = opened.hand_guided() {
+        outln!("{why}: hand-guided capture on the console (as `handeye console`)");
+        let console = match console {
+            Some(console) => console,
+            None => super::console::start(handeye::console::DEFAULT_ADDR.parse()?, false, stop)?,
+        };
+        return super::console::hand_guided(&console, &request, opened, printer, args.console_wait);
+    }
     let done = match &console {
         Some(console) => {
             let mut observer = ConsoleObserver::new(&mut printer, console);
-            let done = cell::run::run(&request, cell::run::Strategy::Planned, &mut observer);
+            observer.show_cell(&opened.cell);
+            let done = cell::run::run_opened(opened, &request, Strategy::Planned, &mut observer);
             observer.flush();
-            match done {
-                Ok(done) => done,
-                Err(e) => {
-                    let e = anyhow::Error::from(e);
-                    super::console::failed(console, &e, args.console_wait);
-                    return Err(e);
-                }
-            }
+            done
         }
-        None => cell::run::run(&request, cell::run::Strategy::Planned, &mut printer)?,
+        None => cell::run::run_opened(opened, &request, Strategy::Planned, &mut printer),
     };
+    let done = done.map_err(|e| failed(&console, e))?;
     let (report, next) = finish_run(&done)?;
     if let Some(console) = &console {
         super::console::finished(console, &done.solved, report, next, args.console_wait);
     }
     Ok(())
-}
-
-/// Why the run is hand-guided (`Some`): a new run's config says `plan.manual`; a resumed session
-/// was recorded by hand (its manifest says so, or its config says `plan.manual`).
-fn hand_guided(args: &RunArgs) -> Option<&'static str> {
-    let manual_config = |config: &std::path::Path| {
-        // A config that does not load is reported by the run itself.
-        handeye::config::CellConfig::load(config).is_ok_and(|c| c.plan.manual)
-    };
-    match (&args.resume, &args.config) {
-        (None, Some(config)) => manual_config(config).then_some("plan.manual"),
-        (Some(dir), config) => {
-            // A folder that is not a session is reported by the resume itself.
-            let Ok(manifest) = handeye::session::SessionFolder::open(dir)
-                .and_then(|folder| folder.read_manifest())
-            else {
-                return None;
-            };
-            if manifest.manual {
-                Some("a hand-guided session")
-            } else {
-                manual_config(config.as_deref().unwrap_or(manifest.config.as_path()))
-                    .then_some("plan.manual")
-            }
-        }
-        (None, None) => None,
-    }
 }
 
 /// Prints a finished run's result, writes its report; returns the report's path (when it could

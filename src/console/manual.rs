@@ -6,7 +6,9 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::cell::run::{run, CellRun, HandGuide, RunError, RunObserver, RunRequest, Strategy};
+use crate::cell::run::{
+    run_opened, CellRun, HandGuide, OpenedRun, RunError, RunObserver, RunRequest, Strategy,
+};
 use crate::cell::PreparedCell;
 use crate::geometry::Pose;
 use crate::robot::Joints;
@@ -21,9 +23,10 @@ use super::observer::{
 use super::Console;
 
 /// Runs a hand-guided session of a cell on `console` until the page (or terminal) finishes it,
-/// then solves it: the one run ([`run`]) with the console as the person's side. `observer`
+/// then solves it: the run `opened` ([`run_opened`]) with the console as the person's side. `observer`
 /// hears what the terminal prints (notes, per-capture lines).
 pub fn run_manual(
+    opened: OpenedRun,
     request: &RunRequest,
     console: &Console,
     observer: &mut dyn RunObserver,
@@ -32,7 +35,7 @@ pub fn run_manual(
         console,
         view: None,
     };
-    run(request, Strategy::HandGuided(&mut guide), observer)
+    run_opened(opened, request, Strategy::HandGuided(&mut guide), observer)
 }
 
 /// The console as the person's side of a hand-guided run: it shows the cell, the suggestions

@@ -118,12 +118,20 @@ pub(crate) fn wait_for_confirmation(
     }
 }
 
-impl RunObserver for ConsoleObserver<'_> {
-    fn plan_checked(&mut self, cell: &PreparedCell) {
-        self.inner.plan_checked(cell);
+impl ConsoleObserver<'_> {
+    /// Shows the page the cell of a run opened before this observer was made (its plan check
+    /// was told to the terminal only).
+    pub fn show_cell(&mut self, cell: &PreparedCell) {
         let (event, view) = cell_events(cell, false);
         self.console.publish(&event);
         self.cell = Some(view);
+    }
+}
+
+impl RunObserver for ConsoleObserver<'_> {
+    fn plan_checked(&mut self, cell: &PreparedCell) {
+        self.inner.plan_checked(cell);
+        self.show_cell(cell);
     }
 
     fn confirm_motion(

@@ -6,8 +6,8 @@
 //! e.g. the pose-space and a reprojection-space answer) and the page layout, in the order a
 //! person reads it: the verdict card (GOOD / CHECK / REDO, made by `verdict`, the same as the
 //! terminal and `result.yaml` show); "use it" (the primary answer as `handeye export` writes it
-//! for ROS 2, URDF, UR and OpenCV, with copy buttons); the evidence (findings — health checks
-//! also from `verdict` —, residual plots, a per-pose table that sorts on a click, frames that
+//! for ROS 2, URDF, UR and OpenCV, with copy buttons); the evidence (the solvers' own notices —
+//! the health checks are the verdict's, on its card —, residual plots, a per-pose table that sorts on a click, frames that
 //! open full size, the cell sketch, rotation axes); the details (every number of every answer,
 //! solver convergence). The verdict card, the "use it" snippets, the per-answer transforms and
 //! their forms ([`export_forms`]) are written by `sections.rs`; the plots are drawn with
@@ -33,8 +33,8 @@ use std::path::{Path, PathBuf};
 use crate::atomic_file::write_atomic;
 use crate::notice::Notice;
 use crate::setup::{PosePair, Setup};
-use crate::solve::{rotation_diversity, Calibration, NoiseModel};
-use crate::verdict::{self, Verdict};
+use crate::solve::Calibration;
+use crate::verdict::Verdict;
 
 use base64::prelude::{Engine as _, BASE64_STANDARD};
 pub use sections::export_forms;
@@ -92,8 +92,6 @@ pub struct ReportInput {
     /// The annotated frames, shown small and full size on a click (may be empty for a plain
     /// dataset).
     pub thumbnails: Vec<FrameThumbnail>,
-    /// The noise model the solver was told (for the "large residual" warning).
-    pub noise: NoiseModel,
     /// Held-out prediction errors, when computed.
     pub holdout: Option<HoldoutSummary>,
     /// The verdict on the primary answer as the session's solve judged it (the one
@@ -205,7 +203,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
         notices.iter().partition(|n| n.needs_attention());
     html.push_str("<section id=\"warnings\"><h3>Findings</h3>\n");
     if attention.is_empty() {
-        html.push_str("<p class=\"ok\">No warnings: enough poses, good rotation spread, residuals as expected.</p>\n");
+        html.push_str("<p class=\"ok\">No warnings from the solver (the checks on the poses and residuals are on the verdict card).</p>\n");
     } else {
         html.push_str("<ul>\n");
         for n in &attention {
@@ -248,17 +246,14 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
     html.push_str("</section>\n");
 
-    let diversity = rotation_diversity(
-        &input
-            .pairs
-            .iter()
-            .map(|p| p.base_from_flange)
-            .collect::<Vec<_>>(),
-    );
+    // The spread the verdict measured (the page measures nothing itself).
+    let spread = verdict
+        .and_then(|v| v.figures.rotation_off_axis_deg)
+        .map(|deg| format!(" Largest rotation off the dominant axis: {deg:.1}°."))
+        .unwrap_or_default();
     let _ = write!(
         html,
-        "<section id=\"rotation-axes\"><h3>Relative rotation axes</h3>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction. Largest rotation off the dominant axis: {:.1}°.</p>\n",
-        diversity.off_axis_deg
+        "<section id=\"rotation-axes\"><h3>Relative rotation axes</h3>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.{spread}</p>\n"
     );
     figure(
         &mut html,
@@ -400,21 +395,23 @@ pub fn write_report(path: &Path, input: &ReportInput) -> Result<(), ReportError>
     })
 }
 
-/// Plain-language notices: the solver's own, plus too few poses, poor rotation spread, and per
-/// answer a likely convention error or residuals beyond the noise model, each saying what to do.
-/// The health checks are `verdict`'s ([`verdict::coverage_notices`],
-/// [`verdict::residual_notice`]): the same the verdict, the terminal and the result file use.
+/// What each answer's solver said about how it was made (prefixed with the answer's label).
+/// The checks on the evidence — too few poses, poor rotation spread, residuals beyond the noise
+/// model — are the verdict's, judged once by the run and shown on its card: the page never
+/// judges again.
 pub fn notices(input: &ReportInput) -> Vec<Notice> {
-    let mut out = verdict::coverage_notices(&input.pairs);
-    for answer in &input.answers {
-        let c = &answer.calibration;
-        let label = &answer.label;
-        if let Some(n) = verdict::residual_notice(c, &input.pairs, &input.noise) {
-            out.push(n.prefixed(label));
-        }
-        out.extend(c.notices.iter().map(|w| w.prefixed(label)));
-    }
-    out
+    input
+        .answers
+        .iter()
+        .flat_map(|answer| {
+            let label = &answer.label;
+            answer
+                .calibration
+                .notices
+                .iter()
+                .map(move |n| n.prefixed(label))
+        })
+        .collect()
 }
 
 /// HTML text escaping.

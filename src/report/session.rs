@@ -18,7 +18,7 @@ use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use crate::setup::CornerObservation;
-use crate::solve::{Calibration, NoiseModel};
+use crate::solve::Calibration;
 use crate::verdict::Verdict;
 use crate::vision::{draw, Target};
 
@@ -88,7 +88,6 @@ pub fn from_session(
     evidence: &Evidence,
     answers: Vec<Answer>,
     optics: Option<Optics<'_>>,
-    noise: NoiseModel,
 ) -> Result<ReportInput, ReportError> {
     let pairs = &evidence.pairs;
     let by_id: HashMap<String, &PoseVisit> = evidence
@@ -155,7 +154,6 @@ pub fn from_session(
         pairs: pairs.clone(),
         answers,
         thumbnails,
-        noise,
         holdout: None,
         verdict: None,
         arm_time: None,
@@ -274,7 +272,6 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
         &solved.evidence,
         Answer::of(solved),
         optics,
-        run.cell.config.solver.to_options().noise,
         solved.verdict.clone(),
         run.arm_time,
     )
@@ -320,15 +317,11 @@ pub fn write_folder_report(
         (Some(board), Some(camera)) => Some(Optics { board, camera }),
         _ => None,
     };
-    let noise = config
-        .map(|c| c.solver.to_options().noise)
-        .unwrap_or_default();
     let path = write(
         folder,
         &evidence,
         vec![Answer::ResultFile(answer)],
         optics,
-        noise,
         verdict,
         crate::cell::run::ArmTime::load(folder.root()),
     )?;
@@ -342,11 +335,10 @@ fn write(
     evidence: &Evidence,
     answers: Vec<Answer>,
     optics: Option<Optics<'_>>,
-    noise: NoiseModel,
     verdict: Option<Verdict>,
     arm_time: Option<crate::cell::run::ArmTime>,
 ) -> Result<std::path::PathBuf, ReportError> {
-    let mut input = from_session(folder, evidence, answers, optics, noise)?;
+    let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
     if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
         input.holdout = Some(super::HoldoutSummary {

@@ -651,7 +651,7 @@ fn two_answers_are_shown_side_by_side() {
     use handeye::geometry::pose_from_rotvec;
     use handeye::report::{render_html, ReportAnswer, ReportInput};
     use handeye::setup::{PosePair, Setup};
-    use handeye::solve::{Method, NoiseModel, SolveOptions};
+    use handeye::solve::{Method, SolveOptions};
     use nalgebra::Vector3;
 
     let camera_mount =
@@ -698,7 +698,6 @@ fn two_answers_are_shown_side_by_side() {
             answer(Method::Iterative, "answer-two"),
         ],
         thumbnails: Vec::new(),
-        noise: NoiseModel::default(),
         holdout: None,
         verdict: None,
         arm_time: None,

@@ -367,6 +367,18 @@ pub struct OpenedRun {
     pub inputs: Vec<session::InputFile>,
 }
 
+impl OpenedRun {
+    /// Why this run is hand-guided (`Some`): the resumed session was recorded by hand (its
+    /// manifest says so), or its config says `plan.manual`. The caller hands it to a hand guide
+    /// ([`run_opened`] with [`Strategy::HandGuided`]).
+    pub fn hand_guided(&self) -> Option<&'static str> {
+        match &self.resumed {
+            Some(resumed) if resumed.manifest.manual => Some("a hand-guided session"),
+            _ => self.cell.config.plan.manual.then_some("plan.manual"),
+        }
+    }
+}
+
 /// The start of every run, planned or hand-guided: for a resume, its session folder (locked
 /// first, so a second resume of the same folder stops here; its notes told to `observer`) and
 /// manifest; the cell of the request's config (a resume's own config unless the request names
@@ -469,13 +481,25 @@ pub fn run(
     strategy: Strategy<'_>,
     observer: &mut dyn RunObserver,
 ) -> Result<CellRun, RunError> {
+    let opened = open_run(request, observer)?;
+    run_opened(opened, request, strategy, observer)
+}
+
+/// [`run`] of a run [`open_run`] opened already (the caller chose the strategy from it, e.g.
+/// from [`OpenedRun::hand_guided`]): nothing is read or prepared again.
+pub fn run_opened(
+    opened: OpenedRun,
+    request: &RunRequest,
+    strategy: Strategy<'_>,
+    observer: &mut dyn RunObserver,
+) -> Result<CellRun, RunError> {
     let DrivenRun {
         cell,
         folder,
         outcome,
         adaptive,
         arm_time,
-    } = drive(request, strategy, observer)?;
+    } = drive_opened(opened, request, strategy, observer)?;
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
     Ok(CellRun {
         cell,
@@ -505,6 +529,16 @@ pub struct DrivenRun {
 /// (it compares the recorded board poses with a result instead of solving them).
 pub fn drive(
     request: &RunRequest,
+    strategy: Strategy<'_>,
+    observer: &mut dyn RunObserver,
+) -> Result<DrivenRun, RunError> {
+    let opened = open_run(request, observer)?;
+    drive_opened(opened, request, strategy, observer)
+}
+
+fn drive_opened(
+    opened: OpenedRun,
+    request: &RunRequest,
     mut strategy: Strategy<'_>,
     observer: &mut dyn RunObserver,
 ) -> Result<DrivenRun, RunError> {
@@ -512,7 +546,7 @@ pub fn drive(
         mut resumed,
         mut cell,
         inputs,
-    } = open_run(request, observer)?;
+    } = opened;
 
     let adaptive = match &mut strategy {
         Strategy::Planned => {
