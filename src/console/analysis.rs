@@ -272,9 +272,8 @@ impl State {
                             continue;
                         }
                     };
-                    let Ok((base_from_flange, camera_from_target)) = visit.poses(&file) else {
-                        continue;
-                    };
+                    let (base_from_flange, camera_from_target) =
+                        (visit.base_from_flange, visit.camera_from_target);
                     let corners: Vec<Point2<f64>> =
                         visit.corners_px.iter().map(|c| c.pixel).collect();
                     if visit.rejected.is_none() {

@@ -90,11 +90,8 @@ pub fn from_session(
     optics: Option<Optics<'_>>,
 ) -> Result<ReportInput, ReportError> {
     let pairs = &evidence.pairs;
-    let by_id: HashMap<String, &PoseVisit> = evidence
-        .visits
-        .iter()
-        .map(|v| (format!("pose-{:03}", v.plan_index), v))
-        .collect();
+    let by_id: HashMap<String, &PoseVisit> =
+        evidence.visits.iter().map(|v| (v.sample_id(), v)).collect();
     let sample_visits: Vec<Option<&PoseVisit>> = pairs
         .iter()
         .map(|p| p.id.as_ref().and_then(|id| by_id.get(id).copied()))

@@ -111,7 +111,7 @@ fn full_run_through_ur_rtde_recovers_the_truth_with_a_tcp_offset_set() {
         assert_close(&target_mount, &truth.target_mount, target_key);
         // The recorded flange poses are the mock's flange, not its TCP.
         let visits = folder.read_visits().unwrap();
-        let (last_recorded, _) = visits.last().unwrap().poses(Path::new("last")).unwrap();
+        let last_recorded = visits.last().unwrap().base_from_flange;
         let flange = mock.base_from_flange();
         assert!((last_recorded.translation.vector - flange.translation.vector).norm() < 1e-6);
         mock.shutdown();

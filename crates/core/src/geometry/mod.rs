@@ -6,6 +6,7 @@
 //! Units are metres and radians. This module depends on nothing else of ours.
 
 pub mod homography;
+pub mod serde_pose;
 pub mod yaml;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};

@@ -954,12 +954,8 @@ fn recorded_order(
     manifest
         .plan
         .iter()
-        .enumerate()
-        .map(|(i, recorded)| {
-            let r = recorded
-                .base_from_flange
-                .to_pose(&format!("plan[{i}]"))
-                .ok()?;
+        .map(|recorded| {
+            let r = recorded.base_from_flange;
             let k = (0..plan.len()).find(|&k| {
                 !used[k]
                     && r.rotation.angle_to(&plan[k].0.rotation) < 1e-9
@@ -974,21 +970,11 @@ fn recorded_order(
 /// Whether a resumed session's recorded plan is `plan` (same flange poses, in order).
 fn same_plan(manifest: &session::SessionManifest, plan: &[(Pose, Joints)]) -> bool {
     manifest.plan.len() == plan.len()
-        && manifest
-            .plan
-            .iter()
-            .zip(plan)
-            .enumerate()
-            .all(|(i, (recorded, (pose, _)))| {
-                recorded
-                    .base_from_flange
-                    .to_pose(&format!("plan[{i}]"))
-                    .map(|r| {
-                        r.rotation.angle_to(&pose.rotation) < 1e-9
-                            && (r.translation.vector - pose.translation.vector).norm() < 1e-9
-                    })
-                    .unwrap_or(false)
-            })
+        && manifest.plan.iter().zip(plan).all(|(recorded, (pose, _))| {
+            let r = recorded.base_from_flange;
+            r.rotation.angle_to(&pose.rotation) < 1e-9
+                && (r.translation.vector - pose.translation.vector).norm() < 1e-9
+        })
 }
 
 #[cfg(test)]

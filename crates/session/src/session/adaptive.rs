@@ -55,7 +55,7 @@ pub fn run_adaptive_session(
     let mut plan = GrowingPlan::open(&setup, manifest_config)?;
     let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
     for visit in setup.folder.read_visits()? {
-        seen.push(visit.poses(&setup.folder.visit_path(visit.plan_index))?.0);
+        seen.push(visit.base_from_flange);
     }
     source.visited(&seen);
     let mut outcome = SessionOutcome::default();
@@ -101,11 +101,7 @@ impl GrowingPlan {
         let path = setup.folder.manifest_path();
         let (poses, inputs, manual) = if path.is_file() {
             let manifest = setup.folder.read_manifest()?;
-            (
-                recorded_plan(&manifest, &path)?,
-                manifest.inputs,
-                manifest.manual,
-            )
+            (recorded_plan(&manifest), manifest.inputs, manifest.manual)
         } else {
             (Vec::new(), Vec::new(), false)
         };
@@ -155,24 +151,16 @@ impl GrowingPlan {
     }
 }
 
-/// The poses (and joints) a growing session's manifest (read from `file`) holds.
-fn recorded_plan(
-    manifest: &SessionManifest,
-    file: &std::path::Path,
-) -> Result<Vec<(Pose, Joints)>, SessionError> {
+/// The poses (and joints) a growing session's manifest holds.
+fn recorded_plan(manifest: &SessionManifest) -> Vec<(Pose, Joints)> {
     manifest
         .plan
         .iter()
-        .enumerate()
-        .map(|(i, planned)| {
-            let pose = planned
-                .base_from_flange
-                .to_pose(&format!("plan[{i}].T_base_flange"))
-                .map_err(|source| SessionError::Pose {
-                    file: file.to_path_buf(),
-                    source,
-                })?;
-            Ok((pose, planned.joints_deg.map(f64::to_radians)))
+        .map(|planned| {
+            (
+                planned.base_from_flange,
+                planned.joints_deg.map(f64::to_radians),
+            )
         })
         .collect()
 }

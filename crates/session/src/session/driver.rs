@@ -26,7 +26,7 @@ use crate::dataset::Dataset;
 use crate::plan::check::MoveCheck;
 use handeye_camera::{Camera, Frame};
 use handeye_core::camera_model::CameraModel;
-use handeye_core::geometry::{Pose, PoseYaml};
+use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::{Joints, MotionLimits, Robot, SettleBySpeed};
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
@@ -503,7 +503,7 @@ pub(crate) fn rebuild_samples(
 ) -> Result<BTreeMap<usize, PosePair>, SessionError> {
     let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
     for visit in visits {
-        if let Some(sample) = accepted_sample(folder, visit)? {
+        if let Some(sample) = visit.sample() {
             samples.insert(visit.plan_index, sample);
         }
     }
@@ -577,7 +577,7 @@ fn spawn_worker(
                     &fault,
                 )
                 .and_then(|visit| {
-                    if let Some(sample) = accepted_sample(&folder, &visit)? {
+                    if let Some(sample) = visit.sample() {
                         samples.insert(visit.plan_index, sample);
                         let dataset = Dataset {
                             setup: session_setup,
@@ -601,33 +601,6 @@ fn spawn_worker(
             }
         })
         .map_err(SessionError::DetectionThreadSpawn)
-}
-
-/// The solver sample of a plan pose; its id ties it to the frame and record files.
-/// The sample a committed record gives, when its board pose was accepted.
-fn accepted_sample(
-    folder: &SessionFolder,
-    visit: &PoseVisit,
-) -> Result<Option<PosePair>, SessionError> {
-    Ok(match visit.poses(&folder.visit_path(visit.plan_index))? {
-        (base_from_flange, Some(camera_from_target)) => Some(sample_of(
-            visit.plan_index,
-            base_from_flange,
-            camera_from_target,
-        )),
-        (_, None) => None,
-    })
-}
-
-pub(crate) fn sample_of(
-    plan_index: usize,
-    base_from_flange: Pose,
-    camera_from_target: Pose,
-) -> PosePair {
-    PosePair {
-        id: Some(format!("pose-{plan_index:03}")),
-        ..PosePair::new(base_from_flange, camera_from_target)
-    }
 }
 
 fn process(
@@ -713,8 +686,7 @@ pub(crate) fn measure(
                             board_pose.rms_px, max_rms
                         ));
                     } else {
-                        visit.camera_from_target =
-                            Some(PoseYaml::from_pose(&board_pose.camera_from_target));
+                        visit.camera_from_target = Some(board_pose.camera_from_target);
                     }
                 }
             }

@@ -34,8 +34,8 @@ use serde::{Deserialize, Serialize};
 use handeye_core::atomic_file::{
     is_temp_name, remove_stale_temp_files, write_atomic, RemovedTemp, TempScope,
 };
-use handeye_core::geometry::{Pose, PoseError, PoseYaml};
-use handeye_core::setup::{CornerObservation, Setup};
+use handeye_core::geometry::{serde_pose, Pose};
+use handeye_core::setup::{CornerObservation, PosePair, Setup};
 use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::Joints;
 use handeye_vision::Target;
@@ -79,7 +79,7 @@ impl SessionManifest {
             plan: plan
                 .iter()
                 .map(|(pose, q)| PlannedPose {
-                    base_from_flange: PoseYaml::from_pose(pose),
+                    base_from_flange: *pose,
                     joints_deg: q.map(f64::to_degrees),
                 })
                 .collect(),
@@ -106,8 +106,8 @@ impl SessionManifest {
 #[serde(deny_unknown_fields)]
 pub struct PlannedPose {
     /// Target flange pose.
-    #[serde(rename = "T_base_flange")]
-    pub base_from_flange: PoseYaml,
+    #[serde(rename = "T_base_flange", with = "serde_pose")]
+    pub base_from_flange: Pose,
     /// The joint solution the arm moves to, degrees.
     pub joints_deg: [f64; 6],
 }
@@ -122,17 +122,18 @@ pub struct PoseVisit {
     /// Index in the plan.
     pub plan_index: usize,
     /// The flange pose the robot reported after settling.
-    #[serde(rename = "T_base_flange")]
-    pub base_from_flange: PoseYaml,
+    #[serde(rename = "T_base_flange", with = "serde_pose")]
+    pub base_from_flange: Pose,
     /// The frame, relative to the session folder.
     pub frame: PathBuf,
     /// Board pose in the camera, when the board was found and accepted.
     #[serde(
         rename = "T_camera_target",
+        with = "serde_pose::option",
         default,
         skip_serializing_if = "Option::is_none"
     )]
-    pub camera_from_target: Option<PoseYaml>,
+    pub camera_from_target: Option<Pose>,
     /// Board reprojection RMS, px.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reprojection_rms_px: Option<f64>,
@@ -375,7 +376,6 @@ impl SessionFolder {
                     len.saturating_sub(1)
                 )));
             }
-            visit.poses(&file)?;
             visit.check_corners_unique(&file)?;
             let frame = self.root.join(&visit.frame);
             if !frame.is_file() {
@@ -463,12 +463,28 @@ fn remove_temp_files(root: &Path) -> Vec<RemovedTemp> {
 }
 
 impl PoseVisit {
+    /// The id of its sample in `samples.yaml` (`pose-NNN`), which ties the sample to the frame
+    /// and the record.
+    pub fn sample_id(&self) -> String {
+        format!("pose-{:03}", self.plan_index)
+    }
+
+    /// The solver sample of the visit, when its board pose was accepted: the one form a
+    /// recorded pose takes on its way to the solver (driver, replay and resume alike).
+    pub fn sample(&self) -> Option<PosePair> {
+        let camera_from_target = self.camera_from_target?;
+        Some(PosePair {
+            id: Some(self.sample_id()),
+            ..PosePair::new(self.base_from_flange, camera_from_target)
+        })
+    }
+
     /// A visit with the robot pose and frame recorded and nothing measured yet.
     pub fn new(plan_index: usize, base_from_flange: &Pose, frame: PathBuf) -> Self {
         PoseVisit {
             schema_version: SchemaVersion::CURRENT,
             plan_index,
-            base_from_flange: PoseYaml::from_pose(base_from_flange),
+            base_from_flange: *base_from_flange,
             frame,
             camera_from_target: None,
             reprojection_rms_px: None,
@@ -531,23 +547,5 @@ impl PoseVisit {
             });
         }
         Ok(())
-    }
-
-    /// The measured robot pose and, when accepted, the board pose.
-    pub fn poses(&self, file: &Path) -> Result<(Pose, Option<Pose>), SessionError> {
-        let wrap = |source: PoseError| SessionError::Pose {
-            file: file.to_path_buf(),
-            source,
-        };
-        let base_from_flange = self
-            .base_from_flange
-            .to_pose("T_base_flange")
-            .map_err(wrap)?;
-        let camera_from_target = self
-            .camera_from_target
-            .as_ref()
-            .map(|p| p.to_pose("T_camera_target").map_err(wrap))
-            .transpose()?;
-        Ok((base_from_flange, camera_from_target))
     }
 }

@@ -5,7 +5,7 @@ use crate::dataset::Dataset;
 use handeye_core::camera_model::CameraModel;
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
-use super::driver::{measure, sample_of};
+use super::driver::measure;
 use super::{PoseVisit, SessionError, SessionFolder};
 
 /// Re-detects every saved frame of `folder` and returns the dataset the frames give now, with the
@@ -30,8 +30,6 @@ pub fn redetect(
                 source: Box::new(source),
             })?
             .into_luma8();
-        let record_path = folder.visit_path(recorded.plan_index);
-        let (base_from_flange, _) = recorded.poses(&record_path)?;
         let visit = measure(
             &detector,
             board,
@@ -40,17 +38,11 @@ pub fn redetect(
             max_rms,
             PoseVisit::new(
                 recorded.plan_index,
-                &base_from_flange,
+                &recorded.base_from_flange,
                 recorded.frame.clone(),
             ),
         );
-        if let (base_from_flange, Some(camera_from_target)) = visit.poses(&record_path)? {
-            samples.push(sample_of(
-                visit.plan_index,
-                base_from_flange,
-                camera_from_target,
-            ));
-        }
+        samples.extend(visit.sample());
         visits.push(visit);
     }
     Ok((

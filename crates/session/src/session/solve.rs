@@ -177,7 +177,7 @@ fn committed_samples(
     let accepted: Vec<String> = visits
         .iter()
         .filter(|v| v.camera_from_target.is_some())
-        .map(|v| format!("pose-{:03}", v.plan_index))
+        .map(PoseVisit::sample_id)
         .collect();
     if accepted.is_empty() {
         let reasons = visits
@@ -404,7 +404,7 @@ pub fn frames_from_visits(
             continue;
         }
         let record = SessionFolder::visit_name(visit.plan_index);
-        let (base_from_flange, _) = visit.poses(&record)?;
+        let base_from_flange = visit.base_from_flange;
         // Corners were checked when the record was read (no point twice); a point the board
         // does not have is refused, never skipped.
         visit.check_corners_on_board(&record, board)?;
@@ -418,7 +418,7 @@ pub fn frames_from_visits(
                 })
             })
             .collect();
-        let id = format!("pose-{:03}", visit.plan_index);
+        let id = visit.sample_id();
         frames.push((
             id.clone(),
             Frame {
