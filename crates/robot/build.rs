@@ -14,7 +14,7 @@ fn main() {
 mod ur_rtde {
     use std::path::PathBuf;
 
-    pub fn build() {
+    pub(crate) fn build() {
         println!("cargo:rerun-if-env-changed=UR_RTDE_PREFIX");
         println!("cargo:rerun-if-changed=src/ur/shim.cpp");
         println!("cargo:rerun-if-changed=src/ur/shim.h");

@@ -7,7 +7,7 @@ use clap::{Args, Subcommand, ValueEnum};
 
 /// USB/UVC cameras.
 #[derive(Debug, Args)]
-pub struct CameraArgs {
+pub(super) struct CameraArgs {
     #[command(subcommand)]
     command: CameraCommand,
 }
@@ -22,7 +22,7 @@ enum CameraCommand {
 
 /// Pixel format on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum PixelFormatArg {
+pub(super) enum PixelFormatArg {
     /// Motion JPEG.
     Mjpeg,
     /// YUYV 4:2:2.
@@ -33,7 +33,7 @@ pub enum PixelFormatArg {
 
 /// Which camera and stream to open.
 #[derive(Debug, Clone, Args)]
-pub struct StreamArgs {
+pub(super) struct StreamArgs {
     /// Camera index (/dev/video<N>) or (part of) its name.
     #[arg(long)]
     pub camera: Option<String>,
@@ -70,7 +70,7 @@ struct SnapArgs {
 }
 
 /// Runs `handeye camera`.
-pub fn run(args: CameraArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: CameraArgs) -> anyhow::Result<()> {
     match args.command {
         CameraCommand::List => uvc::list(),
         CameraCommand::Snap(a) => uvc::snap(&a.stream, &a.output),
@@ -78,7 +78,7 @@ pub fn run(args: CameraArgs) -> anyhow::Result<()> {
 }
 
 #[cfg(not(feature = "uvc"))]
-pub mod uvc {
+pub(super) mod uvc {
     //! Stand-ins when the build lacks the `uvc` feature.
     use super::StreamArgs;
     use handeye::camera_model::CameraModel;
@@ -86,20 +86,20 @@ pub mod uvc {
     const MISSING: &str = "this handeye build lacks USB camera support: rebuild with `cargo build --release --features uvc` (needs libclang-dev)";
 
     /// Fails: this build has no USB camera support.
-    pub fn ensure_available() -> anyhow::Result<()> {
+    pub(crate) fn ensure_available() -> anyhow::Result<()> {
         anyhow::bail!(MISSING)
     }
 
     /// `camera list`.
-    pub fn list() -> anyhow::Result<()> {
+    pub(crate) fn list() -> anyhow::Result<()> {
         anyhow::bail!(MISSING)
     }
     /// `camera snap`.
-    pub fn snap(_: &StreamArgs, _: &std::path::Path) -> anyhow::Result<()> {
+    pub(crate) fn snap(_: &StreamArgs, _: &std::path::Path) -> anyhow::Result<()> {
         anyhow::bail!(MISSING)
     }
     /// Opens a live camera (never, in this build).
-    pub fn open(
+    pub(crate) fn open(
         _: &StreamArgs,
         _: Option<CameraModel>,
     ) -> anyhow::Result<Box<dyn handeye::camera::Camera>> {
@@ -108,7 +108,7 @@ pub mod uvc {
 }
 
 #[cfg(feature = "uvc")]
-pub mod uvc {
+pub(super) mod uvc {
     //! The real thing.
     use anyhow::Context;
 
@@ -119,12 +119,12 @@ pub mod uvc {
     use handeye::camera_model::CameraModel;
 
     /// This build has USB camera support.
-    pub fn ensure_available() -> anyhow::Result<()> {
+    pub(crate) fn ensure_available() -> anyhow::Result<()> {
         Ok(())
     }
 
     /// `camera list`.
-    pub fn list() -> anyhow::Result<()> {
+    pub(crate) fn list() -> anyhow::Result<()> {
         let cameras = list_cameras()?;
         if cameras.is_empty() {
             outln!("no cameras found");
@@ -158,7 +158,7 @@ pub mod uvc {
     }
 
     /// Opens a live camera.
-    pub fn open(
+    pub(crate) fn open(
         stream: &StreamArgs,
         model: Option<CameraModel>,
     ) -> anyhow::Result<Box<dyn handeye::camera::Camera>> {
@@ -166,7 +166,7 @@ pub mod uvc {
     }
 
     /// `camera snap`.
-    pub fn snap(stream: &StreamArgs, output: &std::path::Path) -> anyhow::Result<()> {
+    pub(crate) fn snap(stream: &StreamArgs, output: &std::path::Path) -> anyhow::Result<()> {
         let mut camera = UvcCamera::open(&options(stream), None)?;
         let image = camera.snap()?;
         let mut png = Vec::new();

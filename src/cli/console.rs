@@ -18,7 +18,7 @@ use handeye::session::SolvedSession;
 
 /// Capture by hand: jog or hand-guide the arm, capture on the console page (or Enter here).
 #[derive(Debug, Args)]
-pub struct ConsoleArgs {
+pub(super) struct ConsoleArgs {
     /// The cell config; its plan's poses (if any) are only suggested, never driven.
     #[arg(long, required_unless_present = "resume")]
     pub(super) config: Option<PathBuf>,
@@ -48,7 +48,7 @@ pub struct ConsoleArgs {
 }
 
 /// Runs `handeye console`.
-pub fn run(args: ConsoleArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ConsoleArgs) -> anyhow::Result<()> {
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(

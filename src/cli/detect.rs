@@ -18,7 +18,7 @@ use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetect
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]
-pub struct DetectArgs {
+pub(super) struct DetectArgs {
     /// Board YAML: `target_type: aprilgrid` (Kalibr), `charuco` (OpenCV) or `checkerboard`.
     #[arg(long)]
     target: PathBuf,
@@ -74,7 +74,7 @@ struct ImageResult {
 }
 
 /// Runs `handeye detect`.
-pub fn run(args: DetectArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
     if args.live {
         super::camera::uvc::ensure_available()?;
     }

@@ -30,7 +30,7 @@ enum FormatArg {
 /// eye_to_hand T_base_camera and T_flange_target. Frame ids follow ROS naming: ASCII letters,
 /// digits, `_` and `/` (no leading `/`, no part starting with a digit).
 #[derive(Debug, Args)]
-pub struct ExportArgs {
+pub(super) struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
     result: PathBuf,
     /// The output form.
@@ -56,7 +56,7 @@ pub struct ExportArgs {
 }
 
 /// Runs `handeye export`.
-pub fn run(args: ExportArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
     let ids = FrameIds {
         base: args.base_frame,
         flange: args.flange_frame,

@@ -41,7 +41,7 @@ impl From<SetupArg> for Setup {
 
 /// Import other tools' data as a dataset file (T_base_flange, T_camera_target pairs).
 #[derive(Debug, Args)]
-pub struct ImportArgs {
+pub(super) struct ImportArgs {
     #[command(subcommand)]
     format: ImportFormat,
 }
@@ -441,7 +441,7 @@ fn cell_text(
 }
 
 /// Runs `handeye import`.
-pub fn run(args: ImportArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ImportArgs) -> anyhow::Result<()> {
     match args.format {
         ImportFormat::Visp(a) => {
             let board = Target::load(&a.target)?;

@@ -21,7 +21,7 @@ use clap::{Parser, Subcommand};
 /// Hand-eye and base-world calibration for robot cells.
 #[derive(Debug, Parser)]
 #[command(name = "handeye", version, about, long_about = None)]
-pub struct Cli {
+pub(crate) struct Cli {
     #[command(subcommand)]
     command: Command,
 }
@@ -58,15 +58,15 @@ enum Command {
 /// with code 2 for it, so scripts can tell "nothing found" from a failure (1).
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
-pub struct NothingFound(pub String);
+pub(crate) struct NothingFound(pub String);
 
 impl NothingFound {
     /// The process exit code for it.
-    pub const EXIT_CODE: u8 = 2;
+    pub(crate) const EXIT_CODE: u8 = 2;
 }
 
 /// Runs one parsed command line.
-pub fn run(cli: Cli) -> anyhow::Result<()> {
+pub(crate) fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Run(args) => run::run(args),
         Command::Plan(args) => plan::run(args),

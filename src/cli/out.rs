@@ -16,7 +16,7 @@ static CLOSED: AtomicBool = AtomicBool::new(false);
 
 /// Writes formatted text to stdout; a failure marks stdout closed and is otherwise ignored.
 /// Once stdout is known closed nothing more is attempted.
-pub fn write(args: std::fmt::Arguments<'_>, newline: bool) {
+pub(crate) fn write(args: std::fmt::Arguments<'_>, newline: bool) {
     if CLOSED.load(Ordering::Relaxed) {
         return;
     }
@@ -35,7 +35,7 @@ pub fn write(args: std::fmt::Arguments<'_>, newline: bool) {
 }
 
 /// Flushes stdout (after a prompt without a newline); failures are handled as in [`write`].
-pub fn flush() {
+pub(crate) fn flush() {
     if CLOSED.load(Ordering::Relaxed) {
         return;
     }

@@ -10,7 +10,7 @@ use handeye::plan::{generate, GenerateSpec, Plan, Waypoint};
 
 /// Generate or check pose plans.
 #[derive(Debug, Args)]
-pub struct PlanArgs {
+pub(super) struct PlanArgs {
     #[command(subcommand)]
     command: PlanCommand,
 }
@@ -59,7 +59,7 @@ enum PlanCommand {
 }
 
 /// Runs `handeye plan`.
-pub fn run(args: PlanArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
     match args.command {
         PlanCommand::Generate {
             count,

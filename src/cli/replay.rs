@@ -13,7 +13,7 @@ use handeye::session::{self, replay, SessionFolder};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]
-pub struct ReplayArgs {
+pub(super) struct ReplayArgs {
     /// The session folder.
     session: PathBuf,
     /// Use this cell config instead of the one the session was run with.
@@ -25,7 +25,7 @@ pub struct ReplayArgs {
 }
 
 /// Runs `handeye replay`.
-pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args

@@ -12,7 +12,7 @@ use handeye::session::SessionFolder;
 
 /// Write the calibration report of a solved session folder.
 #[derive(Debug, Args)]
-pub struct ReportArgs {
+pub(super) struct ReportArgs {
     /// The session folder (with result.yaml).
     session: PathBuf,
     /// The cell config (default: the one the session was recorded with), for the board and
@@ -22,7 +22,7 @@ pub struct ReportArgs {
 }
 
 /// Runs `handeye report`.
-pub fn run(args: ReportArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.unwrap_or(manifest.config);

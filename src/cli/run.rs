@@ -17,7 +17,7 @@ use handeye::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
-pub struct RunArgs {
+pub(super) struct RunArgs {
     /// The cell config (robot, camera, board, plan, limits).
     #[arg(long, required_unless_present = "resume")]
     config: Option<PathBuf>,
@@ -49,7 +49,7 @@ pub struct RunArgs {
 }
 
 /// Runs `handeye run`.
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),

@@ -33,7 +33,7 @@ fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
 
 /// Robust loss on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum RobustArg {
+pub(super) enum RobustArg {
     /// Plain least squares.
     None,
     /// Huber loss.
@@ -44,7 +44,7 @@ pub enum RobustArg {
 
 /// Solve space on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum SpaceArg {
+pub(super) enum SpaceArg {
     /// One board pose per frame, the `A = X·B·Y` solver.
     Pose,
     /// Every detected corner of every frame (needs a session folder), from the pose-space answer.
@@ -53,7 +53,7 @@ pub enum SpaceArg {
 
 /// Arguments of `handeye solve`.
 #[derive(Debug, Args)]
-pub struct SolveArgs {
+pub(super) struct SolveArgs {
     /// Dataset file (setup + samples of T_base_flange and T_camera_target), or a session folder.
     samples: PathBuf,
     /// Session folder only: solve in this space (default: the session config's `solver.space`).
@@ -188,7 +188,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
 }
 
 /// Runs `handeye solve`.
-pub fn run(args: SolveArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
     if args.samples.is_dir() {
         return run_session(&args);
     }

@@ -36,7 +36,7 @@ impl From<PaperArg> for Paper {
 
 /// Board utilities.
 #[derive(Debug, Args)]
-pub struct TargetArgs {
+pub(super) struct TargetArgs {
     #[command(subcommand)]
     command: TargetCommand,
 }
@@ -77,7 +77,7 @@ enum TargetCommand {
 }
 
 /// Runs `handeye target ...`.
-pub fn run(args: TargetArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: TargetArgs) -> anyhow::Result<()> {
     match args.command {
         TargetCommand::Render {
             target,

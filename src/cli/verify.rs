@@ -19,7 +19,7 @@ use handeye::verify;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
 #[derive(Debug, Args)]
-pub struct VerifyArgs {
+pub(super) struct VerifyArgs {
     /// The cell config: move the cell to fresh generated poses (needs --result).
     #[arg(long, requires = "result", conflicts_with_all = ["session", "dataset"])]
     config: Option<PathBuf>,
@@ -47,7 +47,7 @@ pub struct VerifyArgs {
 }
 
 /// Runs `handeye verify`.
-pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
         let mounts = ResultFile::load_mounts(result)?;

@@ -72,7 +72,7 @@ pub(crate) struct Analyst {
 
 impl Analyst {
     /// Starts the thread for the session folder at `root`.
-    pub fn start(cell: CellView, root: PathBuf, publisher: Publisher) -> Analyst {
+    pub(super) fn start(cell: CellView, root: PathBuf, publisher: Publisher) -> Analyst {
         let (jobs, rx) = mpsc::channel();
         let latest = FrameSlot::default();
         let slot = latest.clone();
@@ -167,13 +167,13 @@ impl Analyst {
     }
 
     /// A pose was recorded, with the frame as taken.
-    pub fn recorded(&self, index: usize, frame: &SharedFrame) {
+    pub(super) fn recorded(&self, index: usize, frame: &SharedFrame) {
         *self.latest.lock().unwrap_or_else(|e| e.into_inner()) = Some((index, frame.0.clone()));
         self.send(Job::Recorded(index));
     }
 
     /// Queues a job (never blocks).
-    pub fn send(&self, job: Job) {
+    pub(super) fn send(&self, job: Job) {
         if let Some(jobs) = &self.jobs {
             let _ = jobs.send(job);
         }

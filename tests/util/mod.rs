@@ -1,7 +1,8 @@
 //! Shared by the integration tests and the benchmarks: copies of the repo's cell configs
 //! with their relative paths made absolute and a few keys edited.
 
-#![allow(dead_code)]
+// Test helpers are `pub` for the test modules; no crate sees them.
+#![allow(dead_code, unreachable_pub)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -31,17 +31,17 @@ use handeye_core::camera_model::CameraModel;
 /// V4L2 control ids (linux/v4l2-controls.h) nokhwa has no name for.
 mod v4l2 {
     /// `V4L2_CID_EXPOSURE_AUTO` (menu: 1 = manual).
-    pub const EXPOSURE_AUTO: u128 = 0x009a_0901;
+    pub(super) const EXPOSURE_AUTO: u128 = 0x009a_0901;
     /// `V4L2_CID_EXPOSURE_ABSOLUTE` (units of 100 µs).
-    pub const EXPOSURE_ABSOLUTE: u128 = 0x009a_0902;
+    pub(super) const EXPOSURE_ABSOLUTE: u128 = 0x009a_0902;
     /// `V4L2_CID_FOCUS_ABSOLUTE`.
-    pub const FOCUS_ABSOLUTE: u128 = 0x009a_090a;
+    pub(super) const FOCUS_ABSOLUTE: u128 = 0x009a_090a;
     /// `V4L2_CID_FOCUS_AUTO` (boolean).
-    pub const FOCUS_AUTO: u128 = 0x009a_090c;
+    pub(super) const FOCUS_AUTO: u128 = 0x009a_090c;
     /// `V4L2_CID_AUTOGAIN` (boolean).
-    pub const AUTOGAIN: u128 = 0x0098_0912;
+    pub(super) const AUTOGAIN: u128 = 0x0098_0912;
     /// `V4L2_CID_EXPOSURE_AUTO` value for manual exposure.
-    pub const EXPOSURE_MANUAL: i64 = 1;
+    pub(super) const EXPOSURE_MANUAL: i64 = 1;
 }
 
 /// Which camera to open.

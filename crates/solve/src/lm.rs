@@ -43,7 +43,7 @@ pub(crate) struct Outcome {
 
 impl Outcome {
     /// Adds a later run's cost; converged only if both runs were.
-    pub fn absorb(&mut self, later: Outcome) {
+    pub(crate) fn absorb(&mut self, later: Outcome) {
         self.evaluations += later.evaluations;
         self.converged &= later.converged;
     }

@@ -56,21 +56,22 @@ const MAX_MOVE_DURATION_S: f64 = 3600.0;
 
 /// Command ids of ur_rtde 1.6.5 (`RTDE::RobotCommand::Type`) that the mock understands.
 mod cmd {
-    pub const MOVEJ: i32 = 1;
-    pub const MOVEJ_IK: i32 = 2;
-    pub const MOVEL: i32 = 3;
-    pub const MOVEL_FK: i32 = 4;
-    pub const TEACH_MODE: i32 = 18;
-    pub const END_TEACH_MODE: i32 = 19;
-    pub const SET_TCP: i32 = 29;
-    pub const STOPL: i32 = 33;
-    pub const STOPJ: i32 = 34;
-    pub const GET_TCP_OFFSET: i32 = 40;
-    pub const GET_FORWARD_KINEMATICS_DEFAULT: i32 = 43;
-    pub const GET_ACTUAL_TOOL_FLANGE_POSE: i32 = 58;
-    pub const STOP_SCRIPT: i32 = 255;
+    pub(super) const MOVEJ: i32 = 1;
+    pub(super) const MOVEJ_IK: i32 = 2;
+    pub(super) const MOVEL: i32 = 3;
+    pub(super) const MOVEL_FK: i32 = 4;
+    pub(super) const TEACH_MODE: i32 = 18;
+    pub(super) const END_TEACH_MODE: i32 = 19;
+    pub(super) const SET_TCP: i32 = 29;
+    pub(super) const STOPL: i32 = 33;
+    pub(super) const STOPJ: i32 = 34;
+    pub(super) const GET_TCP_OFFSET: i32 = 40;
+    pub(super) const GET_FORWARD_KINEMATICS_DEFAULT: i32 = 43;
+    pub(super) const GET_ACTUAL_TOOL_FLANGE_POSE: i32 = 58;
+    pub(super) const STOP_SCRIPT: i32 = 255;
     /// Commands the script runs and then signals "ready" instead of "done".
-    pub const REALTIME: [i32; 16] = [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71];
+    pub(super) const REALTIME: [i32; 16] =
+        [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71];
 }
 
 #[derive(Debug, Clone, Copy)]

@@ -1,5 +1,7 @@
 //! Shared by the mock's integration tests: a mock controller on free loopback ports.
 
+#![allow(unreachable_pub)] // test helpers, seen by the test files only
+
 use std::net::Ipv4Addr;
 
 use mocks::{MockUr, MockUrConfig, MockUrPorts};

@@ -94,7 +94,7 @@ pub(super) struct GrowingPlan {
 impl GrowingPlan {
     /// The plan the session's manifest holds so far, with its input hashes and its hand-guided
     /// mark (the caller wrote the manifest when it created the session); empty without one.
-    pub fn open(
+    pub(super) fn open(
         setup: &SessionSetup,
         manifest_config: std::path::PathBuf,
     ) -> Result<GrowingPlan, SessionError> {
@@ -116,7 +116,7 @@ impl GrowingPlan {
     /// Adds `pose` to the manifest and visits it with the ordinary driver (on `setup` with the
     /// plan so far), folding what happened into `outcome`; whether its sample was accepted
     /// (otherwise it is dropped from the plan again).
-    pub fn visit(
+    pub(super) fn visit(
         &mut self,
         setup: &SessionSetup,
         pose: (Pose, Joints),

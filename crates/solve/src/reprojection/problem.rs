@@ -40,21 +40,21 @@ pub(super) struct Layout {
 
 impl Layout {
     /// Columns of the pose perturbation (φ_X, ρ_X, φ_Y, ρ_Y).
-    pub const POSE: usize = 12;
+    pub(super) const POSE: usize = 12;
     /// First intrinsics column.
-    pub fn intrinsics_offset(&self) -> usize {
+    pub(super) fn intrinsics_offset(&self) -> usize {
         Self::POSE
     }
     /// First distortion column.
-    pub fn distortion_offset(&self) -> usize {
+    pub(super) fn distortion_offset(&self) -> usize {
         Self::POSE + self.intrinsics
     }
     /// First robot-correction column (= number of global columns).
-    pub fn robot_offset(&self) -> usize {
+    pub(super) fn robot_offset(&self) -> usize {
         Self::POSE + self.intrinsics + self.distortion
     }
     /// All columns.
-    pub fn len(&self) -> usize {
+    pub(super) fn len(&self) -> usize {
         self.robot_offset() + self.robot * self.frames
     }
 }
@@ -104,7 +104,7 @@ pub(super) struct State {
 impl Problem<'_> {
     /// The problem at the start `x0`, `camera0` (zero perturbation and corrections, all weights
     /// one), with the blocks `options` frees.
-    pub fn new<'a>(
+    pub(super) fn new<'a>(
         setup: Setup,
         frames: &'a [Frame],
         x0: Axby,
@@ -155,7 +155,7 @@ impl Problem<'_> {
     }
 
     /// The model at the current parameters.
-    pub fn state(&self) -> State {
+    pub(super) fn state(&self) -> State {
         let d = &self.params;
         let v = |k: usize| Vector3::new(d[k], d[k + 1], d[k + 2]);
         let axby = perturbed(&self.x0, &d.fixed_rows::<{ Layout::POSE }>(0).into_owned());
@@ -200,7 +200,7 @@ impl Problem<'_> {
     }
 
     /// Pixel error (predicted − detected) of every corner, unweighted.
-    pub fn pixel_errors(&self, s: &State) -> Vec<Vec<Vector2<f64>>> {
+    pub(super) fn pixel_errors(&self, s: &State) -> Vec<Vec<Vector2<f64>>> {
         self.frames
             .iter()
             .enumerate()
@@ -354,7 +354,7 @@ impl Problem<'_> {
 
     /// The normal equations `JᵀJ` and `Jᵀr` at the current parameters, accumulated corner by
     /// corner from the block structure (never forming the tall Jacobian), and `‖r‖²`.
-    pub fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+    pub(super) fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
         let r = self.residuals()?;
         let s = self.state();
         let layout = self.layout;
