@@ -23,18 +23,27 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::config::RobotConfig;
-use crate::plan::nbv::{AdaptivePlanner, StopCheck};
+use crate::plan::nbv::AdaptivePlanner;
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{
-    self, changed_inputs, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder,
-    SessionOutcome, SolvedSession,
+    self, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder, SessionOutcome,
+    SolvedSession,
 };
 use handeye_core::geometry::Pose;
-use handeye_core::setup::PosePair;
 use handeye_robot::{Joints, Robot, RobotError, RobotStatus};
-use handeye_solve::Calibration;
 
 use super::{prepare, CellError, PreparedCell};
+
+mod adaptive;
+mod arm_time;
+mod resume;
+
+use adaptive::{adaptive_candidates, drive_plan};
+pub use adaptive::{AdaptiveSummary, ADAPTIVE_EXTRA_CANDIDATES};
+use arm_time::arm_time;
+pub use arm_time::ArmTime;
+pub use resume::ResumedSession;
+use resume::{check_resumed_inputs, recorded_order, same_plan};
 
 /// Where the run's records go.
 #[derive(Debug, Clone)]
@@ -104,121 +113,6 @@ pub struct CellRun {
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
     /// a person moved the arm, and there is no plan to compare with).
     pub arm_time: Option<ArmTime>,
-}
-
-/// The arm time of a run (the time the cell is out of production for the arm's sake: moving
-/// and settling), and an estimate of what the full plan in its given order would have taken.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ArmTime {
-    /// Poses visited in this run.
-    pub poses: usize,
-    /// Time in moves, s (measured).
-    pub moving_s: f64,
-    /// Time settling after moves until the frame's exposure, s (measured).
-    pub settling_s: f64,
-    /// Poses of the full plan (every pose that passes its checks).
-    pub full_plan_poses: usize,
-    /// The full plan in its given order: its moves at the configured limits plus this run's
-    /// mean settling per pose for each of its poses, s (an estimate).
-    pub full_plan_estimate_s: f64,
-}
-
-impl ArmTime {
-    /// Moving plus settling, s.
-    pub fn spent_s(&self) -> f64 {
-        self.moving_s + self.settling_s
-    }
-
-    /// Estimated arm time saved against the full plan in its given order, s (negative: lost).
-    pub fn saved_s(&self) -> f64 {
-        self.full_plan_estimate_s - self.spent_s()
-    }
-
-    /// Whether arm time was measured: a simulated arm that moves instantly
-    /// (`robot.move_duration_s: 0`) spends none — only the microseconds of the loop itself,
-    /// under 10 ms a pose — and then nothing was saved either. (A real arm's move and settle
-    /// take a second or more.)
-    pub fn measured(&self) -> bool {
-        self.poses == 0 || self.spent_s() >= 0.01 * self.poses as f64
-    }
-
-    /// The file in a session folder that keeps it (written after the run, read by the report).
-    pub const FILE: &'static str = "arm_time.yaml";
-
-    /// The arm time a session folder at `root` kept, if it kept one that reads.
-    pub fn load(root: &std::path::Path) -> Option<ArmTime> {
-        let text = std::fs::read_to_string(root.join(Self::FILE)).ok()?;
-        serde_yaml_ng::from_str(&text).ok()
-    }
-}
-
-impl std::fmt::Display for ArmTime {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if !self.measured() {
-            return write!(
-                f,
-                "arm time: not measured, the {} moves took no time (a simulated arm with robot.move_duration_s: 0); the full {}-pose plan in its given order takes about {:.1} s at the configured limits",
-                self.poses, self.full_plan_poses, self.full_plan_estimate_s
-            );
-        }
-        write!(
-            f,
-            "arm time: {:.1} s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so {:.1} s saved ({:.0} %)",
-            self.spent_s(),
-            self.poses,
-            self.moving_s,
-            self.settling_s,
-            self.full_plan_poses,
-            self.full_plan_estimate_s,
-            self.saved_s(),
-            if self.full_plan_estimate_s > 0.0 {
-                100.0 * self.saved_s() / self.full_plan_estimate_s
-            } else {
-                0.0
-            }
-        )
-    }
-}
-
-/// How an adaptive plan went.
-#[derive(Debug, Clone, PartialEq)]
-pub struct AdaptiveSummary {
-    /// Poses in the session's plan now.
-    pub in_session: usize,
-    /// Candidate poses that passed their checks.
-    pub candidates: usize,
-    /// Poses chosen in this run.
-    pub chosen_now: usize,
-    /// The target 1-sigma uncertainty, mm.
-    pub target_uncertainty_mm: f64,
-    /// The most poses the plan may take.
-    pub max_poses: usize,
-    /// The last solved 1-sigma uncertainty, mm, if a solve happened.
-    pub solved_sigma_mm: Option<f64>,
-    /// Whether the target was reached.
-    pub reached: bool,
-}
-
-impl std::fmt::Display for AdaptiveSummary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "adaptive plan: {} of {} candidate poses in the session ({} chosen in this run); target 1-sigma {:.3} mm {}",
-            self.in_session,
-            self.candidates,
-            self.chosen_now,
-            self.target_uncertainty_mm,
-            match self.solved_sigma_mm {
-                Some(s) if self.reached => format!("reached ({s:.3} mm)"),
-                Some(s) if self.in_session >= self.max_poses => format!(
-                    "NOT reached ({s:.3} mm): stopped at plan.max_poses = {}",
-                    self.max_poses
-                ),
-                Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
-                None => "NOT reached (no solve)".into(),
-            }
-        )
-    }
 }
 
 /// Why a run did not happen or did not finish.
@@ -303,57 +197,6 @@ pub fn ensure_robot_ready(robot: &mut dyn Robot) -> Result<(), RunError> {
         RobotStatus::EmergencyStop => Err(RunError::EmergencyStop),
         RobotStatus::NotReady => Err(RunError::NotReady),
     }
-}
-
-/// The resume check of every session kind (planned, adaptive, hand-guided): refuses, naming
-/// each changed file, when the input files (`inputs`, hashed now) differ from those `manifest`
-/// recorded, unless `accept_changed` (then each change is noted and `manifest` takes the files
-/// used now, which the next resume compares against). Returns whether `manifest` changed (the
-/// caller writes it).
-fn check_resumed_inputs(
-    folder: &SessionFolder,
-    manifest: &mut session::SessionManifest,
-    inputs: &[session::InputFile],
-    accept_changed: bool,
-    observer: &mut dyn RunObserver,
-) -> Result<bool, RunError> {
-    if manifest.inputs.is_empty() {
-        observer.note(&format!(
-            "{}: records no input hashes (an older session): changes to the config, board, intrinsics or plan since it was recorded cannot be detected",
-            folder.manifest_path().display()
-        ));
-        return Ok(false);
-    }
-    let changes = changed_inputs(&manifest.inputs, inputs);
-    if !changes.is_empty() && !accept_changed {
-        return Err(SessionError::InputsChanged {
-            folder: folder.root().to_path_buf(),
-            changes,
-        }
-        .into());
-    }
-    for change in &changes {
-        observer.note(&format!(
-            "input changed, accepted (--accept-changed): {change}"
-        ));
-    }
-    if manifest.inputs == inputs {
-        return Ok(false);
-    }
-    manifest.inputs = inputs.to_vec();
-    Ok(true)
-}
-
-/// A session a run continues.
-#[derive(Debug)]
-pub struct ResumedSession {
-    /// Its folder, locked for this run.
-    pub folder: SessionFolder,
-    /// Its manifest, with the input files of this run when changes were accepted.
-    pub manifest: session::SessionManifest,
-    /// Whether `manifest` changed (accepted input changes, or the mark of a hand-guided session
-    /// a planned resume handed over) and is not written to the folder yet.
-    pub manifest_changed: bool,
 }
 
 /// A run opened: the cell prepared and its plan checked, the input files it uses, and for a
@@ -782,233 +625,4 @@ fn drive_opened(
         adaptive: adaptive_summary,
         arm_time,
     })
-}
-
-/// Drives the config's plan: adaptively (the next-best pose among `plan`'s candidates, until
-/// good enough) or as the fixed `plan`; the adaptive summary with the outcome.
-fn drive_plan(
-    cell: &PreparedCell,
-    setup: session::SessionSetup,
-    plan: &[(Pose, Joints)],
-    start: Joints,
-    adaptive: bool,
-    hardware: &mut super::Hardware,
-    observer: &mut dyn RunObserver,
-) -> (
-    Result<SessionOutcome, SessionError>,
-    Option<AdaptiveSummary>,
-) {
-    let folder = setup.folder.clone();
-    let mut on_event = |event: SessionEvent| observer.event(event);
-    if !adaptive {
-        let outcome = session::run_session(
-            setup,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut on_event,
-        );
-        return (outcome, None);
-    }
-    // A generated plan's `count` is the most poses it takes (it chooses from more).
-    let max_poses = cell
-        .config
-        .plan
-        .max_poses
-        .or(cell.config.plan.generate.map(|g| g.count))
-        .unwrap_or(plan.len())
-        .min(plan.len());
-    let mut planner = AdaptivePlanner::new(
-        cell.config.setup,
-        cell.config.nominal.camera_mount,
-        cell.config.nominal.target_mount,
-        plan.to_vec(),
-        cell.config.solver.to_options(),
-        cell.config.adaptive_target_mm(),
-        max_poses,
-    )
-    .with_min_poses(cell.config.plan.min_poses)
-    .with_motion(cell.config.limits, start, per_pose_s(cell))
-    .with_stop_check(good_enough(cell));
-    let outcome = session::run_adaptive_session(
-        setup,
-        cell.config_path(),
-        &mut planner,
-        hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
-        &mut on_event,
-    );
-    let summary = AdaptiveSummary {
-        in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
-        candidates: plan.len(),
-        chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
-        target_uncertainty_mm: cell.config.adaptive_target_mm(),
-        max_poses,
-        solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
-        reached: planner.reached_target(),
-    };
-    (outcome, Some(summary))
-}
-
-/// What one pose costs besides its move, s, for weighing candidates by arm time: the fixed
-/// settle, the settle window when settling by measurement, and a little for the frame.
-fn per_pose_s(cell: &PreparedCell) -> f64 {
-    let s = &cell.config.session;
-    let window = if s.settle_speed_deg_s > 0.0 {
-        s.settle_window_s
-    } else {
-        0.0
-    };
-    s.settle_s + window + 0.05
-}
-
-/// The adaptive stop check besides the 1-sigma: the rotations spread well (the verdict's rule)
-/// and the held-out error is within the verdict's accuracy — what the verdict would call GOOD.
-fn good_enough(cell: &PreparedCell) -> StopCheck {
-    let setup = cell.config.setup;
-    let options = cell.config.solver.to_options();
-    let accuracy = cell.config.verdict.accuracy();
-    StopCheck(Arc::new(move |samples: &[PosePair], c: &Calibration| {
-        let robot: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
-        if handeye_solve::rotation_diversity(&robot).off_axis_deg
-            < handeye_solve::verdict::GOOD_OFF_AXIS_DEG
-        {
-            return false;
-        }
-        match handeye_solve::verdict::held_out(setup, samples, &options, &c.outliers) {
-            Ok(h) => {
-                h.translation_rms_mm <= accuracy.translation_mm
-                    && h.rotation_rms_deg <= accuracy.rotation_deg
-            }
-            Err(_) => false,
-        }
-    }))
-}
-
-/// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
-pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
-
-/// The candidates of an adaptive plan, checked from where the arm stands: the plan's poses that
-/// pass their checks and, for a generated plan (which then takes at most `count` poses), more
-/// views on the same cap (another seed, [`ADAPTIVE_EXTRA_CANDIDATES`] × `count`), so near and
-/// informative poses are there to choose.
-fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
-    let mut candidates = cell.report.passing();
-    if let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) {
-        let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
-            .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
-        if count > 0 {
-            let extra = GenerateSpec {
-                count,
-                seed: spec.seed.wrapping_add(1),
-                ..spec
-            };
-            let views = Plan {
-                waypoints: cell
-                    .generate_views(&extra)
-                    .into_iter()
-                    .map(Waypoint::LookAt)
-                    .collect(),
-            };
-            candidates.extend(cell.check_plan(&views).passing());
-        }
-    }
-    candidates
-}
-
-/// The run's arm time against the full plan in its given order.
-fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
-    let report = &cell.report;
-    let full: Vec<&crate::plan::check::PoseCheck> = report
-        .poses
-        .iter()
-        .filter(|p| p.problems.is_empty())
-        .collect();
-    let given_moves_s = report
-        .given_order_move_time_s
-        .unwrap_or_else(|| report.total_move_time_s());
-    let settle_per_pose = if outcome.visited_now > 0 {
-        outcome.settling_s / outcome.visited_now as f64
-    } else {
-        0.0
-    };
-    ArmTime {
-        poses: outcome.visited_now,
-        moving_s: outcome.moving_s,
-        settling_s: outcome.settling_s,
-        full_plan_poses: full.len(),
-        full_plan_estimate_s: given_moves_s + settle_per_pose * full.len() as f64,
-    }
-}
-
-/// A resumed fixed plan whose poses are `plan`'s in another order (a plan ordered for travel
-/// time from where the arm stood when the session started): the recorded order, with the joints
-/// of today's check. `None` when the poses differ.
-fn recorded_order(
-    manifest: &session::SessionManifest,
-    plan: &[(Pose, Joints)],
-) -> Option<Vec<(Pose, Joints)>> {
-    if manifest.plan.len() != plan.len() {
-        return None;
-    }
-    let mut used = vec![false; plan.len()];
-    manifest
-        .plan
-        .iter()
-        .map(|recorded| {
-            let r = recorded.base_from_flange;
-            let k = (0..plan.len()).find(|&k| {
-                !used[k]
-                    && r.rotation.angle_to(&plan[k].0.rotation) < 1e-9
-                    && (r.translation.vector - plan[k].0.translation.vector).norm() < 1e-9
-            })?;
-            used[k] = true;
-            Some(plan[k])
-        })
-        .collect()
-}
-
-/// Whether a resumed session's recorded plan is `plan` (same flange poses, in order).
-fn same_plan(manifest: &session::SessionManifest, plan: &[(Pose, Joints)]) -> bool {
-    manifest.plan.len() == plan.len()
-        && manifest.plan.iter().zip(plan).all(|(recorded, (pose, _))| {
-            let r = recorded.base_from_flange;
-            r.rotation.angle_to(&pose.rotation) < 1e-9
-                && (r.translation.vector - pose.translation.vector).norm() < 1e-9
-        })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::ArmTime;
-
-    #[test]
-    fn instant_moves_claim_no_saving() {
-        let instant = ArmTime {
-            poses: 8,
-            moving_s: 0.0,
-            settling_s: 0.0,
-            full_plan_poses: 20,
-            full_plan_estimate_s: 28.6,
-        };
-        let text = instant.to_string();
-        assert!(!instant.measured());
-        assert!(
-            text.contains("not measured") && !text.contains("saved"),
-            "{text}"
-        );
-        // What the demo's instant moves really measure: the loop's own few milliseconds.
-        let loop_only = ArmTime {
-            moving_s: 0.0004,
-            settling_s: 0.0031,
-            ..instant
-        };
-        assert!(!loop_only.measured(), "{loop_only}");
-        let real = ArmTime {
-            moving_s: 9.0,
-            settling_s: 1.0,
-            ..instant
-        };
-        assert!(real.measured());
-        assert!(real.to_string().contains("18.6 s saved"), "{real}");
-    }
 }

@@ -1,0 +1,187 @@
+//! The config's plan driven: fixed, or adaptively (the next-best pose among the candidates,
+//! weighed by move time, until the result is good enough).
+
+use std::sync::Arc;
+
+use crate::plan::nbv::{AdaptivePlanner, StopCheck};
+use crate::plan::{GenerateSpec, Plan, Waypoint};
+use crate::session::{self, SessionError, SessionEvent, SessionOutcome};
+use handeye_core::geometry::Pose;
+use handeye_core::setup::PosePair;
+use handeye_robot::Joints;
+use handeye_solve::Calibration;
+
+use super::super::Hardware;
+use super::{PreparedCell, RunObserver};
+
+/// How an adaptive plan went.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveSummary {
+    /// Poses in the session's plan now.
+    pub in_session: usize,
+    /// Candidate poses that passed their checks.
+    pub candidates: usize,
+    /// Poses chosen in this run.
+    pub chosen_now: usize,
+    /// The target 1-sigma uncertainty, mm.
+    pub target_uncertainty_mm: f64,
+    /// The most poses the plan may take.
+    pub max_poses: usize,
+    /// The last solved 1-sigma uncertainty, mm, if a solve happened.
+    pub solved_sigma_mm: Option<f64>,
+    /// Whether the target was reached.
+    pub reached: bool,
+}
+
+impl std::fmt::Display for AdaptiveSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "adaptive plan: {} of {} candidate poses in the session ({} chosen in this run); target 1-sigma {:.3} mm {}",
+            self.in_session,
+            self.candidates,
+            self.chosen_now,
+            self.target_uncertainty_mm,
+            match self.solved_sigma_mm {
+                Some(s) if self.reached => format!("reached ({s:.3} mm)"),
+                Some(s) if self.in_session >= self.max_poses => format!(
+                    "NOT reached ({s:.3} mm): stopped at plan.max_poses = {}",
+                    self.max_poses
+                ),
+                Some(s) => format!("NOT reached ({s:.3} mm): candidates ran out"),
+                None => "NOT reached (no solve)".into(),
+            }
+        )
+    }
+}
+
+/// Drives the config's plan: adaptively (the next-best pose among `plan`'s candidates, until
+/// good enough) or as the fixed `plan`; the adaptive summary with the outcome.
+pub(super) fn drive_plan(
+    cell: &PreparedCell,
+    setup: session::SessionSetup,
+    plan: &[(Pose, Joints)],
+    start: Joints,
+    adaptive: bool,
+    hardware: &mut Hardware,
+    observer: &mut dyn RunObserver,
+) -> (
+    Result<SessionOutcome, SessionError>,
+    Option<AdaptiveSummary>,
+) {
+    let folder = setup.folder.clone();
+    let mut on_event = |event: SessionEvent| observer.event(event);
+    if !adaptive {
+        let outcome = session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            hardware.camera.as_mut(),
+            &mut on_event,
+        );
+        return (outcome, None);
+    }
+    // A generated plan's `count` is the most poses it takes (it chooses from more).
+    let max_poses = cell
+        .config
+        .plan
+        .max_poses
+        .or(cell.config.plan.generate.map(|g| g.count))
+        .unwrap_or(plan.len())
+        .min(plan.len());
+    let mut planner = AdaptivePlanner::new(
+        cell.config.setup,
+        cell.config.nominal.camera_mount,
+        cell.config.nominal.target_mount,
+        plan.to_vec(),
+        cell.config.solver.to_options(),
+        cell.config.adaptive_target_mm(),
+        max_poses,
+    )
+    .with_min_poses(cell.config.plan.min_poses)
+    .with_motion(cell.config.limits, start, per_pose_s(cell))
+    .with_stop_check(good_enough(cell));
+    let outcome = session::run_adaptive_session(
+        setup,
+        cell.config_path(),
+        &mut planner,
+        hardware.robot.as_mut(),
+        hardware.camera.as_mut(),
+        &mut on_event,
+    );
+    let summary = AdaptiveSummary {
+        in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
+        candidates: plan.len(),
+        chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
+        target_uncertainty_mm: cell.config.adaptive_target_mm(),
+        max_poses,
+        solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
+        reached: planner.reached_target(),
+    };
+    (outcome, Some(summary))
+}
+
+/// What one pose costs besides its move, s, for weighing candidates by arm time: the fixed
+/// settle, the settle window when settling by measurement, and a little for the frame.
+fn per_pose_s(cell: &PreparedCell) -> f64 {
+    let s = &cell.config.session;
+    let window = if s.settle_speed_deg_s > 0.0 {
+        s.settle_window_s
+    } else {
+        0.0
+    };
+    s.settle_s + window + 0.05
+}
+
+/// The adaptive stop check besides the 1-sigma: the rotations spread well (the verdict's rule)
+/// and the held-out error is within the verdict's accuracy — what the verdict would call GOOD.
+fn good_enough(cell: &PreparedCell) -> StopCheck {
+    let setup = cell.config.setup;
+    let options = cell.config.solver.to_options();
+    let accuracy = cell.config.verdict.accuracy();
+    StopCheck(Arc::new(move |samples: &[PosePair], c: &Calibration| {
+        let robot: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+        if handeye_solve::rotation_diversity(&robot).off_axis_deg
+            < handeye_solve::verdict::GOOD_OFF_AXIS_DEG
+        {
+            return false;
+        }
+        match handeye_solve::verdict::held_out(setup, samples, &options, &c.outliers) {
+            Ok(h) => {
+                h.translation_rms_mm <= accuracy.translation_mm
+                    && h.rotation_rms_deg <= accuracy.rotation_deg
+            }
+            Err(_) => false,
+        }
+    }))
+}
+
+/// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
+pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
+
+/// The candidates of an adaptive plan, checked from where the arm stands: the plan's poses that
+/// pass their checks and, for a generated plan (which then takes at most `count` poses), more
+/// views on the same cap (another seed, [`ADAPTIVE_EXTRA_CANDIDATES`] × `count`), so near and
+/// informative poses are there to choose.
+pub(super) fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
+    let mut candidates = cell.report.passing();
+    if let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) {
+        let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
+            .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
+        if count > 0 {
+            let extra = GenerateSpec {
+                count,
+                seed: spec.seed.wrapping_add(1),
+                ..spec
+            };
+            let views = Plan {
+                waypoints: cell
+                    .generate_views(&extra)
+                    .into_iter()
+                    .map(Waypoint::LookAt)
+                    .collect(),
+            };
+            candidates.extend(cell.check_plan(&views).passing());
+        }
+    }
+    candidates
+}
