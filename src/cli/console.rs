@@ -23,7 +23,13 @@ pub(super) struct ConsoleArgs {
     #[arg(long, required_unless_present = "resume")]
     pub(super) config: Option<PathBuf>,
     /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(
+        short = 'o',
+        long = "output",
+        alias = "out",
+        value_name = "DIR",
+        conflicts_with = "resume"
+    )]
     pub(super) out: Option<PathBuf>,
     /// Continue a hand-guided session in this folder.
     #[arg(long)]

@@ -20,7 +20,7 @@ use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetect
 #[derive(Debug, Args)]
 pub(super) struct DetectArgs {
     /// Board YAML: `target_type: aprilgrid` (Kalibr), `charuco` (OpenCV) or `checkerboard`.
-    #[arg(long)]
+    #[arg(long = "board", alias = "target")]
     target: PathBuf,
     /// Intrinsics: ROS/OpenCV camera_info YAML or Kalibr camchain YAML.
     #[arg(long)]

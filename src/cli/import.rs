@@ -52,7 +52,7 @@ enum ImportFormat {
     ///
     /// `*_pose_rPe_<N>.yaml` holds T_base_flange (ViSP's rMe: the end-effector in the robot base)
     /// as [tx, ty, tz, θux, θuy, θuz] (m, axis-angle rad). T_camera_target is measured by
-    /// detecting the board (--target) in each image with the folder's intrinsics. Also writes the
+    /// detecting the board (--board) in each image with the folder's intrinsics. Also writes the
     /// intrinsics as camera_info YAML and the poses as a recorded-poses file, so the folder can run
     /// as a session (robot backend `recorded`, camera backend `files`).
     Visp(VispArgs),
@@ -94,7 +94,7 @@ struct VispArgs {
     /// The ViSP data folder.
     folder: PathBuf,
     /// Board YAML the images show (e.g. configs/targets/single-tag36h11-id10.yaml).
-    #[arg(long)]
+    #[arg(long = "board", alias = "target")]
     target: PathBuf,
     /// Intrinsics (camera_info or Kalibr YAML) instead of the folder's XML.
     #[arg(long)]

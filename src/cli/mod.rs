@@ -12,6 +12,7 @@ mod plan;
 mod replay;
 mod report;
 mod run;
+mod shell;
 mod solve;
 mod target;
 mod verify;
@@ -52,6 +53,10 @@ enum Command {
     Verify(verify::VerifyArgs),
     /// Capture by hand on the live browser console (freedrive, suggested views), then solve.
     Console(console::ConsoleArgs),
+    /// Print shell completions for bash, zsh, fish, elvish or PowerShell.
+    Completions(shell::CompletionsArgs),
+    /// Write the man pages (handeye.1 and one per subcommand).
+    Man(shell::ManArgs),
 }
 
 /// A command ran correctly but found nothing to work with (no board in any image): `main` exits
@@ -80,6 +85,8 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Report(args) => report::run(args),
         Command::Verify(args) => verify::run(args),
         Command::Console(args) => console::run(args),
+        Command::Completions(args) => shell::completions(args),
+        Command::Man(args) => shell::man(args),
     }
 }
 

@@ -23,7 +23,13 @@ pub(super) struct RunArgs {
     config: Option<PathBuf>,
     /// Where to write the session folder (default: sessions/YYYY-MM-DD_HH-MM-SS, the start time
     /// in UTC; `-2`, `-3`, ... appended if that folder exists).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(
+        short = 'o',
+        long = "output",
+        alias = "out",
+        value_name = "DIR",
+        conflicts_with = "resume"
+    )]
     out: Option<PathBuf>,
     /// Continue an interrupted session in this folder.
     #[arg(long)]
@@ -41,10 +47,10 @@ pub(super) struct RunArgs {
     console: Option<std::net::SocketAddr>,
     /// Allow --console on an address beyond this machine (anyone who reaches it with the printed
     /// URL, whose secret it checks, can stop the run).
-    #[arg(long, requires = "console")]
+    #[arg(long = "public", alias = "console-public", requires = "console")]
     console_public: bool,
     /// After the run, keep serving the console until Enter (or Ctrl-C) so the page can be read.
-    #[arg(long, requires = "console")]
+    #[arg(long = "wait", alias = "console-wait", requires = "console")]
     console_wait: bool,
 }
 

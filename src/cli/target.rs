@@ -46,7 +46,7 @@ enum TargetCommand {
     /// Write a printable board (.pdf, .png or .svg) at true scale.
     Render {
         /// Board YAML: aprilgrid (Kalibr), charuco (OpenCV) or checkerboard.
-        #[arg(long)]
+        #[arg(long = "board", alias = "target")]
         target: PathBuf,
         /// Output file; the extension (.pdf, .png or .svg) picks the format.
         #[arg(short = 'o', long)]

@@ -33,7 +33,7 @@ pub(super) struct VerifyArgs {
     #[arg(long)]
     seed: Option<u64>,
     /// Where to record the holdout session (default: sessions/verify-YYYY-MM-DD_HH-MM-SS, UTC).
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     out: Option<PathBuf>,
     /// Do not ask for confirmation before moving a real robot (holdout on a real cell).
     #[arg(long)]

@@ -72,7 +72,7 @@ impl Default for ConsoleOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum ConsoleError {
     /// A non-loopback address without the explicit permission.
-    #[error("console address {addr}: not a loopback address; the console serves only this machine (127.0.0.1, ::1) unless asked: pass --console-public to serve it on {addr} (anyone who reaches it with the printed URL, secret included, can stop or move the arm)")]
+    #[error("console address {addr}: not a loopback address; the console serves only this machine (127.0.0.1, ::1) unless asked: pass --public to serve it on {addr} (anyone who reaches it with the printed URL, secret included, can stop or move the arm)")]
     NotLoopback {
         /// The address asked for.
         addr: SocketAddr,

@@ -550,7 +550,7 @@ fn check_true_scale_render(yaml: &Path, count: usize, dir: &Path) {
         render(&[
             "--dpi".as_ref(),
             "150".as_ref(),
-            "--target".as_ref(),
+            "--board".as_ref(),
             yaml.as_os_str(),
             "-o".as_ref(),
             out.as_os_str(),
@@ -615,7 +615,7 @@ fn target_render_fits_charuco_and_chessboards_to_paper() {
         render(&[
             "--paper".as_ref(),
             "a4".as_ref(),
-            "--target".as_ref(),
+            "--board".as_ref(),
             yaml.as_os_str(),
             "-o".as_ref(),
             pdf.as_os_str(),
@@ -658,7 +658,7 @@ fn target_render_fits_charuco_and_chessboards_to_paper() {
             let mut args = vec![
                 "--dpi".as_ref(),
                 "100".as_ref(),
-                "--target".as_ref(),
+                "--board".as_ref(),
                 yaml.as_os_str(),
                 "-o".as_ref(),
                 out.as_os_str(),
@@ -673,7 +673,7 @@ fn target_render_fits_charuco_and_chessboards_to_paper() {
         assert_eq!(grey(&plain), 0, "{file}: a print has no grey overlay");
         assert!(grey(&framed) > 100, "{file}: --show-frame drew no frame");
         let refused = util::handeye()
-            .args(["target", "render", "--no-corner-squares", "--target"])
+            .args(["target", "render", "--no-corner-squares", "--board"])
             .arg(&yaml)
             .arg("-o")
             .arg(dir.path().join("x.png"))

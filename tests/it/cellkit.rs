@@ -745,7 +745,7 @@ fn target_render_with_paper_reports_the_tag_size() {
                 "letter",
                 "--margin-mm",
                 "5",
-                "--target",
+                "--board",
             ])
             .arg(&board)
             .arg("-o")

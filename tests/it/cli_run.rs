@@ -34,7 +34,7 @@ fn killed_mid_run_resumes_from_the_last_sample_and_matches_a_solve_of_the_same_d
     let mut child = handeye()
         .args(["run", "--config"])
         .arg(&config)
-        .arg("--out")
+        .arg("--output")
         .arg(&session)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -133,7 +133,7 @@ fn run_refuses_a_bad_config_before_anything_moves_and_writes_nothing() {
     let output = handeye()
         .args(["run", "--config"])
         .arg(&config)
-        .arg("--out")
+        .arg("--output")
         .arg(&session)
         .output()
         .unwrap();

@@ -9,14 +9,14 @@ use handeye::config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMe
 use crate::util;
 use util::handeye;
 
-/// `handeye run` on `config` with `--out <dir>/session`: it must fail without creating the
+/// `handeye run` on `config` with `--output <dir>/session`: it must fail without creating the
 /// session folder; returns its stderr.
 fn run_is_refused(dir: &Path, config: &Path) -> String {
     let session = dir.join("session");
     let output = handeye()
         .args(["run", "--yes", "--config"])
         .arg(config)
-        .arg("--out")
+        .arg("--output")
         .arg(&session)
         .output()
         .unwrap();
@@ -679,7 +679,7 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     let output = handeye()
         .args(["import", "visp"])
         .arg(&visp)
-        .arg("--target")
+        .arg("--board")
         .arg(util::repo().join("configs/targets/single-tag36h11-id10.yaml"))
         .args(["--setup", "eye_to_hand", "-o"])
         .arg(dir.path().join("data.yaml"))

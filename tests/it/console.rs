@@ -45,7 +45,7 @@ fn a_non_loopback_address_is_refused_unless_asked_for() {
         panic!("0.0.0.0 served without being asked")
     };
     assert!(matches!(e, ConsoleError::NotLoopback { .. }));
-    assert!(e.to_string().contains("--console-public"), "{e}");
+    assert!(e.to_string().contains("--public"), "{e}");
     let console = Console::start(
         &ConsoleOptions {
             allow_remote: true,

@@ -54,7 +54,7 @@ fn run_new(config: &Path, session: &Path) -> Command {
     command
         .args(["run", "--config"])
         .arg(config)
-        .arg("--out")
+        .arg("--output")
         .arg(session);
     command
 }
@@ -260,7 +260,7 @@ fn sigterm_and_sighup_take_the_ctrl_c_path_and_the_run_resumes() {
 }
 
 /// Issue #13 item 2: a second `run --resume DIR` while one runs is refused (naming the running
-/// process), and of two `run --out DIR` started together exactly one runs.
+/// process), and of two `run --output DIR` started together exactly one runs.
 #[test]
 fn a_second_run_of_the_same_folder_is_refused_while_one_runs() {
     let dir = tempfile::tempdir().unwrap();
@@ -417,7 +417,7 @@ fn a_full_disk_while_recording_stops_with_the_resume_hint() {
 }
 
 /// Issue #13 item 10: a run killed between creating its folder and writing `session.yaml`
-/// leaves a folder a new run with `--out` accepts; `--resume` of it says what to do.
+/// leaves a folder a new run with `--output` accepts; `--resume` of it says what to do.
 #[test]
 fn a_folder_left_before_session_yaml_is_reusable_and_resume_says_how() {
     let dir = tempfile::tempdir().unwrap();
@@ -433,7 +433,7 @@ fn a_folder_left_before_session_yaml_is_reusable_and_resume_says_how() {
     let message = stderr(&refused);
     assert!(!refused.status.success());
     assert!(
-        message.contains("no session.yaml") && message.contains("--out"),
+        message.contains("no session.yaml") && message.contains("--output"),
         "{message}"
     );
     let started = output(&mut run_new(&config, &session));

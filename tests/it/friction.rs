@@ -12,12 +12,12 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-/// `handeye run --config <config> --out <session>`, output captured (not a terminal).
+/// `handeye run --config <config> --output <session>`, output captured (not a terminal).
 fn run_session(config: &Path, session: &Path) -> Output {
     handeye()
         .args(["run", "--config"])
         .arg(config)
-        .arg("--out")
+        .arg("--output")
         .arg(session)
         .output()
         .unwrap()
@@ -84,7 +84,7 @@ fn detect_exits_2_with_a_message_when_no_image_shows_the_board() {
     let out = handeye()
         .arg("detect")
         .args(&images)
-        .arg("--target")
+        .arg("--board")
         .arg(util::repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(util::repo().join("configs/cameras/sim-1280x720.yaml"))
@@ -326,7 +326,7 @@ fn file_shape_errors_name_yaml_forms_not_rust_types() {
         (
             vec![
                 "detect".into(),
-                "--target".into(),
+                "--board".into(),
                 list.into(),
                 "--intrinsics".into(),
                 intrinsics.into(),

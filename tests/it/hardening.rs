@@ -144,7 +144,7 @@ fn issue13_detect_cli_with_huge_decimation_or_a_1x1_image_fails_cleanly() {
         let output = handeye()
             .arg("detect")
             .arg(&tiny)
-            .arg("--target")
+            .arg("--board")
             .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
             .arg("--intrinsics")
             .arg(&intrinsics)
@@ -284,7 +284,7 @@ fn issue13_closed_stdout_in_plan_check_and_detect_ends_quietly() {
         handeye()
             .arg("detect")
             .arg(&frame)
-            .arg("--target")
+            .arg("--board")
             .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
             .arg("--intrinsics")
             .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
@@ -605,7 +605,7 @@ fn import_visp_cli(folder: &Path, out: &Path, cell_out: &Path) -> (Option<i32>, 
         handeye()
             .args(["import", "visp"])
             .arg(folder)
-            .arg("--target")
+            .arg("--board")
             .arg(repo().join("configs/targets/single-tag36h11-id10.yaml"))
             .args(["--setup", "eye_in_hand", "--skip-unfound", "-o"])
             .arg(out.join("dataset.yaml"))
@@ -678,7 +678,7 @@ fn issue13_replay_of_a_session_with_a_1x1_frame_skips_that_frame_and_solves() {
         handeye()
             .args(["run", "--config"])
             .arg(&config)
-            .arg("--out")
+            .arg("--output")
             .arg(&session),
     );
     assert_eq!(code, Some(0), "{stderr}");

@@ -266,7 +266,7 @@ fn our_target_render_with_corner_squares_is_detected_back() {
     let render = |name: &str, extra: &[&str]| {
         let png = dir.path().join(name);
         let output = util::handeye()
-            .args(["target", "render", "--target"])
+            .args(["target", "render", "--board"])
             .arg(&target)
             .arg("-o")
             .arg(&png)

@@ -11,6 +11,7 @@ mod armtime;
 mod bag_import;
 mod boards;
 mod cellkit;
+mod cli_names;
 mod cli_run;
 mod closed_forms;
 mod config;

@@ -149,7 +149,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
             "console",
             "--config",
             &config_s,
-            "--out",
+            "--output",
             &session_s,
             "--addr",
             "127.0.0.1:0",

@@ -160,7 +160,7 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
     let run = util::handeye()
         .args(["run", "--yes", "--config"])
         .arg(&config)
-        .arg("--out")
+        .arg("--output")
         .arg(&session)
         .output()
         .unwrap();
@@ -175,7 +175,7 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
         .arg(&config)
         .arg("--result")
         .arg(session.join("result.yaml"))
-        .arg("--out")
+        .arg("--output")
         .arg(&holdout)
         .output()
         .unwrap();
@@ -197,7 +197,7 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
         .arg(&other)
         .arg("--result")
         .arg(session.join("result.yaml"))
-        .arg("--out")
+        .arg("--output")
         .arg(dir.path().join("refused"))
         .output()
         .unwrap();

@@ -363,7 +363,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     let exe = env!("CARGO_BIN_EXE_handeye");
     let output = std::process::Command::new(exe)
         .arg("detect")
-        .arg("--target")
+        .arg("--board")
         .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&intrinsics)
@@ -399,7 +399,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     // A corrupt image fails the command with the file named.
     let output = std::process::Command::new(exe)
         .arg("detect")
-        .arg("--target")
+        .arg("--board")
         .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&intrinsics)
@@ -420,7 +420,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     .unwrap();
     let output = std::process::Command::new(exe)
         .arg("detect")
-        .arg("--target")
+        .arg("--board")
         .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("--intrinsics")
         .arg(&small)
@@ -437,7 +437,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     // Printable boards: SVG written, unknown extension refused.
     let svg = dir.path().join("board.svg");
     let status = std::process::Command::new(exe)
-        .args(["target", "render", "--target"])
+        .args(["target", "render", "--board"])
         .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("-o")
         .arg(&svg)
@@ -446,7 +446,7 @@ fn cli_detect_and_target_render_work_end_to_end() {
     assert!(status.success());
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
     let output = std::process::Command::new(exe)
-        .args(["target", "render", "--target"])
+        .args(["target", "render", "--board"])
         .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
         .arg("-o")
         .arg(dir.path().join("board.bmp"))

@@ -38,7 +38,7 @@ def timed(args, page=None):
     shutil.rmtree(out, ignore_errors=True)
     c0 = cpu()
     t0 = time.monotonic()
-    run = Handeye(["run", "--config", config20, "--out", str(out), *args], work)
+    run = Handeye(["run", "--config", config20, "--output", str(out), *args], work)
     if page is not None:
         page.goto(run.url())
     code = run.wait(timeout=600)
@@ -65,7 +65,7 @@ with sync_playwright() as p:
 
     out = work / "long"
     shutil.rmtree(out, ignore_errors=True)
-    run = Handeye(["run", "--config", config_long, "--out", str(out), "--console", "127.0.0.1:0"], work)
+    run = Handeye(["run", "--config", config_long, "--output", str(out), "--console", "127.0.0.1:0"], work)
     page.goto(run.url())
     samples = []
     while run.proc.poll() is None:

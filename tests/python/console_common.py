@@ -62,7 +62,7 @@ class Handeye:
         return code
 
     def enter(self):
-        """Presses Enter on its stdin (ends a `--console-wait` / `--wait` linger)."""
+        """Presses Enter on its stdin (ends a `--wait` / `--wait` linger)."""
         try:
             self.proc.stdin.write("\n")
             self.proc.stdin.flush()

@@ -33,7 +33,7 @@ def logs(page):
 with sync_playwright() as p:
     browser = launch(p)
     page = browser.new_page()
-    run = Handeye(["console", "--config", config, "--out", str(work / "fd"), "--addr", "127.0.0.1:0"], work)
+    run = Handeye(["console", "--config", config, "--output", str(work / "fd"), "--addr", "127.0.0.1:0"], work)
     try:
         page.goto(run.url())
         page.wait_for_selector("#manual:not(.hidden)", timeout=60000)

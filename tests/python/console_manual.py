@@ -33,7 +33,7 @@ with sync_playwright() as p:
     browser = launch(p)
     page = browser.new_page(viewport={"width": 1280, "height": 860})
     run = Handeye(
-        ["console", "--config", config, "--out", str(session), "--addr", "127.0.0.1:0", "--wait"], work
+        ["console", "--config", config, "--output", str(session), "--addr", "127.0.0.1:0", "--wait"], work
     )
     try:
         page.goto(run.url())

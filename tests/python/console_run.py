@@ -20,7 +20,7 @@ with sync_playwright() as p:
     browser = launch(p)
     page = browser.new_page(viewport={"width": 1280, "height": 860})
 
-    run = Handeye(["run", "--config", config, "--out", str(session), "--console", "127.0.0.1:0"], work)
+    run = Handeye(["run", "--config", config, "--output", str(session), "--console", "127.0.0.1:0"], work)
     try:
         page.goto(run.url())
         # The plan table fills, then pose states change and frames arrive while the arm moves.
@@ -50,7 +50,7 @@ with sync_playwright() as p:
     kept = {r.name for r in records}
 
     resume = Handeye(
-        ["run", "--resume", str(session), "--console", "127.0.0.1:0", "--console-wait"], work
+        ["run", "--resume", str(session), "--console", "127.0.0.1:0", "--wait"], work
     )
     try:
         url = resume.url()

@@ -104,7 +104,7 @@ fn foreign_pages_rebound_hosts_and_missing_or_wrong_secrets_are_refused_for_ever
             "console",
             "--config",
             &config_s,
-            "--out",
+            "--output",
             &session_s,
             "--addr",
             "127.0.0.1:0",
@@ -288,7 +288,7 @@ fn a_public_console_needs_the_secret_too_and_says_so() {
             "console",
             "--config",
             &config_s,
-            "--out",
+            "--output",
             &out_s,
             "--addr",
             "0.0.0.0:0",
@@ -369,7 +369,7 @@ fn two_thousand_connections_under_ulimit_1024_leave_the_run_good() {
             .arg(env!("CARGO_BIN_EXE_handeye"))
             .args(["run", "--config"])
             .arg(&config)
-            .arg("--out")
+            .arg("--output")
             .arg(&out)
             .args(["--console", "127.0.0.1:0"])
             .current_dir(dir.path()),
@@ -450,7 +450,7 @@ fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_sh
             "run",
             "--config",
             &config_s,
-            "--out",
+            "--output",
             &out_s,
             "--console",
             "127.0.0.1:0",

@@ -281,7 +281,7 @@ fn issue25_absurd_focal_length_or_principal_point_is_refused_at_load() {
         handeye()
             .arg("detect")
             .arg(&frame)
-            .arg("--target")
+            .arg("--board")
             .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
             .arg("--intrinsics")
             .arg(&path),

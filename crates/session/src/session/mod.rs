@@ -47,7 +47,7 @@ use handeye_vision::TargetError;
 pub enum SessionError {
     /// The output folder already holds something.
     #[error(
-        "session folder {0} already exists and is not empty; choose another --out or --resume it"
+        "session folder {0} already exists and is not empty; choose another --output or --resume it"
     )]
     FolderExists(PathBuf),
     /// `--resume` (or a reader) was given a folder that is not a session.
@@ -262,7 +262,7 @@ fn not_a_session_hint(root: &std::path::Path) -> String {
         format!(": symlink loop at {}", at.display())
     } else if root.join("poses").is_dir() || root.join("frames").is_dir() {
         format!(
-            "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --out {}`",
+            "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --output {}`",
             root.display()
         )
     } else {
