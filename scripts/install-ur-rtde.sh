@@ -25,16 +25,8 @@ if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$WANT_STAMP" ] && [ -f "$PREFIX/lib
 fi
 
 # Debian build packages (only those missing, so a warm machine needs no apt at all).
-pkgs=(cmake make g++ libboost-system-dev libboost-thread-dev libboost-program-options-dev)
-missing=()
-for p in "${pkgs[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "install-ur-rtde: installing ${missing[*]}"
-  apt-get update -q
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
-fi
+bash "$(dirname "$0")/apt-install.sh" cmake make g++ libboost-system-dev libboost-thread-dev \
+  libboost-program-options-dev
 
 WORK="$(mktemp -d /tmp/ur-rtde-build.XXXXXX)"
 trap 'rm -rf "$WORK"' EXIT
@@ -57,6 +49,12 @@ mkdir build && cd build
 cmake .. -DPYTHON_BINDINGS=OFF -DEXAMPLES=OFF -DBUILD_STATIC=ON \
   -DCMAKE_POSITION_INDEPENDENT_CODE=ON -DCMAKE_INSTALL_PREFIX="$PREFIX"
 nice -n 10 make -j"$JOBS"
-make install
-echo "$WANT_STAMP" >"$STAMP"
+# The prefix may need root (/opt): through sudo when this user cannot write it.
+if mkdir -p "$PREFIX" 2>/dev/null && [ -w "$PREFIX" ]; then
+  make install
+  echo "$WANT_STAMP" >"$STAMP"
+else
+  sudo -n make install
+  echo "$WANT_STAMP" | sudo -n tee "$STAMP" >/dev/null
+fi
 echo "install-ur-rtde: installed ur_rtde $VERSION into $PREFIX"

@@ -2,9 +2,27 @@
 # Runs every test, after installing what a fresh machine lacks: a C/C++ toolchain, ur_rtde 1.6.5
 # built from source into a cached prefix (for the `ur-rtde` driver and its tests against the mock
 # controller), and the ur_rtde Python wheel (the independent client the mock is tested with).
-# Safe to run again: every step skips work already done.
+# Safe to run again: every step skips work already done. Runs as any user: Debian packages go
+# through scripts/apt-install.sh (root, or sudo without a password), Python packages into the
+# user's site (or the active venv) when not root.
+#
+#   scripts/test.sh            every test (what CI runs)
+#   scripts/test.sh --quick    a check of a build in a few minutes: installs nothing, runs the unit
+#                              tests of every crate and the integration tests of the solver,
+#                              configs, files in and out and the simulated cell; a test whose
+#                              tool is missing says so and skips
+#   scripts/test.sh ARGS...    extra arguments go to `cargo test`
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+if [ "${1:-}" = "--quick" ]; then
+  shift
+  cargo test --workspace --lib --bins -q "$@"
+  # The integration areas that need no browser, arm library or Python packages.
+  cargo test --test it -q "$@" -- cli_names:: cli_run:: closed_forms:: config:: dataset:: \
+    driver:: formats:: friction:: layers:: plausibility:: solve:: verdict::
+  exit 0
+fi
 
 need_apt=()
 command -v cc >/dev/null || need_apt+=(build-essential)
@@ -15,23 +33,31 @@ command -v chromium >/dev/null || need_apt+=(chromium)
 # (tests/it/cellkit.rs): an independent PDF reader, not ours.
 command -v pdftoppm >/dev/null || need_apt+=(poppler-utils)
 if [ ${#need_apt[@]} -gt 0 ]; then
-  apt-get update -q
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${need_apt[@]}"
+  bash scripts/apt-install.sh "${need_apt[@]}"
 fi
 
 export UR_RTDE_PREFIX="${UR_RTDE_PREFIX:-/opt/ur_rtde-1.6.5}"
 bash scripts/install-ur-rtde.sh
 
+# pip into the user's site when not root and not in a venv (never into the system's Python).
+pip_install() {
+  if [ "$(id -u)" -ne 0 ] && [ -z "${VIRTUAL_ENV:-}" ]; then
+    python3 -m pip install -q --user "$@"
+  else
+    python3 -m pip install -q "$@"
+  fi
+}
+
 if ! python3 -c "import rtde_control, rtde_receive" 2>/dev/null; then
-  python3 -m pip install -q ur_rtde==1.6.5 || python3 -m pip install -q ur_rtde==1.6.5
+  pip_install ur_rtde==1.6.5 || pip_install ur_rtde==1.6.5
 fi
 
 # numpy + OpenCV for tests/it/boards.rs and tests/it/kalibr_print.rs (tests/python/*.py render
-# ChArUco/chessboard/Kalibr-aprilgrid frames independently of us and compute OpenCV's figures). The test falls back to a
-# venv of its own when this install is refused (PEP 668).
-python3 -c "import cv2, numpy" 2>/dev/null || python3 -m pip install -q numpy "opencv-python-headless<5" || true
+# ChArUco/chessboard/Kalibr-aprilgrid frames independently of us and compute OpenCV's figures).
+# The test falls back to a venv of its own when this install is refused (PEP 668).
+python3 -c "import cv2, numpy" 2>/dev/null || pip_install numpy "opencv-python-headless<5" || true
 # Playwright drives the Debian chromium above in tests/it/console.rs (no browser download).
-python3 -c "import playwright.sync_api" 2>/dev/null || python3 -m pip install -q playwright
+python3 -c "import playwright.sync_api" 2>/dev/null || pip_install playwright
 # ROS 2 bag import (tests/it/bag_import.rs): bags are written by the pure-Python `rosbags` package,
 # installed into the venv the test looks for (it creates the same venv itself when missing).
 bag_venv="${CARGO_TARGET_DIR:-target}/tmp/bag-venv"
