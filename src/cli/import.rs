@@ -297,9 +297,20 @@ fn import_bag(a: BagArgs) -> anyhow::Result<()> {
             imported.folder.join("import/bag-import.yaml").display()
         );
     }
-    outln!(
-        "next: handeye report {out}   (or: handeye solve {out} --space reprojection, handeye replay {out})"
-    );
+    // The report, as after a run (the import solved the session with the run's solve).
+    match super::report::write(&imported.folder, None) {
+        Ok((report, verdict)) => {
+            outln!("report:  {}", report.display());
+            outln!(
+                "{}",
+                super::run::next_step(verdict.as_ref(), &imported.folder.join("result.yaml"))
+            );
+        }
+        Err(e) => {
+            eprintln!("warning: the report could not be written: {e:#}");
+            outln!("next: handeye replay {out}");
+        }
+    }
     Ok(())
 }
 

@@ -8,6 +8,7 @@ use clap::Args;
 use handeye::camera_model::CameraModel;
 use handeye::cell;
 use handeye::config::SolveSpace;
+use handeye::report::session::{write_replay_report, Optics};
 use handeye::result::ResultFile;
 use handeye::session::{self, replay, SessionFolder};
 
@@ -100,6 +101,23 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     if let Some(truth) = &prepared.config.simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
-    outln!("wrote {}", output.display());
+    outln!();
+    outln!("result:  {}", output.display());
+    let optics = Optics {
+        board: &prepared.board,
+        camera: &camera_model,
+    };
+    match write_replay_report(&folder, &solved, optics) {
+        Ok(report) => outln!("report:  {}", report.display()),
+        // The result is saved; a report problem must not hide it.
+        Err(e) => eprintln!(
+            "warning: the report could not be written: {:#}",
+            anyhow::Error::from(e)
+        ),
+    }
+    outln!(
+        "{}",
+        super::run::next_step(solved.verdict.as_ref(), &output)
+    );
     Ok(())
 }

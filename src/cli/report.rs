@@ -9,6 +9,7 @@ use handeye::config::CellConfig;
 use handeye::report::session::write_folder_report;
 use handeye::result::ResultFile;
 use handeye::session::SessionFolder;
+use handeye::verdict::Verdict;
 
 /// Write the calibration report of a solved session folder.
 #[derive(Debug, Args)]
@@ -23,9 +24,21 @@ pub(super) struct ReportArgs {
 
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
-    let folder = SessionFolder::open(&args.session)?;
+    let (path, _) = write(&args.session, args.config)?;
+    outln!("report: {}", path.display());
+    Ok(())
+}
+
+/// Writes the report of the solved session folder `dir` with the board and lens of `config`
+/// (default: the one the session was recorded with); returns its path and the verdict
+/// `result.yaml` holds. What the page lacks and why is printed as a warning.
+pub(super) fn write(
+    dir: &std::path::Path,
+    config: Option<PathBuf>,
+) -> anyhow::Result<(PathBuf, Option<Verdict>)> {
+    let folder = SessionFolder::open(dir)?;
     let manifest = folder.read_manifest()?;
-    let config_path = args.config.unwrap_or(manifest.config);
+    let config_path = config.unwrap_or(manifest.config);
     let config = match CellConfig::load(&config_path) {
         Ok(config) => Some(config),
         Err(e) => {
@@ -49,6 +62,5 @@ pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
     for why in lacking {
         eprintln!("warning: {why}");
     }
-    outln!("report: {}", path.display());
-    Ok(())
+    Ok((path, result.verdict))
 }

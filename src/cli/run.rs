@@ -156,7 +156,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     Ok((report, next))
 }
 /// The last line after a run: the export command, or what the verdict says to do first.
-fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
+pub(super) fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
     let export = format!(
         "handeye export {} --format ros2|urdf|ur|json|opencv",
         shell_word(result)

@@ -81,26 +81,32 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         };
         let v = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
         outln!("{}", v.table());
+        outln!("{}", v.verdict(&cell_config.verdict.accuracy()).1);
         let text = serde_yaml_ng::to_string(&v)?;
         write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
         outln!("holdout session: {}", out.display());
         return Ok(());
     }
-    let (setup, pairs, options) = if let Some(dir) = &args.session {
+    // The session's own solver options and accuracy when its config loads; the defaults else.
+    let (setup, pairs, config) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         let dataset = Dataset::load(&folder.samples_path())?;
-        let options = CellConfig::load(&folder.read_manifest()?.config)
-            .map(|c| c.solver.to_options())
-            .unwrap_or_default();
-        (dataset.setup, dataset.pairs, options)
+        let config = CellConfig::load(&folder.read_manifest()?.config).ok();
+        (dataset.setup, dataset.pairs, config)
     } else if let Some(file) = &args.dataset {
         let dataset = Dataset::load(file)?;
-        (dataset.setup, dataset.pairs, Default::default())
+        (dataset.setup, dataset.pairs, None)
     } else {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
+    let options = config
+        .as_ref()
+        .map(|c| c.solver.to_options())
+        .unwrap_or_default();
+    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
     let v = verify::leave_one_out(setup, &pairs, &options)?;
     outln!("{}", v.table());
+    outln!("{}", v.verdict(&accuracy).1);
     Ok(())
 }
 

@@ -271,6 +271,31 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
         optics,
         solved.verdict.clone(),
         run.arm_time,
+        REPORT_FILE,
+    )
+}
+
+/// The report of a session folder, `<session>/report.html`.
+pub const REPORT_FILE: &str = "report.html";
+/// The report of a replay (`handeye replay`), beside the run's own: `<session>/replay-report.html`.
+pub const REPLAY_REPORT_FILE: &str = "replay-report.html";
+
+/// Writes `<session>/replay-report.html` for a replay (`handeye replay DIR`): the answers, the
+/// verdict and the evidence of the solve just made from the frames detected again (`solved`),
+/// with the board and lens it used; the run's own `report.html` stays. Returns the path written.
+pub fn write_replay_report(
+    folder: &SessionFolder,
+    solved: &SolvedSession,
+    optics: Optics<'_>,
+) -> Result<std::path::PathBuf, ReportError> {
+    write(
+        folder,
+        &solved.evidence,
+        Answer::of(solved),
+        Some(optics),
+        solved.verdict.clone(),
+        None,
+        REPLAY_REPORT_FILE,
     )
 }
 
@@ -321,12 +346,13 @@ pub fn write_folder_report(
         optics,
         verdict,
         crate::cell::run::ArmTime::load(folder.root()),
+        REPORT_FILE,
     )?;
     Ok((path, lacking))
 }
 
 /// The page of a session: its input from the evidence and answers, the held-out figures from
-/// the verdict, written to `<session>/report.html`.
+/// the verdict, written to `<session>/<file_name>`.
 fn write(
     folder: &SessionFolder,
     evidence: &Evidence,
@@ -334,6 +360,7 @@ fn write(
     optics: Option<Optics<'_>>,
     verdict: Option<Verdict>,
     arm_time: Option<crate::cell::run::ArmTime>,
+    file_name: &str,
 ) -> Result<std::path::PathBuf, ReportError> {
     let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
@@ -348,7 +375,7 @@ fn write(
         });
     }
     input.verdict = verdict;
-    let path = folder.root().join("report.html");
+    let path = folder.root().join(file_name);
     super::write_report(&path, &input)?;
     Ok(path)
 }

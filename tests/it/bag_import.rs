@@ -485,6 +485,12 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
     );
     assert!(log.contains("16 samples accepted, 0 skipped"), "{log}");
     assert_calibrated(&out);
+    // Like a run's, the import ends with its report and the next step.
+    assert!(out.join("report.html").is_file(), "{log}");
+    assert!(
+        log.contains("report:") && log.lines().last().unwrap().starts_with("next: "),
+        "{log}"
+    );
     // It is an ordinary session: the reprojection-space solve and the report work on it.
     let solve = handeye()
         .arg("solve")
@@ -497,7 +503,15 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
     let report = handeye().arg("report").arg(&out).output().unwrap();
     assert!(report.status.success(), "{}", text(&report));
     let replay = handeye().arg("replay").arg(&out).output().unwrap();
-    assert!(replay.status.success(), "{}", text(&replay));
+    let log = text(&replay);
+    assert!(replay.status.success(), "{log}");
+    // A replay writes its own report beside the run's and says what to do next.
+    assert!(out.join("replay-report.html").is_file(), "{log}");
+    let next = String::from_utf8_lossy(&replay.stdout);
+    assert!(
+        next.lines().last().unwrap().starts_with("next: ") && next.contains("verdict: "),
+        "{log}"
+    );
 }
 
 /// The import as a library call (what `handeye import bag` is a thin caller of): the notes

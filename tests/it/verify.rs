@@ -189,6 +189,12 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
         out.contains("translation at the target RMS") && out.contains("holdout session"),
         "{out}"
     );
+    // The verdict on the held-out errors, against the config's accuracy (1 mm, 0.1°): the sim
+    // cell's calibration is GOOD.
+    assert!(
+        out.contains("verdict: GOOD — holdout error") && out.contains("asked for"),
+        "{out}"
+    );
     assert!(holdout.join("verify.yaml").is_file() && holdout.join("samples.yaml").is_file());
 
     let other = util::config_variant(dir.path(), "sim-cell-eye-to-hand.yaml", "other.yaml", &[]);

@@ -19,6 +19,7 @@ use crate::session::SessionError;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
+use handeye_solve::verdict::{Accuracy, Level};
 use handeye_solve::{self as solve, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
@@ -240,6 +241,29 @@ pub fn holdout(
 }
 
 impl Verification {
+    /// The verdict on the errors against `accuracy` (the verdict's bands: GOOD within it, CHECK
+    /// up to 3×, REDO beyond) and the line that says it, with what to do.
+    pub fn verdict(&self, accuracy: &Accuracy) -> (Level, String) {
+        let s = &self.summary;
+        let level = accuracy.level_of(s.translation_rms_mm, s.rotation_rms_deg);
+        let line = format!(
+            "verdict: {} — {} error {:.2} mm, {:.3}° (RMS over {} poses) against the {} mm, {}° asked for{}",
+            level.word(),
+            self.kind,
+            s.translation_rms_mm,
+            s.rotation_rms_deg,
+            s.poses,
+            accuracy.translation_mm,
+            accuracy.rotation_deg,
+            match level {
+                Level::Good => "",
+                Level::Check => ": check the setup (was the camera or the board moved since the calibration?), then calibrate again if it holds",
+                Level::Redo => ": do not use this result; calibrate again",
+            }
+        );
+        (level, line)
+    }
+
     /// A table for a terminal: one line per pose, then the summary.
     pub fn table(&self) -> String {
         use std::fmt::Write;

@@ -149,6 +149,16 @@ pub struct Accuracy {
     pub rotation_deg: f64,
 }
 
+impl Accuracy {
+    /// The level of a measured error against this accuracy, the worse of translation and
+    /// rotation: GOOD up to 1×, CHECK up to [`REDO_FACTOR`]×, REDO above (or not finite) — the
+    /// verdict's bands, for a check made apart from a solve (`handeye verify`).
+    pub fn level_of(&self, translation_mm: f64, rotation_deg: f64) -> Level {
+        rules::band(translation_mm, self.translation_mm)
+            .max(rules::band(rotation_deg, self.rotation_deg))
+    }
+}
+
 impl Default for Accuracy {
     fn default() -> Self {
         Accuracy {

@@ -159,11 +159,7 @@ pub fn load_and_solve(
     }
     let dataset = committed_samples(folder, &visits)?;
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let mut solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
-    solved.evidence = Evidence {
-        pairs: dataset.pairs.clone(),
-        visits,
-    };
+    let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
     Ok((solved, dataset))
 }
 
@@ -483,7 +479,11 @@ pub fn solve_session(
         estimated_camera: None,
         summary: String::new(),
         verdict: None,
-        evidence: Evidence::default(),
+        // What it was solved from, for the report.
+        evidence: Evidence {
+            pairs: pairs.to_vec(),
+            visits: visits.to_vec(),
+        },
     };
     let mut notes = Vec::new();
     if let Some((board, camera)) = vision {

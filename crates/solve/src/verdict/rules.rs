@@ -32,7 +32,7 @@ pub struct Evidence<'a> {
 
 /// The level of a measured value against its accuracy: GOOD up to 1×, CHECK up to
 /// [`REDO_FACTOR`]×, REDO above (and for a non-finite value).
-fn band(value: f64, accuracy: f64) -> Level {
+pub(crate) fn band(value: f64, accuracy: f64) -> Level {
     if !value.is_finite() || value > REDO_FACTOR * accuracy {
         Level::Redo
     } else if value > accuracy {
