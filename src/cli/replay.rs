@@ -107,7 +107,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         board: &prepared.board,
         camera: &camera_model,
     };
-    match write_replay_report(&folder, &solved, optics) {
+    match write_replay_report(&folder, &solved, optics, Some(prepared.config.nominal)) {
         Ok(report) => outln!("report:  {}", report.display()),
         // The result is saved; a report problem must not hide it.
         Err(e) => eprintln!(

@@ -100,6 +100,9 @@ pub struct ReportInput {
     pub verdict: Option<Verdict>,
     /// The run's arm time (spent, and saved against the full plan), when the session kept it.
     pub arm_time: Option<crate::cell::run::ArmTime>,
+    /// The config's nominal transforms (what the person measured or expected), shown beside the
+    /// answer in plain words; `None` without a config.
+    pub nominal: Option<crate::setup::CellTransforms>,
 }
 
 /// Why the report could not be made.
@@ -148,11 +151,13 @@ pub const PLOT_KINDS: [&str; 6] = [
     "convergence",
 ];
 
-/// The section ids, in page order: the verdict card; "use it" (export snippets); the evidence
+/// The section ids, in page order: the verdict card; the answer in plain words beside the
+/// nominal; "use it" (export snippets); the evidence
 /// (findings, residual plots, per-pose table, frames, cell sketch, rotation axes); the details
 /// (full numbers of every answer, solver convergence).
-pub const SECTIONS: [&str; 10] = [
+pub const SECTIONS: [&str; 11] = [
     "verdict",
+    "plain",
     "use",
     "warnings",
     "residuals",
@@ -191,6 +196,9 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     if let Some(v) = verdict {
         verdict_card(&mut html, v);
     }
+
+    // In plain words: where the answer puts the camera and the board, beside the nominal.
+    sections::plain_summary(&mut html, &input.answers[0], input.nominal.as_ref());
 
     // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
     use_section(&mut html, &input.answers[0], verdict);

@@ -126,7 +126,7 @@ pub(super) fn verdict_card(html: &mut String, v: &Verdict) {
         for finding in &v.also {
             let _ = writeln!(
                 html,
-                "<li class=\"{}\">{}: {} Next: {}</li>",
+                "<li class=\"{}\">{}: {}<br><span class=\"next\">Next: {}</span></li>",
                 finding.level.word().to_ascii_lowercase(),
                 finding.level.word(),
                 escape(&finding.reason),
@@ -136,6 +136,71 @@ pub(super) fn verdict_card(html: &mut String, v: &Verdict) {
         html.push_str("</ul>\n");
     }
     html.push_str("</section>\n");
+}
+
+/// The answer in plain words, beside the config's nominal values when there are some: where
+/// each transform puts its frame (mm, and roll / pitch / yaw in degrees about x, y, z), and how
+/// far that is from the nominal.
+pub(super) fn plain_summary(
+    html: &mut String,
+    answer: &ReportAnswer,
+    nominal: Option<&crate::setup::CellTransforms>,
+) {
+    let ids = FrameIds::default();
+    let frame = |name: &str| match name {
+        "flange" => format!("the flange ({})", ids.flange),
+        "base" => format!("the robot base ({})", ids.base),
+        "camera" => "the camera".to_string(),
+        "target" => "the board".to_string(),
+        other => other.to_string(),
+    };
+    let place = |pose: &Pose| {
+        // Rounded to the tenth shown, and `+ 0.0`, so a -0.04 prints as 0.0, not -0.0.
+        let tenth = |v: f64| (v * 10.0).round() / 10.0 + 0.0;
+        let t = pose.translation.vector * 1e3;
+        let (roll, pitch, yaw) = pose.rotation.euler_angles();
+        format!(
+            "x {:.1}, y {:.1}, z {:.1} mm, roll {:.1}°, pitch {:.1}°, yaw {:.1}°",
+            tenth(t.x),
+            tenth(t.y),
+            tenth(t.z),
+            tenth(roll.to_degrees()),
+            tenth(pitch.to_degrees()),
+            tenth(yaw.to_degrees())
+        )
+    };
+    html.push_str("<section id=\"plain\"><h3>In plain words</h3>\n<ul>\n");
+    let nominal = nominal.map(|n| n.unknowns());
+    for (k, (key, pose)) in answer.calibration.unknowns().iter().enumerate() {
+        // `T_parent_child`: the child frame's place in the parent frame.
+        let mut names = key.trim_start_matches("T_").splitn(2, '_');
+        let (parent, child) = (names.next().unwrap_or(""), names.next().unwrap_or(""));
+        let mut line = format!(
+            "<b>{}</b> is at {} in the frame of {} (<code>{key}</code>)",
+            escape(&capitalised(&frame(child))),
+            place(pose),
+            escape(&frame(parent))
+        );
+        if let Some((_, nominal)) = nominal.as_ref().map(|n| n[k]) {
+            let apart_mm = (pose.translation.vector - nominal.translation.vector).norm() * 1e3;
+            let apart_deg = pose.rotation.angle_to(&nominal.rotation).to_degrees();
+            let _ = write!(
+                line,
+                "; the config's nominal: {} ({apart_mm:.1} mm and {apart_deg:.1}° apart)",
+                place(&nominal)
+            );
+        }
+        let _ = writeln!(html, "<li>{line}.</li>");
+    }
+    html.push_str("</ul>\n</section>\n");
+}
+
+fn capitalised(text: &str) -> String {
+    let mut chars = text.chars();
+    match chars.next() {
+        Some(first) => first.to_uppercase().chain(chars).collect(),
+        None => String::new(),
+    }
 }
 
 pub(super) fn figure(html: &mut String, kind: &str, svg: &str) {

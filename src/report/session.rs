@@ -154,6 +154,7 @@ pub fn from_session(
         holdout: None,
         verdict: None,
         arm_time: None,
+        nominal: None,
     })
 }
 
@@ -268,10 +269,13 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
         &run.folder,
         &solved.evidence,
         Answer::of(solved),
-        optics,
-        solved.verdict.clone(),
-        run.arm_time,
-        REPORT_FILE,
+        Page {
+            optics,
+            verdict: solved.verdict.clone(),
+            arm_time: run.arm_time,
+            nominal: Some(run.cell.config.nominal),
+            file_name: REPORT_FILE,
+        },
     )
 }
 
@@ -287,15 +291,19 @@ pub fn write_replay_report(
     folder: &SessionFolder,
     solved: &SolvedSession,
     optics: Optics<'_>,
+    nominal: Option<crate::setup::CellTransforms>,
 ) -> Result<std::path::PathBuf, ReportError> {
     write(
         folder,
         &solved.evidence,
         Answer::of(solved),
-        Some(optics),
-        solved.verdict.clone(),
-        None,
-        REPLAY_REPORT_FILE,
+        Page {
+            optics: Some(optics),
+            verdict: solved.verdict.clone(),
+            arm_time: None,
+            nominal,
+            file_name: REPLAY_REPORT_FILE,
+        },
     )
 }
 
@@ -343,12 +351,24 @@ pub fn write_folder_report(
         folder,
         &evidence,
         vec![Answer::ResultFile(answer)],
-        optics,
-        verdict,
-        crate::cell::run::ArmTime::load(folder.root()),
-        REPORT_FILE,
+        Page {
+            optics,
+            verdict,
+            arm_time: crate::cell::run::ArmTime::load(folder.root()),
+            nominal: config.map(|c| c.nominal),
+            file_name: REPORT_FILE,
+        },
     )?;
     Ok((path, lacking))
+}
+
+/// What a session's page shows besides its evidence and answers.
+struct Page<'a> {
+    optics: Option<Optics<'a>>,
+    verdict: Option<Verdict>,
+    arm_time: Option<crate::cell::run::ArmTime>,
+    nominal: Option<crate::setup::CellTransforms>,
+    file_name: &'a str,
 }
 
 /// The page of a session: its input from the evidence and answers, the held-out figures from
@@ -357,13 +377,18 @@ fn write(
     folder: &SessionFolder,
     evidence: &Evidence,
     answers: Vec<Answer>,
-    optics: Option<Optics<'_>>,
-    verdict: Option<Verdict>,
-    arm_time: Option<crate::cell::run::ArmTime>,
-    file_name: &str,
+    page: Page<'_>,
 ) -> Result<std::path::PathBuf, ReportError> {
+    let Page {
+        optics,
+        verdict,
+        arm_time,
+        nominal,
+        file_name,
+    } = page;
     let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
+    input.nominal = nominal;
     if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
         input.holdout = Some(super::HoldoutSummary {
             description: format!(

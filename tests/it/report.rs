@@ -190,7 +190,8 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
 }
 
 /// The page reads in the order a person needs it: the verdict card as the first thing in
-/// `<main>`, then "use it", the evidence, the details (SECTIONS is that order).
+/// `<main>`, then the answer in plain words, "use it", the evidence, the details (SECTIONS is that
+/// order).
 #[test]
 fn report_reads_verdict_then_use_then_evidence_then_details() {
     let (_dir, path) = report();
@@ -216,8 +217,9 @@ fn report_reads_verdict_then_use_then_evidence_then_details() {
         "sections out of order: {SECTIONS:?} at {positions:?}"
     );
     let (evidence, details) = (at(">Evidence</h2>"), at(">Details</h2>"));
-    assert!(positions[1] < evidence && evidence < positions[2]);
-    assert!(positions[7] < details && details < positions[8]);
+    // verdict, plain, use | the evidence | ... | the details: transforms, convergence.
+    assert!(positions[2] < evidence && evidence < positions[3]);
+    assert!(positions[8] < details && details < positions[9]);
 }
 
 /// HTML text unescaping (the inverse of `report::escape`).
@@ -701,8 +703,33 @@ fn two_answers_are_shown_side_by_side() {
         holdout: None,
         verdict: None,
         arm_time: None,
+        nominal: None,
     };
     let html = render_html(&input).unwrap();
+    // Without a config's nominal values the plain summary says where the answer puts each frame.
+    let plain = &html[html.find("<section id=\"plain\"").unwrap()..];
+    let plain = &plain[..plain.find("</section>").unwrap()];
+    assert!(
+        plain.contains("<code>T_flange_camera</code>") && !plain.contains("nominal"),
+        "{plain}"
+    );
+    // With them, both values and how far apart they are (here 10 mm along x, 2° about z).
+    let mut nominal = input.answers[0].calibration.transforms();
+    nominal.camera_mount = nominal.camera_mount
+        * handeye::geometry::Pose::from_parts(
+            nalgebra::Translation3::new(0.01, 0.0, 0.0),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 2f64.to_radians()),
+        );
+    let with_nominal = render_html(&ReportInput {
+        nominal: Some(nominal),
+        ..input.clone()
+    })
+    .unwrap();
+    assert!(
+        with_nominal.contains("(10.0 mm and 2.0° apart)")
+            && with_nominal.contains("(0.0 mm and 0.0° apart)"),
+        "the camera 10 mm and 2° off its nominal, the board on it"
+    );
     // A GOOD page has no caution above the snippets.
     assert!(!html.contains("class=\"caution\""));
     assert_eq!(count(&html, "class=\"answer\" data-answer="), 2);
