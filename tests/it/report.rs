@@ -715,11 +715,10 @@ fn two_answers_are_shown_side_by_side() {
     );
     // With them, both values and how far apart they are (here 10 mm along x, 2° about z).
     let mut nominal = input.answers[0].calibration.transforms();
-    nominal.camera_mount = nominal.camera_mount
-        * handeye::geometry::Pose::from_parts(
-            nalgebra::Translation3::new(0.01, 0.0, 0.0),
-            nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 2f64.to_radians()),
-        );
+    nominal.camera_mount *= handeye::geometry::Pose::from_parts(
+        nalgebra::Translation3::new(0.01, 0.0, 0.0),
+        nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 2f64.to_radians()),
+    );
     let with_nominal = render_html(&ReportInput {
         nominal: Some(nominal),
         ..input.clone()
