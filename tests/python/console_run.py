@@ -19,10 +19,16 @@ POSES = 10
 with sync_playwright() as p:
     browser = launch(p)
     page = browser.new_page(viewport={"width": 1280, "height": 860})
+    # Every request the page makes is answered (no favicon 404 on each load).
+    failed_requests = []
+    page.on("response", lambda r: failed_requests.append(f"{r.status} {r.url}") if r.status >= 400 else None)
 
     run = Handeye(["run", "--config", config, "--output", str(session), "--console", "127.0.0.1:0"], work)
     try:
         page.goto(run.url())
+        # Before the first frame: a note, not a broken-image icon.
+        if page.get_attribute("#frame", "src") is None:
+            assert page.is_visible("#no-frame") and not page.is_visible("#frame")
         # The plan table fills, then pose states change and frames arrive while the arm moves.
         page.wait_for_function(js_count("#plan tr") + f" == {POSES}", timeout=60000)
         page.wait_for_function("document.querySelector('#plan tr[data-state=moving]') !== null", timeout=60000)
@@ -61,6 +67,10 @@ with sync_playwright() as p:
         )
         verdict = page.text_content("#verdict")
         assert verdict == "GOOD", f"verdict {verdict}:\n" + resume.output()
+        # The run is over: the page says so, and nothing is "pending" or "live" any more.
+        assert page.text_content("#conn") == "run ended", page.text_content("#conn")
+        assert "pending" not in page.text_content("#progress"), page.text_content("#progress")
+        assert not page.is_visible("#no-frame")
         # Every pose captured: those kept from before the stop and those taken now.
         assert page.evaluate(js_count("#plan tr[data-state=captured]")) == POSES
         assert page.is_visible("#report")
@@ -77,5 +87,6 @@ with sync_playwright() as p:
         resume.kill()
     assert kept <= {r.name for r in (session / "poses").glob("*.yaml")}
     assert len(list((session / "poses").glob("*.yaml"))) == POSES
+    assert not failed_requests, failed_requests
     browser.close()
 print("console_run: ok")
