@@ -704,3 +704,31 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     assert_eq!(config.detector.decimate, 1.0);
     assert!(config.plan.file.is_none() && config.plan.generate.is_none());
 }
+
+/// A template copied elsewhere keeps its relative paths, which now point nowhere: the error
+/// names the key, where the path was resolved and that paths are relative to the config's
+/// folder (issue #30: it used to say only "cannot read").
+#[test]
+fn a_copied_config_whose_files_are_not_beside_it_says_paths_are_relative_to_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("my-cell.yaml");
+    std::fs::copy(
+        util::repo().join("configs/ur-usb-camera-eye-in-hand.yaml"),
+        &copy,
+    )
+    .unwrap();
+    let out = handeye()
+        .args(["plan", "check", "--config"])
+        .arg(&copy)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("my-cell.yaml: target: ")
+            && err.contains("does not exist")
+            && err.contains("relative to the config file's own folder")
+            && err.contains(&dir.path().display().to_string()),
+        "{err}"
+    );
+}

@@ -65,6 +65,39 @@ pub enum CellError {
     Robot(#[source] Box<handeye_robot::RobotError>),
 }
 
+/// Refuses a config whose board, intrinsics, lens or plan file is not where it says, naming the
+/// key and where its relative path points: a config copied elsewhere (`cp configs/… my-cell.yaml`)
+/// keeps relative paths, which resolve against its own folder, not the folder it came from.
+fn referenced_files_exist(config: &CellConfig) -> Result<(), CellError> {
+    let folder = config
+        .file
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let referenced = [
+        Some(("target", config.target.as_path())),
+        config.intrinsics.as_deref().map(|p| ("intrinsics", p)),
+        config.sim_lens().map(|p| ("camera.intrinsics", p)),
+        config.plan.file.as_deref().map(|p| ("plan.file", p)),
+    ];
+    for (key, path) in referenced.into_iter().flatten() {
+        if path.exists() {
+            continue;
+        }
+        let folder_shown = std::path::absolute(folder).unwrap_or_else(|_| folder.to_path_buf());
+        return Err(CellError::Config(Box::new(ConfigError::Inconsistent {
+            file: config.file.clone(),
+            key: key.into(),
+            problem: format!(
+                "{} does not exist. Paths in a config are relative to the config file's own folder ({}): a config copied from configs/ needs its files copied beside it, or absolute paths",
+                path.display(),
+                folder_shown.display()
+            ),
+        })));
+    }
+    Ok(())
+}
+
 /// The robot and camera of a cell, opened.
 pub struct Hardware {
     /// The arm.
@@ -97,6 +130,7 @@ pub struct PreparedCell {
 /// Loads everything a config names and checks the plan. Nothing moves.
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+    referenced_files_exist(&config)?;
     let board = Target::load(&config.target).map_err(|source| CellError::Board {
         file: config.target.clone(),
         source: Box::new(source),
