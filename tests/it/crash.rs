@@ -441,3 +441,45 @@ fn a_folder_left_before_session_yaml_is_reusable_and_resume_says_how() {
     assert!(!session.join(".tmpAbC123").exists());
     assert_every_pose_once(&session);
 }
+
+/// Issue #30: a session that stopped before it recorded any pose (here killed after its first
+/// frame, before that pose's record) resumes after its inputs were fixed without
+/// `--accept-changed`: there is nothing recorded the change could contradict.
+#[test]
+fn a_session_that_recorded_nothing_resumes_with_changed_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = cell(dir.path(), 0.0);
+    let session = dir.path().join("s");
+    // The plan is visited in its given order (`reorder: false`): pose 0 first.
+    let crashed = output(run_new(&config, &session).env("HANDEYE_FAULT", "abort-after-frame:0"));
+    assert!(!crashed.status.success());
+    assert!(
+        std::fs::read_dir(session.join("poses"))
+            .unwrap()
+            .next()
+            .is_none(),
+        "no pose recorded"
+    );
+    // The person fixes the intrinsics file (same lens, written again with another comment).
+    let intrinsics = dir.path().join("camera.yaml");
+    let text = std::fs::read_to_string(&intrinsics).unwrap();
+    std::fs::write(&intrinsics, format!("# fixed\n{text}")).unwrap();
+    let resumed = output(&mut resume(&session));
+    let err = stderr(&resumed);
+    assert!(resumed.status.success(), "{err}");
+    assert!(
+        err.contains("input changed, accepted (nothing was recorded yet)"),
+        "{err}"
+    );
+    assert_every_pose_once(&session);
+
+    // With poses recorded, a changed input is still refused without --accept-changed.
+    std::fs::write(&intrinsics, format!("# changed again\n{text}")).unwrap();
+    let refused = output(&mut resume(&session));
+    assert!(!refused.status.success());
+    assert!(
+        stderr(&refused).contains("--accept-changed"),
+        "{}",
+        stderr(&refused)
+    );
+}

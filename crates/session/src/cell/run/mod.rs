@@ -257,17 +257,27 @@ pub fn open_run(
             for note in folder.notes() {
                 observer.note(note);
             }
+            // A session that recorded no pose yet (it stopped before its first capture: a
+            // wrong lens file, an arm not ready) takes today's inputs and plan as they are.
+            let recorded_poses = folder.read_visits()?.len();
             let manifest_changed = check_resumed_inputs(
                 &folder,
                 &mut manifest,
                 &inputs,
-                request.accept_changed,
+                if request.accept_changed {
+                    Some("--accept-changed")
+                } else if recorded_poses == 0 {
+                    Some("nothing was recorded yet")
+                } else {
+                    None
+                },
                 observer,
             )?;
             Some(ResumedSession {
                 folder,
                 manifest,
                 manifest_changed,
+                recorded_poses,
             })
         }
         None => None,
@@ -498,8 +508,9 @@ fn drive_opened(
     let folder = match resumed {
         Some(ResumedSession {
             folder,
-            manifest,
-            manifest_changed,
+            mut manifest,
+            mut manifest_changed,
+            recorded_poses,
         }) => {
             // An adaptive or hand-guided session's plan is what it chose so far: it continues
             // from there. A fixed plan ordered for travel time from where the arm stood then
@@ -507,6 +518,12 @@ fn drive_opened(
             if fixed_plan && !same_plan(&manifest, &plan) {
                 match recorded_order(&manifest, &plan) {
                     Some(recorded) => plan = recorded,
+                    // Nothing recorded yet: the plan of today's config is the session's plan.
+                    None if recorded_poses == 0 => {
+                        observer.note("nothing was recorded yet: the session takes the plan of today's config");
+                        manifest.plan = cell.manifest(&plan).plan;
+                        manifest_changed = true;
+                    }
                     None => {
                         return Err(RunError::PlanChanged {
                             folder: folder.root().to_path_buf(),

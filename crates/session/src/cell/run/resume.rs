@@ -9,14 +9,15 @@ use super::{RunError, RunObserver};
 
 /// The resume check of every session kind (planned, adaptive, hand-guided): refuses, naming
 /// each changed file, when the input files (`inputs`, hashed now) differ from those `manifest`
-/// recorded, unless `accept_changed` (then each change is noted and `manifest` takes the files
+/// recorded, unless `accept` says why they are accepted (`--accept-changed`, or a session that
+/// recorded nothing yet; then each change is noted and `manifest` takes the files
 /// used now, which the next resume compares against). Returns whether `manifest` changed (the
 /// caller writes it).
 pub(super) fn check_resumed_inputs(
     folder: &SessionFolder,
     manifest: &mut session::SessionManifest,
     inputs: &[session::InputFile],
-    accept_changed: bool,
+    accept: Option<&str>,
     observer: &mut dyn RunObserver,
 ) -> Result<bool, RunError> {
     if manifest.inputs.is_empty() {
@@ -27,7 +28,7 @@ pub(super) fn check_resumed_inputs(
         return Ok(false);
     }
     let changes = changed_inputs(&manifest.inputs, inputs);
-    if !changes.is_empty() && !accept_changed {
+    if !changes.is_empty() && accept.is_none() {
         return Err(SessionError::InputsChanged {
             folder: folder.root().to_path_buf(),
             changes,
@@ -36,7 +37,8 @@ pub(super) fn check_resumed_inputs(
     }
     for change in &changes {
         observer.note(&format!(
-            "input changed, accepted (--accept-changed): {change}"
+            "input changed, accepted ({}): {change}",
+            accept.unwrap_or_default()
         ));
     }
     if manifest.inputs == inputs {
@@ -56,6 +58,9 @@ pub struct ResumedSession {
     /// Whether `manifest` changed (accepted input changes, or the mark of a hand-guided session
     /// a planned resume handed over) and is not written to the folder yet.
     pub manifest_changed: bool,
+    /// Pose records the session holds (none: it stopped before its first capture, and takes
+    /// today's inputs and plan without `--accept-changed`).
+    pub recorded_poses: usize,
 }
 
 /// A resumed fixed plan whose poses are `plan`'s in another order (a plan ordered for travel
