@@ -3,6 +3,7 @@
 //! PNGs. With `--camera N --live` (the `uvc` build feature) it reads a USB camera instead and
 //! prints the board pose continuously, to aim the camera.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -96,7 +97,20 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
     }
     let mut results = Vec::new();
     let mut found_count = 0;
+    // The per-image lines show the progress on a terminal; when they go to a file or a pipe, a
+    // bar on the terminal's stderr does.
+    let bar = (!std::io::stdout().is_terminal() && std::io::stderr().is_terminal()).then(|| {
+        indicatif::ProgressBar::new(args.images.len() as u64).with_style(
+            indicatif::ProgressStyle::with_template(
+                "detecting {bar:30} {pos}/{len} images, ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        )
+    });
     for path in &args.images {
+        if let Some(bar) = &bar {
+            bar.inc(1);
+        }
         let image = load_gray_image(path)?;
         let detection = match detector.detect(&image) {
             Ok(detection) => detection,
@@ -205,6 +219,9 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
             write_atomic(&out, &bytes).with_context(|| format!("writing {}", out.display()))?;
         }
         results.push(result);
+    }
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
     }
     if let Some(output) = &args.output {
         let yaml = serde_yaml_ng::to_string(&results)?;
