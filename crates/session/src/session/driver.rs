@@ -123,6 +123,9 @@ pub struct SessionOutcome {
     pub moving_s: f64,
     /// Arm time of this run spent settling after moves before the frame was exposed, s.
     pub settling_s: f64,
+    /// What this run's moves take by the move-time model at the configured limits (what the
+    /// plan check estimates), s: against `moving_s`, how the arm really moves compared with it.
+    pub modelled_moving_s: f64,
 }
 
 impl SessionOutcome {
@@ -225,6 +228,7 @@ pub fn run_session(
                     state.outcome.visited_now += 1;
                     state.outcome.moving_s += timing.moving_s;
                     state.outcome.settling_s += timing.settling_s;
+                    state.outcome.modelled_moving_s += timing.modelled_s;
                     state.in_flight += 1;
                     job_tx
                         .send(Job {
@@ -384,6 +388,8 @@ fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut V
 struct PoseTiming {
     moving_s: f64,
     settling_s: f64,
+    /// The move's time by the model at the configured limits, s.
+    modelled_s: f64,
 }
 
 /// Move, settle, grab a fresh frame, read the measured flange pose.
@@ -394,12 +400,13 @@ fn capture(
     plan_index: usize,
 ) -> Result<(Frame, Pose, PoseTiming), ErrorSource> {
     let (_, joints) = &setup.plan[plan_index];
+    let from = robot.joint_positions()?;
     if let Some(check) = &setup.move_check {
-        let from = robot.joint_positions()?;
         if let Some(problem) = check.problem(&from, joints) {
             return Err(ErrorSource::UnsafeMove(problem));
         }
     }
+    let modelled_s = setup.limits.joint_move_time(&from, joints);
     let started = Instant::now();
     robot.move_joints(joints, &setup.limits)?;
     let arrived = Instant::now();
@@ -429,6 +436,7 @@ fn capture(
             .captured_at
             .saturating_duration_since(arrived)
             .as_secs_f64(),
+        modelled_s,
     };
     Ok((frame, base_from_flange, timing))
 }

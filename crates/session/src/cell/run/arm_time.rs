@@ -17,9 +17,20 @@ pub struct ArmTime {
     pub settling_s: f64,
     /// Poses of the full plan (every pose that passes its checks).
     pub full_plan_poses: usize,
-    /// The full plan in its given order: its moves at the configured limits plus this run's
-    /// mean settling per pose for each of its poses, s (an estimate).
+    /// The full plan in its given order: its moves at the configured limits (scaled by
+    /// `move_time_scale`) plus this run's mean settling per pose for each of its poses, s (an
+    /// estimate).
     pub full_plan_estimate_s: f64,
+    /// How this arm's moves compare with the move-time model at the configured limits: this
+    /// run's measured move time over the model's time for the same moves (1 when the arm moves
+    /// as modelled; a simulated arm with a fixed `move_duration_s` differs). The full plan's
+    /// moves are estimated with it, so the saving compares like with like.
+    #[serde(default = "one")]
+    pub move_time_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl ArmTime {
@@ -62,18 +73,36 @@ impl std::fmt::Display for ArmTime {
         }
         write!(
             f,
-            "arm time: {:.1} s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s, so {:.1} s saved ({:.0} %)",
+            "arm time: {:.1} s for {} poses ({:.1} s moving, {:.1} s settling); the full {}-pose plan in its given order: about {:.1} s{}, so {}",
             self.spent_s(),
             self.poses,
             self.moving_s,
             self.settling_s,
             self.full_plan_poses,
             self.full_plan_estimate_s,
-            self.saved_s(),
-            if self.full_plan_estimate_s > 0.0 {
-                100.0 * self.saved_s() / self.full_plan_estimate_s
+            if (self.move_time_scale - 1.0).abs() > 0.1 {
+                format!(
+                    " (its moves at {:.2}x the modelled time, as this arm's moves took)",
+                    self.move_time_scale
+                )
             } else {
-                0.0
+                String::new()
+            },
+            {
+                let percent = if self.full_plan_estimate_s > 0.0 {
+                    100.0 * self.saved_s() / self.full_plan_estimate_s
+                } else {
+                    0.0
+                };
+                if self.saved_s() >= 0.0 {
+                    format!("{:.1} s saved ({percent:.0} %)", self.saved_s())
+                } else {
+                    format!(
+                        "{:.1} s more than the full plan ({:.0} %): the poses chosen were far apart, or the run retried some",
+                        -self.saved_s(),
+                        -percent
+                    )
+                }
             }
         )
     }
@@ -90,6 +119,15 @@ pub(super) fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime
     let given_moves_s = report
         .given_order_move_time_s
         .unwrap_or_else(|| report.total_move_time_s());
+    // How this arm moves against the model (a real UR follows it closely; a simulated arm
+    // with a fixed move time does not): the full plan's moves are estimated at that pace.
+    // (Instant simulated moves measure nothing: the model's own times stand then.)
+    let measured = outcome.arm_time_s() >= 0.01 * outcome.visited_now as f64;
+    let move_time_scale = if measured && outcome.modelled_moving_s > 1e-3 {
+        outcome.moving_s / outcome.modelled_moving_s
+    } else {
+        1.0
+    };
     let settle_per_pose = if outcome.visited_now > 0 {
         outcome.settling_s / outcome.visited_now as f64
     } else {
@@ -100,7 +138,8 @@ pub(super) fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime
         moving_s: outcome.moving_s,
         settling_s: outcome.settling_s,
         full_plan_poses: full.len(),
-        full_plan_estimate_s: given_moves_s + settle_per_pose * full.len() as f64,
+        full_plan_estimate_s: given_moves_s * move_time_scale + settle_per_pose * full.len() as f64,
+        move_time_scale,
     }
 }
 
@@ -116,6 +155,7 @@ mod tests {
             settling_s: 0.0,
             full_plan_poses: 20,
             full_plan_estimate_s: 28.6,
+            move_time_scale: 1.0,
         };
         let text = instant.to_string();
         assert!(!instant.measured());
@@ -137,5 +177,16 @@ mod tests {
         };
         assert!(real.measured());
         assert!(real.to_string().contains("18.6 s saved"), "{real}");
+        // Spending more than the estimate is said as such, not as a negative saving.
+        let slower = ArmTime {
+            moving_s: 30.0,
+            settling_s: 8.0,
+            ..instant
+        };
+        let text = slower.to_string();
+        assert!(
+            text.contains("9.4 s more than the full plan (33 %)") && !text.contains("saved"),
+            "{text}"
+        );
     }
 }
