@@ -406,6 +406,12 @@ pub fn detect(
         Err(e) => return Err(errors::from_error(py, &e)),
     };
     let observations = detection.observations();
+    if observations.is_empty() {
+        let none = TargetError::NoTagsFound {
+            rejected: detection.rejected.len(),
+        };
+        return empty_detection(py, size, errors::message(&none));
+    }
     let n = observations.len();
     let ids: Array1<u32> = observations.iter().map(|o| o.tag_id).collect();
     let subs: Array1<u8> = observations.iter().map(|o| o.corner).collect();

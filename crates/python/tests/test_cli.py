@@ -131,7 +131,7 @@ def test_session_solve_matches_cli_solve_of_the_folder(cli, yaml, sim_session, t
         compare(calibration, result, pairs)
         if space == "reprojection":
             assert calibration.reprojection is not None
-            assert calibration.reprojection["reprojection"]["rms_px"] < 0.5
+            assert calibration.reprojection["reprojection_rms_px"] < 0.5
 
 
 def test_session_reads_what_the_run_wrote(yaml, sim_session):
