@@ -256,14 +256,19 @@ impl Calibration {
     }
 
     fn verdict_inner(&self, py: Python<'_>) -> Option<&Verdict> {
-        self.verdict
-            .get_or_init(|| {
-                let options = self.options.as_ref()?;
-                Some(py.detach(|| {
-                    verdict::assess_result(Ok(&self.inner), &self.pairs, options, self.accuracy)
-                }))
+        if let Some(verdict) = self.verdict.get() {
+            return verdict.as_ref();
+        }
+        // Computed without the GIL and outside the OnceLock's initialisation: a second thread
+        // asking meanwhile computes its own (the same) verdict instead of waiting for this one
+        // while holding the GIL this one needs to return.
+        let verdict = self.options.as_ref().map(|options| {
+            py.detach(|| {
+                verdict::assess_result(Ok(&self.inner), &self.pairs, options, self.accuracy)
             })
-            .as_ref()
+        });
+        let _ = self.verdict.set(verdict);
+        self.verdict.get().and_then(Option::as_ref)
     }
 
     fn names(&self) -> (&'static str, &'static str) {

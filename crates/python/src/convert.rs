@@ -23,7 +23,7 @@ pub fn pose_from_matrix(m: ArrayView2<'_, f64>, path: &str) -> Result<Pose, Stri
     if last
         .iter()
         .zip([0.0, 0.0, 0.0, 1.0])
-        .any(|(v, want)| !((v - want).abs() <= LAST_ROW_TOLERANCE))
+        .any(|(v, want)| (v - want).abs().is_nan() || (v - want).abs() > LAST_ROW_TOLERANCE)
     {
         return Err(format!(
             "{path}: the last row of a homogeneous transform must be [0, 0, 0, 1], found {last:?}"

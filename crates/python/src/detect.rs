@@ -23,6 +23,13 @@ use pyo3::prelude::*;
 use crate::convert::pose_to_py;
 use crate::errors;
 
+/// A board's points: ids, subs, and the points in the target frame (m).
+type BoardPoints<'py> = (
+    Bound<'py, PyArray1<u32>>,
+    Bound<'py, PyArray1<u8>>,
+    Bound<'py, PyArray2<f64>>,
+);
+
 /// A calibration board (aprilgrid, ChArUco or chessboard).
 #[pyclass(name = "Board", module = "handeye", frozen)]
 pub struct Board {
@@ -131,14 +138,7 @@ impl Board {
     }
 
     /// Every point of the board: `(ids (N,), subs (N,), points (N, 3) in the target frame, m)`.
-    fn points<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> (
-        Bound<'py, PyArray1<u32>>,
-        Bound<'py, PyArray1<u8>>,
-        Bound<'py, PyArray2<f64>>,
-    ) {
+    fn points<'py>(&self, py: Python<'py>) -> BoardPoints<'py> {
         let points = self.target.points();
         let ids: Array1<u32> = points.iter().map(|p| p.0).collect();
         let subs: Array1<u8> = points.iter().map(|p| p.1).collect();
