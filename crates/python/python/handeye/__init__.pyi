@@ -2,6 +2,7 @@
 homogeneous matrices, metres; figures people read in degrees and millimetres)."""
 
 from os import PathLike
+from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
@@ -253,10 +254,11 @@ class Session:
 
     def __init__(self, path: _Path) -> None: ...
     @property
-    def path(self) -> str: ...
+    def path(self) -> Path:
+        """The session folder."""
     @property
-    def config(self) -> Any:
-        """The cell config the session was recorded with (a path)."""
+    def config(self) -> Path:
+        """The cell config the session was recorded with."""
     @property
     def setup(self) -> str: ...
     @property
