@@ -152,3 +152,35 @@ def test_session_reads_what_the_run_wrote(yaml, sim_session):
     truth = session.truth
     for name, matrix in stored.transforms.items():
         assert np.linalg.norm(matrix[:3, 3] - truth[name][:3, 3]) < 1e-3
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "setup: eye_in_hand\nsamples: [{T_base_flange: 3}]\n",
+        "setup: hand_in_eye\nsamples: []\n",
+        "setup: eye_in_hand\nsamples:\n  - T_base_flange: {translation: [0, 0, 0], quaternion: {w: 2, x: 0, y: 0, z: 0}}\n"
+        "    T_camera_target: {translation: [0, 0, 1], rotation_vector: [0, 0, 0]}\n",
+        "not: [a dataset\n",
+    ],
+)
+def test_file_errors_have_the_cli_message(cli, tmp_path, text):
+    dataset = tmp_path / "samples.yaml"
+    dataset.write_text(text)
+    run = cli("solve", dataset, check=False)
+    assert run.returncode != 0
+    with pytest.raises(handeye.InputError) as error:
+        handeye.read_dataset(dataset)
+    assert f"error: {error.value}" in run.stderr, (str(error.value), run.stderr)
+
+
+def test_folder_errors_have_the_cli_message(cli, tmp_path):
+    run = cli("solve", tmp_path, check=False)
+    with pytest.raises(handeye.InputError) as error:
+        handeye.Session(tmp_path)
+    assert str(error.value) in run.stderr, (str(error.value), run.stderr)
+    missing = tmp_path / "missing.yaml"
+    run = cli("solve", missing, check=False)
+    with pytest.raises(handeye.FileError) as error:
+        handeye.read_dataset(missing)
+    assert f"error: {error.value}" in run.stderr, (str(error.value), run.stderr)
