@@ -65,6 +65,14 @@ def sim_session(cli, tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def sim_session_eye_to_hand(cli, tmp_path_factory):
+    """A session of the simulated eye-to-hand cell (configs/sim-cell-eye-to-hand.yaml)."""
+    out = tmp_path_factory.mktemp("sim-eth") / "session"
+    cli("run", "--config", REPO / "configs" / "sim-cell-eye-to-hand.yaml", "--out", out, "--yes")
+    return out
+
+
+@pytest.fixture(scope="session")
 def yaml():
     try:
         import yaml as pyyaml

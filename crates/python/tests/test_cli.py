@@ -120,7 +120,9 @@ def test_a_refused_solve_raises_the_cli_message(cli, tmp_path):
     assert f"verdict: REDO — {error.value.verdict.reason}" in run.stdout + run.stderr
 
 
-def test_session_solve_matches_cli_solve_of_the_folder(cli, yaml, sim_session, tmp_path):
+@pytest.mark.parametrize("which", ["sim_session", "sim_session_eye_to_hand"])
+def test_session_solve_matches_cli_solve_of_the_folder(cli, yaml, request, tmp_path, which):
+    sim_session = request.getfixturevalue(which)
     session = handeye.Session(sim_session)
     for space in ("pose", "reprojection"):
         out = tmp_path / f"result-{space}.yaml"
