@@ -24,7 +24,7 @@ use crate::convert::{pose_to_py, poses_from_array, poses_to_py, to_py};
 use crate::errors;
 
 /// The setup named by `name` (`eye_in_hand` or `eye_to_hand`).
-pub fn parse_setup(py: Python<'_>, name: &str) -> PyResult<Setup> {
+pub(crate) fn parse_setup(py: Python<'_>, name: &str) -> PyResult<Setup> {
     match name {
         "eye_in_hand" => Ok(Setup::EyeInHand),
         "eye_to_hand" => Ok(Setup::EyeToHand),
@@ -101,7 +101,7 @@ fn options(
 }
 
 /// The accuracy the verdict judges against (mm, degrees).
-pub fn accuracy(py: Python<'_>, accuracy_mm: f64, accuracy_deg: f64) -> PyResult<Accuracy> {
+pub(crate) fn accuracy(py: Python<'_>, accuracy_mm: f64, accuracy_deg: f64) -> PyResult<Accuracy> {
     for (name, value) in [("accuracy_mm", accuracy_mm), ("accuracy_deg", accuracy_deg)] {
         if !(value.is_finite() && value > 0.0) {
             return Err(errors::input(
@@ -125,7 +125,7 @@ pub fn accuracy(py: Python<'_>, accuracy_mm: f64, accuracy_deg: f64) -> PyResult
     accuracy_mm = verdict::DEFAULT_ACCURACY_MM, accuracy_deg = verdict::DEFAULT_ACCURACY_DEG,
 ))]
 #[allow(clippy::too_many_arguments)]
-pub fn calibrate(
+pub(crate) fn calibrate(
     py: Python<'_>,
     base_from_flange: PyReadonlyArrayDyn<'_, f64>,
     camera_from_target: PyReadonlyArrayDyn<'_, f64>,
@@ -194,7 +194,7 @@ pub fn calibrate(
 
 /// Solves `pairs` (already checked), raising `InputError` (with the REDO verdict as its
 /// `verdict` attribute) when the solver refuses them.
-pub fn solve_pairs(
+pub(crate) fn solve_pairs(
     py: Python<'_>,
     setup: Setup,
     pairs: Vec<PosePair>,
@@ -223,7 +223,7 @@ pub fn solve_pairs(
 
 /// The answer of a solve: both transforms, their 1-sigma, residuals, notices and verdict.
 #[pyclass(name = "Calibration", module = "handeye", frozen)]
-pub struct Calibration {
+pub(crate) struct Calibration {
     pub(crate) inner: handeye_solve::Calibration,
     /// The samples it was solved from (for ids, the held-out check and the result file).
     pub(crate) pairs: Vec<PosePair>,
@@ -486,7 +486,7 @@ impl Calibration {
 
 /// GOOD / CHECK / REDO, the one reason that decided it, and the next action.
 #[pyclass(name = "Verdict", module = "handeye", frozen)]
-pub struct VerdictPy {
+pub(crate) struct VerdictPy {
     pub(crate) inner: Verdict,
 }
 

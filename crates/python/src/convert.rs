@@ -18,7 +18,7 @@ use crate::errors;
 const LAST_ROW_TOLERANCE: f64 = 1e-9;
 
 /// A pose from one 4x4 homogeneous matrix `m` (metres), named `path` in errors.
-pub fn pose_from_matrix(m: ArrayView2<'_, f64>, path: &str) -> Result<Pose, String> {
+pub(crate) fn pose_from_matrix(m: ArrayView2<'_, f64>, path: &str) -> Result<Pose, String> {
     let last = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
     if last
         .iter()
@@ -43,7 +43,7 @@ pub fn pose_from_matrix(m: ArrayView2<'_, f64>, path: &str) -> Result<Pose, Stri
 
 /// The poses of an `(N, 4, 4)` array (a single `(4, 4)` matrix is refused: it is one pose, and
 /// a calibration needs many), named `name` in errors.
-pub fn poses_from_array(
+pub(crate) fn poses_from_array(
     py: Python<'_>,
     array: &PyReadonlyArrayDyn<'_, f64>,
     name: &str,
@@ -71,13 +71,13 @@ pub fn poses_from_array(
 }
 
 /// The 4x4 homogeneous matrix of a pose.
-pub fn matrix(pose: &Pose) -> Array2<f64> {
+pub(crate) fn matrix(pose: &Pose) -> Array2<f64> {
     let rows = to_matrix4_rows(pose);
     Array2::from_shape_fn((4, 4), |(r, c)| rows[r][c])
 }
 
 /// A shape as Python prints it: `(8, 3, 4)`, `(4,)`.
-pub fn shape_text(shape: &[usize]) -> String {
+pub(crate) fn shape_text(shape: &[usize]) -> String {
     match shape {
         [one] => format!("({one},)"),
         _ => format!(
@@ -92,12 +92,12 @@ pub fn shape_text(shape: &[usize]) -> String {
 }
 
 /// A pose as a `(4, 4)` numpy array.
-pub fn pose_to_py<'py>(py: Python<'py>, pose: &Pose) -> Bound<'py, PyArray2<f64>> {
+pub(crate) fn pose_to_py<'py>(py: Python<'py>, pose: &Pose) -> Bound<'py, PyArray2<f64>> {
     matrix(pose).into_pyarray(py)
 }
 
 /// Poses as an `(N, 4, 4)` numpy array.
-pub fn poses_to_py<'py>(py: Python<'py>, poses: &[Pose]) -> Bound<'py, PyArray3<f64>> {
+pub(crate) fn poses_to_py<'py>(py: Python<'py>, poses: &[Pose]) -> Bound<'py, PyArray3<f64>> {
     let mut out = Array3::zeros((poses.len(), 4, 4));
     for (i, pose) in poses.iter().enumerate() {
         out.index_axis_mut(numpy::ndarray::Axis(0), i)
@@ -108,7 +108,10 @@ pub fn poses_to_py<'py>(py: Python<'py>, poses: &[Pose]) -> Bound<'py, PyArray3<
 
 /// Any serde value of the library as plain Python objects (dicts, lists, str, int, float,
 /// bool, None). NaN and infinities become None (as in JSON).
-pub fn to_py<'py, T: serde::Serialize>(py: Python<'py>, value: &T) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn to_py<'py, T: serde::Serialize>(
+    py: Python<'py>,
+    value: &T,
+) -> PyResult<Bound<'py, PyAny>> {
     let value = serde_json::to_value(value)
         .map_err(|e| errors::raise(py, "HandeyeError", format!("internal conversion: {e}")))?;
     json_to_py(py, &value)

@@ -32,7 +32,7 @@ type BoardPoints<'py> = (
 
 /// A calibration board (aprilgrid, ChArUco or chessboard).
 #[pyclass(name = "Board", module = "handeye", frozen)]
-pub struct Board {
+pub(crate) struct Board {
     pub(crate) target: Target,
     /// Started on the first detection and kept (the AprilTag detector runs on its own thread).
     detector: OnceLock<TargetDetector>,
@@ -169,7 +169,7 @@ fn yaml_number(v: f64) -> String {
 
 /// Camera intrinsics: pinhole (px) plus distortion, for one image size.
 #[pyclass(name = "Camera", module = "handeye", frozen)]
-pub struct Camera {
+pub(crate) struct Camera {
     pub(crate) model: CameraModel,
 }
 
@@ -281,7 +281,7 @@ impl Camera {
 /// One detection: corners with ids, their board points, and the board pose when intrinsics
 /// were given.
 #[pyclass(name = "Detection", module = "handeye", frozen, get_all)]
-pub struct Detection {
+pub(crate) struct Detection {
     /// Corner ids (N,): the tag id for an aprilgrid, the inner-corner id for ChArUco and
     /// chessboards.
     ids: Py<PyArray1<u32>>,
@@ -388,7 +388,7 @@ fn grey_image(py: Python<'_>, image: &Bound<'_, PyAny>, channels: &str) -> PyRes
 /// saying why; a bad image or board raises `InputError`.
 #[pyfunction]
 #[pyo3(signature = (image, board, camera = None, *, channels = "bgr"))]
-pub fn detect(
+pub(crate) fn detect(
     py: Python<'_>,
     image: &Bound<'_, PyAny>,
     board: &Board,

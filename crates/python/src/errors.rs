@@ -12,7 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyType;
 
 /// The error and its chain of causes, joined by `: ` (what `anyhow`'s `{:#}` prints).
-pub fn message(error: &(dyn Error + 'static)) -> String {
+pub(crate) fn message(error: &(dyn Error + 'static)) -> String {
     let mut text = error.to_string();
     let mut source = error.source();
     while let Some(cause) = source {
@@ -48,7 +48,7 @@ fn class<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyType>> {
 }
 
 /// An exception of the package's class `name` with `text` as its message.
-pub fn raise(py: Python<'_>, name: &str, text: impl Into<String>) -> PyErr {
+pub(crate) fn raise(py: Python<'_>, name: &str, text: impl Into<String>) -> PyErr {
     let text = text.into();
     match class(py, name) {
         Ok(class) => PyErr::from_type(class, text),
@@ -59,13 +59,13 @@ pub fn raise(py: Python<'_>, name: &str, text: impl Into<String>) -> PyErr {
 }
 
 /// Bad input: `handeye.InputError` (a `ValueError`).
-pub fn input(py: Python<'_>, text: impl Into<String>) -> PyErr {
+pub(crate) fn input(py: Python<'_>, text: impl Into<String>) -> PyErr {
     raise(py, "InputError", text)
 }
 
 /// A library error: `FileError` (an `OSError`) when the cause is an I/O failure, else
 /// `InputError` (a `ValueError`); the message is the error's chain.
-pub fn from_error(py: Python<'_>, error: &(dyn Error + 'static)) -> PyErr {
+pub(crate) fn from_error(py: Python<'_>, error: &(dyn Error + 'static)) -> PyErr {
     let name = if is_io(error) {
         "FileError"
     } else {
@@ -76,7 +76,7 @@ pub fn from_error(py: Python<'_>, error: &(dyn Error + 'static)) -> PyErr {
 
 /// [`from_error`] with `context` before the message (`solving session DIR: ...`), as the CLI
 /// adds it.
-pub fn with_context(py: Python<'_>, context: &str, error: &(dyn Error + 'static)) -> PyErr {
+pub(crate) fn with_context(py: Python<'_>, context: &str, error: &(dyn Error + 'static)) -> PyErr {
     let name = if is_io(error) {
         "FileError"
     } else {

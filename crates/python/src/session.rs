@@ -39,7 +39,7 @@ fn dataset_to_py<'py>(py: Python<'py>, dataset: &Dataset) -> PyResult<Bound<'py,
 
 /// Reads a dataset file (`handeye solve`'s input, a session's `samples.yaml`).
 #[pyfunction]
-pub fn read_dataset(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
+pub(crate) fn read_dataset(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
     let dataset = Dataset::load(&path).map_err(|e| errors::from_error(py, &e))?;
     dataset_to_py(py, &dataset)
 }
@@ -57,13 +57,13 @@ fn read_result(py: Python<'_>, path: &Path, pairs: Vec<PosePair>) -> PyResult<Ca
 /// Reads a result file as a `Calibration` (transforms, 1-sigma, residuals, notices, verdict).
 #[pyfunction]
 #[pyo3(name = "read_result")]
-pub fn read_result_py(py: Python<'_>, path: PathBuf) -> PyResult<Calibration> {
+pub(crate) fn read_result_py(py: Python<'_>, path: PathBuf) -> PyResult<Calibration> {
     read_result(py, &path, Vec::new())
 }
 
 /// A recorded session folder.
 #[pyclass(name = "Session", module = "handeye", frozen)]
-pub struct Session {
+pub(crate) struct Session {
     root: PathBuf,
     config: PathBuf,
     setup: &'static str,
