@@ -238,7 +238,7 @@ pub(crate) struct Calibration {
 
 impl Calibration {
     /// An answer whose verdict is already known (a session's solve, a result file).
-    pub fn with_verdict(
+    pub(crate) fn with_verdict(
         inner: handeye_solve::Calibration,
         pairs: Vec<PosePair>,
         verdict: Option<Verdict>,
