@@ -69,3 +69,20 @@ fi
 # tool (python3, chromium) fails instead (tests/util/mod.rs `skip`).
 export HANDEYE_REQUIRE_TOOLS=1
 cargo test --workspace --features handeye/ur-rtde "$@"
+
+# The Python package (crates/python, docs/python.md): its abi3 wheel built by maturin in the same
+# target dir (the dev profile, whose dependencies the build above already compiled), installed into
+# a venv of its own (which sees the numpy and OpenCV installed above), and its pytest suite, which
+# compares with the `handeye` binary cargo test just built and with OpenCV.
+target_dir="${CARGO_TARGET_DIR:-target}"
+py_venv="$target_dir/tmp/py-venv"
+if ! { [ -x "$py_venv/bin/maturin" ] && "$py_venv/bin/python" -c "import pytest, yaml" 2>/dev/null; }; then
+  python3 -m venv --system-site-packages "$py_venv"
+  "$py_venv/bin/pip" install -q maturin pytest pyyaml
+fi
+"$py_venv/bin/python" -c "import numpy, cv2" 2>/dev/null \
+  || "$py_venv/bin/pip" install -q numpy "opencv-python-headless<5"
+rm -rf "$target_dir/wheels"
+"$py_venv/bin/maturin" build -m crates/python/Cargo.toml -o "$target_dir/wheels"
+"$py_venv/bin/pip" install -q --force-reinstall --no-deps "$target_dir"/wheels/handeye-*.whl
+HANDEYE_BIN="$target_dir/debug/handeye" "$py_venv/bin/python" -m pytest crates/python/tests -q -rs

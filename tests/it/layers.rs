@@ -39,6 +39,16 @@ const CRATES: &[(&str, &[&str])] = &[
         ],
     ),
     ("mocks", &["handeye-core", "handeye-robot"]),
+    // The Python package (crates/python): a top of its own beside the binary.
+    (
+        "handeye-python",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-session",
+        ],
+    ),
 ];
 
 #[test]

@@ -1,0 +1,86 @@
+//! Rust errors as Python exceptions, with the messages the CLI prints.
+//!
+//! The exception classes live in the pure-Python half of the package (`handeye/_errors.py`), so
+//! they can inherit from two bases: `InputError(HandeyeError, ValueError)` for bad input (shapes,
+//! NaN, non-rigid matrices, millimetres, a refused solve, a malformed file) and
+//! `FileError(HandeyeError, OSError)` for a file that cannot be read or written. The message is
+//! the error and its causes joined by `: `, as the CLI prints them (`{error:#}`).
+
+use std::error::Error;
+
+use pyo3::prelude::*;
+use pyo3::types::PyType;
+
+/// The error and its chain of causes, joined by `: ` (what `anyhow`'s `{:#}` prints).
+pub(crate) fn message(error: &(dyn Error + 'static)) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        let cause_text = cause.to_string();
+        // A transparent wrapper repeats its cause's text: print it once.
+        if !text.ends_with(&cause_text) {
+            text.push_str(": ");
+            text.push_str(&cause_text);
+        }
+        source = cause.source();
+    }
+    text
+}
+
+/// True when an I/O failure is somewhere in the chain (a file problem, not bad content).
+fn is_io(error: &(dyn Error + 'static)) -> bool {
+    let mut current = Some(error);
+    while let Some(e) = current {
+        if e.downcast_ref::<std::io::Error>().is_some() {
+            return true;
+        }
+        current = e.source();
+    }
+    false
+}
+
+/// One of the package's exception classes, by name (`InputError`, `FileError`, `HandeyeError`).
+fn class<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyType>> {
+    Ok(py
+        .import("handeye._errors")?
+        .getattr(name)?
+        .cast_into::<PyType>()?)
+}
+
+/// An exception of the package's class `name` with `text` as its message.
+pub(crate) fn raise(py: Python<'_>, name: &str, text: impl Into<String>) -> PyErr {
+    let text = text.into();
+    match class(py, name) {
+        Ok(class) => PyErr::from_type(class, text),
+        // The package is incomplete (the extension imported on its own): a plain ValueError
+        // still carries the message.
+        Err(_) => pyo3::exceptions::PyValueError::new_err(text),
+    }
+}
+
+/// Bad input: `handeye.InputError` (a `ValueError`).
+pub(crate) fn input(py: Python<'_>, text: impl Into<String>) -> PyErr {
+    raise(py, "InputError", text)
+}
+
+/// A library error: `FileError` (an `OSError`) when the cause is an I/O failure, else
+/// `InputError` (a `ValueError`); the message is the error's chain.
+pub(crate) fn from_error(py: Python<'_>, error: &(dyn Error + 'static)) -> PyErr {
+    let name = if is_io(error) {
+        "FileError"
+    } else {
+        "InputError"
+    };
+    raise(py, name, message(error))
+}
+
+/// [`from_error`] with `context` before the message (`solving session DIR: ...`), as the CLI
+/// adds it.
+pub(crate) fn with_context(py: Python<'_>, context: &str, error: &(dyn Error + 'static)) -> PyErr {
+    let name = if is_io(error) {
+        "FileError"
+    } else {
+        "InputError"
+    };
+    raise(py, name, format!("{context}: {}", message(error)))
+}

@@ -1,0 +1,207 @@
+//! `handeye.Session`: a session folder (what `handeye run` writes) read from Python: its samples,
+//! its result and verdict, the simulator's ground truth when the cell is simulated, and
+//! `solve(space=...)` as `handeye solve DIR --space ...` runs it (the session's config for the
+//! board, the intrinsics and the solver settings). Also `read_dataset` for a dataset file.
+//!
+//! Reading never locks the folder and writes nothing, except what the session solve itself
+//! writes when the intrinsics are estimated (`camera_info.yaml`, `samples.yaml`, as the CLI).
+
+use std::path::{Path, PathBuf};
+
+use handeye_core::geometry::Pose;
+use handeye_core::setup::PosePair;
+use handeye_session::config::{CellConfig, SolveSpace};
+use handeye_session::dataset::Dataset;
+use handeye_session::result::ResultFile;
+use handeye_session::session::{self, SessionFolder, SolveInputs};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::calibrate::Calibration;
+use crate::convert::{pose_to_py, poses_to_py};
+use crate::errors;
+
+/// A dataset as Python objects: `{"setup", "T_base_flange" (N, 4, 4), "T_camera_target"
+/// (N, 4, 4), "ids", "weights"}`.
+fn dataset_to_py<'py>(py: Python<'py>, dataset: &Dataset) -> PyResult<Bound<'py, PyDict>> {
+    let flange: Vec<Pose> = dataset.pairs.iter().map(|p| p.base_from_flange).collect();
+    let camera: Vec<Pose> = dataset.pairs.iter().map(|p| p.camera_from_target).collect();
+    let dict = PyDict::new(py);
+    dict.set_item("setup", dataset.setup.name())?;
+    dict.set_item("T_base_flange", poses_to_py(py, &flange))?;
+    dict.set_item("T_camera_target", poses_to_py(py, &camera))?;
+    let ids: Vec<Option<String>> = dataset.pairs.iter().map(|p| p.id.clone()).collect();
+    dict.set_item("ids", ids)?;
+    let weights: Vec<f64> = dataset.pairs.iter().map(|p| p.weight).collect();
+    dict.set_item("weights", weights)?;
+    Ok(dict)
+}
+
+/// Reads a dataset file (`handeye solve`'s input, a session's `samples.yaml`).
+#[pyfunction]
+pub(crate) fn read_dataset(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
+    let dataset = Dataset::load(&path).map_err(|e| errors::from_error(py, &e))?;
+    dataset_to_py(py, &dataset)
+}
+
+/// Reads a result file (`handeye solve -o`, a session's `result.yaml`) as a [`Calibration`]
+/// with the verdict it holds; `pairs` are its samples when known (for ids).
+fn read_result(py: Python<'_>, path: &Path, pairs: Vec<PosePair>) -> PyResult<Calibration> {
+    let file = ResultFile::load(path).map_err(|e| errors::from_error(py, &e))?;
+    let inner = file
+        .to_calibration(path)
+        .map_err(|e| errors::from_error(py, &e))?;
+    Ok(Calibration::with_verdict(inner, pairs, file.verdict, None))
+}
+
+/// Reads a result file as a `Calibration` (transforms, 1-sigma, residuals, notices, verdict).
+#[pyfunction]
+#[pyo3(name = "read_result")]
+pub(crate) fn read_result_py(py: Python<'_>, path: PathBuf) -> PyResult<Calibration> {
+    read_result(py, &path, Vec::new())
+}
+
+/// A recorded session folder.
+#[pyclass(name = "Session", module = "handeye", frozen)]
+pub(crate) struct Session {
+    root: PathBuf,
+    config: PathBuf,
+    setup: &'static str,
+}
+
+impl Session {
+    fn folder(&self, py: Python<'_>) -> PyResult<SessionFolder> {
+        SessionFolder::open(&self.root).map_err(|e| errors::from_error(py, &e))
+    }
+
+    fn dataset(&self, py: Python<'_>) -> PyResult<Dataset> {
+        Dataset::load(&self.folder(py)?.samples_path()).map_err(|e| errors::from_error(py, &e))
+    }
+
+    fn load_config(&self, py: Python<'_>, config: Option<PathBuf>) -> PyResult<CellConfig> {
+        let path = config.unwrap_or_else(|| self.config.clone());
+        CellConfig::load(&path).map_err(|e| errors::with_context(py, "reading the cell config", &e))
+    }
+}
+
+#[pymethods]
+impl Session {
+    /// Opens the session folder at `path` (it must hold `session.yaml`).
+    #[new]
+    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
+        let folder = SessionFolder::open(&path).map_err(|e| errors::from_error(py, &e))?;
+        let manifest = folder
+            .read_manifest()
+            .map_err(|e| errors::from_error(py, &e))?;
+        Ok(Session {
+            root: path,
+            config: manifest.config,
+            setup: manifest.setup.name(),
+        })
+    }
+
+    /// The folder.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.root.clone()
+    }
+
+    /// The cell config the session was recorded with.
+    #[getter]
+    fn config(&self) -> PathBuf {
+        self.config.clone()
+    }
+
+    /// `"eye_in_hand"` or `"eye_to_hand"`.
+    #[getter]
+    fn setup(&self) -> &'static str {
+        self.setup
+    }
+
+    /// The accepted samples (`samples.yaml`): `{"setup", "T_base_flange" (N, 4, 4),
+    /// "T_camera_target" (N, 4, 4), "ids", "weights"}`, metres.
+    #[getter]
+    fn samples<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        dataset_to_py(py, &self.dataset(py)?)
+    }
+
+    /// The session's `result.yaml` as a `Calibration` (with its verdict), or None when the
+    /// session was not solved.
+    #[getter]
+    fn result(&self, py: Python<'_>) -> PyResult<Option<Calibration>> {
+        let path = self.folder(py)?.result_path();
+        if !path.exists() {
+            return Ok(None);
+        }
+        let pairs = self.dataset(py).map(|d| d.pairs).unwrap_or_default();
+        read_result(py, &path, pairs).map(Some)
+    }
+
+    /// The verdict of `result.yaml`, or None.
+    #[getter]
+    fn verdict(&self, py: Python<'_>) -> PyResult<Option<Py<crate::calibrate::VerdictPy>>> {
+        match self.result(py)? {
+            Some(result) => result.verdict(py),
+            None => Ok(None),
+        }
+    }
+
+    /// The simulator's ground truth (`simulation:` of the session's config) by frame name
+    /// (`{"T_flange_camera": 4x4, "T_base_target": 4x4}`), or None for a real cell.
+    #[getter]
+    fn truth<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let config = self.load_config(py, None)?;
+        let Some(truth) = config.simulation else {
+            return Ok(None);
+        };
+        let dict = PyDict::new(py);
+        for (name, pose) in truth.unknowns() {
+            dict.set_item(name, pose_to_py(py, &pose))?;
+        }
+        Ok(Some(dict))
+    }
+
+    /// Solves the session as `handeye solve DIR --space SPACE [--config CONFIG]` does, and
+    /// returns the answer (with its verdict; the reprojection summary in `.reprojection`).
+    /// Writes no result file (`Calibration.save` does).
+    #[pyo3(signature = (space = None, config = None))]
+    fn solve(
+        &self,
+        py: Python<'_>,
+        space: Option<&str>,
+        config: Option<PathBuf>,
+    ) -> PyResult<Calibration> {
+        let folder = self.folder(py)?;
+        let config = self.load_config(py, config)?;
+        let space = match space {
+            None => config.solver.space,
+            Some("pose") => SolveSpace::Pose,
+            Some("reprojection") => SolveSpace::Reprojection,
+            Some(other) => {
+                return Err(errors::input(
+                    py,
+                    format!("space `{other}`: expected `pose` or `reprojection`"),
+                ))
+            }
+        };
+        let inputs = SolveInputs::load(config).map_err(|e| errors::from_error(py, &e))?;
+        let (solved, dataset) = py
+            .detach(|| session::load_and_solve(&folder, &inputs, space))
+            .map_err(|e| {
+                errors::with_context(py, &format!("solving session {}", self.root.display()), &e)
+            })?;
+        let reprojection = solved
+            .reprojection_summary()
+            .map(|s| serde_json::to_value(s).unwrap_or(serde_json::Value::Null));
+        Ok(Calibration::with_verdict(
+            solved.calibration,
+            dataset.pairs,
+            solved.verdict,
+            reprojection,
+        ))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<handeye.Session {} ({})>", self.root.display(), self.setup)
+    }
+}
