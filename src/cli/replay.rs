@@ -73,13 +73,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // Both answers (pose space and, by default, reprojection space) side by side.
     let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
         .then_some((&prepared.board, &camera_model));
-    let solved = session::solve_session(
+    let mut solved = session::solve_session(
         dataset.setup,
         &dataset.pairs,
         &visits,
         vision,
         &prepared.config,
     )?;
+    solved.name_session(folder.root(), &prepared.config);
     let calibration = &solved.calibration;
     let output = args
         .output

@@ -312,6 +312,35 @@ impl PreparedCell {
         std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
     }
 
+    /// The lens and board the simulated camera renders with: the sim camera's own `intrinsics`
+    /// and `target` when it names them (a camera calibrated wrongly, a board printed at another
+    /// scale), else the cell's.
+    fn sim_world(&self) -> Result<(CameraModel, Target), CellError> {
+        let CameraConfig::Sim {
+            intrinsics, target, ..
+        } = &self.config.camera
+        else {
+            return Ok((self.camera_model, self.board.clone()));
+        };
+        let lens = match intrinsics {
+            Some(file) if self.intrinsics_known => {
+                CameraModel::load(file).map_err(|source| CellError::Intrinsics {
+                    file: file.clone(),
+                    source: Box::new(source),
+                })?
+            }
+            _ => self.camera_model,
+        };
+        let board = match target {
+            Some(file) => Target::load(file).map_err(|source| CellError::Board {
+                file: file.clone(),
+                source: Box::new(source),
+            })?,
+            None => self.board.clone(),
+        };
+        Ok((lens, board))
+    }
+
     /// The simulator's ground truth, which the simulated backends render from.
     fn sim_truth(&self) -> Result<CellTransforms, CellError> {
         self.config.simulation.ok_or_else(|| {
@@ -328,15 +357,17 @@ impl PreparedCell {
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
+                let (lens, board) = self.sim_world()?;
                 let (robot, camera) =
-                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
+                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, lens, board)?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
                 let robot = self.open_ur()?;
                 let flange = robot.reported_flange();
-                let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
+                let (lens, board) = self.sim_world()?;
+                let camera = sim::camera(&self.config, truth, flange, lens, board)?;
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {

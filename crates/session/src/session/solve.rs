@@ -100,6 +100,26 @@ impl SolveInputs {
 }
 
 impl SolvedSession {
+    /// Names the session folder, the cell config, its board and intrinsics files in the
+    /// verdict's advice and the summary (the verdict's rules know none of them: see
+    /// `verdict::SessionFiles`).
+    pub fn name_session(&mut self, session: &std::path::Path, config: &CellConfig) {
+        let files = verdict::SessionFiles {
+            session: session.display().to_string(),
+            config: config.file.display().to_string(),
+            board: config.target.display().to_string(),
+            intrinsics: config
+                .intrinsics
+                .as_ref()
+                .map(|f| f.display().to_string())
+                .unwrap_or_default(),
+        };
+        if let Some(verdict) = &mut self.verdict {
+            verdict.name_session(&files);
+        }
+        self.summary = files.fill(&self.summary);
+    }
+
     /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
     /// with its verdict first.
     pub fn result_file(&self, pairs: &[PosePair]) -> ResultFile {
@@ -143,6 +163,16 @@ pub fn solve_folder_in(
 /// When the config has no intrinsics they are estimated from the recorded corners (whatever
 /// `space` says: without intrinsics there are no board poses to solve in pose space alone).
 pub fn load_and_solve(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
+    solved.name_session(folder.root(), &inputs.config);
+    Ok((solved, dataset))
+}
+
+fn solve_loaded(
     folder: &SessionFolder,
     inputs: &SolveInputs,
     space: SolveSpace,

@@ -7,6 +7,7 @@
 
 use std::fmt::Write;
 
+use crate::board_scale::BoardScale;
 use crate::{rotation_diversity, Calibration, NoiseModel};
 use handeye_core::geometry::Pose;
 use handeye_core::notice::{NoticeKind, Severity};
@@ -28,6 +29,8 @@ pub struct Evidence<'a> {
     pub held_out: &'a Result<HeldOut, String>,
     /// The accuracy the user wants.
     pub accuracy: Accuracy,
+    /// The board scale fitted with the calibration, when it could be fitted.
+    pub board_scale: Option<BoardScale>,
 }
 
 /// The level of a measured value against its accuracy: GOOD up to 1×, CHECK up to
@@ -62,6 +65,16 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         outliers: c.outliers.clone(),
         ..Figures::default()
     };
+
+    // The board's size: a wrong one explains the residuals and held-out error it causes, so it
+    // comes before them.
+    if let Some(scale) = &evidence.board_scale {
+        figures.board_scale = Some(scale.factor);
+        figures.board_scale_sigma = Some(scale.sigma);
+        if scale.is_wrong() {
+            findings.push(board_scale_finding(scale, evidence.pairs, a));
+        }
+    }
 
     // Residual health, with the convention check.
     if let Some(notice) = residual_notice(c, evidence.pairs, evidence.noise) {
@@ -237,6 +250,37 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     }
 
     decide(findings, figures, a)
+}
+
+/// The finding of a board that is not the size its file says: the factor, what it means for the
+/// print and the residuals, and the fix (measure a tag, set `tagSize`, replay).
+fn board_scale_finding(scale: &BoardScale, pairs: &[PosePair], a: Accuracy) -> Finding {
+    let s = scale.factor;
+    let distance_mm = super::working_distance_mm(pairs);
+    let effect_mm = (s - 1.0).abs() * distance_mm;
+    let level = band(effect_mm, a.translation_mm).max(Level::Check);
+    let size = if s < 1.0 { "smaller" } else { "larger" };
+    Finding {
+        level,
+        basis: Basis::BoardScale,
+        reason: format!(
+            "the board measures {s:.3}× (±{:.4}) the size in its board file — printed at {:.0} %? Every measured board distance is {:.1} % too {} ({effect_mm:.0} mm at {distance_mm:.0} mm); scaling the board poses by {s:.3} drops the translation residuals from {:.2} mm to {:.2} mm RMS over {} poses",
+            scale.sigma,
+            s * 100.0,
+            (1.0 / s - 1.0).abs() * 100.0,
+            if s < 1.0 { "long" } else { "short" },
+            scale.residual_unscaled_mm,
+            scale.residual_scaled_mm,
+            scale.samples,
+        ),
+        next_action: format!(
+            "measure a printed tag's black square with a ruler (the board is {:.1} % {size} than its file says) and set tagSize (metres) in the board file {}, then `handeye replay {} --config {}`",
+            (s - 1.0).abs() * 100.0,
+            super::BOARD_PLACEHOLDER,
+            super::SESSION_PLACEHOLDER,
+            super::CONFIG_PLACEHOLDER,
+        ),
+    }
 }
 
 fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> Verdict {
