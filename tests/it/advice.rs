@@ -148,3 +148,86 @@ fn a_board_of_the_right_size_is_not_called_wrong() {
     let s = verdict.figures.board_scale.unwrap();
     assert!((s - 1.0).abs() < 0.005, "{s}");
 }
+
+/// `handeye plan check --config CONFIG`: (exit code, all output).
+fn plan_check(config: &Path) -> (Option<i32>, String) {
+    let out = handeye()
+        .args(["plan", "check", "--config"])
+        .arg(config)
+        .output()
+        .unwrap();
+    (out.status.code(), text(&out))
+}
+
+/// `rotation_vector: [0, 0, -90]` (degrees where radians belong) is refused when the config is
+/// read, naming the file, the field and the two ways to write it; the same turn as `rpy_deg` is
+/// read.
+#[test]
+fn degrees_in_a_rotation_vector_are_refused_at_load_and_rpy_deg_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let nominal = "T_flange_camera: {translation: [0.03, -0.07, 0.04], rotation_vector: [0.0, 0.0, 1.5708]}";
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "degrees.yaml",
+        &[(
+            nominal,
+            "T_flange_camera: {translation: [0.03, -0.07, 0.04], rotation_vector: [0, 0, 90]}",
+        )],
+    );
+    let (code, out) = plan_check(&config);
+    assert_eq!(code, Some(1), "{out}");
+    for expected in [
+        config.display().to_string().as_str(),
+        "nominal.T_flange_camera.rotation_vector",
+        "rotation vector [0, 0, 90] is 90.0 long, more than 2π: it looks like degrees",
+        "radians ([0.0000, 0.0000, 1.5708])",
+        "`rpy_deg: [roll, pitch, yaw]`",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in {out}");
+    }
+    assert!(!out.contains("panicked"), "{out}");
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "rpy.yaml",
+        &[(
+            nominal,
+            "T_flange_camera: {translation: [0.03, -0.07, 0.04], rpy_deg: [0, 0, 90]}",
+        )],
+    );
+    let loaded = handeye::config::CellConfig::load(&config).unwrap();
+    let angle = loaded.nominal.camera_mount.rotation.scaled_axis();
+    assert!((angle - nalgebra::Vector3::new(0.0, 0.0, 90f64.to_radians())).norm() < 1e-12);
+}
+
+/// `tagSize: 4` (centimetres) is refused when the board is read, before anything moves, naming
+/// the board file, the key and the metres it likely means.
+#[test]
+fn a_tag_size_in_centimetres_is_refused_at_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = dir.path().join("board-cm.yaml");
+    let text = std::fs::read_to_string(repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
+    std::fs::write(&board, text.replace("tagSize: 0.04\n", "tagSize: 4\n")).unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[(
+            &format!(
+                "target: {}",
+                repo().join("configs/targets/aprilgrid-6x6.yaml").display()
+            ),
+            &format!("target: {}", board.display()),
+        )],
+    );
+    let (code, out) = plan_check(&config);
+    assert_eq!(code, Some(1), "{out}");
+    for expected in [
+        format!("board file {}", board.display()),
+        "`tagSize` must be the edge of a tag's black square in metres, 0.002–1 m, found 4 (that looks like centimetres: tagSize: 0.04 in metres)".to_string(),
+    ] {
+        assert!(out.contains(&expected), "{expected:?} not in {out}");
+    }
+    assert!(!out.contains("panicked"), "{out}");
+}
