@@ -231,3 +231,49 @@ fn a_tag_size_in_centimetres_is_refused_at_load() {
     }
     assert!(!out.contains("panicked"), "{out}");
 }
+
+/// A nominal mount 10 cm off the real one along the optical axis (a drawing of another bracket): the answer is right,
+/// the verdict is CHECK with both values, and the replay with the nominal set right is GOOD.
+#[test]
+fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let nominal = "T_flange_camera: {translation: [0.03, -0.07, 0.04]";
+    let config = cell_with(
+        dir.path(),
+        "cell.yaml",
+        14,
+        &[(nominal, "T_flange_camera: {translation: [0.03, -0.07, 0.14]")],
+    );
+    let session = dir.path().join("session");
+    let run = run_cell(&config, &session);
+    let verdict = run.solved.verdict.clone().unwrap();
+    eprintln!("{}", verdict.terminal_lines());
+    assert_eq!(
+        (verdict.level, verdict.basis),
+        (Level::Check, Basis::FarFromNominal),
+        "{}",
+        verdict.terminal_lines()
+    );
+    for expected in [
+        // |[0.03, -0.07, 0.14] - truth [0.0312, -0.0694, 0.0447]| = 95.3 mm (along the optical
+        // axis: the planned views stay centred on the board).
+        "T_flange_camera is 95 mm and ",
+        "nominal translation [0.030, -0.070, 0.140] m",
+        "solved translation [0.031, -0.069, 0.04",
+    ] {
+        assert!(verdict.reason.contains(expected), "{expected:?} not in {}", verdict.reason);
+    }
+    assert!(
+        verdict.next_action.contains(&format!(
+            "handeye replay {} --config {}",
+            session.display(),
+            config.display()
+        )),
+        "{}",
+        verdict.next_action
+    );
+    let fixed = cell_with(dir.path(), "fixed.yaml", 14, &[]);
+    let (out, after) = replay(&session, &fixed);
+    eprintln!("{out}");
+    assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
+}

@@ -72,6 +72,8 @@ pub enum NoticeKind {
     /// A solved transform no real cell has (a camera far from the flange it is mounted on, the
     /// two unknowns swapped as when both input poses are inverted).
     ImplausibleTransform,
+    /// The answer is far from the config's nominal transforms (the drawing or tape measure).
+    FarFromNominal,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

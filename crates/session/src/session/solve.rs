@@ -471,14 +471,14 @@ fn conclude(
     config: &CellConfig,
     notes: &[String],
 ) {
-    solved
-        .calibration
-        .notices
-        .extend(solve::diagnostics::check_against_nominal(
-            &solved.calibration,
-            &config.nominal,
-            solve::diagnostics::NOMINAL_TOLERANCE_M,
-        ));
+    // Swapped unknowns first (their own cause); else an answer simply far from the nominal.
+    let nominal = solve::diagnostics::check_against_nominal(
+        &solved.calibration,
+        &config.nominal,
+        solve::diagnostics::NOMINAL_TOLERANCE_M,
+    )
+    .or_else(|| solve::diagnostics::check_far_from_nominal(&solved.calibration, &config.nominal));
+    solved.calibration.notices.extend(nominal);
     let verdict = verdict::assess_solved(
         &solved.calibration,
         pairs,

@@ -99,6 +99,27 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         });
     }
 
+    // Far from the nominal transforms: is this the cell the config describes? Before the
+    // held-out error and the solver's notices, which judge the answer's precision, not what it is.
+    if let Some(notice) = c
+        .notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::FarFromNominal)
+    {
+        let (camera, target) = c.setup.unknown_names();
+        findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::FarFromNominal,
+            reason: notice.message.clone(),
+            next_action: format!(
+                "find out which is wrong: if the nominal (drawing, tape measure) is, set the far one of nominal.{camera}, nominal.{target} in {} to its solved value and `handeye replay {} --config {}`; if the cell is as drawn, the camera or board moved or the robot poses are in another frame — fix that and record again",
+                super::CONFIG_PLACEHOLDER,
+                super::SESSION_PLACEHOLDER,
+                super::CONFIG_PLACEHOLDER,
+            ),
+        });
+    }
+
     // Held-out error at the working distance.
     match evidence.held_out {
         Ok(h) => {
@@ -217,6 +238,7 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
                 | NoticeKind::LargeResiduals
                 | NoticeKind::FewPoses
                 | NoticeKind::PoorRotationSpread
+                | NoticeKind::FarFromNominal
         );
         if covered || !notice.needs_attention() {
             continue;
