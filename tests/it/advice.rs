@@ -165,7 +165,8 @@ fn plan_check(config: &Path) -> (Option<i32>, String) {
 #[test]
 fn degrees_in_a_rotation_vector_are_refused_at_load_and_rpy_deg_is_read() {
     let dir = tempfile::tempdir().unwrap();
-    let nominal = "T_flange_camera: {translation: [0.03, -0.07, 0.04], rotation_vector: [0.0, 0.0, 1.5708]}";
+    let nominal =
+        "T_flange_camera: {translation: [0.03, -0.07, 0.04], rotation_vector: [0.0, 0.0, 1.5708]}";
     let config = config_variant(
         dir.path(),
         "sim-cell.yaml",
@@ -242,7 +243,10 @@ fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
         dir.path(),
         "cell.yaml",
         14,
-        &[(nominal, "T_flange_camera: {translation: [0.03, -0.07, 0.14]")],
+        &[(
+            nominal,
+            "T_flange_camera: {translation: [0.03, -0.07, 0.14]",
+        )],
     );
     let session = dir.path().join("session");
     let run = run_cell(&config, &session);
@@ -261,7 +265,11 @@ fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
         "nominal translation [0.030, -0.070, 0.140] m",
         "solved translation [0.031, -0.069, 0.04",
     ] {
-        assert!(verdict.reason.contains(expected), "{expected:?} not in {}", verdict.reason);
+        assert!(
+            verdict.reason.contains(expected),
+            "{expected:?} not in {}",
+            verdict.reason
+        );
     }
     assert!(
         verdict.next_action.contains(&format!(

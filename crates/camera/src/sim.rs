@@ -24,6 +24,8 @@ pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;
 /// A camera that renders the board as the simulated cell truly is.
 pub struct SimCamera {
     model: CameraModel,
+    /// The intrinsics it reports (what the cell believes; `model` unless told otherwise).
+    reported: CameraModel,
     board: Target,
     truth: CellTransforms,
     true_base_from_flange: TrueFlangePose,
@@ -49,6 +51,7 @@ impl SimCamera {
     ) -> Self {
         SimCamera {
             model,
+            reported: model,
             board,
             truth,
             true_base_from_flange,
@@ -58,6 +61,13 @@ impl SimCamera {
             grabs: 0,
             rays: None,
         }
+    }
+
+    /// The same camera reporting `model` as its intrinsics while it renders with its own lens: a
+    /// camera whose calibration file is wrong.
+    pub fn reporting(mut self, model: CameraModel) -> Self {
+        self.reported = model;
+        self
     }
 }
 
@@ -98,6 +108,6 @@ impl Camera for SimCamera {
     }
 
     fn model(&self) -> &CameraModel {
-        &self.model
+        &self.reported
     }
 }

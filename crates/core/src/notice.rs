@@ -74,6 +74,9 @@ pub enum NoticeKind {
     ImplausibleTransform,
     /// The answer is far from the config's nominal transforms (the drawing or tape measure).
     FarFromNominal,
+    /// The configured intrinsics do not fit the frames (intrinsics estimated from the session
+    /// fit far better); the message is the reason, then ` — next: ` and what to do.
+    WrongIntrinsics,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

@@ -17,6 +17,9 @@
 //!   a solve of all the others: translation of the target at the working distance, mm, and
 //!   rotation, degrees, RMS) or the 1-sigma of either transform is above [`REDO_FACTOR`] × `A`;
 //!   or a notice of severity `error`.
+//! * **REDO** — the intrinsics do not fit the frames: a `wrong_intrinsics` notice (the session
+//!   layer's check: board reprojection far above normal and intrinsics estimated from the
+//!   session far from the file's); decides over everything it causes.
 //! * **REDO** (or CHECK when its effect at the working distance is within 3× `A`) — the board is
 //!   not the size its file says: the scale of the board-pose translations fitted with the
 //!   calibration (`board_scale`) is off 1 by more than 1 % and 3 sigmas and explains the
@@ -71,6 +74,8 @@ pub const GOOD_POSES: usize = 8;
 pub const GOOD_OFF_AXIS_DEG: f64 = 20.0;
 /// At most this many samples are held out in turn (evenly spaced) by [`held_out`].
 pub const MAX_HELD_OUT: usize = 100;
+/// Between the reason and the next action in a notice that carries both (`WrongIntrinsics`).
+pub const NEXT_SEPARATOR: &str = " — next: ";
 /// Placeholder for the session folder in a next action; the session layer names the folder
 /// ([`Verdict::name_session`]).
 pub const SESSION_PLACEHOLDER: &str = "<session>";

@@ -360,6 +360,8 @@ impl PreparedCell {
                 let (lens, board) = self.sim_world()?;
                 let (robot, camera) =
                     sim::open(&self.config, truth, self.arm.clone(), self.start_joints, lens, board)?;
+                // The camera reports the cell's intrinsics, rendering with its own lens.
+                let camera = camera.reporting(self.camera_model);
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
@@ -367,7 +369,8 @@ impl PreparedCell {
                 let robot = self.open_ur()?;
                 let flange = robot.reported_flange();
                 let (lens, board) = self.sim_world()?;
-                let camera = sim::camera(&self.config, truth, flange, lens, board)?;
+                let camera = sim::camera(&self.config, truth, flange, lens, board)?
+                    .reporting(self.camera_model);
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {

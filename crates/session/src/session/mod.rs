@@ -93,6 +93,20 @@ pub enum SessionError {
         /// The first rejections, `pose N: why`.
         reasons: String,
     },
+    /// No visited pose gave a sample because the configured intrinsics do not fit the frames.
+    #[error("no pose of session {} gave a sample ({visited} pose(s) visited, every one rejected: {first}): {reason}\nnext: {next}", folder.display())]
+    WrongIntrinsics {
+        /// The session folder.
+        folder: PathBuf,
+        /// Poses visited.
+        visited: usize,
+        /// The first rejection.
+        first: String,
+        /// What is wrong, with the numbers.
+        reason: String,
+        /// What to do (the estimate written into the session, the replay command).
+        next: String,
+    },
     /// `samples.yaml` does not hold exactly the accepted pose records.
     #[error("{}: disagrees with the pose records in poses/: {} (a run killed between a record and this file); `handeye run --resume {}` rebuilds it from the records", file.display(), describe_disagreement(missing, extra), folder.display())]
     SamplesDisagree {

@@ -8,7 +8,10 @@
 //! `solve`, `config`, `dataset`, `result`, `vision` and the ground floor; the folder's reading
 //! and writing go through `SessionFolder`.
 
+mod intrinsics_check;
 mod summary;
+
+pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
 
@@ -16,6 +19,7 @@ use crate::config::{CellConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
+use handeye_core::notice::Notice;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::verdict::{self, Verdict};
 use handeye_solve::{
@@ -187,9 +191,47 @@ fn solve_loaded(
     for visit in &visits {
         visit.check_corners_on_board(&folder.visit_path(visit.plan_index), &inputs.board)?;
     }
-    let dataset = committed_samples(folder, &visits)?;
+    // Intrinsics that are not this camera's: named with the numbers (and the estimate written
+    // into the session), also when they made every pose fail.
+    let setup = folder.read_manifest()?.setup;
+    let wrong = check_intrinsics(folder, setup, &visits, &inputs.board, camera, config)?;
+    let intrinsics_file = config.intrinsics.clone().unwrap_or_default();
+    let dataset = match committed_samples(folder, &visits) {
+        Err(SessionError::NoSamples {
+            folder: root,
+            visited,
+            reasons,
+        }) => {
+            return Err(match &wrong {
+                Some(w) => SessionError::WrongIntrinsics {
+                    visited,
+                    first: reasons.split("; ").next().unwrap_or_default().to_string(),
+                    reason: w.reason(&intrinsics_file),
+                    next: w.next_action(&root, &config.file),
+                    folder: root,
+                },
+                None => SessionError::NoSamples {
+                    folder: root,
+                    visited,
+                    reasons,
+                },
+            })
+        }
+        other => other?,
+    };
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let mut solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
+    let notices: Vec<_> = wrong
+        .iter()
+        .map(|w| w.notice(&intrinsics_file, folder.root(), &config.file))
+        .collect();
+    let mut solved = solve_session_with(
+        dataset.setup,
+        &dataset.pairs,
+        &visits,
+        vision,
+        config,
+        notices,
+    )?;
     solved.evidence = Evidence {
         pairs: dataset.pairs.clone(),
         visits,
@@ -402,7 +444,7 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
-    conclude(&mut solved, &pairs, &options, config, &notes);
+    conclude(&mut solved, &pairs, &options, config, &notes, Vec::new());
     // The board poses just estimated are this session's samples: `samples.yaml` (which the
     // report, `verify` and `solve <session>` read) holds them, consistent with
     // `camera_info.yaml`. The run records none without intrinsics.
@@ -470,7 +512,9 @@ fn conclude(
     options: &SolveOptions,
     config: &CellConfig,
     notes: &[String],
+    findings: Vec<Notice>,
 ) {
+    solved.calibration.notices.extend(findings);
     // Swapped unknowns first (their own cause); else an answer simply far from the nominal.
     let nominal = solve::diagnostics::check_against_nominal(
         &solved.calibration,
@@ -497,6 +541,19 @@ pub fn solve_session(
     visits: &[PoseVisit],
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    solve_session_with(setup, pairs, visits, vision, config, Vec::new())
+}
+
+/// [`solve_session`] with `findings` of the session layer's own checks (wrong intrinsics) added
+/// to the answer's notices before the verdict judges them.
+pub fn solve_session_with(
+    setup: Setup,
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    vision: Option<(&Target, &CameraModel)>,
+    config: &CellConfig,
+    findings: Vec<Notice>,
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();
     let pose_space =
@@ -559,6 +616,6 @@ pub fn solve_session(
             );
         }
     }
-    conclude(&mut solved, pairs, &options, config, &notes);
+    conclude(&mut solved, pairs, &options, config, &notes, findings);
     Ok(solved)
 }

@@ -66,12 +66,31 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         ..Figures::default()
     };
 
+    // Intrinsics that are not this camera's: everything else follows from them.
+    if let Some(notice) = c
+        .notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::WrongIntrinsics)
+    {
+        let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
+            notice.message.as_str(),
+            "calibrate the camera, then solve again",
+        ));
+        findings.push(Finding {
+            level: Level::Redo,
+            basis: Basis::Intrinsics,
+            reason: reason.into(),
+            next_action: next.into(),
+        });
+    }
+
     // The board's size: a wrong one explains the residuals and held-out error it causes, so it
     // comes before them.
     if let Some(scale) = &evidence.board_scale {
         figures.board_scale = Some(scale.factor);
         figures.board_scale_sigma = Some(scale.sigma);
-        if scale.is_wrong() {
+        let intrinsics_wrong = findings.iter().any(|f| f.basis == Basis::Intrinsics);
+        if scale.is_wrong() && !intrinsics_wrong {
             findings.push(board_scale_finding(scale, evidence.pairs, a));
         }
     }
@@ -239,6 +258,7 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
                 | NoticeKind::FewPoses
                 | NoticeKind::PoorRotationSpread
                 | NoticeKind::FarFromNominal
+                | NoticeKind::WrongIntrinsics
         );
         if covered || !notice.needs_attention() {
             continue;
