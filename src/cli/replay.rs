@@ -33,6 +33,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| manifest.config.clone());
     let prepared = cell::prepare(&config_path).context("preparing the cell")?;
+    if let Some((file, name)) = prepared.placeholder_intrinsics() {
+        anyhow::bail!(
+            "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
+            file.display(),
+            config_path.display(),
+            folder.root().display()
+        );
+    }
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(

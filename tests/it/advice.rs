@@ -285,3 +285,214 @@ fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
     eprintln!("{out}");
     assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
 }
+
+// ---- intrinsics ------------------------------------------------------------------------------
+
+/// The simulated lens's fx (`configs/cameras/sim-1280x720.yaml`), px.
+const TRUE_FX: f64 = 800.0;
+
+/// The sim cell (fixed plan of `poses`, so every visited frame stays in the folder) whose
+/// `intrinsics:` is `lens` while its camera really has the simulated lens; `extra` edits after.
+fn cell_with_lens(dir: &Path, name: &str, lens: &Path, extra: &[(&str, &str)]) -> PathBuf {
+    let sim_lens = repo().join("configs/cameras/sim-1280x720.yaml");
+    let cell_lens = format!("intrinsics: {}", sim_lens.display());
+    let wrong_lens = format!("intrinsics: {}", lens.display());
+    let camera_lens = format!("  intrinsics: {}\n  noise_sigma: 2.0", sim_lens.display());
+    let mut edits: Vec<(&str, &str)> = vec![
+        ("count: 20", "count: 14"),
+        ("plan:\n", "plan:\n  adaptive: false\n"),
+        (&cell_lens, &wrong_lens),
+        ("  noise_sigma: 2.0", &camera_lens),
+    ];
+    edits.extend_from_slice(extra);
+    config_variant(dir, "sim-cell.yaml", name, &edits)
+}
+
+/// The simulated lens with fx 8 % too long, written to `dir/fx8.yaml`.
+fn lens_fx_8_percent_off(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    let from = "data: [800.0, 0.0, 641.3, 0.0, 800.0";
+    assert!(text.contains(from));
+    let path = dir.join("fx8.yaml");
+    std::fs::write(
+        &path,
+        text.replace(from, "data: [864.0, 0.0, 641.3, 0.0, 800.0"),
+    )
+    .unwrap();
+    path
+}
+
+/// A run of `config` into `session` that fails: its error, chain and all.
+fn failed_run(config: &Path, session: &Path) -> String {
+    match handeye::cell::run::run(
+        &util::new_run(config, session),
+        handeye::cell::run::Strategy::Planned,
+        &mut util::QuietObserver,
+    ) {
+        Ok(_) => panic!("the run of {} succeeded", config.display()),
+        Err(e) => {
+            let mut message = e.to_string();
+            let mut source = std::error::Error::source(&e);
+            while let Some(s) = source {
+                message.push_str(&format!(": {s}"));
+                source = s.source();
+            }
+            message
+        }
+    }
+}
+
+/// The fix for intrinsics: the cell config with `intrinsics:` pointing at `lens`.
+fn cell_with_intrinsics(dir: &Path, name: &str, lens: &Path) -> PathBuf {
+    let sim_lens = repo().join("configs/cameras/sim-1280x720.yaml");
+    config_variant(
+        dir,
+        "sim-cell.yaml",
+        name,
+        &[
+            ("count: 20", "count: 14"),
+            ("plan:\n", "plan:\n  adaptive: false\n"),
+            (
+                &format!("intrinsics: {}", sim_lens.display()),
+                &format!("intrinsics: {}", lens.display()),
+            ),
+        ],
+    )
+}
+
+/// The shipped placeholder lens file is refused before anything moves (no session folder),
+/// naming the file and both fixes; `plan check` still checks views with it but warns; the fix
+/// it names (drop `intrinsics:`, the run estimates them) is GOOD with fx within 0.5 %.
+#[test]
+fn the_placeholder_intrinsics_are_refused_before_the_arm_moves() {
+    let dir = tempfile::tempdir().unwrap();
+    let placeholder = repo().join("configs/cameras/CHANGE-ME-usb-camera-1280x720.yaml");
+    let config = cell_with_lens(dir.path(), "cell.yaml", &placeholder, &[]);
+    let session = dir.path().join("session");
+    let message = failed_run(&config, &session);
+    for expected in [
+        placeholder.display().to_string(),
+        "the intrinsics are the shipped placeholder (camera_name: CHANGE-ME-placeholder)".into(),
+        "calibrate the camera".into(),
+        format!("point `intrinsics:` in {}", config.display()),
+        "or drop `intrinsics:` so the run estimates them".into(),
+        "nothing was moved".into(),
+    ] {
+        assert!(message.contains(&expected), "{expected:?} not in {message}");
+    }
+    assert!(!session.exists(), "a session folder was made");
+    let (code, out) = plan_check(&config);
+    assert_eq!(code, Some(0), "{out}");
+    assert!(
+        out.contains("is the shipped placeholder (camera_name: CHANGE-ME-placeholder)")
+            && out.contains("`handeye run` refuses it"),
+        "{out}"
+    );
+
+    // The fix: no `intrinsics:`, estimated from the run.
+    let text = std::fs::read_to_string(&config).unwrap();
+    let fixed = dir.path().join("fixed.yaml");
+    let line = format!("intrinsics: {}\n", placeholder.display());
+    assert!(text.contains(&line));
+    std::fs::write(&fixed, text.replace(&line, "")).unwrap();
+    let run = run_cell(&fixed, &dir.path().join("fixed-session"));
+    let verdict = run.solved.verdict.clone().unwrap();
+    assert_eq!(verdict.level, Level::Good, "{}", verdict.terminal_lines());
+    let fx = run.solved.estimated_camera.unwrap().fx;
+    eprintln!("placeholder dropped: fx estimated {fx:.2} px (true {TRUE_FX})");
+    assert!((fx / TRUE_FX - 1.0).abs() < 0.005, "fx {fx}");
+}
+
+/// Checks the advice for the lens with fx 8 % off, and that the estimate it wrote is the true
+/// lens; returns the estimate's path.
+fn assert_intrinsics_advice(text: &str, session: &Path, config: &Path, lens: &Path) -> PathBuf {
+    let estimate = std::fs::canonicalize(session.join("camera_info.yaml"))
+        .expect("the estimate is written into the session");
+    for expected in [
+        format!(
+            "the intrinsics in {} do not fit this camera",
+            lens.display()
+        ),
+        "fx in the file 864.0 px, estimated from this session 800.".into(),
+        "(-7.4 %)".into(),
+        format!(
+            "set `intrinsics: {}` in {}",
+            estimate.display(),
+            config.display()
+        ),
+        format!(
+            "`handeye replay {} --config {}`",
+            session.display(),
+            config.display()
+        ),
+    ] {
+        assert!(text.contains(&expected), "{expected:?} not in {text}");
+    }
+    let estimated = handeye::camera_model::CameraModel::load(&estimate).unwrap();
+    eprintln!(
+        "fx 8 % off: estimated fx {:.2} fy {:.2} cx {:.2} cy {:.2} px (true 800, 800, 641.3, 358.7)",
+        estimated.fx, estimated.fy, estimated.cx, estimated.cy
+    );
+    assert!(
+        (estimated.fx / TRUE_FX - 1.0).abs() < 0.005,
+        "{estimated:?}"
+    );
+    assert!((estimated.fy / 800.0 - 1.0).abs() < 0.005, "{estimated:?}");
+    assert!((estimated.cx - 641.3).abs() < 2.0 && (estimated.cy - 358.7).abs() < 2.0);
+    estimate
+}
+
+/// fx 8 % off: every frame's board RMS is far above the 1 px limit, so every pose is rejected;
+/// the run's error says why with the numbers (not "check that the board is in view"), writes
+/// the estimate into the session, and the replay with it is GOOD.
+#[test]
+fn intrinsics_8_percent_off_that_reject_every_pose_are_named_with_the_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = lens_fx_8_percent_off(dir.path());
+    let config = cell_with_lens(dir.path(), "cell.yaml", &lens, &[]);
+    let session = dir.path().join("session");
+    let message = failed_run(&config, &session);
+    eprintln!("{message}");
+    assert!(message.contains("every one rejected"), "{message}");
+    assert!(
+        !message.contains("check that the board is in view"),
+        "{message}"
+    );
+    let estimate = assert_intrinsics_advice(&message, &session, &config, &lens);
+    let fixed = cell_with_intrinsics(dir.path(), "fixed.yaml", &estimate);
+    let (_, after) = replay(&session, &fixed);
+    assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
+}
+
+/// fx 8 % off with a board RMS limit loose enough to keep the frames: the verdict is REDO on
+/// the intrinsics (not "record more poses"), with the numbers; the replay with the estimate is
+/// GOOD.
+#[test]
+fn intrinsics_8_percent_off_are_the_verdicts_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = lens_fx_8_percent_off(dir.path());
+    let config = cell_with_lens(
+        dir.path(),
+        "cell.yaml",
+        &lens,
+        &[(
+            "max_reprojection_rms_px: 1.0",
+            "max_reprojection_rms_px: 20.0",
+        )],
+    );
+    let session = dir.path().join("session");
+    let run = run_cell(&config, &session);
+    let verdict = run.solved.verdict.clone().unwrap();
+    eprintln!("{}", verdict.terminal_lines());
+    assert_eq!(
+        (verdict.level, verdict.basis),
+        (Level::Redo, Basis::Intrinsics),
+        "{}",
+        verdict.terminal_lines()
+    );
+    let text = format!("{}\n{}", verdict.reason, verdict.next_action);
+    let estimate = assert_intrinsics_advice(&text, &session, &config, &lens);
+    let fixed = cell_with_intrinsics(dir.path(), "fixed.yaml", &estimate);
+    let (_, after) = replay(&session, &fixed);
+    assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
+}

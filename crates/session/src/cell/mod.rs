@@ -73,6 +73,10 @@ pub struct Hardware {
     pub camera: Box<dyn Camera>,
 }
 
+/// What the shipped placeholder intrinsics file has in its `camera_name`
+/// (`configs/cameras/CHANGE-ME-usb-camera-1280x720.yaml`).
+pub const PLACEHOLDER_CAMERA_NAME: &str = "CHANGE-ME";
+
 /// A cell whose config, board, intrinsics and plan are loaded and checked.
 pub struct PreparedCell {
     /// The config.
@@ -310,6 +314,19 @@ impl PreparedCell {
     /// The config file as a session manifest records it (absolute when it can be).
     pub fn config_path(&self) -> std::path::PathBuf {
         std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
+    }
+
+    /// The configured intrinsics file and its `camera_name` when it is the shipped placeholder
+    /// (`camera_name` containing [`PLACEHOLDER_CAMERA_NAME`]): good for `plan check`, useless for
+    /// calibrating, so a run refuses it before anything moves.
+    pub fn placeholder_intrinsics(&self) -> Option<(std::path::PathBuf, String)> {
+        let file = self.config.intrinsics.as_ref()?;
+        let text = std::fs::read_to_string(file).ok()?;
+        let yaml: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).ok()?;
+        let name = yaml.get("camera_name")?.as_str()?;
+        name.to_ascii_uppercase()
+            .contains(PLACEHOLDER_CAMERA_NAME)
+            .then(|| (file.clone(), name.to_string()))
     }
 
     /// The lens and board the simulated camera renders with: the sim camera's own `intrinsics`
