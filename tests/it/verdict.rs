@@ -315,7 +315,7 @@ fn visp_eye_to_hand_ends_with_a_true_reason_and_no_convention_false_alarm() {
     // The residual check judges the residuals against the noise model (the bug: a fixed 1°
     // threshold called the 1.2° residual "usually a convention error"), with either model.
     for noise in [options.noise, NoiseModel::default()] {
-        let found = verdict::residual_notice(&cal, &pairs, &noise);
+        let found = verdict::residual_notice(&cal, pairs, &noise);
         assert!(
             found
                 .as_ref()

@@ -23,9 +23,10 @@ pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;
 
 /// A camera that renders the board as the simulated cell truly is.
 pub struct SimCamera {
+    /// The lens it renders with.
+    lens: CameraModel,
+    /// The intrinsics it reports (what the cell believes; `lens` unless told otherwise).
     model: CameraModel,
-    /// The intrinsics it reports (what the cell believes; `model` unless told otherwise).
-    reported: CameraModel,
     board: Target,
     truth: CellTransforms,
     true_base_from_flange: TrueFlangePose,
@@ -50,8 +51,8 @@ impl SimCamera {
         hidden_grabs: BTreeSet<usize>,
     ) -> Self {
         SimCamera {
+            lens: model,
             model,
-            reported: model,
             board,
             truth,
             true_base_from_flange,
@@ -66,7 +67,7 @@ impl SimCamera {
     /// The same camera reporting `model` as its intrinsics while it renders with its own lens: a
     /// camera whose calibration file is wrong.
     pub fn reporting(mut self, model: CameraModel) -> Self {
-        self.reported = model;
+        self.model = model;
         self
     }
 }
@@ -89,11 +90,11 @@ impl Camera for SimCamera {
             self.truth
                 .camera_from_target(&(self.true_base_from_flange)())
         };
-        let model = &self.model;
-        let rays = self.rays.get_or_insert_with(|| PixelRays::new(model));
+        let lens = &self.lens;
+        let rays = self.rays.get_or_insert_with(|| PixelRays::new(lens));
         let image = render_with_rays(
             &self.board,
-            &self.model,
+            &self.lens,
             rays,
             &camera_from_target,
             &self.options,
@@ -108,6 +109,6 @@ impl Camera for SimCamera {
     }
 
     fn model(&self) -> &CameraModel {
-        &self.reported
+        &self.model
     }
 }
