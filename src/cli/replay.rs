@@ -81,12 +81,40 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // Both answers (pose space and, by default, reprojection space) side by side.
     let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
         .then_some((&prepared.board, &camera_model));
-    let mut solved = session::solve_session(
+    // Intrinsics that do not fit the frames are named here as in a run (the estimate written
+    // into the session), also when they made every pose fail.
+    let wrong = if prepared.intrinsics_known {
+        session::solve::check_intrinsics(
+            &folder,
+            dataset.setup,
+            &visits,
+            &prepared.board,
+            &camera_model,
+            &prepared.config,
+        )?
+    } else {
+        None
+    };
+    let intrinsics_file = prepared.config.intrinsics.clone().unwrap_or_default();
+    if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
+        anyhow::bail!(
+            "every pose of {} was rejected: {}\nnext: {}",
+            folder.root().display(),
+            w.reason(&intrinsics_file),
+            w.next_action(folder.root(), &config_path)
+        );
+    }
+    let notices = wrong
+        .iter()
+        .map(|w| w.notice(&intrinsics_file, folder.root(), &config_path))
+        .collect();
+    let mut solved = session::solve_session_with(
         dataset.setup,
         &dataset.pairs,
         &visits,
         vision,
         &prepared.config,
+        notices,
     )?;
     solved.name_session(folder.root(), &prepared.config);
     let calibration = &solved.calibration;

@@ -24,7 +24,8 @@
 //!   not the size its file says: the scale of the board-pose translations fitted with the
 //!   calibration (`board_scale`) is off 1 by more than 1 % and 3 sigmas and explains the
 //!   residuals; decides over the held-out error and residuals it causes.
-//! * **CHECK** — usable, but something needs a look: held-out error or 1-sigma between 1× and
+//! * **CHECK** — usable, but something needs a look: the answer more than 50 mm or 20° from the
+//!   config's nominal transforms (a `far_from_nominal` notice, both values); held-out error or 1-sigma between 1× and
 //!   3× `A`; samples flagged as outliers (named); residuals more than [`RESIDUAL_FACTOR`] × what
 //!   the noise model expects; rotations less than [`GOOD_OFF_AXIS_DEG`]° off their main axis;
 //!   fewer than [`GOOD_POSES`] poses; no held-out check possible; any other warning of the

@@ -30,8 +30,8 @@ pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
-    load_and_solve, solve_folder, solve_folder_in, solve_session, Evidence, SolveInputs,
-    SolvedSession,
+    load_and_solve, solve_folder, solve_folder_in, solve_session, solve_session_with, Evidence,
+    SolveInputs, SolvedSession,
 };
 pub use staging::{remove_abandoned, Leftover, Staging};
 
