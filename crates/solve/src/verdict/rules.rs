@@ -380,6 +380,51 @@ mod tests {
     }
 
     #[test]
+    fn a_wrong_board_size_is_banded_by_its_error_at_the_working_distance() {
+        use handeye_core::geometry::Pose;
+        let pairs: Vec<PosePair> = (0..5)
+            .map(|_| PosePair::new(Pose::identity(), Pose::translation(0.0, 0.0, 0.6)))
+            .collect();
+        let scale = |factor| BoardScale {
+            factor,
+            sigma: 1e-4,
+            residual_unscaled_mm: 3.0,
+            residual_scaled_mm: 0.05,
+            samples: 5,
+        };
+        // 5 % at 600 mm is 30 mm: REDO against 1 mm, CHECK against 20 mm.
+        let f = board_scale_finding(&scale(0.95), &pairs, Accuracy::default());
+        assert_eq!((f.level, f.basis), (Level::Redo, Basis::BoardScale));
+        assert!(
+            f.reason.starts_with(
+                "the board measures 0.950× (±0.0001) the size in its board file — printed at 95 %?"
+            ),
+            "{}",
+            f.reason
+        );
+        assert!(
+            f.reason.contains("too long (30 mm at 600 mm)"),
+            "{}",
+            f.reason
+        );
+        assert!(f.next_action.contains("5.0 % smaller"), "{}", f.next_action);
+        let loose = Accuracy {
+            translation_mm: 20.0,
+            rotation_deg: 1.0,
+        };
+        let f = board_scale_finding(&scale(1.05), &pairs, loose);
+        assert_eq!(f.level, Level::Check);
+        assert!(f.next_action.contains("5.0 % larger"), "{}", f.next_action);
+        // Within 1 %, or not explaining the residuals, it is no finding.
+        assert!(!scale(0.995).is_wrong());
+        assert!(!BoardScale {
+            residual_scaled_mm: 2.0,
+            ..scale(0.95)
+        }
+        .is_wrong());
+    }
+
+    #[test]
     fn the_worst_finding_decides_and_the_rest_follow_in_check_order() {
         let finding = |level, basis, reason: &str| Finding {
             level,
