@@ -102,6 +102,13 @@ pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
         PlanCommand::Check { config } => {
             let prepared = cell::prepare(&config).context("preparing the cell")?;
             outln!("{}", prepared.report);
+            // Good enough to check views with, never to calibrate: `run` refuses it.
+            if let Some((file, name)) = prepared.placeholder_intrinsics() {
+                outln!(
+                    "warning: {} is the shipped placeholder (camera_name: {name}), not this camera's calibration: `handeye run` refuses it; calibrate the camera and point `intrinsics:` at its camera_info file, or drop `intrinsics:` so the run estimates them",
+                    file.display()
+                );
+            }
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");
             }

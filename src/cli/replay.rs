@@ -34,6 +34,14 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| manifest.config.clone());
     let prepared = cell::prepare(&config_path).context("preparing the cell")?;
+    if let Some((file, name)) = prepared.placeholder_intrinsics() {
+        anyhow::bail!(
+            "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
+            file.display(),
+            config_path.display(),
+            folder.root().display()
+        );
+    }
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(
@@ -74,13 +82,42 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // Both answers (pose space and, by default, reprojection space) side by side.
     let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
         .then_some((&prepared.board, &camera_model));
-    let solved = session::solve_session(
+    // Intrinsics that do not fit the frames are named here as in a run (the estimate written
+    // into the session), also when they made every pose fail.
+    let wrong = if prepared.intrinsics_known {
+        session::solve::check_intrinsics(
+            &folder,
+            dataset.setup,
+            &visits,
+            &prepared.board,
+            &camera_model,
+            &prepared.config,
+        )?
+    } else {
+        None
+    };
+    let intrinsics_file = prepared.config.intrinsics.clone().unwrap_or_default();
+    if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
+        anyhow::bail!(
+            "every pose of {} was rejected: {}\nnext: {}",
+            folder.root().display(),
+            w.reason(&intrinsics_file),
+            w.next_action(folder.root(), &config_path)
+        );
+    }
+    let notices = wrong
+        .iter()
+        .map(|w| w.notice(&intrinsics_file, folder.root(), &config_path))
+        .collect();
+    let mut solved = session::solve_session_with(
         dataset.setup,
         &dataset.pairs,
         &visits,
         vision,
         &prepared.config,
+        notices,
     )?;
+    solved.name_session(folder.root(), &prepared.config);
     let calibration = &solved.calibration;
     let output = args
         .output

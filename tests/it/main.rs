@@ -6,6 +6,7 @@
 mod util;
 
 mod adaptive;
+mod advice;
 mod aprilgrid_photos;
 mod armtime;
 mod bag_import;

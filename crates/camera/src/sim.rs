@@ -23,6 +23,9 @@ pub type TrueFlangePose = Box<dyn Fn() -> Pose + Send>;
 
 /// A camera that renders the board as the simulated cell truly is.
 pub struct SimCamera {
+    /// The lens it renders with.
+    lens: CameraModel,
+    /// The intrinsics it reports (what the cell believes; `lens` unless told otherwise).
     model: CameraModel,
     board: Target,
     truth: CellTransforms,
@@ -48,6 +51,7 @@ impl SimCamera {
         hidden_grabs: BTreeSet<usize>,
     ) -> Self {
         SimCamera {
+            lens: model,
             model,
             board,
             truth,
@@ -58,6 +62,13 @@ impl SimCamera {
             grabs: 0,
             rays: None,
         }
+    }
+
+    /// The same camera reporting `model` as its intrinsics while it renders with its own lens: a
+    /// camera whose calibration file is wrong.
+    pub fn reporting(mut self, model: CameraModel) -> Self {
+        self.model = model;
+        self
     }
 }
 
@@ -79,11 +90,11 @@ impl Camera for SimCamera {
             self.truth
                 .camera_from_target(&(self.true_base_from_flange)())
         };
-        let model = &self.model;
-        let rays = self.rays.get_or_insert_with(|| PixelRays::new(model));
+        let lens = &self.lens;
+        let rays = self.rays.get_or_insert_with(|| PixelRays::new(lens));
         let image = render_with_rays(
             &self.board,
-            &self.model,
+            &self.lens,
             rays,
             &camera_from_target,
             &self.options,

@@ -72,6 +72,11 @@ pub enum NoticeKind {
     /// A solved transform no real cell has (a camera far from the flange it is mounted on, the
     /// two unknowns swapped as when both input poses are inverted).
     ImplausibleTransform,
+    /// The answer is far from the config's nominal transforms (the drawing or tape measure).
+    FarFromNominal,
+    /// The configured intrinsics do not fit the frames (intrinsics estimated from the session
+    /// fit far better); the message is the reason, then ` — next: ` and what to do.
+    WrongIntrinsics,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

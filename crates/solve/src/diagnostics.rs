@@ -21,9 +21,9 @@ use handeye_core::geometry::{rms, rotvec, Pose};
 use handeye_core::setup::{PosePair, Setup};
 
 pub use super::plausibility::{
-    check_against_nominal, check_mounts, check_units, unit_scale, UnitScale, MAX_FLANGE_DISTANCE_M,
-    MAX_FLANGE_MOUNT_M, MAX_TARGET_DISTANCE_M, MAX_UNIT_SCALE, MIN_CELL_MOUNT_M,
-    NOMINAL_TOLERANCE_M,
+    check_against_nominal, check_far_from_nominal, check_mounts, check_units, unit_scale,
+    UnitScale, FAR_FROM_NOMINAL_DEG, FAR_FROM_NOMINAL_M, MAX_FLANGE_DISTANCE_M, MAX_FLANGE_MOUNT_M,
+    MAX_TARGET_DISTANCE_M, MAX_UNIT_SCALE, MIN_CELL_MOUNT_M, NOMINAL_TOLERANCE_M,
 };
 
 /// Fewest samples the problem needs.

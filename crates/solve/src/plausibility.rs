@@ -315,6 +315,65 @@ pub fn check_against_nominal(
     ))
 }
 
+/// An answer farther than this (m) from the config's nominal transform is flagged by
+/// [`check_far_from_nominal`]: a drawing or a tape measure is good to a few centimetres.
+pub const FAR_FROM_NOMINAL_M: f64 = 0.05;
+/// An answer rotated more than this (degrees) from the config's nominal transform is flagged by
+/// [`check_far_from_nominal`].
+pub const FAR_FROM_NOMINAL_DEG: f64 = 20.0;
+
+fn describe_pose(pose: &Pose) -> String {
+    let t = pose.translation.vector;
+    let r = handeye_core::geometry::rotvec(&pose.rotation);
+    format!(
+        "translation [{:.3}, {:.3}, {:.3}] m, rotation_vector [{:.3}, {:.3}, {:.3}]",
+        t.x, t.y, t.z, r.x, r.y, r.z
+    )
+}
+
+/// Flags an answer far from the cell's nominal (expected) transforms: either unknown more than
+/// [`FAR_FROM_NOMINAL_M`] or [`FAR_FROM_NOMINAL_DEG`] from its nominal, with both values. Either
+/// the nominal is wrong (then it wants updating) or the cell is not as drawn: a camera mounted
+/// elsewhere, a board moved, poses in another convention.
+pub fn check_far_from_nominal(
+    calibration: &Calibration,
+    nominal: &CellTransforms,
+) -> Option<Notice> {
+    if nominal.setup != calibration.setup {
+        return None;
+    }
+    let (camera, target) = calibration.setup.unknown_names();
+    let far: Vec<String> = [
+        (camera, &calibration.camera_mount, &nominal.camera_mount),
+        (target, &calibration.target_mount, &nominal.target_mount),
+    ]
+    .into_iter()
+    .filter_map(|(name, answer, expected)| {
+        let off_m = translation_distance(answer, expected);
+        let off_deg = answer.rotation.angle_to(&expected.rotation).to_degrees();
+        (off_m > FAR_FROM_NOMINAL_M || off_deg > FAR_FROM_NOMINAL_DEG).then(|| {
+            format!(
+                "{name} is {:.0} mm and {off_deg:.1}° from its nominal: solved {}, nominal {}",
+                off_m * 1e3,
+                describe_pose(answer),
+                describe_pose(expected)
+            )
+        })
+    })
+    .collect();
+    if far.is_empty() {
+        return None;
+    }
+    Some(Notice::warning(
+        NoticeKind::FarFromNominal,
+        format!(
+            "the answer is far from the config's nominal transforms (more than {:.0} mm or {FAR_FROM_NOMINAL_DEG:.0}°): {}",
+            FAR_FROM_NOMINAL_M * 1e3,
+            far.join("; ")
+        ),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

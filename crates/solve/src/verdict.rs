@@ -17,7 +17,15 @@
 //!   a solve of all the others: translation of the target at the working distance, mm, and
 //!   rotation, degrees, RMS) or the 1-sigma of either transform is above [`REDO_FACTOR`] × `A`;
 //!   or a notice of severity `error`.
-//! * **CHECK** — usable, but something needs a look: held-out error or 1-sigma between 1× and
+//! * **REDO** — the intrinsics do not fit the frames: a `wrong_intrinsics` notice (the session
+//!   layer's check: board reprojection far above normal and intrinsics estimated from the
+//!   session far from the file's); decides over everything it causes.
+//! * **REDO** (or CHECK when its effect at the working distance is within 3× `A`) — the board is
+//!   not the size its file says: the scale of the board-pose translations fitted with the
+//!   calibration (`board_scale`) is off 1 by more than 1 % and 3 sigmas and explains the
+//!   residuals; decides over the held-out error and residuals it causes.
+//! * **CHECK** — usable, but something needs a look: the answer more than 50 mm or 20° from the
+//!   config's nominal transforms (a `far_from_nominal` notice, both values); held-out error or 1-sigma between 1× and
 //!   3× `A`; samples flagged as outliers (named); residuals more than [`RESIDUAL_FACTOR`] × what
 //!   the noise model expects; rotations less than [`GOOD_OFF_AXIS_DEG`]° off their main axis;
 //!   fewer than [`GOOD_POSES`] poses; no held-out check possible; any other warning of the
@@ -67,8 +75,43 @@ pub const GOOD_POSES: usize = 8;
 pub const GOOD_OFF_AXIS_DEG: f64 = 20.0;
 /// At most this many samples are held out in turn (evenly spaced) by [`held_out`].
 pub const MAX_HELD_OUT: usize = 100;
+/// Between the reason and the next action in a notice that carries both (`WrongIntrinsics`).
+pub const NEXT_SEPARATOR: &str = " — next: ";
+/// Placeholder for the session folder in a next action; the session layer names the folder
+/// ([`Verdict::name_session`]).
+pub const SESSION_PLACEHOLDER: &str = "<session>";
+/// Placeholder for the cell config in a next action; the session layer names it.
+pub const CONFIG_PLACEHOLDER: &str = "<cell.yaml>";
+/// Placeholder for the board file in a next action; the session layer names it.
+pub const BOARD_PLACEHOLDER: &str = "<board.yaml>";
+/// Placeholder for the intrinsics file in a next action; the session layer names it.
+pub const INTRINSICS_PLACEHOLDER: &str = "<intrinsics>";
 /// Fewest samples for a held-out check (each fold must still solve).
 pub const MIN_HELD_OUT_SAMPLES: usize = 5;
+
+/// The files a verdict's advice names, filled in by the session layer
+/// ([`Verdict::name_session`]).
+#[derive(Debug, Clone, Default)]
+pub struct SessionFiles {
+    /// The session folder.
+    pub session: String,
+    /// The cell config.
+    pub config: String,
+    /// The board file.
+    pub board: String,
+    /// The intrinsics file (empty when the config has none).
+    pub intrinsics: String,
+}
+
+impl SessionFiles {
+    /// `text` with the placeholders replaced.
+    pub fn fill(&self, text: &str) -> String {
+        text.replace(SESSION_PLACEHOLDER, &self.session)
+            .replace(CONFIG_PLACEHOLDER, &self.config)
+            .replace(BOARD_PLACEHOLDER, &self.board)
+            .replace(INTRINSICS_PLACEHOLDER, &self.intrinsics)
+    }
+}
 
 /// GOOD, CHECK or REDO (ordered: a worse level compares greater).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -107,6 +150,14 @@ pub enum Basis {
     Refused,
     /// The data fits far better with inverted poses: a convention error.
     ConventionError,
+    /// The board is not the size its file says (printed at another scale, `tagSize` wrong): the
+    /// fitted scale of the board-pose translations is off 1 and explains the residuals.
+    BoardScale,
+    /// The intrinsics do not fit the frames (per-frame reprojection far above normal, or the
+    /// intrinsics estimated from the session far from the file's).
+    Intrinsics,
+    /// The answer is far from the config's nominal transforms.
+    FarFromNominal,
     /// The held-out (leave-one-out) prediction error against the accuracy.
     HeldOutError,
     /// The 1-sigma of a transform against the accuracy.
@@ -210,6 +261,12 @@ pub struct Figures {
     /// Largest relative flange rotation off the dominant axis, degrees.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rotation_off_axis_deg: Option<f64>,
+    /// The board scale fitted with the calibration (1: the board is the size its file says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board_scale: Option<f64>,
+    /// 1-sigma of `board_scale`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board_scale_sigma: Option<f64>,
 }
 
 /// GOOD / CHECK / REDO with the reason that decided it, the next action, the figures, and any
@@ -262,6 +319,19 @@ impl Verdict {
                 ..Figures::default()
             },
             also: Vec::new(),
+        }
+    }
+
+    /// The verdict with the placeholders ([`SESSION_PLACEHOLDER`], [`CONFIG_PLACEHOLDER`],
+    /// [`BOARD_PLACEHOLDER`], [`INTRINSICS_PLACEHOLDER`]) in its reasons and next actions
+    /// replaced by the files they stand for (known to the session layer, not to the pure rules).
+    pub fn name_session(&mut self, files: &SessionFiles) {
+        let fill = |text: &mut String| *text = files.fill(text);
+        fill(&mut self.reason);
+        fill(&mut self.next_action);
+        for f in &mut self.also {
+            fill(&mut f.reason);
+            fill(&mut f.next_action);
         }
     }
 

@@ -93,6 +93,31 @@ pub struct Board {
     extent: BoardExtent,
 }
 
+/// Smallest plausible `tagSize`, m (a 2 mm tag is already hard to print and detect).
+pub const MIN_TAG_SIZE_M: f64 = 0.002;
+/// Largest plausible `tagSize`, m.
+pub const MAX_TAG_SIZE_M: f64 = 1.0;
+
+/// A `tagSize` out of range as found, with the unit it was likely written in.
+fn tag_size_found(v: f64) -> String {
+    let likely = |unit: &str, factor: f64| {
+        let metres = v / factor;
+        (MIN_TAG_SIZE_M..=MAX_TAG_SIZE_M)
+            .contains(&metres)
+            .then(|| format!("{v} (that looks like {unit}: tagSize: {metres} in metres)"))
+    };
+    if !v.is_finite() || v <= MAX_TAG_SIZE_M {
+        return v.to_string();
+    }
+    // Centimetres first: a 1–100 cm tag is far more common than a 1–100 mm one written as such.
+    if v <= 100.0 {
+        likely("centimetres", 100.0)
+    } else {
+        likely("millimetres", 1000.0)
+    }
+    .unwrap_or_else(|| v.to_string())
+}
+
 impl Board {
     /// Reads a board YAML file.
     pub fn load(path: &Path) -> Result<Self, TargetError> {
@@ -163,12 +188,14 @@ impl Board {
                 &format!("{cols}x{rows}"),
             ));
         }
-        if !(tag_size.is_finite() && tag_size > 0.0 && tag_size < 10.0) {
+        if !(tag_size.is_finite() && (MIN_TAG_SIZE_M..=MAX_TAG_SIZE_M).contains(&tag_size)) {
             return Err(bad(
                 inline,
                 "tagSize",
-                "a positive edge in metres (< 10 m)",
-                &tag_size.to_string(),
+                &format!(
+                    "the edge of a tag's black square in metres, {MIN_TAG_SIZE_M}–{MAX_TAG_SIZE_M} m"
+                ),
+                &tag_size_found(tag_size),
             ));
         }
         let layout = family.layout(border_bits).ok_or_else(|| {
@@ -470,6 +497,22 @@ mod tests {
         assert!(error.to_string().contains("at least one tag"), "{error}");
         let error = Board::from_yaml_str(&KALIBR.replace("0.088", "-0.088"), path).unwrap_err();
         assert!(error.to_string().contains("tagSize"), "{error}");
+        // Issue #30: a tag size in centimetres or millimetres is named as such.
+        for (size, expected) in [
+            ("4", "`tagSize` must be the edge of a tag's black square in metres, 0.002–1 m, found 4 (that looks like centimetres: tagSize: 0.04 in metres)"),
+            ("40", "found 40 (that looks like centimetres: tagSize: 0.4 in metres)"),
+            ("88", "found 88 (that looks like centimetres: tagSize: 0.88 in metres)"),
+            ("400", "found 400 (that looks like millimetres: tagSize: 0.4 in metres)"),
+            ("0.001", "found 0.001"),
+        ] {
+            let text = format!(
+                "target_type: 'aprilgrid'\ntagCols: 6\ntagRows: 6\ntagSize: {size}\ntagSpacing: 0.3\n"
+            );
+            let error = Board::from_yaml_str(&text, Path::new("board.yaml")).unwrap_err();
+            let message = error.to_string();
+            assert!(message.starts_with("board file board.yaml: "), "{message}");
+            assert!(message.contains(expected), "{message}");
+        }
         let error = Board::from_yaml_str(&format!("{KALIBR}family: tag16h5\n"), path).unwrap_err();
         assert!(error.to_string().contains("family"), "{error}");
         let error = Board::from_yaml_str(&format!("{KALIBR}first_id: 560\n"), path).unwrap_err();

@@ -1,5 +1,7 @@
 //! The pose form of every YAML file (DESIGN.md): `translation` plus exactly one of
-//! `quaternion {w,x,y,z}`, `rotation_vector`, `matrix`.
+//! `quaternion {w,x,y,z}`, `rotation_vector` (radians), `matrix`, `rpy_deg` (degrees, fixed-axis
+//! roll about x, pitch about y, yaw about z: `R = Rz(yaw)·Ry(pitch)·Rx(roll)`, as URDF). A
+//! rotation vector longer than 2π is refused as degrees written where radians belong.
 //!
 //! Parsing is two steps: serde reads the raw shape ([`PoseYaml`], unknown keys refused), then
 //! [`PoseYaml::to_pose`] checks the values and names the YAML path of any problem
@@ -16,6 +18,8 @@ use super::{check_translation, rotation_from_matrix, rotvec, Pose, TranslationPr
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-6;
 /// Largest accepted `‖RᵀR − I‖_F` (and `|det R − 1|`) for a rotation matrix.
 pub const MATRIX_ORTHONORMALITY_TOLERANCE: f64 = 1e-6;
+/// Longest accepted rotation vector, rad: longer, it is almost surely degrees.
+pub const MAX_ROTATION_VECTOR_RAD: f64 = 2.0 * std::f64::consts::PI;
 /// Largest accepted disagreement (rad) between the two rotation forms of a [`PoseRecord`].
 pub const RECORD_CONSISTENCY_TOLERANCE: f64 = 1e-6;
 
@@ -55,7 +59,7 @@ impl From<&UnitQuaternion<f64>> for QuaternionYaml {
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(
     deny_unknown_fields,
-    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z} or rotation_vector: [rx, ry, rz] rad)"
+    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z}, rotation_vector: [rx, ry, rz] rad or rpy_deg: [roll, pitch, yaw] degrees)"
 )]
 pub struct PoseYaml {
     /// Translation in metres, `[x, y, z]`.
@@ -70,6 +74,10 @@ pub struct PoseYaml {
     /// Rotation as a row-major 3x3 matrix.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub matrix: Option<Vec<Vec<f64>>>,
+    /// Rotation as fixed-axis roll (x), pitch (y), yaw (z) in degrees: `R = Rz·Ry·Rx` (URDF's
+    /// `rpy`, in degrees for people).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpy_deg: Option<Vec<f64>>,
 }
 
 /// What is wrong with a pose, and where (the YAML path of the offending field).
@@ -89,11 +97,21 @@ pub enum PoseProblem {
     #[error("missing key `translation` (expected [x, y, z] in metres)")]
     MissingTranslation,
     /// None of the rotation keys.
-    #[error("missing rotation: expected exactly one of `quaternion`, `rotation_vector`, `matrix`")]
+    #[error("missing rotation: expected exactly one of `quaternion`, `rotation_vector`, `matrix`, `rpy_deg`")]
     MissingRotation,
     /// More than one rotation key.
-    #[error("{0} rotation keys given ({1}): expected exactly one of `quaternion`, `rotation_vector`, `matrix`")]
+    #[error("{0} rotation keys given ({1}): expected exactly one of `quaternion`, `rotation_vector`, `matrix`, `rpy_deg`")]
     MultipleRotations(usize, String),
+    /// A rotation vector longer than [`MAX_ROTATION_VECTOR_RAD`]: degrees where radians belong.
+    #[error("rotation vector {given} is {norm:.1} long, more than 2π: it looks like degrees, but a rotation_vector is axis × angle in radians; write it in radians ({radians}) or as `rpy_deg: [roll, pitch, yaw]` in degrees")]
+    DegreesInRotationVector {
+        /// The vector as written.
+        given: String,
+        /// Its length.
+        norm: f64,
+        /// The same numbers read as degrees, converted to radians.
+        radians: String,
+    },
     /// An array of the wrong length.
     #[error("expected {expected} numbers, found {found}")]
     WrongLength {
@@ -186,6 +204,7 @@ impl PoseYaml {
             self.quaternion.as_ref().map(|_| "quaternion"),
             self.rotation_vector.as_ref().map(|_| "rotation_vector"),
             self.matrix.as_ref().map(|_| "matrix"),
+            self.rpy_deg.as_ref().map(|_| "rpy_deg"),
         ]
         .into_iter()
         .flatten()
@@ -200,9 +219,39 @@ impl PoseYaml {
         let rotation = if let Some(q) = &self.quaternion {
             unit_quaternion(q, path)?
         } else if let Some(rv) = &self.rotation_vector {
-            UnitQuaternion::from_scaled_axis(vector3(rv, path, "rotation_vector")?)
+            let v = vector3(rv, path, "rotation_vector")?;
+            if v.norm() > MAX_ROTATION_VECTOR_RAD {
+                let list = |v: Vector3<f64>| {
+                    format!(
+                        "[{}]",
+                        v.iter()
+                            .map(|x| super::readable(*x))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                };
+                return Err(err(
+                    path,
+                    "rotation_vector",
+                    PoseProblem::DegreesInRotationVector {
+                        given: list(v),
+                        norm: v.norm(),
+                        radians: format!(
+                            "[{}]",
+                            v.iter()
+                                .map(|x| format!("{:.4}", x.to_radians()))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    },
+                ));
+            }
+            UnitQuaternion::from_scaled_axis(v)
         } else if let Some(rows) = &self.matrix {
             matrix_rotation(rows, path)?
+        } else if let Some(rpy) = &self.rpy_deg {
+            let v = vector3(rpy, path, "rpy_deg")?.map(f64::to_radians);
+            UnitQuaternion::from_euler_angles(v[0], v[1], v[2])
         } else {
             return Err(err(path, "", PoseProblem::MissingRotation));
         };
@@ -216,6 +265,7 @@ impl PoseYaml {
             quaternion: Some(QuaternionYaml::from(&pose.rotation)),
             rotation_vector: None,
             matrix: None,
+            rpy_deg: None,
         }
     }
 }
@@ -265,7 +315,7 @@ fn matrix_rotation(rows: &[Vec<f64>], path: &str) -> Result<UnitQuaternion<f64>,
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(
     deny_unknown_fields,
-    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z} or rotation_vector: [rx, ry, rz] rad)"
+    expecting = "a pose mapping (translation: [x, y, z] m and quaternion: {w, x, y, z}, rotation_vector: [rx, ry, rz] rad or rpy_deg: [roll, pitch, yaw] degrees)"
 )]
 pub struct PoseRecord {
     /// Translation in metres.
@@ -321,8 +371,16 @@ mod tests {
             parse("translation: [1, 2, 3]\nrotation_vector: [0, 0, 1.5707963267948966]").unwrap();
         let m =
             parse("translation: [1, 2, 3]\nmatrix: [[0, -1, 0], [1, 0, 0], [0, 0, 1]]").unwrap();
+        let rpy = parse("translation: [1, 2, 3]\nrpy_deg: [0, 0, 90]").unwrap();
         assert!(q.rotation.angle_to(&rv.rotation) < 1e-12);
         assert!(q.rotation.angle_to(&m.rotation) < 1e-12);
+        assert!(q.rotation.angle_to(&rpy.rotation) < 1e-12);
+        // Fixed-axis roll, pitch, yaw: R = Rz(yaw)·Ry(pitch)·Rx(roll).
+        let rpy = parse("translation: [0, 0, 0]\nrpy_deg: [10, -20, 30]").unwrap();
+        let expected = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 30f64.to_radians())
+            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), (-20f64).to_radians())
+            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians());
+        assert!(rpy.rotation.angle_to(&expected) < 1e-12);
         assert_eq!(q.translation.vector, Vector3::new(1.0, 2.0, 3.0));
     }
 
@@ -341,6 +399,10 @@ mod tests {
             ("translation: [0, 0, 0]\nmatrix: [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]", "matrix: not a rotation matrix"),
             ("translation: [0, 0, 0]\nmatrix: [[1, 0, 0], [0, 1, 0]]", "matrix: expected 3 numbers, found 2"),
             ("translation: [0, 0, 0]\nmatrix: [[1, 0, 0], [0, 1], [0, 0, 1]]", "matrix[1]: expected 3 numbers, found 2"),
+            // Issue #30: degrees in a rotation vector.
+            ("translation: [0, 0, 0]\nrotation_vector: [0, 0, -90]", "samples[3].T_camera_target.rotation_vector: rotation vector [0, 0, -90] is 90.0 long, more than 2π: it looks like degrees, but a rotation_vector is axis × angle in radians; write it in radians ([0.0000, 0.0000, -1.5708]) or as `rpy_deg: [roll, pitch, yaw]` in degrees"),
+            ("translation: [0, 0, 0]\nrpy_deg: [0, 0]", "rpy_deg: expected 3 numbers, found 2"),
+            ("translation: [0, 0, 0]\nrpy_deg: [0, 0, 0]\nmatrix: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]", "2 rotation keys given (matrix, rpy_deg)"),
         ];
         for (text, expected) in cases {
             let message = parse(text).unwrap_err().to_string();

@@ -106,6 +106,10 @@ pub struct Hardware {
     pub camera: Box<dyn Camera>,
 }
 
+/// What the shipped placeholder intrinsics file has in its `camera_name`
+/// (`configs/cameras/CHANGE-ME-usb-camera-1280x720.yaml`).
+pub const PLACEHOLDER_CAMERA_NAME: &str = "CHANGE-ME";
+
 /// A cell whose config, board, intrinsics and plan are loaded and checked.
 pub struct PreparedCell {
     /// The config.
@@ -346,6 +350,48 @@ impl PreparedCell {
         std::fs::canonicalize(&self.config.file).unwrap_or_else(|_| self.config.file.clone())
     }
 
+    /// The configured intrinsics file and its `camera_name` when it is the shipped placeholder
+    /// (`camera_name` containing [`PLACEHOLDER_CAMERA_NAME`]): good for `plan check`, useless for
+    /// calibrating, so a run refuses it before anything moves.
+    pub fn placeholder_intrinsics(&self) -> Option<(std::path::PathBuf, String)> {
+        let file = self.config.intrinsics.as_ref()?;
+        let text = std::fs::read_to_string(file).ok()?;
+        let yaml: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).ok()?;
+        let name = yaml.get("camera_name")?.as_str()?;
+        name.to_ascii_uppercase()
+            .contains(PLACEHOLDER_CAMERA_NAME)
+            .then(|| (file.clone(), name.to_string()))
+    }
+
+    /// The lens and board the simulated camera renders with: the sim camera's own `intrinsics`
+    /// and `target` when it names them (a camera calibrated wrongly, a board printed at another
+    /// scale), else the cell's.
+    fn sim_world(&self) -> Result<(CameraModel, Target), CellError> {
+        let CameraConfig::Sim {
+            intrinsics, target, ..
+        } = &self.config.camera
+        else {
+            return Ok((self.camera_model, self.board.clone()));
+        };
+        let lens = match intrinsics {
+            Some(file) if self.intrinsics_known => {
+                CameraModel::load(file).map_err(|source| CellError::Intrinsics {
+                    file: file.clone(),
+                    source: Box::new(source),
+                })?
+            }
+            _ => self.camera_model,
+        };
+        let board = match target {
+            Some(file) => Target::load(file).map_err(|source| CellError::Board {
+                file: file.clone(),
+                source: Box::new(source),
+            })?,
+            None => self.board.clone(),
+        };
+        Ok((lens, board))
+    }
+
     /// The simulator's ground truth, which the simulated backends render from.
     fn sim_truth(&self) -> Result<CellTransforms, CellError> {
         self.config.simulation.ok_or_else(|| {
@@ -362,15 +408,20 @@ impl PreparedCell {
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
+                let (lens, board) = self.sim_world()?;
                 let (robot, camera) =
-                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, self.camera_model, self.board.clone())?;
+                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, lens, board)?;
+                // The camera reports the cell's intrinsics, rendering with its own lens.
+                let camera = camera.reporting(self.camera_model);
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
                 let robot = self.open_ur()?;
                 let flange = robot.reported_flange();
-                let camera = sim::camera(&self.config, truth, flange, self.camera_model, self.board.clone())?;
+                let (lens, board) = self.sim_world()?;
+                let camera = sim::camera(&self.config, truth, flange, lens, board)?
+                    .reporting(self.camera_model);
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
             }
             (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {

@@ -185,8 +185,11 @@ impl CellConfig {
         let mut camera = raw.camera;
         match &mut camera {
             CameraConfig::Files { folder } => *folder = resolve(folder),
-            CameraConfig::Sim { intrinsics, .. } => {
+            CameraConfig::Sim {
+                intrinsics, target, ..
+            } => {
                 *intrinsics = intrinsics.as_deref().map(resolve);
+                *target = target.as_deref().map(resolve);
             }
             CameraConfig::Uvc { .. } => {}
         }

@@ -334,9 +334,14 @@ pub enum CameraConfig {
         #[serde(default, skip_serializing_if = "Vec::is_empty")]
         hide_board_in_grabs: Vec<usize>,
         /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
-        /// when the cell has no `intrinsics` (they are then estimated from the run).
+        /// when the cell has no `intrinsics` (they are then estimated from the run). Differing
+        /// from the cell's `intrinsics`, it simulates a camera calibrated wrongly.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         intrinsics: Option<PathBuf>,
+        /// The board the simulated camera sees (board file); defaults to the cell's `target`.
+        /// Differing from it (another `tagSize`), it simulates a board printed at another scale.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        target: Option<PathBuf>,
     },
     /// Frames from an image folder, in plan order.
     Files {

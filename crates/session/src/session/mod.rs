@@ -30,8 +30,8 @@ pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::SessionLock;
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
-    load_and_solve, solve_folder, solve_folder_in, solve_session, Evidence, SolveInputs,
-    SolvedSession,
+    load_and_solve, solve_folder, solve_folder_in, solve_session, solve_session_with, Evidence,
+    SolveInputs, SolvedSession,
 };
 pub use staging::{remove_abandoned, Leftover, Staging};
 
@@ -92,6 +92,20 @@ pub enum SessionError {
         visited: usize,
         /// The first rejections, `pose N: why`.
         reasons: String,
+    },
+    /// No visited pose gave a sample because the configured intrinsics do not fit the frames.
+    #[error("no pose of session {} gave a sample ({visited} pose(s) visited, every one rejected: {first}): {reason}\nnext: {next}", folder.display())]
+    WrongIntrinsics {
+        /// The session folder.
+        folder: PathBuf,
+        /// Poses visited.
+        visited: usize,
+        /// The first rejection.
+        first: String,
+        /// What is wrong, with the numbers.
+        reason: String,
+        /// What to do (the estimate written into the session, the replay command).
+        next: String,
     },
     /// `samples.yaml` does not hold exactly the accepted pose records.
     #[error("{}: disagrees with the pose records in poses/: {} (a run killed between a record and this file); `handeye run --resume {}` rebuilds it from the records", file.display(), describe_disagreement(missing, extra), folder.display())]

@@ -8,7 +8,10 @@
 //! `solve`, `config`, `dataset`, `result`, `vision` and the ground floor; the folder's reading
 //! and writing go through `SessionFolder`.
 
+mod intrinsics_check;
 mod summary;
+
+pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
 
@@ -16,6 +19,7 @@ use crate::config::{CellConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
+use handeye_core::notice::Notice;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::verdict::{self, Verdict};
 use handeye_solve::{
@@ -100,6 +104,26 @@ impl SolveInputs {
 }
 
 impl SolvedSession {
+    /// Names the session folder, the cell config, its board and intrinsics files in the
+    /// verdict's advice and the summary (the verdict's rules know none of them: see
+    /// `verdict::SessionFiles`).
+    pub fn name_session(&mut self, session: &std::path::Path, config: &CellConfig) {
+        let files = verdict::SessionFiles {
+            session: session.display().to_string(),
+            config: config.file.display().to_string(),
+            board: config.target.display().to_string(),
+            intrinsics: config
+                .intrinsics
+                .as_ref()
+                .map(|f| f.display().to_string())
+                .unwrap_or_default(),
+        };
+        if let Some(verdict) = &mut self.verdict {
+            verdict.name_session(&files);
+        }
+        self.summary = files.fill(&self.summary);
+    }
+
     /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
     /// with its verdict first.
     pub fn result_file(&self, pairs: &[PosePair]) -> ResultFile {
@@ -147,6 +171,16 @@ pub fn load_and_solve(
     inputs: &SolveInputs,
     space: SolveSpace,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
+    let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
+    solved.name_session(folder.root(), &inputs.config);
+    Ok((solved, dataset))
+}
+
+fn solve_loaded(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
     let config = &inputs.config;
     let Some(camera) = &inputs.camera else {
         // Every visit with corners goes through `frames_from_visits`, which checks them.
@@ -157,9 +191,47 @@ pub fn load_and_solve(
     for visit in &visits {
         visit.check_corners_on_board(&folder.visit_path(visit.plan_index), &inputs.board)?;
     }
-    let dataset = committed_samples(folder, &visits)?;
+    // Intrinsics that are not this camera's: named with the numbers (and the estimate written
+    // into the session), also when they made every pose fail.
+    let setup = folder.read_manifest()?.setup;
+    let wrong = check_intrinsics(folder, setup, &visits, &inputs.board, camera, config)?;
+    let intrinsics_file = config.intrinsics.clone().unwrap_or_default();
+    let dataset = match committed_samples(folder, &visits) {
+        Err(SessionError::NoSamples {
+            folder: root,
+            visited,
+            reasons,
+        }) => {
+            return Err(match &wrong {
+                Some(w) => SessionError::WrongIntrinsics {
+                    visited,
+                    first: reasons.split("; ").next().unwrap_or_default().to_string(),
+                    reason: w.reason(&intrinsics_file),
+                    next: w.next_action(&root, &config.file),
+                    folder: root,
+                },
+                None => SessionError::NoSamples {
+                    folder: root,
+                    visited,
+                    reasons,
+                },
+            })
+        }
+        other => other?,
+    };
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let solved = solve_session(dataset.setup, &dataset.pairs, &visits, vision, config)?;
+    let notices: Vec<_> = wrong
+        .iter()
+        .map(|w| w.notice(&intrinsics_file, folder.root(), &config.file))
+        .collect();
+    let solved = solve_session_with(
+        dataset.setup,
+        &dataset.pairs,
+        &visits,
+        vision,
+        config,
+        notices,
+    )?;
     Ok((solved, dataset))
 }
 
@@ -368,7 +440,7 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
-    conclude(&mut solved, &pairs, &options, config, &notes);
+    conclude(&mut solved, &pairs, &options, config, &notes, Vec::new());
     // The board poses just estimated are this session's samples: `samples.yaml` (which the
     // report, `verify` and `solve <session>` read) holds them, consistent with
     // `camera_info.yaml`. The run records none without intrinsics.
@@ -436,15 +508,17 @@ fn conclude(
     options: &SolveOptions,
     config: &CellConfig,
     notes: &[String],
+    findings: Vec<Notice>,
 ) {
-    solved
-        .calibration
-        .notices
-        .extend(solve::diagnostics::check_against_nominal(
-            &solved.calibration,
-            &config.nominal,
-            solve::diagnostics::NOMINAL_TOLERANCE_M,
-        ));
+    solved.calibration.notices.extend(findings);
+    // Swapped unknowns first (their own cause); else an answer simply far from the nominal.
+    let nominal = solve::diagnostics::check_against_nominal(
+        &solved.calibration,
+        &config.nominal,
+        solve::diagnostics::NOMINAL_TOLERANCE_M,
+    )
+    .or_else(|| solve::diagnostics::check_far_from_nominal(&solved.calibration, &config.nominal));
+    solved.calibration.notices.extend(nominal);
     let verdict = verdict::assess_solved(
         &solved.calibration,
         pairs,
@@ -463,6 +537,19 @@ pub fn solve_session(
     visits: &[PoseVisit],
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
+) -> Result<SolvedSession, SessionError> {
+    solve_session_with(setup, pairs, visits, vision, config, Vec::new())
+}
+
+/// [`solve_session`] with `findings` of the session layer's own checks (wrong intrinsics) added
+/// to the answer's notices before the verdict judges them.
+pub fn solve_session_with(
+    setup: Setup,
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    vision: Option<(&Target, &CameraModel)>,
+    config: &CellConfig,
+    findings: Vec<Notice>,
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();
     let pose_space =
@@ -529,6 +616,6 @@ pub fn solve_session(
             );
         }
     }
-    conclude(&mut solved, pairs, &options, config, &notes);
+    conclude(&mut solved, pairs, &options, config, &notes, findings);
     Ok(solved)
 }

@@ -151,6 +151,7 @@ pub fn assess_solved(
         noise: &options.noise,
         held_out: &held,
         accuracy,
+        board_scale: crate::board_scale::fit_board_scale(calibration, pairs, options),
     })
 }
 

@@ -7,6 +7,7 @@
 
 use std::fmt::Write;
 
+use crate::board_scale::BoardScale;
 use crate::{rotation_diversity, Calibration, NoiseModel};
 use handeye_core::geometry::Pose;
 use handeye_core::notice::{NoticeKind, Severity};
@@ -28,6 +29,8 @@ pub struct Evidence<'a> {
     pub held_out: &'a Result<HeldOut, String>,
     /// The accuracy the user wants.
     pub accuracy: Accuracy,
+    /// The board scale fitted with the calibration, when it could be fitted.
+    pub board_scale: Option<BoardScale>,
 }
 
 /// The level of a measured value against its accuracy: GOOD up to 1×, CHECK up to
@@ -63,6 +66,35 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         ..Figures::default()
     };
 
+    // Intrinsics that are not this camera's: everything else follows from them.
+    if let Some(notice) = c
+        .notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::WrongIntrinsics)
+    {
+        let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
+            notice.message.as_str(),
+            "calibrate the camera, then solve again",
+        ));
+        findings.push(Finding {
+            level: Level::Redo,
+            basis: Basis::Intrinsics,
+            reason: reason.into(),
+            next_action: next.into(),
+        });
+    }
+
+    // The board's size: a wrong one explains the residuals and held-out error it causes, so it
+    // comes before them.
+    if let Some(scale) = &evidence.board_scale {
+        figures.board_scale = Some(scale.factor);
+        figures.board_scale_sigma = Some(scale.sigma);
+        let intrinsics_wrong = findings.iter().any(|f| f.basis == Basis::Intrinsics);
+        if scale.is_wrong() && !intrinsics_wrong {
+            findings.push(board_scale_finding(scale, evidence.pairs, a));
+        }
+    }
+
     // Residual health, with the convention check.
     if let Some(notice) = residual_notice(c, evidence.pairs, evidence.noise) {
         let (level, basis, next) = if notice.kind == NoticeKind::LikelyConventionError {
@@ -83,6 +115,27 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
             basis,
             reason: notice.message,
             next_action: next.into(),
+        });
+    }
+
+    // Far from the nominal transforms: is this the cell the config describes? Before the
+    // held-out error and the solver's notices, which judge the answer's precision, not what it is.
+    if let Some(notice) = c
+        .notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::FarFromNominal)
+    {
+        let (camera, target) = c.setup.unknown_names();
+        findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::FarFromNominal,
+            reason: notice.message.clone(),
+            next_action: format!(
+                "find out which is wrong: if the nominal (drawing, tape measure) is, set the far one of nominal.{camera}, nominal.{target} in {} to its solved value and `handeye replay {} --config {}`; if the cell is as drawn, the camera or board moved or the robot poses are in another frame — fix that and record again",
+                super::CONFIG_PLACEHOLDER,
+                super::SESSION_PLACEHOLDER,
+                super::CONFIG_PLACEHOLDER,
+            ),
         });
     }
 
@@ -204,6 +257,8 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
                 | NoticeKind::LargeResiduals
                 | NoticeKind::FewPoses
                 | NoticeKind::PoorRotationSpread
+                | NoticeKind::FarFromNominal
+                | NoticeKind::WrongIntrinsics
         );
         if covered || !notice.needs_attention() {
             continue;
@@ -237,6 +292,37 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     }
 
     decide(findings, figures, a)
+}
+
+/// The finding of a board that is not the size its file says: the factor, what it means for the
+/// print and the residuals, and the fix (measure a tag, set `tagSize`, replay).
+fn board_scale_finding(scale: &BoardScale, pairs: &[PosePair], a: Accuracy) -> Finding {
+    let s = scale.factor;
+    let distance_mm = super::working_distance_mm(pairs);
+    let effect_mm = (s - 1.0).abs() * distance_mm;
+    let level = band(effect_mm, a.translation_mm).max(Level::Check);
+    let size = if s < 1.0 { "smaller" } else { "larger" };
+    Finding {
+        level,
+        basis: Basis::BoardScale,
+        reason: format!(
+            "the board measures {s:.3}× (±{:.4}) the size in its board file — printed at {:.0} %? Every measured board distance is {:.1} % too {} ({effect_mm:.0} mm at {distance_mm:.0} mm); scaling the board poses by {s:.3} drops the translation residuals from {:.2} mm to {:.2} mm RMS over {} poses",
+            scale.sigma,
+            s * 100.0,
+            (1.0 / s - 1.0).abs() * 100.0,
+            if s < 1.0 { "long" } else { "short" },
+            scale.residual_unscaled_mm,
+            scale.residual_scaled_mm,
+            scale.samples,
+        ),
+        next_action: format!(
+            "measure a printed tag's black square with a ruler (the board is {:.1} % {size} than its file says) and set tagSize (metres) in the board file {}, then `handeye replay {} --config {}`",
+            (s - 1.0).abs() * 100.0,
+            super::BOARD_PLACEHOLDER,
+            super::SESSION_PLACEHOLDER,
+            super::CONFIG_PLACEHOLDER,
+        ),
+    }
 }
 
 fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> Verdict {
@@ -291,6 +377,51 @@ mod tests {
         assert_eq!(band(3.01, 1.0), Level::Redo);
         assert_eq!(band(f64::NAN, 1.0), Level::Redo);
         assert!(Level::Redo > Level::Check && Level::Check > Level::Good);
+    }
+
+    #[test]
+    fn a_wrong_board_size_is_banded_by_its_error_at_the_working_distance() {
+        use handeye_core::geometry::Pose;
+        let pairs: Vec<PosePair> = (0..5)
+            .map(|_| PosePair::new(Pose::identity(), Pose::translation(0.0, 0.0, 0.6)))
+            .collect();
+        let scale = |factor| BoardScale {
+            factor,
+            sigma: 1e-4,
+            residual_unscaled_mm: 3.0,
+            residual_scaled_mm: 0.05,
+            samples: 5,
+        };
+        // 5 % at 600 mm is 30 mm: REDO against 1 mm, CHECK against 20 mm.
+        let f = board_scale_finding(&scale(0.95), &pairs, Accuracy::default());
+        assert_eq!((f.level, f.basis), (Level::Redo, Basis::BoardScale));
+        assert!(
+            f.reason.starts_with(
+                "the board measures 0.950× (±0.0001) the size in its board file — printed at 95 %?"
+            ),
+            "{}",
+            f.reason
+        );
+        assert!(
+            f.reason.contains("too long (30 mm at 600 mm)"),
+            "{}",
+            f.reason
+        );
+        assert!(f.next_action.contains("5.0 % smaller"), "{}", f.next_action);
+        let loose = Accuracy {
+            translation_mm: 20.0,
+            rotation_deg: 1.0,
+        };
+        let f = board_scale_finding(&scale(1.05), &pairs, loose);
+        assert_eq!(f.level, Level::Check);
+        assert!(f.next_action.contains("5.0 % larger"), "{}", f.next_action);
+        // Within 1 %, or not explaining the residuals, it is no finding.
+        assert!(!scale(0.995).is_wrong());
+        assert!(!BoardScale {
+            residual_scaled_mm: 2.0,
+            ..scale(0.95)
+        }
+        .is_wrong());
     }
 
     #[test]

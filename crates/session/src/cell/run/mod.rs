@@ -121,6 +121,16 @@ pub enum RunError {
     /// A holdout check has no usable view (or an unusable request for views).
     #[error("the verification plan failed its checks: {0}")]
     Holdout(String),
+    /// The intrinsics file is the shipped placeholder, not this camera's calibration.
+    #[error("{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration — a calibration with them gives a wrong hand-eye transform; calibrate the camera and point `intrinsics:` in {} at its camera_info file, or drop `intrinsics:` so the run estimates them from the board; nothing was moved", file.display(), config.display())]
+    PlaceholderIntrinsics {
+        /// The intrinsics file.
+        file: PathBuf,
+        /// Its `camera_name`.
+        name: String,
+        /// The cell config naming it.
+        config: PathBuf,
+    },
     /// A new session needs a config.
     #[error("a new session needs a cell config (--config)")]
     NoConfig,
@@ -251,6 +261,13 @@ pub fn open_run(
         source,
     })?;
     observer.plan_checked(&cell);
+    if let Some((file, name)) = cell.placeholder_intrinsics() {
+        return Err(RunError::PlaceholderIntrinsics {
+            file,
+            name,
+            config: config_path,
+        });
+    }
     let inputs = cell.inputs()?;
     let resumed = match resumed {
         Some((folder, mut manifest)) => {

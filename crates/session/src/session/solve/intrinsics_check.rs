@@ -1,0 +1,202 @@
+//! Intrinsics that are not this camera's (issue #30): the frames' board reprojection RMS far
+//! above normal with the file's intrinsics, and intrinsics estimated from the session's own
+//! corners (Zhang's closed form, then the joint refinement, as without configured intrinsics)
+//! far from the file's and fitting the corners far better. The estimate is written into the
+//! session folder (`camera_info.yaml`, which `replay` also reads when the config has no
+//! intrinsics) and the advice names it, with the numbers and the replay command.
+//!
+//! Depends on `solve` (the estimation), the camera model, the session folder and its visits.
+
+use handeye_core::camera_model::CameraModel;
+use handeye_core::notice::{Notice, NoticeKind, Severity};
+use handeye_core::setup::Setup;
+use handeye_solve::intrinsics::{calibrate_from_scratch, MIN_FRAMES};
+use handeye_solve::verdict::NEXT_SEPARATOR;
+use handeye_solve::Frame;
+use handeye_vision::Target;
+
+use super::{frames_from_visits, reprojection_options, CAMERA_INFO_FILE};
+use crate::config::CellConfig;
+use crate::session::{PoseVisit, SessionError, SessionFolder};
+
+/// Median per-frame board reprojection RMS (px, with the file's intrinsics) above which the
+/// intrinsics are suspected: a good calibration gives a few tenths of a pixel.
+pub(super) const SUSPECT_BOARD_RMS_PX: f64 = 1.0;
+/// A parameter differing from the estimate by more than this fraction (of itself for the focal
+/// lengths, of the image width for the principal point) is named.
+pub(super) const PARAMETER_TOLERANCE: f64 = 0.01;
+/// The estimate must fit the corners at least this many times better than the file's intrinsics.
+pub(super) const BETTER_FIT_FACTOR: f64 = 3.0;
+
+/// What the check found: the file's intrinsics do not fit the frames, and these do.
+#[derive(Debug, Clone)]
+pub struct WrongIntrinsics {
+    /// The intrinsics as the file gives them.
+    pub file_camera: CameraModel,
+    /// The intrinsics estimated from the session's corners.
+    pub estimated: CameraModel,
+    /// Median per-frame board reprojection RMS with the file's intrinsics, px.
+    pub file_rms_px: f64,
+    /// Reprojection RMS of the joint fit with the estimated intrinsics, px.
+    pub estimated_rms_px: f64,
+    /// Frames the estimate is from.
+    pub frames: usize,
+}
+
+impl WrongIntrinsics {
+    /// The parameters that differ, `fx in the file 864.0 px, estimated from this session 800.1 px
+    /// (-7.4 %)`, largest first.
+    pub fn differences(&self) -> String {
+        let (f, e) = (&self.file_camera, &self.estimated);
+        let width = f64::from(f.width.max(1));
+        let mut rows: Vec<(f64, String)> = [
+            ("fx", f.fx, e.fx, f.fx),
+            ("fy", f.fy, e.fy, f.fy),
+            ("cx", f.cx, e.cx, width),
+            ("cy", f.cy, e.cy, width),
+        ]
+        .into_iter()
+        .map(|(name, file, estimated, scale)| {
+            let relative = (estimated - file) / scale;
+            (
+                relative.abs(),
+                format!(
+                    "{name} in the file {file:.1} px, estimated from this session {estimated:.1} px ({:+.1} %)",
+                    (estimated - file) / file * 100.0
+                ),
+            )
+        })
+        .filter(|(relative, _)| *relative > PARAMETER_TOLERANCE)
+        .collect();
+        rows.sort_by(|a, b| b.0.total_cmp(&a.0));
+        if rows.is_empty() {
+            return "the distortion differs (fx, fy, cx, cy agree within 1 %)".into();
+        }
+        rows.into_iter()
+            .map(|(_, r)| r)
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
+
+    /// The sentence that says what is wrong, with the numbers.
+    pub fn reason(&self, file: &std::path::Path) -> String {
+        format!(
+            "the intrinsics in {} do not fit this camera: the board reprojects with a median {:.2} px RMS per frame (normal is a few tenths), {:.2} px with intrinsics estimated from this session's {} frames; {}",
+            file.display(),
+            self.file_rms_px,
+            self.estimated_rms_px,
+            self.frames,
+            self.differences()
+        )
+    }
+
+    /// What to do, naming the estimate written into the session and the replay command.
+    pub fn next_action(&self, folder: &std::path::Path, config: &std::path::Path) -> String {
+        let estimate = folder.join(CAMERA_INFO_FILE);
+        // Absolute: the config reads its paths relative to its own folder.
+        let estimate = std::fs::canonicalize(&estimate).unwrap_or(estimate);
+        format!(
+            "calibrate the camera (or use the estimate written to {}: set `intrinsics: {}` in {}, or drop `intrinsics:` so the run estimates them), then `handeye replay {} --config {}`",
+            estimate.display(),
+            estimate.display(),
+            config.display(),
+            folder.display(),
+            config.display()
+        )
+    }
+
+    /// The notice the verdict turns into its `Intrinsics` finding.
+    pub fn notice(
+        &self,
+        file: &std::path::Path,
+        folder: &std::path::Path,
+        config: &std::path::Path,
+    ) -> Notice {
+        Notice::new(
+            Severity::Error,
+            NoticeKind::WrongIntrinsics,
+            format!(
+                "{}{NEXT_SEPARATOR}{}",
+                self.reason(file),
+                self.next_action(folder, config)
+            ),
+        )
+    }
+}
+
+/// The median of the visits' board reprojection RMS (rejected visits too), px; `None` without
+/// any.
+fn median_board_rms(visits: &[PoseVisit]) -> Option<f64> {
+    let mut values: Vec<f64> = visits
+        .iter()
+        .filter_map(|v| v.reprojection_rms_px)
+        .collect();
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    Some(if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    })
+}
+
+/// Checks the file's intrinsics against the session's frames: when the median board RMS is
+/// above [`SUSPECT_BOARD_RMS_PX`] and at least [`MIN_FRAMES`] frames have corners, estimates
+/// the intrinsics from them; `Some` (with the estimate written to the folder's
+/// `camera_info.yaml`) when the estimate differs and fits [`BETTER_FIT_FACTOR`] times better.
+pub fn check_intrinsics(
+    folder: &SessionFolder,
+    setup: Setup,
+    visits: &[PoseVisit],
+    board: &Target,
+    camera: &CameraModel,
+    config: &CellConfig,
+) -> Result<Option<WrongIntrinsics>, SessionError> {
+    let Some(file_rms_px) = median_board_rms(visits) else {
+        return Ok(None);
+    };
+    if file_rms_px <= SUSPECT_BOARD_RMS_PX {
+        return Ok(None);
+    }
+    let frames: Vec<Frame> = frames_from_visits(visits, board, false)?
+        .into_iter()
+        .map(|(_, f)| f)
+        .collect();
+    if frames.len() < MIN_FRAMES {
+        return Ok(None);
+    }
+    let options = config.solver.to_options();
+    let Ok(scratch) = calibrate_from_scratch(
+        setup,
+        &frames,
+        camera.width,
+        camera.height,
+        &options,
+        &reprojection_options(config),
+    ) else {
+        return Ok(None);
+    };
+    let estimated_rms_px = scratch.joint.errors.rms_px;
+    let found = WrongIntrinsics {
+        file_camera: *camera,
+        estimated: scratch.joint.camera,
+        file_rms_px,
+        estimated_rms_px,
+        frames: frames.len(),
+    };
+    if estimated_rms_px * BETTER_FIT_FACTOR > file_rms_px {
+        return Ok(None);
+    }
+    let path = folder.root().join(CAMERA_INFO_FILE);
+    found
+        .estimated
+        .save_camera_info(&path)
+        .map_err(|source| SessionError::Intrinsics {
+            file: path.clone(),
+            source: Box::new(source),
+        })?;
+    Ok(Some(found))
+}
