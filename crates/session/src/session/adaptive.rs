@@ -141,6 +141,7 @@ impl GrowingPlan {
         outcome.moving_s += step_outcome.moving_s;
         outcome.settling_s += step_outcome.settling_s;
         outcome.modelled_moving_s += step_outcome.modelled_moving_s;
+        outcome.moving_modelled_s += step_outcome.moving_modelled_s;
         outcome.skipped.extend(step_outcome.skipped.iter().cloned());
         let accepted = step_outcome.accepted.contains(&index);
         if accepted {

@@ -123,9 +123,12 @@ pub struct SessionOutcome {
     pub moving_s: f64,
     /// Arm time of this run spent settling after moves before the frame was exposed, s.
     pub settling_s: f64,
-    /// What this run's moves take by the move-time model at the configured limits (what the
-    /// plan check estimates), s: against `moving_s`, how the arm really moves compared with it.
+    /// What this run's checked moves take by the move-time model at the configured limits
+    /// (what the plan check estimates), s: against `moving_modelled_s`, how the arm really
+    /// moves compared with the model.
     pub modelled_moving_s: f64,
+    /// The measured time of the same moves, s.
+    pub moving_modelled_s: f64,
 }
 
 impl SessionOutcome {
@@ -228,7 +231,10 @@ pub fn run_session(
                     state.outcome.visited_now += 1;
                     state.outcome.moving_s += timing.moving_s;
                     state.outcome.settling_s += timing.settling_s;
-                    state.outcome.modelled_moving_s += timing.modelled_s;
+                    if let Some(modelled_s) = timing.modelled_s {
+                        state.outcome.modelled_moving_s += modelled_s;
+                        state.outcome.moving_modelled_s += timing.moving_s;
+                    }
                     state.in_flight += 1;
                     job_tx
                         .send(Job {
@@ -388,8 +394,8 @@ fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut V
 struct PoseTiming {
     moving_s: f64,
     settling_s: f64,
-    /// The move's time by the model at the configured limits, s.
-    modelled_s: f64,
+    /// The move's time by the model at the configured limits, s (for a checked move).
+    modelled_s: Option<f64>,
 }
 
 /// Move, settle, grab a fresh frame, read the measured flange pose.
@@ -400,13 +406,15 @@ fn capture(
     plan_index: usize,
 ) -> Result<(Frame, Pose, PoseTiming), ErrorSource> {
     let (_, joints) = &setup.plan[plan_index];
-    let from = robot.joint_positions()?;
+    // A checked move knows where it starts: its time by the model is kept to compare with.
+    let mut modelled_s = None;
     if let Some(check) = &setup.move_check {
+        let from = robot.joint_positions()?;
         if let Some(problem) = check.problem(&from, joints) {
             return Err(ErrorSource::UnsafeMove(problem));
         }
+        modelled_s = Some(setup.limits.joint_move_time(&from, joints));
     }
-    let modelled_s = setup.limits.joint_move_time(&from, joints);
     let started = Instant::now();
     robot.move_joints(joints, &setup.limits)?;
     let arrived = Instant::now();

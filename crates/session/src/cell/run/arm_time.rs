@@ -124,7 +124,7 @@ pub(super) fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime
     // (Instant simulated moves measure nothing: the model's own times stand then.)
     let measured = outcome.arm_time_s() >= 0.01 * outcome.visited_now as f64;
     let move_time_scale = if measured && outcome.modelled_moving_s > 1e-3 {
-        outcome.moving_s / outcome.modelled_moving_s
+        outcome.moving_modelled_s / outcome.modelled_moving_s
     } else {
         1.0
     };
