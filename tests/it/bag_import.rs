@@ -218,7 +218,7 @@ fn make_bag_with_camera(
 ) -> Option<PathBuf> {
     let python = python()?;
     let board = Board::load(&board_path()).unwrap();
-    let camera = camera.clone();
+    let camera = *camera;
     let (flange_from_camera, base_from_target) = truth();
     let frames = dir.join(format!("{name}-frames"));
     std::fs::create_dir_all(&frames).unwrap();
