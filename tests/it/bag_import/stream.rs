@@ -159,3 +159,55 @@ fn issue29_a_bag_larger_than_the_address_space_allowed_imports_and_calibrates() 
         std::fs::remove_dir_all(&bag).unwrap();
     }
 }
+
+/// Writes the bags docs/ros2-bags.md's memory figures were measured on, with `rosbags`, into
+/// `$HANDEYE_BAG_OUT`: `measure-60s` (60 s, 30 fps 1280x720 mono8, 1.66 GB MCAP) and
+/// `measure-5min` (5 min at 10 fps, 2.6 GB), and `measure-60s-sqlite3`; 20 views, 125 Hz TF,
+/// camera_info. Then, e.g.:
+/// `/usr/bin/time -v handeye import bag $HANDEYE_BAG_OUT/measure-60s --base base_link --flange
+/// tool0 --image /camera/image_raw --camera-info /camera/camera_info --board
+/// configs/targets/aprilgrid-6x6.yaml -o /tmp/s`.
+/// `cargo test --test it -- --ignored bag_import::stream::write_measurement_bags --nocapture`
+#[test]
+#[ignore = "writes 5.8 GB; for measuring by hand"]
+fn write_measurement_bags() {
+    let out = PathBuf::from(std::env::var("HANDEYE_BAG_OUT").expect("HANDEYE_BAG_OUT"));
+    std::fs::create_dir_all(&out).unwrap();
+    let board = Board::load(&board_path()).unwrap();
+    let camera = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    for (name, storage, fps, travel) in [
+        ("measure-60s", "mcap", 30.0, 1.5),
+        ("measure-5min", "mcap", 10.0, 13.5),
+        ("measure-60s-sqlite3", "sqlite3", 30.0, 1.5),
+    ] {
+        if out.join(name).exists() {
+            continue;
+        }
+        let trajectory = StopAndGo {
+            views: views(20, &board),
+            stay: 1.55,
+            travel,
+        };
+        let period = trajectory.stay + trajectory.travel;
+        let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+        let Some(bag) = make_bag_with_camera(
+            &out,
+            name,
+            &BagSpec {
+                storage,
+                image_kind: "mono8",
+                trajectory: &trajectory,
+                fps,
+                tf_hz: 125.0,
+                offset_s: 0.0,
+                camera_info: true,
+                render: &standing,
+            },
+            &camera,
+            |_| {},
+        ) else {
+            return;
+        };
+        println!("{}: {} MB", bag.display(), bag_bytes(&bag) >> 20);
+    }
+}
