@@ -11,8 +11,11 @@
 //! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
 //! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
 //! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused by
-//! `cdr`), sqlite3 rows of unknown topics. A bag larger than the memory the process may use is an
-//! error ([`BagError::OutOfMemory`]), not an abort. docs/ros2-bags.md has the table.
+//! `cdr`), sqlite3 rows of unknown topics. docs/ros2-bags.md has the table.
+//!
+//! The bag is streamed, never held: its memory does not grow with its length ([`import_bag`]
+//! reads it twice, message by message). A memory limit too small for the import's own room is an
+//! error ([`BagError::OutOfMemory`]), not an abort.
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
 //! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
@@ -28,6 +31,8 @@ pub mod image;
 pub mod select;
 pub mod session;
 pub mod storage;
+#[cfg(test)]
+mod storage_tests;
 pub mod tf;
 
 use std::path::{Path, PathBuf};

@@ -309,9 +309,9 @@ impl Bag {
     }
 }
 
-/// MCAP messages read again since the last rewind are kept (the data of the last few of the
-/// topic): a request a few messages back (stamps slightly out of receive order) does not re-read
-/// the file.
+/// The last MCAP messages of the topic read by [`MessageAt`] are kept (their data): a request a
+/// few messages back (stamps slightly out of receive order, the same frame again) does not read
+/// the file again.
 const RECENT_KEPT: usize = 6;
 
 /// Reads single messages of one topic again by their [`Location`] (see [`Bag::message_at`]).
@@ -391,11 +391,12 @@ impl MessageAt<'_> {
                         continue;
                     }
                     let data = message.data.into_owned();
-                    if here == at {
-                        return Ok(data);
-                    }
                     if self.recent.len() == RECENT_KEPT {
                         self.recent.pop_front();
+                    }
+                    if here == at {
+                        self.recent.push_back((here, data.clone()));
+                        return Ok(data);
                     }
                     self.recent.push_back((here, data));
                 }
