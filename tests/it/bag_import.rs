@@ -205,9 +205,20 @@ fn make_bag_edited(
     spec: &BagSpec<'_>,
     edit: impl FnOnce(&mut serde_json::Value),
 ) -> Option<PathBuf> {
+    make_bag_with_camera(dir, name, spec, &camera(), edit)
+}
+
+/// [`make_bag_edited`] with frames rendered by `camera` (its size is the images').
+fn make_bag_with_camera(
+    dir: &Path,
+    name: &str,
+    spec: &BagSpec<'_>,
+    camera: &CameraModel,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> Option<PathBuf> {
     let python = python()?;
     let board = Board::load(&board_path()).unwrap();
-    let camera = camera();
+    let camera = *camera;
     let (flange_from_camera, base_from_target) = truth();
     let frames = dir.join(format!("{name}-frames"));
     std::fs::create_dir_all(&frames).unwrap();
@@ -811,3 +822,4 @@ fn bad_bags_fail_clearly_and_write_nothing() {
 }
 
 mod lies;
+mod stream;

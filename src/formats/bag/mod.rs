@@ -11,8 +11,11 @@
 //! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
 //! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
 //! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused by
-//! `cdr`), sqlite3 rows of unknown topics. A bag larger than the memory the process may use is an
-//! error ([`BagError::OutOfMemory`]), not an abort. docs/ros2-bags.md has the table.
+//! `cdr`), sqlite3 rows of unknown topics. docs/ros2-bags.md has the table.
+//!
+//! The bag is streamed, never held: its memory does not grow with its length ([`import_bag`]
+//! reads it twice, message by message). A memory limit too small for the import's own room is an
+//! error ([`BagError::OutOfMemory`]), not an abort.
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
 //! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
@@ -28,6 +31,8 @@ pub mod image;
 pub mod select;
 pub mod session;
 pub mod storage;
+#[cfg(test)]
+mod storage_tests;
 pub mod tf;
 
 use std::path::{Path, PathBuf};
@@ -307,6 +312,9 @@ pub struct BagImport {
     pub skipped: Vec<Skip>,
     /// Images on the image topic.
     pub images: usize,
+    /// Images whose pixels were read and decoded (the frames the selection looked at: the
+    /// stationary ones, or the sampled ones; never a frame rejected from its stamp and the TF).
+    pub decoded: usize,
     /// Intrinsics from camera_info, when a topic was given.
     pub camera: Option<CameraModel>,
     /// The camera-to-robot clock offset used (s), and how it was found.
@@ -315,7 +323,25 @@ pub struct BagImport {
     pub warnings: Vec<BagWarning>,
 }
 
-/// Reads a bag and picks the frames to calibrate from (see the module docs).
+/// What pass 1 keeps of a message.
+enum Payload {
+    Tf(Result<Vec<cdr::TransformStamped>, CdrError>),
+    Info(Box<Result<cdr::CameraInfo, CdrError>>),
+    /// The header stamp only: the pixels are read again in pass 2 if the frame is looked at.
+    Image(Result<i64, CdrError>),
+}
+
+struct Pass1 {
+    /// Index into the wanted topics.
+    topic: usize,
+    log_time_ns: i64,
+    location: storage::Location,
+    payload: Payload,
+}
+
+/// Reads a bag and picks the frames to calibrate from (see the module docs). The bag is read
+/// twice, message by message, never whole: pass 1 reads the TF, the camera_info and the image
+/// stamps; pass 2 reads and decodes only the frames the selection looks at, one at a time.
 pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
     let bag = storage::Bag::open(path)?;
     let mut wanted: Vec<String> = options.tf_topics.clone();
@@ -389,36 +415,58 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         }
         warnings.push(BagWarning::UnknownTopicRows(rows));
     }
-    let messages = bag.read(&wanted)?;
+    // Pass 1: every message of the wanted topics, one at a time. TF and camera_info are decoded;
+    // of an image only its header stamp is kept (with where it is, for pass 2). Processed in
+    // receive-time order afterwards, as the recorder saw them.
+    let mut reads: Vec<Pass1> = Vec::new();
+    bag.for_each(&wanted, |m| {
+        let payload = if m.topic == options.image_topic {
+            Payload::Image(if compressed {
+                cdr::decode_compressed_image(m.data).map(|c| c.stamp_ns)
+            } else {
+                cdr::decode_image(m.data).map(|c| c.stamp_ns)
+            })
+        } else if Some(m.topic) == options.camera_info_topic.as_deref() {
+            Payload::Info(Box::new(cdr::decode_camera_info(m.data)))
+        } else {
+            Payload::Tf(cdr::decode_tf_message(m.data))
+        };
+        reads.push(Pass1 {
+            topic: wanted.iter().position(|w| w == m.topic).unwrap_or(0),
+            log_time_ns: m.log_time_ns,
+            location: m.location,
+            payload,
+        });
+        Ok(())
+    })?;
+    reads.sort_by_key(|r| r.log_time_ns);
     let mut buffer = tf::TfBuffer::default();
     let mut images = Vec::new();
     let mut infos = Vec::new();
-    let mut per_topic: std::collections::HashMap<&str, usize> = Default::default();
-    for m in &messages {
-        let index = {
-            let n = per_topic.entry(m.topic.as_str()).or_default();
-            *n += 1;
-            *n - 1
-        };
+    let mut per_topic = vec![0usize; wanted.len()];
+    for r in reads {
+        let index = per_topic[r.topic];
+        per_topic[r.topic] += 1;
+        let topic = &wanted[r.topic];
         let wrap = |source: MessageError| BagError::Message {
             path: path.to_path_buf(),
-            topic: m.topic.clone(),
+            topic: topic.clone(),
             index,
-            stamp_ns: m.log_time_ns,
+            stamp_ns: r.log_time_ns,
             source,
         };
-        if m.topic == options.image_topic {
-            images.push((m, index));
-        } else if Some(&m.topic) == options.camera_info_topic.as_ref() {
-            infos.push(cdr::decode_camera_info(&m.data).map_err(|e| wrap(e.into()))?);
-        } else {
-            let is_static = options.tf_static_topics.contains(&m.topic);
-            for t in cdr::decode_tf_message(&m.data).map_err(|e| wrap(e.into()))? {
-                let source = tf::TfSource {
-                    topic: m.topic.clone(),
-                    index,
-                };
-                buffer.add(t, is_static, source);
+        match r.payload {
+            Payload::Image(stamp) => images.push((stamp, index, r.log_time_ns, r.location)),
+            Payload::Info(info) => infos.push((*info).map_err(|e| wrap(e.into()))?),
+            Payload::Tf(transforms) => {
+                let is_static = options.tf_static_topics.contains(topic);
+                for t in transforms.map_err(|e| wrap(e.into()))? {
+                    let source = tf::TfSource {
+                        topic: topic.clone(),
+                        index,
+                    };
+                    buffer.add(t, is_static, source);
+                }
             }
         }
     }
@@ -453,24 +501,19 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         (None, _) => None,
     };
     let decoded = images
-        .iter()
-        .map(|(m, index)| {
-            let header = if compressed {
-                cdr::decode_compressed_image(&m.data).map(|c| c.stamp_ns)
-            } else {
-                cdr::decode_image(&m.data).map(|c| c.stamp_ns)
-            };
-            header
-                .map(|stamp| select::ImageRef {
-                    stamp_ns: stamp,
-                    data: &m.data,
-                    compressed,
+        .into_iter()
+        .map(|(stamp, index, log_time_ns, location)| {
+            stamp
+                .map(|stamp_ns| select::ImageRef {
+                    stamp_ns,
+                    index,
+                    location,
                 })
                 .map_err(|e| BagError::Message {
                     path: path.to_path_buf(),
-                    topic: m.topic.clone(),
-                    index: *index,
-                    stamp_ns: m.log_time_ns,
+                    topic: options.image_topic.clone(),
+                    index,
+                    stamp_ns: log_time_ns,
                     source: e.into(),
                 })
         })
@@ -479,12 +522,12 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
     // by stamp); a large one is a camera clock that went back, and pairing by stamp fails.
     let mut back: Option<(usize, i64, i64)> = None;
     let mut back_count = 0;
-    for (k, pair) in decoded.windows(2).enumerate() {
+    for pair in decoded.windows(2) {
         let (before, after) = (pair[0].stamp_ns, pair[1].stamp_ns);
         if after < before {
             back_count += 1;
             if back.is_none_or(|(_, f, t)| before - after > f - t) {
-                back = Some((images[k + 1].1, before, after));
+                back = Some((pair[1].index, before, after));
             }
         }
     }
@@ -508,7 +551,20 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
             to_ns,
         });
     }
-    let selected = select::select(path, &decoded, &buffer, camera.as_ref(), options)?;
+    // Pass 2: the selection reads and decodes only the frames it looks at (see `select`).
+    let mut frames = select::Frames {
+        reader: bag.message_at(&options.image_topic),
+        compressed,
+        decoded: 0,
+    };
+    let selected = select::select(
+        path,
+        &decoded,
+        &mut frames,
+        &buffer,
+        camera.as_ref(),
+        options,
+    )?;
     if let (Some(camera), Some(first)) = (&camera, selected.samples.first()) {
         if (first.image.width(), first.image.height()) != (camera.width, camera.height) {
             return Err(BagError::CameraInfo {
@@ -530,6 +586,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         samples: selected.samples,
         skipped: selected.skipped,
         images: decoded.len(),
+        decoded: frames.decoded,
         camera,
         offset: selected.offset,
         warnings,

@@ -27,6 +27,7 @@ use crate::vision::{estimate_board_pose, TargetDetector};
 
 use super::cdr;
 use super::image::{compressed_to_gray, raw_to_gray};
+use super::storage::{Location, MessageAt};
 use super::tf::TfBuffer;
 use super::{BagError, BagOptions, BagSample};
 use crate::vision::sharpness::sharpness;
@@ -151,11 +152,20 @@ pub struct OffsetEstimate {
     pub residual_mm: Option<f64>,
 }
 
-/// An image message not decoded yet.
-pub(crate) struct ImageRef<'a> {
+/// An image message not read yet: its header stamp and where it is.
+pub(crate) struct ImageRef {
     pub(crate) stamp_ns: i64,
-    pub(crate) data: &'a [u8],
+    /// 0-based index among the topic's messages (receive order).
+    pub(crate) index: usize,
+    pub(crate) location: Location,
+}
+
+/// Pass 2: the image messages read again from the bag, one at a time, and counted.
+pub(crate) struct Frames<'b> {
+    pub(crate) reader: MessageAt<'b>,
     pub(crate) compressed: bool,
+    /// Frames decoded so far.
+    pub(crate) decoded: usize,
 }
 
 pub(crate) struct Selected {
@@ -164,24 +174,27 @@ pub(crate) struct Selected {
     pub(crate) offset: OffsetEstimate,
 }
 
+/// The frame read from the bag and turned grey; its message is dropped on return.
 fn decode(
     path: &Path,
     topic: &str,
-    index: usize,
-    image: &ImageRef<'_>,
+    image: &ImageRef,
+    frames: &mut Frames<'_>,
 ) -> Result<GrayImage, BagError> {
     let wrap = |source: super::MessageError| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),
-        index,
+        index: image.index,
         stamp_ns: image.stamp_ns,
         source,
     };
-    if image.compressed {
-        let c = cdr::decode_compressed_image(image.data).map_err(|e| wrap(e.into()))?;
+    let data = frames.reader.data(image.location)?;
+    frames.decoded += 1;
+    if frames.compressed {
+        let c = cdr::decode_compressed_image(&data).map_err(|e| wrap(e.into()))?;
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
-        let r = cdr::decode_image(image.data).map_err(|e| wrap(e.into()))?;
+        let r = cdr::decode_image(&data).map_err(|e| wrap(e.into()))?;
         raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
     }
 }
@@ -193,7 +206,8 @@ pub(crate) fn seconds_to_ns(s: f64) -> i64 {
 /// Picks the frames (see the module docs).
 pub(crate) fn select(
     path: &Path,
-    images: &[ImageRef<'_>],
+    images: &[ImageRef],
+    frames: &mut Frames<'_>,
     tf: &TfBuffer,
     camera: Option<&CameraModel>,
     options: &BagOptions,
@@ -224,7 +238,9 @@ pub(crate) fn select(
                 path: path.to_path_buf(),
                 problem: "needs the intrinsics (--camera-info) to measure board poses".into(),
             })?;
-            estimate_offset(path, images, &order, &tf, camera, options, spacing_s, max_s)?
+            estimate_offset(
+                path, images, frames, &order, &tf, camera, options, spacing_s, max_s,
+            )?
         }
     };
     let offset_ns = seconds_to_ns(offset.offset_s);
@@ -246,7 +262,7 @@ pub(crate) fn select(
                 let robot = image.stamp_ns - offset_ns;
                 match lookup(robot) {
                     Ok(base_from_flange) => {
-                        let gray = decode(path, topic, i, image)?;
+                        let gray = decode(path, topic, image, frames)?;
                         last = Some(image.stamp_ns);
                         samples.push(BagSample {
                             image_stamp_ns: image.stamp_ns,
@@ -269,13 +285,14 @@ pub(crate) fn select(
             // Each frame: Some(pose) when stationary; intervals are runs of stationary frames.
             let mut interval: Vec<(usize, Pose)> = Vec::new();
             let close = |interval: &mut Vec<(usize, Pose)>,
+                         frames: &mut Frames<'_>,
                          samples: &mut Vec<BagSample>,
                          skipped: &mut Vec<Skip>|
              -> Result<(), BagError> {
                 let mut best: Option<BagSample> = None;
                 for (i, pose) in interval.drain(..) {
                     let image = &images[i];
-                    let gray = decode(path, topic, i, image)?;
+                    let gray = decode(path, topic, image, frames)?;
                     let candidate = BagSample {
                         image_stamp_ns: image.stamp_ns,
                         robot_stamp_ns: image.stamp_ns - offset_ns,
@@ -328,13 +345,13 @@ pub(crate) fn select(
                         }
                     }
                 };
-                close(&mut interval, &mut samples, &mut skipped)?;
+                close(&mut interval, frames, &mut samples, &mut skipped)?;
                 skipped.push(Skip {
                     stamp_ns: image.stamp_ns,
                     reason,
                 });
             }
-            close(&mut interval, &mut samples, &mut skipped)?;
+            close(&mut interval, frames, &mut samples, &mut skipped)?;
         }
     }
     skipped.sort_by_key(|s| s.stamp_ns);
@@ -350,7 +367,8 @@ pub(crate) fn select(
 #[allow(clippy::too_many_arguments)]
 fn estimate_offset(
     path: &Path,
-    images: &[ImageRef<'_>],
+    images: &[ImageRef],
+    frames: &mut Frames<'_>,
     order: &[usize],
     tf: &TfBuffer,
     camera: &CameraModel,
@@ -379,7 +397,7 @@ fn estimate_offset(
             continue;
         }
         last = Some(image.stamp_ns);
-        let gray = decode(path, &options.image_topic, i, image)?;
+        let gray = decode(path, &options.image_topic, image, frames)?;
         if let Ok(pose) = detector
             .detect(&gray)
             .and_then(|d| estimate_board_pose(&options.board, camera, &d))

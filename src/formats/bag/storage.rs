@@ -1,7 +1,12 @@
 //! The two rosbag2 storage formats: MCAP (`mcap` crate) and sqlite3 `.db3` (`rusqlite`). A bag
 //! is a folder holding `metadata.yaml` and its storage files, or one storage file given directly;
 //! the format follows from the files' extension (and, for a file of another name, its first
-//! bytes). Only the topics asked for are read; messages come back in receive-time order.
+//! bytes). Only the topics asked for are read.
+//!
+//! Nothing holds the whole bag: [`Bag::for_each`] streams the messages of the topics asked for
+//! (MCAP chunk by chunk through a buffered reader, sqlite3 row by row), lending each message to
+//! the caller and dropping it before the next, with its [`Location`]; [`MessageAt`] reads one
+//! message again from its location (the frames chosen, in a second pass).
 //!
 //! A damaged file is refused with its name: an MCAP file that ends early (no footer, or a record
 //! cut short) and an SQLite file shorter than its header says.
@@ -39,16 +44,27 @@ pub struct TopicInfo {
     pub count: usize,
 }
 
-/// One message read from a bag: borrowed where the storage reader lends it, owned otherwise (the
-/// `mcap` crate's reader and the sqlite3 rows copy every message).
-#[derive(Debug, Clone)]
-pub struct BagMessage<'a> {
+/// Where a message is in a bag, to read it again: its storage file and, in it, its position
+/// among the file's messages (MCAP) or its row id (sqlite3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Location {
+    /// Index of the storage file in the bag.
+    pub file: usize,
+    /// MCAP: 0-based position among all messages of the file, in file order; sqlite3: the row id.
+    pub at: u64,
+}
+
+/// One message read from a bag, lent for the time of a [`Bag::for_each`] callback.
+#[derive(Debug, Clone, Copy)]
+pub struct BagMessage<'m> {
     /// Its topic.
-    pub topic: String,
+    pub topic: &'m str,
     /// When the recorder received it, ns.
     pub log_time_ns: i64,
     /// The serialised (CDR) message.
-    pub data: std::borrow::Cow<'a, [u8]>,
+    pub data: &'m [u8],
+    /// Where it is, to read it again.
+    pub location: Location,
 }
 
 /// Rows of an sqlite3 bag's `messages` table whose `topic_id` is in no row of `topics`.
@@ -96,17 +112,17 @@ impl std::fmt::Display for UnknownTopicRows {
     }
 }
 
-/// Memory the import needs besides the bag's bytes (decoded frames, the session run): checked
-/// free after the bag is read, so a bag that just fits fails here, clearly, rather than with an
-/// abort later.
-const HEADROOM_BYTES: usize = 256 << 20;
+/// Memory the import needs besides the message being read: the decoded frames it keeps (one grey
+/// image per sample), the TF, and the session run. Checked free when the bag is opened, so a
+/// limit that cannot fit the import fails there, clearly, rather than with an abort later.
+pub const HEADROOM_BYTES: usize = 64 << 20;
 
 fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
     BagError::OutOfMemory {
         path: file.to_path_buf(),
         bytes,
         problem: format!(
-            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); the import holds the messages it reads in memory (an MCAP bag: the file and a copy of its messages), plus about {} MB: raise the limit, or split the bag (`ros2 bag convert`)",
+            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); the import streams the bag (one message at a time, whatever the bag's size) but needs about {} MB besides, plus its largest message: raise the limit",
             HEADROOM_BYTES >> 20
         ),
     }
@@ -119,8 +135,6 @@ pub struct Bag {
     path: PathBuf,
     files: Vec<PathBuf>,
     format: BagFormat,
-    /// The MCAP files' bytes, read once (empty for sqlite3).
-    mcap: Vec<Vec<u8>>,
 }
 
 const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -178,38 +192,30 @@ impl Bag {
             format = Some(this);
         }
         let format = format.ok_or_else(|| storage("no storage file".into()))?;
-        let mut mcap = Vec::new();
         if format == BagFormat::Mcap {
             for file in &files {
-                let bytes = read_file(file)?;
-                mcap_check_complete(file, &bytes)?;
-                mcap.push(bytes);
+                mcap_check_complete(file)?;
             }
-            // The `mcap` reader copies every message it yields (and its records into a buffer
-            // of its own), with allocations that abort when they fail: room for a copy of the
-            // whole file, plus the rest of the import, is checked here instead.
-            let total: u64 = mcap.iter().map(|b| b.len() as u64).sum();
-            let copies = usize::try_from(total).unwrap_or(usize::MAX);
-            let mut probe: Vec<u8> = Vec::new();
-            probe
-                .try_reserve_exact(copies.saturating_add(HEADROOM_BYTES))
-                .map_err(|_| {
-                    out_of_memory(
-                        path,
-                        total,
-                        &format!(
-                            "the file is in memory, but keeping {} MB free for the copies the MCAP reader makes of its messages and {} MB for the rest of the import",
-                            total.div_ceil(1 << 20),
-                            HEADROOM_BYTES >> 20
-                        ),
-                    )
-                })?;
         }
+        // The room the import needs besides the message being read (HEADROOM_BYTES), reserved
+        // fallibly once: without it, an allocation would abort the process later.
+        let mut probe: Vec<u8> = Vec::new();
+        probe.try_reserve_exact(HEADROOM_BYTES).map_err(|_| {
+            let bytes = files
+                .iter()
+                .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
+                .sum();
+            out_of_memory(
+                path,
+                bytes,
+                &format!("keeping {} MB free for the import", HEADROOM_BYTES >> 20),
+            )
+        })?;
+        drop(probe);
         Ok(Bag {
             path: path.to_path_buf(),
             files,
             format,
-            mcap,
         })
     }
 
@@ -221,9 +227,9 @@ impl Bag {
     /// The topics with their types and message counts, in name order.
     pub fn topics(&self) -> Result<Vec<TopicInfo>, BagError> {
         let mut all: Vec<TopicInfo> = Vec::new();
-        for (i, file) in self.files.iter().enumerate() {
+        for file in &self.files {
             let found = match self.format {
-                BagFormat::Mcap => mcap_topics(file, &self.mcap[i])?,
+                BagFormat::Mcap => mcap_topics(file)?,
                 BagFormat::Sqlite3 => sqlite_topics(file)?,
             };
             for t in found {
@@ -273,34 +279,134 @@ impl Bag {
         Ok(out)
     }
 
-    /// Every message on `topics`, in receive-time order.
-    pub fn read(&self, topics: &[String]) -> Result<Vec<BagMessage<'_>>, BagError> {
-        let mut out = Vec::new();
+    /// Every message on `topics`, lent to `visit` one at a time: file by file, each in its storage
+    /// order (MCAP: file order; sqlite3: row order). The caller orders them by receive time if it
+    /// needs to; only one message is held at a time.
+    pub fn for_each(
+        &self,
+        topics: &[String],
+        mut visit: impl FnMut(BagMessage<'_>) -> Result<(), BagError>,
+    ) -> Result<(), BagError> {
         for (i, file) in self.files.iter().enumerate() {
             match self.format {
-                BagFormat::Mcap => mcap_read(file, &self.mcap[i], topics, &mut out)?,
-                BagFormat::Sqlite3 => sqlite_read(file, topics, &mut out)?,
+                BagFormat::Mcap => mcap_for_each(i, file, topics, &mut visit)?,
+                BagFormat::Sqlite3 => sqlite_for_each(i, file, topics, &mut visit)?,
             }
         }
-        out.sort_by_key(|m| m.log_time_ns);
-        // The messages are in memory; the rest of the import needs room too.
-        let mut probe: Vec<u8> = Vec::new();
-        probe.try_reserve_exact(HEADROOM_BYTES).map_err(|_| {
-            let bytes = self
-                .files
-                .iter()
-                .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
-                .sum();
-            out_of_memory(
-                &self.path,
-                bytes,
-                &format!(
-                    "its messages are in memory, but keeping {} MB free for the rest of the import",
-                    HEADROOM_BYTES >> 20
-                ),
-            )
-        })?;
-        Ok(out)
+        Ok(())
+    }
+
+    /// A reader of single messages of `topic` by their [`Location`].
+    pub fn message_at(&self, topic: &str) -> MessageAt<'_> {
+        MessageAt {
+            bag: self,
+            topic: topic.to_string(),
+            mcap: None,
+            recent: std::collections::VecDeque::new(),
+            sqlite: None,
+            rewinds: 0,
+        }
+    }
+}
+
+/// The last MCAP messages of the topic read by [`MessageAt`] are kept (their data): a request a
+/// few messages back (stamps slightly out of receive order, the same frame again) does not read
+/// the file again.
+const RECENT_KEPT: usize = 6;
+
+/// Reads single messages of one topic again by their [`Location`] (see [`Bag::message_at`]).
+/// MCAP has no cheap random access to a message inside a compressed chunk, so the file is read
+/// forward from where the last request left it, keeping the last [`RECENT_KEPT`] messages of the
+/// topic; a request further back starts the file again. Requests in file order (the frames in
+/// stamp order, as the selection asks for them) read each file once. sqlite3 reads the row.
+pub struct MessageAt<'b> {
+    bag: &'b Bag,
+    topic: String,
+    /// The MCAP file being read, the stream, and the position of the next message.
+    mcap: Option<(usize, McapStream, u64)>,
+    recent: std::collections::VecDeque<(Location, Vec<u8>)>,
+    sqlite: Option<(usize, rusqlite::Connection)>,
+    rewinds: usize,
+}
+
+type McapStream = mcap::io::MessageReader<std::io::BufReader<std::fs::File>>;
+
+impl MessageAt<'_> {
+    /// The serialised message at `at` (of this reader's topic).
+    pub fn data(&mut self, at: Location) -> Result<Vec<u8>, BagError> {
+        let file = self
+            .bag
+            .files
+            .get(at.file)
+            .ok_or_else(|| BagError::Storage {
+                path: self.bag.path.clone(),
+                problem: format!("no storage file {} in the bag", at.file),
+            })?;
+        match self.bag.format {
+            BagFormat::Sqlite3 => {
+                if self.sqlite.as_ref().is_none_or(|(i, _)| *i != at.file) {
+                    self.sqlite = Some((at.file, sqlite_open(file)?));
+                }
+                let (_, db) = self.sqlite.as_ref().expect("opened above");
+                db.query_row(
+                    "SELECT data FROM messages WHERE rowid = ?1",
+                    [at.at as i64],
+                    |row| row.get::<_, Vec<u8>>(0),
+                )
+                .map_err(|e| sqlite_error(file, e))
+            }
+            BagFormat::Mcap => {
+                if let Some(k) = self.recent.iter().position(|(l, _)| *l == at) {
+                    return Ok(self.recent[k].1.clone());
+                }
+                let behind = self
+                    .mcap
+                    .as_ref()
+                    .is_none_or(|(i, _, next)| *i != at.file || *next > at.at);
+                if behind {
+                    if self.mcap.is_some() {
+                        self.rewinds += 1;
+                    }
+                    self.recent.clear();
+                    self.mcap = Some((at.file, mcap_stream(file)?, 0));
+                }
+                let (_, stream, next) = self.mcap.as_mut().expect("opened above");
+                loop {
+                    let Some(message) = stream.next() else {
+                        return Err(BagError::Storage {
+                            path: file.clone(),
+                            problem: format!(
+                                "damaged MCAP file: message {} is gone when read again (the file changed while it was imported?)",
+                                at.at
+                            ),
+                        });
+                    };
+                    let message = message.map_err(|e| mcap_error(file, e))?;
+                    let here = Location {
+                        file: at.file,
+                        at: *next,
+                    };
+                    *next += 1;
+                    if message.channel.topic != self.topic {
+                        continue;
+                    }
+                    let data = message.data.into_owned();
+                    if self.recent.len() == RECENT_KEPT {
+                        self.recent.pop_front();
+                    }
+                    if here == at {
+                        self.recent.push_back((here, data.clone()));
+                        return Ok(data);
+                    }
+                    self.recent.push_back((here, data));
+                }
+            }
+        }
+    }
+
+    /// How often an MCAP file was started again for a request behind the stream.
+    pub fn rewinds(&self) -> usize {
+        self.rewinds
     }
 }
 
@@ -338,29 +444,28 @@ fn file_format(file: &Path) -> Result<BagFormat, BagError> {
     }
 }
 
-/// The whole file, its buffer reserved fallibly: a file larger than the memory the process may
-/// use is an error naming it, not an abort.
-fn read_file(file: &Path) -> Result<Vec<u8>, BagError> {
-    use std::io::Read;
+/// Reading an MCAP file record by record: no record may be longer than this (a damaged length
+/// field would otherwise allocate what it says). Chunks are decompressed as they stream, so the
+/// limit is on one record inside them (an image), not on a chunk.
+fn mcap_record_limit(file_len: u64) -> usize {
+    usize::try_from(file_len)
+        .unwrap_or(usize::MAX)
+        .max(256 << 20)
+}
+
+/// An MCAP file's messages, streamed through a buffered reader.
+fn mcap_stream(file: &Path) -> Result<McapStream, BagError> {
     let io = |source| BagError::Read {
         path: file.to_path_buf(),
         source,
     };
-    let mut f = std::fs::File::open(file).map_err(io)?;
+    let f = std::fs::File::open(file).map_err(io)?;
     let len = f.metadata().map_err(io)?.len();
-    let mut bytes = Vec::new();
-    usize::try_from(len)
-        .ok()
-        .and_then(|n| bytes.try_reserve_exact(n).ok())
-        .ok_or_else(|| {
-            out_of_memory(
-                file,
-                len,
-                &format!("allocating {} MB for it", len.div_ceil(1 << 20)),
-            )
-        })?;
-    f.read_to_end(&mut bytes).map_err(io)?;
-    Ok(bytes)
+    Ok(mcap::io::MessageReader::new_with_options(
+        std::io::BufReader::with_capacity(1 << 20, f),
+        mcap::sans_io::LinearReaderOptions::default()
+            .with_record_length_limit(mcap_record_limit(len)),
+    ))
 }
 
 fn mcap_error(file: &Path, e: mcap::McapError) -> BagError {
@@ -370,17 +475,59 @@ fn mcap_error(file: &Path, e: mcap::McapError) -> BagError {
     }
 }
 
-fn mcap_check_complete(file: &Path, bytes: &[u8]) -> Result<(), BagError> {
-    if bytes.len() < 2 * MCAP_MAGIC.len() || !bytes.ends_with(MCAP_MAGIC) {
+/// Refuses a file without the closing magic (a recording that did not finish, a copy cut short)
+/// before any of it is read.
+fn mcap_check_complete(file: &Path) -> Result<(), BagError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let io = |source| BagError::Read {
+        path: file.to_path_buf(),
+        source,
+    };
+    let mut f = std::fs::File::open(file).map_err(io)?;
+    let len = f.metadata().map_err(io)?.len();
+    let mut tail = [0u8; 8];
+    let complete = len >= 2 * MCAP_MAGIC.len() as u64 && {
+        f.seek(SeekFrom::End(-(MCAP_MAGIC.len() as i64)))
+            .map_err(io)?;
+        f.read_exact(&mut tail).map_err(io)?;
+        tail == MCAP_MAGIC
+    };
+    if !complete {
         return Err(BagError::Storage {
             path: file.to_path_buf(),
             problem: format!(
-                "truncated MCAP file: {} bytes without the closing magic (the recording did not finish or the copy is cut short)",
-                bytes.len()
+                "truncated MCAP file: {len} bytes without the closing magic (the recording did not finish or the copy is cut short)"
             ),
         });
     }
     Ok(())
+}
+
+/// The summary section (channels, message counts), read from the end of the file without the
+/// rest; `None` without one (or when it cannot be read: the messages are counted then).
+fn mcap_summary(file: &Path) -> Option<mcap::Summary> {
+    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+    use std::io::{Read, Seek};
+    let mut f = std::fs::File::open(file).ok()?;
+    let len = f.metadata().ok()?.len();
+    let mut reader = SummaryReader::new_with_options(
+        SummaryReaderOptions::default()
+            .with_file_size(len)
+            .with_record_length_limit(mcap_record_limit(len)),
+    );
+    while let Some(event) = reader.next_event() {
+        match event.ok()? {
+            SummaryReadEvent::ReadRequest(need) => {
+                let n = f.read(reader.insert(need)).ok()?;
+                reader.notify_read(n);
+            }
+            SummaryReadEvent::SeekRequest(to) => {
+                let at = f.seek(to).ok()?;
+                reader.notify_seeked(at);
+            }
+        }
+    }
+    reader.finish()
 }
 
 fn mcap_type(channel: &mcap::Channel<'_>) -> String {
@@ -391,10 +538,10 @@ fn mcap_type(channel: &mcap::Channel<'_>) -> String {
         .unwrap_or_else(|| "(no schema)".into())
 }
 
-fn mcap_topics(file: &Path, bytes: &[u8]) -> Result<Vec<TopicInfo>, BagError> {
+fn mcap_topics(file: &Path) -> Result<Vec<TopicInfo>, BagError> {
     let mut topics: Vec<TopicInfo> = Vec::new();
     // The summary section lists channels and counts without reading every message.
-    if let Ok(Some(summary)) = mcap::Summary::read(bytes) {
+    if let Some(summary) = mcap_summary(file) {
         let counts = summary
             .stats
             .as_ref()
@@ -414,7 +561,7 @@ fn mcap_topics(file: &Path, bytes: &[u8]) -> Result<Vec<TopicInfo>, BagError> {
         }
         topics.clear();
     }
-    for message in mcap::MessageStream::new(bytes).map_err(|e| mcap_error(file, e))? {
+    for message in mcap_stream(file)? {
         let message = message.map_err(|e| mcap_error(file, e))?;
         match topics.iter_mut().find(|t| t.name == message.channel.topic) {
             Some(t) => t.count += 1,
@@ -428,13 +575,13 @@ fn mcap_topics(file: &Path, bytes: &[u8]) -> Result<Vec<TopicInfo>, BagError> {
     Ok(topics)
 }
 
-fn mcap_read<'a>(
+fn mcap_for_each(
+    index: usize,
     file: &Path,
-    bytes: &'a [u8],
     topics: &[String],
-    out: &mut Vec<BagMessage<'a>>,
+    visit: &mut dyn FnMut(BagMessage<'_>) -> Result<(), BagError>,
 ) -> Result<(), BagError> {
-    for message in mcap::MessageStream::new(bytes).map_err(|e| mcap_error(file, e))? {
+    for (at, message) in mcap_stream(file)?.enumerate() {
         let message = message.map_err(|e| mcap_error(file, e))?;
         if !topics.contains(&message.channel.topic) {
             continue;
@@ -448,13 +595,15 @@ fn mcap_read<'a>(
                 ),
             });
         }
-        out.try_reserve(1)
-            .map_err(|_| out_of_memory(file, 0, "growing the list of messages"))?;
-        out.push(BagMessage {
-            topic: message.channel.topic.clone(),
+        visit(BagMessage {
+            topic: &message.channel.topic,
             log_time_ns: i64::try_from(message.log_time).unwrap_or(i64::MAX),
-            data: message.data,
-        });
+            data: &message.data,
+            location: Location {
+                file: index,
+                at: at as u64,
+            },
+        })?;
     }
     Ok(())
 }
@@ -535,9 +684,14 @@ fn sqlite_topics(file: &Path) -> Result<Vec<TopicInfo>, BagError> {
         .map_err(|e| sqlite_error(file, e))
 }
 
-fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Result<(), BagError> {
+fn sqlite_for_each(
+    index: usize,
+    file: &Path,
+    topics: &[String],
+    visit: &mut dyn FnMut(BagMessage<'_>) -> Result<(), BagError>,
+) -> Result<(), BagError> {
     let db = sqlite_open(file)?;
-    let mut ids: Vec<(i64, String, String)> = Vec::new();
+    let mut ids: Vec<(i64, String)> = Vec::new();
     {
         let mut statement = db
             .prepare("SELECT id, name, serialization_format FROM topics")
@@ -557,46 +711,43 @@ fn sqlite_read(file: &Path, topics: &[String], out: &mut Vec<BagMessage>) -> Res
                         ),
                     });
                 }
-                ids.push((id, name, format));
+                ids.push((id, name));
             }
         }
     }
+    if ids.is_empty() {
+        return Ok(());
+    }
+    // Row by row in table order (no ORDER BY: sorting would make SQLite hold the rows); each
+    // row's blob is lent to `visit` and dropped before the next.
+    let list: Vec<String> = ids.iter().map(|(id, _)| id.to_string()).collect();
     let mut statement = db
-        .prepare("SELECT timestamp, data FROM messages WHERE topic_id = ?1 ORDER BY timestamp")
+        .prepare(&format!(
+            "SELECT rowid, topic_id, timestamp, data FROM messages WHERE topic_id IN ({})",
+            list.join(", ")
+        ))
         .map_err(|e| sqlite_error(file, e))?;
-    let mut held: u64 = 0;
-    for (id, name, _) in ids {
-        let mut rows = statement.query([id]).map_err(|e| sqlite_error(file, e))?;
-        while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
-            let log_time_ns: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
-            let blob = row
-                .get_ref(1)
-                .and_then(|v| v.as_blob().map_err(Into::into))
-                .map_err(|e| sqlite_error(file, e))?;
-            // Copied into a buffer reserved fallibly: rows that do not fit in memory are an
-            // error naming the file, not an abort.
-            let mut data = Vec::new();
-            data.try_reserve_exact(blob.len())
-                .and_then(|()| out.try_reserve(1))
-                .map_err(|_| {
-                    let bytes = std::fs::metadata(file).map_or(0, |m| m.len());
-                    out_of_memory(
-                        file,
-                        bytes,
-                        &format!(
-                            "holding the messages of `{name}` ({} MB read so far)",
-                            held.div_ceil(1 << 20)
-                        ),
-                    )
-                })?;
-            data.extend_from_slice(blob);
-            held += data.len() as u64;
-            out.push(BagMessage {
-                topic: name.clone(),
-                log_time_ns,
-                data: std::borrow::Cow::Owned(data),
-            });
-        }
+    let mut rows = statement.query([]).map_err(|e| sqlite_error(file, e))?;
+    while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
+        let rowid: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
+        let topic_id: i64 = row.get(1).map_err(|e| sqlite_error(file, e))?;
+        let log_time_ns: i64 = row.get(2).map_err(|e| sqlite_error(file, e))?;
+        let data = row
+            .get_ref(3)
+            .and_then(|v| v.as_blob().map_err(Into::into))
+            .map_err(|e| sqlite_error(file, e))?;
+        let Some((_, topic)) = ids.iter().find(|(id, _)| *id == topic_id) else {
+            continue;
+        };
+        visit(BagMessage {
+            topic,
+            log_time_ns,
+            data,
+            location: Location {
+                file: index,
+                at: rowid as u64,
+            },
+        })?;
     }
     Ok(())
 }

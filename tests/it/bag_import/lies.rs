@@ -1,5 +1,5 @@
-//! Issue #25: bags that lie are refused or warned about, never imported silently; a bag larger
-//! than the memory allowed fails clearly; killed imports leave nothing behind.
+//! Issue #25: bags that lie are refused or warned about, never imported silently; a memory limit
+//! too small for the import fails clearly; killed imports leave nothing behind.
 
 use super::*;
 
@@ -481,8 +481,8 @@ fn big_bag(dir: &Path, storage: &str, frames: usize) -> Option<PathBuf> {
     )
 }
 
-/// The real binary under `ulimit -v` (KiB) with a bag larger than that allows: exit code 1 and a
-/// clear message, never an abort.
+/// The real binary under `ulimit -v` (KiB): exit code 1 and a clear message when the import
+/// does not fit, never an abort.
 fn import_limited(bag: &Path, out: &Path, limit_kib: u64) -> std::process::Output {
     let exe = env!("CARGO_BIN_EXE_handeye");
     Command::new("bash")
@@ -499,17 +499,18 @@ fn import_limited(bag: &Path, out: &Path, limit_kib: u64) -> std::process::Outpu
 }
 
 #[test]
-fn issue25_a_bag_larger_than_the_memory_allowed_fails_clearly_not_with_an_abort() {
+fn issue25_a_memory_limit_too_small_for_the_import_fails_clearly_not_with_an_abort() {
     let dir = tempfile::tempdir().unwrap();
     for storage in ["mcap", "sqlite3"] {
-        // About 150 MB of frames (the debug binary itself needs under 50 MB).
+        // About 150 MB of frames. The import streams it (issue #29: bag_import/stream.rs imports
+        // a bag larger than the limit), but needs some room of its own besides its binary.
         let Some(bag) = big_bag(dir.path(), storage, 500) else {
             return;
         };
         let out = dir.path().join("session");
-        // Limits (address space, KiB): below the bag's size (its buffer cannot be had), and
-        // above it but without room for the rest of the import.
-        for limit_kib in [120 << 10, 300 << 10] {
+        // Limits (address space, KiB) the binary starts under, without the room the import
+        // reserves (storage::HEADROOM_BYTES, 64 MB).
+        for limit_kib in [40 << 10, 64 << 10] {
             let run = import_limited(&bag, &out, limit_kib);
             let log = text(&run);
             println!("{storage}, ulimit -v {limit_kib}: {log}");
