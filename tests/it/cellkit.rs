@@ -555,9 +555,19 @@ fn the_fitted_board_file_keeps_everything_but_the_tag_size() {
     let original = std::fs::read_to_string(&path).unwrap();
     let fitted = fit_to_paper(&six_by_six(), Paper::Letter, 0.008).unwrap();
     let yaml = fitted_board_yaml(&original, &path, &fitted.board).unwrap();
+    // The first line says the file's size is the fitted one (the original's comments may give
+    // another); then the original, its tag size rewritten.
+    let (header, rest) = yaml.split_once('\n').unwrap();
+    let tag_size = fitted.board.aprilgrid().unwrap().tag_size();
+    assert!(
+        header.starts_with("# Fitted to the paper")
+            && header.contains(&format!("tagSize: {tag_size}"))
+            && header.contains("aprilgrid-6x6.yaml"),
+        "{header}"
+    );
     let changed: Vec<(&str, &str)> = original
         .lines()
-        .zip(yaml.lines())
+        .zip(rest.lines())
         .filter(|(a, b)| a != b)
         .collect();
     assert_eq!(

@@ -302,5 +302,19 @@ pub fn fitted_board_yaml(
             found: format!("{:?}", size_keys(&back)),
         });
     }
-    Ok(out)
+    // The original's comments may state its size ("0.29 m of tags"): the first line says which
+    // size is this file's.
+    let extent = fitted.extent();
+    let header = format!(
+        "# Fitted to the paper by `handeye target render --paper`: {} (a board of {:.0} x {:.0} mm). The comments below are those of {} and may give its size instead.\n",
+        size_keys(fitted)
+            .iter()
+            .map(|(key, value)| format!("{key}: {value}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        (extent.max.x - extent.min.x) * 1e3,
+        (extent.max.y - extent.min.y) * 1e3,
+        path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+    );
+    Ok(header + &out)
 }
