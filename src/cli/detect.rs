@@ -47,6 +47,9 @@ pub(super) struct DetectArgs {
     /// Detector threads: 1 (the AprilTag C library this build links races with more).
     #[arg(long, default_value_t = 1)]
     threads: u8,
+    /// Images detected at once, each with a detector of its own (default: every core).
+    #[arg(short = 'j', long)]
+    jobs: Option<usize>,
     /// Highest accepted hamming distance (0-2).
     #[arg(long, default_value_t = 1)]
     max_hamming: u32,
@@ -87,7 +90,7 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
         max_hamming: args.max_hamming,
         ..DetectorOptions::default()
     };
-    let detector = TargetDetector::spawn(&board, options)?;
+    let detector = TargetDetector::spawn(&board, options.clone())?;
     if args.live {
         return live(&args, &board, &camera, &detector);
     }
@@ -95,8 +98,16 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the annotation folder {}", dir.display()))?;
     }
-    let mut results = Vec::new();
-    let mut found_count = 0;
+    // One detector per worker (the AprilTag detector is single-threaded: frames are the unit
+    // of parallel work), the results printed in the images' order as they complete.
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .clamp(1, args.images.len().max(1));
+    let mut detectors = vec![detector];
+    for _ in 1..jobs {
+        detectors.push(TargetDetector::spawn(&board, options.clone())?);
+    }
     // The per-image lines show the progress on a terminal; when they go to a file or a pipe, a
     // bar on the terminal's stderr does.
     let bar = (!std::io::stdout().is_terminal() && std::io::stderr().is_terminal()).then(|| {
@@ -107,119 +118,50 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         )
     });
-    for path in &args.images {
-        if let Some(bar) = &bar {
-            bar.inc(1);
-        }
-        let image = load_gray_image(path)?;
-        let detection = match detector.detect(&image) {
-            Ok(detection) => detection,
-            // A ChArUco board or chessboard not in view: reported like an aprilgrid without tags.
-            Err(e @ TargetError::BoardNotFound { .. }) => {
-                outln!("{}:", path.display());
-                outln!("  {e}");
-                results.push(ImageResult {
-                    image: path.display().to_string(),
-                    found: false,
-                    tag_ids: Vec::new(),
-                    corner_ids: Vec::new(),
-                    rejected_ids: Vec::new(),
-                    error: Some(e.to_string()),
-                    rms_px: None,
-                    corners_used: None,
-                    ambiguity: None,
-                    camera_from_target: None,
-                });
-                continue;
-            }
-            Err(error) => {
-                return Err(error)
-                    .with_context(|| format!("detecting the board in {}", path.display()))
-            }
-        };
-        let corner_ids: Vec<u32> = detection.points.iter().map(|(id, _)| *id).collect();
-        let pose = estimate_board_pose(&board, &camera, &detection);
-        let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
-        let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
-        outln!("{}:", path.display());
-        if board.aprilgrid().is_some() {
-            outln!("  tags found ({}): {:?}", tag_ids.len(), tag_ids);
-        } else {
-            outln!("  corners found ({}): {:?}", corner_ids.len(), corner_ids);
-        }
-        let mut result = ImageResult {
-            image: path.display().to_string(),
-            found: false,
-            tag_ids,
-            corner_ids,
-            rejected_ids,
-            error: None,
-            rms_px: None,
-            corners_used: None,
-            ambiguity: None,
-            camera_from_target: None,
-        };
-        match &pose {
-            Ok(pose) => {
-                found_count += 1;
-                let record = PoseRecord::from_pose(&pose.camera_from_target);
-                outln!(
-                    "  reprojection RMS {:.3} px over {} corners{}",
-                    pose.rms_px,
-                    pose.corners_used,
-                    if pose.is_ambiguous() {
-                        format!(
-                            " (AMBIGUOUS lone tag, ratio {:.2})",
-                            pose.ambiguity.unwrap_or(0.0)
-                        )
-                    } else {
-                        String::new()
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let failed = std::sync::atomic::AtomicBool::new(false);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let mut results = Vec::new();
+    let mut found_count = 0;
+    std::thread::scope(|scope| -> anyhow::Result<()> {
+        for detector in &detectors {
+            let sender = sender.clone();
+            let (next, failed, board, camera, args) = (&next, &failed, &board, &camera, &args);
+            scope.spawn(move || {
+                use std::sync::atomic::Ordering;
+                while !failed.load(Ordering::Relaxed) {
+                    let index = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(path) = args.images.get(index) else {
+                        break;
+                    };
+                    let outcome =
+                        detect_one(path, detector, board, camera, args.annotate.as_deref());
+                    failed.fetch_or(outcome.is_err(), Ordering::Relaxed);
+                    if sender.send((index, outcome)).is_err() {
+                        break;
                     }
-                );
-                let yaml = serde_yaml_ng::to_string(&record)?;
-                outln!("  T_camera_target:");
-                for line in yaml.lines() {
-                    outln!("    {line}");
                 }
-                result.found = true;
-                result.rms_px = Some(pose.rms_px);
-                result.corners_used = Some(pose.corners_used);
-                result.ambiguity = pose.ambiguity;
-                result.camera_from_target = Some(record);
+            });
+        }
+        drop(sender);
+        let mut waiting = std::collections::BTreeMap::new();
+        for (index, outcome) in receiver {
+            if let Some(bar) = &bar {
+                bar.inc(1);
             }
-            // No board in this frame is a result worth reporting; anything else (image size
-            // disagreeing with the intrinsics, ...) is a setup mistake that stops the run.
-            Err(
-                error @ (TargetError::NoTagsFound { .. }
-                | TargetError::NotEnoughCorners { .. }
-                | TargetError::PoseFailed { .. }),
-            ) => {
-                outln!("  board not found: {error}");
-                result.error = Some(error.to_string());
-            }
-            Err(error) => {
-                return Err(anyhow::anyhow!("{error}"))
-                    .with_context(|| format!("estimating the board pose in {}", path.display()));
+            waiting.insert(index, outcome);
+            while let Some(outcome) = waiting.remove(&results.len()) {
+                // The first failure in the images' order ends the command (the workers stop).
+                let (lines, result) = outcome?;
+                for line in lines {
+                    outln!("{line}");
+                }
+                found_count += usize::from(result.found);
+                results.push(result);
             }
         }
-        if let Some(dir) = &args.annotate {
-            let annotated = annotate(&image, &board, &camera, &detection, pose.as_ref().ok());
-            let name = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "image".to_string());
-            let out = dir.join(format!("{name}-annotated.png"));
-            let mut bytes = Vec::new();
-            annotated
-                .write_to(
-                    &mut std::io::Cursor::new(&mut bytes),
-                    image::ImageFormat::Png,
-                )
-                .with_context(|| format!("encoding {}", out.display()))?;
-            write_atomic(&out, &bytes).with_context(|| format!("writing {}", out.display()))?;
-        }
-        results.push(result);
-    }
+        Ok(())
+    })?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
@@ -278,4 +220,127 @@ fn live(
             ),
         }
     }
+}
+
+/// Detects the board in one image and estimates its pose: the lines to print and the result
+/// (a board not in view is a result; anything else — an unreadable image, intrinsics of another
+/// size — an error naming the image).
+fn detect_one(
+    path: &std::path::Path,
+    detector: &TargetDetector,
+    board: &Target,
+    camera: &CameraModel,
+    annotate_into: Option<&std::path::Path>,
+) -> anyhow::Result<(Vec<String>, ImageResult)> {
+    let mut lines = Vec::new();
+    let image = load_gray_image(path)?;
+    let detection = match detector.detect(&image) {
+        Ok(detection) => detection,
+        // A ChArUco board or chessboard not in view: reported like an aprilgrid without tags.
+        Err(e @ TargetError::BoardNotFound { .. }) => {
+            lines.push(format!("{}:", path.display()));
+            lines.push(format!("  {e}"));
+            let result = ImageResult {
+                image: path.display().to_string(),
+                found: false,
+                tag_ids: Vec::new(),
+                corner_ids: Vec::new(),
+                rejected_ids: Vec::new(),
+                error: Some(e.to_string()),
+                rms_px: None,
+                corners_used: None,
+                ambiguity: None,
+                camera_from_target: None,
+            };
+            return Ok((lines, result));
+        }
+        Err(error) => {
+            return Err(error).with_context(|| format!("detecting the board in {}", path.display()))
+        }
+    };
+    let corner_ids: Vec<u32> = detection.points.iter().map(|(id, _)| *id).collect();
+    let pose = estimate_board_pose(board, camera, &detection);
+    let tag_ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();
+    let rejected_ids = detection.rejected.iter().map(|r| r.id).collect();
+    lines.push(format!("{}:", path.display()));
+    if board.aprilgrid().is_some() {
+        lines.push(format!("  tags found ({}): {:?}", tag_ids.len(), tag_ids));
+    } else {
+        lines.push(format!(
+            "  corners found ({}): {:?}",
+            corner_ids.len(),
+            corner_ids
+        ));
+    }
+    let mut result = ImageResult {
+        image: path.display().to_string(),
+        found: false,
+        tag_ids,
+        corner_ids,
+        rejected_ids,
+        error: None,
+        rms_px: None,
+        corners_used: None,
+        ambiguity: None,
+        camera_from_target: None,
+    };
+    match &pose {
+        Ok(pose) => {
+            let record = PoseRecord::from_pose(&pose.camera_from_target);
+            lines.push(format!(
+                "  reprojection RMS {:.3} px over {} corners{}",
+                pose.rms_px,
+                pose.corners_used,
+                if pose.is_ambiguous() {
+                    format!(
+                        " (AMBIGUOUS lone tag, ratio {:.2})",
+                        pose.ambiguity.unwrap_or(0.0)
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            let yaml = serde_yaml_ng::to_string(&record)?;
+            lines.push(format!("  T_camera_target:"));
+            for line in yaml.lines() {
+                lines.push(format!("    {line}"));
+            }
+            result.found = true;
+            result.rms_px = Some(pose.rms_px);
+            result.corners_used = Some(pose.corners_used);
+            result.ambiguity = pose.ambiguity;
+            result.camera_from_target = Some(record);
+        }
+        // No board in this frame is a result worth reporting; anything else (image size
+        // disagreeing with the intrinsics, ...) is a setup mistake that stops the run.
+        Err(
+            error @ (TargetError::NoTagsFound { .. }
+            | TargetError::NotEnoughCorners { .. }
+            | TargetError::PoseFailed { .. }),
+        ) => {
+            lines.push(format!("  board not found: {error}"));
+            result.error = Some(error.to_string());
+        }
+        Err(error) => {
+            return Err(anyhow::anyhow!("{error}"))
+                .with_context(|| format!("estimating the board pose in {}", path.display()));
+        }
+    }
+    if let Some(dir) = annotate_into {
+        let annotated = annotate(&image, board, camera, &detection, pose.as_ref().ok());
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "image".to_string());
+        let out = dir.join(format!("{name}-annotated.png"));
+        let mut bytes = Vec::new();
+        annotated
+            .write_to(
+                &mut std::io::Cursor::new(&mut bytes),
+                image::ImageFormat::Png,
+            )
+            .with_context(|| format!("encoding {}", out.display()))?;
+        write_atomic(&out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok((lines, result))
 }

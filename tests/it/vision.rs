@@ -478,3 +478,54 @@ fn tag_standard_41h12_board_renders_and_is_detected() {
         assert!(result.rotation_error_deg < 0.1 && result.translation_error_m < 0.001);
     }
 }
+
+/// Issue #29: `detect` on a folder works on every core, one detector per worker; its output is
+/// the same, in the images' order, whatever the number of workers, and the first image that
+/// fails (in that order) is the one named.
+#[test]
+fn detect_on_several_workers_gives_the_same_output_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = crate::util::sim_cell(dir.path(), 6);
+    let session = dir.path().join("s");
+    crate::util::run_cell(&config, &session);
+    let mut frames: Vec<_> = std::fs::read_dir(session.join("frames"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    frames.sort();
+    assert!(frames.len() >= 6);
+    let detect = |jobs: &str, images: &[std::path::PathBuf], out: &std::path::Path| {
+        crate::util::handeye()
+            .args(["detect", "-j", jobs, "--board"])
+            .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
+            .arg("--intrinsics")
+            .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
+            .args(images)
+            .arg("-o")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let (one, two) = (dir.path().join("one.yaml"), dir.path().join("two.yaml"));
+    let a = detect("1", &frames, &one);
+    let b = detect("2", &frames, &two);
+    assert!(a.status.success() && b.status.success());
+    assert_eq!(a.stdout, b.stdout, "the same lines in the same order");
+    assert_eq!(
+        std::fs::read_to_string(&one).unwrap(),
+        std::fs::read_to_string(&two).unwrap()
+    );
+    // An unreadable image among them stops the command naming it (the first in order).
+    let broken = dir.path().join("broken.png");
+    std::fs::write(&broken, b"not a png").unwrap();
+    let mut with_broken = frames.clone();
+    with_broken.insert(2, broken);
+    let c = detect("2", &with_broken, &dir.path().join("three.yaml"));
+    let stderr = String::from_utf8_lossy(&c.stderr);
+    assert!(!c.status.success());
+    assert!(stderr.contains("broken.png"), "{stderr}");
+    // The two images before it were printed, in order; nothing after it.
+    let stdout = String::from_utf8_lossy(&c.stdout);
+    let printed: Vec<&str> = stdout.lines().filter(|l| l.ends_with(".png:")).collect();
+    assert_eq!(printed.len(), 2, "{stdout}");
+}
