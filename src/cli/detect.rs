@@ -301,7 +301,7 @@ fn detect_one(
                 }
             ));
             let yaml = serde_yaml_ng::to_string(&record)?;
-            lines.push(format!("  T_camera_target:"));
+            lines.push("  T_camera_target:".to_string());
             for line in yaml.lines() {
                 lines.push(format!("    {line}"));
             }

@@ -485,17 +485,17 @@ fn tag_standard_41h12_board_renders_and_is_detected() {
 #[test]
 fn detect_on_several_workers_gives_the_same_output_in_order() {
     let dir = tempfile::tempdir().unwrap();
-    let config = crate::util::sim_cell(dir.path(), 6);
+    let config = util::sim_cell(dir.path(), 6);
     let session = dir.path().join("s");
-    crate::util::run_cell(&config, &session);
+    util::run_cell(&config, &session);
     let mut frames: Vec<_> = std::fs::read_dir(session.join("frames"))
         .unwrap()
         .map(|e| e.unwrap().path())
         .collect();
     frames.sort();
     assert!(frames.len() >= 6);
-    let detect = |jobs: &str, images: &[std::path::PathBuf], out: &std::path::Path| {
-        crate::util::handeye()
+    let detect = |jobs: &str, images: &[std::path::PathBuf], out: &Path| {
+        util::handeye()
             .args(["detect", "-j", jobs, "--board"])
             .arg(repo().join("configs/targets/aprilgrid-6x6.yaml"))
             .arg("--intrinsics")
