@@ -45,6 +45,20 @@ pub(crate) fn band(value: f64, accuracy: f64) -> Level {
     }
 }
 
+/// What to do about a solver notice the checks above do not judge: the usual cause of each
+/// kind and its remedy (the notice's own text names the samples, frames or corners).
+fn next_for_notice(kind: NoticeKind) -> &'static str {
+    match kind {
+        NoticeKind::NotConverged => "add poses with larger, more varied rotations (the solve stopped before converging: the poses are too few or too alike), then solve again",
+        NoticeKind::NoCovariance => "add poses that rotate about other axes (the answer is not determined in some direction), then solve again",
+        NoticeKind::FrameOutliers => "look at the frames the notice names in the report (blur, glare, the board partly out of view); re-record or drop them, then solve again",
+        NoticeKind::RobotPoseOutliers => "check the robot poses of the frames the notice names (read before the arm settled, another TCP); re-record them, then solve again",
+        NoticeKind::CornerOutliers => "look at the corners the notice names in the report (glare, a creased or damaged print); flatten or reprint the board, or re-record those frames, then solve again",
+        NoticeKind::ImplausibleTransform => "check the input poses' directions (T_base_flange, not T_flange_base; T_camera_target, not T_target_camera) and the setup (eye_in_hand or eye_to_hand), then solve again",
+        _ => "fix what the notice names, then solve again",
+    }
+}
+
 fn next_for_band(level: Level, what: &str) -> String {
     match level {
         Level::Redo => format!("{what}; then solve again"),
@@ -271,7 +285,7 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
             },
             basis: Basis::SolverNotice,
             reason: notice.message.clone(),
-            next_action: "act on the notice, then solve again".into(),
+            next_action: next_for_notice(notice.kind).into(),
         });
     }
 
@@ -368,6 +382,25 @@ fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> V
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_solver_notice_gets_the_action_of_its_kind() {
+        // Issue #30: "act on the notice" said nothing; each kind names its usual cause.
+        for (kind, words) in [
+            (NoticeKind::FrameOutliers, "blur, glare"),
+            (NoticeKind::RobotPoseOutliers, "before the arm settled"),
+            (NoticeKind::CornerOutliers, "creased or damaged print"),
+            (NoticeKind::ImplausibleTransform, "T_flange_base"),
+            (NoticeKind::NoCovariance, "rotate about other axes"),
+            (NoticeKind::NotConverged, "too few or too alike"),
+        ] {
+            let next = next_for_notice(kind);
+            assert!(
+                next.contains(words) && !next.contains("act on the notice"),
+                "{kind:?}: {next}"
+            );
+        }
+    }
 
     #[test]
     fn bands_are_one_and_three_times_the_accuracy() {
