@@ -102,6 +102,19 @@ pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
         PlanCommand::Check { config } => {
             let prepared = cell::prepare(&config).context("preparing the cell")?;
             outln!("{}", prepared.report);
+            // An adaptive generated plan chooses among more views than its own: every one it
+            // may visit is listed, with the number the run names it by.
+            if let Some(extra) = cell::run::extra_candidates(&prepared) {
+                let plan_poses = prepared.report.poses.len();
+                outln!(
+                    "adaptive plan: the run visits at most {} of these {} candidates, the next-best one at each step; the {} poses above and these {} more (numbered from {plan_poses}):",
+                    prepared.config.plan.max_poses.unwrap_or(plan_poses),
+                    plan_poses + extra.poses.len(),
+                    plan_poses,
+                    extra.poses.len(),
+                );
+                outln!("{extra}");
+            }
             // Good enough to check views with, never to calibrate: `run` refuses it.
             if let Some((file, name)) = prepared.placeholder_intrinsics() {
                 outln!(

@@ -295,7 +295,8 @@ pub(super) fn default_session_dir() -> PathBuf {
 fn progress_bar(len: u64) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} poses  ETA {eta}  {msg}")
+        // "of up to": an adaptive plan stops as soon as the answer is good enough.
+        ProgressStyle::with_template("{bar:30} {pos} of up to {len} poses  {elapsed}  {msg}")
             .expect("valid template"),
     );
     bar

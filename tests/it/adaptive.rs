@@ -260,3 +260,68 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
     let samples = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(samples.pairs.len(), manifest.plan.len());
 }
+
+/// Issue #30: a safety review sees every pose an adaptive run may visit. `handeye plan check`
+/// lists all the candidates (the plan's poses and the extra views), numbered once; the run
+/// says which of those numbers it chose, and each is the pose the session recorded.
+#[test]
+fn plan_check_and_the_adaptive_run_name_the_same_candidates() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = util::sim_cell(dir.path(), 8);
+    let out = util::handeye()
+        .args(["plan", "check", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let listing = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{listing}");
+    assert!(
+        listing.contains("adaptive plan: the run visits at most 8 of these 24 candidates"),
+        "{listing}"
+    );
+    // Candidate number -> the flange position the listing shows (mm, as printed: 3 decimals).
+    let listed: std::collections::HashMap<usize, [f64; 3]> = listing
+        .lines()
+        .filter_map(|line| {
+            let (number, rest) = line.trim_start().split_once("  [")?;
+            let xyz: Vec<f64> = rest
+                .split(']')
+                .next()?
+                .split(',')
+                .map(|v| v.trim().parse().ok())
+                .collect::<Option<_>>()?;
+            Some((number.parse().ok()?, [xyz[0], xyz[1], xyz[2]]))
+        })
+        .collect();
+    assert_eq!(listed.len(), 24, "every candidate listed once");
+
+    let session = dir.path().join("s");
+    let done = util::run_cell(&config, &session);
+    let chosen = &done.adaptive.as_ref().expect("an adaptive run").chosen_now;
+    assert!(!chosen.is_empty());
+    let manifest = done.folder.read_manifest().unwrap();
+    assert_eq!(manifest.plan.len(), chosen.len());
+    for (pose, number) in manifest.plan.iter().zip(chosen) {
+        let shown = listed[number];
+        let t = pose.base_from_flange.translation.vector;
+        for (axis, value) in shown.iter().enumerate() {
+            assert!(
+                (t[axis] - value).abs() < 0.0006,
+                "candidate {number}: the session's pose {t:?} is not the listed {shown:?}"
+            );
+        }
+    }
+    assert!(done
+        .adaptive
+        .as_ref()
+        .unwrap()
+        .to_string()
+        .contains(&format!(
+            "candidates {} of `handeye plan check`",
+            chosen
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+}

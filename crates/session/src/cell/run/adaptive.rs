@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use crate::plan::check::PlanReport;
 use crate::plan::nbv::{AdaptivePlanner, StopCheck};
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{self, SessionError, SessionEvent, SessionOutcome};
@@ -21,8 +22,9 @@ pub struct AdaptiveSummary {
     pub in_session: usize,
     /// Candidate poses that passed their checks.
     pub candidates: usize,
-    /// Poses chosen in this run.
-    pub chosen_now: usize,
+    /// The candidates chosen in this run, in order, by their numbers in `handeye plan check`'s
+    /// listing (the session numbers its poses 0, 1, ... in this order).
+    pub chosen_now: Vec<usize>,
     /// The target 1-sigma uncertainty, mm.
     pub target_uncertainty_mm: f64,
     /// The most poses the plan may take.
@@ -37,10 +39,22 @@ impl std::fmt::Display for AdaptiveSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "adaptive plan: {} of {} candidate poses in the session ({} chosen in this run); target 1-sigma {:.3} mm {}",
+            "adaptive plan: {} of {} candidate poses in the session ({} chosen in this run{}); target 1-sigma {:.3} mm {}",
             self.in_session,
             self.candidates,
-            self.chosen_now,
+            self.chosen_now.len(),
+            if self.chosen_now.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ": candidates {} of `handeye plan check`, in that order",
+                    self.chosen_now
+                        .iter()
+                        .map(usize::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            },
             self.target_uncertainty_mm,
             match self.solved_sigma_mm {
                 Some(s) if self.reached => format!("reached ({s:.3} mm)"),
@@ -60,7 +74,7 @@ impl std::fmt::Display for AdaptiveSummary {
 pub(super) fn drive_plan(
     cell: &PreparedCell,
     setup: session::SessionSetup,
-    plan: &[(Pose, Joints)],
+    (plan, candidate_numbers): (&[(Pose, Joints)], &[usize]),
     start: Joints,
     adaptive: bool,
     hardware: &mut Hardware,
@@ -111,7 +125,12 @@ pub(super) fn drive_plan(
     let summary = AdaptiveSummary {
         in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
         candidates: plan.len(),
-        chosen_now: planner.log.iter().filter(|s| s.chose.is_some()).count(),
+        chosen_now: planner
+            .log
+            .iter()
+            .filter_map(|s| s.chose)
+            .filter_map(|k| candidate_numbers.get(k).copied())
+            .collect(),
         target_uncertainty_mm: cell.config.adaptive_target_mm(),
         max_poses,
         solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
@@ -158,30 +177,54 @@ fn good_enough(cell: &PreparedCell) -> StopCheck {
 /// For an adaptive generated plan: candidate views beyond the plan's `count`, per pose of it.
 pub const ADAPTIVE_EXTRA_CANDIDATES: usize = 2;
 
-/// The candidates of an adaptive plan, checked from where the arm stands: the plan's poses that
-/// pass their checks and, for a generated plan (which then takes at most `count` poses), more
-/// views on the same cap (another seed, [`ADAPTIVE_EXTRA_CANDIDATES`] × `count`), so near and
-/// informative poses are there to choose.
-pub(super) fn adaptive_candidates(cell: &PreparedCell) -> Vec<(Pose, Joints)> {
-    let mut candidates = cell.report.passing();
-    if let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) {
-        let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
-            .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
-        if count > 0 {
-            let extra = GenerateSpec {
-                count,
-                seed: spec.seed.wrapping_add(1),
-                ..spec
-            };
-            let views = Plan {
-                waypoints: cell
-                    .generate_views(&extra)
-                    .into_iter()
-                    .map(Waypoint::LookAt)
-                    .collect(),
-            };
-            candidates.extend(cell.check_plan(&views).passing());
-        }
+/// The views an adaptive generated plan adds to its own poses as candidates (another seed,
+/// [`ADAPTIVE_EXTRA_CANDIDATES`] × `count` views on the same cap, so near and informative poses
+/// are there to choose), checked, numbered after the plan's own poses (`count`, `count + 1`,
+/// ...): what `handeye plan check` lists and the run chooses from. `None` for a plan file or
+/// a plan that is not adaptive.
+pub fn extra_candidates(cell: &PreparedCell) -> Option<PlanReport> {
+    let (Some(spec), None) = (cell.config.plan.generate, &cell.config.plan.file) else {
+        return None;
+    };
+    let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
+        .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
+    if !cell.config.adaptive() || count == 0 {
+        return None;
+    }
+    let extra = GenerateSpec {
+        count,
+        seed: spec.seed.wrapping_add(1),
+        ..spec
+    };
+    let views = Plan {
+        waypoints: cell
+            .generate_views(&extra)
+            .into_iter()
+            .map(Waypoint::LookAt)
+            .collect(),
+    };
+    let mut report = cell.check_plan(&views);
+    for pose in &mut report.poses {
+        pose.index += spec.count;
+    }
+    Some(report)
+}
+
+/// The candidates of an adaptive plan, checked from where the arm stands (the plan's poses that
+/// pass their checks, then the [`extra_candidates`] that do), each with its number in
+/// `handeye plan check`'s listing.
+pub(super) fn adaptive_candidates(cell: &PreparedCell) -> Vec<(usize, Pose, Joints)> {
+    let passing = |report: &PlanReport| -> Vec<(usize, Pose, Joints)> {
+        report
+            .poses
+            .iter()
+            .filter(|p| p.problems.is_empty())
+            .filter_map(|p| p.joints.map(|q| (p.index, p.base_from_flange, q)))
+            .collect()
+    };
+    let mut candidates = passing(&cell.report);
+    if let Some(extra) = extra_candidates(cell) {
+        candidates.extend(passing(&extra));
     }
     candidates
 }

@@ -39,7 +39,7 @@ mod arm_time;
 mod resume;
 
 use adaptive::{adaptive_candidates, drive_plan};
-pub use adaptive::{AdaptiveSummary, ADAPTIVE_EXTRA_CANDIDATES};
+pub use adaptive::{extra_candidates, AdaptiveSummary, ADAPTIVE_EXTRA_CANDIDATES};
 use arm_time::arm_time;
 pub use arm_time::ArmTime;
 pub use resume::ResumedSession;
@@ -468,6 +468,8 @@ fn drive_opened(
     // The plan was checked from an assumed start; check it again from where the arm really is
     // before the first move.
     let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
+    // An adaptive plan's candidates by their numbers in `handeye plan check`'s listing.
+    let mut candidate_numbers = Vec::new();
     let mut plan = match &strategy {
         Strategy::Planned if adaptive => {
             let _ = cell.recheck_from(start);
@@ -477,7 +479,11 @@ fn drive_opened(
                     report: cell.report.to_string(),
                 });
             }
+            candidate_numbers = candidates.iter().map(|(number, ..)| *number).collect();
             candidates
+                .into_iter()
+                .map(|(_, pose, joints)| (pose, joints))
+                .collect()
         }
         Strategy::Planned => match cell.recheck_from(start) {
             Ok(plan) => plan,
@@ -586,7 +592,7 @@ fn drive_opened(
             let driven = drive_plan(
                 &cell,
                 setup,
-                &plan,
+                (&plan, &candidate_numbers),
                 start,
                 adaptive,
                 &mut hardware,
