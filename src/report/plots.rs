@@ -522,6 +522,13 @@ pub fn convergence(input: &ReportInput) -> Result<String, ReportError> {
                     colour.stroke_width(2),
                 ))
                 .map_err(&err)?;
+            // A marker at every step: a phase of one step (the rotation often converges at
+            // once) draws no line, and equal values of two phases would hide one line.
+            chart
+                .draw_series(points.iter().map(|&point| {
+                    Circle::new(point, 3 + 2 * (k as i32 == 0) as i32, colour.filled())
+                }))
+                .map_err(&err)?;
         }
         let entries: Vec<(Mark, String)> = lines
             .iter()

@@ -773,3 +773,25 @@ fn two_answers_are_shown_side_by_side() {
     assert!(caution < use_it.find("<div class=\"snippets\">").unwrap());
     assert_eq!(count(use_it, "<pre id=\"export-"), 4);
 }
+
+/// Issue #30: the convergence plot's rotation line was invisible (the rotation phase often
+/// takes one step, and one point draws no line): every step of every phase has a marker.
+#[test]
+fn every_solver_step_shows_in_the_convergence_plot() {
+    let (_dir, path) = report();
+    let html = std::fs::read_to_string(path).unwrap();
+    let at = html.find("data-kind=\"convergence\"").unwrap();
+    let figure = &html[at..at + html[at..].find("</figure>").unwrap()];
+    let caption = figure
+        .split("iterations: ")
+        .nth(1)
+        .and_then(|rest| rest.split(" refine steps").next())
+        .expect("the caption counts the steps");
+    // "1 rotation, 141 translation, 17" -> 1 + 141 + 17
+    let steps: usize = caption
+        .split(", ")
+        .filter_map(|part| part.split(' ').next()?.parse::<usize>().ok())
+        .sum();
+    assert!(steps > 0, "{caption}");
+    assert_eq!(figure.matches("<circle").count(), steps, "{caption}");
+}
