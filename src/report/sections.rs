@@ -171,10 +171,11 @@ pub(super) fn plain_summary(
     };
     html.push_str("<section id=\"plain\"><h3>In plain words</h3>\n<ul>\n");
     let nominal = nominal.map(|n| n.unknowns());
-    for (k, (key, pose)) in answer.calibration.unknowns().iter().enumerate() {
+    let frames = answer.calibration.setup.unknown_frames();
+    for (k, ((key, pose), (parent, child))) in
+        answer.calibration.unknowns().iter().zip(frames).enumerate()
+    {
         // `T_parent_child`: the child frame's place in the parent frame.
-        let mut names = key.trim_start_matches("T_").splitn(2, '_');
-        let (parent, child) = (names.next().unwrap_or(""), names.next().unwrap_or(""));
         let mut line = format!(
             "<b>{}</b> is at {} in the frame of {} (<code>{key}</code>)",
             escape(&capitalised(&frame(child))),

@@ -405,6 +405,22 @@ fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// The import options of the bags these tests write (the sim arm's frames and topics).
+fn sim_bag_options() -> handeye::formats::bag::BagOptions {
+    handeye::formats::bag::BagOptions {
+        base_frame: "base_link".into(),
+        flange_frame: "tool0".into(),
+        image_topic: "/camera/image_raw".into(),
+        camera_info_topic: Some("/camera/camera_info".into()),
+        tf_topics: vec!["/tf".into(), "/tf_static".into()],
+        tf_static_topics: vec!["/tf_static".into()],
+        select: Default::default(),
+        setup: handeye::setup::Setup::EyeInHand,
+        board: handeye::vision::Target::load(&board_path()).unwrap(),
+        detector: Default::default(),
+    }
+}
+
 fn text(out: &std::process::Output) -> String {
     format!(
         "{}{}",
@@ -529,7 +545,7 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
 /// arrive as it goes, the session is where it was asked for, and the answer is the truth.
 #[test]
 fn the_library_imports_a_bag_into_a_solved_session() {
-    use handeye::formats::bag::{import_bag_session, BagNote, BagOptions, BagSessionRequest};
+    use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
     let dir = tempfile::tempdir().unwrap();
     let board = Board::load(&board_path()).unwrap();
     let trajectory = StopAndGo {
@@ -558,18 +574,7 @@ fn the_library_imports_a_bag_into_a_solved_session() {
     let out = dir.path().join("session");
     let request = BagSessionRequest {
         bag: bag.clone(),
-        options: BagOptions {
-            base_frame: "base_link".into(),
-            flange_frame: "tool0".into(),
-            image_topic: "/camera/image_raw".into(),
-            camera_info_topic: Some("/camera/camera_info".into()),
-            tf_topics: vec!["/tf".into(), "/tf_static".into()],
-            tf_static_topics: vec!["/tf_static".into()],
-            select: Default::default(),
-            setup: handeye::setup::Setup::EyeInHand,
-            board: handeye::vision::Target::load(&board_path()).unwrap(),
-            detector: Default::default(),
-        },
+        options: sim_bag_options(),
         board_file: board_path(),
         decimation: 1.0,
         continuous: false,

@@ -44,6 +44,15 @@ impl Setup {
         }
     }
 
+    /// The (parent, child) frames of the two unknowns, in the order of [`Setup::unknown_names`]
+    /// (`T_parent_child` maps points of the child frame into the parent's).
+    pub fn unknown_frames(self) -> [(&'static str, &'static str); 2] {
+        match self {
+            Setup::EyeInHand => [("flange", "camera"), ("base", "target")],
+            Setup::EyeToHand => [("base", "camera"), ("flange", "target")],
+        }
+    }
+
     /// `B` of `A = X·B·Y` for a robot pose: eye-in-hand `inv(T_base_flange)`, eye-to-hand
     /// `T_base_flange`.
     pub fn chain_b(self, base_from_flange: &Pose) -> Pose {
@@ -198,6 +207,19 @@ impl<'de> Deserialize<'de> for CornerObservation {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_unknowns_frames_are_their_names() {
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let (camera, target) = setup.unknown_names();
+            let names: Vec<String> = setup
+                .unknown_frames()
+                .iter()
+                .map(|(parent, child)| format!("T_{parent}_{child}"))
+                .collect();
+            assert_eq!(names, [camera, target]);
+        }
+    }
 
     #[test]
     fn a_corner_reads_back_as_written_in_the_compact_form() {

@@ -255,10 +255,14 @@ impl Verification {
             s.poses,
             accuracy.translation_mm,
             accuracy.rotation_deg,
-            match level {
-                Level::Good => "",
-                Level::Check => ": check the setup (was the camera or the board moved since the calibration?), then calibrate again if it holds",
-                Level::Redo => ": do not use this result; calibrate again",
+            match (level, self.kind == "holdout") {
+                (Level::Good, _) => "",
+                // Fresh poses disagree with the result: the cell changed since, or the result
+                // was off where the calibration poses did not reach.
+                (Level::Check, true) => ": was the camera or the board moved since the calibration? If not, calibrate again with poses that cover where these are (the largest errors are listed above)",
+                (Level::Redo, true) => ": do not use this result; if nothing moved since the calibration, calibrate again with poses that cover where these are",
+                // The calibration's own samples disagree with each other.
+                (_, false) => ": the samples disagree with each other: look at the largest errors above (a frame or robot pose recorded wrong) and record more poses with larger, more varied rotations",
             }
         );
         (level, line)

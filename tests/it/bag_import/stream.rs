@@ -5,21 +5,6 @@
 
 use super::*;
 
-fn options() -> handeye::formats::bag::BagOptions {
-    handeye::formats::bag::BagOptions {
-        base_frame: "base_link".into(),
-        flange_frame: "tool0".into(),
-        image_topic: "/camera/image_raw".into(),
-        camera_info_topic: Some("/camera/camera_info".into()),
-        tf_topics: vec!["/tf".into(), "/tf_static".into()],
-        tf_static_topics: vec!["/tf_static".into()],
-        select: Default::default(),
-        setup: handeye::setup::Setup::EyeInHand,
-        board: handeye::vision::Target::load(&board_path()).unwrap(),
-        detector: Default::default(),
-    }
-}
-
 /// A stop-and-go bag whose frames while moving are `moving` (a file name for make_bag.py, e.g.
 /// `random:307200` for incompressible noise) and rendered while standing.
 fn stop_and_go_bag(
@@ -70,7 +55,7 @@ fn issue29_pass_two_decodes_only_the_standing_frames() {
         let Some(bag) = stop_and_go_bag(dir.path(), storage, 6, 1.0, "blank") else {
             return;
         };
-        let imported = handeye::formats::bag::import_bag(&bag, &options()).unwrap();
+        let imported = handeye::formats::bag::import_bag(&bag, &sim_bag_options()).unwrap();
         let count = |kind: &str| {
             imported
                 .skipped

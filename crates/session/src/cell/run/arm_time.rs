@@ -33,6 +33,11 @@ fn one() -> f64 {
     1.0
 }
 
+/// Whether `poses` moves that took `spent_s` in all were measured (see [`ArmTime::measured`]).
+fn moves_measured(poses: usize, spent_s: f64) -> bool {
+    poses == 0 || spent_s >= 0.01 * poses as f64
+}
+
 impl ArmTime {
     /// Moving plus settling, s.
     pub fn spent_s(&self) -> f64 {
@@ -49,7 +54,7 @@ impl ArmTime {
     /// under 10 ms a pose — and then nothing was saved either. (A real arm's move and settle
     /// take a second or more.)
     pub fn measured(&self) -> bool {
-        self.poses == 0 || self.spent_s() >= 0.01 * self.poses as f64
+        moves_measured(self.poses, self.spent_s())
     }
 
     /// The file in a session folder that keeps it (written after the run, read by the report).
@@ -122,7 +127,7 @@ pub(super) fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime
     // How this arm moves against the model (a real UR follows it closely; a simulated arm
     // with a fixed move time does not): the full plan's moves are estimated at that pace.
     // (Instant simulated moves measure nothing: the model's own times stand then.)
-    let measured = outcome.arm_time_s() >= 0.01 * outcome.visited_now as f64;
+    let measured = moves_measured(outcome.visited_now, outcome.arm_time_s());
     let move_time_scale = if measured && outcome.modelled_moving_s > 1e-3 {
         outcome.moving_modelled_s / outcome.modelled_moving_s
     } else {
