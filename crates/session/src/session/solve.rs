@@ -15,7 +15,7 @@ pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
 
-use crate::config::{CellConfig, SolveSpace};
+use crate::config::{CellConfig, RobotConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
@@ -511,13 +511,22 @@ fn conclude(
     findings: Vec<Notice>,
 ) {
     solved.calibration.notices.extend(findings);
-    // Swapped unknowns first (their own cause); else an answer simply far from the nominal.
+    // Swapped unknowns first (their own cause); else an answer simply far from the nominal —
+    // unless the nominal is a recorded cell's, which its importer wrote (the identity, or the
+    // data's own answer), not a person's drawing or tape measure.
+    let measured_nominal = !matches!(config.robot, RobotConfig::Recorded { .. });
     let nominal = solve::diagnostics::check_against_nominal(
         &solved.calibration,
         &config.nominal,
         solve::diagnostics::NOMINAL_TOLERANCE_M,
     )
-    .or_else(|| solve::diagnostics::check_far_from_nominal(&solved.calibration, &config.nominal));
+    .or_else(|| {
+        measured_nominal
+            .then(|| {
+                solve::diagnostics::check_far_from_nominal(&solved.calibration, &config.nominal)
+            })
+            .flatten()
+    });
     solved.calibration.notices.extend(nominal);
     let verdict = verdict::assess_solved(
         &solved.calibration,
