@@ -829,4 +829,5 @@ fn bad_bags_fail_clearly_and_write_nothing() {
 }
 
 mod lies;
+mod stops;
 mod stream;

@@ -5,8 +5,10 @@
 //!
 //! * Stop-and-go: a frame is *stationary* when, over `window` around its robot time, the flange
 //!   moved slower than both speed thresholds (`T_base_flange` at `t − w/2`, `t`, `t + w/2`).
-//!   Consecutive stationary frames form an interval; its sharpest frame (variance of the
-//!   Laplacian) is the sample, the others are reported as not the sharpest.
+//!   Consecutive stationary frames at the same place form an interval (frames further apart
+//!   than standing allows start a new one: a camera that sends frames only at the stops); its
+//!   sharpest frame (variance of the Laplacian) is the sample, the others are reported as not the
+//!   sharpest.
 //! * Continuous: every frame at least `spacing` after the previous sample is a sample. The
 //!   offset matters there (the flange moves), so it can be estimated: the board is detected in
 //!   those frames with the camera_info intrinsics, and the offset is the one whose pose pairs fit
@@ -336,6 +338,15 @@ pub(crate) fn select(
                             .max(b.rotation.angle_to(&c.rotation))
                             / h;
                         if v <= o.max_speed_m_s && w <= o.max_speed_rad_s {
+                            // A camera that sends frames only at the stops (triggered by the
+                            // driver) gives consecutive stationary frames of different stops:
+                            // the arm moved between them although no frame saw it move.
+                            if interval
+                                .last()
+                                .is_some_and(|(_, last)| moved_between(last, &b, o))
+                            {
+                                close(&mut interval, frames, &mut samples, &mut skipped)?;
+                            }
                             interval.push((i, b));
                             continue;
                         }
@@ -361,6 +372,14 @@ pub(crate) fn select(
         skipped,
         offset,
     })
+}
+
+/// Whether two stationary frames stand at different stops: the flange is further apart than
+/// standing allows over one window (the speed thresholds times the window).
+fn moved_between(before: &Pose, after: &Pose, o: &SelectOptions) -> bool {
+    let moved_m = (before.translation.vector - after.translation.vector).norm();
+    let turned_rad = before.rotation.angle_to(&after.rotation);
+    moved_m > o.max_speed_m_s * o.window_s || turned_rad > o.max_speed_rad_s * o.window_s
 }
 
 /// The offset whose pose pairs fit a hand-eye calibration best (module docs).
