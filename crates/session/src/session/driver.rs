@@ -1,5 +1,6 @@
-//! The run loop: the arm and camera on the calling thread, detection and recording on a worker
-//! thread, so the vision work for pose i happens while the arm moves to pose i+1.
+//! The run loop: the arm and camera on the calling thread, detection and recording on worker
+//! threads (one per core), so the vision work for pose i happens while the arm moves to pose i+1,
+//! and frames that arrive faster than one core detects them (a recorded cell) use every core.
 //!
 //! Settling: after each move the loop waits the fixed `settle` time, then — when the setup asks
 //! for it and the arm reports joint speeds — until every joint speed has stayed below a threshold
@@ -193,13 +194,15 @@ pub fn run_session(
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
     let camera_model = (!setup.estimate_intrinsics).then(|| *camera.model());
-    let worker = spawn_worker(&setup, camera_model, samples, job_rx, result_tx)?;
+    let workers = spawn_workers(&setup, camera_model, samples, job_rx, result_tx)?;
 
     let mut state = RunState {
         outcome: SessionOutcome::default(),
         attempts: failed_before.iter().map(|i| (*i, 1)).collect(),
         retries: Vec::new(),
         in_flight: 0,
+        submitted: Default::default(),
+        arrived: BTreeMap::new(),
         error: None,
         recorded_before: accepted.len(),
         folder: setup.folder.root().to_path_buf(),
@@ -236,6 +239,7 @@ pub fn run_session(
                         state.outcome.moving_modelled_s += timing.moving_s;
                     }
                     state.in_flight += 1;
+                    state.submitted.push_back(plan_index);
                     job_tx
                         .send(Job {
                             plan_index,
@@ -281,7 +285,7 @@ pub fn run_session(
                 }
             }
             while let Ok(result) = result_rx.try_recv() {
-                state.handle(result, on_event);
+                state.receive(result, on_event);
             }
         }
         // Every result of this pass must be in before deciding on retries.
@@ -290,11 +294,11 @@ pub fn run_session(
     }
     drop(job_tx);
     state.drain(&result_rx, on_event);
-    let worker_result = worker.join();
+    let workers_panicked = workers.into_iter().any(|w| w.join().is_err());
     if let Some(e) = state.error {
         return Err(e);
     }
-    if worker_result.is_err() {
+    if workers_panicked {
         return Err(SessionError::DetectionThread("panicked"));
     }
     let mut outcome = state.outcome;
@@ -310,6 +314,11 @@ struct RunState {
     attempts: BTreeMap<usize, usize>,
     retries: Vec<usize>,
     in_flight: usize,
+    /// The poses handed to the workers, in the order they were (at most one job per pose is in
+    /// flight: retries wait for the pass to drain).
+    submitted: std::collections::VecDeque<usize>,
+    /// Results that finished before an earlier pose's: held so events go out in visit order.
+    arrived: BTreeMap<usize, JobResult>,
     error: Option<SessionError>,
     recorded_before: usize,
     folder: std::path::PathBuf,
@@ -318,6 +327,20 @@ struct RunState {
 impl RunState {
     fn recorded(&self) -> usize {
         self.recorded_before + self.outcome.accepted.len() + self.outcome.skipped.len()
+    }
+
+    /// Takes a worker's result; handles it, and any held behind it, in the order the poses were
+    /// visited (the workers finish in any order).
+    fn receive(&mut self, result: JobResult, on_event: &mut dyn FnMut(SessionEvent)) {
+        self.arrived.insert(result.plan_index, result);
+        while let Some(result) = self
+            .submitted
+            .front()
+            .and_then(|next| self.arrived.remove(next))
+        {
+            self.submitted.pop_front();
+            self.handle(result, on_event);
+        }
     }
 
     fn handle(&mut self, result: JobResult, on_event: &mut dyn FnMut(SessionEvent)) {
@@ -363,7 +386,7 @@ impl RunState {
     ) {
         while self.in_flight > 0 {
             match results.recv() {
-                Ok(result) => self.handle(result, on_event),
+                Ok(result) => self.receive(result, on_event),
                 Err(_) => break,
             }
         }
@@ -565,24 +588,46 @@ impl Fault {
     }
 }
 
-fn spawn_worker(
+/// Starts the detection workers: one per core (at most four), each with its own detector (the
+/// AprilTag detector is single-threaded: frames are the unit of parallel work). A recorded cell
+/// (a bag import, say) hands over frames faster than one core detects them.
+///
+/// Each pose is committed by the worker that measured it (frame, then record); `samples.yaml` is
+/// rewritten under one lock after the sample is added, so each write holds every sample committed
+/// before it, whichever worker finishes first.
+fn spawn_workers(
     setup: &SessionSetup,
     camera_model: Option<CameraModel>,
-    mut samples: BTreeMap<usize, PosePair>,
+    samples: BTreeMap<usize, PosePair>,
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
-) -> Result<std::thread::JoinHandle<()>, SessionError> {
-    let detector = TargetDetector::spawn(&setup.board, setup.detector.clone())
-        .map_err(|e| SessionError::Detector(Box::new(e)))?;
-    let board = setup.board.clone();
-    let folder = setup.folder.clone();
-    let session_setup = setup.setup;
-    let max_rms = setup.max_reprojection_rms_px;
-    let fault = Fault::from_env();
-    std::thread::Builder::new()
-        .name("detection".into())
-        .spawn(move || {
-            for job in jobs {
+) -> Result<Vec<std::thread::JoinHandle<()>>, SessionError> {
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+    let jobs = Arc::new(std::sync::Mutex::new(jobs));
+    let samples = Arc::new(std::sync::Mutex::new(samples));
+    let fault = Arc::new(Fault::from_env());
+    let mut handles = Vec::with_capacity(workers);
+    for worker in 0..workers {
+        let detector = TargetDetector::spawn(&setup.board, setup.detector.clone())
+            .map_err(|e| SessionError::Detector(Box::new(e)))?;
+        let board = setup.board.clone();
+        let folder = setup.folder.clone();
+        let session_setup = setup.setup;
+        let max_rms = setup.max_reprojection_rms_px;
+        let (jobs, samples, fault, results) = (
+            jobs.clone(),
+            samples.clone(),
+            fault.clone(),
+            results.clone(),
+        );
+        let handle = std::thread::Builder::new()
+            .name(format!("detection-{worker}"))
+            .spawn(move || loop {
+                // The lock is held only to take the next job, not while measuring it.
+                let next = jobs.lock().map(|jobs| jobs.recv());
+                let Ok(Ok(job)) = next else {
+                    return;
+                };
                 let visit = process(
                     &job,
                     &detector,
@@ -594,6 +639,9 @@ fn spawn_worker(
                 )
                 .and_then(|visit| {
                     if let Some(sample) = visit.sample() {
+                        let Ok(mut samples) = samples.lock() else {
+                            return Err(SessionError::DetectionThread("panicked"));
+                        };
                         samples.insert(visit.plan_index, sample);
                         let dataset = Dataset {
                             setup: session_setup,
@@ -614,9 +662,11 @@ fn spawn_worker(
                 {
                     return;
                 }
-            }
-        })
-        .map_err(SessionError::DetectionThreadSpawn)
+            })
+            .map_err(SessionError::DetectionThreadSpawn)?;
+        handles.push(handle);
+    }
+    Ok(handles)
 }
 
 fn process(
