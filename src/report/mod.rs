@@ -23,6 +23,7 @@
 //! `result.yaml` also holds carries a `data-key`, so tests can check the page's structure and
 //! values without parsing prose.
 
+mod corners;
 pub mod plots;
 mod sections;
 pub mod session;
@@ -37,6 +38,7 @@ use crate::solve::Calibration;
 use crate::verdict::Verdict;
 
 use base64::prelude::{Engine as _, BASE64_STANDARD};
+pub use corners::{CornerResidual, CORNER_PLOT_KINDS};
 pub use sections::export_forms;
 use sections::{figure, transforms_section, use_section, verdict_card};
 
@@ -103,6 +105,11 @@ pub struct ReportInput {
     /// The config's nominal transforms (what the person measured or expected), shown beside the
     /// answer in plain words; `None` without a config.
     pub nominal: Option<crate::setup::CellTransforms>,
+    /// Every detected corner of the samples with its residual at the primary answer (empty
+    /// without frames: a plain dataset, or no board or intrinsics to reproject with).
+    pub corners: Vec<CornerResidual>,
+    /// The frames' size, px (width, height), when known.
+    pub image_size: Option<(u32, u32)>,
 }
 
 /// Why the report could not be made.
@@ -153,14 +160,15 @@ pub const PLOT_KINDS: [&str; 6] = [
 
 /// The section ids, in page order: the verdict card; the answer in plain words beside the
 /// nominal; "use it" (export snippets); the evidence
-/// (findings, residual plots, per-pose table, frames, cell sketch, rotation axes); the details
+/// (findings, residual plots, corner residuals and coverage, per-pose table, frames, cell sketch, rotation axes); the details
 /// (full numbers of every answer, solver convergence).
-pub const SECTIONS: [&str; 11] = [
+pub const SECTIONS: [&str; 12] = [
     "verdict",
     "plain",
     "use",
     "warnings",
     "residuals",
+    "corners",
     "per-pose",
     "frames",
     "poses-3d",
@@ -246,6 +254,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
         );
     }
     html.push_str("</section>\n");
+    corners::corners_section(&mut html, input)?;
 
     per_pose_table(&mut html, input);
     frames_section(&mut html, input);

@@ -11,7 +11,7 @@ use image::codecs::jpeg::JpegEncoder;
 use image::{imageops, Rgb, RgbImage};
 use nalgebra::Point2;
 
-use super::{FrameThumbnail, ReportAnswer, ReportError, ReportInput};
+use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use crate::camera_model::CameraModel;
 use crate::cell::run::CellRun;
 use crate::dataset::Dataset;
@@ -118,6 +118,22 @@ pub fn from_session(
         })
         .collect();
 
+    let mut corners = Vec::new();
+    if let (Some(optics), Some(primary)) = (optics, answers.first()) {
+        for (sample, (pair, visit)) in pairs.iter().zip(&sample_visits).enumerate() {
+            let Some(visit) = visit else { continue };
+            let predicted = primary
+                .calibration
+                .predict_camera_from_target(&pair.base_from_flange);
+            corners.extend(corner_residuals(optics, &predicted, &visit.corners_px).map(
+                |(detected_px, residual_px)| CornerResidual {
+                    sample,
+                    detected_px,
+                    residual_px,
+                },
+            ));
+        }
+    }
     let mut thumbnails = Vec::new();
     if let (Some(optics), Some(primary)) = (optics, answers.first()) {
         for (sample, (pair, visit)) in pairs.iter().zip(&sample_visits).enumerate() {
@@ -155,6 +171,8 @@ pub fn from_session(
         verdict: None,
         arm_time: None,
         nominal: None,
+        corners,
+        image_size: optics.map(|o| (o.camera.width, o.camera.height)),
     })
 }
 
@@ -165,19 +183,25 @@ pub fn reprojection_rms(
     camera_from_target: &Pose,
     corners_px: &[CornerObservation],
 ) -> Option<f64> {
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for c in corners_px {
-        let Some(point) = optics.board.observation_point(c) else {
-            continue;
-        };
-        let Some(pixel) = optics.camera.project(&(camera_from_target * point)) else {
-            continue;
-        };
-        sum += (pixel - c.pixel).norm_squared();
-        count += 1;
-    }
+    let (sum, count) = corner_residuals(optics, camera_from_target, corners_px)
+        .fold((0.0, 0usize), |(sum, count), (_, r)| {
+            (sum + r.norm_squared(), count + 1)
+        });
     (count > 0).then(|| (sum / count as f64).sqrt())
+}
+
+/// Each detected corner that the board knows and that projects, with its residual (detected
+/// minus the board's corner projected at `camera_from_target`), px.
+fn corner_residuals<'c>(
+    optics: Optics<'c>,
+    camera_from_target: &'c Pose,
+    corners_px: &'c [CornerObservation],
+) -> impl Iterator<Item = (Point2<f64>, nalgebra::Vector2<f64>)> + 'c {
+    corners_px.iter().filter_map(move |c| {
+        let point = optics.board.observation_point(c)?;
+        let pixel = optics.camera.project(&(camera_from_target * point))?;
+        Some((c.pixel, c.pixel - pixel))
+    })
 }
 
 /// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at `camera_from_target`

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use handeye::report::{PLOT_KINDS, SECTIONS};
+use handeye::report::{CORNER_PLOT_KINDS, PLOT_KINDS, SECTIONS};
 use handeye::result::ResultFile;
 
 use crate::util;
@@ -103,7 +103,7 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
             "section {id}"
         );
     }
-    for kind in PLOT_KINDS {
+    for kind in PLOT_KINDS.iter().chain(&CORNER_PLOT_KINDS) {
         assert_eq!(
             count(&html, &format!("data-kind=\"{kind}\"")),
             1,
@@ -112,8 +112,25 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     }
     // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere: one
     // inline script (copy buttons, sorting, the frame overlay), no URL but the SVG namespace.
-    assert_eq!(count(&html, "<figure class=\"plot\""), PLOT_KINDS.len());
-    assert_eq!(count(&html, "<svg"), PLOT_KINDS.len());
+    // The corner section holds every corner of every sample (10 samples of the 6x6 grid).
+    let visits = handeye::session::SessionFolder::open(&path.parent().unwrap().to_path_buf())
+        .unwrap()
+        .read_visits()
+        .unwrap();
+    let corners: usize = visits
+        .iter()
+        .filter(|v| v.camera_from_target.is_some())
+        .map(|v| v.corners_px.len())
+        .sum();
+    assert_eq!(numbers_at(&html, "corners.count"), vec![corners as f64]);
+    let rms = numbers_at(&html, "corners.rms_px")[0];
+    assert!(
+        rms > 0.0 && rms < 0.2,
+        "sim corners reproject within 0.2 px: {rms}"
+    );
+    let plots = PLOT_KINDS.len() + CORNER_PLOT_KINDS.len();
+    assert_eq!(count(&html, "<figure class=\"plot\""), plots);
+    assert_eq!(count(&html, "<svg"), plots);
     assert!(!html.contains("http://") || count(&html, "http://") == count(&html, "xmlns"));
     assert!(!html.contains("https://"));
     assert_eq!(count(&html, "<script"), 1);
@@ -219,7 +236,8 @@ fn report_reads_verdict_then_use_then_evidence_then_details() {
     let (evidence, details) = (at(">Evidence</h2>"), at(">Details</h2>"));
     // verdict, plain, use | the evidence | ... | the details: transforms, convergence.
     assert!(positions[2] < evidence && evidence < positions[3]);
-    assert!(positions[8] < details && details < positions[9]);
+    let transforms = SECTIONS.iter().position(|s| *s == "transforms").unwrap();
+    assert!(positions[transforms - 1] < details && details < positions[transforms]);
 }
 
 /// HTML text unescaping (the inverse of `report::escape`).
@@ -704,6 +722,8 @@ fn two_answers_are_shown_side_by_side() {
         verdict: None,
         arm_time: None,
         nominal: None,
+        corners: Vec::new(),
+        image_size: None,
     };
     let html = render_html(&input).unwrap();
     // Without a config's nominal values the plain summary says where the answer puts each frame.
@@ -741,6 +761,11 @@ fn two_answers_are_shown_side_by_side() {
     for kind in PLOT_KINDS {
         assert_eq!(count(&html, &format!("data-kind=\"{kind}\"")), 1, "{kind}");
     }
+    // Pose pairs alone have no corners: the corner section says so instead of empty plots.
+    for kind in CORNER_PLOT_KINDS {
+        assert_eq!(count(&html, &format!("data-kind=\"{kind}\"")), 0, "{kind}");
+    }
+    assert!(html.contains("No detected corners in this input"));
     // Only the refined answer has a covariance; the iterative one says so instead of a number.
     assert_eq!(
         count(
