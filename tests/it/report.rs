@@ -113,7 +113,7 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere: one
     // inline script (copy buttons, sorting, the frame overlay), no URL but the SVG namespace.
     // The corner section holds every corner of every sample (10 samples of the 6x6 grid).
-    let visits = handeye::session::SessionFolder::open(&path.parent().unwrap().to_path_buf())
+    let visits = handeye::session::SessionFolder::open(path.parent().unwrap())
         .unwrap()
         .read_visits()
         .unwrap();
