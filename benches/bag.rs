@@ -9,6 +9,12 @@
 //! moves are a blank image: they are rejected as moving before being decoded, as real ones would
 //! be.
 //!
+//! Printed once before criterion's rounds: the whole command on all cores and pinned to one
+//! (`taskset -c 0`), each with its CPU time and peak RSS (GNU time), and the same bag read by the
+//! pure-Python `rosbags` (every message deserialised; `benches/read_bag_rosbags.py`). Issue #29's
+//! floors: peak RSS ≤ 300 MB, CPU ≤ 2× the Python reader's. `BAG_SECONDS=600` makes it a
+//! 10-minute bag (16.6 GB on disk) measured once, without criterion's rounds.
+//!
 //! `cargo bench --bench bag -- --warm-up-time 1 --measurement-time 3`
 
 use std::collections::BTreeMap;
@@ -68,7 +74,7 @@ impl Cdr {
     }
 }
 
-fn write_bag(dir: &Path) -> std::path::PathBuf {
+fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     let repo = util::repo();
     let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
     let camera = CameraModel::load(&repo.join("configs/cameras/sim-1280x720.yaml")).unwrap();
@@ -113,27 +119,24 @@ fn write_bag(dir: &Path) -> std::path::PathBuf {
         .collect();
     let blank = vec![110u8; (camera.width * camera.height) as usize];
     let (stay, travel) = (1.55, 1.5);
+    // The views in a loop (a bag longer than one pass, `BAG_SECONDS`, visits them again).
     let at = |t: f64| -> (Pose, Option<usize>) {
         let period = stay + travel;
-        let k = ((t / period).floor() as usize).min(n - 1);
+        let k = (t / period).floor() as usize;
         let within = t - k as f64 * period;
-        if within <= stay || k + 1 >= n {
-            return (views[k], Some(k));
+        if within <= stay {
+            return (views[k % n], Some(k % n));
         }
         let s = (within - stay) / travel;
         (
-            interpolate(&views[k], &views[k + 1], s * s * (3.0 - 2.0 * s)),
+            interpolate(&views[k % n], &views[(k + 1) % n], s * s * (3.0 - 2.0 * s)),
             None,
         )
     };
 
     let bag = dir.join("bag");
     std::fs::create_dir_all(&bag).unwrap();
-    std::fs::write(
-        bag.join("metadata.yaml"),
-        "rosbag2_bagfile_information: {}\n",
-    )
-    .unwrap();
+
     let file = std::fs::File::create(bag.join("bag_0.mcap")).unwrap();
     let mut w = mcap::WriteOptions::new()
         .compression(None)
@@ -150,7 +153,7 @@ fn write_bag(dir: &Path) -> std::path::PathBuf {
     let info = channel("/camera/camera_info", "sensor_msgs/msg/CameraInfo");
     let start: i64 = 1_700_000_000_000_000_000;
     let mut events: Vec<(i64, u16, Vec<u8>)> = Vec::new();
-    let duration = 60.0;
+    let duration = seconds;
     for k in 0..=(duration * 125.0) as i64 {
         let t = k as f64 / 125.0;
         let mut m = Cdr::new();
@@ -202,6 +205,29 @@ fn write_bag(dir: &Path) -> std::path::PathBuf {
         events.push((stamp + 2_000_000, image, m.0));
     }
     events.sort_by_key(|e| e.0);
+    // rosbag2's metadata.yaml, complete enough for `rosbags` (the Python reader compared with).
+    let counts = [
+        ("/tf", "tf2_msgs/msg/TFMessage", tf),
+        ("/camera/image_raw", "sensor_msgs/msg/Image", image),
+        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", info),
+    ]
+    .map(|(topic, ty, id)| {
+        let count = events.iter().filter(|e| e.1 == id).count();
+        format!("    - topic_metadata: {{name: {topic}, type: {ty}, serialization_format: cdr, offered_qos_profiles: ''}}\n      message_count: {count}\n")
+    });
+    let (first, last) = (events[0].0, events[events.len() - 1].0);
+    std::fs::write(
+        bag.join("metadata.yaml"),
+        format!(
+            "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  relative_file_paths: [bag_0.mcap]\n  duration: {{nanoseconds: {}}}\n  starting_time: {{nanoseconds_since_epoch: {first}}}\n  message_count: {}\n  topics_with_message_count:\n{}  compression_format: ''\n  compression_mode: ''\n  files:\n    - path: bag_0.mcap\n      starting_time: {{nanoseconds_since_epoch: {first}}}\n      duration: {{nanoseconds: {}}}\n      message_count: {}\n",
+            last - first,
+            events.len(),
+            counts.concat(),
+            last - first,
+            events.len()
+        ),
+    )
+    .unwrap();
     for (seq, (time, channel_id, data)) in events.into_iter().enumerate() {
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
@@ -218,9 +244,60 @@ fn write_bag(dir: &Path) -> std::path::PathBuf {
     bag
 }
 
+/// `cmd` under GNU time (when it is there), its output and the time line.
+fn timed(mut cmd: Command, label: &str) -> std::process::Output {
+    let mut timed = if Path::new("/usr/bin/time").exists() {
+        let mut c = Command::new("/usr/bin/time");
+        c.args([
+            "-f",
+            &format!("{label}: %e s wall, %U s user, %S s system, %M kB peak RSS"),
+        ])
+        .arg(cmd.get_program())
+        .args(cmd.get_args());
+        c
+    } else {
+        cmd
+    };
+    let o = timed.output().unwrap();
+    println!(
+        "{label}:\n{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+fn import_command(bag: &Path, board: &Path, out: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_handeye"));
+    c.args(["import", "bag"])
+        .arg(bag)
+        .args([
+            "--base",
+            "base",
+            "--flange",
+            "tool0",
+            "--image",
+            "/camera/image_raw",
+        ])
+        .args(["--camera-info", "/camera/camera_info", "--board"])
+        .arg(board)
+        .arg("-o")
+        .arg(out);
+    c
+}
+
 fn main() {
+    // `BAG_SECONDS=600` writes a 10-minute bag (16.6 GB: needs the disk) and measures it once.
+    let seconds: f64 = std::env::var("BAG_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(60.0);
     let dir = tempfile::tempdir().unwrap();
-    let bag = write_bag(dir.path());
+    // `HANDEYE_BENCH_BAG_DIR`: write the bag there and keep it (to profile the import by hand).
+    let bag = match std::env::var_os("HANDEYE_BENCH_BAG_DIR") {
+        Some(keep) => write_bag(Path::new(&keep), seconds),
+        None => write_bag(dir.path(), seconds),
+    };
     let size: u64 = std::fs::read_dir(&bag)
         .unwrap()
         .filter_map(Result::ok)
@@ -250,40 +327,42 @@ fn main() {
         imported.images
     );
     drop(imported);
-    let started = std::time::Instant::now();
-    // Under GNU time when it is there: CPU seconds tell more than wall time on a shared machine.
-    let mut once = if Path::new("/usr/bin/time").exists() {
-        let mut c = Command::new("/usr/bin/time");
-        c.args([
-            "-f",
-            "GNU time: %e s wall, %U s user, %S s system, %M kB peak RSS",
-        ])
-        .arg(env!("CARGO_BIN_EXE_handeye"));
-        c
-    } else {
-        Command::new(env!("CARGO_BIN_EXE_handeye"))
-    };
-    let o = once
-        .args(["import", "bag"])
-        .arg(&bag)
-        .args([
-            "--image",
-            "/camera/image_raw",
-            "--camera-info",
-            "/camera/camera_info",
-            "--board",
-        ])
-        .arg(&board)
-        .arg("-o")
-        .arg(dir.path().join("session-once"))
-        .output()
-        .unwrap();
-    println!(
-        "whole command once: {:.2} s\n{}{}",
-        started.elapsed().as_secs_f64(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
+    // The whole command on both cores, then pinned to one (`taskset`): the detection of the
+    // chosen frames runs on every core.
+    timed(
+        import_command(&bag, &board, &dir.path().join("session-once")),
+        "whole command, all cores",
     );
+    if Path::new("/usr/bin/taskset").exists() {
+        let mut one = Command::new("/usr/bin/taskset");
+        let inner = import_command(&bag, &board, &dir.path().join("session-one-core"));
+        one.args(["-c", "0"])
+            .arg(inner.get_program())
+            .args(inner.get_args());
+        timed(one, "whole command, one core (taskset -c 0)");
+    }
+    // The same bag read by the pure-Python `rosbags` (every message deserialised), in the venv
+    // tests/it/bag_import.rs uses (or `HANDEYE_BAG_PYTHON`): what a ROS user's own script costs.
+    let python = std::env::var_os("HANDEYE_BAG_PYTHON")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(&std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
+                .join("tmp/bag-venv/bin/python")
+        });
+    if python.is_file() {
+        let mut c = Command::new(&python);
+        c.arg(util::repo().join("benches/read_bag_rosbags.py"))
+            .arg(&bag);
+        timed(c, "rosbags (Python) reading every message");
+    } else {
+        println!(
+            "rosbags comparison skipped: no {} (scripts/test.sh makes it)",
+            python.display()
+        );
+    }
+    if seconds > 60.0 {
+        return;
+    }
     let mut run = 0;
     let mut criterion = Criterion::default().configure_from_args().sample_size(10);
     criterion.bench_function(
@@ -292,23 +371,7 @@ fn main() {
             b.iter(|| {
                 run += 1;
                 let out = dir.path().join(format!("session-{run}"));
-                let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
-                    .args(["import", "bag"])
-                    .arg(&bag)
-                    .args([
-                        "--base",
-                        "base",
-                        "--flange",
-                        "tool0",
-                        "--image",
-                        "/camera/image_raw",
-                    ])
-                    .args(["--camera-info", "/camera/camera_info", "--board"])
-                    .arg(&board)
-                    .arg("-o")
-                    .arg(&out)
-                    .output()
-                    .unwrap();
+                let o = import_command(&bag, &board, &out).output().unwrap();
                 assert!(
                     o.status.success(),
                     "{}{}",

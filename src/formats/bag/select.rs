@@ -291,33 +291,27 @@ pub(crate) fn select(
                          samples: &mut Vec<BagSample>,
                          skipped: &mut Vec<Skip>|
              -> Result<(), BagError> {
-                let mut best: Option<BagSample> = None;
-                for (i, pose) in interval.drain(..) {
-                    let image = &images[i];
-                    let gray = decode(path, topic, image, frames)?;
-                    let candidate = BagSample {
-                        image_stamp_ns: image.stamp_ns,
-                        robot_stamp_ns: image.stamp_ns - offset_ns,
-                        base_from_flange: pose,
-                        sharpness: sharpness(&gray),
-                        image: gray,
-                    };
-                    match &best {
-                        Some(b) if b.sharpness >= candidate.sharpness => skipped.push(Skip {
-                            stamp_ns: candidate.image_stamp_ns,
+                if interval.is_empty() {
+                    return Ok(());
+                }
+                let (best, sharpness, image) = sharpest(path, topic, images, interval, frames)?;
+                for (k, (i, _)) in interval.iter().enumerate() {
+                    if k != best {
+                        skipped.push(Skip {
+                            stamp_ns: images[*i].stamp_ns,
                             reason: SkipReason::NotSharpest,
-                        }),
-                        _ => {
-                            if let Some(b) = best.replace(candidate) {
-                                skipped.push(Skip {
-                                    stamp_ns: b.image_stamp_ns,
-                                    reason: SkipReason::NotSharpest,
-                                });
-                            }
-                        }
+                        });
                     }
                 }
-                samples.extend(best);
+                let (i, pose) = interval[best];
+                samples.push(BagSample {
+                    image_stamp_ns: images[i].stamp_ns,
+                    robot_stamp_ns: images[i].stamp_ns - offset_ns,
+                    base_from_flange: pose,
+                    sharpness,
+                    image,
+                });
+                interval.clear();
                 Ok(())
             };
             for &i in &order {
@@ -372,6 +366,79 @@ pub(crate) fn select(
         skipped,
         offset,
     })
+}
+
+/// The sharpest frame of a stationary interval: its position in `interval`, its sharpness and
+/// the frame (the first of equally sharp ones). The frames are read one after another (the bag
+/// is read in order) and scored on every core, a few at a time: memory stays a few frames
+/// whatever the interval's length.
+fn sharpest(
+    path: &Path,
+    topic: &str,
+    images: &[ImageRef],
+    interval: &[(usize, Pose)],
+    frames: &mut Frames<'_>,
+) -> Result<(usize, f64, GrayImage), BagError> {
+    type Best = Option<(f64, usize, GrayImage)>;
+    // Sharper wins; of equally sharp frames the earlier one.
+    let keep = |best: &mut Best, candidate: (f64, usize, GrayImage)| {
+        if best
+            .as_ref()
+            .is_none_or(|b| candidate.0 > b.0 || (candidate.0 == b.0 && candidate.1 < b.1))
+        {
+            *best = Some(candidate);
+        }
+    };
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get().min(4))
+        .min(interval.len());
+    let mut best: Best = None;
+    let mut read = Ok(());
+    let (to_workers, jobs) = std::sync::mpsc::sync_channel::<(usize, GrayImage)>(workers);
+    let jobs = std::sync::Mutex::new(jobs);
+    std::thread::scope(|scope| {
+        let scorers: Vec<_> = (0..workers)
+            .map(|_| {
+                let jobs = &jobs;
+                scope.spawn(move || {
+                    let mut best: Best = None;
+                    while let Ok(Ok((k, gray))) = jobs.lock().map(|j| j.recv()) {
+                        keep(&mut best, (sharpness(&gray), k, gray));
+                    }
+                    best
+                })
+            })
+            .collect();
+        for (k, (i, _)) in interval.iter().enumerate() {
+            match decode(path, topic, &images[*i], frames) {
+                Ok(gray) => {
+                    if to_workers.send((k, gray)).is_err() {
+                        break;
+                    }
+                }
+                Err(e) => {
+                    read = Err(e);
+                    break;
+                }
+            }
+        }
+        drop(to_workers);
+        for scorer in scorers {
+            // A scorer only computes a number: it cannot panic short of a bug.
+            if let Ok(Some(candidate)) = scorer.join() {
+                keep(&mut best, candidate);
+            }
+        }
+    });
+    read?;
+    let (sharpness, k, image) = best.ok_or_else(|| BagError::Message {
+        path: path.to_path_buf(),
+        topic: topic.to_string(),
+        index: images[interval[0].0].index,
+        stamp_ns: images[interval[0].0].stamp_ns,
+        source: super::MessageError::Pixels("no frame of the interval could be scored".into()),
+    })?;
+    Ok((k, sharpness, image))
 }
 
 /// Whether two stationary frames stand at different stops: the flange is further apart than
