@@ -245,7 +245,7 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
 }
 
 /// `cmd` under GNU time (when it is there), its output and the time line.
-fn timed(mut cmd: Command, label: &str) -> std::process::Output {
+fn timed(cmd: Command, label: &str) -> std::process::Output {
     let mut timed = if Path::new("/usr/bin/time").exists() {
         let mut c = Command::new("/usr/bin/time");
         c.args([
