@@ -74,6 +74,12 @@ impl Cdr {
     }
 }
 
+/// A message of the bag to write: its bytes, or an image (stamp, view shown or moving).
+enum Data {
+    Bytes(Vec<u8>),
+    Image(i64, Option<usize>),
+}
+
 fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     let repo = util::repo();
     let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
@@ -152,7 +158,8 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     let image = channel("/camera/image_raw", "sensor_msgs/msg/Image");
     let info = channel("/camera/camera_info", "sensor_msgs/msg/CameraInfo");
     let start: i64 = 1_700_000_000_000_000_000;
-    let mut events: Vec<(i64, u16, Vec<u8>)> = Vec::new();
+    // The image messages are made as they are written (a 10-minute bag does not fit in memory).
+    let mut events: Vec<(i64, u16, Data)> = Vec::new();
     let duration = seconds;
     for k in 0..=(duration * 125.0) as i64 {
         let t = k as f64 / 125.0;
@@ -161,7 +168,7 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         m.header(start + (t * 1e9).round() as i64, "base");
         m.string("tool0");
         m.pose(&at(t).0);
-        events.push((start + (t * 1e9).round() as i64, tf, m.0));
+        events.push((start + (t * 1e9).round() as i64, tf, Data::Bytes(m.0)));
     }
     let mut m = Cdr::new();
     m.header(start, "camera");
@@ -185,11 +192,14 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         m.u32(0);
     }
     m.0.push(0);
-    events.push((start, info, m.0));
+    events.push((start, info, Data::Bytes(m.0)));
     for i in 0..(duration * 30.0) as i64 {
         let t = i as f64 / 30.0;
         let stamp = start + (t * 1e9).round() as i64;
-        let pixels = match at(t).1 {
+        events.push((stamp + 2_000_000, image, Data::Image(stamp, at(t).1)));
+    }
+    let image_message = |stamp: i64, view: Option<usize>| {
+        let pixels = match view {
             Some(k) => &frames[k],
             None => &blank,
         };
@@ -202,8 +212,8 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         m.u32(camera.width);
         m.u32(pixels.len() as u32);
         m.0.extend_from_slice(pixels);
-        events.push((stamp + 2_000_000, image, m.0));
-    }
+        m.0
+    };
     events.sort_by_key(|e| e.0);
     // rosbag2's metadata.yaml, complete enough for `rosbags` (the Python reader compared with).
     let counts = [
@@ -229,6 +239,10 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     )
     .unwrap();
     for (seq, (time, channel_id, data)) in events.into_iter().enumerate() {
+        let data = match data {
+            Data::Bytes(bytes) => bytes,
+            Data::Image(stamp, view) => image_message(stamp, view),
+        };
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id,
