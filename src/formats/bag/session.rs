@@ -352,11 +352,23 @@ pub fn import_bag_session(
     staging
         .commit(&out)
         .with_context(|| format!("moving the session into {}", out.display()))?;
-    // The solve ran in the staging folder; name the session where it is now.
+    // The solve ran in the staging folder; name the session where it is now (the verdict's
+    // advice in result.yaml names the folder, e.g. `handeye replay DIR --config ...`).
+    let (staged_name, final_name) = (stage.to_string_lossy(), out.to_string_lossy());
     let summary = solved
         .summary
         .trim_end()
-        .replace(&*stage.to_string_lossy(), &out.to_string_lossy());
+        .replace(&*staged_name, &final_name);
+    let result_file = out.join("result.yaml");
+    if let Ok(text) = std::fs::read_to_string(&result_file) {
+        if text.contains(&*staged_name) {
+            crate::atomic_file::write_atomic(
+                &result_file,
+                text.replace(&*staged_name, &final_name).as_bytes(),
+            )
+            .with_context(|| format!("writing {}", result_file.display()))?;
+        }
+    }
     Ok(BagSession {
         folder: out,
         accepted: outcome.accepted.len(),
