@@ -529,3 +529,5 @@ fn detect_on_several_workers_gives_the_same_output_in_order() {
     let printed: Vec<&str> = stdout.lines().filter(|l| l.ends_with(".png:")).collect();
     assert_eq!(printed.len(), 2, "{stdout}");
 }
+
+mod small_tags;

@@ -32,6 +32,7 @@ use nalgebra::{Point2, Point3};
 use super::board::Board;
 use super::family::TagFamily;
 use super::ffi;
+use super::regrid::Grid;
 use super::xcorner;
 use super::TargetError;
 use handeye_core::setup::CornerObservation;
@@ -57,6 +58,9 @@ pub struct DetectorOptions {
     pub quad_sigma: f32,
     /// Highest accepted hamming distance (bit errors corrected); 0-2.
     pub max_hamming: u32,
+    /// Search again at full resolution where the tags found say a missing tag is (small or
+    /// blurred tags the quad search missed; `vision::regrid`).
+    pub second_pass: bool,
 }
 
 impl Default for DetectorOptions {
@@ -66,6 +70,7 @@ impl Default for DetectorOptions {
             threads: 1,
             quad_sigma: 0.0,
             max_hamming: 1,
+            second_pass: true,
         }
     }
 }
@@ -266,6 +271,7 @@ impl TagDetector {
             cells_across: board.layout().width_at_border as f64,
         });
         let thread_options = options.clone();
+        let grid = options.second_pass.then(|| Grid::of(board));
         let thread = std::thread::Builder::new()
             .name("apriltag".to_string())
             .spawn(move || {
@@ -273,6 +279,7 @@ impl TagDetector {
                     family,
                     border_bits,
                     x_junctions,
+                    grid,
                     thread_options,
                     receiver,
                     ready_tx,
@@ -398,6 +405,7 @@ fn detector_thread(
     family: TagFamily,
     border_bits: u32,
     x_junctions: Option<XJunctions>,
+    grid: Option<Grid>,
     options: DetectorOptions,
     jobs: mpsc::Receiver<Job>,
     ready: mpsc::Sender<Result<(), String>>,
@@ -424,20 +432,38 @@ fn detector_thread(
             None => binomial_blur(&binomial_blur(&image)),
         };
         let detections = detector.detect(&searched).map(|tags| {
-            tags.into_iter()
-                .map(|t| {
-                    let mut corners_px = to_project_pixels(t.corners);
-                    if let Some(x) = &x_junctions {
-                        x.refine(&image, &mut corners_px);
-                    }
-                    RawDetection {
-                        id: t.id,
-                        hamming: t.hamming,
-                        decision_margin: t.decision_margin,
-                        corners_px,
-                    }
+            let mut found: Vec<RawDetection> = tags
+                .into_iter()
+                .map(|t| RawDetection {
+                    id: t.id,
+                    hamming: t.hamming,
+                    decision_margin: t.decision_margin,
+                    corners_px: to_project_pixels(t.corners),
                 })
-                .collect()
+                .collect();
+            if let Some(grid) = &grid {
+                let first: Vec<(u32, [Point2<f64>; 4])> = found
+                    .iter()
+                    .filter(|d| d.hamming <= options.max_hamming)
+                    .map(|d| (d.id, d.corners_px))
+                    .collect();
+                found.extend(
+                    grid.refind(&mut detector, &searched, &first, to_project_pixels)
+                        .into_iter()
+                        .map(|t| RawDetection {
+                            id: t.id,
+                            hamming: t.hamming,
+                            decision_margin: t.decision_margin,
+                            corners_px: t.corners_px,
+                        }),
+                );
+            }
+            if let Some(x) = &x_junctions {
+                for d in &mut found {
+                    x.refine(&image, &mut d.corners_px);
+                }
+            }
+            found
         });
         let _ = reply.send(detections);
     }

@@ -183,12 +183,28 @@ impl DetectorHandle {
     /// Runs the detector on `image`, after checking that its size is safe for the C code at
     /// this detector's decimation (see the module docs).
     pub(super) fn detect(&mut self, image: &GrayImage) -> Result<Vec<RawTag>, TargetError> {
-        check_image_size(
-            image.width(),
-            image.height(),
-            self.decimation,
-            self.quad_sigma,
-        )?;
+        self.detect_at(image, self.decimation)
+    }
+
+    /// [`Self::detect`] with the quad search at `decimation` for this image only (the second
+    /// pass searches small crops at full resolution).
+    pub(super) fn detect_at(
+        &mut self,
+        image: &GrayImage,
+        decimation: f32,
+    ) -> Result<Vec<RawTag>, TargetError> {
+        check_image_size(image.width(), image.height(), decimation, self.quad_sigma)?;
+        if decimation != self.decimation {
+            self.detector.set_decimation(decimation);
+            let tags = self.detect_checked(image);
+            self.detector.set_decimation(self.decimation);
+            return tags;
+        }
+        self.detect_checked(image)
+    }
+
+    /// The C detector on an image whose size was checked for the current decimation.
+    fn detect_checked(&mut self, image: &GrayImage) -> Result<Vec<RawTag>, TargetError> {
         let (width, height) = (image.width() as usize, image.height() as usize);
         let mut buffer = Image::zeros_with_alignment(width, height, 96).map_err(|error| {
             TargetError::Detector {

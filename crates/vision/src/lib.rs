@@ -24,6 +24,7 @@ pub mod family;
 mod ffi;
 pub mod pnp;
 pub mod print;
+mod regrid;
 pub mod sharpness;
 pub mod subpix;
 pub mod target;
