@@ -24,6 +24,7 @@
 //! values without parsing prose.
 
 pub mod plots;
+pub mod rig;
 mod sections;
 pub mod session;
 
