@@ -34,8 +34,14 @@ pub(super) fn run(config: Option<&Path>, out: PathBuf, resume: bool) -> anyhow::
         outln!("pose {:>3}/{}: {}", p.plan_index + 1, p.of, cameras.join(" · "));
     };
     let done = rig::run_rig(&config, &out, resume, stop, &mut progress)?;
-    for (camera, pose, why) in &done.failed_cameras {
-        outln!("camera `{camera}` stopped delivering frames at plan pose {pose} ({why}): its samples until then are kept and solved");
+    for f in &done.failed_cameras {
+        outln!(
+            "camera `{}` stopped delivering frames at plan pose {} ({}): its samples until then are kept and solved; `handeye run --resume {}` asks it again for the poses it missed",
+            f.camera,
+            f.plan_index,
+            f.error,
+            done.folder.display()
+        );
     }
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",

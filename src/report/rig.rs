@@ -50,6 +50,15 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         escape(&result.reason),
         v = escape(&result.verdict),
     );
+    for f in handeye_session::cell::rig::read_failures(folder) {
+        let _ = write!(
+            html,
+            "<p class=\"REDO\">Camera <b>{}</b> stopped delivering frames at plan pose {}: {}. Its samples until then are kept and solved.</p>",
+            escape(&f.camera),
+            f.plan_index,
+            escape(&f.error)
+        );
+    }
     html.push_str("<h2>Cameras</h2><table><tr><th>camera</th><th>verdict</th><th>samples</th><th>solve</th><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for c in &result.cameras {
         let rows: Vec<(&str, &NamedTransform)> = [("joint", c.joint.as_ref()), ("alone", c.alone.as_ref())]

@@ -116,6 +116,10 @@ pub struct RigOptions {
     pub estimate_noise: bool,
     /// Most Levenberg-Marquardt iterations per fit.
     pub max_iterations: usize,
+    /// The pixel-space solve estimates every flange pose too, around the reported one with this
+    /// 1-sigma per axis (m, rad: the robot's repeatability); every camera that sees the board at
+    /// a pose then corrects the flange pose the others use. `None`: flange poses are exact.
+    pub robot_sigma: Option<(f64, f64)>,
 }
 
 impl Default for RigOptions {
@@ -123,6 +127,7 @@ impl Default for RigOptions {
         RigOptions {
             estimate_noise: true,
             max_iterations: 100,
+            robot_sigma: None,
         }
     }
 }

@@ -13,11 +13,12 @@
 //! so the covariance reads the same way. The robot poses are taken as exact: their noise (a UR's
 //! 0.03 mm) is far below what the cameras see.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Point2, Point3, SMatrix, Vector2};
+use nalgebra::{DMatrix, DVector, Matrix3, Point2, Point3, SMatrix, SVector, Vector2};
 
 use super::{finish, minimize, Layout, RigData, RigError, RigOptions, RigSolution, State};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_core::setup::Setup;
 
 /// The corners one camera saw at one robot pose.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,17 +31,20 @@ pub struct RigFrame {
     pub corners: Vec<(Point3<f64>, Point2<f64>)>,
 }
 
-/// Residual (2) and its Jacobian (2 x 12: the camera's mount, then its board) of one corner,
-/// scaled by `scale` (1/σ).
+/// Residual (2) and its Jacobian (2 x 18: the camera's mount, its board, then the flange pose) of
+/// one corner, scaled by `scale` (1/σ).
+#[allow(clippy::too_many_arguments)]
 fn corner_rows(
     model: &CameraModel,
+    setup: Setup,
     mount: &Pose,
     board: &Pose,
-    b: &Pose,
+    flange: &Pose,
     point: &Point3<f64>,
     pixel: &Point2<f64>,
     scale: f64,
-) -> (Vector2<f64>, SMatrix<f64, 2, 12>) {
+) -> (Vector2<f64>, SMatrix<f64, 2, 18>) {
+    let b = setup.chain_b(flange);
     let in_board_parent = board * point;
     let q = b * in_board_parent;
     let in_camera = mount.inverse_transform_point(&q);
@@ -48,17 +52,30 @@ fn corner_rows(
     let r = (lin.pixel - pixel) * scale;
     let rm_t = mount.rotation.to_rotation_matrix().into_inner().transpose();
     let rb = b.rotation.to_rotation_matrix().into_inner();
-    // Mount M (R ← exp(φ)R, t ← t + ρ): p = Rᵀ(q − t): ∂p/∂φ = Rᵀ[q − t]×, ∂p/∂ρ = −Rᵀ.
-    let d_phi_mount = rm_t * (q.coords - mount.translation.vector).cross_matrix();
-    let d_rho_mount = -rm_t;
-    // Board Y (same perturbation): Y·P = R_Y P + t_Y: ∂/∂ψ = −[R_Y P]×, ∂/∂τ = I; then B, Mᵀ.
+    // Every pose T is perturbed as R ← exp(δθ)R, t ← t + δt.
+    // Mount M: p = Mᵀ(q − t_M): ∂p/∂θ = R_Mᵀ[q − t_M]×, ∂p/∂t = −R_Mᵀ.
+    let d_theta_mount = rm_t * (q.coords - mount.translation.vector).cross_matrix();
+    // Board Y: Y·P = R_Y P + t_Y: ∂/∂θ = −[R_Y P]×, ∂/∂t = I; then through B and Mᵀ.
     let through: Matrix3<f64> = rm_t * rb;
-    let d_psi_board = -through * (board.rotation * point.coords).cross_matrix();
-    let mut d_point = SMatrix::<f64, 3, 12>::zeros();
-    d_point.fixed_view_mut::<3, 3>(0, 0).copy_from(&d_phi_mount);
-    d_point.fixed_view_mut::<3, 3>(0, 3).copy_from(&d_rho_mount);
-    d_point.fixed_view_mut::<3, 3>(0, 6).copy_from(&d_psi_board);
+    let d_theta_board = -through * (board.rotation * point.coords).cross_matrix();
+    // Flange F: eye-to-hand q = F·w: ∂q/∂θ = −[R_F w]×, ∂q/∂t = I; eye-in-hand q = Fᵀ(w − t_F):
+    // ∂q/∂θ = R_Fᵀ[w − t_F]×, ∂q/∂t = −R_Fᵀ (w: the point in the board's parent frame).
+    let w = in_board_parent.coords;
+    let rf = flange.rotation.to_rotation_matrix().into_inner();
+    let (dq_theta, dq_t) = match setup {
+        Setup::EyeToHand => (-(rf * w).cross_matrix(), Matrix3::identity()),
+        Setup::EyeInHand => (
+            rf.transpose() * (w - flange.translation.vector).cross_matrix(),
+            -rf.transpose(),
+        ),
+    };
+    let mut d_point = SMatrix::<f64, 3, 18>::zeros();
+    d_point.fixed_view_mut::<3, 3>(0, 0).copy_from(&d_theta_mount);
+    d_point.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-rm_t));
+    d_point.fixed_view_mut::<3, 3>(0, 6).copy_from(&d_theta_board);
     d_point.fixed_view_mut::<3, 3>(0, 9).copy_from(&through);
+    d_point.fixed_view_mut::<3, 3>(0, 12).copy_from(&(rm_t * dq_theta));
+    d_point.fixed_view_mut::<3, 3>(0, 15).copy_from(&(rm_t * dq_t));
     (r, lin.d_pixel_d_point * d_point * scale)
 }
 
@@ -67,46 +84,85 @@ struct Problem<'a> {
     models: &'a [CameraModel],
     frames: &'a [RigFrame],
     layout: Layout,
+    /// The robot's repeatability (m, rad) when the flange poses are estimated; then the state
+    /// holds one flange pose per robot pose after the boards.
+    robot: Option<(f64, f64)>,
 }
 
 impl Problem<'_> {
-    /// `(mount, board, B)` of a frame at `state`.
+    /// Parameters: the unknowns, then 6 per flange pose when they are estimated.
+    fn len(&self) -> usize {
+        self.layout.len() + self.robot.map_or(0, |_| 6 * self.data.base_from_flange.len())
+    }
+
+    /// Parameter offset of robot pose `i`'s flange (when estimated).
+    fn flange_at(&self, i: usize) -> usize {
+        self.layout.len() + 6 * i
+    }
+
+    /// `(mount, board, flange, board offset)` of a frame at `state`.
     fn chain(&self, state: &State, frame: &RigFrame) -> (Pose, Pose, Pose, usize) {
         let setup = self.data.cameras[frame.camera].setup;
         let bi = self.layout.board_of(setup);
-        (
-            state.poses[frame.camera],
-            state.poses[bi / 6],
-            setup.chain_b(&self.data.base_from_flange[frame.pose]),
-            bi,
-        )
+        let flange = match self.robot {
+            Some(_) => state.poses[self.flange_at(frame.pose) / 6],
+            None => self.data.base_from_flange[frame.pose],
+        };
+        (state.poses[frame.camera], state.poses[bi / 6], flange, bi)
+    }
+
+    /// The robot prior's residual of pose `i` (its flange against the reported one, in sigmas).
+    fn prior(&self, state: &State, i: usize) -> SVector<f64, 6> {
+        let (st, sr) = self.robot.unwrap_or((1.0, 1.0));
+        let mut d = super::difference(&state.poses[self.flange_at(i) / 6], &self.data.base_from_flange[i]);
+        for k in 0..3 {
+            d[k] /= sr;
+            d[k + 3] /= st;
+        }
+        d
     }
 
     fn normal(&self, state: &State, sigma: &[f64]) -> (DMatrix<f64>, DVector<f64>, f64) {
-        let n = self.layout.len();
+        let n = self.len();
         let mut jtj = DMatrix::<f64>::zeros(n, n);
         let mut jtr = DVector::<f64>::zeros(n);
         let mut cost = 0.0;
+        let blocks = if self.robot.is_some() { 3 } else { 2 };
         for frame in self.frames {
-            let (mount, board, b, bi) = self.chain(state, frame);
+            let (mount, board, flange, bi) = self.chain(state, frame);
+            let setup = self.data.cameras[frame.camera].setup;
             let model = &self.models[frame.camera];
             let scale = 1.0 / sigma[frame.camera];
-            let mut local = SMatrix::<f64, 12, 12>::zeros();
-            let mut gradient = SMatrix::<f64, 12, 1>::zeros();
+            let mut local = SMatrix::<f64, 18, 18>::zeros();
+            let mut gradient = SMatrix::<f64, 18, 1>::zeros();
             for (point, pixel) in &frame.corners {
-                let (r, j) = corner_rows(model, &mount, &board, &b, point, pixel, scale);
+                let (r, j) = corner_rows(model, setup, &mount, &board, &flange, point, pixel, scale);
                 local += j.transpose() * j;
                 gradient += j.transpose() * r;
                 cost += r.norm_squared();
             }
-            let at = [6 * frame.camera, bi];
-            for (a, &ra) in at.iter().enumerate() {
-                for (c, &rc) in at.iter().enumerate() {
+            let at = [6 * frame.camera, bi, self.flange_at(frame.pose)];
+            for (a, &ra) in at.iter().enumerate().take(blocks) {
+                for (c, &rc) in at.iter().enumerate().take(blocks) {
                     let mut block = jtj.view_mut((ra, rc), (6, 6));
                     block += local.fixed_view::<6, 6>(6 * a, 6 * c);
                 }
                 let mut g = jtr.rows_mut(ra, 6);
                 g += gradient.fixed_rows::<6>(6 * a);
+            }
+        }
+        if let Some((st, sr)) = self.robot {
+            // The prior's Jacobian is the identity scaled by 1/σ (exact for the translation,
+            // to first order in the small correction for the rotation).
+            for i in 0..self.data.base_from_flange.len() {
+                let r = self.prior(state, i);
+                let at = self.flange_at(i);
+                for k in 0..6 {
+                    let w = if k < 3 { 1.0 / sr } else { 1.0 / st };
+                    jtj[(at + k, at + k)] += w * w;
+                    jtr[at + k] += w * r[k];
+                }
+                cost += r.norm_squared();
             }
         }
         (jtj, jtr, cost)
@@ -116,7 +172,8 @@ impl Problem<'_> {
     fn squares(&self, state: &State) -> Vec<(usize, f64)> {
         let mut out = vec![(0usize, 0.0); self.data.cameras.len()];
         for frame in self.frames {
-            let (mount, board, b, _) = self.chain(state, frame);
+            let (mount, board, flange, _) = self.chain(state, frame);
+            let b = self.data.cameras[frame.camera].setup.chain_b(&flange);
             let model = &self.models[frame.camera];
             for (point, pixel) in &frame.corners {
                 let in_camera = mount.inverse_transform_point(&(b * (board * point)));
@@ -129,15 +186,19 @@ impl Problem<'_> {
     }
 
     fn cost(&self, state: &State, sigma: &[f64]) -> f64 {
-        self.squares_weighted(state, sigma)
-    }
-
-    fn squares_weighted(&self, state: &State, sigma: &[f64]) -> f64 {
-        self.squares(state)
+        let corners: f64 = self
+            .squares(state)
             .iter()
             .zip(sigma)
             .map(|((_, sq), s)| sq / (s * s))
-            .sum()
+            .sum();
+        let prior: f64 = match self.robot {
+            Some(_) => (0..self.data.base_from_flange.len())
+                .map(|i| self.prior(state, i).norm_squared())
+                .sum(),
+            None => 0.0,
+        };
+        corners + prior
     }
 }
 
@@ -176,12 +237,16 @@ pub fn solve_rig_pixels(
     let mut poses = start.camera_mounts.clone();
     poses.extend(start.base_from_target.map(|b| b.0));
     poses.extend(start.flange_from_target.map(|b| b.0));
+    if options.robot_sigma.is_some() {
+        poses.extend(data.base_from_flange.iter().copied());
+    }
     let mut state = State { poses };
     let problem = Problem {
         data,
         models,
         frames,
         layout,
+        robot: options.robot_sigma,
     };
     let mut sigma = vec![START_SIGMA_PX; data.cameras.len()];
     let corners: usize = frames.iter().map(|f| f.corners.len()).sum();
@@ -206,6 +271,7 @@ pub fn solve_rig_pixels(
         }
     }
     let (jtj, _, chi2) = problem.normal(&state, &sigma);
+    // The prior adds as many residuals as flange parameters: the dof are the corners'.
     let dof = (2.0 * corners as f64 - layout.len() as f64).max(1.0);
     finish(
         data,
@@ -222,7 +288,7 @@ pub fn solve_rig_pixels(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{SVector, Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     fn pose(t: [f64; 3], r: [f64; 3]) -> Pose {
         Pose::from_parts(
@@ -253,22 +319,24 @@ mod tests {
         let b = pose([0.6, -0.1, 0.65], [3.0, 0.2, -0.1]);
         let point = Point3::new(0.1, 0.2, 0.0);
         let pixel = Point2::new(600.0, 300.0);
-        let (_, j) = corner_rows(&model, &mount, &board, &b, &point, &pixel, 1.0);
+        for setup in [Setup::EyeToHand, Setup::EyeInHand] {
+        let (_, j) = corner_rows(&model, setup, &mount, &board, &b, &point, &pixel, 1.0);
         let h = 1e-7;
-        for k in 0..12 {
+        for k in 0..18 {
             let mut d = SVector::<f64, 6>::zeros();
             d[k % 6] = h;
             let at = |d: &SVector<f64, 6>| {
-                let (m, y) = if k < 6 {
-                    (super::super::perturb(&mount, d), board)
-                } else {
-                    (mount, super::super::perturb(&board, d))
+                let (m, y, f) = match k / 6 {
+                    0 => (super::super::perturb(&mount, d), board, b),
+                    1 => (mount, super::super::perturb(&board, d), b),
+                    _ => (mount, board, super::super::perturb(&b, d)),
                 };
-                corner_rows(&model, &m, &y, &b, &point, &pixel, 1.0).0
+                corner_rows(&model, setup, &m, &y, &f, &point, &pixel, 1.0).0
             };
             let numeric = (at(&d) - at(&(-d))) / (2.0 * h);
             let err = (numeric - j.column(k)).amax();
-            assert!(err < 1e-3 * (1.0 + numeric.amax()), "column {k}: {numeric} vs {}", j.column(k));
+            assert!(err < 1e-3 * (1.0 + numeric.amax()), "{setup}, column {k}: {numeric} vs {}", j.column(k));
+        }
         }
     }
 }

@@ -174,10 +174,33 @@ pub struct RigRun {
     pub visited_now: usize,
     /// Arm time of this run (moves and settling, once for all cameras), s.
     pub arm_time_s: f64,
-    /// Cameras that stopped delivering frames, with the pose and the error.
-    pub failed_cameras: Vec<(String, usize, String)>,
+    /// Cameras that stopped delivering frames in this run (also in `failures.yaml`).
+    pub failed_cameras: Vec<CameraFailure>,
     /// The joint answer as written to `result.yaml`.
     pub result: RigResultFile,
+}
+
+/// A camera that stopped delivering frames: `failures.yaml` of the session lists them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFailure {
+    /// The camera.
+    pub camera: String,
+    /// The plan pose of its first failed grab.
+    pub plan_index: usize,
+    /// The camera's error.
+    pub error: String,
+}
+
+/// `failures.yaml` of a several-camera session: the cameras that stopped delivering frames in
+/// its last run (absent when none did).
+pub fn root_failures(root: &Path) -> PathBuf {
+    root.join("failures.yaml")
+}
+
+/// The cameras that stopped delivering frames in the session's last run.
+pub fn read_failures(root: &Path) -> Vec<CameraFailure> {
+    read_yaml(&root_failures(root)).unwrap_or_default()
 }
 
 /// One camera of an opened rig.
@@ -310,14 +333,19 @@ pub fn run_rig(
         plan: SessionManifest::new(PathBuf::new(), Setup::EyeInHand, &plan).plan,
     };
     let mut cameras = open_folders(&rig, &prepared, folder, resume, &manifest, &plan)?;
+    // The failures of an earlier run are history: this run asks every camera again.
+    let _ = std::fs::remove_file(root_failures(folder));
     let (mut robot, mut devices) = open_sim(&rig, &prepared)?;
     let failure = injected_failure();
     let mut grabs = vec![0usize; devices.len()];
     let mut visited_now = 0;
     let mut arm_time_s = 0.0;
     let mut failed_cameras = Vec::new();
+    // A camera that failed in this run is not waited for; a resume asks it again.
     let done = |cameras: &[RigCameraRun], index: usize| {
-        cameras.iter().all(|c| c.folder.visit_path(index).is_file())
+        cameras
+            .iter()
+            .all(|c| c.failed || c.folder.visit_path(index).is_file())
     };
     let settle = planner.config.settle();
     for (index, (_, joints)) in plan.iter().enumerate() {
@@ -345,6 +373,10 @@ pub fn run_rig(
         let base_from_flange = robot.base_from_flange().map_err(robot_error)?;
         let mut captures = Vec::new();
         for (c, camera) in cameras.iter_mut().enumerate() {
+            if camera.folder.visit_path(index).is_file() {
+                // Recorded before a resume: kept as it is (the log is never rewritten).
+                continue;
+            }
             let frame_name = SessionFolder::frame_name(index);
             let mut visit = PoseVisit::new(index, &base_from_flange, frame_name.clone());
             let injected = failure
@@ -379,11 +411,24 @@ pub fn run_rig(
                     );
                 }
                 Err(reason) => {
+                    // No record: a record names its frame, and there is none. The pose stays
+                    // open for this camera, so a resume asks it again.
                     if !camera.failed {
                         camera.failed = true;
-                        failed_cameras.push((camera.name.clone(), index, reason.clone()));
+                        failed_cameras.push(CameraFailure {
+                            camera: camera.name.clone(),
+                            plan_index: index,
+                            error: reason.clone(),
+                        });
+                        write_yaml(&failed_cameras, &root_failures(folder))
+                            .map_err(SessionError::from)?;
                     }
-                    visit.rejected = Some(format!("camera `{}`: {reason}", camera.name));
+                    captures.push(CameraCapture {
+                        camera: camera.name.clone(),
+                        reprojection_rms_px: None,
+                        rejected: Some(format!("camera `{}`: {reason}", camera.name)),
+                    });
+                    continue;
                 }
             }
             camera.folder.write_visit(&visit)?;

@@ -104,6 +104,9 @@ pub struct CameraResult {
     /// Its mount solved from its own views alone (the one-camera answer).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alone: Option<NamedTransform>,
+    /// Its corner noise estimated by the pixel-space joint solve (1-sigma per image axis), px.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corner_noise_px: Option<f64>,
     /// RMS rotation residual of its samples in the joint solve, degrees.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residual_rotation_rms_deg: Option<f64>,
@@ -325,7 +328,7 @@ fn camera_verdict(sigma: &PoseSigma, samples: usize, accuracy: &Accuracy) -> (Le
 /// Solves a several-camera session folder jointly and writes its `result.yaml`.
 pub fn solve_rig_folder(root: &Path, rig: &RigConfig) -> Result<RigResultFile, RigSolveError> {
     let problem = load_rig_problem(root, rig)?;
-    let joint = solve_joint(&problem, pixel_space(rig))?;
+    let joint = solve_joint(&problem, pixel_space(rig), robot_sigma(rig))?;
     let result = result_file(rig, &problem, &joint);
     write_yaml(&result, &root.join("result.yaml")).map_err(SessionError::from)?;
     Ok(result)
@@ -337,9 +340,19 @@ pub fn pixel_space(rig: &RigConfig) -> bool {
     rig.cameras[rig.planner].config.solver.space == SolveSpace::Reprojection
 }
 
-/// The joint answer: pose space, then (when `pixels`) refined on the corners.
-pub fn solve_joint(problem: &RigProblem, pixels: bool) -> Result<RigSolution, RigError> {
-    solve_subset(problem, &problem.data, &problem.start, None, pixels)
+/// The robot's repeatability (m, rad) the pixel-space solve estimates the flange poses with.
+pub fn robot_sigma(rig: &RigConfig) -> (f64, f64) {
+    rig.cameras[rig.planner].config.robot_repeatability()
+}
+
+/// The joint answer: pose space, then (when `pixels`) refined on the corners with every flange
+/// pose estimated around the reported one (1-sigma `robot`, m and rad).
+pub fn solve_joint(
+    problem: &RigProblem,
+    pixels: bool,
+    robot: (f64, f64),
+) -> Result<RigSolution, RigError> {
+    solve_subset(problem, &problem.data, &problem.start, None, pixels, robot)
 }
 
 /// The joint answer of `data` (all cameras, or camera `only` of `problem` alone).
@@ -349,6 +362,7 @@ fn solve_subset(
     start: &RigStart,
     only: Option<usize>,
     pixels: bool,
+    robot: (f64, f64),
 ) -> Result<RigSolution, RigError> {
     let pose_space = solve_rig(data, start, &RigOptions::default())?;
     if !pixels {
@@ -366,7 +380,11 @@ fn solve_subset(
                 .collect(),
         ),
     };
-    solve_rig_pixels(data, &models, &frames, &pose_space, &RigOptions::default())
+    let options = RigOptions {
+        robot_sigma: Some(robot),
+        ..RigOptions::default()
+    };
+    solve_rig_pixels(data, &models, &frames, &pose_space, &options)
 }
 
 /// `result.yaml` from the joint answer; each camera's own answer is solved again by the same
@@ -390,6 +408,7 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             left_out: left_out.clone(),
             joint: None,
             alone: None,
+            corner_noise_px: None,
             residual_rotation_rms_deg: None,
             residual_translation_rms_mm: None,
             verdict: Level::Redo.word().into(),
@@ -403,9 +422,17 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
                 camera_mounts: vec![problem.start.camera_mounts[k]],
                 ..problem.start.clone()
             };
-            if let Ok(alone) = solve_subset(problem, &problem.data.only(k), &start_alone, Some(k), pixel_space(rig)) {
+            if let Ok(alone) = solve_subset(
+                problem,
+                &problem.data.only(k),
+                &start_alone,
+                Some(k),
+                pixel_space(rig),
+                robot_sigma(rig),
+            ) {
                 entry.alone = Some(named(parent, &frame, alone.camera_mounts[0], alone.camera_sigmas[0], truth_of(c)));
             }
+            entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
             let (l, reason) = camera_verdict(&joint.camera_sigmas[k], samples, &accuracy);
