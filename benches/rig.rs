@@ -18,14 +18,23 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
 fn problem() -> (RigData, RigStart) {
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell-three-cameras.yaml");
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/sim-cell-three-cameras.yaml");
     let rig = RigConfig::load(&config).expect("the three-camera config loads");
     let mut rng = StdRng::seed_from_u64(27);
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     let flanges: Vec<Pose> = (0..20)
         .map(|_| {
-            let t = Vector3::new(0.5 + rng.random_range(-0.15..0.15), -0.15 + rng.random_range(-0.15..0.15), rng.random_range(0.55..0.75));
-            let r = Vector3::new(std::f64::consts::PI + rng.random_range(-0.45..0.45), rng.random_range(-0.45..0.45), rng.random_range(-0.35..0.35));
+            let t = Vector3::new(
+                0.5 + rng.random_range(-0.15..0.15),
+                -0.15 + rng.random_range(-0.15..0.15),
+                rng.random_range(0.55..0.75),
+            );
+            let r = Vector3::new(
+                std::f64::consts::PI + rng.random_range(-0.45..0.45),
+                rng.random_range(-0.45..0.45),
+                rng.random_range(-0.35..0.35),
+            );
             Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r))
         })
         .collect();
@@ -40,21 +49,38 @@ fn problem() -> (RigData, RigStart) {
             let r = Vector3::from_fn(|_, _| unit.sample(&mut rng) * sr);
             let t = Vector3::from_fn(|_, _| unit.sample(&mut rng) * st);
             let noise = Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r));
-            let exact = predict(truth.setup, &truth.camera_mount, &truth.target_mount, flange);
-            observations.push(RigObservation { camera: c, pose: i, camera_from_target: exact * noise });
+            let exact = predict(
+                truth.setup,
+                &truth.camera_mount,
+                &truth.target_mount,
+                flange,
+            );
+            observations.push(RigObservation {
+                camera: c,
+                pose: i,
+                camera_from_target: exact * noise,
+            });
         }
     }
     let data = RigData {
         cameras: rig
             .cameras
             .iter()
-            .map(|c| RigCamera { name: c.name.clone(), setup: c.config.setup, noise: NoiseModel::default() })
+            .map(|c| RigCamera {
+                name: c.name.clone(),
+                setup: c.config.setup,
+                noise: NoiseModel::default(),
+            })
             .collect(),
         base_from_flange: flanges,
         observations,
     };
     let start = RigStart {
-        camera_mounts: rig.cameras.iter().map(|c| c.config.nominal.camera_mount).collect(),
+        camera_mounts: rig
+            .cameras
+            .iter()
+            .map(|c| c.config.nominal.camera_mount)
+            .collect(),
         base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
         flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
     };
@@ -64,7 +90,9 @@ fn problem() -> (RigData, RigStart) {
 fn joint_solve(c: &mut Criterion) {
     let (data, start) = problem();
     c.bench_function("rig/joint_solve_3_cameras_20_poses", |b| {
-        b.iter(|| solve_rig(black_box(&data), black_box(&start), &RigOptions::default()).expect("solves"))
+        b.iter(|| {
+            solve_rig(black_box(&data), black_box(&start), &RigOptions::default()).expect("solves")
+        })
     });
 }
 

@@ -99,7 +99,11 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
 }
 
 /// Writes `text` atomically to `output`, or prints it.
-fn write_or_print(output: &Option<PathBuf>, format: ExportFormat, text: &str) -> anyhow::Result<()> {
+fn write_or_print(
+    output: &Option<PathBuf>,
+    format: ExportFormat,
+    text: &str,
+) -> anyhow::Result<()> {
     match output {
         Some(path) => {
             let removed = write_atomic_reporting(path, text.as_bytes())

@@ -15,9 +15,11 @@ use handeye::config::rig::RigConfig;
 pub(super) fn run(config: Option<&Path>, out: PathBuf, resume: bool) -> anyhow::Result<()> {
     let config = match config {
         Some(c) => c.to_path_buf(),
-        None => rig::read_manifest(&out)
-            .with_context(|| format!("{}: reading the several-camera session", out.display()))?
-            .config,
+        None => {
+            rig::read_manifest(&out)
+                .with_context(|| format!("{}: reading the several-camera session", out.display()))?
+                .config
+        }
     };
     let stop = Arc::new(AtomicBool::new(false));
     super::stop_on_signals(stop.clone());
@@ -31,7 +33,12 @@ pub(super) fn run(config: Option<&Path>, out: PathBuf, resume: bool) -> anyhow::
                 (None, None) => format!("{} no sample", c.camera),
             })
             .collect();
-        outln!("pose {:>3}/{}: {}", p.plan_index + 1, p.of, cameras.join(" · "));
+        outln!(
+            "pose {:>3}/{}: {}",
+            p.plan_index + 1,
+            p.of,
+            cameras.join(" · ")
+        );
     };
     let done = rig::run_rig(&config, &out, resume, stop, &mut progress)?;
     for f in &done.failed_cameras {
@@ -83,7 +90,13 @@ pub(super) fn print_result(result: &RigResultFile, folder: &Path) {
     };
     for camera in &result.cameras {
         match &camera.joint {
-            Some(t) => outln!("{}   [{}: {} samples, {}]", line(t), camera.verdict, camera.samples, camera.reason),
+            Some(t) => outln!(
+                "{}   [{}: {} samples, {}]",
+                line(t),
+                camera.verdict,
+                camera.samples,
+                camera.reason
+            ),
             None => outln!(
                 "camera `{}`: {} ({})",
                 camera.name,

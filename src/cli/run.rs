@@ -61,10 +61,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         .config
         .as_deref()
         .is_some_and(handeye::config::rig::is_rig_file);
-    let rig_session = args
-        .resume
-        .as_deref()
-        .is_some_and(cell::rig::is_rig_folder);
+    let rig_session = args.resume.as_deref().is_some_and(cell::rig::is_rig_folder);
     if rig_config || rig_session {
         let (folder, resume) = match &args.resume {
             Some(dir) => (dir.clone(), true),

@@ -15,7 +15,7 @@ use handeye_core::geometry::{to_matrix4_rows, Pose};
 use handeye_session::cell::rig::solve::NamedTransform;
 use handeye_session::cell::rig::RigResultFile;
 
-use super::export::{ur_base_link_from_base, is_ur_base_link, ExportError, ExportFormat, FrameIds};
+use super::export::{is_ur_base_link, ur_base_link_from_base, ExportError, ExportFormat, FrameIds};
 
 /// One exported transform with its frame ids.
 struct Exported<'a> {
@@ -68,7 +68,11 @@ pub fn export_rig(
         .chain(&result.boards)
         .map(|t| exported(t, ids))
         .collect();
-    let relative: Vec<Exported> = result.camera_to_camera.iter().map(|t| exported(t, ids)).collect();
+    let relative: Vec<Exported> = result
+        .camera_to_camera
+        .iter()
+        .map(|t| exported(t, ids))
+        .collect();
     let mut out = String::new();
     match format {
         ExportFormat::Ros2 => {

@@ -61,10 +61,11 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
     }
     html.push_str("<h2>Cameras</h2><table><tr><th>camera</th><th>verdict</th><th>samples</th><th>solve</th><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for c in &result.cameras {
-        let rows: Vec<(&str, &NamedTransform)> = [("joint", c.joint.as_ref()), ("alone", c.alone.as_ref())]
-            .into_iter()
-            .filter_map(|(k, t)| t.map(|t| (k, t)))
-            .collect();
+        let rows: Vec<(&str, &NamedTransform)> =
+            [("joint", c.joint.as_ref()), ("alone", c.alone.as_ref())]
+                .into_iter()
+                .filter_map(|(k, t)| t.map(|t| (k, t)))
+                .collect();
         if rows.is_empty() {
             let _ = write!(
                 html,
@@ -106,9 +107,11 @@ pub fn write_rig_report(folder: &Path) -> Result<PathBuf, ReportError> {
         ReportError::Session(Box::new(handeye_session::session::SessionError::from(e)))
     })?;
     let path = folder.join("report.html");
-    write_atomic(&path, render(&result, folder).as_bytes()).map_err(|source| ReportError::Write {
-        path: path.clone(),
-        source,
+    write_atomic(&path, render(&result, folder).as_bytes()).map_err(|source| {
+        ReportError::Write {
+            path: path.clone(),
+            source,
+        }
     })?;
     Ok(path)
 }

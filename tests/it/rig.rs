@@ -37,7 +37,11 @@ fn truth(config: &Path) -> Vec<(String, Pose)> {
 
 fn run_ok(config: &Path, out: &Path, env: &[(&str, &str)]) -> String {
     let mut command = handeye();
-    command.args(["run", "--config"]).arg(config).arg("-o").arg(out);
+    command
+        .args(["run", "--config"])
+        .arg(config)
+        .arg("-o")
+        .arg(out);
     for (k, v) in env {
         command.env(k, v);
     }
@@ -76,27 +80,57 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
     println!("{stdout}");
     for name in ["wrist", "left", "right"] {
         let folder = camera_folder(out, name);
-        assert!(folder.join("frames/000.png").is_file(), "{name}: no frame 0");
-        assert!(folder.join("poses/019.yaml").is_file(), "{name}: no record of pose 19");
+        assert!(
+            folder.join("frames/000.png").is_file(),
+            "{name}: no frame 0"
+        );
+        assert!(
+            folder.join("poses/019.yaml").is_file(),
+            "{name}: no record of pose 19"
+        );
         assert!(folder.join("samples.yaml").is_file(), "{name}: no samples");
     }
     let result = read_result(out);
     for (name, truth) in truth(config) {
-        let solved = result.transform(&name).unwrap_or_else(|| panic!("{name} not in result.yaml"));
+        let solved = result
+            .transform(&name)
+            .unwrap_or_else(|| panic!("{name} not in result.yaml"));
         let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);
-        println!("{name}: {mm:.3} mm, {deg:.4}° from the truth (1-sigma {:.3} mm, {:.4}°)", solved.sigma.translation_mm, solved.sigma.rotation_deg);
-        assert!(mm < 0.5 && deg < 0.05, "{name}: {mm:.3} mm, {deg:.4}° from the truth");
+        println!(
+            "{name}: {mm:.3} mm, {deg:.4}° from the truth (1-sigma {:.3} mm, {:.4}°)",
+            solved.sigma.translation_mm, solved.sigma.rotation_deg
+        );
+        assert!(
+            mm < 0.5 && deg < 0.05,
+            "{name}: {mm:.3} mm, {deg:.4}° from the truth"
+        );
     }
     for camera in &result.cameras {
-        assert!(camera.samples >= 8, "{}: only {} samples", camera.name, camera.samples);
+        assert!(
+            camera.samples >= 8,
+            "{}: only {} samples",
+            camera.name,
+            camera.samples
+        );
     }
     let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
-    let relative = result.transform("T_cam_left_cam_right").expect("T_cam_left_cam_right");
+    let relative = result
+        .transform("T_cam_left_cam_right")
+        .expect("T_cam_left_cam_right");
     let expected = truths["T_base_cam_left"].inverse() * truths["T_base_cam_right"];
     let (mm, deg) = util::pose_error_mm_deg(&relative.pose, &expected);
-    assert!(mm < 0.5 && deg < 0.05, "T_cam_left_cam_right: {mm:.3} mm, {deg:.4}°");
-    assert!(stdout.contains("T_flange_cam_wrist") && stdout.contains("T_base_cam_left"), "{stdout}");
-    assert!(result.transform("T_base_target").is_some() && result.transform("T_flange_target").is_some());
+    assert!(
+        mm < 0.5 && deg < 0.05,
+        "T_cam_left_cam_right: {mm:.3} mm, {deg:.4}°"
+    );
+    assert!(
+        stdout.contains("T_flange_cam_wrist") && stdout.contains("T_base_cam_left"),
+        "{stdout}"
+    );
+    assert!(
+        result.transform("T_base_target").is_some()
+            && result.transform("T_flange_target").is_some()
+    );
 }
 
 /// A camera that stops delivering frames mid-run is named, its samples until then are kept and
@@ -114,23 +148,41 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     let result = read_result(&out);
     let wrist = result.cameras.iter().find(|c| c.name == "wrist").unwrap();
     assert!(wrist.samples >= 6 && wrist.samples <= 8, "{wrist:?}");
-    assert!(wrist.joint.is_some(), "the wrist's samples before the failure are solved");
+    assert!(
+        wrist.joint.is_some(),
+        "the wrist's samples before the failure are solved"
+    );
     // No record without a frame: the poses it missed stay open for a resume.
     assert!(!camera_folder(&out, "wrist").join("poses/009.yaml").exists());
     let failures = std::fs::read_to_string(out.join("failures.yaml")).unwrap();
-    assert!(failures.contains("camera: wrist") && failures.contains("plan_index: 8"), "{failures}");
+    assert!(
+        failures.contains("camera: wrist") && failures.contains("plan_index: 8"),
+        "{failures}"
+    );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains("<b>wrist</b> stopped delivering frames at plan pose 8"));
     let left = result.cameras.iter().find(|c| c.name == "left").unwrap();
     assert!(camera_folder(&out, "left").join("poses/011.yaml").is_file());
     assert!(left.joint.is_some());
     // The camera is back (plugged in again): a resume visits only the poses it missed.
-    let resumed = handeye().args(["run", "--resume"]).arg(&out).output().unwrap();
+    let resumed = handeye()
+        .args(["run", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&resumed.stdout);
-    assert!(resumed.status.success(), "{stdout}{}", String::from_utf8_lossy(&resumed.stderr));
+    assert!(
+        resumed.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
     assert!(stdout.contains("4 poses visited in this run"), "{stdout}");
     assert!(!out.join("failures.yaml").exists());
-    let wrist = read_result(&out).cameras.into_iter().find(|c| c.name == "wrist").unwrap();
+    let wrist = read_result(&out)
+        .cameras
+        .into_iter()
+        .find(|c| c.name == "wrist")
+        .unwrap();
     assert!(wrist.samples >= 10, "{wrist:?}");
 }
 
@@ -141,7 +193,10 @@ fn killed_mid_run_then_resumed_and_replayed() {
     let dir = tempfile::tempdir().unwrap();
     let config = three_cameras(
         dir.path(),
-        &[("count: 20", "count: 10"), ("move_duration_s: 0.0", "move_duration_s: 0.3")],
+        &[
+            ("count: 20", "count: 10"),
+            ("move_duration_s: 0.0", "move_duration_s: 0.3"),
+        ],
     );
     let out = dir.path().join("session");
     let mut child = handeye()
@@ -155,14 +210,24 @@ fn killed_mid_run_then_resumed_and_replayed() {
         .unwrap();
     // Kill once the third pose is recorded by the last camera.
     let deadline = Instant::now() + Duration::from_secs(120);
-    while !camera_folder(&out, "right").join("poses/002.yaml").is_file() {
-        assert!(Instant::now() < deadline, "the run recorded nothing in 120 s");
+    while !camera_folder(&out, "right")
+        .join("poses/002.yaml")
+        .is_file()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the run recorded nothing in 120 s"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     child.kill().unwrap();
     child.wait().unwrap();
     assert!(!out.join("result.yaml").exists());
-    let output = handeye().args(["run", "--resume"]).arg(&out).output().unwrap();
+    let output = handeye()
+        .args(["run", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(
         output.status.success(),
         "resume failed: {}{}",
@@ -179,12 +244,20 @@ fn killed_mid_run_then_resumed_and_replayed() {
     }
     let resumed = read_result(&out);
     let replay = handeye().arg("replay").arg(&out).output().unwrap();
-    assert!(replay.status.success(), "{}", String::from_utf8_lossy(&replay.stderr));
+    assert!(
+        replay.status.success(),
+        "{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
     let replayed = read_result(&out);
     for (a, b) in resumed.transforms().zip(replayed.transforms()) {
         assert_eq!(a.name, b.name);
         let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
-        assert!(mm < 1e-6 && deg < 1e-6, "{}: replay differs by {mm} mm {deg}°", a.name);
+        assert!(
+            mm < 1e-6 && deg < 1e-6,
+            "{}: replay differs by {mm} mm {deg}°",
+            a.name
+        );
     }
 }
 
@@ -197,15 +270,21 @@ fn killed_mid_run_then_resumed_and_replayed() {
 /// run estimates per camera (wrist at ~0.5 m, fixed cameras at ~0.7 m).
 #[test]
 fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
-    use handeye::solve::rig::{pose_error, solve_rig, RigCamera, RigData, RigObservation, RigOptions, RigStart};
-    use handeye::solve::NoiseModel;
     use handeye::setup::{predict, Setup};
+    use handeye::solve::rig::{
+        pose_error, solve_rig, RigCamera, RigData, RigObservation, RigOptions, RigStart,
+    };
+    use handeye::solve::NoiseModel;
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
     let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
     let rig = RigConfig::load(&config).unwrap();
-    let truth: Vec<_> = rig.cameras.iter().map(|c| c.config.simulation.unwrap()).collect();
+    let truth: Vec<_> = rig
+        .cameras
+        .iter()
+        .map(|c| c.config.simulation.unwrap())
+        .collect();
     let setups: Vec<Setup> = truth.iter().map(|t| t.setup).collect();
     let noise = |setup: Setup| match setup {
         Setup::EyeInHand => (0.03f64.to_radians(), 0.15e-3),
@@ -245,28 +324,43 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
             for (c, t) in truth.iter().enumerate() {
                 let (sr, st) = noise(setups[c]);
                 let exact = predict(t.setup, &t.camera_mount, &t.target_mount, flange);
-                observations.push(RigObservation { camera: c, pose: i, camera_from_target: exact * jitter(&mut rng, sr, st) });
+                observations.push(RigObservation {
+                    camera: c,
+                    pose: i,
+                    camera_from_target: exact * jitter(&mut rng, sr, st),
+                });
             }
         }
         let data = RigData {
             cameras: rig
                 .cameras
                 .iter()
-                .map(|c| RigCamera { name: c.name.clone(), setup: c.config.setup, noise: NoiseModel::default() })
+                .map(|c| RigCamera {
+                    name: c.name.clone(),
+                    setup: c.config.setup,
+                    noise: NoiseModel::default(),
+                })
                 .collect(),
             base_from_flange: flanges,
             observations,
         };
         // Both solves start from the same nominal (the config's), as a run without a prior would.
         let start = RigStart {
-            camera_mounts: rig.cameras.iter().map(|c| c.config.nominal.camera_mount).collect(),
+            camera_mounts: rig
+                .cameras
+                .iter()
+                .map(|c| c.config.nominal.camera_mount)
+                .collect(),
             base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
             flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
         };
         let joint = solve_rig(&data, &start, &RigOptions::default()).unwrap();
         let mut alone_mounts = Vec::new();
         for c in 0..cameras {
-            let one = RigStart { camera_mounts: vec![start.camera_mounts[c]], ..start.clone() };
+            let one = RigStart {
+                camera_mounts: vec![start.camera_mounts[c]],
+                ..start.clone()
+            };
             let alone = solve_rig(&data.only(c), &one, &RigOptions::default()).unwrap();
             let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
             let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
@@ -279,7 +373,10 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
         assert_eq!((relative.from, relative.to), (1, 2));
         let (_, mm) = pose_error(&relative.pose, &relative_truth);
         relative_joint_sq += mm * mm;
-        let (_, mm) = pose_error(&(alone_mounts[1].inverse() * alone_mounts[2]), &relative_truth);
+        let (_, mm) = pose_error(
+            &(alone_mounts[1].inverse() * alone_mounts[2]),
+            &relative_truth,
+        );
         relative_chained_sq += mm * mm;
     }
     let rms = |sq: f64| (sq / seeds as f64).sqrt();
@@ -292,14 +389,25 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
         );
         // Never worse (to the precision of the fit); the wrist camera is the only eye-in-hand
         // one, so in pose space it shares nothing and equals its own solve.
-        assert!(joint <= alone * 1.001, "{}: joint {joint} mm > alone {alone} mm", rig.cameras[c].name);
+        assert!(
+            joint <= alone * 1.001,
+            "{}: joint {joint} mm > alone {alone} mm",
+            rig.cameras[c].name
+        );
         if setups[c] == Setup::EyeToHand {
-            assert!(joint < 0.95 * alone, "{}: sharing the flange board must help: {joint} vs {alone}", rig.cameras[c].name);
+            assert!(
+                joint < 0.95 * alone,
+                "{}: sharing the flange board must help: {joint} vs {alone}",
+                rig.cameras[c].name
+            );
         }
     }
     let (joint, chained) = (rms(relative_joint_sq), rms(relative_chained_sq));
     println!("T_cam_left_cam_right translation RMS error: joint {joint:.4} mm, chained {chained:.4} mm ({:.0} % lower)", 100.0 * (1.0 - joint / chained));
-    assert!(joint < 0.9 * chained, "joint {joint} mm vs chained {chained} mm");
+    assert!(
+        joint < 0.9 * chained,
+        "joint {joint} mm vs chained {chained} mm"
+    );
 }
 
 /// The independent anchor for the two fixed cameras: OpenCV's `cv2.stereoCalibrate`
@@ -317,26 +425,51 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
     };
     let (config, out, _) = shipped_run();
     let rig = RigConfig::load(config).unwrap();
-    let (l, r) = (rig.index_of("left").unwrap(), rig.index_of("right").unwrap());
+    let (l, r) = (
+        rig.index_of("left").unwrap(),
+        rig.index_of("right").unwrap(),
+    );
     let board = Target::load(&rig.cameras[l].config.target).unwrap();
-    let model = |c: usize| CameraModel::load(rig.cameras[c].config.intrinsics.as_ref().unwrap()).unwrap();
+    let model =
+        |c: usize| CameraModel::load(rig.cameras[c].config.intrinsics.as_ref().unwrap()).unwrap();
     let (left_model, right_model) = (model(l), model(r));
-    let k = |m: &CameraModel| vec![vec![m.fx, 0.0, m.cx], vec![0.0, m.fy, m.cy], vec![0.0, 0.0, 1.0]];
+    let k = |m: &CameraModel| {
+        vec![
+            vec![m.fx, 0.0, m.cx],
+            vec![0.0, m.fy, m.cy],
+            vec![0.0, 0.0, 1.0],
+        ]
+    };
     let d = |m: &CameraModel| match m.distortion {
         Distortion::RadTan { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
         Distortion::None => vec![0.0; 5],
         ref other => panic!("the sim lens is plumb_bob, found {other:?}"),
     };
-    let visits = |name: &str| SessionFolder::open(&camera_folder(out, name)).unwrap().read_visits().unwrap();
+    let visits = |name: &str| {
+        SessionFolder::open(&camera_folder(out, name))
+            .unwrap()
+            .read_visits()
+            .unwrap()
+    };
     let (left_visits, right_visits) = (visits("left"), visits("right"));
     let mut views = Vec::new();
-    for lv in left_visits.iter().filter(|v| v.camera_from_target.is_some()) {
-        let Some(rv) = right_visits.iter().find(|v| v.plan_index == lv.plan_index && v.camera_from_target.is_some()) else {
+    for lv in left_visits
+        .iter()
+        .filter(|v| v.camera_from_target.is_some())
+    {
+        let Some(rv) = right_visits
+            .iter()
+            .find(|v| v.plan_index == lv.plan_index && v.camera_from_target.is_some())
+        else {
             continue;
         };
         let (mut object, mut left, mut right) = (Vec::new(), Vec::new(), Vec::new());
         for lc in &lv.corners_px {
-            let Some(rc) = rv.corners_px.iter().find(|c| c.tag_id == lc.tag_id && c.corner == lc.corner) else {
+            let Some(rc) = rv
+                .corners_px
+                .iter()
+                .find(|c| c.tag_id == lc.tag_id && c.corner == lc.corner)
+            else {
                 continue;
             };
             let p = board.observation_point(lc).unwrap();
@@ -348,7 +481,11 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
             views.push(serde_json::json!({"object": object, "left": left, "right": right}));
         }
     }
-    assert!(views.len() >= 5, "only {} poses where both fixed cameras saw the board", views.len());
+    assert!(
+        views.len() >= 5,
+        "only {} poses where both fixed cameras saw the board",
+        views.len()
+    );
     let input = serde_json::json!({
         "size": [left_model.width, left_model.height],
         "K1": k(&left_model), "D1": d(&left_model), "K2": k(&right_model), "D2": d(&right_model),
@@ -362,7 +499,11 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
         .arg(&input_path)
         .output()
         .unwrap();
-    assert!(output.status.success(), "stereo_anchor.py: {}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "stereo_anchor.py: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let answer: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let rows: Vec<Vec<f64>> = serde_json::from_value(answer["R"].clone()).unwrap();
     let t: Vec<f64> = serde_json::from_value(answer["T"].clone()).unwrap();
@@ -374,7 +515,10 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
     let opencv = right_from_left.inverse();
     let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
     let expected = truths["T_base_cam_left"].inverse() * truths["T_base_cam_right"];
-    let ours = read_result(out).transform("T_cam_left_cam_right").unwrap().pose;
+    let ours = read_result(out)
+        .transform("T_cam_left_cam_right")
+        .unwrap()
+        .pose;
     let (opencv_mm, opencv_deg) = util::pose_error_mm_deg(&opencv, &expected);
     let (ours_mm, ours_deg) = util::pose_error_mm_deg(&ours, &expected);
     let (apart_mm, apart_deg) = util::pose_error_mm_deg(&ours, &opencv);
@@ -383,8 +527,14 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
         views.len(),
         answer["rms_px"].as_f64().unwrap()
     );
-    assert!(opencv_mm < 0.5 && opencv_deg < 0.05, "OpenCV: {opencv_mm} mm {opencv_deg}°");
-    assert!(ours_mm < 0.5 && ours_deg < 0.05, "handeye: {ours_mm} mm {ours_deg}°");
+    assert!(
+        opencv_mm < 0.5 && opencv_deg < 0.05,
+        "OpenCV: {opencv_mm} mm {opencv_deg}°"
+    );
+    assert!(
+        ours_mm < 0.5 && ours_deg < 0.05,
+        "handeye: {ours_mm} mm {ours_deg}°"
+    );
 }
 
 /// `handeye report` and `handeye export` of a several-camera session name every camera: the
@@ -395,31 +545,80 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
 fn report_and_exports_name_every_camera() {
     let (_, out, _) = shipped_run();
     let report = handeye().arg("report").arg(out).output().unwrap();
-    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stderr));
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    for name in ["T_flange_cam_wrist", "T_base_cam_left", "T_base_cam_right", "T_cam_left_cam_right", "T_base_target", "T_flange_target"] {
+    for name in [
+        "T_flange_cam_wrist",
+        "T_base_cam_left",
+        "T_base_cam_right",
+        "T_cam_left_cam_right",
+        "T_base_target",
+        "T_flange_target",
+    ] {
         assert!(html.contains(name), "report lacks {name}");
     }
     let export = |format: &str| {
-        let o = handeye().arg("export").arg(out.join("result.yaml")).args(["--format", format]).output().unwrap();
-        assert!(o.status.success(), "{format}: {}", String::from_utf8_lossy(&o.stderr));
+        let o = handeye()
+            .arg("export")
+            .arg(out.join("result.yaml"))
+            .args(["--format", format])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{format}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
         String::from_utf8(o.stdout).unwrap()
     };
     let ros2 = export("ros2");
-    for child in ["camera_optical_frame_wrist", "camera_optical_frame_left", "camera_optical_frame_right", "calibration_target", "calibration_target_flange"] {
-        let publishers = ros2.lines().filter(|l| l.starts_with("ros2 run") && l.ends_with(&format!("--child-frame-id {child}"))).count();
-        assert_eq!(publishers, 1, "ros2: {child} must have exactly one parent:\n{ros2}");
+    for child in [
+        "camera_optical_frame_wrist",
+        "camera_optical_frame_left",
+        "camera_optical_frame_right",
+        "calibration_target",
+        "calibration_target_flange",
+    ] {
+        let publishers = ros2
+            .lines()
+            .filter(|l| {
+                l.starts_with("ros2 run") && l.ends_with(&format!("--child-frame-id {child}"))
+            })
+            .count();
+        assert_eq!(
+            publishers, 1,
+            "ros2: {child} must have exactly one parent:\n{ros2}"
+        );
     }
-    assert!(ros2.contains("--frame-id tool0 --child-frame-id camera_optical_frame_wrist"), "{ros2}");
-    assert!(ros2.contains("--frame-id base --child-frame-id camera_optical_frame_left"), "{ros2}");
+    assert!(
+        ros2.contains("--frame-id tool0 --child-frame-id camera_optical_frame_wrist"),
+        "{ros2}"
+    );
+    assert!(
+        ros2.contains("--frame-id base --child-frame-id camera_optical_frame_left"),
+        "{ros2}"
+    );
     let urdf = export("urdf");
     assert_eq!(urdf.matches("<joint ").count(), 5, "{urdf}");
     let opencv = export("opencv");
     let result = read_result(out);
     for t in result.transforms() {
-        assert!(opencv.contains(&format!("{}: !!opencv-matrix", t.name)), "opencv lacks {}", t.name);
+        assert!(
+            opencv.contains(&format!("{}: !!opencv-matrix", t.name)),
+            "opencv lacks {}",
+            t.name
+        );
     }
-    let ur = handeye().arg("export").arg(out.join("result.yaml")).args(["--format", "ur"]).output().unwrap();
+    let ur = handeye()
+        .arg("export")
+        .arg(out.join("result.yaml"))
+        .args(["--format", "ur"])
+        .output()
+        .unwrap();
     assert!(!ur.status.success());
     assert!(String::from_utf8_lossy(&ur.stderr).contains("exports as ros2, urdf or opencv"));
 }
@@ -435,7 +634,8 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     use handeye::camera_model::CameraModel;
     use handeye::setup::predict;
     use handeye::solve::rig::{
-        pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigFrame, RigObservation, RigOptions, RigStart,
+        pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigFrame, RigObservation,
+        RigOptions, RigStart,
     };
     use handeye::solve::NoiseModel;
     use handeye::vision::Target;
@@ -444,7 +644,11 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
 
     let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
     let rig = RigConfig::load(&config).unwrap();
-    let truth: Vec<_> = rig.cameras.iter().map(|c| c.config.simulation.unwrap()).collect();
+    let truth: Vec<_> = rig
+        .cameras
+        .iter()
+        .map(|c| c.config.simulation.unwrap())
+        .collect();
     let models: Vec<CameraModel> = rig
         .cameras
         .iter()
@@ -453,7 +657,14 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     let boards: Vec<Vec<nalgebra::Point3<f64>>> = rig
         .cameras
         .iter()
-        .map(|c| Target::load(&c.config.target).unwrap().points().into_iter().map(|(_, _, p)| p).collect())
+        .map(|c| {
+            Target::load(&c.config.target)
+                .unwrap()
+                .points()
+                .into_iter()
+                .map(|(_, _, p)| p)
+                .collect()
+        })
         .collect();
     let robot = rig.cameras[0].config.robot_repeatability();
     let pixel_sigma = 0.1;
@@ -461,7 +672,10 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     let cameras = truth.len();
     let (mut joint_sq, mut alone_sq) = (vec![0.0; cameras], vec![0.0; cameras]);
     let (mut relative_joint_sq, mut relative_chained_sq) = (0.0, 0.0);
-    let options = RigOptions { robot_sigma: Some(robot), ..RigOptions::default() };
+    let options = RigOptions {
+        robot_sigma: Some(robot),
+        ..RigOptions::default()
+    };
     for seed in 0..seeds {
         let mut rng = rand::rngs::StdRng::seed_from_u64(1000 + seed);
         let unit = Normal::new(0.0, 1.0).unwrap();
@@ -472,12 +686,23 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
         };
         let true_flanges: Vec<Pose> = (0..20)
             .map(|_| {
-                let t = nalgebra::Vector3::new(0.5 + rng.random_range(-0.15..0.15), -0.15 + rng.random_range(-0.15..0.15), rng.random_range(0.55..0.75));
-                let r = nalgebra::Vector3::new(std::f64::consts::PI + rng.random_range(-0.45..0.45), rng.random_range(-0.45..0.45), rng.random_range(-0.35..0.35));
+                let t = nalgebra::Vector3::new(
+                    0.5 + rng.random_range(-0.15..0.15),
+                    -0.15 + rng.random_range(-0.15..0.15),
+                    rng.random_range(0.55..0.75),
+                );
+                let r = nalgebra::Vector3::new(
+                    std::f64::consts::PI + rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.35..0.35),
+                );
                 Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
             })
             .collect();
-        let reported: Vec<Pose> = true_flanges.iter().map(|f| f * jitter(&mut rng, robot.1, robot.0)).collect();
+        let reported: Vec<Pose> = true_flanges
+            .iter()
+            .map(|f| f * jitter(&mut rng, robot.1, robot.0))
+            .collect();
         let (mut observations, mut frames) = (Vec::new(), Vec::new());
         for (i, flange) in true_flanges.iter().enumerate() {
             for (c, t) in truth.iter().enumerate() {
@@ -486,29 +711,48 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                     .iter()
                     .filter_map(|p| {
                         let pixel = models[c].project(&(camera_from_target * p))?;
-                        let noisy = pixel + nalgebra::Vector2::new(unit.sample(&mut rng), unit.sample(&mut rng)) * pixel_sigma;
-                        (noisy.x > 0.0 && noisy.y > 0.0 && noisy.x < 1279.0 && noisy.y < 719.0).then_some((*p, noisy))
+                        let noisy = pixel
+                            + nalgebra::Vector2::new(unit.sample(&mut rng), unit.sample(&mut rng))
+                                * pixel_sigma;
+                        (noisy.x > 0.0 && noisy.y > 0.0 && noisy.x < 1279.0 && noisy.y < 719.0)
+                            .then_some((*p, noisy))
                     })
                     .collect();
                 if corners.len() < 20 {
                     continue;
                 }
                 // A board pose to start from (PnP's role in the run): near the truth.
-                observations.push(RigObservation { camera: c, pose: i, camera_from_target: camera_from_target * jitter(&mut rng, 0.001, 0.001) });
-                frames.push(RigFrame { camera: c, pose: i, corners });
+                observations.push(RigObservation {
+                    camera: c,
+                    pose: i,
+                    camera_from_target: camera_from_target * jitter(&mut rng, 0.001, 0.001),
+                });
+                frames.push(RigFrame {
+                    camera: c,
+                    pose: i,
+                    corners,
+                });
             }
         }
         let data = RigData {
             cameras: rig
                 .cameras
                 .iter()
-                .map(|c| RigCamera { name: c.name.clone(), setup: c.config.setup, noise: NoiseModel::default() })
+                .map(|c| RigCamera {
+                    name: c.name.clone(),
+                    setup: c.config.setup,
+                    noise: NoiseModel::default(),
+                })
                 .collect(),
             base_from_flange: reported,
             observations,
         };
         let start = RigStart {
-            camera_mounts: rig.cameras.iter().map(|c| c.config.nominal.camera_mount).collect(),
+            camera_mounts: rig
+                .cameras
+                .iter()
+                .map(|c| c.config.nominal.camera_mount)
+                .collect(),
             base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
             flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
         };
@@ -516,11 +760,22 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
         let joint = solve_rig_pixels(&data, &models, &frames, &pose_space, &options).unwrap();
         let mut alone_mounts = Vec::new();
         for c in 0..cameras {
-            let one = RigStart { camera_mounts: vec![start.camera_mounts[c]], ..start.clone() };
+            let one = RigStart {
+                camera_mounts: vec![start.camera_mounts[c]],
+                ..start.clone()
+            };
             let only = data.only(c);
-            let own_frames: Vec<RigFrame> = frames.iter().filter(|f| f.camera == c).map(|f| RigFrame { camera: 0, ..f.clone() }).collect();
+            let own_frames: Vec<RigFrame> = frames
+                .iter()
+                .filter(|f| f.camera == c)
+                .map(|f| RigFrame {
+                    camera: 0,
+                    ..f.clone()
+                })
+                .collect();
             let alone_pose = solve_rig(&only, &one, &RigOptions::default()).unwrap();
-            let alone = solve_rig_pixels(&only, &models[c..=c], &own_frames, &alone_pose, &options).unwrap();
+            let alone = solve_rig_pixels(&only, &models[c..=c], &own_frames, &alone_pose, &options)
+                .unwrap();
             let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
             let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
             joint_sq[c] += joint_mm * joint_mm;
@@ -530,7 +785,10 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
         let relative_truth = truth[1].camera_mount.inverse() * truth[2].camera_mount;
         let (_, mm) = pose_error(&joint.relative[0].pose, &relative_truth);
         relative_joint_sq += mm * mm;
-        let (_, mm) = pose_error(&(alone_mounts[1].inverse() * alone_mounts[2]), &relative_truth);
+        let (_, mm) = pose_error(
+            &(alone_mounts[1].inverse() * alone_mounts[2]),
+            &relative_truth,
+        );
         relative_chained_sq += mm * mm;
     }
     let rms = |sq: f64| (sq / seeds as f64).sqrt();
@@ -541,7 +799,11 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
             rig.cameras[c].name,
             100.0 * (1.0 - joint / alone)
         );
-        assert!(joint <= alone * 1.001, "{}: joint {joint} mm > alone {alone} mm", rig.cameras[c].name);
+        assert!(
+            joint <= alone * 1.001,
+            "{}: joint {joint} mm > alone {alone} mm",
+            rig.cameras[c].name
+        );
     }
     let (joint, chained) = (rms(relative_joint_sq), rms(relative_chained_sq));
     println!("pixel space, T_cam_left_cam_right translation RMS error: joint {joint:.4} mm, chained {chained:.4} mm ({:.0} % lower)", 100.0 * (1.0 - joint / chained));

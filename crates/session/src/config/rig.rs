@@ -30,8 +30,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::schema::{
-    CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig,
-    SessionConfig, SolverConfig, VerdictConfig, WorkspaceConfig,
+    CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig, SessionConfig,
+    SolverConfig, VerdictConfig, WorkspaceConfig,
 };
 use super::{CellConfig, ConfigError};
 use handeye_core::geometry::PoseYaml;
@@ -215,7 +215,8 @@ impl RigConfig {
                     name: camera.name.clone(),
                     source: Box::new(source),
                 };
-                let one = one_camera(&raw, camera).map_err(|(key, problem)| wrap(inconsistent(key, problem)))?;
+                let one = one_camera(&raw, camera)
+                    .map_err(|(key, problem)| wrap(inconsistent(key, problem)))?;
                 let config = CellConfig::from_raw(one, file).map_err(wrap)?;
                 Ok(RigCameraConfig {
                     name: camera.name.clone(),
@@ -284,7 +285,10 @@ fn one_camera(rig: &RigConfigFile, camera: &RigCameraFile) -> Result<ConfigFile,
     };
     let target = match camera.setup {
         Setup::EyeInHand => rig.target.clone(),
-        Setup::EyeToHand => rig.flange_target.clone().unwrap_or_else(|| rig.target.clone()),
+        Setup::EyeToHand => rig
+            .flange_target
+            .clone()
+            .unwrap_or_else(|| rig.target.clone()),
     };
     Ok(ConfigFile {
         setup: camera.setup,
@@ -296,10 +300,10 @@ fn one_camera(rig: &RigConfigFile, camera: &RigCameraFile) -> Result<ConfigFile,
         simulation,
         plan: rig.plan.clone(),
         limits: rig.limits,
-        workspace: rig.workspace.clone(),
-        detector: rig.detector.clone(),
+        workspace: rig.workspace,
+        detector: rig.detector,
         solver: rig.solver.clone(),
-        session: rig.session.clone(),
-        verdict: rig.verdict.clone(),
+        session: rig.session,
+        verdict: rig.verdict,
     })
 }

@@ -82,14 +82,20 @@ impl RigData {
                 .observations
                 .iter()
                 .filter(|o| o.camera == camera)
-                .map(|o| RigObservation { camera: 0, ..o.clone() })
+                .map(|o| RigObservation {
+                    camera: 0,
+                    ..o.clone()
+                })
                 .collect(),
         }
     }
 
     /// Observations of camera `camera`.
     pub fn count(&self, camera: usize) -> usize {
-        self.observations.iter().filter(|o| o.camera == camera).count()
+        self.observations
+            .iter()
+            .filter(|o| o.camera == camera)
+            .count()
     }
 
     fn has(&self, setup: Setup) -> bool {
@@ -202,7 +208,9 @@ pub enum RigError {
     #[error("the start has no {0}")]
     MissingStart(&'static str),
     /// An observation names a camera or pose that does not exist.
-    #[error("observation {index} names camera {camera} / pose {pose}, which the data does not have")]
+    #[error(
+        "observation {index} names camera {camera} / pose {pose}, which the data does not have"
+    )]
     BadIndex {
         /// The observation's index.
         index: usize,
@@ -247,7 +255,8 @@ impl Layout {
     }
 
     fn len(&self) -> usize {
-        6 * self.cameras + 6 * (self.fixed_board.is_some() as usize + self.flange_board.is_some() as usize)
+        6 * self.cameras
+            + 6 * (self.fixed_board.is_some() as usize + self.flange_board.is_some() as usize)
     }
 
     fn board_of(&self, setup: Setup) -> usize {
@@ -269,7 +278,8 @@ struct State {
 fn perturb(pose: &Pose, delta: &SVector<f64, 6>) -> Pose {
     Pose::from_parts(
         Translation3::from(pose.translation.vector + Vector3::new(delta[3], delta[4], delta[5])),
-        UnitQuaternion::from_scaled_axis(Vector3::new(delta[0], delta[1], delta[2])) * pose.rotation,
+        UnitQuaternion::from_scaled_axis(Vector3::new(delta[0], delta[1], delta[2]))
+            * pose.rotation,
     )
 }
 
@@ -329,9 +339,19 @@ fn normal_equations(
             let mut delta = SVector::<f64, 6>::zeros();
             delta[k % 6] = STEP;
             let (m_plus, b_plus, m_minus, b_minus) = if k < 6 {
-                (perturb(&mount, &delta), board, perturb(&mount, &(-delta)), board)
+                (
+                    perturb(&mount, &delta),
+                    board,
+                    perturb(&mount, &(-delta)),
+                    board,
+                )
             } else {
-                (mount, perturb(&board, &delta), mount, perturb(&board, &(-delta)))
+                (
+                    mount,
+                    perturb(&board, &delta),
+                    mount,
+                    perturb(&board, &(-delta)),
+                )
             };
             let plus = residual(setup, nm, &m_plus, &b_plus, flange, &o.camera_from_target);
             let minus = residual(setup, nm, &m_minus, &b_minus, flange, &o.camera_from_target);
@@ -384,13 +404,16 @@ fn stepped(state: &State, step: &DVector<f64>) -> State {
     }
 }
 
+/// `JᵀJ`, `Jᵀr` and the cost `Σ r²` at one state.
+type NormalEquations = (DMatrix<f64>, DVector<f64>, f64);
+
 /// Levenberg-Marquardt with Marquardt's diagonal scaling on normal equations the problem builds
 /// (`normal`: `JᵀJ`, `Jᵀr`, cost) and a cost alone (`cost`, for trial steps); returns the
 /// iterations spent. Shared by the pose-space and the pixel-space solve.
 fn minimize(
     state: &mut State,
     max_iterations: usize,
-    normal: &dyn Fn(&State) -> (DMatrix<f64>, DVector<f64>, f64),
+    normal: &dyn Fn(&State) -> NormalEquations,
     cost: &dyn Fn(&State) -> f64,
 ) -> usize {
     let mut damping = 1e-4;
@@ -492,7 +515,11 @@ pub fn solve_rig(
     let layout = Layout::new(data);
     let mut poses = start.camera_mounts.clone();
     if layout.fixed_board.is_some() {
-        poses.push(start.base_from_target.ok_or(RigError::MissingStart("T_base_target"))?);
+        poses.push(
+            start
+                .base_from_target
+                .ok_or(RigError::MissingStart("T_base_target"))?,
+        );
     }
     if layout.flange_board.is_some() {
         poses.push(
@@ -509,7 +536,11 @@ pub fn solve_rig(
     // weight cameras whose noise differs several-fold).
     let redundancy = 1.0 - layout.len() as f64 / n_residuals as f64;
     let mut iterations = 0;
-    let rounds = if options.estimate_noise { NOISE_ROUNDS } else { 1 };
+    let rounds = if options.estimate_noise {
+        NOISE_ROUNDS
+    } else {
+        1
+    };
     for round in 0..rounds {
         iterations += minimize(
             &mut state,
@@ -518,7 +549,10 @@ pub fn solve_rig(
             &|s| cost(data, &layout, s, &noise),
         );
         if options.estimate_noise && round + 1 < rounds {
-            for (c, (count, rot, trans)) in residual_figures(data, &layout, &state).into_iter().enumerate() {
+            for (c, (count, rot, trans)) in residual_figures(data, &layout, &state)
+                .into_iter()
+                .enumerate()
+            {
                 let dof = (3.0 * count as f64 * redundancy).max(1.0);
                 noise[c] = NoiseModel {
                     rotation_sigma_rad: (rot / dof).sqrt().max(1e-7),
@@ -529,7 +563,16 @@ pub fn solve_rig(
     }
     let (jtj, _, chi2) = normal_equations(data, &layout, &state, &noise);
     let dof = (n_residuals as f64 - layout.len() as f64).max(1.0);
-    finish(data, &layout, state, &jtj, chi2 / dof, noise, Vec::new(), iterations)
+    finish(
+        data,
+        &layout,
+        state,
+        &jtj,
+        chi2 / dof,
+        noise,
+        Vec::new(),
+        iterations,
+    )
 }
 
 /// The answer at `state` with the covariance `(JᵀJ)⁻¹·variance_factor` (whitened `J`).
@@ -547,7 +590,9 @@ fn finish(
     let information = jtj.clone().cholesky().ok_or(RigError::Singular)?;
     let covariance = information.inverse() * variance_factor;
     let block = |at: usize| -> Matrix6<f64> { covariance.fixed_view::<6, 6>(at, at).into_owned() };
-    let camera_sigmas = (0..data.cameras.len()).map(|c| pose_sigma(&block(6 * c))).collect();
+    let camera_sigmas = (0..data.cameras.len())
+        .map(|c| pose_sigma(&block(6 * c)))
+        .collect();
     let board = |at: Option<usize>| at.map(|at| (state.poses[at / 6], pose_sigma(&block(at))));
     let relative = relative_mounts(data, &state, &covariance);
     let residuals = residual_figures(data, layout, &state)
@@ -665,7 +710,7 @@ mod tests {
             pose([0.5, -0.3, 1.6], [3.1, -0.05, 0.02]),
         ];
         let fixed = pose([0.5, -0.15, 0.0], [0.01, -0.02, 0.3]);
-        let flange_board = pose([0.0, -0.1, -0.05], [3.14, 0.0, 0.0]);
+        let flange_board = pose([0.0, -0.1, -0.05], [3.1, 0.0, 0.0]);
         let setups = [Setup::EyeInHand, Setup::EyeToHand, Setup::EyeToHand];
         let noise = NoiseModel {
             rotation_sigma_rad: 0.05f64.to_radians(),
@@ -674,29 +719,59 @@ mod tests {
         let flanges: Vec<Pose> = (0..20)
             .map(|_| {
                 pose(
-                    [rng.random_range(0.3..0.7), rng.random_range(-0.4..0.1), rng.random_range(0.5..0.8)],
-                    [3.14 + rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)],
+                    [
+                        rng.random_range(0.3..0.7),
+                        rng.random_range(-0.4..0.1),
+                        rng.random_range(0.5..0.8),
+                    ],
+                    [
+                        std::f64::consts::PI + rng.random_range(-0.5..0.5),
+                        rng.random_range(-0.5..0.5),
+                        rng.random_range(-0.5..0.5),
+                    ],
                 )
             })
             .collect();
         let mut observations = Vec::new();
         for (i, f) in flanges.iter().enumerate() {
             for (c, setup) in setups.iter().enumerate() {
-                let board = if *setup == Setup::EyeInHand { fixed } else { flange_board };
+                let board = if *setup == Setup::EyeInHand {
+                    fixed
+                } else {
+                    flange_board
+                };
                 let truth = predict(*setup, &mounts[c], &board, f);
                 observations.push(RigObservation {
                     camera: c,
                     pose: i,
-                    camera_from_target: noisy(&truth, &mut rng, noise.rotation_sigma_rad, noise.translation_sigma_m),
+                    camera_from_target: noisy(
+                        &truth,
+                        &mut rng,
+                        noise.rotation_sigma_rad,
+                        noise.translation_sigma_m,
+                    ),
                 });
             }
         }
         let cameras = ["wrist", "left", "right"]
             .iter()
             .zip(setups)
-            .map(|(name, setup)| RigCamera { name: name.to_string(), setup, noise: NoiseModel::default() })
+            .map(|(name, setup)| RigCamera {
+                name: name.to_string(),
+                setup,
+                noise: NoiseModel::default(),
+            })
             .collect();
-        (RigData { cameras, base_from_flange: flanges, observations }, mounts, fixed, flange_board)
+        (
+            RigData {
+                cameras,
+                base_from_flange: flanges,
+                observations,
+            },
+            mounts,
+            fixed,
+            flange_board,
+        )
     }
 
     fn start_near(mounts: &[Pose], fixed: Pose, flange: Pose) -> RigStart {
@@ -711,20 +786,38 @@ mod tests {
     #[test]
     fn recovers_every_mount_of_a_three_camera_rig_from_a_perturbed_start() {
         let (data, mounts, fixed, flange) = rig(3);
-        let answer = solve_rig(&data, &start_near(&mounts, fixed, flange), &RigOptions::default()).unwrap();
+        let answer = solve_rig(
+            &data,
+            &start_near(&mounts, fixed, flange),
+            &RigOptions::default(),
+        )
+        .unwrap();
         for (c, truth) in mounts.iter().enumerate() {
             let (deg, mm) = pose_error(&answer.camera_mounts[c], truth);
             let s = answer.camera_sigmas[c];
             // Within 4 sigma of the truth (and the sigma itself sub-mm).
-            assert!(mm < 4.0 * s.translation_mm && deg < 4.0 * s.rotation_deg, "camera {c}: {mm} mm, {deg}° vs {s:?}");
+            assert!(
+                mm < 4.0 * s.translation_mm && deg < 4.0 * s.rotation_deg,
+                "camera {c}: {mm} mm, {deg}° vs {s:?}"
+            );
             assert!(s.translation_mm < 1.0, "{s:?}");
         }
         // The estimated noise is the simulated one (0.05°, 0.3 mm) within 25 %.
         for n in &answer.noise {
-            assert!((n.rotation_sigma_rad.to_degrees() / 0.05 - 1.0).abs() < 0.25, "{n:?}");
-            assert!((n.translation_sigma_m * 1e3 / 0.3 - 1.0).abs() < 0.25, "{n:?}");
+            assert!(
+                (n.rotation_sigma_rad.to_degrees() / 0.05 - 1.0).abs() < 0.25,
+                "{n:?}"
+            );
+            assert!(
+                (n.translation_sigma_m * 1e3 / 0.3 - 1.0).abs() < 0.25,
+                "{n:?}"
+            );
         }
-        assert_eq!(answer.relative.len(), 1, "only the two fixed cameras have a fixed relative pose");
+        assert_eq!(
+            answer.relative.len(),
+            1,
+            "only the two fixed cameras have a fixed relative pose"
+        );
         let rel = &answer.relative[0];
         let (deg, mm) = pose_error(&rel.pose, &(mounts[1].inverse() * mounts[2]));
         assert!(mm < 4.0 * rel.sigma.translation_mm && deg < 4.0 * rel.sigma.rotation_deg);
@@ -734,7 +827,16 @@ mod tests {
     fn a_camera_with_too_few_views_is_named() {
         let (mut data, mounts, fixed, flange) = rig(1);
         data.observations.retain(|o| o.camera != 2 || o.pose < 2);
-        let err = solve_rig(&data, &start_near(&mounts, fixed, flange), &RigOptions::default()).unwrap_err();
-        assert!(err.to_string().contains("camera `right` saw the board at 2 poses"), "{err}");
+        let err = solve_rig(
+            &data,
+            &start_near(&mounts, fixed, flange),
+            &RigOptions::default(),
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("camera `right` saw the board at 2 poses"),
+            "{err}"
+        );
     }
 }

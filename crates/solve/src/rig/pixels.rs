@@ -70,12 +70,20 @@ fn corner_rows(
         ),
     };
     let mut d_point = SMatrix::<f64, 3, 18>::zeros();
-    d_point.fixed_view_mut::<3, 3>(0, 0).copy_from(&d_theta_mount);
+    d_point
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&d_theta_mount);
     d_point.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-rm_t));
-    d_point.fixed_view_mut::<3, 3>(0, 6).copy_from(&d_theta_board);
+    d_point
+        .fixed_view_mut::<3, 3>(0, 6)
+        .copy_from(&d_theta_board);
     d_point.fixed_view_mut::<3, 3>(0, 9).copy_from(&through);
-    d_point.fixed_view_mut::<3, 3>(0, 12).copy_from(&(rm_t * dq_theta));
-    d_point.fixed_view_mut::<3, 3>(0, 15).copy_from(&(rm_t * dq_t));
+    d_point
+        .fixed_view_mut::<3, 3>(0, 12)
+        .copy_from(&(rm_t * dq_theta));
+    d_point
+        .fixed_view_mut::<3, 3>(0, 15)
+        .copy_from(&(rm_t * dq_t));
     (r, lin.d_pixel_d_point * d_point * scale)
 }
 
@@ -92,7 +100,10 @@ struct Problem<'a> {
 impl Problem<'_> {
     /// Parameters: the unknowns, then 6 per flange pose when they are estimated.
     fn len(&self) -> usize {
-        self.layout.len() + self.robot.map_or(0, |_| 6 * self.data.base_from_flange.len())
+        self.layout.len()
+            + self
+                .robot
+                .map_or(0, |_| 6 * self.data.base_from_flange.len())
     }
 
     /// Parameter offset of robot pose `i`'s flange (when estimated).
@@ -114,7 +125,10 @@ impl Problem<'_> {
     /// The robot prior's residual of pose `i` (its flange against the reported one, in sigmas).
     fn prior(&self, state: &State, i: usize) -> SVector<f64, 6> {
         let (st, sr) = self.robot.unwrap_or((1.0, 1.0));
-        let mut d = super::difference(&state.poses[self.flange_at(i) / 6], &self.data.base_from_flange[i]);
+        let mut d = super::difference(
+            &state.poses[self.flange_at(i) / 6],
+            &self.data.base_from_flange[i],
+        );
         for k in 0..3 {
             d[k] /= sr;
             d[k + 3] /= st;
@@ -136,7 +150,8 @@ impl Problem<'_> {
             let mut local = SMatrix::<f64, 18, 18>::zeros();
             let mut gradient = SMatrix::<f64, 18, 1>::zeros();
             for (point, pixel) in &frame.corners {
-                let (r, j) = corner_rows(model, setup, &mount, &board, &flange, point, pixel, scale);
+                let (r, j) =
+                    corner_rows(model, setup, &mount, &board, &flange, point, pixel, scale);
                 local += j.transpose() * j;
                 gradient += j.transpose() * r;
                 cost += r.norm_squared();
@@ -252,7 +267,11 @@ pub fn solve_rig_pixels(
     let corners: usize = frames.iter().map(|f| f.corners.len()).sum();
     let redundancy = 1.0 - layout.len() as f64 / (2 * corners).max(1) as f64;
     let mut iterations = 0;
-    let rounds = if options.estimate_noise { NOISE_ROUNDS } else { 1 };
+    let rounds = if options.estimate_noise {
+        NOISE_ROUNDS
+    } else {
+        1
+    };
     for round in 0..rounds {
         let sigma_now = sigma.clone();
         iterations += minimize(
@@ -320,23 +339,27 @@ mod tests {
         let point = Point3::new(0.1, 0.2, 0.0);
         let pixel = Point2::new(600.0, 300.0);
         for setup in [Setup::EyeToHand, Setup::EyeInHand] {
-        let (_, j) = corner_rows(&model, setup, &mount, &board, &b, &point, &pixel, 1.0);
-        let h = 1e-7;
-        for k in 0..18 {
-            let mut d = SVector::<f64, 6>::zeros();
-            d[k % 6] = h;
-            let at = |d: &SVector<f64, 6>| {
-                let (m, y, f) = match k / 6 {
-                    0 => (super::super::perturb(&mount, d), board, b),
-                    1 => (mount, super::super::perturb(&board, d), b),
-                    _ => (mount, board, super::super::perturb(&b, d)),
+            let (_, j) = corner_rows(&model, setup, &mount, &board, &b, &point, &pixel, 1.0);
+            let h = 1e-7;
+            for k in 0..18 {
+                let mut d = SVector::<f64, 6>::zeros();
+                d[k % 6] = h;
+                let at = |d: &SVector<f64, 6>| {
+                    let (m, y, f) = match k / 6 {
+                        0 => (super::super::perturb(&mount, d), board, b),
+                        1 => (mount, super::super::perturb(&board, d), b),
+                        _ => (mount, board, super::super::perturb(&b, d)),
+                    };
+                    corner_rows(&model, setup, &m, &y, &f, &point, &pixel, 1.0).0
                 };
-                corner_rows(&model, setup, &m, &y, &f, &point, &pixel, 1.0).0
-            };
-            let numeric = (at(&d) - at(&(-d))) / (2.0 * h);
-            let err = (numeric - j.column(k)).amax();
-            assert!(err < 1e-3 * (1.0 + numeric.amax()), "{setup}, column {k}: {numeric} vs {}", j.column(k));
-        }
+                let numeric = (at(&d) - at(&(-d))) / (2.0 * h);
+                let err = (numeric - j.column(k)).amax();
+                assert!(
+                    err < 1e-3 * (1.0 + numeric.amax()),
+                    "{setup}, column {k}: {numeric} vs {}",
+                    j.column(k)
+                );
+            }
         }
     }
 }

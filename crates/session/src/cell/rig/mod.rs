@@ -225,12 +225,12 @@ fn injected_failure() -> Option<(String, usize)> {
     Some((name.to_string(), at.parse().ok()?))
 }
 
+/// The arm and every camera of a rig, opened (cameras in config order).
+type RigHardware = (Box<dyn Robot>, Vec<Box<dyn Camera>>);
+
 /// Opens every camera of a simulated rig around one simulated arm. Each camera renders from the
 /// arm's true pose with its own lens, board and truth.
-fn open_sim(
-    rig: &RigConfig,
-    prepared: &[PreparedCell],
-) -> Result<(Box<dyn Robot>, Vec<Box<dyn Camera>>), RigRunError> {
+fn open_sim(rig: &RigConfig, prepared: &[PreparedCell]) -> Result<RigHardware, RigRunError> {
     let planner = &prepared[rig.planner];
     let truth = |p: &PreparedCell, name: &str| {
         p.config.simulation.ok_or_else(|| {
@@ -299,17 +299,20 @@ pub fn run_rig(
         })
         .collect::<Result<Vec<_>, _>>()?;
     let planner = &prepared[rig.planner];
-    let plan = planner.report.validated().ok_or_else(|| RigRunError::Plan {
-        camera: rig.cameras[rig.planner].name.clone(),
-        problems: planner
-            .report
-            .plan_problems
-            .iter()
-            .chain(planner.report.poses.iter().flat_map(|p| p.problems.iter()))
-            .cloned()
-            .collect::<Vec<_>>()
-            .join("; "),
-    })?;
+    let plan = planner
+        .report
+        .validated()
+        .ok_or_else(|| RigRunError::Plan {
+            camera: rig.cameras[rig.planner].name.clone(),
+            problems: planner
+                .report
+                .plan_problems
+                .iter()
+                .chain(planner.report.poses.iter().flat_map(|p| p.problems.iter()))
+                .cloned()
+                .collect::<Vec<_>>()
+                .join("; "),
+        })?;
     let all_sim = matches!(planner.config.robot, RobotConfig::Sim { .. })
         && prepared
             .iter()
@@ -474,7 +477,9 @@ fn open_folders(
     };
     if resume {
         let on_disk = read_manifest(root).map_err(|e| {
-            folder_error(format!("not a several-camera session ({RIG_MANIFEST}: {e})"))
+            folder_error(format!(
+                "not a several-camera session ({RIG_MANIFEST}: {e})"
+            ))
         })?;
         if on_disk.cameras != manifest.cameras {
             let names = |m: &RigManifest| {
@@ -526,7 +531,10 @@ fn open_folders(
                 folder
             };
             let detector = TargetDetector::spawn(&p.board, p.detector_options()).map_err(|e| {
-                RigRunError::Backend(format!("camera `{}`: starting the detector: {e}", camera.name))
+                RigRunError::Backend(format!(
+                    "camera `{}`: starting the detector: {e}",
+                    camera.name
+                ))
             })?;
             Ok(RigCameraRun {
                 name: camera.name.clone(),

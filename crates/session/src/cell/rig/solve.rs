@@ -15,19 +15,19 @@ use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
 use crate::config::rig::RigConfig;
+use crate::config::SolveSpace;
 use crate::session::{SessionError, SessionFolder};
+use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::write_yaml;
-use crate::config::SolveSpace;
-use handeye_core::camera_model::CameraModel;
 use handeye_solve::rig::{
     pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
 };
-use handeye_vision::Target;
 use handeye_solve::verdict::{Accuracy, Level, GOOD_POSES};
 use handeye_solve::{PoseSigma, SolveError};
+use handeye_vision::Target;
 
 /// Why a several-camera session could not be solved.
 #[derive(Debug, thiserror::Error)]
@@ -153,7 +153,13 @@ impl RigResultFile {
     }
 }
 
-fn named(parent: &str, child: &str, pose: Pose, sigma: PoseSigma, truth: Option<Pose>) -> NamedTransform {
+fn named(
+    parent: &str,
+    child: &str,
+    pose: Pose,
+    sigma: PoseSigma,
+    truth: Option<Pose>,
+) -> NamedTransform {
     let error = truth.map(|t| pose_error(&pose, &t));
     NamedTransform {
         name: format!("T_{parent}_{child}"),
@@ -250,7 +256,9 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         // The joint solve keeps the samples the camera's own robust solve kept.
         let dropped: std::collections::BTreeSet<usize> = alone.dropped.iter().copied().collect();
         for (k, visit) in visits.iter().filter(|v| v.sample().is_some()).enumerate() {
-            if let (Some(camera_from_target), false) = (visit.camera_from_target, dropped.contains(&k)) {
+            if let (Some(camera_from_target), false) =
+                (visit.camera_from_target, dropped.contains(&k))
+            {
                 // Every camera records the same flange pose at a plan index; the reported pose
                 // (not the planned one) is what the solve must use.
                 data.base_from_flange[visit.plan_index] = visit.base_from_flange;
@@ -320,7 +328,10 @@ fn camera_verdict(sigma: &PoseSigma, samples: usize, accuracy: &Accuracy) -> (Le
         level,
         format!(
             "1-sigma {:.3} mm / {:.4}° against the accuracy {} mm / {}°",
-            sigma.translation_mm, sigma.rotation_deg, accuracy.translation_mm, accuracy.rotation_deg
+            sigma.translation_mm,
+            sigma.rotation_deg,
+            accuracy.translation_mm,
+            accuracy.rotation_deg
         ),
     )
 }
@@ -376,7 +387,10 @@ fn solve_subset(
                 .frames
                 .iter()
                 .filter(|f| f.camera == k)
-                .map(|f| RigFrame { camera: 0, ..f.clone() })
+                .map(|f| RigFrame {
+                    camera: 0,
+                    ..f.clone()
+                })
                 .collect(),
         ),
     };
@@ -417,7 +431,13 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
         let mut level = Level::Redo;
         if let Some(k) = problem.config_index.iter().position(|&i| i == c) {
             let parent = mount_parent(setup);
-            entry.joint = Some(named(parent, &frame, joint.camera_mounts[k], joint.camera_sigmas[k], truth_of(c)));
+            entry.joint = Some(named(
+                parent,
+                &frame,
+                joint.camera_mounts[k],
+                joint.camera_sigmas[k],
+                truth_of(c),
+            ));
             let start_alone = RigStart {
                 camera_mounts: vec![problem.start.camera_mounts[k]],
                 ..problem.start.clone()
@@ -430,7 +450,13 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
                 pixel_space(rig),
                 robot_sigma(rig),
             ) {
-                entry.alone = Some(named(parent, &frame, alone.camera_mounts[0], alone.camera_sigmas[0], truth_of(c)));
+                entry.alone = Some(named(
+                    parent,
+                    &frame,
+                    alone.camera_mounts[0],
+                    alone.camera_sigmas[0],
+                    truth_of(c),
+                ));
             }
             entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
@@ -453,18 +479,38 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
     };
     let mut boards = Vec::new();
     if let Some((pose, sigma)) = joint.base_from_target {
-        boards.push(named(board_parent(Setup::EyeInHand), "target", pose, sigma, board_truth(Setup::EyeInHand)));
+        boards.push(named(
+            board_parent(Setup::EyeInHand),
+            "target",
+            pose,
+            sigma,
+            board_truth(Setup::EyeInHand),
+        ));
     }
     if let Some((pose, sigma)) = joint.flange_from_target {
-        boards.push(named(board_parent(Setup::EyeToHand), "target", pose, sigma, board_truth(Setup::EyeToHand)));
+        boards.push(named(
+            board_parent(Setup::EyeToHand),
+            "target",
+            pose,
+            sigma,
+            board_truth(Setup::EyeToHand),
+        ));
     }
     let camera_to_camera = joint
         .relative
         .iter()
         .map(|r| {
             let (from, to) = (problem.config_index[r.from], problem.config_index[r.to]);
-            let truth = truth_of(from).zip(truth_of(to)).map(|(a, b)| a.inverse() * b);
-            named(&rig.cameras[from].frame(), &rig.cameras[to].frame(), r.pose, r.sigma, truth)
+            let truth = truth_of(from)
+                .zip(truth_of(to))
+                .map(|(a, b)| a.inverse() * b);
+            named(
+                &rig.cameras[from].frame(),
+                &rig.cameras[to].frame(),
+                r.pose,
+                r.sigma,
+                truth,
+            )
         })
         .collect();
     RigResultFile {
