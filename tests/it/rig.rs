@@ -809,3 +809,49 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     println!("pixel space, T_cam_left_cam_right translation RMS error: joint {joint:.4} mm, chained {chained:.4} mm ({:.0} % lower)", 100.0 * (1.0 - joint / chained));
     assert!(joint < chained, "joint {joint} mm vs chained {chained} mm");
 }
+
+/// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every
+/// error names the camera and the key; the one-camera form is not taken for it.
+#[test]
+fn config_errors_name_the_camera_and_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let error = |edits: &[(&str, &str)]| {
+        let config = three_cameras(dir.path(), edits);
+        RigConfig::load(&config).unwrap_err().to_string()
+    };
+    let e = error(&[(
+        "noise_sigma: 2.0, blur_sigma_px: 0.5, seed: 12",
+        "noise_sigma: 900.0, blur_sigma_px: 0.5, seed: 12",
+    )]);
+    assert!(
+        e.contains("cameras[1] (`left`)") && e.contains("camera.noise_sigma"),
+        "{e}"
+    );
+    let e = error(&[("name: right", "name: left")]);
+    assert!(
+        e.contains("cameras[2].name") && e.contains("`left` names two cameras"),
+        "{e}"
+    );
+    let e = error(&[("name: right", "name: Right-Cam")]);
+    assert!(
+        e.contains("cameras[2].name") && e.contains("lower-case"),
+        "{e}"
+    );
+    let e = error(&[(
+        "  T_flange_target: {translation: [-0.145, 0.145, -0.03]",
+        "  T_flange_targte: {translation: [-0.145, 0.145, -0.03]",
+    )]);
+    assert!(e.contains("nominal.T_flange_targte"), "{e}");
+    assert!(handeye::config::rig::is_rig_file(&three_cameras(
+        dir.path(),
+        &[]
+    )));
+    assert!(!handeye::config::rig::is_rig_file(
+        &util::repo().join("configs/sim-cell.yaml")
+    ));
+    // The one-camera reader refuses the form with a message naming the key it does not know.
+    let one = handeye::config::CellConfig::load(&three_cameras(dir.path(), &[]))
+        .unwrap_err()
+        .to_string();
+    assert!(one.contains("cameras"), "{one}");
+}

@@ -184,6 +184,14 @@ impl CellConfig {
 
     /// Parses and validates config YAML; relative paths resolve against `file`'s folder.
     pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
+        if rig::is_rig_text(text) {
+            // Said as what it is, not as the first key the one-camera form does not know.
+            return Err(ConfigError::Inconsistent {
+                file: file.to_path_buf(),
+                key: "cameras".into(),
+                problem: "this is a config of several cameras: `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (setup, intrinsics, camera)".into(),
+            });
+        }
         Self::from_raw(ConfigFile::parse(text, file)?, file)
     }
 
