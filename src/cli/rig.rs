@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
-use handeye::cell::rig::{self, RigProgress, RigResultFile};
+use handeye::cell::rig::{self, RigEvent, RigResultFile};
 use handeye::config::rig::RigConfig;
 
 /// `handeye run` of a several-camera config (new, or resuming `resume`).
@@ -23,7 +23,21 @@ pub(super) fn run(config: Option<&Path>, out: PathBuf, resume: bool) -> anyhow::
     };
     let stop = Arc::new(AtomicBool::new(false));
     super::stop_on_signals(stop.clone());
-    let mut progress = |p: &RigProgress| {
+    let mut progress = |event: &RigEvent| {
+        let p = match event {
+            RigEvent::Planned(views) => {
+                let seen: Vec<String> = views
+                    .iter()
+                    .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))
+                    .collect();
+                outln!(
+                    "poses where each camera should see its board (nominal cell): {}",
+                    seen.join(" · ")
+                );
+                return;
+            }
+            RigEvent::Pose(p) => p,
+        };
         let cameras: Vec<String> = p
             .captures
             .iter()

@@ -127,6 +127,11 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
         stdout.contains("T_flange_cam_wrist") && stdout.contains("T_base_cam_left"),
         "{stdout}"
     );
+    // Before moving, the plan (made for the wrist camera) is scored for every camera.
+    assert!(
+        stdout.contains("poses where each camera should see its board (nominal cell): wrist 20/20"),
+        "{stdout}"
+    );
     assert!(
         result.transform("T_base_target").is_some()
             && result.transform("T_flange_target").is_some()

@@ -36,6 +36,7 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{read_yaml, write_yaml};
 use handeye_robot::{Joints, Robot};
+use handeye_solve::rig::MIN_VIEWS_PER_CAMERA;
 use handeye_vision::{Target, TargetDetector};
 
 pub use solve::{solve_rig_folder, RigResultFile, RigSolveError};
@@ -165,6 +166,73 @@ pub struct RigProgress {
     pub captures: Vec<CameraCapture>,
 }
 
+/// How many plan poses each camera is expected to see its board at, by the nominal cell: the
+/// plan is made for one camera, so the others' share is checked before anything moves.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedViews {
+    /// The camera.
+    pub camera: String,
+    /// Poses where at least half the board's corners fall inside its image (by the nominal
+    /// mounts and its lens).
+    pub poses: usize,
+    /// Poses in the plan.
+    pub of: usize,
+}
+
+/// Counts, per camera, the plan poses at which it is expected to see its board (by the nominal
+/// mounts, its lens and the configured image margin).
+pub fn planned_views(
+    rig: &RigConfig,
+    prepared: &[PreparedCell],
+    plan: &[(Pose, Joints)],
+) -> Vec<PlannedViews> {
+    rig.cameras
+        .iter()
+        .zip(prepared)
+        .map(|(camera, p)| {
+            let points = p.board.points();
+            let margin = p.config.session.image_margin_px;
+            let (w, h) = (
+                f64::from(p.camera_model.width),
+                f64::from(p.camera_model.height),
+            );
+            let poses = plan
+                .iter()
+                .filter(|(flange, _)| {
+                    let camera_from_target = p.config.nominal.camera_from_target(flange);
+                    let inside = points
+                        .iter()
+                        .filter_map(|(_, _, point)| {
+                            p.camera_model.project(&(camera_from_target * point))
+                        })
+                        .filter(|px| {
+                            px.x >= margin
+                                && px.y >= margin
+                                && px.x <= w - margin
+                                && px.y <= h - margin
+                        })
+                        .count();
+                    2 * inside >= points.len()
+                })
+                .count();
+            PlannedViews {
+                camera: camera.name.clone(),
+                poses,
+                of: plan.len(),
+            }
+        })
+        .collect()
+}
+
+/// What a several-camera run says as it goes.
+#[derive(Debug, Clone)]
+pub enum RigEvent {
+    /// Before the first move: how many poses each camera is expected to see its board at.
+    Planned(Vec<PlannedViews>),
+    /// One pose done.
+    Pose(RigProgress),
+}
+
 /// What a several-camera run did.
 #[derive(Debug, Clone)]
 pub struct RigRun {
@@ -285,7 +353,7 @@ pub fn run_rig(
     folder: &Path,
     resume: bool,
     stop: Arc<AtomicBool>,
-    on_progress: &mut dyn FnMut(&RigProgress),
+    on_event: &mut dyn FnMut(&RigEvent),
 ) -> Result<RigRun, RigRunError> {
     let rig = RigConfig::load(config_file)?;
     let prepared = rig
@@ -335,6 +403,19 @@ pub fn run_rig(
         planner: rig.cameras[rig.planner].name.clone(),
         plan: SessionManifest::new(PathBuf::new(), Setup::EyeInHand, &plan).plan,
     };
+    let views = planned_views(&rig, &prepared, &plan);
+    if let Some(blind) = views.iter().find(|v| v.poses < MIN_VIEWS_PER_CAMERA) {
+        return Err(RigRunError::Plan {
+            camera: blind.camera.clone(),
+            problems: format!(
+                "by the nominal cell it sees its board at {} of the {} poses (planned for camera `{}`), and a camera needs {MIN_VIEWS_PER_CAMERA}: check its nominal mount, or aim it where the arm goes",
+                blind.poses,
+                blind.of,
+                rig.cameras[rig.planner].name
+            ),
+        });
+    }
+    on_event(&RigEvent::Planned(views));
     let mut cameras = open_folders(&rig, &prepared, folder, resume, &manifest, &plan)?;
     // The failures of an earlier run are history: this run asks every camera again.
     let _ = std::fs::remove_file(root_failures(folder));
@@ -444,11 +525,11 @@ pub fn run_rig(
             });
         }
         visited_now += 1;
-        on_progress(&RigProgress {
+        on_event(&RigEvent::Pose(RigProgress {
             plan_index: index,
             of: plan.len(),
             captures,
-        });
+        }));
     }
     // Release the folders' locks before the solve reads them.
     drop(cameras);
