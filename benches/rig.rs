@@ -5,6 +5,8 @@
 //! `configs/sim-cell-three-cameras.yaml` calls it after each camera's own solve; and the
 //! pixel-space stage that follows it in a run (every board corner, 0.1 px noise, every flange
 //! pose estimated with the sim arm's repeatability; 3 rounds of corner-noise estimation).
+//! Measured (release, shared 2-core machine, a clippy build running beside it): pose space
+//! 5.8 ms, pixel space 88 ms per solve.
 
 use std::hint::black_box;
 
