@@ -84,10 +84,27 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
             ids.base
         );
     }
+    // A several-camera result (`cameras:`): every camera's mount, the boards, camera to camera.
+    if let Ok(text) = std::fs::read_to_string(&args.result) {
+        if let Ok(rig) = serde_yaml_ng::from_str::<handeye::cell::rig::RigResultFile>(&text) {
+            let text = handeye::formats::export_rig::export_rig(&rig, format, &ids)
+                .with_context(|| format!("exporting {}", args.result.display()))?;
+            return write_or_print(&args.output, format, &text);
+        }
+    }
     let mounts = ResultFile::load_mounts(&args.result)?;
     let text = export(&mounts, format, &ids)
         .with_context(|| format!("exporting {}", args.result.display()))?;
-    match &args.output {
+    write_or_print(&args.output, format, &text)
+}
+
+/// Writes `text` atomically to `output`, or prints it.
+fn write_or_print(
+    output: &Option<PathBuf>,
+    format: ExportFormat,
+    text: &str,
+) -> anyhow::Result<()> {
+    match output {
         Some(path) => {
             let removed = write_atomic_reporting(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;

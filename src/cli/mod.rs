@@ -11,6 +11,7 @@ mod import;
 mod plan;
 mod replay;
 mod report;
+mod rig;
 mod run;
 mod shell;
 mod solve;

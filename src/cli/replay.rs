@@ -27,6 +27,9 @@ pub(super) struct ReplayArgs {
 
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    if cell::rig::is_rig_folder(&args.session) {
+        return super::rig::replay(&args.session, args.config.as_deref());
+    }
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
     let config_path = args

@@ -24,6 +24,11 @@ pub(super) struct ReportArgs {
 
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
+    if handeye::cell::rig::is_rig_folder(&args.session) {
+        let path = handeye::report::rig::write_rig_report(&args.session)?;
+        outln!("report: {}", path.display());
+        return Ok(());
+    }
     let (path, _) = write(&args.session, args.config)?;
     outln!("report: {}", path.display());
     Ok(())

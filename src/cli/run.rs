@@ -56,6 +56,19 @@ pub(super) struct RunArgs {
 
 /// Runs `handeye run`.
 pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
+    // A cell with several cameras (`cameras:` in the config, `rig.yaml` in the session).
+    let rig_config = args
+        .config
+        .as_deref()
+        .is_some_and(handeye::config::rig::is_rig_file);
+    let rig_session = args.resume.as_deref().is_some_and(cell::rig::is_rig_folder);
+    if rig_config || rig_session {
+        let (folder, resume) = match &args.resume {
+            Some(dir) => (dir.clone(), true),
+            None => (args.out.clone().unwrap_or_else(default_session_dir), false),
+        };
+        return super::rig::run(args.config.as_deref(), folder, resume);
+    }
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),

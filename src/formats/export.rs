@@ -57,6 +57,9 @@ pub enum ExportError {
         /// The quaternion as found.
         quaternion: [f64; 4],
     },
+    /// A form that cannot hold this result (a several-camera result as UR literals).
+    #[error("{0}")]
+    Unsupported(String),
 }
 
 /// The ROS naming rules a frame id breaks ([`validate_frame_id`]).

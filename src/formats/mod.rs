@@ -6,6 +6,7 @@
 
 pub mod bag;
 pub mod export;
+pub mod export_rig;
 pub mod import;
 
 pub use export::{export, validate_frame_id, ExportError, ExportFormat, FrameIds};

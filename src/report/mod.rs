@@ -25,6 +25,7 @@
 
 mod corners;
 pub mod plots;
+pub mod rig;
 mod sections;
 pub mod session;
 

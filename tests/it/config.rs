@@ -549,8 +549,20 @@ fn shipped_configs_load() {
     for entry in std::fs::read_dir(&configs).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "yaml") {
-            let config = CellConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
-            assert_eq!(config.settle().as_secs_f64(), config.session.settle_s);
+            // A config of several cameras (`cameras:`) loads as one cell config per camera.
+            let configs = if handeye::config::rig::is_rig_file(&path) {
+                handeye::config::rig::RigConfig::load(&path)
+                    .unwrap_or_else(|e| panic!("{e:#}"))
+                    .cameras
+                    .into_iter()
+                    .map(|c| c.config)
+                    .collect()
+            } else {
+                vec![CellConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"))]
+            };
+            for config in configs {
+                assert_eq!(config.settle().as_secs_f64(), config.session.settle_s);
+            }
             loaded += 1;
         }
     }

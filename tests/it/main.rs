@@ -31,6 +31,7 @@ mod noise;
 mod plausibility;
 mod report;
 mod reprojection;
+mod rig;
 mod session;
 mod solve;
 mod uncertainty;

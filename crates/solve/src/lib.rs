@@ -33,6 +33,7 @@ pub mod options;
 pub mod plausibility;
 pub mod refine;
 pub mod reprojection;
+pub mod rig;
 mod robust;
 pub mod verdict;
 

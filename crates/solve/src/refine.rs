@@ -552,7 +552,7 @@ pub fn variance_factor(chi2: f64, dof: usize) -> f64 {
     }
 }
 
-fn pose_sigma(cov: &SMatrix<f64, 6, 6>) -> PoseSigma {
+pub(crate) fn pose_sigma(cov: &SMatrix<f64, 6, 6>) -> PoseSigma {
     let axis = |i: usize| cov[(i, i)].max(0.0).sqrt();
     PoseSigma {
         rotation_deg: (cov[(0, 0)] + cov[(1, 1)] + cov[(2, 2)])

@@ -4,6 +4,7 @@
 //! cell through a whole calibration run (what `handeye run` does).
 
 pub mod recorded;
+pub mod rig;
 pub mod run;
 pub mod sim;
 pub mod uvc;
@@ -134,6 +135,11 @@ pub struct PreparedCell {
 /// Loads everything a config names and checks the plan. Nothing moves.
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+    prepare_config(config)
+}
+
+/// [`prepare`] of a config already read (one camera of a several-camera cell, `config::rig`).
+pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     referenced_files_exist(&config)?;
     let board = Target::load(&config.target).map_err(|source| CellError::Board {
         file: config.target.clone(),

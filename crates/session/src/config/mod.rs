@@ -10,6 +10,7 @@
 //! on the ground floor, `plan`, `robot`, `solve` and `vision` (for their types and bounds).
 
 pub mod recorded;
+pub mod rig;
 pub mod schema;
 pub mod validate;
 
@@ -95,6 +96,17 @@ pub enum ConfigError {
         /// The pose problem with its YAML path.
         problem: PoseError,
     },
+    /// A problem of one camera of a cell with several (`cameras:`), named by its place and name.
+    #[error("cameras[{index}] (`{name}`): {source}")]
+    Camera {
+        /// Its place in the `cameras:` list.
+        index: usize,
+        /// Its name.
+        name: String,
+        /// The problem.
+        #[source]
+        source: Box<ConfigError>,
+    },
     /// A config about to be written does not load back (a bug in the writer).
     #[error("refusing to write a config that would not load")]
     Invalid(#[source] Box<ConfigError>),
@@ -172,7 +184,19 @@ impl CellConfig {
 
     /// Parses and validates config YAML; relative paths resolve against `file`'s folder.
     pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
-        let raw = ConfigFile::parse(text, file)?;
+        if rig::is_rig_text(text) {
+            // Said as what it is, not as the first key the one-camera form does not know.
+            return Err(ConfigError::Inconsistent {
+                file: file.to_path_buf(),
+                key: "cameras".into(),
+                problem: "this is a config of several cameras: `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (setup, intrinsics, camera)".into(),
+            });
+        }
+        Self::from_raw(ConfigFile::parse(text, file)?, file)
+    }
+
+    /// Validates a config's shape as read; relative paths resolve against `file`'s folder.
+    pub fn from_raw(raw: ConfigFile, file: &Path) -> Result<CellConfig, ConfigError> {
         let checked = validate::check(&raw, file)?;
         let folder = file.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| folder.join(p);

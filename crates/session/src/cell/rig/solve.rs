@@ -1,0 +1,529 @@
+//! The joint solve of a several-camera session folder and its `result.yaml`.
+//!
+//! Each camera is first solved alone from its own folder (the one-camera pose-space solve with
+//! the config's solver settings: robust start, outliers left out, its noise estimated); those
+//! answers start the joint solve (`handeye_solve::rig`), which fits every mount and one board per
+//! setup together. `result.yaml` names every transform by its frames (`T_flange_cam_wrist`,
+//! `T_base_cam_left`, `T_base_target`, `T_cam_left_cam_right`), with its 1-sigma, and gives a
+//! verdict per camera and for the cell. Each camera's own answer is kept beside the joint one
+//! (`alone`), so the gain of solving together is on the page. When the config simulates the cell,
+//! every transform's error against the simulator's truth is written too.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::{camera_folder, read_manifest};
+use crate::config::rig::RigConfig;
+use crate::config::SolveSpace;
+use crate::session::{SessionError, SessionFolder};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{serde_pose, Pose};
+use handeye_core::setup::Setup;
+use handeye_core::yaml_file::write_yaml;
+use handeye_solve::rig::{
+    pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
+    RigObservation, RigOptions, RigSolution, RigStart,
+};
+use handeye_solve::verdict::{Accuracy, Level, GOOD_POSES};
+use handeye_solve::{PoseSigma, SolveError};
+use handeye_vision::Target;
+
+/// Why a several-camera session could not be solved.
+#[derive(Debug, thiserror::Error)]
+pub enum RigSolveError {
+    /// Reading the folder.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// A camera's own solve (which starts the joint one) failed.
+    #[error("camera `{camera}`: {source}")]
+    Alone {
+        /// The camera.
+        camera: String,
+        /// Why.
+        #[source]
+        source: Box<SolveError>,
+    },
+    /// The joint solve failed.
+    #[error("the joint solve: {0}")]
+    Joint(#[from] RigError),
+    /// A camera's board or lens file could not be read.
+    #[error("camera `{camera}`: {}: {problem}", file.display())]
+    Input {
+        /// The camera.
+        camera: String,
+        /// The file.
+        file: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// No camera has enough views to be solved.
+    #[error("no camera saw its board at {0} poses or more: nothing to solve")]
+    NothingToSolve(usize),
+}
+
+/// One solved transform, named by its frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NamedTransform {
+    /// `T_<parent>_<child>`.
+    pub name: String,
+    /// The parent frame (`flange`, `base`, `cam_left`).
+    pub parent: String,
+    /// The child frame (`cam_wrist`, `target`, `cam_right`).
+    pub child: String,
+    /// The transform.
+    #[serde(with = "serde_pose")]
+    pub pose: Pose,
+    /// Its 1-sigma.
+    pub sigma: PoseSigma,
+    /// Against the simulator's truth (sim cells only): rotation, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_error_deg: Option<f64>,
+    /// Against the simulator's truth: translation, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_error_mm: Option<f64>,
+}
+
+/// One camera's part of the answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraResult {
+    /// Its name.
+    pub name: String,
+    /// Its setup.
+    pub setup: Setup,
+    /// Poses where it saw its board (accepted samples).
+    pub samples: usize,
+    /// Why it is not in the joint solve, when it is not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub left_out: Option<String>,
+    /// Its mount from the joint solve (absent when left out).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<NamedTransform>,
+    /// Its mount solved from its own views alone (the one-camera answer).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alone: Option<NamedTransform>,
+    /// Its corner noise estimated by the pixel-space joint solve (1-sigma per image axis), px.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corner_noise_px: Option<f64>,
+    /// RMS rotation residual of its samples in the joint solve, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_rotation_rms_deg: Option<f64>,
+    /// RMS translation residual, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_translation_rms_mm: Option<f64>,
+    /// GOOD, CHECK or REDO, with why.
+    pub verdict: String,
+    /// The reason for the verdict.
+    pub reason: String,
+}
+
+/// `result.yaml` of a several-camera session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigResultFile {
+    /// Per camera, config order.
+    pub cameras: Vec<CameraResult>,
+    /// The boards (`T_base_target`, `T_flange_target`) from the joint solve.
+    pub boards: Vec<NamedTransform>,
+    /// Camera-to-camera transforms of cameras of one setup (`T_cam_left_cam_right`).
+    pub camera_to_camera: Vec<NamedTransform>,
+    /// `χ²/dof` of the joint solve.
+    pub variance_factor: f64,
+    /// The cell's verdict: the worst camera's.
+    pub verdict: String,
+    /// Which camera decided it, and why.
+    pub reason: String,
+}
+
+impl RigResultFile {
+    /// Every transform of the answer: the joint mounts, the boards, the camera-to-camera ones.
+    pub fn transforms(&self) -> impl Iterator<Item = &NamedTransform> {
+        self.cameras
+            .iter()
+            .filter_map(|c| c.joint.as_ref())
+            .chain(&self.boards)
+            .chain(&self.camera_to_camera)
+    }
+
+    /// The transform called `name`.
+    pub fn transform(&self, name: &str) -> Option<&NamedTransform> {
+        self.transforms().find(|t| t.name == name)
+    }
+}
+
+fn named(
+    parent: &str,
+    child: &str,
+    pose: Pose,
+    sigma: PoseSigma,
+    truth: Option<Pose>,
+) -> NamedTransform {
+    let error = truth.map(|t| pose_error(&pose, &t));
+    NamedTransform {
+        name: format!("T_{parent}_{child}"),
+        parent: parent.into(),
+        child: child.into(),
+        pose,
+        sigma,
+        truth_error_deg: error.map(|e| e.0),
+        truth_error_mm: error.map(|e| e.1),
+    }
+}
+
+fn mount_parent(setup: Setup) -> &'static str {
+    match setup {
+        Setup::EyeInHand => "flange",
+        Setup::EyeToHand => "base",
+    }
+}
+
+fn board_parent(setup: Setup) -> &'static str {
+    match setup {
+        Setup::EyeInHand => "base",
+        Setup::EyeToHand => "flange",
+    }
+}
+
+/// What the joint solve reads from a session: its data with each camera's own answer as the
+/// start, and which cameras are in it.
+pub struct RigProblem {
+    /// The data of the cameras in the solve.
+    pub data: RigData,
+    /// Each camera's own answer (same order as `data.cameras`).
+    pub start: RigStart,
+    /// Per camera in `data`: its index in the config.
+    pub config_index: Vec<usize>,
+    /// Per config camera: accepted samples, and why it is left out (if it is).
+    pub cameras: Vec<(usize, Option<String>)>,
+    /// The corners of every accepted board pose (the pixel-space solve's data).
+    pub frames: Vec<RigFrame>,
+    /// Per camera in `data`: its lens.
+    pub models: Vec<CameraModel>,
+}
+
+/// Reads every camera's folder and solves each camera alone: the joint problem and its start.
+pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigSolveError> {
+    let manifest = read_manifest(root)?;
+    let mut data = RigData {
+        cameras: Vec::new(),
+        base_from_flange: manifest.plan.iter().map(|p| p.base_from_flange).collect(),
+        observations: Vec::new(),
+    };
+    let mut start = RigStart {
+        camera_mounts: Vec::new(),
+        base_from_target: None,
+        flange_from_target: None,
+    };
+    let mut config_index = Vec::new();
+    let mut cameras = Vec::new();
+    let mut frames = Vec::new();
+    let mut models = Vec::new();
+    for (c, camera) in rig.cameras.iter().enumerate() {
+        let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
+        let visits = folder.read_visits()?;
+        let pairs: Vec<_> = visits.iter().filter_map(|v| v.sample()).collect();
+        let samples = pairs.len();
+        if samples < handeye_solve::rig::MIN_VIEWS_PER_CAMERA {
+            cameras.push((
+                samples,
+                Some(format!(
+                    "saw its board at {samples} poses; a camera needs at least {} to be solved",
+                    handeye_solve::rig::MIN_VIEWS_PER_CAMERA
+                )),
+            ));
+            continue;
+        }
+        let setup = camera.config.setup;
+        let alone = handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options())
+            .map_err(|source| RigSolveError::Alone {
+                camera: camera.name.clone(),
+                source: Box::new(source),
+            })?;
+        let index = data.cameras.len();
+        let board = Target::load(&camera.config.target).map_err(|e| RigSolveError::Input {
+            camera: camera.name.clone(),
+            file: camera.config.target.clone(),
+            problem: e.to_string(),
+        })?;
+        let lens = camera.config.intrinsics.clone().unwrap_or_default();
+        models.push(CameraModel::load(&lens).map_err(|e| RigSolveError::Input {
+            camera: camera.name.clone(),
+            file: lens.clone(),
+            problem: e.to_string(),
+        })?);
+        // The joint solve keeps the samples the camera's own robust solve kept.
+        let dropped: std::collections::BTreeSet<usize> = alone.dropped.iter().copied().collect();
+        for (k, visit) in visits.iter().filter(|v| v.sample().is_some()).enumerate() {
+            if let (Some(camera_from_target), false) =
+                (visit.camera_from_target, dropped.contains(&k))
+            {
+                // Every camera records the same flange pose at a plan index; the reported pose
+                // (not the planned one) is what the solve must use.
+                data.base_from_flange[visit.plan_index] = visit.base_from_flange;
+                data.observations.push(RigObservation {
+                    camera: index,
+                    pose: visit.plan_index,
+                    camera_from_target,
+                });
+                frames.push(RigFrame {
+                    camera: index,
+                    pose: visit.plan_index,
+                    corners: visit
+                        .corners_px
+                        .iter()
+                        .filter_map(|c| board.observation_point(c).map(|p| (p, c.pixel)))
+                        .collect(),
+                });
+            }
+        }
+        data.cameras.push(RigCamera {
+            name: camera.name.clone(),
+            setup,
+            noise: alone
+                .noise
+                .map(|n| n.model())
+                .unwrap_or_else(|| camera.config.solver.to_options().noise),
+        });
+        start.camera_mounts.push(alone.camera_mount);
+        match setup {
+            Setup::EyeInHand => {
+                start.base_from_target.get_or_insert(alone.target_mount);
+            }
+            Setup::EyeToHand => {
+                start.flange_from_target.get_or_insert(alone.target_mount);
+            }
+        }
+        config_index.push(c);
+        cameras.push((samples, None));
+    }
+    if data.cameras.is_empty() {
+        return Err(RigSolveError::NothingToSolve(
+            handeye_solve::rig::MIN_VIEWS_PER_CAMERA,
+        ));
+    }
+    Ok(RigProblem {
+        data,
+        start,
+        config_index,
+        cameras,
+        frames,
+        models,
+    })
+}
+
+/// The verdict of one camera's mount: its 1-sigma against the configured accuracy (GOOD within
+/// it, CHECK up to the verdict's REDO factor, REDO beyond), CHECK with fewer than
+/// [`GOOD_POSES`] samples.
+fn camera_verdict(sigma: &PoseSigma, samples: usize, accuracy: &Accuracy) -> (Level, String) {
+    let level = accuracy.level_of(sigma.translation_mm, sigma.rotation_deg);
+    if level == Level::Good && samples < GOOD_POSES {
+        return (
+            Level::Check,
+            format!("only {samples} samples (GOOD needs {GOOD_POSES}): add poses where it sees its board"),
+        );
+    }
+    (
+        level,
+        format!(
+            "1-sigma {:.3} mm / {:.4}° against the accuracy {} mm / {}°",
+            sigma.translation_mm,
+            sigma.rotation_deg,
+            accuracy.translation_mm,
+            accuracy.rotation_deg
+        ),
+    )
+}
+
+/// Solves a several-camera session folder jointly and writes its `result.yaml`.
+pub fn solve_rig_folder(root: &Path, rig: &RigConfig) -> Result<RigResultFile, RigSolveError> {
+    let problem = load_rig_problem(root, rig)?;
+    let joint = solve_joint(&problem, pixel_space(rig), robot_sigma(rig))?;
+    let result = result_file(rig, &problem, &joint);
+    write_yaml(&result, &root.join("result.yaml")).map_err(SessionError::from)?;
+    Ok(result)
+}
+
+/// Whether the config asks for the answer in pixel space (`solver.space: reprojection`, the
+/// default) rather than pose space.
+pub fn pixel_space(rig: &RigConfig) -> bool {
+    rig.cameras[rig.planner].config.solver.space == SolveSpace::Reprojection
+}
+
+/// The robot's repeatability (m, rad) the pixel-space solve estimates the flange poses with.
+pub fn robot_sigma(rig: &RigConfig) -> (f64, f64) {
+    rig.cameras[rig.planner].config.robot_repeatability()
+}
+
+/// The joint answer: pose space, then (when `pixels`) refined on the corners with every flange
+/// pose estimated around the reported one (1-sigma `robot`, m and rad).
+pub fn solve_joint(
+    problem: &RigProblem,
+    pixels: bool,
+    robot: (f64, f64),
+) -> Result<RigSolution, RigError> {
+    solve_subset(problem, &problem.data, &problem.start, None, pixels, robot)
+}
+
+/// The joint answer of `data` (all cameras, or camera `only` of `problem` alone).
+fn solve_subset(
+    problem: &RigProblem,
+    data: &RigData,
+    start: &RigStart,
+    only: Option<usize>,
+    pixels: bool,
+    robot: (f64, f64),
+) -> Result<RigSolution, RigError> {
+    let pose_space = solve_rig(data, start, &RigOptions::default())?;
+    if !pixels {
+        return Ok(pose_space);
+    }
+    let (models, frames): (Vec<CameraModel>, Vec<RigFrame>) = match only {
+        None => (problem.models.clone(), problem.frames.clone()),
+        Some(k) => (
+            vec![problem.models[k]],
+            problem
+                .frames
+                .iter()
+                .filter(|f| f.camera == k)
+                .map(|f| RigFrame {
+                    camera: 0,
+                    ..f.clone()
+                })
+                .collect(),
+        ),
+    };
+    let options = RigOptions {
+        robot_sigma: Some(robot),
+        ..RigOptions::default()
+    };
+    solve_rig_pixels(data, &models, &frames, &pose_space, &options)
+}
+
+/// `result.yaml` from the joint answer; each camera's own answer is solved again by the same
+/// estimator with its views alone, so `alone` and `joint` differ only by solving together.
+pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -> RigResultFile {
+    let accuracy = Accuracy {
+        translation_mm: rig.cameras[rig.planner].config.verdict.accuracy_mm,
+        rotation_deg: rig.cameras[rig.planner].config.verdict.accuracy_deg,
+    };
+    let truth_of = |c: usize| rig.cameras[c].config.simulation.map(|s| s.camera_mount);
+    let mut cameras = Vec::new();
+    let mut worst: (Level, String) = (Level::Good, "every camera is GOOD".into());
+    for (c, camera) in rig.cameras.iter().enumerate() {
+        let (samples, left_out) = problem.cameras[c].clone();
+        let setup = camera.config.setup;
+        let frame = camera.frame();
+        let mut entry = CameraResult {
+            name: camera.name.clone(),
+            setup,
+            samples,
+            left_out: left_out.clone(),
+            joint: None,
+            alone: None,
+            corner_noise_px: None,
+            residual_rotation_rms_deg: None,
+            residual_translation_rms_mm: None,
+            verdict: Level::Redo.word().into(),
+            reason: left_out.clone().unwrap_or_default(),
+        };
+        let mut level = Level::Redo;
+        if let Some(k) = problem.config_index.iter().position(|&i| i == c) {
+            let parent = mount_parent(setup);
+            entry.joint = Some(named(
+                parent,
+                &frame,
+                joint.camera_mounts[k],
+                joint.camera_sigmas[k],
+                truth_of(c),
+            ));
+            let start_alone = RigStart {
+                camera_mounts: vec![problem.start.camera_mounts[k]],
+                ..problem.start.clone()
+            };
+            if let Ok(alone) = solve_subset(
+                problem,
+                &problem.data.only(k),
+                &start_alone,
+                Some(k),
+                pixel_space(rig),
+                robot_sigma(rig),
+            ) {
+                entry.alone = Some(named(
+                    parent,
+                    &frame,
+                    alone.camera_mounts[0],
+                    alone.camera_sigmas[0],
+                    truth_of(c),
+                ));
+            }
+            entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
+            entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
+            entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
+            let (l, reason) = camera_verdict(&joint.camera_sigmas[k], samples, &accuracy);
+            level = l;
+            entry.verdict = l.word().into();
+            entry.reason = reason;
+        }
+        if level > worst.0 {
+            worst = (level, format!("camera `{}`: {}", camera.name, entry.reason));
+        }
+        cameras.push(entry);
+    }
+    let board_truth = |setup: Setup| {
+        rig.cameras
+            .iter()
+            .find(|c| c.config.setup == setup)
+            .and_then(|c| c.config.simulation.map(|s| s.target_mount))
+    };
+    let mut boards = Vec::new();
+    if let Some((pose, sigma)) = joint.base_from_target {
+        boards.push(named(
+            board_parent(Setup::EyeInHand),
+            "target",
+            pose,
+            sigma,
+            board_truth(Setup::EyeInHand),
+        ));
+    }
+    if let Some((pose, sigma)) = joint.flange_from_target {
+        boards.push(named(
+            board_parent(Setup::EyeToHand),
+            "target",
+            pose,
+            sigma,
+            board_truth(Setup::EyeToHand),
+        ));
+    }
+    let camera_to_camera = joint
+        .relative
+        .iter()
+        .map(|r| {
+            let (from, to) = (problem.config_index[r.from], problem.config_index[r.to]);
+            let truth = truth_of(from)
+                .zip(truth_of(to))
+                .map(|(a, b)| a.inverse() * b);
+            named(
+                &rig.cameras[from].frame(),
+                &rig.cameras[to].frame(),
+                r.pose,
+                r.sigma,
+                truth,
+            )
+        })
+        .collect();
+    RigResultFile {
+        cameras,
+        boards,
+        camera_to_camera,
+        variance_factor: joint.variance_factor,
+        verdict: worst.0.word().into(),
+        reason: worst.1,
+    }
+}
+
+/// The result file of a several-camera session folder.
+pub fn result_path(root: &Path) -> PathBuf {
+    root.join("result.yaml")
+}

@@ -1,0 +1,117 @@
+//! The HTML report of a cell with several cameras (`<session>/report.html` of a several-camera
+//! session): the cell's verdict, one row per camera (its mount from the joint solve and from its
+//! own views alone, 1-sigma, samples, residuals, verdict), the boards, and the camera-to-camera
+//! transforms. Renders `result.yaml` as written; judges nothing. Self-contained HTML.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use handeye_core::atomic_file::write_atomic;
+use handeye_core::geometry::rotvec;
+use handeye_session::cell::rig::solve::NamedTransform;
+use handeye_session::cell::rig::RigResultFile;
+
+use super::{escape, ReportError};
+
+fn transform_cells(t: &NamedTransform) -> String {
+    let p = t.pose.translation.vector;
+    let r = rotvec(&t.pose.rotation);
+    let truth = match (t.truth_error_mm, t.truth_error_deg) {
+        (Some(mm), Some(deg)) => format!("{mm:.3} mm / {deg:.4}°"),
+        _ => "—".into(),
+    };
+    format!(
+        "<td><code>{}</code></td><td>[{:.5}, {:.5}, {:.5}]</td><td>[{:.5}, {:.5}, {:.5}]</td><td>±{:.3} mm / ±{:.4}°</td><td>{}</td>",
+        escape(&t.name),
+        p.x,
+        p.y,
+        p.z,
+        r.x,
+        r.y,
+        r.z,
+        t.sigma.translation_mm,
+        t.sigma.rotation_deg,
+        truth
+    )
+}
+
+/// The page's HTML.
+pub fn render(result: &RigResultFile, folder: &Path) -> String {
+    let mut html = String::from(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
+         <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}\
+         .GOOD{color:#070}.CHECK{color:#a60}.REDO{color:#b00}</style></head><body>",
+    );
+    let _ = write!(
+        html,
+        "<h1>Calibration of a cell with {} cameras</h1><p>Session <code>{}</code></p><h2 class=\"{v}\">Cell: {v}</h2><p>{}</p>",
+        result.cameras.len(),
+        escape(&folder.display().to_string()),
+        escape(&result.reason),
+        v = escape(&result.verdict),
+    );
+    for f in handeye_session::cell::rig::read_failures(folder) {
+        let _ = write!(
+            html,
+            "<p class=\"REDO\">Camera <b>{}</b> stopped delivering frames at plan pose {}: {}. Its samples until then are kept and solved.</p>",
+            escape(&f.camera),
+            f.plan_index,
+            escape(&f.error)
+        );
+    }
+    html.push_str("<h2>Cameras</h2><table><tr><th>camera</th><th>verdict</th><th>samples</th><th>solve</th><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
+    for c in &result.cameras {
+        let rows: Vec<(&str, &NamedTransform)> =
+            [("joint", c.joint.as_ref()), ("alone", c.alone.as_ref())]
+                .into_iter()
+                .filter_map(|(k, t)| t.map(|t| (k, t)))
+                .collect();
+        if rows.is_empty() {
+            let _ = write!(
+                html,
+                "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{}</td><td colspan=\"6\">{}</td></tr>",
+                escape(&c.name),
+                c.samples,
+                escape(c.left_out.as_deref().unwrap_or(&c.reason)),
+                v = escape(&c.verdict)
+            );
+        }
+        for (k, t) in rows {
+            let _ = write!(
+                html,
+                "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{}</td><td>{k}</td>{}</tr>",
+                escape(&c.name),
+                c.samples,
+                transform_cells(t),
+                v = escape(&c.verdict)
+            );
+        }
+    }
+    html.push_str("</table><p>“alone”: the same camera solved from its own views only (the one-camera answer); “joint”: every camera and the boards solved together.</p>");
+    html.push_str("<h2>Boards and camera-to-camera transforms (joint solve)</h2><table><tr><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
+    for t in result.boards.iter().chain(&result.camera_to_camera) {
+        let _ = write!(html, "<tr>{}</tr>", transform_cells(t));
+    }
+    let _ = write!(
+        html,
+        "</table><p>Variance factor of the joint solve (χ²/dof): {:.3}</p></body></html>",
+        result.variance_factor
+    );
+    html
+}
+
+/// Writes `<folder>/report.html` from the folder's `result.yaml`; returns its path.
+pub fn write_rig_report(folder: &Path) -> Result<PathBuf, ReportError> {
+    let result_path = folder.join("result.yaml");
+    let result: RigResultFile = handeye_core::yaml_file::read_yaml(&result_path).map_err(|e| {
+        ReportError::Session(Box::new(handeye_session::session::SessionError::from(e)))
+    })?;
+    let path = folder.join("report.html");
+    write_atomic(&path, render(&result, folder).as_bytes()).map_err(|source| {
+        ReportError::Write {
+            path: path.clone(),
+            source,
+        }
+    })?;
+    Ok(path)
+}

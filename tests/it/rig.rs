@@ -1,0 +1,528 @@
+//! A cell with several cameras (issue #27): `configs/sim-cell-three-cameras.yaml` (a wrist camera
+//! and two fixed cameras) run end to end by the binary, every mount against the simulator's
+//! truth; a camera that stops delivering frames; kill -9 and resume; replay; and the joint
+//! solve against each camera alone and against chaining two single-camera answers (Monte Carlo
+//! over seeds on the same samples).
+
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use handeye::cell::rig::{camera_folder, RigResultFile};
+use handeye::config::rig::RigConfig;
+use handeye::geometry::Pose;
+
+use crate::util;
+use util::handeye;
+
+mod monte_carlo;
+
+/// The three-camera cell with absolute board and lens paths, `edits` applied.
+fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
+    util::config_variant(dir, "sim-cell-three-cameras.yaml", "cell.yaml", edits)
+}
+
+fn read_result(folder: &Path) -> RigResultFile {
+    let text = std::fs::read_to_string(folder.join("result.yaml")).unwrap();
+    serde_yaml_ng::from_str(&text).unwrap()
+}
+
+/// The simulator's truth of every camera mount, by transform name, from the config itself (not
+/// from what the run wrote).
+fn truth(config: &Path) -> Vec<(String, Pose)> {
+    let rig = RigConfig::load(config).unwrap();
+    rig.cameras
+        .iter()
+        .map(|c| (c.mount_key(), c.config.simulation.unwrap().camera_mount))
+        .collect()
+}
+
+fn run_ok(config: &Path, out: &Path, env: &[(&str, &str)]) -> String {
+    let mut command = handeye();
+    command
+        .args(["run", "--config"])
+        .arg(config)
+        .arg("-o")
+        .arg(out);
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    let output = command.output().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout).to_string();
+    assert!(
+        output.status.success(),
+        "run failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}
+
+/// One run of the shipped three-camera cell, shared by the tests that read it (the accuracy test
+/// and the OpenCV anchor): (config, session folder, what the run printed).
+fn shipped_run() -> &'static (PathBuf, PathBuf, String) {
+    static RUN: std::sync::OnceLock<(PathBuf, PathBuf, String)> = std::sync::OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rig-three-cameras");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = three_cameras(&dir, &[]);
+        let out = dir.join("session");
+        let stdout = run_ok(&config, &out, &[]);
+        (config, out, stdout)
+    })
+}
+
+/// The acceptance test of issue #27: one run of the three-camera cell; every camera's frames
+/// and records in its folder; every mount within 0.5 mm / 0.05° of the simulator's truth; the
+/// fixed cameras' relative pose within the same tolerance; every transform named by its frames.
+#[test]
+fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
+    let (config, out, stdout) = shipped_run();
+    let (config, out) = (config.as_path(), out.as_path());
+    println!("{stdout}");
+    for name in ["wrist", "left", "right"] {
+        let folder = camera_folder(out, name);
+        assert!(
+            folder.join("frames/000.png").is_file(),
+            "{name}: no frame 0"
+        );
+        assert!(
+            folder.join("poses/019.yaml").is_file(),
+            "{name}: no record of pose 19"
+        );
+        assert!(folder.join("samples.yaml").is_file(), "{name}: no samples");
+    }
+    let result = read_result(out);
+    for (name, truth) in truth(config) {
+        let solved = result
+            .transform(&name)
+            .unwrap_or_else(|| panic!("{name} not in result.yaml"));
+        let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);
+        println!(
+            "{name}: {mm:.3} mm, {deg:.4}° from the truth (1-sigma {:.3} mm, {:.4}°)",
+            solved.sigma.translation_mm, solved.sigma.rotation_deg
+        );
+        assert!(
+            mm < 0.5 && deg < 0.05,
+            "{name}: {mm:.3} mm, {deg:.4}° from the truth"
+        );
+    }
+    for camera in &result.cameras {
+        assert!(
+            camera.samples >= 8,
+            "{}: only {} samples",
+            camera.name,
+            camera.samples
+        );
+    }
+    let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
+    let relative = result
+        .transform("T_cam_left_cam_right")
+        .expect("T_cam_left_cam_right");
+    let expected = truths["T_base_cam_left"].inverse() * truths["T_base_cam_right"];
+    let (mm, deg) = util::pose_error_mm_deg(&relative.pose, &expected);
+    assert!(
+        mm < 0.5 && deg < 0.05,
+        "T_cam_left_cam_right: {mm:.3} mm, {deg:.4}°"
+    );
+    assert!(
+        stdout.contains("T_flange_cam_wrist") && stdout.contains("T_base_cam_left"),
+        "{stdout}"
+    );
+    // Before moving, the plan (made for the wrist camera) is scored for every camera.
+    assert!(
+        stdout.contains("poses where each camera should see its board (nominal cell): wrist 20/20"),
+        "{stdout}"
+    );
+    assert!(
+        result.transform("T_base_target").is_some()
+            && result.transform("T_flange_target").is_some()
+    );
+}
+
+/// A camera that stops delivering frames mid-run is named, its samples until then are kept and
+/// solved, and the other cameras go on.
+#[test]
+fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = three_cameras(dir.path(), &[("count: 20", "count: 12")]);
+    let out = dir.path().join("session");
+    let stdout = run_ok(&config, &out, &[("HANDEYE_RIG_CAMERA_FAILS", "wrist:8")]);
+    assert!(
+        stdout.contains("camera `wrist` stopped delivering frames at plan pose 8"),
+        "{stdout}"
+    );
+    let result = read_result(&out);
+    let wrist = result.cameras.iter().find(|c| c.name == "wrist").unwrap();
+    assert!(wrist.samples >= 6 && wrist.samples <= 8, "{wrist:?}");
+    assert!(
+        wrist.joint.is_some(),
+        "the wrist's samples before the failure are solved"
+    );
+    // No record without a frame: the poses it missed stay open for a resume.
+    assert!(!camera_folder(&out, "wrist").join("poses/009.yaml").exists());
+    let failures = std::fs::read_to_string(out.join("failures.yaml")).unwrap();
+    assert!(
+        failures.contains("camera: wrist") && failures.contains("plan_index: 8"),
+        "{failures}"
+    );
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains("<b>wrist</b> stopped delivering frames at plan pose 8"));
+    let left = result.cameras.iter().find(|c| c.name == "left").unwrap();
+    assert!(camera_folder(&out, "left").join("poses/011.yaml").is_file());
+    assert!(left.joint.is_some());
+    // The camera is back (plugged in again): a resume visits only the poses it missed.
+    let resumed = handeye()
+        .args(["run", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&resumed.stdout);
+    assert!(
+        resumed.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    assert!(stdout.contains("4 poses visited in this run"), "{stdout}");
+    assert!(!out.join("failures.yaml").exists());
+    let wrist = read_result(&out)
+        .cameras
+        .into_iter()
+        .find(|c| c.name == "wrist")
+        .unwrap();
+    assert!(wrist.samples >= 10, "{wrist:?}");
+}
+
+/// Killed with SIGKILL mid-run, then resumed: every pose has every camera's record once, the
+/// result is written, and `handeye replay` of the folder gives the same answer.
+#[test]
+fn killed_mid_run_then_resumed_and_replayed() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = three_cameras(
+        dir.path(),
+        &[
+            ("count: 20", "count: 10"),
+            ("move_duration_s: 0.0", "move_duration_s: 0.3"),
+        ],
+    );
+    let out = dir.path().join("session");
+    let mut child = handeye()
+        .args(["run", "--config"])
+        .arg(&config)
+        .arg("-o")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill once the third pose is recorded by the last camera.
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !camera_folder(&out, "right")
+        .join("poses/002.yaml")
+        .is_file()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the run recorded nothing in 120 s"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!out.join("result.yaml").exists());
+    let output = handeye()
+        .args(["run", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "resume failed: {}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    for name in ["wrist", "left", "right"] {
+        let poses: Vec<_> = std::fs::read_dir(camera_folder(&out, name).join("poses"))
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().extension().is_some_and(|x| x == "yaml"))
+            .collect();
+        assert_eq!(poses.len(), 10, "{name}: every pose recorded once");
+    }
+    let resumed = read_result(&out);
+    let replay = handeye().arg("replay").arg(&out).output().unwrap();
+    assert!(
+        replay.status.success(),
+        "{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    let replayed = read_result(&out);
+    for (a, b) in resumed.transforms().zip(replayed.transforms()) {
+        assert_eq!(a.name, b.name);
+        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+        assert!(
+            mm < 1e-6 && deg < 1e-6,
+            "{}: replay differs by {mm} mm {deg}°",
+            a.name
+        );
+    }
+}
+
+/// The independent anchor for the two fixed cameras: OpenCV's `cv2.stereoCalibrate`
+/// (intrinsics fixed) on the very corners the run detected at the poses both cameras saw the
+/// flange board, against the simulator's truth and against the joint solve's
+/// `T_cam_left_cam_right`. Both must be within 0.5 mm / 0.05° of the truth.
+#[test]
+fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
+    use handeye::camera_model::{CameraModel, Distortion};
+    use handeye::session::SessionFolder;
+    use handeye::vision::Target;
+
+    let Some(python) = util::python_with_opencv() else {
+        return;
+    };
+    let (config, out, _) = shipped_run();
+    let rig = RigConfig::load(config).unwrap();
+    let (l, r) = (
+        rig.index_of("left").unwrap(),
+        rig.index_of("right").unwrap(),
+    );
+    let board = Target::load(&rig.cameras[l].config.target).unwrap();
+    let model =
+        |c: usize| CameraModel::load(rig.cameras[c].config.intrinsics.as_ref().unwrap()).unwrap();
+    let (left_model, right_model) = (model(l), model(r));
+    let k = |m: &CameraModel| {
+        vec![
+            vec![m.fx, 0.0, m.cx],
+            vec![0.0, m.fy, m.cy],
+            vec![0.0, 0.0, 1.0],
+        ]
+    };
+    let d = |m: &CameraModel| match m.distortion {
+        Distortion::RadTan { k1, k2, p1, p2, k3 } => vec![k1, k2, p1, p2, k3],
+        Distortion::None => vec![0.0; 5],
+        ref other => panic!("the sim lens is plumb_bob, found {other:?}"),
+    };
+    let visits = |name: &str| {
+        SessionFolder::open(&camera_folder(out, name))
+            .unwrap()
+            .read_visits()
+            .unwrap()
+    };
+    let (left_visits, right_visits) = (visits("left"), visits("right"));
+    let mut views = Vec::new();
+    for lv in left_visits
+        .iter()
+        .filter(|v| v.camera_from_target.is_some())
+    {
+        let Some(rv) = right_visits
+            .iter()
+            .find(|v| v.plan_index == lv.plan_index && v.camera_from_target.is_some())
+        else {
+            continue;
+        };
+        let (mut object, mut left, mut right) = (Vec::new(), Vec::new(), Vec::new());
+        for lc in &lv.corners_px {
+            let Some(rc) = rv
+                .corners_px
+                .iter()
+                .find(|c| c.tag_id == lc.tag_id && c.corner == lc.corner)
+            else {
+                continue;
+            };
+            let p = board.observation_point(lc).unwrap();
+            object.push(vec![p.x, p.y, p.z]);
+            left.push(vec![lc.pixel.x, lc.pixel.y]);
+            right.push(vec![rc.pixel.x, rc.pixel.y]);
+        }
+        if object.len() >= 8 {
+            views.push(serde_json::json!({"object": object, "left": left, "right": right}));
+        }
+    }
+    assert!(
+        views.len() >= 5,
+        "only {} poses where both fixed cameras saw the board",
+        views.len()
+    );
+    let input = serde_json::json!({
+        "size": [left_model.width, left_model.height],
+        "K1": k(&left_model), "D1": d(&left_model), "K2": k(&right_model), "D2": d(&right_model),
+        "views": views,
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let input_path = dir.path().join("stereo.json");
+    std::fs::write(&input_path, input.to_string()).unwrap();
+    let output = std::process::Command::new(python)
+        .arg(util::repo().join("tests/python/stereo_anchor.py"))
+        .arg(&input_path)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "stereo_anchor.py: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let answer: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let rows: Vec<Vec<f64>> = serde_json::from_value(answer["R"].clone()).unwrap();
+    let t: Vec<f64> = serde_json::from_value(answer["T"].clone()).unwrap();
+    let rotation = nalgebra::Matrix3::from_fn(|i, j| rows[i][j]);
+    let right_from_left = Pose::from_parts(
+        nalgebra::Translation3::new(t[0], t[1], t[2]),
+        nalgebra::UnitQuaternion::from_matrix(&rotation),
+    );
+    let opencv = right_from_left.inverse();
+    let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
+    let expected = truths["T_base_cam_left"].inverse() * truths["T_base_cam_right"];
+    let ours = read_result(out)
+        .transform("T_cam_left_cam_right")
+        .unwrap()
+        .pose;
+    let (opencv_mm, opencv_deg) = util::pose_error_mm_deg(&opencv, &expected);
+    let (ours_mm, ours_deg) = util::pose_error_mm_deg(&ours, &expected);
+    let (apart_mm, apart_deg) = util::pose_error_mm_deg(&ours, &opencv);
+    println!(
+        "T_cam_left_cam_right vs truth: cv2.stereoCalibrate {opencv_mm:.3} mm {opencv_deg:.4}° ({} views, RMS {:.3} px); handeye joint {ours_mm:.3} mm {ours_deg:.4}°; apart {apart_mm:.3} mm {apart_deg:.4}°",
+        views.len(),
+        answer["rms_px"].as_f64().unwrap()
+    );
+    assert!(
+        opencv_mm < 0.5 && opencv_deg < 0.05,
+        "OpenCV: {opencv_mm} mm {opencv_deg}°"
+    );
+    assert!(
+        ours_mm < 0.5 && ours_deg < 0.05,
+        "handeye: {ours_mm} mm {ours_deg}°"
+    );
+}
+
+/// `handeye report` and `handeye export` of a several-camera session name every camera: the
+/// report has a row per camera and the camera-to-camera transform; ROS 2 and URDF publish every
+/// mount and both boards as a tree (one parent per frame); OpenCV holds every transform, whose
+/// matrices are the result's.
+#[test]
+fn report_and_exports_name_every_camera() {
+    let (_, out, _) = shipped_run();
+    let report = handeye().arg("report").arg(out).output().unwrap();
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    for name in [
+        "T_flange_cam_wrist",
+        "T_base_cam_left",
+        "T_base_cam_right",
+        "T_cam_left_cam_right",
+        "T_base_target",
+        "T_flange_target",
+    ] {
+        assert!(html.contains(name), "report lacks {name}");
+    }
+    let export = |format: &str| {
+        let o = handeye()
+            .arg("export")
+            .arg(out.join("result.yaml"))
+            .args(["--format", format])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{format}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let ros2 = export("ros2");
+    for child in [
+        "camera_optical_frame_wrist",
+        "camera_optical_frame_left",
+        "camera_optical_frame_right",
+        "calibration_target",
+        "calibration_target_flange",
+    ] {
+        let publishers = ros2
+            .lines()
+            .filter(|l| {
+                l.starts_with("ros2 run") && l.ends_with(&format!("--child-frame-id {child}"))
+            })
+            .count();
+        assert_eq!(
+            publishers, 1,
+            "ros2: {child} must have exactly one parent:\n{ros2}"
+        );
+    }
+    assert!(
+        ros2.contains("--frame-id tool0 --child-frame-id camera_optical_frame_wrist"),
+        "{ros2}"
+    );
+    assert!(
+        ros2.contains("--frame-id base --child-frame-id camera_optical_frame_left"),
+        "{ros2}"
+    );
+    let urdf = export("urdf");
+    assert_eq!(urdf.matches("<joint ").count(), 5, "{urdf}");
+    let opencv = export("opencv");
+    let result = read_result(out);
+    for t in result.transforms() {
+        assert!(
+            opencv.contains(&format!("{}: !!opencv-matrix", t.name)),
+            "opencv lacks {}",
+            t.name
+        );
+    }
+    let ur = handeye()
+        .arg("export")
+        .arg(out.join("result.yaml"))
+        .args(["--format", "ur"])
+        .output()
+        .unwrap();
+    assert!(!ur.status.success());
+    assert!(String::from_utf8_lossy(&ur.stderr).contains("exports as ros2, urdf or opencv"));
+}
+
+/// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every
+/// error names the camera and the key; the one-camera form is not taken for it.
+#[test]
+fn config_errors_name_the_camera_and_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let error = |edits: &[(&str, &str)]| {
+        let config = three_cameras(dir.path(), edits);
+        RigConfig::load(&config).unwrap_err().to_string()
+    };
+    let e = error(&[(
+        "noise_sigma: 2.0, blur_sigma_px: 0.5, seed: 12",
+        "noise_sigma: 900.0, blur_sigma_px: 0.5, seed: 12",
+    )]);
+    assert!(
+        e.contains("cameras[1] (`left`)") && e.contains("camera.noise_sigma"),
+        "{e}"
+    );
+    let e = error(&[("name: right", "name: left")]);
+    assert!(
+        e.contains("cameras[2].name") && e.contains("`left` names two cameras"),
+        "{e}"
+    );
+    let e = error(&[("name: right", "name: Right-Cam")]);
+    assert!(
+        e.contains("cameras[2].name") && e.contains("lower-case"),
+        "{e}"
+    );
+    let e = error(&[(
+        "  T_flange_target: {translation: [-0.145, 0.145, -0.03]",
+        "  T_flange_targte: {translation: [-0.145, 0.145, -0.03]",
+    )]);
+    assert!(e.contains("nominal.T_flange_targte"), "{e}");
+    assert!(handeye::config::rig::is_rig_file(&three_cameras(
+        dir.path(),
+        &[]
+    )));
+    assert!(!handeye::config::rig::is_rig_file(
+        &util::repo().join("configs/sim-cell.yaml")
+    ));
+    // The one-camera reader refuses the form with a message naming the key it does not know.
+    let one = handeye::config::CellConfig::load(&three_cameras(dir.path(), &[]))
+        .unwrap_err()
+        .to_string();
+    assert!(one.contains("cameras"), "{one}");
+}

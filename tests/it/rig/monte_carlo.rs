@@ -1,0 +1,344 @@
+//! Monte Carlo over seeds (issue #27): the joint solve of the three-camera cell against each
+//! camera solved alone and against chaining two single-camera answers, on the same samples, in
+//! pose space and in pixel space.
+
+use handeye::config::rig::RigConfig;
+use handeye::geometry::Pose;
+
+use crate::util;
+
+/// Monte Carlo over seeds, on the same samples: the joint solve's error in every mount is at
+/// most the same camera solved alone (RMS over the seeds), strictly smaller for the fixed
+/// cameras that share the flange board, and the fixed cameras' relative pose is more accurate
+/// than chaining their two single-camera answers. The cell is the three-camera config's truth;
+/// the flange poses are the robot poses the run visits (read from a run's folder would tie this
+/// to rendering: instead 20 poses of the same spread); the board-pose noise is what the rendered
+/// run estimates per camera (wrist at ~0.5 m, fixed cameras at ~0.7 m).
+#[test]
+fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
+    use handeye::setup::{predict, Setup};
+    use handeye::solve::rig::{
+        pose_error, solve_rig, RigCamera, RigData, RigObservation, RigOptions, RigStart,
+    };
+    use handeye::solve::NoiseModel;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
+    let rig = RigConfig::load(&config).unwrap();
+    let truth: Vec<_> = rig
+        .cameras
+        .iter()
+        .map(|c| c.config.simulation.unwrap())
+        .collect();
+    let setups: Vec<Setup> = truth.iter().map(|t| t.setup).collect();
+    let noise = |setup: Setup| match setup {
+        Setup::EyeInHand => (0.03f64.to_radians(), 0.15e-3),
+        Setup::EyeToHand => (0.04f64.to_radians(), 0.35e-3),
+    };
+    let seeds = 200;
+    let cameras = truth.len();
+    let (mut joint_sq, mut alone_sq) = (vec![0.0; cameras], vec![0.0; cameras]);
+    let (mut relative_joint_sq, mut relative_chained_sq) = (0.0, 0.0);
+    for seed in 0..seeds {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let unit = Normal::new(0.0, 1.0).unwrap();
+        let jitter = |rng: &mut rand::rngs::StdRng, sr: f64, st: f64| {
+            let r = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * sr);
+            let t = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * st);
+            Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
+        };
+        // The wrist camera's views of the table board (as the plan generates them: the flange
+        // 0.55-0.75 m above the board, tilted up to 30°), which the fixed cameras see from above.
+        let flanges: Vec<Pose> = (0..20)
+            .map(|_| {
+                let t = nalgebra::Vector3::new(
+                    0.5 + rng.random_range(-0.15..0.15),
+                    -0.15 + rng.random_range(-0.15..0.15),
+                    rng.random_range(0.55..0.75),
+                );
+                let r = nalgebra::Vector3::new(
+                    std::f64::consts::PI + rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.35..0.35),
+                );
+                Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
+            })
+            .collect();
+        let mut observations = Vec::new();
+        for (i, flange) in flanges.iter().enumerate() {
+            for (c, t) in truth.iter().enumerate() {
+                let (sr, st) = noise(setups[c]);
+                let exact = predict(t.setup, &t.camera_mount, &t.target_mount, flange);
+                observations.push(RigObservation {
+                    camera: c,
+                    pose: i,
+                    camera_from_target: exact * jitter(&mut rng, sr, st),
+                });
+            }
+        }
+        let data = RigData {
+            cameras: rig
+                .cameras
+                .iter()
+                .map(|c| RigCamera {
+                    name: c.name.clone(),
+                    setup: c.config.setup,
+                    noise: NoiseModel::default(),
+                })
+                .collect(),
+            base_from_flange: flanges,
+            observations,
+        };
+        // Both solves start from the same nominal (the config's), as a run without a prior would.
+        let start = RigStart {
+            camera_mounts: rig
+                .cameras
+                .iter()
+                .map(|c| c.config.nominal.camera_mount)
+                .collect(),
+            base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
+            flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
+        };
+        let joint = solve_rig(&data, &start, &RigOptions::default()).unwrap();
+        let mut alone_mounts = Vec::new();
+        for c in 0..cameras {
+            let one = RigStart {
+                camera_mounts: vec![start.camera_mounts[c]],
+                ..start.clone()
+            };
+            let alone = solve_rig(&data.only(c), &one, &RigOptions::default()).unwrap();
+            let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
+            let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
+            joint_sq[c] += joint_mm * joint_mm;
+            alone_sq[c] += alone_mm * alone_mm;
+            alone_mounts.push(alone.camera_mounts[0]);
+        }
+        let relative_truth = truth[1].camera_mount.inverse() * truth[2].camera_mount;
+        let relative = &joint.relative[0];
+        assert_eq!((relative.from, relative.to), (1, 2));
+        let (_, mm) = pose_error(&relative.pose, &relative_truth);
+        relative_joint_sq += mm * mm;
+        let (_, mm) = pose_error(
+            &(alone_mounts[1].inverse() * alone_mounts[2]),
+            &relative_truth,
+        );
+        relative_chained_sq += mm * mm;
+    }
+    let rms = |sq: f64| (sq / seeds as f64).sqrt();
+    for c in 0..cameras {
+        let (joint, alone) = (rms(joint_sq[c]), rms(alone_sq[c]));
+        println!(
+            "{}: mount translation RMS error joint {joint:.4} mm, alone {alone:.4} mm ({:.0} % lower)",
+            rig.cameras[c].name,
+            100.0 * (1.0 - joint / alone)
+        );
+        // Never worse (to the precision of the fit); the wrist camera is the only eye-in-hand
+        // one, so in pose space it shares nothing and equals its own solve.
+        assert!(
+            joint <= alone * 1.001,
+            "{}: joint {joint} mm > alone {alone} mm",
+            rig.cameras[c].name
+        );
+        if setups[c] == Setup::EyeToHand {
+            assert!(
+                joint < 0.95 * alone,
+                "{}: sharing the flange board must help: {joint} vs {alone}",
+                rig.cameras[c].name
+            );
+        }
+    }
+    let (joint, chained) = (rms(relative_joint_sq), rms(relative_chained_sq));
+    println!("T_cam_left_cam_right translation RMS error: joint {joint:.4} mm, chained {chained:.4} mm ({:.0} % lower)", 100.0 * (1.0 - joint / chained));
+    assert!(
+        joint < 0.9 * chained,
+        "joint {joint} mm vs chained {chained} mm"
+    );
+}
+
+/// Monte Carlo over seeds in pixel space, on the same corners: the three-camera cell's truth and
+/// lenses, the board's real corners projected through the true chain with 0.1 px noise (what the
+/// rendered run estimates), the flange poses reported with the sim arm's repeatability (0.02 mm,
+/// 0.002°). The joint pixel-space solve (every flange pose estimated once for all cameras) is at
+/// least as accurate as each camera alone (the same solve with its corners only) in every mount,
+/// and the fixed cameras' relative pose beats chaining their single-camera answers.
+#[test]
+fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
+    use handeye::camera_model::CameraModel;
+    use handeye::setup::predict;
+    use handeye::solve::rig::{
+        pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigFrame, RigObservation,
+        RigOptions, RigStart,
+    };
+    use handeye::solve::NoiseModel;
+    use handeye::vision::Target;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
+    let rig = RigConfig::load(&config).unwrap();
+    let truth: Vec<_> = rig
+        .cameras
+        .iter()
+        .map(|c| c.config.simulation.unwrap())
+        .collect();
+    let models: Vec<CameraModel> = rig
+        .cameras
+        .iter()
+        .map(|c| CameraModel::load(c.config.intrinsics.as_ref().unwrap()).unwrap())
+        .collect();
+    let boards: Vec<Vec<nalgebra::Point3<f64>>> = rig
+        .cameras
+        .iter()
+        .map(|c| {
+            Target::load(&c.config.target)
+                .unwrap()
+                .points()
+                .into_iter()
+                .map(|(_, _, p)| p)
+                .collect()
+        })
+        .collect();
+    let robot = rig.cameras[0].config.robot_repeatability();
+    let pixel_sigma = 0.1;
+    let seeds = 40;
+    let cameras = truth.len();
+    let (mut joint_sq, mut alone_sq) = (vec![0.0; cameras], vec![0.0; cameras]);
+    let (mut relative_joint_sq, mut relative_chained_sq) = (0.0, 0.0);
+    let options = RigOptions {
+        robot_sigma: Some(robot),
+        ..RigOptions::default()
+    };
+    for seed in 0..seeds {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(1000 + seed);
+        let unit = Normal::new(0.0, 1.0).unwrap();
+        let jitter = |rng: &mut rand::rngs::StdRng, sr: f64, st: f64| {
+            let r = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * sr);
+            let t = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * st);
+            Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
+        };
+        let true_flanges: Vec<Pose> = (0..20)
+            .map(|_| {
+                let t = nalgebra::Vector3::new(
+                    0.5 + rng.random_range(-0.15..0.15),
+                    -0.15 + rng.random_range(-0.15..0.15),
+                    rng.random_range(0.55..0.75),
+                );
+                let r = nalgebra::Vector3::new(
+                    std::f64::consts::PI + rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.45..0.45),
+                    rng.random_range(-0.35..0.35),
+                );
+                Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
+            })
+            .collect();
+        let reported: Vec<Pose> = true_flanges
+            .iter()
+            .map(|f| f * jitter(&mut rng, robot.1, robot.0))
+            .collect();
+        let (mut observations, mut frames) = (Vec::new(), Vec::new());
+        for (i, flange) in true_flanges.iter().enumerate() {
+            for (c, t) in truth.iter().enumerate() {
+                let camera_from_target = predict(t.setup, &t.camera_mount, &t.target_mount, flange);
+                let corners: Vec<_> = boards[c]
+                    .iter()
+                    .filter_map(|p| {
+                        let pixel = models[c].project(&(camera_from_target * p))?;
+                        let noisy = pixel
+                            + nalgebra::Vector2::new(unit.sample(&mut rng), unit.sample(&mut rng))
+                                * pixel_sigma;
+                        (noisy.x > 0.0 && noisy.y > 0.0 && noisy.x < 1279.0 && noisy.y < 719.0)
+                            .then_some((*p, noisy))
+                    })
+                    .collect();
+                if corners.len() < 20 {
+                    continue;
+                }
+                // A board pose to start from (PnP's role in the run): near the truth.
+                observations.push(RigObservation {
+                    camera: c,
+                    pose: i,
+                    camera_from_target: camera_from_target * jitter(&mut rng, 0.001, 0.001),
+                });
+                frames.push(RigFrame {
+                    camera: c,
+                    pose: i,
+                    corners,
+                });
+            }
+        }
+        let data = RigData {
+            cameras: rig
+                .cameras
+                .iter()
+                .map(|c| RigCamera {
+                    name: c.name.clone(),
+                    setup: c.config.setup,
+                    noise: NoiseModel::default(),
+                })
+                .collect(),
+            base_from_flange: reported,
+            observations,
+        };
+        let start = RigStart {
+            camera_mounts: rig
+                .cameras
+                .iter()
+                .map(|c| c.config.nominal.camera_mount)
+                .collect(),
+            base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
+            flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
+        };
+        let pose_space = solve_rig(&data, &start, &RigOptions::default()).unwrap();
+        let joint = solve_rig_pixels(&data, &models, &frames, &pose_space, &options).unwrap();
+        let mut alone_mounts = Vec::new();
+        for c in 0..cameras {
+            let one = RigStart {
+                camera_mounts: vec![start.camera_mounts[c]],
+                ..start.clone()
+            };
+            let only = data.only(c);
+            let own_frames: Vec<RigFrame> = frames
+                .iter()
+                .filter(|f| f.camera == c)
+                .map(|f| RigFrame {
+                    camera: 0,
+                    ..f.clone()
+                })
+                .collect();
+            let alone_pose = solve_rig(&only, &one, &RigOptions::default()).unwrap();
+            let alone = solve_rig_pixels(&only, &models[c..=c], &own_frames, &alone_pose, &options)
+                .unwrap();
+            let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
+            let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
+            joint_sq[c] += joint_mm * joint_mm;
+            alone_sq[c] += alone_mm * alone_mm;
+            alone_mounts.push(alone.camera_mounts[0]);
+        }
+        let relative_truth = truth[1].camera_mount.inverse() * truth[2].camera_mount;
+        let (_, mm) = pose_error(&joint.relative[0].pose, &relative_truth);
+        relative_joint_sq += mm * mm;
+        let (_, mm) = pose_error(
+            &(alone_mounts[1].inverse() * alone_mounts[2]),
+            &relative_truth,
+        );
+        relative_chained_sq += mm * mm;
+    }
+    let rms = |sq: f64| (sq / seeds as f64).sqrt();
+    for c in 0..cameras {
+        let (joint, alone) = (rms(joint_sq[c]), rms(alone_sq[c]));
+        println!(
+            "pixel space, {}: mount translation RMS error joint {joint:.4} mm, alone {alone:.4} mm ({:.0} % lower)",
+            rig.cameras[c].name,
+            100.0 * (1.0 - joint / alone)
+        );
+        assert!(
+            joint <= alone * 1.001,
+            "{}: joint {joint} mm > alone {alone} mm",
+            rig.cameras[c].name
+        );
+    }
+    let (joint, chained) = (rms(relative_joint_sq), rms(relative_chained_sq));
+    println!("pixel space, T_cam_left_cam_right translation RMS error: joint {joint:.4} mm, chained {chained:.4} mm ({:.0} % lower)", 100.0 * (1.0 - joint / chained));
+    assert!(joint < chained, "joint {joint} mm vs chained {chained} mm");
+}
