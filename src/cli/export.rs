@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic_reporting;
-use handeye::formats::{export, ExportError, ExportFormat, FrameIds};
+use handeye::formats::{export, ExportFormat};
 use handeye::result::ResultFile;
 
 /// Export form on the command line.
@@ -27,8 +27,7 @@ enum FormatArg {
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
 /// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
-/// eye_to_hand T_base_camera and T_flange_target. Frame ids follow ROS naming: ASCII letters,
-/// digits, `_` and `/` (no leading `/`, no part starting with a digit).
+/// eye_to_hand T_base_camera and T_flange_target.
 #[derive(Debug, Args)]
 pub(super) struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
@@ -39,38 +38,13 @@ pub(super) struct ExportArgs {
     /// Write here instead of printing.
     #[arg(short = 'o', long)]
     output: Option<PathBuf>,
-    /// Frame id of the robot base (the frame T_base_flange is reported in). `base_link` (the
-    /// UR ROS driver's, `base` turned 180° about z) exports the base-side transform turned to
-    /// match.
-    #[arg(long, default_value = "base")]
-    base_frame: String,
-    /// Frame id of the flange.
-    #[arg(long, default_value = "tool0")]
-    flange_frame: String,
-    /// Frame id of the camera's optical frame (x right, y down, z forward).
-    #[arg(long, default_value = "camera_optical_frame")]
-    camera_frame: String,
-    /// Frame id of the board.
-    #[arg(long, default_value = "calibration_target")]
-    target_frame: String,
+    #[command(flatten)]
+    frames: super::frames::FrameArgs,
 }
 
 /// Runs `handeye export`.
 pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
-    let ids = FrameIds {
-        base: args.base_frame,
-        flange: args.flange_frame,
-        camera: args.camera_frame,
-        target: args.target_frame,
-    };
-    // Checked before anything is read or written, with the flag in the message.
-    ids.validate().map_err(|e| {
-        let flag = match &e {
-            ExportError::FrameId { role, .. } => format!("--{role}-frame"),
-            _ => "a frame flag".to_string(),
-        };
-        anyhow::Error::new(e).context(format!("{flag} is not a ROS frame id"))
-    })?;
+    let ids = args.frames.ids()?;
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
         FormatArg::Urdf => ExportFormat::Urdf,

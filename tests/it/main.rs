@@ -31,6 +31,8 @@ mod noise;
 mod plausibility;
 mod report;
 mod reprojection;
+#[cfg(feature = "ros2")]
+mod ros2_live;
 mod session;
 mod solve;
 mod uncertainty;
