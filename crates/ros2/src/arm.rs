@@ -141,6 +141,20 @@ impl Ros2Arm {
                     reason: e.to_string(),
                 })
             })?;
+        // The controller's action server must be on the graph before anything moves.
+        let found = link.with_node(|node| {
+            smol::block_on(with_timeout(options.timeout, async {
+                action.goal_client().wait_for_service(node).await;
+                action.result_client().wait_for_service(node).await;
+            }))
+        });
+        if found.is_none() {
+            return Err(RobotError::Connect {
+                address: options.action.clone(),
+                timeout: options.timeout,
+                reason: "no FollowJointTrajectory action server answers there (is the controller running and active, on this domain id, with this middleware: robot.graph.rmw?)".into(),
+            });
+        }
         let shared = Arc::new(Shared::default());
         let (stop_tx, stop_rx) = smol::channel::bounded::<()>(1);
         let names = options.joint_names.clone();

@@ -7,6 +7,7 @@
 //! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy` and `pyyaml`
 //! go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
 
+mod cell;
 mod publish;
 
 use std::path::PathBuf;
