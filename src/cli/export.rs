@@ -7,6 +7,8 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic_reporting;
+use handeye::formats::export::named_transforms;
+use handeye::formats::ros2_launch::{launch_file, through_camera_link};
 use handeye::formats::{export, ExportFormat};
 use handeye::result::ResultFile;
 
@@ -15,6 +17,8 @@ use handeye::result::ResultFile;
 enum FormatArg {
     /// ROS 2 static_transform_publisher commands + a launch snippet.
     Ros2,
+    /// A ROS 2 Python launch file that runs as written (`ros2 launch ./FILE.launch.py`).
+    Ros2Launch,
     /// URDF fixed <joint> snippets (origin xyz + rpy).
     Urdf,
     /// UR pose literals p[x, y, z, rx, ry, rz].
@@ -40,6 +44,11 @@ pub(super) struct ExportArgs {
     output: Option<PathBuf>,
     #[command(flatten)]
     frames: super::frames::FrameArgs,
+    /// With `ros2-launch`: the camera's mounting link (REP 103 axes: x forward, y left, z up)
+    /// whose transform to --camera-frame the camera driver already publishes; the camera's
+    /// transform is then written to this link instead, with the standard optical rotation.
+    #[arg(long, value_name = "FRAME")]
+    camera_link: Option<String>,
 }
 
 /// Runs `handeye export`.
@@ -47,6 +56,7 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
     let ids = args.frames.ids()?;
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
+        FormatArg::Ros2Launch => ExportFormat::Ros2Launch,
         FormatArg::Urdf => ExportFormat::Urdf,
         FormatArg::Ur => ExportFormat::Ur,
         FormatArg::Json => ExportFormat::Json,
@@ -59,8 +69,19 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
         );
     }
     let mounts = ResultFile::load_mounts(&args.result)?;
-    let text = export(&mounts, format, &ids)
+    let mut text = export(&mounts, format, &ids)
         .with_context(|| format!("exporting {}", args.result.display()))?;
+    if let Some(link) = &args.camera_link {
+        anyhow::ensure!(
+            format == ExportFormat::Ros2Launch,
+            "--camera-link applies to --format ros2-launch only"
+        );
+        handeye::formats::validate_frame_id(link)
+            .map_err(|p| anyhow::anyhow!("--camera-link {link:?} is not a ROS frame id: {p}"))?;
+        let [camera, target] = named_transforms(&mounts, &ids);
+        let camera = through_camera_link(&camera, link);
+        text = launch_file(mounts.setup, &[camera, target]);
+    }
     match &args.output {
         Some(path) => {
             let removed = write_atomic_reporting(path, text.as_bytes())

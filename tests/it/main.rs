@@ -31,6 +31,7 @@ mod noise;
 mod plausibility;
 mod report;
 mod reprojection;
+mod ros2_export;
 #[cfg(feature = "ros2")]
 mod ros2_live;
 mod session;

@@ -468,6 +468,12 @@ impl Robot for Ros2Arm {
         Ok(())
     }
 
+    fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
+        Err(RobotError::Backend(
+            "freedrive is not switched over ROS 2: use the teach pendant's freedrive button (or the arm's own hand-guiding mode), then capture where the arm stands".into(),
+        ))
+    }
+
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
         self.interrupt = Some(flag);
     }

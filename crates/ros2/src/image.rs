@@ -160,7 +160,7 @@ pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, Stri
 mod tests {
     use super::*;
 
-    fn raw<'a>(encoding: &str, w: u32, h: u32, step: u32, data: &'a [u8]) -> RawImage<'a> {
+    fn raw<'a>(encoding: &'a str, w: u32, h: u32, step: u32, data: &'a [u8]) -> RawImage<'a> {
         RawImage {
             height: h,
             width: w,

@@ -65,7 +65,7 @@ impl TfTree {
     }
 
     /// `(root, T_root_frame)`.
-    fn from_root(&self, frame: &str) -> Result<(String, Pose), String> {
+    fn root_and_pose(&self, frame: &str) -> Result<(String, Pose), String> {
         let mut pose = Pose::identity();
         let mut at = frame.to_string();
         for _ in 0..256 {
@@ -91,8 +91,8 @@ impl TfTree {
                 ));
             }
         }
-        let (root_a, root_from_a) = self.from_root(a)?;
-        let (root_b, root_from_b) = self.from_root(b)?;
+        let (root_a, root_from_a) = self.root_and_pose(a)?;
+        let (root_b, root_from_b) = self.root_and_pose(b)?;
         if root_a != root_b {
             return Err(format!(
                 "frames {a:?} and {b:?} are not connected in the TF tree ({a:?} hangs from {root_a:?}, {b:?} from {root_b:?})"

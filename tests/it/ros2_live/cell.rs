@@ -45,13 +45,13 @@ fn views() -> PathBuf {
 }
 
 /// The peer process, its stdout events collected; killed when dropped.
-struct Peer {
+pub(super) struct Peer {
     child: Child,
     events: Arc<Mutex<Vec<serde_json::Value>>>,
 }
 
 impl Peer {
-    fn start(python: &PathBuf, domain: u16, faults: &[&str]) -> Peer {
+    pub(super) fn start(python: &PathBuf, domain: u16, faults: &[&str]) -> Peer {
         let mut child = peer(python, domain)
             .arg("sim-cell")
             .arg(views())

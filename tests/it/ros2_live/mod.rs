@@ -4,10 +4,11 @@
 //! interface (handeye `--interface 127.0.0.1`, the peer `--loopback`: unicast discovery, no
 //! multicast), each test on a domain id of its own.
 //!
-//! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy` and `pyyaml`
-//! go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
+//! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy`, `pyyaml` and
+//! `pillow` go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
 
 mod cell;
+mod idle;
 mod publish;
 
 use std::path::PathBuf;
@@ -28,7 +29,7 @@ pub(crate) fn python() -> Option<PathBuf> {
             let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("ros2-venv");
             let python = venv.join("bin/python");
             let ready = Command::new(&python)
-                .args(["-c", "import cyclonedds, numpy, yaml"])
+                .args(["-c", "import cyclonedds, numpy, yaml, PIL"])
                 .output()
                 .is_ok_and(|o| o.status.success());
             if !ready {
@@ -39,12 +40,19 @@ pub(crate) fn python() -> Option<PathBuf> {
                     .expect("python3 -m venv");
                 assert!(status.success(), "python3 -m venv {}", venv.display());
                 let status = Command::new(venv.join("bin/pip"))
-                    .args(["install", "--quiet", "cyclonedds", "numpy", "pyyaml"])
+                    .args([
+                        "install",
+                        "--quiet",
+                        "cyclonedds",
+                        "numpy",
+                        "pyyaml",
+                        "pillow",
+                    ])
                     .status()
                     .expect("pip");
                 assert!(
                     status.success(),
-                    "pip install cyclonedds numpy pyyaml (needs PyPI)"
+                    "pip install cyclonedds numpy pyyaml pillow (needs PyPI)"
                 );
             }
             Some(python)

@@ -204,7 +204,7 @@ pub enum RobotConfig {
     },
     /// An arm under a ROS 2 driver: `/tf`, `/joint_states`, FollowJointTrajectory (needs the
     /// `ros2` feature; `config::ros2`).
-    Ros2(super::ros2::Ros2Robot),
+    Ros2(Box<super::ros2::Ros2Robot>),
 }
 
 fn is_zero(v: &f64) -> bool {
