@@ -17,29 +17,36 @@ use handeye::result::ResultFile;
 use super::{peer, python};
 use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, within};
 
-/// The rendered views the peer serves (configs/ros2-sim-cell-views.yaml), made once.
+/// The views the peer serves: a sim run of `config` into `CARGO_TARGET_TMPDIR/name`, made once.
+fn render(name: &str, config: &Path) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    if !dir.join("result.yaml").exists() {
+        let _ = std::fs::remove_dir_all(&dir);
+        let out = handeye()
+            .args(["run", "--config"])
+            .arg(config)
+            .arg("-o")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    dir
+}
+
+/// The eye-in-hand views (configs/ros2-sim-cell-views.yaml).
 fn views() -> PathBuf {
     static VIEWS: OnceLock<PathBuf> = OnceLock::new();
     VIEWS
         .get_or_init(|| {
-            let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("ros2-views");
-            if !dir.join("result.yaml").exists() {
-                let _ = std::fs::remove_dir_all(&dir);
-                let config = repo().join("configs/ros2-sim-cell-views.yaml");
-                let out = handeye()
-                    .args(["run", "--config"])
-                    .arg(&config)
-                    .arg("-o")
-                    .arg(&dir)
-                    .output()
-                    .unwrap();
-                assert!(
-                    out.status.success(),
-                    "{}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
-            }
-            dir
+            render(
+                "ros2-views",
+                &repo().join("configs/ros2-sim-cell-views.yaml"),
+            )
         })
         .clone()
 }
@@ -52,9 +59,13 @@ pub(super) struct Peer {
 
 impl Peer {
     pub(super) fn start(python: &PathBuf, domain: u16, faults: &[&str]) -> Peer {
+        Self::serving(python, domain, &views(), faults)
+    }
+
+    fn serving(python: &PathBuf, domain: u16, views: &Path, faults: &[&str]) -> Peer {
         let mut child = peer(python, domain)
             .arg("sim-cell")
-            .arg(views())
+            .arg(views)
             .arg("--camera-info")
             .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
             .args(faults)
@@ -353,5 +364,75 @@ fn without_a_driver_the_action_server_is_named() {
             log.contains("/scaled_joint_trajectory_controller/follow_joint_trajectory"),
             "{log}"
         );
+    });
+}
+
+/// The eye-to-hand cell of configs/sim-cell-eye-to-hand.yaml over ROS 2: the camera on a post,
+/// the board on the flange.
+#[test]
+fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let fixed = [(
+            "  generate: {count: 20",
+            "  adaptive: false\n  generate: {count: 12",
+        )];
+        let sim = config_variant(
+            dir.path(),
+            "sim-cell-eye-to-hand.yaml",
+            "views.yaml",
+            &fixed,
+        );
+        let views = render("ros2-views-eye-to-hand", &sim);
+        let peer = Peer::serving(&python, 79, &views, &[]);
+        let robot = "robot:\n  backend: ros2\n  model: ur10e\n  graph: {domain_id: 79, interfaces: [127.0.0.1], rmw: cyclonedds}\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n\ncamera:\n  backend: ros2\n  camera_info_topic: /camera_info\n";
+        let config = config_variant(
+            dir.path(),
+            "sim-cell-eye-to-hand.yaml",
+            "ros2-cell.yaml",
+            &[
+                fixed[0],
+                ("robot:\n  backend: sim\n  model: ur10e\n  start_joints_deg: [0, -90, 90, -90, -90, 0]\n  move_duration_s: 0.0\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n  seed: 5\n\ncamera:\n  backend: sim\n  noise_sigma: 2.0\n  blur_sigma_px: 0.5\n  seed: 13\n", robot),
+                ("session: {settle_s: 0.0,", "session: {settle_s: 0.0, settle_window_s: 0.05,"),
+            ],
+        );
+        let out_dir = dir.path().join("session");
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out));
+        assert!(
+            peer.events("no_view").is_empty(),
+            "{:?}",
+            peer.events("no_view")
+        );
+        let mounts = ResultFile::load_mounts(&out_dir.join("result.yaml")).unwrap();
+        let camera = handeye::geometry::Pose::from_parts(
+            nalgebra::Translation3::new(1.1537, 0.0042, 0.7468),
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                0.4247281012,
+                -0.5658387224,
+                -0.5656999087,
+                0.4235754875,
+            )),
+        );
+        let target = pose_from_rotvec(
+            Vector3::new(-0.1432, -0.1461, 0.0113),
+            Vector3::new(0.011, 0.006, 0.021),
+        );
+        for (name, got, want) in [
+            ("T_base_camera", mounts.camera_mount, camera),
+            ("T_flange_target", mounts.target_mount, target),
+        ] {
+            let (mm, deg) = pose_error_mm_deg(&got, &want);
+            eprintln!("{name}: {mm:.3} mm, {deg:.4}° from the truth");
+            assert!(mm < 0.5 && deg < 0.05, "{name}: {mm} mm, {deg}°");
+        }
     });
 }
