@@ -261,3 +261,57 @@ impl Ros2Camera {
             })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::schema::{CameraConfig, RobotConfig};
+    use super::*;
+
+    #[test]
+    fn the_ur_driver_defaults_and_the_checks() {
+        let robot: RobotConfig = serde_yaml_ng::from_str("backend: ros2\nmodel: ur5e\n").unwrap();
+        let RobotConfig::Ros2(r) = robot else {
+            panic!("not ros2")
+        };
+        assert_eq!(
+            r.action,
+            "/scaled_joint_trajectory_controller/follow_joint_trajectory"
+        );
+        assert_eq!(
+            (r.base_frame.as_str(), r.flange_frame.as_str()),
+            ("base", "tool0")
+        );
+        assert_eq!(r.graph.rmw, Rmw::Fastrtps);
+        assert!(r.problem().is_none());
+
+        let unknown = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nhost: 1.2.3.4\n");
+        assert!(unknown.unwrap_err().to_string().contains("host"));
+
+        let bad: RobotConfig =
+            serde_yaml_ng::from_str("backend: ros2\naction: relative/name\n").unwrap();
+        let RobotConfig::Ros2(r) = bad else { panic!() };
+        let (key, problem) = r.problem().unwrap();
+        assert_eq!(key, "robot.action");
+        assert!(problem.contains("absolute"), "{problem}");
+
+        let domain: RobotConfig =
+            serde_yaml_ng::from_str("backend: ros2\ngraph: {domain_id: 300}\n").unwrap();
+        let RobotConfig::Ros2(r) = domain else {
+            panic!()
+        };
+        assert_eq!(r.problem().unwrap().0, "robot.graph.domain_id");
+
+        let camera: CameraConfig =
+            serde_yaml_ng::from_str("backend: ros2\nimage_topic: /cam/image_raw\n").unwrap();
+        let CameraConfig::Ros2(c) = camera else {
+            panic!()
+        };
+        assert!(c.problem().is_none() && !c.compressed);
+        let camera: CameraConfig =
+            serde_yaml_ng::from_str("backend: ros2\nframe_timeout_s: 0\n").unwrap();
+        let CameraConfig::Ros2(c) = camera else {
+            panic!()
+        };
+        assert_eq!(c.problem().unwrap().0, "camera.frame_timeout_s");
+    }
+}
