@@ -65,10 +65,17 @@ if ! "$bag_venv/bin/python" -c "import rosbags, numpy" 2>/dev/null; then
   python3 -m venv "$bag_venv" && "$bag_venv/bin/pip" install -q rosbags numpy
 fi
 
+# Live ROS 2 (tests/it/ros2_live): the independent peer is Eclipse Cyclone DDS's Python binding
+# (no ROS installation), in the venv the tests look for (they create the same venv when missing).
+ros2_venv="${CARGO_TARGET_DIR:-target}/tmp/ros2-venv"
+if ! "$ros2_venv/bin/python" -c "import cyclonedds, numpy, yaml, PIL" 2>/dev/null; then
+  python3 -m venv "$ros2_venv" && "$ros2_venv/bin/pip" install -q cyclonedds numpy pyyaml pillow
+fi
+
 # Everything the comparison tests need is installed above: a test that would skip for a missing
 # tool (python3, chromium) fails instead (tests/util/mod.rs `skip`).
 export HANDEYE_REQUIRE_TOOLS=1
-cargo test --workspace --features handeye/ur-rtde "$@"
+cargo test --workspace --features handeye/ur-rtde,handeye/ros2 "$@"
 
 # The Python package (crates/python, docs/python.md): its abi3 wheel built by maturin in the same
 # target dir (the dev profile, whose dependencies the build above already compiled), installed into

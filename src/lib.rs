@@ -15,6 +15,7 @@ pub mod report;
 pub use handeye_camera as camera;
 pub use handeye_core::{atomic_file, camera_model, geometry, notice, setup, yaml_file};
 pub use handeye_robot as robot;
+pub use handeye_ros2 as ros2;
 pub use handeye_session::{cell, config, dataset, plan, result, session, verify};
 pub use handeye_solve as solve;
 pub use handeye_solve::verdict;

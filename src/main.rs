@@ -12,7 +12,12 @@ fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("HANDEYE_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                // The DDS stack (ROS 2 backends) warns about every peer it cannot reach at once
+                // while discovery settles, and about sockets as it shuts down; our backends report what
+                // failed in their own errors.
+                .unwrap_or_else(|_| {
+                    tracing_subscriber::EnvFilter::new("warn,rustdds=off,ros2_client=error")
+                }),
         )
         .with_writer(std::io::stderr)
         .init();

@@ -7,7 +7,9 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic_reporting;
-use handeye::formats::{export, ExportError, ExportFormat, FrameIds};
+use handeye::formats::export::named_transforms;
+use handeye::formats::ros2_launch::{launch_file, through_camera_link};
+use handeye::formats::{export, ExportFormat};
 use handeye::result::ResultFile;
 
 /// Export form on the command line.
@@ -15,6 +17,8 @@ use handeye::result::ResultFile;
 enum FormatArg {
     /// ROS 2 static_transform_publisher commands + a launch snippet.
     Ros2,
+    /// A ROS 2 Python launch file that runs as written (`ros2 launch ./FILE.launch.py`).
+    Ros2Launch,
     /// URDF fixed <joint> snippets (origin xyz + rpy).
     Urdf,
     /// UR pose literals p[x, y, z, rx, ry, rz].
@@ -27,8 +31,7 @@ enum FormatArg {
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
 /// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
-/// eye_to_hand T_base_camera and T_flange_target. Frame ids follow ROS naming: ASCII letters,
-/// digits, `_` and `/` (no leading `/`, no part starting with a digit).
+/// eye_to_hand T_base_camera and T_flange_target.
 #[derive(Debug, Args)]
 pub(super) struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
@@ -39,40 +42,21 @@ pub(super) struct ExportArgs {
     /// Write here instead of printing.
     #[arg(short = 'o', long)]
     output: Option<PathBuf>,
-    /// Frame id of the robot base (the frame T_base_flange is reported in). `base_link` (the
-    /// UR ROS driver's, `base` turned 180° about z) exports the base-side transform turned to
-    /// match.
-    #[arg(long, default_value = "base")]
-    base_frame: String,
-    /// Frame id of the flange.
-    #[arg(long, default_value = "tool0")]
-    flange_frame: String,
-    /// Frame id of the camera's optical frame (x right, y down, z forward).
-    #[arg(long, default_value = "camera_optical_frame")]
-    camera_frame: String,
-    /// Frame id of the board.
-    #[arg(long, default_value = "calibration_target")]
-    target_frame: String,
+    #[command(flatten)]
+    frames: super::frames::FrameArgs,
+    /// With `ros2-launch`: the camera's mounting link (REP 103 axes: x forward, y left, z up)
+    /// whose transform to --camera-frame the camera driver already publishes; the camera's
+    /// transform is then written to this link instead, with the standard optical rotation.
+    #[arg(long, value_name = "FRAME")]
+    camera_link: Option<String>,
 }
 
 /// Runs `handeye export`.
 pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
-    let ids = FrameIds {
-        base: args.base_frame,
-        flange: args.flange_frame,
-        camera: args.camera_frame,
-        target: args.target_frame,
-    };
-    // Checked before anything is read or written, with the flag in the message.
-    ids.validate().map_err(|e| {
-        let flag = match &e {
-            ExportError::FrameId { role, .. } => format!("--{role}-frame"),
-            _ => "a frame flag".to_string(),
-        };
-        anyhow::Error::new(e).context(format!("{flag} is not a ROS frame id"))
-    })?;
+    let ids = args.frames.ids()?;
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
+        FormatArg::Ros2Launch => ExportFormat::Ros2Launch,
         FormatArg::Urdf => ExportFormat::Urdf,
         FormatArg::Ur => ExportFormat::Ur,
         FormatArg::Json => ExportFormat::Json,
@@ -93,8 +77,19 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
         }
     }
     let mounts = ResultFile::load_mounts(&args.result)?;
-    let text = export(&mounts, format, &ids)
+    let mut text = export(&mounts, format, &ids)
         .with_context(|| format!("exporting {}", args.result.display()))?;
+    if let Some(link) = &args.camera_link {
+        anyhow::ensure!(
+            format == ExportFormat::Ros2Launch,
+            "--camera-link applies to --format ros2-launch only"
+        );
+        handeye::formats::validate_frame_id(link)
+            .map_err(|p| anyhow::anyhow!("--camera-link {link:?} is not a ROS frame id: {p}"))?;
+        let [camera, target] = named_transforms(&mounts, &ids);
+        let camera = through_camera_link(&camera, link);
+        text = launch_file(mounts.setup, &[camera, target]);
+    }
     write_or_print(&args.output, format, &text)
 }
 

@@ -7,8 +7,10 @@ mod camera;
 mod console;
 mod detect;
 mod export;
+mod frames;
 mod import;
 mod plan;
+mod publish;
 mod replay;
 mod report;
 mod rig;
@@ -46,6 +48,8 @@ enum Command {
     Import(import::ImportArgs),
     /// Export a result as ROS 2, URDF, UR, JSON or OpenCV text.
     Export(export::ExportArgs),
+    /// Publish a result's two transforms on ROS 2 /tf_static, latched (needs the `ros2` build feature).
+    Publish(publish::PublishArgs),
     /// USB/UVC cameras: list them, snap a frame (needs the `uvc` build feature).
     Camera(camera::CameraArgs),
     /// Write the HTML calibration report of a solved session.
@@ -82,6 +86,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Target(args) => target::run(args),
         Command::Import(args) => import::run(args),
         Command::Export(args) => export::run(args),
+        Command::Publish(args) => publish::run(args),
         Command::Camera(args) => camera::run(args),
         Command::Report(args) => report::run(args),
         Command::Verify(args) => verify::run(args),

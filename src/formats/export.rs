@@ -125,6 +125,8 @@ pub fn validate_frame_id(id: &str) -> Result<(), FrameIdProblem> {
 pub enum ExportFormat {
     /// ROS 2 `static_transform_publisher` commands and a launch snippet.
     Ros2,
+    /// A ROS 2 Python launch file that runs as written (`formats::ros2_launch`).
+    Ros2Launch,
     /// URDF fixed-joint snippets.
     Urdf,
     /// UR pose literals `p[x, y, z, rx, ry, rz]`.
@@ -137,8 +139,9 @@ pub enum ExportFormat {
 
 impl ExportFormat {
     /// Every format, in documentation order.
-    pub const ALL: [ExportFormat; 5] = [
+    pub const ALL: [ExportFormat; 6] = [
         ExportFormat::Ros2,
+        ExportFormat::Ros2Launch,
         ExportFormat::Urdf,
         ExportFormat::Ur,
         ExportFormat::Json,
@@ -149,6 +152,7 @@ impl ExportFormat {
     pub fn name(self) -> &'static str {
         match self {
             ExportFormat::Ros2 => "ros2",
+            ExportFormat::Ros2Launch => "ros2-launch",
             ExportFormat::Urdf => "urdf",
             ExportFormat::Ur => "ur",
             ExportFormat::Json => "json",
@@ -303,6 +307,7 @@ pub fn export(
     }
     Ok(match format {
         ExportFormat::Ros2 => ros2(mounts.setup, &transforms),
+        ExportFormat::Ros2Launch => super::ros2_launch::launch_file(mounts.setup, &transforms),
         ExportFormat::Urdf => urdf(mounts.setup, &transforms),
         ExportFormat::Ur => ur(mounts.setup, &transforms),
         ExportFormat::Json => json_text(mounts.setup, &transforms),

@@ -8,6 +8,7 @@ pub mod bag;
 pub mod export;
 pub mod export_rig;
 pub mod import;
+pub mod ros2_launch;
 
 pub use export::{export, validate_frame_id, ExportError, ExportFormat, FrameIds};
 pub use import::ImportError;

@@ -18,6 +18,10 @@ const CRATES: &[(&str, &[&str])] = &[
     ("handeye-robot", &["handeye-core"]),
     ("handeye-camera", &["handeye-core", "handeye-vision"]),
     (
+        "handeye-ros2",
+        &["handeye-core", "handeye-robot", "handeye-camera"],
+    ),
+    (
         "handeye-session",
         &[
             "handeye-core",
@@ -25,6 +29,7 @@ const CRATES: &[(&str, &[&str])] = &[
             "handeye-vision",
             "handeye-robot",
             "handeye-camera",
+            "handeye-ros2",
         ],
     ),
     (
@@ -36,6 +41,7 @@ const CRATES: &[(&str, &[&str])] = &[
             "handeye-robot",
             "handeye-camera",
             "handeye-session",
+            "handeye-ros2",
         ],
     ),
     ("mocks", &["handeye-core", "handeye-robot"]),

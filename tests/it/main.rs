@@ -32,6 +32,9 @@ mod plausibility;
 mod report;
 mod reprojection;
 mod rig;
+mod ros2_export;
+#[cfg(feature = "ros2")]
+mod ros2_live;
 mod session;
 mod solve;
 mod uncertainty;

@@ -27,7 +27,6 @@
 //! and `vision` (board detection for the offset estimate).
 
 pub mod cdr;
-pub mod image;
 pub mod select;
 pub mod session;
 pub mod storage;

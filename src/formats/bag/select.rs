@@ -28,11 +28,11 @@ use crate::solve::{solve, Method, SolveOptions};
 use crate::vision::{estimate_board_pose, TargetDetector};
 
 use super::cdr;
-use super::image::{compressed_to_gray, raw_to_gray};
 use super::storage::{Location, MessageAt};
 use super::tf::TfBuffer;
 use super::{BagError, BagOptions, BagSample};
 use crate::vision::sharpness::sharpness;
+use handeye_ros2::image::{compressed_to_gray, raw_to_gray, CompressedImage, RawImage};
 
 /// How the arm moved while the bag was recorded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -194,9 +194,21 @@ fn decode(
     frames.decoded += 1;
     if frames.compressed {
         let c = cdr::decode_compressed_image(&data).map_err(|e| wrap(e.into()))?;
+        let c = CompressedImage {
+            format: &c.format,
+            data: c.data,
+        };
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
         let r = cdr::decode_image(&data).map_err(|e| wrap(e.into()))?;
+        let r = RawImage {
+            height: r.height,
+            width: r.width,
+            encoding: &r.encoding,
+            is_bigendian: r.is_bigendian,
+            step: r.step,
+            data: r.data,
+        };
         raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
     }
 }

@@ -5,6 +5,7 @@
 
 pub mod recorded;
 pub mod rig;
+pub mod ros2;
 pub mod run;
 pub mod sim;
 pub mod uvc;
@@ -179,7 +180,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
         RobotConfig::Sim {
             start_joints_deg, ..
         } => start_joints_deg.map(f64::to_radians),
-        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } => {
+        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } | RobotConfig::Ros2(_) => {
             crate::config::default_start_joints()
         }
     };
@@ -436,6 +437,9 @@ impl PreparedCell {
                 let camera = uvc::open_camera(&self.config.camera, self.camera_model)?;
                 Ok(Hardware { robot: Box::new(self.open_ur()?), camera })
             }
+            (RobotConfig::Ros2(_), CameraConfig::Ros2(_)) => {
+                ros2::open(&self.config, self.camera_model, self.arm.clone())
+            }
             (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
@@ -528,6 +532,7 @@ fn robot_name(r: &RobotConfig) -> &'static str {
         RobotConfig::Sim { .. } => "sim",
         RobotConfig::Ur { .. } => "ur",
         RobotConfig::Recorded { .. } => "recorded",
+        RobotConfig::Ros2(_) => "ros2",
     }
 }
 
@@ -536,5 +541,6 @@ fn camera_name(c: &CameraConfig) -> &'static str {
         CameraConfig::Sim { .. } => "sim",
         CameraConfig::Files { .. } => "files",
         CameraConfig::Uvc { .. } => "uvc",
+        CameraConfig::Ros2(_) => "ros2",
     }
 }

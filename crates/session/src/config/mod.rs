@@ -11,6 +11,7 @@
 
 pub mod recorded;
 pub mod rig;
+pub mod ros2;
 pub mod schema;
 pub mod validate;
 
@@ -215,7 +216,7 @@ impl CellConfig {
                 *intrinsics = intrinsics.as_deref().map(resolve);
                 *target = target.as_deref().map(resolve);
             }
-            CameraConfig::Uvc { .. } => {}
+            CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => {}
         }
         Ok(CellConfig {
             file: file.to_path_buf(),
@@ -245,7 +246,7 @@ impl CellConfig {
                 ..
             } => Some(lens),
             CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
-            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } => None,
+            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => None,
         }
     }
 
@@ -278,6 +279,10 @@ impl CellConfig {
             } => (
                 repeatability_mm.unwrap_or(0.1),
                 repeatability_deg.unwrap_or(0.01),
+            ),
+            RobotConfig::Ros2(r) => (
+                r.repeatability_mm.unwrap_or(0.03),
+                r.repeatability_deg.unwrap_or(0.003),
             ),
         };
         (mm * 1e-3, deg.to_radians())

@@ -116,7 +116,7 @@ impl ArmModel {
     tag = "backend",
     rename_all = "snake_case",
     deny_unknown_fields,
-    expecting = "a mapping with `backend: sim`, `backend: ur` or `backend: recorded`"
+    expecting = "a mapping with `backend: sim`, `backend: ur`, `backend: recorded` or `backend: ros2`"
 )]
 pub enum RobotConfig {
     /// The simulated UR arm.
@@ -202,6 +202,9 @@ pub enum RobotConfig {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         repeatability_deg: Option<f64>,
     },
+    /// An arm under a ROS 2 driver: `/tf`, `/joint_states`, FollowJointTrajectory (needs the
+    /// `ros2` feature; `config::ros2`).
+    Ros2(Box<super::ros2::Ros2Robot>),
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -265,7 +268,12 @@ impl RobotConfig {
                 joint_ranges_deg: Some(r),
                 ..
             } => *r,
-            RobotConfig::Ur { .. } if setup == Setup::EyeInHand => FLANGE_CAMERA_JOINT_RANGES_DEG,
+            RobotConfig::Ros2(r) if r.joint_ranges_deg.is_some() => {
+                r.joint_ranges_deg.unwrap_or(ARM_JOINT_RANGES_DEG)
+            }
+            RobotConfig::Ur { .. } | RobotConfig::Ros2(_) if setup == Setup::EyeInHand => {
+                FLANGE_CAMERA_JOINT_RANGES_DEG
+            }
             _ => ARM_JOINT_RANGES_DEG,
         }
     }
@@ -280,6 +288,7 @@ impl RobotConfig {
     pub fn model(&self) -> &'static str {
         match self {
             RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model.name(),
+            RobotConfig::Ros2(r) => r.model.name(),
             // A recorded arm is never planned with kinematics; any valid name will do.
             RobotConfig::Recorded { .. } => ArmModel::Ur5e.name(),
         }
@@ -316,7 +325,7 @@ impl PixelFormatName {
     tag = "backend",
     rename_all = "snake_case",
     deny_unknown_fields,
-    expecting = "a mapping with `backend: sim`, `backend: files` or `backend: uvc`"
+    expecting = "a mapping with `backend: sim`, `backend: files`, `backend: uvc` or `backend: ros2`"
 )]
 pub enum CameraConfig {
     /// Frames rendered from the simulated cell's true chain.
@@ -378,6 +387,8 @@ pub enum CameraConfig {
         #[serde(default = "default_uvc_stale_frames")]
         stale_frames: usize,
     },
+    /// A camera under a ROS 2 camera node (needs the `ros2` feature; `config::ros2`).
+    Ros2(super::ros2::Ros2Camera),
 }
 
 fn default_uvc_device() -> String {

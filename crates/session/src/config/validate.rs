@@ -354,6 +354,12 @@ impl Validator<'_> {
                 repeatability_deg,
                 ..
             } => self.repeatability(*repeatability_mm, *repeatability_deg)?,
+            RobotConfig::Ros2(r) => {
+                if let Some((key, problem)) = r.problem() {
+                    return Err(self.inconsistent(&key, problem));
+                }
+                self.repeatability(r.repeatability_mm, r.repeatability_deg)?;
+            }
         }
         Ok(())
     }
@@ -368,6 +374,7 @@ impl Validator<'_> {
             | RobotConfig::Ur {
                 joint_ranges_deg, ..
             } => joint_ranges_deg,
+            RobotConfig::Ros2(r) => &r.joint_ranges_deg,
             RobotConfig::Recorded { .. } => &None,
         };
         if let Some(ranges) = given {
@@ -450,6 +457,11 @@ impl Validator<'_> {
                 }
             }
             CameraConfig::Files { .. } => {}
+            CameraConfig::Ros2(c) => {
+                if let Some((key, problem)) = c.problem() {
+                    return Err(self.inconsistent(&key, problem));
+                }
+            }
             CameraConfig::Uvc {
                 device,
                 width,

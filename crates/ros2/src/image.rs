@@ -2,15 +2,40 @@
 //! detector reads: `mono8`, `mono16` (top 8 bits), `rgb8`/`bgr8`/`rgba8`/`bgra8` (Rec. 601 luma),
 //! `bayer_*8` (the symmetric 3x3 kernel `[1 2 1; 2 4 2; 1 2 1]/16`, which gives `(R + 2G + B)/4`
 //! at every pixel of every Bayer layout without shifting edges), and JPEG/PNG via `image`.
+//! One decoder for every source of these messages: the bag importer and the live `ros2` camera.
 
 use image::GrayImage;
 
-use super::cdr::{CompressedImage, RawImage};
+/// The pixels of a `sensor_msgs/Image`, borrowed from wherever the message was decoded.
+#[derive(Debug, Clone, Copy)]
+pub struct RawImage<'a> {
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// `mono8`, `rgb8`, ...
+    pub encoding: &'a str,
+    /// Whether multi-byte pixels are big endian.
+    pub is_bigendian: bool,
+    /// Bytes per row.
+    pub step: u32,
+    /// The pixels.
+    pub data: &'a [u8],
+}
+
+/// The bytes of a `sensor_msgs/CompressedImage`.
+#[derive(Debug, Clone, Copy)]
+pub struct CompressedImage<'a> {
+    /// `jpeg`, `png`, or image_transport's `mono8; jpeg compressed mono8`.
+    pub format: &'a str,
+    /// The encoded file.
+    pub data: &'a [u8],
+}
 
 /// A raw image as 8-bit grey.
 pub fn raw_to_gray(raw: &RawImage<'_>) -> Result<GrayImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
-    let bytes_per_pixel = match raw.encoding.as_str() {
+    let bytes_per_pixel = match raw.encoding {
         "mono8" | "8UC1" => 1,
         "mono16" | "16UC1" => 2,
         "rgb8" | "bgr8" => 3,
@@ -40,7 +65,7 @@ pub fn raw_to_gray(raw: &RawImage<'_>) -> Result<GrayImage, String> {
     }
     let row = |y: usize| &raw.data[y * step..y * step + w * bytes_per_pixel];
     let mut out = vec![0u8; w * h];
-    match raw.encoding.as_str() {
+    match raw.encoding {
         "mono8" | "8UC1" => {
             for y in 0..h {
                 out[y * w..(y + 1) * w].copy_from_slice(row(y));
@@ -135,12 +160,11 @@ pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, Stri
 mod tests {
     use super::*;
 
-    fn raw<'a>(encoding: &str, w: u32, h: u32, step: u32, data: &'a [u8]) -> RawImage<'a> {
+    fn raw<'a>(encoding: &'a str, w: u32, h: u32, step: u32, data: &'a [u8]) -> RawImage<'a> {
         RawImage {
-            stamp_ns: 0,
             height: h,
             width: w,
-            encoding: encoding.into(),
+            encoding,
             is_bigendian: false,
             step,
             data,

@@ -1,0 +1,498 @@
+//! `robot.backend: ros2`: an arm under a ROS 2 driver (the UR driver, any ros2_control arm).
+//! The flange pose is `T_base_flange` from `/tf` + `/tf_static` between the configured frames,
+//! the joints come from `/joint_states`, and a move is one `control_msgs/FollowJointTrajectory`
+//! goal: the UR `moveJ` trapezoid at the configured joint speed and acceleration, sampled into
+//! waypoints with their speeds, so the controller never exceeds the limits. The interrupt flag
+//! (STOP, Ctrl-C) cancels the goal; a controller's error code comes back in words.
+//!
+//! Blocking: every call waits for its messages with the configured timeout; after any error no
+//! goal of ours is left running (it was cancelled, or the controller ended it).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use futures::{FutureExt, StreamExt};
+use ros2_client::action::{ActionClient, ActionClientQosPolicies};
+use ros2_client::action_msgs::GoalStatusEnum;
+use ros2_client::{ActionTypeName, ServiceMapping};
+
+use handeye_core::geometry::Pose;
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
+
+use crate::link::{sensor_data_qos, static_qos, topic_name, Ros2Link};
+use crate::listen::{joint_sample, JointSample, Shared};
+use crate::msg::{
+    follow_joint_trajectory_error, Duration as RosDuration, FollowJointTrajectoryFeedback,
+    FollowJointTrajectoryGoal, FollowJointTrajectoryResult, JointState, JointTrajectory,
+    JointTrajectoryPoint, TfMessage,
+};
+use crate::Ros2Error;
+
+impl ros2_client::Message for FollowJointTrajectoryGoal {}
+impl ros2_client::Message for FollowJointTrajectoryResult {}
+impl ros2_client::Message for FollowJointTrajectoryFeedback {}
+
+type FjtClient = ActionClient<
+    FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult,
+    FollowJointTrajectoryFeedback,
+>;
+
+/// How request/reply (actions) is framed: the middleware of the other nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    /// rmw_fastrtps (RPC over DDS, enhanced mapping).
+    FastRtps,
+    /// rmw_cyclonedds.
+    Cyclone,
+}
+
+/// The arm's names and timeouts.
+#[derive(Debug, Clone)]
+pub struct ArmOptions {
+    /// `T_base_flange`'s base frame.
+    pub base_frame: String,
+    /// Its flange frame.
+    pub flange_frame: String,
+    /// Joint names, base to wrist 3.
+    pub joint_names: [String; 6],
+    /// `/joint_states`.
+    pub joint_states_topic: String,
+    /// `/tf`.
+    pub tf_topic: String,
+    /// `/tf_static`.
+    pub tf_static_topic: String,
+    /// The FollowJointTrajectory action.
+    pub action: String,
+    /// Wait for a topic's message or the action server this long.
+    pub timeout: Duration,
+    /// Request/reply framing.
+    pub framing: Framing,
+    /// Kinematics for linear moves (IK to joints), when the arm is a UR model handeye knows.
+    pub kinematics: Option<UrModel>,
+}
+
+/// A joint sample older than this is stale: the driver is gone or the graph split.
+const STALE: Duration = Duration::from_secs(1);
+
+/// The ROS 2 arm.
+pub struct Ros2Arm {
+    options: ArmOptions,
+    shared: Arc<Shared>,
+    action: FjtClient,
+    interrupt: Option<Arc<AtomicBool>>,
+    // Dropping it ends the reader task.
+    _stop_reader: smol::channel::Sender<()>,
+    _link: Ros2Link,
+}
+
+fn backend(message: String) -> RobotError {
+    RobotError::Backend(message.into())
+}
+
+fn setup_error(e: Ros2Error) -> RobotError {
+    RobotError::Connect {
+        address: "the ROS 2 graph".into(),
+        timeout: Duration::ZERO,
+        reason: e.to_string(),
+    }
+}
+
+impl Ros2Arm {
+    /// Subscribes to the joint states and TF, makes the action client, and waits (up to the
+    /// timeout) for the first joint state and the flange pose: a missing topic or frame fails
+    /// here, before anything moves.
+    pub fn open(link: &Ros2Link, options: ArmOptions) -> Result<Ros2Arm, RobotError> {
+        let joints_sub = link
+            .subscribe::<JointState>(&options.joint_states_topic, sensor_data_qos())
+            .map_err(setup_error)?;
+        let tf_sub = link
+            .subscribe::<TfMessage>(&options.tf_topic, sensor_data_qos())
+            .map_err(setup_error)?;
+        let static_sub = link
+            .subscribe::<TfMessage>(&options.tf_static_topic, static_qos())
+            .map_err(setup_error)?;
+        let action_name = topic_name(&options.action).map_err(setup_error)?;
+        let qos = crate::link::reliable_qos();
+        let action = link
+            .with_node(|node| {
+                node.create_action_client::<FollowJointTrajectoryGoal, FollowJointTrajectoryResult, FollowJointTrajectoryFeedback>(
+                    match options.framing {
+                        Framing::FastRtps => ServiceMapping::Enhanced,
+                        Framing::Cyclone => ServiceMapping::Cyclone,
+                    },
+                    &action_name,
+                    &ActionTypeName::new("control_msgs", "FollowJointTrajectory"),
+                    ActionClientQosPolicies {
+                        goal_service: qos.clone(),
+                        result_service: qos.clone(),
+                        cancel_service: qos.clone(),
+                        feedback_subscription: qos.clone(),
+                        status_subscription: qos,
+                    },
+                )
+            })
+            .map_err(|e| {
+                setup_error(Ros2Error::Setup {
+                    what: format!("the action client of {}", options.action),
+                    reason: e.to_string(),
+                })
+            })?;
+        // The controller's action server must be on the graph before anything moves.
+        let found = link.with_node(|node| {
+            smol::block_on(with_timeout(options.timeout, async {
+                action.goal_client().wait_for_service(node).await;
+                action.result_client().wait_for_service(node).await;
+            }))
+        });
+        if found.is_none() {
+            return Err(RobotError::Connect {
+                address: options.action.clone(),
+                timeout: options.timeout,
+                reason: "no FollowJointTrajectory action server answers there (is the controller running and active, on this domain id, with this middleware: robot.graph.rmw?)".into(),
+            });
+        }
+        let shared = Arc::new(Shared::default());
+        let (stop_tx, stop_rx) = smol::channel::bounded::<()>(1);
+        let names = options.joint_names.clone();
+        let task_shared = shared.clone();
+        thread::Builder::new()
+            .name("ros2-arm".into())
+            .spawn(move || {
+                smol::block_on(async move {
+                    let joints = joints_sub.async_stream().map(Event::Joints);
+                    let tf = tf_sub.async_stream().map(|m| Event::Tf(m, false));
+                    let statics = static_sub.async_stream().map(|m| Event::Tf(m, true));
+                    let events =
+                        futures::stream::select(joints, futures::stream::select(tf, statics));
+                    let apply = events.for_each(|event| {
+                        apply(&task_shared, &names, event);
+                        futures::future::ready(())
+                    });
+                    futures::future::select(Box::pin(apply), Box::pin(stop_rx.recv())).await;
+                })
+            })
+            .map_err(|e| backend(format!("cannot start the ROS 2 arm reader: {e}")))?;
+        let mut arm = Ros2Arm {
+            options,
+            shared,
+            action,
+            interrupt: None,
+            _stop_reader: stop_tx,
+            _link: link.clone(),
+        };
+        arm.fresh_joints(Instant::now() - STALE)?;
+        arm.base_from_flange()?;
+        Ok(arm)
+    }
+
+    /// The newest joint sample received after `after`, waiting up to the timeout.
+    fn fresh_joints(&self, after: Instant) -> Result<JointSample, RobotError> {
+        let deadline = Instant::now() + self.options.timeout;
+        let (state, ok) = self
+            .shared
+            .wait_until(deadline, |s| s.joints.is_some_and(|j| j.received >= after));
+        match state.joints {
+            Some(j) if ok => Ok(j),
+            _ => {
+                let why = match (&state.joints_problem, state.joints) {
+                    (Some(p), _) => format!(": its messages do not fit the configured joints: {p}"),
+                    (None, Some(j)) => format!(
+                        ": the last one came {:.1} s ago (is the driver still running?)",
+                        j.received.elapsed().as_secs_f64()
+                    ),
+                    (None, None) => ": none heard at all (is the driver running, on this domain id, with this topic name?)".into(),
+                };
+                Err(RobotError::ConnectionLost(format!(
+                    "no fresh message on {} within {:.1} s{why}",
+                    self.options.joint_states_topic,
+                    self.options.timeout.as_secs_f64()
+                )))
+            }
+        }
+    }
+
+    fn interrupted(&self) -> bool {
+        self.interrupt
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::SeqCst))
+    }
+
+    /// The goal for a synchronised joint move `from` → `to` at `limits`: the trapezoid of the
+    /// leading joint sampled every 50 ms (at least 4 points), positions and speeds.
+    pub fn trajectory(
+        names: &[String; 6],
+        from: &Joints,
+        to: &Joints,
+        limits: &MotionLimits,
+    ) -> FollowJointTrajectoryGoal {
+        let travel = handeye_robot::leading_travel(from, to);
+        let total = limits.joint_move_time(from, to);
+        let steps = ((total / 0.05).ceil() as usize).clamp(4, 400);
+        let points = (1..=steps)
+            .map(|k| {
+                let t = total * k as f64 / steps as f64;
+                let (fraction, speed) =
+                    trapezoid_at(travel, limits.joint_speed, limits.joint_acceleration, t);
+                let last = k == steps;
+                JointTrajectoryPoint {
+                    positions: (0..6)
+                        .map(|i| from[i] + fraction * (to[i] - from[i]))
+                        .collect(),
+                    velocities: (0..6)
+                        .map(|i| {
+                            if last || travel == 0.0 {
+                                0.0
+                            } else {
+                                (to[i] - from[i]) / travel * speed
+                            }
+                        })
+                        .collect(),
+                    time_from_start: RosDuration::from_secs_f64(t),
+                    ..JointTrajectoryPoint::default()
+                }
+            })
+            .collect();
+        FollowJointTrajectoryGoal {
+            trajectory: JointTrajectory {
+                joint_names: names.to_vec(),
+                points,
+                ..JointTrajectory::default()
+            },
+            ..FollowJointTrajectoryGoal::default()
+        }
+    }
+
+    fn run_goal(&mut self, goal: FollowJointTrajectoryGoal, total: f64) -> Result<(), RobotError> {
+        let action = self.options.action.clone();
+        let timeout = self.options.timeout;
+        let send = smol::block_on(with_timeout(timeout, self.action.async_send_goal(goal)));
+        let (goal_id, response) = match send {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => return Err(backend(format!("sending the trajectory goal to {action} failed: {e:?}"))),
+            None => {
+                return Err(RobotError::ConnectionLost(format!(
+                    "the action server {action} did not answer the goal within {:.1} s (is the controller running and active?)",
+                    timeout.as_secs_f64()
+                )))
+            }
+        };
+        if !response.accepted {
+            return Err(backend(format!(
+                "the controller behind {action} rejected the trajectory goal (is it active, and are the joint names {} its joints?)",
+                self.options.joint_names.join(", ")
+            )));
+        }
+        // The result arrives when the controller ends the goal; meanwhile watch the interrupt
+        // flag, the deadline and the driver's heartbeat.
+        let deadline = Instant::now() + Duration::from_secs_f64(total) + timeout;
+        enum Outcome {
+            Done(Result<(GoalStatusEnum, FollowJointTrajectoryResult), String>),
+            Interrupted,
+            Late,
+            Silent,
+        }
+        let outcome = smol::block_on(async {
+            let result = self.action.async_request_result(goal_id).fuse();
+            futures::pin_mut!(result);
+            loop {
+                let tick = FutureExt::fuse(smol::Timer::after(Duration::from_millis(10)));
+                futures::pin_mut!(tick);
+                futures::select! {
+                    r = result => return Outcome::Done(r.map_err(|e| format!("{e:?}"))),
+                    _ = tick => {
+                        if self.interrupted() {
+                            return Outcome::Interrupted;
+                        }
+                        if Instant::now() > deadline {
+                            return Outcome::Late;
+                        }
+                        let silent = self.shared.lock().joints.is_none_or(|j| j.received.elapsed() > timeout);
+                        if silent {
+                            return Outcome::Silent;
+                        }
+                    }
+                }
+            }
+        });
+        let cancel = |this: &Self| {
+            smol::block_on(with_timeout(
+                Duration::from_secs(2),
+                this.action
+                    .async_cancel_goal(goal_id, ros2_client::builtin_interfaces::Time::ZERO),
+            ))
+        };
+        match outcome {
+            Outcome::Done(Ok((GoalStatusEnum::Succeeded, r))) if r.error_code == 0 => Ok(()),
+            Outcome::Done(Ok((status, r))) => Err(backend(format!(
+                "the controller behind {action} ended the move {status:?}: error_code {} ({}){}",
+                r.error_code,
+                follow_joint_trajectory_error(r.error_code),
+                if r.error_string.is_empty() { String::new() } else { format!(": {}", r.error_string) }
+            ))),
+            Outcome::Done(Err(e)) => Err(backend(format!("asking {action} for the move's result failed: {e}"))),
+            Outcome::Interrupted => match cancel(self) {
+                Some(Ok(_)) => Err(RobotError::Interrupted),
+                other => Err(backend(format!(
+                    "the move was stopped on request but {action} did not confirm the cancel ({}): stop the arm on the teach pendant",
+                    match other { Some(Err(e)) => format!("{e:?}"), _ => "no answer within 2 s".into() }
+                ))),
+            },
+            Outcome::Late => {
+                let _ = cancel(self);
+                Err(RobotError::MoveTimeout(Duration::from_secs_f64(total) + timeout))
+            }
+            Outcome::Silent => {
+                let _ = cancel(self);
+                Err(RobotError::ConnectionLost(format!(
+                    "{} went silent for {:.1} s during the move (driver or network gone); the goal was cancelled if the controller could still hear it",
+                    self.options.joint_states_topic,
+                    timeout.as_secs_f64()
+                )))
+            }
+        }
+    }
+}
+
+/// `future`'s output, or `None` after `timeout`.
+async fn with_timeout<T>(
+    timeout: Duration,
+    future: impl std::future::Future<Output = T>,
+) -> Option<T> {
+    let future = future.fuse();
+    let timer = FutureExt::fuse(smol::Timer::after(timeout));
+    futures::pin_mut!(future, timer);
+    futures::select! {
+        v = future => Some(v),
+        _ = timer => None,
+    }
+}
+
+enum Event {
+    Joints(ros2_client::ReadResult<(JointState, ros2_client::MessageInfo)>),
+    Tf(
+        ros2_client::ReadResult<(TfMessage, ros2_client::MessageInfo)>,
+        bool,
+    ),
+}
+
+fn apply(shared: &Shared, names: &[String; 6], event: Event) {
+    let received = Instant::now();
+    match event {
+        Event::Joints(Ok((msg, _))) => {
+            shared.update(|s| match joint_sample(&msg, names, received) {
+                Ok(sample) => {
+                    s.previous = s.joints.replace(sample);
+                    s.joints_problem = None;
+                }
+                Err(problem) => s.joints_problem = Some(problem),
+            })
+        }
+        Event::Tf(Ok((msg, _)), is_static) => shared.update(|s| {
+            s.tf.update(&msg);
+            if !is_static {
+                s.tf_received = Some(received);
+            }
+        }),
+        Event::Joints(Err(e)) | Event::Tf(Err(e), _) => {
+            tracing::warn!("ROS 2 arm: a message could not be read: {e:?}")
+        }
+    }
+}
+
+impl Robot for Ros2Arm {
+    fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
+        // A /tf message heard after this call: the pose of the arm as it stands now.
+        let asked = Instant::now();
+        let deadline = asked + self.options.timeout;
+        let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
+        let (state, _) = self.shared.wait_until(deadline, |s| {
+            s.tf_received.is_some_and(|t| t >= asked) && s.tf.lookup(base, flange).is_ok()
+        });
+        match state.tf.lookup(base, flange) {
+            Ok(pose) if state.tf_received.is_some_and(|t| t >= asked) => Ok(pose),
+            Ok(_) => Err(RobotError::ConnectionLost(format!(
+                "no fresh message on {} within {:.1} s (is the driver still running?)",
+                self.options.tf_topic,
+                self.options.timeout.as_secs_f64()
+            ))),
+            Err(why) => Err(backend(format!(
+                "T_{base}_{flange} from {} + {}: {why}",
+                self.options.tf_topic, self.options.tf_static_topic
+            ))),
+        }
+    }
+
+    fn joint_positions(&mut self) -> Result<Joints, RobotError> {
+        Ok(self.fresh_joints(Instant::now() - STALE)?.positions)
+    }
+
+    fn move_linear(
+        &mut self,
+        base_from_flange: &Pose,
+        limits: &MotionLimits,
+    ) -> Result<(), RobotError> {
+        let Some(model) = self.options.kinematics.clone() else {
+            return Err(RobotError::Unreachable(
+                "linear moves need the arm's kinematics (a UR `robot.model`); give joint waypoints instead".into(),
+            ));
+        };
+        let seed = self.joint_positions()?;
+        let joints = model
+            .inverse_nearest(base_from_flange, &seed)
+            .ok_or_else(|| {
+                RobotError::Unreachable("no joint solution within the joint limits".into())
+            })?;
+        self.move_joints(&joints, limits)
+    }
+
+    fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
+        limits.check()?;
+        if self.interrupted() {
+            return Err(RobotError::Interrupted);
+        }
+        let from = self.joint_positions()?;
+        if handeye_robot::leading_travel(&from, joints) < 1e-6 {
+            return Ok(());
+        }
+        let goal = Self::trajectory(&self.options.joint_names, &from, joints, limits);
+        let total = limits.joint_move_time(&from, joints);
+        self.run_goal(goal, total)
+    }
+
+    fn stop(&mut self) -> Result<(), RobotError> {
+        // Moves block until they end or are cancelled: no goal of ours is running here.
+        Ok(())
+    }
+
+    fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
+        Err(RobotError::Backend(
+            "freedrive is not switched over ROS 2: use the teach pendant's freedrive button (or the arm's own hand-guiding mode), then capture where the arm stands".into(),
+        ))
+    }
+
+    fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
+    }
+
+    fn status(&mut self) -> Result<RobotStatus, RobotError> {
+        self.fresh_joints(Instant::now() - STALE)?;
+        Ok(RobotStatus::Ready)
+    }
+
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        let now = self.fresh_joints(Instant::now() - STALE)?;
+        if let Some(v) = now.velocities {
+            return Ok(Some(v));
+        }
+        // No speeds from the driver: the difference of the last two samples.
+        let previous = self.shared.lock().previous;
+        Ok(previous.and_then(|p| {
+            let dt = now.stamp.duration_since(p.stamp).ok()?.as_secs_f64();
+            (dt > 0.0).then(|| std::array::from_fn(|i| (now.positions[i] - p.positions[i]) / dt))
+        }))
+    }
+}

@@ -1,0 +1,217 @@
+//! One DDS participant and one ROS 2 node for everything handeye does on ROS 2 in a process
+//! (the robot and camera backends and `handeye publish` share it): ros2-client on RustDDS.
+//!
+//! Discovery is standard RTPS (SPDP/SEDP, multicast where the network has it, and RustDDS's
+//! same-host unicast to the well-known loopback ports), so any ROS 2 node on the same domain id
+//! finds it — rmw_cyclonedds, rmw_fastrtps — with no ROS installation here. `interfaces` limits
+//! the participant to some local addresses (e.g. `127.0.0.1` for a test on one machine, the
+//! robot network's address on a lab PC with several).
+
+use std::net::IpAddr;
+use std::sync::{Arc, Mutex};
+use std::thread;
+
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+    Subscription,
+};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+use crate::msg::RosType;
+use crate::Ros2Error;
+
+/// Where and as whom to join the ROS 2 graph.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkOptions {
+    /// The ROS_DOMAIN_ID (0–232).
+    pub domain_id: u16,
+    /// Local addresses to use; empty: every interface.
+    pub interfaces: Vec<IpAddr>,
+    /// The node's name (`handeye`).
+    pub node_name: String,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        LinkOptions {
+            domain_id: 0,
+            interfaces: Vec::new(),
+            node_name: "handeye".into(),
+        }
+    }
+}
+
+/// A joined ROS 2 graph: cheap to clone, every clone the same node.
+#[derive(Clone)]
+pub struct Ros2Link {
+    node: Arc<Mutex<Node>>,
+    options: LinkOptions,
+}
+
+impl std::fmt::Debug for Ros2Link {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ros2Link")
+            .field("options", &self.options)
+            .finish()
+    }
+}
+
+fn setup(what: impl Into<String>) -> impl FnOnce(String) -> Ros2Error {
+    let what = what.into();
+    move |reason| Ros2Error::Setup { what, reason }
+}
+
+impl Ros2Link {
+    /// Joins domain `options.domain_id` as node `/<node_name>`; its background task (graph
+    /// updates) runs on a thread of its own until the last clone is dropped.
+    pub fn open(options: LinkOptions) -> Result<Ros2Link, Ros2Error> {
+        if options.domain_id > 232 {
+            return Err(Ros2Error::Setup {
+                what: format!("the DDS participant on domain {}", options.domain_id),
+                reason: "a ROS 2 domain id is 0..=232".into(),
+            });
+        }
+        let what = format!("the DDS participant on domain {}", options.domain_id);
+        let mut builder =
+            ros2_client::dds::rustdds::DomainParticipantBuilder::new(options.domain_id);
+        if !options.interfaces.is_empty() {
+            builder = builder.with_only_networks(options.interfaces.iter().copied());
+        }
+        let participant = builder
+            .build()
+            .map_err(|e| setup(what.clone())(e.to_string()))?;
+        let context = Context::from_domain_participant(participant)
+            .map_err(|e| setup(what.clone())(e.to_string()))?;
+        let node_name = NodeName::new("/", &options.node_name).map_err(|e| Ros2Error::Name {
+            kind: "node",
+            name: options.node_name.clone(),
+            reason: e.to_string(),
+        })?;
+        let mut node = context
+            .new_node(
+                node_name,
+                NodeOptions::new()
+                    .enable_rosout(false)
+                    .start_parameter_services(false),
+            )
+            .map_err(|e| setup(format!("the node {:?}", options.node_name))(e.to_string()))?;
+        let spinner = node
+            .spinner()
+            .map_err(|e| setup("the node's background task")(e.to_string()))?;
+        // The spinner ends when the node is dropped.
+        thread::Builder::new()
+            .name("ros2-spin".into())
+            .spawn(move || smol::block_on(spinner.spin()))
+            .map_err(|e| setup("the node's background thread")(e.to_string()))?;
+        Ok(Ros2Link {
+            node: Arc::new(Mutex::new(node)),
+            options,
+        })
+    }
+
+    /// The options it was opened with.
+    pub fn options(&self) -> &LinkOptions {
+        &self.options
+    }
+
+    fn topic<M: RosType>(
+        &self,
+        node: &Node,
+        name: &str,
+        qos: &QosProfile,
+    ) -> Result<ros2_client::dds::rustdds::Topic, Ros2Error> {
+        let parsed = topic_name(name)?;
+        node.create_topic(&parsed, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
+            .map_err(|e| setup(format!("the topic {name}"))(e.to_string()))
+    }
+
+    /// A reader of `name` (an absolute ROS name, `/tf`) with `qos`.
+    pub fn subscribe<M: RosType + DeserializeOwned + 'static>(
+        &self,
+        name: &str,
+        qos: QosProfile,
+    ) -> Result<Subscription<M>, Ros2Error> {
+        let mut node = self.node.lock().unwrap_or_else(|p| p.into_inner());
+        let topic = self.topic::<M>(&node, name, &qos)?;
+        node.create_subscription(&topic, Some(qos))
+            .map_err(|e| setup(format!("a reader of {name}"))(e.to_string()))
+    }
+
+    /// A writer of `name` with `qos`.
+    pub fn publisher<M: RosType + Serialize>(
+        &self,
+        name: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<M>, Ros2Error> {
+        let mut node = self.node.lock().unwrap_or_else(|p| p.into_inner());
+        let topic = self.topic::<M>(&node, name, &qos)?;
+        node.create_publisher(&topic, Some(qos))
+            .map_err(|e| setup(format!("a writer of {name}"))(e.to_string()))
+    }
+
+    /// Runs `f` with the node (to make action clients and the like).
+    pub fn with_node<T>(&self, f: impl FnOnce(&mut Node) -> T) -> T {
+        let mut node = self.node.lock().unwrap_or_else(|p| p.into_inner());
+        f(&mut node)
+    }
+}
+
+/// Parses an absolute ROS 2 topic or action name (`/tf`, `/camera/image_raw`).
+pub fn topic_name(name: &str) -> Result<Name, Ros2Error> {
+    let bad = |reason: String| Ros2Error::Name {
+        kind: "topic",
+        name: name.to_string(),
+        reason,
+    };
+    let Some(rest) = name.strip_prefix('/') else {
+        return Err(bad("it must be absolute (start with /)".into()));
+    };
+    let (namespace, base) = match rest.rsplit_once('/') {
+        Some((ns, base)) => (format!("/{ns}"), base),
+        None => ("/".to_string(), rest),
+    };
+    Name::new(&namespace, base).map_err(|e| bad(e.to_string()))
+}
+
+/// QoS of sensor streams (`rclcpp::SensorDataQoS`: best effort, keep last 5), which a reader
+/// must match for images from camera drivers; best effort readers also take reliable writers.
+pub fn sensor_data_qos() -> QosProfile {
+    QosProfile::subscription_default()
+        .reliability(ros2_client::qos::Reliability::BestEffort)
+        .history(ros2_client::qos::History::KeepLast { depth: 5 })
+}
+
+/// Reliable, volatile, keep last 10: action and service traffic.
+pub fn reliable_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability(ros2_client::qos::Reliability::Reliable {
+            when_full: ros2_client::qos::WhenFull::DEFAULT,
+        })
+        .history(ros2_client::qos::History::KeepLast { depth: 10 })
+}
+
+/// QoS of `/tf_static` (tf2's `StaticBroadcasterQoS`: reliable, transient local, keep last 1):
+/// a late joiner still gets the last message.
+pub fn static_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability(ros2_client::qos::Reliability::Reliable {
+            when_full: ros2_client::qos::WhenFull::DEFAULT,
+        })
+        .durability(ros2_client::qos::Durability::TransientLocal)
+        .history(ros2_client::qos::History::KeepLast { depth: 1 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topic_names_are_checked() {
+        assert!(topic_name("/tf").is_ok());
+        assert!(topic_name("/camera/image_raw").is_ok());
+        let e = topic_name("tf").unwrap_err().to_string();
+        assert!(e.contains("absolute"), "{e}");
+        assert!(topic_name("/9bad").is_err());
+    }
+}

@@ -1,0 +1,282 @@
+//! What the arm says on the graph, kept current by a reader task: the newest `/joint_states`
+//! (and the one before, for speeds when the driver sends none) and the TF tree from `/tf` and
+//! `/tf_static`. Readers wait on it with a deadline; nothing here blocks a DDS thread.
+//!
+//! Frames: each TF edge is `T_parent_child`; [`TfTree::lookup`] chains them to `T_a_b` for any
+//! two frames of one tree.
+
+use std::collections::BTreeMap;
+use std::sync::{Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant, SystemTime};
+
+use handeye_core::geometry::Pose;
+
+use crate::msg::{JointState, TfMessage};
+
+/// One `/joint_states` message in the configured joint order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointSample {
+    /// Positions, rad.
+    pub positions: [f64; 6],
+    /// Speeds the driver reported, rad/s (`None` when it sends none).
+    pub velocities: Option<[f64; 6]>,
+    /// The message's stamp.
+    pub stamp: SystemTime,
+    /// When it arrived here.
+    pub received: Instant,
+}
+
+/// One TF edge: `T_parent_child`.
+#[derive(Debug, Clone, PartialEq)]
+struct Edge {
+    parent: String,
+    parent_from_child: Pose,
+}
+
+/// The TF tree as last heard.
+#[derive(Debug, Clone, Default)]
+pub struct TfTree {
+    edges: BTreeMap<String, Edge>,
+}
+
+impl TfTree {
+    /// Adds or replaces the edges of one message (a bad quaternion is skipped and logged).
+    pub fn update(&mut self, msg: &TfMessage) {
+        for t in &msg.transforms {
+            let child = t.child_frame_id.trim_start_matches('/').to_string();
+            let parent = t.header.frame_id.trim_start_matches('/').to_string();
+            match t.transform.to_pose() {
+                Some(pose) => {
+                    self.edges.insert(
+                        child,
+                        Edge {
+                            parent,
+                            parent_from_child: pose,
+                        },
+                    );
+                }
+                None => tracing::warn!("TF {parent} → {child}: not a rigid transform, skipped"),
+            }
+        }
+    }
+
+    fn known(&self, frame: &str) -> bool {
+        self.edges.contains_key(frame) || self.edges.values().any(|e| e.parent == frame)
+    }
+
+    /// `(root, T_root_frame)`.
+    fn root_and_pose(&self, frame: &str) -> Result<(String, Pose), String> {
+        let mut pose = Pose::identity();
+        let mut at = frame.to_string();
+        for _ in 0..256 {
+            match self.edges.get(&at) {
+                Some(edge) => {
+                    pose = edge.parent_from_child * pose;
+                    at = edge.parent.clone();
+                }
+                None => return Ok((at, pose)),
+            }
+        }
+        Err(format!("the TF tree has a loop through {frame:?}"))
+    }
+
+    /// `T_a_b`, or why not (a frame unknown, the two in different trees), naming the frames
+    /// the tree holds.
+    pub fn lookup(&self, a: &str, b: &str) -> Result<Pose, String> {
+        for frame in [a, b] {
+            if !self.known(frame) {
+                return Err(format!(
+                    "frame {frame:?} is not in the TF tree; frames heard: {}",
+                    self.frames().join(", ")
+                ));
+            }
+        }
+        let (root_a, root_from_a) = self.root_and_pose(a)?;
+        let (root_b, root_from_b) = self.root_and_pose(b)?;
+        if root_a != root_b {
+            return Err(format!(
+                "frames {a:?} and {b:?} are not connected in the TF tree ({a:?} hangs from {root_a:?}, {b:?} from {root_b:?})"
+            ));
+        }
+        Ok(root_from_a.inverse() * root_from_b)
+    }
+
+    /// Every frame heard, sorted.
+    pub fn frames(&self) -> Vec<String> {
+        let mut all: Vec<String> = self
+            .edges
+            .iter()
+            .flat_map(|(child, e)| [child.clone(), e.parent.clone()])
+            .collect();
+        all.sort();
+        all.dedup();
+        all
+    }
+}
+
+/// The state the reader task keeps.
+#[derive(Debug, Default)]
+pub struct ArmState {
+    /// The newest joint sample.
+    pub joints: Option<JointSample>,
+    /// The one before it.
+    pub previous: Option<JointSample>,
+    /// A `/joint_states` message that lacked a configured joint (the newest such problem).
+    pub joints_problem: Option<String>,
+    /// The TF tree.
+    pub tf: TfTree,
+    /// When the last `/tf` message arrived.
+    pub tf_received: Option<Instant>,
+}
+
+/// [`ArmState`] behind a lock, with a condition variable readers wait on.
+#[derive(Debug, Default)]
+pub struct Shared {
+    state: Mutex<ArmState>,
+    changed: Condvar,
+}
+
+impl Shared {
+    /// The state, locked.
+    pub fn lock(&self) -> MutexGuard<'_, ArmState> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Applies `f` and wakes the waiters.
+    pub fn update(&self, f: impl FnOnce(&mut ArmState)) {
+        f(&mut self.lock());
+        self.changed.notify_all();
+    }
+
+    /// Waits until `ready` holds or `deadline` passes; returns the guard and whether it held.
+    pub fn wait_until(
+        &self,
+        deadline: Instant,
+        mut ready: impl FnMut(&ArmState) -> bool,
+    ) -> (MutexGuard<'_, ArmState>, bool) {
+        let mut guard = self.lock();
+        loop {
+            if ready(&guard) {
+                return (guard, true);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return (guard, false);
+            }
+            let wait = (deadline - now).min(Duration::from_millis(100));
+            guard = self
+                .changed
+                .wait_timeout(guard, wait)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
+        }
+    }
+}
+
+/// The sample of `msg` in the order of `names`, or which name it lacks.
+pub fn joint_sample(
+    msg: &JointState,
+    names: &[String; 6],
+    received: Instant,
+) -> Result<JointSample, String> {
+    let mut positions = [0.0; 6];
+    let mut velocities = [0.0; 6];
+    let mut has_velocity = msg.velocity.len() == msg.name.len();
+    for (i, name) in names.iter().enumerate() {
+        let Some(k) = msg.name.iter().position(|n| n == name) else {
+            return Err(format!(
+                "joint {name:?} is not in the message (it names {})",
+                msg.name.join(", ")
+            ));
+        };
+        positions[i] = *msg.position.get(k).ok_or_else(|| {
+            format!(
+                "joint {name:?} has no position ({} positions for {} names)",
+                msg.position.len(),
+                msg.name.len()
+            )
+        })?;
+        match msg.velocity.get(k) {
+            Some(v) if v.is_finite() => velocities[i] = *v,
+            _ => has_velocity = false,
+        }
+    }
+    if positions.iter().any(|p| !p.is_finite()) {
+        return Err("a joint position is not finite".into());
+    }
+    Ok(JointSample {
+        positions,
+        velocities: has_velocity.then_some(velocities),
+        stamp: msg.header.stamp.to_system(),
+        received,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::{Header, Transform, TransformStamped};
+    use nalgebra::Vector3;
+
+    fn edge(parent: &str, child: &str, pose: Pose) -> TransformStamped {
+        TransformStamped {
+            header: Header {
+                frame_id: parent.into(),
+                ..Header::default()
+            },
+            child_frame_id: child.into(),
+            transform: Transform::from_pose(&pose),
+        }
+    }
+
+    #[test]
+    fn a_chain_is_composed_and_missing_frames_are_named() {
+        let world_base = Pose::new(Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.5));
+        let base_link = Pose::new(Vector3::new(0.0, 0.2, 0.1), Vector3::new(0.1, 0.0, 0.0));
+        let link_tool = Pose::new(Vector3::new(0.0, 0.0, 0.3), Vector3::new(0.0, 0.2, 0.0));
+        let mut tree = TfTree::default();
+        tree.update(&TfMessage {
+            transforms: vec![
+                edge("world", "base", world_base),
+                edge("base", "link", base_link),
+                edge("/link", "tool0", link_tool),
+            ],
+        });
+        let got = tree.lookup("base", "tool0").unwrap();
+        let want = base_link * link_tool;
+        assert!((got.to_homogeneous() - want.to_homogeneous()).norm() < 1e-12);
+        let back = tree.lookup("tool0", "world").unwrap();
+        let want = (world_base * base_link * link_tool).inverse();
+        assert!((back.to_homogeneous() - want.to_homogeneous()).norm() < 1e-12);
+        let e = tree.lookup("base", "flange").unwrap_err();
+        assert!(
+            e.contains("\"flange\" is not in the TF tree") && e.contains("tool0"),
+            "{e}"
+        );
+        tree.update(&TfMessage {
+            transforms: vec![edge("map", "camera", Pose::identity())],
+        });
+        let e = tree.lookup("base", "camera").unwrap_err();
+        assert!(e.contains("not connected"), "{e}");
+    }
+
+    #[test]
+    fn joint_states_are_ordered_by_name() {
+        let names = ["a", "b", "c", "d", "e", "f"].map(String::from);
+        let msg = JointState {
+            name: ["f", "e", "d", "c", "b", "a"].map(String::from).to_vec(),
+            position: vec![6.0, 5.0, 4.0, 3.0, 2.0, 1.0],
+            ..JointState::default()
+        };
+        let s = joint_sample(&msg, &names, Instant::now()).unwrap();
+        assert_eq!(s.positions, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert!(s.velocities.is_none());
+        let short = JointState {
+            name: vec!["a".into()],
+            position: vec![0.0],
+            ..JointState::default()
+        };
+        let e = joint_sample(&short, &names, Instant::now()).unwrap_err();
+        assert!(e.contains("joint \"b\" is not in the message"), "{e}");
+    }
+}

@@ -1,0 +1,475 @@
+//! The ROS 2 messages handeye reads and writes on the wire, as serde structs whose field order is
+//! the `.msg` definition's (CDR serialises fields in order, with no names): builtin_interfaces,
+//! std_msgs/Header, geometry_msgs transforms, tf2_msgs/TFMessage, sensor_msgs (JointState, Image,
+//! CompressedImage, CameraInfo), trajectory_msgs and control_msgs/FollowJointTrajectory.
+//!
+//! The DDS type name of each is `pkg::msg::dds_::Type_` ([`RosType`]), the topic `rt/<name>`;
+//! ros2-client adds both. Conversions to handeye's types sit beside the structs: a
+//! [`Transform`] is `T_parent_child` of its [`TransformStamped`] (header frame = parent, child
+//! frame = child), metres, unit quaternion (x, y, z, w on the wire).
+
+use std::time::{Duration as StdDuration, SystemTime, UNIX_EPOCH};
+
+use nalgebra::{Quaternion as NaQuaternion, Translation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+
+use handeye_core::geometry::Pose;
+
+/// A ROS 2 interface's package and name, for the DDS type name.
+pub trait RosType {
+    /// The package, e.g. `tf2_msgs`.
+    const PACKAGE: &'static str;
+    /// The type, e.g. `TFMessage`.
+    const NAME: &'static str;
+}
+
+macro_rules! ros_type {
+    ($ty:ty, $pkg:literal, $name:literal) => {
+        impl RosType for $ty {
+            const PACKAGE: &'static str = $pkg;
+            const NAME: &'static str = $name;
+        }
+    };
+}
+
+/// builtin_interfaces/Time: seconds and nanoseconds since the Unix epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Time {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds, below 1e9.
+    pub nanosec: u32,
+}
+
+impl Time {
+    /// The wall clock now.
+    pub fn now() -> Time {
+        Time::from_system(SystemTime::now())
+    }
+
+    /// A system time (before the epoch counts as the epoch; after 2038 saturates).
+    pub fn from_system(t: SystemTime) -> Time {
+        let since = t.duration_since(UNIX_EPOCH).unwrap_or_default();
+        Time {
+            sec: i32::try_from(since.as_secs()).unwrap_or(i32::MAX),
+            nanosec: since.subsec_nanos(),
+        }
+    }
+
+    /// As a system time (a negative stamp counts as the epoch).
+    pub fn to_system(self) -> SystemTime {
+        let secs = u64::try_from(self.sec).unwrap_or(0);
+        UNIX_EPOCH + StdDuration::new(secs, self.nanosec.min(999_999_999))
+    }
+}
+
+/// builtin_interfaces/Duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Duration {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds, below 1e9.
+    pub nanosec: u32,
+}
+
+impl Duration {
+    /// From seconds (negative or not finite counts as zero).
+    pub fn from_secs_f64(s: f64) -> Duration {
+        let d = if s.is_finite() && s > 0.0 {
+            StdDuration::from_secs_f64(s.min(i32::MAX as f64))
+        } else {
+            StdDuration::ZERO
+        };
+        Duration {
+            sec: d.as_secs() as i32,
+            nanosec: d.subsec_nanos(),
+        }
+    }
+
+    /// In seconds.
+    pub fn as_secs_f64(self) -> f64 {
+        self.sec as f64 + self.nanosec as f64 * 1e-9
+    }
+}
+
+/// std_msgs/Header.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Header {
+    /// When the data was measured.
+    pub stamp: Time,
+    /// The frame the data is in.
+    pub frame_id: String,
+}
+
+/// geometry_msgs/Vector3.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Vector3 {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+}
+
+/// geometry_msgs/Quaternion (x, y, z, w on the wire).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Quaternion {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+    /// w.
+    pub w: f64,
+}
+
+/// geometry_msgs/Transform: `T_parent_child`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    /// Child origin in the parent frame, m.
+    pub translation: Vector3,
+    /// Child axes in the parent frame.
+    pub rotation: Quaternion,
+}
+
+impl Transform {
+    /// From `T_parent_child`.
+    pub fn from_pose(parent_from_child: &Pose) -> Transform {
+        let t = parent_from_child.translation.vector;
+        let q = parent_from_child.rotation.quaternion();
+        Transform {
+            translation: Vector3 {
+                x: t.x,
+                y: t.y,
+                z: t.z,
+            },
+            rotation: Quaternion {
+                x: q.i,
+                y: q.j,
+                z: q.k,
+                w: q.w,
+            },
+        }
+    }
+
+    /// `T_parent_child`, or `None` when a value is not finite or the quaternion is far from unit
+    /// length (|q| outside 0.99…1.01: a publisher's bug, not rounding).
+    pub fn to_pose(&self) -> Option<Pose> {
+        let (t, r) = (self.translation, self.rotation);
+        let q = NaQuaternion::new(r.w, r.x, r.y, r.z);
+        let norm = q.norm();
+        let finite = [t.x, t.y, t.z, r.x, r.y, r.z, r.w]
+            .iter()
+            .all(|v| v.is_finite());
+        if !finite || !(0.99..=1.01).contains(&norm) {
+            return None;
+        }
+        Some(Pose::from_parts(
+            Translation3::new(t.x, t.y, t.z),
+            UnitQuaternion::from_quaternion(q),
+        ))
+    }
+}
+
+/// geometry_msgs/TransformStamped.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransformStamped {
+    /// Stamp and parent frame.
+    pub header: Header,
+    /// The child frame.
+    pub child_frame_id: String,
+    /// `T_parent_child`.
+    pub transform: Transform,
+}
+
+/// tf2_msgs/TFMessage: what `/tf` and `/tf_static` carry.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct TfMessage {
+    /// The transforms.
+    pub transforms: Vec<TransformStamped>,
+}
+ros_type!(TfMessage, "tf2_msgs", "TFMessage");
+
+/// sensor_msgs/JointState.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct JointState {
+    /// Measurement time.
+    pub header: Header,
+    /// Joint names.
+    pub name: Vec<String>,
+    /// Positions, rad.
+    pub position: Vec<f64>,
+    /// Speeds, rad/s (may be empty).
+    pub velocity: Vec<f64>,
+    /// Efforts (may be empty).
+    pub effort: Vec<f64>,
+}
+ros_type!(JointState, "sensor_msgs", "JointState");
+
+/// sensor_msgs/Image.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Image {
+    /// Exposure time and the camera's optical frame.
+    pub header: Header,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// `mono8`, `mono16`, `rgb8`, `bgr8`, `bayer_rggb8`, ...
+    pub encoding: String,
+    /// 1 when multi-byte pixels are big-endian.
+    pub is_bigendian: u8,
+    /// Bytes per row.
+    pub step: u32,
+    /// The pixels.
+    pub data: Vec<u8>,
+}
+ros_type!(Image, "sensor_msgs", "Image");
+
+/// sensor_msgs/CompressedImage.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct CompressedImage {
+    /// Exposure time and the camera's optical frame.
+    pub header: Header,
+    /// `jpeg`, `png` (image_transport adds the raw encoding: `bgr8; jpeg compressed bgr8`).
+    pub format: String,
+    /// The compressed file's bytes.
+    pub data: Vec<u8>,
+}
+ros_type!(CompressedImage, "sensor_msgs", "CompressedImage");
+
+/// sensor_msgs/RegionOfInterest.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct RegionOfInterest {
+    /// Left column.
+    pub x_offset: u32,
+    /// Top row.
+    pub y_offset: u32,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// Whether the region was rectified.
+    pub do_rectify: bool,
+}
+
+/// sensor_msgs/CameraInfo.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct CameraInfo {
+    /// Stamp and the camera's optical frame.
+    pub header: Header,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// `plumb_bob`, `rational_polynomial`, `equidistant`.
+    pub distortion_model: String,
+    /// Distortion coefficients.
+    pub d: Vec<f64>,
+    /// Intrinsic matrix, row-major.
+    pub k: [f64; 9],
+    /// Rectification rotation, row-major.
+    pub r: [f64; 9],
+    /// Projection matrix, row-major.
+    pub p: [f64; 12],
+    /// Binning in x.
+    pub binning_x: u32,
+    /// Binning in y.
+    pub binning_y: u32,
+    /// Region of interest.
+    pub roi: RegionOfInterest,
+}
+ros_type!(CameraInfo, "sensor_msgs", "CameraInfo");
+
+/// trajectory_msgs/JointTrajectoryPoint.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct JointTrajectoryPoint {
+    /// Positions, rad.
+    pub positions: Vec<f64>,
+    /// Speeds, rad/s (empty: the controller interpolates).
+    pub velocities: Vec<f64>,
+    /// Accelerations, rad/s² (may be empty).
+    pub accelerations: Vec<f64>,
+    /// Efforts (may be empty).
+    pub effort: Vec<f64>,
+    /// When to be there, from the trajectory's start.
+    pub time_from_start: Duration,
+}
+
+/// trajectory_msgs/JointTrajectory.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct JointTrajectory {
+    /// Start time (zero: now).
+    pub header: Header,
+    /// Joint names, in the order of every point's values.
+    pub joint_names: Vec<String>,
+    /// The waypoints.
+    pub points: Vec<JointTrajectoryPoint>,
+}
+
+/// geometry_msgs/Twist.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Twist {
+    /// m/s.
+    pub linear: Vector3,
+    /// rad/s.
+    pub angular: Vector3,
+}
+
+/// trajectory_msgs/MultiDOFJointTrajectoryPoint.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct MultiDofJointTrajectoryPoint {
+    /// Transforms.
+    pub transforms: Vec<Transform>,
+    /// Speeds.
+    pub velocities: Vec<Twist>,
+    /// Accelerations.
+    pub accelerations: Vec<Twist>,
+    /// When to be there.
+    pub time_from_start: Duration,
+}
+
+/// trajectory_msgs/MultiDOFJointTrajectory (handeye sends it empty).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct MultiDofJointTrajectory {
+    /// Start time.
+    pub header: Header,
+    /// Joint names.
+    pub joint_names: Vec<String>,
+    /// Waypoints.
+    pub points: Vec<MultiDofJointTrajectoryPoint>,
+}
+
+/// control_msgs/JointTolerance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct JointTolerance {
+    /// Joint name.
+    pub name: String,
+    /// rad (0: the controller's default, -1: none).
+    pub position: f64,
+    /// rad/s.
+    pub velocity: f64,
+    /// rad/s².
+    pub acceleration: f64,
+}
+
+/// control_msgs/JointComponentTolerance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct JointComponentTolerance {
+    /// Joint name.
+    pub joint_name: String,
+    /// Which component (X_AXIS = 1, ...).
+    pub component: u16,
+    /// Position tolerance.
+    pub position: f64,
+    /// Speed tolerance.
+    pub velocity: f64,
+    /// Acceleration tolerance.
+    pub acceleration: f64,
+}
+
+/// control_msgs/action/FollowJointTrajectory goal (control_msgs 4.x and later: Humble, Jazzy).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryGoal {
+    /// The joint trajectory.
+    pub trajectory: JointTrajectory,
+    /// Unused (empty).
+    pub multi_dof_trajectory: MultiDofJointTrajectory,
+    /// Per-joint path tolerances (empty: the controller's).
+    pub path_tolerance: Vec<JointTolerance>,
+    /// Unused (empty).
+    pub component_path_tolerance: Vec<JointComponentTolerance>,
+    /// Per-joint goal tolerances (empty: the controller's).
+    pub goal_tolerance: Vec<JointTolerance>,
+    /// Unused (empty).
+    pub component_goal_tolerance: Vec<JointComponentTolerance>,
+    /// How late the arm may arrive.
+    pub goal_time_tolerance: Duration,
+}
+
+/// control_msgs/action/FollowJointTrajectory result.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryResult {
+    /// 0 on success, negative codes: [`follow_joint_trajectory_error`].
+    pub error_code: i32,
+    /// The controller's words.
+    pub error_string: String,
+}
+
+/// control_msgs/action/FollowJointTrajectory feedback.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FollowJointTrajectoryFeedback {
+    /// Stamp.
+    pub header: Header,
+    /// Joint names.
+    pub joint_names: Vec<String>,
+    /// Where the arm should be.
+    pub desired: JointTrajectoryPoint,
+    /// Where it is.
+    pub actual: JointTrajectoryPoint,
+    /// The difference.
+    pub error: JointTrajectoryPoint,
+    /// Unused.
+    pub multi_dof_joint_names: Vec<String>,
+    /// Unused.
+    pub multi_dof_desired: MultiDofJointTrajectoryPoint,
+    /// Unused.
+    pub multi_dof_actual: MultiDofJointTrajectoryPoint,
+    /// Unused.
+    pub multi_dof_error: MultiDofJointTrajectoryPoint,
+}
+
+/// What a FollowJointTrajectory result's `error_code` means, in words a person can act on.
+pub fn follow_joint_trajectory_error(code: i32) -> &'static str {
+    match code {
+        0 => "successful",
+        -1 => "INVALID_GOAL: the controller rejected the trajectory (joint names, sizes or times)",
+        -2 => "INVALID_JOINTS: the joint names do not match the controller's joints",
+        -3 => "OLD_HEADER_TIMESTAMP: the trajectory's start time is in the past",
+        -4 => {
+            "PATH_TOLERANCE_VIOLATED: the arm left the path tolerance (collision, payload, limits)"
+        }
+        -5 => "GOAL_TOLERANCE_VIOLATED: the arm did not reach the goal within its tolerance",
+        _ => "an error code control_msgs does not define",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3 as NaVector3;
+
+    #[test]
+    fn a_transform_round_trips_a_pose() {
+        let pose = Pose::new(
+            NaVector3::new(0.1, -0.2, 0.3),
+            NaVector3::new(0.4, 0.5, -0.6),
+        );
+        let back = Transform::from_pose(&pose).to_pose().unwrap();
+        assert!((back.translation.vector - pose.translation.vector).norm() < 1e-15);
+        assert!(back.rotation.angle_to(&pose.rotation) < 1e-12);
+    }
+
+    #[test]
+    fn a_bad_quaternion_is_refused() {
+        let mut t = Transform::from_pose(&Pose::identity());
+        t.rotation.w = 2.0;
+        assert!(t.to_pose().is_none());
+        t.rotation.w = f64::NAN;
+        assert!(t.to_pose().is_none());
+    }
+
+    #[test]
+    fn times_and_durations_convert() {
+        let t = Time {
+            sec: 1_700_000_000,
+            nanosec: 5,
+        };
+        assert_eq!(Time::from_system(t.to_system()), t);
+        assert_eq!(Duration::from_secs_f64(1.5).nanosec, 500_000_000);
+        assert_eq!(Duration::from_secs_f64(-1.0), Duration::default());
+        assert!(follow_joint_trajectory_error(-4).starts_with("PATH_TOLERANCE"));
+    }
+}

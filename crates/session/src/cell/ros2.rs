@@ -1,0 +1,78 @@
+//! Opening the `backend: ros2` arm and camera (docs/ros2-live.md): one ROS 2 node for both, on
+//! the domain and interfaces the config names; the camera alone takes its own `graph`. Built
+//! with the `ros2` feature; without it, a clear error says the build lacks it.
+
+use handeye_core::camera_model::CameraModel;
+use handeye_robot::kinematics::UrModel;
+
+use super::{CellError, Hardware};
+use crate::config::CellConfig;
+
+/// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`).
+#[cfg(not(feature = "ros2"))]
+pub fn open(_: &CellConfig, _: CameraModel, _: UrModel) -> Result<Hardware, CellError> {
+    Err(CellError::Backend(
+        "backend `ros2` needs a handeye build with the `ros2` feature: `cargo build --release --features ros2` (no ROS installation needed)".into(),
+    ))
+}
+
+/// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`): the arm first (its
+/// joint states and flange pose must be heard before anything else), then the camera.
+#[cfg(feature = "ros2")]
+pub fn open(config: &CellConfig, model: CameraModel, arm: UrModel) -> Result<Hardware, CellError> {
+    use std::time::Duration;
+
+    use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
+    use handeye_ros2::camera::{CameraOptions, Ros2Camera};
+    use handeye_ros2::link::{LinkOptions, Ros2Link};
+
+    use crate::config::ros2::Rmw;
+    use crate::config::{CameraConfig, RobotConfig};
+
+    let (RobotConfig::Ros2(r), CameraConfig::Ros2(c)) = (&config.robot, &config.camera) else {
+        return Err(CellError::Backend(
+            "the ROS 2 cell needs `robot: {backend: ros2}` and `camera: {backend: ros2}`".into(),
+        ));
+    };
+    let link = Ros2Link::open(LinkOptions {
+        domain_id: r.graph.domain_id,
+        interfaces: r.graph.interfaces.clone(),
+        node_name: "handeye".into(),
+    })
+    .map_err(|e| CellError::Backend(e.to_string()))?;
+    let timeout = Duration::from_secs_f64(r.graph.connect_timeout_s);
+    let robot = Ros2Arm::open(
+        &link,
+        ArmOptions {
+            base_frame: r.base_frame.clone(),
+            flange_frame: r.flange_frame.clone(),
+            joint_names: r.joint_names.clone(),
+            joint_states_topic: r.joint_states_topic.clone(),
+            tf_topic: r.tf_topic.clone(),
+            tf_static_topic: r.tf_static_topic.clone(),
+            action: r.action.clone(),
+            timeout,
+            framing: match r.graph.rmw {
+                Rmw::Fastrtps => Framing::FastRtps,
+                Rmw::Cyclonedds => Framing::Cyclone,
+            },
+            kinematics: Some(arm),
+        },
+    )
+    .map_err(|e| CellError::Robot(Box::new(e)))?;
+    let camera = Ros2Camera::open(
+        &link,
+        CameraOptions {
+            image_topic: c.image_topic.clone(),
+            compressed: c.compressed,
+            camera_info_topic: c.camera_info_topic.clone(),
+            timeout: Duration::from_secs_f64(c.frame_timeout_s),
+            model,
+        },
+    )
+    .map_err(|e| CellError::Backend(format!("the ROS 2 camera: {e}")))?;
+    Ok(Hardware {
+        robot: Box::new(robot),
+        camera: Box::new(camera),
+    })
+}

@@ -1,0 +1,317 @@
+//! The `backend: ros2` sections of a cell config: an arm under a ROS 2 driver (`/tf`,
+//! `/joint_states`, a FollowJointTrajectory action) and a camera under a ROS 2 camera node
+//! (`sensor_msgs/Image` or `CompressedImage` + `CameraInfo`). The DDS domain, the local
+//! interfaces and every topic, frame and action name come from here; the defaults are those of
+//! the UR ROS 2 driver (`ur_robot_driver`) and a usual camera node. Needs the `ros2` build
+//! feature to open (docs/ros2-live.md); any build reads and checks it.
+
+use std::net::IpAddr;
+
+use serde::{Deserialize, Serialize};
+
+use super::schema::ArmModel;
+
+/// Where on the ROS 2 graph handeye joins: shared by the arm and the camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Graph {
+    /// The ROS_DOMAIN_ID, 0–232.
+    #[serde(default)]
+    pub domain_id: u16,
+    /// Local addresses DDS may use (the robot network's; `127.0.0.1` for one machine); empty:
+    /// every interface.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub interfaces: Vec<IpAddr>,
+    /// How long to wait for the first message of each topic and for the action server, s.
+    #[serde(default = "default_connect_timeout_s")]
+    pub connect_timeout_s: f64,
+    /// The ROS middleware the other nodes run: it decides how action calls (request/reply) are
+    /// framed on the wire. `fastrtps` is ROS 2's default; `cyclonedds` when the robot's nodes run
+    /// with `RMW_IMPLEMENTATION=rmw_cyclonedds_cpp`.
+    #[serde(default)]
+    pub rmw: Rmw,
+}
+
+/// The ROS middleware of the other nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Rmw {
+    /// rmw_fastrtps_cpp (the default of Humble and Jazzy).
+    #[default]
+    Fastrtps,
+    /// rmw_cyclonedds_cpp.
+    Cyclonedds,
+}
+
+impl Default for Ros2Graph {
+    fn default() -> Self {
+        Ros2Graph {
+            domain_id: 0,
+            interfaces: Vec::new(),
+            connect_timeout_s: default_connect_timeout_s(),
+            rmw: Rmw::default(),
+        }
+    }
+}
+
+fn default_connect_timeout_s() -> f64 {
+    10.0
+}
+
+/// `robot: {backend: ros2, ...}`: an arm under a ROS 2 driver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Robot {
+    /// The arm model whose kinematics plan the poses (a UR model; see `ArmModel`).
+    #[serde(default)]
+    pub model: ArmModel,
+    /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_ranges_deg: Option<[[f64; 2]; 6]>,
+    /// Domain, interfaces, timeouts.
+    #[serde(default)]
+    pub graph: Ros2Graph,
+    /// The TF frame `T_base_flange` is measured in (the UR driver's `base`).
+    #[serde(default = "default_base_frame")]
+    pub base_frame: String,
+    /// The TF frame of the flange (`tool0`).
+    #[serde(default = "default_flange_frame")]
+    pub flange_frame: String,
+    /// The arm's joint names, base to wrist 3, as `/joint_states` and the controller name them.
+    #[serde(default = "default_joint_names")]
+    pub joint_names: [String; 6],
+    /// The `sensor_msgs/JointState` topic.
+    #[serde(default = "default_joint_states_topic")]
+    pub joint_states_topic: String,
+    /// The TF topic.
+    #[serde(default = "default_tf_topic")]
+    pub tf_topic: String,
+    /// The static TF topic.
+    #[serde(default = "default_tf_static_topic")]
+    pub tf_static_topic: String,
+    /// The `control_msgs/action/FollowJointTrajectory` action.
+    #[serde(default = "default_action")]
+    pub action: String,
+    /// 1-sigma error of the flange pose the driver reports, mm (default 0.03).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub repeatability_mm: Option<f64>,
+    /// 1-sigma rotation error of the reported flange pose, degrees (default 0.003).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub repeatability_deg: Option<f64>,
+}
+
+fn default_base_frame() -> String {
+    "base".into()
+}
+fn default_flange_frame() -> String {
+    "tool0".into()
+}
+fn default_joint_names() -> [String; 6] {
+    [
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]
+    .map(String::from)
+}
+fn default_joint_states_topic() -> String {
+    "/joint_states".into()
+}
+fn default_tf_topic() -> String {
+    "/tf".into()
+}
+fn default_tf_static_topic() -> String {
+    "/tf_static".into()
+}
+fn default_action() -> String {
+    "/scaled_joint_trajectory_controller/follow_joint_trajectory".into()
+}
+
+/// `camera: {backend: ros2, ...}`: a camera under a ROS 2 camera node.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Camera {
+    /// The image topic (`sensor_msgs/Image`, or `sensor_msgs/CompressedImage` with
+    /// `compressed: true`).
+    #[serde(default = "default_image_topic")]
+    pub image_topic: String,
+    /// The image topic carries `CompressedImage` (JPEG or PNG).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub compressed: bool,
+    /// The `sensor_msgs/CameraInfo` topic; its size must match the config's `intrinsics`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_info_topic: Option<String>,
+    /// Domain and interfaces when the arm is not on ROS 2 (otherwise the arm's are used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<Ros2Graph>,
+    /// How long to wait for a frame exposed after the arm settled, s.
+    #[serde(default = "default_frame_timeout_s")]
+    pub frame_timeout_s: f64,
+}
+
+fn default_image_topic() -> String {
+    "/image_raw".into()
+}
+fn default_frame_timeout_s() -> f64 {
+    5.0
+}
+
+/// A problem in a `ros2` section: the key (YAML path) and what is wrong with it.
+pub(super) type Problem = (String, String);
+
+fn name_problem(key: &str, name: &str) -> Option<Problem> {
+    let ok = name.starts_with('/')
+        && name.len() > 1
+        && !name.ends_with('/')
+        && !name.contains("//")
+        && name.split('/').skip(1).all(|part| {
+            part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                && !part.starts_with(|c: char| c.is_ascii_digit())
+        });
+    (!ok).then(|| {
+        (
+            key.to_string(),
+            format!("{name:?} is not an absolute ROS 2 name: expected `/a/b` of letters, digits and `_`, no part starting with a digit"),
+        )
+    })
+}
+
+fn frame_problem(key: &str, frame: &str) -> Option<Problem> {
+    let ok = !frame.is_empty()
+        && !frame.starts_with('/')
+        && frame
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/');
+    (!ok).then(|| {
+        (
+            key.to_string(),
+            format!("{frame:?} is not a TF frame id: expected letters, digits, `_` and `/`, no leading `/`"),
+        )
+    })
+}
+
+fn graph_problem(key: &str, graph: &Ros2Graph) -> Option<Problem> {
+    if graph.domain_id > 232 {
+        return Some((
+            format!("{key}.domain_id"),
+            format!(
+                "{} is not a ROS 2 domain id: expected 0..=232",
+                graph.domain_id
+            ),
+        ));
+    }
+    let t = graph.connect_timeout_s;
+    (!(t.is_finite() && t > 0.0 && t <= 600.0)).then(|| {
+        (
+            format!("{key}.connect_timeout_s"),
+            format!("{t} s: expected a value in (0, 600] s"),
+        )
+    })
+}
+
+impl Ros2Robot {
+    /// The names, frames and numbers checked (the first problem found).
+    pub(super) fn problem(&self) -> Option<Problem> {
+        graph_problem("robot.graph", &self.graph)
+            .or_else(|| frame_problem("robot.base_frame", &self.base_frame))
+            .or_else(|| frame_problem("robot.flange_frame", &self.flange_frame))
+            .or_else(|| name_problem("robot.joint_states_topic", &self.joint_states_topic))
+            .or_else(|| name_problem("robot.tf_topic", &self.tf_topic))
+            .or_else(|| name_problem("robot.tf_static_topic", &self.tf_static_topic))
+            .or_else(|| name_problem("robot.action", &self.action))
+            .or_else(|| {
+                let mut seen = std::collections::BTreeSet::new();
+                self.joint_names.iter().enumerate().find_map(|(i, n)| {
+                    (n.trim().is_empty() || !seen.insert(n)).then(|| {
+                        (
+                            format!("robot.joint_names[{i}]"),
+                            format!("{n:?}: expected a joint name, each different"),
+                        )
+                    })
+                })
+            })
+    }
+}
+
+impl Ros2Camera {
+    /// The names and numbers checked (the first problem found).
+    pub(super) fn problem(&self) -> Option<Problem> {
+        let t = self.frame_timeout_s;
+        name_problem("camera.image_topic", &self.image_topic)
+            .or_else(|| {
+                self.camera_info_topic
+                    .as_deref()
+                    .and_then(|n| name_problem("camera.camera_info_topic", n))
+            })
+            .or_else(|| {
+                self.graph
+                    .as_ref()
+                    .and_then(|g| graph_problem("camera.graph", g))
+            })
+            .or_else(|| {
+                (!(t.is_finite() && t > 0.0 && t <= 600.0)).then(|| {
+                    (
+                        "camera.frame_timeout_s".to_string(),
+                        format!("{t} s: expected a value in (0, 600] s"),
+                    )
+                })
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::schema::{CameraConfig, RobotConfig};
+    use super::*;
+
+    #[test]
+    fn the_ur_driver_defaults_and_the_checks() {
+        let robot: RobotConfig = serde_yaml_ng::from_str("backend: ros2\nmodel: ur5e\n").unwrap();
+        let RobotConfig::Ros2(r) = robot else {
+            panic!("not ros2")
+        };
+        assert_eq!(
+            r.action,
+            "/scaled_joint_trajectory_controller/follow_joint_trajectory"
+        );
+        assert_eq!(
+            (r.base_frame.as_str(), r.flange_frame.as_str()),
+            ("base", "tool0")
+        );
+        assert_eq!(r.graph.rmw, Rmw::Fastrtps);
+        assert!(r.problem().is_none());
+
+        let unknown = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nhost: 1.2.3.4\n");
+        assert!(unknown.unwrap_err().to_string().contains("host"));
+
+        let bad: RobotConfig =
+            serde_yaml_ng::from_str("backend: ros2\naction: relative/name\n").unwrap();
+        let RobotConfig::Ros2(r) = bad else { panic!() };
+        let (key, problem) = r.problem().unwrap();
+        assert_eq!(key, "robot.action");
+        assert!(problem.contains("absolute"), "{problem}");
+
+        let domain: RobotConfig =
+            serde_yaml_ng::from_str("backend: ros2\ngraph: {domain_id: 300}\n").unwrap();
+        let RobotConfig::Ros2(r) = domain else {
+            panic!()
+        };
+        assert_eq!(r.problem().unwrap().0, "robot.graph.domain_id");
+
+        let camera: CameraConfig =
+            serde_yaml_ng::from_str("backend: ros2\nimage_topic: /cam/image_raw\n").unwrap();
+        let CameraConfig::Ros2(c) = camera else {
+            panic!()
+        };
+        assert!(c.problem().is_none() && !c.compressed);
+        let camera: CameraConfig =
+            serde_yaml_ng::from_str("backend: ros2\nframe_timeout_s: 0\n").unwrap();
+        let CameraConfig::Ros2(c) = camera else {
+            panic!()
+        };
+        assert_eq!(c.problem().unwrap().0, "camera.frame_timeout_s");
+    }
+}

@@ -1,0 +1,330 @@
+"""A simulated ROS 2 arm and camera served from a rendered handeye sim session, the way the UR
+ROS 2 driver and a camera node would: `/joint_states` (100 Hz), `/tf` (base_link -> tool0, 50 Hz)
+and `/tf_static` (base_link -> base, the UR driver's 180 degree turn), `/image_raw` (mono8,
+15 Hz) with `/camera_info`, and the `FollowJointTrajectory` action on
+`/scaled_joint_trajectory_controller/follow_joint_trajectory`, framed as rmw_cyclonedds frames
+requests and replies (a 16-byte header: the client's id and a sequence number).
+
+The views come from SESSION_DIR (a `handeye run` of a sim config with the same plan): the arm
+at rest at plan pose k reports that session's recorded `T_base_flange` of pose k, and the camera
+shows its frame k; an image stamped at time t shows where the arm was at t (before the arm
+arrives, the previous view). Every goal, cancel and fault is printed on stdout as one JSON line.
+
+Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
+--die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
+tool0).
+"""
+
+import glob
+import json
+import math
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+import yaml
+
+from . import dds
+from . import msgs as m
+
+JOINTS = [
+    "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+    "wrist_1_joint", "wrist_2_joint", "wrist_3_joint",
+]
+
+
+# Universal Robots' published DH parameters (d1, a2, a3, d4, d5, d6), metres; alpha is the same
+# for every model: (pi/2, 0, 0, pi/2, -pi/2, 0).
+UR_DH = {
+    "ur5e": (0.1625, -0.425, -0.3922, 0.1333, 0.0997, 0.0996),
+    "ur10e": (0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655),
+}
+
+
+def forward(model, q):
+    """T_base_flange (4x4) at joints q: the product of Rz(q) Tz(d) Tx(a) Rx(alpha) per link."""
+    d1, a2, a3, d4, d5, d6 = UR_DH[model]
+    d = (d1, 0, 0, d4, d5, d6)
+    a = (0, a2, a3, 0, 0, 0)
+    alpha = (math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0)
+    T = np.eye(4)
+    for i in range(6):
+        ct, st = math.cos(q[i]), math.sin(q[i])
+        ca, sa = math.cos(alpha[i]), math.sin(alpha[i])
+        T = T @ np.array([[ct, -st * ca, st * sa, a[i] * ct],
+                          [st, ct * ca, -ct * sa, a[i] * st],
+                          [0, sa, ca, d[i]],
+                          [0, 0, 0, 1]])
+    return T
+
+
+def quat_of(R):
+    """(x, y, z, w) of a rotation matrix."""
+    w = math.sqrt(max(0.0, 1 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
+    x = math.copysign(math.sqrt(max(0.0, 1 + R[0, 0] - R[1, 1] - R[2, 2])) / 2, R[2, 1] - R[1, 2])
+    y = math.copysign(math.sqrt(max(0.0, 1 - R[0, 0] + R[1, 1] - R[2, 2])) / 2, R[0, 2] - R[2, 0])
+    z = math.copysign(math.sqrt(max(0.0, 1 - R[0, 0] - R[1, 1] + R[2, 2])) / 2, R[1, 0] - R[0, 1])
+    return (x, y, z, w)
+
+
+def add_arguments(p):
+    p.add_argument("session", help="a sim session folder (session.yaml, poses/, frames/)")
+    p.add_argument("--camera-info", required=True, help="the camera_info YAML of the sim camera")
+    p.add_argument("--start-joints-deg", default="0,-90,90,-90,-90,0")
+    p.add_argument("--model", default="ur10e", choices=sorted(UR_DH))
+    p.add_argument("--action", default="/scaled_joint_trajectory_controller/follow_joint_trajectory")
+    p.add_argument("--image-hz", type=float, default=15.0)
+    p.add_argument("--abort-goal", type=int, default=0)
+    p.add_argument("--die-in-goal", type=int, default=0)
+    p.add_argument("--no-tool0", action="store_true")
+    p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
+                   help="report goals whose waypoint speeds exceed this (0: no check)")
+
+
+def say(**kw):
+    print(json.dumps(kw), flush=True)
+
+
+def stamp_now():
+    t = time.time()
+    return m.Time(int(t), int((t % 1) * 1e9))
+
+
+def quat_mul(a, b):
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+def pose_of(p):
+    q = p["quaternion"]
+    return np.array(p["translation"], float), (q["x"], q["y"], q["z"], q["w"])
+
+
+def load_session(folder):
+    from PIL import Image as PilImage
+
+    with open(os.path.join(folder, "session.yaml")) as f:
+        session = yaml.safe_load(f)
+    plan = [pose_of(p["T_base_flange"]) for p in session["plan"]]
+    views = {}
+    for path in sorted(glob.glob(os.path.join(folder, "poses", "*.yaml"))):
+        with open(path) as f:
+            rec = yaml.safe_load(f)
+        frame = np.asarray(PilImage.open(os.path.join(folder, rec["frame"])).convert("L"))
+        views[rec["plan_index"]] = (pose_of(rec["T_base_flange"]), frame)
+    return plan, views
+
+
+class Arm:
+    """The arm's state: joints, speeds, which view it shows; moved by trajectory goals."""
+
+    def __init__(self, model, start, plan, views):
+        self.model = model
+        self.lock = threading.Lock()
+        self.q = np.array(start, float)
+        self.qd = np.zeros(6)
+        self.plan, self.views = plan, views
+        self.view = None  # (pose, frame) of the plan pose the arm stands at
+        self.goal = None  # (goal id, points [(t, q)], start time, done event)
+
+    def nearest_view(self, q):
+        """The rendered view of the plan pose whose flange position the arm's forward
+        kinematics reaches (within 1 mm), or None."""
+        T = forward(self.model, q)
+        d = [float(np.linalg.norm(t - T[:3, 3])) for t, _ in self.plan]
+        k = int(np.argmin(d)) if d else -1
+        if k < 0 or d[k] > 1e-3 or k not in self.views:
+            say(event="no_view", joints=list(q), nearest=k, distance_m=d[k] if d else None)
+            return None
+        return self.views[k]
+
+    def flange(self):
+        """(translation, quaternion xyzw) of T_base_flange: the recorded one at a view, else the
+        forward kinematics (moving, or at a pose with no view)."""
+        if self.view is not None and self.goal is None:
+            return self.view[0]
+        T = forward(self.model, self.q)
+        return T[:3, 3], quat_of(T[:3, :3])
+
+
+def cdr_bytes(frame):
+    return frame.tobytes()
+
+
+def run(args):
+    plan, views = load_session(args.session)
+    with open(args.camera_info) as f:
+        ci = yaml.safe_load(f)
+    start = np.radians([float(v) for v in args.start_joints_deg.split(",")])
+    arm = Arm(args.model, start, plan, views)
+
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    dp = dds.participant(args.domain, args.loopback)
+    W = lambda name, T, qos: DataWriter(dp, Topic(dp, name, T), qos=qos)  # noqa: E731
+    R = lambda name, T, qos: DataReader(dp, Topic(dp, name, T), qos=qos)  # noqa: E731
+    js_w = W("rt/joint_states", m.JointState, dds.qos_reliable())
+    tf_w = W("rt/tf", m.TFMessage, dds.qos_reliable(100))
+    tfs_w = W("rt/tf_static", m.TFMessage, dds.qos_static())
+    img_w = W("rt/image_raw", m.Image, dds.qos_sensor())
+    info_w = W("rt/camera_info", m.CameraInfo, dds.qos_sensor())
+    a = "/_action/"
+    base = args.action
+    goal_r = R("rq" + base + a + "send_goalRequest", m.SendGoalRequest, dds.qos_reliable())
+    goal_w = W("rr" + base + a + "send_goalReply", m.SendGoalReply, dds.qos_reliable())
+    res_r = R("rq" + base + a + "get_resultRequest", m.GetResultRequest, dds.qos_reliable())
+    res_w = W("rr" + base + a + "get_resultReply", m.GetResultReply, dds.qos_reliable())
+    can_r = R("rq" + base + a + "cancel_goalRequest", m.CancelGoalRequest, dds.qos_reliable())
+    can_w = W("rr" + base + a + "cancel_goalReply", m.CancelGoalReply, dds.qos_reliable())
+    fb_w = W("rt" + base + a + "feedback", m.FeedbackMessage, dds.qos_reliable())
+
+    # base_link -> base: the UR driver's static turn of 180 degrees about z.
+    turn = (0.0, 0.0, 1.0, 0.0)
+    tfs_w.write(m.TFMessage([m.TransformStamped(
+        m.Header(stamp_now(), "base_link"), "base",
+        m.Transform(m.Vector3(0, 0, 0), m.Quaternion(*turn)))]))
+
+    K = ci["camera_matrix"]["data"]
+    info = m.CameraInfo(
+        header=m.Header(stamp_now(), "camera_optical_frame"),
+        height=ci["image_height"], width=ci["image_width"],
+        distortion_model=ci.get("distortion_model", "plumb_bob"),
+        d=list(ci["distortion_coefficients"]["data"]), k=list(K),
+        r=[1, 0, 0, 0, 1, 0, 0, 0, 1],
+        p=[K[0], 0, K[2], 0, 0, K[4], K[5], 0, 0, 0, 1, 0])
+
+    goals = {}  # goal uuid bytes -> dict(status, result, waiting=[(client_id, seq)])
+    goal_count = [0]
+
+    def finish(gid, status, code=0, text=""):
+        g = goals[gid]
+        g["status"], g["code"], g["text"] = status, code, text
+        for cid, seq in g["waiting"]:
+            res_w.write(m.GetResultReply(cid, seq, status, m.FJTResult(code, text)))
+        g["waiting"] = []
+
+    def serve():
+        for req in goal_r.take(N=10):
+            if not hasattr(req, "goal_id"):
+                continue
+            gid = bytes(req.goal_id.uuid)
+            tr = req.goal.trajectory
+            goal_count[0] += 1
+            n = goal_count[0]
+            pts = [(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9, np.array(p.positions),
+                    np.array(p.velocities) if len(p.velocities) == 6 else None) for p in tr.points]
+            ok = list(tr.joint_names) == JOINTS and pts and all(len(q) == 6 for _, q, _ in pts)
+            max_speed = max((float(np.max(np.abs(v))) for _, _, v in pts if v is not None), default=0.0)
+            goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
+            say(event="goal", n=n, accepted=bool(ok), points=len(pts),
+                duration_s=pts[-1][0] if pts else 0.0, max_joint_speed_rad_s=max_speed,
+                joint_names=list(tr.joint_names))
+            if not ok:
+                continue
+            goals[gid] = {"status": 2, "waiting": [], "n": n}
+            with arm.lock:
+                arm.goal = (gid, pts, time.monotonic(), arm.q.copy(), n)
+        for req in res_r.take(N=10):
+            if not hasattr(req, "goal_id"):
+                continue
+            gid = bytes(req.goal_id.uuid)
+            g = goals.get(gid)
+            if g is None:
+                res_w.write(m.GetResultReply(req.client_id, req.seq, 0, m.FJTResult(-1, "unknown goal")))
+            elif g["status"] in (4, 5, 6):
+                res_w.write(m.GetResultReply(req.client_id, req.seq, g["status"], m.FJTResult(g["code"], g["text"])))
+            else:
+                g["waiting"].append((req.client_id, req.seq))
+        for req in can_r.take(N=10):
+            if not hasattr(req, "goal_info"):
+                continue
+            gid = bytes(req.goal_info.goal_id.uuid)
+            canceling = []
+            with arm.lock:
+                if arm.goal and (arm.goal[0] == gid or not any(gid)):
+                    cur = arm.goal[0]
+                    arm.goal = None
+                    arm.qd = np.zeros(6)
+                    canceling.append(m.GoalInfo(m.UUID(list(cur)), stamp_now()))
+                    say(event="cancel", n=goals[cur]["n"], joints=list(arm.q))
+                    finish(cur, 5, 0, "canceled")
+            can_w.write(m.CancelGoalReply(req.client_id, req.seq, 0 if canceling else 2, canceling))
+
+    def step(now):
+        with arm.lock:
+            if not arm.goal:
+                return
+            gid, pts, t0, q0, n = arm.goal
+            t = now - t0
+            total = pts[-1][0]
+            if args.die_in_goal == n and t > total / 2:
+                say(event="die", n=n)
+                os._exit(0)
+            if args.abort_goal == n and t > total / 2:
+                arm.goal = None
+                arm.qd = np.zeros(6)
+                say(event="abort", n=n)
+                finish(gid, 6, -4, "simulated: path tolerance violated at joint shoulder_lift_joint")
+                return
+            if t >= total:
+                arm.q = pts[-1][1].copy()
+                arm.qd = np.zeros(6)
+                arm.goal = None
+                arm.view = arm.nearest_view(arm.q)
+                finish(gid, 4)
+                say(event="arrived", n=n, at=time.time())
+                return
+            prev_t, prev_q = 0.0, q0
+            for tk, qk, _ in pts:
+                if t <= tk:
+                    f = (t - prev_t) / max(tk - prev_t, 1e-9)
+                    q = prev_q + f * (qk - prev_q)
+                    arm.qd = (qk - prev_q) / max(tk - prev_t, 1e-9)
+                    arm.q = q
+                    break
+                prev_t, prev_q = tk, qk
+
+    say(event="ready", poses=len(views))
+    next_js = next_tf = next_img = next_info = time.monotonic()
+    while True:
+        now = time.monotonic()
+        serve()
+        step(now)
+        with arm.lock:
+            q, qd, view, flange = arm.q.copy(), arm.qd.copy(), arm.view, arm.flange()
+        if now >= next_js:
+            js_w.write(m.JointState(m.Header(stamp_now(), "base_link"), JOINTS, list(q), list(qd), []))
+            next_js += 0.01
+        if now >= next_tf and not args.no_tool0:
+            (t, rot) = flange
+            # base_link -> tool0 = turn * T_base_flange
+            tq = quat_mul(turn, rot)
+            tt = (-t[0], -t[1], t[2])
+            tf_w.write(m.TFMessage([m.TransformStamped(
+                m.Header(stamp_now(), "base_link"), "tool0",
+                m.Transform(m.Vector3(*tt), m.Quaternion(*tq)))]))
+            next_tf += 0.02
+        elif now >= next_tf:
+            next_tf += 0.02
+        if view is None and now >= next_img:
+            # No rendered view here (the start pose): a grey frame without a board.
+            view = (None, np.full((ci["image_height"], ci["image_width"]), 128, np.uint8))
+        if now >= next_img and view is not None:
+            frame = view[1]
+            h, w = frame.shape
+            img_w.write(m.Image(m.Header(stamp_now(), "camera_optical_frame"), h, w, "mono8", 0, w,
+                                cdr_bytes(frame)))
+            next_img += 1.0 / args.image_hz
+        if now >= next_info:
+            info.header.stamp = stamp_now()
+            info_w.write(info)
+            next_info += 0.5
+        time.sleep(0.002)

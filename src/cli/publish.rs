@@ -1,0 +1,125 @@
+//! `handeye publish <result.yaml>`: the two solved unknowns on ROS 2 `/tf_static`, latched
+//! (reliable, transient local, depth 1: what `static_transform_publisher` does), until Ctrl-C or
+//! `--duration`. The frame ids and the `base_link` turn are `export`'s (`named_transforms`).
+
+use std::net::IpAddr;
+use std::path::PathBuf;
+
+use clap::Args;
+
+use handeye::formats::export::named_transforms;
+use handeye::result::ResultFile;
+
+/// Publish a result's T_parent_child transforms (eye_in_hand T_flange_camera and T_base_target,
+/// eye_to_hand T_base_camera and T_flange_target) on /tf_static, with no ROS installation.
+#[derive(Debug, Args)]
+pub(super) struct PublishArgs {
+    /// The result YAML written by `handeye solve` or `handeye run`.
+    result: PathBuf,
+    #[command(flatten)]
+    frames: super::frames::FrameArgs,
+    /// The ROS 2 domain id (default: $ROS_DOMAIN_ID, else 0).
+    #[arg(long)]
+    domain_id: Option<u16>,
+    /// A local address DDS may use (repeat for several; default: every interface).
+    #[arg(long = "interface", value_name = "ADDRESS")]
+    interfaces: Vec<IpAddr>,
+    /// The topic.
+    #[arg(long, default_value = "/tf_static")]
+    topic: String,
+    /// Stop after this many seconds (default: keep publishing until Ctrl-C).
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+}
+
+/// Runs `handeye publish`.
+pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
+    let ids = args.frames.ids()?;
+    if let Some(d) = args.duration {
+        anyhow::ensure!(
+            d.is_finite() && d > 0.0,
+            "--duration {d} s must be a positive number of seconds"
+        );
+    }
+    let domain_id = match args.domain_id {
+        Some(id) => id,
+        None => match std::env::var("ROS_DOMAIN_ID") {
+            Ok(v) if !v.trim().is_empty() => v
+                .trim()
+                .parse()
+                .map_err(|_| anyhow::anyhow!("ROS_DOMAIN_ID={v:?} is not a domain id (0..=232)"))?,
+            _ => 0,
+        },
+    };
+    let mounts = ResultFile::load_mounts(&args.result)?;
+    let transforms = named_transforms(&mounts, &ids);
+    publish(
+        &transforms,
+        domain_id,
+        args.interfaces,
+        &args.topic,
+        args.duration,
+    )
+}
+
+#[cfg(feature = "ros2")]
+fn publish(
+    transforms: &[handeye::formats::export::NamedTransform; 2],
+    domain_id: u16,
+    interfaces: Vec<IpAddr>,
+    topic: &str,
+    duration: Option<f64>,
+) -> anyhow::Result<()> {
+    use std::sync::atomic::Ordering;
+    use std::time::{Duration, Instant};
+
+    use handeye_ros2::link::{LinkOptions, Ros2Link};
+    use handeye_ros2::tf_static::{StaticPublisher, StaticTransform};
+
+    let statics: Vec<StaticTransform> = transforms
+        .iter()
+        .map(|t| StaticTransform {
+            parent: t.parent.clone(),
+            child: t.child.clone(),
+            parent_from_child: t.parent_from_child,
+        })
+        .collect();
+    let link = Ros2Link::open(LinkOptions {
+        domain_id,
+        interfaces,
+        node_name: "handeye_publish".into(),
+    })?;
+    let _publisher = StaticPublisher::publish(&link, topic, &statics)?;
+    for t in transforms {
+        outln!(
+            "publishing {} ({} → {}) on {topic}, domain {domain_id}",
+            t.key,
+            t.parent,
+            t.child
+        );
+    }
+    match duration {
+        Some(s) => outln!("latched for {s} s"),
+        None => outln!("latched until Ctrl-C"),
+    }
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    super::stop_on_signals(stop.clone());
+    let end = duration.map(|s| Instant::now() + Duration::from_secs_f64(s));
+    while !stop.load(Ordering::SeqCst) && end.is_none_or(|end| Instant::now() < end) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "ros2"))]
+fn publish(
+    _transforms: &[handeye::formats::export::NamedTransform; 2],
+    _domain_id: u16,
+    _interfaces: Vec<IpAddr>,
+    _topic: &str,
+    _duration: Option<f64>,
+) -> anyhow::Result<()> {
+    anyhow::bail!(
+        "this handeye was built without ROS 2: rebuild with `cargo build --release --features ros2`"
+    )
+}

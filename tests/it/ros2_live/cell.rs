@@ -1,0 +1,441 @@
+//! `handeye run` of `configs/ros2-sim-cell.yaml` against the independent peer serving the
+//! simulated cell (`scripts/ros2-peer.py sim-cell`): the run recovers the simulator's truth; STOP
+//! (Ctrl-C) cancels the goal the peer runs; an aborted goal, a dead peer and a frame missing
+//! from the TF tree are clear errors that keep the samples, and `--resume` completes.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use nalgebra::Vector3;
+
+use handeye::geometry::pose_from_rotvec;
+use handeye::result::ResultFile;
+
+use super::{peer, python};
+use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, within};
+
+/// The views the peer serves: a sim run of `config` into `CARGO_TARGET_TMPDIR/name`, made once.
+fn render(name: &str, config: &Path) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    if !dir.join("result.yaml").exists() {
+        let _ = std::fs::remove_dir_all(&dir);
+        let out = handeye()
+            .args(["run", "--config"])
+            .arg(config)
+            .arg("-o")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    dir
+}
+
+/// The eye-in-hand views (configs/ros2-sim-cell-views.yaml).
+fn views() -> PathBuf {
+    static VIEWS: OnceLock<PathBuf> = OnceLock::new();
+    VIEWS
+        .get_or_init(|| {
+            render(
+                "ros2-views",
+                &repo().join("configs/ros2-sim-cell-views.yaml"),
+            )
+        })
+        .clone()
+}
+
+/// The peer process, its stdout events collected; killed when dropped.
+pub(super) struct Peer {
+    child: Child,
+    events: Arc<Mutex<Vec<serde_json::Value>>>,
+}
+
+impl Peer {
+    pub(super) fn start(python: &PathBuf, domain: u16, faults: &[&str]) -> Peer {
+        Self::serving(python, domain, &views(), faults)
+    }
+
+    fn serving(python: &PathBuf, domain: u16, views: &Path, faults: &[&str]) -> Peer {
+        let mut child = peer(python, domain)
+            .arg("sim-cell")
+            .arg(views)
+            .arg("--camera-info")
+            .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
+            .args(faults)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("ros2-peer.py sim-cell");
+        let events = Arc::new(Mutex::new(Vec::new()));
+        let sink = events.clone();
+        let stdout = child.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Ok(v) = serde_json::from_str(&line) {
+                    sink.lock().unwrap().push(v);
+                }
+            }
+        });
+        let peer = Peer { child, events };
+        peer.wait_for("ready", Duration::from_secs(60));
+        peer
+    }
+
+    fn events(&self, kind: &str) -> Vec<serde_json::Value> {
+        self.events
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|e| e["event"] == kind)
+            .cloned()
+            .collect()
+    }
+
+    fn wait_for(&self, kind: &str, limit: Duration) -> serde_json::Value {
+        let end = Instant::now() + limit;
+        loop {
+            if let Some(e) = self.events(kind).pop() {
+                return e;
+            }
+            assert!(
+                Instant::now() < end,
+                "the peer said no {kind:?} within {limit:?}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Peer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// configs/ros2-sim-cell.yaml on `domain`, written into `dir`.
+fn cell(dir: &Path, domain: u16, edits: &[(&str, &str)]) -> PathBuf {
+    let mut all = vec![("domain_id: 42", format!("domain_id: {domain}"))];
+    all.extend(edits.iter().map(|(a, b)| (*a, b.to_string())));
+    let edits: Vec<(&str, &str)> = all.iter().map(|(a, b)| (*a, b.as_str())).collect();
+    config_variant(dir, "ros2-sim-cell.yaml", "ros2-cell.yaml", &edits)
+}
+
+fn run(args: &[&str]) -> Output {
+    handeye()
+        .args(args)
+        .env("HANDEYE_LOG", "warn,rustdds=off,handeye_ros2::latency=info")
+        .output()
+        .unwrap()
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// The result in `session` against configs/ros2-sim-cell.yaml's `simulation:` truth, within
+/// 0.5 mm and 0.05°.
+fn assert_truth(session: &Path) {
+    let mounts = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
+    let camera = pose_from_rotvec(
+        Vector3::new(0.0312, -0.0694, 0.0447),
+        Vector3::new(0.021, -0.016, 1.561),
+    );
+    let target = pose_from_rotvec(
+        Vector3::new(0.5034, -0.1467, 0.0021),
+        Vector3::new(0.012, -0.018, 0.297),
+    );
+    for (name, got, want) in [
+        ("T_flange_camera", mounts.camera_mount, camera),
+        ("T_base_target", mounts.target_mount, target),
+    ] {
+        let (mm, deg) = pose_error_mm_deg(&got, &want);
+        eprintln!("{name}: {mm:.3} mm, {deg:.4}° from the truth");
+        assert!(mm < 0.5 && deg < 0.05, "{name}: {mm} mm, {deg}°");
+    }
+}
+
+fn poses_kept(session: &Path) -> usize {
+    std::fs::read_dir(session.join("poses")).map_or(0, |d| d.count())
+}
+
+#[test]
+fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 72, &[]);
+        let config = cell(dir.path(), 72, &[]);
+        let out_dir = dir.path().join("session");
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ]);
+        let log = text(&out);
+        assert!(out.status.success(), "{log}");
+        assert_truth(&out_dir);
+        // Every goal within the configured 60 °/s, every pose served with its rendered view.
+        let goals = peer.events("goal");
+        assert_eq!(goals.len(), 12, "{goals:?}");
+        for g in &goals {
+            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
+            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
+        }
+        assert!(
+            peer.events("no_view").is_empty(),
+            "{:?}",
+            peer.events("no_view")
+        );
+        // The measured time from the arm's rest to the captured frame's stamp.
+        let after: Vec<f64> = log
+            .lines()
+            .filter_map(|l| l.split("frame stamped ").nth(1))
+            .filter_map(|l| l.split(" ms").next()?.parse().ok())
+            .collect();
+        assert_eq!(after.len(), 12, "{log}");
+        eprintln!(
+            "frame stamp after the arm settled: median {:.1} ms, max {:.1} ms",
+            crate::util::median(after.clone()),
+            after.iter().cloned().fold(0.0, f64::max)
+        );
+    });
+}
+
+/// Runs the cell into `out` with the peer's `faults`, expecting failure with `expected` in the
+/// message after some samples; then resumes against a healthy peer and checks the truth.
+fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let config = cell(
+        dir.path(),
+        domain,
+        &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
+    );
+    let out_dir = dir.path().join("session");
+    {
+        let _peer = Peer::start(&python, domain, faults);
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ]);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(log.contains(expected), "expected {expected:?} in:\n{log}");
+        let kept = poses_kept(&out_dir);
+        assert!(kept >= 2, "{kept} samples kept:\n{log}");
+    }
+    let _peer = Peer::start(&python, domain, &[]);
+    let out = run(&["run", "--yes", "--resume", out_dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert_truth(&out_dir);
+}
+
+#[test]
+fn an_aborted_goal_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(73, &["--abort-goal", "4"], "PATH_TOLERANCE_VIOLATED")
+    });
+}
+
+#[test]
+fn a_peer_dying_mid_move_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(74, &["--die-in-goal", "4"], "/joint_states")
+    });
+}
+
+#[test]
+fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(300), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 75, &[]);
+        let config = cell(dir.path(), 75, &[]);
+        let out_dir = dir.path().join("session");
+        let child = handeye()
+            .args([
+                "run",
+                "--yes",
+                "--config",
+                config.to_str().unwrap(),
+                "-o",
+                out_dir.to_str().unwrap(),
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Mid-move of the first goal after the second that takes at least a second.
+        let end = Instant::now() + Duration::from_secs(120);
+        let n = loop {
+            let long = peer.events("goal").into_iter().find(|g| {
+                g["n"].as_u64().unwrap() >= 2 && g["duration_s"].as_f64().unwrap() >= 1.0
+            });
+            if let Some(g) = long {
+                break g["n"].as_u64().unwrap();
+            }
+            assert!(Instant::now() < end, "no goal of a second or more");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        std::thread::sleep(Duration::from_millis(200));
+        // Ctrl-C: SIGINT to the child's own pid.
+        let status = Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let cancel = peer.wait_for("cancel", Duration::from_secs(10));
+        assert_eq!(cancel["n"], n, "{cancel}");
+        let out = child.wait_with_output().unwrap();
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        // The samples of the moves before are kept; the cancelled move never arrived.
+        assert_eq!(poses_kept(&out_dir) as u64, n - 1, "{log}");
+        assert_eq!(peer.events("arrived").len() as u64, n - 1);
+    });
+}
+
+#[test]
+fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 76, &["--no-tool0"]);
+        let config = cell(
+            dir.path(),
+            76,
+            &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
+        );
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            dir.path().join("s").to_str().unwrap(),
+        ]);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(log.contains("\"tool0\" is not in the TF tree"), "{log}");
+        assert!(
+            peer.events("goal").is_empty(),
+            "something moved: {:?}",
+            peer.events("goal")
+        );
+    });
+}
+
+#[test]
+fn without_a_driver_the_action_server_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    within(Duration::from_secs(60), move || {
+        let config = cell(
+            dir.path(),
+            77,
+            &[("connect_timeout_s: 10", "connect_timeout_s: 2")],
+        );
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            dir.path().join("s").to_str().unwrap(),
+        ]);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("/scaled_joint_trajectory_controller/follow_joint_trajectory"),
+            "{log}"
+        );
+    });
+}
+
+/// The eye-to-hand cell of configs/sim-cell-eye-to-hand.yaml over ROS 2: the camera on a post,
+/// the board on the flange.
+#[test]
+fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let fixed = [(
+            "  generate: {count: 20",
+            "  adaptive: false\n  generate: {count: 12",
+        )];
+        let sim = config_variant(
+            dir.path(),
+            "sim-cell-eye-to-hand.yaml",
+            "views.yaml",
+            &fixed,
+        );
+        let views = render("ros2-views-eye-to-hand", &sim);
+        let peer = Peer::serving(&python, 79, &views, &[]);
+        let robot = "robot:\n  backend: ros2\n  model: ur10e\n  graph: {domain_id: 79, interfaces: [127.0.0.1], rmw: cyclonedds}\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n\ncamera:\n  backend: ros2\n  camera_info_topic: /camera_info\n";
+        let config = config_variant(
+            dir.path(),
+            "sim-cell-eye-to-hand.yaml",
+            "ros2-cell.yaml",
+            &[
+                fixed[0],
+                ("robot:\n  backend: sim\n  model: ur10e\n  start_joints_deg: [0, -90, 90, -90, -90, 0]\n  move_duration_s: 0.0\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n  seed: 5\n\ncamera:\n  backend: sim\n  noise_sigma: 2.0\n  blur_sigma_px: 0.5\n  seed: 13\n", robot),
+                ("session: {settle_s: 0.0,", "session: {settle_s: 0.0, settle_window_s: 0.05,"),
+            ],
+        );
+        let out_dir = dir.path().join("session");
+        let out = run(&[
+            "run",
+            "--yes",
+            "--config",
+            config.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out));
+        assert!(
+            peer.events("no_view").is_empty(),
+            "{:?}",
+            peer.events("no_view")
+        );
+        let mounts = ResultFile::load_mounts(&out_dir.join("result.yaml")).unwrap();
+        let camera = handeye::geometry::Pose::from_parts(
+            nalgebra::Translation3::new(1.1537, 0.0042, 0.7468),
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                0.4247281012,
+                -0.5658387224,
+                -0.5656999087,
+                0.4235754875,
+            )),
+        );
+        let target = pose_from_rotvec(
+            Vector3::new(-0.1432, -0.1461, 0.0113),
+            Vector3::new(0.011, 0.006, 0.021),
+        );
+        for (name, got, want) in [
+            ("T_base_camera", mounts.camera_mount, camera),
+            ("T_flange_target", mounts.target_mount, target),
+        ] {
+            let (mm, deg) = pose_error_mm_deg(&got, &want);
+            eprintln!("{name}: {mm:.3} mm, {deg:.4}° from the truth");
+            assert!(mm < 0.5 && deg < 0.05, "{name}: {mm} mm, {deg}°");
+        }
+    });
+}

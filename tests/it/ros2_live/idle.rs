@@ -1,0 +1,86 @@
+//! What the ros2 arm and camera cost while idle: both open against the peer's streams (joint
+//! states at 100 Hz, TF at 50 Hz, 1280x720 mono8 images at 15 Hz), nothing moving, for 10 s;
+//! the process's CPU time over that. A measurement, not a check of this machine's speed: run it
+//! alone (`cargo test --features ros2 --test it -- --ignored ros2_live::idle --nocapture`), since
+//! the other tests' threads would count too.
+
+use std::time::{Duration, Instant};
+
+use handeye::camera::Camera;
+use handeye::camera_model::CameraModel;
+use handeye::robot::Robot;
+use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
+use handeye::ros2::camera::{CameraOptions, Ros2Camera};
+use handeye::ros2::link::{LinkOptions, Ros2Link};
+
+use super::cell::Peer;
+use super::python;
+use crate::util::repo;
+
+fn cpu_seconds() -> f64 {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+    // SAFETY: getrusage fills the struct it is given; RUSAGE_SELF is always valid.
+    let usage = unsafe {
+        libc::getrusage(libc::RUSAGE_SELF, usage.as_mut_ptr());
+        usage.assume_init()
+    };
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(usage.ru_utime) + t(usage.ru_stime)
+}
+
+#[test]
+#[ignore = "a measurement: run alone"]
+fn idle_cpu_of_the_ros2_backends() {
+    let Some(python) = python() else { return };
+    let _peer = Peer::start(&python, 78, &[]);
+    let link = Ros2Link::open(LinkOptions {
+        domain_id: 78,
+        interfaces: vec![std::net::Ipv4Addr::LOCALHOST.into()],
+        node_name: "handeye_idle".into(),
+    })
+    .unwrap();
+    let names = [
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]
+    .map(String::from);
+    let mut arm = Ros2Arm::open(
+        &link,
+        ArmOptions {
+            base_frame: "base".into(),
+            flange_frame: "tool0".into(),
+            joint_names: names,
+            joint_states_topic: "/joint_states".into(),
+            tf_topic: "/tf".into(),
+            tf_static_topic: "/tf_static".into(),
+            action: "/scaled_joint_trajectory_controller/follow_joint_trajectory".into(),
+            timeout: Duration::from_secs(10),
+            framing: Framing::Cyclone,
+            kinematics: None,
+        },
+    )
+    .unwrap();
+    let model = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    let mut camera = Ros2Camera::open(
+        &link,
+        CameraOptions {
+            image_topic: "/image_raw".into(),
+            compressed: false,
+            camera_info_topic: Some("/camera_info".into()),
+            timeout: Duration::from_secs(10),
+            model,
+        },
+    )
+    .unwrap();
+    camera.grab(Instant::now()).unwrap();
+    arm.joint_positions().unwrap();
+    let (cpu0, wall0) = (cpu_seconds(), Instant::now());
+    std::thread::sleep(Duration::from_secs(10));
+    let share = (cpu_seconds() - cpu0) / wall0.elapsed().as_secs_f64();
+    eprintln!("idle ros2 arm + camera: {:.1} % of one core", share * 100.0);
+    assert!(share < 1.0, "{share}");
+}

@@ -1,0 +1,72 @@
+//! Live ROS 2 (`--features ros2`) against an independent peer: Eclipse Cyclone DDS from PyPI
+//! (`cyclonedds`) running `scripts/ros2-peer.py`, whose message types are written from the ROS 2
+//! `.msg` definitions on its own (`scripts/ros2_peer/msgs.py`). Both sides keep to the loopback
+//! interface (handeye `--interface 127.0.0.1`, the peer `--loopback`: unicast discovery, no
+//! multicast), each test on a domain id of its own.
+//!
+//! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy`, `pyyaml` and
+//! `pillow` go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
+
+mod cell;
+mod idle;
+mod publish;
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::OnceLock;
+
+use crate::util;
+
+/// The venv's python with cyclonedds, or `None` (printed) without python3.
+pub(crate) fn python() -> Option<PathBuf> {
+    static PYTHON: OnceLock<Option<PathBuf>> = OnceLock::new();
+    PYTHON
+        .get_or_init(|| {
+            if Command::new("python3").arg("--version").output().is_err() {
+                util::skip("python3 is absent (the ROS 2 peer is Cyclone DDS's Python binding)");
+                return None;
+            }
+            let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("ros2-venv");
+            let python = venv.join("bin/python");
+            let ready = Command::new(&python)
+                .args(["-c", "import cyclonedds, numpy, yaml, PIL"])
+                .output()
+                .is_ok_and(|o| o.status.success());
+            if !ready {
+                let status = Command::new("python3")
+                    .args(["-m", "venv"])
+                    .arg(&venv)
+                    .status()
+                    .expect("python3 -m venv");
+                assert!(status.success(), "python3 -m venv {}", venv.display());
+                let status = Command::new(venv.join("bin/pip"))
+                    .args([
+                        "install",
+                        "--quiet",
+                        "cyclonedds",
+                        "numpy",
+                        "pyyaml",
+                        "pillow",
+                    ])
+                    .status()
+                    .expect("pip");
+                assert!(
+                    status.success(),
+                    "pip install cyclonedds numpy pyyaml pillow (needs PyPI)"
+                );
+            }
+            Some(python)
+        })
+        .clone()
+}
+
+/// `scripts/ros2-peer.py` on `domain`, loopback only.
+pub(crate) fn peer(python: &PathBuf, domain: u16) -> Command {
+    let mut c = Command::new(python);
+    c.arg(util::repo().join("scripts/ros2-peer.py")).args([
+        "--domain",
+        &domain.to_string(),
+        "--loopback",
+    ]);
+    c
+}
