@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use handeye::cell::run::{open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
 use handeye::cell::{self, PreparedCell};
 use handeye::console::ConsoleObserver;
+use handeye::geometry::Pose;
 use handeye::session::SessionEvent;
 use handeye::verdict::{Level, Verdict};
 
@@ -207,6 +208,11 @@ pub(super) struct Printer {
     stop: Arc<AtomicBool>,
     /// stdout or stderr is not a terminal: plain lines, no bar.
     plain: bool,
+    /// Every pose the run may visit with its number in `handeye plan check`'s listing (the
+    /// plan's poses; an adaptive plan's extra candidates too).
+    listed: Vec<(Pose, usize)>,
+    /// The session's poses (plan index) by their plan check number, as the arm moves to them.
+    numbers: std::collections::HashMap<usize, usize>,
 }
 
 impl Printer {
@@ -216,7 +222,18 @@ impl Printer {
             bar: None,
             stop,
             plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
+            listed: Vec::new(),
+            numbers: Default::default(),
         }
+    }
+
+    /// ` (plan check #N)` for a session pose that `handeye plan check` lists, else nothing: one
+    /// numbering for a safety review, whatever order the session visits the poses in.
+    fn listed_as(&self, plan_index: usize) -> String {
+        self.numbers
+            .get(&plan_index)
+            .map(|n| format!(" (plan check #{n})"))
+            .unwrap_or_default()
     }
 
     fn line(&self, line: String) {
@@ -230,6 +247,17 @@ impl Printer {
 impl RunObserver for Printer {
     fn plan_checked(&mut self, cell: &PreparedCell) {
         outln!("{}", cell.report);
+        self.listed = cell
+            .report
+            .poses
+            .iter()
+            .chain(
+                cell::run::extra_candidates(cell)
+                    .iter()
+                    .flat_map(|extra| &extra.poses),
+            )
+            .map(|p| (p.base_from_flange, p.index))
+            .collect();
     }
 
     fn confirm_motion(
@@ -259,9 +287,20 @@ impl RunObserver for Printer {
 
     fn event(&mut self, event: SessionEvent) {
         match event {
-            SessionEvent::Moving { plan_index } => {
+            SessionEvent::Moving { plan_index, target } => {
+                // The same flange pose as listed (copied, or read back from the manifest).
+                let listed = self.listed.iter().find(|(pose, _)| {
+                    handeye::geometry::translation_distance(pose, &target) < 1e-9
+                        && pose.rotation.angle_to(&target.rotation) < 1e-9
+                });
+                if let Some((_, number)) = listed {
+                    self.numbers.insert(plan_index, *number);
+                }
                 if let Some(bar) = &self.bar {
-                    bar.set_message(format!("moving to pose {plan_index}"))
+                    bar.set_message(format!(
+                        "moving to pose {plan_index}{}",
+                        self.listed_as(plan_index)
+                    ))
                 }
             }
             SessionEvent::Recorded {
@@ -272,15 +311,14 @@ impl RunObserver for Printer {
                 will_retry,
                 ..
             } => {
+                let pose = format!("pose {plan_index:>3}{}", self.listed_as(plan_index));
                 let line = match (&rejected, reprojection_rms_px) {
                     (None, Some(rms)) => {
-                        format!("pose {plan_index:>3}: ok, {tags} tags, board RMS {rms:.3} px")
+                        format!("{pose}: ok, {tags} tags, board RMS {rms:.3} px")
                     }
-                    (Some(why), _) if will_retry => {
-                        format!("pose {plan_index:>3}: {why}; will retry once")
-                    }
-                    (Some(why), _) => format!("pose {plan_index:>3}: skipped: {why}"),
-                    (None, None) => format!("pose {plan_index:>3}: ok"),
+                    (Some(why), _) if will_retry => format!("{pose}: {why}; will retry once"),
+                    (Some(why), _) => format!("{pose}: skipped: {why}"),
+                    (None, None) => format!("{pose}: ok"),
                 };
                 self.line(line);
                 if let (Some(bar), false) = (&self.bar, will_retry) {

@@ -182,7 +182,7 @@ impl RunObserver for ConsoleObserver<'_> {
 
     fn event(&mut self, event: SessionEvent) {
         match &event {
-            SessionEvent::Moving { plan_index } => {
+            SessionEvent::Moving { plan_index, .. } => {
                 self.console.publish(&ConsoleEvent::Moving {
                     plan_index: *plan_index,
                     joints_deg: self.plan.get(*plan_index).map(joints_deg),

@@ -325,3 +325,77 @@ fn plan_check_and_the_adaptive_run_name_the_same_candidates() {
                 .join(", ")
         )));
 }
+
+/// Issue #30: one numbering. The run's line for each pose names the pose by its number in
+/// `handeye plan check`'s listing, an adaptive run's choices as its summary lists them and a
+/// fixed plan's in the order the listing shows (the order that runs).
+#[test]
+fn the_runs_pose_lines_use_plan_checks_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let numbers = |config: &std::path::Path, out: &str| -> (Vec<usize>, Vec<usize>, String) {
+        let check = util::handeye()
+            .args(["plan", "check", "--config"])
+            .arg(config)
+            .output()
+            .unwrap();
+        let listing = String::from_utf8_lossy(&check.stdout).into_owned();
+        assert!(check.status.success(), "{listing}");
+        // The listing's numbers in the order it lists them (the plan's poses first).
+        let listed: Vec<usize> = listing
+            .lines()
+            .filter(|line| line.contains("  ["))
+            .filter_map(|line| line.split_whitespace().next()?.parse().ok())
+            .collect();
+        let run = util::handeye()
+            .args(["run", "--config"])
+            .arg(config)
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap();
+        let log = format!(
+            "{}{}",
+            String::from_utf8_lossy(&run.stdout),
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(run.status.success(), "{log}");
+        let shown: Vec<usize> = log
+            .lines()
+            // A pose's line (not the listing's header): `pose   0 (plan check #17): ok, ...`.
+            .filter(|line| line.starts_with("pose ") && line.contains(": "))
+            .map(|line| {
+                let at = line
+                    .find("(plan check #")
+                    .unwrap_or_else(|| panic!("{line}"));
+                let rest = &line[at + "(plan check #".len()..];
+                rest[..rest.find(')').unwrap()].parse().unwrap()
+            })
+            .collect();
+        (listed, shown, log)
+    };
+    // Adaptive (the default): the numbers the lines show are the summary's choices, in order.
+    let config = util::sim_cell(dir.path(), 8);
+    let (listed, shown, log) = numbers(&config, "adaptive");
+    assert!(!shown.is_empty(), "{log}");
+    assert!(
+        shown.iter().all(|n| listed.contains(n)),
+        "{shown:?} {listed:?}"
+    );
+    let summary = shown
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ");
+    assert!(
+        log.contains(&format!("candidates {summary} of `handeye plan check`")),
+        "{log}"
+    );
+    // Fixed: every pose of the listing, in the listing's order.
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("plan:\n", "plan:\n  adaptive: false\n");
+    let fixed = dir.path().join("fixed.yaml");
+    std::fs::write(&fixed, text).unwrap();
+    let (listed, shown, log) = numbers(&fixed, "fixed");
+    assert_eq!(shown, listed, "{log}");
+}

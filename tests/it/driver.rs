@@ -247,7 +247,7 @@ fn moving(events: &[SessionEvent]) -> Vec<usize> {
     events
         .iter()
         .filter_map(|e| match e {
-            SessionEvent::Moving { plan_index } => Some(*plan_index),
+            SessionEvent::Moving { plan_index, .. } => Some(*plan_index),
             SessionEvent::Recorded { .. } => None,
         })
         .collect()
@@ -464,7 +464,7 @@ fn a_stop_request_before_the_next_pose_stops_without_moving() {
         &mut robot,
         &mut camera,
         &mut |e| {
-            if let SessionEvent::Moving { plan_index: 0 } = e {
+            if let SessionEvent::Moving { plan_index: 0, .. } = e {
                 flag.store(true, Ordering::SeqCst);
             }
         },

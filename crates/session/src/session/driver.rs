@@ -82,6 +82,9 @@ pub enum SessionEvent {
     Moving {
         /// Plan index.
         plan_index: usize,
+        /// The flange pose it moves to (`T_base_flange`): what names the pose in
+        /// `handeye plan check`'s listing, whatever the session's own numbering.
+        target: Pose,
     },
     /// A pose was processed.
     Recorded {
@@ -228,7 +231,10 @@ pub fn run_session(
                 });
                 break 'passes;
             }
-            on_event(SessionEvent::Moving { plan_index });
+            on_event(SessionEvent::Moving {
+                plan_index,
+                target: setup.plan[plan_index].0,
+            });
             match capture(robot, camera, &setup, plan_index) {
                 Ok((frame, base_from_flange, timing)) => {
                     state.outcome.visited_now += 1;
