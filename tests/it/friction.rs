@@ -61,9 +61,12 @@ fn piped_output_has_one_line_per_pose() {
     let stdout = run_session_ok(&config, &dir.path().join("session"));
     // Output captured here is a pipe, as with `| tee log`: the bar is hidden, the lines are not.
     for pose in 0..6 {
-        let prefix = format!("pose {pose:>3}: ok, ");
+        // `pose   0 (plan check #4): ok, ...`: the session's number, then plan check's.
+        let prefix = format!("pose {pose:>3} (plan check #");
         assert!(
-            stdout.lines().any(|l| l.starts_with(&prefix)),
+            stdout
+                .lines()
+                .any(|l| l.starts_with(&prefix) && l.contains("): ok, ")),
             "no line for pose {pose} in:\n{stdout}"
         );
     }
