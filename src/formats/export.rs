@@ -323,37 +323,85 @@ fn shell_line(words: &[String]) -> String {
     shlex::try_join(words.iter().map(String::as_str)).unwrap_or_default()
 }
 
+/// The shell command that publishes `parent_from_child` on `/tf_static` (`tf2_ros`'
+/// `static_transform_publisher`), its words quoted for a POSIX shell.
+pub(super) fn static_publisher_command(
+    parent: &str,
+    child: &str,
+    parent_from_child: &Pose,
+) -> String {
+    let (p, q) = (
+        parent_from_child.translation.vector,
+        parent_from_child.rotation,
+    );
+    let mut words: Vec<String> = ["ros2", "run", "tf2_ros", "static_transform_publisher"]
+        .iter()
+        .map(|w| w.to_string())
+        .collect();
+    for (flag, value) in [
+        ("--x", p.x),
+        ("--y", p.y),
+        ("--z", p.z),
+        ("--qx", q.i),
+        ("--qy", q.j),
+        ("--qz", q.k),
+        ("--qw", q.w),
+    ] {
+        words.push(flag.to_string());
+        words.push(value.to_string());
+    }
+    for (flag, id) in [("--frame-id", parent), ("--child-frame-id", child)] {
+        words.push(flag.to_string());
+        words.push(id.to_string());
+    }
+    shell_line(&words)
+}
+
+/// A URDF fixed joint holding `parent_from_child` (rpy fixed-axis), under a comment naming it.
+pub(super) fn urdf_joint(
+    name: &str,
+    parent: &str,
+    child: &str,
+    parent_from_child: &Pose,
+) -> String {
+    let p = parent_from_child.translation.vector;
+    let (roll, pitch, yaw) = parent_from_child.rotation.euler_angles();
+    format!(
+        "<!-- {name} -->\n<joint name=\"{parent}_to_{child}_joint\" type=\"fixed\">\n  <parent link=\"{parent}\"/>\n  <child link=\"{child}\"/>\n  <origin xyz=\"{} {} {}\" rpy=\"{roll} {pitch} {yaw}\"/>\n</joint>",
+        p.x, p.y, p.z
+    )
+}
+
+/// An OpenCV FileStorage 4x4 matrix `name` (row-major, metres) with its frame ids.
+pub(super) fn opencv_matrix(
+    name: &str,
+    parent: &str,
+    child: &str,
+    parent_from_child: &Pose,
+) -> String {
+    let data: Vec<String> = to_matrix4_rows(parent_from_child)
+        .iter()
+        .flatten()
+        .map(|v| format!("{v:e}"))
+        .collect();
+    format!(
+        "{name}: !!opencv-matrix\n   rows: 4\n   cols: 4\n   dt: d\n   data: [ {} ]\n{name}_parent: \"{parent}\"\n{name}_child: \"{child}\"",
+        data.join(", ")
+    )
+}
+
 fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
     let mut out = format!(
         "# handeye calibration ({setup}): static transforms for ROS 2 (tf2_ros).\n\
          # Each publishes T_parent_child: frame-id = parent, child-frame-id = child.\n"
     );
     for t in transforms {
-        let (p, q) = (
-            t.parent_from_child.translation.vector,
-            t.parent_from_child.rotation,
+        let _ = writeln!(
+            out,
+            "# {}\n{}",
+            t.key,
+            static_publisher_command(&t.parent, &t.child, &t.parent_from_child)
         );
-        let mut words: Vec<String> = ["ros2", "run", "tf2_ros", "static_transform_publisher"]
-            .iter()
-            .map(|w| w.to_string())
-            .collect();
-        for (flag, value) in [
-            ("--x", p.x),
-            ("--y", p.y),
-            ("--z", p.z),
-            ("--qx", q.i),
-            ("--qy", q.j),
-            ("--qz", q.k),
-            ("--qw", q.w),
-        ] {
-            words.push(flag.to_string());
-            words.push(value.to_string());
-        }
-        for (flag, id) in [("--frame-id", &t.parent), ("--child-frame-id", &t.child)] {
-            words.push(flag.to_string());
-            words.push(id.clone());
-        }
-        let _ = writeln!(out, "# {}\n{}", t.key, shell_line(&words));
     }
     out.push_str(
         "\n# Launch snippet (Python launch file):\n\
@@ -382,12 +430,10 @@ fn urdf(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
         "<!-- handeye calibration ({setup}). Each fixed joint holds T_parent_child; rpy is fixed-axis\n     roll (x), pitch (y), yaw (z): R = Rz(yaw) Ry(pitch) Rx(roll). Add the child links if\n     your URDF lacks them. -->\n"
     );
     for t in transforms {
-        let p = t.parent_from_child.translation.vector;
-        let (roll, pitch, yaw) = t.parent_from_child.rotation.euler_angles();
         let _ = writeln!(
             out,
-            "<!-- {} -->\n<joint name=\"{}_to_{}_joint\" type=\"fixed\">\n  <parent link=\"{}\"/>\n  <child link=\"{}\"/>\n  <origin xyz=\"{} {} {}\" rpy=\"{} {} {}\"/>\n</joint>",
-            t.key, t.parent, t.child, t.parent, t.child, p.x, p.y, p.z, roll, pitch, yaw
+            "{}",
+            urdf_joint(t.key, &t.parent, &t.child, &t.parent_from_child)
         );
     }
     out
@@ -464,20 +510,10 @@ fn opencv(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
         "%YAML:1.0\n---\n# handeye calibration: 4x4 T_parent_child, row-major, metres.\nsetup: \"{setup}\"\n"
     );
     for t in transforms {
-        let data: Vec<String> = to_matrix4_rows(&t.parent_from_child)
-            .iter()
-            .flatten()
-            .map(|v| format!("{v:e}"))
-            .collect();
         let _ = writeln!(
             out,
-            "{}: !!opencv-matrix\n   rows: 4\n   cols: 4\n   dt: d\n   data: [ {} ]\n{}_parent: \"{}\"\n{}_child: \"{}\"",
-            t.key,
-            data.join(", "),
-            t.key,
-            t.parent,
-            t.key,
-            t.child
+            "{}",
+            opencv_matrix(t.key, &t.parent, &t.child, &t.parent_from_child)
         );
     }
     out

@@ -11,11 +11,14 @@
 
 use std::fmt::Write as _;
 
-use handeye_core::geometry::{to_matrix4_rows, Pose};
+use handeye_core::geometry::Pose;
 use handeye_session::cell::rig::solve::NamedTransform;
 use handeye_session::cell::rig::RigResultFile;
 
-use super::export::{is_ur_base_link, ur_base_link_from_base, ExportError, ExportFormat, FrameIds};
+use super::export::{
+    is_ur_base_link, opencv_matrix, static_publisher_command, ur_base_link_from_base, urdf_joint,
+    ExportError, ExportFormat, FrameIds,
+};
 
 /// One exported transform with its frame ids.
 struct Exported<'a> {
@@ -78,11 +81,11 @@ pub fn export_rig(
         ExportFormat::Ros2 => {
             out.push_str("# handeye calibration of a cell with several cameras: static transforms for ROS 2 (tf2_ros).\n# Each publishes T_parent_child: frame-id = parent, child-frame-id = child.\n");
             for t in &tree {
-                let (p, q) = (t.pose.translation.vector, t.pose.rotation);
                 let _ = writeln!(
                     out,
-                    "# {}\nros2 run tf2_ros static_transform_publisher --x {} --y {} --z {} --qx {} --qy {} --qz {} --qw {} --frame-id {} --child-frame-id {}",
-                    t.name, p.x, p.y, p.z, q.i, q.j, q.k, q.w, t.parent, t.child
+                    "# {}\n{}",
+                    t.name,
+                    static_publisher_command(&t.parent, &t.child, &t.pose)
                 );
             }
             for t in &relative {
@@ -97,13 +100,7 @@ pub fn export_rig(
         ExportFormat::Urdf => {
             out.push_str("<!-- handeye calibration of a cell with several cameras. Each fixed joint holds T_parent_child;\n     rpy is fixed-axis roll (x), pitch (y), yaw (z). -->\n");
             for t in &tree {
-                let p = t.pose.translation.vector;
-                let (roll, pitch, yaw) = t.pose.rotation.euler_angles();
-                let _ = writeln!(
-                    out,
-                    "<!-- {} -->\n<joint name=\"{}_to_{}_joint\" type=\"fixed\">\n  <parent link=\"{}\"/>\n  <child link=\"{}\"/>\n  <origin xyz=\"{} {} {}\" rpy=\"{} {} {}\"/>\n</joint>",
-                    t.name, t.parent, t.child, t.parent, t.child, p.x, p.y, p.z, roll, pitch, yaw
-                );
+                let _ = writeln!(out, "{}", urdf_joint(t.name, &t.parent, &t.child, &t.pose));
             }
             for t in &relative {
                 let _ = writeln!(out, "<!-- {} is implied by the joints above -->", t.name);
@@ -112,21 +109,7 @@ pub fn export_rig(
         ExportFormat::Opencv => {
             out.push_str("%YAML:1.0\n---\n# handeye calibration of a cell with several cameras: 4x4 T_parent_child, row-major, metres.\n");
             for t in tree.iter().chain(&relative) {
-                let data: Vec<String> = to_matrix4_rows(&t.pose)
-                    .iter()
-                    .flatten()
-                    .map(|v| format!("{v:e}"))
-                    .collect();
-                let _ = writeln!(
-                    out,
-                    "{}: !!opencv-matrix\n   rows: 4\n   cols: 4\n   dt: d\n   data: [ {} ]\n{}_parent: \"{}\"\n{}_child: \"{}\"",
-                    t.name,
-                    data.join(", "),
-                    t.name,
-                    t.parent,
-                    t.name,
-                    t.child
-                );
+                let _ = writeln!(out, "{}", opencv_matrix(t.name, &t.parent, &t.child, &t.pose));
             }
         }
         other => {

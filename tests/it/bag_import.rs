@@ -32,30 +32,12 @@ fn python() -> Option<PathBuf> {
     static PYTHON: OnceLock<Option<PathBuf>> = OnceLock::new();
     PYTHON
         .get_or_init(|| {
-            if Command::new("python3").arg("--version").output().is_err() {
-                util::skip("python3 is absent (the bags are written by the `rosbags` package)");
-                return None;
-            }
-            let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("bag-venv");
-            let python = venv.join("bin/python");
-            let ready = Command::new(&python)
-                .args(["-c", "import rosbags, numpy"])
-                .output()
-                .is_ok_and(|o| o.status.success());
-            if !ready {
-                let status = Command::new("python3")
-                    .args(["-m", "venv"])
-                    .arg(&venv)
-                    .status()
-                    .expect("python3 -m venv");
-                assert!(status.success(), "python3 -m venv {}", venv.display());
-                let status = Command::new(venv.join("bin/pip"))
-                    .args(["install", "--quiet", "rosbags", "numpy"])
-                    .status()
-                    .expect("pip");
-                assert!(status.success(), "pip install rosbags numpy (needs PyPI)");
-            }
-            Some(python)
+            util::venv_python(
+                "bag-venv",
+                "rosbags, numpy",
+                &["rosbags", "numpy"],
+                "the bags are written by the `rosbags` package",
+            )
         })
         .clone()
 }

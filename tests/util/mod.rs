@@ -257,3 +257,38 @@ pub fn within<T: Send + 'static>(
         Err(_) => panic!("test did not finish within {limit:?}"),
     }
 }
+
+/// The python of the venv `name` under the test target's tmp dir, made (with `packages` from
+/// PyPI) when `imports` cannot be imported there yet; `None` (printed, with `why` python3 is
+/// needed) without python3. Callers keep the answer in a `OnceLock` (tests run in parallel).
+pub fn venv_python(name: &str, imports: &str, packages: &[&str], why: &str) -> Option<PathBuf> {
+    if Command::new("python3").arg("--version").output().is_err() {
+        skip(&format!("python3 is absent ({why})"));
+        return None;
+    }
+    let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let python = venv.join("bin/python");
+    let ready = Command::new(&python)
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ready {
+        let status = Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .status()
+            .expect("python3 -m venv");
+        assert!(status.success(), "python3 -m venv {}", venv.display());
+        let status = Command::new(venv.join("bin/pip"))
+            .args(["install", "--quiet"])
+            .args(packages)
+            .status()
+            .expect("pip");
+        assert!(
+            status.success(),
+            "pip install {} (needs PyPI)",
+            packages.join(" ")
+        );
+    }
+    Some(python)
+}

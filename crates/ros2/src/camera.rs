@@ -80,56 +80,27 @@ impl Ros2Camera {
             ),
             None => None,
         };
-        let task_slot = slot.clone();
-        if options.compressed {
-            let sub = link
-                .subscribe::<CompressedImage>(&topic, sensor_data_qos())
-                .map_err(err)?;
-            spawn_reader(
-                task_slot,
-                stop_rx,
-                move |slot| {
-                    Box::pin(async move {
-                        let frames = sub.async_stream().for_each(|m| {
-                            store(
-                                &slot,
-                                m.map(|(msg, _)| Newest {
-                                    stamp: msg.header.stamp.to_system(),
-                                    pixels: Pixels::Compressed(msg),
-                                }),
-                            );
-                            futures::future::ready(())
-                        });
-                        frames.await
-                    })
+        // Only the newest message is kept (undecoded): memory is one frame whatever the rate.
+        let frames = if options.compressed {
+            newest_of(
+                link.subscribe::<CompressedImage>(&topic, sensor_data_qos())
+                    .map_err(err)?,
+                |msg| Newest {
+                    stamp: msg.header.stamp.to_system(),
+                    pixels: Pixels::Compressed(msg),
                 },
-                info_sub,
-            )?;
+            )
         } else {
-            let sub = link
-                .subscribe::<Image>(&topic, sensor_data_qos())
-                .map_err(err)?;
-            spawn_reader(
-                task_slot,
-                stop_rx,
-                move |slot| {
-                    Box::pin(async move {
-                        let frames = sub.async_stream().for_each(|m| {
-                            store(
-                                &slot,
-                                m.map(|(msg, _)| Newest {
-                                    stamp: msg.header.stamp.to_system(),
-                                    pixels: Pixels::Raw(msg),
-                                }),
-                            );
-                            futures::future::ready(())
-                        });
-                        frames.await
-                    })
+            newest_of(
+                link.subscribe::<Image>(&topic, sensor_data_qos())
+                    .map_err(err)?,
+                |msg| Newest {
+                    stamp: msg.header.stamp.to_system(),
+                    pixels: Pixels::Raw(msg),
                 },
-                info_sub,
-            )?;
-        }
+            )
+        };
+        spawn_reader(slot.clone(), stop_rx, frames, info_sub)?;
         let camera = Ros2Camera {
             options,
             slot,
@@ -180,11 +151,29 @@ impl Ros2Camera {
 }
 
 type ReaderFuture = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
+type FramesReader = Box<dyn FnOnce(Arc<Slot>) -> ReaderFuture + Send>;
+
+/// The reader of an image topic: each message read becomes the slot's newest frame.
+fn newest_of<M>(sub: ros2_client::Subscription<M>, newest: fn(M) -> Newest) -> FramesReader
+where
+    M: serde::de::DeserializeOwned + Send + Sync + 'static,
+{
+    Box::new(move |slot: Arc<Slot>| -> ReaderFuture {
+        Box::pin(async move {
+            sub.async_stream()
+                .for_each(|m| {
+                    store(&slot, m.map(|(msg, _)| newest(msg)));
+                    futures::future::ready(())
+                })
+                .await
+        })
+    })
+}
 
 fn spawn_reader(
     slot: Arc<Slot>,
     stop: smol::channel::Receiver<()>,
-    frames: impl FnOnce(Arc<Slot>) -> ReaderFuture + Send + 'static,
+    frames: FramesReader,
     info: Option<ros2_client::Subscription<CameraInfo>>,
 ) -> Result<(), CameraError> {
     thread::Builder::new()

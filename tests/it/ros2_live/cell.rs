@@ -136,6 +136,18 @@ fn run(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// `handeye run --yes --config CONFIG -o OUT` (as [`run`]).
+fn run_cell(config: &Path, out: &Path) -> Output {
+    run(&[
+        "run",
+        "--yes",
+        "--config",
+        config.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ])
+}
+
 fn text(out: &Output) -> String {
     format!(
         "{}\n{}",
@@ -178,14 +190,7 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
         let peer = Peer::start(&python, 72, &[]);
         let config = cell(dir.path(), 72, &[]);
         let out_dir = dir.path().join("session");
-        let out = run(&[
-            "run",
-            "--yes",
-            "--config",
-            config.to_str().unwrap(),
-            "-o",
-            out_dir.to_str().unwrap(),
-        ]);
+        let out = run_cell(&config, &out_dir);
         let log = text(&out);
         assert!(out.status.success(), "{log}");
         assert_truth(&out_dir);
@@ -229,14 +234,7 @@ fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
     let out_dir = dir.path().join("session");
     {
         let _peer = Peer::start(&python, domain, faults);
-        let out = run(&[
-            "run",
-            "--yes",
-            "--config",
-            config.to_str().unwrap(),
-            "-o",
-            out_dir.to_str().unwrap(),
-        ]);
+        let out = run_cell(&config, &out_dir);
         let log = text(&out);
         assert!(!out.status.success(), "{log}");
         assert!(log.contains(expected), "expected {expected:?} in:\n{log}");
@@ -325,14 +323,7 @@ fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
             76,
             &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
         );
-        let out = run(&[
-            "run",
-            "--yes",
-            "--config",
-            config.to_str().unwrap(),
-            "-o",
-            dir.path().join("s").to_str().unwrap(),
-        ]);
+        let out = run_cell(&config, &dir.path().join("s"));
         let log = text(&out);
         assert!(!out.status.success(), "{log}");
         assert!(log.contains("\"tool0\" is not in the TF tree"), "{log}");
@@ -353,14 +344,7 @@ fn without_a_driver_the_action_server_is_named() {
             77,
             &[("connect_timeout_s: 10", "connect_timeout_s: 2")],
         );
-        let out = run(&[
-            "run",
-            "--yes",
-            "--config",
-            config.to_str().unwrap(),
-            "-o",
-            dir.path().join("s").to_str().unwrap(),
-        ]);
+        let out = run_cell(&config, &dir.path().join("s"));
         let log = text(&out);
         assert!(!out.status.success(), "{log}");
         assert!(
@@ -401,14 +385,7 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
             ],
         );
         let out_dir = dir.path().join("session");
-        let out = run(&[
-            "run",
-            "--yes",
-            "--config",
-            config.to_str().unwrap(),
-            "-o",
-            out_dir.to_str().unwrap(),
-        ]);
+        let out = run_cell(&config, &out_dir);
         assert!(out.status.success(), "{}", text(&out));
         assert!(
             peer.events("no_view").is_empty(),

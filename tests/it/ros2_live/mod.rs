@@ -22,40 +22,12 @@ pub(crate) fn python() -> Option<PathBuf> {
     static PYTHON: OnceLock<Option<PathBuf>> = OnceLock::new();
     PYTHON
         .get_or_init(|| {
-            if Command::new("python3").arg("--version").output().is_err() {
-                util::skip("python3 is absent (the ROS 2 peer is Cyclone DDS's Python binding)");
-                return None;
-            }
-            let venv = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("ros2-venv");
-            let python = venv.join("bin/python");
-            let ready = Command::new(&python)
-                .args(["-c", "import cyclonedds, numpy, yaml, PIL"])
-                .output()
-                .is_ok_and(|o| o.status.success());
-            if !ready {
-                let status = Command::new("python3")
-                    .args(["-m", "venv"])
-                    .arg(&venv)
-                    .status()
-                    .expect("python3 -m venv");
-                assert!(status.success(), "python3 -m venv {}", venv.display());
-                let status = Command::new(venv.join("bin/pip"))
-                    .args([
-                        "install",
-                        "--quiet",
-                        "cyclonedds",
-                        "numpy",
-                        "pyyaml",
-                        "pillow",
-                    ])
-                    .status()
-                    .expect("pip");
-                assert!(
-                    status.success(),
-                    "pip install cyclonedds numpy pyyaml pillow (needs PyPI)"
-                );
-            }
-            Some(python)
+            util::venv_python(
+                "ros2-venv",
+                "cyclonedds, numpy, yaml, PIL",
+                &["cyclonedds", "numpy", "pyyaml", "pillow"],
+                "the ROS 2 peer is Cyclone DDS's Python binding",
+            )
         })
         .clone()
 }
