@@ -17,7 +17,7 @@ use crate::cell::run::CellRun;
 use crate::dataset::Dataset;
 use crate::geometry::Pose;
 use crate::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
-use crate::setup::CornerObservation;
+use crate::setup::{CornerObservation, PosePair};
 use crate::solve::Calibration;
 use crate::verdict::Verdict;
 use crate::vision::{draw, Target};
@@ -134,29 +134,39 @@ pub fn from_session(
             ));
         }
     }
+    // One frame per sample read, annotated and encoded: on every core (rayon keeps the order).
     let mut thumbnails = Vec::new();
     if let (Some(optics), Some(primary)) = (optics, answers.first()) {
-        for (sample, (pair, visit)) in pairs.iter().zip(&sample_visits).enumerate() {
-            let Some(visit) = visit else { continue };
-            let predicted = primary
-                .calibration
-                .predict_camera_from_target(&pair.base_from_flange);
-            let path = folder.root().join(&visit.frame);
-            let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
-            thumbnails.push(FrameThumbnail {
-                sample,
-                caption: format!(
-                    "sample {sample} ({}), board RMS {}",
-                    pair.id.as_deref().unwrap_or("?"),
-                    visit
-                        .reprojection_rms_px
-                        .map(|r| format!("{r:.3} px"))
-                        .unwrap_or_else(|| "-".into())
-                ),
-                bytes,
-                mime: "image/jpeg",
-            });
-        }
+        use rayon::prelude::*;
+        let shown: Vec<(usize, &PosePair, &PoseVisit)> = pairs
+            .iter()
+            .zip(&sample_visits)
+            .enumerate()
+            .filter_map(|(sample, (pair, visit))| Some((sample, pair, (*visit)?)))
+            .collect();
+        thumbnails = shown
+            .into_par_iter()
+            .map(|(sample, pair, visit)| {
+                let predicted = primary
+                    .calibration
+                    .predict_camera_from_target(&pair.base_from_flange);
+                let path = folder.root().join(&visit.frame);
+                let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
+                Ok(FrameThumbnail {
+                    sample,
+                    caption: format!(
+                        "sample {sample} ({}), board RMS {}",
+                        pair.id.as_deref().unwrap_or("?"),
+                        visit
+                            .reprojection_rms_px
+                            .map(|r| format!("{r:.3} px"))
+                            .unwrap_or_else(|| "-".into())
+                    ),
+                    bytes,
+                    mime: "image/jpeg",
+                })
+            })
+            .collect::<Result<Vec<_>, ReportError>>()?;
     }
     Ok(ReportInput {
         title: folder.root().display().to_string(),

@@ -149,6 +149,13 @@ impl<'a> CdrReader<'a> {
 
     /// A `std_msgs/Header`: the stamp in nanoseconds and the frame id.
     pub fn header(&mut self, field: &str) -> Result<(i64, String), CdrError> {
+        let stamp_ns = self.stamp(field)?;
+        let frame = self.string(&format!("{field}.frame_id"))?;
+        Ok((stamp_ns, frame))
+    }
+
+    /// The stamp of a `std_msgs/Header`, nanoseconds.
+    fn stamp(&mut self, field: &str) -> Result<i64, CdrError> {
         let sec = self.i32(&format!("{field}.stamp.sec"))?;
         let nanosec = self.u32(&format!("{field}.stamp.nanosec"))?;
         // A `builtin_interfaces/Time` keeps the fraction of a second in `nanosec`: a value of a
@@ -162,8 +169,7 @@ impl<'a> CdrReader<'a> {
                 ),
             });
         }
-        let frame = self.string(&format!("{field}.frame_id"))?;
-        Ok((i64::from(sec) * 1_000_000_000 + i64::from(nanosec), frame))
+        Ok(i64::from(sec) * 1_000_000_000 + i64::from(nanosec))
     }
 }
 
@@ -271,6 +277,12 @@ pub struct CompressedImage<'a> {
     pub format: String,
     /// The encoded file.
     pub data: &'a [u8],
+}
+
+/// The header stamp of a message that starts with a `std_msgs/Header` (`Image`,
+/// `CompressedImage`, ...), ns: read from its first bytes, so a message's head is enough.
+pub fn decode_stamp(message: &[u8]) -> Result<i64, CdrError> {
+    CdrReader::new(message)?.stamp("header")
 }
 
 /// Decodes a `sensor_msgs/msg/CompressedImage`.

@@ -27,6 +27,7 @@
 //! and `vision` (board detection for the offset estimate).
 
 pub mod cdr;
+mod mcap_index;
 pub mod select;
 pub mod session;
 pub mod storage;
@@ -415,16 +416,13 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         warnings.push(BagWarning::UnknownTopicRows(rows));
     }
     // Pass 1: every message of the wanted topics, one at a time. TF and camera_info are decoded;
-    // of an image only its header stamp is kept (with where it is, for pass 2). Processed in
-    // receive-time order afterwards, as the recorder saw them.
+    // of an image only its header stamp is read and kept (with where it is, for pass 2), the
+    // rest is checked when the frame is decoded. Processed in receive-time order afterwards, as
+    // the recorder saw them.
     let mut reads: Vec<Pass1> = Vec::new();
-    bag.for_each(&wanted, |m| {
+    bag.for_each(&wanted, std::slice::from_ref(&options.image_topic), |m| {
         let payload = if m.topic == options.image_topic {
-            Payload::Image(if compressed {
-                cdr::decode_compressed_image(m.data).map(|c| c.stamp_ns)
-            } else {
-                cdr::decode_image(m.data).map(|c| c.stamp_ns)
-            })
+            Payload::Image(cdr::decode_stamp(m.data))
         } else if Some(m.topic) == options.camera_info_topic.as_deref() {
             Payload::Info(Box::new(cdr::decode_camera_info(m.data)))
         } else {

@@ -183,6 +183,19 @@ fn decode(
     image: &ImageRef,
     frames: &mut Frames<'_>,
 ) -> Result<GrayImage, BagError> {
+    let data = frames.reader.data(image.location)?;
+    frames.decoded += 1;
+    to_gray(path, topic, image, frames.compressed, &data)
+}
+
+/// A frame's message turned grey.
+fn to_gray(
+    path: &Path,
+    topic: &str,
+    image: &ImageRef,
+    compressed: bool,
+    data: &[u8],
+) -> Result<GrayImage, BagError> {
     let wrap = |source: super::MessageError| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),
@@ -190,17 +203,15 @@ fn decode(
         stamp_ns: image.stamp_ns,
         source,
     };
-    let data = frames.reader.data(image.location)?;
-    frames.decoded += 1;
-    if frames.compressed {
-        let c = cdr::decode_compressed_image(&data).map_err(|e| wrap(e.into()))?;
+    if compressed {
+        let c = cdr::decode_compressed_image(data).map_err(|e| wrap(e.into()))?;
         let c = CompressedImage {
             format: &c.format,
             data: c.data,
         };
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
-        let r = cdr::decode_image(&data).map_err(|e| wrap(e.into()))?;
+        let r = cdr::decode_image(data).map_err(|e| wrap(e.into()))?;
         let r = RawImage {
             height: r.height,
             width: r.width,
@@ -381,9 +392,10 @@ pub(crate) fn select(
 }
 
 /// The sharpest frame of a stationary interval: its position in `interval`, its sharpness and
-/// the frame (the first of equally sharp ones). The frames are read one after another (the bag
-/// is read in order) and scored on every core, a few at a time: memory stays a few frames
-/// whatever the interval's length.
+/// the frame (the first of equally sharp ones). One worker per core reads, decodes and scores the
+/// frames, a few at a time, so memory stays a few frames whatever the interval's length. A frame
+/// the bag can read where it is (an indexed MCAP file) is read by the worker; otherwise this
+/// thread reads the bag in order and hands the worker the message.
 fn sharpest(
     path: &Path,
     topic: &str,
@@ -401,48 +413,81 @@ fn sharpest(
             *best = Some(candidate);
         }
     };
+    /// A frame for a worker: read it where it is, or its message read already.
+    enum Job {
+        Read,
+        Message(Vec<u8>),
+    }
     let workers = std::thread::available_parallelism()
         .map_or(1, |n| n.get().min(4))
         .min(interval.len());
+    let bag = frames.reader.bag();
+    let compressed = frames.compressed;
     let mut best: Best = None;
-    let mut read = Ok(());
-    let (to_workers, jobs) = std::sync::mpsc::sync_channel::<(usize, GrayImage)>(workers);
+    // The first error in the interval's order (a worker's or the reading's).
+    let mut failed: Option<(usize, BagError)> = None;
+    let (to_workers, jobs) = std::sync::mpsc::sync_channel::<(usize, Job)>(workers);
     let jobs = std::sync::Mutex::new(jobs);
     std::thread::scope(|scope| {
         let scorers: Vec<_> = (0..workers)
             .map(|_| {
                 let jobs = &jobs;
-                scope.spawn(move || {
+                scope.spawn(move || -> (Best, Option<(usize, BagError)>) {
                     let mut best: Best = None;
-                    while let Ok(Ok((k, gray))) = jobs.lock().map(|j| j.recv()) {
-                        keep(&mut best, (sharpness(&gray), k, gray));
+                    while let Ok(Ok((k, job))) = jobs.lock().map(|j| j.recv()) {
+                        let image = &images[interval[k].0];
+                        let message = match job {
+                            Job::Message(data) => Ok(data),
+                            Job::Read => bag.read_direct(image.location),
+                        };
+                        match message.and_then(|m| to_gray(path, topic, image, compressed, &m)) {
+                            Ok(gray) => keep(&mut best, (sharpness(&gray), k, gray)),
+                            // Later frames are still taken so the reader is not blocked.
+                            Err(e) => return (best, Some((k, e))),
+                        }
                     }
-                    best
+                    (best, None)
                 })
             })
             .collect();
         for (k, (i, _)) in interval.iter().enumerate() {
-            match decode(path, topic, &images[*i], frames) {
-                Ok(gray) => {
-                    if to_workers.send((k, gray)).is_err() {
+            let location = images[*i].location;
+            let job = if location.direct() {
+                Ok(Job::Read)
+            } else {
+                frames.reader.data(location).map(Job::Message)
+            };
+            match job {
+                Ok(job) => {
+                    frames.decoded += 1;
+                    if to_workers.send((k, job)).is_err() {
                         break;
                     }
                 }
                 Err(e) => {
-                    read = Err(e);
+                    failed = Some((k, e));
                     break;
                 }
             }
         }
         drop(to_workers);
         for scorer in scorers {
-            // A scorer only computes a number: it cannot panic short of a bug.
-            if let Ok(Some(candidate)) = scorer.join() {
-                keep(&mut best, candidate);
+            // A scorer only decodes and computes a number: it cannot panic short of a bug.
+            if let Ok((candidate, error)) = scorer.join() {
+                if let Some(candidate) = candidate {
+                    keep(&mut best, candidate);
+                }
+                if let Some((k, e)) = error {
+                    if failed.as_ref().is_none_or(|(f, _)| k < *f) {
+                        failed = Some((k, e));
+                    }
+                }
             }
         }
     });
-    read?;
+    if let Some((_, e)) = failed {
+        return Err(e);
+    }
     let (sharpness, k, image) = best.ok_or_else(|| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),

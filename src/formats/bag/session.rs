@@ -223,19 +223,27 @@ pub fn import_bag_session(
     let images_dir = import_dir.join("images");
     std::fs::create_dir_all(&images_dir)
         .with_context(|| format!("creating {}", images_dir.display()))?;
-    let mut samples = Vec::new();
-    for (i, s) in imported.samples.iter().enumerate() {
-        let file = images_dir.join(format!("{i:03}.png"));
-        s.image
-            .save(&file)
-            .with_context(|| format!("writing {}", file.display()))?;
-        samples.push(BagSampleRecord {
-            frame: format!("import/images/{i:03}.png"),
-            image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
-            robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
-            sharpness: s.sharpness,
-        });
-    }
+    // The frames are encoded on every core (rayon keeps the order).
+    let samples = {
+        use rayon::prelude::*;
+        imported
+            .samples
+            .par_iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let file = images_dir.join(format!("{i:03}.png"));
+                s.image
+                    .save(&file)
+                    .with_context(|| format!("writing {}", file.display()))?;
+                Ok(BagSampleRecord {
+                    frame: format!("import/images/{i:03}.png"),
+                    image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
+                    robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
+                    sharpness: s.sharpness,
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?
+    };
     let poses: Vec<_> = imported
         .samples
         .iter()

@@ -13,6 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::mcap_index::McapIndex;
 use super::BagError;
 
 /// Which storage a bag uses.
@@ -44,14 +45,37 @@ pub struct TopicInfo {
     pub count: usize,
 }
 
-/// Where a message is in a bag, to read it again: its storage file and, in it, its position
-/// among the file's messages (MCAP) or its row id (sqlite3).
+/// Where a message is in a bag, to read it again: its storage file and its place in it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Location {
     /// Index of the storage file in the bag.
     pub file: usize,
-    /// MCAP: 0-based position among all messages of the file, in file order; sqlite3: the row id.
-    pub at: u64,
+    /// Where in that file.
+    pub at: Position,
+}
+
+impl Location {
+    /// Whether [`Bag::read_direct`] reads it (from any thread).
+    pub fn direct(&self) -> bool {
+        matches!(self.at, Position::Bytes { .. })
+    }
+}
+
+/// A message's place in its storage file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Position {
+    /// MCAP read linearly: 0-based position among all messages of the file, in file order.
+    Nth(u64),
+    /// MCAP through its index (`mcap_index`): the message's data, where it is in the file. Read
+    /// with one positional read, from any thread ([`Bag::read_direct`]).
+    Bytes {
+        /// Offset of the data in the file.
+        offset: u64,
+        /// Its length.
+        len: u64,
+    },
+    /// sqlite3: the row id.
+    Row(i64),
 }
 
 /// One message read from a bag, lent for the time of a [`Bag::for_each`] callback.
@@ -61,7 +85,8 @@ pub struct BagMessage<'m> {
     pub topic: &'m str,
     /// When the recorder received it, ns.
     pub log_time_ns: i64,
-    /// The serialised (CDR) message.
+    /// The serialised (CDR) message; of a topic read for its head only (see [`Bag::for_each`]),
+    /// its first bytes.
     pub data: &'m [u8],
     /// Where it is, to read it again.
     pub location: Location,
@@ -117,7 +142,7 @@ impl std::fmt::Display for UnknownTopicRows {
 /// limit that cannot fit the import fails there, clearly, rather than with an abort later.
 pub const HEADROOM_BYTES: usize = 64 << 20;
 
-fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
+pub(super) fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
     BagError::OutOfMemory {
         path: file.to_path_buf(),
         bytes,
@@ -135,6 +160,8 @@ pub struct Bag {
     path: PathBuf,
     files: Vec<PathBuf>,
     format: BagFormat,
+    /// Per storage file, its MCAP index when it serves positional reads (`mcap_index`).
+    indexes: Vec<Option<McapIndex>>,
 }
 
 const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -212,10 +239,30 @@ impl Bag {
             )
         })?;
         drop(probe);
+        let indexes = files
+            .iter()
+            .map(|file| match format {
+                BagFormat::Mcap => {
+                    let index = McapIndex::open(file, mcap_summary(file));
+                    tracing::debug!(
+                        "{}: {}",
+                        file.display(),
+                        if index.is_some() {
+                            "read through its index"
+                        } else {
+                            "read linearly (no summary or message index, or compressed chunks)"
+                        }
+                    );
+                    index
+                }
+                BagFormat::Sqlite3 => None,
+            })
+            .collect();
         Ok(Bag {
             path: path.to_path_buf(),
             files,
             format,
+            indexes,
         })
     }
 
@@ -281,19 +328,42 @@ impl Bag {
 
     /// Every message on `topics`, lent to `visit` one at a time: file by file, each in its storage
     /// order (MCAP: file order; sqlite3: row order). The caller orders them by receive time if it
-    /// needs to; only one message is held at a time.
+    /// needs to; only one message is held at a time. Of the topics in `heads_only`, only the first
+    /// [`HEAD_BYTES`] of each message are needed (an image's header): an indexed MCAP file and
+    /// sqlite3 read just those; an MCAP file read linearly lends the whole message.
     pub fn for_each(
         &self,
         topics: &[String],
+        heads_only: &[String],
         mut visit: impl FnMut(BagMessage<'_>) -> Result<(), BagError>,
     ) -> Result<(), BagError> {
         for (i, file) in self.files.iter().enumerate() {
-            match self.format {
-                BagFormat::Mcap => mcap_for_each(i, file, topics, &mut visit)?,
-                BagFormat::Sqlite3 => sqlite_for_each(i, file, topics, &mut visit)?,
+            match (self.format, &self.indexes[i]) {
+                (BagFormat::Mcap, Some(index)) => {
+                    index.for_each(i, topics, heads_only, HEAD_BYTES, &mut visit)?
+                }
+                (BagFormat::Mcap, None) => mcap_for_each(i, file, topics, &mut visit)?,
+                (BagFormat::Sqlite3, _) => {
+                    sqlite_for_each(i, file, topics, heads_only, &mut visit)?
+                }
             }
         }
         Ok(())
+    }
+
+    /// The message at a [`Location::direct`] location read where it is, from any thread (read
+    /// the others through [`MessageAt`]).
+    pub fn read_direct(&self, at: Location) -> Result<Vec<u8>, BagError> {
+        match (at.at, self.indexes.get(at.file).and_then(Option::as_ref)) {
+            (Position::Bytes { offset, len }, Some(index)) => index.read(offset, len),
+            (position, _) => Err(BagError::Storage {
+                path: self.path.clone(),
+                problem: format!(
+                    "no indexed MCAP file {} to read {position:?} from in the bag",
+                    at.file
+                ),
+            }),
+        }
     }
 
     /// A reader of single messages of `topic` by their [`Location`].
@@ -308,6 +378,10 @@ impl Bag {
         }
     }
 }
+
+/// What [`Bag::for_each`] reads of a message of a `heads_only` topic: a `std_msgs/Header` with
+/// any sane frame id, and more than the stamp the import reads.
+pub const HEAD_BYTES: usize = 256;
 
 /// The last MCAP messages of the topic read by [`MessageAt`] are kept (their data): a request a
 /// few messages back (stamps slightly out of receive order, the same frame again) does not read
@@ -331,9 +405,17 @@ pub struct MessageAt<'b> {
 
 type McapStream = mcap::io::MessageReader<std::io::BufReader<std::fs::File>>;
 
-impl MessageAt<'_> {
+impl<'b> MessageAt<'b> {
+    /// The bag it reads (for [`Bag::read_direct`] from other threads).
+    pub fn bag(&self) -> &'b Bag {
+        self.bag
+    }
+
     /// The serialised message at `at` (of this reader's topic).
     pub fn data(&mut self, at: Location) -> Result<Vec<u8>, BagError> {
+        if at.direct() {
+            return self.bag.read_direct(at);
+        }
         let file = self
             .bag
             .files
@@ -342,65 +424,73 @@ impl MessageAt<'_> {
                 path: self.bag.path.clone(),
                 problem: format!("no storage file {} in the bag", at.file),
             })?;
-        match self.bag.format {
-            BagFormat::Sqlite3 => {
+        match (self.bag.format, at.at) {
+            (BagFormat::Sqlite3, Position::Row(row)) => {
                 if self.sqlite.as_ref().is_none_or(|(i, _)| *i != at.file) {
                     self.sqlite = Some((at.file, sqlite_open(file)?));
                 }
                 let (_, db) = self.sqlite.as_ref().expect("opened above");
-                db.query_row(
-                    "SELECT data FROM messages WHERE rowid = ?1",
-                    [at.at as i64],
-                    |row| row.get::<_, Vec<u8>>(0),
-                )
+                db.query_row("SELECT data FROM messages WHERE rowid = ?1", [row], |row| {
+                    row.get::<_, Vec<u8>>(0)
+                })
                 .map_err(|e| sqlite_error(file, e))
             }
-            BagFormat::Mcap => {
-                if let Some(k) = self.recent.iter().position(|(l, _)| *l == at) {
-                    return Ok(self.recent[k].1.clone());
-                }
-                let behind = self
-                    .mcap
-                    .as_ref()
-                    .is_none_or(|(i, _, next)| *i != at.file || *next > at.at);
-                if behind {
-                    if self.mcap.is_some() {
-                        self.rewinds += 1;
-                    }
-                    self.recent.clear();
-                    self.mcap = Some((at.file, mcap_stream(file)?, 0));
-                }
-                let (_, stream, next) = self.mcap.as_mut().expect("opened above");
-                loop {
-                    let Some(message) = stream.next() else {
-                        return Err(BagError::Storage {
-                            path: file.clone(),
-                            problem: format!(
-                                "damaged MCAP file: message {} is gone when read again (the file changed while it was imported?)",
-                                at.at
-                            ),
-                        });
-                    };
-                    let message = message.map_err(|e| mcap_error(file, e))?;
-                    let here = Location {
-                        file: at.file,
-                        at: *next,
-                    };
-                    *next += 1;
-                    if message.channel.topic != self.topic {
-                        continue;
-                    }
-                    let data = message.data.into_owned();
-                    if self.recent.len() == RECENT_KEPT {
-                        self.recent.pop_front();
-                    }
-                    if here == at {
-                        self.recent.push_back((here, data.clone()));
-                        return Ok(data);
-                    }
-                    self.recent.push_back((here, data));
-                }
+            (BagFormat::Mcap, Position::Nth(nth)) => self.mcap_nth(at.file, file, nth),
+            (_, position) => Err(BagError::Storage {
+                path: file.clone(),
+                problem: format!("no message at {position:?} in a {} file", self.bag.format),
+            }),
+        }
+    }
+
+    /// The `nth` message of an MCAP file read linearly (see the type's docs).
+    fn mcap_nth(&mut self, index: usize, file: &Path, nth: u64) -> Result<Vec<u8>, BagError> {
+        let at = Location {
+            file: index,
+            at: Position::Nth(nth),
+        };
+        if let Some(k) = self.recent.iter().position(|(l, _)| *l == at) {
+            return Ok(self.recent[k].1.clone());
+        }
+        let behind = self
+            .mcap
+            .as_ref()
+            .is_none_or(|(i, _, next)| *i != index || *next > nth);
+        if behind {
+            if self.mcap.is_some() {
+                self.rewinds += 1;
             }
+            self.recent.clear();
+            self.mcap = Some((index, mcap_stream(file)?, 0));
+        }
+        let (_, stream, next) = self.mcap.as_mut().expect("opened above");
+        loop {
+            let Some(message) = stream.next() else {
+                return Err(BagError::Storage {
+                    path: file.to_path_buf(),
+                    problem: format!(
+                        "damaged MCAP file: message {nth} is gone when read again (the file changed while it was imported?)"
+                    ),
+                });
+            };
+            let message = message.map_err(|e| mcap_error(file, e))?;
+            let here = Location {
+                file: index,
+                at: Position::Nth(*next),
+            };
+            *next += 1;
+            if message.channel.topic != self.topic {
+                continue;
+            }
+            let data = message.data.into_owned();
+            if self.recent.len() == RECENT_KEPT {
+                self.recent.pop_front();
+            }
+            if here == at {
+                self.recent.push_back((here, data.clone()));
+                return Ok(data);
+            }
+            self.recent.push_back((here, data));
         }
     }
 
@@ -447,7 +537,7 @@ fn file_format(file: &Path) -> Result<BagFormat, BagError> {
 /// Reading an MCAP file record by record: no record may be longer than this (a damaged length
 /// field would otherwise allocate what it says). Chunks are decompressed as they stream, so the
 /// limit is on one record inside them (an image), not on a chunk.
-fn mcap_record_limit(file_len: u64) -> usize {
+pub(super) fn mcap_record_limit(file_len: u64) -> usize {
     usize::try_from(file_len)
         .unwrap_or(usize::MAX)
         .max(256 << 20)
@@ -601,7 +691,7 @@ fn mcap_for_each(
             data: &message.data,
             location: Location {
                 file: index,
-                at: at as u64,
+                at: Position::Nth(at as u64),
             },
         })?;
     }
@@ -688,6 +778,7 @@ fn sqlite_for_each(
     index: usize,
     file: &Path,
     topics: &[String],
+    heads_only: &[String],
     visit: &mut dyn FnMut(BagMessage<'_>) -> Result<(), BagError>,
 ) -> Result<(), BagError> {
     let db = sqlite_open(file)?;
@@ -719,25 +810,48 @@ fn sqlite_for_each(
         return Ok(());
     }
     // Row by row in table order (no ORDER BY: sorting would make SQLite hold the rows); each
-    // row's blob is lent to `visit` and dropped before the next.
+    // row's blob is lent to `visit` and dropped before the next. Of a `heads_only` topic the row
+    // leaves its blob out (the CASE reads the column only for the others) and the head is read
+    // through incremental blob I/O: the rest of a frame's pages are not read.
     let list: Vec<String> = ids.iter().map(|(id, _)| id.to_string()).collect();
+    let heads: Vec<String> = ids
+        .iter()
+        .filter(|(_, name)| heads_only.contains(name))
+        .map(|(id, _)| id.to_string())
+        .collect();
     let mut statement = db
         .prepare(&format!(
-            "SELECT rowid, topic_id, timestamp, data FROM messages WHERE topic_id IN ({})",
+            "SELECT rowid, topic_id, timestamp, CASE WHEN topic_id IN ({}) THEN NULL ELSE data END FROM messages WHERE topic_id IN ({})",
+            heads.join(", "),
             list.join(", ")
         ))
         .map_err(|e| sqlite_error(file, e))?;
     let mut rows = statement.query([]).map_err(|e| sqlite_error(file, e))?;
+    let mut head = Vec::with_capacity(HEAD_BYTES);
     while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
         let rowid: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
         let topic_id: i64 = row.get(1).map_err(|e| sqlite_error(file, e))?;
         let log_time_ns: i64 = row.get(2).map_err(|e| sqlite_error(file, e))?;
-        let data = row
-            .get_ref(3)
-            .and_then(|v| v.as_blob().map_err(Into::into))
-            .map_err(|e| sqlite_error(file, e))?;
         let Some((_, topic)) = ids.iter().find(|(id, _)| *id == topic_id) else {
             continue;
+        };
+        let data = if heads_only.contains(topic) {
+            use std::io::Read;
+            let blob = db
+                .blob_open(rusqlite::MAIN_DB, "messages", "data", rowid, true)
+                .map_err(|e| sqlite_error(file, e))?;
+            head.clear();
+            blob.take(HEAD_BYTES as u64)
+                .read_to_end(&mut head)
+                .map_err(|source| BagError::Read {
+                    path: file.to_path_buf(),
+                    source,
+                })?;
+            head.as_slice()
+        } else {
+            row.get_ref(3)
+                .and_then(|v| v.as_blob().map_err(Into::into))
+                .map_err(|e| sqlite_error(file, e))?
         };
         visit(BagMessage {
             topic,
@@ -745,7 +859,7 @@ fn sqlite_for_each(
             data,
             location: Location {
                 file: index,
-                at: rowid as u64,
+                at: Position::Row(rowid),
             },
         })?;
     }
