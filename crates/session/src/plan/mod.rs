@@ -37,6 +37,16 @@ pub enum Waypoint {
     FlangePose(Pose),
     /// A joint configuration, radians.
     Joints(Joints),
+    /// A taught pose: the joints a person guided the arm to (radians) and the flange pose
+    /// `T_base_flange` the arm reported there (TF on ROS 2). The arm moves to the joints; the
+    /// plan check uses the taught pose, so an arm with no kinematics handeye knows can replay
+    /// it. YAML: `joints_deg` and `T_base_flange` together.
+    Taught {
+        /// The joints, radians.
+        joints: Joints,
+        /// `T_base_flange` as the arm reported it at those joints.
+        base_from_flange: Pose,
+    },
     /// A view of the board.
     LookAt(LookAt),
 }
@@ -104,7 +114,7 @@ struct PlanFile {
     waypoints: Vec<WaypointYaml>,
 }
 
-#[derive(Debug, Default, Serialize, Deserialize)]
+#[derive(Debug, Default, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct WaypointYaml {
     #[serde(
@@ -147,8 +157,8 @@ impl Plan {
         Ok(Plan { waypoints })
     }
 
-    /// Writes the plan as YAML (atomically).
-    pub fn save(&self, file: &Path) -> Result<(), PlanError> {
+    /// The plan as plan-file YAML ([`Plan::load`] reads it back).
+    pub fn to_yaml(&self) -> String {
         let raw = PlanFile {
             waypoints: self
                 .waypoints
@@ -156,7 +166,12 @@ impl Plan {
                 .map(WaypointYaml::from_waypoint)
                 .collect(),
         };
-        let text = serde_yaml_ng::to_string(&raw).expect("plan serialises");
+        serde_yaml_ng::to_string(&raw).expect("plan serialises")
+    }
+
+    /// Writes the plan as YAML (atomically).
+    pub fn save(&self, file: &Path) -> Result<(), PlanError> {
+        let text = self.to_yaml();
         handeye_core::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| {
             PlanError::Write {
                 file: file.to_path_buf(),
@@ -181,10 +196,33 @@ impl WaypointYaml {
         .iter()
         .filter(|g| **g)
         .count();
-        if given != 1 {
+        let taught = self.base_from_flange.is_some() && self.joints_deg.is_some();
+        if given != 1 && !(given == 2 && taught) {
             return Err(problem(format!(
-                "expected exactly one of `T_base_flange`, `joints_deg`, `look_at`; found {given}"
+                "expected exactly one of `T_base_flange`, `joints_deg`, `look_at` (or `joints_deg` with the `T_base_flange` taught there); found {given}"
             )));
+        }
+        if taught {
+            let Waypoint::Joints(joints) = Self {
+                base_from_flange: None,
+                ..self.clone()
+            }
+            .to_waypoint(path, file)?
+            else {
+                unreachable!("a waypoint of joints alone is a joint waypoint")
+            };
+            let Waypoint::FlangePose(base_from_flange) = Self {
+                joints_deg: None,
+                ..self.clone()
+            }
+            .to_waypoint(path, file)?
+            else {
+                unreachable!("a waypoint of a pose alone is a pose waypoint")
+            };
+            return Ok(Waypoint::Taught {
+                joints,
+                base_from_flange,
+            });
         }
         if let Some(pose) = &self.base_from_flange {
             let pose = pose
@@ -238,6 +276,14 @@ impl WaypointYaml {
                 joints_deg: Some(q.iter().map(|v| v.to_degrees()).collect()),
                 ..Default::default()
             },
+            Waypoint::Taught {
+                joints,
+                base_from_flange,
+            } => WaypointYaml {
+                base_from_flange: Some(PoseYaml::from_pose(base_from_flange)),
+                joints_deg: Some(joints.iter().map(|v| v.to_degrees()).collect()),
+                ..Default::default()
+            },
             Waypoint::LookAt(v) => WaypointYaml {
                 look_at: Some(*v),
                 ..Default::default()
@@ -248,19 +294,66 @@ impl WaypointYaml {
 
 impl Waypoint {
     /// The flange pose `T_base_flange` this waypoint asks for in `cell` (joint waypoints go
-    /// through forward kinematics, look-at views through the cell's nominal transforms).
+    /// through forward kinematics — `None` when `forward` has none —, look-at views through the
+    /// cell's nominal transforms, taught ones are where the arm reported it stood).
     pub fn flange_pose(
         &self,
         cell: &CellTransforms,
         board_centre: &Point3<f64>,
-        forward: impl Fn(&Joints) -> Pose,
-    ) -> Pose {
-        match self {
+        forward: impl Fn(&Joints) -> Option<Pose>,
+    ) -> Option<Pose> {
+        Some(match self {
             Waypoint::FlangePose(p) => *p,
-            Waypoint::Joints(q) => forward(q),
+            Waypoint::Taught {
+                base_from_flange, ..
+            } => *base_from_flange,
+            Waypoint::Joints(q) => forward(q)?,
             Waypoint::LookAt(view) => {
                 cell.base_from_flange_for_view(&view.target_from_camera(board_centre))
             }
+        })
+    }
+
+    /// The joints this waypoint names (joint and taught waypoints), radians.
+    pub fn joints(&self) -> Option<Joints> {
+        match self {
+            Waypoint::Joints(q) | Waypoint::Taught { joints: q, .. } => Some(*q),
+            Waypoint::FlangePose(_) | Waypoint::LookAt(_) => None,
+        }
+    }
+
+    /// What an arm without kinematics cannot run of this waypoint (its YAML key and why), or
+    /// `None` for a taught waypoint.
+    pub fn needs_kinematics(&self) -> Option<(&'static str, &'static str)> {
+        match self {
+            Waypoint::Taught { .. } => None,
+            Waypoint::Joints(_) => Some((
+                "T_base_flange",
+                "a joint waypoint needs the flange pose taught with it (`T_base_flange` beside `joints_deg`): without the arm's kinematics the plan check cannot know where these joints put the flange",
+            )),
+            Waypoint::FlangePose(_) => Some((
+                "joints_deg",
+                "a flange pose needs the arm's kinematics to become joints: give the joints taught there (`joints_deg` beside `T_base_flange`)",
+            )),
+            Waypoint::LookAt(_) => Some((
+                "look_at",
+                "a look-at view needs the arm's kinematics to become joints: teach the view by hand (`handeye console`) and use the session's taught plan",
+            )),
+        }
+    }
+}
+
+impl Plan {
+    /// A taught plan: each (flange pose, joints) a hand-guided session captured, in order.
+    pub fn taught(poses: &[(Pose, Joints)]) -> Plan {
+        Plan {
+            waypoints: poses
+                .iter()
+                .map(|(base_from_flange, joints)| Waypoint::Taught {
+                    joints: *joints,
+                    base_from_flange: *base_from_flange,
+                })
+                .collect(),
         }
     }
 }

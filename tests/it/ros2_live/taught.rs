@@ -1,0 +1,141 @@
+//! Taught joint waypoints on an arm with no model handeye knows (issue #26): `robot.model: none`
+//! and the joint names of another make (the peer publishes and takes goals for `fr3_joint1..6`;
+//! the kinematics inside it stay the simulated UR10e's, which handeye never learns), with a
+//! taught plan — at each view the joints and the flange pose the arm reported there, the file a
+//! hand-guided session writes (`taught-plan.yaml`). The run moves by FollowJointTrajectory
+//! goals to the taught joints at the configured limits, the plan check uses the taught flange
+//! poses, and the solve recovers the simulator's truth. A joint plan without taught flange
+//! poses, and a generated plan, are refused before anything opens, naming file and field.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use handeye::plan::Plan;
+
+use super::cell::{assert_truth, captures, cell, run_cell, text, views, Peer};
+use super::python;
+use crate::util::within;
+
+const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
+
+/// The ROS 2 cell as an arm of no known model with `plan` under `plan:` (a YAML line).
+fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
+    // The arm's own joint ranges, as its datasheet gives them (here: every joint ±360°).
+    let model = format!(
+        "model: none\n  joint_names: [{}]\n  joint_ranges_deg: {}",
+        NAMES.replace(',', ", "),
+        "[[-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]"
+    );
+    cell(
+        dir,
+        domain,
+        &[
+            ("model: ur10e", &model),
+            (
+                "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+                plan,
+            ),
+            ("connect_timeout_s: 10", "connect_timeout_s: 3"),
+        ],
+    )
+}
+
+/// The rendered views as a taught plan (the joints each stood at, the flange pose the arm
+/// reported there), written to `dir/taught.yaml`.
+fn taught_plan(dir: &Path) -> PathBuf {
+    let poses: Vec<_> = captures(&views())
+        .into_iter()
+        .map(|(_, pose, joints_deg)| (pose, joints_deg.map(f64::to_radians)))
+        .collect();
+    let file = dir.join("taught.yaml");
+    Plan::taught(&poses).save(&file).unwrap();
+    file
+}
+
+#[test]
+fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(500), move || {
+        let dir = tempfile::tempdir().unwrap();
+        taught_plan(dir.path());
+        let peer = Peer::serving(&python, 81, &views(), &["--joint-names", NAMES]);
+        let config = no_model_cell(dir.path(), 81, "  file: taught.yaml");
+        let session = dir.path().join("session");
+        let out = run_cell(&config, &session);
+        let log = text(&out);
+        assert!(out.status.success(), "{log}");
+        assert!(
+            log.contains("robot.model: none"),
+            "the plan check says what it could not check:\n{log}"
+        );
+        // One goal per taught view, each for the configured joints, within 60 °/s.
+        let goals = peer.events("goal");
+        assert_eq!(goals.len(), captures(&views()).len(), "{goals:?}");
+        for g in &goals {
+            assert_eq!(g["accepted"], true, "{g}");
+            assert_eq!(
+                g["joint_names"],
+                serde_json::json!(NAMES.split(',').collect::<Vec<_>>())
+            );
+            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
+            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
+        }
+        assert!(
+            peer.events("no_view").is_empty(),
+            "{:?}",
+            peer.events("no_view")
+        );
+        assert_truth(&session);
+    });
+}
+
+#[test]
+fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    within(Duration::from_secs(60), move || {
+        // Joints without the flange pose taught there.
+        std::fs::write(
+            dir.path().join("joints.yaml"),
+            "waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n",
+        )
+        .unwrap();
+        let config = no_model_cell(dir.path(), 83, "  file: joints.yaml");
+        let out = run_cell(&config, &dir.path().join("s"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("joints.yaml")
+                && log.contains("waypoints[0].T_base_flange")
+                && log.contains("robot.model is none"),
+            "{log}"
+        );
+        // Generated views need kinematics too.
+        let config = no_model_cell(
+            dir.path(),
+            83,
+            "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+        );
+        let out = run_cell(&config, &dir.path().join("s2"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("ros2-cell.yaml") && log.contains("plan.generate"),
+            "{log}"
+        );
+        // An arm of no known model must name its joint ranges.
+        let yaml = std::fs::read_to_string(&config).unwrap();
+        let (before, after) = yaml.split_once("  joint_ranges_deg:").unwrap();
+        let rest = after.split_once('\n').unwrap().1;
+        std::fs::write(&config, format!("{before}{rest}")).unwrap();
+        let out = run_cell(&config, &dir.path().join("s3"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("ros2-cell.yaml") && log.contains("robot.joint_ranges_deg"),
+            "{log}"
+        );
+        for s in ["s", "s2", "s3"] {
+            assert!(!dir.path().join(s).exists(), "{s} was created");
+        }
+    });
+}
