@@ -122,6 +122,20 @@ impl Peer {
         self.stdin.flush().unwrap();
     }
 
+    /// `goals` goals, each within the configured 60 °/s, every pose served with its rendered
+    /// view; the goals.
+    pub(super) fn assert_served(&self, goals: usize) -> Vec<serde_json::Value> {
+        let all = self.events("goal");
+        assert_eq!(all.len(), goals, "{all:?}");
+        for g in &all {
+            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
+            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
+        }
+        let no_view = self.events("no_view");
+        assert!(no_view.is_empty(), "{no_view:?}");
+        all
+    }
+
     pub(super) fn events(&self, kind: &str) -> Vec<serde_json::Value> {
         self.events
             .lock()
@@ -238,18 +252,7 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
         let log = text(&out);
         assert!(out.status.success(), "{log}");
         assert_truth(&out_dir);
-        // Every goal within the configured 60 °/s, every pose served with its rendered view.
-        let goals = peer.events("goal");
-        assert_eq!(goals.len(), 12, "{goals:?}");
-        for g in &goals {
-            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
-            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
-        }
-        assert!(
-            peer.events("no_view").is_empty(),
-            "{:?}",
-            peer.events("no_view")
-        );
+        peer.assert_served(12);
         // The measured time from the arm's rest to the captured frame's stamp.
         let after: Vec<f64> = log
             .lines()

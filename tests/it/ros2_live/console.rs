@@ -14,6 +14,7 @@
 //! STOP: pressing it during a planned ROS 2 run cancels the running trajectory goal (the peer
 //! sees the cancel), the samples so far are kept, and `--resume` completes the run.
 
+use std::path::Path;
 use std::time::Duration;
 
 use handeye::plan::{Plan, Waypoint};
@@ -25,6 +26,25 @@ use super::python;
 use crate::util::live::{runtime, Live, Page};
 use crate::util::{handeye, within};
 
+/// `handeye ARGS CONFIG OUT_FLAG SESSION` in `dir`, serving the console (DDS logs quiet).
+fn serving_console(
+    dir: &Path,
+    args: &[&str],
+    config: &Path,
+    out_flag: &[&str],
+    session: &Path,
+) -> Live {
+    Live::spawn(
+        handeye()
+            .args(args)
+            .arg(config)
+            .args(out_flag)
+            .arg(session)
+            .env("HANDEYE_LOG", "warn,rustdds=off")
+            .current_dir(dir),
+    )
+}
+
 #[test]
 fn a_hand_guided_console_session_over_ros2_recovers_the_truth() {
     let Some(python) = python() else { return };
@@ -33,15 +53,12 @@ fn a_hand_guided_console_session_over_ros2_recovers_the_truth() {
         let mut peer = Peer::start(&python, 80, &[]);
         let config = cell(dir.path(), 80, &[]);
         let session = dir.path().join("guided");
-        let mut live = Live::spawn(
-            handeye()
-                .args(["console", "--config"])
-                .arg(&config)
-                .arg("--output")
-                .arg(&session)
-                .args(["--addr", "127.0.0.1:0"])
-                .env("HANDEYE_LOG", "warn,rustdds=off")
-                .current_dir(dir.path()),
+        let mut live = serving_console(
+            dir.path(),
+            &["console", "--addr", "127.0.0.1:0", "--config"],
+            &config,
+            &["--output"],
+            &session,
         );
         let url = live.url();
         let rendered = captures(&views());
@@ -130,15 +147,12 @@ fn stop_on_the_console_cancels_the_goal_and_resume_completes() {
         let peer = Peer::start(&python, 82, &[]);
         let config = cell(dir.path(), 82, &[]);
         let session = dir.path().join("stopped");
-        let mut live = Live::spawn(
-            handeye()
-                .args(["run", "--yes", "--config"])
-                .arg(&config)
-                .arg("-o")
-                .arg(&session)
-                .args(["--console", "127.0.0.1:0"])
-                .env("HANDEYE_LOG", "warn,rustdds=off")
-                .current_dir(dir.path()),
+        let mut live = serving_console(
+            dir.path(),
+            &["run", "--yes", "--console", "127.0.0.1:0", "--config"],
+            &config,
+            &["-o"],
+            &session,
         );
         let url = live.url();
         let n = runtime().block_on(async {

@@ -321,6 +321,18 @@ mod tests {
         assert_eq!(r.graph.rmw, Rmw::Fastrtps);
         assert!(r.problem().is_none());
 
+        // No model: `none` or absent; it must name its joint ranges.
+        for text in ["backend: ros2\nmodel: none\n", "backend: ros2\n"] {
+            let RobotConfig::Ros2(r) = serde_yaml_ng::from_str(text).unwrap() else {
+                panic!("not ros2")
+            };
+            assert_eq!(r.model, None);
+            assert_eq!(r.problem().unwrap().0, "robot.joint_ranges_deg");
+        }
+        let typo = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nmodel: ur6e\n");
+        let typo = typo.unwrap_err().to_string();
+        assert!(typo.contains("ur6e") && typo.contains("`none`"), "{typo}");
+
         let unknown = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nhost: 1.2.3.4\n");
         assert!(unknown.unwrap_err().to_string().contains("host"));
 

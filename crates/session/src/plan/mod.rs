@@ -114,7 +114,7 @@ struct PlanFile {
     waypoints: Vec<WaypointYaml>,
 }
 
-#[derive(Debug, Default, Clone, Serialize, Deserialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct WaypointYaml {
     #[serde(
@@ -181,6 +181,31 @@ impl Plan {
     }
 }
 
+/// `joints_deg` as radians, or what is wrong with it (its key first).
+fn joints_from_degrees(joints: &[f64]) -> Result<Joints, String> {
+    if joints.len() != 6 {
+        return Err(format!(
+            "joints_deg: expected 6 joint angles in degrees, found {}",
+            joints.len()
+        ));
+    }
+    // Joints turn ±360° at most; anything else is a typo or radians mistaken for degrees.
+    if let Some((i, bad)) = joints
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
+    {
+        return Err(format!(
+            "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
+        ));
+    }
+    let mut q = [0.0; 6];
+    for (dst, src) in q.iter_mut().zip(joints) {
+        *dst = src.to_radians();
+    }
+    Ok(q)
+}
+
 impl WaypointYaml {
     fn to_waypoint(&self, path: &str, file: &Path) -> Result<Waypoint, PlanError> {
         let problem = |problem: String| PlanError::Waypoint {
@@ -202,59 +227,32 @@ impl WaypointYaml {
                 "expected exactly one of `T_base_flange`, `joints_deg`, `look_at` (or `joints_deg` with the `T_base_flange` taught there); found {given}"
             )));
         }
-        if taught {
-            let Waypoint::Joints(joints) = Self {
-                base_from_flange: None,
-                ..self.clone()
+        let base_from_flange = self
+            .base_from_flange
+            .as_ref()
+            .map(|pose| {
+                pose.to_pose(&format!("{path}.T_base_flange"))
+                    .map_err(|problem| PlanError::Pose {
+                        file: file.to_path_buf(),
+                        problem,
+                    })
+            })
+            .transpose()?;
+        let joints = self
+            .joints_deg
+            .as_deref()
+            .map(|joints| joints_from_degrees(joints).map_err(problem))
+            .transpose()?;
+        match (joints, base_from_flange) {
+            (Some(joints), Some(base_from_flange)) => {
+                return Ok(Waypoint::Taught {
+                    joints,
+                    base_from_flange,
+                })
             }
-            .to_waypoint(path, file)?
-            else {
-                unreachable!("a waypoint of joints alone is a joint waypoint")
-            };
-            let Waypoint::FlangePose(base_from_flange) = Self {
-                joints_deg: None,
-                ..self.clone()
-            }
-            .to_waypoint(path, file)?
-            else {
-                unreachable!("a waypoint of a pose alone is a pose waypoint")
-            };
-            return Ok(Waypoint::Taught {
-                joints,
-                base_from_flange,
-            });
-        }
-        if let Some(pose) = &self.base_from_flange {
-            let pose = pose
-                .to_pose(&format!("{path}.T_base_flange"))
-                .map_err(|problem| PlanError::Pose {
-                    file: file.to_path_buf(),
-                    problem,
-                })?;
-            return Ok(Waypoint::FlangePose(pose));
-        }
-        if let Some(joints) = &self.joints_deg {
-            if joints.len() != 6 {
-                return Err(problem(format!(
-                    "joints_deg: expected 6 joint angles in degrees, found {}",
-                    joints.len()
-                )));
-            }
-            // UR joints turn ±360°; anything else is a typo or radians mistaken for degrees.
-            if let Some((i, bad)) = joints
-                .iter()
-                .enumerate()
-                .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
-            {
-                return Err(problem(format!(
-                    "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
-                )));
-            }
-            let mut q = [0.0; 6];
-            for (dst, src) in q.iter_mut().zip(joints) {
-                *dst = src.to_radians();
-            }
-            return Ok(Waypoint::Joints(q));
+            (Some(joints), None) => return Ok(Waypoint::Joints(joints)),
+            (None, Some(pose)) => return Ok(Waypoint::FlangePose(pose)),
+            (None, None) => {}
         }
         let Some(view) = self.look_at else {
             return Err(problem(
@@ -395,6 +393,55 @@ mod tests {
             _ => panic!("kind changed"),
         }
         assert_eq!(plan.waypoints[2], back.waypoints[2]);
+    }
+
+    #[test]
+    fn taught_waypoints_read_and_round_trip_and_say_what_needs_kinematics() {
+        let plan = parse(
+            "waypoints:\n\
+             - joints_deg: [10, -80, 95, -100, -90, 5]\n  \
+               T_base_flange: {translation: [0.4, 0.1, 0.5], rotation_vector: [3.1, 0.1, 0]}\n",
+        )
+        .unwrap();
+        let Waypoint::Taught {
+            joints,
+            base_from_flange,
+        } = plan.waypoints[0]
+        else {
+            panic!("not taught: {:?}", plan.waypoints[0])
+        };
+        assert!((joints[1] - (-80f64).to_radians()).abs() < 1e-12);
+        assert!((base_from_flange.translation.vector.x - 0.4).abs() < 1e-12);
+        assert_eq!(plan.waypoints[0].needs_kinematics(), None);
+        let back = parse(&Plan::taught(&[(base_from_flange, joints)]).to_yaml()).unwrap();
+        let Waypoint::Taught {
+            joints: joints_back,
+            base_from_flange: pose_back,
+        } = back.waypoints[0]
+        else {
+            panic!("not taught after a round trip: {:?}", back.waypoints[0])
+        };
+        assert!(joints
+            .iter()
+            .zip(&joints_back)
+            .all(|(a, b)| (a - b).abs() < 1e-12));
+        assert!((pose_back.to_homogeneous() - base_from_flange.to_homogeneous()).norm() < 1e-12);
+        let bad = parse(
+            "waypoints:\n- {joints_deg: [0, 0, 0], T_base_flange: {translation: [0, 0, 0], rotation_vector: [0, 0, 0]}}\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            bad.contains("waypoints[0]: joints_deg: expected 6"),
+            "{bad}"
+        );
+        let joints_only = parse("waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n").unwrap();
+        assert_eq!(
+            joints_only.waypoints[0]
+                .needs_kinematics()
+                .map(|(key, _)| key),
+            Some("T_base_flange")
+        );
     }
 
     #[test]
