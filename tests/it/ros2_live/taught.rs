@@ -84,6 +84,17 @@ fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
 fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
     within(Duration::from_secs(60), move || {
+        // `handeye run` of `config` into `session` fails before anything opens, saying `words`.
+        let refused = |config: &Path, session: &str, words: &[&str]| {
+            let out = run_cell(config, &dir.path().join(session));
+            let log = text(&out);
+            assert!(!out.status.success(), "{log}");
+            assert!(
+                words.iter().all(|w| log.contains(w)),
+                "{words:?} in:\n{log}"
+            );
+            assert!(!dir.path().join(session).exists(), "{session} was created");
+        };
         // Joints without the flange pose taught there.
         std::fs::write(
             dir.path().join("joints.yaml"),
@@ -91,14 +102,14 @@ fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
         )
         .unwrap();
         let config = no_model_cell(dir.path(), 83, "  file: joints.yaml");
-        let out = run_cell(&config, &dir.path().join("s"));
-        let log = text(&out);
-        assert!(!out.status.success(), "{log}");
-        assert!(
-            log.contains("joints.yaml")
-                && log.contains("waypoints[0].T_base_flange")
-                && log.contains("robot.model is none"),
-            "{log}"
+        refused(
+            &config,
+            "s",
+            &[
+                "joints.yaml",
+                "waypoints[0].T_base_flange",
+                "robot.model is none",
+            ],
         );
         // Generated views need kinematics too.
         let config = no_model_cell(
@@ -106,27 +117,12 @@ fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
             83,
             "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
         );
-        let out = run_cell(&config, &dir.path().join("s2"));
-        let log = text(&out);
-        assert!(!out.status.success(), "{log}");
-        assert!(
-            log.contains("ros2-cell.yaml") && log.contains("plan.generate"),
-            "{log}"
-        );
+        refused(&config, "s2", &["ros2-cell.yaml", "plan.generate"]);
         // An arm of no known model must name its joint ranges.
         let yaml = std::fs::read_to_string(&config).unwrap();
         let (before, after) = yaml.split_once("  joint_ranges_deg:").unwrap();
         let rest = after.split_once('\n').unwrap().1;
         std::fs::write(&config, format!("{before}{rest}")).unwrap();
-        let out = run_cell(&config, &dir.path().join("s3"));
-        let log = text(&out);
-        assert!(!out.status.success(), "{log}");
-        assert!(
-            log.contains("ros2-cell.yaml") && log.contains("robot.joint_ranges_deg"),
-            "{log}"
-        );
-        for s in ["s", "s2", "s3"] {
-            assert!(!dir.path().join(s).exists(), "{s} was created");
-        }
+        refused(&config, "s3", &["ros2-cell.yaml", "robot.joint_ranges_deg"]);
     });
 }
