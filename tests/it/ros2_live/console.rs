@@ -14,7 +14,7 @@
 //! STOP: pressing it during a planned ROS 2 run cancels the running trajectory goal (the peer
 //! sees the cancel), the samples so far are kept, and `--resume` completes the run.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use handeye::plan::{Plan, Waypoint};
@@ -52,11 +52,19 @@ fn a_hand_guided_console_session_over_ros2_recovers_the_truth() {
         let dir = tempfile::tempdir().unwrap();
         let mut peer = Peer::start(&python, 80, &[]);
         let config = cell(dir.path(), 80, &[]);
-        let session = dir.path().join("guided");
+        hand_guided_session(dir.path(), &mut peer, &config);
+    });
+}
+
+/// A hand-guided session of `config` on the console into `dir/guided`, every rendered view
+/// captured by hand (the checks above), solved to the truth; the session folder.
+pub(super) fn hand_guided_session(dir: &Path, peer: &mut Peer, config: &Path) -> PathBuf {
+    {
+        let session = dir.join("guided");
         let mut live = serving_console(
-            dir.path(),
+            dir,
             &["console", "--addr", "127.0.0.1:0", "--config"],
-            &config,
+            config,
             &["--output"],
             &session,
         );
@@ -136,7 +144,8 @@ fn a_hand_guided_console_session_over_ros2_recovers_the_truth() {
         }
         eprintln!("verdict {}", verdict["verdict"]);
         assert_truth(&session);
-    });
+        session
+    }
 }
 
 #[test]

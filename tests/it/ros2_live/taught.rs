@@ -5,21 +5,22 @@
 //! hand-guided session writes (`taught-plan.yaml`). The run moves by FollowJointTrajectory
 //! goals to the taught joints at the configured limits, the plan check uses the taught flange
 //! poses, and the solve recovers the simulator's truth. A joint plan without taught flange
-//! poses, and a generated plan, are refused before anything opens, naming file and field.
+//! poses, and a generated plan, are refused before anything opens, naming file and field. The
+//! whole way — hand-guided with no plan, then the session's taught plan replayed — runs too.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use handeye::plan::Plan;
 
-use super::cell::{assert_truth, captures, cell, run_cell, text, views, Peer};
+use super::cell::{assert_truth, captures, cell, poses_kept, run_cell, text, views, Peer};
 use super::python;
 use crate::util::within;
 
-const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
+pub(super) const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
 
 /// The ROS 2 cell as an arm of no known model with `plan` under `plan:` (a YAML line).
-fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
+pub(super) fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
     // The arm's own joint ranges, as its datasheet gives them (here: every joint ±360°).
     let model = format!(
         "model: none\n  joint_names: [{}]\n  joint_ranges_deg: {}",
@@ -77,6 +78,33 @@ fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
             );
         }
         assert_truth(&session);
+    });
+}
+
+/// The whole way for an arm of no known model: hand-guided on the console with no plan
+/// (`plan: {manual: true}`, no suggestions), its `taught-plan.yaml` then replayed by `handeye
+/// run` — trajectory goals to the taught joints — to the truth.
+#[test]
+fn an_arm_of_no_known_model_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(700), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let mut peer = Peer::serving(&python, 85, &views(), &["--joint-names", NAMES]);
+        let config = no_model_cell(dir.path(), 85, "  manual: true");
+        let session = super::console::hand_guided_session(dir.path(), &mut peer, &config);
+        let taught = session.join("taught-plan.yaml");
+        let config = no_model_cell(dir.path(), 85, &format!("  file: {}", taught.display()));
+        let replay = dir.path().join("replay");
+        let out = run_cell(&config, &replay);
+        assert!(out.status.success(), "{}", text(&out));
+        // Every taught view visited; the arm stood at the last one captured, which the
+        // travel-time order visits first, with no move: one goal fewer than views.
+        let views = captures(&views()).len();
+        assert_eq!(poses_kept(&replay), views);
+        for g in peer.assert_served(views - 1) {
+            assert_eq!(g["accepted"], true, "{g}");
+        }
+        assert_truth(&replay);
     });
 }
 

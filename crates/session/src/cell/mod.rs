@@ -340,6 +340,18 @@ impl PreparedCell {
     /// The plan check of the order that will run (the order of least move time unless
     /// `plan.reorder` is false).
     fn check(&self) -> PlanReport {
+        if self.plan.waypoints.is_empty() {
+            // Hand-guided with no plan (`plan.manual` alone): nothing to check or suggest.
+            return PlanReport {
+                poses: Vec::new(),
+                plan_problems: Vec::new(),
+                notes: vec![
+                    "plan.manual with no plan: no views to suggest; every view is chosen by hand on the console".into(),
+                ],
+                intrinsics: None,
+                given_order_move_time_s: None,
+            };
+        }
         let mut report =
             check_plan_ordered(&self.plan, &self.check_context(), self.config.plan.reorder);
         if !self.intrinsics_known {

@@ -592,6 +592,8 @@ impl Validator<'_> {
                 ))
             }
             (Some(_), None) => {}
+            // Hand-guided with no views to suggest (an arm of no known model, say).
+            (None, None) if plan.manual => {}
             (None, Some(spec)) => {
                 // Views at hundreds of metres: the distances were written in mm.
                 let [near, far] = spec.distance;
@@ -619,7 +621,7 @@ impl Validator<'_> {
             _ => {
                 return Err(self.inconsistent(
                     "plan",
-                    "expected exactly one of `file` (a scripted plan) and `generate`".into(),
+                    "expected exactly one of `file` (a scripted plan) and `generate` (or neither with `manual: true`: hand-guided, no suggested views)".into(),
                 ))
             }
         }
