@@ -10,6 +10,11 @@ at rest at plan pose k reports that session's recorded `T_base_flange` of pose k
 shows its frame k; an image stamped at time t shows where the arm was at t (before the arm
 arrives, the previous view). Every goal, cancel and fault is printed on stdout as one JSON line.
 
+Hand-guiding, as a person with the pendant's freedrive would: a line `guide K` on stdin moves the
+arm to plan pose K's joints over --guide-s seconds, with no trajectory goal (joint speeds on
+/joint_states, the flange from the forward kinematics while it moves), printing `guiding` when it
+starts and `guided` when it stands there.
+
 Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
 --die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
 tool0).
@@ -74,8 +79,12 @@ def add_arguments(p):
     p.add_argument("--camera-info", required=True, help="the camera_info YAML of the sim camera")
     p.add_argument("--start-joints-deg", default="0,-90,90,-90,-90,0")
     p.add_argument("--model", default="ur10e", choices=sorted(UR_DH))
+    p.add_argument("--joint-names", default=",".join(JOINTS),
+                   help="the six joint names it publishes and takes goals for (another arm's, e.g. "
+                        "fr3_joint1,...: the kinematics inside stay the --model's)")
     p.add_argument("--action", default="/scaled_joint_trajectory_controller/follow_joint_trajectory")
     p.add_argument("--image-hz", type=float, default=15.0)
+    p.add_argument("--guide-s", type=float, default=1.5, help="how long a `guide K` move takes")
     p.add_argument("--abort-goal", type=int, default=0)
     p.add_argument("--die-in-goal", type=int, default=0)
     p.add_argument("--no-tool0", action="store_true")
@@ -112,13 +121,14 @@ def load_session(folder):
     with open(os.path.join(folder, "session.yaml")) as f:
         session = yaml.safe_load(f)
     plan = [pose_of(p["T_base_flange"]) for p in session["plan"]]
+    plan_joints = [np.radians(p["joints_deg"]) for p in session["plan"]]
     views = {}
     for path in sorted(glob.glob(os.path.join(folder, "poses", "*.yaml"))):
         with open(path) as f:
             rec = yaml.safe_load(f)
         frame = np.asarray(PilImage.open(os.path.join(folder, rec["frame"])).convert("L"))
         views[rec["plan_index"]] = (pose_of(rec["T_base_flange"]), frame)
-    return plan, views
+    return plan, plan_joints, views
 
 
 class Arm:
@@ -132,6 +142,7 @@ class Arm:
         self.plan, self.views = plan, views
         self.view = None  # (pose, frame) of the plan pose the arm stands at
         self.goal = None  # (goal id, points [(t, q)], start time, done event)
+        self.guide = None  # (plan index, from joints, to joints, start time, duration): by hand
 
     def nearest_view(self, q):
         """The rendered view of the plan pose whose flange position the arm's forward
@@ -147,7 +158,7 @@ class Arm:
     def flange(self):
         """(translation, quaternion xyzw) of T_base_flange: the recorded one at a view, else the
         forward kinematics (moving, or at a pose with no view)."""
-        if self.view is not None and self.goal is None:
+        if self.view is not None and self.goal is None and self.guide is None:
             return self.view[0]
         T = forward(self.model, self.q)
         return T[:3, 3], quat_of(T[:3, :3])
@@ -158,11 +169,14 @@ def cdr_bytes(frame):
 
 
 def run(args):
-    plan, views = load_session(args.session)
+    plan, plan_joints, views = load_session(args.session)
     with open(args.camera_info) as f:
         ci = yaml.safe_load(f)
     start = np.radians([float(v) for v in args.start_joints_deg.split(",")])
     arm = Arm(args.model, start, plan, views)
+    joint_names = args.joint_names.split(",")
+    if len(joint_names) != 6:
+        raise SystemExit(f"--joint-names: expected 6 names, got {len(joint_names)}")
 
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
@@ -221,7 +235,7 @@ def run(args):
             n = goal_count[0]
             pts = [(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9, np.array(p.positions),
                     np.array(p.velocities) if len(p.velocities) == 6 else None) for p in tr.points]
-            ok = list(tr.joint_names) == JOINTS and pts and all(len(q) == 6 for _, q, _ in pts)
+            ok = list(tr.joint_names) == joint_names and pts and all(len(q) == 6 for _, q, _ in pts) and arm.guide is None
             max_speed = max((float(np.max(np.abs(v))) for _, _, v in pts if v is not None), default=0.0)
             goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
             say(event="goal", n=n, accepted=bool(ok), points=len(pts),
@@ -258,8 +272,43 @@ def run(args):
                     finish(cur, 5, 0, "canceled")
             can_w.write(m.CancelGoalReply(req.client_id, req.seq, 0 if canceling else 2, canceling))
 
+    def hand_guide(now):
+        """A person moving the arm: a smooth (cosine) joint path to the plan pose, no goal."""
+        k, q0, q1, t0, duration = arm.guide
+        f = min(1.0, (now - t0) / duration)
+        if f >= 1.0:
+            arm.q, arm.qd, arm.guide = q1.copy(), np.zeros(6), None
+            arm.view = arm.nearest_view(arm.q)
+            say(event="guided", k=k, at=time.time())
+            return
+        s = (1 - math.cos(math.pi * f)) / 2
+        arm.q = q0 + s * (q1 - q0)
+        arm.qd = (q1 - q0) * math.pi / 2 * math.sin(math.pi * f) / duration
+
+    def read_commands():
+        for line in sys.stdin:
+            words = line.split()
+            if len(words) == 2 and words[0] == "guide" and words[1].isdigit():
+                k = int(words[1])
+                if k >= len(plan_joints):
+                    say(event="bad_command", line=line.strip())
+                    continue
+                with arm.lock:
+                    if arm.goal:
+                        say(event="bad_command", line=line.strip(), why="a goal is running")
+                        continue
+                    arm.guide = (k, arm.q.copy(), plan_joints[k], time.monotonic(), args.guide_s)
+                say(event="guiding", k=k)
+            elif words:
+                say(event="bad_command", line=line.strip())
+
+    threading.Thread(target=read_commands, daemon=True).start()
+
     def step(now):
         with arm.lock:
+            if arm.guide:
+                hand_guide(now)
+                return
             if not arm.goal:
                 return
             gid, pts, t0, q0, n = arm.goal
@@ -301,7 +350,7 @@ def run(args):
         with arm.lock:
             q, qd, view, flange = arm.q.copy(), arm.qd.copy(), arm.view, arm.flange()
         if now >= next_js:
-            js_w.write(m.JointState(m.Header(stamp_now(), "base_link"), JOINTS, list(q), list(qd), []))
+            js_w.write(m.JointState(m.Header(stamp_now(), "base_link"), joint_names, list(q), list(qd), []))
             next_js += 0.01
         if now >= next_tf and not args.no_tool0:
             (t, rot) = flange

@@ -77,14 +77,14 @@ fn the_reordered_plan_visits_the_same_poses_inside_the_ranges_and_the_box() {
 
         // Every move from the start, in the order that runs, within the joint ranges and with its
         // whole joint path inside the workspace box (the checks the run applies before a move).
-        let check = MoveCheck {
-            arm: ordered.arm.clone(),
-            workspace: ordered.config.workspace,
-        };
+        let check = MoveCheck::with_model(
+            ordered.arm.clone().expect("a UR model"),
+            ordered.config.workspace,
+        );
         let mut from = ordered.start_joints;
         for (pose, joints) in &plan {
             assert_eq!(check.problem(&from, joints), None);
-            assert!(ordered.arm.within_limits(joints));
+            assert!(ordered.arm.as_ref().unwrap().within_limits(joints));
             assert!(ordered.config.workspace.contains(pose));
             from = *joints;
         }
@@ -144,7 +144,7 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
     let (robot, camera) = cell::sim::open(
         &prepared.config,
         truth,
-        prepared.arm.clone(),
+        prepared.kinematics().unwrap(),
         prepared.start_joints,
         prepared.camera_model,
         prepared.board.clone(),

@@ -162,8 +162,13 @@ fn every_model_name_is_accepted_in_the_config() {
     for name in UrModel::NAMES {
         let config = CellConfig::load(&sim_with_model(dir.path(), name)).unwrap();
         assert!(matches!(config.robot, RobotConfig::Sim { .. }));
-        assert_eq!(config.robot.model(), name);
-        assert_eq!(UrModel::by_name(config.robot.model()).unwrap().name, name);
+        assert_eq!(config.robot.model(), Some(name));
+        assert_eq!(
+            UrModel::by_name(config.robot.model().unwrap())
+                .unwrap()
+                .name,
+            name
+        );
     }
 }
 
@@ -258,7 +263,7 @@ fn a_generated_plan_stays_inside_a_restricted_range() {
         // The same flange pose (so the same view), reached by another joint solution where the
         // free one turned wrist 3 below zero.
         assert!(
-            (cell.arm.forward(q).to_homogeneous() - pose.to_homogeneous())
+            (cell.arm.as_ref().unwrap().forward(q).to_homogeneous() - pose.to_homogeneous())
                 .abs()
                 .max()
                 < 1e-9
@@ -386,13 +391,13 @@ fn every_move_is_held_to_the_ranges() {
     let mut arm = UrModel::ur5e();
     arm.joint_limits =
         FLANGE_CAMERA_JOINT_RANGES_DEG.map(|[lo, hi]| (lo.to_radians(), hi.to_radians()));
-    let check = handeye::plan::check::MoveCheck {
+    let check = handeye::plan::check::MoveCheck::with_model(
         arm,
-        workspace: handeye::robot::WorkspaceBox {
+        handeye::robot::WorkspaceBox {
             min: Vector3::new(-2.0, -2.0, -2.0),
             max: Vector3::new(2.0, 2.0, 2.0),
         },
-    };
+    );
     let home = [0.0, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians);
     let wound = [0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians);
     assert_eq!(check.problem(&home, &home), None);

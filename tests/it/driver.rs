@@ -556,13 +556,13 @@ fn a_move_that_would_leave_the_workspace_is_not_sent() {
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("session")).unwrap();
     let mut setup = session_setup(folder.clone(), Arc::new(AtomicBool::new(false)));
-    setup.move_check = Some(MoveCheck {
-        arm: UrModel::ur5e(),
-        workspace: WorkspaceBox {
+    setup.move_check = Some(MoveCheck::with_model(
+        UrModel::ur5e(),
+        WorkspaceBox {
             min: Vector3::new(5.0, 5.0, 5.0),
             max: Vector3::new(6.0, 6.0, 6.0),
         },
-    });
+    ));
     let mut robot = ScriptedRobot::new(vec![
         Expect::SetInterrupt,
         Expect::Joints(Ok(joints(0))),

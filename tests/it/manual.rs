@@ -11,87 +11,31 @@ use crate::util;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
-use futures_util::{SinkExt, StreamExt};
-use serde_json::Value;
-use tokio_tungstenite::tungstenite::Message;
+use util::live::{runtime, Live, Page};
 
-use util::live::{Live, STEP};
-
-type Ws =
-    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
-
-/// The console's page, as a WebSocket client.
-struct Page {
-    ws: Ws,
-}
-
-impl Page {
-    async fn open(url: &str) -> Page {
-        let (ws, _) = tokio_tungstenite::connect_async(util::console_socket(url))
-            .await
-            .expect("the console accepts a WebSocket");
-        Page { ws }
-    }
-
-    async fn send(&mut self, cmd: &str) {
-        self.ws
-            .send(Message::Text(format!(r#"{{"cmd":"{cmd}"}}"#).into()))
-            .await
-            .expect("sends");
-    }
-
-    /// The next event of `kind` (JSON `type`), skipping the rest.
-    async fn next(&mut self, kind: &str) -> Value {
-        let wait = async {
-            loop {
-                match self.ws.next().await {
-                    Some(Ok(Message::Text(text))) => {
-                        let event: Value = serde_json::from_str(&text).expect("events are JSON");
-                        if event["type"] == kind {
-                            return event;
-                        }
-                    }
-                    Some(Ok(_)) => {}
-                    other => panic!("the console closed while waiting for {kind}: {other:?}"),
-                }
-            }
-        };
-        tokio::time::timeout(STEP, wait)
-            .await
-            .unwrap_or_else(|_| panic!("no {kind} event within {STEP:?}"))
-    }
-
-    /// Sends the arm to the suggested view and captures there until `n` captures were accepted
-    /// (the checks' messages go into the failure when they are not).
-    async fn capture_views(&mut self, n: usize) {
-        let (mut accepted, mut tries) = (0, 0);
-        let mut messages = Vec::new();
-        while accepted < n {
-            tries += 1;
-            assert!(
-                tries <= 3 * n,
-                "{n} captures were not accepted in {} tries: {messages:#?}",
-                3 * n
-            );
-            self.send("go_to_suggestion").await;
-            let moved = self.next("check").await;
-            messages.push(moved["message"].as_str().unwrap_or_default().to_string());
-            assert_eq!(moved["ok"], true, "the move to the suggestion: {moved}");
-            self.send("capture").await;
-            let check = self.next("check").await;
-            messages.push(check["message"].as_str().unwrap_or_default().to_string());
-            if check["ok"] == true {
-                accepted += 1;
-            }
+/// Sends the arm to the suggested view and captures there until `n` captures were accepted
+/// (the checks' messages go into the failure when they are not).
+async fn capture_views(page: &mut Page, n: usize) {
+    let (mut accepted, mut tries) = (0, 0);
+    let mut messages = Vec::new();
+    while accepted < n {
+        tries += 1;
+        assert!(
+            tries <= 3 * n,
+            "{n} captures were not accepted in {} tries: {messages:#?}",
+            3 * n
+        );
+        page.send("go_to_suggestion").await;
+        let moved = page.next("check").await;
+        messages.push(moved["message"].as_str().unwrap_or_default().to_string());
+        assert_eq!(moved["ok"], true, "the move to the suggestion: {moved}");
+        page.send("capture").await;
+        let check = page.next("check").await;
+        messages.push(check["message"].as_str().unwrap_or_default().to_string());
+        if check["ok"] == true {
+            accepted += 1;
         }
     }
-}
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("a runtime")
 }
 
 /// The simulated cell with its 20 generated views as the candidates suggested, its board a
@@ -159,7 +103,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
     let url = live.url();
     rt.block_on(async {
         let mut page = Page::open(&url).await;
-        page.capture_views(4).await;
+        capture_views(&mut page, 4).await;
         // As a page does: STOP, and the page stays until the run has ended.
         page.send("stop").await;
         page.next("ended").await;
@@ -218,7 +162,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
                 captured.insert(pose["plan_index"].as_u64());
             }
         }
-        page.capture_views(6).await;
+        capture_views(&mut page, 6).await;
         page.send("finish").await;
         page.next("finished").await
     });

@@ -109,3 +109,66 @@ impl Drop for Live {
 /// A WebSocket client's connection to the console (tokio-tungstenite).
 pub type Socket =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// The console's page, as a WebSocket client (no browser): sends commands, waits for events.
+pub struct Page {
+    ws: Socket,
+}
+
+impl Page {
+    /// Connects to the console at `url` (the printed URL, with its secret).
+    pub async fn open(url: &str) -> Page {
+        let (ws, _) = tokio_tungstenite::connect_async(super::console_socket(url))
+            .await
+            .expect("the console accepts a WebSocket");
+        Page { ws }
+    }
+
+    /// Sends `{"cmd": cmd}`.
+    pub async fn send(&mut self, cmd: &str) {
+        self.send_json(serde_json::json!({ "cmd": cmd })).await;
+    }
+
+    /// Sends a command with its fields (`{"cmd": "freedrive", "on": true}`).
+    pub async fn send_json(&mut self, command: serde_json::Value) {
+        use futures_util::SinkExt;
+        self.ws
+            .send(tokio_tungstenite::tungstenite::Message::Text(
+                command.to_string().into(),
+            ))
+            .await
+            .expect("sends");
+    }
+
+    /// The next event of `kind` (JSON `type`), skipping the rest; within [`STEP`].
+    pub async fn next(&mut self, kind: &str) -> serde_json::Value {
+        use futures_util::StreamExt;
+        use tokio_tungstenite::tungstenite::Message;
+        let wait = async {
+            loop {
+                match self.ws.next().await {
+                    Some(Ok(Message::Text(text))) => {
+                        let event: serde_json::Value =
+                            serde_json::from_str(&text).expect("events are JSON");
+                        if event["type"] == kind {
+                            return event;
+                        }
+                    }
+                    Some(Ok(_)) => {}
+                    other => panic!("the console closed while waiting for {kind}: {other:?}"),
+                }
+            }
+        };
+        tokio::time::timeout(STEP, wait)
+            .await
+            .unwrap_or_else(|_| panic!("no {kind} event within {STEP:?}"))
+    }
+}
+
+/// A runtime for a test's page.
+pub fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a runtime")
+}

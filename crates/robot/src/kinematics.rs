@@ -46,6 +46,17 @@ pub struct UrModel {
     pub joint_limits: [(f64, f64); 6],
 }
 
+/// The first joint of `joints` outside its range in `limits` (`[(min, max)]`, rad): its 0-based
+/// index and value; a non-finite value counts as outside. For any six-joint arm, with or without
+/// a model.
+pub fn outside_ranges(limits: &[(f64, f64); 6], joints: &Joints) -> Option<(usize, f64)> {
+    joints
+        .iter()
+        .zip(limits.iter())
+        .position(|(q, (lo, hi))| !(q.is_finite() && *q >= *lo && *q <= *hi))
+        .map(|i| (i, joints[i]))
+}
+
 /// The joint names, base to wrist 3, as messages and the README use them.
 pub const JOINT_NAMES: [&str; 6] = ["base", "shoulder", "elbow", "wrist 1", "wrist 2", "wrist 3"];
 
@@ -160,11 +171,7 @@ impl UrModel {
     /// The first joint of `joints` outside its limit (0-based index and its value, rad), if any;
     /// a non-finite value counts as outside.
     pub fn outside_limits(&self, joints: &Joints) -> Option<(usize, f64)> {
-        joints
-            .iter()
-            .zip(self.joint_limits.iter())
-            .position(|(q, (lo, hi))| !(q.is_finite() && *q >= *lo && *q <= *hi))
-            .map(|i| (i, joints[i]))
+        outside_ranges(&self.joint_limits, joints)
     }
 
     /// This model with the arm's own joint limits (whatever a cell narrowed them to).

@@ -209,6 +209,10 @@ pub enum RobotError {
     /// The interrupt flag was set during the move: the arm was stopped where it was.
     #[error("the move was stopped on request; the arm decelerated and stands where it stopped")]
     Interrupted,
+    /// This backend cannot do what was asked (switch freedrive over ROS 2, say); the message
+    /// says what to do instead. Nothing was changed on the arm.
+    #[error("{0}")]
+    NotAvailable(String),
     /// Anything else the backend reports.
     #[error("robot backend error")]
     Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
@@ -241,9 +245,9 @@ pub trait Robot: Send {
     fn status(&mut self) -> Result<RobotStatus, RobotError>;
     /// Freedrive (UR teach mode) on or off: while on, a person can move the arm by hand, and
     /// the arm holds where it is let go; off, it holds its position under control again. Backends
-    /// without it say so.
+    /// that cannot switch it return [`RobotError::NotAvailable`] saying how to hand-guide instead.
     fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
-        Err(RobotError::Backend(
+        Err(RobotError::NotAvailable(
             "freedrive is not available with this robot backend (only a real UR arm has it)".into(),
         ))
     }

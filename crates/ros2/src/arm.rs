@@ -75,6 +75,9 @@ pub struct ArmOptions {
     pub kinematics: Option<UrModel>,
 }
 
+/// How to hand-guide an arm under a ROS 2 driver, since handeye cannot switch its freedrive.
+pub const HAND_GUIDING: &str = "handeye does not switch freedrive over ROS 2: hand-guide the arm with its own means (a UR: hold the freedrive button on the back of the teach pendant, or Freedrive on the pendant's Move tab; another arm: its hand-guiding or teach mode), let go where the board is in view, then capture: the capture waits for /joint_states to show the arm still and takes a frame stamped after that";
+
 /// A joint sample older than this is stale: the driver is gone or the graph split.
 const STALE: Duration = Duration::from_secs(1);
 
@@ -469,9 +472,10 @@ impl Robot for Ros2Arm {
     }
 
     fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
-        Err(RobotError::Backend(
-            "freedrive is not switched over ROS 2: use the teach pendant's freedrive button (or the arm's own hand-guiding mode), then capture where the arm stands".into(),
-        ))
+        // ROS 2 has no standard service for it (the UR driver's freedrive controller is a
+        // controller switch plus a keep-alive topic of its own): the person switches it on the
+        // arm, and capture reads where the arm stands whatever moved it.
+        Err(RobotError::NotAvailable(HAND_GUIDING.into()))
     }
 
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {

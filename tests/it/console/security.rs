@@ -2,6 +2,7 @@
 //! connection and message limits).
 
 use super::*;
+use util::live::runtime;
 
 fn url_parts(url: &str) -> (String, String) {
     let rest = url.strip_prefix("http://").expect("an http URL");
@@ -71,13 +72,6 @@ const COMMANDS: [&str; 8] = [
     r#"{"cmd":"go_to_suggestion"}"#,
     r#"{"cmd":"finish"}"#,
 ];
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap()
-}
 
 /// The events a page gets until the console closes (the history first).
 async fn events_until_closed(socket: &mut util::live::Socket) -> Vec<serde_json::Value> {

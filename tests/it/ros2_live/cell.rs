@@ -3,9 +3,9 @@
 //! (Ctrl-C) cancels the goal the peer runs; an aborted goal, a dead peer and a frame missing
 //! from the TF tree are clear errors that keep the samples, and `--resume` completes.
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, ChildStdin, Command, Output, Stdio};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -39,7 +39,7 @@ fn render(name: &str, config: &Path) -> PathBuf {
 }
 
 /// The eye-in-hand views (configs/ros2-sim-cell-views.yaml).
-fn views() -> PathBuf {
+pub(super) fn views() -> PathBuf {
     static VIEWS: OnceLock<PathBuf> = OnceLock::new();
     VIEWS
         .get_or_init(|| {
@@ -51,9 +51,31 @@ fn views() -> PathBuf {
         .clone()
 }
 
+/// The accepted records of `session`: plan index, `T_base_flange` and the manifest plan's joints
+/// (degrees), in plan order.
+pub(super) fn captures(session: &Path) -> Vec<(usize, handeye::geometry::Pose, [f64; 6])> {
+    let folder = handeye::session::SessionFolder::open(session).unwrap();
+    let plan = folder.read_manifest().unwrap().plan;
+    let mut visits = folder.read_visits().unwrap();
+    visits.retain(|v| v.rejected.is_none() && v.camera_from_target.is_some());
+    visits.sort_by_key(|v| v.plan_index);
+    visits
+        .iter()
+        .map(|v| {
+            (
+                v.plan_index,
+                v.base_from_flange,
+                plan[v.plan_index].joints_deg,
+            )
+        })
+        .collect()
+}
+
 /// The peer process, its stdout events collected; killed when dropped.
 pub(super) struct Peer {
     child: Child,
+    /// Its commands (`guide K`: hand-guide the arm to plan pose K).
+    stdin: ChildStdin,
     events: Arc<Mutex<Vec<serde_json::Value>>>,
 }
 
@@ -62,13 +84,14 @@ impl Peer {
         Self::serving(python, domain, &views(), faults)
     }
 
-    fn serving(python: &PathBuf, domain: u16, views: &Path, faults: &[&str]) -> Peer {
+    pub(super) fn serving(python: &PathBuf, domain: u16, views: &Path, faults: &[&str]) -> Peer {
         let mut child = peer(python, domain)
             .arg("sim-cell")
             .arg(views)
             .arg("--camera-info")
             .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
             .args(faults)
+            .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -83,12 +106,37 @@ impl Peer {
                 }
             }
         });
-        let peer = Peer { child, events };
+        let stdin = child.stdin.take().unwrap();
+        let peer = Peer {
+            child,
+            stdin,
+            events,
+        };
         peer.wait_for("ready", Duration::from_secs(60));
         peer
     }
 
-    fn events(&self, kind: &str) -> Vec<serde_json::Value> {
+    /// Hand-guides the arm to plan pose `k` (no trajectory goal), as a person would.
+    pub(super) fn guide(&mut self, k: usize) {
+        writeln!(self.stdin, "guide {k}").expect("the peer reads its commands");
+        self.stdin.flush().unwrap();
+    }
+
+    /// `goals` goals, each within the configured 60 °/s, every pose served with its rendered
+    /// view; the goals.
+    pub(super) fn assert_served(&self, goals: usize) -> Vec<serde_json::Value> {
+        let all = self.events("goal");
+        assert_eq!(all.len(), goals, "{all:?}");
+        for g in &all {
+            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
+            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
+        }
+        let no_view = self.events("no_view");
+        assert!(no_view.is_empty(), "{no_view:?}");
+        all
+    }
+
+    pub(super) fn events(&self, kind: &str) -> Vec<serde_json::Value> {
         self.events
             .lock()
             .unwrap()
@@ -98,10 +146,20 @@ impl Peer {
             .collect()
     }
 
-    fn wait_for(&self, kind: &str, limit: Duration) -> serde_json::Value {
+    pub(super) fn wait_for(&self, kind: &str, limit: Duration) -> serde_json::Value {
+        self.wait_for_one(kind, limit, |_| true)
+    }
+
+    /// The newest event of `kind` that `which` picks, waiting up to `limit`.
+    pub(super) fn wait_for_one(
+        &self,
+        kind: &str,
+        limit: Duration,
+        which: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
         let end = Instant::now() + limit;
         loop {
-            if let Some(e) = self.events(kind).pop() {
+            if let Some(e) = self.events(kind).into_iter().rfind(|e| which(e)) {
                 return e;
             }
             assert!(
@@ -121,14 +179,14 @@ impl Drop for Peer {
 }
 
 /// configs/ros2-sim-cell.yaml on `domain`, written into `dir`.
-fn cell(dir: &Path, domain: u16, edits: &[(&str, &str)]) -> PathBuf {
+pub(super) fn cell(dir: &Path, domain: u16, edits: &[(&str, &str)]) -> PathBuf {
     let mut all = vec![("domain_id: 42", format!("domain_id: {domain}"))];
     all.extend(edits.iter().map(|(a, b)| (*a, b.to_string())));
     let edits: Vec<(&str, &str)> = all.iter().map(|(a, b)| (*a, b.as_str())).collect();
     config_variant(dir, "ros2-sim-cell.yaml", "ros2-cell.yaml", &edits)
 }
 
-fn run(args: &[&str]) -> Output {
+pub(super) fn run(args: &[&str]) -> Output {
     handeye()
         .args(args)
         .env("HANDEYE_LOG", "warn,rustdds=off,handeye_ros2::latency=info")
@@ -137,7 +195,7 @@ fn run(args: &[&str]) -> Output {
 }
 
 /// `handeye run --yes --config CONFIG -o OUT` (as [`run`]).
-fn run_cell(config: &Path, out: &Path) -> Output {
+pub(super) fn run_cell(config: &Path, out: &Path) -> Output {
     run(&[
         "run",
         "--yes",
@@ -148,7 +206,7 @@ fn run_cell(config: &Path, out: &Path) -> Output {
     ])
 }
 
-fn text(out: &Output) -> String {
+pub(super) fn text(out: &Output) -> String {
     format!(
         "{}\n{}",
         String::from_utf8_lossy(&out.stdout),
@@ -158,7 +216,7 @@ fn text(out: &Output) -> String {
 
 /// The result in `session` against configs/ros2-sim-cell.yaml's `simulation:` truth, within
 /// 0.5 mm and 0.05°.
-fn assert_truth(session: &Path) {
+pub(super) fn assert_truth(session: &Path) {
     let mounts = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
     let camera = pose_from_rotvec(
         Vector3::new(0.0312, -0.0694, 0.0447),
@@ -178,7 +236,7 @@ fn assert_truth(session: &Path) {
     }
 }
 
-fn poses_kept(session: &Path) -> usize {
+pub(super) fn poses_kept(session: &Path) -> usize {
     std::fs::read_dir(session.join("poses")).map_or(0, |d| d.count())
 }
 
@@ -194,18 +252,7 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
         let log = text(&out);
         assert!(out.status.success(), "{log}");
         assert_truth(&out_dir);
-        // Every goal within the configured 60 °/s, every pose served with its rendered view.
-        let goals = peer.events("goal");
-        assert_eq!(goals.len(), 12, "{goals:?}");
-        for g in &goals {
-            let speed = g["max_joint_speed_rad_s"].as_f64().unwrap();
-            assert!(speed <= 60f64.to_radians() + 1e-9, "{g}");
-        }
-        assert!(
-            peer.events("no_view").is_empty(),
-            "{:?}",
-            peer.events("no_view")
-        );
+        peer.assert_served(12);
         // The measured time from the arm's rest to the captured frame's stamp.
         let after: Vec<f64> = log
             .lines()
@@ -261,6 +308,16 @@ fn a_peer_dying_mid_move_is_named_and_resume_completes() {
     });
 }
 
+/// Waits until the arm is 200 ms into the first goal after the second that takes at least a
+/// second; its number.
+pub(super) fn mid_long_goal(peer: &Peer) -> u64 {
+    let long = peer.wait_for_one("goal", Duration::from_secs(120), |g| {
+        g["n"].as_u64().unwrap() >= 2 && g["duration_s"].as_f64().unwrap() >= 1.0
+    });
+    std::thread::sleep(Duration::from_millis(200));
+    long["n"].as_u64().unwrap()
+}
+
 #[test]
 fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
     let Some(python) = python() else { return };
@@ -282,19 +339,7 @@ fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        // Mid-move of the first goal after the second that takes at least a second.
-        let end = Instant::now() + Duration::from_secs(120);
-        let n = loop {
-            let long = peer.events("goal").into_iter().find(|g| {
-                g["n"].as_u64().unwrap() >= 2 && g["duration_s"].as_f64().unwrap() >= 1.0
-            });
-            if let Some(g) = long {
-                break g["n"].as_u64().unwrap();
-            }
-            assert!(Instant::now() < end, "no goal of a second or more");
-            std::thread::sleep(Duration::from_millis(10));
-        };
-        std::thread::sleep(Duration::from_millis(200));
+        let n = mid_long_goal(&peer);
         // Ctrl-C: SIGINT to the child's own pid.
         let status = Command::new("kill")
             .args(["-INT", &child.id().to_string()])

@@ -8,8 +8,10 @@
 //! `pillow` go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
 
 mod cell;
+mod console;
 mod idle;
 mod publish;
+mod taught;
 
 use std::path::PathBuf;
 use std::process::Command;

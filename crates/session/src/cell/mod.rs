@@ -123,8 +123,11 @@ pub struct PreparedCell {
     pub camera_model: CameraModel,
     /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
     pub intrinsics_known: bool,
-    /// The arm's kinematics.
-    pub arm: UrModel,
+    /// The arm's kinematics (a UR model, its joint limits the cell's); `None` for a ROS 2 arm
+    /// handeye has no model of (`robot.model: none`), which replays taught plans only.
+    pub arm: Option<UrModel>,
+    /// The cell's joint ranges, `(min, max)` rad (`robot.joint_ranges_deg` or the defaults).
+    pub joint_limits: [(f64, f64); 6],
     /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
     pub start_joints: Joints,
     /// The plan.
@@ -167,15 +170,19 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
         })?,
         None => recorded::provisional_model(&config)?,
     };
-    let mut arm = UrModel::by_name(config.robot.model()).ok_or_else(|| {
-        CellError::Backend(format!(
-            "robot.model: no kinematics for `{}`",
-            config.robot.model()
-        ))
-    })?;
     // The cell's joint ranges (robot.joint_ranges_deg, or the defaults) bind the IK choice, the
     // plan check, every move check and the backends.
-    arm.joint_limits = config.robot.joint_limits(config.setup);
+    let joint_limits = config.robot.joint_limits(config.setup);
+    let arm = match config.robot.model() {
+        Some(name) => {
+            let mut arm = UrModel::by_name(name).ok_or_else(|| {
+                CellError::Backend(format!("robot.model: no kinematics for `{name}`"))
+            })?;
+            arm.joint_limits = joint_limits;
+            Some(arm)
+        }
+        None => None,
+    };
     let start_joints = match &config.robot {
         RobotConfig::Sim {
             start_joints_deg, ..
@@ -192,6 +199,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             camera_model,
             intrinsics_known,
             arm,
+            joint_limits,
             start_joints,
             plan,
             report,
@@ -207,6 +215,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
         camera_model,
         intrinsics_known,
         arm,
+        joint_limits,
         start_joints,
         plan: Plan {
             waypoints: Vec::new(),
@@ -221,6 +230,13 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     };
     prepared.plan = match (scripted, &prepared.config.plan.generate) {
         (Some(plan), _) => plan,
+        (None, Some(_)) if prepared.arm.is_none() => {
+            return Err(no_kinematics(
+                &prepared.config,
+                "plan.generate",
+                "generated views need the arm's kinematics to become joints: give `plan.file`, a taught plan (`taught-plan.yaml` of a hand-guided session), or plan by hand (`handeye console`)",
+            ))
+        }
         (None, Some(spec)) => Plan {
             waypoints: prepared
                 .generate_views(spec)
@@ -228,21 +244,63 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
                 .map(Waypoint::LookAt)
                 .collect(),
         },
+        // Hand-guided with nothing to suggest: the person chooses every view.
+        (None, None) if prepared.config.plan.manual => Plan {
+            waypoints: Vec::new(),
+        },
         (None, None) => {
             return Err(CellError::Backend(
-                "plan: the config gives neither a plan file nor `generate:`".into(),
+                "plan: the config gives neither a plan file nor `generate:` (nor `manual: true`, hand-guided capture with no suggested views)".into(),
             ))
         }
     };
+    if prepared.arm.is_none() {
+        refuse_untaught_waypoints(&prepared)?;
+    }
     prepared.report = prepared.check();
     Ok(prepared)
+}
+
+/// A config error for an arm without kinematics (`robot.model: none`): the key that needs them.
+fn no_kinematics(config: &CellConfig, key: &str, problem: &str) -> CellError {
+    CellError::Config(Box::new(ConfigError::Inconsistent {
+        file: config.file.clone(),
+        key: key.into(),
+        problem: format!("robot.model is none (no kinematics handeye knows): {problem}"),
+    }))
+}
+
+/// Refuses, before anything opens, a plan an arm without kinematics cannot run: each waypoint
+/// must be taught (joints with the flange pose the arm reported there). Names the plan file and
+/// the waypoint's missing key.
+fn refuse_untaught_waypoints(cell: &PreparedCell) -> Result<(), CellError> {
+    let Some(file) = &cell.config.plan.file else {
+        return Ok(());
+    };
+    let untaught = cell
+        .plan
+        .waypoints
+        .iter()
+        .enumerate()
+        .find_map(|(i, w)| w.needs_kinematics().map(|(key, why)| (i, key, why)));
+    match untaught {
+        Some((i, key, why)) => Err(CellError::Plan(Box::new(PlanError::Waypoint {
+            file: file.clone(),
+            path: format!("waypoints[{i}].{key}"),
+            problem: format!(
+                "robot.model is none (no kinematics handeye knows for this arm): {why}"
+            ),
+        }))),
+        None => Ok(()),
+    }
 }
 
 impl PreparedCell {
     /// What a plan is checked against: this cell from the arm's current start joints.
     fn check_context(&self) -> CheckContext<'_> {
         CheckContext {
-            arm: &self.arm,
+            arm: self.arm.as_ref(),
+            joint_limits: &self.joint_limits,
             start_joints: self.start_joints,
             cell: &self.config.nominal,
             workspace: &self.config.workspace,
@@ -282,6 +340,18 @@ impl PreparedCell {
     /// The plan check of the order that will run (the order of least move time unless
     /// `plan.reorder` is false).
     fn check(&self) -> PlanReport {
+        if self.plan.waypoints.is_empty() {
+            // Hand-guided with no plan (`plan.manual` alone): nothing to check or suggest.
+            return PlanReport {
+                poses: Vec::new(),
+                plan_problems: Vec::new(),
+                notes: vec![
+                    "plan.manual with no plan: no views to suggest; every view is chosen by hand on the console".into(),
+                ],
+                intrinsics: None,
+                given_order_move_time_s: None,
+            };
+        }
         let mut report =
             check_plan_ordered(&self.plan, &self.check_context(), self.config.plan.reorder);
         if !self.intrinsics_known {
@@ -409,6 +479,17 @@ impl PreparedCell {
         })
     }
 
+    /// The arm's kinematics, for what cannot do without them (the simulated arm).
+    pub fn kinematics(&self) -> Result<UrModel, CellError> {
+        self.arm.clone().ok_or_else(|| {
+            no_kinematics(
+                &self.config,
+                "robot.model",
+                "this backend needs a UR model (`ur5e`, `ur10e`, ...)",
+            )
+        })
+    }
+
     /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)
     /// arm renders from the pose the arm reports.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
@@ -417,7 +498,7 @@ impl PreparedCell {
                 let truth = self.sim_truth()?;
                 let (lens, board) = self.sim_world()?;
                 let (robot, camera) =
-                    sim::open(&self.config, truth, self.arm.clone(), self.start_joints, lens, board)?;
+                    sim::open(&self.config, truth, self.kinematics()?, self.start_joints, lens, board)?;
                 // The camera reports the cell's intrinsics, rendering with its own lens.
                 let camera = camera.reporting(self.camera_model);
                 Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
@@ -469,7 +550,7 @@ impl PreparedCell {
         let mut ur = handeye_robot::ur::UrRobotConfig::new(host.clone());
         ur.connect_timeout = std::time::Duration::from_secs_f64(*connect_timeout_s);
         ur.workspace = Some(self.config.workspace);
-        ur.model = Some(self.arm.clone());
+        ur.model = self.arm.clone();
         let robot =
             handeye_robot::ur::UrRobot::connect(ur).map_err(|e| CellError::Robot(Box::new(e)))?;
         Ok(Shared::new_dyn(robot))
@@ -506,6 +587,7 @@ impl PreparedCell {
             move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
                 MoveCheck {
                     arm: self.arm.clone(),
+                    joint_limits: self.joint_limits,
                     workspace: self.config.workspace,
                 }
             }),

@@ -10,7 +10,7 @@ use crate::config::CellConfig;
 
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`).
 #[cfg(not(feature = "ros2"))]
-pub fn open(_: &CellConfig, _: CameraModel, _: UrModel) -> Result<Hardware, CellError> {
+pub fn open(_: &CellConfig, _: CameraModel, _: Option<UrModel>) -> Result<Hardware, CellError> {
     Err(CellError::Backend(
         "backend `ros2` needs a handeye build with the `ros2` feature: `cargo build --release --features ros2` (no ROS installation needed)".into(),
     ))
@@ -19,7 +19,11 @@ pub fn open(_: &CellConfig, _: CameraModel, _: UrModel) -> Result<Hardware, Cell
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`): the arm first (its
 /// joint states and flange pose must be heard before anything else), then the camera.
 #[cfg(feature = "ros2")]
-pub fn open(config: &CellConfig, model: CameraModel, arm: UrModel) -> Result<Hardware, CellError> {
+pub fn open(
+    config: &CellConfig,
+    model: CameraModel,
+    arm: Option<UrModel>,
+) -> Result<Hardware, CellError> {
     use std::time::Duration;
 
     use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
@@ -56,7 +60,7 @@ pub fn open(config: &CellConfig, model: CameraModel, arm: UrModel) -> Result<Har
                 Rmw::Fastrtps => Framing::FastRtps,
                 Rmw::Cyclonedds => Framing::Cyclone,
             },
-            kinematics: Some(arm),
+            kinematics: arm,
         },
     )
     .map_err(|e| CellError::Robot(Box::new(e)))?;

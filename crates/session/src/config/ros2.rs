@@ -62,9 +62,15 @@ fn default_connect_timeout_s() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Ros2Robot {
-    /// The arm model whose kinematics plan the poses (a UR model; see `ArmModel`).
-    #[serde(default)]
-    pub model: ArmModel,
+    /// The arm model whose kinematics plan the poses (a UR model; see `ArmModel`); `none` (or
+    /// absent) for an arm handeye has no model of: it replays taught plans (joints with the
+    /// flange pose taught there) and is calibrated hand-guided.
+    #[serde(
+        default,
+        deserialize_with = "model_or_none",
+        serialize_with = "write_model_or_none"
+    )]
+    pub model: Option<ArmModel>,
     /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_ranges_deg: Option<[[f64; 2]; 6]>,
@@ -98,6 +104,27 @@ pub struct Ros2Robot {
     /// 1-sigma rotation error of the reported flange pose, degrees (default 0.003).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub repeatability_deg: Option<f64>,
+}
+
+/// `model: ur10e` or `model: none`.
+fn model_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<ArmModel>, D::Error> {
+    use serde::de::IntoDeserializer;
+    let name = String::deserialize(d)?;
+    if name == "none" {
+        return Ok(None);
+    }
+    ArmModel::deserialize(name.as_str().into_deserializer())
+        .map(Some)
+        .map_err(|e: serde::de::value::Error| {
+            serde::de::Error::custom(format!("{e}, or `none` for an arm with no UR model"))
+        })
+}
+
+fn write_model_or_none<S: serde::Serializer>(
+    model: &Option<ArmModel>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_str(model.map_or("none", ArmModel::name))
 }
 
 fn default_base_frame() -> String {
@@ -223,6 +250,16 @@ impl Ros2Robot {
             .or_else(|| name_problem("robot.tf_static_topic", &self.tf_static_topic))
             .or_else(|| name_problem("robot.action", &self.action))
             .or_else(|| {
+                // A UR model brings its ranges; an arm of no known model must name its own, so
+                // no taught joint is checked against a UR's.
+                (self.model.is_none() && self.joint_ranges_deg.is_none()).then(|| {
+                    (
+                        "robot.joint_ranges_deg".to_string(),
+                        "missing: with `model: none` handeye knows no joint ranges of this arm; expected six `[min, max]` in degrees, base to wrist, from the arm's datasheet (narrower where cables or the cell need it)".to_string(),
+                    )
+                })
+            })
+            .or_else(|| {
                 let mut seen = std::collections::BTreeSet::new();
                 self.joint_names.iter().enumerate().find_map(|(i, n)| {
                     (n.trim().is_empty() || !seen.insert(n)).then(|| {
@@ -283,6 +320,18 @@ mod tests {
         );
         assert_eq!(r.graph.rmw, Rmw::Fastrtps);
         assert!(r.problem().is_none());
+
+        // No model: `none` or absent; it must name its joint ranges.
+        for text in ["backend: ros2\nmodel: none\n", "backend: ros2\n"] {
+            let RobotConfig::Ros2(r) = serde_yaml_ng::from_str(text).unwrap() else {
+                panic!("not ros2")
+            };
+            assert_eq!(r.model, None);
+            assert_eq!(r.problem().unwrap().0, "robot.joint_ranges_deg");
+        }
+        let typo = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nmodel: ur6e\n");
+        let typo = typo.unwrap_err().to_string();
+        assert!(typo.contains("ur6e") && typo.contains("`none`"), "{typo}");
 
         let unknown = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nhost: 1.2.3.4\n");
         assert!(unknown.unwrap_err().to_string().contains("host"));

@@ -284,13 +284,14 @@ impl RobotConfig {
             .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
     }
 
-    /// The arm model name, for kinematics checks.
-    pub fn model(&self) -> &'static str {
+    /// The arm model name, for kinematics checks; `None` for a ROS 2 arm of no model handeye
+    /// knows (`model: none`).
+    pub fn model(&self) -> Option<&'static str> {
         match self {
-            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => model.name(),
-            RobotConfig::Ros2(r) => r.model.name(),
+            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => Some(model.name()),
+            RobotConfig::Ros2(r) => r.model.map(ArmModel::name),
             // A recorded arm is never planned with kinematics; any valid name will do.
-            RobotConfig::Recorded { .. } => ArmModel::Ur5e.name(),
+            RobotConfig::Recorded { .. } => Some(ArmModel::Ur5e.name()),
         }
     }
 }

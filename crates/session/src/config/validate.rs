@@ -377,11 +377,18 @@ impl Validator<'_> {
             RobotConfig::Ros2(r) => &r.joint_ranges_deg,
             RobotConfig::Recorded { .. } => &None,
         };
+        // An arm of no known model (a ROS 2 arm with `model: none`) has its own limits: any
+        // range within a full turn each way is taken as the datasheet's.
+        let no_model = robot.model().is_none();
         if let Some(ranges) = given {
             for (i, ([lo, hi], [arm_lo, arm_hi])) in
                 ranges.iter().zip(ARM_JOINT_RANGES_DEG).enumerate()
             {
-                let arm = Range::closed(arm_lo, arm_hi, "°");
+                let arm = if no_model {
+                    Range::closed(-360.0, 360.0, "°")
+                } else {
+                    Range::closed(arm_lo, arm_hi, "°")
+                };
                 self.number(&format!("robot.joint_ranges_deg[{i}][0]"), *lo, arm)?;
                 self.number(&format!("robot.joint_ranges_deg[{i}][1]"), *hi, arm)?;
                 if lo >= hi {
@@ -389,7 +396,11 @@ impl Validator<'_> {
                         &format!("robot.joint_ranges_deg[{i}]"),
                         format!(
                             "{} range [{}, {}] °: expected min < max",
-                            JOINT_NAMES[i],
+                            if no_model {
+                                "the joint's"
+                            } else {
+                                JOINT_NAMES[i]
+                            },
                             readable(*lo),
                             readable(*hi)
                         ),
@@ -581,6 +592,8 @@ impl Validator<'_> {
                 ))
             }
             (Some(_), None) => {}
+            // Hand-guided with no views to suggest (an arm of no known model, say).
+            (None, None) if plan.manual => {}
             (None, Some(spec)) => {
                 // Views at hundreds of metres: the distances were written in mm.
                 let [near, far] = spec.distance;
@@ -608,7 +621,7 @@ impl Validator<'_> {
             _ => {
                 return Err(self.inconsistent(
                     "plan",
-                    "expected exactly one of `file` (a scripted plan) and `generate`".into(),
+                    "expected exactly one of `file` (a scripted plan) and `generate` (or neither with `manual: true`: hand-guided, no suggested views)".into(),
                 ))
             }
         }

@@ -11,7 +11,7 @@ use nalgebra::Point3;
 
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
-use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
+use handeye_robot::kinematics::{outside_ranges, UrModel, JOINT_NAMES};
 use handeye_robot::{Joints, MotionLimits, WorkspaceBox};
 use handeye_vision::Target;
 
@@ -23,8 +23,11 @@ const PATH_SAMPLES: usize = 16;
 
 /// What the checker needs to know about the cell.
 pub struct CheckContext<'a> {
-    /// The arm's kinematics and joint limits.
-    pub arm: &'a UrModel,
+    /// The arm's kinematics (a UR model); `None` for an arm handeye has no model of, whose plan
+    /// is taught: its flange poses are the taught ones and its paths are not checked.
+    pub arm: Option<&'a UrModel>,
+    /// The cell's joint ranges, `(min, max)` rad (`robot.joint_ranges_deg`).
+    pub joint_limits: &'a [(f64, f64); 6],
     /// Where the arm is before the first move.
     pub start_joints: Joints,
     /// Nominal cell transforms.
@@ -135,18 +138,36 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     let mut views = Vec::with_capacity(plan.waypoints.len());
     let mut view_pixels = Vec::with_capacity(plan.waypoints.len());
     for (index, waypoint) in plan.waypoints.iter().enumerate() {
-        let base_from_flange = waypoint.flange_pose(ctx.cell, &centre, |q| ctx.arm.forward(q));
+        let forward = |q: &Joints| ctx.arm.map(|arm| arm.forward(q));
+        let Some(base_from_flange) = waypoint.flange_pose(ctx.cell, &centre, forward) else {
+            // Joints without a taught pose on an arm without kinematics: nowhere to check.
+            let why = waypoint.needs_kinematics().map_or("", |(_, why)| why);
+            poses.push(PoseCheck {
+                index,
+                base_from_flange: Pose::identity(),
+                joints: None,
+                distance_m: f64::NAN,
+                image_margin_px: f64::NEG_INFINITY,
+                move_time_s: 0.0,
+                problems: vec![why.to_string()],
+            });
+            continue;
+        };
         let mut problems = Vec::new();
-        let joints = match waypoint {
-            Waypoint::Joints(q) if ctx.arm.within_limits(q) => Some(*q),
-            Waypoint::Joints(_) => None,
-            _ => ctx.arm.inverse_nearest(&base_from_flange, &previous),
+        let joints = match (waypoint.joints(), ctx.arm) {
+            (Some(q), _) => outside_ranges(ctx.joint_limits, &q).is_none().then_some(q),
+            (None, Some(arm)) => arm.inverse_nearest(&base_from_flange, &previous),
+            (None, None) => None,
         };
         let mut move_time_s = 0.0;
         match joints {
-            None => problems.push(unreachable(ctx.arm, waypoint, &base_from_flange, &previous)),
+            None => problems.push(unreachable(ctx, waypoint, &base_from_flange, &previous)),
             Some(q) => {
-                if let Some(outside) = path_leaves_box(ctx.arm, &previous, &q, ctx.workspace) {
+                // Without kinematics the path between taught poses is unknown (a note says so).
+                let outside = ctx
+                    .arm
+                    .and_then(|arm| path_leaves_box(arm, &previous, &q, ctx.workspace));
+                if let Some(outside) = outside {
                     problems.push(outside);
                 }
                 move_time_s = ctx.limits.joint_move_time(&previous, &q);
@@ -201,7 +222,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         ctx.camera.width,
         ctx.camera.height,
     );
-    let notes = match coverage.problem() {
+    let mut notes = match coverage.problem() {
         Some(problem) => vec![format!(
             "{problem} (fine when the intrinsics are known; needed when the config has none)"
         )],
@@ -210,6 +231,9 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
             coverage.tilted_views, coverage.tilt_direction_spread_deg, coverage.coverage_percent
         )],
     };
+    if ctx.arm.is_none() {
+        notes.push(NO_KINEMATICS_NOTE.into());
+    }
     PlanReport {
         poses,
         plan_problems,
@@ -241,7 +265,8 @@ pub fn check_plan_ordered(plan: &Plan, ctx: &CheckContext, reorder: bool) -> Pla
         return given;
     };
     let mover = MoveCheck {
-        arm: ctx.arm.clone(),
+        arm: ctx.arm.cloned(),
+        joint_limits: *ctx.joint_limits,
         workspace: *ctx.workspace,
     };
     let order = super::order::order_for_travel(&ctx.start_joints, &joints, |a, b| {
@@ -295,34 +320,46 @@ fn distances_in_millimetres(plan: &Plan) -> Option<String> {
         })
 }
 
+/// What the plan check of an arm without kinematics (`robot.model: none`) cannot check.
+pub const NO_KINEMATICS_NOTE: &str = "robot.model: none: the taught flange poses are checked (workspace box, board in view, rotation spread), the joint paths between them are not (no kinematics): each move is a straight line in joint space between taught joints at the configured limits, so teach the poses in an order whose paths are clear";
+
 /// Why a waypoint has no joint solution: the joint that leaves its range and its value when the
 /// arm could reach the pose with its own limits (or the scripted joints break a range), else
-/// plain unreachability.
-fn unreachable(arm: &UrModel, waypoint: &Waypoint, pose: &Pose, previous: &Joints) -> String {
-    let nearest = match waypoint {
-        Waypoint::Joints(q) => Some(*q),
-        _ => arm.with_arm_limits().inverse_nearest(pose, previous),
+/// plain unreachability (or, without kinematics, why the waypoint needs them).
+fn unreachable(ctx: &CheckContext, waypoint: &Waypoint, pose: &Pose, previous: &Joints) -> String {
+    let nearest = match (waypoint.joints(), ctx.arm) {
+        (Some(q), _) => Some(q),
+        (None, Some(arm)) => arm.with_arm_limits().inverse_nearest(pose, previous),
+        (None, None) => {
+            let why = waypoint.needs_kinematics().map_or("", |(_, why)| why);
+            return why.to_string();
+        }
     };
-    let Some((i, value)) = nearest.and_then(|q| arm.outside_limits(&q)) else {
+    let Some((i, value)) = nearest.and_then(|q| outside_ranges(ctx.joint_limits, &q)) else {
         return "unreachable: no inverse-kinematics solution inside the joint limits".into();
     };
-    let how = match waypoint {
-        Waypoint::Joints(_) => "its joints put",
-        _ => "reachable only with",
+    let how = match waypoint.joints() {
+        Some(_) => "its joints put",
+        None => "reachable only with",
     };
     format!(
         "outside the joint ranges: {how} {}",
-        joint_outside(arm, i, value)
+        joint_outside(ctx.joint_limits, ctx.arm.is_some(), i, value)
     )
 }
 
-/// `joint 2 (shoulder) at -190.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[1])`.
-fn joint_outside(arm: &UrModel, i: usize, value: f64) -> String {
-    let (lo, hi) = arm.joint_limits[i];
+/// `joint 2 (shoulder) at -190.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[1])`
+/// (the UR joint's name only for a UR model).
+fn joint_outside(limits: &[(f64, f64); 6], ur: bool, i: usize, value: f64) -> String {
+    let (lo, hi) = limits[i];
+    let name = if ur {
+        format!(" ({})", JOINT_NAMES[i])
+    } else {
+        String::new()
+    };
     format!(
-        "joint {} ({}) at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
+        "joint {}{name} at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
         i + 1,
-        JOINT_NAMES[i],
         value.to_degrees(),
         lo.to_degrees(),
         hi.to_degrees()
@@ -344,25 +381,37 @@ pub fn board_centre(board: &Target) -> Point3<f64> {
 /// and after a stop the arm may stand anywhere.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MoveCheck {
-    /// The arm's kinematics.
-    pub arm: UrModel,
+    /// The arm's kinematics; `None` for an arm handeye has no model of (its path is not known).
+    pub arm: Option<UrModel>,
+    /// The cell's joint ranges, `(min, max)` rad.
+    pub joint_limits: [(f64, f64); 6],
     /// The box the flange must stay in along the whole joint move.
     pub workspace: WorkspaceBox,
 }
 
 impl MoveCheck {
+    /// The check of a UR model's moves: its joint limits, its kinematics, `workspace`.
+    pub fn with_model(arm: UrModel, workspace: WorkspaceBox) -> MoveCheck {
+        MoveCheck {
+            joint_limits: arm.joint_limits,
+            arm: Some(arm),
+            workspace,
+        }
+    }
+
     /// Why the straight joint move `from` → `to` is not safe, if it is not: `to` outside the
     /// arm's joint ranges (the cell's `robot.joint_ranges_deg`), or the path leaving the box.
     /// `from` may lie outside the ranges (the arm stands where it was left): moving back in is
     /// allowed.
     pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
-        if let Some((i, value)) = self.arm.outside_limits(to) {
+        if let Some((i, value)) = outside_ranges(&self.joint_limits, to) {
             return Some(format!(
                 "the move puts {}",
-                joint_outside(&self.arm, i, value)
+                joint_outside(&self.joint_limits, self.arm.is_some(), i, value)
             ));
         }
-        path_leaves_box(&self.arm, from, to, &self.workspace)
+        let arm = self.arm.as_ref()?;
+        path_leaves_box(arm, from, to, &self.workspace)
     }
 
     /// The time of the joint move `from` → `to` at `limits` (s) when it is safe, `None` when

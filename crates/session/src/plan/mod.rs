@@ -37,6 +37,16 @@ pub enum Waypoint {
     FlangePose(Pose),
     /// A joint configuration, radians.
     Joints(Joints),
+    /// A taught pose: the joints a person guided the arm to (radians) and the flange pose
+    /// `T_base_flange` the arm reported there (TF on ROS 2). The arm moves to the joints; the
+    /// plan check uses the taught pose, so an arm with no kinematics handeye knows can replay
+    /// it. YAML: `joints_deg` and `T_base_flange` together.
+    Taught {
+        /// The joints, radians.
+        joints: Joints,
+        /// `T_base_flange` as the arm reported it at those joints.
+        base_from_flange: Pose,
+    },
     /// A view of the board.
     LookAt(LookAt),
 }
@@ -147,8 +157,8 @@ impl Plan {
         Ok(Plan { waypoints })
     }
 
-    /// Writes the plan as YAML (atomically).
-    pub fn save(&self, file: &Path) -> Result<(), PlanError> {
+    /// The plan as plan-file YAML ([`Plan::load`] reads it back).
+    pub fn to_yaml(&self) -> String {
         let raw = PlanFile {
             waypoints: self
                 .waypoints
@@ -156,7 +166,12 @@ impl Plan {
                 .map(WaypointYaml::from_waypoint)
                 .collect(),
         };
-        let text = serde_yaml_ng::to_string(&raw).expect("plan serialises");
+        serde_yaml_ng::to_string(&raw).expect("plan serialises")
+    }
+
+    /// Writes the plan as YAML (atomically).
+    pub fn save(&self, file: &Path) -> Result<(), PlanError> {
+        let text = self.to_yaml();
         handeye_core::atomic_file::write_atomic(file, text.as_bytes()).map_err(|source| {
             PlanError::Write {
                 file: file.to_path_buf(),
@@ -164,6 +179,31 @@ impl Plan {
             }
         })
     }
+}
+
+/// `joints_deg` as radians, or what is wrong with it (its key first).
+fn joints_from_degrees(joints: &[f64]) -> Result<Joints, String> {
+    if joints.len() != 6 {
+        return Err(format!(
+            "joints_deg: expected 6 joint angles in degrees, found {}",
+            joints.len()
+        ));
+    }
+    // Joints turn ±360° at most; anything else is a typo or radians mistaken for degrees.
+    if let Some((i, bad)) = joints
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
+    {
+        return Err(format!(
+            "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
+        ));
+    }
+    let mut q = [0.0; 6];
+    for (dst, src) in q.iter_mut().zip(joints) {
+        *dst = src.to_radians();
+    }
+    Ok(q)
 }
 
 impl WaypointYaml {
@@ -181,42 +221,38 @@ impl WaypointYaml {
         .iter()
         .filter(|g| **g)
         .count();
-        if given != 1 {
+        let taught = self.base_from_flange.is_some() && self.joints_deg.is_some();
+        if given != 1 && !(given == 2 && taught) {
             return Err(problem(format!(
-                "expected exactly one of `T_base_flange`, `joints_deg`, `look_at`; found {given}"
+                "expected exactly one of `T_base_flange`, `joints_deg`, `look_at` (or `joints_deg` with the `T_base_flange` taught there); found {given}"
             )));
         }
-        if let Some(pose) = &self.base_from_flange {
-            let pose = pose
-                .to_pose(&format!("{path}.T_base_flange"))
-                .map_err(|problem| PlanError::Pose {
-                    file: file.to_path_buf(),
-                    problem,
-                })?;
-            return Ok(Waypoint::FlangePose(pose));
-        }
-        if let Some(joints) = &self.joints_deg {
-            if joints.len() != 6 {
-                return Err(problem(format!(
-                    "joints_deg: expected 6 joint angles in degrees, found {}",
-                    joints.len()
-                )));
+        let base_from_flange = self
+            .base_from_flange
+            .as_ref()
+            .map(|pose| {
+                pose.to_pose(&format!("{path}.T_base_flange"))
+                    .map_err(|problem| PlanError::Pose {
+                        file: file.to_path_buf(),
+                        problem,
+                    })
+            })
+            .transpose()?;
+        let joints = self
+            .joints_deg
+            .as_deref()
+            .map(|joints| joints_from_degrees(joints).map_err(problem))
+            .transpose()?;
+        match (joints, base_from_flange) {
+            (Some(joints), Some(base_from_flange)) => {
+                return Ok(Waypoint::Taught {
+                    joints,
+                    base_from_flange,
+                })
             }
-            // UR joints turn ±360°; anything else is a typo or radians mistaken for degrees.
-            if let Some((i, bad)) = joints
-                .iter()
-                .enumerate()
-                .find(|(_, v)| !(v.is_finite() && v.abs() <= 360.0))
-            {
-                return Err(problem(format!(
-                    "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
-                )));
-            }
-            let mut q = [0.0; 6];
-            for (dst, src) in q.iter_mut().zip(joints) {
-                *dst = src.to_radians();
-            }
-            return Ok(Waypoint::Joints(q));
+            (Some(joints), None) => return Ok(Waypoint::Joints(joints)),
+            (None, Some(pose)) => return Ok(Waypoint::FlangePose(pose)),
+            (None, None) => {}
         }
         let Some(view) = self.look_at else {
             return Err(problem(
@@ -238,6 +274,14 @@ impl WaypointYaml {
                 joints_deg: Some(q.iter().map(|v| v.to_degrees()).collect()),
                 ..Default::default()
             },
+            Waypoint::Taught {
+                joints,
+                base_from_flange,
+            } => WaypointYaml {
+                base_from_flange: Some(PoseYaml::from_pose(base_from_flange)),
+                joints_deg: Some(joints.iter().map(|v| v.to_degrees()).collect()),
+                ..Default::default()
+            },
             Waypoint::LookAt(v) => WaypointYaml {
                 look_at: Some(*v),
                 ..Default::default()
@@ -248,19 +292,66 @@ impl WaypointYaml {
 
 impl Waypoint {
     /// The flange pose `T_base_flange` this waypoint asks for in `cell` (joint waypoints go
-    /// through forward kinematics, look-at views through the cell's nominal transforms).
+    /// through forward kinematics — `None` when `forward` has none —, look-at views through the
+    /// cell's nominal transforms, taught ones are where the arm reported it stood).
     pub fn flange_pose(
         &self,
         cell: &CellTransforms,
         board_centre: &Point3<f64>,
-        forward: impl Fn(&Joints) -> Pose,
-    ) -> Pose {
-        match self {
+        forward: impl Fn(&Joints) -> Option<Pose>,
+    ) -> Option<Pose> {
+        Some(match self {
             Waypoint::FlangePose(p) => *p,
-            Waypoint::Joints(q) => forward(q),
+            Waypoint::Taught {
+                base_from_flange, ..
+            } => *base_from_flange,
+            Waypoint::Joints(q) => forward(q)?,
             Waypoint::LookAt(view) => {
                 cell.base_from_flange_for_view(&view.target_from_camera(board_centre))
             }
+        })
+    }
+
+    /// The joints this waypoint names (joint and taught waypoints), radians.
+    pub fn joints(&self) -> Option<Joints> {
+        match self {
+            Waypoint::Joints(q) | Waypoint::Taught { joints: q, .. } => Some(*q),
+            Waypoint::FlangePose(_) | Waypoint::LookAt(_) => None,
+        }
+    }
+
+    /// What an arm without kinematics cannot run of this waypoint (its YAML key and why), or
+    /// `None` for a taught waypoint.
+    pub fn needs_kinematics(&self) -> Option<(&'static str, &'static str)> {
+        match self {
+            Waypoint::Taught { .. } => None,
+            Waypoint::Joints(_) => Some((
+                "T_base_flange",
+                "a joint waypoint needs the flange pose taught with it (`T_base_flange` beside `joints_deg`): without the arm's kinematics the plan check cannot know where these joints put the flange",
+            )),
+            Waypoint::FlangePose(_) => Some((
+                "joints_deg",
+                "a flange pose needs the arm's kinematics to become joints: give the joints taught there (`joints_deg` beside `T_base_flange`)",
+            )),
+            Waypoint::LookAt(_) => Some((
+                "look_at",
+                "a look-at view needs the arm's kinematics to become joints: teach the view by hand (`handeye console`) and use the session's taught plan",
+            )),
+        }
+    }
+}
+
+impl Plan {
+    /// A taught plan: each (flange pose, joints) a hand-guided session captured, in order.
+    pub fn taught(poses: &[(Pose, Joints)]) -> Plan {
+        Plan {
+            waypoints: poses
+                .iter()
+                .map(|(base_from_flange, joints)| Waypoint::Taught {
+                    joints: *joints,
+                    base_from_flange: *base_from_flange,
+                })
+                .collect(),
         }
     }
 }
@@ -302,6 +393,55 @@ mod tests {
             _ => panic!("kind changed"),
         }
         assert_eq!(plan.waypoints[2], back.waypoints[2]);
+    }
+
+    #[test]
+    fn taught_waypoints_read_and_round_trip_and_say_what_needs_kinematics() {
+        let plan = parse(
+            "waypoints:\n\
+             - joints_deg: [10, -80, 95, -100, -90, 5]\n  \
+               T_base_flange: {translation: [0.4, 0.1, 0.5], rotation_vector: [3.1, 0.1, 0]}\n",
+        )
+        .unwrap();
+        let Waypoint::Taught {
+            joints,
+            base_from_flange,
+        } = plan.waypoints[0]
+        else {
+            panic!("not taught: {:?}", plan.waypoints[0])
+        };
+        assert!((joints[1] - (-80f64).to_radians()).abs() < 1e-12);
+        assert!((base_from_flange.translation.vector.x - 0.4).abs() < 1e-12);
+        assert_eq!(plan.waypoints[0].needs_kinematics(), None);
+        let back = parse(&Plan::taught(&[(base_from_flange, joints)]).to_yaml()).unwrap();
+        let Waypoint::Taught {
+            joints: joints_back,
+            base_from_flange: pose_back,
+        } = back.waypoints[0]
+        else {
+            panic!("not taught after a round trip: {:?}", back.waypoints[0])
+        };
+        assert!(joints
+            .iter()
+            .zip(&joints_back)
+            .all(|(a, b)| (a - b).abs() < 1e-12));
+        assert!((pose_back.to_homogeneous() - base_from_flange.to_homogeneous()).norm() < 1e-12);
+        let bad = parse(
+            "waypoints:\n- {joints_deg: [0, 0, 0], T_base_flange: {translation: [0, 0, 0], rotation_vector: [0, 0, 0]}}\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            bad.contains("waypoints[0]: joints_deg: expected 6"),
+            "{bad}"
+        );
+        let joints_only = parse("waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n").unwrap();
+        assert_eq!(
+            joints_only.waypoints[0]
+                .needs_kinematics()
+                .map(|(key, _)| key),
+            Some("T_base_flange")
+        );
     }
 
     #[test]

@@ -29,7 +29,7 @@ use handeye_camera::{Camera, Frame};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
-use handeye_robot::{Joints, MotionLimits, Robot, SettleBySpeed};
+use handeye_robot::{Joints, MotionLimits, Robot, RobotError, SettleBySpeed};
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 use super::folder::{PoseVisit, SessionFolder};
@@ -261,13 +261,11 @@ pub fn run_session(
                     let folder = setup.folder.root().to_path_buf();
                     let recorded = state.recorded();
                     state.error = Some(match source {
-                        ErrorSource::Robot(handeye_robot::RobotError::Interrupted) => {
-                            SessionError::Interrupted {
-                                plan_index,
-                                recorded,
-                                folder,
-                            }
-                        }
+                        ErrorSource::Robot(RobotError::Interrupted) => SessionError::Interrupted {
+                            plan_index,
+                            recorded,
+                            folder,
+                        },
                         ErrorSource::Robot(source) => SessionError::Robot {
                             plan_index,
                             recorded,
@@ -449,7 +447,8 @@ fn capture(
     let arrived = Instant::now();
     std::thread::sleep(setup.settle);
     let settled = match &setup.settle_by_speed {
-        Some(rule) => wait_until_still(robot, rule, arrived, &setup.stop)?,
+        Some(rule) => wait_until_still(robot, rule, arrived, &setup.stop)
+            .map_err(|e| ErrorSource::Robot(e.into_robot_error(rule)))?,
         None => Instant::now(),
     };
     let mut frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
@@ -478,20 +477,59 @@ fn capture(
     Ok((frame, base_from_flange, timing))
 }
 
+/// Why [`wait_until_still`] found no still arm.
+pub(super) enum NotStill {
+    /// The arm's own error, or [`RobotError::Interrupted`] when a stop was requested.
+    Robot(RobotError),
+    /// A joint still moved at `fastest` rad/s when the rule's timeout ran out.
+    Moving {
+        /// The fastest joint speed of the last reading above the threshold, rad/s.
+        fastest: f64,
+    },
+}
+
+impl NotStill {
+    /// What the rule's numbers say about an arm that did not settle.
+    pub(super) fn moving_message(fastest: f64, rule: &SettleBySpeed) -> String {
+        format!(
+            "a joint still moved at {:.2}°/s {:.1} s on (session.settle_speed_deg_s = {:.2}°/s for session.settle_window_s = {:.2} s)",
+            fastest.to_degrees(),
+            rule.timeout.as_secs_f64(),
+            rule.max_joint_speed.to_degrees(),
+            rule.window.as_secs_f64()
+        )
+    }
+
+    /// As a robot error of a move that did not settle.
+    fn into_robot_error(self, rule: &SettleBySpeed) -> RobotError {
+        match self {
+            NotStill::Robot(e) => e,
+            NotStill::Moving { fastest } => RobotError::Backend(
+                format!(
+                    "the arm did not settle after the move: {}",
+                    Self::moving_message(fastest, rule)
+                )
+                .into(),
+            ),
+        }
+    }
+}
+
 /// Waits until every joint speed the arm reports has stayed below the rule's threshold for the
 /// rule's window; returns the start of that quiet window (a frame exposed from then on shows the
 /// arm at rest). Returns at once when the arm reports no speeds. Fails when the arm is still
-/// moving `timeout` after `arrived`, or when a stop is requested.
-fn wait_until_still(
+/// moving `timeout` after `since` (the end of a move, or a hand-guided capture's request), or
+/// when a stop is requested.
+pub(super) fn wait_until_still(
     robot: &mut dyn Robot,
     rule: &SettleBySpeed,
-    arrived: Instant,
+    since: Instant,
     stop: &AtomicBool,
-) -> Result<Instant, ErrorSource> {
+) -> Result<Instant, NotStill> {
     let mut quiet_since: Option<Instant> = None;
     let mut fastest = 0.0f64;
     loop {
-        let Some(speeds) = robot.joint_speeds()? else {
+        let Some(speeds) = robot.joint_speeds().map_err(NotStill::Robot)? else {
             return Ok(Instant::now());
         };
         // Taken after the reading: the reading shows the arm no later than this.
@@ -501,39 +539,30 @@ fn wait_until_still(
             quiet_since = None;
             fastest = if top.is_nan() { f64::INFINITY } else { top };
         } else {
-            let since = *quiet_since.get_or_insert(now);
-            if now.duration_since(since) >= rule.window {
-                return Ok(since);
+            let quiet = *quiet_since.get_or_insert(now);
+            if now.duration_since(quiet) >= rule.window {
+                return Ok(quiet);
             }
         }
         if stop.load(Ordering::SeqCst) {
-            return Err(ErrorSource::Robot(handeye_robot::RobotError::Interrupted));
+            return Err(NotStill::Robot(RobotError::Interrupted));
         }
-        if now.duration_since(arrived) > rule.timeout {
-            return Err(ErrorSource::Robot(handeye_robot::RobotError::Backend(
-                format!(
-                    "the arm did not settle: {:.1} s after the move a joint still moved at {:.2}°/s (session.settle_speed_deg_s = {:.2}°/s for session.settle_window_s = {:.2} s)",
-                    rule.timeout.as_secs_f64(),
-                    fastest.to_degrees(),
-                    rule.max_joint_speed.to_degrees(),
-                    rule.window.as_secs_f64()
-                )
-                .into(),
-            )));
+        if now.duration_since(since) > rule.timeout {
+            return Err(NotStill::Moving { fastest });
         }
         std::thread::sleep(SETTLE_POLL);
     }
 }
 
 enum ErrorSource {
-    Robot(handeye_robot::RobotError),
+    Robot(RobotError),
     Camera(handeye_camera::CameraError),
     /// The move was refused before it was sent.
     UnsafeMove(String),
 }
 
-impl From<handeye_robot::RobotError> for ErrorSource {
-    fn from(e: handeye_robot::RobotError) -> Self {
+impl From<RobotError> for ErrorSource {
+    fn from(e: RobotError) -> Self {
         ErrorSource::Robot(e)
     }
 }

@@ -26,6 +26,7 @@ use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_vision::sharpness::sharpness;
 
 use super::adaptive::GrowingPlan;
+use super::driver::{wait_until_still, NotStill};
 use super::{SessionError, SessionEvent, SessionOutcome, SessionSetup};
 
 /// What a person asks for during a manual session.
@@ -172,6 +173,21 @@ impl Robot for StandStill<'_> {
     fn status(&mut self) -> Result<RobotStatus, RobotError> {
         self.0.status()
     }
+    // The driver settles on these: a frame is taken only once the arm has stood still.
+    fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
+        self.0.joint_speeds()
+    }
+}
+
+/// An error with its sources, `: `-joined (a backend error's own message is its source).
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    text
 }
 
 /// Runs (or resumes) a hand-guided session until the person finishes it or the stop flag is
@@ -196,16 +212,7 @@ pub fn run_manual_session(
     }
     // The recorded plan's poses were all accepted except perhaps the last (refused, or a stop
     // mid-capture): it is dropped and its index reused, as during the session.
-    let accepted: Vec<usize> = setup
-        .folder
-        .read_visits()?
-        .iter()
-        .filter(|v| {
-            v.camera_from_target.is_some()
-                || (setup.estimate_intrinsics && v.rejected.is_none() && !v.corners_px.is_empty())
-        })
-        .map(|v| v.plan_index)
-        .collect();
+    let accepted = accepted_indices(&setup)?;
     while growing
         .poses
         .len()
@@ -249,9 +256,19 @@ pub fn run_manual_session(
                         message: format!("freedrive {}", if on { "on" } else { "off" }),
                     });
                 }
+                // An arm whose freedrive handeye cannot switch (ROS 2) is still hand-guided, by
+                // its own means: the message says how, and capture works as ever.
+                Err(RobotError::NotAvailable(how)) => control.event(ManualEvent::Check {
+                    ok: false,
+                    message: format!("freedrive {}: {how}", if on { "on" } else { "off" }),
+                }),
                 Err(e) => control.event(ManualEvent::Check {
                     ok: false,
-                    message: format!("freedrive {}: {e}", if on { "on" } else { "off" }),
+                    message: format!(
+                        "freedrive {}: {}",
+                        if on { "on" } else { "off" },
+                        error_chain(&e)
+                    ),
                 }),
             },
             ManualCommand::GoToSuggestion => {
@@ -341,9 +358,52 @@ pub fn run_manual_session(
     if freedrive {
         let _ = robot.set_freedrive(false);
     }
+    // Kept whatever ended the session (a stop too): what was captured so far is taught.
+    let taught = write_taught_plan(&setup, &growing.poses);
     result?;
+    taught?;
     outcome.accepted = (0..growing.poses.len()).collect();
     Ok(outcome)
+}
+
+/// The file in a hand-guided session's folder that holds its accepted captures as a plan.
+pub const TAUGHT_PLAN_FILE: &str = "taught-plan.yaml";
+
+/// The plan indices of the captures on disk that were accepted.
+fn accepted_indices(setup: &SessionSetup) -> Result<Vec<usize>, SessionError> {
+    Ok(setup
+        .folder
+        .read_visits()?
+        .iter()
+        .filter(|v| {
+            v.camera_from_target.is_some()
+                || (setup.estimate_intrinsics && v.rejected.is_none() && !v.corners_px.is_empty())
+        })
+        .map(|v| v.plan_index)
+        .collect())
+}
+
+/// Writes the accepted captures as a taught plan ([`TAUGHT_PLAN_FILE`]): each the joints the
+/// arm stood at and the flange pose it reported there, so an arm with no kinematics handeye
+/// knows can replay the views (`plan.file`), and any arm can repeat them without a person.
+fn write_taught_plan(setup: &SessionSetup, poses: &[(Pose, Joints)]) -> Result<(), SessionError> {
+    let accepted = accepted_indices(setup)?;
+    let taught: Vec<(Pose, Joints)> = poses
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| accepted.contains(i))
+        .map(|(_, pose)| *pose)
+        .collect();
+    if taught.is_empty() {
+        return Ok(());
+    }
+    let text = format!(
+        "# The views of this hand-guided session, taught: the joints each capture stood at and the\n# T_base_flange the arm reported there. Replay with `plan: {{file: {TAUGHT_PLAN_FILE}}}`.\n{}",
+        crate::plan::Plan::taught(&taught).to_yaml()
+    );
+    setup
+        .folder
+        .write_file(std::path::Path::new(TAUGHT_PLAN_FILE), text.as_bytes())
 }
 
 /// A fault of the arm or camera outside a capture.
@@ -441,6 +501,26 @@ fn capture(
     control: &mut dyn ManualControl,
 ) -> Result<bool, SessionError> {
     std::thread::sleep(setup.settle);
+    // A person may still be moving the arm (or let go of it a moment ago): where it stands is
+    // read once its joint speeds have stayed low, as after a planned move.
+    if let Some(rule) = &setup.settle_by_speed {
+        match wait_until_still(robot, rule, Instant::now(), &setup.stop) {
+            Ok(_) => {}
+            Err(NotStill::Moving { fastest }) => {
+                control.event(ManualEvent::Check {
+                    ok: false,
+                    message: format!(
+                        "the arm is still moving ({}): let go of it and hold it still, then capture again",
+                        NotStill::moving_message(fastest, rule)
+                    ),
+                });
+                return Ok(false);
+            }
+            Err(NotStill::Robot(e)) => {
+                return Err(ArmFault::Robot(e).into_session(setup, plan.poses.len()))
+            }
+        }
+    }
     let here = robot
         .joint_positions()
         .and_then(|j| Ok((robot.base_from_flange()?, j)));

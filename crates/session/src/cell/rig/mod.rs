@@ -310,7 +310,10 @@ fn open_sim(rig: &RigConfig, prepared: &[PreparedCell]) -> Result<RigHardware, R
     let (robot, planner_camera) = super::sim::open(
         &planner.config,
         truth(planner, &rig.cameras[rig.planner].name)?,
-        planner.arm.clone(),
+        planner.kinematics().map_err(|e| RigRunError::Cell {
+            camera: rig.cameras[rig.planner].name.clone(),
+            source: Box::new(e),
+        })?,
         planner.start_joints,
         planner.camera_model,
         planner.board.clone(),

@@ -1,0 +1,156 @@
+//! Taught joint waypoints on an arm with no model handeye knows (issue #26): `robot.model: none`
+//! and the joint names of another make (the peer publishes and takes goals for `fr3_joint1..6`;
+//! the kinematics inside it stay the simulated UR10e's, which handeye never learns), with a
+//! taught plan — at each view the joints and the flange pose the arm reported there, the file a
+//! hand-guided session writes (`taught-plan.yaml`). The run moves by FollowJointTrajectory
+//! goals to the taught joints at the configured limits, the plan check uses the taught flange
+//! poses, and the solve recovers the simulator's truth. A joint plan without taught flange
+//! poses, and a generated plan, are refused before anything opens, naming file and field. The
+//! whole way — hand-guided with no plan, then the session's taught plan replayed — runs too.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use handeye::plan::Plan;
+
+use super::cell::{assert_truth, captures, cell, poses_kept, run_cell, text, views, Peer};
+use super::python;
+use crate::util::within;
+
+pub(super) const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
+
+/// The ROS 2 cell as an arm of no known model with `plan` under `plan:` (a YAML line).
+pub(super) fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
+    // The arm's own joint ranges, as its datasheet gives them (here: every joint ±360°).
+    let model = format!(
+        "model: none\n  joint_names: [{}]\n  joint_ranges_deg: {}",
+        NAMES.replace(',', ", "),
+        "[[-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]"
+    );
+    cell(
+        dir,
+        domain,
+        &[
+            ("model: ur10e", &model),
+            (
+                "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+                plan,
+            ),
+            ("connect_timeout_s: 10", "connect_timeout_s: 3"),
+        ],
+    )
+}
+
+/// The rendered views as a taught plan (the joints each stood at, the flange pose the arm
+/// reported there), written to `dir/taught.yaml`.
+fn taught_plan(dir: &Path) -> PathBuf {
+    let poses: Vec<_> = captures(&views())
+        .into_iter()
+        .map(|(_, pose, joints_deg)| (pose, joints_deg.map(f64::to_radians)))
+        .collect();
+    let file = dir.join("taught.yaml");
+    Plan::taught(&poses).save(&file).unwrap();
+    file
+}
+
+#[test]
+fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(500), move || {
+        let dir = tempfile::tempdir().unwrap();
+        taught_plan(dir.path());
+        let peer = Peer::serving(&python, 81, &views(), &["--joint-names", NAMES]);
+        let config = no_model_cell(dir.path(), 81, "  file: taught.yaml");
+        let session = dir.path().join("session");
+        let out = run_cell(&config, &session);
+        let log = text(&out);
+        assert!(out.status.success(), "{log}");
+        assert!(
+            log.contains("robot.model: none"),
+            "the plan check says what it could not check:\n{log}"
+        );
+        // One goal per taught view, each for the configured joints, within 60 °/s.
+        for g in peer.assert_served(captures(&views()).len()) {
+            assert_eq!(g["accepted"], true, "{g}");
+            assert_eq!(
+                g["joint_names"],
+                serde_json::json!(NAMES.split(',').collect::<Vec<_>>())
+            );
+        }
+        assert_truth(&session);
+    });
+}
+
+/// The whole way for an arm of no known model: hand-guided on the console with no plan
+/// (`plan: {manual: true}`, no suggestions), its `taught-plan.yaml` then replayed by `handeye
+/// run` — trajectory goals to the taught joints — to the truth.
+#[test]
+fn an_arm_of_no_known_model_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(700), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let mut peer = Peer::serving(&python, 85, &views(), &["--joint-names", NAMES]);
+        let config = no_model_cell(dir.path(), 85, "  manual: true");
+        let session = super::console::hand_guided_session(dir.path(), &mut peer, &config);
+        let taught = session.join("taught-plan.yaml");
+        let config = no_model_cell(dir.path(), 85, &format!("  file: {}", taught.display()));
+        let replay = dir.path().join("replay");
+        let out = run_cell(&config, &replay);
+        assert!(out.status.success(), "{}", text(&out));
+        // Every taught view visited; the arm stood at the last one captured, which the
+        // travel-time order visits first, with no move: one goal fewer than views.
+        let views = captures(&views()).len();
+        assert_eq!(poses_kept(&replay), views);
+        for g in peer.assert_served(views - 1) {
+            assert_eq!(g["accepted"], true, "{g}");
+        }
+        assert_truth(&replay);
+    });
+}
+
+#[test]
+fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    within(Duration::from_secs(60), move || {
+        // `handeye run` of `config` into `session` fails before anything opens, saying `words`.
+        let refused = |config: &Path, session: &str, words: &[&str]| {
+            let out = run_cell(config, &dir.path().join(session));
+            let log = text(&out);
+            assert!(!out.status.success(), "{log}");
+            assert!(
+                words.iter().all(|w| log.contains(w)),
+                "{words:?} in:\n{log}"
+            );
+            assert!(!dir.path().join(session).exists(), "{session} was created");
+        };
+        // Joints without the flange pose taught there.
+        std::fs::write(
+            dir.path().join("joints.yaml"),
+            "waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n",
+        )
+        .unwrap();
+        let config = no_model_cell(dir.path(), 83, "  file: joints.yaml");
+        refused(
+            &config,
+            "s",
+            &[
+                "joints.yaml",
+                "waypoints[0].T_base_flange",
+                "robot.model is none",
+            ],
+        );
+        // Generated views need kinematics too.
+        let config = no_model_cell(
+            dir.path(),
+            83,
+            "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
+        );
+        refused(&config, "s2", &["ros2-cell.yaml", "plan.generate"]);
+        // An arm of no known model must name its joint ranges.
+        let yaml = std::fs::read_to_string(&config).unwrap();
+        let (before, after) = yaml.split_once("  joint_ranges_deg:").unwrap();
+        let rest = after.split_once('\n').unwrap().1;
+        std::fs::write(&config, format!("{before}{rest}")).unwrap();
+        refused(&config, "s3", &["ros2-cell.yaml", "robot.joint_ranges_deg"]);
+    });
+}
