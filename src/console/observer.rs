@@ -191,6 +191,8 @@ impl RunObserver for ConsoleObserver<'_> {
             SessionEvent::Recorded { .. } => {
                 publish_recorded(self.console, self.analyst.as_ref(), &event)
             }
+            // The terminal names it (the printer below); the page shows the poses.
+            SessionEvent::CameraLost(_) => {}
         }
         self.inner.event(event);
     }
@@ -211,6 +213,7 @@ pub(super) fn publish_recorded(console: &Console, analyst: Option<&Analyst>, eve
         rejected,
         will_retry,
         frame,
+        ..
     } = event
     else {
         return;

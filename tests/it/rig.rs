@@ -140,34 +140,37 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
     );
 }
 
-/// A camera that stops delivering frames mid-run is named, its samples until then are kept and
-/// solved, and the other cameras go on.
+/// A camera that stops delivering frames mid-run (the driver's `camera-lost` fault) is named,
+/// its samples until then are kept and solved, and the other cameras go on. (It fails at plan
+/// pose 4: the simulated arm of the resume starts again at its start joints, from where the
+/// travel order reaches the poses left without leaving the workspace box; the later poses of
+/// this plan are in the other elbow configuration, a move the check refuses from the start.)
 #[test]
 fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     let dir = tempfile::tempdir().unwrap();
     let config = three_cameras(dir.path(), &[("count: 20", "count: 12")]);
     let out = dir.path().join("session");
-    let stdout = run_ok(&config, &out, &[("HANDEYE_RIG_CAMERA_FAILS", "wrist:8")]);
+    let stdout = run_ok(&config, &out, &[("HANDEYE_FAULT", "camera-lost:wrist:4")]);
     assert!(
-        stdout.contains("camera `wrist` stopped delivering frames at plan pose 8"),
+        stdout.contains("camera `wrist` stopped delivering frames at plan pose 4"),
         "{stdout}"
     );
     let result = read_result(&out);
     let wrist = result.cameras.iter().find(|c| c.name == "wrist").unwrap();
-    assert!(wrist.samples >= 6 && wrist.samples <= 8, "{wrist:?}");
+    assert!(wrist.samples >= 3 && wrist.samples <= 4, "{wrist:?}");
     assert!(
         wrist.joint.is_some(),
         "the wrist's samples before the failure are solved"
     );
     // No record without a frame: the poses it missed stay open for a resume.
-    assert!(!camera_folder(&out, "wrist").join("poses/009.yaml").exists());
+    assert!(!camera_folder(&out, "wrist").join("poses/005.yaml").exists());
     let failures = std::fs::read_to_string(out.join("failures.yaml")).unwrap();
     assert!(
-        failures.contains("camera: wrist") && failures.contains("plan_index: 8"),
+        failures.contains("camera: wrist") && failures.contains("plan_index: 4"),
         "{failures}"
     );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(report.contains("<b>wrist</b> stopped delivering frames at plan pose 8"));
+    assert!(report.contains("<b>wrist</b> stopped delivering frames at plan pose 4"));
     let left = result.cameras.iter().find(|c| c.name == "left").unwrap();
     assert!(camera_folder(&out, "left").join("poses/011.yaml").is_file());
     assert!(left.joint.is_some());
@@ -183,7 +186,7 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
         "{stdout}{}",
         String::from_utf8_lossy(&resumed.stderr)
     );
-    assert!(stdout.contains("4 poses visited in this run"), "{stdout}");
+    assert!(stdout.contains("8 poses visited in this run"), "{stdout}");
     assert!(!out.join("failures.yaml").exists());
     let wrist = read_result(&out)
         .cameras

@@ -123,6 +123,7 @@ pub fn open(
             selector,
         }),
         camera: Box::new(camera),
+        others: Vec::new(),
     })
 }
 

@@ -74,5 +74,6 @@ pub fn open(config: &CellConfig, model: CameraModel, arm: UrModel) -> Result<Har
     Ok(Hardware {
         robot: Box::new(robot),
         camera: Box::new(camera),
+        others: Vec::new(),
     })
 }

@@ -84,12 +84,22 @@ pub(super) fn drive_plan(
     Option<AdaptiveSummary>,
 ) {
     let folder = setup.folder.clone();
-    let mut on_event = |event: SessionEvent| observer.event(event);
+    let rig_root = setup.rig.as_ref().map(|rig| rig.root.clone());
+    let mut on_event = |event: SessionEvent| {
+        // A lost camera of a several-camera session is kept in `failures.yaml` as it happens.
+        if let (SessionEvent::CameraLost(failure), Some(root)) = (&event, &rig_root) {
+            if let Err(e) = super::super::rig::record_failure(root, failure) {
+                observer.note(&format!("failures.yaml could not be written: {e}"));
+            }
+        }
+        observer.event(event)
+    };
     if !adaptive {
-        let outcome = session::run_session(
+        let outcome = session::run_cameras_session(
             setup,
             hardware.robot.as_mut(),
             hardware.camera.as_mut(),
+            &mut hardware.others,
             &mut on_event,
         );
         return (outcome, None);
