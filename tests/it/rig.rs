@@ -16,6 +16,7 @@ use crate::util;
 use util::handeye;
 
 mod monte_carlo;
+mod ur_mock;
 
 /// The three-camera cell with absolute board and lens paths, `edits` applied.
 fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
