@@ -115,7 +115,26 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
             camera.name,
             camera.samples
         );
+        // Each camera is judged with the leave-one-out check of its own samples, as one camera
+        // is; on this clean cell every one is GOOD, and so is the cell (the worst of them).
+        let held_out = camera
+            .held_out
+            .unwrap_or_else(|| panic!("{}: no held-out check ({})", camera.name, camera.reason));
+        println!(
+            "{}: {} — held-out {:.3} mm / {:.4}° over {} poses",
+            camera.name,
+            camera.verdict,
+            held_out.translation_rms_mm,
+            held_out.rotation_rms_deg,
+            held_out.poses
+        );
+        assert!(held_out.poses >= 8, "{}: {held_out:?}", camera.name);
+        assert_eq!(camera.verdict, "GOOD", "{}: {}", camera.name, camera.reason);
+        assert!(camera.reason.contains("held-out"), "{}", camera.reason);
     }
+    assert_eq!(result.verdict, "GOOD", "{}", result.reason);
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains("Verdict per camera"));
     let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
     let relative = result
         .transform("T_cam_left_cam_right")
@@ -159,6 +178,16 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     let result = read_result(&out);
     let wrist = result.cameras.iter().find(|c| c.name == "wrist").unwrap();
     assert!(wrist.samples >= 3 && wrist.samples <= 4, "{wrist:?}");
+    // Too few samples for the leave-one-out check: the camera is not GOOD, and says why; the
+    // cell's verdict is the worst camera's and names it.
+    assert!(wrist.held_out.is_none(), "{wrist:?}");
+    assert_ne!(wrist.verdict, "GOOD", "{wrist:?}");
+    assert_ne!(result.verdict, "GOOD");
+    assert!(
+        result.reason.contains("camera `wrist`"),
+        "{}",
+        result.reason
+    );
     assert!(
         wrist.joint.is_some(),
         "the wrist's samples before the failure are solved"
