@@ -559,3 +559,42 @@ fn config_errors_name_the_camera_and_the_key() {
         .to_string();
     assert!(one.contains("cameras"), "{one}");
 }
+
+/// The adaptive plan of the three-camera cell: each next pose is scored over every camera (the
+/// sum of the expected information gains of the cameras that would see their board there and
+/// are not good enough yet), and the run stops only when every camera is good enough. It must
+/// end with every mount within 0.5 mm / 0.05° of the truth in fewer poses than the fixed plan's
+/// 20.
+#[test]
+fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = three_cameras(dir.path(), &[("adaptive: false", "adaptive: true")]);
+    let out = dir.path().join("session");
+    let stdout = run_ok(&config, &out, &[]);
+    println!("{stdout}");
+    let manifest: handeye::session::SessionManifest = serde_yaml_ng::from_str(
+        &std::fs::read_to_string(camera_folder(&out, "wrist").join("session.yaml")).unwrap(),
+    )
+    .unwrap();
+    let poses = manifest.plan.len();
+    println!("adaptive: {poses} poses (the fixed plan: 20)");
+    assert!(poses < 20, "{poses} poses");
+    let result = read_result(&out);
+    for (name, truth) in truth(&config) {
+        let solved = result.transform(&name).unwrap();
+        let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);
+        println!("{name}: {mm:.3} mm, {deg:.4}° from the truth");
+        assert!(mm < 0.5 && deg < 0.05, "{name}: {mm:.3} mm, {deg:.4}°");
+    }
+    // It stopped because every camera was good enough, not because it ran out.
+    for camera in &result.cameras {
+        assert_eq!(camera.verdict, "GOOD", "{}: {}", camera.name, camera.reason);
+        // Every camera's folder records the same growing plan.
+        let other: handeye::session::SessionManifest = serde_yaml_ng::from_str(
+            &std::fs::read_to_string(camera_folder(&out, &camera.name).join("session.yaml"))
+                .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(other.plan.len(), poses, "{}", camera.name);
+    }
+}

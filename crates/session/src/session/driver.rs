@@ -192,6 +192,9 @@ pub struct SessionOutcome {
     pub moving_modelled_s: f64,
     /// Cameras that stopped delivering frames in this run while others still did.
     pub failed_cameras: Vec<CameraFailure>,
+    /// Per camera (the first is the setup's own, then `setup.rig`'s others): plan indices with
+    /// an accepted record, ascending.
+    pub accepted_by_camera: Vec<Vec<usize>>,
 }
 
 impl SessionOutcome {
@@ -368,7 +371,12 @@ pub fn run_cameras_session(
         return Err(SessionError::DetectionThread("panicked"));
     }
     let mut outcome = state.outcome;
-    outcome.accepted = state.accepted[0].iter().copied().collect();
+    outcome.accepted_by_camera = state
+        .accepted
+        .iter()
+        .map(|poses| poses.iter().copied().collect())
+        .collect();
+    outcome.accepted = outcome.accepted_by_camera[0].clone();
     Ok(outcome)
 }
 

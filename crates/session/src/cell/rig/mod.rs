@@ -14,6 +14,7 @@
 //! `failures.yaml` as it happens, its records so far are kept, and the run goes on with the
 //! others; `--resume` asks it again for the poses it missed.
 
+pub mod adaptive;
 pub mod solve;
 
 use std::path::{Path, PathBuf};
@@ -94,39 +95,34 @@ pub struct PlannedViews {
 fn planned_views(cells: &[(&str, &PreparedCell)], plan: &[(Pose, Joints)]) -> Vec<PlannedViews> {
     cells
         .iter()
-        .map(|(name, p)| {
-            let points = p.board.points();
-            let margin = p.config.session.image_margin_px;
-            let (w, h) = (
-                f64::from(p.camera_model.width),
-                f64::from(p.camera_model.height),
-            );
-            let poses = plan
+        .map(|(name, p)| PlannedViews {
+            camera: name.to_string(),
+            poses: plan
                 .iter()
-                .filter(|(flange, _)| {
-                    let camera_from_target = p.config.nominal.camera_from_target(flange);
-                    let inside = points
-                        .iter()
-                        .filter_map(|(_, _, point)| {
-                            p.camera_model.project(&(camera_from_target * point))
-                        })
-                        .filter(|px| {
-                            px.x >= margin
-                                && px.y >= margin
-                                && px.x <= w - margin
-                                && px.y <= h - margin
-                        })
-                        .count();
-                    2 * inside >= points.len()
-                })
-                .count();
-            PlannedViews {
-                camera: name.to_string(),
-                poses,
-                of: plan.len(),
-            }
+                .filter(|(flange, _)| sees_board(p, flange))
+                .count(),
+            of: plan.len(),
         })
         .collect()
+}
+
+/// Whether the camera of `cell` is expected to see its board with the flange at
+/// `base_from_flange`: at least half the board's corners inside its image, by the nominal mounts,
+/// its lens and the configured image margin.
+pub fn sees_board(cell: &PreparedCell, base_from_flange: &Pose) -> bool {
+    let points = cell.board.points();
+    let margin = cell.config.session.image_margin_px;
+    let (w, h) = (
+        f64::from(cell.camera_model.width),
+        f64::from(cell.camera_model.height),
+    );
+    let camera_from_target = cell.config.nominal.camera_from_target(base_from_flange);
+    let inside = points
+        .iter()
+        .filter_map(|(_, _, point)| cell.camera_model.project(&(camera_from_target * point)))
+        .filter(|px| px.x >= margin && px.y >= margin && px.x <= w - margin && px.y <= h - margin)
+        .count();
+    2 * inside >= points.len()
 }
 
 /// A several-camera cell's other cameras, prepared: each a one-camera cell of the shared arm,
@@ -145,7 +141,7 @@ impl RigCells {
     }
 
     /// Every camera's name and cell, in config order, the planner being `cell`.
-    fn cells<'a>(&'a self, cell: &'a PreparedCell) -> Vec<(&'a str, &'a PreparedCell)> {
+    pub fn cells<'a>(&'a self, cell: &'a PreparedCell) -> Vec<(&'a str, &'a PreparedCell)> {
         let mut others = self.others.iter();
         self.config
             .cameras

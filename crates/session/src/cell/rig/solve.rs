@@ -215,9 +215,13 @@ pub struct RigProblem {
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
 pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigSolveError> {
     let manifest = read_manifest(root)?;
+    // The plan as the planner camera's session holds it (an adaptive session's grows there).
+    let plan = SessionFolder::open(&camera_folder(root, &manifest.planner))?
+        .read_manifest()?
+        .plan;
     let mut data = RigData {
         cameras: Vec::new(),
-        base_from_flange: manifest.plan.iter().map(|p| p.base_from_flange).collect(),
+        base_from_flange: plan.iter().map(|p| p.base_from_flange).collect(),
         observations: Vec::new(),
     };
     let mut start = RigStart {

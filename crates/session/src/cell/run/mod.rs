@@ -451,12 +451,11 @@ fn drive_opened(
                 return Err(RunError::PlanFailed);
             }
             if let Some(rig) = &cell.rig {
-                if adaptive {
-                    return Err(RunError::Cameras(
-                        "an adaptive plan with several cameras is not available yet: set `plan: {adaptive: false}` (the plan then runs fixed, every camera at every pose); nothing was moved".into(),
-                    ));
-                }
-                let plan = cell.report.validated().unwrap_or_default();
+                // An adaptive plan's candidates are the passing poses; a fixed plan all of them.
+                let plan = match adaptive {
+                    true => cell.report.passing(),
+                    false => cell.report.validated().unwrap_or_default(),
+                };
                 let views = rig.check_views(&cell, &plan).map_err(RunError::Cameras)?;
                 observer.cameras_planned(&views);
             }
@@ -641,8 +640,10 @@ fn drive_opened(
                     ))
                 })?;
                 let resuming = matches!(request.target, SessionTarget::Resume(_));
+                // An adaptive session's plan grows as it goes (in the planner camera's folder).
+                let recorded: &[(Pose, Joints)] = if fixed_plan { &plan } else { &[] };
                 setup.rig = Some(
-                    rig.session_cameras(root, resuming, &plan)
+                    rig.session_cameras(root, resuming, recorded)
                         .map_err(RunError::Cameras)?,
                 );
             }
