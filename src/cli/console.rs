@@ -192,6 +192,38 @@ pub(super) fn finished(
     linger(console, wait);
 }
 
+/// The end of a several-camera run on the console: the cell's verdict (the worst camera's) and
+/// every camera's, the report.
+pub(super) fn finished_rig(
+    console: &Console,
+    result: &handeye::cell::rig::RigResultFile,
+    report: Option<PathBuf>,
+    next: String,
+    wait: bool,
+) {
+    let has_report = report.is_some();
+    if let Some(path) = report {
+        console.set_report(path);
+    }
+    let cameras: Vec<String> = result
+        .cameras
+        .iter()
+        .map(|c| format!("{}: {} — {}", c.name, c.verdict, c.reason))
+        .collect();
+    console.publish(&ConsoleEvent::Finished {
+        verdict: Some(result.verdict.clone()),
+        summary: format!(
+            "cell: {} — {}\n{}",
+            result.verdict,
+            result.reason,
+            cameras.join("\n")
+        ),
+        next,
+        report: has_report,
+    });
+    linger(console, wait);
+}
+
 /// With `wait`, serves the page until Enter (or Ctrl-C); otherwise lets connected pages receive
 /// the last events first.
 fn linger(console: &Console, wait: bool) {

@@ -109,8 +109,14 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
     };
     let done = done.map_err(|e| failed(&console, e))?;
     let (report, next) = finish_run(&done)?;
-    if let Some(console) = &console {
-        super::console::finished(console, &done.solved, report, next, args.console_wait);
+    match (&console, &done.rig) {
+        (Some(console), Some(rig)) => {
+            super::console::finished_rig(console, rig, report, next, args.console_wait)
+        }
+        (Some(console), None) => {
+            super::console::finished(console, &done.solved, report, next, args.console_wait)
+        }
+        (None, _) => {}
     }
     Ok(())
 }

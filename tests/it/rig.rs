@@ -15,6 +15,7 @@ use handeye::geometry::Pose;
 use crate::util;
 use util::handeye;
 
+mod console;
 mod monte_carlo;
 mod ur_mock;
 
