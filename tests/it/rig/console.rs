@@ -34,7 +34,11 @@ fn the_console_shows_every_camera_of_a_several_camera_run_by_name() {
         dir.path(),
     );
     let url = live.url();
-    let page = http_get_page(&url);
+    let (authority, query) = url
+        .strip_prefix("http://")
+        .and_then(|rest| rest.split_once('/'))
+        .expect("an http URL with the secret");
+    let page = crate::console::http_get(authority.parse().unwrap(), &format!("/{query}"));
     assert!(
         page.contains("id=\"cameras\"") && page.contains("camera_pose(e)"),
         "the page has no cameras' table"
@@ -111,22 +115,6 @@ fn the_console_shows_every_camera_of_a_several_camera_run_by_name() {
             "{summary}"
         );
     }
-}
-
-/// The console's page, fetched with its secret.
-fn http_get_page(url: &str) -> String {
-    use std::io::{Read, Write};
-    let rest = url.strip_prefix("http://").unwrap();
-    let (authority, query) = rest.split_once('/').unwrap();
-    let mut stream = std::net::TcpStream::connect(authority).unwrap();
-    write!(
-        stream,
-        "GET /{query} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
-    )
-    .unwrap();
-    let mut text = String::new();
-    stream.read_to_string(&mut text).unwrap();
-    text
 }
 
 /// The events of one type, in order.

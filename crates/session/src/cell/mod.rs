@@ -308,6 +308,25 @@ impl PreparedCell {
         report
     }
 
+    /// The next-best-pose planner of this camera over `candidates`, from the nominal cell, with
+    /// the solver's noise model; stops at `target_uncertainty_mm` or `max_samples`.
+    pub fn adaptive_planner(
+        &self,
+        candidates: Vec<(Pose, Joints)>,
+        target_uncertainty_mm: f64,
+        max_samples: usize,
+    ) -> crate::plan::nbv::AdaptivePlanner {
+        crate::plan::nbv::AdaptivePlanner::new(
+            self.config.setup,
+            self.config.nominal.camera_mount,
+            self.config.nominal.target_mount,
+            candidates,
+            self.config.solver.to_options(),
+            target_uncertainty_mm,
+            max_samples,
+        )
+    }
+
     /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
         matches!(

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use crate::plan::check::PlanReport;
-use crate::plan::nbv::{AdaptivePlanner, StopCheck};
+use crate::plan::nbv::StopCheck;
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{self, SessionError, SessionEvent, SessionOutcome};
 use handeye_core::geometry::Pose;
@@ -115,18 +115,11 @@ pub(super) fn drive_plan(
     // The planner camera's model; a several-camera cell adds one per other camera (they weigh
     // in on every choice and must each be good enough to stop: `rig::adaptive`).
     let camera_planner = |camera: &PreparedCell, max: usize| {
-        AdaptivePlanner::new(
-            camera.config.setup,
-            camera.config.nominal.camera_mount,
-            camera.config.nominal.target_mount,
-            plan.to_vec(),
-            camera.config.solver.to_options(),
-            camera.config.adaptive_target_mm(),
-            max,
-        )
-        .with_min_poses(cell.config.plan.min_poses)
-        .with_motion(cell.config.limits, start, per_pose_s(cell))
-        .with_stop_check(good_enough(camera))
+        camera
+            .adaptive_planner(plan.to_vec(), camera.config.adaptive_target_mm(), max)
+            .with_min_poses(cell.config.plan.min_poses)
+            .with_motion(cell.config.limits, start, per_pose_s(cell))
+            .with_stop_check(good_enough(camera))
     };
     let mut planner = camera_planner(cell, max_poses);
     let others: Vec<_> = setup

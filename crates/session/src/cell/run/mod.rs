@@ -23,7 +23,6 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::config::RobotConfig;
-use crate::plan::nbv::AdaptivePlanner;
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{
     self, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder, SessionOutcome,
@@ -673,16 +672,8 @@ fn drive_opened(
             observer.session_folder(&folder, &[]);
             observer.session_started(plan.len());
             let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {
-                AdaptivePlanner::new(
-                    cell.config.setup,
-                    cell.config.nominal.camera_mount,
-                    cell.config.nominal.target_mount,
-                    plan.clone(),
-                    cell.config.solver.to_options(),
-                    // Suggestions never stop on their own: the person decides when to finish.
-                    0.0,
-                    usize::MAX,
-                )
+                // Suggestions never stop on their own: the person decides when to finish.
+                cell.adaptive_planner(plan.clone(), 0.0, usize::MAX)
             });
             let options = ManualOptions {
                 real_arm: !cell.is_simulated() && !request.motion_confirmed,
