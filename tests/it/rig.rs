@@ -599,3 +599,62 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
         assert_eq!(other.plan.len(), poses, "{}", camera.name);
     }
 }
+
+/// The shipped run's frames and flange poses replayed as a recorded cell of three cameras
+/// (`robot: recorded`, each camera `backend: files` on its own folder of frames): the same run
+/// lifecycle opens the recorded arm and every folder camera beside it (one frame selector for
+/// all), and the joint answer is the live run's within 0.05 mm / 0.005°.
+#[test]
+fn a_recorded_three_camera_cell_replays_the_live_run() {
+    let (config, live, _) = shipped_run();
+    let dir = tempfile::tempdir().unwrap();
+    let wrist = handeye::session::SessionFolder::open(&camera_folder(live, "wrist")).unwrap();
+    let poses: Vec<Pose> = wrist
+        .read_visits()
+        .unwrap()
+        .iter()
+        .map(|v| v.base_from_flange)
+        .collect();
+    assert_eq!(poses.len(), 20);
+    let poses_file = dir.path().join("poses.yaml");
+    handeye::robot::recorded::save_recorded_poses(&poses, &poses_file).unwrap();
+    let text = std::fs::read_to_string(config).unwrap();
+    let arm_start = text.find("robot:\n  backend: sim").unwrap();
+    let arm_end = arm_start + text[arm_start..].find("\n\n").unwrap();
+    // The recorded poses are the plan.
+    let plan_start = text.find("plan:\n  generate").unwrap();
+    let plan_end = plan_start + text[plan_start..].find("\n\n").unwrap();
+    assert!(arm_end < plan_start);
+    let mut recorded = format!(
+        "{}robot: {{backend: recorded, poses: {}}}{}{}",
+        &text[..arm_start],
+        poses_file.display(),
+        &text[arm_end..plan_start],
+        &text[plan_end..]
+    );
+    for (name, seed) in [("wrist", 11), ("left", 12), ("right", 13)] {
+        let sim =
+            format!("camera: {{backend: sim, noise_sigma: 2.0, blur_sigma_px: 0.5, seed: {seed}}}");
+        let files = format!(
+            "camera: {{backend: files, folder: {}}}",
+            camera_folder(live, name).join("frames").display()
+        );
+        assert!(recorded.contains(&sim), "{sim}");
+        recorded = recorded.replace(&sim, &files);
+    }
+    let recorded_config = dir.path().join("recorded.yaml");
+    std::fs::write(&recorded_config, recorded).unwrap();
+    let out = dir.path().join("session");
+    let stdout = run_ok(&recorded_config, &out, &[]);
+    let live_result = read_result(live);
+    let replayed = read_result(&out);
+    for (name, _) in truth(config) {
+        let (a, b) = (
+            live_result.transform(&name).unwrap(),
+            replayed.transform(&name).unwrap(),
+        );
+        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+        println!("{name}: recorded vs live {mm:.4} mm, {deg:.5}°");
+        assert!(mm < 0.05 && deg < 0.005, "{name}: {mm} mm {deg}°\n{stdout}");
+    }
+}

@@ -521,9 +521,13 @@ impl PreparedCell {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
                 })?;
+                let (hardware, selector) = recorded::open(&self.config, &plan, self.camera_model)?;
                 Ok((
-                    recorded::open(&self.config, &plan, self.camera_model)?,
-                    ArmSide::Recorded,
+                    hardware,
+                    ArmSide::Recorded {
+                        selector,
+                        poses: plan.len(),
+                    },
                 ))
             }
             (robot, camera) => Err(self.unavailable(robot, camera)),
@@ -553,8 +557,11 @@ impl PreparedCell {
             (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
                 uvc::open_camera(&self.config.camera, self.camera_model)
             }
+            (CameraConfig::Files { .. }, ArmSide::Recorded { selector, poses }) => {
+                recorded::open_camera(&self.config, selector, *poses, self.camera_model)
+            }
             (camera, _) => Err(CellError::Backend(format!(
-                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are)",
+                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm)",
                 camera_name(camera),
                 robot_name(&self.config.robot)
             ))),
@@ -642,8 +649,13 @@ pub enum ArmSide {
     Flange(Box<dyn Fn() -> handeye_camera::sim::TrueFlangePose>),
     /// A ROS 2 arm (its camera comes with its node).
     Ros2,
-    /// Recorded poses (their frames come from a folder).
-    Recorded,
+    /// Recorded poses: a folder camera serves the frame of the pose the robot is at.
+    Recorded {
+        /// Set by the recorded robot on each move.
+        selector: handeye_camera::files::FrameSelector,
+        /// Poses recorded (a frame each).
+        poses: usize,
+    },
 }
 
 fn robot_name(r: &RobotConfig) -> &'static str {

@@ -283,7 +283,11 @@ fn error_chain(error: &dyn std::error::Error) -> String {
     let mut text = error.to_string();
     let mut source = error.source();
     while let Some(e) = source {
-        text.push_str(&format!(": {e}"));
+        // A wrapper that says what its source says adds nothing.
+        let said = e.to_string();
+        if !text.contains(&said) {
+            text.push_str(&format!(": {said}"));
+        }
         source = e.source();
     }
     text
