@@ -513,10 +513,11 @@ impl PreparedCell {
                 };
                 Ok((hardware(Box::new(robot), camera), side))
             }
-            (RobotConfig::Ros2(_), CameraConfig::Ros2(_)) => Ok((
-                ros2::open(&self.config, self.camera_model, self.arm.clone())?,
-                ArmSide::Ros2,
-            )),
+            (RobotConfig::Ros2(_), CameraConfig::Ros2(_)) => {
+                let (hardware, node) =
+                    ros2::open(&self.config, self.camera_model, self.arm.clone())?;
+                Ok((hardware, ArmSide::Ros2(node)))
+            }
             (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
@@ -557,11 +558,14 @@ impl PreparedCell {
             (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
                 uvc::open_camera(&self.config.camera, self.camera_model)
             }
+            (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => {
+                ros2::open_camera(&self.config, node, self.camera_model)
+            }
             (CameraConfig::Files { .. }, ArmSide::Recorded { selector, poses }) => {
                 recorded::open_camera(&self.config, selector, *poses, self.camera_model)
             }
             (camera, _) => Err(CellError::Backend(format!(
-                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm)",
+                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
                 camera_name(camera),
                 robot_name(&self.config.robot)
             ))),
@@ -647,8 +651,8 @@ pub enum ArmSide {
     /// The arm's flange pose, as a simulated camera follows it (the simulator's true pose for a
     /// simulated arm, the reported one for a real arm): each call makes a source.
     Flange(Box<dyn Fn() -> handeye_camera::sim::TrueFlangePose>),
-    /// A ROS 2 arm (its camera comes with its node).
-    Ros2,
+    /// A ROS 2 arm: its node, on which a ROS 2 camera subscribes.
+    Ros2(ros2::Ros2Node),
     /// Recorded poses: a folder camera serves the frame of the pose the robot is at.
     Recorded {
         /// Set by the recorded robot on each move.
