@@ -134,3 +134,84 @@ impl PlanSource for RigPlanner {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use handeye_core::setup::Setup;
+    use handeye_solve::SolveOptions;
+    use nalgebra::Vector3;
+
+    /// A candidate seen by two cameras gains for both: with the same model for each, the
+    /// choice over the cameras goes to the candidate the second camera alone sees, whichever
+    /// the first camera alone would take; with the second camera blind everywhere, the choice
+    /// is the first camera's own.
+    #[test]
+    fn the_choice_sums_the_gains_of_the_cameras_that_see_their_board() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        let down = pose_from_rotvec(
+            Vector3::zeros(),
+            Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+        );
+        let at = |x: f64, rotation: Vector3<f64>| {
+            pose_from_rotvec(Vector3::new(x, 0.0, 0.5), rotation) * down
+        };
+        let candidates: Vec<(Pose, Joints)> = [
+            at(0.5, Vector3::new(0.0, 0.0, 1.0)),
+            at(0.45, Vector3::new(0.5, 0.0, 0.0)),
+            at(0.55, Vector3::new(0.0, 0.4, 0.2)),
+        ]
+        .into_iter()
+        .map(|pose| (pose, [0.0; 6]))
+        .collect();
+        let planner = || {
+            AdaptivePlanner::new(
+                Setup::EyeInHand,
+                camera_mount,
+                target_mount,
+                candidates.clone(),
+                SolveOptions::default(),
+                0.1,
+                usize::MAX,
+            )
+        };
+        let alone = planner().next(&[]).expect("a first pose");
+        let first_alone = candidates
+            .iter()
+            .position(|(pose, _)| *pose == alone.0)
+            .unwrap();
+        let other = (first_alone + 1) % candidates.len();
+        let folder = std::env::temp_dir().join(format!(
+            "handeye-rig-planner-{}-{}",
+            std::process::id(),
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_nanos()
+        ));
+        let second = SessionFolder::create(&folder).unwrap();
+        let choose = |second_sees: Vec<bool>| {
+            let mut rig = RigPlanner::new(
+                vec![planner(), planner()],
+                vec![second.clone()],
+                vec![vec![true; 3], second_sees],
+                10,
+            );
+            let (pose, _) = rig.next_pose(&[]).expect("a first pose");
+            candidates.iter().position(|(p, _)| *p == pose).unwrap()
+        };
+        let mut only_other = vec![false; 3];
+        only_other[other] = true;
+        assert_eq!(choose(only_other), other, "the second camera's gain counts");
+        assert_eq!(
+            choose(vec![false; 3]),
+            first_alone,
+            "a blind camera adds nothing"
+        );
+        drop(second);
+        let _ = std::fs::remove_dir_all(&folder);
+    }
+}
