@@ -658,3 +658,42 @@ fn a_recorded_three_camera_cell_replays_the_live_run() {
         assert!(mm < 0.05 && deg < 0.005, "{name}: {mm} mm {deg}°\n{stdout}");
     }
 }
+
+/// An adaptive run whose fixed camera `left` stops delivering at its fourth pose: it is named
+/// once (the adaptive loop drives one pose at a time, and a lost camera is not asked again in
+/// the run), its samples are kept, the others go on to the end and are solved.
+#[test]
+fn adaptive_run_names_a_lost_camera_once_and_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = three_cameras(dir.path(), &[("adaptive: false", "adaptive: true")]);
+    let out = dir.path().join("session");
+    let stdout = run_ok(&config, &out, &[("HANDEYE_FAULT", "camera-lost:left:3")]);
+    assert_eq!(
+        stdout
+            .matches("camera `left` stopped delivering frames")
+            .count(),
+        1,
+        "{stdout}"
+    );
+    let failures = std::fs::read_to_string(out.join("failures.yaml")).unwrap();
+    assert_eq!(failures.matches("camera: left").count(), 1, "{failures}");
+    let result = read_result(&out);
+    let left = result.cameras.iter().find(|c| c.name == "left").unwrap();
+    assert_eq!(left.samples, 3, "{left:?}");
+    // Three samples about nearly one axis: its own solve fails, so it is left out of the joint
+    // solve by name (REDO, and so the cell), and the others are solved.
+    assert!(left.joint.is_none(), "{left:?}");
+    assert!(
+        left.left_out
+            .as_deref()
+            .is_some_and(|why| why.contains("own solve")),
+        "{left:?}"
+    );
+    assert_eq!(left.verdict, "REDO");
+    assert_eq!(result.verdict, "REDO");
+    assert!(result.reason.contains("camera `left`"), "{}", result.reason);
+    for name in ["wrist", "right"] {
+        let camera = result.cameras.iter().find(|c| c.name == name).unwrap();
+        assert!(camera.samples >= 8 && camera.joint.is_some(), "{camera:?}");
+    }
+}

@@ -47,7 +47,7 @@ impl PlanSource for AdaptivePlanner {
 /// grabs at each pose, every camera's folder gets the growing plan, and a pose is kept when any
 /// camera accepted it (the cameras' records share the plan's numbering).
 pub fn run_adaptive_session(
-    setup: SessionSetup,
+    mut setup: SessionSetup,
     manifest_config: std::path::PathBuf,
     source: &mut dyn PlanSource,
     robot: &mut dyn Robot,
@@ -85,6 +85,14 @@ pub fn run_adaptive_session(
             on_event,
             &mut outcome,
         )?;
+        // A camera lost at this pose is not asked again in this run (as in a fixed plan).
+        if let Some(rig) = &mut setup.rig {
+            rig.lost = outcome
+                .failed_cameras
+                .iter()
+                .map(|f| f.camera.clone())
+                .collect();
+        }
     }
     Ok(outcome)
 }

@@ -96,6 +96,9 @@ pub struct RigCameras {
     pub camera_name: String,
     /// The others, in config order.
     pub others: Vec<OtherCamera>,
+    /// Cameras (any of them, by name) lost earlier in this run: not asked again (an adaptive
+    /// session drives one pose at a time).
+    pub lost: Vec<String>,
 }
 
 /// A further camera of a several-camera session: its own folder, setup and board (the
@@ -486,7 +489,15 @@ impl RunState {
             previous,
             accepted,
             attempts,
-            lost: vec![false; recordings.len()],
+            lost: recordings
+                .iter()
+                .map(|r| {
+                    setup
+                        .rig
+                        .as_ref()
+                        .is_some_and(|rig| rig.lost.contains(&r.name))
+                })
+                .collect(),
             names: recordings.iter().map(|r| r.name.clone()).collect(),
             in_flight: 0,
             submitted: Default::default(),

@@ -255,6 +255,7 @@ impl RigCells {
             root: root.to_path_buf(),
             camera_name: self.planner_name().to_string(),
             others,
+            lost: Vec::new(),
         })
     }
 }

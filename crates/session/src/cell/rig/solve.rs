@@ -26,7 +26,7 @@ use handeye_solve::rig::{
     RigObservation, RigOptions, RigSolution, RigStart,
 };
 use handeye_solve::verdict::{Accuracy, HeldOut, Level, GOOD_POSES};
-use handeye_solve::{PoseSigma, SolveError};
+use handeye_solve::PoseSigma;
 use handeye_vision::Target;
 
 /// Why a several-camera session could not be solved.
@@ -35,15 +35,6 @@ pub enum RigSolveError {
     /// Reading the folder.
     #[error(transparent)]
     Session(#[from] SessionError),
-    /// A camera's own solve (which starts the joint one) failed.
-    #[error("camera `{camera}`: {source}")]
-    Alone {
-        /// The camera.
-        camera: String,
-        /// Why.
-        #[source]
-        source: Box<SolveError>,
-    },
     /// The joint solve failed.
     #[error("the joint solve: {0}")]
     Joint(#[from] RigError),
@@ -251,11 +242,17 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             continue;
         }
         let setup = camera.config.setup;
-        let alone = handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options())
-            .map_err(|source| RigSolveError::Alone {
-                camera: camera.name.clone(),
-                source: Box::new(source),
-            })?;
+        // A camera whose own solve fails (its samples too few or too alike, say after it was
+        // lost early) is left out of the joint solve, named with why; the others are solved.
+        let alone = match handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options()) {
+            Ok(alone) => alone,
+            Err(e) => {
+                let why = format!("its own solve of its {samples} samples failed: {e}");
+                held_out.push(Err(why.clone()));
+                cameras.push((samples, Some(why)));
+                continue;
+            }
+        };
         held_out.push(handeye_solve::verdict::held_out(
             setup,
             &pairs,
