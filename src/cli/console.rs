@@ -179,13 +179,61 @@ pub(super) fn finished(
     next: String,
     wait: bool,
 ) {
+    let verdict = solved.verdict.as_ref().map(|v| v.level.word().to_string());
+    publish_finished(
+        console,
+        (verdict, solved.summary.clone()),
+        report,
+        next,
+        wait,
+    );
+}
+
+/// The end of a several-camera run on the console: the cell's verdict (the worst camera's) and
+/// every camera's, the report.
+pub(super) fn finished_rig(
+    console: &Console,
+    result: &handeye::cell::rig::RigResultFile,
+    report: Option<PathBuf>,
+    next: String,
+    wait: bool,
+) {
+    let cameras: Vec<String> = result
+        .cameras
+        .iter()
+        .map(|c| format!("{}: {} — {}", c.name, c.verdict, c.reason))
+        .collect();
+    let summary = format!(
+        "cell: {} — {}\n{}",
+        result.verdict,
+        result.reason,
+        cameras.join("\n")
+    );
+    publish_finished(
+        console,
+        (Some(result.verdict.clone()), summary),
+        report,
+        next,
+        wait,
+    );
+}
+
+/// Publishes the end of a run (its verdict and summary, where the report is, the next step),
+/// then ends as [`linger`] says.
+fn publish_finished(
+    console: &Console,
+    (verdict, summary): (Option<String>, String),
+    report: Option<PathBuf>,
+    next: String,
+    wait: bool,
+) {
     let has_report = report.is_some();
     if let Some(path) = report {
         console.set_report(path);
     }
     console.publish(&ConsoleEvent::Finished {
-        verdict: solved.verdict.as_ref().map(|v| v.level.word().to_string()),
-        summary: solved.summary.clone(),
+        verdict,
+        summary,
         next,
         report: has_report,
     });

@@ -1,78 +1,34 @@
-//! The several-camera forms of `handeye run` and `handeye replay` (a config with `cameras:`, a
-//! session folder with `rig.yaml`): turns the arguments into a call of
-//! [`cell::rig::run_rig`] / [`cell::rig::solve_rig_folder`] and prints every camera's answer.
+//! The several-camera ends of `handeye run` and `handeye replay` (a config with `cameras:`, a
+//! session folder with `rig.yaml`): every camera's answer printed, the report written. The run
+//! itself is `cell::run::run`, as for one camera; replay is [`rig::solve_rig_folder`].
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
-use anyhow::Context;
-
-use handeye::cell::rig::{self, RigEvent, RigResultFile};
+use handeye::cell::rig::{self, RigResultFile};
+use handeye::cell::run::CellRun;
 use handeye::config::rig::RigConfig;
 
-/// `handeye run` of a several-camera config (new, or resuming `resume`).
-pub(super) fn run(config: Option<&Path>, out: PathBuf, resume: bool) -> anyhow::Result<()> {
-    let config = match config {
-        Some(c) => c.to_path_buf(),
-        None => {
-            rig::read_manifest(&out)
-                .with_context(|| format!("{}: reading the several-camera session", out.display()))?
-                .config
-        }
-    };
-    let stop = Arc::new(AtomicBool::new(false));
-    super::stop_on_signals(stop.clone());
-    let mut progress = |event: &RigEvent| {
-        let p = match event {
-            RigEvent::Planned(views) => {
-                let seen: Vec<String> = views
-                    .iter()
-                    .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))
-                    .collect();
-                outln!(
-                    "poses where each camera should see its board (nominal cell): {}",
-                    seen.join(" · ")
-                );
-                return;
-            }
-            RigEvent::Pose(p) => p,
-        };
-        let cameras: Vec<String> = p
-            .captures
-            .iter()
-            .map(|c| match (&c.rejected, c.reprojection_rms_px) {
-                (None, Some(rms)) => format!("{} {rms:.2} px", c.camera),
-                (Some(why), _) => format!("{} no sample ({why})", c.camera),
-                (None, None) => format!("{} no sample", c.camera),
-            })
-            .collect();
-        outln!(
-            "pose {:>3}/{}: {}",
-            p.plan_index + 1,
-            p.of,
-            cameras.join(" · ")
-        );
-    };
-    let done = rig::run_rig(&config, &out, resume, stop, &mut progress)?;
-    for f in &done.failed_cameras {
-        outln!(
-            "camera `{}` stopped delivering frames at plan pose {} ({}): its samples until then are kept and solved; `handeye run --resume {}` asks it again for the poses it missed",
-            f.camera,
-            f.plan_index,
-            f.error,
-            done.folder.display()
-        );
-    }
+/// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
+/// for one camera): what the run did, every camera's answer, the report.
+pub(super) fn finish_run(
+    done: &CellRun,
+    result: &RigResultFile,
+) -> anyhow::Result<(Option<PathBuf>, String)> {
+    let root = rig::root_of(done.folder.root()).unwrap_or(done.folder.root());
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",
-        done.visited_now,
-        done.arm_time_s
+        done.outcome.visited_now,
+        done.outcome.arm_time_s()
     );
-    print_result(&done.result, &done.folder);
-    let report = handeye::report::rig::write_rig_report(&done.folder)?;
+    print_result(result, root);
+    let report = handeye::report::rig::write_rig_report(root)?;
     outln!("report: {}", report.display());
-    Ok(())
+    let next = format!(
+        "next: handeye export {} --format ros2|urdf|opencv",
+        root.join("result.yaml").display()
+    );
+    outln!("{next}");
+    Ok((Some(report), next))
 }
 
 /// `handeye replay` of a several-camera session folder: the joint solve again from its records.

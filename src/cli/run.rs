@@ -57,19 +57,6 @@ pub(super) struct RunArgs {
 
 /// Runs `handeye run`.
 pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
-    // A cell with several cameras (`cameras:` in the config, `rig.yaml` in the session).
-    let rig_config = args
-        .config
-        .as_deref()
-        .is_some_and(handeye::config::rig::is_rig_file);
-    let rig_session = args.resume.as_deref().is_some_and(cell::rig::is_rig_folder);
-    if rig_config || rig_session {
-        let (folder, resume) = match &args.resume {
-            Some(dir) => (dir.clone(), true),
-            None => (args.out.clone().unwrap_or_else(default_session_dir), false),
-        };
-        return super::rig::run(args.config.as_deref(), folder, resume);
-    }
     let target = match &args.resume {
         Some(dir) => SessionTarget::Resume(dir.clone()),
         None => SessionTarget::New(args.out.clone().unwrap_or_else(default_session_dir)),
@@ -122,8 +109,14 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
     };
     let done = done.map_err(|e| failed(&console, e))?;
     let (report, next) = finish_run(&done)?;
-    if let Some(console) = &console {
-        super::console::finished(console, &done.solved, report, next, args.console_wait);
+    match (&console, &done.rig) {
+        (Some(console), Some(rig)) => {
+            super::console::finished_rig(console, rig, report, next, args.console_wait)
+        }
+        (Some(console), None) => {
+            super::console::finished(console, &done.solved, report, next, args.console_wait)
+        }
+        (None, _) => {}
     }
     Ok(())
 }
@@ -141,6 +134,10 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+    }
+    // A cell with several cameras: the joint answer, its report, and every camera named.
+    if let Some(rig) = &done.rig {
+        return super::rig::finish_run(done, rig);
     }
     let result = &done.solved;
     outln!("{}", result.summary);
@@ -213,6 +210,8 @@ pub(super) struct Printer {
     listed: Vec<(Pose, usize)>,
     /// The session's poses (plan index) by their plan check number, as the arm moves to them.
     numbers: std::collections::HashMap<usize, usize>,
+    /// A several-camera cell: the planner camera (a pose is done when its record is in).
+    planner_camera: Option<String>,
 }
 
 impl Printer {
@@ -224,6 +223,7 @@ impl Printer {
             plain: !(std::io::stdout().is_terminal() && std::io::stderr().is_terminal()),
             listed: Vec::new(),
             numbers: Default::default(),
+            planner_camera: None,
         }
     }
 
@@ -258,6 +258,18 @@ impl RunObserver for Printer {
             )
             .map(|p| (p.base_from_flange, p.index))
             .collect();
+        self.planner_camera = cell.rig.as_ref().map(|rig| rig.planner_name().to_string());
+    }
+
+    fn cameras_planned(&mut self, views: &[cell::rig::PlannedViews]) {
+        let seen: Vec<String> = views
+            .iter()
+            .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))
+            .collect();
+        outln!(
+            "poses where each camera should see its board (nominal cell): {}",
+            seen.join(" · ")
+        );
     }
 
     fn confirm_motion(
@@ -305,13 +317,17 @@ impl RunObserver for Printer {
             }
             SessionEvent::Recorded {
                 plan_index,
+                camera,
                 reprojection_rms_px,
                 tags,
                 rejected,
                 will_retry,
                 ..
             } => {
-                let pose = format!("pose {plan_index:>3}{}", self.listed_as(plan_index));
+                let mut pose = format!("pose {plan_index:>3}{}", self.listed_as(plan_index));
+                if let Some(camera) = &camera {
+                    pose.push_str(&format!(" {camera}"));
+                }
                 let line = match (&rejected, reprojection_rms_px) {
                     (None, Some(rms)) => {
                         format!("{pose}: ok, {tags} tags, board RMS {rms:.3} px")
@@ -321,10 +337,16 @@ impl RunObserver for Printer {
                     (None, None) => format!("{pose}: ok"),
                 };
                 self.line(line);
-                if let (Some(bar), false) = (&self.bar, will_retry) {
+                // Of several cameras, the planner camera's record counts the pose.
+                let counts = camera.is_none() || camera == self.planner_camera;
+                if let (Some(bar), false, true) = (&self.bar, will_retry, counts) {
                     bar.inc(1);
                 }
             }
+            SessionEvent::CameraLost(failure) => self.line(format!(
+                "camera `{}` stopped delivering frames at plan pose {} ({}): its samples until then are kept and solved, the other cameras go on; `handeye run --resume` asks it again for the poses it missed",
+                failure.camera, failure.plan_index, failure.error
+            )),
         }
     }
 

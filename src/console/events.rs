@@ -102,6 +102,10 @@ pub enum ConsoleEvent {
         manual: bool,
         /// The camera image size, px.
         image: [u32; 2],
+        /// A cell with several cameras: their names, in config order (the first-named of
+        /// `unknowns` is the planner camera's); empty for one camera.
+        #[serde(skip_serializing_if = "Vec::is_empty")]
+        cameras: Vec<String>,
     },
     /// The plan (for a manual session: the views the suggestions come from).
     Plan {
@@ -153,6 +157,31 @@ pub enum ConsoleEvent {
         rms_px: Option<f64>,
         /// Tags used.
         tags: usize,
+    },
+    /// One camera's record of a pose, in a cell with several cameras (every camera's, the
+    /// planner camera's too; `Pose` and the running estimate stay the planner camera's).
+    CameraPose {
+        /// The camera.
+        camera: String,
+        /// Plan index.
+        plan_index: usize,
+        /// Accepted or rejected (no retry for the others: they grab whenever the arm is there).
+        state: PoseState,
+        /// Why it was rejected.
+        why: Option<String>,
+        /// Board reprojection RMS, px.
+        rms_px: Option<f64>,
+        /// Tags used.
+        tags: usize,
+    },
+    /// A camera of a several-camera cell stopped delivering frames; the others go on.
+    CameraLost {
+        /// The camera.
+        camera: String,
+        /// The plan pose of its failed grab.
+        plan_index: usize,
+        /// The camera's error.
+        error: String,
     },
     /// The running estimate after an accepted pose (pose space, from the samples so far).
     Estimate {

@@ -23,6 +23,9 @@ pub struct ConsoleObserver<'a> {
     cell: Option<CellView>,
     analyst: Option<Analyst>,
     plan: Vec<Joints>,
+    /// A several-camera cell: the planner camera, whose records drive the plan table and the
+    /// running estimate.
+    planner_camera: Option<String>,
 }
 
 impl<'a> ConsoleObserver<'a> {
@@ -34,6 +37,7 @@ impl<'a> ConsoleObserver<'a> {
             cell: None,
             analyst: None,
             plan: Vec::new(),
+            planner_camera: None,
         }
     }
 
@@ -53,6 +57,9 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
         simulated: cell.is_simulated(),
         manual,
         image: [cell.camera_model.width, cell.camera_model.height],
+        cameras: cell.rig.as_ref().map_or_else(Vec::new, |rig| {
+            rig.config.cameras.iter().map(|c| c.name.clone()).collect()
+        }),
     };
     let view = CellView {
         setup: cell.config.setup,
@@ -125,6 +132,7 @@ impl ConsoleObserver<'_> {
         let (event, view) = cell_events(cell, false);
         self.console.publish(&event);
         self.cell = Some(view);
+        self.planner_camera = cell.rig.as_ref().map(|r| r.planner_name().to_string());
     }
 }
 
@@ -188,9 +196,37 @@ impl RunObserver for ConsoleObserver<'_> {
                     joints_deg: self.plan.get(*plan_index).map(joints_deg),
                 });
             }
+            SessionEvent::Recorded {
+                camera: Some(camera),
+                plan_index,
+                reprojection_rms_px,
+                tags,
+                rejected,
+                will_retry,
+                ..
+            } => {
+                // Several cameras: every camera's record in its table; the planner camera's
+                // also drives the plan table and the running estimate (its board and lens).
+                self.console.publish(&ConsoleEvent::CameraPose {
+                    camera: camera.clone(),
+                    plan_index: *plan_index,
+                    state: PoseState::visited(rejected.is_some(), *will_retry),
+                    why: rejected.clone(),
+                    rms_px: *reprojection_rms_px,
+                    tags: *tags,
+                });
+                if Some(camera) == self.planner_camera.as_ref() {
+                    publish_recorded(self.console, self.analyst.as_ref(), &event);
+                }
+            }
             SessionEvent::Recorded { .. } => {
                 publish_recorded(self.console, self.analyst.as_ref(), &event)
             }
+            SessionEvent::CameraLost(failure) => self.console.publish(&ConsoleEvent::CameraLost {
+                camera: failure.camera.clone(),
+                plan_index: failure.plan_index,
+                error: failure.error.clone(),
+            }),
         }
         self.inner.event(event);
     }
@@ -211,6 +247,7 @@ pub(super) fn publish_recorded(console: &Console, analyst: Option<&Analyst>, eve
         rejected,
         will_retry,
         frame,
+        ..
     } = event
     else {
         return;

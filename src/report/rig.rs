@@ -88,6 +88,26 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         }
     }
     html.push_str("</table><p>“alone”: the same camera solved from its own views only (the one-camera answer); “joint”: every camera and the boards solved together.</p>");
+    // Each camera's verdict with the leave-one-out check of its own samples; the cell's is the
+    // worst of them.
+    html.push_str("<h2>Verdict per camera</h2><table><tr><th>camera</th><th>verdict</th><th>held-out error (leave-one-out, its own samples)</th><th>why</th></tr>");
+    for c in &result.cameras {
+        let held_out = match &c.held_out {
+            Some(h) => format!(
+                "{:.2} mm / {:.3}° over {} poses",
+                h.translation_rms_mm, h.rotation_rms_deg, h.poses
+            ),
+            None => "—".into(),
+        };
+        let _ = write!(
+            html,
+            "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{held_out}</td><td>{}</td></tr>",
+            escape(&c.name),
+            escape(&c.reason),
+            v = escape(&c.verdict)
+        );
+    }
+    html.push_str("</table>");
     html.push_str("<h2>Boards and camera-to-camera transforms (joint solve)</h2><table><tr><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for t in result.boards.iter().chain(&result.camera_to_camera) {
         let _ = write!(html, "<tr>{}</tr>", transform_cells(t));

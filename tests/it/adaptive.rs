@@ -161,7 +161,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
         config.clone(),
         &mut planner,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        (hardware.camera.as_mut(), &mut []),
         &mut |_e: SessionEvent| {},
     )
     .unwrap();
@@ -228,7 +228,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
             config.to_path_buf(),
             &mut planner,
             hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
+            (hardware.camera.as_mut(), &mut []),
             &mut |_e: SessionEvent| {},
         );
         (outcome, planner)

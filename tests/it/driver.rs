@@ -147,6 +147,7 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
         settle: Duration::ZERO,
         settle_by_speed: None,
         reorder: false,
+        rig: None,
         max_reprojection_rms_px: 1.0,
         board: board().into(),
         // One detector thread: with more, the AprilTag C worker pool races now and then (see
@@ -238,7 +239,7 @@ fn recorded(events: &[SessionEvent]) -> Vec<(usize, Option<String>, bool)> {
                 will_retry,
                 ..
             } => Some((*plan_index, rejected.clone(), *will_retry)),
-            SessionEvent::Moving { .. } => None,
+            SessionEvent::Moving { .. } | SessionEvent::CameraLost(_) => None,
         })
         .collect()
 }
@@ -248,7 +249,7 @@ fn moving(events: &[SessionEvent]) -> Vec<usize> {
         .iter()
         .filter_map(|e| match e {
             SessionEvent::Moving { plan_index, .. } => Some(*plan_index),
-            SessionEvent::Recorded { .. } => None,
+            SessionEvent::Recorded { .. } | SessionEvent::CameraLost(_) => None,
         })
         .collect()
 }

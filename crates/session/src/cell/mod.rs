@@ -104,8 +104,11 @@ fn referenced_files_exist(config: &CellConfig) -> Result<(), CellError> {
 pub struct Hardware {
     /// The arm.
     pub robot: Box<dyn Robot>,
-    /// The camera.
+    /// The camera (of a several-camera cell: the one the plan is made for).
     pub camera: Box<dyn Camera>,
+    /// A several-camera cell's other cameras, in the order of [`PreparedCell::rig`]'s `others`
+    /// (empty for one camera).
+    pub others: Vec<Box<dyn Camera>>,
 }
 
 /// What the shipped placeholder intrinsics file has in its `camera_name`
@@ -134,10 +137,17 @@ pub struct PreparedCell {
     pub plan: Plan,
     /// The plan check.
     pub report: PlanReport,
+    /// A cell with several cameras: this cell is the camera the plan is made for, and the
+    /// others are here (`None`: one camera).
+    pub rig: Option<rig::RigCells>,
 }
 
-/// Loads everything a config names and checks the plan. Nothing moves.
+/// Loads everything a config names and checks the plan. Nothing moves. A config of several
+/// cameras (`cameras:`) is prepared camera by camera (`rig::prepare_rig`).
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
+    if crate::config::rig::is_rig_file(config_file) {
+        return rig::prepare_rig(config_file);
+    }
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
     prepare_config(config)
 }
@@ -203,6 +213,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             start_joints,
             plan,
             report,
+            rig: None,
         });
     }
     let scripted = match &config.plan.file {
@@ -227,6 +238,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             intrinsics: None,
             given_order_move_time_s: None,
         },
+        rig: None,
     };
     prepared.plan = match (scripted, &prepared.config.plan.generate) {
         (Some(plan), _) => plan,
@@ -366,6 +378,25 @@ impl PreparedCell {
         report
     }
 
+    /// The next-best-pose planner of this camera over `candidates`, from the nominal cell, with
+    /// the solver's noise model; stops at `target_uncertainty_mm` or `max_samples`.
+    pub fn adaptive_planner(
+        &self,
+        candidates: Vec<(Pose, Joints)>,
+        target_uncertainty_mm: f64,
+        max_samples: usize,
+    ) -> crate::plan::nbv::AdaptivePlanner {
+        crate::plan::nbv::AdaptivePlanner::new(
+            self.config.setup,
+            self.config.nominal.camera_mount,
+            self.config.nominal.target_mount,
+            candidates,
+            self.config.solver.to_options(),
+            target_uncertainty_mm,
+            max_samples,
+        )
+    }
+
     /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
         matches!(
@@ -415,6 +446,20 @@ impl PreparedCell {
         }
         if let RobotConfig::Recorded { poses, .. } = &self.config.robot {
             files.push(("robot.poses", poses.clone()));
+        }
+        // A several-camera cell's other cameras: their boards and lenses, once each.
+        for (_, other) in self.rig.iter().flat_map(|rig| &rig.others) {
+            for (role, file) in [
+                ("target", other.config.target.clone()),
+                (
+                    "intrinsics",
+                    other.config.intrinsics.clone().unwrap_or_default(),
+                ),
+            ] {
+                if !file.as_os_str().is_empty() && !files.iter().any(|(_, f)| *f == file) {
+                    files.push((role, file));
+                }
+            }
         }
         files
             .iter()
@@ -490,47 +535,120 @@ impl PreparedCell {
         })
     }
 
-    /// Opens the robot and camera the config names. A simulated camera next to a real (or mock)
-    /// arm renders from the pose the arm reports.
+    /// Opens the robot and camera the config names, and a several-camera cell's other cameras
+    /// beside them (each by the same mapping, [`PreparedCell::open_camera_beside`]). A simulated
+    /// camera next to a real (or mock) arm renders from the pose the arm reports.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
+        let (mut hardware, arm) = self.open_arm_and_camera()?;
+        for (name, other) in self.rig.iter().flat_map(|rig| &rig.others) {
+            let camera = other
+                .open_camera_beside(&arm)
+                .map_err(|e| CellError::Backend(format!("camera `{name}`: {e}")))?;
+            hardware.others.push(camera);
+        }
+        Ok(hardware)
+    }
+
+    fn open_arm_and_camera(&self) -> Result<(Hardware, ArmSide), CellError> {
+        let hardware = |robot: Box<dyn Robot>, camera: Box<dyn Camera>| Hardware {
+            robot,
+            camera,
+            others: Vec::new(),
+        };
         match (&self.config.robot, &self.config.camera) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
                 let (lens, board) = self.sim_world()?;
-                let (robot, camera) =
-                    sim::open(&self.config, truth, self.kinematics()?, self.start_joints, lens, board)?;
+                let (robot, camera) = sim::open(
+                    &self.config,
+                    truth,
+                    self.kinematics()?,
+                    self.start_joints,
+                    lens,
+                    board,
+                )?;
                 // The camera reports the cell's intrinsics, rendering with its own lens.
                 let camera = camera.reporting(self.camera_model);
-                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
+                let arm = robot.clone();
+                let side = ArmSide::Flange(Box::new(move || {
+                    let arm = arm.clone();
+                    Box::new(move || arm.lock().true_base_from_flange())
+                }));
+                Ok((hardware(Box::new(robot), Box::new(camera)), side))
             }
-            (RobotConfig::Ur { .. }, CameraConfig::Sim { .. }) => {
-                let truth = self.sim_truth()?;
-                let robot = self.open_ur()?;
-                let flange = robot.reported_flange();
-                let (lens, board) = self.sim_world()?;
-                let camera = sim::camera(&self.config, truth, flange, lens, board)?
-                    .reporting(self.camera_model);
-                Ok(Hardware { robot: Box::new(robot), camera: Box::new(camera) })
-            }
-            (RobotConfig::Ur { .. }, CameraConfig::Uvc { .. }) => {
+            (RobotConfig::Ur { .. }, CameraConfig::Sim { .. } | CameraConfig::Uvc { .. }) => {
                 // The real cell: open the camera first, so a missing camera never leaves a
                 // connected arm behind.
-                let camera = uvc::open_camera(&self.config.camera, self.camera_model)?;
-                Ok(Hardware { robot: Box::new(self.open_ur()?), camera })
+                let uvc = match &self.config.camera {
+                    CameraConfig::Uvc { .. } => {
+                        Some(uvc::open_camera(&self.config.camera, self.camera_model)?)
+                    }
+                    _ => None,
+                };
+                let robot = self.open_ur()?;
+                let arm = robot.clone();
+                let side = ArmSide::Flange(Box::new(move || arm.reported_flange()));
+                let camera = match uvc {
+                    Some(camera) => camera,
+                    None => self.open_camera_beside(&side)?,
+                };
+                Ok((hardware(Box::new(robot), camera), side))
             }
             (RobotConfig::Ros2(_), CameraConfig::Ros2(_)) => {
-                ros2::open(&self.config, self.camera_model, self.arm.clone())
+                let (hardware, node) =
+                    ros2::open(&self.config, self.camera_model, self.arm.clone())?;
+                Ok((hardware, ArmSide::Ros2(node)))
             }
             (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
                 })?;
-                recorded::open(&self.config, &plan, self.camera_model)
+                let (hardware, selector) = recorded::open(&self.config, &plan, self.camera_model)?;
+                Ok((
+                    hardware,
+                    ArmSide::Recorded {
+                        selector,
+                        poses: plan.len(),
+                    },
+                ))
             }
-            (robot, camera) => Err(CellError::Backend(format!(
-                "the combination robot backend `{}` with camera backend `{}` is not available in this build",
-                robot_name(robot),
-                camera_name(camera)
+            (robot, camera) => Err(self.unavailable(robot, camera)),
+        }
+    }
+
+    fn unavailable(&self, robot: &RobotConfig, camera: &CameraConfig) -> CellError {
+        CellError::Backend(format!(
+            "the combination robot backend `{}` with camera backend `{}` is not available in this build",
+            robot_name(robot),
+            camera_name(camera)
+        ))
+    }
+
+    /// Opens this cell's camera beside an arm opened already (a several-camera cell's other
+    /// cameras): a simulated camera renders from the arm's pose; a USB camera needs nothing of
+    /// the arm.
+    pub fn open_camera_beside(&self, arm: &ArmSide) -> Result<Box<dyn Camera>, CellError> {
+        match (&self.config.camera, arm) {
+            (CameraConfig::Sim { .. }, ArmSide::Flange(flange)) => {
+                let truth = self.sim_truth()?;
+                let (lens, board) = self.sim_world()?;
+                let camera = sim::camera(&self.config, truth, flange(), lens, board)?
+                    .reporting(self.camera_model);
+                Ok(Box::new(camera))
+            }
+            (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
+                uvc::open_camera(&self.config.camera, self.camera_model)
+            }
+            (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => {
+                ros2::open_camera(&self.config, node, self.camera_model)
+            }
+            (CameraConfig::Files { .. }, ArmSide::Recorded { selector, poses }) => {
+                recorded::open_camera(&self.config, selector, *poses, self.camera_model)
+            }
+            (camera, _) => Err(CellError::Backend(format!(
+                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
+                camera_name(camera),
+                robot_name(&self.config.robot)
             ))),
         }
     }
@@ -579,6 +697,7 @@ impl PreparedCell {
             settle: self.config.settle(),
             settle_by_speed: self.config.settle_by_speed(),
             reorder: self.config.plan.reorder,
+            rig: None,
             max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
             board: self.board.clone(),
             detector: self.detector_options(),
@@ -607,6 +726,22 @@ impl PreparedCell {
         }
         self.report.validated().ok_or(&self.report)
     }
+}
+
+/// What a camera opened beside an arm may need of it.
+pub enum ArmSide {
+    /// The arm's flange pose, as a simulated camera follows it (the simulator's true pose for a
+    /// simulated arm, the reported one for a real arm): each call makes a source.
+    Flange(Box<dyn Fn() -> handeye_camera::sim::TrueFlangePose>),
+    /// A ROS 2 arm: its node, on which a ROS 2 camera subscribes.
+    Ros2(ros2::Ros2Node),
+    /// Recorded poses: a folder camera serves the frame of the pose the robot is at.
+    Recorded {
+        /// Set by the recorded robot on each move.
+        selector: handeye_camera::files::FrameSelector,
+        /// Poses recorded (a frame each).
+        poses: usize,
+    },
 }
 
 fn robot_name(r: &RobotConfig) -> &'static str {

@@ -95,35 +95,53 @@ pub fn provisional_model(config: &CellConfig) -> Result<CameraModel, CellError> 
 }
 
 /// Opens the recorded robot and the image-folder camera; the folder must hold a frame for every
-/// pose of `plan`.
+/// pose of `plan`. The selector the robot sets on each move comes back too: another folder
+/// camera of the cell (a several-camera cell) follows it ([`open_camera`]).
 pub fn open(
     config: &CellConfig,
     plan: &[(Pose, Joints)],
     camera_model: CameraModel,
-) -> Result<Hardware, CellError> {
-    let (RobotConfig::Recorded { .. }, CameraConfig::Files { folder }) =
-        (&config.robot, &config.camera)
-    else {
+) -> Result<(Hardware, FrameSelector), CellError> {
+    let RobotConfig::Recorded { .. } = &config.robot else {
         return Err(CellError::Backend(
             "a recorded cell needs `robot: {backend: recorded}` and `camera: {backend: files}`"
                 .into(),
         ));
     };
     let selector = FrameSelector::default();
+    let camera = open_camera(config, &selector, plan.len(), camera_model)?;
+    let hardware = Hardware {
+        robot: Box::new(SelectingRobot {
+            // The validated plan of a recorded cell is the recorded poses, in file order.
+            robot: RecordedRobot::new(plan.iter().map(|(pose, _)| *pose).collect()),
+            selector: selector.clone(),
+        }),
+        camera,
+        others: Vec::new(),
+    };
+    Ok((hardware, selector))
+}
+
+/// Opens the image-folder camera of `config`, serving the frame of the pose `selector` names;
+/// the folder must hold a frame for each of `poses` poses.
+pub fn open_camera(
+    config: &CellConfig,
+    selector: &FrameSelector,
+    poses: usize,
+    camera_model: CameraModel,
+) -> Result<Box<dyn handeye_camera::Camera>, CellError> {
+    let CameraConfig::Files { folder } = &config.camera else {
+        return Err(CellError::Backend(
+            "recorded poses need `camera: {backend: files}`".into(),
+        ));
+    };
     let camera = FilesCamera::open(folder, camera_model)
         .map_err(|e| CellError::Backend(e.to_string()))?
         .with_selector(selector.clone());
     camera
-        .require_frames(plan.len())
+        .require_frames(poses)
         .map_err(|e| CellError::Backend(e.to_string()))?;
-    Ok(Hardware {
-        robot: Box::new(SelectingRobot {
-            // The validated plan of a recorded cell is the recorded poses, in file order.
-            robot: RecordedRobot::new(plan.iter().map(|(pose, _)| *pose).collect()),
-            selector,
-        }),
-        camera: Box::new(camera),
-    })
+    Ok(Box::new(camera))
 }
 
 /// The recorded robot, telling the folder camera which pose it is at after every move.

@@ -1,39 +1,68 @@
 //! Opening the `backend: ros2` arm and camera (docs/ros2-live.md): one ROS 2 node for both, on
-//! the domain and interfaces the config names; the camera alone takes its own `graph`. Built
+//! the domain and interfaces the config names; the camera alone takes its own `graph`. A
+//! several-camera cell's other ROS 2 cameras subscribe on the same node ([`Ros2Node`]). Built
 //! with the `ros2` feature; without it, a clear error says the build lacks it.
 
+use handeye_camera::Camera;
 use handeye_core::camera_model::CameraModel;
 use handeye_robot::kinematics::UrModel;
 
 use super::{CellError, Hardware};
 use crate::config::CellConfig;
 
+/// The ROS 2 node a cell's arm was opened on: its other cameras subscribe on it.
+#[cfg(feature = "ros2")]
+pub type Ros2Node = handeye_ros2::link::Ros2Link;
+
+/// Without the `ros2` feature there is no node.
+#[cfg(not(feature = "ros2"))]
+pub type Ros2Node = ();
+
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`).
 #[cfg(not(feature = "ros2"))]
-pub fn open(_: &CellConfig, _: CameraModel, _: Option<UrModel>) -> Result<Hardware, CellError> {
-    Err(CellError::Backend(
+pub fn open(
+    _: &CellConfig,
+    _: CameraModel,
+    _: Option<UrModel>,
+) -> Result<(Hardware, Ros2Node), CellError> {
+    Err(no_ros2())
+}
+
+/// Opens a ROS 2 camera on the node of the cell's arm.
+#[cfg(not(feature = "ros2"))]
+pub fn open_camera(
+    _: &CellConfig,
+    _: &Ros2Node,
+    _: CameraModel,
+) -> Result<Box<dyn Camera>, CellError> {
+    Err(no_ros2())
+}
+
+#[cfg(not(feature = "ros2"))]
+fn no_ros2() -> CellError {
+    CellError::Backend(
         "backend `ros2` needs a handeye build with the `ros2` feature: `cargo build --release --features ros2` (no ROS installation needed)".into(),
-    ))
+    )
 }
 
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`): the arm first (its
-/// joint states and flange pose must be heard before anything else), then the camera.
+/// joint states and flange pose must be heard before anything else), then the camera; the node
+/// comes back for the cell's other cameras.
 #[cfg(feature = "ros2")]
 pub fn open(
     config: &CellConfig,
     model: CameraModel,
     arm: Option<UrModel>,
-) -> Result<Hardware, CellError> {
+) -> Result<(Hardware, Ros2Node), CellError> {
     use std::time::Duration;
 
     use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
-    use handeye_ros2::camera::{CameraOptions, Ros2Camera};
     use handeye_ros2::link::{LinkOptions, Ros2Link};
 
     use crate::config::ros2::Rmw;
-    use crate::config::{CameraConfig, RobotConfig};
+    use crate::config::RobotConfig;
 
-    let (RobotConfig::Ros2(r), CameraConfig::Ros2(c)) = (&config.robot, &config.camera) else {
+    let RobotConfig::Ros2(r) = &config.robot else {
         return Err(CellError::Backend(
             "the ROS 2 cell needs `robot: {backend: ros2}` and `camera: {backend: ros2}`".into(),
         ));
@@ -64,8 +93,35 @@ pub fn open(
         },
     )
     .map_err(|e| CellError::Robot(Box::new(e)))?;
+    let camera = open_camera(config, &link, model)?;
+    let hardware = Hardware {
+        robot: Box::new(robot),
+        camera,
+        others: Vec::new(),
+    };
+    Ok((hardware, link))
+}
+
+/// Opens the ROS 2 camera of `config` (`camera: {backend: ros2}`) on `link`.
+#[cfg(feature = "ros2")]
+pub fn open_camera(
+    config: &CellConfig,
+    link: &Ros2Node,
+    model: CameraModel,
+) -> Result<Box<dyn Camera>, CellError> {
+    use std::time::Duration;
+
+    use handeye_ros2::camera::{CameraOptions, Ros2Camera};
+
+    use crate::config::CameraConfig;
+
+    let CameraConfig::Ros2(c) = &config.camera else {
+        return Err(CellError::Backend(
+            "the ROS 2 cell needs `robot: {backend: ros2}` and `camera: {backend: ros2}`".into(),
+        ));
+    };
     let camera = Ros2Camera::open(
-        &link,
+        link,
         CameraOptions {
             image_topic: c.image_topic.clone(),
             compressed: c.compressed,
@@ -75,8 +131,5 @@ pub fn open(
         },
     )
     .map_err(|e| CellError::Backend(format!("the ROS 2 camera: {e}")))?;
-    Ok(Hardware {
-        robot: Box::new(robot),
-        camera: Box::new(camera),
-    })
+    Ok(Box::new(camera))
 }

@@ -62,11 +62,11 @@ fn default_connect_timeout_s() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Ros2Robot {
-    /// The arm model whose kinematics plan the poses (a UR model; see `ArmModel`); `none` (or
-    /// absent) for an arm handeye has no model of: it replays taught plans (joints with the
-    /// flange pose taught there) and is calibrated hand-guided.
+    /// The arm model whose kinematics plan the poses (a UR model; see `ArmModel`), or `none` for
+    /// an arm handeye has no model of: it replays taught plans (joints with the flange pose
+    /// taught there) and is calibrated hand-guided. Required: a ROS 2 arm may be any arm, and
+    /// guessing a UR model for one that is not would plan with the wrong kinematics.
     #[serde(
-        default,
         deserialize_with = "model_or_none",
         serialize_with = "write_model_or_none"
     )]
@@ -321,14 +321,17 @@ mod tests {
         assert_eq!(r.graph.rmw, Rmw::Fastrtps);
         assert!(r.problem().is_none());
 
-        // No model: `none` or absent; it must name its joint ranges.
-        for text in ["backend: ros2\nmodel: none\n", "backend: ros2\n"] {
-            let RobotConfig::Ros2(r) = serde_yaml_ng::from_str(text).unwrap() else {
-                panic!("not ros2")
-            };
-            assert_eq!(r.model, None);
-            assert_eq!(r.problem().unwrap().0, "robot.joint_ranges_deg");
-        }
+        // No model: `none`; it must name its joint ranges.
+        let RobotConfig::Ros2(r) = serde_yaml_ng::from_str("backend: ros2\nmodel: none\n").unwrap()
+        else {
+            panic!("not ros2")
+        };
+        assert_eq!(r.model, None);
+        assert_eq!(r.problem().unwrap().0, "robot.joint_ranges_deg");
+        // Absent: refused, not guessed.
+        let absent = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\n");
+        let absent = absent.unwrap_err().to_string();
+        assert!(absent.contains("model"), "{absent}");
         let typo = serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nmodel: ur6e\n");
         let typo = typo.unwrap_err().to_string();
         assert!(typo.contains("ur6e") && typo.contains("`none`"), "{typo}");
@@ -337,14 +340,15 @@ mod tests {
         assert!(unknown.unwrap_err().to_string().contains("host"));
 
         let bad: RobotConfig =
-            serde_yaml_ng::from_str("backend: ros2\naction: relative/name\n").unwrap();
+            serde_yaml_ng::from_str("backend: ros2\nmodel: ur5e\naction: relative/name\n").unwrap();
         let RobotConfig::Ros2(r) = bad else { panic!() };
         let (key, problem) = r.problem().unwrap();
         assert_eq!(key, "robot.action");
         assert!(problem.contains("absolute"), "{problem}");
 
         let domain: RobotConfig =
-            serde_yaml_ng::from_str("backend: ros2\ngraph: {domain_id: 300}\n").unwrap();
+            serde_yaml_ng::from_str("backend: ros2\nmodel: ur5e\ngraph: {domain_id: 300}\n")
+                .unwrap();
         let RobotConfig::Ros2(r) = domain else {
             panic!()
         };

@@ -265,6 +265,87 @@ impl AdaptivePlanner {
 
     /// The next pose to visit given the samples accepted so far, or `None` to stop.
     pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
+        let (done, solved_sigma_mm) = self.assess(samples);
+        let choice = if done {
+            None
+        } else {
+            let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+            let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
+            self.model
+                .next_best_per_second(&taken, &poses, &self.used, &|i| self.seconds(i))
+        };
+        self.log.push(AdaptiveStep {
+            samples: samples.len(),
+            solved_sigma_mm,
+            chose: choice.map(|c| c.0),
+            predicted_sigma_mm: choice.map(|c| c.1.worst_translation_mm()),
+        });
+        let (index, _) = choice?;
+        Some(self.take(index))
+    }
+
+    /// Arm time of candidate `i` from where the arm stands (move and the per-pose time), s;
+    /// without a motion model every candidate costs the same.
+    pub fn seconds(&self, i: usize) -> f64 {
+        match &self.motion {
+            Some(m) => m.limits.joint_move_time(&m.at, &self.candidates[i].1) + m.per_pose_s,
+            None => 1.0,
+        }
+    }
+
+    /// The candidates (flange pose, joints).
+    pub fn candidates(&self) -> &[(Pose, Joints)] {
+        &self.candidates
+    }
+
+    /// Per candidate (`None` when taken already): how much its sample would reduce this
+    /// camera's predicted score given `samples`, as `ln(score now / score after)`.
+    pub fn gains(&self, samples: &[PosePair]) -> Vec<Option<f64>> {
+        let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
+        let solution = self.model.solution();
+        let h = self.model.information(&taken);
+        let now = self.model.predict(&h).map(|p| p.score);
+        self.candidates
+            .iter()
+            .zip(&self.used)
+            .map(|((c, _), used)| {
+                if *used {
+                    return None;
+                }
+                let added = h + sample_information(
+                    &solution,
+                    &self.model.setup.chain_b(c),
+                    &self.model.options.noise,
+                );
+                let after = self.model.predict(&added)?.score;
+                Some((now? / after).ln())
+            })
+            .collect()
+    }
+
+    /// Whether candidate `i` is still to be chosen (not taken).
+    pub fn is_free(&self, i: usize) -> bool {
+        !self.used.get(i).copied().unwrap_or(true)
+    }
+
+    /// How many candidates are taken (chosen, or visited before a resume).
+    pub fn taken(&self) -> usize {
+        self.used.iter().filter(|used| **used).count()
+    }
+
+    /// Takes candidate `index`: not chosen again, and the arm stands there next.
+    pub fn take(&mut self, index: usize) -> (Pose, Joints) {
+        self.used[index] = true;
+        if let Some(m) = &mut self.motion {
+            m.at = self.candidates[index].1;
+        }
+        self.candidates[index]
+    }
+
+    /// Solves `samples` (from [`Self::DEFAULT_MIN_SAMPLES`] on) and judges the stop rule:
+    /// whether to stop (good enough, or the most samples reached), with the solved worst
+    /// translation 1-sigma, mm.
+    pub fn assess(&mut self, samples: &[PosePair]) -> (bool, Option<f64>) {
         let mut solved_sigma_mm = None;
         if samples.len() >= self.min_samples {
             let model = &mut self.model;
@@ -301,33 +382,7 @@ impl AdaptivePlanner {
                 _ => true,
             };
         self.reached = good;
-        let done = good || samples.len() >= self.max_samples;
-        let choice = if done {
-            None
-        } else {
-            let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
-            let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
-            let joints: Vec<Joints> = self.candidates.iter().map(|c| c.1).collect();
-            // Without a motion model every candidate costs the same: the least score after wins.
-            let seconds = |i: usize| match &self.motion {
-                Some(m) => m.limits.joint_move_time(&m.at, &joints[i]) + m.per_pose_s,
-                None => 1.0,
-            };
-            self.model
-                .next_best_per_second(&taken, &poses, &self.used, &seconds)
-        };
-        self.log.push(AdaptiveStep {
-            samples: samples.len(),
-            solved_sigma_mm,
-            chose: choice.map(|c| c.0),
-            predicted_sigma_mm: choice.map(|c| c.1.worst_translation_mm()),
-        });
-        let (index, _) = choice?;
-        self.used[index] = true;
-        if let Some(m) = &mut self.motion {
-            m.at = self.candidates[index].1;
-        }
-        Some(self.candidates[index])
+        (good || samples.len() >= self.max_samples, solved_sigma_mm)
     }
 
     /// Marks the candidates at these flange poses (within 1 mm and 0.1°) as taken: a resumed

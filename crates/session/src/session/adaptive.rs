@@ -20,7 +20,7 @@ use handeye_core::setup::PosePair;
 use handeye_robot::{Joints, Robot};
 
 use super::SessionManifest;
-use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
+use super::{run_cameras_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
 
 /// Yields the next pose of a session from the samples accepted so far.
 pub trait PlanSource {
@@ -42,12 +42,16 @@ impl PlanSource for AdaptivePlanner {
 
 /// Runs a session whose poses come from `source`, one at a time. `setup.plan` is ignored (the
 /// source is the plan); `manifest_config` is the config path written into the manifest.
+///
+/// A several-camera session (`setup.rig`, `others` the further cameras' devices): every camera
+/// grabs at each pose, every camera's folder gets the growing plan, and a pose is kept when any
+/// camera accepted it (the cameras' records share the plan's numbering).
 pub fn run_adaptive_session(
-    setup: SessionSetup,
+    mut setup: SessionSetup,
     manifest_config: std::path::PathBuf,
     source: &mut dyn PlanSource,
     robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
+    (camera, others): (&mut dyn Camera, &mut [Box<dyn Camera>]),
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
     // A resumed session: the manifest lists the poses chosen so far (the last one may not have
@@ -73,7 +77,22 @@ pub fn run_adaptive_session(
         let Some(pose) = next.take() else {
             break;
         };
-        plan.visit(&setup, pose, robot, camera, on_event, &mut outcome)?;
+        plan.visit(
+            &setup,
+            pose,
+            robot,
+            (camera, others),
+            on_event,
+            &mut outcome,
+        )?;
+        // A camera lost at this pose is not asked again in this run (as in a fixed plan).
+        if let Some(rig) = &mut setup.rig {
+            rig.lost = outcome
+                .failed_cameras
+                .iter()
+                .map(|f| f.camera.clone())
+                .collect();
+        }
     }
     Ok(outcome)
 }
@@ -121,35 +140,59 @@ impl GrowingPlan {
         setup: &SessionSetup,
         pose: (Pose, Joints),
         robot: &mut dyn Robot,
-        camera: &mut dyn Camera,
+        (camera, others): (&mut dyn Camera, &mut [Box<dyn Camera>]),
         on_event: &mut dyn FnMut(SessionEvent),
         outcome: &mut SessionOutcome,
     ) -> Result<bool, SessionError> {
         self.poses.push(pose);
-        let mut manifest =
-            SessionManifest::new(self.manifest_config.clone(), setup.setup, &self.poses)
-                .with_inputs(self.inputs.clone());
-        manifest.manual = self.manual;
-        setup.folder.write_manifest(&manifest)?;
+        self.write_manifests(setup)?;
         let step = SessionSetup {
             plan: self.poses.clone(),
             ..setup.clone()
         };
         let index = self.poses.len() - 1;
-        let step_outcome = run_session(step, robot, camera, on_event)?;
+        let step_outcome = run_cameras_session(step, robot, camera, others, on_event)?;
         outcome.visited_now += step_outcome.visited_now;
         outcome.moving_s += step_outcome.moving_s;
         outcome.settling_s += step_outcome.settling_s;
         outcome.modelled_moving_s += step_outcome.modelled_moving_s;
         outcome.moving_modelled_s += step_outcome.moving_modelled_s;
         outcome.skipped.extend(step_outcome.skipped.iter().cloned());
-        let accepted = step_outcome.accepted.contains(&index);
+        outcome
+            .failed_cameras
+            .extend(step_outcome.failed_cameras.iter().cloned());
+        // Several cameras: kept when any camera accepted it (their records of it stay).
+        let accepted = step_outcome
+            .accepted_by_camera
+            .iter()
+            .any(|poses| poses.contains(&index));
         if accepted {
             outcome.accepted = step_outcome.accepted;
+            outcome.accepted_by_camera = step_outcome.accepted_by_camera;
         } else {
             self.poses.pop();
         }
         Ok(accepted)
+    }
+}
+
+impl GrowingPlan {
+    /// The plan so far into the session's manifest (and a several-camera session's other
+    /// cameras' manifests).
+    fn write_manifests(&self, setup: &SessionSetup) -> Result<(), SessionError> {
+        let mut manifest =
+            SessionManifest::new(self.manifest_config.clone(), setup.setup, &self.poses)
+                .with_inputs(self.inputs.clone());
+        manifest.manual = self.manual;
+        setup.folder.write_manifest(&manifest)?;
+        for other in setup.rig.iter().flat_map(|rig| &rig.others) {
+            other.folder.write_manifest(&SessionManifest::new(
+                self.manifest_config.clone(),
+                other.setup,
+                &self.poses,
+            ))?;
+        }
+        Ok(())
     }
 }
 

@@ -16,6 +16,13 @@
 //! `abort-after-samples` abort the process right after that write (as a crash would);
 //! `full-disk-at-record` fails the record write as a full disk does. The crash-consistency
 //! tests (`tests/it/crash.rs`) set it; it is not a user option and nothing else sets it.
+//! `camera-lost:<camera>:<plan index>` makes that camera's grab fail there, as an unplugged
+//! camera does (`camera` is the camera of a one-camera cell; a several-camera cell's cameras by
+//! their names).
+//!
+//! Several cameras (`SessionSetup::rig`): one move and settle per pose, then every camera that
+//! still needs the pose grabs; each camera's records go to its own folder, in the one-camera
+//! layout, measured by the same workers.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -23,17 +30,22 @@ use std::sync::mpsc;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::dataset::Dataset;
+use serde::{Deserialize, Serialize};
+
 use crate::plan::check::MoveCheck;
 use handeye_camera::{Camera, Frame};
-use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
-use handeye_core::setup::{PosePair, Setup};
+use handeye_core::setup::Setup;
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, SettleBySpeed};
-use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+use handeye_vision::{DetectorOptions, Target};
 
 use super::folder::{PoseVisit, SessionFolder};
 use super::SessionError;
+
+mod record;
+
+pub(crate) use record::{measure, rebuild_samples};
+use record::{spawn_workers, Fault, Job, JobResult, Recording};
 
 /// Everything the loop needs besides the hardware.
 #[derive(Clone)]
@@ -70,6 +82,50 @@ pub struct SessionSetup {
     /// where the arm stands (every move allowed by `move_check`), instead of plan order; `false`
     /// keeps plan order (a scripted order).
     pub reorder: bool,
+    /// A cell with several cameras: the others, grabbed at the same poses (`None`: one camera).
+    pub rig: Option<RigCameras>,
+}
+
+/// The further cameras of a several-camera session: `folder` of the [`SessionSetup`] is the
+/// first camera's.
+#[derive(Clone)]
+pub struct RigCameras {
+    /// The session's root folder (what `--resume` takes).
+    pub root: std::path::PathBuf,
+    /// The first camera's name.
+    pub camera_name: String,
+    /// The others, in config order.
+    pub others: Vec<OtherCamera>,
+    /// Cameras (any of them, by name) lost earlier in this run: not asked again (an adaptive
+    /// session drives one pose at a time).
+    pub lost: Vec<String>,
+}
+
+/// A further camera of a several-camera session: its own folder, setup and board (the
+/// detector settings and reprojection limit are the session's).
+#[derive(Clone)]
+pub struct OtherCamera {
+    /// Its name.
+    pub name: String,
+    /// Its folder, in the one-camera layout.
+    pub folder: SessionFolder,
+    /// On the flange or fixed in the cell.
+    pub setup: Setup,
+    /// The board it looks at.
+    pub board: Target,
+}
+
+/// A camera that stopped delivering frames while others still did: a several-camera session's
+/// `failures.yaml` lists them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFailure {
+    /// The camera.
+    pub camera: String,
+    /// The plan pose of its failed grab.
+    pub plan_index: usize,
+    /// The camera's error.
+    pub error: String,
 }
 
 /// How often the joint speeds are read while settling (a UR streams them at 500 Hz).
@@ -90,6 +146,8 @@ pub enum SessionEvent {
     Recorded {
         /// Plan index.
         plan_index: usize,
+        /// The camera, in a several-camera session.
+        camera: Option<String>,
         /// Board RMS when accepted.
         reprojection_rms_px: Option<f64>,
         /// Tags used.
@@ -102,6 +160,8 @@ pub enum SessionEvent {
         /// for live displays: they need not read it back from disk.
         frame: SharedFrame,
     },
+    /// A camera of a several-camera session stopped delivering frames; the others go on.
+    CameraLost(CameraFailure),
 }
 
 /// A recorded frame shared without a copy; its `Debug` shows only its size.
@@ -133,6 +193,11 @@ pub struct SessionOutcome {
     pub modelled_moving_s: f64,
     /// The measured time of the same moves, s.
     pub moving_modelled_s: f64,
+    /// Cameras that stopped delivering frames in this run while others still did.
+    pub failed_cameras: Vec<CameraFailure>,
+    /// Per camera (the first is the setup's own, then `setup.rig`'s others): plan indices with
+    /// an accepted record, ascending.
+    pub accepted_by_camera: Vec<Vec<usize>>,
 }
 
 impl SessionOutcome {
@@ -140,18 +205,6 @@ impl SessionOutcome {
     pub fn arm_time_s(&self) -> f64 {
         self.moving_s + self.settling_s
     }
-}
-
-struct Job {
-    plan_index: usize,
-    frame: Frame,
-    base_from_flange: Pose,
-}
-
-struct JobResult {
-    plan_index: usize,
-    visit: Result<PoseVisit, SessionError>,
-    image: Arc<image::GrayImage>,
 }
 
 /// Runs (or resumes) a session: visits every plan pose without an accepted record, retries a
@@ -163,57 +216,44 @@ pub fn run_session(
     camera: &mut dyn Camera,
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
-    let previous = setup.folder.read_visits()?;
-    if let Some(phantom) = previous.iter().find(|v| v.plan_index >= setup.plan.len()) {
-        return Err(SessionError::Record {
-            file: setup.folder.visit_path(phantom.plan_index),
-            path: "plan_index".into(),
-            message: format!(
-                "{} is not a pose of the plan ({} poses)",
-                phantom.plan_index,
-                setup.plan.len()
-            ),
-        });
+    run_cameras_session(setup, robot, camera, &mut [], on_event)
+}
+
+/// [`run_session`] of a cell with several cameras: `others` are the devices of `setup.rig`'s
+/// further cameras, in the same order. At each pose the arm moves and settles once, then every
+/// camera that still needs the pose grabs; each camera's frames are measured and committed into
+/// its own folder. A pose is visited again (once) while some camera has no accepted record of
+/// it. A camera that fails while another still delivers is named (`SessionOutcome::
+/// failed_cameras`, [`SessionEvent::CameraLost`]), its records kept, and not asked again in
+/// this run; when the last camera fails the run stops as a one-camera run does.
+pub fn run_cameras_session(
+    setup: SessionSetup,
+    robot: &mut dyn Robot,
+    camera: &mut dyn Camera,
+    others: &mut [Box<dyn Camera>],
+    on_event: &mut dyn FnMut(SessionEvent),
+) -> Result<SessionOutcome, SessionError> {
+    let recordings = recordings(&setup, camera, others)?;
+    let mut devices: Vec<&mut dyn Camera> = vec![camera];
+    devices.extend(others.iter_mut().map(|c| c.as_mut() as &mut dyn Camera));
+    let mut state = RunState::new(&setup, &recordings)?;
+    let mut samples = Vec::with_capacity(recordings.len());
+    for (recording, visits) in recordings.iter().zip(&state.previous) {
+        // The records are the log; samples.yaml is rebuilt from them before anything moves.
+        samples.push(rebuild_samples(&recording.folder, recording.setup, visits)?);
     }
-    // The records are the log; samples.yaml is rebuilt from them before anything moves.
-    let samples = rebuild_samples(&setup.folder, setup.setup, &previous)?;
-    let mut accepted: BTreeSet<usize> = BTreeSet::new();
-    let mut failed_before: BTreeSet<usize> = BTreeSet::new();
-    for visit in &previous {
-        let corners_only =
-            setup.estimate_intrinsics && visit.rejected.is_none() && !visit.corners_px.is_empty();
-        if visit.camera_from_target.is_some() || corners_only {
-            accepted.insert(visit.plan_index);
-        } else {
-            failed_before.insert(visit.plan_index);
-        }
-    }
-    let mut pending: Vec<usize> = (0..setup.plan.len())
-        .filter(|i| !accepted.contains(i))
-        .collect();
+    let mut pending = state.pending(setup.plan.len());
 
     // A stop request ends a move in progress, not only the run after it.
     robot.set_interrupt(setup.stop.clone());
     let (job_tx, job_rx) = mpsc::channel::<Job>();
     let (result_tx, result_rx) = mpsc::channel::<JobResult>();
-    let camera_model = (!setup.estimate_intrinsics).then(|| *camera.model());
-    let workers = spawn_workers(&setup, camera_model, samples, job_rx, result_tx)?;
-
-    let mut state = RunState {
-        outcome: SessionOutcome::default(),
-        attempts: failed_before.iter().map(|i| (*i, 1)).collect(),
-        retries: Vec::new(),
-        in_flight: 0,
-        submitted: Default::default(),
-        arrived: BTreeMap::new(),
-        error: None,
-        recorded_before: accepted.len(),
-        folder: setup.folder.root().to_path_buf(),
-    };
+    let fault = Arc::new(Fault::from_env());
+    let workers = spawn_workers(&recordings, samples, fault.clone(), job_rx, result_tx)?;
 
     // A fresh plan runs in its (checked) order; what a resumed run has left is visited in travel
     // order from where the arm stands now. Retries follow each pass in plan order.
-    if !(accepted.is_empty() && failed_before.is_empty()) {
+    if state.resumed() {
         order_for_travel(robot, &setup, &mut pending);
     }
     'passes: while !pending.is_empty() {
@@ -221,13 +261,19 @@ pub fn run_session(
             if state.error.is_some() {
                 break 'passes;
             }
+            let needed: Vec<usize> = (0..recordings.len())
+                .filter(|&c| state.wants(c, plan_index))
+                .collect();
+            if needed.is_empty() {
+                continue;
+            }
             if setup.stop.load(Ordering::SeqCst) {
                 let _ = robot.stop();
                 state.drain(&result_rx, on_event);
                 state.error = Some(SessionError::Interrupted {
                     plan_index,
                     recorded: state.recorded(),
-                    folder: setup.folder.root().to_path_buf(),
+                    folder: state.folder.clone(),
                 });
                 break 'passes;
             }
@@ -235,30 +281,50 @@ pub fn run_session(
                 plan_index,
                 target: setup.plan[plan_index].0,
             });
-            match capture(robot, camera, &setup, plan_index) {
-                Ok((frame, base_from_flange, timing)) => {
-                    state.outcome.visited_now += 1;
-                    state.outcome.moving_s += timing.moving_s;
-                    state.outcome.settling_s += timing.settling_s;
-                    if let Some(modelled_s) = timing.modelled_s {
-                        state.outcome.modelled_moving_s += modelled_s;
-                        state.outcome.moving_modelled_s += timing.moving_s;
+            let visited = arrive(robot, &setup, plan_index).and_then(|arrival| {
+                let mut frames = Vec::with_capacity(needed.len());
+                for &c in &needed {
+                    let grabbed =
+                        if fault.at(&format!("camera-lost:{}", recordings[c].name), plan_index) {
+                            Err(handeye_camera::CameraError::Backend(
+                                "no fresh frame (injected by HANDEYE_FAULT)".into(),
+                            ))
+                        } else {
+                            grab_fresh(&mut *devices[c], arrival.settled)
+                        };
+                    match grabbed {
+                        Ok(frame) => frames.push((c, frame)),
+                        // Another camera still delivers: this one is named and left out.
+                        Err(error) if state.delivering() > 1 => {
+                            state.lose(c, plan_index, error.to_string(), on_event)
+                        }
+                        Err(error) => return Err(ErrorSource::Camera(error)),
                     }
-                    state.in_flight += 1;
-                    state.submitted.push_back(plan_index);
-                    job_tx
-                        .send(Job {
-                            plan_index,
-                            frame,
-                            base_from_flange,
-                        })
-                        .map_err(|_| SessionError::DetectionThread("stopped"))?;
+                }
+                let base_from_flange = robot.base_from_flange()?;
+                Ok((arrival, frames, base_from_flange))
+            });
+            match visited {
+                Ok((arrival, frames, base_from_flange)) => {
+                    state.count(&arrival, frames.first().map(|(_, f)| f.captured_at));
+                    for (camera, frame) in frames {
+                        state.in_flight += 1;
+                        state.submitted.push_back((plan_index, camera));
+                        job_tx
+                            .send(Job {
+                                camera,
+                                plan_index,
+                                frame,
+                                base_from_flange,
+                            })
+                            .map_err(|_| SessionError::DetectionThread("stopped"))?;
+                    }
                 }
                 Err(source) => {
                     // Stop first, then let the worker finish what it has so the count is true.
                     let _ = robot.stop();
                     state.drain(&result_rx, on_event);
-                    let folder = setup.folder.root().to_path_buf();
+                    let folder = state.folder.clone();
                     let recorded = state.recorded();
                     state.error = Some(match source {
                         ErrorSource::Robot(RobotError::Interrupted) => SessionError::Interrupted {
@@ -294,7 +360,7 @@ pub fn run_session(
         }
         // Every result of this pass must be in before deciding on retries.
         state.drain(&result_rx, on_event);
-        pending = std::mem::take(&mut state.retries);
+        pending = state.pending(setup.plan.len());
     }
     drop(job_tx);
     state.drain(&result_rx, on_event);
@@ -306,37 +372,219 @@ pub fn run_session(
         return Err(SessionError::DetectionThread("panicked"));
     }
     let mut outcome = state.outcome;
-    outcome.accepted.extend(accepted);
-    outcome.accepted.sort_unstable();
-    outcome.accepted.dedup();
+    outcome.accepted_by_camera = state
+        .accepted
+        .iter()
+        .map(|poses| poses.iter().copied().collect())
+        .collect();
+    outcome.accepted = outcome.accepted_by_camera[0].clone();
     Ok(outcome)
 }
 
-/// Book-keeping of a run in progress.
+/// The run's cameras as recordings: the setup's own first, then `setup.rig`'s others.
+fn recordings(
+    setup: &SessionSetup,
+    camera: &dyn Camera,
+    others: &[Box<dyn Camera>],
+) -> Result<Vec<Recording>, SessionError> {
+    let rig_others = setup.rig.as_ref().map_or(&[][..], |rig| &rig.others[..]);
+    if rig_others.len() != others.len() {
+        return Err(SessionError::DetectionThread(
+            "the further cameras opened do not match the session's",
+        ));
+    }
+    let mut recordings = vec![Recording {
+        name: setup
+            .rig
+            .as_ref()
+            .map_or_else(|| "camera".to_string(), |rig| rig.camera_name.clone()),
+        folder: setup.folder.clone(),
+        setup: setup.setup,
+        board: setup.board.clone(),
+        detector: setup.detector.clone(),
+        max_rms: setup.max_reprojection_rms_px,
+        model: (!setup.estimate_intrinsics).then(|| *camera.model()),
+    }];
+    recordings.extend(
+        rig_others
+            .iter()
+            .zip(others)
+            .map(|(other, device)| Recording {
+                name: other.name.clone(),
+                folder: other.folder.clone(),
+                setup: other.setup,
+                board: other.board.clone(),
+                detector: setup.detector.clone(),
+                max_rms: setup.max_reprojection_rms_px,
+                model: Some(*device.model()),
+            }),
+    );
+    Ok(recordings)
+}
+
+/// Book-keeping of a run in progress. Cameras are numbered as in [`recordings`]; the outcome's
+/// accepted and skipped poses are the first camera's (the one the plan is made for).
 struct RunState {
     outcome: SessionOutcome,
-    attempts: BTreeMap<usize, usize>,
-    retries: Vec<usize>,
+    /// Each camera's records from before this run.
+    previous: Vec<Vec<PoseVisit>>,
+    /// Each camera's poses with an accepted record.
+    accepted: Vec<BTreeSet<usize>>,
+    /// Measurements per (camera, pose), counting those of earlier runs.
+    attempts: BTreeMap<(usize, usize), usize>,
+    /// Cameras that stopped delivering in this run.
+    lost: Vec<bool>,
+    names: Vec<String>,
     in_flight: usize,
-    /// The poses handed to the workers, in the order they were (at most one job per pose is in
-    /// flight: retries wait for the pass to drain).
-    submitted: std::collections::VecDeque<usize>,
-    /// Results that finished before an earlier pose's: held so events go out in visit order.
-    arrived: BTreeMap<usize, JobResult>,
+    /// The (pose, camera) jobs handed to the workers, in the order they were (at most one job
+    /// per pose and camera is in flight: retries wait for the pass to drain).
+    submitted: std::collections::VecDeque<(usize, usize)>,
+    /// Results that finished before an earlier job's: held so events go out in visit order.
+    arrived: BTreeMap<(usize, usize), JobResult>,
     error: Option<SessionError>,
     recorded_before: usize,
+    /// The folder a resume takes (a several-camera session's root).
     folder: std::path::PathBuf,
+    /// Whether the cameras are named in events (several cameras).
+    named: bool,
 }
 
 impl RunState {
+    fn new(setup: &SessionSetup, recordings: &[Recording]) -> Result<RunState, SessionError> {
+        let mut previous = Vec::with_capacity(recordings.len());
+        let mut accepted = Vec::with_capacity(recordings.len());
+        let mut attempts = BTreeMap::new();
+        for (c, recording) in recordings.iter().enumerate() {
+            let visits = recording.folder.read_visits()?;
+            if let Some(phantom) = visits.iter().find(|v| v.plan_index >= setup.plan.len()) {
+                return Err(SessionError::Record {
+                    file: recording.folder.visit_path(phantom.plan_index),
+                    path: "plan_index".into(),
+                    message: format!(
+                        "{} is not a pose of the plan ({} poses)",
+                        phantom.plan_index,
+                        setup.plan.len()
+                    ),
+                });
+            }
+            let mut ok = BTreeSet::new();
+            for visit in &visits {
+                let corners_only = recording.model.is_none()
+                    && visit.rejected.is_none()
+                    && !visit.corners_px.is_empty();
+                if visit.camera_from_target.is_some() || corners_only {
+                    ok.insert(visit.plan_index);
+                } else {
+                    attempts.insert((c, visit.plan_index), 1);
+                }
+            }
+            previous.push(visits);
+            accepted.push(ok);
+        }
+        Ok(RunState {
+            outcome: SessionOutcome::default(),
+            recorded_before: accepted[0].len(),
+            previous,
+            accepted,
+            attempts,
+            lost: recordings
+                .iter()
+                .map(|r| {
+                    setup
+                        .rig
+                        .as_ref()
+                        .is_some_and(|rig| rig.lost.contains(&r.name))
+                })
+                .collect(),
+            names: recordings.iter().map(|r| r.name.clone()).collect(),
+            in_flight: 0,
+            submitted: Default::default(),
+            arrived: BTreeMap::new(),
+            error: None,
+            folder: setup
+                .rig
+                .as_ref()
+                .map_or_else(|| setup.folder.root().to_path_buf(), |rig| rig.root.clone()),
+            named: setup.rig.is_some(),
+        })
+    }
+
+    /// Whether anything was recorded before this run.
+    fn resumed(&self) -> bool {
+        self.previous.iter().any(|v| !v.is_empty())
+    }
+
+    /// Whether camera `c` grabs at pose `i` when the arm is there: it delivers, has no accepted
+    /// record of it, and was not measured there twice.
+    fn wants(&self, c: usize, i: usize) -> bool {
+        !self.lost[c] && !self.accepted[c].contains(&i) && self.tries(c, i) < 2
+    }
+
+    fn tries(&self, c: usize, i: usize) -> usize {
+        self.attempts.get(&(c, i)).copied().unwrap_or(0)
+    }
+
+    /// The poses the arm still goes to, in plan order: those the first camera wants (a rejected
+    /// pose once more, as with one camera), and those another camera has no record of. Another
+    /// camera's rejection does not send the arm back: a fixed camera that cannot see its board
+    /// from a pose would not see it the second time either; it grabs again whenever the arm is
+    /// there anyway.
+    fn pending(&self, poses: usize) -> Vec<usize> {
+        (0..poses)
+            .filter(|&i| {
+                self.wants(0, i)
+                    || (1..self.lost.len()).any(|c| self.wants(c, i) && self.tries(c, i) == 0)
+            })
+            .collect()
+    }
+
+    /// Cameras still delivering frames.
+    fn delivering(&self) -> usize {
+        self.lost.iter().filter(|lost| !**lost).count()
+    }
+
+    /// Camera `c` failed to grab at pose `plan_index`: named, and not asked again in this run.
+    fn lose(
+        &mut self,
+        c: usize,
+        plan_index: usize,
+        error: String,
+        on_event: &mut dyn FnMut(SessionEvent),
+    ) {
+        self.lost[c] = true;
+        let failure = CameraFailure {
+            camera: self.names[c].clone(),
+            plan_index,
+            error,
+        };
+        on_event(SessionEvent::CameraLost(failure.clone()));
+        self.outcome.failed_cameras.push(failure);
+    }
+
+    /// Adds one visit's arm time (settling up to the first frame's exposure).
+    fn count(&mut self, arrival: &Arrival, exposed: Option<Instant>) {
+        let outcome = &mut self.outcome;
+        outcome.visited_now += 1;
+        outcome.moving_s += arrival.moving_s;
+        outcome.settling_s += exposed
+            .unwrap_or(arrival.settled)
+            .saturating_duration_since(arrival.arrived)
+            .as_secs_f64();
+        if let Some(modelled_s) = arrival.modelled_s {
+            outcome.modelled_moving_s += modelled_s;
+            outcome.moving_modelled_s += arrival.moving_s;
+        }
+    }
+
     fn recorded(&self) -> usize {
         self.recorded_before + self.outcome.accepted.len() + self.outcome.skipped.len()
     }
 
-    /// Takes a worker's result; handles it, and any held behind it, in the order the poses were
-    /// visited (the workers finish in any order).
+    /// Takes a worker's result; handles it, and any held behind it, in the order the jobs were
+    /// handed out (the workers finish in any order).
     fn receive(&mut self, result: JobResult, on_event: &mut dyn FnMut(SessionEvent)) {
-        self.arrived.insert(result.plan_index, result);
+        self.arrived
+            .insert((result.plan_index, result.camera), result);
         while let Some(result) = self
             .submitted
             .front()
@@ -349,7 +597,7 @@ impl RunState {
 
     fn handle(&mut self, result: JobResult, on_event: &mut dyn FnMut(SessionEvent)) {
         self.in_flight -= 1;
-        let i = result.plan_index;
+        let (c, i) = (result.camera, result.plan_index);
         let visit = match result.visit {
             Ok(visit) => visit,
             Err(e) => {
@@ -364,16 +612,22 @@ impl RunState {
                 return;
             }
         };
-        let tries = self.attempts.entry(i).or_insert(0);
+        let tries = self.attempts.entry((c, i)).or_insert(0);
         *tries += 1;
         let will_retry = visit.rejected.is_some() && *tries < 2;
-        match &visit.rejected {
-            None => self.outcome.accepted.push(i),
-            Some(_) if will_retry => self.retries.push(i),
-            Some(why) => self.outcome.skipped.push((i, why.clone())),
+        if visit.rejected.is_none() {
+            self.accepted[c].insert(i);
+        }
+        if c == 0 {
+            match &visit.rejected {
+                None => self.outcome.accepted.push(i),
+                Some(_) if will_retry => {}
+                Some(why) => self.outcome.skipped.push((i, why.clone())),
+            }
         }
         on_event(SessionEvent::Recorded {
             plan_index: i,
+            camera: self.named.then(|| self.names[c].clone()),
             reprojection_rms_px: visit.reprojection_rms_px,
             tags: visit.tags,
             rejected: visit.rejected,
@@ -417,21 +671,21 @@ fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut V
     *pending = order.iter().map(|&k| pending[k]).collect();
 }
 
-/// Where the arm time of one pose went, s.
-struct PoseTiming {
+/// The arm at a pose, settled: when it arrived and stood still, and what the move took.
+struct Arrival {
+    arrived: Instant,
+    settled: Instant,
     moving_s: f64,
-    settling_s: f64,
     /// The move's time by the model at the configured limits, s (for a checked move).
     modelled_s: Option<f64>,
 }
 
-/// Move, settle, grab a fresh frame, read the measured flange pose.
-fn capture(
+/// Move (checked from where the arm stands) and settle.
+fn arrive(
     robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
     setup: &SessionSetup,
     plan_index: usize,
-) -> Result<(Frame, Pose, PoseTiming), ErrorSource> {
+) -> Result<Arrival, ErrorSource> {
     let (_, joints) = &setup.plan[plan_index];
     // A checked move knows where it starts: its time by the model is kept to compare with.
     let mut modelled_s = None;
@@ -451,30 +705,34 @@ fn capture(
             .map_err(|e| ErrorSource::Robot(e.into_robot_error(rule)))?,
         None => Instant::now(),
     };
-    let mut frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+    Ok(Arrival {
+        arrived,
+        settled,
+        moving_s: arrived.duration_since(started).as_secs_f64(),
+        modelled_s,
+    })
+}
+
+/// Grabs a frame exposed no earlier than `settled`.
+fn grab_fresh(
+    camera: &mut dyn Camera,
+    settled: Instant,
+) -> Result<Frame, handeye_camera::CameraError> {
+    let mut frame = camera.grab(settled)?;
     // A camera that hands out a frame exposed before the arm stood still breaks its contract;
     // never use such a frame (grab again, a few times).
     for _ in 0..3 {
         if frame.captured_at >= settled {
             break;
         }
-        frame = camera.grab(settled).map_err(ErrorSource::Camera)?;
+        frame = camera.grab(settled)?;
     }
     if frame.captured_at < settled {
-        return Err(ErrorSource::Camera(handeye_camera::CameraError::Backend(
+        return Err(handeye_camera::CameraError::Backend(
             "the camera returned only frames exposed before the arm stood still (its frames' exposure times are earlier than the time asked for)".into(),
-        )));
+        ));
     }
-    let base_from_flange = robot.base_from_flange()?;
-    let timing = PoseTiming {
-        moving_s: arrived.duration_since(started).as_secs_f64(),
-        settling_s: frame
-            .captured_at
-            .saturating_duration_since(arrived)
-            .as_secs_f64(),
-        modelled_s,
-    };
-    Ok((frame, base_from_flange, timing))
+    Ok(frame)
 }
 
 /// Why [`wait_until_still`] found no still arm.
@@ -565,233 +823,4 @@ impl From<RobotError> for ErrorSource {
     fn from(e: RobotError) -> Self {
         ErrorSource::Robot(e)
     }
-}
-
-/// Rebuilds `samples.yaml` from the committed records `visits` (every accepted pose once, in
-/// plan order; a sample without a record dropped) and returns the samples by plan index. Without
-/// any accepted record a stale samples file is removed.
-pub(crate) fn rebuild_samples(
-    folder: &SessionFolder,
-    setup: Setup,
-    visits: &[PoseVisit],
-) -> Result<BTreeMap<usize, PosePair>, SessionError> {
-    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
-    for visit in visits {
-        if let Some(sample) = visit.sample() {
-            samples.insert(visit.plan_index, sample);
-        }
-    }
-    let path = folder.samples_path();
-    if !samples.is_empty() {
-        Dataset {
-            setup,
-            pairs: samples.values().cloned().collect(),
-        }
-        .save(&path)?;
-    } else if path.is_file() {
-        std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
-    }
-    Ok(samples)
-}
-
-/// The `HANDEYE_FAULT=<fault>:<plan index>` test hook (see the module docs): the fault and the
-/// plan index it names, when the variable is set.
-#[derive(Debug)]
-struct Fault(Option<(String, usize)>);
-
-impl Fault {
-    fn from_env() -> Fault {
-        let value = std::env::var("HANDEYE_FAULT").unwrap_or_default();
-        Fault(
-            value
-                .split_once(':')
-                .and_then(|(kind, index)| Some((kind.to_string(), index.parse().ok()?))),
-        )
-    }
-
-    /// Whether the hook asks for `kind` at `plan_index`.
-    fn at(&self, kind: &str, plan_index: usize) -> bool {
-        matches!(&self.0, Some((k, i)) if k == kind && *i == plan_index)
-    }
-
-    /// Aborts the process (a crash: no destructor, no cleanup) when the hook asks for `kind` at
-    /// `plan_index`.
-    fn abort_at(&self, kind: &str, plan_index: usize) {
-        if self.at(kind, plan_index) {
-            std::process::abort();
-        }
-    }
-}
-
-/// Starts the detection workers: one per core (at most four), each with its own detector (the
-/// AprilTag detector is single-threaded: frames are the unit of parallel work). A recorded cell
-/// (a bag import, say) hands over frames faster than one core detects them.
-///
-/// Each pose is committed by the worker that measured it (frame, then record); `samples.yaml` is
-/// rewritten under one lock after the sample is added, so each write holds every sample committed
-/// before it, whichever worker finishes first.
-fn spawn_workers(
-    setup: &SessionSetup,
-    camera_model: Option<CameraModel>,
-    samples: BTreeMap<usize, PosePair>,
-    jobs: mpsc::Receiver<Job>,
-    results: mpsc::Sender<JobResult>,
-) -> Result<Vec<std::thread::JoinHandle<()>>, SessionError> {
-    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
-    let jobs = Arc::new(std::sync::Mutex::new(jobs));
-    let samples = Arc::new(std::sync::Mutex::new(samples));
-    let fault = Arc::new(Fault::from_env());
-    let mut handles = Vec::with_capacity(workers);
-    for worker in 0..workers {
-        let detector = TargetDetector::spawn(&setup.board, setup.detector.clone())
-            .map_err(|e| SessionError::Detector(Box::new(e)))?;
-        let board = setup.board.clone();
-        let folder = setup.folder.clone();
-        let session_setup = setup.setup;
-        let max_rms = setup.max_reprojection_rms_px;
-        let (jobs, samples, fault, results) = (
-            jobs.clone(),
-            samples.clone(),
-            fault.clone(),
-            results.clone(),
-        );
-        let handle = std::thread::Builder::new()
-            .name(format!("detection-{worker}"))
-            .spawn(move || loop {
-                // The lock is held only to take the next job, not while measuring it.
-                let next = jobs.lock().map(|jobs| jobs.recv());
-                let Ok(Ok(job)) = next else {
-                    return;
-                };
-                let visit = process(
-                    &job,
-                    &detector,
-                    &board,
-                    camera_model.as_ref(),
-                    &folder,
-                    max_rms,
-                    &fault,
-                )
-                .and_then(|visit| {
-                    if let Some(sample) = visit.sample() {
-                        let Ok(mut samples) = samples.lock() else {
-                            return Err(SessionError::DetectionThread("panicked"));
-                        };
-                        samples.insert(visit.plan_index, sample);
-                        let dataset = Dataset {
-                            setup: session_setup,
-                            pairs: samples.values().cloned().collect(),
-                        };
-                        dataset.save(&folder.samples_path())?;
-                        fault.abort_at("abort-after-samples", visit.plan_index);
-                    }
-                    Ok(visit)
-                });
-                if results
-                    .send(JobResult {
-                        plan_index: job.plan_index,
-                        visit,
-                        image: Arc::new(job.frame.image),
-                    })
-                    .is_err()
-                {
-                    return;
-                }
-            })
-            .map_err(SessionError::DetectionThreadSpawn)?;
-        handles.push(handle);
-    }
-    Ok(handles)
-}
-
-fn process(
-    job: &Job,
-    detector: &TargetDetector,
-    board: &Target,
-    camera_model: Option<&CameraModel>,
-    folder: &SessionFolder,
-    max_rms: f64,
-    fault: &Fault,
-) -> Result<PoseVisit, SessionError> {
-    let frame_name = SessionFolder::frame_name(job.plan_index);
-    let mut png = Vec::new();
-    job.frame
-        .image
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(|source| SessionError::Frame {
-            path: frame_name.clone(),
-            source: Box::new(source),
-        })?;
-    folder.write_file(&frame_name, &png)?;
-    fault.abort_at("abort-after-frame", job.plan_index);
-
-    let visit = measure(
-        detector,
-        board,
-        camera_model,
-        &job.frame.image,
-        max_rms,
-        PoseVisit::new(job.plan_index, &job.base_from_flange, frame_name),
-    );
-    if fault.at("full-disk-at-record", job.plan_index) {
-        return Err(SessionError::Io {
-            path: folder.visit_path(job.plan_index),
-            source: std::io::Error::new(
-                std::io::ErrorKind::StorageFull,
-                "no space left on device (injected by HANDEYE_FAULT)",
-            ),
-        });
-    }
-    folder.write_visit(&visit)?;
-    fault.abort_at("abort-after-record", job.plan_index);
-    Ok(visit)
-}
-
-/// Detects the board in `image`, estimates its pose and fills the detection fields of `visit`
-/// (a rejection reason instead of a pose when the board is missing or fits badly). Without a
-/// camera model (intrinsics still unknown) only the corners are recorded.
-pub(crate) fn measure(
-    detector: &TargetDetector,
-    board: &Target,
-    camera_model: Option<&CameraModel>,
-    image: &image::GrayImage,
-    max_rms: f64,
-    mut visit: PoseVisit,
-) -> PoseVisit {
-    match detector.detect(image) {
-        Err(e) => visit.rejected = Some(e.to_string()),
-        Ok(detection) => {
-            visit.corners_px = detection.observations();
-            let Some(camera_model) = camera_model else {
-                visit.tags = match board.aprilgrid() {
-                    Some(grid) => detection
-                        .tags
-                        .iter()
-                        .filter(|t| grid.tag(t.id).is_some())
-                        .count(),
-                    None => detection.points.len(),
-                };
-                if visit.tags == 0 {
-                    visit.rejected = Some("no tag of the board detected".to_string());
-                }
-                return visit;
-            };
-            match estimate_board_pose(board, camera_model, &detection) {
-                Err(e) => visit.rejected = Some(e.to_string()),
-                Ok(board_pose) => {
-                    visit.tags = board_pose.tags_used;
-                    visit.reprojection_rms_px = Some(board_pose.rms_px);
-                    if board_pose.rms_px > max_rms {
-                        visit.rejected = Some(format!(
-                            "board reprojection RMS {:.2} px exceeds {:.2} px",
-                            board_pose.rms_px, max_rms
-                        ));
-                    } else {
-                        visit.camera_from_target = Some(board_pose.camera_from_target);
-                    }
-                }
-            }
-        }
-    }
-    visit
 }

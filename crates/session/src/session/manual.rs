@@ -575,7 +575,7 @@ fn capture(
         &step,
         (base_from_flange, joints),
         &mut StandStill(robot),
-        camera,
+        (camera, &mut []),
         &mut |event| {
             if let SessionEvent::Recorded { rejected, .. } = &event {
                 last_rejection.clone_from(rejected);

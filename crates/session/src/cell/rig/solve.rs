@@ -25,8 +25,8 @@ use handeye_solve::rig::{
     pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
 };
-use handeye_solve::verdict::{Accuracy, Level, GOOD_POSES};
-use handeye_solve::{PoseSigma, SolveError};
+use handeye_solve::verdict::{Accuracy, HeldOut, Level, GOOD_POSES};
+use handeye_solve::PoseSigma;
 use handeye_vision::Target;
 
 /// Why a several-camera session could not be solved.
@@ -35,15 +35,6 @@ pub enum RigSolveError {
     /// Reading the folder.
     #[error(transparent)]
     Session(#[from] SessionError),
-    /// A camera's own solve (which starts the joint one) failed.
-    #[error("camera `{camera}`: {source}")]
-    Alone {
-        /// The camera.
-        camera: String,
-        /// Why.
-        #[source]
-        source: Box<SolveError>,
-    },
     /// The joint solve failed.
     #[error("the joint solve: {0}")]
     Joint(#[from] RigError),
@@ -113,7 +104,13 @@ pub struct CameraResult {
     /// RMS translation residual, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residual_translation_rms_mm: Option<f64>,
-    /// GOOD, CHECK or REDO, with why.
+    /// The leave-one-out check of its own samples (each predicted by a one-camera solve of the
+    /// others), as the one-camera verdict runs it; absent when it could not run (`reason`
+    /// says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOut>,
+    /// GOOD, CHECK or REDO: the worse of its 1-sigma and its held-out error against the
+    /// accuracy asked for.
     pub verdict: String,
     /// The reason for the verdict.
     pub reason: String,
@@ -197,6 +194,9 @@ pub struct RigProblem {
     pub config_index: Vec<usize>,
     /// Per config camera: accepted samples, and why it is left out (if it is).
     pub cameras: Vec<(usize, Option<String>)>,
+    /// Per config camera: the leave-one-out check of its own samples (the one-camera verdict's
+    /// held-out error), or why there is none.
+    pub held_out: Vec<Result<HeldOut, String>>,
     /// The corners of every accepted board pose (the pixel-space solve's data).
     pub frames: Vec<RigFrame>,
     /// Per camera in `data`: its lens.
@@ -206,9 +206,13 @@ pub struct RigProblem {
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
 pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigSolveError> {
     let manifest = read_manifest(root)?;
+    // The plan as the planner camera's session holds it (an adaptive session's grows there).
+    let plan = SessionFolder::open(&camera_folder(root, &manifest.planner))?
+        .read_manifest()?
+        .plan;
     let mut data = RigData {
         cameras: Vec::new(),
-        base_from_flange: manifest.plan.iter().map(|p| p.base_from_flange).collect(),
+        base_from_flange: plan.iter().map(|p| p.base_from_flange).collect(),
         observations: Vec::new(),
     };
     let mut start = RigStart {
@@ -218,6 +222,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
     };
     let mut config_index = Vec::new();
     let mut cameras = Vec::new();
+    let mut held_out = Vec::new();
     let mut frames = Vec::new();
     let mut models = Vec::new();
     for (c, camera) in rig.cameras.iter().enumerate() {
@@ -226,6 +231,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         let pairs: Vec<_> = visits.iter().filter_map(|v| v.sample()).collect();
         let samples = pairs.len();
         if samples < handeye_solve::rig::MIN_VIEWS_PER_CAMERA {
+            held_out.push(Err(format!("only {samples} samples")));
             cameras.push((
                 samples,
                 Some(format!(
@@ -236,11 +242,23 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             continue;
         }
         let setup = camera.config.setup;
-        let alone = handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options())
-            .map_err(|source| RigSolveError::Alone {
-                camera: camera.name.clone(),
-                source: Box::new(source),
-            })?;
+        // A camera whose own solve fails (its samples too few or too alike, say after it was
+        // lost early) is left out of the joint solve, named with why; the others are solved.
+        let alone = match handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options()) {
+            Ok(alone) => alone,
+            Err(e) => {
+                let why = format!("its own solve of its {samples} samples failed: {e}");
+                held_out.push(Err(why.clone()));
+                cameras.push((samples, Some(why)));
+                continue;
+            }
+        };
+        held_out.push(handeye_solve::verdict::held_out(
+            setup,
+            &pairs,
+            &camera.config.solver.to_options(),
+            &alone.outliers,
+        ));
         let index = data.cameras.len();
         let board = Target::load(&camera.config.target).map_err(|e| RigSolveError::Input {
             camera: camera.name.clone(),
@@ -308,16 +326,47 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         start,
         config_index,
         cameras,
+        held_out,
         frames,
         models,
     })
 }
 
-/// The verdict of one camera's mount: its 1-sigma against the configured accuracy (GOOD within
-/// it, CHECK up to the verdict's REDO factor, REDO beyond), CHECK with fewer than
-/// [`GOOD_POSES`] samples.
-fn camera_verdict(sigma: &PoseSigma, samples: usize, accuracy: &Accuracy) -> (Level, String) {
+/// The verdict of one camera's mount: its 1-sigma and its held-out error (each against the
+/// configured accuracy: GOOD within it, CHECK up to the verdict's REDO factor, REDO beyond; the
+/// worse of the two), CHECK with fewer than [`GOOD_POSES`] samples or without a held-out check.
+fn camera_verdict(
+    sigma: &PoseSigma,
+    held_out: &Result<HeldOut, String>,
+    samples: usize,
+    accuracy: &Accuracy,
+) -> (Level, String) {
     let level = accuracy.level_of(sigma.translation_mm, sigma.rotation_deg);
+    let against = format!(
+        "against the accuracy {} mm / {}°",
+        accuracy.translation_mm, accuracy.rotation_deg
+    );
+    match held_out {
+        Ok(h) => {
+            let held = accuracy.level_of(h.translation_rms_mm, h.rotation_rms_deg);
+            if held > level {
+                return (
+                    held,
+                    format!(
+                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses of its own, target at ~{:.0} mm) {against}: record more poses with larger, more varied rotations where it sees its board",
+                        h.translation_rms_mm, h.rotation_rms_deg, h.poses, h.working_distance_mm
+                    ),
+                );
+            }
+        }
+        Err(why) if level == Level::Good => {
+            return (
+                Level::Check,
+                format!("no held-out check ({why}): record more poses where it sees its board"),
+            )
+        }
+        Err(_) => {}
+    }
     if level == Level::Good && samples < GOOD_POSES {
         return (
             Level::Check,
@@ -327,11 +376,16 @@ fn camera_verdict(sigma: &PoseSigma, samples: usize, accuracy: &Accuracy) -> (Le
     (
         level,
         format!(
-            "1-sigma {:.3} mm / {:.4}° against the accuracy {} mm / {}°",
+            "1-sigma {:.3} mm / {:.4}°{} {against}",
             sigma.translation_mm,
             sigma.rotation_deg,
-            accuracy.translation_mm,
-            accuracy.rotation_deg
+            match held_out {
+                Ok(h) => format!(
+                    ", held-out {:.2} mm / {:.3}° over {} poses",
+                    h.translation_rms_mm, h.rotation_rms_deg, h.poses
+                ),
+                Err(_) => String::new(),
+            }
         ),
     )
 }
@@ -425,6 +479,7 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             corner_noise_px: None,
             residual_rotation_rms_deg: None,
             residual_translation_rms_mm: None,
+            held_out: problem.held_out[c].as_ref().ok().copied(),
             verdict: Level::Redo.word().into(),
             reason: left_out.clone().unwrap_or_default(),
         };
@@ -461,7 +516,12 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
-            let (l, reason) = camera_verdict(&joint.camera_sigmas[k], samples, &accuracy);
+            let (l, reason) = camera_verdict(
+                &joint.camera_sigmas[k],
+                &problem.held_out[c],
+                samples,
+                &accuracy,
+            );
             level = l;
             entry.verdict = l.word().into();
             entry.reason = reason;

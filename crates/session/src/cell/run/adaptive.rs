@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use crate::plan::check::PlanReport;
-use crate::plan::nbv::{AdaptivePlanner, StopCheck};
+use crate::plan::nbv::StopCheck;
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{self, SessionError, SessionEvent, SessionOutcome};
 use handeye_core::geometry::Pose;
@@ -84,12 +84,22 @@ pub(super) fn drive_plan(
     Option<AdaptiveSummary>,
 ) {
     let folder = setup.folder.clone();
-    let mut on_event = |event: SessionEvent| observer.event(event);
+    let rig_root = setup.rig.as_ref().map(|rig| rig.root.clone());
+    let mut on_event = |event: SessionEvent| {
+        // A lost camera of a several-camera session is kept in `failures.yaml` as it happens.
+        if let (SessionEvent::CameraLost(failure), Some(root)) = (&event, &rig_root) {
+            if let Err(e) = super::super::rig::record_failure(root, failure) {
+                observer.note(&format!("failures.yaml could not be written: {e}"));
+            }
+        }
+        observer.event(event)
+    };
     if !adaptive {
-        let outcome = session::run_session(
+        let outcome = session::run_cameras_session(
             setup,
             hardware.robot.as_mut(),
             hardware.camera.as_mut(),
+            &mut hardware.others,
             &mut on_event,
         );
         return (outcome, None);
@@ -102,26 +112,55 @@ pub(super) fn drive_plan(
         .or(cell.config.plan.generate.map(|g| g.count))
         .unwrap_or(plan.len())
         .min(plan.len());
-    let mut planner = AdaptivePlanner::new(
-        cell.config.setup,
-        cell.config.nominal.camera_mount,
-        cell.config.nominal.target_mount,
-        plan.to_vec(),
-        cell.config.solver.to_options(),
-        cell.config.adaptive_target_mm(),
-        max_poses,
-    )
-    .with_min_poses(cell.config.plan.min_poses)
-    .with_motion(cell.config.limits, start, per_pose_s(cell))
-    .with_stop_check(good_enough(cell));
+    // The planner camera's model; a several-camera cell adds one per other camera (they weigh
+    // in on every choice and must each be good enough to stop: `rig::adaptive`).
+    let camera_planner = |camera: &PreparedCell, max: usize| {
+        camera
+            .adaptive_planner(plan.to_vec(), camera.config.adaptive_target_mm(), max)
+            .with_min_poses(cell.config.plan.min_poses)
+            .with_motion(cell.config.limits, start, per_pose_s(cell))
+            .with_stop_check(good_enough(camera))
+    };
+    let mut planner = camera_planner(cell, max_poses);
+    let others: Vec<_> = setup
+        .rig
+        .iter()
+        .flat_map(|rig| &rig.others)
+        .map(|o| o.folder.clone())
+        .collect();
+    let mut rig_planner = cell.rig.as_ref().map(|rig| {
+        let cells = std::iter::once(cell).chain(rig.others.iter().map(|(_, c)| c));
+        let mut planners = vec![camera_planner(cell, usize::MAX)];
+        planners.extend(
+            rig.others
+                .iter()
+                .map(|(_, c)| camera_planner(c, usize::MAX)),
+        );
+        let sees = cells
+            .map(|c| {
+                plan.iter()
+                    .map(|(flange, _)| super::super::rig::sees_board(c, flange))
+                    .collect()
+            })
+            .collect();
+        super::super::rig::adaptive::RigPlanner::new(planners, others, sees, max_poses)
+    });
+    let source: &mut dyn session::PlanSource = match &mut rig_planner {
+        Some(rig) => rig,
+        None => &mut planner,
+    };
     let outcome = session::run_adaptive_session(
         setup,
         cell.config_path(),
-        &mut planner,
+        source,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        (hardware.camera.as_mut(), &mut hardware.others),
         &mut on_event,
     );
+    let (planner, reached) = match &rig_planner {
+        Some(rig) => (rig.primary(), rig.reached_target()),
+        None => (&planner, planner.reached_target()),
+    };
     let summary = AdaptiveSummary {
         in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
         candidates: plan.len(),
@@ -134,7 +173,7 @@ pub(super) fn drive_plan(
         target_uncertainty_mm: cell.config.adaptive_target_mm(),
         max_poses,
         solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
-        reached: planner.reached_target(),
+        reached,
     };
     (outcome, Some(summary))
 }

@@ -23,7 +23,6 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::config::RobotConfig;
-use crate::plan::nbv::AdaptivePlanner;
 use crate::plan::{GenerateSpec, Plan, Waypoint};
 use crate::session::{
     self, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder, SessionOutcome,
@@ -85,6 +84,9 @@ pub trait RunObserver {
         cell: &PreparedCell,
         poses: usize,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
+    /// A several-camera cell: how many of the plan's poses each camera is expected to see its
+    /// board at (by the nominal cell), before anything moves.
+    fn cameras_planned(&mut self, _views: &[super::rig::PlannedViews]) {}
     /// Something a person should know (a stale lock taken over, changed inputs accepted...).
     fn note(&mut self, _message: &str) {}
     /// The session folder is ready and `plan` (for an adaptive plan: its candidates) validated
@@ -106,8 +108,11 @@ pub struct CellRun {
     pub folder: SessionFolder,
     /// What the loop did.
     pub outcome: SessionOutcome,
-    /// The solved session (`result.yaml` is written).
+    /// The solved session (`result.yaml` is written; of a several-camera cell: the planner
+    /// camera's own, in its folder).
     pub solved: SolvedSession,
+    /// A several-camera cell: the joint answer, as written to the session's `result.yaml`.
+    pub rig: Option<super::rig::RigResultFile>,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
@@ -131,6 +136,12 @@ pub enum RunError {
         /// The cell config naming it.
         config: PathBuf,
     },
+    /// A several-camera cell's cameras, plan or folder do not fit the run.
+    #[error("{0}")]
+    Cameras(String),
+    /// The joint solve of a several-camera cell.
+    #[error(transparent)]
+    RigSolve(#[from] super::rig::RigSolveError),
     /// A new session needs a config.
     #[error("a new session needs a cell config (--config)")]
     NoConfig,
@@ -244,7 +255,8 @@ pub fn open_run(
 ) -> Result<OpenedRun, RunError> {
     let (resumed, config_path) = match &request.target {
         SessionTarget::Resume(dir) => {
-            let folder = SessionFolder::resume(dir)?;
+            // A several-camera session is resumed through its planner camera's folder.
+            let folder = SessionFolder::resume(&super::rig::session_folder_of(dir))?;
             let manifest = folder.read_manifest()?;
             let config = request
                 .config
@@ -371,11 +383,16 @@ pub fn run_opened(
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
+    let rig = match (&cell.rig, super::rig::root_of(folder.root())) {
+        (Some(rig), Some(root)) => Some(super::rig::solve_rig_folder(root, &rig.config)?),
+        _ => None,
+    };
     Ok(CellRun {
         cell,
         folder,
         outcome,
         solved,
+        rig,
         adaptive,
         arm_time,
     })
@@ -432,12 +449,26 @@ fn drive_opened(
             if !adaptive && !cell.report.ok() {
                 return Err(RunError::PlanFailed);
             }
+            if let Some(rig) = &cell.rig {
+                // An adaptive plan's candidates are the passing poses; a fixed plan all of them.
+                let plan = match adaptive {
+                    true => cell.report.passing(),
+                    false => cell.report.validated().unwrap_or_default(),
+                };
+                let views = rig.check_views(&cell, &plan).map_err(RunError::Cameras)?;
+                observer.cameras_planned(&views);
+            }
             if !cell.is_simulated() && !request.motion_confirmed {
                 observer
                     .confirm_motion(&cell, cell.plan.waypoints.len())
                     .map_err(RunError::NotConfirmed)?;
             }
             adaptive
+        }
+        Strategy::Holdout(_) | Strategy::HandGuided(_) if cell.rig.is_some() => {
+            return Err(RunError::Cameras(
+                "a cell with several cameras runs its planned poses only (no held-out check or hand-guided capture yet); nothing was moved".into(),
+            ));
         }
         Strategy::Holdout(spec) => {
             spec.validate()
@@ -561,7 +592,23 @@ fn drive_opened(
         }
         None => {
             let folder = match &request.target {
-                SessionTarget::New(out) => SessionFolder::create(out)?,
+                SessionTarget::New(out) => match &cell.rig {
+                    Some(rig) => {
+                        if super::rig::is_rig_folder(out) {
+                            return Err(RunError::Cameras(format!(
+                                "{}: already holds a several-camera session: pass --resume to continue it, or choose another folder",
+                                out.display()
+                            )));
+                        }
+                        SessionFolder::create(&super::rig::camera_folder(out, rig.planner_name()))?
+                    }
+                    None => SessionFolder::create(out)?,
+                },
+                SessionTarget::Created(_) if cell.rig.is_some() => {
+                    return Err(RunError::Cameras(
+                        "a cell with several cameras cannot record into a staging folder".into(),
+                    ))
+                }
                 SessionTarget::Created(folder) => folder.clone(),
                 SessionTarget::Resume(_) => unreachable!("a resume has its folder"),
             };
@@ -583,7 +630,22 @@ fn drive_opened(
 
     let (outcome, adaptive_summary) = match &mut strategy {
         Strategy::Planned | Strategy::Holdout(_) => {
-            let setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
+            let mut setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
+            if let Some(rig) = &cell.rig {
+                let root = super::rig::root_of(folder.root()).ok_or_else(|| {
+                    RunError::Cameras(format!(
+                        "{}: not inside a several-camera session",
+                        folder.root().display()
+                    ))
+                })?;
+                let resuming = matches!(request.target, SessionTarget::Resume(_));
+                // An adaptive session's plan grows as it goes (in the planner camera's folder).
+                let recorded: &[(Pose, Joints)] = if fixed_plan { &plan } else { &[] };
+                setup.rig = Some(
+                    rig.session_cameras(root, resuming, recorded)
+                        .map_err(RunError::Cameras)?,
+                );
+            }
             observer.session_folder(&folder, &plan);
             observer.session_started(match strategy {
                 Strategy::Holdout(_) => plan.len(),
@@ -610,16 +672,8 @@ fn drive_opened(
             observer.session_folder(&folder, &[]);
             observer.session_started(plan.len());
             let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {
-                AdaptivePlanner::new(
-                    cell.config.setup,
-                    cell.config.nominal.camera_mount,
-                    cell.config.nominal.target_mount,
-                    plan.clone(),
-                    cell.config.solver.to_options(),
-                    // Suggestions never stop on their own: the person decides when to finish.
-                    0.0,
-                    usize::MAX,
-                )
+                // Suggestions never stop on their own: the person decides when to finish.
+                cell.adaptive_planner(plan.clone(), 0.0, usize::MAX)
             });
             let options = ManualOptions {
                 real_arm: !cell.is_simulated() && !request.motion_confirmed,

@@ -1,0 +1,274 @@
+//! The recording side of the run loop: the detection workers that measure each frame and commit
+//! it (frame, record, `samples.yaml`) into its camera's folder, and the `HANDEYE_FAULT` test hook.
+
+use std::collections::BTreeMap;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+
+use crate::dataset::Dataset;
+use handeye_camera::Frame;
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+
+use super::super::folder::{PoseVisit, SessionFolder};
+use super::super::SessionError;
+
+/// One camera's recording: where its records go and how its frames are measured. The run's
+/// cameras are numbered by their place in the run (0: the setup's own camera).
+#[derive(Clone)]
+pub(super) struct Recording {
+    /// Its name in messages (`camera` for a one-camera cell).
+    pub name: String,
+    pub folder: SessionFolder,
+    pub setup: Setup,
+    pub board: Target,
+    pub detector: DetectorOptions,
+    pub max_rms: f64,
+    /// `None` while the intrinsics are unknown: corners only.
+    pub model: Option<CameraModel>,
+}
+
+pub(super) struct Job {
+    pub camera: usize,
+    pub plan_index: usize,
+    pub frame: Frame,
+    pub base_from_flange: Pose,
+}
+
+pub(super) struct JobResult {
+    pub camera: usize,
+    pub plan_index: usize,
+    pub visit: Result<PoseVisit, SessionError>,
+    pub image: Arc<image::GrayImage>,
+}
+
+/// Rebuilds `samples.yaml` from the committed records `visits` (every accepted pose once, in
+/// plan order; a sample without a record dropped) and returns the samples by plan index. Without
+/// any accepted record a stale samples file is removed.
+pub(crate) fn rebuild_samples(
+    folder: &SessionFolder,
+    setup: Setup,
+    visits: &[PoseVisit],
+) -> Result<BTreeMap<usize, PosePair>, SessionError> {
+    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
+    for visit in visits {
+        if let Some(sample) = visit.sample() {
+            samples.insert(visit.plan_index, sample);
+        }
+    }
+    let path = folder.samples_path();
+    if !samples.is_empty() {
+        Dataset {
+            setup,
+            pairs: samples.values().cloned().collect(),
+        }
+        .save(&path)?;
+    } else if path.is_file() {
+        std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
+    }
+    Ok(samples)
+}
+
+/// The `HANDEYE_FAULT=<fault>:<plan index>` test hook (see the module docs): the fault and the
+/// plan index it names, when the variable is set. The fault may itself hold a `:`
+/// (`camera-lost:<camera>`): the plan index is what follows the last one.
+#[derive(Debug)]
+pub(super) struct Fault(Option<(String, usize)>);
+
+impl Fault {
+    pub(super) fn from_env() -> Fault {
+        let value = std::env::var("HANDEYE_FAULT").unwrap_or_default();
+        Fault(
+            value
+                .rsplit_once(':')
+                .and_then(|(kind, index)| Some((kind.to_string(), index.parse().ok()?))),
+        )
+    }
+
+    /// Whether the hook asks for `kind` at `plan_index`.
+    pub(super) fn at(&self, kind: &str, plan_index: usize) -> bool {
+        matches!(&self.0, Some((k, i)) if k == kind && *i == plan_index)
+    }
+
+    /// Aborts the process (a crash: no destructor, no cleanup) when the hook asks for `kind` at
+    /// `plan_index`.
+    fn abort_at(&self, kind: &str, plan_index: usize) {
+        if self.at(kind, plan_index) {
+            std::process::abort();
+        }
+    }
+}
+
+/// One camera as a worker holds it: its recording, its own detector, and its samples so far
+/// (shared by the workers).
+struct WorkerCamera {
+    recording: Recording,
+    detector: TargetDetector,
+    samples: Arc<Mutex<BTreeMap<usize, PosePair>>>,
+}
+
+/// Starts the detection workers: one per core (at most four), each with its own detector for
+/// every camera (the AprilTag detector is single-threaded: frames are the unit of parallel
+/// work). A recorded cell (a bag import, say) hands over frames faster than one core detects
+/// them.
+///
+/// Each pose is committed by the worker that measured it (frame, then record); a camera's
+/// `samples.yaml` is rewritten under its lock after the sample is added, so each write holds
+/// every sample committed before it, whichever worker finishes first.
+pub(super) fn spawn_workers(
+    cameras: &[Recording],
+    samples: Vec<BTreeMap<usize, PosePair>>,
+    fault: Arc<Fault>,
+    jobs: mpsc::Receiver<Job>,
+    results: mpsc::Sender<JobResult>,
+) -> Result<Vec<std::thread::JoinHandle<()>>, SessionError> {
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+    let jobs = Arc::new(Mutex::new(jobs));
+    let samples: Vec<_> = samples
+        .into_iter()
+        .map(|s| Arc::new(Mutex::new(s)))
+        .collect();
+    let mut handles = Vec::with_capacity(workers);
+    for worker in 0..workers {
+        let held = cameras
+            .iter()
+            .zip(&samples)
+            .map(|(recording, samples)| {
+                Ok(WorkerCamera {
+                    detector: TargetDetector::spawn(&recording.board, recording.detector.clone())
+                        .map_err(|e| SessionError::Detector(Box::new(e)))?,
+                    recording: recording.clone(),
+                    samples: samples.clone(),
+                })
+            })
+            .collect::<Result<Vec<_>, SessionError>>()?;
+        let (jobs, fault, results) = (jobs.clone(), fault.clone(), results.clone());
+        let handle = std::thread::Builder::new()
+            .name(format!("detection-{worker}"))
+            .spawn(move || loop {
+                // The lock is held only to take the next job, not while measuring it.
+                let next = jobs.lock().map(|jobs| jobs.recv());
+                let Ok(Ok(job)) = next else {
+                    return;
+                };
+                let camera = &held[job.camera];
+                let visit = process(&job, camera, &fault).and_then(|visit| {
+                    if let Some(sample) = visit.sample() {
+                        let Ok(mut samples) = camera.samples.lock() else {
+                            return Err(SessionError::DetectionThread("panicked"));
+                        };
+                        samples.insert(visit.plan_index, sample);
+                        let dataset = Dataset {
+                            setup: camera.recording.setup,
+                            pairs: samples.values().cloned().collect(),
+                        };
+                        dataset.save(&camera.recording.folder.samples_path())?;
+                        fault.abort_at("abort-after-samples", visit.plan_index);
+                    }
+                    Ok(visit)
+                });
+                if results
+                    .send(JobResult {
+                        camera: job.camera,
+                        plan_index: job.plan_index,
+                        visit,
+                        image: Arc::new(job.frame.image),
+                    })
+                    .is_err()
+                {
+                    return;
+                }
+            })
+            .map_err(SessionError::DetectionThreadSpawn)?;
+        handles.push(handle);
+    }
+    Ok(handles)
+}
+
+fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit, SessionError> {
+    let recording = &camera.recording;
+    let folder = &recording.folder;
+    let frame_name = SessionFolder::frame_name(job.plan_index);
+    let mut png = Vec::new();
+    job.frame
+        .image
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|source| SessionError::Frame {
+            path: frame_name.clone(),
+            source: Box::new(source),
+        })?;
+    folder.write_file(&frame_name, &png)?;
+    fault.abort_at("abort-after-frame", job.plan_index);
+
+    let visit = measure(
+        &camera.detector,
+        &recording.board,
+        recording.model.as_ref(),
+        &job.frame.image,
+        recording.max_rms,
+        PoseVisit::new(job.plan_index, &job.base_from_flange, frame_name),
+    );
+    if fault.at("full-disk-at-record", job.plan_index) {
+        return Err(SessionError::Io {
+            path: folder.visit_path(job.plan_index),
+            source: std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                "no space left on device (injected by HANDEYE_FAULT)",
+            ),
+        });
+    }
+    folder.write_visit(&visit)?;
+    fault.abort_at("abort-after-record", job.plan_index);
+    Ok(visit)
+}
+
+/// Detects the board in `image`, estimates its pose and fills the detection fields of `visit`
+/// (a rejection reason instead of a pose when the board is missing or fits badly). Without a
+/// camera model (intrinsics still unknown) only the corners are recorded.
+pub(crate) fn measure(
+    detector: &TargetDetector,
+    board: &Target,
+    camera_model: Option<&CameraModel>,
+    image: &image::GrayImage,
+    max_rms: f64,
+    mut visit: PoseVisit,
+) -> PoseVisit {
+    match detector.detect(image) {
+        Err(e) => visit.rejected = Some(e.to_string()),
+        Ok(detection) => {
+            visit.corners_px = detection.observations();
+            let Some(camera_model) = camera_model else {
+                visit.tags = match board.aprilgrid() {
+                    Some(grid) => detection
+                        .tags
+                        .iter()
+                        .filter(|t| grid.tag(t.id).is_some())
+                        .count(),
+                    None => detection.points.len(),
+                };
+                if visit.tags == 0 {
+                    visit.rejected = Some("no tag of the board detected".to_string());
+                }
+                return visit;
+            };
+            match estimate_board_pose(board, camera_model, &detection) {
+                Err(e) => visit.rejected = Some(e.to_string()),
+                Ok(board_pose) => {
+                    visit.tags = board_pose.tags_used;
+                    visit.reprojection_rms_px = Some(board_pose.rms_px);
+                    if board_pose.rms_px > max_rms {
+                        visit.rejected = Some(format!(
+                            "board reprojection RMS {:.2} px exceeds {:.2} px",
+                            board_pose.rms_px, max_rms
+                        ));
+                    } else {
+                        visit.camera_from_target = Some(board_pose.camera_from_target);
+                    }
+                }
+            }
+        }
+    }
+    visit
+}
