@@ -4,9 +4,11 @@
 //! bytes). Only the topics asked for are read.
 //!
 //! Nothing holds the whole bag: [`Bag::for_each`] streams the messages of the topics asked for
-//! (MCAP chunk by chunk through a buffered reader, sqlite3 row by row), lending each message to
-//! the caller and dropping it before the next, with its [`Location`]; [`MessageAt`] reads one
-//! message again from its location (the frames chosen, in a second pass).
+//! (MCAP with uncompressed chunks through its index, `mcap_index`, reading only the heads of the
+//! image messages; other MCAP files chunk by chunk through a buffered reader; sqlite3 row by row,
+//! `sqlite`), lending each message to the caller and dropping it before the next, with its
+//! [`Location`]; [`MessageAt`] reads one message again from its location (the frames chosen, in a
+//! second pass), and [`Bag::read_direct`] one of an indexed file from any thread.
 //!
 //! A damaged file is refused with its name: an MCAP file that ends early (no footer, or a record
 //! cut short) and an SQLite file shorter than its header says.
@@ -15,6 +17,9 @@ use std::path::{Path, PathBuf};
 
 use super::mcap_index::McapIndex;
 use super::BagError;
+use sqlite::{sqlite_error, sqlite_for_each, sqlite_open, sqlite_topics};
+
+mod sqlite;
 
 /// Which storage a bag uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -692,174 +697,6 @@ fn mcap_for_each(
             location: Location {
                 file: index,
                 at: Position::Nth(at as u64),
-            },
-        })?;
-    }
-    Ok(())
-}
-
-fn sqlite_error(file: &Path, e: rusqlite::Error) -> BagError {
-    BagError::Storage {
-        path: file.to_path_buf(),
-        problem: format!("damaged sqlite3 bag: {e}"),
-    }
-}
-
-/// Opens a `.db3` read-only after checking its length against the page count in its header
-/// (a truncated copy otherwise reads as a bag with fewer messages).
-fn sqlite_open(file: &Path) -> Result<rusqlite::Connection, BagError> {
-    let bytes_len = std::fs::metadata(file)
-        .map_err(|source| BagError::Read {
-            path: file.to_path_buf(),
-            source,
-        })?
-        .len();
-    let mut header = [0u8; 100];
-    {
-        use std::io::Read;
-        let n = std::fs::File::open(file)
-            .and_then(|mut f| f.read(&mut header))
-            .map_err(|source| BagError::Read {
-                path: file.to_path_buf(),
-                source,
-            })?;
-        if n < 100 || !header.starts_with(SQLITE_MAGIC) {
-            return Err(BagError::Storage {
-                path: file.to_path_buf(),
-                problem: format!("not an sqlite3 file ({n} bytes of header)"),
-            });
-        }
-    }
-    let page_size = match u16::from_be_bytes([header[16], header[17]]) {
-        1 => 65536u64,
-        p => u64::from(p),
-    };
-    let pages = u64::from(u32::from_be_bytes([
-        header[28], header[29], header[30], header[31],
-    ]));
-    let counter = &header[24..28];
-    let valid_for = &header[92..96];
-    if pages > 0 && counter == valid_for && bytes_len < pages * page_size {
-        return Err(BagError::Storage {
-            path: file.to_path_buf(),
-            problem: format!(
-                "truncated sqlite3 file: {bytes_len} bytes, its header says {pages} pages of {page_size} bytes"
-            ),
-        });
-    }
-    rusqlite::Connection::open_with_flags(
-        file,
-        rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
-    )
-    .map_err(|e| sqlite_error(file, e))
-}
-
-fn sqlite_topics(file: &Path) -> Result<Vec<TopicInfo>, BagError> {
-    let db = sqlite_open(file)?;
-    let mut statement = db
-        .prepare(
-            "SELECT t.name, t.type, (SELECT COUNT(*) FROM messages m WHERE m.topic_id = t.id) FROM topics t",
-        )
-        .map_err(|e| sqlite_error(file, e))?;
-    let rows = statement
-        .query_map([], |row| {
-            Ok(TopicInfo {
-                name: row.get(0)?,
-                type_name: row.get(1)?,
-                count: row.get::<_, i64>(2)? as usize,
-            })
-        })
-        .map_err(|e| sqlite_error(file, e))?;
-    rows.collect::<Result<Vec<_>, _>>()
-        .map_err(|e| sqlite_error(file, e))
-}
-
-fn sqlite_for_each(
-    index: usize,
-    file: &Path,
-    topics: &[String],
-    heads_only: &[String],
-    visit: &mut dyn FnMut(BagMessage<'_>) -> Result<(), BagError>,
-) -> Result<(), BagError> {
-    let db = sqlite_open(file)?;
-    let mut ids: Vec<(i64, String)> = Vec::new();
-    {
-        let mut statement = db
-            .prepare("SELECT id, name, serialization_format FROM topics")
-            .map_err(|e| sqlite_error(file, e))?;
-        let rows = statement
-            .query_map([], |row| Ok((row.get(0)?, row.get(1)?, row.get(2)?)))
-            .map_err(|e| sqlite_error(file, e))?;
-        for row in rows {
-            let (id, name, format): (i64, String, String) =
-                row.map_err(|e| sqlite_error(file, e))?;
-            if topics.contains(&name) {
-                if format != "cdr" {
-                    return Err(BagError::Storage {
-                        path: file.to_path_buf(),
-                        problem: format!(
-                            "topic `{name}` is serialised as `{format}`, expected cdr"
-                        ),
-                    });
-                }
-                ids.push((id, name));
-            }
-        }
-    }
-    if ids.is_empty() {
-        return Ok(());
-    }
-    // Row by row in table order (no ORDER BY: sorting would make SQLite hold the rows); each
-    // row's blob is lent to `visit` and dropped before the next. Of a `heads_only` topic the row
-    // leaves its blob out (the CASE reads the column only for the others) and the head is read
-    // through incremental blob I/O: the rest of a frame's pages are not read.
-    let list: Vec<String> = ids.iter().map(|(id, _)| id.to_string()).collect();
-    let heads: Vec<String> = ids
-        .iter()
-        .filter(|(_, name)| heads_only.contains(name))
-        .map(|(id, _)| id.to_string())
-        .collect();
-    let mut statement = db
-        .prepare(&format!(
-            "SELECT rowid, topic_id, timestamp, CASE WHEN topic_id IN ({}) THEN NULL ELSE data END FROM messages WHERE topic_id IN ({})",
-            heads.join(", "),
-            list.join(", ")
-        ))
-        .map_err(|e| sqlite_error(file, e))?;
-    let mut rows = statement.query([]).map_err(|e| sqlite_error(file, e))?;
-    let mut head = Vec::with_capacity(HEAD_BYTES);
-    while let Some(row) = rows.next().map_err(|e| sqlite_error(file, e))? {
-        let rowid: i64 = row.get(0).map_err(|e| sqlite_error(file, e))?;
-        let topic_id: i64 = row.get(1).map_err(|e| sqlite_error(file, e))?;
-        let log_time_ns: i64 = row.get(2).map_err(|e| sqlite_error(file, e))?;
-        let Some((_, topic)) = ids.iter().find(|(id, _)| *id == topic_id) else {
-            continue;
-        };
-        let data = if heads_only.contains(topic) {
-            use std::io::Read;
-            let blob = db
-                .blob_open(rusqlite::MAIN_DB, "messages", "data", rowid, true)
-                .map_err(|e| sqlite_error(file, e))?;
-            head.clear();
-            blob.take(HEAD_BYTES as u64)
-                .read_to_end(&mut head)
-                .map_err(|source| BagError::Read {
-                    path: file.to_path_buf(),
-                    source,
-                })?;
-            head.as_slice()
-        } else {
-            row.get_ref(3)
-                .and_then(|v| v.as_blob().map_err(Into::into))
-                .map_err(|e| sqlite_error(file, e))?
-        };
-        visit(BagMessage {
-            topic,
-            log_time_ns,
-            data,
-            location: Location {
-                file: index,
-                at: Position::Row(rowid),
             },
         })?;
     }
