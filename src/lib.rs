@@ -13,7 +13,7 @@ pub mod formats;
 pub mod report;
 
 pub use handeye_camera as camera;
-pub use handeye_core::{atomic_file, camera_model, geometry, notice, setup, yaml_file};
+pub use handeye_core::{atomic_file, camera_model, error_text, geometry, notice, setup, yaml_file};
 pub use handeye_robot as robot;
 pub use handeye_ros2 as ros2;
 pub use handeye_session::{cell, config, dataset, plan, result, session, verify};

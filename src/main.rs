@@ -26,7 +26,12 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
             // Not eprintln!: with stderr closed too, the exit code is all that is left to say.
-            let _ = writeln!(std::io::stderr(), "error: {error:#}");
+            // Each cause once: `{:#}` repeats a source its wrapper's message already quotes.
+            let _ = writeln!(
+                std::io::stderr(),
+                "error: {}",
+                handeye::error_text::error_chain(error.as_ref())
+            );
             if error.downcast_ref::<cli::NothingFound>().is_some() {
                 ExitCode::from(cli::NothingFound::EXIT_CODE)
             } else {

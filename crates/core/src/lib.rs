@@ -12,6 +12,7 @@
 
 pub mod atomic_file;
 pub mod camera_model;
+pub mod error_text;
 pub mod geometry;
 pub mod notice;
 pub mod setup;

@@ -19,6 +19,7 @@ use image::GrayImage;
 use crate::dataset::Dataset;
 use crate::plan::nbv::AdaptivePlanner;
 use handeye_camera::Camera;
+use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{
     relative_rotation_axis, translation_distance, Pose, MIN_AXIS_ANGLE_RAD,
 };
@@ -177,17 +178,6 @@ impl Robot for StandStill<'_> {
     fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
         self.0.joint_speeds()
     }
-}
-
-/// An error with its sources, `: `-joined (a backend error's own message is its source).
-fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(&format!(": {s}"));
-        source = s.source();
-    }
-    text
 }
 
 /// Runs (or resumes) a hand-guided session until the person finishes it or the stop flag is

@@ -26,6 +26,7 @@ use crate::config::rig::RigConfig;
 use crate::session::{
     OtherCamera, PlannedPose, RigCameras, SessionError, SessionFolder, SessionManifest,
 };
+use handeye_core::error_text::error_chain;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{read_yaml, write_yaml};
@@ -277,21 +278,6 @@ pub fn prepare_rig(config_file: &Path) -> Result<PreparedCell, CellError> {
         others: cells,
     });
     Ok(planner)
-}
-
-/// An error and its sources, one sentence.
-fn error_chain(error: &dyn std::error::Error) -> String {
-    let mut text = error.to_string();
-    let mut source = error.source();
-    while let Some(e) = source {
-        // A wrapper that says what its source says adds nothing.
-        let said = e.to_string();
-        if !text.contains(&said) {
-            text.push_str(&format!(": {said}"));
-        }
-        source = e.source();
-    }
-    text
 }
 
 /// The root folder of a several-camera session whose planner camera records into
