@@ -12,18 +12,19 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use handeye::camera_model::CameraModel;
-use handeye::config::rig::RigConfig;
-use handeye::geometry::Pose;
-use handeye::setup::{predict, Setup};
+use handeye::setup::predict;
 use handeye::solve::rig::{
-    solve_rig, solve_rig_pixels, RigCamera, RigData, RigFrame, RigObservation, RigOptions, RigStart,
+    solve_rig, solve_rig_pixels, RigData, RigFrame, RigObservation, RigOptions, RigStart,
 };
-use handeye::solve::NoiseModel;
 use handeye::vision::Target;
-use nalgebra::{UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
+
+#[path = "../tests/util/mod.rs"]
+mod util;
+
+use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
 
 /// The pose-space problem, the lenses, every camera's corners, the robot's repeatability.
 type Problem = (
@@ -35,26 +36,10 @@ type Problem = (
 );
 
 fn problem() -> Problem {
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("configs/sim-cell-three-cameras.yaml");
-    let rig = RigConfig::load(&config).expect("the three-camera config loads");
+    let rig = util::rig::three_cameras();
     let mut rng = StdRng::seed_from_u64(27);
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
-    let flanges: Vec<Pose> = (0..20)
-        .map(|_| {
-            let t = Vector3::new(
-                0.5 + rng.random_range(-0.15..0.15),
-                -0.15 + rng.random_range(-0.15..0.15),
-                rng.random_range(0.55..0.75),
-            );
-            let r = Vector3::new(
-                std::f64::consts::PI + rng.random_range(-0.45..0.45),
-                rng.random_range(-0.45..0.45),
-                rng.random_range(-0.35..0.35),
-            );
-            Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r))
-        })
-        .collect();
+    let flanges = wrist_views(&mut rng, 20);
     let models: Vec<CameraModel> = rig
         .cameras
         .iter()
@@ -68,13 +53,8 @@ fn problem() -> Problem {
         for (c, camera) in rig.cameras.iter().enumerate() {
             let board = Target::load(&camera.config.target).expect("board");
             let truth = camera.config.simulation.expect("a simulated cell");
-            let (sr, st) = match truth.setup {
-                Setup::EyeInHand => (0.03f64.to_radians(), 0.15e-3),
-                Setup::EyeToHand => (0.04f64.to_radians(), 0.35e-3),
-            };
-            let r = Vector3::from_fn(|_, _| unit.sample(&mut rng) * sr);
-            let t = Vector3::from_fn(|_, _| unit.sample(&mut rng) * st);
-            let noise = Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r));
+            let (sr, st) = board_pose_noise(truth.setup);
+            let noise = jitter(&mut rng, sr, st);
             let exact = predict(
                 truth.setup,
                 &truth.camera_mount,
@@ -102,28 +82,8 @@ fn problem() -> Problem {
             });
         }
     }
-    let data = RigData {
-        cameras: rig
-            .cameras
-            .iter()
-            .map(|c| RigCamera {
-                name: c.name.clone(),
-                setup: c.config.setup,
-                noise: NoiseModel::default(),
-            })
-            .collect(),
-        base_from_flange: flanges,
-        observations,
-    };
-    let start = RigStart {
-        camera_mounts: rig
-            .cameras
-            .iter()
-            .map(|c| c.config.nominal.camera_mount)
-            .collect(),
-        base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
-        flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
-    };
+    let data = rig_data(&rig, flanges, observations);
+    let start = nominal_start(&rig);
     let robot = rig.cameras[0].config.robot_repeatability();
     (data, start, models, frames, robot)
 }

@@ -16,6 +16,7 @@ use handeye::geometry::{translation_distance, Pose};
 
 pub mod fakes;
 pub mod live;
+pub mod rig;
 
 /// The crate root.
 pub fn repo() -> PathBuf {

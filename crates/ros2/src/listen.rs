@@ -33,10 +33,17 @@ struct Edge {
     parent_from_child: Pose,
 }
 
+/// The most frames the tree keeps: a robot cell's tree has tens to a few hundred. Anyone on the
+/// DDS domain can publish `/tf` (plain DDS has no authentication), and each new child name would
+/// otherwise be kept for the life of the run; edges of frames already known still update.
+pub const MAX_TF_FRAMES: usize = 4096;
+
 /// The TF tree as last heard.
 #[derive(Debug, Clone, Default)]
 pub struct TfTree {
     edges: BTreeMap<String, Edge>,
+    /// Whether a new frame was dropped at [`MAX_TF_FRAMES`] (said once).
+    full: bool,
 }
 
 impl TfTree {
@@ -45,6 +52,15 @@ impl TfTree {
         for t in &msg.transforms {
             let child = t.child_frame_id.trim_start_matches('/').to_string();
             let parent = t.header.frame_id.trim_start_matches('/').to_string();
+            if self.edges.len() >= MAX_TF_FRAMES && !self.edges.contains_key(&child) {
+                if !self.full {
+                    tracing::warn!(
+                        "TF: more than {MAX_TF_FRAMES} frames heard; new frames ({child}, ...) are ignored"
+                    );
+                    self.full = true;
+                }
+                continue;
+            }
             match t.transform.to_pose() {
                 Some(pose) => {
                     self.edges.insert(
@@ -227,6 +243,29 @@ mod tests {
             child_frame_id: child.into(),
             transform: Transform::from_pose(&pose),
         }
+    }
+
+    #[test]
+    fn a_flood_of_new_frames_is_bounded_and_known_frames_still_update() {
+        let mut tree = TfTree::default();
+        tree.update(&TfMessage {
+            transforms: vec![edge("base", "tool0", Pose::identity())],
+        });
+        let flood: Vec<_> = (0..2 * MAX_TF_FRAMES)
+            .map(|i| edge("base", &format!("junk_{i}"), Pose::identity()))
+            .collect();
+        tree.update(&TfMessage { transforms: flood });
+        assert_eq!(
+            tree.frames().len(),
+            MAX_TF_FRAMES + 1,
+            "the frames plus `base`"
+        );
+        let moved = Pose::new(Vector3::new(0.0, 0.0, 0.4), Vector3::zeros());
+        tree.update(&TfMessage {
+            transforms: vec![edge("base", "tool0", moved)],
+        });
+        let got = tree.lookup("base", "tool0").unwrap();
+        assert!((got.to_homogeneous() - moved.to_homogeneous()).norm() < 1e-12);
     }
 
     #[test]

@@ -2,7 +2,6 @@
 //! camera solved alone and against chaining two single-camera answers, on the same samples, in
 //! pose space and in pixel space.
 
-use handeye::config::rig::RigConfig;
 use handeye::geometry::Pose;
 
 use crate::util;
@@ -17,58 +16,28 @@ use crate::util;
 #[test]
 fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
     use handeye::setup::{predict, Setup};
-    use handeye::solve::rig::{
-        pose_error, solve_rig, RigCamera, RigData, RigObservation, RigOptions, RigStart,
-    };
-    use handeye::solve::NoiseModel;
-    use rand::{Rng, SeedableRng};
-    use rand_distr::{Distribution, Normal};
+    use handeye::solve::rig::{pose_error, solve_rig, RigObservation, RigOptions, RigStart};
+    use rand::SeedableRng;
+    use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
 
-    let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
-    let rig = RigConfig::load(&config).unwrap();
+    let rig = util::rig::three_cameras();
     let truth: Vec<_> = rig
         .cameras
         .iter()
         .map(|c| c.config.simulation.unwrap())
         .collect();
     let setups: Vec<Setup> = truth.iter().map(|t| t.setup).collect();
-    let noise = |setup: Setup| match setup {
-        Setup::EyeInHand => (0.03f64.to_radians(), 0.15e-3),
-        Setup::EyeToHand => (0.04f64.to_radians(), 0.35e-3),
-    };
     let seeds = 200;
     let cameras = truth.len();
     let (mut joint_sq, mut alone_sq) = (vec![0.0; cameras], vec![0.0; cameras]);
     let (mut relative_joint_sq, mut relative_chained_sq) = (0.0, 0.0);
     for seed in 0..seeds {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let unit = Normal::new(0.0, 1.0).unwrap();
-        let jitter = |rng: &mut rand::rngs::StdRng, sr: f64, st: f64| {
-            let r = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * sr);
-            let t = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * st);
-            Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
-        };
-        // The wrist camera's views of the table board (as the plan generates them: the flange
-        // 0.55-0.75 m above the board, tilted up to 30°), which the fixed cameras see from above.
-        let flanges: Vec<Pose> = (0..20)
-            .map(|_| {
-                let t = nalgebra::Vector3::new(
-                    0.5 + rng.random_range(-0.15..0.15),
-                    -0.15 + rng.random_range(-0.15..0.15),
-                    rng.random_range(0.55..0.75),
-                );
-                let r = nalgebra::Vector3::new(
-                    std::f64::consts::PI + rng.random_range(-0.45..0.45),
-                    rng.random_range(-0.45..0.45),
-                    rng.random_range(-0.35..0.35),
-                );
-                Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
-            })
-            .collect();
+        let flanges = wrist_views(&mut rng, 20);
         let mut observations = Vec::new();
         for (i, flange) in flanges.iter().enumerate() {
             for (c, t) in truth.iter().enumerate() {
-                let (sr, st) = noise(setups[c]);
+                let (sr, st) = board_pose_noise(setups[c]);
                 let exact = predict(t.setup, &t.camera_mount, &t.target_mount, flange);
                 observations.push(RigObservation {
                     camera: c,
@@ -77,29 +46,9 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
                 });
             }
         }
-        let data = RigData {
-            cameras: rig
-                .cameras
-                .iter()
-                .map(|c| RigCamera {
-                    name: c.name.clone(),
-                    setup: c.config.setup,
-                    noise: NoiseModel::default(),
-                })
-                .collect(),
-            base_from_flange: flanges,
-            observations,
-        };
+        let data = rig_data(&rig, flanges, observations);
         // Both solves start from the same nominal (the config's), as a run without a prior would.
-        let start = RigStart {
-            camera_mounts: rig
-                .cameras
-                .iter()
-                .map(|c| c.config.nominal.camera_mount)
-                .collect(),
-            base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
-            flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
-        };
+        let start = nominal_start(&rig);
         let joint = solve_rig(&data, &start, &RigOptions::default()).unwrap();
         let mut alone_mounts = Vec::new();
         for c in 0..cameras {
@@ -167,16 +116,14 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     use handeye::camera_model::CameraModel;
     use handeye::setup::predict;
     use handeye::solve::rig::{
-        pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigFrame, RigObservation,
-        RigOptions, RigStart,
+        pose_error, solve_rig, solve_rig_pixels, RigFrame, RigObservation, RigOptions, RigStart,
     };
-    use handeye::solve::NoiseModel;
     use handeye::vision::Target;
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+    use util::rig::{jitter, nominal_start, rig_data, wrist_views};
 
-    let config = util::repo().join("configs/sim-cell-three-cameras.yaml");
-    let rig = RigConfig::load(&config).unwrap();
+    let rig = util::rig::three_cameras();
     let truth: Vec<_> = rig
         .cameras
         .iter()
@@ -212,26 +159,7 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     for seed in 0..seeds {
         let mut rng = rand::rngs::StdRng::seed_from_u64(1000 + seed);
         let unit = Normal::new(0.0, 1.0).unwrap();
-        let jitter = |rng: &mut rand::rngs::StdRng, sr: f64, st: f64| {
-            let r = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * sr);
-            let t = nalgebra::Vector3::from_fn(|_, _| unit.sample(rng) * st);
-            Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
-        };
-        let true_flanges: Vec<Pose> = (0..20)
-            .map(|_| {
-                let t = nalgebra::Vector3::new(
-                    0.5 + rng.random_range(-0.15..0.15),
-                    -0.15 + rng.random_range(-0.15..0.15),
-                    rng.random_range(0.55..0.75),
-                );
-                let r = nalgebra::Vector3::new(
-                    std::f64::consts::PI + rng.random_range(-0.45..0.45),
-                    rng.random_range(-0.45..0.45),
-                    rng.random_range(-0.35..0.35),
-                );
-                Pose::from_parts(t.into(), nalgebra::UnitQuaternion::from_scaled_axis(r))
-            })
-            .collect();
+        let true_flanges = wrist_views(&mut rng, 20);
         let reported: Vec<Pose> = true_flanges
             .iter()
             .map(|f| f * jitter(&mut rng, robot.1, robot.0))
@@ -267,28 +195,8 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                 });
             }
         }
-        let data = RigData {
-            cameras: rig
-                .cameras
-                .iter()
-                .map(|c| RigCamera {
-                    name: c.name.clone(),
-                    setup: c.config.setup,
-                    noise: NoiseModel::default(),
-                })
-                .collect(),
-            base_from_flange: reported,
-            observations,
-        };
-        let start = RigStart {
-            camera_mounts: rig
-                .cameras
-                .iter()
-                .map(|c| c.config.nominal.camera_mount)
-                .collect(),
-            base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
-            flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
-        };
+        let data = rig_data(&rig, reported, observations);
+        let start = nominal_start(&rig);
         let pose_space = solve_rig(&data, &start, &RigOptions::default()).unwrap();
         let joint = solve_rig_pixels(&data, &models, &frames, &pose_space, &options).unwrap();
         let mut alone_mounts = Vec::new();

@@ -1,0 +1,91 @@
+//! Synthetic samples of the three-camera cell (`configs/sim-cell-three-cameras.yaml`), shared by
+//! its Monte Carlo tests and its bench: the config, the wrist views, the board-pose noise a
+//! rendered run estimates, and the joint problem from the config's nominal mounts.
+
+use handeye::config::rig::RigConfig;
+use handeye::geometry::Pose;
+use handeye::setup::Setup;
+use handeye::solve::rig::{RigCamera, RigData, RigObservation, RigStart};
+use handeye::solve::NoiseModel;
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::rngs::StdRng;
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+
+/// The three-camera config (wrist, left, right).
+pub fn three_cameras() -> RigConfig {
+    RigConfig::load(&super::repo().join("configs/sim-cell-three-cameras.yaml"))
+        .expect("the three-camera config loads")
+}
+
+/// A random pose with Gaussian rotation (rad) and translation (m) per axis, rotation drawn first.
+pub fn jitter(rng: &mut StdRng, rotation_sigma: f64, translation_sigma: f64) -> Pose {
+    let unit = Normal::new(0.0, 1.0).expect("unit normal");
+    let r = Vector3::from_fn(|_, _| unit.sample(rng) * rotation_sigma);
+    let t = Vector3::from_fn(|_, _| unit.sample(rng) * translation_sigma);
+    Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r))
+}
+
+/// `n` flange poses as the plan generates the wrist camera's views of the table board: the
+/// flange 0.55–0.75 m above it, tilted up to about 30° (the fixed cameras see it from above).
+pub fn wrist_views(rng: &mut StdRng, n: usize) -> Vec<Pose> {
+    (0..n)
+        .map(|_| {
+            let t = Vector3::new(
+                0.5 + rng.random_range(-0.15..0.15),
+                -0.15 + rng.random_range(-0.15..0.15),
+                rng.random_range(0.55..0.75),
+            );
+            let r = Vector3::new(
+                std::f64::consts::PI + rng.random_range(-0.45..0.45),
+                rng.random_range(-0.45..0.45),
+                rng.random_range(-0.35..0.35),
+            );
+            Pose::from_parts(t.into(), UnitQuaternion::from_scaled_axis(r))
+        })
+        .collect()
+}
+
+/// The board-pose noise (rotation rad, translation m) the rendered run estimates: the wrist
+/// camera at ~0.5 m, the fixed cameras at ~0.7 m.
+pub fn board_pose_noise(setup: Setup) -> (f64, f64) {
+    match setup {
+        Setup::EyeInHand => (0.03f64.to_radians(), 0.15e-3),
+        Setup::EyeToHand => (0.04f64.to_radians(), 0.35e-3),
+    }
+}
+
+/// The joint problem's data: every camera of `rig` with the default noise model.
+pub fn rig_data(
+    rig: &RigConfig,
+    base_from_flange: Vec<Pose>,
+    observations: Vec<RigObservation>,
+) -> RigData {
+    RigData {
+        cameras: rig
+            .cameras
+            .iter()
+            .map(|c| RigCamera {
+                name: c.name.clone(),
+                setup: c.config.setup,
+                noise: NoiseModel::default(),
+            })
+            .collect(),
+        base_from_flange,
+        observations,
+    }
+}
+
+/// The start a run without a prior has: the config's nominal mounts (the wrist camera's board on
+/// the table, the fixed cameras' board on the flange).
+pub fn nominal_start(rig: &RigConfig) -> RigStart {
+    RigStart {
+        camera_mounts: rig
+            .cameras
+            .iter()
+            .map(|c| c.config.nominal.camera_mount)
+            .collect(),
+        base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
+        flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
+    }
+}
