@@ -5,10 +5,11 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use handeye::robot::kinematics::UrModel;
+use handeye::robot::Joints;
 
 fn kinematics(c: &mut Criterion) {
     let model = UrModel::ur5e();
-    let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+    let q = Joints::from([0.3, -1.2, 1.4, -0.8, 1.1, 0.4]);
     let pose = model.forward(&q);
     c.bench_function("ur5e forward", |b| b.iter(|| model.forward(black_box(&q))));
     c.bench_function("ur5e inverse (all 8)", |b| {

@@ -7,6 +7,7 @@ use anyhow::{bail, Context};
 use clap::Parser;
 use handeye_core::geometry::pose_from_rotvec;
 use handeye_robot::kinematics::UrModel;
+use handeye_robot::Joints;
 use mocks::{ControllerVersion, MockFaults, MockUr, MockUrConfig, MockUrPorts};
 use nalgebra::Vector3;
 
@@ -83,7 +84,7 @@ fn main() -> anyhow::Result<()> {
             script: args.script_port,
         },
         model,
-        start_joints: [j[0], j[1], j[2], j[3], j[4], j[5]],
+        start_joints: Joints::from_six([j[0], j[1], j[2], j[3], j[4], j[5]]),
         controller_version: args.controller_version,
         flange_from_tcp: pose_from_rotvec(
             Vector3::new(t[0], t[1], t[2]),

@@ -158,7 +158,7 @@ impl Default for MockUrConfig {
             address: IpAddr::V4(Ipv4Addr::LOCALHOST),
             ports: MockUrPorts::default(),
             model: UrModel::ur5e(),
-            start_joints: [0.0, -1.571, 1.571, -1.571, -1.571, 0.0],
+            start_joints: Joints::from_six([0.0, -1.571, 1.571, -1.571, -1.571, 0.0]),
             controller_version: ControllerVersion::default(),
             flange_from_tcp: Pose::identity(),
             instant_moves: false,

@@ -7,6 +7,7 @@ use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
 use handeye_core::geometry::{pose_from_rotvec, rotvec};
+use handeye_robot::Joints;
 use mocks::{MockFaults, MockUrConfig};
 use nalgebra::Vector3;
 
@@ -96,7 +97,7 @@ fn streams_kinematically_consistent_state_with_ur_rtde_field_sizes() {
     );
     let q = f64s(&data[9..57]);
     let tcp = f64s(&data[57..105]);
-    let expected = m.config().model.forward(&q.clone().try_into().unwrap()) * offset;
+    let expected = m.config().model.forward(&Joints::from_slice(&q).unwrap()) * offset;
     let t = expected.translation.vector;
     let r = rotvec(&expected.rotation);
     let want = [t.x, t.y, t.z, r.x, r.y, r.z];

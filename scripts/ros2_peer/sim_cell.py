@@ -48,8 +48,85 @@ UR_DH = {
 }
 
 
-def forward(model, q):
-    """T_base_flange (4x4) at joints q: the product of Rz(q) Tz(d) Tx(a) Rx(alpha) per link."""
+# Franka's published kinematics for its seven-joint arms (Panda, FR3), Craig's modified DH: per
+# joint (a, d, alpha) of Rx(alpha) Tx(a) Rz(q) Tz(d), then the flange 0.107 m along the last z.
+FRANKA_MDH = ((0, 0.333, 0), (0, 0, -math.pi / 2), (0, 0.316, math.pi / 2),
+              (0.0825, 0, math.pi / 2), (-0.0825, 0.384, -math.pi / 2), (0, 0, math.pi / 2),
+              (0.088, 0, math.pi / 2))
+FRANKA_FLANGE_D = 0.107
+FRANKA_LIMITS = ((-2.8973, 2.8973), (-1.7628, 1.7628), (-2.8973, 2.8973), (-3.0718, -0.0698),
+                 (-2.8973, 2.8973), (-0.0175, 3.7525), (-2.8973, 2.8973))
+FRANKA_HOME = (0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4)
+MODELS = sorted(["ur5e", "ur10e", "franka"])
+
+
+def joint_count(model):
+    return 7 if model == "franka" else 6
+
+
+def franka_forward(q):
+    """The flange of a Franka arm in its own base frame (4x4) at joints q."""
+    T = np.eye(4)
+    for (a, d, alpha), qi in zip(FRANKA_MDH, q):
+        ca, sa, ct, st = math.cos(alpha), math.sin(alpha), math.cos(qi), math.sin(qi)
+        T = T @ np.array([[ct, -st, 0, a],
+                          [st * ca, ct * ca, -sa, -d * sa],
+                          [st * sa, ct * sa, ca, d * ca],
+                          [0, 0, 0, 1]])
+    flange = np.eye(4)
+    flange[2, 3] = FRANKA_FLANGE_D
+    return T @ flange
+
+
+def rotvec_of(R):
+    """The rotation vector of a rotation matrix: from its skew part up to 90 degrees (exact near
+    zero, where the IK converges), through its quaternion beyond (safe near pi)."""
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1) / 2
+    if c > 0:
+        v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2
+        n = float(np.linalg.norm(v))
+        return v if n < 1e-15 else v * (math.atan2(n, c) / n)
+    x, y, z, w = quat_of(R)
+    if w < 0:
+        x, y, z, w = -x, -y, -z, -w
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-15:
+        return np.zeros(3)
+    return np.array([x, y, z]) * (2 * math.atan2(n, w) / n)
+
+
+def franka_inverse(target, seed_rng):
+    """Joints inside Franka's limits whose flange is `target` (4x4, in the arm's base frame) to
+    1e-10, by damped least squares from the home pose and then random starts; None if none."""
+    lo = np.array([l for l, _ in FRANKA_LIMITS])
+    hi = np.array([h for _, h in FRANKA_LIMITS])
+
+    def error(q):
+        T = franka_forward(q)
+        return np.concatenate([target[:3, 3] - T[:3, 3], rotvec_of(target[:3, :3] @ T[:3, :3].T)])
+
+    starts = [np.array(FRANKA_HOME)] + [seed_rng.uniform(lo, hi) for _ in range(30)]
+    for q in starts:
+        q = np.clip(q, lo + 1e-3, hi - 1e-3)
+        for _ in range(100):
+            e = error(q)
+            if np.linalg.norm(e) < 1e-10:
+                return q
+            J = np.empty((6, 7))
+            for j in range(7):
+                dq = np.zeros(7)
+                dq[j] = 1e-7
+                J[:, j] = (e - error(q + dq)) / 1e-7
+            step = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
+            q = np.clip(q + step, lo + 1e-4, hi - 1e-4)
+    return None
+
+
+def forward(model, q, mount=None):
+    """T_base_flange (4x4) at joints q. A UR: the product of Rz(q) Tz(d) Tx(a) Rx(alpha) per
+    link. A Franka arm: its kinematics, its base at `mount` (T_base_armbase)."""
+    if model == "franka":
+        return mount @ franka_forward(q)
     d1, a2, a3, d4, d5, d6 = UR_DH[model]
     d = (d1, 0, 0, d4, d5, d6)
     a = (0, a2, a3, 0, 0, 0)
@@ -77,11 +154,16 @@ def quat_of(R):
 def add_arguments(p):
     p.add_argument("session", help="a sim session folder (session.yaml, poses/, frames/)")
     p.add_argument("--camera-info", required=True, help="the camera_info YAML of the sim camera")
-    p.add_argument("--start-joints-deg", default="0,-90,90,-90,-90,0")
-    p.add_argument("--model", default="ur10e", choices=sorted(UR_DH))
-    p.add_argument("--joint-names", default=",".join(JOINTS),
-                   help="the six joint names it publishes and takes goals for (another arm's, e.g. "
-                        "fr3_joint1,...: the kinematics inside stay the --model's)")
+    p.add_argument("--start-joints-deg", default=None,
+                   help="default: 0,-90,90,-90,-90,0 for a UR, Franka's home pose for franka")
+    p.add_argument("--model", default="ur10e", choices=MODELS,
+                   help="the arm's kinematics: a UR, or `franka` (seven joints, Franka's published "
+                        "kinematics; mounted where it reaches every view, and each view's joints "
+                        "found by its inverse kinematics)")
+    p.add_argument("--joint-names", default=None,
+                   help="the joint names it publishes and takes goals for (default: the UR driver's "
+                        "six, or fr3_joint1..7 for franka; another arm's names may be given: the "
+                        "kinematics inside stay the --model's)")
     p.add_argument("--action", default="/scaled_joint_trajectory_controller/follow_joint_trajectory")
     p.add_argument("--image-hz", type=float, default=15.0)
     p.add_argument("--guide-s", type=float, default=1.5, help="how long a `guide K` move takes")
@@ -134,11 +216,11 @@ def load_session(folder):
 class Arm:
     """The arm's state: joints, speeds, which view it shows; moved by trajectory goals."""
 
-    def __init__(self, model, start, plan, views):
-        self.model = model
+    def __init__(self, model, start, plan, views, mount=None):
+        self.model, self.mount = model, mount
         self.lock = threading.Lock()
         self.q = np.array(start, float)
-        self.qd = np.zeros(6)
+        self.qd = np.zeros(len(self.q))
         self.plan, self.views = plan, views
         self.view = None  # (pose, frame) of the plan pose the arm stands at
         self.goal = None  # (goal id, points [(t, q)], start time, done event)
@@ -147,7 +229,7 @@ class Arm:
     def nearest_view(self, q):
         """The rendered view of the plan pose whose flange position the arm's forward
         kinematics reaches (within 1 mm), or None."""
-        T = forward(self.model, q)
+        T = forward(self.model, q, self.mount)
         d = [float(np.linalg.norm(t - T[:3, 3])) for t, _ in self.plan]
         k = int(np.argmin(d)) if d else -1
         if k < 0 or d[k] > 1e-3 or k not in self.views:
@@ -160,7 +242,7 @@ class Arm:
         forward kinematics (moving, or at a pose with no view)."""
         if self.view is not None and self.goal is None and self.guide is None:
             return self.view[0]
-        T = forward(self.model, self.q)
+        T = forward(self.model, self.q, self.mount)
         return T[:3, 3], quat_of(T[:3, :3])
 
 
@@ -168,15 +250,54 @@ def cdr_bytes(frame):
     return frame.tobytes()
 
 
+def matrix_of(pose):
+    """4x4 of (translation, quaternion xyzw)."""
+    t, (x, y, z, w) = pose
+    T = np.eye(4)
+    T[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    T[:3, 3] = t
+    return T
+
+
+def franka_plan(plan):
+    """A Franka arm's mount (T_base_armbase) and, per plan pose, the joints that reach it: the
+    arm stands 0.3 m back from the views' centre (towards the base's origin) and 0.55 m below
+    it, facing the views (its reach, 0.855 m, then covers every view of the shipped plan with
+    its wrist's ranges)."""
+    centre = np.mean([t for t, _ in plan], axis=0)
+    yaw = math.atan2(centre[1], centre[0])
+    mount = np.eye(4)
+    mount[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]]
+    mount[:3, 3] = centre - mount[:3, :3] @ np.array([0.3, 0.0, 0.55])
+    rng = np.random.default_rng(7)
+    joints = []
+    for k, pose in enumerate(plan):
+        q = franka_inverse(np.linalg.inv(mount) @ matrix_of(pose), rng)
+        if q is None:
+            raise SystemExit(f"franka: plan pose {k} is out of the arm's reach from its mount")
+        joints.append(q)
+    return mount, joints
+
+
 def run(args):
     plan, plan_joints, views = load_session(args.session)
     with open(args.camera_info) as f:
         ci = yaml.safe_load(f)
-    start = np.radians([float(v) for v in args.start_joints_deg.split(",")])
-    arm = Arm(args.model, start, plan, views)
-    joint_names = args.joint_names.split(",")
-    if len(joint_names) != 6:
-        raise SystemExit(f"--joint-names: expected 6 names, got {len(joint_names)}")
+    dof = joint_count(args.model)
+    mount = None
+    if args.model == "franka":
+        mount, plan_joints = franka_plan(plan)
+        default_start, default_names = np.degrees(FRANKA_HOME), [f"fr3_joint{i}" for i in range(1, 8)]
+    else:
+        default_start, default_names = (0, -90, 90, -90, -90, 0), JOINTS
+    start = np.radians([float(v) for v in args.start_joints_deg.split(",")]
+                       if args.start_joints_deg else default_start)
+    joint_names = args.joint_names.split(",") if args.joint_names else list(default_names)
+    if len(joint_names) != dof or len(start) != dof:
+        raise SystemExit(f"--joint-names, --start-joints-deg: expected {dof} values for {args.model}")
+    arm = Arm(args.model, start, plan, views, mount)
 
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
@@ -234,8 +355,8 @@ def run(args):
             goal_count[0] += 1
             n = goal_count[0]
             pts = [(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9, np.array(p.positions),
-                    np.array(p.velocities) if len(p.velocities) == 6 else None) for p in tr.points]
-            ok = list(tr.joint_names) == joint_names and pts and all(len(q) == 6 for _, q, _ in pts) and arm.guide is None
+                    np.array(p.velocities) if len(p.velocities) == dof else None) for p in tr.points]
+            ok = list(tr.joint_names) == joint_names and pts and all(len(q) == dof for _, q, _ in pts) and arm.guide is None
             max_speed = max((float(np.max(np.abs(v))) for _, _, v in pts if v is not None), default=0.0)
             goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
             say(event="goal", n=n, accepted=bool(ok), points=len(pts),
@@ -266,7 +387,7 @@ def run(args):
                 if arm.goal and (arm.goal[0] == gid or not any(gid)):
                     cur = arm.goal[0]
                     arm.goal = None
-                    arm.qd = np.zeros(6)
+                    arm.qd = np.zeros(dof)
                     canceling.append(m.GoalInfo(m.UUID(list(cur)), stamp_now()))
                     say(event="cancel", n=goals[cur]["n"], joints=list(arm.q))
                     finish(cur, 5, 0, "canceled")
@@ -277,7 +398,7 @@ def run(args):
         k, q0, q1, t0, duration = arm.guide
         f = min(1.0, (now - t0) / duration)
         if f >= 1.0:
-            arm.q, arm.qd, arm.guide = q1.copy(), np.zeros(6), None
+            arm.q, arm.qd, arm.guide = q1.copy(), np.zeros(dof), None
             arm.view = arm.nearest_view(arm.q)
             say(event="guided", k=k, at=time.time())
             return
@@ -319,13 +440,13 @@ def run(args):
                 os._exit(0)
             if args.abort_goal == n and t > total / 2:
                 arm.goal = None
-                arm.qd = np.zeros(6)
+                arm.qd = np.zeros(dof)
                 say(event="abort", n=n)
                 finish(gid, 6, -4, "simulated: path tolerance violated at joint shoulder_lift_joint")
                 return
             if t >= total:
                 arm.q = pts[-1][1].copy()
-                arm.qd = np.zeros(6)
+                arm.qd = np.zeros(dof)
                 arm.goal = None
                 arm.view = arm.nearest_view(arm.q)
                 finish(gid, 4)
@@ -341,7 +462,9 @@ def run(args):
                     break
                 prev_t, prev_q = tk, qk
 
-    say(event="ready", poses=len(views))
+    # The joints of each plan pose (degrees): a taught plan for this arm pairs them with the
+    # flange pose it reports there.
+    say(event="ready", poses=len(views), plan_joints_deg=[list(np.degrees(q)) for q in plan_joints])
     next_js = next_tf = next_img = next_info = time.monotonic()
     while True:
         now = time.monotonic()

@@ -29,8 +29,8 @@ impl PoseView {
 }
 
 /// Joints in degrees, for the page.
-pub fn joints_deg(joints: &Joints) -> [f64; 6] {
-    joints.map(f64::to_degrees)
+pub fn joints_deg(joints: &Joints) -> Vec<f64> {
+    joints.iter().map(|q| q.to_degrees()).collect()
 }
 
 /// Where a plan pose stands.
@@ -68,7 +68,7 @@ pub struct PlannedView {
     /// Target flange pose `T_base_flange`.
     pub flange: PoseView,
     /// The joints that reach it, degrees.
-    pub joints_deg: [f64; 6],
+    pub joints_deg: Vec<f64>,
 }
 
 /// 1-sigma of both unknowns.
@@ -143,7 +143,7 @@ pub enum ConsoleEvent {
         /// Plan index.
         plan_index: usize,
         /// The joints it moves to, degrees.
-        joints_deg: Option<[f64; 6]>,
+        joints_deg: Option<Vec<f64>>,
     },
     /// A pose was processed.
     Pose {
@@ -206,7 +206,7 @@ pub enum ConsoleEvent {
     /// Where the arm stands (manual sessions).
     Arm {
         /// Joints, degrees.
-        joints_deg: [f64; 6],
+        joints_deg: Vec<f64>,
         /// `T_base_flange`.
         flange: PoseView,
         /// Freedrive (teach mode) is on.
@@ -217,7 +217,7 @@ pub enum ConsoleEvent {
         /// The flange pose to go to, `T_base_flange`.
         flange: PoseView,
         /// The joints that reach it, degrees.
-        joints_deg: [f64; 6],
+        joints_deg: Vec<f64>,
         /// Where the board centre would appear in the image at the current estimate, px.
         board_px: Option<[f64; 2]>,
         /// The rotation axis it adds (unit, base frame), relative to the nearest accepted pose.

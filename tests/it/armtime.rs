@@ -367,7 +367,7 @@ mod through_ur_rtde {
         MockUr::start(MockUrConfig {
             address: address.parse::<IpAddr>().unwrap(),
             model: UrModel::ur10e(),
-            start_joints: [0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians),
+            start_joints: Joints::from([0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians)),
             trapezoidal_moves: true,
             ringing: Some(Ringing {
                 amplitude_rad: 0.1f64.to_radians(),

@@ -13,6 +13,7 @@ use handeye::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_D
 use handeye::config::{CellConfig, RobotConfig};
 use handeye::plan::{Plan, Waypoint};
 use handeye::robot::kinematics::UrModel;
+use handeye::robot::Joints;
 use handeye::setup::Setup;
 use handeye::vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
 use handeye::vision::{Board, DetectorOptions, TagDetector, TagFamily};
@@ -98,7 +99,7 @@ fn every_model_matches_its_published_dh_chain() {
         let model = UrModel::by_name(name).unwrap();
         for q in JOINT_VECTORS {
             let expected = dh_chain(&params, &q);
-            let got = model.forward(&q).to_homogeneous();
+            let got = model.forward(&Joints::from(q)).to_homogeneous();
             assert!(
                 (got - expected).abs().max() < 1e-12,
                 "{name} at {q:?}: {got} vs {expected}"
@@ -106,7 +107,7 @@ fn every_model_matches_its_published_dh_chain() {
         }
         // Stretched out at zero joints the flange is a2 + a3 along x: the arm's published reach
         // figures are that plus the wrist (so a swapped a2/d4 would show here too).
-        let home = model.forward(&[0.0; 6]).translation.vector;
+        let home = model.forward(&Joints::zeros(6)).translation.vector;
         let expected = Vector3::new(
             params[1] + params[2],
             -(params[3] + params[5]),
@@ -121,6 +122,7 @@ fn every_model_inverts_its_own_forward_kinematics() {
     for name in UrModel::NAMES {
         let model = UrModel::by_name(name).unwrap();
         for q in &JOINT_VECTORS[1..] {
+            let q = &Joints::from(*q);
             let pose = model.forward(q);
             let all = model.inverse(&pose);
             assert!(
@@ -204,7 +206,7 @@ fn sim_with_ranges(dir: &Path, ranges: &str) -> PathBuf {
     )
 }
 
-fn inside(q: &[f64; 6], ranges: &[[f64; 2]; 6]) -> bool {
+fn inside(q: &Joints, ranges: &[[f64; 2]]) -> bool {
     q.iter()
         .zip(ranges)
         .all(|(v, [lo, hi])| (lo..=hi).contains(&&v.to_degrees()))
@@ -314,8 +316,12 @@ fn a_scripted_pose_outside_the_range_is_refused() {
     let cell = handeye::cell::prepare(&path).unwrap();
     let plan = Plan {
         waypoints: vec![
-            Waypoint::Joints([0.0, -90.0, 90.0, -90.0, -90.0, 170.0].map(f64::to_radians)),
-            Waypoint::Joints([0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians)),
+            Waypoint::Joints(Joints::from(
+                [0.0, -90.0, 90.0, -90.0, -90.0, 170.0].map(f64::to_radians),
+            )),
+            Waypoint::Joints(Joints::from(
+                [0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians),
+            )),
         ],
     };
     let report = cell.check_plan(&plan);
@@ -398,8 +404,8 @@ fn every_move_is_held_to_the_ranges() {
             max: Vector3::new(2.0, 2.0, 2.0),
         },
     );
-    let home = [0.0, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians);
-    let wound = [0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians);
+    let home = Joints::from([0.0, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians));
+    let wound = Joints::from([0.0, -90.0, 90.0, -90.0, -90.0, 280.0].map(f64::to_radians));
     assert_eq!(check.problem(&home, &home), None);
     assert_eq!(
         check.problem(&home, &wound).as_deref(),

@@ -369,8 +369,9 @@ fn freedrive_switches_through_ur_rtde_on_the_mock_controller() {
         assert!(mock.hand_guide(pushed));
         // The reading follows within a few data packages (packages already on their way when
         // the hand moved the arm still show the old joints; CI's load can delay them).
-        let left_there =
-            |read: &[f64; 6]| read.iter().zip(&pushed).all(|(r, p)| (r - p).abs() < 1e-6);
+        let left_there = |read: &handeye::robot::Joints| {
+            read.iter().zip(&pushed).all(|(r, p)| (r - p).abs() < 1e-6)
+        };
         let deadline = std::time::Instant::now() + Duration::from_secs(5);
         let mut read = robot.joint_positions().unwrap();
         while !left_there(&read) && std::time::Instant::now() < deadline {
@@ -432,14 +433,14 @@ fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
     let mock = mocks::MockUr::start(mocks::MockUrConfig {
         address: "127.0.0.62".parse().unwrap(),
         model: handeye::robot::kinematics::UrModel::ur10e(),
-        start_joints: [
+        start_joints: handeye::robot::Joints::from([
             0.0,
             -90f64.to_radians(),
             90f64.to_radians(),
             -90f64.to_radians(),
             -90f64.to_radians(),
             0.0,
-        ],
+        ]),
         instant_moves: true,
         ..mocks::MockUrConfig::default()
     })
@@ -481,7 +482,7 @@ fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
                 "the page's freedrive did not reach the controller"
             );
             // The person pushes the arm to the suggested view (rounded to 0.1° on the page).
-            assert!(mock.hand_guide(joints.expect("joints first")));
+            assert!(mock.hand_guide(joints.expect("joints first").into()));
             seen_on = true;
             writeln!(stdin, "MOVED").unwrap();
         } else if line == "FREEDRIVE_OFF" {

@@ -101,14 +101,14 @@ fn base_from_flange(i: usize) -> Pose {
 /// The joints of plan pose `i` (the fakes only compare them).
 fn joints(i: usize) -> Joints {
     let k = i as f64;
-    [
+    Joints::from([
         0.1 * k,
         -1.5 + 0.05 * k,
         1.5,
         -1.5,
         -1.5 - 0.02 * k,
         0.3 * k,
-    ]
+    ])
 }
 
 /// The frame of plan pose `i`, rendered once per test binary.

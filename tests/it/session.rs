@@ -290,7 +290,7 @@ fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_se
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     // Shoulder lowered: the flange hangs below the table top (the box starts at z = 5 cm).
-    let jogged = [0.0, 0.6, 0.0, 0.0, 0.0, 0.0];
+    let jogged = handeye::robot::Joints::from([0.0, 0.6, 0.0, 0.0, 0.0, 0.0]);
     let flange = prepared
         .kinematics()
         .unwrap()

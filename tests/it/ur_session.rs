@@ -45,14 +45,14 @@ fn start_mock(address: &str, flange_from_tcp: Pose, faults: MockFaults) -> MockU
     MockUr::start(MockUrConfig {
         address: address.parse::<IpAddr>().unwrap(),
         model: UrModel::ur10e(),
-        start_joints: [
+        start_joints: handeye::robot::Joints::from([
             0.0,
             -90f64.to_radians(),
             90f64.to_radians(),
             -90f64.to_radians(),
             -90f64.to_radians(),
             0.0,
-        ],
+        ]),
         flange_from_tcp,
         instant_moves: true,
         faults,

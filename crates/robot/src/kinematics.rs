@@ -47,9 +47,9 @@ pub struct UrModel {
 }
 
 /// The first joint of `joints` outside its range in `limits` (`[(min, max)]`, rad): its 0-based
-/// index and value; a non-finite value counts as outside. For any six-joint arm, with or without
-/// a model.
-pub fn outside_ranges(limits: &[(f64, f64); 6], joints: &Joints) -> Option<(usize, f64)> {
+/// index and value; a non-finite value counts as outside. For any arm, with or without a model
+/// (the caller has checked that `limits` has a range for each joint).
+pub fn outside_ranges(limits: &[(f64, f64)], joints: &Joints) -> Option<(usize, f64)> {
     joints
         .iter()
         .zip(limits.iter())
@@ -154,9 +154,11 @@ impl UrModel {
         Isometry3::from_parts(translation, rotation)
     }
 
-    /// Forward kinematics: the flange pose `T_base_flange` at `joints` (rad). Limits are not
+    /// Forward kinematics: the flange pose `T_base_flange` at `joints` (rad), six of them (a
+    /// plan's joint count is checked against the arm's before any kinematics). Limits are not
     /// checked here; see [`UrModel::within_limits`].
     pub fn forward(&self, joints: &Joints) -> Pose {
+        debug_assert_eq!(joints.len(), 6, "a UR arm has six joints");
         (0..6).fold(Pose::identity(), |acc, i| acc * self.link(i, joints[i]))
     }
 
@@ -194,7 +196,7 @@ impl UrModel {
     pub fn inverse(&self, base_from_flange: &Pose) -> Vec<Joints> {
         self.branches(base_from_flange, 0.0)
             .into_iter()
-            .filter_map(|q| self.wrap_into_limits(&q, &[0.0; 6]))
+            .filter_map(|q| self.wrap_into_limits(&q, &Joints::zeros(6)))
             .collect()
     }
 
@@ -225,7 +227,7 @@ impl UrModel {
     /// Moves each joint by multiples of 2π to the value nearest `preferred` that lies inside the
     /// limits; `None` if some joint has no such value.
     fn wrap_into_limits(&self, q: &Joints, preferred: &Joints) -> Option<Joints> {
-        let mut out = [0.0; 6];
+        let mut out = Joints::zeros(6);
         for i in 0..6 {
             let (lo, hi) = self.joint_limits[i];
             // The twin nearest to the preference, then step inward if that one is outside.
@@ -318,7 +320,8 @@ impl UrModel {
                     let s3 = theta3.sin();
                     let theta2 = py.atan2(px) - (a3 * s3).atan2(a2 + a3 * c3);
                     let theta4 = phi234 - theta2 - theta3;
-                    let q = [theta1, theta2, theta3, theta4, theta5, theta6].map(wrap_pi);
+                    let q =
+                        Joints::from([theta1, theta2, theta3, theta4, theta5, theta6].map(wrap_pi));
                     if self.reaches(&q, target) && !out.iter().any(|o| max_angle_diff(o, &q) < 1e-9)
                     {
                         out.push(q);
@@ -370,7 +373,7 @@ mod tests {
     use rand::{Rng, SeedableRng};
 
     fn random_joints(rng: &mut impl Rng) -> Joints {
-        std::array::from_fn(|_| rng.random_range(-PI..PI))
+        Joints::from_fn(6, |_| rng.random_range(-PI..PI))
     }
 
     /// Away from the wrist, elbow and shoulder singularities, where the branch that produced a
@@ -386,7 +389,7 @@ mod tests {
         // At zero joints the UR arm lies stretched along −x: x = a2 + a3, y = −(d4 + d6),
         // z = d1 − d5; the flange orientation is Rx(π/2): x along +x, z along −y.
         for model in [UrModel::ur5e(), UrModel::ur10e()] {
-            let pose = model.forward(&[0.0; 6]);
+            let pose = model.forward(&Joints::zeros(6));
             let [d1, _, _, d4, d5, d6] = model.d;
             let expected = Vector3::new(model.a[1] + model.a[2], -(d4 + d6), d1 - d5);
             assert!(
@@ -400,7 +403,10 @@ mod tests {
             assert!((rot * Vector3::z() - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-12);
         }
         // UR5e numbers spelled out: (−0.8172, −0.2329, 0.0628) m.
-        let p = UrModel::ur5e().forward(&[0.0; 6]).translation.vector;
+        let p = UrModel::ur5e()
+            .forward(&Joints::zeros(6))
+            .translation
+            .vector;
         assert!((p - Vector3::new(-0.8172, -0.2329, 0.0628)).norm() < 1e-12);
     }
 
@@ -445,15 +451,15 @@ mod tests {
     #[test]
     fn generic_pose_has_eight_solutions() {
         let model = UrModel::ur5e();
-        let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+        let q = Joints::from([0.3, -1.2, 1.4, -0.8, 1.1, 0.4]);
         assert_eq!(model.inverse(&model.forward(&q)).len(), 8);
     }
 
     #[test]
     fn nearest_picks_the_twin_close_to_the_seed() {
         let model = UrModel::ur5e();
-        let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
-        let seed = [0.3 - TAU + 0.1, -1.2, 1.4, -0.8, 1.1, 0.4 - TAU];
+        let q = Joints::from([0.3, -1.2, 1.4, -0.8, 1.1, 0.4]);
+        let seed = Joints::from([0.3 - TAU + 0.1, -1.2, 1.4, -0.8, 1.1, 0.4 - TAU]);
         let near = model.inverse_nearest(&model.forward(&q), &seed).unwrap();
         assert!(max_angle_diff(&near, &q) < 1e-9);
         assert!((near[0] - (0.3 - TAU)).abs() < 1e-9 && (near[5] - seed[5]).abs() < 1e-9);
@@ -462,7 +468,7 @@ mod tests {
     #[test]
     fn wrist_singularity_keeps_seed_joint6() {
         let model = UrModel::ur5e();
-        let q = [0.3, -1.2, 1.4, -0.8, 0.0, 0.7];
+        let q = Joints::from([0.3, -1.2, 1.4, -0.8, 0.0, 0.7]);
         let pose = model.forward(&q);
         let near = model.inverse_nearest(&pose, &q).unwrap();
         let fk = model.forward(&near);
@@ -476,7 +482,7 @@ mod tests {
         let model = UrModel::ur5e();
         let far = Isometry3::translation(2.0, 0.0, 0.3);
         assert!(model.inverse(&far).is_empty());
-        assert!(model.inverse_nearest(&far, &[0.0; 6]).is_none());
+        assert!(model.inverse_nearest(&far, &Joints::zeros(6)).is_none());
         let nan = Isometry3::translation(f64::NAN, 0.0, 0.3);
         assert!(model.inverse(&nan).is_empty());
     }
@@ -484,15 +490,15 @@ mod tests {
     #[test]
     fn narrowed_limits_filter_solutions() {
         let mut model = UrModel::ur5e();
-        let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+        let q = Joints::from([0.3, -1.2, 1.4, -0.8, 1.1, 0.4]);
         let pose = model.forward(&q);
         // Elbow only positive: half of the branches remain, all with θ3 > 0.
         model.joint_limits[2] = (0.0, PI);
         let all = model.inverse(&pose);
         assert_eq!(all.len(), 4);
         assert!(all.iter().all(|s| s[2] > 0.0 && model.within_limits(s)));
-        assert!(!model.within_limits(&[0.0, 0.0, -0.1, 0.0, 0.0, 0.0]));
-        assert!(!model.within_limits(&[f64::NAN, 0.0, 0.1, 0.0, 0.0, 0.0]));
+        assert!(!model.within_limits(&Joints::from([0.0, 0.0, -0.1, 0.0, 0.0, 0.0])));
+        assert!(!model.within_limits(&Joints::from([f64::NAN, 0.0, 0.1, 0.0, 0.0, 0.0])));
     }
 
     #[test]

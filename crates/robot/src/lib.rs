@@ -4,8 +4,10 @@
 //! only this trait.
 //!
 //! Frames: every pose here is `T_base_flange` (the tool flange, tool0, with no TCP offset) in the
-//! robot's base frame; metres and radians. Joint positions are radians, base to wrist 3.
+//! robot's base frame; metres and radians. Joint positions are radians, base joint first ([`Joints`]: six on a UR, up to seven on an arm
+//! driven over ROS 2).
 
+pub mod joints;
 pub mod kinematics;
 pub mod recorded;
 pub mod sim;
@@ -20,8 +22,16 @@ use nalgebra::Vector3;
 
 use handeye_core::geometry::Pose;
 
-/// Joint positions in radians, base joint first.
-pub type Joints = [f64; 6];
+pub use joints::{JointCountError, Joints, MAX_JOINTS};
+
+/// `joints` as a six-joint arm's, or [`RobotError::JointCount`]: the check a UR backend makes
+/// before it moves.
+pub fn six_joints(joints: &Joints) -> Result<[f64; 6], RobotError> {
+    joints.six().ok_or(RobotError::JointCount {
+        arm: 6,
+        asked: joints.len(),
+    })
+}
 
 /// Speed and acceleration caps for a move. Backends never exceed these; the session takes them
 /// from the cell config.
@@ -203,6 +213,15 @@ pub enum RobotError {
     /// No joint solution within the joint limits reaches the target.
     #[error("target pose is not reachable within the joint limits: {0}")]
     Unreachable(String),
+    /// A joint move names another number of joints than the arm has (a seven-joint arm's taught
+    /// plan replayed on a UR, say). Nothing moved.
+    #[error("the arm has {arm} joints but the move names {asked}; a plan taught on one arm replays only on an arm with the same joints")]
+    JointCount {
+        /// The arm's joints.
+        arm: usize,
+        /// The joints the move named.
+        asked: usize,
+    },
     /// A move did not finish in time.
     #[error("move did not finish within {0:?}; the arm was stopped")]
     MoveTimeout(Duration),

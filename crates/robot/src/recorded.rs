@@ -74,7 +74,7 @@ pub fn save_recorded_poses(poses: &[Pose], path: &Path) -> Result<(), FileError>
 
 /// The plan "joints" of recorded pose `index`: `index` degrees in joint 0, zeros elsewhere.
 pub fn plan_joints(index: usize) -> Joints {
-    [(index as f64).to_radians(), 0.0, 0.0, 0.0, 0.0, 0.0]
+    Joints::from([(index as f64).to_radians(), 0.0, 0.0, 0.0, 0.0, 0.0])
 }
 
 /// The recorded pose a [`plan_joints`] value names, if it names one.
@@ -193,7 +193,7 @@ mod tests {
         }
         assert!(robot.move_joints(&plan_joints(3), &limits).is_err());
         assert!(robot
-            .move_joints(&[0.5, 0.0, 0.0, 0.0, 0.0, 0.0], &limits)
+            .move_joints(&Joints::from([0.5, 0.0, 0.0, 0.0, 0.0, 0.0]), &limits)
             .is_err());
 
         std::fs::write(

@@ -29,7 +29,9 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::kinematics::UrModel;
-use super::{leading_travel, trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use super::{
+    leading_travel, six_joints, trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus,
+};
 use handeye_core::geometry::{pose_from_rotvec, Pose};
 
 /// Faults the simulated arm injects, counted in completed moves.
@@ -119,6 +121,9 @@ pub enum SimRobotError {
         /// Upper limit, degrees.
         max_deg: f64,
     },
+    /// The start names another number of joints than a UR's six.
+    #[error("sim robot start has {0} joints; the simulated UR arm has 6")]
+    StartJointCount(usize),
 }
 
 /// The latched fault state of the simulated controller.
@@ -178,6 +183,9 @@ impl SimRobot {
                 Err(SimRobotError::BadNoise { name, value, unit })
             }
         };
+        if start.len() != 6 {
+            return Err(SimRobotError::StartJointCount(start.len()));
+        }
         let position_noise = noise("repeatability_m", options.repeatability_m, "m")?;
         let rotation_noise = noise("repeatability_rad", options.repeatability_rad, "rad")?;
         if let Some(index) = (0..6).find(|&i| {
@@ -225,10 +233,10 @@ impl SimRobot {
         let Some(record) = self.history.iter().rev().find(|r| r.started <= t) else {
             // Before the first move (or a moment before it started): standing at the start.
             let q = self.history.front().map_or(self.joints, |r| r.from);
-            return (q, [0.0; 6]);
+            return (q, Joints::zeros(6));
         };
         let dt = t.duration_since(record.started).as_secs_f64();
-        let delta: Joints = std::array::from_fn(|i| record.to[i] - record.from[i]);
+        let delta: Joints = Joints::from_fn(6, |i| record.to[i] - record.from[i]);
         let lead = leading_travel(&record.from, &record.to);
         if dt < record.duration_s && lead > 0.0 {
             let (fraction, lead_speed) = match record.profile {
@@ -236,20 +244,20 @@ impl SimRobot {
                 None => (dt / record.duration_s, lead / record.duration_s),
             };
             return (
-                std::array::from_fn(|i| record.from[i] + delta[i] * fraction),
-                std::array::from_fn(|i| delta[i] / lead * lead_speed),
+                Joints::from_fn(6, |i| record.from[i] + delta[i] * fraction),
+                Joints::from_fn(6, |i| delta[i] / lead * lead_speed),
             );
         }
         let Some(ringing) = self.options.ringing else {
-            return (record.to, [0.0; 6]);
+            return (record.to, Joints::zeros(6));
         };
         let t = dt - record.duration_s;
         let w = 2.0 * std::f64::consts::PI * ringing.frequency_hz;
         let envelope = (-t / ringing.decay_s).exp();
         let (sin, cos) = (w * t).sin_cos();
         (
-            std::array::from_fn(|i| record.to[i] + record.ringing[i] * envelope * sin),
-            std::array::from_fn(|i| {
+            Joints::from_fn(6, |i| record.to[i] + record.ringing[i] * envelope * sin),
+            Joints::from_fn(6, |i| {
                 record.ringing[i] * envelope * (w * cos - sin / ringing.decay_s)
             }),
         )
@@ -333,7 +341,7 @@ impl SimRobot {
             to: joints,
             duration_s,
             profile,
-            ringing: std::array::from_fn(|i| {
+            ringing: Joints::from_fn(6, |i| {
                 if lead > 0.0 {
                     amplitude * (joints[i] - from[i]) / lead
                 } else {
@@ -357,7 +365,7 @@ impl SimRobot {
                     to: stopped,
                     duration_s: 0.0,
                     profile: None,
-                    ringing: [0.0; 6],
+                    ringing: Joints::zeros(6),
                 });
                 self.arrive(stopped);
                 return Err(RobotError::Interrupted);
@@ -441,6 +449,7 @@ impl Robot for SimRobot {
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
         limits.check()?;
+        six_joints(joints)?;
         self.arm_faults()?;
         if let Some(i) = (0..6).find(|&i| {
             let (lo, hi) = self.model.joint_limits[i];
@@ -496,7 +505,7 @@ mod tests {
     use super::*;
     use handeye_core::geometry::translation_distance;
 
-    const HOME: Joints = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+    const HOME: Joints = Joints::from_six([0.3, -1.2, 1.4, -0.8, 1.1, 0.4]);
 
     fn sim(options: SimRobotOptions) -> SimRobot {
         SimRobot::new(UrModel::ur5e(), HOME, options).unwrap()
@@ -505,7 +514,7 @@ mod tests {
     #[test]
     fn linear_move_reaches_target_exactly_without_noise() {
         let mut robot = sim(SimRobotOptions::default());
-        let target = UrModel::ur5e().forward(&[0.5, -1.0, 1.2, -0.9, 1.3, 0.2]);
+        let target = UrModel::ur5e().forward(&Joints::from([0.5, -1.0, 1.2, -0.9, 1.3, 0.2]));
         robot
             .move_linear(&target, &MotionLimits::default())
             .unwrap();
@@ -574,7 +583,7 @@ mod tests {
         let flag = Arc::new(AtomicBool::new(false));
         robot.set_interrupt(flag.clone());
         let start = robot.joint_positions().unwrap();
-        let target = [0.6, -1.0, 1.2, -0.6, 1.3, 0.2];
+        let target = Joints::from([0.6, -1.0, 1.2, -0.6, 1.3, 0.2]);
         let setter = {
             let flag = flag.clone();
             std::thread::spawn(move || {
@@ -623,7 +632,10 @@ mod tests {
         );
         assert_eq!(robot.joint_positions().unwrap(), before);
         let err = robot
-            .move_joints(&[0.0, 0.0, 7.0, 0.0, 0.0, 0.0], &MotionLimits::default())
+            .move_joints(
+                &Joints::from([0.0, 0.0, 7.0, 0.0, 0.0, 0.0]),
+                &MotionLimits::default(),
+            )
             .unwrap_err();
         assert!(
             matches!(err, RobotError::Unreachable(ref m) if m.contains("joint 2")),
@@ -782,7 +794,7 @@ mod tests {
         assert!(err.to_string().contains("repeatability_m = -1 m"), "{err}");
         let err = SimRobot::new(
             UrModel::ur5e(),
-            [0.0, 0.0, 0.0, 0.0, 0.0, 10.0],
+            Joints::from([0.0, 0.0, 0.0, 0.0, 0.0, 10.0]),
             SimRobotOptions::default(),
         )
         .unwrap_err();

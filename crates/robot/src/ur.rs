@@ -35,7 +35,7 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 
 use super::kinematics::UrModel;
-use super::{Joints, MotionLimits, Robot, RobotError, RobotStatus, WorkspaceBox};
+use super::{six_joints, Joints, MotionLimits, Robot, RobotError, RobotStatus, WorkspaceBox};
 use handeye_core::geometry::{pose_from_rotvec, rotvec, Pose};
 
 /// `runtime_state` PLAYING: the control script runs.
@@ -603,12 +603,13 @@ impl Robot for UrRobot {
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {
         self.wait_fresh(None)?;
         self.read_six("getActualQ", ffi::urrtde_get_actual_q)
+            .map(Joints::from)
     }
 
     fn joint_speeds(&mut self) -> Result<Option<Joints>, RobotError> {
         self.wait_fresh(None)?;
         self.read_six("getActualQd", ffi::urrtde_get_actual_qd)
-            .map(Some)
+            .map(|qd| Some(Joints::from(qd)))
     }
 
     fn move_linear(
@@ -632,6 +633,7 @@ impl Robot for UrRobot {
 
     fn move_joints(&mut self, joints: &Joints, limits: &MotionLimits) -> Result<(), RobotError> {
         limits.check()?;
+        let target = six_joints(joints)?;
         if !joints.iter().all(|v| v.is_finite()) {
             return Err(backend(UrError::NonFinite { what: "moveJ" }));
         }
@@ -641,7 +643,7 @@ impl Robot for UrRobot {
         }
         self.run_move(
             MoveKind::Joint,
-            *joints,
+            target,
             limits.joint_speed,
             limits.joint_acceleration,
         )

@@ -57,8 +57,9 @@ pub struct ArmOptions {
     pub base_frame: String,
     /// Its flange frame.
     pub flange_frame: String,
-    /// Joint names, base to wrist 3.
-    pub joint_names: [String; 6],
+    /// Joint names, base joint first: one per joint of the arm (six on a UR, seven on a Franka
+    /// or a KUKA iiwa; at most [`handeye_robot::MAX_JOINTS`]).
+    pub joint_names: Vec<String>,
     /// `/joint_states`.
     pub joint_states_topic: String,
     /// `/tf`.
@@ -227,7 +228,7 @@ impl Ros2Arm {
     /// The goal for a synchronised joint move `from` → `to` at `limits`: the trapezoid of the
     /// leading joint sampled every 50 ms (at least 4 points), positions and speeds.
     pub fn trajectory(
-        names: &[String; 6],
+        names: &[String],
         from: &Joints,
         to: &Joints,
         limits: &MotionLimits,
@@ -242,10 +243,10 @@ impl Ros2Arm {
                     trapezoid_at(travel, limits.joint_speed, limits.joint_acceleration, t);
                 let last = k == steps;
                 JointTrajectoryPoint {
-                    positions: (0..6)
+                    positions: (0..to.len())
                         .map(|i| from[i] + fraction * (to[i] - from[i]))
                         .collect(),
-                    velocities: (0..6)
+                    velocities: (0..to.len())
                         .map(|i| {
                             if last || travel == 0.0 {
                                 0.0
@@ -382,7 +383,7 @@ enum Event {
     ),
 }
 
-fn apply(shared: &Shared, names: &[String; 6], event: Event) {
+fn apply(shared: &Shared, names: &[String], event: Event) {
     let received = Instant::now();
     match event {
         Event::Joints(Ok((msg, _))) => {
@@ -458,6 +459,12 @@ impl Robot for Ros2Arm {
             return Err(RobotError::Interrupted);
         }
         let from = self.joint_positions()?;
+        if joints.len() != from.len() {
+            return Err(RobotError::JointCount {
+                arm: from.len(),
+                asked: joints.len(),
+            });
+        }
         if handeye_robot::leading_travel(&from, joints) < 1e-6 {
             return Ok(());
         }
@@ -496,7 +503,11 @@ impl Robot for Ros2Arm {
         let previous = self.shared.lock().previous;
         Ok(previous.and_then(|p| {
             let dt = now.stamp.duration_since(p.stamp).ok()?.as_secs_f64();
-            (dt > 0.0).then(|| std::array::from_fn(|i| (now.positions[i] - p.positions[i]) / dt))
+            (dt > 0.0).then(|| {
+                Joints::from_fn(now.positions.len(), |i| {
+                    (now.positions[i] - p.positions[i]) / dt
+                })
+            })
         }))
     }
 }

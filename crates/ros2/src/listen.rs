@@ -11,15 +11,17 @@ use std::time::{Duration, Instant, SystemTime};
 
 use handeye_core::geometry::Pose;
 
+use handeye_robot::Joints;
+
 use crate::msg::{JointState, TfMessage};
 
 /// One `/joint_states` message in the configured joint order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointSample {
-    /// Positions, rad.
-    pub positions: [f64; 6],
+    /// Positions, rad, one per configured joint name.
+    pub positions: Joints,
     /// Speeds the driver reported, rad/s (`None` when it sends none).
-    pub velocities: Option<[f64; 6]>,
+    pub velocities: Option<Joints>,
     /// The message's stamp.
     pub stamp: SystemTime,
     /// When it arrived here.
@@ -192,11 +194,12 @@ impl Shared {
 /// The sample of `msg` in the order of `names`, or which name it lacks.
 pub fn joint_sample(
     msg: &JointState,
-    names: &[String; 6],
+    names: &[String],
     received: Instant,
 ) -> Result<JointSample, String> {
-    let mut positions = [0.0; 6];
-    let mut velocities = [0.0; 6];
+    let mut positions = Joints::from_slice(&vec![0.0; names.len()])
+        .map_err(|e| format!("the configured joint names: {e}"))?;
+    let mut velocities = positions;
     let mut has_velocity = msg.velocity.len() == msg.name.len();
     for (i, name) in names.iter().enumerate() {
         let Some(k) = msg.name.iter().position(|n| n == name) else {

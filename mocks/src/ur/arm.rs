@@ -396,7 +396,7 @@ impl Arm {
                     self.ring = Some(RingDown {
                         arrived: motion.started + motion.duration,
                         to,
-                        amplitude: std::array::from_fn(|i| {
+                        amplitude: Joints::from_fn(6, |i| {
                             ringing.amplitude_rad * (to[i] - from[i]) / lead
                         }),
                     });
@@ -423,8 +423,8 @@ impl Arm {
         let envelope = (-t / ringing.decay_s).exp();
         let (sin, cos) = (w * t).sin_cos();
         Some((
-            std::array::from_fn(|i| ring.amplitude[i] * envelope * sin),
-            std::array::from_fn(|i| {
+            Joints::from_fn(6, |i| ring.amplitude[i] * envelope * sin),
+            Joints::from_fn(6, |i| {
                 ring.amplitude[i] * envelope * (w * cos - sin / ringing.decay_s)
             }),
         ))
@@ -437,7 +437,7 @@ impl Arm {
         let Some((offset, _)) = self.ringing_at(now) else {
             return;
         };
-        self.joints = std::array::from_fn(|i| ring.to[i] + offset[i]);
+        self.joints = Joints::from_fn(6, |i| ring.to[i] + offset[i]);
         let t = now.saturating_duration_since(ring.arrived).as_secs_f64();
         if self
             .ringing
@@ -452,7 +452,7 @@ impl Arm {
     fn set_path_position(&mut self, path: &MotionPath, fraction: f64) {
         match *path {
             MotionPath::Joint { from, to } => {
-                self.joints = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * fraction);
+                self.joints = Joints::from_fn(6, |i| from[i] + (to[i] - from[i]) * fraction);
             }
             MotionPath::Linear { from, to } => {
                 let pose = Isometry3::from_parts(
@@ -530,7 +530,7 @@ impl Arm {
                 let path = match command {
                     cmd::MOVEJ => MotionPath::Joint {
                         from: self.joints,
-                        to: target,
+                        to: target.into(),
                     },
                     cmd::MOVEJ_IK => {
                         let flange = from_ur_vector(&target) * self.flange_from_tcp.inverse();
@@ -548,7 +548,7 @@ impl Arm {
                     },
                     _ => MotionPath::Linear {
                         from: self.base_from_flange(),
-                        to: self.model.forward(&target),
+                        to: self.model.forward(&target.into()),
                     },
                 };
                 if let MotionPath::Linear { to, .. } = path {
@@ -700,12 +700,14 @@ impl Arm {
                     let lead = lead_travel(&from, &to);
                     let t = now.saturating_duration_since(started).as_secs_f64();
                     let (_, lead_speed) = trapezoid_at(lead, v, a, t);
-                    std::array::from_fn(|i| (to[i] - from[i]) / lead * lead_speed)
+                    Joints::from_fn(6, |i| (to[i] - from[i]) / lead * lead_speed)
                 }
-                None => std::array::from_fn(|i| (to[i] - from[i]) / duration.as_secs_f64()),
+                None => Joints::from_fn(6, |i| (to[i] - from[i]) / duration.as_secs_f64()),
             },
-            None => self.ringing_at(now).map_or([0.0; 6], |(_, speeds)| speeds),
-            _ => [0.0; 6],
+            None => self
+                .ringing_at(now)
+                .map_or(Joints::zeros(6), |(_, speeds)| speeds),
+            _ => Joints::zeros(6),
         };
         let safety_mode = if self.safety_bits & SAFETY_EMERGENCY_STOP != 0 {
             7 // ROBOT_EMERGENCY_STOP
@@ -750,9 +752,9 @@ mod tests {
     use super::*;
 
     /// An arm running the control program with a moveJ to `target` at `speed` in the registers.
-    fn arm_with_movej(speed: f64, target: Joints) -> (Arm, Instant) {
+    fn arm_with_movej(speed: f64, target: [f64; 6]) -> (Arm, Instant) {
         let model = UrModel::ur5e();
-        let start = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0];
+        let start = Joints::from_six([0.0, -1.5, 1.5, -1.5, -1.5, 0.0]);
         let mut arm = Arm::new(model, start, Pose::identity(), false, MockFaults::default());
         let now = Instant::now();
         arm.start_program(now);

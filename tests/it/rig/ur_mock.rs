@@ -53,7 +53,9 @@ fn body() {
     let mock = MockUr::start(MockUrConfig {
         address: "127.0.0.76".parse::<IpAddr>().unwrap(),
         model: UrModel::ur10e(),
-        start_joints: [0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians),
+        start_joints: handeye::robot::Joints::from(
+            [0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians),
+        ),
         flange_from_tcp: Pose::identity(),
         instant_moves: true,
         faults: MockFaults {

@@ -53,7 +53,7 @@ pub(super) fn views() -> PathBuf {
 
 /// The accepted records of `session`: plan index, `T_base_flange` and the manifest plan's joints
 /// (degrees), in plan order.
-pub(super) fn captures(session: &Path) -> Vec<(usize, handeye::geometry::Pose, [f64; 6])> {
+pub(super) fn captures(session: &Path) -> Vec<(usize, handeye::geometry::Pose, Vec<f64>)> {
     let folder = handeye::session::SessionFolder::open(session).unwrap();
     let plan = folder.read_manifest().unwrap().plan;
     let mut visits = folder.read_visits().unwrap();
@@ -65,7 +65,7 @@ pub(super) fn captures(session: &Path) -> Vec<(usize, handeye::geometry::Pose, [
             (
                 v.plan_index,
                 v.base_from_flange,
-                plan[v.plan_index].joints_deg,
+                plan[v.plan_index].joints_deg.clone(),
             )
         })
         .collect()

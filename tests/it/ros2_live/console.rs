@@ -113,15 +113,20 @@ pub(super) fn hand_guided_session(dir: &Path, peer: &mut Peer, config: &Path) ->
             peer.events("goal")
         );
         // Each capture is where the arm came to rest at its view: the joints /joint_states gave
-        // and the flange pose TF gave there (the rendered session's record of that view).
+        // (the peer's arm's joints at that view: six on a UR, seven on its Franka) and the
+        // flange pose TF gave there (the rendered session's record of that view).
         let got = captures(&session);
         assert_eq!(got.len(), rendered.len(), "{out}");
-        for ((_, pose, joints), (k, want_pose, want_joints)) in got.iter().zip(&rendered) {
+        let arm_joints = peer.wait_for("ready", Duration::from_secs(1))["plan_joints_deg"].clone();
+        for ((_, pose, joints), (k, want_pose, _)) in got.iter().zip(&rendered) {
             let (mm, deg) = crate::util::pose_error_mm_deg(pose, want_pose);
             assert!(mm < 1e-6 && deg < 1e-6, "capture {k}: {mm} mm, {deg}°");
+            let want_joints: Vec<f64> = serde_json::from_value(arm_joints[k].clone()).unwrap();
+            assert_eq!(joints.len(), want_joints.len(), "capture {k}: {joints:?}");
             // "Still" is the settle rule's (every joint below 0.5 °/s for 50 ms): an arm easing
             // into its rest may still creep by thousandths of a degree when it counts as still.
-            let worst = (0..6).fold(0.0f64, |m, i| m.max((joints[i] - want_joints[i]).abs()));
+            let worst =
+                (0..joints.len()).fold(0.0f64, |m, i| m.max((joints[i] - want_joints[i]).abs()));
             assert!(
                 worst < 0.01,
                 "capture {k}: joints {joints:?} vs {want_joints:?}"
@@ -140,7 +145,10 @@ pub(super) fn hand_guided_session(dir: &Path, peer: &mut Peer, config: &Path) ->
             };
             let (mm, deg) = crate::util::pose_error_mm_deg(base_from_flange, pose);
             assert!(mm < 1e-6 && deg < 1e-6, "taught {k}: {mm} mm, {deg}°");
-            assert!((0..6).all(|i| (taught_joints[i].to_degrees() - joints[i]).abs() < 1e-9));
+            assert_eq!(taught_joints.len(), joints.len());
+            assert!(
+                (0..joints.len()).all(|i| (taught_joints[i].to_degrees() - joints[i]).abs() < 1e-9)
+            );
         }
         eprintln!("verdict {}", verdict["verdict"]);
         assert_truth(&session);

@@ -53,7 +53,7 @@ fn idle_cpu_of_the_ros2_backends() {
         ArmOptions {
             base_frame: "base".into(),
             flange_frame: "tool0".into(),
-            joint_names: names,
+            joint_names: names.to_vec(),
             joint_states_topic: "/joint_states".into(),
             tf_topic: "/tf".into(),
             tf_static_topic: "/tf_static".into(),

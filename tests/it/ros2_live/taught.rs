@@ -6,12 +6,16 @@
 //! goals to the taught joints at the configured limits, the plan check uses the taught flange
 //! poses, and the solve recovers the simulator's truth. A joint plan without taught flange
 //! poses, and a generated plan, are refused before anything opens, naming file and field. The
-//! whole way — hand-guided with no plan, then the session's taught plan replayed — runs too.
+//! whole way — hand-guided with no plan, then the session's taught plan replayed — runs on a
+//! seven-joint arm (the peer's `--model franka`: Franka's published kinematics, `fr3_joint1..7`,
+//! mounted where it reaches every view), and a seven-joint taught plan given to a six-joint arm
+//! is refused by the plan check before anything moves.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use handeye::plan::Plan;
+use handeye::robot::Joints;
 
 use super::cell::{assert_truth, captures, cell, poses_kept, run_cell, text, views, Peer};
 use super::python;
@@ -19,13 +23,35 @@ use crate::util::within;
 
 pub(super) const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
 
+/// The UR driver's joint names.
+const UR_NAMES: &str =
+    "shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,wrist_2_joint,wrist_3_joint";
+/// The seven joints of the peer's Franka arm (its default names).
+const FRANKA_NAMES: &str =
+    "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6,fr3_joint7";
+/// Franka's datasheet joint ranges, degrees.
+const FRANKA_RANGES_DEG: &str =
+    "[[-166, 166], [-101, 101], [-166, 166], [-176, -4], [-166, 166], [-1, 215], [-166, 166]]";
+
 /// The ROS 2 cell as an arm of no known model with `plan` under `plan:` (a YAML line).
 pub(super) fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
     // The arm's own joint ranges, as its datasheet gives them (here: every joint ±360°).
+    let ranges = "[[-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]";
+    arm_cell(dir, domain, plan, "none", NAMES, ranges)
+}
+
+/// The ROS 2 cell of `model` (`none` or a UR) with these joint names and ranges and `plan`.
+fn arm_cell(
+    dir: &Path,
+    domain: u16,
+    plan: &str,
+    model: &str,
+    names: &str,
+    ranges: &str,
+) -> PathBuf {
     let model = format!(
-        "model: none\n  joint_names: [{}]\n  joint_ranges_deg: {}",
-        NAMES.replace(',', ", "),
-        "[[-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360], [-360, 360]]"
+        "model: {model}\n  joint_names: [{}]\n  joint_ranges_deg: {ranges}",
+        names.replace(',', ", "),
     );
     cell(
         dir,
@@ -46,7 +72,7 @@ pub(super) fn no_model_cell(dir: &Path, domain: u16, plan: &str) -> PathBuf {
 fn taught_plan(dir: &Path) -> PathBuf {
     let poses: Vec<_> = captures(&views())
         .into_iter()
-        .map(|(_, pose, joints_deg)| (pose, joints_deg.map(f64::to_radians)))
+        .map(|(_, pose, deg)| (pose, Joints::from_fn(deg.len(), |i| deg[i].to_radians())))
         .collect();
     let file = dir.join("taught.yaml");
     Plan::taught(&poses).save(&file).unwrap();
@@ -81,19 +107,33 @@ fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
     });
 }
 
-/// The whole way for an arm of no known model: hand-guided on the console with no plan
-/// (`plan: {manual: true}`, no suggestions), its `taught-plan.yaml` then replayed by `handeye
-/// run` — trajectory goals to the taught joints — to the truth.
+/// The whole way for a seven-joint arm of no known model (a Franka): hand-guided on the console
+/// with no plan (`plan: {manual: true}`, no suggestions), its `taught-plan.yaml` — seven joints
+/// per view — then replayed by `handeye run` — trajectory goals for the seven joints to the
+/// taught ones — to the truth.
 #[test]
-fn an_arm_of_no_known_model_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
+fn a_seven_joint_arm_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(700), move || {
         let dir = tempfile::tempdir().unwrap();
-        let mut peer = Peer::serving(&python, 85, &views(), &["--joint-names", NAMES]);
-        let config = no_model_cell(dir.path(), 85, "  manual: true");
+        let mut peer = Peer::serving(&python, 85, &views(), &["--model", "franka"]);
+        let franka = |plan: &str| {
+            arm_cell(
+                dir.path(),
+                85,
+                plan,
+                "none",
+                FRANKA_NAMES,
+                FRANKA_RANGES_DEG,
+            )
+        };
+        let config = franka("  manual: true");
         let session = super::console::hand_guided_session(dir.path(), &mut peer, &config);
+        // (hand_guided_session checks each capture's joints against the peer's arm's, and the
+        // taught plan against the captures.)
+        assert!(captures(&session).iter().all(|(_, _, q)| q.len() == 7));
         let taught = session.join("taught-plan.yaml");
-        let config = no_model_cell(dir.path(), 85, &format!("  file: {}", taught.display()));
+        let config = franka(&format!("  file: {}", taught.display()));
         let replay = dir.path().join("replay");
         let out = run_cell(&config, &replay);
         assert!(out.status.success(), "{}", text(&out));
@@ -103,8 +143,46 @@ fn an_arm_of_no_known_model_is_hand_guided_and_its_taught_plan_replays_to_the_tr
         assert_eq!(poses_kept(&replay), views);
         for g in peer.assert_served(views - 1) {
             assert_eq!(g["accepted"], true, "{g}");
+            assert_eq!(
+                g["joint_names"],
+                serde_json::json!(FRANKA_NAMES.split(',').collect::<Vec<_>>())
+            );
         }
+        assert!(captures(&replay).iter().all(|(_, _, q)| q.len() == 7));
         assert_truth(&replay);
+    });
+}
+
+/// A plan taught on a seven-joint arm, given to a six-joint UR: the plan check refuses every
+/// pose, saying the joint counts, and nothing opens.
+#[test]
+fn a_seven_joint_plan_is_refused_on_a_six_joint_arm() {
+    let dir = tempfile::tempdir().unwrap();
+    within(Duration::from_secs(60), move || {
+        std::fs::write(
+            dir.path().join("seven.yaml"),
+            "waypoints:\n- joints_deg: [40, -37, -30, -132, -17, 90, -83]\n  T_base_flange: {translation: [0.75, 0.05, 0.61], rotation_vector: [3.1, 0, 0]}\n",
+        )
+        .unwrap();
+        let ranges =
+            "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-360, 360]]";
+        let config = arm_cell(
+            dir.path(),
+            84,
+            "  file: seven.yaml",
+            "ur10e",
+            UR_NAMES,
+            ranges,
+        );
+        let session = dir.path().join("s");
+        let out = run_cell(&config, &session);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("7 joints named, but the arm has 6"),
+            "the count is said:\n{log}"
+        );
+        assert!(!session.exists(), "the session was created:\n{log}");
     });
 }
 

@@ -130,7 +130,7 @@ pub struct PreparedCell {
     /// handeye has no model of (`robot.model: none`), which replays taught plans only.
     pub arm: Option<UrModel>,
     /// The cell's joint ranges, `(min, max)` rad (`robot.joint_ranges_deg` or the defaults).
-    pub joint_limits: [(f64, f64); 6],
+    pub joint_limits: Vec<(f64, f64)>,
     /// Where the arm starts (sim) or is assumed to start for planning (real arm: read at connect).
     pub start_joints: Joints,
     /// The plan.
@@ -188,7 +188,13 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             let mut arm = UrModel::by_name(name).ok_or_else(|| {
                 CellError::Backend(format!("robot.model: no kinematics for `{name}`"))
             })?;
-            arm.joint_limits = joint_limits;
+            // Six ranges: the config check holds a UR model to six joints.
+            arm.joint_limits = joint_limits.as_slice().try_into().map_err(|_| {
+                CellError::Backend(format!(
+                    "robot.joint_ranges_deg: {} ranges for the six joints of a {name}",
+                    joint_limits.len()
+                ))
+            })?;
             Some(arm)
         }
         None => None,
@@ -196,9 +202,9 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     let start_joints = match &config.robot {
         RobotConfig::Sim {
             start_joints_deg, ..
-        } => start_joints_deg.map(f64::to_radians),
+        } => Joints::from(start_joints_deg.map(f64::to_radians)),
         RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } | RobotConfig::Ros2(_) => {
-            crate::config::default_start_joints()
+            Joints::from(crate::config::default_start_joints())
         }
     };
     if let RobotConfig::Recorded { .. } = config.robot {
@@ -268,6 +274,11 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     };
     if prepared.arm.is_none() {
         refuse_untaught_waypoints(&prepared)?;
+        // No default start fits an arm of unknown joints: plan from the first taught pose (a
+        // real arm's run checks again from where it stands).
+        if let Some(first) = prepared.plan.waypoints.iter().find_map(Waypoint::joints) {
+            prepared.start_joints = first;
+        }
     }
     prepared.report = prepared.check();
     Ok(prepared)
@@ -706,7 +717,7 @@ impl PreparedCell {
             move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
                 MoveCheck {
                     arm: self.arm.clone(),
-                    joint_limits: self.joint_limits,
+                    joint_limits: self.joint_limits.clone(),
                     workspace: self.config.workspace,
                 }
             }),

@@ -10,6 +10,7 @@ use std::net::IpAddr;
 use serde::{Deserialize, Serialize};
 
 use super::schema::ArmModel;
+use handeye_robot::MAX_JOINTS;
 
 /// Where on the ROS 2 graph handeye joins: shared by the arm and the camera.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -71,9 +72,10 @@ pub struct Ros2Robot {
         serialize_with = "write_model_or_none"
     )]
     pub model: Option<ArmModel>,
-    /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3.
+    /// Allowed range of each joint, `[min, max]` degrees, base joint first: one per name in
+    /// `joint_names`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub joint_ranges_deg: Option<[[f64; 2]; 6]>,
+    pub joint_ranges_deg: Option<Vec<[f64; 2]>>,
     /// Domain, interfaces, timeouts.
     #[serde(default)]
     pub graph: Ros2Graph,
@@ -83,9 +85,10 @@ pub struct Ros2Robot {
     /// The TF frame of the flange (`tool0`).
     #[serde(default = "default_flange_frame")]
     pub flange_frame: String,
-    /// The arm's joint names, base to wrist 3, as `/joint_states` and the controller name them.
+    /// The arm's joint names, base joint first, as `/joint_states` and the controller name them:
+    /// six on a UR (the UR driver's names by default), seven on a Franka or a KUKA iiwa.
     #[serde(default = "default_joint_names")]
-    pub joint_names: [String; 6],
+    pub joint_names: Vec<String>,
     /// The `sensor_msgs/JointState` topic.
     #[serde(default = "default_joint_states_topic")]
     pub joint_states_topic: String,
@@ -133,7 +136,7 @@ fn default_base_frame() -> String {
 fn default_flange_frame() -> String {
     "tool0".into()
 }
-fn default_joint_names() -> [String; 6] {
+fn default_joint_names() -> Vec<String> {
     [
         "shoulder_pan_joint",
         "shoulder_lift_joint",
@@ -143,6 +146,7 @@ fn default_joint_names() -> [String; 6] {
         "wrist_3_joint",
     ]
     .map(String::from)
+    .to_vec()
 }
 fn default_joint_states_topic() -> String {
     "/joint_states".into()
@@ -250,14 +254,34 @@ impl Ros2Robot {
             .or_else(|| name_problem("robot.tf_static_topic", &self.tf_static_topic))
             .or_else(|| name_problem("robot.action", &self.action))
             .or_else(|| {
-                // A UR model brings its ranges; an arm of no known model must name its own, so
-                // no taught joint is checked against a UR's.
-                (self.model.is_none() && self.joint_ranges_deg.is_none()).then(|| {
+                let n = self.joint_names.len();
+                let expected = match self.model {
+                    Some(model) => (n != 6).then(|| format!("six, the joints of a {}", model.name())),
+                    None => (!(1..=MAX_JOINTS).contains(&n))
+                        .then(|| format!("one per joint of the arm, base first (at most {MAX_JOINTS})")),
+                };
+                expected.map(|expected| {
                     (
-                        "robot.joint_ranges_deg".to_string(),
-                        "missing: with `model: none` handeye knows no joint ranges of this arm; expected six `[min, max]` in degrees, base to wrist, from the arm's datasheet (narrower where cables or the cell need it)".to_string(),
+                        "robot.joint_names".to_string(),
+                        format!("{n} names: expected {expected}"),
                     )
                 })
+            })
+            .or_else(|| {
+                // A UR model brings its ranges; an arm of no known model must name its own, so
+                // no taught joint is checked against a UR's.
+                let n = self.joint_names.len();
+                match &self.joint_ranges_deg {
+                    None if self.model.is_none() => Some((
+                        "robot.joint_ranges_deg".to_string(),
+                        format!("missing: with `model: none` handeye knows no joint ranges of this arm; expected {n} `[min, max]` in degrees, one per name in robot.joint_names, from the arm's datasheet (narrower where cables or the cell need it)"),
+                    )),
+                    Some(ranges) if ranges.len() != n => Some((
+                        "robot.joint_ranges_deg".to_string(),
+                        format!("{} ranges: expected {n}, one `[min, max]` per name in robot.joint_names", ranges.len()),
+                    )),
+                    _ => None,
+                }
             })
             .or_else(|| {
                 let mut seen = std::collections::BTreeSet::new();

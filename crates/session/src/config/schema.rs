@@ -253,13 +253,13 @@ pub const FLANGE_CAMERA_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
 ];
 
 impl RobotConfig {
-    /// The joint ranges in force, `[min, max]` degrees, base to wrist 3: the config's
+    /// The joint ranges in force, `[min, max]` degrees, base joint first: the config's
     /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real
     /// arm (`backend: ur`) carrying the camera (`setup: eye_in_hand`), and the arm's own
     /// [`ARM_JOINT_RANGES_DEG`] for everything else (eye-to-hand has no cable on the flange; the
     /// simulator has no cable at all).
-    pub fn joint_ranges_deg(&self, setup: Setup) -> [[f64; 2]; 6] {
-        match self {
+    pub fn joint_ranges_deg(&self, setup: Setup) -> Vec<[f64; 2]> {
+        let ur_ranges = match self {
             RobotConfig::Sim {
                 joint_ranges_deg: Some(r),
                 ..
@@ -269,19 +269,22 @@ impl RobotConfig {
                 ..
             } => *r,
             RobotConfig::Ros2(r) if r.joint_ranges_deg.is_some() => {
-                r.joint_ranges_deg.unwrap_or(ARM_JOINT_RANGES_DEG)
+                return r.joint_ranges_deg.clone().unwrap_or_default();
             }
             RobotConfig::Ur { .. } | RobotConfig::Ros2(_) if setup == Setup::EyeInHand => {
                 FLANGE_CAMERA_JOINT_RANGES_DEG
             }
             _ => ARM_JOINT_RANGES_DEG,
-        }
+        };
+        ur_ranges.to_vec()
     }
 
     /// [`RobotConfig::joint_ranges_deg`] in radians, as `UrModel::joint_limits` takes them.
-    pub fn joint_limits(&self, setup: Setup) -> [(f64, f64); 6] {
+    pub fn joint_limits(&self, setup: Setup) -> Vec<(f64, f64)> {
         self.joint_ranges_deg(setup)
+            .into_iter()
             .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
+            .collect()
     }
 
     /// The arm model name, for kinematics checks; `None` for a ROS 2 arm of no model handeye

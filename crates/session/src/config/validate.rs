@@ -367,27 +367,24 @@ impl Validator<'_> {
     /// `robot.joint_ranges_deg`: per joint `[min, max]` inside the arm's own range with
     /// `min < max`; a sim arm's `start_joints_deg` inside the ranges in force.
     fn joint_ranges(&self, robot: &RobotConfig, setup: Setup) -> Result<(), ConfigError> {
-        let given = match robot {
+        let given: Option<&[[f64; 2]]> = match robot {
             RobotConfig::Sim {
                 joint_ranges_deg, ..
             }
             | RobotConfig::Ur {
                 joint_ranges_deg, ..
-            } => joint_ranges_deg,
-            RobotConfig::Ros2(r) => &r.joint_ranges_deg,
-            RobotConfig::Recorded { .. } => &None,
+            } => joint_ranges_deg.as_ref().map(|r| &r[..]),
+            RobotConfig::Ros2(r) => r.joint_ranges_deg.as_deref(),
+            RobotConfig::Recorded { .. } => None,
         };
         // An arm of no known model (a ROS 2 arm with `model: none`) has its own limits: any
         // range within a full turn each way is taken as the datasheet's.
         let no_model = robot.model().is_none();
         if let Some(ranges) = given {
-            for (i, ([lo, hi], [arm_lo, arm_hi])) in
-                ranges.iter().zip(ARM_JOINT_RANGES_DEG).enumerate()
-            {
-                let arm = if no_model {
-                    Range::closed(-360.0, 360.0, "°")
-                } else {
-                    Range::closed(arm_lo, arm_hi, "°")
+            for (i, [lo, hi]) in ranges.iter().enumerate() {
+                let arm = match ARM_JOINT_RANGES_DEG.get(i) {
+                    Some([arm_lo, arm_hi]) if !no_model => Range::closed(*arm_lo, *arm_hi, "°"),
+                    _ => Range::closed(-360.0, 360.0, "°"),
                 };
                 self.number(&format!("robot.joint_ranges_deg[{i}][0]"), *lo, arm)?;
                 self.number(&format!("robot.joint_ranges_deg[{i}][1]"), *hi, arm)?;

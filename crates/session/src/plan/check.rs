@@ -27,7 +27,7 @@ pub struct CheckContext<'a> {
     /// is taught: its flange poses are the taught ones and its paths are not checked.
     pub arm: Option<&'a UrModel>,
     /// The cell's joint ranges, `(min, max)` rad (`robot.joint_ranges_deg`).
-    pub joint_limits: &'a [(f64, f64); 6],
+    pub joint_limits: &'a [(f64, f64)],
     /// Where the arm is before the first move.
     pub start_joints: Joints,
     /// Nominal cell transforms.
@@ -139,9 +139,20 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     let mut view_pixels = Vec::with_capacity(plan.waypoints.len());
     for (index, waypoint) in plan.waypoints.iter().enumerate() {
         let forward = |q: &Joints| ctx.arm.map(|arm| arm.forward(q));
-        let Some(base_from_flange) = waypoint.flange_pose(ctx.cell, &centre, forward) else {
-            // Joints without a taught pose on an arm without kinematics: nowhere to check.
-            let why = waypoint.needs_kinematics().map_or("", |(_, why)| why);
+        // Joints of another arm (a count other than this arm's) have no pose here; joints without
+        // a taught pose on an arm without kinematics: nowhere to check.
+        let count = waypoint
+            .joints()
+            .and_then(|q| joint_count_problem(ctx.joint_limits, &q));
+        let base_from_flange = match count {
+            None => waypoint.flange_pose(ctx.cell, &centre, forward),
+            Some(_) => None,
+        };
+        let Some(base_from_flange) = base_from_flange else {
+            let why = count.unwrap_or_else(|| {
+                let why = waypoint.needs_kinematics().map_or("", |(_, why)| why);
+                why.to_string()
+            });
             poses.push(PoseCheck {
                 index,
                 base_from_flange: Pose::identity(),
@@ -149,13 +160,13 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
                 distance_m: f64::NAN,
                 image_margin_px: f64::NEG_INFINITY,
                 move_time_s: 0.0,
-                problems: vec![why.to_string()],
+                problems: vec![why],
             });
             continue;
         };
         let mut problems = Vec::new();
         let joints = match (waypoint.joints(), ctx.arm) {
-            (Some(q), _) => outside_ranges(ctx.joint_limits, &q).is_none().then_some(q),
+            (Some(q), _) => joint_problem(ctx.joint_limits, &q).is_none().then_some(q),
             (None, Some(arm)) => arm.inverse_nearest(&base_from_flange, &previous),
             (None, None) => None,
         };
@@ -266,7 +277,7 @@ pub fn check_plan_ordered(plan: &Plan, ctx: &CheckContext, reorder: bool) -> Pla
     };
     let mover = MoveCheck {
         arm: ctx.arm.cloned(),
-        joint_limits: *ctx.joint_limits,
+        joint_limits: ctx.joint_limits.to_vec(),
         workspace: *ctx.workspace,
     };
     let order = super::order::order_for_travel(&ctx.start_joints, &joints, |a, b| {
@@ -335,6 +346,9 @@ fn unreachable(ctx: &CheckContext, waypoint: &Waypoint, pose: &Pose, previous: &
             return why.to_string();
         }
     };
+    if let Some(count) = nearest.and_then(|q| joint_count_problem(ctx.joint_limits, &q)) {
+        return count;
+    }
     let Some((i, value)) = nearest.and_then(|q| outside_ranges(ctx.joint_limits, &q)) else {
         return "unreachable: no inverse-kinematics solution inside the joint limits".into();
     };
@@ -348,9 +362,28 @@ fn unreachable(ctx: &CheckContext, waypoint: &Waypoint, pose: &Pose, previous: &
     )
 }
 
+/// Joints of another arm: a count other than the arm's (one range per joint in `limits`).
+fn joint_count_problem(limits: &[(f64, f64)], joints: &Joints) -> Option<String> {
+    (joints.len() != limits.len()).then(|| {
+        format!(
+            "{} joints named, but the arm has {} (robot.joint_names, robot.joint_ranges_deg): a plan taught on one arm replays only on an arm with the same joints",
+            joints.len(),
+            limits.len()
+        )
+    })
+}
+
+/// What is wrong with `joints` on this arm, if anything: another joint count, or a joint outside
+/// its range.
+fn joint_problem(limits: &[(f64, f64)], joints: &Joints) -> Option<String> {
+    joint_count_problem(limits, joints).or_else(|| {
+        outside_ranges(limits, joints).map(|(i, value)| joint_outside(limits, false, i, value))
+    })
+}
+
 /// `joint 2 (shoulder) at -190.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[1])`
 /// (the UR joint's name only for a UR model).
-fn joint_outside(limits: &[(f64, f64); 6], ur: bool, i: usize, value: f64) -> String {
+fn joint_outside(limits: &[(f64, f64)], ur: bool, i: usize, value: f64) -> String {
     let (lo, hi) = limits[i];
     let name = if ur {
         format!(" ({})", JOINT_NAMES[i])
@@ -383,8 +416,8 @@ pub fn board_centre(board: &Target) -> Point3<f64> {
 pub struct MoveCheck {
     /// The arm's kinematics; `None` for an arm handeye has no model of (its path is not known).
     pub arm: Option<UrModel>,
-    /// The cell's joint ranges, `(min, max)` rad.
-    pub joint_limits: [(f64, f64); 6],
+    /// The cell's joint ranges, `(min, max)` rad: one per joint of the arm.
+    pub joint_limits: Vec<(f64, f64)>,
     /// The box the flange must stay in along the whole joint move.
     pub workspace: WorkspaceBox,
 }
@@ -393,7 +426,7 @@ impl MoveCheck {
     /// The check of a UR model's moves: its joint limits, its kinematics, `workspace`.
     pub fn with_model(arm: UrModel, workspace: WorkspaceBox) -> MoveCheck {
         MoveCheck {
-            joint_limits: arm.joint_limits,
+            joint_limits: arm.joint_limits.to_vec(),
             arm: Some(arm),
             workspace,
         }
@@ -404,6 +437,9 @@ impl MoveCheck {
     /// `from` may lie outside the ranges (the arm stands where it was left): moving back in is
     /// allowed.
     pub fn problem(&self, from: &Joints, to: &Joints) -> Option<String> {
+        if let Some(count) = joint_count_problem(&self.joint_limits, to) {
+            return Some(count);
+        }
         if let Some((i, value)) = outside_ranges(&self.joint_limits, to) {
             return Some(format!(
                 "the move puts {}",
@@ -432,10 +468,7 @@ fn path_leaves_box(
 ) -> Option<String> {
     (0..=PATH_SAMPLES).find_map(|k| {
         let s = k as f64 / PATH_SAMPLES as f64;
-        let mut q = [0.0; 6];
-        for j in 0..6 {
-            q[j] = from[j] + (to[j] - from[j]) * s;
-        }
+        let q = Joints::from_fn(to.len(), |j| from[j] + (to[j] - from[j]) * s);
         let pose = arm.forward(&q);
         (!workspace.contains(&pose)).then(|| {
             let p = pose.translation.vector;

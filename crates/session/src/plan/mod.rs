@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use handeye_core::geometry::{Pose, PoseError, PoseYaml};
 use handeye_core::setup::CellTransforms;
 use handeye_core::yaml_file::{parse_yaml, read_text, FileError};
-use handeye_robot::Joints;
+use handeye_robot::{Joints, MAX_JOINTS};
 
 pub use generate::{generate, GenerateSpec, GenerateSpecError};
 
@@ -183,9 +183,9 @@ impl Plan {
 
 /// `joints_deg` as radians, or what is wrong with it (its key first).
 fn joints_from_degrees(joints: &[f64]) -> Result<Joints, String> {
-    if joints.len() != 6 {
+    if !(1..=MAX_JOINTS).contains(&joints.len()) {
         return Err(format!(
-            "joints_deg: expected 6 joint angles in degrees, found {}",
+            "joints_deg: expected one angle in degrees per joint of the arm (six on a UR, seven on a Franka or a KUKA iiwa), found {}",
             joints.len()
         ));
     }
@@ -199,11 +199,7 @@ fn joints_from_degrees(joints: &[f64]) -> Result<Joints, String> {
             "joints_deg[{i}]: expected a value in [-360, 360] °, found {bad}"
         ));
     }
-    let mut q = [0.0; 6];
-    for (dst, src) in q.iter_mut().zip(joints) {
-        *dst = src.to_radians();
-    }
-    Ok(q)
+    Ok(Joints::from_fn(joints.len(), |i| joints[i].to_radians()))
 }
 
 impl WaypointYaml {
@@ -427,12 +423,12 @@ mod tests {
             .all(|(a, b)| (a - b).abs() < 1e-12));
         assert!((pose_back.to_homogeneous() - base_from_flange.to_homogeneous()).norm() < 1e-12);
         let bad = parse(
-            "waypoints:\n- {joints_deg: [0, 0, 0], T_base_flange: {translation: [0, 0, 0], rotation_vector: [0, 0, 0]}}\n",
+            "waypoints:\n- {joints_deg: [0, 0, 0, 0, 0, 0, 0, 0], T_base_flange: {translation: [0, 0, 0], rotation_vector: [0, 0, 0]}}\n",
         )
         .unwrap_err()
         .to_string();
         assert!(
-            bad.contains("waypoints[0]: joints_deg: expected 6"),
+            bad.contains("waypoints[0]: joints_deg: expected one angle in degrees per joint of the arm (six on a UR, seven on a Franka or a KUKA iiwa), found 8"),
             "{bad}"
         );
         let joints_only = parse("waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n").unwrap();
@@ -445,10 +441,23 @@ mod tests {
     }
 
     #[test]
+    fn a_seven_joint_taught_plan_reads_and_round_trips() {
+        let plan = parse(
+            "waypoints:\n- joints_deg: [0, -30, 0, -120, 0, 90, 45]\n  T_base_flange: {translation: [0.4, 0, 0.5], rotation_vector: [3.14, 0, 0]}\n",
+        )
+        .unwrap();
+        let joints = plan.waypoints[0].joints().unwrap();
+        assert_eq!(joints.len(), 7);
+        assert!((joints[6] - 45f64.to_radians()).abs() < 1e-12);
+        let back = parse(&plan.to_yaml()).unwrap();
+        assert_eq!(back.waypoints[0].joints(), Some(joints));
+    }
+
+    #[test]
     fn malformed_plans_get_clear_errors() {
         let cases = [
             ("waypoints: []", "no waypoints"),
-            ("waypoints:\n- {joints_deg: [0, 1, 2]}", "plan.yaml: waypoints[0]: joints_deg: expected 6 joint angles"),
+            ("waypoints:\n- {joints_deg: []}", "plan.yaml: waypoints[0]: joints_deg: expected one angle in degrees per joint of the arm"),
             ("waypoints:\n- {look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 0}}", "waypoints[0]: look_at: elevation_deg must be in (0, 90]"),
             ("waypoints:\n- {look_at: {distance: -1, azimuth_deg: 0, elevation_deg: 80}}", "distance must be a positive"),
             ("waypoints:\n- {joints_deg: [0,0,0,0,0,0], look_at: {distance: 0.5, azimuth_deg: 0, elevation_deg: 80}}", "exactly one of"),

@@ -158,7 +158,7 @@ mod tests {
     use handeye_robot::MotionLimits;
 
     fn at(x: f64) -> Joints {
-        [x, 0.0, 0.0, 0.0, 0.0, 0.0]
+        Joints::from([x, 0.0, 0.0, 0.0, 0.0, 0.0])
     }
 
     #[test]

@@ -201,11 +201,6 @@ fn recorded_plan(manifest: &SessionManifest) -> Vec<(Pose, Joints)> {
     manifest
         .plan
         .iter()
-        .map(|planned| {
-            (
-                planned.base_from_flange,
-                planned.joints_deg.map(f64::to_radians),
-            )
-        })
+        .map(|planned| (planned.base_from_flange, planned.joints()))
         .collect()
 }

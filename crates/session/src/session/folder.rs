@@ -37,7 +37,7 @@ use handeye_core::atomic_file::{
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::{CornerObservation, PosePair, Setup};
 use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
-use handeye_robot::Joints;
+use handeye_robot::{Joints, MAX_JOINTS};
 use handeye_vision::Target;
 
 use super::inputs::InputFile;
@@ -80,7 +80,7 @@ impl SessionManifest {
                 .iter()
                 .map(|(pose, q)| PlannedPose {
                     base_from_flange: *pose,
-                    joints_deg: q.map(f64::to_degrees),
+                    joints_deg: q.iter().map(|v| v.to_degrees()).collect(),
                 })
                 .collect(),
             inputs: Vec::new(),
@@ -108,8 +108,32 @@ pub struct PlannedPose {
     /// Target flange pose.
     #[serde(rename = "T_base_flange", with = "serde_pose")]
     pub base_from_flange: Pose,
-    /// The joint solution the arm moves to, degrees.
-    pub joints_deg: [f64; 6],
+    /// The joint solution the arm moves to, degrees, base joint first (six on a UR, up to
+    /// seven on an arm driven over ROS 2).
+    #[serde(deserialize_with = "joint_angles")]
+    pub joints_deg: Vec<f64>,
+}
+
+impl PlannedPose {
+    /// The joints, radians.
+    pub fn joints(&self) -> Joints {
+        Joints::from_fn(self.joints_deg.len(), |i| self.joints_deg[i].to_radians())
+    }
+}
+
+/// `joints_deg`: one to [`MAX_JOINTS`] finite angles.
+fn joint_angles<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+    let angles = Vec::<f64>::deserialize(d)?;
+    if !(1..=MAX_JOINTS).contains(&angles.len()) {
+        return Err(serde::de::Error::invalid_length(
+            angles.len(),
+            &"one to seven joint angles",
+        ));
+    }
+    if angles.iter().any(|a| !a.is_finite()) {
+        return Err(serde::de::Error::custom("a joint angle is not finite"));
+    }
+    Ok(angles)
 }
 
 /// What happened at one plan pose.

@@ -165,7 +165,7 @@ mod tests {
             at(0.55, Vector3::new(0.0, 0.4, 0.2)),
         ]
         .into_iter()
-        .map(|pose| (pose, [0.0; 6]))
+        .map(|pose| (pose, Joints::zeros(6)))
         .collect();
         let planner = || {
             AdaptivePlanner::new(
