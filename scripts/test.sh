@@ -32,6 +32,11 @@ command -v chromium >/dev/null || need_apt+=(chromium)
 # Poppler's pdftoppm renders the printable board PDF so the detector can read it back
 # (tests/it/cellkit.rs): an independent PDF reader, not ours.
 command -v pdftoppm >/dev/null || need_apt+=(poppler-utils)
+# Fast DDS, the other ROS 2 middleware (tests/it/ros2_live/fastdds.rs): its C++ peer is generated
+# by fastddsgen and linked with Debian's Fast DDS (scripts/fastdds_peer).
+command -v fastddsgen >/dev/null || need_apt+=(fastddsgen)
+[ -e /usr/include/fastdds/dds/domain/DomainParticipant.hpp ] || need_apt+=(libfastrtps-dev)
+[ -e /usr/include/fastcdr/Cdr.h ] || need_apt+=(libfastcdr-dev)
 if [ ${#need_apt[@]} -gt 0 ]; then
   bash scripts/apt-install.sh "${need_apt[@]}"
 fi

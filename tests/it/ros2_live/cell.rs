@@ -85,17 +85,25 @@ impl Peer {
     }
 
     pub(super) fn serving(python: &PathBuf, domain: u16, views: &Path, faults: &[&str]) -> Peer {
-        let mut child = peer(python, domain)
+        let mut command = peer(python, domain);
+        command
             .arg("sim-cell")
             .arg(views)
             .arg("--camera-info")
             .arg(repo().join("configs/cameras/sim-1280x720.yaml"))
-            .args(faults)
+            .args(faults);
+        Self::spawn(command)
+    }
+
+    /// Starts a peer's `sim-cell` command (this one's or the Fast DDS peer's: the same JSON
+    /// events) and waits for its `ready`.
+    pub(super) fn spawn(mut command: Command) -> Peer {
+        let mut child = command
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
-            .expect("ros2-peer.py sim-cell");
+            .expect("the peer's sim-cell");
         let events = Arc::new(Mutex::new(Vec::new()));
         let sink = events.clone();
         let stdout = child.stdout.take().unwrap();

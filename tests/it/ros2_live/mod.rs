@@ -1,14 +1,16 @@
 //! Live ROS 2 (`--features ros2`) against an independent peer: Eclipse Cyclone DDS from PyPI
 //! (`cyclonedds`) running `scripts/ros2-peer.py`, whose message types are written from the ROS 2
-//! `.msg` definitions on its own (`scripts/ros2_peer/msgs.py`). Both sides keep to the loopback
-//! interface (handeye `--interface 127.0.0.1`, the peer `--loopback`: unicast discovery, no
-//! multicast), each test on a domain id of its own.
+//! `.msg` definitions on its own (`scripts/ros2_peer/msgs.py`); `fastdds.rs` runs the same kind of
+//! checks against eProsima Fast DDS (a C++ peer, `scripts/fastdds_peer`; what it needs is in that
+//! module's doc). Both sides keep to the loopback interface (handeye `--interface 127.0.0.1`, the
+//! peer `--loopback`: unicast discovery, no multicast), each test on a domain id of its own.
 //!
 //! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy`, `pyyaml` and
 //! `pillow` go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
 
 mod cell;
 mod console;
+mod fastdds;
 mod idle;
 mod publish;
 mod taught;

@@ -2,7 +2,7 @@
 //! latched `/tf_static` to 1e-9.
 
 use std::io::{BufRead, BufReader};
-use std::process::Stdio;
+use std::process::{Child, Stdio};
 
 use handeye::formats::export::named_transforms;
 use handeye::formats::FrameIds;
@@ -11,7 +11,7 @@ use handeye::result::ResultFile;
 use super::{peer, python};
 use crate::util::{handeye, repo, within};
 
-fn result_file() -> std::path::PathBuf {
+pub(super) fn result_file() -> std::path::PathBuf {
     repo().join("tests/fuzz-corpus/result/result.yaml")
 }
 
@@ -20,28 +20,7 @@ fn a_late_joiner_reads_the_published_calibration_from_tf_static() {
     let Some(python) = python() else { return };
     let domain = 71;
     within(std::time::Duration::from_secs(120), move || {
-        let mut publisher = handeye()
-            .args(["publish"])
-            .arg(result_file())
-            .args([
-                "--domain-id",
-                &domain.to_string(),
-                "--interface",
-                "127.0.0.1",
-            ])
-            .args(["--base-frame", "base_link", "--duration", "60"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("handeye publish");
-        // Started only once the message is out: the peer is a late joiner.
-        let mut lines = BufReader::new(publisher.stdout.take().unwrap()).lines();
-        let printed: Vec<String> = lines
-            .by_ref()
-            .map_while(Result::ok)
-            .take_while(|l| !l.starts_with("latched"))
-            .collect();
-        assert_eq!(printed.len(), 2, "{printed:?}");
+        let mut publisher = start_publisher(domain);
         let out = peer(&python, domain)
             .args(["tf-static", "--expect", "2", "--timeout", "30"])
             .output()
@@ -53,37 +32,72 @@ fn a_late_joiner_reads_the_published_calibration_from_tf_static() {
             "peer: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let read: serde_json::Value = serde_json::from_slice(&out.stdout).expect("peer JSON");
-        let ids = FrameIds {
-            base: "base_link".into(),
-            flange: "tool0".into(),
-            camera: "camera_optical_frame".into(),
-            target: "calibration_target".into(),
-        };
-        let mounts = ResultFile::load_mounts(&result_file()).unwrap();
-        let want = named_transforms(&mounts, &ids);
-        let got = read["transforms"].as_array().unwrap();
-        assert_eq!(got.len(), 2);
-        for w in &want {
-            let g = got
-                .iter()
-                .find(|g| g["child"] == w.child.as_str())
-                .unwrap_or_else(|| panic!("{} not read back: {read}", w.child));
-            assert_eq!(g["parent"], w.parent.as_str());
-            let t = w.parent_from_child.translation.vector;
-            let q = w.parent_from_child.rotation.quaternion();
-            let f = |v: &serde_json::Value, i: usize| v.as_array().unwrap()[i].as_f64().unwrap();
-            for i in 0..3 {
-                assert!(
-                    (f(&g["translation"], i) - t[i]).abs() < 1e-9,
-                    "{}: {g}",
-                    w.key
-                );
-            }
-            let wq = [q.i, q.j, q.k, q.w];
-            let same = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) - wq[i]).abs() < 1e-9);
-            let flipped = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) + wq[i]).abs() < 1e-9);
-            assert!(same || flipped, "{}: {g} vs {wq:?}", w.key);
-        }
+        assert_read_back(&out.stdout);
     });
+}
+
+/// A peer's JSON read of `/tf_static` (`{"transforms": [{parent, child, translation,
+/// quaternion_xyzw}]}`) against `result_file()`'s two transforms, to 1e-9.
+pub(super) fn assert_read_back(peer_stdout: &[u8]) {
+    let read: serde_json::Value = serde_json::from_slice(peer_stdout).expect("peer JSON");
+    let ids = FrameIds {
+        base: "base_link".into(),
+        flange: "tool0".into(),
+        camera: "camera_optical_frame".into(),
+        target: "calibration_target".into(),
+    };
+    let mounts = ResultFile::load_mounts(&result_file()).unwrap();
+    let want = named_transforms(&mounts, &ids);
+    let got = read["transforms"].as_array().unwrap();
+    assert_eq!(got.len(), 2);
+    for w in &want {
+        let g = got
+            .iter()
+            .find(|g| g["child"] == w.child.as_str())
+            .unwrap_or_else(|| panic!("{} not read back: {read}", w.child));
+        assert_eq!(g["parent"], w.parent.as_str());
+        let t = w.parent_from_child.translation.vector;
+        let q = w.parent_from_child.rotation.quaternion();
+        let f = |v: &serde_json::Value, i: usize| v.as_array().unwrap()[i].as_f64().unwrap();
+        for i in 0..3 {
+            assert!(
+                (f(&g["translation"], i) - t[i]).abs() < 1e-9,
+                "{}: {g}",
+                w.key
+            );
+        }
+        let wq = [q.i, q.j, q.k, q.w];
+        let same = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) - wq[i]).abs() < 1e-9);
+        let flipped = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) + wq[i]).abs() < 1e-9);
+        assert!(same || flipped, "{}: {g} vs {wq:?}", w.key);
+    }
+}
+
+/// `handeye publish` of `result_file()` on `domain` (loopback), once it says the message is out.
+pub(super) fn start_publisher(domain: u16) -> Child {
+    let mut publisher = handeye()
+        .args(["publish"])
+        .arg(result_file())
+        .args([
+            "--domain-id",
+            &domain.to_string(),
+            "--interface",
+            "127.0.0.1",
+        ])
+        .args(["--base-frame", "base_link", "--duration", "60"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("handeye publish");
+    // Started only once the message is out: the peer is a late joiner.
+    let mut lines = BufReader::new(publisher.stdout.take().unwrap()).lines();
+    let printed: Vec<String> = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .take_while(|l| !l.starts_with("latched"))
+        .collect();
+    assert_eq!(printed.len(), 2, "{printed:?}");
+    // The rest of its output is drained, so the pipe stays open while it runs.
+    std::thread::spawn(move || lines.for_each(drop));
+    publisher
 }
