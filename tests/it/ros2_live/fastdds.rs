@@ -256,7 +256,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
 
         let joint = joint.unwrap();
         assert_eq!(joint.positions, positions);
-        assert_eq!(joint.velocities, Some(speeds));
+        assert_eq!(joint.velocities, Some(speeds.into()));
         let age = std::time::SystemTime::now()
             .duration_since(joint.stamp)
             .expect("a joint stamp in the past");
@@ -323,7 +323,7 @@ fn sim_table(dir: &Path, views: &Path) -> PathBuf {
         words(&[t.x, t.y, t.z, q.i, q.j, q.k, q.w])
     };
     let start = [0.0f64, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians);
-    let start_flange = handeye::robot::kinematics::UrModel::ur10e().forward(&start);
+    let start_flange = handeye::robot::kinematics::UrModel::ur10e().forward(&start.into());
     let mut table = format!("start {} {}\n", words(&start), tf(&start_flange));
     let mut visits = folder.read_visits().unwrap();
     visits.sort_by_key(|v| v.plan_index);
