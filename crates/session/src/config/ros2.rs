@@ -391,4 +391,36 @@ mod tests {
         };
         assert_eq!(c.problem().unwrap().0, "camera.frame_timeout_s");
     }
+
+    /// The ROS 2 arm of `yaml` (after `backend: ros2`) and its first problem.
+    fn arm_problem(yaml: &str) -> Option<Problem> {
+        let robot: RobotConfig =
+            serde_yaml_ng::from_str(&format!("backend: ros2\n{yaml}")).unwrap();
+        let RobotConfig::Ros2(r) = robot else {
+            panic!("not ros2")
+        };
+        r.problem()
+    }
+
+    #[test]
+    fn joint_names_and_ranges_count_the_arms_joints() {
+        let seven = "[j1, j2, j3, j4, j5, j6, j7]";
+        let seven_ranges = "[[-166, 166], [-101, 101], [-166, 166], [-176, -4], [-166, 166], [-1, 215], [-166, 166]]";
+        // A seven-joint arm of no model: seven names, seven ranges.
+        let franka =
+            format!("model: none\njoint_names: {seven}\njoint_ranges_deg: {seven_ranges}\n");
+        assert_eq!(arm_problem(&franka), None);
+        // Six ranges for seven names: the count is said.
+        let short = franka.replace("[-1, 215], ", "");
+        let (key, problem) = arm_problem(&short).unwrap();
+        assert_eq!(key, "robot.joint_ranges_deg");
+        assert!(problem.starts_with("6 ranges: expected 7"), "{problem}");
+        // A UR has six joints, whatever the names say.
+        let (key, problem) = arm_problem(&format!("model: ur5e\njoint_names: {seven}\n")).unwrap();
+        assert_eq!(key, "robot.joint_names");
+        assert_eq!(problem, "7 names: expected six, the joints of a ur5e");
+        // More than seven: refused.
+        let eight = "model: none\njoint_names: [a, b, c, d, e, f, g, h]\njoint_ranges_deg: []\n";
+        assert_eq!(arm_problem(eight).unwrap().0, "robot.joint_names");
+    }
 }
