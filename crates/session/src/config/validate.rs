@@ -393,10 +393,9 @@ impl Validator<'_> {
                         &format!("robot.joint_ranges_deg[{i}]"),
                         format!(
                             "{} range [{}, {}] °: expected min < max",
-                            if no_model {
-                                "the joint's"
-                            } else {
-                                JOINT_NAMES[i]
+                            match JOINT_NAMES.get(i) {
+                                Some(name) if !no_model => name,
+                                _ => "the joint's",
                             },
                             readable(*lo),
                             readable(*hi)

@@ -166,7 +166,7 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         };
         let mut problems = Vec::new();
         let joints = match (waypoint.joints(), ctx.arm) {
-            (Some(q), _) => joint_problem(ctx.joint_limits, &q).is_none().then_some(q),
+            (Some(q), _) => joints_fit(ctx.joint_limits, &q).then_some(q),
             (None, Some(arm)) => arm.inverse_nearest(&base_from_flange, &previous),
             (None, None) => None,
         };
@@ -373,22 +373,18 @@ fn joint_count_problem(limits: &[(f64, f64)], joints: &Joints) -> Option<String>
     })
 }
 
-/// What is wrong with `joints` on this arm, if anything: another joint count, or a joint outside
-/// its range.
-fn joint_problem(limits: &[(f64, f64)], joints: &Joints) -> Option<String> {
-    joint_count_problem(limits, joints).or_else(|| {
-        outside_ranges(limits, joints).map(|(i, value)| joint_outside(limits, false, i, value))
-    })
+/// Whether `joints` fit this arm: its joint count, each joint inside its range.
+fn joints_fit(limits: &[(f64, f64)], joints: &Joints) -> bool {
+    joint_count_problem(limits, joints).is_none() && outside_ranges(limits, joints).is_none()
 }
 
 /// `joint 2 (shoulder) at -190.0°, outside its range [-180, 180]° (robot.joint_ranges_deg[1])`
 /// (the UR joint's name only for a UR model).
 fn joint_outside(limits: &[(f64, f64)], ur: bool, i: usize, value: f64) -> String {
     let (lo, hi) = limits[i];
-    let name = if ur {
-        format!(" ({})", JOINT_NAMES[i])
-    } else {
-        String::new()
+    let name = match JOINT_NAMES.get(i) {
+        Some(name) if ur => format!(" ({name})"),
+        _ => String::new(),
     };
     format!(
         "joint {}{name} at {:.1}°, outside its range [{:.0}, {:.0}]° (robot.joint_ranges_deg[{i}])",
