@@ -108,29 +108,10 @@ static int stream(DomainParticipant* p, Args& a)
         }
     }
     Publisher* pub = p->create_publisher(PUBLISHER_QOS_DEFAULT);
-    auto writer = [&](Topic* t, Qos q, int depth) {
-        DataWriter* w = pub->create_datawriter(t, writer_qos(q, depth));
-        if (w == nullptr)
-        {
-            die("cannot create a writer of " + t->get_name());
-        }
-        return w;
-    };
-    // tf2's DynamicBroadcasterQoS (reliable, keep last 100) and StaticBroadcasterQoS.
-    DataWriter* tf_w = writer(ros_topic<tf2::TFMessage_PubSubType>(p, "/tf"), Qos::Reliable, 100);
-    DataWriter* static_w = writer(ros_topic<tf2::TFMessage_PubSubType>(p, "/tf_static"), Qos::Latched, 1);
-    DataWriter* joints_w = writer(ros_topic<sen::JointState_PubSubType>(p, "/joint_states"), Qos::Reliable, 10);
-    DataWriter* image_w = writer(ros_topic<sen::Image_PubSubType>(p, "/image_raw"), Qos::Sensor, 5);
-    DataWriter* info_w = writer(ros_topic<sen::CameraInfo_PubSubType>(p, "/camera_info"), Qos::Sensor, 5);
+    auto [tf_w, static_w, joints_w, image_w, info_w] = driver_writers(p, pub);
 
     write_static(static_w, s.tf_static);
-    sen::Image_ image;
-    image.header().frame_id("camera_optical_frame");
-    image.width(s.width);
-    image.height(s.height);
-    image.encoding("mono8");
-    image.is_bigendian(0);
-    image.step(s.width);
+    sen::Image_ image = mono8_image(s.width, s.height);
     image.data().resize(static_cast<size_t>(s.width) * s.height);
     for (uint32_t y = 0; y < s.height; ++y)
     {

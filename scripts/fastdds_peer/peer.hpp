@@ -79,9 +79,11 @@ inline DomainParticipant* loopback_participant(int domain, bool shm)
     return p;
 }
 
-// A ROS 2 topic of type T: `rt/<name>`, the type registered under its DDS name.
+// A ROS 2 topic of type T, the type registered under its DDS name: `rt/<name>`, or with `prefix`
+// and `suffix` a service's `rq/<name>Request` and `rr/<name>Reply`.
 template<typename PubSubType>
-inline Topic* ros_topic(DomainParticipant* p, const std::string& ros_name)
+inline Topic* ros_topic(DomainParticipant* p, const std::string& ros_name,
+                        const std::string& prefix = "rt", const std::string& suffix = "")
 {
     TypeSupport type(new PubSubType());
     std::string type_name = type.get_type_name();
@@ -89,10 +91,11 @@ inline Topic* ros_topic(DomainParticipant* p, const std::string& ros_name)
     {
         type.register_type(p);
     }
-    Topic* t = p->create_topic("rt" + ros_name, type_name, TOPIC_QOS_DEFAULT);
+    std::string name = prefix + ros_name + suffix;
+    Topic* t = p->create_topic(name, type_name, TOPIC_QOS_DEFAULT);
     if (t == nullptr)
     {
-        die("cannot create the topic rt" + ros_name);
+        die("cannot create the topic " + name);
     }
     return t;
 }
@@ -291,6 +294,48 @@ inline void write_static(DataWriter* w, std::vector<geo::TransformStamped_> tran
         msg.transforms().push_back(t);
     }
     w->write(&msg);
+}
+
+// An empty mono8 image of the camera (`camera_optical_frame`), its pixels to be filled in.
+inline sen::Image_ mono8_image(uint32_t width, uint32_t height)
+{
+    sen::Image_ image;
+    image.header().frame_id("camera_optical_frame");
+    image.width(width);
+    image.height(height);
+    image.encoding("mono8");
+    image.is_bigendian(0);
+    image.step(width);
+    return image;
+}
+
+inline DataWriter* new_writer(Publisher* pub, Topic* t, Qos q, int depth)
+{
+    DataWriter* w = pub->create_datawriter(t, writer_qos(q, depth));
+    if (w == nullptr)
+    {
+        die("cannot create a writer of " + t->get_name());
+    }
+    return w;
+}
+
+// The topics a UR driver and a camera node publish, with their publishers' QoS: tf2's
+// DynamicBroadcasterQoS (reliable, keep last 100) and StaticBroadcasterQoS, a reliable
+// /joint_states, sensor data QoS for the camera.
+struct DriverWriters
+{
+    DataWriter *tf, *tf_static, *joints, *image, *info;
+};
+
+inline DriverWriters driver_writers(DomainParticipant* p, Publisher* pub)
+{
+    return DriverWriters{
+        new_writer(pub, ros_topic<tf2::TFMessage_PubSubType>(p, "/tf"), Qos::Reliable, 100),
+        new_writer(pub, ros_topic<tf2::TFMessage_PubSubType>(p, "/tf_static"), Qos::Latched, 1),
+        new_writer(pub, ros_topic<sen::JointState_PubSubType>(p, "/joint_states"), Qos::Reliable, 10),
+        new_writer(pub, ros_topic<sen::Image_PubSubType>(p, "/image_raw"), Qos::Sensor, 5),
+        new_writer(pub, ros_topic<sen::CameraInfo_PubSubType>(p, "/camera_info"), Qos::Sensor, 5),
+    };
 }
 
 // ---- the commands ----------------------------------------------------------------------------

@@ -202,14 +202,7 @@ int sim_cell(DomainParticipant* p, Args& a)
 
     Publisher* pub = p->create_publisher(PUBLISHER_QOS_DEFAULT);
     Subscriber* sub = p->create_subscriber(SUBSCRIBER_QOS_DEFAULT);
-    auto writer = [&](Topic* t, Qos q, int depth) {
-        DataWriter* w = pub->create_datawriter(t, writer_qos(q, depth));
-        if (w == nullptr)
-        {
-            die("cannot create a writer of " + t->get_name());
-        }
-        return w;
-    };
+    auto writer = [&](Topic* t, Qos q, int depth) { return new_writer(pub, t, q, depth); };
     auto reader = [&](Topic* t) {
         DataReader* r = sub->create_datareader(t, reader_qos(Qos::Reliable, 100));
         if (r == nullptr)
@@ -218,59 +211,21 @@ int sim_cell(DomainParticipant* p, Args& a)
         }
         return r;
     };
-    DataWriter* tf_w = writer(ros_topic<tf2::TFMessage_PubSubType>(p, "/tf"), Qos::Reliable, 100);
-    DataWriter* static_w = writer(ros_topic<tf2::TFMessage_PubSubType>(p, "/tf_static"), Qos::Latched, 1);
-    DataWriter* joints_w = writer(ros_topic<sen::JointState_PubSubType>(p, "/joint_states"), Qos::Reliable, 10);
-    DataWriter* image_w = writer(ros_topic<sen::Image_PubSubType>(p, "/image_raw"), Qos::Sensor, 5);
-    DataWriter* info_w = writer(ros_topic<sen::CameraInfo_PubSubType>(p, "/camera_info"), Qos::Sensor, 5);
+    auto [tf_w, static_w, joints_w, image_w, info_w] = driver_writers(p, pub);
     // The action's services as rmw_fastrtps names them: rq/<action>/_action/<service>Request and
     // rr/...Reply, the request's id being the sample identity of its DDS write (no header in the
     // payload); a reply carries it back as its related sample identity.
     auto service = [&](const char* name) { return action + "/_action/" + name; };
-    auto request_topic = [&](auto* type, const std::string& name) {
-        using T = std::remove_pointer_t<decltype(type)>;
-        TypeSupport ts(new T());
-        if (p->find_type(ts.get_type_name()).empty())
-        {
-            ts.register_type(p);
-        }
-        Topic* t = p->create_topic("rq" + name + "Request", ts.get_type_name(), TOPIC_QOS_DEFAULT);
-        if (t == nullptr)
-        {
-            die("cannot create the topic rq" + name + "Request");
-        }
-        return t;
-    };
-    auto reply_topic = [&](auto* type, const std::string& name) {
-        using T = std::remove_pointer_t<decltype(type)>;
-        TypeSupport ts(new T());
-        if (p->find_type(ts.get_type_name()).empty())
-        {
-            ts.register_type(p);
-        }
-        Topic* t = p->create_topic("rr" + name + "Reply", ts.get_type_name(), TOPIC_QOS_DEFAULT);
-        if (t == nullptr)
-        {
-            die("cannot create the topic rr" + name + "Reply");
-        }
-        return t;
-    };
-    DataReader* goal_r = reader(request_topic((act::FollowJointTrajectory_SendGoal_Request_PubSubType*)nullptr, service("send_goal")));
-    DataWriter* goal_w = writer(reply_topic((act::FollowJointTrajectory_SendGoal_Response_PubSubType*)nullptr, service("send_goal")), Qos::Reliable, 100);
-    DataReader* result_r = reader(request_topic((act::FollowJointTrajectory_GetResult_Request_PubSubType*)nullptr, service("get_result")));
-    DataWriter* result_w = writer(reply_topic((act::FollowJointTrajectory_GetResult_Response_PubSubType*)nullptr, service("get_result")), Qos::Reliable, 100);
-    DataReader* cancel_r = reader(request_topic((action_msgs::srv::dds_::CancelGoal_Request_PubSubType*)nullptr, service("cancel_goal")));
-    DataWriter* cancel_w = writer(reply_topic((action_msgs::srv::dds_::CancelGoal_Response_PubSubType*)nullptr, service("cancel_goal")), Qos::Reliable, 100);
+    DataReader* goal_r = reader(ros_topic<act::FollowJointTrajectory_SendGoal_Request_PubSubType>(p, service("send_goal"), "rq", "Request"));
+    DataWriter* goal_w = writer(ros_topic<act::FollowJointTrajectory_SendGoal_Response_PubSubType>(p, service("send_goal"), "rr", "Reply"), Qos::Reliable, 100);
+    DataReader* result_r = reader(ros_topic<act::FollowJointTrajectory_GetResult_Request_PubSubType>(p, service("get_result"), "rq", "Request"));
+    DataWriter* result_w = writer(ros_topic<act::FollowJointTrajectory_GetResult_Response_PubSubType>(p, service("get_result"), "rr", "Reply"), Qos::Reliable, 100);
+    DataReader* cancel_r = reader(ros_topic<action_msgs::srv::dds_::CancelGoal_Request_PubSubType>(p, service("cancel_goal"), "rq", "Request"));
+    DataWriter* cancel_w = writer(ros_topic<action_msgs::srv::dds_::CancelGoal_Response_PubSubType>(p, service("cancel_goal"), "rr", "Reply"), Qos::Reliable, 100);
 
     write_static(static_w, s.tf_static);
     sen::CameraInfo_ info = camera_info_of(s);
-    sen::Image_ image;
-    image.header().frame_id("camera_optical_frame");
-    image.width(s.width);
-    image.height(s.height);
-    image.encoding("mono8");
-    image.is_bigendian(0);
-    image.step(s.width);
+    sen::Image_ image = mono8_image(s.width, s.height);
     const std::vector<uint8_t> grey(frame_bytes, 128);
 
     Joints q = table[0].q, qd{};

@@ -333,36 +333,38 @@ fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
         let dir = tempfile::tempdir().unwrap();
         let peer = Peer::start(&python, 75, &[]);
         let config = cell(dir.path(), 75, &[]);
-        let out_dir = dir.path().join("session");
-        let child = handeye()
-            .args([
-                "run",
-                "--yes",
-                "--config",
-                config.to_str().unwrap(),
-                "-o",
-                out_dir.to_str().unwrap(),
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let n = mid_long_goal(&peer);
-        // Ctrl-C: SIGINT to the child's own pid.
-        let status = Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-        let cancel = peer.wait_for("cancel", Duration::from_secs(10));
-        assert_eq!(cancel["n"], n, "{cancel}");
-        let out = child.wait_with_output().unwrap();
-        let log = text(&out);
-        assert!(!out.status.success(), "{log}");
-        // The samples of the moves before are kept; the cancelled move never arrived.
-        assert_eq!(poses_kept(&out_dir) as u64, n - 1, "{log}");
-        assert_eq!(peer.events("arrived").len() as u64, n - 1);
+        ctrl_c_mid_goal(&peer, &config, &dir.path().join("session"));
     });
+}
+
+/// `handeye run` of `config` into `out_dir`, Ctrl-C (SIGINT to its own pid) in the middle of a
+/// long move: the peer sees that goal cancelled and handeye hears it confirmed, the run fails,
+/// the samples of the moves before are kept and the cancelled move never arrived.
+pub(super) fn ctrl_c_mid_goal(peer: &Peer, config: &Path, out_dir: &Path) {
+    let child = handeye()
+        .args(["run", "--yes", "--config"])
+        .arg(config)
+        .arg("-o")
+        .arg(out_dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let n = mid_long_goal(peer);
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let cancel = peer.wait_for("cancel", Duration::from_secs(10));
+    assert_eq!(cancel["n"], n, "{cancel}");
+    let out = child.wait_with_output().unwrap();
+    let log = text(&out);
+    assert!(!out.status.success(), "{log}");
+    // Unconfirmed, handeye would ask to stop the arm on the pendant.
+    assert!(!log.contains("did not confirm the cancel"), "{log}");
+    assert_eq!(poses_kept(out_dir) as u64, n - 1, "{log}");
+    assert_eq!(peer.events("arrived").len() as u64, n - 1);
 }
 
 #[test]

@@ -34,15 +34,14 @@ use std::time::{Duration, Instant};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 use handeye::camera::Camera;
-use handeye::camera_model::CameraModel;
 use handeye::geometry::Pose;
-use handeye::ros2::camera::{CameraOptions, Ros2Camera};
 use handeye::ros2::link::{sensor_data_qos, static_qos, LinkOptions, Ros2Link};
 use handeye::ros2::listen::{joint_sample, TfTree};
 use handeye::ros2::msg::{CameraInfo, JointState, TfMessage};
 
-use super::cell::{assert_truth, cell, mid_long_goal, poses_kept, run_cell, text, views, Peer};
-use super::publish::{assert_read_back, start_publisher};
+use super::cell::{assert_truth, cell, ctrl_c_mid_goal, poses_kept, run_cell, text, views, Peer};
+use super::publish::late_joiner_reads_back;
+use super::{open_sim_camera, sim_camera_model, UR_JOINTS};
 use crate::util::{repo, skip, within};
 
 /// The peer's binary, built once (make in scripts/fastdds_peer), or `None` (printed) when Fast
@@ -113,19 +112,7 @@ fn a_fast_dds_late_joiner_reads_the_published_calibration_from_tf_static() {
     let Some(binary) = fastdds_peer() else { return };
     let domain = 90;
     within(Duration::from_secs(120), move || {
-        let mut publisher = start_publisher(domain);
-        let out = peer(&binary, domain)
-            .args(["tf-static", "--expect", "2", "--timeout", "30"])
-            .output()
-            .expect("fastdds-peer");
-        let _ = publisher.kill();
-        let _ = publisher.wait();
-        assert!(
-            out.status.success(),
-            "peer: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert_read_back(&out.stdout);
+        late_joiner_reads_back(domain, peer(&binary, domain));
     });
 }
 
@@ -167,17 +154,10 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         let base_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
         let shoulder_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
         let tool_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
-        let names = [
-            "shoulder_pan_joint",
-            "shoulder_lift_joint",
-            "elbow_joint",
-            "wrist_1_joint",
-            "wrist_2_joint",
-            "wrist_3_joint",
-        ];
+        let names = UR_JOINTS;
         let positions = [0.1, -std::f64::consts::FRAC_PI_2, 1.2, -0.3, -1.57, 3.0];
         let speeds = [0.0, 0.25, -0.5, 0.0, 1e-3, -2.5];
-        let model = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+        let model = sim_camera_model();
         let [fx, fy, cx, cy] = model.intrinsics();
         let d = model.distortion.coefficients();
         assert_eq!(d.len(), 5);
@@ -270,17 +250,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         assert_eq!(info.header.frame_id, "camera_optical_frame");
 
         // The camera backend: its camera_info check, then a frame stamped after the ask.
-        let mut camera = Ros2Camera::open(
-            &link,
-            CameraOptions {
-                image_topic: "/image_raw".into(),
-                compressed: false,
-                camera_info_topic: Some("/camera_info".into()),
-                timeout: Duration::from_secs(10),
-                model,
-            },
-        )
-        .unwrap();
+        let mut camera = open_sim_camera(&link);
         let frames = 3;
         for _ in 0..frames {
             let frame = camera.grab(Instant::now()).unwrap();
@@ -348,7 +318,7 @@ fn sim_table(dir: &Path, views: &Path) -> PathBuf {
 
 /// The Fast DDS peer serving the simulated cell on `domain` (`faults`: `--abort-goal N`).
 fn fast_dds_cell(binary: &Path, dir: &Path, domain: u16, faults: &[&str]) -> Peer {
-    let model = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
+    let model = sim_camera_model();
     let [fx, fy, cx, cy] = model.intrinsics();
     let mut command = peer(binary, domain);
     command
@@ -431,30 +401,6 @@ fn ctrl_c_cancels_a_fast_dds_goal() {
         let dir = tempfile::tempdir().unwrap();
         let peer = fast_dds_cell(&binary, dir.path(), 94, &[]);
         let config = fast_dds_config(dir.path(), 94);
-        let out_dir = dir.path().join("session");
-        let child = crate::util::handeye()
-            .args(["run", "--yes", "--config"])
-            .arg(&config)
-            .arg("-o")
-            .arg(&out_dir)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let n = mid_long_goal(&peer);
-        let status = Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-        let cancel = peer.wait_for("cancel", Duration::from_secs(10));
-        assert_eq!(cancel["n"], n, "{cancel}");
-        let out = child.wait_with_output().unwrap();
-        let log = text(&out);
-        assert!(!out.status.success(), "{log}");
-        // handeye heard the cancel confirmed (else it asks to stop the arm on the pendant).
-        assert!(!log.contains("did not confirm the cancel"), "{log}");
-        assert_eq!(poses_kept(&out_dir) as u64, n - 1, "{log}");
-        assert_eq!(peer.events("arrived").len() as u64, n - 1);
+        ctrl_c_mid_goal(&peer, &config, &dir.path().join("session"));
     });
 }

@@ -7,15 +7,12 @@
 use std::time::{Duration, Instant};
 
 use handeye::camera::Camera;
-use handeye::camera_model::CameraModel;
 use handeye::robot::Robot;
 use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
-use handeye::ros2::camera::{CameraOptions, Ros2Camera};
 use handeye::ros2::link::{LinkOptions, Ros2Link};
 
 use super::cell::Peer;
-use super::python;
-use crate::util::repo;
+use super::{open_sim_camera, python, UR_JOINTS};
 
 fn cpu_seconds() -> f64 {
     let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
@@ -39,21 +36,12 @@ fn idle_cpu_of_the_ros2_backends() {
         node_name: "handeye_idle".into(),
     })
     .unwrap();
-    let names = [
-        "shoulder_pan_joint",
-        "shoulder_lift_joint",
-        "elbow_joint",
-        "wrist_1_joint",
-        "wrist_2_joint",
-        "wrist_3_joint",
-    ]
-    .map(String::from);
     let mut arm = Ros2Arm::open(
         &link,
         ArmOptions {
             base_frame: "base".into(),
             flange_frame: "tool0".into(),
-            joint_names: names.to_vec(),
+            joint_names: UR_JOINTS.map(String::from).to_vec(),
             joint_states_topic: "/joint_states".into(),
             tf_topic: "/tf".into(),
             tf_static_topic: "/tf_static".into(),
@@ -64,18 +52,7 @@ fn idle_cpu_of_the_ros2_backends() {
         },
     )
     .unwrap();
-    let model = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
-    let mut camera = Ros2Camera::open(
-        &link,
-        CameraOptions {
-            image_topic: "/image_raw".into(),
-            compressed: false,
-            camera_info_topic: Some("/camera_info".into()),
-            timeout: Duration::from_secs(10),
-            model,
-        },
-    )
-    .unwrap();
+    let mut camera = open_sim_camera(&link);
     camera.grab(Instant::now()).unwrap();
     arm.joint_positions().unwrap();
     let (cpu0, wall0) = (cpu_seconds(), Instant::now());

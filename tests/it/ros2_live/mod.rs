@@ -18,6 +18,11 @@ mod taught;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::OnceLock;
+use std::time::Duration;
+
+use handeye::camera_model::CameraModel;
+use handeye::ros2::camera::{CameraOptions, Ros2Camera};
+use handeye::ros2::link::Ros2Link;
 
 use crate::util;
 
@@ -45,4 +50,35 @@ pub(crate) fn peer(python: &PathBuf, domain: u16) -> Command {
         "--loopback",
     ]);
     c
+}
+
+/// The UR driver's joint names, base first.
+pub(crate) const UR_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
+/// The simulated cell's camera (`configs/cameras/sim-1280x720.yaml`).
+pub(crate) fn sim_camera_model() -> CameraModel {
+    CameraModel::load(&util::repo().join("configs/cameras/sim-1280x720.yaml")).unwrap()
+}
+
+/// handeye's ROS 2 camera on `link` reading `/image_raw` and `/camera_info` of the simulated
+/// cell's camera.
+pub(crate) fn open_sim_camera(link: &Ros2Link) -> Ros2Camera {
+    Ros2Camera::open(
+        link,
+        CameraOptions {
+            image_topic: "/image_raw".into(),
+            compressed: false,
+            camera_info_topic: Some("/camera_info".into()),
+            timeout: Duration::from_secs(10),
+            model: sim_camera_model(),
+        },
+    )
+    .unwrap()
 }

@@ -2,7 +2,7 @@
 //! latched `/tf_static` to 1e-9.
 
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::{Child, Command, Stdio};
 
 use handeye::formats::export::named_transforms;
 use handeye::formats::FrameIds;
@@ -11,7 +11,7 @@ use handeye::result::ResultFile;
 use super::{peer, python};
 use crate::util::{handeye, repo, within};
 
-pub(super) fn result_file() -> std::path::PathBuf {
+fn result_file() -> std::path::PathBuf {
     repo().join("tests/fuzz-corpus/result/result.yaml")
 }
 
@@ -20,25 +20,31 @@ fn a_late_joiner_reads_the_published_calibration_from_tf_static() {
     let Some(python) = python() else { return };
     let domain = 71;
     within(std::time::Duration::from_secs(120), move || {
-        let mut publisher = start_publisher(domain);
-        let out = peer(&python, domain)
-            .args(["tf-static", "--expect", "2", "--timeout", "30"])
-            .output()
-            .expect("ros2-peer.py");
-        let _ = publisher.kill();
-        let _ = publisher.wait();
-        assert!(
-            out.status.success(),
-            "peer: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert_read_back(&out.stdout);
+        late_joiner_reads_back(domain, peer(&python, domain));
     });
+}
+
+/// `handeye publish` on `domain`; once the message is out, `peer` (a peer's command line up to
+/// its subcommand) joins late with `tf-static` and must read the calibration back to 1e-9.
+pub(super) fn late_joiner_reads_back(domain: u16, mut peer: Command) {
+    let mut publisher = start_publisher(domain);
+    let out = peer
+        .args(["tf-static", "--expect", "2", "--timeout", "30"])
+        .output()
+        .expect("the peer runs");
+    let _ = publisher.kill();
+    let _ = publisher.wait();
+    assert!(
+        out.status.success(),
+        "peer: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_read_back(&out.stdout);
 }
 
 /// A peer's JSON read of `/tf_static` (`{"transforms": [{parent, child, translation,
 /// quaternion_xyzw}]}`) against `result_file()`'s two transforms, to 1e-9.
-pub(super) fn assert_read_back(peer_stdout: &[u8]) {
+fn assert_read_back(peer_stdout: &[u8]) {
     let read: serde_json::Value = serde_json::from_slice(peer_stdout).expect("peer JSON");
     let ids = FrameIds {
         base: "base_link".into(),
@@ -74,7 +80,7 @@ pub(super) fn assert_read_back(peer_stdout: &[u8]) {
 }
 
 /// `handeye publish` of `result_file()` on `domain` (loopback), once it says the message is out.
-pub(super) fn start_publisher(domain: u16) -> Child {
+fn start_publisher(domain: u16) -> Child {
     let mut publisher = handeye()
         .args(["publish"])
         .arg(result_file())

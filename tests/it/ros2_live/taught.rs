@@ -23,9 +23,6 @@ use crate::util::within;
 
 pub(super) const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
 
-/// The UR driver's joint names.
-const UR_NAMES: &str =
-    "shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,wrist_2_joint,wrist_3_joint";
 /// The seven joints of the peer's Franka arm (its default names).
 const FRANKA_NAMES: &str =
     "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6,fr3_joint7";
@@ -171,7 +168,7 @@ fn a_seven_joint_plan_is_refused_on_a_six_joint_arm() {
             84,
             "  file: seven.yaml",
             "ur10e",
-            UR_NAMES,
+            &super::UR_JOINTS.join(","),
             ranges,
         );
         let session = dir.path().join("s");
