@@ -275,3 +275,54 @@ class CancelGoalReply(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Re
     seq: int64 = 0
     return_code: int8 = 0
     goals_canceling: sequence[GoalInfo] = field(default_factory=list)
+
+
+@dataclass
+class Bool(IdlStruct, typename=_n("std_msgs", "msg", "Bool")):
+    data: bool = False
+
+
+# controller_manager_msgs/SwitchController, as each distribution's ros2_control defines it (the
+# .srv files of its humble and jazzy branches): Humble keeps the deprecated start/stop lists and
+# start_asap among the fields; the reply's `message` is Jazzy's.
+SWITCH = "controller_manager_msgs::srv::dds_::SwitchController"
+
+
+@dataclass
+class SwitchRequestHumble(IdlStruct, typename=SWITCH + "_Request_"):
+    client_id: uint64 = 0
+    seq: int64 = 0
+    activate_controllers: sequence[str] = field(default_factory=list)
+    deactivate_controllers: sequence[str] = field(default_factory=list)
+    start_controllers: sequence[str] = field(default_factory=list)
+    stop_controllers: sequence[str] = field(default_factory=list)
+    strictness: int32 = 0
+    start_asap: bool = False
+    activate_asap: bool = False
+    timeout: Duration = field(default_factory=Duration)
+
+
+@dataclass
+class SwitchReplyHumble(IdlStruct, typename=SWITCH + "_Response_"):
+    client_id: uint64 = 0
+    seq: int64 = 0
+    ok: bool = False
+
+
+@dataclass
+class SwitchRequestJazzy(IdlStruct, typename=SWITCH + "_Request_"):
+    client_id: uint64 = 0
+    seq: int64 = 0
+    activate_controllers: sequence[str] = field(default_factory=list)
+    deactivate_controllers: sequence[str] = field(default_factory=list)
+    strictness: int32 = 0
+    activate_asap: bool = False
+    timeout: Duration = field(default_factory=Duration)
+
+
+@dataclass
+class SwitchReplyJazzy(IdlStruct, typename=SWITCH + "_Response_"):
+    client_id: uint64 = 0
+    seq: int64 = 0
+    ok: bool = False
+    message: str = ""

@@ -15,6 +15,14 @@ arm to plan pose K's joints over --guide-s seconds, with no trajectory goal (joi
 /joint_states, the flange from the forward kinematics while it moves), printing `guiding` when it
 starts and `guided` when it stands there.
 
+Freedrive as the UR driver (2.5 or later) serves it, with --freedrive humble|jazzy: the
+controller manager's switch_controller service in that distribution's layout (strict switches
+between the motion controller of --action and freedrive_mode_controller), and the freedrive
+controller's keep-alive topic `~/enable_freedrive_mode` (freedrive ends after
+--freedrive-timeout-s without `true`). Goals are then refused while the motion controller is
+inactive, and `guide K` is refused unless the arm is in freedrive (the arm stops where it is when
+freedrive ends mid-guide).
+
 Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
 --die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
 tool0).
@@ -167,6 +175,9 @@ def add_arguments(p):
     p.add_argument("--action", default="/scaled_joint_trajectory_controller/follow_joint_trajectory")
     p.add_argument("--image-hz", type=float, default=15.0)
     p.add_argument("--guide-s", type=float, default=1.5, help="how long a `guide K` move takes")
+    p.add_argument("--freedrive", choices=["humble", "jazzy"], default=None,
+                   help="serve the UR driver's freedrive: switch_controller as this distribution lays it out")
+    p.add_argument("--freedrive-timeout-s", type=float, default=1.0)
     p.add_argument("--abort-goal", type=int, default=0)
     p.add_argument("--die-in-goal", type=int, default=0)
     p.add_argument("--no-tool0", action="store_true")
@@ -246,6 +257,66 @@ class Arm:
         return T[:3, 3], quat_of(T[:3, :3])
 
 
+class Freedrive:
+    """The UR driver's controller manager and freedrive_mode_controller (see the module docs)."""
+
+    FREEDRIVE = "freedrive_mode_controller"
+
+    def __init__(self, args, R, W, action):
+        if args.freedrive == "humble":
+            req, self.reply = m.SwitchRequestHumble, m.SwitchReplyHumble
+        else:
+            req, self.reply = m.SwitchRequestJazzy, m.SwitchReplyJazzy
+        self.motion = action.strip("/").split("/")[0]
+        self.active = {self.motion}
+        self.on, self.last, self.timeout = False, 0.0, args.freedrive_timeout_s
+        self.switch_r = R("rq/controller_manager/switch_controllerRequest", req, dds.qos_reliable())
+        self.switch_w = W("rr/controller_manager/switch_controllerReply", self.reply, dds.qos_reliable())
+        self.enable_r = R(f"rt/{self.FREEDRIVE}/enable_freedrive_mode", m.Bool, dds.qos_reliable())
+
+    def motion_active(self):
+        return self.motion in self.active
+
+    def set(self, on, why):
+        self.on = on
+        say(event="freedrive", on=on, why=why)
+
+    def serve(self, now):
+        """Answers switches and keep-alives; True when freedrive ended here."""
+        was = self.on
+        known = {self.motion, self.FREEDRIVE}
+        try:
+            requests = self.switch_r.take(N=10)
+        except Exception as e:  # a request in another distribution's layout does not parse
+            say(event="bad_request", service="switch_controller", error=str(e))
+            requests = []
+        for req in requests:
+            if not hasattr(req, "strictness"):
+                continue
+            act, deact = list(req.activate_controllers), list(req.deactivate_controllers)
+            ok = (all(c in known and c not in self.active for c in act)
+                  and all(c in self.active for c in deact))
+            if ok:
+                self.active = (self.active - set(deact)) | set(act)
+                if self.FREEDRIVE not in self.active and self.on:
+                    self.set(False, "controller deactivated")
+            self.switch_w.write(self.reply(req.client_id, req.seq, ok))
+            say(event="switch", activate=act, deactivate=deact, strictness=req.strictness, ok=ok,
+                active=sorted(self.active))
+        for msg in self.enable_r.take(N=100):
+            if self.FREEDRIVE not in self.active:
+                continue
+            if msg.data:
+                self.last = now
+                if not self.on:
+                    self.set(True, "enabled")
+            elif self.on:
+                self.set(False, "disabled")
+        if self.on and now - self.last > self.timeout:
+            self.set(False, "keep-alive timeout")
+        return was and not self.on
+
+
 def cdr_bytes(frame):
     return frame.tobytes()
 
@@ -320,6 +391,7 @@ def run(args):
     can_r = R("rq" + base + a + "cancel_goalRequest", m.CancelGoalRequest, dds.qos_reliable())
     can_w = W("rr" + base + a + "cancel_goalReply", m.CancelGoalReply, dds.qos_reliable())
     fb_w = W("rt" + base + a + "feedback", m.FeedbackMessage, dds.qos_reliable())
+    freedrive = Freedrive(args, R, W, base) if args.freedrive else None
 
     # base_link -> base: the UR driver's static turn of 180 degrees about z.
     turn = (0.0, 0.0, 1.0, 0.0)
@@ -357,6 +429,8 @@ def run(args):
             pts = [(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9, np.array(p.positions),
                     np.array(p.velocities) if len(p.velocities) == dof else None) for p in tr.points]
             ok = list(tr.joint_names) == joint_names and pts and all(len(q) == dof for _, q, _ in pts) and arm.guide is None
+            # An inactive controller's action server takes no goals.
+            ok = ok and (freedrive is None or freedrive.motion_active())
             max_speed = max((float(np.max(np.abs(v))) for _, _, v in pts if v is not None), default=0.0)
             goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
             say(event="goal", n=n, accepted=bool(ok), points=len(pts),
@@ -418,6 +492,9 @@ def run(args):
                     if arm.goal:
                         say(event="bad_command", line=line.strip(), why="a goal is running")
                         continue
+                    if freedrive is not None and not freedrive.on:
+                        say(event="bad_command", line=line.strip(), why="not in freedrive")
+                        continue
                     arm.guide = (k, arm.q.copy(), plan_joints[k], time.monotonic(), args.guide_s)
                 say(event="guiding", k=k)
             elif words:
@@ -469,6 +546,13 @@ def run(args):
     while True:
         now = time.monotonic()
         serve()
+        if freedrive is not None and freedrive.serve(now) and arm.guide:
+            # Freedrive ended mid-guide: the arm holds where it is.
+            with arm.lock:
+                k = arm.guide[0]
+                arm.guide, arm.qd = None, np.zeros(dof)
+                arm.view = arm.nearest_view(arm.q)
+            say(event="guide_stopped", k=k)
         step(now)
         with arm.lock:
             q, qd, view, flange = arm.q.copy(), arm.qd.copy(), arm.view, arm.flange()

@@ -22,6 +22,7 @@ use handeye_core::geometry::Pose;
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
+use crate::freedrive::{Freedrive, FreedriveOptions};
 use crate::link::{sensor_data_qos, static_qos, topic_name, Ros2Link};
 use crate::listen::{joint_sample, JointSample, Shared};
 use crate::msg::{
@@ -74,10 +75,12 @@ pub struct ArmOptions {
     pub framing: Framing,
     /// Kinematics for linear moves (IK to joints), when the arm is a UR model handeye knows.
     pub kinematics: Option<UrModel>,
+    /// Freedrive through the UR driver's controllers; `None`: the person switches it on the arm.
+    pub freedrive: Option<FreedriveOptions>,
 }
 
-/// How to hand-guide an arm under a ROS 2 driver, since handeye cannot switch its freedrive.
-pub const HAND_GUIDING: &str = "handeye does not switch freedrive over ROS 2: hand-guide the arm with its own means (a UR: hold the freedrive button on the back of the teach pendant, or Freedrive on the pendant's Move tab; another arm: its hand-guiding or teach mode), let go where the board is in view, then capture: the capture waits for /joint_states to show the arm still and takes a frame stamped after that";
+/// How to hand-guide an arm under a ROS 2 driver when handeye does not switch its freedrive.
+pub const HAND_GUIDING: &str = "handeye does not switch freedrive on this arm (a UR under ur_robot_driver 2.5 or later: give robot.freedrive in the config): hand-guide the arm with its own means (a UR: hold the freedrive button on the back of the teach pendant, or Freedrive on the pendant's Move tab; another arm: its hand-guiding or teach mode), let go where the board is in view, then capture: the capture waits for /joint_states to show the arm still and takes a frame stamped after that";
 
 /// A joint sample older than this is stale: the driver is gone or the graph split.
 const STALE: Duration = Duration::from_secs(1);
@@ -88,6 +91,7 @@ pub struct Ros2Arm {
     shared: Arc<Shared>,
     action: FjtClient,
     interrupt: Option<Arc<AtomicBool>>,
+    freedrive: Option<Freedrive>,
     // Dropping it ends the reader task.
     _stop_reader: smol::channel::Sender<()>,
     _link: Ros2Link,
@@ -180,11 +184,16 @@ impl Ros2Arm {
                 })
             })
             .map_err(|e| backend(format!("cannot start the ROS 2 arm reader: {e}")))?;
+        let freedrive = match &options.freedrive {
+            Some(f) => Some(Freedrive::open(link, f.clone(), options.framing)?),
+            None => None,
+        };
         let mut arm = Ros2Arm {
             options,
             shared,
             action,
             interrupt: None,
+            freedrive,
             _stop_reader: stop_tx,
             _link: link.clone(),
         };
@@ -362,7 +371,7 @@ impl Ros2Arm {
 }
 
 /// `future`'s output, or `None` after `timeout`.
-async fn with_timeout<T>(
+pub(crate) async fn with_timeout<T>(
     timeout: Duration,
     future: impl std::future::Future<Output = T>,
 ) -> Option<T> {
@@ -478,11 +487,14 @@ impl Robot for Ros2Arm {
         Ok(())
     }
 
-    fn set_freedrive(&mut self, _on: bool) -> Result<(), RobotError> {
-        // ROS 2 has no standard service for it (the UR driver's freedrive controller is a
-        // controller switch plus a keep-alive topic of its own): the person switches it on the
-        // arm, and capture reads where the arm stands whatever moved it.
-        Err(RobotError::NotAvailable(HAND_GUIDING.into()))
+    fn set_freedrive(&mut self, on: bool) -> Result<(), RobotError> {
+        // ROS 2 has no standard way (the UR driver's is a controller switch plus a keep-alive
+        // topic of its own, `freedrive`): without it the person switches freedrive on the arm,
+        // and capture reads where the arm stands whatever moved it.
+        match &mut self.freedrive {
+            Some(freedrive) => freedrive.set(on),
+            None => Err(RobotError::NotAvailable(HAND_GUIDING.into())),
+        }
     }
 
     fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {

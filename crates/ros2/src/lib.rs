@@ -17,6 +17,8 @@ pub mod arm;
 #[cfg(feature = "dds")]
 pub mod camera;
 #[cfg(feature = "dds")]
+pub mod freedrive;
+#[cfg(feature = "dds")]
 pub mod link;
 #[cfg(feature = "dds")]
 pub mod tf_static;

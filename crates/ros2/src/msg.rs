@@ -1,7 +1,8 @@
 //! The ROS 2 messages handeye reads and writes on the wire, as serde structs whose field order is
 //! the `.msg` definition's (CDR serialises fields in order, with no names): builtin_interfaces,
 //! std_msgs/Header, geometry_msgs transforms, tf2_msgs/TFMessage, sensor_msgs (JointState, Image,
-//! CompressedImage, CameraInfo), trajectory_msgs and control_msgs/FollowJointTrajectory.
+//! CompressedImage, CameraInfo), trajectory_msgs and control_msgs/FollowJointTrajectory,
+//! std_msgs/Bool and controller_manager_msgs/SwitchController (freedrive on a UR arm).
 //!
 //! The DDS type name of each is `pkg::msg::dds_::Type_` ([`RosType`]), the topic `rt/<name>`;
 //! ros2-client adds both. Conversions to handeye's types sit beside the structs: a
@@ -434,6 +435,63 @@ pub fn follow_joint_trajectory_error(code: i32) -> &'static str {
         -5 => "GOAL_TOLERANCE_VIOLATED: the arm did not reach the goal within its tolerance",
         _ => "an error code control_msgs does not define",
     }
+}
+
+/// std_msgs/Bool.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Bool {
+    /// The value.
+    pub data: bool,
+}
+ros_type!(Bool, "std_msgs", "Bool");
+
+/// `SwitchController.strictness`: fail if any controller cannot be switched.
+pub const SWITCH_STRICT: i32 = 2;
+
+/// controller_manager_msgs/SwitchController request as Humble's ros2_control (2.x) lays it out:
+/// the deprecated `start`/`stop` lists and `start_asap` sit among the fields, so it differs on
+/// the wire from Jazzy's ([`SwitchControllerJazzy`]).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct SwitchControllerHumble {
+    /// Controllers to activate.
+    pub activate_controllers: Vec<String>,
+    /// Controllers to deactivate.
+    pub deactivate_controllers: Vec<String>,
+    /// Deprecated; empty.
+    pub start_controllers: Vec<String>,
+    /// Deprecated; empty.
+    pub stop_controllers: Vec<String>,
+    /// [`SWITCH_STRICT`].
+    pub strictness: i32,
+    /// Deprecated; false.
+    pub start_asap: bool,
+    /// Activate as soon as the hardware is ready.
+    pub activate_asap: bool,
+    /// Zero: no timeout.
+    pub timeout: Duration,
+}
+
+/// controller_manager_msgs/SwitchController request as Jazzy's ros2_control (4.x) lays it out.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct SwitchControllerJazzy {
+    /// Controllers to activate.
+    pub activate_controllers: Vec<String>,
+    /// Controllers to deactivate.
+    pub deactivate_controllers: Vec<String>,
+    /// [`SWITCH_STRICT`].
+    pub strictness: i32,
+    /// Activate as soon as the hardware is ready.
+    pub activate_asap: bool,
+    /// Zero: no timeout.
+    pub timeout: Duration,
+}
+
+/// controller_manager_msgs/SwitchController response: `ok` (newer releases add a message after
+/// it, which is not read: a CDR reader stops at the fields it knows).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct SwitchControllerResponse {
+    /// Whether the controllers were switched.
+    pub ok: bool,
 }
 
 #[cfg(test)]

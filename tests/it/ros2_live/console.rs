@@ -3,13 +3,15 @@
 //!
 //! Hand-guided capture: `handeye console` of configs/ros2-sim-cell.yaml
 //! against the independent peer, driven from the console's WebSocket as the page drives it (no
-//! browser). Freedrive from the page is answered with how to hand-guide the arm instead, and
-//! the session goes on; the peer's arm is then "hand-guided" to each view (its `guide K`
-//! command: a joint path with no trajectory goal, as a person with the pendant's freedrive), every
-//! other capture asked for while the arm still moves. Each capture must be taken where the arm
-//! came to rest (joints from /joint_states, `T_base_flange` from TF, a frame stamped after it
-//! stood still), the session's taught plan holds them, and the solve recovers the simulator's
-//! truth.
+//! browser). With `robot.freedrive`, the page's freedrive switches the UR driver's controllers
+//! (the peer serves them as ur_robot_driver does, and refuses to be guided out of freedrive);
+//! without it (an arm of no known model, `taught.rs`), freedrive is answered with how to
+//! hand-guide the arm instead, and the session goes on. The peer's arm is then "hand-guided" to
+//! each view (its `guide K` command: a joint path with no trajectory goal, as a person would);
+//! without freedrive switching every other capture is asked for while the arm still moves. Each
+//! capture must be taken where the arm came to rest (joints from /joint_states, `T_base_flange`
+//! from TF, a frame stamped after it stood still), the session's taught plan holds them, and the
+//! solve recovers the simulator's truth.
 //!
 //! STOP: pressing it during a planned ROS 2 run cancels the running trajectory goal (the peer
 //! sees the cancel), the samples so far are kept, and `--resume` completes the run.
@@ -45,20 +47,55 @@ fn serving_console(
     )
 }
 
+/// A UR arm under the UR driver, freedrive switched from the page: every switch strict and
+/// answered, the arm under the motion controller again when the session ends.
 #[test]
-fn a_hand_guided_console_session_over_ros2_recovers_the_truth() {
+fn a_hand_guided_console_session_with_freedrive_over_ros2_recovers_the_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(600), move || {
         let dir = tempfile::tempdir().unwrap();
-        let mut peer = Peer::start(&python, 80, &[]);
-        let config = cell(dir.path(), 80, &[]);
-        hand_guided_session(dir.path(), &mut peer, &config);
+        let mut peer = Peer::start(&python, 80, &["--freedrive", "jazzy"]);
+        let config = cell(
+            dir.path(),
+            80,
+            &[(
+                "  flange_frame: tool0",
+                "  flange_frame: tool0\n  freedrive: {distro: jazzy}",
+            )],
+        );
+        hand_guided_session(dir.path(), &mut peer, &config, true);
+        let switches = peer.events("switch");
+        assert!(switches.len() >= 2, "{switches:?}");
+        for s in &switches {
+            assert_eq!(
+                (&s["ok"], &s["strictness"]),
+                (&true.into(), &2.into()),
+                "{s}"
+            );
+        }
+        let motion = "scaled_joint_trajectory_controller";
+        assert_eq!(switches[0]["activate"][0], "freedrive_mode_controller");
+        assert_eq!(switches[0]["deactivate"][0], motion);
+        let last = switches.last().unwrap();
+        assert_eq!(last["active"], serde_json::json!([motion]), "{switches:?}");
+        assert!(peer.events("bad_command").is_empty());
+        assert!(peer
+            .events("freedrive")
+            .iter()
+            .all(|e| e["why"] != "keep-alive timeout"));
     });
 }
 
 /// A hand-guided session of `config` on the console into `dir/guided`, every rendered view
-/// captured by hand (the checks above), solved to the truth; the session folder.
-pub(super) fn hand_guided_session(dir: &Path, peer: &mut Peer, config: &Path) -> PathBuf {
+/// captured by hand (the checks above), solved to the truth; the session folder. `freedrive`:
+/// the page switches it on and the arm is let go at each view before the capture (which switches
+/// freedrive off while it takes the sample); otherwise the page is told how to hand-guide.
+pub(super) fn hand_guided_session(
+    dir: &Path,
+    peer: &mut Peer,
+    config: &Path,
+    freedrive: bool,
+) -> PathBuf {
     {
         let session = dir.join("guided");
         let mut live = serving_console(
@@ -72,20 +109,40 @@ pub(super) fn hand_guided_session(dir: &Path, peer: &mut Peer, config: &Path) ->
         let rendered = captures(&views());
         let verdict = runtime().block_on(async {
             let mut page = Page::open(&url).await;
-            // Freedrive cannot be switched over ROS 2: the answer says how to hand-guide.
             page.send_json(serde_json::json!({"cmd": "freedrive", "on": true}))
                 .await;
             let check = page.next("check").await;
             let message = check["message"].as_str().unwrap_or_default();
-            assert_eq!(check["ok"], false, "{check}");
-            assert!(
-                message.contains("teach pendant") && message.contains("capture"),
-                "{message}"
-            );
+            if freedrive {
+                assert_eq!(check["ok"], true, "{check}");
+                peer.wait_for_one("freedrive", Duration::from_secs(10), |e| e["on"] == true);
+            } else {
+                // Freedrive is not switched on this arm: the answer says how to hand-guide.
+                assert_eq!(check["ok"], false, "{check}");
+                assert!(
+                    message.contains("teach pendant") && message.contains("capture"),
+                    "{message}"
+                );
+            }
             for (n, &(k, ..)) in rendered.iter().enumerate() {
+                if freedrive {
+                    // The capture before switched freedrive off for the sample and then on
+                    // again: the person guides once the arm is free again.
+                    let on = || {
+                        peer.events("freedrive")
+                            .iter()
+                            .filter(|e| e["on"] == true)
+                            .count()
+                    };
+                    let end = std::time::Instant::now() + Duration::from_secs(10);
+                    while on() < n + 1 && std::time::Instant::now() < end {
+                        tokio::time::sleep(Duration::from_millis(20)).await;
+                    }
+                    assert_eq!(on(), n + 1, "freedrive is not back on after capture {n}");
+                }
                 peer.guide(k);
                 let limit = Duration::from_secs(30);
-                if n % 2 == 0 {
+                if freedrive || n % 2 == 0 {
                     // Let go at the view: the arm stands still when the capture is asked for.
                     peer.wait_for_one("guided", limit, |e| e["k"] == k);
                 } else {

@@ -49,6 +49,7 @@ fn idle_cpu_of_the_ros2_backends() {
             timeout: Duration::from_secs(10),
             framing: Framing::Cyclone,
             kinematics: None,
+            freedrive: None,
         },
     )
     .unwrap();

@@ -11,6 +11,7 @@
 mod cell;
 mod console;
 mod fastdds;
+mod freedrive;
 mod idle;
 mod publish;
 mod taught;

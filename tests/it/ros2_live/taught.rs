@@ -125,7 +125,7 @@ fn a_seven_joint_arm_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
             )
         };
         let config = franka("  manual: true");
-        let session = super::console::hand_guided_session(dir.path(), &mut peer, &config);
+        let session = super::console::hand_guided_session(dir.path(), &mut peer, &config, false);
         // (hand_guided_session checks each capture's joints against the peer's arm's, and the
         // taught plan against the captures.)
         assert!(captures(&session).iter().all(|(_, _, q)| q.len() == 7));

@@ -59,8 +59,9 @@ pub fn open(
     use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
     use handeye_ros2::link::{LinkOptions, Ros2Link};
 
-    use crate::config::ros2::Rmw;
+    use crate::config::ros2::{Rmw, RosDistro};
     use crate::config::RobotConfig;
+    use handeye_ros2::freedrive::{Distro, FreedriveOptions};
 
     let RobotConfig::Ros2(r) = &config.robot else {
         return Err(CellError::Backend(
@@ -90,6 +91,16 @@ pub fn open(
                 Rmw::Cyclonedds => Framing::Cyclone,
             },
             kinematics: arm,
+            freedrive: r.freedrive.as_ref().map(|f| FreedriveOptions {
+                controller_manager: f.controller_manager.clone(),
+                freedrive_controller: f.controller.clone(),
+                motion_controller: f.motion_controller.clone(),
+                distro: match f.distro {
+                    RosDistro::Humble => Distro::Humble,
+                    RosDistro::Jazzy => Distro::Jazzy,
+                },
+                timeout,
+            }),
         },
     )
     .map_err(|e| CellError::Robot(Box::new(e)))?;

@@ -101,12 +101,54 @@ pub struct Ros2Robot {
     /// The `control_msgs/action/FollowJointTrajectory` action.
     #[serde(default = "default_action")]
     pub action: String,
+    /// Freedrive from handeye (the console's button) through the UR driver's
+    /// `freedrive_mode_controller`; absent: the person switches it on the arm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub freedrive: Option<Ros2Freedrive>,
     /// 1-sigma error of the flange pose the driver reports, mm (default 0.03).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub repeatability_mm: Option<f64>,
     /// 1-sigma rotation error of the reported flange pose, degrees (default 0.003).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub repeatability_deg: Option<f64>,
+}
+
+/// `robot.freedrive`: the UR driver's controllers that freedrive switches between.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Freedrive {
+    /// The ROS 2 distribution of the controller manager: Humble's and Jazzy's ros2_control lay
+    /// the controller switch out differently on the wire, so it is required.
+    pub distro: RosDistro,
+    /// The controller manager's node.
+    #[serde(default = "default_controller_manager")]
+    pub controller_manager: String,
+    /// The freedrive controller (loaded inactive by the UR driver 2.5 or later).
+    #[serde(default = "default_freedrive_controller")]
+    pub controller: String,
+    /// The controller behind `robot.action`, inactive while freedrive is on.
+    #[serde(default = "default_motion_controller")]
+    pub motion_controller: String,
+}
+
+/// A ROS 2 distribution whose ros2_control handeye speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RosDistro {
+    /// Humble Hawksbill (ros2_control 2.x).
+    Humble,
+    /// Jazzy Jalisco (ros2_control 4.x).
+    Jazzy,
+}
+
+fn default_controller_manager() -> String {
+    "/controller_manager".into()
+}
+fn default_freedrive_controller() -> String {
+    "freedrive_mode_controller".into()
+}
+fn default_motion_controller() -> String {
+    "scaled_joint_trajectory_controller".into()
 }
 
 /// `model: ur10e` or `model: none`.
@@ -210,6 +252,24 @@ fn name_problem(key: &str, name: &str) -> Option<Problem> {
     })
 }
 
+/// A controller's name: one ROS name part (letters, digits, `_`; not starting with a digit).
+fn controller_problem(key: &str, name: &str) -> Option<Problem> {
+    name_problem(key, &format!("/{name}")).map(|(key, _)| {
+        (
+            key,
+            format!("{name:?}: expected a controller's name (letters, digits and _, not starting with a digit)"),
+        )
+    })
+    .or_else(|| {
+        name.contains('/').then(|| {
+            (
+                key.to_string(),
+                format!("{name:?}: expected the controller's name alone, without a namespace"),
+            )
+        })
+    })
+}
+
 fn frame_problem(key: &str, frame: &str) -> Option<Problem> {
     let ok = !frame.is_empty()
         && !frame.starts_with('/')
@@ -253,6 +313,17 @@ impl Ros2Robot {
             .or_else(|| name_problem("robot.tf_topic", &self.tf_topic))
             .or_else(|| name_problem("robot.tf_static_topic", &self.tf_static_topic))
             .or_else(|| name_problem("robot.action", &self.action))
+            .or_else(|| {
+                let f = self.freedrive.as_ref()?;
+                name_problem("robot.freedrive.controller_manager", &f.controller_manager)
+                    .or_else(|| controller_problem("robot.freedrive.controller", &f.controller))
+                    .or_else(|| {
+                        controller_problem(
+                            "robot.freedrive.motion_controller",
+                            &f.motion_controller,
+                        )
+                    })
+            })
             .or_else(|| {
                 let n = self.joint_names.len();
                 let expected = match self.model {
@@ -400,6 +471,36 @@ mod tests {
             panic!("not ros2")
         };
         r.problem()
+    }
+
+    #[test]
+    fn freedrive_names_its_distribution_and_controllers() {
+        let robot: RobotConfig =
+            serde_yaml_ng::from_str("backend: ros2\nmodel: ur5e\nfreedrive: {distro: humble}\n")
+                .unwrap();
+        let RobotConfig::Ros2(r) = robot else {
+            panic!("not ros2")
+        };
+        let f = r.freedrive.as_ref().unwrap();
+        assert_eq!(f.distro, RosDistro::Humble);
+        assert_eq!(f.controller, "freedrive_mode_controller");
+        assert_eq!(f.motion_controller, "scaled_joint_trajectory_controller");
+        assert_eq!(f.controller_manager, "/controller_manager");
+        assert!(r.problem().is_none());
+        // The distribution is required: the two lay the switch out differently.
+        let missing =
+            serde_yaml_ng::from_str::<RobotConfig>("backend: ros2\nmodel: ur5e\nfreedrive: {}\n");
+        assert!(missing.unwrap_err().to_string().contains("distro"));
+        let iron = serde_yaml_ng::from_str::<RobotConfig>(
+            "backend: ros2\nmodel: ur5e\nfreedrive: {distro: iron}\n",
+        );
+        assert!(iron.unwrap_err().to_string().contains("iron"));
+        let (key, problem) = arm_problem(
+            "model: ur5e\nfreedrive: {distro: jazzy, controller: ur/freedrive_mode_controller}\n",
+        )
+        .unwrap();
+        assert_eq!(key, "robot.freedrive.controller");
+        assert!(problem.contains("without a namespace"), "{problem}");
     }
 
     #[test]

@@ -1,0 +1,138 @@
+//! Freedrive on a UR arm under the UR ROS 2 driver, handeye's `Ros2Arm` against the peer's
+//! controller manager (`--freedrive humble|jazzy`: switch_controller as that distribution's
+//! ros2_control lays it out, and the freedrive controller's keep-alive topic). On: a strict
+//! switch to `freedrive_mode_controller`, then a keep-alive that holds freedrive past the
+//! controller's timeout; a trajectory goal sent meanwhile is refused by the inactive motion
+//! controller and named; off: the switch back, after which goals are taken again. A distribution
+//! that does not match the controller manager's is named in the error, and dropping the arm while
+//! in freedrive switches back.
+
+use std::time::Duration;
+
+use handeye::error_text::error_chain;
+use handeye::robot::{MotionLimits, Robot};
+use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
+use handeye::ros2::freedrive::{Distro, FreedriveOptions};
+use handeye::ros2::link::{LinkOptions, Ros2Link};
+
+use super::cell::Peer;
+use super::{python, UR_JOINTS};
+use crate::util::within;
+
+/// handeye's arm on the peer of `domain`, switching freedrive as `distro` lays it out.
+fn arm(domain: u16, distro: Distro) -> Ros2Arm {
+    let link = Ros2Link::open(LinkOptions {
+        domain_id: domain,
+        interfaces: vec![std::net::Ipv4Addr::LOCALHOST.into()],
+        node_name: "handeye_freedrive".into(),
+    })
+    .unwrap();
+    Ros2Arm::open(
+        &link,
+        ArmOptions {
+            base_frame: "base".into(),
+            flange_frame: "tool0".into(),
+            joint_names: UR_JOINTS.map(String::from).to_vec(),
+            joint_states_topic: "/joint_states".into(),
+            tf_topic: "/tf".into(),
+            tf_static_topic: "/tf_static".into(),
+            action: "/scaled_joint_trajectory_controller/follow_joint_trajectory".into(),
+            timeout: Duration::from_secs(5),
+            framing: Framing::Cyclone,
+            kinematics: None,
+            freedrive: Some(FreedriveOptions {
+                controller_manager: "/controller_manager".into(),
+                freedrive_controller: "freedrive_mode_controller".into(),
+                motion_controller: "scaled_joint_trajectory_controller".into(),
+                distro,
+                timeout: Duration::from_secs(5),
+            }),
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn freedrive_switches_the_ur_drivers_controllers_and_keeps_itself_alive() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        // Humble's layout here (the console test uses Jazzy's).
+        let peer = Peer::start(&python, 86, &["--freedrive", "humble"]);
+        let mut arm = arm(86, Distro::Humble);
+        let start = arm.joint_positions().unwrap();
+        arm.set_freedrive(true).unwrap();
+        let on = peer.wait_for_one("freedrive", Duration::from_secs(5), |e| e["on"] == true);
+        assert_eq!(on["why"], "enabled");
+        // Held past the peer's 1 s keep-alive timeout: the keep-alive runs.
+        std::thread::sleep(Duration::from_secs(3));
+        assert!(peer.events("freedrive").iter().all(|e| e["on"] == true));
+        // The motion controller is inactive: a goal now is refused, and the error says so.
+        let mut moved = start;
+        moved[5] += 0.2;
+        let err = error_chain(
+            &arm.move_joints(&moved, &MotionLimits::default())
+                .unwrap_err(),
+        );
+        assert!(err.contains("rejected"), "{err}");
+        arm.set_freedrive(false).unwrap();
+        let off = peer.wait_for_one("freedrive", Duration::from_secs(5), |e| e["on"] == false);
+        // Asked off (the `false` and the switch may reach it in either order), not timed out.
+        assert_ne!(off["why"], "keep-alive timeout", "{off}");
+        // The peer answers a switch before it prints it: wait for the print.
+        let motion_back = |n: usize| {
+            peer.wait_for_one("switch", Duration::from_secs(5), |e| {
+                e["activate"][0] == "scaled_joint_trajectory_controller"
+            });
+            let switches = peer.events("switch");
+            assert_eq!(switches.len(), n, "{switches:?}");
+            switches
+        };
+        let switches = motion_back(2);
+        for s in &switches {
+            assert_eq!(
+                (&s["ok"], &s["strictness"]),
+                (&true.into(), &2.into()),
+                "{s}"
+            );
+        }
+        assert_eq!(
+            switches[1]["active"],
+            serde_json::json!(["scaled_joint_trajectory_controller"])
+        );
+        // Goals are taken again.
+        arm.move_joints(&moved, &MotionLimits::default()).unwrap();
+        let arrived = peer.wait_for("arrived", Duration::from_secs(5));
+        assert_eq!(peer.events("goal").len(), 2, "{arrived}");
+        // Dropped while in freedrive: switched back.
+        arm.set_freedrive(true).unwrap();
+        drop(arm);
+        peer.wait_for_one("switch", Duration::from_secs(5), |e| {
+            e["activate"][0] == "freedrive_mode_controller"
+        });
+        let switches = std::iter::repeat_with(|| peer.events("switch"))
+            .take(250)
+            .inspect(|_| std::thread::sleep(Duration::from_millis(20)))
+            .find(|s| s.len() == 4)
+            .unwrap_or_else(|| panic!("{:?}", peer.events("switch")));
+        assert_eq!(
+            switches[3]["active"],
+            serde_json::json!(["scaled_joint_trajectory_controller"])
+        );
+    });
+}
+
+#[test]
+fn a_distribution_the_controller_manager_does_not_run_is_named() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(60), move || {
+        let peer = Peer::start(&python, 87, &["--freedrive", "humble"]);
+        let mut arm = arm(87, Distro::Jazzy);
+        let err = error_chain(&arm.set_freedrive(true).unwrap_err());
+        assert!(
+            err.contains("robot.freedrive.distro (jazzy)") && err.contains("Humble and Jazzy"),
+            "{err}"
+        );
+        assert!(peer.events("freedrive").is_empty());
+        assert!(peer.events("switch").is_empty());
+    });
+}
