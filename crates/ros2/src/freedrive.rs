@@ -135,8 +135,12 @@ impl Freedrive {
             self.options.motion_controller.clone(),
         );
         if on {
-            self.switch(vec![freedrive], vec![motion])?;
-            self.publish(true)?;
+            self.switch(vec![freedrive.clone()], vec![motion.clone()])?;
+            if let Err(e) = self.publish(true) {
+                // Not free after all: give the arm back to the motion controller.
+                let _ = self.switch(vec![motion], vec![freedrive]);
+                return Err(e);
+            }
             let stop = Arc::new(AtomicBool::new(false));
             let (flag, enable) = (stop.clone(), self.enable.clone());
             let thread = thread::Builder::new()
