@@ -25,7 +25,6 @@
 //! installs them); skips with a printed reason without them (fails under HANDEYE_REQUIRE_TOOLS).
 
 use std::io::{BufRead, BufReader};
-use std::net::{IpAddr, Ipv4Addr};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
@@ -35,13 +34,13 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 use handeye::camera::Camera;
 use handeye::geometry::Pose;
-use handeye::ros2::link::{sensor_data_qos, static_qos, LinkOptions, Ros2Link};
+use handeye::ros2::link::{sensor_data_qos, static_qos};
 use handeye::ros2::listen::{joint_sample, TfTree};
 use handeye::ros2::msg::{CameraInfo, JointState, TfMessage};
 
 use super::cell::{assert_truth, cell, ctrl_c_mid_goal, poses_kept, run_cell, text, views, Peer};
 use super::publish::late_joiner_reads_back;
-use super::{open_sim_camera, sim_camera_model, UR_JOINTS};
+use super::{loopback_link, open_sim_camera, sim_camera_model, UR_JOINTS};
 use crate::util::{repo, skip, within};
 
 /// The peer's binary, built once (make in scripts/fastdds_peer), or `None` (printed) when Fast
@@ -187,12 +186,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         // /tf_static was written before handeye joins: it must come from the writer's history.
         std::thread::sleep(Duration::from_millis(500));
 
-        let link = Ros2Link::open(LinkOptions {
-            domain_id: domain,
-            interfaces: vec![IpAddr::V4(Ipv4Addr::LOCALHOST)],
-            node_name: "handeye_fastdds_test".into(),
-        })
-        .unwrap();
+        let link = loopback_link(domain, "handeye_fastdds_test");
         let tf = link
             .subscribe::<TfMessage>("/tf", sensor_data_qos())
             .unwrap();

@@ -11,45 +11,23 @@ use std::time::Duration;
 
 use handeye::error_text::error_chain;
 use handeye::robot::{MotionLimits, Robot};
-use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
+use handeye::ros2::arm::Ros2Arm;
 use handeye::ros2::freedrive::{Distro, FreedriveOptions};
-use handeye::ros2::link::{LinkOptions, Ros2Link};
 
 use super::cell::Peer;
-use super::{python, UR_JOINTS};
+use super::{loopback_link, open_ur_arm, python};
 use crate::util::within;
 
 /// handeye's arm on the peer of `domain`, switching freedrive as `distro` lays it out.
 fn arm(domain: u16, distro: Distro) -> Ros2Arm {
-    let link = Ros2Link::open(LinkOptions {
-        domain_id: domain,
-        interfaces: vec![std::net::Ipv4Addr::LOCALHOST.into()],
-        node_name: "handeye_freedrive".into(),
-    })
-    .unwrap();
-    Ros2Arm::open(
-        &link,
-        ArmOptions {
-            base_frame: "base".into(),
-            flange_frame: "tool0".into(),
-            joint_names: UR_JOINTS.map(String::from).to_vec(),
-            joint_states_topic: "/joint_states".into(),
-            tf_topic: "/tf".into(),
-            tf_static_topic: "/tf_static".into(),
-            action: "/scaled_joint_trajectory_controller/follow_joint_trajectory".into(),
-            timeout: Duration::from_secs(5),
-            framing: Framing::Cyclone,
-            kinematics: None,
-            freedrive: Some(FreedriveOptions {
-                controller_manager: "/controller_manager".into(),
-                freedrive_controller: "freedrive_mode_controller".into(),
-                motion_controller: "scaled_joint_trajectory_controller".into(),
-                distro,
-                timeout: Duration::from_secs(5),
-            }),
-        },
-    )
-    .unwrap()
+    let freedrive = FreedriveOptions {
+        controller_manager: "/controller_manager".into(),
+        freedrive_controller: "freedrive_mode_controller".into(),
+        motion_controller: "scaled_joint_trajectory_controller".into(),
+        distro,
+        timeout: Duration::from_secs(5),
+    };
+    open_ur_arm(&loopback_link(domain, "handeye_freedrive"), Some(freedrive))
 }
 
 #[test]

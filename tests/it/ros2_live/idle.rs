@@ -8,11 +8,9 @@ use std::time::{Duration, Instant};
 
 use handeye::camera::Camera;
 use handeye::robot::Robot;
-use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
-use handeye::ros2::link::{LinkOptions, Ros2Link};
 
 use super::cell::Peer;
-use super::{open_sim_camera, python, UR_JOINTS};
+use super::{loopback_link, open_sim_camera, open_ur_arm, python};
 
 fn cpu_seconds() -> f64 {
     let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
@@ -30,29 +28,8 @@ fn cpu_seconds() -> f64 {
 fn idle_cpu_of_the_ros2_backends() {
     let Some(python) = python() else { return };
     let _peer = Peer::start(&python, 78, &[]);
-    let link = Ros2Link::open(LinkOptions {
-        domain_id: 78,
-        interfaces: vec![std::net::Ipv4Addr::LOCALHOST.into()],
-        node_name: "handeye_idle".into(),
-    })
-    .unwrap();
-    let mut arm = Ros2Arm::open(
-        &link,
-        ArmOptions {
-            base_frame: "base".into(),
-            flange_frame: "tool0".into(),
-            joint_names: UR_JOINTS.map(String::from).to_vec(),
-            joint_states_topic: "/joint_states".into(),
-            tf_topic: "/tf".into(),
-            tf_static_topic: "/tf_static".into(),
-            action: "/scaled_joint_trajectory_controller/follow_joint_trajectory".into(),
-            timeout: Duration::from_secs(10),
-            framing: Framing::Cyclone,
-            kinematics: None,
-            freedrive: None,
-        },
-    )
-    .unwrap();
+    let link = loopback_link(78, "handeye_idle");
+    let mut arm = open_ur_arm(&link, None);
     let mut camera = open_sim_camera(&link);
     camera.grab(Instant::now()).unwrap();
     arm.joint_positions().unwrap();

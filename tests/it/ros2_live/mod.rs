@@ -22,8 +22,10 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use handeye::camera_model::CameraModel;
+use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
 use handeye::ros2::camera::{CameraOptions, Ros2Camera};
-use handeye::ros2::link::Ros2Link;
+use handeye::ros2::freedrive::FreedriveOptions;
+use handeye::ros2::link::{LinkOptions, Ros2Link};
 
 use crate::util;
 
@@ -79,6 +81,38 @@ pub(crate) fn open_sim_camera(link: &Ros2Link) -> Ros2Camera {
             camera_info_topic: Some("/camera_info".into()),
             timeout: Duration::from_secs(10),
             model: sim_camera_model(),
+        },
+    )
+    .unwrap()
+}
+
+/// handeye's ROS 2 node on the peer's `domain` (loopback), named `node`.
+pub(crate) fn loopback_link(domain: u16, node: &str) -> Ros2Link {
+    Ros2Link::open(LinkOptions {
+        domain_id: domain,
+        interfaces: vec![std::net::Ipv4Addr::LOCALHOST.into()],
+        node_name: node.into(),
+    })
+    .unwrap()
+}
+
+/// handeye's arm on `link` as the peer's simulated UR is named (the UR driver's joints, frames
+/// and action; no kinematics), switching freedrive with `freedrive`.
+pub(crate) fn open_ur_arm(link: &Ros2Link, freedrive: Option<FreedriveOptions>) -> Ros2Arm {
+    Ros2Arm::open(
+        link,
+        ArmOptions {
+            base_frame: "base".into(),
+            flange_frame: "tool0".into(),
+            joint_names: UR_JOINTS.map(String::from).to_vec(),
+            joint_states_topic: "/joint_states".into(),
+            tf_topic: "/tf".into(),
+            tf_static_topic: "/tf_static".into(),
+            action: "/scaled_joint_trajectory_controller/follow_joint_trajectory".into(),
+            timeout: Duration::from_secs(10),
+            framing: Framing::Cyclone,
+            kinematics: None,
+            freedrive,
         },
     )
     .unwrap()
