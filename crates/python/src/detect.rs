@@ -401,7 +401,7 @@ pub(crate) fn detect(
     let detection = match py.detach(|| detector.detect(&grey)) {
         Ok(detection) => detection,
         Err(e @ (TargetError::NoTagsFound { .. } | TargetError::BoardNotFound { .. })) => {
-            return empty_detection(py, size, errors::message(&e))
+            return empty_detection(py, size, handeye_core::error_text::error_chain(&e))
         }
         Err(e) => return Err(errors::from_error(py, &e)),
     };
@@ -410,7 +410,7 @@ pub(crate) fn detect(
         let none = TargetError::NoTagsFound {
             rejected: detection.rejected.len(),
         };
-        return empty_detection(py, size, errors::message(&none));
+        return empty_detection(py, size, handeye_core::error_text::error_chain(&none));
     }
     let n = observations.len();
     let ids: Array1<u32> = observations.iter().map(|o| o.tag_id).collect();
@@ -431,7 +431,7 @@ pub(crate) fn detect(
                     Some(pose.rms_px),
                     None,
                 ),
-                Err(e) => (None, None, Some(errors::message(&e))),
+                Err(e) => (None, None, Some(handeye_core::error_text::error_chain(&e))),
             }
         }
     };

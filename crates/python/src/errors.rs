@@ -4,28 +4,14 @@
 //! they can inherit from two bases: `InputError(HandeyeError, ValueError)` for bad input (shapes,
 //! NaN, non-rigid matrices, millimetres, a refused solve, a malformed file) and
 //! `FileError(HandeyeError, OSError)` for a file that cannot be read or written. The message is
-//! the error and its causes joined by `: `, as the CLI prints them (`{error:#}`).
+//! the error and its causes joined by `: `, each said once, as the CLI prints them
+//! (`handeye_core::error_text::error_chain`).
 
 use std::error::Error;
 
+use handeye_core::error_text::error_chain;
 use pyo3::prelude::*;
 use pyo3::types::PyType;
-
-/// The error and its chain of causes, joined by `: ` (what `anyhow`'s `{:#}` prints).
-pub(crate) fn message(error: &(dyn Error + 'static)) -> String {
-    let mut text = error.to_string();
-    let mut source = error.source();
-    while let Some(cause) = source {
-        let cause_text = cause.to_string();
-        // A transparent wrapper repeats its cause's text: print it once.
-        if !text.ends_with(&cause_text) {
-            text.push_str(": ");
-            text.push_str(&cause_text);
-        }
-        source = cause.source();
-    }
-    text
-}
 
 /// True when an I/O failure is somewhere in the chain (a file problem, not bad content).
 fn is_io(error: &(dyn Error + 'static)) -> bool {
@@ -71,7 +57,7 @@ pub(crate) fn from_error(py: Python<'_>, error: &(dyn Error + 'static)) -> PyErr
     } else {
         "InputError"
     };
-    raise(py, name, message(error))
+    raise(py, name, error_chain(error))
 }
 
 /// [`from_error`] with `context` before the message (`solving session DIR: ...`), as the CLI
@@ -82,5 +68,5 @@ pub(crate) fn with_context(py: Python<'_>, context: &str, error: &(dyn Error + '
     } else {
         "InputError"
     };
-    raise(py, name, format!("{context}: {}", message(error)))
+    raise(py, name, format!("{context}: {}", error_chain(error)))
 }

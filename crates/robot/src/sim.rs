@@ -188,14 +188,11 @@ impl SimRobot {
         }
         let position_noise = noise("repeatability_m", options.repeatability_m, "m")?;
         let rotation_noise = noise("repeatability_rad", options.repeatability_rad, "rad")?;
-        if let Some(index) = (0..6).find(|&i| {
-            let (lo, hi) = model.joint_limits[i];
-            !(start[i].is_finite() && start[i] >= lo && start[i] <= hi)
-        }) {
+        if let Some((index, value)) = model.outside_limits(&start) {
             return Err(SimRobotError::StartOutsideLimits {
                 model: model.name.clone(),
                 index,
-                value_deg: start[index].to_degrees(),
+                value_deg: value.to_degrees(),
                 min_deg: model.joint_limits[index].0.to_degrees(),
                 max_deg: model.joint_limits[index].1.to_degrees(),
             });
@@ -451,15 +448,12 @@ impl Robot for SimRobot {
         limits.check()?;
         six_joints(joints)?;
         self.arm_faults()?;
-        if let Some(i) = (0..6).find(|&i| {
-            let (lo, hi) = self.model.joint_limits[i];
-            !(joints[i].is_finite() && joints[i] >= lo && joints[i] <= hi)
-        }) {
+        if let Some((i, value)) = self.model.outside_limits(joints) {
             let (lo, hi) = self.model.joint_limits[i];
             return Err(RobotError::Unreachable(format!(
                 "{}: joint {i} target {:.3} deg is outside its limits [{:.1}, {:.1}] deg",
                 self.model.name,
-                joints[i].to_degrees(),
+                value.to_degrees(),
                 lo.to_degrees(),
                 hi.to_degrees()
             )));

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use handeye_core::geometry::Pose;
 
-use handeye_robot::Joints;
+use handeye_robot::{JointCountError, Joints, MAX_JOINTS};
 
 use crate::msg::{JointState, TfMessage};
 
@@ -197,8 +197,13 @@ pub fn joint_sample(
     names: &[String],
     received: Instant,
 ) -> Result<JointSample, String> {
-    let mut positions = Joints::from_slice(&vec![0.0; names.len()])
-        .map_err(|e| format!("the configured joint names: {e}"))?;
+    if !(1..=MAX_JOINTS).contains(&names.len()) {
+        return Err(format!(
+            "the configured joint names: {}",
+            JointCountError(names.len())
+        ));
+    }
+    let mut positions = Joints::zeros(names.len());
     let mut velocities = positions;
     let mut has_velocity = msg.velocity.len() == msg.name.len();
     for (i, name) in names.iter().enumerate() {

@@ -33,6 +33,7 @@ use std::time::{Duration, Instant};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 use handeye::camera::Camera;
+use handeye::formats::export::ur_base_link_from_base;
 use handeye::geometry::Pose;
 use handeye::ros2::link::{sensor_data_qos, static_qos};
 use handeye::ros2::listen::{joint_sample, TfTree};
@@ -40,7 +41,7 @@ use handeye::ros2::msg::{CameraInfo, JointState, TfMessage};
 
 use super::cell::{assert_truth, cell, ctrl_c_mid_goal, poses_kept, run_cell, text, views, Peer};
 use super::publish::late_joiner_reads_back;
-use super::{loopback_link, open_sim_camera, sim_camera_model, UR_JOINTS};
+use super::{loopback_link, open_sim_camera, sim_camera_model};
 use crate::util::{repo, skip, within};
 
 /// The peer's binary, built once (make in scripts/fastdds_peer), or `None` (printed) when Fast
@@ -153,7 +154,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         let base_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
         let shoulder_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
         let tool_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
-        let names = UR_JOINTS;
+        let names = handeye::config::ros2::UR_DRIVER_JOINT_NAMES;
         let positions = [0.1, -std::f64::consts::FRAC_PI_2, 1.2, -0.3, -1.57, 3.0];
         let speeds = [0.0, 0.25, -0.5, 0.0, 1e-3, -2.5];
         let model = sim_camera_model();
@@ -256,14 +257,13 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
     });
 }
 
-/// The UR driver's `base_link → base`: 180° about z (handeye's config reads `base → tool0`).
-fn ur_base_turn() -> Pose {
-    pose([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 180.0)
+/// The UR10e's DH parameters as the peer takes them (d1, a2, a3, d4, d5, d6), metres, from the
+/// model the views were rendered with: the peer's forward kinematics finds the view the arm
+/// arrived at by its flange position.
+fn ur10e_dh() -> [f64; 6] {
+    let m = handeye::robot::kinematics::UrModel::ur10e();
+    [m.d[0], m.a[1], m.a[2], m.d[3], m.d[4], m.d[5]]
 }
-
-/// Universal Robots' published DH parameters of the UR10e (d1, a2, a3, d4, d5, d6), metres: the
-/// peer's forward kinematics finds the view the arm arrived at by its flange position.
-const UR10E_DH: [f64; 6] = [0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655];
 
 /// The table the peer's `sim-cell` serves, written into `dir` from the rendered `views`: the
 /// start (configs/ros2-sim-cell-views.yaml's start joints, the flange there by handeye's UR10e
@@ -272,7 +272,7 @@ const UR10E_DH: [f64; 6] = [0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655
 /// PNG decoder).
 fn sim_table(dir: &Path, views: &Path) -> PathBuf {
     let folder = handeye::session::SessionFolder::open(views).unwrap();
-    let turn = ur_base_turn();
+    let turn = ur_base_link_from_base();
     let words = |values: &[f64]| {
         values
             .iter()
@@ -320,7 +320,7 @@ fn fast_dds_cell(binary: &Path, dir: &Path, domain: u16, faults: &[&str]) -> Pee
         .arg("--table")
         .arg(sim_table(dir, &views()))
         .arg("--dh")
-        .args(UR10E_DH.map(|x| format!("{x:?}")))
+        .args(ur10e_dh().map(|x| format!("{x:?}")))
         .args(["--image", "1280", "720", "--camera-info"])
         .args(
             [fx, fy, cx, cy]
@@ -329,7 +329,11 @@ fn fast_dds_cell(binary: &Path, dir: &Path, domain: u16, faults: &[&str]) -> Pee
                 .map(|x| format!("{x:?}")),
         )
         .arg("--tf-static")
-        .args(transform_args("base_link", "base", &ur_base_turn()))
+        .args(transform_args(
+            "base_link",
+            "base",
+            &ur_base_link_from_base(),
+        ))
         .args(faults);
     Peer::spawn(command)
 }

@@ -22,6 +22,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use handeye::camera_model::CameraModel;
+use handeye::config::ros2::UR_DRIVER_JOINT_NAMES;
 use handeye::ros2::arm::{ArmOptions, Framing, Ros2Arm};
 use handeye::ros2::camera::{CameraOptions, Ros2Camera};
 use handeye::ros2::freedrive::FreedriveOptions;
@@ -54,16 +55,6 @@ pub(crate) fn peer(python: &PathBuf, domain: u16) -> Command {
     ]);
     c
 }
-
-/// The UR driver's joint names, base first.
-pub(crate) const UR_JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
 
 /// The simulated cell's camera (`configs/cameras/sim-1280x720.yaml`).
 pub(crate) fn sim_camera_model() -> CameraModel {
@@ -104,7 +95,7 @@ pub(crate) fn open_ur_arm(link: &Ros2Link, freedrive: Option<FreedriveOptions>) 
         ArmOptions {
             base_frame: "base".into(),
             flange_frame: "tool0".into(),
-            joint_names: UR_JOINTS.map(String::from).to_vec(),
+            joint_names: UR_DRIVER_JOINT_NAMES.map(String::from).to_vec(),
             joint_states_topic: "/joint_states".into(),
             tf_topic: "/tf".into(),
             tf_static_topic: "/tf_static".into(),

@@ -168,7 +168,7 @@ fn a_seven_joint_plan_is_refused_on_a_six_joint_arm() {
             84,
             "  file: seven.yaml",
             "ur10e",
-            &super::UR_JOINTS.join(","),
+            &handeye::config::ros2::UR_DRIVER_JOINT_NAMES.join(","),
             ranges,
         );
         let session = dir.path().join("s");

@@ -178,17 +178,18 @@ fn default_base_frame() -> String {
 fn default_flange_frame() -> String {
     "tool0".into()
 }
+/// The UR ROS 2 driver's joint names, base first: `robot.joint_names`' default.
+pub const UR_DRIVER_JOINT_NAMES: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
 fn default_joint_names() -> Vec<String> {
-    [
-        "shoulder_pan_joint",
-        "shoulder_lift_joint",
-        "elbow_joint",
-        "wrist_1_joint",
-        "wrist_2_joint",
-        "wrist_3_joint",
-    ]
-    .map(String::from)
-    .to_vec()
+    UR_DRIVER_JOINT_NAMES.map(String::from).to_vec()
 }
 fn default_joint_states_topic() -> String {
     "/joint_states".into()
