@@ -151,9 +151,9 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
     let domain = 91;
     within(Duration::from_secs(120), move || {
         // A chain on /tf (two edges) and a latched edge on /tf_static.
-        let base_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
-        let shoulder_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
-        let tool_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
+        let base_from_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
+        let shoulder_from_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
+        let tool_from_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
         let names = handeye::config::ros2::UR_DRIVER_JOINT_NAMES;
         let positions = [0.1, -std::f64::consts::FRAC_PI_2, 1.2, -0.3, -1.57, 3.0];
         let speeds = [0.0, 0.25, -0.5, 0.0, 1e-3, -2.5];
@@ -166,13 +166,13 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         command.arg("stream");
         command
             .arg("--tf")
-            .args(transform_args("base_link", "shoulder", &base_shoulder));
+            .args(transform_args("base_link", "shoulder", &base_from_shoulder));
         command
             .arg("--tf")
-            .args(transform_args("shoulder", "tool0", &shoulder_tool));
+            .args(transform_args("shoulder", "tool0", &shoulder_from_tool));
         command
             .arg("--tf-static")
-            .args(transform_args("tool0", "camera_link", &tool_camera));
+            .args(transform_args("tool0", "camera_link", &tool_from_camera));
         // Listed in another order than handeye's joint order: read by name.
         for i in [3, 0, 5, 1, 4, 2] {
             command
@@ -205,7 +205,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         let mut info = None;
         let deadline = Instant::now() + Duration::from_secs(30);
         let joint_names = names.map(String::from);
-        let camera_in_base = loop {
+        let base_from_camera = loop {
             drain!(tf, |m: TfMessage| tree.update(&m));
             drain!(tf_static, |m: TfMessage| tree.update(&m));
             drain!(joints, |m: JointState| {
@@ -225,8 +225,8 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
             );
             std::thread::sleep(Duration::from_millis(20));
         };
-        let want = base_shoulder * shoulder_tool * tool_camera;
-        let (mm, deg) = crate::util::pose_error_mm_deg(&camera_in_base, &want);
+        let want = base_from_shoulder * shoulder_from_tool * tool_from_camera;
+        let (mm, deg) = crate::util::pose_error_mm_deg(&base_from_camera, &want);
         assert!(mm < 1e-9 && deg < 1e-9, "T_base_camera: {mm} mm, {deg}°");
 
         let joint = joint.unwrap();
