@@ -201,17 +201,17 @@ pub(super) fn finished_rig(
     let cameras: Vec<String> = result
         .cameras
         .iter()
-        .map(|c| format!("{}: {} — {}", c.name, c.verdict, c.reason))
+        .map(|c| format!("{}: {} — {}", c.name, c.verdict.level, c.verdict.reason))
         .collect();
     let summary = format!(
         "cell: {} — {}\n{}",
-        result.verdict,
-        result.reason,
+        result.verdict.level,
+        result.verdict.reason,
         cameras.join("\n")
     );
     publish_finished(
         console,
-        (Some(result.verdict.clone()), summary),
+        (Some(result.verdict.level.word().into()), summary),
         report,
         next,
         wait,

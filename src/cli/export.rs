@@ -1,5 +1,6 @@
-//! `handeye export <result.yaml> --format ros2|urdf|ur|json|opencv`: the two solved unknowns in
-//! the forms other tools read (`handeye::formats::export`), printed or written atomically.
+//! `handeye export <result.yaml> --format ros2|urdf|ur|json|opencv`: the solved transforms (a
+//! one-camera cell's two unknowns, or every camera's mount and the boards of a cell with several)
+//! in the forms other tools read (`handeye::formats::export`), printed or written atomically.
 
 use std::path::PathBuf;
 
@@ -7,9 +8,10 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye::atomic_file::write_atomic_reporting;
-use handeye::formats::export::named_transforms;
-use handeye::formats::ros2_launch::{launch_file, through_camera_link};
-use handeye::formats::{export, ExportFormat};
+use handeye::cell::rig::RigResultFile;
+use handeye::formats::export::{self, Exported, ExportedCell};
+use handeye::formats::ros2_launch::through_camera_link;
+use handeye::formats::ExportFormat;
 use handeye::result::ResultFile;
 
 /// Export form on the command line.
@@ -68,29 +70,61 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
             ids.base
         );
     }
-    // A several-camera result (`cameras:`): every camera's mount, the boards, camera to camera.
-    if let Ok(text) = std::fs::read_to_string(&args.result) {
-        if let Ok(rig) = serde_yaml_ng::from_str::<handeye::cell::rig::RigResultFile>(&text) {
-            let text = handeye::formats::export_rig::export_rig(&rig, format, &ids)
-                .with_context(|| format!("exporting {}", args.result.display()))?;
-            return write_or_print(&args.output, format, &text);
-        }
-    }
-    let mounts = ResultFile::load_mounts(&args.result)?;
-    let mut text = export(&mounts, format, &ids)
-        .with_context(|| format!("exporting {}", args.result.display()))?;
+    let mut exported = exported_result(&args.result, &ids)?;
     if let Some(link) = &args.camera_link {
         anyhow::ensure!(
             format == ExportFormat::Ros2Launch,
             "--camera-link applies to --format ros2-launch only"
         );
+        anyhow::ensure!(
+            matches!(exported.cell, ExportedCell::One(_)),
+            "--camera-link names the link of one camera; {} is a result of {} cameras",
+            args.result.display(),
+            match exported.cell {
+                ExportedCell::Cameras(n) => n,
+                ExportedCell::One(_) => 1,
+            }
+        );
         handeye::formats::validate_frame_id(link)
             .map_err(|p| anyhow::anyhow!("--camera-link {link:?} is not a ROS frame id: {p}"))?;
-        let [camera, target] = named_transforms(&mounts, &ids);
-        let camera = through_camera_link(&camera, link);
-        text = launch_file(mounts.setup, &[camera, target]);
+        exported.tree[0] = through_camera_link(&exported.tree[0], link);
     }
+    let text = exported
+        .text(format)
+        .with_context(|| format!("exporting {}", args.result.display()))?;
     write_or_print(&args.output, format, &text)
+}
+
+/// Every transform of a result file, one camera's (`handeye run`, `solve`) or several cameras'
+/// (a `cameras:` cell), under the frame ids `ids`, checked for export.
+pub(super) fn exported_result(
+    result: &std::path::Path,
+    ids: &handeye::formats::FrameIds,
+) -> anyhow::Result<Exported> {
+    let text = std::fs::read_to_string(result).ok();
+    let several: Option<serde_yaml_ng::Value> = text
+        .as_deref()
+        .and_then(|t| serde_yaml_ng::from_str::<serde_yaml_ng::Value>(t).ok())
+        .filter(|v| v.get("cameras").is_some());
+    let exported = match several {
+        Some(value) => {
+            let rig: RigResultFile = serde_yaml_ng::from_value(value).map_err(|e| {
+                // result.yaml is derived from the session's records: an older layout is
+                // solved again, not converted.
+                anyhow::anyhow!(
+                    "{}: not the several-camera result layout this handeye writes ({e}); solve the session again with `handeye replay {}`",
+                    result.display(),
+                    result.parent().unwrap_or(std::path::Path::new(".")).display()
+                )
+            })?;
+            Exported::cameras(&rig, ids)
+        }
+        None => Exported::one(&ResultFile::load_mounts(result)?, ids),
+    };
+    exported
+        .check(ids)
+        .with_context(|| format!("exporting {}", result.display()))?;
+    Ok(exported)
 }
 
 /// Writes `text` atomically to `output`, or prints it.

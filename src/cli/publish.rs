@@ -1,14 +1,12 @@
-//! `handeye publish <result.yaml>`: the two solved unknowns on ROS 2 `/tf_static`, latched
+//! `handeye publish <result.yaml>`: the solved transforms (a one-camera cell's two unknowns, or
+//! every camera's mount and the boards of a cell with several) on ROS 2 `/tf_static`, latched
 //! (reliable, transient local, depth 1: what `static_transform_publisher` does), until Ctrl-C or
-//! `--duration`. The frame ids and the `base_link` turn are `export`'s (`named_transforms`).
+//! `--duration`. The frame ids and the `base_link` turn are `export`'s (`exported_result`).
 
 use std::net::IpAddr;
 use std::path::PathBuf;
 
 use clap::Args;
-
-use handeye::formats::export::named_transforms;
-use handeye::result::ResultFile;
 
 /// Publish a result's T_parent_child transforms (eye_in_hand T_flange_camera and T_base_target,
 /// eye_to_hand T_base_camera and T_flange_target) on /tf_static, with no ROS installation.
@@ -51,8 +49,9 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
             _ => 0,
         },
     };
-    let mounts = ResultFile::load_mounts(&args.result)?;
-    let transforms = named_transforms(&mounts, &ids);
+    // A tree: every mount and board; camera-to-camera transforms would give a camera a second
+    // parent.
+    let transforms = super::export::exported_result(&args.result, &ids)?.tree;
     publish(
         &transforms,
         domain_id,
@@ -64,7 +63,7 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "ros2")]
 fn publish(
-    transforms: &[handeye::formats::export::NamedTransform; 2],
+    transforms: &[handeye::formats::export::NamedTransform],
     domain_id: u16,
     interfaces: Vec<IpAddr>,
     topic: &str,
@@ -113,7 +112,7 @@ fn publish(
 
 #[cfg(not(feature = "ros2"))]
 fn publish(
-    _transforms: &[handeye::formats::export::NamedTransform; 2],
+    _transforms: &[handeye::formats::export::NamedTransform],
     _domain_id: u16,
     _interfaces: Vec<IpAddr>,
     _topic: &str,

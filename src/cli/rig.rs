@@ -63,21 +63,21 @@ pub(super) fn print_result(result: &RigResultFile, folder: &Path) {
             Some(t) => outln!(
                 "{}   [{}: {} samples, {}]",
                 line(t),
-                camera.verdict,
+                camera.verdict.level,
                 camera.samples,
-                camera.reason
+                camera.verdict.reason
             ),
             None => outln!(
                 "camera `{}`: {} ({})",
                 camera.name,
-                camera.verdict,
-                camera.left_out.as_deref().unwrap_or(&camera.reason)
+                camera.verdict.level,
+                camera.left_out.as_deref().unwrap_or(&camera.verdict.reason)
             ),
         }
     }
     for t in result.boards.iter().chain(&result.camera_to_camera) {
         outln!("{}", line(t));
     }
-    outln!("cell: {} — {}", result.verdict, result.reason);
+    outln!("cell: {} — {}", result.verdict.level, result.verdict.reason);
     outln!("result: {}", folder.join("result.yaml").display());
 }

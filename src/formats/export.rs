@@ -27,6 +27,7 @@ use serde_json::json;
 use crate::geometry::{check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem};
 use crate::setup::CellTransforms;
 use crate::setup::Setup;
+use handeye_session::cell::rig::RigResultFile;
 
 /// Why a result cannot be exported.
 #[derive(Debug, thiserror::Error)]
@@ -45,7 +46,7 @@ pub enum ExportError {
     #[error("{key}: translation {problem}: refusing to export it")]
     Translation {
         /// `T_a_b` of the transform.
-        key: &'static str,
+        key: String,
         /// What is wrong.
         problem: TranslationProblem,
     },
@@ -53,7 +54,7 @@ pub enum ExportError {
     #[error("{key}: rotation quaternion (x, y, z, w) {quaternion:?} is not a finite unit quaternion: refusing to export it")]
     Rotation {
         /// `T_a_b` of the transform.
-        key: &'static str,
+        key: String,
         /// The quaternion as found.
         quaternion: [f64; 4],
     },
@@ -210,14 +211,55 @@ impl Default for FrameIds {
 /// One exported transform: `T_parent_child` with its frame ids.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NamedTransform {
-    /// Our name, `T_a_b` (`T_flange_camera`, ...).
-    pub key: &'static str,
+    /// Our name, `T_a_b` in the result's frame names (`T_flange_camera`, `T_base_cam_left`, ...).
+    pub key: String,
     /// The parent frame id (frame `a`).
     pub parent: String,
     /// The child frame id (frame `b`).
     pub child: String,
     /// `T_parent_child`.
     pub parent_from_child: Pose,
+}
+
+impl NamedTransform {
+    /// `T_parent_child` between frames as result files name them (`base`, `flange`, `camera`,
+    /// `cam_<name>`, `target`), under the ids `ids` gives them: `camera` is the camera id,
+    /// `cam_<name>` the camera id with `_<name>` (every camera's optical frame distinct), the
+    /// board on the flange the target id with `_flange` when the cell has boards on both sides.
+    /// A transform whose parent is the robot base is expressed in the frame the base id names:
+    /// under the UR ROS driver's `base_link` ([`is_ur_base_link`]) it is turned 180° about z.
+    pub fn with_ids(
+        parent: &str,
+        child: &str,
+        parent_from_child: Pose,
+        ids: &FrameIds,
+        two_boards: bool,
+    ) -> NamedTransform {
+        let flange_board = two_boards && parent == "flange" && child == "target";
+        let id = |frame: &str| match frame {
+            "base" => ids.base.clone(),
+            "flange" => ids.flange.clone(),
+            "camera" => ids.camera.clone(),
+            "target" if flange_board => format!("{}_flange", ids.target),
+            "target" => ids.target.clone(),
+            camera => format!(
+                "{}_{}",
+                ids.camera,
+                camera.strip_prefix("cam_").unwrap_or(camera)
+            ),
+        };
+        let parent_from_child = if parent == "base" && is_ur_base_link(&ids.base) {
+            ur_base_link_from_base() * parent_from_child
+        } else {
+            parent_from_child
+        };
+        NamedTransform {
+            key: format!("T_{parent}_{child}"),
+            parent: id(parent),
+            child: id(child),
+            parent_from_child,
+        }
+    }
 }
 
 /// True when a base frame id names the UR ROS driver's `base_link` (also under a prefix, e.g.
@@ -239,80 +281,130 @@ pub fn ur_base_link_from_base() -> Pose {
     )
 }
 
-/// The two unknowns of a solved cell with their frame ids: camera mount first, target mount
-/// second. A transform whose parent is the robot base is expressed in the frame the base id names:
-/// under the UR ROS driver's `base_link` ([`is_ur_base_link`]) it is turned 180° about z.
+/// The two unknowns of a solved one-camera cell with their frame ids: camera mount first, target
+/// mount second (see [`NamedTransform::with_ids`]).
 pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [NamedTransform; 2] {
-    let (camera_key, target_key) = mounts.setup.unknown_names();
-    let in_base_frame = |pose: Pose| {
-        if is_ur_base_link(&ids.base) {
-            ur_base_link_from_base() * pose
-        } else {
-            pose
-        }
-    };
-    let (camera_parent, target_parent, camera_mount, target_mount) = match mounts.setup {
-        Setup::EyeInHand => (
-            &ids.flange,
-            &ids.base,
-            mounts.camera_mount,
-            in_base_frame(mounts.target_mount),
-        ),
-        Setup::EyeToHand => (
-            &ids.base,
-            &ids.flange,
-            in_base_frame(mounts.camera_mount),
-            mounts.target_mount,
-        ),
+    let (camera_parent, target_parent) = match mounts.setup {
+        Setup::EyeInHand => ("flange", "base"),
+        Setup::EyeToHand => ("base", "flange"),
     };
     [
-        NamedTransform {
-            key: camera_key,
-            parent: camera_parent.clone(),
-            child: ids.camera.clone(),
-            parent_from_child: camera_mount,
-        },
-        NamedTransform {
-            key: target_key,
-            parent: target_parent.clone(),
-            child: ids.target.clone(),
-            parent_from_child: target_mount,
-        },
+        NamedTransform::with_ids(camera_parent, "camera", mounts.camera_mount, ids, false),
+        NamedTransform::with_ids(target_parent, "target", mounts.target_mount, ids, false),
     ]
 }
 
-/// The text of `mounts` in `format`, after checking the frame ids ([`FrameIds::validate`]) and
-/// that both transforms are finite and within `geometry::MAX_TRANSLATION_M`.
+/// What a cell's export is of: the header of every form names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportedCell {
+    /// One camera in this setup: the tree is its two unknowns, camera mount first.
+    One(Setup),
+    /// A cell with this many cameras: the tree is every camera's mount and the boards.
+    Cameras(usize),
+}
+
+impl std::fmt::Display for ExportedCell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ExportedCell::One(setup) => write!(f, "({setup})"),
+            ExportedCell::Cameras(n) => write!(f, "of a cell with {n} cameras"),
+        }
+    }
+}
+
+/// Every transform of a solved cell as the export forms write it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exported {
+    /// What the cell is.
+    pub cell: ExportedCell,
+    /// The transforms a TF tree holds (one parent per frame): every camera's mount and every
+    /// board's.
+    pub tree: Vec<NamedTransform>,
+    /// Transforms the tree implies (camera to camera): written where a form holds them without
+    /// giving a frame a second parent (as comments in the ROS 2 and URDF forms).
+    pub implied: Vec<NamedTransform>,
+}
+
+impl Exported {
+    /// The export of a several-camera result: every camera's mount (from the joint solve) and
+    /// the boards in the tree, the camera-to-camera transforms implied by them. A camera left
+    /// out of the joint solve has no mount to export.
+    pub fn cameras(result: &RigResultFile, ids: &FrameIds) -> Exported {
+        let two_boards = result.boards.len() > 1;
+        let named = |t: &handeye_session::cell::rig::solve::NamedTransform| {
+            NamedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)
+        };
+        Exported {
+            cell: ExportedCell::Cameras(result.cameras.len()),
+            tree: result
+                .cameras
+                .iter()
+                .filter_map(|c| c.joint.as_ref())
+                .chain(&result.boards)
+                .map(named)
+                .collect(),
+            implied: result.camera_to_camera.iter().map(named).collect(),
+        }
+    }
+
+    /// The export of a one-camera cell's two unknowns.
+    pub fn one(mounts: &CellTransforms, ids: &FrameIds) -> Exported {
+        Exported {
+            cell: ExportedCell::One(mounts.setup),
+            tree: named_transforms(mounts, ids).to_vec(),
+            implied: Vec::new(),
+        }
+    }
+
+    /// Checks the frame ids ([`FrameIds::validate`]) and that every transform is finite and
+    /// within `geometry::MAX_TRANSLATION_M`.
+    pub fn check(&self, ids: &FrameIds) -> Result<(), ExportError> {
+        ids.validate()?;
+        for t in self.tree.iter().chain(&self.implied) {
+            check_translation(&t.parent_from_child.translation.vector).map_err(|problem| {
+                ExportError::Translation {
+                    key: t.key.clone(),
+                    problem,
+                }
+            })?;
+            let q = t.parent_from_child.rotation.into_inner();
+            if !(q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6) {
+                return Err(ExportError::Rotation {
+                    key: t.key.clone(),
+                    quaternion: [q.i, q.j, q.k, q.w],
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The text of the export in `format` (check it first with [`Exported::check`]).
+    pub fn text(&self, format: ExportFormat) -> Result<String, ExportError> {
+        Ok(match (format, self.cell) {
+            (ExportFormat::Ros2, _) => ros2(self),
+            (ExportFormat::Ros2Launch, _) => super::ros2_launch::launch_file(self.cell, &self.tree),
+            (ExportFormat::Urdf, _) => urdf(self),
+            (ExportFormat::Ur, ExportedCell::One(setup)) => ur(setup, &self.tree),
+            (ExportFormat::Ur, ExportedCell::Cameras(_)) => {
+                return Err(ExportError::Unsupported(
+                    "`ur` holds the two transforms of a one-camera cell (one TCP); a cell with several cameras exports as ros2, urdf or opencv (or ros2-launch, json)".into(),
+                ))
+            }
+            (ExportFormat::Json, _) => json_text(self),
+            (ExportFormat::Opencv, _) => opencv(self),
+        })
+    }
+}
+
+/// The text of a one-camera cell's `mounts` in `format`, after [`Exported::check`].
 pub fn export(
     mounts: &CellTransforms,
     format: ExportFormat,
     ids: &FrameIds,
 ) -> Result<String, ExportError> {
-    ids.validate()?;
-    let transforms = named_transforms(mounts, ids);
-    for t in &transforms {
-        check_translation(&t.parent_from_child.translation.vector).map_err(|problem| {
-            ExportError::Translation {
-                key: t.key,
-                problem,
-            }
-        })?;
-        let q = t.parent_from_child.rotation.into_inner();
-        if !(q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6) {
-            return Err(ExportError::Rotation {
-                key: t.key,
-                quaternion: [q.i, q.j, q.k, q.w],
-            });
-        }
-    }
-    Ok(match format {
-        ExportFormat::Ros2 => ros2(mounts.setup, &transforms),
-        ExportFormat::Ros2Launch => super::ros2_launch::launch_file(mounts.setup, &transforms),
-        ExportFormat::Urdf => urdf(mounts.setup, &transforms),
-        ExportFormat::Ur => ur(mounts.setup, &transforms),
-        ExportFormat::Json => json_text(mounts.setup, &transforms),
-        ExportFormat::Opencv => opencv(mounts.setup, &transforms),
-    })
+    let exported = Exported::one(mounts, ids);
+    exported.check(ids)?;
+    exported.text(format)
 }
 
 /// One POSIX shell command line, each word quoted where the shell would otherwise interpret
@@ -325,11 +417,7 @@ fn shell_line(words: &[String]) -> String {
 
 /// The shell command that publishes `parent_from_child` on `/tf_static` (`tf2_ros`'
 /// `static_transform_publisher`), its words quoted for a POSIX shell.
-pub(super) fn static_publisher_command(
-    parent: &str,
-    child: &str,
-    parent_from_child: &Pose,
-) -> String {
+fn static_publisher_command(parent: &str, child: &str, parent_from_child: &Pose) -> String {
     let (p, q) = (
         parent_from_child.translation.vector,
         parent_from_child.rotation,
@@ -358,12 +446,7 @@ pub(super) fn static_publisher_command(
 }
 
 /// A URDF fixed joint holding `parent_from_child` (rpy fixed-axis), under a comment naming it.
-pub(super) fn urdf_joint(
-    name: &str,
-    parent: &str,
-    child: &str,
-    parent_from_child: &Pose,
-) -> String {
+fn urdf_joint(name: &str, parent: &str, child: &str, parent_from_child: &Pose) -> String {
     let p = parent_from_child.translation.vector;
     let (roll, pitch, yaw) = parent_from_child.rotation.euler_angles();
     format!(
@@ -373,12 +456,7 @@ pub(super) fn urdf_joint(
 }
 
 /// An OpenCV FileStorage 4x4 matrix `name` (row-major, metres) with its frame ids.
-pub(super) fn opencv_matrix(
-    name: &str,
-    parent: &str,
-    child: &str,
-    parent_from_child: &Pose,
-) -> String {
+fn opencv_matrix(name: &str, parent: &str, child: &str, parent_from_child: &Pose) -> String {
     let data: Vec<String> = to_matrix4_rows(parent_from_child)
         .iter()
         .flatten()
@@ -390,12 +468,26 @@ pub(super) fn opencv_matrix(
     )
 }
 
-fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
-    let mut out = format!(
-        "# handeye calibration ({setup}): static transforms for ROS 2 (tf2_ros).\n\
-         # Each publishes T_parent_child: frame-id = parent, child-frame-id = child.\n"
+/// The line naming an implied transform in a tree form, where publishing it would give its
+/// child a second parent.
+fn implied_comment(t: &NamedTransform) -> String {
+    let (p, q) = (
+        t.parent_from_child.translation.vector,
+        t.parent_from_child.rotation,
     );
-    for t in transforms {
+    format!(
+        "{} (implied by the transforms above; not published: {} already has a parent): xyz [{}, {}, {}], quaternion xyzw [{}, {}, {}, {}]",
+        t.key, t.child, p.x, p.y, p.z, q.i, q.j, q.k, q.w
+    )
+}
+
+fn ros2(exported: &Exported) -> String {
+    let mut out = format!(
+        "# handeye calibration {}: static transforms for ROS 2 (tf2_ros).\n\
+         # Each publishes T_parent_child: frame-id = parent, child-frame-id = child.\n",
+        exported.cell
+    );
+    for t in &exported.tree {
         let _ = writeln!(
             out,
             "# {}\n{}",
@@ -403,13 +495,16 @@ fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
             static_publisher_command(&t.parent, &t.child, &t.parent_from_child)
         );
     }
+    for t in &exported.implied {
+        let _ = writeln!(out, "# {}", implied_comment(t));
+    }
     out.push_str(
         "\n# Launch snippet (Python launch file):\n\
          from launch import LaunchDescription\n\
          from launch_ros.actions import Node\n\n\n\
          def generate_launch_description():\n    return LaunchDescription([\n",
     );
-    for t in transforms {
+    for t in &exported.tree {
         let (p, q) = (
             t.parent_from_child.translation.vector,
             t.parent_from_child.rotation,
@@ -425,16 +520,20 @@ fn ros2(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
     out
 }
 
-fn urdf(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
+fn urdf(exported: &Exported) -> String {
     let mut out = format!(
-        "<!-- handeye calibration ({setup}). Each fixed joint holds T_parent_child; rpy is fixed-axis\n     roll (x), pitch (y), yaw (z): R = Rz(yaw) Ry(pitch) Rx(roll). Add the child links if\n     your URDF lacks them. -->\n"
+        "<!-- handeye calibration {}. Each fixed joint holds T_parent_child; rpy is fixed-axis\n     roll (x), pitch (y), yaw (z): R = Rz(yaw) Ry(pitch) Rx(roll). Add the child links if\n     your URDF lacks them. -->\n",
+        exported.cell
     );
-    for t in transforms {
+    for t in &exported.tree {
         let _ = writeln!(
             out,
             "{}",
-            urdf_joint(t.key, &t.parent, &t.child, &t.parent_from_child)
+            urdf_joint(&t.key, &t.parent, &t.child, &t.parent_from_child)
         );
+    }
+    for t in &exported.implied {
+        let _ = writeln!(out, "<!-- {} -->", implied_comment(t));
     }
     out
 }
@@ -446,7 +545,7 @@ pub fn ur_pose_literal(pose: &Pose) -> String {
     format!("p[{}, {}, {}, {}, {}, {}]", p.x, p.y, p.z, r.x, r.y, r.z)
 }
 
-fn ur(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
+fn ur(setup: Setup, transforms: &[NamedTransform]) -> String {
     let mut out = format!(
         "# handeye calibration ({setup}) as UR pose literals p[x, y, z, rx, ry, rz] (m, rotation vector rad).\n"
     );
@@ -476,15 +575,18 @@ fn ur(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
     out
 }
 
-fn json_value(setup: Setup, transforms: &[NamedTransform; 2]) -> serde_json::Value {
+fn json_value(exported: &Exported) -> serde_json::Value {
     let mut object = serde_json::Map::new();
-    object.insert("setup".into(), json!(setup.name()));
-    for t in transforms {
+    match exported.cell {
+        ExportedCell::One(setup) => object.insert("setup".into(), json!(setup.name())),
+        ExportedCell::Cameras(n) => object.insert("cameras".into(), json!(n)),
+    };
+    for t in exported.tree.iter().chain(&exported.implied) {
         let p = t.parent_from_child.translation.vector;
         let q = t.parent_from_child.rotation;
         let r = rotvec(&q);
         object.insert(
-            t.key.into(),
+            t.key.clone(),
             json!({
                 "parent": t.parent,
                 "child": t.child,
@@ -498,22 +600,30 @@ fn json_value(setup: Setup, transforms: &[NamedTransform; 2]) -> serde_json::Val
     serde_json::Value::Object(object)
 }
 
-fn json_text(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
-    let mut text = serde_json::to_string_pretty(&json_value(setup, transforms))
+fn json_text(exported: &Exported) -> String {
+    let mut text = serde_json::to_string_pretty(&json_value(exported))
         .expect("a JSON value always serialises");
     text.push('\n');
     text
 }
 
-fn opencv(setup: Setup, transforms: &[NamedTransform; 2]) -> String {
-    let mut out = format!(
-        "%YAML:1.0\n---\n# handeye calibration: 4x4 T_parent_child, row-major, metres.\nsetup: \"{setup}\"\n"
+fn opencv(exported: &Exported) -> String {
+    let mut out = String::from(
+        "%YAML:1.0\n---\n# handeye calibration: 4x4 T_parent_child, row-major, metres.\n",
     );
-    for t in transforms {
+    match exported.cell {
+        ExportedCell::One(setup) => {
+            let _ = writeln!(out, "setup: \"{setup}\"");
+        }
+        ExportedCell::Cameras(n) => {
+            let _ = writeln!(out, "cameras: {n}");
+        }
+    }
+    for t in exported.tree.iter().chain(&exported.implied) {
         let _ = writeln!(
             out,
             "{}",
-            opencv_matrix(t.key, &t.parent, &t.child, &t.parent_from_child)
+            opencv_matrix(&t.key, &t.parent, &t.child, &t.parent_from_child)
         );
     }
     out
@@ -585,20 +695,24 @@ mod tests {
         let ids = FrameIds::default();
         let [camera, target] = named_transforms(&mounts(Setup::EyeInHand), &ids);
         assert_eq!(
-            (camera.key, camera.parent.as_str(), camera.child.as_str()),
+            (
+                camera.key.as_str(),
+                camera.parent.as_str(),
+                camera.child.as_str()
+            ),
             ("T_flange_camera", "tool0", "camera_optical_frame")
         );
         assert_eq!(
-            (target.key, target.parent.as_str()),
+            (target.key.as_str(), target.parent.as_str()),
             ("T_base_target", "base")
         );
         let [camera, target] = named_transforms(&mounts(Setup::EyeToHand), &ids);
         assert_eq!(
-            (camera.key, camera.parent.as_str()),
+            (camera.key.as_str(), camera.parent.as_str()),
             ("T_base_camera", "base")
         );
         assert_eq!(
-            (target.key, target.parent.as_str()),
+            (target.key.as_str(), target.parent.as_str()),
             ("T_flange_target", "tool0")
         );
         let ur_text = export(&mounts(Setup::EyeToHand), ExportFormat::Ur, &ids).unwrap();

@@ -6,7 +6,6 @@
 
 pub mod bag;
 pub mod export;
-pub mod export_rig;
 pub mod import;
 pub mod ros2_launch;
 

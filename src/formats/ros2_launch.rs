@@ -12,10 +12,8 @@ use std::fmt::Write as _;
 
 use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion};
 
+use super::export::{ExportedCell, NamedTransform};
 use handeye_core::geometry::Pose;
-use handeye_core::setup::Setup;
-
-use super::export::NamedTransform;
 
 /// `T_link_optical` of a camera whose link has REP 103 body axes: optical z (forward) is the
 /// link's x, optical x (right) its -y, optical y (down) its -z; no offset.
@@ -29,7 +27,7 @@ pub fn link_from_optical() -> Pose {
 /// T_parent_optical · inv(T_link_optical)`, child `link`.
 pub fn through_camera_link(camera: &NamedTransform, link: &str) -> NamedTransform {
     NamedTransform {
-        key: camera.key,
+        key: camera.key.clone(),
         parent: camera.parent.clone(),
         child: link.to_string(),
         parent_from_child: camera.parent_from_child * link_from_optical().inverse(),
@@ -37,9 +35,9 @@ pub fn through_camera_link(camera: &NamedTransform, link: &str) -> NamedTransfor
 }
 
 /// The launch file publishing `transforms`.
-pub fn launch_file(setup: Setup, transforms: &[NamedTransform]) -> String {
+pub fn launch_file(cell: ExportedCell, transforms: &[NamedTransform]) -> String {
     let mut out = format!(
-        "# handeye calibration ({setup}): static transforms for ROS 2, run with\n\
+        "# handeye calibration {cell}: static transforms for ROS 2, run with\n\
          #   ros2 launch ./handeye_calibration.launch.py\n\
          # Each node publishes T_parent_child on /tf_static (frame-id = parent, child-frame-id = child).\n\
          from launch import LaunchDescription\n\

@@ -47,8 +47,8 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         "<h1>Calibration of a cell with {} cameras</h1><p>Session <code>{}</code></p><h2 class=\"{v}\">Cell: {v}</h2><p>{}</p>",
         result.cameras.len(),
         escape(&folder.display().to_string()),
-        escape(&result.reason),
-        v = escape(&result.verdict),
+        escape(&result.verdict.reason),
+        v = result.verdict.level.word(),
     );
     for f in handeye_session::cell::rig::read_failures(folder) {
         let _ = write!(
@@ -72,8 +72,8 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
                 "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{}</td><td colspan=\"6\">{}</td></tr>",
                 escape(&c.name),
                 c.samples,
-                escape(c.left_out.as_deref().unwrap_or(&c.reason)),
-                v = escape(&c.verdict)
+                escape(c.left_out.as_deref().unwrap_or(&c.verdict.reason)),
+                v = c.verdict.level.word()
             );
         }
         for (k, t) in rows {
@@ -83,7 +83,7 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
                 escape(&c.name),
                 c.samples,
                 transform_cells(t),
-                v = escape(&c.verdict)
+                v = c.verdict.level.word()
             );
         }
     }
@@ -103,8 +103,8 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
             html,
             "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{held_out}</td><td>{}</td></tr>",
             escape(&c.name),
-            escape(&c.reason),
-            v = escape(&c.verdict)
+            escape(&c.verdict.reason),
+            v = c.verdict.level.word()
         );
     }
     html.push_str("</table>");

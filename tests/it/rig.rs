@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use handeye::cell::rig::{camera_folder, RigResultFile};
 use handeye::config::rig::RigConfig;
 use handeye::geometry::Pose;
+use handeye::verdict::Level;
 
 use crate::util;
 use util::handeye;
@@ -118,22 +119,40 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
         );
         // Each camera is judged with the leave-one-out check of its own samples, as one camera
         // is; on this clean cell every one is GOOD, and so is the cell (the worst of them).
-        let held_out = camera
-            .held_out
-            .unwrap_or_else(|| panic!("{}: no held-out check ({})", camera.name, camera.reason));
+        let held_out = camera.held_out.unwrap_or_else(|| {
+            panic!(
+                "{}: no held-out check ({})",
+                camera.name, camera.verdict.reason
+            )
+        });
         println!(
             "{}: {} — held-out {:.3} mm / {:.4}° over {} poses",
             camera.name,
-            camera.verdict,
+            camera.verdict.level,
             held_out.translation_rms_mm,
             held_out.rotation_rms_deg,
             held_out.poses
         );
         assert!(held_out.poses >= 8, "{}: {held_out:?}", camera.name);
-        assert_eq!(camera.verdict, "GOOD", "{}: {}", camera.name, camera.reason);
-        assert!(camera.reason.contains("held-out"), "{}", camera.reason);
+        assert_eq!(
+            camera.verdict.level,
+            Level::Good,
+            "{}: {}",
+            camera.name,
+            camera.verdict.reason
+        );
+        assert!(
+            camera.verdict.reason.contains("held-out"),
+            "{}",
+            camera.verdict.reason
+        );
     }
-    assert_eq!(result.verdict, "GOOD", "{}", result.reason);
+    assert_eq!(
+        result.verdict.level,
+        Level::Good,
+        "{}",
+        result.verdict.reason
+    );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains("Verdict per camera"));
     let truths: std::collections::BTreeMap<_, _> = truth(config).into_iter().collect();
@@ -182,12 +201,12 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     // Too few samples for the leave-one-out check: the camera is not GOOD, and says why; the
     // cell's verdict is the worst camera's and names it.
     assert!(wrist.held_out.is_none(), "{wrist:?}");
-    assert_ne!(wrist.verdict, "GOOD", "{wrist:?}");
-    assert_ne!(result.verdict, "GOOD");
+    assert_ne!(wrist.verdict.level, Level::Good, "{wrist:?}");
+    assert_ne!(result.verdict.level, Level::Good);
     assert!(
-        result.reason.contains("camera `wrist`"),
+        result.verdict.reason.contains("camera `wrist`"),
         "{}",
-        result.reason
+        result.verdict.reason
     );
     assert!(
         wrist.joint.is_some(),
@@ -515,6 +534,73 @@ fn report_and_exports_name_every_camera() {
     assert!(String::from_utf8_lossy(&ur.stderr).contains("exports as ros2, urdf or opencv"));
 }
 
+/// The one exporter writes a several-camera result in JSON and as a ROS 2 launch file too (every
+/// mount and both boards, each transform's matrix the result's); a several-camera result in an
+/// older layout is refused naming the file and `handeye replay`, which writes it anew.
+#[test]
+fn json_and_launch_exports_hold_every_camera_and_an_old_layout_says_replay() {
+    let (_, out, _) = shipped_run();
+    let result = read_result(out);
+    let export = |file: &Path, format: &str| {
+        handeye()
+            .arg("export")
+            .arg(file)
+            .args(["--format", format])
+            .output()
+            .unwrap()
+    };
+    let json = export(&out.join("result.yaml"), "json");
+    assert!(
+        json.status.success(),
+        "{}",
+        String::from_utf8_lossy(&json.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(json["cameras"], 3, "{json}");
+    for t in result.transforms() {
+        let rows = json[&t.name]["matrix"]
+            .as_array()
+            .unwrap_or_else(|| panic!("json lacks {}: {json}", t.name));
+        let m = t.pose.to_homogeneous();
+        for (r, row) in rows.iter().enumerate() {
+            for (c, v) in row.as_array().unwrap().iter().enumerate() {
+                assert!(
+                    (v.as_f64().unwrap() - m[(r, c)]).abs() < 1e-12,
+                    "{} [{r},{c}]",
+                    t.name
+                );
+            }
+        }
+    }
+    let launch = export(&out.join("result.yaml"), "ros2-launch");
+    assert!(
+        launch.status.success(),
+        "{}",
+        String::from_utf8_lossy(&launch.stderr)
+    );
+    let launch = String::from_utf8(launch.stdout).unwrap();
+    assert_eq!(launch.matches("Node(").count(), 5, "{launch}");
+    assert!(
+        launch.contains("'--child-frame-id', 'camera_optical_frame_right'"),
+        "{launch}"
+    );
+    // The layout written before verdicts were typed: `verdict: GOOD` and a `reason` beside it.
+    let old = out.parent().unwrap().join("old-layout-result.yaml");
+    let mut value: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(out.join("result.yaml")).unwrap())
+            .unwrap();
+    value["verdict"] = "GOOD".into();
+    value["reason"] = "every camera is GOOD".into();
+    std::fs::write(&old, serde_yaml_ng::to_string(&value).unwrap()).unwrap();
+    let refused = export(&old, "ros2");
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("old-layout-result.yaml") && stderr.contains("handeye replay"),
+        "{stderr}"
+    );
+}
+
 /// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every
 /// error names the camera and the key; the one-camera form is not taken for it.
 #[test]
@@ -589,7 +675,13 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
     }
     // It stopped because every camera was good enough, not because it ran out.
     for camera in &result.cameras {
-        assert_eq!(camera.verdict, "GOOD", "{}: {}", camera.name, camera.reason);
+        assert_eq!(
+            camera.verdict.level,
+            Level::Good,
+            "{}: {}",
+            camera.name,
+            camera.verdict.reason
+        );
         // Every camera's folder records the same growing plan.
         let other: handeye::session::SessionManifest = serde_yaml_ng::from_str(
             &std::fs::read_to_string(camera_folder(&out, &camera.name).join("session.yaml"))
@@ -689,9 +781,13 @@ fn adaptive_run_names_a_lost_camera_once_and_goes_on() {
             .is_some_and(|why| why.contains("own solve")),
         "{left:?}"
     );
-    assert_eq!(left.verdict, "REDO");
-    assert_eq!(result.verdict, "REDO");
-    assert!(result.reason.contains("camera `left`"), "{}", result.reason);
+    assert_eq!(left.verdict.level, Level::Redo);
+    assert_eq!(result.verdict.level, Level::Redo);
+    assert!(
+        result.verdict.reason.contains("camera `left`"),
+        "{}",
+        result.verdict.reason
+    );
     for name in ["wrist", "right"] {
         let camera = result.cameras.iter().find(|c| c.name == name).unwrap();
         assert!(camera.samples >= 8 && camera.joint.is_some(), "{camera:?}");

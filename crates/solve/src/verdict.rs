@@ -54,11 +54,13 @@ use serde::{Deserialize, Serialize};
 use crate::SolveError;
 
 pub mod evidence;
+pub mod mount;
 pub mod rules;
 
 pub use evidence::{
     assess_result, assess_solved, coverage_notices, held_out, residual_notice, working_distance_mm,
 };
+pub use mount::{assess_mount, worst_camera};
 pub use rules::{assess, Evidence};
 
 /// Default accuracy the user wants for translation, mm.

@@ -25,7 +25,7 @@ use handeye_solve::rig::{
     pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
 };
-use handeye_solve::verdict::{Accuracy, HeldOut, Level, GOOD_POSES};
+use handeye_solve::verdict::{self, Accuracy, HeldOut, Verdict};
 use handeye_solve::PoseSigma;
 use handeye_vision::Target;
 
@@ -109,11 +109,10 @@ pub struct CameraResult {
     /// says why).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOut>,
-    /// GOOD, CHECK or REDO: the worse of its 1-sigma and its held-out error against the
-    /// accuracy asked for.
-    pub verdict: String,
-    /// The reason for the verdict.
-    pub reason: String,
+    /// GOOD, CHECK or REDO with its reason and next action: the worse of its 1-sigma and its
+    /// held-out error against the accuracy asked for (`verdict::assess_mount`); REDO when it is
+    /// left out.
+    pub verdict: Verdict,
 }
 
 /// `result.yaml` of a several-camera session.
@@ -128,10 +127,8 @@ pub struct RigResultFile {
     pub camera_to_camera: Vec<NamedTransform>,
     /// `χ²/dof` of the joint solve.
     pub variance_factor: f64,
-    /// The cell's verdict: the worst camera's.
-    pub verdict: String,
-    /// Which camera decided it, and why.
-    pub reason: String,
+    /// The cell's verdict: the worst camera's, naming it (`verdict::worst_camera`).
+    pub verdict: Verdict,
 }
 
 impl RigResultFile {
@@ -253,7 +250,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 continue;
             }
         };
-        held_out.push(handeye_solve::verdict::held_out(
+        held_out.push(verdict::held_out(
             setup,
             &pairs,
             &camera.config.solver.to_options(),
@@ -332,64 +329,6 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
     })
 }
 
-/// The verdict of one camera's mount: its 1-sigma and its held-out error (each against the
-/// configured accuracy: GOOD within it, CHECK up to the verdict's REDO factor, REDO beyond; the
-/// worse of the two), CHECK with fewer than [`GOOD_POSES`] samples or without a held-out check.
-fn camera_verdict(
-    sigma: &PoseSigma,
-    held_out: &Result<HeldOut, String>,
-    samples: usize,
-    accuracy: &Accuracy,
-) -> (Level, String) {
-    let level = accuracy.level_of(sigma.translation_mm, sigma.rotation_deg);
-    let against = format!(
-        "against the accuracy {} mm / {}°",
-        accuracy.translation_mm, accuracy.rotation_deg
-    );
-    match held_out {
-        Ok(h) => {
-            let held = accuracy.level_of(h.translation_rms_mm, h.rotation_rms_deg);
-            if held > level {
-                return (
-                    held,
-                    format!(
-                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses of its own, target at ~{:.0} mm) {against}: record more poses with larger, more varied rotations where it sees its board",
-                        h.translation_rms_mm, h.rotation_rms_deg, h.poses, h.working_distance_mm
-                    ),
-                );
-            }
-        }
-        Err(why) if level == Level::Good => {
-            return (
-                Level::Check,
-                format!("no held-out check ({why}): record more poses where it sees its board"),
-            )
-        }
-        Err(_) => {}
-    }
-    if level == Level::Good && samples < GOOD_POSES {
-        return (
-            Level::Check,
-            format!("only {samples} samples (GOOD needs {GOOD_POSES}): add poses where it sees its board"),
-        );
-    }
-    (
-        level,
-        format!(
-            "1-sigma {:.3} mm / {:.4}°{} {against}",
-            sigma.translation_mm,
-            sigma.rotation_deg,
-            match held_out {
-                Ok(h) => format!(
-                    ", held-out {:.2} mm / {:.3}° over {} poses",
-                    h.translation_rms_mm, h.rotation_rms_deg, h.poses
-                ),
-                Err(_) => String::new(),
-            }
-        ),
-    )
-}
-
 /// Solves a several-camera session folder jointly and writes its `result.yaml`.
 pub fn solve_rig_folder(root: &Path, rig: &RigConfig) -> Result<RigResultFile, RigSolveError> {
     let problem = load_rig_problem(root, rig)?;
@@ -464,7 +403,6 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
     };
     let truth_of = |c: usize| rig.cameras[c].config.simulation.map(|s| s.camera_mount);
     let mut cameras = Vec::new();
-    let mut worst: (Level, String) = (Level::Good, "every camera is GOOD".into());
     for (c, camera) in rig.cameras.iter().enumerate() {
         let (samples, left_out) = problem.cameras[c].clone();
         let setup = camera.config.setup;
@@ -480,10 +418,12 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             residual_rotation_rms_deg: None,
             residual_translation_rms_mm: None,
             held_out: problem.held_out[c].as_ref().ok().copied(),
-            verdict: Level::Redo.word().into(),
-            reason: left_out.clone().unwrap_or_default(),
+            verdict: verdict::mount::left_out(
+                left_out.as_deref().unwrap_or_default(),
+                samples,
+                accuracy,
+            ),
         };
-        let mut level = Level::Redo;
         if let Some(k) = problem.config_index.iter().position(|&i| i == c) {
             let parent = mount_parent(setup);
             entry.joint = Some(named(
@@ -516,21 +456,19 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
-            let (l, reason) = camera_verdict(
+            entry.verdict = verdict::assess_mount(
                 &joint.camera_sigmas[k],
-                &problem.held_out[c],
+                problem.held_out[c].as_ref().map_err(String::as_str),
                 samples,
-                &accuracy,
+                accuracy,
             );
-            level = l;
-            entry.verdict = l.word().into();
-            entry.reason = reason;
-        }
-        if level > worst.0 {
-            worst = (level, format!("camera `{}`: {}", camera.name, entry.reason));
         }
         cameras.push(entry);
     }
+    let cell_verdict = verdict::worst_camera(
+        cameras.iter().map(|c| (c.name.as_str(), &c.verdict)),
+        accuracy,
+    );
     let board_truth = |setup: Setup| {
         rig.cameras
             .iter()
@@ -578,8 +516,7 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
         boards,
         camera_to_camera,
         variance_factor: joint.variance_factor,
-        verdict: worst.0.word().into(),
-        reason: worst.1,
+        verdict: cell_verdict,
     }
 }
 

@@ -1,0 +1,211 @@
+//! The verdict on one camera's mount solved with others (a cell with several cameras): the same
+//! bands as a one-camera verdict ([`Accuracy::level_of`]) applied to what the joint solve
+//! measures of that camera — its mount's 1-sigma and the held-out error of its own samples —
+//! with the same pose count for GOOD ([`GOOD_POSES`]). The cell's verdict is its worst camera's
+//! ([`worst_camera`]).
+
+use super::{Accuracy, Basis, Figures, HeldOut, Level, Verdict, GOOD_POSES};
+use crate::PoseSigma;
+
+/// The verdict of a camera's mount from the joint solve: the worse of its 1-sigma and its
+/// held-out error against `accuracy` (GOOD within it, CHECK up to the REDO factor, REDO
+/// beyond); CHECK with fewer than [`GOOD_POSES`] samples or with no held-out check
+/// (`held_out` says why there is none).
+pub fn assess_mount(
+    sigma: &PoseSigma,
+    held_out: Result<&HeldOut, &str>,
+    samples: usize,
+    accuracy: Accuracy,
+) -> Verdict {
+    let level = accuracy.level_of(sigma.translation_mm, sigma.rotation_deg);
+    let against = format!(
+        "against the accuracy {} mm / {}°",
+        accuracy.translation_mm, accuracy.rotation_deg
+    );
+    let figures = Figures {
+        poses: samples,
+        held_out: held_out.ok().copied(),
+        sigma_translation_mm: Some(sigma.translation_mm),
+        sigma_rotation_deg: Some(sigma.rotation_deg),
+        ..Figures::default()
+    };
+    let verdict = |level, basis, reason: String, next_action: &str| Verdict {
+        level,
+        basis,
+        reason,
+        next_action: next_action.into(),
+        accuracy,
+        figures: figures.clone(),
+        also: Vec::new(),
+    };
+    let more_poses = "record more poses with larger, more varied rotations where it sees its board";
+    match held_out {
+        Ok(h) => {
+            let held = accuracy.level_of(h.translation_rms_mm, h.rotation_rms_deg);
+            if held > level {
+                return verdict(
+                    held,
+                    Basis::HeldOutError,
+                    format!(
+                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses of its own, target at ~{:.0} mm) {against}",
+                        h.translation_rms_mm, h.rotation_rms_deg, h.poses, h.working_distance_mm
+                    ),
+                    more_poses,
+                );
+            }
+        }
+        Err(why) if level == Level::Good => {
+            return verdict(
+                Level::Check,
+                Basis::FewPoses,
+                format!("no held-out check ({why})"),
+                "record more poses where it sees its board",
+            )
+        }
+        Err(_) => {}
+    }
+    if level == Level::Good && samples < GOOD_POSES {
+        return verdict(
+            Level::Check,
+            Basis::FewPoses,
+            format!("only {samples} samples (GOOD needs {GOOD_POSES})"),
+            "add poses where it sees its board",
+        );
+    }
+    let held = match held_out {
+        Ok(h) => format!(
+            ", held-out {:.2} mm / {:.3}° over {} poses",
+            h.translation_rms_mm, h.rotation_rms_deg, h.poses
+        ),
+        Err(_) => String::new(),
+    };
+    let (basis, next_action) = match level {
+        Level::Good => (Basis::WithinAccuracy, "use it"),
+        _ => (Basis::Uncertainty, more_poses),
+    };
+    verdict(
+        level,
+        basis,
+        format!(
+            "1-sigma {:.3} mm / {:.4}°{held} {against}",
+            sigma.translation_mm, sigma.rotation_deg
+        ),
+        next_action,
+    )
+}
+
+/// The verdict of a camera left out of the joint solve (too few views, its own solve failed):
+/// REDO, saying why.
+pub fn left_out(why: &str, samples: usize, accuracy: Accuracy) -> Verdict {
+    Verdict {
+        level: Level::Redo,
+        basis: Basis::Refused,
+        reason: why.into(),
+        next_action: "record poses where it sees its board".into(),
+        accuracy,
+        figures: Figures {
+            poses: samples,
+            ..Figures::default()
+        },
+        also: Vec::new(),
+    }
+}
+
+/// The cell's verdict from its cameras' (name, verdict): the worst camera's, its reason
+/// naming the camera (the first camera when several are equally bad); GOOD when every camera
+/// is.
+pub fn worst_camera<'a>(
+    cameras: impl IntoIterator<Item = (&'a str, &'a Verdict)>,
+    accuracy: Accuracy,
+) -> Verdict {
+    let mut worst: Option<(&str, &Verdict)> = None;
+    for (name, verdict) in cameras {
+        if verdict.level > worst.map_or(Level::Good, |(_, w)| w.level) {
+            worst = Some((name, verdict));
+        }
+    }
+    match worst {
+        Some((name, verdict)) => Verdict {
+            reason: format!("camera `{name}`: {}", verdict.reason),
+            next_action: format!("camera `{name}`: {}", verdict.next_action),
+            ..verdict.clone()
+        },
+        None => Verdict {
+            level: Level::Good,
+            basis: Basis::WithinAccuracy,
+            reason: "every camera is GOOD".into(),
+            next_action: "use it".into(),
+            accuracy,
+            figures: Figures::default(),
+            also: Vec::new(),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sigma(translation_mm: f64, rotation_deg: f64) -> PoseSigma {
+        PoseSigma {
+            rotation_deg,
+            translation_mm,
+            rotation_axes_deg: [rotation_deg; 3],
+            translation_axes_mm: [translation_mm; 3],
+        }
+    }
+
+    fn held(translation_rms_mm: f64) -> HeldOut {
+        HeldOut {
+            poses: 12,
+            translation_rms_mm,
+            rotation_rms_deg: 0.01,
+            working_distance_mm: 500.0,
+        }
+    }
+
+    #[test]
+    fn a_mount_is_judged_by_the_worse_of_its_sigma_and_its_held_out_error() {
+        let accuracy = Accuracy::default();
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
+        assert_eq!(
+            (good.level, good.basis),
+            (Level::Good, Basis::WithinAccuracy)
+        );
+        let held_out = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy);
+        assert_eq!(
+            (held_out.level, held_out.basis),
+            (Level::Check, Basis::HeldOutError)
+        );
+        let unsure = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy);
+        assert_eq!(
+            (unsure.level, unsure.basis),
+            (Level::Redo, Basis::Uncertainty)
+        );
+        let few = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), GOOD_POSES - 1, accuracy);
+        assert_eq!((few.level, few.basis), (Level::Check, Basis::FewPoses));
+        let unchecked = assess_mount(&sigma(0.1, 0.01), Err("only 4 samples"), 12, accuracy);
+        assert_eq!(unchecked.level, Level::Check);
+        assert!(
+            unchecked.reason.contains("only 4 samples"),
+            "{}",
+            unchecked.reason
+        );
+    }
+
+    #[test]
+    fn the_cell_is_its_worst_camera_named() {
+        let accuracy = Accuracy::default();
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let check = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy);
+        let cell = worst_camera([("wrist", &good), ("left", &check)], accuracy);
+        assert_eq!(cell.level, Level::Check);
+        assert!(
+            cell.reason.starts_with("camera `left`: "),
+            "{}",
+            cell.reason
+        );
+        let all_good = worst_camera([("wrist", &good)], accuracy);
+        assert_eq!(all_good.level, Level::Good);
+    }
+}
