@@ -21,20 +21,16 @@ use std::time::{Duration, Instant};
 use criterion::Criterion;
 use handeye::cell;
 use handeye::console::{Console, ConsoleObserver, ConsoleOptions};
+use rustix::time::{clock_gettime, ClockId};
 
 #[path = "../tests/util/mod.rs"]
 mod util;
 
-/// User + system CPU time of this process, or of the calling thread, s.
-fn cpu_s(who: libc::c_int) -> f64 {
-    // SAFETY: getrusage writes one `rusage` into the struct we pass and reads nothing else.
-    let usage = unsafe {
-        let mut usage: libc::rusage = std::mem::zeroed();
-        libc::getrusage(who, &mut usage);
-        usage
-    };
-    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    s(usage.ru_utime) + s(usage.ru_stime)
+/// CPU time (user + system) of this process (`ClockId::ProcessCPUTime`) or of the calling
+/// thread (`ClockId::ThreadCPUTime`), s.
+fn cpu_s(clock: ClockId) -> f64 {
+    let t = clock_gettime(clock);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
 /// A page that reads everything until the console closes; returns its messages and adds its
@@ -56,7 +52,7 @@ fn client(url: String, client_cpu_us: Arc<AtomicU64>) -> std::thread::JoinHandle
             }
             n
         });
-        let cpu = cpu_s(libc::RUSAGE_THREAD);
+        let cpu = cpu_s(ClockId::ThreadCPUTime);
         client_cpu_us.fetch_add((cpu * 1e6) as u64, Ordering::Relaxed);
         messages
     })
@@ -127,15 +123,18 @@ fn main() {
         .unwrap_or(10);
     let (mut without, mut with, mut messages) = (Vec::new(), Vec::new(), 0);
     for _ in 0..rounds {
-        let (c0, t0) = (cpu_s(libc::RUSAGE_SELF), Instant::now());
+        let (c0, t0) = (cpu_s(ClockId::ProcessCPUTime), Instant::now());
         plain(&config, next_out());
-        without.push((t0.elapsed().as_secs_f64(), cpu_s(libc::RUSAGE_SELF) - c0));
+        without.push((
+            t0.elapsed().as_secs_f64(),
+            cpu_s(ClockId::ProcessCPUTime) - c0,
+        ));
         let client0 = client_cpu_us.load(Ordering::Relaxed);
-        let (c0, t0) = (cpu_s(libc::RUSAGE_SELF), Instant::now());
+        let (c0, t0) = (cpu_s(ClockId::ProcessCPUTime), Instant::now());
         messages = with_console(&config, next_out(), &client_cpu_us);
         let wall = t0.elapsed().as_secs_f64();
         let client_s = (client_cpu_us.load(Ordering::Relaxed) - client0) as f64 * 1e-6;
-        with.push((wall, cpu_s(libc::RUSAGE_SELF) - c0 - client_s));
+        with.push((wall, cpu_s(ClockId::ProcessCPUTime) - c0 - client_s));
     }
     let median = |runs: &[(f64, f64)], pick: fn(&(f64, f64)) -> f64| {
         let mut v: Vec<f64> = runs.iter().map(pick).collect();

@@ -215,13 +215,11 @@ fn box_downscale(image: &GrayImage, factor: u32, w: u32, h: u32) -> GrayImage {
 /// the process's, so it stays below the run's however the process was started); the console's
 /// work is best-effort.
 fn lower_priority() {
+    // `None` is `who` 0: on Linux the calling thread alone. A failure just leaves the priority
+    // as it was.
     #[cfg(target_os = "linux")]
-    // SAFETY: getpriority and setpriority with `who` 0 read and change only the calling thread's
-    // nice value; they take no pointers, and a failure (returned, not signalled) just leaves the
-    // priority as it was.
-    unsafe {
-        let now = libc::getpriority(libc::PRIO_PROCESS, 0);
-        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (now + 10).clamp(10, 19));
+    if let Ok(now) = rustix::process::getpriority_process(None) {
+        let _ = rustix::process::setpriority_process(None, (now + 10).clamp(10, 19));
     }
 }
 

@@ -11,7 +11,9 @@ pub mod joints;
 pub mod kinematics;
 pub mod recorded;
 pub mod sim;
+// ur_rtde's C++ through its C shim: the crate's one module with `unsafe`.
 #[cfg(feature = "ur-rtde")]
+#[allow(unsafe_code)]
 pub mod ur;
 
 use std::sync::atomic::AtomicBool;

@@ -21,6 +21,8 @@ pub mod chessboard;
 pub mod detect;
 pub mod draw;
 pub mod family;
+// The AprilTag C library's bindings: the crate's one module with `unsafe`.
+#[allow(unsafe_code)]
 mod ffi;
 pub mod pnp;
 pub mod print;

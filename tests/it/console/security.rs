@@ -333,16 +333,15 @@ fn a_public_console_needs_the_secret_too_and_says_so() {
 /// Raises this process's own descriptor limit (the attacker's side of the flood test) as far
 /// as its hard limit allows, up to `want`.
 fn raise_nofile(want: u64) {
-    let mut limit = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
-    // SAFETY: plain getrlimit/setrlimit on a struct we own.
-    unsafe {
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) == 0 && limit.rlim_cur < want {
-            limit.rlim_cur = want.min(limit.rlim_max);
-            libc::setrlimit(libc::RLIMIT_NOFILE, &limit);
-        }
+    use rustix::process::{getrlimit, setrlimit, Resource, Rlimit};
+    let limit = getrlimit(Resource::Nofile);
+    // `None` is unlimited.
+    if limit.current.is_some_and(|current| current < want) {
+        let raised = Rlimit {
+            current: Some(limit.maximum.map_or(want, |max| want.min(max))),
+            maximum: limit.maximum,
+        };
+        let _ = setrlimit(Resource::Nofile, raised);
     }
 }
 
