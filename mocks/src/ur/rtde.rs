@@ -251,77 +251,11 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
                     }
                     Some(packet(kind, &p))
                 }
-                SETUP_OUTPUTS => {
-                    if payload.len() < 8 {
-                        return;
-                    }
-                    let frequency = f64::from_be_bytes(payload[..8].try_into().unwrap_or([0; 8]));
-                    let names = String::from_utf8_lossy(&payload[8..]).to_string();
-                    let fields: Vec<(String, Option<FieldType>)> = names
-                        .split(',')
-                        .filter(|n| !n.is_empty())
-                        .map(|n| (n.to_string(), output_type(n)))
-                        .collect();
-                    let types: Vec<&str> = fields
-                        .iter()
-                        .map(|(_, t)| t.map_or("NOT_FOUND", FieldType::name))
-                        .collect();
-                    // Recipe ids are one byte: past 255 recipes on a connection the setup fails
-                    // (id 0, nothing stored) instead of wrapping onto an earlier recipe.
-                    let id = u8::try_from(outputs.len() + 1).unwrap_or(0);
-                    let mut p = vec![id];
-                    p.extend_from_slice(types.join(",").as_bytes());
-                    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
-                        let hz = if frequency.is_finite() {
-                            frequency.clamp(1.0, 500.0)
-                        } else {
-                            125.0
-                        };
-                        outputs.push(OutputRecipe {
-                            id,
-                            fields: fields
-                                .into_iter()
-                                .map(|(n, t)| (n, t.unwrap_or(FieldType::Double)))
-                                .collect(),
-                            period: Duration::from_secs_f64(1.0 / hz),
-                            next_send: Instant::now(),
-                        });
-                    }
-                    Some(packet(kind, &p))
-                }
-                SETUP_INPUTS => {
-                    let names = String::from_utf8_lossy(&payload).to_string();
-                    let fields: Vec<(String, Option<FieldType>)> = names
-                        .split(',')
-                        .filter(|n| !n.is_empty())
-                        .map(|n| (n.to_string(), input_type(n)))
-                        .collect();
-                    // ur_rtde hard-codes recipe ids 1, 2, 3, ... in setup order, per connection.
-                    // One byte, as for the outputs: past 255 recipes the setup fails (id 0).
-                    let id = u8::try_from(inputs.len() + 1).unwrap_or(0);
-                    if fields
-                        .iter()
-                        .any(|(n, _)| register_index(n, "input_int_register_") == Some(24))
-                    {
-                        shared.arm().set_register_offset(24);
-                    }
-                    let types: Vec<&str> = fields
-                        .iter()
-                        .map(|(_, t)| t.map_or("NOT_FOUND", FieldType::name))
-                        .collect();
-                    let mut p = vec![id];
-                    p.extend_from_slice(types.join(",").as_bytes());
-                    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
-                        inputs.push((
-                            id,
-                            fields
-                                .into_iter()
-                                .map(|(n, t)| (n, t.unwrap_or(FieldType::Double)))
-                                .collect(),
-                        ));
-                    }
-                    Some(packet(kind, &p))
-                }
+                SETUP_OUTPUTS => match setup_outputs(&payload, &mut outputs) {
+                    Some(p) => Some(packet(kind, &p)),
+                    None => return,
+                },
+                SETUP_INPUTS => Some(packet(kind, &setup_inputs(&payload, &mut inputs, &shared))),
                 START => {
                     started = true;
                     let now = Instant::now();
@@ -350,35 +284,123 @@ pub(crate) fn serve(mut stream: TcpStream, shared: Arc<Shared>) {
                 }
             }
         }
-        if started && !outputs.is_empty() {
-            let now = Instant::now();
-            if outputs.iter().any(|r| now >= r.next_send) {
-                let snapshot = {
-                    let mut arm = shared.arm();
-                    if arm.streaming_stopped() {
-                        None
-                    } else {
-                        Some(arm.snapshot(now))
-                    }
-                };
-                if let Some(snapshot) = snapshot {
-                    for r in outputs.iter_mut().filter(|r| now >= r.next_send) {
-                        let mut p = vec![r.id];
-                        for (name, kind) in &r.fields {
-                            encode_field(&mut p, name, *kind, &snapshot);
-                        }
-                        if stream.write_all(&packet(DATA_PACKAGE, &p)).is_err() {
-                            return;
-                        }
-                        r.next_send += r.period;
-                        if r.next_send < now {
-                            r.next_send = now + r.period; // fell behind: do not burst
-                        }
-                    }
-                }
-            }
+        if started && stream_outputs(&mut stream, &shared, &mut outputs).is_err() {
+            return;
         }
     }
+}
+
+/// A `SETUP_OUTPUTS` request: the reply's payload (recipe id and field types), the recipe kept
+/// when every field is known; `None` for a malformed request (the client is dropped).
+fn setup_outputs(payload: &[u8], outputs: &mut Vec<OutputRecipe>) -> Option<Vec<u8>> {
+    if payload.len() < 8 {
+        return None;
+    }
+    let frequency = f64::from_be_bytes(payload[..8].try_into().unwrap_or([0; 8]));
+    let names = String::from_utf8_lossy(&payload[8..]).to_string();
+    let fields: Vec<(String, Option<FieldType>)> = names
+        .split(',')
+        .filter(|n| !n.is_empty())
+        .map(|n| (n.to_string(), output_type(n)))
+        .collect();
+    let types: Vec<&str> = fields
+        .iter()
+        .map(|(_, t)| t.map_or("NOT_FOUND", FieldType::name))
+        .collect();
+    // Recipe ids are one byte: past 255 recipes on a connection the setup fails (id 0, nothing
+    // stored) instead of wrapping onto an earlier recipe.
+    let id = u8::try_from(outputs.len() + 1).unwrap_or(0);
+    let mut p = vec![id];
+    p.extend_from_slice(types.join(",").as_bytes());
+    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
+        let hz = if frequency.is_finite() {
+            frequency.clamp(1.0, 500.0)
+        } else {
+            125.0
+        };
+        outputs.push(OutputRecipe {
+            id,
+            fields: fields
+                .into_iter()
+                .map(|(n, t)| (n, t.unwrap_or(FieldType::Double)))
+                .collect(),
+            period: Duration::from_secs_f64(1.0 / hz),
+            next_send: Instant::now(),
+        });
+    }
+    Some(p)
+}
+
+/// A `SETUP_INPUTS` request: the reply's payload (recipe id and field types), the recipe kept
+/// when every field is known.
+fn setup_inputs(
+    payload: &[u8],
+    inputs: &mut Vec<(u8, Vec<(String, FieldType)>)>,
+    shared: &Shared,
+) -> Vec<u8> {
+    let names = String::from_utf8_lossy(payload).to_string();
+    let fields: Vec<(String, Option<FieldType>)> = names
+        .split(',')
+        .filter(|n| !n.is_empty())
+        .map(|n| (n.to_string(), input_type(n)))
+        .collect();
+    // ur_rtde hard-codes recipe ids 1, 2, 3, ... in setup order, per connection. One byte, as
+    // for the outputs: past 255 recipes the setup fails (id 0).
+    let id = u8::try_from(inputs.len() + 1).unwrap_or(0);
+    if fields
+        .iter()
+        .any(|(n, _)| register_index(n, "input_int_register_") == Some(24))
+    {
+        shared.arm().set_register_offset(24);
+    }
+    let types: Vec<&str> = fields
+        .iter()
+        .map(|(_, t)| t.map_or("NOT_FOUND", FieldType::name))
+        .collect();
+    let mut p = vec![id];
+    p.extend_from_slice(types.join(",").as_bytes());
+    if id != 0 && fields.iter().all(|(_, t)| t.is_some()) {
+        inputs.push((
+            id,
+            fields
+                .into_iter()
+                .map(|(n, t)| (n, t.unwrap_or(FieldType::Double)))
+                .collect(),
+        ));
+    }
+    p
+}
+
+/// Sends every output recipe that is due (one arm snapshot for all of them); an error when the
+/// client is gone.
+fn stream_outputs(
+    stream: &mut TcpStream,
+    shared: &Shared,
+    outputs: &mut [OutputRecipe],
+) -> std::io::Result<()> {
+    let now = Instant::now();
+    if outputs.is_empty() || !outputs.iter().any(|r| now >= r.next_send) {
+        return Ok(());
+    }
+    let snapshot = {
+        let mut arm = shared.arm();
+        if arm.streaming_stopped() {
+            return Ok(());
+        }
+        arm.snapshot(now)
+    };
+    for r in outputs.iter_mut().filter(|r| now >= r.next_send) {
+        let mut p = vec![r.id];
+        for (name, kind) in &r.fields {
+            encode_field(&mut p, name, *kind, &snapshot);
+        }
+        stream.write_all(&packet(DATA_PACKAGE, &p))?;
+        r.next_send += r.period;
+        if r.next_send < now {
+            r.next_send = now + r.period; // fell behind: do not burst
+        }
+    }
+    Ok(())
 }
 
 /// Writes one input data package into the registers, then lets the script react.

@@ -237,80 +237,23 @@ pub fn run_manual_session(
         };
         match command {
             ManualCommand::Finish => break Ok(()),
-            ManualCommand::Freedrive(on) => match robot.set_freedrive(on) {
-                Ok(()) => {
+            ManualCommand::Freedrive(on) => {
+                if switch_freedrive(robot, on, control) {
                     freedrive = on;
                     last_live = None;
-                    control.event(ManualEvent::Check {
-                        ok: true,
-                        message: format!("freedrive {}", if on { "on" } else { "off" }),
-                    });
                 }
-                // An arm whose freedrive handeye cannot switch (ROS 2) is still hand-guided, by
-                // its own means: the message says how, and capture works as ever.
-                Err(RobotError::NotAvailable(how)) => control.event(ManualEvent::Check {
-                    ok: false,
-                    message: format!("freedrive {}: {how}", if on { "on" } else { "off" }),
-                }),
-                Err(e) => control.event(ManualEvent::Check {
-                    ok: false,
-                    message: format!(
-                        "freedrive {}: {}",
-                        if on { "on" } else { "off" },
-                        error_chain(&e)
-                    ),
-                }),
-            },
+            }
             ManualCommand::GoToSuggestion => {
-                let Some((_, joints)) = suggestion else {
-                    control.event(ManualEvent::Check {
-                        ok: false,
-                        message: "no suggestion to go to (no candidate views left)".into(),
-                    });
-                    continue;
-                };
-                if !confirmed {
-                    confirmed = control.confirm_move();
-                    if !confirmed {
-                        control.event(ManualEvent::Check {
-                            ok: false,
-                            message: "the move was not confirmed; nothing moved".into(),
-                        });
-                        continue;
-                    }
-                }
-                if freedrive {
-                    if let Err(e) = robot.set_freedrive(false) {
-                        break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()));
-                    }
-                    freedrive = false;
-                }
-                if let Some(check) = &setup.move_check {
-                    let from = match robot.joint_positions() {
-                        Ok(j) => j,
-                        Err(e) => {
-                            break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()))
-                        }
-                    };
-                    if let Some(problem) = check.problem(&from, &joints) {
-                        control.event(ManualEvent::Check {
-                            ok: false,
-                            message: format!("the move to the suggestion was not sent: {problem}"),
-                        });
-                        continue;
-                    }
-                }
-                match robot.move_joints(&joints, &setup.limits) {
-                    Ok(()) => {
-                        last_live = None;
-                        control.event(ManualEvent::Check {
-                            ok: true,
-                            message: "at the suggested view".into(),
-                        });
-                    }
-                    Err(e) => {
-                        break Err(ArmFault::Robot(e).into_session(&setup, growing.poses.len()))
-                    }
+                match go_to_suggestion(
+                    &setup,
+                    suggestion.map(|(_, joints)| joints),
+                    (&mut confirmed, &mut freedrive),
+                    robot,
+                    control,
+                ) {
+                    Ok(true) => last_live = None,
+                    Ok(false) => {}
+                    Err(fault) => break Err(fault.into_session(&setup, growing.poses.len())),
                 }
             }
             ManualCommand::Capture => {
@@ -354,6 +297,69 @@ pub fn run_manual_session(
     taught?;
     outcome.accepted = (0..growing.poses.len()).collect();
     Ok(outcome)
+}
+
+/// `ManualCommand::Freedrive(on)`: switched and said; whether it switched. An arm whose
+/// freedrive handeye cannot switch (ROS 2) is still hand-guided, by its own means: the message
+/// says how, and capture works as ever.
+fn switch_freedrive(robot: &mut dyn Robot, on: bool, control: &mut dyn ManualControl) -> bool {
+    let word = if on { "on" } else { "off" };
+    let (ok, message) = match robot.set_freedrive(on) {
+        Ok(()) => (true, format!("freedrive {word}")),
+        Err(RobotError::NotAvailable(how)) => (false, format!("freedrive {word}: {how}")),
+        Err(e) => (false, format!("freedrive {word}: {}", error_chain(&e))),
+    };
+    control.event(ManualEvent::Check { ok, message });
+    ok
+}
+
+/// `ManualCommand::GoToSuggestion`: the move to the suggested view (`joints`), confirmed once
+/// for a real arm (`confirmed`), out of freedrive first (`freedrive`), checked like any move;
+/// whether the arm moved. A move not made is said on the page; an arm that fails is the error.
+fn go_to_suggestion(
+    setup: &SessionSetup,
+    joints: Option<Joints>,
+    (confirmed, freedrive): (&mut bool, &mut bool),
+    robot: &mut dyn Robot,
+    control: &mut dyn ManualControl,
+) -> Result<bool, ArmFault> {
+    let refuse = |control: &mut dyn ManualControl, message: String| {
+        control.event(ManualEvent::Check { ok: false, message });
+        Ok(false)
+    };
+    let Some(joints) = joints else {
+        return refuse(
+            control,
+            "no suggestion to go to (no candidate views left)".into(),
+        );
+    };
+    if !*confirmed {
+        *confirmed = control.confirm_move();
+        if !*confirmed {
+            return refuse(control, "the move was not confirmed; nothing moved".into());
+        }
+    }
+    if *freedrive {
+        robot.set_freedrive(false).map_err(ArmFault::Robot)?;
+        *freedrive = false;
+    }
+    if let Some(check) = &setup.move_check {
+        let from = robot.joint_positions().map_err(ArmFault::Robot)?;
+        if let Some(problem) = check.problem(&from, &joints) {
+            return refuse(
+                control,
+                format!("the move to the suggestion was not sent: {problem}"),
+            );
+        }
+    }
+    robot
+        .move_joints(&joints, &setup.limits)
+        .map_err(ArmFault::Robot)?;
+    control.event(ManualEvent::Check {
+        ok: true,
+        message: "at the suggested view".into(),
+    });
+    Ok(true)
 }
 
 /// The file in a hand-guided session's folder that holds its accepted captures as a plan.

@@ -23,10 +23,9 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::config::RobotConfig;
-use crate::plan::{GenerateSpec, Plan, Waypoint};
+use crate::plan::GenerateSpec;
 use crate::session::{
-    self, ManualControl, ManualOptions, SessionError, SessionEvent, SessionFolder, SessionOutcome,
-    SolvedSession,
+    self, ManualControl, SessionError, SessionEvent, SessionFolder, SessionOutcome, SolvedSession,
 };
 use handeye_core::geometry::Pose;
 use handeye_robot::{Joints, Robot, RobotError, RobotStatus};
@@ -36,13 +35,12 @@ use super::{prepare, CellError, PreparedCell};
 mod adaptive;
 mod arm_time;
 mod resume;
+mod stages;
 
-use adaptive::{adaptive_candidates, drive_plan};
 pub use adaptive::{extra_candidates, AdaptiveSummary, ADAPTIVE_EXTRA_CANDIDATES};
-use arm_time::arm_time;
 pub use arm_time::ArmTime;
+use resume::check_resumed_inputs;
 pub use resume::ResumedSession;
-use resume::{check_resumed_inputs, recorded_order, same_plan};
 
 /// Where the run's records go.
 #[derive(Debug, Clone)]
@@ -423,6 +421,9 @@ pub fn drive(
     drive_opened(opened, request, strategy, observer)
 }
 
+/// The run's stages in order ([`stages`]): the strategy's checks, the hardware opened and the
+/// arm found ready, the poses checked from where it stands, the session folder, the session
+/// driven, the arm time.
 fn drive_opened(
     opened: OpenedRun,
     request: &RunRequest,
@@ -434,284 +435,37 @@ fn drive_opened(
         mut cell,
         inputs,
     } = opened;
-
-    let adaptive = match &mut strategy {
-        Strategy::Planned => {
-            // Adaptive: the plan's poses are candidates; the ones that fail their checks are
-            // skipped.
-            let adaptive = cell.config.adaptive();
-            if adaptive && !cell.intrinsics_known {
-                return Err(RunError::AdaptiveNeedsIntrinsics);
-            }
-            if adaptive && cell.report.passing().is_empty() {
-                return Err(RunError::NoPassingPose);
-            }
-            if !adaptive && !cell.report.ok() {
-                return Err(RunError::PlanFailed);
-            }
-            if let Some(rig) = &cell.rig {
-                // An adaptive plan's candidates are the passing poses; a fixed plan all of them.
-                let plan = match adaptive {
-                    true => cell.report.passing(),
-                    false => cell.report.validated().unwrap_or_default(),
-                };
-                let views = rig.check_views(&cell, &plan).map_err(RunError::Cameras)?;
-                observer.cameras_planned(&views);
-            }
-            if !cell.is_simulated() && !request.motion_confirmed {
-                observer
-                    .confirm_motion(&cell, cell.plan.waypoints.len())
-                    .map_err(RunError::NotConfirmed)?;
-            }
-            adaptive
-        }
-        Strategy::Holdout(_) | Strategy::HandGuided(_) if cell.rig.is_some() => {
-            return Err(RunError::Cameras(
-                "a cell with several cameras runs its planned poses only (no held-out check or hand-guided capture yet); nothing was moved".into(),
-            ));
-        }
-        Strategy::Holdout(spec) => {
-            spec.validate()
-                .map_err(|e| RunError::Holdout(e.to_string()))?;
-            if !cell.is_simulated() && !request.motion_confirmed {
-                observer
-                    .confirm_motion(&cell, spec.count)
-                    .map_err(RunError::NotConfirmed)?;
-            }
-            false
-        }
-        Strategy::HandGuided(guide) => {
-            // A session a planned resume handed over (an older one without the mark) is marked
-            // hand-guided.
-            if let Some(resumed) = &mut resumed {
-                if !resumed.manifest.manual {
-                    resumed.manifest.manual = true;
-                    resumed.manifest_changed = true;
-                }
-            }
-            guide.prepared(&cell);
-            false
-        }
-    };
-    let poses = cell.plan.waypoints.len();
+    let adaptive =
+        stages::check_before_opening(&cell, &mut resumed, request, &mut strategy, observer)?;
     let mut hardware = cell.open_hardware().map_err(RunError::Hardware)?;
     ensure_robot_ready(hardware.robot.as_mut())?;
-    // The plan was checked from an assumed start; check it again from where the arm really is
-    // before the first move.
     let start = hardware.robot.joint_positions().map_err(RunError::Joints)?;
-    // An adaptive plan's candidates by their numbers in `handeye plan check`'s listing.
-    let mut candidate_numbers = Vec::new();
-    let mut plan = match &strategy {
-        Strategy::Planned if adaptive => {
-            let _ = cell.recheck_from(start);
-            let candidates = adaptive_candidates(&cell);
-            if candidates.is_empty() {
-                return Err(RunError::NoPassingPoseFromArm {
-                    report: cell.report.to_string(),
-                });
-            }
-            candidate_numbers = candidates.iter().map(|(number, ..)| *number).collect();
-            candidates
-                .into_iter()
-                .map(|(_, pose, joints)| (pose, joints))
-                .collect()
-        }
-        Strategy::Planned => match cell.recheck_from(start) {
-            Ok(plan) => plan,
-            Err(report) => {
-                return Err(RunError::PlanFailsFromArm {
-                    report: report.to_string(),
-                })
-            }
-        },
-        Strategy::Holdout(spec) => {
-            // The cell was prepared from an assumed start: the views are checked from where
-            // the arm is, and only usable ones kept (each move is checked again before it is
-            // sent).
-            let _ = cell.recheck_from(start);
-            let views = Plan {
-                waypoints: cell
-                    .generate_views(spec)
-                    .into_iter()
-                    .map(Waypoint::LookAt)
-                    .collect(),
-            };
-            let passing = cell.check_plan(&views).passing();
-            if passing.is_empty() {
-                return Err(RunError::Holdout(format!(
-                    "from the arm's actual position none of the {} generated views is reachable and shows the board; nothing was moved",
-                    spec.count
-                )));
-            }
-            passing
-        }
-        // Suggestions come from the plan's poses that pass their checks from where the arm
-        // stands.
-        Strategy::HandGuided(_) => {
-            let _ = cell.recheck_from(start);
-            cell.report.passing()
-        }
-    };
+    let stages::SessionPoses {
+        mut plan,
+        candidate_numbers,
+    } = stages::poses_from_arm(&mut cell, &strategy, adaptive, start)?;
     // The plan this session records in its manifest and visits as given.
     let fixed_plan = match strategy {
         Strategy::Planned => !adaptive,
         Strategy::Holdout(_) => true,
         Strategy::HandGuided(_) => false,
     };
-
-    let folder = match resumed {
-        Some(ResumedSession {
-            folder,
-            mut manifest,
-            mut manifest_changed,
-            recorded_poses,
-        }) => {
-            // An adaptive or hand-guided session's plan is what it chose so far: it continues
-            // from there. A fixed plan ordered for travel time from where the arm stood then
-            // keeps that order.
-            if fixed_plan && !same_plan(&manifest, &plan) {
-                match recorded_order(&manifest, &plan) {
-                    Some(recorded) => plan = recorded,
-                    // Nothing recorded yet: the plan of today's config is the session's plan.
-                    None if recorded_poses == 0 => {
-                        observer.note("nothing was recorded yet: the session takes the plan of today's config");
-                        manifest.plan = cell.manifest(&plan).plan;
-                        manifest_changed = true;
-                    }
-                    None => {
-                        return Err(RunError::PlanChanged {
-                            folder: folder.root().to_path_buf(),
-                        })
-                    }
-                }
-            }
-            if manifest_changed {
-                folder.write_manifest(&manifest)?;
-            }
-            folder
-        }
-        None => {
-            let folder = match &request.target {
-                SessionTarget::New(out) => match &cell.rig {
-                    Some(rig) => {
-                        if super::rig::is_rig_folder(out) {
-                            return Err(RunError::Cameras(format!(
-                                "{}: already holds a several-camera session: pass --resume to continue it, or choose another folder",
-                                out.display()
-                            )));
-                        }
-                        SessionFolder::create(&super::rig::camera_folder(out, rig.planner_name()))?
-                    }
-                    None => SessionFolder::create(out)?,
-                },
-                SessionTarget::Created(_) if cell.rig.is_some() => {
-                    return Err(RunError::Cameras(
-                        "a cell with several cameras cannot record into a staging folder".into(),
-                    ))
-                }
-                SessionTarget::Created(folder) => folder.clone(),
-                SessionTarget::Resume(_) => unreachable!("a resume has its folder"),
-            };
-            for note in folder.notes() {
-                observer.note(note);
-            }
-            // An adaptive or hand-guided session's manifest starts empty and grows with the
-            // poses it visits.
-            let recorded: &[(Pose, Joints)] = if fixed_plan { &plan } else { &[] };
-            let manifest = cell.manifest(recorded).with_inputs(inputs);
-            let manifest = match strategy {
-                Strategy::HandGuided(_) => manifest.hand_guided(),
-                Strategy::Planned | Strategy::Holdout(_) => manifest,
-            };
-            folder.write_manifest(&manifest)?;
-            folder
-        }
-    };
-
-    let (outcome, adaptive_summary) = match &mut strategy {
-        Strategy::Planned | Strategy::Holdout(_) => {
-            let mut setup = cell.session_setup(folder.clone(), plan.clone(), request.stop.clone());
-            if let Some(rig) = &cell.rig {
-                let root = super::rig::root_of(folder.root()).ok_or_else(|| {
-                    RunError::Cameras(format!(
-                        "{}: not inside a several-camera session",
-                        folder.root().display()
-                    ))
-                })?;
-                let resuming = matches!(request.target, SessionTarget::Resume(_));
-                // An adaptive session's plan grows as it goes (in the planner camera's folder).
-                let recorded: &[(Pose, Joints)] = if fixed_plan { &plan } else { &[] };
-                setup.rig = Some(
-                    rig.session_cameras(root, resuming, recorded)
-                        .map_err(RunError::Cameras)?,
-                );
-            }
-            observer.session_folder(&folder, &plan);
-            observer.session_started(match strategy {
-                Strategy::Holdout(_) => plan.len(),
-                _ => poses,
-            });
-            let driven = drive_plan(
-                &cell,
-                setup,
-                (&plan, &candidate_numbers),
-                start,
-                adaptive,
-                &mut hardware,
-                observer,
-            );
-            observer.session_ended();
-            let (outcome, summary) = driven;
-            if let Some(summary) = &summary {
-                observer.note(&summary.to_string());
-            }
-            (outcome, summary)
-        }
-        Strategy::HandGuided(guide) => {
-            let setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
-            observer.session_folder(&folder, &[]);
-            observer.session_started(plan.len());
-            let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {
-                // Suggestions never stop on their own: the person decides when to finish.
-                cell.adaptive_planner(plan.clone(), 0.0, usize::MAX)
-            });
-            let options = ManualOptions {
-                real_arm: !cell.is_simulated() && !request.motion_confirmed,
-                ..ManualOptions::default()
-            };
-            let outcome = {
-                let mut control = guide.control(&cell, &folder, &plan, &mut *observer);
-                session::run_manual_session(
-                    setup,
-                    cell.config_path(),
-                    planner.as_mut(),
-                    &options,
-                    hardware.robot.as_mut(),
-                    hardware.camera.as_mut(),
-                    control.as_mut(),
-                )
-            };
-            observer.session_ended();
-            guide.ended();
-            (outcome, None)
-        }
-    };
-    let outcome = outcome?;
-    // A person moved a hand-guided arm, and there is no plan to compare with; a recorded robot
-    // (frames imported from a bag or a ViSP folder) moved nothing now: no arm time for either.
+    let folder = stages::session_folder(
+        &cell, resumed, request, &strategy, &mut plan, fixed_plan, inputs, observer,
+    )?;
+    let (outcome, adaptive_summary) = stages::drive_session(
+        &cell,
+        &folder,
+        request,
+        &mut strategy,
+        (&plan, &candidate_numbers),
+        (start, adaptive, fixed_plan),
+        &mut hardware,
+        observer,
+    )?;
     let recorded = matches!(cell.config.robot, RobotConfig::Recorded { .. });
-    let arm_time =
-        (matches!(strategy, Strategy::Planned) && !recorded).then(|| arm_time(&cell, &outcome));
-    if let Some(arm_time) = &arm_time {
-        observer.note(&arm_time.to_string());
-        // Kept beside the result for the report; a failure to write it loses only this figure.
-        if let Ok(text) = serde_yaml_ng::to_string(arm_time) {
-            if let Err(e) = folder.write_file(std::path::Path::new(ArmTime::FILE), text.as_bytes())
-            {
-                observer.note(&format!("the arm time could not be kept: {e}"));
-            }
-        }
-    }
+    let arm_time = (matches!(strategy, Strategy::Planned) && !recorded)
+        .then(|| stages::keep_arm_time(&cell, &folder, &outcome, observer));
     Ok(DrivenRun {
         cell,
         folder,
