@@ -57,7 +57,7 @@ pub mod evidence;
 pub mod rules;
 
 pub use evidence::{
-    assess_result, assess_solved, coverage_notices, held_out, residual_notice, working_distance_mm,
+    assess_modelled, assess_result, assess_solved, coverage_notices, held_out, residual_notice, working_distance_mm,
 };
 pub use rules::{assess, Evidence};
 
@@ -156,6 +156,9 @@ pub enum Basis {
     /// The intrinsics do not fit the frames (per-frame reprojection far above normal, or the
     /// intrinsics estimated from the session far from the file's).
     Intrinsics,
+    /// The corners contradict both the intrinsics and the board file, or cannot tell which of
+    /// the two is wrong (the cell model, `solve::cell_model`).
+    IntrinsicsAndBoard,
     /// The answer is far from the config's nominal transforms.
     FarFromNominal,
     /// The held-out (leave-one-out) prediction error against the accuracy.
@@ -267,6 +270,10 @@ pub struct Figures {
     /// 1-sigma of `board_scale`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub board_scale_sigma: Option<f64>,
+    /// The cell model's choice between the files as given and a wrong intrinsics or board file,
+    /// when the corners were fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell_model: Option<crate::cell_model::CellModelSummary>,
 }
 
 /// GOOD / CHECK / REDO with the reason that decided it, the next action, the figures, and any
