@@ -22,6 +22,11 @@
 //! views cannot tell the lens from the board: the answer is then ambiguous, and the verdict names
 //! both files and the measurement that separates them.
 //!
+//! A file is *unverifiable* by these views when, with its quantity free, the transforms are not
+//! pinned within the accuracy asked: a wrong one would fit as well as a right one (a focal length
+//! from views all at one distance, say). The files as given are then not GOOD either: REDO,
+//! naming the file and the views that would check it.
+//!
 //! An explanation is *determined* when its fit pins both transforms within the accuracy asked
 //! (the marginal 1-sigma, with the freed quantities estimated). [`CellModel::finding`] turns the
 //! choice into the verdict's finding: CHECK with the estimates (the answer uses them) when
@@ -49,8 +54,9 @@ use handeye_core::setup::Setup;
 /// A BIC difference above this between two explanations is decisive (Kass and Raftery 1995:
 /// "very strong" evidence); below it the two one-file explanations are not told apart.
 pub const DECISIVE_BIC: f64 = 10.0;
-/// A parameter is named as wrong when its estimate is this many sigmas from the file's value.
-pub const NAMED_SIGMAS: f64 = 3.0;
+/// A parameter is named as wrong when its estimate is this many sigmas from the file's value (5:
+/// with up to nine parameters freed at once, 3 would name a right one in one fit of forty).
+pub const NAMED_SIGMAS: f64 = 5.0;
 /// The file written into the session with the estimated intrinsics.
 pub const CORRECTED_INTRINSICS_FILE: &str = "camera_info.yaml";
 /// The file written into the session with the estimated board size.
@@ -142,6 +148,10 @@ pub struct Candidate {
     pub bic: f64,
     /// Corner reprojection RMS, px.
     pub rms_px: f64,
+    /// Larger 1-sigma translation of the two transforms with this explanation's freedom, mm.
+    pub sigma_translation_mm: f64,
+    /// Larger 1-sigma rotation of the two transforms with this explanation's freedom, degrees.
+    pub sigma_rotation_deg: f64,
 }
 
 /// A parameter of a given file and what the corners say it is.
@@ -217,6 +227,11 @@ pub struct CellModelSummary {
     /// The views cannot tell a wrong lens from a wrong board (the two one-file explanations'
     /// BIC within [`DECISIVE_BIC`]).
     pub ambiguous: bool,
+    /// Files these views cannot check: with the file's quantity free, the transforms are not
+    /// pinned within the accuracy asked (the views would not see it wrong, so a wrong one would
+    /// pass unnoticed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unverifiable: Vec<GivenFile>,
     /// Corner residuals (`n` of the BIC).
     pub residuals: usize,
     /// Larger 1-sigma translation of the two transforms under the chosen explanation, mm.
@@ -245,7 +260,7 @@ impl CellModelSummary {
     /// ambiguous; REDO naming the file(s) and the measurement that would decide otherwise.
     pub fn finding(&self, accuracy: Accuracy) -> Option<Finding> {
         if self.chosen == Explanation::AsGiven {
-            return None;
+            return self.unverifiable_finding(accuracy);
         }
         let blamed = self.blamed();
         let basis = match blamed.as_slice() {
@@ -275,6 +290,16 @@ impl CellModelSummary {
                 "{} {} not fit this cell: ",
                 files.join(" and "),
                 if files.len() > 1 { "do" } else { "does" }
+            );
+        }
+        let scale = self.estimates.iter().find(|e| e.parameter == "scale");
+        if let (Some(e), false) = (scale, self.ambiguous) {
+            let _ = write!(
+                reason,
+                "the board measures {:.3}× (±{:.4}) the size in its board file — printed at {:.0} %?; ",
+                e.estimate,
+                e.sigma,
+                e.estimate * 100.0
             );
         }
         if let (Some(g), Some(c)) = (given, chosen) {
@@ -348,6 +373,60 @@ impl CellModelSummary {
             next_action: format!(
                 "fix the file: {}; then `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`",
                 fixes.join("; ")
+            ),
+        })
+    }
+}
+
+impl CellModelSummary {
+    /// The files as given are chosen, but the views could not have seen some of them wrong:
+    /// REDO naming the file(s) and the views that would check them.
+    fn unverifiable_finding(&self, accuracy: Accuracy) -> Option<Finding> {
+        let basis = match self.unverifiable.as_slice() {
+            [] => return None,
+            [GivenFile::Intrinsics] => Basis::Intrinsics,
+            [GivenFile::Board] => Basis::BoardScale,
+            _ => Basis::IntrinsicsAndBoard,
+        };
+        let files: Vec<String> = self
+            .unverifiable
+            .iter()
+            .map(|f| match f {
+                GivenFile::Intrinsics => {
+                    format!("the intrinsics in {INTRINSICS_PLACEHOLDER} (focal length, principal point, distortion)")
+                }
+                GivenFile::Board => format!("the board's size in {BOARD_PLACEHOLDER}"),
+            })
+            .collect();
+        let sigma: Vec<String> = self
+            .unverifiable
+            .iter()
+            .filter_map(|f| {
+                let e = match f {
+                    GivenFile::Intrinsics => Explanation::Intrinsics,
+                    GivenFile::Board => Explanation::BoardScale,
+                };
+                let c = self.candidate(e)?;
+                Some(format!(
+                    "with {} the transforms are known to {:.2} mm, {:.3}°",
+                    e.label(),
+                    c.sigma_translation_mm,
+                    c.sigma_rotation_deg
+                ))
+            })
+            .collect();
+        Some(Finding {
+            level: Level::Redo,
+            basis,
+            reason: format!(
+                "these views cannot check {}: a wrong file would fit them as well as a right one ({}; {} mm, {}° asked), so the answer rests on the file unchecked",
+                files.join(" or "),
+                sigma.join("; "),
+                accuracy.translation_mm,
+                accuracy.rotation_deg
+            ),
+            next_action: format!(
+                "record views nearer and farther (±15 cm) with the board tilted 20–40° about two axes and reaching the image corners, or measure a printed tag's black square with a ruler (it fixes the board's scale); then `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`"
             ),
         })
     }
@@ -550,12 +629,15 @@ pub fn fit_cell_model(
         .map(|(e, fit)| {
             let k = free_parameters(*e, camera);
             let chi2 = cost(fit);
+            let (sigma_translation_mm, sigma_rotation_deg) = sigmas(fit);
             Candidate {
                 explanation: *e,
                 chi2,
                 parameters: k,
                 bic: chi2 / variance + k as f64 * ln_n,
                 rms_px: fit.errors.rms_px,
+                sigma_translation_mm,
+                sigma_rotation_deg,
             }
         })
         .collect();
@@ -579,6 +661,22 @@ pub fn fit_cell_model(
         }
         _ => false,
     };
+    // A file whose quantity, freed, leaves the transforms unpinned cannot be checked here.
+    let pinned = |e: Explanation| {
+        candidates.iter().any(|c| {
+            c.explanation == e
+                && c.sigma_translation_mm <= accuracy.translation_mm
+                && c.sigma_rotation_deg <= accuracy.rotation_deg
+        })
+    };
+    let unverifiable: Vec<GivenFile> = [
+        (GivenFile::Intrinsics, Explanation::Intrinsics),
+        (GivenFile::Board, Explanation::BoardScale),
+    ]
+    .into_iter()
+    .filter(|(_, e)| !pinned(*e))
+    .map(|(f, _)| f)
+    .collect();
     let index = fits
         .iter()
         .position(|(e, _)| *e == best)
@@ -593,9 +691,192 @@ pub fn fit_cell_model(
         estimates: estimates(best, camera, &fit),
         determined,
         ambiguous,
+        unverifiable,
         residuals: n,
         sigma_translation_mm,
         sigma_rotation_deg,
     };
     Ok(CellModel { summary, fit })
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    use super::*;
+    use crate::reprojection::Corner;
+    use handeye_core::geometry::pose_from_rotvec;
+
+    fn lens() -> CameraModel {
+        CameraModel {
+            width: 1280,
+            height: 720,
+            fx: 800.0,
+            fy: 800.0,
+            cx: 641.3,
+            cy: 358.7,
+            distortion: Distortion::RadTan {
+                k1: -0.08,
+                k2: 0.05,
+                p1: 0.0004,
+                p2: -0.0006,
+                k3: 0.0,
+            },
+        }
+    }
+
+    /// `T_camera_target` of a camera `distance` from the board's centre, tilted `tilt` (rad)
+    /// towards `azimuth`, rolled `roll`.
+    fn view(centre: Vector3<f64>, distance: f64, tilt: f64, azimuth: f64, roll: f64) -> Pose {
+        let direction = Vector3::new(
+            tilt.sin() * azimuth.cos(),
+            tilt.sin() * azimuth.sin(),
+            tilt.cos(),
+        );
+        let position = centre + direction * distance;
+        let z = (centre - position).normalize();
+        let x = (Vector3::x() - z * z.dot(&Vector3::x())).normalize();
+        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, z.cross(&x), z]))
+            * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
+        Pose::from_parts(
+            Translation3::from(position),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        )
+        .inverse()
+    }
+
+    /// Eye-in-hand frames of a `side`x`side` grid of `pitch` (m) seen through `lens()` at
+    /// `views`, 0.2 px noise; and the true mounts.
+    fn frames(side: usize, pitch: f64, views: &[Pose], seed: u64) -> (Vec<Frame>, Pose, Pose) {
+        let camera_mount = pose_from_rotvec(
+            Vector3::new(0.0312, -0.0694, 0.0447),
+            Vector3::new(0.021, -0.016, 1.561),
+        );
+        let target_mount = pose_from_rotvec(
+            Vector3::new(0.5034, -0.1467, 0.0021),
+            Vector3::new(0.012, -0.018, 0.297),
+        );
+        let noise = Normal::new(0.0, 0.2).unwrap();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let truth = lens();
+        let frames = views
+            .iter()
+            .map(|camera_from_target| {
+                let corners = (0..side * side)
+                    .filter_map(|k| {
+                        let p = Point3::new((k % side) as f64 * pitch, (k / side) as f64 * pitch, 0.0);
+                        let px = truth.project(&(camera_from_target * p))?;
+                        Some(Corner {
+                            point_in_target: p,
+                            pixel: Point2::new(
+                                px.x + noise.sample(&mut rng),
+                                px.y + noise.sample(&mut rng),
+                            ),
+                        })
+                    })
+                    .collect();
+                Frame {
+                    base_from_flange: target_mount
+                        * camera_from_target.inverse()
+                        * camera_mount.inverse(),
+                    corners,
+                    id: None,
+                }
+            })
+            .collect();
+        (frames, camera_mount, target_mount)
+    }
+
+    fn options() -> ReprojectionOptions {
+        ReprojectionOptions {
+            pixel_sigma_px: 0.2,
+            ..ReprojectionOptions::default()
+        }
+    }
+
+    /// Tilted views at 0.45–0.75 m of a 0.29 m grid.
+    fn varied_views(seed: u64) -> Vec<Pose> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        (0..12)
+            .map(|_| {
+                view(
+                    Vector3::new(0.14, 0.14, 0.0),
+                    rng.random_range(0.45..0.75),
+                    rng.random_range(0.1..0.6),
+                    rng.random_range(0.0..std::f64::consts::TAU),
+                    rng.random_range(-0.5..0.5),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_focal_length_6_percent_long_is_named_with_its_estimate_and_a_right_file_is_not() {
+        let (frames, x, y) = frames(8, 0.04, &varied_views(1), 2);
+        let accuracy = Accuracy::default();
+        let right = fit_cell_model(Setup::EyeInHand, &frames, &lens(), &x, &y, &options(), accuracy)
+            .unwrap();
+        assert_eq!(right.summary.chosen, Explanation::AsGiven, "{:?}", right.summary);
+        assert!(right.summary.unverifiable.is_empty(), "{:?}", right.summary);
+        assert!(right.summary.finding(accuracy).is_none());
+
+        let mut file = lens();
+        file.fx = 848.0;
+        file.fy = 848.0;
+        let model =
+            fit_cell_model(Setup::EyeInHand, &frames, &file, &x, &y, &options(), accuracy).unwrap();
+        let s = &model.summary;
+        assert_eq!(s.chosen, Explanation::Intrinsics, "{s:?}");
+        assert!(s.determined && !s.ambiguous, "{s:?}");
+        assert!((model.camera().fx / 800.0 - 1.0).abs() < 0.002, "{:?}", model.camera());
+        let f = s.finding(accuracy).unwrap();
+        assert_eq!((f.level, f.basis), (Level::Check, Basis::Intrinsics), "{}", f.reason);
+        for expected in [
+            format!("the intrinsics in {INTRINSICS_PLACEHOLDER} does not fit this cell"),
+            "fx in the file 848.0 px, estimated from this session ".to_string(),
+            "(-5.7 %)".to_string(),
+            "the answer uses the estimate".to_string(),
+        ] {
+            assert!(f.reason.contains(&expected), "{expected:?} not in {}", f.reason);
+        }
+        assert!(f.next_action.contains(CORRECTED_INTRINSICS_FILE), "{}", f.next_action);
+        assert!(!f.reason.contains("board"), "{}", f.reason);
+        // The principal point and distortion are right: not named.
+        assert!(!f.reason.contains("cx in the file"), "{}", f.reason);
+    }
+
+    #[test]
+    fn views_that_cannot_check_the_focal_length_are_redo_naming_the_measurement() {
+        // A 6 cm grid orbited at 1 m: hardly any perspective, so a focal length error moves the
+        // camera along its axis instead of showing in the corners.
+        let views: Vec<Pose> = (0..10)
+            .map(|k| {
+                let k = k as f64;
+                view(Vector3::new(0.03, 0.03, 0.0), 1.0, 0.35 + 0.1 * (k * 1.3).sin(), k * 0.63, 0.4 * (k * 0.7).cos())
+            })
+            .collect();
+        let (frames, x, y) = frames(4, 0.02, &views, 3);
+        let accuracy = Accuracy::default();
+        for fx in [800.0, 848.0] {
+            let mut file = lens();
+            file.fx = fx;
+            file.fy = fx;
+            let model = fit_cell_model(Setup::EyeInHand, &frames, &file, &x, &y, &options(), accuracy)
+                .unwrap();
+            let s = &model.summary;
+            let f = s.finding(accuracy).unwrap_or_else(|| panic!("fx {fx}: no finding: {s:?}"));
+            assert_eq!(f.level, Level::Redo, "fx {fx}: {}", f.reason);
+            assert!(
+                matches!(f.basis, Basis::Intrinsics | Basis::IntrinsicsAndBoard),
+                "fx {fx}: {:?} {}",
+                f.basis,
+                f.reason
+            );
+            assert!(f.reason.contains(INTRINSICS_PLACEHOLDER), "{}", f.reason);
+            assert!(f.next_action.contains("nearer and farther"), "{}", f.next_action);
+        }
+    }
 }

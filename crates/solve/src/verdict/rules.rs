@@ -109,6 +109,10 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         figures.cell_model = Some(model.clone());
         findings.extend(model.finding(a));
     }
+    let modelled_scale = evidence
+        .cell_model
+        .filter(|m| m.chosen.board_wrong())
+        .and_then(|m| m.estimates.iter().find(|e| e.parameter == "scale"));
 
     // The board's size in pose space (without corners): a wrong one explains the residuals and
     // held-out error it causes, so it comes before them.
@@ -119,6 +123,12 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         if scale.is_wrong() && !intrinsics_wrong && evidence.cell_model.is_none() {
             findings.push(board_scale_finding(scale, evidence.pairs, a));
         }
+    }
+    // The board's scale the answer used, when the cell model estimated it (the pose-space fit
+    // above then ran on board poses already corrected by it).
+    if let Some(e) = modelled_scale {
+        figures.board_scale = Some(e.estimate);
+        figures.board_scale_sigma = Some(e.sigma);
     }
 
     // Residual health, with the convention check.
