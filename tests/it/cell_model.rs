@@ -129,7 +129,8 @@ impl Mistake {
             }
             Mistake::DistortionDropped => file.distortion = Distortion::None,
             Mistake::DistortionFlipped => {
-                let flipped: Vec<f64> = truth.distortion.coefficients().iter().map(|c| -c).collect();
+                let flipped: Vec<f64> =
+                    truth.distortion.coefficients().iter().map(|c| -c).collect();
                 file.distortion = truth.distortion.with_coefficients(&flipped).unwrap();
             }
             Mistake::AnotherLens => {
@@ -171,7 +172,10 @@ fn truth(setup: Setup) -> (Pose, Pose) {
         ),
         // A camera 1.2 m over the table looking down; the board on the flange.
         Setup::EyeToHand => (
-            pose_from_rotvec(Vector3::new(0.55, -0.05, 1.2), Vector3::new(3.12, 0.04, 0.0)),
+            pose_from_rotvec(
+                Vector3::new(0.55, -0.05, 1.2),
+                Vector3::new(3.12, 0.04, 0.0),
+            ),
             pose_from_rotvec(
                 Vector3::new(-0.145, -0.145, 0.012),
                 Vector3::new(0.01, -0.02, 0.2),
@@ -325,11 +329,20 @@ fn solve_case(c: &Case, config: &CellConfig, board: &Target) -> Outcome {
         camera_mount,
         target_mount,
     };
-    let solved =
-        session::solve_session(c.setup, &c.pairs, &c.visits, Some((board, &c.lens)), &config)
-            .unwrap();
+    let solved = session::solve_session(
+        c.setup,
+        &c.pairs,
+        &c.visits,
+        Some((board, &c.lens)),
+        &config,
+    )
+    .unwrap();
     let verdict = solved.verdict.clone().unwrap();
-    let model = &solved.cell_model.as_ref().expect("the cell model ran").summary;
+    let model = &solved
+        .cell_model
+        .as_ref()
+        .expect("the cell model ran")
+        .summary;
     let e1 = pose_error_mm_deg(&solved.calibration.camera_mount, &camera_mount);
     let e2 = pose_error_mm_deg(&solved.calibration.target_mount, &target_mount);
     Outcome {
@@ -433,14 +446,19 @@ fn drawn_cases(seed: u64, count: usize) {
         good_but_wrong.len(),
         nothing.len(),
     );
-    for o in outcomes
-        .iter()
-        .filter(|o| o.blamed != o.mistake.wrong() || (o.mistake == Mistake::Nothing && o.level != Level::Good))
-    {
+    for o in outcomes.iter().filter(|o| {
+        o.blamed != o.mistake.wrong() || (o.mistake == Mistake::Nothing && o.level != Level::Good)
+    }) {
         eprintln!("--- {:?} {:?}:\n{}", o.setup, o.mistake, o.reason);
     }
-    assert!(misblamed.is_empty(), "blamed the other file: {misblamed:#?}");
-    assert!(good_but_wrong.is_empty(), "GOOD and wrong: {good_but_wrong:#?}");
+    assert!(
+        misblamed.is_empty(),
+        "blamed the other file: {misblamed:#?}"
+    );
+    assert!(
+        good_but_wrong.is_empty(),
+        "GOOD and wrong: {good_but_wrong:#?}"
+    );
     assert!(
         right as f64 >= 0.95 * wrong.len() as f64,
         "the wrong file named in {right} of {}",

@@ -22,6 +22,9 @@
 //! views cannot tell the lens from the board: the answer is then ambiguous, and the verdict names
 //! both files and the measurement that separates them.
 //!
+//! A wrong file whose correction moves neither transform by half the accuracy asked does not
+//! matter at that accuracy: the files as given then stand (`immaterial` says which deviated).
+//!
 //! A file is *unverifiable* by these views when, with its quantity free, the transforms are not
 //! pinned within the accuracy asked: a wrong one would fit as well as a right one (a focal length
 //! from views all at one distance, say). The files as given are then not GOOD either: REDO,
@@ -43,8 +46,8 @@ use crate::reprojection::{
     refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions,
 };
 use crate::verdict::{
-    Accuracy, Basis, Finding, Level, BOARD_PLACEHOLDER, CONFIG_PLACEHOLDER,
-    INTRINSICS_PLACEHOLDER, SESSION_PLACEHOLDER,
+    Accuracy, Basis, Finding, Level, BOARD_PLACEHOLDER, CONFIG_PLACEHOLDER, INTRINSICS_PLACEHOLDER,
+    SESSION_PLACEHOLDER,
 };
 use crate::{RobustLoss, SolveError};
 use handeye_core::camera_model::{CameraModel, Distortion};
@@ -227,6 +230,11 @@ pub struct CellModelSummary {
     /// The views cannot tell a wrong lens from a wrong board (the two one-file explanations'
     /// BIC within [`DECISIVE_BIC`]).
     pub ambiguous: bool,
+    /// The explanation the BIC chose when its correction moves neither transform by half the
+    /// accuracy asked: the files as given then stand (the deviation does not matter at that
+    /// accuracy), and this says which file deviated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub immaterial: Option<Explanation>,
     /// Files these views cannot check: with the file's quantity free, the transforms are not
     /// pinned within the accuracy asked (the views would not see it wrong, so a wrong one would
     /// pass unnoticed).
@@ -320,7 +328,11 @@ impl CellModelSummary {
             .map(Estimate::describe)
             .collect();
         let named = if named.is_empty() {
-            self.estimates.iter().take(1).map(Estimate::describe).collect()
+            self.estimates
+                .iter()
+                .take(1)
+                .map(Estimate::describe)
+                .collect()
         } else {
             named
         };
@@ -471,13 +483,7 @@ fn options_for(e: Explanation, base: &ReprojectionOptions) -> ReprojectionOption
 
 fn cost(fit: &ReprojectionCalibration) -> f64 {
     // Whitened corner cost; the robot-correction prior is common to all explanations and left out.
-    let n: f64 = fit
-        .errors
-        .corner_px
-        .iter()
-        .flatten()
-        .map(|e| e * e)
-        .sum();
+    let n: f64 = fit.errors.corner_px.iter().flatten().map(|e| e * e).sum();
     n / (fit.pixel_sigma_px * fit.pixel_sigma_px)
 }
 
@@ -506,11 +512,20 @@ fn sigmas(fit: &ReprojectionCalibration) -> (f64, f64) {
     }
 }
 
-fn estimates(
-    e: Explanation,
-    file: &CameraModel,
-    fit: &ReprojectionCalibration,
-) -> Vec<Estimate> {
+/// The larger translation (mm) and rotation (degrees) difference between the two fits' mounts.
+fn difference(a: &ReprojectionCalibration, b: &ReprojectionCalibration) -> (f64, f64) {
+    let d = |x: &Pose, y: &Pose| {
+        (
+            (x.translation.vector - y.translation.vector).norm() * 1e3,
+            x.rotation.angle_to(&y.rotation).to_degrees(),
+        )
+    };
+    let (t1, r1) = d(&a.camera_mount, &b.camera_mount);
+    let (t2, r2) = d(&a.target_mount, &b.target_mount);
+    (t1.max(t2), r1.max(r2))
+}
+
+fn estimates(e: Explanation, file: &CameraModel, fit: &ReprojectionCalibration) -> Vec<Estimate> {
     let mut out = Vec::new();
     if e.intrinsics_wrong() {
         if let Some(sigma) = fit.intrinsics_sigma_px {
@@ -641,11 +656,25 @@ pub fn fit_cell_model(
             }
         })
         .collect();
-    let best = candidates
+    let mut best = candidates
         .iter()
         .min_by(|a, b| a.bic.total_cmp(&b.bic))
         .expect("at least one candidate")
         .explanation;
+    // A wrong file whose correction moves neither transform by half the accuracy asked does not
+    // matter at that accuracy (a board 0.01 % off, measurable with sharp corners): the files as
+    // given stand, and the deviation is only reported.
+    let mut immaterial = None;
+    if best != Explanation::AsGiven {
+        let of = |e: Explanation| fits.iter().find(|(f, _)| *f == e).map(|(_, fit)| fit);
+        if let (Some(given), Some(chosen)) = (of(Explanation::AsGiven), of(best)) {
+            let (t, r) = difference(given, chosen);
+            if t <= 0.5 * accuracy.translation_mm && r <= 0.5 * accuracy.rotation_deg {
+                immaterial = Some(best);
+                best = Explanation::AsGiven;
+            }
+        }
+    }
     let bic_of = |e: Explanation| {
         candidates
             .iter()
@@ -653,12 +682,8 @@ pub fn fit_cell_model(
             .map_or(f64::INFINITY, |c| c.bic)
     };
     let ambiguous = match best {
-        Explanation::BoardScale => {
-            bic_of(Explanation::Intrinsics) - bic_of(best) < DECISIVE_BIC
-        }
-        Explanation::Intrinsics => {
-            bic_of(Explanation::BoardScale) - bic_of(best) < DECISIVE_BIC
-        }
+        Explanation::BoardScale => bic_of(Explanation::Intrinsics) - bic_of(best) < DECISIVE_BIC,
+        Explanation::Intrinsics => bic_of(Explanation::BoardScale) - bic_of(best) < DECISIVE_BIC,
         _ => false,
     };
     // A file whose quantity, freed, leaves the transforms unpinned cannot be checked here.
@@ -691,6 +716,7 @@ pub fn fit_cell_model(
         estimates: estimates(best, camera, &fit),
         determined,
         ambiguous,
+        immaterial,
         unverifiable,
         residuals: n,
         sigma_translation_mm,
@@ -739,8 +765,9 @@ mod tests {
         let position = centre + direction * distance;
         let z = (centre - position).normalize();
         let x = (Vector3::x() - z * z.dot(&Vector3::x())).normalize();
-        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, z.cross(&x), z]))
-            * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
+        let rotation =
+            Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, z.cross(&x), z]))
+                * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
         Pose::from_parts(
             Translation3::from(position),
             UnitQuaternion::from_rotation_matrix(&rotation),
@@ -767,7 +794,8 @@ mod tests {
             .map(|camera_from_target| {
                 let corners = (0..side * side)
                     .filter_map(|k| {
-                        let p = Point3::new((k % side) as f64 * pitch, (k / side) as f64 * pitch, 0.0);
+                        let p =
+                            Point3::new((k % side) as f64 * pitch, (k / side) as f64 * pitch, 0.0);
                         let px = truth.project(&(camera_from_target * p))?;
                         Some(Corner {
                             point_in_target: p,
@@ -817,32 +845,70 @@ mod tests {
     fn a_focal_length_6_percent_long_is_named_with_its_estimate_and_a_right_file_is_not() {
         let (frames, x, y) = frames(8, 0.04, &varied_views(1), 2);
         let accuracy = Accuracy::default();
-        let right = fit_cell_model(Setup::EyeInHand, &frames, &lens(), &x, &y, &options(), accuracy)
-            .unwrap();
-        assert_eq!(right.summary.chosen, Explanation::AsGiven, "{:?}", right.summary);
+        let right = fit_cell_model(
+            Setup::EyeInHand,
+            &frames,
+            &lens(),
+            &x,
+            &y,
+            &options(),
+            accuracy,
+        )
+        .unwrap();
+        assert_eq!(
+            right.summary.chosen,
+            Explanation::AsGiven,
+            "{:?}",
+            right.summary
+        );
         assert!(right.summary.unverifiable.is_empty(), "{:?}", right.summary);
         assert!(right.summary.finding(accuracy).is_none());
 
         let mut file = lens();
         file.fx = 848.0;
         file.fy = 848.0;
-        let model =
-            fit_cell_model(Setup::EyeInHand, &frames, &file, &x, &y, &options(), accuracy).unwrap();
+        let model = fit_cell_model(
+            Setup::EyeInHand,
+            &frames,
+            &file,
+            &x,
+            &y,
+            &options(),
+            accuracy,
+        )
+        .unwrap();
         let s = &model.summary;
         assert_eq!(s.chosen, Explanation::Intrinsics, "{s:?}");
         assert!(s.determined && !s.ambiguous, "{s:?}");
-        assert!((model.camera().fx / 800.0 - 1.0).abs() < 0.002, "{:?}", model.camera());
+        assert!(
+            (model.camera().fx / 800.0 - 1.0).abs() < 0.002,
+            "{:?}",
+            model.camera()
+        );
         let f = s.finding(accuracy).unwrap();
-        assert_eq!((f.level, f.basis), (Level::Check, Basis::Intrinsics), "{}", f.reason);
+        assert_eq!(
+            (f.level, f.basis),
+            (Level::Check, Basis::Intrinsics),
+            "{}",
+            f.reason
+        );
         for expected in [
             format!("the intrinsics in {INTRINSICS_PLACEHOLDER} does not fit this cell"),
             "fx in the file 848.0 px, estimated from this session ".to_string(),
             "(-5.7 %)".to_string(),
             "the answer uses the estimate".to_string(),
         ] {
-            assert!(f.reason.contains(&expected), "{expected:?} not in {}", f.reason);
+            assert!(
+                f.reason.contains(&expected),
+                "{expected:?} not in {}",
+                f.reason
+            );
         }
-        assert!(f.next_action.contains(CORRECTED_INTRINSICS_FILE), "{}", f.next_action);
+        assert!(
+            f.next_action.contains(CORRECTED_INTRINSICS_FILE),
+            "{}",
+            f.next_action
+        );
         assert!(!f.reason.contains("board"), "{}", f.reason);
         // The principal point and distortion are right: not named.
         assert!(!f.reason.contains("cx in the file"), "{}", f.reason);
@@ -855,7 +921,13 @@ mod tests {
         let views: Vec<Pose> = (0..10)
             .map(|k| {
                 let k = k as f64;
-                view(Vector3::new(0.03, 0.03, 0.0), 1.0, 0.35 + 0.1 * (k * 1.3).sin(), k * 0.63, 0.4 * (k * 0.7).cos())
+                view(
+                    Vector3::new(0.03, 0.03, 0.0),
+                    1.0,
+                    0.35 + 0.1 * (k * 1.3).sin(),
+                    k * 0.63,
+                    0.4 * (k * 0.7).cos(),
+                )
             })
             .collect();
         let (frames, x, y) = frames(4, 0.02, &views, 3);
@@ -864,10 +936,20 @@ mod tests {
             let mut file = lens();
             file.fx = fx;
             file.fy = fx;
-            let model = fit_cell_model(Setup::EyeInHand, &frames, &file, &x, &y, &options(), accuracy)
-                .unwrap();
+            let model = fit_cell_model(
+                Setup::EyeInHand,
+                &frames,
+                &file,
+                &x,
+                &y,
+                &options(),
+                accuracy,
+            )
+            .unwrap();
             let s = &model.summary;
-            let f = s.finding(accuracy).unwrap_or_else(|| panic!("fx {fx}: no finding: {s:?}"));
+            let f = s
+                .finding(accuracy)
+                .unwrap_or_else(|| panic!("fx {fx}: no finding: {s:?}"));
             assert_eq!(f.level, Level::Redo, "fx {fx}: {}", f.reason);
             assert!(
                 matches!(f.basis, Basis::Intrinsics | Basis::IntrinsicsAndBoard),
@@ -876,7 +958,11 @@ mod tests {
                 f.reason
             );
             assert!(f.reason.contains(INTRINSICS_PLACEHOLDER), "{}", f.reason);
-            assert!(f.next_action.contains("nearer and farther"), "{}", f.next_action);
+            assert!(
+                f.next_action.contains("nearer and farther"),
+                "{}",
+                f.next_action
+            );
         }
     }
 }

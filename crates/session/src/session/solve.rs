@@ -593,16 +593,19 @@ pub fn solve_session_with(
     let mut notes = Vec::new();
     let mut corrected = Vec::new();
     if let Some((board, camera)) = vision {
-        // Frames the pose-space solve dropped as outliers stay out here too.
+        // Frames the pose-space solve dropped as outliers stay out of the fits; each is checked
+        // against the pixel answer afterwards.
         let dropped: Vec<&str> = solved
             .pose_space
             .dropped
             .iter()
             .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
             .collect();
-        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board, true)?
-            .into_iter()
+        let all = frames_from_visits(visits, board, true)?;
+        let (ids, frames): (Vec<String>, Vec<Frame>) = all
+            .iter()
             .filter(|(id, _)| !dropped.contains(&id.as_str()))
+            .cloned()
             .unzip();
         if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
             let ropts = reprojection_options(config);
@@ -630,18 +633,47 @@ pub fn solve_session_with(
                 board_scale: model.board_scale(),
                 ..ropts
             };
-            let reprojection = refine_reprojection(
-                setup,
-                &frames,
-                &model.camera(),
-                &model.fit.camera_mount,
-                &model.fit.target_mount,
-                &final_options,
-            )
-            .map_err(|source| SessionError::Solve {
-                stage: "reprojection refinement",
-                source: Box::new(source),
-            })?;
+            let refine = |frames: &[Frame], start: &ReprojectionCalibration| {
+                refine_reprojection(
+                    setup,
+                    frames,
+                    &start.camera,
+                    &start.camera_mount,
+                    &start.target_mount,
+                    &ReprojectionOptions {
+                        board_scale: start.board_scale,
+                        ..final_options.clone()
+                    },
+                )
+                .map_err(|source| SessionError::Solve {
+                    stage: "reprojection refinement",
+                    source: Box::new(source),
+                })
+            };
+            let mut reprojection = refine(&frames, &model.fit)?;
+            // Pose-space outlier flags the corners do not confirm (the pose-space noise model is
+            // isotropic, a PnP pose's error is not): those frames are kept.
+            let flagged: Vec<&str> = p
+                .outliers
+                .iter()
+                .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
+                .collect();
+            let kept = pixel_consistent(setup, &all, &flagged, &reprojection, &final_options);
+            let (mut ids, mut frames) = (ids, frames);
+            if kept.iter().any(|(id, _)| dropped.contains(&id.as_str())) {
+                for (id, frame) in &all {
+                    if dropped.contains(&id.as_str()) && kept.iter().any(|(k, _)| k == id) {
+                        ids.push(id.clone());
+                        frames.push(frame.clone());
+                    }
+                }
+                reprojection = refine(&frames, &reprojection)?;
+            }
+            for (id, rms) in &kept {
+                notes.push(format!(
+                    "{id}: flagged in pose space, but its corners fit the pixel answer ({rms:.2} px RMS): kept"
+                ));
+            }
             solved.pose_space_errors = Some(reprojection_errors(
                 setup,
                 &frames,
@@ -668,6 +700,7 @@ pub fn solve_session_with(
                     reprojection.board_scale
                 ));
             }
+            unflag(&mut solved.calibration, pairs, &kept);
             solved.reprojection = Some(reprojection);
             solved.cell_model = Some(model);
             solved.frame_ids = ids;
@@ -686,6 +719,72 @@ pub fn solve_session_with(
     Ok(solved)
 }
 
+/// Of the frames `flagged` as outliers in pose space, those whose corners fit `fit` (robot pose
+/// as recorded, board scale and camera of the fit) within the reprojection's own frame-outlier
+/// rule (`median + factor · 1.4826 · MAD` of the fitted frames' RMS, at least the floor): their
+/// ids with their RMS, px.
+fn pixel_consistent(
+    setup: Setup,
+    all: &[(String, Frame)],
+    flagged: &[&str],
+    fit: &ReprojectionCalibration,
+    options: &ReprojectionOptions,
+) -> Vec<(String, f64)> {
+    let rms: Vec<f64> = fit
+        .recorded_pose_errors
+        .frame_rms_px
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if rms.is_empty() {
+        return Vec::new();
+    }
+    let median = solve::diagnostics::median(&rms);
+    let deviations: Vec<f64> = rms.iter().map(|v| (v - median).abs()).collect();
+    let mad = solve::diagnostics::median(&deviations);
+    let threshold =
+        (median + options.outlier_mad_factor * 1.4826 * mad).max(options.outlier_floor_px);
+    all.iter()
+        .filter(|(id, _)| flagged.contains(&id.as_str()))
+        .filter_map(|(id, frame)| {
+            let mut scaled = frame.clone();
+            for c in &mut scaled.corners {
+                c.point_in_target.coords *= fit.board_scale;
+            }
+            let e = reprojection_errors(
+                setup,
+                std::slice::from_ref(&scaled),
+                &fit.camera,
+                &fit.camera_mount,
+                &fit.target_mount,
+            );
+            (e.rms_px.is_finite() && e.rms_px <= threshold).then(|| (id.clone(), e.rms_px))
+        })
+        .collect()
+}
+
+/// Clears the outlier flags (and the notices naming them) of the samples `kept`.
+fn unflag(calibration: &mut Calibration, pairs: &[PosePair], kept: &[(String, f64)]) {
+    let is_kept = |i: &usize| {
+        pairs
+            .get(*i)
+            .and_then(|p| p.id.as_deref())
+            .is_some_and(|id| kept.iter().any(|(k, _)| k == id))
+    };
+    calibration.outliers.retain(|i| !is_kept(i));
+    calibration.dropped.retain(|i| !is_kept(i));
+    calibration.notices.retain(|n| {
+        !(matches!(
+            n.kind,
+            handeye_core::notice::NoticeKind::Outliers
+                | handeye_core::notice::NoticeKind::DroppedOutliers
+        ) && kept
+            .iter()
+            .any(|(id, _)| n.message.contains(&format!("({id})"))))
+    });
+}
+
 /// `pairs` with each board pose estimated again (PnP over the frame's corners) with the camera
 /// and board scale of `fit`; a pair without a frame, or whose PnP fails, keeps its pose.
 fn corrected_pairs(
@@ -697,9 +796,7 @@ fn corrected_pairs(
         .iter()
         .map(|pair| {
             let mut out = pair.clone();
-            let frame = frames
-                .iter()
-                .find(|f| f.id.is_some() && f.id == pair.id);
+            let frame = frames.iter().find(|f| f.id.is_some() && f.id == pair.id);
             if let Some(frame) = frame {
                 let correspondences: Vec<_> = frame
                     .corners

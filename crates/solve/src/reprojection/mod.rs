@@ -444,7 +444,8 @@ pub fn refine_reprojection(
                 let sigma = |i: usize| cov[(i, i)].max(0.0).sqrt();
                 if problem.layout.distortion > 0 {
                     let o = problem.layout.distortion_offset();
-                    distortion_sigma = Some((o..o + problem.layout.distortion).map(sigma).collect());
+                    distortion_sigma =
+                        Some((o..o + problem.layout.distortion).map(sigma).collect());
                 }
                 if problem.layout.board_scale > 0 {
                     board_scale_sigma = Some(sigma(problem.layout.board_scale_offset()));

@@ -15,11 +15,11 @@ use handeye_core::notice::{Notice, NoticeKind, Severity};
 use handeye_core::setup::{PosePair, Setup};
 
 use super::rules::{assess, Evidence};
-use crate::cell_model::CellModelSummary;
 use super::{
     Accuracy, HeldOut, Verdict, GOOD_OFF_AXIS_DEG, GOOD_POSES, MAX_HELD_OUT, MIN_HELD_OUT_SAMPLES,
     RESIDUAL_FACTOR,
 };
+use crate::cell_model::CellModelSummary;
 
 /// Median camera-to-target distance of `pairs`, mm: where a held-out error is measured.
 pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
