@@ -191,17 +191,15 @@ impl Estimate {
         let (digits, relative) = if unit.is_empty() {
             (4, String::new())
         } else {
-            (1, {
-                let r = if self.parameter.starts_with('f') {
-                    format!(
-                        " ({:+.1} %)",
-                        (self.estimate - self.file_value) / self.file_value * 100.0
-                    )
-                } else {
-                    format!(" ({:+.1} px)", self.estimate - self.file_value)
-                };
-                r
-            })
+            let relative = if self.parameter.starts_with('f') {
+                format!(
+                    " ({:+.1} %)",
+                    (self.estimate - self.file_value) / self.file_value * 100.0
+                )
+            } else {
+                format!(" ({:+.1} px)", self.estimate - self.file_value)
+            };
+            (1, relative)
         };
         format!(
             "{} in the file {:.digits$}{unit}, estimated from this session {:.digits$} ± {:.*}{unit}{relative}",
@@ -492,12 +490,7 @@ fn free_parameters(e: Explanation, camera: &CameraModel) -> usize {
         Distortion::None => 5,
         d => d.coefficient_count(),
     };
-    12 + if e.board_wrong() { 1 } else { 0 }
-        + if e.intrinsics_wrong() {
-            4 + distortion
-        } else {
-            0
-        }
+    12 + usize::from(e.board_wrong()) + usize::from(e.intrinsics_wrong()) * (4 + distortion)
 }
 
 fn sigmas(fit: &ReprojectionCalibration) -> (f64, f64) {

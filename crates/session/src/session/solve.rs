@@ -834,7 +834,7 @@ pub fn write_corrected_files(
         return Ok(Vec::new());
     };
     let summary = &model.summary;
-    if summary.chosen == Explanation::AsGiven {
+    if summary.chosen == Explanation::AsGiven || !summary.determined || summary.ambiguous {
         return Ok(Vec::new());
     }
     let mut written = Vec::new();
