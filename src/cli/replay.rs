@@ -120,6 +120,8 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         &prepared.config,
         notices,
     )?;
+    // The estimates of a file the cell model blames, written into the session as in a run.
+    session::solve::write_corrected_files(folder.root(), &solved, &prepared.config)?;
     solved.name_session(folder.root(), &prepared.config);
     let calibration = &solved.calibration;
     let output = args

@@ -105,6 +105,23 @@ fn wrong_board_size(scale: f64, name: &str) {
         verdict.next_action
     );
 
+    // The cell model wrote the board file with the estimated size into the session (#38), and it
+    // reads as a board.
+    let written = session.join("board.yaml");
+    handeye::vision::Target::load(&written).expect("the corrected board file reads");
+    let text = std::fs::read_to_string(&written).unwrap();
+    let tag_size: f64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("tagSize:"))
+        .and_then(|rest| rest.split('#').next())
+        .and_then(|v| v.trim().parse().ok())
+        .expect("tagSize in the corrected board file");
+    assert!(
+        (tag_size / (0.04 * scale) - 1.0).abs() < 0.005,
+        "corrected tagSize {tag_size}, true {}",
+        0.04 * scale
+    );
+
     // The fix: the cell's board file with the measured tag size, replayed.
     let fixed_board = board_with_tag_size(dir.path(), "measured.yaml", 0.04 * scale);
     let board_line = format!("target: {}", fixed_board.display());

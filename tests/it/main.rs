@@ -11,6 +11,7 @@ mod aprilgrid_photos;
 mod armtime;
 mod bag_import;
 mod boards;
+mod cell_model;
 mod cellkit;
 mod cli_names;
 mod cli_run;

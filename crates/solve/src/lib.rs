@@ -21,6 +21,7 @@
 
 pub mod board_scale;
 pub mod calibration;
+pub mod cell_model;
 pub mod closed_form;
 pub mod compare;
 pub mod diagnostics;

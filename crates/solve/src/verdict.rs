@@ -20,8 +20,14 @@
 //! * **REDO** — the intrinsics do not fit the frames: a `wrong_intrinsics` notice (the session
 //!   layer's check: board reprojection far above normal and intrinsics estimated from the
 //!   session far from the file's); decides over everything it causes.
-//! * **REDO** (or CHECK when its effect at the working distance is within 3× `A`) — the board is
-//!   not the size its file says: the scale of the board-pose translations fitted with the
+//! * **CHECK** or **REDO** — the cell model ([`crate::cell_model`], when the corners were fitted)
+//!   chooses a wrong intrinsics or board file by BIC: CHECK when the views determine the quantity
+//!   (the answer uses the estimate, the finding names the file, the parameters, the file's values
+//!   and the estimates with their 1-sigma), REDO when they do not, when a wrong lens cannot be
+//!   told from a wrong board, or when the files as given are chosen but the views could not have
+//!   seen them wrong; replaces the pose-space board-scale rule below.
+//! * **REDO** (or CHECK when its effect at the working distance is within 3× `A`) — without
+//!   corners, the board is not the size its file says: the scale of the board-pose translations fitted with the
 //!   calibration (`board_scale`) is off 1 by more than 1 % and 3 sigmas and explains the
 //!   residuals; decides over the held-out error and residuals it causes.
 //! * **CHECK** — usable, but something needs a look: the answer more than 50 mm or 20° from the
@@ -58,7 +64,8 @@ pub mod mount;
 pub mod rules;
 
 pub use evidence::{
-    assess_result, assess_solved, coverage_notices, held_out, residual_notice, working_distance_mm,
+    assess_modelled, assess_result, assess_solved, coverage_notices, held_out, residual_notice,
+    working_distance_mm,
 };
 pub use mount::{assess_mount, worst_camera};
 pub use rules::{assess, Evidence};
@@ -158,6 +165,9 @@ pub enum Basis {
     /// The intrinsics do not fit the frames (per-frame reprojection far above normal, or the
     /// intrinsics estimated from the session far from the file's).
     Intrinsics,
+    /// The corners contradict both the intrinsics and the board file, or cannot tell which of
+    /// the two is wrong (the cell model, `solve::cell_model`).
+    IntrinsicsAndBoard,
     /// The answer is far from the config's nominal transforms.
     FarFromNominal,
     /// The held-out (leave-one-out) prediction error against the accuracy.
@@ -269,6 +279,10 @@ pub struct Figures {
     /// 1-sigma of `board_scale`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub board_scale_sigma: Option<f64>,
+    /// The cell model's choice between the files as given and a wrong intrinsics or board file,
+    /// when the corners were fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell_model: Option<crate::cell_model::CellModelSummary>,
 }
 
 /// GOOD / CHECK / REDO with the reason that decided it, the next action, the figures, and any

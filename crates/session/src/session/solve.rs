@@ -21,6 +21,7 @@ use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::notice::Notice;
 use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::cell_model::{self, fit_cell_model, CellModel, Explanation};
 use handeye_solve::verdict::{self, Verdict};
 use handeye_solve::{
     self as solve, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
@@ -50,6 +51,10 @@ pub struct SolvedSession {
     pub summary: String,
     /// GOOD / CHECK / REDO and why, from the same figures the result file and report show.
     pub verdict: Option<Verdict>,
+    /// The cell model's choice between the files as given and a wrong intrinsics or board file
+    /// (when the corners were fitted): the answer uses its estimates, and
+    /// [`write_corrected_files`] writes them into the session.
+    pub cell_model: Option<CellModel>,
     /// What it was solved from, as read once: the report renders these, it reads nothing again.
     pub evidence: Evidence,
 }
@@ -232,6 +237,7 @@ fn solve_loaded(
         config,
         notices,
     )?;
+    write_corrected_files(folder.root(), &solved, config)?;
     Ok((solved, dataset))
 }
 
@@ -422,6 +428,7 @@ fn solve_from_scratch(
         estimated_camera: Some(camera),
         summary: String::new(),
         verdict: None,
+        cell_model: None,
         evidence: Evidence::default(),
     };
     let c = &scratch.joint.camera;
@@ -528,11 +535,12 @@ fn conclude(
             .flatten()
     });
     solved.calibration.notices.extend(nominal);
-    let verdict = verdict::assess_solved(
+    let verdict = verdict::assess_modelled(
         &solved.calibration,
         pairs,
         options,
         config.verdict.accuracy(),
+        solved.cell_model.as_ref().map(|m| &m.summary),
     );
     solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(notes));
     solved.verdict = Some(verdict);
@@ -575,6 +583,7 @@ pub fn solve_session_with(
         estimated_camera: None,
         summary: String::new(),
         verdict: None,
+        cell_model: None,
         // What it was solved from, for the report.
         evidence: Evidence {
             pairs: pairs.to_vec(),
@@ -582,33 +591,89 @@ pub fn solve_session_with(
         },
     };
     let mut notes = Vec::new();
+    let mut corrected = Vec::new();
     if let Some((board, camera)) = vision {
-        // Frames the pose-space solve dropped as outliers stay out here too.
+        // Frames the pose-space solve dropped as outliers stay out of the fits; each is checked
+        // against the pixel answer afterwards.
         let dropped: Vec<&str> = solved
             .pose_space
             .dropped
             .iter()
             .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
             .collect();
-        let (ids, frames): (Vec<String>, Vec<Frame>) = frames_from_visits(visits, board, true)?
-            .into_iter()
+        let all = frames_from_visits(visits, board, true)?;
+        let (ids, frames): (Vec<String>, Vec<Frame>) = all
+            .iter()
             .filter(|(id, _)| !dropped.contains(&id.as_str()))
+            .cloned()
             .unzip();
         if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
             let ropts = reprojection_options(config);
             let p = &solved.pose_space;
-            let reprojection = refine_reprojection(
+            // Which given file the corners contradict, if any (issue #38); the answer is then
+            // refined with the chosen explanation's estimates free.
+            let model = fit_cell_model(
                 setup,
                 &frames,
                 camera,
                 &p.camera_mount,
                 &p.target_mount,
                 &ropts,
+                config.verdict.accuracy(),
             )
             .map_err(|source| SessionError::Solve {
-                stage: "reprojection refinement",
+                stage: "cell model",
                 source: Box::new(source),
             })?;
+            let chosen = model.summary.chosen;
+            let final_options = ReprojectionOptions {
+                refine_intrinsics: chosen.intrinsics_wrong(),
+                refine_distortion: chosen.intrinsics_wrong(),
+                refine_board_scale: chosen.board_wrong(),
+                board_scale: model.board_scale(),
+                ..ropts
+            };
+            let refine = |frames: &[Frame], start: &ReprojectionCalibration| {
+                refine_reprojection(
+                    setup,
+                    frames,
+                    &start.camera,
+                    &start.camera_mount,
+                    &start.target_mount,
+                    &ReprojectionOptions {
+                        board_scale: start.board_scale,
+                        ..final_options.clone()
+                    },
+                )
+                .map_err(|source| SessionError::Solve {
+                    stage: "reprojection refinement",
+                    source: Box::new(source),
+                })
+            };
+            let mut reprojection = refine(&frames, &model.fit)?;
+            // Pose-space outlier flags the corners do not confirm (the pose-space noise model is
+            // isotropic, a PnP pose's error is not): those frames are kept.
+            let flagged: Vec<&str> = p
+                .outliers
+                .iter()
+                .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
+                .collect();
+            let kept = pixel_consistent(setup, &all, &flagged, &reprojection, &final_options);
+            let (mut ids, mut frames) = (ids, frames);
+            if kept.iter().any(|(id, _)| dropped.contains(&id.as_str())) {
+                for (id, frame) in &all {
+                    if dropped.contains(&id.as_str()) && kept.iter().any(|(k, _)| k == id) {
+                        ids.push(id.clone());
+                        frames.push(frame.clone());
+                    }
+                }
+                reprojection = refine(&frames, &reprojection)?;
+            }
+            for (id, rms) in &kept {
+                notes.push(format!(
+                    "{id}: flagged in pose space, but its corners fit the pixel answer ({rms:.2} px RMS): kept"
+                ));
+            }
             solved.pose_space_errors = Some(reprojection_errors(
                 setup,
                 &frames,
@@ -616,8 +681,28 @@ pub fn solve_session_with(
                 &p.camera_mount,
                 &p.target_mount,
             ));
-            solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
+            if chosen == Explanation::AsGiven {
+                solved.calibration = reprojection.to_calibration(p, pairs, &options.noise);
+            } else {
+                // The board poses again with the corrected files: the verdict's held-out error
+                // and residuals judge the answer, not the wrong file.
+                corrected = corrected_pairs(pairs, &frames, &reprojection);
+                let start = solve::solve(setup, &corrected, &options).unwrap_or_else(|_| p.clone());
+                solved.calibration =
+                    reprojection.to_calibration(&start, &corrected, &options.noise);
+                notes.push(format!(
+                    "the cell model chose \"{}\": the answer uses the estimate (camera fx {:.2} fy {:.2} cx {:.2} cy {:.2} px, board scale {:.4})",
+                    chosen.label(),
+                    reprojection.camera.fx,
+                    reprojection.camera.fy,
+                    reprojection.camera.cx,
+                    reprojection.camera.cy,
+                    reprojection.board_scale
+                ));
+            }
+            unflag(&mut solved.calibration, pairs, &kept);
             solved.reprojection = Some(reprojection);
+            solved.cell_model = Some(model);
             solved.frame_ids = ids;
         } else {
             notes.push(
@@ -625,6 +710,184 @@ pub fn solve_session_with(
             );
         }
     }
-    conclude(&mut solved, pairs, &options, config, &notes, findings);
+    let judged = if corrected.is_empty() {
+        pairs
+    } else {
+        &corrected
+    };
+    conclude(&mut solved, judged, &options, config, &notes, findings);
     Ok(solved)
+}
+
+/// Of the frames `flagged` as outliers in pose space, those whose corners fit `fit` (robot pose
+/// as recorded, board scale and camera of the fit) within the reprojection's own frame-outlier
+/// rule (`median + factor · 1.4826 · MAD` of the fitted frames' RMS, at least the floor): their
+/// ids with their RMS, px.
+fn pixel_consistent(
+    setup: Setup,
+    all: &[(String, Frame)],
+    flagged: &[&str],
+    fit: &ReprojectionCalibration,
+    options: &ReprojectionOptions,
+) -> Vec<(String, f64)> {
+    let rms: Vec<f64> = fit
+        .recorded_pose_errors
+        .frame_rms_px
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if rms.is_empty() {
+        return Vec::new();
+    }
+    let median = solve::diagnostics::median(&rms);
+    let deviations: Vec<f64> = rms.iter().map(|v| (v - median).abs()).collect();
+    let mad = solve::diagnostics::median(&deviations);
+    let threshold =
+        (median + options.outlier_mad_factor * 1.4826 * mad).max(options.outlier_floor_px);
+    all.iter()
+        .filter(|(id, _)| flagged.contains(&id.as_str()))
+        .filter_map(|(id, frame)| {
+            let mut scaled = frame.clone();
+            for c in &mut scaled.corners {
+                c.point_in_target.coords *= fit.board_scale;
+            }
+            let e = reprojection_errors(
+                setup,
+                std::slice::from_ref(&scaled),
+                &fit.camera,
+                &fit.camera_mount,
+                &fit.target_mount,
+            );
+            (e.rms_px.is_finite() && e.rms_px <= threshold).then(|| (id.clone(), e.rms_px))
+        })
+        .collect()
+}
+
+/// Clears the outlier flags (and the notices naming them) of the samples `kept`.
+fn unflag(calibration: &mut Calibration, pairs: &[PosePair], kept: &[(String, f64)]) {
+    let is_kept = |i: &usize| {
+        pairs
+            .get(*i)
+            .and_then(|p| p.id.as_deref())
+            .is_some_and(|id| kept.iter().any(|(k, _)| k == id))
+    };
+    calibration.outliers.retain(|i| !is_kept(i));
+    calibration.dropped.retain(|i| !is_kept(i));
+    calibration.notices.retain(|n| {
+        !(matches!(
+            n.kind,
+            handeye_core::notice::NoticeKind::Outliers
+                | handeye_core::notice::NoticeKind::DroppedOutliers
+        ) && kept
+            .iter()
+            .any(|(id, _)| n.message.contains(&format!("({id})"))))
+    });
+}
+
+/// `pairs` with each board pose estimated again (PnP over the frame's corners) with the camera
+/// and board scale of `fit`; a pair without a frame, or whose PnP fails, keeps its pose.
+fn corrected_pairs(
+    pairs: &[PosePair],
+    frames: &[Frame],
+    fit: &ReprojectionCalibration,
+) -> Vec<PosePair> {
+    pairs
+        .iter()
+        .map(|pair| {
+            let mut out = pair.clone();
+            let frame = frames.iter().find(|f| f.id.is_some() && f.id == pair.id);
+            if let Some(frame) = frame {
+                let correspondences: Vec<_> = frame
+                    .corners
+                    .iter()
+                    .map(|c| {
+                        (
+                            nalgebra::Point3::from(c.point_in_target.coords * fit.board_scale),
+                            c.pixel,
+                        )
+                    })
+                    .collect();
+                let tags = (correspondences.len() / 4).max(2);
+                if let Ok(pose) = handeye_vision::pnp::estimate_pose_from_points(
+                    &fit.camera,
+                    &correspondences,
+                    tags,
+                ) {
+                    out.camera_from_target = pose.camera_from_target;
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// Writes the estimates of the files the cell model blames into the session folder `root`
+/// (`camera_info.yaml` with the estimated intrinsics, `board.yaml`: the config's board file with
+/// its size scaled), when the chosen explanation is determined. Returns the files written.
+pub fn write_corrected_files(
+    root: &std::path::Path,
+    solved: &SolvedSession,
+    config: &CellConfig,
+) -> Result<Vec<std::path::PathBuf>, SessionError> {
+    let (Some(model), Some(fit)) = (&solved.cell_model, &solved.reprojection) else {
+        return Ok(Vec::new());
+    };
+    let summary = &model.summary;
+    if summary.chosen == Explanation::AsGiven || !summary.determined || summary.ambiguous {
+        return Ok(Vec::new());
+    }
+    let mut written = Vec::new();
+    if summary.chosen.intrinsics_wrong() {
+        let path = root.join(cell_model::CORRECTED_INTRINSICS_FILE);
+        fit.camera
+            .save_camera_info(&path)
+            .map_err(|source| SessionError::Intrinsics {
+                file: path.clone(),
+                source: Box::new(source),
+            })?;
+        written.push(path);
+    }
+    if summary.chosen.board_wrong() {
+        let path = root.join(cell_model::CORRECTED_BOARD_FILE);
+        if let Some(text) = std::fs::read_to_string(&config.target)
+            .ok()
+            .and_then(|text| scaled_board_text(&text, fit.board_scale))
+        {
+            std::fs::write(&path, text).map_err(|source| SessionError::Io {
+                path: path.clone(),
+                source,
+            })?;
+            written.push(path);
+        }
+    }
+    Ok(written)
+}
+
+/// A board file's text with every length (`tagSize`, `squareSize`, `markerSize`) times `scale`;
+/// `None` when it has none.
+fn scaled_board_text(text: &str, scale: f64) -> Option<String> {
+    let mut found = false;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|line| {
+            for key in ["tagSize", "squareSize", "markerSize"] {
+                let prefix = format!("{key}:");
+                let trimmed = line.trim_start();
+                if let Some(rest) = trimmed.strip_prefix(&prefix) {
+                    let value = rest.split('#').next().unwrap_or("").trim();
+                    if let Ok(v) = value.parse::<f64>() {
+                        found = true;
+                        let indent = &line[..line.len() - trimmed.len()];
+                        return format!(
+                            "{indent}{key}: {:.6}  # {v} in the given file, × {scale:.4} estimated by handeye's cell model",
+                            v * scale
+                        );
+                    }
+                }
+            }
+            line.to_string()
+        })
+        .collect();
+    found.then(|| lines.join("\n") + "\n")
 }

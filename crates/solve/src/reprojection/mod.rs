@@ -92,6 +92,12 @@ pub struct ReprojectionOptions {
     pub refine_intrinsics: bool,
     /// Fit the distortion coefficients too (a model without distortion becomes `plumb_bob`).
     pub refine_distortion: bool,
+    /// Fit the board's scale too: one factor on every board point (the cell model's "the board
+    /// is not the size its file says", [`crate::cell_model`]).
+    pub refine_board_scale: bool,
+    /// The board scale the fit holds, or starts from when `refine_board_scale` (1: the board is
+    /// the size its file says).
+    pub board_scale: f64,
     /// Fit a small correction of every robot pose, held by this prior (`None`: robot poses exact).
     pub robot_prior: Option<RobotPrior>,
     /// A frame or corner is flagged when its error exceeds `median + factor · 1.4826 · MAD` ...
@@ -116,6 +122,8 @@ impl Default for ReprojectionOptions {
             robust: RobustLoss::Huber(3.0),
             refine_intrinsics: false,
             refine_distortion: false,
+            refine_board_scale: false,
+            board_scale: 1.0,
             robot_prior: None,
             outlier_mad_factor: 5.0,
             outlier_floor_px: 2.0,
@@ -156,6 +164,12 @@ pub struct ReprojectionCalibration {
     pub uncertainty: Option<Uncertainty>,
     /// 1-sigma of `fx fy cx cy`, px (when the intrinsics were fitted).
     pub intrinsics_sigma_px: Option<[f64; 4]>,
+    /// 1-sigma of the distortion coefficients, in the model's order (when they were fitted).
+    pub distortion_sigma: Option<Vec<f64>>,
+    /// The board scale at the optimum (the factor on every board point; the given one when held).
+    pub board_scale: f64,
+    /// 1-sigma of `board_scale` (when it was fitted).
+    pub board_scale_sigma: Option<f64>,
     /// The corner noise the answer was weighted with, px: estimated from the residuals when
     /// `estimate_noise` was set and an estimate could be made, the given one otherwise.
     pub pixel_sigma_px: f64,
@@ -275,6 +289,7 @@ fn validate(
 ) -> Result<(), SolveError> {
     require_positive("reprojection.pixel_sigma_px", options.pixel_sigma_px)?;
     require_positive("reprojection.outlier_floor_px", options.outlier_floor_px)?;
+    require_positive("reprojection.board_scale", options.board_scale)?;
     options
         .robust
         .validate("reprojection.robust.huber", "reprojection.robust.cauchy")?;
@@ -410,6 +425,8 @@ pub fn refine_reprojection(
     let variance_factor = super::refine::variance_factor(residuals.norm_squared(), dof);
     let mut uncertainty = None;
     let mut intrinsics_sigma_px = None;
+    let mut distortion_sigma = None;
+    let mut board_scale_sigma = None;
     if options.covariance {
         let (jtj, _, _) = problem
             .normal_equations()
@@ -423,6 +440,15 @@ pub fn refine_reprojection(
                     let o = problem.layout.intrinsics_offset();
                     intrinsics_sigma_px =
                         Some([0, 1, 2, 3].map(|i| cov[(o + i, o + i)].max(0.0).sqrt()));
+                }
+                let sigma = |i: usize| cov[(i, i)].max(0.0).sqrt();
+                if problem.layout.distortion > 0 {
+                    let o = problem.layout.distortion_offset();
+                    distortion_sigma =
+                        Some((o..o + problem.layout.distortion).map(sigma).collect());
+                }
+                if problem.layout.board_scale > 0 {
+                    board_scale_sigma = Some(sigma(problem.layout.board_scale_offset()));
                 }
             }
             None => notices.push(messages::singular()),
@@ -462,6 +488,9 @@ pub fn refine_reprojection(
         corrected_base_from_flange,
         uncertainty,
         intrinsics_sigma_px,
+        distortion_sigma,
+        board_scale: s.board_scale,
+        board_scale_sigma,
         pixel_sigma_px: 1.0 / problem.inv_sigma_px,
         robot_prior: problem.prior,
         noise_estimated,

@@ -5,7 +5,8 @@
 //!
 //! Parameters: a local perturbation of X and Y (see [`crate::refine::perturbed`]); then
 //! `fx fy cx cy` (px) and the distortion coefficients when free (packed and differentiated by
-//! [`handeye_core::camera_model`]); then per frame a robot correction `T_base_flange ← (R·exp(φ), t + ρ)`.
+//! [`handeye_core::camera_model`]); then the board scale when free (the factor on every board
+//! point, for the cell model's "board not the size its file says"); then per frame a robot correction `T_base_flange ← (R·exp(φ), t + ρ)`.
 //! Each corner row touches at most 12 + 9 global columns and the 6 columns of its own frame's
 //! correction.
 //!
@@ -14,7 +15,8 @@
 
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{
-    DMatrix, DVector, Dyn, Matrix3, Owned, SMatrix, Translation3, UnitQuaternion, Vector2, Vector3,
+    DMatrix, DVector, Dyn, Matrix3, Owned, Point3, SMatrix, Translation3, UnitQuaternion, Vector2,
+    Vector3,
 };
 
 use super::{Frame, ReprojectionOptions, RobotPrior};
@@ -32,6 +34,9 @@ pub(super) struct Layout {
     pub intrinsics: usize,
     /// Distortion coefficient columns (the model's count, or 0).
     pub distortion: usize,
+    /// Board scale column (1 or 0): the factor on every board point (`0.95`: the board is 0.95×
+    /// the size its file says).
+    pub board_scale: usize,
     /// Columns per frame's robot correction (6 or 0).
     pub robot: usize,
     /// Frames.
@@ -49,9 +54,13 @@ impl Layout {
     pub(super) fn distortion_offset(&self) -> usize {
         Self::POSE + self.intrinsics
     }
+    /// The board scale column (when free).
+    pub(super) fn board_scale_offset(&self) -> usize {
+        Self::POSE + self.intrinsics + self.distortion
+    }
     /// First robot-correction column (= number of global columns).
     pub(super) fn robot_offset(&self) -> usize {
-        Self::POSE + self.intrinsics + self.distortion
+        Self::POSE + self.intrinsics + self.distortion + self.board_scale
     }
     /// All columns.
     pub(super) fn len(&self) -> usize {
@@ -81,6 +90,8 @@ pub(super) struct Problem<'a> {
     pub prior_weights: Vec<f64>,
     /// 1 / corner noise sigma, 1/px: whitens the pixel residuals.
     pub inv_sigma_px: f64,
+    /// The board scale when it is held (the options' `board_scale`).
+    pub board_scale: f64,
     /// The prior on the robot corrections (`None`: robot poses exact, no correction columns).
     pub prior: Option<RobotPrior>,
     /// Rows of each frame's first corner.
@@ -95,6 +106,8 @@ pub(super) struct State {
     pub axby: Axby,
     /// The camera model (intrinsics and coefficients as fitted).
     pub camera: CameraModel,
+    /// The factor on every board point (1 when the scale is held).
+    pub board_scale: f64,
     /// Per frame: `B` of `A = X·B·Y` from the (corrected) robot pose.
     pub b: Vec<Pose>,
     /// Per frame: (φ, ρ) robot correction.
@@ -118,6 +131,7 @@ impl Problem<'_> {
             } else {
                 0
             },
+            board_scale: usize::from(options.refine_board_scale),
             robot: if options.robot_prior.is_some() { 6 } else { 0 },
             frames: frames.len(),
         };
@@ -131,6 +145,9 @@ impl Problem<'_> {
             params
                 .rows_mut(o, layout.distortion)
                 .copy_from_slice(&camera0.distortion.coefficients());
+        }
+        if layout.board_scale > 0 {
+            params[layout.board_scale_offset()] = options.board_scale;
         }
         let mut row_offsets = Vec::with_capacity(frames.len());
         let mut rows = 0;
@@ -148,6 +165,7 @@ impl Problem<'_> {
             weights: frames.iter().map(|f| vec![1.0; f.corners.len()]).collect(),
             prior_weights: vec![1.0; frames.len()],
             inv_sigma_px: 1.0 / options.pixel_sigma_px,
+            board_scale: options.board_scale,
             prior: options.robot_prior,
             row_offsets,
             corner_rows: rows,
@@ -172,6 +190,11 @@ impl Problem<'_> {
                 .with_coefficients(&d.as_slice()[o..o + self.layout.distortion])
                 .expect("the layout holds exactly the model's coefficient count");
         }
+        let board_scale = if self.layout.board_scale > 0 {
+            d[self.layout.board_scale_offset()]
+        } else {
+            self.board_scale
+        };
         let mut corrections = Vec::with_capacity(self.frames.len());
         let mut b = Vec::with_capacity(self.frames.len());
         for (f, frame) in self.frames.iter().enumerate() {
@@ -190,6 +213,7 @@ impl Problem<'_> {
         State {
             axby,
             camera,
+            board_scale,
             b,
             corrections,
         }
@@ -210,7 +234,7 @@ impl Problem<'_> {
                     .corners
                     .iter()
                     .map(|c| {
-                        let p = chain * c.point_in_target;
+                        let p = chain * Point3::from(c.point_in_target.coords * s.board_scale);
                         s.camera.project_clamped(&p) - c.pixel
                     })
                     .collect()
@@ -306,8 +330,8 @@ impl Problem<'_> {
             let rxrb = rx * rb;
             let d_phi_y_base = -(rxrb * ry);
             for (c, corner) in frame.corners.iter().enumerate() {
-                let p = corner.point_in_target.coords;
-                let q = s.axby.y * corner.point_in_target; // in Y's parent frame
+                let p = corner.point_in_target.coords * s.board_scale;
+                let q = s.axby.y * Point3::from(p); // in Y's parent frame
                 let w = b * q; // in X's right frame
                 let pc = s.axby.x * w; // in the camera
                 let projection = camera.linearise(&pc);
@@ -333,6 +357,12 @@ impl Problem<'_> {
                     global
                         .view_mut((0, layout.distortion_offset()), (2, layout.distortion))
                         .copy_from(&(camera.d_pixel_d_coefficients(projection.normalised) * k));
+                }
+                if layout.board_scale > 0 {
+                    let d_point = rxrb * ry * corner.point_in_target.coords;
+                    global
+                        .fixed_view_mut::<2, 1>(0, layout.board_scale_offset())
+                        .copy_from(&(d_pix * d_point));
                 }
                 if layout.robot > 0 {
                     // First order in the (tiny) correction itself; exact at zero correction.
@@ -509,6 +539,8 @@ mod tests {
         let options = ReprojectionOptions {
             refine_intrinsics: true,
             refine_distortion: true,
+            refine_board_scale: true,
+            board_scale: 1.02,
             robot_prior: Some(RobotPrior {
                 translation_sigma_m: 1e-4,
                 rotation_sigma_rad: 1e-4,

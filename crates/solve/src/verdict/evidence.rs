@@ -19,6 +19,7 @@ use super::{
     Accuracy, HeldOut, Verdict, GOOD_OFF_AXIS_DEG, GOOD_POSES, MAX_HELD_OUT, MIN_HELD_OUT_SAMPLES,
     RESIDUAL_FACTOR,
 };
+use crate::cell_model::CellModelSummary;
 
 /// Median camera-to-target distance of `pairs`, mm: where a held-out error is measured.
 pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
@@ -144,6 +145,18 @@ pub fn assess_solved(
     options: &SolveOptions,
     accuracy: Accuracy,
 ) -> Verdict {
+    assess_modelled(calibration, pairs, options, accuracy, None)
+}
+
+/// [`assess_solved`] with the cell model's choice (when the corners were fitted): `pairs` are
+/// then the board poses with the files as the chosen explanation corrects them.
+pub fn assess_modelled(
+    calibration: &Calibration,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    accuracy: Accuracy,
+    cell_model: Option<&CellModelSummary>,
+) -> Verdict {
     let held = held_out(calibration.setup, pairs, options, &calibration.outliers);
     assess(&Evidence {
         calibration,
@@ -152,6 +165,7 @@ pub fn assess_solved(
         held_out: &held,
         accuracy,
         board_scale: crate::board_scale::fit_board_scale(calibration, pairs, options),
+        cell_model,
     })
 }
 

@@ -8,6 +8,7 @@
 use std::fmt::Write;
 
 use crate::board_scale::BoardScale;
+use crate::cell_model::CellModelSummary;
 use crate::{rotation_diversity, Calibration, NoiseModel};
 use handeye_core::geometry::Pose;
 use handeye_core::notice::{NoticeKind, Severity};
@@ -31,6 +32,10 @@ pub struct Evidence<'a> {
     pub accuracy: Accuracy,
     /// The board scale fitted with the calibration, when it could be fitted.
     pub board_scale: Option<BoardScale>,
+    /// The cell model's choice between the files as given and a wrong intrinsics or board file
+    /// (reprojection space, [`crate::cell_model`]), when the corners were fitted. It replaces
+    /// the pose-space board-scale rule.
+    pub cell_model: Option<&'a CellModelSummary>,
 }
 
 /// The level of a measured value against its accuracy: GOOD up to 1×, CHECK up to
@@ -98,15 +103,32 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         });
     }
 
-    // The board's size: a wrong one explains the residuals and held-out error it causes, so it
-    // comes before them.
+    // The cell model: which given file the corners contradict (a model choice); it explains the
+    // residuals and held-out error a wrong file causes, so it comes before them.
+    if let Some(model) = evidence.cell_model {
+        figures.cell_model = Some(model.clone());
+        findings.extend(model.finding(a));
+    }
+    let modelled_scale = evidence
+        .cell_model
+        .filter(|m| m.chosen.board_wrong())
+        .and_then(|m| m.estimates.iter().find(|e| e.parameter == "scale"));
+
+    // The board's size in pose space (without corners): a wrong one explains the residuals and
+    // held-out error it causes, so it comes before them.
     if let Some(scale) = &evidence.board_scale {
         figures.board_scale = Some(scale.factor);
         figures.board_scale_sigma = Some(scale.sigma);
         let intrinsics_wrong = findings.iter().any(|f| f.basis == Basis::Intrinsics);
-        if scale.is_wrong() && !intrinsics_wrong {
+        if scale.is_wrong() && !intrinsics_wrong && evidence.cell_model.is_none() {
             findings.push(board_scale_finding(scale, evidence.pairs, a));
         }
+    }
+    // The board's scale the answer used, when the cell model estimated it (the pose-space fit
+    // above then ran on board poses already corrected by it).
+    if let Some(e) = modelled_scale {
+        figures.board_scale = Some(e.estimate);
+        figures.board_scale_sigma = Some(e.sigma);
     }
 
     // Residual health, with the convention check.
