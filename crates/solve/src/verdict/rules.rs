@@ -176,140 +176,20 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     }
 
     // Held-out error at the working distance.
-    match evidence.held_out {
-        Ok(h) => {
-            figures.held_out = Some(*h);
-            let level = band(h.translation_rms_mm, a.translation_mm)
-                .max(band(h.rotation_rms_deg, a.rotation_deg));
-            if level > Level::Good {
-                findings.push(Finding {
-                    level,
-                    basis: Basis::HeldOutError,
-                    reason: format!(
-                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses, target at ~{:.0} mm) against the {} mm, {}° asked for",
-                        h.translation_rms_mm,
-                        h.rotation_rms_deg,
-                        h.poses,
-                        h.working_distance_mm,
-                        a.translation_mm,
-                        a.rotation_deg
-                    ),
-                    next_action: next_for_band(
-                        level,
-                        "record more poses with larger, more varied rotations, the board closer and better lit",
-                    ),
-                });
-            }
-        }
-        Err(why) => findings.push(Finding {
-            level: Level::Check,
-            basis: Basis::FewPoses,
-            reason: format!("no held-out check: {why}"),
-            next_action: "record more poses (12–20) so each can be checked against the others"
-                .into(),
-        }),
-    }
+    findings.extend(held_out_finding(
+        evidence.held_out.as_ref().map_err(String::as_str),
+        a,
+        &mut figures,
+    ));
 
     // 1-sigma of both transforms.
-    match &c.uncertainty {
-        Some(u) => {
-            let t = u
-                .camera_mount
-                .translation_mm
-                .max(u.target_mount.translation_mm);
-            let r = u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg);
-            figures.sigma_translation_mm = Some(t);
-            figures.sigma_rotation_deg = Some(r);
-            let level = band(t, a.translation_mm).max(band(r, a.rotation_deg));
-            if level > Level::Good {
-                let (camera_name, target_name) = c.setup.unknown_names();
-                findings.push(Finding {
-                    level,
-                    basis: Basis::Uncertainty,
-                    reason: format!(
-                        "1-sigma up to {t:.2} mm, {r:.3}° ({camera_name}: {:.2} mm, {:.3}°; {target_name}: {:.2} mm, {:.3}°) against the {} mm, {}° asked for",
-                        u.camera_mount.translation_mm,
-                        u.camera_mount.rotation_deg,
-                        u.target_mount.translation_mm,
-                        u.target_mount.rotation_deg,
-                        a.translation_mm,
-                        a.rotation_deg
-                    ),
-                    next_action: next_for_band(
-                        level,
-                        "record more poses with larger, more varied rotations",
-                    ),
-                });
-            }
-        }
-        None => findings.push(Finding {
-            level: Level::Check,
-            basis: Basis::Uncertainty,
-            reason: format!(
-                "no 1-sigma: the {} method computes none",
-                c.solver.method.name()
-            ),
-            next_action: "solve with the refined method to see the uncertainty".into(),
-        }),
-    }
+    findings.extend(uncertainty_finding(c, a, &mut figures));
 
     // Outliers, named.
-    if !c.outliers.is_empty() {
-        let named: Vec<String> = c
-            .outliers
-            .iter()
-            .map(
-                |&i| match evidence.pairs.get(i).and_then(|p| p.id.as_deref()) {
-                    Some(id) => format!("{i} ({id})"),
-                    None => i.to_string(),
-                },
-            )
-            .collect();
-        let dropped = if c.dropped.is_empty() {
-            "still in the solve"
-        } else {
-            "dropped from the solve"
-        };
-        findings.push(Finding {
-            level: Level::Check,
-            basis: Basis::Outliers,
-            reason: format!(
-                "{} sample(s) flagged as outliers ({dropped}): {}",
-                c.outliers.len(),
-                named.join(", ")
-            ),
-            next_action: "look at the detection and the robot pose of those samples; re-record them if they are wrong".into(),
-        });
-    }
+    findings.extend(outliers_finding(c, evidence.pairs));
 
     // The solver's own warnings and errors not judged above.
-    for notice in &c.notices {
-        let covered = matches!(
-            notice.kind,
-            NoticeKind::Outliers
-                | NoticeKind::DroppedOutliers
-                | NoticeKind::PoorlyDetermined
-                | NoticeKind::LikelyConventionError
-                | NoticeKind::LargeResiduals
-                | NoticeKind::FewPoses
-                | NoticeKind::PoorRotationSpread
-                | NoticeKind::FarFromNominal
-                | NoticeKind::WrongIntrinsics
-        );
-        if covered || !notice.needs_attention() {
-            continue;
-        }
-        findings.push(Finding {
-            level: if notice.severity == Severity::Error {
-                Level::Redo
-            } else {
-                Level::Check
-            },
-            basis: Basis::SolverNotice,
-            reason: notice.message.clone(),
-            next_action: next_for_notice(notice.kind).into(),
-        });
-    }
+    findings.extend(solver_notice_findings(c));
 
     // Coverage.
     let robot: Vec<Pose> = evidence.pairs.iter().map(|p| p.base_from_flange).collect();
@@ -328,6 +208,146 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     }
 
     decide(findings, figures, a)
+}
+
+/// The held-out error at the working distance against the accuracy (none within it), or the
+/// missing check; kept in `figures`.
+fn held_out_finding(
+    held_out: Result<&HeldOut, &str>,
+    a: Accuracy,
+    figures: &mut Figures,
+) -> Option<Finding> {
+    match held_out {
+        Ok(h) => {
+            figures.held_out = Some(*h);
+            let level = band(h.translation_rms_mm, a.translation_mm)
+                .max(band(h.rotation_rms_deg, a.rotation_deg));
+            (level > Level::Good).then(|| Finding {
+                level,
+                basis: Basis::HeldOutError,
+                reason: format!(
+                    "held-out error {:.2} mm, {:.3}° (RMS over {} poses, target at ~{:.0} mm) against the {} mm, {}° asked for",
+                    h.translation_rms_mm,
+                    h.rotation_rms_deg,
+                    h.poses,
+                    h.working_distance_mm,
+                    a.translation_mm,
+                    a.rotation_deg
+                ),
+                next_action: next_for_band(
+                    level,
+                    "record more poses with larger, more varied rotations, the board closer and better lit",
+                ),
+            })
+        }
+        Err(why) => Some(Finding {
+            level: Level::Check,
+            basis: Basis::FewPoses,
+            reason: format!("no held-out check: {why}"),
+            next_action: "record more poses (12–20) so each can be checked against the others"
+                .into(),
+        }),
+    }
+}
+
+/// The larger 1-sigma of the two transforms against the accuracy (none within it), or its
+/// absence; kept in `figures`.
+fn uncertainty_finding(c: &Calibration, a: Accuracy, figures: &mut Figures) -> Option<Finding> {
+    let Some(u) = &c.uncertainty else {
+        return Some(Finding {
+            level: Level::Check,
+            basis: Basis::Uncertainty,
+            reason: format!(
+                "no 1-sigma: the {} method computes none",
+                c.solver.method.name()
+            ),
+            next_action: "solve with the refined method to see the uncertainty".into(),
+        });
+    };
+    let t = u
+        .camera_mount
+        .translation_mm
+        .max(u.target_mount.translation_mm);
+    let r = u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg);
+    figures.sigma_translation_mm = Some(t);
+    figures.sigma_rotation_deg = Some(r);
+    let level = band(t, a.translation_mm).max(band(r, a.rotation_deg));
+    let (camera_name, target_name) = c.setup.unknown_names();
+    (level > Level::Good).then(|| Finding {
+        level,
+        basis: Basis::Uncertainty,
+        reason: format!(
+            "1-sigma up to {t:.2} mm, {r:.3}° ({camera_name}: {:.2} mm, {:.3}°; {target_name}: {:.2} mm, {:.3}°) against the {} mm, {}° asked for",
+            u.camera_mount.translation_mm,
+            u.camera_mount.rotation_deg,
+            u.target_mount.translation_mm,
+            u.target_mount.rotation_deg,
+            a.translation_mm,
+            a.rotation_deg
+        ),
+        next_action: next_for_band(level, "record more poses with larger, more varied rotations"),
+    })
+}
+
+/// The samples flagged as outliers, named by index and id.
+fn outliers_finding(c: &Calibration, pairs: &[PosePair]) -> Option<Finding> {
+    if c.outliers.is_empty() {
+        return None;
+    }
+    let named: Vec<String> = c
+        .outliers
+        .iter()
+        .map(|&i| match pairs.get(i).and_then(|p| p.id.as_deref()) {
+            Some(id) => format!("{i} ({id})"),
+            None => i.to_string(),
+        })
+        .collect();
+    let dropped = if c.dropped.is_empty() {
+        "still in the solve"
+    } else {
+        "dropped from the solve"
+    };
+    Some(Finding {
+        level: Level::Check,
+        basis: Basis::Outliers,
+        reason: format!(
+            "{} sample(s) flagged as outliers ({dropped}): {}",
+            c.outliers.len(),
+            named.join(", ")
+        ),
+        next_action: "look at the detection and the robot pose of those samples; re-record them if they are wrong".into(),
+    })
+}
+
+/// The solver's own warnings and errors that no other finding judges.
+fn solver_notice_findings(c: &Calibration) -> impl Iterator<Item = Finding> + '_ {
+    c.notices
+        .iter()
+        .filter(|notice| {
+            let covered = matches!(
+                notice.kind,
+                NoticeKind::Outliers
+                    | NoticeKind::DroppedOutliers
+                    | NoticeKind::PoorlyDetermined
+                    | NoticeKind::LikelyConventionError
+                    | NoticeKind::LargeResiduals
+                    | NoticeKind::FewPoses
+                    | NoticeKind::PoorRotationSpread
+                    | NoticeKind::FarFromNominal
+                    | NoticeKind::WrongIntrinsics
+            );
+            !covered && notice.needs_attention()
+        })
+        .map(|notice| Finding {
+            level: if notice.severity == Severity::Error {
+                Level::Redo
+            } else {
+                Level::Check
+            },
+            basis: Basis::SolverNotice,
+            reason: notice.message.clone(),
+            next_action: next_for_notice(notice.kind).into(),
+        })
 }
 
 /// The finding of a board that is not the size its file says: the factor, what it means for the
