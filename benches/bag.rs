@@ -28,10 +28,10 @@ use rand::SeedableRng;
 
 use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
 use handeye::camera_model::CameraModel;
-use handeye::formats::bag::tf::interpolate;
 use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::plan::lookat::LookAt;
 use handeye::vision::{Board, Target};
+use handeye_ros2_bag::tf::interpolate;
 
 #[path = "../tests/util/mod.rs"]
 mod util;
@@ -320,7 +320,7 @@ fn main() {
     println!("bag: {} ({:.2} GB)", bag.display(), size as f64 / 1e9);
     let board = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
     // The split, once: the library's part (read, TF, selection, decoding) and the whole command.
-    let options = handeye::formats::bag::BagOptions {
+    let options = handeye_ros2_bag::BagOptions {
         base_frame: "base".into(),
         flange_frame: "tool0".into(),
         image_topic: "/camera/image_raw".into(),
@@ -333,7 +333,7 @@ fn main() {
         detector: Default::default(),
     };
     let started = std::time::Instant::now();
-    let imported = handeye::formats::bag::import_bag(&bag, &options).unwrap();
+    let imported = handeye_ros2_bag::import_bag(&bag, &options).unwrap();
     println!(
         "library import_bag: {:.2} s ({} samples of {} images)",
         started.elapsed().as_secs_f64(),

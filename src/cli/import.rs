@@ -10,7 +10,7 @@ use clap::{Args, Subcommand, ValueEnum};
 use handeye::camera_model::CameraModel;
 use handeye::config::{recorded_cell, CellConfig, RecordedFiles};
 use handeye::dataset::Dataset;
-use handeye::formats::bag::{import_bag_session, BagNote, BagOptions, BagSessionRequest};
+use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
 use handeye::formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
@@ -18,6 +18,7 @@ use handeye::formats::import::{
 use handeye::robot::recorded::save_recorded_poses;
 use handeye::setup::Setup;
 use handeye::vision::{DetectorOptions, Target};
+use handeye_ros2_bag::BagOptions;
 
 /// The cell layout on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -220,7 +221,7 @@ fn in_range(option: &str, value: f64, lo: f64, hi: f64) -> anyhow::Result<f64> {
 }
 
 fn bag_options(a: &BagArgs) -> anyhow::Result<BagOptions> {
-    use handeye::formats::bag::{Motion, OffsetChoice, SelectOptions};
+    use handeye_ros2_bag::{Motion, OffsetChoice, SelectOptions};
     anyhow::ensure!(
         (1.0..=16.0).contains(&a.decimation),
         "--decimation {}: expected 1 to 16",

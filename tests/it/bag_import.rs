@@ -18,11 +18,11 @@ use rand::SeedableRng;
 
 use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
 use handeye::camera_model::{CameraModel, Distortion};
-use handeye::formats::bag::tf::interpolate;
 use handeye::geometry::{pose_from_rotvec, Pose};
 use handeye::plan::lookat::LookAt;
 use handeye::result::ResultFile;
 use handeye::vision::Board;
+use handeye_ros2_bag::tf::interpolate;
 
 use crate::util;
 use util::{handeye, pose_error_mm_deg, repo};
@@ -388,8 +388,8 @@ fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
 }
 
 /// The import options of the bags these tests write (the sim arm's frames and topics).
-fn sim_bag_options() -> handeye::formats::bag::BagOptions {
-    handeye::formats::bag::BagOptions {
+fn sim_bag_options() -> handeye_ros2_bag::BagOptions {
+    handeye_ros2_bag::BagOptions {
         base_frame: "base_link".into(),
         flange_frame: "tool0".into(),
         image_topic: "/camera/image_raw".into(),

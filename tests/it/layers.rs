@@ -21,6 +21,17 @@ const CRATES: &[(&str, &[&str])] = &[
         "handeye-ros2",
         &["handeye-core", "handeye-robot", "handeye-camera"],
     ),
+    // ROS 2 bags, beside the live crate whose messages they decode into.
+    (
+        "handeye-ros2-bag",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-camera",
+            "handeye-ros2",
+        ],
+    ),
     (
         "handeye-session",
         &[
@@ -42,6 +53,7 @@ const CRATES: &[(&str, &[&str])] = &[
             "handeye-camera",
             "handeye-session",
             "handeye-ros2",
+            "handeye-ros2-bag",
         ],
     ),
     ("mocks", &["handeye-core", "handeye-robot"]),

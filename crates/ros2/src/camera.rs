@@ -16,7 +16,7 @@ use futures::StreamExt;
 use handeye_camera::{Camera, CameraError, Frame};
 use handeye_core::camera_model::CameraModel;
 
-use crate::image::{compressed_to_gray, raw_to_gray, CompressedImage as CompressedView, RawImage};
+use crate::image::{compressed_to_gray, raw_to_gray};
 use crate::link::{sensor_data_qos, Ros2Link};
 use crate::msg::{CameraInfo, CompressedImage, Image};
 
@@ -253,18 +253,8 @@ impl Camera for Ros2Camera {
                 );
                 let topic = &self.options.image_topic;
                 let image = match &n.pixels {
-                    Pixels::Raw(m) => raw_to_gray(&RawImage {
-                        height: m.height,
-                        width: m.width,
-                        encoding: &m.encoding,
-                        is_bigendian: m.is_bigendian != 0,
-                        step: m.step,
-                        data: &m.data,
-                    }),
-                    Pixels::Compressed(m) => compressed_to_gray(&CompressedView {
-                        format: &m.format,
-                        data: &m.data,
-                    }),
+                    Pixels::Raw(m) => raw_to_gray(m),
+                    Pixels::Compressed(m) => compressed_to_gray(m),
                 }
                 .map_err(|reason| CameraError::Frame {
                     path: topic.clone(),

@@ -2,40 +2,17 @@
 //! detector reads: `mono8`, `mono16` (top 8 bits), `rgb8`/`bgr8`/`rgba8`/`bgra8` (Rec. 601 luma),
 //! `bayer_*8` (the symmetric 3x3 kernel `[1 2 1; 2 4 2; 1 2 1]/16`, which gives `(R + 2G + B)/4`
 //! at every pixel of every Bayer layout without shifting edges), and JPEG/PNG via `image`.
-//! One decoder for every source of these messages: the bag importer and the live `ros2` camera.
+//! One decoder of the one message model ([`crate::msg`]) for every source of these messages: bags
+//! (`handeye-ros2-bag`) and the live `ros2` camera.
 
 use image::GrayImage;
 
-/// The pixels of a `sensor_msgs/Image`, borrowed from wherever the message was decoded.
-#[derive(Debug, Clone, Copy)]
-pub struct RawImage<'a> {
-    /// Rows.
-    pub height: u32,
-    /// Columns.
-    pub width: u32,
-    /// `mono8`, `rgb8`, ...
-    pub encoding: &'a str,
-    /// Whether multi-byte pixels are big endian.
-    pub is_bigendian: bool,
-    /// Bytes per row.
-    pub step: u32,
-    /// The pixels.
-    pub data: &'a [u8],
-}
-
-/// The bytes of a `sensor_msgs/CompressedImage`.
-#[derive(Debug, Clone, Copy)]
-pub struct CompressedImage<'a> {
-    /// `jpeg`, `png`, or image_transport's `mono8; jpeg compressed mono8`.
-    pub format: &'a str,
-    /// The encoded file.
-    pub data: &'a [u8],
-}
+use crate::msg::{CompressedImage, Image};
 
 /// A raw image as 8-bit grey.
-pub fn raw_to_gray(raw: &RawImage<'_>) -> Result<GrayImage, String> {
+pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
-    let bytes_per_pixel = match raw.encoding {
+    let bytes_per_pixel = match raw.encoding.as_str() {
         "mono8" | "8UC1" => 1,
         "mono16" | "16UC1" => 2,
         "rgb8" | "bgr8" => 3,
@@ -65,14 +42,14 @@ pub fn raw_to_gray(raw: &RawImage<'_>) -> Result<GrayImage, String> {
     }
     let row = |y: usize| &raw.data[y * step..y * step + w * bytes_per_pixel];
     let mut out = vec![0u8; w * h];
-    match raw.encoding {
+    match raw.encoding.as_str() {
         "mono8" | "8UC1" => {
             for y in 0..h {
                 out[y * w..(y + 1) * w].copy_from_slice(row(y));
             }
         }
         "mono16" | "16UC1" => {
-            let high = usize::from(!raw.is_bigendian);
+            let high = usize::from(raw.is_bigendian == 0);
             for y in 0..h {
                 for (o, px) in out[y * w..(y + 1) * w]
                     .iter_mut()
@@ -135,9 +112,9 @@ pub const MAX_DECODE_BYTES: u64 = 512 << 20;
 
 /// A compressed image (JPEG or PNG) as 8-bit grey, within [`MAX_DECODED_SIDE_PX`] and
 /// [`MAX_DECODE_BYTES`].
-pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, String> {
+pub fn compressed_to_gray(image: &CompressedImage) -> Result<GrayImage, String> {
     let fail = |e: image::ImageError| format!("format `{}`: cannot decode: {e}", image.format);
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(image.data))
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(&image.data))
         .with_guessed_format()
         .map_err(|e| fail(e.into()))?;
     let mut limits = image::Limits::default();
@@ -160,14 +137,14 @@ pub fn compressed_to_gray(image: &CompressedImage<'_>) -> Result<GrayImage, Stri
 mod tests {
     use super::*;
 
-    fn raw<'a>(encoding: &'a str, w: u32, h: u32, step: u32, data: &'a [u8]) -> RawImage<'a> {
-        RawImage {
+    fn raw(encoding: &str, w: u32, h: u32, step: u32, data: &[u8]) -> Image {
+        Image {
             height: h,
             width: w,
-            encoding,
-            is_bigendian: false,
+            encoding: encoding.into(),
             step,
-            data,
+            data: data.to_vec(),
+            ..Image::default()
         }
     }
 

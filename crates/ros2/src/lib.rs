@@ -1,5 +1,8 @@
-//! Live ROS 2 for handeye without a ROS installation. [`msg`] holds the ROS 2 messages handeye
-//! reads and writes (serde structs in `.msg` field order, always built); with the `dds` feature,
+//! ROS 2 for handeye without a ROS installation. [`msg`] holds the ROS 2 messages handeye reads
+//! and writes (serde structs in `.msg` field order, always built), [`cdr`] their serialised form
+//! (the `cdr-encoding` codec RustDDS uses), [`image`] their pixels as grey and
+//! [`msg::CameraInfo::camera_model`] their intrinsics: one model for bags (`handeye-ros2-bag`,
+//! beside this crate) and the live graph. With the `dds` feature,
 //! [`link`] is one DDS participant and node (ros2-client on RustDDS: pure Rust, no ROS, no
 //! Cyclone/Fast DDS library) and [`tf_static`] publishes transforms the way
 //! `static_transform_publisher` does.
@@ -8,6 +11,7 @@
 //! and radians. This crate sits beside the robot and camera crates and uses their traits; the
 //! session opens it, nothing below names it.
 
+pub mod cdr;
 pub mod image;
 pub mod listen;
 pub mod msg;

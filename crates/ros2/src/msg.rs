@@ -14,6 +14,7 @@ use std::time::{Duration as StdDuration, SystemTime, UNIX_EPOCH};
 use nalgebra::{Quaternion as NaQuaternion, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 
+use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::Pose;
 
 /// A ROS 2 interface's package and name, for the DDS type name.
@@ -22,6 +23,48 @@ pub trait RosType {
     const PACKAGE: &'static str;
     /// The type, e.g. `TFMessage`.
     const NAME: &'static str;
+
+    /// The ROS 2 type name, e.g. `tf2_msgs/msg/TFMessage` (as a bag's topic list names it).
+    fn type_name() -> String {
+        format!("{}/msg/{}", Self::PACKAGE, Self::NAME)
+    }
+}
+
+/// A `uint8[]` field (pixels, compressed files) as one block on the wire: CDR's `sequence<octet>`
+/// is a `u32` length and the bytes, the same as a sequence of `u8`, but read and written whole.
+mod octets {
+    use serde::de::{Error, SeqAccess, Visitor};
+    use serde::{Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(bytes: &[u8], serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_bytes(bytes)
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Vec<u8>, D::Error> {
+        struct Octets;
+        impl<'de> Visitor<'de> for Octets {
+            type Value = Vec<u8>;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a byte sequence")
+            }
+            fn visit_bytes<E: Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
+                Ok(v.to_vec())
+            }
+            fn visit_byte_buf<E: Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
+                Ok(v)
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<u8>, A::Error> {
+                let mut out = Vec::new();
+                while let Some(b) = seq.next_element()? {
+                    out.push(b);
+                }
+                Ok(out)
+            }
+        }
+        deserializer.deserialize_byte_buf(Octets)
+    }
 }
 
 macro_rules! ros_type {
@@ -55,6 +98,22 @@ impl Time {
             sec: i32::try_from(since.as_secs()).unwrap_or(i32::MAX),
             nanosec: since.subsec_nanos(),
         }
+    }
+
+    /// Nanoseconds since the epoch, or why not: a `nanosec` of a second or more is a broken
+    /// writer, and read as is it would move the stamp by whole seconds (pairing a frame with
+    /// another pose), so it is refused, naming `field` (the stamp's path in its message).
+    pub fn checked_ns(self, field: &str) -> Result<i64, crate::cdr::CdrError> {
+        if self.nanosec >= 1_000_000_000 {
+            return Err(crate::cdr::CdrError::Field {
+                field: format!("{field}.nanosec"),
+                problem: format!(
+                    "{}, expected below 1000000000 (the nanoseconds within second {})",
+                    self.nanosec, self.sec
+                ),
+            });
+        }
+        Ok(i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec))
     }
 
     /// As a system time (a negative stamp counts as the epoch).
@@ -225,6 +284,7 @@ pub struct Image {
     /// Bytes per row.
     pub step: u32,
     /// The pixels.
+    #[serde(with = "octets")]
     pub data: Vec<u8>,
 }
 ros_type!(Image, "sensor_msgs", "Image");
@@ -237,6 +297,7 @@ pub struct CompressedImage {
     /// `jpeg`, `png` (image_transport adds the raw encoding: `bgr8; jpeg compressed bgr8`).
     pub format: String,
     /// The compressed file's bytes.
+    #[serde(with = "octets")]
     pub data: Vec<u8>,
 }
 ros_type!(CompressedImage, "sensor_msgs", "CompressedImage");
@@ -283,6 +344,68 @@ pub struct CameraInfo {
     pub roi: RegionOfInterest,
 }
 ros_type!(CameraInfo, "sensor_msgs", "CameraInfo");
+
+impl CameraInfo {
+    /// handeye's camera model of this camera: the one conversion of a `CameraInfo`, for bags and
+    /// the live graph. `plumb_bob` (4 or 5 coefficients) or no distortion; binning, a region of
+    /// interest smaller than the image and skew are refused (the images would not be the
+    /// calibrated ones), with the reason; so are intrinsics the model's checks refuse.
+    pub fn camera_model(&self) -> Result<CameraModel, String> {
+        let binned = |b: u32| b > 1;
+        if binned(self.binning_x) || binned(self.binning_y) {
+            return Err(format!(
+                "binning {}x{} is not supported (calibrate at full resolution)",
+                self.binning_x, self.binning_y
+            ));
+        }
+        let roi = &self.roi;
+        if roi.height != 0 && roi.width != 0 && (roi.height, roi.width) != (self.height, self.width)
+        {
+            return Err(format!(
+                "a region of interest ({}x{} at {}, {}) is not supported",
+                roi.width, roi.height, roi.x_offset, roi.y_offset
+            ));
+        }
+        let distortion = match (self.distortion_model.as_str(), self.d.as_slice()) {
+            (_, []) => Distortion::None,
+            ("plumb_bob", d) if d.len() == 5 || d.len() == 4 => Distortion::RadTan {
+                k1: d[0],
+                k2: d[1],
+                p1: d[2],
+                p2: d[3],
+                k3: d.get(4).copied().unwrap_or(0.0),
+            },
+            ("plumb_bob", d) => {
+                return Err(format!(
+                    "distortion_model plumb_bob with {} coefficients, expected 5 (k1, k2, p1, p2, k3)",
+                    d.len()
+                ))
+            }
+            (other, _) => {
+                return Err(format!(
+                    "distortion_model `{other}` is not supported (only plumb_bob); give the intrinsics without --camera-info so they are estimated"
+                ))
+            }
+        };
+        let k = self.k;
+        let model = CameraModel {
+            width: self.width,
+            height: self.height,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion,
+        };
+        if k[1] != 0.0 {
+            return Err(format!("skew K[0][1] = {} is not supported", k[1]));
+        }
+        model
+            .validate(std::path::Path::new("camera_info"))
+            .map_err(|e| format!("K {:?}, D {:?}: {e}", k, self.d))?;
+        Ok(model)
+    }
+}
 
 /// trajectory_msgs/JointTrajectoryPoint.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -517,6 +640,42 @@ mod tests {
         assert!(t.to_pose().is_none());
         t.rotation.w = f64::NAN;
         assert!(t.to_pose().is_none());
+    }
+
+    #[test]
+    fn camera_info_becomes_a_camera_model_or_says_why_not() {
+        let mut info = CameraInfo {
+            width: 640,
+            height: 480,
+            distortion_model: "plumb_bob".into(),
+            d: vec![-0.1, 0.01, 0.001, 0.002, 0.0],
+            k: [600.0, 0.0, 320.0, 0.0, 601.0, 240.0, 0.0, 0.0, 1.0],
+            ..CameraInfo::default()
+        };
+        let model = info.camera_model().unwrap();
+        assert_eq!(
+            (model.fx, model.fy, model.cx, model.cy, model.width),
+            (600.0, 601.0, 320.0, 240.0, 640)
+        );
+        assert!(matches!(model.distortion, Distortion::RadTan { k1, .. } if k1 == -0.1));
+        info.distortion_model = "rational_polynomial".into();
+        assert!(info
+            .camera_model()
+            .unwrap_err()
+            .contains("rational_polynomial"));
+        info.distortion_model = "plumb_bob".into();
+        info.binning_x = 2;
+        assert!(info.camera_model().unwrap_err().contains("binning 2x0"));
+        info.binning_x = 0;
+        info.roi.width = 320;
+        info.roi.height = 240;
+        assert!(info
+            .camera_model()
+            .unwrap_err()
+            .contains("region of interest"));
+        info.roi = RegionOfInterest::default();
+        info.k[1] = 0.5;
+        assert!(info.camera_model().unwrap_err().contains("skew"));
     }
 
     #[test]

@@ -49,7 +49,7 @@ fn issue30_frames_only_at_the_stops_give_one_sample_per_stop() {
     let Some((bag, views)) = stops_only_bag(dir.path(), stops) else {
         return;
     };
-    let imported = handeye::formats::bag::import_bag(&bag, &sim_bag_options()).unwrap();
+    let imported = handeye_ros2_bag::import_bag(&bag, &sim_bag_options()).unwrap();
     assert_eq!(
         imported.samples.len(),
         stops,

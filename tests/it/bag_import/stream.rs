@@ -55,7 +55,7 @@ fn issue29_pass_two_decodes_only_the_standing_frames() {
         let Some(bag) = stop_and_go_bag(dir.path(), storage, 6, 1.0, "blank") else {
             return;
         };
-        let imported = handeye::formats::bag::import_bag(&bag, &sim_bag_options()).unwrap();
+        let imported = handeye_ros2_bag::import_bag(&bag, &sim_bag_options()).unwrap();
         let count = |kind: &str| {
             imported
                 .skipped

@@ -178,6 +178,9 @@ pub struct PoseVisit {
 #[derive(Debug, Clone)]
 pub struct SessionFolder {
     root: PathBuf,
+    /// Where the folder will be once its writer moves it there (an import's staging folder is
+    /// renamed into place at the end): the path the result's advice names.
+    shown_as: Option<PathBuf>,
     lock: Option<Arc<SessionLock>>,
     notes: Vec<String>,
 }
@@ -235,6 +238,7 @@ impl SessionFolder {
         }
         Ok(SessionFolder {
             root: root.to_path_buf(),
+            shown_as: None,
             lock: None,
             notes: Vec::new(),
         })
@@ -286,6 +290,7 @@ impl SessionFolder {
         }
         Ok(SessionFolder {
             root: root.to_path_buf(),
+            shown_as: None,
             lock: Some(Arc::new(lock)),
             notes,
         })
@@ -305,6 +310,29 @@ impl SessionFolder {
     /// The folder.
     pub fn root(&self) -> &Path {
         &self.root
+    }
+
+    /// The same folder, to be moved to `path` by its writer when the run is done (a staging
+    /// folder): what the session writes for people to act on (the verdict's advice, the
+    /// summary) names `path`, and every file is still written under [`SessionFolder::root`].
+    pub fn to_be_moved_to(mut self, path: &Path) -> SessionFolder {
+        self.shown_as = Some(path.to_path_buf());
+        self
+    }
+
+    /// Where the folder is for a person reading the result: [`SessionFolder::root`], or the
+    /// path given to [`SessionFolder::to_be_moved_to`].
+    pub fn shown_root(&self) -> &Path {
+        self.shown_as.as_deref().unwrap_or(&self.root)
+    }
+
+    /// Where a person finds `path`: a file inside the folder under [`SessionFolder::shown_root`],
+    /// any other as it is.
+    pub fn shown(&self, path: &Path) -> PathBuf {
+        match (&self.shown_as, path.strip_prefix(&self.root)) {
+            (Some(shown), Ok(inside)) => shown.join(inside),
+            _ => path.to_path_buf(),
+        }
     }
 
     /// `session.yaml`.

@@ -113,15 +113,27 @@ impl SolvedSession {
     /// verdict's advice and the summary (the verdict's rules know none of them: see
     /// `verdict::SessionFiles`).
     pub fn name_session(&mut self, session: &std::path::Path, config: &CellConfig) {
+        self.name_files(session, config, &|path| path.to_path_buf());
+    }
+
+    /// [`SolvedSession::name_session`] for a session in `folder`, naming it and the files in it
+    /// where a person will find them ([`SessionFolder::shown`]).
+    pub fn name_session_in(&mut self, folder: &SessionFolder, config: &CellConfig) {
+        self.name_files(folder.shown_root(), config, &|path| folder.shown(path));
+    }
+
+    fn name_files(
+        &mut self,
+        session: &std::path::Path,
+        config: &CellConfig,
+        shown: &dyn Fn(&std::path::Path) -> std::path::PathBuf,
+    ) {
+        let name = |path: &std::path::Path| shown(path).display().to_string();
         let files = verdict::SessionFiles {
             session: session.display().to_string(),
-            config: config.file.display().to_string(),
-            board: config.target.display().to_string(),
-            intrinsics: config
-                .intrinsics
-                .as_ref()
-                .map(|f| f.display().to_string())
-                .unwrap_or_default(),
+            config: name(&config.file),
+            board: name(&config.target),
+            intrinsics: config.intrinsics.as_deref().map(name).unwrap_or_default(),
         };
         if let Some(verdict) = &mut self.verdict {
             verdict.name_session(&files);
@@ -177,7 +189,7 @@ pub fn load_and_solve(
     space: SolveSpace,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
-    solved.name_session(folder.root(), &inputs.config);
+    solved.name_session_in(folder, &inputs.config);
     Ok((solved, dataset))
 }
 
@@ -227,7 +239,13 @@ fn solve_loaded(
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
     let notices: Vec<_> = wrong
         .iter()
-        .map(|w| w.notice(&intrinsics_file, folder.root(), &config.file))
+        .map(|w| {
+            w.notice(
+                &folder.shown(&intrinsics_file),
+                folder.shown_root(),
+                &folder.shown(&config.file),
+            )
+        })
         .collect();
     let solved = solve_session_with(
         dataset.setup,
@@ -439,7 +457,7 @@ fn solve_from_scratch(
         i.fx, i.fy, i.cx, i.cy,
         c.fx, c.fy, c.cx, c.cy,
         "plumb_bob", c.distortion_coefficients(),
-        camera_info.display()
+        folder.shown_root().join(CAMERA_INFO_FILE).display()
     )];
     if let Some(sigma) = scratch.joint.intrinsics_sigma_px {
         notes.push(format!(

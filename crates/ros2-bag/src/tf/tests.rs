@@ -10,8 +10,8 @@ fn pose(t: [f64; 3], angle_z: f64) -> Pose {
     )
 }
 
-fn stamped(stamp_ns: i64, parent: &str, child: &str, p: Pose) -> TransformStamped {
-    TransformStamped {
+fn stamped(stamp_ns: i64, parent: &str, child: &str, p: Pose) -> EdgeSample {
+    EdgeSample {
         stamp_ns,
         parent: parent.into(),
         child: child.into(),
@@ -261,6 +261,58 @@ fn conflicting_samples_and_stamps_going_back() {
         .to_string();
     assert!(
         e.contains("`/tf` message 11 is stamped 8.000000000 s after 10.000000000 s"),
+        "{e}"
+    );
+}
+
+/// A TF message of a bag, through the one codec: slashes dropped, stamps in ns, and a `nanosec`
+/// of a second or more or a quaternion off unit length refused with the field and the value.
+#[test]
+fn tf_messages_become_edge_samples_or_name_the_bad_field() {
+    use handeye_ros2::cdr;
+    use handeye_ros2::msg::{Header, TfMessage, Time, Transform, TransformStamped};
+    let turn = pose([1.0, -2.0, 3.0], std::f64::consts::FRAC_PI_2);
+    let message = |nanosec: u32, w_scale: f64| {
+        let mut transform = Transform::from_pose(&turn);
+        transform.rotation.w *= w_scale;
+        let bytes = cdr::encode(&TfMessage {
+            transforms: vec![TransformStamped {
+                header: Header {
+                    stamp: Time { sec: 2, nanosec },
+                    frame_id: "/base".into(),
+                },
+                child_frame_id: "tool0".into(),
+                transform,
+            }],
+        })
+        .unwrap();
+        edge_samples(&cdr::decode::<TfMessage>(&bytes).unwrap())
+    };
+    let samples = message(1, 1.0).unwrap();
+    assert_eq!(samples.len(), 1);
+    assert_eq!(
+        (
+            samples[0].stamp_ns,
+            samples[0].parent.as_str(),
+            samples[0].child.as_str()
+        ),
+        (2_000_000_001, "base", "tool0")
+    );
+    assert!(
+        samples[0]
+            .parent_from_child
+            .rotation
+            .angle_to(&turn.rotation)
+            < 1e-12
+    );
+    let e = message(1_500_000_000, 1.0).unwrap_err().to_string();
+    assert!(
+        e.contains("`transforms[0].header.stamp.nanosec`: 1500000000, expected below 1000000000"),
+        "{e}"
+    );
+    let e = message(0, 1.5).unwrap_err().to_string();
+    assert!(
+        e.contains("`transforms[0].transform`") && e.contains("unit quaternion"),
         "{e}"
     );
 }

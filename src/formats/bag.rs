@@ -1,4 +1,5 @@
-//! A ROS 2 bag imported as a session (`handeye import bag`): the bag read ([`import_bag`]), its
+//! A ROS 2 bag imported as a session (`handeye import bag`): the bag read
+//! ([`handeye_ros2_bag::import_bag`]: storage, TF, the frames chosen), its
 //! frames written with their flange poses as a recorded cell in a staging folder beside the
 //! output, run through the ordinary session driver and solved there, and the folder renamed into
 //! place only when all of that succeeded; the staging folder of an import that was killed is
@@ -19,7 +20,7 @@ use crate::cell::run::{self as run, RunError, RunObserver, RunRequest, SessionTa
 use crate::cell::PreparedCell;
 use crate::session::{self, SessionFolder, SolvedSession};
 
-use super::{import_bag, BagOptions, SkipReason};
+use handeye_ros2_bag::{import_bag, BagOptions, SkipReason};
 
 /// What to import and where.
 #[derive(Debug, Clone)]
@@ -218,7 +219,9 @@ pub fn import_bag_session(
         .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
     let stage = staging.path().to_path_buf();
     // Created (and locked) first: the imported files go into it, then the run records there.
-    let folder = SessionFolder::create(&stage)?;
+    // The result names the session where it will be (the verdict's advice, e.g. `handeye replay
+    // DIR --config ...`), not the staging folder.
+    let folder = SessionFolder::create(&stage)?.to_be_moved_to(&out);
     let import_dir = stage.join("import");
     let images_dir = import_dir.join("images");
     std::fs::create_dir_all(&images_dir)
@@ -360,23 +363,7 @@ pub fn import_bag_session(
     staging
         .commit(&out)
         .with_context(|| format!("moving the session into {}", out.display()))?;
-    // The solve ran in the staging folder; name the session where it is now (the verdict's
-    // advice in result.yaml names the folder, e.g. `handeye replay DIR --config ...`).
-    let (staged_name, final_name) = (stage.to_string_lossy(), out.to_string_lossy());
-    let summary = solved
-        .summary
-        .trim_end()
-        .replace(&*staged_name, &final_name);
-    let result_file = out.join("result.yaml");
-    if let Ok(text) = std::fs::read_to_string(&result_file) {
-        if text.contains(&*staged_name) {
-            crate::atomic_file::write_atomic(
-                &result_file,
-                text.replace(&*staged_name, &final_name).as_bytes(),
-            )
-            .with_context(|| format!("writing {}", result_file.display()))?;
-        }
-    }
+    let summary = solved.summary.trim_end().to_string();
     Ok(BagSession {
         folder: out,
         accepted: outcome.accepted.len(),

@@ -204,7 +204,7 @@ impl Bag {
                 })
                 .collect();
             files.sort_by(|a, b| {
-                crate::camera::files::natural_cmp(&a.to_string_lossy(), &b.to_string_lossy())
+                handeye_camera::files::natural_cmp(&a.to_string_lossy(), &b.to_string_lossy())
             });
             if files.is_empty() {
                 return Err(storage(

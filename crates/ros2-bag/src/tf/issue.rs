@@ -1,7 +1,7 @@
 //! What is wrong with a bag's TF data ([`TfIssue`]), where each transform came from
 //! ([`TfSource`]), and why a lookup fails ([`TfError`]).
 
-use crate::geometry::Pose;
+use handeye_core::geometry::Pose;
 
 /// Two transforms closer than this (m, rad) are the same value (a republished static, a
 /// duplicated message): the float round trips of a writer stay orders of magnitude below.

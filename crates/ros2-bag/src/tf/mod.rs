@@ -15,12 +15,61 @@ mod tests;
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::geometry::Pose;
+use handeye_core::geometry::Pose;
 
-use super::cdr::TransformStamped;
+use handeye_ros2::cdr::CdrError;
+use handeye_ros2::msg::TfMessage;
 
 use issue::{apart, same};
 pub use issue::{stamp_text, TfError, TfIssue, TfSource, TfWarning, AMBIGUOUS_DEG, AMBIGUOUS_MM};
+
+/// One transform of a TF message as the buffer keeps it: `T_parent_child` at `stamp_ns`, the
+/// frame ids without a leading `/` (tf2 ignores it, a ROS 1 habit).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EdgeSample {
+    /// Header stamp, ns.
+    pub stamp_ns: i64,
+    /// `header.frame_id` (the parent).
+    pub parent: String,
+    /// `child_frame_id`.
+    pub child: String,
+    /// Maps points in the child frame into the parent frame.
+    pub parent_from_child: Pose,
+}
+
+/// The transforms of one `tf2_msgs/TFMessage` of a bag, or the first that is not a stamped rigid
+/// transform: a `nanosec` of a second or more, a value not finite, a quaternion further than
+/// 1e-3 from unit length (a bag's numbers are the publisher's, unrounded). Refused, not skipped:
+/// the pose at a frame would silently come from other messages.
+pub fn edge_samples(message: &TfMessage) -> Result<Vec<EdgeSample>, CdrError> {
+    let strip = |frame: &str| frame.strip_prefix('/').unwrap_or(frame).to_string();
+    let mut out = Vec::with_capacity(message.transforms.len());
+    for (i, t) in message.transforms.iter().enumerate() {
+        let field = |name: &str| format!("transforms[{i}].{name}");
+        let stamp_ns = t.header.stamp.checked_ns(&field("header.stamp"))?;
+        let (v, r) = (t.transform.translation, t.transform.rotation);
+        let norm = (r.x * r.x + r.y * r.y + r.z * r.z + r.w * r.w).sqrt();
+        let pose = t
+            .transform
+            .to_pose()
+            .filter(|_| (norm - 1.0).abs() < 1e-3)
+            .ok_or_else(|| CdrError::Field {
+                field: field("transform"),
+                problem: format!(
+                    "translation {:?}, rotation (x, y, z, w) {:?}: not finite or not a unit quaternion",
+                    [v.x, v.y, v.z],
+                    [r.x, r.y, r.z, r.w]
+                ),
+            })?;
+        out.push(EdgeSample {
+            stamp_ns,
+            parent: strip(&t.header.frame_id),
+            child: strip(&t.child_frame_id),
+            parent_from_child: pose,
+        });
+    }
+    Ok(out)
+}
 
 #[derive(Debug, Clone)]
 enum Edge {
@@ -55,7 +104,7 @@ pub struct TfBuffer {
 
 impl TfBuffer {
     /// Adds one transform (from `/tf_static` when `is_static`), read from `source`.
-    pub fn add(&mut self, t: TransformStamped, is_static: bool, source: TfSource) {
+    pub fn add(&mut self, t: EdgeSample, is_static: bool, source: TfSource) {
         let parents = self.parents.entry(t.child.clone()).or_default();
         if !parents.iter().any(|(p, _)| *p == t.parent) {
             parents.push((t.parent.clone(), source.clone()));

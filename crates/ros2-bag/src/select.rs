@@ -21,18 +21,19 @@ use std::path::Path;
 
 use ::image::GrayImage;
 
-use crate::camera_model::CameraModel;
-use crate::geometry::Pose;
-use crate::setup::PosePair;
-use crate::solve::{solve, Method, SolveOptions};
-use crate::vision::{estimate_board_pose, TargetDetector};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::PosePair;
+use handeye_solve::{solve, Method, SolveOptions};
+use handeye_vision::{estimate_board_pose, TargetDetector};
 
-use super::cdr;
 use super::storage::{Location, MessageAt};
 use super::tf::TfBuffer;
 use super::{BagError, BagOptions, BagSample};
-use crate::vision::sharpness::sharpness;
-use handeye_ros2::image::{compressed_to_gray, raw_to_gray, CompressedImage, RawImage};
+use handeye_ros2::cdr;
+use handeye_ros2::image::{compressed_to_gray, raw_to_gray};
+use handeye_ros2::msg::{CompressedImage, Image};
+use handeye_vision::sharpness::sharpness;
 
 /// How the arm moved while the bag was recorded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -204,22 +205,10 @@ fn to_gray(
         source,
     };
     if compressed {
-        let c = cdr::decode_compressed_image(data).map_err(|e| wrap(e.into()))?;
-        let c = CompressedImage {
-            format: &c.format,
-            data: c.data,
-        };
+        let c = cdr::decode::<CompressedImage>(data).map_err(|e| wrap(e.into()))?;
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
-        let r = cdr::decode_image(data).map_err(|e| wrap(e.into()))?;
-        let r = RawImage {
-            height: r.height,
-            width: r.width,
-            encoding: &r.encoding,
-            is_bigendian: r.is_bigendian,
-            step: r.step,
-            data: r.data,
-        };
+        let r = cdr::decode::<Image>(data).map_err(|e| wrap(e.into()))?;
         raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
     }
 }

@@ -1,35 +1,35 @@
-//! ROS 2 bags in, calibration samples out: `handeye import bag`.
+//! ROS 2 bags in, calibration samples out: what `handeye import bag` reads.
 //!
 //! Reads both rosbag2 storage formats (MCAP, sqlite3 `.db3`) without a ROS installation, decodes
 //! `tf2_msgs/TFMessage`, `sensor_msgs/Image`, `sensor_msgs/CompressedImage` and
-//! `sensor_msgs/CameraInfo` with a small CDR reader, chains the TF tree from the base to the
-//! flange at each image stamp, and picks the frames to calibrate from: the sharpest frame of each
-//! interval where the arm stood still (stop-and-go), or frames at a fixed spacing while it moved
-//! (continuous, with the camera-to-robot clock offset given or estimated from the data). Every
-//! frame not taken is reported with why (moving, TF gap, ...).
+//! `sensor_msgs/CameraInfo` into `handeye-ros2`'s messages with its CDR codec (the one the live
+//! graph uses), chains the TF tree from the base to the flange at each image stamp, and picks the
+//! frames to calibrate from: the sharpest frame of each interval where the arm stood still
+//! (stop-and-go), or frames at a fixed spacing while it moved (continuous, with the
+//! camera-to-robot clock offset given or estimated from the data). Every frame not taken is
+//! reported with why (moving, TF gap, ...).
 //!
 //! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
 //! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
-//! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused by
-//! `cdr`), sqlite3 rows of unknown topics. docs/ros2-bags.md has the table.
+//! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused
+//! when the message is decoded), sqlite3 rows of unknown topics. docs/ros2-bags.md has the table.
 //!
 //! The bag is streamed, never held: its memory does not grow with its length ([`import_bag`]
 //! reads it twice, message by message). A memory limit too small for the import's own room is an
 //! error ([`BagError::OutOfMemory`]), not an abort.
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
-//! an ordinary session through the recorded-cell path (the CLI's `import bag`); this module writes
-//! nothing.
+//! an ordinary session through the recorded-cell path (`handeye::formats::bag`); this crate
+//! writes nothing.
 //!
-//! Submodules: `storage` (the two storage formats), `cdr` (message decoding), `tf` (the TF
-//! buffer), `image` (pixel encodings to grey), `select` (stationary intervals, sharpness, the
-//! clock offset). Depends on `geometry`, `setup`, `camera_model`, `solve` (the offset estimate)
-//! and `vision` (board detection for the offset estimate).
+//! Modules: `storage` (the two storage formats; `mcap_index`, an MCAP file's index), `tf` (the TF
+//! buffer), `select` (stationary intervals, sharpness, the clock offset). Sits beside
+//! `handeye-ros2` (the messages, their CDR form, pixels to grey, `CameraInfo` to a camera model)
+//! and uses `core`, `solve` (the offset estimate) and `vision` (board detection for it,
+//! sharpness).
 
-pub mod cdr;
 mod mcap_index;
 pub mod select;
-pub mod session;
 pub mod storage;
 #[cfg(test)]
 mod storage_tests;
@@ -39,14 +39,14 @@ use std::path::{Path, PathBuf};
 
 use ::image::GrayImage;
 
-use crate::camera_model::CameraModel;
-use crate::geometry::Pose;
-use crate::setup::Setup;
-use crate::vision::{DetectorOptions, Target};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::Setup;
+use handeye_ros2::cdr::{self, CdrError};
+use handeye_ros2::msg::{CameraInfo, TfMessage};
+use handeye_vision::{DetectorOptions, Target};
 
-pub use cdr::CdrError;
 pub use select::{Motion, OffsetChoice, OffsetEstimate, SelectOptions, Skip, SkipReason};
-pub use session::{import_bag_session, BagNote, BagSession, BagSessionRequest};
 pub use storage::{BagFormat, TopicInfo};
 pub use tf::{TfError, TfIssue, TfWarning};
 
@@ -296,7 +296,7 @@ pub struct BagSample {
     pub base_from_flange: Pose,
     /// The image, 8-bit grey.
     pub image: GrayImage,
-    /// [`crate::vision::sharpness`]: Laplacian over gradient energy, about 2 for sharp edges,
+    /// [`handeye_vision::sharpness`]: Laplacian over gradient energy, about 2 for sharp edges,
     /// lower with blur.
     pub sharpness: f64,
 }
@@ -325,8 +325,8 @@ pub struct BagImport {
 
 /// What pass 1 keeps of a message.
 enum Payload {
-    Tf(Result<Vec<cdr::TransformStamped>, CdrError>),
-    Info(Box<Result<cdr::CameraInfo, CdrError>>),
+    Tf(Result<Vec<tf::EdgeSample>, CdrError>),
+    Info(Box<Result<CameraInfo, CdrError>>),
     /// The header stamp only: the pixels are read again in pass 2 if the frame is looked at.
     Image(Result<i64, CdrError>),
 }
@@ -422,11 +422,18 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
     let mut reads: Vec<Pass1> = Vec::new();
     bag.for_each(&wanted, std::slice::from_ref(&options.image_topic), |m| {
         let payload = if m.topic == options.image_topic {
-            Payload::Image(cdr::decode_stamp(m.data))
+            Payload::Image(
+                cdr::decode_header_stamp(m.data).and_then(|t| t.checked_ns("header.stamp")),
+            )
         } else if Some(m.topic) == options.camera_info_topic.as_deref() {
-            Payload::Info(Box::new(cdr::decode_camera_info(m.data)))
+            Payload::Info(Box::new(cdr::decode::<CameraInfo>(m.data).and_then(
+                |info| {
+                    info.header.stamp.checked_ns("header.stamp")?;
+                    Ok(info)
+                },
+            )))
         } else {
-            Payload::Tf(cdr::decode_tf_message(m.data))
+            Payload::Tf(cdr::decode::<TfMessage>(m.data).and_then(|tf| tf::edge_samples(&tf)))
         };
         reads.push(Pass1 {
             topic: wanted.iter().position(|w| w == m.topic).unwrap_or(0),
@@ -488,11 +495,12 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         }
         (Some(t), Some(info)) => {
             Some(
-                camera_from_info(info).map_err(|problem| BagError::CameraInfo {
-                    path: path.to_path_buf(),
-                    topic: t.name.clone(),
-                    problem,
-                })?,
+                info.camera_model()
+                    .map_err(|problem| BagError::CameraInfo {
+                        path: path.to_path_buf(),
+                        topic: t.name.clone(),
+                        problem,
+                    })?,
             )
         }
         (None, _) => None,
@@ -601,64 +609,4 @@ fn expect_type(path: &Path, topic: &TopicInfo, expected: &'static str) -> Result
             expected,
         })
     }
-}
-
-/// Our camera model from a `sensor_msgs/CameraInfo` (`plumb_bob` or no distortion; binning and
-/// ROI must be off, since the images would then not be the calibrated size).
-pub fn camera_from_info(info: &cdr::CameraInfo) -> Result<CameraModel, String> {
-    use crate::camera_model::Distortion;
-    let binned = |b: u32| b > 1;
-    if binned(info.binning.0) || binned(info.binning.1) {
-        return Err(format!(
-            "binning {}x{} is not supported (calibrate at full resolution)",
-            info.binning.0, info.binning.1
-        ));
-    }
-    if info.roi[2] != 0
-        && info.roi[3] != 0
-        && (info.roi[2], info.roi[3]) != (info.height, info.width)
-    {
-        return Err(format!(
-            "a region of interest ({}x{} at {}, {}) is not supported",
-            info.roi[3], info.roi[2], info.roi[0], info.roi[1]
-        ));
-    }
-    let distortion = match (info.distortion_model.as_str(), info.d.as_slice()) {
-        (_, []) => Distortion::None,
-        ("plumb_bob", d) if d.len() == 5 || d.len() == 4 => Distortion::RadTan {
-            k1: d[0],
-            k2: d[1],
-            p1: d[2],
-            p2: d[3],
-            k3: d.get(4).copied().unwrap_or(0.0),
-        },
-        ("plumb_bob", d) => {
-            return Err(format!(
-                "distortion_model plumb_bob with {} coefficients, expected 5 (k1, k2, p1, p2, k3)",
-                d.len()
-            ))
-        }
-        (other, _) => {
-            return Err(format!(
-                "distortion_model `{other}` is not supported (only plumb_bob); give the intrinsics without --camera-info so they are estimated"
-            ))
-        }
-    };
-    let k = info.k;
-    let model = CameraModel {
-        width: info.width,
-        height: info.height,
-        fx: k[0],
-        fy: k[4],
-        cx: k[2],
-        cy: k[5],
-        distortion,
-    };
-    if k[1] != 0.0 {
-        return Err(format!("skew K[0][1] = {} is not supported", k[1]));
-    }
-    model
-        .validate(Path::new("camera_info"))
-        .map_err(|e| format!("K {:?}, D {:?}: {e}", k, info.d))?;
-    Ok(model)
 }
