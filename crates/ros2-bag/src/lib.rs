@@ -339,17 +339,22 @@ struct Pass1 {
     payload: Payload,
 }
 
-/// Reads a bag and picks the frames to calibrate from (see the module docs). The bag is read
-/// twice, message by message, never whole: pass 1 reads the TF, the camera_info and the image
-/// stamps; pass 2 reads and decodes only the frames the selection looks at, one at a time.
-pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
-    let bag = storage::Bag::open(path)?;
-    let mut wanted: Vec<String> = options.tf_topics.clone();
-    wanted.push(options.image_topic.clone());
-    if let Some(info) = &options.camera_info_topic {
-        wanted.push(info.clone());
-    }
-    let topics = bag.topics()?;
+/// The topics an import reads, found in the bag and of the types it reads.
+struct WantedTopics {
+    /// The image topic's images are `sensor_msgs/msg/CompressedImage`.
+    compressed: bool,
+    /// The camera_info topic, when one was given.
+    info: Option<TopicInfo>,
+}
+
+/// The image, camera_info and TF topics of `options` in the bag's `topics`, each of its
+/// expected type; a missing one is named with the topics the bag has. At least one TF topic
+/// must exist (a missing /tf_static is normal: it may be in /tf).
+fn wanted_topics(
+    path: &Path,
+    topics: &[TopicInfo],
+    options: &BagOptions,
+) -> Result<WantedTopics, BagError> {
     let find = |topic: &str, role: &'static str| -> Result<TopicInfo, BagError> {
         topics
             .iter()
@@ -365,28 +370,27 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
                     .collect(),
             })
     };
-    let image_topic = find(&options.image_topic, "--image")?;
-    let compressed = match image_topic.type_name.as_str() {
+    let image = find(&options.image_topic, "--image")?;
+    let compressed = match image.type_name.as_str() {
         "sensor_msgs/msg/Image" => false,
         "sensor_msgs/msg/CompressedImage" => true,
         other => {
             return Err(BagError::TopicType {
                 path: path.to_path_buf(),
-                topic: image_topic.name.clone(),
+                topic: image.name.clone(),
                 found: other.to_string(),
                 expected: "sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage",
             })
         }
     };
-    let info_topic = options
+    let info = options
         .camera_info_topic
         .as_deref()
         .map(|t| find(t, "--camera-info"))
         .transpose()?;
-    if let Some(info) = &info_topic {
+    if let Some(info) = &info {
         expect_type(path, info, "sensor_msgs/msg/CameraInfo")?;
     }
-    // TF topics: at least one must exist; a missing /tf_static is normal (it may be in /tf).
     let tf_present: Vec<&TopicInfo> = options
         .tf_topics
         .iter()
@@ -401,6 +405,84 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
     for t in &tf_present {
         expect_type(path, t, "tf2_msgs/msg/TFMessage")?;
     }
+    Ok(WantedTopics { compressed, info })
+}
+
+/// The lens of the first camera_info message, when a topic was given (it must hold one).
+fn camera_of(
+    path: &Path,
+    info_topic: Option<&TopicInfo>,
+    first: Option<&CameraInfo>,
+) -> Result<Option<CameraModel>, BagError> {
+    let Some(topic) = info_topic else {
+        return Ok(None);
+    };
+    let problem = |problem: String| BagError::CameraInfo {
+        path: path.to_path_buf(),
+        topic: topic.name.clone(),
+        problem,
+    };
+    let info = first.ok_or_else(|| problem("no message".into()))?;
+    info.camera_model().map(Some).map_err(problem)
+}
+
+/// Image stamps in receive order: a small step back is delivery order (the frames are sorted by
+/// stamp; a warning); a large one, past the TF gap interpolated across, is a camera clock that
+/// went back, and pairing by stamp fails (an error).
+fn image_stamps_back(
+    path: &Path,
+    images: &[select::ImageRef],
+    options: &BagOptions,
+) -> Result<Option<BagWarning>, BagError> {
+    let max_back_ns = select::seconds_to_ns(options.select.max_tf_gap_s);
+    let mut back: Option<(usize, i64, i64)> = None;
+    let mut back_count = 0;
+    for pair in images.windows(2) {
+        let (before, after) = (pair[0].stamp_ns, pair[1].stamp_ns);
+        if after < before {
+            back_count += 1;
+            if back.is_none_or(|(_, f, t)| before - after > f - t) {
+                back = Some((pair[1].index, before, after));
+            }
+        }
+    }
+    let Some((index, from_ns, to_ns)) = back else {
+        return Ok(None);
+    };
+    if from_ns - to_ns > max_back_ns {
+        return Err(BagError::StampsBack {
+            path: path.to_path_buf(),
+            topic: options.image_topic.clone(),
+            count: back_count,
+            index,
+            from_ns,
+            to_ns,
+            max_back_ms: options.select.max_tf_gap_s * 1e3,
+        });
+    }
+    Ok(Some(BagWarning::ImageStampsBack {
+        topic: options.image_topic.clone(),
+        count: back_count,
+        index,
+        from_ns,
+        to_ns,
+    }))
+}
+
+/// Reads a bag and picks the frames to calibrate from (see the module docs). The bag is read
+/// twice, message by message, never whole: pass 1 reads the TF, the camera_info and the image
+/// stamps; pass 2 reads and decodes only the frames the selection looks at, one at a time.
+pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
+    let bag = storage::Bag::open(path)?;
+    let mut wanted: Vec<String> = options.tf_topics.clone();
+    wanted.push(options.image_topic.clone());
+    if let Some(info) = &options.camera_info_topic {
+        wanted.push(info.clone());
+    }
+    let WantedTopics {
+        compressed,
+        info: info_topic,
+    } = wanted_topics(path, &bag.topics()?, options)?;
 
     let mut warnings = Vec::new();
     for rows in bag.unknown_topic_rows()? {
@@ -485,26 +567,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
             source: Box::new(source),
         })?;
     warnings.extend(tf_warnings.into_iter().map(|w| BagWarning::Tf(Box::new(w))));
-    let camera = match (&info_topic, infos.first()) {
-        (Some(t), None) => {
-            return Err(BagError::CameraInfo {
-                path: path.to_path_buf(),
-                topic: t.name.clone(),
-                problem: "no message".into(),
-            })
-        }
-        (Some(t), Some(info)) => {
-            Some(
-                info.camera_model()
-                    .map_err(|problem| BagError::CameraInfo {
-                        path: path.to_path_buf(),
-                        topic: t.name.clone(),
-                        problem,
-                    })?,
-            )
-        }
-        (None, _) => None,
-    };
+    let camera = camera_of(path, info_topic.as_ref(), infos.first())?;
     let decoded = images
         .into_iter()
         .map(|(stamp, index, log_time_ns, location)| {
@@ -523,39 +586,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
                 })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    // Image stamps in receive order: a small step back is delivery order (the frames are sorted
-    // by stamp); a large one is a camera clock that went back, and pairing by stamp fails.
-    let mut back: Option<(usize, i64, i64)> = None;
-    let mut back_count = 0;
-    for pair in decoded.windows(2) {
-        let (before, after) = (pair[0].stamp_ns, pair[1].stamp_ns);
-        if after < before {
-            back_count += 1;
-            if back.is_none_or(|(_, f, t)| before - after > f - t) {
-                back = Some((pair[1].index, before, after));
-            }
-        }
-    }
-    if let Some((index, from_ns, to_ns)) = back {
-        if from_ns - to_ns > max_back_ns {
-            return Err(BagError::StampsBack {
-                path: path.to_path_buf(),
-                topic: options.image_topic.clone(),
-                count: back_count,
-                index,
-                from_ns,
-                to_ns,
-                max_back_ms: options.select.max_tf_gap_s * 1e3,
-            });
-        }
-        warnings.push(BagWarning::ImageStampsBack {
-            topic: options.image_topic.clone(),
-            count: back_count,
-            index,
-            from_ns,
-            to_ns,
-        });
-    }
+    warnings.extend(image_stamps_back(path, &decoded, options)?);
     // Pass 2: the selection reads and decodes only the frames it looks at (see `select`).
     let mut frames = select::Frames {
         reader: bag.message_at(&options.image_topic),
