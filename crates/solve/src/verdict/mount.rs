@@ -4,7 +4,8 @@
 //! with the same pose count for GOOD ([`GOOD_POSES`]). The cell's verdict is its worst camera's
 //! ([`worst_camera`]).
 
-use super::{Accuracy, Basis, Figures, HeldOut, Level, Verdict, GOOD_POSES};
+use super::{Accuracy, Basis, Figures, Finding, HeldOut, Level, Verdict, GOOD_POSES};
+use crate::cell_model::CellModelSummary;
 use crate::PoseSigma;
 
 /// The verdict of a camera's mount from the joint solve: the worse of its 1-sigma and its
@@ -92,6 +93,38 @@ pub fn assess_mount(
         ),
         next_action,
     )
+}
+
+/// A camera's verdict with its cell model (issue #38): the model's summary goes into the
+/// figures; its finding (a given file the corners contradict, or one these views cannot check)
+/// leads when it is at least as bad as `verdict`, which then follows under `also` (when not
+/// GOOD), and follows under `also` otherwise. So a camera whose lens or board file is wrong is
+/// never GOOD, and its verdict names the file.
+pub fn with_cell_model(verdict: Verdict, model: Option<&CellModelSummary>) -> Verdict {
+    let Some(model) = model else {
+        return verdict;
+    };
+    let mut verdict = verdict;
+    verdict.figures.cell_model = Some(model.clone());
+    let Some(finding) = model.finding(verdict.accuracy) else {
+        return verdict;
+    };
+    if finding.level >= verdict.level {
+        let before = Finding {
+            level: verdict.level,
+            basis: verdict.basis,
+            reason: std::mem::replace(&mut verdict.reason, finding.reason),
+            next_action: std::mem::replace(&mut verdict.next_action, finding.next_action),
+        };
+        verdict.level = finding.level;
+        verdict.basis = finding.basis;
+        if before.level > Level::Good {
+            verdict.also.insert(0, before);
+        }
+    } else {
+        verdict.also.push(finding);
+    }
+    verdict
 }
 
 /// The verdict of a camera left out of the joint solve (too few views, its own solve failed):
