@@ -226,6 +226,73 @@ mod tests {
         );
     }
 
+    fn summary(chosen: crate::cell_model::Explanation) -> CellModelSummary {
+        use crate::cell_model::{Candidate, Estimate, Explanation, GivenFile};
+        let candidate = |explanation, bic| Candidate {
+            explanation,
+            chi2: bic,
+            parameters: 12,
+            bic,
+            rms_px: 0.1,
+            sigma_translation_mm: 0.1,
+            sigma_rotation_deg: 0.01,
+        };
+        CellModelSummary {
+            chosen,
+            candidates: vec![
+                candidate(Explanation::AsGiven, 5000.0),
+                candidate(Explanation::BoardScale, 4000.0),
+                candidate(Explanation::Intrinsics, 100.0),
+            ],
+            estimates: vec![Estimate {
+                file: GivenFile::Intrinsics,
+                parameter: "fx".into(),
+                file_value: 848.0,
+                estimate: 800.0,
+                sigma: 0.05,
+            }],
+            determined: true,
+            ambiguous: false,
+            immaterial: None,
+            unverifiable: Vec::new(),
+            residuals: 5000,
+            sigma_translation_mm: 0.1,
+            sigma_rotation_deg: 0.01,
+            written: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_good_mount_with_a_wrong_lens_file_is_not_good_and_names_the_file() {
+        use crate::cell_model::Explanation;
+        let accuracy = Accuracy::default();
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let wrong = with_cell_model(good.clone(), Some(&summary(Explanation::Intrinsics)));
+        assert_eq!(
+            (wrong.level, wrong.basis),
+            (Level::Check, Basis::Intrinsics)
+        );
+        assert!(
+            wrong.reason.contains("fx in the file 848.0 px"),
+            "{}",
+            wrong.reason
+        );
+        assert!(wrong.also.is_empty(), "a GOOD mount adds no finding");
+        assert!(wrong.figures.cell_model.is_some());
+        // A worse mount verdict leads; the cell model's finding follows it.
+        let redo = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let both = with_cell_model(redo, Some(&summary(Explanation::Intrinsics)));
+        assert_eq!((both.level, both.basis), (Level::Redo, Basis::Uncertainty));
+        assert_eq!(both.also[0].basis, Basis::Intrinsics);
+        // Files as given: the verdict stands, with the model's figures.
+        let right = with_cell_model(good.clone(), Some(&summary(Explanation::AsGiven)));
+        assert_eq!(
+            (right.level, right.reason.as_str()),
+            (Level::Good, good.reason.as_str())
+        );
+        assert!(right.figures.cell_model.is_some());
+    }
+
     #[test]
     fn the_cell_is_its_worst_camera_named() {
         let accuracy = Accuracy::default();
