@@ -121,7 +121,8 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         notices,
     )?;
     // The estimates of a file the cell model blames, written into the session as in a run.
-    session::solve::write_corrected_files(folder.root(), &solved, &prepared.config)?;
+    let written = session::solve::write_corrected_files(folder.root(), &solved, &prepared.config)?;
+    session::solve::record_written(&mut solved, &written);
     solved.name_session(folder.root(), &prepared.config);
     let calibration = &solved.calibration;
     let output = args

@@ -108,6 +108,13 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         );
     }
     html.push_str("</table>");
+    // Each camera's cell model (issue #38): which of its files its corners contradict.
+    for c in &result.cameras {
+        if let Some(model) = &c.verdict.figures.cell_model {
+            let _ = write!(html, "<h3>Camera {}</h3>", escape(&c.name));
+            super::sections::cell_model_table(&mut html, model);
+        }
+    }
     html.push_str("<h2>Boards and camera-to-camera transforms (joint solve)</h2><table><tr><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for t in result.boards.iter().chain(&result.camera_to_camera) {
         let _ = write!(html, "<tr>{}</tr>", transform_cells(t));

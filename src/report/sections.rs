@@ -13,6 +13,7 @@ use super::{escape, ReportAnswer};
 use crate::formats::export::{export, ExportFormat, FrameIds};
 use crate::geometry::yaml::PoseRecord;
 use crate::geometry::{rotvec, to_matrix4_rows, Pose};
+use crate::solve::cell_model::{CellModelSummary, GivenFile};
 use crate::verdict::{Level, Verdict};
 
 /// The forms "use it" shows, with their headings: what `handeye export --format <name>` writes.
@@ -121,6 +122,9 @@ pub(super) fn verdict_card(html: &mut String, v: &Verdict) {
         let _ = writeln!(html, "<li>{}</li>", escape(&row));
     }
     html.push_str("</ul>\n");
+    if let Some(model) = &f.cell_model {
+        cell_model_table(html, model);
+    }
     if !v.also.is_empty() {
         html.push_str("<h3>Also</h3>\n<ul>\n");
         for finding in &v.also {
@@ -136,6 +140,73 @@ pub(super) fn verdict_card(html: &mut String, v: &Verdict) {
         html.push_str("</ul>\n");
     }
     html.push_str("</section>\n");
+}
+
+/// The cell model's choice as the verdict holds it (issue #38): every explanation fitted with
+/// its BIC above the chosen one's and its corner RMS, each estimated parameter against the
+/// file's value with its 1-sigma, and the corrected files written. It renders; it judges nothing.
+pub(super) fn cell_model_table(html: &mut String, model: &CellModelSummary) {
+    let best = model
+        .candidates
+        .iter()
+        .find(|c| c.explanation == model.chosen)
+        .map_or(0.0, |c| c.bic);
+    let _ = writeln!(
+        html,
+        "<div class=\"cell-model\"><h3>Cell model: the data choose <span data-key=\"cell_model.chosen\">{}</span></h3>",
+        escape(model.chosen.label())
+    );
+    if let Some(e) = model.immaterial {
+        let _ = writeln!(
+            html,
+            "<p>The corners prefer \"{}\", but it moves neither transform by half the accuracy asked: the files as given stand.</p>",
+            escape(e.label())
+        );
+    }
+    html.push_str("<table><tr><th>explanation</th><th>free parameters</th><th>corner RMS (px)</th><th>BIC above the chosen</th></tr>\n");
+    for c in &model.candidates {
+        let mark = if c.explanation == model.chosen {
+            " class=\"chosen\""
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            html,
+            "<tr{mark}><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.1}</td></tr>",
+            escape(c.explanation.label()),
+            c.parameters,
+            c.rms_px,
+            c.bic - best
+        );
+    }
+    html.push_str("</table>\n");
+    if !model.estimates.is_empty() {
+        html.push_str("<table><tr><th>file</th><th>parameter</th><th>in the file</th><th>estimated (± 1σ)</th><th>off by</th></tr>\n");
+        for e in &model.estimates {
+            let file = match e.file {
+                GivenFile::Intrinsics => "intrinsics",
+                GivenFile::Board => "board",
+            };
+            let _ = writeln!(
+                html,
+                "<tr><td>{file}</td><td>{}</td><td>{:.4}</td><td>{:.4} ± {:.4}</td><td>{:.1} σ</td></tr>",
+                escape(&e.parameter),
+                e.file_value,
+                e.estimate,
+                e.sigma,
+                e.sigmas()
+            );
+        }
+        html.push_str("</table>\n");
+    }
+    for path in &model.written {
+        let _ = writeln!(
+            html,
+            "<p>Corrected file written: <code>{}</code></p>",
+            escape(path)
+        );
+    }
+    html.push_str("</div>\n");
 }
 
 /// The answer in plain words, beside the config's nominal values when there are some: where

@@ -122,6 +122,27 @@ fn wrong_board_size(scale: f64, name: &str) {
         0.04 * scale
     );
 
+    // The report shows the cell model's choice from the verdict: the explanation chosen, the
+    // others with their BIC gap, the scale against the file's with its 1-sigma, the file written.
+    let page = handeye::report::session::write_run_report(&run).unwrap();
+    let report = std::fs::read_to_string(page).unwrap();
+    let model = verdict.figures.cell_model.as_ref().expect("the cell model");
+    let scale_row = model
+        .estimates
+        .iter()
+        .find(|e| e.parameter == "scale")
+        .map(|e| format!("{:.4} ± {:.4}", e.estimate, e.sigma))
+        .unwrap();
+    for expected in [
+        "Cell model: the data choose <span data-key=\"cell_model.chosen\">board scale free</span>",
+        "BIC above the chosen",
+        "<td>files as given</td>",
+        &scale_row,
+        &format!("Corrected file written: <code>{}</code>", written.display()),
+    ] {
+        assert!(report.contains(expected), "{expected:?} not in the report");
+    }
+
     // The fix: the cell's board file with the measured tag size, replayed.
     let fixed_board = board_with_tag_size(dir.path(), "measured.yaml", 0.04 * scale);
     let board_line = format!("target: {}", fixed_board.display());

@@ -793,3 +793,142 @@ fn adaptive_run_names_a_lost_camera_once_and_goes_on() {
         assert!(camera.samples >= 8 && camera.joint.is_some(), "{camera:?}");
     }
 }
+
+/// Issue #38 in a several-camera cell: the wrist camera's lens file has fx and fy 6 % long (the
+/// simulated camera renders through the true lens, its own `camera.intrinsics`). Its cell model
+/// names the file and the parameter with the estimate and its 1-sigma, its verdict is not GOOD,
+/// the corrected `camera_info.yaml` is written into its folder and the joint answer uses it; the
+/// two fixed cameras, whose files are right, stay GOOD.
+#[test]
+fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay_good() {
+    use handeye::camera_model::CameraModel;
+    use handeye::solve::cell_model::GivenFile;
+    use handeye::verdict::Basis;
+
+    let dir = tempfile::tempdir().unwrap();
+    let true_lens = util::repo().join("configs/cameras/sim-1280x720.yaml");
+    let truth_model = CameraModel::load(&true_lens).unwrap();
+    let mut wrong_model = truth_model;
+    wrong_model.fx *= 1.06;
+    wrong_model.fy *= 1.06;
+    let wrong = dir.path().join("wrist-camera-info.yaml");
+    wrong_model.save_camera_info(&wrong).unwrap();
+    let wrist = "    intrinsics: {lens}\n    camera: {backend: sim, noise_sigma: 2.0, blur_sigma_px: 0.5, seed: 11";
+    let from = wrist.replace("{lens}", &true_lens.display().to_string());
+    let to = format!(
+        "    intrinsics: {}\n    camera: {{backend: sim, intrinsics: {}, noise_sigma: 2.0, blur_sigma_px: 0.5, seed: 11",
+        wrong.display(),
+        true_lens.display()
+    );
+    let config = three_cameras(dir.path(), &[(&from, &to)]);
+    let out = dir.path().join("session");
+    let stdout = run_ok(&config, &out, &[]);
+    println!("{stdout}");
+    let result = read_result(&out);
+    let camera = |name: &str| result.cameras.iter().find(|c| c.name == name).unwrap();
+
+    let wrist = camera("wrist");
+    let v = &wrist.verdict;
+    println!("wrist: {}", v.terminal_lines());
+    assert!(v.level >= Level::Check, "{}", v.terminal_lines());
+    // The lens file alone is named: the board file is right.
+    assert_eq!(v.basis, Basis::Intrinsics, "{}", v.reason);
+    assert!(!v.reason.contains("board file"), "{}", v.reason);
+    let file = wrong.display().to_string();
+    assert!(v.reason.contains(&file), "{file} not in {}", v.reason);
+    let model = v
+        .figures
+        .cell_model
+        .as_ref()
+        .expect("the cell model's figures");
+    assert_eq!(model.blamed(), vec![GivenFile::Intrinsics], "{model:?}");
+    for (parameter, truth) in [("fx", truth_model.fx), ("fy", truth_model.fy)] {
+        let e = model
+            .estimates
+            .iter()
+            .find(|e| e.parameter == parameter)
+            .unwrap_or_else(|| panic!("no {parameter} estimate: {model:?}"));
+        println!(
+            "wrist {parameter}: file {:.1}, estimate {:.2} ± {:.2}, truth {truth}",
+            e.file_value, e.estimate, e.sigma
+        );
+        assert!((e.file_value / truth - 1.06).abs() < 1e-9, "{e:?}");
+        assert!((e.estimate / truth - 1.0).abs() < 0.005, "{e:?}");
+        assert!(e.sigmas() > 5.0, "{e:?}");
+        assert!(
+            v.reason
+                .contains(&format!("{parameter} in the file {:.1} px", e.file_value)),
+            "{}",
+            v.reason
+        );
+    }
+    if model.determined && !model.ambiguous {
+        // The estimate is written into the camera's folder and the joint answer uses it.
+        let path = camera_folder(&out, "wrist").join("camera_info.yaml");
+        assert_eq!(model.written, vec![path.display().to_string()]);
+        let written = CameraModel::load(&path)
+            .expect("the corrected camera_info.yaml in the wrist camera's folder");
+        assert!(
+            (written.fx / truth_model.fx - 1.0).abs() < 0.005,
+            "{written:?}"
+        );
+        let joint = wrist.joint.as_ref().unwrap();
+        let accuracy = v.accuracy;
+        println!(
+            "wrist joint answer vs truth: {:.3} mm, {:.4}°",
+            joint.truth_error_mm.unwrap(),
+            joint.truth_error_deg.unwrap()
+        );
+        assert!(
+            joint.truth_error_mm.unwrap() < accuracy.translation_mm
+                && joint.truth_error_deg.unwrap() < accuracy.rotation_deg,
+            "{joint:?}"
+        );
+    } else {
+        assert_eq!(v.level, Level::Redo, "{}", v.terminal_lines());
+    }
+    // The page shows each camera's cell model as its verdict holds it.
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let fx = model
+        .estimates
+        .iter()
+        .find(|e| e.parameter == "fx")
+        .unwrap();
+    for expected in [
+        "<h3>Camera wrist</h3>".to_string(),
+        "Cell model: the data choose <span data-key=\"cell_model.chosen\">intrinsics free</span>"
+            .to_string(),
+        format!(
+            "<td>fx</td><td>{:.4}</td><td>{:.4} ± {:.4}</td>",
+            fx.file_value, fx.estimate, fx.sigma
+        ),
+    ] {
+        assert!(report.contains(&expected), "{expected:?} not in the report");
+    }
+    for path in &model.written {
+        assert!(report.contains(&format!("Corrected file written: <code>{path}</code>")));
+    }
+    for name in ["left", "right"] {
+        let c = camera(name);
+        assert_eq!(
+            c.verdict.level,
+            Level::Good,
+            "{name}: {}",
+            c.verdict.terminal_lines()
+        );
+        let m = c
+            .verdict
+            .figures
+            .cell_model
+            .as_ref()
+            .expect("its cell model");
+        assert!(m.blamed().is_empty(), "{name}: {m:?}");
+        assert!(!camera_folder(&out, name).join("camera_info.yaml").exists());
+    }
+    assert!(result.verdict.level >= Level::Check);
+    assert!(
+        result.verdict.reason.starts_with("camera `wrist`: "),
+        "{}",
+        result.verdict.reason
+    );
+}

@@ -24,6 +24,8 @@
 //!
 //! A wrong file whose correction moves neither transform by half the accuracy asked does not
 //! matter at that accuracy: the files as given then stand (`immaterial` says which deviated).
+//! Likewise a two-file choice whose second file moves neither transform by half the accuracy
+//! beyond a one-file fit is that one-file explanation.
 //!
 //! A file is *unverifiable* by these views when, with its quantity free, the transforms are not
 //! pinned within the accuracy asked: a wrong one would fit as well as a right one (a focal length
@@ -244,6 +246,9 @@ pub struct CellModelSummary {
     pub sigma_translation_mm: f64,
     /// Larger 1-sigma rotation of the two transforms under the chosen explanation, degrees.
     pub sigma_rotation_deg: f64,
+    /// The corrected files the session layer wrote with the estimates (paths), if any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub written: Vec<String>,
 }
 
 impl CellModelSummary {
@@ -668,6 +673,31 @@ pub fn fit_cell_model(
             }
         }
     }
+    // Likewise within the two-file explanation: a file whose freedom moves neither transform by
+    // half the accuracy beyond the one-file fit does not matter (a board 1.0003× with corners
+    // sharp to 0.03 px); the one-file explanation stands, the lower BIC of the two first.
+    if best == Explanation::IntrinsicsAndBoard {
+        let of = |e: Explanation| fits.iter().find(|(f, _)| *f == e).map(|(_, fit)| fit);
+        let mut simpler: Vec<&Candidate> = candidates
+            .iter()
+            .filter(|c| {
+                matches!(
+                    c.explanation,
+                    Explanation::Intrinsics | Explanation::BoardScale
+                )
+            })
+            .collect();
+        simpler.sort_by(|a, b| a.bic.total_cmp(&b.bic));
+        for c in simpler {
+            if let (Some(one), Some(both)) = (of(c.explanation), of(best)) {
+                let (t, r) = difference(one, both);
+                if t <= 0.5 * accuracy.translation_mm && r <= 0.5 * accuracy.rotation_deg {
+                    best = c.explanation;
+                    break;
+                }
+            }
+        }
+    }
     let bic_of = |e: Explanation| {
         candidates
             .iter()
@@ -714,6 +744,7 @@ pub fn fit_cell_model(
         residuals: n,
         sigma_translation_mm,
         sigma_rotation_deg,
+        written: Vec::new(),
     };
     Ok(CellModel { summary, fit })
 }

@@ -67,7 +67,7 @@ pub use evidence::{
     assess_modelled, assess_result, assess_solved, coverage_notices, held_out, residual_notice,
     working_distance_mm,
 };
-pub use mount::{assess_mount, worst_camera};
+pub use mount::{assess_mount, with_cell_model, worst_camera};
 pub use rules::{assess, Evidence};
 
 /// Default accuracy the user wants for translation, mm.

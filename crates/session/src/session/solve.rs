@@ -255,7 +255,9 @@ fn solve_loaded(
         config,
         notices,
     )?;
-    write_corrected_files(folder.root(), &solved, config)?;
+    let mut solved = solved;
+    let written = write_corrected_files(folder.root(), &solved, config)?;
+    record_written(&mut solved, &written);
     Ok((solved, dataset))
 }
 
@@ -341,7 +343,7 @@ pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
 /// File with both answers' reprojection errors per frame, in the session folder.
 pub const REPROJECTION_FILE: &str = "reprojection.yaml";
 
-fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
+pub(crate) fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
     ReprojectionOptions {
         pixel_sigma_px: config.solver.pixel_sigma_px,
         estimate_noise: config.solver.estimate_noise,
@@ -851,7 +853,35 @@ pub fn write_corrected_files(
     let (Some(model), Some(fit)) = (&solved.cell_model, &solved.reprojection) else {
         return Ok(Vec::new());
     };
-    let summary = &model.summary;
+    write_estimates(root, &model.summary, fit, &config.target)
+}
+
+/// Records the corrected files `written` in the cell model's summary and the verdict's figures
+/// (the result file and the report show them).
+pub fn record_written(solved: &mut SolvedSession, written: &[std::path::PathBuf]) {
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    if let Some(model) = &mut solved.cell_model {
+        model.summary.written.clone_from(&names);
+    }
+    if let Some(model) = solved
+        .verdict
+        .as_mut()
+        .and_then(|v| v.figures.cell_model.as_mut())
+    {
+        model.written = names;
+    }
+}
+
+/// Writes the estimates of `fit` (its camera, its board scale) for the files `summary` blames
+/// into the folder `root` (`camera_info.yaml`; `board.yaml`: the board file `target` with its
+/// size scaled), when the chosen explanation is determined and unambiguous. Returns the files
+/// written.
+pub fn write_estimates(
+    root: &std::path::Path,
+    summary: &cell_model::CellModelSummary,
+    fit: &ReprojectionCalibration,
+    target: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, SessionError> {
     if summary.chosen == Explanation::AsGiven || !summary.determined || summary.ambiguous {
         return Ok(Vec::new());
     }
@@ -868,7 +898,7 @@ pub fn write_corrected_files(
     }
     if summary.chosen.board_wrong() {
         let path = root.join(cell_model::CORRECTED_BOARD_FILE);
-        if let Some(text) = std::fs::read_to_string(&config.target)
+        if let Some(text) = std::fs::read_to_string(target)
             .ok()
             .and_then(|text| scaled_board_text(&text, fit.board_scale))
         {

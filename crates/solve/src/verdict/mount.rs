@@ -4,7 +4,8 @@
 //! with the same pose count for GOOD ([`GOOD_POSES`]). The cell's verdict is its worst camera's
 //! ([`worst_camera`]).
 
-use super::{Accuracy, Basis, Figures, HeldOut, Level, Verdict, GOOD_POSES};
+use super::{Accuracy, Basis, Figures, Finding, HeldOut, Level, Verdict, GOOD_POSES};
+use crate::cell_model::CellModelSummary;
 use crate::PoseSigma;
 
 /// The verdict of a camera's mount from the joint solve: the worse of its 1-sigma and its
@@ -92,6 +93,38 @@ pub fn assess_mount(
         ),
         next_action,
     )
+}
+
+/// A camera's verdict with its cell model (issue #38): the model's summary goes into the
+/// figures; its finding (a given file the corners contradict, or one these views cannot check)
+/// leads when it is at least as bad as `verdict`, which then follows under `also` (when not
+/// GOOD), and follows under `also` otherwise. So a camera whose lens or board file is wrong is
+/// never GOOD, and its verdict names the file.
+pub fn with_cell_model(verdict: Verdict, model: Option<&CellModelSummary>) -> Verdict {
+    let Some(model) = model else {
+        return verdict;
+    };
+    let mut verdict = verdict;
+    verdict.figures.cell_model = Some(model.clone());
+    let Some(finding) = model.finding(verdict.accuracy) else {
+        return verdict;
+    };
+    if finding.level >= verdict.level {
+        let before = Finding {
+            level: verdict.level,
+            basis: verdict.basis,
+            reason: std::mem::replace(&mut verdict.reason, finding.reason),
+            next_action: std::mem::replace(&mut verdict.next_action, finding.next_action),
+        };
+        verdict.level = finding.level;
+        verdict.basis = finding.basis;
+        if before.level > Level::Good {
+            verdict.also.insert(0, before);
+        }
+    } else {
+        verdict.also.push(finding);
+    }
+    verdict
 }
 
 /// The verdict of a camera left out of the joint solve (too few views, its own solve failed):
@@ -191,6 +224,73 @@ mod tests {
             "{}",
             unchecked.reason
         );
+    }
+
+    fn summary(chosen: crate::cell_model::Explanation) -> CellModelSummary {
+        use crate::cell_model::{Candidate, Estimate, Explanation, GivenFile};
+        let candidate = |explanation, bic| Candidate {
+            explanation,
+            chi2: bic,
+            parameters: 12,
+            bic,
+            rms_px: 0.1,
+            sigma_translation_mm: 0.1,
+            sigma_rotation_deg: 0.01,
+        };
+        CellModelSummary {
+            chosen,
+            candidates: vec![
+                candidate(Explanation::AsGiven, 5000.0),
+                candidate(Explanation::BoardScale, 4000.0),
+                candidate(Explanation::Intrinsics, 100.0),
+            ],
+            estimates: vec![Estimate {
+                file: GivenFile::Intrinsics,
+                parameter: "fx".into(),
+                file_value: 848.0,
+                estimate: 800.0,
+                sigma: 0.05,
+            }],
+            determined: true,
+            ambiguous: false,
+            immaterial: None,
+            unverifiable: Vec::new(),
+            residuals: 5000,
+            sigma_translation_mm: 0.1,
+            sigma_rotation_deg: 0.01,
+            written: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_good_mount_with_a_wrong_lens_file_is_not_good_and_names_the_file() {
+        use crate::cell_model::Explanation;
+        let accuracy = Accuracy::default();
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let wrong = with_cell_model(good.clone(), Some(&summary(Explanation::Intrinsics)));
+        assert_eq!(
+            (wrong.level, wrong.basis),
+            (Level::Check, Basis::Intrinsics)
+        );
+        assert!(
+            wrong.reason.contains("fx in the file 848.0 px"),
+            "{}",
+            wrong.reason
+        );
+        assert!(wrong.also.is_empty(), "a GOOD mount adds no finding");
+        assert!(wrong.figures.cell_model.is_some());
+        // A worse mount verdict leads; the cell model's finding follows it.
+        let redo = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let both = with_cell_model(redo, Some(&summary(Explanation::Intrinsics)));
+        assert_eq!((both.level, both.basis), (Level::Redo, Basis::Uncertainty));
+        assert_eq!(both.also[0].basis, Basis::Intrinsics);
+        // Files as given: the verdict stands, with the model's figures.
+        let right = with_cell_model(good.clone(), Some(&summary(Explanation::AsGiven)));
+        assert_eq!(
+            (right.level, right.reason.as_str()),
+            (Level::Good, good.reason.as_str())
+        );
+        assert!(right.figures.cell_model.is_some());
     }
 
     #[test]

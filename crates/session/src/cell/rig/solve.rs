@@ -15,19 +15,25 @@ use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
 use crate::config::rig::RigConfig;
-use crate::config::SolveSpace;
-use crate::session::{SessionError, SessionFolder};
+use crate::config::{CellConfig, SolveSpace};
+use crate::session::solve::{reprojection_options, write_estimates};
+use crate::session::{PoseVisit, SessionError, SessionFolder};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
-use handeye_core::setup::Setup;
+use handeye_core::setup::{PosePair, Setup};
 use handeye_core::yaml_file::write_yaml;
+use handeye_solve::cell_model::{fit_cell_model, CellModel, CellModelSummary, Explanation};
+use handeye_solve::reprojection::{Corner, Frame};
 use handeye_solve::rig::{
     pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
 };
 use handeye_solve::verdict::{self, Accuracy, HeldOut, Verdict};
+use handeye_solve::Calibration;
 use handeye_solve::PoseSigma;
+use handeye_vision::pnp::estimate_pose_from_points;
 use handeye_vision::Target;
+use nalgebra::Point3;
 
 /// Why a several-camera session could not be solved.
 #[derive(Debug, thiserror::Error)]
@@ -196,8 +202,11 @@ pub struct RigProblem {
     pub held_out: Vec<Result<HeldOut, String>>,
     /// The corners of every accepted board pose (the pixel-space solve's data).
     pub frames: Vec<RigFrame>,
-    /// Per camera in `data`: its lens.
+    /// Per camera in `data`: its lens (the cell model's estimate when it corrected the file).
     pub models: Vec<CameraModel>,
+    /// Per config camera: its cell model (issue #38: which of its given files its corners
+    /// contradict), fitted on its own views; `None` when it is left out or the fit failed.
+    pub cell_models: Vec<Option<CellModel>>,
 }
 
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
@@ -222,6 +231,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
     let mut held_out = Vec::new();
     let mut frames = Vec::new();
     let mut models = Vec::new();
+    let mut cell_models = Vec::new();
     for (c, camera) in rig.cameras.iter().enumerate() {
         let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
         let visits = folder.read_visits()?;
@@ -250,12 +260,6 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 continue;
             }
         };
-        held_out.push(verdict::held_out(
-            setup,
-            &pairs,
-            &camera.config.solver.to_options(),
-            &alone.outliers,
-        ));
         let index = data.cameras.len();
         let board = Target::load(&camera.config.target).map_err(|e| RigSolveError::Input {
             camera: camera.name.clone(),
@@ -263,17 +267,66 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             problem: e.to_string(),
         })?;
         let lens = camera.config.intrinsics.clone().unwrap_or_default();
-        models.push(CameraModel::load(&lens).map_err(|e| RigSolveError::Input {
+        let file_model = CameraModel::load(&lens).map_err(|e| RigSolveError::Input {
             camera: camera.name.clone(),
             file: lens.clone(),
             problem: e.to_string(),
-        })?);
+        })?;
         // The joint solve keeps the samples the camera's own robust solve kept.
         let dropped: std::collections::BTreeSet<usize> = alone.dropped.iter().copied().collect();
-        for (k, visit) in visits.iter().filter(|v| v.sample().is_some()).enumerate() {
-            if let (Some(camera_from_target), false) =
-                (visit.camera_from_target, dropped.contains(&k))
-            {
+        let kept: Vec<&PoseVisit> = visits
+            .iter()
+            .filter(|v| v.sample().is_some())
+            .enumerate()
+            .filter(|(k, _)| !dropped.contains(k))
+            .map(|(_, v)| v)
+            .collect();
+        let model = camera_cell_model(&camera.config, &kept, &board, &file_model, &alone);
+        // Where the views determine a wrong file's quantity, the camera's board poses, its lens
+        // and its board points are those of the estimate: its held-out check and the joint solve
+        // judge and use the corrected cell, not the wrong file.
+        let correction = model
+            .as_ref()
+            .filter(|m| corrects(&m.summary))
+            .map(|m| (m.camera(), m.board_scale()));
+        let (lens_used, scale) = correction.unwrap_or((file_model, 1.0));
+        let corners_of = |visit: &PoseVisit| -> Vec<_> {
+            visit
+                .corners_px
+                .iter()
+                .filter_map(|c| {
+                    board
+                        .observation_point(c)
+                        .map(|p| (Point3::from(p.coords * scale), c.pixel))
+                })
+                .collect()
+        };
+        let corrected_pose = |visit: &PoseVisit| {
+            let correspondences = corners_of(visit);
+            let tags = (correspondences.len() / 4).max(2);
+            correction
+                .and_then(|_| estimate_pose_from_points(&lens_used, &correspondences, tags).ok())
+                .map(|p| p.camera_from_target)
+                .or(visit.camera_from_target)
+        };
+        let judged: Vec<_> = visits
+            .iter()
+            .filter_map(|v| {
+                v.sample().map(|pair| PosePair {
+                    camera_from_target: corrected_pose(v).unwrap_or(pair.camera_from_target),
+                    ..pair
+                })
+            })
+            .collect();
+        held_out.push(verdict::held_out(
+            setup,
+            &judged,
+            &camera.config.solver.to_options(),
+            &alone.outliers,
+        ));
+        models.push(lens_used);
+        for visit in kept {
+            if let Some(camera_from_target) = corrected_pose(visit) {
                 // Every camera records the same flange pose at a plan index; the reported pose
                 // (not the planned one) is what the solve must use.
                 data.base_from_flange[visit.plan_index] = visit.base_from_flange;
@@ -285,11 +338,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 frames.push(RigFrame {
                     camera: index,
                     pose: visit.plan_index,
-                    corners: visit
-                        .corners_px
-                        .iter()
-                        .filter_map(|c| board.observation_point(c).map(|p| (p, c.pixel)))
-                        .collect(),
+                    corners: corners_of(visit),
                 });
             }
         }
@@ -301,7 +350,12 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 .map(|n| n.model())
                 .unwrap_or_else(|| camera.config.solver.to_options().noise),
         });
-        start.camera_mounts.push(alone.camera_mount);
+        start.camera_mounts.push(match (&model, correction) {
+            (Some(m), Some(_)) => m.fit.camera_mount,
+            _ => alone.camera_mount,
+        });
+        cell_models.resize(c, None);
+        cell_models.push(model);
         match setup {
             Setup::EyeInHand => {
                 start.base_from_target.get_or_insert(alone.target_mount);
@@ -326,16 +380,121 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         held_out,
         frames,
         models,
+        cell_models: {
+            cell_models.resize(rig.cameras.len(), None);
+            cell_models
+        },
     })
+}
+
+/// Whether the cell model corrects a file: a wrong file chosen, its quantity determined by the
+/// views and not ambiguous between lens and board.
+fn corrects(summary: &CellModelSummary) -> bool {
+    summary.chosen != Explanation::AsGiven && summary.determined && !summary.ambiguous
+}
+
+/// The cell model of one camera (issue #38), fitted on the corners of its `kept` visits through
+/// the lens and board of its files, from its own pose-space answer `alone`; `None` when the fit
+/// fails (fewer than 3 frames with corners, say): its verdict then rests on its mount alone.
+fn camera_cell_model(
+    config: &CellConfig,
+    kept: &[&PoseVisit],
+    board: &Target,
+    lens: &CameraModel,
+    alone: &Calibration,
+) -> Option<CellModel> {
+    let frames: Vec<Frame> = kept
+        .iter()
+        .map(|visit| Frame {
+            base_from_flange: visit.base_from_flange,
+            corners: visit
+                .corners_px
+                .iter()
+                .filter_map(|c| {
+                    Some(Corner {
+                        point_in_target: board.observation_point(c)?,
+                        pixel: c.pixel,
+                    })
+                })
+                .collect(),
+            id: Some(visit.sample_id()),
+        })
+        .filter(|f| !f.corners.is_empty())
+        .collect();
+    if frames.len() < 3 {
+        return None;
+    }
+    fit_cell_model(
+        config.setup,
+        &frames,
+        lens,
+        &alone.camera_mount,
+        &alone.target_mount,
+        &reprojection_options(config),
+        config.verdict.accuracy(),
+    )
+    .ok()
 }
 
 /// Solves a several-camera session folder jointly and writes its `result.yaml`.
 pub fn solve_rig_folder(root: &Path, rig: &RigConfig) -> Result<RigResultFile, RigSolveError> {
     let problem = load_rig_problem(root, rig)?;
     let joint = solve_joint(&problem, pixel_space(rig), robot_sigma(rig))?;
-    let result = result_file(rig, &problem, &joint);
+    let mut result = result_file(rig, &problem, &joint);
+    let written = write_corrected_files(root, rig, &problem)?;
+    for (entry, files) in result.cameras.iter_mut().zip(written) {
+        if let Some(model) = entry.verdict.figures.cell_model.as_mut() {
+            model.written = files.iter().map(|p| p.display().to_string()).collect();
+        }
+    }
+    name_files(root, rig, &mut result);
     write_yaml(&result, &root.join("result.yaml")).map_err(SessionError::from)?;
     Ok(result)
+}
+
+/// Writes the estimate of each camera whose cell model corrects a file into its own folder
+/// (`cameras/<name>/camera_info.yaml`, `board.yaml`); per config camera, the files written.
+fn write_corrected_files(
+    root: &Path,
+    rig: &RigConfig,
+    problem: &RigProblem,
+) -> Result<Vec<Vec<PathBuf>>, SessionError> {
+    let mut written = Vec::new();
+    for (camera, model) in rig.cameras.iter().zip(&problem.cell_models) {
+        written.push(match model {
+            Some(model) => write_estimates(
+                &camera_folder(root, &camera.name),
+                &model.summary,
+                &model.fit,
+                &camera.config.target,
+            )?,
+            None => Vec::new(),
+        });
+    }
+    Ok(written)
+}
+
+/// Names each camera's folder, the cell config, its board and lens files in its verdict's
+/// advice, and the cell's verdict again from them.
+fn name_files(root: &Path, rig: &RigConfig, result: &mut RigResultFile) {
+    for (camera, entry) in rig.cameras.iter().zip(&mut result.cameras) {
+        let files = verdict::SessionFiles {
+            session: camera_folder(root, &camera.name).display().to_string(),
+            config: rig.file.display().to_string(),
+            board: camera.config.target.display().to_string(),
+            intrinsics: camera
+                .config
+                .intrinsics
+                .as_ref()
+                .map(|f| f.display().to_string())
+                .unwrap_or_default(),
+        };
+        entry.verdict.name_session(&files);
+    }
+    result.verdict = verdict::worst_camera(
+        result.cameras.iter().map(|c| (c.name.as_str(), &c.verdict)),
+        result.verdict.accuracy,
+    );
 }
 
 /// Whether the config asks for the answer in pixel space (`solver.space: reprojection`, the
@@ -456,11 +615,14 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
             entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
-            entry.verdict = verdict::assess_mount(
-                &joint.camera_sigmas[k],
-                problem.held_out[c].as_ref().map_err(String::as_str),
-                samples,
-                accuracy,
+            entry.verdict = verdict::with_cell_model(
+                verdict::assess_mount(
+                    &joint.camera_sigmas[k],
+                    problem.held_out[c].as_ref().map_err(String::as_str),
+                    samples,
+                    accuracy,
+                ),
+                problem.cell_models[c].as_ref().map(|m| &m.summary),
             );
         }
         cameras.push(entry);
