@@ -7,12 +7,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye::atomic_file::write_atomic_reporting;
-use handeye::cell::rig::RigResultFile;
 use handeye::formats::export::{self, Exported, ExportedCell};
 use handeye::formats::ros2_launch::through_camera_link;
 use handeye::formats::ExportFormat;
-use handeye::result::ResultFile;
+use handeye_core::atomic_file::write_atomic_reporting;
+use handeye_session::cell::rig::RigResultFile;
+use handeye_session::result::ResultFile;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

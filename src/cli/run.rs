@@ -9,12 +9,14 @@ use std::sync::Arc;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use handeye::cell::run::{open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
-use handeye::cell::{self, PreparedCell};
 use handeye::console::ConsoleObserver;
-use handeye::geometry::Pose;
-use handeye::session::SessionEvent;
-use handeye::verdict::{Level, Verdict};
+use handeye_core::geometry::Pose;
+use handeye_session::cell::run::{
+    open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
+};
+use handeye_session::cell::{self, PreparedCell};
+use handeye_session::session::SessionEvent;
+use handeye_solve::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -302,7 +304,7 @@ impl RunObserver for Printer {
             SessionEvent::Moving { plan_index, target } => {
                 // The same flange pose as listed (copied, or read back from the manifest).
                 let listed = self.listed.iter().find(|(pose, _)| {
-                    handeye::geometry::translation_distance(pose, &target) < 1e-9
+                    handeye_core::geometry::translation_distance(pose, &target) < 1e-9
                         && pose.rotation.angle_to(&target.rotation) < 1e-9
                 });
                 if let Some((_, number)) = listed {
@@ -358,7 +360,7 @@ impl RunObserver for Printer {
 }
 
 pub(super) fn default_session_dir() -> PathBuf {
-    handeye::session::dated_session_path(
+    handeye_session::session::dated_session_path(
         std::path::Path::new("sessions"),
         "",
         std::time::SystemTime::now(),

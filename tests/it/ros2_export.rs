@@ -11,8 +11,8 @@ use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use handeye::formats::export::named_transforms;
 use handeye::formats::ros2_launch::link_from_optical;
 use handeye::formats::FrameIds;
-use handeye::geometry::Pose;
-use handeye::result::ResultFile;
+use handeye_core::geometry::Pose;
+use handeye_session::result::ResultFile;
 
 use crate::util::{self, handeye, pose_error_mm_deg, repo};
 

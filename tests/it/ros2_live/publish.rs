@@ -6,7 +6,7 @@ use std::process::{Child, Command, Stdio};
 
 use handeye::formats::export::named_transforms;
 use handeye::formats::FrameIds;
-use handeye::result::ResultFile;
+use handeye_session::result::ResultFile;
 
 use super::{peer, python};
 use crate::util::{handeye, repo, within};
