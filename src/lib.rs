@@ -8,5 +8,4 @@
 //! it uses (`handeye_core::geometry`, `handeye_solve::verdict`, …).
 
 pub mod console;
-pub mod formats;
 pub mod report;

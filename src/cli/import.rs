@@ -1,19 +1,19 @@
 //! `handeye import <format> ... -o dataset.yaml`: other tools' hand-eye data into our dataset
 //! form (`T_base_flange`, `T_camera_target` pairs). The library does the reading
-//! (`handeye::formats::import`); this file maps arguments and prints what was found.
+//! (`handeye_formats::import`); this file maps arguments and prints what was found.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
-use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::setup::Setup;
+use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
-use handeye_core::camera_model::CameraModel;
-use handeye_core::setup::Setup;
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_ros2_bag::BagOptions;
 use handeye_session::config::{recorded_cell, CellConfig, RecordedFiles};
@@ -401,7 +401,7 @@ fn cell_text(
     target: &Path,
     camera_info: &Path,
     poses: &Path,
-    imported: &handeye::formats::import::VispImport,
+    imported: &handeye_formats::import::VispImport,
 ) -> anyhow::Result<String> {
     let frames = handeye_camera::files::list_frames(folder)?;
     let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();

@@ -10,9 +10,9 @@
 use std::fmt::Write;
 
 use super::{escape, ReportAnswer};
-use crate::formats::export::{export, ExportFormat, FrameIds};
 use handeye_core::geometry::yaml::PoseRecord;
 use handeye_core::geometry::{rotvec, to_matrix4_rows, Pose};
+use handeye_formats::export::{export, ExportFormat, FrameIds};
 use handeye_solve::verdict::{Level, Verdict};
 
 /// The forms "use it" shows, with their headings: what `handeye export --format <name>` writes.
@@ -323,7 +323,7 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
         ("4x4 matrix", matrix, None),
         (
             "UR pose (URScript)",
-            crate::formats::export::ur_pose_literal(pose),
+            handeye_formats::export::ur_pose_literal(pose),
             None,
         ),
     ]

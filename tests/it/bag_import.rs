@@ -529,7 +529,7 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
 /// arrive as it goes, the session is where it was asked for, and the answer is the truth.
 #[test]
 fn the_library_imports_a_bag_into_a_solved_session() {
-    use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
+    use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
     let dir = tempfile::tempdir().unwrap();
     let board = Board::load(&board_path()).unwrap();
     let trajectory = StopAndGo {

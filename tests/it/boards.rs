@@ -287,8 +287,8 @@ fn an_unknown_dictionary_is_refused_listing_the_accepted_names() {
 /// (`chessboard-data.txt`), real 640x480 photographs. Found in every frame, solved end to end.
 #[test]
 fn visp_eye_in_hand_chessboard_set_is_detected_in_every_frame_and_solved() {
-    use handeye::formats::import::{import_visp, VispOptions};
     use handeye_core::setup::Setup;
+    use handeye_formats::import::{import_visp, VispOptions};
     use handeye_solve::{self as solve, NoiseModel, SolveOptions};
     let Some(folder) = util::dataset("visp_franka_data-eye-in-hand") else {
         return;

@@ -11,13 +11,13 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use handeye::formats::export::{export, ExportFormat, FrameIds};
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_formats::export::{export, ExportFormat, FrameIds};
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, scan_visp_folder, CsvOptions, CsvPoseForm, ImportError, VispOptions,
 };
-use handeye_core::camera_model::CameraModel;
-use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_session::cell;
 use handeye_session::result::ResultFile;

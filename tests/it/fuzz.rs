@@ -28,12 +28,12 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::PoseYaml;
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, CsvOptions, CsvPoseForm, VispOptions,
 };
-use handeye_core::camera_model::CameraModel;
-use handeye_core::geometry::PoseYaml;
 use handeye_robot::recorded::load_recorded_poses;
 use handeye_session::config::CellConfig;
 use handeye_session::dataset::Dataset;

@@ -6,13 +6,13 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use handeye::formats::export::{export, validate_frame_id, ExportFormat, FrameIdProblem, FrameIds};
-use handeye::formats::import::{
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
+use handeye_formats::export::{export, validate_frame_id, ExportFormat, FrameIdProblem, FrameIds};
+use handeye_formats::import::{
     import_csv_pairs, import_moveit_json, read_visp_camera_xml, read_visp_pose, CsvOptions,
     CsvPoseForm,
 };
-use handeye_core::geometry::{pose_from_rotvec, Pose};
-use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
 use handeye_session::dataset::Dataset;
 use handeye_vision::{Board, DetectorOptions, TagDetector, TargetError};
 use image::GrayImage;

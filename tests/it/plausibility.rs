@@ -5,10 +5,10 @@
 
 use std::process::Command;
 
-use handeye::formats::import::{import_moveit_json, import_visp, VispOptions};
 use handeye_core::geometry::Pose;
 use handeye_core::notice::NoticeKind;
 use handeye_core::setup::{CellTransforms, PosePair, Setup};
+use handeye_formats::import::{import_moveit_json, import_visp, VispOptions};
 use handeye_session::config::CellConfig;
 use handeye_session::dataset::Dataset;
 use handeye_session::plan::check::board_centre;

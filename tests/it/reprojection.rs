@@ -590,7 +590,7 @@ fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
         let image = load_gray_image(&folder.join(format!("franka_image-{n}.png"))).unwrap();
         let detection = detector.detect(&image).unwrap();
         let pose = estimate_board_pose(&board, &camera, &detection).unwrap();
-        let robot = handeye::formats::import::read_visp_pose(
+        let robot = handeye_formats::import::read_visp_pose(
             &folder.join(format!("franka_pose_rPe_{n}.yaml")),
         )
         .unwrap();

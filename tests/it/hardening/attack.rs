@@ -473,7 +473,7 @@ fn issue25_symlink_loops_are_named_as_such() {
             .contains(&format!("symlink loop at {}", a.display())),
         "board"
     );
-    let e = handeye::formats::import::scan_visp_folder(&a).unwrap_err();
+    let e = handeye_formats::import::scan_visp_folder(&a).unwrap_err();
     assert!(
         format!("{:#}", anyhow::Error::new(e))
             .contains(&format!("symlink loop at {}", a.display())),
