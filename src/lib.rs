@@ -7,5 +7,4 @@
 //! formats in and out) and the `handeye` binary. It re-exports nothing: a caller names the crate
 //! it uses (`handeye_core::geometry`, `handeye_solve::verdict`, …).
 
-pub mod console;
 pub mod report;

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use clap::Args;
 
-use handeye::console::manual::run_manual;
-use handeye::console::{Command, Console, ConsoleEvent, ConsoleOptions};
+use handeye_console::manual::run_manual;
+use handeye_console::{Command, Console, ConsoleEvent, ConsoleOptions};
 use handeye_session::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
 use handeye_session::session::SolvedSession;
 
@@ -39,7 +39,7 @@ pub(super) struct ConsoleArgs {
     #[arg(long, requires = "resume")]
     pub(super) accept_changed: bool,
     /// The console's address (port 0 picks a free one); the URL is printed.
-    #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", default_value = handeye_console::DEFAULT_ADDR)]
     pub(super) addr: SocketAddr,
     /// Allow an address beyond this machine (anyone who reaches it with the printed URL, whose
     /// secret it checks, can move the arm).

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use handeye::console::ConsoleObserver;
+use handeye_console::ConsoleObserver;
 use handeye_core::geometry::Pose;
 use handeye_session::cell::run::{
     open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
@@ -46,7 +46,7 @@ pub(super) struct RunArgs {
     yes: bool,
     /// Serve the live console (frames, plan, coverage, estimate, STOP) on ADDR (default
     /// 127.0.0.1:8765; port 0 picks a free one); the URL is printed.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye::console::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye_console::DEFAULT_ADDR)]
     console: Option<std::net::SocketAddr>,
     /// Allow --console on an address beyond this machine (anyone who reaches it with the printed
     /// URL, whose secret it checks, can stop the run).
@@ -80,7 +80,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         None => None,
     };
     let mut printer = Printer::new(stop.clone());
-    let failed = |console: &Option<handeye::console::Console>, e: RunError| {
+    let failed = |console: &Option<handeye_console::Console>, e: RunError| {
         let e = anyhow::Error::from(e);
         if let Some(console) = console {
             super::console::failed(console, &e, args.console_wait);
@@ -95,7 +95,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         outln!("{why}: hand-guided capture on the console (as `handeye console`)");
         let console = match console {
             Some(console) => console,
-            None => super::console::start(handeye::console::DEFAULT_ADDR.parse()?, false, stop)?,
+            None => super::console::start(handeye_console::DEFAULT_ADDR.parse()?, false, stop)?,
         };
         return super::console::hand_guided(&console, &request, opened, printer, args.console_wait);
     }

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use handeye::console::{Console, ConsoleError, ConsoleEvent, ConsoleOptions};
+use handeye_console::{Console, ConsoleError, ConsoleEvent, ConsoleOptions};
 
 fn loopback() -> ConsoleOptions {
     ConsoleOptions {
@@ -129,7 +129,7 @@ fn a_page_gets_the_history_live_events_and_frames_and_stop_sets_the_flag() {
         );
         assert_eq!(
             console.next_command(Duration::from_secs(5)),
-            Some(handeye::console::Command::Stop)
+            Some(handeye_console::Command::Stop)
         );
     });
 }
@@ -173,7 +173,7 @@ fn a_stop_from_a_page_that_leaves_at_once_still_stops() {
             });
             assert_eq!(
                 console.next_command(Duration::from_secs(10)),
-                Some(handeye::console::Command::Stop),
+                Some(handeye_console::Command::Stop),
                 "attempt {attempt}: the STOP of a page that left at once was lost"
             );
             assert!(stop.swap(false, Ordering::SeqCst));
@@ -517,9 +517,9 @@ fn the_command_queue_is_bounded_and_stop_still_gets_through() {
     let console = Console::start(&loopback(), stop.clone()).unwrap();
     let sender = console.command_sender();
     for _ in 0..10_000 {
-        sender.send(handeye::console::Command::Capture);
+        sender.send(handeye_console::Command::Capture);
     }
-    sender.send(handeye::console::Command::Stop);
+    sender.send(handeye_console::Command::Stop);
     assert!(
         stop.load(Ordering::SeqCst),
         "STOP set the flag even with a full queue"

@@ -54,6 +54,16 @@ const CRATES: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "handeye-console",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-robot",
+            "handeye-session",
+        ],
+    ),
+    (
         "handeye",
         &[
             "handeye-core",
@@ -65,6 +75,7 @@ const CRATES: &[(&str, &[&str])] = &[
             "handeye-ros2",
             "handeye-ros2-bag",
             "handeye-formats",
+            "handeye-console",
         ],
     ),
     ("mocks", &["handeye-core", "handeye-robot"]),
@@ -185,8 +196,8 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// The module path of a source file (`src/console/server.rs` → `[console, server]`,
-/// `src/console/mod.rs` → `[console]`).
+/// The module path of a source file (`src/report/plots.rs` → `[report, plots]`,
+/// `src/report/mod.rs` → `[report]`).
 fn module_path(src: &Path, file: &Path) -> Vec<String> {
     let rel = file
         .strip_prefix(src)
