@@ -338,7 +338,8 @@ fn modules_inside_a_crate_name_only_the_modules_below_them() {
             }
         }
     }
-    assert!(checked > 50, "only {checked} source files checked");
+    // The session ladder and the report (formats and console are crates of their own now).
+    assert!(checked > 40, "only {checked} source files checked");
     assert!(
         violations.is_empty(),
         "layer rules broken:\n{}",
