@@ -26,12 +26,12 @@ use criterion::Criterion;
 use nalgebra::{Point3, Vector3};
 use rand::SeedableRng;
 
-use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
-use handeye::camera_model::CameraModel;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::plan::lookat::LookAt;
-use handeye::vision::{Board, Target};
+use handeye_camera::render::{render_with_rays, PixelRays, RenderOptions};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_ros2_bag::tf::interpolate;
+use handeye_session::plan::lookat::LookAt;
+use handeye_vision::{Board, Target};
 
 #[path = "../tests/util/mod.rs"]
 mod util;
@@ -328,7 +328,7 @@ fn main() {
         tf_topics: vec!["/tf".into(), "/tf_static".into()],
         tf_static_topics: vec!["/tf_static".into()],
         select: Default::default(),
-        setup: handeye::setup::Setup::EyeInHand,
+        setup: handeye_core::setup::Setup::EyeInHand,
         board: Target::load(&board).unwrap(),
         detector: Default::default(),
     };

@@ -19,8 +19,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use criterion::Criterion;
-use handeye::cell;
-use handeye::console::{Console, ConsoleObserver, ConsoleOptions};
+use handeye_console::{Console, ConsoleObserver, ConsoleOptions};
+use handeye_session::cell;
 use rustix::time::{clock_gettime, ClockId};
 
 #[path = "../tests/util/mod.rs"]

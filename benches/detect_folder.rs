@@ -13,10 +13,10 @@ use criterion::Criterion;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
-use handeye::camera::render::{render, RenderOptions};
-use handeye::camera_model::CameraModel;
-use handeye::geometry::Pose;
-use handeye::vision::Target;
+use handeye_camera::render::{render, RenderOptions};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_vision::Target;
 
 #[path = "../tests/util/mod.rs"]
 mod util;

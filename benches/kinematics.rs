@@ -4,8 +4,8 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use handeye::robot::kinematics::UrModel;
-use handeye::robot::Joints;
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::Joints;
 
 fn kinematics(c: &mut Criterion) {
     let model = UrModel::ur5e();

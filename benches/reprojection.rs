@@ -13,11 +13,11 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use handeye::camera_model::CameraModel;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::setup::Setup;
-use handeye::solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior};
-use handeye::vision::Board;
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::Setup;
+use handeye_solve::{refine_reprojection, Corner, Frame, ReprojectionOptions, RobotPrior};
+use handeye_vision::Board;
 
 #[path = "../tests/util/mod.rs"]
 mod util;

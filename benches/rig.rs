@@ -11,12 +11,12 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use handeye::camera_model::CameraModel;
-use handeye::setup::predict;
-use handeye::solve::rig::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::setup::predict;
+use handeye_solve::rig::{
     solve_rig, solve_rig_pixels, RigData, RigFrame, RigObservation, RigOptions, RigStart,
 };
-use handeye::vision::Target;
+use handeye_vision::Target;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};

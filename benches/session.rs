@@ -16,10 +16,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use criterion::Criterion;
-use handeye::cell;
-use handeye::cell::run::{CellRun, RunObserver};
-use handeye::dataset::Dataset;
-use handeye::session::{self, SessionFolder};
+use handeye_session::cell;
+use handeye_session::cell::run::{CellRun, RunObserver};
+use handeye_session::dataset::Dataset;
+use handeye_session::session::{self, SessionFolder};
 
 #[path = "../tests/util/mod.rs"]
 mod util;
@@ -104,7 +104,7 @@ fn accuracy(done: &CellRun) -> (f64, f64) {
     let c = &done.solved.calibration;
     let u = c.uncertainty.as_ref().expect("covariance");
     let truth = done.cell.config.simulation.expect("sim truth");
-    let error = |a: &handeye::geometry::Pose, b: &handeye::geometry::Pose| {
+    let error = |a: &handeye_core::geometry::Pose, b: &handeye_core::geometry::Pose| {
         (a.translation.vector - b.translation.vector).norm() * 1e3
     };
     (
@@ -119,7 +119,7 @@ fn accuracy(done: &CellRun) -> (f64, f64) {
 /// The pose-space 1-sigma of a session's samples, mm: what the adaptive stop rule measures.
 fn pose_space_sigma_mm(done: &CellRun) -> f64 {
     let samples = Dataset::load(&done.folder.samples_path()).unwrap();
-    let c = handeye::solve::solve(
+    let c = handeye_solve::solve(
         samples.setup,
         &samples.pairs,
         &done.cell.config.solver.to_options(),

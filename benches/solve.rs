@@ -10,9 +10,9 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use handeye::geometry::Pose;
-use handeye::setup::{predict, PosePair, Setup};
-use handeye::solve::{self, iterative, AxbyData, IterativeOptions, SolveOptions};
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_solve::{self as solve, iterative, AxbyData, IterativeOptions, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

@@ -14,10 +14,10 @@ use std::path::Path;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use handeye::camera::render::{render, RenderOptions};
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::geometry::Pose;
-use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+use handeye_camera::render::{render, RenderOptions};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::Pose;
+use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 

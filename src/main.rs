@@ -30,7 +30,7 @@ fn main() -> ExitCode {
             let _ = writeln!(
                 std::io::stderr(),
                 "error: {}",
-                handeye::error_text::error_chain(error.as_ref())
+                handeye_core::error_text::error_chain(error.as_ref())
             );
             if error.downcast_ref::<cli::NothingFound>().is_some() {
                 ExitCode::from(cli::NothingFound::EXIT_CODE)

@@ -81,7 +81,7 @@ pub(super) fn run(args: CameraArgs) -> anyhow::Result<()> {
 pub(super) mod uvc {
     //! Stand-ins when the build lacks the `uvc` feature.
     use super::StreamArgs;
-    use handeye::camera_model::CameraModel;
+    use handeye_core::camera_model::CameraModel;
 
     const MISSING: &str = "this handeye build lacks USB camera support: rebuild with `cargo build --release --features uvc` (needs libclang-dev)";
 
@@ -102,7 +102,7 @@ pub(super) mod uvc {
     pub(crate) fn open(
         _: &StreamArgs,
         _: Option<CameraModel>,
-    ) -> anyhow::Result<Box<dyn handeye::camera::Camera>> {
+    ) -> anyhow::Result<Box<dyn handeye_camera::Camera>> {
         anyhow::bail!(MISSING)
     }
 }
@@ -113,10 +113,10 @@ pub(super) mod uvc {
     use anyhow::Context;
 
     use super::{PixelFormatArg, StreamArgs};
-    use handeye::atomic_file::write_atomic;
-    use handeye::camera::decode::PixelFormat;
-    use handeye::camera::uvc::{list_cameras, UvcCamera, UvcDevice, UvcOptions};
-    use handeye::camera_model::CameraModel;
+    use handeye_camera::decode::PixelFormat;
+    use handeye_camera::uvc::{list_cameras, UvcCamera, UvcDevice, UvcOptions};
+    use handeye_core::atomic_file::write_atomic;
+    use handeye_core::camera_model::CameraModel;
 
     /// This build has USB camera support.
     pub(crate) fn ensure_available() -> anyhow::Result<()> {
@@ -161,7 +161,7 @@ pub(super) mod uvc {
     pub(crate) fn open(
         stream: &StreamArgs,
         model: Option<CameraModel>,
-    ) -> anyhow::Result<Box<dyn handeye::camera::Camera>> {
+    ) -> anyhow::Result<Box<dyn handeye_camera::Camera>> {
         Ok(Box::new(UvcCamera::open(&options(stream), model)?))
     }
 

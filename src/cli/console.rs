@@ -11,10 +11,10 @@ use std::time::Duration;
 
 use clap::Args;
 
-use handeye::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
-use handeye::console::manual::run_manual;
-use handeye::console::{Command, Console, ConsoleEvent, ConsoleOptions};
-use handeye::session::SolvedSession;
+use handeye_console::manual::run_manual;
+use handeye_console::{Command, Console, ConsoleEvent, ConsoleOptions};
+use handeye_session::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
+use handeye_session::session::SolvedSession;
 
 /// Capture by hand: jog or hand-guide the arm, capture on the console page (or Enter here).
 #[derive(Debug, Args)]
@@ -39,7 +39,7 @@ pub(super) struct ConsoleArgs {
     #[arg(long, requires = "resume")]
     pub(super) accept_changed: bool,
     /// The console's address (port 0 picks a free one); the URL is printed.
-    #[arg(long, value_name = "ADDR", default_value = handeye::console::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", default_value = handeye_console::DEFAULT_ADDR)]
     pub(super) addr: SocketAddr,
     /// Allow an address beyond this machine (anyone who reaches it with the printed URL, whose
     /// secret it checks, can move the arm).
@@ -193,7 +193,7 @@ pub(super) fn finished(
 /// every camera's, the report.
 pub(super) fn finished_rig(
     console: &Console,
-    result: &handeye::cell::rig::RigResultFile,
+    result: &handeye_session::cell::rig::RigResultFile,
     report: Option<PathBuf>,
     next: String,
     wait: bool,

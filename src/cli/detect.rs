@@ -10,12 +10,12 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 
-use handeye::atomic_file::write_atomic;
-use handeye::camera_model::CameraModel;
-use handeye::geometry::PoseRecord;
-use handeye::vision::annotate::annotate;
-use handeye::vision::detect::load_gray_image;
-use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector, TargetError};
+use handeye_core::atomic_file::write_atomic;
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::PoseRecord;
+use handeye_vision::annotate::annotate;
+use handeye_vision::detect::load_gray_image;
+use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector, TargetError};
 
 /// Detect the board and estimate `T_camera_target` in each image.
 #[derive(Debug, Args)]
@@ -208,7 +208,7 @@ fn live(
         match estimate_board_pose(board, camera_model, &detection) {
             Ok(pose) => {
                 let t = pose.camera_from_target.translation.vector;
-                let r = handeye::geometry::rotvec(&pose.camera_from_target.rotation);
+                let r = handeye_core::geometry::rotvec(&pose.camera_from_target.rotation);
                 outln!(
                     "T_camera_target: t [{:+.4}, {:+.4}, {:+.4}] m, rotvec [{:+.4}, {:+.4}, {:+.4}] rad, {} tags, RMS {:.2} px, distance {:.3} m",
                     t.x, t.y, t.z, r.x, r.y, r.z, pose.tags_used, pose.rms_px, t.norm()

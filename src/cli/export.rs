@@ -1,18 +1,18 @@
 //! `handeye export <result.yaml> --format ros2|urdf|ur|json|opencv`: the solved transforms (a
 //! one-camera cell's two unknowns, or every camera's mount and the boards of a cell with several)
-//! in the forms other tools read (`handeye::formats::export`), printed or written atomically.
+//! in the forms other tools read (`handeye_formats::export`), printed or written atomically.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye::atomic_file::write_atomic_reporting;
-use handeye::cell::rig::RigResultFile;
-use handeye::formats::export::{self, Exported, ExportedCell};
-use handeye::formats::ros2_launch::through_camera_link;
-use handeye::formats::ExportFormat;
-use handeye::result::ResultFile;
+use handeye_core::atomic_file::write_atomic_reporting;
+use handeye_formats::export::{self, Exported, ExportedCell};
+use handeye_formats::ros2_launch::through_camera_link;
+use handeye_formats::ExportFormat;
+use handeye_session::cell::rig::RigResultFile;
+use handeye_session::result::ResultFile;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -85,7 +85,7 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
                 ExportedCell::One(_) => 1,
             }
         );
-        handeye::formats::validate_frame_id(link)
+        handeye_formats::validate_frame_id(link)
             .map_err(|p| anyhow::anyhow!("--camera-link {link:?} is not a ROS frame id: {p}"))?;
         exported.tree[0] = through_camera_link(&exported.tree[0], link);
     }
@@ -99,7 +99,7 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
 /// (a `cameras:` cell), under the frame ids `ids`, checked for export.
 pub(super) fn exported_result(
     result: &std::path::Path,
-    ids: &handeye::formats::FrameIds,
+    ids: &handeye_formats::FrameIds,
 ) -> anyhow::Result<Exported> {
     let text = std::fs::read_to_string(result).ok();
     let several: Option<serde_yaml_ng::Value> = text

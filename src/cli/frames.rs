@@ -3,7 +3,7 @@
 
 use clap::Args;
 
-use handeye::formats::{ExportError, FrameIds};
+use handeye_formats::{ExportError, FrameIds};
 
 /// Frame ids of the exported or published transforms. They follow ROS naming: ASCII letters,
 /// digits, `_` and `/` (no leading `/`, no part starting with a digit).

@@ -1,24 +1,24 @@
 //! `handeye import <format> ... -o dataset.yaml`: other tools' hand-eye data into our dataset
 //! form (`T_base_flange`, `T_camera_target` pairs). The library does the reading
-//! (`handeye::formats::import`); this file maps arguments and prints what was found.
+//! (`handeye_formats::import`); this file maps arguments and prints what was found.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
-use handeye::camera_model::CameraModel;
-use handeye::config::{recorded_cell, CellConfig, RecordedFiles};
-use handeye::dataset::Dataset;
-use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::setup::Setup;
+use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
-use handeye::robot::recorded::save_recorded_poses;
-use handeye::setup::Setup;
-use handeye::vision::{DetectorOptions, Target};
+use handeye_robot::recorded::save_recorded_poses;
 use handeye_ros2_bag::BagOptions;
+use handeye_session::config::{recorded_cell, CellConfig, RecordedFiles};
+use handeye_session::dataset::Dataset;
+use handeye_vision::{DetectorOptions, Target};
 
 /// The cell layout on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -401,9 +401,9 @@ fn cell_text(
     target: &Path,
     camera_info: &Path,
     poses: &Path,
-    imported: &handeye::formats::import::VispImport,
+    imported: &handeye_formats::import::VispImport,
 ) -> anyhow::Result<String> {
-    let frames = handeye::camera::files::list_frames(folder)?;
+    let frames = handeye_camera::files::list_frames(folder)?;
     let paired: Vec<&PathBuf> = imported.frames.iter().map(|f| &f.files.image).collect();
     anyhow::ensure!(
         frames.iter().collect::<Vec<_>>() == paired,
@@ -412,15 +412,15 @@ fn cell_text(
     );
     let setup = imported.dataset.setup;
     // Nominal transforms from a quick solve (they only feed the plan report of a recorded cell).
-    let (camera_mount, target_mount) = match handeye::solve::solve(
+    let (camera_mount, target_mount) = match handeye_solve::solve(
         setup,
         &imported.dataset.pairs,
-        &handeye::solve::SolveOptions::default(),
+        &handeye_solve::SolveOptions::default(),
     ) {
         Ok(c) => (c.camera_mount, c.target_mount),
         Err(_) => (
-            handeye::geometry::Pose::identity(),
-            handeye::geometry::Pose::identity(),
+            handeye_core::geometry::Pose::identity(),
+            handeye_core::geometry::Pose::identity(),
         ),
     };
     let folder = canonical(folder)?;
@@ -482,7 +482,7 @@ pub(super) fn run(args: ImportArgs) -> anyhow::Result<()> {
                         "{}: board RMS {rms:.3} px{}",
                         f.files.image.display(),
                         match f.ambiguity {
-                            Some(r) if r > handeye::vision::pnp::AMBIGUITY_WARN_RATIO =>
+                            Some(r) if r > handeye_vision::pnp::AMBIGUITY_WARN_RATIO =>
                                 format!(" (AMBIGUOUS lone tag, ratio {r:.2})"),
                             _ => String::new(),
                         }
@@ -521,7 +521,7 @@ pub(super) fn run(args: ImportArgs) -> anyhow::Result<()> {
             })?;
             if let Some((cell_out, text)) = cell {
                 outputs.write(cell_out, || {
-                    handeye::atomic_file::write_atomic(cell_out, text.as_bytes())
+                    handeye_core::atomic_file::write_atomic(cell_out, text.as_bytes())
                         .with_context(|| format!("writing {}", cell_out.display()))
                 })?;
                 outln!("wrote a recorded-cell config to {}", cell_out.display());

@@ -98,7 +98,10 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<()> {
 
 /// Asks on the terminal before a real robot moves through `poses` poses; refuses when no one
 /// can answer (no terminal: `--yes` is the explicit way to run unattended).
-fn confirm_motion(prepared: &handeye::cell::PreparedCell, poses: usize) -> anyhow::Result<()> {
+fn confirm_motion(
+    prepared: &handeye_session::cell::PreparedCell,
+    poses: usize,
+) -> anyhow::Result<()> {
     use std::io::{BufRead, IsTerminal};
     if !std::io::stdin().is_terminal() {
         anyhow::bail!(

@@ -63,7 +63,7 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "ros2")]
 fn publish(
-    transforms: &[handeye::formats::export::NamedTransform],
+    transforms: &[handeye_formats::export::NamedTransform],
     domain_id: u16,
     interfaces: Vec<IpAddr>,
     topic: &str,
@@ -112,7 +112,7 @@ fn publish(
 
 #[cfg(not(feature = "ros2"))]
 fn publish(
-    _transforms: &[handeye::formats::export::NamedTransform],
+    _transforms: &[handeye_formats::export::NamedTransform],
     _domain_id: u16,
     _interfaces: Vec<IpAddr>,
     _topic: &str,

@@ -5,12 +5,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::camera_model::CameraModel;
-use handeye::cell;
-use handeye::config::SolveSpace;
 use handeye::report::session::{write_replay_report, Optics};
-use handeye::result::ResultFile;
-use handeye::session::{self, replay, SessionFolder};
+use handeye_core::camera_model::CameraModel;
+use handeye_session::cell;
+use handeye_session::config::SolveSpace;
+use handeye_session::result::ResultFile;
+use handeye_session::session::{self, replay, SessionFolder};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]

@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::config::CellConfig;
 use handeye::report::session::write_folder_report;
-use handeye::result::ResultFile;
-use handeye::session::SessionFolder;
-use handeye::verdict::Verdict;
+use handeye_session::config::CellConfig;
+use handeye_session::result::ResultFile;
+use handeye_session::session::SessionFolder;
+use handeye_solve::verdict::Verdict;
 
 /// Write the calibration report of a solved session folder.
 #[derive(Debug, Args)]
@@ -24,7 +24,7 @@ pub(super) struct ReportArgs {
 
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
-    if handeye::cell::rig::is_rig_folder(&args.session) {
+    if handeye_session::cell::rig::is_rig_folder(&args.session) {
         let path = handeye::report::rig::write_rig_report(&args.session)?;
         outln!("report: {}", path.display());
         return Ok(());

@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use handeye::cell::rig::{self, RigResultFile};
-use handeye::cell::run::CellRun;
-use handeye::config::rig::RigConfig;
+use handeye_session::cell::rig::{self, RigResultFile};
+use handeye_session::cell::run::CellRun;
+use handeye_session::config::rig::RigConfig;
 
 /// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
 /// for one camera): what the run did, every camera's answer, the report.

@@ -9,12 +9,14 @@ use std::sync::Arc;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use handeye::cell::run::{open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
-use handeye::cell::{self, PreparedCell};
-use handeye::console::ConsoleObserver;
-use handeye::geometry::Pose;
-use handeye::session::SessionEvent;
-use handeye::verdict::{Level, Verdict};
+use handeye_console::ConsoleObserver;
+use handeye_core::geometry::Pose;
+use handeye_session::cell::run::{
+    open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
+};
+use handeye_session::cell::{self, PreparedCell};
+use handeye_session::session::SessionEvent;
+use handeye_solve::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
 #[derive(Debug, Args)]
@@ -44,7 +46,7 @@ pub(super) struct RunArgs {
     yes: bool,
     /// Serve the live console (frames, plan, coverage, estimate, STOP) on ADDR (default
     /// 127.0.0.1:8765; port 0 picks a free one); the URL is printed.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye::console::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = handeye_console::DEFAULT_ADDR)]
     console: Option<std::net::SocketAddr>,
     /// Allow --console on an address beyond this machine (anyone who reaches it with the printed
     /// URL, whose secret it checks, can stop the run).
@@ -78,7 +80,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         None => None,
     };
     let mut printer = Printer::new(stop.clone());
-    let failed = |console: &Option<handeye::console::Console>, e: RunError| {
+    let failed = |console: &Option<handeye_console::Console>, e: RunError| {
         let e = anyhow::Error::from(e);
         if let Some(console) = console {
             super::console::failed(console, &e, args.console_wait);
@@ -93,7 +95,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         outln!("{why}: hand-guided capture on the console (as `handeye console`)");
         let console = match console {
             Some(console) => console,
-            None => super::console::start(handeye::console::DEFAULT_ADDR.parse()?, false, stop)?,
+            None => super::console::start(handeye_console::DEFAULT_ADDR.parse()?, false, stop)?,
         };
         return super::console::hand_guided(&console, &request, opened, printer, args.console_wait);
     }
@@ -302,7 +304,7 @@ impl RunObserver for Printer {
             SessionEvent::Moving { plan_index, target } => {
                 // The same flange pose as listed (copied, or read back from the manifest).
                 let listed = self.listed.iter().find(|(pose, _)| {
-                    handeye::geometry::translation_distance(pose, &target) < 1e-9
+                    handeye_core::geometry::translation_distance(pose, &target) < 1e-9
                         && pose.rotation.angle_to(&target.rotation) < 1e-9
                 });
                 if let Some((_, number)) = listed {
@@ -358,7 +360,7 @@ impl RunObserver for Printer {
 }
 
 pub(super) fn default_session_dir() -> PathBuf {
-    handeye::session::dated_session_path(
+    handeye_session::session::dated_session_path(
         std::path::Path::new("sessions"),
         "",
         std::time::SystemTime::now(),

@@ -8,12 +8,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye::config::{validate, CellConfig, SolveSpace};
-use handeye::dataset::Dataset;
-use handeye::geometry::readable;
-use handeye::result::ResultFile;
-use handeye::session::{self, SessionFolder};
-use handeye::solve::{self, Method, NoiseModel, RobustLoss, SolveOptions};
+use handeye_core::geometry::readable;
+use handeye_session::config::{validate, CellConfig, SolveSpace};
+use handeye_session::dataset::Dataset;
+use handeye_session::result::ResultFile;
+use handeye_session::session::{self, SessionFolder};
+use handeye_solve::{self as solve, Method, NoiseModel, RobustLoss, SolveOptions};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
 /// `solver.method` takes), each with its one-line summary in `--help`.
@@ -201,7 +201,7 @@ pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
     let dataset = Dataset::load(&args.samples)?;
     let result = solve::solve(dataset.setup, &dataset.pairs, &options);
     // The verdict comes first, also when the solve is refused (REDO, with the reason).
-    let verdict = handeye::verdict::assess_result(
+    let verdict = handeye_solve::verdict::assess_result(
         result.as_ref(),
         &dataset.pairs,
         &options,

@@ -7,11 +7,11 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand, ValueEnum};
 
-use handeye::atomic_file::write_atomic;
-use handeye::vision::print::{
+use handeye_core::atomic_file::write_atomic;
+use handeye_vision::print::{
     board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, size_keys, Paper,
 };
-use handeye::vision::Target;
+use handeye_vision::Target;
 
 /// `--paper` values.
 #[derive(Debug, Clone, Copy, ValueEnum)]

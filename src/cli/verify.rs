@@ -7,15 +7,15 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 
-use handeye::atomic_file::write_atomic;
-use handeye::cell::run::{RunObserver, RunRequest, SessionTarget};
-use handeye::cell::PreparedCell;
-use handeye::config::CellConfig;
-use handeye::dataset::Dataset;
-use handeye::plan::GenerateSpec;
-use handeye::result::ResultFile;
-use handeye::session::SessionFolder;
-use handeye::verify;
+use handeye_core::atomic_file::write_atomic;
+use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
+use handeye_session::cell::PreparedCell;
+use handeye_session::config::CellConfig;
+use handeye_session::dataset::Dataset;
+use handeye_session::plan::GenerateSpec;
+use handeye_session::result::ResultFile;
+use handeye_session::session::SessionFolder;
+use handeye_session::verify;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
 #[derive(Debug, Args)]
@@ -66,7 +66,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             ..base
         };
         let out = args.out.clone().unwrap_or_else(|| {
-            handeye::session::dated_session_path(
+            handeye_session::session::dated_session_path(
                 std::path::Path::new("sessions"),
                 "verify-",
                 std::time::SystemTime::now(),

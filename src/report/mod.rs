@@ -32,11 +32,11 @@ pub mod session;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
-use crate::atomic_file::write_atomic;
-use crate::notice::Notice;
-use crate::setup::{PosePair, Setup};
-use crate::solve::Calibration;
-use crate::verdict::Verdict;
+use handeye_core::atomic_file::write_atomic;
+use handeye_core::notice::Notice;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::verdict::Verdict;
+use handeye_solve::Calibration;
 
 use base64::prelude::{Engine as _, BASE64_STANDARD};
 pub use corners::{CornerResidual, CORNER_PLOT_KINDS};
@@ -102,10 +102,10 @@ pub struct ReportInput {
     /// page shows no verdict card.
     pub verdict: Option<Verdict>,
     /// The run's arm time (spent, and saved against the full plan), when the session kept it.
-    pub arm_time: Option<crate::cell::run::ArmTime>,
+    pub arm_time: Option<handeye_session::cell::run::ArmTime>,
     /// The config's nominal transforms (what the person measured or expected), shown beside the
     /// answer in plain words; `None` without a config.
-    pub nominal: Option<crate::setup::CellTransforms>,
+    pub nominal: Option<handeye_core::setup::CellTransforms>,
     /// Every detected corner of the samples with its residual at the primary answer (empty
     /// without frames: a plain dataset, or no board or intrinsics to reproject with).
     pub corners: Vec<CornerResidual>,
@@ -129,7 +129,7 @@ pub enum ReportError {
     },
     /// A session file could not be read.
     #[error("reading the session for the report failed")]
-    Session(#[source] Box<crate::session::SessionError>),
+    Session(#[source] Box<handeye_session::session::SessionError>),
     /// A frame could not be read or encoded.
     #[error("{}: cannot draw the frame for the report: {message}", path.display())]
     Frame {

@@ -7,9 +7,9 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{ReportError, ReportInput};
-use crate::geometry::{relative_rotation_axis, Pose};
-use crate::setup::{PosePair, Setup};
-use crate::solve::Phase;
+use handeye_core::geometry::{relative_rotation_axis, Pose};
+use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::Phase;
 
 const WIDTH: u32 = 900;
 const HEIGHT: u32 = 300;

@@ -10,11 +10,11 @@
 use std::fmt::Write;
 
 use super::{escape, ReportAnswer};
-use crate::formats::export::{export, ExportFormat, FrameIds};
-use crate::geometry::yaml::PoseRecord;
-use crate::geometry::{rotvec, to_matrix4_rows, Pose};
-use crate::solve::cell_model::{CellModelSummary, GivenFile};
-use crate::verdict::{Level, Verdict};
+use handeye_core::geometry::yaml::PoseRecord;
+use handeye_core::geometry::{rotvec, to_matrix4_rows, Pose};
+use handeye_formats::export::{export, ExportFormat, FrameIds};
+use handeye_solve::cell_model::{CellModelSummary, GivenFile};
+use handeye_solve::verdict::{Level, Verdict};
 
 /// The forms "use it" shows, with their headings: what `handeye export --format <name>` writes.
 const USE_FORMS: [(ExportFormat, &str); 4] = [
@@ -215,7 +215,7 @@ pub(super) fn cell_model_table(html: &mut String, model: &CellModelSummary) {
 pub(super) fn plain_summary(
     html: &mut String,
     answer: &ReportAnswer,
-    nominal: Option<&crate::setup::CellTransforms>,
+    nominal: Option<&handeye_core::setup::CellTransforms>,
 ) {
     let ids = FrameIds::default();
     let frame = |name: &str| match name {
@@ -347,7 +347,7 @@ pub(super) fn transforms_section(html: &mut String, k: usize, answer: &ReportAns
 pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static str>)> {
     let t = pose.translation.vector;
     // w ≥ 0, as the YAML writes it.
-    let q = crate::geometry::yaml::QuaternionYaml::from(&pose.rotation);
+    let q = handeye_core::geometry::yaml::QuaternionYaml::from(&pose.rotation);
     let rv = rotvec(&pose.rotation);
     let m = to_matrix4_rows(pose);
     let (roll, pitch, yaw) = pose.rotation.euler_angles();
@@ -394,7 +394,7 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
         ("4x4 matrix", matrix, None),
         (
             "UR pose (URScript)",
-            crate::formats::export::ur_pose_literal(pose),
+            handeye_formats::export::ur_pose_literal(pose),
             None,
         ),
     ]
@@ -406,7 +406,7 @@ mod tests {
 
     #[test]
     fn ur_form_is_translation_then_rotation_vector() {
-        let pose = crate::geometry::pose_from_rotvec(
+        let pose = handeye_core::geometry::pose_from_rotvec(
             nalgebra::Vector3::new(0.1, -0.2, 0.3),
             nalgebra::Vector3::new(0.0, 0.0, 0.5),
         );

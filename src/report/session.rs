@@ -12,15 +12,15 @@ use image::{imageops, Rgb, RgbImage};
 use nalgebra::Point2;
 
 use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
-use crate::camera_model::CameraModel;
-use crate::cell::run::CellRun;
-use crate::dataset::Dataset;
-use crate::geometry::Pose;
-use crate::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
-use crate::setup::{CornerObservation, PosePair};
-use crate::solve::Calibration;
-use crate::verdict::Verdict;
-use crate::vision::{draw, Target};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{CornerObservation, PosePair};
+use handeye_session::cell::run::CellRun;
+use handeye_session::dataset::Dataset;
+use handeye_session::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
+use handeye_solve::verdict::Verdict;
+use handeye_solve::Calibration;
+use handeye_vision::{draw, Target};
 
 /// Largest width of a frame in the report, px: the grid shows it small, a click full size.
 /// Narrower frames keep their size.
@@ -331,7 +331,7 @@ pub fn write_replay_report(
     folder: &SessionFolder,
     solved: &SolvedSession,
     optics: Optics<'_>,
-    nominal: Option<crate::setup::CellTransforms>,
+    nominal: Option<handeye_core::setup::CellTransforms>,
 ) -> Result<std::path::PathBuf, ReportError> {
     write(
         folder,
@@ -353,7 +353,7 @@ pub fn write_replay_report(
 /// and what the page lacks and why (a board or intrinsics file that cannot be read: no frames).
 pub fn write_folder_report(
     folder: &SessionFolder,
-    config: Option<&crate::config::CellConfig>,
+    config: Option<&handeye_session::config::CellConfig>,
     answer: Calibration,
     verdict: Option<Verdict>,
 ) -> Result<(std::path::PathBuf, Vec<String>), ReportError> {
@@ -394,7 +394,7 @@ pub fn write_folder_report(
         Page {
             optics,
             verdict,
-            arm_time: crate::cell::run::ArmTime::load(folder.root()),
+            arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.nominal),
             file_name: REPORT_FILE,
         },
@@ -406,8 +406,8 @@ pub fn write_folder_report(
 struct Page<'a> {
     optics: Option<Optics<'a>>,
     verdict: Option<Verdict>,
-    arm_time: Option<crate::cell::run::ArmTime>,
-    nominal: Option<crate::setup::CellTransforms>,
+    arm_time: Option<handeye_session::cell::run::ArmTime>,
+    nominal: Option<handeye_core::setup::CellTransforms>,
     file_name: &'a str,
 }
 

@@ -8,13 +8,13 @@
 //! the simulator's truth, and the adaptive stop rule is given the 1-sigma the 20-pose random
 //! solve reports, so both aim at the same target.
 
-use handeye::cell;
-use handeye::geometry::Pose;
-use handeye::plan::nbv::AdaptivePlanner;
-use handeye::plan::{generate, GenerateSpec, Plan, Waypoint};
-use handeye::robot::Joints;
-use handeye::setup::{CellTransforms, PosePair};
-use handeye::solve;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{CellTransforms, PosePair};
+use handeye_robot::Joints;
+use handeye_session::cell;
+use handeye_session::plan::nbv::AdaptivePlanner;
+use handeye_session::plan::{generate, GenerateSpec, Plan, Waypoint};
+use handeye_solve as solve;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -141,7 +141,7 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
 /// session folder is a normal one (manifest lists exactly the visited poses).
 #[test]
 fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
-    use handeye::session::{self, SessionEvent, SessionFolder};
+    use handeye_session::session::{self, SessionEvent, SessionFolder};
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
@@ -204,7 +204,7 @@ fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
 /// is visited twice, and the planner goes on from the samples on disk to its target.
 #[test]
 fn a_stopped_adaptive_session_resumes_to_its_target() {
-    use handeye::session::{self, SessionError, SessionEvent, SessionFolder};
+    use handeye_session::session::{self, SessionError, SessionEvent, SessionFolder};
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
@@ -257,7 +257,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
             assert_ne!(a.joints_deg, b.joints_deg);
         }
     }
-    let samples = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    let samples = handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(samples.pairs.len(), manifest.plan.len());
 }
 

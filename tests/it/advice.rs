@@ -9,8 +9,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use handeye::result::ResultFile;
-use handeye::verdict::{Basis, Level, Verdict};
+use handeye_session::result::ResultFile;
+use handeye_solve::verdict::{Basis, Level, Verdict};
 
 use crate::util::{self, config_variant, handeye, repo, run_cell};
 
@@ -108,7 +108,7 @@ fn wrong_board_size(scale: f64, name: &str) {
     // The cell model wrote the board file with the estimated size into the session (#38), and it
     // reads as a board.
     let written = session.join("board.yaml");
-    handeye::vision::Target::load(&written).expect("the corrected board file reads");
+    handeye_vision::Target::load(&written).expect("the corrected board file reads");
     let text = std::fs::read_to_string(&written).unwrap();
     let tag_size: f64 = text
         .lines()
@@ -235,7 +235,7 @@ fn degrees_in_a_rotation_vector_are_refused_at_load_and_rpy_deg_is_read() {
             "T_flange_camera: {translation: [0.03, -0.07, 0.04], rpy_deg: [0, 0, 90]}",
         )],
     );
-    let loaded = handeye::config::CellConfig::load(&config).unwrap();
+    let loaded = handeye_session::config::CellConfig::load(&config).unwrap();
     let angle = loaded.nominal.camera_mount.rotation.scaled_axis();
     assert!((angle - nalgebra::Vector3::new(0.0, 0.0, 90f64.to_radians())).norm() < 1e-12);
 }
@@ -362,9 +362,9 @@ fn lens_fx_8_percent_off(dir: &Path) -> PathBuf {
 
 /// A run of `config` into `session` that fails: its error, chain and all.
 fn failed_run(config: &Path, session: &Path) -> String {
-    match handeye::cell::run::run(
+    match handeye_session::cell::run::run(
         &util::new_run(config, session),
-        handeye::cell::run::Strategy::Planned,
+        handeye_session::cell::run::Strategy::Planned,
         &mut util::QuietObserver,
     ) {
         Ok(_) => panic!("the run of {} succeeded", config.display()),
@@ -466,7 +466,7 @@ fn assert_intrinsics_advice(text: &str, session: &Path, config: &Path, lens: &Pa
     ] {
         assert!(text.contains(&expected), "{expected:?} not in {text}");
     }
-    let estimated = handeye::camera_model::CameraModel::load(&estimate).unwrap();
+    let estimated = handeye_core::camera_model::CameraModel::load(&estimate).unwrap();
     eprintln!(
         "fx 8 % off: estimated fx {:.2} fy {:.2} cx {:.2} cy {:.2} px (true 800, 800, 641.3, 358.7)",
         estimated.fx, estimated.fy, estimated.cx, estimated.cy

@@ -12,8 +12,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use handeye::vision::detect::load_gray_image;
-use handeye::vision::{Board, DetectorOptions, TagDetector, TagFamily};
+use handeye_vision::detect::load_gray_image;
+use handeye_vision::{Board, DetectorOptions, TagDetector, TagFamily};
 use nalgebra::Point2;
 
 use crate::util;

@@ -8,15 +8,15 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use handeye::camera::{Camera, CameraError, Frame};
-use handeye::camera_model::CameraModel;
-use handeye::cell;
-use handeye::cell::run as cell_run;
-use handeye::geometry::Pose;
-use handeye::plan::check::MoveCheck;
-use handeye::robot::sim::SimRobot;
-use handeye::robot::Joints;
-use handeye::session::{self, SessionFolder};
+use handeye_camera::{Camera, CameraError, Frame};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_robot::sim::SimRobot;
+use handeye_robot::Joints;
+use handeye_session::cell;
+use handeye_session::cell::run as cell_run;
+use handeye_session::plan::check::MoveCheck;
+use handeye_session::session::{self, SessionFolder};
 
 use crate::util;
 
@@ -348,8 +348,8 @@ mod through_ur_rtde {
     use std::sync::mpsc;
     use std::time::Duration;
 
-    use handeye::robot::kinematics::UrModel;
-    use handeye::robot::sim::Ringing;
+    use handeye_robot::kinematics::UrModel;
+    use handeye_robot::sim::Ringing;
     use mocks::{MockUr, MockUrConfig};
 
     fn with_timeout<T: Send + 'static>(

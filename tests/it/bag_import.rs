@@ -16,13 +16,13 @@ use std::sync::OnceLock;
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 
-use handeye::camera::render::{render_with_rays, PixelRays, RenderOptions};
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::plan::lookat::LookAt;
-use handeye::result::ResultFile;
-use handeye::vision::Board;
+use handeye_camera::render::{render_with_rays, PixelRays, RenderOptions};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_ros2_bag::tf::interpolate;
+use handeye_session::plan::lookat::LookAt;
+use handeye_session::result::ResultFile;
+use handeye_vision::Board;
 
 use crate::util;
 use util::{handeye, pose_error_mm_deg, repo};
@@ -397,8 +397,8 @@ fn sim_bag_options() -> handeye_ros2_bag::BagOptions {
         tf_topics: vec!["/tf".into(), "/tf_static".into()],
         tf_static_topics: vec!["/tf_static".into()],
         select: Default::default(),
-        setup: handeye::setup::Setup::EyeInHand,
-        board: handeye::vision::Target::load(&board_path()).unwrap(),
+        setup: handeye_core::setup::Setup::EyeInHand,
+        board: handeye_vision::Target::load(&board_path()).unwrap(),
         detector: Default::default(),
     }
 }
@@ -529,7 +529,7 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
 /// arrive as it goes, the session is where it was asked for, and the answer is the truth.
 #[test]
 fn the_library_imports_a_bag_into_a_solved_session() {
-    use handeye::formats::bag::{import_bag_session, BagNote, BagSessionRequest};
+    use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
     let dir = tempfile::tempdir().unwrap();
     let board = Board::load(&board_path()).unwrap();
     let trajectory = StopAndGo {

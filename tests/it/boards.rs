@@ -19,10 +19,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::geometry::Pose;
-use handeye::vision::print::size_keys;
-use handeye::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::Pose;
+use handeye_vision::print::size_keys;
+use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion};
 use serde_json::Value;
 
@@ -287,9 +287,9 @@ fn an_unknown_dictionary_is_refused_listing_the_accepted_names() {
 /// (`chessboard-data.txt`), real 640x480 photographs. Found in every frame, solved end to end.
 #[test]
 fn visp_eye_in_hand_chessboard_set_is_detected_in_every_frame_and_solved() {
-    use handeye::formats::import::{import_visp, VispOptions};
-    use handeye::setup::Setup;
-    use handeye::solve::{self, NoiseModel, SolveOptions};
+    use handeye_core::setup::Setup;
+    use handeye_formats::import::{import_visp, VispOptions};
+    use handeye_solve::{self as solve, NoiseModel, SolveOptions};
     let Some(folder) = util::dataset("visp_franka_data-eye-in-hand") else {
         return;
     };
@@ -391,7 +391,7 @@ fn charuco_reflectance_matches_opencv_generate_image() {
 /// at the pose they were rendered at.
 #[test]
 fn simulated_camera_renders_each_board_readably() {
-    use handeye::camera::render::{render, RenderOptions};
+    use handeye_camera::render::{render, RenderOptions};
     use rand::SeedableRng;
     let camera = CameraModel {
         width: 1280,

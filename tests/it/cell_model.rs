@@ -15,15 +15,15 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::config::CellConfig;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::session::{self, PoseVisit};
-use handeye::setup::{CellTransforms, CornerObservation, PosePair, Setup};
-use handeye::solve::cell_model::GivenFile;
-use handeye::verdict::Level;
-use handeye::vision::pnp::estimate_pose_from_points;
-use handeye::vision::Target;
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{CellTransforms, CornerObservation, PosePair, Setup};
+use handeye_session::config::CellConfig;
+use handeye_session::session::{self, PoseVisit};
+use handeye_solve::cell_model::GivenFile;
+use handeye_solve::verdict::Level;
+use handeye_vision::pnp::estimate_pose_from_points;
+use handeye_vision::Target;
 
 use crate::util::{pose_error_mm_deg, repo};
 
@@ -283,7 +283,7 @@ fn case(seed: u64, setup: Setup, mistake: Mistake, board: &Target) -> Case {
         };
         let plan_index = visits.len();
         let visit = PoseVisit {
-            schema_version: handeye::yaml_file::SchemaVersion::CURRENT,
+            schema_version: handeye_core::yaml_file::SchemaVersion::CURRENT,
             plan_index,
             base_from_flange: reported,
             frame: PathBuf::from(format!("frames/{plan_index:03}.png")),
@@ -349,7 +349,7 @@ fn solve_case(c: &Case, config: &CellConfig, board: &Target) -> Outcome {
         mistake: c.mistake,
         setup: c.setup,
         level: verdict.level,
-        blamed: if verdict.basis == handeye::verdict::Basis::WithinAccuracy {
+        blamed: if verdict.basis == handeye_solve::verdict::Basis::WithinAccuracy {
             Vec::new()
         } else {
             model.blamed()

@@ -9,14 +9,14 @@ use nalgebra::{Matrix4, Vector3};
 
 use std::path::{Path, PathBuf};
 
-use handeye::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
-use handeye::config::{CellConfig, RobotConfig};
-use handeye::plan::{Plan, Waypoint};
-use handeye::robot::kinematics::UrModel;
-use handeye::robot::Joints;
-use handeye::setup::Setup;
-use handeye::vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
-use handeye::vision::{Board, DetectorOptions, TagDetector, TagFamily};
+use handeye_core::setup::Setup;
+use handeye_robot::kinematics::UrModel;
+use handeye_robot::Joints;
+use handeye_session::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
+use handeye_session::config::{CellConfig, RobotConfig};
+use handeye_session::plan::{Plan, Waypoint};
+use handeye_vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
+use handeye_vision::{Board, DetectorOptions, TagDetector, TagFamily};
 
 use crate::util;
 
@@ -217,7 +217,7 @@ fn inside(q: &Joints, ranges: &[[f64; 2]]) -> bool {
 #[test]
 fn a_generated_plan_stays_inside_a_restricted_range() {
     let dir = tempfile::tempdir().unwrap();
-    let free = handeye::cell::prepare(&util::config_variant(
+    let free = handeye_session::cell::prepare(&util::config_variant(
         dir.path(),
         "sim-cell.yaml",
         "free.yaml",
@@ -248,7 +248,7 @@ fn a_generated_plan_stays_inside_a_restricted_range() {
         dir.path(),
         "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [0, 360]]",
     );
-    let cell = handeye::cell::prepare(&path).unwrap();
+    let cell = handeye_session::cell::prepare(&path).unwrap();
     let validated = cell.report.validated().unwrap_or_else(|| {
         panic!(
             "{:#?}",
@@ -282,7 +282,7 @@ fn views_outside_a_tight_range_are_refused_naming_the_joint() {
         dir.path(),
         "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-20, 20]]",
     );
-    let cell = handeye::cell::prepare(&path).unwrap();
+    let cell = handeye_session::cell::prepare(&path).unwrap();
     let ranges = cell.config.robot.joint_ranges_deg(cell.config.setup);
     let mut refused = 0;
     for p in &cell.report.poses {
@@ -313,7 +313,7 @@ fn a_scripted_pose_outside_the_range_is_refused() {
         .map(|[lo, hi]| format!("[{lo}, {hi}]"))
         .join(", ");
     let path = sim_with_ranges(dir.path(), &format!("[{flange}]"));
-    let cell = handeye::cell::prepare(&path).unwrap();
+    let cell = handeye_session::cell::prepare(&path).unwrap();
     let plan = Plan {
         waypoints: vec![
             Waypoint::Joints(Joints::from(
@@ -397,9 +397,9 @@ fn every_move_is_held_to_the_ranges() {
     let mut arm = UrModel::ur5e();
     arm.joint_limits =
         FLANGE_CAMERA_JOINT_RANGES_DEG.map(|[lo, hi]| (lo.to_radians(), hi.to_radians()));
-    let check = handeye::plan::check::MoveCheck::with_model(
+    let check = handeye_session::plan::check::MoveCheck::with_model(
         arm,
-        handeye::robot::WorkspaceBox {
+        handeye_robot::WorkspaceBox {
             min: Vector3::new(-2.0, -2.0, -2.0),
             max: Vector3::new(2.0, 2.0, 2.0),
         },
@@ -654,7 +654,10 @@ fn the_templates_load_without_the_simulated_lens() {
         assert_eq!(config.setup, setup, "{name}");
         assert!(matches!(config.robot, RobotConfig::Ur { .. }), "{name}");
         assert!(
-            matches!(config.camera, handeye::config::CameraConfig::Uvc { .. }),
+            matches!(
+                config.camera,
+                handeye_session::config::CameraConfig::Uvc { .. }
+            ),
             "{name}"
         );
         let lens = config.intrinsics.as_ref().expect("a lens file");
@@ -668,7 +671,7 @@ fn the_templates_load_without_the_simulated_lens() {
             "{}",
             lens.display()
         );
-        handeye::camera_model::CameraModel::load(lens).unwrap();
+        handeye_core::camera_model::CameraModel::load(lens).unwrap();
     }
 }
 
@@ -715,7 +718,8 @@ fn every_value_to_change_is_marked() {
 #[test]
 fn the_template_plans_pass_the_check() {
     for name in TEMPLATES {
-        let cell = handeye::cell::prepare(&util::repo().join("configs").join(name)).unwrap();
+        let cell =
+            handeye_session::cell::prepare(&util::repo().join("configs").join(name)).unwrap();
         let problems: Vec<_> = cell.report.poses.iter().flat_map(|p| &p.problems).collect();
         assert!(
             cell.report.ok(),

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use handeye::config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMethod};
+use handeye_session::config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMethod};
 
 use crate::util;
 use util::handeye;
@@ -207,7 +207,7 @@ fn misspelled_solver_method_is_an_error_listing_the_accepted_names() {
         assert_eq!(loaded.solver.method, SolverMethod::ClosedForm);
         assert_eq!(
             loaded.solver.to_options().method,
-            handeye::solve::Method::ClosedForm
+            handeye_solve::Method::ClosedForm
         );
     }
 }
@@ -230,7 +230,7 @@ fn yaml_values_in_messages_are_shown_in_flow_style() {
             &format!("intrinsics: {}\n# was: ", bad_lens.display()),
         )],
     );
-    let message = match handeye::cell::prepare(&config) {
+    let message = match handeye_session::cell::prepare(&config) {
         Ok(_) => panic!("a 1-number camera matrix loaded"),
         Err(e) => format!("{:#}", anyhow::Error::new(e)),
     };
@@ -550,8 +550,8 @@ fn shipped_configs_load() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "yaml") {
             // A config of several cameras (`cameras:`) loads as one cell config per camera.
-            let configs = if handeye::config::rig::is_rig_file(&path) {
-                handeye::config::rig::RigConfig::load(&path)
+            let configs = if handeye_session::config::rig::is_rig_file(&path) {
+                handeye_session::config::rig::RigConfig::load(&path)
                     .unwrap_or_else(|e| panic!("{e:#}"))
                     .cameras
                     .into_iter()
@@ -711,7 +711,7 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     assert!(matches!(config.robot, RobotConfig::Recorded { .. }));
     assert!(matches!(
         config.camera,
-        handeye::config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
+        handeye_session::config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
     ));
     assert_eq!(config.detector.decimate, 1.0);
     assert!(config.plan.file.is_none() && config.plan.generate.is_none());

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use handeye::console::{Console, ConsoleError, ConsoleEvent, ConsoleOptions};
+use handeye_console::{Console, ConsoleError, ConsoleEvent, ConsoleOptions};
 
 fn loopback() -> ConsoleOptions {
     ConsoleOptions {
@@ -129,7 +129,7 @@ fn a_page_gets_the_history_live_events_and_frames_and_stop_sets_the_flag() {
         );
         assert_eq!(
             console.next_command(Duration::from_secs(5)),
-            Some(handeye::console::Command::Stop)
+            Some(handeye_console::Command::Stop)
         );
     });
 }
@@ -173,7 +173,7 @@ fn a_stop_from_a_page_that_leaves_at_once_still_stops() {
             });
             assert_eq!(
                 console.next_command(Duration::from_secs(10)),
-                Some(handeye::console::Command::Stop),
+                Some(handeye_console::Command::Stop),
                 "attempt {attempt}: the STOP of a page that left at once was lost"
             );
             assert!(stop.swap(false, Ordering::SeqCst));
@@ -343,8 +343,8 @@ fn browser_drives_a_hand_guided_session_to_a_good_verdict() {
 #[cfg(feature = "ur-rtde")]
 #[test]
 fn freedrive_switches_through_ur_rtde_on_the_mock_controller() {
-    use handeye::robot::ur::{UrRobot, UrRobotConfig};
-    use handeye::robot::Robot;
+    use handeye_robot::ur::{UrRobot, UrRobotConfig};
+    use handeye_robot::Robot;
     within(Duration::from_secs(90), || {
         let mock = mocks::MockUr::start(mocks::MockUrConfig {
             address: std::net::IpAddr::V4(std::net::Ipv4Addr::new(127, 0, 0, 61)),
@@ -369,7 +369,7 @@ fn freedrive_switches_through_ur_rtde_on_the_mock_controller() {
         assert!(mock.hand_guide(pushed));
         // The reading follows within a few data packages (packages already on their way when
         // the hand moved the arm still show the old joints; CI's load can delay them).
-        let left_there = |read: &handeye::robot::Joints| {
+        let left_there = |read: &handeye_robot::Joints| {
             read.iter().zip(&pushed).all(|(r, p)| (r - p).abs() < 1e-6)
         };
         let deadline = std::time::Instant::now() + Duration::from_secs(5);
@@ -402,7 +402,7 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
         "manual.yaml",
         &[("plan:\n", "plan:\n  manual: true\n")],
     );
-    let config = handeye::config::CellConfig::load(&manual).expect("a manual plan loads");
+    let config = handeye_session::config::CellConfig::load(&manual).expect("a manual plan loads");
     assert!(config.plan.manual && config.plan.adaptive != Some(true));
     let both = util::config_variant(
         dir.path(),
@@ -410,7 +410,8 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
         "both.yaml",
         &[("plan:\n", "plan:\n  manual: true\n  adaptive: true\n")],
     );
-    let e = handeye::config::CellConfig::load(&both).expect_err("manual and adaptive refused");
+    let e =
+        handeye_session::config::CellConfig::load(&both).expect_err("manual and adaptive refused");
     let message = format!("{e:#}");
     assert!(
         message.contains("plan.manual") && message.contains("adaptive"),
@@ -432,8 +433,8 @@ fn browser_switches_freedrive_on_a_ur_arm_and_captures_where_it_was_left() {
     let dir = tempfile::tempdir().unwrap();
     let mock = mocks::MockUr::start(mocks::MockUrConfig {
         address: "127.0.0.62".parse().unwrap(),
-        model: handeye::robot::kinematics::UrModel::ur10e(),
-        start_joints: handeye::robot::Joints::from([
+        model: handeye_robot::kinematics::UrModel::ur10e(),
+        start_joints: handeye_robot::Joints::from([
             0.0,
             -90f64.to_radians(),
             90f64.to_radians(),
@@ -516,9 +517,9 @@ fn the_command_queue_is_bounded_and_stop_still_gets_through() {
     let console = Console::start(&loopback(), stop.clone()).unwrap();
     let sender = console.command_sender();
     for _ in 0..10_000 {
-        sender.send(handeye::console::Command::Capture);
+        sender.send(handeye_console::Command::Capture);
     }
-    sender.send(handeye::console::Command::Stop);
+    sender.send(handeye_console::Command::Stop);
     assert!(
         stop.load(Ordering::SeqCst),
         "STOP set the flag even with a full queue"

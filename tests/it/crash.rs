@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use handeye::dataset::Dataset;
+use handeye_session::dataset::Dataset;
 
 use crate::util;
 use util::handeye;
@@ -204,7 +204,7 @@ fn sigkill_mid_run_then_resume_cleans_temp_files_and_has_every_pose_once() {
         for entry in std::fs::read_dir(session.join(dir)).unwrap() {
             let name = entry.unwrap().file_name();
             assert!(
-                !handeye::atomic_file::is_temp_name(&name.to_string_lossy()),
+                !handeye_core::atomic_file::is_temp_name(&name.to_string_lossy()),
                 "{dir}/{name:?} left behind"
             );
         }
@@ -363,7 +363,7 @@ fn resume_refuses_changed_intrinsics_unless_accepted() {
     );
     assert_ne!(text, edited);
     std::fs::write(&camera, &edited).unwrap();
-    let new_hash = handeye::session::inputs::sha256_hex(edited.as_bytes());
+    let new_hash = handeye_session::session::inputs::sha256_hex(edited.as_bytes());
 
     let refused = output(&mut resume(&session));
     let message = stderr(&refused);

@@ -4,10 +4,10 @@
 use std::path::Path;
 use std::process::Command;
 
-use handeye::dataset::{Dataset, FileError};
-use handeye::geometry::{Pose, PoseYaml};
-use handeye::result::ResultFile;
-use handeye::setup::{predict, Setup};
+use handeye_core::geometry::{Pose, PoseYaml};
+use handeye_core::setup::{predict, Setup};
+use handeye_session::dataset::{Dataset, FileError};
+use handeye_session::result::ResultFile;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// A valid eye-in-hand dataset text of 6 noise-free samples with diverse rotations, and its truth.
@@ -63,7 +63,7 @@ fn valid_dataset_loads_and_solves() {
     let dataset = Dataset::parse(&text, Path::new("x.yaml")).unwrap();
     assert_eq!(dataset.pairs.len(), 6);
     assert_eq!(dataset.pairs[2].id.as_deref(), Some("pose-2"));
-    let cal = handeye::solve::solve(dataset.setup, &dataset.pairs, &Default::default()).unwrap();
+    let cal = handeye_solve::solve(dataset.setup, &dataset.pairs, &Default::default()).unwrap();
     assert!(cal.camera_mount.rotation.angle_to(&camera_mount.rotation) < 1e-9);
 }
 
@@ -307,7 +307,7 @@ fn cli_solve_failure_exits_non_zero_and_writes_nothing() {
 fn result_with_the_wrong_unknowns_is_refused() {
     let (text, _, _) = dataset_text();
     let dataset = Dataset::parse(&text, Path::new("x.yaml")).unwrap();
-    let cal = handeye::solve::solve(dataset.setup, &dataset.pairs, &Default::default()).unwrap();
+    let cal = handeye_solve::solve(dataset.setup, &dataset.pairs, &Default::default()).unwrap();
     let mut file = ResultFile::from_calibration(&cal, &dataset.pairs);
     file.setup = Setup::EyeToHand;
     let e = file.mounts(Path::new("r.yaml")).unwrap_err().to_string();

@@ -12,17 +12,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
-use handeye::camera::render::{render, RenderOptions};
-use handeye::camera::CameraError;
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::dataset::Dataset;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::robot::{Joints, MotionLimits, RobotError};
-use handeye::session::{
+use handeye_camera::render::{render, RenderOptions};
+use handeye_camera::CameraError;
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{CellTransforms, Setup};
+use handeye_robot::{Joints, MotionLimits, RobotError};
+use handeye_session::dataset::Dataset;
+use handeye_session::session::{
     run_session, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup,
 };
-use handeye::setup::{CellTransforms, Setup};
-use handeye::vision::{Board, DetectorOptions};
+use handeye_vision::{Board, DetectorOptions};
 use image::{GrayImage, Luma};
 use nalgebra::{Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -548,9 +548,9 @@ fn a_resumed_run_visits_only_the_poses_without_a_sample() {
 
 #[test]
 fn a_move_that_would_leave_the_workspace_is_not_sent() {
-    use handeye::plan::check::MoveCheck;
-    use handeye::robot::kinematics::UrModel;
-    use handeye::robot::WorkspaceBox;
+    use handeye_robot::kinematics::UrModel;
+    use handeye_robot::WorkspaceBox;
+    use handeye_session::plan::check::MoveCheck;
 
     // Every move is checked from the joints the arm reports before it is sent: with a workspace
     // box far from every pose the first move is refused, the arm is stopped, nothing is recorded.
@@ -595,7 +595,7 @@ fn nothing_recorded(folder: &SessionFolder) -> bool {
 #[test]
 #[should_panic(expected = "ScriptedRobot: call #1 was move_joints")]
 fn the_scripted_robot_refuses_a_move_to_other_joints() {
-    use handeye::robot::Robot;
+    use handeye_robot::Robot;
     let mut robot = ScriptedRobot::new(vec![Expect::move_to(joints(1))]);
     let _ = robot.move_joints(&joints(2), &MotionLimits::default());
 }
@@ -603,7 +603,7 @@ fn the_scripted_robot_refuses_a_move_to_other_joints() {
 #[test]
 #[should_panic(expected = "ScriptedRobot: call #2 was stop(), expected base_from_flange()")]
 fn the_scripted_robot_refuses_calls_out_of_order() {
-    use handeye::robot::Robot;
+    use handeye_robot::Robot;
     let mut robot = ScriptedRobot::new(vec![
         Expect::move_to(joints(0)),
         Expect::pose(base_from_flange(0)),
@@ -616,7 +616,7 @@ fn the_scripted_robot_refuses_calls_out_of_order() {
 #[test]
 #[should_panic(expected = "1 expected calls not made")]
 fn the_scripted_robot_fails_when_an_expected_call_is_not_made() {
-    use handeye::robot::Robot;
+    use handeye_robot::Robot;
     let mut robot = ScriptedRobot::new(vec![Expect::move_to(joints(0)), Expect::stop()]);
     let _ = robot.move_joints(&joints(0), &MotionLimits::default());
     drop(robot);
@@ -625,7 +625,7 @@ fn the_scripted_robot_fails_when_an_expected_call_is_not_made() {
 #[test]
 #[should_panic(expected = "ScriptedCamera: unexpected grab #2")]
 fn the_scripted_camera_refuses_an_unexpected_grab() {
-    use handeye::camera::Camera;
+    use handeye_camera::Camera;
     let mut camera = ScriptedCamera::new(camera_model(), vec![Grab::Frame(empty_frame())]);
     let _ = camera.grab(std::time::Instant::now());
     let _ = camera.grab(std::time::Instant::now());

@@ -11,22 +11,22 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use handeye::camera_model::CameraModel;
-use handeye::cell;
-use handeye::formats::export::{export, ExportFormat, FrameIds};
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_formats::export::{export, ExportFormat, FrameIds};
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, scan_visp_folder, CsvOptions, CsvPoseForm, ImportError, VispOptions,
 };
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::result::ResultFile;
-use handeye::robot::recorded::save_recorded_poses;
-use handeye::session::{self, SessionFolder};
+use handeye_robot::recorded::save_recorded_poses;
+use handeye_session::cell;
+use handeye_session::result::ResultFile;
+use handeye_session::session::{self, SessionFolder};
 
-use handeye::setup::{self, CellTransforms, PosePair, Setup};
-use handeye::solve::{self, Calibration, NoiseModel, SolveOptions};
-use handeye::verify::leave_one_out;
-use handeye::vision::{Board, DetectorOptions};
+use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
+use handeye_session::verify::leave_one_out;
+use handeye_solve::{self as solve, Calibration, NoiseModel, SolveOptions};
+use handeye_vision::{Board, DetectorOptions};
 
 use crate::util;
 use util::{dataset, pose_error_mm_deg, repo};

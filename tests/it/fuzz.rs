@@ -28,20 +28,20 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use handeye::camera_model::CameraModel;
-use handeye::config::CellConfig;
-use handeye::dataset::Dataset;
-use handeye::formats::import::{
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::PoseYaml;
+use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, CsvOptions, CsvPoseForm, VispOptions,
 };
-use handeye::geometry::PoseYaml;
-use handeye::plan::Plan;
-use handeye::result::ResultFile;
-use handeye::robot::recorded::load_recorded_poses;
-use handeye::session::SessionFolder;
-use handeye::vision::detect::load_gray_image;
-use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
+use handeye_robot::recorded::load_recorded_poses;
+use handeye_session::config::CellConfig;
+use handeye_session::dataset::Dataset;
+use handeye_session::plan::Plan;
+use handeye_session::result::ResultFile;
+use handeye_session::session::SessionFolder;
+use handeye_vision::detect::load_gray_image;
+use handeye_vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 use image::{GrayImage, ImageFormat, Luma};
 use proptest::collection::vec;
 use proptest::prelude::*;
@@ -803,7 +803,7 @@ fn fuzz_visp_folder_import() {
                 std::fs::write(dir.join(path), content).unwrap();
             }
             let options = VispOptions {
-                setup: handeye::setup::Setup::EyeToHand,
+                setup: handeye_core::setup::Setup::EyeToHand,
                 board: board.clone().into(),
                 camera: None,
                 detector: detector_options(),
@@ -824,7 +824,7 @@ fn model_for(width: u32, height: u32) -> CameraModel {
         fy: f,
         cx: (width as f64 - 1.0) / 2.0,
         cy: (height as f64 - 1.0) / 2.0,
-        distortion: handeye::camera_model::Distortion::None,
+        distortion: handeye_core::camera_model::Distortion::None,
     }
 }
 
@@ -865,8 +865,8 @@ fn fuzz_png_frames_for_the_detector() {
 #[test]
 #[ignore = "writes the PNG seeds into tests/fuzz-corpus/png; run by hand"]
 fn regenerate_png_seeds() {
-    use handeye::camera::render::{render, RenderOptions};
-    use handeye::geometry::pose_from_rotvec;
+    use handeye_camera::render::{render, RenderOptions};
+    use handeye_core::geometry::pose_from_rotvec;
     use nalgebra::Vector3;
     use rand::SeedableRng;
 

@@ -12,10 +12,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::geometry::Pose;
-use handeye::vision::detect::load_gray_image;
-use handeye::vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TagFamily};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::Pose;
+use handeye_vision::detect::load_gray_image;
+use handeye_vision::{estimate_board_pose, Board, DetectorOptions, TagDetector, TagFamily};
 use nalgebra::{Matrix4, Point2};
 use sha2::{Digest, Sha256};
 

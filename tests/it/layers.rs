@@ -44,6 +44,26 @@ const CRATES: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "handeye-formats",
+        &[
+            "handeye-core",
+            "handeye-vision",
+            "handeye-robot",
+            "handeye-session",
+            "handeye-ros2-bag",
+        ],
+    ),
+    (
+        "handeye-console",
+        &[
+            "handeye-core",
+            "handeye-solve",
+            "handeye-vision",
+            "handeye-robot",
+            "handeye-session",
+        ],
+    ),
+    (
         "handeye",
         &[
             "handeye-core",
@@ -54,6 +74,8 @@ const CRATES: &[(&str, &[&str])] = &[
             "handeye-session",
             "handeye-ros2",
             "handeye-ros2-bag",
+            "handeye-formats",
+            "handeye-console",
         ],
     ),
     ("mocks", &["handeye-core", "handeye-robot"]),
@@ -155,32 +177,9 @@ const LADDERS: &[Ladder] = &[
     },
     Ladder {
         src: "src",
-        // The re-exports of lib.rs: the crates below.
-        below: &[
-            "atomic_file",
-            "camera",
-            "camera_model",
-            "cell",
-            "config",
-            "dataset",
-            "geometry",
-            "notice",
-            "plan",
-            "result",
-            "robot",
-            "session",
-            "setup",
-            "solve",
-            "verdict",
-            "verify",
-            "vision",
-            "yaml_file",
-        ],
-        modules: &[
-            ("formats", &[]),
-            ("report", &["formats"]),
-            ("console", &["formats", "report"]),
-        ],
+        // No re-exports: the crates below are named as themselves, never through `crate::`.
+        below: &[],
+        modules: &[("report", &[]), ("console", &["report"])],
         // The binary (main.rs, cli/) is the top: it may use anything.
         skip: &["lib", "main", "cli"],
     },
@@ -197,8 +196,8 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// The module path of a source file (`src/console/server.rs` → `[console, server]`,
-/// `src/console/mod.rs` → `[console]`).
+/// The module path of a source file (`src/report/plots.rs` → `[report, plots]`,
+/// `src/report/mod.rs` → `[report]`).
 fn module_path(src: &Path, file: &Path) -> Vec<String> {
     let rel = file
         .strip_prefix(src)
@@ -339,7 +338,8 @@ fn modules_inside_a_crate_name_only_the_modules_below_them() {
             }
         }
     }
-    assert!(checked > 50, "only {checked} source files checked");
+    // The session ladder and the report (formats and console are crates of their own now).
+    assert!(checked > 40, "only {checked} source files checked");
     assert!(
         violations.is_empty(),
         "layer rules broken:\n{}",

@@ -4,10 +4,12 @@
 //! model (and, with outliers, on the inliers alone).
 
 use crate::util::median;
-use handeye::geometry::Pose;
-use handeye::notice::{NoticeKind, Severity};
-use handeye::setup::{predict, PosePair, Setup};
-use handeye::solve::{self, Calibration, EstimateNoise, NoiseModel, NoiseSource, SolveOptions};
+use handeye_core::geometry::Pose;
+use handeye_core::notice::{NoticeKind, Severity};
+use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_solve::{
+    self as solve, Calibration, EstimateNoise, NoiseModel, NoiseSource, SolveOptions,
+};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -495,7 +497,7 @@ fn honesty(case: &McCase, first_seed: u64, sets: u64) -> [Honesty; 4] {
         {
             // The covariance's perturbation: R_est = exp(δθ)·R_true, t_est = t_true + δt.
             let d_theta =
-                handeye::geometry::rotvec(&(estimate.rotation * truth.rotation.inverse()));
+                handeye_core::geometry::rotvec(&(estimate.rotation * truth.rotation.inverse()));
             let d_t = estimate.translation.vector - truth.translation.vector;
             for (kind, error) in [d_theta, d_t].into_iter().enumerate() {
                 let h = &mut out[2 * k + kind];
@@ -602,7 +604,7 @@ fn result_file_holds_the_noise_used_and_reads_it_back() {
     let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("result.yaml");
-    handeye::result::ResultFile::from_calibration(&found, &c.pairs)
+    handeye_session::result::ResultFile::from_calibration(&found, &c.pairs)
         .save(&path)
         .unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
@@ -610,7 +612,7 @@ fn result_file_holds_the_noise_used_and_reads_it_back() {
         text.contains("noise:") && text.contains("rotation: estimated"),
         "{text}"
     );
-    let back = handeye::result::ResultFile::load(&path)
+    let back = handeye_session::result::ResultFile::load(&path)
         .unwrap()
         .to_calibration(&path)
         .unwrap();

@@ -5,17 +5,17 @@
 
 use std::process::Command;
 
-use handeye::config::CellConfig;
-use handeye::dataset::Dataset;
-use handeye::formats::import::{import_moveit_json, import_visp, VispOptions};
-use handeye::geometry::Pose;
-use handeye::notice::NoticeKind;
-use handeye::plan::check::board_centre;
-use handeye::plan::generate;
-use handeye::setup::{CellTransforms, PosePair, Setup};
-use handeye::solve::diagnostics::{check_against_nominal, check_units, unit_scale};
-use handeye::solve::{self, AxbyData, NoiseModel, SolveError, SolveOptions, UnitsProblem};
-use handeye::vision::{Board, DetectorOptions};
+use handeye_core::geometry::Pose;
+use handeye_core::notice::NoticeKind;
+use handeye_core::setup::{CellTransforms, PosePair, Setup};
+use handeye_formats::import::{import_moveit_json, import_visp, VispOptions};
+use handeye_session::config::CellConfig;
+use handeye_session::dataset::Dataset;
+use handeye_session::plan::check::board_centre;
+use handeye_session::plan::generate;
+use handeye_solve::diagnostics::{check_against_nominal, check_units, unit_scale};
+use handeye_solve::{self as solve, AxbyData, NoiseModel, SolveError, SolveOptions, UnitsProblem};
+use handeye_vision::{Board, DetectorOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::SeedableRng;

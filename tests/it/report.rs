@@ -9,7 +9,7 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use handeye::report::{CORNER_PLOT_KINDS, PLOT_KINDS, SECTIONS};
-use handeye::result::ResultFile;
+use handeye_session::result::ResultFile;
 
 use crate::util;
 use util::repo;
@@ -113,7 +113,7 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere: one
     // inline script (copy buttons, sorting, the frame overlay), no URL but the SVG namespace.
     // The corner section holds every corner of every sample (10 samples of the 6x6 grid).
-    let visits = handeye::session::SessionFolder::open(path.parent().unwrap())
+    let visits = handeye_session::session::SessionFolder::open(path.parent().unwrap())
         .unwrap()
         .read_visits()
         .unwrap();
@@ -647,7 +647,7 @@ fn result_file_round_trips_through_a_calibration() {
     let result_path = folder.join("result.yaml");
     let result = ResultFile::load(&result_path).unwrap();
     let calibration = result.to_calibration(&result_path).unwrap();
-    let pairs = handeye::dataset::Dataset::load(&folder.join("samples.yaml"))
+    let pairs = handeye_session::dataset::Dataset::load(&folder.join("samples.yaml"))
         .unwrap()
         .pairs;
     let again = ResultFile::from_calibration(&calibration, &pairs);
@@ -668,10 +668,10 @@ fn result_file_round_trips_through_a_calibration() {
 /// no frames): both in the transforms section and in the bar legends, each plot still once.
 #[test]
 fn two_answers_are_shown_side_by_side() {
-    use handeye::geometry::pose_from_rotvec;
     use handeye::report::{render_html, ReportAnswer, ReportInput};
-    use handeye::setup::{PosePair, Setup};
-    use handeye::solve::{Method, SolveOptions};
+    use handeye_core::geometry::pose_from_rotvec;
+    use handeye_core::setup::{PosePair, Setup};
+    use handeye_solve::{Method, SolveOptions};
     use nalgebra::Vector3;
 
     let camera_mount =
@@ -705,7 +705,7 @@ fn two_answers_are_shown_side_by_side() {
         };
         ReportAnswer {
             label: label.into(),
-            calibration: handeye::solve::solve(Setup::EyeInHand, &pairs, &options).unwrap(),
+            calibration: handeye_solve::solve(Setup::EyeInHand, &pairs, &options).unwrap(),
             reprojection_px: vec![None; pairs.len()],
         }
     };
@@ -735,7 +735,7 @@ fn two_answers_are_shown_side_by_side() {
     );
     // With them, both values and how far apart they are (here 10 mm along x, 2° about z).
     let mut nominal = input.answers[0].calibration.transforms();
-    nominal.camera_mount *= handeye::geometry::Pose::from_parts(
+    nominal.camera_mount *= handeye_core::geometry::Pose::from_parts(
         nalgebra::Translation3::new(0.01, 0.0, 0.0),
         nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 2f64.to_radians()),
     );
@@ -778,13 +778,13 @@ fn two_answers_are_shown_side_by_side() {
 
     // A REDO verdict (here: a solve refused for too few poses) opens the page and puts a
     // caution above the snippets; the snippets are still there to inspect.
-    let refused = handeye::solve::solve(Setup::EyeInHand, &pairs[..2], &SolveOptions::default())
+    let refused = handeye_solve::solve(Setup::EyeInHand, &pairs[..2], &SolveOptions::default())
         .expect_err("two poses are too few");
     let redo = ReportInput {
-        verdict: Some(handeye::verdict::Verdict::refused(
+        verdict: Some(handeye_solve::verdict::Verdict::refused(
             &refused,
             2,
-            handeye::verdict::Accuracy::default(),
+            handeye_solve::verdict::Accuracy::default(),
         )),
         ..input
     };

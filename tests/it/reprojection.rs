@@ -8,17 +8,17 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use handeye::camera_model::CameraModel;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::notice::NoticeKind;
-use handeye::setup::{PosePair, Setup};
-use handeye::solve::intrinsics::{calibrate_from_scratch, zhang_intrinsics};
-use handeye::solve::{
-    self, refine_reprojection, reprojection_errors, Corner, Frame, NoiseModel,
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::notice::NoticeKind;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::intrinsics::{calibrate_from_scratch, zhang_intrinsics};
+use handeye_solve::{
+    self as solve, refine_reprojection, reprojection_errors, Corner, Frame, NoiseModel,
     ReprojectionCalibration, ReprojectionOptions, RobotPrior, SolveError, SolveOptions,
 };
-use handeye::vision::pnp::estimate_pose_from_points;
-use handeye::vision::Board;
+use handeye_vision::pnp::estimate_pose_from_points;
+use handeye_vision::Board;
 
 use crate::util;
 use util::{dataset, pose_error_mm_deg, repo};
@@ -575,8 +575,8 @@ fn bad_input_is_a_clear_error() {
 
 #[test]
 fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
-    use handeye::vision::pnp::estimate_board_pose;
-    use handeye::vision::{detect::load_gray_image, DetectorOptions, TagDetector};
+    use handeye_vision::pnp::estimate_board_pose;
+    use handeye_vision::{detect::load_gray_image, DetectorOptions, TagDetector};
     let Some(folder) = dataset("visp_franka_data-eye-to-hand") else {
         return;
     };
@@ -590,7 +590,7 @@ fn visp_eye_to_hand_reprojection_is_no_worse_than_pose_space() {
         let image = load_gray_image(&folder.join(format!("franka_image-{n}.png"))).unwrap();
         let detection = detector.detect(&image).unwrap();
         let pose = estimate_board_pose(&board, &camera, &detection).unwrap();
-        let robot = handeye::formats::import::read_visp_pose(
+        let robot = handeye_formats::import::read_visp_pose(
             &folder.join(format!("franka_pose_rPe_{n}.yaml")),
         )
         .unwrap();
@@ -720,7 +720,7 @@ fn a_far_off_robot_pose_is_flagged_and_left_out_with_corrections_on() {
 /// CHECK; robot poses that scatter far more than configured still get a warning.
 #[test]
 fn an_arm_better_than_configured_is_information_and_a_far_worse_one_a_warning() {
-    use handeye::notice::Severity;
+    use handeye_core::notice::Severity;
     let camera = sim_camera();
     let robot_notice = |robot_sigma: (f64, f64), configured: (f64, f64)| {
         let s = scenario(41, 16, 0.1, robot_sigma, false);

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use handeye::cell::rig::{camera_folder, RigResultFile};
-use handeye::config::rig::RigConfig;
-use handeye::geometry::Pose;
-use handeye::verdict::Level;
+use handeye_core::geometry::Pose;
+use handeye_session::cell::rig::{camera_folder, RigResultFile};
+use handeye_session::config::rig::RigConfig;
+use handeye_solve::verdict::Level;
 
 use crate::util;
 use util::handeye;
@@ -327,9 +327,9 @@ fn killed_mid_run_then_resumed_and_replayed() {
 /// `T_cam_left_cam_right`. Both must be within 0.5 mm / 0.05° of the truth.
 #[test]
 fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
-    use handeye::camera_model::{CameraModel, Distortion};
-    use handeye::session::SessionFolder;
-    use handeye::vision::Target;
+    use handeye_core::camera_model::{CameraModel, Distortion};
+    use handeye_session::session::SessionFolder;
+    use handeye_vision::Target;
 
     let Some(python) = util::python_with_opencv() else {
         return;
@@ -633,15 +633,15 @@ fn config_errors_name_the_camera_and_the_key() {
         "  T_flange_targte: {translation: [-0.145, 0.145, -0.03]",
     )]);
     assert!(e.contains("nominal.T_flange_targte"), "{e}");
-    assert!(handeye::config::rig::is_rig_file(&three_cameras(
+    assert!(handeye_session::config::rig::is_rig_file(&three_cameras(
         dir.path(),
         &[]
     )));
-    assert!(!handeye::config::rig::is_rig_file(
+    assert!(!handeye_session::config::rig::is_rig_file(
         &util::repo().join("configs/sim-cell.yaml")
     ));
     // The one-camera reader refuses the form with a message naming the key it does not know.
-    let one = handeye::config::CellConfig::load(&three_cameras(dir.path(), &[]))
+    let one = handeye_session::config::CellConfig::load(&three_cameras(dir.path(), &[]))
         .unwrap_err()
         .to_string();
     assert!(one.contains("cameras"), "{one}");
@@ -659,7 +659,7 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
     let out = dir.path().join("session");
     let stdout = run_ok(&config, &out, &[]);
     println!("{stdout}");
-    let manifest: handeye::session::SessionManifest = serde_yaml_ng::from_str(
+    let manifest: handeye_session::session::SessionManifest = serde_yaml_ng::from_str(
         &std::fs::read_to_string(camera_folder(&out, "wrist").join("session.yaml")).unwrap(),
     )
     .unwrap();
@@ -683,7 +683,7 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
             camera.verdict.reason
         );
         // Every camera's folder records the same growing plan.
-        let other: handeye::session::SessionManifest = serde_yaml_ng::from_str(
+        let other: handeye_session::session::SessionManifest = serde_yaml_ng::from_str(
             &std::fs::read_to_string(camera_folder(&out, &camera.name).join("session.yaml"))
                 .unwrap(),
         )
@@ -700,7 +700,8 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
 fn a_recorded_three_camera_cell_replays_the_live_run() {
     let (config, live, _) = shipped_run();
     let dir = tempfile::tempdir().unwrap();
-    let wrist = handeye::session::SessionFolder::open(&camera_folder(live, "wrist")).unwrap();
+    let wrist =
+        handeye_session::session::SessionFolder::open(&camera_folder(live, "wrist")).unwrap();
     let poses: Vec<Pose> = wrist
         .read_visits()
         .unwrap()
@@ -709,7 +710,7 @@ fn a_recorded_three_camera_cell_replays_the_live_run() {
         .collect();
     assert_eq!(poses.len(), 20);
     let poses_file = dir.path().join("poses.yaml");
-    handeye::robot::recorded::save_recorded_poses(&poses, &poses_file).unwrap();
+    handeye_robot::recorded::save_recorded_poses(&poses, &poses_file).unwrap();
     let text = std::fs::read_to_string(config).unwrap();
     let arm_start = text.find("robot:\n  backend: sim").unwrap();
     let arm_end = arm_start + text[arm_start..].find("\n\n").unwrap();
@@ -801,9 +802,9 @@ fn adaptive_run_names_a_lost_camera_once_and_goes_on() {
 /// two fixed cameras, whose files are right, stay GOOD.
 #[test]
 fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay_good() {
-    use handeye::camera_model::CameraModel;
-    use handeye::solve::cell_model::GivenFile;
-    use handeye::verdict::Basis;
+    use handeye_core::camera_model::CameraModel;
+    use handeye_solve::cell_model::GivenFile;
+    use handeye_solve::verdict::Basis;
 
     let dir = tempfile::tempdir().unwrap();
     let true_lens = util::repo().join("configs/cameras/sim-1280x720.yaml");

@@ -8,11 +8,11 @@ use std::process::Command;
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 
-use handeye::formats::export::named_transforms;
-use handeye::formats::ros2_launch::link_from_optical;
-use handeye::formats::FrameIds;
-use handeye::geometry::Pose;
-use handeye::result::ResultFile;
+use handeye_core::geometry::Pose;
+use handeye_formats::export::named_transforms;
+use handeye_formats::ros2_launch::link_from_optical;
+use handeye_formats::FrameIds;
+use handeye_session::result::ResultFile;
 
 use crate::util::{self, handeye, pose_error_mm_deg, repo};
 

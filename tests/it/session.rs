@@ -6,9 +6,9 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-use handeye::cell::{self, PreparedCell};
-use handeye::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
-use handeye::setup::CellTransforms;
+use handeye_core::setup::CellTransforms;
+use handeye_session::cell::{self, PreparedCell};
+use handeye_session::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
 
 use crate::util;
 
@@ -90,7 +90,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         prepared.config.session.max_reprojection_rms_px,
     )
     .unwrap();
-    let again = handeye::solve::solve(
+    let again = handeye_solve::solve(
         dataset.setup,
         &dataset.pairs,
         &prepared.config.solver.to_options(),
@@ -210,7 +210,7 @@ fn protective_stop_keeps_the_data_and_resume_finishes() {
     let outcome = run(&prepared, &folder).unwrap();
     assert_eq!(outcome.visited_now, 7);
     assert_eq!(outcome.accepted, (0..12).collect::<Vec<_>>());
-    let dataset = handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    let dataset = handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(dataset.pairs.len(), 12);
 }
 
@@ -290,7 +290,7 @@ fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_se
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     // Shoulder lowered: the flange hangs below the table top (the box starts at z = 5 cm).
-    let jogged = handeye::robot::Joints::from([0.0, 0.6, 0.0, 0.0, 0.0, 0.0]);
+    let jogged = handeye_robot::Joints::from([0.0, 0.6, 0.0, 0.0, 0.0, 0.0]);
     let flange = prepared
         .kinematics()
         .unwrap()
@@ -442,8 +442,8 @@ fn every_shipped_cell_config_loads_and_its_plan_passes_its_checks() {
         if path.extension().is_some_and(|e| e == "yaml") {
             // A several-camera config loads here; its run (tests/it/rig.rs) checks its plan for
             // every camera.
-            if handeye::config::rig::is_rig_file(&path) {
-                handeye::config::rig::RigConfig::load(&path)
+            if handeye_session::config::rig::is_rig_file(&path) {
+                handeye_session::config::rig::RigConfig::load(&path)
                     .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
                 checked += 1;
                 continue;
@@ -471,7 +471,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(!prepared.intrinsics_known);
     // The generated views push the board across the image for the intrinsics; the same plan
     // with the intrinsics known keeps the board centred.
-    let coverage = |report: &handeye::plan::check::PlanReport| {
+    let coverage = |report: &handeye_session::plan::check::PlanReport| {
         report.intrinsics.as_ref().unwrap().coverage_percent
     };
     let centred = cell::prepare(&repo().join("configs/sim-cell.yaml")).unwrap();
@@ -496,9 +496,10 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
         solved.summary,
         solved.compare_with_truth(prepared.config.simulation.as_ref().unwrap())
     );
-    let truth_camera = handeye::camera_model::CameraModel::load(&lens).unwrap();
+    let truth_camera = handeye_core::camera_model::CameraModel::load(&lens).unwrap();
     let written =
-        handeye::camera_model::CameraModel::load(&folder.root().join("camera_info.yaml")).unwrap();
+        handeye_core::camera_model::CameraModel::load(&folder.root().join("camera_info.yaml"))
+            .unwrap();
     let estimated = solved.estimated_camera.unwrap();
     for (name, found, written, truth) in [
         ("fx", estimated.fx, written.fx, truth_camera.fx),

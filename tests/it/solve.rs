@@ -2,12 +2,12 @@
 //! independent maximum-likelihood optimum, degenerate and mislabelled input, and MoveIt's real
 //! eye-to-hand data.
 
-use handeye::geometry::Pose;
-use handeye::notice::{NoticeKind, Severity};
-use handeye::setup::{predict, PosePair, Setup};
-use handeye::solve::{
-    self, closed_form, iterative, AxbyData, EstimateNoise, IterativeOptions, Method, NoiseModel,
-    RobustLoss, SolveError, SolveOptions,
+use handeye_core::geometry::Pose;
+use handeye_core::notice::{NoticeKind, Severity};
+use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_solve::{
+    self as solve, closed_form, iterative, AxbyData, EstimateNoise, IterativeOptions, Method,
+    NoiseModel, RobustLoss, SolveError, SolveOptions,
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -579,7 +579,7 @@ fn read_moveit(path: &std::path::Path) -> Vec<PosePair> {
     let raw: Vec<[[[f64; 4]; 4]; 2]> = serde_json::from_str(&text).unwrap();
     let pose = |m: &[[f64; 4]; 4]| {
         let r = Matrix3::from_fn(|i, j| m[i][j]);
-        let q = handeye::geometry::rotation_from_matrix(&r, 1e-6).expect("rotation matrix");
+        let q = handeye_core::geometry::rotation_from_matrix(&r, 1e-6).expect("rotation matrix");
         Pose::from_parts(Translation3::new(m[0][3], m[1][3], m[2][3]), q)
     };
     raw.iter()

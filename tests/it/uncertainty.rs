@@ -7,9 +7,9 @@
 //! `T_a_b`): the true error component over its reported sigma is a standard normal if the
 //! covariance is right, so it falls within 1 sigma 68.3 % and within 3 sigma 99.73 % of the time.
 
-use handeye::geometry::{rotvec, Pose};
-use handeye::setup::{PosePair, Setup};
-use handeye::solve::{self, NoiseModel, SolveOptions};
+use handeye_core::geometry::{rotvec, Pose};
+use handeye_core::setup::{PosePair, Setup};
+use handeye_solve::{self as solve, NoiseModel, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

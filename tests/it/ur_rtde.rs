@@ -9,9 +9,9 @@ use std::f64::consts::PI;
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::{Duration, Instant};
 
-use handeye::geometry::{pose_from_rotvec, translation_distance, Pose};
-use handeye::robot::ur::{UrRobot, UrRobotConfig};
-use handeye::robot::{MotionLimits, Robot, RobotError, RobotStatus, WorkspaceBox};
+use handeye_core::geometry::{pose_from_rotvec, translation_distance, Pose};
+use handeye_robot::ur::{UrRobot, UrRobotConfig};
+use handeye_robot::{MotionLimits, Robot, RobotError, RobotStatus, WorkspaceBox};
 use mocks::{MockFaults, MockUr, MockUrConfig};
 use nalgebra::{UnitQuaternion, Vector3};
 

@@ -9,10 +9,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
-use handeye::cell;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::robot::kinematics::UrModel;
-use handeye::session::{self, SessionError, SessionFolder, SessionOutcome};
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_robot::kinematics::UrModel;
+use handeye_session::cell;
+use handeye_session::session::{self, SessionError, SessionFolder, SessionOutcome};
 use mocks::{MockFaults, MockUr, MockUrConfig};
 use nalgebra::Vector3;
 
@@ -45,7 +45,7 @@ fn start_mock(address: &str, flange_from_tcp: Pose, faults: MockFaults) -> MockU
     MockUr::start(MockUrConfig {
         address: address.parse::<IpAddr>().unwrap(),
         model: UrModel::ur10e(),
-        start_joints: handeye::robot::Joints::from([
+        start_joints: handeye_robot::Joints::from([
             0.0,
             -90f64.to_radians(),
             90f64.to_radians(),

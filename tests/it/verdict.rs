@@ -9,15 +9,15 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
 
-use handeye::config::{CellConfig, ConfigError};
-use handeye::formats::import::{import_visp, VispOptions};
-use handeye::geometry::Pose;
-use handeye::notice::NoticeKind;
-use handeye::result::ResultFile;
-use handeye::setup::{predict, PosePair, Setup};
-use handeye::solve::{self, NoiseModel, SolveError, SolveOptions};
-use handeye::verdict::{self, Accuracy, Basis, Level};
-use handeye::vision::{Board, DetectorOptions};
+use handeye_core::geometry::Pose;
+use handeye_core::notice::NoticeKind;
+use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_formats::import::{import_visp, VispOptions};
+use handeye_session::config::{CellConfig, ConfigError};
+use handeye_session::result::ResultFile;
+use handeye_solve::verdict::{self, Accuracy, Basis, Level};
+use handeye_solve::{self as solve, NoiseModel, SolveError, SolveOptions};
+use handeye_vision::{Board, DetectorOptions};
 
 use crate::util;
 use util::{config_variant, dataset, repo};

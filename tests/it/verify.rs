@@ -4,12 +4,12 @@
 
 use std::path::PathBuf;
 
-use handeye::cell;
-use handeye::geometry::{pose_from_rotvec, Pose};
-use handeye::plan::GenerateSpec;
-use handeye::setup::{self, CellTransforms, PosePair, Setup};
-use handeye::solve::SolveOptions;
-use handeye::verify;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
+use handeye_session::cell;
+use handeye_session::plan::GenerateSpec;
+use handeye_session::verify;
+use handeye_solve::SolveOptions;
 use nalgebra::Vector3;
 
 use crate::util;
@@ -77,7 +77,8 @@ fn holdout_errors_agree_with_the_known_error_of_the_result() {
         );
     let off = holdout(&wrong_camera, &truth.target_mount, &dir.path().join("off"));
     eprintln!("{}", off.table());
-    let samples = handeye::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
+    let samples =
+        handeye_session::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
     for (e, pair) in off.poses.iter().zip(&samples.pairs) {
         let with_truth = truth.camera_from_target(&pair.base_from_flange);
         let with_result = setup::predict(

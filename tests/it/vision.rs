@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
-use handeye::camera::render::{render, RenderOptions};
-use handeye::camera_model::{CameraModel, Distortion};
-use handeye::geometry::Pose;
-use handeye::vision::detect::load_gray_image;
-use handeye::vision::{
+use handeye_camera::render::{render, RenderOptions};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::Pose;
+use handeye_vision::detect::load_gray_image;
+use handeye_vision::{
     estimate_board_pose, reproject, Board, DetectorOptions, TagDetector, TargetError,
 };
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -327,16 +327,8 @@ fn tags_not_on_the_board_are_rejected() {
     let truth = random_view(&board, &camera, &mut rng, 0.5, 0.6, 20.0);
     let image = render(&board, &camera, &truth, &RenderOptions::default(), &mut rng);
     // A 2x2 board with ids 20-23 and the same tags: only those four are accepted.
-    let small = Board::aprilgrid(
-        2,
-        2,
-        0.04,
-        0.25,
-        handeye::vision::TagFamily::Tag36h11,
-        20,
-        2,
-    )
-    .unwrap();
+    let small =
+        Board::aprilgrid(2, 2, 0.04, 0.25, handeye_vision::TagFamily::Tag36h11, 20, 2).unwrap();
     let detector = TagDetector::spawn(&small, DetectorOptions::default()).unwrap();
     let detection = detector.detect(&image).unwrap();
     let ids: Vec<u32> = detection.tags.iter().map(|t| t.id).collect();

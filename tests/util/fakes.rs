@@ -16,10 +16,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
-use handeye::camera::{Camera, CameraError, Frame};
-use handeye::camera_model::CameraModel;
-use handeye::geometry::Pose;
-use handeye::robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
+use handeye_camera::{Camera, CameraError, Frame};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::Pose;
+use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use image::GrayImage;
 
 /// Joint values and pose coordinates must match to this (radians, metres): the driver passes

@@ -10,9 +10,9 @@ use std::process::Command;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use handeye::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
-use handeye::cell::PreparedCell;
-use handeye::geometry::{translation_distance, Pose};
+use handeye_core::geometry::{translation_distance, Pose};
+use handeye_session::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
+use handeye_session::cell::PreparedCell;
 
 pub mod fakes;
 pub mod live;
@@ -204,9 +204,9 @@ pub fn new_run(config: &Path, out: &Path) -> RunRequest {
 /// A new session of the cell `config` run into `out` in-process and solved, as `handeye run
 /// --yes` does.
 pub fn run_cell(config: &Path, out: &Path) -> CellRun {
-    handeye::cell::run::run(
+    handeye_session::cell::run::run(
         &new_run(config, out),
-        handeye::cell::run::Strategy::Planned,
+        handeye_session::cell::run::Strategy::Planned,
         &mut QuietObserver,
     )
     .unwrap_or_else(|e| panic!("run of {}: {e}", config.display()))

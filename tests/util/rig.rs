@@ -2,11 +2,11 @@
 //! its Monte Carlo tests and its bench: the config, the wrist views, the board-pose noise a
 //! rendered run estimates, and the joint problem from the config's nominal mounts.
 
-use handeye::config::rig::RigConfig;
-use handeye::geometry::Pose;
-use handeye::setup::Setup;
-use handeye::solve::rig::{RigCamera, RigData, RigObservation, RigStart};
-use handeye::solve::NoiseModel;
+use handeye_core::geometry::Pose;
+use handeye_core::setup::Setup;
+use handeye_session::config::rig::RigConfig;
+use handeye_solve::rig::{RigCamera, RigData, RigObservation, RigStart};
+use handeye_solve::NoiseModel;
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::Rng;

@@ -19,7 +19,7 @@
 //! error ([`BagError::OutOfMemory`]), not an abort.
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
-//! an ordinary session through the recorded-cell path (`handeye::formats::bag`); this crate
+//! an ordinary session through the recorded-cell path (`handeye_formats::bag`); this crate
 //! writes nothing.
 //!
 //! Modules: `storage` (the two storage formats; `mcap_index`, an MCAP file's index), `tf` (the TF

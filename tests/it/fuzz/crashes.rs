@@ -37,7 +37,7 @@ fn detect_without_crash(path: &Path) {
 fn crash_detector_worker_pool_race_more_threads_are_refused() {
     let folder = corpus().join("visp_folder");
     let options = VispOptions {
-        setup: handeye::setup::Setup::EyeToHand,
+        setup: handeye_core::setup::Setup::EyeToHand,
         board: Board::load(&repo().join("configs/targets/aprilgrid-2x2-example.yaml"))
             .unwrap()
             .into(),

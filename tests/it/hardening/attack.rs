@@ -20,7 +20,7 @@ fn camera_info(k: &str, d: &str) -> String {
 const K_SIM: &str = "800.0, 0.0, 641.3, 0.0, 800.0, 358.7, 0.0, 0.0, 1.0";
 
 fn load_error(path: &Path) -> String {
-    handeye::camera_model::CameraModel::load(path)
+    handeye_core::camera_model::CameraModel::load(path)
         .expect_err("must be refused")
         .to_string()
 }
@@ -171,7 +171,7 @@ fn issue25_two_visp_pose_files_with_one_number_are_refused() {
 
 #[test]
 fn issue25_absurd_distortion_is_refused_by_every_intrinsics_source() {
-    use handeye::camera_model::{CameraModel, Distortion};
+    use handeye_core::camera_model::{CameraModel, Distortion};
     let dir = tempfile::tempdir().unwrap();
     // ROS camera_info YAML.
     let path = write(
@@ -473,7 +473,7 @@ fn issue25_symlink_loops_are_named_as_such() {
             .contains(&format!("symlink loop at {}", a.display())),
         "board"
     );
-    let e = handeye::formats::import::scan_visp_folder(&a).unwrap_err();
+    let e = handeye_formats::import::scan_visp_folder(&a).unwrap_err();
     assert!(
         format!("{:#}", anyhow::Error::new(e))
             .contains(&format!("symlink loop at {}", a.display())),
@@ -495,7 +495,7 @@ fn issue25_export_removes_killed_runs_temp_files_and_spares_a_locked_one() {
     assert_eq!(code, Some(0), "{stderr}");
     let out = dir.path().join("tf.launch");
     // What two killed exports left, and one another export is still writing (it holds the lock).
-    let suffix = handeye::atomic_file::TEMP_SUFFIX;
+    let suffix = handeye_core::atomic_file::TEMP_SUFFIX;
     let killed: Vec<PathBuf> = ["K1lled", "K2lled"]
         .iter()
         .map(|r| {

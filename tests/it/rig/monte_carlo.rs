@@ -2,7 +2,7 @@
 //! camera solved alone and against chaining two single-camera answers, on the same samples, in
 //! pose space and in pixel space.
 
-use handeye::geometry::Pose;
+use handeye_core::geometry::Pose;
 
 use crate::util;
 
@@ -15,8 +15,8 @@ use crate::util;
 /// run estimates per camera (wrist at ~0.5 m, fixed cameras at ~0.7 m).
 #[test]
 fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
-    use handeye::setup::{predict, Setup};
-    use handeye::solve::rig::{pose_error, solve_rig, RigObservation, RigOptions, RigStart};
+    use handeye_core::setup::{predict, Setup};
+    use handeye_solve::rig::{pose_error, solve_rig, RigObservation, RigOptions, RigStart};
     use rand::SeedableRng;
     use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
 
@@ -113,12 +113,12 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
 /// and the fixed cameras' relative pose beats chaining their single-camera answers.
 #[test]
 fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
-    use handeye::camera_model::CameraModel;
-    use handeye::setup::predict;
-    use handeye::solve::rig::{
+    use handeye_core::camera_model::CameraModel;
+    use handeye_core::setup::predict;
+    use handeye_solve::rig::{
         pose_error, solve_rig, solve_rig_pixels, RigFrame, RigObservation, RigOptions, RigStart,
     };
-    use handeye::vision::Target;
+    use handeye_vision::Target;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     use util::rig::{jitter, nominal_start, rig_data, wrist_views};

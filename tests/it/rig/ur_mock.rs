@@ -12,11 +12,11 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
-use handeye::cell::rig::camera_folder;
-use handeye::cell::run::{run, RunError, RunRequest, SessionTarget, Strategy};
-use handeye::geometry::Pose;
-use handeye::robot::kinematics::UrModel;
-use handeye::session::SessionError;
+use handeye_core::geometry::Pose;
+use handeye_robot::kinematics::UrModel;
+use handeye_session::cell::rig::camera_folder;
+use handeye_session::cell::run::{run, RunError, RunRequest, SessionTarget, Strategy};
+use handeye_session::session::SessionError;
 use mocks::{MockFaults, MockUr, MockUrConfig};
 
 use crate::util;
@@ -53,7 +53,7 @@ fn body() {
     let mock = MockUr::start(MockUrConfig {
         address: "127.0.0.76".parse::<IpAddr>().unwrap(),
         model: UrModel::ur10e(),
-        start_joints: handeye::robot::Joints::from(
+        start_joints: handeye_robot::Joints::from(
             [0.0, -90f64, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians),
         ),
         flange_from_tcp: Pose::identity(),

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
 
-use handeye::geometry::pose_from_rotvec;
-use handeye::result::ResultFile;
+use handeye_core::geometry::pose_from_rotvec;
+use handeye_session::result::ResultFile;
 
 use super::{peer, python};
 use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, within};
@@ -53,8 +53,8 @@ pub(super) fn views() -> PathBuf {
 
 /// The accepted records of `session`: plan index, `T_base_flange` and the manifest plan's joints
 /// (degrees), in plan order.
-pub(super) fn captures(session: &Path) -> Vec<(usize, handeye::geometry::Pose, Vec<f64>)> {
-    let folder = handeye::session::SessionFolder::open(session).unwrap();
+pub(super) fn captures(session: &Path) -> Vec<(usize, handeye_core::geometry::Pose, Vec<f64>)> {
+    let folder = handeye_session::session::SessionFolder::open(session).unwrap();
     let plan = folder.read_manifest().unwrap().plan;
     let mut visits = folder.read_visits().unwrap();
     visits.retain(|v| v.rejected.is_none() && v.camera_from_target.is_some());
@@ -449,7 +449,7 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
             peer.events("no_view")
         );
         let mounts = ResultFile::load_mounts(&out_dir.join("result.yaml")).unwrap();
-        let camera = handeye::geometry::Pose::from_parts(
+        let camera = handeye_core::geometry::Pose::from_parts(
             nalgebra::Translation3::new(1.1537, 0.0042, 0.7468),
             nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
                 0.4247281012,

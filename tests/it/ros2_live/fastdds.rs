@@ -32,12 +32,12 @@ use std::time::{Duration, Instant};
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
-use handeye::camera::Camera;
-use handeye::formats::export::ur_base_link_from_base;
-use handeye::geometry::Pose;
-use handeye::ros2::link::{sensor_data_qos, static_qos};
-use handeye::ros2::listen::{joint_sample, TfTree};
-use handeye::ros2::msg::{CameraInfo, JointState, TfMessage};
+use handeye_camera::Camera;
+use handeye_core::geometry::Pose;
+use handeye_formats::export::ur_base_link_from_base;
+use handeye_ros2::link::{sensor_data_qos, static_qos};
+use handeye_ros2::listen::{joint_sample, TfTree};
+use handeye_ros2::msg::{CameraInfo, JointState, TfMessage};
 
 use super::cell::{assert_truth, cell, ctrl_c_mid_goal, poses_kept, run_cell, text, views, Peer};
 use super::publish::late_joiner_reads_back;
@@ -154,7 +154,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         let base_from_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
         let shoulder_from_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
         let tool_from_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
-        let names = handeye::config::ros2::UR_DRIVER_JOINT_NAMES;
+        let names = handeye_session::config::ros2::UR_DRIVER_JOINT_NAMES;
         let positions = [0.1, -std::f64::consts::FRAC_PI_2, 1.2, -0.3, -1.57, 3.0];
         let speeds = [0.0, 0.25, -0.5, 0.0, 1e-3, -2.5];
         let model = sim_camera_model();
@@ -261,7 +261,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
 /// model the views were rendered with: the peer's forward kinematics finds the view the arm
 /// arrived at by its flange position.
 fn ur10e_dh() -> [f64; 6] {
-    let m = handeye::robot::kinematics::UrModel::ur10e();
+    let m = handeye_robot::kinematics::UrModel::ur10e();
     [m.d[0], m.a[1], m.a[2], m.d[3], m.d[4], m.d[5]]
 }
 
@@ -271,7 +271,7 @@ fn ur10e_dh() -> [f64; 6] {
 /// peer's key), its `base_link → tool0` and its frame as raw mono8 bytes (the C++ peer needs no
 /// PNG decoder).
 fn sim_table(dir: &Path, views: &Path) -> PathBuf {
-    let folder = handeye::session::SessionFolder::open(views).unwrap();
+    let folder = handeye_session::session::SessionFolder::open(views).unwrap();
     let turn = ur_base_link_from_base();
     let words = |values: &[f64]| {
         values
@@ -287,7 +287,7 @@ fn sim_table(dir: &Path, views: &Path) -> PathBuf {
         words(&[t.x, t.y, t.z, q.i, q.j, q.k, q.w])
     };
     let start = [0.0f64, -90.0, 90.0, -90.0, -90.0, 0.0].map(f64::to_radians);
-    let start_flange = handeye::robot::kinematics::UrModel::ur10e().forward(&start.into());
+    let start_flange = handeye_robot::kinematics::UrModel::ur10e().forward(&start.into());
     let mut table = format!("start {} {}\n", words(&start), tf(&start_flange));
     let mut visits = folder.read_visits().unwrap();
     visits.sort_by_key(|v| v.plan_index);

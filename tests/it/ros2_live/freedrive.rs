@@ -9,10 +9,10 @@
 
 use std::time::Duration;
 
-use handeye::error_text::error_chain;
-use handeye::robot::{MotionLimits, Robot};
-use handeye::ros2::arm::Ros2Arm;
-use handeye::ros2::freedrive::{Distro, FreedriveOptions};
+use handeye_core::error_text::error_chain;
+use handeye_robot::{MotionLimits, Robot};
+use handeye_ros2::arm::Ros2Arm;
+use handeye_ros2::freedrive::{Distro, FreedriveOptions};
 
 use super::cell::Peer;
 use super::{loopback_link, open_ur_arm, python};

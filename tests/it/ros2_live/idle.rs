@@ -6,8 +6,8 @@
 
 use std::time::{Duration, Instant};
 
-use handeye::camera::Camera;
-use handeye::robot::Robot;
+use handeye_camera::Camera;
+use handeye_robot::Robot;
 
 use super::cell::Peer;
 use super::{loopback_link, open_sim_camera, open_ur_arm, python};

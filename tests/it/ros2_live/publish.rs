@@ -4,9 +4,9 @@
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 
-use handeye::formats::export::named_transforms;
-use handeye::formats::FrameIds;
-use handeye::result::ResultFile;
+use handeye_formats::export::named_transforms;
+use handeye_formats::FrameIds;
+use handeye_session::result::ResultFile;
 
 use super::{peer, python};
 use crate::util::{handeye, repo, within};

@@ -27,7 +27,7 @@ fn both_spaces_over_seeds(
         let prepared = cell::prepare(&config).unwrap();
         assert_eq!(
             prepared.config.solver.space,
-            handeye::config::SolveSpace::Reprojection
+            handeye_session::config::SolveSpace::Reprojection
         );
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
         run(&prepared, &folder).unwrap();
@@ -136,7 +136,7 @@ fn copy_session(from: &Path, to: &Path) {
 }
 
 fn sample_ids(folder: &Path) -> Vec<String> {
-    handeye::dataset::Dataset::load(&folder.join("samples.yaml"))
+    handeye_session::dataset::Dataset::load(&folder.join("samples.yaml"))
         .unwrap()
         .pairs
         .iter()
@@ -361,8 +361,8 @@ fn files_carry_a_schema_version_and_a_newer_one_is_refused() {
     let folder = SessionFolder::open(&out).unwrap();
     assert_eq!(folder.read_manifest().unwrap().plan.len(), 8);
     assert!(!folder.read_visits().unwrap().is_empty());
-    handeye::dataset::Dataset::load(&folder.samples_path()).unwrap();
-    handeye::result::ResultFile::load_mounts(&out.join("result.yaml")).unwrap();
+    handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    handeye_session::result::ResultFile::load_mounts(&out.join("result.yaml")).unwrap();
     drop(folder);
     // A newer version: refused, naming the file and the version.
     let newer = |file: &str| {

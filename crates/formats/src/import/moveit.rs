@@ -9,8 +9,8 @@ use std::path::Path;
 use nalgebra::{Matrix3, Translation3, Vector3};
 
 use super::{checked_translation, read_text, ImportError, MATRIX_TOLERANCE};
-use crate::geometry::{rotation_from_matrix, Pose};
-use crate::setup::PosePair;
+use handeye_core::geometry::{rotation_from_matrix, Pose};
+use handeye_core::setup::PosePair;
 
 /// A 4x4 homogeneous matrix (row-major) as a pose; `location` names it in errors.
 pub fn pose_from_matrix4(

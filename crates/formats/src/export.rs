@@ -24,9 +24,11 @@ use std::fmt::Write as _;
 
 use serde_json::json;
 
-use crate::geometry::{check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem};
-use crate::setup::CellTransforms;
-use crate::setup::Setup;
+use handeye_core::geometry::{
+    check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem,
+};
+use handeye_core::setup::CellTransforms;
+use handeye_core::setup::Setup;
 use handeye_session::cell::rig::RigResultFile;
 
 /// Why a result cannot be exported.

@@ -6,14 +6,14 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::cell::run::{
+use handeye_core::geometry::Pose;
+use handeye_core::setup::predict;
+use handeye_robot::Joints;
+use handeye_session::cell::run::{
     run_opened, CellRun, HandGuide, OpenedRun, RunError, RunObserver, RunRequest, Strategy,
 };
-use crate::cell::PreparedCell;
-use crate::geometry::Pose;
-use crate::robot::Joints;
-use crate::session::{ManualCommand, ManualControl, ManualEvent, SessionFolder};
-use crate::setup::predict;
+use handeye_session::cell::PreparedCell;
+use handeye_session::session::{ManualCommand, ManualControl, ManualEvent, SessionFolder};
 
 use super::analysis::{Analyst, CellView, Job};
 use super::events::{joints_deg, Command, ConsoleEvent, PoseView};

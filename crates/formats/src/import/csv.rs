@@ -13,8 +13,8 @@ use std::path::Path;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use super::{checked_translation, read_text, ImportError, QUATERNION_TOLERANCE};
-use crate::geometry::{pose_from_rotvec, Pose};
-use crate::setup::PosePair;
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::PosePair;
 
 /// How one pose is written in a CSV row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -16,12 +16,12 @@ use std::time::{Duration, Instant};
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
 
-use crate::camera_model::CameraModel;
-use crate::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
-use crate::session::{PoseVisit, SharedFrame};
-use crate::setup::{predict, PosePair, Setup};
-use crate::solve::{solve, SolveOptions};
-use crate::vision::{draw, Target};
+use handeye_core::camera_model::CameraModel;
+use handeye_core::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
+use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_session::session::{PoseVisit, SharedFrame};
+use handeye_solve::{solve, SolveOptions};
+use handeye_vision::{draw, Target};
 
 use super::events::{ConsoleEvent, PoseView, SigmaView};
 use super::Publisher;
@@ -262,8 +262,8 @@ impl State {
                 Job::Recorded(index) => {
                     let file = self
                         .root
-                        .join(crate::session::SessionFolder::visit_name(index));
-                    let visit: PoseVisit = match crate::yaml_file::read_yaml(&file) {
+                        .join(handeye_session::session::SessionFolder::visit_name(index));
+                    let visit: PoseVisit = match handeye_core::yaml_file::read_yaml(&file) {
                         Ok(visit) => visit,
                         Err(e) => {
                             tracing::warn!("console: {e}");

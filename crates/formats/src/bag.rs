@@ -10,15 +10,17 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
-use crate::config::{recorded_cell, RecordedFiles};
-use crate::geometry::Pose;
-use crate::robot::recorded::save_recorded_poses;
+use handeye_core::geometry::Pose;
+use handeye_robot::recorded::save_recorded_poses;
+use handeye_session::config::{recorded_cell, RecordedFiles};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::cell::run::{self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy};
-use crate::cell::PreparedCell;
-use crate::session::{self, SessionFolder, SolvedSession};
+use handeye_session::cell::run::{
+    self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
+};
+use handeye_session::cell::PreparedCell;
+use handeye_session::session::{self, SessionFolder, SolvedSession};
 
 use handeye_ros2_bag::{import_bag, BagOptions, SkipReason};
 
@@ -355,7 +357,7 @@ pub fn import_bag_session(
     };
     let record_file = import_dir.join("bag-import.yaml");
     let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
-    crate::atomic_file::write_atomic(&record_file, text.as_bytes())
+    handeye_core::atomic_file::write_atomic(&record_file, text.as_bytes())
         .with_context(|| format!("writing {}", record_file.display()))?;
     // The session folder's lock goes with its last handle; then the folder can move.
     drop(done.folder);

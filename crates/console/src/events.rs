@@ -4,8 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{rotvec, Pose};
-use crate::robot::Joints;
+use handeye_core::geometry::{rotvec, Pose};
+use handeye_robot::Joints;
 
 /// A pose as the page shows it: translation in mm, rotation vector in degrees.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -31,8 +31,8 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
 
-use crate::geometry::{check_translation, TranslationProblem};
-use crate::vision::TargetError;
+use handeye_core::geometry::{check_translation, TranslationProblem};
+use handeye_vision::TargetError;
 
 /// Tolerance on the orthonormality of an imported rotation matrix (Frobenius norm).
 pub const MATRIX_TOLERANCE: f64 = 1e-6;
@@ -134,6 +134,6 @@ fn checked_translation(
 fn read_text(path: &Path) -> Result<String, ImportError> {
     std::fs::read_to_string(path).map_err(|source| ImportError::Read {
         path: path.to_path_buf(),
-        source: crate::yaml_file::name_symlink_loop(path, source),
+        source: handeye_core::yaml_file::name_symlink_loop(path, source),
     })
 }

@@ -15,11 +15,11 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::{checked_translation, read_text, ImportError};
-use crate::camera_model::{CameraModel, Distortion};
-use crate::dataset::Dataset;
-use crate::geometry::{pose_from_rotvec, Pose};
-use crate::setup::{PosePair, Setup};
-use crate::vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+use handeye_core::camera_model::{CameraModel, Distortion};
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{PosePair, Setup};
+use handeye_session::dataset::Dataset;
+use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -206,7 +206,7 @@ pub struct VispFolder {
 pub fn scan_visp_folder(folder: &Path) -> Result<VispFolder, ImportError> {
     let entries = std::fs::read_dir(folder).map_err(|source| ImportError::Read {
         path: folder.to_path_buf(),
-        source: crate::yaml_file::name_symlink_loop(folder, source),
+        source: handeye_core::yaml_file::name_symlink_loop(folder, source),
     })?;
     let mut poses = Vec::new();
     let mut images = Vec::new();
@@ -363,7 +363,7 @@ pub fn import_visp(folder: &Path, options: &VispOptions) -> Result<VispImport, I
     let mut pairs = Vec::new();
     for files in found.samples {
         let base_from_flange = read_visp_pose(&files.pose_file)?;
-        let image = crate::vision::detect::load_gray_image(&files.image)
+        let image = handeye_vision::detect::load_gray_image(&files.image)
             .map_err(|e| ImportError::Target(Box::new(e)))?;
         if (image.width(), image.height()) != (camera.width, camera.height) {
             return Err(ImportError::Value {

@@ -6,11 +6,11 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use crate::cell::run::RunObserver;
-use crate::cell::PreparedCell;
-use crate::geometry::Pose;
-use crate::robot::Joints;
-use crate::session::{SessionEvent, SessionFolder};
+use handeye_core::geometry::Pose;
+use handeye_robot::Joints;
+use handeye_session::cell::run::RunObserver;
+use handeye_session::cell::PreparedCell;
+use handeye_session::session::{SessionEvent, SessionFolder};
 
 use super::analysis::{Analyst, CellView, Job};
 use super::events::{joints_deg, Command, ConsoleEvent, PlannedView, PoseState, PoseView};
@@ -67,7 +67,7 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
         model: cell.camera_model,
         // The running estimate skips the outlier loop (a person watches it converge; the solve
         // at the end is the real one, with every check).
-        options: crate::solve::SolveOptions {
+        options: handeye_solve::SolveOptions {
             drop_outliers: false,
             ..cell.config.solver.to_options()
         },
