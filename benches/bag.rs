@@ -80,6 +80,55 @@ enum Data {
     Image(i64, Option<usize>),
 }
 
+/// The `sensor_msgs/msg/CameraInfo` message of `camera`, stamped `start`.
+fn camera_info_message(camera: &CameraModel, start: i64) -> Vec<u8> {
+    let mut m = Cdr::new();
+    m.header(start, "camera");
+    m.u32(camera.height);
+    m.u32(camera.width);
+    m.string("plumb_bob");
+    let d = camera.distortion_coefficients();
+    m.u32(5);
+    for i in 0..5 {
+        m.f64(d.get(i).copied().unwrap_or(0.0));
+    }
+    for v in [
+        camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
+    ] {
+        m.f64(v);
+    }
+    for _ in 0..21 {
+        m.f64(0.0);
+    }
+    for _ in 0..6 {
+        m.u32(0);
+    }
+    m.0.push(0);
+    m.0
+}
+
+/// rosbag2's metadata.yaml of the bag's `events` on `topics` (name, type, channel id).
+fn write_metadata(bag: &Path, events: &[(i64, u16, Data)], topics: [(&str, &str, u16); 3]) {
+    // rosbag2's metadata.yaml, complete enough for `rosbags` (the Python reader compared with).
+    let counts = topics.map(|(topic, ty, id)| {
+        let count = events.iter().filter(|e| e.1 == id).count();
+        format!("    - topic_metadata: {{name: {topic}, type: {ty}, serialization_format: cdr, offered_qos_profiles: ''}}\n      message_count: {count}\n")
+    });
+    let (first, last) = (events[0].0, events[events.len() - 1].0);
+    std::fs::write(
+        bag.join("metadata.yaml"),
+        format!(
+            "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  relative_file_paths: [bag_0.mcap]\n  duration: {{nanoseconds: {}}}\n  starting_time: {{nanoseconds_since_epoch: {first}}}\n  message_count: {}\n  topics_with_message_count:\n{}  compression_format: ''\n  compression_mode: ''\n  files:\n    - path: bag_0.mcap\n      starting_time: {{nanoseconds_since_epoch: {first}}}\n      duration: {{nanoseconds: {}}}\n      message_count: {}\n",
+            last - first,
+            events.len(),
+            counts.concat(),
+            last - first,
+            events.len()
+        ),
+    )
+    .unwrap();
+}
+
 fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     let repo = util::repo();
     let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
@@ -170,29 +219,11 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         m.pose(&at(t).0);
         events.push((start + (t * 1e9).round() as i64, tf, Data::Bytes(m.0)));
     }
-    let mut m = Cdr::new();
-    m.header(start, "camera");
-    m.u32(camera.height);
-    m.u32(camera.width);
-    m.string("plumb_bob");
-    let d = camera.distortion_coefficients();
-    m.u32(5);
-    for i in 0..5 {
-        m.f64(d.get(i).copied().unwrap_or(0.0));
-    }
-    for v in [
-        camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
-    ] {
-        m.f64(v);
-    }
-    for _ in 0..21 {
-        m.f64(0.0);
-    }
-    for _ in 0..6 {
-        m.u32(0);
-    }
-    m.0.push(0);
-    events.push((start, info, Data::Bytes(m.0)));
+    events.push((
+        start,
+        info,
+        Data::Bytes(camera_info_message(&camera, start)),
+    ));
     for i in 0..(duration * 30.0) as i64 {
         let t = i as f64 / 30.0;
         let stamp = start + (t * 1e9).round() as i64;
@@ -215,29 +246,15 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         m.0
     };
     events.sort_by_key(|e| e.0);
-    // rosbag2's metadata.yaml, complete enough for `rosbags` (the Python reader compared with).
-    let counts = [
-        ("/tf", "tf2_msgs/msg/TFMessage", tf),
-        ("/camera/image_raw", "sensor_msgs/msg/Image", image),
-        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", info),
-    ]
-    .map(|(topic, ty, id)| {
-        let count = events.iter().filter(|e| e.1 == id).count();
-        format!("    - topic_metadata: {{name: {topic}, type: {ty}, serialization_format: cdr, offered_qos_profiles: ''}}\n      message_count: {count}\n")
-    });
-    let (first, last) = (events[0].0, events[events.len() - 1].0);
-    std::fs::write(
-        bag.join("metadata.yaml"),
-        format!(
-            "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  relative_file_paths: [bag_0.mcap]\n  duration: {{nanoseconds: {}}}\n  starting_time: {{nanoseconds_since_epoch: {first}}}\n  message_count: {}\n  topics_with_message_count:\n{}  compression_format: ''\n  compression_mode: ''\n  files:\n    - path: bag_0.mcap\n      starting_time: {{nanoseconds_since_epoch: {first}}}\n      duration: {{nanoseconds: {}}}\n      message_count: {}\n",
-            last - first,
-            events.len(),
-            counts.concat(),
-            last - first,
-            events.len()
-        ),
-    )
-    .unwrap();
+    write_metadata(
+        &bag,
+        &events,
+        [
+            ("/tf", "tf2_msgs/msg/TFMessage", tf),
+            ("/camera/image_raw", "sensor_msgs/msg/Image", image),
+            ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", info),
+        ],
+    );
     for (seq, (time, channel_id, data)) in events.into_iter().enumerate() {
         let data = match data {
             Data::Bytes(bytes) => bytes,

@@ -22,7 +22,7 @@ use handeye_session::cell::run::{
 use handeye_session::cell::PreparedCell;
 use handeye_session::session::{self, SessionFolder, SolvedSession};
 
-use handeye_ros2_bag::{import_bag, BagOptions, SkipReason};
+use handeye_ros2_bag::{import_bag, BagImport, BagOptions, SkipReason};
 
 /// What to import and where.
 #[derive(Debug, Clone)]
@@ -105,19 +105,12 @@ struct BagSkipRecord {
     reason: String,
 }
 
-/// Imports a bag as a session: reads it, then runs its frames as a recorded cell into a staging
-/// folder next to the output and renames it into place when everything succeeded. What it finds
-/// on the way goes to `say` at once (so what was said before a refusal is read).
-pub fn import_bag_session(
-    request: &BagSessionRequest,
-    say: &mut dyn FnMut(BagNote),
-) -> anyhow::Result<BagSession> {
-    let a = request;
-    let options = &request.options;
-    let out = absolute(&a.output)?;
+/// The output folder must be new or empty; staging folders of imports that were killed (kill
+/// -9, a power cut) beside it are removed, those of imports still running are left alone.
+fn check_output(out: &Path, say: &mut dyn FnMut(BagNote)) -> anyhow::Result<()> {
     if out.exists() {
         let empty = out.is_dir()
-            && std::fs::read_dir(&out)
+            && std::fs::read_dir(out)
                 .with_context(|| format!("reading {}", out.display()))?
                 .next()
                 .is_none();
@@ -144,7 +137,16 @@ pub fn import_bag_session(
             }
         }
     }
-    let imported = import_bag(&a.bag, options).context("importing a ROS 2 bag")?;
+    Ok(())
+}
+
+/// What the bag held and what was taken of it, said at once (read whatever follows).
+fn say_what_was_read(
+    request: &BagSessionRequest,
+    imported: &BagImport,
+    say: &mut dyn FnMut(BagNote),
+) {
+    let (a, options) = (request, &request.options);
     // Said first, so they are read whatever follows (even a refusal for too few frames).
     for w in &imported.warnings {
         say(BagNote::Warning(format!("{}: {w}", a.bag.display())));
@@ -196,6 +198,57 @@ pub fn import_bag_session(
             o.offset_s * 1e3
         )));
     }
+}
+
+/// The import's record (`import/bag-import.yaml`): the bag, the clock offset, every frame taken
+/// and skipped, the warnings.
+fn import_record(
+    request: &BagSessionRequest,
+    imported: &BagImport,
+    samples: Vec<BagSampleRecord>,
+) -> anyhow::Result<BagImportRecord> {
+    let (a, options, o) = (request, &request.options, &imported.offset);
+    Ok(BagImportRecord {
+        bag: absolute(&a.bag)?,
+        format: imported.format.to_string(),
+        image_topic: options.image_topic.clone(),
+        images: imported.images,
+        time_offset_s: o.offset_s,
+        time_offset_estimated: o.estimated,
+        time_offset_residual_mm: o.residual_mm,
+        samples,
+        skipped: imported
+            .skipped
+            .iter()
+            .map(|s| BagSkipRecord {
+                image_stamp_s: s.stamp_ns as f64 * 1e-9,
+                reason: s.reason.to_string(),
+            })
+            .collect(),
+        warnings: imported
+            .warnings
+            .iter()
+            .map(|w| BagWarningRecord {
+                kind: w.kind().to_string(),
+                message: w.to_string(),
+            })
+            .collect(),
+    })
+}
+
+/// Imports a bag as a session: reads it, then runs its frames as a recorded cell into a staging
+/// folder next to the output and renames it into place when everything succeeded. What it finds
+/// on the way goes to `say` at once (so what was said before a refusal is read).
+pub fn import_bag_session(
+    request: &BagSessionRequest,
+    say: &mut dyn FnMut(BagNote),
+) -> anyhow::Result<BagSession> {
+    let a = request;
+    let options = &request.options;
+    let out = absolute(&a.output)?;
+    check_output(&out, say)?;
+    let imported = import_bag(&a.bag, options).context("importing a ROS 2 bag")?;
+    say_what_was_read(request, &imported, say);
     anyhow::ensure!(
         imported.samples.len() >= 3,
         "{}: only {} usable frames (a calibration needs at least 3 views): {}",
@@ -329,32 +382,7 @@ pub fn import_bag_session(
             imported.samples[*index].image_stamp_ns as f64 * 1e-9
         )));
     }
-    let record = BagImportRecord {
-        bag: absolute(&a.bag)?,
-        format: imported.format.to_string(),
-        image_topic: options.image_topic.clone(),
-        images: imported.images,
-        time_offset_s: o.offset_s,
-        time_offset_estimated: o.estimated,
-        time_offset_residual_mm: o.residual_mm,
-        samples,
-        skipped: imported
-            .skipped
-            .iter()
-            .map(|s| BagSkipRecord {
-                image_stamp_s: s.stamp_ns as f64 * 1e-9,
-                reason: s.reason.to_string(),
-            })
-            .collect(),
-        warnings: imported
-            .warnings
-            .iter()
-            .map(|w| BagWarningRecord {
-                kind: w.kind().to_string(),
-                message: w.to_string(),
-            })
-            .collect(),
-    };
+    let record = import_record(a, &imported, samples)?;
     let record_file = import_dir.join("bag-import.yaml");
     let text = serde_yaml_ng::to_string(&record).context("writing the import record")?;
     handeye_core::atomic_file::write_atomic(&record_file, text.as_bytes())

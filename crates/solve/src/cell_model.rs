@@ -571,6 +571,39 @@ fn estimates(e: Explanation, file: &CameraModel, fit: &ReprojectionCalibration) 
     out
 }
 
+/// Each fitted explanation scored by BIC, with the variance factor of the most general fit as
+/// the noise level every explanation is judged by (`n` = 2 per corner).
+fn candidates(
+    fits: &[(Explanation, ReprojectionCalibration)],
+    camera: &CameraModel,
+    frames: &[Frame],
+) -> Vec<Candidate> {
+    let n = 2 * frames.iter().map(|f| f.corners.len()).sum::<usize>();
+    let general = fits
+        .iter()
+        .max_by_key(|(e, _)| free_parameters(*e, camera))
+        .expect("the files-as-given fit is always there");
+    let k_general = free_parameters(general.0, camera);
+    let variance = (cost(&general.1) / n.saturating_sub(k_general).max(1) as f64).max(1e-12);
+    let ln_n = (n.max(2) as f64).ln();
+    fits.iter()
+        .map(|(e, fit)| {
+            let k = free_parameters(*e, camera);
+            let chi2 = cost(fit);
+            let (sigma_translation_mm, sigma_rotation_deg) = sigmas(fit);
+            Candidate {
+                explanation: *e,
+                chi2,
+                parameters: k,
+                bic: chi2 / variance + k as f64 * ln_n,
+                rms_px: fit.errors.rms_px,
+                sigma_translation_mm,
+                sigma_rotation_deg,
+            }
+        })
+        .collect()
+}
+
 /// Fits the four explanations to the corners of `frames` from the start transforms, and chooses
 /// between them (module docs). `camera` is the intrinsics file; `options` gives the pixel sigma
 /// and the robot prior of every fit. `accuracy` decides whether the chosen fit is determined.
@@ -628,32 +661,7 @@ pub fn fit_cell_model(
     ) {
         fits.push((Explanation::IntrinsicsAndBoard, fit));
     }
-    let n = 2 * frames.iter().map(|f| f.corners.len()).sum::<usize>();
-    // The variance factor of the most general fit: the noise level every explanation is judged by.
-    let general = fits
-        .iter()
-        .max_by_key(|(e, _)| free_parameters(*e, camera))
-        .expect("the files-as-given fit is always there");
-    let k_general = free_parameters(general.0, camera);
-    let variance = (cost(&general.1) / n.saturating_sub(k_general).max(1) as f64).max(1e-12);
-    let ln_n = (n.max(2) as f64).ln();
-    let candidates: Vec<Candidate> = fits
-        .iter()
-        .map(|(e, fit)| {
-            let k = free_parameters(*e, camera);
-            let chi2 = cost(fit);
-            let (sigma_translation_mm, sigma_rotation_deg) = sigmas(fit);
-            Candidate {
-                explanation: *e,
-                chi2,
-                parameters: k,
-                bic: chi2 / variance + k as f64 * ln_n,
-                rms_px: fit.errors.rms_px,
-                sigma_translation_mm,
-                sigma_rotation_deg,
-            }
-        })
-        .collect();
+    let candidates = candidates(&fits, camera, frames);
     let mut best = candidates
         .iter()
         .min_by(|a, b| a.bic.total_cmp(&b.bic))
@@ -741,7 +749,7 @@ pub fn fit_cell_model(
         ambiguous,
         immaterial,
         unverifiable,
-        residuals: n,
+        residuals: 2 * frames.iter().map(|f| f.corners.len()).sum::<usize>(),
         sigma_translation_mm,
         sigma_rotation_deg,
         written: Vec::new(),

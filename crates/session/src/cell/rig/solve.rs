@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
-use crate::config::rig::RigConfig;
+use crate::config::rig::{RigCameraConfig, RigConfig};
 use crate::config::{CellConfig, SolveSpace};
 use crate::session::solve::{reprojection_options, write_estimates};
 use crate::session::{PoseVisit, SessionError, SessionFolder};
@@ -209,6 +209,20 @@ pub struct RigProblem {
     pub cell_models: Vec<Option<CellModel>>,
 }
 
+/// A camera's board and lens files, read; an error names the camera and the file.
+fn camera_files(camera: &RigCameraConfig) -> Result<(Target, CameraModel), RigSolveError> {
+    let input = |file: &Path, problem: String| RigSolveError::Input {
+        camera: camera.name.clone(),
+        file: file.to_path_buf(),
+        problem,
+    };
+    let board = Target::load(&camera.config.target)
+        .map_err(|e| input(&camera.config.target, e.to_string()))?;
+    let lens = camera.config.intrinsics.clone().unwrap_or_default();
+    let model = CameraModel::load(&lens).map_err(|e| input(&lens, e.to_string()))?;
+    Ok((board, model))
+}
+
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
 pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigSolveError> {
     let manifest = read_manifest(root)?;
@@ -249,9 +263,10 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             continue;
         }
         let setup = camera.config.setup;
+        let options = camera.config.solver.to_options();
         // A camera whose own solve fails (its samples too few or too alike, say after it was
         // lost early) is left out of the joint solve, named with why; the others are solved.
-        let alone = match handeye_solve::solve(setup, &pairs, &camera.config.solver.to_options()) {
+        let alone = match handeye_solve::solve(setup, &pairs, &options) {
             Ok(alone) => alone,
             Err(e) => {
                 let why = format!("its own solve of its {samples} samples failed: {e}");
@@ -261,17 +276,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             }
         };
         let index = data.cameras.len();
-        let board = Target::load(&camera.config.target).map_err(|e| RigSolveError::Input {
-            camera: camera.name.clone(),
-            file: camera.config.target.clone(),
-            problem: e.to_string(),
-        })?;
-        let lens = camera.config.intrinsics.clone().unwrap_or_default();
-        let file_model = CameraModel::load(&lens).map_err(|e| RigSolveError::Input {
-            camera: camera.name.clone(),
-            file: lens.clone(),
-            problem: e.to_string(),
-        })?;
+        let (board, file_model) = camera_files(camera)?;
         // The joint solve keeps the samples the camera's own robust solve kept.
         let dropped: std::collections::BTreeSet<usize> = alone.dropped.iter().copied().collect();
         let kept: Vec<&PoseVisit> = visits
@@ -318,12 +323,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 })
             })
             .collect();
-        held_out.push(verdict::held_out(
-            setup,
-            &judged,
-            &camera.config.solver.to_options(),
-            &alone.outliers,
-        ));
+        held_out.push(verdict::held_out(setup, &judged, &options, &alone.outliers));
         models.push(lens_used);
         for visit in kept {
             if let Some(camera_from_target) = corrected_pose(visit) {
@@ -345,10 +345,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         data.cameras.push(RigCamera {
             name: camera.name.clone(),
             setup,
-            noise: alone
-                .noise
-                .map(|n| n.model())
-                .unwrap_or_else(|| camera.config.solver.to_options().noise),
+            noise: alone.noise.map_or(options.noise, |n| n.model()),
         });
         start.camera_mounts.push(match (&model, correction) {
             (Some(m), Some(_)) => m.fit.camera_mount,
@@ -356,14 +353,12 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         });
         cell_models.resize(c, None);
         cell_models.push(model);
-        match setup {
-            Setup::EyeInHand => {
-                start.base_from_target.get_or_insert(alone.target_mount);
-            }
-            Setup::EyeToHand => {
-                start.flange_from_target.get_or_insert(alone.target_mount);
-            }
-        }
+        // The board of each setup starts from the first camera of that setup.
+        let board_start = match setup {
+            Setup::EyeInHand => &mut start.base_from_target,
+            Setup::EyeToHand => &mut start.flange_from_target,
+        };
+        board_start.get_or_insert(alone.target_mount);
         config_index.push(c);
         cameras.push((samples, None));
     }
