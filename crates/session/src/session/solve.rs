@@ -257,7 +257,9 @@ fn solve_loaded(
     )?;
     let mut solved = solved;
     let written = write_corrected_files(folder.root(), &solved, config)?;
-    record_written(&mut solved, &written);
+    // Named where a person finds them (an import's staging folder is renamed into place).
+    let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
+    record_written(&mut solved, &shown);
     Ok((solved, dataset))
 }
 
