@@ -9,7 +9,7 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use handeye_core::atomic_file::write_atomic;
 use handeye_vision::print::{
-    board_pdf, board_png, board_svg, fit_to_paper, fitted_board_yaml, size_keys, Paper,
+    board_pdf, board_png, board_svg, fit_to_paper, resized_board_yaml, size_keys, Paper,
 };
 use handeye_vision::Target;
 
@@ -134,7 +134,12 @@ pub(super) fn run(args: TargetArgs) -> anyhow::Result<()> {
             if let (Some(fitted), Some(board_out)) = (&fitted, &board_out) {
                 let text = std::fs::read_to_string(&target)
                     .with_context(|| format!("reading {}", target.display()))?;
-                let mut yaml = fitted_board_yaml(&text, &target, &fitted.board)?;
+                let mut yaml = resized_board_yaml(
+                    &text,
+                    &target,
+                    &fitted.board,
+                    "Fitted to the paper by `handeye target render --paper`",
+                )?;
                 if no_corner_squares && !yaml.lines().any(|l| l.starts_with("corner_squares:")) {
                     yaml.push_str("corner_squares: false # printed with --no-corner-squares\n");
                 }

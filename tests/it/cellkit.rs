@@ -15,7 +15,7 @@ use handeye_robot::Joints;
 use handeye_session::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
 use handeye_session::config::{CellConfig, RobotConfig};
 use handeye_session::plan::{Plan, Waypoint};
-use handeye_vision::print::{board_pdf, fit_to_paper, fitted_board_yaml, Paper};
+use handeye_vision::print::{board_pdf, fit_to_paper, resized_board_yaml, Paper};
 use handeye_vision::{Board, DetectorOptions, TagDetector, TagFamily};
 
 use crate::util;
@@ -565,7 +565,7 @@ fn the_fitted_board_file_keeps_everything_but_the_tag_size() {
     let path = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
     let original = std::fs::read_to_string(&path).unwrap();
     let fitted = fit_to_paper(&six_by_six(), Paper::Letter, 0.008).unwrap();
-    let yaml = fitted_board_yaml(&original, &path, &fitted.board).unwrap();
+    let yaml = resized_board_yaml(&original, &path, &fitted.board, "Fitted to the paper").unwrap();
     // The first line says the file's size is the fitted one (the original's comments may give
     // another); then the original, its tag size rewritten.
     let (header, rest) = yaml.split_once('\n').unwrap();

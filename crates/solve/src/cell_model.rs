@@ -252,6 +252,12 @@ pub struct CellModelSummary {
 }
 
 impl CellModelSummary {
+    /// Whether the answer uses a corrected file: a wrong file chosen, its quantity determined by
+    /// the views and not ambiguous between lens and board.
+    pub fn corrects(&self) -> bool {
+        self.chosen != Explanation::AsGiven && self.determined && !self.ambiguous
+    }
+
     /// The files the verdict blames: those of the chosen explanation, or both when the views
     /// cannot tell them apart.
     pub fn blamed(&self) -> Vec<GivenFile> {

@@ -14,7 +14,7 @@
 //!
 //! This file holds the page geometry shared by the writers (`Page`, the black runs of a board);
 //! `png.rs` the PNG writer, `svg.rs` the SVG writer, `pdf.rs` the PDF writer, and `paper.rs` the
-//! sheets of paper and the fitting of a board to one ([`fit_to_paper`], [`fitted_board_yaml`]).
+//! sheets of paper and the fitting of a board to one ([`fit_to_paper`], [`resized_board_yaml`], [`scaled`]).
 //! Their public items are re-exported here: callers use `vision::print::…` paths only.
 
 use super::draw;
@@ -26,7 +26,7 @@ mod png;
 mod svg;
 
 pub use paper::{
-    fit_to_paper, fitted_board_yaml, size_keys, FittedBoard, Paper, Sheet, MARGIN_MM,
+    fit_to_paper, resized_board_yaml, scaled, size_keys, FittedBoard, Paper, Sheet, MARGIN_MM,
     MIN_FITTED_SIZE_M,
 };
 pub use pdf::board_pdf;

@@ -489,8 +489,8 @@ fn solve_from_scratch(
 /// board pose, or any visit with corners when `require_pose` is false) with its corners mapped to
 /// board points; corners of tags not on the board are skipped. Ids are `pose-NNN` like the
 /// samples'.
-pub fn frames_from_visits(
-    visits: &[PoseVisit],
+pub fn frames_from_visits<'a>(
+    visits: impl IntoIterator<Item = &'a PoseVisit>,
     board: &Target,
     require_pose: bool,
 ) -> Result<Vec<(String, Frame)>, SessionError> {
@@ -884,7 +884,7 @@ pub fn write_estimates(
     fit: &ReprojectionCalibration,
     target: &std::path::Path,
 ) -> Result<Vec<std::path::PathBuf>, SessionError> {
-    if summary.chosen == Explanation::AsGiven || !summary.determined || summary.ambiguous {
+    if !summary.corrects() {
         return Ok(Vec::new());
     }
     let mut written = Vec::new();
@@ -900,44 +900,72 @@ pub fn write_estimates(
     }
     if summary.chosen.board_wrong() {
         let path = root.join(cell_model::CORRECTED_BOARD_FILE);
-        if let Some(text) = std::fs::read_to_string(target)
-            .ok()
-            .and_then(|text| scaled_board_text(&text, fit.board_scale))
-        {
-            std::fs::write(&path, text).map_err(|source| SessionError::Io {
-                path: path.clone(),
-                source,
-            })?;
-            written.push(path);
-        }
+        written.push(write_scaled_board(target, fit.board_scale, &path)?);
     }
     Ok(written)
 }
 
-/// A board file's text with every length (`tagSize`, `squareSize`, `markerSize`) times `scale`;
-/// `None` when it has none.
-fn scaled_board_text(text: &str, scale: f64) -> Option<String> {
-    let mut found = false;
-    let lines: Vec<String> = text
-        .lines()
-        .map(|line| {
-            for key in ["tagSize", "squareSize", "markerSize"] {
-                let prefix = format!("{key}:");
-                let trimmed = line.trim_start();
-                if let Some(rest) = trimmed.strip_prefix(&prefix) {
-                    let value = rest.split('#').next().unwrap_or("").trim();
-                    if let Ok(v) = value.parse::<f64>() {
-                        found = true;
-                        let indent = &line[..line.len() - trimmed.len()];
-                        return format!(
-                            "{indent}{key}: {:.6}  # {v} in the given file, × {scale:.4} estimated by handeye's cell model",
-                            v * scale
-                        );
-                    }
-                }
+/// The board file `target` with every size times `scale` (the sizes the board file's kind
+/// has: `tagSize`, `squareLength` and `markerLength`, the spacings of a chessboard), every other
+/// line kept, written whole or not at all to `path`.
+fn write_scaled_board(
+    target: &std::path::Path,
+    scale: f64,
+    path: &std::path::Path,
+) -> Result<std::path::PathBuf, SessionError> {
+    let board_error = |source| SessionError::Board {
+        file: target.to_path_buf(),
+        source: Box::new(source),
+    };
+    let text = std::fs::read_to_string(target).map_err(|source| SessionError::Io {
+        path: target.to_path_buf(),
+        source,
+    })?;
+    let board = Target::from_yaml_str(&text, target).map_err(board_error)?;
+    let scaled = handeye_vision::print::scaled(&board, scale).map_err(board_error)?;
+    let how = format!(
+        "The board as this session measured it: {scale:.5} × the sizes of {} (handeye's cell model)",
+        target.display()
+    );
+    let yaml = handeye_vision::print::resized_board_yaml(&text, target, &scaled, &how)
+        .map_err(board_error)?;
+    handeye_core::atomic_file::write_atomic(path, yaml.as_bytes()).map_err(|source| {
+        SessionError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    })?;
+    Ok(path.to_path_buf())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::print::size_keys;
+
+    /// A board measured at another scale is written back with every size of its kind scaled
+    /// (an aprilgrid's `tagSize`, a ChArUco board's square and marker lengths, a chessboard's
+    /// spacings), and reads back as the same board at that size.
+    #[test]
+    fn a_scaled_board_of_every_kind_reads_back_at_its_measured_size() {
+        let targets =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/targets");
+        let dir = tempfile::tempdir().unwrap();
+        for name in [
+            "aprilgrid-6x6.yaml",
+            "charuco-9x6-5x5.yaml",
+            "checkerboard-10x7.yaml",
+        ] {
+            let given = targets.join(name);
+            let out = dir.path().join(name);
+            let written = write_scaled_board(&given, 0.952, &out).unwrap();
+            let before = size_keys(&Target::load(&given).unwrap());
+            let after = size_keys(&Target::load(&written).unwrap());
+            assert_eq!(before.len(), after.len(), "{name}");
+            for ((key, b), (key_after, a)) in before.iter().zip(&after) {
+                assert_eq!(key, key_after);
+                assert!((a / b - 0.952).abs() < 1e-9, "{name} {key}: {b} -> {a}");
             }
-            line.to_string()
-        })
-        .collect();
-    found.then(|| lines.join("\n") + "\n")
+        }
+    }
 }

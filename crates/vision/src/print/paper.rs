@@ -1,6 +1,6 @@
 //! Sheets of paper and fitting a board to one: [`Paper`], [`Sheet`], [`fit_to_paper`] (the
 //! largest board whose sheet extent and caption strip fit the printable area) and
-//! [`fitted_board_yaml`] (the board file rewritten with the fitted sizes).
+//! [`resized_board_yaml`] (the board file rewritten with the fitted sizes).
 //!
 //! Depends on `vision::{board, charuco, chessboard, target}` (the boards and their YAML reader)
 //! and `vision::TargetError`.
@@ -164,6 +164,13 @@ fn resized(target: &Target, sizes: &[f64]) -> Result<Target, TargetError> {
     })
 }
 
+/// The same board with every size of [`size_keys`] times `factor` (a board printed at another
+/// scale than its file says).
+pub fn scaled(target: &Target, factor: f64) -> Result<Target, TargetError> {
+    let sizes: Vec<f64> = size_keys(target).iter().map(|(_, v)| v * factor).collect();
+    resized(target, &sizes)
+}
+
 /// The board's sheet extent (squares or tags plus white margin), width and height, m.
 pub(super) fn extent_size(target: &Target) -> (f64, f64) {
     let e = target.extent();
@@ -257,14 +264,15 @@ pub fn fit_to_paper(
     })
 }
 
-/// The board file `original` (its YAML text, from `path`) with its [`size_keys`] set to the
-/// fitted board's, every other line and comment kept; checked by reading it back. Refused when
-/// the file has no line of its own for a size key (a flow mapping, say): then enter the sizes
-/// by hand.
-pub fn fitted_board_yaml(
+/// The board file `original` (its YAML text, from `path`) with its [`size_keys`] set to those of
+/// `fitted` (the same board at another size), every other line and comment kept, under a first
+/// line saying `how` the sizes were found; checked by reading it back. Refused when the file has
+/// no line of its own for a size key (a flow mapping, say): then enter the sizes by hand.
+pub fn resized_board_yaml(
     original: &str,
     path: &std::path::Path,
     fitted: &Target,
+    how: &str,
 ) -> Result<String, TargetError> {
     let mut out = original.to_string();
     for (key, value) in size_keys(fitted) {
@@ -306,7 +314,7 @@ pub fn fitted_board_yaml(
     // size is this file's.
     let extent = fitted.extent();
     let header = format!(
-        "# Fitted to the paper by `handeye target render --paper`: {} (a board of {:.0} x {:.0} mm). The comments below are those of {} and may give its size instead.\n",
+        "# {how}: {} (a board of {:.0} x {:.0} mm). The comments below are those of {} and may give its size instead.\n",
         size_keys(fitted)
             .iter()
             .map(|(key, value)| format!("{key}: {value}"))

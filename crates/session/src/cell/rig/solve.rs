@@ -16,14 +16,14 @@ use serde::{Deserialize, Serialize};
 use super::{camera_folder, read_manifest};
 use crate::config::rig::{RigCameraConfig, RigConfig};
 use crate::config::{CellConfig, SolveSpace};
-use crate::session::solve::{reprojection_options, write_estimates};
+use crate::session::solve::{frames_from_visits, reprojection_options, write_estimates};
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_core::yaml_file::write_yaml;
-use handeye_solve::cell_model::{fit_cell_model, CellModel, CellModelSummary, Explanation};
-use handeye_solve::reprojection::{Corner, Frame};
+use handeye_solve::cell_model::{fit_cell_model, CellModel};
+use handeye_solve::reprojection::Frame;
 use handeye_solve::rig::{
     pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
@@ -292,7 +292,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
         // judge and use the corrected cell, not the wrong file.
         let correction = model
             .as_ref()
-            .filter(|m| corrects(&m.summary))
+            .filter(|m| m.summary.corrects())
             .map(|m| (m.camera(), m.board_scale()));
         let (lens_used, scale) = correction.unwrap_or((file_model, 1.0));
         let corners_of = |visit: &PoseVisit| -> Vec<_> {
@@ -382,12 +382,6 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
     })
 }
 
-/// Whether the cell model corrects a file: a wrong file chosen, its quantity determined by the
-/// views and not ambiguous between lens and board.
-fn corrects(summary: &CellModelSummary) -> bool {
-    summary.chosen != Explanation::AsGiven && summary.determined && !summary.ambiguous
-}
-
 /// The cell model of one camera (issue #38), fitted on the corners of its `kept` visits through
 /// the lens and board of its files, from its own pose-space answer `alone`; `None` when the fit
 /// fails (fewer than 3 frames with corners, say): its verdict then rests on its mount alone.
@@ -398,23 +392,10 @@ fn camera_cell_model(
     lens: &CameraModel,
     alone: &Calibration,
 ) -> Option<CellModel> {
-    let frames: Vec<Frame> = kept
-        .iter()
-        .map(|visit| Frame {
-            base_from_flange: visit.base_from_flange,
-            corners: visit
-                .corners_px
-                .iter()
-                .filter_map(|c| {
-                    Some(Corner {
-                        point_in_target: board.observation_point(c)?,
-                        pixel: c.pixel,
-                    })
-                })
-                .collect(),
-            id: Some(visit.sample_id()),
-        })
-        .filter(|f| !f.corners.is_empty())
+    let frames: Vec<Frame> = frames_from_visits(kept.iter().copied(), board, true)
+        .ok()?
+        .into_iter()
+        .map(|(_, frame)| frame)
         .collect();
     if frames.len() < 3 {
         return None;
