@@ -599,6 +599,20 @@ fn json_and_launch_exports_hold_every_camera_and_an_old_layout_says_replay() {
         stderr.contains("old-layout-result.yaml") && stderr.contains("handeye replay"),
         "{stderr}"
     );
+    // A frame name edited into the file that is no ROS frame id (it would be pasted into XML,
+    // Python and shell) is refused by every form, naming it.
+    let edited = out.parent().unwrap().join("edited-result.yaml");
+    let text = std::fs::read_to_string(out.join("result.yaml")).unwrap();
+    assert!(text.contains("cam_left"));
+    std::fs::write(&edited, text.replace("cam_left", "cam_left\"/><x")).unwrap();
+    for format in ["ros2", "ros2-launch", "urdf", "json", "opencv"] {
+        let refused = export(&edited, format);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert!(
+            !refused.status.success() && stderr.contains("frame id") && stderr.contains("left"),
+            "{format}: {stderr}"
+        );
+    }
 }
 
 /// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every

@@ -37,7 +37,8 @@ pub enum ExportError {
     /// A frame id that is not a valid ROS frame id.
     #[error("{role} frame id {id:?}: {problem}")]
     FrameId {
-        /// Which frame (`base`, `flange`, `camera`, `target`).
+        /// Which frame (`base`, `flange`, `camera`, `target`; or `parent` / `child` of a transform a
+        /// several-camera result names).
         role: &'static str,
         /// The id as given.
         id: String,
@@ -363,6 +364,15 @@ impl Exported {
     pub fn check(&self, ids: &FrameIds) -> Result<(), ExportError> {
         ids.validate()?;
         for t in self.tree.iter().chain(&self.implied) {
+            // A several-camera result names its own frames (`cam_<name>`), and a result file is
+            // text anyone can edit: every id is pasted into shell, Python, XML and URScript.
+            for (role, id) in [("parent", &t.parent), ("child", &t.child)] {
+                validate_frame_id(id).map_err(|problem| ExportError::FrameId {
+                    role,
+                    id: id.clone(),
+                    problem,
+                })?;
+            }
             check_translation(&t.parent_from_child.translation.vector).map_err(|problem| {
                 ExportError::Translation {
                     key: t.key.clone(),
