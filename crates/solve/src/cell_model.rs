@@ -48,8 +48,8 @@ use crate::reprojection::{
     refine_reprojection, Frame, ReprojectionCalibration, ReprojectionOptions,
 };
 use crate::verdict::{
-    Accuracy, Basis, Finding, Level, BOARD_PLACEHOLDER, CONFIG_PLACEHOLDER, INTRINSICS_PLACEHOLDER,
-    SESSION_PLACEHOLDER,
+    Accuracy, Basis, Finding, Level, BOARD_PLACEHOLDER, BOARD_SIZE_KEYS, CONFIG_PLACEHOLDER,
+    INTRINSICS_PLACEHOLDER, SESSION_PLACEHOLDER,
 };
 use crate::{RobustLoss, SolveError};
 use handeye_core::camera_model::{CameraModel, Distortion};
@@ -359,7 +359,7 @@ impl CellModelSummary {
             );
             let _ = write!(
                 next,
-                "then set the measured tagSize in {BOARD_PLACEHOLDER} or a calibrated lens in {INTRINSICS_PLACEHOLDER} and `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`"
+                "then set the board's measured {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or a calibrated lens in {INTRINSICS_PLACEHOLDER}, and `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`"
             );
             return Some(Finding {
                 level: Level::Redo,
@@ -383,7 +383,7 @@ impl CellModelSummary {
                     "set `intrinsics: {SESSION_PLACEHOLDER}/{CORRECTED_INTRINSICS_FILE}` (the estimate, written there) in {CONFIG_PLACEHOLDER} or calibrate the camera"
                 )),
                 GivenFile::Board => fixes.push(format!(
-                    "measure a printed tag's black square with a ruler and set tagSize in {BOARD_PLACEHOLDER} (the estimate is written to {SESSION_PLACEHOLDER}/{CORRECTED_BOARD_FILE})"
+                    "measure a printed tag or square with a ruler and set the board's {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or use {SESSION_PLACEHOLDER}/{CORRECTED_BOARD_FILE} (the estimate, written there) as the config's `target`"
                 )),
             }
         }
@@ -397,9 +397,7 @@ impl CellModelSummary {
             ),
         })
     }
-}
 
-impl CellModelSummary {
     /// The files as given are chosen, but the views could not have seen some of them wrong:
     /// REDO naming the file(s) and the views that would check them.
     fn unverifiable_finding(&self, accuracy: Accuracy) -> Option<Finding> {
@@ -463,13 +461,13 @@ pub struct CellModel {
 }
 
 impl CellModel {
-    /// The camera model the answer uses: the estimate when the intrinsics are blamed and
-    /// determined, else the file's.
+    /// The camera model of the chosen fit: the estimate when the chosen explanation frees the
+    /// intrinsics, else the file's (the answer uses it when [`CellModelSummary::corrects`]).
     pub fn camera(&self) -> CameraModel {
         self.fit.camera
     }
 
-    /// The board scale the answer uses (1 unless the board is blamed).
+    /// The board scale of the chosen fit (1 unless it frees the board's scale).
     pub fn board_scale(&self) -> f64 {
         self.fit.board_scale
     }

@@ -176,7 +176,7 @@ pub fn median(values: &[f64]) -> f64 {
 
 /// The outlier threshold of [`flag_outliers`], sigmas:
 /// `max(median + mad_factor · 1.4826 · MAD, floor_sigma)`.
-pub(super) fn outlier_threshold(normalised: &[f64], mad_factor: f64, floor_sigma: f64) -> f64 {
+pub fn outlier_threshold(normalised: &[f64], mad_factor: f64, floor_sigma: f64) -> f64 {
     let med = median(normalised);
     let deviations: Vec<f64> = normalised.iter().map(|v| (v - med).abs()).collect();
     let mad = median(&deviations);

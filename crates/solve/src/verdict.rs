@@ -95,6 +95,9 @@ pub const CONFIG_PLACEHOLDER: &str = "<cell.yaml>";
 pub const BOARD_PLACEHOLDER: &str = "<board.yaml>";
 /// Placeholder for the intrinsics file in a next action; the session layer names it.
 pub const INTRINSICS_PLACEHOLDER: &str = "<intrinsics>";
+/// The board file's size keys in advice, for every board kind (the solver does not know which
+/// one the cell has).
+pub const BOARD_SIZE_KEYS: &str = "its size in metres (`tagSize` of an aprilgrid, `squareLength` and `markerLength` of a ChArUco board, `colSpacingMeters` and `rowSpacingMeters` of a chessboard)";
 /// Fewest samples for a held-out check (each fold must still solve).
 pub const MIN_HELD_OUT_SAMPLES: usize = 5;
 

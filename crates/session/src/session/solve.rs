@@ -762,11 +762,11 @@ fn pixel_consistent(
     if rms.is_empty() {
         return Vec::new();
     }
-    let median = solve::diagnostics::median(&rms);
-    let deviations: Vec<f64> = rms.iter().map(|v| (v - median).abs()).collect();
-    let mad = solve::diagnostics::median(&deviations);
-    let threshold =
-        (median + options.outlier_mad_factor * 1.4826 * mad).max(options.outlier_floor_px);
+    let threshold = solve::diagnostics::outlier_threshold(
+        &rms,
+        options.outlier_mad_factor,
+        options.outlier_floor_px,
+    );
     all.iter()
         .filter(|(id, _)| flagged.contains(&id.as_str()))
         .filter_map(|(id, frame)| {
@@ -819,29 +819,32 @@ fn corrected_pairs(
         .map(|pair| {
             let mut out = pair.clone();
             let frame = frames.iter().find(|f| f.id.is_some() && f.id == pair.id);
-            if let Some(frame) = frame {
-                let correspondences: Vec<_> = frame
+            let correspondences = frame.map(|frame| {
+                frame
                     .corners
                     .iter()
-                    .map(|c| {
-                        (
-                            nalgebra::Point3::from(c.point_in_target.coords * fit.board_scale),
-                            c.pixel,
-                        )
-                    })
-                    .collect();
-                let tags = (correspondences.len() / 4).max(2);
-                if let Ok(pose) = handeye_vision::pnp::estimate_pose_from_points(
-                    &fit.camera,
-                    &correspondences,
-                    tags,
-                ) {
-                    out.camera_from_target = pose.camera_from_target;
-                }
+                    .map(|c| (c.point_in_target * fit.board_scale, c.pixel))
+                    .collect::<Vec<_>>()
+            });
+            if let Some(pose) = correspondences.and_then(|c| board_pose(&fit.camera, &c)) {
+                out.camera_from_target = pose;
             }
             out
         })
         .collect()
+}
+
+/// `T_camera_target` by PnP over a frame's (board point, pixel) pairs through `camera`: the board
+/// pose again with corrected files (a lens estimated, board points scaled); `None` when PnP fails.
+pub(crate) fn board_pose(
+    camera: &CameraModel,
+    correspondences: &[(nalgebra::Point3<f64>, nalgebra::Point2<f64>)],
+) -> Option<handeye_core::geometry::Pose> {
+    // More than one tag: a board, never the lone-tag ambiguity check (four corners a tag).
+    let tags = (correspondences.len() / 4).max(2);
+    handeye_vision::pnp::estimate_pose_from_points(camera, correspondences, tags)
+        .ok()
+        .map(|p| p.camera_from_target)
 }
 
 /// Writes the estimates of the files the cell model blames into the session folder `root`

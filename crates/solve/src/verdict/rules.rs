@@ -372,8 +372,9 @@ fn board_scale_finding(scale: &BoardScale, pairs: &[PosePair], a: Accuracy) -> F
             scale.samples,
         ),
         next_action: format!(
-            "measure a printed tag's black square with a ruler (the board is {:.1} % {size} than its file says) and set tagSize (metres) in the board file {}, then `handeye replay {} --config {}`",
+            "measure a printed tag's black square with a ruler (the board is {:.1} % {size} than its file says) and set {} in the board file {}, then `handeye replay {} --config {}`",
             (s - 1.0).abs() * 100.0,
+            super::BOARD_SIZE_KEYS,
             super::BOARD_PLACEHOLDER,
             super::SESSION_PLACEHOLDER,
             super::CONFIG_PLACEHOLDER,

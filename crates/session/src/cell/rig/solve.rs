@@ -16,7 +16,9 @@ use serde::{Deserialize, Serialize};
 use super::{camera_folder, read_manifest};
 use crate::config::rig::{RigCameraConfig, RigConfig};
 use crate::config::{CellConfig, SolveSpace};
-use crate::session::solve::{frames_from_visits, reprojection_options, write_estimates};
+use crate::session::solve::{
+    board_pose, frames_from_visits, reprojection_options, write_estimates,
+};
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
@@ -31,7 +33,6 @@ use handeye_solve::rig::{
 use handeye_solve::verdict::{self, Accuracy, HeldOut, Verdict};
 use handeye_solve::Calibration;
 use handeye_solve::PoseSigma;
-use handeye_vision::pnp::estimate_pose_from_points;
 use handeye_vision::Target;
 use nalgebra::Point3;
 
@@ -307,11 +308,8 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 .collect()
         };
         let corrected_pose = |visit: &PoseVisit| {
-            let correspondences = corners_of(visit);
-            let tags = (correspondences.len() / 4).max(2);
             correction
-                .and_then(|_| estimate_pose_from_points(&lens_used, &correspondences, tags).ok())
-                .map(|p| p.camera_from_target)
+                .and_then(|_| board_pose(&lens_used, &corners_of(visit)))
                 .or(visit.camera_from_target)
         };
         let judged: Vec<_> = visits
