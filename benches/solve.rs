@@ -6,13 +6,17 @@
 //! Instruction counts (valgrind --tool=callgrind on this binary with `--profile-time 2`) are
 //! the repeatable figure on a shared machine: default pipeline N = 20, 7.8 M per solve before,
 //! 0.97 M after.
+//!
+//! `solve_and_judge`: what `handeye solve samples.yaml` does after reading the file (the
+//! default solve and its verdict, held-out check included), N = 20 / 100 / 1000, clean and with
+//! 10 % gross outliers (5°, 5 cm) — the figures issue #43 compares with the CLI's.
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{predict, PosePair, Setup};
-use handeye_solve::{self as solve, iterative, AxbyData, IterativeOptions, SolveOptions};
+use handeye_solve::{self as solve, iterative, verdict, AxbyData, IterativeOptions, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -111,12 +115,41 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
+/// `pairs(n)` with every tenth measurement moved by 5° and 5 cm (gross outliers).
+fn with_outliers(n: usize) -> Vec<PosePair> {
+    let mut data = pairs(n);
+    for pair in data.iter_mut().step_by(10) {
+        let kick = Pose::from_parts(
+            Translation3::new(0.05, -0.03, 0.04),
+            UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 5f64.to_radians(), 0.0)),
+        );
+        pair.camera_from_target = kick * pair.camera_from_target;
+    }
+    data
+}
+
+fn bench_solve_and_judge(c: &mut Criterion) {
+    let mut group = c.benchmark_group("solve_and_judge");
+    let options = SolveOptions::default();
+    for n in [20usize, 100, 1000] {
+        for (name, data) in [("clean", pairs(n)), ("outliers_10pct", with_outliers(n))] {
+            group.bench_with_input(BenchmarkId::new(name, n), &data, |b, d| {
+                b.iter(|| {
+                    let result = solve::solve(Setup::EyeInHand, black_box(d), &options);
+                    verdict::assess_result(result.as_ref(), d, &options, Default::default())
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default()
         .warm_up_time(std::time::Duration::from_millis(300))
         .measurement_time(std::time::Duration::from_secs(1))
         .sample_size(20);
-    targets = bench
+    targets = bench, bench_solve_and_judge
 }
 criterion_main!(benches);

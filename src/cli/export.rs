@@ -112,9 +112,10 @@ pub(super) fn exported_result(
                 // result.yaml is derived from the session's records: an older layout is
                 // solved again, not converted.
                 anyhow::anyhow!(
-                    "{}: not the several-camera result layout this handeye writes ({e}); solve the session again with `handeye replay {}`",
+                    "{}: not the several-camera result layout this handeye writes ({e}); solve the session again with `handeye replay {} -o {}`",
                     result.display(),
-                    result.parent().unwrap_or(std::path::Path::new(".")).display()
+                    result.parent().unwrap_or(std::path::Path::new(".")).display(),
+                    result.display()
                 )
             })?;
             Exported::cameras(&rig, ids)

@@ -5,11 +5,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::report::session::{write_replay_report, Optics};
+use handeye::report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
 use handeye_core::camera_model::CameraModel;
 use handeye_session::cell;
 use handeye_session::config::SolveSpace;
 use handeye_session::result::ResultFile;
+use handeye_session::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use handeye_session::session::{self, replay, SessionFolder};
 
 /// Re-detect the board in a session's frames and solve again offline.
@@ -20,7 +21,9 @@ pub(super) struct ReplayArgs {
     /// Use this cell config instead of the one the session was run with.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Where to write the replayed result (default: <session>/replay-result.yaml).
+    /// Where to write the replayed result (default: <session>/replay-result.yaml); its report
+    /// (replay-report.html) and the estimates of wrong files (replay-estimates/) go beside it.
+    /// A replay never writes over what the run recorded.
     #[arg(short, long)]
     output: Option<PathBuf>,
 }
@@ -28,7 +31,11 @@ pub(super) struct ReplayArgs {
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     if cell::rig::is_rig_folder(&args.session) {
-        return super::rig::replay(&args.session, args.config.as_deref());
+        return super::rig::replay(
+            &args.session,
+            args.config.as_deref(),
+            args.output.as_deref(),
+        );
     }
     let folder = SessionFolder::open(&args.session)?;
     let manifest = folder.read_manifest()?;
@@ -120,14 +127,16 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         &prepared.config,
         notices,
     )?;
-    // The estimates of a file the cell model blames, written into the session as in a run.
-    let written = session::solve::write_corrected_files(folder.root(), &solved, &prepared.config)?;
-    session::solve::record_written(&mut solved, &written);
-    solved.name_session(folder.root(), &prepared.config);
-    let calibration = &solved.calibration;
     let output = args
         .output
-        .unwrap_or_else(|| folder.root().join("replay-result.yaml"));
+        .unwrap_or_else(|| folder.root().join(REPLAY_RESULT_FILE));
+    // The estimates of a file the cell model blames, beside the replay's result (the run's own
+    // stay as they were).
+    let estimates = beside(&output, REPLAY_ESTIMATES_FOLDER);
+    let written = session::solve::write_corrected_files(&estimates, &solved, &prepared.config)?;
+    session::solve::record_written(&mut solved, &written);
+    solved.name_replay(folder.root(), &estimates, &prepared.config);
+    let calibration = &solved.calibration;
     solved.result_file(&dataset.pairs).save(&output)?;
     outln!("{}", solved.summary);
     if folder.result_path().is_file() {
@@ -150,7 +159,14 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         board: &prepared.board,
         camera: &camera_model,
     };
-    match write_replay_report(&folder, &solved, optics, Some(prepared.config.nominal)) {
+    let report = beside(&output, REPLAY_REPORT_FILE);
+    match write_replay_report(
+        &folder,
+        &report,
+        &solved,
+        optics,
+        Some(prepared.config.nominal),
+    ) {
         Ok(report) => outln!("report:  {}", report.display()),
         // The result is saved; a report problem must not hide it.
         Err(e) => eprintln!(

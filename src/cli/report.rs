@@ -25,7 +25,7 @@ pub(super) struct ReportArgs {
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
     if handeye_session::cell::rig::is_rig_folder(&args.session) {
-        let path = handeye::report::rig::write_rig_report(&args.session)?;
+        let path = handeye::report::rig::write_rig_folder_report(&args.session)?;
         outln!("report: {}", path.display());
         return Ok(());
     }

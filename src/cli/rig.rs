@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use handeye::report::session::REPLAY_REPORT_FILE;
 use handeye_session::cell::rig::{self, RigResultFile};
 use handeye_session::cell::run::CellRun;
 use handeye_session::config::rig::RigConfig;
@@ -20,33 +21,43 @@ pub(super) fn finish_run(
         done.outcome.visited_now,
         done.outcome.arm_time_s()
     );
-    print_result(result, root);
-    let report = handeye::report::rig::write_rig_report(root)?;
+    let output = rig::RigOutput::run(root);
+    print_result(result, &output.result);
+    let report = root.join("report.html");
+    handeye::report::rig::write_rig_report(result, root, &report)?;
     outln!("report: {}", report.display());
     let next = format!(
         "next: handeye export {} --format ros2|urdf|opencv",
-        root.join("result.yaml").display()
+        output.result.display()
     );
     outln!("{next}");
     Ok((Some(report), next))
 }
 
-/// `handeye replay` of a several-camera session folder: the joint solve again from its records.
-pub(super) fn replay(folder: &Path, config: Option<&Path>) -> anyhow::Result<()> {
+/// `handeye replay` of a several-camera session folder: the joint solve again from its
+/// records, written to `output` (default `<folder>/replay-result.yaml`) with its report and
+/// estimates beside it; the session's own files are left as the run wrote them.
+pub(super) fn replay(
+    folder: &Path,
+    config: Option<&Path>,
+    output: Option<&Path>,
+) -> anyhow::Result<()> {
     let config = match config {
         Some(c) => c.to_path_buf(),
         None => rig::read_manifest(folder)?.config,
     };
     let rig_config = RigConfig::load(&config)?;
-    let result = rig::solve_rig_folder(folder, &rig_config)?;
-    print_result(&result, folder);
-    let report = handeye::report::rig::write_rig_report(folder)?;
+    let output = rig::RigOutput::replay(folder, output);
+    let result = rig::solve_rig_folder(folder, &rig_config, &output)?;
+    print_result(&result, &output.result);
+    let report = handeye_session::session::replay::beside(&output.result, REPLAY_REPORT_FILE);
+    handeye::report::rig::write_rig_report(&result, folder, &report)?;
     outln!("report: {}", report.display());
     Ok(())
 }
 
 /// Prints every camera's mount, the boards and the camera-to-camera transforms.
-pub(super) fn print_result(result: &RigResultFile, folder: &Path) {
+pub(super) fn print_result(result: &RigResultFile, result_file: &Path) {
     let line = |t: &rig::solve::NamedTransform| {
         let p = t.pose.translation.vector;
         let truth = match (t.truth_error_mm, t.truth_error_deg) {
@@ -79,5 +90,5 @@ pub(super) fn print_result(result: &RigResultFile, folder: &Path) {
         outln!("{}", line(t));
     }
     outln!("cell: {} — {}", result.verdict.level, result.verdict.reason);
-    outln!("result: {}", folder.join("result.yaml").display());
+    outln!("result: {}", result_file.display());
 }

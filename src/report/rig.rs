@@ -127,18 +127,26 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
     html
 }
 
-/// Writes `<folder>/report.html` from the folder's `result.yaml`; returns its path.
-pub fn write_rig_report(folder: &Path) -> Result<PathBuf, ReportError> {
+/// Writes `<folder>/report.html` from the folder's `result.yaml` (`handeye report DIR`);
+/// returns its path.
+pub fn write_rig_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
     let result_path = folder.join("result.yaml");
     let result: RigResultFile = handeye_core::yaml_file::read_yaml(&result_path).map_err(|e| {
         ReportError::Session(Box::new(handeye_session::session::SessionError::from(e)))
     })?;
     let path = folder.join("report.html");
-    write_atomic(&path, render(&result, folder).as_bytes()).map_err(|source| {
-        ReportError::Write {
-            path: path.clone(),
-            source,
-        }
-    })?;
+    write_rig_report(&result, folder, &path)?;
     Ok(path)
+}
+
+/// Writes the page of `result`, the answer of the session in `folder`, to `path`.
+pub fn write_rig_report(
+    result: &RigResultFile,
+    folder: &Path,
+    path: &Path,
+) -> Result<(), ReportError> {
+    write_atomic(path, render(result, folder).as_bytes()).map_err(|source| ReportError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
 }

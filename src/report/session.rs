@@ -314,21 +314,23 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
             verdict: solved.verdict.clone(),
             arm_time: run.arm_time,
             nominal: Some(run.cell.config.nominal),
-            file_name: REPORT_FILE,
+            path: run.folder.root().join(REPORT_FILE),
         },
     )
 }
 
 /// The report of a session folder, `<session>/report.html`.
 pub const REPORT_FILE: &str = "report.html";
-/// The report of a replay (`handeye replay`), beside the run's own: `<session>/replay-report.html`.
+/// The report of a replay (`handeye replay`), beside its result (the session folder by
+/// default, where the run's own `report.html` stays).
 pub const REPLAY_REPORT_FILE: &str = "replay-report.html";
 
-/// Writes `<session>/replay-report.html` for a replay (`handeye replay DIR`): the answers, the
-/// verdict and the evidence of the solve just made from the frames detected again (`solved`),
-/// with the board and lens it used; the run's own `report.html` stays. Returns the path written.
+/// Writes the page of a replay (`handeye replay DIR`) to `path`: the answers, the verdict and
+/// the evidence of the solve just made from the frames detected again (`solved`), with the
+/// board and lens it used; the run's own `report.html` stays. Returns the path written.
 pub fn write_replay_report(
     folder: &SessionFolder,
+    path: &std::path::Path,
     solved: &SolvedSession,
     optics: Optics<'_>,
     nominal: Option<handeye_core::setup::CellTransforms>,
@@ -342,7 +344,7 @@ pub fn write_replay_report(
             verdict: solved.verdict.clone(),
             arm_time: None,
             nominal,
-            file_name: REPLAY_REPORT_FILE,
+            path: path.to_path_buf(),
         },
     )
 }
@@ -396,7 +398,7 @@ pub fn write_folder_report(
             verdict,
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.nominal),
-            file_name: REPORT_FILE,
+            path: folder.root().join(REPORT_FILE),
         },
     )?;
     Ok((path, lacking))
@@ -408,11 +410,11 @@ struct Page<'a> {
     verdict: Option<Verdict>,
     arm_time: Option<handeye_session::cell::run::ArmTime>,
     nominal: Option<handeye_core::setup::CellTransforms>,
-    file_name: &'a str,
+    path: std::path::PathBuf,
 }
 
 /// The page of a session: its input from the evidence and answers, the held-out figures from
-/// the verdict, written to `<session>/<file_name>`.
+/// the verdict, written to the page's `path`.
 fn write(
     folder: &SessionFolder,
     evidence: &Evidence,
@@ -424,7 +426,7 @@ fn write(
         verdict,
         arm_time,
         nominal,
-        file_name,
+        path,
     } = page;
     let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
@@ -440,7 +442,6 @@ fn write(
         });
     }
     input.verdict = verdict;
-    let path = folder.root().join(file_name);
     super::write_report(&path, &input)?;
     Ok(path)
 }

@@ -697,6 +697,23 @@ fn issue13_replay_of_a_session_with_a_1x1_frame_skips_that_frame_and_solves() {
         "{stdout}"
     );
     assert!(session.join("replay-result.yaml").exists());
+    // With `-o` elsewhere the replay writes nothing into the session.
+    let recorded = util::folder_bytes(&session);
+    let elsewhere = dir.path().join("replayed.yaml");
+    let output = handeye()
+        .arg("replay")
+        .arg(&session)
+        .arg("-o")
+        .arg(&elsewhere)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(0));
+    assert!(elsewhere.is_file() && dir.path().join("replay-report.html").is_file());
+    assert_eq!(
+        util::folder_bytes(&session),
+        recorded,
+        "replay -o wrote into the session"
+    );
 }
 
 mod attack;

@@ -303,20 +303,62 @@ fn killed_mid_run_then_resumed_and_replayed() {
         assert_eq!(poses.len(), 10, "{name}: every pose recorded once");
     }
     let resumed = read_result(&out);
-    let replay = handeye().arg("replay").arg(&out).output().unwrap();
-    assert!(
-        replay.status.success(),
-        "{}",
-        String::from_utf8_lossy(&replay.stderr)
-    );
-    let replayed = read_result(&out);
-    for (a, b) in resumed.transforms().zip(replayed.transforms()) {
-        assert_eq!(a.name, b.name);
-        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+    // A replay writes beside its output and never over what the run recorded: with `-o`
+    // elsewhere every file of the session stays byte for byte; by default its result is
+    // `replay-result.yaml` in the session.
+    let recorded = util::folder_bytes(&out);
+    let elsewhere = dir.path().join("replayed/answer.yaml");
+    std::fs::create_dir_all(elsewhere.parent().unwrap()).unwrap();
+    for output in [Some(&elsewhere), None] {
+        let mut replay = handeye();
+        replay.arg("replay").arg(&out);
+        if let Some(file) = output {
+            replay.arg("-o").arg(file);
+        }
+        let replay = replay.output().unwrap();
         assert!(
-            mm < 1e-6 && deg < 1e-6,
-            "{}: replay differs by {mm} mm {deg}°",
-            a.name
+            replay.status.success(),
+            "{}",
+            String::from_utf8_lossy(&replay.stderr)
+        );
+        let file = output.cloned().unwrap_or(out.join("replay-result.yaml"));
+        let replayed: RigResultFile =
+            serde_yaml_ng::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        for (a, b) in resumed.transforms().zip(replayed.transforms()) {
+            assert_eq!(a.name, b.name);
+            let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+            assert!(
+                mm < 1e-6 && deg < 1e-6,
+                "{}: replay differs by {mm} mm {deg}°",
+                a.name
+            );
+        }
+        assert!(file.with_file_name("replay-report.html").is_file());
+        if output.is_some() {
+            assert_eq!(
+                util::folder_bytes(&out),
+                recorded,
+                "replay -o wrote into the session"
+            );
+        }
+    }
+    let after = util::folder_bytes(&out);
+    let added: Vec<_> = after
+        .keys()
+        .filter(|k| !recorded.contains_key(*k))
+        .collect();
+    assert_eq!(
+        added,
+        ["replay-report.html", "replay-result.yaml"]
+            .map(PathBuf::from)
+            .iter()
+            .collect::<Vec<_>>()
+    );
+    for (file, bytes) in &recorded {
+        assert!(
+            after.get(file) == Some(bytes),
+            "{}: changed by the replay",
+            file.display()
         );
     }
 }

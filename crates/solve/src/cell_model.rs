@@ -49,7 +49,7 @@ use crate::reprojection::{
 };
 use crate::verdict::{
     Accuracy, Basis, Finding, Level, BOARD_PLACEHOLDER, BOARD_SIZE_KEYS, CONFIG_PLACEHOLDER,
-    INTRINSICS_PLACEHOLDER, SESSION_PLACEHOLDER,
+    ESTIMATES_PLACEHOLDER, INTRINSICS_PLACEHOLDER, SESSION_PLACEHOLDER,
 };
 use crate::{RobustLoss, SolveError};
 use handeye_core::camera_model::{CameraModel, Distortion};
@@ -380,10 +380,10 @@ impl CellModelSummary {
         for f in &blamed {
             match f {
                 GivenFile::Intrinsics => fixes.push(format!(
-                    "set `intrinsics: {SESSION_PLACEHOLDER}/{CORRECTED_INTRINSICS_FILE}` (the estimate, written there) in {CONFIG_PLACEHOLDER} or calibrate the camera"
+                    "set `intrinsics: {ESTIMATES_PLACEHOLDER}/{CORRECTED_INTRINSICS_FILE}` (the estimate, written there) in {CONFIG_PLACEHOLDER} or calibrate the camera"
                 )),
                 GivenFile::Board => fixes.push(format!(
-                    "measure a printed tag or square with a ruler and set the board's {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or use {SESSION_PLACEHOLDER}/{CORRECTED_BOARD_FILE} (the estimate, written there) as the config's `target`"
+                    "measure a printed tag or square with a ruler and set the board's {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or use {ESTIMATES_PLACEHOLDER}/{CORRECTED_BOARD_FILE} (the estimate, written there) as the config's `target`"
                 )),
             }
         }

@@ -89,6 +89,10 @@ pub const NEXT_SEPARATOR: &str = " — next: ";
 /// Placeholder for the session folder in a next action; the session layer names the folder
 /// ([`Verdict::name_session`]).
 pub const SESSION_PLACEHOLDER: &str = "<session>";
+/// Placeholder for the folder a solve writes its estimates of wrong files into (the session
+/// folder for a run; beside its output for a replay, which never writes into the session);
+/// the session layer names it.
+pub const ESTIMATES_PLACEHOLDER: &str = "<estimates>";
 /// Placeholder for the cell config in a next action; the session layer names it.
 pub const CONFIG_PLACEHOLDER: &str = "<cell.yaml>";
 /// Placeholder for the board file in a next action; the session layer names it.
@@ -107,6 +111,8 @@ pub const MIN_HELD_OUT_SAMPLES: usize = 5;
 pub struct SessionFiles {
     /// The session folder.
     pub session: String,
+    /// The folder the estimates of wrong files are written into.
+    pub estimates: String,
     /// The cell config.
     pub config: String,
     /// The board file.
@@ -119,6 +125,7 @@ impl SessionFiles {
     /// `text` with the placeholders replaced.
     pub fn fill(&self, text: &str) -> String {
         text.replace(SESSION_PLACEHOLDER, &self.session)
+            .replace(ESTIMATES_PLACEHOLDER, &self.estimates)
             .replace(CONFIG_PLACEHOLDER, &self.config)
             .replace(BOARD_PLACEHOLDER, &self.board)
             .replace(INTRINSICS_PLACEHOLDER, &self.intrinsics)
@@ -341,7 +348,8 @@ impl Verdict {
         }
     }
 
-    /// The verdict with the placeholders ([`SESSION_PLACEHOLDER`], [`CONFIG_PLACEHOLDER`],
+    /// The verdict with the placeholders ([`SESSION_PLACEHOLDER`], [`ESTIMATES_PLACEHOLDER`],
+    /// [`CONFIG_PLACEHOLDER`],
     /// [`BOARD_PLACEHOLDER`], [`INTRINSICS_PLACEHOLDER`]) in its reasons and next actions
     /// replaced by the files they stand for (known to the session layer, not to the pure rules).
     pub fn name_session(&mut self, files: &SessionFiles) {

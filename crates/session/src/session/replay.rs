@@ -1,12 +1,27 @@
 //! Replay: detect the board again in a session's saved frames and solve again, offline — to
 //! check a result, or to re-run with other detector or solver settings.
 
+use std::path::{Path, PathBuf};
+
 use crate::dataset::Dataset;
 use handeye_core::camera_model::CameraModel;
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
 use super::driver::measure;
 use super::{PoseVisit, SessionError, SessionFolder};
+
+/// A replay's result file in the session folder when no other is asked for.
+pub const REPLAY_RESULT_FILE: &str = "replay-result.yaml";
+/// The folder beside a replay's result that holds its estimates of wrong files.
+pub const REPLAY_ESTIMATES_FOLDER: &str = "replay-estimates";
+
+/// `name` in the folder of the file `file` (the working folder for a bare file name).
+pub fn beside(file: &Path, name: &str) -> PathBuf {
+    match file.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir.join(name),
+        _ => PathBuf::from(name),
+    }
+}
 
 /// Re-detects every saved frame of `folder` and returns the dataset the frames give now, with the
 /// visits as re-measured (in plan order).

@@ -111,26 +111,35 @@ impl SolveInputs {
 impl SolvedSession {
     /// Names the session folder, the cell config, its board and intrinsics files in the
     /// verdict's advice and the summary (the verdict's rules know none of them: see
-    /// `verdict::SessionFiles`).
-    pub fn name_session(&mut self, session: &std::path::Path, config: &CellConfig) {
-        self.name_files(session, config, &|path| path.to_path_buf());
+    /// `verdict::SessionFiles`), for a replay of `session` whose estimates of wrong files went
+    /// into `estimates` (beside its output: a replay writes nothing into the session).
+    pub fn name_replay(
+        &mut self,
+        session: &std::path::Path,
+        estimates: &std::path::Path,
+        config: &CellConfig,
+    ) {
+        self.name_files([session, estimates], config, &|path| path.to_path_buf());
     }
 
-    /// [`SolvedSession::name_session`] for a session in `folder`, naming it and the files in it
-    /// where a person will find them ([`SessionFolder::shown`]).
+    /// The files named as in [`SolvedSession::name_replay`] for a run's session in `folder`
+    /// (its estimates written into it), naming it and the files in it where a person will
+    /// find them ([`SessionFolder::shown`]).
     pub fn name_session_in(&mut self, folder: &SessionFolder, config: &CellConfig) {
-        self.name_files(folder.shown_root(), config, &|path| folder.shown(path));
+        let shown = folder.shown_root();
+        self.name_files([shown, shown], config, &|path| folder.shown(path));
     }
 
     fn name_files(
         &mut self,
-        session: &std::path::Path,
+        [session, estimates]: [&std::path::Path; 2],
         config: &CellConfig,
         shown: &dyn Fn(&std::path::Path) -> std::path::PathBuf,
     ) {
         let name = |path: &std::path::Path| shown(path).display().to_string();
         let files = verdict::SessionFiles {
             session: session.display().to_string(),
+            estimates: estimates.display().to_string(),
             config: name(&config.file),
             board: name(&config.target),
             intrinsics: config.intrinsics.as_deref().map(name).unwrap_or_default(),
@@ -890,6 +899,11 @@ pub fn write_estimates(
     if !summary.corrects() {
         return Ok(Vec::new());
     }
+    // A replay's estimates folder is made on first use.
+    std::fs::create_dir_all(root).map_err(|source| SessionError::Io {
+        path: root.to_path_buf(),
+        source,
+    })?;
     let mut written = Vec::new();
     if summary.chosen.intrinsics_wrong() {
         let path = root.join(cell_model::CORRECTED_INTRINSICS_FILE);

@@ -34,7 +34,7 @@ use handeye_robot::Joints;
 use handeye_solve::rig::MIN_VIEWS_PER_CAMERA;
 
 pub use crate::session::CameraFailure;
-pub use solve::{solve_rig_folder, RigResultFile, RigSolveError};
+pub use solve::{solve_rig_folder, RigOutput, RigResultFile, RigSolveError};
 
 /// `rig.yaml`: the cameras of a several-camera session and its plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 use super::{camera_folder, read_manifest};
 use crate::config::rig::{RigCameraConfig, RigConfig};
 use crate::config::{CellConfig, SolveSpace};
+use crate::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use crate::session::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
 };
@@ -410,26 +411,63 @@ fn camera_cell_model(
     .ok()
 }
 
-/// Solves a several-camera session folder jointly and writes its `result.yaml`.
-pub fn solve_rig_folder(root: &Path, rig: &RigConfig) -> Result<RigResultFile, RigSolveError> {
+/// Where a solve of a several-camera folder writes: its result file, and the folder each
+/// camera's estimates of wrong files go into.
+#[derive(Debug, Clone)]
+pub struct RigOutput {
+    /// The result file.
+    pub result: PathBuf,
+    /// The folder holding one folder per camera for its estimates.
+    estimates: PathBuf,
+}
+
+impl RigOutput {
+    /// A run's own: `<root>/result.yaml`, each camera's estimates in `<root>/cameras/<name>`.
+    pub fn run(root: &Path) -> RigOutput {
+        RigOutput {
+            result: root.join("result.yaml"),
+            estimates: root.join("cameras"),
+        }
+    }
+
+    /// A replay's: `result` (default `<root>/replay-result.yaml`), the estimates in
+    /// `replay-estimates/<name>` beside it. Nothing a run recorded is written over.
+    pub fn replay(root: &Path, result: Option<&Path>) -> RigOutput {
+        let result = result.map_or_else(|| root.join(REPLAY_RESULT_FILE), Path::to_path_buf);
+        let estimates = beside(&result, REPLAY_ESTIMATES_FOLDER);
+        RigOutput { result, estimates }
+    }
+
+    fn estimates_of(&self, camera: &str) -> PathBuf {
+        self.estimates.join(camera)
+    }
+}
+
+/// Solves a several-camera session folder jointly and writes the result and the estimates
+/// where `output` says.
+pub fn solve_rig_folder(
+    root: &Path,
+    rig: &RigConfig,
+    output: &RigOutput,
+) -> Result<RigResultFile, RigSolveError> {
     let problem = load_rig_problem(root, rig)?;
     let joint = solve_joint(&problem, pixel_space(rig), robot_sigma(rig))?;
     let mut result = result_file(rig, &problem, &joint);
-    let written = write_corrected_files(root, rig, &problem)?;
+    let written = write_corrected_files(output, rig, &problem)?;
     for (entry, files) in result.cameras.iter_mut().zip(written) {
         if let Some(model) = entry.verdict.figures.cell_model.as_mut() {
             model.written = files.iter().map(|p| p.display().to_string()).collect();
         }
     }
-    name_files(root, rig, &mut result);
-    write_yaml(&result, &root.join("result.yaml")).map_err(SessionError::from)?;
+    name_files(root, output, rig, &mut result);
+    write_yaml(&result, &output.result).map_err(SessionError::from)?;
     Ok(result)
 }
 
 /// Writes the estimate of each camera whose cell model corrects a file into its own folder
-/// (`cameras/<name>/camera_info.yaml`, `board.yaml`); per config camera, the files written.
+/// (`camera_info.yaml`, `board.yaml`); per config camera, the files written.
 fn write_corrected_files(
-    root: &Path,
+    output: &RigOutput,
     rig: &RigConfig,
     problem: &RigProblem,
 ) -> Result<Vec<Vec<PathBuf>>, SessionError> {
@@ -437,7 +475,7 @@ fn write_corrected_files(
     for (camera, model) in rig.cameras.iter().zip(&problem.cell_models) {
         written.push(match model {
             Some(model) => write_estimates(
-                &camera_folder(root, &camera.name),
+                &output.estimates_of(&camera.name),
                 &model.summary,
                 &model.fit,
                 &camera.config.target,
@@ -448,12 +486,13 @@ fn write_corrected_files(
     Ok(written)
 }
 
-/// Names each camera's folder, the cell config, its board and lens files in its verdict's
-/// advice, and the cell's verdict again from them.
-fn name_files(root: &Path, rig: &RigConfig, result: &mut RigResultFile) {
+/// Names each camera's folder, its estimates' folder, the cell config, its board and lens
+/// files in its verdict's advice, and the cell's verdict again from them.
+fn name_files(root: &Path, output: &RigOutput, rig: &RigConfig, result: &mut RigResultFile) {
     for (camera, entry) in rig.cameras.iter().zip(&mut result.cameras) {
         let files = verdict::SessionFiles {
             session: camera_folder(root, &camera.name).display().to_string(),
+            estimates: output.estimates_of(&camera.name).display().to_string(),
             config: rig.file.display().to_string(),
             board: camera.config.target.display().to_string(),
             intrinsics: camera

@@ -382,7 +382,11 @@ pub fn run_opened(
     } = drive_opened(opened, request, strategy, observer)?;
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
     let rig = match (&cell.rig, super::rig::root_of(folder.root())) {
-        (Some(rig), Some(root)) => Some(super::rig::solve_rig_folder(root, &rig.config)?),
+        (Some(rig), Some(root)) => Some(super::rig::solve_rig_folder(
+            root,
+            &rig.config,
+            &super::rig::RigOutput::run(root),
+        )?),
         _ => None,
     };
     Ok(CellRun {
