@@ -8,6 +8,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye_core::atomic_file::write_atomic_reporting;
+use handeye_core::setup::RobotFrames;
 use handeye_formats::export::{self, Exported, ExportedCell};
 use handeye_formats::ros2_launch::through_camera_link;
 use handeye_formats::ExportFormat;
@@ -55,7 +56,6 @@ pub(super) struct ExportArgs {
 
 /// Runs `handeye export`.
 pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
-    let ids = args.frames.ids()?;
     let format = match args.format {
         FormatArg::Ros2 => ExportFormat::Ros2,
         FormatArg::Ros2Launch => ExportFormat::Ros2Launch,
@@ -64,13 +64,7 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
         FormatArg::Json => ExportFormat::Json,
         FormatArg::Opencv => ExportFormat::Opencv,
     };
-    if export::is_ur_base_link(&ids.base) {
-        eprintln!(
-            "note: {} is the UR ROS driver's base_link (base turned 180° about z): the base-side transform is exported in it",
-            ids.base
-        );
-    }
-    let mut exported = exported_result(&args.result, &ids)?;
+    let mut exported = exported_result(&args.result, args.frames)?;
     if let Some(link) = &args.camera_link {
         anyhow::ensure!(
             format == ExportFormat::Ros2Launch,
@@ -96,16 +90,32 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
 }
 
 /// Every transform of a result file, one camera's (`handeye run`, `solve`) or several cameras'
-/// (a `cameras:` cell), under the frame ids `ids`, checked for export.
+/// (a `cameras:` cell), under the frame ids `frames` asks for (by default the frames the
+/// result's robot poses were read in), checked for export.
 pub(super) fn exported_result(
     result: &std::path::Path,
-    ids: &handeye_formats::FrameIds,
+    frames: super::frames::FrameArgs,
 ) -> anyhow::Result<Exported> {
     let text = std::fs::read_to_string(result).ok();
-    let several: Option<serde_yaml_ng::Value> = text
+    let value: Option<serde_yaml_ng::Value> = text
         .as_deref()
-        .and_then(|t| serde_yaml_ng::from_str::<serde_yaml_ng::Value>(t).ok())
-        .filter(|v| v.get("cameras").is_some());
+        .and_then(|t| serde_yaml_ng::from_str::<serde_yaml_ng::Value>(t).ok());
+    // Which frames the robot poses are in (older results: the UR controller's `base`, `tool0`).
+    let robot: RobotFrames = match value.as_ref().and_then(|v| v.get("robot_frames")) {
+        Some(v) => serde_yaml_ng::from_value(v.clone())
+            .map_err(|e| anyhow::anyhow!("{}: robot_frames: {e}", result.display()))?,
+        None => RobotFrames::default(),
+    };
+    let ids = &frames.ids(&robot)?;
+    if export::base_turn(&ids.poses_in, &ids.base).is_some() {
+        eprintln!(
+            "note: the robot poses of {} were read in `{}`; exported under `{}`, the UR pair's other frame (base_link is base turned 180° about z), the base-side transforms are turned to match",
+            result.display(),
+            ids.poses_in,
+            ids.base
+        );
+    }
+    let several = value.filter(|v| v.get("cameras").is_some());
     let exported = match several {
         Some(value) => {
             let rig: RigResultFile = serde_yaml_ng::from_value(value).map_err(|e| {

@@ -432,6 +432,8 @@ fn cell_text(
             intrinsics: Some(absolute(camera_info)?),
             poses: absolute(poses)?,
             images: folder.clone(),
+            // ViSP's robot poses are in the arm's base, named as the controller does.
+            frames: handeye_core::setup::RobotFrames::default(),
         },
         (camera_mount, target_mount),
         &base_from_flange,

@@ -32,7 +32,6 @@ pub(super) struct PublishArgs {
 
 /// Runs `handeye publish`.
 pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
-    let ids = args.frames.ids()?;
     if let Some(d) = args.duration {
         anyhow::ensure!(
             d.is_finite() && d > 0.0,
@@ -51,7 +50,7 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
     };
     // A tree: every mount and board; camera-to-camera transforms would give a camera a second
     // parent.
-    let transforms = super::export::exported_result(&args.result, &ids)?.tree;
+    let transforms = super::export::exported_result(&args.result, args.frames)?.tree;
     publish(
         &transforms,
         domain_id,

@@ -137,7 +137,9 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     session::solve::record_written(&mut solved, &written);
     solved.name_replay(folder.root(), &estimates, &prepared.config);
     let calibration = &solved.calibration;
-    solved.result_file(&dataset.pairs).save(&output)?;
+    solved
+        .result_file(&dataset.pairs, &prepared.config)
+        .save(&output)?;
     outln!("{}", solved.summary);
     if folder.result_path().is_file() {
         let recorded = ResultFile::load_mounts(&folder.result_path())?;

@@ -182,7 +182,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
-    solved.result_file(&dataset.pairs).save(&output)?;
+    solved.result_file(&dataset.pairs, config).save(&output)?;
     outln!("wrote {}", output.display());
     Ok(())
 }

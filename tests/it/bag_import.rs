@@ -494,6 +494,40 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
     );
     assert!(log.contains("16 samples accepted, 0 skipped"), "{log}");
     assert_calibrated(&out);
+    // The result says which frames its robot poses were read in, and the exports name them and
+    // leave the transforms as they are: by default and with `--base-frame base_link` alike (it
+    // used to be turned 180° a second time as if it were the controller's `base`).
+    let result = ResultFile::load(&out.join("result.yaml")).unwrap();
+    let frames = result.robot_frames.clone().expect("robot_frames recorded");
+    assert_eq!(
+        (frames.base.as_str(), frames.flange.as_str()),
+        ("base_link", "tool0")
+    );
+    let (_, base_link_from_target) = truth();
+    for extra in [&[][..], &["--base-frame", "base_link"][..]] {
+        let export = handeye()
+            .arg("export")
+            .arg(out.join("result.yaml"))
+            .args(["--format", "json"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(export.status.success(), "{}", text(&export));
+        let json: serde_json::Value = serde_json::from_slice(&export.stdout).unwrap();
+        let board = &json["T_base_target"];
+        assert_eq!(board["parent"], "base_link", "{extra:?}: {json}");
+        let t = &board["translation"];
+        let exported = Vector3::new(
+            t[0].as_f64().unwrap(),
+            t[1].as_f64().unwrap(),
+            t[2].as_f64().unwrap(),
+        );
+        let off_mm = (exported - base_link_from_target.translation.vector).norm() * 1e3;
+        assert!(
+            off_mm < 0.5,
+            "{extra:?}: {off_mm} mm from the truth in base_link"
+        );
+    }
     // Like a run's, the import ends with its report and the next step; the importer's
     // placeholder nominal is not judged (it used to make every import CHECK "far from nominal").
     assert!(out.join("report.html").is_file(), "{log}");

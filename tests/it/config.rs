@@ -744,3 +744,35 @@ fn a_copied_config_whose_files_are_not_beside_it_says_paths_are_relative_to_it()
         "{err}"
     );
 }
+
+/// A UR model whose poses would be read in the driver's `base_link` (what RViz shows) is refused
+/// at load naming the key and the fix: the plan, `nominal` and `workspace` of a UR model are in
+/// the controller's `base`, and `base_link` is it turned 180° about z (issue #39: it ran to a
+/// CHECK "179.8° from its nominal", and the export turned the answer a second time). Under a
+/// prefix too; the default `base` loads.
+#[test]
+fn a_ur_model_read_in_base_link_is_refused_at_load_naming_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    for (frame, fix) in [
+        ("base_link", "base_frame: base"),
+        ("ur/base_link", "base_frame: ur/base"),
+    ] {
+        let config = util::config_variant(
+            dir.path(),
+            "ros2-sim-cell.yaml",
+            "cell.yaml",
+            &[("base_frame: base ", &format!("base_frame: {frame} "))],
+        );
+        let message = load_error(&config);
+        assert!(
+            message.contains("robot.base_frame")
+                && message.contains(frame)
+                && message.contains(fix)
+                && message.contains("--base-frame"),
+            "{message}"
+        );
+    }
+    let config = util::config_variant(dir.path(), "ros2-sim-cell.yaml", "cell.yaml", &[]);
+    let loaded = CellConfig::load(&config).unwrap();
+    assert_eq!(loaded.robot.frames().base, "base");
+}

@@ -509,6 +509,7 @@ fn exports_match_hand_checked_fixtures() {
         flange: "flange".into(),
         camera: "cam".into(),
         target: "board".into(),
+        poses_in: "base".into(),
     };
     let ur = export(&m, ExportFormat::Ur, &ids).unwrap();
     assert!(

@@ -104,6 +104,7 @@ fn the_launch_file_runs_and_publishes_the_result() {
         flange: "tool0".into(),
         camera: "camera_optical_frame".into(),
         target: "calibration_target".into(),
+        poses_in: "base".into(),
     };
     let want = named_transforms(&ResultFile::load_mounts(&result).unwrap(), &ids);
     assert_eq!(nodes.len(), 2);

@@ -94,6 +94,48 @@ impl PosePair {
     }
 }
 
+/// The frames the robot's flange poses were read in: each `T_base_flange` is the pose of
+/// `flange` in `base` as the arm's driver names them, so every `base`-side answer is in `base`.
+/// The UR controller reports in its own `base` and `tool0` (the default, and what a result that
+/// does not say means); an arm under ROS 2 in the TF frames its config names.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotFrames {
+    /// The frame the poses are in (`T_base_flange`'s `base`).
+    pub base: String,
+    /// The flange frame.
+    pub flange: String,
+}
+
+impl Default for RobotFrames {
+    /// The UR controller's `base` and `tool0`.
+    fn default() -> Self {
+        RobotFrames {
+            base: "base".into(),
+            flange: "tool0".into(),
+        }
+    }
+}
+
+/// True when a base frame id names the UR ROS driver's `base_link` (also under a prefix, e.g.
+/// `ur/base_link`): that frame is the controller's `base` turned 180° about z.
+pub fn is_ur_base_link(base_id: &str) -> bool {
+    base_id.rsplit('/').next() == Some("base_link")
+}
+
+/// `T_base_link_base` of the UR ROS driver: `base_link` is `base` turned 180° about z (the
+/// controller reports `T_base_flange` in `base`, so a transform exported under `base_link` must
+/// be turned too, or it lands on the wrong side of the robot).
+pub fn ur_base_link_from_base() -> Pose {
+    Pose::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_axis_angle(
+            &nalgebra::Vector3::z_axis(),
+            std::f64::consts::PI,
+        ),
+    )
+}
+
 /// The cell's two fixed transforms, named by setup: as known before calibrating (nominal, from a
 /// drawing or a tape measure), as simulated (ground truth), or as solved and read back from a
 /// result file. Plans turn views into flange poses with them (see `plan`).

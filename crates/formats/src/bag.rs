@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use handeye_core::geometry::Pose;
+use handeye_core::setup::RobotFrames;
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_session::config::{recorded_cell, RecordedFiles};
 use std::sync::atomic::AtomicBool;
@@ -313,24 +314,7 @@ pub fn import_bag_session(
     }
     std::fs::copy(&a.board_file, import_dir.join("target.yaml"))
         .with_context(|| format!("copying {}", a.board_file.display()))?;
-    let setup = options.setup;
-    let identity = Pose::identity();
-    let config = recorded_cell(
-        setup,
-        RecordedFiles {
-            target: PathBuf::from("target.yaml"),
-            intrinsics: imported
-                .camera
-                .is_some()
-                .then(|| PathBuf::from("camera_info.yaml")),
-            poses: PathBuf::from("poses.yaml"),
-            images: PathBuf::from("images"),
-        },
-        // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
-        (identity, identity),
-        &poses,
-        a.decimation,
-    );
+    let config = recorded_config(a, imported.camera.is_some(), &poses);
     let config_file = import_dir.join("cell.yaml");
     config.save(
         &config_file,
@@ -443,4 +427,32 @@ impl RunObserver for RecordedRun<'_> {
     fn note(&mut self, message: &str) {
         (self.say)(BagNote::Line(format!("note: {message}")));
     }
+}
+
+/// The recorded cell of an import: the frames and flange poses in `<import>/`, in the frames
+/// the bag's poses were read in.
+fn recorded_config(
+    a: &BagSessionRequest,
+    with_intrinsics: bool,
+    poses: &[Pose],
+) -> handeye_session::config::ConfigFile {
+    let options = &a.options;
+    let identity = Pose::identity();
+    recorded_cell(
+        options.setup,
+        RecordedFiles {
+            target: PathBuf::from("target.yaml"),
+            intrinsics: with_intrinsics.then(|| PathBuf::from("camera_info.yaml")),
+            poses: PathBuf::from("poses.yaml"),
+            images: PathBuf::from("images"),
+            frames: RobotFrames {
+                base: options.base_frame.clone(),
+                flange: options.flange_frame.clone(),
+            },
+        },
+        // Nominal transforms only feed a recorded cell's plan report; the solve needs none.
+        (identity, identity),
+        poses,
+        a.decimation,
+    )
 }

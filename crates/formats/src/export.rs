@@ -27,8 +27,8 @@ use serde_json::json;
 use handeye_core::geometry::{
     check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem,
 };
-use handeye_core::setup::CellTransforms;
 use handeye_core::setup::Setup;
+use handeye_core::setup::{is_ur_base_link, ur_base_link_from_base, CellTransforms};
 use handeye_session::cell::rig::RigResultFile;
 
 /// Why a result cannot be exported.
@@ -176,6 +176,10 @@ pub struct FrameIds {
     pub camera: String,
     /// The board frame.
     pub target: String,
+    /// The frame the result's robot poses were read in (its `robot_frames.base`; `base`, the
+    /// UR controller's, when it does not say): a base-side transform is turned only when `base`
+    /// names the other of the UR pair `base` / `base_link` ([`base_turn`]).
+    pub poses_in: String,
 }
 
 impl FrameIds {
@@ -207,8 +211,24 @@ impl Default for FrameIds {
             flange: "tool0".into(),
             camera: "camera_optical_frame".into(),
             target: "calibration_target".into(),
+            poses_in: "base".into(),
         }
     }
+}
+
+/// The turn from the frame the robot poses were read in (`poses_in`) to the exported base frame
+/// `base`: the UR ROS driver's `base_link` is the controller's `base` turned 180° about z, so
+/// a result in `base` exported under `base_link`, or one read in `base_link` exported under
+/// `base`, is turned; `None` when both name the same side (a result read in `base_link` and
+/// exported under it is not turned a second time).
+pub fn base_turn(poses_in: &str, base: &str) -> Option<Pose> {
+    let is_ur_base = |id: &str| id.rsplit('/').next() == Some("base");
+    let turned = if is_ur_base_link(poses_in) {
+        is_ur_base(base)
+    } else {
+        is_ur_base_link(base)
+    };
+    turned.then(ur_base_link_from_base)
 }
 
 /// One exported transform: `T_parent_child` with its frame ids.
@@ -230,7 +250,7 @@ impl NamedTransform {
     /// `cam_<name>` the camera id with `_<name>` (every camera's optical frame distinct), the
     /// board on the flange the target id with `_flange` when the cell has boards on both sides.
     /// A transform whose parent is the robot base is expressed in the frame the base id names:
-    /// under the UR ROS driver's `base_link` ([`is_ur_base_link`]) it is turned 180° about z.
+    /// turned 180° about z between the UR pair `base` / `base_link` ([`base_turn`]).
     pub fn with_ids(
         parent: &str,
         child: &str,
@@ -251,10 +271,9 @@ impl NamedTransform {
                 camera.strip_prefix("cam_").unwrap_or(camera)
             ),
         };
-        let parent_from_child = if parent == "base" && is_ur_base_link(&ids.base) {
-            ur_base_link_from_base() * parent_from_child
-        } else {
-            parent_from_child
+        let parent_from_child = match base_turn(&ids.poses_in, &ids.base) {
+            Some(turn) if parent == "base" => turn * parent_from_child,
+            _ => parent_from_child,
         };
         NamedTransform {
             key: format!("T_{parent}_{child}"),
@@ -263,25 +282,6 @@ impl NamedTransform {
             parent_from_child,
         }
     }
-}
-
-/// True when a base frame id names the UR ROS driver's `base_link` (also under a prefix, e.g.
-/// `ur/base_link`): that frame is the controller's `base` turned 180° about z.
-pub fn is_ur_base_link(base_id: &str) -> bool {
-    base_id.rsplit('/').next() == Some("base_link")
-}
-
-/// `T_base_link_base` of the UR ROS driver: `base_link` is `base` turned 180° about z (the
-/// controller reports `T_base_flange` in `base`, so a transform exported under `base_link` must
-/// be turned too, or it lands on the wrong side of the robot).
-pub fn ur_base_link_from_base() -> Pose {
-    Pose::from_parts(
-        nalgebra::Translation3::identity(),
-        nalgebra::UnitQuaternion::from_axis_angle(
-            &nalgebra::Vector3::z_axis(),
-            std::f64::consts::PI,
-        ),
-    )
 }
 
 /// The two unknowns of a solved one-camera cell with their frame ids: camera mount first, target
@@ -700,6 +700,38 @@ mod tests {
         assert!(is_ur_base_link("ur/base_link"));
         assert!(!is_ur_base_link("base"));
         assert!(!is_ur_base_link("base_link_inertia"));
+    }
+
+    /// Poses read in `base_link` (a ROS 2 arm's TF, a bag's `--base base_link`) are exported
+    /// under `base_link` as they are — never turned a second time — and under `base` turned back.
+    #[test]
+    fn a_result_read_in_base_link_is_turned_only_toward_base() {
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let m = mounts(setup);
+            let in_link = |base: &str| FrameIds {
+                base: base.into(),
+                poses_in: "base_link".into(),
+                ..FrameIds::default()
+            };
+            let kept = named_transforms(&m, &in_link("base_link"));
+            let unturned = named_transforms(&m, &FrameIds::default());
+            let back = named_transforms(&m, &in_link("base"));
+            for ((k, u), b) in kept.iter().zip(&unturned).zip(&back) {
+                assert_eq!(k.parent_from_child, u.parent_from_child, "{}", k.key);
+                if k.parent == "base_link" {
+                    let turned = ur_base_link_from_base() * k.parent_from_child;
+                    assert!(
+                        (b.parent_from_child.to_homogeneous() - turned.to_homogeneous()).norm()
+                            < 1e-12
+                    );
+                } else {
+                    assert_eq!(b.parent_from_child, k.parent_from_child);
+                }
+            }
+        }
+        assert!(base_turn("ur/base_link", "ur/base_link").is_none());
+        assert!(base_turn("base", "world").is_none());
+        assert!(base_turn("base", "ur/base_link").is_some());
     }
 
     #[test]

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::{Pose, PoseRecord};
 use handeye_core::notice::Notice;
-use handeye_core::setup::{CellTransforms, PosePair, Setup};
+use handeye_core::setup::{CellTransforms, PosePair, RobotFrames, Setup};
 use handeye_core::yaml_file::SchemaVersion;
 use handeye_core::yaml_file::{read_yaml, write_yaml, FileError};
 use handeye_solve::verdict::Verdict;
@@ -135,6 +135,11 @@ pub struct ResultFile {
     /// verdicts existed, or when no verdict was computed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<Verdict>,
+    /// The frames the robot poses were read in: every `T_base_*` is in `robot_frames.base`
+    /// (absent in files written before it and for a dataset solved alone: the UR controller's
+    /// `base` and `tool0`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_frames: Option<RobotFrames>,
     /// eye_in_hand camera mount.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub T_flange_camera: Option<PoseRecord>,
@@ -177,6 +182,12 @@ impl ResultFile {
     /// after `setup`.
     pub fn with_verdict(mut self, verdict: Verdict) -> ResultFile {
         self.verdict = Some(verdict);
+        self
+    }
+
+    /// The same file naming the frames the robot poses were read in.
+    pub fn with_robot_frames(mut self, frames: RobotFrames) -> ResultFile {
+        self.robot_frames = Some(frames);
         self
     }
 
@@ -227,6 +238,7 @@ impl ResultFile {
             schema_version: SchemaVersion::CURRENT,
             setup: calibration.setup,
             verdict: None,
+            robot_frames: None,
             T_flange_camera: if eye_in_hand { camera.clone() } else { None },
             T_base_target: if eye_in_hand { target.clone() } else { None },
             T_base_camera: if eye_in_hand { None } else { camera },

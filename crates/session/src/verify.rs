@@ -77,7 +77,10 @@ pub enum VerifyError {
         /// Needed.
         required: usize,
     },
-    /// A fold (or the full solve) failed.
+    /// The solve of every sample, where the folds start, failed.
+    #[error("solving every sample failed")]
+    Solve(#[source] SolveError),
+    /// A fold failed.
     #[error("solving without sample {left_out} failed")]
     Fold {
         /// The left-out sample.
@@ -172,7 +175,7 @@ pub fn compare(
 }
 
 /// Leave-one-out cross-validation: each sample is predicted by a solve of all the others
-/// (covariance and convention checks off in the folds: only the estimate matters there).
+/// ([`solve::predict_left_out`], each fold started from the solve of every sample).
 pub fn leave_one_out(
     setup: Setup,
     pairs: &[PosePair],
@@ -185,9 +188,10 @@ pub fn leave_one_out(
             required: REQUIRED,
         });
     }
+    let full = solve::solve(setup, pairs, options).map_err(VerifyError::Solve)?;
     let mut poses = Vec::with_capacity(pairs.len());
     for (left_out, p) in pairs.iter().enumerate() {
-        let predicted = solve::predict_left_out(setup, pairs, options, left_out)
+        let predicted = solve::predict_left_out(setup, pairs, options, left_out, &full)
             .map_err(|source| VerifyError::Fold { left_out, source })?;
         poses.push(prediction_error(
             left_out,

@@ -50,6 +50,16 @@ impl Estimator {
         }
     }
 
+    /// Starts the estimate at `noise` instead (a fit near one whose sigmas were estimated
+    /// settles in a round or two); the fixed point is the same, as the bounds are absolute.
+    /// Only while the estimate is active: otherwise the sigmas are the options' and stay so.
+    pub(super) fn starting_at(mut self, noise: NoiseModel) -> Self {
+        if self.active() {
+            self.noise = noise;
+        }
+        self
+    }
+
     /// True when a sigma is to be estimated and the data can.
     pub(super) fn active(&self) -> bool {
         self.estimate.any() && self.enough

@@ -9,7 +9,7 @@
 //! refinement). Levenberg-Marquardt on the 12x12 normal equations (`solve::lm::minimize_normal`,
 //! shared with the reprojection-space refinement) minimises, re-anchoring the perturbation at
 //! every accepted step; the normal equations are summed per sample by 3x3 blocks, no tall
-//! Jacobian is formed (the speed of the default pipeline: `benches/solve.rs`). The problem is
+//! Jacobian is formed (the speed of the default pipeline: `crates/solve/benches/solve.rs`). The problem is
 //! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
 //! reweighted least squares on each sample's whitened norm. The sigmas themselves are
 //! estimated from the residuals, alternated with the fit (see [`super::noise`]), unless
@@ -435,6 +435,17 @@ pub fn refine(
     start: &Axby,
     options: &SolveOptions,
 ) -> Result<Refined, SolveError> {
+    refine_from(data, start, None, options)
+}
+
+/// [`refine`] with the noise estimate (when `options` estimate it) started at `noise`, the
+/// sigmas of a fit of nearly the same data: it then settles in a round or two.
+pub fn refine_from(
+    data: &AxbyData,
+    start: &Axby,
+    noise: Option<NoiseModel>,
+    options: &SolveOptions,
+) -> Result<Refined, SolveError> {
     let n = data.len();
     let mut robust = vec![1.0; n];
     let scale_of = |robust: &[f64]| -> Vec<f64> {
@@ -445,6 +456,9 @@ pub fn refine(
             .collect()
     };
     let mut estimator = noise::Estimator::new(data.len(), options);
+    if let Some(start) = noise {
+        estimator = estimator.starting_at(start);
+    }
     let mut noise = estimator.noise();
     let mut run = minimise(data, start, &scale_of(&robust), &noise)?;
     let mut evaluations = run.evaluations;

@@ -34,7 +34,7 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 use handeye_camera::Camera;
 use handeye_core::geometry::Pose;
-use handeye_formats::export::ur_base_link_from_base;
+use handeye_core::setup::ur_base_link_from_base;
 use handeye_ros2::link::{sensor_data_qos, static_qos};
 use handeye_ros2::listen::{joint_sample, TfTree};
 use handeye_ros2::msg::{CameraInfo, JointState, TfMessage};

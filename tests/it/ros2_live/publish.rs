@@ -51,6 +51,7 @@ fn assert_read_back(peer_stdout: &[u8]) {
         flange: "tool0".into(),
         camera: "camera_optical_frame".into(),
         target: "calibration_target".into(),
+        poses_in: "base".into(),
     };
     let mounts = ResultFile::load_mounts(&result_file()).unwrap();
     let want = named_transforms(&mounts, &ids);

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use handeye_core::geometry::{Pose, PoseYaml};
-use handeye_core::setup::Setup;
+use handeye_core::setup::{RobotFrames, Setup};
 
 use super::{
     CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PlanConfig, RobotConfig, SessionConfig,
@@ -24,6 +24,8 @@ pub struct RecordedFiles {
     pub poses: PathBuf,
     /// The folder of images, one per pose in natural order.
     pub images: PathBuf,
+    /// The frames the recorded poses are in.
+    pub frames: RobotFrames,
 }
 
 /// The config of a recorded cell that replays imported frames: the flange poses
@@ -55,6 +57,7 @@ pub fn recorded_cell(
             poses: files.poses,
             repeatability_mm: None,
             repeatability_deg: None,
+            frames: Some(files.frames),
         },
         camera: CameraConfig::Files {
             folder: files.images,

@@ -10,6 +10,7 @@ use std::net::IpAddr;
 use serde::{Deserialize, Serialize};
 
 use super::schema::ArmModel;
+use handeye_core::setup::is_ur_base_link;
 use handeye_robot::MAX_JOINTS;
 
 /// Where on the ROS 2 graph handeye joins: shared by the arm and the camera.
@@ -271,7 +272,7 @@ fn controller_problem(key: &str, name: &str) -> Option<Problem> {
     })
 }
 
-fn frame_problem(key: &str, frame: &str) -> Option<Problem> {
+pub(super) fn frame_problem(key: &str, frame: &str) -> Option<Problem> {
     let ok = !frame.is_empty()
         && !frame.starts_with('/')
         && frame
@@ -305,10 +306,31 @@ fn graph_problem(key: &str, graph: &Ros2Graph) -> Option<Problem> {
 }
 
 impl Ros2Robot {
+    /// A UR model's poses read in the driver's `base_link`: the model plans, and the nominal
+    /// transforms and the workspace box are given, in the controller's `base` (`base_link` is
+    /// it turned 180° about z), so the two would mix; handeye reads `base` and turns the answer
+    /// at export instead.
+    fn base_link_problem(&self) -> Option<Problem> {
+        let model = self.model?;
+        is_ur_base_link(&self.base_frame).then(|| {
+            (
+                "robot.base_frame".to_string(),
+                format!(
+                    "`{}` is the UR driver's base_link, the controller's `base` turned 180° about z; with `model: {}` the plan, `nominal` and `workspace` are in `base`: set `base_frame: {}` (the driver publishes both) and export or publish with `--base-frame {}` to get the answer in base_link",
+                    self.base_frame,
+                    model.name(),
+                    self.base_frame.strip_suffix("_link").unwrap_or("base"),
+                    self.base_frame
+                ),
+            )
+        })
+    }
+
     /// The names, frames and numbers checked (the first problem found).
     pub(super) fn problem(&self) -> Option<Problem> {
         graph_problem("robot.graph", &self.graph)
             .or_else(|| frame_problem("robot.base_frame", &self.base_frame))
+            .or_else(|| self.base_link_problem())
             .or_else(|| frame_problem("robot.flange_frame", &self.flange_frame))
             .or_else(|| name_problem("robot.joint_states_topic", &self.joint_states_topic))
             .or_else(|| name_problem("robot.tf_topic", &self.tf_topic))

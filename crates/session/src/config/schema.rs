@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::plan::GenerateSpec;
 use handeye_core::geometry::PoseYaml;
-use handeye_core::setup::Setup;
+use handeye_core::setup::{RobotFrames, Setup};
 use handeye_robot::MotionLimits;
 use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
 use handeye_solve::Method;
@@ -201,6 +201,10 @@ pub enum RobotConfig {
         /// The same for rotation, degrees (default 0.01).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         repeatability_deg: Option<f64>,
+        /// The frames the recorded poses are in (a bag's `--base` and `--flange`); default the
+        /// UR controller's `base` and `tool0`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        frames: Option<RobotFrames>,
     },
     /// An arm under a ROS 2 driver: `/tf`, `/joint_states`, FollowJointTrajectory (needs the
     /// `ros2` feature; `config::ros2`).
@@ -285,6 +289,19 @@ impl RobotConfig {
             .into_iter()
             .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
             .collect()
+    }
+
+    /// The frames the arm's flange poses are read in: a ROS 2 arm's TF frames, a recorded arm's
+    /// recorded ones, the UR controller's `base` and `tool0` otherwise.
+    pub fn frames(&self) -> RobotFrames {
+        match self {
+            RobotConfig::Ros2(r) => RobotFrames {
+                base: r.base_frame.clone(),
+                flange: r.flange_frame.clone(),
+            },
+            RobotConfig::Recorded { frames, .. } => frames.clone().unwrap_or_default(),
+            RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => RobotFrames::default(),
+        }
     }
 
     /// The arm model name, for kinematics checks; `None` for a ROS 2 arm of no model handeye

@@ -352,8 +352,17 @@ impl Validator<'_> {
             RobotConfig::Recorded {
                 repeatability_mm,
                 repeatability_deg,
+                frames,
                 ..
-            } => self.repeatability(*repeatability_mm, *repeatability_deg)?,
+            } => {
+                self.repeatability(*repeatability_mm, *repeatability_deg)?;
+                if let Some((key, problem)) = frames.as_ref().and_then(|f| {
+                    super::ros2::frame_problem("robot.frames.base", &f.base)
+                        .or_else(|| super::ros2::frame_problem("robot.frames.flange", &f.flange))
+                }) {
+                    return Err(self.inconsistent(&key, problem));
+                }
+            }
             RobotConfig::Ros2(r) => {
                 if let Some((key, problem)) = r.problem() {
                     return Err(self.inconsistent(&key, problem));

@@ -151,9 +151,10 @@ impl SolvedSession {
     }
 
     /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
-    /// with its verdict first.
-    pub fn result_file(&self, pairs: &[PosePair]) -> ResultFile {
-        let file = ResultFile::from_calibration(&self.calibration, pairs);
+    /// with its verdict first and the frames `config`'s arm reports its poses in.
+    pub fn result_file(&self, pairs: &[PosePair], config: &CellConfig) -> ResultFile {
+        let file = ResultFile::from_calibration(&self.calibration, pairs)
+            .with_robot_frames(config.robot.frames());
         match &self.verdict {
             Some(verdict) => file.with_verdict(verdict.clone()),
             None => file,
@@ -177,7 +178,7 @@ pub fn solve_folder_in(
 ) -> Result<SolvedSession, SessionError> {
     let (solved, dataset) = load_and_solve(folder, inputs, space)?;
     solved
-        .result_file(&dataset.pairs)
+        .result_file(&dataset.pairs, &inputs.config)
         .save(&folder.result_path())?;
     if let Some(summary) = solved.reprojection_summary() {
         handeye_core::yaml_file::write_yaml(&summary, &folder.root().join(REPROJECTION_FILE))?;

@@ -32,14 +32,16 @@ pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
 
 /// Held-out (leave-one-out) errors: each sample (at most [`MAX_HELD_OUT`], evenly spaced) is
 /// predicted by a solve of all the others with `options` (covariance and convention checks off
-/// in the folds), and the prediction compared with its measured `T_camera_target`. Samples in
-/// `outliers` are held out like the others but left out of the summary. Fails (with the reason)
-/// for fewer than [`MIN_HELD_OUT_SAMPLES`] samples or when a fold cannot be solved.
+/// in the folds, each started from `full`, the answer of all the samples: see
+/// [`solve::predict_left_out`]), and the prediction compared with its measured
+/// `T_camera_target`. Samples `full` flags as outliers are held out like the others but left
+/// out of the summary. Fails (with the reason) for fewer than [`MIN_HELD_OUT_SAMPLES`] samples
+/// or when a fold cannot be solved.
 pub fn held_out(
     setup: Setup,
     pairs: &[PosePair],
     options: &SolveOptions,
-    outliers: &[usize],
+    full: &Calibration,
 ) -> Result<HeldOut, String> {
     let n = pairs.len();
     if n < MIN_HELD_OUT_SAMPLES {
@@ -51,12 +53,13 @@ pub fn held_out(
     let mut errors = Vec::with_capacity(count);
     for k in 0..count {
         let left_out = k * n / count;
-        let predicted = solve::predict_left_out(setup, pairs, options, left_out).map_err(|e| {
-            format!(
+        let predicted =
+            solve::predict_left_out(setup, pairs, options, left_out, full).map_err(|e| {
+                format!(
                 "solving without sample {left_out} failed ({e}): the answer hangs on that one pose"
             )
-        })?;
-        if outliers.contains(&left_out) {
+            })?;
+        if full.outliers.contains(&left_out) {
             continue;
         }
         let measured: &Pose = &pairs[left_out].camera_from_target;
@@ -157,7 +160,7 @@ pub fn assess_modelled(
     accuracy: Accuracy,
     cell_model: Option<&CellModelSummary>,
 ) -> Verdict {
-    let held = held_out(calibration.setup, pairs, options, &calibration.outliers);
+    let held = held_out(calibration.setup, pairs, options, calibration);
     assess(&Evidence {
         calibration,
         pairs,

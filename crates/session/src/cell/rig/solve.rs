@@ -23,7 +23,7 @@ use crate::session::solve::{
 use crate::session::{PoseVisit, SessionError, SessionFolder};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
-use handeye_core::setup::{PosePair, Setup};
+use handeye_core::setup::{PosePair, RobotFrames, Setup};
 use handeye_core::yaml_file::write_yaml;
 use handeye_solve::cell_model::{fit_cell_model, CellModel};
 use handeye_solve::reprojection::Frame;
@@ -127,6 +127,10 @@ pub struct CameraResult {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RigResultFile {
+    /// The frames the robot poses were read in (absent in files written before it: the UR
+    /// controller's `base` and `tool0`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_frames: Option<RobotFrames>,
     /// Per camera, config order.
     pub cameras: Vec<CameraResult>,
     /// The boards (`T_base_target`, `T_flange_target`) from the joint solve.
@@ -322,7 +326,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
                 })
             })
             .collect();
-        held_out.push(verdict::held_out(setup, &judged, &options, &alone.outliers));
+        held_out.push(verdict::held_out(setup, &judged, &options, &alone));
         models.push(lens_used);
         for visit in kept {
             if let Some(camera_from_target) = corrected_pose(visit) {
@@ -687,6 +691,7 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
         })
         .collect();
     RigResultFile {
+        robot_frames: Some(rig.cameras[rig.planner].config.robot.frames()),
         cameras,
         boards,
         camera_to_camera,

@@ -203,7 +203,7 @@ fn good_enough(cell: &PreparedCell) -> StopCheck {
         {
             return false;
         }
-        match handeye_solve::verdict::held_out(setup, samples, &options, &c.outliers) {
+        match handeye_solve::verdict::held_out(setup, samples, &options, c) {
             Ok(h) => {
                 h.translation_rms_mm <= accuracy.translation_mm
                     && h.rotation_rms_deg <= accuracy.rotation_deg
