@@ -54,8 +54,9 @@ pub enum CameraModelError {
     },
     /// The YAML is neither a `camera_info` file nor a Kalibr camchain.
     #[error(
-        "intrinsics file {path}: not a ROS camera_info YAML (needs `camera_matrix`) nor a Kalibr \
-         camchain (needs `cam0`); found {found}"
+        "intrinsics file {path}: not a ROS camera_info YAML (needs `camera_matrix`), a \
+         sensor_msgs/CameraInfo message as `ros2 topic echo --once <topic>` prints it (needs \
+         `k`, `width`, `height`) nor a Kalibr camchain (needs `cam0`); found {found}"
     )]
     UnknownFormat {
         /// The file.
@@ -215,6 +216,9 @@ impl CameraModel {
 
     /// Parses intrinsics YAML text; `path` only names the source in errors.
     pub fn from_yaml_str(text: &str, path: &Path) -> Result<Self, CameraModelError> {
+        // `ros2 topic echo --once` ends its message with a `---` line: the end of the message,
+        // not a second YAML document.
+        let text = strip_echo_end(text);
         let value: Value =
             serde_yaml_ng::from_str(text).map_err(|problem| CameraModelError::NotYaml {
                 path: path.to_path_buf(),
@@ -257,6 +261,8 @@ impl CameraModel {
             reader.camera_info(&value)?
         } else if let Some(cam0) = value.get("cam0") {
             reader.kalibr(cam0)?
+        } else if value.get("k").is_some() && value.get("width").is_some() {
+            reader.camera_info_message(&value)?
         } else {
             let found = match &value {
                 Value::Mapping(_) if keys.is_empty() => "an empty mapping".to_string(),
@@ -333,6 +339,16 @@ const CAMERA_INFO_KEYS: [&str; 8] = [
     "rectification_matrix",
     "projection_matrix",
 ];
+
+/// `text` without the `---` line `ros2 topic echo` prints after a message (and what follows
+/// only blank lines); any other text as it is.
+fn strip_echo_end(text: &str) -> &str {
+    let trimmed = text.trim_end();
+    match trimmed.strip_suffix("---") {
+        Some(rest) if rest.is_empty() || rest.ends_with('\n') => rest,
+        _ => text,
+    }
+}
 
 /// Whether `key` is a top-level key of a Kalibr camchain (`cam0`, `cam1`, ...).
 fn is_kalibr_key(key: &str) -> bool {
@@ -542,6 +558,41 @@ impl Reader<'_> {
         })
     }
 
+    /// A `sensor_msgs/CameraInfo` message as `ros2 topic echo` prints it: `width`, `height`,
+    /// `k` (row-major 3x3), `d`, `distortion_model` (the topic a RealSense or any ROS camera
+    /// driver publishes its factory calibration on).
+    fn camera_info_message(&self, root: &Value) -> Result<CameraModel, CameraModelError> {
+        let width = self.size(self.get(root, "width", "width")?, "width")?;
+        let height = self.size(self.get(root, "height", "height")?, "height")?;
+        let k = self.numbers(self.get(root, "k", "k")?, "k", &[9])?;
+        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+            return Err(self.bad("k", "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", &root["k"]));
+        }
+        let coefficients = match root.get("d") {
+            None | Some(Value::Null) => Vec::new(),
+            Some(d) => self.numbers(d, "d", &[0, 4, 5, 8])?,
+        };
+        // A driver without a calibration publishes an empty model name and no coefficients.
+        let model_name = match root.get("distortion_model") {
+            None => "plumb_bob".to_string(),
+            Some(v) => match v.as_str() {
+                Some("") if coefficients.is_empty() => "plumb_bob".to_string(),
+                Some(name) => name.to_string(),
+                None => return Err(self.bad("distortion_model", "a string", v)),
+            },
+        };
+        let distortion = self.distortion(&model_name, &coefficients, "distortion_model")?;
+        Ok(CameraModel {
+            width,
+            height,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion,
+        })
+    }
+
     fn kalibr(&self, cam0: &Value) -> Result<CameraModel, CameraModelError> {
         if let Some(model) = cam0.get("camera_model") {
             if model.as_str() != Some("pinhole") {
@@ -644,6 +695,44 @@ mod tests {
             let loaded = CameraModel::load(&path).unwrap();
             assert_eq!(loaded, model);
         }
+    }
+
+    /// What `ros2 topic echo --once /camera/color/camera_info` prints for a RealSense D435's
+    /// colour stream (its factory calibration), `---` and all: read as the message says.
+    #[test]
+    fn a_camera_info_message_as_ros2_topic_echo_prints_it_loads() {
+        let echo = "header:\n  stamp:\n    sec: 1733300000\n    nanosec: 123456789\n  frame_id: camera_color_optical_frame\nheight: 720\nwidth: 1280\ndistortion_model: plumb_bob\nd:\n- 0.0\n- 0.0\n- 0.0\n- 0.0\n- 0.0\nk:\n- 909.7\n- 0.0\n- 644.2\n- 0.0\n- 908.9\n- 371.5\n- 0.0\n- 0.0\n- 1.0\nr:\n- 1.0\n- 0.0\n- 0.0\n- 0.0\n- 1.0\n- 0.0\n- 0.0\n- 0.0\n- 1.0\np:\n- 909.7\n- 0.0\n- 644.2\n- 0.0\n- 0.0\n- 908.9\n- 371.5\n- 0.0\n- 0.0\n- 0.0\n- 1.0\n- 0.0\nbinning_x: 0\nbinning_y: 0\nroi:\n  x_offset: 0\n  y_offset: 0\n  height: 0\n  width: 0\n  do_rectify: false\n---\n";
+        let model = CameraModel::from_yaml_str(echo, Path::new("echo.yaml")).unwrap();
+        assert_eq!((model.width, model.height), (1280, 720));
+        assert_eq!(
+            (model.fx, model.fy, model.cx, model.cy),
+            (909.7, 908.9, 644.2, 371.5)
+        );
+        assert_eq!(
+            model.distortion,
+            Distortion::RadTan {
+                k1: 0.0,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+                k3: 0.0
+            }
+        );
+        // A driver with no calibration: an empty model name and no coefficients.
+        let bare = echo
+            .replace("distortion_model: plumb_bob", "distortion_model: ''")
+            .replace("d:\n- 0.0\n- 0.0\n- 0.0\n- 0.0\n- 0.0\n", "d: []\n");
+        let model = CameraModel::from_yaml_str(&bare, Path::new("echo.yaml")).unwrap();
+        assert_eq!(model.distortion, Distortion::None);
+        // A skewed `k` is refused naming the key.
+        let skewed = echo.replacen("- 909.7\n- 0.0\n", "- 909.7\n- 2.0\n", 1);
+        let message = CameraModel::from_yaml_str(&skewed, Path::new("echo.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("echo.yaml") && message.contains("`k` must be [fx, 0, cx"),
+            "{message}"
+        );
     }
 
     #[test]
