@@ -304,7 +304,11 @@ fn import_bag(a: BagArgs) -> anyhow::Result<()> {
             outln!("report:  {}", report.display());
             outln!(
                 "{}",
-                super::run::next_step(verdict.as_ref(), &imported.folder.join("result.yaml"))
+                super::run::next_step(
+                    verdict.as_ref(),
+                    &imported.folder.join("result.yaml"),
+                    super::run::Stack::Ros2
+                )
             );
         }
         Err(e) => {

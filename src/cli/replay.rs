@@ -178,7 +178,11 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     outln!(
         "{}",
-        super::run::next_step(solved.verdict.as_ref(), &output)
+        super::run::next_step(
+            solved.verdict.as_ref(),
+            &output,
+            super::run::Stack::of(&prepared.config.robot)
+        )
     );
     Ok(())
 }

@@ -164,16 +164,30 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     if let Some(report) = &report {
         outln!("report:  {}", report.display());
     }
-    let next = next_step(result.verdict.as_ref(), &result_path);
+    let next = next_step(
+        result.verdict.as_ref(),
+        &result_path,
+        Stack::of(&done.cell.config.robot),
+    );
     outln!("{next}");
     Ok((report, next))
 }
 /// The last line after a run: the export command, or what the verdict says to do first.
-pub(super) fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> String {
-    let export = format!(
-        "handeye export {} --format ros2|urdf|ur|json|opencv",
-        shell_word(result)
-    );
+pub(super) fn next_step(
+    verdict: Option<&Verdict>,
+    result: &std::path::Path,
+    stack: Stack,
+) -> String {
+    let result = shell_word(result);
+    let export = match stack {
+        // A ROS 2 cell wants the transforms on /tf_static (or in its launch files).
+        Stack::Ros2 => format!(
+            "handeye publish {result} (latched on /tf_static), or handeye export {result} --format ros2-launch|ros2|urdf|json"
+        ),
+        Stack::Controller => {
+            format!("handeye export {result} --format ros2|urdf|ur|json|opencv")
+        }
+    };
     match verdict {
         Some(v) if v.level == Level::Redo => format!(
             "next: {} (the verdict is {}; do not export this result)",
@@ -186,6 +200,26 @@ pub(super) fn next_step(verdict: Option<&Verdict>, result: &std::path::Path) -> 
             v.level.word()
         ),
         _ => format!("next: {export}"),
+    }
+}
+
+/// Where the answer goes next: a ROS 2 graph (a ROS 2 arm, a bag), or anything else (the
+/// exports a UR controller, URDF or OpenCV read).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Stack {
+    /// The arm's poses came over ROS 2.
+    Ros2,
+    /// A UR controller over RTDE, a simulated or recorded arm.
+    Controller,
+}
+
+impl Stack {
+    /// The stack of a cell whose arm is `robot`.
+    pub(super) fn of(robot: &handeye_session::config::RobotConfig) -> Stack {
+        match robot {
+            handeye_session::config::RobotConfig::Ros2(_) => Stack::Ros2,
+            _ => Stack::Controller,
+        }
     }
 }
 

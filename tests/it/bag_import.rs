@@ -536,6 +536,14 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
         log.contains("report:") && log.lines().last().unwrap().starts_with("next: "),
         "{log}"
     );
+    // A bag is a ROS 2 recording: the next step puts the answer on its graph.
+    assert!(
+        log.lines()
+            .last()
+            .unwrap()
+            .starts_with("next: handeye publish "),
+        "{log}"
+    );
     // It is an ordinary session: the reprojection-space solve and the report work on it.
     let solve = handeye()
         .arg("solve")

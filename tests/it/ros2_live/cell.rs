@@ -261,6 +261,13 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
         let log = text(&out);
         assert!(out.status.success(), "{log}");
         assert_truth(&out_dir);
+        // A ROS 2 cell is told how the answer reaches its graph.
+        let next = String::from_utf8_lossy(&out.stdout);
+        let next = next.lines().last().unwrap_or_default();
+        assert!(
+            next.starts_with("next: handeye publish ") && next.contains("--format ros2-launch"),
+            "{log}"
+        );
         peer.assert_served(12);
         // The measured time from the arm's rest to the captured frame's stamp.
         let after: Vec<f64> = log
