@@ -104,7 +104,8 @@ pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
             outln!("{}", prepared.report);
             // An adaptive generated plan chooses among more views than its own: every one it
             // may visit is listed, with the number the run names it by.
-            if let Some(extra) = cell::run::extra_candidates(&prepared) {
+            let extra = cell::run::extra_candidates(&prepared);
+            if let Some(extra) = &extra {
                 let plan_poses = prepared.report.poses.len();
                 outln!(
                     "adaptive plan: the run visits at most {} of these {} candidates, the next-best one at each step; the {} poses above and these {} more (numbered from {plan_poses}):",
@@ -121,6 +122,35 @@ pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
                     "warning: {} is the shipped placeholder (camera_name: {name}), not this camera's calibration: `handeye run` refuses it; calibrate the camera and point `intrinsics:` at its camera_info file, or drop `intrinsics:` so the run estimates them",
                     file.display()
                 );
+            }
+            // An adaptive plan's poses (and its extra candidates) are candidates: the run skips
+            // the ones that fail, so the plan passes while any candidate does.
+            if prepared.config.adaptive() && !prepared.report.ok() {
+                let every: Vec<_> = prepared
+                    .report
+                    .poses
+                    .iter()
+                    .chain(extra.iter().flat_map(|e| e.poses.iter()))
+                    .collect();
+                let skipped: Vec<String> = every
+                    .iter()
+                    .filter(|p| !p.problems.is_empty())
+                    .map(|p| p.index.to_string())
+                    .collect();
+                let passing = every.len() - skipped.len();
+                if passing == 0 {
+                    bail!(
+                        "no candidate of the adaptive plan passes its checks (all {} fail)",
+                        every.len()
+                    );
+                }
+                outln!(
+                    "adaptive plan: {passing} of its {} candidates pass; the run skips the {} that fail (poses {})",
+                    every.len(),
+                    skipped.len(),
+                    skipped.join(", ")
+                );
+                return Ok(());
             }
             if !prepared.report.ok() {
                 bail!("the plan failed its checks");

@@ -649,3 +649,113 @@ fn plan_file_distances_in_millimetres_are_one_message() {
     let (code, stdout, stderr) = plan_check(&config);
     assert_eq!(code, Some(0), "{stdout}\n{stderr}");
 }
+
+/// #39 item 7: a lab's own board, a Kalibr 6x6 at tagSize 0.088 (2.2× the shipped one), with
+/// the shipped plan distances: a row that fails says from how far its view would hold the board
+/// (farther than it is), the report gives the nearest head-on distance, and an adaptive plan
+/// passes by skipping its failing candidates, listing them, as the run does. A view far beyond
+/// the arm says it is out of reach, with the figures, not "joint limits".
+#[test]
+fn plan_check_says_at_which_distance_a_big_board_fits_and_what_is_out_of_reach() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = std::fs::read_to_string(util::repo().join("configs/targets/aprilgrid-6x6.yaml"))
+        .unwrap()
+        .replace("tagSize: 0.04", "tagSize: 0.088");
+    let board_file = dir.path().join("kalibr-6x6-088.yaml");
+    std::fs::write(&board_file, board).unwrap();
+    let target = format!("target: {}", board_file.display());
+    let shipped_target = format!(
+        "target: {}",
+        util::repo()
+            .join("configs/targets/aprilgrid-6x6.yaml")
+            .display()
+    );
+    let check = |config: &Path| {
+        let out = handeye()
+            .args(["plan", "check", "--config"])
+            .arg(config)
+            .output()
+            .unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.success(), text)
+    };
+    let fixed = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "fixed.yaml",
+        &[
+            (&shipped_target, &target),
+            ("seed: 1}", "seed: 1}\n  adaptive: false"),
+        ],
+    );
+    let (ok, text) = check(&fixed);
+    assert!(!ok, "{text}");
+    let mut rows = 0;
+    for line in text
+        .lines()
+        .filter(|l| l.contains("board not fully inside"))
+    {
+        let fits = line
+            .split("this view fits from ")
+            .nth(1)
+            .unwrap_or_else(|| panic!("no distance: {line}"));
+        let from: f64 = fits.split(" m (now ").next().unwrap().parse().unwrap();
+        let now: f64 = fits
+            .split(" m (now ")
+            .nth(1)
+            .and_then(|r| r.split(" m)").next())
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(from > now && from < 3.0, "{line}");
+        rows += 1;
+    }
+    assert!(rows > 0, "{text}");
+    assert!(
+        text.contains("this lens sees the whole board, head-on and centred, from "),
+        "{text}"
+    );
+    // Adaptive (the default for a generated plan): with these distances no candidate holds the
+    // board and the plan is refused; from 0.75–1.0 m some do, and the plan passes naming the
+    // candidates the run will skip.
+    let adaptive = |name: &str, distance: &str| {
+        util::config_variant(
+            dir.path(),
+            "sim-cell.yaml",
+            name,
+            &[
+                (&shipped_target, &target),
+                ("distance: [0.55, 0.75]", distance),
+            ],
+        )
+    };
+    let (ok, text) = check(&adaptive("near.yaml", "distance: [0.55, 0.75]"));
+    assert!(
+        !ok && text.contains("no candidate of the adaptive plan passes"),
+        "{text}"
+    );
+    let (ok, text) = check(&adaptive("mixed.yaml", "distance: [0.75, 1.0]"));
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("adaptive plan: ") && l.contains("candidates pass"))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(ok && line.contains("the run skips the"), "{text}");
+    // Views 2.5–2.7 m from the board: beyond a UR10e's reach.
+    let far = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "far.yaml",
+        &[("distance: [0.55, 0.75]", "distance: [2.5, 2.7]")],
+    );
+    let (ok, text) = check(&far);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("out of the ur10e's reach: its wrist centre would be")
+            && !text.contains("no inverse-kinematics solution inside the joint limits"),
+        "{text}"
+    );
+}

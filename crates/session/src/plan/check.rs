@@ -206,8 +206,12 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
             problems.push(if image_margin_px == f64::NEG_INFINITY {
                 "board is behind the camera".to_string()
             } else {
+                let fits = match fitting_distance(ctx, &camera_from_target, &board_points, &centre) {
+                    Some(d) => format!("; this view fits from {d:.2} m (now {distance_m:.2} m)"),
+                    None => "; no distance fits: the view aims the board's centre too near the image border".into(),
+                };
                 format!(
-                    "board not fully inside the image with {:.0} px margin (closest corner {:.0} px from the border)",
+                    "{NOT_INSIDE} with {:.0} px margin (closest corner {:.0} px from the border){fits}",
                     ctx.margin_px, image_margin_px
                 )
             });
@@ -244,6 +248,22 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
     };
     if ctx.arm.is_none() {
         notes.push(NO_KINEMATICS_NOTE.into());
+    }
+    if poses
+        .iter()
+        .any(|p| p.problems.iter().any(|m| m.starts_with(NOT_INSIDE)))
+    {
+        let head_on = Pose::from_parts(
+            // The board's centre 1 m in front of the camera, facing it.
+            nalgebra::Translation3::new(-centre.x, -centre.y, 1.0 - centre.z),
+            nalgebra::UnitQuaternion::identity(),
+        );
+        if let Some(d) = fitting_distance(ctx, &head_on, &board_points, &centre) {
+            notes.push(format!(
+                "this lens sees the whole board, head-on and centred, from {d:.2} m with a {:.0} px margin: views nearer than that cannot hold it",
+                ctx.margin_px
+            ));
+        }
     }
     PlanReport {
         poses,
@@ -350,7 +370,10 @@ fn unreachable(ctx: &CheckContext, waypoint: &Waypoint, pose: &Pose, previous: &
         return count;
     }
     let Some((i, value)) = nearest.and_then(|q| outside_ranges(ctx.joint_limits, &q)) else {
-        return "unreachable: no inverse-kinematics solution inside the joint limits".into();
+        return match ctx.arm {
+            Some(arm) => beyond_reach(arm, pose),
+            None => "unreachable: no inverse-kinematics solution inside the joint limits".into(),
+        };
     };
     let how = match waypoint.joints() {
         Some(_) => "its joints put",
@@ -360,6 +383,68 @@ fn unreachable(ctx: &CheckContext, waypoint: &Waypoint, pose: &Pose, previous: &
         "outside the joint ranges: {how} {}",
         joint_outside(ctx.joint_limits, ctx.arm.is_some(), i, value)
     )
+}
+
+/// How a view's board-outside-the-image problem starts.
+const NOT_INSIDE: &str = "board not fully inside the image";
+
+/// The nearest distance (camera to board centre, m) at which the view `camera_from_target`
+/// holds the whole board with the margin `ctx` asks, moving the board along the line of sight
+/// through its centre (the view's direction and tilt kept), up to 10 m; `None` when no distance
+/// does (the centre itself too near the border).
+fn fitting_distance(
+    ctx: &CheckContext,
+    camera_from_target: &Pose,
+    points: &[Point3<f64>],
+    centre: &Point3<f64>,
+) -> Option<f64> {
+    let ray = (camera_from_target * centre).coords;
+    let distance = ray.norm();
+    if distance.is_nan() || distance <= 0.0 {
+        return None;
+    }
+    let at = |d: f64| {
+        let shift = ray * (d / distance - 1.0);
+        let moved = Pose::from_parts(
+            (camera_from_target.translation.vector + shift).into(),
+            camera_from_target.rotation,
+        );
+        board_margin(ctx.camera, &moved, points) >= ctx.margin_px
+    };
+    // The margin grows with distance once the board is in front: the first 1 cm step that fits.
+    let far = 10.0;
+    let mut d = 0.01;
+    while d <= far {
+        if at(d) {
+            return Some(d);
+        }
+        d += 0.01;
+    }
+    None
+}
+
+/// Why a flange pose has no inverse-kinematics solution at all (with the arm's own joint
+/// limits): its wrist centre (the flange origin `d6` back along the tool axis) beyond what the
+/// upper arm and forearm span from the shoulder — out of reach, with the figures — or within
+/// that span (too near the arm's own base axis, or a singular wrist).
+fn beyond_reach(arm: &UrModel, pose: &Pose) -> String {
+    let wrist = pose * Point3::new(0.0, 0.0, -arm.d[5]);
+    let shoulder = Point3::new(0.0, 0.0, arm.d[0]);
+    let distance = (wrist - shoulder).norm();
+    // The wrist centre moves on a sphere of up to |a2| + |a3| about the shoulder, offset
+    // sideways by the wrist's own link d4.
+    let span = (arm.a[1].abs() + arm.a[2].abs()).hypot(arm.d[3]);
+    if distance > span {
+        format!(
+            "out of the {}'s reach: its wrist centre would be {distance:.2} m from the shoulder, the arm spans {span:.2} m (bring the view nearer the base)",
+            arm.name
+        )
+    } else {
+        format!(
+            "no inverse-kinematics solution although within the {}'s reach ({distance:.2} m of {span:.2} m from the shoulder): too near the base axis or at a wrist singularity",
+            arm.name
+        )
+    }
 }
 
 /// Joints of another arm: a count other than the arm's (one range per joint in `limits`).
