@@ -168,6 +168,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         &solved,
         optics,
         Some(prepared.config.nominal),
+        prepared.config.robot.frames(),
     ) {
         Ok(report) => outln!("report:  {}", report.display()),
         // The result is saved; a report problem must not hide it.

@@ -63,6 +63,7 @@ pub(super) fn write(
         config.as_ref(),
         calibration,
         result.verdict.clone(),
+        result.robot_frames.clone().unwrap_or_default(),
     )?;
     for why in lacking {
         eprintln!("warning: {why}");

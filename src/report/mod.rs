@@ -111,6 +111,9 @@ pub struct ReportInput {
     pub corners: Vec<CornerResidual>,
     /// The frames' size, px (width, height), when known.
     pub image_size: Option<(u32, u32)>,
+    /// The frames the robot poses were read in: "use it" names the base and flange by them, as
+    /// `handeye export` does by default.
+    pub robot_frames: handeye_core::setup::RobotFrames,
 }
 
 /// Why the report could not be made.
@@ -210,7 +213,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     sections::plain_summary(&mut html, &input.answers[0], input.nominal.as_ref());
 
     // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
-    use_section(&mut html, &input.answers[0], verdict);
+    use_section(&mut html, &input.answers[0], verdict, &input.robot_frames);
 
     // 3. The evidence.
     html.push_str("<h2 class=\"part\">Evidence</h2>\n");

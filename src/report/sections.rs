@@ -12,6 +12,7 @@ use std::fmt::Write;
 use super::{escape, ReportAnswer};
 use handeye_core::geometry::yaml::PoseRecord;
 use handeye_core::geometry::{rotvec, to_matrix4_rows, Pose};
+use handeye_core::setup::RobotFrames;
 use handeye_formats::export::{export, ExportFormat, FrameIds};
 use handeye_solve::cell_model::{CellModelSummary, GivenFile};
 use handeye_solve::verdict::{Level, Verdict};
@@ -36,8 +37,18 @@ const USE_FORMS: [(ExportFormat, &str); 4] = [
 /// "Use it": the primary answer in every form of [`USE_FORMS`], each the exact text
 /// `handeye export` writes with the default frame ids, in a `<pre>` with a copy button. A REDO
 /// verdict puts a caution above them; an answer the exporter refuses shows why instead.
-pub(super) fn use_section(html: &mut String, answer: &ReportAnswer, verdict: Option<&Verdict>) {
-    let ids = FrameIds::default();
+pub(super) fn use_section(
+    html: &mut String,
+    answer: &ReportAnswer,
+    verdict: Option<&Verdict>,
+    robot: &RobotFrames,
+) {
+    let ids = FrameIds {
+        base: robot.base.clone(),
+        flange: robot.flange.clone(),
+        poses_in: robot.base.clone(),
+        ..FrameIds::default()
+    };
     let _ = writeln!(
         html,
         "<section id=\"use\"><h2>Use it</h2>\n<p>The transforms of <b>{}</b>, as <code>handeye export result.yaml --format …</code> writes them, with the frame ids <code>{}</code> (robot base), <code>{}</code> (flange), <code>{}</code> (camera optical frame: x right, y down, z forward) and <code>{}</code> (board). For other ids, or the UR ROS driver's <code>base_link</code> (<code>base</code> turned 180° about z), run <code>handeye export</code> with <code>--base-frame</code>, <code>--camera-frame</code>, …</p>",

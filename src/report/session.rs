@@ -14,7 +14,7 @@ use nalgebra::Point2;
 use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
-use handeye_core::setup::{CornerObservation, PosePair};
+use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_session::cell::run::CellRun;
 use handeye_session::dataset::Dataset;
 use handeye_session::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
@@ -183,6 +183,7 @@ pub fn from_session(
         nominal: None,
         corners,
         image_size: optics.map(|o| (o.camera.width, o.camera.height)),
+        robot_frames: RobotFrames::default(),
     })
 }
 
@@ -314,6 +315,7 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
             verdict: solved.verdict.clone(),
             arm_time: run.arm_time,
             nominal: Some(run.cell.config.nominal),
+            robot_frames: run.cell.config.robot.frames(),
             path: run.folder.root().join(REPORT_FILE),
         },
     )
@@ -334,6 +336,7 @@ pub fn write_replay_report(
     solved: &SolvedSession,
     optics: Optics<'_>,
     nominal: Option<handeye_core::setup::CellTransforms>,
+    robot_frames: RobotFrames,
 ) -> Result<std::path::PathBuf, ReportError> {
     write(
         folder,
@@ -344,6 +347,7 @@ pub fn write_replay_report(
             verdict: solved.verdict.clone(),
             arm_time: None,
             nominal,
+            robot_frames,
             path: path.to_path_buf(),
         },
     )
@@ -358,6 +362,7 @@ pub fn write_folder_report(
     config: Option<&handeye_session::config::CellConfig>,
     answer: Calibration,
     verdict: Option<Verdict>,
+    robot_frames: RobotFrames,
 ) -> Result<(std::path::PathBuf, Vec<String>), ReportError> {
     let session_error = |e: SessionError| ReportError::Session(Box::new(e));
     let evidence = Evidence {
@@ -398,6 +403,7 @@ pub fn write_folder_report(
             verdict,
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.nominal),
+            robot_frames,
             path: folder.root().join(REPORT_FILE),
         },
     )?;
@@ -410,6 +416,7 @@ struct Page<'a> {
     verdict: Option<Verdict>,
     arm_time: Option<handeye_session::cell::run::ArmTime>,
     nominal: Option<handeye_core::setup::CellTransforms>,
+    robot_frames: RobotFrames,
     path: std::path::PathBuf,
 }
 
@@ -426,11 +433,13 @@ fn write(
         verdict,
         arm_time,
         nominal,
+        robot_frames,
         path,
     } = page;
     let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
     input.nominal = nominal;
+    input.robot_frames = robot_frames;
     if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
         input.holdout = Some(super::HoldoutSummary {
             description: format!(

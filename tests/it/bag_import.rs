@@ -528,6 +528,12 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
             "{extra:?}: {off_mm} mm from the truth in base_link"
         );
     }
+    // The report's "use it" names the frames as the export does.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        page.contains("--frame-id base_link") && !page.contains("--frame-id base "),
+        "the report's ROS 2 snippet does not name base_link"
+    );
     // Like a run's, the import ends with its report and the next step; the importer's
     // placeholder nominal is not judged (it used to make every import CHECK "far from nominal").
     assert!(out.join("report.html").is_file(), "{log}");

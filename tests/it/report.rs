@@ -724,6 +724,7 @@ fn two_answers_are_shown_side_by_side() {
         nominal: None,
         corners: Vec::new(),
         image_size: None,
+        robot_frames: Default::default(),
     };
     let html = render_html(&input).unwrap();
     // Without a config's nominal values the plain summary says where the answer puts each frame.
