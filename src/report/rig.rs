@@ -12,6 +12,8 @@ use handeye_session::cell::rig::solve::NamedTransform;
 use handeye_session::cell::rig::RigResultFile;
 
 use super::{escape, ReportError};
+use handeye_formats::export::{ExportFormat, Exported, FrameIds};
+use handeye_solve::verdict::Level;
 
 fn transform_cells(t: &NamedTransform) -> String {
     let p = t.pose.translation.vector;
@@ -37,10 +39,11 @@ fn transform_cells(t: &NamedTransform) -> String {
 
 /// The page's HTML.
 pub fn render(result: &RigResultFile, folder: &Path) -> String {
-    let mut html = String::from(
+    let mut html = format!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
-         <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}\
-         .GOOD{color:#070}.CHECK{color:#a60}.REDO{color:#b00}</style></head><body>",
+         <style>{}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}\
+         .GOOD{{color:#070}}.CHECK{{color:#a60}}.REDO{{color:#b00}}</style></head><body>",
+        super::CSS
     );
     let _ = write!(
         html,
@@ -50,6 +53,7 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         escape(&result.verdict.reason),
         v = result.verdict.level.word(),
     );
+    use_section(&mut html, result);
     for f in handeye_session::cell::rig::read_failures(folder) {
         let _ = write!(
             html,
@@ -121,10 +125,76 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
     }
     let _ = write!(
         html,
-        "</table><p>Variance factor of the joint solve (χ²/dof): {:.3}</p></body></html>",
+        "</table><p>Variance factor of the joint solve (χ²/dof): {:.3}</p>",
         result.variance_factor
     );
+    let _ = write!(html, "<script>{}</script></body></html>", super::SCRIPT);
     html
+}
+
+/// The forms "use it" shows for several cameras (`ur` holds one TCP: not for a cell).
+const USE_FORMS: [(ExportFormat, &str); 4] = [
+    (
+        ExportFormat::Ros2Launch,
+        "ROS 2: a launch file with one static_transform_publisher per transform",
+    ),
+    (ExportFormat::Urdf, "URDF: fixed joints"),
+    (
+        ExportFormat::Json,
+        "JSON: every transform with its 4x4 matrix",
+    ),
+    (
+        ExportFormat::Opencv,
+        "OpenCV: FileStorage YAML (4x4 matrices)",
+    ),
+];
+
+/// "Use it": every camera's mount and the boards in the forms of [`USE_FORMS`], each the exact
+/// text `handeye export result.yaml --format …` writes (its default frame ids, the result's
+/// robot frames), in a `<pre>` with a copy button; a caution above them when the cell is REDO.
+fn use_section(html: &mut String, result: &RigResultFile) {
+    let robot = result.robot_frames.clone().unwrap_or_default();
+    let ids = FrameIds {
+        base: robot.base.clone(),
+        flange: robot.flange.clone(),
+        poses_in: robot.base,
+        ..FrameIds::default()
+    };
+    // The result as result.yaml holds it (written and read back), so the page shows the very
+    // text `handeye export result.yaml` prints, to the last digit.
+    let read_back: Option<RigResultFile> = serde_yaml_ng::to_string(result)
+        .ok()
+        .and_then(|text| serde_yaml_ng::from_str(&text).ok());
+    let exported = Exported::cameras(read_back.as_ref().unwrap_or(result), &ids);
+    let _ = write!(
+        html,
+        "<section id=\"use\"><h2>Use it</h2><p>Every camera's mount and the boards, as <code>handeye export result.yaml --format …</code> writes them: camera <code>&lt;name&gt;</code>'s optical frame is <code>{}_&lt;name&gt;</code>, the robot base <code>{}</code>, the flange <code>{}</code>. Camera-to-camera transforms are comments (published, they would give a camera a second parent).</p>",
+        escape(&ids.camera),
+        escape(&ids.base),
+        escape(&ids.flange)
+    );
+    if result.verdict.level == Level::Redo {
+        html.push_str("<p class=\"caution\">The cell's verdict is REDO: do not put these numbers on the cell; record again as the verdict says.</p>");
+    }
+    html.push_str("<div class=\"snippets\">");
+    for (format, heading) in USE_FORMS {
+        let name = format.name();
+        let body = match exported.check(&ids).and_then(|()| exported.text(format)) {
+            Ok(text) => format!(
+                "<div class=\"snippet-head\"><h4>{heading}</h4><button type=\"button\" class=\"copy\" data-target=\"export-{name}\">Copy</button></div><pre id=\"export-{name}\">{}</pre>",
+                escape(&text)
+            ),
+            Err(e) => format!(
+                "<div class=\"snippet-head\"><h4>{heading}</h4></div><p class=\"error\">not exported: {}</p>",
+                escape(&e.to_string())
+            ),
+        };
+        let _ = write!(
+            html,
+            "<div class=\"snippet\" data-format=\"{name}\">{body}</div>"
+        );
+    }
+    html.push_str("</div></section>");
 }
 
 /// Writes `<folder>/report.html` from the folder's `result.yaml` (`handeye report DIR`);

@@ -626,6 +626,21 @@ fn json_and_launch_exports_hold_every_camera_and_an_old_layout_says_replay() {
         launch.contains("'--child-frame-id', 'camera_optical_frame_right'"),
         "{launch}"
     );
+    // The report's "use it" holds the very text the export writes, with a copy button.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let pre = page
+        .split("<pre id=\"export-ros2-launch\">")
+        .nth(1)
+        .and_then(|rest| rest.split("</pre>").next())
+        .expect("the report shows the launch file");
+    let unescaped = pre
+        .replace("&#39;", "'")
+        .replace("&quot;", "\"")
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&");
+    assert_eq!(unescaped, launch);
+    assert!(page.contains("data-target=\"export-ros2-launch\">Copy</button>"));
     // The layout written before verdicts were typed: `verdict: GOOD` and a `reason` beside it.
     let old = out.parent().unwrap().join("old-layout-result.yaml");
     let mut value: serde_yaml_ng::Value =
