@@ -6,7 +6,7 @@
 //! determinant +1 within 1e-6, a translation no robot cell exceeds) and the same messages, with
 //! the array's name and index as the path (`T_base_flange[3].matrix: not a rotation matrix ...`).
 
-use handeye_core::geometry::yaml::PoseProblem;
+use handeye_core::geometry::yaml::{PoseProblem, MATRIX_ORTHONORMALITY_TOLERANCE};
 use handeye_core::geometry::{to_matrix4_rows, Pose, PoseYaml};
 use nalgebra::Matrix3;
 use numpy::ndarray::{Array2, Array3, ArrayView2, Axis, Ix2};
@@ -22,12 +22,12 @@ use crate::errors;
 /// Largest accepted deviation of a homogeneous matrix's last row from `[0, 0, 0, 1]`.
 const LAST_ROW_TOLERANCE: f64 = 1e-9;
 
-/// A pose from one 4x4 homogeneous matrix `m` whose translation is in units of `scale` metres
-/// (1 for metres, 1e-3 for millimetres), named `path` in errors.
+/// A pose from one 4x4 homogeneous matrix `m` whose translation is in `units`, named `path` in
+/// errors.
 pub(crate) fn pose_from_matrix(
     m: ArrayView2<'_, f64>,
     path: &str,
-    scale: f64,
+    units: Units,
 ) -> Result<Pose, String> {
     let last = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
     if last
@@ -41,9 +41,9 @@ pub(crate) fn pose_from_matrix(
     }
     let yaml = PoseYaml {
         translation: Some(vec![
-            m[(0, 3)] * scale,
-            m[(1, 3)] * scale,
-            m[(2, 3)] * scale,
+            units.to_metres(m[(0, 3)]),
+            units.to_metres(m[(1, 3)]),
+            units.to_metres(m[(2, 3)]),
         ]),
         matrix: Some(
             (0..3)
@@ -61,15 +61,15 @@ pub(crate) fn pose_from_matrix(
 pub(crate) struct Units {
     /// As the caller spells it: `"m"` or `"mm"`.
     pub(crate) name: &'static str,
-    /// Metres per unit.
-    pub(crate) metres: f64,
+    /// Units per metre (1 or 1000: exact, so `x * 1000 / 1000` is `x` wherever float64 can).
+    pub(crate) per_metre: f64,
 }
 
 impl Units {
     /// Metres.
     pub(crate) const METRES: Units = Units {
         name: "m",
-        metres: 1.0,
+        per_metre: 1.0,
     };
 
     /// `"m"` or `"mm"`, else `InputError` naming the argument.
@@ -78,7 +78,7 @@ impl Units {
             "m" => Ok(Units::METRES),
             "mm" => Ok(Units {
                 name: "mm",
-                metres: 1e-3,
+                per_metre: 1000.0,
             }),
             other => Err(errors::input(
                 py,
@@ -89,7 +89,12 @@ impl Units {
 
     /// A translation in these units from one in metres.
     pub(crate) fn of_metres(self, metres: f64) -> f64 {
-        metres / self.metres
+        metres * self.per_metre
+    }
+
+    /// A translation in metres from one in these units.
+    pub(crate) fn to_metres(self, value: f64) -> f64 {
+        value / self.per_metre
     }
 }
 
@@ -195,7 +200,7 @@ pub(crate) fn poses_from_any(
             let m = m
                 .into_dimensionality::<Ix2>()
                 .map_err(|e| errors::input(py, e.to_string()))?;
-            pose_from_matrix(m, &format!("{name}[{i}]"), units.metres)
+            pose_from_matrix(m, &format!("{name}[{i}]"), units)
                 .map_err(|e| errors::input(py, with_units_hint(e, units)))
         })
         .collect()
@@ -236,15 +241,15 @@ struct Items<'py> {
 
 impl<'py> Items<'py> {
     fn new(py: Python<'py>, value: &Bound<'py, PyAny>, name: &str) -> PyResult<Items<'py>> {
-        let is_array = value.hasattr("__array_interface__").unwrap_or(false);
-        if is_array {
-            if let Ok(array) = f64_array(py, value)? {
-                if array.shape().len() >= 2 {
-                    return Ok(Items {
-                        stacked: Some(array),
-                        list: Vec::new(),
-                    });
-                }
+        // One array for the whole argument when numpy makes one (a stacked array, or a list of
+        // arrays of one shape: one call into numpy instead of one per pose); else item by item
+        // (a list of mixed shapes, which OpenCV takes too).
+        if let Ok(array) = f64_array(py, value)? {
+            if array.shape().len() >= 2 {
+                return Ok(Items {
+                    stacked: Some(array),
+                    list: Vec::new(),
+                });
             }
         }
         let iter = value.try_iter().map_err(|_| {
@@ -294,11 +299,17 @@ fn type_name(value: &Bound<'_, PyAny>) -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
-/// The nearest rotation (SVD) of a matrix within [`PROJECT_TOLERANCE`] of one, else `None`.
+/// The nearest rotation (SVD) of a matrix within [`PROJECT_TOLERANCE`] of one, else `None`; a
+/// matrix the pose parser takes as it is (within [`MATRIX_ORTHONORMALITY_TOLERANCE`]) is
+/// returned as it is, so the same numbers give the same answer as `calibrate`'s 4x4 matrices.
 fn nearest_rotation(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     let off = (m.transpose() * m - Matrix3::identity()).norm();
-    if off > PROJECT_TOLERANCE || (m.determinant() - 1.0).abs() > PROJECT_TOLERANCE {
+    let det_off = (m.determinant() - 1.0).abs();
+    if off > PROJECT_TOLERANCE || det_off > PROJECT_TOLERANCE {
         return None;
+    }
+    if off <= MATRIX_ORTHONORMALITY_TOLERANCE && det_off <= MATRIX_ORTHONORMALITY_TOLERANCE {
+        return Some(*m);
     }
     let svd = m.svd(true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
@@ -326,7 +337,7 @@ fn pose_from_rt(
     }
     let (r, r_shape) = rotation;
     let mut yaml = PoseYaml {
-        translation: Some(t.iter().map(|v| v * units.metres).collect()),
+        translation: Some(t.iter().map(|&v| units.to_metres(v)).collect()),
         ..PoseYaml::default()
     };
     if r_shape == [3, 3] {

@@ -203,8 +203,20 @@ def test_every_opencv_method_drops_and_names_two_outliers(method, outliers, cv2)
 # --- units ----------------------------------------------------------------------------------
 
 
+def on_a_binary_grid(T):
+    """`T` with its translations rounded to 2^-30 m (~1 nm): numbers of at most 31 significant
+    bits, so `1000 * t` is exact in float64 and the millimetre data are exactly the metre data
+    ×1000. (With arbitrary doubles `1000 * t / 1000` can differ from `t` by an ulp, and the
+    iterative solver's answer moves with such a difference by ~1e-10 of itself: the
+    comparison would measure the solver's convergence, not the handling of units.)"""
+    out = np.array(T, dtype=float)
+    out[..., :3, 3] = np.round(out[..., :3, 3] * 2.0**30) / 2.0**30
+    return out
+
+
 def test_units_mm_answers_the_metre_answer_times_1000():
     flange, camera, _, _ = cell(43, n=20)
+    flange, camera = on_a_binary_grid(flange), on_a_binary_grid(camera)
     mm = lambda T: np.concatenate([T[:, :3, :3], 1000 * T[:, :3, 3:]], axis=2)  # noqa: E731
     flange_mm = np.array([np.vstack([m, [0, 0, 0, 1]]) for m in mm(flange)])
     camera_mm = np.array([np.vstack([m, [0, 0, 0, 1]]) for m in mm(camera)])
@@ -228,6 +240,7 @@ def test_units_mm_through_the_opencv_shaped_calls_as_opencv_answers_in_mm(cv2):
     """With every input in mm OpenCV answers in mm (the same answer ×1000); handeye does the
     same with units="mm", and without it refuses with a message that names units="mm"."""
     flange, camera, _, _ = cell(44, n=20)
+    flange, camera = on_a_binary_grid(flange), on_a_binary_grid(camera)
     R_g, t_g, R_t, t_t = opencv_inputs(flange, camera)
     t_g_mm, t_t_mm = [1000 * t for t in t_g], [1000 * t for t in t_t]
     R_cv, t_cv = cv2.calibrateHandEye(R_g, t_g, R_t, t_t, method=cv2.CALIB_HAND_EYE_TSAI)
@@ -239,7 +252,7 @@ def test_units_mm_through_the_opencv_shaped_calls_as_opencv_answers_in_mm(cv2):
     with pytest.raises(handeye.InputError, match=r'millimetres given as metres.*units="mm"'):
         handeye.calibrateHandEye(R_g, t_g_mm, R_t, t_t_mm)
     # Robot-world: both translations in mm.
-    base2gripper = [inverse(T) for T in flange]
+    base2gripper = [on_a_binary_grid(inverse(T)) for T in flange]
     R_b = [T[:3, :3] for T in base2gripper]
     t_b = [T[:3, 3:4] for T in base2gripper]
     out = handeye.calibrateRobotWorldHandEye(R_t, t_t, R_b, t_b, verdict=False)
