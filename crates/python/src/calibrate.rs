@@ -10,12 +10,13 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{readable, Pose};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_session::config::validate;
 use handeye_session::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
-use handeye_solve::{Method, NoiseModel, RobustLoss, SolveOptions};
+use handeye_solve::{Method, NoiseModel, RobustLoss, SolveError, SolveOptions};
 use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -290,7 +291,19 @@ pub(crate) fn solve_pairs(
             units,
         }),
         Err(error) => {
-            let err = errors::from_error(py, &error);
+            let err = match &error {
+                // The check's advice names metres: the translations it read were converted.
+                SolveError::ImplausibleUnits { .. } if units != Units::METRES => errors::input(
+                    py,
+                    format!(
+                        "{} (read with units=\"{}\", converted to metres: give every translation, robot and camera, in {})",
+                        error_chain(&error),
+                        units.name,
+                        units.name
+                    ),
+                ),
+                _ => errors::from_error(py, &error),
+            };
             let refused = Verdict::refused(&error, pairs.len(), accuracy);
             err.value(py)
                 .setattr("verdict", Py::new(py, VerdictPy { inner: refused })?)?;

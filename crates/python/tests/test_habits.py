@@ -261,14 +261,22 @@ def test_units_mm_through_the_opencv_shaped_calls_as_opencv_answers_in_mm(cv2):
         assert np.max(np.abs(out_mm[i] - 1000 * out[i])) < 1e-9
 
 
-def test_mixed_units_are_still_refused_with_units_mm():
+def test_mixed_units_are_still_refused_with_units_mm(cv2):
     """units="mm" with the robot in mm but the board poses still in metres: the solver's units
-    check names the mismatch."""
-    flange, camera, _, _ = cell(45, n=20)
+    check names the mismatch, where OpenCV answers it silently, wrong in either unit."""
+    flange, camera, truth, _ = cell(45, n=20)
     flange_mm = flange.copy()
     flange_mm[:, :3, 3] *= 1000
-    with pytest.raises(handeye.InputError, match=r"not in metres|times too large|unit"):
+    R_g, t_g, R_t, t_t = opencv_inputs(flange_mm, camera)
+    R_cv, t_cv = cv2.calibrateHandEye(R_g, t_g, R_t, t_t)
+    as_metres = errors(as_matrix(R_cv, t_cv), truth)[1]
+    as_mm = errors(as_matrix(R_cv, t_cv / 1000), truth)[1]
+    assert min(as_metres, as_mm) > 10.0, (as_metres, as_mm)
+    message = r"translations are not in metres: robot and camera translations disagree in scale.*\(read with units=\"mm\", converted to metres: give every translation, robot and camera, in mm\)"
+    with pytest.raises(handeye.InputError, match=message):
         handeye.calibrate(flange_mm, camera, units="mm")
+    with pytest.raises(handeye.InputError, match=message):
+        handeye.calibrateHandEye(R_g, t_g, R_t, t_t, units="mm")
     with pytest.raises(handeye.InputError, match=r"units `cm`: expected `m`"):
         handeye.calibrate(flange, camera, units="cm")
 
