@@ -100,8 +100,11 @@ def test_ctrl_c_while_the_cell_runs_stops_it_cleanly(tmp_path):
     with pytest.raises(KeyboardInterrupt) as error:
         handeye.run(CONFIG, out=out, progress=progress)
     assert error.value.session_folder == out
+    # Stopped at the next event: a move (the samples are the ones seen) or the next record's
+    # callback, interrupted before it counted the sample already written.
     recorded = len(handeye.Session(out).samples["T_base_flange"])
-    assert recorded >= 2 and recorded == len(accepted), (recorded, accepted)
+    assert recorded >= 2 and len(accepted) <= recorded <= len(accepted) + 1, (recorded, accepted)
+    assert handeye.Session(out).result is None
 
 
 def test_run_refuses_what_it_cannot_do(tmp_path):
