@@ -114,3 +114,28 @@ def test_run_refuses_what_it_cannot_do(tmp_path):
         handeye.run(CONFIG, out=tmp_path / "x", resume=tmp_path / "y")
     with pytest.raises(handeye.HandeyeError, match=r"running the cell: preparing the cell"):
         handeye.run(tmp_path / "missing.yaml", out=tmp_path / "x")
+
+
+def strict_config(tmp_path):
+    """configs/sim-cell.yaml asking for 0.001 mm and 0.0001°: a verdict that cannot be GOOD."""
+    text = CONFIG.read_text()
+    for key in ("target: ", "intrinsics: "):
+        text = text.replace(f"\n{key}", f"\n{key}{CONFIG.parent}/", 1)
+    path = tmp_path / "strict-cell.yaml"
+    path.write_text(text + "\nverdict: {accuracy_mm: 0.001, accuracy_deg: 0.0001}\n")
+    return path
+
+
+def test_a_session_solve_and_a_run_whose_verdict_is_not_good_warn_once(sim_session, tmp_path):
+    config = strict_config(tmp_path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cal = handeye.Session(sim_session).solve(space="pose", config=config)
+        session = handeye.run(config, out=tmp_path / "session")
+    found = [w for w in caught if issubclass(w.category, handeye.CalibrationWarning)]
+    assert len(found) == 2, [str(w.message) for w in caught]
+    for warning, verdict in zip(found, [cal.verdict, session.verdict]):
+        assert verdict.level in ("CHECK", "REDO")
+        assert warning.message.verdict.reason == verdict.reason and verdict.next_action in str(warning.message)
+        assert "0.001 mm" in verdict.reason, verdict.reason
+        assert warning.filename == __file__, warning.filename
