@@ -10,17 +10,18 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{readable, Pose};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_session::config::validate;
 use handeye_session::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
-use handeye_solve::{Method, NoiseModel, RobustLoss, SolveOptions};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArrayDyn};
+use handeye_solve::{Method, NoiseModel, RobustLoss, SolveError, SolveOptions};
+use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::convert::{pose_to_py, poses_from_array, poses_to_py, to_py};
+use crate::convert::{pose_to_py_in, poses_from_any, poses_from_rt, poses_to_py_in, to_py, Units};
 use crate::errors;
 
 /// The setup named by `name` (`eye_in_hand` or `eye_to_hand`).
@@ -123,12 +124,13 @@ pub(crate) fn accuracy(py: Python<'_>, accuracy_mm: f64, accuracy_deg: f64) -> P
     rotation_sigma_deg = None, translation_sigma_mm = None, robust = "none", robust_scale = 3.0,
     keep_outliers = false, warm_start = false, ids = None, weights = None,
     accuracy_mm = verdict::DEFAULT_ACCURACY_MM, accuracy_deg = verdict::DEFAULT_ACCURACY_DEG,
+    units = "m",
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calibrate(
     py: Python<'_>,
-    base_from_flange: PyReadonlyArrayDyn<'_, f64>,
-    camera_from_target: PyReadonlyArrayDyn<'_, f64>,
+    base_from_flange: &Bound<'_, PyAny>,
+    camera_from_target: &Bound<'_, PyAny>,
     setup: &str,
     method: &str,
     rotation_sigma_deg: Option<f64>,
@@ -141,6 +143,7 @@ pub(crate) fn calibrate(
     weights: Option<Vec<f64>>,
     accuracy_mm: f64,
     accuracy_deg: f64,
+    units: &str,
 ) -> PyResult<Calibration> {
     let setup = parse_setup(py, setup)?;
     let options = options(
@@ -154,8 +157,9 @@ pub(crate) fn calibrate(
         warm_start,
     )?;
     let accuracy = accuracy(py, accuracy_mm, accuracy_deg)?;
-    let flange = poses_from_array(py, &base_from_flange, "T_base_flange")?;
-    let camera = poses_from_array(py, &camera_from_target, "T_camera_target")?;
+    let units = Units::parse(py, units)?;
+    let flange = poses_from_any(py, base_from_flange, "T_base_flange", units)?;
+    let camera = poses_from_any(py, camera_from_target, "T_camera_target", units)?;
     if flange.len() != camera.len() {
         return Err(errors::input(
             py,
@@ -189,7 +193,80 @@ pub(crate) fn calibrate(
             id: ids.as_ref().map(|ids| ids[i].clone()),
         })
         .collect();
-    solve_pairs(py, setup, pairs, options, accuracy)
+    solve_pairs(py, setup, pairs, options, accuracy, units)
+}
+
+/// The solve of the OpenCV-shaped calls (`calibrateHandEye`, `calibrateRobotWorldHandEye`):
+/// lists of rotations and translations (`names` in errors: robot side first), every check in
+/// Rust, then the solve of [`calibrate`] with its defaults and `method`. With `invert_flange`
+/// the robot side is `T_flange_base` (OpenCV's `base2gripper`) and is inverted.
+#[pyfunction]
+#[pyo3(signature = (
+    robot_rotations, robot_translations, camera_rotations, camera_translations, names, *,
+    method = "refined", units = "m", invert_flange = false,
+))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn calibrate_rt(
+    py: Python<'_>,
+    robot_rotations: &Bound<'_, PyAny>,
+    robot_translations: &Bound<'_, PyAny>,
+    camera_rotations: &Bound<'_, PyAny>,
+    camera_translations: &Bound<'_, PyAny>,
+    names: [String; 4],
+    method: &str,
+    units: &str,
+    invert_flange: bool,
+) -> PyResult<Calibration> {
+    let options = options(py, method, None, None, "none", 3.0, false, false)?;
+    let units = Units::parse(py, units)?;
+    let robot = poses_from_rt(
+        py,
+        robot_rotations,
+        robot_translations,
+        (&names[0], &names[1]),
+        units,
+    )?;
+    let camera = poses_from_rt(
+        py,
+        camera_rotations,
+        camera_translations,
+        (&names[2], &names[3]),
+        units,
+    )?;
+    if robot.len() != camera.len() {
+        return Err(errors::input(
+            py,
+            format!(
+                "{} has {} poses but {} has {}: give one of each per sample",
+                names[0],
+                robot.len(),
+                names[2],
+                camera.len()
+            ),
+        ));
+    }
+    let pairs: Vec<PosePair> = robot
+        .into_iter()
+        .zip(camera)
+        .map(|(robot, camera_from_target)| PosePair {
+            base_from_flange: if invert_flange {
+                robot.inverse()
+            } else {
+                robot
+            },
+            camera_from_target,
+            weight: 1.0,
+            id: None,
+        })
+        .collect();
+    solve_pairs(
+        py,
+        Setup::EyeInHand,
+        pairs,
+        options,
+        Accuracy::default(),
+        units,
+    )
 }
 
 /// Solves `pairs` (already checked), raising `InputError` (with the REDO verdict as its
@@ -200,6 +277,7 @@ pub(crate) fn solve_pairs(
     pairs: Vec<PosePair>,
     options: SolveOptions,
     accuracy: Accuracy,
+    units: Units,
 ) -> PyResult<Calibration> {
     let result = py.detach(|| handeye_solve::solve(setup, &pairs, &options));
     match result {
@@ -210,9 +288,22 @@ pub(crate) fn solve_pairs(
             accuracy,
             verdict: OnceLock::new(),
             reprojection: None,
+            units,
         }),
         Err(error) => {
-            let err = errors::from_error(py, &error);
+            let err = match &error {
+                // The check's advice names metres: the translations it read were converted.
+                SolveError::ImplausibleUnits { .. } if units != Units::METRES => errors::input(
+                    py,
+                    format!(
+                        "{} (read with units=\"{}\", converted to metres: give every translation, robot and camera, in {})",
+                        error_chain(&error),
+                        units.name,
+                        units.name
+                    ),
+                ),
+                _ => errors::from_error(py, &error),
+            };
             let refused = Verdict::refused(&error, pairs.len(), accuracy);
             err.value(py)
                 .setattr("verdict", Py::new(py, VerdictPy { inner: refused })?)?;
@@ -234,6 +325,8 @@ pub(crate) struct Calibration {
     pub(crate) verdict: OnceLock<Option<Verdict>>,
     /// A session's reprojection-space summary (`reprojection.yaml`'s content), when it has one.
     pub(crate) reprojection: Option<serde_json::Value>,
+    /// The unit of the translations it was given and answers in (files are always metres).
+    pub(crate) units: Units,
 }
 
 impl Calibration {
@@ -252,6 +345,7 @@ impl Calibration {
             accuracy,
             verdict: OnceLock::from(verdict),
             reprojection,
+            units: Units::METRES,
         }
     }
 
@@ -287,7 +381,7 @@ impl Calibration {
                 self.inner.setup
             )));
         };
-        Ok(pose_to_py(py, pose).unbind())
+        Ok(pose_to_py_in(py, pose, self.units).unbind())
     }
 }
 
@@ -299,24 +393,34 @@ impl Calibration {
         self.inner.setup.name()
     }
 
-    /// The camera mount, 4x4 (m): `T_flange_camera` (eye-in-hand) or `T_base_camera`.
+    /// The unit of the translations of its transforms, `"m"` or `"mm"` (the `units` it was
+    /// given; sigmas and residuals say theirs in their names).
+    #[getter]
+    fn units(&self) -> &'static str {
+        self.units.name
+    }
+
+    /// The camera mount, 4x4 (translation in `units`): `T_flange_camera` (eye-in-hand) or
+    /// `T_base_camera`.
     #[getter]
     fn camera_mount<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        pose_to_py(py, &self.inner.camera_mount)
+        pose_to_py_in(py, &self.inner.camera_mount, self.units)
     }
 
-    /// The target mount, 4x4 (m): `T_base_target` (eye-in-hand) or `T_flange_target`.
+    /// The target mount, 4x4 (translation in `units`): `T_base_target` (eye-in-hand) or
+    /// `T_flange_target`.
     #[getter]
     fn target_mount<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        pose_to_py(py, &self.inner.target_mount)
+        pose_to_py_in(py, &self.inner.target_mount, self.units)
     }
 
-    /// Both transforms by frame name, camera mount first: `{"T_flange_camera": 4x4, ...}`.
+    /// Both transforms by frame name, camera mount first: `{"T_flange_camera": 4x4, ...}`
+    /// (translations in `units`).
     #[getter]
     fn transforms<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let dict = PyDict::new(py);
         for (name, pose) in self.inner.unknowns() {
-            dict.set_item(name, pose_to_py(py, &pose))?;
+            dict.set_item(name, pose_to_py_in(py, &pose, self.units))?;
         }
         Ok(dict)
     }
@@ -359,13 +463,24 @@ impl Calibration {
         Ok(Some(dict))
     }
 
-    /// 12x12 covariance (camera mount [rotation rad, translation m], target mount [same]), or
-    /// None.
+    /// 12x12 covariance (camera mount [rotation rad, translation in `units`], target mount
+    /// [same]), or None.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        // Rows 3..6 and 9..12 are translations: scaled by the unit once per index.
+        let scale = |i: usize| {
+            if (3..6).contains(&(i % 6)) {
+                self.units.of_metres(1.0)
+            } else {
+                1.0
+            }
+        };
         self.inner.uncertainty.as_ref().map(|u| {
             let c = &u.covariance;
-            numpy::ndarray::Array2::from_shape_fn((12, 12), |(r, k)| c[(r, k)]).into_pyarray(py)
+            numpy::ndarray::Array2::from_shape_fn((12, 12), |(r, k)| {
+                c[(r, k)] * scale(r) * scale(k)
+            })
+            .into_pyarray(py)
         })
     }
 
@@ -443,18 +558,19 @@ impl Calibration {
             .transpose()
     }
 
-    /// The `T_camera_target` this calibration predicts for each `T_base_flange` ((N, 4, 4), m).
+    /// The `T_camera_target` this calibration predicts for each `T_base_flange` ((N, 4, 4),
+    /// translations in `units`, as given and answered).
     fn predict<'py>(
         &self,
         py: Python<'py>,
-        base_from_flange: PyReadonlyArrayDyn<'_, f64>,
+        base_from_flange: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        let flange = poses_from_array(py, &base_from_flange, "T_base_flange")?;
+        let flange = poses_from_any(py, base_from_flange, "T_base_flange", self.units)?;
         let predicted: Vec<Pose> = flange
             .iter()
             .map(|p| self.inner.predict_camera_from_target(p))
             .collect();
-        Ok(poses_to_py(py, &predicted))
+        Ok(poses_to_py_in(py, &predicted, self.units))
     }
 
     /// The terminal summary `handeye solve` prints.
@@ -462,7 +578,8 @@ impl Calibration {
         self.inner.summary()
     }
 
-    /// Writes the result file `handeye solve -o` writes (YAML, atomically), verdict first.
+    /// Writes the result file `handeye solve -o` writes (YAML, atomically, in metres whatever
+    /// the `units`), verdict first.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let mut file = ResultFile::from_calibration(&self.inner, &self.pairs);
         if let Some(verdict) = self.verdict_inner(py) {

@@ -70,3 +70,19 @@ pub(crate) fn with_context(py: Python<'_>, context: &str, error: &(dyn Error + '
     };
     raise(py, name, format!("{context}: {}", error_chain(error)))
 }
+
+/// `handeye.CalibrationWarning` (through `handeye._errors.warn_verdict`, the one place that
+/// says it) when `verdict` is not GOOD, pointing at the Python line that called into Rust. A
+/// warnings filter set to "error" makes it an exception, returned here.
+pub(crate) fn warn_verdict(
+    py: Python<'_>,
+    verdict: Option<Py<crate::calibrate::VerdictPy>>,
+) -> PyResult<()> {
+    if let Some(verdict) = verdict {
+        // Stack level 1 above `warn_verdict`'s own frame: a Rust function has no frame, so
+        // that is the caller's line.
+        py.import("handeye._errors")?
+            .call_method1("warn_verdict", (verdict, 1))?;
+    }
+    Ok(())
+}

@@ -14,6 +14,7 @@ mod calibrate;
 mod convert;
 mod detect;
 mod errors;
+mod run;
 mod session;
 
 use pyo3::prelude::*;
@@ -22,6 +23,8 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _handeye(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate::calibrate_rt, m)?)?;
+    m.add_function(wrap_pyfunction!(run::run, m)?)?;
     m.add_function(wrap_pyfunction!(detect::detect, m)?)?;
     m.add_function(wrap_pyfunction!(session::read_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(session::read_result_py, m)?)?;

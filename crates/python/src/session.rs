@@ -88,7 +88,7 @@ impl Session {
 impl Session {
     /// Opens the session folder at `path` (it must hold `session.yaml`).
     #[new]
-    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
+    pub(crate) fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
         let folder = SessionFolder::open(&path).map_err(|e| errors::from_error(py, &e))?;
         let manifest = folder
             .read_manifest()
@@ -162,7 +162,8 @@ impl Session {
     }
 
     /// Solves the session as `handeye solve DIR --space SPACE [--config CONFIG]` does, and
-    /// returns the answer (with its verdict; the reprojection summary in `.reprojection`).
+    /// returns the answer (with its verdict; the reprojection summary in `.reprojection`);
+    /// warns with `CalibrationWarning` when the verdict is not GOOD.
     /// Writes no result file (`Calibration.save` does).
     #[pyo3(signature = (space = None, config = None))]
     fn solve(
@@ -193,12 +194,14 @@ impl Session {
         let reprojection = solved
             .reprojection_summary()
             .map(|s| serde_json::to_value(s).unwrap_or(serde_json::Value::Null));
-        Ok(Calibration::with_verdict(
+        let calibration = Calibration::with_verdict(
             solved.calibration,
             dataset.pairs,
             solved.verdict,
             reprojection,
-        ))
+        );
+        errors::warn_verdict(py, calibration.verdict(py)?)?;
+        Ok(calibration)
     }
 
     fn __repr__(&self) -> String {

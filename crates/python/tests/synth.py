@@ -72,7 +72,10 @@ def cell(seed, n=20, setup="eye_in_hand", rotation_sigma_deg=0.2, translation_si
 def errors(estimate, truth):
     """`(rotation error in degrees, translation error in mm)` of a 4x4 estimate."""
     R = estimate[:3, :3] @ truth[:3, :3].T
-    angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+    # atan2 of the sine and cosine of the angle: exact near 0, where arccos of the cosine
+    # alone cannot resolve below ~1e-6° (1 - cos is under the float64 round-off there).
+    sine = np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2
+    angle = np.degrees(np.arctan2(sine, (np.trace(R) - 1) / 2))
     return angle, 1e3 * np.linalg.norm(estimate[:3, 3] - truth[:3, 3])
 
 

@@ -1,9 +1,10 @@
 """Type stubs of the handeye package (frames: ``T_a_b`` maps points of ``b`` into ``a``; 4x4
-homogeneous matrices, metres; figures people read in degrees and millimetres)."""
+homogeneous matrices, metres unless a call is given ``units="mm"``; figures people read in
+degrees and millimetres)."""
 
 from os import PathLike
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, overload
+from typing import Any, Callable, Dict, List, Literal, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -11,7 +12,8 @@ import numpy.typing as npt
 __version__: str
 
 _Path = Union[str, "PathLike[str]"]
-_Matrices = npt.ArrayLike  # (N, 4, 4) homogeneous transforms, metres
+_Matrices = npt.ArrayLike  # (N, 4, 4) homogeneous transforms, metres (or the call's units)
+_Units = Literal["m", "mm"]
 _Mat4 = npt.NDArray[np.float64]  # (4, 4)
 
 class HandeyeError(Exception):
@@ -25,6 +27,14 @@ class InputError(HandeyeError, ValueError):
 
 class FileError(HandeyeError, OSError):
     """A file or folder that cannot be read or written."""
+
+class CalibrationWarning(UserWarning):
+    """An answer whose verdict is CHECK or REDO: the verdict's reason and next step."""
+
+    verdict: Optional[Verdict]
+    """The verdict that raised it."""
+
+    def __init__(self, message: str, verdict: Optional[Verdict] = None) -> None: ...
 
 class Verdict:
     """GOOD / CHECK / REDO with the one reason that decided it and the next action."""
@@ -58,33 +68,36 @@ class Calibration:
     def setup(self) -> str:
         """``"eye_in_hand"`` or ``"eye_to_hand"``."""
     @property
+    def units(self) -> str:
+        """``"m"`` or ``"mm"``: the unit of the transforms' translations (the call's ``units``)."""
+    @property
     def camera_mount(self) -> _Mat4:
-        """``T_flange_camera`` (eye-in-hand) or ``T_base_camera`` (eye-to-hand), 4x4, m."""
+        """``T_flange_camera`` (eye-in-hand) or ``T_base_camera`` (eye-to-hand), 4x4, ``units``."""
     @property
     def target_mount(self) -> _Mat4:
-        """``T_base_target`` (eye-in-hand) or ``T_flange_target`` (eye-to-hand), 4x4, m."""
+        """``T_base_target`` (eye-in-hand) or ``T_flange_target`` (eye-to-hand), 4x4, ``units``."""
     @property
     def transforms(self) -> Dict[str, _Mat4]:
         """Both transforms by frame name, camera mount first."""
     @property
     def T_flange_camera(self) -> _Mat4:
-        """Eye-in-hand camera mount (AttributeError for eye-to-hand), 4x4, m."""
+        """Eye-in-hand camera mount (AttributeError for eye-to-hand), 4x4, ``units``."""
     @property
     def T_base_target(self) -> _Mat4:
-        """Eye-in-hand target mount, 4x4, m."""
+        """Eye-in-hand target mount, 4x4, ``units``."""
     @property
     def T_base_camera(self) -> _Mat4:
-        """Eye-to-hand camera mount, 4x4, m."""
+        """Eye-to-hand camera mount, 4x4, ``units``."""
     @property
     def T_flange_target(self) -> _Mat4:
-        """Eye-to-hand target mount, 4x4, m."""
+        """Eye-to-hand target mount, 4x4, ``units``."""
     @property
     def sigma(self) -> Optional[Dict[str, Dict[str, Any]]]:
         """1-sigma per transform: ``rotation_deg``, ``translation_mm`` (totals) and
         ``rotation_axes_deg``, ``translation_axes_mm`` (per axis of its first frame)."""
     @property
     def covariance(self) -> Optional[npt.NDArray[np.float64]]:
-        """12x12: camera mount [rotation rad, translation m], target mount [same]."""
+        """12x12: camera mount [rotation rad, translation in ``units``], target mount [same]."""
     @property
     def residuals(self) -> Dict[str, Any]:
         """Per sample ``rotation_deg``, ``translation_mm``, ``normalised`` (arrays, NaN for a
@@ -114,19 +127,21 @@ class Calibration:
         """A session's reprojection-space summary (px), else None."""
     @property
     def verdict(self) -> Optional[Verdict]:
-        """GOOD / CHECK / REDO (computed on first read: one held-out solve per sample)."""
+        """GOOD / CHECK / REDO (computed by the call, or with ``verdict=False`` on first read)."""
     def predict(self, T_base_flange: _Matrices) -> npt.NDArray[np.float64]:
-        """The ``T_camera_target`` predicted for each ``T_base_flange``: (N, 4, 4), m."""
+        """The ``T_camera_target`` predicted for each ``T_base_flange``: (N, 4, 4), ``units``."""
     def summary(self) -> str:
         """The summary ``handeye solve`` prints."""
     def save(self, path: _Path) -> None:
-        """Writes the result file ``handeye solve -o`` writes."""
+        """Writes the result file ``handeye solve -o`` writes (metres, whatever ``units``)."""
 
 def calibrate(
     T_base_flange: _Matrices,
     T_camera_target: _Matrices,
     setup: str = "eye_in_hand",
     *,
+    units: _Units = "m",
+    verdict: bool = True,
     method: str = "refined",
     rotation_sigma_deg: Optional[float] = None,
     translation_sigma_mm: Optional[float] = None,
@@ -139,7 +154,8 @@ def calibrate(
     accuracy_mm: float = 1.0,
     accuracy_deg: float = 0.1,
 ) -> Calibration:
-    """Solves both unknown transforms from (N, 4, 4) pose pairs in metres (as ``handeye solve``)."""
+    """Solves both unknown transforms from (N, 4, 4) pose pairs (as ``handeye solve``); warns
+    with CalibrationWarning when the verdict is not GOOD."""
 
 CALIB_HAND_EYE_TSAI: int
 CALIB_HAND_EYE_PARK: int
@@ -158,6 +174,8 @@ def calibrateHandEye(
     t_cam2gripper: Any = None,
     method: Union[int, str, None] = None,
     *,
+    units: _Units = "m",
+    verdict: bool = True,
     return_calibration: bool = False,
 ) -> Any:
     """``cv2.calibrateHandEye`` with handeye's solver: ``(R_cam2gripper (3, 3), t_cam2gripper (3, 1))``
@@ -174,6 +192,8 @@ def calibrateRobotWorldHandEye(
     t_gripper2cam: Any = None,
     method: Union[int, str, None] = None,
     *,
+    units: _Units = "m",
+    verdict: bool = True,
     return_calibration: bool = False,
 ) -> Any:
     """``cv2.calibrateRobotWorldHandEye`` with handeye's solver: ``(R_base2world, t_base2world,
@@ -273,7 +293,20 @@ class Session:
     def truth(self) -> Optional[Dict[str, _Mat4]]:
         """The simulator's ground truth by frame name, or None for a real cell."""
     def solve(self, space: Optional[str] = None, config: Optional[_Path] = None) -> Calibration:
-        """Solves as ``handeye solve DIR --space SPACE`` (``pose`` or ``reprojection``)."""
+        """Solves as ``handeye solve DIR --space SPACE`` (``pose`` or ``reprojection``); warns
+        with CalibrationWarning when the verdict is not GOOD."""
+
+def run(
+    config: Optional[_Path] = None,
+    out: Optional[_Path] = None,
+    *,
+    resume: Optional[_Path] = None,
+    progress: Optional[Callable[[Dict[str, Any]], None]] = None,
+    yes: bool = False,
+    accept_changed: bool = False,
+) -> Session:
+    """Runs a cell as ``handeye run`` (progress as one dict per event; Ctrl-C keeps the samples)
+    and returns its session (``.path``, ``.result``, ``.verdict``)."""
 
 def read_dataset(path: _Path) -> Dict[str, Any]:
     """A dataset file: ``setup``, ``T_base_flange``, ``T_camera_target`` (N, 4, 4), ``ids``, ``weights``."""

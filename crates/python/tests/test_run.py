@@ -1,0 +1,141 @@
+"""`handeye.run`: a cell run from Python through the library code `handeye run` calls, on the
+simulated cell (configs/sim-cell.yaml): it recovers the simulator's truth, records what the CLI
+records, reports progress as events, and Ctrl-C (a KeyboardInterrupt) mid-run keeps the samples
+recorded so far in a session that resumes."""
+
+import os
+import signal
+import threading
+import warnings
+
+import numpy as np
+import pytest
+
+import handeye
+from conftest import REPO
+from synth import errors
+
+CONFIG = REPO / "configs" / "sim-cell.yaml"
+# The tolerance the Rust tests hold the simulated cell to (tests/it/bag_import.rs, boards.rs).
+TOLERANCE_MM, TOLERANCE_DEG = 0.5, 0.05
+
+
+def assert_truth_recovered(session):
+    truth = session.truth
+    assert set(truth) == {"T_flange_camera", "T_base_target"}
+    for name, T in truth.items():
+        rot, trans = errors(session.result.transforms[name], T)
+        assert trans < TOLERANCE_MM and rot < TOLERANCE_DEG, f"{name}: {trans:.3f} mm, {rot:.4f}°"
+
+
+def test_run_recovers_the_simulated_truth_with_progress_events(tmp_path):
+    events = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", handeye.CalibrationWarning)  # GOOD: no warning
+        session = handeye.run(CONFIG, out=tmp_path / "session", progress=events.append)
+    assert isinstance(session, handeye.Session) and session.path == tmp_path / "session"
+    assert session.verdict.level == "GOOD", session.verdict.reason
+    assert_truth_recovered(session)
+    kinds = [e["event"] for e in events]
+    assert kinds[:2] == ["plan_checked", "started"], kinds
+    # The loop's end after its last record (notes about the run may follow).
+    assert "ended" in kinds and kinds.index("ended") > len(kinds) - 1 - kinds[::-1].index("recorded"), kinds
+    assert "poses" in events[1] and "report" in events[0]
+    moving = [e for e in events if e["event"] == "moving"]
+    assert moving and all(e["T_base_flange"].shape == (4, 4) for e in moving)
+    accepted = [e for e in events if e["event"] == "recorded" and e["rejected"] is None]
+    assert len(accepted) == len(session.samples["T_base_flange"])
+    assert all(e["reprojection_rms_px"] < 1.0 and e["tags"] > 0 for e in accepted)
+
+
+def test_run_records_and_solves_what_the_cli_does(sim_session, tmp_path):
+    """The same config through `handeye run` (the sim_session fixture) and `handeye.run`: the
+    same samples and the same answer (the simulator is seeded)."""
+    ours = handeye.run(CONFIG, out=tmp_path / "session")
+    theirs = handeye.Session(sim_session)
+    for key in ("T_base_flange", "T_camera_target"):
+        assert np.array_equal(ours.samples[key], theirs.samples[key]), key
+    for name, T in theirs.result.transforms.items():
+        assert np.max(np.abs(ours.result.transforms[name] - T)) < 1e-9, name
+    assert ours.verdict.level == theirs.verdict.level and ours.verdict.reason == theirs.verdict.reason
+
+
+def test_an_interrupt_from_the_progress_callback_keeps_the_samples_and_the_session_resumes(tmp_path):
+    out = tmp_path / "session"
+    accepted = []
+
+    def progress(event):
+        if event["event"] == "recorded" and event["rejected"] is None:
+            accepted.append(event["plan_index"])
+            if len(accepted) == 4:
+                raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt, match=r"\(4 poses recorded\); the arm was stopped; .*handeye\.run\(resume=") as error:
+        handeye.run(CONFIG, out=out, progress=progress)
+    assert error.value.session_folder == out
+    # The samples so far are on disk, unsolved, as after the CLI's Ctrl-C.
+    kept = handeye.Session(out)
+    ids = kept.samples["ids"]
+    assert len(ids) == len(kept.samples["T_base_flange"]) == 4
+    assert kept.result is None
+    # ... and the session resumes to the end.
+    session = handeye.run(resume=out)
+    assert len(session.samples["T_base_flange"]) > 4
+    assert session.samples["ids"][:4] == ids
+    assert_truth_recovered(session)
+
+
+def test_ctrl_c_while_the_cell_runs_stops_it_cleanly(tmp_path):
+    """A real SIGINT, sent from another thread while the run holds no GIL (as Ctrl-C arrives):
+    Python's handler runs from the progress path and the run stops with its samples kept."""
+    out = tmp_path / "session"
+    accepted = []
+
+    def progress(event):
+        if event["event"] == "recorded" and event["rejected"] is None:
+            accepted.append(event["plan_index"])
+            if len(accepted) == 2:
+                threading.Timer(0.0, os.kill, (os.getpid(), signal.SIGINT)).start()
+
+    with pytest.raises(KeyboardInterrupt) as error:
+        handeye.run(CONFIG, out=out, progress=progress)
+    assert error.value.session_folder == out
+    # Stopped at the next event: a move (the samples are the ones seen) or the next record's
+    # callback, interrupted before it counted the sample already written.
+    recorded = len(handeye.Session(out).samples["T_base_flange"])
+    assert recorded >= 2 and len(accepted) <= recorded <= len(accepted) + 1, (recorded, accepted)
+    assert handeye.Session(out).result is None
+
+
+def test_run_refuses_what_it_cannot_do(tmp_path):
+    with pytest.raises(handeye.InputError, match=r"a new session needs a cell config"):
+        handeye.run(out=tmp_path / "x")
+    with pytest.raises(handeye.InputError, match=r"out and resume given"):
+        handeye.run(CONFIG, out=tmp_path / "x", resume=tmp_path / "y")
+    with pytest.raises(handeye.HandeyeError, match=r"running the cell: preparing the cell"):
+        handeye.run(tmp_path / "missing.yaml", out=tmp_path / "x")
+
+
+def strict_config(tmp_path):
+    """configs/sim-cell.yaml asking for 0.001 mm and 0.0001°: a verdict that cannot be GOOD."""
+    text = CONFIG.read_text()
+    for key in ("target: ", "intrinsics: "):
+        text = text.replace(f"\n{key}", f"\n{key}{CONFIG.parent}/", 1)
+    path = tmp_path / "strict-cell.yaml"
+    path.write_text(text + "\nverdict: {accuracy_mm: 0.001, accuracy_deg: 0.0001}\n")
+    return path
+
+
+def test_a_session_solve_and_a_run_whose_verdict_is_not_good_warn_once(sim_session, tmp_path):
+    config = strict_config(tmp_path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cal = handeye.Session(sim_session).solve(space="pose", config=config)
+        session = handeye.run(config, out=tmp_path / "session")
+    found = [w for w in caught if issubclass(w.category, handeye.CalibrationWarning)]
+    assert len(found) == 2, [str(w.message) for w in caught]
+    for warning, verdict in zip(found, [cal.verdict, session.verdict]):
+        assert verdict.level in ("CHECK", "REDO")
+        assert warning.message.verdict.reason == verdict.reason and verdict.next_action in str(warning.message)
+        assert "0.001 mm" in verdict.reason, verdict.reason
+        assert warning.filename == __file__, warning.filename
