@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -79,3 +80,31 @@ def yaml():
     except ImportError:
         need("PyYAML is not installed (pip install pyyaml)")
     return pyyaml
+
+
+@pytest.fixture(scope="session")
+def cv2():
+    """OpenCV, the independent reference (skipped with the reason when it is not installed)."""
+    try:
+        import cv2 as opencv
+    except ImportError:
+        need("OpenCV is not installed (pip install opencv-python-headless)")
+    return opencv
+
+
+def opencv_inputs(flange, camera):
+    """4x4 T_base_flange and T_camera_target lists as cv2.calibrateHandEye takes them."""
+    return (
+        [T[:3, :3] for T in flange],
+        [T[:3, 3:4] for T in flange],
+        [T[:3, :3] for T in camera],
+        [T[:3, 3:4] for T in camera],
+    )
+
+
+def as_matrix(R, t):
+    """A 4x4 transform from a 3x3 rotation and a translation of any shape."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.ravel(t)
+    return T

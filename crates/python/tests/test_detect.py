@@ -7,22 +7,13 @@ import numpy as np
 import pytest
 
 import handeye
-from conftest import REPO, need
+from conftest import REPO
 from synth import record_matrix, transform
 
 W, H = 1280, 720
 K = np.array([[900.0, 0.0, 640.0], [0.0, 900.0, 360.0], [0.0, 0.0, 1.0]])
 SQUARES_X, SQUARES_Y, SQUARE, MARKER = 7, 5, 0.04, 0.03
 PX_PER_SQUARE = 120
-
-
-@pytest.fixture(scope="module")
-def cv2():
-    try:
-        import cv2 as opencv
-    except ImportError:
-        need("OpenCV is not installed (pip install opencv-python-headless)")
-    return opencv
 
 
 def render(cv2, cam_from_cvboard):

@@ -7,36 +7,11 @@ import numpy as np
 import pytest
 
 import handeye
-from conftest import need
+from conftest import as_matrix, opencv_inputs
 from synth import cell, errors, inverse
 
 SEEDS = range(10, 20)
 HAND_EYE = ["TSAI", "PARK", "HORAUD", "ANDREFF", "DANIILIDIS"]
-
-
-@pytest.fixture(scope="module")
-def cv2():
-    try:
-        import cv2 as opencv
-    except ImportError:
-        need("OpenCV is not installed (pip install opencv-python-headless)")
-    return opencv
-
-
-def opencv_inputs(flange, camera):
-    return (
-        [T[:3, :3] for T in flange],
-        [T[:3, 3:4] for T in flange],
-        [T[:3, :3] for T in camera],
-        [T[:3, 3:4] for T in camera],
-    )
-
-
-def as_matrix(R, t):
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = np.ravel(t)
-    return T
 
 
 def test_handeye_is_at_least_as_accurate_as_every_opencv_hand_eye_method(cv2):

@@ -340,6 +340,19 @@ const CAMERA_INFO_KEYS: [&str; 8] = [
     "projection_matrix",
 ];
 
+/// The model of the row-major camera matrix `k` (checked: no skew) with its image size.
+fn pinhole((width, height): (u32, u32), k: &[f64], distortion: Distortion) -> CameraModel {
+    CameraModel {
+        width,
+        height,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        distortion,
+    }
+}
+
 /// `text` without the `---` line `ros2 topic echo` prints after a message (and what follows
 /// only blank lines); any other text as it is.
 fn strip_echo_end(text: &str) -> &str {
@@ -524,13 +537,7 @@ impl Reader<'_> {
                 self.matrix_shape(node, key, shape)?;
             }
         }
-        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-            return Err(self.bad(
-                "camera_matrix.data",
-                "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)",
-                &matrix["data"],
-            ));
-        }
+        self.no_skew(&k, "camera_matrix.data", &matrix["data"])?;
         let model_name = match root.get("distortion_model") {
             None => "plumb_bob".to_string(),
             Some(v) => v
@@ -547,15 +554,16 @@ impl Reader<'_> {
             )?,
         };
         let distortion = self.distortion(&model_name, &coefficients, "distortion_model")?;
-        Ok(CameraModel {
-            width,
-            height,
-            fx: k[0],
-            fy: k[4],
-            cx: k[2],
-            cy: k[5],
-            distortion,
-        })
+        Ok(pinhole((width, height), &k, distortion))
+    }
+
+    /// A row-major camera matrix `k` (at `key`, the node `found`) without skew:
+    /// `[fx, 0, cx, 0, fy, cy, 0, 0, 1]`.
+    fn no_skew(&self, k: &[f64], key: &str, found: &Value) -> Result<(), CameraModelError> {
+        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+            return Err(self.bad(key, "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", found));
+        }
+        Ok(())
     }
 
     /// A `sensor_msgs/CameraInfo` message as `ros2 topic echo` prints it: `width`, `height`,
@@ -565,9 +573,7 @@ impl Reader<'_> {
         let width = self.size(self.get(root, "width", "width")?, "width")?;
         let height = self.size(self.get(root, "height", "height")?, "height")?;
         let k = self.numbers(self.get(root, "k", "k")?, "k", &[9])?;
-        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-            return Err(self.bad("k", "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", &root["k"]));
-        }
+        self.no_skew(&k, "k", &root["k"])?;
         let coefficients = match root.get("d") {
             None | Some(Value::Null) => Vec::new(),
             Some(d) => self.numbers(d, "d", &[0, 4, 5, 8])?,
@@ -582,15 +588,7 @@ impl Reader<'_> {
             },
         };
         let distortion = self.distortion(&model_name, &coefficients, "distortion_model")?;
-        Ok(CameraModel {
-            width,
-            height,
-            fx: k[0],
-            fy: k[4],
-            cx: k[2],
-            cy: k[5],
-            distortion,
-        })
+        Ok(pinhole((width, height), &k, distortion))
     }
 
     fn kalibr(&self, cam0: &Value) -> Result<CameraModel, CameraModelError> {
