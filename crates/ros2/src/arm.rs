@@ -163,7 +163,10 @@ impl Ros2Arm {
                 reason: "no FollowJointTrajectory action server answers there (is the controller running and active, on this domain id, with this middleware: robot.graph.rmw?)".into(),
             });
         }
-        let shared = Arc::new(Shared::default());
+        let shared = Arc::new(Shared::wanting(&[
+            &options.base_frame,
+            &options.flange_frame,
+        ]));
         let (stop_tx, stop_rx) = smol::channel::bounded::<()>(1);
         let names = options.joint_names.clone();
         let task_shared = shared.clone();

@@ -37,24 +37,44 @@ struct Edge {
 
 /// The most frames the tree keeps: a robot cell's tree has tens to a few hundred. Anyone on the
 /// DDS domain can publish `/tf` (plain DDS has no authentication), and each new child name would
-/// otherwise be kept for the life of the run; edges of frames already known still update.
+/// otherwise be kept for the life of the run; edges of frames already known still update. The
+/// frames the run needs ([`TfTree::wanting`]) and their chains are never crowded out: a full
+/// tree drops another frame to take them.
 pub const MAX_TF_FRAMES: usize = 4096;
 
 /// The TF tree as last heard.
 #[derive(Debug, Clone, Default)]
 pub struct TfTree {
     edges: BTreeMap<String, Edge>,
+    /// The frames looked up (the configured base and flange): they and every frame above them
+    /// stay when the tree is full.
+    wanted: Vec<String>,
     /// Whether a new frame was dropped at [`MAX_TF_FRAMES`] (said once).
     full: bool,
 }
 
 impl TfTree {
+    /// An empty tree that keeps `frames` and their chains even when a flood of other frame names
+    /// fills it.
+    pub fn wanting(frames: &[&str]) -> TfTree {
+        TfTree {
+            wanted: frames
+                .iter()
+                .map(|f| f.trim_start_matches('/').to_string())
+                .collect(),
+            ..TfTree::default()
+        }
+    }
+
     /// Adds or replaces the edges of one message (a bad quaternion is skipped and logged).
     pub fn update(&mut self, msg: &TfMessage) {
         for t in &msg.transforms {
             let child = t.child_frame_id.trim_start_matches('/').to_string();
             let parent = t.header.frame_id.trim_start_matches('/').to_string();
-            if self.edges.len() >= MAX_TF_FRAMES && !self.edges.contains_key(&child) {
+            if self.edges.len() >= MAX_TF_FRAMES
+                && !self.edges.contains_key(&child)
+                && !(self.needs(&child) && self.drop_one_unneeded())
+            {
                 if !self.full {
                     tracing::warn!(
                         "TF: more than {MAX_TF_FRAMES} frames heard; new frames ({child}, ...) are ignored"
@@ -76,6 +96,38 @@ impl TfTree {
                 None => tracing::warn!("TF {parent} → {child}: not a rigid transform, skipped"),
             }
         }
+    }
+
+    /// The frames on the chains of the wanted frames, each up to the highest one heard.
+    fn pinned(&self) -> std::collections::BTreeSet<String> {
+        let mut pinned = std::collections::BTreeSet::new();
+        for frame in &self.wanted {
+            let mut at = frame.clone();
+            // A loop ends the walk (at most one pass over the tree).
+            while pinned.insert(at.clone()) {
+                match self.edges.get(&at) {
+                    Some(edge) => at.clone_from(&edge.parent),
+                    None => break,
+                }
+            }
+        }
+        pinned
+    }
+
+    /// Whether `child`'s edge belongs to a wanted frame's chain: the frame itself, or the top
+    /// of its chain so far (the next edge up).
+    fn needs(&self, child: &str) -> bool {
+        self.pinned().contains(child)
+    }
+
+    /// Makes room by dropping one frame no wanted chain goes through; false when there is none.
+    fn drop_one_unneeded(&mut self) -> bool {
+        let pinned = self.pinned();
+        let Some(victim) = self.edges.keys().find(|k| !pinned.contains(*k)).cloned() else {
+            return false;
+        };
+        self.edges.remove(&victim);
+        true
     }
 
     fn known(&self, frame: &str) -> bool {
@@ -155,6 +207,18 @@ pub struct Shared {
 }
 
 impl Shared {
+    /// Empty, with a TF tree that keeps `frames` (the configured base and flange) and their
+    /// chains however many other frames are heard.
+    pub fn wanting(frames: &[&str]) -> Shared {
+        Shared {
+            state: Mutex::new(ArmState {
+                tf: TfTree::wanting(frames),
+                ..ArmState::default()
+            }),
+            changed: Condvar::new(),
+        }
+    }
+
     /// The state, locked.
     pub fn lock(&self) -> MutexGuard<'_, ArmState> {
         self.state.lock().unwrap_or_else(|p| p.into_inner())
@@ -274,6 +338,44 @@ mod tests {
         });
         let got = tree.lookup("base", "tool0").unwrap();
         assert!((got.to_homogeneous() - moved.to_homogeneous()).norm() < 1e-12);
+    }
+
+    /// #40: a /tf flood of new frame names that fills the tree before the arm's chain is heard
+    /// does not crowd the configured frames out: their chain (heard after the flood, child
+    /// first as a driver may send it) is kept and composes.
+    #[test]
+    fn a_flood_before_the_chain_does_not_crowd_out_the_configured_frames() {
+        let mut tree = TfTree::wanting(&["base", "/tool0"]);
+        let flood: Vec<_> = (0..2 * MAX_TF_FRAMES)
+            .map(|i| edge("world", &format!("junk_{i}"), Pose::identity()))
+            .collect();
+        tree.update(&TfMessage { transforms: flood });
+        let shoulder = Pose::new(Vector3::new(0.0, 0.0, 0.18), Vector3::new(0.0, 0.0, 0.3));
+        let wrist = Pose::new(Vector3::new(0.4, 0.1, 0.2), Vector3::new(0.2, 0.0, 0.1));
+        let tool = Pose::new(Vector3::new(0.0, 0.0, 0.1), Vector3::new(0.0, 0.3, 0.0));
+        tree.update(&TfMessage {
+            transforms: vec![
+                edge("wrist_3_link", "tool0", tool),
+                edge("shoulder_link", "wrist_3_link", wrist),
+                edge("base", "shoulder_link", shoulder),
+                edge("world", "base", Pose::identity()),
+            ],
+        });
+        let got = tree.lookup("base", "tool0").unwrap();
+        let want = shoulder * wrist * tool;
+        assert!((got.to_homogeneous() - want.to_homogeneous()).norm() < 1e-12);
+        assert!(tree.edges.len() <= MAX_TF_FRAMES);
+        // Without wanted frames the flood wins, as before (the bound holds).
+        let mut plain = TfTree::default();
+        plain.update(&TfMessage {
+            transforms: (0..MAX_TF_FRAMES + 10)
+                .map(|i| edge("world", &format!("junk_{i}"), Pose::identity()))
+                .collect(),
+        });
+        plain.update(&TfMessage {
+            transforms: vec![edge("world", "tool0", tool)],
+        });
+        assert!(plain.lookup("world", "tool0").is_err());
     }
 
     #[test]
