@@ -84,6 +84,12 @@ pub const HAND_GUIDING: &str = "handeye does not switch freedrive on this arm (a
 
 /// A joint sample older than this is stale: the driver is gone or the graph split.
 const STALE: Duration = Duration::from_secs(1);
+/// Farthest a joint may be from a goal's end point once the controller says it succeeded, rad
+/// (a trajectory controller's goal tolerance is far tighter; this is about a goal that did
+/// not move the arm at all).
+const ARRIVED_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// How long `/joint_states` may take to show the arm at a succeeded goal's end point.
+const ARRIVAL_WAIT: Duration = Duration::from_secs(2);
 
 /// The ROS 2 arm.
 pub struct Ros2Arm {
@@ -280,6 +286,44 @@ impl Ros2Arm {
             },
             ..FollowJointTrajectoryGoal::default()
         }
+    }
+
+    /// A goal the controller reported SUCCEEDED is only done when `/joint_states` shows the arm
+    /// at its end point: a second action server of the same name, or a controller that answers
+    /// without moving, would otherwise pass for a move (and every pose would "see no board").
+    fn check_arrival(&self, goal: &Joints) -> Result<(), RobotError> {
+        let off = |s: &crate::listen::ArmState| {
+            s.joints.and_then(|j| {
+                (j.positions.len() == goal.len()).then(|| {
+                    (0..goal.len())
+                        .map(|i| (i, (j.positions[i] - goal[i]).abs()))
+                        .fold(
+                            (0, 0.0),
+                            |worst, this| if this.1 > worst.1 { this } else { worst },
+                        )
+                })
+            })
+        };
+        let (state, arrived) = self.shared.wait_until(Instant::now() + ARRIVAL_WAIT, |s| {
+            off(s).is_some_and(|(_, rad)| rad <= ARRIVED_RAD)
+        });
+        if arrived {
+            return Ok(());
+        }
+        let worst = match off(&state) {
+            Some((joint, rad)) => format!(
+                "{} is {:.1}° from it",
+                self.options.joint_names[joint],
+                rad.to_degrees()
+            ),
+            None => format!("no {} message was heard", self.options.joint_states_topic),
+        };
+        Err(backend(format!(
+            "the controller behind {} answered SUCCEEDED but {} did not reach the goal's end point within {:.0} s: {worst} (a second action server of that name on the domain, or a controller that does not drive this arm?)",
+            self.options.action,
+            self.options.joint_states_topic,
+            ARRIVAL_WAIT.as_secs_f64()
+        )))
     }
 
     fn run_goal(&mut self, goal: FollowJointTrajectoryGoal, total: f64) -> Result<(), RobotError> {
@@ -482,7 +526,8 @@ impl Robot for Ros2Arm {
         }
         let goal = Self::trajectory(&self.options.joint_names, &from, joints, limits);
         let total = limits.joint_move_time(&from, joints);
-        self.run_goal(goal, total)
+        self.run_goal(goal, total)?;
+        self.check_arrival(joints)
     }
 
     fn stop(&mut self) -> Result<(), RobotError> {

@@ -317,6 +317,19 @@ fn an_aborted_goal_is_named_and_resume_completes() {
     });
 }
 
+/// #40: a controller that answers a goal SUCCEEDED without moving the arm is named as such
+/// (the arm never reached the goal's end point), not "no tag of the board found" at every pose.
+#[test]
+fn a_goal_that_succeeds_without_moving_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(
+            88,
+            &["--succeed-without-moving", "4"],
+            "answered SUCCEEDED but /joint_states did not reach the goal's end point",
+        )
+    });
+}
+
 #[test]
 fn a_peer_dying_mid_move_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
