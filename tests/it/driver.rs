@@ -585,6 +585,76 @@ fn a_move_that_would_leave_the_workspace_is_not_sent() {
     assert!(nothing_recorded(&folder));
 }
 
+/// #40: a retry whose path from where the arm stands would leave the workspace box is not
+/// sent; the pose keeps its first (rejected) record, is named as skipped with the reason, and
+/// the run ends with the samples it has instead of an error that asks for a resume.
+#[test]
+fn a_retry_that_cannot_be_reached_is_skipped_and_the_run_ends_with_its_samples() {
+    use handeye_robot::kinematics::UrModel;
+    use handeye_robot::WorkspaceBox;
+    use handeye_session::plan::check::MoveCheck;
+
+    let arm = UrModel::ur5e();
+    // The box holds every flange position on the plan's own joint paths (0 → 1 → 2 → 3), with
+    // 5 cm to spare; the arm then reports itself swung 120° about its base, from where the way
+    // back to pose 1 sweeps out of it.
+    let (mut min, mut max) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
+    for i in 0..POSES - 1 {
+        for step in 0..=20 {
+            let f = step as f64 / 20.0;
+            let q = Joints::from_fn(6, |j| joints(i)[j] * (1.0 - f) + joints(i + 1)[j] * f);
+            let p = arm.forward(&q).translation.vector;
+            min = min.inf(&p);
+            max = max.sup(&p);
+        }
+    }
+    let margin = Vector3::repeat(0.05);
+    let workspace = WorkspaceBox {
+        min: min - margin,
+        max: max + margin,
+    };
+    let mut swung = joints(3);
+    swung[0] += 120f64.to_radians();
+    let dir = tempfile::tempdir().unwrap();
+    let folder = SessionFolder::create(&dir.path().join("session")).unwrap();
+    let mut setup = session_setup(folder.clone(), Arc::new(AtomicBool::new(false)));
+    setup.move_check = Some(MoveCheck::with_model(arm, workspace));
+    let mut script = vec![Expect::SetInterrupt];
+    for i in 0..POSES {
+        let from = if i == 0 { joints(0) } else { joints(i - 1) };
+        script.push(Expect::Joints(Ok(from)));
+        script.extend(visit(i));
+    }
+    // The second pass: the arm says where it stands, and the retry of pose 1 is not sent.
+    script.push(Expect::Joints(Ok(swung)));
+    let mut robot = ScriptedRobot::new(script).with_limits(MotionLimits::default());
+    let grabs = vec![
+        Grab::Frame(frame(0)),
+        Grab::Frame(empty_frame()),
+        Grab::Frame(frame(2)),
+        Grab::Frame(frame(3)),
+    ];
+    let mut camera = ScriptedCamera::new(camera_model(), grabs);
+    let result = run_session(setup, &mut robot, &mut camera, &mut |_| {});
+    drop(robot);
+    drop(camera);
+    let outcome = result.expect("the run ends with its samples");
+    assert_eq!(outcome.accepted, vec![0, 2, 3]);
+    assert_eq!(outcome.skipped.len(), 1, "{:?}", outcome.skipped);
+    let (index, reason) = &outcome.skipped[0];
+    assert_eq!(*index, 1);
+    assert!(
+        reason.starts_with("not visited again") && reason.contains("workspace box"),
+        "{reason}"
+    );
+    // Pose 1 keeps its one (rejected) record.
+    let visits = folder.read_visits().unwrap();
+    assert_eq!(visits.iter().filter(|v| v.plan_index == 1).count(), 1);
+}
+
 fn nothing_recorded(folder: &SessionFolder) -> bool {
     folder.read_visits().unwrap().is_empty() && !folder.samples_path().exists()
 }

@@ -323,6 +323,24 @@ pub fn run_cameras_session(
                             .map_err(|_| SessionError::DetectionThread("stopped"))?;
                     }
                 }
+                // A second visit whose path from where the arm now stands leaves the checked
+                // space (the joint limits, the workspace box): nothing moved, the pose keeps its
+                // first record, and the run goes on without it rather than ending with the
+                // samples it has (issue #40: 8 good poses, then "resume" for a retry that
+                // could never be reached from there).
+                Err(ErrorSource::UnsafeMove(problem))
+                    if needed.iter().all(|&c| state.tries(c, plan_index) > 0) =>
+                {
+                    for &c in &needed {
+                        state.attempts.insert((c, plan_index), 2);
+                    }
+                    if needed.contains(&0) {
+                        state.outcome.skipped.push((
+                            plan_index,
+                            format!("not visited again: from where the arm stood {problem}"),
+                        ));
+                    }
+                }
                 Err(source) => {
                     // Stop first, then let the worker finish what it has so the count is true.
                     let _ = robot.stop();
