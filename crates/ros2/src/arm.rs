@@ -439,6 +439,15 @@ enum Event {
     ),
 }
 
+/// The publisher of a message as a number (its DDS writer's GID, hashed): two publishers of
+/// one TF edge are told apart by it.
+fn publisher_id(info: &ros2_client::MessageInfo) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    info.publisher_gid().as_bytes().hash(&mut hasher);
+    hasher.finish()
+}
+
 fn apply(shared: &Shared, names: &[String], event: Event) {
     let received = Instant::now();
     match event {
@@ -451,8 +460,8 @@ fn apply(shared: &Shared, names: &[String], event: Event) {
                 Err(problem) => s.joints_problem = Some(problem),
             })
         }
-        Event::Tf(Ok((msg, _)), is_static) => shared.update(|s| {
-            s.tf.update(&msg);
+        Event::Tf(Ok((msg, info)), is_static) => shared.update(|s| {
+            s.tf.update_from(&msg, publisher_id(&info), received);
             if !is_static {
                 s.tf_received = Some(received);
             }

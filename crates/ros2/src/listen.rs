@@ -28,12 +28,25 @@ pub struct JointSample {
     pub received: Instant,
 }
 
-/// One TF edge: `T_parent_child`.
+/// One TF edge: `T_parent_child`, with what each publisher of it said last.
 #[derive(Debug, Clone, PartialEq)]
 struct Edge {
     parent: String,
     parent_from_child: Pose,
+    /// Per publisher heard within [`SOURCES_WINDOW`]: its id, its last pose, when.
+    sources: Vec<(u64, Pose, Instant)>,
+    /// Two publishers that disagree: the message a lookup through this edge fails with.
+    conflict: Option<String>,
 }
+
+/// How long a publisher of an edge counts as current: two publishers of one edge heard within
+/// this of each other, saying different transforms, contradict each other (a handover to a
+/// restarted publisher does not).
+const SOURCES_WINDOW: Duration = Duration::from_secs(1);
+/// Two publishers' transforms of one edge farther apart than this contradict each other, m and
+/// rad (far above a driver's own jitter at rest).
+const CONFLICT_M: f64 = 1e-3;
+const CONFLICT_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 
 /// The most frames the tree keeps: a robot cell's tree has tens to a few hundred. Anyone on the
 /// DDS domain can publish `/tf` (plain DDS has no authentication), and each new child name would
@@ -66,8 +79,17 @@ impl TfTree {
         }
     }
 
-    /// Adds or replaces the edges of one message (a bad quaternion is skipped and logged).
+    /// Adds or replaces the edges of one message (a bad quaternion is skipped and logged), as
+    /// from one publisher heard now.
     pub fn update(&mut self, msg: &TfMessage) {
+        self.update_from(msg, 0, Instant::now());
+    }
+
+    /// [`TfTree::update`] of a message from the publisher `source` (its DDS writer, hashed)
+    /// heard at `now`: an edge that two publishers send with different transforms is marked,
+    /// and a lookup through it fails naming both (issue #40: a second publisher of
+    /// base → tool0 made a run "measure the board at 0.119×").
+    pub fn update_from(&mut self, msg: &TfMessage, source: u64, now: Instant) {
         for t in &msg.transforms {
             let child = t.child_frame_id.trim_start_matches('/').to_string();
             let parent = t.header.frame_id.trim_start_matches('/').to_string();
@@ -85,11 +107,23 @@ impl TfTree {
             }
             match t.transform.to_pose() {
                 Some(pose) => {
+                    let mut sources = self
+                        .edges
+                        .remove(&child)
+                        .map(|e| e.sources)
+                        .unwrap_or_default();
+                    sources.retain(|(id, _, heard)| {
+                        *id != source && now.saturating_duration_since(*heard) <= SOURCES_WINDOW
+                    });
+                    sources.push((source, pose, now));
+                    let conflict = contradiction(&parent, &child, &sources);
                     self.edges.insert(
                         child,
                         Edge {
                             parent,
                             parent_from_child: pose,
+                            sources,
+                            conflict,
                         },
                     );
                 }
@@ -140,6 +174,10 @@ impl TfTree {
         let mut at = frame.to_string();
         for _ in 0..256 {
             match self.edges.get(&at) {
+                Some(Edge {
+                    conflict: Some(conflict),
+                    ..
+                }) => return Err(conflict.clone()),
                 Some(edge) => {
                     pose = edge.parent_from_child * pose;
                     at = edge.parent.clone();
@@ -182,6 +220,23 @@ impl TfTree {
         all.dedup();
         all
     }
+}
+
+/// The message of an edge whose current publishers disagree, or `None`.
+fn contradiction(parent: &str, child: &str, sources: &[(u64, Pose, Instant)]) -> Option<String> {
+    let newest = sources.last()?;
+    sources[..sources.len() - 1].iter().find_map(|other| {
+        let mm = (other.1.translation.vector - newest.1.translation.vector).norm();
+        let rad = other.1.rotation.angle_to(&newest.1.rotation);
+        (mm > CONFLICT_M || rad > CONFLICT_RAD).then(|| {
+            format!(
+                "the TF edge {parent} → {child} has {} publishers that disagree by {:.1} mm and {:.1}° (another node publishes it too: a second robot_state_publisher, a static publisher left running?); stop all but the driver's",
+                sources.len(),
+                mm * 1e3,
+                rad.to_degrees()
+            )
+        })
+    })
 }
 
 /// The state the reader task keeps.
@@ -376,6 +431,49 @@ mod tests {
             transforms: vec![edge("world", "tool0", tool)],
         });
         assert!(plain.lookup("world", "tool0").is_err());
+    }
+
+    /// #40: two publishers of base → tool0 10 cm and 180° apart, while the arm stands: the
+    /// lookup fails naming the edge and the disagreement; one publisher moving the edge, or a
+    /// handover to another after a pause, is no contradiction.
+    #[test]
+    fn two_publishers_of_one_edge_that_disagree_are_named() {
+        let at_rest = Pose::new(Vector3::new(0.4, 0.1, 0.3), Vector3::zeros());
+        let other = Pose::new(
+            Vector3::new(0.5, 0.1, 0.3),
+            Vector3::new(0.0, 0.0, std::f64::consts::PI),
+        );
+        let start = Instant::now();
+        let ms = |t: u64| start + Duration::from_millis(t);
+        let msg = |pose| TfMessage {
+            transforms: vec![edge("base", "tool0", pose)],
+        };
+        let mut tree = TfTree::default();
+        for k in 0..20 {
+            tree.update_from(&msg(at_rest), 1, ms(8 * k));
+            tree.update_from(&msg(other), 2, ms(8 * k + 5));
+        }
+        let e = tree.lookup("base", "tool0").unwrap_err();
+        assert!(
+            e.contains("base → tool0") && e.contains("2 publishers") && e.contains("100.0 mm"),
+            "{e}"
+        );
+        // One publisher moving the edge.
+        let mut moving = TfTree::default();
+        for k in 0..20 {
+            let p = Pose::new(
+                Vector3::new(0.4 + 0.01 * k as f64, 0.1, 0.3),
+                Vector3::zeros(),
+            );
+            moving.update_from(&msg(p), 1, ms(8 * k));
+        }
+        assert!(moving.lookup("base", "tool0").is_ok());
+        // A restarted publisher (a new writer) after a pause of more than the window.
+        let mut handover = TfTree::default();
+        handover.update_from(&msg(at_rest), 1, ms(0));
+        handover.update_from(&msg(other), 2, ms(1500));
+        let got = handover.lookup("base", "tool0").unwrap();
+        assert!((got.to_homogeneous() - other.to_homogeneous()).norm() < 1e-12);
     }
 
     #[test]
