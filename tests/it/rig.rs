@@ -694,6 +694,22 @@ fn config_errors_name_the_camera_and_the_key() {
         e.contains("cameras[2].name") && e.contains("`left` names two cameras"),
         "{e}"
     );
+    // #40: 101 cameras reached 5.5 GB after one pose; more than 16 are refused at load.
+    let right = "  - name: right\n";
+    let text = std::fs::read_to_string(three_cameras(dir.path(), &[])).unwrap();
+    let block_start = text.find(right).unwrap();
+    let block_end = text[block_start..].find("\n\n").unwrap() + block_start + 1;
+    let block = &text[block_start..block_end];
+    let more: String = (0..14)
+        .map(|k| block.replace("name: right", &format!("name: extra_{k}")))
+        .collect();
+    let many = dir.path().join("seventeen.yaml");
+    std::fs::write(&many, text.replacen(block, &format!("{block}{more}"), 1)).unwrap();
+    let e = RigConfig::load(&many).unwrap_err().to_string();
+    assert!(
+        e.contains("cameras") && e.contains("17 cameras: at most 16"),
+        "{e}"
+    );
     let e = error(&[("name: right", "name: Right-Cam")]);
     assert!(
         e.contains("cameras[2].name") && e.contains("lower-case"),

@@ -38,6 +38,10 @@ use handeye_core::geometry::PoseYaml;
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{parse_yaml, read_text};
 
+/// The most cameras one cell runs: every camera grabs, holds its frame and is detected at every
+/// pose; far beyond any real cell, a config with more is a mistake or an attack on memory.
+pub const MAX_CAMERAS: usize = 16;
+
 /// A several-camera cell config as written.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -177,6 +181,15 @@ impl RigConfig {
             return Err(inconsistent(
                 "cameras".into(),
                 "the list is empty: give at least one camera (or use the one-camera form)".into(),
+            ));
+        }
+        if raw.cameras.len() > MAX_CAMERAS {
+            return Err(inconsistent(
+                "cameras".into(),
+                format!(
+                    "{} cameras: at most {MAX_CAMERAS} in one cell (each holds its frames and a detector in memory at every pose, tens of MB at 1280x720; issue #40 measured 101 cameras at 5.5 GB after one pose): split the cell into runs of fewer cameras",
+                    raw.cameras.len()
+                ),
             ));
         }
         let mut seen = std::collections::BTreeSet::new();
