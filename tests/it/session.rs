@@ -379,10 +379,15 @@ fn an_unreachable_pose_is_reported_with_its_index() {
         .map(|p| p.index)
         .collect();
     assert_eq!(bad, vec![2], "{}", prepared.report);
-    assert!(prepared.report.poses[2]
-        .problems
-        .iter()
-        .any(|p| p.contains("unreachable")));
+    // 3 m out: beyond the UR10e's reach, said with the figures (not "joint limits").
+    assert!(
+        prepared.report.poses[2]
+            .problems
+            .iter()
+            .any(|p| p.contains("out of the ur10e's reach")),
+        "{}",
+        prepared.report
+    );
 }
 
 #[test]
