@@ -27,6 +27,14 @@ pub(super) struct ReplayArgs {
 
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    // The run writes the files a replay writes (the report, the estimates of a blamed file).
+    session::refuse_live(
+        &args.session,
+        &format!(
+            "replay it when the run has ended (`handeye solve {}` gives a provisional answer meanwhile)",
+            args.session.display()
+        ),
+    )?;
     if cell::rig::is_rig_folder(&args.session) {
         return super::rig::replay(&args.session, args.config.as_deref());
     }
