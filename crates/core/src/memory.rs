@@ -119,21 +119,17 @@ fn cgroup_limit() -> Option<Limit> {
             continue;
         };
         let relative = path.trim_start_matches('/');
-        let (base, limit_file, usage_file) = if controllers.is_empty() {
-            (root.to_path_buf(), "memory.max", "memory.current")
+        let (base, files) = if controllers.is_empty() {
+            (root.to_path_buf(), CGROUP_V2)
         } else if controllers.split(',').any(|c| c == "memory") {
-            (
-                root.join("memory"),
-                "memory.limit_in_bytes",
-                "memory.usage_in_bytes",
-            )
+            (root.join("memory"), CGROUP_V1)
         } else {
             continue;
         };
         // The group and each ancestor up to the mount's root.
         let mut dir = base.join(relative);
         loop {
-            if let Some(limit) = cgroup_files(&dir, limit_file, usage_file) {
+            if let Some(limit) = cgroup_files(&dir, files) {
                 if best.as_ref().is_none_or(|b| limit.room() < b.room()) {
                     best = Some(limit);
                 }
@@ -146,20 +142,51 @@ fn cgroup_limit() -> Option<Limit> {
     best
 }
 
-/// One cgroup folder's limit and usage; `None` when it sets no limit ("max", or v1's huge
-/// number for none) or cannot be read.
-fn cgroup_files(dir: &Path, limit_file: &str, usage_file: &str) -> Option<Limit> {
+/// The files of one cgroup version: its limit, its usage and, in its `memory.stat`, the key of
+/// the page cache the kernel drops first under pressure.
+#[derive(Debug, Clone, Copy)]
+struct CgroupFiles {
+    limit: &'static str,
+    usage: &'static str,
+    inactive_file: &'static str,
+}
+
+const CGROUP_V2: CgroupFiles = CgroupFiles {
+    limit: "memory.max",
+    usage: "memory.current",
+    inactive_file: "inactive_file",
+};
+
+const CGROUP_V1: CgroupFiles = CgroupFiles {
+    limit: "memory.limit_in_bytes",
+    usage: "memory.usage_in_bytes",
+    inactive_file: "total_inactive_file",
+};
+
+/// One cgroup folder's limit and what of it is in use; `None` when it sets no limit ("max", or
+/// v1's huge number for none) or cannot be read. In use is the usage less the inactive page
+/// cache (the working set, as container runtimes count it): the kernel reclaims that cache
+/// before it refuses memory, so counting it would refuse room that is there.
+fn cgroup_files(dir: &Path, files: CgroupFiles) -> Option<Limit> {
     let read = |name: &str| std::fs::read_to_string(dir.join(name)).ok();
-    let bytes: u64 = read(limit_file)?.trim().parse().ok()?;
+    let bytes: u64 = read(files.limit)?.trim().parse().ok()?;
     // cgroup v1 says "no limit" with the largest page-aligned i64.
     if bytes >= 1 << 60 {
         return None;
     }
-    let in_use = read(usage_file)?.trim().parse().unwrap_or(0);
+    let usage: u64 = read(files.usage)?.trim().parse().unwrap_or(0);
+    let inactive_file = read("memory.stat")
+        .and_then(|stat| {
+            stat.lines().find_map(|line| {
+                let (key, value) = line.split_once(' ')?;
+                (key == files.inactive_file).then(|| value.trim().parse::<u64>().ok())?
+            })
+        })
+        .unwrap_or(0);
     Some(Limit {
-        kind: LimitKind::Cgroup(dir.join(limit_file)),
+        kind: LimitKind::Cgroup(dir.join(files.limit)),
         bytes,
-        in_use,
+        in_use: usage.saturating_sub(inactive_file),
     })
 }
 
@@ -306,25 +333,26 @@ mod tests {
     }
 
     #[test]
-    fn a_cgroup_folder_without_a_limit_is_no_limit() {
+    fn a_cgroup_folder_without_a_limit_is_no_limit_and_its_page_cache_is_room() {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("memory.max"), "max\n").unwrap();
-        std::fs::write(dir.path().join("memory.current"), "1000\n").unwrap();
-        assert_eq!(
-            cgroup_files(dir.path(), "memory.max", "memory.current"),
-            None
+        let write = |name: &str, text: &str| std::fs::write(dir.path().join(name), text).unwrap();
+        write("memory.max", "max\n");
+        write("memory.current", "1000\n");
+        assert_eq!(cgroup_files(dir.path(), CGROUP_V2), None);
+        write("memory.max", "268435456\n");
+        let limit = cgroup_files(dir.path(), CGROUP_V2).unwrap();
+        assert_eq!((limit.bytes, limit.in_use), (256 * MB, 1000));
+        // 200 MB used, 150 MB of it inactive page cache: 50 MB in use, 206 MB of room.
+        write("memory.current", &(200 * MB).to_string());
+        write(
+            "memory.stat",
+            &format!("anon 1\ninactive_file {}\nactive_file 2\n", 150 * MB),
         );
-        std::fs::write(dir.path().join("memory.max"), "268435456\n").unwrap();
-        let limit = cgroup_files(dir.path(), "memory.max", "memory.current").unwrap();
-        assert_eq!(
-            (limit.bytes, limit.in_use, limit.room()),
-            (256 * MB, 1000, 256 * MB - 1000)
-        );
+        let limit = cgroup_files(dir.path(), CGROUP_V2).unwrap();
+        assert_eq!((limit.in_use, limit.room()), (50 * MB, 206 * MB));
         // cgroup v1's "no limit".
-        std::fs::write(dir.path().join("memory.max"), "9223372036854771712\n").unwrap();
-        assert_eq!(
-            cgroup_files(dir.path(), "memory.max", "memory.current"),
-            None
-        );
+        write("memory.limit_in_bytes", "9223372036854771712\n");
+        write("memory.usage_in_bytes", "1000\n");
+        assert_eq!(cgroup_files(dir.path(), CGROUP_V1), None);
     }
 }
