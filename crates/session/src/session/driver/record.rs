@@ -112,10 +112,14 @@ struct WorkerCamera {
     samples: Arc<Mutex<BTreeMap<usize, PosePair>>>,
 }
 
-/// Memory the run needs besides its detection workers: the solve over every corner, the report
-/// (frames annotated and encoded), a camera's frames in flight. Counted with the workers before
-/// they start, so a limit too small for the run ends it there, with the figures.
-const RUN_BESIDES_DETECTION_BYTES: u64 = 96 << 20;
+/// Memory the run needs besides its detection workers and what it holds already when they start
+/// (the camera, the renderer of a simulated one, the plan): the solve over every corner, the
+/// report (frames annotated and encoded), a camera's frames in flight. Counted with the workers
+/// before they start, so a limit too small for the run ends it there, with the figures. Measured
+/// (issue #44): the simulated cell's run of 20 poses under `ulimit -v` holds 88-113 MB of address
+/// space when its workers start and peaks near 110 MB with one detector thread; 32 MB more than
+/// that and the workers' own estimate leave a margin for larger reports and other cameras.
+const RUN_BESIDES_DETECTION_BYTES: u64 = 32 << 20;
 
 /// How many detection workers to start: `-j` (the detector options' `jobs`) or one per core (at
 /// most four), as many as the memory limits leave room for. Fewer than asked for with `-j` is
