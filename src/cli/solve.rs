@@ -165,17 +165,18 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         None => config.solver.space,
     };
     let inputs = session::SolveInputs::load(config)?;
-    let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
-        .with_context(|| format!("solving session {}", args.samples.display()))?;
-    let config = &inputs.config;
-    // A run still recording: said before the answer and after it (the result file holds it too,
-    // as the solve's first notice).
+    // A run still recording: said before the solve (whose failure with few samples so far is
+    // then read as such) and after the answer; the result file holds it too, as the solve's
+    // first notice.
     let provisional = folder
         .live_run()
         .map(|run| format!("provisional: {run}; this answer is of the samples so far: solve again when the run has ended"));
     if let Some(line) = &provisional {
         outln!("{line}");
     }
+    let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
+        .with_context(|| format!("solving session {}", args.samples.display()))?;
+    let config = &inputs.config;
     outln!("{}", solved.summary);
     if let Some(truth) = &config.simulation {
         outln!("{}", solved.compare_with_truth(truth));

@@ -7,7 +7,9 @@
 //! is smaller than one 4x4 threshold tile indexes memory before its buffers and crashes the
 //! process. [`DetectorHandle::detect`] therefore checks every image's size first
 //! ([`check_image_size`]); the decimation itself is bounded by `vision::detect` before a
-//! detector is built. Depends on `vision::family` (the layout type) and `vision::TargetError`.
+//! detector is built. Nor does it check what its `malloc`s return: [`detector_bytes`] bounds what
+//! it allocates for an image, and `vision::detect` makes sure that much is there before each call
+//! (issue #44), so a memory limit is an error, not a crash in C. Depends on `vision::family` (the layout type) and `vision::TargetError`.
 
 use apriltag::{Detector, Image};
 use apriltag_sys as sys;
