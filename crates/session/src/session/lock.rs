@@ -70,10 +70,9 @@ pub fn live_run(root: &Path) -> Result<Option<LiveRun>, SessionError> {
     if !cameras.is_dir() {
         return Ok(None);
     }
-    let entries = std::fs::read_dir(&cameras).map_err(|source| SessionError::Io {
-        path: cameras.clone(),
-        source,
-    })?;
+    let Ok(entries) = std::fs::read_dir(&cameras) else {
+        return Ok(None);
+    };
     for entry in entries.filter_map(Result::ok) {
         if let Some(run) = live_run_in(&entry.path())? {
             return Ok(Some(run));
@@ -100,11 +99,11 @@ fn live_run_in(folder: &Path) -> Result<Option<LiveRun>, SessionError> {
         path: path.clone(),
         source,
     };
-    // Read-only and never created: a reader leaves no trace in the folder.
-    let mut file = match File::open(&path) {
-        Ok(file) => file,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(io(e)),
+    // Read-only and never created: a reader leaves no trace in the folder. A lock file that
+    // cannot be opened (none, a symlink loop, no permission) holds no run this look can see;
+    // the read that follows names what is wrong with the folder.
+    let Ok(mut file) = File::open(&path) else {
+        return Ok(None);
     };
     match FileExt::try_lock_shared(&file) {
         Ok(()) => {
