@@ -155,10 +155,14 @@ fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
                 return Err(error);
             }
         }
-        tracing::warn!(
-            "{fit} detector thread(s) instead of {wanted}: the memory limit leaves room for {fit} ({} MB each)",
-            each.div_ceil(memory::MB)
-        );
+        // Once a process: an adaptive run starts its workers again for every pose.
+        static SAID: std::sync::Once = std::sync::Once::new();
+        SAID.call_once(|| {
+            tracing::warn!(
+                "{fit} detector thread(s) instead of {wanted}: the memory limit leaves room for {fit} ({} MB each)",
+                each.div_ceil(memory::MB)
+            );
+        });
     }
     Ok(fit)
 }
