@@ -9,6 +9,8 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Under `ulimit -v`, before any thread allocates: one allocator arena (see the function).
+    handeye_vision::detect::fit_allocator_to_limits();
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("HANDEYE_LOG")

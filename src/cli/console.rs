@@ -72,6 +72,7 @@ pub(super) fn run(args: ConsoleArgs) -> anyhow::Result<()> {
         motion_confirmed: args.yes,
         accept_changed: args.accept_changed,
         stop,
+        jobs: None,
     };
     let mut printer = super::run::Printer::new(request.stop.clone());
     let opened = match open_run(&request, &mut printer) {

@@ -100,10 +100,11 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
     }
     // One detector per worker (the AprilTag detector is single-threaded: frames are the unit
     // of parallel work), the results printed in the images' order as they complete.
-    let jobs = args
+    let wanted = args
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .clamp(1, args.images.len().max(1));
+    let jobs = jobs_that_fit(&args, &board, &options, &camera, wanted)?;
     let mut detectors = vec![detector];
     for _ in 1..jobs {
         detectors.push(TargetDetector::spawn(&board, options.clone())?);
@@ -124,10 +125,10 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
     let mut results = Vec::new();
     let mut found_count = 0;
     std::thread::scope(|scope| -> anyhow::Result<()> {
-        for detector in &detectors {
+        for (detector_index, detector) in detectors.iter().enumerate() {
             let sender = sender.clone();
             let (next, failed, board, camera, args) = (&next, &failed, &board, &camera, &args);
-            scope.spawn(move || {
+            let worker = std::thread::Builder::new().spawn_scoped(scope, move || {
                 use std::sync::atomic::Ordering;
                 while !failed.load(Ordering::Relaxed) {
                     let index = next.fetch_add(1, Ordering::Relaxed);
@@ -142,6 +143,16 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
                     }
                 }
             });
+            // The detectors started already; a worker that cannot start leaves its images to
+            // the others, unless none started.
+            if let Err(e) = worker {
+                anyhow::ensure!(
+                    detector_index > 0,
+                    "{}",
+                    handeye_core::memory::thread_start_error("a detection worker", &e)
+                );
+                break;
+            }
         }
         drop(sender);
         let mut waiting = std::collections::BTreeMap::new();
@@ -185,6 +196,43 @@ pub(super) fn run(args: DetectArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// How many images to detect at once: `wanted`, or as many as the memory limits leave room for
+/// at the camera's image size (said when fewer; refused with the figures when `-j` asked for
+/// more than fit).
+fn jobs_that_fit(
+    args: &DetectArgs,
+    board: &Target,
+    options: &DetectorOptions,
+    camera: &CameraModel,
+    wanted: usize,
+) -> anyhow::Result<usize> {
+    use handeye_core::memory;
+    let (width, height) = (camera.width, camera.height);
+    // A detector and its thread, the image being read and its annotated copy.
+    let each = TargetDetector::memory_needed(board, options, width, height)
+        + 4 * u64::from(width) * u64::from(height);
+    let what = |n: usize| format!("detection with {n} detector thread(s) at {width}x{height}");
+    // The results of every image are kept until the end: small; the rest of the command too.
+    let fit = memory::how_many_fit(what, DETECT_BESIDES_DETECTORS_BYTES, each, wanted)?;
+    if fit < wanted {
+        if args.jobs.is_some() {
+            memory::check(
+                &what(wanted),
+                DETECT_BESIDES_DETECTORS_BYTES + each * wanted as u64,
+                &format!(" or use `-j {fit}`"),
+            )?;
+        }
+        eprintln!(
+            "note: {fit} detector thread(s) instead of {wanted}: the memory limit leaves room for {fit} ({} MB each)",
+            each.div_ceil(memory::MB)
+        );
+    }
+    Ok(fit)
+}
+
+/// Memory `detect` needs besides its detectors: the board, the results, PnP.
+const DETECT_BESIDES_DETECTORS_BYTES: u64 = 16 << 20;
 
 /// `detect --camera N --live`: one line per frame with the board pose, until interrupted.
 fn live(

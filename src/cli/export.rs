@@ -96,6 +96,10 @@ pub(super) fn exported_result(
     result: &std::path::Path,
     frames: super::frames::FrameArgs,
 ) -> anyhow::Result<Exported> {
+    // The result of a session a run is still recording is rewritten when the run ends.
+    if let Some(folder) = result.parent() {
+        super::say_if_live(folder)?;
+    }
     let text = std::fs::read_to_string(result).ok();
     let value: Option<serde_yaml_ng::Value> = text
         .as_deref()

@@ -206,6 +206,10 @@ struct BagArgs {
     /// Quad decimation of the detector (1 = full resolution, at most 16).
     #[arg(long, default_value_t = 1.0)]
     decimation: f32,
+    /// Frames decoded and detected at once, each by a thread of its own (default: one per core,
+    /// at most four, fewer when the memory limit leaves room for fewer).
+    #[arg(short = 'j', long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    jobs: Option<usize>,
     /// The session folder to create (must not exist, or be empty).
     #[arg(short = 'o', long)]
     output: PathBuf,
@@ -265,6 +269,7 @@ fn bag_options(a: &BagArgs) -> anyhow::Result<BagOptions> {
         board,
         detector: DetectorOptions {
             decimation: a.decimation,
+            jobs: a.jobs,
             ..DetectorOptions::default()
         },
     })

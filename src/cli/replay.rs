@@ -30,6 +30,14 @@ pub(super) struct ReplayArgs {
 
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    // The run writes the files a replay writes (the report, the estimates of a blamed file).
+    session::refuse_live(
+        &args.session,
+        &format!(
+            "replay it when the run has ended (`handeye solve {}` gives a provisional answer meanwhile)",
+            args.session.display()
+        ),
+    )?;
     if cell::rig::is_rig_folder(&args.session) {
         return super::rig::replay(
             &args.session,
@@ -141,17 +149,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .result_file(&dataset.pairs, &prepared.config)
         .save(&output)?;
     outln!("{}", solved.summary);
-    if folder.result_path().is_file() {
-        let recorded = ResultFile::load_mounts(&folder.result_path())?;
-        let then = [recorded.camera_mount, recorded.target_mount];
-        for ((key, now), then) in calibration.unknowns().iter().zip(then.iter()) {
-            outln!(
-                "{key}: replay differs from the recorded result by {:.4} mm, {:.5}°",
-                (now.translation.vector - then.translation.vector).norm() * 1e3,
-                now.rotation.angle_to(&then.rotation).to_degrees()
-            );
-        }
-    }
+    print_difference_from_recorded(&folder, calibration)?;
     if let Some(truth) = &prepared.config.simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
@@ -185,5 +183,25 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
             super::run::Stack::of(&prepared.config.robot)
         )
     );
+    Ok(())
+}
+
+/// How far the replayed answer is from the one the run recorded (when it recorded one).
+fn print_difference_from_recorded(
+    folder: &SessionFolder,
+    calibration: &handeye_solve::Calibration,
+) -> anyhow::Result<()> {
+    if !folder.result_path().is_file() {
+        return Ok(());
+    }
+    let recorded = ResultFile::load_mounts(&folder.result_path())?;
+    let then = [recorded.camera_mount, recorded.target_mount];
+    for ((key, now), then) in calibration.unknowns().iter().zip(then.iter()) {
+        outln!(
+            "{key}: replay differs from the recorded result by {:.4} mm, {:.5}°",
+            (now.translation.vector - then.translation.vector).norm() * 1e3,
+            now.rotation.angle_to(&then.rotation).to_degrees()
+        );
+    }
     Ok(())
 }

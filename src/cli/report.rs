@@ -25,6 +25,7 @@ pub(super) struct ReportArgs {
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
     if handeye_session::cell::rig::is_rig_folder(&args.session) {
+        super::say_if_live(&args.session)?;
         let path = handeye::report::rig::write_rig_folder_report(&args.session)?;
         outln!("report: {}", path.display());
         return Ok(());
@@ -42,6 +43,19 @@ pub(super) fn write(
     config: Option<PathBuf>,
 ) -> anyhow::Result<(PathBuf, Option<Verdict>)> {
     let folder = SessionFolder::open(dir)?;
+    let live = folder.live_run().cloned();
+    if let Some(run) = &live {
+        // Without a result there is nothing to report yet; the run writes both when it ends.
+        anyhow::ensure!(
+            folder.result_path().is_file(),
+            "session folder {}: {run}; it writes result.yaml and report.html when it ends (`handeye solve {}` gives a provisional answer now)",
+            dir.display(),
+            dir.display()
+        );
+        eprintln!(
+            "provisional: {run}; this report is of result.yaml as an earlier part of the session wrote it: run `handeye report` again when the run has ended"
+        );
+    }
     let manifest = folder.read_manifest()?;
     let config_path = config.unwrap_or(manifest.config);
     let config = match CellConfig::load(&config_path) {
@@ -54,9 +68,15 @@ pub(super) fn write(
     let result_path = folder.result_path();
     let result = ResultFile::load(&result_path)
         .context("no usable result (solve the session first: `handeye replay`)")?;
-    let calibration = result
+    let mut calibration = result
         .to_calibration(&result_path)
         .context("no usable result (solve the session first: `handeye replay`)")?;
+    if let Some(run) = &live {
+        // The page's findings say it too.
+        calibration
+            .notices
+            .insert(0, handeye_session::session::solve::provisional_notice(run));
+    }
     // The verdict the solve recorded (a result written before verdicts has none: no card).
     let (path, lacking) = write_folder_report(
         &folder,

@@ -55,6 +55,10 @@ pub(super) struct RunArgs {
     /// After the run, keep serving the console until Enter (or Ctrl-C) so the page can be read.
     #[arg(long = "wait", alias = "console-wait", requires = "console")]
     console_wait: bool,
+    /// Detection threads, each with a detector of its own (default: one per core, at most four,
+    /// fewer when the memory limit leaves room for fewer).
+    #[arg(short = 'j', long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    jobs: Option<usize>,
 }
 
 /// Runs `handeye run`.
@@ -70,6 +74,7 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
         motion_confirmed: args.yes,
         accept_changed: args.accept_changed,
         stop: stop.clone(),
+        jobs: args.jobs,
     };
     let console = match args.console {
         Some(addr) => Some(super::console::start(

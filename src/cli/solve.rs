@@ -165,6 +165,15 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         None => config.solver.space,
     };
     let inputs = session::SolveInputs::load(config)?;
+    // A run still recording: said before the solve (whose failure with few samples so far is
+    // then read as such) and after the answer; the result file holds it too, as the solve's
+    // first notice.
+    let provisional = folder
+        .live_run()
+        .map(|run| format!("provisional: {run}; this answer is of the samples so far: solve again when the run has ended"));
+    if let Some(line) = &provisional {
+        outln!("{line}");
+    }
     let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
         .with_context(|| format!("solving session {}", args.samples.display()))?;
     let config = &inputs.config;
@@ -184,6 +193,9 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
     solved.result_file(&dataset.pairs, config).save(&output)?;
     outln!("wrote {}", output.display());
+    if let Some(line) = &provisional {
+        outln!("{line}");
+    }
     Ok(())
 }
 
@@ -198,6 +210,10 @@ pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
         args.samples.display()
     );
     let options = args.options()?;
+    // A session's samples.yaml, given as a file, while its run records more.
+    if let Some(folder) = args.samples.parent() {
+        super::say_if_live(folder)?;
+    }
     let dataset = Dataset::load(&args.samples)?;
     let result = solve::solve(dataset.setup, &dataset.pairs, &options);
     // The verdict comes first, also when the solve is refused (REDO, with the reason).

@@ -50,6 +50,14 @@ pub(super) struct VerifyArgs {
 pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     if let Some(config) = &args.config {
         let result = args.result.as_ref().expect("clap requires --result");
+        // A result of a session still being recorded: the run holds the arm, and the answer is
+        // not its last.
+        if let Some(folder) = result.parent() {
+            handeye_session::session::refuse_live(
+                folder,
+                "verify its result on the cell when the run has ended: the arm is the run's until then",
+            )?;
+        }
         let mounts = ResultFile::load_mounts(result)?;
         let cell_config = CellConfig::load(config).context("reading the cell config")?;
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
@@ -78,6 +86,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             motion_confirmed: args.yes,
             accept_changed: false,
             stop: super::stop_on_ctrl_c(),
+            jobs: None,
         };
         let v = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
         outln!("{}", v.table());
@@ -90,6 +99,14 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     // The session's own solver options and accuracy when its config loads; the defaults else.
     let (setup, pairs, config) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
+        if let Some(run) = folder.live_run() {
+            anyhow::ensure!(
+                folder.samples_path().is_file(),
+                "session folder {}: {run}; no pose has given a sample yet: verify it when the run has recorded some",
+                dir.display()
+            );
+            outln!("provisional: {run}; this check is of the samples so far: verify again when the run has ended");
+        }
         let dataset = Dataset::load(&folder.samples_path())?;
         let config = CellConfig::load(&folder.read_manifest()?.config).ok();
         (dataset.setup, dataset.pairs, config)

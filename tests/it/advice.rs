@@ -158,6 +158,9 @@ fn wrong_board_size(scale: f64, name: &str) {
             &board_line,
         )],
     );
+    // The run ends here, as `handeye run` exits: its lock goes with it (a replay of a session a
+    // run still holds is refused, issue #44).
+    drop(run);
     let (printed_out, after) = replay(&session, &fixed);
     eprintln!("{printed_out}");
     assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
@@ -289,6 +292,9 @@ fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
     let session = dir.path().join("session");
     let run = run_cell(&config, &session);
     let verdict = run.solved.verdict.clone().unwrap();
+    // The run ends here, as `handeye run` exits: its lock goes with it (a replay of a
+    // session a run still holds is refused, issue #44).
+    drop(run);
     eprintln!("{}", verdict.terminal_lines());
     assert_eq!(
         (verdict.level, verdict.basis),
@@ -521,6 +527,9 @@ fn intrinsics_8_percent_off_are_the_verdicts_reason() {
     let session = dir.path().join("session");
     let run = run_cell(&config, &session);
     let verdict = run.solved.verdict.clone().unwrap();
+    // The run ends here, as `handeye run` exits: its lock goes with it (a replay of a
+    // session a run still holds is refused, issue #44).
+    drop(run);
     eprintln!("{}", verdict.terminal_lines());
     assert_eq!(
         (verdict.level, verdict.basis),

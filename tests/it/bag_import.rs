@@ -859,5 +859,6 @@ fn bad_bags_fail_clearly_and_write_nothing() {
 }
 
 mod lies;
+mod limits;
 mod stops;
 mod stream;

@@ -292,7 +292,7 @@ fn a_second_run_of_the_same_folder_is_refused_while_one_runs() {
     let message = stderr(&second);
     assert!(!second.status.success(), "{message}");
     assert!(
-        message.contains("is in use by process") && message.contains(&pid),
+        message.contains(&format!("a run (pid {pid}) is recording this session")),
         "{message}"
     );
     let first = first.wait_with_output().unwrap();
@@ -323,12 +323,10 @@ fn a_second_run_of_the_same_folder_is_refused_while_one_runs() {
     );
     let refused = outputs.iter().find(|o| !o.status.success()).unwrap();
     let message = stderr(refused);
-    // The loser may see the lock before the winner has written its PID into it ("in use by
-    // another process"), or the folder already made ("already exists").
+    // The loser may see the lock before the winner has written its PID into it ("a run is
+    // recording"), or the folder already made ("already exists").
     assert!(
-        message.contains("is in use by process")
-            || message.contains("is in use by another process")
-            || message.contains("already exists"),
+        message.contains("is recording this session") || message.contains("already exists"),
         "{message}"
     );
     assert_every_pose_once(&race);

@@ -198,6 +198,7 @@ pub fn new_run(config: &Path, out: &Path) -> RunRequest {
         motion_confirmed: true,
         accept_changed: false,
         stop: Arc::new(AtomicBool::new(false)),
+        jobs: None,
     }
 }
 

@@ -7,6 +7,8 @@
 //! - [`setup`]: eye-in-hand / eye-to-hand, the two unknowns of a cell, a pose pair, a corner
 //!   observation;
 //! - [`notice`]: typed messages with a severity;
+//! - [`memory`]: the memory limits the process runs under (`ulimit -v`, the cgroup's), and the
+//!   check that a step fits them;
 //! - [`atomic_file`], [`yaml_file`]: files written whole or not at all, YAML read with errors that
 //!   name the file, the key and the line.
 
@@ -14,6 +16,7 @@ pub mod atomic_file;
 pub mod camera_model;
 pub mod error_text;
 pub mod geometry;
+pub mod memory;
 pub mod notice;
 pub mod setup;
 pub mod yaml_file;

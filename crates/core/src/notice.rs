@@ -77,6 +77,9 @@ pub enum NoticeKind {
     /// The configured intrinsics do not fit the frames (intrinsics estimated from the session
     /// fit far better); the message is the reason, then ` — next: ` and what to do.
     WrongIntrinsics,
+    /// The session was still being recorded when it was solved: the answer is of the poses so
+    /// far, and the run will add to them.
+    Provisional,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

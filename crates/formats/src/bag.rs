@@ -331,6 +331,7 @@ pub fn import_bag_session(
         motion_confirmed: true,
         accept_changed: false,
         stop: Arc::new(AtomicBool::new(false)),
+        jobs: request.options.detector.jobs,
     };
     let mut observer = RecordedRun {
         report: String::new(),

@@ -174,6 +174,8 @@ pub(crate) fn run(
         motion_confirmed: yes,
         accept_changed,
         stop: stop.clone(),
+        // One detection thread per core (at most four), fewer when the memory limits say so.
+        jobs: None,
     };
     let mut observer = PyObserver {
         progress,

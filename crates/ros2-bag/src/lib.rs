@@ -160,6 +160,12 @@ pub enum BagError {
         /// The largest step back allowed, ms.
         max_back_ms: f64,
     },
+    /// A step of the import does not fit the memory limits the process runs under.
+    #[error(transparent)]
+    Memory(#[from] handeye_core::memory::NotEnoughMemory),
+    /// A thread of the import could not start (memory named when a limit is the cause).
+    #[error("{0}")]
+    ThreadStart(String),
     /// The bag (or a part of it) does not fit in the memory the process may use.
     #[error("not enough memory to read {} ({} MB): {problem}", path.display(), bytes.div_ceil(1 << 20))]
     OutOfMemory {
@@ -409,6 +415,36 @@ fn wanted_topics(
 }
 
 /// The lens of the first camera_info message, when a topic was given (it must hold one).
+/// The frame size pass 2's memory is counted at when the bag has no camera_info: 1920x1080.
+const UNKNOWN_FRAME_PIXELS: u64 = 1920 * 1080;
+
+/// How many threads read, decode and score pass 2's frames: `-j` (the detector options' `jobs`)
+/// or one per core (at most four), as many as the memory limits leave room for. Each holds a
+/// window of one frame: its message (up to 3 bytes a pixel, or a compressed one decoded to
+/// colour), its grey image and the sharpness filter's copy.
+fn decoding_workers(camera: Option<&CameraModel>, options: &BagOptions) -> Result<usize, BagError> {
+    let pixels = camera.map_or(UNKNOWN_FRAME_PIXELS, |c| {
+        u64::from(c.width) * u64::from(c.height)
+    });
+    let window = 8 * pixels;
+    let wanted = options
+        .detector
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(4)));
+    let fit = handeye_core::memory::how_many_fit(
+        |n| format!("reading the bag's frames with {n} thread(s)"),
+        0,
+        window,
+        wanted,
+    )?;
+    if fit < wanted {
+        tracing::warn!(
+            "{fit} thread(s) read the bag's frames instead of {wanted}: the memory limit leaves room for {fit}"
+        );
+    }
+    Ok(fit)
+}
+
 fn camera_of(
     path: &Path,
     info_topic: Option<&TopicInfo>,
@@ -592,6 +628,7 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         reader: bag.message_at(&options.image_topic),
         compressed,
         decoded: 0,
+        workers: decoding_workers(camera.as_ref(), options)?,
     };
     let selected = select::select(
         path,

@@ -169,6 +169,8 @@ pub(crate) struct Frames<'b> {
     pub(crate) compressed: bool,
     /// Frames decoded so far.
     pub(crate) decoded: usize,
+    /// Threads that read, decode and score frames at once (what the memory limits allow).
+    pub(crate) workers: usize,
 }
 
 pub(crate) struct Selected {
@@ -407,9 +409,7 @@ fn sharpest(
         Read,
         Message(Vec<u8>),
     }
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get().min(4))
-        .min(interval.len());
+    let workers = frames.workers.clamp(1, interval.len().max(1));
     let bag = frames.reader.bag();
     let compressed = frames.compressed;
     let mut best: Best = None;
@@ -418,10 +418,12 @@ fn sharpest(
     let (to_workers, jobs) = std::sync::mpsc::sync_channel::<(usize, Job)>(workers);
     let jobs = std::sync::Mutex::new(jobs);
     std::thread::scope(|scope| {
-        let scorers: Vec<_> = (0..workers)
-            .map(|_| {
-                let jobs = &jobs;
-                scope.spawn(move || -> (Best, Option<(usize, BagError)>) {
+        let mut scorers = Vec::with_capacity(workers);
+        for _ in 0..workers {
+            let jobs = &jobs;
+            let started = std::thread::Builder::new().spawn_scoped(
+                scope,
+                move || -> (Best, Option<(usize, BagError)>) {
                     let mut best: Best = None;
                     while let Ok(Ok((k, job))) = jobs.lock().map(|j| j.recv()) {
                         let image = &images[interval[k].0];
@@ -436,9 +438,22 @@ fn sharpest(
                         }
                     }
                     (best, None)
-                })
-            })
-            .collect();
+                },
+            );
+            match started {
+                Ok(scorer) => scorers.push(scorer),
+                // Those that started go on: fewer threads, the same frames.
+                Err(_) if !scorers.is_empty() => break,
+                Err(e) => {
+                    let what = "a thread to read the bag's frames";
+                    failed = Some((
+                        0,
+                        BagError::ThreadStart(handeye_core::memory::thread_start_error(what, &e)),
+                    ));
+                    return;
+                }
+            }
+        }
         for (k, (i, _)) in interval.iter().enumerate() {
             let location = images[*i].location;
             let job = if location.direct() {

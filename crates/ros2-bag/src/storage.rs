@@ -148,11 +148,27 @@ impl std::fmt::Display for UnknownTopicRows {
 pub const HEADROOM_BYTES: usize = 64 << 20;
 
 pub(super) fn out_of_memory(file: &Path, bytes: u64, what: &str) -> BagError {
+    use handeye_core::memory;
+    // The limit that was reached, with its figures, when one is set.
+    let limit = memory::limits()
+        .into_iter()
+        .min_by_key(memory::Limit::room)
+        .map_or_else(
+            || "a memory limit such as `ulimit -v`, or too little free RAM".to_string(),
+            |limit| {
+                format!(
+                    "the limit is {} MB ({}), {} MB of it in use",
+                    limit.bytes / memory::MB,
+                    limit.kind,
+                    limit.in_use.div_ceil(memory::MB)
+                )
+            },
+        );
     BagError::OutOfMemory {
         path: file.to_path_buf(),
         bytes,
         problem: format!(
-            "{what} failed (a memory limit such as `ulimit -v`, or too little free RAM); the import streams the bag (one message at a time, whatever the bag's size) but needs about {} MB besides, plus its largest message: raise the limit",
+            "{what} failed ({limit}); the import streams the bag (one message at a time, whatever the bag's size) but needs about {} MB besides, plus its largest message: raise the limit",
             HEADROOM_BYTES >> 20
         ),
     }

@@ -61,6 +61,10 @@ pub struct DetectorOptions {
     /// Search again at full resolution where the tags found say a missing tag is (small or
     /// blurred tags the quad search missed; `vision::regrid`).
     pub second_pass: bool,
+    /// Frames detected at once, each by a detector of its own on a thread of its own (`-j`):
+    /// `None` is one per core (at most four), fewer when the memory limits leave room for fewer
+    /// ([`TargetDetector::memory_needed`](crate::TargetDetector::memory_needed)).
+    pub jobs: Option<usize>,
 }
 
 impl Default for DetectorOptions {
@@ -71,8 +75,44 @@ impl Default for DetectorOptions {
             quad_sigma: 0.0,
             max_hamming: 1,
             second_pass: true,
+            jobs: None,
         }
     }
+}
+
+/// Prepares the allocator for the memory limits the process runs under, before detector
+/// threads start: under `ulimit -v`, one allocator arena for all threads (see the C binding's
+/// note: per-thread arenas reserve address space the C detector then lacks). Called by every
+/// memory check of the detection; harmless to call again.
+pub fn fit_allocator_to_limits() {
+    ffi::fit_allocator_to_limits();
+}
+
+/// The stack of a thread std starts (2 MiB) and its guard page, bytes.
+pub(crate) const THREAD_STACK_BYTES: u64 = (2 << 20) + 4096;
+
+/// Bytes per frame pixel the detector thread holds besides the C detector: the frame it was
+/// sent, the two binomial passes (16-bit rows, then the 8-bit result, twice) or the X-junction
+/// copy, with a margin for the second pass's crops.
+const RUST_BYTES_PER_PIXEL: u64 = 8;
+
+/// The memory one AprilTag detector needs at most at a `width`x`height` frame, bytes: the C
+/// detector's working memory (`ffi::detector_bytes`), the frame copies of its thread, and the
+/// stacks of that thread and of the worker that feeds it.
+pub(crate) fn tag_detector_bytes(
+    board: &Board,
+    options: &DetectorOptions,
+    width: u32,
+    height: u32,
+) -> u64 {
+    ffi::detector_bytes(
+        board.family(),
+        width,
+        height,
+        options.decimation,
+        options.max_hamming,
+    ) + RUST_BYTES_PER_PIXEL * u64::from(width) * u64::from(height)
+        + 2 * THREAD_STACK_BYTES
 }
 
 /// A detector option out of range: the field, the value and what is accepted.
@@ -286,7 +326,7 @@ impl TagDetector {
                 )
             })
             .map_err(|error| TargetError::Detector {
-                reason: format!("cannot start the detector thread: {error}"),
+                reason: handeye_core::memory::thread_start_error("the detector thread", &error),
             })?;
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(TagDetector {
@@ -427,6 +467,21 @@ fn detector_thread(
     };
     let _ = ready.send(Ok(()));
     while let Ok((image, reply)) = jobs.recv() {
+        // The C detector checks none of its allocations: what it may take at this frame's size
+        // is made sure of first, so a limit reached is this error, never a crash.
+        let (width, height) = (image.width(), image.height());
+        let needed = ffi::detector_bytes(
+            family,
+            width,
+            height,
+            options.decimation,
+            options.max_hamming,
+        ) + RUST_BYTES_PER_PIXEL * u64::from(width) * u64::from(height);
+        let what = format!("the AprilTag detector at {width}x{height}");
+        if let Err(e) = handeye_core::memory::probe(&what, needed, " or use `-j 1`") {
+            let _ = reply.send(Err(TargetError::Memory(e)));
+            continue;
+        }
         let searched = match &x_junctions {
             Some(_) => separate_x_junctions(&image),
             None => binomial_blur(&binomial_blur(&image)),

@@ -7,7 +7,9 @@
 //! is smaller than one 4x4 threshold tile indexes memory before its buffers and crashes the
 //! process. [`DetectorHandle::detect`] therefore checks every image's size first
 //! ([`check_image_size`]); the decimation itself is bounded by `vision::detect` before a
-//! detector is built. Depends on `vision::family` (the layout type) and `vision::TargetError`.
+//! detector is built. Nor does it check what its `malloc`s return: [`detector_bytes`] bounds what
+//! it allocates for an image, and `vision::detect` makes sure that much is there before each call
+//! (issue #44), so a memory limit is an error, not a crash in C. Depends on `vision::family` (the layout type) and `vision::TargetError`.
 
 use apriltag::{Detector, Image};
 use apriltag_sys as sys;
@@ -292,6 +294,63 @@ fn min_image_side(decimation: f32, min_quad: u32) -> u32 {
 /// indexes out of bounds with fewer than one tile per side; two tiles leave a margin (and no
 /// tag fits in less anyway).
 pub(super) const MIN_QUAD_IMAGE_SIDE_PX: u32 = 8;
+
+/// Bytes the C detector allocates per pixel of its quad-search image, at most: the decimated
+/// copy and the threshold image (1 + 1), the union-find of connected components (8: a 32-bit
+/// parent and size per pixel) and the gradient clusters (up to four 12-byte boundary points per
+/// pixel, 48). A noisy frame comes near it; a board on a plain background uses a fraction.
+const C_BYTES_PER_QUAD_PIXEL: u64 = 58;
+
+/// The C detector's quick-decode table of one family, bytes: three slots of 16 bytes per code
+/// and per pattern within `bits` corrected bits (`quick_decode_init`). Built once per detector.
+fn quick_decode_bytes(codes: u64, nbits: u64, bits: u32) -> u64 {
+    let patterns = match bits {
+        0 | 1 => 1 + nbits,
+        _ => 1 + nbits + nbits * (nbits - 1) / 2,
+    };
+    codes * patterns * 3 * 16
+}
+
+/// The memory one C detector allocates, at most, to search a `width`x`height` image at
+/// `decimation` (the library checks none of its allocations, so this is what must be free):
+/// its aligned copy of the image, the quad search's working memory and the decode table of
+/// `family` within `max_hamming` bits.
+pub(super) fn detector_bytes(
+    family: TagFamily,
+    width: u32,
+    height: u32,
+    decimation: f32,
+    max_hamming: u32,
+) -> u64 {
+    let (quad_width, quad_height) = quad_image_size(width, height, decimation);
+    let quad = u64::from(quad_width) * u64::from(quad_height);
+    // The detector's own copy of the frame, rows padded to 96 bytes.
+    let image = u64::from(width.next_multiple_of(96)) * u64::from(height);
+    let layout = standard_layout(family);
+    let table = quick_decode_bytes(
+        layout.codes.len() as u64,
+        u64::from(layout.nbits),
+        max_hamming.clamp(1, 2),
+    );
+    image + quad * C_BYTES_PER_QUAD_PIXEL + table
+}
+
+/// Under an address-space limit (`ulimit -v`), keeps glibc's allocator to one arena. Each
+/// thread that allocates otherwise gets an arena of its own, which reserves 64 MB of address
+/// space on a 64-bit system however little it holds: a few detector threads then leave no room
+/// for the allocations themselves, and the C detector, which checks none of its `malloc`s,
+/// crashes. One arena shares the space (the detectors' large blocks are mapped one by one
+/// anyway). Without a limit nothing changes.
+pub(super) fn fit_allocator_to_limits() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    if handeye_core::memory::address_space_limited() {
+        // SAFETY: mallopt(M_ARENA_MAX) only sets a limit glibc reads when it next creates an
+        // arena; it may be called at any time from any thread, and touches no memory of ours.
+        unsafe {
+            libc::mallopt(libc::M_ARENA_MAX, 1);
+        }
+    }
+}
 
 /// One detection as the C library reports it (pixel centres at `i + 0.5`).
 pub(super) struct RawTag {

@@ -87,6 +87,9 @@ pub enum TargetError {
         #[source]
         source: image::ImageError,
     },
+    /// The memory a detector needs is not there (a limit such as `ulimit -v`).
+    #[error(transparent)]
+    Memory(#[from] handeye_core::memory::NotEnoughMemory),
     /// The AprilTag detector could not be created.
     #[error("AprilTag detector: {reason}")]
     Detector {

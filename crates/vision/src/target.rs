@@ -229,6 +229,10 @@ fn parse<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T, T
     })
 }
 
+/// Bytes per pixel the ChArUco and chessboard corner search holds at most (see
+/// [`TargetDetector::memory_needed`]).
+const CORNER_SEARCH_BYTES_PER_PIXEL: u64 = 32;
+
 /// The detector of a target: the AprilTag detector thread for aprilgrids, the chessboard
 /// corner detector for ChArUco boards and chessboards. `Send + Sync`.
 #[derive(Debug)]
@@ -254,6 +258,28 @@ impl TargetDetector {
             Target::Charuco(board) => TargetDetector::Charuco(Box::new(board.detector()?)),
             Target::Checkerboard(board) => TargetDetector::Checkerboard(board.clone()),
         })
+    }
+
+    /// The memory one detector of `target` needs at most to detect a `width`x`height` frame,
+    /// with the thread it runs on, bytes: what a check against the process's memory limits
+    /// ([`handeye_core::memory`]) counts per detector thread.
+    pub fn memory_needed(
+        target: &(impl AsTarget + ?Sized),
+        options: &DetectorOptions,
+        width: u32,
+        height: u32,
+    ) -> u64 {
+        match &*target.as_target() {
+            Target::Aprilgrid(board) => {
+                super::detect::tag_detector_bytes(board, options, width, height)
+            }
+            // The ChESS corner search's image pyramid and response maps (32-bit floats, a few
+            // of them per pixel) on the worker's own thread.
+            Target::Charuco(_) | Target::Checkerboard(_) => {
+                CORNER_SEARCH_BYTES_PER_PIXEL * u64::from(width) * u64::from(height)
+                    + super::detect::THREAD_STACK_BYTES
+            }
+        }
     }
 
     /// Detects the board in a grey image.

@@ -77,6 +77,7 @@ fn body() {
         motion_confirmed: confirmed,
         accept_changed: false,
         stop: Arc::new(AtomicBool::new(false)),
+        jobs: None,
     };
 
     // A real arm: without `--yes` the run asks, and a refusal moves nothing and writes nothing.

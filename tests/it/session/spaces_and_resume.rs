@@ -117,6 +117,7 @@ fn library_run(
             motion_confirmed: false,
             accept_changed: false,
             stop: Arc::new(AtomicBool::new(false)),
+            jobs: None,
         },
         cell::run::Strategy::Planned,
         &mut util::QuietObserver,

@@ -425,6 +425,7 @@ fn recordings(
         detector: setup.detector.clone(),
         max_rms: setup.max_reprojection_rms_px,
         model: (!setup.estimate_intrinsics).then(|| *camera.model()),
+        frame_size: (camera.model().width, camera.model().height),
     }];
     recordings.extend(
         rig_others
@@ -438,6 +439,7 @@ fn recordings(
                 detector: setup.detector.clone(),
                 max_rms: setup.max_reprojection_rms_px,
                 model: Some(*device.model()),
+                frame_size: (device.model().width, device.model().height),
             }),
     );
     Ok(recordings)

@@ -41,7 +41,7 @@ use handeye_robot::{Joints, MAX_JOINTS};
 use handeye_vision::Target;
 
 use super::inputs::InputFile;
-use super::lock::{SessionLock, LOCK_FILE};
+use super::lock::{live_run, LiveRun, SessionLock, LOCK_FILE};
 use handeye_core::yaml_file::SchemaVersion;
 
 use super::SessionError;
@@ -182,6 +182,8 @@ pub struct SessionFolder {
     /// renamed into place at the end): the path the result's advice names.
     shown_as: Option<PathBuf>,
     lock: Option<Arc<SessionLock>>,
+    /// The run recording the folder when it was opened to read (see [`SessionFolder::open`]).
+    live: Option<LiveRun>,
     notes: Vec<String>,
 }
 
@@ -231,17 +233,37 @@ impl SessionFolder {
         Ok(folder)
     }
 
-    /// Opens an existing session folder to read it (no lock).
+    /// Opens an existing session folder to read it (no lock). A run recording it is looked for
+    /// first ([`live_run`]): before its first pose (no `session.yaml` yet) that is the error
+    /// ([`SessionError::Recording`]: there is nothing to read, and nothing was left unfinished);
+    /// after it, the folder opens and [`SessionFolder::live_run`] names the run, so what is read
+    /// is said to be provisional.
     pub fn open(root: &Path) -> Result<SessionFolder, SessionError> {
+        // The lock this process holds is its own run's (a run solving its folder at the end).
+        let live = live_run(root)?.filter(|run| run.pid != Some(std::process::id()));
         if !root.join("session.yaml").is_file() {
-            return Err(SessionError::NotASession(root.to_path_buf()));
+            return Err(match live {
+                Some(run) => SessionError::Recording {
+                    run,
+                    next: "it writes session.yaml before its first pose: nothing to read yet"
+                        .to_string(),
+                },
+                None => SessionError::NotASession(root.to_path_buf()),
+            });
         }
         Ok(SessionFolder {
             root: root.to_path_buf(),
             shown_as: None,
             lock: None,
+            live,
             notes: Vec::new(),
         })
+    }
+
+    /// The run that was recording the folder when it was opened to read, if one was: what is
+    /// read is the poses so far, and the run will add to them.
+    pub fn live_run(&self) -> Option<&LiveRun> {
+        self.live.as_ref()
     }
 
     /// Opens an existing session folder to continue it: takes its lock (refused while another
@@ -292,6 +314,7 @@ impl SessionFolder {
             root: root.to_path_buf(),
             shown_as: None,
             lock: Some(Arc::new(lock)),
+            live: None,
             notes,
         })
     }

@@ -30,7 +30,7 @@ pub use driver::{
 };
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
-pub use lock::SessionLock;
+pub use lock::{live_run, refuse_live, LiveRun, SessionLock};
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
     load_and_solve, solve_folder, solve_folder_in, solve_session, solve_session_with, Evidence,
@@ -57,12 +57,19 @@ pub enum SessionError {
     #[error("{} is not a session folder (no session.yaml){}", .0.display(), not_a_session_hint(.0))]
     NotASession(PathBuf),
     /// Another live process runs or resumes the session in this folder.
-    #[error("session folder {} is in use by {} (lock file {}): wait for that run to end or stop it; two runs in one folder would mix their samples", folder.display(), match owner { Some(pid) => format!("process {pid}"), None => "another process".to_string() }, folder.join(lock::LOCK_FILE).display())]
+    #[error("session folder {}: {run} (lock file {}): wait for that run to end or stop it; two runs in one folder would mix their samples", run.folder.display(), run.folder.join(lock::LOCK_FILE).display())]
     Locked {
-        /// The session folder.
-        folder: PathBuf,
-        /// The PID the lock file names, when it names one.
-        owner: Option<u32>,
+        /// The run holding the lock.
+        run: LiveRun,
+    },
+    /// A command that must not read a session while it is recorded (`replay`), or that finds
+    /// nothing to read yet (`solve` before the run's first sample), was given a live session.
+    #[error("session folder {}: {run}; {next}", run.folder.display())]
+    Recording {
+        /// The run recording it.
+        run: LiveRun,
+        /// What to do instead.
+        next: String,
     },
     /// Input files changed since the session was recorded; resuming would mix two cells.
     #[error("the input files of {} changed since the session was recorded:\n{}\nresuming would mix samples taken with different inputs: restore the files, start a new session, or resume with --accept-changed", folder.display(), changes.iter().map(|c| format!("  - {c}")).collect::<Vec<_>>().join("\n"))]
@@ -247,9 +254,10 @@ pub enum SessionError {
     /// The board detector could not start or failed on a frame.
     #[error("the board detector failed")]
     Detector(#[source] Box<TargetError>),
-    /// The detection thread could not start.
-    #[error("cannot start the detection thread")]
-    DetectionThreadSpawn(#[source] std::io::Error),
+    /// A detection thread could not start (the message names memory when a limit is the
+    /// cause).
+    #[error("{0}")]
+    DetectionThreadSpawn(String),
     /// The detection thread ended before the run did.
     #[error("the detection thread {0}")]
     DetectionThread(&'static str),

@@ -56,7 +56,7 @@ pub fn redetect(
                 &recorded.base_from_flange,
                 recorded.frame.clone(),
             ),
-        );
+        )?;
         samples.extend(visit.sample());
         visits.push(visit);
     }

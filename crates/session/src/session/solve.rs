@@ -19,7 +19,7 @@ use crate::config::{CellConfig, RobotConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
-use handeye_core::notice::Notice;
+use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::cell_model::{self, fit_cell_model, CellModel, Explanation};
 use handeye_solve::verdict::{self, Verdict};
@@ -200,7 +200,23 @@ pub fn load_and_solve(
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
     solved.name_session_in(folder, &inputs.config);
+    if let Some(run) = folder.live_run() {
+        solved
+            .calibration
+            .notices
+            .insert(0, provisional_notice(run));
+    }
     Ok((solved, dataset))
+}
+
+/// What a solve of a session a run is still recording says first (and its result file holds).
+pub fn provisional_notice(run: &super::LiveRun) -> Notice {
+    Notice::warning(
+        NoticeKind::Provisional,
+        format!(
+            "provisional: {run}; this answer is of the samples recorded when it was solved: solve again when the run has ended"
+        ),
+    )
 }
 
 fn solve_loaded(
@@ -285,6 +301,13 @@ fn committed_samples(
         .filter(|v| v.camera_from_target.is_some())
         .map(PoseVisit::sample_id)
         .collect();
+    if let (true, Some(run)) = (accepted.is_empty(), folder.live_run()) {
+        return Err(SessionError::Recording {
+            run: run.clone(),
+            next: "no pose has given a sample yet: solve it again when the run has recorded some"
+                .to_string(),
+        });
+    }
     if accepted.is_empty() {
         let reasons = visits
             .iter()
@@ -310,6 +333,14 @@ fn committed_samples(
         });
     }
     let path = folder.samples_path();
+    if folder.live_run().is_some() {
+        // A run is recording: samples.yaml is rewritten after each record, so it may lag the
+        // records by a pose. The records are the log; take the samples from them.
+        return Ok(Dataset {
+            setup: folder.read_manifest()?.setup,
+            pairs: visits.iter().filter_map(PoseVisit::sample).collect(),
+        });
+    }
     let dataset = if path.is_file() {
         Dataset::load(&path)?
     } else {
@@ -807,13 +838,10 @@ fn unflag(calibration: &mut Calibration, pairs: &[PosePair], kept: &[(String, f6
     calibration.outliers.retain(|i| !is_kept(i));
     calibration.dropped.retain(|i| !is_kept(i));
     calibration.notices.retain(|n| {
-        !(matches!(
-            n.kind,
-            handeye_core::notice::NoticeKind::Outliers
-                | handeye_core::notice::NoticeKind::DroppedOutliers
-        ) && kept
-            .iter()
-            .any(|(id, _)| n.message.contains(&format!("({id})"))))
+        !(matches!(n.kind, NoticeKind::Outliers | NoticeKind::DroppedOutliers)
+            && kept
+                .iter()
+                .any(|(id, _)| n.message.contains(&format!("({id})"))))
     });
 }
 

@@ -69,6 +69,8 @@ pub struct RunRequest {
     pub accept_changed: bool,
     /// Set (by Ctrl-C, SIGTERM, SIGHUP) to stop the arm and end the run with every sample kept.
     pub stop: Arc<AtomicBool>,
+    /// Detection threads (`-j`; `None`: one per core, at most four, as the memory limits allow).
+    pub jobs: Option<usize>,
 }
 
 /// Told what happens during a run (the CLI prints it).

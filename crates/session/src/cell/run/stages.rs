@@ -260,6 +260,7 @@ pub(super) fn drive_session(
         Strategy::HandGuided(guide) => guide,
         Strategy::Planned | Strategy::Holdout(_) => {
             let mut setup = cell.session_setup(folder.clone(), plan.to_vec(), request.stop.clone());
+            setup.detector.jobs = request.jobs;
             if let Some(rig) = &cell.rig {
                 let root = super::super::rig::root_of(folder.root()).ok_or_else(|| {
                     RunError::Cameras(format!(
@@ -296,7 +297,8 @@ pub(super) fn drive_session(
             return Ok((outcome?, summary));
         }
     };
-    let setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
+    let mut setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
+    setup.detector.jobs = request.jobs;
     observer.session_folder(folder, &[]);
     observer.session_started(plan.len());
     let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {

@@ -9,6 +9,7 @@ use crate::dataset::Dataset;
 use handeye_camera::Frame;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_core::memory;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
@@ -28,6 +29,8 @@ pub(super) struct Recording {
     pub max_rms: f64,
     /// `None` while the intrinsics are unknown: corners only.
     pub model: Option<CameraModel>,
+    /// The camera's frame size, px (what its detectors' memory is counted at).
+    pub frame_size: (u32, u32),
 }
 
 pub(super) struct Job {
@@ -109,7 +112,62 @@ struct WorkerCamera {
     samples: Arc<Mutex<BTreeMap<usize, PosePair>>>,
 }
 
-/// Starts the detection workers: one per core (at most four), each with its own detector for
+/// Memory the run needs besides its detection workers and what it holds already when they start
+/// (the camera, the renderer of a simulated one, the plan): the solve over every corner, the
+/// report (frames annotated and encoded), a camera's frames in flight. Counted with the workers
+/// before they start, so a limit too small for the run ends it there, with the figures. Measured
+/// (issue #44): the simulated cell's run of 20 poses under `ulimit -v` holds 88-113 MB of address
+/// space when its workers start and peaks near 110 MB with one detector thread; 32 MB more than
+/// that and the workers' own estimate leave a margin for larger reports and other cameras.
+const RUN_BESIDES_DETECTION_BYTES: u64 = 32 << 20;
+
+/// How many detection workers to start: `-j` (the detector options' `jobs`) or one per core (at
+/// most four), as many as the memory limits leave room for. Fewer than asked for with `-j` is
+/// refused with the figures; fewer than the default is said and taken.
+fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
+    handeye_vision::detect::fit_allocator_to_limits();
+    let asked = cameras.first().and_then(|c| c.detector.jobs);
+    let wanted =
+        asked.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(4)));
+    // Each worker: a detector per camera, the frame it measures and its PNG.
+    let each: u64 = cameras
+        .iter()
+        .map(|c| {
+            let (width, height) = c.frame_size;
+            TargetDetector::memory_needed(&c.board, &c.detector, width, height)
+                + 2 * u64::from(width) * u64::from(height)
+        })
+        .sum();
+    let (width, height) = cameras.first().map_or((0, 0), |c| c.frame_size);
+    let what = |n: usize| format!("the run with {n} detector thread(s) at {width}x{height}");
+    let fit = memory::how_many_fit(what, RUN_BESIDES_DETECTION_BYTES, each, wanted)
+        .map_err(|e| SessionError::Detector(Box::new(e.into())))?;
+    if fit < wanted {
+        if asked.is_some() {
+            let error = memory::check(
+                &what(wanted),
+                RUN_BESIDES_DETECTION_BYTES + each * wanted as u64,
+                &format!(" or use `-j {fit}`"),
+            )
+            .err()
+            .map(|e| SessionError::Detector(Box::new(e.into())));
+            if let Some(error) = error {
+                return Err(error);
+            }
+        }
+        // Once a process: an adaptive run starts its workers again for every pose.
+        static SAID: std::sync::Once = std::sync::Once::new();
+        SAID.call_once(|| {
+            tracing::warn!(
+                "{fit} detector thread(s) instead of {wanted}: the memory limit leaves room for {fit} ({} MB each)",
+                each.div_ceil(memory::MB)
+            );
+        });
+    }
+    Ok(fit)
+}
+
+/// Starts the detection workers ([`worker_count`] of them), each with its own detector for
 /// every camera (the AprilTag detector is single-threaded: frames are the unit of parallel
 /// work). A recorded cell (a bag import, say) hands over frames faster than one core detects
 /// them.
@@ -124,7 +182,7 @@ pub(super) fn spawn_workers(
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<Vec<std::thread::JoinHandle<()>>, SessionError> {
-    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+    let workers = worker_count(cameras)?;
     let jobs = Arc::new(Mutex::new(jobs));
     let samples: Vec<_> = samples
         .into_iter()
@@ -181,7 +239,12 @@ pub(super) fn spawn_workers(
                     return;
                 }
             })
-            .map_err(SessionError::DetectionThreadSpawn)?;
+            .map_err(|error| {
+                SessionError::DetectionThreadSpawn(memory::thread_start_error(
+                    "a detection thread",
+                    &error,
+                ))
+            })?;
         handles.push(handle);
     }
     Ok(handles)
@@ -209,7 +272,7 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
         &job.frame.image,
         recording.max_rms,
         PoseVisit::new(job.plan_index, &job.base_from_flange, frame_name),
-    );
+    )?;
     if fault.at("full-disk-at-record", job.plan_index) {
         return Err(SessionError::Io {
             path: folder.visit_path(job.plan_index),
@@ -226,7 +289,8 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
 
 /// Detects the board in `image`, estimates its pose and fills the detection fields of `visit`
 /// (a rejection reason instead of a pose when the board is missing or fits badly). Without a
-/// camera model (intrinsics still unknown) only the corners are recorded.
+/// camera model (intrinsics still unknown) only the corners are recorded. A detector short of
+/// memory is the error, not a rejection: the pose was not measured, and a resume measures it.
 pub(crate) fn measure(
     detector: &TargetDetector,
     board: &Target,
@@ -234,8 +298,11 @@ pub(crate) fn measure(
     image: &image::GrayImage,
     max_rms: f64,
     mut visit: PoseVisit,
-) -> PoseVisit {
+) -> Result<PoseVisit, SessionError> {
     match detector.detect(image) {
+        Err(e @ handeye_vision::TargetError::Memory(_)) => {
+            return Err(SessionError::Detector(Box::new(e)))
+        }
         Err(e) => visit.rejected = Some(e.to_string()),
         Ok(detection) => {
             visit.corners_px = detection.observations();
@@ -251,7 +318,7 @@ pub(crate) fn measure(
                 if visit.tags == 0 {
                     visit.rejected = Some("no tag of the board detected".to_string());
                 }
-                return visit;
+                return Ok(visit);
             };
             match estimate_board_pose(board, camera_model, &detection) {
                 Err(e) => visit.rejected = Some(e.to_string()),
@@ -270,5 +337,5 @@ pub(crate) fn measure(
             }
         }
     }
-    visit
+    Ok(visit)
 }
