@@ -10,8 +10,8 @@
 //! until the rename. The operating system drops that lock when the writer dies, however it dies,
 //! so a temporary file whose lock can be taken is a dead writer's and is removed
 //! ([`remove_stale_temp_files`]); one whose lock is held belongs to a running writer and is left
-//! alone. Every [`write_atomic`] first removes the stale temporary files of its own destination
-//! and names each one (a `tracing` warning; [`write_atomic_reporting`] returns them instead).
+//! alone. Every [`write_atomic`] first removes the stale temporary files of its kind in its
+//! folder, whatever their destination, and names each one (a `tracing` warning; [`write_atomic_reporting`] returns them instead).
 
 use std::fs::File;
 use std::io::Write;
@@ -82,8 +82,14 @@ pub struct RemovedTemp {
 /// Which temporary files [`remove_stale_temp_files`] looks at.
 #[derive(Debug, Clone, Copy)]
 pub enum TempScope<'a> {
-    /// Those of one destination file (what [`write_atomic`] sweeps before writing it).
+    /// Those of one destination file.
     Destination(&'a Path),
+    /// Every temporary file of [`write_atomic`]'s own form (`.<name>.<random>.handeye-tmp`),
+    /// whatever its destination: what [`write_atomic`] sweeps before writing (a killed
+    /// `export -o a.yaml` leaves one that a later `export -o b.yaml` in the folder removes).
+    /// The name is ours alone and its lock tells a live writer, so no other program's file is
+    /// touched.
+    Ours,
     /// Every temporary file in the folder, earlier versions' unlocked ones included: only for a
     /// folder the caller owns, where no other program writes (a session folder under its lock).
     OwnedFolder,
@@ -99,15 +105,16 @@ pub fn remove_stale_temp_files(folder: &Path, scope: TempScope<'_>) -> Vec<Remov
     };
     let prefix = match scope {
         TempScope::Destination(destination) => Some(temp_prefix(destination)),
-        TempScope::OwnedFolder => None,
+        TempScope::Ours | TempScope::OwnedFolder => None,
     };
     let mut removed = Vec::new();
     for entry in entries.flatten() {
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        let ours = match &prefix {
-            Some(prefix) => is_temp_of(&name, prefix),
-            None => is_temp_name(&name),
+        let ours = match (&prefix, scope) {
+            (Some(prefix), _) => is_temp_of(&name, prefix),
+            (None, TempScope::Ours) => is_locked_temp_name(&name),
+            (None, _) => is_temp_name(&name),
         };
         if !ours {
             continue;
@@ -179,7 +186,7 @@ pub fn write_atomic_reporting(path: &Path, contents: &[u8]) -> std::io::Result<V
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let removed = remove_stale_temp_files(folder, TempScope::Destination(path));
+    let removed = remove_stale_temp_files(folder, TempScope::Ours);
     let mut temp = locked_temp_file(folder, path)?;
     if let Ok(existing) = std::fs::metadata(path) {
         if existing.is_file() {
@@ -286,7 +293,7 @@ mod tests {
     }
 
     #[test]
-    fn stale_temps_of_the_destination_are_removed_and_locked_ones_kept() {
+    fn stale_temps_of_every_destination_are_removed_and_locked_ones_kept() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out.yaml");
         let stale = dir.path().join(format!(".out.yaml.Kil1ed{TEMP_SUFFIX}"));
@@ -300,15 +307,23 @@ mod tests {
         // file) is still writing `live`.
         let holder = File::open(&live).unwrap();
         FileExt::try_lock(&holder).unwrap();
+        // A dead writer's file of another destination goes too (it is ours by its name); an
+        // earlier version's unlocked one is not (the name could be another program's).
         let removed = write_atomic_reporting(&out, b"whole").unwrap();
         assert_eq!(
             removed,
-            vec![RemovedTemp {
-                path: stale.clone(),
-                bytes: 4
-            }]
+            vec![
+                RemovedTemp {
+                    path: other.clone(),
+                    bytes: 4
+                },
+                RemovedTemp {
+                    path: stale.clone(),
+                    bytes: 4
+                }
+            ]
         );
-        assert!(!stale.exists() && live.exists() && other.exists() && foreign.exists());
+        assert!(!stale.exists() && live.exists() && !other.exists() && foreign.exists());
         assert_eq!(std::fs::read(&out).unwrap(), b"whole");
         // Once its writer is gone, the next write removes it too.
         drop(holder);
@@ -317,7 +332,7 @@ mod tests {
         assert!(!live.exists());
         // An owned folder's sweep takes every temporary file, earlier versions' too.
         let removed = remove_stale_temp_files(dir.path(), TempScope::OwnedFolder);
-        assert_eq!(removed.len(), 2);
-        assert!(!other.exists() && !foreign.exists());
+        assert_eq!(removed.len(), 1);
+        assert!(!foreign.exists());
     }
 }

@@ -494,18 +494,17 @@ fn issue25_export_removes_killed_runs_temp_files_and_spares_a_locked_one() {
     let (code, stderr) = stderr_of(handeye().arg("solve").arg(&samples).arg("-o").arg(&result));
     assert_eq!(code, Some(0), "{stderr}");
     let out = dir.path().join("tf.launch");
-    // What two killed exports left, and one another export is still writing (it holds the lock).
+    // What two killed exports left, one killed export to another file (#40: it was left), and
+    // one another export is still writing (it holds the lock).
     let suffix = handeye_core::atomic_file::TEMP_SUFFIX;
-    let killed: Vec<PathBuf> = ["K1lled", "K2lled"]
-        .iter()
-        .map(|r| {
-            write(
-                dir.path(),
-                &format!(".tf.launch.{r}{suffix}"),
-                "half an export",
-            )
-        })
-        .collect();
+    let killed: Vec<PathBuf> = [
+        ".tf.launch.K1lled",
+        ".tf.launch.K2lled",
+        ".other.urdf.K3lled",
+    ]
+    .iter()
+    .map(|r| write(dir.path(), &format!("{r}{suffix}"), "half an export"))
+    .collect();
     let live = write(
         dir.path(),
         &format!(".tf.launch.L1veXX{suffix}"),
