@@ -128,8 +128,14 @@ async fn gate(State(hub): State<Arc<Hub>>, request: Request, next: Next) -> Resp
             .get(name)
             .map(|value: &HeaderValue| value.to_str().unwrap_or("(not text)"))
     };
+    // An absolute-form target (`GET http://other.example/… HTTP/1.1`) names the host the
+    // request is for, before any Host header (RFC 9112 §3.2.2): it must name this console too.
+    let host = match request.uri().authority() {
+        Some(authority) => Some(authority.as_str()),
+        None => text(header::HOST),
+    };
     let verdict = hub.gate.check(
-        text(header::HOST),
+        host,
         text(header::ORIGIN),
         request.uri().query(),
         headers.contains_key(header::UPGRADE),

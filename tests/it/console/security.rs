@@ -221,6 +221,16 @@ fn foreign_pages_rebound_hosts_and_missing_or_wrong_secrets_are_refused_for_ever
             "{what}: the page was served"
         );
     }
+    // An absolute-form target naming another host, the Host header local (#40: it was served).
+    let (status, text) = raw_get(
+        addr,
+        &format!("http://evil.example:{}/?{with_secret}", addr.port()),
+        &[("Host", authority.clone())],
+    );
+    assert!(
+        matches!(status, 400 | 403) && !text.contains("<title>handeye console</title>"),
+        "an absolute-form target naming another host: {status}\n{text}"
+    );
     let (status, text) = raw_get(addr, "/", &[("Host", authority.clone())]);
     assert!(
         text.contains("open the URL the terminal printed"),
