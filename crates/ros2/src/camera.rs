@@ -108,7 +108,36 @@ impl Ros2Camera {
             _link: link.clone(),
         };
         camera.check_info()?;
+        camera.check_frames()?;
         Ok(camera)
+    }
+
+    /// Waits (up to the timeout) for a first frame on the image topic, so a topic nobody
+    /// publishes is named before the arm moves, not after the first move (issue #39).
+    fn check_frames(&self) -> Result<(), CameraError> {
+        let deadline = Instant::now() + self.options.timeout;
+        let mut newest = self.slot.newest.lock().unwrap_or_else(|p| p.into_inner());
+        while newest.is_none() && Instant::now() < deadline {
+            newest = self
+                .slot
+                .changed
+                .wait_timeout(newest, Duration::from_millis(50))
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
+        }
+        if newest.is_some() {
+            return Ok(());
+        }
+        Err(open_error(format!(
+            "no image on {} within {:.1} s, nothing has moved: is the camera node running, on this domain id, publishing sensor_msgs/{} under that name?",
+            self.options.image_topic,
+            self.options.timeout.as_secs_f64(),
+            if self.options.compressed {
+                "CompressedImage"
+            } else {
+                "Image"
+            }
+        )))
     }
 
     fn check_info(&self) -> Result<(), CameraError> {

@@ -411,6 +411,34 @@ fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
     });
 }
 
+/// #39: an image topic nobody publishes is named when the camera opens, before the arm moves
+/// (it was found at the first pose, after a move).
+#[test]
+fn an_image_topic_nobody_publishes_is_named_before_anything_moves() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 96, &[]);
+        let config = cell(
+            dir.path(),
+            96,
+            &[
+                ("image_topic: /image_raw", "image_topic: /no_such_image"),
+                ("frame_timeout_s: 5", "frame_timeout_s: 2"),
+            ],
+        );
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("no image on /no_such_image") && log.contains("nothing has moved"),
+            "{log}"
+        );
+        assert!(peer.events("goal").is_empty(), "a goal was sent:\n{log}");
+    });
+}
+
 #[test]
 fn without_a_driver_the_action_server_is_named() {
     let dir = tempfile::tempdir().unwrap();
