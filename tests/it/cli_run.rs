@@ -130,13 +130,7 @@ fn run_refuses_a_bad_config_before_anything_moves_and_writes_nothing() {
         ],
     );
     let session = dir.path().join("session");
-    let output = handeye()
-        .args(["run", "--config"])
-        .arg(&config)
-        .arg("--output")
-        .arg(&session)
-        .output()
-        .unwrap();
+    let output = util::run_cli(&config, &session);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(

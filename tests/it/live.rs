@@ -107,13 +107,7 @@ fn after_several_poses_solve_report_verify_are_provisional_and_replay_resume_ref
     let dir = tempfile::tempdir().unwrap();
     let config = sim_cell(dir.path(), 6);
     let session = dir.path().join("session");
-    let out = handeye()
-        .args(["run", "--config"])
-        .arg(&config)
-        .arg("--output")
-        .arg(&session)
-        .output()
-        .unwrap();
+    let out = crate::util::run_cli(&config, &session);
     assert!(out.status.success(), "{}", text(&out));
     let poses = std::fs::read_dir(session.join("poses")).unwrap().count();
     assert_eq!(poses, 6);

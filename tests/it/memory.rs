@@ -12,7 +12,7 @@ use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use crate::util::{handeye, repo, sim_cell};
+use crate::util::{repo, sim_cell};
 
 /// The built binary with `args` under `ulimit -v limit_mb` MB.
 pub(crate) fn under_limit(limit_mb: u64, args: &[&std::ffi::OsStr]) -> Output {
@@ -74,13 +74,7 @@ pub(crate) fn sim() -> Sim {
     let dir = tempfile::tempdir().unwrap();
     let config = sim_cell(dir.path(), 6);
     let session = dir.path().join("recorded");
-    let out = handeye()
-        .args(["run", "--config"])
-        .arg(&config)
-        .arg("--output")
-        .arg(&session)
-        .output()
-        .unwrap();
+    let out = crate::util::run_cli(&config, &session);
     assert!(out.status.success(), "{out:?}");
     let mut frames: Vec<PathBuf> = std::fs::read_dir(session.join("frames"))
         .unwrap()

@@ -189,6 +189,17 @@ impl RunObserver for QuietObserver {
     }
 }
 
+/// `handeye run --config CONFIG --output SESSION`, its output (status, stdout, stderr).
+pub fn run_cli(config: &Path, session: &Path) -> std::process::Output {
+    handeye()
+        .args(["run", "--config"])
+        .arg(config)
+        .arg("--output")
+        .arg(session)
+        .output()
+        .unwrap()
+}
+
 /// `handeye run --yes` of the cell `config` into the new session folder `out` (a mock
 /// controller's arm moves without asking).
 pub fn new_run(config: &Path, out: &Path) -> RunRequest {

@@ -254,8 +254,9 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         .any(|p| p.problems.iter().any(|m| m.starts_with(NOT_INSIDE)))
     {
         let head_on = Pose::from_parts(
-            // The board's centre 1 m in front of the camera, facing it.
-            nalgebra::Translation3::new(-centre.x, -centre.y, 1.0 - centre.z),
+            // The board's centre 5 cm in front of the camera, facing it: the search goes out
+            // from there.
+            nalgebra::Translation3::new(-centre.x, -centre.y, 0.05 - centre.z),
             nalgebra::UnitQuaternion::identity(),
         );
         if let Some(d) = fitting_distance(ctx, &head_on, &board_points, &centre) {
@@ -411,9 +412,10 @@ fn fitting_distance(
         );
         board_margin(ctx.camera, &moved, points) >= ctx.margin_px
     };
-    // The margin grows with distance once the board is in front: the first 1 cm step that fits.
+    // The margin grows with distance once the board is in front: the first 1 cm step that fits,
+    // from where the view stands (a view that does not fit now fits only farther out).
     let far = 10.0;
-    let mut d = 0.01;
+    let mut d = distance.min(far);
     while d <= far {
         if at(d) {
             return Some(d);
