@@ -43,16 +43,14 @@ fn problem() -> Problem {
     let models: Vec<CameraModel> = rig
         .cameras
         .iter()
-        .map(|c| {
-            CameraModel::load(c.config.intrinsics.as_ref().expect("intrinsics")).expect("lens")
-        })
+        .map(|c| CameraModel::load(c.intrinsics.as_ref().expect("intrinsics")).expect("lens"))
         .collect();
     let mut observations = Vec::new();
     let mut frames = Vec::new();
     for (i, flange) in flanges.iter().enumerate() {
         for (c, camera) in rig.cameras.iter().enumerate() {
-            let board = Target::load(&camera.config.target).expect("board");
-            let truth = camera.config.simulation.expect("a simulated cell");
+            let board = Target::load(&camera.target).expect("board");
+            let truth = camera.simulation.expect("a simulated cell");
             let (sr, st) = board_pose_noise(truth.setup);
             let noise = jitter(&mut rng, sr, st);
             let exact = predict(
@@ -84,7 +82,7 @@ fn problem() -> Problem {
     }
     let data = rig_data(&rig, flanges, observations);
     let start = nominal_start(&rig);
-    let robot = rig.cameras[0].config.robot_repeatability();
+    let robot = rig.robot_repeatability();
     (data, start, models, frames, robot)
 }
 

@@ -103,7 +103,7 @@ fn timed_run(config: &Path, out: &Path) -> (CellRun, f64) {
 fn accuracy(done: &CellRun) -> (f64, f64) {
     let c = &done.solved.calibration;
     let u = c.uncertainty.as_ref().expect("covariance");
-    let truth = done.cell.config.simulation.expect("sim truth");
+    let truth = done.cell.config.camera().simulation.expect("sim truth");
     let error = |a: &handeye_core::geometry::Pose, b: &handeye_core::geometry::Pose| {
         (a.translation.vector - b.translation.vector).norm() * 1e3
     };

@@ -63,12 +63,12 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(
-        prepared.config.setup == manifest.setup,
+        prepared.config.camera().setup == manifest.setup,
         "session {} was recorded as {}, but {} describes a {} cell: replay it with the config it was recorded with",
         folder.root().display(),
         manifest.setup,
         config_path.display(),
-        prepared.config.setup
+        prepared.config.camera().setup
     );
     // A cell without configured intrinsics replays with the ones its run estimated.
     let camera_model = if prepared.intrinsics_known {
@@ -114,7 +114,12 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let intrinsics_file = prepared.config.intrinsics.clone().unwrap_or_default();
+    let intrinsics_file = prepared
+        .config
+        .camera()
+        .intrinsics
+        .clone()
+        .unwrap_or_default();
     if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
         anyhow::bail!(
             "every pose of {} was rejected: {}\nnext: {}",
@@ -150,7 +155,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .save(&output)?;
     outln!("{}", solved.summary);
     print_difference_from_recorded(&folder, calibration)?;
-    if let Some(truth) = &prepared.config.simulation {
+    if let Some(truth) = &prepared.config.camera().simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
     outln!();
@@ -165,7 +170,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         &report,
         &solved,
         optics,
-        Some(prepared.config.nominal),
+        Some(prepared.config.camera().nominal),
         prepared.config.robot.frames(),
     ) {
         Ok(report) => outln!("report:  {}", report.display()),

@@ -58,7 +58,7 @@ pub(super) fn write(
     }
     let manifest = folder.read_manifest()?;
     let config_path = config.unwrap_or(manifest.config);
-    let config = match CellConfig::load(&config_path) {
+    let config = match CellConfig::load(&config_path).and_then(CellConfig::single_camera) {
         Ok(config) => Some(config),
         Err(e) => {
             eprintln!("warning: {e}; the report will have no thumbnails or reprojection errors");

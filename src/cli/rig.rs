@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use handeye::report::session::REPLAY_REPORT_FILE;
 use handeye_session::cell::rig::{self, RigResultFile};
 use handeye_session::cell::run::CellRun;
-use handeye_session::config::rig::RigConfig;
+use handeye_session::config::CellConfig;
 
 /// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
 /// for one camera): what the run did, every camera's answer, the report.
@@ -46,7 +46,7 @@ pub(super) fn replay(
         Some(c) => c.to_path_buf(),
         None => rig::read_manifest(folder)?.config,
     };
-    let rig_config = RigConfig::load(&config)?;
+    let rig_config = CellConfig::load(&config)?;
     let output = rig::RigOutput::replay(folder, output);
     let result = rig::solve_rig_folder(folder, &rig_config, &output)?;
     print_result(&result, &output.result);

@@ -148,7 +148,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     }
     let result = &done.solved;
     outln!("{}", result.summary);
-    if let Some(truth) = &done.cell.config.simulation {
+    if let Some(truth) = &done.cell.config.camera().simulation {
         outln!("{}", result.compare_with_truth(truth));
     }
     let report = match handeye::report::session::write_run_report(done) {

@@ -158,7 +158,9 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.samples)?;
     let manifest = folder.read_manifest()?;
     let config_path = args.config.clone().unwrap_or(manifest.config);
-    let config = CellConfig::load(&config_path).context("reading the cell config")?;
+    let config = CellConfig::load(&config_path)
+        .and_then(CellConfig::single_camera)
+        .context("reading the cell config")?;
     let space = match args.space {
         Some(SpaceArg::Pose) => SolveSpace::Pose,
         Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
@@ -178,7 +180,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         .with_context(|| format!("solving session {}", args.samples.display()))?;
     let config = &inputs.config;
     outln!("{}", solved.summary);
-    if let Some(truth) = &config.simulation {
+    if let Some(truth) = &config.camera().simulation {
         outln!("{}", solved.compare_with_truth(truth));
     }
     if args.compare {

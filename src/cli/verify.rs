@@ -59,7 +59,9 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             )?;
         }
         let mounts = ResultFile::load_mounts(result)?;
-        let cell_config = CellConfig::load(config).context("reading the cell config")?;
+        let cell_config = CellConfig::load(config)
+            .and_then(CellConfig::single_camera)
+            .context("reading the cell config")?;
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -108,7 +110,9 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             outln!("provisional: {run}; this check is of the samples so far: verify again when the run has ended");
         }
         let dataset = Dataset::load(&folder.samples_path())?;
-        let config = CellConfig::load(&folder.read_manifest()?.config).ok();
+        let config = CellConfig::load(&folder.read_manifest()?.config)
+            .and_then(CellConfig::single_camera)
+            .ok();
         (dataset.setup, dataset.pairs, config)
     } else if let Some(file) = &args.dataset {
         let dataset = Dataset::load(file)?;

@@ -314,7 +314,7 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
             optics,
             verdict: solved.verdict.clone(),
             arm_time: run.arm_time,
-            nominal: Some(run.cell.config.nominal),
+            nominal: Some(run.cell.config.camera().nominal),
             robot_frames: run.cell.config.robot.frames(),
             path: run.folder.root().join(REPORT_FILE),
         },
@@ -372,7 +372,7 @@ pub fn write_folder_report(
         visits: folder.read_visits().map_err(session_error)?,
     };
     let mut lacking = Vec::new();
-    let board = config.and_then(|c| match Target::load(&c.target) {
+    let board = config.and_then(|c| match Target::load(&c.camera().target) {
         Ok(board) => Some(board),
         Err(e) => {
             lacking.push(format!("no frames or reprojection errors: {e}"));
@@ -381,7 +381,7 @@ pub fn write_folder_report(
     });
     // Intrinsics from the config, else the ones a from-scratch run estimated into the session.
     let camera_file = config
-        .and_then(|c| c.intrinsics.clone())
+        .and_then(|c| c.camera().intrinsics.clone())
         .or_else(|| Some(folder.root().join("camera_info.yaml")).filter(|p| p.is_file()));
     let camera = camera_file.and_then(|file| match CameraModel::load(&file) {
         Ok(camera) => Some(camera),
@@ -402,7 +402,7 @@ pub fn write_folder_report(
             optics,
             verdict,
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
-            nominal: config.map(|c| c.nominal),
+            nominal: config.map(|c| c.camera().nominal),
             robot_frames,
             path: folder.root().join(REPORT_FILE),
         },

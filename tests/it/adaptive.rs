@@ -48,6 +48,7 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
     let prepared = cell::prepare(&config).expect("the sim cell config prepares");
     let truth = prepared
         .config
+        .camera()
         .simulation
         .expect("the sim cell has a ground truth");
     let options = prepared.config.solver.to_options();
@@ -99,8 +100,8 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
 
         let mut planner = AdaptivePlanner::new(
             truth.setup,
-            prepared.config.nominal.camera_mount,
-            prepared.config.nominal.target_mount,
+            prepared.config.camera().nominal.camera_mount,
+            prepared.config.camera().nominal.target_mount,
             candidates.clone(),
             options.clone(),
             target_mm,
@@ -147,7 +148,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
 
     let config = repo().join("configs/sim-cell.yaml");
     let prepared = cell::prepare(&config).unwrap();
-    let truth = prepared.config.simulation.unwrap();
+    let truth = prepared.config.camera().simulation.unwrap();
     let candidates = prepared.report.validated().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
@@ -190,9 +191,9 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
 fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
     let candidates = prepared.report.validated().unwrap();
     AdaptivePlanner::new(
-        prepared.config.setup,
-        prepared.config.nominal.camera_mount,
-        prepared.config.nominal.target_mount,
+        prepared.config.camera().setup,
+        prepared.config.camera().nominal.camera_mount,
+        prepared.config.camera().nominal.target_mount,
         candidates.clone(),
         prepared.config.solver.to_options(),
         target_mm,

@@ -239,7 +239,7 @@ fn degrees_in_a_rotation_vector_are_refused_at_load_and_rpy_deg_is_read() {
         )],
     );
     let loaded = handeye_session::config::CellConfig::load(&config).unwrap();
-    let angle = loaded.nominal.camera_mount.rotation.scaled_axis();
+    let angle = loaded.camera().nominal.camera_mount.rotation.scaled_axis();
     assert!((angle - nalgebra::Vector3::new(0.0, 0.0, 90f64.to_radians())).norm() < 1e-12);
 }
 

@@ -140,7 +140,7 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
-    let truth = prepared.config.simulation.unwrap();
+    let truth = prepared.config.camera().simulation.unwrap();
     let (robot, camera) = cell::sim::open(
         &prepared.config,
         truth,

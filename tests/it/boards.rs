@@ -476,7 +476,7 @@ fn sim_cell_sessions_with_charuco_and_chessboard_recover_the_truth() {
             done.solved.reprojection.is_some(),
             "{board}: no reprojection answer"
         );
-        let truth = done.cell.config.simulation.as_ref().unwrap();
+        let truth = done.cell.config.camera().simulation.as_ref().unwrap();
         let [(ck, cm), (tk, tm)] = done.solved.calibration.unknowns();
         for (key, estimate, truth) in [(ck, cm, truth.camera_mount), (tk, tm, truth.target_mount)] {
             let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);
@@ -519,7 +519,7 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
             "{name}: {found:.3} px, truth {truth:.3} px"
         );
     }
-    let sim = done.cell.config.simulation.as_ref().unwrap();
+    let sim = done.cell.config.camera().simulation.as_ref().unwrap();
     let [(ck, cm), (tk, tm)] = solved.calibration.unknowns();
     for (key, estimate, truth) in [(ck, cm, sim.camera_mount), (tk, tm, sim.target_mount)] {
         let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);

@@ -322,9 +322,9 @@ struct Outcome {
 
 fn solve_case(c: &Case, config: &CellConfig, board: &Target) -> Outcome {
     let mut config = config.clone();
-    config.setup = c.setup;
+    config.camera_mut().setup = c.setup;
     let (camera_mount, target_mount) = truth(c.setup);
-    config.nominal = CellTransforms {
+    config.camera_mut().nominal = CellTransforms {
         setup: c.setup,
         camera_mount,
         target_mount,

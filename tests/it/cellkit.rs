@@ -283,7 +283,10 @@ fn views_outside_a_tight_range_are_refused_naming_the_joint() {
         "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-20, 20]]",
     );
     let cell = handeye_session::cell::prepare(&path).unwrap();
-    let ranges = cell.config.robot.joint_ranges_deg(cell.config.setup);
+    let ranges = cell
+        .config
+        .robot
+        .joint_ranges_deg(cell.config.camera().setup);
     let mut refused = 0;
     for p in &cell.report.poses {
         match p.joints {
@@ -651,16 +654,16 @@ fn the_templates_load_without_the_simulated_lens() {
     for (name, setup) in TEMPLATES.iter().zip([Setup::EyeInHand, Setup::EyeToHand]) {
         let path = util::repo().join("configs").join(name);
         let config = CellConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
-        assert_eq!(config.setup, setup, "{name}");
+        assert_eq!(config.camera().setup, setup, "{name}");
         assert!(matches!(config.robot, RobotConfig::Ur { .. }), "{name}");
         assert!(
             matches!(
-                config.camera,
+                config.camera().backend,
                 handeye_session::config::CameraConfig::Uvc { .. }
             ),
             "{name}"
         );
-        let lens = config.intrinsics.as_ref().expect("a lens file");
+        let lens = config.camera().intrinsics.as_ref().expect("a lens file");
         assert!(
             !lens.ends_with("sim-1280x720.yaml"),
             "{name} uses the sim camera's lens"
@@ -726,14 +729,17 @@ fn the_template_plans_pass_the_check() {
             "{name}: {problems:?} {:?}",
             cell.report.plan_problems
         );
-        let ranges = cell.config.robot.joint_ranges_deg(cell.config.setup);
+        let ranges = cell
+            .config
+            .robot
+            .joint_ranges_deg(cell.config.camera().setup);
         for (_, q) in cell.report.validated().unwrap() {
             assert!(inside(&q, &ranges), "{name}: {q:?}");
         }
     }
     let in_hand = CellConfig::load(&util::repo().join("configs").join(TEMPLATES[0])).unwrap();
     assert_eq!(
-        in_hand.robot.joint_ranges_deg(in_hand.setup),
+        in_hand.robot.joint_ranges_deg(in_hand.camera().setup),
         FLANGE_CAMERA_JOINT_RANGES_DEG
     );
 }

@@ -624,7 +624,7 @@ fn load_config(path: &Path) -> Outcome {
         Err(e) => err(&e),
         Ok(config) => {
             let _ = config.settle();
-            let _ = config.sim_lens();
+            let _ = config.camera().sim_lens();
             Outcome::Ok
         }
     }

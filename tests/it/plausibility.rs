@@ -43,8 +43,8 @@ struct SimCell {
 /// and the board poses the camera would see there, with 0.2° / 1 mm of board-pose noise.
 fn sim_cell(name: &'static str, seed: u64) -> SimCell {
     let config = CellConfig::load(&repo().join("configs").join(name)).unwrap();
-    let truth = config.simulation.unwrap();
-    let board = Board::load(&config.target).unwrap();
+    let truth = config.camera().simulation.unwrap();
+    let board = Board::load(&config.camera().target).unwrap();
     let centre = board_centre(&board.clone().into());
     let spec = config.plan.generate.as_ref().unwrap();
     let mut rng = StdRng::seed_from_u64(seed);
@@ -71,7 +71,7 @@ fn sim_cell(name: &'static str, seed: u64) -> SimCell {
     SimCell {
         name,
         truth,
-        nominal: config.nominal,
+        nominal: config.camera().nominal,
         pairs,
     }
 }

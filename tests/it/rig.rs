@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use handeye_core::geometry::Pose;
 use handeye_session::cell::rig::{camera_folder, RigResultFile};
-use handeye_session::config::rig::RigConfig;
+use handeye_session::config::CellConfig;
 use handeye_solve::verdict::Level;
 
 use crate::util;
@@ -33,10 +33,10 @@ fn read_result(folder: &Path) -> RigResultFile {
 /// The simulator's truth of every camera mount, by transform name, from the config itself (not
 /// from what the run wrote).
 fn truth(config: &Path) -> Vec<(String, Pose)> {
-    let rig = RigConfig::load(config).unwrap();
+    let rig = CellConfig::load(config).unwrap();
     rig.cameras
         .iter()
-        .map(|c| (c.mount_key(), c.config.simulation.unwrap().camera_mount))
+        .map(|c| (c.mount_key(), c.simulation.unwrap().camera_mount))
         .collect()
 }
 
@@ -377,14 +377,13 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
         return;
     };
     let (config, out, _) = shipped_run();
-    let rig = RigConfig::load(config).unwrap();
+    let rig = CellConfig::load(config).unwrap();
     let (l, r) = (
         rig.index_of("left").unwrap(),
         rig.index_of("right").unwrap(),
     );
-    let board = Target::load(&rig.cameras[l].config.target).unwrap();
-    let model =
-        |c: usize| CameraModel::load(rig.cameras[c].config.intrinsics.as_ref().unwrap()).unwrap();
+    let board = Target::load(&rig.cameras[l].target).unwrap();
+    let model = |c: usize| CameraModel::load(rig.cameras[c].intrinsics.as_ref().unwrap()).unwrap();
     let (left_model, right_model) = (model(l), model(r));
     let k = |m: &CameraModel| {
         vec![
@@ -679,7 +678,7 @@ fn config_errors_name_the_camera_and_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let error = |edits: &[(&str, &str)]| {
         let config = three_cameras(dir.path(), edits);
-        RigConfig::load(&config).unwrap_err().to_string()
+        CellConfig::load(&config).unwrap_err().to_string()
     };
     let e = error(&[(
         "noise_sigma: 2.0, blur_sigma_px: 0.5, seed: 12",
@@ -705,7 +704,7 @@ fn config_errors_name_the_camera_and_the_key() {
         .collect();
     let many = dir.path().join("seventeen.yaml");
     std::fs::write(&many, text.replacen(block, &format!("{block}{more}"), 1)).unwrap();
-    let e = RigConfig::load(&many).unwrap_err().to_string();
+    let e = CellConfig::load(&many).unwrap_err().to_string();
     assert!(
         e.contains("cameras") && e.contains("17 cameras: at most 16"),
         "{e}"
@@ -720,18 +719,42 @@ fn config_errors_name_the_camera_and_the_key() {
         "  T_flange_targte: {translation: [-0.145, 0.145, -0.03]",
     )]);
     assert!(e.contains("nominal.T_flange_targte"), "{e}");
-    assert!(handeye_session::config::rig::is_rig_file(&three_cameras(
-        dir.path(),
-        &[]
-    )));
-    assert!(!handeye_session::config::rig::is_rig_file(
-        &util::repo().join("configs/sim-cell.yaml")
-    ));
-    // The one-camera reader refuses the form with a message naming the key it does not know.
-    let one = handeye_session::config::CellConfig::load(&three_cameras(dir.path(), &[]))
-        .unwrap_err()
-        .to_string();
-    assert!(one.contains("cameras"), "{one}");
+    // One schema: the list form and the one-camera form load as one `CellConfig`, the latter a
+    // list of one camera whose frame is `camera`.
+    let three = CellConfig::load(&three_cameras(dir.path(), &[])).unwrap();
+    assert!(three.listed);
+    let frames: Vec<&str> = three.cameras.iter().map(|c| c.frame.as_str()).collect();
+    assert_eq!(frames, ["cam_wrist", "cam_left", "cam_right"]);
+    assert_eq!(three.camera().name, "wrist");
+    let one = CellConfig::load(&util::repo().join("configs/sim-cell.yaml")).unwrap();
+    assert!(!one.listed);
+    assert_eq!(one.cameras.len(), 1);
+    assert_eq!(one.camera().frame, "camera");
+    assert_eq!(one.camera().mount_key(), "T_flange_camera");
+    // A command that takes one camera refuses the list, naming the key.
+    let refused = three.single_camera().unwrap_err().to_string();
+    assert!(
+        refused.contains("cameras") && refused.contains("several cameras"),
+        "{refused}"
+    );
+    // A camera's key at the top level beside the list is named with where it belongs.
+    let text = std::fs::read_to_string(three_cameras(dir.path(), &[])).unwrap();
+    let mixed = dir.path().join("mixed.yaml");
+    std::fs::write(&mixed, format!("setup: eye_in_hand\n{text}")).unwrap();
+    let e = CellConfig::load(&mixed).unwrap_err().to_string();
+    assert!(
+        e.contains("mixed.yaml") && e.contains("setup") && e.contains("each camera gives its own"),
+        "{e}"
+    );
+    // The one-camera form without its setup says what is missing.
+    let sim = std::fs::read_to_string(util::repo().join("configs/sim-cell.yaml")).unwrap();
+    let bare = dir.path().join("no-setup.yaml");
+    std::fs::write(&bare, sim.replacen("setup: eye_in_hand\n", "", 1)).unwrap();
+    let e = CellConfig::load(&bare).unwrap_err().to_string();
+    assert!(
+        e.contains("no-setup.yaml") && e.contains("setup: missing"),
+        "{e}"
+    );
 }
 
 /// The adaptive plan of the three-camera cell: each next pose is scored over every camera (the

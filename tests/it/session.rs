@@ -68,7 +68,10 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
     let config = repo().join("configs/sim-cell.yaml");
     let (prepared, folder, solved) = full_run(&config, &dir.path().join("s"));
-    assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
+    assert_recovers_truth(
+        &solved,
+        prepared.config.camera().simulation.as_ref().unwrap(),
+    );
     assert!(folder.result_path().is_file());
     // Every pose left its frame and record on disk.
     for i in 0..prepared.plan.waypoints.len() {
@@ -79,7 +82,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
     eprintln!(
         "{}\n{}",
         solved.summary,
-        solved.compare_with_truth(prepared.config.simulation.as_ref().unwrap())
+        solved.compare_with_truth(prepared.config.camera().simulation.as_ref().unwrap())
     );
     // Replay re-detects the saved frames and reproduces the result (both answers).
     let (dataset, visits) = session::replay::redetect(
@@ -141,7 +144,10 @@ fn eye_to_hand_sim_cell_recovers_the_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
     let config = repo().join("configs/sim-cell-eye-to-hand.yaml");
     let (prepared, _, solved) = full_run(&config, &dir.path().join("s"));
-    assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
+    assert_recovers_truth(
+        &solved,
+        prepared.config.camera().simulation.as_ref().unwrap(),
+    );
 }
 
 #[test]
@@ -177,7 +183,7 @@ fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
     let [(_, camera_mount), _] = solved.calibration.unknowns();
     let (mm, deg) = pose_error_mm_deg(
         &camera_mount,
-        &prepared.config.simulation.unwrap().camera_mount,
+        &prepared.config.camera().simulation.unwrap().camera_mount,
     );
     assert!(mm < 1.0 && deg < 0.1, "{mm} mm {deg}°");
 }
@@ -445,14 +451,8 @@ fn every_shipped_cell_config_loads_and_its_plan_passes_its_checks() {
     for entry in std::fs::read_dir(repo().join("configs")).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "yaml") {
-            // A several-camera config loads here; its run (tests/it/rig.rs) checks its plan for
-            // every camera.
-            if handeye_session::config::rig::is_rig_file(&path) {
-                handeye_session::config::rig::RigConfig::load(&path)
-                    .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
-                checked += 1;
-                continue;
-            }
+            // A several-camera config is prepared as every config is (its plan checked for the
+            // camera it is made for; its run, tests/it/rig.rs, checks every camera's views).
             let prepared =
                 cell::prepare(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(
@@ -499,7 +499,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     eprintln!(
         "{}\n{}",
         solved.summary,
-        solved.compare_with_truth(prepared.config.simulation.as_ref().unwrap())
+        solved.compare_with_truth(prepared.config.camera().simulation.as_ref().unwrap())
     );
     let truth_camera = handeye_core::camera_model::CameraModel::load(&lens).unwrap();
     let written =
@@ -522,7 +522,10 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     // Rendered corners with known intrinsics fit to ~0.09 px RMS; estimated ones must match that.
     let rms = solved.reprojection.as_ref().unwrap().errors.rms_px;
     assert!(rms < 0.12, "reprojection RMS {rms:.4} px");
-    assert_recovers_truth(&solved, prepared.config.simulation.as_ref().unwrap());
+    assert_recovers_truth(
+        &solved,
+        prepared.config.camera().simulation.as_ref().unwrap(),
+    );
     assert!(folder.result_path().is_file());
     let summary: session::solve::ReprojectionSummary = serde_yaml_ng::from_str(
         &std::fs::read_to_string(folder.root().join("reprojection.yaml")).unwrap(),

@@ -104,7 +104,7 @@ fn full_run_through_ur_rtde_recovers_the_truth_with_a_tcp_offset_set() {
         let outcome = outcome.unwrap();
         assert_eq!(outcome.accepted.len(), 12, "skipped {:?}", outcome.skipped);
         let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
-        let truth = prepared.config.simulation.unwrap();
+        let truth = prepared.config.camera().simulation.unwrap();
         let [(camera_key, camera_mount), (target_key, target_mount)] =
             solved.calibration.unknowns();
         assert_close(&camera_mount, &truth.camera_mount, camera_key);

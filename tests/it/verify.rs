@@ -47,7 +47,12 @@ fn holdout(
 #[test]
 fn holdout_errors_agree_with_the_known_error_of_the_result() {
     let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/sim-cell.yaml");
-    let truth = cell::prepare(&config).unwrap().config.simulation.unwrap();
+    let truth = cell::prepare(&config)
+        .unwrap()
+        .config
+        .camera()
+        .simulation
+        .unwrap();
     let dir = tempfile::tempdir().unwrap();
 
     // The true transforms: what is left is the measurement noise of a rendered board pose.

@@ -4,7 +4,7 @@
 
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
-use handeye_session::config::rig::RigConfig;
+use handeye_session::config::CellConfig;
 use handeye_solve::rig::{RigCamera, RigData, RigObservation, RigStart};
 use handeye_solve::NoiseModel;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -13,8 +13,8 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
 /// The three-camera config (wrist, left, right).
-pub fn three_cameras() -> RigConfig {
-    RigConfig::load(&super::repo().join("configs/sim-cell-three-cameras.yaml"))
+pub fn three_cameras() -> CellConfig {
+    CellConfig::load(&super::repo().join("configs/sim-cell-three-cameras.yaml"))
         .expect("the three-camera config loads")
 }
 
@@ -57,7 +57,7 @@ pub fn board_pose_noise(setup: Setup) -> (f64, f64) {
 
 /// The joint problem's data: every camera of `rig` with the default noise model.
 pub fn rig_data(
-    rig: &RigConfig,
+    rig: &CellConfig,
     base_from_flange: Vec<Pose>,
     observations: Vec<RigObservation>,
 ) -> RigData {
@@ -67,7 +67,7 @@ pub fn rig_data(
             .iter()
             .map(|c| RigCamera {
                 name: c.name.clone(),
-                setup: c.config.setup,
+                setup: c.setup,
                 noise: NoiseModel::default(),
             })
             .collect(),
@@ -78,14 +78,10 @@ pub fn rig_data(
 
 /// The start a run without a prior has: the config's nominal mounts (the wrist camera's board on
 /// the table, the fixed cameras' board on the flange).
-pub fn nominal_start(rig: &RigConfig) -> RigStart {
+pub fn nominal_start(rig: &CellConfig) -> RigStart {
     RigStart {
-        camera_mounts: rig
-            .cameras
-            .iter()
-            .map(|c| c.config.nominal.camera_mount)
-            .collect(),
-        base_from_target: Some(rig.cameras[0].config.nominal.target_mount),
-        flange_from_target: Some(rig.cameras[1].config.nominal.target_mount),
+        camera_mounts: rig.cameras.iter().map(|c| c.nominal.camera_mount).collect(),
+        base_from_target: Some(rig.cameras[0].nominal.target_mount),
+        flange_from_target: Some(rig.cameras[1].nominal.target_mount),
     }
 }

@@ -49,10 +49,10 @@ impl<'a> ConsoleObserver<'a> {
 
 /// What the console shows of a cell, published when the cell is ready.
 pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, CellView) {
-    let (a, b) = cell.config.setup.unknown_names();
+    let (a, b) = cell.config.camera().setup.unknown_names();
     let event = ConsoleEvent::Cell {
         config: cell.config.file.display().to_string(),
-        setup: cell.config.setup.name().to_string(),
+        setup: cell.config.camera().setup.name().to_string(),
         unknowns: [a.to_string(), b.to_string()],
         simulated: cell.is_simulated(),
         manual,
@@ -62,7 +62,7 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
         }),
     };
     let view = CellView {
-        setup: cell.config.setup,
+        setup: cell.config.camera().setup,
         board: cell.board.clone(),
         model: cell.camera_model,
         // The running estimate skips the outlier loop (a person watches it converge; the solve
@@ -72,8 +72,8 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
             ..cell.config.solver.to_options()
         },
         nominal: (
-            cell.config.nominal.camera_mount,
-            cell.config.nominal.target_mount,
+            cell.config.camera().nominal.camera_mount,
+            cell.config.camera().nominal.target_mount,
         ),
     };
     (event, view)

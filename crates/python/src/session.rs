@@ -80,7 +80,9 @@ impl Session {
 
     fn load_config(&self, py: Python<'_>, config: Option<PathBuf>) -> PyResult<CellConfig> {
         let path = config.unwrap_or_else(|| self.config.clone());
-        CellConfig::load(&path).map_err(|e| errors::with_context(py, "reading the cell config", &e))
+        CellConfig::load(&path)
+            .and_then(CellConfig::single_camera)
+            .map_err(|e| errors::with_context(py, "reading the cell config", &e))
     }
 }
 
@@ -151,7 +153,7 @@ impl Session {
     #[getter]
     fn truth<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let config = self.load_config(py, None)?;
-        let Some(truth) = config.simulation else {
+        let Some(truth) = config.camera().simulation else {
             return Ok(None);
         };
         let dict = PyDict::new(py);

@@ -224,7 +224,9 @@ pub fn holdout(
         .as_deref()
         .ok_or_else(|| VerifyError::Plan("a holdout check needs the cell config".into()))?;
     let cell_setup = CellConfig::load(config)
+        .and_then(CellConfig::single_camera)
         .map_err(|e| VerifyError::Plan(e.to_string()))?
+        .camera()
         .setup;
     if calibration.setup != cell_setup {
         return Err(VerifyError::SetupMismatch {

@@ -310,7 +310,7 @@ fn uvc_camera_config_is_validated_and_needs_the_feature() {
     let config =
         handeye_session::config::CellConfig::parse(&text("yuyv"), Path::new("cell.yaml")).unwrap();
     assert!(matches!(
-        &config.camera,
+        &config.camera().backend,
         handeye_session::config::CameraConfig::Uvc {
             width: 640,
             height: 480,
@@ -326,7 +326,7 @@ fn uvc_camera_config_is_validated_and_needs_the_feature() {
         "{e}"
     );
     let model = CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
-    let opened = cell::uvc::open_camera(&config.camera, model);
+    let opened = cell::uvc::open_camera(&config.camera().backend, model);
     if cfg!(feature = "uvc") {
         // No camera exists on build machines: opening must fail cleanly, not panic.
         assert!(opened.is_err());

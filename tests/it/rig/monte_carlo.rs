@@ -21,11 +21,7 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
     use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
 
     let rig = util::rig::three_cameras();
-    let truth: Vec<_> = rig
-        .cameras
-        .iter()
-        .map(|c| c.config.simulation.unwrap())
-        .collect();
+    let truth: Vec<_> = rig.cameras.iter().map(|c| c.simulation.unwrap()).collect();
     let setups: Vec<Setup> = truth.iter().map(|t| t.setup).collect();
     let seeds = 200;
     let cameras = truth.len();
@@ -124,21 +120,17 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     use util::rig::{jitter, nominal_start, rig_data, wrist_views};
 
     let rig = util::rig::three_cameras();
-    let truth: Vec<_> = rig
-        .cameras
-        .iter()
-        .map(|c| c.config.simulation.unwrap())
-        .collect();
+    let truth: Vec<_> = rig.cameras.iter().map(|c| c.simulation.unwrap()).collect();
     let models: Vec<CameraModel> = rig
         .cameras
         .iter()
-        .map(|c| CameraModel::load(c.config.intrinsics.as_ref().unwrap()).unwrap())
+        .map(|c| CameraModel::load(c.intrinsics.as_ref().unwrap()).unwrap())
         .collect();
     let boards: Vec<Vec<nalgebra::Point3<f64>>> = rig
         .cameras
         .iter()
         .map(|c| {
-            Target::load(&c.config.target)
+            Target::load(&c.target)
                 .unwrap()
                 .points()
                 .into_iter()
@@ -146,7 +138,7 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                 .collect()
         })
         .collect();
-    let robot = rig.cameras[0].config.robot_repeatability();
+    let robot = rig.robot_repeatability();
     let pixel_sigma = 0.1;
     let seeds = 40;
     let cameras = truth.len();

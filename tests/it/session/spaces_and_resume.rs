@@ -33,7 +33,7 @@ fn both_spaces_over_seeds(
         run(&prepared, &folder).unwrap();
         let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         assert!(solved.reprojection.is_some());
-        let truth = prepared.config.simulation.unwrap();
+        let truth = prepared.config.camera().simulation.unwrap();
         for (sum, answer) in sums
             .iter_mut()
             .zip([&solved.pose_space, &solved.calibration])

@@ -77,9 +77,13 @@ fn referenced_files_exist(config: &CellConfig) -> Result<(), CellError> {
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     let referenced = [
-        Some(("target", config.target.as_path())),
-        config.intrinsics.as_deref().map(|p| ("intrinsics", p)),
-        config.sim_lens().map(|p| ("camera.intrinsics", p)),
+        Some(("target", config.camera().target.as_path())),
+        config
+            .camera()
+            .intrinsics
+            .as_deref()
+            .map(|p| ("intrinsics", p)),
+        config.camera().sim_lens().map(|p| ("camera.intrinsics", p)),
         config.plan.file.as_deref().map(|p| ("plan.file", p)),
     ];
     for (key, path) in referenced.into_iter().flatten() {
@@ -145,24 +149,25 @@ pub struct PreparedCell {
 /// Loads everything a config names and checks the plan. Nothing moves. A config of several
 /// cameras (`cameras:`) is prepared camera by camera (`rig::prepare_rig`).
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
-    if crate::config::rig::is_rig_file(config_file) {
-        return rig::prepare_rig(config_file);
-    }
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+    if config.listed {
+        return rig::prepare_rig(config);
+    }
     prepare_config(config)
 }
 
-/// [`prepare`] of a config already read (one camera of a several-camera cell, `config::rig`).
+/// [`prepare`] of a one-camera config already read (also one camera of a several-camera cell,
+/// [`CellConfig::for_camera`]).
 pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     referenced_files_exist(&config)?;
-    let board = Target::load(&config.target).map_err(|source| CellError::Board {
-        file: config.target.clone(),
+    let board = Target::load(&config.camera().target).map_err(|source| CellError::Board {
+        file: config.camera().target.clone(),
         source: Box::new(source),
     })?;
     // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
     // the run then records corners only and the intrinsics are estimated afterwards.
-    let intrinsics_known = config.intrinsics.is_some();
-    let model_file = match (&config.intrinsics, config.sim_lens(), &config.robot, &config.camera) {
+    let intrinsics_known = config.camera().intrinsics.is_some();
+    let model_file = match (&config.camera().intrinsics, config.camera().sim_lens(), &config.robot, &config.camera().backend) {
         (Some(file), ..) => Some(file.clone()),
         (None, Some(lens), ..) => Some(lens.to_path_buf()),
         // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
@@ -182,7 +187,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
     };
     // The cell's joint ranges (robot.joint_ranges_deg, or the defaults) bind the IK choice, the
     // plan check, every move check and the backends.
-    let joint_limits = config.robot.joint_limits(config.setup);
+    let joint_limits = config.robot.joint_limits(config.camera().setup);
     let arm = match config.robot.model() {
         Some(name) => {
             let mut arm = UrModel::by_name(name).ok_or_else(|| {
@@ -325,7 +330,7 @@ impl PreparedCell {
             arm: self.arm.as_ref(),
             joint_limits: &self.joint_limits,
             start_joints: self.start_joints,
-            cell: &self.config.nominal,
+            cell: &self.config.camera().nominal,
             workspace: &self.config.workspace,
             limits: &self.config.limits,
             camera: &self.camera_model,
@@ -398,9 +403,9 @@ impl PreparedCell {
         max_samples: usize,
     ) -> crate::plan::nbv::AdaptivePlanner {
         crate::plan::nbv::AdaptivePlanner::new(
-            self.config.setup,
-            self.config.nominal.camera_mount,
-            self.config.nominal.target_mount,
+            self.config.camera().setup,
+            self.config.camera().nominal.camera_mount,
+            self.config.camera().nominal.target_mount,
             candidates,
             self.config.solver.to_options(),
             target_uncertainty_mm,
@@ -429,7 +434,7 @@ impl PreparedCell {
 
     /// The session manifest for a validated plan.
     pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
-        SessionManifest::new(self.config_path(), self.config.setup, plan)
+        SessionManifest::new(self.config_path(), self.config.camera().setup, plan)
     }
 
     /// What the session solve needs, as this cell loaded it: the board and (when the config
@@ -447,9 +452,9 @@ impl PreparedCell {
     pub fn inputs(&self) -> Result<Vec<InputFile>, SessionError> {
         let mut files = vec![
             ("config", self.config.file.clone()),
-            ("target", self.config.target.clone()),
+            ("target", self.config.camera().target.clone()),
         ];
-        if let Some(file) = &self.config.intrinsics {
+        if let Some(file) = &self.config.camera().intrinsics {
             files.push(("intrinsics", file.clone()));
         }
         if let Some(file) = &self.config.plan.file {
@@ -461,10 +466,10 @@ impl PreparedCell {
         // A several-camera cell's other cameras: their boards and lenses, once each.
         for (_, other) in self.rig.iter().flat_map(|rig| &rig.others) {
             for (role, file) in [
-                ("target", other.config.target.clone()),
+                ("target", other.config.camera().target.clone()),
                 (
                     "intrinsics",
-                    other.config.intrinsics.clone().unwrap_or_default(),
+                    other.config.camera().intrinsics.clone().unwrap_or_default(),
                 ),
             ] {
                 if !file.as_os_str().is_empty() && !files.iter().any(|(_, f)| *f == file) {
@@ -487,7 +492,7 @@ impl PreparedCell {
     /// (`camera_name` containing [`PLACEHOLDER_CAMERA_NAME`]): good for `plan check`, useless for
     /// calibrating, so a run refuses it before anything moves.
     pub fn placeholder_intrinsics(&self) -> Option<(std::path::PathBuf, String)> {
-        let file = self.config.intrinsics.as_ref()?;
+        let file = self.config.camera().intrinsics.as_ref()?;
         let text = std::fs::read_to_string(file).ok()?;
         let yaml: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).ok()?;
         let name = yaml.get("camera_name")?.as_str()?;
@@ -502,7 +507,7 @@ impl PreparedCell {
     fn sim_world(&self) -> Result<(CameraModel, Target), CellError> {
         let CameraConfig::Sim {
             intrinsics, target, ..
-        } = &self.config.camera
+        } = &self.config.camera().backend
         else {
             return Ok((self.camera_model, self.board.clone()));
         };
@@ -527,7 +532,7 @@ impl PreparedCell {
 
     /// The simulator's ground truth, which the simulated backends render from.
     fn sim_truth(&self) -> Result<CellTransforms, CellError> {
-        self.config.simulation.ok_or_else(|| {
+        self.config.camera().simulation.ok_or_else(|| {
             CellError::Backend(
                 "a simulated backend needs `simulation:` (the cell's true transforms) in the config"
                     .into(),
@@ -566,7 +571,7 @@ impl PreparedCell {
             camera,
             others: Vec::new(),
         };
-        match (&self.config.robot, &self.config.camera) {
+        match (&self.config.robot, &self.config.camera().backend) {
             (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
                 let truth = self.sim_truth()?;
                 let (lens, board) = self.sim_world()?;
@@ -590,10 +595,11 @@ impl PreparedCell {
             (RobotConfig::Ur { .. }, CameraConfig::Sim { .. } | CameraConfig::Uvc { .. }) => {
                 // The real cell: open the camera first, so a missing camera never leaves a
                 // connected arm behind.
-                let uvc = match &self.config.camera {
-                    CameraConfig::Uvc { .. } => {
-                        Some(uvc::open_camera(&self.config.camera, self.camera_model)?)
-                    }
+                let uvc = match &self.config.camera().backend {
+                    CameraConfig::Uvc { .. } => Some(uvc::open_camera(
+                        &self.config.camera().backend,
+                        self.camera_model,
+                    )?),
                     _ => None,
                 };
                 let robot = self.open_ur()?;
@@ -639,7 +645,7 @@ impl PreparedCell {
     /// cameras): a simulated camera renders from the arm's pose; a USB camera needs nothing of
     /// the arm.
     pub fn open_camera_beside(&self, arm: &ArmSide) -> Result<Box<dyn Camera>, CellError> {
-        match (&self.config.camera, arm) {
+        match (&self.config.camera().backend, arm) {
             (CameraConfig::Sim { .. }, ArmSide::Flange(flange)) => {
                 let truth = self.sim_truth()?;
                 let (lens, board) = self.sim_world()?;
@@ -648,7 +654,7 @@ impl PreparedCell {
                 Ok(Box::new(camera))
             }
             (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
-                uvc::open_camera(&self.config.camera, self.camera_model)
+                uvc::open_camera(&self.config.camera().backend, self.camera_model)
             }
             (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => {
                 ros2::open_camera(&self.config, node, self.camera_model)
@@ -702,7 +708,7 @@ impl PreparedCell {
     ) -> SessionSetup {
         SessionSetup {
             folder,
-            setup: self.config.setup,
+            setup: self.config.camera().setup,
             plan,
             limits: self.config.limits,
             settle: self.config.settle(),

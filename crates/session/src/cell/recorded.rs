@@ -35,7 +35,7 @@ pub fn plan(
         .iter()
         .enumerate()
         .map(|(index, base_from_flange)| {
-            let camera_from_target = config.nominal.camera_from_target(base_from_flange);
+            let camera_from_target = config.camera().nominal.camera_from_target(base_from_flange);
             PoseCheck {
                 index,
                 base_from_flange: *base_from_flange,
@@ -70,7 +70,7 @@ pub fn plan(
 /// distortion), used only for the plan report's information-only margins and the folder camera's
 /// frame-size check.
 pub fn provisional_model(config: &CellConfig) -> Result<CameraModel, CellError> {
-    let CameraConfig::Files { folder } = &config.camera else {
+    let CameraConfig::Files { folder } = &config.camera().backend else {
         return Err(CellError::Backend(
             "a recorded cell needs `camera: {backend: files}`".into(),
         ));
@@ -130,7 +130,7 @@ pub fn open_camera(
     poses: usize,
     camera_model: CameraModel,
 ) -> Result<Box<dyn handeye_camera::Camera>, CellError> {
-    let CameraConfig::Files { folder } = &config.camera else {
+    let CameraConfig::Files { folder } = &config.camera().backend else {
         return Err(CellError::Backend(
             "recorded poses need `camera: {backend: files}`".into(),
         ));

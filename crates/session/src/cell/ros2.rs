@@ -126,7 +126,7 @@ pub fn open_camera(
 
     use crate::config::CameraConfig;
 
-    let CameraConfig::Ros2(c) = &config.camera else {
+    let CameraConfig::Ros2(c) = &config.camera().backend else {
         return Err(CellError::Backend(
             "the ROS 2 cell needs `robot: {backend: ros2}` and `camera: {backend: ros2}`".into(),
         ));

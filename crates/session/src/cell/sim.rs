@@ -168,7 +168,7 @@ pub fn camera(
         seed,
         hide_board_in_grabs,
         ..
-    } = &config.camera
+    } = &config.camera().backend
     else {
         return Err(CellError::Backend(
             "expected `camera: {backend: sim}`".into(),

@@ -9,8 +9,8 @@
 //! Units are SI with the suffix in the key where a person reads (`_deg`, `_mm`, `_s`). Depends
 //! on the ground floor, `plan`, `robot`, `solve` and `vision` (for their types and bounds).
 
+pub mod cameras;
 pub mod recorded;
-pub mod rig;
 pub mod ros2;
 pub mod schema;
 pub mod validate;
@@ -26,9 +26,9 @@ use handeye_solve::{NoiseModel, SolveOptions};
 
 pub use recorded::{recorded_cell, RecordedFiles};
 pub use schema::{
-    ArmModel, CameraConfig, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName, PlanConfig,
-    RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, VerdictConfig,
-    WorkspaceConfig,
+    ArmModel, CameraConfig, CameraFile, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName,
+    PlanConfig, RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, VerdictConfig,
+    WorkspaceConfig, MAX_CAMERAS,
 };
 pub use validate::{
     Range, MAX_JOINT_ACCELERATION_DEG, MAX_JOINT_SPEED_DEG, MAX_LINEAR_ACCELERATION,
@@ -139,26 +139,21 @@ impl SolverConfig {
     }
 }
 
-/// A validated cell config with paths resolved.
+/// A validated cell config with paths resolved: the arm, the plan and the settings shared by the
+/// cell's cameras, and the cameras (one or several).
 #[derive(Debug, Clone)]
 pub struct CellConfig {
     /// The file it came from.
     pub file: PathBuf,
-    /// Eye-in-hand or eye-to-hand.
-    pub setup: Setup,
-    /// Board spec file.
-    pub target: PathBuf,
-    /// Camera intrinsics file (camera_info YAML or Kalibr camchain); `None`: estimate them from
-    /// the run's board corners (Zhang's closed form, then the joint reprojection refinement).
-    pub intrinsics: Option<PathBuf>,
+    /// The cameras, in the order written (one for the one-camera form).
+    pub cameras: Vec<CellCamera>,
+    /// Index of the camera the plan is made for: the first eye-in-hand one, else the first.
+    pub planner: usize,
+    /// Whether the file lists its cameras (`cameras:`): each is then named, its frame is
+    /// `cam_<name>` and it records into its own folder of the session, also when there is one.
+    pub listed: bool,
     /// The arm.
     pub robot: RobotConfig,
-    /// The camera.
-    pub camera: CameraConfig,
-    /// The cell's transforms as known before calibrating (used to plan).
-    pub nominal: CellTransforms,
-    /// The simulator's ground truth (sim backends only).
-    pub simulation: Option<CellTransforms>,
     /// Where the plan comes from (file paths resolved).
     pub plan: PlanConfig,
     /// Motion limits.
@@ -177,6 +172,50 @@ pub struct CellConfig {
     settle: Duration,
 }
 
+/// One camera of a cell, validated, paths resolved.
+#[derive(Debug, Clone)]
+pub struct CellCamera {
+    /// Its name (`cameras[].name`; `camera` in the one-camera form).
+    pub name: String,
+    /// Its frame: `cam_<name>` in a `cameras:` list, `camera` in the one-camera form.
+    pub frame: String,
+    /// Eye-in-hand or eye-to-hand.
+    pub setup: Setup,
+    /// The board it sees (spec file).
+    pub target: PathBuf,
+    /// Its intrinsics file (camera_info YAML or Kalibr camchain); `None`: estimate them from
+    /// the run's board corners (Zhang's closed form, then the joint reprojection refinement).
+    pub intrinsics: Option<PathBuf>,
+    /// Its backend.
+    pub backend: CameraConfig,
+    /// Its mount and its board as known before calibrating (used to plan).
+    pub nominal: CellTransforms,
+    /// The simulator's ground truth of them (sim backends only).
+    pub simulation: Option<CellTransforms>,
+}
+
+impl CellCamera {
+    /// The YAML key of its mount: `T_flange_<frame>` or `T_base_<frame>`.
+    pub fn mount_key(&self) -> String {
+        match self.setup {
+            Setup::EyeInHand => format!("T_flange_{}", self.frame),
+            Setup::EyeToHand => format!("T_base_{}", self.frame),
+        }
+    }
+
+    /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
+    pub fn sim_lens(&self) -> Option<&Path> {
+        match &self.backend {
+            CameraConfig::Sim {
+                intrinsics: Some(lens),
+                ..
+            } => Some(lens),
+            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
+            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => None,
+        }
+    }
+}
+
 impl CellConfig {
     /// Reads and validates a cell config.
     pub fn load(file: &Path) -> Result<CellConfig, ConfigError> {
@@ -185,19 +224,52 @@ impl CellConfig {
 
     /// Parses and validates config YAML; relative paths resolve against `file`'s folder.
     pub fn parse(text: &str, file: &Path) -> Result<CellConfig, ConfigError> {
-        if rig::is_rig_text(text) {
-            // Said as what it is, not as the first key the one-camera form does not know.
-            return Err(ConfigError::Inconsistent {
-                file: file.to_path_buf(),
-                key: "cameras".into(),
-                problem: "this is a config of several cameras: `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (setup, intrinsics, camera)".into(),
-            });
-        }
         Self::from_raw(ConfigFile::parse(text, file)?, file)
     }
 
-    /// Validates a config's shape as read; relative paths resolve against `file`'s folder.
+    /// Validates a config's shape as read, camera by camera (an error of a listed camera names
+    /// it); relative paths resolve against `file`'s folder.
     pub fn from_raw(raw: ConfigFile, file: &Path) -> Result<CellConfig, ConfigError> {
+        let listed = raw.cameras.is_some();
+        let mut cell: Option<CellConfig> = None;
+        for (index, view) in cameras::camera_views(&raw, file)?.into_iter().enumerate() {
+            let named = view.name.clone();
+            let one =
+                Self::one_camera(view.config, named.as_deref(), file).map_err(
+                    |source| match &named {
+                        Some(name) => ConfigError::Camera {
+                            index,
+                            name: name.clone(),
+                            source: Box::new(source),
+                        },
+                        None => source,
+                    },
+                )?;
+            match &mut cell {
+                Some(cell) => cell.cameras.extend(one.cameras),
+                None => cell = Some(one),
+            }
+        }
+        let mut cell = cell.ok_or_else(|| ConfigError::Inconsistent {
+            file: file.to_path_buf(),
+            key: "cameras".into(),
+            problem: "no camera".into(),
+        })?;
+        cell.listed = listed;
+        cell.planner = cell
+            .cameras
+            .iter()
+            .position(|c| c.setup == Setup::EyeInHand)
+            .unwrap_or(0);
+        Ok(cell)
+    }
+
+    /// The cell as the one-camera config `raw` says it (a camera of a list is named `name`).
+    fn one_camera(
+        raw: ConfigFile,
+        name: Option<&str>,
+        file: &Path,
+    ) -> Result<CellConfig, ConfigError> {
         let checked = validate::check(&raw, file)?;
         let folder = file.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| folder.join(p);
@@ -207,8 +279,8 @@ impl CellConfig {
         if let RobotConfig::Recorded { poses, .. } = &mut robot {
             *poses = resolve(poses);
         }
-        let mut camera = raw.camera;
-        match &mut camera {
+        let mut backend = checked.camera;
+        match &mut backend {
             CameraConfig::Files { folder } => *folder = resolve(folder),
             CameraConfig::Sim {
                 intrinsics, target, ..
@@ -218,15 +290,22 @@ impl CellConfig {
             }
             CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => {}
         }
-        Ok(CellConfig {
-            file: file.to_path_buf(),
-            setup: raw.setup,
+        let camera = CellCamera {
+            name: name.unwrap_or("camera").to_string(),
+            frame: name.map_or_else(|| "camera".to_string(), |n| format!("cam_{n}")),
+            setup: checked.setup,
             target: resolve(&raw.target),
             intrinsics: raw.intrinsics.as_deref().map(resolve),
-            robot,
-            camera,
+            backend,
             nominal: checked.nominal,
             simulation: checked.simulation,
+        };
+        Ok(CellConfig {
+            file: file.to_path_buf(),
+            cameras: vec![camera],
+            planner: 0,
+            listed: name.is_some(),
+            robot,
             plan,
             limits: checked.limits,
             workspace: checked.workspace,
@@ -238,16 +317,42 @@ impl CellConfig {
         })
     }
 
-    /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
-    pub fn sim_lens(&self) -> Option<&Path> {
-        match &self.camera {
-            CameraConfig::Sim {
-                intrinsics: Some(lens),
-                ..
-            } => Some(lens),
-            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
-            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => None,
+    /// The camera the plan is made for (the only one of a one-camera cell).
+    pub fn camera(&self) -> &CellCamera {
+        &self.cameras[self.planner]
+    }
+
+    /// Index of the camera called `name`.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.cameras.iter().position(|c| c.name == name)
+    }
+
+    /// The camera the plan is made for, to change (tests and tools that vary a cell).
+    pub fn camera_mut(&mut self) -> &mut CellCamera {
+        &mut self.cameras[self.planner]
+    }
+
+    /// The cell as its camera `index` alone sees it: the shared arm, plan and settings with that
+    /// camera only (a several-camera cell prepares each camera so).
+    pub fn for_camera(&self, index: usize) -> CellConfig {
+        CellConfig {
+            cameras: vec![self.cameras[index].clone()],
+            planner: 0,
+            ..self.clone()
         }
+    }
+
+    /// This config when it has one camera; else the error a command that takes one camera
+    /// gives (`handeye run`, `replay`, `report` and `export` take several).
+    pub fn single_camera(self) -> Result<CellConfig, ConfigError> {
+        if self.cameras.len() == 1 && !self.listed {
+            return Ok(self);
+        }
+        Err(ConfigError::Inconsistent {
+            file: self.file,
+            key: "cameras".into(),
+            problem: "this is a config of several cameras: `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (setup, intrinsics, camera)".into(),
+        })
     }
 
     /// How far the robot's reported flange pose may be from the true one, 1-sigma per axis, as
@@ -309,7 +414,7 @@ impl CellConfig {
     pub fn adaptive(&self) -> bool {
         self.plan.adaptive.unwrap_or(
             self.plan.generate.is_some()
-                && self.intrinsics.is_some()
+                && self.camera().intrinsics.is_some()
                 && !matches!(self.robot, RobotConfig::Recorded { .. }),
         )
     }

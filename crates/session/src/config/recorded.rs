@@ -50,7 +50,9 @@ pub fn recorded_cell(
     }
     let (camera_key, target_key) = setup.unknown_names();
     ConfigFile {
-        setup,
+        setup: Some(setup),
+        flange_target: None,
+        cameras: None,
         target: files.target,
         intrinsics: files.intrinsics,
         robot: RobotConfig::Recorded {
@@ -59,9 +61,9 @@ pub fn recorded_cell(
             repeatability_deg: None,
             frames: Some(files.frames),
         },
-        camera: CameraConfig::Files {
+        camera: Some(CameraConfig::Files {
             folder: files.images,
-        },
+        }),
         nominal: BTreeMap::from([
             (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
             (target_key.to_string(), PoseYaml::from_pose(&target_mount)),

@@ -22,30 +22,49 @@ use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM
 use handeye_solve::Method;
 
 /// A whole cell config file as written (paths as written, nothing checked but the shape).
+///
+/// One schema for a cell of one camera or several. A cell of several cameras lists them under
+/// `cameras:` (each with its name, setup, intrinsics, backend and mount); a cell of one camera may
+/// give that camera's keys at the top level instead (`setup`, `intrinsics`, `camera`, its mount
+/// in `nominal`), which reads as a list of one. See `config::cameras` for the list form.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(
     deny_unknown_fields,
     expecting = "a mapping of config keys (setup, target, robot, camera, nominal, workspace, ...)"
 )]
 pub struct ConfigFile {
-    /// Eye-in-hand or eye-to-hand.
-    pub setup: Setup,
-    /// Board spec file (relative to the config's folder).
+    /// Eye-in-hand or eye-to-hand (the one-camera form: each camera of a `cameras:` list has its
+    /// own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setup: Option<Setup>,
+    /// Board spec file (relative to the config's folder); with `cameras:`, the board fixed in the
+    /// cell (eye-in-hand cameras), and the flange board too when `flange_target` is absent.
     pub target: PathBuf,
-    /// Camera intrinsics file; absent: estimated from the run (sim camera or recorded frames).
+    /// With `cameras:`: the board on the flange, seen by eye-to-hand cameras; default `target`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flange_target: Option<PathBuf>,
+    /// Camera intrinsics file (the one-camera form); absent: estimated from the run (sim camera or
+    /// recorded frames).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intrinsics: Option<PathBuf>,
     /// The arm.
     pub robot: RobotConfig,
-    /// The camera.
-    pub camera: CameraConfig,
-    /// The cell's transforms as known before calibrating (`T_flange_camera`/`T_base_target` or
-    /// `T_base_camera`/`T_flange_target`).
+    /// The camera (the one-camera form).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraConfig>,
+    /// The cameras of the cell, each with its own setup, lens, backend and mount (1 to
+    /// [`MAX_CAMERAS`]); absent: the one-camera form.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cameras: Option<Vec<CameraFile>>,
+    /// The cell's transforms as known before calibrating: the one-camera form's mount and board
+    /// (`T_flange_camera`/`T_base_target` or `T_base_camera`/`T_flange_target`); with `cameras:`
+    /// the boards only (`T_base_target` when some camera is eye-in-hand, `T_flange_target` when
+    /// some camera is eye-to-hand), each camera's mount being its own `nominal`.
     pub nominal: BTreeMap<String, PoseYaml>,
     /// The simulator's ground truth, same keys as `nominal` (sim backends only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<BTreeMap<String, PoseYaml>>,
-    /// Where the plan comes from.
+    /// Where the plan comes from (with `cameras:`, planned for the first eye-in-hand camera).
     #[serde(default)]
     pub plan: PlanConfig,
     /// Motion limits.
@@ -53,7 +72,7 @@ pub struct ConfigFile {
     pub limits: LimitsConfig,
     /// The box the flange origin must stay in, base frame.
     pub workspace: WorkspaceConfig,
-    /// Detector settings.
+    /// Detector settings (every camera).
     #[serde(default)]
     pub detector: DetectorConfig,
     /// Solver settings.
@@ -62,9 +81,33 @@ pub struct ConfigFile {
     /// Session settings.
     #[serde(default)]
     pub session: SessionConfig,
-    /// The accuracy the GOOD / CHECK / REDO verdict judges against.
+    /// The accuracy the GOOD / CHECK / REDO verdict judges against (each camera's).
     #[serde(default)]
     pub verdict: VerdictConfig,
+}
+
+/// The most cameras one cell runs: every camera grabs, holds its frame and is detected at every
+/// pose; far beyond any real cell, a config with more is a mistake or an attack on memory.
+pub const MAX_CAMERAS: usize = 16;
+
+/// One camera of a `cameras:` list as written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFile {
+    /// Its name: lower-case letters, digits and `_` (frames are named `cam_<name>`).
+    pub name: String,
+    /// On the flange (`eye_in_hand`) or fixed in the cell (`eye_to_hand`).
+    pub setup: Setup,
+    /// Its intrinsics (camera_info YAML or Kalibr camchain): required, a several-camera run
+    /// does not estimate them.
+    pub intrinsics: PathBuf,
+    /// Its backend.
+    pub camera: CameraConfig,
+    /// Its mount as known before calibrating: `T_flange_cam_<name>` or `T_base_cam_<name>`.
+    pub nominal: PoseYaml,
+    /// Its simulated mount (sim backends only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<PoseYaml>,
 }
 
 /// The arm models whose kinematics the tool knows (Universal Robots' published DH parameters,

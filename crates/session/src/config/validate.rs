@@ -200,6 +200,8 @@ pub const IMAGE_MARGIN_PX: Range = Range::closed(0.0, 1000.0, "px");
 /// What validation produces besides the checked shape: the values converted to the units and
 /// types the rest of the tool uses.
 pub(super) struct Checked {
+    pub setup: Setup,
+    pub camera: CameraConfig,
     pub nominal: CellTransforms,
     pub simulation: Option<CellTransforms>,
     pub limits: MotionLimits,
@@ -210,9 +212,16 @@ pub(super) struct Checked {
 /// Checks every value of `raw` (read from `file`).
 pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigError> {
     let v = Validator { file };
+    // `config::cameras` hands each camera over in the one-camera form, its setup and backend given.
+    let (Some(setup), Some(camera)) = (raw.setup, raw.camera.clone()) else {
+        return Err(v.inconsistent(
+            "setup",
+            "missing: a camera needs its `setup` and `camera`".into(),
+        ));
+    };
     v.robot(&raw.robot)?;
-    v.joint_ranges(&raw.robot, raw.setup)?;
-    v.camera(raw)?;
+    v.joint_ranges(&raw.robot, setup)?;
+    v.camera(&camera, raw.intrinsics.is_some())?;
     let limits = v.limits(raw)?;
     let workspace = v.workspace(raw)?;
     v.plan(raw)?;
@@ -225,22 +234,24 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
         ACCURACY_DEG,
     )?;
     let settle = v.session(raw)?;
-    let nominal = v.transforms(raw.setup, "nominal", &raw.nominal)?;
+    let nominal = v.transforms(setup, "nominal", &raw.nominal)?;
     let simulation = raw
         .simulation
         .as_ref()
-        .map(|m| v.transforms(raw.setup, "simulation", m))
+        .map(|m| v.transforms(setup, "simulation", m))
         .transpose()?;
-    let uses_sim = matches!(raw.robot, RobotConfig::Sim { .. })
-        || matches!(raw.camera, CameraConfig::Sim { .. });
+    let uses_sim =
+        matches!(raw.robot, RobotConfig::Sim { .. }) || matches!(camera, CameraConfig::Sim { .. });
     if uses_sim && simulation.is_none() {
-        let (camera_key, target_key) = raw.setup.unknown_names();
+        let (camera_key, target_key) = setup.unknown_names();
         return Err(v.inconsistent(
             "simulation",
             format!("the sim backends need the ground truth: `simulation: {{{camera_key}: ..., {target_key}: ...}}`"),
         ));
     }
     Ok(Checked {
+        setup,
+        camera,
         nominal,
         simulation,
         limits,
@@ -447,8 +458,8 @@ impl Validator<'_> {
         Ok(())
     }
 
-    fn camera(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
-        match &raw.camera {
+    fn camera(&self, camera: &CameraConfig, cell_intrinsics: bool) -> Result<(), ConfigError> {
+        match camera {
             CameraConfig::Sim {
                 noise_sigma,
                 blur_sigma_px,
@@ -465,7 +476,7 @@ impl Validator<'_> {
                         HIDDEN_GRAB,
                     )?;
                 }
-                if raw.intrinsics.is_none() && intrinsics.is_none() {
+                if !cell_intrinsics && intrinsics.is_none() {
                     return Err(self.inconsistent(
                         "camera.intrinsics",
                         "the cell has no `intrinsics` (they will be estimated), so the sim camera needs its lens: `camera: {backend: sim, intrinsics: <camera_info.yaml>}`".into(),

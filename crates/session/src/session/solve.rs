@@ -85,11 +85,12 @@ pub struct SolveInputs {
 impl SolveInputs {
     /// Loads the board and the intrinsics (when the config names them) of `config`.
     pub fn load(config: CellConfig) -> Result<SolveInputs, SessionError> {
-        let board = Target::load(&config.target).map_err(|source| SessionError::Board {
-            file: config.target.clone(),
-            source: Box::new(source),
-        })?;
-        let camera = match &config.intrinsics {
+        let board =
+            Target::load(&config.camera().target).map_err(|source| SessionError::Board {
+                file: config.camera().target.clone(),
+                source: Box::new(source),
+            })?;
+        let camera = match &config.camera().intrinsics {
             Some(file) => {
                 Some(
                     CameraModel::load(file).map_err(|source| SessionError::Intrinsics {
@@ -141,8 +142,13 @@ impl SolvedSession {
             session: session.display().to_string(),
             estimates: estimates.display().to_string(),
             config: name(&config.file),
-            board: name(&config.target),
-            intrinsics: config.intrinsics.as_deref().map(name).unwrap_or_default(),
+            board: name(&config.camera().target),
+            intrinsics: config
+                .camera()
+                .intrinsics
+                .as_deref()
+                .map(name)
+                .unwrap_or_default(),
         };
         if let Some(verdict) = &mut self.verdict {
             verdict.name_session(&files);
@@ -238,7 +244,7 @@ fn solve_loaded(
     // into the session), also when they made every pose fail.
     let setup = folder.read_manifest()?.setup;
     let wrong = check_intrinsics(folder, setup, &visits, &inputs.board, camera, config)?;
-    let intrinsics_file = config.intrinsics.clone().unwrap_or_default();
+    let intrinsics_file = config.camera().intrinsics.clone().unwrap_or_default();
     let dataset = match committed_samples(folder, &visits) {
         Err(SessionError::NoSamples {
             folder: root,
@@ -587,13 +593,16 @@ fn conclude(
     let measured_nominal = !matches!(config.robot, RobotConfig::Recorded { .. });
     let nominal = solve::diagnostics::check_against_nominal(
         &solved.calibration,
-        &config.nominal,
+        &config.camera().nominal,
         solve::diagnostics::NOMINAL_TOLERANCE_M,
     )
     .or_else(|| {
         measured_nominal
             .then(|| {
-                solve::diagnostics::check_far_from_nominal(&solved.calibration, &config.nominal)
+                solve::diagnostics::check_far_from_nominal(
+                    &solved.calibration,
+                    &config.camera().nominal,
+                )
             })
             .flatten()
     });
@@ -896,7 +905,7 @@ pub fn write_corrected_files(
     let (Some(model), Some(fit)) = (&solved.cell_model, &solved.reprojection) else {
         return Ok(Vec::new());
     };
-    write_estimates(root, &model.summary, fit, &config.target)
+    write_estimates(root, &model.summary, fit, &config.camera().target)
 }
 
 /// Records the corrected files `written` in the cell model's summary and the verdict's figures

@@ -1,6 +1,6 @@
-//! A cell with several cameras (`config::rig`): one arm, one plan, every camera capturing at
+//! A cell with several cameras (a `cameras:` config, `config::cameras`): one arm, one plan, every camera capturing at
 //! every pose, one joint solve (`solve.rs`). It runs as every run does, through `cell::run`: the
-//! camera the plan is made for (the first eye-in-hand one, see `RigConfig::planner`) is the
+//! camera the plan is made for (the first eye-in-hand one, see `CellConfig::planner`) is the
 //! run's `PreparedCell`, the others hang off it ([`RigCells`]), `open_hardware` opens each of
 //! them beside the arm, and the driver (`session::run_cameras_session`) moves and settles once
 //! per pose and grabs every camera. Arm time is shared: the moves and settling are paid once
@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{prepare_config, CellError, PreparedCell};
-use crate::config::rig::RigConfig;
+use crate::config::CellConfig;
 use crate::session::{
     OtherCamera, PlannedPose, RigCameras, SessionError, SessionFolder, SessionManifest,
 };
@@ -117,7 +117,11 @@ pub fn sees_board(cell: &PreparedCell, base_from_flange: &Pose) -> bool {
         f64::from(cell.camera_model.width),
         f64::from(cell.camera_model.height),
     );
-    let camera_from_target = cell.config.nominal.camera_from_target(base_from_flange);
+    let camera_from_target = cell
+        .config
+        .camera()
+        .nominal
+        .camera_from_target(base_from_flange);
     let inside = points
         .iter()
         .filter_map(|(_, _, point)| cell.camera_model.project(&(camera_from_target * point)))
@@ -129,8 +133,8 @@ pub fn sees_board(cell: &PreparedCell, base_from_flange: &Pose) -> bool {
 /// A several-camera cell's other cameras, prepared: each a one-camera cell of the shared arm,
 /// plan and settings (the planner camera is the `PreparedCell` that holds this).
 pub struct RigCells {
-    /// The config.
-    pub config: RigConfig,
+    /// The config (every camera).
+    pub config: CellConfig,
     /// The other cameras, in config order, by name.
     pub others: Vec<(String, PreparedCell)>,
 }
@@ -138,7 +142,7 @@ pub struct RigCells {
 impl RigCells {
     /// The planner camera's name.
     pub fn planner_name(&self) -> &str {
-        &self.config.cameras[self.config.planner].name
+        &self.config.camera().name
     }
 
     /// Every camera's name and cell, in config order, the planner being `cell`.
@@ -168,7 +172,7 @@ impl RigCells {
                 .iter()
                 .map(|c| RigManifestCamera {
                     name: c.name.clone(),
-                    setup: c.config.setup,
+                    setup: c.setup,
                 })
                 .collect(),
             planner: self.planner_name().to_string(),
@@ -246,7 +250,7 @@ impl RigCells {
                 Ok(OtherCamera {
                     name: name.clone(),
                     folder,
-                    setup: p.config.setup,
+                    setup: p.config.camera().setup,
                     board: p.board.clone(),
                 })
             })
@@ -263,11 +267,10 @@ impl RigCells {
 
 /// Prepares a several-camera cell: each camera as a one-camera cell (its errors name it); the
 /// planner camera's is returned, holding the others.
-pub fn prepare_rig(config_file: &Path) -> Result<PreparedCell, CellError> {
-    let rig = RigConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
+pub fn prepare_rig(rig: CellConfig) -> Result<PreparedCell, CellError> {
     let mut cells = Vec::with_capacity(rig.cameras.len());
-    for camera in &rig.cameras {
-        let cell = prepare_config(camera.config.clone()).map_err(|e| {
+    for (index, camera) in rig.cameras.iter().enumerate() {
+        let cell = prepare_config(rig.for_camera(index)).map_err(|e| {
             CellError::Backend(format!("camera `{}`: {}", camera.name, error_chain(&e)))
         })?;
         cells.push((camera.name.clone(), cell));

@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
-use crate::config::rig::{RigCameraConfig, RigConfig};
-use crate::config::{CellConfig, SolveSpace};
+use crate::config::SolveSpace;
+use crate::config::{CellCamera, CellConfig};
 use crate::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use crate::session::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
@@ -216,21 +216,20 @@ pub struct RigProblem {
 }
 
 /// A camera's board and lens files, read; an error names the camera and the file.
-fn camera_files(camera: &RigCameraConfig) -> Result<(Target, CameraModel), RigSolveError> {
+fn camera_files(camera: &CellCamera) -> Result<(Target, CameraModel), RigSolveError> {
     let input = |file: &Path, problem: String| RigSolveError::Input {
         camera: camera.name.clone(),
         file: file.to_path_buf(),
         problem,
     };
-    let board = Target::load(&camera.config.target)
-        .map_err(|e| input(&camera.config.target, e.to_string()))?;
-    let lens = camera.config.intrinsics.clone().unwrap_or_default();
+    let board = Target::load(&camera.target).map_err(|e| input(&camera.target, e.to_string()))?;
+    let lens = camera.intrinsics.clone().unwrap_or_default();
     let model = CameraModel::load(&lens).map_err(|e| input(&lens, e.to_string()))?;
     Ok((board, model))
 }
 
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
-pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigSolveError> {
+pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, RigSolveError> {
     let manifest = read_manifest(root)?;
     // The plan as the planner camera's session holds it (an adaptive session's grows there).
     let plan = SessionFolder::open(&camera_folder(root, &manifest.planner))?
@@ -268,8 +267,8 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             ));
             continue;
         }
-        let setup = camera.config.setup;
-        let options = camera.config.solver.to_options();
+        let setup = camera.setup;
+        let options = rig.solver.to_options();
         // A camera whose own solve fails (its samples too few or too alike, say after it was
         // lost early) is left out of the joint solve, named with why; the others are solved.
         let alone = match handeye_solve::solve(setup, &pairs, &options) {
@@ -292,7 +291,7 @@ pub fn load_rig_problem(root: &Path, rig: &RigConfig) -> Result<RigProblem, RigS
             .filter(|(k, _)| !dropped.contains(k))
             .map(|(_, v)| v)
             .collect();
-        let model = camera_cell_model(&camera.config, &kept, &board, &file_model, &alone);
+        let model = camera_cell_model(&rig.for_camera(c), &kept, &board, &file_model, &alone);
         // Where the views determine a wrong file's quantity, the camera's board poses, its lens
         // and its board points are those of the estimate: its held-out check and the joint solve
         // judge and use the corrected cell, not the wrong file.
@@ -404,7 +403,7 @@ fn camera_cell_model(
         return None;
     }
     fit_cell_model(
-        config.setup,
+        config.camera().setup,
         &frames,
         lens,
         &alone.camera_mount,
@@ -451,7 +450,7 @@ impl RigOutput {
 /// where `output` says.
 pub fn solve_rig_folder(
     root: &Path,
-    rig: &RigConfig,
+    rig: &CellConfig,
     output: &RigOutput,
 ) -> Result<RigResultFile, RigSolveError> {
     let problem = load_rig_problem(root, rig)?;
@@ -472,7 +471,7 @@ pub fn solve_rig_folder(
 /// (`camera_info.yaml`, `board.yaml`); per config camera, the files written.
 fn write_corrected_files(
     output: &RigOutput,
-    rig: &RigConfig,
+    rig: &CellConfig,
     problem: &RigProblem,
 ) -> Result<Vec<Vec<PathBuf>>, SessionError> {
     let mut written = Vec::new();
@@ -482,7 +481,7 @@ fn write_corrected_files(
                 &output.estimates_of(&camera.name),
                 &model.summary,
                 &model.fit,
-                &camera.config.target,
+                &camera.target,
             )?,
             None => Vec::new(),
         });
@@ -492,15 +491,14 @@ fn write_corrected_files(
 
 /// Names each camera's folder, its estimates' folder, the cell config, its board and lens
 /// files in its verdict's advice, and the cell's verdict again from them.
-fn name_files(root: &Path, output: &RigOutput, rig: &RigConfig, result: &mut RigResultFile) {
+fn name_files(root: &Path, output: &RigOutput, rig: &CellConfig, result: &mut RigResultFile) {
     for (camera, entry) in rig.cameras.iter().zip(&mut result.cameras) {
         let files = verdict::SessionFiles {
             session: camera_folder(root, &camera.name).display().to_string(),
             estimates: output.estimates_of(&camera.name).display().to_string(),
             config: rig.file.display().to_string(),
-            board: camera.config.target.display().to_string(),
+            board: camera.target.display().to_string(),
             intrinsics: camera
-                .config
                 .intrinsics
                 .as_ref()
                 .map(|f| f.display().to_string())
@@ -516,13 +514,13 @@ fn name_files(root: &Path, output: &RigOutput, rig: &RigConfig, result: &mut Rig
 
 /// Whether the config asks for the answer in pixel space (`solver.space: reprojection`, the
 /// default) rather than pose space.
-pub fn pixel_space(rig: &RigConfig) -> bool {
-    rig.cameras[rig.planner].config.solver.space == SolveSpace::Reprojection
+pub fn pixel_space(rig: &CellConfig) -> bool {
+    rig.solver.space == SolveSpace::Reprojection
 }
 
 /// The robot's repeatability (m, rad) the pixel-space solve estimates the flange poses with.
-pub fn robot_sigma(rig: &RigConfig) -> (f64, f64) {
-    rig.cameras[rig.planner].config.robot_repeatability()
+pub fn robot_sigma(rig: &CellConfig) -> (f64, f64) {
+    rig.robot_repeatability()
 }
 
 /// The joint answer: pose space, then (when `pixels`) refined on the corners with every flange
@@ -572,17 +570,17 @@ fn solve_subset(
 
 /// `result.yaml` from the joint answer; each camera's own answer is solved again by the same
 /// estimator with its views alone, so `alone` and `joint` differ only by solving together.
-pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -> RigResultFile {
+pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) -> RigResultFile {
     let accuracy = Accuracy {
-        translation_mm: rig.cameras[rig.planner].config.verdict.accuracy_mm,
-        rotation_deg: rig.cameras[rig.planner].config.verdict.accuracy_deg,
+        translation_mm: rig.verdict.accuracy_mm,
+        rotation_deg: rig.verdict.accuracy_deg,
     };
-    let truth_of = |c: usize| rig.cameras[c].config.simulation.map(|s| s.camera_mount);
+    let truth_of = |c: usize| rig.cameras[c].simulation.map(|s| s.camera_mount);
     let mut cameras = Vec::new();
     for (c, camera) in rig.cameras.iter().enumerate() {
         let (samples, left_out) = problem.cameras[c].clone();
-        let setup = camera.config.setup;
-        let frame = camera.frame();
+        let setup = camera.setup;
+        let frame = &camera.frame;
         let mut entry = CameraResult {
             name: camera.name.clone(),
             setup,
@@ -651,8 +649,8 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
     let board_truth = |setup: Setup| {
         rig.cameras
             .iter()
-            .find(|c| c.config.setup == setup)
-            .and_then(|c| c.config.simulation.map(|s| s.target_mount))
+            .find(|c| c.setup == setup)
+            .and_then(|c| c.simulation.map(|s| s.target_mount))
     };
     let mut boards = Vec::new();
     if let Some((pose, sigma)) = joint.base_from_target {
@@ -682,8 +680,8 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
                 .zip(truth_of(to))
                 .map(|(a, b)| a.inverse() * b);
             named(
-                &rig.cameras[from].frame(),
-                &rig.cameras[to].frame(),
+                &rig.cameras[from].frame,
+                &rig.cameras[to].frame,
                 r.pose,
                 r.sigma,
                 truth,
@@ -691,7 +689,7 @@ pub fn result_file(rig: &RigConfig, problem: &RigProblem, joint: &RigSolution) -
         })
         .collect();
     RigResultFile {
-        robot_frames: Some(rig.cameras[rig.planner].config.robot.frames()),
+        robot_frames: Some(rig.robot.frames()),
         cameras,
         boards,
         camera_to_camera,

@@ -193,7 +193,7 @@ fn per_pose_s(cell: &PreparedCell) -> f64 {
 /// The adaptive stop check besides the 1-sigma: the rotations spread well (the verdict's rule)
 /// and the held-out error is within the verdict's accuracy — what the verdict would call GOOD.
 fn good_enough(cell: &PreparedCell) -> StopCheck {
-    let setup = cell.config.setup;
+    let setup = cell.config.camera().setup;
     let options = cell.config.solver.to_options();
     let accuracy = cell.config.verdict.accuracy();
     StopCheck(Arc::new(move |samples: &[PosePair], c: &Calibration| {
