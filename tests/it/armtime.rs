@@ -141,11 +141,17 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     folder.write_manifest(&prepared.manifest(&plan)).unwrap();
     let truth = prepared.config.camera().simulation.unwrap();
-    let (robot, camera) = cell::sim::open(
+    let robot = cell::sim::arm(
         &prepared.config,
-        truth,
         prepared.kinematics().unwrap(),
         prepared.start_joints,
+    )
+    .unwrap();
+    let arm = robot.clone();
+    let camera = cell::sim::camera(
+        &prepared.config,
+        truth,
+        Box::new(move || arm.lock().true_base_from_flange()),
         prepared.camera_model,
         prepared.board.clone(),
     )

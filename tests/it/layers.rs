@@ -1,8 +1,9 @@
 //! The layer rules of ARCHITECTURE.md. Between crates the compiler enforces them: a crate can
 //! name only its dependencies. What is left to check here:
 //!
-//! - no `Cargo.toml` adds a dependency that reaches up a layer (read from `cargo metadata`, so a
-//!   new member crate must be given its place in [`CRATES`]);
+//! - ARCHITECTURE.md's crate table is the workspace (`cargo metadata`): every member crate has
+//!   its row, folder and layer, its "may use" is exactly its dependencies, and no `Cargo.toml`
+//!   adds a dependency that reaches up a layer;
 //! - inside the two crates that hold several layers (`handeye-session` and the top crate in
 //!   `src/`), every module names only the modules below it, whether through `crate::x`,
 //!   `crate::{x, y}` or `super::…` paths that climb to the crate root.
@@ -10,89 +11,58 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// Each workspace crate and the workspace crates it may depend on (normal and build deps).
-const CRATES: &[(&str, &[&str])] = &[
-    ("handeye-core", &[]),
-    ("handeye-solve", &["handeye-core"]),
-    ("handeye-vision", &["handeye-core"]),
-    ("handeye-robot", &["handeye-core"]),
-    ("handeye-camera", &["handeye-core", "handeye-vision"]),
-    (
-        "handeye-ros2",
-        &["handeye-core", "handeye-robot", "handeye-camera"],
-    ),
-    // ROS 2 bags, beside the live crate whose messages they decode into.
-    (
-        "handeye-ros2-bag",
-        &[
-            "handeye-core",
-            "handeye-solve",
-            "handeye-vision",
-            "handeye-camera",
-            "handeye-ros2",
-        ],
-    ),
-    (
-        "handeye-session",
-        &[
-            "handeye-core",
-            "handeye-solve",
-            "handeye-vision",
-            "handeye-robot",
-            "handeye-camera",
-            "handeye-ros2",
-        ],
-    ),
-    (
-        "handeye-formats",
-        &[
-            "handeye-core",
-            "handeye-vision",
-            "handeye-robot",
-            "handeye-session",
-            "handeye-ros2-bag",
-        ],
-    ),
-    (
-        "handeye-console",
-        &[
-            "handeye-core",
-            "handeye-solve",
-            "handeye-vision",
-            "handeye-robot",
-            "handeye-session",
-        ],
-    ),
-    (
-        "handeye",
-        &[
-            "handeye-core",
-            "handeye-solve",
-            "handeye-vision",
-            "handeye-robot",
-            "handeye-camera",
-            "handeye-session",
-            "handeye-ros2",
-            "handeye-ros2-bag",
-            "handeye-formats",
-            "handeye-console",
-        ],
-    ),
-    ("mocks", &["handeye-core", "handeye-robot"]),
-    // The Python package (crates/python): a top of its own beside the binary.
-    (
-        "handeye-python",
-        &[
-            "handeye-core",
-            "handeye-solve",
-            "handeye-vision",
-            "handeye-session",
-        ],
-    ),
-];
+/// One row of ARCHITECTURE.md's crate table.
+struct Row {
+    layer: u32,
+    name: String,
+    folder: String,
+    may_use: BTreeSet<String>,
+}
 
+/// The crate table of ARCHITECTURE.md (`| layer | crate | folder | owns | may use |`): the layer's
+/// number, the crate, its folder and the crates it may use (short names: `core` is
+/// `handeye-core`).
+fn architecture_table() -> Vec<Row> {
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("ARCHITECTURE.md"))
+            .expect("ARCHITECTURE.md reads");
+    let full = |short: &str| match short {
+        "mocks" => "mocks".to_string(),
+        short => format!("handeye-{short}"),
+    };
+    text.lines()
+        .filter(|line| line.starts_with("| ") && line.contains("| `"))
+        .filter_map(|line| {
+            let cells: Vec<&str> = line.trim_matches('|').split(" | ").map(str::trim).collect();
+            let layer = cells.first()?.split(' ').next()?.parse().ok()?;
+            let name = cells.get(1)?.trim_matches('`').to_string();
+            let folder = cells
+                .get(2)?
+                .trim_matches('`')
+                .trim_end_matches('/')
+                .to_string();
+            let may_use = cells
+                .last()?
+                .split(", ")
+                .filter(|s| !s.is_empty() && *s != "—")
+                .map(full)
+                .collect();
+            Some(Row {
+                layer,
+                name,
+                folder,
+                may_use,
+            })
+        })
+        .collect()
+}
+
+/// ARCHITECTURE.md's crate table against `cargo metadata`: every member crate has a row and its
+/// folder; its "may use" is exactly its workspace dependencies (normal and build; tests may use
+/// anything, the top crate's tests drive the mock controller), so the table's claims stay true;
+/// and each of those sits in a lower layer, so no `Cargo.toml` adds a dependency that reaches up.
 #[test]
-fn no_crate_depends_on_a_crate_above_it() {
+fn the_architecture_table_is_the_workspace_and_no_crate_depends_on_a_crate_above_it() {
     let output = std::process::Command::new(env!("CARGO"))
         .args([
             "metadata",
@@ -115,33 +85,73 @@ fn no_crate_depends_on_a_crate_above_it() {
         .iter()
         .map(|p| p["name"].as_str().unwrap())
         .collect();
-    let rules: BTreeMap<&str, &[&str]> = CRATES.iter().copied().collect();
+    let table = architecture_table();
+    let rows: BTreeMap<&str, &Row> = table.iter().map(|r| (r.name.as_str(), r)).collect();
+    assert_eq!(rows.len(), table.len(), "a crate has two rows");
     let mut violations = Vec::new();
+    for row in &table {
+        if !members.contains(row.name.as_str()) {
+            violations.push(format!(
+                "ARCHITECTURE.md names `{}`, which is not a workspace member",
+                row.name
+            ));
+        }
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     for package in packages {
         let name = package["name"].as_str().unwrap();
-        let Some(allowed) = rules.get(name) else {
+        let Some(row) = rows.get(name) else {
             violations.push(format!(
-                "crate `{name}` has no layer in tests/it/layers.rs (and ARCHITECTURE.md): add it"
+                "crate `{name}` has no row in ARCHITECTURE.md's crate table: add it with its layer"
             ));
             continue;
         };
-        for dependency in package["dependencies"].as_array().unwrap() {
-            let dep = dependency["name"].as_str().unwrap();
-            // Tests may use anything (the top crate's tests drive the mock controller).
-            if dependency["kind"] == "dev" || !members.contains(dep) {
-                continue;
-            }
-            if !allowed.contains(&dep) {
-                violations.push(format!(
-                    "crate `{name}` depends on `{dep}`, which its layer may not use"
-                ));
+        let manifest = Path::new(package["manifest_path"].as_str().unwrap());
+        let folder = manifest
+            .parent()
+            .unwrap()
+            .strip_prefix(root)
+            .unwrap_or(manifest);
+        let folder = match folder.to_str().unwrap() {
+            "" => "src".to_string(),
+            other => other.to_string(),
+        };
+        if folder != row.folder {
+            violations.push(format!(
+                "`{name}`: ARCHITECTURE.md says folder `{}`, it is `{folder}`",
+                row.folder
+            ));
+        }
+        let uses: BTreeSet<String> = package["dependencies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|d| d["kind"] != "dev")
+            .map(|d| d["name"].as_str().unwrap())
+            .filter(|d| members.contains(d))
+            .map(str::to_string)
+            .collect();
+        if uses != row.may_use {
+            violations.push(format!(
+                "`{name}`: ARCHITECTURE.md says it may use {:?}, its Cargo.toml uses {uses:?}",
+                row.may_use
+            ));
+        }
+        for dep in &uses {
+            if let Some(below) = rows.get(dep.as_str()) {
+                if below.layer >= row.layer {
+                    violations.push(format!(
+                        "`{name}` (layer {}) depends on `{dep}` (layer {}): a crate uses only crates of lower layers",
+                        row.layer, below.layer
+                    ));
+                }
             }
         }
     }
-    assert!(members.len() >= 7, "only {members:?} in the workspace");
+    assert!(members.len() >= 10, "only {members:?} in the workspace");
     assert!(
         violations.is_empty(),
-        "layer rules broken:\n{}",
+        "ARCHITECTURE.md and the workspace disagree:\n{}",
         violations.join("\n")
     );
 }

@@ -551,11 +551,30 @@ impl PreparedCell {
         })
     }
 
-    /// Opens the robot and camera the config names, and a several-camera cell's other cameras
-    /// beside them (each by the same mapping, [`PreparedCell::open_camera_beside`]). A simulated
-    /// camera next to a real (or mock) arm renders from the pose the arm reports.
+    /// Opens the arm the config names, then its camera and a several-camera cell's other
+    /// cameras beside it, each through one opener ([`PreparedCell::open_camera_beside`]): a
+    /// simulated camera renders from the pose the arm gives (the simulator's true pose, or the
+    /// pose a real arm reports), a ROS 2 camera subscribes on the arm's node, a folder camera
+    /// serves the recorded pose's frame. A camera that needs nothing of the arm (USB) opens
+    /// first, so a missing camera never leaves a connected arm behind.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
-        let (mut hardware, arm) = self.open_arm_and_camera()?;
+        let standalone = match &self.config.camera().backend {
+            CameraConfig::Uvc { .. } => Some(uvc::open_camera(
+                &self.config.camera().backend,
+                self.camera_model,
+            )?),
+            CameraConfig::Sim { .. } | CameraConfig::Files { .. } | CameraConfig::Ros2(_) => None,
+        };
+        let (robot, arm) = self.open_arm()?;
+        let camera = match standalone {
+            Some(camera) => camera,
+            None => self.open_camera_beside(&arm)?,
+        };
+        let mut hardware = Hardware {
+            robot,
+            camera,
+            others: Vec::new(),
+        };
         for (name, other) in self.rig.iter().flat_map(|rig| &rig.others) {
             let camera = other
                 .open_camera_beside(&arm)
@@ -565,85 +584,47 @@ impl PreparedCell {
         Ok(hardware)
     }
 
-    fn open_arm_and_camera(&self) -> Result<(Hardware, ArmSide), CellError> {
-        let hardware = |robot: Box<dyn Robot>, camera: Box<dyn Camera>| Hardware {
-            robot,
-            camera,
-            others: Vec::new(),
-        };
-        match (&self.config.robot, &self.config.camera().backend) {
-            (RobotConfig::Sim { .. }, CameraConfig::Sim { .. }) => {
-                let truth = self.sim_truth()?;
-                let (lens, board) = self.sim_world()?;
-                let (robot, camera) = sim::open(
-                    &self.config,
-                    truth,
-                    self.kinematics()?,
-                    self.start_joints,
-                    lens,
-                    board,
-                )?;
-                // The camera reports the cell's intrinsics, rendering with its own lens.
-                let camera = camera.reporting(self.camera_model);
+    /// Opens the arm the config names, with what its cameras need of it.
+    fn open_arm(&self) -> Result<(Box<dyn Robot>, ArmSide), CellError> {
+        match &self.config.robot {
+            RobotConfig::Sim { .. } => {
+                let robot = sim::arm(&self.config, self.kinematics()?, self.start_joints)?;
                 let arm = robot.clone();
                 let side = ArmSide::Flange(Box::new(move || {
                     let arm = arm.clone();
                     Box::new(move || arm.lock().true_base_from_flange())
                 }));
-                Ok((hardware(Box::new(robot), Box::new(camera)), side))
+                Ok((Box::new(robot), side))
             }
-            (RobotConfig::Ur { .. }, CameraConfig::Sim { .. } | CameraConfig::Uvc { .. }) => {
-                // The real cell: open the camera first, so a missing camera never leaves a
-                // connected arm behind.
-                let uvc = match &self.config.camera().backend {
-                    CameraConfig::Uvc { .. } => Some(uvc::open_camera(
-                        &self.config.camera().backend,
-                        self.camera_model,
-                    )?),
-                    _ => None,
-                };
+            RobotConfig::Ur { .. } => {
                 let robot = self.open_ur()?;
                 let arm = robot.clone();
                 let side = ArmSide::Flange(Box::new(move || arm.reported_flange()));
-                let camera = match uvc {
-                    Some(camera) => camera,
-                    None => self.open_camera_beside(&side)?,
-                };
-                Ok((hardware(Box::new(robot), camera), side))
+                Ok((Box::new(robot), side))
             }
-            (RobotConfig::Ros2(_), CameraConfig::Ros2(_)) => {
-                let (hardware, node) =
-                    ros2::open(&self.config, self.camera_model, self.arm.clone())?;
-                Ok((hardware, ArmSide::Ros2(node)))
+            RobotConfig::Ros2(_) => {
+                let (robot, node) = ros2::open_arm(&self.config, self.arm.clone())?;
+                Ok((robot, ArmSide::Ros2(node)))
             }
-            (RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => {
+            RobotConfig::Recorded { .. } => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
                 })?;
-                let (hardware, selector) = recorded::open(&self.config, &plan, self.camera_model)?;
+                let (robot, selector) = recorded::arm(&self.config, &plan)?;
                 Ok((
-                    hardware,
+                    robot,
                     ArmSide::Recorded {
                         selector,
                         poses: plan.len(),
                     },
                 ))
             }
-            (robot, camera) => Err(self.unavailable(robot, camera)),
         }
     }
 
-    fn unavailable(&self, robot: &RobotConfig, camera: &CameraConfig) -> CellError {
-        CellError::Backend(format!(
-            "the combination robot backend `{}` with camera backend `{}` is not available in this build",
-            robot_name(robot),
-            camera_name(camera)
-        ))
-    }
-
-    /// Opens this cell's camera beside an arm opened already (a several-camera cell's other
-    /// cameras): a simulated camera renders from the arm's pose; a USB camera needs nothing of
-    /// the arm.
+    /// Opens this cell's camera beside an arm opened already: a simulated camera renders from
+    /// the arm's pose, a USB camera needs nothing of the arm, a ROS 2 camera subscribes on the
+    /// arm's node, a folder camera follows the recorded arm.
     pub fn open_camera_beside(&self, arm: &ArmSide) -> Result<Box<dyn Camera>, CellError> {
         match (&self.config.camera().backend, arm) {
             (CameraConfig::Sim { .. }, ArmSide::Flange(flange)) => {
@@ -663,7 +644,7 @@ impl PreparedCell {
                 recorded::open_camera(&self.config, selector, *poses, self.camera_model)
             }
             (camera, _) => Err(CellError::Backend(format!(
-                "a camera with backend `{}` beside the `{}` arm of a several-camera cell is not available in this build (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
+                "a camera with backend `{}` beside the `{}` arm is not available (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
                 camera_name(camera),
                 robot_name(&self.config.robot)
             ))),

@@ -15,7 +15,7 @@ use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_solve::check_rotation_diversity;
 use handeye_vision::Target;
 
-use super::{CellError, Hardware};
+use super::CellError;
 
 /// The plan of a recorded cell and its report (distances and image margins under the nominal
 /// transforms, for information only).
@@ -94,14 +94,13 @@ pub fn provisional_model(config: &CellConfig) -> Result<CameraModel, CellError> 
     })
 }
 
-/// Opens the recorded robot and the image-folder camera; the folder must hold a frame for every
-/// pose of `plan`. The selector the robot sets on each move comes back too: another folder
-/// camera of the cell (a several-camera cell) follows it ([`open_camera`]).
-pub fn open(
+/// Opens the recorded arm of `config` (`robot: {backend: recorded}`): it serves the validated
+/// plan's poses (the recorded ones, in file order) and names each pose it moves to on the
+/// selector its folder cameras serve frames by ([`open_camera`]).
+pub fn arm(
     config: &CellConfig,
     plan: &[(Pose, Joints)],
-    camera_model: CameraModel,
-) -> Result<(Hardware, FrameSelector), CellError> {
+) -> Result<(Box<dyn Robot>, FrameSelector), CellError> {
     let RobotConfig::Recorded { .. } = &config.robot else {
         return Err(CellError::Backend(
             "a recorded cell needs `robot: {backend: recorded}` and `camera: {backend: files}`"
@@ -109,17 +108,11 @@ pub fn open(
         ));
     };
     let selector = FrameSelector::default();
-    let camera = open_camera(config, &selector, plan.len(), camera_model)?;
-    let hardware = Hardware {
-        robot: Box::new(SelectingRobot {
-            // The validated plan of a recorded cell is the recorded poses, in file order.
-            robot: RecordedRobot::new(plan.iter().map(|(pose, _)| *pose).collect()),
-            selector: selector.clone(),
-        }),
-        camera,
-        others: Vec::new(),
+    let robot = SelectingRobot {
+        robot: RecordedRobot::new(plan.iter().map(|(pose, _)| *pose).collect()),
+        selector: selector.clone(),
     };
-    Ok((hardware, selector))
+    Ok((Box::new(robot), selector))
 }
 
 /// Opens the image-folder camera of `config`, serving the frame of the pose `selector` names;

@@ -7,7 +7,7 @@ use handeye_camera::Camera;
 use handeye_core::camera_model::CameraModel;
 use handeye_robot::kinematics::UrModel;
 
-use super::{CellError, Hardware};
+use super::CellError;
 use crate::config::CellConfig;
 
 /// The ROS 2 node a cell's arm was opened on: its other cameras subscribe on it.
@@ -20,11 +20,10 @@ pub type Ros2Node = ();
 
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`).
 #[cfg(not(feature = "ros2"))]
-pub fn open(
+pub fn open_arm(
     _: &CellConfig,
-    _: CameraModel,
     _: Option<UrModel>,
-) -> Result<(Hardware, Ros2Node), CellError> {
+) -> Result<(Box<dyn handeye_robot::Robot>, Ros2Node), CellError> {
     Err(no_ros2())
 }
 
@@ -45,15 +44,14 @@ fn no_ros2() -> CellError {
     )
 }
 
-/// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`): the arm first (its
-/// joint states and flange pose must be heard before anything else), then the camera; the node
-/// comes back for the cell's other cameras.
+/// Opens the ROS 2 arm of `config` (`robot: {backend: ros2}`), before any camera: its joint
+/// states and flange pose must be heard before anything else; the node comes back for the
+/// cell's cameras ([`open_camera`]).
 #[cfg(feature = "ros2")]
-pub fn open(
+pub fn open_arm(
     config: &CellConfig,
-    model: CameraModel,
     arm: Option<UrModel>,
-) -> Result<(Hardware, Ros2Node), CellError> {
+) -> Result<(Box<dyn handeye_robot::Robot>, Ros2Node), CellError> {
     use std::time::Duration;
 
     use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
@@ -104,13 +102,7 @@ pub fn open(
         },
     )
     .map_err(|e| CellError::Robot(Box::new(e)))?;
-    let camera = open_camera(config, &link, model)?;
-    let hardware = Hardware {
-        robot: Box::new(robot),
-        camera,
-        others: Vec::new(),
-    };
-    Ok((hardware, link))
+    Ok((Box::new(robot), link))
 }
 
 /// Opens the ROS 2 camera of `config` (`camera: {backend: ros2}`) on `link`.

@@ -101,15 +101,13 @@ impl<R: Robot + ?Sized> Robot for Shared<R> {
     }
 }
 
-/// Builds the simulated arm and camera a config describes.
-pub fn open(
+/// Builds the simulated arm a config describes (its cameras follow its true flange pose:
+/// [`camera`]).
+pub fn arm(
     config: &CellConfig,
-    truth: CellTransforms,
     arm: UrModel,
     start: Joints,
-    camera_model: CameraModel,
-    board: Target,
-) -> Result<(Shared<SimRobot>, SimCamera), CellError> {
+) -> Result<Shared<SimRobot>, CellError> {
     let RobotConfig::Sim {
         move_duration_s,
         repeatability_mm,
@@ -145,13 +143,7 @@ pub fn open(
     };
     let robot =
         SimRobot::new(arm, start, options).map_err(|e| CellError::Backend(e.to_string()))?;
-    let robot = Shared::new(robot);
-    let camera_arm = robot.clone();
-    let true_pose = Box::new(move || camera_arm.lock().true_base_from_flange());
-    Ok((
-        robot,
-        camera(config, truth, true_pose, camera_model, board)?,
-    ))
+    Ok(Shared::new(robot))
 }
 
 /// The simulated camera a config describes, rendering with the flange pose `flange` gives.
