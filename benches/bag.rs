@@ -4,7 +4,8 @@
 //! every standing frame, then the recorded-cell session (detection of the 20 chosen frames) and
 //! the solve. Target: ≤ 10 s.
 //!
-//! The bag is written here with the `mcap` crate into a temporary folder (the integration tests
+//! The bag is written here with the `mcap` crate and the tree's one CDR codec
+//! (`handeye_ros2::cdr`) into a temporary folder (the integration tests
 //! use bags from the independent `rosbags` writer; this only needs the size). Frames while the arm
 //! moves are a blank image: they are rejected as moving before being decoded, as real ones would
 //! be.
@@ -29,6 +30,7 @@ use rand::SeedableRng;
 use handeye_camera::render::{render_with_rays, PixelRays, RenderOptions};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_ros2::msg::{CameraInfo, Header, Image, TfMessage, Time, Transform, TransformStamped};
 use handeye_ros2_bag::tf::interpolate;
 use handeye_session::plan::lookat::LookAt;
 use handeye_vision::{Board, Target};
@@ -36,42 +38,20 @@ use handeye_vision::{Board, Target};
 #[path = "../tests/util/mod.rs"]
 mod util;
 
-/// Little-endian CDR (after the 4-byte encapsulation header).
-struct Cdr(Vec<u8>);
+/// A ROS 2 header stamped `ns` (nanoseconds since the epoch) in `frame`.
+fn header(ns: i64, frame: &str) -> Header {
+    Header {
+        stamp: Time {
+            sec: (ns / 1_000_000_000) as i32,
+            nanosec: (ns % 1_000_000_000) as u32,
+        },
+        frame_id: frame.into(),
+    }
+}
 
-impl Cdr {
-    fn new() -> Self {
-        Cdr(vec![0, 1, 0, 0])
-    }
-    fn align(&mut self, n: usize) {
-        while !(self.0.len() - 4).is_multiple_of(n) {
-            self.0.push(0);
-        }
-    }
-    fn u32(&mut self, v: u32) {
-        self.align(4);
-        self.0.extend_from_slice(&v.to_le_bytes());
-    }
-    fn f64(&mut self, v: f64) {
-        self.align(8);
-        self.0.extend_from_slice(&v.to_le_bytes());
-    }
-    fn string(&mut self, s: &str) {
-        self.u32(s.len() as u32 + 1);
-        self.0.extend_from_slice(s.as_bytes());
-        self.0.push(0);
-    }
-    fn header(&mut self, ns: i64, frame: &str) {
-        self.u32((ns / 1_000_000_000) as u32);
-        self.u32((ns % 1_000_000_000) as u32);
-        self.string(frame);
-    }
-    fn pose(&mut self, p: &Pose) {
-        let (t, q) = (p.translation.vector, p.rotation.coords);
-        for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
-            self.f64(v);
-        }
-    }
+/// A message in its serialised form, through the one CDR codec of the tree (`handeye_ros2::cdr`).
+fn cdr<T: serde::Serialize>(message: &T) -> Vec<u8> {
+    handeye_ros2::cdr::encode(message).expect("a ROS 2 message serialises")
 }
 
 /// A message of the bag to write: its bytes, or an image (stamp, view shown or moving).
@@ -82,29 +62,18 @@ enum Data {
 
 /// The `sensor_msgs/msg/CameraInfo` message of `camera`, stamped `start`.
 fn camera_info_message(camera: &CameraModel, start: i64) -> Vec<u8> {
-    let mut m = Cdr::new();
-    m.header(start, "camera");
-    m.u32(camera.height);
-    m.u32(camera.width);
-    m.string("plumb_bob");
     let d = camera.distortion_coefficients();
-    m.u32(5);
-    for i in 0..5 {
-        m.f64(d.get(i).copied().unwrap_or(0.0));
-    }
-    for v in [
-        camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
-    ] {
-        m.f64(v);
-    }
-    for _ in 0..21 {
-        m.f64(0.0);
-    }
-    for _ in 0..6 {
-        m.u32(0);
-    }
-    m.0.push(0);
-    m.0
+    cdr(&CameraInfo {
+        header: header(start, "camera"),
+        height: camera.height,
+        width: camera.width,
+        distortion_model: "plumb_bob".into(),
+        d: (0..5).map(|i| d.get(i).copied().unwrap_or(0.0)).collect(),
+        k: [
+            camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0,
+        ],
+        ..CameraInfo::default()
+    })
 }
 
 /// rosbag2's metadata.yaml of the bag's `events` on `topics` (name, type, channel id).
@@ -212,12 +181,15 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     let duration = seconds;
     for k in 0..=(duration * 125.0) as i64 {
         let t = k as f64 / 125.0;
-        let mut m = Cdr::new();
-        m.u32(1);
-        m.header(start + (t * 1e9).round() as i64, "base");
-        m.string("tool0");
-        m.pose(&at(t).0);
-        events.push((start + (t * 1e9).round() as i64, tf, Data::Bytes(m.0)));
+        let stamp = start + (t * 1e9).round() as i64;
+        let message = TfMessage {
+            transforms: vec![TransformStamped {
+                header: header(stamp, "base"),
+                child_frame_id: "tool0".into(),
+                transform: Transform::from_pose(&at(t).0),
+            }],
+        };
+        events.push((stamp, tf, Data::Bytes(cdr(&message))));
     }
     events.push((
         start,
@@ -234,16 +206,15 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
             Some(k) => &frames[k],
             None => &blank,
         };
-        let mut m = Cdr::new();
-        m.header(stamp, "camera");
-        m.u32(camera.height);
-        m.u32(camera.width);
-        m.string("mono8");
-        m.0.push(0);
-        m.u32(camera.width);
-        m.u32(pixels.len() as u32);
-        m.0.extend_from_slice(pixels);
-        m.0
+        cdr(&Image {
+            header: header(stamp, "camera"),
+            height: camera.height,
+            width: camera.width,
+            encoding: "mono8".into(),
+            is_bigendian: 0,
+            step: camera.width,
+            data: pixels.clone(),
+        })
     };
     events.sort_by_key(|e| e.0);
     write_metadata(

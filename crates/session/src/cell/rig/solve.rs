@@ -602,7 +602,7 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
             let parent = mount_parent(setup);
             entry.joint = Some(named(
                 parent,
-                &frame,
+                frame,
                 joint.camera_mounts[k],
                 joint.camera_sigmas[k],
                 truth_of(c),
@@ -621,7 +621,7 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
             ) {
                 entry.alone = Some(named(
                     parent,
-                    &frame,
+                    frame,
                     alone.camera_mounts[0],
                     alone.camera_sigmas[0],
                     truth_of(c),
