@@ -62,7 +62,7 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "ros2")]
 fn publish(
-    transforms: &[handeye_formats::export::NamedTransform],
+    transforms: &[handeye_formats::export::FramedTransform],
     domain_id: u16,
     interfaces: Vec<IpAddr>,
     topic: &str,
@@ -111,7 +111,7 @@ fn publish(
 
 #[cfg(not(feature = "ros2"))]
 fn publish(
-    _transforms: &[handeye_formats::export::NamedTransform],
+    _transforms: &[handeye_formats::export::FramedTransform],
     _domain_id: u16,
     _interfaces: Vec<IpAddr>,
     _topic: &str,

@@ -13,7 +13,7 @@ use handeye_session::config::{validate, CellConfig, SolveSpace};
 use handeye_session::dataset::Dataset;
 use handeye_session::result::ResultFile;
 use handeye_session::session::{self, SessionFolder};
-use handeye_solve::{self as solve, Method, NoiseModel, RobustLoss, SolveOptions};
+use handeye_solve::{self as solve, Method, RobustLoss, SolveOptions, SolverChoice};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
 /// `solver.method` takes), each with its one-line summary in `--help`.
@@ -131,25 +131,20 @@ impl SolveArgs {
                 ),
             }
         }
-        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
-            self.rotation_sigma_deg,
-            self.translation_sigma_mm,
-            true,
-        );
-        let mut options = SolveOptions {
+        Ok(SolverChoice {
             method: self.method,
-            noise,
-            estimate_noise,
+            rotation_sigma_deg: self.rotation_sigma_deg,
+            translation_sigma_mm: self.translation_sigma_mm,
+            estimate_noise: true,
             robust: match self.robust {
                 RobustArg::None => RobustLoss::None,
                 RobustArg::Huber => RobustLoss::Huber(self.robust_scale),
                 RobustArg::Cauchy => RobustLoss::Cauchy(self.robust_scale),
             },
             drop_outliers: !self.keep_outliers,
-            ..SolveOptions::default()
-        };
-        options.iterative.warm_start = self.warm_start;
-        Ok(options)
+            warm_start: self.warm_start,
+        }
+        .options())
     }
 }
 

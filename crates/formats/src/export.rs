@@ -231,9 +231,11 @@ pub fn base_turn(poses_in: &str, base: &str) -> Option<Pose> {
     turned.then(ur_base_link_from_base)
 }
 
-/// One exported transform: `T_parent_child` with its frame ids.
+/// One exported transform: `T_parent_child` under the frame ids it is published with (a
+/// result's `NamedTransform` is the same transform in the result's own frame names, with its
+/// 1-sigma).
 #[derive(Debug, Clone, PartialEq)]
-pub struct NamedTransform {
+pub struct FramedTransform {
     /// Our name, `T_a_b` in the result's frame names (`T_flange_camera`, `T_base_cam_left`, ...).
     pub key: String,
     /// The parent frame id (frame `a`).
@@ -244,7 +246,7 @@ pub struct NamedTransform {
     pub parent_from_child: Pose,
 }
 
-impl NamedTransform {
+impl FramedTransform {
     /// `T_parent_child` between frames as result files name them (`base`, `flange`, `camera`,
     /// `cam_<name>`, `target`), under the ids `ids` gives them: `camera` is the camera id,
     /// `cam_<name>` the camera id with `_<name>` (every camera's optical frame distinct), the
@@ -257,7 +259,7 @@ impl NamedTransform {
         parent_from_child: Pose,
         ids: &FrameIds,
         two_boards: bool,
-    ) -> NamedTransform {
+    ) -> FramedTransform {
         let flange_board = two_boards && parent == "flange" && child == "target";
         let id = |frame: &str| match frame {
             "base" => ids.base.clone(),
@@ -275,7 +277,7 @@ impl NamedTransform {
             Some(turn) if parent == "base" => turn * parent_from_child,
             _ => parent_from_child,
         };
-        NamedTransform {
+        FramedTransform {
             key: format!("T_{parent}_{child}"),
             parent: id(parent),
             child: id(child),
@@ -285,15 +287,15 @@ impl NamedTransform {
 }
 
 /// The two unknowns of a solved one-camera cell with their frame ids: camera mount first, target
-/// mount second (see [`NamedTransform::with_ids`]).
-pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [NamedTransform; 2] {
+/// mount second (see [`FramedTransform::with_ids`]).
+pub fn named_transforms(mounts: &CellTransforms, ids: &FrameIds) -> [FramedTransform; 2] {
     let (camera_parent, target_parent) = match mounts.setup {
         Setup::EyeInHand => ("flange", "base"),
         Setup::EyeToHand => ("base", "flange"),
     };
     [
-        NamedTransform::with_ids(camera_parent, "camera", mounts.camera_mount, ids, false),
-        NamedTransform::with_ids(target_parent, "target", mounts.target_mount, ids, false),
+        FramedTransform::with_ids(camera_parent, "camera", mounts.camera_mount, ids, false),
+        FramedTransform::with_ids(target_parent, "target", mounts.target_mount, ids, false),
     ]
 }
 
@@ -322,10 +324,10 @@ pub struct Exported {
     pub cell: ExportedCell,
     /// The transforms a TF tree holds (one parent per frame): every camera's mount and every
     /// board's.
-    pub tree: Vec<NamedTransform>,
+    pub tree: Vec<FramedTransform>,
     /// Transforms the tree implies (camera to camera): written where a form holds them without
     /// giving a frame a second parent (as comments in the ROS 2 and URDF forms).
-    pub implied: Vec<NamedTransform>,
+    pub implied: Vec<FramedTransform>,
 }
 
 impl Exported {
@@ -335,7 +337,7 @@ impl Exported {
     pub fn cameras(result: &RigResultFile, ids: &FrameIds) -> Exported {
         let two_boards = result.boards.len() > 1;
         let named = |t: &handeye_session::cell::rig::solve::NamedTransform| {
-            NamedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)
+            FramedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)
         };
         Exported {
             cell: ExportedCell::Cameras(result.cameras.len()),
@@ -482,7 +484,7 @@ fn opencv_matrix(name: &str, parent: &str, child: &str, parent_from_child: &Pose
 
 /// The line naming an implied transform in a tree form, where publishing it would give its
 /// child a second parent.
-fn implied_comment(t: &NamedTransform) -> String {
+fn implied_comment(t: &FramedTransform) -> String {
     let (p, q) = (
         t.parent_from_child.translation.vector,
         t.parent_from_child.rotation,
@@ -557,7 +559,7 @@ pub fn ur_pose_literal(pose: &Pose) -> String {
     format!("p[{}, {}, {}, {}, {}, {}]", p.x, p.y, p.z, r.x, r.y, r.z)
 }
 
-fn ur(setup: Setup, transforms: &[NamedTransform]) -> String {
+fn ur(setup: Setup, transforms: &[FramedTransform]) -> String {
     let mut out = format!(
         "# handeye calibration ({setup}) as UR pose literals p[x, y, z, rx, ry, rz] (m, rotation vector rad).\n"
     );

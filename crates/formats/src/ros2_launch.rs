@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 
 use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion};
 
-use super::export::{ExportedCell, NamedTransform};
+use super::export::{ExportedCell, FramedTransform};
 use handeye_core::geometry::Pose;
 
 /// `T_link_optical` of a camera whose link has REP 103 body axes: optical z (forward) is the
@@ -25,8 +25,8 @@ pub fn link_from_optical() -> Pose {
 
 /// The camera's transform re-hung from its mounting link `link`: `T_parent_link =
 /// T_parent_optical · inv(T_link_optical)`, child `link`.
-pub fn through_camera_link(camera: &NamedTransform, link: &str) -> NamedTransform {
-    NamedTransform {
+pub fn through_camera_link(camera: &FramedTransform, link: &str) -> FramedTransform {
+    FramedTransform {
         key: camera.key.clone(),
         parent: camera.parent.clone(),
         child: link.to_string(),
@@ -35,7 +35,7 @@ pub fn through_camera_link(camera: &NamedTransform, link: &str) -> NamedTransfor
 }
 
 /// The launch file publishing `transforms`.
-pub fn launch_file(cell: ExportedCell, transforms: &[NamedTransform]) -> String {
+pub fn launch_file(cell: ExportedCell, transforms: &[FramedTransform]) -> String {
     let mut out = format!(
         "# handeye calibration {cell}: static transforms for ROS 2, run with\n\
          #   ros2 launch ./handeye_calibration.launch.py\n\

@@ -16,7 +16,7 @@ use handeye_core::setup::{PosePair, Setup};
 use handeye_session::config::validate;
 use handeye_session::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
-use handeye_solve::{Method, NoiseModel, RobustLoss, SolveError, SolveOptions};
+use handeye_solve::{Method, RobustLoss, SolveError, SolveOptions, SolverChoice};
 use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -87,18 +87,16 @@ fn options(
             ))
         }
     };
-    let (noise, estimate_noise) =
-        NoiseModel::given_or_estimated(rotation_sigma_deg, translation_sigma_mm, true);
-    let mut options = SolveOptions {
+    Ok(SolverChoice {
         method,
-        noise,
-        estimate_noise,
+        rotation_sigma_deg,
+        translation_sigma_mm,
+        estimate_noise: true,
         robust,
         drop_outliers: !keep_outliers,
-        ..SolveOptions::default()
-    };
-    options.iterative.warm_start = warm_start;
-    Ok(options)
+        warm_start,
+    }
+    .options())
 }
 
 /// The accuracy the verdict judges against (mm, degrees).

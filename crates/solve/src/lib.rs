@@ -50,7 +50,7 @@ pub use diagnostics::{check_rotation_diversity, rotation_diversity, RotationDive
 pub use error::{SampleProblem, SolveError, UnitsProblem};
 pub use iterative::{IterativeOptions, IterativeOutcome};
 use options::require_positive;
-pub use options::{EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions};
+pub use options::{EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions, SolverChoice};
 pub use reprojection::{
     refine_reprojection, reprojection_errors, Corner, Frame, ReprojectionCalibration,
     ReprojectionErrors, ReprojectionOptions, RobotPrior,

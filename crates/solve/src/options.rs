@@ -281,6 +281,65 @@ impl RobustLoss {
     }
 }
 
+/// What a person chooses of a solve, in the units they write it: a config's `solver:` section,
+/// `handeye solve`'s flags and the Python keywords all become [`SolveOptions`] through
+/// [`SolverChoice::options`], the one place the choice meets the solver's defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverChoice {
+    /// The estimator.
+    pub method: Method,
+    /// Board-pose rotation noise given, degrees (1-sigma per axis); `None`: estimated.
+    pub rotation_sigma_deg: Option<f64>,
+    /// Board-pose translation noise given, mm; `None`: estimated.
+    pub translation_sigma_mm: Option<f64>,
+    /// Estimate the sigmas not given from the residuals (`false`: the defaults as given).
+    pub estimate_noise: bool,
+    /// Robust loss of the refinement.
+    pub robust: RobustLoss,
+    /// Leave outliers out of the final fit (`false`: only flag them).
+    pub drop_outliers: bool,
+    /// Start the iterative method from the closed form.
+    pub warm_start: bool,
+}
+
+impl Default for SolverChoice {
+    fn default() -> Self {
+        let options = SolveOptions::default();
+        SolverChoice {
+            method: options.method,
+            rotation_sigma_deg: None,
+            translation_sigma_mm: None,
+            estimate_noise: true,
+            robust: options.robust,
+            drop_outliers: options.drop_outliers,
+            warm_start: options.iterative.warm_start,
+        }
+    }
+}
+
+impl SolverChoice {
+    /// The solver options this choice means: a sigma given is used as is, one absent is
+    /// estimated from the residuals (from the solver's default start) unless `estimate_noise`
+    /// is off; everything not chosen is the solver's default.
+    pub fn options(&self) -> SolveOptions {
+        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
+            self.rotation_sigma_deg,
+            self.translation_sigma_mm,
+            self.estimate_noise,
+        );
+        let mut options = SolveOptions {
+            method: self.method,
+            noise,
+            estimate_noise,
+            robust: self.robust,
+            drop_outliers: self.drop_outliers,
+            ..SolveOptions::default()
+        };
+        options.iterative.warm_start = self.warm_start;
+        options
+    }
+}
+
 /// Everything [`solve`] can be told.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolveOptions {

@@ -22,7 +22,7 @@ use handeye_core::geometry::PoseError;
 use handeye_core::setup::{CellTransforms, Setup};
 use handeye_core::yaml_file::{parse_yaml, read_text, shape_error, FileError};
 use handeye_robot::{MotionLimits, WorkspaceBox};
-use handeye_solve::{NoiseModel, SolveOptions};
+use handeye_solve::{SolveOptions, SolverChoice};
 
 pub use recorded::{recorded_cell, RecordedFiles};
 pub use schema::{
@@ -124,18 +124,15 @@ impl SolverConfig {
     /// estimated from the residuals (from the solver's default start) unless `estimate_noise`
     /// is off.
     pub fn to_options(&self) -> SolveOptions {
-        let (noise, estimate_noise) = NoiseModel::given_or_estimated(
-            self.rotation_sigma_deg,
-            self.translation_sigma_mm,
-            self.estimate_noise,
-        );
-        SolveOptions {
+        SolverChoice {
             method: self.method,
-            noise,
-            estimate_noise,
+            rotation_sigma_deg: self.rotation_sigma_deg,
+            translation_sigma_mm: self.translation_sigma_mm,
+            estimate_noise: self.estimate_noise,
             drop_outliers: self.drop_outliers,
-            ..SolveOptions::default()
+            ..SolverChoice::default()
         }
+        .options()
     }
 }
 
