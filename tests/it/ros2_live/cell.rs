@@ -578,12 +578,16 @@ fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
 /// Named before anything moves (or at the first pose, when discovery is late), nothing recorded.
 #[test]
 fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
-    within(Duration::from_secs(200), || a_second_flange_publisher(97, 0, 0));
+    within(Duration::from_secs(200), || {
+        a_second_flange_publisher(97, 0, 0)
+    });
 }
 
 /// The same publisher appearing mid-run: the poses before it are kept, the one after is not
 /// recorded, and the run stops naming it.
 #[test]
 fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
-    within(Duration::from_secs(300), || a_second_flange_publisher(98, 4, 3));
+    within(Duration::from_secs(300), || {
+        a_second_flange_publisher(98, 4, 3)
+    });
 }
