@@ -170,6 +170,19 @@ impl GrowingPlan {
             outcome.accepted = step_outcome.accepted;
             outcome.accepted_by_camera = step_outcome.accepted_by_camera;
         } else {
+            // The next pose reuses the index: its rejected record (the corners it saw) is kept
+            // aside, for the check of intrinsics that reject every pose.
+            for folder in std::iter::once(&setup.folder).chain(
+                setup
+                    .rig
+                    .iter()
+                    .flat_map(|rig| &rig.others)
+                    .map(|o| &o.folder),
+            ) {
+                if folder.visit_path(index).is_file() {
+                    folder.keep_rejected_visit(index)?;
+                }
+            }
             self.poses.pop();
         }
         Ok(accepted)
