@@ -58,7 +58,13 @@ pub fn run_adaptive_session(
     // been reached); none of them, nor any pose visited and rejected, is chosen again.
     let mut plan = GrowingPlan::open(&setup, manifest_config)?;
     let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
-    for visit in setup.folder.read_visits()? {
+    // With the rejected records kept aside (their index reused by a later pose).
+    for visit in setup
+        .folder
+        .read_visits()?
+        .into_iter()
+        .chain(setup.folder.read_rejected_visits()?)
+    {
         seen.push(visit.base_from_flange);
     }
     source.visited(&seen);
