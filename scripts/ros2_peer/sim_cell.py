@@ -25,7 +25,10 @@ freedrive ends mid-guide).
 
 Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
 --die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
-tool0).
+tool0), --succeed-without-moving N, --second-flange-publisher [N] (a second DDS writer on /tf, as
+a second robot_state_publisher or a static publisher left running would be: base_link -> tool0
+10 cm and 180 degrees from the driver's, at 200 Hz, while the arm stands; from the start, or from
+the end of the Nth goal on).
 """
 
 import glob
@@ -181,6 +184,11 @@ def add_arguments(p):
     p.add_argument("--abort-goal", type=int, default=0)
     p.add_argument("--die-in-goal", type=int, default=0)
     p.add_argument("--no-tool0", action="store_true")
+    p.add_argument("--second-flange-publisher", type=int, nargs="?", const=0, default=None,
+                   metavar="N",
+                   help="a second writer of base_link -> tool0 on /tf (200 Hz, while the arm stands): "
+                        "the driver's flange turned 180 degrees about its x axis and 10 cm along its z; "
+                        "from the start, or once goal N has ended")
     p.add_argument("--succeed-without-moving", type=int, default=0,
                    help="answer goal N SUCCEEDED at once and leave the arm where it stands")
     p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
@@ -381,6 +389,9 @@ def run(args):
     R = lambda name, T, qos: DataReader(dp, Topic(dp, name, T), qos=qos)  # noqa: E731
     js_w = W("rt/joint_states", m.JointState, dds.qos_reliable())
     tf_w = W("rt/tf", m.TFMessage, dds.qos_reliable(100))
+    # Another node's writer of the same topic (its own DDS writer, so its own publisher gid).
+    tf2_w = (W("rt/tf", m.TFMessage, dds.qos_reliable(100))
+             if args.second_flange_publisher is not None else None)
     tfs_w = W("rt/tf_static", m.TFMessage, dds.qos_static())
     img_w = W("rt/image_raw", m.Image, dds.qos_sensor())
     info_w = W("rt/camera_info", m.CameraInfo, dds.qos_sensor())
@@ -550,7 +561,8 @@ def run(args):
     # The joints of each plan pose (degrees): a taught plan for this arm pairs them with the
     # flange pose it reports there.
     say(event="ready", poses=len(views), plan_joints_deg=[list(np.degrees(q)) for q in plan_joints])
-    next_js = next_tf = next_img = next_info = time.monotonic()
+    next_js = next_tf = next_tf2 = next_img = next_info = time.monotonic()
+    second = 0
     while True:
         now = time.monotonic()
         serve()
@@ -578,6 +590,22 @@ def run(args):
             next_tf += 0.02
         elif now >= next_tf:
             next_tf += 0.02
+        if tf2_w is not None and now >= next_tf2:
+            next_tf2 += 0.005
+            with arm.lock:
+                standing = arm.goal is None and arm.guide is None
+            if standing and goal_count[0] >= args.second_flange_publisher:
+                # The driver's flange, then 10 cm along its z and turned 180 degrees about its x.
+                t, rot = flange
+                R = matrix_of((t, rot))[:3, :3]
+                t2 = np.asarray(t) + R[:, 2] * 0.10
+                rot2 = quat_mul(rot, (1.0, 0.0, 0.0, 0.0))
+                tf2_w.write(m.TFMessage([m.TransformStamped(
+                    m.Header(stamp_now(), "base_link"), "tool0",
+                    m.Transform(m.Vector3(-t2[0], -t2[1], t2[2]), m.Quaternion(*quat_mul(turn, rot2))))]))
+                second += 1
+                if second == 1:
+                    say(event="second_flange_publisher", offset_m=0.10, turn_deg=180.0)
         if view is None and now >= next_img:
             # No rendered view here (the start pose): a grey frame without a board.
             view = (None, np.full((ci["image_height"], ci["image_width"]), 128, np.uint8))

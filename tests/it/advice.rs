@@ -508,6 +508,30 @@ fn intrinsics_8_percent_off_that_reject_every_pose_are_named_with_the_numbers() 
     assert_eq!(after.level, Level::Good, "{}", after.terminal_lines());
 }
 
+/// The same lens file in an adaptive run (#38): a growing plan reuses the index of a rejected
+/// pose, so its records were overwritten and the one left was too few to estimate the lens
+/// from ("check that the board is in view"); the rejected records are kept aside
+/// (`rejected/`) and the error names the intrinsics with the numbers and the estimate.
+#[test]
+fn intrinsics_8_percent_off_that_reject_every_pose_of_an_adaptive_plan_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = lens_fx_8_percent_off(dir.path());
+    let config = cell_with_lens(
+        dir.path(),
+        "cell.yaml",
+        &lens,
+        &[("  adaptive: false\n", "")],
+    );
+    let session = dir.path().join("session");
+    let message = failed_run(&config, &session);
+    eprintln!("{message}");
+    assert!(
+        !message.contains("check that the board is in view"),
+        "{message}"
+    );
+    assert_intrinsics_advice(&message, &session, &config, &lens);
+}
+
 /// fx 8 % off with a board RMS limit loose enough to keep the frames: the verdict is REDO on
 /// the intrinsics (not "record more poses"), with the numbers; the replay with the estimate is
 /// GOOD.

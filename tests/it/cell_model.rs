@@ -29,7 +29,7 @@ use crate::util::{pose_error_mm_deg, repo};
 
 /// A mistake in the cell's files (the camera and board really are the shipped ones).
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Mistake {
+pub(crate) enum Mistake {
     Nothing,
     /// fx and fy both times these factors (together: equal).
     Focal(f64, f64),
@@ -48,7 +48,7 @@ enum Mistake {
 }
 
 impl Mistake {
-    fn wrong(self) -> Vec<GivenFile> {
+    pub(crate) fn wrong(self) -> Vec<GivenFile> {
         match self {
             Mistake::Nothing => vec![],
             Mistake::Board(_) => vec![GivenFile::Board],
@@ -57,7 +57,7 @@ impl Mistake {
         }
     }
 
-    fn class(self) -> &'static str {
+    pub(crate) fn class(self) -> &'static str {
         match self {
             Mistake::Nothing => "nothing",
             Mistake::Focal(a, b) if a == b => "focal together",
@@ -72,7 +72,7 @@ impl Mistake {
     }
 
     /// Draws a class (nothing in one case of five) and its magnitude.
-    fn draw(rng: &mut StdRng) -> Mistake {
+    pub(crate) fn draw(rng: &mut StdRng) -> Mistake {
         let sign = |rng: &mut StdRng| if rng.random_bool(0.5) { 1.0 } else { -1.0 };
         let percent = |rng: &mut StdRng, lo: f64, hi: f64| sign(rng) * rng.random_range(lo..hi);
         match rng.random_range(0..10) {
@@ -112,7 +112,7 @@ impl Mistake {
     }
 
     /// The intrinsics file with this mistake, from the true lens.
-    fn lens_file(self, truth: &CameraModel) -> CameraModel {
+    pub(crate) fn lens_file(self, truth: &CameraModel) -> CameraModel {
         let mut file = *truth;
         match self {
             Mistake::Focal(a, b) => {
@@ -148,7 +148,7 @@ impl Mistake {
     }
 
     /// The true board size as a factor of the file's.
-    fn board_factor(self) -> f64 {
+    pub(crate) fn board_factor(self) -> f64 {
         match self {
             Mistake::Board(s) | Mistake::LensAndBoard(_, s) => s,
             _ => 1.0,

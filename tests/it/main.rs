@@ -16,6 +16,7 @@ mod armtime;
 mod bag_import;
 mod boards;
 mod cell_model;
+mod cell_model_run;
 mod cellkit;
 mod cli_names;
 mod cli_run;

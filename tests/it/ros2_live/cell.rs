@@ -520,3 +520,74 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
         }
     });
 }
+
+/// #38: a second publisher of base_link → tool0 on the domain (another node's writer on /tf,
+/// 10 cm and 180° from the driver's flange, at 200 Hz while the arm stands) made a run "measure
+/// the board at 0.119×" and answer 805 mm off. The run names the contradiction — the edge, two
+/// publishers, how far apart they are — records no pose from it, and writes no answer: no board
+/// scale or lens file is blamed, no GOOD or CHECK verdict is given. `from_goal`: the peer's
+/// second publisher starts once that goal has ended (0: from the start); `kept`: the poses
+/// recorded before it.
+fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let from = from_goal.to_string();
+    let peer = Peer::start(&python, domain, &["--second-flange-publisher", &from]);
+    let config = cell(dir.path(), domain, &[]);
+    let out_dir = dir.path().join("session");
+    let out = run_cell(&config, &out_dir);
+    let log = text(&out);
+    eprintln!("{log}");
+    assert!(
+        !peer.events("second_flange_publisher").is_empty(),
+        "the peer's second publisher never wrote"
+    );
+    assert!(!out.status.success(), "{log}");
+    // The edge, the count of its publishers and how far apart they are (the peer's offset:
+    // 100 mm and 180°), and what to do.
+    assert!(
+        log.contains("base_link → tool0 has 2 publishers that disagree by 100.0 mm and 180.0°"),
+        "{log}"
+    );
+    assert!(log.contains("stop all but the driver's"), "{log}");
+    for blame in [
+        "board measures",
+        "printed at",
+        "tagSize",
+        "intrinsics in",
+        "camera_info.yaml",
+    ] {
+        assert!(!log.contains(blame), "blamed a file ({blame:?}):\n{log}");
+    }
+    // No answer from contradictory poses: no result, no verdict, no pose recorded while the
+    // second publisher spoke.
+    assert!(!out_dir.join("result.yaml").exists(), "{log}");
+    for level in ["GOOD", "CHECK", "REDO"] {
+        assert!(!log.contains(level), "a {level} verdict:\n{log}");
+    }
+    assert_eq!(poses_kept(&out_dir), kept, "poses recorded:\n{log}");
+    // Named when the arm is opened, or — when DDS discovery matches the second writer only
+    // after that check — at the first pose, before its capture is recorded.
+    let goals = peer.events("goal").len();
+    assert!(
+        goals == from_goal || (from_goal == 0 && goals == 1),
+        "{goals} goals:\n{log}"
+    );
+}
+
+/// Named before anything moves (or at the first pose, when discovery is late), nothing recorded.
+#[test]
+fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
+    within(Duration::from_secs(200), || {
+        a_second_flange_publisher(97, 0, 0)
+    });
+}
+
+/// The same publisher appearing mid-run: the poses before it are kept, the one after is not
+/// recorded, and the run stops naming it.
+#[test]
+fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
+    within(Duration::from_secs(300), || {
+        a_second_flange_publisher(98, 4, 3)
+    });
+}

@@ -58,7 +58,13 @@ pub fn run_adaptive_session(
     // been reached); none of them, nor any pose visited and rejected, is chosen again.
     let mut plan = GrowingPlan::open(&setup, manifest_config)?;
     let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
-    for visit in setup.folder.read_visits()? {
+    // With the rejected records kept aside (their index reused by a later pose).
+    for visit in setup
+        .folder
+        .read_visits()?
+        .into_iter()
+        .chain(setup.folder.read_rejected_visits()?)
+    {
         seen.push(visit.base_from_flange);
     }
     source.visited(&seen);
@@ -170,6 +176,19 @@ impl GrowingPlan {
             outcome.accepted = step_outcome.accepted;
             outcome.accepted_by_camera = step_outcome.accepted_by_camera;
         } else {
+            // The next pose reuses the index: its rejected record (the corners it saw) is kept
+            // aside, for the check of intrinsics that reject every pose.
+            for folder in std::iter::once(&setup.folder).chain(
+                setup
+                    .rig
+                    .iter()
+                    .flat_map(|rig| &rig.others)
+                    .map(|o| &o.folder),
+            ) {
+                if folder.visit_path(index).is_file() {
+                    folder.keep_rejected_visit(index)?;
+                }
+            }
             self.poses.pop();
         }
         Ok(accepted)

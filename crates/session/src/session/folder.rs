@@ -40,6 +40,9 @@ use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::{Joints, MAX_JOINTS};
 use handeye_vision::Target;
 
+/// Where a growing plan keeps the rejected records whose index the next pose reuses.
+const REJECTED_DIR: &str = "rejected";
+
 use super::inputs::InputFile;
 use super::lock::{live_run, LiveRun, SessionLock, LOCK_FILE};
 use handeye_core::yaml_file::SchemaVersion;
@@ -401,6 +404,54 @@ impl SessionFolder {
     /// Records one visit.
     pub fn write_visit(&self, visit: &PoseVisit) -> Result<(), SessionError> {
         self.write_yaml(&self.visit_path(visit.plan_index), visit)
+    }
+
+    /// Keeps the rejected record of plan pose `plan_index` of a growing plan (adaptive,
+    /// hand-guided) whose index the next pose reuses: copied to `rejected/NNN.yaml` (numbered in
+    /// order), so the corners it saw still count when the session is checked for intrinsics that
+    /// do not fit the frames (issue #38: an adaptive run whose every pose was rejected for its
+    /// board reprojection kept one record, too few to estimate the lens from). Its frame is
+    /// not kept (the next pose's overwrites it).
+    pub fn keep_rejected_visit(&self, plan_index: usize) -> Result<(), SessionError> {
+        let visit: PoseVisit = self.read_yaml(&self.visit_path(plan_index))?;
+        let folder = self.root.join(REJECTED_DIR);
+        std::fs::create_dir_all(&folder).map_err(|source| SessionError::Io {
+            path: folder.clone(),
+            source,
+        })?;
+        let serial = std::fs::read_dir(&folder)
+            .map_err(|source| SessionError::Io {
+                path: folder.clone(),
+                source,
+            })?
+            .filter(|e| {
+                e.as_ref()
+                    .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "yaml"))
+            })
+            .count();
+        self.write_yaml(&folder.join(format!("{serial:03}.yaml")), &visit)
+    }
+
+    /// The rejected records [`SessionFolder::keep_rejected_visit`] kept, in order (none for a
+    /// fixed plan: its rejected records stay in `poses/`).
+    pub fn read_rejected_visits(&self) -> Result<Vec<PoseVisit>, SessionError> {
+        let folder = self.root.join(REJECTED_DIR);
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            return Ok(Vec::new());
+        };
+        let mut files: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "yaml"))
+            .collect();
+        files.sort();
+        files
+            .iter()
+            .map(|file| {
+                let visit: PoseVisit = self.read_yaml(file)?;
+                visit.check_corners_unique(file)?;
+                Ok(visit)
+            })
+            .collect()
     }
 
     /// All committed visits, in plan order, each checked: its file name, its `plan_index` and

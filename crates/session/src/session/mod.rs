@@ -117,6 +117,23 @@ pub enum SessionError {
         /// What to do (the estimate written into the session, the replay command).
         next: String,
     },
+    /// The few poses the configured intrinsics let through could not be solved, and the
+    /// intrinsics do not fit the frames (issue #38: an adaptive plan that kept 2 of 60 poses).
+    #[error("the session {} could not be solved from the {accepted} pose(s) of {visited} visited that its intrinsics let through ({why}): {reason}\nnext: {next}", folder.display())]
+    WrongIntrinsicsFewSamples {
+        /// The session folder.
+        folder: PathBuf,
+        /// Poses accepted.
+        accepted: usize,
+        /// Poses visited (with those a growing plan kept aside).
+        visited: usize,
+        /// Why the solve refused them.
+        why: String,
+        /// What is wrong, with the numbers.
+        reason: String,
+        /// What to do (the estimate written into the session, the replay command).
+        next: String,
+    },
     /// `samples.yaml` does not hold exactly the accepted pose records.
     #[error("{}: disagrees with the pose records in poses/: {} (a run killed between a record and this file); `handeye run --resume {}` rebuilds it from the records", file.display(), describe_disagreement(missing, extra), folder.display())]
     SamplesDisagree {

@@ -243,7 +243,10 @@ fn solve_loaded(
     // Intrinsics that are not this camera's: named with the numbers (and the estimate written
     // into the session), also when they made every pose fail.
     let setup = folder.read_manifest()?.setup;
-    let wrong = check_intrinsics(folder, setup, &visits, &inputs.board, camera, config)?;
+    // With the rejected records an adaptive or hand-guided plan kept aside (their index reused).
+    let mut seen = visits.clone();
+    seen.extend(folder.read_rejected_visits()?);
+    let wrong = check_intrinsics(folder, setup, &seen, &inputs.board, camera, config)?;
     let intrinsics_file = config.camera().intrinsics.clone().unwrap_or_default();
     let dataset = match committed_samples(folder, &visits) {
         Err(SessionError::NoSamples {
@@ -253,7 +256,7 @@ fn solve_loaded(
         }) => {
             return Err(match &wrong {
                 Some(w) => SessionError::WrongIntrinsics {
-                    visited,
+                    visited: visited.max(seen.len()),
                     first: reasons.split("; ").next().unwrap_or_default().to_string(),
                     reason: w.reason(&intrinsics_file),
                     next: w.next_action(&root, &config.file),
@@ -279,14 +282,29 @@ fn solve_loaded(
             )
         })
         .collect();
-    let solved = solve_session_with(
+    let solved = match solve_session_with(
         dataset.setup,
         &dataset.pairs,
         &visits,
         vision,
         config,
         notices,
-    )?;
+    ) {
+        // The few poses the intrinsics let through could not be solved: the intrinsics are
+        // the cause to name (an adaptive plan that kept 2 of 60 poses).
+        Err(SessionError::Solve { source, .. }) if wrong.is_some() => {
+            let w = wrong.as_ref().expect("checked");
+            return Err(SessionError::WrongIntrinsicsFewSamples {
+                accepted: dataset.pairs.len(),
+                visited: seen.len(),
+                why: source.to_string(),
+                reason: w.reason(&intrinsics_file),
+                next: w.next_action(folder.root(), &config.file),
+                folder: folder.root().to_path_buf(),
+            });
+        }
+        other => other?,
+    };
     let mut solved = solved;
     let written = write_corrected_files(folder.root(), &solved, config)?;
     // Named where a person finds them (an import's staging folder is renamed into place).
