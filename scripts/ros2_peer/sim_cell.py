@@ -28,7 +28,9 @@ Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_
 tool0), --succeed-without-moving N, --second-flange-publisher [N] (a second DDS writer on /tf, as
 a second robot_state_publisher or a static publisher left running would be: base_link -> tool0
 10 cm and 180 degrees from the driver's, at 200 Hz, while the arm stands; from the start, or from
-the end of the Nth goal on).
+the end of the Nth goal on), --jumping-flange N (from the end of the Nth goal on, while the arm
+stands, every other base_link -> tool0 of the driver's own /tf writer is 5 mm off along x while
+/joint_states stand: a flange pose that contradicts the joints).
 """
 
 import glob
@@ -189,6 +191,9 @@ def add_arguments(p):
                    help="a second writer of base_link -> tool0 on /tf (200 Hz, while the arm stands): "
                         "the driver's flange turned 180 degrees about its x axis and 10 cm along its z; "
                         "from the start, or once goal N has ended")
+    p.add_argument("--jumping-flange", type=int, default=None, metavar="N",
+                   help="once goal N has ended, while the arm stands, every other base_link -> tool0 "
+                        "message of the driver's /tf writer is 5 mm off along x (the joints stand)")
     p.add_argument("--succeed-without-moving", type=int, default=0,
                    help="answer goal N SUCCEEDED at once and leave the arm where it stands")
     p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
@@ -563,6 +568,7 @@ def run(args):
     say(event="ready", poses=len(views), plan_joints_deg=[list(np.degrees(q)) for q in plan_joints])
     next_js = next_tf = next_tf2 = next_img = next_info = time.monotonic()
     second = 0
+    jumps = 0
     while True:
         now = time.monotonic()
         serve()
@@ -584,6 +590,15 @@ def run(args):
             # base_link -> tool0 = turn * T_base_flange
             tq = quat_mul(turn, rot)
             tt = (-t[0], -t[1], t[2])
+            if args.jumping_flange is not None and goal_count[0] >= args.jumping_flange:
+                with arm.lock:
+                    standing = arm.goal is None and arm.guide is None
+                if standing:
+                    jumps += 1
+                    if jumps % 2 == 0:
+                        tt = (tt[0] + 0.005, tt[1], tt[2])
+                    if jumps == 1:
+                        say(event="jumping_flange", offset_m=0.005)
             tf_w.write(m.TFMessage([m.TransformStamped(
                 m.Header(stamp_now(), "base_link"), "tool0",
                 m.Transform(m.Vector3(*tt), m.Quaternion(*tq)))]))

@@ -84,6 +84,16 @@ pub const HAND_GUIDING: &str = "handeye does not switch freedrive on this arm (a
 
 /// A joint sample older than this is stale: the driver is gone or the graph split.
 const STALE: Duration = Duration::from_secs(1);
+/// How long a flange pose is watched for standing with the joints, and for how many /tf
+/// messages at most (a driver at 50–500 Hz sends several within it).
+const STANDING_WINDOW: Duration = Duration::from_millis(150);
+const STANDING_MESSAGES: usize = 4;
+/// Joints that move less than this (rad, 0.005°) between two samples stand.
+const JOINTS_STAND_RAD: f64 = 0.005 * std::f64::consts::PI / 180.0;
+/// A standing flange pose moving more than this contradicts its joints, m and rad (far above a
+/// driver's own jitter at rest, as for two publishers of one edge).
+const FLANGE_JITTER_M: f64 = 1e-3;
+const FLANGE_JITTER_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 /// Farthest a joint may be from a goal's end point once the controller says it succeeded, rad
 /// (a trajectory controller's goal tolerance is far tighter; this is about a goal that did
 /// not move the arm at all).
@@ -235,6 +245,76 @@ impl Ros2Arm {
                 )))
             }
         }
+    }
+
+    /// The flange pose of the first /tf message heard after `asked`, waiting until `deadline`.
+    fn flange_after(&self, asked: Instant, deadline: Instant) -> Result<Pose, RobotError> {
+        let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
+        let (state, _) = self.shared.wait_until(deadline, |s| {
+            s.tf_received.is_some_and(|t| t >= asked) && s.tf.lookup(base, flange).is_ok()
+        });
+        match state.tf.lookup(base, flange) {
+            Ok(pose) if state.tf_received.is_some_and(|t| t >= asked) => Ok(pose),
+            Ok(_) => Err(RobotError::ConnectionLost(format!(
+                "no fresh message on {} within {:.1} s (is the driver still running?)",
+                self.options.tf_topic,
+                self.options.timeout.as_secs_f64()
+            ))),
+            Err(why) => Err(backend(format!(
+                "T_{base}_{flange} from {} + {}: {why}",
+                self.options.tf_topic, self.options.tf_static_topic
+            ))),
+        }
+    }
+
+    /// Checks that the flange pose /tf gives stands while /joint_states stand (issue #38: a
+    /// robot pose stream that contradicts itself is named as such, not as a board scale): over
+    /// the next few /tf messages (at most [`STANDING_WINDOW`]) it may not move by more than a
+    /// driver's jitter while the joints move by less than [`JOINTS_STAND_RAD`]. A jumping flange
+    /// (a relay replaying old transforms, a second chain published under the driver's frame
+    /// names from one writer, a driver publishing a wrong chain) is refused with what moved.
+    fn check_standing_flange(&self, first: &Pose) -> Result<(), RobotError> {
+        let joints_first = self.shared.lock().joints;
+        let window_end = Instant::now() + STANDING_WINDOW;
+        let (mut moved_m, mut moved_rad, mut heard) = (0.0f64, 0.0f64, 0);
+        let mut after = Instant::now();
+        while heard < STANDING_MESSAGES && Instant::now() < window_end {
+            let pose = match self.flange_after(after, window_end) {
+                Ok(pose) => pose,
+                // Nothing more within the window: what was heard is the check.
+                Err(RobotError::ConnectionLost(_)) => break,
+                Err(e) => return Err(e),
+            };
+            after = Instant::now();
+            heard += 1;
+            let step = first.inverse() * pose;
+            moved_m = moved_m.max(step.translation.vector.norm());
+            moved_rad = moved_rad.max(step.rotation.angle());
+        }
+        let joints_last = self.shared.lock().joints;
+        let (Some(before), Some(now)) = (joints_first, joints_last) else {
+            return Ok(());
+        };
+        let joints_moved = before
+            .positions
+            .iter()
+            .zip(now.positions.iter())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let stood = now.received > before.received && joints_moved < JOINTS_STAND_RAD;
+        if stood && (moved_m > FLANGE_JITTER_M || moved_rad > FLANGE_JITTER_RAD) {
+            let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
+            return Err(backend(format!(
+                "the flange pose {base} → {flange} on {} moved {:.1} mm / {:.2}° over {} messages while {} stood still (the joints moved {:.4}°): the flange pose contradicts the joints — is a relay replaying old transforms, or another chain published under these frame names? Stop it; nothing was recorded at this pose",
+                self.options.tf_topic,
+                moved_m * 1e3,
+                moved_rad.to_degrees(),
+                heard + 1,
+                self.options.joint_states_topic,
+                joints_moved.to_degrees()
+            )));
+        }
+        Ok(())
     }
 
     fn interrupted(&self) -> bool {
@@ -476,23 +556,9 @@ impl Robot for Ros2Arm {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
         // A /tf message heard after this call: the pose of the arm as it stands now.
         let asked = Instant::now();
-        let deadline = asked + self.options.timeout;
-        let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
-        let (state, _) = self.shared.wait_until(deadline, |s| {
-            s.tf_received.is_some_and(|t| t >= asked) && s.tf.lookup(base, flange).is_ok()
-        });
-        match state.tf.lookup(base, flange) {
-            Ok(pose) if state.tf_received.is_some_and(|t| t >= asked) => Ok(pose),
-            Ok(_) => Err(RobotError::ConnectionLost(format!(
-                "no fresh message on {} within {:.1} s (is the driver still running?)",
-                self.options.tf_topic,
-                self.options.timeout.as_secs_f64()
-            ))),
-            Err(why) => Err(backend(format!(
-                "T_{base}_{flange} from {} + {}: {why}",
-                self.options.tf_topic, self.options.tf_static_topic
-            ))),
-        }
+        let flange = self.flange_after(asked, asked + self.options.timeout)?;
+        self.check_standing_flange(&flange)?;
+        Ok(flange)
     }
 
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {

@@ -317,6 +317,17 @@ fn an_aborted_goal_is_named_and_resume_completes() {
     });
 }
 
+/// #38: a flange pose on /tf that jumps while /joint_states stand (every other message 5 mm
+/// off, from the end of goal 4 on) is named as a pose stream that contradicts its joints — not
+/// as a board scale or a lens — the poses before it are kept, and a resume against a healthy
+/// driver completes to the truth.
+#[test]
+fn a_flange_pose_that_jumps_while_the_joints_stand_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(99, &["--jumping-flange", "4"], "contradicts the joints")
+    });
+}
+
 /// #40: a controller that answers a goal SUCCEEDED without moving the arm is named as such
 /// (the arm never reached the goal's end point), not "no tag of the board found" at every pose.
 #[test]
