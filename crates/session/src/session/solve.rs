@@ -282,18 +282,18 @@ fn solve_loaded(
             )
         })
         .collect();
-    let solved = match solve_session_with(
+    let solved = solve_session_with(
         dataset.setup,
         &dataset.pairs,
         &visits,
         vision,
         config,
         notices,
-    ) {
+    );
+    let mut solved = match (solved, &wrong) {
         // The few poses the intrinsics let through could not be solved: the intrinsics are
         // the cause to name (an adaptive plan that kept 2 of 60 poses).
-        Err(SessionError::Solve { source, .. }) if wrong.is_some() => {
-            let w = wrong.as_ref().expect("checked");
+        (Err(SessionError::Solve { source, .. }), Some(w)) => {
             return Err(SessionError::WrongIntrinsicsFewSamples {
                 accepted: dataset.pairs.len(),
                 visited: seen.len(),
@@ -303,9 +303,8 @@ fn solve_loaded(
                 folder: folder.root().to_path_buf(),
             });
         }
-        other => other?,
+        (solved, _) => solved?,
     };
-    let mut solved = solved;
     let written = write_corrected_files(folder.root(), &solved, config)?;
     // Named where a person finds them (an import's staging folder is renamed into place).
     let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
