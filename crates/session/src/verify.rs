@@ -24,7 +24,7 @@ use handeye_solve::{self as solve, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PoseError {
+pub struct PredictionError {
     /// Sample index.
     pub index: usize,
     /// Sample id, if any.
@@ -61,7 +61,7 @@ pub struct Verification {
     /// What was compared (`holdout` or `leave-one-out`).
     pub kind: String,
     /// Per pose.
-    pub poses: Vec<PoseError>,
+    pub poses: Vec<PredictionError>,
     /// Summary.
     pub summary: ErrorSummary,
 }
@@ -108,7 +108,7 @@ pub enum VerifyError {
     Run(Box<RunError>),
 }
 
-fn summarise(errors: &[PoseError]) -> ErrorSummary {
+fn summarise(errors: &[PredictionError]) -> ErrorSummary {
     let stats = |values: Vec<f64>| -> (f64, f64, f64) {
         if values.is_empty() {
             return (f64::NAN, f64::NAN, f64::NAN);
@@ -143,8 +143,8 @@ pub fn prediction_error(
     id: Option<String>,
     predicted: &Pose,
     measured: &Pose,
-) -> PoseError {
-    PoseError {
+) -> PredictionError {
+    PredictionError {
         index,
         id,
         rotation_deg: predicted.rotation.angle_to(&measured.rotation).to_degrees(),
@@ -159,7 +159,7 @@ pub fn compare(
     target_mount: &Pose,
     pairs: &[PosePair],
 ) -> Verification {
-    let poses: Vec<PoseError> = pairs
+    let poses: Vec<PredictionError> = pairs
         .iter()
         .enumerate()
         .map(|(i, p)| {
