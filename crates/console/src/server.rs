@@ -3,11 +3,16 @@
 //! then live events and the latest frame; a page that falls [`super::LAG`] events behind is
 //! disconnected (it reconnects and catches up) so it can never hold the run back.
 //!
-//! Every request passes the [`Gate`](super::gate::Gate) (Host, Origin, the secret) first. The
-//! server holds at most [`MAX_CONNECTIONS`] connections and [`MAX_PAGES`] pages at a time, gives
-//! a request [`HEADER_TIMEOUT`] to send its headers and a page's message at most
-//! [`MAX_COMMAND_BYTES`]: however many connections a client opens, the run keeps its file
-//! descriptors (further connections wait in the kernel's accept queue).
+//! Every request passes the [`Gate`](super::gate::Gate) (Host, Origin, the secret) first; a
+//! refused request closes its connection. The server holds at most [`MAX_CONNECTIONS`]
+//! connections and [`MAX_PAGES`] pages at a time, gives a request [`HEADER_TIMEOUT`] to send its
+//! headers (also the idle deadline of a kept-alive connection), a blocked write at most
+//! [`WRITE_TIMEOUT`] (a client that stops reading its answers gives its slot back) and a page's
+//! message at most [`MAX_COMMAND_BYTES`]: however many connections a client opens, the run keeps
+//! its file descriptors (further connections wait in the kernel's accept queue). When every slot
+//! is taken, [`RESERVED_SLOTS`] more are kept for requests that carry the secret (issue #40: 64
+//! connections that pipelined requests and never read held every slot, and the STOP page could
+//! not be opened).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -47,6 +52,18 @@ const MAX_BAD_MESSAGES: usize = 16;
 /// and sends nothing gives its slot back after this).
 const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long a write may stay blocked (the client reads nothing of its answers) before the
+/// connection is closed.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Slots beyond [`MAX_CONNECTIONS`] for a request with the console's secret: a connection on one
+/// must send its headers within [`RESERVED_HEADER_TIMEOUT`], and any request on it that the gate
+/// refuses closes it.
+pub(super) const RESERVED_SLOTS: usize = 4;
+
+/// Header deadline on a reserved slot: a browser sends its request at once.
+const RESERVED_HEADER_TIMEOUT: Duration = Duration::from_secs(1);
+
 /// Pause after a failed accept that is not the client's doing (out of file descriptors: the
 /// connections closing meanwhile give some back).
 const ACCEPT_BACKOFF: Duration = Duration::from_millis(50);
@@ -74,16 +91,17 @@ pub(super) fn serve(
             .layer(middleware::from_fn_with_state(hub.clone(), gate))
             .with_state(hub.clone());
         let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+        let reserved = Arc::new(Semaphore::new(RESERVED_SLOTS));
         loop {
             // A free slot first: until one is, connections wait in the kernel's queue and take
-            // no descriptor of ours.
-            let slot = tokio::select! {
-                slot = slots.clone().acquire_owned() => match slot {
-                    Ok(slot) => slot,
-                    Err(_) => break,
-                },
+            // no descriptor of ours. The reserved ones only when every other is taken.
+            let (slot, header_timeout) = tokio::select! {
+                biased;
                 _ = &mut shutdown => break,
+                slot = slots.clone().acquire_owned() => (slot, HEADER_TIMEOUT),
+                slot = reserved.clone().acquire_owned() => (slot, RESERVED_HEADER_TIMEOUT),
             };
+            let Ok(slot) = slot else { break };
             let stream = tokio::select! {
                 accepted = listener.accept() => match accepted {
                     Ok((stream, _)) => stream,
@@ -102,10 +120,10 @@ pub(super) fn serve(
                 // The deadline also runs while a kept-alive connection waits for its next
                 // request, so an idle one gives its slot back too.
                 http.timer(hyper_util::rt::TokioTimer::new())
-                    .header_read_timeout(HEADER_TIMEOUT);
+                    .header_read_timeout(header_timeout);
                 let connection = http
                     .serve_connection(
-                        hyper_util::rt::TokioIo::new(stream),
+                        hyper_util::rt::TokioIo::new(WriteDeadline::new(stream)),
                         hyper_util::service::TowerToHyperService::new(app),
                     )
                     .with_upgrades();
@@ -142,7 +160,13 @@ async fn gate(State(hub): State<Arc<Hub>>, request: Request, next: Next) -> Resp
     );
     if let Err(refusal) = verdict {
         hub.refused(&refusal);
-        return (refusal.status(), refusal.to_string()).into_response();
+        // The connection goes with the refusal: requests pipelined behind it are not read.
+        return (
+            refusal.status(),
+            [(header::CONNECTION, "close")],
+            refusal.to_string(),
+        )
+            .into_response();
     }
     let mut response = next.run(request).await;
     let headers = response.headers_mut();
@@ -332,5 +356,104 @@ async fn send_latest_frame(
     match frame {
         Some(jpeg) => send(sink, Message::Binary(jpeg)).await,
         None => true,
+    }
+}
+
+/// A connection whose writes may stay blocked at most [`WRITE_TIMEOUT`]: a client that stops
+/// reading its answers (they pile up in the socket's buffers) gets an error on the write, so
+/// hyper closes the connection and its slot comes back. Reads pass through (their deadline is
+/// hyper's header timeout).
+struct WriteDeadline {
+    stream: tokio::net::TcpStream,
+    /// Armed when a write first finds the socket full; cleared when one goes through.
+    stalled: Option<std::pin::Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl WriteDeadline {
+    fn new(stream: tokio::net::TcpStream) -> WriteDeadline {
+        WriteDeadline {
+            stream,
+            stalled: None,
+        }
+    }
+
+    /// `poll` on the stream, with the deadline run while it is pending.
+    fn deadlined<T>(
+        &mut self,
+        cx: &mut std::task::Context<'_>,
+        poll: impl FnOnce(
+            std::pin::Pin<&mut tokio::net::TcpStream>,
+            &mut std::task::Context<'_>,
+        ) -> std::task::Poll<std::io::Result<T>>,
+    ) -> std::task::Poll<std::io::Result<T>> {
+        use std::future::Future;
+        use std::task::Poll;
+        match poll(std::pin::Pin::new(&mut self.stream), cx) {
+            Poll::Ready(result) => {
+                self.stalled = None;
+                Poll::Ready(result)
+            }
+            Poll::Pending => {
+                let stalled = self
+                    .stalled
+                    .get_or_insert_with(|| Box::pin(tokio::time::sleep(WRITE_TIMEOUT)));
+                match stalled.as_mut().poll(cx) {
+                    Poll::Ready(()) => Poll::Ready(Err(std::io::Error::new(
+                        std::io::ErrorKind::TimedOut,
+                        "the client read nothing of its answers for the write deadline",
+                    ))),
+                    Poll::Pending => Poll::Pending,
+                }
+            }
+        }
+    }
+}
+
+impl tokio::io::AsyncRead for WriteDeadline {
+    fn poll_read(
+        self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.get_mut().stream).poll_read(cx, buf)
+    }
+}
+
+impl tokio::io::AsyncWrite for WriteDeadline {
+    fn poll_write(
+        self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        self.get_mut()
+            .deadlined(cx, |stream, cx| stream.poll_write(cx, buf))
+    }
+
+    fn poll_write_vectored(
+        self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        self.get_mut()
+            .deadlined(cx, |stream, cx| stream.poll_write_vectored(cx, bufs))
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.stream.is_write_vectored()
+    }
+
+    fn poll_flush(
+        self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        self.get_mut()
+            .deadlined(cx, |stream, cx| stream.poll_flush(cx))
+    }
+
+    fn poll_shutdown(
+        self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.get_mut().stream).poll_shutdown(cx)
     }
 }

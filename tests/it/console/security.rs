@@ -440,6 +440,76 @@ fn two_thousand_connections_under_ulimit_1024_leave_the_run_good() {
     );
 }
 
+/// #40: more connections than the console has slots, each pipelining hundreds of page loads
+/// with the secret and never reading an answer, held open: a page load still gets its page (a
+/// blocked write has a deadline, so the stalled connections give their slots back), and the run
+/// ends GOOD. Before the deadline, four tries over 80 s got nothing.
+#[test]
+fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
+    use std::io::Write;
+    raise_nofile(4096);
+    let dir = tempfile::tempdir().unwrap();
+    // Slow moves: the run goes on through the whole test.
+    let config = sim_config(dir.path(), 12, 2.5);
+    let out = dir.path().join("session");
+    let (config_s, out_s) = (config.display().to_string(), out.display().to_string());
+    let mut live = util::live::Live::start(
+        &[
+            "run",
+            "--config",
+            &config_s,
+            "--output",
+            &out_s,
+            "--console",
+            "127.0.0.1:0",
+        ],
+        dir.path(),
+    );
+    let url = live.url();
+    let (authority, secret) = url_parts(&url);
+    let addr: SocketAddr = authority.parse().unwrap();
+    let request = format!("GET /?token={secret} HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
+    let rt = runtime();
+    // Every slot and more: 600 page loads each (about 11 MB of answers, far beyond the socket
+    // buffers, which the attacker keeps small), never read.
+    let stalled: Vec<std::net::TcpStream> = rt.block_on(async {
+        let mut stalled = Vec::new();
+        for _ in 0..72 {
+            let socket = tokio::net::TcpSocket::new_v4().unwrap();
+            socket.set_recv_buffer_size(4096).unwrap();
+            let stream = socket.connect(addr).await.unwrap().into_std().unwrap();
+            stream.set_nonblocking(false).unwrap();
+            let mut writer = &stream;
+            writer.write_all(request.as_bytes()).unwrap();
+            stalled.push(stream);
+        }
+        stalled
+    });
+    // Let them fill their answers' buffers and block the console's writes.
+    std::thread::sleep(Duration::from_secs(2));
+    let started = std::time::Instant::now();
+    let (status, text) = raw_get(
+        addr,
+        &format!("/?token={secret}"),
+        &[("Host", authority.clone())],
+    );
+    let waited = started.elapsed();
+    let running = live.running();
+    eprintln!("a page load behind 72 stalled connections: {status} after {waited:.1?}");
+    assert_eq!(status, 200, "{text}");
+    assert!(text.contains("<html"), "not the page: {text}");
+    assert!(
+        running,
+        "the run ended before the page was asked for (the test proves nothing)"
+    );
+    drop(stalled);
+    let (ok, out) = live.finish();
+    assert!(
+        ok && out.contains("GOOD"),
+        "the run under stalled connections:\n{out}"
+    );
+}
+
 #[test]
 fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_shortened() {
     use futures_util::{SinkExt, StreamExt};
