@@ -13,12 +13,11 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use handeye_core::camera_model::CameraModel;
-use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 use handeye_solve::cell_model::GivenFile;
 use handeye_solve::verdict::{Basis, Level, Verdict};
@@ -36,37 +35,19 @@ enum Plan {
     Adaptive,
 }
 
-/// The shipped cell of `setup` (its `simulation:` truth: camera mount, target mount).
+/// The shipped cell of `setup` and its `simulation:` truth (camera mount, target mount), read
+/// from the config itself.
 fn shipped(setup: Setup) -> (&'static str, Pose, Pose) {
-    match setup {
-        Setup::EyeInHand => (
-            "sim-cell.yaml",
-            pose_from_rotvec(
-                Vector3::new(0.0312, -0.0694, 0.0447),
-                Vector3::new(0.021, -0.016, 1.561),
-            ),
-            pose_from_rotvec(
-                Vector3::new(0.5034, -0.1467, 0.0021),
-                Vector3::new(0.012, -0.018, 0.297),
-            ),
-        ),
-        Setup::EyeToHand => (
-            "sim-cell-eye-to-hand.yaml",
-            Pose::from_parts(
-                Translation3::new(1.1537, 0.0042, 0.7468),
-                UnitQuaternion::from_quaternion(Quaternion::new(
-                    0.4247281012,
-                    -0.5658387224,
-                    -0.5656999087,
-                    0.4235754875,
-                )),
-            ),
-            pose_from_rotvec(
-                Vector3::new(-0.1432, -0.1461, 0.0113),
-                Vector3::new(0.011, 0.006, 0.021),
-            ),
-        ),
-    }
+    let name = match setup {
+        Setup::EyeInHand => "sim-cell.yaml",
+        Setup::EyeToHand => "sim-cell-eye-to-hand.yaml",
+    };
+    let truth = handeye_session::config::CellConfig::load(&repo().join("configs").join(name))
+        .unwrap()
+        .camera()
+        .simulation
+        .expect("the shipped sim cell gives its truth");
+    (name, truth.camera_mount, truth.target_mount)
 }
 
 /// The cell config of one case in `dir`: the cell's files with `mistake`, the simulated camera
