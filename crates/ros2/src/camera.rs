@@ -58,7 +58,7 @@ pub struct Ros2Camera {
     options: CameraOptions,
     slot: Arc<Slot>,
     _stop_reader: smol::channel::Sender<()>,
-    _link: Ros2Link,
+    link: Ros2Link,
 }
 
 fn open_error(what: String) -> CameraError {
@@ -105,7 +105,7 @@ impl Ros2Camera {
             options,
             slot,
             _stop_reader: stop_tx,
-            _link: link.clone(),
+            link: link.clone(),
         };
         camera.check_info()?;
         camera.check_frames()?;
@@ -128,15 +128,30 @@ impl Ros2Camera {
         if newest.is_some() {
             return Ok(());
         }
+        let kind = if self.options.compressed {
+            "CompressedImage"
+        } else {
+            "Image"
+        };
+        // The image topics heard on the domain: the one meant is usually among them.
+        let heard: Vec<String> = self
+            .link
+            .heard_topics()
+            .into_iter()
+            .filter(|(_, ty)| {
+                ty == "sensor_msgs/msg/Image" || ty == "sensor_msgs/msg/CompressedImage"
+            })
+            .map(|(name, ty)| format!("{name} ({ty})"))
+            .collect();
+        let heard = if heard.is_empty() {
+            "no image topic is heard on this domain".to_string()
+        } else {
+            format!("image topics heard on this domain: {}", heard.join(", "))
+        };
         Err(open_error(format!(
-            "no image on {} within {:.1} s, nothing has moved: is the camera node running, on this domain id, publishing sensor_msgs/{} under that name?",
+            "no image on {} within {:.1} s, nothing has moved: is the camera node running, on this domain id, publishing sensor_msgs/{kind} under that name? ({heard})",
             self.options.image_topic,
             self.options.timeout.as_secs_f64(),
-            if self.options.compressed {
-                "CompressedImage"
-            } else {
-                "Image"
-            }
         )))
     }
 

@@ -46,6 +46,8 @@ impl Default for LinkOptions {
 #[derive(Clone)]
 pub struct Ros2Link {
     node: Arc<Mutex<Node>>,
+    /// The DDS context, for what discovery has heard.
+    context: Context,
     options: LinkOptions,
 }
 
@@ -106,8 +108,29 @@ impl Ros2Link {
             .map_err(|e| setup("the node's background thread")(e.to_string()))?;
         Ok(Ros2Link {
             node: Arc::new(Mutex::new(node)),
+            context,
             options,
         })
+    }
+
+    /// The ROS 2 topics discovery has heard of on the domain so far, as `(name, type)` in ROS
+    /// form (`/camera/image_raw`, `sensor_msgs/msg/Image`), sorted: what an error about a topic
+    /// nobody publishes lists.
+    pub fn heard_topics(&self) -> Vec<(String, String)> {
+        let mut topics: Vec<(String, String)> = self
+            .context
+            .discovered_topics()
+            .into_iter()
+            .filter_map(|t| {
+                // ROS 2 topics are `rt/<name>` in DDS, their types `pkg::msg::dds_::Type_`.
+                let name = format!("/{}", t.name.strip_prefix("rt/")?);
+                let ty = t.type_name.replace("::dds_::", "::").replace("::", "/");
+                Some((name, ty.trim_end_matches('_').to_string()))
+            })
+            .collect();
+        topics.sort();
+        topics.dedup();
+        topics
     }
 
     /// The options it was opened with.

@@ -446,6 +446,11 @@ fn an_image_topic_nobody_publishes_is_named_before_anything_moves() {
             log.contains("no image on /no_such_image") && log.contains("nothing has moved"),
             "{log}"
         );
+        // The topic the peer does publish is listed, with its type.
+        assert!(
+            log.contains("image topics heard on this domain: /image_raw (sensor_msgs/msg/Image)"),
+            "{log}"
+        );
         assert!(peer.events("goal").is_empty(), "a goal was sent:\n{log}");
     });
 }
