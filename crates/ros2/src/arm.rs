@@ -110,7 +110,7 @@ pub struct Ros2Arm {
     freedrive: Option<Freedrive>,
     // Dropping it ends the reader task.
     _stop_reader: smol::channel::Sender<()>,
-    _link: Ros2Link,
+    link: Ros2Link,
 }
 
 fn backend(message: String) -> RobotError {
@@ -176,7 +176,10 @@ impl Ros2Arm {
             return Err(RobotError::Connect {
                 address: options.action.clone(),
                 timeout: options.timeout,
-                reason: "no FollowJointTrajectory action server answers there (is the controller running and active, on this domain id, with this middleware: robot.graph.rmw?)".into(),
+                reason: format!(
+                    "no FollowJointTrajectory action server answers there ({})",
+                    silent_action(link, &options.action, options.framing)
+                ),
             });
         }
         let shared = Arc::new(Shared::wanting(&[
@@ -214,7 +217,7 @@ impl Ros2Arm {
             interrupt: None,
             freedrive,
             _stop_reader: stop_tx,
-            _link: link.clone(),
+            link: link.clone(),
         };
         arm.fresh_joints(Instant::now() - STALE)?;
         arm.base_from_flange()?;
@@ -412,11 +415,16 @@ impl Ros2Arm {
         let send = smol::block_on(with_timeout(timeout, self.action.async_send_goal(goal)));
         let (goal_id, response) = match send {
             Some(Ok(r)) => r,
-            Some(Err(e)) => return Err(backend(format!("sending the trajectory goal to {action} failed: {e:?}"))),
+            Some(Err(e)) => {
+                return Err(backend(format!(
+                    "sending the trajectory goal to {action} failed: {e:?}"
+                )))
+            }
             None => {
                 return Err(RobotError::ConnectionLost(format!(
-                    "the action server {action} did not answer the goal within {:.1} s (is the controller running and active?)",
-                    timeout.as_secs_f64()
+                    "the action server {action} did not answer the goal within {:.1} s ({})",
+                    timeout.as_secs_f64(),
+                    silent_action(&self.link, &action, self.options.framing)
                 )))
             }
         };
@@ -517,6 +525,43 @@ enum Event {
         ros2_client::ReadResult<(TfMessage, ros2_client::MessageInfo)>,
         bool,
     ),
+}
+
+/// Why an action server may not answer, from what discovery heard on the domain (issue #39: a
+/// middleware mismatch and an empty domain were both "is the controller running?"): nothing at
+/// all heard (the domain id or the network interfaces), the action's own topics heard (the server
+/// is there, so it does not read our requests: the other middleware's request framing,
+/// `robot.graph.rmw`), or other action servers heard (another name).
+fn silent_action(link: &Ros2Link, action: &str, framing: Framing) -> String {
+    let heard = link.heard_topics();
+    let domain = link.options().domain_id;
+    if heard.is_empty() {
+        return format!(
+            "nothing at all is heard on domain {domain}: no ROS 2 node runs there — check robot.graph.domain_id against the driver's ROS_DOMAIN_ID, and robot.graph.interfaces"
+        );
+    }
+    let own = format!("{action}/_action/");
+    if heard.iter().any(|(name, _)| name.starts_with(&own)) {
+        let (ours, other) = match framing {
+            Framing::FastRtps => ("fastrtps", "cyclonedds"),
+            Framing::Cyclone => ("cyclonedds", "fastrtps"),
+        };
+        return format!(
+            "its topics are on the domain, so it is there but does not take our requests: robot.graph.rmw is `{ours}`; if the driver runs the other middleware (its RMW_IMPLEMENTATION), set `rmw: {other}`"
+        );
+    }
+    let servers: Vec<&str> = heard
+        .iter()
+        .filter_map(|(name, _)| name.strip_suffix("/_action/status"))
+        .collect();
+    if servers.is_empty() {
+        "is the controller running and active? No action server is heard on this domain".into()
+    } else {
+        format!(
+            "is the controller running and active? Action servers heard on this domain: {}",
+            servers.join(", ")
+        )
+    }
 }
 
 /// The publisher of a message as a number (its DDS writer's GID, hashed): two publishers of

@@ -113,18 +113,38 @@ impl Ros2Link {
         })
     }
 
-    /// The ROS 2 topics discovery has heard of on the domain so far, as `(name, type)` in ROS
-    /// form (`/camera/image_raw`, `sensor_msgs/msg/Image`), sorted: what an error about a topic
-    /// nobody publishes lists.
+    /// The ROS 2 topics other participants on the domain write or read, as discovery has heard
+    /// them so far: `(name, type)` in ROS form (`/camera/image_raw`, `sensor_msgs/msg/Image`),
+    /// sorted. Our own readers and writers are not counted: what an error about a topic nobody
+    /// publishes, or an empty domain, lists.
     pub fn heard_topics(&self) -> Vec<(String, String)> {
-        let mut topics: Vec<(String, String)> = self
-            .context
-            .discovered_topics()
+        use ros2_client::dds::rustdds::RTPSEntity;
+        let participant = self.context.domain_participant();
+        let ours = participant.guid().prefix;
+        let writers = participant
+            .discovered_writers()
             .into_iter()
-            .filter_map(|t| {
+            .filter_map(|w| {
+                (w.writer_proxy.remote_writer_guid.prefix != ours).then(|| {
+                    let t = w.publication_topic_data;
+                    (t.topic_name, t.type_name)
+                })
+            });
+        let readers = participant
+            .discovered_readers()
+            .into_iter()
+            .filter_map(|r| {
+                (r.reader_proxy.remote_reader_guid.prefix != ours).then(|| {
+                    let t = r.subscription_topic_data;
+                    (t.topic_name().clone(), t.type_name().clone())
+                })
+            });
+        let mut topics: Vec<(String, String)> = writers
+            .chain(readers)
+            .filter_map(|(name, ty)| {
                 // ROS 2 topics are `rt/<name>` in DDS, their types `pkg::msg::dds_::Type_`.
-                let name = format!("/{}", t.name.strip_prefix("rt/")?);
-                let ty = t.type_name.replace("::dds_::", "::").replace("::", "/");
+                let name = format!("/{}", name.strip_prefix("rt/")?);
+                let ty = ty.replace("::dds_::", "::").replace("::", "/");
                 Some((name, ty.trim_end_matches('_').to_string()))
             })
             .collect();

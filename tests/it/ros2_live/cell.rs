@@ -471,6 +471,43 @@ fn without_a_driver_the_action_server_is_named() {
             log.contains("/scaled_joint_trajectory_controller/follow_joint_trajectory"),
             "{log}"
         );
+        // #39: an empty domain is said as such, not as a controller that is not running.
+        assert!(
+            log.contains("nothing at all is heard on domain 77"),
+            "{log}"
+        );
+    });
+}
+
+/// #39: the config says `rmw: fastrtps` while the driver runs Cyclone DDS: the action server's
+/// topics are heard but it does not take the goal; the message names robot.graph.rmw and the
+/// other middleware (it was "is the controller running?"), and nothing has moved.
+#[test]
+fn a_middleware_mismatch_names_robot_graph_rmw() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 95, &[]);
+        let config = cell(
+            dir.path(),
+            95,
+            &[
+                ("rmw: cyclonedds", "rmw: fastrtps"),
+                ("connect_timeout_s: 10", "connect_timeout_s: 3"),
+            ],
+        );
+        let out = run_cell(&config, &dir.path().join("s"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("robot.graph.rmw is `fastrtps`") && log.contains("set `rmw: cyclonedds`"),
+            "{log}"
+        );
+        assert!(
+            peer.events("goal").is_empty(),
+            "the peer took a goal: {:?}",
+            peer.events("goal")
+        );
     });
 }
 
