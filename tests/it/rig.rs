@@ -734,7 +734,7 @@ fn config_errors_name_the_camera_and_the_key() {
     // A command that takes one camera refuses the list, naming the key.
     let refused = three.single_camera().unwrap_err().to_string();
     assert!(
-        refused.contains("cameras") && refused.contains("several cameras"),
+        refused.contains("cameras") && refused.contains("lists its cameras (3 under `cameras:`)"),
         "{refused}"
     );
     // A camera's key at the top level beside the list is named with where it belongs.

@@ -10,7 +10,8 @@
 //! [`WRITE_TIMEOUT`] (a client that stops reading its answers gives its slot back) and a page's
 //! message at most [`MAX_COMMAND_BYTES`]: however many connections a client opens, the run keeps
 //! its file descriptors (further connections wait in the kernel's accept queue). When every slot
-//! is taken, [`RESERVED_SLOTS`] more are kept for requests that carry the secret (issue #40: 64
+//! is taken, [`RESERVED_SLOTS`] more open, where a connection lives only while its requests carry
+//! the secret: 1 s to send its headers, closed at its first refused request (issue #40: 64
 //! connections that pipelined requests and never read held every slot, and the STOP page could
 //! not be opened).
 
@@ -56,9 +57,9 @@ const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
 /// connection is closed.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// Slots beyond [`MAX_CONNECTIONS`] for a request with the console's secret: a connection on one
-/// must send its headers within [`RESERVED_HEADER_TIMEOUT`], and any request on it that the gate
-/// refuses closes it.
+/// Slots beyond [`MAX_CONNECTIONS`], taken only when those are all in use: a connection on one
+/// must send its headers within [`RESERVED_HEADER_TIMEOUT`], and a request the gate refuses
+/// (no secret, a foreign Host or Origin) closes it, as on every slot.
 pub(super) const RESERVED_SLOTS: usize = 4;
 
 /// Header deadline on a reserved slot: a browser sends its request at once.

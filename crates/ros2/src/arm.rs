@@ -24,7 +24,7 @@ use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, Robot
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
 use crate::link::{sensor_data_qos, static_qos, topic_name, Ros2Link};
-use crate::listen::{joint_sample, JointSample, Shared};
+use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
     follow_joint_trajectory_error, Duration as RosDuration, FollowJointTrajectoryFeedback,
     FollowJointTrajectoryGoal, FollowJointTrajectoryResult, JointState, JointTrajectory,
@@ -90,10 +90,6 @@ const STANDING_WINDOW: Duration = Duration::from_millis(150);
 const STANDING_MESSAGES: usize = 4;
 /// Joints that move less than this (rad, 0.005°) between two samples stand.
 const JOINTS_STAND_RAD: f64 = 0.005 * std::f64::consts::PI / 180.0;
-/// A standing flange pose moving more than this contradicts its joints, m and rad (far above a
-/// driver's own jitter at rest, as for two publishers of one edge).
-const FLANGE_JITTER_M: f64 = 1e-3;
-const FLANGE_JITTER_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 /// Farthest a joint may be from a goal's end point once the controller says it succeeded, rad
 /// (a trajectory controller's goal tolerance is far tighter; this is about a goal that did
 /// not move the arm at all).
@@ -298,14 +294,10 @@ impl Ros2Arm {
         let (Some(before), Some(now)) = (joints_first, joints_last) else {
             return Ok(());
         };
-        let joints_moved = before
-            .positions
-            .iter()
-            .zip(now.positions.iter())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let joints_moved =
+            farthest_joint(&before.positions, &now.positions).map_or(0.0, |(_, rad)| rad);
         let stood = now.received > before.received && joints_moved < JOINTS_STAND_RAD;
-        if stood && (moved_m > FLANGE_JITTER_M || moved_rad > FLANGE_JITTER_RAD) {
+        if stood && (moved_m > AT_REST_JITTER_M || moved_rad > AT_REST_JITTER_RAD) {
             let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
             return Err(backend(format!(
                 "the flange pose {base} → {flange} on {} moved {:.1} mm / {:.2}° over {} messages while {} stood still (the joints moved {:.4}°): the flange pose contradicts the joints — is a relay replaying old transforms, or another chain published under these frame names? Stop it; nothing was recorded at this pose",
@@ -375,18 +367,8 @@ impl Ros2Arm {
     /// at its end point: a second action server of the same name, or a controller that answers
     /// without moving, would otherwise pass for a move (and every pose would "see no board").
     fn check_arrival(&self, goal: &Joints) -> Result<(), RobotError> {
-        let off = |s: &crate::listen::ArmState| {
-            s.joints.and_then(|j| {
-                (j.positions.len() == goal.len()).then(|| {
-                    (0..goal.len())
-                        .map(|i| (i, (j.positions[i] - goal[i]).abs()))
-                        .fold(
-                            (0, 0.0),
-                            |worst, this| if this.1 > worst.1 { this } else { worst },
-                        )
-                })
-            })
-        };
+        let off =
+            |s: &crate::listen::ArmState| s.joints.and_then(|j| farthest_joint(&j.positions, goal));
         let (state, arrived) = self.shared.wait_until(Instant::now() + ARRIVAL_WAIT, |s| {
             off(s).is_some_and(|(_, rad)| rad <= ARRIVED_RAD)
         });
@@ -525,6 +507,21 @@ enum Event {
         ros2_client::ReadResult<(TfMessage, ros2_client::MessageInfo)>,
         bool,
     ),
+}
+
+/// The joint farthest apart in `a` and `b` and by how much (rad); `None` when their counts
+/// differ.
+fn farthest_joint(a: &Joints, b: &Joints) -> Option<(usize, f64)> {
+    (a.len() == b.len()).then(|| {
+        a.iter()
+            .zip(b.iter())
+            .map(|(x, y)| (x - y).abs())
+            .enumerate()
+            .fold(
+                (0, 0.0),
+                |worst, this| if this.1 > worst.1 { this } else { worst },
+            )
+    })
 }
 
 /// Why an action server may not answer, from what discovery heard on the domain (issue #39: a

@@ -43,10 +43,14 @@ struct Edge {
 /// this of each other, saying different transforms, contradict each other (a handover to a
 /// restarted publisher does not).
 const SOURCES_WINDOW: Duration = Duration::from_secs(1);
-/// Two publishers' transforms of one edge farther apart than this contradict each other, m and
-/// rad (far above a driver's own jitter at rest).
-const CONFLICT_M: f64 = 1e-3;
-const CONFLICT_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
+/// How far one edge's transform may jitter at rest, m and rad (far above a driver's own
+/// jitter): two publishers of one edge farther apart contradict each other, and so does a
+/// flange pose that moves this much while its joints stand (`arm`).
+pub(crate) const AT_REST_JITTER_M: f64 = 1e-3;
+pub(crate) const AT_REST_JITTER_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
+/// Publishers of one edge remembered at once: two are enough to see a contradiction, and a
+/// domain where anyone can make writers must not grow an edge's list with each of them.
+const MAX_SOURCES: usize = 8;
 
 /// The most frames the tree keeps: a robot cell's tree has tens to a few hundred. Anyone on the
 /// DDS domain can publish `/tf` (plain DDS has no authentication), and each new child name would
@@ -115,6 +119,9 @@ impl TfTree {
                     sources.retain(|(id, _, heard)| {
                         *id != source && now.saturating_duration_since(*heard) <= SOURCES_WINDOW
                     });
+                    if sources.len() >= MAX_SOURCES {
+                        sources.remove(0);
+                    }
                     sources.push((source, pose, now));
                     let conflict = contradiction(&parent, &child, &sources);
                     self.edges.insert(
@@ -228,7 +235,7 @@ fn contradiction(parent: &str, child: &str, sources: &[(u64, Pose, Instant)]) ->
     sources[..sources.len() - 1].iter().find_map(|other| {
         let mm = (other.1.translation.vector - newest.1.translation.vector).norm();
         let rad = other.1.rotation.angle_to(&newest.1.rotation);
-        (mm > CONFLICT_M || rad > CONFLICT_RAD).then(|| {
+        (mm > AT_REST_JITTER_M || rad > AT_REST_JITTER_RAD).then(|| {
             format!(
                 "the TF edge {parent} → {child} has {} publishers that disagree by {:.1} mm and {:.1}° (another node publishes it too: a second robot_state_publisher, a static publisher left running?); stop all but the driver's",
                 sources.len(),
@@ -474,6 +481,26 @@ mod tests {
         handover.update_from(&msg(other), 2, ms(1500));
         let got = handover.lookup("base", "tool0").unwrap();
         assert!((got.to_homogeneous() - other.to_homogeneous()).norm() < 1e-12);
+    }
+
+    /// Every DDS writer is a source: a thousand writers of one edge within the window keep at
+    /// most [`MAX_SOURCES`] of them, and a disagreeing one among the newest is still seen.
+    #[test]
+    fn an_edge_remembers_a_bounded_number_of_publishers() {
+        let at_rest = Pose::new(Vector3::new(0.4, 0.1, 0.3), Vector3::zeros());
+        let msg = |pose| TfMessage {
+            transforms: vec![edge("base", "tool0", pose)],
+        };
+        let now = Instant::now();
+        let mut tree = TfTree::default();
+        for writer in 0..1000 {
+            tree.update_from(&msg(at_rest), writer, now);
+        }
+        assert_eq!(tree.edges["tool0"].sources.len(), MAX_SOURCES);
+        assert!(tree.lookup("base", "tool0").is_ok());
+        let away = Pose::new(Vector3::new(0.5, 0.1, 0.3), Vector3::zeros());
+        tree.update_from(&msg(away), 5000, now);
+        assert!(tree.lookup("base", "tool0").is_err());
     }
 
     #[test]

@@ -340,6 +340,26 @@ fn a_public_console_needs_the_secret_too_and_says_so() {
     );
 }
 
+/// `handeye run` of the sim cell (`count` poses, moves of `move_duration_s`) in `dir` with its
+/// console on a free local port.
+fn run_with_console(dir: &Path, count: usize, move_duration_s: f64) -> util::live::Live {
+    let config = sim_config(dir, count, move_duration_s);
+    let out = dir.join("session");
+    let (config_s, out_s) = (config.display().to_string(), out.display().to_string());
+    util::live::Live::start(
+        &[
+            "run",
+            "--config",
+            &config_s,
+            "--output",
+            &out_s,
+            "--console",
+            "127.0.0.1:0",
+        ],
+        dir,
+    )
+}
+
 /// Raises this process's own descriptor limit (the attacker's side of the flood test) as far
 /// as its hard limit allows, up to `want`.
 fn raise_nofile(want: u64) {
@@ -450,21 +470,7 @@ fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
     raise_nofile(4096);
     let dir = tempfile::tempdir().unwrap();
     // Slow moves: the run goes on through the whole test.
-    let config = sim_config(dir.path(), 12, 2.5);
-    let out = dir.path().join("session");
-    let (config_s, out_s) = (config.display().to_string(), out.display().to_string());
-    let mut live = util::live::Live::start(
-        &[
-            "run",
-            "--config",
-            &config_s,
-            "--output",
-            &out_s,
-            "--console",
-            "127.0.0.1:0",
-        ],
-        dir.path(),
-    );
+    let mut live = run_with_console(dir.path(), 12, 2.5);
     let url = live.url();
     let (authority, secret) = url_parts(&url);
     let addr: SocketAddr = authority.parse().unwrap();
@@ -515,21 +521,7 @@ fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_sh
     use futures_util::{SinkExt, StreamExt};
     use tokio_tungstenite::tungstenite::Message;
     let dir = tempfile::tempdir().unwrap();
-    let config = sim_config(dir.path(), 8, 1.0);
-    let out = dir.path().join("session");
-    let (config_s, out_s) = (config.display().to_string(), out.display().to_string());
-    let mut live = util::live::Live::start(
-        &[
-            "run",
-            "--config",
-            &config_s,
-            "--output",
-            &out_s,
-            "--console",
-            "127.0.0.1:0",
-        ],
-        dir.path(),
-    );
+    let mut live = run_with_console(dir.path(), 8, 1.0);
     let url = live.url();
     let rt = runtime();
     rt.block_on(async {

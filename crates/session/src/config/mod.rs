@@ -339,16 +339,19 @@ impl CellConfig {
         }
     }
 
-    /// This config when it has one camera; else the error a command that takes one camera
-    /// gives (`handeye run`, `replay`, `report` and `export` take several).
+    /// This config when it is the one-camera form; else (a `cameras:` list, also of one) the
+    /// error a command that takes one camera gives (`handeye run`, `replay`, `report` and `export` take several).
     pub fn single_camera(self) -> Result<CellConfig, ConfigError> {
         if self.cameras.len() == 1 && !self.listed {
             return Ok(self);
         }
         Err(ConfigError::Inconsistent {
+            problem: format!(
+                "this config lists its cameras ({} under `cameras:`): `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (`setup`, `intrinsics`, `camera` at the top level)",
+                self.cameras.len()
+            ),
             file: self.file,
             key: "cameras".into(),
-            problem: "this is a config of several cameras: `handeye run`, `replay`, `report` and `export` take it; this command takes a one-camera config (setup, intrinsics, camera)".into(),
         })
     }
 

@@ -14,8 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
-use crate::config::SolveSpace;
-use crate::config::{CellCamera, CellConfig};
+use crate::config::{CellCamera, CellConfig, SolveSpace};
 use crate::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use crate::session::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
