@@ -45,13 +45,13 @@ fn calibrate(config: &Path, out: &Path) {
     let prepared = cell::prepare(config).unwrap();
     let plan = prepared.report.validated().expect("valid plan");
     let folder = SessionFolder::create(out).unwrap();
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     session::run_session(
         setup,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_| {},
     )
     .unwrap();

@@ -71,8 +71,8 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         prepared.config.camera().setup
     );
     // A cell without configured intrinsics replays with the ones its run estimated.
-    let camera_model = if prepared.intrinsics_known {
-        prepared.camera_model
+    let camera_model = if prepared.camera().intrinsics_known {
+        prepared.camera().camera_model
     } else {
         let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
         CameraModel::load(&file).context(
@@ -81,7 +81,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     };
     let (dataset, visits) = replay::redetect(
         &folder,
-        &prepared.board,
+        &prepared.camera().board,
         &camera_model,
         prepared.detector_options(),
         prepared.config.session.max_reprojection_rms_px,
@@ -99,15 +99,15 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     // Both answers (pose space and, by default, reprojection space) side by side.
     let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
-        .then_some((&prepared.board, &camera_model));
+        .then_some((&prepared.camera().board, &camera_model));
     // Intrinsics that do not fit the frames are named here as in a run (the estimate written
     // into the session), also when they made every pose fail.
-    let wrong = if prepared.intrinsics_known {
+    let wrong = if prepared.camera().intrinsics_known {
         session::solve::check_intrinsics(
             &folder,
             dataset.setup,
             &visits,
-            &prepared.board,
+            &prepared.camera().board,
             &camera_model,
             &prepared.config,
         )?
@@ -161,7 +161,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     outln!();
     outln!("result:  {}", output.display());
     let optics = Optics {
-        board: &prepared.board,
+        board: &prepared.camera().board,
         camera: &camera_model,
     };
     let report = beside(&output, REPLAY_REPORT_FILE);

@@ -299,7 +299,10 @@ impl RunObserver for Printer {
             )
             .map(|p| (p.base_from_flange, p.index))
             .collect();
-        self.planner_camera = cell.rig.as_ref().map(|rig| rig.planner_name().to_string());
+        self.planner_camera = cell
+            .config
+            .listed
+            .then(|| cell.config.camera().name.clone());
     }
 
     fn cameras_planned(&mut self, views: &[cell::rig::PlannedViews]) {

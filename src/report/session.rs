@@ -297,13 +297,13 @@ fn annotated_frame(
 pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
     let solved = &run.solved;
     // The intrinsics of the config, else the ones the run estimated.
-    let camera = if run.cell.intrinsics_known {
-        Some(run.cell.camera_model)
+    let camera = if run.cell.camera().intrinsics_known {
+        Some(run.cell.camera().camera_model)
     } else {
         solved.estimated_camera
     };
     let optics = camera.as_ref().map(|camera| Optics {
-        board: &run.cell.board,
+        board: &run.cell.camera().board,
         camera,
     });
     write(

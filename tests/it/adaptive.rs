@@ -162,7 +162,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
         config.clone(),
         &mut planner,
         hardware.robot.as_mut(),
-        (hardware.camera.as_mut(), &mut []),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_e: SessionEvent| {},
     )
     .unwrap();
@@ -229,7 +229,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
             config.to_path_buf(),
             &mut planner,
             hardware.robot.as_mut(),
-            (hardware.camera.as_mut(), &mut []),
+            &mut [hardware.cameras[0].as_mut()],
             &mut |_e: SessionEvent| {},
         );
         (outcome, planner)

@@ -139,7 +139,7 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
     let plan = prepared.report.validated().expect("valid plan");
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let truth = prepared.config.camera().simulation.unwrap();
     let robot = cell::sim::arm(
         &prepared.config,
@@ -152,8 +152,8 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
         &prepared.config,
         truth,
         Box::new(move || arm.lock().true_base_from_flange()),
-        prepared.camera_model,
-        prepared.board.clone(),
+        prepared.camera().camera_model,
+        prepared.camera().board.clone(),
     )
     .unwrap();
     let exposures = Arc::new(Mutex::new(Vec::new()));
@@ -166,7 +166,8 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
         .settle_by_speed
         .map_or(0.0, |s| s.max_joint_speed.to_degrees());
     let mut driven = robot.clone();
-    let outcome = session::run_session(setup, &mut driven, &mut camera, &mut |_| {}).unwrap();
+    let outcome =
+        session::run_session(setup, &mut driven, &mut [&mut camera], &mut |_| {}).unwrap();
     assert_eq!(outcome.visited_now, 6);
     assert!(outcome.moving_s > 0.0);
     let arm = robot.lock();
@@ -434,10 +435,10 @@ mod through_ur_rtde {
         let plan = prepared.recheck_from(start).expect("plan valid");
         let dir = tempfile::tempdir().unwrap();
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+        folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
         let fastest = Arc::new(Mutex::new(Vec::new()));
         let mut camera = ProbingCamera {
-            inner: hardware.camera,
+            inner: hardware.cameras.remove(0),
             probe: mock.speed_probe(),
             fastest: fastest.clone(),
         };
@@ -445,8 +446,13 @@ mod through_ur_rtde {
         let threshold = setup
             .settle_by_speed
             .map_or(0.0, |s| s.max_joint_speed.to_degrees());
-        let outcome =
-            session::run_session(setup, hardware.robot.as_mut(), &mut camera, &mut |_| {}).unwrap();
+        let outcome = session::run_session(
+            setup,
+            hardware.robot.as_mut(),
+            &mut [&mut camera],
+            &mut |_| {},
+        )
+        .unwrap();
         assert_eq!(outcome.accepted.len(), 5, "{:?}", outcome.skipped);
         let fastest = fastest.lock().unwrap().clone();
         (fastest, threshold)

@@ -502,7 +502,7 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
         &[("aprilgrid-6x6.yaml", "charuco-9x6-5x5.yaml")],
     );
     let done = util::run_cell(&config, &dir.path().join("s"));
-    assert!(!done.cell.intrinsics_known);
+    assert!(!done.cell.camera().intrinsics_known);
     assert_eq!(done.outcome.accepted.len(), done.cell.plan.waypoints.len());
     let solved = &done.solved;
     let truth = CameraModel::load(&util::repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();

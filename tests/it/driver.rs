@@ -20,7 +20,8 @@ use handeye_core::setup::{CellTransforms, Setup};
 use handeye_robot::{Joints, MotionLimits, RobotError};
 use handeye_session::dataset::Dataset;
 use handeye_session::session::{
-    run_session, SessionError, SessionEvent, SessionFolder, SessionOutcome, SessionSetup,
+    run_session, SessionCamera, SessionError, SessionEvent, SessionFolder, SessionOutcome,
+    SessionSetup,
 };
 use handeye_vision::{Board, DetectorOptions};
 use image::{GrayImage, Luma};
@@ -138,8 +139,16 @@ fn empty_frame() -> GrayImage {
 
 fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
     SessionSetup {
-        folder,
-        setup: Setup::EyeInHand,
+        resume_folder: folder.root().to_path_buf(),
+        cameras: vec![SessionCamera {
+            name: "camera".into(),
+            folder,
+            setup: Setup::EyeInHand,
+            board: board().into(),
+            estimate_intrinsics: false,
+        }],
+        named_cameras: false,
+        lost: Vec::new(),
         plan: (0..POSES)
             .map(|i| (base_from_flange(i), joints(i)))
             .collect(),
@@ -147,9 +156,7 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
         settle: Duration::ZERO,
         settle_by_speed: None,
         reorder: false,
-        rig: None,
         max_reprojection_rms_px: 1.0,
-        board: board().into(),
         // One detector thread: with more, the AprilTag C worker pool races now and then (see
         // tests/it/fuzz.rs, `crash_detector_worker_pool_race`); the driver does not care.
         detector: DetectorOptions {
@@ -157,7 +164,6 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
             ..DetectorOptions::default()
         },
         stop,
-        estimate_intrinsics: false,
         move_check: None,
     }
 }
@@ -188,7 +194,7 @@ fn run(robot: Vec<Expect>, grabs: Vec<Grab>) -> Run {
     let result = run_session(
         session_setup(folder.clone(), Arc::new(AtomicBool::new(false))),
         &mut robot,
-        &mut camera,
+        &mut [&mut camera],
         &mut |e| events.push(e),
     );
     drop(robot);
@@ -463,7 +469,7 @@ fn a_stop_request_before_the_next_pose_stops_without_moving() {
     let result = run_session(
         session_setup(folder.clone(), stop.clone()),
         &mut robot,
-        &mut camera,
+        &mut [&mut camera],
         &mut |e| {
             if let SessionEvent::Moving { plan_index: 0, .. } = e {
                 flag.store(true, Ordering::SeqCst);
@@ -510,7 +516,7 @@ fn a_resumed_run_visits_only_the_poses_without_a_sample() {
     let first = run_session(
         session_setup(folder.clone(), Arc::new(AtomicBool::new(false))),
         &mut robot,
-        &mut camera,
+        &mut [&mut camera],
         &mut |_| {},
     );
     drop(robot);
@@ -531,7 +537,7 @@ fn a_resumed_run_visits_only_the_poses_without_a_sample() {
     let outcome = run_session(
         session_setup(folder.clone(), Arc::new(AtomicBool::new(false))),
         &mut robot,
-        &mut camera,
+        &mut [&mut camera],
         &mut |_| {},
     )
     .unwrap();
@@ -570,7 +576,7 @@ fn a_move_that_would_leave_the_workspace_is_not_sent() {
         Expect::stop(),
     ]);
     let mut camera = ScriptedCamera::new(camera_model(), Vec::new());
-    let result = run_session(setup, &mut robot, &mut camera, &mut |_| {});
+    let result = run_session(setup, &mut robot, &mut [&mut camera], &mut |_| {});
     drop(robot);
     drop(camera);
     match result {
@@ -638,7 +644,7 @@ fn a_retry_that_cannot_be_reached_is_skipped_and_the_run_ends_with_its_samples()
         Grab::Frame(frame(3)),
     ];
     let mut camera = ScriptedCamera::new(camera_model(), grabs);
-    let result = run_session(setup, &mut robot, &mut camera, &mut |_| {});
+    let result = run_session(setup, &mut robot, &mut [&mut camera], &mut |_| {});
     drop(robot);
     drop(camera);
     let outcome = result.expect("the run ends with its samples");

@@ -154,12 +154,12 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
     assert_eq!(plan.len(), 8);
 
     let folder = SessionFolder::create(&dir.path().join("session")).unwrap();
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     let outcome = session::run_session(
         prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false))),
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_| {},
     )
     .unwrap();
@@ -171,8 +171,8 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
         &visp,
         &VispOptions {
             setup: Setup::EyeToHand,
-            board: prepared.board.clone(),
-            camera: Some(prepared.camera_model),
+            board: prepared.camera().board.clone(),
+            camera: Some(prepared.camera().camera_model),
             detector: prepared.detector_options(),
             skip_unfound: false,
         },

@@ -21,14 +21,14 @@ fn config_variant(dir: &Path, base: &str, edits: &[(&str, &str)]) -> PathBuf {
 fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome, SessionError> {
     let plan = prepared.report.validated().expect("plan passes its checks");
     if folder.read_manifest().is_err() {
-        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+        folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     }
     let mut hardware = prepared.open_hardware().unwrap();
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     session::run_session(
         setup,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_e: SessionEvent| {},
     )
 }
@@ -87,8 +87,8 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
     // Replay re-detects the saved frames and reproduces the result (both answers).
     let (dataset, visits) = session::replay::redetect(
         &folder,
-        &prepared.board,
-        &prepared.camera_model,
+        &prepared.camera().board,
+        &prepared.camera().camera_model,
         prepared.detector_options(),
         prepared.config.session.max_reprojection_rms_px,
     )
@@ -103,7 +103,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         dataset.setup,
         &dataset.pairs,
         &visits,
-        Some((&prepared.board, &prepared.camera_model)),
+        Some((&prepared.camera().board, &prepared.camera().camera_model)),
         &prepared.config,
     )
     .unwrap();
@@ -237,7 +237,7 @@ fn a_stop_request_ends_the_move_in_progress_and_resume_finishes() {
     let out = dir.path().join("s");
     let folder = SessionFolder::create(&out).unwrap();
     let plan = prepared.report.validated().unwrap();
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let setup = prepared.session_setup(folder.clone(), plan, stop.clone());
@@ -246,7 +246,7 @@ fn a_stop_request_ends_the_move_in_progress_and_resume_finishes() {
     let error = session::run_session(
         setup,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |e: SessionEvent| {
             if let SessionEvent::Moving { plan_index: 2, .. } = e {
                 let stop = stop.clone();
@@ -293,7 +293,7 @@ fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_se
     let prepared = cell::prepare(&config).unwrap();
     let plan = prepared.report.validated().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
-    folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+    folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     // Shoulder lowered: the flange hangs below the table top (the box starts at z = 5 cm).
     let jogged = handeye_robot::Joints::from([0.0, 0.6, 0.0, 0.0, 0.0, 0.0]);
@@ -312,7 +312,7 @@ fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_se
     let error = session::run_session(
         setup,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_| {},
     )
     .unwrap_err();
@@ -473,7 +473,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     let lens = repo().join("configs/cameras/sim-1280x720.yaml");
     // The shipped config: sim-cell.yaml with the lens moved from `intrinsics` to the simulator.
     let prepared = cell::prepare(&repo().join("configs/sim-cell-no-intrinsics.yaml")).unwrap();
-    assert!(!prepared.intrinsics_known);
+    assert!(!prepared.camera().intrinsics_known);
     // The generated views push the board across the image for the intrinsics; the same plan
     // with the intrinsics known keeps the board centred.
     let coverage = |report: &handeye_session::plan::check::PlanReport| {

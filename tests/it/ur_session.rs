@@ -72,13 +72,13 @@ fn run(
         .recheck_from(start)
         .expect("plan valid from the mock's start");
     if folder.read_manifest().is_err() {
-        folder.write_manifest(&prepared.manifest(&plan)).unwrap();
+        folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     }
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
     let outcome = session::run_session(
         setup,
         hardware.robot.as_mut(),
-        hardware.camera.as_mut(),
+        &mut [hardware.cameras[0].as_mut()],
         &mut |_| {},
     );
     (prepared, outcome)

@@ -56,15 +56,19 @@ pub(crate) fn cell_events(cell: &PreparedCell, manual: bool) -> (ConsoleEvent, C
         unknowns: [a.to_string(), b.to_string()],
         simulated: cell.is_simulated(),
         manual,
-        image: [cell.camera_model.width, cell.camera_model.height],
-        cameras: cell.rig.as_ref().map_or_else(Vec::new, |rig| {
-            rig.config.cameras.iter().map(|c| c.name.clone()).collect()
-        }),
+        image: [
+            cell.camera().camera_model.width,
+            cell.camera().camera_model.height,
+        ],
+        cameras: match cell.config.listed {
+            true => cell.config.cameras.iter().map(|c| c.name.clone()).collect(),
+            false => Vec::new(),
+        },
     };
     let view = CellView {
         setup: cell.config.camera().setup,
-        board: cell.board.clone(),
-        model: cell.camera_model,
+        board: cell.camera().board.clone(),
+        model: cell.camera().camera_model,
         // The running estimate skips the outlier loop (a person watches it converge; the solve
         // at the end is the real one, with every check).
         options: handeye_solve::SolveOptions {
@@ -132,7 +136,10 @@ impl ConsoleObserver<'_> {
         let (event, view) = cell_events(cell, false);
         self.console.publish(&event);
         self.cell = Some(view);
-        self.planner_camera = cell.rig.as_ref().map(|r| r.planner_name().to_string());
+        self.planner_camera = cell
+            .config
+            .listed
+            .then(|| cell.config.camera().name.clone());
     }
 }
 

@@ -222,8 +222,8 @@ fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
     let prepared = cell::prepare(&config).unwrap();
     let replay = session::replay::redetect(
         &SessionFolder::open(&dir.path().join("zero")).unwrap(),
-        &prepared.board,
-        &prepared.camera_model,
+        &prepared.camera().board,
+        &prepared.camera().camera_model,
         prepared.detector_options(),
         1.0,
     )

@@ -16,16 +16,18 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::config::{CameraConfig, CellConfig, ConfigError, RobotConfig};
+use crate::config::{CameraConfig, CellCamera, CellConfig, ConfigError, RobotConfig};
 use crate::plan::check::MoveCheck;
 use crate::plan::check::{check_plan, check_plan_ordered, CheckContext, PlanReport};
 use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
 use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
 use crate::session::{
-    InputFile, SessionError, SessionFolder, SessionManifest, SessionSetup, SolveInputs,
+    InputFile, SessionCamera, SessionError, SessionFolder, SessionManifest, SessionSetup,
+    SolveInputs,
 };
 use handeye_camera::Camera;
 use handeye_core::camera_model::CameraModel;
+use handeye_core::error_text::error_chain;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_robot::kinematics::UrModel;
@@ -70,66 +72,82 @@ pub enum CellError {
 /// Refuses a config whose board, intrinsics, lens or plan file is not where it says, naming the
 /// key and where its relative path points: a config copied elsewhere (`cp configs/… my-cell.yaml`)
 /// keeps relative paths, which resolve against its own folder, not the folder it came from.
-fn referenced_files_exist(config: &CellConfig) -> Result<(), CellError> {
+fn file_exists(config: &CellConfig, key: &str, path: &Path) -> Result<(), CellError> {
+    if path.exists() {
+        return Ok(());
+    }
     let folder = config
         .file
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let referenced = [
-        Some(("target", config.camera().target.as_path())),
-        config
-            .camera()
-            .intrinsics
-            .as_deref()
-            .map(|p| ("intrinsics", p)),
-        config.camera().sim_lens().map(|p| ("camera.intrinsics", p)),
-        config.plan.file.as_deref().map(|p| ("plan.file", p)),
-    ];
-    for (key, path) in referenced.into_iter().flatten() {
-        if path.exists() {
-            continue;
-        }
-        let folder_shown = std::path::absolute(folder).unwrap_or_else(|_| folder.to_path_buf());
-        return Err(CellError::Config(Box::new(ConfigError::Inconsistent {
-            file: config.file.clone(),
-            key: key.into(),
-            problem: format!(
-                "{} does not exist. Paths in a config are relative to the config file's own folder ({}): a config copied from configs/ needs its files copied beside it, or absolute paths",
-                path.display(),
-                folder_shown.display()
-            ),
-        })));
-    }
-    Ok(())
+    let folder_shown = std::path::absolute(folder).unwrap_or_else(|_| folder.to_path_buf());
+    Err(CellError::Config(Box::new(ConfigError::Inconsistent {
+        file: config.file.clone(),
+        key: key.into(),
+        problem: format!(
+            "{} does not exist. Paths in a config are relative to the config file's own folder ({}): a config copied from configs/ needs its files copied beside it, or absolute paths",
+            path.display(),
+            folder_shown.display()
+        ),
+    })))
 }
 
-/// The robot and camera of a cell, opened.
+/// [`file_exists`] for a camera's board, intrinsics and simulated lens.
+fn referenced_files_exist(config: &CellConfig, camera: &CellCamera) -> Result<(), CellError> {
+    let referenced = [
+        Some(("target", camera.target.as_path())),
+        camera.intrinsics.as_deref().map(|p| ("intrinsics", p)),
+        camera.sim_lens().map(|p| ("camera.intrinsics", p)),
+    ];
+    referenced
+        .into_iter()
+        .flatten()
+        .try_for_each(|(key, path)| file_exists(config, key, path))
+}
+
+/// The robot and cameras of a cell, opened.
 pub struct Hardware {
     /// The arm.
     pub robot: Box<dyn Robot>,
-    /// The camera (of a several-camera cell: the one the plan is made for).
-    pub camera: Box<dyn Camera>,
-    /// A several-camera cell's other cameras, in the order of [`PreparedCell::rig`]'s `others`
-    /// (empty for one camera).
-    pub others: Vec<Box<dyn Camera>>,
+    /// The cameras in the order a session grabs them: the planner camera first, then the others
+    /// in config order ([`PreparedCell::run_order`]).
+    pub cameras: Vec<Box<dyn Camera>>,
+}
+
+impl Hardware {
+    /// The arm and the cameras, as a session takes them.
+    pub fn devices(&mut self) -> (&mut dyn Robot, Vec<&mut dyn Camera>) {
+        let cameras = self
+            .cameras
+            .iter_mut()
+            .map(|c| c.as_mut() as &mut dyn Camera);
+        (self.robot.as_mut(), cameras.collect())
+    }
 }
 
 /// What the shipped placeholder intrinsics file has in its `camera_name`
 /// (`configs/cameras/CHANGE-ME-usb-camera-1280x720.yaml`).
 pub const PLACEHOLDER_CAMERA_NAME: &str = "CHANGE-ME";
 
-/// A cell whose config, board, intrinsics and plan are loaded and checked.
-pub struct PreparedCell {
-    /// The config.
-    pub config: CellConfig,
-    /// The board.
+/// One camera of a cell, made ready: its board and lens loaded.
+pub struct PreparedCamera {
+    /// The board it looks at.
     pub board: Target,
-    /// The intrinsics (without configured intrinsics: the sim camera's lens, for planning and
+    /// Its intrinsics (without configured intrinsics: the sim camera's lens, for planning and
     /// rendering only — the run estimates the intrinsics).
     pub camera_model: CameraModel,
     /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
     pub intrinsics_known: bool,
+}
+
+/// A cell whose config, boards, intrinsics and plan are loaded and checked: one arm, one plan,
+/// and its cameras (one, or several sharing the arm's poses).
+pub struct PreparedCell {
+    /// The config (every camera; `config.camera()` is the one the plan is made for).
+    pub config: CellConfig,
+    /// The cameras, in config order (`config.planner` is the plan's).
+    pub cameras: Vec<PreparedCamera>,
     /// The arm's kinematics (a UR model, its joint limits the cell's); `None` for a ROS 2 arm
     /// handeye has no model of (`robot.model: none`), which replays taught plans only.
     pub arm: Option<UrModel>,
@@ -139,52 +157,66 @@ pub struct PreparedCell {
     pub start_joints: Joints,
     /// The plan.
     pub plan: Plan,
-    /// The plan check.
+    /// The plan check (made for the planner camera).
     pub report: PlanReport,
-    /// A cell with several cameras: this cell is the camera the plan is made for, and the
-    /// others are here (`None`: one camera).
-    pub rig: Option<rig::RigCells>,
 }
 
-/// Loads everything a config names and checks the plan. Nothing moves. A config of several
-/// cameras (`cameras:`) is prepared camera by camera (`rig::prepare_rig`).
+/// Loads everything a config names and checks the plan. Nothing moves.
 pub fn prepare(config_file: &Path) -> Result<PreparedCell, CellError> {
     let config = CellConfig::load(config_file).map_err(|e| CellError::Config(Box::new(e)))?;
-    if config.listed {
-        return rig::prepare_rig(config);
-    }
     prepare_config(config)
 }
 
-/// [`prepare`] of a one-camera config already read (also one camera of a several-camera cell,
-/// [`CellConfig::for_camera`]).
-pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
-    referenced_files_exist(&config)?;
-    let board = Target::load(&config.camera().target).map_err(|source| CellError::Board {
-        file: config.camera().target.clone(),
-        source: Box::new(source),
-    })?;
-    // Without intrinsics the plan is checked (and the sim renders) with the sim camera's lens;
-    // the run then records corners only and the intrinsics are estimated afterwards.
-    let intrinsics_known = config.camera().intrinsics.is_some();
-    let model_file = match (&config.camera().intrinsics, config.camera().sim_lens(), &config.robot, &config.camera().backend) {
-        (Some(file), ..) => Some(file.clone()),
-        (None, Some(lens), ..) => Some(lens.to_path_buf()),
-        // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
-        (None, None, RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => None,
-        (None, None, ..) => {
-            return Err(CellError::Backend(
-                "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
-            ))
-        }
-    };
-    let camera_model = match &model_file {
-        Some(file) => CameraModel::load(file).map_err(|source| CellError::Intrinsics {
-            file: file.clone(),
+/// Loads camera `index`'s board and lens (a listed camera's errors name it).
+fn prepare_camera(config: &CellConfig, index: usize) -> Result<PreparedCamera, CellError> {
+    let camera = &config.cameras[index];
+    let prepared = referenced_files_exist(config, camera).and_then(|()| {
+        let board = Target::load(&camera.target).map_err(|source| CellError::Board {
+            file: camera.target.clone(),
             source: Box::new(source),
-        })?,
-        None => recorded::provisional_model(&config)?,
-    };
+        })?;
+        // Without intrinsics the plan is checked (and the sim renders) with the sim camera's
+        // lens; the run then records corners only and the intrinsics are estimated afterwards.
+        let intrinsics_known = camera.intrinsics.is_some();
+        let model_file = match (&camera.intrinsics, camera.sim_lens(), &config.robot, &camera.backend) {
+            (Some(file), ..) => Some(file.clone()),
+            (None, Some(lens), ..) => Some(lens.to_path_buf()),
+            // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
+            (None, None, RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => None,
+            (None, None, ..) => {
+                return Err(CellError::Backend(
+                    "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
+                ))
+            }
+        };
+        let camera_model = match &model_file {
+            Some(file) => CameraModel::load(file).map_err(|source| CellError::Intrinsics {
+                file: file.clone(),
+                source: Box::new(source),
+            })?,
+            None => recorded::provisional_model(&config.for_camera(index))?,
+        };
+        Ok(PreparedCamera {
+            board,
+            camera_model,
+            intrinsics_known,
+        })
+    });
+    prepared.map_err(|e| match config.listed {
+        true => CellError::Backend(format!("camera `{}`: {}", camera.name, error_chain(&e))),
+        false => e,
+    })
+}
+
+/// [`prepare`] of a config already read: every camera's board and lens, then the arm and the
+/// plan (made and checked for the planner camera).
+pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
+    let cameras = (0..config.cameras.len())
+        .map(|index| prepare_camera(&config, index))
+        .collect::<Result<Vec<_>, _>>()?;
+    if let Some(file) = &config.plan.file {
+        file_exists(&config, "plan.file", file)?;
+    }
     // The cell's joint ranges (robot.joint_ranges_deg, or the defaults) bind the IK choice, the
     // plan check, every move check and the backends.
     let joint_limits = config.robot.joint_limits(config.camera().setup);
@@ -212,30 +244,9 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             Joints::from(crate::config::default_start_joints())
         }
     };
-    if let RobotConfig::Recorded { .. } = config.robot {
-        let (plan, report) = recorded::plan(&config, &camera_model, &board)?;
-        return Ok(PreparedCell {
-            config,
-            board,
-            camera_model,
-            intrinsics_known,
-            arm,
-            joint_limits,
-            start_joints,
-            plan,
-            report,
-            rig: None,
-        });
-    }
-    let scripted = match &config.plan.file {
-        Some(file) => Some(Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?),
-        None => None,
-    };
     let mut prepared = PreparedCell {
         config,
-        board,
-        camera_model,
-        intrinsics_known,
+        cameras,
         arm,
         joint_limits,
         start_joints,
@@ -249,7 +260,17 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             intrinsics: None,
             given_order_move_time_s: None,
         },
-        rig: None,
+    };
+    if let RobotConfig::Recorded { .. } = prepared.config.robot {
+        let camera = prepared.camera();
+        let (plan, report) = recorded::plan(&prepared.config, &camera.camera_model, &camera.board)?;
+        prepared.plan = plan;
+        prepared.report = report;
+        return Ok(prepared);
+    }
+    let scripted = match &prepared.config.plan.file {
+        Some(file) => Some(Plan::load(file).map_err(|e| CellError::Plan(Box::new(e)))?),
+        None => None,
     };
     prepared.plan = match (scripted, &prepared.config.plan.generate) {
         (Some(plan), _) => plan,
@@ -326,6 +347,7 @@ fn refuse_untaught_waypoints(cell: &PreparedCell) -> Result<(), CellError> {
 impl PreparedCell {
     /// What a plan is checked against: this cell from the arm's current start joints.
     fn check_context(&self) -> CheckContext<'_> {
+        let camera = self.camera();
         CheckContext {
             arm: self.arm.as_ref(),
             joint_limits: &self.joint_limits,
@@ -333,8 +355,8 @@ impl PreparedCell {
             cell: &self.config.camera().nominal,
             workspace: &self.config.workspace,
             limits: &self.config.limits,
-            camera: &self.camera_model,
-            board: &self.board,
+            camera: &camera.camera_model,
+            board: &camera.board,
             margin_px: self.config.session.image_margin_px,
         }
     }
@@ -350,7 +372,8 @@ impl PreparedCell {
     /// intrinsics when the config has none, centred otherwise).
     pub fn generate_views(&self, spec: &GenerateSpec) -> Vec<LookAt> {
         let mut views = generate(spec);
-        let spread = spec.image_spread.unwrap_or(if self.intrinsics_known {
+        let camera = self.camera();
+        let spread = spec.image_spread.unwrap_or(if camera.intrinsics_known {
             0.0
         } else {
             IMAGE_SPREAD_FOR_INTRINSICS
@@ -358,8 +381,8 @@ impl PreparedCell {
         spread_across_image(
             &mut views,
             spread,
-            &self.camera_model,
-            &self.board,
+            &camera.camera_model,
+            &camera.board,
             self.config.session.image_margin_px,
         );
         views
@@ -382,7 +405,7 @@ impl PreparedCell {
         }
         let mut report =
             check_plan_ordered(&self.plan, &self.check_context(), self.config.plan.reorder);
-        if !self.intrinsics_known {
+        if !self.camera().intrinsics_known {
             // The intrinsics come from this very run: a plan that cannot give them is refused.
             let (blocking, notes): (Vec<String>, Vec<String>) = report
                 .notes
@@ -394,18 +417,20 @@ impl PreparedCell {
         report
     }
 
-    /// The next-best-pose planner of this camera over `candidates`, from the nominal cell, with
-    /// the solver's noise model; stops at `target_uncertainty_mm` or `max_samples`.
+    /// The next-best-pose planner of camera `camera` over `candidates`, from the nominal cell,
+    /// with the solver's noise model; stops at `target_uncertainty_mm` or `max_samples`.
     pub fn adaptive_planner(
         &self,
+        camera: usize,
         candidates: Vec<(Pose, Joints)>,
         target_uncertainty_mm: f64,
         max_samples: usize,
     ) -> crate::plan::nbv::AdaptivePlanner {
+        let camera = &self.config.cameras[camera];
         crate::plan::nbv::AdaptivePlanner::new(
-            self.config.camera().setup,
-            self.config.camera().nominal.camera_mount,
-            self.config.camera().nominal.target_mount,
+            camera.setup,
+            camera.nominal.camera_mount,
+            camera.nominal.target_mount,
             candidates,
             self.config.solver.to_options(),
             target_uncertainty_mm,
@@ -432,18 +457,57 @@ impl PreparedCell {
         }
     }
 
-    /// The session manifest for a validated plan.
-    pub fn manifest(&self, plan: &[(Pose, Joints)]) -> SessionManifest {
-        SessionManifest::new(self.config_path(), self.config.camera().setup, plan)
+    /// The camera the plan is made for (`config.planner`).
+    pub fn camera(&self) -> &PreparedCamera {
+        &self.cameras[self.config.planner]
     }
 
-    /// What the session solve needs, as this cell loaded it: the board and (when the config
-    /// gives them) the intrinsics, so nothing is loaded twice.
+    /// The cameras other than the planner's, in config order, by index.
+    pub fn others(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.cameras.len()).filter(|&c| c != self.config.planner)
+    }
+
+    /// Whether camera `camera` is expected to see its board with the flange at
+    /// `base_from_flange`: at least half the board's corners inside its image, by the nominal
+    /// mounts, its lens and the configured image margin.
+    pub fn sees_board(&self, camera: usize, base_from_flange: &Pose) -> bool {
+        let PreparedCamera {
+            board,
+            camera_model,
+            ..
+        } = &self.cameras[camera];
+        let points = board.points();
+        let margin = self.config.session.image_margin_px;
+        let (w, h) = (
+            f64::from(camera_model.width),
+            f64::from(camera_model.height),
+        );
+        let camera_from_target = self.config.cameras[camera]
+            .nominal
+            .camera_from_target(base_from_flange);
+        let inside = points
+            .iter()
+            .filter_map(|(_, _, point)| camera_model.project(&(camera_from_target * point)))
+            .filter(|px| {
+                px.x >= margin && px.y >= margin && px.x <= w - margin && px.y <= h - margin
+            })
+            .count();
+        2 * inside >= points.len()
+    }
+
+    /// The session manifest of camera `camera` for a validated plan.
+    pub fn manifest(&self, camera: usize, plan: &[(Pose, Joints)]) -> SessionManifest {
+        SessionManifest::new(self.config_path(), self.config.cameras[camera].setup, plan)
+    }
+
+    /// What the session solve of the planner camera needs, as this cell loaded it: the board and
+    /// (when the config gives them) the intrinsics, so nothing is loaded twice.
     pub fn solve_inputs(&self) -> SolveInputs {
+        let camera = self.camera();
         SolveInputs {
-            config: self.config.clone(),
-            board: self.board.clone(),
-            camera: self.intrinsics_known.then_some(self.camera_model),
+            config: self.config.for_camera(self.config.planner),
+            board: camera.board.clone(),
+            camera: camera.intrinsics_known.then_some(camera.camera_model),
         }
     }
 
@@ -464,13 +528,10 @@ impl PreparedCell {
             files.push(("robot.poses", poses.clone()));
         }
         // A several-camera cell's other cameras: their boards and lenses, once each.
-        for (_, other) in self.rig.iter().flat_map(|rig| &rig.others) {
+        for other in self.others().map(|c| &self.config.cameras[c]) {
             for (role, file) in [
-                ("target", other.config.camera().target.clone()),
-                (
-                    "intrinsics",
-                    other.config.camera().intrinsics.clone().unwrap_or_default(),
-                ),
+                ("target", other.target.clone()),
+                ("intrinsics", other.intrinsics.clone().unwrap_or_default()),
             ] {
                 if !file.as_os_str().is_empty() && !files.iter().any(|(_, f)| *f == file) {
                     files.push((role, file));
@@ -504,35 +565,36 @@ impl PreparedCell {
     /// The lens and board the simulated camera renders with: the sim camera's own `intrinsics`
     /// and `target` when it names them (a camera calibrated wrongly, a board printed at another
     /// scale), else the cell's.
-    fn sim_world(&self) -> Result<(CameraModel, Target), CellError> {
+    fn sim_world(&self, camera: usize) -> Result<(CameraModel, Target), CellError> {
+        let prepared = &self.cameras[camera];
         let CameraConfig::Sim {
             intrinsics, target, ..
-        } = &self.config.camera().backend
+        } = &self.config.cameras[camera].backend
         else {
-            return Ok((self.camera_model, self.board.clone()));
+            return Ok((prepared.camera_model, prepared.board.clone()));
         };
         let lens = match intrinsics {
-            Some(file) if self.intrinsics_known => {
+            Some(file) if prepared.intrinsics_known => {
                 CameraModel::load(file).map_err(|source| CellError::Intrinsics {
                     file: file.clone(),
                     source: Box::new(source),
                 })?
             }
-            _ => self.camera_model,
+            _ => prepared.camera_model,
         };
         let board = match target {
             Some(file) => Target::load(file).map_err(|source| CellError::Board {
                 file: file.clone(),
                 source: Box::new(source),
             })?,
-            None => self.board.clone(),
+            None => prepared.board.clone(),
         };
         Ok((lens, board))
     }
 
     /// The simulator's ground truth, which the simulated backends render from.
-    fn sim_truth(&self) -> Result<CellTransforms, CellError> {
-        self.config.camera().simulation.ok_or_else(|| {
+    fn sim_truth(&self, camera: usize) -> Result<CellTransforms, CellError> {
+        self.config.cameras[camera].simulation.ok_or_else(|| {
             CellError::Backend(
                 "a simulated backend needs `simulation:` (the cell's true transforms) in the config"
                     .into(),
@@ -558,30 +620,37 @@ impl PreparedCell {
     /// serves the recorded pose's frame. A camera that needs nothing of the arm (USB) opens
     /// first, so a missing camera never leaves a connected arm behind.
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
-        let standalone = match &self.config.camera().backend {
+        let planner = self.config.planner;
+        let mut standalone = match &self.config.camera().backend {
             CameraConfig::Uvc { .. } => Some(uvc::open_camera(
                 &self.config.camera().backend,
-                self.camera_model,
+                self.camera().camera_model,
             )?),
             CameraConfig::Sim { .. } | CameraConfig::Files { .. } | CameraConfig::Ros2(_) => None,
         };
         let (robot, arm) = self.open_arm()?;
-        let camera = match standalone {
-            Some(camera) => camera,
-            None => self.open_camera_beside(&arm)?,
-        };
-        let mut hardware = Hardware {
-            robot,
-            camera,
-            others: Vec::new(),
-        };
-        for (name, other) in self.rig.iter().flat_map(|rig| &rig.others) {
-            let camera = other
-                .open_camera_beside(&arm)
-                .map_err(|e| CellError::Backend(format!("camera `{name}`: {e}")))?;
-            hardware.others.push(camera);
+        let mut cameras = Vec::with_capacity(self.cameras.len());
+        for c in self.run_order() {
+            let camera = match (c == planner, standalone.take()) {
+                (true, Some(camera)) => camera,
+                _ => self
+                    .open_camera_beside(c, &arm)
+                    .map_err(|e| match self.config.listed {
+                        true => CellError::Backend(format!(
+                            "camera `{}`: {e}",
+                            self.config.cameras[c].name
+                        )),
+                        false => e,
+                    })?,
+            };
+            cameras.push(camera);
         }
-        Ok(hardware)
+        Ok(Hardware { robot, cameras })
+    }
+
+    /// The cameras in the order a session grabs them: the planner camera, then the others.
+    pub fn run_order(&self) -> impl Iterator<Item = usize> + '_ {
+        std::iter::once(self.config.planner).chain(self.others())
     }
 
     /// Opens the arm the config names, with what its cameras need of it.
@@ -622,26 +691,30 @@ impl PreparedCell {
         }
     }
 
-    /// Opens this cell's camera beside an arm opened already: a simulated camera renders from
-    /// the arm's pose, a USB camera needs nothing of the arm, a ROS 2 camera subscribes on the
-    /// arm's node, a folder camera follows the recorded arm.
-    pub fn open_camera_beside(&self, arm: &ArmSide) -> Result<Box<dyn Camera>, CellError> {
-        match (&self.config.camera().backend, arm) {
+    /// Opens camera `camera` beside an arm opened already: a simulated camera renders from the
+    /// arm's pose, a USB camera needs nothing of the arm, a ROS 2 camera subscribes on the arm's
+    /// node, a folder camera follows the recorded arm. (The backends take the cell as this
+    /// camera alone sees it, [`CellConfig::for_camera`].)
+    pub fn open_camera_beside(
+        &self,
+        camera: usize,
+        arm: &ArmSide,
+    ) -> Result<Box<dyn Camera>, CellError> {
+        let config = self.config.for_camera(camera);
+        let model = self.cameras[camera].camera_model;
+        match (&config.camera().backend, arm) {
             (CameraConfig::Sim { .. }, ArmSide::Flange(flange)) => {
-                let truth = self.sim_truth()?;
-                let (lens, board) = self.sim_world()?;
-                let camera = sim::camera(&self.config, truth, flange(), lens, board)?
-                    .reporting(self.camera_model);
+                let truth = self.sim_truth(camera)?;
+                let (lens, board) = self.sim_world(camera)?;
+                let camera = sim::camera(&config, truth, flange(), lens, board)?.reporting(model);
                 Ok(Box::new(camera))
             }
             (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
-                uvc::open_camera(&self.config.camera().backend, self.camera_model)
+                uvc::open_camera(&config.camera().backend, model)
             }
-            (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => {
-                ros2::open_camera(&self.config, node, self.camera_model)
-            }
+            (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => ros2::open_camera(&config, node, model),
             (CameraConfig::Files { .. }, ArmSide::Recorded { selector, poses }) => {
-                recorded::open_camera(&self.config, selector, *poses, self.camera_model)
+                recorded::open_camera(&config, selector, *poses, model)
             }
             (camera, _) => Err(CellError::Backend(format!(
                 "a camera with backend `{}` beside the `{}` arm is not available (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
@@ -680,7 +753,9 @@ impl PreparedCell {
         ))
     }
 
-    /// What the session loop needs to run this cell's validated `plan` into `folder`.
+    /// What the session loop needs to run this cell's validated `plan` into `folder`: the
+    /// planner camera records there (a several-camera cell adds the others with
+    /// [`PreparedCell::session_cameras`]).
     pub fn session_setup(
         &self,
         folder: SessionFolder,
@@ -688,19 +763,18 @@ impl PreparedCell {
         stop: Arc<AtomicBool>,
     ) -> SessionSetup {
         SessionSetup {
-            folder,
-            setup: self.config.camera().setup,
+            resume_folder: folder.root().to_path_buf(),
+            cameras: vec![self.session_camera(self.config.planner, folder)],
+            named_cameras: self.config.listed,
+            lost: Vec::new(),
             plan,
             limits: self.config.limits,
             settle: self.config.settle(),
             settle_by_speed: self.config.settle_by_speed(),
             reorder: self.config.plan.reorder,
-            rig: None,
             max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
-            board: self.board.clone(),
             detector: self.detector_options(),
             stop,
-            estimate_intrinsics: !self.intrinsics_known,
             move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
                 MoveCheck {
                     arm: self.arm.clone(),
@@ -708,6 +782,17 @@ impl PreparedCell {
                     workspace: self.config.workspace,
                 }
             }),
+        }
+    }
+
+    /// Camera `camera` of a session, recording into `folder`.
+    pub fn session_camera(&self, camera: usize, folder: SessionFolder) -> SessionCamera {
+        SessionCamera {
+            name: self.config.cameras[camera].name.clone(),
+            folder,
+            setup: self.config.cameras[camera].setup,
+            board: self.cameras[camera].board.clone(),
+            estimate_intrinsics: !self.cameras[camera].intrinsics_known,
         }
     }
 

@@ -20,7 +20,7 @@ use handeye_core::setup::PosePair;
 use handeye_robot::{Joints, Robot};
 
 use super::SessionManifest;
-use super::{run_cameras_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
+use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
 
 /// Yields the next pose of a session from the samples accepted so far.
 pub trait PlanSource {
@@ -43,7 +43,7 @@ impl PlanSource for AdaptivePlanner {
 /// Runs a session whose poses come from `source`, one at a time. `setup.plan` is ignored (the
 /// source is the plan); `manifest_config` is the config path written into the manifest.
 ///
-/// A several-camera session (`setup.rig`, `others` the further cameras' devices): every camera
+/// A several-camera session (`setup.cameras`, `cameras` their devices): every camera
 /// grabs at each pose, every camera's folder gets the growing plan, and a pose is kept when any
 /// camera accepted it (the cameras' records share the plan's numbering).
 pub fn run_adaptive_session(
@@ -51,7 +51,7 @@ pub fn run_adaptive_session(
     manifest_config: std::path::PathBuf,
     source: &mut dyn PlanSource,
     robot: &mut dyn Robot,
-    (camera, others): (&mut dyn Camera, &mut [Box<dyn Camera>]),
+    cameras: &mut [&mut dyn Camera],
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
     // A resumed session: the manifest lists the poses chosen so far (the last one may not have
@@ -60,10 +60,10 @@ pub fn run_adaptive_session(
     let mut seen: Vec<Pose> = plan.poses.iter().map(|(pose, _)| *pose).collect();
     // With the rejected records kept aside (their index reused by a later pose).
     for visit in setup
-        .folder
+        .folder()
         .read_visits()?
         .into_iter()
-        .chain(setup.folder.read_rejected_visits()?)
+        .chain(setup.folder().read_rejected_visits()?)
     {
         seen.push(visit.base_from_flange);
     }
@@ -73,8 +73,8 @@ pub fn run_adaptive_session(
     let mut next = plan.poses.pop();
     loop {
         if next.is_none() {
-            let samples = if setup.folder.samples_path().is_file() {
-                Dataset::load(&setup.folder.samples_path())?.pairs
+            let samples = if setup.folder().samples_path().is_file() {
+                Dataset::load(&setup.folder().samples_path())?.pairs
             } else {
                 Vec::new()
             };
@@ -83,22 +83,13 @@ pub fn run_adaptive_session(
         let Some(pose) = next.take() else {
             break;
         };
-        plan.visit(
-            &setup,
-            pose,
-            robot,
-            (camera, others),
-            on_event,
-            &mut outcome,
-        )?;
+        plan.visit(&setup, pose, robot, cameras, on_event, &mut outcome)?;
         // A camera lost at this pose is not asked again in this run (as in a fixed plan).
-        if let Some(rig) = &mut setup.rig {
-            rig.lost = outcome
-                .failed_cameras
-                .iter()
-                .map(|f| f.camera.clone())
-                .collect();
-        }
+        setup.lost = outcome
+            .failed_cameras
+            .iter()
+            .map(|f| f.camera.clone())
+            .collect();
     }
     Ok(outcome)
 }
@@ -123,9 +114,9 @@ impl GrowingPlan {
         setup: &SessionSetup,
         manifest_config: std::path::PathBuf,
     ) -> Result<GrowingPlan, SessionError> {
-        let path = setup.folder.manifest_path();
+        let path = setup.folder().manifest_path();
         let (poses, inputs, manual) = if path.is_file() {
-            let manifest = setup.folder.read_manifest()?;
+            let manifest = setup.folder().read_manifest()?;
             (recorded_plan(&manifest), manifest.inputs, manifest.manual)
         } else {
             (Vec::new(), Vec::new(), false)
@@ -146,7 +137,7 @@ impl GrowingPlan {
         setup: &SessionSetup,
         pose: (Pose, Joints),
         robot: &mut dyn Robot,
-        (camera, others): (&mut dyn Camera, &mut [Box<dyn Camera>]),
+        cameras: &mut [&mut dyn Camera],
         on_event: &mut dyn FnMut(SessionEvent),
         outcome: &mut SessionOutcome,
     ) -> Result<bool, SessionError> {
@@ -157,7 +148,7 @@ impl GrowingPlan {
             ..setup.clone()
         };
         let index = self.poses.len() - 1;
-        let step_outcome = run_cameras_session(step, robot, camera, others, on_event)?;
+        let step_outcome = run_session(step, robot, cameras, on_event)?;
         outcome.visited_now += step_outcome.visited_now;
         outcome.moving_s += step_outcome.moving_s;
         outcome.settling_s += step_outcome.settling_s;
@@ -178,13 +169,7 @@ impl GrowingPlan {
         } else {
             // The next pose reuses the index: its rejected record (the corners it saw) is kept
             // aside, for the check of intrinsics that reject every pose.
-            for folder in std::iter::once(&setup.folder).chain(
-                setup
-                    .rig
-                    .iter()
-                    .flat_map(|rig| &rig.others)
-                    .map(|o| &o.folder),
-            ) {
+            for folder in setup.cameras.iter().map(|c| &c.folder) {
                 if folder.visit_path(index).is_file() {
                     folder.keep_rejected_visit(index)?;
                 }
@@ -196,20 +181,17 @@ impl GrowingPlan {
 }
 
 impl GrowingPlan {
-    /// The plan so far into the session's manifest (and a several-camera session's other
-    /// cameras' manifests).
+    /// The plan so far into every camera's manifest (the session's, the first camera's, with its
+    /// input hashes and hand-guided mark).
     fn write_manifests(&self, setup: &SessionSetup) -> Result<(), SessionError> {
-        let mut manifest =
-            SessionManifest::new(self.manifest_config.clone(), setup.setup, &self.poses)
-                .with_inputs(self.inputs.clone());
-        manifest.manual = self.manual;
-        setup.folder.write_manifest(&manifest)?;
-        for other in setup.rig.iter().flat_map(|rig| &rig.others) {
-            other.folder.write_manifest(&SessionManifest::new(
-                self.manifest_config.clone(),
-                other.setup,
-                &self.poses,
-            ))?;
+        for (c, camera) in setup.cameras.iter().enumerate() {
+            let mut manifest =
+                SessionManifest::new(self.manifest_config.clone(), camera.setup, &self.poses);
+            if c == 0 {
+                manifest = manifest.with_inputs(self.inputs.clone());
+                manifest.manual = self.manual;
+            }
+            camera.folder.write_manifest(&manifest)?;
         }
         Ok(())
     }

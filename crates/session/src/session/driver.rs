@@ -20,7 +20,7 @@
 //! camera does (`camera` is the camera of a one-camera cell; a several-camera cell's cameras by
 //! their names).
 //!
-//! Several cameras (`SessionSetup::rig`): one move and settle per pose, then every camera that
+//! Several cameras (`SessionSetup::cameras`): one move and settle per pose, then every camera that
 //! still needs the pose grabs; each camera's records go to its own folder, in the one-camera
 //! layout, measured by the same workers.
 
@@ -50,13 +50,35 @@ pub(in crate::session) use still::{wait_until_still, NotStill};
 pub(crate) use record::{measure, rebuild_samples};
 use record::{spawn_workers, Fault, Job, JobResult, Recording};
 
+/// One camera of a session: where its records go and what it measures.
+#[derive(Clone)]
+pub struct SessionCamera {
+    /// Its name (`camera` for a config that does not name its cameras).
+    pub name: String,
+    /// Its folder, in the one-camera layout; the first camera's is the session's.
+    pub folder: SessionFolder,
+    /// Eye-in-hand or eye-to-hand (written into its samples.yaml).
+    pub setup: Setup,
+    /// The board it looks at.
+    pub board: Target,
+    /// Its intrinsics are not known yet: record the detected corners only (no board pose, which
+    /// needs intrinsics); they are estimated from all frames after the run.
+    pub estimate_intrinsics: bool,
+}
+
 /// Everything the loop needs besides the hardware.
 #[derive(Clone)]
 pub struct SessionSetup {
-    /// Where records go (created or opened for resume).
-    pub folder: SessionFolder,
-    /// Eye-in-hand or eye-to-hand (written into samples.yaml).
-    pub setup: Setup,
+    /// The cameras, in the order the devices are passed: the first is the one the plan is made
+    /// for (its folder is the session's); several cameras grab at the same poses.
+    pub cameras: Vec<SessionCamera>,
+    /// The folder a resume takes: the first camera's, or a several-camera session's root.
+    pub resume_folder: std::path::PathBuf,
+    /// Whether events name their camera (a config that lists its cameras).
+    pub named_cameras: bool,
+    /// Cameras (by name) lost earlier in this run: not asked again (an adaptive session drives
+    /// one pose at a time).
+    pub lost: Vec<String>,
     /// The validated plan: target flange pose and the joint solution for each pose.
     pub plan: Vec<(Pose, Joints)>,
     /// Speed and acceleration caps for every move.
@@ -68,16 +90,11 @@ pub struct SessionSetup {
     pub settle_by_speed: Option<SettleBySpeed>,
     /// Frames whose board reprojection RMS exceeds this are rejected.
     pub max_reprojection_rms_px: f64,
-    /// The board.
-    pub board: Target,
     /// Detector settings.
     pub detector: DetectorOptions,
     /// Set (e.g. by Ctrl-C) to stop the arm — a move in progress decelerates where it is — and
     /// end the run cleanly.
     pub stop: Arc<AtomicBool>,
-    /// The intrinsics are not known yet: record the detected corners only (no board pose, which
-    /// needs intrinsics); they are estimated from all frames after the run.
-    pub estimate_intrinsics: bool,
     /// Every move is checked from the arm's actual joints before it is sent (`None`: nothing
     /// moves, e.g. a recorded robot).
     pub move_check: Option<MoveCheck>,
@@ -85,37 +102,13 @@ pub struct SessionSetup {
     /// where the arm stands (every move allowed by `move_check`), instead of plan order; `false`
     /// keeps plan order (a scripted order).
     pub reorder: bool,
-    /// A cell with several cameras: the others, grabbed at the same poses (`None`: one camera).
-    pub rig: Option<RigCameras>,
 }
 
-/// The further cameras of a several-camera session: `folder` of the [`SessionSetup`] is the
-/// first camera's.
-#[derive(Clone)]
-pub struct RigCameras {
-    /// The session's root folder (what `--resume` takes).
-    pub root: std::path::PathBuf,
-    /// The first camera's name.
-    pub camera_name: String,
-    /// The others, in config order.
-    pub others: Vec<OtherCamera>,
-    /// Cameras (any of them, by name) lost earlier in this run: not asked again (an adaptive
-    /// session drives one pose at a time).
-    pub lost: Vec<String>,
-}
-
-/// A further camera of a several-camera session: its own folder, setup and board (the
-/// detector settings and reprojection limit are the session's).
-#[derive(Clone)]
-pub struct OtherCamera {
-    /// Its name.
-    pub name: String,
-    /// Its folder, in the one-camera layout.
-    pub folder: SessionFolder,
-    /// On the flange or fixed in the cell.
-    pub setup: Setup,
-    /// The board it looks at.
-    pub board: Target,
+impl SessionSetup {
+    /// The session's folder: the first camera's.
+    pub fn folder(&self) -> &SessionFolder {
+        &self.cameras[0].folder
+    }
 }
 
 /// A camera that stopped delivering frames while others still did: a several-camera session's
@@ -198,7 +191,7 @@ pub struct SessionOutcome {
     pub moving_modelled_s: f64,
     /// Cameras that stopped delivering frames in this run while others still did.
     pub failed_cameras: Vec<CameraFailure>,
-    /// Per camera (the first is the setup's own, then `setup.rig`'s others): plan indices with
+    /// Per camera (in `SessionSetup::cameras`' order): plan indices with
     /// an accepted record, ascending.
     pub accepted_by_camera: Vec<Vec<usize>>,
 }
@@ -213,32 +206,21 @@ impl SessionOutcome {
 /// Runs (or resumes) a session: visits every plan pose without an accepted record, retries a
 /// pose whose board was not found once, and keeps every record on disk whatever happens. On a
 /// robot fault, camera fault or stop request the arm is stopped and the error says how to resume.
+///
+/// `cameras` are the devices of `setup.cameras`, in the same order. At each pose the arm moves
+/// and settles once, then every camera that still needs the pose grabs; each camera's frames are
+/// measured and committed into its own folder. A pose is visited again (once) while some camera
+/// has no accepted record of it. A camera that fails while another still delivers is named
+/// (`SessionOutcome::failed_cameras`, [`SessionEvent::CameraLost`]), its records kept, and not
+/// asked again in this run; when the last camera fails the run stops.
 pub fn run_session(
     setup: SessionSetup,
     robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
+    cameras: &mut [&mut dyn Camera],
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
-    run_cameras_session(setup, robot, camera, &mut [], on_event)
-}
-
-/// [`run_session`] of a cell with several cameras: `others` are the devices of `setup.rig`'s
-/// further cameras, in the same order. At each pose the arm moves and settles once, then every
-/// camera that still needs the pose grabs; each camera's frames are measured and committed into
-/// its own folder. A pose is visited again (once) while some camera has no accepted record of
-/// it. A camera that fails while another still delivers is named (`SessionOutcome::
-/// failed_cameras`, [`SessionEvent::CameraLost`]), its records kept, and not asked again in
-/// this run; when the last camera fails the run stops as a one-camera run does.
-pub fn run_cameras_session(
-    setup: SessionSetup,
-    robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
-    others: &mut [Box<dyn Camera>],
-    on_event: &mut dyn FnMut(SessionEvent),
-) -> Result<SessionOutcome, SessionError> {
-    let recordings = recordings(&setup, camera, others)?;
-    let mut devices: Vec<&mut dyn Camera> = vec![camera];
-    devices.extend(others.iter_mut().map(|c| c.as_mut() as &mut dyn Camera));
+    let recordings = recordings(&setup, cameras)?;
+    let devices = cameras;
     let mut state = RunState::new(&setup, &recordings)?;
     let mut samples = Vec::with_capacity(recordings.len());
     for (recording, visits) in recordings.iter().zip(&state.previous) {
@@ -402,47 +384,31 @@ pub fn run_cameras_session(
     Ok(outcome)
 }
 
-/// The run's cameras as recordings: the setup's own first, then `setup.rig`'s others.
+/// The run's cameras as recordings, in `setup.cameras`' order.
 fn recordings(
     setup: &SessionSetup,
-    camera: &dyn Camera,
-    others: &[Box<dyn Camera>],
+    devices: &[&mut dyn Camera],
 ) -> Result<Vec<Recording>, SessionError> {
-    let rig_others = setup.rig.as_ref().map_or(&[][..], |rig| &rig.others[..]);
-    if rig_others.len() != others.len() {
+    if setup.cameras.len() != devices.len() || devices.is_empty() {
         return Err(SessionError::DetectionThread(
-            "the further cameras opened do not match the session's",
+            "the cameras opened do not match the session's",
         ));
     }
-    let mut recordings = vec![Recording {
-        name: setup
-            .rig
-            .as_ref()
-            .map_or_else(|| "camera".to_string(), |rig| rig.camera_name.clone()),
-        folder: setup.folder.clone(),
-        setup: setup.setup,
-        board: setup.board.clone(),
-        detector: setup.detector.clone(),
-        max_rms: setup.max_reprojection_rms_px,
-        model: (!setup.estimate_intrinsics).then(|| *camera.model()),
-        frame_size: (camera.model().width, camera.model().height),
-    }];
-    recordings.extend(
-        rig_others
-            .iter()
-            .zip(others)
-            .map(|(other, device)| Recording {
-                name: other.name.clone(),
-                folder: other.folder.clone(),
-                setup: other.setup,
-                board: other.board.clone(),
-                detector: setup.detector.clone(),
-                max_rms: setup.max_reprojection_rms_px,
-                model: Some(*device.model()),
-                frame_size: (device.model().width, device.model().height),
-            }),
-    );
-    Ok(recordings)
+    Ok(setup
+        .cameras
+        .iter()
+        .zip(devices)
+        .map(|(camera, device)| Recording {
+            name: camera.name.clone(),
+            folder: camera.folder.clone(),
+            setup: camera.setup,
+            board: camera.board.clone(),
+            detector: setup.detector.clone(),
+            max_rms: setup.max_reprojection_rms_px,
+            model: (!camera.estimate_intrinsics).then(|| *device.model()),
+            frame_size: (device.model().width, device.model().height),
+        })
+        .collect())
 }
 
 /// Book-keeping of a run in progress. Cameras are numbered as in [`recordings`]; the outcome's
@@ -512,23 +478,15 @@ impl RunState {
             attempts,
             lost: recordings
                 .iter()
-                .map(|r| {
-                    setup
-                        .rig
-                        .as_ref()
-                        .is_some_and(|rig| rig.lost.contains(&r.name))
-                })
+                .map(|r| setup.lost.contains(&r.name))
                 .collect(),
             names: recordings.iter().map(|r| r.name.clone()).collect(),
             in_flight: 0,
             submitted: Default::default(),
             arrived: BTreeMap::new(),
             error: None,
-            folder: setup
-                .rig
-                .as_ref()
-                .map_or_else(|| setup.folder.root().to_path_buf(), |rig| rig.root.clone()),
-            named: setup.rig.is_some(),
+            folder: setup.resume_folder.clone(),
+            named: setup.named_cameras,
         })
     }
 

@@ -223,7 +223,7 @@ pub fn run_manual_session(
             break Err(SessionError::Interrupted {
                 plan_index: growing.poses.len(),
                 recorded: growing.poses.len(),
-                folder: setup.folder.root().to_path_buf(),
+                folder: setup.folder().root().to_path_buf(),
             });
         }
         if last_live.is_none_or(|t| t.elapsed() >= options.live_every) {
@@ -368,12 +368,14 @@ pub const TAUGHT_PLAN_FILE: &str = "taught-plan.yaml";
 /// The plan indices of the captures on disk that were accepted.
 fn accepted_indices(setup: &SessionSetup) -> Result<Vec<usize>, SessionError> {
     Ok(setup
-        .folder
+        .folder()
         .read_visits()?
         .iter()
         .filter(|v| {
             v.camera_from_target.is_some()
-                || (setup.estimate_intrinsics && v.rejected.is_none() && !v.corners_px.is_empty())
+                || (setup.cameras[0].estimate_intrinsics
+                    && v.rejected.is_none()
+                    && !v.corners_px.is_empty())
         })
         .map(|v| v.plan_index)
         .collect())
@@ -398,7 +400,7 @@ fn write_taught_plan(setup: &SessionSetup, poses: &[(Pose, Joints)]) -> Result<(
         crate::plan::Plan::taught(&taught).to_yaml()
     );
     setup
-        .folder
+        .folder()
         .write_file(std::path::Path::new(TAUGHT_PLAN_FILE), text.as_bytes())
 }
 
@@ -410,7 +412,7 @@ enum ArmFault {
 
 impl ArmFault {
     fn into_session(self, setup: &SessionSetup, recorded: usize) -> SessionError {
-        let folder = setup.folder.root().to_path_buf();
+        let folder = setup.folder().root().to_path_buf();
         match self {
             ArmFault::Robot(RobotError::Interrupted) => SessionError::Interrupted {
                 plan_index: recorded,
@@ -465,8 +467,8 @@ fn suggest(
     let Some(planner) = suggester else {
         return Ok(None);
     };
-    let samples = if setup.folder.samples_path().is_file() {
-        Dataset::load(&setup.folder.samples_path())?.pairs
+    let samples = if setup.folder().samples_path().is_file() {
+        Dataset::load(&setup.folder().samples_path())?.pairs
     } else {
         Vec::new()
     };
@@ -571,7 +573,7 @@ fn capture(
         &step,
         (base_from_flange, joints),
         &mut StandStill(robot),
-        (camera, &mut []),
+        &mut [&mut *camera],
         &mut |event| {
             if let SessionEvent::Recorded { rejected, .. } = &event {
                 last_rejection.clone_from(rejected);

@@ -25,8 +25,8 @@ use std::path::PathBuf;
 
 pub use adaptive::{run_adaptive_session, PlanSource};
 pub use driver::{
-    run_cameras_session, run_session, CameraFailure, OtherCamera, RigCameras, SessionEvent,
-    SessionOutcome, SessionSetup, SharedFrame,
+    run_session, CameraFailure, SessionCamera, SessionEvent, SessionOutcome, SessionSetup,
+    SharedFrame,
 };
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};

@@ -1,8 +1,8 @@
 //! A cell with several cameras (a `cameras:` config, `config::cameras`): one arm, one plan, every camera capturing at
 //! every pose, one joint solve (`solve.rs`). It runs as every run does, through `cell::run`: the
 //! camera the plan is made for (the first eye-in-hand one, see `CellConfig::planner`) is the
-//! run's `PreparedCell`, the others hang off it ([`RigCells`]), `open_hardware` opens each of
-//! them beside the arm, and the driver (`session::run_cameras_session`) moves and settles once
+//! one the plan is checked for, the others are `PreparedCell::cameras` beside it,
+//! `open_hardware` opens each of them beside the arm, and the driver (`session::run_session`) moves and settles once
 //! per pose and grabs every camera. Arm time is shared: the moves and settling are paid once
 //! for all cameras.
 //!
@@ -21,12 +21,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{prepare_config, CellError, PreparedCell};
-use crate::config::CellConfig;
-use crate::session::{
-    OtherCamera, PlannedPose, RigCameras, SessionError, SessionFolder, SessionManifest,
-};
-use handeye_core::error_text::error_chain;
+use super::PreparedCell;
+use crate::session::{PlannedPose, SessionError, SessionFolder, SessionManifest, SessionSetup};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{read_yaml, write_yaml};
@@ -91,79 +87,9 @@ pub struct PlannedViews {
     pub of: usize,
 }
 
-/// Counts, per camera, the plan poses at which it is expected to see its board (by the nominal
-/// mounts, its lens and the configured image margin).
-fn planned_views(cells: &[(&str, &PreparedCell)], plan: &[(Pose, Joints)]) -> Vec<PlannedViews> {
-    cells
-        .iter()
-        .map(|(name, p)| PlannedViews {
-            camera: name.to_string(),
-            poses: plan
-                .iter()
-                .filter(|(flange, _)| sees_board(p, flange))
-                .count(),
-            of: plan.len(),
-        })
-        .collect()
-}
-
-/// Whether the camera of `cell` is expected to see its board with the flange at
-/// `base_from_flange`: at least half the board's corners inside its image, by the nominal mounts,
-/// its lens and the configured image margin.
-pub fn sees_board(cell: &PreparedCell, base_from_flange: &Pose) -> bool {
-    let points = cell.board.points();
-    let margin = cell.config.session.image_margin_px;
-    let (w, h) = (
-        f64::from(cell.camera_model.width),
-        f64::from(cell.camera_model.height),
-    );
-    let camera_from_target = cell
-        .config
-        .camera()
-        .nominal
-        .camera_from_target(base_from_flange);
-    let inside = points
-        .iter()
-        .filter_map(|(_, _, point)| cell.camera_model.project(&(camera_from_target * point)))
-        .filter(|px| px.x >= margin && px.y >= margin && px.x <= w - margin && px.y <= h - margin)
-        .count();
-    2 * inside >= points.len()
-}
-
-/// A several-camera cell's other cameras, prepared: each a one-camera cell of the shared arm,
-/// plan and settings (the planner camera is the `PreparedCell` that holds this).
-pub struct RigCells {
-    /// The config (every camera).
-    pub config: CellConfig,
-    /// The other cameras, in config order, by name.
-    pub others: Vec<(String, PreparedCell)>,
-}
-
-impl RigCells {
-    /// The planner camera's name.
-    pub fn planner_name(&self) -> &str {
-        &self.config.camera().name
-    }
-
-    /// Every camera's name and cell, in config order, the planner being `cell`.
-    pub fn cells<'a>(&'a self, cell: &'a PreparedCell) -> Vec<(&'a str, &'a PreparedCell)> {
-        let mut others = self.others.iter();
-        self.config
-            .cameras
-            .iter()
-            .enumerate()
-            .filter_map(|(c, camera)| {
-                if c == self.config.planner {
-                    Some((camera.name.as_str(), cell))
-                } else {
-                    others.next().map(|(name, p)| (name.as_str(), p))
-                }
-            })
-            .collect()
-    }
-
+impl PreparedCell {
     /// The rig manifest of a session visiting `plan`.
-    fn manifest(&self, plan: &[(Pose, Joints)]) -> RigManifest {
+    fn rig_manifest(&self, plan: &[(Pose, Joints)]) -> RigManifest {
         RigManifest {
             config: self.config.file.clone(),
             cameras: self
@@ -175,40 +101,48 @@ impl RigCells {
                     setup: c.setup,
                 })
                 .collect(),
-            planner: self.planner_name().to_string(),
+            planner: self.config.camera().name.clone(),
             plan: SessionManifest::new(PathBuf::new(), Setup::EyeInHand, plan).plan,
         }
     }
 
-    /// How many of `plan`'s poses each camera is expected to see its board at; refuses (naming
-    /// it) a camera expected to see it at fewer than a camera needs.
-    pub fn check_views(
-        &self,
-        cell: &PreparedCell,
-        plan: &[(Pose, Joints)],
-    ) -> Result<Vec<PlannedViews>, String> {
-        let views = planned_views(&self.cells(cell), plan);
+    /// How many of `plan`'s poses each camera is expected to see its board at (by the nominal
+    /// mounts, its lens and the configured image margin); refuses (naming it) a camera expected
+    /// to see it at fewer than a camera needs: the plan is made for one camera, so the others'
+    /// share is checked before anything moves.
+    pub fn check_views(&self, plan: &[(Pose, Joints)]) -> Result<Vec<PlannedViews>, String> {
+        let views: Vec<PlannedViews> = (0..self.cameras.len())
+            .map(|c| PlannedViews {
+                camera: self.config.cameras[c].name.clone(),
+                poses: plan
+                    .iter()
+                    .filter(|(flange, _)| self.sees_board(c, flange))
+                    .count(),
+                of: plan.len(),
+            })
+            .collect();
         match views.iter().find(|v| v.poses < MIN_VIEWS_PER_CAMERA) {
             Some(blind) => Err(format!(
                 "camera `{}`: by the nominal cell it sees its board at {} of the {} poses (planned for camera `{}`), and a camera needs {MIN_VIEWS_PER_CAMERA}: check its nominal mount, or aim it where the arm goes; nothing was moved",
                 blind.camera,
                 blind.poses,
                 blind.of,
-                self.planner_name()
+                self.config.camera().name
             )),
             None => Ok(views),
         }
     }
 
-    /// Makes (for a new session) or checks (`resume`) `rig.yaml` at `root` and opens the other
-    /// cameras' folders (created when missing), for the driver.
+    /// Makes (for a new session) or checks (`resume`) `rig.yaml` at `root` and adds the other
+    /// cameras to `setup`, their folders created when missing; a resume then takes `root`.
     pub fn session_cameras(
         &self,
+        setup: &mut SessionSetup,
         root: &Path,
         resume: bool,
         plan: &[(Pose, Joints)],
-    ) -> Result<RigCameras, String> {
-        let manifest = self.manifest(plan);
+    ) -> Result<(), String> {
+        let manifest = self.rig_manifest(plan);
         let problem = |p: String| format!("{}: {p}", root.display());
         if resume && root.join(RIG_MANIFEST).is_file() {
             let on_disk = read_manifest(root).map_err(|e| {
@@ -235,52 +169,23 @@ impl RigCells {
         }
         // The failures of an earlier run are history: this run asks every camera again.
         let _ = std::fs::remove_file(root_failures(root));
-        let others = self
-            .others
-            .iter()
-            .map(|(name, p)| {
-                let sub = camera_folder(root, name);
-                let folder = if sub.join("session.yaml").is_file() {
-                    SessionFolder::resume(&sub)?
-                } else {
-                    let folder = SessionFolder::create(&sub)?;
-                    folder.write_manifest(&p.manifest(plan))?;
+        for c in self.others() {
+            let sub = camera_folder(root, &self.config.cameras[c].name);
+            let folder = if sub.join("session.yaml").is_file() {
+                SessionFolder::resume(&sub)
+            } else {
+                SessionFolder::create(&sub).and_then(|folder| {
                     folder
-                };
-                Ok(OtherCamera {
-                    name: name.clone(),
-                    folder,
-                    setup: p.config.camera().setup,
-                    board: p.board.clone(),
+                        .write_manifest(&self.manifest(c, plan))
+                        .map(|()| folder)
                 })
-            })
-            .collect::<Result<Vec<_>, SessionError>>()
+            }
             .map_err(|e| problem(e.to_string()))?;
-        Ok(RigCameras {
-            root: root.to_path_buf(),
-            camera_name: self.planner_name().to_string(),
-            others,
-            lost: Vec::new(),
-        })
+            setup.cameras.push(self.session_camera(c, folder));
+        }
+        setup.resume_folder = root.to_path_buf();
+        Ok(())
     }
-}
-
-/// Prepares a several-camera cell: each camera as a one-camera cell (its errors name it); the
-/// planner camera's is returned, holding the others.
-pub fn prepare_rig(rig: CellConfig) -> Result<PreparedCell, CellError> {
-    let mut cells = Vec::with_capacity(rig.cameras.len());
-    for (index, camera) in rig.cameras.iter().enumerate() {
-        let cell = prepare_config(rig.for_camera(index)).map_err(|e| {
-            CellError::Backend(format!("camera `{}`: {}", camera.name, error_chain(&e)))
-        })?;
-        cells.push((camera.name.clone(), cell));
-    }
-    let (_, mut planner) = cells.remove(rig.planner);
-    planner.rig = Some(RigCells {
-        config: rig,
-        others: cells,
-    });
-    Ok(planner)
 }
 
 /// The root folder of a several-camera session whose planner camera records into

@@ -83,8 +83,8 @@ pub(super) fn drive_plan(
     Result<SessionOutcome, SessionError>,
     Option<AdaptiveSummary>,
 ) {
-    let folder = setup.folder.clone();
-    let rig_root = setup.rig.as_ref().map(|rig| rig.root.clone());
+    let folder = setup.folder().clone();
+    let rig_root = cell.config.listed.then(|| setup.resume_folder.clone());
     let mut on_event = |event: SessionEvent| {
         // A lost camera of a several-camera session is kept in `failures.yaml` as it happens.
         if let (SessionEvent::CameraLost(failure), Some(root)) = (&event, &rig_root) {
@@ -95,13 +95,8 @@ pub(super) fn drive_plan(
         observer.event(event)
     };
     if !adaptive {
-        let outcome = session::run_cameras_session(
-            setup,
-            hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
-            &mut hardware.others,
-            &mut on_event,
-        );
+        let (robot, mut cameras) = hardware.devices();
+        let outcome = session::run_session(setup, robot, &mut cameras, &mut on_event);
         return (outcome, None);
     }
     // A generated plan's `count` is the most poses it takes (it chooses from more).
@@ -114,32 +109,27 @@ pub(super) fn drive_plan(
         .min(plan.len());
     // The planner camera's model; a several-camera cell adds one per other camera (they weigh
     // in on every choice and must each be good enough to stop: `rig::adaptive`).
-    let camera_planner = |camera: &PreparedCell, max: usize| {
-        camera
-            .adaptive_planner(plan.to_vec(), camera.config.adaptive_target_mm(), max)
+    let camera_planner = |camera: usize, max: usize| {
+        cell.adaptive_planner(camera, plan.to_vec(), cell.config.adaptive_target_mm(), max)
             .with_min_poses(cell.config.plan.min_poses)
             .with_motion(cell.config.limits, start, per_pose_s(cell))
-            .with_stop_check(good_enough(camera))
+            .with_stop_check(good_enough(cell, camera))
     };
-    let mut planner = camera_planner(cell, max_poses);
-    let others: Vec<_> = setup
-        .rig
+    let mut planner = camera_planner(cell.config.planner, max_poses);
+    let others: Vec<_> = setup.cameras[1..]
         .iter()
-        .flat_map(|rig| &rig.others)
         .map(|o| o.folder.clone())
         .collect();
-    let mut rig_planner = cell.rig.as_ref().map(|rig| {
-        let cells = std::iter::once(cell).chain(rig.others.iter().map(|(_, c)| c));
-        let mut planners = vec![camera_planner(cell, usize::MAX)];
-        planners.extend(
-            rig.others
-                .iter()
-                .map(|(_, c)| camera_planner(c, usize::MAX)),
-        );
-        let sees = cells
+    let mut rig_planner = cell.config.listed.then(|| {
+        let planners = cell
+            .run_order()
+            .map(|c| camera_planner(c, usize::MAX))
+            .collect();
+        let sees = cell
+            .run_order()
             .map(|c| {
                 plan.iter()
-                    .map(|(flange, _)| super::super::rig::sees_board(c, flange))
+                    .map(|(flange, _)| cell.sees_board(c, flange))
                     .collect()
             })
             .collect();
@@ -149,12 +139,13 @@ pub(super) fn drive_plan(
         Some(rig) => rig,
         None => &mut planner,
     };
+    let (robot, mut cameras) = hardware.devices();
     let outcome = session::run_adaptive_session(
         setup,
         cell.config_path(),
         source,
-        hardware.robot.as_mut(),
-        (hardware.camera.as_mut(), &mut hardware.others),
+        robot,
+        &mut cameras,
         &mut on_event,
     );
     let (planner, reached) = match &rig_planner {
@@ -192,8 +183,8 @@ fn per_pose_s(cell: &PreparedCell) -> f64 {
 
 /// The adaptive stop check besides the 1-sigma: the rotations spread well (the verdict's rule)
 /// and the held-out error is within the verdict's accuracy — what the verdict would call GOOD.
-fn good_enough(cell: &PreparedCell) -> StopCheck {
-    let setup = cell.config.camera().setup;
+fn good_enough(cell: &PreparedCell, camera: usize) -> StopCheck {
+    let setup = cell.config.cameras[camera].setup;
     let options = cell.config.solver.to_options();
     let accuracy = cell.config.verdict.accuracy();
     StopCheck(Arc::new(move |samples: &[PosePair], c: &Calibration| {

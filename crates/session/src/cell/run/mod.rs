@@ -383,10 +383,10 @@ pub fn run_opened(
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
     let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
-    let rig = match (&cell.rig, super::rig::root_of(folder.root())) {
-        (Some(rig), Some(root)) => Some(super::rig::solve_rig_folder(
+    let rig = match (cell.config.listed, super::rig::root_of(folder.root())) {
+        (true, Some(root)) => Some(super::rig::solve_rig_folder(
             root,
-            &rig.config,
+            &cell.config,
             &super::rig::RigOutput::run(root),
         )?),
         _ => None,

@@ -31,7 +31,7 @@ pub(super) fn check_before_opening(
             // Adaptive: the plan's poses are candidates; the ones that fail their checks are
             // skipped.
             let adaptive = cell.config.adaptive();
-            if adaptive && !cell.intrinsics_known {
+            if adaptive && !cell.camera().intrinsics_known {
                 return Err(RunError::AdaptiveNeedsIntrinsics);
             }
             if adaptive && cell.report.passing().is_empty() {
@@ -40,13 +40,13 @@ pub(super) fn check_before_opening(
             if !adaptive && !cell.report.ok() {
                 return Err(RunError::PlanFailed);
             }
-            if let Some(rig) = &cell.rig {
+            if cell.config.listed {
                 // An adaptive plan's candidates are the passing poses; a fixed plan all of them.
                 let plan = match adaptive {
                     true => cell.report.passing(),
                     false => cell.report.validated().unwrap_or_default(),
                 };
-                let views = rig.check_views(cell, &plan).map_err(RunError::Cameras)?;
+                let views = cell.check_views(&plan).map_err(RunError::Cameras)?;
                 observer.cameras_planned(&views);
             }
             if !cell.is_simulated() && !request.motion_confirmed {
@@ -56,7 +56,7 @@ pub(super) fn check_before_opening(
             }
             Ok(adaptive)
         }
-        Strategy::Holdout(_) | Strategy::HandGuided(_) if cell.rig.is_some() => {
+        Strategy::Holdout(_) | Strategy::HandGuided(_) if cell.config.listed => {
             Err(RunError::Cameras(
                 "a cell with several cameras runs its planned poses only (no held-out check or hand-guided capture yet); nothing was moved".into(),
             ))
@@ -196,7 +196,7 @@ pub(super) fn session_folder(
                     observer.note(
                         "nothing was recorded yet: the session takes the plan of today's config",
                     );
-                    manifest.plan = cell.manifest(plan).plan;
+                    manifest.plan = cell.manifest(cell.config.planner, plan).plan;
                     manifest_changed = true;
                 }
                 None => {
@@ -211,30 +211,35 @@ pub(super) fn session_folder(
         }
         return Ok(folder);
     }
-    let folder = match (&request.target, &cell.rig) {
-        (SessionTarget::New(out), Some(rig)) => {
+    let folder = match (&request.target, cell.config.listed) {
+        (SessionTarget::New(out), true) => {
             if super::super::rig::is_rig_folder(out) {
                 return Err(RunError::Cameras(format!(
                     "{}: already holds a several-camera session: pass --resume to continue it, or choose another folder",
                     out.display()
                 )));
             }
-            SessionFolder::create(&super::super::rig::camera_folder(out, rig.planner_name()))?
+            SessionFolder::create(&super::super::rig::camera_folder(
+                out,
+                &cell.config.camera().name,
+            ))?
         }
-        (SessionTarget::New(out), None) => SessionFolder::create(out)?,
-        (SessionTarget::Created(_), Some(_)) => {
+        (SessionTarget::New(out), false) => SessionFolder::create(out)?,
+        (SessionTarget::Created(_), true) => {
             return Err(RunError::Cameras(
                 "a cell with several cameras cannot record into a staging folder".into(),
             ))
         }
-        (SessionTarget::Created(folder), None) => folder.clone(),
+        (SessionTarget::Created(folder), false) => folder.clone(),
         (SessionTarget::Resume(_), _) => unreachable!("a resume has its folder"),
     };
     for note in folder.notes() {
         observer.note(note);
     }
     let recorded: &[(Pose, Joints)] = if fixed_plan { plan } else { &[] };
-    let manifest = cell.manifest(recorded).with_inputs(inputs);
+    let manifest = cell
+        .manifest(cell.config.planner, recorded)
+        .with_inputs(inputs);
     let manifest = match strategy {
         Strategy::HandGuided(_) => manifest.hand_guided(),
         Strategy::Planned | Strategy::Holdout(_) => manifest,
@@ -261,7 +266,7 @@ pub(super) fn drive_session(
         Strategy::Planned | Strategy::Holdout(_) => {
             let mut setup = cell.session_setup(folder.clone(), plan.to_vec(), request.stop.clone());
             setup.detector.jobs = request.jobs;
-            if let Some(rig) = &cell.rig {
+            if cell.config.listed {
                 let root = super::super::rig::root_of(folder.root()).ok_or_else(|| {
                     RunError::Cameras(format!(
                         "{}: not inside a several-camera session",
@@ -271,10 +276,8 @@ pub(super) fn drive_session(
                 let resuming = matches!(request.target, SessionTarget::Resume(_));
                 // An adaptive session's plan grows as it goes (in the planner camera's folder).
                 let recorded: &[(Pose, Joints)] = if fixed_plan { plan } else { &[] };
-                setup.rig = Some(
-                    rig.session_cameras(root, resuming, recorded)
-                        .map_err(RunError::Cameras)?,
-                );
+                cell.session_cameras(&mut setup, root, resuming, recorded)
+                    .map_err(RunError::Cameras)?;
             }
             observer.session_folder(folder, plan);
             observer.session_started(match strategy {
@@ -301,9 +304,9 @@ pub(super) fn drive_session(
     setup.detector.jobs = request.jobs;
     observer.session_folder(folder, &[]);
     observer.session_started(plan.len());
-    let mut planner = (!plan.is_empty() && cell.intrinsics_known).then(|| {
+    let mut planner = (!plan.is_empty() && cell.camera().intrinsics_known).then(|| {
         // Suggestions never stop on their own: the person decides when to finish.
-        cell.adaptive_planner(plan.to_vec(), 0.0, usize::MAX)
+        cell.adaptive_planner(cell.config.planner, plan.to_vec(), 0.0, usize::MAX)
     });
     let options = ManualOptions {
         real_arm: !cell.is_simulated() && !request.motion_confirmed,
@@ -317,7 +320,7 @@ pub(super) fn drive_session(
             planner.as_mut(),
             &options,
             hardware.robot.as_mut(),
-            hardware.camera.as_mut(),
+            hardware.cameras[0].as_mut(),
             control.as_mut(),
         )
     };
