@@ -25,14 +25,16 @@ def participant(domain, loopback):
     return DomainParticipant(domain)
 
 
-def qos_static():
+def qos_static(depth=1):
+    """Latched: a writer's last message reaches late joiners. A reader of several writers keeps
+    `depth` messages (tf2's /tf_static listener keeps 100), else one writer's hides another's."""
     from cyclonedds.core import Policy, Qos
     from cyclonedds.util import duration
 
     return Qos(
         Policy.Reliability.Reliable(duration(milliseconds=100)),
         Policy.Durability.TransientLocal,
-        Policy.History.KeepLast(1),
+        Policy.History.KeepLast(depth),
     )
 
 

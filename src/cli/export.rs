@@ -9,9 +9,10 @@ use clap::{Args, ValueEnum};
 
 use handeye_core::atomic_file::write_atomic_reporting;
 use handeye_core::setup::RobotFrames;
-use handeye_formats::export::{self, Exported, ExportedCell};
-use handeye_formats::ros2_launch::through_camera_link;
+use handeye_formats::export::{self, Exported};
 use handeye_formats::ExportFormat;
+
+use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
 use handeye_session::cell::rig::RigResultFile;
 use handeye_session::result::ResultFile;
 
@@ -47,11 +48,11 @@ pub(super) struct ExportArgs {
     output: Option<PathBuf>,
     #[command(flatten)]
     frames: super::frames::FrameArgs,
-    /// With `ros2-launch`: the camera's mounting link (REP 103 axes: x forward, y left, z up)
-    /// whose transform to --camera-frame the camera driver already publishes; the camera's
-    /// transform is then written to this link instead, with the standard optical rotation.
-    #[arg(long, value_name = "FRAME")]
-    camera_link: Option<String>,
+    /// With `ros2-launch` and --camera-link: where the camera driver's chain is read.
+    #[command(flatten)]
+    domain: DomainArgs,
+    #[command(flatten)]
+    link: CameraLinkArgs,
 }
 
 /// Runs `handeye export`.
@@ -65,28 +66,59 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
         FormatArg::Opencv => ExportFormat::Opencv,
     };
     let mut exported = exported_result(&args.result, args.frames)?;
-    if let Some(link) = &args.camera_link {
+    if args.link.camera_link.is_some() {
         anyhow::ensure!(
             format == ExportFormat::Ros2Launch,
             "--camera-link applies to --format ros2-launch only"
         );
-        anyhow::ensure!(
-            matches!(exported.cell, ExportedCell::One(_)),
-            "--camera-link names the link of one camera; {} is a result of {} cameras",
-            args.result.display(),
-            match exported.cell {
-                ExportedCell::Cameras(n) => n,
-                ExportedCell::One(_) => 1,
-            }
-        );
-        handeye_formats::validate_frame_id(link)
-            .map_err(|p| anyhow::anyhow!("--camera-link {link:?} is not a ROS frame id: {p}"))?;
-        exported.tree[0] = through_camera_link(&exported.tree[0], link);
+        let folder = args.result.parent().unwrap_or(std::path::Path::new("."));
+        let (heard, topic) = match args.link.recorded_chain(folder)? {
+            None => (None, "/tf_static".to_string()),
+            Some(Ok((tree, from))) => (Some(tree), from),
+            Some(Err(())) => (
+                Some(read_graph(&args.domain, &args.link, "/tf_static")?),
+                "/tf_static".to_string(),
+            ),
+        };
+        let heard = heard.as_ref();
+        hang_camera(&mut exported, &args.link, heard, &topic)?;
     }
     let text = exported
         .text(format)
         .with_context(|| format!("exporting {}", args.result.display()))?;
     write_or_print(&args.output, format, &text)
+}
+
+/// The static transforms on the domain's `topic` (a camera driver's chain).
+#[cfg(feature = "ros2")]
+fn read_graph(
+    domain: &DomainArgs,
+    link: &CameraLinkArgs,
+    topic: &str,
+) -> anyhow::Result<handeye_ros2::listen::TfTree> {
+    use handeye_ros2::link::{LinkOptions, Ros2Link};
+    let ros2 = Ros2Link::open(LinkOptions {
+        domain_id: domain.domain_id()?,
+        interfaces: domain.interfaces.clone(),
+        node_name: "handeye_export".into(),
+    })?;
+    Ok(handeye_ros2::tf_static::hear_static(
+        &ros2,
+        topic,
+        link.tf_wait()?,
+    )?)
+}
+
+/// Without ROS 2 in the build the graph cannot be read.
+#[cfg(not(feature = "ros2"))]
+fn read_graph(
+    _domain: &DomainArgs,
+    _link: &CameraLinkArgs,
+    _topic: &str,
+) -> anyhow::Result<handeye_ros2::listen::TfTree> {
+    anyhow::bail!(
+        "--camera-link reads the camera driver's chain from ROS 2, and this handeye was built without it: rebuild with `--features ros2`, pass --tf-from a session holding tf_static.yaml, or --optical-rotation-only to assume the chain"
+    )
 }
 
 /// Every transform of a result file, one camera's (`handeye run`, `solve`) or several cameras'

@@ -4,6 +4,7 @@
 pub(crate) mod out;
 
 mod camera;
+mod camera_link;
 mod console;
 mod detect;
 mod export;

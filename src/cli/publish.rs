@@ -1,27 +1,30 @@
 //! `handeye publish <result.yaml>`: the solved transforms (a one-camera cell's two unknowns, or
 //! every camera's mount and the boards of a cell with several) on ROS 2 `/tf_static`, latched
 //! (reliable, transient local, depth 1: what `static_transform_publisher` does), until Ctrl-C or
-//! `--duration`. The frame ids and the `base_link` turn are `export`'s (`exported_result`).
+//! `--duration`. The frame ids and the `base_link` turn are `export`'s (`exported_result`); what
+//! the graph already publishes is read first (`camera_link`: a frame is never given a second
+//! parent, and `--camera-link` hangs the camera from its driver's chain).
 
-use std::net::IpAddr;
 use std::path::PathBuf;
 
 use clap::Args;
 
+use super::camera_link::{CameraLinkArgs, DomainArgs};
+
 /// Publish a result's T_parent_child transforms (eye_in_hand T_flange_camera and T_base_target,
 /// eye_to_hand T_base_camera and T_flange_target) on /tf_static, with no ROS installation.
+/// /tf_static is read first: a frame that already has a parent there is refused, and
+/// --camera-link hangs the camera from the link its driver's chain starts at.
 #[derive(Debug, Args)]
 pub(super) struct PublishArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
     result: PathBuf,
     #[command(flatten)]
     frames: super::frames::FrameArgs,
-    /// The ROS 2 domain id (default: $ROS_DOMAIN_ID, else 0).
-    #[arg(long)]
-    domain_id: Option<u16>,
-    /// A local address DDS may use (repeat for several; default: every interface).
-    #[arg(long = "interface", value_name = "ADDRESS")]
-    interfaces: Vec<IpAddr>,
+    #[command(flatten)]
+    domain: DomainArgs,
+    #[command(flatten)]
+    link: CameraLinkArgs,
     /// The topic.
     #[arg(long, default_value = "/tf_static")]
     topic: String,
@@ -38,23 +41,16 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
             "--duration {d} s must be a positive number of seconds"
         );
     }
-    let domain_id = match args.domain_id {
-        Some(id) => id,
-        None => match std::env::var("ROS_DOMAIN_ID") {
-            Ok(v) if !v.trim().is_empty() => v
-                .trim()
-                .parse()
-                .map_err(|_| anyhow::anyhow!("ROS_DOMAIN_ID={v:?} is not a domain id (0..=232)"))?,
-            _ => 0,
-        },
-    };
+    let domain_id = args.domain.domain_id()?;
+    args.link.tf_wait()?;
     // A tree: every mount and board; camera-to-camera transforms would give a camera a second
     // parent.
-    let transforms = super::export::exported_result(&args.result, args.frames)?.tree;
+    let exported = super::export::exported_result(&args.result, args.frames)?;
     publish(
-        &transforms,
+        exported,
+        &args.link,
         domain_id,
-        args.interfaces,
+        args.domain.interfaces,
         &args.topic,
         args.duration,
     )
@@ -62,9 +58,10 @@ pub(super) fn run(args: PublishArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "ros2")]
 fn publish(
-    transforms: &[handeye_formats::export::FramedTransform],
+    mut exported: handeye_formats::export::Exported,
+    camera_link: &CameraLinkArgs,
     domain_id: u16,
-    interfaces: Vec<IpAddr>,
+    interfaces: Vec<std::net::IpAddr>,
     topic: &str,
     duration: Option<f64>,
 ) -> anyhow::Result<()> {
@@ -72,8 +69,17 @@ fn publish(
     use std::time::{Duration, Instant};
 
     use handeye_ros2::link::{LinkOptions, Ros2Link};
-    use handeye_ros2::tf_static::{StaticPublisher, StaticTransform};
+    use handeye_ros2::tf_static::{hear_static, StaticPublisher, StaticTransform};
 
+    let link = Ros2Link::open(LinkOptions {
+        domain_id,
+        interfaces,
+        node_name: "handeye_publish".into(),
+    })?;
+    // What the graph holds already (a camera driver's chain), before any frame gets a parent.
+    let heard = hear_static(&link, topic, camera_link.tf_wait()?)?;
+    super::camera_link::hang_camera(&mut exported, camera_link, Some(&heard), topic)?;
+    let transforms = exported.tree;
     let statics: Vec<StaticTransform> = transforms
         .iter()
         .map(|t| StaticTransform {
@@ -82,13 +88,8 @@ fn publish(
             parent_from_child: t.parent_from_child,
         })
         .collect();
-    let link = Ros2Link::open(LinkOptions {
-        domain_id,
-        interfaces,
-        node_name: "handeye_publish".into(),
-    })?;
     let _publisher = StaticPublisher::publish(&link, topic, &statics)?;
-    for t in transforms {
+    for t in &transforms {
         outln!(
             "publishing {} ({} → {}) on {topic}, domain {domain_id}",
             t.key,
@@ -111,9 +112,10 @@ fn publish(
 
 #[cfg(not(feature = "ros2"))]
 fn publish(
-    _transforms: &[handeye_formats::export::FramedTransform],
+    _exported: handeye_formats::export::Exported,
+    _camera_link: &CameraLinkArgs,
     _domain_id: u16,
-    _interfaces: Vec<IpAddr>,
+    _interfaces: Vec<std::net::IpAddr>,
     _topic: &str,
     _duration: Option<f64>,
 ) -> anyhow::Result<()> {

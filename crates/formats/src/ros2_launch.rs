@@ -2,11 +2,11 @@
 //! (`ros2 launch ./handeye_calibration.launch.py`): one `tf2_ros` `static_transform_publisher`
 //! node per solved transform, each `T_parent_child` with its translation and quaternion.
 //!
-//! A camera driver usually publishes its own `camera_link → camera_optical_frame`; a frame has
-//! one parent in TF, so publishing `T_flange_camera_optical_frame` beside it breaks the tree.
-//! [`through_camera_link`] turns the camera's transform into one to its mounting link (REP 103
-//! body axes: x forward, y left, z up) with the standard optical rotation, which the driver's
-//! own transform then completes.
+//! A camera driver usually publishes its own `camera_link → … → camera_optical_frame`; a frame
+//! has one parent in TF, so publishing `T_flange_camera_optical_frame` beside it breaks the tree.
+//! [`through_camera_link`] turns the camera's transform into one to its mounting link, given the
+//! driver's own `T_link_optical` (read from the graph by the CLI; [`link_from_optical`] is the
+//! bare optical rotation of REP 103 body axes), which the driver's chain then completes.
 
 use std::fmt::Write as _;
 
@@ -23,14 +23,19 @@ pub fn link_from_optical() -> Pose {
     Pose::from_parts(Translation3::identity(), rotation)
 }
 
-/// The camera's transform re-hung from its mounting link `link`: `T_parent_link =
-/// T_parent_optical · inv(T_link_optical)`, child `link`.
-pub fn through_camera_link(camera: &FramedTransform, link: &str) -> FramedTransform {
+/// The camera's transform re-hung from its mounting link `link`, whose chain to the optical
+/// frame is `link_from_optical`: `T_parent_link = T_parent_optical · inv(T_link_optical)`, child
+/// `link`.
+pub fn through_camera_link(
+    camera: &FramedTransform,
+    link: &str,
+    link_from_optical: &Pose,
+) -> FramedTransform {
     FramedTransform {
         key: camera.key.clone(),
         parent: camera.parent.clone(),
         child: link.to_string(),
-        parent_from_child: camera.parent_from_child * link_from_optical().inverse(),
+        parent_from_child: camera.parent_from_child * link_from_optical.inverse(),
     }
 }
 

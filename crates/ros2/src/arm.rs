@@ -23,7 +23,7 @@ use handeye_robot::kinematics::UrModel;
 use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
-use crate::link::{sensor_data_qos, static_qos, topic_name, Ros2Link};
+use crate::link::{sensor_data_qos, static_reader_qos, topic_name, Ros2Link};
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
     follow_joint_trajectory_error, Duration as RosDuration, FollowJointTrajectoryFeedback,
@@ -133,7 +133,7 @@ impl Ros2Arm {
             .subscribe::<TfMessage>(&options.tf_topic, sensor_data_qos())
             .map_err(setup_error)?;
         let static_sub = link
-            .subscribe::<TfMessage>(&options.tf_static_topic, static_qos())
+            .subscribe::<TfMessage>(&options.tf_static_topic, static_reader_qos())
             .map_err(setup_error)?;
         let action_name = topic_name(&options.action).map_err(setup_error)?;
         let qos = crate::link::reliable_qos();
@@ -563,7 +563,7 @@ fn silent_action(link: &Ros2Link, action: &str, framing: Framing) -> String {
 
 /// The publisher of a message as a number (its DDS writer's GID, hashed): two publishers of
 /// one TF edge are told apart by it.
-fn publisher_id(info: &ros2_client::MessageInfo) -> u64 {
+pub(crate) fn publisher_id(info: &ros2_client::MessageInfo) -> u64 {
     use std::hash::{Hash, Hasher};
     let mut hasher = std::collections::hash_map::DefaultHasher::new();
     info.publisher_gid().as_bytes().hash(&mut hasher);

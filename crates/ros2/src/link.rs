@@ -245,6 +245,13 @@ pub fn static_qos() -> QosProfile {
         .history(ros2_client::qos::History::KeepLast { depth: 1 })
 }
 
+/// A reader of latched transforms: [`static_qos`] keeping 100 messages, as tf2's `/tf_static`
+/// listener does (each writer's latched message counts; with one kept, a second node's message
+/// arriving in the same instant would hide the first's).
+pub fn static_reader_qos() -> QosProfile {
+    static_qos().history(ros2_client::qos::History::KeepLast { depth: 100 })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

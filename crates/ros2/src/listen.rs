@@ -216,6 +216,25 @@ impl TfTree {
         Ok(root_from_a.inverse() * root_from_b)
     }
 
+    /// Every edge heard: `(parent, child, T_parent_child)`, by child.
+    pub fn edges(&self) -> Vec<(String, String, Pose)> {
+        self.edges
+            .iter()
+            .map(|(child, e)| (e.parent.clone(), child.clone(), e.parent_from_child))
+            .collect()
+    }
+
+    /// The parent `frame` hangs from, if any was heard.
+    pub fn parent_of(&self, frame: &str) -> Option<&str> {
+        self.edges.get(frame).map(|e| e.parent.as_str())
+    }
+
+    /// The top of `frame`'s chain (`frame` itself when it has no parent), or why there is none
+    /// (a loop, or an edge on it whose publishers disagree).
+    pub fn root_of(&self, frame: &str) -> Result<String, String> {
+        self.root_and_pose(frame).map(|(root, _)| root)
+    }
+
     /// Every frame heard, sorted.
     pub fn frames(&self) -> Vec<String> {
         let mut all: Vec<String> = self

@@ -2,10 +2,13 @@
 //! `tf2_msgs/TFMessage` holding every transform, on a reliable, transient-local writer of depth
 //! 1, so a node that starts later still receives it while the writer lives.
 
+use std::time::{Duration, Instant};
+
 use handeye_core::geometry::Pose;
 use ros2_client::Publisher;
 
-use crate::link::{static_qos, Ros2Link};
+use crate::link::{static_qos, static_reader_qos, Ros2Link};
+use crate::listen::TfTree;
 use crate::msg::{Header, TfMessage, Time, Transform, TransformStamped};
 use crate::Ros2Error;
 
@@ -59,4 +62,25 @@ impl StaticPublisher {
             })?;
         Ok(StaticPublisher { _writer: writer })
     }
+}
+
+/// The static transforms other nodes keep latched on `topic` (normally `/tf_static`), as a late
+/// joiner hears them within `window` (transient local: each publisher's message arrives once
+/// discovery has matched it, a second or so on one machine): the tree they make, each edge with
+/// its publisher (two publishers of one edge that disagree make a lookup through it fail, naming
+/// both).
+pub fn hear_static(link: &Ros2Link, topic: &str, window: Duration) -> Result<TfTree, Ros2Error> {
+    let reader = link.subscribe::<TfMessage>(topic, static_reader_qos())?;
+    let mut tree = TfTree::default();
+    let end = Instant::now() + window;
+    while Instant::now() < end {
+        match reader.take() {
+            Ok(Some((message, info))) => {
+                tree.update_from(&message, crate::arm::publisher_id(&info), Instant::now());
+            }
+            // Nothing new (or an undecodable sample, which a tf2 listener skips too).
+            Ok(None) | Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    Ok(tree)
 }

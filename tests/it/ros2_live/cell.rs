@@ -269,6 +269,18 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
             "{log}"
         );
         peer.assert_served(12);
+        // What the graph held as static is part of the session: the driver's base_link → base
+        // turn, as the peer publishes it.
+        let recorded = handeye_session::session::tf_static::StaticTransformsFile::load(
+            &out_dir.join("tf_static.yaml"),
+        )
+        .unwrap();
+        let turn = recorded
+            .transforms
+            .iter()
+            .find(|t| (t.parent.as_str(), t.child.as_str()) == ("base_link", "base"))
+            .unwrap_or_else(|| panic!("{recorded:?}"));
+        assert!((turn.pose.rotation.angle() - std::f64::consts::PI).abs() < 1e-9);
         // The measured time from the arm's rest to the captured frame's stamp.
         let after: Vec<f64> = log
             .lines()

@@ -8,6 +8,7 @@
 //! Needs python3 (skips with a printed reason without it); `cyclonedds`, `numpy`, `pyyaml` and
 //! `pillow` go into a venv under CARGO_TARGET_TMPDIR on first use (scripts/test.sh does the same for CI).
 
+mod camera_chain;
 mod cell;
 mod console;
 mod fastdds;

@@ -113,6 +113,8 @@ pub struct Hardware {
     /// The cameras in the order a session grabs them: the planner camera first, then the others
     /// in config order ([`PreparedCell::run_order`]).
     pub cameras: Vec<Box<dyn Camera>>,
+    /// A ROS 2 cell's node: what the graph publishes is read on it (`None` for other arms).
+    pub ros2: Option<ros2::Ros2Node>,
 }
 
 impl Hardware {
@@ -629,6 +631,10 @@ impl PreparedCell {
             CameraConfig::Sim { .. } | CameraConfig::Files { .. } | CameraConfig::Ros2(_) => None,
         };
         let (robot, arm) = self.open_arm()?;
+        let ros2 = match &arm {
+            ArmSide::Ros2(node) => Some(node.clone()),
+            ArmSide::Flange(_) | ArmSide::Recorded { .. } => None,
+        };
         let mut cameras = Vec::with_capacity(self.cameras.len());
         for c in self.run_order() {
             let camera = match (c == planner, standalone.take()) {
@@ -645,7 +651,11 @@ impl PreparedCell {
             };
             cameras.push(camera);
         }
-        Ok(Hardware { robot, cameras })
+        Ok(Hardware {
+            robot,
+            cameras,
+            ros2,
+        })
     }
 
     /// The cameras in the order a session grabs them: the planner camera, then the others.

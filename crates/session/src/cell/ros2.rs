@@ -136,3 +136,39 @@ pub fn open_camera(
     .map_err(|e| CellError::Backend(format!("the ROS 2 camera: {e}")))?;
     Ok(Box::new(camera))
 }
+
+/// Records what the graph holds on the cell's `/tf_static` into the session folder
+/// (`tf_static.yaml`): the camera driver's chain, the robot driver's static frames.
+#[cfg(feature = "ros2")]
+pub fn record_static_transforms(
+    config: &CellConfig,
+    node: &Ros2Node,
+    folder: &crate::session::SessionFolder,
+) -> Result<usize, String> {
+    use crate::config::RobotConfig;
+    use crate::session::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
+    let RobotConfig::Ros2(r) = &config.robot else {
+        return Ok(0);
+    };
+    // Latched messages reach a late joiner once discovery has matched it: a second or so here.
+    let tree = handeye_ros2::tf_static::hear_static(
+        node,
+        &r.tf_static_topic,
+        std::time::Duration::from_secs_f64(1.5),
+    )
+    .map_err(|e| e.to_string())?;
+    let file = StaticTransformsFile::from_tree(&r.tf_static_topic, &tree);
+    file.save(&folder.root().join(TF_STATIC_FILE))
+        .map_err(|e| e.to_string())?;
+    Ok(file.transforms.len())
+}
+
+/// Without ROS 2 in the build there is no graph to record.
+#[cfg(not(feature = "ros2"))]
+pub fn record_static_transforms(
+    _config: &CellConfig,
+    _node: &Ros2Node,
+    _folder: &crate::session::SessionFolder,
+) -> Result<usize, String> {
+    Ok(0)
+}

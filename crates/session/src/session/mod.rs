@@ -20,6 +20,7 @@ pub mod manual;
 pub mod replay;
 pub mod solve;
 pub mod staging;
+pub mod tf_static;
 
 use std::path::PathBuf;
 

@@ -261,6 +261,17 @@ pub(super) fn drive_session(
     hardware: &mut Hardware,
     observer: &mut dyn RunObserver,
 ) -> Result<(SessionOutcome, Option<AdaptiveSummary>), RunError> {
+    // What the ROS 2 graph publishes as static (a camera driver's chain) is part of the session.
+    if let Some(node) = &hardware.ros2 {
+        match crate::cell::ros2::record_static_transforms(&cell.config, node, folder) {
+            Ok(0) => {}
+            Ok(n) => observer.note(&format!(
+                "{n} static transforms heard on the graph, kept in {}",
+                session::tf_static::TF_STATIC_FILE
+            )),
+            Err(e) => observer.note(&format!("the graph's static transforms were not kept: {e}")),
+        }
+    }
     let guide = match strategy {
         Strategy::HandGuided(guide) => guide,
         Strategy::Planned | Strategy::Holdout(_) => {
