@@ -28,6 +28,31 @@ pub(super) struct ReplayArgs {
     output: Option<PathBuf>,
 }
 
+/// The cell of `config_path` as the session `folder` recorded it: intrinsics a run read from
+/// the camera driver's topic are the session's (no driver needed); the shipped placeholder lens
+/// is refused.
+fn prepare_for(
+    folder: &SessionFolder,
+    config_path: &std::path::Path,
+) -> anyhow::Result<cell::PreparedCell> {
+    let mut config =
+        handeye_session::config::CellConfig::load(config_path).context("preparing the cell")?;
+    let from_topic = folder.root().join(cell::INTRINSICS_FROM_TOPIC_FILE);
+    if config.camera().intrinsics.is_none() && from_topic.is_file() {
+        config.camera_mut().intrinsics = Some(from_topic);
+    }
+    let prepared = cell::prepare_config(config).context("preparing the cell")?;
+    if let Some((file, name)) = prepared.placeholder_intrinsics() {
+        anyhow::bail!(
+            "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
+            file.display(),
+            config_path.display(),
+            folder.root().display()
+        );
+    }
+    Ok(prepared)
+}
+
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // The run writes the files a replay writes (the report, the estimates of a blamed file).
@@ -51,15 +76,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .config
         .clone()
         .unwrap_or_else(|| manifest.config.clone());
-    let prepared = cell::prepare(&config_path).context("preparing the cell")?;
-    if let Some((file, name)) = prepared.placeholder_intrinsics() {
-        anyhow::bail!(
-            "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
-            file.display(),
-            config_path.display(),
-            folder.root().display()
-        );
-    }
+    let prepared = prepare_for(&folder, &config_path)?;
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(

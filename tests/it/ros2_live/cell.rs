@@ -226,7 +226,12 @@ pub(super) fn text(out: &Output) -> String {
 /// The result in `session` against configs/ros2-sim-cell.yaml's `simulation:` truth, within
 /// 0.5 mm and 0.05°.
 pub(super) fn assert_truth(session: &Path) {
-    let mounts = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
+    assert_truth_of(&session.join("result.yaml"));
+}
+
+/// [`assert_truth`] of a result file.
+pub(super) fn assert_truth_of(result: &Path) {
+    let mounts = ResultFile::load_mounts(result).unwrap();
     let camera = pose_from_rotvec(
         Vector3::new(0.0312, -0.0694, 0.0447),
         Vector3::new(0.021, -0.016, 1.561),
@@ -293,6 +298,38 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
             crate::util::median(after.clone()),
             after.iter().cloned().fold(0.0, f64::max)
         );
+    });
+}
+
+#[test]
+fn intrinsics_from_the_camera_info_topic_alone_recover_the_truth() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 89, &[]);
+        // No `intrinsics:` file: the camera driver's camera_info is the calibration.
+        let file_line = format!(
+            "intrinsics: {}/cameras/sim-1280x720.yaml\n",
+            repo().join("configs").display()
+        );
+        let config = cell(dir.path(), 89, &[(file_line.as_str(), "")]);
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        assert!(out.status.success(), "{log}");
+        assert!(log.contains("intrinsics read from /camera_info"), "{log}");
+        assert_truth(&out_dir);
+        let kept = handeye_core::camera_model::CameraModel::load(
+            &out_dir.join(handeye_session::cell::INTRINSICS_FROM_TOPIC_FILE),
+        )
+        .unwrap();
+        let truth = super::sim_camera_model();
+        assert!((kept.fx - truth.fx).abs() < 1e-9 && (kept.cy - truth.cy).abs() < 1e-9);
+        // The session replays with the driver gone: the intrinsics it read are the session's.
+        drop(peer);
+        let replay = run(&["replay", out_dir.to_str().unwrap()]);
+        assert!(replay.status.success(), "{}", text(&replay));
+        assert_truth_of(&out_dir.join("replay-result.yaml"));
     });
 }
 

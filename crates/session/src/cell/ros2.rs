@@ -172,3 +172,62 @@ pub fn record_static_transforms(
 ) -> Result<usize, String> {
     Ok(0)
 }
+
+/// The intrinsics a ROS 2 camera driver publishes on `topic` (its factory calibration, as a
+/// RealSense keeps it): one `sensor_msgs/CameraInfo` heard on the cell's graph within the
+/// camera's frame timeout, for a config that gives no `intrinsics:` file.
+#[cfg(feature = "ros2")]
+pub fn intrinsics_from_topic(
+    config: &CellConfig,
+    topic: &str,
+    timeout_s: f64,
+) -> Result<CameraModel, CellError> {
+    use std::time::{Duration, Instant};
+
+    use handeye_ros2::link::{sensor_data_qos, LinkOptions, Ros2Link};
+    use handeye_ros2::msg::CameraInfo;
+
+    use crate::config::RobotConfig;
+
+    let RobotConfig::Ros2(r) = &config.robot else {
+        return Err(CellError::Backend(
+            "intrinsics from the camera_info topic need `robot: {backend: ros2}`".into(),
+        ));
+    };
+    let link = Ros2Link::open(LinkOptions {
+        domain_id: r.graph.domain_id,
+        interfaces: r.graph.interfaces.clone(),
+        node_name: "handeye_intrinsics".into(),
+    })
+    .map_err(|e| CellError::Backend(e.to_string()))?;
+    let reader = link
+        .subscribe::<CameraInfo>(topic, sensor_data_qos())
+        .map_err(|e| CellError::Backend(e.to_string()))?;
+    let end = Instant::now() + Duration::from_secs_f64(timeout_s);
+    while Instant::now() < end {
+        match reader.take() {
+            Ok(Some((info, _))) => {
+                return info.camera_model().map_err(|e| {
+                    CellError::Backend(format!(
+                        "intrinsics: none given, and the CameraInfo on {topic} is not a calibration: {e}; give `intrinsics:` (a camera_info YAML file)"
+                    ))
+                })
+            }
+            Ok(None) | Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    Err(CellError::Backend(format!(
+        "intrinsics: none given, so they are read from the camera driver's {topic}, and no CameraInfo arrived there within {timeout_s} s on domain {}: start the camera driver (or check camera.camera_info_topic), or give `intrinsics:` (a camera_info YAML file, `ros2 topic echo --once {topic}` prints one)",
+        r.graph.domain_id
+    )))
+}
+
+/// Without ROS 2 in the build no topic can be read.
+#[cfg(not(feature = "ros2"))]
+pub fn intrinsics_from_topic(
+    _config: &CellConfig,
+    _topic: &str,
+    _timeout_s: f64,
+) -> Result<CameraModel, CellError> {
+    Err(no_ros2())
+}

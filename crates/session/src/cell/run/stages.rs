@@ -261,6 +261,17 @@ pub(super) fn drive_session(
     hardware: &mut Hardware,
     observer: &mut dyn RunObserver,
 ) -> Result<(SessionOutcome, Option<AdaptiveSummary>), RunError> {
+    // Intrinsics read from the camera driver's topic are part of the session (a replay uses them).
+    if let Some(topic) = &cell.camera().intrinsics_topic {
+        let file = folder.root().join(crate::cell::INTRINSICS_FROM_TOPIC_FILE);
+        match cell.camera().camera_model.save_camera_info(&file) {
+            Ok(()) => observer.note(&format!(
+                "intrinsics read from {topic}, kept in {}",
+                crate::cell::INTRINSICS_FROM_TOPIC_FILE
+            )),
+            Err(e) => observer.note(&format!("the intrinsics from {topic} were not kept: {e}")),
+        }
+    }
     // What the ROS 2 graph publishes as static (a camera driver's chain) is part of the session.
     if let Some(node) = &hardware.ros2 {
         match crate::cell::ros2::record_static_transforms(&cell.config, node, folder) {
