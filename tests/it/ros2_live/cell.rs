@@ -274,6 +274,9 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
             "{log}"
         );
         peer.assert_served(12);
+        // The file is the driver's calibration: nothing to say about it.
+        let result = std::fs::read_to_string(out_dir.join("result.yaml")).unwrap();
+        assert!(!result.contains("camera driver publishes"), "{result}");
         // What the graph held as static is part of the session: the driver's base_link → base
         // turn, as the peer publishes it.
         let recorded = handeye_session::session::tf_static::StaticTransformsFile::load(
@@ -317,7 +320,10 @@ fn intrinsics_from_the_camera_info_topic_alone_recover_the_truth() {
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
         assert!(out.status.success(), "{log}");
-        assert!(log.contains("intrinsics read from /camera_info"), "{log}");
+        assert!(
+            log.contains("the camera driver's calibration on /camera_info kept in"),
+            "{log}"
+        );
         assert_truth(&out_dir);
         let kept = handeye_core::camera_model::CameraModel::load(
             &out_dir.join(handeye_session::cell::INTRINSICS_FROM_TOPIC_FILE),
@@ -330,6 +336,42 @@ fn intrinsics_from_the_camera_info_topic_alone_recover_the_truth() {
         let replay = run(&["replay", out_dir.to_str().unwrap()]);
         assert!(replay.status.success(), "{}", text(&replay));
         assert_truth_of(&out_dir.join("replay-result.yaml"));
+    });
+}
+
+#[test]
+fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 85, &[]);
+        // A file 4 % off in fx and fy while the driver publishes the camera's true calibration.
+        let lens = dir.path().join("stale.yaml");
+        let stale_lens = std::fs::read_to_string(repo().join("configs/cameras/sim-1280x720.yaml"))
+            .unwrap()
+            .replace(
+                "data: [800.0, 0.0, 641.3, 0.0, 800.0,",
+                "data: [832.0, 0.0, 641.3, 0.0, 832.0,",
+            );
+        std::fs::write(&lens, stale_lens).unwrap();
+        let file_line = format!(
+            "intrinsics: {}/cameras/sim-1280x720.yaml",
+            repo().join("configs").display()
+        );
+        let stale = format!("intrinsics: {}", lens.display());
+        let config = cell(dir.path(), 85, &[(file_line.as_str(), stale.as_str())]);
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        drop(peer);
+        let result = std::fs::read_to_string(out_dir.join("result.yaml"))
+            .unwrap_or_else(|e| panic!("{e}: {log}"));
+        assert!(
+            result.contains("differ from the calibration the camera driver publishes")
+                && result.contains("fx 832.0 px in the file, 800.0 px from the driver")
+                && result.contains("corners fit the driver"),
+            "{result}"
+        );
     });
 }
 

@@ -146,9 +146,9 @@ pub struct PreparedCamera {
     pub intrinsics_topic: Option<String>,
 }
 
-/// The intrinsics a ROS 2 camera driver published, kept in the session of a run that read them
-/// from its camera_info topic (a replay uses them).
-pub const INTRINSICS_FROM_TOPIC_FILE: &str = "camera_info_from_topic.yaml";
+/// The intrinsics a ROS 2 camera driver published, kept in the session of a run (a replay of a
+/// config without an `intrinsics:` file uses them; with one, the solve compares the two).
+pub use crate::session::solve::DRIVER_CALIBRATION_FILE as INTRINSICS_FROM_TOPIC_FILE;
 
 /// A cell whose config, boards, intrinsics and plan are loaded and checked: one arm, one plan,
 /// and its cameras (one, or several sharing the arm's poses).

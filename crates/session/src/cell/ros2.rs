@@ -182,10 +182,7 @@ pub fn intrinsics_from_topic(
     topic: &str,
     timeout_s: f64,
 ) -> Result<CameraModel, CellError> {
-    use std::time::{Duration, Instant};
-
-    use handeye_ros2::link::{sensor_data_qos, LinkOptions, Ros2Link};
-    use handeye_ros2::msg::CameraInfo;
+    use handeye_ros2::link::{LinkOptions, Ros2Link};
 
     use crate::config::RobotConfig;
 
@@ -200,6 +197,27 @@ pub fn intrinsics_from_topic(
         node_name: "handeye_intrinsics".into(),
     })
     .map_err(|e| CellError::Backend(e.to_string()))?;
+    read_camera_info(&link, topic, timeout_s)?.ok_or_else(|| {
+        CellError::Backend(format!(
+            "intrinsics: none given, so they are read from the camera driver's {topic}, and no CameraInfo arrived there within {timeout_s} s on domain {}: start the camera driver (or check camera.camera_info_topic), or give `intrinsics:` (a camera_info YAML file, `ros2 topic echo --once {topic}` prints one)",
+            r.graph.domain_id
+        ))
+    })
+}
+
+/// The calibration in the first `CameraInfo` heard on `topic` within `timeout_s` (`None`: none
+/// heard).
+#[cfg(feature = "ros2")]
+pub fn read_camera_info(
+    link: &Ros2Node,
+    topic: &str,
+    timeout_s: f64,
+) -> Result<Option<CameraModel>, CellError> {
+    use std::time::{Duration, Instant};
+
+    use handeye_ros2::link::sensor_data_qos;
+    use handeye_ros2::msg::CameraInfo;
+
     let reader = link
         .subscribe::<CameraInfo>(topic, sensor_data_qos())
         .map_err(|e| CellError::Backend(e.to_string()))?;
@@ -207,19 +225,26 @@ pub fn intrinsics_from_topic(
     while Instant::now() < end {
         match reader.take() {
             Ok(Some((info, _))) => {
-                return info.camera_model().map_err(|e| {
+                return info.camera_model().map(Some).map_err(|e| {
                     CellError::Backend(format!(
-                        "intrinsics: none given, and the CameraInfo on {topic} is not a calibration: {e}; give `intrinsics:` (a camera_info YAML file)"
+                        "the CameraInfo on {topic} is not a calibration: {e}; give `intrinsics:` (a camera_info YAML file)"
                     ))
                 })
             }
             Ok(None) | Err(_) => std::thread::sleep(Duration::from_millis(20)),
         }
     }
-    Err(CellError::Backend(format!(
-        "intrinsics: none given, so they are read from the camera driver's {topic}, and no CameraInfo arrived there within {timeout_s} s on domain {}: start the camera driver (or check camera.camera_info_topic), or give `intrinsics:` (a camera_info YAML file, `ros2 topic echo --once {topic}` prints one)",
-        r.graph.domain_id
-    )))
+    Ok(None)
+}
+
+/// Without ROS 2 in the build no topic can be read.
+#[cfg(not(feature = "ros2"))]
+pub fn read_camera_info(
+    _link: &Ros2Node,
+    _topic: &str,
+    _timeout_s: f64,
+) -> Result<Option<CameraModel>, CellError> {
+    Err(no_ros2())
 }
 
 /// Without ROS 2 in the build no topic can be read.

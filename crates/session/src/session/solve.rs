@@ -8,9 +8,11 @@
 //! `solve`, `config`, `dataset`, `result`, `vision` and the ground floor; the folder's reading
 //! and writing go through `SessionFolder`.
 
+mod driver_calibration;
 mod intrinsics_check;
 mod summary;
 
+pub use driver_calibration::DRIVER_CALIBRATION_FILE;
 pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
@@ -206,6 +208,22 @@ pub fn load_and_solve(
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
     solved.name_session_in(folder, &inputs.config);
+    // A ROS 2 driver's own calibration, kept by the run, against the config's file.
+    if let (Some(file), Some(file_model), true) = (
+        &inputs.config.camera().intrinsics,
+        &inputs.camera,
+        folder.root().join(DRIVER_CALIBRATION_FILE).is_file(),
+    ) {
+        let visits = folder.read_visits()?;
+        let notice = driver_calibration::driver_calibration_notice(
+            folder,
+            file,
+            file_model,
+            &visits,
+            &inputs.board,
+        );
+        solved.calibration.notices.extend(notice);
+    }
     if let Some(run) = folder.live_run() {
         solved
             .calibration
