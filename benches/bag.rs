@@ -98,7 +98,24 @@ fn write_metadata(bag: &Path, events: &[(i64, u16, Data)], topics: [(&str, &str,
     .unwrap();
 }
 
-fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
+/// The stops of a bag of `seconds` with `stops` stops (0: the default, 20 views of 1.55 s with
+/// 1.5 s of travel between them, looped): how many distinct views, and how long the arm stands at
+/// each and travels between two.
+fn stop_layout(seconds: f64, stops: usize) -> (usize, f64, f64) {
+    if stops == 0 {
+        return (20, 1.55, 1.5);
+    }
+    // Each stop 60 % standing, 40 % travel; a stop must outlast the 0.2 s still window.
+    let period = seconds / stops as f64;
+    assert!(
+        period * 0.6 > 0.25,
+        "{stops} stops in {seconds} s leave {:.2} s per stop: too short to stand still",
+        period
+    );
+    (stops, period * 0.6, period * 0.4)
+}
+
+fn write_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
     let repo = util::repo();
     let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
     let camera = CameraModel::load(&repo.join("configs/cameras/sim-1280x720.yaml")).unwrap();
@@ -111,7 +128,7 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         Vector3::new(0.012, -0.018, 0.297),
     );
     let centre = Point3::new(0.145, 0.145, 0.0);
-    let n = 20;
+    let (n, stay, travel) = stop_layout(seconds, stops);
     let views: Vec<Pose> = (0..n)
         .map(|i| {
             let look = LookAt {
@@ -142,7 +159,6 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         })
         .collect();
     let blank = vec![110u8; (camera.width * camera.height) as usize];
-    let (stay, travel) = (1.55, 1.5);
     // The views in a loop (a bag longer than one pass, `BAG_SECONDS`, visits them again).
     let at = |t: f64| -> (Pose, Option<usize>) {
         let period = stay + travel;
@@ -294,12 +310,22 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(60.0);
+    // `BAG_STOPS=200`: that many stops, each at its own view (default: 20 views, 3.05 s a stop).
+    let stops: usize = std::env::var("BAG_STOPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
     let dir = tempfile::tempdir().unwrap();
-    // `HANDEYE_BENCH_BAG_DIR`: write the bag there and keep it (to profile the import by hand).
+    // `HANDEYE_BENCH_BAG_DIR`: write the bag there and keep it (to profile the import by hand);
+    // with `HANDEYE_BENCH_WRITE_ONLY=1` nothing else is done (the bags of the docs' table).
     let bag = match std::env::var_os("HANDEYE_BENCH_BAG_DIR") {
-        Some(keep) => write_bag(Path::new(&keep), seconds),
-        None => write_bag(dir.path(), seconds),
+        Some(keep) => write_bag(Path::new(&keep), seconds, stops),
+        None => write_bag(dir.path(), seconds, stops),
     };
+    if std::env::var_os("HANDEYE_BENCH_WRITE_ONLY").is_some() {
+        println!("bag written: {}", bag.display());
+        return;
+    }
     let size: u64 = std::fs::read_dir(&bag)
         .unwrap()
         .filter_map(Result::ok)
@@ -362,7 +388,7 @@ fn main() {
             python.display()
         );
     }
-    if seconds > 60.0 {
+    if seconds > 60.0 || stops != 0 {
         return;
     }
     let mut run = 0;
