@@ -376,7 +376,9 @@ fn import_frames(
     let mut samples = Vec::new();
     let imported = import_bag_to(&request.bag, &request.options, &mut |i, sample, image| {
         let file = images_dir.join(format!("{i:03}.png"));
-        write_png(&file, image).with_context(|| format!("writing {}", file.display()))?;
+        image
+            .save(&file)
+            .with_context(|| format!("writing {}", file.display()))?;
         samples.push(BagSampleRecord {
             frame: format!("import/images/{i:03}.png"),
             image_stamp_s: sample.image_stamp_ns as f64 * 1e-9,
@@ -387,23 +389,6 @@ fn import_frames(
     })
     .context("importing a ROS 2 bag")?;
     Ok((imported, samples))
-}
-
-/// `image` as a PNG file, with the fast deflate (about a tenth of the default level's time, for
-/// files a fifth larger): a frame is written once here and read once by the session's camera.
-fn write_png(file: &Path, image: &image::GrayImage) -> anyhow::Result<()> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::ImageEncoder;
-    let mut bytes = Vec::new();
-    PngEncoder::new_with_quality(&mut bytes, CompressionType::Fast, FilterType::Adaptive)
-        .write_image(
-            image.as_raw(),
-            image.width(),
-            image.height(),
-            image::ExtendedColorType::L8,
-        )?;
-    std::fs::write(file, bytes)?;
-    Ok(())
 }
 
 /// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.

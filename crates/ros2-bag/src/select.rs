@@ -258,8 +258,28 @@ fn to_gray(
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
         let r = cdr::decode::<Image>(data).map_err(|e| wrap(e.into()))?;
-        raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
+        match packed_mono8(r) {
+            Ok(gray) => Ok(gray),
+            Err(r) => raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e))),
+        }
     }
+}
+
+/// A `mono8` image whose rows are packed (`step` = `width`, the usual case) is its own grey
+/// image: its pixels are taken as they are, not copied ([`raw_to_gray`] copies every other
+/// form, and checks it).
+pub(crate) fn packed_mono8(raw: Image) -> Result<GrayImage, Image> {
+    let pixels = raw.width as usize * raw.height as usize;
+    let packed = matches!(raw.encoding.as_str(), "mono8" | "8UC1")
+        && raw.step == raw.width
+        && pixels > 0
+        && raw.data.len() >= pixels;
+    if !packed {
+        return Err(raw);
+    }
+    let (width, height, mut data) = (raw.width, raw.height, raw.data);
+    data.truncate(pixels);
+    Ok(GrayImage::from_raw(width, height, data).expect("width × height pixels, checked"))
 }
 
 pub(crate) fn seconds_to_ns(s: f64) -> i64 {

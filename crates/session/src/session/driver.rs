@@ -378,6 +378,15 @@ pub fn run_cameras_session(
             while let Ok(result) = result_rx.try_recv() {
                 state.receive(result, on_event);
             }
+            // A few frames in flight per detection worker: a camera that serves faster than the
+            // board is detected (a recorded cell's folder camera serves at once) would otherwise
+            // queue every frame of the plan in memory (issue #43).
+            while state.in_flight > 2 * workers.len() {
+                match result_rx.recv() {
+                    Ok(result) => state.receive(result, on_event),
+                    Err(_) => break,
+                }
+            }
         }
         // Every result of this pass must be in before deciding on retries.
         state.drain(&result_rx, on_event);
