@@ -305,8 +305,9 @@ fn time_field(report: &str, name: &str) -> Option<String> {
 
 /// `h:mm:ss` or `m:ss.ss` as seconds.
 fn clock_seconds(text: &str) -> f64 {
-    text.split(':')
-        .fold(0.0, |total, part| total * 60.0 + part.parse::<f64>().unwrap_or(f64::NAN))
+    text.split(':').fold(0.0, |total, part| {
+        total * 60.0 + part.parse::<f64>().unwrap_or(f64::NAN)
+    })
 }
 
 /// `cmd` under GNU time `-v` (when it is there): prints its output and one line of figures;
@@ -316,7 +317,10 @@ fn timed(cmd: Command, label: &str) -> Option<Measured> {
     if !Path::new("/usr/bin/time").exists() {
         let mut cmd = cmd;
         let o = cmd.output().unwrap();
-        println!("{label}: (no /usr/bin/time)\n{}", String::from_utf8_lossy(&o.stdout));
+        println!(
+            "{label}: (no /usr/bin/time)\n{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
         return None;
     }
     let mut c = Command::new("/usr/bin/time");
@@ -406,7 +410,10 @@ fn compare(bag: &Path, board: &Path, dir: &Path) {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(1);
-    let mut binaries = vec![("this build", std::path::PathBuf::from(env!("CARGO_BIN_EXE_handeye")))];
+    let mut binaries = vec![(
+        "this build",
+        std::path::PathBuf::from(env!("CARGO_BIN_EXE_handeye")),
+    )];
     if let Some(before) = before {
         binaries.insert(0, ("before", before));
     }

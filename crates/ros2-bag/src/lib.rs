@@ -665,7 +665,10 @@ pub fn import_bag_to(
             if (image.width(), image.height()) != (camera.width, camera.height) {
                 return Err(BagError::CameraInfo {
                     path: path.to_path_buf(),
-                    topic: info_topic.as_ref().map(|t| t.name.clone()).unwrap_or_default(),
+                    topic: info_topic
+                        .as_ref()
+                        .map(|t| t.name.clone())
+                        .unwrap_or_default(),
                     problem: format!(
                         "{}x{} px, but the images on `{}` are {}x{} px",
                         camera.width,

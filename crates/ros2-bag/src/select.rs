@@ -411,7 +411,8 @@ impl StopAndGo<'_, '_> {
         skipped: &mut Vec<Skip>,
     ) -> Result<(), BagError> {
         let o = &options.select;
-        let lookup = |robot_ns: i64| tf.lookup(&options.base_frame, &options.flange_frame, robot_ns);
+        let lookup =
+            |robot_ns: i64| tf.lookup(&options.base_frame, &options.flange_frame, robot_ns);
         let half = seconds_to_ns(o.window_s / 2.0);
         let h = o.window_s / 2.0;
         // Each frame: Some(pose) when stationary; intervals are runs of stationary frames.

@@ -138,7 +138,8 @@ fn write_stops_bag(file: &Path, stops: usize) {
 }
 
 fn options(jobs: usize) -> BagOptions {
-    let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/targets/aprilgrid-6x6.yaml");
+    let board =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/targets/aprilgrid-6x6.yaml");
     BagOptions {
         base_frame: "base".into(),
         flange_frame: "tool0".into(),
@@ -185,7 +186,11 @@ fn frames_held_at_once_stay_bounded_however_many_stops_and_each_stops_sharp_fram
         assert_eq!(handed, expected);
         // The standing frames were all decoded (several per stop), yet each worker holds at most
         // its best and the frame it scores, and the interval's best is handed on alone.
-        assert!(imported.decoded >= 5 * stops, "{} decoded", imported.decoded);
+        assert!(
+            imported.decoded >= 5 * stops,
+            "{} decoded",
+            imported.decoded
+        );
         assert!(
             (1..=2 * jobs + 1).contains(&imported.frames_held_at_once),
             "{stops} stops, {jobs} worker(s): {} frames held at once",
@@ -229,7 +234,10 @@ fn a_packed_mono8_frame_is_taken_as_it_is_and_other_layouts_are_copied() {
     };
     let packed = super::select::packed_mono8(image(4, pixels.clone())).unwrap();
     assert_eq!(packed.as_raw(), &pixels);
-    assert_eq!(packed, handeye_ros2::image::raw_to_gray(&image(4, pixels.clone())).unwrap());
+    assert_eq!(
+        packed,
+        handeye_ros2::image::raw_to_gray(&image(4, pixels.clone())).unwrap()
+    );
     // Rows padded to 6 bytes: not packed, left to the copying decoder.
     let padded: Vec<u8> = (0..18u8).collect();
     assert!(super::select::packed_mono8(image(6, padded)).is_err());

@@ -109,7 +109,10 @@ mod tests {
             assert!(b < s / 4.0, "a board blurred by 5 px scores {b}, sharp {s}");
             // Decimated by 4: the same order, a sharp board still about 2.
             let (s4, b4) = (sharpness_at(&sharp, 4), sharpness_at(&blurred, 4));
-            assert!(s4 > b4 && (1.5..3.0).contains(&s4), "by 4: sharp {s4}, blurred {b4}");
+            assert!(
+                s4 > b4 && (1.5..3.0).contains(&s4),
+                "by 4: sharp {s4}, blurred {b4}"
+            );
             sharp_scores.push(s);
         }
         // The same edges at a quarter of the contrast: the same score.
@@ -136,7 +139,9 @@ mod tests {
 
     #[test]
     fn blocks_of_four_and_three_are_the_sums_written_out() {
-        let noisy = GrayImage::from_fn(41, 27, |x, y| image::Luma([((x * 37 + y * 11) % 253) as u8]));
+        let noisy = GrayImage::from_fn(41, 27, |x, y| {
+            image::Luma([((x * 37 + y * 11) % 253) as u8])
+        });
         let p = noisy.as_raw();
         for (b, w, h) in [(4usize, 10usize, 6usize), (3, 13, 9)] {
             let naive: Vec<i32> = (0..w * h)
@@ -154,7 +159,9 @@ mod tests {
     #[test]
     fn block_two_is_the_two_by_two_sum_written_out() {
         // The general block sum at 2 is exactly the 2×2 sums it replaced.
-        let noisy = GrayImage::from_fn(37, 29, |x, y| image::Luma([((x * 31 + y * 17) % 251) as u8]));
+        let noisy = GrayImage::from_fn(37, 29, |x, y| {
+            image::Luma([((x * 31 + y * 17) % 251) as u8])
+        });
         let (w, h) = (18usize, 14usize);
         let p = noisy.as_raw();
         let sums: Vec<i32> = (0..w * h)
