@@ -662,23 +662,7 @@ pub fn import_bag_to(
     let mut hand_on = |sample: &BagSample, image: &GrayImage| -> Result<(), BagError> {
         // The camera_info's size is the images' before anything is handed on.
         if let (Some(camera), 0) = (&camera, taken) {
-            if (image.width(), image.height()) != (camera.width, camera.height) {
-                return Err(BagError::CameraInfo {
-                    path: path.to_path_buf(),
-                    topic: info_topic
-                        .as_ref()
-                        .map(|t| t.name.clone())
-                        .unwrap_or_default(),
-                    problem: format!(
-                        "{}x{} px, but the images on `{}` are {}x{} px",
-                        camera.width,
-                        camera.height,
-                        options.image_topic,
-                        image.width(),
-                        image.height()
-                    ),
-                });
-            }
+            frame_size_check(path, camera, info_topic.as_ref(), options, image)?;
         }
         sink(taken, sample, image).map_err(BagError::Output)?;
         taken += 1;
@@ -703,6 +687,31 @@ pub fn import_bag_to(
         camera,
         offset: selected.offset,
         warnings,
+    })
+}
+
+/// The camera_info's size must be the images'.
+fn frame_size_check(
+    path: &Path,
+    camera: &CameraModel,
+    info_topic: Option<&TopicInfo>,
+    options: &BagOptions,
+    image: &GrayImage,
+) -> Result<(), BagError> {
+    if (image.width(), image.height()) == (camera.width, camera.height) {
+        return Ok(());
+    }
+    Err(BagError::CameraInfo {
+        path: path.to_path_buf(),
+        topic: info_topic.map(|t| t.name.clone()).unwrap_or_default(),
+        problem: format!(
+            "{}x{} px, but the images on `{}` are {}x{} px",
+            camera.width,
+            camera.height,
+            options.image_topic,
+            image.width(),
+            image.height()
+        ),
     })
 }
 
