@@ -1,9 +1,10 @@
 //! A ROS 2 bag imported as a session (`handeye import bag`): the bag read
-//! ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its
-//! frames written as they are chosen (none is kept in memory) with their flange poses as a
-//! recorded cell in a staging folder beside the output, run through the ordinary session driver and solved there, and the folder renamed into
-//! place only when all of that succeeded; the staging folder of an import that was killed is
-//! removed by the next one. What the import did is recorded in `<session>/import/bag-import.yaml`.
+//! ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its frames written as
+//! they are chosen (none is kept in memory) with their flange poses as a recorded cell in a
+//! staging folder beside the output, run through the ordinary session driver and solved there,
+//! and the folder renamed into place only when all of that succeeded; the staging folder of an
+//! import that was killed is removed by the next one. What the import did is recorded in
+//! `<session>/import/bag-import.yaml`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
