@@ -1,8 +1,8 @@
-//! Importing a 60 s ROS 2 bag with 30 fps 1280x720 `mono8` images (1.7 GB of pixels, MCAP
-//! without chunk compression, as rosbag2 writes by default) and 125 Hz TF: the whole
+//! Importing a ROS 2 bag with 30 fps 1280x720 `mono8` images (a 60 s bag is 1.7 GB of pixels,
+//! MCAP without chunk compression, as rosbag2 writes by default) and 125 Hz TF: the whole
 //! `handeye import bag` command — reading, TF chaining, stationary detection and sharpness over
-//! every standing frame, then the recorded-cell session (detection of the 20 chosen frames) and
-//! the solve. Target: ≤ 10 s.
+//! every standing frame, the chosen frames written, then the recorded-cell session (detection of
+//! the chosen frames), the solve and the report. Target: ≤ 10 s for 60 s.
 //!
 //! The bag is written here with the `mcap` crate and the tree's one CDR codec
 //! (`handeye_ros2::cdr`) into a temporary folder (the integration tests
@@ -10,11 +10,20 @@
 //! moves are a blank image: they are rejected as moving before being decoded, as real ones would
 //! be.
 //!
-//! Printed once before criterion's rounds: the whole command on all cores and pinned to one
-//! (`taskset -c 0`), each with its CPU time and peak RSS (GNU time), and the same bag read by the
-//! pure-Python `rosbags` (every message deserialised; `benches/read_bag_rosbags.py`). Issue #29's
-//! floors: peak RSS ≤ 300 MB, CPU ≤ 2× the Python reader's. `BAG_SECONDS=600` makes it a
-//! 10-minute bag (16.6 GB on disk) measured once, without criterion's rounds.
+//! Printed once before criterion's rounds: the whole command under GNU time (`-v`: CPU user +
+//! system, peak RSS) beside the same bag read by the pure-Python `rosbags` (every message
+//! deserialised; `benches/read_bag_rosbags.py`) in the same round, with the ratio of their CPU
+//! and the load average, then the command pinned to one core (`taskset -c 0`). Issue #43's
+//! goals: peak RSS ≤ 150 MB, CPU ≤ 1.5× the Python reader's.
+//!
+//! * `BAG_SECONDS=15` (default 60) and `BAG_STOPS=200` (default: 20 views of 1.55 s with 1.5 s
+//!   of travel, looped; with `BAG_STOPS` each stop its own view, 60 % of a stop standing): other
+//!   bags, measured once without criterion's rounds. 200 stops need 120 s or more (a stop must
+//!   outlast the 0.2 s still window).
+//! * `HANDEYE_BENCH_BAG_DIR=DIR HANDEYE_BENCH_WRITE_ONLY=1`: write the bag into DIR and stop;
+//!   `HANDEYE_BENCH_BAG=DIR/bag`: measure that bag instead of writing one.
+//! * `HANDEYE_BENCH_BEFORE=PATH`: also measure another `handeye` build (before a change), in the
+//!   same rounds; `HANDEYE_BENCH_ROUNDS=N` rounds (default 1), interleaved.
 //!
 //! `cargo bench --bench bag -- --warm-up-time 1 --measurement-time 3`
 
@@ -98,7 +107,24 @@ fn write_metadata(bag: &Path, events: &[(i64, u16, Data)], topics: [(&str, &str,
     .unwrap();
 }
 
-fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
+/// The stops of a bag of `seconds` with `stops` stops (0: the default, 20 views of 1.55 s with
+/// 1.5 s of travel between them, looped): how many distinct views, and how long the arm stands at
+/// each and travels between two.
+fn stop_layout(seconds: f64, stops: usize) -> (usize, f64, f64) {
+    if stops == 0 {
+        return (20, 1.55, 1.5);
+    }
+    // Each stop 60 % standing, 40 % travel; a stop must outlast the 0.2 s still window.
+    let period = seconds / stops as f64;
+    assert!(
+        period * 0.6 > 0.25,
+        "{stops} stops in {seconds} s leave {:.2} s per stop: too short to stand still",
+        period
+    );
+    (stops, period * 0.6, period * 0.4)
+}
+
+fn write_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
     let repo = util::repo();
     let board = Board::load(&repo.join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
     let camera = CameraModel::load(&repo.join("configs/cameras/sim-1280x720.yaml")).unwrap();
@@ -111,7 +137,7 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         Vector3::new(0.012, -0.018, 0.297),
     );
     let centre = Point3::new(0.145, 0.145, 0.0);
-    let n = 20;
+    let (n, stay, travel) = stop_layout(seconds, stops);
     let views: Vec<Pose> = (0..n)
         .map(|i| {
             let look = LookAt {
@@ -142,7 +168,6 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
         })
         .collect();
     let blank = vec![110u8; (camera.width * camera.height) as usize];
-    let (stay, travel) = (1.55, 1.5);
     // The views in a loop (a bag longer than one pass, `BAG_SECONDS`, visits them again).
     let at = |t: f64| -> (Pose, Option<usize>) {
         let period = stay + travel;
@@ -246,31 +271,95 @@ fn write_bag(dir: &Path, seconds: f64) -> std::path::PathBuf {
     bag
 }
 
-/// `cmd` under GNU time (when it is there), its output and the time line.
-fn timed(cmd: Command, label: &str) -> std::process::Output {
-    let mut timed = if Path::new("/usr/bin/time").exists() {
-        let mut c = Command::new("/usr/bin/time");
-        c.args([
-            "-f",
-            &format!("{label}: %e s wall, %U s user, %S s system, %M kB peak RSS"),
-        ])
-        .arg(cmd.get_program())
-        .args(cmd.get_args());
-        c
-    } else {
-        cmd
+/// What GNU time (`/usr/bin/time -v`) measured of one command, and the load average (1 min)
+/// just before it started.
+struct Measured {
+    wall_s: f64,
+    user_s: f64,
+    system_s: f64,
+    peak_rss_kb: u64,
+    load: f64,
+}
+
+impl Measured {
+    fn cpu_s(&self) -> f64 {
+        self.user_s + self.system_s
+    }
+}
+
+/// The 1-minute load average (`/proc/loadavg`), or NaN.
+fn load_average() -> f64 {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+/// The value of GNU time's `-v` line `name: value`.
+fn time_field(report: &str, name: &str) -> Option<String> {
+    report.lines().find_map(|line| {
+        let (key, value) = line.trim().rsplit_once(": ")?;
+        (key == name).then(|| value.trim().to_string())
+    })
+}
+
+/// `h:mm:ss` or `m:ss.ss` as seconds.
+fn clock_seconds(text: &str) -> f64 {
+    text.split(':').fold(0.0, |total, part| {
+        total * 60.0 + part.parse::<f64>().unwrap_or(f64::NAN)
+    })
+}
+
+/// `cmd` under GNU time `-v` (when it is there): prints its output and one line of figures;
+/// `None` without GNU time or when it failed.
+fn timed(cmd: Command, label: &str) -> Option<Measured> {
+    let load = load_average();
+    if !Path::new("/usr/bin/time").exists() {
+        let mut cmd = cmd;
+        let o = cmd.output().unwrap();
+        println!(
+            "{label}: (no /usr/bin/time)\n{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+        return None;
+    }
+    let mut c = Command::new("/usr/bin/time");
+    c.arg("-v").arg(cmd.get_program()).args(cmd.get_args());
+    let o = c.output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let field = |name: &str| time_field(&stderr, name);
+    let measured = Measured {
+        wall_s: clock_seconds(&field("Elapsed (wall clock) time (h:mm:ss or m:ss)")?),
+        user_s: field("User time (seconds)")?.parse().ok()?,
+        system_s: field("System time (seconds)")?.parse().ok()?,
+        peak_rss_kb: field("Maximum resident set size (kbytes)")?.parse().ok()?,
+        load,
     };
-    let o = timed.output().unwrap();
+    let last = |text: &str, n: usize| -> String {
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(n)..].join("\n")
+    };
     println!(
-        "{label}:\n{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
+        "{label}: {:.2} s wall, {:.2} s user + {:.2} s system = {:.2} s CPU, {:.0} MB peak RSS (load average {:.2}){}\n{}",
+        measured.wall_s,
+        measured.user_s,
+        measured.system_s,
+        measured.cpu_s(),
+        measured.peak_rss_kb as f64 / 1024.0,
+        load,
+        if o.status.success() { "" } else { " FAILED" },
+        last(&String::from_utf8_lossy(&o.stdout), 3)
     );
-    o
+    o.status.success().then_some(measured)
 }
 
 fn import_command(bag: &Path, board: &Path, out: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_handeye"));
+    import_command_of(Path::new(env!("CARGO_BIN_EXE_handeye")), bag, board, out)
+}
+
+/// `import bag` of `handeye` (this tree's binary, or another build to compare with).
+fn import_command_of(handeye: &Path, bag: &Path, board: &Path, out: &Path) -> Command {
+    let mut c = Command::new(handeye);
     c.args(["import", "bag"])
         .arg(bag)
         .args([
@@ -288,18 +377,100 @@ fn import_command(bag: &Path, board: &Path, out: &Path) -> Command {
     c
 }
 
+/// The Python interpreter of the venv with `rosbags` (`HANDEYE_BAG_PYTHON`, else the one
+/// scripts/test.sh makes under the target folder).
+fn rosbags_python() -> std::path::PathBuf {
+    std::env::var_os("HANDEYE_BAG_PYTHON")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(&std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
+                .join("tmp/bag-venv/bin/python")
+        })
+}
+
+/// The bag to measure: `HANDEYE_BENCH_BAG` (one written before), else one written now into
+/// `HANDEYE_BENCH_BAG_DIR` (kept) or `dir`.
+fn the_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
+    if let Some(bag) = std::env::var_os("HANDEYE_BENCH_BAG") {
+        return bag.into();
+    }
+    match std::env::var_os("HANDEYE_BENCH_BAG_DIR") {
+        Some(keep) => write_bag(Path::new(&keep), seconds, stops),
+        None => write_bag(dir, seconds, stops),
+    }
+}
+
+/// The whole command, and `HANDEYE_BENCH_BEFORE`'s (an earlier build) when given, each beside
+/// the `rosbags` reader, `HANDEYE_BENCH_ROUNDS` times (default 1) interleaved: peak RSS, CPU
+/// (user + system) and the ratio to the reader's CPU in the same round, with the load average.
+fn compare(bag: &Path, board: &Path, dir: &Path) {
+    let python = rosbags_python();
+    let before = std::env::var_os("HANDEYE_BENCH_BEFORE").map(std::path::PathBuf::from);
+    let rounds: usize = std::env::var("HANDEYE_BENCH_ROUNDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let mut binaries = vec![(
+        "this build",
+        std::path::PathBuf::from(env!("CARGO_BIN_EXE_handeye")),
+    )];
+    if let Some(before) = before {
+        binaries.insert(0, ("before", before));
+    }
+    for round in 0..rounds {
+        let reader = if python.is_file() {
+            let mut c = Command::new(&python);
+            c.arg(util::repo().join("benches/read_bag_rosbags.py"))
+                .arg(bag);
+            timed(c, "rosbags (Python) reading every message")
+        } else {
+            println!(
+                "rosbags comparison skipped: no {} (scripts/test.sh makes it)",
+                python.display()
+            );
+            None
+        };
+        for (name, handeye) in &binaries {
+            let out = dir.join(format!("session-{name}-{round}").replace(' ', "-"));
+            let label = format!("import bag, {name}, all cores");
+            let Some(m) = timed(import_command_of(handeye, bag, board, &out), &label) else {
+                continue;
+            };
+            if let Some(r) = &reader {
+                println!(
+                    "  {name}: {:.0} MB peak RSS, CPU {:.2} s = {:.2}x the reader's {:.2} s (load average {:.2} / {:.2})",
+                    m.peak_rss_kb as f64 / 1024.0,
+                    m.cpu_s(),
+                    m.cpu_s() / r.cpu_s(),
+                    r.cpu_s(),
+                    m.load,
+                    r.load
+                );
+            }
+            let _ = std::fs::remove_dir_all(&out);
+        }
+    }
+}
+
 fn main() {
     // `BAG_SECONDS=600` writes a 10-minute bag (16.6 GB: needs the disk) and measures it once.
     let seconds: f64 = std::env::var("BAG_SECONDS")
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(60.0);
+    // `BAG_STOPS=200`: that many stops, each at its own view (default: 20 views, 3.05 s a stop).
+    let stops: usize = std::env::var("BAG_STOPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
     let dir = tempfile::tempdir().unwrap();
-    // `HANDEYE_BENCH_BAG_DIR`: write the bag there and keep it (to profile the import by hand).
-    let bag = match std::env::var_os("HANDEYE_BENCH_BAG_DIR") {
-        Some(keep) => write_bag(Path::new(&keep), seconds),
-        None => write_bag(dir.path(), seconds),
-    };
+    // With `HANDEYE_BENCH_WRITE_ONLY=1` the bag is written (into `HANDEYE_BENCH_BAG_DIR`) and
+    // nothing else is done (the bags of the docs' table).
+    let bag = the_bag(dir.path(), seconds, stops);
+    if std::env::var_os("HANDEYE_BENCH_WRITE_ONLY").is_some() {
+        println!("bag written: {}", bag.display());
+        return;
+    }
     let size: u64 = std::fs::read_dir(&bag)
         .unwrap()
         .filter_map(Result::ok)
@@ -323,18 +494,16 @@ fn main() {
     let started = std::time::Instant::now();
     let imported = handeye_ros2_bag::import_bag(&bag, &options).unwrap();
     println!(
-        "library import_bag: {:.2} s ({} samples of {} images)",
+        "library import_bag: {:.2} s ({} samples of {} images, {} decoded, at most {} decoded frames alive at once)",
         started.elapsed().as_secs_f64(),
         imported.samples.len(),
-        imported.images
+        imported.images,
+        imported.decoded,
+        imported.frames_held_at_once
     );
     drop(imported);
-    // The whole command on both cores, then pinned to one (`taskset`): the detection of the
-    // chosen frames runs on every core.
-    timed(
-        import_command(&bag, &board, &dir.path().join("session-once")),
-        "whole command, all cores",
-    );
+    compare(&bag, &board, dir.path());
+    // Pinned to one core (`taskset`): the detection of the chosen frames runs on every core.
     if Path::new("/usr/bin/taskset").exists() {
         let mut one = Command::new("/usr/bin/taskset");
         let inner = import_command(&bag, &board, &dir.path().join("session-one-core"));
@@ -343,26 +512,7 @@ fn main() {
             .args(inner.get_args());
         timed(one, "whole command, one core (taskset -c 0)");
     }
-    // The same bag read by the pure-Python `rosbags` (every message deserialised), in the venv
-    // tests/it/bag_import.rs uses (or `HANDEYE_BAG_PYTHON`): what a ROS user's own script costs.
-    let python = std::env::var_os("HANDEYE_BAG_PYTHON")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(&std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
-                .join("tmp/bag-venv/bin/python")
-        });
-    if python.is_file() {
-        let mut c = Command::new(&python);
-        c.arg(util::repo().join("benches/read_bag_rosbags.py"))
-            .arg(&bag);
-        timed(c, "rosbags (Python) reading every message");
-    } else {
-        println!(
-            "rosbags comparison skipped: no {} (scripts/test.sh makes it)",
-            python.display()
-        );
-    }
-    if seconds > 60.0 {
+    if seconds > 60.0 || stops != 0 || std::env::var_os("HANDEYE_BENCH_BAG").is_some() {
         return;
     }
     let mut run = 0;

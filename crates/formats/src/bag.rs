@@ -1,9 +1,10 @@
 //! A ROS 2 bag imported as a session (`handeye import bag`): the bag read
-//! ([`handeye_ros2_bag::import_bag`]: storage, TF, the frames chosen), its
-//! frames written with their flange poses as a recorded cell in a staging folder beside the
-//! output, run through the ordinary session driver and solved there, and the folder renamed into
-//! place only when all of that succeeded; the staging folder of an import that was killed is
-//! removed by the next one. What the import did is recorded in `<session>/import/bag-import.yaml`.
+//! ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its frames written as
+//! they are chosen (none is kept in memory) with their flange poses as a recorded cell in a
+//! staging folder beside the output, run through the ordinary session driver and solved there,
+//! and the folder renamed into place only when all of that succeeded; the staging folder of an
+//! import that was killed is removed by the next one. What the import did is recorded in
+//! `<session>/import/bag-import.yaml`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -23,7 +24,7 @@ use handeye_session::cell::run::{
 use handeye_session::cell::PreparedCell;
 use handeye_session::session::{self, SessionFolder, SolvedSession};
 
-use handeye_ros2_bag::{import_bag, BagImport, BagOptions, SkipReason};
+use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, SkipReason};
 
 /// What to import and where.
 #[derive(Debug, Clone)]
@@ -245,10 +246,29 @@ pub fn import_bag_session(
     say: &mut dyn FnMut(BagNote),
 ) -> anyhow::Result<BagSession> {
     let a = request;
-    let options = &request.options;
     let out = absolute(&a.output)?;
     check_output(&out, say)?;
-    let imported = import_bag(&a.bag, options).context("importing a ROS 2 bag")?;
+    // Stage everything next to the output; dropped (removed) on any error. Created (and locked)
+    // first: the chosen frames are written into it as the bag is read, then the run records
+    // there. The result names the session where it will be (the verdict's advice, e.g.
+    // `handeye replay DIR --config ...`), not the staging folder.
+    let parent = out
+        .parent()
+        .ok_or_else(|| anyhow::anyhow!("{}: has no parent folder", out.display()))?;
+    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
+    let staging = session::Staging::create(parent, &name, STAGING_TAG)
+        .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
+    let stage = staging.path().to_path_buf();
+    let folder = SessionFolder::create(&stage)?.to_be_moved_to(&out);
+    let import_dir = stage.join("import");
+    let images_dir = import_dir.join("images");
+    std::fs::create_dir_all(&images_dir)
+        .with_context(|| format!("creating {}", images_dir.display()))?;
+    let (imported, samples) = import_frames(a, &images_dir)?;
     say_what_was_read(request, &imported, say);
     anyhow::ensure!(
         imported.samples.len() >= 3,
@@ -262,47 +282,6 @@ pub fn import_bag_session(
         }
     );
 
-    // Stage everything next to the output; dropped (removed) on any error.
-    let parent = out
-        .parent()
-        .ok_or_else(|| anyhow::anyhow!("{}: has no parent folder", out.display()))?;
-    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "session".into());
-    let staging = session::Staging::create(parent, &name, STAGING_TAG)
-        .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
-    let stage = staging.path().to_path_buf();
-    // Created (and locked) first: the imported files go into it, then the run records there.
-    // The result names the session where it will be (the verdict's advice, e.g. `handeye replay
-    // DIR --config ...`), not the staging folder.
-    let folder = SessionFolder::create(&stage)?.to_be_moved_to(&out);
-    let import_dir = stage.join("import");
-    let images_dir = import_dir.join("images");
-    std::fs::create_dir_all(&images_dir)
-        .with_context(|| format!("creating {}", images_dir.display()))?;
-    // The frames are encoded on every core (rayon keeps the order).
-    let samples = {
-        use rayon::prelude::*;
-        imported
-            .samples
-            .par_iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let file = images_dir.join(format!("{i:03}.png"));
-                s.image
-                    .save(&file)
-                    .with_context(|| format!("writing {}", file.display()))?;
-                Ok(BagSampleRecord {
-                    frame: format!("import/images/{i:03}.png"),
-                    image_stamp_s: s.image_stamp_ns as f64 * 1e-9,
-                    robot_stamp_s: s.robot_stamp_ns as f64 * 1e-9,
-                    sharpness: s.sharpness,
-                })
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?
-    };
     let poses: Vec<_> = imported
         .samples
         .iter()
@@ -387,6 +366,30 @@ pub fn import_bag_session(
         summary,
         solved,
     })
+}
+
+/// Reads the bag, writing each chosen frame into `images_dir` (`NNN.png`) the moment it is
+/// chosen; returns what was read and the frames' records.
+fn import_frames(
+    request: &BagSessionRequest,
+    images_dir: &Path,
+) -> anyhow::Result<(BagImport, Vec<BagSampleRecord>)> {
+    let mut samples = Vec::new();
+    let imported = import_bag_to(&request.bag, &request.options, &mut |i, sample, image| {
+        let file = images_dir.join(format!("{i:03}.png"));
+        image
+            .save(&file)
+            .with_context(|| format!("writing {}", file.display()))?;
+        samples.push(BagSampleRecord {
+            frame: format!("import/images/{i:03}.png"),
+            image_stamp_s: sample.image_stamp_ns as f64 * 1e-9,
+            robot_stamp_s: sample.robot_stamp_ns as f64 * 1e-9,
+            sharpness: sample.sharpness,
+        });
+        Ok(())
+    })
+    .context("importing a ROS 2 bag")?;
+    Ok((imported, samples))
 }
 
 /// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.

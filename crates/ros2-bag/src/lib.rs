@@ -20,7 +20,9 @@
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
 //! an ordinary session through the recorded-cell path (`handeye_formats::bag`); this crate
-//! writes nothing.
+//! writes nothing. Each chosen frame is handed over the moment it is chosen ([`import_bag_to`])
+//! and not kept, so the import's memory does not grow with the number of samples either: a few
+//! decoded frames are alive at once ([`BagImport::frames_held_at_once`]).
 //!
 //! Modules: `storage` (the two storage formats; `mcap_index`, an MCAP file's index), `tf` (the TF
 //! buffer), `select` (stationary intervals, sharpness, the clock offset). Sits beside
@@ -30,6 +32,8 @@
 
 mod mcap_index;
 pub mod select;
+#[cfg(test)]
+mod select_tests;
 pub mod storage;
 #[cfg(test)]
 mod storage_tests;
@@ -176,6 +180,9 @@ pub enum BagError {
         /// What could not be allocated, and what to do.
         problem: String,
     },
+    /// The caller could not take a chosen frame (writing it failed); its error names the file.
+    #[error(transparent)]
+    Output(Box<dyn std::error::Error + Send + Sync>),
     /// The clock offset could not be estimated.
     #[error("{}: estimating the camera-to-robot clock offset: {problem}", path.display())]
     Offset {
@@ -291,7 +298,8 @@ pub struct BagOptions {
     pub detector: DetectorOptions,
 }
 
-/// One frame chosen for calibration.
+/// One frame chosen for calibration (its image went to the caller as it was chosen:
+/// [`import_bag_to`]).
 #[derive(Debug, Clone)]
 pub struct BagSample {
     /// The image's header stamp (camera clock), ns.
@@ -300,8 +308,6 @@ pub struct BagSample {
     pub robot_stamp_ns: i64,
     /// `T_base_flange` at `robot_stamp_ns`, interpolated.
     pub base_from_flange: Pose,
-    /// The image, 8-bit grey.
-    pub image: GrayImage,
     /// [`handeye_vision::sharpness`]: Laplacian over gradient energy, about 2 for sharp edges,
     /// lower with blur.
     pub sharpness: f64,
@@ -327,7 +333,16 @@ pub struct BagImport {
     pub offset: OffsetEstimate,
     /// What is wrong with the bag but did not stop the import.
     pub warnings: Vec<BagWarning>,
+    /// The most decoded frames that were alive at once (pass 2's workers' frames and bests, the
+    /// frame being handed over): a few, whatever the number of samples.
+    pub frames_held_at_once: usize,
 }
+
+/// Where [`import_bag_to`] hands each chosen frame, as it is chosen: its number (0, 1, ... in
+/// stamp order), the sample and its 8-bit grey image, which is dropped on return. An error stops
+/// the import ([`BagError::Output`]).
+pub type FrameSink<'s> = dyn FnMut(usize, &BagSample, &GrayImage) -> Result<(), Box<dyn std::error::Error + Send + Sync>>
+    + 's;
 
 /// What pass 1 keeps of a message.
 enum Payload {
@@ -505,10 +520,22 @@ fn image_stamps_back(
     }))
 }
 
-/// Reads a bag and picks the frames to calibrate from (see the module docs). The bag is read
-/// twice, message by message, never whole: pass 1 reads the TF, the camera_info and the image
-/// stamps; pass 2 reads and decodes only the frames the selection looks at, one at a time.
+/// Reads a bag and picks the frames to calibrate from, without their images: [`import_bag_to`]
+/// with a sink that drops them.
 pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
+    import_bag_to(path, options, &mut |_, _, _| Ok(()))
+}
+
+/// Reads a bag and picks the frames to calibrate from (see the module docs), handing each
+/// chosen frame to `sink` as it is chosen (in stamp order; its size is checked against the
+/// camera_info first). The bag is read twice, message by message, never whole: pass 1 reads the
+/// TF, the camera_info and the image stamps; pass 2 reads and decodes only the frames the
+/// selection looks at, a few at a time.
+pub fn import_bag_to(
+    path: &Path,
+    options: &BagOptions,
+    sink: &mut FrameSink<'_>,
+) -> Result<BagImport, BagError> {
     let bag = storage::Bag::open(path)?;
     let mut wanted: Vec<String> = options.tf_topics.clone();
     wanted.push(options.image_topic.clone());
@@ -629,6 +656,17 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         compressed,
         decoded: 0,
         workers: decoding_workers(camera.as_ref(), options)?,
+        held: select::FrameCount::default(),
+    };
+    let mut taken = 0;
+    let mut hand_on = |sample: &BagSample, image: &GrayImage| -> Result<(), BagError> {
+        // The camera_info's size is the images' before anything is handed on.
+        if let (Some(camera), 0) = (&camera, taken) {
+            frame_size_check(path, camera, info_topic.as_ref(), options, image)?;
+        }
+        sink(taken, sample, image).map_err(BagError::Output)?;
+        taken += 1;
+        Ok(())
     };
     let selected = select::select(
         path,
@@ -637,32 +675,43 @@ pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagErr
         &buffer,
         camera.as_ref(),
         options,
+        &mut hand_on,
     )?;
-    if let (Some(camera), Some(first)) = (&camera, selected.samples.first()) {
-        if (first.image.width(), first.image.height()) != (camera.width, camera.height) {
-            return Err(BagError::CameraInfo {
-                path: path.to_path_buf(),
-                topic: info_topic.map(|t| t.name).unwrap_or_default(),
-                problem: format!(
-                    "{}x{} px, but the images on `{}` are {}x{} px",
-                    camera.width,
-                    camera.height,
-                    options.image_topic,
-                    first.image.width(),
-                    first.image.height()
-                ),
-            });
-        }
-    }
     Ok(BagImport {
         format: bag.format(),
         samples: selected.samples,
         skipped: selected.skipped,
         images: decoded.len(),
         decoded: frames.decoded,
+        frames_held_at_once: frames.held.peak(),
         camera,
         offset: selected.offset,
         warnings,
+    })
+}
+
+/// The camera_info's size must be the images'.
+fn frame_size_check(
+    path: &Path,
+    camera: &CameraModel,
+    info_topic: Option<&TopicInfo>,
+    options: &BagOptions,
+    image: &GrayImage,
+) -> Result<(), BagError> {
+    if (image.width(), image.height()) == (camera.width, camera.height) {
+        return Ok(());
+    }
+    Err(BagError::CameraInfo {
+        path: path.to_path_buf(),
+        topic: info_topic.map(|t| t.name.clone()).unwrap_or_default(),
+        problem: format!(
+            "{}x{} px, but the images on `{}` are {}x{} px",
+            camera.width,
+            camera.height,
+            options.image_topic,
+            image.width(),
+            image.height()
+        ),
     })
 }
 

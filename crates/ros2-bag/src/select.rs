@@ -18,6 +18,7 @@
 //! Frames whose TF lookup fails (a TF gap, or outside the TF stream) are skipped with the reason.
 
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ::image::GrayImage;
 
@@ -33,7 +34,11 @@ use super::{BagError, BagOptions, BagSample};
 use handeye_ros2::cdr;
 use handeye_ros2::image::{compressed_to_gray, raw_to_gray};
 use handeye_ros2::msg::{CompressedImage, Image};
-use handeye_vision::sharpness::sharpness;
+use handeye_vision::sharpness::{sharpness, sharpness_at};
+
+/// The decimation a standing interval's frames are ranked at ([`sharpness_at`]): 4×4 blocks, about
+/// half the work of [`sharpness`]'s 2×2; the winner alone is scored with [`sharpness`].
+const RANKING_BLOCK: usize = 4;
 
 /// How the arm moved while the bag was recorded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -171,7 +176,48 @@ pub(crate) struct Frames<'b> {
     pub(crate) decoded: usize,
     /// Threads that read, decode and score frames at once (what the memory limits allow).
     pub(crate) workers: usize,
+    /// The decoded frames alive at once.
+    pub(crate) held: FrameCount,
 }
+
+/// How many decoded frames are alive at once, and the most there were: what keeps the import's
+/// memory flat is that this stays a few frames (each worker's frame and best, the interval's
+/// best, the sample being handed on), whatever the number of samples or frames.
+#[derive(Debug, Default)]
+pub(crate) struct FrameCount {
+    now: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+impl FrameCount {
+    /// `image`, counted until it is dropped.
+    fn hold(&self, image: GrayImage) -> Held<'_> {
+        let now = self.now.fetch_add(1, Ordering::SeqCst) + 1;
+        self.peak.fetch_max(now, Ordering::SeqCst);
+        Held { image, count: self }
+    }
+
+    /// The most decoded frames that were alive at once.
+    pub(crate) fn peak(&self) -> usize {
+        self.peak.load(Ordering::SeqCst)
+    }
+}
+
+/// A decoded frame, counted in its [`FrameCount`] while it lives.
+pub(crate) struct Held<'c> {
+    pub(crate) image: GrayImage,
+    count: &'c FrameCount,
+}
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        self.count.now.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Where each chosen frame goes the moment it is chosen (in stamp order): the sample and its
+/// image, which is dropped on return.
+pub(crate) type Sink<'s> = dyn FnMut(&BagSample, &GrayImage) -> Result<(), BagError> + 's;
 
 pub(crate) struct Selected {
     pub(crate) samples: Vec<BagSample>,
@@ -180,15 +226,16 @@ pub(crate) struct Selected {
 }
 
 /// The frame read from the bag and turned grey; its message is dropped on return.
-fn decode(
+fn decode<'f>(
     path: &Path,
     topic: &str,
     image: &ImageRef,
-    frames: &mut Frames<'_>,
-) -> Result<GrayImage, BagError> {
+    frames: &'f mut Frames<'_>,
+) -> Result<Held<'f>, BagError> {
     let data = frames.reader.data(image.location)?;
     frames.decoded += 1;
-    to_gray(path, topic, image, frames.compressed, &data)
+    let gray = to_gray(path, topic, image, frames.compressed, &data)?;
+    Ok(frames.held.hold(gray))
 }
 
 /// A frame's message turned grey.
@@ -211,15 +258,36 @@ fn to_gray(
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
         let r = cdr::decode::<Image>(data).map_err(|e| wrap(e.into()))?;
-        raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e)))
+        match packed_mono8(r) {
+            Ok(gray) => Ok(gray),
+            Err(r) => raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e))),
+        }
     }
+}
+
+/// A `mono8` image whose rows are packed (`step` = `width`, the usual case) is its own grey
+/// image: its pixels are taken as they are, not copied ([`raw_to_gray`] copies every other
+/// form, and checks it).
+pub(crate) fn packed_mono8(raw: Image) -> Result<GrayImage, Image> {
+    let pixels = raw.width as usize * raw.height as usize;
+    let packed = matches!(raw.encoding.as_str(), "mono8" | "8UC1")
+        && raw.step == raw.width
+        && pixels > 0
+        && raw.data.len() >= pixels;
+    if !packed {
+        return Err(raw);
+    }
+    let (width, height, mut data) = (raw.width, raw.height, raw.data);
+    data.truncate(pixels);
+    Ok(GrayImage::from_raw(width, height, data).expect("width × height pixels, checked"))
 }
 
 pub(crate) fn seconds_to_ns(s: f64) -> i64 {
     (s * 1e9).round() as i64
 }
 
-/// Picks the frames (see the module docs).
+/// Picks the frames (see the module docs); each chosen frame goes to `sink` as it is chosen, in
+/// stamp order, and is not kept.
 pub(crate) fn select(
     path: &Path,
     images: &[ImageRef],
@@ -227,6 +295,7 @@ pub(crate) fn select(
     tf: &TfBuffer,
     camera: Option<&CameraModel>,
     options: &BagOptions,
+    sink: &mut Sink<'_>,
 ) -> Result<Selected, BagError> {
     let o = &options.select;
     let mut tf = tf.clone();
@@ -280,13 +349,14 @@ pub(crate) fn select(
                     Ok(base_from_flange) => {
                         let gray = decode(path, topic, image, frames)?;
                         last = Some(image.stamp_ns);
-                        samples.push(BagSample {
+                        let sample = BagSample {
                             image_stamp_ns: image.stamp_ns,
                             robot_stamp_ns: robot,
                             base_from_flange,
-                            sharpness: sharpness(&gray),
-                            image: gray,
-                        });
+                            sharpness: sharpness(&gray.image),
+                        };
+                        sink(&sample, &gray.image)?;
+                        samples.push(sample);
                     }
                     Err(e) => skipped.push(Skip {
                         stamp_ns: image.stamp_ns,
@@ -296,85 +366,21 @@ pub(crate) fn select(
             }
         }
         Motion::StopAndGo => {
-            let half = seconds_to_ns(o.window_s / 2.0);
-            let h = o.window_s / 2.0;
-            // Each frame: Some(pose) when stationary; intervals are runs of stationary frames.
-            let mut interval: Vec<(usize, Pose)> = Vec::new();
-            let close = |interval: &mut Vec<(usize, Pose)>,
-                         frames: &mut Frames<'_>,
-                         samples: &mut Vec<BagSample>,
-                         skipped: &mut Vec<Skip>|
-             -> Result<(), BagError> {
-                if interval.is_empty() {
-                    return Ok(());
-                }
-                let (best, sharpness, image) = sharpest(path, topic, images, interval, frames)?;
-                for (k, (i, _)) in interval.iter().enumerate() {
-                    if k != best {
-                        skipped.push(Skip {
-                            stamp_ns: images[*i].stamp_ns,
-                            reason: SkipReason::NotSharpest,
-                        });
-                    }
-                }
-                let (i, pose) = interval[best];
-                samples.push(BagSample {
-                    image_stamp_ns: images[i].stamp_ns,
-                    robot_stamp_ns: images[i].stamp_ns - offset_ns,
-                    base_from_flange: pose,
-                    sharpness,
-                    image,
-                });
-                interval.clear();
-                Ok(())
+            let standing = StopAndGo {
+                path,
+                topic,
+                images,
+                offset_ns,
+                sink,
             };
-            for &i in &order {
-                let image = &images[i];
-                let robot = image.stamp_ns - offset_ns;
-                let poses = lookup(robot - half)
-                    .and_then(|a| Ok((a, lookup(robot)?, lookup(robot + half)?)));
-                let reason = match poses {
-                    Err(e) => SkipReason::TfGap(e.to_string()),
-                    Ok((a, b, c)) => {
-                        let v = (a.translation.vector - b.translation.vector)
-                            .norm()
-                            .max((b.translation.vector - c.translation.vector).norm())
-                            / h;
-                        let w = a
-                            .rotation
-                            .angle_to(&b.rotation)
-                            .max(b.rotation.angle_to(&c.rotation))
-                            / h;
-                        if v <= o.max_speed_m_s && w <= o.max_speed_rad_s {
-                            // A camera that sends frames only at the stops (triggered by the
-                            // driver) gives consecutive stationary frames of different stops:
-                            // the arm moved between them although no frame saw it move.
-                            if interval
-                                .last()
-                                .is_some_and(|(_, last)| moved_between(last, &b, o))
-                            {
-                                close(&mut interval, frames, &mut samples, &mut skipped)?;
-                            }
-                            interval.push((i, b));
-                            continue;
-                        }
-                        SkipReason::Moving {
-                            speed_mm_s: v * 1e3,
-                            speed_deg_s: w.to_degrees(),
-                        }
-                    }
-                };
-                close(&mut interval, frames, &mut samples, &mut skipped)?;
-                skipped.push(Skip {
-                    stamp_ns: image.stamp_ns,
-                    reason,
-                });
-            }
-            close(&mut interval, frames, &mut samples, &mut skipped)?;
+            standing.run(&order, frames, &tf, options, &mut samples, &mut skipped)?;
         }
     }
     skipped.sort_by_key(|s| s.stamp_ns);
-    samples.sort_by_key(|s| s.image_stamp_ns);
+    // Handed on in stamp order already (the frames are walked in it).
+    debug_assert!(samples
+        .windows(2)
+        .all(|p| p[0].image_stamp_ns <= p[1].image_stamp_ns));
     Ok(Selected {
         samples,
         skipped,
@@ -382,37 +388,158 @@ pub(crate) fn select(
     })
 }
 
+/// Stop-and-go: the sharpest frame of each stationary interval, handed to the sink when its
+/// interval closes.
+struct StopAndGo<'a, 's> {
+    path: &'a Path,
+    topic: &'a str,
+    images: &'a [ImageRef],
+    offset_ns: i64,
+    sink: &'a mut Sink<'s>,
+}
+
+impl StopAndGo<'_, '_> {
+    /// Walks the frames in stamp `order`: each stationary or skipped with why; a run of
+    /// stationary frames at one place is an interval, closed by the first frame that is not.
+    fn run(
+        mut self,
+        order: &[usize],
+        frames: &mut Frames<'_>,
+        tf: &TfBuffer,
+        options: &BagOptions,
+        samples: &mut Vec<BagSample>,
+        skipped: &mut Vec<Skip>,
+    ) -> Result<(), BagError> {
+        let o = &options.select;
+        let lookup =
+            |robot_ns: i64| tf.lookup(&options.base_frame, &options.flange_frame, robot_ns);
+        let half = seconds_to_ns(o.window_s / 2.0);
+        let h = o.window_s / 2.0;
+        // Each frame: Some(pose) when stationary; intervals are runs of stationary frames.
+        let mut interval: Vec<(usize, Pose)> = Vec::new();
+        for &i in order {
+            let image = &self.images[i];
+            let robot = image.stamp_ns - self.offset_ns;
+            let poses =
+                lookup(robot - half).and_then(|a| Ok((a, lookup(robot)?, lookup(robot + half)?)));
+            let reason = match poses {
+                Err(e) => SkipReason::TfGap(e.to_string()),
+                Ok((a, b, c)) => {
+                    let v = (a.translation.vector - b.translation.vector)
+                        .norm()
+                        .max((b.translation.vector - c.translation.vector).norm())
+                        / h;
+                    let w = a
+                        .rotation
+                        .angle_to(&b.rotation)
+                        .max(b.rotation.angle_to(&c.rotation))
+                        / h;
+                    if v <= o.max_speed_m_s && w <= o.max_speed_rad_s {
+                        // A camera that sends frames only at the stops (triggered by the
+                        // driver) gives consecutive stationary frames of different stops:
+                        // the arm moved between them although no frame saw it move.
+                        if interval
+                            .last()
+                            .is_some_and(|(_, last)| moved_between(last, &b, o))
+                        {
+                            self.close(&mut interval, frames, samples, skipped)?;
+                        }
+                        interval.push((i, b));
+                        continue;
+                    }
+                    SkipReason::Moving {
+                        speed_mm_s: v * 1e3,
+                        speed_deg_s: w.to_degrees(),
+                    }
+                }
+            };
+            self.close(&mut interval, frames, samples, skipped)?;
+            skipped.push(Skip {
+                stamp_ns: image.stamp_ns,
+                reason,
+            });
+        }
+        self.close(&mut interval, frames, samples, skipped)
+    }
+
+    /// The interval's sharpest frame becomes a sample (handed to the sink, then dropped); the
+    /// others are skipped as not the sharpest.
+    fn close(
+        &mut self,
+        interval: &mut Vec<(usize, Pose)>,
+        frames: &mut Frames<'_>,
+        samples: &mut Vec<BagSample>,
+        skipped: &mut Vec<Skip>,
+    ) -> Result<(), BagError> {
+        if interval.is_empty() {
+            return Ok(());
+        }
+        let images = self.images;
+        let (best, sharpness, image) = sharpest(self.path, self.topic, images, interval, frames)?;
+        for (k, (i, _)) in interval.iter().enumerate() {
+            if k != best {
+                skipped.push(Skip {
+                    stamp_ns: images[*i].stamp_ns,
+                    reason: SkipReason::NotSharpest,
+                });
+            }
+        }
+        let (i, pose) = interval[best];
+        let sample = BagSample {
+            image_stamp_ns: images[i].stamp_ns,
+            robot_stamp_ns: images[i].stamp_ns - self.offset_ns,
+            base_from_flange: pose,
+            sharpness,
+        };
+        (self.sink)(&sample, &image.image)?;
+        drop(image);
+        samples.push(sample);
+        interval.clear();
+        Ok(())
+    }
+}
+
 /// The sharpest frame of a stationary interval: its position in `interval`, its sharpness and
-/// the frame (the first of equally sharp ones). One worker per core reads, decodes and scores the
-/// frames, a few at a time, so memory stays a few frames whatever the interval's length. A frame
-/// the bag can read where it is (an indexed MCAP file) is read by the worker; otherwise this
-/// thread reads the bag in order and hands the worker the message.
-fn sharpest(
+/// the frame (the first of equally sharp ones). The frames are ranked on a decimated view
+/// ([`RANKING_BLOCK`]) and only the winner is scored with [`sharpness`]. One worker per core
+/// reads, decodes and ranks the frames, a few at a time, each keeping only its best so far, so
+/// memory stays a few frames whatever the interval's length. A frame the bag can read where it
+/// is (an indexed MCAP file) is read by the worker; otherwise this thread reads the bag in order
+/// and hands the worker the message.
+fn sharpest<'f>(
     path: &Path,
     topic: &str,
     images: &[ImageRef],
     interval: &[(usize, Pose)],
-    frames: &mut Frames<'_>,
-) -> Result<(usize, f64, GrayImage), BagError> {
-    type Best = Option<(f64, usize, GrayImage)>;
+    frames: &'f mut Frames<'_>,
+) -> Result<(usize, f64, Held<'f>), BagError> {
+    type Best<'h> = Option<(f64, usize, Held<'h>)>;
     // Sharper wins; of equally sharp frames the earlier one.
-    let keep = |best: &mut Best, candidate: (f64, usize, GrayImage)| {
+    fn keep<'h>(best: &mut Best<'h>, candidate: (f64, usize, Held<'h>)) {
         if best
             .as_ref()
             .is_none_or(|b| candidate.0 > b.0 || (candidate.0 == b.0 && candidate.1 < b.1))
         {
             *best = Some(candidate);
         }
-    };
+    }
     /// A frame for a worker: read it where it is, or its message read already.
     enum Job {
         Read,
         Message(Vec<u8>),
     }
     let workers = frames.workers.clamp(1, interval.len().max(1));
-    let bag = frames.reader.bag();
-    let compressed = frames.compressed;
-    let mut best: Best = None;
+    let Frames {
+        reader,
+        compressed,
+        decoded,
+        held,
+        ..
+    } = frames;
+    let held: &'f FrameCount = held;
+    let bag = reader.bag();
+    let compressed = *compressed;
+    let mut best: Best<'f> = None;
     // The first error in the interval's order (a worker's or the reading's).
     let mut failed: Option<(usize, BagError)> = None;
     let (to_workers, jobs) = std::sync::mpsc::sync_channel::<(usize, Job)>(workers);
@@ -423,8 +550,8 @@ fn sharpest(
             let jobs = &jobs;
             let started = std::thread::Builder::new().spawn_scoped(
                 scope,
-                move || -> (Best, Option<(usize, BagError)>) {
-                    let mut best: Best = None;
+                move || -> (Best<'f>, Option<(usize, BagError)>) {
+                    let mut best: Best<'f> = None;
                     while let Ok(Ok((k, job))) = jobs.lock().map(|j| j.recv()) {
                         let image = &images[interval[k].0];
                         let message = match job {
@@ -432,7 +559,10 @@ fn sharpest(
                             Job::Read => bag.read_direct(image.location),
                         };
                         match message.and_then(|m| to_gray(path, topic, image, compressed, &m)) {
-                            Ok(gray) => keep(&mut best, (sharpness(&gray), k, gray)),
+                            Ok(gray) => {
+                                let score = sharpness_at(&gray, RANKING_BLOCK);
+                                keep(&mut best, (score, k, held.hold(gray)));
+                            }
                             // Later frames are still taken so the reader is not blocked.
                             Err(e) => return (best, Some((k, e))),
                         }
@@ -459,11 +589,11 @@ fn sharpest(
             let job = if location.direct() {
                 Ok(Job::Read)
             } else {
-                frames.reader.data(location).map(Job::Message)
+                reader.data(location).map(Job::Message)
             };
             match job {
                 Ok(job) => {
-                    frames.decoded += 1;
+                    *decoded += 1;
                     if to_workers.send((k, job)).is_err() {
                         break;
                     }
@@ -492,14 +622,14 @@ fn sharpest(
     if let Some((_, e)) = failed {
         return Err(e);
     }
-    let (sharpness, k, image) = best.ok_or_else(|| BagError::Message {
+    let (_, k, image) = best.ok_or_else(|| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),
         index: images[interval[0].0].index,
         stamp_ns: images[interval[0].0].stamp_ns,
         source: super::MessageError::Pixels("no frame of the interval could be scored".into()),
     })?;
-    Ok((k, sharpness, image))
+    Ok((k, sharpness(&image.image), image))
 }
 
 /// Whether two stationary frames stand at different stops: the flange is further apart than
@@ -546,7 +676,7 @@ fn estimate_offset(
         last = Some(image.stamp_ns);
         let gray = decode(path, &options.image_topic, image, frames)?;
         if let Ok(pose) = detector
-            .detect(&gray)
+            .detect(&gray.image)
             .and_then(|d| estimate_board_pose(&options.board, camera, &d))
         {
             measured.push((image.stamp_ns, pose.camera_from_target));

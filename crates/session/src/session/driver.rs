@@ -357,9 +357,7 @@ pub fn run_session(
                     break 'passes;
                 }
             }
-            while let Ok(result) = result_rx.try_recv() {
-                state.receive(result, on_event);
-            }
+            state.receive_ready(&result_rx, 2 * workers.len(), on_event);
         }
         // Every result of this pass must be in before deciding on retries.
         state.drain(&result_rx, on_event);
@@ -615,6 +613,27 @@ impl RunState {
             will_retry,
             frame: SharedFrame(result.image),
         });
+    }
+
+    /// Takes the results that are in, then waits for more while over `most_in_flight` jobs are
+    /// in flight: a few frames per detection worker, as a camera that serves faster than the
+    /// board is detected (a recorded cell's folder camera serves at once) would otherwise queue
+    /// every frame of the plan in memory (issue #43).
+    fn receive_ready(
+        &mut self,
+        results: &mpsc::Receiver<JobResult>,
+        most_in_flight: usize,
+        on_event: &mut dyn FnMut(SessionEvent),
+    ) {
+        while let Ok(result) = results.try_recv() {
+            self.receive(result, on_event);
+        }
+        while self.in_flight > most_in_flight {
+            match results.recv() {
+                Ok(result) => self.receive(result, on_event),
+                Err(_) => break,
+            }
+        }
     }
 
     /// Waits for every job in flight.
