@@ -163,14 +163,20 @@ fn monte_carlo(
         tally.mean_mm[0] += with.0 / DRAWS as f64;
         tally.mean_mm[1] += without.0 / DRAWS as f64;
         tally.worst_without_mm = tally.worst_without_mm.max(without.0);
-        tally.worst_with = (tally.worst_with.0.max(with.0), tally.worst_with.1.max(with.1));
+        tally.worst_with = (
+            tally.worst_with.0.max(with.0),
+            tally.worst_with.1.max(with.1),
+        );
         if with.0 <= 0.5 && with.1 <= 0.05 {
             tally.within_bar += 1;
         }
         // Base and wrist 3 are absorbed on a UR, in both setups; the four others estimated.
         for j in [0, 5] {
             assert!(
-                matches!(fit.offsets[j].status, OffsetStatus::Absorbed { by: Some(_) }),
+                matches!(
+                    fit.offsets[j].status,
+                    OffsetStatus::Absorbed { by: Some(_) }
+                ),
                 "draw {draw}: {:?}",
                 fit.offsets[j]
             );
@@ -270,7 +276,10 @@ fn poses_needed_for_the_offsets() {
         let config = config_variant(dir.path(), base, base, &[("count: 20", "count: 40")]);
         let (joints, model, physical) = shipped_plan(&config);
         let mut figures = Vec::new();
-        for n in [8, 12, 16, 20, 30, 40].into_iter().filter(|&n| n <= joints.len()) {
+        for n in [8, 12, 16, 20, 30, 40]
+            .into_iter()
+            .filter(|&n| n <= joints.len())
+        {
             let cell = (joints[..n].to_vec(), model.clone(), physical);
             let t = monte_carlo(&cell, &sigmas, RENDERED);
             figures.push((
@@ -318,7 +327,9 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
     eprintln!("transforms: {mm:.3} mm, {deg:.4}° from the truth");
     assert!(mm <= 0.5 && deg <= 0.05, "{mm} mm, {deg}°");
     // The offsets, each with its 1σ in the result file; base and wrist 3 absorbed.
-    let kinematics = result.kinematics.expect("the result records the arm's model");
+    let kinematics = result
+        .kinematics
+        .expect("the result records the arm's model");
     assert_eq!(kinematics.model, "ur10e");
     assert_eq!(kinematics.joint_offsets.len(), 6);
     assert_eq!(
@@ -333,7 +344,11 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
         let sigma = o.sigma_deg.unwrap_or_else(|| panic!("joint {j}: {o:?}"));
         let error = o.offset_deg - errors.joint_offsets_rad[j].to_degrees();
         eprintln!("{}: error {error:+.4}° (1σ {sigma:.4}°)", o.joint);
-        assert!(error.abs() <= 3.0 * sigma, "{}: {error}° vs 1σ {sigma}°", o.joint);
+        assert!(
+            error.abs() <= 3.0 * sigma,
+            "{}: {error}° vs 1σ {sigma}°",
+            o.joint
+        );
     }
     assert!(kinematics.translation_rms_mm.with < kinematics.translation_rms_mm.without);
 }
@@ -352,10 +367,16 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
         CellConfig::parse(&base, &file).unwrap().arm_errors,
         "the draw repeats"
     );
-    assert!(errors.joint_offsets_rad.iter().all(|v| v.abs() < 0.2f64.to_radians()));
+    assert!(errors
+        .joint_offsets_rad
+        .iter()
+        .all(|v| v.abs() < 0.2f64.to_radians()));
     // The truth is folded: the sim arm's base and wrist 3 offsets are in the transforms.
     let arm = cell.true_arm.clone().unwrap();
-    assert_eq!((arm.joint_offsets_rad[0], arm.joint_offsets_rad[5]), (0.0, 0.0));
+    assert_eq!(
+        (arm.joint_offsets_rad[0], arm.joint_offsets_rad[5]),
+        (0.0, 0.0)
+    );
     let plain = CellConfig::load(&repo().join("configs/sim-cell.yaml")).unwrap();
     let (moved_mm, _) = pose_error_mm_deg(
         &cell.camera().simulation.unwrap().target_mount,
@@ -380,10 +401,7 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
         "{message}"
     );
     let message = refused(draw, "arm_errors: {joint_offset_deg: 0.03}");
-    assert!(
-        message.contains("simulation.arm_errors.seed"),
-        "{message}"
-    );
+    assert!(message.contains("simulation.arm_errors.seed"), "{message}");
     let message = refused(draw, "arm_errors: {a_mm: [0.1, 0.2]}");
     assert!(
         message.contains("simulation.arm_errors.a_mm") && message.contains("2 values"),

@@ -73,7 +73,11 @@ impl ArmErrors {
     pub fn draw(seed: u64, sigmas: &ArmErrorSigmas) -> ArmErrors {
         let mut rng = StdRng::seed_from_u64(seed);
         let mut six = |sigma: f64| {
-            let sigma = if sigma.is_finite() { sigma.max(0.0) } else { 0.0 };
+            let sigma = if sigma.is_finite() {
+                sigma.max(0.0)
+            } else {
+                0.0
+            };
             [0; 6].map(|_| {
                 let z: f64 = StandardNormal.sample(&mut rng);
                 sigma * z
@@ -199,9 +203,7 @@ mod tests {
                     Setup::EyeInHand => {
                         t.camera_mount.inverse() * arm.forward(&q).inverse() * t.target_mount
                     }
-                    Setup::EyeToHand => {
-                        t.camera_mount.inverse() * arm.forward(&q) * t.target_mount
-                    }
+                    Setup::EyeToHand => t.camera_mount.inverse() * arm.forward(&q) * t.target_mount,
                 };
                 let a = seen(&arm, &truth);
                 let b = seen(&folded_arm, &folded);

@@ -325,9 +325,7 @@ fn identifiability(setup: Setup, n: &DMatrix<f64>, joints: usize) -> Vec<Option<
         let k = span.len();
         let nss = DMatrix::from_fn(k, k, |i, j| n[(span[i], span[j])]);
         let nsc = DVector::from_fn(k, |i, _| n[(span[i], c)]);
-        let explained = nss
-            .cholesky()
-            .map_or(0.0, |ch| nsc.dot(&ch.solve(&nsc)));
+        let explained = nss.cholesky().map_or(0.0, |ch| nsc.dot(&ch.solve(&nsc)));
         ((own - explained).max(0.0) / own).sqrt()
     };
     let x: Vec<usize> = (0..6).collect();
@@ -360,7 +358,9 @@ fn identifiability(setup: Setup, n: &DMatrix<f64>, joints: usize) -> Vec<Option<
         let Some(ch) = nxx.cholesky() else { break };
         let k = free.len();
         let nfx = DMatrix::from_fn(k, 12, |i, j| n[(POSE_PARAMS + free[i], j)]);
-        let nff = DMatrix::from_fn(k, k, |i, j| n[(POSE_PARAMS + free[i], POSE_PARAMS + free[j])]);
+        let nff = DMatrix::from_fn(k, k, |i, j| {
+            n[(POSE_PARAMS + free[i], POSE_PARAMS + free[j])]
+        });
         let schur = &nff - &nfx * ch.solve(&nfx.transpose());
         let scale = DVector::from_fn(k, |i, _| 1.0 / schur[(i, i)].max(f64::MIN_POSITIVE).sqrt());
         let scaled = DMatrix::from_fn(k, k, |i, j| schur[(i, j)] * scale[i] * scale[j]);
@@ -561,7 +561,10 @@ mod tests {
     fn cell(seed: u64, offsets: [f64; 6], n: usize) -> (Vec<ArmSample>, Pose, Pose) {
         let chain = ur10e();
         let mut rng = StdRng::seed_from_u64(seed);
-        let x = pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.57));
+        let x = pose_from_rotvec(
+            Vector3::new(0.03, -0.07, 0.04),
+            Vector3::new(0.0, 0.0, 1.57),
+        );
         let y = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
         let noise_r = Normal::new(0.0, 0.02f64.to_radians()).unwrap();
         let noise_t = Normal::new(0.0, 0.1e-3).unwrap();
@@ -620,12 +623,15 @@ mod tests {
                 by: Some("T_flange_camera")
             }
         );
-        for j in 1..5 {
-            let OffsetStatus::Estimated { sigma_rad } = fit.offsets[j].status else {
-                panic!("joint {j}: {:?}", fit.offsets[j]);
+        for (j, (fitted, truth)) in fit.offsets.iter().zip(offsets).enumerate().take(5).skip(1) {
+            let OffsetStatus::Estimated { sigma_rad } = fitted.status else {
+                panic!("joint {j}: {fitted:?}");
             };
-            let error = fit.offsets[j].offset_rad - offsets[j];
-            assert!(error.abs() < 4.0 * sigma_rad, "joint {j}: {error} vs {sigma_rad}");
+            let error = fitted.offset_rad - truth;
+            assert!(
+                error.abs() < 4.0 * sigma_rad,
+                "joint {j}: {error} vs {sigma_rad}"
+            );
             assert!(sigma_rad < 0.01 * deg, "joint {j}: 1σ {sigma_rad}");
         }
         assert!(translation_distance(&fit.camera_mount, &x) < 0.5e-3);
@@ -639,7 +645,10 @@ mod tests {
         // transform, which the flange-side unknown takes whole, offsets included.
         let chain = ur10e();
         let mut rng = StdRng::seed_from_u64(1);
-        let x = pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.57));
+        let x = pose_from_rotvec(
+            Vector3::new(0.03, -0.07, 0.04),
+            Vector3::new(0.0, 0.0, 1.57),
+        );
         let y = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
         let samples: Vec<ArmSample> = (0..20)
             .map(|_| {

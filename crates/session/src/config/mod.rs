@@ -300,13 +300,12 @@ impl CellConfig {
         // can find is in the controller's frames (see `handeye_robot::arm_errors`).
         let (true_arm, simulation) = match (&checked.arm_errors, &checked.simulation, &robot) {
             (Some(errors), Some(truth), RobotConfig::Sim { model, .. }) => {
-                let nominal = UrModel::by_name(model.name()).ok_or_else(|| {
-                    ConfigError::Inconsistent {
+                let nominal =
+                    UrModel::by_name(model.name()).ok_or_else(|| ConfigError::Inconsistent {
                         file: file.to_path_buf(),
                         key: "robot.model".into(),
                         problem: format!("no kinematics known for `{}`", model.name()),
-                    }
-                })?;
+                    })?;
                 let (arm, folded) = errors.fold(&nominal, truth);
                 (Some(arm), Some(folded))
             }

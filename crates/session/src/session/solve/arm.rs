@@ -141,11 +141,7 @@ pub fn estimate_arm(
             v
         })
         .collect();
-    Ok(Some(Corrected {
-        pairs,
-        visits,
-        arm,
-    }))
+    Ok(Some(Corrected { pairs, visits, arm }))
 }
 
 impl ArmEstimate {
