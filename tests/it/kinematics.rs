@@ -423,3 +423,136 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
     assert_eq!(plain.solver.kinematics, None);
     assert!(plain.arm_errors.is_none() && plain.true_arm.is_none());
 }
+
+/// A joint's origin as a URDF gives it (`xyz`, `rpy` = `Rz(yaw)·Ry(pitch)·Rx(roll)`), read from
+/// a parsed ur_calibration YAML by key.
+fn urdf_origin(entry: &serde_yaml_ng::Value) -> Pose {
+    let get = |key: &str| {
+        entry
+            .get(key)
+            .and_then(serde_yaml_ng::Value::as_f64)
+            .unwrap_or_else(|| panic!("no {key} in {entry:?}"))
+    };
+    Pose::from_parts(
+        nalgebra::Translation3::new(get("x"), get("y"), get("z")),
+        nalgebra::UnitQuaternion::from_euler_angles(get("roll"), get("pitch"), get("yaw")),
+    )
+}
+
+/// `T_base_tool0` of a ur_calibration YAML at `q`, as ur_description chains it: each joint's
+/// origin then its turn about z; `base` is `base_link_inertia` and `tool0` is `wrist_3_link`
+/// (their fixed transforms compose to the identity).
+fn urdf_forward(text: &str, q: &[f64]) -> Pose {
+    let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(text).unwrap();
+    let kinematics = doc.get("kinematics").expect("a kinematics mapping");
+    assert!(kinematics
+        .get("hash")
+        .and_then(serde_yaml_ng::Value::as_str)
+        .is_some_and(|h| h.starts_with("calib_")));
+    [
+        "shoulder",
+        "upper_arm",
+        "forearm",
+        "wrist_1",
+        "wrist_2",
+        "wrist_3",
+    ]
+    .iter()
+    .zip(q)
+    .fold(Pose::identity(), |acc, (link, angle)| {
+        acc * urdf_origin(kinematics.get(*link).unwrap())
+            * Pose::from_parts(
+                nalgebra::Translation3::identity(),
+                nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), *angle),
+            )
+    })
+}
+
+/// `handeye export RESULT --format ur-calibration` of a result with the arm's model: read back
+/// by a generic YAML parser and chained as a URDF, it reproduces the corrected flange poses
+/// `FK(q + δ)` within 1e-6 m (and 1e-6 rad).
+#[test]
+fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
+    use handeye_session::result::{JointOffsetYaml, KinematicsYaml, WithWithout};
+    let model = UrModel::ur10e();
+    let offsets_deg = [0.0, 0.0531, -0.0201, -0.0008, 0.0727, 0.0];
+    let kinematics = KinematicsYaml {
+        model: "ur10e".into(),
+        estimated: "joint_offsets".into(),
+        joint_offsets: offsets_deg
+            .iter()
+            .enumerate()
+            .map(|(j, o)| JointOffsetYaml {
+                joint: format!("joint {j}"),
+                offset_deg: *o,
+                sigma_deg: Some(0.001),
+                absorbed_by: None,
+                undetermined: false,
+            })
+            .collect(),
+        translation_rms_mm: WithWithout {
+            with: 0.0,
+            without: 0.0,
+        },
+        rotation_rms_deg: WithWithout {
+            with: 0.0,
+            without: 0.0,
+        },
+        uncertainty: None,
+    };
+    // Through the binary, from a result file.
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session");
+    let config = config_variant(dir.path(), "sim-cell-arm-errors.yaml", "cell.yaml", &[]);
+    let run = crate::util::run_cli(&config, &session);
+    assert!(run.status.success());
+    let result_path = session.join("result.yaml");
+    let mut result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+    result.kinematics = Some(kinematics);
+    result.save(&result_path).unwrap();
+    let out = dir.path().join("calibration.yaml");
+    let export = crate::util::handeye()
+        .args(["export"])
+        .arg(&result_path)
+        .args(["--format", "ur-calibration", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        export.status.success(),
+        "{}",
+        String::from_utf8_lossy(&export.stderr)
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    let errors = ArmErrors {
+        joint_offsets_rad: offsets_deg.map(f64::to_radians),
+        ..ArmErrors::default()
+    };
+    let corrected = errors.true_arm(&model);
+    let mut rng = StdRng::seed_from_u64(3);
+    for _ in 0..50 {
+        let q: Vec<f64> = (0..6)
+            .map(|_| rand::Rng::random_range(&mut rng, -3.0..3.0))
+            .collect();
+        let expected = corrected.forward(&handeye_robot::Joints::from_fn(6, |k| q[k]));
+        let (mm, deg) = pose_error_mm_deg(&urdf_forward(&text, &q), &expected);
+        assert!(
+            mm < 1e-3 && deg.to_radians() < 1e-6,
+            "{mm} mm, {deg}° at {q:?}"
+        );
+    }
+    // A result without the arm's model is refused, naming the key.
+    result.kinematics = None;
+    result.save(&result_path).unwrap();
+    let refused = crate::util::handeye()
+        .args(["export"])
+        .arg(&result_path)
+        .args(["--format", "ur-calibration"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && stderr.contains("kinematics"),
+        "{stderr}"
+    );
+}
