@@ -417,6 +417,17 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
         message.contains("solver.kinematics") && message.contains("not yet implemented"),
         "{message}"
     );
+    let text = base
+        .replace("intrinsics: cameras/sim-1280x720.yaml\n", "")
+        .replace(
+            "camera:\n  backend: sim\n",
+            "camera:\n  backend: sim\n  intrinsics: cameras/sim-1280x720.yaml\n",
+        );
+    let message = CellConfig::parse(&text, &file).unwrap_err().to_string();
+    assert!(
+        message.contains("solver.kinematics") && message.contains("intrinsics"),
+        "{message}"
+    );
     let message = refused("kinematics: joint_offsets", "kinematics: all");
     assert!(message.contains("solver"), "{message}");
     // Absent: nothing estimated, and the shipped demo cell is unchanged.

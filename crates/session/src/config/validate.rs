@@ -725,6 +725,12 @@ impl Validator<'_> {
                 "`joint_offsets` needs the arm's published model and each pose's joints: a sim, ur or ros2 arm with `robot.model`".into(),
             ));
         }
+        if s.kinematics == Some(KinematicsChoice::JointOffsets) && raw.intrinsics.is_none() {
+            return Err(self.inconsistent(
+                "solver.kinematics",
+                "`joint_offsets` needs the camera's `intrinsics`: a run that estimates them does not estimate the arm's model yet".into(),
+            ));
+        }
         if s.kinematics == Some(KinematicsChoice::Dh) {
             return Err(self.inconsistent(
                 "solver.kinematics",
