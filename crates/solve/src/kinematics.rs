@@ -25,8 +25,6 @@
 //!
 //! Pure maths: no I/O, no clocks; depends on the ground floor (`geometry::dh_link`, `setup`).
 
-use std::cell::RefCell;
-
 use nalgebra::{DMatrix, DVector, SMatrix};
 
 use super::lm::{minimize_normal, NormalEquations};
@@ -177,13 +175,9 @@ struct Problem<'a> {
     anchor: Axby,
     anchor_offsets: Vec<f64>,
     delta: DVector<f64>,
-    /// Σ r² of the rotation rows and of the translation rows, and their information, at the
-    /// last linearisation.
-    last: RefCell<Option<Linearised>>,
 }
 
 /// The normal equations at one point, split by group of rows (for the noise estimate).
-#[derive(Clone)]
 struct Linearised {
     rotation: DMatrix<f64>,
     translation: DMatrix<f64>,
@@ -288,10 +282,7 @@ impl NormalEquations for Problem<'_> {
         if !cost.is_finite() {
             return None;
         }
-        let h = &lin.rotation + &lin.translation;
-        let g = lin.gradient.clone();
-        *self.last.borrow_mut() = Some(lin);
-        Some((h, g, cost))
+        Some((&lin.rotation + &lin.translation, lin.gradient, cost))
     }
 
     fn cost(&self) -> Option<f64> {
@@ -428,7 +419,6 @@ pub fn fit_joint_offsets(
         anchor: Axby::from_mounts(start.0, start.1),
         anchor_offsets: zero.clone(),
         delta: DVector::zeros(POSE_PARAMS),
-        last: RefCell::new(None),
     };
     let before = problem.rms();
     // Which offsets the transforms absorb is a property of the chain and the configurations:
@@ -448,7 +438,6 @@ pub fn fit_joint_offsets(
         anchor: Axby::from_mounts(start.0, start.1),
         delta: DVector::zeros(POSE_PARAMS),
         anchor_offsets: zero.clone(),
-        last: RefCell::new(None),
         ..problem
     }
     .linearise(&all);
