@@ -31,6 +31,9 @@ enum FormatArg {
     Json,
     /// OpenCV FileStorage YAML with 4x4 matrices.
     Opencv,
+    /// ur_robot_driver's kinematics calibration YAML (as ur_calibration writes it) of the arm's
+    /// model the solve estimated (`solver.kinematics`).
+    UrCalibration,
 }
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
@@ -58,6 +61,8 @@ pub(super) struct ExportArgs {
 /// Runs `handeye export`.
 pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
     let format = match args.format {
+        // The arm's model, not the transforms: its own form.
+        FormatArg::UrCalibration => return export_ur_calibration(&args),
         FormatArg::Ros2 => ExportFormat::Ros2,
         FormatArg::Ros2Launch => ExportFormat::Ros2Launch,
         FormatArg::Urdf => ExportFormat::Urdf,
@@ -172,6 +177,28 @@ pub(super) fn exported_result(
         .check(ids)
         .with_context(|| format!("exporting {}", result.display()))?;
     Ok(exported)
+}
+
+/// `--format ur-calibration`: the arm's model of a result (its `kinematics:` section).
+fn export_ur_calibration(args: &ExportArgs) -> anyhow::Result<()> {
+    let result = ResultFile::load(&args.result)?;
+    let kinematics = result.kinematics.as_ref().ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: no `kinematics:` section: the arm's model was not estimated (solve with `solver: {{kinematics: joint_offsets}}`)",
+            args.result.display()
+        )
+    })?;
+    let text = handeye_formats::ur_calibration::ur_calibration_yaml(kinematics)
+        .with_context(|| format!("exporting {}", args.result.display()))?;
+    match &args.output {
+        Some(path) => {
+            write_atomic_reporting(path, text.as_bytes())
+                .with_context(|| format!("writing {}", path.display()))?;
+            outln!("wrote ur-calibration to {}", path.display());
+        }
+        None => out!("{text}"),
+    }
+    Ok(())
 }
 
 /// Writes `text` atomically to `output`, or prints it.

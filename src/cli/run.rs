@@ -151,6 +151,9 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     if let Some(truth) = &done.cell.config.camera().simulation {
         outln!("{}", result.compare_with_truth(truth));
     }
+    if let (Some(arm), Some(errors)) = (&result.arm, &done.cell.config.arm_errors) {
+        outln!("{}", arm.compare_with_truth(errors));
+    }
     let report = match handeye::report::session::write_run_report(done) {
         Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.

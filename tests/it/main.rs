@@ -31,6 +31,7 @@ mod friction;
 mod fuzz;
 mod hardening;
 mod kalibr_print;
+mod kinematics;
 mod layers;
 mod live;
 mod manual;

@@ -16,7 +16,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::Joints;
-use handeye_core::geometry::{translation_distance, Pose};
+use handeye_core::geometry::{dh_link, translation_distance, Pose};
 
 /// Largest flange position error (m) of an inverse solution, checked by forward kinematics;
 /// a candidate worse than this (numerical breakdown at a singularity) is dropped.
@@ -147,11 +147,7 @@ impl UrModel {
     /// The transform of DH link `i` (0-based) at joint angle `theta`: `T_{i}_{i+1}` in 0-based
     /// frame numbers, i.e. `Rz(θ) · Tz(d) · Tx(a) · Rx(α)`.
     fn link(&self, i: usize, theta: f64) -> Pose {
-        let (s, c) = theta.sin_cos();
-        let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta)
-            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), self.alpha[i]);
-        let translation = Translation3::new(self.a[i] * c, self.a[i] * s, self.d[i]);
-        Isometry3::from_parts(translation, rotation)
+        dh_link(theta, self.d[i], self.a[i], self.alpha[i])
     }
 
     /// Forward kinematics: the flange pose `T_base_flange` at `joints` (rad), six of them (a

@@ -7,6 +7,7 @@
 //! robot's base frame; metres and radians. Joint positions are radians, base joint first ([`Joints`]: six on a UR, up to seven on an arm
 //! driven over ROS 2).
 
+pub mod arm_errors;
 pub mod joints;
 pub mod kinematics;
 pub mod recorded;

@@ -16,6 +16,12 @@
 //! once per move and held while the arm stands still (a real controller's reading of a standing
 //! arm does not jitter from read to read). Joint positions are reported exactly.
 //!
+//! The arm's own errors: by default the true geometry is the model's. With
+//! [`SimRobot::with_true_arm`] the arm stands where a [`TrueArm`] puts the flange
+//! (`FK_true(q)`, what the camera renders from) while it reports the pose its nominal model
+//! computes from the same joints (`FK_nominal(q)`, perturbed by the repeatability noise), as a
+//! real controller does.
+//!
 //! Frames: `T_base_flange`; metres, radians, [`Duration`]. Depends on `robot` and `geometry` only.
 
 use std::collections::VecDeque;
@@ -28,6 +34,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
+use super::arm_errors::TrueArm;
 use super::kinematics::UrModel;
 use super::{
     leading_travel, six_joints, trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus,
@@ -153,6 +160,8 @@ struct MotionRecord {
 #[derive(Debug)]
 pub struct SimRobot {
     model: UrModel,
+    /// The true geometry (`None`: the model's).
+    true_arm: Option<TrueArm>,
     options: SimRobotOptions,
     /// The commanded joints (where the arm comes to rest).
     joints: Joints,
@@ -201,6 +210,7 @@ impl SimRobot {
         Ok(SimRobot {
             rng: StdRng::seed_from_u64(options.seed),
             model,
+            true_arm: None,
             options,
             joints: start,
             history: VecDeque::with_capacity(HISTORY_LEN),
@@ -215,12 +225,28 @@ impl SimRobot {
         })
     }
 
+    /// The same arm whose true geometry is `arm` (see the module docs): it stands at
+    /// `arm.forward(q)` and reports its model's `forward(q)`.
+    pub fn with_true_arm(mut self, arm: TrueArm) -> Self {
+        self.true_arm = Some(arm);
+        self.true_pose = self.true_forward(&self.joints);
+        self
+    }
+
+    /// The flange pose the true geometry puts the flange at for `joints`.
+    fn true_forward(&self, joints: &Joints) -> Pose {
+        match &self.true_arm {
+            Some(arm) => arm.forward(joints),
+            None => self.model.forward(joints),
+        }
+    }
+
     /// The arm's exact flange pose `T_base_flange` now (what a simulated camera renders from):
     /// the pose at rest, or where the arm is on its way or while it rings down.
     pub fn true_base_from_flange(&self) -> Pose {
         match self.options.ringing {
             None => self.true_pose,
-            Some(_) => self.model.forward(&self.joint_state_at(Instant::now()).0),
+            Some(_) => self.true_forward(&self.joint_state_at(Instant::now()).0),
         }
     }
 
@@ -377,11 +403,16 @@ impl SimRobot {
     /// The arm stands at `joints`: the true pose follows, the reading draws new noise.
     fn arrive(&mut self, joints: Joints) {
         self.joints = joints;
-        self.true_pose = self.model.forward(&joints);
+        self.true_pose = self.true_forward(&joints);
         let dp = Vector3::from_fn(|_, _| self.position_noise.sample(&mut self.rng));
         let dr = Vector3::from_fn(|_, _| self.rotation_noise.sample(&mut self.rng));
         // Noise in the flange frame: the reading is off by a small rigid motion at the flange.
-        self.reported_pose = self.true_pose * pose_from_rotvec(dp, dr);
+        // The controller computes the reading through its nominal model.
+        let computed = match self.true_arm {
+            Some(_) => self.model.forward(&joints),
+            None => self.true_pose,
+        };
+        self.reported_pose = computed * pose_from_rotvec(dp, dr);
     }
 
     fn interrupted(&self) -> bool {
@@ -551,6 +582,29 @@ mod tests {
         let rms_rad = (sq_rad / n as f64 / 3.0).sqrt();
         assert!((rms_m - 1e-4).abs() < 1e-5, "position rms {rms_m}");
         assert!((rms_rad - 1e-3).abs() < 1e-4, "rotation rms {rms_rad}");
+    }
+
+    #[test]
+    fn an_arm_with_errors_reports_its_nominal_model_and_stands_at_its_true_one() {
+        let errors = crate::arm_errors::ArmErrors::draw(
+            3,
+            &crate::arm_errors::ArmErrorSigmas {
+                joint_offset_rad: 0.03f64.to_radians(),
+                length_m: 3e-4,
+                twist_rad: 0.02f64.to_radians(),
+            },
+        );
+        let truth = errors.true_arm(&UrModel::ur5e());
+        let mut robot = sim(SimRobotOptions::default()).with_true_arm(truth.clone());
+        let q = Joints::from([0.5, -1.0, 1.2, -0.9, 1.3, 0.2]);
+        robot.move_joints(&q, &MotionLimits::default()).unwrap();
+        let reported = robot.base_from_flange().unwrap();
+        let nominal = UrModel::ur5e().forward(&q);
+        assert!(translation_distance(&reported, &nominal) < 1e-12);
+        let seen = robot.true_base_from_flange();
+        assert!(translation_distance(&seen, &truth.forward(&q)) < 1e-12);
+        // The two differ by what the errors do to the flange (a fraction of a millimetre and up).
+        assert!(translation_distance(&seen, &reported) > 1e-4);
     }
 
     #[test]

@@ -58,6 +58,68 @@ pub struct UncertaintyYaml {
     pub covariance: Vec<Vec<f64>>,
 }
 
+/// The arm's model section (`solver.kinematics: joint_offsets`): each joint's zero offset (the
+/// true angle is the reported one plus it) with its 1σ, or why it was held at zero; the fit's
+/// residuals with and without it.
+///
+/// ```yaml
+/// kinematics:
+///   model: ur10e
+///   estimated: joint_offsets
+///   joint_offsets:
+///     - {joint: base, offset_deg: 0.0, absorbed_by: T_base_target}
+///     - {joint: shoulder, offset_deg: 0.0213, sigma_deg: 0.0019}
+///   translation_rms_mm: {with: 0.08, without: 0.41}
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KinematicsYaml {
+    /// The arm model whose published DH chain is the nominal (`ur10e`).
+    pub model: String,
+    /// What was estimated (`joint_offsets`).
+    pub estimated: String,
+    /// Each joint, base first.
+    pub joint_offsets: Vec<JointOffsetYaml>,
+    /// Pose-space translation residual RMS, mm, with the offsets and without them.
+    pub translation_rms_mm: WithWithout,
+    /// Pose-space rotation residual RMS, degrees, with the offsets and without them.
+    pub rotation_rms_deg: WithWithout,
+    /// The transforms' 1σ in the pose-space fit with the offsets (their uncertainty included);
+    /// the answer's own `uncertainty` holds the offsets at their estimates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintyYaml>,
+}
+
+/// A figure with the arm's model and without it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WithWithout {
+    /// With the arm's model estimated.
+    pub with: f64,
+    /// With the arm's published model.
+    pub without: f64,
+}
+
+/// One joint's zero offset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointOffsetYaml {
+    /// The joint's name (`base`, `shoulder`, `elbow`, `wrist 1`, `wrist 2`, `wrist 3`).
+    pub joint: String,
+    /// The offset, degrees (0 when held).
+    pub offset_deg: f64,
+    /// Its 1σ, degrees (estimated offsets only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_deg: Option<f64>,
+    /// The transform that absorbs it (no data can tell them apart): held at zero. `both` when
+    /// the two together do.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub absorbed_by: Option<String>,
+    /// The recorded configurations do not determine it: held at zero.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub undetermined: bool,
+}
+
 /// Residuals of one sample.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -160,6 +222,10 @@ pub struct ResultFile {
     /// fitted in reprojection space, and in older files).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<PoseNoise>,
+    /// The arm's own model estimated with the transforms (`solver.kinematics`; absent when it
+    /// was not estimated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<KinematicsYaml>,
     /// Residuals.
     pub residuals: ResidualsYaml,
     /// Indices of samples flagged as outliers.
@@ -182,6 +248,12 @@ impl ResultFile {
     /// after `setup`.
     pub fn with_verdict(mut self, verdict: Verdict) -> ResultFile {
         self.verdict = Some(verdict);
+        self
+    }
+
+    /// The same file with the arm's model estimated with it.
+    pub fn with_kinematics(mut self, kinematics: KinematicsYaml) -> ResultFile {
+        self.kinematics = Some(kinematics);
         self
     }
 
@@ -245,6 +317,7 @@ impl ResultFile {
             T_flange_target: if eye_in_hand { None } else { target },
             uncertainty,
             noise: calibration.noise,
+            kinematics: None,
             residuals: ResidualsYaml {
                 rotation_rms_deg: r.rotation_rms_deg,
                 rotation_max_deg: r.rotation_max_deg,

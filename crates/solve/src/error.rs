@@ -44,6 +44,18 @@ pub enum SolveError {
         /// What is wrong.
         problem: SampleProblem,
     },
+    /// A sample for the arm's model whose joint angles do not fit the arm's chain.
+    #[error("sample {index}{}: {found} joint angles (or one not finite), the arm's model has {expected} joints", id.as_ref().map(|i| format!(" ({i})")).unwrap_or_default())]
+    ArmJoints {
+        /// Index of the sample.
+        index: usize,
+        /// Its id, if any.
+        id: Option<String>,
+        /// Joint angles it has.
+        found: usize,
+        /// Joints of the chain.
+        expected: usize,
+    },
     /// An option with a bad value.
     #[error("option `{name}` = {value}: {expected}")]
     InvalidOption {

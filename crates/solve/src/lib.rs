@@ -28,6 +28,7 @@ pub mod diagnostics;
 pub mod error;
 pub mod intrinsics;
 pub mod iterative;
+pub mod kinematics;
 mod lm;
 pub mod noise;
 pub mod options;

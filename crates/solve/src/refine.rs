@@ -90,7 +90,7 @@ fn left_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
 }
 
 /// Residual rows (6: rotation then translation) and their Jacobian (6x12) of one sample.
-type Rows = (SVector<f64, 6>, SMatrix<f64, 6, 12>);
+pub(crate) type Rows = (SVector<f64, 6>, SMatrix<f64, 6, 12>);
 
 /// Unscaled residual (rotation rad, translation m) of a sample `(a, b)` at `s`, and `X·B·Y`.
 fn raw_residual(s: &Axby, a: &Pose, b: &Pose) -> (Vector3<f64>, Vector3<f64>, Pose) {
@@ -102,7 +102,7 @@ fn raw_residual(s: &Axby, a: &Pose, b: &Pose) -> (Vector3<f64>, Vector3<f64>, Po
 
 /// Whitened residual of a sample, rotation rows times `kr` (= scale/σ_r), translation rows
 /// times `kt` (= scale/σ_t).
-fn sample_residual(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> SVector<f64, 6> {
+pub(crate) fn sample_residual(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> SVector<f64, 6> {
     let (r, t, _) = raw_residual(s, a, b);
     let mut out = SVector::<f64, 6>::zeros();
     out.fixed_rows_mut::<3>(0).copy_from(&(r * kr));
@@ -112,7 +112,7 @@ fn sample_residual(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> SVector<f6
 
 /// [`sample_residual`] and its analytic Jacobian in the parameters [φ_X, ρ_X, φ_Y, ρ_Y] at
 /// `δ = 0` (the perturbation of [`perturbed`] around `s`).
-fn sample_rows(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> Rows {
+pub(crate) fn sample_rows(s: &Axby, a: &Pose, b: &Pose, kr: f64, kt: f64) -> Rows {
     let (r, t, predicted) = raw_residual(s, a, b);
     let mut e = SVector::<f64, 6>::zeros();
     e.fixed_rows_mut::<3>(0).copy_from(&(r * kr));

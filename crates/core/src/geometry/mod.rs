@@ -25,6 +25,17 @@ pub fn pose_from_rotvec(translation: Vector3<f64>, rotvec: Vector3<f64>) -> Pose
     )
 }
 
+/// One link of a standard Denavit–Hartenberg chain at joint angle `theta` (rad):
+/// `T_{i-1}_{i} = Rz(θ) · Tz(d) · Tx(a) · Rx(α)` (m, rad). The one DH link of the project: the
+/// arm models' forward kinematics (`handeye_robot::kinematics`) and the solver's arm model
+/// (`handeye_solve::kinematics`) both chain it.
+pub fn dh_link(theta: f64, d: f64, a: f64, alpha: f64) -> Pose {
+    let (s, c) = theta.sin_cos();
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta)
+        * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), alpha);
+    Isometry3::from_parts(Translation3::new(a * c, a * s, d), rotation)
+}
+
 /// The rotation vector (axis · angle, rad, angle in [0, π]) of a rotation.
 ///
 /// Goes through the quaternion, which stays well conditioned near 180° where the

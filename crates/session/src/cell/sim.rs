@@ -1,5 +1,6 @@
 //! The simulated cell: a simulated arm and a simulated camera sharing one world, so the camera
-//! renders from the arm's true pose while the arm reports a noisy one.
+//! renders from the arm's true pose while the arm reports a noisy one (computed through its
+//! nominal model when the config gives the arm's own errors, `simulation.arm_errors`).
 
 use std::cell::Cell;
 use std::sync::atomic::AtomicBool;
@@ -143,6 +144,11 @@ pub fn arm(
     };
     let robot =
         SimRobot::new(arm, start, options).map_err(|e| CellError::Backend(e.to_string()))?;
+    // The arm's own errors (`simulation.arm_errors`): it reports through its nominal model.
+    let robot = match &config.true_arm {
+        Some(truth) => robot.with_true_arm(truth.clone()),
+        None => robot,
+    };
     Ok(Shared::new(robot))
 }
 

@@ -25,7 +25,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::schema::{CameraFile, ConfigFile, MAX_CAMERAS};
+use super::schema::{CameraFile, ConfigFile, SimulationFile, MAX_CAMERAS};
 use super::ConfigError;
 use handeye_core::geometry::PoseYaml;
 use handeye_core::setup::Setup;
@@ -174,10 +174,13 @@ fn one_camera(cell: &ConfigFile, camera: &CameraFile) -> Result<ConfigFile, (Str
         (board_key.to_string(), board("nominal", &cell.nominal)?),
     ]);
     let simulation = match (&camera.simulation, &cell.simulation) {
-        (Some(mount), Some(boards)) => Some(BTreeMap::from([
-            (mount_key.to_string(), mount.clone()),
-            (board_key.to_string(), board("simulation", boards)?),
-        ])),
+        (Some(mount), Some(boards)) => Some(SimulationFile {
+            arm_errors: boards.arm_errors.clone(),
+            transforms: BTreeMap::from([
+                (mount_key.to_string(), mount.clone()),
+                (board_key.to_string(), board("simulation", &boards.transforms)?),
+            ]),
+        }),
         (None, None) => None,
         (Some(_), None) => {
             return Err((

@@ -21,14 +21,17 @@ use std::time::Duration;
 use handeye_core::geometry::PoseError;
 use handeye_core::setup::{CellTransforms, Setup};
 use handeye_core::yaml_file::{parse_yaml, read_text, shape_error, FileError};
+use handeye_robot::arm_errors::{ArmErrors, TrueArm};
+use handeye_robot::kinematics::UrModel;
 use handeye_robot::{MotionLimits, WorkspaceBox};
 use handeye_solve::{SolveOptions, SolverChoice};
 
 pub use recorded::{recorded_cell, RecordedFiles};
 pub use schema::{
-    ArmModel, CameraConfig, CameraFile, ConfigFile, DetectorConfig, LimitsConfig, PixelFormatName,
-    PlanConfig, RobotConfig, SessionConfig, SolveSpace, SolverConfig, SolverMethod, VerdictConfig,
-    WorkspaceConfig, MAX_CAMERAS,
+    ArmErrorsFile, ArmModel, CameraConfig, CameraFile, ConfigFile, DetectorConfig,
+    KinematicsChoice, LimitsConfig, PixelFormatName, PlanConfig, RobotConfig, SessionConfig,
+    SimulationFile, SolveSpace, SolverConfig, SolverMethod, VerdictConfig, WorkspaceConfig,
+    MAX_CAMERAS,
 };
 pub use validate::{
     Range, MAX_JOINT_ACCELERATION_DEG, MAX_JOINT_SPEED_DEG, MAX_LINEAR_ACCELERATION,
@@ -165,6 +168,12 @@ pub struct CellConfig {
     pub session: SessionConfig,
     /// The accuracy the verdict judges against.
     pub verdict: VerdictConfig,
+    /// The simulated arm's own errors (`simulation.arm_errors`) as given or drawn: the truth the
+    /// arm model estimated from a run is checked against.
+    pub arm_errors: Option<ArmErrors>,
+    /// The simulated arm's true geometry, the base and last joint offsets folded into each
+    /// camera's `simulation` transforms (`ArmErrors::fold`): what the sim arm stands at.
+    pub true_arm: Option<TrueArm>,
     /// `session.settle_s`, checked and converted.
     settle: Duration,
 }
@@ -287,6 +296,21 @@ impl CellConfig {
             }
             CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => {}
         }
+        // The base and last joint offsets no data tell from the transforms: the truth a run
+        // can find is in the controller's frames (see `handeye_robot::arm_errors`).
+        let (true_arm, simulation) = match (&checked.arm_errors, &checked.simulation, &robot) {
+            (Some(errors), Some(truth), RobotConfig::Sim { model, .. }) => {
+                let nominal =
+                    UrModel::by_name(model.name()).ok_or_else(|| ConfigError::Inconsistent {
+                        file: file.to_path_buf(),
+                        key: "robot.model".into(),
+                        problem: format!("no kinematics known for `{}`", model.name()),
+                    })?;
+                let (arm, folded) = errors.fold(&nominal, truth);
+                (Some(arm), Some(folded))
+            }
+            _ => (None, checked.simulation),
+        };
         let camera = CellCamera {
             name: name.unwrap_or("camera").to_string(),
             frame: name.map_or_else(|| "camera".to_string(), |n| format!("cam_{n}")),
@@ -295,7 +319,7 @@ impl CellConfig {
             intrinsics: raw.intrinsics.as_deref().map(resolve),
             backend,
             nominal: checked.nominal,
-            simulation: checked.simulation,
+            simulation,
         };
         Ok(CellConfig {
             file: file.to_path_buf(),
@@ -310,6 +334,8 @@ impl CellConfig {
             solver: raw.solver,
             session: raw.session,
             verdict: raw.verdict,
+            arm_errors: checked.arm_errors,
+            true_arm,
             settle: checked.settle,
         })
     }

@@ -61,9 +61,10 @@ pub struct ConfigFile {
     /// the boards only (`T_base_target` when some camera is eye-in-hand, `T_flange_target` when
     /// some camera is eye-to-hand), each camera's mount being its own `nominal`.
     pub nominal: BTreeMap<String, PoseYaml>,
-    /// The simulator's ground truth, same keys as `nominal` (sim backends only).
+    /// The simulator's ground truth, same keys as `nominal` (sim backends only), and the
+    /// simulated arm's own kinematic errors (`arm_errors`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub simulation: Option<BTreeMap<String, PoseYaml>>,
+    pub simulation: Option<SimulationFile>,
     /// Where the plan comes from (with `cameras:`, planned for the first eye-in-hand camera).
     #[serde(default)]
     pub plan: PlanConfig,
@@ -84,6 +85,51 @@ pub struct ConfigFile {
     /// The accuracy the GOOD / CHECK / REDO verdict judges against (each camera's).
     #[serde(default)]
     pub verdict: VerdictConfig,
+}
+
+/// The `simulation:` section as written: the true transforms (the keys of `nominal`) and the
+/// simulated arm's kinematic errors.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct SimulationFile {
+    /// The simulated arm's errors against its published model (absent: none): it reports
+    /// `FK_nominal(q)` while the camera sees the flange at `FK_true(q)`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arm_errors: Option<ArmErrorsFile>,
+    /// The true transforms, same keys as `nominal` (checked by `config::validate`, which
+    /// refuses any other key).
+    #[serde(flatten)]
+    pub transforms: BTreeMap<String, PoseYaml>,
+}
+
+/// `simulation.arm_errors`: either drawn (`seed` with the sigmas) or given per joint (the
+/// lists); not both. Degrees and millimetres, as a person writes them.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArmErrorsFile {
+    /// Seed of a random draw with the sigmas below.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// 1-sigma of each joint's zero offset, degrees (with `seed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_offset_deg: Option<f64>,
+    /// 1-sigma of each link's DH `d` and `a`, mm (with `seed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_mm: Option<f64>,
+    /// 1-sigma of each link's DH twist `α`, degrees (with `seed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twist_deg: Option<f64>,
+    /// Each joint's zero offset, degrees, base first (six).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_offsets_deg: Option<Vec<f64>>,
+    /// Each link's DH `d` error, mm (six).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub d_mm: Option<Vec<f64>>,
+    /// Each link's DH `a` error, mm (six).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub a_mm: Option<Vec<f64>>,
+    /// Each link's DH twist error, degrees (six).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_deg: Option<Vec<f64>>,
 }
 
 /// The most cameras one cell runs: every camera grabs, holds its frame and is detected at every
@@ -649,6 +695,34 @@ pub struct SolverConfig {
     /// `repeatability_*`; `false` weights with the values as given (defaults where absent).
     #[serde(default = "yes")]
     pub estimate_noise: bool,
+    /// The arm's own model estimated with the two transforms (issue #41): `none`, or
+    /// `joint_offsets` (the joint zero offsets the data determine, from each pose's recorded
+    /// joints and the arm's published DH model). `dh` is not yet implemented. Absent: `none`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<KinematicsChoice>,
+}
+
+/// `solver.kinematics`: which of the arm's own parameters are estimated with the cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KinematicsChoice {
+    /// The arm's model as published (the reported flange poses are taken as they are).
+    None,
+    /// The joint zero offsets the data determine (those the two transforms absorb are named).
+    JointOffsets,
+    /// Joint offsets and DH corrections (not yet implemented: refused when the config is read).
+    Dh,
+}
+
+impl KinematicsChoice {
+    /// The YAML name.
+    pub fn name(self) -> &'static str {
+        match self {
+            KinematicsChoice::None => "none",
+            KinematicsChoice::JointOffsets => "joint_offsets",
+            KinematicsChoice::Dh => "dh",
+        }
+    }
 }
 
 /// Where the final answer is fitted.
@@ -696,6 +770,7 @@ impl Default for SolverConfig {
             pixel_sigma_px: default_pixel_sigma_px(),
             robot_corrections: true,
             estimate_noise: true,
+            kinematics: None,
         }
     }
 }

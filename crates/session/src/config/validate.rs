@@ -16,10 +16,14 @@ use std::time::Duration;
 
 use nalgebra::Vector3;
 
-use super::schema::{CameraConfig, ConfigFile, RobotConfig, ARM_JOINT_RANGES_DEG, JOINT_NAMES};
+use super::schema::{
+    ArmErrorsFile, CameraConfig, ConfigFile, KinematicsChoice, RobotConfig, ARM_JOINT_RANGES_DEG,
+    JOINT_NAMES,
+};
 use super::ConfigError;
 use handeye_core::geometry::{readable, PoseYaml};
 use handeye_core::setup::{CellTransforms, Setup};
+use handeye_robot::arm_errors::{ArmErrorSigmas, ArmErrors};
 use handeye_robot::{MotionLimits, WorkspaceBox};
 use handeye_vision::DetectorOptions;
 
@@ -98,6 +102,15 @@ impl fmt::Display for Range {
 // that would hang or exhaust the machine), never an unusual but real setup.
 
 /// `robot.start_joints_deg[i]` (sim), degrees: UR joints turn ±360°.
+/// `simulation.arm_errors.joint_offset_deg` and `twist_deg` (sigmas), °.
+pub const ARM_ERROR_SIGMA_DEG: Range = Range::closed(0.0, 1.0, "°");
+/// `simulation.arm_errors.length_mm` (sigma), mm.
+pub const ARM_ERROR_SIGMA_MM: Range = Range::closed(0.0, 10.0, "mm");
+/// `simulation.arm_errors.joint_offsets_deg[i]` and `alpha_deg[i]`, °.
+pub const ARM_ERROR_DEG: Range = Range::closed(-5.0, 5.0, "°");
+/// `simulation.arm_errors.d_mm[i]` and `a_mm[i]`, mm.
+pub const ARM_ERROR_MM: Range = Range::closed(-50.0, 50.0, "mm");
+/// `robot.start_joints_deg[i]`, °.
 pub const START_JOINT_DEG: Range = Range::closed(-360.0, 360.0, "°");
 /// `robot.move_duration_s` (sim), s.
 pub const MOVE_DURATION_S: Range = Range::closed(0.0, 60.0, "s");
@@ -204,6 +217,7 @@ pub(super) struct Checked {
     pub camera: CameraConfig,
     pub nominal: CellTransforms,
     pub simulation: Option<CellTransforms>,
+    pub arm_errors: Option<ArmErrors>,
     pub limits: MotionLimits,
     pub workspace: WorkspaceBox,
     pub settle: Duration,
@@ -238,8 +252,12 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
     let simulation = raw
         .simulation
         .as_ref()
-        .map(|m| v.transforms(setup, "simulation", m))
+        .map(|m| v.transforms(setup, "simulation", &m.transforms))
         .transpose()?;
+    let arm_errors = match raw.simulation.as_ref().and_then(|m| m.arm_errors.as_ref()) {
+        Some(errors) => Some(v.arm_errors(&raw.robot, errors)?),
+        None => None,
+    };
     let uses_sim =
         matches!(raw.robot, RobotConfig::Sim { .. }) || matches!(camera, CameraConfig::Sim { .. });
     if uses_sim && simulation.is_none() {
@@ -254,6 +272,7 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
         camera,
         nominal,
         simulation,
+        arm_errors,
         limits,
         workspace,
         settle,
@@ -695,7 +714,99 @@ impl Validator<'_> {
             self.number("solver.translation_sigma_mm", sigma, TRANSLATION_SIGMA_MM)?;
         }
         self.number("solver.pixel_sigma_px", s.pixel_sigma_px, PIXEL_SIGMA_PX)?;
+        let modelled = match &raw.robot {
+            RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => true,
+            RobotConfig::Ros2(r) => r.model.is_some(),
+            RobotConfig::Recorded { .. } => false,
+        };
+        if s.kinematics == Some(KinematicsChoice::JointOffsets) && !modelled {
+            return Err(self.inconsistent(
+                "solver.kinematics",
+                "`joint_offsets` needs the arm's published model and each pose's joints: a sim, ur or ros2 arm with `robot.model`".into(),
+            ));
+        }
+        if s.kinematics == Some(KinematicsChoice::JointOffsets) && raw.intrinsics.is_none() {
+            return Err(self.inconsistent(
+                "solver.kinematics",
+                "`joint_offsets` needs the camera's `intrinsics`: a run that estimates them does not estimate the arm's model yet".into(),
+            ));
+        }
+        if s.kinematics == Some(KinematicsChoice::Dh) {
+            return Err(self.inconsistent(
+                "solver.kinematics",
+                "`dh` (the DH corrections) is not yet implemented: use `joint_offsets` (the joint zero offsets) or `none`".into(),
+            ));
+        }
         Ok(())
+    }
+
+    /// `simulation.arm_errors`: a seeded draw or the per-joint lists (not both), for the sim arm.
+    fn arm_errors(&self, robot: &RobotConfig, e: &ArmErrorsFile) -> Result<ArmErrors, ConfigError> {
+        const KEY: &str = "simulation.arm_errors";
+        if !matches!(robot, RobotConfig::Sim { .. }) {
+            return Err(self.inconsistent(
+                KEY,
+                "the arm's own errors are simulated by the sim arm only (`robot: {backend: sim}`)"
+                    .into(),
+            ));
+        }
+        let lists = [
+            ("joint_offsets_deg", &e.joint_offsets_deg, ARM_ERROR_DEG),
+            ("d_mm", &e.d_mm, ARM_ERROR_MM),
+            ("a_mm", &e.a_mm, ARM_ERROR_MM),
+            ("alpha_deg", &e.alpha_deg, ARM_ERROR_DEG),
+        ];
+        let sigmas = [
+            ("joint_offset_deg", e.joint_offset_deg, ARM_ERROR_SIGMA_DEG),
+            ("length_mm", e.length_mm, ARM_ERROR_SIGMA_MM),
+            ("twist_deg", e.twist_deg, ARM_ERROR_SIGMA_DEG),
+        ];
+        let listed = lists.iter().any(|(_, l, _)| l.is_some());
+        if let Some(seed) = e.seed {
+            if listed {
+                return Err(self.inconsistent(
+                    KEY,
+                    "give a seeded draw (`seed` with `joint_offset_deg`, `length_mm`, `twist_deg`) or the per-joint lists (`joint_offsets_deg`, `d_mm`, `a_mm`, `alpha_deg`), not both".into(),
+                ));
+            }
+            let mut values = [0.0; 3];
+            for (value, (name, sigma, range)) in values.iter_mut().zip(sigmas) {
+                *value = self.number(&format!("{KEY}.{name}"), sigma.unwrap_or(0.0), range)?;
+            }
+            return Ok(ArmErrors::draw(
+                seed,
+                &ArmErrorSigmas {
+                    joint_offset_rad: values[0].to_radians(),
+                    length_m: values[1] * 1e-3,
+                    twist_rad: values[2].to_radians(),
+                },
+            ));
+        }
+        if let Some((name, _, _)) = sigmas.iter().find(|(_, s, _)| s.is_some()) {
+            return Err(self.inconsistent(
+                &format!("{KEY}.seed"),
+                format!("missing: `{name}` is the sigma of a random draw, which needs a `seed`"),
+            ));
+        }
+        let mut six = [[0.0; 6]; 4];
+        for (out, (name, list, range)) in six.iter_mut().zip(lists) {
+            let Some(list) = list else { continue };
+            if list.len() != 6 {
+                return Err(self.inconsistent(
+                    &format!("{KEY}.{name}"),
+                    format!("{} values: one per joint, base first (six)", list.len()),
+                ));
+            }
+            for (i, value) in list.iter().enumerate() {
+                out[i] = self.number(&format!("{KEY}.{name}[{i}]"), *value, range)?;
+            }
+        }
+        Ok(ArmErrors {
+            joint_offsets_rad: six[0].map(f64::to_radians),
+            d_m: six[1].map(|v| v * 1e-3),
+            a_m: six[2].map(|v| v * 1e-3),
+            alpha_rad: six[3].map(f64::to_radians),
+        })
     }
 
     fn session(&self, raw: &ConfigFile) -> Result<Duration, ConfigError> {

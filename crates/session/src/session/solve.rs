@@ -8,10 +8,12 @@
 //! `solve`, `config`, `dataset`, `result`, `vision` and the ground floor; the folder's reading
 //! and writing go through `SessionFolder`.
 
+mod arm;
 mod driver_calibration;
 mod intrinsics_check;
 mod summary;
 
+pub use arm::{dh_chain, estimate_arm, ArmEstimate, Corrected};
 pub use driver_calibration::DRIVER_CALIBRATION_FILE;
 pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
@@ -59,6 +61,9 @@ pub struct SolvedSession {
     pub cell_model: Option<CellModel>,
     /// What it was solved from, as read once: the report renders these, it reads nothing again.
     pub evidence: Evidence,
+    /// The arm's own model estimated with the transforms (`solver.kinematics: joint_offsets`):
+    /// the samples and visits above are corrected by it.
+    pub arm: Option<ArmEstimate>,
 }
 
 /// What a session was solved from: its samples (`samples.yaml`) and its pose records
@@ -161,8 +166,11 @@ impl SolvedSession {
     /// The result file of this answer (`pairs`: the samples it was solved from, for their ids),
     /// with its verdict first and the frames `config`'s arm reports its poses in.
     pub fn result_file(&self, pairs: &[PosePair], config: &CellConfig) -> ResultFile {
-        let file = ResultFile::from_calibration(&self.calibration, pairs)
+        let mut file = ResultFile::from_calibration(&self.calibration, pairs)
             .with_robot_frames(config.robot.frames());
+        if let Some(arm) = &self.arm {
+            file = file.with_kinematics(arm.result_section());
+        }
         match &self.verdict {
             Some(verdict) => file.with_verdict(verdict.clone()),
             None => file,
@@ -260,7 +268,8 @@ fn solve_loaded(
     }
     // Intrinsics that are not this camera's: named with the numbers (and the estimate written
     // into the session), also when they made every pose fail.
-    let setup = folder.read_manifest()?.setup;
+    let manifest = folder.read_manifest()?;
+    let setup = manifest.setup;
     // With the rejected records an adaptive or hand-guided plan kept aside (their index reused).
     let mut seen = visits.clone();
     seen.extend(folder.read_rejected_visits()?);
@@ -300,14 +309,26 @@ fn solve_loaded(
             )
         })
         .collect();
-    let solved = solve_session_with(
+    // The arm's own model (`solver.kinematics`): the rest of the solve sees corrected poses.
+    let corrected = estimate_arm(
         dataset.setup,
+        config,
+        &manifest.plan,
         &dataset.pairs,
         &visits,
-        vision,
-        config,
-        notices,
-    );
+    )?;
+    let (pairs, solved_visits) = match &corrected {
+        Some(c) => (&c.pairs[..], &c.visits[..]),
+        None => (&dataset.pairs[..], &visits[..]),
+    };
+    let solved = solve_session_with(dataset.setup, pairs, solved_visits, vision, config, notices)
+        .map(|mut solved| {
+            if let Some(c) = corrected {
+                solved.summary = format!("{}\n{}", solved.summary, c.arm.describe().join("\n"));
+                solved.arm = Some(c.arm);
+            }
+            solved
+        });
     let mut solved = match (solved, &wrong) {
         // The few poses the intrinsics let through could not be solved: the intrinsics are
         // the cause to name (an adaptive plan that kept 2 of 60 poses).
@@ -534,6 +555,7 @@ fn solve_from_scratch(
         verdict: None,
         cell_model: None,
         evidence: Evidence::default(),
+        arm: None,
     };
     let c = &scratch.joint.camera;
     let i = &scratch.initial;
@@ -696,6 +718,7 @@ pub fn solve_session_with(
             pairs: pairs.to_vec(),
             visits: visits.to_vec(),
         },
+        arm: None,
     };
     let mut notes = Vec::new();
     let mut corrected = Vec::new();

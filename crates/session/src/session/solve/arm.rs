@@ -1,0 +1,274 @@
+//! The arm's own model in a session's solve (`solver.kinematics: joint_offsets`, issue #41): the
+//! joint zero offsets fitted with the two transforms (`handeye_solve::kinematics`) from each
+//! sample's recorded joints (the manifest's plan pose the visit was taken at) and the arm's
+//! published DH model, then every robot pose corrected by them, so the rest of the solve (the
+//! pose-space answer, the reprojection refinement, the verdict) works on the flange poses the
+//! corrected arm reports.
+//!
+//! Frames: `T_base_flange` in the controller's base; the offsets in radians inside, degrees in
+//! the result file. Depends on `config`, `result`, the folder's records and `solve`.
+
+use handeye_core::geometry::Pose;
+use handeye_core::setup::{PosePair, Setup};
+use handeye_robot::arm_errors::ArmErrors;
+use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
+use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, DhChain, OffsetStatus};
+use handeye_solve::{self as solve, SolveError};
+
+use crate::config::{CellConfig, KinematicsChoice};
+use crate::result::{JointOffsetYaml, KinematicsYaml, UncertaintyYaml, WithWithout};
+use crate::session::{PlannedPose, PoseVisit, SessionError};
+
+/// The DH chain of a UR model, as the solver takes it.
+pub fn dh_chain(model: &UrModel) -> DhChain {
+    DhChain {
+        d: model.d.to_vec(),
+        a: model.a.to_vec(),
+        alpha: model.alpha.to_vec(),
+    }
+}
+
+/// The arm's model as a session's solve estimated it.
+#[derive(Debug, Clone)]
+pub struct ArmEstimate {
+    /// The arm model whose published chain is the nominal (`ur10e`).
+    pub model: String,
+    /// That chain.
+    pub chain: DhChain,
+    /// The joint fit (offsets, the transforms with them, residuals with and without).
+    pub fit: ArmFit,
+}
+
+/// The session's samples and visits with the robot poses the arm's model corrects, and the model.
+pub struct Corrected {
+    /// The pose pairs, each `T_base_flange` corrected.
+    pub pairs: Vec<PosePair>,
+    /// The visits, each `T_base_flange` corrected.
+    pub visits: Vec<PoseVisit>,
+    /// The estimate.
+    pub arm: ArmEstimate,
+}
+
+/// The joints a visit was taken at: its plan pose's (rad), if the plan has it.
+fn joints_of(plan: &[PlannedPose], visit: &PoseVisit) -> Option<Vec<f64>> {
+    plan.get(visit.plan_index)
+        .map(|p| p.joints_deg.iter().map(|v| v.to_radians()).collect())
+}
+
+/// When `config` asks for the arm's model (`solver.kinematics: joint_offsets`), fits it to
+/// `pairs` (ids `pose-NNN` of `visits`, whose plan poses in `plan` hold the joints) and returns
+/// the samples and visits corrected by it; `None` otherwise.
+///
+/// The start is the pose-space solve of the same samples with the config's options; the samples
+/// it drops as outliers stay out of the arm's fit (and are corrected all the same).
+pub fn estimate_arm(
+    setup: Setup,
+    config: &CellConfig,
+    plan: &[PlannedPose],
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+) -> Result<Option<Corrected>, SessionError> {
+    if config.solver.kinematics != Some(KinematicsChoice::JointOffsets) {
+        return Ok(None);
+    }
+    let failed = |source: SolveError| SessionError::Solve {
+        stage: "the arm's joint offsets",
+        source: Box::new(source),
+    };
+    let name = config.robot.model().unwrap_or_default();
+    let model = UrModel::by_name(name).ok_or_else(|| {
+        failed(SolveError::RefinementFailed(
+            "the arm's model has no published kinematics",
+        ))
+    })?;
+    let chain = dh_chain(&model);
+    let mut samples = Vec::with_capacity(pairs.len());
+    for (index, pair) in pairs.iter().enumerate() {
+        let joints = visits
+            .iter()
+            .find(|v| Some(v.sample_id()) == pair.id)
+            .and_then(|v| joints_of(plan, v))
+            .ok_or_else(|| {
+                failed(SolveError::ArmJoints {
+                    index,
+                    id: pair.id.clone(),
+                    found: 0,
+                    expected: chain.joints(),
+                })
+            })?;
+        samples.push(ArmSample {
+            pair: pair.clone(),
+            joints,
+        });
+    }
+    let options = config.solver.to_options();
+    let start = solve::solve(setup, pairs, &options).map_err(failed)?;
+    let kept: Vec<ArmSample> = samples
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !start.dropped.contains(i))
+        .map(|(_, s)| s.clone())
+        .collect();
+    let noise = start.noise.map_or(options.noise, |n| n.model());
+    let fit = fit_joint_offsets(
+        setup,
+        &chain,
+        &kept,
+        (&start.camera_mount, &start.target_mount),
+        noise,
+        &options,
+    )
+    .map_err(failed)?;
+    let arm = ArmEstimate {
+        model: model.name.clone(),
+        chain,
+        fit,
+    };
+    let pairs = samples
+        .iter()
+        .map(|s| PosePair {
+            base_from_flange: arm.fit.corrected_flange(&arm.chain, s),
+            ..s.pair.clone()
+        })
+        .collect();
+    let visits = visits
+        .iter()
+        .map(|v| {
+            let mut v = v.clone();
+            if let Some(joints) = joints_of(plan, &v) {
+                v.base_from_flange = arm.corrected(&v.base_from_flange, &joints);
+            }
+            v
+        })
+        .collect();
+    Ok(Some(Corrected { pairs, visits, arm }))
+}
+
+impl ArmEstimate {
+    /// A reported flange pose at `joints` (rad) corrected by the offsets.
+    pub fn corrected(&self, reported: &Pose, joints: &[f64]) -> Pose {
+        let zero = vec![0.0; self.chain.joints()];
+        reported
+            * self.chain.forward(joints, &zero).inverse()
+            * self.chain.forward(joints, &self.fit.offset_vector())
+    }
+
+    /// The result file's `kinematics:` section.
+    pub fn result_section(&self) -> KinematicsYaml {
+        let fit = &self.fit;
+        let joint_offsets = fit
+            .offsets
+            .iter()
+            .map(|o| {
+                let mut row = JointOffsetYaml {
+                    joint: joint_name(o.joint),
+                    offset_deg: o.offset_rad.to_degrees(),
+                    sigma_deg: None,
+                    absorbed_by: None,
+                    undetermined: false,
+                };
+                match o.status {
+                    OffsetStatus::Estimated { sigma_rad } => {
+                        row.sigma_deg = Some(sigma_rad.to_degrees());
+                    }
+                    OffsetStatus::Absorbed { by } => {
+                        row.absorbed_by = Some(by.unwrap_or("both").to_string());
+                    }
+                    OffsetStatus::Undetermined => row.undetermined = true,
+                }
+                row
+            })
+            .collect();
+        let eye_in_hand = fit.setup == Setup::EyeInHand;
+        let uncertainty = fit.uncertainty.as_ref().map(|u| {
+            let (cam, tgt) = (Some(u.camera_mount), Some(u.target_mount));
+            UncertaintyYaml {
+                T_flange_camera: if eye_in_hand { cam } else { None },
+                T_base_target: if eye_in_hand { tgt } else { None },
+                T_base_camera: if eye_in_hand { None } else { cam },
+                T_flange_target: if eye_in_hand { None } else { tgt },
+                variance_factor: u.variance_factor,
+                covariance: u
+                    .covariance
+                    .row_iter()
+                    .map(|r| r.iter().copied().collect())
+                    .collect(),
+            }
+        });
+        KinematicsYaml {
+            model: self.model.clone(),
+            estimated: KinematicsChoice::JointOffsets.name().to_string(),
+            joint_offsets,
+            translation_rms_mm: WithWithout {
+                with: fit.translation_rms_mm[0],
+                without: fit.translation_rms_mm[1],
+            },
+            rotation_rms_deg: WithWithout {
+                with: fit.rotation_rms_deg[0],
+                without: fit.rotation_rms_deg[1],
+            },
+            uncertainty,
+        }
+    }
+
+    /// Lines for people: each joint's offset with its 1σ or why it was held, and the residuals
+    /// with and without the arm's model.
+    pub fn describe(&self) -> Vec<String> {
+        let fit = &self.fit;
+        let mut lines = vec![format!(
+            "arm model ({}, joint zero offsets estimated with the transforms): pose-space residual RMS {:.3} mm / {:.4}° with it, {:.3} mm / {:.4}° with the published model",
+            self.model,
+            fit.translation_rms_mm[0],
+            fit.rotation_rms_deg[0],
+            fit.translation_rms_mm[1],
+            fit.rotation_rms_deg[1],
+        )];
+        for o in &fit.offsets {
+            let what = match o.status {
+                OffsetStatus::Estimated { sigma_rad } => format!(
+                    "{:+.4}° ± {:.4}° (1σ)",
+                    o.offset_rad.to_degrees(),
+                    sigma_rad.to_degrees()
+                ),
+                OffsetStatus::Absorbed { by: Some(by) } => {
+                    format!("absorbed by {by} (no data can tell them apart): held at 0")
+                }
+                OffsetStatus::Absorbed { by: None } => {
+                    "absorbed by the two transforms together: held at 0".to_string()
+                }
+                OffsetStatus::Undetermined => {
+                    "not determined by these poses (add poses that move this joint further): held at 0"
+                        .to_string()
+                }
+            };
+            lines.push(format!("  {} offset: {what}", joint_name(o.joint)));
+        }
+        lines
+    }
+
+    /// The offsets against the simulator's true arm errors (the estimated ones, in their 1σ),
+    /// one line each, for the simulated cell's truth check.
+    pub fn compare_with_truth(&self, truth: &ArmErrors) -> String {
+        let mut lines = vec!["arm model truth check (estimated joint offsets):".to_string()];
+        for o in &self.fit.offsets {
+            if let OffsetStatus::Estimated { sigma_rad } = o.status {
+                let error = o.offset_rad - truth.joint_offsets_rad[o.joint];
+                lines.push(format!(
+                    "  {} offset: error {:+.4}° ({:.1}σ) against the simulator's {:+.4}°",
+                    joint_name(o.joint),
+                    error.to_degrees(),
+                    error.abs() / sigma_rad,
+                    truth.joint_offsets_rad[o.joint].to_degrees()
+                ));
+            }
+        }
+        lines.join("\n")
+    }
+}
+
+/// A joint's name (`base` … `wrist 3`), or `joint N` past a UR's six.
+fn joint_name(joint: usize) -> String {
+    JOINT_NAMES
+        .get(joint)
+        .map_or_else(|| format!("joint {}", joint + 1), |n| (*n).to_string())
+}

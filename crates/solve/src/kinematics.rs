@@ -1,0 +1,683 @@
+//! The arm's own model estimated with the cell (issue #41): the joint zero offsets of a serial
+//! arm, fitted jointly with both unknowns of `A = X·B·Y` in pose space, from each sample's
+//! recorded joint angles and the arm's nominal DH chain ([`DhChain`]).
+//!
+//! A controller reports `T_base_flange = FK_nominal(q)`; with joint zero offsets `δ` the flange
+//! is at `FK(q + δ)`. Each sample's robot pose is the reported one corrected by the change of
+//! model, `T_base_flange(δ) = T_reported · FK(q)⁻¹ · FK(q + δ)` (equal to the reported pose at
+//! `δ = 0`, so the fit starts exactly where the pose-space solve ended, and a controller whose
+//! reading differs slightly from the published model keeps its own reading). The residual and
+//! its weights are those of the pose-space refinement (`refine`: rotation and translation rows
+//! whitened by the board-pose noise, whose two sigmas are re-estimated with the fit by the same
+//! variance component estimation, `noise`); the parameters are the refinement's local
+//! perturbation of `X` and `Y` (analytic Jacobian, `refine::sample_rows`) and the free offsets
+//! (central differences through the chain: a handful of columns). Levenberg-Marquardt on the
+//! normal equations (`lm::minimize_normal`), the covariance `(JᵀJ)⁻¹` scaled by `χ²/dof` at the
+//! optimum, as the refinement's.
+//!
+//! Identifiability, from the normal equations at the start: an offset whose Jacobian column lies
+//! in the span of the transforms' columns (its Schur complement against them vanishes) is
+//! absorbed by them — on a UR the base joint's (a turn of the base frame about z: the base-side
+//! transform) and the last joint's (a turn of the flange about its axis: the flange-side one) —
+//! and is held at zero and named; of the rest, a combination the recorded configurations do not
+//! determine (the reduced information's smallest eigenvalue below [`UNDETERMINED_RATIO`] of
+//! its largest) is held at zero and named too. Every other offset gets its 1σ.
+//!
+//! Pure maths: no I/O, no clocks; depends on the ground floor (`geometry::dh_link`, `setup`).
+
+use nalgebra::{DMatrix, DVector, SMatrix};
+
+use super::lm::{minimize_normal, NormalEquations};
+use super::noise::Estimator;
+use super::refine::{mount_uncertainty, perturbed, sample_residual, sample_rows, variance_factor};
+use super::{Axby, NoiseModel, PoseNoise, SolveError, SolveOptions, Uncertainty};
+use handeye_core::geometry::{dh_link, Pose};
+use handeye_core::setup::{PosePair, Setup};
+
+/// A transform parameter count: φ_X, ρ_X, φ_Y, ρ_Y.
+const POSE_PARAMS: usize = 12;
+/// Step of the central differences in a joint offset, rad.
+const OFFSET_STEP_RAD: f64 = 1e-6;
+/// An offset whose Jacobian column keeps less than this fraction of its norm after the
+/// transforms' columns are projected out is absorbed by them (exactly absorbed columns keep
+/// ~1e-9: the differences' round-off).
+pub const ABSORBED_RATIO: f64 = 1e-5;
+/// The reduced information of the free offsets (diagonal scaled to 1) whose smallest eigenvalue
+/// is below this fraction of its largest leaves a combination of offsets undetermined.
+pub const UNDETERMINED_RATIO: f64 = 1e-8;
+/// Most rounds of noise re-estimation, each a refit.
+const MAX_ROUNDS: usize = 12;
+
+/// A serial arm's nominal standard DH chain, base first: link `i` is
+/// `Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)` (m, rad), the convention of `geometry::dh_link`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DhChain {
+    /// Link offsets `d_i`, m.
+    pub d: Vec<f64>,
+    /// Link lengths `a_i`, m.
+    pub a: Vec<f64>,
+    /// Link twists `α_i`, rad.
+    pub alpha: Vec<f64>,
+}
+
+impl DhChain {
+    /// Number of joints.
+    pub fn joints(&self) -> usize {
+        self.d.len()
+    }
+
+    /// `T_base_flange` at `joints` plus `offsets` (rad, one each).
+    pub fn forward(&self, joints: &[f64], offsets: &[f64]) -> Pose {
+        (0..self.joints()).fold(Pose::identity(), |acc, i| {
+            acc * dh_link(joints[i] + offsets[i], self.d[i], self.a[i], self.alpha[i])
+        })
+    }
+}
+
+/// One sample for the arm's model: the pose pair (its reported `T_base_flange`) and the joint
+/// angles the arm stood at (rad, base first).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmSample {
+    /// The pose pair as recorded.
+    pub pair: PosePair,
+    /// The joints, rad.
+    pub joints: Vec<f64>,
+}
+
+/// What became of one joint's zero offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum OffsetStatus {
+    /// Estimated, with its 1σ (rad).
+    Estimated {
+        /// 1σ, rad.
+        sigma_rad: f64,
+    },
+    /// No data can tell it from a transform: held at zero, absorbed by the transform of this
+    /// YAML key (`T_base_target`, `T_flange_camera`, ...), or by both together.
+    Absorbed {
+        /// The key of the transform that absorbs it; `None`: the two together.
+        by: Option<&'static str>,
+    },
+    /// The recorded configurations do not determine it (with the others): held at zero.
+    Undetermined,
+}
+
+/// One joint's zero offset as fitted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointOffset {
+    /// The joint, 0-based from the base.
+    pub joint: usize,
+    /// The offset, rad (the true joint angle is the reported one plus this); zero unless
+    /// estimated.
+    pub offset_rad: f64,
+    /// Estimated, absorbed or undetermined.
+    pub status: OffsetStatus,
+}
+
+/// The joint fit of the two transforms and the arm's joint offsets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmFit {
+    /// Which setup.
+    pub setup: Setup,
+    /// The camera mount (`T_flange_camera` or `T_base_camera`) with the offsets estimated.
+    pub camera_mount: Pose,
+    /// The target mount (`T_base_target` or `T_flange_target`).
+    pub target_mount: Pose,
+    /// The transforms' 1σ, the offsets' uncertainty included (marginal); `None` if singular.
+    pub uncertainty: Option<Uncertainty>,
+    /// Every joint's offset, base first.
+    pub offsets: Vec<JointOffset>,
+    /// The board-pose noise the fit ended with.
+    pub noise: PoseNoise,
+    /// Translation residual RMS of the fit, mm, with the offsets and without them (the
+    /// pose-space fit of the same samples, the start).
+    pub translation_rms_mm: [f64; 2],
+    /// Rotation residual RMS, degrees, with and without the offsets.
+    pub rotation_rms_deg: [f64; 2],
+    /// Levenberg-Marquardt met its tolerance in the last round.
+    pub converged: bool,
+}
+
+impl ArmFit {
+    /// The offsets as a vector (rad, zero where not estimated), for [`DhChain::forward`].
+    pub fn offset_vector(&self) -> Vec<f64> {
+        self.offsets.iter().map(|o| o.offset_rad).collect()
+    }
+
+    /// A sample's robot pose corrected by the fitted offsets:
+    /// `T_reported · FK(q)⁻¹ · FK(q + δ)`.
+    pub fn corrected_flange(&self, chain: &DhChain, sample: &ArmSample) -> Pose {
+        let zero = vec![0.0; chain.joints()];
+        sample.pair.base_from_flange
+            * chain.forward(&sample.joints, &zero).inverse()
+            * chain.forward(&sample.joints, &self.offset_vector())
+    }
+}
+
+/// A sample prepared for the fit: its measured `A`, its correction `T_reported · FK(q)⁻¹`, its
+/// joints, and its scale `sqrt(weight)`.
+struct Prepared {
+    a: Pose,
+    correction: Pose,
+    joints: Vec<f64>,
+    scale: f64,
+}
+
+/// The fit's problem for [`minimize_normal`]: parameters `[δX/δY perturbation, free offsets]`
+/// around an anchor that moves to every accepted point.
+struct Problem<'a> {
+    setup: Setup,
+    chain: &'a DhChain,
+    samples: &'a [Prepared],
+    /// Joints whose offsets are free, in parameter order.
+    free: &'a [usize],
+    noise: NoiseModel,
+    anchor: Axby,
+    anchor_offsets: Vec<f64>,
+    delta: DVector<f64>,
+}
+
+/// The normal equations at one point, split by group of rows (for the noise estimate).
+struct Linearised {
+    rotation: DMatrix<f64>,
+    translation: DMatrix<f64>,
+    gradient: DVector<f64>,
+    squares: [f64; 2],
+}
+
+impl Problem<'_> {
+    fn params(&self) -> usize {
+        POSE_PARAMS + self.free.len()
+    }
+
+    fn current(&self) -> (Axby, Vec<f64>) {
+        let pose = perturbed(
+            &self.anchor,
+            &self.delta.fixed_rows::<POSE_PARAMS>(0).into_owned(),
+        );
+        let mut offsets = self.anchor_offsets.clone();
+        for (k, &j) in self.free.iter().enumerate() {
+            offsets[j] += self.delta[POSE_PARAMS + k];
+        }
+        (pose, offsets)
+    }
+
+    fn b(&self, sample: &Prepared, offsets: &[f64]) -> Pose {
+        self.setup
+            .chain_b(&(sample.correction * self.chain.forward(&sample.joints, offsets)))
+    }
+
+    fn weights(&self, sample: &Prepared) -> (f64, f64) {
+        (
+            sample.scale / self.noise.rotation_sigma_rad,
+            sample.scale / self.noise.translation_sigma_m,
+        )
+    }
+
+    /// Residual and Jacobian (6 × params) of every sample at the current point, with the
+    /// offsets of `columns` (joint indices) as the last columns.
+    fn linearise(&self, columns: &[usize]) -> Linearised {
+        let (s, offsets) = self.current();
+        let p = POSE_PARAMS + columns.len();
+        let mut lin = Linearised {
+            rotation: DMatrix::zeros(p, p),
+            translation: DMatrix::zeros(p, p),
+            gradient: DVector::zeros(p),
+            squares: [0.0; 2],
+        };
+        for sample in self.samples {
+            let (kr, kt) = self.weights(sample);
+            let b = self.b(sample, &offsets);
+            let (e, pose_rows) = sample_rows(&s, &sample.a, &b, kr, kt);
+            let mut j = DMatrix::<f64>::zeros(6, p);
+            j.view_mut((0, 0), (6, POSE_PARAMS)).copy_from(&pose_rows);
+            for (k, &joint) in columns.iter().enumerate() {
+                let mut shifted = offsets.clone();
+                shifted[joint] += OFFSET_STEP_RAD;
+                let plus = sample_residual(&s, &sample.a, &self.b(sample, &shifted), kr, kt);
+                shifted[joint] -= 2.0 * OFFSET_STEP_RAD;
+                let minus = sample_residual(&s, &sample.a, &self.b(sample, &shifted), kr, kt);
+                j.set_column(POSE_PARAMS + k, &((plus - minus) / (2.0 * OFFSET_STEP_RAD)));
+            }
+            let (jr, jt) = (j.rows(0, 3), j.rows(3, 3));
+            lin.rotation += jr.tr_mul(&jr);
+            lin.translation += jt.tr_mul(&jt);
+            lin.gradient += j.tr_mul(&DVector::from_column_slice(e.as_slice()));
+            lin.squares[0] += e.fixed_rows::<3>(0).norm_squared();
+            lin.squares[1] += e.fixed_rows::<3>(3).norm_squared();
+        }
+        lin
+    }
+
+    /// Σ r² at the current point.
+    fn total_cost(&self) -> f64 {
+        let (s, offsets) = self.current();
+        self.samples
+            .iter()
+            .map(|sample| {
+                let (kr, kt) = self.weights(sample);
+                sample_residual(&s, &sample.a, &self.b(sample, &offsets), kr, kt).norm_squared()
+            })
+            .sum()
+    }
+
+    /// Unweighted residual RMS (rad, m) at the current point.
+    fn rms(&self) -> (f64, f64) {
+        let (s, offsets) = self.current();
+        let n = self.samples.len().max(1) as f64;
+        let (mut r2, mut t2) = (0.0, 0.0);
+        for sample in self.samples {
+            let e = sample_residual(&s, &sample.a, &self.b(sample, &offsets), 1.0, 1.0);
+            r2 += e.fixed_rows::<3>(0).norm_squared();
+            t2 += e.fixed_rows::<3>(3).norm_squared();
+        }
+        ((r2 / n).sqrt(), (t2 / n).sqrt())
+    }
+}
+
+impl NormalEquations for Problem<'_> {
+    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        let lin = self.linearise(self.free);
+        let cost = lin.squares[0] + lin.squares[1];
+        if !cost.is_finite() {
+            return None;
+        }
+        Some((&lin.rotation + &lin.translation, lin.gradient, cost))
+    }
+
+    fn cost(&self) -> Option<f64> {
+        let cost = self.total_cost();
+        cost.is_finite().then_some(cost)
+    }
+
+    fn params_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.delta
+    }
+
+    fn accepted(&mut self) {
+        let (pose, offsets) = self.current();
+        self.anchor = pose;
+        self.anchor_offsets = offsets;
+        self.delta.fill(0.0);
+    }
+}
+
+/// Which offsets the data can estimate, from the information `n` (whitened `JᵀJ`, the 12
+/// transform parameters then one column per joint) at the start: each joint's status, `None`
+/// for the free ones.
+fn identifiability(setup: Setup, n: &DMatrix<f64>, joints: usize) -> Vec<Option<OffsetStatus>> {
+    let (camera_key, target_key) = setup.unknown_names();
+    // What of column `c` remains after projecting out the columns `span`, as a fraction.
+    let remains = |c: usize, span: &[usize]| -> f64 {
+        let own = n[(c, c)];
+        if own <= 0.0 {
+            return 0.0;
+        }
+        let k = span.len();
+        let nss = DMatrix::from_fn(k, k, |i, j| n[(span[i], span[j])]);
+        let nsc = DVector::from_fn(k, |i, _| n[(span[i], c)]);
+        let explained = nss.cholesky().map_or(0.0, |ch| nsc.dot(&ch.solve(&nsc)));
+        ((own - explained).max(0.0) / own).sqrt()
+    };
+    let x: Vec<usize> = (0..6).collect();
+    let y: Vec<usize> = (6..12).collect();
+    let xy: Vec<usize> = (0..12).collect();
+    let mut status: Vec<Option<OffsetStatus>> = (0..joints)
+        .map(|j| {
+            let c = POSE_PARAMS + j;
+            if remains(c, &xy) >= ABSORBED_RATIO {
+                return None;
+            }
+            let by = if remains(c, &x) < ABSORBED_RATIO {
+                Some(camera_key)
+            } else if remains(c, &y) < ABSORBED_RATIO {
+                Some(target_key)
+            } else {
+                None
+            };
+            Some(OffsetStatus::Absorbed { by })
+        })
+        .collect();
+    // Of the rest, drop the joint that carries a combination the data do not determine, one at
+    // a time, until the reduced information is well conditioned.
+    loop {
+        let free: Vec<usize> = (0..joints).filter(|&j| status[j].is_none()).collect();
+        if free.is_empty() {
+            break;
+        }
+        let nxx = DMatrix::from_fn(12, 12, |i, j| n[(i, j)]);
+        let Some(ch) = nxx.cholesky() else { break };
+        let k = free.len();
+        let nfx = DMatrix::from_fn(k, 12, |i, j| n[(POSE_PARAMS + free[i], j)]);
+        let nff = DMatrix::from_fn(k, k, |i, j| {
+            n[(POSE_PARAMS + free[i], POSE_PARAMS + free[j])]
+        });
+        let schur = &nff - &nfx * ch.solve(&nfx.transpose());
+        let scale = DVector::from_fn(k, |i, _| 1.0 / schur[(i, i)].max(f64::MIN_POSITIVE).sqrt());
+        let scaled = DMatrix::from_fn(k, k, |i, j| schur[(i, j)] * scale[i] * scale[j]);
+        let eigen = scaled.symmetric_eigen();
+        let (lo, hi) = eigen.eigenvalues.iter().enumerate().fold(
+            ((0, f64::INFINITY), f64::NEG_INFINITY),
+            |((at, lo), hi), (i, &v)| (if v < lo { (i, v) } else { (at, lo) }, hi.max(v)),
+        );
+        if lo.1 >= UNDETERMINED_RATIO * hi {
+            break;
+        }
+        let worst = eigen.eigenvectors.column(lo.0).iamax();
+        status[free[worst]] = Some(OffsetStatus::Undetermined);
+    }
+    status
+}
+
+/// Fits the two transforms and the joint zero offsets the data determine, started from the
+/// pose-space answer `start` (camera mount, target mount) and its board-pose noise `noise`, for
+/// `samples` of `setup` and the arm's nominal `chain`. `options` says which sigmas are estimated
+/// (as the pose-space solve's). Pass the samples the pose-space solve kept (its outliers out).
+///
+/// Errors: a sample whose joint count is not the chain's, fewer than three samples, or a fit
+/// whose residuals break down.
+pub fn fit_joint_offsets(
+    setup: Setup,
+    chain: &DhChain,
+    samples: &[ArmSample],
+    start: (&Pose, &Pose),
+    noise: NoiseModel,
+    options: &SolveOptions,
+) -> Result<ArmFit, SolveError> {
+    if samples.len() < 3 {
+        return Err(SolveError::TooFewSamples {
+            found: samples.len(),
+            required: 3,
+        });
+    }
+    let joints = chain.joints();
+    let zero = vec![0.0; joints];
+    let mut prepared = Vec::with_capacity(samples.len());
+    for (index, s) in samples.iter().enumerate() {
+        if s.joints.len() != joints || s.joints.iter().any(|q| !q.is_finite()) {
+            return Err(SolveError::ArmJoints {
+                index,
+                id: s.pair.id.clone(),
+                found: s.joints.len(),
+                expected: joints,
+            });
+        }
+        prepared.push(Prepared {
+            a: s.pair.camera_from_target,
+            correction: s.pair.base_from_flange * chain.forward(&s.joints, &zero).inverse(),
+            joints: s.joints.clone(),
+            scale: s.pair.weight.sqrt(),
+        });
+    }
+    let all: Vec<usize> = (0..joints).collect();
+    let problem = Problem {
+        setup,
+        chain,
+        samples: &prepared,
+        free: &[],
+        noise,
+        anchor: Axby::from_mounts(start.0, start.1),
+        anchor_offsets: zero.clone(),
+        delta: DVector::zeros(POSE_PARAMS),
+    };
+    let before = problem.rms();
+    // Which offsets the transforms absorb is a property of the chain and the configurations:
+    // judged on the published model's poses (no reading noise, which would blur an exact
+    // absorption by its own few 1e-5).
+    let structural: Vec<Prepared> = prepared
+        .iter()
+        .map(|p| Prepared {
+            a: p.a,
+            correction: Pose::identity(),
+            joints: p.joints.clone(),
+            scale: p.scale,
+        })
+        .collect();
+    let at_start = Problem {
+        samples: &structural,
+        anchor: Axby::from_mounts(start.0, start.1),
+        delta: DVector::zeros(POSE_PARAMS),
+        anchor_offsets: zero.clone(),
+        ..problem
+    }
+    .linearise(&all);
+    let status = identifiability(setup, &(&at_start.rotation + &at_start.translation), joints);
+    let free: Vec<usize> = (0..joints).filter(|&j| status[j].is_none()).collect();
+    let mut problem = Problem {
+        free: &free,
+        delta: DVector::zeros(POSE_PARAMS + free.len()),
+        ..problem
+    };
+    let mut estimator = Estimator::new(samples.len(), options).starting_at(noise);
+    let mut converged = false;
+    for _ in 0..MAX_ROUNDS {
+        problem.noise = estimator.noise();
+        converged = minimize_normal(&mut problem)?.converged;
+        let lin = problem.linearise(&free);
+        let groups = groups(&lin, 3.0 * samples.len() as f64);
+        if estimator.step_with(groups) {
+            break;
+        }
+    }
+    let lin = problem.linearise(&free);
+    let chi2 = lin.squares[0] + lin.squares[1];
+    let p = problem.params();
+    let factor = variance_factor(chi2, (6 * samples.len()).saturating_sub(p));
+    let covariance = (&lin.rotation + &lin.translation)
+        .try_inverse()
+        .map(|inverse| inverse * factor);
+    let (solution, offsets) = problem.current();
+    let uncertainty = covariance.as_ref().map(|c| {
+        let block: SMatrix<f64, 12, 12> = c.fixed_view::<12, 12>(0, 0).into_owned();
+        mount_uncertainty(&solution, &block, factor)
+    });
+    let after = problem.rms();
+    let (camera_mount, target_mount) = solution.to_mounts();
+    let offsets = (0..joints)
+        .map(|j| {
+            let status = status[j].unwrap_or_else(|| {
+                let k = POSE_PARAMS + free.iter().position(|&f| f == j).unwrap_or(0);
+                OffsetStatus::Estimated {
+                    sigma_rad: covariance
+                        .as_ref()
+                        .map_or(f64::NAN, |c| c[(k, k)].max(0.0).sqrt()),
+                }
+            });
+            JointOffset {
+                joint: j,
+                offset_rad: offsets[j],
+                status,
+            }
+        })
+        .collect();
+    Ok(ArmFit {
+        setup,
+        camera_mount,
+        target_mount,
+        uncertainty,
+        offsets,
+        noise: estimator.outcome(),
+        translation_rms_mm: [after.1 * 1e3, before.1 * 1e3],
+        rotation_rms_deg: [after.0.to_degrees(), before.0.to_degrees()],
+        converged,
+    })
+}
+
+/// The two groups' `(Σ r², redundancy)` of variance component estimation (see
+/// `refine::group_redundancy`) from normal equations split by group, `rows` rows in each.
+fn groups(lin: &Linearised, rows: f64) -> Option<[(f64, f64); 2]> {
+    let inverse = (&lin.rotation + &lin.translation).cholesky()?.inverse();
+    let share = |group: &DMatrix<f64>| inverse.component_mul(group).sum();
+    Some([
+        (lin.squares[0], rows - share(&lin.rotation)),
+        (lin.squares[1], rows - share(&lin.translation)),
+    ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::{pose_from_rotvec, translation_distance};
+    use nalgebra::Vector3;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// The UR10e's published DH chain.
+    fn ur10e() -> DhChain {
+        use std::f64::consts::FRAC_PI_2;
+        DhChain {
+            d: vec![0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655],
+            a: vec![0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0],
+            alpha: vec![FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0],
+        }
+    }
+
+    #[test]
+    fn chain_forward_shifts_joints_by_offsets() {
+        let chain = ur10e();
+        let q = [0.3, -1.2, 1.4, -0.8, 1.1, 0.4];
+        let d = [0.01, -0.02, 0.0, 0.005, 0.0, 0.03];
+        let shifted: Vec<f64> = q.iter().zip(&d).map(|(a, b)| a + b).collect();
+        let a = chain.forward(&q, &d);
+        let b = chain.forward(&shifted, &[0.0; 6]);
+        assert!(translation_distance(&a, &b) < 1e-15);
+    }
+
+    /// Samples of an eye-in-hand cell whose arm has `offsets` (rad): reported through the
+    /// nominal chain (with reading noise), seen through the true one, board poses with Gaussian
+    /// noise.
+    fn cell(seed: u64, offsets: [f64; 6], n: usize) -> (Vec<ArmSample>, Pose, Pose) {
+        let chain = ur10e();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let x = pose_from_rotvec(
+            Vector3::new(0.03, -0.07, 0.04),
+            Vector3::new(0.0, 0.0, 1.57),
+        );
+        let y = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
+        let noise_r = Normal::new(0.0, 0.02f64.to_radians()).unwrap();
+        let noise_t = Normal::new(0.0, 0.1e-3).unwrap();
+        let samples = (0..n)
+            .map(|_| {
+                let q: Vec<f64> = (0..6).map(|_| rng.random_range(-1.5..1.5)).collect();
+                // The controller's reading, with its repeatability (0.02 mm, 0.002°): the
+                // absorbed offsets must be found all the same.
+                let reading = pose_from_rotvec(
+                    Vector3::from_fn(|_, _| 2e-5 * rng.random_range(-1.0..1.0)),
+                    Vector3::from_fn(|_, _| 3.5e-5 * rng.random_range(-1.0..1.0)),
+                );
+                let reported = chain.forward(&q, &[0.0; 6]) * reading;
+                let truth = chain.forward(&q, &offsets);
+                let seen = x.inverse() * truth.inverse() * y;
+                let dn = pose_from_rotvec(
+                    Vector3::from_fn(|_, _| noise_t.sample(&mut rng)),
+                    Vector3::from_fn(|_, _| noise_r.sample(&mut rng)),
+                );
+                ArmSample {
+                    pair: PosePair::new(reported, seen * dn),
+                    joints: q,
+                }
+            })
+            .collect();
+        (samples, x, y)
+    }
+
+    #[test]
+    fn base_and_last_offsets_are_absorbed_and_the_middle_ones_found() {
+        let deg = 1f64.to_radians();
+        let offsets = [0.0, 0.03 * deg, -0.04 * deg, 0.05 * deg, -0.02 * deg, 0.0];
+        let (samples, x, y) = cell(4, offsets, 40);
+        let noise = NoiseModel {
+            rotation_sigma_rad: 0.02f64.to_radians(),
+            translation_sigma_m: 1e-4,
+        };
+        let fit = fit_joint_offsets(
+            Setup::EyeInHand,
+            &ur10e(),
+            &samples,
+            (&x, &y),
+            noise,
+            &SolveOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(
+            fit.offsets[0].status,
+            OffsetStatus::Absorbed {
+                by: Some("T_base_target")
+            }
+        );
+        assert_eq!(
+            fit.offsets[5].status,
+            OffsetStatus::Absorbed {
+                by: Some("T_flange_camera")
+            }
+        );
+        for (j, (fitted, truth)) in fit.offsets.iter().zip(offsets).enumerate().take(5).skip(1) {
+            let OffsetStatus::Estimated { sigma_rad } = fitted.status else {
+                panic!("joint {j}: {fitted:?}");
+            };
+            let error = fitted.offset_rad - truth;
+            assert!(
+                error.abs() < 4.0 * sigma_rad,
+                "joint {j}: {error} vs {sigma_rad}"
+            );
+            assert!(sigma_rad < 0.01 * deg, "joint {j}: 1σ {sigma_rad}");
+        }
+        assert!(translation_distance(&fit.camera_mount, &x) < 0.5e-3);
+        assert!(translation_distance(&fit.target_mount, &y) < 0.5e-3);
+        assert!(fit.translation_rms_mm[0] < fit.translation_rms_mm[1]);
+    }
+
+    #[test]
+    fn offsets_of_joints_that_never_move_are_absorbed_by_the_camera_mount() {
+        // The three wrist joints held still: everything after the elbow is one constant
+        // transform, which the flange-side unknown takes whole, offsets included.
+        let chain = ur10e();
+        let mut rng = StdRng::seed_from_u64(1);
+        let x = pose_from_rotvec(
+            Vector3::new(0.03, -0.07, 0.04),
+            Vector3::new(0.0, 0.0, 1.57),
+        );
+        let y = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
+        let samples: Vec<ArmSample> = (0..20)
+            .map(|_| {
+                let q = vec![
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                    0.4,
+                    1.1,
+                    -0.3,
+                ];
+                let reported = chain.forward(&q, &[0.0; 6]);
+                ArmSample {
+                    pair: PosePair::new(reported, x.inverse() * reported.inverse() * y),
+                    joints: q,
+                }
+            })
+            .collect();
+        let fit = fit_joint_offsets(
+            Setup::EyeInHand,
+            &chain,
+            &samples,
+            (&x, &y),
+            NoiseModel::default(),
+            &SolveOptions::default(),
+        )
+        .unwrap();
+        for j in 3..6 {
+            assert_eq!(
+                fit.offsets[j].status,
+                OffsetStatus::Absorbed {
+                    by: Some("T_flange_camera")
+                },
+                "joint {j}"
+            );
+        }
+        assert!(matches!(
+            fit.offsets[1].status,
+            OffsetStatus::Estimated { .. }
+        ));
+        assert!(fit.offsets.iter().all(|o| o.offset_rad.abs() < 1e-9));
+    }
+}

@@ -1,0 +1,569 @@
+//! The arm's own errors (issue #41): joint zero offsets estimated with the two transforms.
+//!
+//! Monte Carlo over drawn arm errors (seeded): the shipped sim cells' own plans (their joints,
+//! from the plan check of `configs/sim-cell.yaml` and `configs/sim-cell-eye-to-hand.yaml`, a
+//! UR10e), each pose's flange reported through the published model (`FK_nominal(q)`, with the
+//! arm's repeatability noise) while the board is seen from the true arm (`FK_true(q)`, with
+//! board-pose noise): synthetic pose pairs, so the draws run in seconds in a debug build. The
+//! truth is in the controller's frames (`ArmErrors::fold`: the base and last joint offsets no
+//! data can tell from the transforms). Then one whole run of `configs/sim-cell-arm-errors.yaml`
+//! through the binary (rendered frames, detection, the solve with `solver.kinematics:
+//! joint_offsets`), checked against its truth.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::setup::{CellTransforms, PosePair, Setup};
+use handeye_robot::arm_errors::{ArmErrorSigmas, ArmErrors};
+use handeye_robot::kinematics::UrModel;
+use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, OffsetStatus};
+use handeye_solve::{NoiseModel, SolveOptions};
+
+use crate::util::{config_variant, pose_error_mm_deg, repo};
+
+/// Draws per setup (the issue asks for at least 20).
+const DRAWS: u64 = 24;
+
+/// The board-pose noise of the synthetic samples, 1σ per axis (mm, °), besides the arm's
+/// repeatability (0.02 mm, 0.002°, as the shipped cells' `robot:`).
+#[derive(Debug, Clone, Copy)]
+struct BoardNoise(f64, f64);
+
+/// The rendered sim cell's: its pose-space residuals with the arm model are 0.02–0.05 mm and
+/// 0.005–0.007° RMS over 30 poses, arm repeatability included.
+const RENDERED: BoardNoise = BoardNoise(0.02, 0.005);
+/// Five times that: a poorer lens or board.
+const PESSIMISTIC: BoardNoise = BoardNoise(0.1, 0.02);
+
+/// The shipped cell `config`'s plan joints (rad), its arm model and its physical truth.
+fn shipped_plan(config: &Path) -> (Vec<Vec<f64>>, UrModel, CellTransforms) {
+    let prepared = handeye_session::cell::prepare(config).unwrap();
+    let joints: Vec<Vec<f64>> = prepared
+        .report
+        .poses
+        .iter()
+        .filter_map(|p| p.joints.as_ref().map(|q| q.iter().copied().collect()))
+        .collect();
+    let truth = prepared.config.camera().simulation.unwrap();
+    (joints, prepared.arm.unwrap(), truth)
+}
+
+/// Samples of the cell `truth` whose arm has `errors`: reported through `model` with the arm's
+/// repeatability (0.02 mm, 0.002°), seen through the true arm with the board-pose noise `board`.
+fn samples(
+    joints: &[Vec<f64>],
+    model: &UrModel,
+    errors: &ArmErrors,
+    physical: &CellTransforms,
+    board: BoardNoise,
+    seed: u64,
+) -> (Vec<ArmSample>, CellTransforms) {
+    let (arm, truth) = errors.fold(model, physical);
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut noise = |mm: f64, deg: f64| {
+        let (t, r) = (
+            Normal::new(0.0, mm * 1e-3).unwrap(),
+            Normal::new(0.0, deg.to_radians()).unwrap(),
+        );
+        pose_from_rotvec(
+            Vector3::from_fn(|_, _| t.sample(&mut rng)),
+            Vector3::from_fn(|_, _| r.sample(&mut rng)),
+        )
+    };
+    let out = joints
+        .iter()
+        .enumerate()
+        .map(|(i, q)| {
+            let q6 = handeye_robot::Joints::from_fn(6, |k| q[k]);
+            let reported = model.forward(&q6) * noise(0.02, 0.002);
+            let flange = arm.forward(&q6);
+            let seen = match truth.setup {
+                Setup::EyeInHand => {
+                    truth.camera_mount.inverse() * flange.inverse() * truth.target_mount
+                }
+                Setup::EyeToHand => truth.camera_mount.inverse() * flange * truth.target_mount,
+            };
+            let mut pair = PosePair::new(reported, seen * noise(board.0, board.1));
+            pair.id = Some(format!("pose-{i:03}"));
+            ArmSample {
+                pair,
+                joints: q.clone(),
+            }
+        })
+        .collect();
+    (out, truth)
+}
+
+/// The larger translation (mm) and rotation (°) error of the two transforms against `truth`.
+fn transform_error(camera: &Pose, target: &Pose, truth: &CellTransforms) -> (f64, f64) {
+    let (ct, cr) = pose_error_mm_deg(camera, &truth.camera_mount);
+    let (tt, tr) = pose_error_mm_deg(target, &truth.target_mount);
+    (ct.max(tt), cr.max(tr))
+}
+
+/// The pose-space solve without the arm's model, then the joint fit with it.
+fn solve_both(setup: Setup, model: &UrModel, samples: &[ArmSample]) -> (Pose, Pose, ArmFit) {
+    let pairs: Vec<PosePair> = samples.iter().map(|s| s.pair.clone()).collect();
+    let options = SolveOptions::default();
+    let plain = handeye_solve::solve(setup, &pairs, &options).unwrap();
+    let noise: NoiseModel = plain.noise.map_or(options.noise, |n| n.model());
+    let fit = fit_joint_offsets(
+        setup,
+        &handeye_session::session::solve::dh_chain(model),
+        samples,
+        (&plain.camera_mount, &plain.target_mount),
+        noise,
+        &options,
+    )
+    .unwrap();
+    (plain.camera_mount, plain.target_mount, fit)
+}
+
+/// What the draws of one setup gave.
+#[derive(Debug, Default)]
+struct Tally {
+    draws: usize,
+    /// Draws whose every estimated offset is within 3σ of the truth.
+    within_3_sigma: usize,
+    /// Draws with both transforms within 0.5 mm / 0.05°.
+    within_bar: usize,
+    /// Largest transform error with the arm model, (mm, °).
+    worst_with: (f64, f64),
+    /// Mean transform translation error, mm: with, without.
+    mean_mm: [f64; 2],
+    /// Largest transform translation error without the arm model, mm.
+    worst_without_mm: f64,
+    /// RMS of (estimate − truth) / 1σ over every estimated offset of every draw (1 when the
+    /// 1σ are right).
+    normalised_rms: f64,
+    /// The estimated offsets' 1σ, degrees, sorted.
+    sigmas_deg: Vec<f64>,
+}
+
+/// The draws of `sigmas` for the plan `joints` of the cell `physical`.
+fn monte_carlo(
+    (joints, model, physical): &(Vec<Vec<f64>>, UrModel, CellTransforms),
+    sigmas: &ArmErrorSigmas,
+    board: BoardNoise,
+) -> Tally {
+    let mut tally = Tally::default();
+    let mut squares = Vec::new();
+    for draw in 0..DRAWS {
+        let errors = ArmErrors::draw(1000 + draw, sigmas);
+        let (samples, truth) = samples(joints, model, &errors, physical, board, draw);
+        let (camera, target, fit) = solve_both(physical.setup, model, &samples);
+        let without = transform_error(&camera, &target, &truth);
+        let with = transform_error(&fit.camera_mount, &fit.target_mount, &truth);
+        tally.draws += 1;
+        tally.mean_mm[0] += with.0 / DRAWS as f64;
+        tally.mean_mm[1] += without.0 / DRAWS as f64;
+        tally.worst_without_mm = tally.worst_without_mm.max(without.0);
+        tally.worst_with = (
+            tally.worst_with.0.max(with.0),
+            tally.worst_with.1.max(with.1),
+        );
+        if with.0 <= 0.5 && with.1 <= 0.05 {
+            tally.within_bar += 1;
+        }
+        // Base and wrist 3 are absorbed on a UR, in both setups; the four others estimated.
+        for j in [0, 5] {
+            assert!(
+                matches!(
+                    fit.offsets[j].status,
+                    OffsetStatus::Absorbed { by: Some(_) }
+                ),
+                "draw {draw}: {:?}",
+                fit.offsets[j]
+            );
+        }
+        let mut all = true;
+        for o in &fit.offsets[1..5] {
+            let OffsetStatus::Estimated { sigma_rad } = o.status else {
+                panic!("draw {draw}: {o:?} not estimated");
+            };
+            let error = o.offset_rad - errors.joint_offsets_rad[o.joint];
+            tally.sigmas_deg.push(sigma_rad.to_degrees());
+            squares.push((error / sigma_rad).powi(2));
+            all &= error.abs() <= 3.0 * sigma_rad;
+        }
+        if all {
+            tally.within_3_sigma += 1;
+        }
+    }
+    tally.normalised_rms = (squares.iter().sum::<f64>() / squares.len() as f64).sqrt();
+    tally.sigmas_deg.sort_by(f64::total_cmp);
+    tally
+}
+
+fn print(what: &str, t: &Tally) {
+    eprintln!(
+        "{what}: {} draws, offsets within 3σ in {} (normalised error RMS {:.2}, median 1σ {:.4}°), transforms within 0.5 mm / 0.05° in {} (worst {:.3} mm / {:.4}°); mean transform error {:.3} mm with the arm model, {:.3} mm without (worst {:.3} mm)",
+        t.draws,
+        t.within_3_sigma,
+        t.normalised_rms,
+        t.sigmas_deg[t.sigmas_deg.len() / 2],
+        t.within_bar,
+        t.worst_with.0,
+        t.worst_with.1,
+        t.mean_mm[0],
+        t.mean_mm[1],
+        t.worst_without_mm
+    );
+}
+
+/// Joint offsets drawn with 1σ 0.03° on every joint (no link errors: the model estimated is
+/// the model simulated), both shipped cells with their plans generated at 30 poses (at 20 the
+/// eye-to-hand cell's transforms meet the bar in 19 draws of 24: `poses_needed_for_the_offsets`).
+#[test]
+fn drawn_joint_offsets_are_found_within_their_sigma_and_the_transforms_within_the_bar() {
+    let sigmas = ArmErrorSigmas {
+        joint_offset_rad: 0.03f64.to_radians(),
+        ..ArmErrorSigmas::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
+        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
+        let cell = shipped_plan(&variant);
+        assert!(cell.0.len() >= 25, "{} plan poses", cell.0.len());
+        let t = monte_carlo(&cell, &sigmas, RENDERED);
+        print(config, &t);
+        // ≥ 95 % of the draws, and 1σ that are 1σ.
+        assert!(20 * t.within_3_sigma >= 19 * t.draws, "{config}: {t:?}");
+        assert!(20 * t.within_bar >= 19 * t.draws, "{config}: {t:?}");
+        assert!((0.6..1.5).contains(&t.normalised_rms), "{config}: {t:?}");
+        // Without the arm model the same errors cost more.
+        assert!(t.mean_mm[1] > 2.0 * t.mean_mm[0], "{config}: {t:?}");
+        // With five times the board noise the offsets' 1σ still cover the truth (the bar on
+        // the transforms is then the noise's, not the arm's: printed).
+        let t = monte_carlo(&cell, &sigmas, PESSIMISTIC);
+        print(&format!("{config}, 5x board noise"), &t);
+        assert!(20 * t.within_3_sigma >= 19 * t.draws, "{config}: {t:?}");
+    }
+}
+
+/// Link length and twist errors of a few tenths of a millimetre and hundredths of a degree
+/// besides the offsets: `joint_offsets` does not model them (the DH corrections would). The
+/// figures are printed; the offsets must still make the answer better on average.
+#[test]
+fn with_length_and_twist_errors_too_the_offsets_still_help() {
+    let sigmas = ArmErrorSigmas {
+        joint_offset_rad: 0.03f64.to_radians(),
+        length_m: 0.2e-3,
+        twist_rad: 0.01f64.to_radians(),
+    };
+    let cell = shipped_plan(&repo().join("configs/sim-cell.yaml"));
+    let t = monte_carlo(&cell, &sigmas, RENDERED);
+    print("sim-cell.yaml with 0.2 mm / 0.01° link errors", &t);
+    assert!(t.mean_mm[0] < t.mean_mm[1], "{t:?}");
+}
+
+/// How many poses the offsets need: the first N poses of a 40-pose generated plan of each
+/// shipped cell, over the draws, the offsets' median 1σ and the mean transform error with and
+/// without the arm's model.
+#[test]
+fn poses_needed_for_the_offsets() {
+    let dir = tempfile::tempdir().unwrap();
+    let sigmas = ArmErrorSigmas {
+        joint_offset_rad: 0.03f64.to_radians(),
+        ..ArmErrorSigmas::default()
+    };
+    for base in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
+        let config = config_variant(dir.path(), base, base, &[("count: 20", "count: 40")]);
+        let (joints, model, physical) = shipped_plan(&config);
+        let mut figures = Vec::new();
+        for n in [8, 12, 16, 20, 30, 40]
+            .into_iter()
+            .filter(|&n| n <= joints.len())
+        {
+            let cell = (joints[..n].to_vec(), model.clone(), physical);
+            let t = monte_carlo(&cell, &sigmas, RENDERED);
+            figures.push((
+                n,
+                t.sigmas_deg[t.sigmas_deg.len() / 2],
+                t.mean_mm[0],
+                t.mean_mm[1],
+            ));
+        }
+        eprintln!(
+            "{base} poses: (N, median offset 1σ °, mean transform error mm with, without): {figures:?}"
+        );
+        let (first, last) = (figures[0], figures[figures.len() - 1]);
+        assert!(last.0 >= 30 && last.1 < first.1, "{figures:?}");
+    }
+}
+
+#[test]
+fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_binary() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_variant(
+        dir.path(),
+        "sim-cell-arm-errors.yaml",
+        "sim-cell-arm-errors.yaml",
+        &[],
+    );
+    let session = dir.path().join("session");
+    let output = crate::util::run_cli(&config, &session);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    eprintln!("{stdout}");
+    assert!(stdout.contains("arm model truth check"), "{stdout}");
+    let cell = handeye_session::config::CellConfig::load(&config).unwrap();
+    let truth = cell.camera().simulation.unwrap();
+    let errors = cell.arm_errors.unwrap();
+    let result_path = session.join("result.yaml");
+    let result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+    // The transforms, against the truth in the controller's frames.
+    let mounts = result.mounts(&result_path).unwrap();
+    let (mm, deg) = transform_error(&mounts.camera_mount, &mounts.target_mount, &truth);
+    eprintln!("transforms: {mm:.3} mm, {deg:.4}° from the truth");
+    assert!(mm <= 0.5 && deg <= 0.05, "{mm} mm, {deg}°");
+    // The offsets, each with its 1σ in the result file; base and wrist 3 absorbed.
+    let kinematics = result
+        .kinematics
+        .expect("the result records the arm's model");
+    assert_eq!(kinematics.model, "ur10e");
+    assert_eq!(kinematics.joint_offsets.len(), 6);
+    assert_eq!(
+        kinematics.joint_offsets[0].absorbed_by.as_deref(),
+        Some("T_base_target")
+    );
+    assert_eq!(
+        kinematics.joint_offsets[5].absorbed_by.as_deref(),
+        Some("T_flange_camera")
+    );
+    for (j, o) in kinematics.joint_offsets.iter().enumerate().take(5).skip(1) {
+        let sigma = o.sigma_deg.unwrap_or_else(|| panic!("joint {j}: {o:?}"));
+        let error = o.offset_deg - errors.joint_offsets_rad[j].to_degrees();
+        eprintln!("{}: error {error:+.4}° (1σ {sigma:.4}°)", o.joint);
+        assert!(
+            error.abs() <= 3.0 * sigma,
+            "{}: {error}° vs 1σ {sigma}°",
+            o.joint
+        );
+    }
+    assert!(kinematics.translation_rms_mm.with < kinematics.translation_rms_mm.without);
+}
+
+/// `simulation.arm_errors` and `solver.kinematics` in a config: read, drawn repeatably, folded
+/// into the truth; mistakes named by file and key.
+#[test]
+fn arm_errors_and_kinematics_keys_are_read_and_checked() {
+    use handeye_session::config::CellConfig;
+    let base = std::fs::read_to_string(repo().join("configs/sim-cell-arm-errors.yaml")).unwrap();
+    let file = repo().join("configs/sim-cell-arm-errors.yaml");
+    let cell = CellConfig::parse(&base, &file).unwrap();
+    let errors = cell.arm_errors.unwrap();
+    assert_eq!(
+        Some(errors),
+        CellConfig::parse(&base, &file).unwrap().arm_errors,
+        "the draw repeats"
+    );
+    assert!(errors
+        .joint_offsets_rad
+        .iter()
+        .all(|v| v.abs() < 0.2f64.to_radians()));
+    // The truth is folded: the sim arm's base and wrist 3 offsets are in the transforms.
+    let arm = cell.true_arm.clone().unwrap();
+    assert_eq!(
+        (arm.joint_offsets_rad[0], arm.joint_offsets_rad[5]),
+        (0.0, 0.0)
+    );
+    let plain = CellConfig::load(&repo().join("configs/sim-cell.yaml")).unwrap();
+    let (moved_mm, _) = pose_error_mm_deg(
+        &cell.camera().simulation.unwrap().target_mount,
+        &plain.camera().simulation.unwrap().target_mount,
+    );
+    assert!(moved_mm > 0.01 && moved_mm < 2.0, "{moved_mm}");
+
+    let refused = |from: &str, to: &str| {
+        assert!(base.contains(from), "{from}");
+        let text = base.replace(from, to);
+        CellConfig::parse(&text, &file).unwrap_err().to_string()
+    };
+    let draw = "arm_errors: {seed: 41, joint_offset_deg: 0.03, length_mm: 0.02, twist_deg: 0.001}";
+    let message = refused(
+        draw,
+        "arm_errors: {seed: 41, joint_offset_deg: 0.03, d_mm: [0, 0, 0, 0, 0, 0]}",
+    );
+    assert!(
+        message.contains("sim-cell-arm-errors.yaml")
+            && message.contains("simulation.arm_errors")
+            && message.contains("not both"),
+        "{message}"
+    );
+    let message = refused(draw, "arm_errors: {joint_offset_deg: 0.03}");
+    assert!(message.contains("simulation.arm_errors.seed"), "{message}");
+    let message = refused(draw, "arm_errors: {a_mm: [0.1, 0.2]}");
+    assert!(
+        message.contains("simulation.arm_errors.a_mm") && message.contains("2 values"),
+        "{message}"
+    );
+    let message = refused(draw, "arm_errors: {seed: 1, twist_deg: 3}");
+    assert!(
+        message.contains("simulation.arm_errors.twist_deg"),
+        "{message}"
+    );
+    let message = refused("kinematics: joint_offsets", "kinematics: dh");
+    assert!(
+        message.contains("solver.kinematics") && message.contains("not yet implemented"),
+        "{message}"
+    );
+    let text = base
+        .replace("intrinsics: cameras/sim-1280x720.yaml\n", "")
+        .replace(
+            "camera:\n  backend: sim\n",
+            "camera:\n  backend: sim\n  intrinsics: cameras/sim-1280x720.yaml\n",
+        );
+    let message = CellConfig::parse(&text, &file).unwrap_err().to_string();
+    assert!(
+        message.contains("solver.kinematics") && message.contains("intrinsics"),
+        "{message}"
+    );
+    let message = refused("kinematics: joint_offsets", "kinematics: all");
+    assert!(message.contains("solver"), "{message}");
+    // Absent: nothing estimated, and the shipped demo cell is unchanged.
+    assert_eq!(plain.solver.kinematics, None);
+    assert!(plain.arm_errors.is_none() && plain.true_arm.is_none());
+}
+
+/// A joint's origin as a URDF gives it (`xyz`, `rpy` = `Rz(yaw)·Ry(pitch)·Rx(roll)`), read from
+/// a parsed ur_calibration YAML by key.
+fn urdf_origin(entry: &serde_yaml_ng::Value) -> Pose {
+    let get = |key: &str| {
+        entry
+            .get(key)
+            .and_then(serde_yaml_ng::Value::as_f64)
+            .unwrap_or_else(|| panic!("no {key} in {entry:?}"))
+    };
+    Pose::from_parts(
+        nalgebra::Translation3::new(get("x"), get("y"), get("z")),
+        nalgebra::UnitQuaternion::from_euler_angles(get("roll"), get("pitch"), get("yaw")),
+    )
+}
+
+/// `T_base_tool0` of a ur_calibration YAML at `q`, as ur_description chains it: each joint's
+/// origin then its turn about z; `base` is `base_link_inertia` and `tool0` is `wrist_3_link`
+/// (their fixed transforms compose to the identity).
+fn urdf_forward(text: &str, q: &[f64]) -> Pose {
+    let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(text).unwrap();
+    let kinematics = doc.get("kinematics").expect("a kinematics mapping");
+    assert!(kinematics
+        .get("hash")
+        .and_then(serde_yaml_ng::Value::as_str)
+        .is_some_and(|h| h.starts_with("calib_")));
+    [
+        "shoulder",
+        "upper_arm",
+        "forearm",
+        "wrist_1",
+        "wrist_2",
+        "wrist_3",
+    ]
+    .iter()
+    .zip(q)
+    .fold(Pose::identity(), |acc, (link, angle)| {
+        acc * urdf_origin(kinematics.get(*link).unwrap())
+            * Pose::from_parts(
+                nalgebra::Translation3::identity(),
+                nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), *angle),
+            )
+    })
+}
+
+/// `handeye export RESULT --format ur-calibration` of a result with the arm's model: read back
+/// by a generic YAML parser and chained as a URDF, it reproduces the corrected flange poses
+/// `FK(q + δ)` within 1e-6 m (and 1e-6 rad).
+#[test]
+fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
+    use handeye_session::result::{JointOffsetYaml, KinematicsYaml, WithWithout};
+    let model = UrModel::ur10e();
+    let offsets_deg = [0.0, 0.0531, -0.0201, -0.0008, 0.0727, 0.0];
+    let kinematics = KinematicsYaml {
+        model: "ur10e".into(),
+        estimated: "joint_offsets".into(),
+        joint_offsets: offsets_deg
+            .iter()
+            .enumerate()
+            .map(|(j, o)| JointOffsetYaml {
+                joint: format!("joint {j}"),
+                offset_deg: *o,
+                sigma_deg: Some(0.001),
+                absorbed_by: None,
+                undetermined: false,
+            })
+            .collect(),
+        translation_rms_mm: WithWithout {
+            with: 0.0,
+            without: 0.0,
+        },
+        rotation_rms_deg: WithWithout {
+            with: 0.0,
+            without: 0.0,
+        },
+        uncertainty: None,
+    };
+    // Through the binary, from a result file.
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session");
+    let config = config_variant(dir.path(), "sim-cell-arm-errors.yaml", "cell.yaml", &[]);
+    let run = crate::util::run_cli(&config, &session);
+    assert!(run.status.success());
+    let result_path = session.join("result.yaml");
+    let mut result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+    result.kinematics = Some(kinematics);
+    result.save(&result_path).unwrap();
+    let out = dir.path().join("calibration.yaml");
+    let export = crate::util::handeye()
+        .args(["export"])
+        .arg(&result_path)
+        .args(["--format", "ur-calibration", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        export.status.success(),
+        "{}",
+        String::from_utf8_lossy(&export.stderr)
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    let errors = ArmErrors {
+        joint_offsets_rad: offsets_deg.map(f64::to_radians),
+        ..ArmErrors::default()
+    };
+    let corrected = errors.true_arm(&model);
+    let mut rng = StdRng::seed_from_u64(3);
+    for _ in 0..50 {
+        let q: Vec<f64> = (0..6)
+            .map(|_| rand::Rng::random_range(&mut rng, -3.0..3.0))
+            .collect();
+        let expected = corrected.forward(&handeye_robot::Joints::from_fn(6, |k| q[k]));
+        let (mm, deg) = pose_error_mm_deg(&urdf_forward(&text, &q), &expected);
+        assert!(
+            mm < 1e-3 && deg.to_radians() < 1e-6,
+            "{mm} mm, {deg}° at {q:?}"
+        );
+    }
+    // A result without the arm's model is refused, naming the key.
+    result.kinematics = None;
+    result.save(&result_path).unwrap();
+    let refused = crate::util::handeye()
+        .args(["export"])
+        .arg(&result_path)
+        .args(["--format", "ur-calibration"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && stderr.contains("kinematics"),
+        "{stderr}"
+    );
+}
