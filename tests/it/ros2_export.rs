@@ -168,7 +168,7 @@ fn camera_link_needs_the_launch_format() {
 
 /// The RealSense-style chain `camera_link → camera_color_frame → camera_color_optical_frame`
 /// (the colour imager 32 mm to the side, turned 0.4° about z) as `tf_static.yaml` records it.
-fn realsense_chain() -> (
+pub(crate) fn realsense_chain() -> (
     handeye_session::session::tf_static::StaticTransformsFile,
     Pose,
 ) {

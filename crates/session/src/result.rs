@@ -120,6 +120,29 @@ pub struct JointOffsetYaml {
     pub undetermined: bool,
 }
 
+impl UncertaintyYaml {
+    /// The file form of `uncertainty` of a `setup`'s two unknowns (under that setup's keys).
+    pub fn of(setup: Setup, uncertainty: &Uncertainty) -> UncertaintyYaml {
+        let eye_in_hand = setup == Setup::EyeInHand;
+        let (cam, tgt) = (
+            Some(uncertainty.camera_mount),
+            Some(uncertainty.target_mount),
+        );
+        UncertaintyYaml {
+            T_flange_camera: if eye_in_hand { cam } else { None },
+            T_base_target: if eye_in_hand { tgt } else { None },
+            T_base_camera: if eye_in_hand { None } else { cam },
+            T_flange_target: if eye_in_hand { None } else { tgt },
+            variance_factor: uncertainty.variance_factor,
+            covariance: uncertainty
+                .covariance
+                .row_iter()
+                .map(|r| r.iter().copied().collect())
+                .collect(),
+        }
+    }
+}
+
 /// Residuals of one sample.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -269,21 +292,10 @@ impl ResultFile {
         let camera = Some(PoseRecord::from_pose(&calibration.camera_mount));
         let target = Some(PoseRecord::from_pose(&calibration.target_mount));
         let eye_in_hand = calibration.setup == Setup::EyeInHand;
-        let uncertainty = calibration.uncertainty.as_ref().map(|u| {
-            let (cam, tgt) = (Some(u.camera_mount), Some(u.target_mount));
-            UncertaintyYaml {
-                T_flange_camera: if eye_in_hand { cam } else { None },
-                T_base_target: if eye_in_hand { tgt } else { None },
-                T_base_camera: if eye_in_hand { None } else { cam },
-                T_flange_target: if eye_in_hand { None } else { tgt },
-                variance_factor: u.variance_factor,
-                covariance: u
-                    .covariance
-                    .row_iter()
-                    .map(|r| r.iter().copied().collect())
-                    .collect(),
-            }
-        });
+        let uncertainty = calibration
+            .uncertainty
+            .as_ref()
+            .map(|u| UncertaintyYaml::of(calibration.setup, u));
         let r = &calibration.residuals;
         let finite = |v: f64| v.is_finite().then_some(v);
         let samples = (0..r.rotation_deg.len())

@@ -224,17 +224,9 @@ fn the_launch_file_hangs_the_camera_from_the_chain_the_driver_publishes() {
         let nodes = crate::ros2_export::launched(&launch).unwrap();
         let (parent, child, flange_from_link) = crate::ros2_export::node_transform(&nodes[0]);
         assert_eq!((parent.as_str(), child.as_str()), ("tool0", "camera_link"));
-        // The driver's chain, as the peer publishes it.
-        let half = 0.4_f64.to_radians() / 2.0;
-        let link_from_color = Pose::from_parts(
-            Translation3::new(0.0, 0.032, 0.0),
-            UnitQuaternion::from_quaternion(Quaternion::new(half.cos(), 0.0, 0.0, half.sin())),
-        );
-        let color_from_optical = Pose::from_parts(
-            Translation3::identity(),
-            UnitQuaternion::from_quaternion(Quaternion::new(0.5, -0.5, 0.5, -0.5)),
-        );
-        let composed = flange_from_link * link_from_color * color_from_optical;
+        // The driver's chain, as the peer publishes it (`camera-chain --offset 0 0.032 0`).
+        let (_, link_from_optical) = crate::ros2_export::realsense_chain();
+        let composed = flange_from_link * link_from_optical;
         let want = calibrated_flange_from_optical();
         let metres = (composed.translation.vector - want.translation.vector).norm();
         let (_, deg) = pose_error_mm_deg(&composed, &want);

@@ -14,9 +14,10 @@ use crate::config::CellConfig;
 #[cfg(feature = "ros2")]
 pub type Ros2Node = handeye_ros2::link::Ros2Link;
 
-/// Without the `ros2` feature there is no node.
+/// Without the `ros2` feature there is no node (nothing makes one: `open_arm` refuses).
 #[cfg(not(feature = "ros2"))]
-pub type Ros2Node = ();
+#[derive(Debug, Clone)]
+pub struct Ros2Node;
 
 /// Opens the ROS 2 arm and camera of `config` (both `backend: ros2`).
 #[cfg(not(feature = "ros2"))]

@@ -179,22 +179,10 @@ impl ArmEstimate {
                 row
             })
             .collect();
-        let eye_in_hand = fit.setup == Setup::EyeInHand;
-        let uncertainty = fit.uncertainty.as_ref().map(|u| {
-            let (cam, tgt) = (Some(u.camera_mount), Some(u.target_mount));
-            UncertaintyYaml {
-                T_flange_camera: if eye_in_hand { cam } else { None },
-                T_base_target: if eye_in_hand { tgt } else { None },
-                T_base_camera: if eye_in_hand { None } else { cam },
-                T_flange_target: if eye_in_hand { None } else { tgt },
-                variance_factor: u.variance_factor,
-                covariance: u
-                    .covariance
-                    .row_iter()
-                    .map(|r| r.iter().copied().collect())
-                    .collect(),
-            }
-        });
+        let uncertainty = fit
+            .uncertainty
+            .as_ref()
+            .map(|u| UncertaintyYaml::of(fit.setup, u));
         KinematicsYaml {
             model: self.model.clone(),
             estimated: KinematicsChoice::JointOffsets.name().to_string(),
