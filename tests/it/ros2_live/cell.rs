@@ -677,7 +677,13 @@ fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
     let dir = tempfile::tempdir().unwrap();
     let from = from_goal.to_string();
     let peer = Peer::start(&python, domain, &["--second-flange-publisher", &from]);
-    let config = cell(dir.path(), domain, &[]);
+    // The peer floods /tf at 200 Hz: on a loaded 2-core machine its action server can take
+    // longer than the shipped 10 s to answer (a CI run saw it), which is not what this tests.
+    let config = cell(
+        dir.path(),
+        domain,
+        &[("connect_timeout_s: 10}", "connect_timeout_s: 40}")],
+    );
     let out_dir = dir.path().join("session");
     let out = run_cell(&config, &out_dir);
     let log = text(&out);
