@@ -79,29 +79,31 @@ impl CameraLinkArgs {
         Ok(std::time::Duration::from_secs_f64(self.tf_wait))
     }
 
-    /// Where an export reads the driver's chain for a result in `result_folder`: `None` when it
-    /// is assumed (`--optical-rotation-only`), else the recorded file (`--tf-from`, or the
-    /// session's own) with where it came from, or the graph (`Err(())`).
+    /// Whether the chain is assumed (`--optical-rotation-only`), not read.
+    pub(super) fn assumes_chain(&self) -> bool {
+        self.optical_rotation_only
+    }
+
+    /// The driver's chain as recorded for a result in `result_folder`: `--tf-from` (a session
+    /// folder or its `tf_static.yaml`), else the result's own session's record; with where it
+    /// came from. `None`: no record (the graph is read instead).
     pub(super) fn recorded_chain(
         &self,
         result_folder: &std::path::Path,
-    ) -> anyhow::Result<Option<Result<(TfTree, String), ()>>> {
+    ) -> anyhow::Result<Option<(TfTree, String)>> {
         use handeye_session::session::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
-        if self.camera_link.is_none() || self.optical_rotation_only {
-            return Ok(None);
-        }
         let file = match &self.tf_from {
             Some(path) if path.is_dir() => path.join(TF_STATIC_FILE),
             Some(path) => path.clone(),
             None => match result_folder.join(TF_STATIC_FILE) {
                 recorded if recorded.is_file() => recorded,
-                _ => return Ok(Some(Err(()))),
+                _ => return Ok(None),
             },
         };
         let recorded =
             StaticTransformsFile::load(&file).map_err(|e| anyhow::anyhow!("--tf-from: {e}"))?;
         let from = format!("{} (recorded from {})", file.display(), recorded.topic);
-        Ok(Some(Ok((recorded.tree(), from))))
+        Ok(Some((recorded.tree(), from)))
     }
 }
 
@@ -157,7 +159,7 @@ fn driver_chain(
             let pose = tree
                 .lookup(link, optical)
                 .map_err(|e| anyhow::anyhow!("--camera-link {link}: {e}"))?;
-            println!(
+            outln!(
                 "the camera's chain as the driver publishes it on {topic}: {} (T_{link}_{optical}: translation [{:.4}, {:.4}, {:.4}] m)",
                 chain.iter().rev().cloned().collect::<Vec<_>>().join(" → "),
                 pose.translation.vector.x,

@@ -77,16 +77,24 @@ pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
             "--camera-link applies to --format ros2-launch only"
         );
         let folder = args.result.parent().unwrap_or(std::path::Path::new("."));
-        let (heard, topic) = match args.link.recorded_chain(folder)? {
-            None => (None, "/tf_static".to_string()),
-            Some(Ok((tree, from))) => (Some(tree), from),
-            Some(Err(())) => (
-                Some(read_graph(&args.domain, &args.link, "/tf_static")?),
-                "/tf_static".to_string(),
-            ),
+        let topic = "/tf_static";
+        let heard = match args.link.assumes_chain() {
+            true => None,
+            false => Some(match args.link.recorded_chain(folder)? {
+                Some(recorded) => recorded,
+                None => (
+                    read_graph(&args.domain, &args.link, topic)?,
+                    topic.to_string(),
+                ),
+            }),
         };
-        let heard = heard.as_ref();
-        hang_camera(&mut exported, &args.link, heard, &topic)?;
+        let (tree, from) = heard.unzip();
+        hang_camera(
+            &mut exported,
+            &args.link,
+            tree.as_ref(),
+            from.as_deref().unwrap_or(topic),
+        )?;
     }
     let text = exported
         .text(format)

@@ -368,7 +368,7 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
             .unwrap_or_else(|e| panic!("{e}: {log}"));
         assert!(
             result.contains("differ from the calibration the camera driver publishes")
-                && result.contains("fx 832.0 px in the file, 800.0 px from the driver")
+                && result.contains("fx in the file 832.0 px, from the driver 800.0 px")
                 && result.contains("corners fit the driver"),
             "{result}"
         );

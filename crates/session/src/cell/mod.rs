@@ -139,11 +139,10 @@ pub struct PreparedCamera {
     /// Its intrinsics (without configured intrinsics: the sim camera's lens, for planning and
     /// rendering only — the run estimates the intrinsics).
     pub camera_model: CameraModel,
-    /// Whether the config gives the intrinsics (otherwise they are estimated after the run).
+    /// Whether the intrinsics are known: from the config's file, or (a ROS 2 camera without
+    /// one) from its driver's camera_info topic, [`INTRINSICS_FROM_TOPIC_FILE`]; otherwise they
+    /// are estimated after the run.
     pub intrinsics_known: bool,
-    /// The ROS 2 topic the intrinsics were read from, when the config gives no file (a run
-    /// keeps them in its session, [`INTRINSICS_FROM_TOPIC_FILE`]).
-    pub intrinsics_topic: Option<String>,
 }
 
 /// The intrinsics a ROS 2 camera driver published, kept in the session of a run (a replay of a
@@ -184,22 +183,19 @@ fn prepare_camera(config: &CellConfig, index: usize) -> Result<PreparedCamera, C
             file: camera.target.clone(),
             source: Box::new(source),
         })?;
+        // A ROS 2 camera driver publishes its calibration: without a file, read, not estimated.
+        if let (None, CameraConfig::Ros2(c)) = (&camera.intrinsics, &camera.backend) {
+            if let Some(topic) = &c.camera_info_topic {
+                let camera_model = ros2::intrinsics_from_topic(config, topic, c.frame_timeout_s)?;
+                return Ok(PreparedCamera {
+                    board,
+                    camera_model,
+                    intrinsics_known: true,
+                });
+            }
+        }
         // Without intrinsics the plan is checked (and the sim renders) with the sim camera's
         // lens; the run then records corners only and the intrinsics are estimated afterwards.
-        let intrinsics_topic = match (&camera.intrinsics, &camera.backend) {
-            (None, CameraConfig::Ros2(c)) => c.camera_info_topic.clone(),
-            _ => None,
-        };
-        if let (Some(topic), CameraConfig::Ros2(c)) = (&intrinsics_topic, &camera.backend) {
-            // A ROS 2 camera driver publishes its calibration: read, not estimated.
-            let camera_model = ros2::intrinsics_from_topic(config, topic, c.frame_timeout_s)?;
-            return Ok(PreparedCamera {
-                board,
-                camera_model,
-                intrinsics_known: true,
-                intrinsics_topic,
-            });
-        }
         let intrinsics_known = camera.intrinsics.is_some();
         let model_file = match (&camera.intrinsics, camera.sim_lens(), &config.robot, &camera.backend) {
             (Some(file), ..) => Some(file.clone()),
@@ -223,7 +219,6 @@ fn prepare_camera(config: &CellConfig, index: usize) -> Result<PreparedCamera, C
             board,
             camera_model,
             intrinsics_known,
-            intrinsics_topic: None,
         })
     });
     prepared.map_err(|e| match config.listed {

@@ -138,40 +138,78 @@ pub fn open_camera(
     Ok(Box::new(camera))
 }
 
-/// Records what the graph holds on the cell's `/tf_static` into the session folder
-/// (`tf_static.yaml`): the camera driver's chain, the robot driver's static frames.
+/// What a ROS 2 cell's graph holds that its session keeps, as notes to say: the calibration the
+/// camera driver publishes (`camera_info_from_topic.yaml`: the cell's intrinsics when the config
+/// gives no file, which a replay uses; else what the solve compares the file with) and the
+/// static transforms on `/tf_static` (`tf_static.yaml`: the camera driver's chain, the robot
+/// driver's static frames).
 #[cfg(feature = "ros2")]
-pub fn record_static_transforms(
-    config: &CellConfig,
+pub fn record_graph(
+    cell: &super::PreparedCell,
     node: &Ros2Node,
     folder: &crate::session::SessionFolder,
-) -> Result<usize, String> {
-    use crate::config::RobotConfig;
+) -> Vec<String> {
+    use crate::config::{CameraConfig, RobotConfig};
     use crate::session::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
-    let RobotConfig::Ros2(r) = &config.robot else {
-        return Ok(0);
-    };
-    // Latched messages reach a late joiner once discovery has matched it: a second or so here.
-    let tree = handeye_ros2::tf_static::hear_static(
-        node,
-        &r.tf_static_topic,
-        std::time::Duration::from_secs_f64(1.5),
-    )
-    .map_err(|e| e.to_string())?;
-    let file = StaticTransformsFile::from_tree(&r.tf_static_topic, &tree);
-    file.save(&folder.root().join(TF_STATIC_FILE))
-        .map_err(|e| e.to_string())?;
-    Ok(file.transforms.len())
+
+    let mut notes = Vec::new();
+    let camera = cell.camera();
+    if let CameraConfig::Ros2(c) = &cell.config.camera().backend {
+        if let Some(topic) = &c.camera_info_topic {
+            // Without a file the cell's intrinsics are the driver's, read when it was prepared.
+            let model = match cell.config.camera().intrinsics {
+                None => Ok(Some(camera.camera_model)),
+                Some(_) => read_camera_info(node, topic, c.frame_timeout_s),
+            };
+            let file = folder.root().join(super::INTRINSICS_FROM_TOPIC_FILE);
+            notes.push(match model {
+                Ok(Some(model)) => match model.save_camera_info(&file) {
+                    Ok(()) => format!(
+                        "the camera driver's calibration on {topic} kept in {}",
+                        super::INTRINSICS_FROM_TOPIC_FILE
+                    ),
+                    Err(e) => format!("the calibration on {topic} was not kept: {e}"),
+                },
+                Ok(None) => {
+                    format!("no CameraInfo on {topic}: the driver's calibration was not kept")
+                }
+                Err(e) => format!("the calibration on {topic} was not kept: {e}"),
+            });
+        }
+    }
+    if let RobotConfig::Ros2(r) = &cell.config.robot {
+        // Latched messages reach a late joiner once discovery has matched it: a second or so.
+        let heard = handeye_ros2::tf_static::hear_static(
+            node,
+            &r.tf_static_topic,
+            std::time::Duration::from_secs_f64(1.5),
+        )
+        .map_err(|e| e.to_string())
+        .map(|tree| StaticTransformsFile::from_tree(&r.tf_static_topic, &tree))
+        .and_then(|file| {
+            file.save(&folder.root().join(TF_STATIC_FILE))
+                .map(|()| file.transforms.len())
+                .map_err(|e| e.to_string())
+        });
+        match heard {
+            Ok(0) => {}
+            Ok(n) => notes.push(format!(
+                "{n} static transforms heard on the graph, kept in {TF_STATIC_FILE}"
+            )),
+            Err(e) => notes.push(format!("the graph's static transforms were not kept: {e}")),
+        }
+    }
+    notes
 }
 
-/// Without ROS 2 in the build there is no graph to record.
+/// Without ROS 2 in the build there is no graph (and no node to have opened).
 #[cfg(not(feature = "ros2"))]
-pub fn record_static_transforms(
-    _config: &CellConfig,
+pub fn record_graph(
+    _cell: &super::PreparedCell,
     _node: &Ros2Node,
     _folder: &crate::session::SessionFolder,
-) -> Result<usize, String> {
-    Ok(0)
+) -> Vec<String> {
+    Vec::new()
 }
 
 /// The intrinsics a ROS 2 camera driver publishes on `topic` (its factory calibration, as a

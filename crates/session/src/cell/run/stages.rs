@@ -261,16 +261,10 @@ pub(super) fn drive_session(
     hardware: &mut Hardware,
     observer: &mut dyn RunObserver,
 ) -> Result<(SessionOutcome, Option<AdaptiveSummary>), RunError> {
-    keep_driver_calibration(cell, hardware, folder, observer);
-    // What the ROS 2 graph publishes as static (a camera driver's chain) is part of the session.
+    // What the ROS 2 graph publishes (the driver's calibration, its static chain) is the session's.
     if let Some(node) = &hardware.ros2 {
-        match crate::cell::ros2::record_static_transforms(&cell.config, node, folder) {
-            Ok(0) => {}
-            Ok(n) => observer.note(&format!(
-                "{n} static transforms heard on the graph, kept in {}",
-                session::tf_static::TF_STATIC_FILE
-            )),
-            Err(e) => observer.note(&format!("the graph's static transforms were not kept: {e}")),
+        for note in crate::cell::ros2::record_graph(cell, node, folder) {
+            observer.note(&note);
         }
     }
     let guide = match strategy {
@@ -339,48 +333,6 @@ pub(super) fn drive_session(
     observer.session_ended();
     guide.ended();
     Ok((outcome?, None))
-}
-
-/// The calibration a ROS 2 camera driver publishes is part of the session
-/// (`camera_info_from_topic.yaml`): the cell's intrinsics when the config gives no file (a
-/// replay uses them), else what the solve compares the file with.
-fn keep_driver_calibration(
-    cell: &PreparedCell,
-    hardware: &Hardware,
-    folder: &SessionFolder,
-    observer: &mut dyn RunObserver,
-) {
-    let file = folder.root().join(crate::cell::INTRINSICS_FROM_TOPIC_FILE);
-    let camera = cell.camera();
-    let (model, topic) = match (
-        &camera.intrinsics_topic,
-        &cell.config.camera().backend,
-        &hardware.ros2,
-    ) {
-        (Some(topic), ..) => (Ok(Some(camera.camera_model)), topic.clone()),
-        (None, crate::config::CameraConfig::Ros2(c), Some(node)) => match &c.camera_info_topic {
-            Some(topic) => (
-                crate::cell::ros2::read_camera_info(node, topic, c.frame_timeout_s),
-                topic.clone(),
-            ),
-            None => return,
-        },
-        _ => return,
-    };
-    let kept = model.map_err(|e| e.to_string()).and_then(|m| {
-        m.map(|m| m.save_camera_info(&file).map_err(|e| e.to_string()))
-            .transpose()
-    });
-    match kept {
-        Ok(Some(())) => observer.note(&format!(
-            "the camera driver's calibration on {topic} kept in {}",
-            crate::cell::INTRINSICS_FROM_TOPIC_FILE
-        )),
-        Ok(None) => observer.note(&format!(
-            "no CameraInfo on {topic}: the driver's calibration was not kept"
-        )),
-        Err(e) => observer.note(&format!("the calibration on {topic} was not kept: {e}")),
-    }
 }
 
 /// The arm time of a planned run with an arm that moved now (a person moved a hand-guided arm;

@@ -9,15 +9,12 @@ use handeye_core::notice::{Notice, NoticeKind};
 use handeye_vision::Target;
 
 use super::board_pose;
+use super::intrinsics_check::{differing_parameters, median};
 use crate::session::{PoseVisit, SessionFolder};
 
 /// The file in a session folder that keeps the calibration a ROS 2 camera driver published on
 /// its camera_info topic.
 pub const DRIVER_CALIBRATION_FILE: &str = "camera_info_from_topic.yaml";
-
-/// Focal lengths further apart than this fraction, or a principal point further than this
-/// fraction of the image width, make the two calibrations differ.
-const DIFFERENT: f64 = 0.01;
 
 /// The notice of a config intrinsics `file` (loaded as `file_model`) that differs from the
 /// driver's calibration kept in `folder`; `None` when there is none or they agree.
@@ -30,17 +27,7 @@ pub(super) fn driver_calibration_notice(
 ) -> Option<Notice> {
     let kept = folder.root().join(DRIVER_CALIBRATION_FILE);
     let driver = CameraModel::load(&kept).ok()?;
-    let width = f64::from(file_model.width.max(1));
-    let rows: Vec<String> = [
-        ("fx", file_model.fx, driver.fx, file_model.fx),
-        ("fy", file_model.fy, driver.fy, file_model.fy),
-        ("cx", file_model.cx, driver.cx, width),
-        ("cy", file_model.cy, driver.cy, width),
-    ]
-    .into_iter()
-    .filter(|(_, a, b, scale)| ((a - b) / scale).abs() > DIFFERENT)
-    .map(|(name, a, b, _)| format!("{name} {a:.1} px in the file, {b:.1} px from the driver"))
-    .collect();
+    let rows = differing_parameters(file_model, &driver, "from the driver");
     let sizes_differ = (file_model.width, file_model.height) != (driver.width, driver.height);
     if rows.is_empty() && !sizes_differ {
         return None;
@@ -64,7 +51,7 @@ pub(super) fn driver_calibration_notice(
             file_model.width, file_model.height, driver.width, driver.height
         )
     } else {
-        rows.join(", ")
+        rows.join("; ")
     };
     Some(Notice::warning(
         NoticeKind::Other,
@@ -79,7 +66,7 @@ pub(super) fn driver_calibration_notice(
 /// The median per-frame board reprojection RMS of `visits` with the board pose solved by `lens`,
 /// px; `None` without three frames to judge by.
 fn median_fit(lens: &CameraModel, visits: &[PoseVisit], board: &Target) -> Option<f64> {
-    let mut values: Vec<f64> = visits
+    let values: Vec<f64> = visits
         .iter()
         .filter(|v| v.rejected.is_none())
         .filter_map(|v| {
@@ -97,9 +84,9 @@ fn median_fit(lens: &CameraModel, visits: &[PoseVisit], board: &Target) -> Optio
                 .then(|| (squares.iter().sum::<f64>() / squares.len() as f64).sqrt())
         })
         .collect();
+    // Three frames at least to judge by.
     if values.len() < 3 {
         return None;
     }
-    values.sort_by(f64::total_cmp);
-    Some(values[values.len() / 2])
+    median(values)
 }

@@ -47,35 +47,15 @@ impl WrongIntrinsics {
     /// The parameters that differ, `fx in the file 864.0 px, estimated from this session 800.1 px
     /// (-7.4 %)`, largest first.
     pub fn differences(&self) -> String {
-        let (f, e) = (&self.file_camera, &self.estimated);
-        let width = f64::from(f.width.max(1));
-        let mut rows: Vec<(f64, String)> = [
-            ("fx", f.fx, e.fx, f.fx),
-            ("fy", f.fy, e.fy, f.fy),
-            ("cx", f.cx, e.cx, width),
-            ("cy", f.cy, e.cy, width),
-        ]
-        .into_iter()
-        .map(|(name, file, estimated, scale)| {
-            let relative = (estimated - file) / scale;
-            (
-                relative.abs(),
-                format!(
-                    "{name} in the file {file:.1} px, estimated from this session {estimated:.1} px ({:+.1} %)",
-                    (estimated - file) / file * 100.0
-                ),
-            )
-        })
-        .filter(|(relative, _)| *relative > PARAMETER_TOLERANCE)
-        .collect();
-        rows.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let rows = differing_parameters(
+            &self.file_camera,
+            &self.estimated,
+            "estimated from this session",
+        );
         if rows.is_empty() {
             return "the distortion differs (fx, fy, cx, cy agree within 1 %)".into();
         }
-        rows.into_iter()
-            .map(|(_, r)| r)
-            .collect::<Vec<_>>()
-            .join("; ")
+        rows.join("; ")
     }
 
     /// The sentence that says what is wrong, with the numbers.
@@ -124,13 +104,39 @@ impl WrongIntrinsics {
     }
 }
 
-/// The median of the visits' board reprojection RMS (rejected visits too), px; `None` without
-/// any.
-fn median_board_rms(visits: &[PoseVisit]) -> Option<f64> {
-    let mut values: Vec<f64> = visits
-        .iter()
-        .filter_map(|v| v.reprojection_rms_px)
-        .collect();
+/// The parameters of `other` (`other_is`: where it comes from) that differ from `file`'s by
+/// more than [`PARAMETER_TOLERANCE`], `fx in the file 864.0 px, estimated from this session
+/// 800.1 px (-7.4 %)`, largest first.
+pub(super) fn differing_parameters(
+    file: &CameraModel,
+    other: &CameraModel,
+    other_is: &str,
+) -> Vec<String> {
+    let width = f64::from(file.width.max(1));
+    let mut rows: Vec<(f64, String)> = [
+        ("fx", file.fx, other.fx, file.fx),
+        ("fy", file.fy, other.fy, file.fy),
+        ("cx", file.cx, other.cx, width),
+        ("cy", file.cy, other.cy, width),
+    ]
+    .into_iter()
+    .map(|(name, in_file, theirs, scale)| {
+        (
+            ((theirs - in_file) / scale).abs(),
+            format!(
+                "{name} in the file {in_file:.1} px, {other_is} {theirs:.1} px ({:+.1} %)",
+                (theirs - in_file) / in_file * 100.0
+            ),
+        )
+    })
+    .filter(|(relative, _)| *relative > PARAMETER_TOLERANCE)
+    .collect();
+    rows.sort_by(|a, b| b.0.total_cmp(&a.0));
+    rows.into_iter().map(|(_, r)| r).collect()
+}
+
+/// The median of `values`; `None` without any.
+pub(super) fn median(mut values: Vec<f64>) -> Option<f64> {
     if values.is_empty() {
         return None;
     }
@@ -141,6 +147,17 @@ fn median_board_rms(visits: &[PoseVisit]) -> Option<f64> {
     } else {
         0.5 * (values[n / 2 - 1] + values[n / 2])
     })
+}
+
+/// The median of the visits' board reprojection RMS (rejected visits too), px; `None` without
+/// any.
+fn median_board_rms(visits: &[PoseVisit]) -> Option<f64> {
+    median(
+        visits
+            .iter()
+            .filter_map(|v| v.reprojection_rms_px)
+            .collect(),
+    )
 }
 
 /// Checks the file's intrinsics against the session's frames: when the median board RMS is
