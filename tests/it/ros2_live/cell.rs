@@ -380,11 +380,9 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
 fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let config = cell(
-        dir.path(),
-        domain,
-        &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
-    );
+    // The shipped 10 s to answer, not less: on a loaded 2-core CI machine a 3 s budget let a
+    // slow-to-answer goal read as the fault under test (seen once in CI).
+    let config = cell(dir.path(), domain, &[]);
     let out_dir = dir.path().join("session");
     {
         let _peer = Peer::start(&python, domain, faults);

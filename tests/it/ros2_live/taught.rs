@@ -59,7 +59,6 @@ fn arm_cell(
                 "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
                 plan,
             ),
-            ("connect_timeout_s: 10", "connect_timeout_s: 3"),
         ],
     )
 }
