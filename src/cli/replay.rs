@@ -114,52 +114,22 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    // Both answers (pose space and, by default, reprojection space) side by side.
-    let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
-        .then_some((&prepared.camera().board, &camera_model));
-    // Intrinsics that do not fit the frames are named here as in a run (the estimate written
-    // into the session), also when they made every pose fail.
-    let wrong = if prepared.camera().intrinsics_known {
-        session::solve::check_intrinsics(
-            &folder,
-            dataset.setup,
-            &visits,
-            &prepared.camera().board,
-            &camera_model,
-            &prepared.config,
-        )?
-    } else {
-        None
-    };
-    let intrinsics_file = prepared
-        .config
-        .camera()
-        .intrinsics
-        .clone()
-        .unwrap_or_default();
-    if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
-        anyhow::bail!(
-            "every pose of {} was rejected: {}\nnext: {}",
-            folder.root().display(),
-            w.reason(&intrinsics_file),
-            w.next_action(folder.root(), &config_path)
-        );
-    }
-    let notices = wrong
-        .iter()
-        .map(|w| w.notice(&intrinsics_file, folder.root(), &config_path))
-        .collect();
-    let mut solved = session::solve_session_with(
-        dataset.setup,
-        &dataset.pairs,
+    let mut solved = solve_replayed(
+        &folder,
+        &prepared,
+        &config_path,
+        &camera_model,
+        &dataset,
         &visits,
-        vision,
-        &prepared.config,
-        notices,
     )?;
     let output = args
         .output
         .unwrap_or_else(|| folder.root().join(REPLAY_RESULT_FILE));
+    // `-o` into a folder that does not exist yet makes it, as a several-camera replay does.
+    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot make the folder", parent.display()))?;
+    }
     // The estimates of a file the cell model blames, beside the replay's result (the run's own
     // stay as they were).
     let estimates = beside(&output, REPLAY_ESTIMATES_FOLDER);
@@ -206,6 +176,93 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         )
     );
     Ok(())
+}
+
+/// The replayed dataset solved and judged as a run's solve does: intrinsics that do not fit the
+/// frames named (their estimate written into the session), also when they let too few poses
+/// through, and the camera driver's calibration a ROS 2 run kept compared with the file.
+fn solve_replayed(
+    folder: &SessionFolder,
+    prepared: &cell::PreparedCell,
+    config_path: &std::path::Path,
+    camera_model: &CameraModel,
+    dataset: &handeye_session::dataset::Dataset,
+    visits: &[session::PoseVisit],
+) -> anyhow::Result<session::solve::SolvedSession> {
+    // Both answers (pose space and, by default, reprojection space) side by side.
+    let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
+        .then_some((&prepared.camera().board, camera_model));
+    // Intrinsics that do not fit the frames are named here as in a run (the estimate written
+    // into the session), also when they made every pose fail.
+    let wrong = if prepared.camera().intrinsics_known {
+        session::solve::check_intrinsics(
+            folder,
+            dataset.setup,
+            visits,
+            &prepared.camera().board,
+            camera_model,
+            &prepared.config,
+        )?
+    } else {
+        None
+    };
+    let intrinsics_file = prepared
+        .config
+        .camera()
+        .intrinsics
+        .clone()
+        .unwrap_or_default();
+    // The camera driver's own calibration a ROS 2 run kept, against the config's file.
+    let driver = session::solve::driver_calibration_notice(
+        folder,
+        &prepared.config,
+        camera_model,
+        visits,
+        &prepared.camera().board,
+    );
+    if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
+        let (reason, next) = session::solve::with_driver_calibration(
+            w.reason(&intrinsics_file),
+            w.next_action(folder.root(), config_path),
+            driver.as_ref(),
+        );
+        anyhow::bail!(
+            "every pose of {} was rejected: {reason}\nnext: {next}",
+            folder.root().display(),
+        );
+    }
+    let notices = wrong
+        .iter()
+        .map(|w| w.notice(&intrinsics_file, folder.root(), config_path))
+        .chain(driver.clone())
+        .collect();
+    let solved = session::solve_session_with(
+        dataset.setup,
+        &dataset.pairs,
+        visits,
+        vision,
+        &prepared.config,
+        notices,
+    );
+    let solved = match (solved, &wrong) {
+        // The few poses the intrinsics let through could not be solved: the intrinsics are the
+        // cause to name, as a run's solve does.
+        (Err(session::SessionError::Solve { source, .. }), Some(w)) => {
+            return Err(w
+                .few_samples_error(
+                    folder.root(),
+                    &intrinsics_file,
+                    config_path,
+                    dataset.pairs.len(),
+                    visits.len(),
+                    source.to_string(),
+                    driver.as_ref(),
+                )
+                .into())
+        }
+        (solved, _) => solved?,
+    };
+    Ok(solved)
 }
 
 /// How far the replayed answer is from the one the run recorded (when it recorded one).

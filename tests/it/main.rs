@@ -26,6 +26,7 @@ mod console;
 mod crash;
 mod dataset;
 mod driver;
+mod driver_calibration;
 mod formats;
 mod friction;
 mod fuzz;

@@ -77,6 +77,12 @@ pub enum NoticeKind {
     /// The configured intrinsics do not fit the frames (intrinsics estimated from the session
     /// fit far better); the message is the reason, then ` — next: ` and what to do.
     WrongIntrinsics,
+    /// The configured intrinsics file differs from the calibration the camera driver publishes
+    /// (a ROS 2 camera's `camera_info`, kept in the session). A warning when the board's corners
+    /// fit the driver's better or cannot tell (the verdict's `Intrinsics` finding, CHECK), info
+    /// when they fit the file better; a warning's message is the reason, then ` — next: ` and
+    /// what to do.
+    DriverCalibration,
     /// The session was still being recorded when it was solved: the answer is of the poses so
     /// far, and the run will add to them.
     Provisional,

@@ -14,7 +14,9 @@ mod intrinsics_check;
 mod summary;
 
 pub use arm::{dh_chain, estimate_arm, ArmEstimate, Corrected};
-pub use driver_calibration::DRIVER_CALIBRATION_FILE;
+pub use driver_calibration::{
+    driver_calibration_notice, with_driver_calibration, DRIVER_CALIBRATION_FILE,
+};
 pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
@@ -216,22 +218,6 @@ pub fn load_and_solve(
 ) -> Result<(SolvedSession, Dataset), SessionError> {
     let (mut solved, dataset) = solve_loaded(folder, inputs, space)?;
     solved.name_session_in(folder, &inputs.config);
-    // A ROS 2 driver's own calibration, kept by the run, against the config's file.
-    if let (Some(file), Some(file_model), true) = (
-        &inputs.config.camera().intrinsics,
-        &inputs.camera,
-        folder.root().join(DRIVER_CALIBRATION_FILE).is_file(),
-    ) {
-        let visits = folder.read_visits()?;
-        let notice = driver_calibration::driver_calibration_notice(
-            folder,
-            file,
-            file_model,
-            &visits,
-            &inputs.board,
-        );
-        solved.calibration.notices.extend(notice);
-    }
     if let Some(run) = folder.live_run() {
         solved
             .calibration
@@ -282,13 +268,22 @@ fn solve_loaded(
             reasons,
         }) => {
             return Err(match &wrong {
-                Some(w) => SessionError::WrongIntrinsics {
-                    visited: visited.max(seen.len()),
-                    first: reasons.split("; ").next().unwrap_or_default().to_string(),
-                    reason: w.reason(&intrinsics_file),
-                    next: w.next_action(&root, &config.file),
-                    folder: root,
-                },
+                Some(w) => {
+                    let driver =
+                        driver_calibration_notice(folder, config, camera, &seen, &inputs.board);
+                    let (reason, next) = with_driver_calibration(
+                        w.reason(&intrinsics_file),
+                        w.next_action(&root, &config.file),
+                        driver.as_ref(),
+                    );
+                    SessionError::WrongIntrinsics {
+                        visited: visited.max(seen.len()),
+                        first: reasons.split("; ").next().unwrap_or_default().to_string(),
+                        reason,
+                        next,
+                        folder: root,
+                    }
+                }
                 None => SessionError::NoSamples {
                     folder: root,
                     visited,
@@ -299,7 +294,7 @@ fn solve_loaded(
         other => other?,
     };
     let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let notices: Vec<_> = wrong
+    let mut notices: Vec<_> = wrong
         .iter()
         .map(|w| {
             w.notice(
@@ -309,6 +304,15 @@ fn solve_loaded(
             )
         })
         .collect();
+    // A ROS 2 driver's own calibration, kept by the run, against the config's file: a finding
+    // of the verdict, so it goes in before the solve judges.
+    notices.extend(driver_calibration_notice(
+        folder,
+        config,
+        camera,
+        &seen,
+        &inputs.board,
+    ));
     // The arm's own model (`solver.kinematics`): the rest of the solve sees corrected poses.
     let corrected = estimate_arm(
         dataset.setup,
@@ -321,6 +325,10 @@ fn solve_loaded(
         Some(c) => (&c.pairs[..], &c.visits[..]),
         None => (&dataset.pairs[..], &visits[..]),
     };
+    let driver = notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::DriverCalibration)
+        .cloned();
     let solved = solve_session_with(dataset.setup, pairs, solved_visits, vision, config, notices)
         .map(|mut solved| {
             if let Some(c) = corrected {
@@ -333,14 +341,15 @@ fn solve_loaded(
         // The few poses the intrinsics let through could not be solved: the intrinsics are
         // the cause to name (an adaptive plan that kept 2 of 60 poses).
         (Err(SessionError::Solve { source, .. }), Some(w)) => {
-            return Err(SessionError::WrongIntrinsicsFewSamples {
-                accepted: dataset.pairs.len(),
-                visited: seen.len(),
-                why: source.to_string(),
-                reason: w.reason(&intrinsics_file),
-                next: w.next_action(folder.root(), &config.file),
-                folder: folder.root().to_path_buf(),
-            });
+            return Err(w.few_samples_error(
+                folder.root(),
+                &intrinsics_file,
+                &config.file,
+                dataset.pairs.len(),
+                seen.len(),
+                source.to_string(),
+                driver.as_ref(),
+            ));
         }
         (solved, _) => solved?,
     };

@@ -103,6 +103,27 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         });
     }
 
+    // The camera driver's own calibration differing from the file, the corners fitting the
+    // driver's better (or too few frames to tell): the file may be stale. CHECK, not REDO: the
+    // answer may still be within the accuracy; the wrong-intrinsics check above and the cell
+    // model below judge how far the file is off.
+    if let Some(notice) = c
+        .notices
+        .iter()
+        .find(|n| n.kind == NoticeKind::DriverCalibration && n.needs_attention())
+    {
+        let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
+            notice.message.as_str(),
+            "calibrate the camera, then solve again",
+        ));
+        findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::Intrinsics,
+            reason: reason.into(),
+            next_action: next.into(),
+        });
+    }
+
     // The cell model: which given file the corners contradict (a model choice); it explains the
     // residuals and held-out error a wrong file causes, so it comes before them.
     if let Some(model) = evidence.cell_model {
@@ -119,7 +140,10 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
     if let Some(scale) = &evidence.board_scale {
         figures.board_scale = Some(scale.factor);
         figures.board_scale_sigma = Some(scale.sigma);
-        let intrinsics_wrong = findings.iter().any(|f| f.basis == Basis::Intrinsics);
+        let intrinsics_wrong = c
+            .notices
+            .iter()
+            .any(|n| n.kind == NoticeKind::WrongIntrinsics);
         if scale.is_wrong() && !intrinsics_wrong && evidence.cell_model.is_none() {
             findings.push(board_scale_finding(scale, evidence.pairs, a));
         }

@@ -85,6 +85,34 @@ impl WrongIntrinsics {
         )
     }
 
+    /// The error of a solve refused (`why`) on the `accepted` of `visited` poses these intrinsics
+    /// let through, with the camera driver's calibration (`driver`) when it needs attention.
+    #[allow(clippy::too_many_arguments)]
+    pub fn few_samples_error(
+        &self,
+        folder: &std::path::Path,
+        file: &std::path::Path,
+        config: &std::path::Path,
+        accepted: usize,
+        visited: usize,
+        why: String,
+        driver: Option<&Notice>,
+    ) -> SessionError {
+        let (reason, next) = super::driver_calibration::with_driver_calibration(
+            self.reason(file),
+            self.next_action(folder, config),
+            driver,
+        );
+        SessionError::WrongIntrinsicsFewSamples {
+            folder: folder.to_path_buf(),
+            accepted,
+            visited,
+            why,
+            reason,
+            next,
+        }
+    }
+
     /// The notice the verdict turns into its `Intrinsics` finding.
     pub fn notice(
         &self,
@@ -133,6 +161,57 @@ pub(super) fn differing_parameters(
     .collect();
     rows.sort_by(|a, b| b.0.total_cmp(&a.0));
     rows.into_iter().map(|(_, r)| r).collect()
+}
+
+/// Two lenses' distortion differing by more than this at some point of the image, px, is a
+/// difference worth naming (the board's corners are located to ~0.1 px).
+pub(super) const DISTORTION_TOLERANCE_PX: f64 = 1.0;
+
+/// How far `other`'s distortion (`other_is`: where it comes from) moves a pixel from where
+/// `file`'s puts it, at worst over the image (both with `file`'s focal lengths and principal
+/// point, so only the distortion differs): `distortion in the file … against …: up to 6.3 px
+/// apart over the image`; `None` within [`DISTORTION_TOLERANCE_PX`]. A file with no distortion
+/// for a lens that has some is the classic case.
+pub(super) fn differing_distortion(
+    file: &CameraModel,
+    other: &CameraModel,
+    other_is: &str,
+) -> Option<String> {
+    let mut same_pinhole = *other;
+    (same_pinhole.fx, same_pinhole.fy) = (file.fx, file.fy);
+    (same_pinhole.cx, same_pinhole.cy) = (file.cx, file.cy);
+    let worst = ray_displacement_px(file, &same_pinhole);
+    (worst > DISTORTION_TOLERANCE_PX).then(|| {
+        format!(
+            "distortion in the file {} against {other_is} {}: up to {worst:.1} px apart over the image",
+            describe_distortion(file),
+            describe_distortion(other)
+        )
+    })
+}
+
+/// How far apart, at worst, the two lenses put the image of one ray, px: over the rays of a
+/// 17×17 grid of `file`'s pixels.
+pub(super) fn ray_displacement_px(file: &CameraModel, other: &CameraModel) -> f64 {
+    let steps = 16;
+    (0..=steps)
+        .flat_map(|i| (0..=steps).map(move |j| (i, j)))
+        .filter_map(|(i, j)| {
+            let u = f64::from(file.width) * f64::from(i) / f64::from(steps);
+            let v = f64::from(file.height) * f64::from(j) / f64::from(steps);
+            let ray = nalgebra::Point3::new((u - file.cx) / file.fx, (v - file.cy) / file.fy, 1.0);
+            Some((file.project(&ray)? - other.project(&ray)?).norm())
+        })
+        .fold(0.0f64, f64::max)
+}
+
+fn describe_distortion(lens: &CameraModel) -> String {
+    let coefficients = lens.distortion.coefficients();
+    if coefficients.iter().all(|c| *c == 0.0) {
+        return "none".into();
+    }
+    let list: Vec<String> = coefficients.iter().map(|c| format!("{c:.4}")).collect();
+    format!("[{}]", list.join(", "))
 }
 
 /// The median of `values`; `None` without any.
