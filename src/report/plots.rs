@@ -109,26 +109,59 @@ fn legend(area: &Area<'_>, title: &str, entries: &[(Mark, String)]) -> PlotResul
     Ok(())
 }
 
+/// One series of a grouped bar chart: a bar per sample where it has a value.
+pub struct BarSeries<'a> {
+    /// Its legend label (an answer's, a camera's).
+    pub label: &'a str,
+    /// Per sample (the x axis, from 0), its value.
+    pub values: Vec<Option<f64>>,
+    /// Samples it flagged as outliers (red).
+    pub outliers: &'a [usize],
+    /// Samples it dropped from its fit (a grey stub).
+    pub dropped: &'a [usize],
+}
+
 /// Grouped bars: one group per sample, one bar per answer; outliers red.
 pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String, ReportError> {
-    let kind = which.kind();
-    let err = plot_error(kind);
     let n = input.pairs.len();
-    let values: Vec<Vec<Option<f64>>> = input
+    let series: Vec<BarSeries<'_>> = input
         .answers
         .iter()
-        .map(|a| {
-            (0..n)
-                .map(|i| {
-                    let v = match which {
-                        ResidualKind::Rotation => a.calibration.residuals.rotation_deg.get(i),
-                        ResidualKind::Translation => a.calibration.residuals.translation_mm.get(i),
-                        ResidualKind::Reprojection => {
-                            a.reprojection_px.get(i).and_then(|v| v.as_ref())
-                        }
-                    };
-                    v.copied().filter(|v| v.is_finite())
+        .map(|a| BarSeries {
+            label: &a.label,
+            values: (0..n)
+                .map(|i| match which {
+                    ResidualKind::Rotation => a.calibration.residuals.rotation_deg.get(i).copied(),
+                    ResidualKind::Translation => {
+                        a.calibration.residuals.translation_mm.get(i).copied()
+                    }
+                    ResidualKind::Reprojection => a.reprojection_px.get(i).copied().flatten(),
                 })
+                .collect(),
+            outliers: &a.calibration.outliers,
+            dropped: &a.calibration.dropped,
+        })
+        .collect();
+    bars(which, "sample", "answer", &series)
+}
+
+/// Grouped bars of `series` over `x_desc` (one group per index, one bar per series; outliers
+/// red, dropped samples a grey stub), the legend titled `legend_title`.
+pub fn bars(
+    which: ResidualKind,
+    x_desc: &str,
+    legend_title: &str,
+    series: &[BarSeries<'_>],
+) -> Result<String, ReportError> {
+    let kind = which.kind();
+    let err = plot_error(kind);
+    let n = series.iter().map(|s| s.values.len()).max().unwrap_or(0);
+    let values: Vec<Vec<Option<f64>>> = series
+        .iter()
+        .map(|s| {
+            s.values
+                .iter()
+                .map(|v| v.filter(|v| v.is_finite()))
                 .collect()
         })
         .collect();
@@ -153,7 +186,7 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
         chart
             .configure_mesh()
             .disable_x_mesh()
-            .x_desc("sample")
+            .x_desc(x_desc)
             .y_desc(which.y_desc())
             .label_style(("sans-serif", 16))
             .axis_desc_style(("sans-serif", 17))
@@ -161,14 +194,13 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
             .x_label_formatter(&|x| format!("{:.0}", x))
             .draw()
             .map_err(&err)?;
-        let answers = input.answers.len().max(1) as f64;
-        let width = 0.8 / answers;
-        for (k, answer) in input.answers.iter().enumerate() {
+        let width = 0.8 / series.len().max(1) as f64;
+        for (k, one) in series.iter().enumerate() {
             let colour = ANSWER_COLOURS[k % ANSWER_COLOURS.len()];
             let bars = values[k].iter().enumerate().filter_map(|(i, v)| {
                 let v = (*v)?;
                 let x0 = i as f64 - 0.4 + k as f64 * width;
-                let fill = if answer.calibration.outliers.contains(&i) {
+                let fill = if one.outliers.contains(&i) {
                     OUTLIER
                 } else {
                     colour
@@ -180,7 +212,7 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
             });
             chart.draw_series(bars).map_err(&err)?;
             // Dropped samples have no residual in the fit: a grey stub on the axis says so.
-            let dropped = answer.calibration.dropped.iter().map(|&i| {
+            let dropped = one.dropped.iter().map(|&i| {
                 let x0 = i as f64 - 0.4 + k as f64 * width;
                 Rectangle::new([(x0, 0.0), (x0 + width * 0.9, top * 0.03)], GREY.filled())
             });
@@ -194,26 +226,21 @@ pub fn residual_bars(input: &ReportInput, which: ResidualKind) -> Result<String,
             )
             .map_err(&err)?;
         }
-        let mut entries: Vec<(Mark, String)> = input
-            .answers
+        let mut entries: Vec<(Mark, String)> = series
             .iter()
             .enumerate()
-            .map(|(k, a)| {
+            .map(|(k, s)| {
                 (
                     Mark::Square(ANSWER_COLOURS[k % ANSWER_COLOURS.len()]),
-                    a.label.clone(),
+                    s.label.to_string(),
                 )
             })
             .collect();
         entries.push((Mark::Square(OUTLIER), "flagged outlier".into()));
-        if input
-            .answers
-            .iter()
-            .any(|a| !a.calibration.dropped.is_empty())
-        {
+        if series.iter().any(|s| !s.dropped.is_empty()) {
             entries.push((Mark::Square(GREY), "dropped from the fit".into()));
         }
-        legend(&key, "answer", &entries).map_err(&err)?;
+        legend(&key, legend_title, &entries).map_err(&err)?;
         root.present().map_err(&err)?;
     }
     Ok(svg)

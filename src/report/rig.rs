@@ -11,6 +11,7 @@ use handeye_core::geometry::rotvec;
 use handeye_session::cell::rig::solve::NamedTransform;
 use handeye_session::cell::rig::RigResultFile;
 
+use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
 use super::{escape, ReportError};
 use handeye_formats::export::{ExportFormat, Exported, FrameIds};
 use handeye_solve::verdict::Level;
@@ -38,7 +39,7 @@ fn transform_cells(t: &NamedTransform) -> String {
 }
 
 /// The page's HTML.
-pub fn render(result: &RigResultFile, folder: &Path) -> String {
+pub fn render(result: &RigResultFile, folder: &Path) -> Result<String, ReportError> {
     let mut html = format!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
          <style>{}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}\
@@ -128,8 +129,97 @@ pub fn render(result: &RigResultFile, folder: &Path) -> String {
         "</table><p>Variance factor of the joint solve (χ²/dof): {:.3}</p>",
         result.variance_factor
     );
+    residuals_section(&mut html, result)?;
+    rotation_axes_section(&mut html, result, folder)?;
     let _ = write!(html, "<script>{}</script></body></html>", super::SCRIPT);
-    html
+    Ok(html)
+}
+
+/// Every camera's residual at each plan pose in the joint solve, rotation and translation: the
+/// one-camera page's per-pose bars with a bar per camera.
+fn residuals_section(html: &mut String, result: &RigResultFile) -> Result<(), ReportError> {
+    html.push_str("<section id=\"residuals\"><h2>Per-pose residuals (joint solve)</h2><p>For every camera at every plan pose where it saw its board: the board pose it measured against the one the joint answer predicts there. A camera whose bars stand far above the others' at the same poses disagrees with them; a grey stub marks a sample its own solve dropped as an outlier (left out of the joint solve).</p>");
+    let poses = result
+        .cameras
+        .iter()
+        .flat_map(|c| c.residuals_per_pose.iter().map(|r| r.index + 1))
+        .max()
+        .unwrap_or(0);
+    // Per camera, the samples its own robust solve dropped (a grey stub at their pose).
+    let dropped: Vec<Vec<usize>> = result
+        .cameras
+        .iter()
+        .map(|c| {
+            c.residuals_per_pose
+                .iter()
+                .filter(|r| r.dropped)
+                .map(|r| r.index)
+                .collect()
+        })
+        .collect();
+    for which in [ResidualKind::Rotation, ResidualKind::Translation] {
+        let series: Vec<BarSeries<'_>> = result
+            .cameras
+            .iter()
+            .zip(&dropped)
+            .filter(|(c, _)| !c.residuals_per_pose.is_empty())
+            .map(|(c, dropped)| {
+                let mut values = vec![None; poses];
+                for r in &c.residuals_per_pose {
+                    values[r.index] = match which {
+                        ResidualKind::Translation => r.translation_mm,
+                        _ => r.rotation_deg,
+                    };
+                }
+                BarSeries {
+                    label: &c.name,
+                    values,
+                    outliers: &[],
+                    dropped,
+                }
+            })
+            .collect();
+        if series.is_empty() {
+            html.push_str("<p>No per-pose residuals in this result (written before they were kept): replay the session to see them.</p>");
+            break;
+        }
+        super::sections::figure(
+            html,
+            which.kind(),
+            &bars(which, "plan pose", "camera", &series)?,
+        );
+    }
+    html.push_str("</section>");
+    Ok(())
+}
+
+/// The relative rotation axes of the flange poses (one arm for every camera: those of the
+/// camera that saw its board at the most poses, from its samples).
+fn rotation_axes_section(
+    html: &mut String,
+    result: &RigResultFile,
+    folder: &Path,
+) -> Result<(), ReportError> {
+    let pairs = result
+        .cameras
+        .iter()
+        .filter_map(|c| {
+            let camera = handeye_session::cell::rig::camera_folder(folder, &c.name);
+            let samples = handeye_session::session::SessionFolder::open(&camera)
+                .ok()?
+                .samples_path();
+            handeye_session::dataset::Dataset::load(&samples).ok()
+        })
+        .map(|d| d.pairs)
+        .max_by_key(Vec::len)
+        .unwrap_or_default();
+    if pairs.len() < 2 {
+        return Ok(());
+    }
+    html.push_str("<section id=\"rotation-axes\"><h2>Relative rotation axes</h2><p>Axes of the relative flange rotations between every two poses (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.</p>");
+    super::sections::figure(html, "rotation-axes", &rotation_axes(&pairs)?);
+    html.push_str("</section>");
+    Ok(())
 }
 
 /// The forms "use it" shows for several cameras (`ur` holds one TCP: not for a cell).
@@ -215,7 +305,7 @@ pub fn write_rig_report(
     folder: &Path,
     path: &Path,
 ) -> Result<(), ReportError> {
-    write_atomic(path, render(result, folder).as_bytes()).map_err(|source| ReportError::Write {
+    write_atomic(path, render(result, folder)?.as_bytes()).map_err(|source| ReportError::Write {
         path: path.to_path_buf(),
         source,
     })

@@ -489,6 +489,72 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
     );
 }
 
+/// The several-camera page shows the evidence the one-camera page does (issue #39): every
+/// camera's residual at each plan pose in the joint solve (a bar per camera, the result's
+/// per-pose residuals, whose RMS is the camera's RMS in the file) and the relative rotation axes.
+#[test]
+fn the_several_camera_report_plots_every_cameras_residuals_and_the_rotation_axes() {
+    let (_, out, _) = shipped_run();
+    let result = read_result(out);
+    for camera in &result.cameras {
+        // One entry per sample; those its own robust solve dropped have no residual.
+        assert_eq!(
+            camera.residuals_per_pose.len(),
+            camera.samples,
+            "{}",
+            camera.name
+        );
+        assert!(
+            camera
+                .residuals_per_pose
+                .iter()
+                .all(|r| r.dropped == r.rotation_deg.is_none()),
+            "{}",
+            camera.name
+        );
+        let dropped = camera
+            .residuals_per_pose
+            .iter()
+            .filter(|r| r.dropped)
+            .count();
+        println!(
+            "{}: {dropped} of {} samples dropped",
+            camera.name, camera.samples
+        );
+        let rms = |value: fn(&handeye_session::result::SampleResidualYaml) -> Option<f64>| {
+            let squares: Vec<f64> = camera
+                .residuals_per_pose
+                .iter()
+                .filter_map(|r| value(r).map(|v| v.powi(2)))
+                .collect();
+            (squares.iter().sum::<f64>() / squares.len() as f64).sqrt()
+        };
+        let (rotation, translation) = (rms(|r| r.rotation_deg), rms(|r| r.translation_mm));
+        println!(
+            "{}: residual RMS {rotation:.4}°, {translation:.3} mm",
+            camera.name
+        );
+        assert!((rotation - camera.residual_rotation_rms_deg.unwrap()).abs() < 1e-9);
+        assert!((translation - camera.residual_translation_rms_mm.unwrap()).abs() < 1e-9);
+    }
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    for kind in ["residual-rotation", "residual-translation", "rotation-axes"] {
+        let start = page
+            .find(&format!("data-kind=\"{kind}\""))
+            .unwrap_or_else(|| panic!("no {kind} plot"));
+        let figure = &page[start..start + page[start..].find("</figure>").unwrap()];
+        assert!(figure.contains("<svg"), "{kind}");
+        if kind.starts_with("residual") {
+            for name in ["wrist", "left", "right"] {
+                assert!(
+                    figure.contains(&format!(">\n{name}\n<")),
+                    "{kind} has no bar for {name}"
+                );
+            }
+        }
+    }
+}
+
 /// `handeye report` and `handeye export` of a several-camera session name every camera: the
 /// report has a row per camera and the camera-to-camera transform; ROS 2 and URDF publish every
 /// mount and both boards as a tree (one parent per frame); OpenCV holds every transform, whose

@@ -152,7 +152,7 @@ pub struct RelativeMount {
 }
 
 /// A camera's residuals at the optimum.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RigResiduals {
     /// Observations used.
     pub samples: usize,
@@ -160,6 +160,20 @@ pub struct RigResiduals {
     pub rotation_rms_deg: f64,
     /// RMS translation residual, mm.
     pub translation_rms_mm: f64,
+    /// Each of its observations' residual, in the order of the data's observations.
+    pub per_pose: Vec<PoseResidual>,
+}
+
+/// One observation's residual at the optimum (the pose-space residual of the one-camera solve:
+/// how far the board pose it saw is from the one the answer predicts there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseResidual {
+    /// The pose (index into [`RigData::base_from_flange`]).
+    pub pose: usize,
+    /// Rotation residual, degrees.
+    pub rotation_deg: f64,
+    /// Translation residual, mm.
+    pub translation_mm: f64,
 }
 
 /// The joint answer.
@@ -451,8 +465,8 @@ fn minimize(
 }
 
 /// Per-camera residual figures (unwhitened) at `state`.
-fn residual_figures(data: &RigData, layout: &Layout, state: &State) -> Vec<(usize, f64, f64)> {
-    let mut sums = vec![(0usize, 0.0, 0.0); data.cameras.len()];
+fn residual_figures(data: &RigData, layout: &Layout, state: &State) -> Vec<Vec<PoseResidual>> {
+    let mut per_camera = vec![Vec::new(); data.cameras.len()];
     let unit = NoiseModel {
         rotation_sigma_rad: 1.0,
         translation_sigma_m: 1.0,
@@ -469,12 +483,13 @@ fn residual_figures(data: &RigData, layout: &Layout, state: &State) -> Vec<(usiz
             &data.base_from_flange[o.pose],
             &o.camera_from_target,
         );
-        let s = &mut sums[o.camera];
-        s.0 += 1;
-        s.1 += r.fixed_rows::<3>(0).norm_squared();
-        s.2 += r.fixed_rows::<3>(3).norm_squared();
+        per_camera[o.camera].push(PoseResidual {
+            pose: o.pose,
+            rotation_deg: r.fixed_rows::<3>(0).norm().to_degrees(),
+            translation_mm: r.fixed_rows::<3>(3).norm() * 1e3,
+        });
     }
-    sums
+    per_camera
 }
 
 /// Rounds of noise estimation alternated with the fit.
@@ -549,11 +564,20 @@ pub fn solve_rig(
             &|s| cost(data, &layout, s, &noise),
         );
         if options.estimate_noise && round + 1 < rounds {
-            for (c, (count, rot, trans)) in residual_figures(data, &layout, &state)
+            for (c, per_pose) in residual_figures(data, &layout, &state)
                 .into_iter()
                 .enumerate()
             {
-                let dof = (3.0 * count as f64 * redundancy).max(1.0);
+                // Sums of squares in radians and metres.
+                let rot: f64 = per_pose
+                    .iter()
+                    .map(|r| r.rotation_deg.to_radians().powi(2))
+                    .sum();
+                let trans: f64 = per_pose
+                    .iter()
+                    .map(|r| (r.translation_mm * 1e-3).powi(2))
+                    .sum();
+                let dof = (3.0 * per_pose.len() as f64 * redundancy).max(1.0);
                 noise[c] = NoiseModel {
                     rotation_sigma_rad: (rot / dof).sqrt().max(1e-7),
                     translation_sigma_m: (trans / dof).sqrt().max(1e-7),
@@ -597,12 +621,16 @@ fn finish(
     let relative = relative_mounts(data, &state, &covariance);
     let residuals = residual_figures(data, layout, &state)
         .into_iter()
-        .map(|(samples, rot, trans)| {
-            let n = samples.max(1) as f64;
+        .map(|per_pose| {
+            let n = per_pose.len().max(1) as f64;
+            let rms = |value: fn(&PoseResidual) -> f64| {
+                (per_pose.iter().map(|r| value(r).powi(2)).sum::<f64>() / n).sqrt()
+            };
             RigResiduals {
-                samples,
-                rotation_rms_deg: (rot / n).sqrt().to_degrees(),
-                translation_rms_mm: (trans / n).sqrt() * 1e3,
+                samples: per_pose.len(),
+                rotation_rms_deg: rms(|r| r.rotation_deg),
+                translation_rms_mm: rms(|r| r.translation_mm),
+                per_pose,
             }
         })
         .collect();

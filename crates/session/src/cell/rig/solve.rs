@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
 use crate::config::{CellCamera, CellConfig, SolveSpace};
+use crate::result::SampleResidualYaml;
 use crate::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use crate::session::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
@@ -27,7 +28,7 @@ use handeye_core::yaml_file::write_yaml;
 use handeye_solve::cell_model::{fit_cell_model, CellModel};
 use handeye_solve::reprojection::Frame;
 use handeye_solve::rig::{
-    pose_error, solve_rig, solve_rig_pixels, RigCamera, RigData, RigError, RigFrame,
+    pose_error, solve_rig, solve_rig_pixels, PoseResidual, RigCamera, RigData, RigError, RigFrame,
     RigObservation, RigOptions, RigSolution, RigStart,
 };
 use handeye_solve::verdict::{self, Accuracy, HeldOut, Verdict};
@@ -111,6 +112,10 @@ pub struct CameraResult {
     /// RMS translation residual, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residual_translation_rms_mm: Option<f64>,
+    /// Each of its samples' residual in the joint solve, the one-camera result's per-sample form
+    /// (`index`: the plan pose; absent in files written before it and when it is left out).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub residuals_per_pose: Vec<SampleResidualYaml>,
     /// The leave-one-out check of its own samples (each predicted by a one-camera solve of the
     /// others), as the one-camera verdict runs it; absent when it could not run (`reason`
     /// says why).
@@ -120,6 +125,36 @@ pub struct CameraResult {
     /// held-out error against the accuracy asked for (`verdict::assess_mount`); REDO when it is
     /// left out.
     pub verdict: Verdict,
+}
+
+/// The plan poses of the visits that gave a sample.
+fn plan_poses_of_samples(visits: &[PoseVisit]) -> Vec<usize> {
+    visits
+        .iter()
+        .filter(|v| v.sample().is_some())
+        .map(|v| v.plan_index)
+        .collect()
+}
+
+/// A camera's residual at each plan pose of its samples (`sample_poses`), in the one-camera
+/// result's per-sample form; a sample its own robust solve dropped (so the joint solve left it
+/// out) is `dropped`, without a residual.
+fn per_pose_residuals(sample_poses: &[usize], joint: &[PoseResidual]) -> Vec<SampleResidualYaml> {
+    sample_poses
+        .iter()
+        .map(|&pose| {
+            let r = joint.iter().find(|r| r.pose == pose);
+            SampleResidualYaml {
+                index: pose,
+                id: None,
+                rotation_deg: r.map(|r| r.rotation_deg),
+                translation_mm: r.map(|r| r.translation_mm),
+                normalised: None,
+                outlier: false,
+                dropped: r.is_none(),
+            }
+        })
+        .collect()
 }
 
 /// `result.yaml` of a several-camera session.
@@ -202,6 +237,8 @@ pub struct RigProblem {
     pub config_index: Vec<usize>,
     /// Per config camera: accepted samples, and why it is left out (if it is).
     pub cameras: Vec<(usize, Option<String>)>,
+    /// Per config camera: the plan poses of its accepted samples.
+    pub sample_poses: Vec<Vec<usize>>,
     /// Per config camera: the leave-one-out check of its own samples (the one-camera verdict's
     /// held-out error), or why there is none.
     pub held_out: Vec<Result<HeldOut, String>>,
@@ -250,11 +287,13 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
     let mut frames = Vec::new();
     let mut models = Vec::new();
     let mut cell_models = Vec::new();
+    let mut sample_poses = Vec::new();
     for (c, camera) in rig.cameras.iter().enumerate() {
         let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
         let visits = folder.read_visits()?;
         let pairs: Vec<_> = visits.iter().filter_map(|v| v.sample()).collect();
         let samples = pairs.len();
+        sample_poses.push(plan_poses_of_samples(&visits));
         if samples < handeye_solve::rig::MIN_VIEWS_PER_CAMERA {
             held_out.push(Err(format!("only {samples} samples")));
             cameras.push((
@@ -373,6 +412,7 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
         start,
         config_index,
         cameras,
+        sample_poses,
         held_out,
         frames,
         models,
@@ -590,6 +630,7 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
             corner_noise_px: None,
             residual_rotation_rms_deg: None,
             residual_translation_rms_mm: None,
+            residuals_per_pose: Vec::new(),
             held_out: problem.held_out[c].as_ref().ok().copied(),
             verdict: verdict::mount::left_out(
                 left_out.as_deref().unwrap_or_default(),
@@ -629,6 +670,8 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
             entry.corner_noise_px = joint.pixel_sigma_px.get(k).copied();
             entry.residual_rotation_rms_deg = Some(joint.residuals[k].rotation_rms_deg);
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
+            entry.residuals_per_pose =
+                per_pose_residuals(&problem.sample_poses[c], &joint.residuals[k].per_pose);
             entry.verdict = verdict::with_cell_model(
                 verdict::assess_mount(
                     &joint.camera_sigmas[k],
