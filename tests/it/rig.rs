@@ -25,7 +25,7 @@ fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
     util::config_variant(dir, "sim-cell-three-cameras.yaml", "cell.yaml", edits)
 }
 
-fn read_result(folder: &Path) -> RigResultFile {
+pub(crate) fn read_result(folder: &Path) -> RigResultFile {
     let text = std::fs::read_to_string(folder.join("result.yaml")).unwrap();
     serde_yaml_ng::from_str(&text).unwrap()
 }
@@ -62,7 +62,7 @@ fn run_ok(config: &Path, out: &Path, env: &[(&str, &str)]) -> String {
 
 /// One run of the shipped three-camera cell, shared by the tests that read it (the accuracy test
 /// and the OpenCV anchor): (config, session folder, what the run printed).
-fn shipped_run() -> &'static (PathBuf, PathBuf, String) {
+pub(crate) fn shipped_run() -> &'static (PathBuf, PathBuf, String) {
     static RUN: std::sync::OnceLock<(PathBuf, PathBuf, String)> = std::sync::OnceLock::new();
     RUN.get_or_init(|| {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rig-three-cameras");

@@ -108,3 +108,88 @@ fn start_publisher(domain: u16) -> Child {
     std::thread::spawn(move || lines.for_each(drop));
     publisher
 }
+
+/// A several-camera result (#39) is published as one tree: every camera's mount and both boards
+/// on /tf_static, each frame with one parent, read back by the independent peer to 1e-9 against
+/// the result file; the camera-to-camera transforms (which would give a camera a second parent)
+/// are not.
+#[test]
+fn a_several_camera_result_is_published_as_one_tree() {
+    let Some(python) = python() else { return };
+    let domain = 84;
+    let (_, session, _) = crate::rig::shipped_run();
+    let result_path = session.join("result.yaml");
+    let result = crate::rig::read_result(session);
+    within(std::time::Duration::from_secs(300), move || {
+        let mut publisher = handeye()
+            .arg("publish")
+            .arg(&result_path)
+            .args([
+                "--domain-id",
+                &domain.to_string(),
+                "--interface",
+                "127.0.0.1",
+            ])
+            .args(["--duration", "90"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("handeye publish");
+        let mut lines = BufReader::new(publisher.stdout.take().unwrap()).lines();
+        let printed: Vec<String> = lines
+            .by_ref()
+            .map_while(Result::ok)
+            .take_while(|l| !l.starts_with("latched"))
+            .collect();
+        std::thread::spawn(move || lines.for_each(drop));
+        // Three mounts and two boards.
+        let mounts = result.cameras.iter().filter(|c| c.joint.is_some()).count();
+        let expected = mounts + result.boards.len();
+        assert_eq!((mounts, expected), (3, 5), "{printed:?}");
+        let out = peer(&python, domain)
+            .args([
+                "tf-static",
+                "--expect",
+                &expected.to_string(),
+                "--timeout",
+                "60",
+            ])
+            .output()
+            .expect("the peer runs");
+        let _ = publisher.kill();
+        let _ = publisher.wait();
+        assert!(
+            out.status.success(),
+            "peer: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let read: serde_json::Value = serde_json::from_slice(&out.stdout).expect("peer JSON");
+        let got = read["transforms"].as_array().unwrap();
+        assert_eq!(got.len(), expected, "{read}");
+        let f = |v: &serde_json::Value, i: usize| v.as_array().unwrap()[i].as_f64().unwrap();
+        for t in result
+            .cameras
+            .iter()
+            .filter_map(|c| c.joint.as_ref())
+            .chain(&result.boards)
+        {
+            // A camera `cam_<name>` is published as `camera_optical_frame_<name>`, a board by
+            // its own name: matched by the translation, which names it unambiguously here.
+            let want = t.pose.translation.vector;
+            let g = got
+                .iter()
+                .find(|g| (0..3).all(|i| (f(&g["translation"], i) - want[i]).abs() < 1e-9))
+                .unwrap_or_else(|| panic!("{} not read back to 1e-9: {read}", t.name));
+            let q = t.pose.rotation.quaternion();
+            let wq = [q.i, q.j, q.k, q.w];
+            let same = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) - wq[i]).abs() < 1e-9);
+            let flipped = (0..4).all(|i| (f(&g["quaternion_xyzw"], i) + wq[i]).abs() < 1e-9);
+            assert!(same || flipped, "{}: {g}", t.name);
+        }
+        // One parent per frame.
+        for g in got {
+            let parents = got.iter().filter(|o| o["child"] == g["child"]).count();
+            assert_eq!(parents, 1, "{} has {parents} parents: {read}", g["child"]);
+        }
+    });
+}
