@@ -236,10 +236,10 @@ fn solve_replayed(
         .map(|w| w.notice(&intrinsics_file, folder.root(), config_path))
         .chain(driver.clone())
         .collect();
-    let solved = session::solve_session_with(
-        dataset.setup,
-        &dataset.pairs,
+    let solved = session::solve::solve_with_arm(
+        dataset,
         visits,
+        &folder.read_manifest()?.plan,
         vision,
         &prepared.config,
         notices,

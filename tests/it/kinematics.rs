@@ -143,6 +143,14 @@ struct Tally {
     normalised_rms: f64,
     /// The estimated offsets' 1σ, degrees, sorted.
     sigmas_deg: Vec<f64>,
+    /// Draws whose data choose the arm's model (`ArmFit::model_choice_margin` positive: what
+    /// `solver.kinematics: auto`, the default, keeps).
+    chosen: usize,
+    /// Draws whose `auto` answer (with the model where chosen, without elsewhere) has both
+    /// transforms within 0.5 mm / 0.05°.
+    auto_within_bar: usize,
+    /// Mean transform translation error of the `auto` answer, mm.
+    auto_mean_mm: f64,
 }
 
 /// The draws of `sigmas` for the plan `joints` of the cell `physical`.
@@ -160,6 +168,11 @@ fn monte_carlo(
         let without = transform_error(&camera, &target, &truth);
         let with = transform_error(&fit.camera_mount, &fit.target_mount, &truth);
         tally.draws += 1;
+        let chosen = fit.model_choice_margin() > 0.0;
+        tally.chosen += usize::from(chosen);
+        let auto = if chosen { with } else { without };
+        tally.auto_mean_mm += auto.0 / DRAWS as f64;
+        tally.auto_within_bar += usize::from(auto.0 <= 0.5 && auto.1 <= 0.05);
         tally.mean_mm[0] += with.0 / DRAWS as f64;
         tally.mean_mm[1] += without.0 / DRAWS as f64;
         tally.worst_without_mm = tally.worst_without_mm.max(without.0);
@@ -202,8 +215,11 @@ fn monte_carlo(
 
 fn print(what: &str, t: &Tally) {
     eprintln!(
-        "{what}: {} draws, offsets within 3σ in {} (normalised error RMS {:.2}, median 1σ {:.4}°), transforms within 0.5 mm / 0.05° in {} (worst {:.3} mm / {:.4}°); mean transform error {:.3} mm with the arm model, {:.3} mm without (worst {:.3} mm)",
+        "{what}: {} draws, the data choose the arm's model in {} (auto: within the bar in {}, mean {:.3} mm), offsets within 3σ in {} (normalised error RMS {:.2}, median 1σ {:.4}°), transforms within 0.5 mm / 0.05° in {} (worst {:.3} mm / {:.4}°); mean transform error {:.3} mm with the arm model, {:.3} mm without (worst {:.3} mm)",
         t.draws,
+        t.chosen,
+        t.auto_within_bar,
+        t.auto_mean_mm,
         t.within_3_sigma,
         t.normalised_rms,
         t.sigmas_deg[t.sigmas_deg.len() / 2],
@@ -236,13 +252,40 @@ fn drawn_joint_offsets_are_found_within_their_sigma_and_the_transforms_within_th
         assert!(20 * t.within_3_sigma >= 19 * t.draws, "{config}: {t:?}");
         assert!(20 * t.within_bar >= 19 * t.draws, "{config}: {t:?}");
         assert!((0.6..1.5).contains(&t.normalised_rms), "{config}: {t:?}");
-        // Without the arm model the same errors cost more.
+        // Without the arm model the same errors cost more, and the data say so: `auto` keeps
+        // the model in ≥ 95 % of the draws.
         assert!(t.mean_mm[1] > 2.0 * t.mean_mm[0], "{config}: {t:?}");
+        assert!(20 * t.chosen >= 19 * t.draws, "{config}: {t:?}");
+        assert!(20 * t.auto_within_bar >= 19 * t.draws, "{config}: {t:?}");
         // With five times the board noise the offsets' 1σ still cover the truth (the bar on
         // the transforms is then the noise's, not the arm's: printed).
         let t = monte_carlo(&cell, &sigmas, PESSIMISTIC);
         print(&format!("{config}, 5x board noise"), &t);
         assert!(20 * t.within_3_sigma >= 19 * t.draws, "{config}: {t:?}");
+    }
+}
+
+/// An arm exactly as published (no joint offsets, no link errors), the same cells, plans and
+/// noise: the data do not choose the arm's model (`solver.kinematics: auto` keeps the published
+/// one) in ≥ 95 % of the draws — at the rendered cell's board noise and at five times it.
+#[test]
+fn an_arm_as_published_is_not_given_a_model_by_the_default() {
+    let exact = ArmErrorSigmas {
+        joint_offset_rad: 0.0,
+        ..ArmErrorSigmas::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
+        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
+        let cell = shipped_plan(&variant);
+        for (noise, board) in [("rendered", RENDERED), ("5x", PESSIMISTIC)] {
+            let t = monte_carlo(&cell, &exact, board);
+            print(&format!("{config}, an exact arm, {noise} board noise"), &t);
+            assert!(20 * t.chosen <= t.draws, "{config}, {noise}: {t:?}");
+            if noise == "rendered" {
+                assert!(20 * t.auto_within_bar >= 19 * t.draws, "{config}: {t:?}");
+            }
+        }
     }
 }
 
@@ -353,6 +396,80 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
     assert!(kinematics.translation_rms_mm.with < kinematics.translation_rms_mm.without);
 }
 
+/// `solver.kinematics` absent is `auto`: the data choose. The shipped arm-errors cell without
+/// the key keeps the arm's model (its offsets explain the residuals) and meets the bar; the
+/// shipped sim cell, whose arm is exactly as published, keeps the published model and says
+/// why. `none` keeps the old default one key away.
+#[test]
+fn by_default_the_data_choose_the_arms_model_through_the_binary() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |base: &str, edits: &[(&str, &str)], name: &str| {
+        let config = config_variant(dir.path(), base, &format!("{name}.yaml"), edits);
+        let session = dir.path().join(name);
+        let output = crate::util::run_cli(&config, &session);
+        assert!(
+            output.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let result_path = session.join("result.yaml");
+        let result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+        let cell = handeye_session::config::CellConfig::load(&config).unwrap();
+        let mounts = result.mounts(&result_path).unwrap();
+        let (mm, deg) = transform_error(
+            &mounts.camera_mount,
+            &mounts.target_mount,
+            &cell.camera().simulation.unwrap(),
+        );
+        let said: Vec<String> = result.notices.iter().map(|n| n.message.clone()).collect();
+        eprintln!("{name}: {mm:.3} mm, {deg:.4}° from the truth; {said:?}");
+        (result, (mm, deg), said)
+    };
+    let errors_auto = [(", kinematics: joint_offsets}", "}")];
+    let (result, (mm, deg), said) = run("sim-cell-arm-errors.yaml", &errors_auto, "errors-auto");
+    assert!(result.kinematics.is_some(), "{said:?}");
+    assert!(
+        said.iter()
+            .any(|m| m.contains("the data choose the arm's own model")),
+        "{said:?}"
+    );
+    assert!(mm <= 0.5 && deg <= 0.05, "{mm} mm, {deg}°");
+    // A replay solves as the run did: the same choice, the same answer.
+    let replayed = dir.path().join("errors-auto-replay/result.yaml");
+    let replay = crate::util::handeye()
+        .arg("replay")
+        .arg(dir.path().join("errors-auto"))
+        .arg("-o")
+        .arg(&replayed)
+        .output()
+        .unwrap();
+    assert!(
+        replay.status.success(),
+        "{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    let again = handeye_session::result::ResultFile::load(&replayed).unwrap();
+    assert_eq!(
+        again.kinematics.map(|k| k.joint_offsets.len()),
+        result.kinematics.as_ref().map(|k| k.joint_offsets.len())
+    );
+    let errors_none = [(", kinematics: joint_offsets}", ", kinematics: none}")];
+    let (result, (mm_none, _), _) = run("sim-cell-arm-errors.yaml", &errors_none, "errors-none");
+    assert!(result.kinematics.is_none());
+    assert!(
+        mm_none > mm,
+        "without the arm's model {mm_none} mm, with it {mm} mm"
+    );
+    let (result, (mm, deg), said) = run("sim-cell.yaml", &[], "exact-auto");
+    assert!(result.kinematics.is_none(), "{said:?}");
+    assert!(
+        said.iter()
+            .any(|m| m.contains("the arm's published model is kept")),
+        "{said:?}"
+    );
+    assert!(mm <= 0.5 && deg <= 0.05, "{mm} mm, {deg}°");
+}
+
 /// `simulation.arm_errors` and `solver.kinematics` in a config: read, drawn repeatably, folded
 /// into the truth; mistakes named by file and key.
 #[test]
@@ -432,6 +549,10 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
     assert!(message.contains("solver"), "{message}");
     // Absent: nothing estimated, and the shipped demo cell is unchanged.
     assert_eq!(plain.solver.kinematics, None);
+    assert_eq!(
+        plain.solver.kinematics(),
+        handeye_session::config::KinematicsChoice::Auto
+    );
     assert!(plain.arm_errors.is_none() && plain.true_arm.is_none());
 }
 

@@ -695,17 +695,30 @@ pub struct SolverConfig {
     /// `repeatability_*`; `false` weights with the values as given (defaults where absent).
     #[serde(default = "yes")]
     pub estimate_noise: bool,
-    /// The arm's own model estimated with the two transforms (issue #41): `none`, or
-    /// `joint_offsets` (the joint zero offsets the data determine, from each pose's recorded
-    /// joints and the arm's published DH model). `dh` is not yet implemented. Absent: `none`.
+    /// The arm's own model estimated with the two transforms (issue #41): `auto` (the default:
+    /// the joint zero offsets are fitted and kept only when the data choose them), `none` (the
+    /// published model, the behaviour before `auto`), or `joint_offsets` (always estimated: the
+    /// joint zero offsets the data determine, from each pose's recorded joints and the arm's
+    /// published DH model). `dh` is not yet implemented. Absent: `auto`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<KinematicsChoice>,
+}
+
+impl SolverConfig {
+    /// `solver.kinematics`, `auto` when absent.
+    pub fn kinematics(&self) -> KinematicsChoice {
+        self.kinematics.unwrap_or(KinematicsChoice::Auto)
+    }
 }
 
 /// `solver.kinematics`: which of the arm's own parameters are estimated with the cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KinematicsChoice {
+    /// The joint zero offsets fitted where the arm's model and joints are known, and kept when
+    /// the data choose them (they lower χ² by more than noise alone would in 99 % of cells:
+    /// `ArmFit::model_choice_margin`); the published model otherwise.
+    Auto,
     /// The arm's model as published (the reported flange poses are taken as they are).
     None,
     /// The joint zero offsets the data determine (those the two transforms absorb are named).
@@ -718,6 +731,7 @@ impl KinematicsChoice {
     /// The YAML name.
     pub fn name(self) -> &'static str {
         match self {
+            KinematicsChoice::Auto => "auto",
             KinematicsChoice::None => "none",
             KinematicsChoice::JointOffsets => "joint_offsets",
             KinematicsChoice::Dh => "dh",

@@ -313,30 +313,11 @@ fn solve_loaded(
         &seen,
         &inputs.board,
     ));
-    // The arm's own model (`solver.kinematics`): the rest of the solve sees corrected poses.
-    let corrected = estimate_arm(
-        dataset.setup,
-        config,
-        &manifest.plan,
-        &dataset.pairs,
-        &visits,
-    )?;
-    let (pairs, solved_visits) = match &corrected {
-        Some(c) => (&c.pairs[..], &c.visits[..]),
-        None => (&dataset.pairs[..], &visits[..]),
-    };
     let driver = notices
         .iter()
         .find(|n| n.kind == NoticeKind::DriverCalibration)
         .cloned();
-    let solved = solve_session_with(dataset.setup, pairs, solved_visits, vision, config, notices)
-        .map(|mut solved| {
-            if let Some(c) = corrected {
-                solved.summary = format!("{}\n{}", solved.summary, c.arm.describe().join("\n"));
-                solved.arm = Some(c.arm);
-            }
-            solved
-        });
+    let solved = solve_with_arm(&dataset, &visits, &manifest.plan, vision, config, notices);
     let mut solved = match (solved, &wrong) {
         // The few poses the intrinsics let through could not be solved: the intrinsics are
         // the cause to name (an adaptive plan that kept 2 of 60 poses).
@@ -358,6 +339,34 @@ fn solve_loaded(
     let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
     record_written(&mut solved, &shown);
     Ok((solved, dataset))
+}
+
+/// `dataset` (its `visits`, taken at the poses of `plan`) solved with the arm's own model as
+/// `config` asks (`solver.kinematics`, [`estimate_arm`]: the rest of the solve then sees the
+/// corrected robot poses, and the choice is a notice) and judged; a run's solve and a replay
+/// both solve through it.
+pub fn solve_with_arm(
+    dataset: &Dataset,
+    visits: &[PoseVisit],
+    plan: &[super::PlannedPose],
+    vision: Option<(&Target, &CameraModel)>,
+    config: &CellConfig,
+    mut notices: Vec<Notice>,
+) -> Result<SolvedSession, SessionError> {
+    let (corrected, arm_choice) =
+        estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
+    notices.extend(arm_choice);
+    let (pairs, solved_visits) = match &corrected {
+        Some(c) => (&c.pairs[..], &c.visits[..]),
+        None => (&dataset.pairs[..], visits),
+    };
+    let mut solved =
+        solve_session_with(dataset.setup, pairs, solved_visits, vision, config, notices)?;
+    if let Some(c) = corrected {
+        solved.summary = format!("{}\n{}", solved.summary, c.arm.describe().join("\n"));
+        solved.arm = Some(c.arm);
+    }
+    Ok(solved)
 }
 
 /// The folder's `samples.yaml`, checked against the committed records: it must hold exactly the

@@ -9,13 +9,14 @@
 //! the result file. Depends on `config`, `result`, the folder's records and `solve`.
 
 use handeye_core::geometry::Pose;
+use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::arm_errors::ArmErrors;
 use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
 use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, DhChain, OffsetStatus};
 use handeye_solve::{self as solve, SolveError};
 
-use crate::config::{CellConfig, KinematicsChoice};
+use crate::config::{CellConfig, KinematicsChoice, RobotConfig};
 use crate::result::{JointOffsetYaml, KinematicsYaml, UncertaintyYaml, WithWithout};
 use crate::session::{PlannedPose, PoseVisit, SessionError};
 
@@ -55,9 +56,11 @@ fn joints_of(plan: &[PlannedPose], visit: &PoseVisit) -> Option<Vec<f64>> {
         .map(|p| p.joints_deg.iter().map(|v| v.to_radians()).collect())
 }
 
-/// When `config` asks for the arm's model (`solver.kinematics: joint_offsets`), fits it to
+/// The arm's model as `config` asks (`solver.kinematics`): with `joint_offsets`, fits it to
 /// `pairs` (ids `pose-NNN` of `visits`, whose plan poses in `plan` hold the joints) and returns
-/// the samples and visits corrected by it; `None` otherwise.
+/// the samples and visits corrected by it; with `auto` (the default), fits it where the arm's
+/// model, the joints and the intrinsics are known and keeps it when the data choose it
+/// ([`ArmFit::model_choice_margin`]), saying which in the notice; with `none`, nothing.
 ///
 /// The start is the pose-space solve of the same samples with the config's options; the samples
 /// it drops as outliers stay out of the arm's fit (and are corrected all the same).
@@ -67,16 +70,72 @@ pub fn estimate_arm(
     plan: &[PlannedPose],
     pairs: &[PosePair],
     visits: &[PoseVisit],
-) -> Result<Option<Corrected>, SessionError> {
-    if config.solver.kinematics != Some(KinematicsChoice::JointOffsets) {
-        return Ok(None);
+) -> Result<(Option<Corrected>, Option<Notice>), SessionError> {
+    let model = config.robot.model().and_then(UrModel::by_name);
+    let chosen_by_data = match config.solver.kinematics() {
+        KinematicsChoice::JointOffsets => false,
+        // The published model unless the data say otherwise; a cell whose arm or lens is not
+        // known, or whose poses lack their joints, is not asked (the validation refuses
+        // `joint_offsets` there).
+        KinematicsChoice::Auto
+            if model.is_some()
+                && !matches!(config.robot, RobotConfig::Recorded { .. })
+                && config.camera().intrinsics.is_some()
+                && pairs.iter().all(|p| {
+                    visits
+                        .iter()
+                        .find(|v| Some(v.sample_id()) == p.id)
+                        .is_some_and(|v| joints_of(plan, v).is_some())
+                }) =>
+        {
+            true
+        }
+        _ => return Ok((None, None)),
+    };
+    let corrected = fit_arm(setup, config, plan, pairs, visits, model)?;
+    if !chosen_by_data {
+        return Ok((Some(corrected), None));
     }
+    let fit = &corrected.arm.fit;
+    let (gain, k) = (fit.model_choice_margin(), fit.estimated());
+    let figures = format!(
+        "{k} joint zero offsets against the {}'s published model: χ² {:.1} with them, {:.1} without, {} than noise alone explains in 99 % of cells ({:.1})",
+        corrected.arm.model,
+        fit.chi2[0],
+        fit.chi2[1],
+        if gain > 0.0 { "more" } else { "no more" },
+        fit.chi2[1] - fit.chi2[0] - gain
+    );
+    if gain > 0.0 {
+        let notice = Notice::info(
+            NoticeKind::Other,
+            format!("the data choose the arm's own model ({figures}): the robot poses are corrected by the offsets (`solver.kinematics: none` keeps the published model)"),
+        );
+        Ok((Some(corrected), Some(notice)))
+    } else {
+        let notice = Notice::info(
+            NoticeKind::Other,
+            format!("the arm's published model is kept: the data do not choose the arm's own model ({figures})"),
+        );
+        Ok((None, Some(notice)))
+    }
+}
+
+/// The joint zero offsets of `model`'s published chain fitted to `pairs` with the two
+/// transforms, and the samples and visits corrected by them.
+fn fit_arm(
+    setup: Setup,
+    config: &CellConfig,
+    plan: &[PlannedPose],
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+    model: Option<UrModel>,
+) -> Result<Corrected, SessionError> {
     let failed = |source: SolveError| SessionError::Solve {
         stage: "the arm's joint offsets",
         source: Box::new(source),
     };
-    let name = config.robot.model().unwrap_or_default();
-    let model = UrModel::by_name(name).ok_or_else(|| {
+    let model = model.ok_or_else(|| {
         failed(SolveError::RefinementFailed(
             "the arm's model has no published kinematics",
         ))
@@ -141,7 +200,7 @@ pub fn estimate_arm(
             v
         })
         .collect();
-    Ok(Some(Corrected { pairs, visits, arm }))
+    Ok(Corrected { pairs, visits, arm })
 }
 
 impl ArmEstimate {
