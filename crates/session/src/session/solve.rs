@@ -21,7 +21,7 @@ pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
 
-use crate::config::{CellConfig, RobotConfig, SolveSpace};
+use crate::config::{CellConfig, KinematicsChoice, RobotConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
 use handeye_core::camera_model::CameraModel;
@@ -345,6 +345,11 @@ fn solve_loaded(
 /// `config` asks (`solver.kinematics`, [`estimate_arm`]: the rest of the solve then sees the
 /// corrected robot poses, and the choice is a notice) and judged; a run's solve and a replay
 /// both solve through it.
+///
+/// With `auto` the cell is first solved with the published model, and the arm's is asked only
+/// when nothing of the given files or conventions is contradicted: a board printed at 105 % or
+/// a lens file off leaves systematic residuals that joint offsets would partly absorb, and the
+/// files are the cause to name (their fix comes first; a replay after it asks the arm again).
 pub fn solve_with_arm(
     dataset: &Dataset,
     visits: &[PoseVisit],
@@ -353,20 +358,68 @@ pub fn solve_with_arm(
     config: &CellConfig,
     mut notices: Vec<Notice>,
 ) -> Result<SolvedSession, SessionError> {
+    let solve = |pairs: &[PosePair], visits: &[PoseVisit], notices: Vec<Notice>| {
+        solve_session_with(dataset.setup, pairs, visits, vision, config, notices)
+    };
+    let published = match config.solver.kinematics() {
+        KinematicsChoice::Auto => {
+            let published = solve(&dataset.pairs, visits, notices.clone())?;
+            if let Some(basis) = contradicted_files(&published) {
+                let mut published = published;
+                published.calibration.notices.push(Notice::info(
+                    NoticeKind::Other,
+                    format!("the arm's own model was not asked: the verdict names {basis} first (fix it and replay; `solver.kinematics: joint_offsets` asks regardless)"),
+                ));
+                return Ok(published);
+            }
+            Some(published)
+        }
+        _ => None,
+    };
     let (corrected, arm_choice) =
         estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
-    notices.extend(arm_choice);
-    let (pairs, solved_visits) = match &corrected {
-        Some(c) => (&c.pairs[..], &c.visits[..]),
-        None => (&dataset.pairs[..], visits),
+    let Some(corrected) = corrected else {
+        return match published {
+            Some(mut published) => {
+                published.calibration.notices.extend(arm_choice);
+                Ok(published)
+            }
+            None => solve(&dataset.pairs, visits, notices),
+        };
     };
-    let mut solved =
-        solve_session_with(dataset.setup, pairs, solved_visits, vision, config, notices)?;
-    if let Some(c) = corrected {
-        solved.summary = format!("{}\n{}", solved.summary, c.arm.describe().join("\n"));
-        solved.arm = Some(c.arm);
-    }
+    notices.extend(arm_choice);
+    let mut solved = solve(&corrected.pairs, &corrected.visits, notices)?;
+    solved.summary = format!(
+        "{}\n{}",
+        solved.summary,
+        corrected.arm.describe().join("\n")
+    );
+    solved.arm = Some(corrected.arm);
     Ok(solved)
+}
+
+/// What of the given files or conventions `solved`'s verdict finds contradicted (a lens, a
+/// board's size, both, a convention), in words; `None` when nothing is.
+fn contradicted_files(solved: &SolvedSession) -> Option<&'static str> {
+    use handeye_solve::verdict::{Basis, Level};
+    // The corners' own choice, also where the correction is immaterial at the accuracy asked.
+    match solved.cell_model.as_ref().map(|m| m.summary.chosen) {
+        Some(Explanation::Intrinsics) => return Some("the intrinsics"),
+        Some(Explanation::BoardScale) => return Some("the board's size"),
+        Some(Explanation::IntrinsicsAndBoard) => return Some("the intrinsics and the board"),
+        _ => {}
+    }
+    let verdict = solved.verdict.as_ref()?;
+    let lead = (verdict.level > Level::Good).then_some(verdict.basis);
+    lead.into_iter()
+        .chain(verdict.also.iter().map(|f| f.basis))
+        .find_map(|basis| match basis {
+            Basis::Intrinsics => Some("the intrinsics"),
+            Basis::BoardScale => Some("the board's size"),
+            Basis::IntrinsicsAndBoard => Some("the intrinsics and the board"),
+            Basis::ConventionError => Some("the poses' convention"),
+            _ => None,
+        })
 }
 
 /// The folder's `samples.yaml`, checked against the committed records: it must hold exactly the
