@@ -26,6 +26,7 @@
 mod corners;
 pub mod plots;
 pub mod rig;
+mod scale;
 mod sections;
 pub mod session;
 

@@ -8,9 +8,10 @@ use std::collections::HashMap;
 use std::io::Cursor;
 
 use image::codecs::jpeg::JpegEncoder;
-use image::{imageops, Rgb, RgbImage};
+use image::{Rgb, RgbImage};
 use nalgebra::Point2;
 
+use super::scale::area_average;
 use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
@@ -233,19 +234,21 @@ fn annotated_frame(
     let width = grey.width().clamp(1, FRAME_WIDTH);
     let scale = f64::from(width) / f64::from(grey.width().max(1));
     let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
-    // Area averaging (`thumbnail`): a fraction of a filtered resize's time, which was a tenth of
-    // a bag import's CPU (a frame already narrow enough is kept as it is).
+    // Area averaging (`scale`: a fraction of a filtered resize's time, which was a tenth of a bag
+    // import's CPU); a frame already narrow enough is kept as it is.
     let small = if width == grey.width() {
         grey
     } else {
-        imageops::thumbnail(&grey, width, height)
+        area_average(&grey, width, height)
     };
     // Lines and crosses readable at full size and in the small grid alike.
     let stroke = if width >= 640 { 2 } else { 1 };
-    let mut out = RgbImage::from_fn(small.width(), small.height(), |x, y| {
-        let v = small.get_pixel(x, y)[0];
-        Rgb([v, v, v])
-    });
+    let mut rgb = vec![0u8; 3 * small.as_raw().len()];
+    for (pixel, &v) in rgb.chunks_exact_mut(3).zip(small.as_raw()) {
+        pixel.fill(v);
+    }
+    let mut out =
+        RgbImage::from_raw(small.width(), small.height(), rgb).expect("three bytes a pixel");
     // Pixel centres: OpenCV pixel u maps to (u + 0.5)·s − 0.5 in the scaled frame.
     let to_thumb =
         |p: Point2<f64>| Point2::new((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);

@@ -294,7 +294,11 @@ impl Camera for ScriptedCamera {
                     "ScriptedCamera: grab #{}: the scripted frame does not have the model's size",
                     self.grabs
                 );
-                Ok(Frame { image, captured_at })
+                Ok(Frame {
+                    image,
+                    captured_at,
+                    png: None,
+                })
             }
             Some(Grab::Fail(e)) => Err(e),
             None => panic!(

@@ -174,18 +174,19 @@ impl Camera for FilesCamera {
                 frames: self.frames.len(),
                 poses: index + 1,
             })?;
-        let image = image::ImageReader::open(path)
-            .and_then(|r| r.with_guessed_format())
-            .map_err(|e| CameraError::Frame {
-                path: path.display().to_string(),
-                reason: e.to_string(),
-            })?
-            .decode()
-            .map_err(|e| CameraError::Frame {
-                path: path.display().to_string(),
-                reason: e.to_string(),
-            })?
-            .into_luma8();
+        let unreadable = |reason: String| CameraError::Frame {
+            path: path.display().to_string(),
+            reason,
+        };
+        let bytes = std::fs::read(path).map_err(|e| unreadable(e.to_string()))?;
+        let reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
+            .with_guessed_format()
+            .map_err(|e| unreadable(e.to_string()))?;
+        let is_png = reader.format() == Some(image::ImageFormat::Png);
+        let decoded = reader.decode().map_err(|e| unreadable(e.to_string()))?;
+        // A grey 8-bit PNG holds exactly the frame's pixels: its bytes can be stored as they are.
+        let png = (is_png && decoded.color() == image::ColorType::L8).then_some(bytes);
+        let image = decoded.into_luma8();
         if (image.width(), image.height()) != (self.model.width, self.model.height) {
             return Err(CameraError::Frame {
                 path: path.display().to_string(),
@@ -201,6 +202,7 @@ impl Camera for FilesCamera {
         Ok(Frame {
             image,
             captured_at: Instant::now(),
+            png,
         })
     }
 
@@ -288,5 +290,23 @@ mod tests {
         let mut wrong_size = FilesCamera::open(dir.path(), model(8, 3)).unwrap();
         let e = wrong_size.grab(Instant::now()).unwrap_err().to_string();
         assert!(e.contains("f-1.png") && e.contains("4x3"), "{e}");
+    }
+
+    #[test]
+    fn hands_on_the_file_of_a_grey_png_and_of_no_other_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let grey = image::GrayImage::from_fn(4, 3, |x, y| image::Luma([(10 * x + y) as u8]));
+        grey.save(dir.path().join("0.png")).unwrap();
+        let colour = image::RgbImage::from_pixel(4, 3, image::Rgb([10, 200, 30]));
+        colour.save(dir.path().join("1.png")).unwrap();
+        let mut camera = FilesCamera::open(dir.path(), model(4, 3)).unwrap();
+        let frame = camera.grab(Instant::now()).unwrap();
+        let file = std::fs::read(dir.path().join("0.png")).unwrap();
+        assert_eq!(frame.png.as_deref(), Some(file.as_slice()));
+        assert_eq!(frame.image, grey);
+        // A colour frame is served grey: its file does not hold those pixels.
+        let frame = camera.grab(Instant::now()).unwrap();
+        assert_eq!(frame.png, None);
+        assert_eq!(frame.image, image::DynamicImage::from(colour).into_luma8());
     }
 }

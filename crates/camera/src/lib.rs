@@ -30,6 +30,10 @@ pub struct Frame {
     pub image: GrayImage,
     /// When the exposure happened (or the best the backend knows).
     pub captured_at: Instant,
+    /// The frame's PNG file as it was read, when the frame is a recorded grey PNG (the
+    /// image-folder camera): a session stores these bytes as its frame file instead of encoding
+    /// the same pixels again.
+    pub png: Option<Vec<u8>>,
 }
 
 /// Why a camera call failed.

@@ -105,6 +105,7 @@ impl Camera for SimCamera {
         Ok(Frame {
             image,
             captured_at: exposure_start,
+            png: None,
         })
     }
 

@@ -375,7 +375,11 @@ impl Camera for UvcCamera {
             Ok(reply) => reply?,
             Err(_) => return Err(CameraError::Timeout(self.timeout)),
         };
-        Ok(Frame { image, captured_at })
+        Ok(Frame {
+            image,
+            captured_at,
+            png: None,
+        })
     }
 
     fn model(&self) -> &CameraModel {

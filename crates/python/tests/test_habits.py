@@ -10,7 +10,7 @@ import pytest
 
 import handeye
 from conftest import as_matrix, opencv_inputs
-from synth import cell, errors, inverse, transform
+from synth import cell, errors, inverse, rotation, transform
 
 
 def quiet_cell(seed, n=20):
@@ -135,15 +135,25 @@ def board_flipped(camera, indices=(3, 11)):
     return bad
 
 
+# How far each closed form may be from handeye's refined answer on the seeded cells below
+# (rotation and translation error, × refined's): the measured ratios and why not 2× are in
+# test_every_opencv_method_drops_and_names_two_outliers.
+CLOSED_FORM_BOUND = {"TSAI": 2.3, "PARK": 2.3, "HORAUD": 2.3, "ANDREFF": 2.3, "DANIILIDIS": 2.2}
+
+
 @pytest.mark.parametrize("method", ["TSAI", "PARK", "HORAUD", "ANDREFF", "DANIILIDIS"])
 @pytest.mark.parametrize("outliers", [with_outliers, board_flipped])
 def test_every_opencv_method_drops_and_names_two_outliers(method, outliers, cv2):
     """The README's 10 seeded cells (N = 20, 0.2° / 1 mm noise) with two gross outliers
     (samples 3 and 11): each of OpenCV's methods run by handeye names both, leaves them out (its
     answer is its own fit of the 18 other samples), and is far better than cv2's same method.
-    Against handeye's refined answer on the same data: within 2.5× (measured 2.13–2.26×; the
-    closed forms are 2.0–2.2× refined's error on the same cells without any outlier, the
-    figures of docs/python.md, so the issue's 2× is out of reach of a closed form here)."""
+    Against handeye's refined answer on the same data (0.110°, 1.04 mm), measured: TSAI 2.24× /
+    2.16× (rotation / translation), PARK, HORAUD and ANDREFF 2.26× / 2.16×, DANIILIDIS 2.13× /
+    2.13×; bounded at 2.3× and 2.2× (`CLOSED_FORM_BOUND`). The issue's 2× is out of reach of these
+    methods on these cells: TSAI, PARK, HORAUD and ANDREFF take the rotation from the rotations
+    alone, and the best any estimate from the rotations alone does here is 2.26× (the next
+    test); DANIILIDIS, which solves rotation and translation together, gains a little on that.
+    Their translation follows from their rotation (the answer's lever arm)."""
     ours, refined, theirs = [], [], []
     for seed in range(10, 20):
         flange, camera, truth, _ = cell(seed, n=20)
@@ -171,8 +181,66 @@ def test_every_opencv_method_drops_and_names_two_outliers(method, outliers, cv2)
         f"({ours[0] / refined[0]:.2f}×, {ours[1] / refined[1]:.2f}× refined's {refined[0]:.3f}° {refined[1]:.2f} mm), "
         f"cv2 {theirs[0]:.3f}° {theirs[1]:.2f} mm"
     )
-    assert ours[0] <= 2.5 * refined[0] and ours[1] <= 2.5 * refined[1], (ours, refined)
+    bound = CLOSED_FORM_BOUND[method]
+    assert ours[0] <= bound * refined[0] and ours[1] <= bound * refined[1], (ours, refined)
     assert ours[0] < theirs[0] and ours[1] < theirs[1], (ours, theirs)
+
+
+def log_rotation(R):
+    """The rotation vector (rad) of a 3x3 rotation below 180°."""
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2
+    s = np.linalg.norm(w)
+    return w if s < 1e-15 else w / s * np.arctan2(s, (np.trace(R) - 1) / 2)
+
+
+def rotation_from_rotations_alone(T_base_flange, T_camera_target, R_flange_camera, iterations=10):
+    """The least-squares `R_flange_camera` of the board-pose rotations alone, the translations
+    unused: Gauss-Newton over both rotations of `R_camera_target = R_camera_flange ·
+    R_flange_base · R_base_target` (the noise is a rotation on the left, in the camera frame, as
+    synth.cell draws it), from `R_flange_camera`. The best a method that takes the rotation from
+    the rotations alone can do, whatever its algebra."""
+    R_x = R_flange_camera.T
+    R_y = T_base_flange[0, :3, :3] @ R_flange_camera @ T_camera_target[0, :3, :3]
+    for _ in range(iterations):
+        rows, residuals = [], []
+        for F, C in zip(T_base_flange, T_camera_target):
+            predicted = R_x @ F[:3, :3].T @ R_y
+            residuals.append(log_rotation(C[:3, :3] @ predicted.T))
+            # exp(dx)·R_x·R_Fᵀ·R_y·exp(dy) = exp(dx + predicted·dy)·predicted to first order.
+            rows.append(np.hstack([np.eye(3), predicted]))
+        step = np.linalg.lstsq(np.vstack(rows), np.concatenate(residuals), rcond=None)[0]
+        R_x, R_y = rotation(step[:3]) @ R_x, R_y @ rotation(step[3:])
+    return R_x.T
+
+
+def test_the_rotation_of_the_rotation_only_methods_is_what_the_rotations_hold():
+    """Why TSAI, PARK, HORAUD and ANDREFF are 2.2-2.3× the refined answer's error, not 2×, on
+    the cells of the test above (its 18 samples without the outliers): each takes `R_X` from the
+    rotations alone, and the least-squares rotation of the rotations alone is 2.26× refined's
+    error there (0.248° against 0.110°; refined also reads the rotation off the translations,
+    through the board's ~0.6 m lever arm, where 1 mm of noise is ~0.1°). Each method's rotation
+    is that good (measured 0.245-0.248°): their algebra loses nothing."""
+    keep = [i for i in range(20) if i not in (3, 11)]
+    methods = ("TSAI", "PARK", "HORAUD", "ANDREFF")
+    ours, alone, refined = {m: [] for m in methods}, [], []
+    for seed in range(10, 20):
+        flange, camera, truth, _ = cell(seed, n=20)
+        flange, camera = flange[keep], camera[keep]
+        for method in methods:
+            R, t = handeye.calibrateHandEye(
+                *opencv_inputs(flange, camera), method=getattr(handeye, f"CALIB_HAND_EYE_{method}"), verdict=False
+            )
+            ours[method].append(errors(as_matrix(R, t), truth)[0])
+        R_alone = rotation_from_rotations_alone(flange, camera, as_matrix(R, t)[:3, :3])
+        alone.append(errors(as_matrix(R_alone, truth[:3, 3:4]), truth)[0])
+        refined.append(errors(handeye.calibrate(flange, camera, verdict=False).T_flange_camera, truth)[0])
+    rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
+    alone, refined = rms(alone), rms(refined)
+    print(f"\nrotation from the rotations alone {alone:.3f}° = {alone / refined:.2f}× refined's {refined:.3f}°")
+    assert alone > 2.0 * refined, (alone, refined)
+    for method in methods:
+        print(f"{method}: {rms(ours[method]):.3f}°")
+        assert rms(ours[method]) <= 1.02 * alone, (method, rms(ours[method]), alone)
 
 
 # --- units ----------------------------------------------------------------------------------

@@ -320,6 +320,7 @@ impl Camera for Ros2Camera {
                 return Ok(Frame {
                     image,
                     captured_at: monotonic(n.stamp),
+                    png: None,
                 });
             }
             let now = Instant::now();

@@ -254,15 +254,25 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
     let recording = &camera.recording;
     let folder = &recording.folder;
     let frame_name = SessionFolder::frame_name(job.plan_index);
-    let mut png = Vec::new();
-    job.frame
-        .image
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(|source| SessionError::Frame {
-            path: frame_name.clone(),
-            source: Box::new(source),
-        })?;
-    folder.write_file(&frame_name, &png)?;
+    // A recorded grey PNG (an image folder, a bag's imported frames) is stored as it was read:
+    // the same pixels, not encoded a second time.
+    let encoded;
+    let png = match &job.frame.png {
+        Some(png) => png,
+        None => {
+            let mut png = Vec::new();
+            job.frame
+                .image
+                .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+                .map_err(|source| SessionError::Frame {
+                    path: frame_name.clone(),
+                    source: Box::new(source),
+                })?;
+            encoded = png;
+            &encoded
+        }
+    };
+    folder.write_file(&frame_name, png)?;
     fault.abort_at("abort-after-frame", job.plan_index);
 
     let visit = measure(
