@@ -346,10 +346,12 @@ fn solve_loaded(
 /// corrected robot poses, and the choice is a notice) and judged; a run's solve and a replay
 /// both solve through it.
 ///
-/// With `auto` the cell is first solved with the published model, and the arm's is asked only
-/// when nothing of the given files or conventions is contradicted: a board printed at 105 % or
-/// a lens file off leaves systematic residuals that joint offsets would partly absorb, and the
-/// files are the cause to name (their fix comes first; a replay after it asks the arm again).
+/// With `auto` a cell whose data choose the arm's model is solved both ways, and the arm's
+/// answer is kept unless its verdict contradicts a given file or convention: a board printed
+/// at 105 % or a lens file off leaves systematic
+/// residuals that joint offsets partly absorb (the file is then the cause to name, and its fix
+/// comes first), while an arm's own errors can look like a wrong lens to the corners until the
+/// robot poses are corrected.
 pub fn solve_with_arm(
     dataset: &Dataset,
     visits: &[PoseVisit],
@@ -361,41 +363,37 @@ pub fn solve_with_arm(
     let solve = |pairs: &[PosePair], visits: &[PoseVisit], notices: Vec<Notice>| {
         solve_session_with(dataset.setup, pairs, visits, vision, config, notices)
     };
-    let published = match config.solver.kinematics() {
-        KinematicsChoice::Auto => {
-            let published = solve(&dataset.pairs, visits, notices.clone())?;
-            if let Some(basis) = contradicted_files(&published) {
-                let mut published = published;
-                published.calibration.notices.push(Notice::info(
-                    NoticeKind::Other,
-                    format!("the arm's own model was not asked: the verdict names {basis} first (fix it and replay; `solver.kinematics: joint_offsets` asks regardless)"),
-                ));
-                return Ok(published);
-            }
-            Some(published)
-        }
-        _ => None,
-    };
     let (corrected, arm_choice) =
         estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
     let Some(corrected) = corrected else {
-        return match published {
-            Some(mut published) => {
-                published.calibration.notices.extend(arm_choice);
-                Ok(published)
-            }
-            None => solve(&dataset.pairs, visits, notices),
-        };
+        notices.extend(arm_choice);
+        return solve(&dataset.pairs, visits, notices);
     };
-    notices.extend(arm_choice);
-    let mut solved = solve(&corrected.pairs, &corrected.visits, notices)?;
-    solved.summary = format!(
+    let published = match config.solver.kinematics() {
+        KinematicsChoice::Auto => Some(solve(&dataset.pairs, visits, notices.clone())?),
+        _ => None,
+    };
+    let mut with_arm = solve(
+        &corrected.pairs,
+        &corrected.visits,
+        notices.iter().cloned().chain(arm_choice.clone()).collect(),
+    )?;
+    if let (Some(mut published), Some(after)) = (published, contradicted_files(&with_arm)) {
+        published.calibration.notices.push(Notice::info(
+            NoticeKind::Other,
+            format!(
+                "the arm's published model is kept: its own model would lower the residuals, but with it the verdict names {after}; fix that first and replay (`solver.kinematics: joint_offsets` keeps the arm's model regardless)"
+            ),
+        ));
+        return Ok(published);
+    }
+    with_arm.summary = format!(
         "{}\n{}",
-        solved.summary,
+        with_arm.summary,
         corrected.arm.describe().join("\n")
     );
-    solved.arm = Some(corrected.arm);
-    Ok(solved)
+    with_arm.arm = Some(corrected.arm);
+    Ok(with_arm)
 }
 
 /// What of the given files or conventions `solved`'s verdict finds contradicted (a lens, a
