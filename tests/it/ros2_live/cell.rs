@@ -377,12 +377,22 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
 
 /// Runs the cell into `out` with the peer's `faults`, expecting failure with `expected` in the
 /// message after some samples; then resumes against a healthy peer and checks the truth.
-fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
+pub(super) fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
+    fails_then_resumes_with(domain, faults, &[], expected)
+}
+
+/// [`fails_then_resumes`] with the cell's config edited (`edits`, as [`cell`] takes them).
+pub(super) fn fails_then_resumes_with(
+    domain: u16,
+    faults: &[&str],
+    edits: &[(&str, &str)],
+    expected: &str,
+) {
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     // The shipped 10 s to answer, not less: on a loaded 2-core CI machine a 3 s budget let a
     // slow-to-answer goal read as the fault under test (seen once in CI).
-    let config = cell(dir.path(), domain, &[]);
+    let config = cell(dir.path(), domain, edits);
     let out_dir = dir.path().join("session");
     {
         let _peer = Peer::start(&python, domain, faults);
