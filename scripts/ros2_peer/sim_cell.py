@@ -33,7 +33,8 @@ stands, every other base_link -> tool0 of the driver's own /tf writer is 5 mm of
 /joint_states stand: a flange pose that contradicts the joints), --huge-images [MB] (the image topic carries mono8 frames of MB megabytes, 100 by
 default, once a second instead of the views: a camera node streaming far more than the
 intrinsics' size; written from a thread of their own, serialised once, so the action server and
-/tf keep being served; with --huge-images-from N, from the start of the Nth goal on).
+/tf keep being served; with --huge-images-from N, once the Nth goal has ended: a camera switched
+while the arm stands).
 """
 
 import glob
@@ -204,7 +205,7 @@ def add_arguments(p):
                    help="publish mono8 frames of MB megabytes (10000 px wide) on the image topic, "
                         "once a second, instead of the rendered views")
     p.add_argument("--huge-images-from", type=int, default=0, metavar="N",
-                   help="the huge images replace the views from the start of goal N on (0: from the start)")
+                   help="the huge images replace the views once goal N has ended (0: from the start)")
     p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
                    help="report goals whose waypoint speeds exceed this (0: no check)")
 
@@ -470,6 +471,7 @@ def run(args):
 
     goals = {}  # goal uuid bytes -> dict(status, result, waiting=[(client_id, seq)])
     goal_count = [0]
+    arrived_count = [0]
 
     def finish(gid, status, code=0, text=""):
         g = goals[gid]
@@ -562,7 +564,7 @@ def run(args):
 
     threading.Thread(target=read_commands, daemon=True).start()
     def huge_now():
-        return args.huge_images is not None and goal_count[0] >= args.huge_images_from
+        return args.huge_images is not None and arrived_count[0] >= args.huge_images_from
 
     if args.huge_images is not None:
         threading.Thread(target=huge_images, args=(img_w, args.huge_images, huge_now),
@@ -599,6 +601,7 @@ def run(args):
                 arm.goal = None
                 arm.view = arm.nearest_view(arm.q)
                 finish(gid, 4)
+                arrived_count[0] += 1
                 say(event="arrived", n=n, at=time.time())
                 return
             prev_t, prev_q = 0.0, q0

@@ -102,14 +102,16 @@ fn bounded(newest: Newest, bound: u64) -> Newest {
         return newest;
     }
     Newest {
-        stamp: newest.stamp,
         pixels: Pixels::Oversized(Oversized { bytes, held }),
+        ..newest
     }
 }
 
 struct Newest {
     pixels: Pixels,
     stamp: SystemTime,
+    /// When it came.
+    received: Instant,
 }
 
 #[derive(Default)]
@@ -156,6 +158,7 @@ impl Ros2Camera {
                 bound,
                 |msg| Newest {
                     stamp: msg.header.stamp.to_system(),
+                    received: Instant::now(),
                     pixels: Pixels::Compressed(msg),
                 },
             )
@@ -166,6 +169,7 @@ impl Ros2Camera {
                 bound,
                 |msg| Newest {
                     stamp: msg.header.stamp.to_system(),
+                    received: Instant::now(),
                     pixels: Pixels::Raw(msg),
                 },
             )
@@ -249,7 +253,13 @@ impl Ros2Camera {
     /// What a grab that waited its timeout without a frame stamped after `not_before` says,
     /// given the newest message heard: one over the size bound is named as such (later ones
     /// of that size may not have come whole), an old one points at the clocks.
-    fn no_fresh_frame(&self, newest: Option<&Newest>, not_before: SystemTime) -> CameraError {
+    /// `waiting_since`: when the grab began to wait.
+    fn no_fresh_frame(
+        &self,
+        newest: Option<&Newest>,
+        not_before: SystemTime,
+        waiting_since: Instant,
+    ) -> CameraError {
         let topic = &self.options.image_topic;
         let waited = self.options.timeout.as_secs_f64();
         if let Some(Newest {
@@ -266,9 +276,19 @@ impl Ros2Camera {
             };
         }
         let why = match newest {
-            Some(n) => format!(
+            // Frames keep coming, stamped before: the clocks.
+            Some(n) if n.received >= waiting_since => format!(
                 "the newest is stamped {:.3} s before: is the camera node's clock in step with this machine's?",
                 not_before.duration_since(n.stamp).unwrap_or_default().as_secs_f64()
+            ),
+            // None came whole while waiting: DDS hands over only whole messages, so frames
+            // grown too large to arrive look like frames that stopped.
+            Some(n) => format!(
+                "none came whole while waiting, the last {:.1} s before the arm settled: the camera node stopped, or its frames grew too large to come through whole (far over {}, the most a {}x{} px frame takes)",
+                not_before.duration_since(n.stamp).unwrap_or_default().as_secs_f64(),
+                megabytes(max_frame_bytes(&self.options.model)),
+                self.options.model.width,
+                self.options.model.height,
             ),
             None => "none heard at all: is the camera node running, on this domain id, with this topic name?".into(),
         };
@@ -414,7 +434,8 @@ fn monotonic(stamp: SystemTime) -> Instant {
 impl Camera for Ros2Camera {
     fn grab(&mut self, not_before: Instant) -> Result<Frame, CameraError> {
         let not_before_wall = wall_clock(not_before);
-        let deadline = Instant::now() + self.options.timeout;
+        let waiting_since = Instant::now();
+        let deadline = waiting_since + self.options.timeout;
         let mut newest = self.slot.newest.lock().unwrap_or_else(|p| p.into_inner());
         loop {
             if let Some(n) = newest.take_if(|n| n.stamp >= not_before_wall) {
@@ -458,7 +479,7 @@ impl Camera for Ros2Camera {
             }
             let now = Instant::now();
             if now >= deadline {
-                return Err(self.no_fresh_frame(newest.as_ref(), not_before_wall));
+                return Err(self.no_fresh_frame(newest.as_ref(), not_before_wall, waiting_since));
             }
             newest = self
                 .slot
@@ -482,6 +503,7 @@ mod tests {
     fn raw(width: u32, height: u32, encoding: &str, bytes: usize) -> Newest {
         Newest {
             stamp: SystemTime::UNIX_EPOCH,
+            received: Instant::now(),
             pixels: Pixels::Raw(Image {
                 header: Header::default(),
                 height,
@@ -524,6 +546,7 @@ mod tests {
         }
         let jpeg = Newest {
             stamp: SystemTime::UNIX_EPOCH,
+            received: Instant::now(),
             pixels: Pixels::Compressed(CompressedImage {
                 header: Header::default(),
                 format: "jpeg".into(),
