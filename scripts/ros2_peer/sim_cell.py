@@ -30,7 +30,10 @@ a second robot_state_publisher or a static publisher left running would be: base
 10 cm and 180 degrees from the driver's, at 200 Hz, while the arm stands; from the start, or from
 the end of the Nth goal on), --jumping-flange N (from the end of the Nth goal on, while the arm
 stands, every other base_link -> tool0 of the driver's own /tf writer is 5 mm off along x while
-/joint_states stand: a flange pose that contradicts the joints), --huge-images [MB] (the image topic carries mono8 frames of MB megabytes, 100 by
+/joint_states stand: a flange pose that contradicts the joints), --flange-off-model N (from the
+end of the Nth goal on, 0: from the start, while the arm stands, the driver's base_link -> tool0
+is 40 mm off along x from the arm's forward kinematics, steadily: a chain that is not the
+arm's), --huge-images [MB] (the image topic carries mono8 frames of MB megabytes, 100 by
 default, once a second instead of the views: a camera node streaming far more than the
 intrinsics' size; written from a thread of their own, serialised once, so the action server and
 /tf keep being served; with --huge-images-from N, once the Nth goal has ended: a camera switched
@@ -199,6 +202,9 @@ def add_arguments(p):
     p.add_argument("--jumping-flange", type=int, default=None, metavar="N",
                    help="once goal N has ended, while the arm stands, every other base_link -> tool0 "
                         "message of the driver's /tf writer is 5 mm off along x (the joints stand)")
+    p.add_argument("--flange-off-model", type=int, default=None, metavar="N",
+                   help="once goal N has ended (0: from the start), while the arm stands, the driver's "
+                        "base_link -> tool0 is 40 mm off along x, steadily (the joints are the arm's)")
     p.add_argument("--succeed-without-moving", type=int, default=0,
                    help="answer goal N SUCCEEDED at once and leave the arm where it stands")
     p.add_argument("--huge-images", type=float, nargs="?", const=100.0, default=None, metavar="MB",
@@ -524,6 +530,8 @@ def run(args):
                     cur = arm.goal[0]
                     arm.goal = None
                     arm.qd = np.zeros(dof)
+                    # Stopped between views: no rendered view, the flange from the kinematics.
+                    arm.view = None
                     canceling.append(m.GoalInfo(m.UUID(list(cur)), stamp_now()))
                     say(event="cancel", n=goals[cur]["n"], joints=list(arm.q))
                     finish(cur, 5, 0, "canceled")
@@ -592,6 +600,7 @@ def run(args):
             if args.abort_goal == n and t > total / 2:
                 arm.goal = None
                 arm.qd = np.zeros(dof)
+                arm.view = None
                 say(event="abort", n=n)
                 finish(gid, 6, -4, "simulated: path tolerance violated at joint shoulder_lift_joint")
                 return
@@ -620,6 +629,7 @@ def run(args):
     next_js = next_tf = next_tf2 = next_img = next_info = time.monotonic()
     second = 0
     jumps = 0
+    off_model = 0
     while True:
         now = time.monotonic()
         serve()
@@ -650,6 +660,14 @@ def run(args):
                         tt = (tt[0] + 0.005, tt[1], tt[2])
                     if jumps == 1:
                         say(event="jumping_flange", offset_m=0.005)
+            if args.flange_off_model is not None and goal_count[0] >= args.flange_off_model:
+                with arm.lock:
+                    standing = arm.goal is None and arm.guide is None
+                if standing:
+                    tt = (tt[0] + 0.04, tt[1], tt[2])
+                    off_model += 1
+                    if off_model == 1:
+                        say(event="flange_off_model", offset_m=0.04)
             tf_w.write(m.TFMessage([m.TransformStamped(
                 m.Header(stamp_now(), "base_link"), "tool0",
                 m.Transform(m.Vector3(*tt), m.Quaternion(*tq)))]))

@@ -444,6 +444,43 @@ fn a_goal_that_succeeds_without_moving_is_named_and_resume_completes() {
     });
 }
 
+/// #40: a flange pose on /tf that stands with the joints but is 40 mm from the forward
+/// kinematics of the arm's model at them (`robot.model: ur10e`; from the end of goal 4 on) is
+/// named with both sources, nothing is recorded under it, the poses before are kept, and a
+/// resume against a healthy driver completes to the truth.
+#[test]
+fn a_flange_pose_off_the_models_kinematics_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(
+            64,
+            &["--flange-off-model", "4"],
+            "from the forward kinematics of the ur10e model at the joints on /joint_states",
+        )
+    });
+}
+
+/// The same contradiction from the start: named when the arm is opened, before anything moves.
+#[test]
+fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 65, &["--flange-off-model", "0"]);
+        let config = cell(dir.path(), 65, &[]);
+        let out = run_cell(&config, &dir.path().join("s"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("the flange pose base → tool0 on /tf (at [")
+                && log
+                    .contains("is 40.0 mm / 0.00° from the forward kinematics of the ur10e model")
+                && log.contains("the flange pose contradicts the joints' kinematics"),
+            "{log}"
+        );
+        assert!(peer.events("goal").is_empty(), "a goal was sent:\n{log}");
+    });
+}
+
 #[test]
 fn a_peer_dying_mid_move_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
