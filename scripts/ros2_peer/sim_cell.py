@@ -30,13 +30,21 @@ a second robot_state_publisher or a static publisher left running would be: base
 10 cm and 180 degrees from the driver's, at 200 Hz, while the arm stands; from the start, or from
 the end of the Nth goal on), --jumping-flange N (from the end of the Nth goal on, while the arm
 stands, every other base_link -> tool0 of the driver's own /tf writer is 5 mm off along x while
-/joint_states stand: a flange pose that contradicts the joints).
+/joint_states stand: a flange pose that contradicts the joints), --flange-off-model N (from the
+end of the Nth goal on, 0: from the start, while the arm stands, the driver's base_link -> tool0
+is 40 mm off along x from the arm's forward kinematics, steadily: a chain that is not the
+arm's), --huge-images [MB] (the image topic carries mono8 frames of MB megabytes, 100 by
+default, once a second instead of the views: a camera node streaming far more than the
+intrinsics' size; written from a thread of their own, serialised once, so the action server and
+/tf keep being served; with --huge-images-from N, once the Nth goal has ended: a camera switched
+while the arm stands).
 """
 
 import glob
 import json
 import math
 import os
+import struct
 import sys
 import threading
 import time
@@ -194,8 +202,16 @@ def add_arguments(p):
     p.add_argument("--jumping-flange", type=int, default=None, metavar="N",
                    help="once goal N has ended, while the arm stands, every other base_link -> tool0 "
                         "message of the driver's /tf writer is 5 mm off along x (the joints stand)")
+    p.add_argument("--flange-off-model", type=int, default=None, metavar="N",
+                   help="once goal N has ended (0: from the start), while the arm stands, the driver's "
+                        "base_link -> tool0 is 40 mm off along x, steadily (the joints are the arm's)")
     p.add_argument("--succeed-without-moving", type=int, default=0,
                    help="answer goal N SUCCEEDED at once and leave the arm where it stands")
+    p.add_argument("--huge-images", type=float, nargs="?", const=100.0, default=None, metavar="MB",
+                   help="publish mono8 frames of MB megabytes (10000 px wide) on the image topic, "
+                        "once a second, instead of the rendered views")
+    p.add_argument("--huge-images-from", type=int, default=0, metavar="N",
+                   help="the huge images replace the views once goal N has ended (0: from the start)")
     p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
                    help="report goals whose waypoint speeds exceed this (0: no check)")
 
@@ -332,6 +348,39 @@ class Freedrive:
         return was and not self.on
 
 
+def huge_images(writer, megabytes, active):
+    """Writes a mono8 frame of `megabytes` MB (10000 px wide) on `writer` once a second while
+    `active()`, forever.
+
+    Serialising 100 MB through the Python binding takes over 10 s (a loop over bytes), which
+    would stall this peer's action server and hide what the test is about; so the frame is
+    serialised once from a small image whose data field is then replaced, and only the stamp
+    (bytes 4..12, after the 4-byte encapsulation header) is rewritten before each raw write."""
+    from cyclonedds._clayer import ddspy_write
+
+    width = 10000
+    height = max(1, int(megabytes * 1e6) // width)
+    size = width * height
+    small = m.Image(m.Header(stamp_now(), "camera_optical_frame"), height, width, "mono8", 0,
+                    width, bytes(4)).serialize()
+    # The data sequence ends the message: its uint32 length, then its 4 bytes.
+    frame = bytearray(small[:-8] + struct.pack("<I", size) + bytes(size))
+    first = True
+    while True:
+        if not active():
+            time.sleep(0.01)
+            continue
+        t = time.time()
+        frame[4:12] = struct.pack("<iI", int(t), int((t % 1) * 1e9))
+        started = time.monotonic()
+        ddspy_write(writer._ref, bytes(frame))
+        if first:
+            say(event="huge_image", bytes=size, width=width, height=height,
+                write_s=time.monotonic() - started)
+            first = False
+        time.sleep(max(0.0, 1.0 - (time.monotonic() - started)))
+
+
 def cdr_bytes(frame):
     return frame.tobytes()
 
@@ -428,6 +477,7 @@ def run(args):
 
     goals = {}  # goal uuid bytes -> dict(status, result, waiting=[(client_id, seq)])
     goal_count = [0]
+    arrived_count = [0]
 
     def finish(gid, status, code=0, text=""):
         g = goals[gid]
@@ -480,6 +530,8 @@ def run(args):
                     cur = arm.goal[0]
                     arm.goal = None
                     arm.qd = np.zeros(dof)
+                    # Stopped between views: no rendered view, the flange from the kinematics.
+                    arm.view = None
                     canceling.append(m.GoalInfo(m.UUID(list(cur)), stamp_now()))
                     say(event="cancel", n=goals[cur]["n"], joints=list(arm.q))
                     finish(cur, 5, 0, "canceled")
@@ -519,6 +571,12 @@ def run(args):
                 say(event="bad_command", line=line.strip())
 
     threading.Thread(target=read_commands, daemon=True).start()
+    def huge_now():
+        return args.huge_images is not None and arrived_count[0] >= args.huge_images_from
+
+    if args.huge_images is not None:
+        threading.Thread(target=huge_images, args=(img_w, args.huge_images, huge_now),
+                         daemon=True).start()
 
     def step(now):
         with arm.lock:
@@ -542,6 +600,7 @@ def run(args):
             if args.abort_goal == n and t > total / 2:
                 arm.goal = None
                 arm.qd = np.zeros(dof)
+                arm.view = None
                 say(event="abort", n=n)
                 finish(gid, 6, -4, "simulated: path tolerance violated at joint shoulder_lift_joint")
                 return
@@ -551,6 +610,7 @@ def run(args):
                 arm.goal = None
                 arm.view = arm.nearest_view(arm.q)
                 finish(gid, 4)
+                arrived_count[0] += 1
                 say(event="arrived", n=n, at=time.time())
                 return
             prev_t, prev_q = 0.0, q0
@@ -569,6 +629,7 @@ def run(args):
     next_js = next_tf = next_tf2 = next_img = next_info = time.monotonic()
     second = 0
     jumps = 0
+    off_model = 0
     while True:
         now = time.monotonic()
         serve()
@@ -599,6 +660,14 @@ def run(args):
                         tt = (tt[0] + 0.005, tt[1], tt[2])
                     if jumps == 1:
                         say(event="jumping_flange", offset_m=0.005)
+            if args.flange_off_model is not None and goal_count[0] >= args.flange_off_model:
+                with arm.lock:
+                    standing = arm.goal is None and arm.guide is None
+                if standing:
+                    tt = (tt[0] + 0.04, tt[1], tt[2])
+                    off_model += 1
+                    if off_model == 1:
+                        say(event="flange_off_model", offset_m=0.04)
             tf_w.write(m.TFMessage([m.TransformStamped(
                 m.Header(stamp_now(), "base_link"), "tool0",
                 m.Transform(m.Vector3(*tt), m.Quaternion(*tq)))]))
@@ -624,7 +693,7 @@ def run(args):
         if view is None and now >= next_img:
             # No rendered view here (the start pose): a grey frame without a board.
             view = (None, np.full((ci["image_height"], ci["image_width"]), 128, np.uint8))
-        if now >= next_img and view is not None:
+        if now >= next_img and view is not None and not huge_now():
             frame = view[1]
             h, w = frame.shape
             img_w.write(m.Image(m.Header(stamp_now(), "camera_optical_frame"), h, w, "mono8", 0, w,

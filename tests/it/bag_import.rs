@@ -862,3 +862,4 @@ mod lies;
 mod limits;
 mod stops;
 mod stream;
+mod tolerated;

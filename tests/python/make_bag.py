@@ -15,6 +15,9 @@ SPEC.json (paths relative to it):
     tf: [[stamp_ns, parent, child, tx, ty, tz, qx, qy, qz, qw], ...]   (one TFMessage per stamp)
     tf_static: [[...same...]]   (one TFMessage at the start)
     images: [[stamp_ns, file], ...]   (a third element: its receive time, ns)
+    image_format (optional): the CompressedImage format label, instead of image_kind
+    is_bigendian, extra_bytes (optional, mono8): the flag written, zero bytes added past the
+        last row (a header that lies about its data)
 
 A TF row may end with an 11th element, its receive time (ns): rows are then grouped into
 messages by receive time instead (a /tf_static row received later is a second message). A stamp
@@ -133,11 +136,14 @@ def main() -> None:
                         cache[name] = (base / name).read_bytes()
                     data = np.frombuffer(cache[name], dtype=np.uint8)
                 if kind == 'mono8':
+                    if spec.get('extra_bytes'):
+                        data = np.concatenate([data, np.zeros(spec['extra_bytes'], np.uint8)])
                     msg = Image(header=header(stamp, spec['frame_id']), height=height, width=width,
-                                encoding='mono8', is_bigendian=0, step=width, data=data)
+                                encoding='mono8', is_bigendian=spec.get('is_bigendian', 0),
+                                step=width, data=data)
                 else:
-                    msg = CompressedImage(header=header(stamp, spec['frame_id']), format=kind,
-                                          data=data)
+                    msg = CompressedImage(header=header(stamp, spec['frame_id']),
+                                          format=spec.get('image_format', kind), data=data)
                 writer.write(image_conn, receive, ts.serialize_cdr(msg, image_type.__msgtype__))
 
 

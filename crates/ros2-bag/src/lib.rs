@@ -12,7 +12,10 @@
 //! A bag that contradicts itself is refused where that makes a pose or the pairing of frames
 //! with poses ambiguous, and warned about ([`BagWarning`]) where it does not: the TF tree's
 //! contradictions (see `tf`), image stamps going back, a `nanosec` of a second or more (refused
-//! when the message is decoded), sqlite3 rows of unknown topics. docs/ros2-bags.md has the table.
+//! when the message is decoded), sqlite3 rows of unknown topics, storage files `metadata.yaml`
+//! names outside the bag folder (not read), image headers that contradict their data (a format
+//! label of another codec, data past the last row, a big-endian flag on single bytes; see
+//! `handeye_ros2::image::ImageLie`). docs/ros2-bags.md has the table.
 //!
 //! The bag is streamed, never held: its memory does not grow with its length ([`import_bag`]
 //! reads it twice, message by message). A memory limit too small for the import's own room is an
@@ -226,6 +229,22 @@ pub enum BagWarning {
     },
     /// sqlite3 rows whose topic id is in no topic: their messages are lost.
     UnknownTopicRows(storage::UnknownTopicRows),
+    /// Image messages whose header contradicts their data, read all the same (one warning per
+    /// kind of lie).
+    ImageLie {
+        /// The image topic.
+        topic: String,
+        /// The first such message's lie.
+        lie: handeye_ros2::image::ImageLie,
+        /// Its 0-based index on the topic.
+        index: usize,
+        /// How many of the messages decoded tell it.
+        count: usize,
+        /// How many messages were decoded.
+        decoded: usize,
+    },
+    /// `metadata.yaml` names storage files outside the bag's folder: they are not read.
+    FilesOutsideBag(storage::FilesOutside),
 }
 
 impl BagWarning {
@@ -235,6 +254,8 @@ impl BagWarning {
             BagWarning::Tf(w) => w.issue.kind(),
             BagWarning::ImageStampsBack { .. } => "image stamps going back",
             BagWarning::UnknownTopicRows(_) => "rows of unknown topics",
+            BagWarning::ImageLie { lie, .. } => lie.kind(),
+            BagWarning::FilesOutsideBag(_) => "files outside the bag",
         }
     }
 }
@@ -261,6 +282,17 @@ impl std::fmt::Display for BagWarning {
                 "{rows}; their messages are ignored (at most {:.0} % of the rows may be lost before the bag is refused)",
                 storage::UNKNOWN_TOPIC_ROWS_REFUSED * 100.0
             ),
+            BagWarning::ImageLie {
+                topic,
+                lie,
+                index,
+                count,
+                decoded,
+            } => write!(
+                f,
+                "topic `{topic}`: {count} of the {decoded} image(s) decoded say what their data is not: message {index} has {lie}"
+            ),
+            BagWarning::FilesOutsideBag(outside) => write!(f, "{outside}"),
         }
     }
 }
@@ -520,6 +552,31 @@ fn image_stamps_back(
     }))
 }
 
+/// What the bag's storage says that does not stop the import: `metadata.yaml` naming files
+/// outside the folder, sqlite3 rows of unknown topics (refused above
+/// [`storage::UNKNOWN_TOPIC_ROWS_REFUSED`] of the rows).
+fn storage_warnings(bag: &storage::Bag) -> Result<Vec<BagWarning>, BagError> {
+    let mut warnings: Vec<BagWarning> = bag
+        .files_outside()
+        .cloned()
+        .map(BagWarning::FilesOutsideBag)
+        .into_iter()
+        .collect();
+    for rows in bag.unknown_topic_rows()? {
+        if rows.fraction() > storage::UNKNOWN_TOPIC_ROWS_REFUSED {
+            return Err(BagError::Storage {
+                path: rows.file.clone(),
+                problem: format!(
+                    "damaged sqlite3 bag: {rows}; more than {:.0} % of the rows lost (they may be the frames or TF the calibration needs); expected every row to name a topic of table `topics`",
+                    storage::UNKNOWN_TOPIC_ROWS_REFUSED * 100.0
+                ),
+            });
+        }
+        warnings.push(BagWarning::UnknownTopicRows(rows));
+    }
+    Ok(warnings)
+}
+
 /// Reads a bag and picks the frames to calibrate from, without their images: [`import_bag_to`]
 /// with a sink that drops them.
 pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
@@ -547,19 +604,7 @@ pub fn import_bag_to(
         info: info_topic,
     } = wanted_topics(path, &bag.topics()?, options)?;
 
-    let mut warnings = Vec::new();
-    for rows in bag.unknown_topic_rows()? {
-        if rows.fraction() > storage::UNKNOWN_TOPIC_ROWS_REFUSED {
-            return Err(BagError::Storage {
-                path: rows.file.clone(),
-                problem: format!(
-                    "damaged sqlite3 bag: {rows}; more than {:.0} % of the rows lost (they may be the frames or TF the calibration needs); expected every row to name a topic of table `topics`",
-                    storage::UNKNOWN_TOPIC_ROWS_REFUSED * 100.0
-                ),
-            });
-        }
-        warnings.push(BagWarning::UnknownTopicRows(rows));
-    }
+    let mut warnings = storage_warnings(&bag)?;
     // Pass 1: every message of the wanted topics, one at a time. TF and camera_info are decoded;
     // of an image only its header stamp is read and kept (with where it is, for pass 2), the
     // rest is checked when the frame is decoded. Processed in receive-time order afterwards, as
@@ -657,6 +702,7 @@ pub fn import_bag_to(
         decoded: 0,
         workers: decoding_workers(camera.as_ref(), options)?,
         held: select::FrameCount::default(),
+        lies: select::ImageLies::default(),
     };
     let mut taken = 0;
     let mut hand_on = |sample: &BagSample, image: &GrayImage| -> Result<(), BagError> {
@@ -677,6 +723,20 @@ pub fn import_bag_to(
         options,
         &mut hand_on,
     )?;
+    let decoded_count = frames.decoded;
+    warnings.extend(
+        frames
+            .lies
+            .into_counts()
+            .into_iter()
+            .map(|(count, lie, index)| BagWarning::ImageLie {
+                topic: options.image_topic.clone(),
+                lie,
+                index,
+                count,
+                decoded: decoded_count,
+            }),
+    );
     Ok(BagImport {
         format: bag.format(),
         samples: selected.samples,

@@ -17,6 +17,7 @@
 //!
 //! Frames whose TF lookup fails (a TF gap, or outside the TF stream) are skipped with the reason.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -32,7 +33,7 @@ use super::storage::{Location, MessageAt};
 use super::tf::TfBuffer;
 use super::{BagError, BagOptions, BagSample};
 use handeye_ros2::cdr;
-use handeye_ros2::image::{compressed_to_gray, raw_to_gray};
+use handeye_ros2::image::{compressed_lie, compressed_to_gray, raw_lies, raw_to_gray, ImageLie};
 use handeye_ros2::msg::{CompressedImage, Image};
 use handeye_vision::sharpness::{sharpness, sharpness_at};
 
@@ -178,6 +179,40 @@ pub(crate) struct Frames<'b> {
     pub(crate) workers: usize,
     /// The decoded frames alive at once.
     pub(crate) held: FrameCount,
+    /// What the decoded messages' headers said that their data contradicts.
+    pub(crate) lies: ImageLies,
+}
+
+/// The lies of the image messages decoded ([`ImageLie`]), by kind: how many messages told it,
+/// and the first one's lie and 0-based index on the topic. Noted by pass 2's workers at once.
+#[derive(Debug, Default)]
+pub(crate) struct ImageLies(std::sync::Mutex<BTreeMap<&'static str, (usize, ImageLie, usize)>>);
+
+impl ImageLies {
+    fn note(&self, lie: ImageLie, index: usize) {
+        let mut lies = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        match lies.get_mut(lie.kind()) {
+            // Workers decode out of order: the first is the lowest index.
+            Some(seen) => {
+                seen.0 += 1;
+                if index < seen.2 {
+                    (seen.1, seen.2) = (lie, index);
+                }
+            }
+            None => {
+                lies.insert(lie.kind(), (1, lie, index));
+            }
+        }
+    }
+
+    /// (messages, the first one's lie, its index) per kind, in kind order.
+    pub(crate) fn into_counts(self) -> Vec<(usize, ImageLie, usize)> {
+        self.0
+            .into_inner()
+            .unwrap_or_else(|p| p.into_inner())
+            .into_values()
+            .collect()
+    }
 }
 
 /// How many decoded frames are alive at once, and the most there were: what keeps the import's
@@ -234,17 +269,18 @@ fn decode<'f>(
 ) -> Result<Held<'f>, BagError> {
     let data = frames.reader.data(image.location)?;
     frames.decoded += 1;
-    let gray = to_gray(path, topic, image, frames.compressed, &data)?;
+    let gray = to_gray(path, topic, image, frames.compressed, &data, &frames.lies)?;
     Ok(frames.held.hold(gray))
 }
 
-/// A frame's message turned grey.
+/// A frame's message turned grey, its header's lies about its data noted in `lies`.
 fn to_gray(
     path: &Path,
     topic: &str,
     image: &ImageRef,
     compressed: bool,
     data: &[u8],
+    lies: &ImageLies,
 ) -> Result<GrayImage, BagError> {
     let wrap = |source: super::MessageError| BagError::Message {
         path: path.to_path_buf(),
@@ -255,9 +291,15 @@ fn to_gray(
     };
     if compressed {
         let c = cdr::decode::<CompressedImage>(data).map_err(|e| wrap(e.into()))?;
+        if let Some(lie) = compressed_lie(&c) {
+            lies.note(lie, image.index);
+        }
         compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
     } else {
         let r = cdr::decode::<Image>(data).map_err(|e| wrap(e.into()))?;
+        for lie in raw_lies(&r) {
+            lies.note(lie, image.index);
+        }
         match packed_mono8(r) {
             Ok(gray) => Ok(gray),
             Err(r) => raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e))),
@@ -534,9 +576,11 @@ fn sharpest<'f>(
         compressed,
         decoded,
         held,
+        lies,
         ..
     } = frames;
     let held: &'f FrameCount = held;
+    let lies: &ImageLies = lies;
     let bag = reader.bag();
     let compressed = *compressed;
     let mut best: Best<'f> = None;
@@ -558,7 +602,9 @@ fn sharpest<'f>(
                             Job::Message(data) => Ok(data),
                             Job::Read => bag.read_direct(image.location),
                         };
-                        match message.and_then(|m| to_gray(path, topic, image, compressed, &m)) {
+                        match message
+                            .and_then(|m| to_gray(path, topic, image, compressed, &m, lies))
+                        {
                             Ok(gray) => {
                                 let score = sharpness_at(&gray, RANKING_BLOCK);
                                 keep(&mut best, (score, k, held.hold(gray)));

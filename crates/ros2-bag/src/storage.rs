@@ -97,6 +97,63 @@ pub struct BagMessage<'m> {
     pub location: Location,
 }
 
+/// Storage files a bag folder's `metadata.yaml` names outside the folder (absolute, or up
+/// through `..`). They are not read: a bag is its folder's own storage files.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FilesOutside {
+    /// The `metadata.yaml`.
+    pub metadata: PathBuf,
+    /// The paths of `relative_file_paths` that leave the folder, as written.
+    pub paths: Vec<String>,
+}
+
+impl std::fmt::Display for FilesOutside {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let paths: Vec<String> = self.paths.iter().map(|p| format!("`{p}`")).collect();
+        write!(
+            f,
+            "{}: relative_file_paths names {} outside the bag folder; not read (the storage files in the folder are); expected paths inside the folder",
+            self.metadata.display(),
+            paths.join(", ")
+        )
+    }
+}
+
+/// The paths of `folder/metadata.yaml`'s `relative_file_paths` that leave the folder, if any.
+/// A metadata file that does not parse, or lacks the list, names none: the storage files are
+/// found in the folder, not through it.
+fn files_outside(folder: &Path) -> Option<FilesOutside> {
+    let metadata = folder.join("metadata.yaml");
+    let text = std::fs::read_to_string(&metadata).ok()?;
+    let yaml: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).ok()?;
+    let listed = yaml
+        .get("rosbag2_bagfile_information")?
+        .get("relative_file_paths")?
+        .as_sequence()?;
+    let paths: Vec<String> = listed
+        .iter()
+        .filter_map(|p| p.as_str())
+        .filter(|p| leaves_folder(Path::new(p)))
+        .map(String::from)
+        .collect();
+    (!paths.is_empty()).then_some(FilesOutside { metadata, paths })
+}
+
+/// Whether `path`, taken from inside a folder, ends outside it (written out, not resolved).
+fn leaves_folder(path: &Path) -> bool {
+    use std::path::Component;
+    let mut depth = 0usize;
+    for part in path.components() {
+        match part {
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+            Component::ParentDir if depth > 0 => depth -= 1,
+            Component::ParentDir | Component::RootDir | Component::Prefix(_) => return true,
+        }
+    }
+    false
+}
+
 /// Rows of an sqlite3 bag's `messages` table whose `topic_id` is in no row of `topics`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UnknownTopicRows {
@@ -183,6 +240,8 @@ pub struct Bag {
     format: BagFormat,
     /// Per storage file, its MCAP index when it serves positional reads (`mcap_index`).
     indexes: Vec<Option<McapIndex>>,
+    /// What a folder's `metadata.yaml` names outside it.
+    outside: Option<FilesOutside>,
 }
 
 const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -281,10 +340,16 @@ impl Bag {
             .collect();
         Ok(Bag {
             path: path.to_path_buf(),
+            outside: meta.is_dir().then(|| files_outside(path)).flatten(),
             files,
             format,
             indexes,
         })
+    }
+
+    /// The storage files a folder's `metadata.yaml` names outside the folder (not read).
+    pub fn files_outside(&self) -> Option<&FilesOutside> {
+        self.outside.as_ref()
     }
 
     /// The storage format.

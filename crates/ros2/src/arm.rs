@@ -73,7 +73,8 @@ pub struct ArmOptions {
     pub timeout: Duration,
     /// Request/reply framing.
     pub framing: Framing,
-    /// Kinematics for linear moves (IK to joints), when the arm is a UR model handeye knows.
+    /// The arm's kinematics, when it is a UR model handeye knows: linear moves (IK to joints),
+    /// and the check of each flange pose against the forward kinematics of its joints.
     pub kinematics: Option<UrModel>,
     /// Freedrive through the UR driver's controllers; `None`: the person switches it on the arm.
     pub freedrive: Option<FreedriveOptions>,
@@ -96,6 +97,13 @@ const JOINTS_STAND_RAD: f64 = 0.005 * std::f64::consts::PI / 180.0;
 const ARRIVED_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// How long `/joint_states` may take to show the arm at a succeeded goal's end point.
 const ARRIVAL_WAIT: Duration = Duration::from_secs(2);
+/// Farthest the flange pose on /tf may be from the forward kinematics of the model's nominal
+/// parameters at the joints on /joint_states (m, rad): a UR driver publishes its arm's factory
+/// calibration, a few millimetres and tenths of a degree from the nominal model; a chain that
+/// is not the arm's (another tool0, a wrong base frame, a relay) is centimetres or degrees off.
+const MODEL_AGREES_M: f64 = 0.02;
+/// See [`MODEL_AGREES_M`]: 2°.
+const MODEL_AGREES_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
 
 /// The ROS 2 arm.
 pub struct Ros2Arm {
@@ -272,7 +280,8 @@ impl Ros2Arm {
     /// driver's jitter while the joints move by less than [`JOINTS_STAND_RAD`]. A jumping flange
     /// (a relay replaying old transforms, a second chain published under the driver's frame
     /// names from one writer, a driver publishing a wrong chain) is refused with what moved.
-    fn check_standing_flange(&self, first: &Pose) -> Result<(), RobotError> {
+    /// Whether the joints stood (the flange pose and the joints then describe one instant).
+    fn check_standing_flange(&self, first: &Pose) -> Result<bool, RobotError> {
         let joints_first = self.shared.lock().joints;
         let window_end = Instant::now() + STANDING_WINDOW;
         let (mut moved_m, mut moved_rad, mut heard) = (0.0f64, 0.0f64, 0);
@@ -292,7 +301,7 @@ impl Ros2Arm {
         }
         let joints_last = self.shared.lock().joints;
         let (Some(before), Some(now)) = (joints_first, joints_last) else {
-            return Ok(());
+            return Ok(false);
         };
         let joints_moved =
             farthest_joint(&before.positions, &now.positions).map_or(0.0, |(_, rad)| rad);
@@ -309,7 +318,51 @@ impl Ros2Arm {
                 joints_moved.to_degrees()
             )));
         }
-        Ok(())
+        Ok(stood)
+    }
+
+    /// Checks the flange pose /tf gives against the forward kinematics of the arm's model at
+    /// the joints /joint_states gives (issue #40; with a known model only): beyond
+    /// [`MODEL_AGREES_M`] / [`MODEL_AGREES_RAD`] the two sources contradict each other and the
+    /// pose is refused naming both, as [`Ros2Arm::check_standing_flange`] refuses a flange that
+    /// moves while the joints stand. Called only when the joints stood (a hand-guided arm in
+    /// motion would be compared across the few milliseconds between the two topics).
+    fn check_flange_against_model(&self, flange: &Pose) -> Result<(), RobotError> {
+        let Some(model) = &self.options.kinematics else {
+            return Ok(());
+        };
+        let joints = self.fresh_joints(Instant::now() - STALE)?.positions;
+        if joints.len() != 6 {
+            return Ok(());
+        }
+        let from_joints = model.forward(&joints);
+        let off = from_joints.inverse() * flange;
+        let (off_m, off_rad) = (off.translation.vector.norm(), off.rotation.angle());
+        if off_m <= MODEL_AGREES_M && off_rad <= MODEL_AGREES_RAD {
+            return Ok(());
+        }
+        let (base, flange_frame) = (&self.options.base_frame, &self.options.flange_frame);
+        let degrees: Vec<String> = joints
+            .iter()
+            .map(|q| format!("{:.2}", q.to_degrees()))
+            .collect();
+        let at = |p: &Pose| {
+            let t = p.translation.vector * 1e3;
+            format!("[{:.1}, {:.1}, {:.1}] mm", t.x, t.y, t.z)
+        };
+        Err(backend(format!(
+            "the flange pose {base} → {flange_frame} on {} (at {}) is {:.1} mm / {:.2}° from the forward kinematics of the {} model at the joints on {} ([{}]°, at {}), beyond the {:.0} mm / {:.0}° an arm's calibration explains: the flange pose contradicts the joints' kinematics — are robot.base_frame and robot.flange_frame the model's base and flange (a UR driver's `base` and `tool0`, not `base_link`), robot.model this arm's, and no other chain published under these frame names? Nothing was recorded at this pose",
+            self.options.tf_topic,
+            at(flange),
+            off_m * 1e3,
+            off_rad.to_degrees(),
+            model.name,
+            self.options.joint_states_topic,
+            degrees.join(", "),
+            at(&from_joints),
+            MODEL_AGREES_M * 1e3,
+            MODEL_AGREES_RAD.to_degrees(),
+        )))
     }
 
     fn interrupted(&self) -> bool {
@@ -599,7 +652,9 @@ impl Robot for Ros2Arm {
         // A /tf message heard after this call: the pose of the arm as it stands now.
         let asked = Instant::now();
         let flange = self.flange_after(asked, asked + self.options.timeout)?;
-        self.check_standing_flange(&flange)?;
+        if self.check_standing_flange(&flange)? {
+            self.check_flange_against_model(&flange)?;
+        }
         Ok(flange)
     }
 

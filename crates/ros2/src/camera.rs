@@ -2,6 +2,11 @@
 //! rgb8, bgr8, bayer) or `CompressedImage` topic, read best effort (the sensor-data QoS camera
 //! drivers publish with), and its `CameraInfo` checked against the cell's intrinsics.
 //!
+//! A message larger than any frame of the intrinsics' size can be ([`max_frame_bytes`]) is
+//! refused as it arrives, its pixels dropped at once, and named with the topic, its size and the
+//! bound: at open, before the arm moves, or at the pose whose frame it is (issue #40: 100 MB
+//! frames were otherwise held, or never came through whole and read as a silent topic).
+//!
 //! A frame counts only if its header stamp is at or after the instant the session asks for
 //! (the moment the arm settled, measured from `/joint_states`): a frame exposed while the arm
 //! still moved is never used. Stamps are the camera node's clock; on one machine (or with
@@ -39,11 +44,74 @@ pub struct CameraOptions {
 enum Pixels {
     Raw(Image),
     Compressed(CompressedImage),
+    /// Over [`max_frame_bytes`]: refused as it came, only what it was is kept.
+    Oversized(Oversized),
+}
+
+/// A message refused for its size.
+struct Oversized {
+    /// The bytes of its pixels (`data`).
+    bytes: usize,
+    /// What it said it held: `10000x10000 mono8`, `jpeg`.
+    held: String,
+}
+
+/// The widest pixel ROS's image encodings have: 8 bytes (`rgba16`, `64FC1`).
+const WIDEST_PIXEL_BYTES: u64 = 8;
+
+/// The most bytes a frame of `model`'s size can take in any encoding (`rgba16` with no row
+/// padding beyond a byte a pixel): 7.4 MB for 1280x720 px. A compressed frame is never larger
+/// than its raw form in practice, so the same bound holds for it.
+pub fn max_frame_bytes(model: &CameraModel) -> u64 {
+    u64::from(model.width) * u64::from(model.height) * WIDEST_PIXEL_BYTES
+}
+
+/// `bytes` in megabytes, as a person reads it.
+fn megabytes(bytes: u64) -> String {
+    format!("{:.1} MB", bytes as f64 / 1e6)
+}
+
+/// What a topic's message over the bound is called: its topic, size, what it held and the
+/// bound.
+fn oversized_reason(topic: &str, o: &Oversized, model: &CameraModel) -> String {
+    format!(
+        "the images on {topic} are {} ({}), over the {} a {}x{} px frame takes at most ({WIDEST_PIXEL_BYTES} bytes a pixel, the widest encoding)",
+        megabytes(o.bytes as u64),
+        o.held,
+        megabytes(max_frame_bytes(model)),
+        model.width,
+        model.height,
+    )
+}
+
+/// What to look at when a topic's frames are over the bound.
+const OVERSIZED_CHECK: &str =
+    "is this the camera the intrinsics are for, streaming at their resolution?";
+
+/// `newest`, or what it was when its pixels exceed `bound` bytes (dropped here, at once).
+fn bounded(newest: Newest, bound: u64) -> Newest {
+    let (bytes, held) = match &newest.pixels {
+        Pixels::Raw(m) => (
+            m.data.len(),
+            format!("{}x{} {}", m.width, m.height, m.encoding),
+        ),
+        Pixels::Compressed(m) => (m.data.len(), m.format.clone()),
+        Pixels::Oversized(_) => return newest,
+    };
+    if bytes as u64 <= bound {
+        return newest;
+    }
+    Newest {
+        pixels: Pixels::Oversized(Oversized { bytes, held }),
+        ..newest
+    }
 }
 
 struct Newest {
     pixels: Pixels,
     stamp: SystemTime,
+    /// When it came.
+    received: Instant,
 }
 
 #[derive(Default)]
@@ -80,13 +148,17 @@ impl Ros2Camera {
             ),
             None => None,
         };
-        // Only the newest message is kept (undecoded): memory is one frame whatever the rate.
+        // Only the newest message is kept (undecoded): memory is one frame whatever the rate,
+        // and one frame's size at most.
+        let bound = max_frame_bytes(&options.model);
         let frames = if options.compressed {
             newest_of(
                 link.subscribe::<CompressedImage>(&topic, sensor_data_qos())
                     .map_err(err)?,
+                bound,
                 |msg| Newest {
                     stamp: msg.header.stamp.to_system(),
+                    received: Instant::now(),
                     pixels: Pixels::Compressed(msg),
                 },
             )
@@ -94,8 +166,10 @@ impl Ros2Camera {
             newest_of(
                 link.subscribe::<Image>(&topic, sensor_data_qos())
                     .map_err(err)?,
+                bound,
                 |msg| Newest {
                     stamp: msg.header.stamp.to_system(),
+                    received: Instant::now(),
                     pixels: Pixels::Raw(msg),
                 },
             )
@@ -113,7 +187,8 @@ impl Ros2Camera {
     }
 
     /// Waits (up to the timeout) for a first frame on the image topic, so a topic nobody
-    /// publishes is named before the arm moves, not after the first move (issue #39).
+    /// publishes is named before the arm moves, not after the first move (issue #39), and so is
+    /// one whose frames are over the size bound (#40).
     fn check_frames(&self) -> Result<(), CameraError> {
         let deadline = Instant::now() + self.options.timeout;
         let mut newest = self.slot.newest.lock().unwrap_or_else(|p| p.into_inner());
@@ -125,8 +200,16 @@ impl Ros2Camera {
                 .unwrap_or_else(|p| p.into_inner())
                 .0;
         }
-        if newest.is_some() {
-            return Ok(());
+        let topic = &self.options.image_topic;
+        match newest.as_ref().map(|n| &n.pixels) {
+            Some(Pixels::Oversized(o)) => {
+                return Err(open_error(format!(
+                    "{}: refused, nothing has moved; {OVERSIZED_CHECK}",
+                    oversized_reason(topic, o, &self.options.model)
+                )))
+            }
+            Some(_) => return Ok(()),
+            None => {}
         }
         let kind = if self.options.compressed {
             "CompressedImage"
@@ -143,16 +226,78 @@ impl Ros2Camera {
             })
             .map(|(name, ty)| format!("{name} ({ty})"))
             .collect();
+        let written = heard.iter().any(|h| h.starts_with(&format!("{topic} (")));
         let heard = if heard.is_empty() {
             "no image topic is heard on this domain".to_string()
         } else {
             format!("image topics heard on this domain: {}", heard.join(", "))
         };
+        if written {
+            // A writer of the topic is there, yet no message came whole. DDS hands over only
+            // whole messages, so their size is not known here; far too large ones are what
+            // never arrive (their fragments are lost on the way).
+            return Err(open_error(format!(
+                "no whole image on {topic} within {:.1} s although a writer of it is on the graph, nothing has moved: either it sends nothing (a camera not streaming, or waiting for a trigger) or its frames are too large to come through whole (far over {}, the most a {}x{} px frame takes: a camera at another resolution than the intrinsics', or a node sending oversized messages) ({heard})",
+                self.options.timeout.as_secs_f64(),
+                megabytes(max_frame_bytes(&self.options.model)),
+                self.options.model.width,
+                self.options.model.height,
+            )));
+        }
         Err(open_error(format!(
-            "no image on {} within {:.1} s, nothing has moved: is the camera node running, on this domain id, publishing sensor_msgs/{kind} under that name? ({heard})",
-            self.options.image_topic,
+            "no image on {topic} within {:.1} s, nothing has moved: is the camera node running, on this domain id, publishing sensor_msgs/{kind} under that name? ({heard})",
             self.options.timeout.as_secs_f64(),
         )))
+    }
+
+    /// What a grab that waited its timeout without a frame stamped after `not_before` says,
+    /// given the newest message heard: one over the size bound is named as such (later ones
+    /// of that size may not have come whole), an old one points at the clocks.
+    /// `waiting_since`: when the grab began to wait.
+    fn no_fresh_frame(
+        &self,
+        newest: Option<&Newest>,
+        not_before: SystemTime,
+        waiting_since: Instant,
+    ) -> CameraError {
+        let topic = &self.options.image_topic;
+        let waited = self.options.timeout.as_secs_f64();
+        if let Some(Newest {
+            pixels: Pixels::Oversized(o),
+            ..
+        }) = newest
+        {
+            return CameraError::Frame {
+                path: topic.clone(),
+                reason: format!(
+                    "no whole frame stamped after the arm settled within {waited:.1} s, and the last message heard was refused: {}; {OVERSIZED_CHECK}",
+                    oversized_reason(topic, o, &self.options.model)
+                ),
+            };
+        }
+        let why = match newest {
+            // Frames keep coming, stamped before: the clocks.
+            Some(n) if n.received >= waiting_since => format!(
+                "the newest is stamped {:.3} s before: is the camera node's clock in step with this machine's?",
+                not_before.duration_since(n.stamp).unwrap_or_default().as_secs_f64()
+            ),
+            // None came whole while waiting: DDS hands over only whole messages, so frames
+            // grown too large to arrive look like frames that stopped.
+            Some(n) => format!(
+                "none came whole while waiting, the last {:.1} s before the arm settled: the camera node stopped, or its frames grew too large to come through whole (far over {}, the most a {}x{} px frame takes)",
+                not_before.duration_since(n.stamp).unwrap_or_default().as_secs_f64(),
+                megabytes(max_frame_bytes(&self.options.model)),
+                self.options.model.width,
+                self.options.model.height,
+            ),
+            None => "none heard at all: is the camera node running, on this domain id, with this topic name?".into(),
+        };
+        CameraError::Backend(
+            format!(
+                "no frame on {topic} stamped after the arm settled within {waited:.1} s ({why})"
+            )
+            .into(),
+        )
     }
 
     fn check_info(&self) -> Result<(), CameraError> {
@@ -197,8 +342,13 @@ impl Ros2Camera {
 type ReaderFuture = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
 type FramesReader = Box<dyn FnOnce(Arc<Slot>) -> ReaderFuture + Send>;
 
-/// The reader of an image topic: each message read becomes the slot's newest frame.
-fn newest_of<M>(sub: ros2_client::Subscription<M>, newest: fn(M) -> Newest) -> FramesReader
+/// The reader of an image topic: each message read becomes the slot's newest frame, or the
+/// record of one refused when its pixels exceed `bound` bytes.
+fn newest_of<M>(
+    sub: ros2_client::Subscription<M>,
+    bound: u64,
+    newest: fn(M) -> Newest,
+) -> FramesReader
 where
     M: serde::de::DeserializeOwned + Send + Sync + 'static,
 {
@@ -206,7 +356,7 @@ where
         Box::pin(async move {
             sub.async_stream()
                 .for_each(|m| {
-                    store(&slot, m.map(|(msg, _)| newest(msg)));
+                    store(&slot, m.map(|(msg, _)| bounded(newest(msg), bound)));
                     futures::future::ready(())
                 })
                 .await
@@ -284,7 +434,8 @@ fn monotonic(stamp: SystemTime) -> Instant {
 impl Camera for Ros2Camera {
     fn grab(&mut self, not_before: Instant) -> Result<Frame, CameraError> {
         let not_before_wall = wall_clock(not_before);
-        let deadline = Instant::now() + self.options.timeout;
+        let waiting_since = Instant::now();
+        let deadline = waiting_since + self.options.timeout;
         let mut newest = self.slot.newest.lock().unwrap_or_else(|p| p.into_inner());
         loop {
             if let Some(n) = newest.take_if(|n| n.stamp >= not_before_wall) {
@@ -299,6 +450,10 @@ impl Camera for Ros2Camera {
                 let image = match &n.pixels {
                     Pixels::Raw(m) => raw_to_gray(m),
                     Pixels::Compressed(m) => compressed_to_gray(m),
+                    Pixels::Oversized(o) => Err(format!(
+                        "{}: refused; {OVERSIZED_CHECK}",
+                        oversized_reason(topic, o, &self.options.model)
+                    )),
                 }
                 .map_err(|reason| CameraError::Frame {
                     path: topic.clone(),
@@ -325,22 +480,7 @@ impl Camera for Ros2Camera {
             }
             let now = Instant::now();
             if now >= deadline {
-                let heard = newest.as_ref().map(|n| n.stamp);
-                return Err(CameraError::Backend(
-                    format!(
-                        "no frame on {} stamped after the arm settled within {:.1} s ({})",
-                        self.options.image_topic,
-                        self.options.timeout.as_secs_f64(),
-                        match heard {
-                            Some(s) => format!(
-                                "the newest is stamped {:.3} s before: is the camera node's clock in step with this machine's?",
-                                not_before_wall.duration_since(s).unwrap_or_default().as_secs_f64()
-                            ),
-                            None => "none heard at all: is the camera node running, on this domain id, with this topic name?".into(),
-                        }
-                    )
-                    .into(),
-                ));
+                return Err(self.no_fresh_frame(newest.as_ref(), not_before_wall, waiting_since));
             }
             newest = self
                 .slot
@@ -353,5 +493,80 @@ impl Camera for Ros2Camera {
 
     fn model(&self) -> &CameraModel {
         &self.options.model
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::Header;
+
+    fn raw(width: u32, height: u32, encoding: &str, bytes: usize) -> Newest {
+        Newest {
+            stamp: SystemTime::UNIX_EPOCH,
+            received: Instant::now(),
+            pixels: Pixels::Raw(Image {
+                header: Header::default(),
+                height,
+                width,
+                encoding: encoding.into(),
+                is_bigendian: 0,
+                step: width,
+                data: vec![0; bytes],
+            }),
+        }
+    }
+
+    fn model(width: u32, height: u32) -> CameraModel {
+        let mut m = CameraModel::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../configs/cameras/sim-1280x720.yaml"),
+        )
+        .unwrap();
+        (m.width, m.height) = (width, height);
+        m
+    }
+
+    /// Every message up to the bound passes whole, whatever its encoding; one byte over it is
+    /// refused with its size and what it held, raw or compressed.
+    #[test]
+    fn messages_over_the_frame_bound_are_refused_with_their_size() {
+        let m = model(1280, 720);
+        let bound = max_frame_bytes(&m);
+        assert_eq!(bound, 1280 * 720 * 8);
+        for (encoding, bytes) in [("mono8", 1280 * 720), ("rgba16", bound as usize)] {
+            let kept = bounded(raw(1280, 720, encoding, bytes), bound);
+            assert!(matches!(kept.pixels, Pixels::Raw(ref i) if i.data.len() == bytes));
+        }
+        for bytes in [bound as usize + 1, 10_000 * 10_000] {
+            let refused = bounded(raw(10_000, 10_000, "mono8", bytes), bound);
+            let Pixels::Oversized(o) = &refused.pixels else {
+                panic!("{bytes} bytes kept")
+            };
+            assert_eq!((o.bytes, o.held.as_str()), (bytes, "10000x10000 mono8"));
+        }
+        let jpeg = Newest {
+            stamp: SystemTime::UNIX_EPOCH,
+            received: Instant::now(),
+            pixels: Pixels::Compressed(CompressedImage {
+                header: Header::default(),
+                format: "jpeg".into(),
+                data: vec![0; bound as usize + 1],
+            }),
+        };
+        assert!(
+            matches!(bounded(jpeg, bound).pixels, Pixels::Oversized(ref o) if o.held == "jpeg")
+        );
+        let o = Oversized {
+            bytes: 100_000_000,
+            held: "10000x10000 mono8".into(),
+        };
+        let reason = oversized_reason("/image_raw", &o, &m);
+        assert!(
+            reason.contains(
+                "/image_raw are 100.0 MB (10000x10000 mono8), over the 7.4 MB a 1280x720 px frame"
+            ),
+            "{reason}"
+        );
     }
 }

@@ -9,6 +9,106 @@ use image::GrayImage;
 
 use crate::msg::{CompressedImage, Image};
 
+/// What an image message says about itself that its data contradicts, where the pixels can
+/// still be read: tolerated, but named (issue #40), since a lying writer may lie elsewhere too.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ImageLie {
+    /// A compressed image whose `format` names one codec and whose bytes are another's; it is
+    /// decoded as what its bytes are.
+    FormatLabel {
+        /// The `format` field (`jpeg`, `bgr8; jpeg compressed bgr8`, `webp`).
+        label: String,
+        /// What the bytes are (`PNG`).
+        holds: &'static str,
+    },
+    /// Raw data longer than `height × step`: the bytes past the last row are not pixels.
+    DataPastLastRow {
+        /// The data's length.
+        bytes: usize,
+        /// `height × step`.
+        rows: usize,
+    },
+    /// `is_bigendian` set on an encoding of one byte a channel, where byte order means nothing.
+    BigEndianOnBytes {
+        /// The encoding (`mono8`).
+        encoding: String,
+    },
+}
+
+impl ImageLie {
+    /// A short name for counting and tests.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ImageLie::FormatLabel { .. } => "format label of other data",
+            ImageLie::DataPastLastRow { .. } => "data past the last row",
+            ImageLie::BigEndianOnBytes { .. } => "big-endian flag on bytes",
+        }
+    }
+}
+
+impl std::fmt::Display for ImageLie {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ImageLie::FormatLabel { label, holds } => write!(
+                f,
+                "format `{label}` but {holds} data (decoded as {holds})"
+            ),
+            ImageLie::DataPastLastRow { bytes, rows } => write!(
+                f,
+                "{bytes} bytes of data, longer than height × step = {rows} (the {} bytes past the last row are ignored)",
+                bytes - rows
+            ),
+            ImageLie::BigEndianOnBytes { encoding } => write!(
+                f,
+                "is_bigendian set on `{encoding}`, whose channels are single bytes (the flag is ignored)"
+            ),
+        }
+    }
+}
+
+/// The codecs a `format` field may name, as the `image` crate knows them.
+const CODECS: [(&str, image::ImageFormat, &str); 3] = [
+    ("jpeg", image::ImageFormat::Jpeg, "JPEG"),
+    ("png", image::ImageFormat::Png, "PNG"),
+    ("webp", image::ImageFormat::WebP, "WebP"),
+];
+
+/// The lie of a compressed image's `format` label, if it names a codec its bytes are not.
+pub fn compressed_lie(image: &CompressedImage) -> Option<ImageLie> {
+    let label = image.format.to_ascii_lowercase();
+    let named = CODECS
+        .iter()
+        .find(|(word, _, _)| label.contains(word) || (*word == "jpeg" && label.contains("jpg")))?;
+    let found = image::guess_format(&image.data).ok()?;
+    let (_, _, holds) = CODECS.iter().find(|(_, format, _)| *format == found)?;
+    (named.1 != found).then(|| ImageLie::FormatLabel {
+        label: image.format.clone(),
+        holds,
+    })
+}
+
+/// The lies of a raw image's header about its data (see [`ImageLie`]).
+pub fn raw_lies(raw: &Image) -> Vec<ImageLie> {
+    let mut lies = Vec::new();
+    let rows = raw.height as usize * raw.step as usize;
+    if raw.data.len() > rows {
+        lies.push(ImageLie::DataPastLastRow {
+            bytes: raw.data.len(),
+            rows,
+        });
+    }
+    let single_bytes = matches!(
+        raw.encoding.as_str(),
+        "mono8" | "8UC1" | "8UC3" | "8UC4" | "rgb8" | "bgr8" | "rgba8" | "bgra8"
+    ) || (raw.encoding.starts_with("bayer_") && raw.encoding.ends_with('8'));
+    if raw.is_bigendian != 0 && single_bytes {
+        lies.push(ImageLie::BigEndianOnBytes {
+            encoding: raw.encoding.clone(),
+        });
+    }
+    lies
+}
+
 /// A raw image as 8-bit grey.
 pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
@@ -146,6 +246,60 @@ mod tests {
             data: data.to_vec(),
             ..Image::default()
         }
+    }
+
+    /// Each lie is found on the encodings it applies to and only there: an honest message of
+    /// each kind says nothing.
+    #[test]
+    fn lies_of_a_header_about_its_data_are_found() {
+        assert!(raw_lies(&raw("mono8", 2, 2, 2, &[0; 4])).is_empty());
+        assert!(raw_lies(&raw("mono8", 2, 2, 3, &[0; 5])).is_empty());
+        let long = raw_lies(&raw("mono8", 2, 2, 2, &[0; 7]));
+        assert_eq!(long, [ImageLie::DataPastLastRow { bytes: 7, rows: 4 }]);
+        assert!(long[0]
+            .to_string()
+            .contains("height × step = 4 (the 3 bytes"));
+        for encoding in ["mono8", "rgb8", "bgra8", "bayer_grbg8"] {
+            let mut image = raw(encoding, 1, 1, 4, &[0; 4]);
+            image.is_bigendian = 1;
+            assert_eq!(
+                raw_lies(&image)[0].kind(),
+                "big-endian flag on bytes",
+                "{encoding}"
+            );
+        }
+        let mut wide = raw("mono16", 1, 1, 2, &[0; 2]);
+        wide.is_bigendian = 1;
+        assert!(
+            raw_lies(&wide).is_empty(),
+            "byte order means something on mono16"
+        );
+
+        let mut png = Vec::new();
+        GrayImage::new(2, 2)
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let compressed = |format: &str, data: &[u8]| CompressedImage {
+            format: format.into(),
+            data: data.to_vec(),
+            ..CompressedImage::default()
+        };
+        for label in ["jpeg", "bgr8; jpeg compressed bgr8", "jpg", "webp"] {
+            let lie = compressed_lie(&compressed(label, &png)).expect(label);
+            assert_eq!(
+                lie,
+                ImageLie::FormatLabel {
+                    label: label.into(),
+                    holds: "PNG"
+                }
+            );
+        }
+        assert_eq!(compressed_lie(&compressed("png", &png)), None);
+        assert_eq!(
+            compressed_lie(&compressed("", &png)),
+            None,
+            "no codec named"
+        );
     }
 
     #[test]

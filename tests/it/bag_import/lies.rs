@@ -34,7 +34,7 @@ fn small_bag_edited(
 
 /// A TF row for make_bag.py: identity rotation, translation `t`, received at `receive` (ns) when
 /// given.
-fn tf_row(
+pub(super) fn tf_row(
     stamp: serde_json::Value,
     parent: &str,
     child: &str,
@@ -48,7 +48,7 @@ fn tf_row(
     row
 }
 
-const S: i64 = 1_000_000_000;
+pub(super) const S: i64 = 1_000_000_000;
 
 /// Imports `bag`, expects a refusal (exit code 1) naming the bag and leaving nothing behind;
 /// returns the log.

@@ -377,19 +377,33 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
 
 /// Runs the cell into `out` with the peer's `faults`, expecting failure with `expected` in the
 /// message after some samples; then resumes against a healthy peer and checks the truth.
-fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
+pub(super) fn fails_then_resumes(domain: u16, faults: &[&str], expected: &str) {
+    fails_then_resumes_with(domain, faults, &[], &[expected])
+}
+
+/// [`fails_then_resumes`] with the cell's config edited (`edits`, as [`cell`] takes them),
+/// expecting one of `expected` in the message.
+pub(super) fn fails_then_resumes_with(
+    domain: u16,
+    faults: &[&str],
+    edits: &[(&str, &str)],
+    expected: &[&str],
+) {
     let Some(python) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     // The shipped 10 s to answer, not less: on a loaded 2-core CI machine a 3 s budget let a
     // slow-to-answer goal read as the fault under test (seen once in CI).
-    let config = cell(dir.path(), domain, &[]);
+    let config = cell(dir.path(), domain, edits);
     let out_dir = dir.path().join("session");
     {
         let _peer = Peer::start(&python, domain, faults);
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
         assert!(!out.status.success(), "{log}");
-        assert!(log.contains(expected), "expected {expected:?} in:\n{log}");
+        assert!(
+            expected.iter().any(|e| log.contains(e)),
+            "expected one of {expected:?} in:\n{log}"
+        );
         let kept = poses_kept(&out_dir);
         assert!(kept >= 2, "{kept} samples kept:\n{log}");
     }
@@ -427,6 +441,43 @@ fn a_goal_that_succeeds_without_moving_is_named_and_resume_completes() {
             &["--succeed-without-moving", "4"],
             "answered SUCCEEDED but /joint_states did not reach the goal's end point",
         )
+    });
+}
+
+/// #40: a flange pose on /tf that stands with the joints but is 40 mm from the forward
+/// kinematics of the arm's model at them (`robot.model: ur10e`; from the end of goal 4 on) is
+/// named with both sources, nothing is recorded under it, the poses before are kept, and a
+/// resume against a healthy driver completes to the truth.
+#[test]
+fn a_flange_pose_off_the_models_kinematics_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes(
+            64,
+            &["--flange-off-model", "4"],
+            "from the forward kinematics of the ur10e model at the joints on /joint_states",
+        )
+    });
+}
+
+/// The same contradiction from the start: named when the arm is opened, before anything moves.
+#[test]
+fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(120), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let peer = Peer::start(&python, 65, &["--flange-off-model", "0"]);
+        let config = cell(dir.path(), 65, &[]);
+        let out = run_cell(&config, &dir.path().join("s"));
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains("the flange pose base → tool0 on /tf (at [")
+                && log
+                    .contains("is 40.0 mm / 0.00° from the forward kinematics of the ur10e model")
+                && log.contains("the flange pose contradicts the joints' kinematics"),
+            "{log}"
+        );
+        assert!(peer.events("goal").is_empty(), "a goal was sent:\n{log}");
     });
 }
 

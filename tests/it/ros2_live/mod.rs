@@ -14,6 +14,7 @@ mod console;
 mod fastdds;
 mod freedrive;
 mod idle;
+mod oversized;
 mod publish;
 mod taught;
 

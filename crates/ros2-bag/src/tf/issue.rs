@@ -79,6 +79,18 @@ pub enum TfIssue {
         /// Further differing values after those two.
         more: usize,
     },
+    /// One edge given both a static value (`/tf_static`) and moving ones (`/tf`): tf2 would use
+    /// whichever came last; the moving one is used here, whatever the order.
+    StaticAndMoving {
+        /// The parent.
+        parent: String,
+        /// The child.
+        child: String,
+        /// Its first static message.
+        statics: TfSource,
+        /// Its first moving message.
+        moving: TfSource,
+    },
     /// A frame given two parents (tf2 keeps the latest, so the tree changes shape mid-bag).
     TwoParents {
         /// The frame.
@@ -140,6 +152,7 @@ impl TfIssue {
         match self {
             TfIssue::Loop { frames } => frames.iter().map(String::as_str).collect(),
             TfIssue::StaticConflict { child, .. }
+            | TfIssue::StaticAndMoving { child, .. }
             | TfIssue::TwoParents { child, .. }
             | TfIssue::ConflictingSamples { child, .. }
             | TfIssue::StampsBack { child, .. } => vec![child.as_str()],
@@ -150,6 +163,7 @@ impl TfIssue {
     pub fn kind(&self) -> &'static str {
         match self {
             TfIssue::StaticConflict { .. } => "static conflict",
+            TfIssue::StaticAndMoving { .. } => "edge both static and moving",
             TfIssue::TwoParents { .. } => "two parents",
             TfIssue::Loop { .. } => "loop",
             TfIssue::ConflictingSamples { .. } => "conflicting transforms at one stamp",
@@ -174,6 +188,8 @@ impl TfIssue {
             // that went back (a restarted simulation, a looped playback): one stamp then names
             // two moments and the interpolation mixes them.
             TfIssue::StampsBack { largest_ns, .. } => *largest_ns > max_back_ns,
+            // The moving transforms are used: the pose is theirs, what the arm reported.
+            TfIssue::StaticAndMoving { .. } => false,
         }
     }
 }
@@ -203,6 +219,15 @@ impl std::fmt::Display for TfIssue {
                     }
                 )
             }
+            TfIssue::StaticAndMoving {
+                parent,
+                child,
+                statics,
+                moving,
+            } => write!(
+                f,
+                "`{parent}` → `{child}` is both static ({statics}) and moving ({moving} on); the moving transforms are used, the static value ignored; expected each edge on one of the two"
+            ),
             TfIssue::TwoParents {
                 child,
                 first,
@@ -278,6 +303,7 @@ impl std::fmt::Display for TfWarning {
                     f,
                     ", but at most {AMBIGUOUS_MM} mm and {AMBIGUOUS_DEG}° apart; the first value of each stamp is used)"
                 ),
+                TfIssue::StaticAndMoving { .. } => f.write_str(")"),
                 _ => f.write_str(", but within the allowed TF gap: the samples are used in stamp order)"),
             }
         } else {

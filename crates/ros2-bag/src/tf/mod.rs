@@ -6,7 +6,8 @@
 //!
 //! A bag can lie about its tree, and every lie is found and named ([`TfIssue`]): one child given
 //! two different static transforms, a frame with two parents, parents that loop back, one edge
-//! with two different transforms at one stamp, stamps that go back in time on an edge.
+//! with two different transforms at one stamp, stamps that go back in time on an edge, one edge
+//! both static and moving (the moving one is used, whichever came first).
 //! [`TfBuffer::check`] refuses the ones that make `T_base_flange` ambiguous when they are on the
 //! chain it is read from, and returns the others as warnings.
 mod issue;
@@ -71,10 +72,11 @@ pub fn edge_samples(message: &TfMessage) -> Result<Vec<EdgeSample>, CdrError> {
     Ok(out)
 }
 
+/// An edge's transforms, with its first message.
 #[derive(Debug, Clone)]
 enum Edge {
     Static(Pose, TfSource),
-    Dynamic(Vec<(i64, Pose)>),
+    Dynamic(Vec<(i64, Pose)>, TfSource),
 }
 
 /// Steps back in time on one edge of one topic.
@@ -96,6 +98,8 @@ pub struct TfBuffer {
     parents: BTreeMap<String, Vec<(String, TfSource)>>,
     /// child → its [`TfIssue::StaticConflict`].
     static_conflicts: BTreeMap<String, TfIssue>,
+    /// child → its [`TfIssue::StaticAndMoving`].
+    static_and_moving: BTreeMap<String, TfIssue>,
     /// (topic, parent, child) → stamps going back.
     back: BTreeMap<(String, String, String), BackSteps>,
     /// Conflicting samples found by [`TfBuffer::finish`].
@@ -137,7 +141,7 @@ impl TfBuffer {
         let sample = (t.stamp_ns, t.parent_from_child);
         match self.edges.get_mut(&t.child) {
             // One more sample of a known dynamic edge.
-            Some((parent, Edge::Dynamic(samples), _)) if *parent == t.parent && !is_static => {
+            Some((parent, Edge::Dynamic(samples, _), _)) if *parent == t.parent && !is_static => {
                 samples.push(sample);
             }
             // The same static edge again: a republished value, or a conflicting one (recorded;
@@ -163,18 +167,45 @@ impl TfBuffer {
                     *first = source;
                 }
             }
-            // A new child, a child re-parented (the latest parent wins, as in tf2; recorded as
-            // two parents) or turned static or dynamic: the edge starts again.
+            // A static value of an edge that moves (the same parent): the moving one is kept,
+            // the static one named.
+            Some((parent, Edge::Dynamic(_, first), _)) if *parent == t.parent && is_static => {
+                let moving = first.clone();
+                self.note_static_and_moving(&t, source, moving);
+            }
+            // A moving edge that had a static value: the moving one replaces it, named.
+            Some((parent, Edge::Static(_, first), _)) if *parent == t.parent && !is_static => {
+                let statics = first.clone();
+                self.note_static_and_moving(&t, statics, source.clone());
+                let topic = source.topic.clone();
+                let edge = Edge::Dynamic(vec![sample], source);
+                self.edges.insert(t.child, (t.parent, edge, topic));
+            }
+            // A new child, or a child re-parented (the latest parent wins, as in tf2; recorded
+            // as two parents): the edge starts again.
             _ => {
                 let topic = source.topic.clone();
                 let edge = if is_static {
                     Edge::Static(t.parent_from_child, source)
                 } else {
-                    Edge::Dynamic(vec![sample])
+                    Edge::Dynamic(vec![sample], source)
                 };
                 self.edges.insert(t.child, (t.parent, edge, topic));
             }
         }
+    }
+
+    /// Notes (once per edge: the first static and moving messages) that `t`'s edge is given
+    /// both a static value, at `statics`, and moving ones, from `moving`.
+    fn note_static_and_moving(&mut self, t: &EdgeSample, statics: TfSource, moving: TfSource) {
+        self.static_and_moving
+            .entry(t.child.clone())
+            .or_insert_with(|| TfIssue::StaticAndMoving {
+                parent: t.parent.clone(),
+                child: t.child.clone(),
+                statics,
+                moving,
+            });
     }
 
     /// Sorts the samples and notes the stamps given two different transforms (the first value of
@@ -182,7 +213,7 @@ impl TfBuffer {
     pub fn finish(&mut self) {
         self.conflicts.clear();
         for (child, (parent, edge, topic)) in self.edges.iter_mut() {
-            let Edge::Dynamic(samples) = edge else {
+            let Edge::Dynamic(samples, _) = edge else {
                 continue;
             };
             // Stable: the first value received for a stamp stays first.
@@ -310,6 +341,7 @@ impl TfBuffer {
             }
         }
         issues.extend(self.static_conflicts.values().cloned());
+        issues.extend(self.static_and_moving.values().cloned());
         issues.extend(self.conflicts.iter().cloned());
         for ((topic, parent, child), b) in &self.back {
             if let Some((largest_ns, at, from_ns, to_ns)) = &b.largest {
@@ -417,7 +449,7 @@ impl TfBuffer {
         };
         let samples = match edge {
             Edge::Static(p, _) => return Ok(*p),
-            Edge::Dynamic(samples) => samples,
+            Edge::Dynamic(samples, _) => samples,
         };
         let gap = |side, nearest: String| TfError::Gap {
             parent: parent.clone(),

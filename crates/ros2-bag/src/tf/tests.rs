@@ -169,6 +169,50 @@ fn a_second_static_value_on_the_chain_is_refused_with_both_values() {
     );
 }
 
+/// One edge both static and moving, in either order of arrival: named with its first static
+/// and first moving message, a warning on the chain, and the pose is the moving one's.
+#[test]
+fn an_edge_both_static_and_moving_is_named_and_the_moving_one_used() {
+    let static_value = stamped(0, "base", "wrist", pose([0.8, 0.0, 0.0], 0.0));
+    let before = {
+        let mut tf = TfBuffer::default();
+        tf.add(static_value.clone(), true, from("/tf_static", 3));
+        let moving = arm();
+        for (child, (parent, edge, _)) in &moving.edges {
+            if let Edge::Dynamic(samples, _) = edge {
+                for (k, (stamp, p)) in samples.iter().enumerate() {
+                    let sample = stamped(*stamp, parent, child, *p);
+                    tf.add(sample, false, from("/tf", k));
+                }
+            } else if let Edge::Static(p, source) = edge {
+                tf.add(stamped(0, parent, child, *p), true, source.clone());
+            }
+        }
+        tf
+    };
+    let after = {
+        let mut tf = arm();
+        tf.add(static_value, true, from("/tf_static", 3));
+        tf
+    };
+    for mut tf in [before, after] {
+        tf.finish();
+        let w = tf.check("base", "tool0", 100_000_000).unwrap();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].issue.kind(), "edge both static and moving");
+        let said = w[0].to_string();
+        assert!(
+            w[0].on_chain
+                && said.contains("`base` → `wrist` is both static (`/tf_static` message 3)")
+                && said.contains("moving (`/tf` message 0 on)")
+                && said.contains("the moving transforms are used"),
+            "{said}"
+        );
+        let at = tf.lookup("base", "tool0", 5_000_000_000).unwrap();
+        assert!((at.translation.vector.x - 0.5).abs() < 1e-12, "{at:?}");
+    }
+}
+
 #[test]
 fn two_parents_and_loops_are_named_not_called_unconnected() {
     let mut tf = arm();
