@@ -11,7 +11,7 @@ use image::codecs::jpeg::JpegEncoder;
 use image::{Rgb, RgbImage};
 use nalgebra::Point2;
 
-use super::scale::area_average;
+use super::scale::box_shrink;
 use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
@@ -234,12 +234,12 @@ fn annotated_frame(
     let width = grey.width().clamp(1, FRAME_WIDTH);
     let scale = f64::from(width) / f64::from(grey.width().max(1));
     let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
-    // Area averaging (`scale`: a fraction of a filtered resize's time, which was a tenth of a bag
+    // A box filter (`scale`: a fraction of a filtered resize's time, which was a tenth of a bag
     // import's CPU); a frame already narrow enough is kept as it is.
     let small = if width == grey.width() {
         grey
     } else {
-        area_average(&grey, width, height)
+        box_shrink(&grey, width, height).map_err(frame_error)?
     };
     // Lines and crosses readable at full size and in the small grid alike.
     let stroke = if width >= 640 { 2 } else { 1 };

@@ -90,6 +90,7 @@ fn frames_over_the_size_bound_are_refused_naming_the_topic_before_anything_moves
 /// what is wrong, before anything moves: refused with its size when one came whole, else as
 /// a topic whose writer is there but whose frames do not come through, with the bound.
 #[test]
+#[ignore = "floods loopback DDS with 100 MB frames (handeye's DDS holds up to 1.3 GB of fragments): beside the other live tests on a 2-core machine their peers miss their deadlines; run alone with --ignored"]
 fn hundred_megabyte_frames_are_named_on_the_image_topic_not_the_action_server() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(200), move || {
@@ -115,6 +116,7 @@ fn hundred_megabyte_frames_are_named_on_the_image_topic_not_the_action_server() 
 /// peer's first goal answered after the shipped 10 s, which is not what this tests) and a frame
 /// 15 s to come (the peer writes one a second; best effort loses some of them whole).
 #[test]
+#[ignore = "floods loopback DDS with 12 MB frames from goal 4 on: beside the other live tests on a 2-core machine their peers miss their deadlines; run alone with --ignored"]
 fn frames_turning_huge_mid_run_are_refused_at_that_pose_and_resume_completes() {
     within(Duration::from_secs(400), || {
         fails_then_resumes_with(
