@@ -82,31 +82,45 @@ fn assert_read_back(peer_stdout: &[u8]) {
 
 /// `handeye publish` of `result_file()` on `domain` (loopback), once it says the message is out.
 fn start_publisher(domain: u16) -> Child {
+    let (publisher, printed) = publish_until_latched(
+        &result_file(),
+        domain,
+        &["--base-frame", "base_link", "--duration", "60"],
+    );
+    assert_eq!(printed.len(), 2, "{printed:?}");
+    publisher
+}
+
+/// `handeye publish` of `result` on `domain` (loopback) with `extra` arguments, started only
+/// once it says the message is out (a peer read then is a late joiner); the lines it printed
+/// until then. The rest of its output is drained, so the pipe stays open while it runs.
+fn publish_until_latched(
+    result: &std::path::Path,
+    domain: u16,
+    extra: &[&str],
+) -> (Child, Vec<String>) {
     let mut publisher = handeye()
-        .args(["publish"])
-        .arg(result_file())
+        .arg("publish")
+        .arg(result)
         .args([
             "--domain-id",
             &domain.to_string(),
             "--interface",
             "127.0.0.1",
         ])
-        .args(["--base-frame", "base_link", "--duration", "60"])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
         .expect("handeye publish");
-    // Started only once the message is out: the peer is a late joiner.
     let mut lines = BufReader::new(publisher.stdout.take().unwrap()).lines();
     let printed: Vec<String> = lines
         .by_ref()
         .map_while(Result::ok)
         .take_while(|l| !l.starts_with("latched"))
         .collect();
-    assert_eq!(printed.len(), 2, "{printed:?}");
-    // The rest of its output is drained, so the pipe stays open while it runs.
     std::thread::spawn(move || lines.for_each(drop));
-    publisher
+    (publisher, printed)
 }
 
 /// A several-camera result (#39) is published as one tree: every camera's mount and both boards
@@ -121,27 +135,8 @@ fn a_several_camera_result_is_published_as_one_tree() {
     let result_path = session.join("result.yaml");
     let result = crate::rig::read_result(session);
     within(std::time::Duration::from_secs(300), move || {
-        let mut publisher = handeye()
-            .arg("publish")
-            .arg(&result_path)
-            .args([
-                "--domain-id",
-                &domain.to_string(),
-                "--interface",
-                "127.0.0.1",
-            ])
-            .args(["--duration", "90"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("handeye publish");
-        let mut lines = BufReader::new(publisher.stdout.take().unwrap()).lines();
-        let printed: Vec<String> = lines
-            .by_ref()
-            .map_while(Result::ok)
-            .take_while(|l| !l.starts_with("latched"))
-            .collect();
-        std::thread::spawn(move || lines.for_each(drop));
+        let (mut publisher, printed) =
+            publish_until_latched(&result_path, domain, &["--duration", "90"]);
         // Three mounts and two boards.
         let mounts = result.cameras.iter().filter(|c| c.joint.is_some()).count();
         let expected = mounts + result.boards.len();

@@ -85,43 +85,31 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
         ..Figures::default()
     };
 
-    // Intrinsics that are not this camera's: everything else follows from them.
-    if let Some(notice) = c
-        .notices
-        .iter()
-        .find(|n| n.kind == NoticeKind::WrongIntrinsics)
-    {
-        let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
-            notice.message.as_str(),
-            "calibrate the camera, then solve again",
-        ));
-        findings.push(Finding {
-            level: Level::Redo,
-            basis: Basis::Intrinsics,
-            reason: reason.into(),
-            next_action: next.into(),
-        });
-    }
-
-    // The camera driver's own calibration differing from the file, the corners fitting the
-    // driver's better (or too few frames to tell): the file may be stale. CHECK, not REDO: the
-    // answer may still be within the accuracy; the wrong-intrinsics check above and the cell
-    // model below judge how far the file is off.
-    if let Some(notice) = c
-        .notices
-        .iter()
-        .find(|n| n.kind == NoticeKind::DriverCalibration && n.needs_attention())
-    {
-        let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
-            notice.message.as_str(),
-            "calibrate the camera, then solve again",
-        ));
-        findings.push(Finding {
-            level: Level::Check,
-            basis: Basis::Intrinsics,
-            reason: reason.into(),
-            next_action: next.into(),
-        });
+    // Intrinsics that are not this camera's: everything else follows from them (REDO). The
+    // camera driver's own calibration differing from the file, the corners fitting the
+    // driver's better (or too few frames to tell): the file may be stale (CHECK, not REDO: the
+    // answer may still be within the accuracy; the wrong-intrinsics check and the cell model
+    // below judge how far the file is off).
+    for (kind, level) in [
+        (NoticeKind::WrongIntrinsics, Level::Redo),
+        (NoticeKind::DriverCalibration, Level::Check),
+    ] {
+        if let Some(notice) = c
+            .notices
+            .iter()
+            .find(|n| n.kind == kind && n.needs_attention())
+        {
+            let (reason, next) = notice.message.split_once(super::NEXT_SEPARATOR).unwrap_or((
+                notice.message.as_str(),
+                "calibrate the camera, then solve again",
+            ));
+            findings.push(Finding {
+                level,
+                basis: Basis::Intrinsics,
+                reason: reason.into(),
+                next_action: next.into(),
+            });
+        }
     }
 
     // The cell model: which given file the corners contradict (a model choice); it explains the
