@@ -653,7 +653,16 @@ impl Robot for Ros2Arm {
         let asked = Instant::now();
         let flange = self.flange_after(asked, asked + self.options.timeout)?;
         if self.check_standing_flange(&flange)? {
-            self.check_flange_against_model(&flange)?;
+            if let Err(contradiction) = self.check_flange_against_model(&flange) {
+                // Once more with a flange pose heard after the first look (the joints are read
+                // fresh each time): a /tf and a /joint_states message of different instants (one
+                // delivered late on a loaded machine) contradict each other for a moment; a
+                // wrong chain or model does so every time.
+                let now = Instant::now();
+                let again = self.flange_after(now, now + self.options.timeout)?;
+                self.check_flange_against_model(&again)
+                    .map_err(|_| contradiction)?;
+            }
         }
         Ok(flange)
     }

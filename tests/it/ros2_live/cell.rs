@@ -191,6 +191,19 @@ impl Drop for Peer {
 pub(super) fn cell(dir: &Path, domain: u16, edits: &[(&str, &str)]) -> PathBuf {
     let mut all = vec![("domain_id: 42", format!("domain_id: {domain}"))];
     all.extend(edits.iter().map(|(a, b)| (*a, b.to_string())));
+    // 30 s for the peer to answer unless a test sets its own: two Python peers rendering frames
+    // beside two handeye runs on a 2-core machine were seen to answer a goal's result after the
+    // shipped 10 s (a move "not finished" although the peer had arrived), which is not what the
+    // tests assert. The shipped 10 s stays the default of the config.
+    if !edits
+        .iter()
+        .any(|(from, _)| from.contains("connect_timeout_s"))
+    {
+        all.push((
+            "connect_timeout_s: 10}",
+            "connect_timeout_s: 30}".to_string(),
+        ));
+    }
     let edits: Vec<(&str, &str)> = all.iter().map(|(a, b)| (*a, b.as_str())).collect();
     config_variant(dir, "ros2-sim-cell.yaml", "ros2-cell.yaml", &edits)
 }
