@@ -8,7 +8,6 @@ use clap::Args;
 use handeye::report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
 use handeye_core::camera_model::CameraModel;
 use handeye_session::cell;
-use handeye_session::config::SolveSpace;
 use handeye_session::result::ResultFile;
 use handeye_session::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use handeye_session::session::{self, replay, SessionFolder};
@@ -114,13 +113,21 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let mut solved = solve_replayed(
+    // Solved and judged as a run's solve is: the checks of the given files included.
+    let samples = if dataset.pairs.is_empty() {
+        Err(session::solve::no_samples(&folder, &visits))
+    } else {
+        Ok(dataset)
+    };
+    let (mut solved, dataset) = session::solve::solve_records(
         &folder,
-        &prepared,
-        &config_path,
-        &camera_model,
-        &dataset,
+        &folder.read_manifest()?,
+        samples,
         &visits,
+        &visits,
+        (&prepared.camera().board, &camera_model),
+        prepared.config.solver.space,
+        &prepared.config,
     )?;
     let output = args
         .output
@@ -176,93 +183,6 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         )
     );
     Ok(())
-}
-
-/// The replayed dataset solved and judged as a run's solve does: intrinsics that do not fit the
-/// frames named (their estimate written into the session), also when they let too few poses
-/// through, and the camera driver's calibration a ROS 2 run kept compared with the file.
-fn solve_replayed(
-    folder: &SessionFolder,
-    prepared: &cell::PreparedCell,
-    config_path: &std::path::Path,
-    camera_model: &CameraModel,
-    dataset: &handeye_session::dataset::Dataset,
-    visits: &[session::PoseVisit],
-) -> anyhow::Result<session::solve::SolvedSession> {
-    // Both answers (pose space and, by default, reprojection space) side by side.
-    let vision = (prepared.config.solver.space == SolveSpace::Reprojection)
-        .then_some((&prepared.camera().board, camera_model));
-    // Intrinsics that do not fit the frames are named here as in a run (the estimate written
-    // into the session), also when they made every pose fail.
-    let wrong = if prepared.camera().intrinsics_known {
-        session::solve::check_intrinsics(
-            folder,
-            dataset.setup,
-            visits,
-            &prepared.camera().board,
-            camera_model,
-            &prepared.config,
-        )?
-    } else {
-        None
-    };
-    let intrinsics_file = prepared
-        .config
-        .camera()
-        .intrinsics
-        .clone()
-        .unwrap_or_default();
-    // The camera driver's own calibration a ROS 2 run kept, against the config's file.
-    let driver = session::solve::driver_calibration_notice(
-        folder,
-        &prepared.config,
-        camera_model,
-        visits,
-        &prepared.camera().board,
-    );
-    if let (Some(w), true) = (&wrong, dataset.pairs.is_empty()) {
-        let (reason, next) = session::solve::with_driver_calibration(
-            w.reason(&intrinsics_file),
-            w.next_action(folder.root(), config_path),
-            driver.as_ref(),
-        );
-        anyhow::bail!(
-            "every pose of {} was rejected: {reason}\nnext: {next}",
-            folder.root().display(),
-        );
-    }
-    let notices = wrong
-        .iter()
-        .map(|w| w.notice(&intrinsics_file, folder.root(), config_path))
-        .chain(driver.clone())
-        .collect();
-    let solved = session::solve::solve_with_arm(
-        dataset,
-        visits,
-        &folder.read_manifest()?.plan,
-        vision,
-        &prepared.config,
-        notices,
-    );
-    let solved = match (solved, &wrong) {
-        // The few poses the intrinsics let through could not be solved: the intrinsics are the
-        // cause to name, as a run's solve does.
-        (Err(session::SessionError::Solve { source, .. }), Some(w)) => {
-            return Err(w
-                .few_samples_error(
-                    folder.root(),
-                    &intrinsics_file,
-                    config_path,
-                    dataset.pairs.len(),
-                    visits.len(),
-                    source.to_string(),
-                    driver.as_ref(),
-                )
-                .into())
-        }
-        (solved, _) => solved?,
-    };
-    Ok(solved)
 }
 
 /// How far the replayed answer is from the one the run recorded (when it recorded one).

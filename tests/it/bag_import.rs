@@ -121,6 +121,13 @@ struct StopAndGo {
     travel: f64,
 }
 
+impl StopAndGo {
+    /// Whether the arm stands at `t` (s): the frames worth rendering.
+    fn standing(&self, t: f64) -> bool {
+        t % (self.stay + self.travel) <= self.stay + 1e-9
+    }
+}
+
 impl Trajectory for StopAndGo {
     fn at(&self, t: f64) -> Pose {
         let period = self.stay + self.travel;
@@ -451,9 +458,8 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
         stay: 0.8,
         travel: 0.7,
     };
-    let period = trajectory.stay + trajectory.travel;
     // Frames while moving are blank: taking one would lose a view (checked below).
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag(
         dir.path(),
         "stop-and-go",
@@ -585,8 +591,7 @@ fn the_library_imports_a_bag_into_a_solved_session() {
         stay: 0.8,
         travel: 0.7,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag(
         dir.path(),
         "library",
@@ -711,8 +716,7 @@ fn without_camera_info_the_intrinsics_are_estimated() {
         stay: 0.6,
         travel: 0.6,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag(
         dir.path(),
         "no-info",

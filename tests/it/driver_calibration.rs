@@ -131,7 +131,7 @@ fn a_file_that_differs_from_the_drivers_calibration_is_a_finding_whichever_lens_
             }
             Err(refused) => {
                 assert!(
-                    refused.contains("every pose")
+                    refused.contains("every one rejected")
                         || refused.contains("that its intrinsics let through"),
                     "{refused}"
                 );

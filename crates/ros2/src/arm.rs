@@ -652,19 +652,23 @@ impl Robot for Ros2Arm {
         // A /tf message heard after this call: the pose of the arm as it stands now.
         let asked = Instant::now();
         let flange = self.flange_after(asked, asked + self.options.timeout)?;
-        if self.check_standing_flange(&flange)? {
-            if let Err(contradiction) = self.check_flange_against_model(&flange) {
-                // Once more with a flange pose heard after the first look (the joints are read
-                // fresh each time): a /tf and a /joint_states message of different instants (one
-                // delivered late on a loaded machine) contradict each other for a moment; a
-                // wrong chain or model does so every time.
+        if !self.check_standing_flange(&flange)? {
+            return Ok(flange);
+        }
+        match self.check_flange_against_model(&flange) {
+            Ok(()) => Ok(flange),
+            // Once more with a flange pose heard after the first look (the joints are read fresh
+            // each time): a /tf and a /joint_states message of different instants (one delivered
+            // late on a loaded machine) contradict each other for a moment, and the pose that
+            // agrees is the one kept; a wrong chain or model contradicts every time.
+            Err(contradiction) => {
                 let now = Instant::now();
                 let again = self.flange_after(now, now + self.options.timeout)?;
                 self.check_flange_against_model(&again)
                     .map_err(|_| contradiction)?;
+                Ok(again)
             }
         }
-        Ok(flange)
     }
 
     fn joint_positions(&mut self) -> Result<Joints, RobotError> {

@@ -97,10 +97,7 @@ pub fn raw_lies(raw: &Image) -> Vec<ImageLie> {
             rows,
         });
     }
-    let single_bytes = matches!(
-        raw.encoding.as_str(),
-        "mono8" | "8UC1" | "8UC3" | "8UC4" | "rgb8" | "bgr8" | "rgba8" | "bgra8"
-    ) || (raw.encoding.starts_with("bayer_") && raw.encoding.ends_with('8'));
+    let single_bytes = layout(&raw.encoding).is_some_and(|l| l.channel_bytes == 1);
     if raw.is_bigendian != 0 && single_bytes {
         lies.push(ImageLie::BigEndianOnBytes {
             encoding: raw.encoding.clone(),
@@ -109,20 +106,43 @@ pub fn raw_lies(raw: &Image) -> Vec<ImageLie> {
     lies
 }
 
+/// How a raw encoding lays out a pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Layout {
+    /// Bytes a pixel.
+    pixel_bytes: usize,
+    /// Bytes a channel (where byte order matters above 1).
+    channel_bytes: usize,
+}
+
+/// The layout of the raw encodings handeye reads; `None` for another.
+fn layout(encoding: &str) -> Option<Layout> {
+    let (pixel_bytes, channel_bytes) = match encoding {
+        "mono8" | "8UC1" => (1, 1),
+        "mono16" | "16UC1" => (2, 2),
+        "rgb8" | "bgr8" => (3, 1),
+        "rgba8" | "bgra8" => (4, 1),
+        e if e.starts_with("bayer_") && e.ends_with('8') => (1, 1),
+        _ => return None,
+    };
+    Some(Layout {
+        pixel_bytes,
+        channel_bytes,
+    })
+}
+
 /// A raw image as 8-bit grey.
 pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
-    let bytes_per_pixel = match raw.encoding.as_str() {
-        "mono8" | "8UC1" => 1,
-        "mono16" | "16UC1" => 2,
-        "rgb8" | "bgr8" => 3,
-        "rgba8" | "bgra8" => 4,
-        e if e.starts_with("bayer_") && e.ends_with('8') => 1,
-        other => {
-            return Err(format!(
-                "image encoding `{other}` is not supported (mono8, mono16, rgb8, bgr8, rgba8, bgra8, bayer_*8)"
-            ))
-        }
+    let Some(Layout {
+        pixel_bytes: bytes_per_pixel,
+        ..
+    }) = layout(&raw.encoding)
+    else {
+        return Err(format!(
+            "image encoding `{}` is not supported (mono8, mono16, rgb8, bgr8, rgba8, bgra8, bayer_*8)",
+            raw.encoding
+        ));
     };
     let step = raw.step as usize;
     if w == 0

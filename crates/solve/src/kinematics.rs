@@ -143,8 +143,10 @@ pub struct ArmFit {
     pub samples: usize,
 }
 
-/// The 99 % quantile of χ² with 1, 2, … 6 degrees of freedom (a UR's six offsets at most).
-const CHI2_99: [f64; 6] = [6.635, 9.210, 11.345, 13.277, 15.086, 16.812];
+/// The 99 % quantile of χ² with 1, 2, … 10 degrees of freedom (an arm's joint offsets).
+const CHI2_99: [f64; 10] = [
+    6.635, 9.210, 11.345, 13.277, 15.086, 16.812, 18.475, 20.090, 21.666, 23.209,
+];
 
 impl ArmFit {
     /// Offsets estimated (neither absorbed nor undetermined).
@@ -162,11 +164,17 @@ impl ArmFit {
     /// ~21 of four offsets at 30 poses and let eye-to-hand cells whose offsets cost 0.4–0.9 mm
     /// go without; noise alone passes this test once in a hundred cells.)
     pub fn model_choice_margin(&self) -> f64 {
-        let k = self.estimated();
-        if k == 0 {
-            return f64::NEG_INFINITY;
-        }
-        self.chi2[1] - self.chi2[0] - CHI2_99[(k - 1).min(CHI2_99.len() - 1)]
+        self.chi2[1] - self.chi2[0] - self.model_choice_threshold()
+    }
+
+    /// How much `k` free numbers lower χ² by noise alone in 99 % of cells, `χ²(k; 0.99)`;
+    /// infinite (the data never choose) with no offset estimated or more than the table holds.
+    pub fn model_choice_threshold(&self) -> f64 {
+        self.estimated()
+            .checked_sub(1)
+            .and_then(|k| CHI2_99.get(k))
+            .copied()
+            .unwrap_or(f64::INFINITY)
     }
 
     /// The offsets as a vector (rad, zero where not estimated), for [`DhChain::forward`].

@@ -290,8 +290,7 @@ fn issue25_small_lies_are_imported_with_named_warnings() {
         stay: 0.8,
         travel: 0.7,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag_edited(
         dir.path(),
         "small-lies",

@@ -49,8 +49,7 @@ fn limit_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
         stay: 0.6,
         travel: 0.4,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     make_bag(
         dir,
         &format!("limits-{storage}"),

@@ -20,8 +20,7 @@ fn stop_and_go_bag(
         stay: 0.6,
         travel,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     let name = format!("stream-{storage}");
     make_bag_edited(
         dir,
@@ -173,8 +172,7 @@ fn write_measurement_bags() {
             stay: 1.55,
             travel,
         };
-        let period = trajectory.stay + trajectory.travel;
-        let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+        let standing = |t: f64| trajectory.standing(t);
         let Some(bag) = make_bag_with_camera(
             &out,
             name,

@@ -20,8 +20,7 @@ fn tolerated_bag(
         stay: 0.6,
         travel: 0.6,
     };
-    let period = trajectory.stay + trajectory.travel;
-    let standing = |t: f64| t % period <= trajectory.stay + 1e-9;
+    let standing = |t: f64| trajectory.standing(t);
     make_bag_edited(
         dir,
         name,

@@ -26,10 +26,23 @@ fn a_late_joiner_reads_the_published_calibration_from_tf_static() {
 
 /// `handeye publish` on `domain`; once the message is out, `peer` (a peer's command line up to
 /// its subcommand) joins late with `tf-static` and must read the calibration back to 1e-9.
-pub(super) fn late_joiner_reads_back(domain: u16, mut peer: Command) {
-    let mut publisher = start_publisher(domain);
+pub(super) fn late_joiner_reads_back(domain: u16, peer: Command) {
+    let publisher = start_publisher(domain);
+    assert_read_back(&read_while_published(peer, publisher, 2, 30));
+}
+
+/// What `peer` (a peer's command line up to its subcommand) reads of `/tf_static` as a late
+/// joiner (`tf-static`, waiting up to `timeout_s` for `expect` transforms) while `publisher`
+/// runs; the publisher is stopped after. The peer's JSON.
+fn read_while_published(
+    mut peer: Command,
+    mut publisher: Child,
+    expect: usize,
+    timeout_s: u32,
+) -> Vec<u8> {
     let out = peer
-        .args(["tf-static", "--expect", "2", "--timeout", "30"])
+        .args(["tf-static", "--expect", &expect.to_string()])
+        .args(["--timeout", &timeout_s.to_string()])
         .output()
         .expect("the peer runs");
     let _ = publisher.kill();
@@ -39,7 +52,7 @@ pub(super) fn late_joiner_reads_back(domain: u16, mut peer: Command) {
         "peer: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert_read_back(&out.stdout);
+    out.stdout
 }
 
 /// A peer's JSON read of `/tf_static` (`{"transforms": [{parent, child, translation,
@@ -135,30 +148,14 @@ fn a_several_camera_result_is_published_as_one_tree() {
     let result_path = session.join("result.yaml");
     let result = crate::rig::read_result(session);
     within(std::time::Duration::from_secs(300), move || {
-        let (mut publisher, printed) =
+        let (publisher, printed) =
             publish_until_latched(&result_path, domain, &["--duration", "90"]);
         // Three mounts and two boards.
         let mounts = result.cameras.iter().filter(|c| c.joint.is_some()).count();
         let expected = mounts + result.boards.len();
         assert_eq!((mounts, expected), (3, 5), "{printed:?}");
-        let out = peer(&python, domain)
-            .args([
-                "tf-static",
-                "--expect",
-                &expected.to_string(),
-                "--timeout",
-                "60",
-            ])
-            .output()
-            .expect("the peer runs");
-        let _ = publisher.kill();
-        let _ = publisher.wait();
-        assert!(
-            out.status.success(),
-            "peer: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let read: serde_json::Value = serde_json::from_slice(&out.stdout).expect("peer JSON");
+        let out = read_while_published(peer(&python, domain), publisher, expected, 60);
+        let read: serde_json::Value = serde_json::from_slice(&out).expect("peer JSON");
         let got = read["transforms"].as_array().unwrap();
         assert_eq!(got.len(), expected, "{read}");
         let f = |v: &serde_json::Value, i: usize| v.as_array().unwrap()[i].as_f64().unwrap();

@@ -345,6 +345,27 @@ pub const FLANGE_CAMERA_JOINT_RANGES_DEG: [[f64; 2]; 6] = [
     [-180.0, 180.0],
 ];
 
+/// Why the arm's own model cannot be estimated for a cell of `robot` with the camera's
+/// `intrinsics` (`solver.kinematics`); `None` when it can. `joint_offsets` is refused for it
+/// when the config is read, `auto` keeps the published model.
+pub fn arm_model_unavailable(
+    robot: &RobotConfig,
+    intrinsics: Option<&std::path::Path>,
+) -> Option<&'static str> {
+    let modelled = match robot {
+        RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => true,
+        RobotConfig::Ros2(r) => r.model.is_some(),
+        RobotConfig::Recorded { .. } => false,
+    };
+    if !modelled {
+        return Some("the arm's published model and each pose's joints: a sim, ur or ros2 arm with `robot.model`");
+    }
+    if intrinsics.is_none() {
+        return Some("the camera's `intrinsics`: a run that estimates them does not estimate the arm's model yet");
+    }
+    None
+}
+
 impl RobotConfig {
     /// The joint ranges in force, `[min, max]` degrees, base joint first: the config's
     /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real

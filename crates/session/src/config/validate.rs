@@ -714,22 +714,15 @@ impl Validator<'_> {
             self.number("solver.translation_sigma_mm", sigma, TRANSLATION_SIGMA_MM)?;
         }
         self.number("solver.pixel_sigma_px", s.pixel_sigma_px, PIXEL_SIGMA_PX)?;
-        let modelled = match &raw.robot {
-            RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => true,
-            RobotConfig::Ros2(r) => r.model.is_some(),
-            RobotConfig::Recorded { .. } => false,
-        };
-        if s.kinematics == Some(KinematicsChoice::JointOffsets) && !modelled {
-            return Err(self.inconsistent(
-                "solver.kinematics",
-                "`joint_offsets` needs the arm's published model and each pose's joints: a sim, ur or ros2 arm with `robot.model`".into(),
-            ));
-        }
-        if s.kinematics == Some(KinematicsChoice::JointOffsets) && raw.intrinsics.is_none() {
-            return Err(self.inconsistent(
-                "solver.kinematics",
-                "`joint_offsets` needs the camera's `intrinsics`: a run that estimates them does not estimate the arm's model yet".into(),
-            ));
+        if s.kinematics == Some(KinematicsChoice::JointOffsets) {
+            if let Some(needs) =
+                super::schema::arm_model_unavailable(&raw.robot, raw.intrinsics.as_deref())
+            {
+                return Err(self.inconsistent(
+                    "solver.kinematics",
+                    format!("`joint_offsets` needs {needs}"),
+                ));
+            }
         }
         if s.kinematics == Some(KinematicsChoice::Dh) {
             return Err(self.inconsistent(

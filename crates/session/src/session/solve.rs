@@ -252,80 +252,90 @@ fn solve_loaded(
     for visit in &visits {
         visit.check_corners_on_board(&folder.visit_path(visit.plan_index), &inputs.board)?;
     }
-    // Intrinsics that are not this camera's: named with the numbers (and the estimate written
-    // into the session), also when they made every pose fail.
     let manifest = folder.read_manifest()?;
-    let setup = manifest.setup;
     // With the rejected records an adaptive or hand-guided plan kept aside (their index reused).
     let mut seen = visits.clone();
     seen.extend(folder.read_rejected_visits()?);
-    let wrong = check_intrinsics(folder, setup, &seen, &inputs.board, camera, config)?;
-    let intrinsics_file = config.camera().intrinsics.clone().unwrap_or_default();
-    let dataset = match committed_samples(folder, &visits) {
-        Err(SessionError::NoSamples {
-            folder: root,
-            visited,
-            reasons,
-        }) => {
-            return Err(match &wrong {
-                Some(w) => {
-                    let driver =
-                        driver_calibration_notice(folder, config, camera, &seen, &inputs.board);
-                    let (reason, next) = with_driver_calibration(
-                        w.reason(&intrinsics_file),
-                        w.next_action(&root, &config.file),
-                        driver.as_ref(),
-                    );
-                    SessionError::WrongIntrinsics {
-                        visited: visited.max(seen.len()),
-                        first: reasons.split("; ").next().unwrap_or_default().to_string(),
-                        reason,
-                        next,
-                        folder: root,
-                    }
-                }
-                None => SessionError::NoSamples {
-                    folder: root,
-                    visited,
-                    reasons,
-                },
-            })
-        }
-        other => other?,
-    };
-    let vision = (space == SolveSpace::Reprojection).then_some((&inputs.board, camera));
-    let mut notices: Vec<_> = wrong
-        .iter()
-        .map(|w| {
-            w.notice(
-                &folder.shown(&intrinsics_file),
-                folder.shown_root(),
-                &folder.shown(&config.file),
-            )
-        })
-        .collect();
+    let samples = committed_samples(folder, &visits);
+    let (mut solved, dataset) = solve_records(
+        folder,
+        &manifest,
+        samples,
+        &visits,
+        &seen,
+        (&inputs.board, camera),
+        space,
+        config,
+    )?;
+    let written = write_corrected_files(folder.root(), &solved, config)?;
+    // Named where a person finds them (an import's staging folder is renamed into place).
+    let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
+    record_written(&mut solved, &shown);
+    Ok((solved, dataset))
+}
+
+/// A session's records solved and judged with the checks of its given files, as every solve of
+/// a session makes them — a run's (its committed records) and a replay's (its frames detected
+/// again): intrinsics that do not fit the frames `seen` are named (their estimate written into
+/// the session), also when they rejected every pose (`samples` is then the error saying so) or
+/// let too few through to solve; the camera driver's calibration a ROS 2 run kept is compared
+/// with the intrinsics file; then [`solve_with_arm`].
+#[allow(clippy::too_many_arguments)]
+pub fn solve_records(
+    folder: &SessionFolder,
+    manifest: &super::SessionManifest,
+    samples: Result<Dataset, SessionError>,
+    visits: &[PoseVisit],
+    seen: &[PoseVisit],
+    (board, camera): (&Target, &CameraModel),
+    space: SolveSpace,
+    config: &CellConfig,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let wrong = check_intrinsics(folder, manifest.setup, seen, board, camera, config)?;
+    let intrinsics_file = folder.shown(&config.camera().intrinsics.clone().unwrap_or_default());
+    let config_file = folder.shown(&config.file);
     // A ROS 2 driver's own calibration, kept by the run, against the config's file: a finding
     // of the verdict, so it goes in before the solve judges.
-    notices.extend(driver_calibration_notice(
-        folder,
-        config,
-        camera,
-        &seen,
-        &inputs.board,
-    ));
-    let driver = notices
+    let driver = driver_calibration_notice(folder, config, camera, seen, board);
+    let dataset = match (samples, &wrong) {
+        (
+            Err(SessionError::NoSamples {
+                folder: root,
+                visited,
+                reasons,
+            }),
+            Some(w),
+        ) => {
+            let (reason, next) = with_driver_calibration(
+                w.reason(&intrinsics_file),
+                w.next_action(&root, &config_file),
+                driver.as_ref(),
+            );
+            return Err(SessionError::WrongIntrinsics {
+                visited: visited.max(seen.len()),
+                first: reasons.split("; ").next().unwrap_or_default().to_string(),
+                reason,
+                next,
+                folder: root,
+            });
+        }
+        (samples, _) => samples?,
+    };
+    let vision = (space == SolveSpace::Reprojection).then_some((board, camera));
+    let notices = wrong
         .iter()
-        .find(|n| n.kind == NoticeKind::DriverCalibration)
-        .cloned();
-    let solved = solve_with_arm(&dataset, &visits, &manifest.plan, vision, config, notices);
-    let mut solved = match (solved, &wrong) {
+        .map(|w| w.notice(&intrinsics_file, folder.shown_root(), &config_file))
+        .chain(driver.clone())
+        .collect();
+    let solved = solve_with_arm(&dataset, visits, &manifest.plan, vision, config, notices);
+    let solved = match (solved, &wrong) {
         // The few poses the intrinsics let through could not be solved: the intrinsics are
         // the cause to name (an adaptive plan that kept 2 of 60 poses).
         (Err(SessionError::Solve { source, .. }), Some(w)) => {
             return Err(w.few_samples_error(
-                folder.root(),
+                folder.shown_root(),
                 &intrinsics_file,
-                &config.file,
+                &config_file,
                 dataset.pairs.len(),
                 seen.len(),
                 source.to_string(),
@@ -334,11 +344,33 @@ fn solve_loaded(
         }
         (solved, _) => solved?,
     };
-    let written = write_corrected_files(folder.root(), &solved, config)?;
-    // Named where a person finds them (an import's staging folder is renamed into place).
-    let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
-    record_written(&mut solved, &shown);
     Ok((solved, dataset))
+}
+
+/// The error of `folder`'s `visits` none of which gave a sample, with the first rejections.
+pub fn no_samples(folder: &SessionFolder, visits: &[PoseVisit]) -> SessionError {
+    let reasons = visits
+        .iter()
+        .take(3)
+        .map(|v| {
+            format!(
+                "pose {}: {}",
+                v.plan_index,
+                v.rejected.as_deref().unwrap_or("no board pose")
+            )
+        })
+        .chain((visits.len() > 3).then(|| "...".to_string()))
+        .collect::<Vec<_>>()
+        .join("; ");
+    SessionError::NoSamples {
+        folder: folder.root().to_path_buf(),
+        visited: visits.len(),
+        reasons: if reasons.is_empty() {
+            "no pose was visited".into()
+        } else {
+            reasons
+        },
+    }
 }
 
 /// `dataset` (its `visits`, taken at the poses of `plan`) solved with the arm's own model as
@@ -396,21 +428,30 @@ pub fn solve_with_arm(
     Ok(with_arm)
 }
 
-/// What of the given files or conventions `solved`'s verdict finds contradicted (a lens, a
-/// board's size, both, a convention), in words; `None` when nothing is.
+/// What of the given files or conventions `solved` finds contradicted (a lens, a board's size,
+/// both, a convention), in words: the cell model's choice (also where its correction is
+/// immaterial at the accuracy asked), the verdict's leading finding, its further ones; `None`
+/// when nothing is.
 fn contradicted_files(solved: &SolvedSession) -> Option<&'static str> {
     use handeye_solve::verdict::{Basis, Level};
-    // The corners' own choice, also where the correction is immaterial at the accuracy asked.
-    match solved.cell_model.as_ref().map(|m| m.summary.chosen) {
-        Some(Explanation::Intrinsics) => return Some("the intrinsics"),
-        Some(Explanation::BoardScale) => return Some("the board's size"),
-        Some(Explanation::IntrinsicsAndBoard) => return Some("the intrinsics and the board"),
-        _ => {}
-    }
-    let verdict = solved.verdict.as_ref()?;
-    let lead = (verdict.level > Level::Good).then_some(verdict.basis);
-    lead.into_iter()
-        .chain(verdict.also.iter().map(|f| f.basis))
+    let from_corners = solved
+        .cell_model
+        .as_ref()
+        .and_then(|m| match m.summary.chosen {
+            Explanation::AsGiven => None,
+            Explanation::Intrinsics => Some(Basis::Intrinsics),
+            Explanation::BoardScale => Some(Basis::BoardScale),
+            Explanation::IntrinsicsAndBoard => Some(Basis::IntrinsicsAndBoard),
+        });
+    let verdict = solved.verdict.as_ref();
+    let lead = verdict.filter(|v| v.level > Level::Good).map(|v| v.basis);
+    let also = verdict
+        .into_iter()
+        .flat_map(|v| v.also.iter().map(|f| f.basis));
+    from_corners
+        .into_iter()
+        .chain(lead)
+        .chain(also)
         .find_map(|basis| match basis {
             Basis::Intrinsics => Some("the intrinsics"),
             Basis::BoardScale => Some("the board's size"),
@@ -440,28 +481,7 @@ fn committed_samples(
         });
     }
     if accepted.is_empty() {
-        let reasons = visits
-            .iter()
-            .take(3)
-            .map(|v| {
-                format!(
-                    "pose {}: {}",
-                    v.plan_index,
-                    v.rejected.as_deref().unwrap_or("no board pose")
-                )
-            })
-            .chain((visits.len() > 3).then(|| "...".to_string()))
-            .collect::<Vec<_>>()
-            .join("; ");
-        return Err(SessionError::NoSamples {
-            folder: folder.root().to_path_buf(),
-            visited: visits.len(),
-            reasons: if reasons.is_empty() {
-                "no pose was visited".into()
-            } else {
-                reasons
-            },
-        });
+        return Err(no_samples(folder, visits));
     }
     let path = folder.samples_path();
     if folder.live_run().is_some() {
@@ -1014,11 +1034,17 @@ pub(crate) fn board_pose(
     camera: &CameraModel,
     correspondences: &[(nalgebra::Point3<f64>, nalgebra::Point2<f64>)],
 ) -> Option<handeye_core::geometry::Pose> {
+    board_fit(camera, correspondences).map(|p| p.camera_from_target)
+}
+
+/// [`board_pose`] with its fit (the corners' reprojection RMS).
+pub(crate) fn board_fit(
+    camera: &CameraModel,
+    correspondences: &[(nalgebra::Point3<f64>, nalgebra::Point2<f64>)],
+) -> Option<handeye_vision::pnp::BoardPose> {
     // More than one tag: a board, never the lone-tag ambiguity check (four corners a tag).
     let tags = (correspondences.len() / 4).max(2);
-    handeye_vision::pnp::estimate_pose_from_points(camera, correspondences, tags)
-        .ok()
-        .map(|p| p.camera_from_target)
+    handeye_vision::pnp::estimate_pose_from_points(camera, correspondences, tags).ok()
 }
 
 /// Writes the estimates of the files the cell model blames into the session folder `root`

@@ -170,10 +170,10 @@ pub struct RigResiduals {
 pub struct PoseResidual {
     /// The pose (index into [`RigData::base_from_flange`]).
     pub pose: usize,
-    /// Rotation residual, degrees.
-    pub rotation_deg: f64,
-    /// Translation residual, mm.
-    pub translation_mm: f64,
+    /// Rotation residual, rad.
+    pub rotation_rad: f64,
+    /// Translation residual, m.
+    pub translation_m: f64,
 }
 
 /// The joint answer.
@@ -485,8 +485,8 @@ fn residual_figures(data: &RigData, layout: &Layout, state: &State) -> Vec<Vec<P
         );
         per_camera[o.camera].push(PoseResidual {
             pose: o.pose,
-            rotation_deg: r.fixed_rows::<3>(0).norm().to_degrees(),
-            translation_mm: r.fixed_rows::<3>(3).norm() * 1e3,
+            rotation_rad: r.fixed_rows::<3>(0).norm(),
+            translation_m: r.fixed_rows::<3>(3).norm(),
         });
     }
     per_camera
@@ -568,15 +568,8 @@ pub fn solve_rig(
                 .into_iter()
                 .enumerate()
             {
-                // Sums of squares in radians and metres.
-                let rot: f64 = per_pose
-                    .iter()
-                    .map(|r| r.rotation_deg.to_radians().powi(2))
-                    .sum();
-                let trans: f64 = per_pose
-                    .iter()
-                    .map(|r| (r.translation_mm * 1e-3).powi(2))
-                    .sum();
+                let rot: f64 = per_pose.iter().map(|r| r.rotation_rad.powi(2)).sum();
+                let trans: f64 = per_pose.iter().map(|r| r.translation_m.powi(2)).sum();
                 let dof = (3.0 * per_pose.len() as f64 * redundancy).max(1.0);
                 noise[c] = NoiseModel {
                     rotation_sigma_rad: (rot / dof).sqrt().max(1e-7),
@@ -628,8 +621,8 @@ fn finish(
             };
             RigResiduals {
                 samples: per_pose.len(),
-                rotation_rms_deg: rms(|r| r.rotation_deg),
-                translation_rms_mm: rms(|r| r.translation_mm),
+                rotation_rms_deg: rms(|r| r.rotation_rad).to_degrees(),
+                translation_rms_mm: rms(|r| r.translation_m) * 1e3,
                 per_pose,
             }
         })

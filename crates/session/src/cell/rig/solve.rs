@@ -147,8 +147,8 @@ fn per_pose_residuals(sample_poses: &[usize], joint: &[PoseResidual]) -> Vec<Sam
             SampleResidualYaml {
                 index: pose,
                 id: None,
-                rotation_deg: r.map(|r| r.rotation_deg),
-                translation_mm: r.map(|r| r.translation_mm),
+                rotation_deg: r.map(|r| r.rotation_rad.to_degrees()),
+                translation_mm: r.map(|r| r.translation_m * 1e3),
                 normalised: None,
                 outlier: false,
                 dropped: r.is_none(),

@@ -256,9 +256,8 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
     let frame_name = SessionFolder::frame_name(job.plan_index);
     // A recorded grey PNG (an image folder, a bag's imported frames) is stored as it was read:
     // the same pixels, not encoded a second time.
-    let encoded;
-    let png = match &job.frame.png {
-        Some(png) => png,
+    let png: std::borrow::Cow<[u8]> = match &job.frame.png {
+        Some(png) => png.into(),
         None => {
             let mut png = Vec::new();
             job.frame
@@ -268,11 +267,10 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
                     path: frame_name.clone(),
                     source: Box::new(source),
                 })?;
-            encoded = png;
-            &encoded
+            png.into()
         }
     };
-    folder.write_file(&frame_name, png)?;
+    folder.write_file(&frame_name, &png)?;
     fault.abort_at("abort-after-frame", job.plan_index);
 
     let visit = measure(

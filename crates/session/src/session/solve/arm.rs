@@ -16,7 +16,8 @@ use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
 use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, DhChain, OffsetStatus};
 use handeye_solve::{self as solve, SolveError};
 
-use crate::config::{CellConfig, KinematicsChoice, RobotConfig};
+use crate::config::schema::arm_model_unavailable;
+use crate::config::{CellConfig, KinematicsChoice};
 use crate::result::{JointOffsetYaml, KinematicsYaml, UncertaintyYaml, WithWithout};
 use crate::session::{PlannedPose, PoseVisit, SessionError};
 
@@ -79,8 +80,8 @@ pub fn estimate_arm(
         // `joint_offsets` there).
         KinematicsChoice::Auto
             if model.is_some()
-                && !matches!(config.robot, RobotConfig::Recorded { .. })
-                && config.camera().intrinsics.is_some()
+                && arm_model_unavailable(&config.robot, config.camera().intrinsics.as_deref())
+                    .is_none()
                 && pairs.iter().all(|p| {
                     visits
                         .iter()
@@ -104,7 +105,7 @@ pub fn estimate_arm(
         fit.chi2[0],
         fit.chi2[1],
         if gain > 0.0 { "more" } else { "no more" },
-        fit.chi2[1] - fit.chi2[0] - gain
+        fit.model_choice_threshold()
     );
     if gain > 0.0 {
         let notice = Notice::info(

@@ -10,13 +10,13 @@ use handeye_core::notice::{Notice, NoticeKind};
 use handeye_solve::verdict::NEXT_SEPARATOR;
 use handeye_vision::Target;
 
-use super::board_pose;
+use super::board_fit;
 use super::intrinsics_check::{
-    differing_distortion, differing_parameters, median, ray_displacement_px,
-    DISTORTION_TOLERANCE_PX,
+    differing_distortion, differing_parameters, ray_displacement_px, DISTORTION_TOLERANCE_PX,
 };
 use crate::config::CellConfig;
 use crate::session::{PoseVisit, SessionFolder};
+use handeye_solve::diagnostics::median;
 
 /// The file in a session folder that keeps the calibration a ROS 2 camera driver published on
 /// its camera_info topic.
@@ -142,18 +142,9 @@ fn median_fit(lens: &CameraModel, visits: &[PoseVisit], board: &Target) -> Optio
                 .iter()
                 .filter_map(|c| board.observation_point(c).map(|p| (p, c.pixel)))
                 .collect();
-            let pose = board_pose(lens, &points)?;
-            let squares: Vec<f64> = points
-                .iter()
-                .filter_map(|(p, px)| lens.project(&(pose * p)).map(|q| (q - px).norm_squared()))
-                .collect();
-            (!squares.is_empty())
-                .then(|| (squares.iter().sum::<f64>() / squares.len() as f64).sqrt())
+            board_fit(lens, &points).map(|fit| fit.rms_px)
         })
         .collect();
     // Three frames at least to judge by.
-    if values.len() < 3 {
-        return None;
-    }
-    median(values)
+    (values.len() >= 3).then(|| median(&values))
 }

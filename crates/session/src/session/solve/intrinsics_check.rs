@@ -214,29 +214,14 @@ fn describe_distortion(lens: &CameraModel) -> String {
     format!("[{}]", list.join(", "))
 }
 
-/// The median of `values`; `None` without any.
-pub(super) fn median(mut values: Vec<f64>) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    })
-}
-
 /// The median of the visits' board reprojection RMS (rejected visits too), px; `None` without
 /// any.
 fn median_board_rms(visits: &[PoseVisit]) -> Option<f64> {
-    median(
-        visits
-            .iter()
-            .filter_map(|v| v.reprojection_rms_px)
-            .collect(),
-    )
+    let values: Vec<f64> = visits
+        .iter()
+        .filter_map(|v| v.reprojection_rms_px)
+        .collect();
+    (!values.is_empty()).then(|| handeye_solve::diagnostics::median(&values))
 }
 
 /// Checks the file's intrinsics against the session's frames: when the median board RMS is
