@@ -39,9 +39,9 @@ use rand::SeedableRng;
 use handeye_camera::render::{render_with_rays, PixelRays, RenderOptions};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_plan::lookat::LookAt;
 use handeye_ros2::msg::{CameraInfo, Header, Image, TfMessage, Time, Transform, TransformStamped};
 use handeye_ros2_bag::tf::interpolate;
-use handeye_session::plan::lookat::LookAt;
 use handeye_vision::{Board, Target};
 
 #[path = "../tests/util/mod.rs"]

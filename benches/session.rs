@@ -16,10 +16,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use criterion::Criterion;
+use handeye_records::dataset::Dataset;
+use handeye_records::SessionFolder;
 use handeye_session::cell;
 use handeye_session::cell::run::{CellRun, RunObserver};
-use handeye_session::dataset::Dataset;
-use handeye_session::session::{self, SessionFolder};
 
 #[path = "../tests/util/mod.rs"]
 mod util;
@@ -48,14 +48,14 @@ fn calibrate(config: &Path, out: &Path) {
     folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-    session::run_session(
+    handeye_session::run_session(
         setup,
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
         &mut |_| {},
     )
     .unwrap();
-    session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
 }
 
 fn peak_rss_mb() -> f64 {

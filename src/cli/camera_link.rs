@@ -91,7 +91,7 @@ impl CameraLinkArgs {
         &self,
         result_folder: &std::path::Path,
     ) -> anyhow::Result<Option<(TfTree, String)>> {
-        use handeye_session::session::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
+        use handeye_records::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
         let file = match &self.tf_from {
             Some(path) if path.is_dir() => path.join(TF_STATIC_FILE),
             Some(path) => path.clone(),

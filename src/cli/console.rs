@@ -13,8 +13,8 @@ use clap::Args;
 
 use handeye_console::manual::run_manual;
 use handeye_console::{Command, Console, ConsoleEvent, ConsoleOptions};
+use handeye_records::SolvedSession;
 use handeye_session::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
-use handeye_session::session::SolvedSession;
 
 /// Capture by hand: jog or hand-guide the arm, capture on the console page (or Enter here).
 #[derive(Debug, Args)]

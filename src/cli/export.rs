@@ -13,8 +13,8 @@ use handeye_formats::export::{self, Exported};
 use handeye_formats::ExportFormat;
 
 use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
+use handeye_records::result::ResultFile;
 use handeye_session::cell::rig::RigResultFile;
-use handeye_session::result::ResultFile;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

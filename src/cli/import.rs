@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
+use handeye_config::{recorded_cell, CellConfig, RecordedFiles};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::setup::Setup;
 use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
@@ -14,10 +15,9 @@ use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
 };
+use handeye_records::dataset::Dataset;
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_ros2_bag::BagOptions;
-use handeye_session::config::{recorded_cell, CellConfig, RecordedFiles};
-use handeye_session::dataset::Dataset;
 use handeye_vision::{DetectorOptions, Target};
 
 /// The cell layout on the command line.

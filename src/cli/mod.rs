@@ -100,10 +100,8 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<()> {
 /// The run recording the session folder `root`, if one does, said on stderr: what the command
 /// reads of the folder is the poses so far (`solve`, `report`, `verify` go on; `replay` and
 /// `run --resume` refuse instead).
-fn say_if_live(
-    root: &std::path::Path,
-) -> anyhow::Result<Option<handeye_session::session::LiveRun>> {
-    let live = handeye_session::session::live_run(root)?;
+fn say_if_live(root: &std::path::Path) -> anyhow::Result<Option<handeye_records::LiveRun>> {
+    let live = handeye_records::live_run(root)?;
     if let Some(run) = &live {
         eprintln!(
             "provisional: {run}; what is read here is those poses: run this again when the run has ended"

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 
+use handeye_plan::{generate, GenerateSpec, Plan, Waypoint};
 use handeye_session::cell;
-use handeye_session::plan::{generate, GenerateSpec, Plan, Waypoint};
 
 /// Generate or check pose plans.
 #[derive(Debug, Args)]

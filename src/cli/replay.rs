@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
 use handeye_core::camera_model::CameraModel;
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
+use handeye_report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
 use handeye_session::cell;
-use handeye_session::result::ResultFile;
-use handeye_session::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
-use handeye_session::session::{self, replay, SessionFolder};
+use handeye_session::replay;
+use handeye_session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]
@@ -34,8 +35,7 @@ fn prepare_for(
     folder: &SessionFolder,
     config_path: &std::path::Path,
 ) -> anyhow::Result<cell::PreparedCell> {
-    let mut config =
-        handeye_session::config::CellConfig::load(config_path).context("preparing the cell")?;
+    let mut config = handeye_config::CellConfig::load(config_path).context("preparing the cell")?;
     let from_topic = folder.root().join(cell::INTRINSICS_FROM_TOPIC_FILE);
     if config.camera().intrinsics.is_none() && from_topic.is_file() {
         config.camera_mut().intrinsics = Some(from_topic);
@@ -55,7 +55,7 @@ fn prepare_for(
 /// Runs `handeye replay`.
 pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // The run writes the files a replay writes (the report, the estimates of a blamed file).
-    session::refuse_live(
+    handeye_records::refuse_live(
         &args.session,
         &format!(
             "replay it when the run has ended (`handeye solve {}` gives a provisional answer meanwhile)",
@@ -90,7 +90,7 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let camera_model = if prepared.camera().intrinsics_known {
         prepared.camera().camera_model
     } else {
-        let file = folder.root().join(session::solve::CAMERA_INFO_FILE);
+        let file = folder.root().join(handeye_records::solve::CAMERA_INFO_FILE);
         CameraModel::load(&file).context(
             "the config has no intrinsics and the session has no estimated ones: solve the session first",
         )?
@@ -115,11 +115,11 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     // Solved and judged as a run's solve is: the checks of the given files included.
     let samples = if dataset.pairs.is_empty() {
-        Err(session::solve::no_samples(&folder, &visits))
+        Err(handeye_records::solve::no_samples(&folder, &visits))
     } else {
         Ok(dataset)
     };
-    let (mut solved, dataset) = session::solve::solve_records(
+    let (mut solved, dataset) = handeye_records::solve::solve_records(
         &folder,
         &folder.read_manifest()?,
         samples,
@@ -140,8 +140,9 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // The estimates of a file the cell model blames, beside the replay's result (the run's own
     // stay as they were).
     let estimates = beside(&output, REPLAY_ESTIMATES_FOLDER);
-    let written = session::solve::write_corrected_files(&estimates, &solved, &prepared.config)?;
-    session::solve::record_written(&mut solved, &written);
+    let written =
+        handeye_records::solve::write_corrected_files(&estimates, &solved, &prepared.config)?;
+    handeye_records::solve::record_written(&mut solved, &written);
     solved.name_replay(folder.root(), &estimates, &prepared.config);
     let calibration = &solved.calibration;
     solved

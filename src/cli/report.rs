@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use handeye::report::session::write_folder_report;
-use handeye_session::config::CellConfig;
-use handeye_session::result::ResultFile;
-use handeye_session::session::SessionFolder;
+use handeye_config::CellConfig;
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
+use handeye_report::session::write_folder_report;
 use handeye_solve::verdict::Verdict;
 
 /// Write the calibration report of a solved session folder.
@@ -26,7 +26,7 @@ pub(super) struct ReportArgs {
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
     if handeye_session::cell::rig::is_rig_folder(&args.session) {
         super::say_if_live(&args.session)?;
-        let path = handeye::report::rig::write_rig_folder_report(&args.session)?;
+        let path = handeye_report::rig::write_rig_folder_report(&args.session)?;
         outln!("report: {}", path.display());
         return Ok(());
     }
@@ -75,7 +75,7 @@ pub(super) fn write(
         // The page's findings say it too.
         calibration
             .notices
-            .insert(0, handeye_session::session::solve::provisional_notice(run));
+            .insert(0, handeye_records::solve::provisional_notice(run));
     }
     // The verdict the solve recorded (a result written before verdicts has none: no card).
     let (path, lacking) = write_folder_report(

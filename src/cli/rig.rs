@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
-use handeye::report::session::REPLAY_REPORT_FILE;
+use handeye_config::CellConfig;
+use handeye_report::session::REPLAY_REPORT_FILE;
 use handeye_session::cell::rig::{self, RigResultFile};
 use handeye_session::cell::run::CellRun;
-use handeye_session::config::CellConfig;
 
 /// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
 /// for one camera): what the run did, every camera's answer, the report.
@@ -24,7 +24,7 @@ pub(super) fn finish_run(
     let output = rig::RigOutput::run(root);
     print_result(result, &output.result);
     let report = root.join("report.html");
-    handeye::report::rig::write_rig_report(result, root, &report)?;
+    handeye_report::rig::write_rig_report(result, root, &report)?;
     outln!("report: {}", report.display());
     let next = format!(
         "next: handeye export {} --format ros2|urdf|opencv",
@@ -50,8 +50,8 @@ pub(super) fn replay(
     let output = rig::RigOutput::replay(folder, output);
     let result = rig::solve_rig_folder(folder, &rig_config, &output)?;
     print_result(&result, &output.result);
-    let report = handeye_session::session::replay::beside(&output.result, REPLAY_REPORT_FILE);
-    handeye::report::rig::write_rig_report(&result, folder, &report)?;
+    let report = handeye_session::replay::beside(&output.result, REPLAY_REPORT_FILE);
+    handeye_report::rig::write_rig_report(&result, folder, &report)?;
     outln!("report: {}", report.display());
     Ok(())
 }

@@ -15,7 +15,7 @@ use handeye_session::cell::run::{
     open_run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
 };
 use handeye_session::cell::{self, PreparedCell};
-use handeye_session::session::SessionEvent;
+use handeye_session::SessionEvent;
 use handeye_solve::verdict::{Level, Verdict};
 
 /// Calibrate a cell: move through the plan, record every frame and pose, solve.
@@ -154,7 +154,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     if let (Some(arm), Some(errors)) = (&result.arm, &done.cell.config.arm_errors) {
         outln!("{}", arm.compare_with_truth(errors));
     }
-    let report = match handeye::report::session::write_run_report(done) {
+    let report = match handeye_report::session::write_run_report(done) {
         Ok(path) => Some(path),
         // The calibration is saved; a report problem must not hide it.
         Err(e) => {
@@ -223,9 +223,9 @@ pub(super) enum Stack {
 
 impl Stack {
     /// The stack of a cell whose arm is `robot`.
-    pub(super) fn of(robot: &handeye_session::config::RobotConfig) -> Stack {
+    pub(super) fn of(robot: &handeye_config::RobotConfig) -> Stack {
         match robot {
-            handeye_session::config::RobotConfig::Ros2(_) => Stack::Ros2,
+            handeye_config::RobotConfig::Ros2(_) => Stack::Ros2,
             _ => Stack::Controller,
         }
     }
@@ -405,7 +405,7 @@ impl RunObserver for Printer {
 }
 
 pub(super) fn default_session_dir() -> PathBuf {
-    handeye_session::session::dated_session_path(
+    handeye_records::dated_session_path(
         std::path::Path::new("sessions"),
         "",
         std::time::SystemTime::now(),

@@ -8,11 +8,11 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
+use handeye_config::{validate, CellConfig, SolveSpace};
 use handeye_core::geometry::readable;
-use handeye_session::config::{validate, CellConfig, SolveSpace};
-use handeye_session::dataset::Dataset;
-use handeye_session::result::ResultFile;
-use handeye_session::session::{self, SessionFolder};
+use handeye_records::dataset::Dataset;
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
 use handeye_solve::{self as solve, Method, RobustLoss, SolveOptions, SolverChoice};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
@@ -161,7 +161,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
         None => config.solver.space,
     };
-    let inputs = session::SolveInputs::load(config)?;
+    let inputs = handeye_records::SolveInputs::load(config)?;
     // A run still recording: said before the solve (whose failure with few samples so far is
     // then read as such) and after the answer; the result file holds it too, as the solve's
     // first notice.
@@ -171,7 +171,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     if let Some(line) = &provisional {
         outln!("{line}");
     }
-    let (solved, dataset) = session::load_and_solve(&folder, &inputs, space)
+    let (solved, dataset) = handeye_records::load_and_solve(&folder, &inputs, space)
         .with_context(|| format!("solving session {}", args.samples.display()))?;
     let config = &inputs.config;
     outln!("{}", solved.summary);

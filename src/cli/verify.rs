@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 
+use handeye_config::CellConfig;
 use handeye_core::atomic_file::write_atomic;
+use handeye_plan::GenerateSpec;
+use handeye_records::dataset::Dataset;
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
 use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye_session::cell::PreparedCell;
-use handeye_session::config::CellConfig;
-use handeye_session::dataset::Dataset;
-use handeye_session::plan::GenerateSpec;
-use handeye_session::result::ResultFile;
-use handeye_session::session::SessionFolder;
 use handeye_session::verify;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
@@ -53,7 +53,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         // A result of a session still being recorded: the run holds the arm, and the answer is
         // not its last.
         if let Some(folder) = result.parent() {
-            handeye_session::session::refuse_live(
+            handeye_records::refuse_live(
                 folder,
                 "verify its result on the cell when the run has ended: the arm is the run's until then",
             )?;
@@ -76,7 +76,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             ..base
         };
         let out = args.out.clone().unwrap_or_else(|| {
-            handeye_session::session::dated_session_path(
+            handeye_records::dated_session_path(
                 std::path::Path::new("sessions"),
                 "verify-",
                 std::time::SystemTime::now(),

@@ -10,10 +10,10 @@
 
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{CellTransforms, PosePair};
+use handeye_plan::nbv::AdaptivePlanner;
+use handeye_plan::{generate, GenerateSpec, Plan, Waypoint};
 use handeye_robot::Joints;
 use handeye_session::cell;
-use handeye_session::plan::nbv::AdaptivePlanner;
-use handeye_session::plan::{generate, GenerateSpec, Plan, Waypoint};
 use handeye_solve as solve;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -142,7 +142,8 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
 /// session folder is a normal one (manifest lists exactly the visited poses).
 #[test]
 fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
-    use handeye_session::session::{self, SessionEvent, SessionFolder};
+    use handeye_records::SessionFolder;
+    use handeye_session::SessionEvent;
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
@@ -157,7 +158,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     let mut hardware = prepared.open_hardware().unwrap();
     let setup =
         prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
-    let outcome = session::run_adaptive_session(
+    let outcome = handeye_session::run_adaptive_session(
         setup,
         config.clone(),
         &mut planner,
@@ -174,7 +175,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     );
     assert!(used < candidates.len(), "{used} poses");
     assert_eq!(folder.read_manifest().unwrap().plan.len(), used);
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     let c = &solved.calibration;
     let error = true_error_mm(c, &truth);
     let sigma = c.uncertainty.as_ref().unwrap();
@@ -205,7 +206,8 @@ fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
 /// is visited twice, and the planner goes on from the samples on disk to its target.
 #[test]
 fn a_stopped_adaptive_session_resumes_to_its_target() {
-    use handeye_session::session::{self, SessionError, SessionEvent, SessionFolder};
+    use handeye_records::{SessionError, SessionFolder};
+    use handeye_session::SessionEvent;
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
@@ -224,7 +226,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
         let mut hardware = prepared.open_hardware().unwrap();
         let setup =
             prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
-        let outcome = session::run_adaptive_session(
+        let outcome = handeye_session::run_adaptive_session(
             setup,
             config.to_path_buf(),
             &mut planner,
@@ -258,7 +260,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
             assert_ne!(a.joints_deg, b.joints_deg);
         }
     }
-    let samples = handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    let samples = handeye_records::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(samples.pairs.len(), manifest.plan.len());
 }
 

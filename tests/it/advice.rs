@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 use handeye_solve::verdict::{Basis, Level, Verdict};
 
 use crate::util::{self, config_variant, handeye, repo, run_cell};
@@ -124,7 +124,7 @@ fn wrong_board_size(scale: f64, name: &str) {
 
     // The report shows the cell model's choice from the verdict: the explanation chosen, the
     // others with their BIC gap, the scale against the file's with its 1-sigma, the file written.
-    let page = handeye::report::session::write_run_report(&run).unwrap();
+    let page = handeye_report::session::write_run_report(&run).unwrap();
     let report = std::fs::read_to_string(page).unwrap();
     let model = verdict.figures.cell_model.as_ref().expect("the cell model");
     let scale_row = model
@@ -238,7 +238,7 @@ fn degrees_in_a_rotation_vector_are_refused_at_load_and_rpy_deg_is_read() {
             "T_flange_camera: {translation: [0.03, -0.07, 0.04], rpy_deg: [0, 0, 90]}",
         )],
     );
-    let loaded = handeye_session::config::CellConfig::load(&config).unwrap();
+    let loaded = handeye_config::CellConfig::load(&config).unwrap();
     let angle = loaded.camera().nominal.camera_mount.rotation.scaled_axis();
     assert!((angle - nalgebra::Vector3::new(0.0, 0.0, 90f64.to_radians())).norm() < 1e-12);
 }

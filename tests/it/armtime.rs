@@ -11,12 +11,12 @@ use std::time::Instant;
 use handeye_camera::{Camera, CameraError, Frame};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_plan::check::MoveCheck;
+use handeye_records::SessionFolder;
 use handeye_robot::sim::SimRobot;
 use handeye_robot::Joints;
 use handeye_session::cell;
 use handeye_session::cell::run as cell_run;
-use handeye_session::plan::check::MoveCheck;
-use handeye_session::session::{self, SessionFolder};
 
 use crate::util;
 
@@ -167,7 +167,7 @@ fn fastest_joint_during_exposures(config: &Path) -> (Vec<f64>, f64) {
         .map_or(0.0, |s| s.max_joint_speed.to_degrees());
     let mut driven = robot.clone();
     let outcome =
-        session::run_session(setup, &mut driven, &mut [&mut camera], &mut |_| {}).unwrap();
+        handeye_session::run_session(setup, &mut driven, &mut [&mut camera], &mut |_| {}).unwrap();
     assert_eq!(outcome.visited_now, 6);
     assert!(outcome.moving_s > 0.0);
     let arm = robot.lock();
@@ -276,7 +276,7 @@ fn the_adaptive_default_stops_at_the_target_never_before_the_minimum() {
         done.arm_time.expect("a planned run keeps its arm time")
     );
     // ... and the report says so.
-    let page = handeye::report::session::write_run_report(&done).unwrap();
+    let page = handeye_report::session::write_run_report(&done).unwrap();
     let html = std::fs::read_to_string(page).unwrap();
     assert!(
         html.contains("Arm time: not measured") && !html.contains("data-key=\"arm_time.saved_s\""),
@@ -446,7 +446,7 @@ mod through_ur_rtde {
         let threshold = setup
             .settle_by_speed
             .map_or(0.0, |s| s.max_joint_speed.to_degrees());
-        let outcome = session::run_session(
+        let outcome = handeye_session::run_session(
             setup,
             hardware.robot.as_mut(),
             &mut [&mut camera],
@@ -553,7 +553,7 @@ fn the_demo_cells_instant_moves_say_arm_time_was_not_measured() {
     let done = util::run_cell(&timed, &dir.path().join("timed"));
     let arm_time = done.arm_time.expect("a planned run keeps its arm time");
     assert!(arm_time.measured() && arm_time.moving_s > 0.3, "{arm_time}");
-    let page = handeye::report::session::write_run_report(&done).unwrap();
+    let page = handeye_report::session::write_run_report(&done).unwrap();
     let html = std::fs::read_to_string(page).unwrap();
     assert!(
         html.contains("data-key=\"arm_time.saved_s\""),

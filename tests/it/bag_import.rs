@@ -19,9 +19,9 @@ use rand::SeedableRng;
 use handeye_camera::render::{render_with_rays, PixelRays, RenderOptions};
 use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_plan::lookat::LookAt;
+use handeye_records::result::ResultFile;
 use handeye_ros2_bag::tf::interpolate;
-use handeye_session::plan::lookat::LookAt;
-use handeye_session::result::ResultFile;
 use handeye_vision::Board;
 
 use crate::util;

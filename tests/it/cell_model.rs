@@ -1,7 +1,7 @@
 //! Wrong files, right answer (issue #38): the cell's intrinsics or board file wrong by a mistake
 //! whose class and magnitude are drawn at random (seeded), both setups; synthetic corners through
 //! the true lens and board with pixel noise and the robot's repeatability, solved by the
-//! single-camera session path (`session::solve_session`: PnP with the files as given, the
+//! single-camera session path (`handeye_records::solve_session`: PnP with the files as given, the
 //! pose-space solve, the cell model, the reprojection answer, the verdict).
 //!
 //! Counted over the drawn cases: the verdict names exactly the wrong file(s); it blames an
@@ -15,11 +15,11 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
+use handeye_config::CellConfig;
 use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_core::setup::{CellTransforms, CornerObservation, PosePair, Setup};
-use handeye_session::config::CellConfig;
-use handeye_session::session::{self, PoseVisit};
+use handeye_records::PoseVisit;
 use handeye_solve::cell_model::GivenFile;
 use handeye_solve::verdict::Level;
 use handeye_vision::pnp::estimate_pose_from_points;
@@ -329,7 +329,7 @@ fn solve_case(c: &Case, config: &CellConfig, board: &Target) -> Outcome {
         camera_mount,
         target_mount,
     };
-    let solved = session::solve_session(
+    let solved = handeye_records::solve_session(
         c.setup,
         &c.pairs,
         &c.visits,

@@ -42,7 +42,7 @@ fn shipped(setup: Setup) -> (&'static str, Pose, Pose) {
         Setup::EyeInHand => "sim-cell.yaml",
         Setup::EyeToHand => "sim-cell-eye-to-hand.yaml",
     };
-    let truth = handeye_session::config::CellConfig::load(&repo().join("configs").join(name))
+    let truth = handeye_config::CellConfig::load(&repo().join("configs").join(name))
         .unwrap()
         .camera()
         .simulation
@@ -208,7 +208,7 @@ fn run_case(setup: Setup, plan: Plan, mistake: Mistake, seed: u64) -> Outcome {
 /// Runs `count` drawn cases from `seed` (setups and plans in turn) and checks the counts of the
 /// module doc.
 fn drawn_runs(seed: u64, count: usize) {
-    let accuracy = handeye_session::config::CellConfig::load(&repo().join("configs/sim-cell.yaml"))
+    let accuracy = handeye_config::CellConfig::load(&repo().join("configs/sim-cell.yaml"))
         .unwrap()
         .verdict
         .accuracy();

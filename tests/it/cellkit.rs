@@ -9,12 +9,12 @@ use nalgebra::{Matrix4, Vector3};
 
 use std::path::{Path, PathBuf};
 
+use handeye_config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
+use handeye_config::{CellConfig, RobotConfig};
 use handeye_core::setup::Setup;
+use handeye_plan::{Plan, Waypoint};
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::Joints;
-use handeye_session::config::schema::{ARM_JOINT_RANGES_DEG, FLANGE_CAMERA_JOINT_RANGES_DEG};
-use handeye_session::config::{CellConfig, RobotConfig};
-use handeye_session::plan::{Plan, Waypoint};
 use handeye_vision::print::{board_pdf, fit_to_paper, resized_board_yaml, Paper};
 use handeye_vision::{Board, DetectorOptions, TagDetector, TagFamily};
 
@@ -400,7 +400,7 @@ fn every_move_is_held_to_the_ranges() {
     let mut arm = UrModel::ur5e();
     arm.joint_limits =
         FLANGE_CAMERA_JOINT_RANGES_DEG.map(|[lo, hi]| (lo.to_radians(), hi.to_radians()));
-    let check = handeye_session::plan::check::MoveCheck::with_model(
+    let check = handeye_plan::check::MoveCheck::with_model(
         arm,
         handeye_robot::WorkspaceBox {
             min: Vector3::new(-2.0, -2.0, -2.0),
@@ -659,7 +659,7 @@ fn the_templates_load_without_the_simulated_lens() {
         assert!(
             matches!(
                 config.camera().backend,
-                handeye_session::config::CameraConfig::Uvc { .. }
+                handeye_config::CameraConfig::Uvc { .. }
             ),
             "{name}"
         );

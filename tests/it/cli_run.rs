@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use handeye_session::dataset::Dataset;
-use handeye_session::result::ResultFile;
+use handeye_records::dataset::Dataset;
+use handeye_records::result::ResultFile;
 
 use crate::util;
 use util::handeye;
@@ -94,11 +94,11 @@ fn killed_mid_run_resumes_from_the_last_sample_and_matches_a_solve_of_the_same_d
 
     // The final result equals an uninterrupted solve of the same data.
     let result = ResultFile::load_mounts(&session.join("result.yaml")).unwrap();
-    let config = handeye_session::config::CellConfig::load(&config).unwrap();
-    let folder = handeye_session::session::SessionFolder::open(&session).unwrap();
+    let config = handeye_config::CellConfig::load(&config).unwrap();
+    let folder = handeye_records::SessionFolder::open(&session).unwrap();
     let space = config.solver.space;
-    let inputs = handeye_session::session::SolveInputs::load(config).unwrap();
-    let (direct, _) = handeye_session::session::load_and_solve(&folder, &inputs, space).unwrap();
+    let inputs = handeye_records::SolveInputs::load(config).unwrap();
+    let (direct, _) = handeye_records::load_and_solve(&folder, &inputs, space).unwrap();
     let direct = direct.calibration;
     assert!(
         (result.camera_mount.translation.vector - direct.camera_mount.translation.vector).norm()

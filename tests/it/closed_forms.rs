@@ -7,7 +7,7 @@ use std::process::Command;
 
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{predict, PosePair, Setup};
-use handeye_session::dataset::Dataset;
+use handeye_records::dataset::Dataset;
 use handeye_solve::{self as solve, closed_form, AxbyData, Method, SolveError, SolveOptions};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -330,14 +330,14 @@ fn solve_cli_takes_every_method_and_prints_the_comparison_table() {
 #[test]
 fn config_solver_method_takes_every_cli_name() {
     for name in Method::NAMES {
-        let config: handeye_session::config::SolverConfig =
+        let config: handeye_config::SolverConfig =
             serde_yaml_ng::from_str(&format!("method: {name}")).unwrap();
         assert_eq!(Some(config.method), Method::from_name(name), "{name}");
         assert_eq!(config.to_options().method, config.method, "{name}");
         assert_eq!(name.parse::<Method>(), Ok(config.method), "{name}");
     }
     for method in Method::ALL {
-        let config: handeye_session::config::SolverConfig =
+        let config: handeye_config::SolverConfig =
             serde_yaml_ng::from_str(&format!("method: {}", method.name())).unwrap();
         assert_eq!(config.method, method);
         // Written back under its own name.
@@ -347,10 +347,9 @@ fn config_solver_method_takes_every_cli_name() {
             "{text}"
         );
     }
-    let shah: handeye_session::config::SolverConfig =
-        serde_yaml_ng::from_str("method: shah").unwrap();
+    let shah: handeye_config::SolverConfig = serde_yaml_ng::from_str("method: shah").unwrap();
     assert_eq!(shah.method, Method::ClosedForm);
-    let error = serde_yaml_ng::from_str::<handeye_session::config::SolverConfig>("method: tsia")
+    let error = serde_yaml_ng::from_str::<handeye_config::SolverConfig>("method: tsia")
         .unwrap_err()
         .to_string();
     for name in Method::NAMES {

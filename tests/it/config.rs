@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use handeye_session::config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMethod};
+use handeye_config::{CellConfig, ConfigError, ConfigFile, RobotConfig, SolverMethod};
 
 use crate::util;
 use util::handeye;
@@ -704,7 +704,7 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     assert!(matches!(config.robot, RobotConfig::Recorded { .. }));
     assert!(matches!(
         config.camera().backend,
-        handeye_session::config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
+        handeye_config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
     ));
     assert_eq!(config.detector.decimate, 1.0);
     assert!(config.plan.file.is_none() && config.plan.generate.is_none());

@@ -402,7 +402,7 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
         "manual.yaml",
         &[("plan:\n", "plan:\n  manual: true\n")],
     );
-    let config = handeye_session::config::CellConfig::load(&manual).expect("a manual plan loads");
+    let config = handeye_config::CellConfig::load(&manual).expect("a manual plan loads");
     assert!(config.plan.manual && config.plan.adaptive != Some(true));
     let both = util::config_variant(
         dir.path(),
@@ -410,8 +410,7 @@ fn plan_manual_is_read_and_refused_together_with_adaptive() {
         "both.yaml",
         &[("plan:\n", "plan:\n  manual: true\n  adaptive: true\n")],
     );
-    let e =
-        handeye_session::config::CellConfig::load(&both).expect_err("manual and adaptive refused");
+    let e = handeye_config::CellConfig::load(&both).expect_err("manual and adaptive refused");
     let message = format!("{e:#}");
     assert!(
         message.contains("plan.manual") && message.contains("adaptive"),

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use handeye_session::dataset::Dataset;
+use handeye_records::dataset::Dataset;
 
 use crate::util;
 use util::handeye;
@@ -361,7 +361,7 @@ fn resume_refuses_changed_intrinsics_unless_accepted() {
     );
     assert_ne!(text, edited);
     std::fs::write(&camera, &edited).unwrap();
-    let new_hash = handeye_session::session::inputs::sha256_hex(edited.as_bytes());
+    let new_hash = handeye_records::inputs::sha256_hex(edited.as_bytes());
 
     let refused = output(&mut resume(&session));
     let message = stderr(&refused);

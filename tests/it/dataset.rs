@@ -6,8 +6,8 @@ use std::process::Command;
 
 use handeye_core::geometry::{Pose, PoseYaml};
 use handeye_core::setup::{predict, Setup};
-use handeye_session::dataset::{Dataset, FileError};
-use handeye_session::result::ResultFile;
+use handeye_records::dataset::{Dataset, FileError};
+use handeye_records::result::ResultFile;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// A valid eye-in-hand dataset text of 6 noise-free samples with diverse rotations, and its truth.

@@ -17,12 +17,10 @@ use handeye_camera::CameraError;
 use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_core::setup::{CellTransforms, Setup};
+use handeye_records::dataset::Dataset;
+use handeye_records::{SessionError, SessionFolder};
 use handeye_robot::{Joints, MotionLimits, RobotError};
-use handeye_session::dataset::Dataset;
-use handeye_session::session::{
-    run_session, SessionCamera, SessionError, SessionEvent, SessionFolder, SessionOutcome,
-    SessionSetup,
-};
+use handeye_session::{run_session, SessionCamera, SessionEvent, SessionOutcome, SessionSetup};
 use handeye_vision::{Board, DetectorOptions};
 use image::{GrayImage, Luma};
 use nalgebra::{Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -554,9 +552,9 @@ fn a_resumed_run_visits_only_the_poses_without_a_sample() {
 
 #[test]
 fn a_move_that_would_leave_the_workspace_is_not_sent() {
+    use handeye_plan::check::MoveCheck;
     use handeye_robot::kinematics::UrModel;
     use handeye_robot::WorkspaceBox;
-    use handeye_session::plan::check::MoveCheck;
 
     // Every move is checked from the joints the arm reports before it is sent: with a workspace
     // box far from every pose the first move is refused, the arm is stopped, nothing is recorded.
@@ -596,9 +594,9 @@ fn a_move_that_would_leave_the_workspace_is_not_sent() {
 /// the run ends with the samples it has instead of an error that asks for a resume.
 #[test]
 fn a_retry_that_cannot_be_reached_is_skipped_and_the_run_ends_with_its_samples() {
+    use handeye_plan::check::MoveCheck;
     use handeye_robot::kinematics::UrModel;
     use handeye_robot::WorkspaceBox;
-    use handeye_session::plan::check::MoveCheck;
 
     let arm = UrModel::ur5e();
     // The box holds every flange position on the plan's own joint paths (0 → 1 → 2 → 3), with

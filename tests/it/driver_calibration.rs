@@ -17,8 +17,8 @@ use rand::{Rng, SeedableRng};
 
 use handeye_core::camera_model::CameraModel;
 use handeye_core::notice::{NoticeKind, Severity};
-use handeye_session::result::ResultFile;
-use handeye_session::session::solve::DRIVER_CALIBRATION_FILE;
+use handeye_records::result::ResultFile;
+use handeye_records::solve::DRIVER_CALIBRATION_FILE;
 use handeye_solve::cell_model::GivenFile;
 use handeye_solve::verdict::{Level, Verdict};
 

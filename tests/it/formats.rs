@@ -18,10 +18,10 @@ use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, scan_visp_folder, CsvOptions, CsvPoseForm, ImportError, VispOptions,
 };
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_session::cell;
-use handeye_session::result::ResultFile;
-use handeye_session::session::{self, SessionFolder};
 
 use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
 use handeye_session::verify::leave_one_out;
@@ -156,7 +156,7 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
     let folder = SessionFolder::create(&dir.path().join("session")).unwrap();
     folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     let mut hardware = prepared.open_hardware().unwrap();
-    let outcome = session::run_session(
+    let outcome = handeye_session::run_session(
         prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false))),
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
@@ -164,7 +164,7 @@ fn visp_eye_to_hand_as_a_folder_session_gives_the_same_answer() {
     )
     .unwrap();
     assert_eq!(outcome.accepted, (0..8).collect::<Vec<_>>());
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
 
     // The import path with the same detector and solver settings.
     let imported = import_visp(

@@ -46,7 +46,7 @@ fn the_no_intrinsics_demo_writes_its_report() {
     let report = std::fs::read_to_string(session.join("report.html")).unwrap();
     // The samples the solve used (board poses by PnP with the estimated intrinsics) are in the
     // session, so the report has one thumbnail per frame.
-    let samples = handeye_session::dataset::Dataset::load(&session.join("samples.yaml")).unwrap();
+    let samples = handeye_records::dataset::Dataset::load(&session.join("samples.yaml")).unwrap();
     assert_eq!(samples.pairs.len(), 20);
     assert!(
         report.contains("pose-019"),
@@ -108,7 +108,7 @@ fn detect_exits_2_with_a_message_when_no_image_shows_the_board() {
 
 #[test]
 fn default_session_names_are_utc_date_times_without_collisions() {
-    use handeye_session::session::dated_session_path;
+    use handeye_records::dated_session_path;
     use std::time::{Duration, UNIX_EPOCH};
     let dir = tempfile::tempdir().unwrap();
     let at = |secs: u64| UNIX_EPOCH + Duration::from_secs(secs);
@@ -160,7 +160,7 @@ fn run_without_out_names_the_session_by_its_start_time() {
     // The name is the start time (UTC), to the second: between the names of the times before
     // and after the run, and of their form.
     let name_at = |t| {
-        handeye_session::session::dated_session_path(Path::new(""), "", t)
+        handeye_records::dated_session_path(Path::new(""), "", t)
             .to_string_lossy()
             .into_owned()
     };

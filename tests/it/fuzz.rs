@@ -28,18 +28,18 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
+use handeye_config::CellConfig;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::PoseYaml;
 use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, read_visp_camera_xml,
     read_visp_pose, CsvOptions, CsvPoseForm, VispOptions,
 };
+use handeye_plan::Plan;
+use handeye_records::dataset::Dataset;
+use handeye_records::result::ResultFile;
+use handeye_records::SessionFolder;
 use handeye_robot::recorded::load_recorded_poses;
-use handeye_session::config::CellConfig;
-use handeye_session::dataset::Dataset;
-use handeye_session::plan::Plan;
-use handeye_session::result::ResultFile;
-use handeye_session::session::SessionFolder;
 use handeye_vision::detect::load_gray_image;
 use handeye_vision::{estimate_board_pose, Board, DetectorOptions, TagDetector};
 use image::{GrayImage, ImageFormat, Luma};

@@ -13,7 +13,7 @@ use handeye_formats::import::{
     import_csv_pairs, import_moveit_json, read_visp_camera_xml, read_visp_pose, CsvOptions,
     CsvPoseForm,
 };
-use handeye_session::dataset::Dataset;
+use handeye_records::dataset::Dataset;
 use handeye_vision::{Board, DetectorOptions, TagDetector, TargetError};
 use image::GrayImage;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
@@ -257,7 +257,7 @@ fn issue13_closed_stdout_ends_quietly_and_solve_still_writes_its_result() {
         !stderr.contains("Broken pipe") && !stderr.contains("panicked"),
         "{stderr}"
     );
-    let mounts = handeye_session::result::ResultFile::load_mounts(&result).unwrap();
+    let mounts = handeye_records::result::ResultFile::load_mounts(&result).unwrap();
     let error =
         (mounts.camera_mount.translation.vector - truth().camera_mount.translation.vector).norm();
     assert!(error < 1e-6, "result written and right: {error} m");
@@ -306,7 +306,7 @@ fn issue13_closed_stdout_in_plan_check_and_detect_ends_quietly() {
 fn issue13_a_1e300_translation_in_a_dataset_is_refused_naming_file_sample_and_field() {
     let dir = tempfile::tempdir().unwrap();
     let samples = write_dataset(dir.path());
-    let mut raw: handeye_session::dataset::DatasetYaml =
+    let mut raw: handeye_records::dataset::DatasetYaml =
         serde_yaml_ng::from_str(&std::fs::read_to_string(&samples).unwrap()).unwrap();
     raw.samples[4].camera_from_target.translation = Some(vec![1e300, 0.0, 0.2]);
     std::fs::write(&samples, serde_yaml_ng::to_string(&raw).unwrap()).unwrap();

@@ -114,7 +114,7 @@ fn solve_both(setup: Setup, model: &UrModel, samples: &[ArmSample]) -> (Pose, Po
     let noise: NoiseModel = plain.noise.map_or(options.noise, |n| n.model());
     let fit = fit_joint_offsets(
         setup,
-        &handeye_session::session::solve::dh_chain(model),
+        &handeye_records::solve::dh_chain(model),
         samples,
         (&plain.camera_mount, &plain.target_mount),
         noise,
@@ -359,11 +359,11 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
     );
     eprintln!("{stdout}");
     assert!(stdout.contains("arm model truth check"), "{stdout}");
-    let cell = handeye_session::config::CellConfig::load(&config).unwrap();
+    let cell = handeye_config::CellConfig::load(&config).unwrap();
     let truth = cell.camera().simulation.unwrap();
     let errors = cell.arm_errors.unwrap();
     let result_path = session.join("result.yaml");
-    let result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+    let result = handeye_records::result::ResultFile::load(&result_path).unwrap();
     // The transforms, against the truth in the controller's frames.
     let mounts = result.mounts(&result_path).unwrap();
     let (mm, deg) = transform_error(&mounts.camera_mount, &mounts.target_mount, &truth);
@@ -413,8 +413,8 @@ fn by_default_the_data_choose_the_arms_model_through_the_binary() {
             String::from_utf8_lossy(&output.stderr)
         );
         let result_path = session.join("result.yaml");
-        let result = handeye_session::result::ResultFile::load(&result_path).unwrap();
-        let cell = handeye_session::config::CellConfig::load(&config).unwrap();
+        let result = handeye_records::result::ResultFile::load(&result_path).unwrap();
+        let cell = handeye_config::CellConfig::load(&config).unwrap();
         let mounts = result.mounts(&result_path).unwrap();
         let (mm, deg) = transform_error(
             &mounts.camera_mount,
@@ -448,7 +448,7 @@ fn by_default_the_data_choose_the_arms_model_through_the_binary() {
         "{}",
         String::from_utf8_lossy(&replay.stderr)
     );
-    let again = handeye_session::result::ResultFile::load(&replayed).unwrap();
+    let again = handeye_records::result::ResultFile::load(&replayed).unwrap();
     assert_eq!(
         again.kinematics.map(|k| k.joint_offsets.len()),
         result.kinematics.as_ref().map(|k| k.joint_offsets.len())
@@ -474,7 +474,7 @@ fn by_default_the_data_choose_the_arms_model_through_the_binary() {
 /// into the truth; mistakes named by file and key.
 #[test]
 fn arm_errors_and_kinematics_keys_are_read_and_checked() {
-    use handeye_session::config::CellConfig;
+    use handeye_config::CellConfig;
     let base = std::fs::read_to_string(repo().join("configs/sim-cell-arm-errors.yaml")).unwrap();
     let file = repo().join("configs/sim-cell-arm-errors.yaml");
     let cell = CellConfig::parse(&base, &file).unwrap();
@@ -551,7 +551,7 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
     assert_eq!(plain.solver.kinematics, None);
     assert_eq!(
         plain.solver.kinematics(),
-        handeye_session::config::KinematicsChoice::Auto
+        handeye_config::KinematicsChoice::Auto
     );
     assert!(plain.arm_errors.is_none() && plain.true_arm.is_none());
 }
@@ -605,7 +605,7 @@ fn urdf_forward(text: &str, q: &[f64]) -> Pose {
 /// `FK(q + δ)` within 1e-6 m (and 1e-6 rad).
 #[test]
 fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
-    use handeye_session::result::{JointOffsetYaml, KinematicsYaml, WithWithout};
+    use handeye_records::result::{JointOffsetYaml, KinematicsYaml, WithWithout};
     let model = UrModel::ur10e();
     let offsets_deg = [0.0, 0.0531, -0.0201, -0.0008, 0.0727, 0.0];
     let kinematics = KinematicsYaml {
@@ -639,7 +639,7 @@ fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
     let run = crate::util::run_cli(&config, &session);
     assert!(run.status.success());
     let result_path = session.join("result.yaml");
-    let mut result = handeye_session::result::ResultFile::load(&result_path).unwrap();
+    let mut result = handeye_records::result::ResultFile::load(&result_path).unwrap();
     result.kinematics = Some(kinematics);
     result.save(&result_path).unwrap();
     let out = dir.path().join("calibration.yaml");

@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::process::Output;
 
-use handeye_session::session::{SessionFolder, SessionLock};
+use handeye_records::{SessionFolder, SessionLock};
 
 use crate::util::{handeye, sim_cell};
 

@@ -71,7 +71,7 @@ fn run_to_end(args: &[&str], cwd: &Path) -> (bool, String) {
 
 /// Accepted pose records in the session.
 fn accepted_records(session: &Path) -> usize {
-    handeye_session::session::SessionFolder::open(session)
+    handeye_records::SessionFolder::open(session)
         .and_then(|f| f.read_visits())
         .expect("the records read")
         .iter()
@@ -115,7 +115,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
         "the stop says how to resume:\n{out}"
     );
     assert_eq!(accepted_records(&session), 4, "the samples are kept");
-    let manifest = handeye_session::session::SessionFolder::open(&session)
+    let manifest = handeye_records::SessionFolder::open(&session)
         .and_then(|f| f.read_manifest())
         .unwrap();
     assert!(
@@ -174,7 +174,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
     );
     assert_eq!(verdict["verdict"], "GOOD", "{verdict}\n{out}");
     assert_eq!(accepted_records(&session), 10);
-    let samples = handeye_session::dataset::Dataset::load(&session.join("samples.yaml")).unwrap();
+    let samples = handeye_records::dataset::Dataset::load(&session.join("samples.yaml")).unwrap();
     assert_eq!(
         samples.pairs.len(),
         10,

@@ -604,7 +604,7 @@ fn result_file_holds_the_noise_used_and_reads_it_back() {
     let found = solve::solve(Setup::EyeInHand, &c.pairs, &SolveOptions::default()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("result.yaml");
-    handeye_session::result::ResultFile::from_calibration(&found, &c.pairs)
+    handeye_records::result::ResultFile::from_calibration(&found, &c.pairs)
         .save(&path)
         .unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
@@ -612,7 +612,7 @@ fn result_file_holds_the_noise_used_and_reads_it_back() {
         text.contains("noise:") && text.contains("rotation: estimated"),
         "{text}"
     );
-    let back = handeye_session::result::ResultFile::load(&path)
+    let back = handeye_records::result::ResultFile::load(&path)
         .unwrap()
         .to_calibration(&path)
         .unwrap();

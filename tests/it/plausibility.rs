@@ -5,14 +5,14 @@
 
 use std::process::Command;
 
+use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
 use handeye_core::notice::NoticeKind;
 use handeye_core::setup::{CellTransforms, PosePair, Setup};
 use handeye_formats::import::{import_moveit_json, import_visp, VispOptions};
-use handeye_session::config::CellConfig;
-use handeye_session::dataset::Dataset;
-use handeye_session::plan::check::board_centre;
-use handeye_session::plan::generate;
+use handeye_plan::check::board_centre;
+use handeye_plan::generate;
+use handeye_records::dataset::Dataset;
 use handeye_solve::diagnostics::{check_against_nominal, check_units, unit_scale};
 use handeye_solve::{self as solve, AxbyData, NoiseModel, SolveError, SolveOptions, UnitsProblem};
 use handeye_vision::{Board, DetectorOptions};

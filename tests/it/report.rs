@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use handeye::report::{CORNER_PLOT_KINDS, PLOT_KINDS, SECTIONS};
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
+use handeye_report::{CORNER_PLOT_KINDS, PLOT_KINDS, SECTIONS};
 
 use crate::util;
 use util::repo;
@@ -39,7 +39,7 @@ fn report() -> &'static (tempfile::TempDir, PathBuf) {
             .replace("plan:\n", "plan:\n  adaptive: false\n");
         std::fs::write(&config, text).unwrap();
         let done = util::run_cell(&config, &dir.path().join("s"));
-        let path = handeye::report::session::write_run_report(&done).unwrap();
+        let path = handeye_report::session::write_run_report(&done).unwrap();
         (dir, path)
     })
 }
@@ -113,7 +113,7 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     // Every plot is an inline SVG drawn by plotters; nothing is loaded from elsewhere: one
     // inline script (copy buttons, sorting, the frame overlay), no URL but the SVG namespace.
     // The corner section holds every corner of every sample (10 samples of the 6x6 grid).
-    let visits = handeye_session::session::SessionFolder::open(path.parent().unwrap())
+    let visits = handeye_records::SessionFolder::open(path.parent().unwrap())
         .unwrap()
         .read_visits()
         .unwrap();
@@ -647,7 +647,7 @@ fn result_file_round_trips_through_a_calibration() {
     let result_path = folder.join("result.yaml");
     let result = ResultFile::load(&result_path).unwrap();
     let calibration = result.to_calibration(&result_path).unwrap();
-    let pairs = handeye_session::dataset::Dataset::load(&folder.join("samples.yaml"))
+    let pairs = handeye_records::dataset::Dataset::load(&folder.join("samples.yaml"))
         .unwrap()
         .pairs;
     let again = ResultFile::from_calibration(&calibration, &pairs);
@@ -668,9 +668,9 @@ fn result_file_round_trips_through_a_calibration() {
 /// no frames): both in the transforms section and in the bar legends, each plot still once.
 #[test]
 fn two_answers_are_shown_side_by_side() {
-    use handeye::report::{render_html, ReportAnswer, ReportInput};
     use handeye_core::geometry::pose_from_rotvec;
     use handeye_core::setup::{PosePair, Setup};
+    use handeye_report::{render_html, ReportAnswer, ReportInput};
     use handeye_solve::{Method, SolveOptions};
     use nalgebra::Vector3;
 

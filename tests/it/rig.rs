@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
+use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
 use handeye_session::cell::rig::{camera_folder, RigResultFile};
-use handeye_session::config::CellConfig;
 use handeye_solve::verdict::Level;
 
 use crate::util;
@@ -370,7 +370,7 @@ fn killed_mid_run_then_resumed_and_replayed() {
 #[test]
 fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
     use handeye_core::camera_model::{CameraModel, Distortion};
-    use handeye_session::session::SessionFolder;
+    use handeye_records::SessionFolder;
     use handeye_vision::Target;
 
     let Some(python) = util::python_with_opencv() else {
@@ -521,7 +521,7 @@ fn the_several_camera_report_plots_every_cameras_residuals_and_the_rotation_axes
             "{}: {dropped} of {} samples dropped",
             camera.name, camera.samples
         );
-        let rms = |value: fn(&handeye_session::result::SampleResidualYaml) -> Option<f64>| {
+        let rms = |value: fn(&handeye_records::result::SampleResidualYaml) -> Option<f64>| {
             let squares: Vec<f64> = camera
                 .residuals_per_pose
                 .iter()
@@ -835,7 +835,7 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
     let out = dir.path().join("session");
     let stdout = run_ok(&config, &out, &[]);
     println!("{stdout}");
-    let manifest: handeye_session::session::SessionManifest = serde_yaml_ng::from_str(
+    let manifest: handeye_records::SessionManifest = serde_yaml_ng::from_str(
         &std::fs::read_to_string(camera_folder(&out, "wrist").join("session.yaml")).unwrap(),
     )
     .unwrap();
@@ -859,7 +859,7 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
             camera.verdict.reason
         );
         // Every camera's folder records the same growing plan.
-        let other: handeye_session::session::SessionManifest = serde_yaml_ng::from_str(
+        let other: handeye_records::SessionManifest = serde_yaml_ng::from_str(
             &std::fs::read_to_string(camera_folder(&out, &camera.name).join("session.yaml"))
                 .unwrap(),
         )
@@ -876,8 +876,7 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
 fn a_recorded_three_camera_cell_replays_the_live_run() {
     let (config, live, _) = shipped_run();
     let dir = tempfile::tempdir().unwrap();
-    let wrist =
-        handeye_session::session::SessionFolder::open(&camera_folder(live, "wrist")).unwrap();
+    let wrist = handeye_records::SessionFolder::open(&camera_folder(live, "wrist")).unwrap();
     let poses: Vec<Pose> = wrist
         .read_visits()
         .unwrap()

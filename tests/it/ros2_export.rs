@@ -12,7 +12,7 @@ use handeye_core::geometry::Pose;
 use handeye_formats::export::named_transforms;
 use handeye_formats::ros2_launch::link_from_optical;
 use handeye_formats::FrameIds;
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 
 use crate::util::{self, handeye, pose_error_mm_deg, repo};
 
@@ -168,11 +168,8 @@ fn camera_link_needs_the_launch_format() {
 
 /// The RealSense-style chain `camera_link → camera_color_frame → camera_color_optical_frame`
 /// (the colour imager 32 mm to the side, turned 0.4° about z) as `tf_static.yaml` records it.
-pub(crate) fn realsense_chain() -> (
-    handeye_session::session::tf_static::StaticTransformsFile,
-    Pose,
-) {
-    use handeye_session::session::tf_static::{HeardTransform, StaticTransformsFile};
+pub(crate) fn realsense_chain() -> (handeye_records::tf_static::StaticTransformsFile, Pose) {
+    use handeye_records::tf_static::{HeardTransform, StaticTransformsFile};
     let half = 0.4_f64.to_radians() / 2.0;
     let link_from_color = Pose::from_parts(
         Translation3::new(0.0, 0.032, 0.0),

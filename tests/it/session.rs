@@ -7,8 +7,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use handeye_core::setup::CellTransforms;
+use handeye_records::{SessionError, SessionFolder};
 use handeye_session::cell::{self, PreparedCell};
-use handeye_session::session::{self, SessionError, SessionEvent, SessionFolder, SessionOutcome};
+use handeye_session::{SessionEvent, SessionOutcome};
 
 use crate::util;
 
@@ -25,7 +26,7 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
     }
     let mut hardware = prepared.open_hardware().unwrap();
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-    session::run_session(
+    handeye_session::run_session(
         setup,
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
@@ -33,7 +34,7 @@ fn run(prepared: &PreparedCell, folder: &SessionFolder) -> Result<SessionOutcome
     )
 }
 
-fn assert_recovers_truth(solved: &session::SolvedSession, truth: &CellTransforms) {
+fn assert_recovers_truth(solved: &handeye_records::SolvedSession, truth: &CellTransforms) {
     let [(camera_key, camera_mount), (target_key, target_mount)] = solved.calibration.unknowns();
     for (key, estimate, truth) in [
         (camera_key, camera_mount, truth.camera_mount),
@@ -48,7 +49,10 @@ fn assert_recovers_truth(solved: &session::SolvedSession, truth: &CellTransforms
     }
 }
 
-fn full_run(config: &Path, out: &Path) -> (PreparedCell, SessionFolder, session::SolvedSession) {
+fn full_run(
+    config: &Path,
+    out: &Path,
+) -> (PreparedCell, SessionFolder, handeye_records::SolvedSession) {
     let prepared = cell::prepare(config).unwrap();
     assert!(prepared.report.ok(), "{}", prepared.report);
     let folder = SessionFolder::create(out).unwrap();
@@ -59,7 +63,7 @@ fn full_run(config: &Path, out: &Path) -> (PreparedCell, SessionFolder, session:
         "skipped: {:?}",
         outcome.skipped
     );
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     (prepared, folder, solved)
 }
 
@@ -85,7 +89,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         solved.compare_with_truth(prepared.config.camera().simulation.as_ref().unwrap())
     );
     // Replay re-detects the saved frames and reproduces the result (both answers).
-    let (dataset, visits) = session::replay::redetect(
+    let (dataset, visits) = handeye_session::replay::redetect(
         &folder,
         &prepared.camera().board,
         &prepared.camera().camera_model,
@@ -99,7 +103,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         &prepared.config.solver.to_options(),
     )
     .unwrap();
-    let again_both = session::solve_session(
+    let again_both = handeye_records::solve_session(
         dataset.setup,
         &dataset.pairs,
         &visits,
@@ -179,7 +183,7 @@ fn hidden_board_poses_are_retried_then_skipped_and_the_run_still_succeeds() {
     );
     assert_eq!(outcome.accepted.len(), 13);
     assert!(outcome.accepted.contains(&8));
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     let [(_, camera_mount), _] = solved.calibration.unknowns();
     let (mm, deg) = pose_error_mm_deg(
         &camera_mount,
@@ -216,7 +220,7 @@ fn protective_stop_keeps_the_data_and_resume_finishes() {
     let outcome = run(&prepared, &folder).unwrap();
     assert_eq!(outcome.visited_now, 7);
     assert_eq!(outcome.accepted, (0..12).collect::<Vec<_>>());
-    let dataset = handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    let dataset = handeye_records::dataset::Dataset::load(&folder.samples_path()).unwrap();
     assert_eq!(dataset.pairs.len(), 12);
 }
 
@@ -243,7 +247,7 @@ fn a_stop_request_ends_the_move_in_progress_and_resume_finishes() {
     let setup = prepared.session_setup(folder.clone(), plan, stop.clone());
     // Ctrl-C 0.4 s into the third move (moves take 1 s each).
     let mut pressed_at = None;
-    let error = session::run_session(
+    let error = handeye_session::run_session(
         setup,
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
@@ -309,7 +313,7 @@ fn a_move_that_would_leave_the_workspace_box_from_where_the_arm_stands_is_not_se
         .move_joints(&jogged, &prepared.config.limits)
         .unwrap();
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-    let error = session::run_session(
+    let error = handeye_session::run_session(
         setup,
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
@@ -476,7 +480,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(!prepared.camera().intrinsics_known);
     // The generated views push the board across the image for the intrinsics; the same plan
     // with the intrinsics known keeps the board centred.
-    let coverage = |report: &handeye_session::plan::check::PlanReport| {
+    let coverage = |report: &handeye_plan::check::PlanReport| {
         report.intrinsics.as_ref().unwrap().coverage_percent
     };
     let centred = cell::prepare(&repo().join("configs/sim-cell.yaml")).unwrap();
@@ -495,7 +499,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
     assert!(visits
         .iter()
         .all(|v| v.camera_from_target.is_none() && !v.corners_px.is_empty()));
-    let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+    let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
     eprintln!(
         "{}\n{}",
         solved.summary,
@@ -527,7 +531,7 @@ fn sim_cell_without_intrinsics_estimates_them_and_the_cell() {
         prepared.config.camera().simulation.as_ref().unwrap(),
     );
     assert!(folder.result_path().is_file());
-    let summary: session::solve::ReprojectionSummary = serde_yaml_ng::from_str(
+    let summary: handeye_records::solve::ReprojectionSummary = serde_yaml_ng::from_str(
         &std::fs::read_to_string(folder.root().join("reprojection.yaml")).unwrap(),
     )
     .unwrap();

@@ -10,9 +10,10 @@ use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_records::{SessionError, SessionFolder};
 use handeye_robot::kinematics::UrModel;
 use handeye_session::cell;
-use handeye_session::session::{self, SessionError, SessionFolder, SessionOutcome};
+use handeye_session::SessionOutcome;
 use mocks::{MockFaults, MockUr, MockUrConfig};
 use nalgebra::Vector3;
 
@@ -75,7 +76,7 @@ fn run(
         folder.write_manifest(&prepared.manifest(0, &plan)).unwrap();
     }
     let setup = prepared.session_setup(folder.clone(), plan, Arc::new(AtomicBool::new(false)));
-    let outcome = session::run_session(
+    let outcome = handeye_session::run_session(
         setup,
         hardware.robot.as_mut(),
         &mut [hardware.cameras[0].as_mut()],
@@ -103,7 +104,7 @@ fn full_run_through_ur_rtde_recovers_the_truth_with_a_tcp_offset_set() {
         let (prepared, outcome) = run(&config, &folder);
         let outcome = outcome.unwrap();
         assert_eq!(outcome.accepted.len(), 12, "skipped {:?}", outcome.skipped);
-        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+        let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         let truth = prepared.config.camera().simulation.unwrap();
         let [(camera_key, camera_mount), (target_key, target_mount)] =
             solved.calibration.unknowns();

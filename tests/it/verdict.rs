@@ -9,12 +9,12 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
 
+use handeye_config::{CellConfig, ConfigError};
 use handeye_core::geometry::Pose;
 use handeye_core::notice::NoticeKind;
 use handeye_core::setup::{predict, PosePair, Setup};
 use handeye_formats::import::{import_visp, VispOptions};
-use handeye_session::config::{CellConfig, ConfigError};
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Basis, Level};
 use handeye_solve::{self as solve, NoiseModel, SolveError, SolveOptions};
 use handeye_vision::{Board, DetectorOptions};

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_core::setup::{self, CellTransforms, PosePair, Setup};
+use handeye_plan::GenerateSpec;
 use handeye_session::cell;
-use handeye_session::plan::GenerateSpec;
 use handeye_session::verify;
 use handeye_solve::SolveOptions;
 use nalgebra::Vector3;
@@ -83,7 +83,7 @@ fn holdout_errors_agree_with_the_known_error_of_the_result() {
     let off = holdout(&wrong_camera, &truth.target_mount, &dir.path().join("off"));
     eprintln!("{}", off.table());
     let samples =
-        handeye_session::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
+        handeye_records::dataset::Dataset::load(&dir.path().join("off/samples.yaml")).unwrap();
     for (e, pair) in off.poses.iter().zip(&samples.pairs) {
         let with_truth = truth.camera_from_target(&pair.base_from_flange);
         let with_result = setup::predict(

@@ -2,9 +2,9 @@
 //! its Monte Carlo tests and its bench: the config, the wrist views, the board-pose noise a
 //! rendered run estimates, and the joint problem from the config's nominal mounts.
 
+use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
-use handeye_session::config::CellConfig;
 use handeye_solve::rig::{RigCamera, RigData, RigObservation, RigStart};
 use handeye_solve::NoiseModel;
 use nalgebra::{UnitQuaternion, Vector3};

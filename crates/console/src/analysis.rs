@@ -19,7 +19,8 @@ use nalgebra::{Point2, Point3};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
 use handeye_core::setup::{predict, PosePair, Setup};
-use handeye_session::session::{PoseVisit, SharedFrame};
+use handeye_records::PoseVisit;
+use handeye_session::SharedFrame;
 use handeye_solve::{solve, SolveOptions};
 use handeye_vision::{draw, Target};
 
@@ -262,7 +263,7 @@ impl State {
                 Job::Recorded(index) => {
                     let file = self
                         .root
-                        .join(handeye_session::session::SessionFolder::visit_name(index));
+                        .join(handeye_records::SessionFolder::visit_name(index));
                     let visit: PoseVisit = match handeye_core::yaml_file::read_yaml(&file) {
                         Ok(visit) => visit,
                         Err(e) => {

@@ -8,12 +8,13 @@ use std::time::Duration;
 
 use handeye_core::geometry::Pose;
 use handeye_core::setup::predict;
+use handeye_records::SessionFolder;
 use handeye_robot::Joints;
 use handeye_session::cell::run::{
     run_opened, CellRun, HandGuide, OpenedRun, RunError, RunObserver, RunRequest, Strategy,
 };
 use handeye_session::cell::PreparedCell;
-use handeye_session::session::{ManualCommand, ManualControl, ManualEvent, SessionFolder};
+use handeye_session::{ManualCommand, ManualControl, ManualEvent};
 
 use super::analysis::{Analyst, CellView, Job};
 use super::events::{joints_deg, Command, ConsoleEvent, PoseView};

@@ -7,10 +7,11 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use handeye_core::geometry::Pose;
+use handeye_records::SessionFolder;
 use handeye_robot::Joints;
 use handeye_session::cell::run::RunObserver;
 use handeye_session::cell::PreparedCell;
-use handeye_session::session::{SessionEvent, SessionFolder};
+use handeye_session::SessionEvent;
 
 use super::analysis::{Analyst, CellView, Job};
 use super::events::{joints_deg, Command, ConsoleEvent, PlannedView, PoseState, PoseView};

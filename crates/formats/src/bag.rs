@@ -11,18 +11,18 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
+use handeye_config::{recorded_cell, RecordedFiles};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::RobotFrames;
 use handeye_robot::recorded::save_recorded_poses;
-use handeye_session::config::{recorded_cell, RecordedFiles};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use handeye_records::{SessionFolder, SolvedSession};
 use handeye_session::cell::run::{
     self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
 };
 use handeye_session::cell::PreparedCell;
-use handeye_session::session::{self, SessionFolder, SolvedSession};
 
 use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, SkipReason};
 
@@ -125,13 +125,13 @@ fn check_output(out: &Path, say: &mut dyn FnMut(BagNote)) -> anyhow::Result<()> 
     // Staging folders of imports that were killed (kill -9, a power cut) are removed here; those
     // of imports still running beside this one are locked and left alone.
     if let Some(parent) = out.parent() {
-        for leftover in session::remove_abandoned(parent, STAGING_TAG)? {
+        for leftover in handeye_records::remove_abandoned(parent, STAGING_TAG)? {
             match leftover {
-                session::Leftover::Removed(path) => say(BagNote::Line(format!(
+                handeye_records::Leftover::Removed(path) => say(BagNote::Line(format!(
                     "removed {} left by an import that was killed",
                     leaf(&path)
                 ))),
-                session::Leftover::InUse(path, pid) => say(BagNote::Line(format!(
+                handeye_records::Leftover::InUse(path, pid) => say(BagNote::Line(format!(
                     "left {} alone: an import still running{} writes into it",
                     leaf(&path),
                     pid.map(|p| format!(" (pid {p})")).unwrap_or_default()
@@ -260,7 +260,7 @@ pub fn import_bag_session(
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "session".into());
-    let staging = session::Staging::create(parent, &name, STAGING_TAG)
+    let staging = handeye_records::Staging::create(parent, &name, STAGING_TAG)
         .with_context(|| format!("creating a staging folder in {}", parent.display()))?;
     let stage = staging.path().to_path_buf();
     let folder = SessionFolder::create(&stage)?.to_be_moved_to(&out);
@@ -456,7 +456,7 @@ fn recorded_config(
     a: &BagSessionRequest,
     with_intrinsics: bool,
     poses: &[Pose],
-) -> handeye_session::config::ConfigFile {
+) -> handeye_config::ConfigFile {
     let options = &a.options;
     let identity = Pose::identity();
     recorded_cell(

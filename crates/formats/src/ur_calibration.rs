@@ -31,8 +31,8 @@ use std::fmt::Write as _;
 use nalgebra::{Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use handeye_core::geometry::{dh_link, Pose};
+use handeye_records::result::KinematicsYaml;
 use handeye_robot::kinematics::UrModel;
-use handeye_session::result::KinematicsYaml;
 
 /// The joint names of the YAML, base first.
 pub const LINKS: [&str; 6] = [

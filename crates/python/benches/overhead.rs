@@ -9,7 +9,7 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use handeye_session::dataset::Dataset;
+use handeye_records::dataset::Dataset;
 use handeye_solve::{NoiseModel, SolveOptions};
 
 fn bench(c: &mut Criterion) {

@@ -10,11 +10,11 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use handeye_config::validate;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{readable, Pose};
 use handeye_core::setup::{PosePair, Setup};
-use handeye_session::config::validate;
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
 use handeye_solve::{Method, RobustLoss, SolveError, SolveOptions, SolverChoice};
 use numpy::{IntoPyArray, PyArray2, PyArray3};

@@ -11,11 +11,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use handeye_core::error_text::error_chain;
+use handeye_records::{dated_session_path, SessionError};
 use handeye_session::cell::run::{
     open_run, run_opened, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
 };
 use handeye_session::cell::PreparedCell;
-use handeye_session::session::{dated_session_path, SessionError, SessionEvent};
+use handeye_session::SessionEvent;
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;

@@ -8,12 +8,12 @@
 
 use std::path::{Path, PathBuf};
 
+use handeye_config::{CellConfig, SolveSpace};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
-use handeye_session::config::{CellConfig, SolveSpace};
-use handeye_session::dataset::Dataset;
-use handeye_session::result::ResultFile;
-use handeye_session::session::{self, SessionFolder, SolveInputs};
+use handeye_records::dataset::Dataset;
+use handeye_records::result::ResultFile;
+use handeye_records::{SessionFolder, SolveInputs};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -189,7 +189,7 @@ impl Session {
         };
         let inputs = SolveInputs::load(config).map_err(|e| errors::from_error(py, &e))?;
         let (solved, dataset) = py
-            .detach(|| session::load_and_solve(&folder, &inputs, space))
+            .detach(|| handeye_records::load_and_solve(&folder, &inputs, space))
             .map_err(|e| {
                 errors::with_context(py, &format!("solving session {}", self.root.display()), &e)
             })?;

@@ -12,13 +12,13 @@
 use serde::{Deserialize, Serialize};
 
 use crate::cell::run::{self, RunError, RunObserver, RunRequest, Strategy};
-use crate::config::CellConfig;
-use crate::dataset::Dataset;
-use crate::plan::GenerateSpec;
-use crate::session::SessionError;
+use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
+use handeye_plan::GenerateSpec;
+use handeye_records::dataset::Dataset;
+use handeye_records::SessionError;
 use handeye_solve::verdict::{Accuracy, Level};
 use handeye_solve::{self as solve, SolveError, SolveOptions};
 

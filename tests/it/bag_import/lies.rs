@@ -423,8 +423,7 @@ fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
     };
     // This process holds a staging folder as a concurrent import does (the lock is per process).
     let live =
-        handeye_session::session::Staging::create(dir.path(), "refused-session", "importing")
-            .unwrap();
+        handeye_records::Staging::create(dir.path(), "refused-session", "importing").unwrap();
     std::fs::write(live.path().join("session.yaml"), "being written").unwrap();
     let out = dir.path().join("refused-session");
     let run = import(&bag, &out, &[]);

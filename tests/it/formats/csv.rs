@@ -307,18 +307,17 @@ fn uvc_camera_config_is_validated_and_needs_the_feature() {
             "setup: eye_in_hand\ntarget: t.yaml\nintrinsics: c.yaml\nrobot: {{backend: ur, host: 10.0.0.2}}\ncamera: {{backend: uvc, device: '0', width: 640, height: 480, pixel_format: {pixel_format}, exposure_us: 8000, focus: 0}}\nnominal:\n  T_flange_camera: {{translation: [0, 0, 0.05], rotation_vector: [0, 0, 0]}}\n  T_base_target: {{translation: [0.5, 0, 0], rotation_vector: [3.1, 0, 0]}}\nplan: {{file: plan.yaml}}\nworkspace: {{min: [-1, -1, -1], max: [1, 1, 1]}}\n"
         )
     };
-    let config =
-        handeye_session::config::CellConfig::parse(&text("yuyv"), Path::new("cell.yaml")).unwrap();
+    let config = handeye_config::CellConfig::parse(&text("yuyv"), Path::new("cell.yaml")).unwrap();
     assert!(matches!(
         &config.camera().backend,
-        handeye_session::config::CameraConfig::Uvc {
+        handeye_config::CameraConfig::Uvc {
             width: 640,
             height: 480,
             stale_frames: 4,
             ..
         }
     ));
-    let e = handeye_session::config::CellConfig::parse(&text("h264"), Path::new("cell.yaml"))
+    let e = handeye_config::CellConfig::parse(&text("h264"), Path::new("cell.yaml"))
         .unwrap_err()
         .to_string();
     assert!(

@@ -13,10 +13,10 @@ use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use handeye_core::geometry::Pose;
+use handeye_records::SessionError;
 use handeye_robot::kinematics::UrModel;
 use handeye_session::cell::rig::camera_folder;
 use handeye_session::cell::run::{run, RunError, RunRequest, SessionTarget, Strategy};
-use handeye_session::session::SessionError;
 use mocks::{MockFaults, MockUr, MockUrConfig};
 
 use crate::util;

@@ -9,7 +9,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 
 use handeye_core::geometry::Pose;
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use super::{peer, python};

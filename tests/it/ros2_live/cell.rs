@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 
 use handeye_core::geometry::pose_from_rotvec;
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 
 use super::{peer, python};
 use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, within};
@@ -54,7 +54,7 @@ pub(super) fn views() -> PathBuf {
 /// The accepted records of `session`: plan index, `T_base_flange` and the manifest plan's joints
 /// (degrees), in plan order.
 pub(super) fn captures(session: &Path) -> Vec<(usize, handeye_core::geometry::Pose, Vec<f64>)> {
-    let folder = handeye_session::session::SessionFolder::open(session).unwrap();
+    let folder = handeye_records::SessionFolder::open(session).unwrap();
     let plan = folder.read_manifest().unwrap().plan;
     let mut visits = folder.read_visits().unwrap();
     visits.retain(|v| v.rejected.is_none() && v.camera_from_target.is_some());
@@ -292,10 +292,9 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
         assert!(!result.contains("camera driver publishes"), "{result}");
         // What the graph held as static is part of the session: the driver's base_link → base
         // turn, as the peer publishes it.
-        let recorded = handeye_session::session::tf_static::StaticTransformsFile::load(
-            &out_dir.join("tf_static.yaml"),
-        )
-        .unwrap();
+        let recorded =
+            handeye_records::tf_static::StaticTransformsFile::load(&out_dir.join("tf_static.yaml"))
+                .unwrap();
         let turn = recorded
             .transforms
             .iter()

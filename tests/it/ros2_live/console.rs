@@ -19,7 +19,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use handeye_session::plan::{Plan, Waypoint};
+use handeye_plan::{Plan, Waypoint};
 
 use super::cell::{
     assert_truth, captures, cell, mid_long_goal, poses_kept, run, text, views, Peer,

@@ -154,7 +154,7 @@ fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
         let base_from_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
         let shoulder_from_tool = pose([0.613, 0.0571, -0.2], [0.3, -1.0, 0.2], -71.5);
         let tool_from_camera = pose([0.0312, -0.0694, 0.0447], [0.01, -0.012, 1.0], 89.4);
-        let names = handeye_session::config::ros2::UR_DRIVER_JOINT_NAMES;
+        let names = handeye_config::ros2::UR_DRIVER_JOINT_NAMES;
         let positions = [0.1, -std::f64::consts::FRAC_PI_2, 1.2, -0.3, -1.57, 3.0];
         let speeds = [0.0, 0.25, -0.5, 0.0, 1e-3, -2.5];
         let model = sim_camera_model();
@@ -271,7 +271,7 @@ fn ur10e_dh() -> [f64; 6] {
 /// peer's key), its `base_link → tool0` and its frame as raw mono8 bytes (the C++ peer needs no
 /// PNG decoder).
 fn sim_table(dir: &Path, views: &Path) -> PathBuf {
-    let folder = handeye_session::session::SessionFolder::open(views).unwrap();
+    let folder = handeye_records::SessionFolder::open(views).unwrap();
     let turn = ur_base_link_from_base();
     let words = |values: &[f64]| {
         values

@@ -23,12 +23,12 @@ use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
+use handeye_config::ros2::UR_DRIVER_JOINT_NAMES;
 use handeye_core::camera_model::CameraModel;
 use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
 use handeye_ros2::camera::{CameraOptions, Ros2Camera};
 use handeye_ros2::freedrive::FreedriveOptions;
 use handeye_ros2::link::{LinkOptions, Ros2Link};
-use handeye_session::config::ros2::UR_DRIVER_JOINT_NAMES;
 
 use crate::util;
 

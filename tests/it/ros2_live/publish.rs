@@ -6,7 +6,7 @@ use std::process::{Child, Command, Stdio};
 
 use handeye_formats::export::named_transforms;
 use handeye_formats::FrameIds;
-use handeye_session::result::ResultFile;
+use handeye_records::result::ResultFile;
 
 use super::{peer, python};
 use crate::util::{handeye, repo, within};

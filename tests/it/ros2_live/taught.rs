@@ -14,8 +14,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use handeye_plan::Plan;
 use handeye_robot::Joints;
-use handeye_session::plan::Plan;
 
 use super::cell::{assert_truth, captures, cell, poses_kept, run_cell, text, views, Peer};
 use super::python;
@@ -167,7 +167,7 @@ fn a_seven_joint_plan_is_refused_on_a_six_joint_arm() {
             84,
             "  file: seven.yaml",
             "ur10e",
-            &handeye_session::config::ros2::UR_DRIVER_JOINT_NAMES.join(","),
+            &handeye_config::ros2::UR_DRIVER_JOINT_NAMES.join(","),
             ranges,
         );
         let session = dir.path().join("s");

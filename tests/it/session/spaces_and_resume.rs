@@ -27,11 +27,11 @@ fn both_spaces_over_seeds(
         let prepared = cell::prepare(&config).unwrap();
         assert_eq!(
             prepared.config.solver.space,
-            handeye_session::config::SolveSpace::Reprojection
+            handeye_config::SolveSpace::Reprojection
         );
         let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
         run(&prepared, &folder).unwrap();
-        let solved = session::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
+        let solved = handeye_records::solve_folder(&folder, &prepared.solve_inputs()).unwrap();
         assert!(solved.reprojection.is_some());
         let truth = prepared.config.camera().simulation.unwrap();
         for (sum, answer) in sums
@@ -137,7 +137,7 @@ fn copy_session(from: &Path, to: &Path) {
 }
 
 fn sample_ids(folder: &Path) -> Vec<String> {
-    handeye_session::dataset::Dataset::load(&folder.join("samples.yaml"))
+    handeye_records::dataset::Dataset::load(&folder.join("samples.yaml"))
         .unwrap()
         .pairs
         .iter()
@@ -220,7 +220,7 @@ fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
     );
     assert!(!message.contains("frames/005.png"), "{message}");
     let prepared = cell::prepare(&config).unwrap();
-    let replay = session::replay::redetect(
+    let replay = handeye_session::replay::redetect(
         &SessionFolder::open(&dir.path().join("zero")).unwrap(),
         &prepared.camera().board,
         &prepared.camera().camera_model,
@@ -236,7 +236,7 @@ fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
     let orphan = dir.path().join("orphan");
     copy_session(&original, &orphan);
     std::fs::remove_file(orphan.join("poses/005.yaml")).unwrap();
-    let message = session::solve_folder(
+    let message = handeye_records::solve_folder(
         &SessionFolder::open(&orphan).unwrap(),
         &prepared.solve_inputs(),
     )
@@ -362,8 +362,8 @@ fn files_carry_a_schema_version_and_a_newer_one_is_refused() {
     let folder = SessionFolder::open(&out).unwrap();
     assert_eq!(folder.read_manifest().unwrap().plan.len(), 8);
     assert!(!folder.read_visits().unwrap().is_empty());
-    handeye_session::dataset::Dataset::load(&folder.samples_path()).unwrap();
-    handeye_session::result::ResultFile::load_mounts(&out.join("result.yaml")).unwrap();
+    handeye_records::dataset::Dataset::load(&folder.samples_path()).unwrap();
+    handeye_records::result::ResultFile::load_mounts(&out.join("result.yaml")).unwrap();
     drop(folder);
     // A newer version: refused, naming the file and the version.
     let newer = |file: &str| {

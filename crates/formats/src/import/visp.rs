@@ -18,7 +18,7 @@ use super::{checked_translation, read_text, ImportError};
 use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::{pose_from_rotvec, Pose};
 use handeye_core::setup::{PosePair, Setup};
-use handeye_session::dataset::Dataset;
+use handeye_records::dataset::Dataset;
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 #[derive(serde::Deserialize)]

@@ -16,20 +16,18 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::config::{CameraConfig, CellCamera, CellConfig, ConfigError, RobotConfig};
-use crate::plan::check::MoveCheck;
-use crate::plan::check::{check_plan, check_plan_ordered, CheckContext, PlanReport};
-use crate::plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
-use crate::plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
-use crate::session::{
-    InputFile, SessionCamera, SessionError, SessionFolder, SessionManifest, SessionSetup,
-    SolveInputs,
-};
+use crate::{SessionCamera, SessionSetup};
 use handeye_camera::Camera;
+use handeye_config::{CameraConfig, CellCamera, CellConfig, ConfigError, RobotConfig};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
+use handeye_plan::check::MoveCheck;
+use handeye_plan::check::{check_plan, check_plan_ordered, CheckContext, PlanReport};
+use handeye_plan::generate::{spread_across_image, IMAGE_SPREAD_FOR_INTRINSICS};
+use handeye_plan::{generate, GenerateSpec, LookAt, Plan, PlanError, Waypoint};
+use handeye_records::{InputFile, SessionError, SessionFolder, SessionManifest, SolveInputs};
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::{Joints, Robot};
 use handeye_vision::{DetectorOptions, Target};
@@ -147,7 +145,7 @@ pub struct PreparedCamera {
 
 /// The intrinsics a ROS 2 camera driver published, kept in the session of a run (a replay of a
 /// config without an `intrinsics:` file uses them; with one, the solve compares the two).
-pub use crate::session::solve::DRIVER_CALIBRATION_FILE as INTRINSICS_FROM_TOPIC_FILE;
+pub use handeye_records::solve::DRIVER_CALIBRATION_FILE as INTRINSICS_FROM_TOPIC_FILE;
 
 /// A cell whose config, boards, intrinsics and plan are loaded and checked: one arm, one plan,
 /// and its cameras (one, or several sharing the arm's poses).
@@ -260,7 +258,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             start_joints_deg, ..
         } => Joints::from(start_joints_deg.map(f64::to_radians)),
         RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } | RobotConfig::Ros2(_) => {
-            Joints::from(crate::config::default_start_joints())
+            Joints::from(handeye_config::default_start_joints())
         }
     };
     let mut prepared = PreparedCell {
@@ -444,9 +442,9 @@ impl PreparedCell {
         candidates: Vec<(Pose, Joints)>,
         target_uncertainty_mm: f64,
         max_samples: usize,
-    ) -> crate::plan::nbv::AdaptivePlanner {
+    ) -> handeye_plan::nbv::AdaptivePlanner {
         let camera = &self.config.cameras[camera];
-        crate::plan::nbv::AdaptivePlanner::new(
+        handeye_plan::nbv::AdaptivePlanner::new(
             camera.setup,
             camera.nominal.camera_mount,
             camera.nominal.target_mount,

@@ -4,12 +4,12 @@
 //! with pose `i`. Nothing is checked for reach or joint limits: a real arm already visited these
 //! poses. Only the rotation diversity the solver needs is checked before running.
 
-use crate::config::{CameraConfig, CellConfig, RobotConfig};
-use crate::plan::check::{board_margin, board_points, PlanReport, PoseCheck};
-use crate::plan::{Plan, Waypoint};
 use handeye_camera::files::{FilesCamera, FrameSelector};
+use handeye_config::{CameraConfig, CellConfig, RobotConfig};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_plan::check::{board_margin, board_points, PlanReport, PoseCheck};
+use handeye_plan::{Plan, Waypoint};
 use handeye_robot::recorded::{load_recorded_poses, plan_joints, RecordedRobot};
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_solve::check_rotation_diversity;

@@ -8,7 +8,7 @@ use handeye_core::camera_model::CameraModel;
 use handeye_robot::kinematics::UrModel;
 
 use super::CellError;
-use crate::config::CellConfig;
+use handeye_config::CellConfig;
 
 /// The ROS 2 node a cell's arm was opened on: its other cameras subscribe on it.
 #[cfg(feature = "ros2")]
@@ -58,8 +58,8 @@ pub fn open_arm(
     use handeye_ros2::arm::{ArmOptions, Framing, Ros2Arm};
     use handeye_ros2::link::{LinkOptions, Ros2Link};
 
-    use crate::config::ros2::{Rmw, RosDistro};
-    use crate::config::RobotConfig;
+    use handeye_config::ros2::{Rmw, RosDistro};
+    use handeye_config::RobotConfig;
     use handeye_ros2::freedrive::{Distro, FreedriveOptions};
 
     let RobotConfig::Ros2(r) = &config.robot else {
@@ -117,7 +117,7 @@ pub fn open_camera(
 
     use handeye_ros2::camera::{CameraOptions, Ros2Camera};
 
-    use crate::config::CameraConfig;
+    use handeye_config::CameraConfig;
 
     let CameraConfig::Ros2(c) = &config.camera().backend else {
         return Err(CellError::Backend(
@@ -147,10 +147,10 @@ pub fn open_camera(
 pub fn record_graph(
     cell: &super::PreparedCell,
     node: &Ros2Node,
-    folder: &crate::session::SessionFolder,
+    folder: &handeye_records::SessionFolder,
 ) -> Vec<String> {
-    use crate::config::{CameraConfig, RobotConfig};
-    use crate::session::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
+    use handeye_config::{CameraConfig, RobotConfig};
+    use handeye_records::tf_static::{StaticTransformsFile, TF_STATIC_FILE};
 
     let mut notes = Vec::new();
     let camera = cell.camera();
@@ -207,7 +207,7 @@ pub fn record_graph(
 pub fn record_graph(
     _cell: &super::PreparedCell,
     _node: &Ros2Node,
-    _folder: &crate::session::SessionFolder,
+    _folder: &handeye_records::SessionFolder,
 ) -> Vec<String> {
     Vec::new()
 }
@@ -223,7 +223,7 @@ pub fn intrinsics_from_topic(
 ) -> Result<CameraModel, CellError> {
     use handeye_ros2::link::{LinkOptions, Ros2Link};
 
-    use crate::config::RobotConfig;
+    use handeye_config::RobotConfig;
 
     let RobotConfig::Ros2(r) = &config.robot else {
         return Err(CellError::Backend(

@@ -6,9 +6,9 @@ use std::cell::Cell;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use crate::config::{CameraConfig, CellConfig, RobotConfig};
 use handeye_camera::render::RenderOptions;
 use handeye_camera::sim::{SimCamera, TrueFlangePose};
+use handeye_config::{CameraConfig, CellConfig, RobotConfig};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;

@@ -2,8 +2,8 @@
 //! feature; without it, a clear error says the build lacks it. The session sees the `Camera`
 //! trait either way.
 
-use crate::config::CameraConfig;
 use handeye_camera::Camera;
+use handeye_config::CameraConfig;
 use handeye_core::camera_model::CameraModel;
 
 use super::CellError;

@@ -14,9 +14,10 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
 use handeye_robot::Joints;
 
-use crate::dataset::Dataset;
-use crate::plan::nbv::{AdaptivePlanner, AdaptiveStep};
-use crate::session::{PlanSource, SessionFolder};
+use crate::PlanSource;
+use handeye_plan::nbv::{AdaptivePlanner, AdaptiveStep};
+use handeye_records::dataset::Dataset;
+use handeye_records::SessionFolder;
 
 /// The next-best pose over several cameras.
 pub struct RigPlanner {

@@ -22,14 +22,15 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::PreparedCell;
-use crate::session::{PlannedPose, SessionError, SessionFolder, SessionManifest, SessionSetup};
+use crate::SessionSetup;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{read_yaml, write_yaml};
+use handeye_records::{PlannedPose, SessionError, SessionFolder, SessionManifest};
 use handeye_robot::Joints;
 use handeye_solve::rig::MIN_VIEWS_PER_CAMERA;
 
-pub use crate::session::CameraFailure;
+pub use crate::CameraFailure;
 pub use solve::{solve_rig_folder, RigOutput, RigResultFile, RigSolveError};
 
 /// `rig.yaml`: the cameras of a several-camera session and its plan.

@@ -14,17 +14,17 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{camera_folder, read_manifest};
-use crate::config::{CellCamera, CellConfig, SolveSpace};
-use crate::result::SampleResidualYaml;
-use crate::session::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
-use crate::session::solve::{
-    board_pose, frames_from_visits, reprojection_options, write_estimates,
-};
-use crate::session::{PoseVisit, SessionError, SessionFolder};
+use crate::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
+use handeye_config::{CellCamera, CellConfig, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::{PosePair, RobotFrames, Setup};
 use handeye_core::yaml_file::write_yaml;
+use handeye_records::result::SampleResidualYaml;
+use handeye_records::solve::{
+    board_pose, frames_from_visits, reprojection_options, write_estimates,
+};
+use handeye_records::{PoseVisit, SessionError, SessionFolder};
 use handeye_solve::cell_model::{fit_cell_model, CellModel};
 use handeye_solve::reprojection::Frame;
 use handeye_solve::rig::{

@@ -3,12 +3,13 @@
 
 use std::sync::Arc;
 
-use crate::plan::check::PlanReport;
-use crate::plan::nbv::StopCheck;
-use crate::plan::{GenerateSpec, Plan, Waypoint};
-use crate::session::{self, SessionError, SessionEvent, SessionOutcome};
+use crate::{SessionEvent, SessionOutcome};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
+use handeye_plan::check::PlanReport;
+use handeye_plan::nbv::StopCheck;
+use handeye_plan::{GenerateSpec, Plan, Waypoint};
+use handeye_records::SessionError;
 use handeye_robot::Joints;
 use handeye_solve::Calibration;
 
@@ -73,7 +74,7 @@ impl std::fmt::Display for AdaptiveSummary {
 /// good enough) or as the fixed `plan`; the adaptive summary with the outcome.
 pub(super) fn drive_plan(
     cell: &PreparedCell,
-    setup: session::SessionSetup,
+    setup: crate::SessionSetup,
     (plan, candidate_numbers): (&[(Pose, Joints)], &[usize]),
     start: Joints,
     adaptive: bool,
@@ -96,7 +97,7 @@ pub(super) fn drive_plan(
     };
     if !adaptive {
         let (robot, mut cameras) = hardware.devices();
-        let outcome = session::run_session(setup, robot, &mut cameras, &mut on_event);
+        let outcome = crate::run_session(setup, robot, &mut cameras, &mut on_event);
         return (outcome, None);
     }
     // A generated plan's `count` is the most poses it takes (it chooses from more).
@@ -135,12 +136,12 @@ pub(super) fn drive_plan(
             .collect();
         super::super::rig::adaptive::RigPlanner::new(planners, others, sees, max_poses)
     });
-    let source: &mut dyn session::PlanSource = match &mut rig_planner {
+    let source: &mut dyn crate::PlanSource = match &mut rig_planner {
         Some(rig) => rig,
         None => &mut planner,
     };
     let (robot, mut cameras) = hardware.devices();
-    let outcome = session::run_adaptive_session(
+    let outcome = crate::run_adaptive_session(
         setup,
         cell.config_path(),
         source,
@@ -217,7 +218,7 @@ pub fn extra_candidates(cell: &PreparedCell) -> Option<PlanReport> {
         return None;
     };
     let count = (spec.count * ADAPTIVE_EXTRA_CANDIDATES)
-        .min(crate::plan::MAX_PLAN_POSES.saturating_sub(spec.count));
+        .min(handeye_plan::MAX_PLAN_POSES.saturating_sub(spec.count));
     if !cell.config.adaptive() || count == 0 {
         return None;
     }

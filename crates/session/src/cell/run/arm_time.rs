@@ -1,7 +1,7 @@
 //! Arm time: what a run spent moving and settling, against what the full plan in its given
 //! order would have cost; kept in the session folder for the report.
 
-use crate::session::SessionOutcome;
+use crate::SessionOutcome;
 
 use super::PreparedCell;
 
@@ -116,7 +116,7 @@ impl std::fmt::Display for ArmTime {
 /// The run's arm time against the full plan in its given order.
 pub(super) fn arm_time(cell: &PreparedCell, outcome: &SessionOutcome) -> ArmTime {
     let report = &cell.report;
-    let full: Vec<&crate::plan::check::PoseCheck> = report
+    let full: Vec<&handeye_plan::check::PoseCheck> = report
         .poses
         .iter()
         .filter(|p| p.problems.is_empty())

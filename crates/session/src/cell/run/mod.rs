@@ -22,12 +22,11 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::config::RobotConfig;
-use crate::plan::GenerateSpec;
-use crate::session::{
-    self, ManualControl, SessionError, SessionEvent, SessionFolder, SessionOutcome, SolvedSession,
-};
+use crate::{ManualControl, SessionEvent, SessionOutcome};
+use handeye_config::RobotConfig;
 use handeye_core::geometry::Pose;
+use handeye_plan::GenerateSpec;
+use handeye_records::{SessionError, SessionFolder, SolvedSession};
 use handeye_robot::{Joints, Robot, RobotError, RobotStatus};
 
 use super::{prepare, CellError, PreparedCell};
@@ -228,7 +227,7 @@ pub struct OpenedRun {
     /// The cell, prepared.
     pub cell: PreparedCell,
     /// The run's input files, hashed now.
-    pub inputs: Vec<session::InputFile>,
+    pub inputs: Vec<handeye_records::InputFile>,
 }
 
 impl OpenedRun {
@@ -382,7 +381,7 @@ pub fn run_opened(
         adaptive,
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
-    let solved = session::solve_folder(&folder, &cell.solve_inputs())?;
+    let solved = handeye_records::solve_folder(&folder, &cell.solve_inputs())?;
     let rig = match (cell.config.listed, super::rig::root_of(folder.root())) {
         (true, Some(root)) => Some(super::rig::solve_rig_folder(
             root,

@@ -1,8 +1,8 @@
 //! A resumed session: its input files checked against the ones it recorded, and its recorded
 //! plan matched with today's.
 
-use crate::session::{self, changed_inputs, SessionError, SessionFolder};
 use handeye_core::geometry::Pose;
+use handeye_records::{changed_inputs, SessionError, SessionFolder};
 use handeye_robot::Joints;
 
 use super::{RunError, RunObserver};
@@ -15,8 +15,8 @@ use super::{RunError, RunObserver};
 /// caller writes it).
 pub(super) fn check_resumed_inputs(
     folder: &SessionFolder,
-    manifest: &mut session::SessionManifest,
-    inputs: &[session::InputFile],
+    manifest: &mut handeye_records::SessionManifest,
+    inputs: &[handeye_records::InputFile],
     accept: Option<&str>,
     observer: &mut dyn RunObserver,
 ) -> Result<bool, RunError> {
@@ -54,7 +54,7 @@ pub struct ResumedSession {
     /// Its folder, locked for this run.
     pub folder: SessionFolder,
     /// Its manifest, with the input files of this run when changes were accepted.
-    pub manifest: session::SessionManifest,
+    pub manifest: handeye_records::SessionManifest,
     /// Whether `manifest` changed (accepted input changes, or the mark of a hand-guided session
     /// a planned resume handed over) and is not written to the folder yet.
     pub manifest_changed: bool,
@@ -67,7 +67,7 @@ pub struct ResumedSession {
 /// time from where the arm stood when the session started): the recorded order, with the joints
 /// of today's check. `None` when the poses differ.
 pub(super) fn recorded_order(
-    manifest: &session::SessionManifest,
+    manifest: &handeye_records::SessionManifest,
     plan: &[(Pose, Joints)],
 ) -> Option<Vec<(Pose, Joints)>> {
     if manifest.plan.len() != plan.len() {
@@ -91,7 +91,10 @@ pub(super) fn recorded_order(
 }
 
 /// Whether a resumed session's recorded plan is `plan` (same flange poses, in order).
-pub(super) fn same_plan(manifest: &session::SessionManifest, plan: &[(Pose, Joints)]) -> bool {
+pub(super) fn same_plan(
+    manifest: &handeye_records::SessionManifest,
+    plan: &[(Pose, Joints)],
+) -> bool {
     manifest.plan.len() == plan.len()
         && manifest.plan.iter().zip(plan).all(|(recorded, (pose, _))| {
             let r = recorded.base_from_flange;

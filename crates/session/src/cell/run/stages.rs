@@ -7,9 +7,10 @@
 use std::path::Path;
 
 use crate::cell::{Hardware, PreparedCell};
-use crate::plan::{Plan, Waypoint};
-use crate::session::{self, InputFile, ManualOptions, SessionError, SessionFolder, SessionOutcome};
+use crate::{ManualOptions, SessionOutcome};
 use handeye_core::geometry::Pose;
+use handeye_plan::{Plan, Waypoint};
+use handeye_records::{InputFile, SessionError, SessionFolder};
 use handeye_robot::Joints;
 
 use super::adaptive::{adaptive_candidates, drive_plan, AdaptiveSummary};
@@ -320,7 +321,7 @@ pub(super) fn drive_session(
     };
     let outcome: Result<SessionOutcome, SessionError> = {
         let mut control = guide.control(cell, folder, plan, &mut *observer);
-        session::run_manual_session(
+        crate::run_manual_session(
             setup,
             cell.config_path(),
             planner.as_mut(),

@@ -12,15 +12,15 @@
 //! (the last may not have been reached), the source is told every pose already visited, and it
 //! goes on choosing from the samples on disk.
 
-use crate::dataset::Dataset;
-use crate::plan::nbv::AdaptivePlanner;
 use handeye_camera::Camera;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
+use handeye_plan::nbv::AdaptivePlanner;
+use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, Robot};
 
-use super::SessionManifest;
-use super::{run_session, SessionError, SessionEvent, SessionOutcome, SessionSetup};
+use crate::driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
+use handeye_records::{SessionError, SessionManifest};
 
 /// Yields the next pose of a session from the samples accepted so far.
 pub trait PlanSource {
@@ -102,7 +102,7 @@ pub(super) struct GrowingPlan {
     pub poses: Vec<(Pose, Joints)>,
     manifest_config: std::path::PathBuf,
     /// The input hashes written when the session was created: kept with every manifest rewrite.
-    inputs: Vec<super::InputFile>,
+    inputs: Vec<handeye_records::InputFile>,
     /// A hand-guided session (kept with every manifest rewrite).
     manual: bool,
 }

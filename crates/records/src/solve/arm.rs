@@ -16,10 +16,10 @@ use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
 use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, DhChain, OffsetStatus};
 use handeye_solve::{self as solve, SolveError};
 
-use crate::config::schema::arm_model_unavailable;
-use crate::config::{CellConfig, KinematicsChoice};
 use crate::result::{JointOffsetYaml, KinematicsYaml, UncertaintyYaml, WithWithout};
-use crate::session::{PlannedPose, PoseVisit, SessionError};
+use crate::{PlannedPose, PoseVisit, SessionError};
+use handeye_config::schema::arm_model_unavailable;
+use handeye_config::{CellConfig, KinematicsChoice};
 
 /// The DH chain of a UR model, as the solver takes it.
 pub fn dh_chain(model: &UrModel) -> DhChain {

@@ -16,9 +16,9 @@ use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInp
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
+use handeye_records::dataset::Dataset;
+use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_session::cell::run::CellRun;
-use handeye_session::dataset::Dataset;
-use handeye_session::session::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_solve::verdict::Verdict;
 use handeye_solve::Calibration;
 use handeye_vision::{draw, Target};
@@ -362,7 +362,7 @@ pub fn write_replay_report(
 /// and what the page lacks and why (a board or intrinsics file that cannot be read: no frames).
 pub fn write_folder_report(
     folder: &SessionFolder,
-    config: Option<&handeye_session::config::CellConfig>,
+    config: Option<&handeye_config::CellConfig>,
     answer: Calibration,
     verdict: Option<Verdict>,
     robot_frames: RobotFrames,

@@ -16,19 +16,19 @@ use std::time::{Duration, Instant};
 
 use image::GrayImage;
 
-use crate::dataset::Dataset;
-use crate::plan::nbv::AdaptivePlanner;
 use handeye_camera::Camera;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{
     relative_rotation_axis, translation_distance, Pose, MIN_AXIS_ANGLE_RAD,
 };
+use handeye_plan::nbv::AdaptivePlanner;
+use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_vision::sharpness::sharpness;
 
-use super::adaptive::GrowingPlan;
-use super::driver::{wait_until_still, NotStill};
-use super::{SessionError, SessionEvent, SessionOutcome, SessionSetup};
+use crate::adaptive::GrowingPlan;
+use crate::driver::{wait_until_still, NotStill, SessionEvent, SessionOutcome, SessionSetup};
+use handeye_records::SessionError;
 
 /// What a person asks for during a manual session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -184,7 +184,7 @@ impl Robot for StandStill<'_> {
 /// set (then the arm is stopped, freedrive switched off and the error says how to resume).
 /// `setup.plan` is ignored: the captures are the plan. `suggester`'s candidates are the views it
 /// suggests. The session folder's manifest, marked hand-guided
-/// ([`SessionManifest::hand_guided`](super::SessionManifest::hand_guided)), is the caller's to
+/// ([`SessionManifest::hand_guided`](handeye_records::SessionManifest::hand_guided)), is the caller's to
 /// write first: every capture keeps its mark.
 pub fn run_manual_session(
     setup: SessionSetup,
@@ -397,7 +397,7 @@ fn write_taught_plan(setup: &SessionSetup, poses: &[(Pose, Joints)]) -> Result<(
     }
     let text = format!(
         "# The views of this hand-guided session, taught: the joints each capture stood at and the\n# T_base_flange the arm reported there. Replay with `plan: {{file: {TAUGHT_PLAN_FILE}}}`.\n{}",
-        crate::plan::Plan::taught(&taught).to_yaml()
+        handeye_plan::Plan::taught(&taught).to_yaml()
     );
     setup
         .folder()

@@ -3,12 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::dataset::Dataset;
 use handeye_core::camera_model::CameraModel;
+use handeye_records::dataset::Dataset;
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
-use super::driver::measure;
-use super::{PoseVisit, SessionError, SessionFolder};
+use crate::driver::measure;
+use handeye_records::{PoseVisit, SessionError, SessionFolder};
 
 /// A replay's result file in the session folder when no other is asked for.
 pub const REPLAY_RESULT_FILE: &str = "replay-result.yaml";

@@ -567,13 +567,13 @@ fn path_leaves_box(
 }
 
 /// Every corner of the board (tag corners of an aprilgrid), in the target frame.
-pub(crate) fn board_points(board: &Target) -> Vec<Point3<f64>> {
+pub fn board_points(board: &Target) -> Vec<Point3<f64>> {
     board.points().into_iter().map(|(_, _, p)| p).collect()
 }
 
 /// Smallest distance from any board point's projection to the image border (px); −∞ if a point
 /// is behind the camera.
-pub(crate) fn board_margin(
+pub fn board_margin(
     camera: &CameraModel,
     camera_from_target: &Pose,
     points: &[Point3<f64>],

@@ -632,7 +632,7 @@ impl Validator<'_> {
             (None, Some(spec)) => {
                 // Views at hundreds of metres: the distances were written in mm.
                 let [near, far] = spec.distance;
-                let limit = crate::plan::generate::MAX_DISTANCE_M;
+                let limit = handeye_plan::generate::MAX_DISTANCE_M;
                 if near > 0.0 && far > limit && far / 1000.0 <= limit {
                     return Err(ConfigError::Millimetres {
                         file: self.file.to_path_buf(),

@@ -133,7 +133,7 @@ pub enum ReportError {
     },
     /// A session file could not be read.
     #[error("reading the session for the report failed")]
-    Session(#[source] Box<handeye_session::session::SessionError>),
+    Session(#[source] Box<handeye_records::SessionError>),
     /// A frame could not be read or encoded.
     #[error("{}: cannot draw the frame for the report: {message}", path.display())]
     Frame {

@@ -32,20 +32,20 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::check::MoveCheck;
 use handeye_camera::{Camera, Frame};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
+use handeye_plan::check::MoveCheck;
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, SettleBySpeed};
 use handeye_vision::{DetectorOptions, Target};
 
-use super::folder::{PoseVisit, SessionFolder};
-use super::SessionError;
+use handeye_records::folder::{PoseVisit, SessionFolder};
+use handeye_records::SessionError;
 
 mod record;
 mod still;
 
-pub(in crate::session) use still::{wait_until_still, NotStill};
+pub(crate) use still::{wait_until_still, NotStill};
 
 pub(crate) use record::{measure, rebuild_samples};
 use record::{spawn_workers, Fault, Job, JobResult, Recording};
@@ -665,7 +665,7 @@ fn order_for_travel(robot: &mut dyn Robot, setup: &SessionSetup, pending: &mut V
         return;
     };
     let joints: Vec<Joints> = pending.iter().map(|&i| setup.plan[i].1).collect();
-    let order = crate::plan::order::order_for_travel(&from, &joints, |a, b| {
+    let order = handeye_plan::order::order_for_travel(&from, &joints, |a, b| {
         check.safe_move_time(a, b, &setup.limits)
     });
     *pending = order.iter().map(|&k| pending[k]).collect();

@@ -14,9 +14,9 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::GenerateSpec;
 use handeye_core::geometry::PoseYaml;
 use handeye_core::setup::{RobotFrames, Setup};
+use handeye_plan::GenerateSpec;
 use handeye_robot::MotionLimits;
 use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
 use handeye_solve::Method;

@@ -205,10 +205,10 @@ fn rotation_axes_section(
         .iter()
         .filter_map(|c| {
             let camera = handeye_session::cell::rig::camera_folder(folder, &c.name);
-            let samples = handeye_session::session::SessionFolder::open(&camera)
+            let samples = handeye_records::SessionFolder::open(&camera)
                 .ok()?
                 .samples_path();
-            handeye_session::dataset::Dataset::load(&samples).ok()
+            handeye_records::dataset::Dataset::load(&samples).ok()
         })
         .map(|d| d.pairs)
         .max_by_key(Vec::len)
@@ -291,9 +291,8 @@ fn use_section(html: &mut String, result: &RigResultFile) {
 /// returns its path.
 pub fn write_rig_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
     let result_path = folder.join("result.yaml");
-    let result: RigResultFile = handeye_core::yaml_file::read_yaml(&result_path).map_err(|e| {
-        ReportError::Session(Box::new(handeye_session::session::SessionError::from(e)))
-    })?;
+    let result: RigResultFile = handeye_core::yaml_file::read_yaml(&result_path)
+        .map_err(|e| ReportError::Session(Box::new(handeye_records::SessionError::from(e))))?;
     let path = folder.join("report.html");
     write_rig_report(&result, folder, &path)?;
     Ok(path)

@@ -16,8 +16,8 @@ use handeye_solve::Frame;
 use handeye_vision::Target;
 
 use super::{frames_from_visits, reprojection_options, CAMERA_INFO_FILE};
-use crate::config::CellConfig;
-use crate::session::{PoseVisit, SessionError, SessionFolder};
+use crate::{PoseVisit, SessionError, SessionFolder};
+use handeye_config::CellConfig;
 
 /// Median per-frame board reprojection RMS (px, with the file's intrinsics) above which the
 /// intrinsics are suspected: a good calibration gives a few tenths of a pixel.

@@ -14,8 +14,8 @@ use super::board_fit;
 use super::intrinsics_check::{
     differing_distortion, differing_parameters, ray_displacement_px, DISTORTION_TOLERANCE_PX,
 };
-use crate::config::CellConfig;
-use crate::session::{PoseVisit, SessionFolder};
+use crate::{PoseVisit, SessionFolder};
+use handeye_config::CellConfig;
 use handeye_solve::diagnostics::median;
 
 /// The file in a session folder that keeps the calibration a ROS 2 camera driver published on

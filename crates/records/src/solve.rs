@@ -21,9 +21,9 @@ pub use intrinsics_check::{check_intrinsics, WrongIntrinsics};
 
 pub use summary::{FrameRms, ReprojectionSummary};
 
-use crate::config::{CellConfig, KinematicsChoice, RobotConfig, SolveSpace};
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
+use handeye_config::{CellConfig, KinematicsChoice, RobotConfig, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
@@ -537,7 +537,9 @@ pub const CAMERA_INFO_FILE: &str = "camera_info.yaml";
 /// File with both answers' reprojection errors per frame, in the session folder.
 pub const REPROJECTION_FILE: &str = "reprojection.yaml";
 
-pub(crate) fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
+/// The reprojection-space solve's options of a cell: its corner noise, whether to estimate it,
+/// and the arm's repeatability as a prior when the config asks for robot corrections.
+pub fn reprojection_options(config: &CellConfig) -> ReprojectionOptions {
     ReprojectionOptions {
         pixel_sigma_px: config.solver.pixel_sigma_px,
         estimate_noise: config.solver.estimate_noise,
@@ -1030,7 +1032,7 @@ fn corrected_pairs(
 
 /// `T_camera_target` by PnP over a frame's (board point, pixel) pairs through `camera`: the board
 /// pose again with corrected files (a lens estimated, board points scaled); `None` when PnP fails.
-pub(crate) fn board_pose(
+pub fn board_pose(
     camera: &CameraModel,
     correspondences: &[(nalgebra::Point3<f64>, nalgebra::Point2<f64>)],
 ) -> Option<handeye_core::geometry::Pose> {

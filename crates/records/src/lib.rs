@@ -1,38 +1,31 @@
-//! The session: drives a validated plan on a robot and a camera, records every sample to disk as
-//! it is taken, then solves. The only layer that knows about time, hardware and disk; it sees the
-//! `Robot` and `Camera` traits, never a backend.
+//! A session's records: what the files of a session folder hold and how they are read, kept and
+//! solved. Below the run (`handeye-session`), above the config (`handeye-config`):
 //!
-//! Per pose: move (joint move to the validated joint solution) → settle → grab a frame newer than
-//! the settle instant → read the measured `T_base_flange` → hand the frame to the detection
-//! thread, which detects, estimates `T_camera_target` and writes the records while the arm is
-//! already moving to the next pose.
+//! - [`dataset`], [`result`]: pose-pair datasets and the result file;
+//! - [`folder`]: the session folder, a write-ahead log (a pose is committed by its record;
+//!   `samples.yaml` is rebuilt from the records on every start and resume), locked by the process
+//!   running it ([`lock`]), with the sha256 of its input files so a resume can refuse changed
+//!   inputs ([`inputs`]); [`staging`] folders of a run not yet moved into place; what a ROS 2 graph
+//!   keeps on `/tf_static` ([`tf_static`]);
+//! - [`solve`]: the session solve (`solve_with_arm`, the one a run, `handeye solve`, Python and
+//!   `replay` go through), its checks of the given files and its verdict.
 //!
-//! The folder is a write-ahead log (a pose is committed by its record; `samples.yaml` is rebuilt
-//! from the records on every start and resume), locked by the process running it (`lock`), and
-//! records the sha256 of its input files so a resume can refuse changed inputs (`inputs`).
+//! [`SessionError`] is every way a session can stop or fail to be read.
 
-pub mod adaptive;
-pub mod driver;
+pub mod dataset;
 pub mod folder;
 pub mod inputs;
 pub mod lock;
-pub mod manual;
-pub mod replay;
+pub mod result;
 pub mod solve;
 pub mod staging;
 pub mod tf_static;
 
 use std::path::PathBuf;
 
-pub use adaptive::{run_adaptive_session, PlanSource};
-pub use driver::{
-    run_session, CameraFailure, SessionCamera, SessionEvent, SessionOutcome, SessionSetup,
-    SharedFrame,
-};
 pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::{live_run, refuse_live, LiveRun, SessionLock};
-pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};
 pub use solve::{
     load_and_solve, solve_folder, solve_folder_in, solve_session, solve_session_with, Evidence,
     SolveInputs, SolvedSession,

@@ -9,7 +9,7 @@ use handeye_robot::{Robot, RobotError, SettleBySpeed};
 use super::SETTLE_POLL;
 
 /// Why [`wait_until_still`] found no still arm.
-pub(in crate::session) enum NotStill {
+pub(crate) enum NotStill {
     /// The arm's own error, or [`RobotError::Interrupted`] when a stop was requested.
     Robot(RobotError),
     /// A joint still moved at `fastest` rad/s when the rule's timeout ran out.
@@ -21,7 +21,7 @@ pub(in crate::session) enum NotStill {
 
 impl NotStill {
     /// What the rule's numbers say about an arm that did not settle.
-    pub(in crate::session) fn moving_message(fastest: f64, rule: &SettleBySpeed) -> String {
+    pub(crate) fn moving_message(fastest: f64, rule: &SettleBySpeed) -> String {
         format!(
             "a joint still moved at {:.2}°/s {:.1} s on (session.settle_speed_deg_s = {:.2}°/s for session.settle_window_s = {:.2} s)",
             fastest.to_degrees(),
@@ -32,7 +32,7 @@ impl NotStill {
     }
 
     /// As a robot error of a move that did not settle.
-    pub(in crate::session) fn into_robot_error(self, rule: &SettleBySpeed) -> RobotError {
+    pub(crate) fn into_robot_error(self, rule: &SettleBySpeed) -> RobotError {
         match self {
             NotStill::Robot(e) => e,
             NotStill::Moving { fastest } => RobotError::Backend(
@@ -51,7 +51,7 @@ impl NotStill {
 /// arm at rest). Returns at once when the arm reports no speeds. Fails when the arm is still
 /// moving `timeout` after `since` (the end of a move, or a hand-guided capture's request), or
 /// when a stop is requested.
-pub(in crate::session) fn wait_until_still(
+pub(crate) fn wait_until_still(
     robot: &mut dyn Robot,
     rule: &SettleBySpeed,
     since: Instant,

@@ -5,16 +5,16 @@ use std::collections::BTreeMap;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 
-use crate::dataset::Dataset;
 use handeye_camera::Frame;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::memory;
 use handeye_core::setup::{PosePair, Setup};
+use handeye_records::dataset::Dataset;
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
-use super::super::folder::{PoseVisit, SessionFolder};
-use super::super::SessionError;
+use handeye_records::folder::{PoseVisit, SessionFolder};
+use handeye_records::SessionError;
 
 /// One camera's recording: where its records go and how its frames are measured. The run's
 /// cameras are numbered by their place in the run (0: the setup's own camera).
