@@ -19,6 +19,7 @@
 //! depends only on the ground floor (`handeye-core`: `geometry`, `setup`, `camera_model`) and
 //! nalgebra: the crate has no other dependency of ours, so the compiler holds it to that.
 
+mod arrow;
 pub mod board_scale;
 pub mod calibration;
 pub mod cell_model;

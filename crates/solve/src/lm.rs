@@ -20,6 +20,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::allocator::{Allocator, Reallocator};
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
 
+use super::arrow::{solve_damped, Structure};
 use super::SolveError;
 
 /// Most outer iterations (normal-equation builds) of [`minimize_normal`].
@@ -108,6 +109,12 @@ pub(crate) trait NormalEquations {
     /// Called after every accepted step, e.g. to re-anchor a local parametrisation so the next
     /// linearisation is exact at the new point.
     fn accepted(&mut self) {}
+
+    /// How `JᵀJ` is laid out: an arrowhead (per-frame blocks coupled only through the global
+    /// parameters) is solved by its Schur complement, in time linear in the frames.
+    fn structure(&self) -> Structure {
+        Structure::Dense
+    }
 }
 
 /// Levenberg-Marquardt on the normal equations of `problem` (Marquardt's scaling: the damping
@@ -122,6 +129,7 @@ pub(crate) trait NormalEquations {
 pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Outcome, SolveError> {
     let mut lambda = INITIAL_DAMPING;
     let mut evaluations = 0;
+    let structure = problem.structure();
     for _ in 0..MAX_NORMAL_ITERATIONS {
         let (h, g, cost) = problem
             .normal_equations()
@@ -129,15 +137,11 @@ pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Out
         evaluations += 1;
         let mut accepted = false;
         for _ in 0..MAX_DAMPING_TRIES {
-            let mut a = h.clone();
-            for i in 0..a.nrows() {
-                a[(i, i)] += lambda * h[(i, i)].max(1e-12);
-            }
-            let Some(cholesky) = a.cholesky() else {
+            let Some(step) = solve_damped(&h, &g, lambda, structure) else {
                 lambda *= 10.0;
                 continue;
             };
-            let step = -cholesky.solve(&g);
+            let step = -step;
             let saved = problem.params_mut().clone();
             *problem.params_mut() += &step;
             evaluations += 1;

@@ -42,6 +42,7 @@ mod problem;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Point2, Point3, SMatrix, Translation3, UnitQuaternion, Vector2};
 
+use super::arrow::inverse_parts;
 use super::lm::{minimize_dense, minimize_normal, Outcome};
 use super::refine::mount_uncertainty;
 use super::require_positive;
@@ -431,9 +432,11 @@ pub fn refine_reprojection(
         let (jtj, _, _) = problem
             .normal_equations()
             .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
-        match jtj.cholesky() {
-            Some(chol) => {
-                let cov = chol.inverse() * variance_factor;
+        // The global parameters' block of the inverse only (the robot corrections' is never
+        // read): by the Schur complement when the corrections make `JᵀJ` an arrowhead.
+        match inverse_parts(&jtj, problem.layout.structure()) {
+            Some(parts) => {
+                let cov = parts.global * variance_factor;
                 let pose_cov: SMatrix<f64, 12, 12> = cov.fixed_view::<12, 12>(0, 0).into();
                 uncertainty = Some(mount_uncertainty(&s.axby, &pose_cov, variance_factor));
                 if problem.layout.intrinsics > 0 {

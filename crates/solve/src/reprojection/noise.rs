@@ -10,6 +10,7 @@ use levenberg_marquardt::LeastSquaresProblem;
 use super::outliers::reweight;
 use super::problem::{reanchor, Problem};
 use super::{fit, run_lm, ReprojectionOptions, RobotPrior};
+use crate::arrow::inverse_parts;
 use crate::lm::Outcome;
 use crate::{RobustLoss, SolveError};
 
@@ -36,7 +37,9 @@ struct NoiseEstimate {
 
 fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
     let (normal, _, _) = problem.normal_equations()?;
-    let covariance = normal.cholesky()?.inverse();
+    // The robot parameters' variances only: by blocks (linear in the frames), not the whole
+    // inverse (cubic).
+    let covariance = inverse_parts(&normal, problem.layout.structure())?;
     let residuals = problem.residuals()?;
     let n_params = problem.layout.len() as f64;
     let pixel_sum = residuals.rows(0, problem.corner_rows).norm_squared();
@@ -61,7 +64,7 @@ fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
                     prior.translation_sigma_m
                 };
                 prior_share +=
-                    problem.prior_weights[f] * covariance[(o + i, o + i)] / (sigma * sigma);
+                    problem.prior_weights[f] * covariance.variance(o + i) / (sigma * sigma);
                 count += problem.prior_weights[f];
                 sum += residuals[row + i] * residuals[row + i];
             }

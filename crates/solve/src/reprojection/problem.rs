@@ -20,6 +20,7 @@ use nalgebra::{
 };
 
 use super::{Frame, ReprojectionOptions, RobotPrior};
+use crate::arrow::Structure;
 use crate::lm::NormalEquations;
 use crate::refine::perturbed;
 use crate::Axby;
@@ -62,6 +63,18 @@ impl Layout {
     pub(super) fn robot_offset(&self) -> usize {
         Self::POSE + self.intrinsics + self.distortion + self.board_scale
     }
+    /// The shape of `JᵀJ`: with per-frame robot corrections, an arrowhead (each frame's six
+    /// coupled to the others only through the global parameters before them).
+    pub(super) fn structure(&self) -> Structure {
+        if self.robot > 0 {
+            Structure::Arrow {
+                global: self.robot_offset(),
+            }
+        } else {
+            Structure::Dense
+        }
+    }
+
     /// All columns.
     pub(super) fn len(&self) -> usize {
         self.robot_offset() + self.robot * self.frames
@@ -460,6 +473,10 @@ impl NormalEquations for Problem<'_> {
 
     fn accepted(&mut self) {
         reanchor(self);
+    }
+
+    fn structure(&self) -> Structure {
+        self.layout.structure()
     }
 }
 
