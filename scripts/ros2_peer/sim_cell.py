@@ -216,8 +216,18 @@ def add_arguments(p):
                    help="report goals whose waypoint speeds exceed this (0: no check)")
 
 
+_SAY = threading.Lock()
+
+
 def say(**kw):
-    print(json.dumps(kw), flush=True)
+    """One JSON event a line on stdout, written whole under a lock: print() writes the text and
+    its newline in two writes, so two threads' events could share a line (the huge-image
+    writer's first event and `ready` did, 2 starts in 5 under the test harness, which then read
+    neither and waited for `ready` in vain)."""
+    line = json.dumps(kw) + "\n"
+    with _SAY:
+        sys.stdout.write(line)
+        sys.stdout.flush()
 
 
 def stamp_now():

@@ -298,9 +298,10 @@ fn import_bag(a: BagArgs) -> anyhow::Result<()> {
     outln!("{}", imported.summary);
     if imported.warnings > 0 {
         outln!(
-            "the bag has {} warning(s) (printed above, recorded in {}): check them before using this answer",
+            "the bag has {} warning(s) (printed above, recorded in {} and among the notices of {}): check them before using this answer",
             imported.warnings,
-            imported.folder.join("import/bag-import.yaml").display()
+            imported.folder.join("import/bag-import.yaml").display(),
+            imported.folder.join("result.yaml").display()
         );
     }
     // The report, as after a run (the import solved the session with the run's solve).

@@ -86,6 +86,12 @@ pub enum NoticeKind {
     /// The session was still being recorded when it was solved: the answer is of the poses so
     /// far, and the run will add to them.
     Provisional,
+    /// A ROS 2 bag the session was imported from says something of itself that is not so (a
+    /// lie or a contradiction the import tolerated: `metadata.yaml` naming files outside the
+    /// bag, an image whose header contradicts its data, one TF edge both static and moving,
+    /// ...); the message names the bag, the topic or frames and the kind of lie, as
+    /// `import/bag-import.yaml` records it.
+    BagWarning,
     /// Anything else (also a plain message read from an older result file).
     Other,
 }

@@ -48,6 +48,7 @@ use ::image::GrayImage;
 
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::Setup;
 use handeye_ros2::cdr::{self, CdrError};
 use handeye_ros2::msg::{CameraInfo, TfMessage};
@@ -248,6 +249,17 @@ pub enum BagWarning {
 }
 
 impl BagWarning {
+    /// The warning as a notice of the session imported from `bag` (`result.yaml`'s `notices:`
+    /// and the report's findings): a warning, since the answer was made from data that lied
+    /// about itself and a person should look before using it. The message names the bag and the
+    /// kind of lie, then what [`Display`](std::fmt::Display) says.
+    pub fn notice(&self, bag: &Path) -> Notice {
+        Notice::warning(
+            NoticeKind::BagWarning,
+            format!("ROS 2 bag {} ({}): {self}", bag.display(), self.kind()),
+        )
+    }
+
     /// A short name for counting and tests.
     pub fn kind(&self) -> &'static str {
         match self {

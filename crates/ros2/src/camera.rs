@@ -148,32 +148,23 @@ impl Ros2Camera {
             ),
             None => None,
         };
-        // Only the newest message is kept (undecoded): memory is one frame whatever the rate,
-        // and one frame's size at most.
+        // Only the newest message is kept (undecoded), in DDS's cache as in the slot: memory is
+        // a frame or two whatever the rate, and a refused frame's size at most.
         let bound = max_frame_bytes(&options.model);
         let frames = if options.compressed {
-            newest_of(
-                link.subscribe::<CompressedImage>(&topic, sensor_data_qos())
-                    .map_err(err)?,
-                bound,
-                |msg| Newest {
-                    stamp: msg.header.stamp.to_system(),
-                    received: Instant::now(),
-                    pixels: Pixels::Compressed(msg),
-                },
-            )
+            newest_of::<CompressedImage>(link, &topic, bound, |msg| Newest {
+                stamp: msg.header.stamp.to_system(),
+                received: Instant::now(),
+                pixels: Pixels::Compressed(msg),
+            })
         } else {
-            newest_of(
-                link.subscribe::<Image>(&topic, sensor_data_qos())
-                    .map_err(err)?,
-                bound,
-                |msg| Newest {
-                    stamp: msg.header.stamp.to_system(),
-                    received: Instant::now(),
-                    pixels: Pixels::Raw(msg),
-                },
-            )
-        };
+            newest_of::<Image>(link, &topic, bound, |msg| Newest {
+                stamp: msg.header.stamp.to_system(),
+                received: Instant::now(),
+                pixels: Pixels::Raw(msg),
+            })
+        }
+        .map_err(err)?;
         spawn_reader(slot.clone(), stop_rx, frames, info_sub)?;
         let camera = Ros2Camera {
             options,
@@ -342,26 +333,93 @@ impl Ros2Camera {
 type ReaderFuture = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
 type FramesReader = Box<dyn FnOnce(Arc<Slot>) -> ReaderFuture + Send>;
 
+/// How long the image reader waits for a whole message before it makes its DDS reader anew.
+/// RustDDS reassembles a fragmented message in a buffer of the message's full size, made on its
+/// first fragment, and keeps up to 128 unfinished ones per writer until 10 s pass without a
+/// fragment: frames too large to come whole over best effort (100 MB ones) held half a gigabyte
+/// within the 5 s a camera waits at open. A new reader starts with no buffer; a healthy camera
+/// (a whole frame at least every 2 s) never sees this happen, and a frame of the bound, 7.4 MB,
+/// comes whole well within it even at 100 Mbit/s.
+const REASSEMBLY_WINDOW: Duration = Duration::from_secs(2);
+
 /// The reader of an image topic: each message read becomes the slot's newest frame, or the
-/// record of one refused when its pixels exceed `bound` bytes.
+/// record of one refused when its pixels exceed `bound` bytes. After the first refused message
+/// the topic's reader is dropped (its frames are not taken in any more, only the record stays to
+/// name the topic to every grab), and a reader that has had nothing whole for
+/// [`REASSEMBLY_WINDOW`] is made anew (dropping what it was reassembling): memory stays bounded
+/// whatever arrives on the topic.
 fn newest_of<M>(
-    sub: ros2_client::Subscription<M>,
+    link: &Ros2Link,
+    topic: &str,
     bound: u64,
     newest: fn(M) -> Newest,
-) -> FramesReader
+) -> Result<FramesReader, crate::Ros2Error>
 where
-    M: serde::de::DeserializeOwned + Send + Sync + 'static,
+    M: crate::msg::RosType + serde::de::DeserializeOwned + Send + Sync + 'static,
 {
-    Box::new(move |slot: Arc<Slot>| -> ReaderFuture {
+    let first = link.subscribe_newest::<M>(topic, sensor_data_qos())?;
+    let (link, topic) = (link.clone(), topic.to_string());
+    Ok(Box::new(move |slot: Arc<Slot>| -> ReaderFuture {
         Box::pin(async move {
-            sub.async_stream()
-                .for_each(|m| {
-                    store(&slot, m.map(|(msg, _)| bounded(newest(msg), bound)));
-                    futures::future::ready(())
-                })
-                .await
+            let mut sub = first;
+            while let ReaderEnd::Stale = read_whole(&sub, &slot, bound, newest).await {
+                // The old reader goes first, with its unfinished buffers.
+                drop(sub);
+                sub = match link.subscribe_newest::<M>(&topic, sensor_data_qos()) {
+                    Ok(sub) => sub,
+                    Err(e) => {
+                        tracing::warn!(
+                            "ROS 2 camera: a new reader of {topic} could not be made: {e}"
+                        );
+                        return;
+                    }
+                };
+            }
+            // `sub` (the DDS reader) goes with this future: after a refused frame the topic's
+            // frames are no longer taken in.
         })
-    })
+    }))
+}
+
+/// Why [`read_whole`] stopped reading.
+enum ReaderEnd {
+    /// Nothing came whole for [`REASSEMBLY_WINDOW`].
+    Stale,
+    /// A message over the bound came (recorded in the slot), or the reader ended.
+    Done,
+}
+
+/// Reads `sub` into `slot` until a message over `bound` comes or nothing whole comes for
+/// [`REASSEMBLY_WINDOW`].
+async fn read_whole<M>(
+    sub: &ros2_client::Subscription<M>,
+    slot: &Slot,
+    bound: u64,
+    newest: fn(M) -> Newest,
+) -> ReaderEnd
+where
+    M: serde::de::DeserializeOwned + 'static,
+{
+    let mut stream = std::pin::pin!(sub.async_stream());
+    loop {
+        let next = futures::future::select(
+            stream.next(),
+            Box::pin(smol::Timer::after(REASSEMBLY_WINDOW)),
+        )
+        .await;
+        let m = match next {
+            futures::future::Either::Left((Some(m), _)) => m,
+            futures::future::Either::Left((None, _)) => return ReaderEnd::Done,
+            futures::future::Either::Right(_) => return ReaderEnd::Stale,
+        };
+        let m = m.map(|(msg, _)| bounded(newest(msg), bound));
+        let refused = matches!(&m, Ok(n) if matches!(n.pixels, Pixels::Oversized(_)));
+        store(slot, m);
+        if refused {
+            tracing::info!("ROS 2 camera: a frame over the size bound came; no more are read");
+            return ReaderEnd::Done;
+        }
+    }
 }
 
 fn spawn_reader(

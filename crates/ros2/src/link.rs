@@ -181,6 +181,49 @@ impl Ros2Link {
             .map_err(|e| setup(format!("a reader of {name}"))(e.to_string()))
     }
 
+    /// A reader of `name` that holds at most the newest message: its topic is made here with a
+    /// DDS resource limit of one sample and `qos` keeps the last one. RustDDS keeps up to 64
+    /// messages of a topic made without a limit (whatever the reader's history depth), and
+    /// keeps a topic's cache for the participant's life: with 100 MB camera frames that was
+    /// 1.3 GB (issue #40). For a topic whose messages are only ever wanted newest-first (a
+    /// camera's frames); no other reader of `name` may be made in this process, or its limit
+    /// would raise the topic's.
+    pub fn subscribe_newest<M: RosType + DeserializeOwned + 'static>(
+        &self,
+        name: &str,
+        qos: QosProfile,
+    ) -> Result<Subscription<M>, Ros2Error> {
+        use ros2_client::dds::rustdds::{policy, QosPolicies, QosPolicyBuilder, TopicKind};
+        let qos = qos.history(ros2_client::qos::History::KeepLast { depth: 1 });
+        let one = policy::ResourceLimits {
+            max_samples: 1,
+            max_instances: 1,
+            max_samples_per_instance: 1,
+        };
+        let dds_qos = QosPolicies::from(&qos)
+            .modify_by(&QosPolicyBuilder::new().resource_limits(one).build());
+        let parsed = topic_name(name)?;
+        let node_name =
+            NodeName::new("/", &self.options.node_name).map_err(|e| Ros2Error::Name {
+                kind: "node",
+                name: self.options.node_name.clone(),
+                reason: e.to_string(),
+            })?;
+        let mut node = self.node.lock().unwrap_or_else(|p| p.into_inner());
+        let topic = self
+            .context
+            .domain_participant()
+            .create_topic(
+                parsed.to_dds_name("rt", &node_name, ""),
+                MessageTypeName::new(M::PACKAGE, M::NAME).dds_msg_type(),
+                &dds_qos,
+                TopicKind::NoKey,
+            )
+            .map_err(|e| setup(format!("the topic {name}"))(e.to_string()))?;
+        node.create_subscription(&topic, Some(qos))
+            .map_err(|e| setup(format!("a reader of {name}"))(e.to_string()))
+    }
+
     /// A writer of `name` with `qos`.
     pub fn publisher<M: RosType + Serialize>(
         &self,

@@ -72,7 +72,41 @@ fn imported_with(dir: &Path, bag: &Path, warnings: &[(&str, &[&str])]) -> String
     let expected: Vec<&str> = warnings.iter().map(|(kind, _)| *kind).collect();
     assert_eq!(kinds, expected, "{record}");
     assert!(log.contains("6 samples accepted"), "{log}");
+    bag_notices_in_result(&out, bag, warnings);
     log
+}
+
+/// The session's `result.yaml` holds each of `warnings` as a notice of kind `bag_warning` and
+/// severity `warning` naming the bag and the lie (and no other bag notice), read back by the
+/// result's own loader, and the report shows each among its findings.
+fn bag_notices_in_result(session: &Path, bag: &Path, warnings: &[(&str, &[&str])]) {
+    use handeye_core::notice::{NoticeKind, Severity};
+    let path = session.join("result.yaml");
+    let result = ResultFile::load(&path).unwrap();
+    let bag_notices: Vec<_> = result
+        .notices
+        .iter()
+        .filter(|n| n.kind == NoticeKind::BagWarning)
+        .collect();
+    assert_eq!(bag_notices.len(), warnings.len(), "{:#?}", result.notices);
+    let bag = std::path::absolute(bag).unwrap();
+    let page = std::fs::read_to_string(session.join("report.html")).unwrap();
+    for ((kind, said), notice) in warnings.iter().zip(&bag_notices) {
+        assert_eq!(notice.severity, Severity::Warning, "{notice:?}");
+        let head = format!("ROS 2 bag {} ({kind}): ", bag.display());
+        assert!(notice.message.starts_with(&head), "{notice:?}");
+        for part in *said {
+            assert!(
+                notice.message.contains(part),
+                "`{part}` missing: {notice:?}"
+            );
+        }
+        // The page escapes HTML: look for the kind as it is written there.
+        assert!(
+            page.contains(&format!("({kind}): ")),
+            "the report does not show the `{kind}` warning"
+        );
+    }
 }
 
 #[test]

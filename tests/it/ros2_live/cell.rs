@@ -109,8 +109,12 @@ impl Peer {
         let stdout = child.stdout.take().unwrap();
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Ok(v) = serde_json::from_str(&line) {
-                    sink.lock().unwrap().push(v);
+                match serde_json::from_str(&line) {
+                    Ok(v) => sink.lock().unwrap().push(v),
+                    // Said, so that a line the harness could not read is not a silent peer.
+                    Err(e) => eprintln!(
+                        "the peer printed a line that is not one JSON event ({e}): {line}"
+                    ),
                 }
             }
         });
