@@ -72,8 +72,12 @@ pub fn joint_origins(model: &UrModel, offsets_rad: &[f64; 6]) -> [Pose; 6] {
     })
 }
 
-/// The calibration YAML of the arm's model in `kinematics` (a result's section).
-pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationError> {
+/// The arm's model a result's `kinematics` section holds: its model's published DH chain and
+/// the estimated joint zero offsets, rad. Every export of the arm's model (this file,
+/// `arm_model`'s DH table and URDF) starts here.
+pub fn corrected_arm(
+    kinematics: &KinematicsYaml,
+) -> Result<(UrModel, [f64; 6]), UrCalibrationError> {
     let model = UrModel::by_name(&kinematics.model)
         .ok_or_else(|| UrCalibrationError::UnknownModel(kinematics.model.clone()))?;
     let offsets: [f64; 6] = kinematics
@@ -83,6 +87,12 @@ pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCali
         .collect::<Vec<_>>()
         .try_into()
         .map_err(|v: Vec<f64>| UrCalibrationError::JointCount(v.len()))?;
+    Ok((model, offsets))
+}
+
+/// The calibration YAML of the arm's model in `kinematics` (a result's section).
+pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationError> {
+    let (model, offsets) = corrected_arm(kinematics)?;
     let origins = joint_origins(&model, &offsets);
     let mut text = format!(
         "# ur_robot_driver kinematics calibration (the form ur_calibration writes; load it as\n\
