@@ -69,7 +69,8 @@ pub fn dh_table(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationErro
         "# DH table of the {} as handeye estimated it (result.yaml `kinematics:`, estimated: {}).\n\
          # Standard DH, base first: T_{{i-1}}_{{i}} = Rz(q_i + theta_offset_i) * Tz(d_i) * Tx(a_i) * Rx(alpha_i),\n\
          # q_i the joint angle the controller reports; chained from the base frame to the flange (tool0).\n\
-         # Metres and radians. The published table with the joint zero offsets; {}.\n\
+         # Metres and radians. The published table (with the link corrections of `estimated: dh`)\n\
+         # and the joint zero offsets; {}.\n\
          # joint a d alpha theta_offset\n",
         model.name,
         kinematics.estimated,
@@ -93,7 +94,7 @@ pub fn arm_urdf(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationErro
     let mut text = format!(
         "<?xml version=\"1.0\"?>\n\
          <!-- The {name}'s kinematic chain as handeye estimated it (result.yaml `kinematics:`, estimated:\n     \
-         {estimated}): ur_description's joints, each origin the published DH link with the joint zero\n     \
+         {estimated}): ur_description's joints, each origin the DH link (published, corrected under dh) with the joint zero\n     \
          offset ({held}). base is the controller's base frame, tool0 the flange.\n     \
          Kinematics only: no meshes or inertias; effort and velocity are 0, position limits as handeye\n     \
          plans with. origin rpy: R = Rz(yaw) * Ry(pitch) * Rx(roll). -->\n\
