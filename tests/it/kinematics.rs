@@ -790,6 +790,9 @@ fn urdf_forward(text: &str, q: &[f64]) -> Pose {
     })
 }
 
+/// A reader of an exported arm model: `T_base_tool0` of the file's text at the joints.
+type ForwardOf = fn(&str, &[f64]) -> Pose;
+
 /// `T_base_tool0` of a DH table (`--format dh-table`) at `q`: its lines read as
 /// `joint a d alpha theta_offset` (comments `#`), each link `Rz(q + theta_offset) · Tz(d) ·
 /// Tx(a) · Rx(alpha)` composed here from those numbers.
@@ -968,7 +971,7 @@ fn the_arm_model_exports_reproduce_the_corrected_flange_poses() {
     errors.alpha_rad[2] = 0.01f64.to_radians();
     errors.d_m[3] = -0.05e-3;
     let corrected = errors.true_arm(&model);
-    let forms: [(&str, fn(&str, &[f64]) -> Pose); 3] = [
+    let forms: [(&str, ForwardOf); 3] = [
         ("ur-calibration", urdf_forward),
         ("dh-table", dh_table_forward),
         ("arm-urdf", urdf_chain_forward),
