@@ -8,7 +8,8 @@
 //! truth is in the controller's frames (`ArmErrors::fold`: the base and last joint offsets no
 //! data can tell from the transforms). Then one whole run of `configs/sim-cell-arm-errors.yaml`
 //! through the binary (rendered frames, detection, the solve with `solver.kinematics:
-//! joint_offsets`), checked against its truth. The exports of the arm's model (ur-calibration,
+//! joint_offsets`), checked against its truth. The DH corrections (`solver.kinematics: dh`)
+//! over the same plans with link errors drawn too. The exports of the arm's model (ur-calibration,
 //! dh-table, arm-urdf) read back by parsers of their own; the fit against scipy's
 //! (`reference.rs`).
 
