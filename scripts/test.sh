@@ -61,6 +61,14 @@ fi
 # ChArUco/chessboard/Kalibr-aprilgrid frames independently of us and compute OpenCV's figures).
 # The test falls back to a venv of its own when this install is refused (PEP 668).
 python3 -c "import cv2, numpy" 2>/dev/null || pip_install numpy "opencv-python-headless<5" || true
+# scipy for tests/it/kinematics/reference.rs (tests/python/kinematics_reference.py fits the arm's
+# joint offsets with scipy's least_squares, the independent reference of ours); where the user
+# install is refused (PEP 668), into the venv the test looks for.
+if ! python3 -c "import numpy, scipy.optimize" 2>/dev/null && ! pip_install numpy scipy; then
+  scipy_venv="${CARGO_TARGET_DIR:-target}/tmp/scipy-venv"
+  "$scipy_venv/bin/python" -c "import numpy, scipy.optimize" 2>/dev/null \
+    || { python3 -m venv "$scipy_venv" && "$scipy_venv/bin/pip" install -q numpy scipy; }
+fi
 # Playwright drives the Debian chromium above in tests/it/console.rs (no browser download).
 python3 -c "import playwright.sync_api" 2>/dev/null || pip_install playwright
 # ROS 2 bag import (tests/it/bag_import.rs): bags are written by the pure-Python `rosbags` package,

@@ -1,6 +1,8 @@
 //! `handeye export <result.yaml> --format ros2|urdf|ur|json|opencv`: the solved transforms (a
 //! one-camera cell's two unknowns, or every camera's mount and the boards of a cell with several)
-//! in the forms other tools read (`handeye_formats::export`), printed or written atomically.
+//! in the forms other tools read (`handeye_formats::export`), printed or written atomically;
+//! `--format ur-calibration|dh-table|arm-urdf`: the arm's model the solve estimated
+//! (`handeye_formats::{ur_calibration, arm_model}`).
 
 use std::path::PathBuf;
 
@@ -34,11 +36,17 @@ enum FormatArg {
     /// ur_robot_driver's kinematics calibration YAML (as ur_calibration writes it) of the arm's
     /// model the solve estimated (`solver.kinematics`).
     UrCalibration,
+    /// The arm's estimated model as a plain DH table (a, d, alpha, theta_offset per joint; m, rad).
+    DhTable,
+    /// The arm's estimated model as a standalone URDF of its chain (base → ur_description's six
+    /// joints → tool0), for robot_state_publisher or an IK solver. (`urdf` is the transforms.)
+    ArmUrdf,
 }
 
 /// Export a result file's two transforms. Every form holds T_parent_child (points in the child
 /// frame mapped into the parent frame): eye_in_hand T_flange_camera and T_base_target,
-/// eye_to_hand T_base_camera and T_flange_target.
+/// eye_to_hand T_base_camera and T_flange_target. `ur-calibration`, `dh-table` and `arm-urdf`
+/// export the arm's model the solve estimated instead (the result's `kinematics:` section).
 #[derive(Debug, Args)]
 pub(super) struct ExportArgs {
     /// The result YAML written by `handeye solve` or `handeye run`.
@@ -62,7 +70,9 @@ pub(super) struct ExportArgs {
 pub(super) fn run(args: ExportArgs) -> anyhow::Result<()> {
     let format = match args.format {
         // The arm's model, not the transforms: its own form.
-        FormatArg::UrCalibration => return export_ur_calibration(&args),
+        FormatArg::UrCalibration | FormatArg::DhTable | FormatArg::ArmUrdf => {
+            return export_arm_model(&args)
+        }
         FormatArg::Ros2 => ExportFormat::Ros2,
         FormatArg::Ros2Launch => ExportFormat::Ros2Launch,
         FormatArg::Urdf => ExportFormat::Urdf,
@@ -187,8 +197,10 @@ pub(super) fn exported_result(
     Ok(exported)
 }
 
-/// `--format ur-calibration`: the arm's model of a result (its `kinematics:` section).
-fn export_ur_calibration(args: &ExportArgs) -> anyhow::Result<()> {
+/// `--format ur-calibration|dh-table|arm-urdf`: the arm's model of a result (its `kinematics:`
+/// section).
+fn export_arm_model(args: &ExportArgs) -> anyhow::Result<()> {
+    use handeye_formats::{arm_model, ur_calibration};
     let result = ResultFile::load(&args.result)?;
     let kinematics = result.kinematics.as_ref().ok_or_else(|| {
         anyhow::anyhow!(
@@ -196,13 +208,20 @@ fn export_ur_calibration(args: &ExportArgs) -> anyhow::Result<()> {
             args.result.display()
         )
     })?;
-    let text = handeye_formats::ur_calibration::ur_calibration_yaml(kinematics)
-        .with_context(|| format!("exporting {}", args.result.display()))?;
+    let (name, text) = match args.format {
+        FormatArg::DhTable => ("dh-table", arm_model::dh_table(kinematics)),
+        FormatArg::ArmUrdf => ("arm-urdf", arm_model::arm_urdf(kinematics)),
+        _ => (
+            "ur-calibration",
+            ur_calibration::ur_calibration_yaml(kinematics),
+        ),
+    };
+    let text = text.with_context(|| format!("exporting {}", args.result.display()))?;
     match &args.output {
         Some(path) => {
             write_atomic_reporting(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;
-            outln!("wrote ur-calibration to {}", path.display());
+            outln!("wrote {name} to {}", path.display());
         }
         None => out!("{text}"),
     }

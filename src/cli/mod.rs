@@ -47,7 +47,7 @@ enum Command {
     Target(target::TargetArgs),
     /// Import ViSP, MoveIt Calibration or CSV data as a dataset file.
     Import(import::ImportArgs),
-    /// Export a result as ROS 2, URDF, UR, JSON or OpenCV text.
+    /// Export a result as ROS 2, URDF, UR, JSON or OpenCV text, or its arm model (ur-calibration, dh-table, arm-urdf).
     Export(export::ExportArgs),
     /// Publish a result's two transforms on ROS 2 /tf_static, latched (needs the `ros2` build feature).
     Publish(publish::PublishArgs),

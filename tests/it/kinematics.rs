@@ -8,7 +8,10 @@
 //! truth is in the controller's frames (`ArmErrors::fold`: the base and last joint offsets no
 //! data can tell from the transforms). Then one whole run of `configs/sim-cell-arm-errors.yaml`
 //! through the binary (rendered frames, detection, the solve with `solver.kinematics:
-//! joint_offsets`), checked against its truth.
+//! joint_offsets`), checked against its truth. The DH corrections (`solver.kinematics: dh`)
+//! over the same plans with link errors drawn too. The exports of the arm's model (ur-calibration,
+//! dh-table, arm-urdf) read back by parsers of their own; the fit against scipy's
+//! (`reference.rs`).
 
 use std::path::Path;
 
@@ -25,6 +28,8 @@ use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, OffsetStat
 use handeye_solve::{NoiseModel, SolveOptions};
 
 use crate::util::{config_variant, pose_error_mm_deg, repo};
+
+mod reference;
 
 /// Draws per setup (the issue asks for at least 20).
 const DRAWS: u64 = 24;
@@ -63,6 +68,26 @@ fn samples(
     board: BoardNoise,
     seed: u64,
 ) -> (Vec<ArmSample>, CellTransforms) {
+    let repeatability = BoardNoise(0.02, 0.002);
+    samples_with(
+        joints,
+        model,
+        errors,
+        physical,
+        [board, repeatability],
+        seed,
+    )
+}
+
+/// [`samples`] with the board-pose noise and the arm's repeatability `[board, arm]`.
+fn samples_with(
+    joints: &[Vec<f64>],
+    model: &UrModel,
+    errors: &ArmErrors,
+    physical: &CellTransforms,
+    [board, arm_noise]: [BoardNoise; 2],
+    seed: u64,
+) -> (Vec<ArmSample>, CellTransforms) {
     let (arm, truth) = errors.fold(model, physical);
     let mut rng = StdRng::seed_from_u64(seed);
     let mut noise = |mm: f64, deg: f64| {
@@ -80,7 +105,7 @@ fn samples(
         .enumerate()
         .map(|(i, q)| {
             let q6 = handeye_robot::Joints::from_fn(6, |k| q[k]);
-            let reported = model.forward(&q6) * noise(0.02, 0.002);
+            let reported = model.forward(&q6) * noise(arm_noise.0, arm_noise.1);
             let flange = arm.forward(&q6);
             let seen = match truth.setup {
                 Setup::EyeInHand => {
@@ -303,6 +328,168 @@ fn with_length_and_twist_errors_too_the_offsets_still_help() {
     let t = monte_carlo(&cell, &sigmas, RENDERED);
     print("sim-cell.yaml with 0.2 mm / 0.01° link errors", &t);
     assert!(t.mean_mm[0] < t.mean_mm[1], "{t:?}");
+}
+
+/// `solver.kinematics: dh` (`fit_arm` with `ArmModel::Dh`): 24 drawn arms per shipped cell
+/// (offsets 0.03°, link lengths 0.2 mm, twists 0.01°, 1σ each; the plans generated at 30
+/// poses, the rendered cell's board noise and the arm's repeatability). The truth is taken in
+/// the parametrisation the data determine: the same fit of the same poses without any noise
+/// (it reproduces every seen board pose to 1e-4 mm: the held parameters are absorbed or
+/// undetermined exactly). Asserted: eye-in-hand, both transforms within 0.5 mm / 0.05° of that
+/// truth in ≥ 95 % of the draws; both setups, both transforms within 3 of their reported 1σ in
+/// ≥ 95 % of the draws, each estimated parameter within 3σ of its truth in ≥ 95 % of the
+/// draws, the parameters' errors over 1σ of RMS 0.7–1.3. Printed: the parameters held, the
+/// eye-to-hand bar figure, and the transform error of the joint offsets alone against the
+/// physical truth.
+#[test]
+fn drawn_dh_errors_are_found_within_their_sigma_and_the_transforms_within_the_bar() {
+    use handeye_solve::kinematics::{fit_arm, ArmModel};
+    use std::collections::BTreeMap;
+    let sigmas = ArmErrorSigmas {
+        joint_offset_rad: 0.03f64.to_radians(),
+        length_m: 0.2e-3,
+        twist_rad: 0.01f64.to_radians(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for (config, count) in [("sim-cell.yaml", 30), ("sim-cell-eye-to-hand.yaml", 30)] {
+        let variant = config_variant(
+            dir.path(),
+            config,
+            config,
+            &[("count: 20", &format!("count: {count}"))],
+        );
+        let (joints, model, physical) = shipped_plan(&variant);
+        assert!(
+            joints.len() + 5 >= count,
+            "{config}: {} poses",
+            joints.len()
+        );
+        let chain = handeye_records::solve::dh_chain(&model);
+        let (mut within_bar, mut worst, mut offsets_only_mm) = (0, (0.0f64, 0.0f64), 0.0);
+        let (mut within_sigma, mut sigma_mm) = (0, Vec::new());
+        let mut outside: BTreeMap<String, usize> = BTreeMap::new();
+        let mut squares = Vec::new();
+        let mut held = String::new();
+        for draw in 0..DRAWS {
+            let errors = ArmErrors::draw(3000 + draw, &sigmas);
+            let (noisy, physical_truth) =
+                samples(&joints, &model, &errors, &physical, RENDERED, draw);
+            let none = BoardNoise(0.0, 0.0);
+            let (exact, _) = samples_with(&joints, &model, &errors, &physical, [none, none], draw);
+            let (_, _, offsets_only) = solve_both(physical.setup, &model, &noisy);
+            offsets_only_mm += transform_error(
+                &offsets_only.camera_mount,
+                &offsets_only.target_mount,
+                &physical_truth,
+            )
+            .0 / DRAWS as f64;
+            let pairs: Vec<PosePair> = noisy.iter().map(|s| s.pair.clone()).collect();
+            let options = SolveOptions::default();
+            let plain = handeye_solve::solve(physical.setup, &pairs, &options).unwrap();
+            let fit = fit_arm(
+                ArmModel::Dh,
+                physical.setup,
+                &chain,
+                &noisy,
+                (&plain.camera_mount, &plain.target_mount),
+                plain.noise.map_or(options.noise, |n| n.model()),
+                &options,
+            )
+            .unwrap();
+            let fixed = SolveOptions {
+                estimate_noise: handeye_solve::EstimateNoise::NONE,
+                ..SolveOptions::default()
+            };
+            let truth = fit_arm(
+                ArmModel::Dh,
+                physical.setup,
+                &chain,
+                &exact,
+                (&fit.camera_mount, &fit.target_mount),
+                fit.noise.model(),
+                &fixed,
+            )
+            .unwrap();
+            assert!(
+                truth.translation_rms_mm[0] < 1e-4,
+                "{config} draw {draw}: the noise-free fit leaves {} mm",
+                truth.translation_rms_mm[0]
+            );
+            let error = (
+                pose_error_mm_deg(&fit.camera_mount, &truth.camera_mount),
+                pose_error_mm_deg(&fit.target_mount, &truth.target_mount),
+            );
+            let (mm, deg) = (error.0 .0.max(error.1 .0), error.0 .1.max(error.1 .1));
+            worst = (worst.0.max(mm), worst.1.max(deg));
+            // The transforms' own 1σ (the link corrections' uncertainty included) cover their
+            // error: each within 3σ.
+            let u = fit.uncertainty.as_ref().expect("the fit's 1σ");
+            let ratio = [
+                error.0 .0 / u.camera_mount.translation_mm,
+                error.0 .1 / u.camera_mount.rotation_deg,
+                error.1 .0 / u.target_mount.translation_mm,
+                error.1 .1 / u.target_mount.rotation_deg,
+            ]
+            .into_iter()
+            .fold(0.0f64, f64::max);
+            within_sigma += usize::from(ratio <= 3.0);
+            sigma_mm.push(
+                u.camera_mount
+                    .translation_mm
+                    .max(u.target_mount.translation_mm),
+            );
+            within_bar += usize::from(mm <= 0.5 && deg <= 0.05);
+            let (ours, theirs) = (fit.corrections(), truth.corrections());
+            let rows = fit
+                .offsets
+                .iter()
+                .map(|o| (o.joint, 0, "theta_offset", o.status))
+                .chain(
+                    fit.links
+                        .iter()
+                        .map(|l| (l.joint, l.parameter as usize, l.parameter.name(), l.status)),
+                );
+            let mut this_held = Vec::new();
+            for (j, p, name, status) in rows {
+                let OffsetStatus::Estimated { sigma_rad } = status else {
+                    this_held.push(format!("{name}{j}: {status:?}"));
+                    continue;
+                };
+                let e = (ours[j][p] - theirs[j][p]) / sigma_rad;
+                squares.push(e * e);
+                *outside.entry(format!("{name}{j}")).or_insert(0) += usize::from(e.abs() > 3.0);
+            }
+            held = this_held.join(", ");
+        }
+        let rms = (squares.iter().sum::<f64>() / squares.len() as f64).sqrt();
+        eprintln!(
+            "{config}, dh: transforms within 0.5 mm / 0.05° of the truth in {within_bar} of {DRAWS} (worst {:.3} mm / {:.4}°, within 3 of their 1σ in {within_sigma}, median translation 1σ {:.3} mm); parameters outside 3σ per draw: {outside:?}; error / 1σ RMS {rms:.2}; held (last draw): {held}; the joint offsets alone: mean transform error {offsets_only_mm:.3} mm against the physical truth",
+            worst.0,
+            worst.1,
+            crate::util::median(sigma_mm)
+        );
+        assert!(
+            20 * within_sigma >= 19 * DRAWS as usize,
+            "{config}: {within_sigma}"
+        );
+        // The bar holds eye-in-hand; eye-to-hand the shipped plan leaves the transforms with a
+        // median 0.86 mm 1σ once the links are free (0.46 mm at 60 poses; measured: 10 of 24
+        // within the bar at 30 poses, 9 at 60; the 1σ cover the error in 24 of 24), so there
+        // the honest 1σ are what is asserted.
+        if physical.setup == Setup::EyeInHand {
+            assert!(
+                20 * within_bar >= 19 * DRAWS as usize,
+                "{config}: {within_bar}"
+            );
+        }
+        for (param, n) in &outside {
+            assert!(
+                20 * n <= DRAWS as usize,
+                "{config}: {param} outside 3σ in {n} draws"
+            );
+        }
+        assert!((0.7..1.3).contains(&rms), "{config}: error / 1σ RMS {rms}");
+    }
 }
 
 /// How many poses the offsets need: the first N poses of a 40-pose generated plan of each
@@ -529,11 +716,12 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
         message.contains("simulation.arm_errors.twist_deg"),
         "{message}"
     );
-    let message = refused("kinematics: joint_offsets", "kinematics: dh");
-    assert!(
-        message.contains("solver.kinematics") && message.contains("not yet implemented"),
-        "{message}"
-    );
+    let dh = CellConfig::parse(
+        &base.replace("kinematics: joint_offsets", "kinematics: dh"),
+        &file,
+    )
+    .unwrap();
+    assert_eq!(dh.solver.kinematics(), handeye_config::KinematicsChoice::Dh);
     let text = base
         .replace("intrinsics: cameras/sim-1280x720.yaml\n", "")
         .replace(
@@ -600,17 +788,119 @@ fn urdf_forward(text: &str, q: &[f64]) -> Pose {
     })
 }
 
-/// `handeye export RESULT --format ur-calibration` of a result with the arm's model: read back
-/// by a generic YAML parser and chained as a URDF, it reproduces the corrected flange poses
-/// `FK(q + δ)` within 1e-6 m (and 1e-6 rad).
+/// A reader of an exported arm model: `T_base_tool0` of the file's text at the joints.
+type ForwardOf = fn(&str, &[f64]) -> Pose;
+
+/// `T_base_tool0` of a DH table (`--format dh-table`) at `q`: its lines read as
+/// `joint a d alpha theta_offset` (comments `#`), each link `Rz(q + theta_offset) · Tz(d) ·
+/// Tx(a) · Rx(alpha)` composed here from those numbers.
+fn dh_table_forward(text: &str, q: &[f64]) -> Pose {
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            l.split_whitespace()
+                .skip(1)
+                .map(|v| v.parse::<f64>().unwrap_or_else(|e| panic!("{l}: {e}")))
+                .collect()
+        })
+        .collect();
+    assert_eq!(rows.len(), 6, "{text}");
+    let turn = |axis: &nalgebra::Unit<Vector3<f64>>, angle: f64| {
+        Pose::from_parts(
+            nalgebra::Translation3::identity(),
+            nalgebra::UnitQuaternion::from_axis_angle(axis, angle),
+        )
+    };
+    let shift = |x: f64, z: f64| {
+        Pose::from_parts(
+            nalgebra::Translation3::new(x, 0.0, z),
+            nalgebra::UnitQuaternion::identity(),
+        )
+    };
+    rows.iter()
+        .zip(q)
+        .fold(Pose::identity(), |acc, (row, angle)| {
+            let (a, d, alpha, offset) = (row[0], row[1], row[2], row[3]);
+            acc * turn(&Vector3::z_axis(), angle + offset)
+                * shift(0.0, d)
+                * shift(a, 0.0)
+                * turn(&Vector3::x_axis(), alpha)
+        })
+}
+
+/// `T_base_tool0` of a URDF (`--format arm-urdf`) at `q`, read by roxmltree: from the link
+/// `base`, each joint whose parent is the current link, its `origin xyz rpy`
+/// (`Rz(yaw)·Ry(pitch)·Rx(roll)`), then a revolute joint's turn about its `axis` by the next
+/// angle of `q`, until `tool0`.
+fn urdf_chain_forward(text: &str, q: &[f64]) -> Pose {
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let numbers = |node: roxmltree::Node, key: &str| -> Vec<f64> {
+        node.attribute(key)
+            .unwrap_or_else(|| panic!("no {key}"))
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect()
+    };
+    let (mut link, mut pose, mut angles) = ("base".to_string(), Pose::identity(), q.iter());
+    while link != "tool0" {
+        let joint = doc
+            .descendants()
+            .find(|n| {
+                n.has_tag_name("joint")
+                    && n.children()
+                        .any(|c| c.has_tag_name("parent") && c.attribute("link") == Some(&link))
+            })
+            .unwrap_or_else(|| panic!("no joint from {link}"));
+        let child = |tag: &str| joint.children().find(|c| c.has_tag_name(tag));
+        let origin = child("origin").unwrap();
+        let (xyz, rpy) = (numbers(origin, "xyz"), numbers(origin, "rpy"));
+        pose *= Pose::from_parts(
+            nalgebra::Translation3::new(xyz[0], xyz[1], xyz[2]),
+            nalgebra::UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
+        );
+        if joint.attribute("type") == Some("revolute") {
+            let axis = numbers(child("axis").unwrap(), "xyz");
+            pose *= Pose::from_parts(
+                nalgebra::Translation3::identity(),
+                nalgebra::UnitQuaternion::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(Vector3::new(axis[0], axis[1], axis[2])),
+                    *angles.next().expect("more joints than angles"),
+                ),
+            );
+        }
+        link = child("child")
+            .unwrap()
+            .attribute("link")
+            .unwrap()
+            .to_string();
+    }
+    assert!(angles.next().is_none(), "fewer joints than angles");
+    pose
+}
+
+/// `handeye export RESULT --format ur-calibration | dh-table | arm-urdf` of a result with the
+/// arm's model: each read back by a parser of its own (a generic YAML parser chained as
+/// ur_description chains it; the table's numbers composed as DH links; roxmltree's URDF chained
+/// joint by joint) reproduces the corrected flange poses (the joint offsets and three link
+/// corrections of `estimated: dh`) within 1e-6 m and 1e-6 rad at 50 random joint vectors.
 #[test]
-fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
-    use handeye_records::result::{JointOffsetYaml, KinematicsYaml, WithWithout};
+fn the_arm_model_exports_reproduce_the_corrected_flange_poses() {
+    use handeye_records::result::{
+        JointOffsetYaml, KinematicsYaml, LinkCorrectionYaml, WithWithout,
+    };
     let model = UrModel::ur10e();
+    // Link corrections as `estimated: dh` writes them: the shoulder's a, the elbow's alpha, the
+    // wrist 1's d.
+    let links = [
+        ("shoulder", "a", "mm", 0.12),
+        ("elbow", "alpha", "deg", 0.01),
+        ("wrist 1", "d", "mm", -0.05),
+    ];
     let offsets_deg = [0.0, 0.0531, -0.0201, -0.0008, 0.0727, 0.0];
     let kinematics = KinematicsYaml {
         model: "ur10e".into(),
-        estimated: "joint_offsets".into(),
+        estimated: "dh".into(),
         joint_offsets: offsets_deg
             .iter()
             .enumerate()
@@ -618,6 +908,18 @@ fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
                 joint: format!("joint {j}"),
                 offset_deg: *o,
                 sigma_deg: Some(0.001),
+                absorbed_by: None,
+                undetermined: false,
+            })
+            .collect(),
+        links: links
+            .iter()
+            .map(|(joint, parameter, unit, correction)| LinkCorrectionYaml {
+                joint: (*joint).into(),
+                parameter: (*parameter).into(),
+                unit: (*unit).into(),
+                correction: *correction,
+                sigma: Some(0.01),
                 absorbed_by: None,
                 undetermined: false,
             })
@@ -632,59 +934,95 @@ fn the_ur_calibration_export_reproduces_the_corrected_flange_poses() {
         },
         uncertainty: None,
     };
-    // Through the binary, from a result file.
+    // Through the binary, from a result file: the shipped arm-errors cell solved with
+    // `kinematics: dh` (its section names every link correction), then given the section above.
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("session");
-    let config = config_variant(dir.path(), "sim-cell-arm-errors.yaml", "cell.yaml", &[]);
+    let config = config_variant(
+        dir.path(),
+        "sim-cell-arm-errors.yaml",
+        "cell.yaml",
+        &[("kinematics: joint_offsets", "kinematics: dh")],
+    );
     let run = crate::util::run_cli(&config, &session);
-    assert!(run.status.success());
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let result_path = session.join("result.yaml");
     let mut result = handeye_records::result::ResultFile::load(&result_path).unwrap();
+    let solved = result.kinematics.as_ref().expect("the arm's model");
+    assert_eq!(solved.estimated, "dh");
+    assert_eq!(solved.links.len(), 18, "{solved:?}");
+    assert!(
+        solved.links.iter().filter(|l| l.sigma.is_some()).count() >= 10,
+        "{solved:?}"
+    );
     result.kinematics = Some(kinematics);
     result.save(&result_path).unwrap();
-    let out = dir.path().join("calibration.yaml");
-    let export = crate::util::handeye()
-        .args(["export"])
-        .arg(&result_path)
-        .args(["--format", "ur-calibration", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        export.status.success(),
-        "{}",
-        String::from_utf8_lossy(&export.stderr)
-    );
-    let text = std::fs::read_to_string(&out).unwrap();
-    let errors = ArmErrors {
+    let mut errors = ArmErrors {
         joint_offsets_rad: offsets_deg.map(f64::to_radians),
         ..ArmErrors::default()
     };
+    errors.a_m[1] = 0.12e-3;
+    errors.alpha_rad[2] = 0.01f64.to_radians();
+    errors.d_m[3] = -0.05e-3;
     let corrected = errors.true_arm(&model);
-    let mut rng = StdRng::seed_from_u64(3);
-    for _ in 0..50 {
-        let q: Vec<f64> = (0..6)
-            .map(|_| rand::Rng::random_range(&mut rng, -3.0..3.0))
-            .collect();
-        let expected = corrected.forward(&handeye_robot::Joints::from_fn(6, |k| q[k]));
-        let (mm, deg) = pose_error_mm_deg(&urdf_forward(&text, &q), &expected);
+    let forms: [(&str, ForwardOf); 3] = [
+        ("ur-calibration", urdf_forward),
+        ("dh-table", dh_table_forward),
+        ("arm-urdf", urdf_chain_forward),
+    ];
+    for (format, forward) in forms {
+        let out = dir.path().join(format);
+        let export = crate::util::handeye()
+            .args(["export"])
+            .arg(&result_path)
+            .args(["--format", format, "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
         assert!(
-            mm < 1e-3 && deg.to_radians() < 1e-6,
-            "{mm} mm, {deg}° at {q:?}"
+            export.status.success(),
+            "{format}: {}",
+            String::from_utf8_lossy(&export.stderr)
+        );
+        let text = std::fs::read_to_string(&out).unwrap();
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut worst = (0.0f64, 0.0f64);
+        for _ in 0..50 {
+            let q: Vec<f64> = (0..6)
+                .map(|_| rand::Rng::random_range(&mut rng, -3.0..3.0))
+                .collect();
+            let expected = corrected.forward(&handeye_robot::Joints::from_fn(6, |k| q[k]));
+            let (mm, deg) = pose_error_mm_deg(&forward(&text, &q), &expected);
+            assert!(
+                mm < 1e-3 && deg.to_radians() < 1e-6,
+                "{format}: {mm} mm, {deg}° at {q:?}\n{text}"
+            );
+            worst = (worst.0.max(mm), worst.1.max(deg.to_radians()));
+        }
+        eprintln!(
+            "{format}: worst {:.1e} m, {:.1e} rad from the corrected model",
+            worst.0 * 1e-3,
+            worst.1
         );
     }
     // A result without the arm's model is refused, naming the key.
     result.kinematics = None;
     result.save(&result_path).unwrap();
-    let refused = crate::util::handeye()
-        .args(["export"])
-        .arg(&result_path)
-        .args(["--format", "ur-calibration"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert!(
-        !refused.status.success() && stderr.contains("kinematics"),
-        "{stderr}"
-    );
+    for (format, _) in forms {
+        let refused = crate::util::handeye()
+            .args(["export"])
+            .arg(&result_path)
+            .args(["--format", format])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert!(
+            !refused.status.success() && stderr.contains("kinematics"),
+            "{format}: {stderr}"
+        );
+    }
 }

@@ -720,7 +720,8 @@ pub struct SolverConfig {
     /// the joint zero offsets are fitted and kept only when the data choose them), `none` (the
     /// published model, the behaviour before `auto`), or `joint_offsets` (always estimated: the
     /// joint zero offsets the data determine, from each pose's recorded joints and the arm's
-    /// published DH model). `dh` is not yet implemented. Absent: `auto`.
+    /// published DH model), or `dh` (always estimated: the offsets and the link `d`, `a` and `α`
+    /// corrections the data determine). Absent: `auto`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<KinematicsChoice>,
 }
@@ -744,7 +745,8 @@ pub enum KinematicsChoice {
     None,
     /// The joint zero offsets the data determine (those the two transforms absorb are named).
     JointOffsets,
-    /// Joint offsets and DH corrections (not yet implemented: refused when the config is read).
+    /// The joint offsets and the DH link corrections (`d`, `a`, `α`) the data determine (those
+    /// the transforms absorb and those the poses leave undetermined are named).
     Dh,
 }
 

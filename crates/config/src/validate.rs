@@ -714,21 +714,16 @@ impl Validator<'_> {
             self.number("solver.translation_sigma_mm", sigma, TRANSLATION_SIGMA_MM)?;
         }
         self.number("solver.pixel_sigma_px", s.pixel_sigma_px, PIXEL_SIGMA_PX)?;
-        if s.kinematics == Some(KinematicsChoice::JointOffsets) {
+        if let Some(choice @ (KinematicsChoice::JointOffsets | KinematicsChoice::Dh)) = s.kinematics
+        {
             if let Some(needs) =
                 super::schema::arm_model_unavailable(&raw.robot, raw.intrinsics.as_deref())
             {
                 return Err(self.inconsistent(
                     "solver.kinematics",
-                    format!("`joint_offsets` needs {needs}"),
+                    format!("`{}` needs {needs}", choice.name()),
                 ));
             }
-        }
-        if s.kinematics == Some(KinematicsChoice::Dh) {
-            return Err(self.inconsistent(
-                "solver.kinematics",
-                "`dh` (the DH corrections) is not yet implemented: use `joint_offsets` (the joint zero offsets) or `none`".into(),
-            ));
         }
         Ok(())
     }

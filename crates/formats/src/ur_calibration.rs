@@ -32,7 +32,7 @@ use nalgebra::{Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use handeye_core::geometry::{dh_link, Pose};
 use handeye_records::result::KinematicsYaml;
-use handeye_robot::kinematics::UrModel;
+use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
 
 /// The joint names of the YAML, base first.
 pub const LINKS: [&str; 6] = [
@@ -53,6 +53,16 @@ pub enum UrCalibrationError {
     /// The result's offsets are not one per joint of a UR.
     #[error("kinematics.joint_offsets: {0} joints, a UR has 6")]
     JointCount(usize),
+    /// A link correction names no joint or parameter of the chain.
+    #[error("kinematics.links: `{joint} {parameter}` ({unit}) is not a link correction of a UR's chain (joints {joints}; parameters d and a in mm, alpha in deg)", joints = JOINT_NAMES.join(", "))]
+    Link {
+        /// The row's joint.
+        joint: String,
+        /// The row's parameter.
+        parameter: String,
+        /// The row's unit.
+        unit: String,
+    },
 }
 
 /// Each joint's origin in its parent link (see the module docs) for `model` with the joint zero
@@ -72,10 +82,31 @@ pub fn joint_origins(model: &UrModel, offsets_rad: &[f64; 6]) -> [Pose; 6] {
     })
 }
 
-/// The calibration YAML of the arm's model in `kinematics` (a result's section).
-pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationError> {
-    let model = UrModel::by_name(&kinematics.model)
+/// The arm's model a result's `kinematics` section holds: its model's published DH chain with
+/// the section's link corrections (`links:`, `estimated: dh`), and the estimated joint zero
+/// offsets, rad. Every export of the arm's model (this file, `arm_model`'s DH table and URDF)
+/// starts here.
+pub fn corrected_arm(
+    kinematics: &KinematicsYaml,
+) -> Result<(UrModel, [f64; 6]), UrCalibrationError> {
+    let mut model = UrModel::by_name(&kinematics.model)
         .ok_or_else(|| UrCalibrationError::UnknownModel(kinematics.model.clone()))?;
+    for link in &kinematics.links {
+        let joint = JOINT_NAMES.iter().position(|n| *n == link.joint);
+        let (slot, scale) = match (joint, link.parameter.as_str(), link.unit.as_str()) {
+            (Some(j), "d", "mm") => (&mut model.d[j], 1e-3),
+            (Some(j), "a", "mm") => (&mut model.a[j], 1e-3),
+            (Some(j), "alpha", "deg") => (&mut model.alpha[j], 1f64.to_radians()),
+            _ => {
+                return Err(UrCalibrationError::Link {
+                    joint: link.joint.clone(),
+                    parameter: link.parameter.clone(),
+                    unit: link.unit.clone(),
+                })
+            }
+        };
+        *slot += link.correction * scale;
+    }
     let offsets: [f64; 6] = kinematics
         .joint_offsets
         .iter()
@@ -83,10 +114,17 @@ pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCali
         .collect::<Vec<_>>()
         .try_into()
         .map_err(|v: Vec<f64>| UrCalibrationError::JointCount(v.len()))?;
+    Ok((model, offsets))
+}
+
+/// The calibration YAML of the arm's model in `kinematics` (a result's section).
+pub fn ur_calibration_yaml(kinematics: &KinematicsYaml) -> Result<String, UrCalibrationError> {
+    let (model, offsets) = corrected_arm(kinematics)?;
     let origins = joint_origins(&model, &offsets);
     let mut text = format!(
         "# ur_robot_driver kinematics calibration (the form ur_calibration writes; load it as\n\
-         # kinematics_params_file): the {} published DH model with the joint zero offsets handeye\n\
+         # kinematics_params_file): the {} published DH model (with the link corrections of\n\
+         # `estimated: dh`) and the joint zero offsets handeye\n\
          # estimated (deg, base first: {}). Offsets the cell's transforms absorb are held at 0.\n\
          kinematics:\n",
         model.name,

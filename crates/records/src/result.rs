@@ -71,6 +71,10 @@ pub struct UncertaintyYaml {
 ///     - {joint: shoulder, offset_deg: 0.0213, sigma_deg: 0.0019}
 ///   translation_rms_mm: {with: 0.08, without: 0.41}
 /// ```
+///
+/// With `estimated: dh`, `links:` too: each link's `d`, `a` (mm) and `alpha` (deg) correction
+/// (true minus published) in the same form, e.g.
+/// `{joint: shoulder, parameter: a, unit: mm, correction: 0.12, sigma: 0.01}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct KinematicsYaml {
@@ -80,6 +84,9 @@ pub struct KinematicsYaml {
     pub estimated: String,
     /// Each joint, base first.
     pub joint_offsets: Vec<JointOffsetYaml>,
+    /// With `estimated: dh`: each link's `d`, `a` and `alpha` corrections, base first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub links: Vec<LinkCorrectionYaml>,
     /// Pose-space translation residual RMS, mm, with the offsets and without them.
     pub translation_rms_mm: WithWithout,
     /// Pose-space rotation residual RMS, degrees, with the offsets and without them.
@@ -113,6 +120,29 @@ pub struct JointOffsetYaml {
     pub sigma_deg: Option<f64>,
     /// The transform that absorbs it (no data can tell them apart): held at zero. `both` when
     /// the two together do.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub absorbed_by: Option<String>,
+    /// The recorded configurations do not determine it: held at zero.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub undetermined: bool,
+}
+
+/// One link correction of `estimated: dh`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkCorrectionYaml {
+    /// The joint whose link it is (`base` … `wrist 3`).
+    pub joint: String,
+    /// `d`, `a` or `alpha` (standard DH).
+    pub parameter: String,
+    /// `mm` (`d`, `a`) or `deg` (`alpha`).
+    pub unit: String,
+    /// True minus published, in `unit` (0 when held).
+    pub correction: f64,
+    /// Its 1σ, in `unit` (estimated corrections only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
+    /// The transform that absorbs it: held at zero (`both` when the two together do).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub absorbed_by: Option<String>,
     /// The recorded configurations do not determine it: held at zero.

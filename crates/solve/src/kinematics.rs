@@ -1,6 +1,8 @@
 //! The arm's own model estimated with the cell (issue #41): the joint zero offsets of a serial
-//! arm, fitted jointly with both unknowns of `A = X·B·Y` in pose space, from each sample's
-//! recorded joint angles and the arm's nominal DH chain ([`DhChain`]).
+//! arm — or with [`ArmModel::Dh`] every DH parameter of its links (offset, `d`, `a`, `α`) —
+//! fitted jointly with both unknowns of `A = X·B·Y` in pose space, from each sample's recorded
+//! joint angles and the arm's nominal DH chain ([`DhChain`]). Below, "offsets" reads "chain
+//! parameters" under `Dh`.
 //!
 //! A controller reports `T_base_flange = FK_nominal(q)`; with joint zero offsets `δ` the flange
 //! is at `FK(q + δ)`. Each sample's robot pose is the reported one corrected by the change of
@@ -19,9 +21,12 @@
 //! in the span of the transforms' columns (its Schur complement against them vanishes) is
 //! absorbed by them — on a UR the base joint's (a turn of the base frame about z: the base-side
 //! transform) and the last joint's (a turn of the flange about its axis: the flange-side one) —
-//! and is held at zero and named; of the rest, a combination the recorded configurations do not
-//! determine (the reduced information's smallest eigenvalue below [`UNDETERMINED_RATIO`] of
-//! its largest) is held at zero and named too. Every other offset gets its 1σ.
+//! and is held at zero and named (under `Dh` also the base link's `d` and the last link's `d`,
+//! `a`, `α`); of the rest, taken in order, one the transforms and the parameters kept before it
+//! explain but for [`UNDETERMINED_RATIO`] of its information is undetermined by the recorded
+//! configurations, held at zero and named too (under `Dh` on a UR: the `d` of the second and
+//! third of the three parallel joints, which move the flange only by the sum of the three).
+//! Every other parameter gets its 1σ.
 //!
 //! Pure maths: no I/O, no clocks; depends on the ground floor (`geometry::dh_link`, `setup`).
 
@@ -36,14 +41,14 @@ use handeye_core::setup::{PosePair, Setup};
 
 /// A transform parameter count: φ_X, ρ_X, φ_Y, ρ_Y.
 const POSE_PARAMS: usize = 12;
-/// Step of the central differences in a joint offset, rad.
+/// Step of the central differences in a chain parameter, rad or m.
 const OFFSET_STEP_RAD: f64 = 1e-6;
 /// An offset whose Jacobian column keeps less than this fraction of its norm after the
 /// transforms' columns are projected out is absorbed by them (exactly absorbed columns keep
 /// ~1e-9: the differences' round-off).
 pub const ABSORBED_RATIO: f64 = 1e-5;
-/// The reduced information of the free offsets (diagonal scaled to 1) whose smallest eigenvalue
-/// is below this fraction of its largest leaves a combination of offsets undetermined.
+/// A parameter of which the transforms and the parameters kept before it explain all but this
+/// fraction of its information (its Schur complement over its own diagonal) is undetermined.
 pub const UNDETERMINED_RATIO: f64 = 1e-8;
 /// Most rounds of noise re-estimation, each a refit.
 const MAX_ROUNDS: usize = 12;
@@ -72,6 +77,79 @@ impl DhChain {
             acc * dh_link(joints[i] + offsets[i], self.d[i], self.a[i], self.alpha[i])
         })
     }
+
+    /// `T_base_flange` at `joints` with `corrections` of the chain, per joint in the order of
+    /// [`LinkParameter`]: the zero offset (rad), the changes of `d` and `a` (m) and of `α` (rad).
+    pub fn forward_corrected(&self, joints: &[f64], corrections: &[[f64; 4]]) -> Pose {
+        (0..self.joints()).fold(Pose::identity(), |acc, i| {
+            let [theta, d, a, alpha] = corrections[i];
+            acc * dh_link(
+                joints[i] + theta,
+                self.d[i] + d,
+                self.a[i] + a,
+                self.alpha[i] + alpha,
+            )
+        })
+    }
+}
+
+/// Which of the arm's model a fit estimates (`solver.kinematics`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArmModel {
+    /// The joint zero offsets alone.
+    JointOffsets,
+    /// Every DH parameter of every link (zero offset, `d`, `a`, `α`) the data observe.
+    Dh,
+}
+
+/// One DH parameter of a link, in the order of [`DhChain::forward_corrected`]'s corrections.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkParameter {
+    /// The joint's zero offset `θ`, rad.
+    ThetaOffset,
+    /// The link offset `d`, m.
+    D,
+    /// The link length `a`, m.
+    A,
+    /// The link twist `α`, rad.
+    Alpha,
+}
+
+impl LinkParameter {
+    /// In the order of the corrections.
+    pub const ALL: [LinkParameter; 4] = [
+        LinkParameter::ThetaOffset,
+        LinkParameter::D,
+        LinkParameter::A,
+        LinkParameter::Alpha,
+    ];
+
+    /// The DH table's name (`theta_offset`, `d`, `a`, `alpha`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LinkParameter::ThetaOffset => "theta_offset",
+            LinkParameter::D => "d",
+            LinkParameter::A => "a",
+            LinkParameter::Alpha => "alpha",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// One link length or twist correction as fitted (`ArmModel::Dh`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkCorrection {
+    /// The joint whose link it is, 0-based from the base.
+    pub joint: usize,
+    /// `d`, `a` or `α`.
+    pub parameter: LinkParameter,
+    /// The correction (true minus published), m or rad; zero unless estimated.
+    pub value: f64,
+    /// Estimated (its 1σ in `value`'s unit), absorbed or undetermined.
+    pub status: OffsetStatus,
 }
 
 /// One sample for the arm's model: the pose pair (its reported `T_base_flange`) and the joint
@@ -84,12 +162,12 @@ pub struct ArmSample {
     pub joints: Vec<f64>,
 }
 
-/// What became of one joint's zero offset.
+/// What became of one joint's zero offset (or of a link correction, [`LinkCorrection`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum OffsetStatus {
-    /// Estimated, with its 1σ (rad).
+    /// Estimated, with its 1σ (rad; a link length's in m).
     Estimated {
-        /// 1σ, rad.
+        /// 1σ, rad (a link length's: m).
         sigma_rad: f64,
     },
     /// No data can tell it from a transform: held at zero, absorbed by the transform of this
@@ -127,6 +205,11 @@ pub struct ArmFit {
     pub uncertainty: Option<Uncertainty>,
     /// Every joint's offset, base first.
     pub offsets: Vec<JointOffset>,
+    /// What was estimated.
+    pub model: ArmModel,
+    /// With [`ArmModel::Dh`]: every link's `d`, `a` and `α` corrections, base first; empty with
+    /// the offsets alone.
+    pub links: Vec<LinkCorrection>,
     /// The board-pose noise the fit ended with.
     pub noise: PoseNoise,
     /// Translation residual RMS of the fit, mm, with the offsets and without them (the
@@ -149,11 +232,13 @@ const CHI2_99: [f64; 10] = [
 ];
 
 impl ArmFit {
-    /// Offsets estimated (neither absorbed nor undetermined).
+    /// Parameters estimated (neither absorbed nor undetermined): offsets and link corrections.
     pub fn estimated(&self) -> usize {
         self.offsets
             .iter()
-            .filter(|o| matches!(o.status, OffsetStatus::Estimated { .. }))
+            .map(|o| o.status)
+            .chain(self.links.iter().map(|l| l.status))
+            .filter(|s| matches!(s, OffsetStatus::Estimated { .. }))
             .count()
     }
 
@@ -182,13 +267,27 @@ impl ArmFit {
         self.offsets.iter().map(|o| o.offset_rad).collect()
     }
 
-    /// A sample's robot pose corrected by the fitted offsets:
-    /// `T_reported · FK(q)⁻¹ · FK(q + δ)`.
+    /// Every joint's corrections in the order of [`LinkParameter`] (zero where not estimated),
+    /// for [`DhChain::forward_corrected`].
+    pub fn corrections(&self) -> Vec<[f64; 4]> {
+        let mut out: Vec<[f64; 4]> = self
+            .offsets
+            .iter()
+            .map(|o| [o.offset_rad, 0.0, 0.0, 0.0])
+            .collect();
+        for l in &self.links {
+            out[l.joint][l.parameter.index()] = l.value;
+        }
+        out
+    }
+
+    /// A sample's robot pose corrected by the fitted model:
+    /// `T_reported · FK(q)⁻¹ · FK_corrected(q)`.
     pub fn corrected_flange(&self, chain: &DhChain, sample: &ArmSample) -> Pose {
         let zero = vec![0.0; chain.joints()];
         sample.pair.base_from_flange
             * chain.forward(&sample.joints, &zero).inverse()
-            * chain.forward(&sample.joints, &self.offset_vector())
+            * chain.forward_corrected(&sample.joints, &self.corrections())
     }
 }
 
@@ -201,17 +300,20 @@ struct Prepared {
     scale: f64,
 }
 
-/// The fit's problem for [`minimize_normal`]: parameters `[δX/δY perturbation, free offsets]`
-/// around an anchor that moves to every accepted point.
+/// A parameter of the chain: the joint and the [`LinkParameter`] index.
+type Param = (usize, usize);
+
+/// The fit's problem for [`minimize_normal`]: parameters `[δX/δY perturbation, free chain
+/// parameters]` around an anchor that moves to every accepted point.
 struct Problem<'a> {
     setup: Setup,
     chain: &'a DhChain,
     samples: &'a [Prepared],
-    /// Joints whose offsets are free, in parameter order.
-    free: &'a [usize],
+    /// The chain's free parameters, in parameter order.
+    free: &'a [Param],
     noise: NoiseModel,
     anchor: Axby,
-    anchor_offsets: Vec<f64>,
+    anchor_corrections: Vec<[f64; 4]>,
     delta: DVector<f64>,
 }
 
@@ -228,21 +330,22 @@ impl Problem<'_> {
         POSE_PARAMS + self.free.len()
     }
 
-    fn current(&self) -> (Axby, Vec<f64>) {
+    fn current(&self) -> (Axby, Vec<[f64; 4]>) {
         let pose = perturbed(
             &self.anchor,
             &self.delta.fixed_rows::<POSE_PARAMS>(0).into_owned(),
         );
-        let mut offsets = self.anchor_offsets.clone();
-        for (k, &j) in self.free.iter().enumerate() {
-            offsets[j] += self.delta[POSE_PARAMS + k];
+        let mut corrections = self.anchor_corrections.clone();
+        for (k, &(j, p)) in self.free.iter().enumerate() {
+            corrections[j][p] += self.delta[POSE_PARAMS + k];
         }
-        (pose, offsets)
+        (pose, corrections)
     }
 
-    fn b(&self, sample: &Prepared, offsets: &[f64]) -> Pose {
-        self.setup
-            .chain_b(&(sample.correction * self.chain.forward(&sample.joints, offsets)))
+    fn b(&self, sample: &Prepared, corrections: &[[f64; 4]]) -> Pose {
+        self.setup.chain_b(
+            &(sample.correction * self.chain.forward_corrected(&sample.joints, corrections)),
+        )
     }
 
     fn weights(&self, sample: &Prepared) -> (f64, f64) {
@@ -253,8 +356,8 @@ impl Problem<'_> {
     }
 
     /// Residual and Jacobian (6 × params) of every sample at the current point, with the
-    /// offsets of `columns` (joint indices) as the last columns.
-    fn linearise(&self, columns: &[usize]) -> Linearised {
+    /// chain parameters of `columns` as the last columns.
+    fn linearise(&self, columns: &[Param]) -> Linearised {
         let (s, offsets) = self.current();
         let p = POSE_PARAMS + columns.len();
         let mut lin = Linearised {
@@ -269,11 +372,11 @@ impl Problem<'_> {
             let (e, pose_rows) = sample_rows(&s, &sample.a, &b, kr, kt);
             let mut j = DMatrix::<f64>::zeros(6, p);
             j.view_mut((0, 0), (6, POSE_PARAMS)).copy_from(&pose_rows);
-            for (k, &joint) in columns.iter().enumerate() {
+            for (k, &(joint, p)) in columns.iter().enumerate() {
                 let mut shifted = offsets.clone();
-                shifted[joint] += OFFSET_STEP_RAD;
+                shifted[joint][p] += OFFSET_STEP_RAD;
                 let plus = sample_residual(&s, &sample.a, &self.b(sample, &shifted), kr, kt);
-                shifted[joint] -= 2.0 * OFFSET_STEP_RAD;
+                shifted[joint][p] -= 2.0 * OFFSET_STEP_RAD;
                 let minus = sample_residual(&s, &sample.a, &self.b(sample, &shifted), kr, kt);
                 j.set_column(POSE_PARAMS + k, &((plus - minus) / (2.0 * OFFSET_STEP_RAD)));
             }
@@ -333,16 +436,16 @@ impl NormalEquations for Problem<'_> {
     }
 
     fn accepted(&mut self) {
-        let (pose, offsets) = self.current();
+        let (pose, corrections) = self.current();
         self.anchor = pose;
-        self.anchor_offsets = offsets;
+        self.anchor_corrections = corrections;
         self.delta.fill(0.0);
     }
 }
 
-/// Which offsets the data can estimate, from the information `n` (whitened `JᵀJ`, the 12
-/// transform parameters then one column per joint) at the start: each joint's status, `None`
-/// for the free ones.
+/// Which chain parameters the data can estimate, from the information `n` (whitened `JᵀJ`, the
+/// 12 transform parameters then one column per candidate parameter) at the start: each
+/// candidate's status, `None` for the free ones.
 fn identifiability(setup: Setup, n: &DMatrix<f64>, joints: usize) -> Vec<Option<OffsetStatus>> {
     let (camera_key, target_key) = setup.unknown_names();
     // What of column `c` remains after projecting out the columns `span`, as a fraction.
@@ -376,33 +479,22 @@ fn identifiability(setup: Setup, n: &DMatrix<f64>, joints: usize) -> Vec<Option<
             Some(OffsetStatus::Absorbed { by })
         })
         .collect();
-    // Of the rest, drop the joint that carries a combination the data do not determine, one at
-    // a time, until the reduced information is well conditioned.
-    loop {
-        let free: Vec<usize> = (0..joints).filter(|&j| status[j].is_none()).collect();
-        if free.is_empty() {
-            break;
+    // Of the rest, in order, hold each one that the transforms and the parameters kept before
+    // it already explain (all but `UNDETERMINED_RATIO` of its information): of a combination the
+    // recorded configurations do not determine (the `d` of parallel joints, which only move the
+    // flange by their sum) the first member is kept and the later ones held, whatever the noise
+    // of the poses this is judged on.
+    let mut kept = xy;
+    for (c, held) in status.iter_mut().enumerate() {
+        if held.is_some() {
+            continue;
         }
-        let nxx = DMatrix::from_fn(12, 12, |i, j| n[(i, j)]);
-        let Some(ch) = nxx.cholesky() else { break };
-        let k = free.len();
-        let nfx = DMatrix::from_fn(k, 12, |i, j| n[(POSE_PARAMS + free[i], j)]);
-        let nff = DMatrix::from_fn(k, k, |i, j| {
-            n[(POSE_PARAMS + free[i], POSE_PARAMS + free[j])]
-        });
-        let schur = &nff - &nfx * ch.solve(&nfx.transpose());
-        let scale = DVector::from_fn(k, |i, _| 1.0 / schur[(i, i)].max(f64::MIN_POSITIVE).sqrt());
-        let scaled = DMatrix::from_fn(k, k, |i, j| schur[(i, j)] * scale[i] * scale[j]);
-        let eigen = scaled.symmetric_eigen();
-        let (lo, hi) = eigen.eigenvalues.iter().enumerate().fold(
-            ((0, f64::INFINITY), f64::NEG_INFINITY),
-            |((at, lo), hi), (i, &v)| (if v < lo { (i, v) } else { (at, lo) }, hi.max(v)),
-        );
-        if lo.1 >= UNDETERMINED_RATIO * hi {
-            break;
+        let column = POSE_PARAMS + c;
+        if remains(column, &kept).powi(2) < UNDETERMINED_RATIO {
+            *held = Some(OffsetStatus::Undetermined);
+        } else {
+            kept.push(column);
         }
-        let worst = eigen.eigenvectors.column(lo.0).iamax();
-        status[free[worst]] = Some(OffsetStatus::Undetermined);
     }
     status
 }
@@ -422,6 +514,19 @@ pub fn fit_joint_offsets(
     noise: NoiseModel,
     options: &SolveOptions,
 ) -> Result<ArmFit, SolveError> {
+    fit_arm(
+        ArmModel::JointOffsets,
+        setup,
+        chain,
+        samples,
+        start,
+        noise,
+        options,
+    )
+}
+
+/// Each sample prepared for the fit, checked against the chain's joint count.
+fn prepare(chain: &DhChain, samples: &[ArmSample]) -> Result<Vec<Prepared>, SolveError> {
     if samples.len() < 3 {
         return Err(SolveError::TooFewSamples {
             found: samples.len(),
@@ -430,24 +535,51 @@ pub fn fit_joint_offsets(
     }
     let joints = chain.joints();
     let zero = vec![0.0; joints];
-    let mut prepared = Vec::with_capacity(samples.len());
-    for (index, s) in samples.iter().enumerate() {
-        if s.joints.len() != joints || s.joints.iter().any(|q| !q.is_finite()) {
-            return Err(SolveError::ArmJoints {
-                index,
-                id: s.pair.id.clone(),
-                found: s.joints.len(),
-                expected: joints,
-            });
-        }
-        prepared.push(Prepared {
-            a: s.pair.camera_from_target,
-            correction: s.pair.base_from_flange * chain.forward(&s.joints, &zero).inverse(),
-            joints: s.joints.clone(),
-            scale: s.pair.weight.sqrt(),
-        });
-    }
-    let all: Vec<usize> = (0..joints).collect();
+    samples
+        .iter()
+        .enumerate()
+        .map(|(index, s)| {
+            if s.joints.len() != joints || s.joints.iter().any(|q| !q.is_finite()) {
+                return Err(SolveError::ArmJoints {
+                    index,
+                    id: s.pair.id.clone(),
+                    found: s.joints.len(),
+                    expected: joints,
+                });
+            }
+            Ok(Prepared {
+                a: s.pair.camera_from_target,
+                correction: s.pair.base_from_flange * chain.forward(&s.joints, &zero).inverse(),
+                joints: s.joints.clone(),
+                scale: s.pair.weight.sqrt(),
+            })
+        })
+        .collect()
+}
+
+/// [`fit_joint_offsets`] for the parameters `model` names: with [`ArmModel::Dh`] every link's
+/// zero offset, `d`, `a` and `α` are candidates, and the identifiability analysis (module docs)
+/// holds those the transforms absorb (on a UR: the base link's `θ` and `d`, the last link's
+/// four) and those the recorded configurations do not determine (on a UR: two of the `d` of the
+/// three parallel joints, whose sum alone moves the flange).
+pub fn fit_arm(
+    model: ArmModel,
+    setup: Setup,
+    chain: &DhChain,
+    samples: &[ArmSample],
+    start: (&Pose, &Pose),
+    noise: NoiseModel,
+    options: &SolveOptions,
+) -> Result<ArmFit, SolveError> {
+    let prepared = prepare(chain, samples)?;
+    let joints = chain.joints();
+    let zero = vec![[0.0; 4]; joints];
+    let candidates: Vec<Param> = match model {
+        ArmModel::JointOffsets => (0..joints).map(|j| (j, 0)).collect(),
+        ArmModel::Dh => (0..joints)
+            .flat_map(|j| (0..4).map(move |p| (j, p)))
+            .collect(),
+    };
     let problem = Problem {
         setup,
         chain,
@@ -455,11 +587,11 @@ pub fn fit_joint_offsets(
         free: &[],
         noise,
         anchor: Axby::from_mounts(start.0, start.1),
-        anchor_offsets: zero.clone(),
+        anchor_corrections: zero.clone(),
         delta: DVector::zeros(POSE_PARAMS),
     };
     let before = problem.rms();
-    // Which offsets the transforms absorb is a property of the chain and the configurations:
+    // Which parameters the transforms absorb is a property of the chain and the configurations:
     // judged on the published model's poses (no reading noise, which would blur an exact
     // absorption by its own few 1e-5).
     let structural: Vec<Prepared> = prepared
@@ -475,12 +607,21 @@ pub fn fit_joint_offsets(
         samples: &structural,
         anchor: Axby::from_mounts(start.0, start.1),
         delta: DVector::zeros(POSE_PARAMS),
-        anchor_offsets: zero.clone(),
+        anchor_corrections: zero.clone(),
         ..problem
     }
-    .linearise(&all);
-    let status = identifiability(setup, &(&at_start.rotation + &at_start.translation), joints);
-    let free: Vec<usize> = (0..joints).filter(|&j| status[j].is_none()).collect();
+    .linearise(&candidates);
+    let status = identifiability(
+        setup,
+        &(&at_start.rotation + &at_start.translation),
+        candidates.len(),
+    );
+    let free: Vec<Param> = candidates
+        .iter()
+        .zip(&status)
+        .filter(|(_, s)| s.is_none())
+        .map(|(c, _)| *c)
+        .collect();
     let mut problem = Problem {
         free: &free,
         delta: DVector::zeros(POSE_PARAMS + free.len()),
@@ -499,18 +640,17 @@ pub fn fit_joint_offsets(
     }
     let lin = problem.linearise(&free);
     let chi2 = lin.squares[0] + lin.squares[1];
-    let p = problem.params();
-    let factor = variance_factor(chi2, (6 * samples.len()).saturating_sub(p));
+    let factor = variance_factor(chi2, (6 * samples.len()).saturating_sub(problem.params()));
     let covariance = (&lin.rotation + &lin.translation)
         .try_inverse()
         .map(|inverse| inverse * factor);
-    let (solution, offsets) = problem.current();
+    let (solution, corrections) = problem.current();
     let uncertainty = covariance.as_ref().map(|c| {
         let block: SMatrix<f64, 12, 12> = c.fixed_view::<12, 12>(0, 0).into_owned();
         mount_uncertainty(&solution, &block, factor)
     });
     let after = problem.rms();
-    // The two transforms alone, refitted under the same noise: the model without offsets,
+    // The two transforms alone, refitted under the same noise: the model without the arm's,
     // against which the data choose (`ArmFit::model_choice_margin`).
     let chi2_with = problem.total_cost();
     let mut alone = Problem {
@@ -520,35 +660,54 @@ pub fn fit_joint_offsets(
         free: &[],
         noise: problem.noise,
         anchor: Axby::from_mounts(start.0, start.1),
-        anchor_offsets: zero.clone(),
+        anchor_corrections: zero,
         delta: DVector::zeros(POSE_PARAMS),
     };
     minimize_normal(&mut alone)?;
     let chi2_without = alone.total_cost();
-    let (camera_mount, target_mount) = solution.to_mounts();
-    let offsets = (0..joints)
-        .map(|j| {
-            let status = status[j].unwrap_or_else(|| {
-                let k = POSE_PARAMS + free.iter().position(|&f| f == j).unwrap_or(0);
+    // Each candidate's status: held as the analysis said, or estimated with its 1σ.
+    let status_of = |param: Param| -> OffsetStatus {
+        let at = candidates.iter().position(|&c| c == param);
+        match at.and_then(|i| status[i]) {
+            Some(held) => held,
+            None => {
+                let k = POSE_PARAMS + free.iter().position(|&f| f == param).unwrap_or(0);
                 OffsetStatus::Estimated {
                     sigma_rad: covariance
                         .as_ref()
                         .map_or(f64::NAN, |c| c[(k, k)].max(0.0).sqrt()),
                 }
-            });
-            JointOffset {
-                joint: j,
-                offset_rad: offsets[j],
-                status,
             }
+        }
+    };
+    let offsets = (0..joints)
+        .map(|j| JointOffset {
+            joint: j,
+            offset_rad: corrections[j][0],
+            status: status_of((j, 0)),
         })
         .collect();
+    let links = match model {
+        ArmModel::JointOffsets => Vec::new(),
+        ArmModel::Dh => (0..joints)
+            .flat_map(|j| LinkParameter::ALL[1..].iter().map(move |&p| (j, p)))
+            .map(|(j, parameter)| LinkCorrection {
+                joint: j,
+                parameter,
+                value: corrections[j][parameter.index()],
+                status: status_of((j, parameter.index())),
+            })
+            .collect(),
+    };
+    let (camera_mount, target_mount) = solution.to_mounts();
     Ok(ArmFit {
         setup,
         camera_mount,
         target_mount,
         uncertainty,
         offsets,
+        model,
+        links,
         noise: estimator.outcome(),
         translation_rms_mm: [after.1 * 1e3, before.1 * 1e3],
         rotation_rms_deg: [after.0.to_degrees(), before.0.to_degrees()],
@@ -734,5 +893,181 @@ mod tests {
             OffsetStatus::Estimated { .. }
         ));
         assert!(fit.offsets.iter().all(|o| o.offset_rad.abs() < 1e-9));
+    }
+
+    /// A UR10e eye-in-hand cell whose true chain differs from the published one by
+    /// `corrections` (per joint: θ offset, d, a, α), at `n` joint vectors drawn in ±1.5 rad:
+    /// samples with the reading and board noise of [`cell`], and the same without noise.
+    fn dh_cell(seed: u64, corrections: &[[f64; 4]], n: usize) -> [Vec<ArmSample>; 2] {
+        let chain = ur10e();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let x = pose_from_rotvec(
+            Vector3::new(0.03, -0.07, 0.04),
+            Vector3::new(0.0, 0.0, 1.57),
+        );
+        let y = pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3));
+        let noise_r = Normal::new(0.0, 0.005f64.to_radians()).unwrap();
+        let noise_t = Normal::new(0.0, 0.02e-3).unwrap();
+        let mut noisy = Vec::new();
+        let mut exact = Vec::new();
+        for _ in 0..n {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-1.5..1.5)).collect();
+            let reading = pose_from_rotvec(
+                Vector3::from_fn(|_, _| 2e-5 * rng.random_range(-1.0..1.0)),
+                Vector3::from_fn(|_, _| 3.5e-5 * rng.random_range(-1.0..1.0)),
+            );
+            let dn = pose_from_rotvec(
+                Vector3::from_fn(|_, _| noise_t.sample(&mut rng)),
+                Vector3::from_fn(|_, _| noise_r.sample(&mut rng)),
+            );
+            let nominal = chain.forward(&q, &[0.0; 6]);
+            let seen = x.inverse() * chain.forward_corrected(&q, corrections).inverse() * y;
+            noisy.push(ArmSample {
+                pair: PosePair::new(nominal * reading, seen * dn),
+                joints: q.clone(),
+            });
+            exact.push(ArmSample {
+                pair: PosePair::new(nominal, seen),
+                joints: q,
+            });
+        }
+        [noisy, exact]
+    }
+
+    /// `ArmModel::Dh` over 20 drawn arms (offsets 0.03°, lengths 0.2 mm, twists 0.01°, 1σ; 40
+    /// poses): the same parameters held in every draw (base θ and d absorbed by
+    /// `T_base_target`, the last link's four by `T_flange_camera`, two `d` of the parallel
+    /// joints undetermined); each of the 16 estimated parameters within 3σ of the truth in the
+    /// parametrisation the data determine (the fit of the same poses without noise, which
+    /// reproduces the true flange poses: the held parameters are absorbed exactly) in ≥ 95 % of
+    /// the draws, the errors over 1σ of RMS 0.7–1.3, and both transforms within 0.5 mm / 0.05°
+    /// of that truth.
+    #[test]
+    fn dh_corrections_the_data_observe_are_found_within_their_sigma() {
+        let mut within = 0;
+        let mut squares = Vec::new();
+        let mut outside = std::collections::BTreeMap::new();
+        let draws = 20;
+        for draw in 0..draws {
+            let mut rng = StdRng::seed_from_u64(500 + draw);
+            let sigma = [0.03f64.to_radians(), 0.2e-3, 0.2e-3, 0.01f64.to_radians()];
+            let corrections: Vec<[f64; 4]> = (0..6)
+                .map(|_| {
+                    std::array::from_fn(|k| Normal::new(0.0, sigma[k]).unwrap().sample(&mut rng))
+                })
+                .collect();
+            let [noisy, exact] = dh_cell(draw, &corrections, 40);
+            let pairs: Vec<PosePair> = noisy.iter().map(|s| s.pair.clone()).collect();
+            let options = SolveOptions::default();
+            let plain = crate::solve(Setup::EyeInHand, &pairs, &options).unwrap();
+            let fit = fit_arm(
+                ArmModel::Dh,
+                Setup::EyeInHand,
+                &ur10e(),
+                &noisy,
+                (&plain.camera_mount, &plain.target_mount),
+                plain.noise.map_or(options.noise, |n| n.model()),
+                &options,
+            )
+            .unwrap();
+            // The truth the data can determine: the same fit of the poses without noise, its
+            // weights fixed at the noisy fit's.
+            let fixed = SolveOptions {
+                estimate_noise: crate::EstimateNoise::NONE,
+                ..SolveOptions::default()
+            };
+            let truth = fit_arm(
+                ArmModel::Dh,
+                Setup::EyeInHand,
+                &ur10e(),
+                &exact,
+                (&fit.camera_mount, &fit.target_mount),
+                fit.noise.model(),
+                &fixed,
+            )
+            .unwrap();
+            assert!(truth.translation_rms_mm[0] < 1e-6, "draw {draw}: {truth:?}");
+            let statuses: Vec<String> = fit
+                .offsets
+                .iter()
+                .map(|o| format!("θ{}: {:?}", o.joint, o.status))
+                .chain(
+                    fit.links
+                        .iter()
+                        .map(|l| format!("{}{}: {:?}", l.parameter.name(), l.joint, l.status)),
+                )
+                .collect();
+            if draw == 0 {
+                eprintln!("{statuses:#?}");
+            }
+            // Absorbed: the base link's θ and d by the base-side transform, the last link's
+            // four by the flange-side one; undetermined: the d of the second and third of the
+            // three parallel joints (only the sum of the three moves the flange).
+            let held: Vec<&String> = statuses
+                .iter()
+                .filter(|s| !s.contains("Estimated"))
+                .collect();
+            assert_eq!(
+                held,
+                [
+                    "θ0: Absorbed { by: Some(\"T_base_target\") }",
+                    "θ5: Absorbed { by: Some(\"T_flange_camera\") }",
+                    "d0: Absorbed { by: Some(\"T_base_target\") }",
+                    "d2: Undetermined",
+                    "d3: Undetermined",
+                    "d5: Absorbed { by: Some(\"T_flange_camera\") }",
+                    "a5: Absorbed { by: Some(\"T_flange_camera\") }",
+                    "alpha5: Absorbed { by: Some(\"T_flange_camera\") }",
+                ],
+                "draw {draw}"
+            );
+            let values = |f: &ArmFit| f.corrections();
+            let (ours, theirs) = (values(&fit), values(&truth));
+            let mut all = true;
+            for (j, p, status) in fit.offsets.iter().map(|o| (o.joint, 0, o.status)).chain(
+                fit.links
+                    .iter()
+                    .map(|l| (l.joint, l.parameter.index(), l.status)),
+            ) {
+                if let OffsetStatus::Estimated { sigma_rad } = status {
+                    let e = (ours[j][p] - theirs[j][p]) / sigma_rad;
+                    squares.push(e * e);
+                    all &= e.abs() <= 3.0;
+                    *outside.entry((j, p)).or_insert(0) += usize::from(e.abs() > 3.0);
+                }
+            }
+            within += usize::from(all);
+            let mm = translation_distance(&fit.camera_mount, &truth.camera_mount)
+                .max(translation_distance(&fit.target_mount, &truth.target_mount))
+                * 1e3;
+            let deg = fit
+                .camera_mount
+                .rotation
+                .angle_to(&truth.camera_mount.rotation)
+                .max(
+                    fit.target_mount
+                        .rotation
+                        .angle_to(&truth.target_mount.rotation),
+                )
+                .to_degrees();
+            eprintln!(
+                "draw {draw}: {} estimated, within 3σ: {all}, transforms {mm:.3} mm {deg:.4}°",
+                fit.estimated()
+            );
+            assert!(mm <= 0.5 && deg <= 0.05, "draw {draw}: {mm} mm, {deg}°");
+        }
+        let rms = (squares.iter().sum::<f64>() / squares.len() as f64).sqrt();
+        eprintln!(
+            "{within} of {draws} draws with every estimated parameter within 3σ, normalised error RMS {rms:.2}; outside 3σ (joint, parameter): {outside:?}"
+        );
+        // Each parameter within 3σ in ≥ 95 % of the draws (all 16 at once would be 0.9973^16 ≈
+        // 96 % by chance alone), and 1σ that are 1σ.
+        for (param, n) in &outside {
+            assert!(
+                20 * n <= draws as usize,
+                "{param:?}: outside 3σ in {n} of {draws}"
+            );
+        }
+        assert!((0.7..1.3).contains(&rms), "normalised error RMS {rms}");
     }
 }

@@ -13,10 +13,14 @@ use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::arm_errors::ArmErrors;
 use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
-use handeye_solve::kinematics::{fit_joint_offsets, ArmFit, ArmSample, DhChain, OffsetStatus};
+use handeye_solve::kinematics::{
+    fit_arm as fit_model, ArmFit, ArmModel, ArmSample, DhChain, LinkParameter, OffsetStatus,
+};
 use handeye_solve::{self as solve, SolveError};
 
-use crate::result::{JointOffsetYaml, KinematicsYaml, UncertaintyYaml, WithWithout};
+use crate::result::{
+    JointOffsetYaml, KinematicsYaml, LinkCorrectionYaml, UncertaintyYaml, WithWithout,
+};
 use crate::{PlannedPose, PoseVisit, SessionError};
 use handeye_config::schema::arm_model_unavailable;
 use handeye_config::{CellConfig, KinematicsChoice};
@@ -74,7 +78,7 @@ pub fn estimate_arm(
 ) -> Result<(Option<Corrected>, Option<Notice>), SessionError> {
     let model = config.robot.model().and_then(UrModel::by_name);
     let chosen_by_data = match config.solver.kinematics() {
-        KinematicsChoice::JointOffsets => false,
+        KinematicsChoice::JointOffsets | KinematicsChoice::Dh => false,
         // The published model unless the data say otherwise; a cell whose arm or lens is not
         // known, or whose poses lack their joints, is not asked (the validation refuses
         // `joint_offsets` there).
@@ -170,7 +174,13 @@ fn fit_arm(
         .map(|(_, s)| s.clone())
         .collect();
     let noise = start.noise.map_or(options.noise, |n| n.model());
-    let fit = fit_joint_offsets(
+    // `auto` chooses between the published model and the joint offsets.
+    let estimated = match config.solver.kinematics() {
+        KinematicsChoice::Dh => ArmModel::Dh,
+        _ => ArmModel::JointOffsets,
+    };
+    let fit = fit_model(
+        estimated,
         setup,
         &chain,
         &kept,
@@ -205,12 +215,14 @@ fn fit_arm(
 }
 
 impl ArmEstimate {
-    /// A reported flange pose at `joints` (rad) corrected by the offsets.
+    /// A reported flange pose at `joints` (rad) corrected by the fitted model.
     pub fn corrected(&self, reported: &Pose, joints: &[f64]) -> Pose {
         let zero = vec![0.0; self.chain.joints()];
         reported
             * self.chain.forward(joints, &zero).inverse()
-            * self.chain.forward(joints, &self.fit.offset_vector())
+            * self
+                .chain
+                .forward_corrected(joints, &self.fit.corrections())
     }
 
     /// The result file's `kinematics:` section.
@@ -245,8 +257,14 @@ impl ArmEstimate {
             .map(|u| UncertaintyYaml::of(fit.setup, u));
         KinematicsYaml {
             model: self.model.clone(),
-            estimated: KinematicsChoice::JointOffsets.name().to_string(),
+            estimated: match fit.model {
+                ArmModel::JointOffsets => KinematicsChoice::JointOffsets,
+                ArmModel::Dh => KinematicsChoice::Dh,
+            }
+            .name()
+            .to_string(),
             joint_offsets,
+            links: fit.links.iter().map(link_row).collect(),
             translation_rms_mm: WithWithout {
                 with: fit.translation_rms_mm[0],
                 without: fit.translation_rms_mm[1],
@@ -264,8 +282,12 @@ impl ArmEstimate {
     pub fn describe(&self) -> Vec<String> {
         let fit = &self.fit;
         let mut lines = vec![format!(
-            "arm model ({}, joint zero offsets estimated with the transforms): pose-space residual RMS {:.3} mm / {:.4}° with it, {:.3} mm / {:.4}° with the published model",
+            "arm model ({}, {} estimated with the transforms): pose-space residual RMS {:.3} mm / {:.4}° with it, {:.3} mm / {:.4}° with the published model",
             self.model,
+            match fit.model {
+                ArmModel::JointOffsets => "joint zero offsets",
+                ArmModel::Dh => "joint zero offsets and DH link corrections",
+            },
             fit.translation_rms_mm[0],
             fit.rotation_rms_deg[0],
             fit.translation_rms_mm[1],
@@ -291,6 +313,23 @@ impl ArmEstimate {
             };
             lines.push(format!("  {} offset: {what}", joint_name(o.joint)));
         }
+        let mut held = Vec::new();
+        for l in &fit.links {
+            let row = link_row(l);
+            let name = format!("{} {}", row.joint, row.parameter);
+            match (row.sigma, row.absorbed_by) {
+                (Some(sigma), _) => lines.push(format!(
+                    "  {name}: {:+.4} {unit} ± {sigma:.4} {unit} (1σ)",
+                    row.correction,
+                    unit = row.unit
+                )),
+                (None, Some(by)) => held.push(format!("{name} (absorbed by {by})")),
+                (None, None) => held.push(format!("{name} (not determined by these poses)")),
+            }
+        }
+        if !held.is_empty() {
+            lines.push(format!("  held at 0: {}", held.join(", ")));
+        }
         lines
     }
 
@@ -312,6 +351,29 @@ impl ArmEstimate {
         }
         lines.join("\n")
     }
+}
+
+/// A link correction's row of the result file (`d`, `a` in mm; `alpha` in degrees).
+fn link_row(l: &handeye_solve::kinematics::LinkCorrection) -> LinkCorrectionYaml {
+    let (unit, scale) = match l.parameter {
+        LinkParameter::Alpha | LinkParameter::ThetaOffset => ("deg", 1f64.to_degrees()),
+        LinkParameter::D | LinkParameter::A => ("mm", 1e3),
+    };
+    let mut row = LinkCorrectionYaml {
+        joint: joint_name(l.joint),
+        parameter: l.parameter.name().to_string(),
+        unit: unit.to_string(),
+        correction: l.value * scale,
+        sigma: None,
+        absorbed_by: None,
+        undetermined: false,
+    };
+    match l.status {
+        OffsetStatus::Estimated { sigma_rad } => row.sigma = Some(sigma_rad * scale),
+        OffsetStatus::Absorbed { by } => row.absorbed_by = Some(by.unwrap_or("both").to_string()),
+        OffsetStatus::Undetermined => row.undetermined = true,
+    }
+    row
 }
 
 /// A joint's name (`base` … `wrist 3`), or `joint N` past a UR's six.
