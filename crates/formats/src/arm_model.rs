@@ -22,18 +22,11 @@ use nalgebra::Rotation3;
 use crate::ur_calibration::{corrected_arm, joint_origins, UrCalibrationError};
 use handeye_records::result::KinematicsYaml;
 
-/// The joints as `ur_description` names them, base first; each turns the link of [`LINKS`] at
-/// the same place.
-pub const JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
+// The joints as `ur_description` names them, base first: the names the UR ROS 2 driver
+// publishes (one list, the config's); each turns the link of `LINKS` at the same place.
+use handeye_config::ros2::UR_DRIVER_JOINT_NAMES as JOINTS;
 
-/// The link each joint of [`JOINTS`] moves, as `ur_description` names them.
+/// The link each joint moves (`shoulder_pan_joint` the first), as `ur_description` names them.
 pub const LINKS: [&str; 6] = [
     "shoulder_link",
     "upper_arm_link",

@@ -51,7 +51,7 @@ struct Factors {
 /// parameters; `None` when a block or the Schur complement is not positive definite.
 fn factor(h: &DMatrix<f64>, global: usize, damping: f64) -> Option<Factors> {
     let n = h.nrows();
-    debug_assert!(n >= global && (n - global) % BLOCK == 0);
+    debug_assert!(n >= global && (n - global).is_multiple_of(BLOCK));
     let damp = |i: usize| damping * h[(i, i)].max(1e-12);
     let mut schur = h.view((0, 0), (global, global)).clone_owned();
     for i in 0..global {
