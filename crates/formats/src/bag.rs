@@ -18,7 +18,6 @@ use handeye_robot::recorded::save_recorded_poses;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use handeye_records::result::ResultFile;
 use handeye_records::{SessionFolder, SolvedSession};
 use handeye_session::cell::run::{
     self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
@@ -283,6 +282,13 @@ pub fn import_bag_session(
         }
     );
 
+    // The bag's tolerated lies go into the session's records before it runs, so its solve (and
+    // every later `solve` or `replay` of it) lists them beside the solver's notices.
+    if !imported.warnings.is_empty() {
+        let bag = absolute(&a.bag)?;
+        let notices: Vec<_> = imported.warnings.iter().map(|w| w.notice(&bag)).collect();
+        folder.save_input_notices(&notices)?;
+    }
     let poses: Vec<_> = imported
         .samples
         .iter()
@@ -340,8 +346,7 @@ pub fn import_bag_session(
         input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
     }
     done.folder.write_manifest(&manifest)?;
-    let (outcome, mut solved) = (done.outcome, done.solved);
-    add_bag_notices(&done.folder, &absolute(&a.bag)?, &imported, &mut solved)?;
+    let (outcome, solved) = (done.outcome, done.solved);
     for (index, why) in &outcome.skipped {
         say(BagNote::Line(format!(
             "  frame {index:03} ({:.3} s): board not found or rejected: {why}",
@@ -368,30 +373,6 @@ pub fn import_bag_session(
         summary,
         solved,
     })
-}
-
-/// The bag's warnings added to the notices of the answer the run solved, in `result.yaml` (where
-/// the report and a later reader find them beside the solver's own) and in `solved`: the run's
-/// solve knows nothing of the bag, so the import adds them once the result is written. A bag with
-/// no warning leaves the file as the run wrote it.
-fn add_bag_notices(
-    folder: &SessionFolder,
-    bag: &Path,
-    imported: &BagImport,
-    solved: &mut SolvedSession,
-) -> anyhow::Result<()> {
-    if imported.warnings.is_empty() {
-        return Ok(());
-    }
-    let notices: Vec<_> = imported.warnings.iter().map(|w| w.notice(bag)).collect();
-    let path = folder.result_path();
-    let mut result = ResultFile::load(&path)?;
-    result.notices.extend(notices.iter().cloned());
-    result
-        .save(&path)
-        .with_context(|| format!("adding the bag's warnings to {}", path.display()))?;
-    solved.calibration.notices.extend(notices);
-    Ok(())
 }
 
 /// Reads the bag, writing each chosen frame into `images_dir` (`NNN.png`) the moment it is

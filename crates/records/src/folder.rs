@@ -35,6 +35,7 @@ use handeye_core::atomic_file::{
     is_temp_name, remove_stale_temp_files, write_atomic, RemovedTemp, TempScope,
 };
 use handeye_core::geometry::{serde_pose, Pose};
+use handeye_core::notice::Notice;
 use handeye_core::setup::{CornerObservation, PosePair, Setup};
 use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::{Joints, MAX_JOINTS};
@@ -374,6 +375,36 @@ impl SessionFolder {
     /// `result.yaml`.
     pub fn result_path(&self) -> PathBuf {
         self.root.join("result.yaml")
+    }
+
+    /// `import/notices.yaml`: what the session's input said about itself that its data do not
+    /// show (a bag's tolerated lies, issue #40), written by the import before the run.
+    pub fn input_notices_path(&self) -> PathBuf {
+        self.root.join("import").join("notices.yaml")
+    }
+
+    /// Writes the notices the session's input carried ([`Self::input_notices_path`]); every
+    /// solve of the session adds them to its answer's.
+    pub fn save_input_notices(&self, notices: &[Notice]) -> Result<(), SessionError> {
+        let path = self.input_notices_path();
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|source| SessionError::Io {
+                path: dir.to_path_buf(),
+                source,
+            })?;
+        }
+        self.write_yaml(&path, &notices)
+    }
+
+    /// The notices the session's input carried: none when the file is absent (a session not
+    /// imported, or imported before it existed).
+    pub fn input_notices(&self) -> Result<Vec<Notice>, SessionError> {
+        let path = self.input_notices_path();
+        if path.is_file() {
+            self.read_yaml(&path)
+        } else {
+            Ok(Vec::new())
+        }
     }
 
     /// Frame file of a plan pose, relative to the session folder.

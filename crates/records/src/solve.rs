@@ -344,6 +344,10 @@ pub fn solve_records(
         }
         (solved, _) => solved?,
     };
+    // What the input said about itself (a bag's tolerated lies): beside the solver's notices in
+    // every solve of the session, after the verdict (they describe the input, not the answer).
+    let mut solved = solved;
+    solved.calibration.notices.extend(folder.input_notices()?);
     Ok((solved, dataset))
 }
 

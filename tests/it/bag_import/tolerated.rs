@@ -73,7 +73,40 @@ fn imported_with(dir: &Path, bag: &Path, warnings: &[(&str, &[&str])]) -> String
     assert_eq!(kinds, expected, "{record}");
     assert!(log.contains("6 samples accepted"), "{log}");
     bag_notices_in_result(&out, bag, warnings);
+    solved_again_keeps_them(&out, warnings);
     log
+}
+
+/// A later `handeye solve` of the imported session, which reads the session and not the bag,
+/// lists the same bag notices in the result it writes (they are the session's records, not a
+/// patch of the import's result).
+fn solved_again_keeps_them(session: &Path, warnings: &[(&str, &[&str])]) {
+    use handeye_core::notice::NoticeKind;
+    let again = session.join("result-again.yaml");
+    let solve = crate::util::handeye()
+        .arg("solve")
+        .arg(session)
+        .arg("-o")
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(solve.status.success(), "{}", text(&solve));
+    let first = ResultFile::load(&session.join("result.yaml")).unwrap();
+    let second = ResultFile::load(&again).unwrap();
+    let bag_notices = |r: &ResultFile| -> Vec<String> {
+        r.notices
+            .iter()
+            .filter(|n| n.kind == NoticeKind::BagWarning)
+            .map(|n| n.message.clone())
+            .collect()
+    };
+    assert_eq!(
+        bag_notices(&second).len(),
+        warnings.len(),
+        "{:#?}",
+        second.notices
+    );
+    assert_eq!(bag_notices(&second), bag_notices(&first));
 }
 
 /// The session's `result.yaml` holds each of `warnings` as a notice of kind `bag_warning` and
