@@ -83,7 +83,7 @@ fn imported_with(dir: &Path, bag: &Path, warnings: &[(&str, &[&str])]) -> String
 fn solved_again_keeps_them(session: &Path, warnings: &[(&str, &[&str])]) {
     use handeye_core::notice::NoticeKind;
     let again = session.join("result-again.yaml");
-    let solve = crate::util::handeye()
+    let solve = handeye()
         .arg("solve")
         .arg(session)
         .arg("-o")
