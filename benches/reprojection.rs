@@ -123,6 +123,11 @@ fn reprojection(c: &mut Criterion) {
         refine_distortion: true,
         ..ReprojectionOptions::default()
     };
+    // The demo cell's arm repeatability (0.02 mm, 0.002°), the prior of the robot corrections.
+    let repeatability = RobotPrior {
+        translation_sigma_m: 2e-5,
+        rotation_sigma_rad: 0.002f64.to_radians(),
+    };
     let mut group = c.benchmark_group("reprojection");
     group.sample_size(20);
     group.bench_function("20 frames 6x6, intrinsics + distortion free", |b| {
@@ -160,10 +165,7 @@ fn reprojection(c: &mut Criterion) {
                 &start_camera,
                 &start_target,
                 &ReprojectionOptions {
-                    robot_prior: Some(RobotPrior {
-                        translation_sigma_m: 2e-5,
-                        rotation_sigma_rad: 0.002f64.to_radians(),
-                    }),
+                    robot_prior: Some(repeatability),
                     ..free.clone()
                 },
             )
@@ -182,10 +184,7 @@ fn reprojection(c: &mut Criterion) {
                     &start_camera,
                     &start_target,
                     &ReprojectionOptions {
-                        robot_prior: Some(RobotPrior {
-                            translation_sigma_m: 2e-5,
-                            rotation_sigma_rad: 0.002f64.to_radians(),
-                        }),
+                        robot_prior: Some(repeatability),
                         estimate_noise: true,
                         ..free.clone()
                     },
@@ -209,10 +208,7 @@ fn reprojection(c: &mut Criterion) {
                     &start_camera,
                     &start_target,
                     &ReprojectionOptions {
-                        robot_prior: Some(RobotPrior {
-                            translation_sigma_m: 2e-5,
-                            rotation_sigma_rad: 0.002f64.to_radians(),
-                        }),
+                        robot_prior: Some(repeatability),
                         estimate_noise: true,
                         ..ReprojectionOptions::default()
                     },

@@ -46,6 +46,8 @@ impl Default for LinkOptions {
 #[derive(Clone)]
 pub struct Ros2Link {
     node: Arc<Mutex<Node>>,
+    /// The node's name, parsed once (a topic's DDS name is made relative to it).
+    node_name: NodeName,
     /// The DDS context, for what discovery has heard.
     context: Context,
     options: LinkOptions,
@@ -92,7 +94,7 @@ impl Ros2Link {
         })?;
         let mut node = context
             .new_node(
-                node_name,
+                node_name.clone(),
                 NodeOptions::new()
                     .enable_rosout(false)
                     .start_parameter_services(false),
@@ -108,6 +110,7 @@ impl Ros2Link {
             .map_err(|e| setup("the node's background thread")(e.to_string()))?;
         Ok(Ros2Link {
             node: Arc::new(Mutex::new(node)),
+            node_name,
             context,
             options,
         })
@@ -203,18 +206,12 @@ impl Ros2Link {
         let dds_qos = QosPolicies::from(&qos)
             .modify_by(&QosPolicyBuilder::new().resource_limits(one).build());
         let parsed = topic_name(name)?;
-        let node_name =
-            NodeName::new("/", &self.options.node_name).map_err(|e| Ros2Error::Name {
-                kind: "node",
-                name: self.options.node_name.clone(),
-                reason: e.to_string(),
-            })?;
         let mut node = self.node.lock().unwrap_or_else(|p| p.into_inner());
         let topic = self
             .context
             .domain_participant()
             .create_topic(
-                parsed.to_dds_name("rt", &node_name, ""),
+                parsed.to_dds_name("rt", &self.node_name, ""),
                 MessageTypeName::new(M::PACKAGE, M::NAME).dds_msg_type(),
                 &dds_qos,
                 TopicKind::NoKey,
