@@ -211,7 +211,7 @@ fn the_launch_file_hangs_the_camera_from_the_chain_recorded_in_the_session() {
     let want = ResultFile::load_mounts(&result).unwrap().camera_mount;
     let elsewhere = dir.path().join("chain.yaml");
     recorded.save(&elsewhere).unwrap();
-    // The session's own record (no graph is read: domain 77 stays empty), then --tf-from a file.
+    // The session's own record (no graph is read: its domain stays empty), then --tf-from a file.
     for extra in [
         vec![],
         vec!["--tf-from".to_string(), elsewhere.display().to_string()],
@@ -228,7 +228,7 @@ fn the_launch_file_hangs_the_camera_from_the_chain_recorded_in_the_session() {
             .args(["--camera-frame", "camera_color_optical_frame"])
             .args([
                 "--domain-id",
-                "77",
+                &util::ros_domain().to_string(),
                 "--interface",
                 "127.0.0.1",
                 "--tf-wait",

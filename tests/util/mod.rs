@@ -18,6 +18,24 @@ pub mod fakes;
 pub mod live;
 pub mod rig;
 
+/// A DDS domain id no other test of this process uses: live ROS 2 tests run side by side, and two
+/// on one domain hear each other's nodes (a second action server of one name, a domain that was
+/// to be empty). 20..=101: clear of the shipped configs' 42 and, on the RTPS port formula
+/// (7400 + 250·id), below Linux's ephemeral ports (32768 on).
+pub fn ros_domain() -> u16 {
+    static NEXT: std::sync::atomic::AtomicU16 = std::sync::atomic::AtomicU16::new(20);
+    loop {
+        let id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        assert!(
+            id <= 101,
+            "more live ROS 2 tests than free DDS domain ids (20..=101)"
+        );
+        if id != 42 {
+            return id;
+        }
+    }
+}
+
 /// The crate root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

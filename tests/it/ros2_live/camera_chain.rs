@@ -13,7 +13,7 @@ use handeye_records::result::ResultFile;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use super::{peer, python};
-use crate::util::{handeye, pose_error_mm_deg, repo, within};
+use crate::util::{handeye, pose_error_mm_deg, repo, ros_domain, within};
 
 const OPTICAL: &str = "camera_color_optical_frame";
 
@@ -102,7 +102,7 @@ fn calibrated_flange_from_optical() -> Pose {
 #[test]
 fn publish_refuses_a_second_parent_then_hangs_the_camera_from_the_drivers_link() {
     let Some(python) = python() else { return };
-    let domain = 92;
+    let domain = ros_domain();
     within(std::time::Duration::from_secs(200), move || {
         let mut driver = camera_driver(&python, domain);
 
@@ -189,7 +189,7 @@ fn publish_refuses_a_second_parent_then_hangs_the_camera_from_the_drivers_link()
 #[test]
 fn the_launch_file_hangs_the_camera_from_the_chain_the_driver_publishes() {
     let Some(python) = python() else { return };
-    let domain = 91;
+    let domain = ros_domain();
     within(std::time::Duration::from_secs(120), move || {
         let mut driver = camera_driver(&python, domain);
         let dir = tempfile::tempdir().unwrap();
@@ -249,7 +249,7 @@ fn the_launch_file_refuses_a_link_whose_chain_is_not_heard() {
             "--tf-wait",
             "1",
             "--domain-id",
-            "77",
+            &ros_domain().to_string(),
             "--interface",
             "127.0.0.1",
         ])

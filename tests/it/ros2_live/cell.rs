@@ -15,7 +15,7 @@ use handeye_core::geometry::pose_from_rotvec;
 use handeye_records::result::ResultFile;
 
 use super::{peer, python};
-use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, within};
+use crate::util::{config_variant, handeye, pose_error_mm_deg, repo, ros_domain, within};
 
 /// The views the peer serves: a sim run of `config` into `CARGO_TARGET_TMPDIR/name`, made once.
 fn render(name: &str, config: &Path) -> PathBuf {
@@ -186,6 +186,22 @@ impl Peer {
 
 impl Drop for Peer {
     fn drop(&mut self) {
+        // A failing test names what the peer last said, so a flake shows which side went quiet.
+        if std::thread::panicking() {
+            let all = self.events.lock().map(|e| e.clone()).unwrap_or_default();
+            let last: Vec<String> = all
+                .iter()
+                .rev()
+                .take(12)
+                .rev()
+                .map(|e| e.to_string())
+                .collect();
+            eprintln!(
+                "the peer's last events ({} in all):\n  {}",
+                all.len(),
+                last.join("\n  ")
+            );
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
@@ -276,8 +292,9 @@ fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(400), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 72, &[]);
-        let config = cell(dir.path(), 72, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
+        let config = cell(dir.path(), domain, &[]);
         let out_dir = dir.path().join("session");
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
@@ -325,13 +342,14 @@ fn intrinsics_from_the_camera_info_topic_alone_recover_the_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(400), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 89, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
         // No `intrinsics:` file: the camera driver's camera_info is the calibration.
         let file_line = format!(
             "intrinsics: {}/cameras/sim-1280x720.yaml\n",
             repo().join("configs").display()
         );
-        let config = cell(dir.path(), 89, &[(file_line.as_str(), "")]);
+        let config = cell(dir.path(), domain, &[(file_line.as_str(), "")]);
         let out_dir = dir.path().join("session");
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
@@ -360,7 +378,8 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(400), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 85, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
         // A file 4 % off in fx and fy while the driver publishes the camera's true calibration.
         let lens = dir.path().join("stale.yaml");
         let stale_lens = std::fs::read_to_string(repo().join("configs/cameras/sim-1280x720.yaml"))
@@ -375,7 +394,7 @@ fn an_intrinsics_file_that_differs_from_the_drivers_calibration_is_named() {
             repo().join("configs").display()
         );
         let stale = format!("intrinsics: {}", lens.display());
-        let config = cell(dir.path(), 85, &[(file_line.as_str(), stale.as_str())]);
+        let config = cell(dir.path(), domain, &[(file_line.as_str(), stale.as_str())]);
         let out_dir = dir.path().join("session");
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
@@ -432,7 +451,11 @@ pub(super) fn fails_then_resumes_with(
 #[test]
 fn an_aborted_goal_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
-        fails_then_resumes(73, &["--abort-goal", "4"], "PATH_TOLERANCE_VIOLATED")
+        fails_then_resumes(
+            ros_domain(),
+            &["--abort-goal", "4"],
+            "PATH_TOLERANCE_VIOLATED",
+        )
     });
 }
 
@@ -443,7 +466,11 @@ fn an_aborted_goal_is_named_and_resume_completes() {
 #[test]
 fn a_flange_pose_that_jumps_while_the_joints_stand_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
-        fails_then_resumes(99, &["--jumping-flange", "4"], "contradicts the joints")
+        fails_then_resumes(
+            ros_domain(),
+            &["--jumping-flange", "4"],
+            "contradicts the joints",
+        )
     });
 }
 
@@ -453,7 +480,7 @@ fn a_flange_pose_that_jumps_while_the_joints_stand_is_named_and_resume_completes
 fn a_goal_that_succeeds_without_moving_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
         fails_then_resumes(
-            88,
+            ros_domain(),
             &["--succeed-without-moving", "4"],
             "answered SUCCEEDED but /joint_states did not reach the goal's end point",
         )
@@ -468,7 +495,7 @@ fn a_goal_that_succeeds_without_moving_is_named_and_resume_completes() {
 fn a_flange_pose_off_the_models_kinematics_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
         fails_then_resumes(
-            64,
+            ros_domain(),
             &["--flange-off-model", "4"],
             "from the forward kinematics of the ur10e model at the joints on /joint_states",
         )
@@ -481,8 +508,9 @@ fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 65, &["--flange-off-model", "0"]);
-        let config = cell(dir.path(), 65, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--flange-off-model", "0"]);
+        let config = cell(dir.path(), domain, &[]);
         let out = run_cell(&config, &dir.path().join("s"));
         let log = text(&out);
         assert!(!out.status.success(), "{log}");
@@ -500,7 +528,7 @@ fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
 #[test]
 fn a_peer_dying_mid_move_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {
-        fails_then_resumes(74, &["--die-in-goal", "4"], "/joint_states")
+        fails_then_resumes(ros_domain(), &["--die-in-goal", "4"], "/joint_states")
     });
 }
 
@@ -519,8 +547,9 @@ fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(300), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 75, &[]);
-        let config = cell(dir.path(), 75, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
+        let config = cell(dir.path(), domain, &[]);
         ctrl_c_mid_goal(&peer, &config, &dir.path().join("session"));
     });
 }
@@ -529,7 +558,7 @@ fn ctrl_c_cancels_the_goal_and_keeps_the_samples() {
 /// long move: the peer sees that goal cancelled and handeye hears it confirmed, the run fails,
 /// the samples of the moves before are kept and the cancelled move never arrived.
 pub(super) fn ctrl_c_mid_goal(peer: &Peer, config: &Path, out_dir: &Path) {
-    let child = handeye()
+    let mut child = handeye()
         .args(["run", "--yes", "--config"])
         .arg(config)
         .arg("-o")
@@ -538,7 +567,17 @@ pub(super) fn ctrl_c_mid_goal(peer: &Peer, config: &Path, out_dir: &Path) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let n = mid_long_goal(peer);
+    // A run that ends before its long move (or never sends it) is shown, not left running.
+    let waited = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| mid_long_goal(peer)));
+    let n = match waited {
+        Ok(n) => n,
+        Err(panic) => {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            eprintln!("handeye's output:\n{}", text(&out));
+            std::panic::resume_unwind(panic)
+        }
+    };
     let status = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -560,10 +599,11 @@ fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 76, &["--no-tool0"]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--no-tool0"]);
         let config = cell(
             dir.path(),
-            76,
+            domain,
             &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
         );
         let out = run_cell(&config, &dir.path().join("s"));
@@ -585,10 +625,11 @@ fn an_image_topic_nobody_publishes_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 96, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
         let config = cell(
             dir.path(),
-            96,
+            domain,
             &[
                 ("image_topic: /image_raw", "image_topic: /no_such_image"),
                 ("frame_timeout_s: 5", "frame_timeout_s: 2"),
@@ -615,9 +656,10 @@ fn an_image_topic_nobody_publishes_is_named_before_anything_moves() {
 fn without_a_driver_the_action_server_is_named() {
     let dir = tempfile::tempdir().unwrap();
     within(Duration::from_secs(60), move || {
+        let domain = ros_domain();
         let config = cell(
             dir.path(),
-            77,
+            domain,
             &[("connect_timeout_s: 10", "connect_timeout_s: 2")],
         );
         let out = run_cell(&config, &dir.path().join("s"));
@@ -629,7 +671,7 @@ fn without_a_driver_the_action_server_is_named() {
         );
         // #39: an empty domain is said as such, not as a controller that is not running.
         assert!(
-            log.contains("nothing at all is heard on domain 77"),
+            log.contains(&format!("nothing at all is heard on domain {domain}")),
             "{log}"
         );
     });
@@ -643,10 +685,11 @@ fn a_middleware_mismatch_names_robot_graph_rmw() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 95, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
         let config = cell(
             dir.path(),
-            95,
+            domain,
             &[
                 ("rmw: cyclonedds", "rmw: fastrtps"),
                 ("connect_timeout_s: 10", "connect_timeout_s: 3"),
@@ -685,7 +728,8 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
             &fixed,
         );
         let views = render("ros2-views-eye-to-hand", &sim);
-        let peer = Peer::serving(&python, 79, &views, &[]);
+        let domain = ros_domain();
+        let peer = Peer::serving(&python, domain, &views, &[]);
         let robot = "robot:\n  backend: ros2\n  model: ur10e\n  graph: {domain_id: 79, interfaces: [127.0.0.1], rmw: cyclonedds}\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n\ncamera:\n  backend: ros2\n  camera_info_topic: /camera_info\n";
         let config = config_variant(
             dir.path(),
@@ -794,7 +838,7 @@ fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
 #[test]
 fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
     within(Duration::from_secs(200), || {
-        a_second_flange_publisher(97, 0, 0)
+        a_second_flange_publisher(ros_domain(), 0, 0)
     });
 }
 
@@ -803,6 +847,6 @@ fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
 #[test]
 fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
     within(Duration::from_secs(300), || {
-        a_second_flange_publisher(98, 4, 3)
+        a_second_flange_publisher(ros_domain(), 4, 3)
     });
 }

@@ -26,7 +26,7 @@ use super::cell::{
 };
 use super::python;
 use crate::util::live::{runtime, Live, Page};
-use crate::util::{handeye, within};
+use crate::util::{handeye, ros_domain, within};
 
 /// `handeye ARGS CONFIG OUT_FLAG SESSION` in `dir`, serving the console (DDS logs quiet).
 fn serving_console(
@@ -54,10 +54,11 @@ fn a_hand_guided_console_session_with_freedrive_over_ros2_recovers_the_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(600), move || {
         let dir = tempfile::tempdir().unwrap();
-        let mut peer = Peer::start(&python, 80, &["--freedrive", "jazzy"]);
+        let domain = ros_domain();
+        let mut peer = Peer::start(&python, domain, &["--freedrive", "jazzy"]);
         let config = cell(
             dir.path(),
-            80,
+            domain,
             &[(
                 "  flange_frame: tool0",
                 "  flange_frame: tool0\n  freedrive: {distro: jazzy}",
@@ -218,8 +219,9 @@ fn stop_on_the_console_cancels_the_goal_and_resume_completes() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(600), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = Peer::start(&python, 82, &[]);
-        let config = cell(dir.path(), 82, &[]);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &[]);
+        let config = cell(dir.path(), domain, &[]);
         let session = dir.path().join("stopped");
         let mut live = serving_console(
             dir.path(),

@@ -42,7 +42,7 @@ use handeye_ros2::msg::{CameraInfo, JointState, TfMessage};
 use super::cell::{assert_truth, cell, ctrl_c_mid_goal, poses_kept, run_cell, text, views, Peer};
 use super::publish::late_joiner_reads_back;
 use super::{loopback_link, open_sim_camera, sim_camera_model};
-use crate::util::{repo, skip, within};
+use crate::util::{repo, ros_domain, skip, within};
 
 /// The peer's binary, built once (make in scripts/fastdds_peer), or `None` (printed) when Fast
 /// DDS or fastddsgen is not installed.
@@ -110,7 +110,7 @@ fn start(mut command: Command) -> Running {
 #[test]
 fn a_fast_dds_late_joiner_reads_the_published_calibration_from_tf_static() {
     let Some(binary) = fastdds_peer() else { return };
-    let domain = 90;
+    let domain = ros_domain();
     within(Duration::from_secs(120), move || {
         late_joiner_reads_back(domain, peer(&binary, domain));
     });
@@ -148,7 +148,7 @@ macro_rules! drain {
 #[test]
 fn handeye_reads_tf_joint_states_and_images_a_fast_dds_node_publishes() {
     let Some(binary) = fastdds_peer() else { return };
-    let domain = 91;
+    let domain = ros_domain();
     within(Duration::from_secs(120), move || {
         // A chain on /tf (two edges) and a latched edge on /tf_static.
         let base_from_shoulder = pose([0.1, -0.2, 0.181], [0.0, 0.0, 1.0], 37.0);
@@ -351,8 +351,9 @@ fn eye_in_hand_over_fast_dds_recovers_the_simulated_truth() {
     let Some(binary) = fastdds_peer() else { return };
     within(Duration::from_secs(400), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = fast_dds_cell(&binary, dir.path(), 92, &[]);
-        let config = fast_dds_config(dir.path(), 92);
+        let domain = ros_domain();
+        let peer = fast_dds_cell(&binary, dir.path(), domain, &[]);
+        let config = fast_dds_config(dir.path(), domain);
         let out_dir = dir.path().join("session");
         let out = run_cell(&config, &out_dir);
         assert!(
@@ -375,8 +376,9 @@ fn a_goal_a_fast_dds_controller_aborts_is_named() {
     let Some(binary) = fastdds_peer() else { return };
     within(Duration::from_secs(300), move || {
         let dir = tempfile::tempdir().unwrap();
-        let _peer = fast_dds_cell(&binary, dir.path(), 93, &["--abort-goal", "4"]);
-        let config = fast_dds_config(dir.path(), 93);
+        let domain = ros_domain();
+        let _peer = fast_dds_cell(&binary, dir.path(), domain, &["--abort-goal", "4"]);
+        let config = fast_dds_config(dir.path(), domain);
         let out_dir = dir.path().join("session");
         let out = run_cell(&config, &out_dir);
         let log = text(&out);
@@ -397,8 +399,9 @@ fn ctrl_c_cancels_a_fast_dds_goal() {
     let Some(binary) = fastdds_peer() else { return };
     within(Duration::from_secs(300), move || {
         let dir = tempfile::tempdir().unwrap();
-        let peer = fast_dds_cell(&binary, dir.path(), 94, &[]);
-        let config = fast_dds_config(dir.path(), 94);
+        let domain = ros_domain();
+        let peer = fast_dds_cell(&binary, dir.path(), domain, &[]);
+        let config = fast_dds_config(dir.path(), domain);
         ctrl_c_mid_goal(&peer, &config, &dir.path().join("session"));
     });
 }

@@ -16,7 +16,7 @@ use handeye_ros2::freedrive::{Distro, FreedriveOptions};
 
 use super::cell::Peer;
 use super::{loopback_link, open_ur_arm, python};
-use crate::util::within;
+use crate::util::{ros_domain, within};
 
 /// handeye's arm on the peer of `domain`, switching freedrive as `distro` lays it out.
 fn arm(domain: u16, distro: Distro) -> Ros2Arm {
@@ -35,8 +35,9 @@ fn freedrive_switches_the_ur_drivers_controllers_and_keeps_itself_alive() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
         // Humble's layout here (the console test uses Jazzy's).
-        let peer = Peer::start(&python, 86, &["--freedrive", "humble"]);
-        let mut arm = arm(86, Distro::Humble);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--freedrive", "humble"]);
+        let mut arm = arm(domain, Distro::Humble);
         let start = arm.joint_positions().unwrap();
         arm.set_freedrive(true).unwrap();
         let on = peer.wait_for_one("freedrive", Duration::from_secs(5), |e| e["on"] == true);
@@ -103,8 +104,9 @@ fn freedrive_switches_the_ur_drivers_controllers_and_keeps_itself_alive() {
 fn a_distribution_the_controller_manager_does_not_run_is_named() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(60), move || {
-        let peer = Peer::start(&python, 87, &["--freedrive", "humble"]);
-        let mut arm = arm(87, Distro::Jazzy);
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--freedrive", "humble"]);
+        let mut arm = arm(domain, Distro::Jazzy);
         let err = error_chain(&arm.set_freedrive(true).unwrap_err());
         assert!(
             err.contains("robot.freedrive.distro (jazzy)") && err.contains("Humble and Jazzy"),

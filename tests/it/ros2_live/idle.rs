@@ -11,6 +11,7 @@ use handeye_robot::Robot;
 
 use super::cell::Peer;
 use super::{loopback_link, open_sim_camera, open_ur_arm, python};
+use crate::util::ros_domain;
 
 /// CPU time (user + system) of this process, s.
 fn cpu_seconds() -> f64 {
@@ -22,8 +23,9 @@ fn cpu_seconds() -> f64 {
 #[ignore = "a measurement: run alone"]
 fn idle_cpu_of_the_ros2_backends() {
     let Some(python) = python() else { return };
-    let _peer = Peer::start(&python, 78, &[]);
-    let link = loopback_link(78, "handeye_idle");
+    let domain = ros_domain();
+    let _peer = Peer::start(&python, domain, &[]);
+    let link = loopback_link(domain, "handeye_idle");
     let mut arm = open_ur_arm(&link, None);
     let mut camera = open_sim_camera(&link);
     camera.grab(Instant::now()).unwrap();

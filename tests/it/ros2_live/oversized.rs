@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::cell::{cell, fails_then_resumes_with, run_cell, text, Peer};
 use super::python;
-use crate::util::{handeye, within};
+use crate::util::{handeye, ros_domain, within};
 
 /// The bound of the simulated cell's 1280x720 px camera: 8 bytes a pixel.
 const BOUND: &str = "over the 7.4 MB a 1280x720 px frame takes at most";
@@ -79,7 +79,10 @@ fn quarter_size_cell(dir: &Path, domain: u16) -> std::path::PathBuf {
 fn frames_over_the_size_bound_are_refused_naming_the_topic_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(300), move || {
-        for (domain, megabytes, held) in [(60, "1", "10000x100"), (61, "2.5", "10000x250")] {
+        for (domain, megabytes, held) in [
+            (ros_domain(), "1", "10000x100"),
+            (ros_domain(), "2.5", "10000x250"),
+        ] {
             let dir = tempfile::tempdir().unwrap();
             let config = quarter_size_cell(dir.path(), domain);
             let log = refused_before_anything_moves(&python, domain, &config, megabytes);
@@ -152,12 +155,13 @@ fn hundred_megabyte_frames_are_named_on_the_image_topic_not_the_action_server() 
     let Some(python) = python() else { return };
     within(Duration::from_secs(200), move || {
         let dir = tempfile::tempdir().unwrap();
+        let domain = ros_domain();
         let config = cell(
             dir.path(),
-            62,
+            domain,
             &[("frame_timeout_s: 5", "frame_timeout_s: 15")],
         );
-        let peer = Peer::start(&python, 62, &["--huge-images", "100"]);
+        let peer = Peer::start(&python, domain, &["--huge-images", "100"]);
         let (out, peak) = run_cell_with_peak_memory(&config, &config.with_file_name("session"));
         let log = refused(&peer, &out);
         assert!(
@@ -189,7 +193,7 @@ fn hundred_megabyte_frames_are_named_on_the_image_topic_not_the_action_server() 
 fn frames_turning_huge_mid_run_are_refused_at_that_pose_and_resume_completes() {
     within(Duration::from_secs(400), || {
         fails_then_resumes_with(
-            63,
+            ros_domain(),
             &["--huge-images", "12", "--huge-images-from", "4"],
             &[
                 ("connect_timeout_s: 10}", "connect_timeout_s: 30}"),

@@ -9,7 +9,7 @@ use handeye_formats::FrameIds;
 use handeye_records::result::ResultFile;
 
 use super::{peer, python};
-use crate::util::{handeye, repo, within};
+use crate::util::{handeye, repo, ros_domain, within};
 
 fn result_file() -> std::path::PathBuf {
     repo().join("tests/fuzz-corpus/result/result.yaml")
@@ -18,7 +18,7 @@ fn result_file() -> std::path::PathBuf {
 #[test]
 fn a_late_joiner_reads_the_published_calibration_from_tf_static() {
     let Some(python) = python() else { return };
-    let domain = 71;
+    let domain = ros_domain();
     within(std::time::Duration::from_secs(120), move || {
         late_joiner_reads_back(domain, peer(&python, domain));
     });
@@ -143,7 +143,7 @@ fn publish_until_latched(
 #[test]
 fn a_several_camera_result_is_published_as_one_tree() {
     let Some(python) = python() else { return };
-    let domain = 84;
+    let domain = ros_domain();
     let (_, session, _) = crate::rig::shipped_run();
     let result_path = session.join("result.yaml");
     let result = crate::rig::read_result(session);

@@ -19,7 +19,7 @@ use handeye_robot::Joints;
 
 use super::cell::{assert_truth, captures, cell, poses_kept, run_cell, text, views, Peer};
 use super::python;
-use crate::util::within;
+use crate::util::{ros_domain, within};
 
 pub(super) const NAMES: &str = "fr3_joint1,fr3_joint2,fr3_joint3,fr3_joint4,fr3_joint5,fr3_joint6";
 
@@ -81,8 +81,9 @@ fn a_taught_plan_runs_on_an_arm_of_no_known_model_and_recovers_the_truth() {
     within(Duration::from_secs(500), move || {
         let dir = tempfile::tempdir().unwrap();
         taught_plan(dir.path());
-        let peer = Peer::serving(&python, 81, &views(), &["--joint-names", NAMES]);
-        let config = no_model_cell(dir.path(), 81, "  file: taught.yaml");
+        let domain = ros_domain();
+        let peer = Peer::serving(&python, domain, &views(), &["--joint-names", NAMES]);
+        let config = no_model_cell(dir.path(), domain, "  file: taught.yaml");
         let session = dir.path().join("session");
         let out = run_cell(&config, &session);
         let log = text(&out);
@@ -112,11 +113,12 @@ fn a_seven_joint_arm_is_hand_guided_and_its_taught_plan_replays_to_the_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(700), move || {
         let dir = tempfile::tempdir().unwrap();
-        let mut peer = Peer::serving(&python, 85, &views(), &["--model", "franka"]);
+        let domain = ros_domain();
+        let mut peer = Peer::serving(&python, domain, &views(), &["--model", "franka"]);
         let franka = |plan: &str| {
             arm_cell(
                 dir.path(),
-                85,
+                domain,
                 plan,
                 "none",
                 FRANKA_NAMES,
@@ -164,7 +166,7 @@ fn a_seven_joint_plan_is_refused_on_a_six_joint_arm() {
             "[[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-360, 360]]";
         let config = arm_cell(
             dir.path(),
-            84,
+            ros_domain(),
             "  file: seven.yaml",
             "ur10e",
             &handeye_config::ros2::UR_DRIVER_JOINT_NAMES.join(","),
@@ -203,7 +205,8 @@ fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
             "waypoints:\n- {joints_deg: [0, -90, 90, -90, -90, 0]}\n",
         )
         .unwrap();
-        let config = no_model_cell(dir.path(), 83, "  file: joints.yaml");
+        let domain = ros_domain();
+        let config = no_model_cell(dir.path(), domain, "  file: joints.yaml");
         refused(
             &config,
             "s",
@@ -216,7 +219,7 @@ fn without_a_model_untaught_plans_are_refused_naming_file_and_field() {
         // Generated views need kinematics too.
         let config = no_model_cell(
             dir.path(),
-            83,
+            domain,
             "  generate: {count: 12, distance: [0.55, 0.75], max_tilt_deg: 30, max_roll_deg: 20, seed: 1}",
         );
         refused(&config, "s2", &["ros2-cell.yaml", "plan.generate"]);
