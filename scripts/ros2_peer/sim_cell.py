@@ -172,6 +172,40 @@ def quat_of(R):
     return (x, y, z, w)
 
 
+class LyingActionServer:
+    """A FollowJointTrajectory action server of the driver's name on a DDS participant of its own
+    (another process's, as far as discovery can tell): it accepts every goal and answers
+    SUCCEEDED at once, moving nothing. Its replies reach the client beside the driver's."""
+
+    def __init__(self, domain, loopback, action):
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        dp = dds.participant(domain, loopback)
+        a = action + "/_action/"
+        self.goal_r = DataReader(dp, Topic(dp, "rq" + a + "send_goalRequest", m.SendGoalRequest),
+                                 qos=dds.qos_reliable())
+        self.goal_w = DataWriter(dp, Topic(dp, "rr" + a + "send_goalReply", m.SendGoalReply),
+                                 qos=dds.qos_reliable())
+        self.res_r = DataReader(dp, Topic(dp, "rq" + a + "get_resultRequest", m.GetResultRequest),
+                                qos=dds.qos_reliable())
+        self.res_w = DataWriter(dp, Topic(dp, "rr" + a + "get_resultReply", m.GetResultReply),
+                                qos=dds.qos_reliable())
+        self.participant = dp
+        self.goals = 0
+
+    def serve(self):
+        for req in self.goal_r.take(N=10):
+            if hasattr(req, "goal_id"):
+                self.goals += 1
+                self.goal_w.write(m.SendGoalReply(req.client_id, req.seq, True, stamp_now()))
+                say(event="liar_goal", n=self.goals)
+        for req in self.res_r.take(N=10):
+            if hasattr(req, "goal_id"):
+                self.res_w.write(m.GetResultReply(req.client_id, req.seq, 4, m.FJTResult(0, "")))
+
+
 def add_arguments(p):
     p.add_argument("session", help="a sim session folder (session.yaml, poses/, frames/)")
     p.add_argument("--camera-info", required=True, help="the camera_info YAML of the sim camera")
@@ -212,6 +246,16 @@ def add_arguments(p):
                         "once a second, instead of the rendered views")
     p.add_argument("--huge-images-from", type=int, default=0, metavar="N",
                    help="the huge images replace the views once goal N has ended (0: from the start)")
+    p.add_argument("--duplicate-action-server", type=int, nargs="?", const=0, default=None,
+                   metavar="N",
+                   help="a second action server of the same name, on a DDS participant of its own "
+                        "(a simulated controller left running beside the driver): it accepts every "
+                        "goal and answers SUCCEEDED at once without moving anything; from the "
+                        "start, or from when goal N is accepted")
+    p.add_argument("--tf-flood", type=int, default=0, metavar="K",
+                   help="K frame names nobody asked for on /tf (flood_0 ... flood_K-1, 500 to a "
+                        "message, every second), and the driver's base_link -> tool0 only after "
+                        "the first flood")
     p.add_argument("--max-joint-speed-deg", type=float, default=0.0,
                    help="report goals whose waypoint speeds exceed this (0: no check)")
 
@@ -469,6 +513,7 @@ def run(args):
     can_w = W("rr" + base + a + "cancel_goalReply", m.CancelGoalReply, dds.qos_reliable())
     fb_w = W("rt" + base + a + "feedback", m.FeedbackMessage, dds.qos_reliable())
     freedrive = Freedrive(args, R, W, base) if args.freedrive else None
+    liar = None
 
     # base_link -> base: the UR driver's static turn of 180 degrees about z.
     turn = (0.0, 0.0, 1.0, 0.0)
@@ -640,9 +685,28 @@ def run(args):
     second = 0
     jumps = 0
     off_model = 0
+    flooded = False
+    next_flood = time.monotonic()
     while True:
         now = time.monotonic()
         serve()
+        if liar is None and args.duplicate_action_server is not None \
+                and goal_count[0] >= args.duplicate_action_server:
+            liar = LyingActionServer(args.domain, args.loopback, base)
+            say(event="duplicate_action_server", after_goal=goal_count[0])
+        if liar is not None:
+            liar.serve()
+        if args.tf_flood and now >= next_flood:
+            # Another node's frames: names nobody asked for, enough to fill a listener's cap.
+            for start in range(0, args.tf_flood, 500):
+                tf_w.write(m.TFMessage([m.TransformStamped(
+                    m.Header(stamp_now(), "world"), f"flood_{k}",
+                    m.Transform(m.Vector3(0.0, 0.0, 0.0), m.Quaternion(0.0, 0.0, 0.0, 1.0)))
+                    for k in range(start, min(start + 500, args.tf_flood))]))
+            if not flooded:
+                say(event="tf_flood", frames=args.tf_flood)
+            flooded = True
+            next_flood = now + 1.0
         if freedrive is not None and freedrive.serve(now) and arm.guide:
             # Freedrive ended mid-guide: the arm holds where it is.
             with arm.lock:
@@ -656,7 +720,7 @@ def run(args):
         if now >= next_js:
             js_w.write(m.JointState(m.Header(stamp_now(), "base_link"), joint_names, list(q), list(qd), []))
             next_js += 0.01
-        if now >= next_tf and not args.no_tool0:
+        if now >= next_tf and not args.no_tool0 and (flooded or not args.tf_flood):
             (t, rot) = flange
             # base_link -> tool0 = turn * T_base_flange
             tq = quat_mul(turn, rot)

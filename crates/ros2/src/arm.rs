@@ -23,7 +23,7 @@ use handeye_robot::kinematics::UrModel;
 use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
-use crate::link::{sensor_data_qos, static_reader_qos, topic_name, Ros2Link};
+use crate::link::{poll_for, sensor_data_qos, static_reader_qos, topic_name, Ros2Link, POLL};
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
     follow_joint_trajectory_error, Duration as RosDuration, FollowJointTrajectoryFeedback,
@@ -170,13 +170,24 @@ impl Ros2Arm {
                 })
             })?;
         // The controller's action server must be on the graph before anything moves.
-        let found = link.with_node(|node| {
-            smol::block_on(with_timeout(options.timeout, async {
-                action.goal_client().wait_for_service(node).await;
-                action.result_client().wait_for_service(node).await;
-            }))
+        let found = link.wait_until_matched(options.timeout, |node| {
+            action
+                .goal_client()
+                .wait_for_service(node)
+                .now_or_never()
+                .is_some()
+                && action
+                    .result_client()
+                    .wait_for_service(node)
+                    .now_or_never()
+                    .is_some()
+                && action
+                    .cancel_client()
+                    .wait_for_service(node)
+                    .now_or_never()
+                    .is_some()
         });
-        if found.is_none() {
+        if !found {
             return Err(RobotError::Connect {
                 address: options.action.clone(),
                 timeout: options.timeout,
@@ -186,6 +197,7 @@ impl Ros2Arm {
                 ),
             });
         }
+        one_action_server(link, &options.action)?;
         let shared = Arc::new(Shared::wanting(&[
             &options.base_frame,
             &options.flange_frame,
@@ -446,13 +458,22 @@ impl Ros2Arm {
 
     fn run_goal(&mut self, goal: FollowJointTrajectoryGoal, total: f64) -> Result<(), RobotError> {
         let action = self.options.action.clone();
+        // A second server may have joined since the arm was opened.
+        one_action_server(&self.link, &action)?;
         let timeout = self.options.timeout;
-        let send = smol::block_on(with_timeout(timeout, self.action.async_send_goal(goal)));
-        let (goal_id, response) = match send {
+        let (request, goal_id) = self.action.send_goal(goal).map_err(|e| {
+            backend(format!(
+                "sending the trajectory goal to {action} failed: {e:?}"
+            ))
+        })?;
+        let response = poll_for(Instant::now() + timeout, || {
+            self.action.receive_goal_response(request)
+        });
+        let response = match response {
             Some(Ok(r)) => r,
             Some(Err(e)) => {
                 return Err(backend(format!(
-                    "sending the trajectory goal to {action} failed: {e:?}"
+                    "reading the answer to the trajectory goal from {action} failed: {e:?}"
                 )))
             }
             None => {
@@ -470,43 +491,63 @@ impl Ros2Arm {
             )));
         }
         // The result arrives when the controller ends the goal; meanwhile watch the interrupt
-        // flag, the deadline and the driver's heartbeat.
-        let deadline = Instant::now() + Duration::from_secs_f64(total) + timeout;
-        enum Outcome {
-            Done(Result<(GoalStatusEnum, FollowJointTrajectoryResult), String>),
-            Interrupted,
-            Late,
-            Silent,
-        }
-        let outcome = smol::block_on(async {
-            let result = self.action.async_request_result(goal_id).fuse();
-            futures::pin_mut!(result);
-            loop {
-                let tick = FutureExt::fuse(smol::Timer::after(Duration::from_millis(10)));
-                futures::pin_mut!(tick);
-                futures::select! {
-                    r = result => return Outcome::Done(r.map_err(|e| format!("{e:?}"))),
-                    _ = tick => {
-                        if self.interrupted() {
-                            return Outcome::Interrupted;
-                        }
-                        if Instant::now() > deadline {
-                            return Outcome::Late;
-                        }
-                        let silent = self.shared.lock().joints.is_none_or(|j| j.received.elapsed() > timeout);
-                        if silent {
-                            return Outcome::Silent;
-                        }
-                    }
+        // flag, the deadline and the driver's heartbeat. A result request or its answer lost on
+        // the way must not end the run (a CI run against Cyclone DDS ended "move did not
+        // finish" with the arm arrived and the result never heard): from the move's planned
+        // end on, the result is asked for again every RESULT_REASK; an action server answers
+        // each request, and the first answer to any of them ends the wait.
+        let started = Instant::now();
+        let deadline = started + Duration::from_secs_f64(total) + timeout;
+        let ask = |this: &Self| {
+            this.action.request_result(goal_id).map_err(|e| {
+                backend(format!(
+                    "asking {action} for the move's result failed: {e:?}"
+                ))
+            })
+        };
+        let mut asked = vec![ask(self)?];
+        let mut next_ask = started + Duration::from_secs_f64(total) + RESULT_REASK;
+        let outcome = loop {
+            match self.action.result_client().receive_response() {
+                Ok(Some((id, r))) if asked.contains(&id) => {
+                    break Outcome::Done(Ok((r.status, r.result)));
                 }
+                // An answer to another request (of an earlier goal): read past it.
+                Ok(Some(_)) => continue,
+                Ok(None) => {}
+                Err(e) => break Outcome::Done(Err(format!("{e:?}"))),
             }
-        });
+            if self.interrupted() {
+                break Outcome::Interrupted;
+            }
+            let now = Instant::now();
+            if now > deadline {
+                break Outcome::Late;
+            }
+            let silent = self
+                .shared
+                .lock()
+                .joints
+                .is_none_or(|j| j.received.elapsed() > timeout);
+            if silent {
+                break Outcome::Silent;
+            }
+            if now >= next_ask {
+                // A request that cannot be written is no reason to leave the move unwatched:
+                // the earlier ones stand.
+                match ask(self) {
+                    Ok(id) => asked.push(id),
+                    Err(e) => tracing::warn!("{e}"),
+                }
+                next_ask = now + RESULT_REASK;
+            }
+            thread::sleep(POLL);
+        };
         let cancel = |this: &Self| {
-            smol::block_on(with_timeout(
-                Duration::from_secs(2),
-                this.action
-                    .async_cancel_goal(goal_id, ros2_client::builtin_interfaces::Time::ZERO),
-            ))
+            let request = this.action.cancel_goal(goal_id).ok()?;
+            poll_for(Instant::now() + Duration::from_secs(2), || {
+                this.action.receive_cancel_response(request)
+            })
         };
         match outcome {
             Outcome::Done(Ok((GoalStatusEnum::Succeeded, r))) if r.error_code == 0 => Ok(()),
@@ -540,18 +581,33 @@ impl Ros2Arm {
     }
 }
 
-/// `future`'s output, or `None` after `timeout`.
-pub(crate) async fn with_timeout<T>(
-    timeout: Duration,
-    future: impl std::future::Future<Output = T>,
-) -> Option<T> {
-    let future = future.fuse();
-    let timer = FutureExt::fuse(smol::Timer::after(timeout));
-    futures::pin_mut!(future, timer);
-    futures::select! {
-        v = future => Some(v),
-        _ = timer => None,
+/// How a goal ended, as [`Ros2Arm::run_goal`] saw it.
+enum Outcome {
+    Done(Result<(GoalStatusEnum, FollowJointTrajectoryResult), String>),
+    Interrupted,
+    Late,
+    Silent,
+}
+
+/// How often the result of a move past its planned end is asked for again.
+const RESULT_REASK: Duration = Duration::from_secs(2);
+
+/// Refuses an action whose goals more than one DDS participant takes: both servers answer every
+/// goal and the first answer wins, so a simulated controller left running beside the driver
+/// answers SUCCEEDED for moves that never happen (issue #40: "no tag of the board found" at
+/// every pose, or a workspace-box stop after a few). Said before anything moves, or before the
+/// goal a newly joined server would have taken.
+fn one_action_server(link: &Ros2Link, action: &str) -> Result<(), RobotError> {
+    let servers = link.participants_reading(&format!("rq{action}/_action/send_goalRequest"));
+    if servers.len() <= 1 {
+        return Ok(());
     }
+    Err(backend(format!(
+        "{} action servers take the goals of {action} on domain {} (DDS participants {}): each answers every goal and handeye cannot tell which one drives the arm — stop the one that does not (a second driver, or a simulated controller left running); nothing was sent",
+        servers.len(),
+        link.options().domain_id,
+        servers.join(", ")
+    )))
 }
 
 enum Event {

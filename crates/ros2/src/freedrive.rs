@@ -15,13 +15,14 @@ use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
+use futures::FutureExt;
 use ros2_client::service::Client;
 use ros2_client::{Publisher, ServiceMapping, ServiceTypeName};
 
 use handeye_robot::RobotError;
 
-use crate::arm::{with_timeout, Framing};
-use crate::link::{reliable_qos, topic_name, Ros2Link};
+use crate::arm::Framing;
+use crate::link::{call, reliable_qos, topic_name, Ros2Link};
 use crate::msg::{
     Bool, SwitchControllerHumble, SwitchControllerJazzy, SwitchControllerResponse, SWITCH_STRICT,
 };
@@ -183,41 +184,39 @@ impl Freedrive {
             self.options.controller_manager
         );
         let timeout = self.options.timeout;
-        // The service on the graph first (the node is shared: held only for this), then the call.
-        let found = self.link.with_node(|node| {
-            smol::block_on(with_timeout(timeout, async {
-                match &self.switch {
-                    SwitchClient::Humble(client) => client.wait_for_service(node).await,
-                    SwitchClient::Jazzy(client) => client.wait_for_service(node).await,
-                }
-            }))
+        // The service on the graph first, then the call.
+        let served = self.link.wait_until_matched(timeout, |node| {
+            match &self.switch {
+                SwitchClient::Humble(client) => client.wait_for_service(node).now_or_never(),
+                SwitchClient::Jazzy(client) => client.wait_for_service(node).now_or_never(),
+            }
+            .is_some()
         });
-        let answer = match found {
-            None => None,
-            Some(()) => smol::block_on(with_timeout(timeout, async {
-                match &self.switch {
-                    SwitchClient::Humble(client) => {
-                        client
-                            .async_call_service(SwitchControllerHumble {
-                                activate_controllers: activate.clone(),
-                                deactivate_controllers: deactivate.clone(),
-                                strictness: SWITCH_STRICT,
-                                ..SwitchControllerHumble::default()
-                            })
-                            .await
-                    }
-                    SwitchClient::Jazzy(client) => {
-                        client
-                            .async_call_service(SwitchControllerJazzy {
-                                activate_controllers: activate.clone(),
-                                deactivate_controllers: deactivate.clone(),
-                                strictness: SWITCH_STRICT,
-                                ..SwitchControllerJazzy::default()
-                            })
-                            .await
-                    }
-                }
-            })),
+        let answer = if served {
+            match &self.switch {
+                SwitchClient::Humble(client) => call(
+                    client,
+                    SwitchControllerHumble {
+                        activate_controllers: activate.clone(),
+                        deactivate_controllers: deactivate.clone(),
+                        strictness: SWITCH_STRICT,
+                        ..SwitchControllerHumble::default()
+                    },
+                    timeout,
+                ),
+                SwitchClient::Jazzy(client) => call(
+                    client,
+                    SwitchControllerJazzy {
+                        activate_controllers: activate.clone(),
+                        deactivate_controllers: deactivate.clone(),
+                        strictness: SWITCH_STRICT,
+                        ..SwitchControllerJazzy::default()
+                    },
+                    timeout,
+                ),
+            }
+        } else {
+            None
         };
         let distro = match self.options.distro {
             Distro::Humble => "humble",
@@ -229,9 +228,10 @@ impl Freedrive {
                 "{what}: the controller manager refused (are both controllers loaded? the UR driver 2.5 or later loads {} inactive)",
                 self.options.freedrive_controller
             ))),
-            Some(Err(e)) => Err(backend(format!("{what}: {e:?}"))),
+            Some(Err(e)) => Err(backend(format!("{what}: {e}"))),
             None => Err(RobotError::ConnectionLost(format!(
-                "{what}: no answer within {timeout:?} (is the controller manager on this domain, and is robot.freedrive.distro ({distro}) its ROS 2 distribution? Humble and Jazzy lay this request out differently)"
+                "{what}: {} within {timeout:?} (is the controller manager on this domain, and is robot.freedrive.distro ({distro}) its ROS 2 distribution? Humble and Jazzy lay this request out differently)",
+                if served { "no answer" } else { "no server of it found" }
             ))),
         }
     }

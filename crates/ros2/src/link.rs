@@ -10,6 +10,7 @@
 use std::net::IpAddr;
 use std::sync::{Arc, Mutex};
 use std::thread;
+use std::time::{Duration, Instant};
 
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
@@ -154,6 +155,60 @@ impl Ros2Link {
         topics.sort();
         topics.dedup();
         topics
+    }
+
+    /// The other DDS participants with a reader of the DDS topic `dds_topic` (`rq/…Request` for
+    /// a service's or an action's server), as their GUID prefixes in hex, sorted: two servers of
+    /// one name both take every request and both answer it.
+    pub fn participants_reading(&self, dds_topic: &str) -> Vec<String> {
+        let participant = self.context.domain_participant();
+        let readers = participant
+            .discovered_readers()
+            .into_iter()
+            .filter(|r| r.subscription_topic_data.topic_name() == dds_topic)
+            .map(|r| r.reader_proxy.remote_reader_guid);
+        self.others(readers)
+    }
+
+    /// Waits up to `timeout` until `matched` holds of the node (a client's
+    /// `wait_for_service(node).now_or_never().is_some()`: its request writer matched to a
+    /// server's reader, its reply reader to a server's writer), then [`MATCH_SETTLE`] more;
+    /// whether it came to hold. Asked afresh every [`POLL`]: ros2-client's `wait_for_service`
+    /// future looks at the matches only when a match event arrives, and one missed on a loaded
+    /// machine waited out the whole timeout with the server there (CI).
+    ///
+    /// Why the settle: a request must reach a server that has matched our writer too. Cyclone
+    /// DDS drops a sample from a writer it has not matched yet, and once matched it takes what
+    /// the writer's first heartbeat announces as history a volatile reader is not owed: a goal
+    /// or a controller switch written in between is lost for good (seen in CI, the peer never
+    /// heard it). Each side learns of the other's endpoints in the same discovery exchange, so
+    /// the server's match follows ours by the time it takes to process it.
+    pub fn wait_until_matched(&self, timeout: Duration, matched: impl Fn(&Node) -> bool) -> bool {
+        let found = poll_for(Instant::now() + timeout, || {
+            Ok::<_, ()>(self.with_node(|node| matched(node)).then_some(()))
+        })
+        .is_some();
+        if found {
+            thread::sleep(MATCH_SETTLE);
+        }
+        found
+    }
+
+    /// The participants of `endpoints` other than ours, as GUID prefixes in hex, sorted, each
+    /// once.
+    fn others(
+        &self,
+        endpoints: impl Iterator<Item = ros2_client::dds::rustdds::GUID>,
+    ) -> Vec<String> {
+        use ros2_client::dds::rustdds::RTPSEntity;
+        let ours = self.context.domain_participant().guid().prefix;
+        let mut others: Vec<String> = endpoints
+            .filter(|guid| guid.prefix != ours)
+            .map(|guid| format!("{:?}", guid.prefix))
+            .collect();
+        others.sort();
+        others.dedup();
+        others
     }
 
     /// The options it was opened with.
@@ -304,4 +359,54 @@ mod tests {
         assert!(e.contains("absolute"), "{e}");
         assert!(topic_name("/9bad").is_err());
     }
+}
+
+/// How long a first request waits after our side matched its server
+/// ([`Ros2Link::wait_until_matched`]).
+const MATCH_SETTLE: Duration = Duration::from_secs(1);
+
+/// How often [`poll_for`] looks.
+pub(crate) const POLL: Duration = Duration::from_millis(10);
+
+/// `read`'s first `Some` (or error), looked for every [`POLL`] until `deadline`; `None` after.
+/// Replies are polled, not awaited: ros2-client's reply futures wake on DDS notifications, and
+/// one missed on a loaded machine left a goal "unanswered" for the whole timeout (seen in CI).
+pub(crate) fn poll_for<T, E>(
+    deadline: Instant,
+    mut read: impl FnMut() -> Result<Option<T>, E>,
+) -> Option<Result<T, E>> {
+    loop {
+        match read() {
+            Ok(Some(v)) => return Some(Ok(v)),
+            Err(e) => return Some(Err(e)),
+            Ok(None) if Instant::now() >= deadline => return None,
+            Ok(None) => thread::sleep(POLL),
+        }
+    }
+}
+
+/// `request` to `client`'s server and its answer, polled for up to `timeout` ([`poll_for`]);
+/// `None` without an answer.
+pub(crate) fn call<Req, Resp>(
+    client: &ros2_client::Client<Req, Resp>,
+    request: Req,
+    timeout: Duration,
+) -> Option<Result<Resp, String>>
+where
+    Req: ros2_client::Message + 'static,
+    Resp: ros2_client::Message + 'static,
+{
+    let id = match client.send_request(request) {
+        Ok(id) => id,
+        Err(e) => return Some(Err(format!("{e:?}"))),
+    };
+    poll_for(Instant::now() + timeout, || loop {
+        match client.receive_response() {
+            Ok(Some((answered, response))) if answered == id => return Ok(Some(response)),
+            // An answer to an earlier request: read past it.
+            Ok(Some(_)) => continue,
+            Ok(None) => return Ok(None),
+            Err(e) => return Err(format!("{e:?}")),
+        }
+    })
 }

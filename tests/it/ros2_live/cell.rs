@@ -730,14 +730,14 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
         let views = render("ros2-views-eye-to-hand", &sim);
         let domain = ros_domain();
         let peer = Peer::serving(&python, domain, &views, &[]);
-        let robot = "robot:\n  backend: ros2\n  model: ur10e\n  graph: {domain_id: 79, interfaces: [127.0.0.1], rmw: cyclonedds}\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n\ncamera:\n  backend: ros2\n  camera_info_topic: /camera_info\n";
+        let robot = format!("robot:\n  backend: ros2\n  model: ur10e\n  graph: {{domain_id: {domain}, interfaces: [127.0.0.1], rmw: cyclonedds}}\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n\ncamera:\n  backend: ros2\n  camera_info_topic: /camera_info\n");
         let config = config_variant(
             dir.path(),
             "sim-cell-eye-to-hand.yaml",
             "ros2-cell.yaml",
             &[
                 fixed[0],
-                ("robot:\n  backend: sim\n  model: ur10e\n  start_joints_deg: [0, -90, 90, -90, -90, 0]\n  move_duration_s: 0.0\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n  seed: 5\n\ncamera:\n  backend: sim\n  noise_sigma: 2.0\n  blur_sigma_px: 0.5\n  seed: 13\n", robot),
+                ("robot:\n  backend: sim\n  model: ur10e\n  start_joints_deg: [0, -90, 90, -90, -90, 0]\n  move_duration_s: 0.0\n  repeatability_mm: 0.02\n  repeatability_deg: 0.002\n  seed: 5\n\ncamera:\n  backend: sim\n  noise_sigma: 2.0\n  blur_sigma_px: 0.5\n  seed: 13\n", robot.as_str()),
                 ("session: {settle_s: 0.0,", "session: {settle_s: 0.0, settle_window_s: 0.05,"),
             ],
         );
@@ -848,5 +848,74 @@ fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
 fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
     within(Duration::from_secs(300), || {
         a_second_flange_publisher(ros_domain(), 4, 3)
+    });
+}
+
+/// #40: a second action server of the driver's name (a simulated controller left running, on a
+/// DDS participant of its own) that answers every goal SUCCEEDED at once, from the start: named
+/// with both participants before a goal is sent, nothing recorded.
+#[test]
+fn a_duplicate_action_server_is_named_before_anything_moves() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(200), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--duplicate-action-server"]);
+        let config = cell(dir.path(), domain, &[]);
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        assert!(!out.status.success(), "{log}");
+        assert!(
+            log.contains(&format!(
+                "2 action servers take the goals of /scaled_joint_trajectory_controller/follow_joint_trajectory on domain {domain}"
+            )),
+            "{log}"
+        );
+        assert!(log.contains("nothing was sent"), "{log}");
+        assert!(peer.events("goal").is_empty(), "a goal was sent:\n{log}");
+        assert!(
+            peer.events("liar_goal").is_empty(),
+            "a goal was sent:\n{log}"
+        );
+        assert_eq!(poses_kept(&out_dir), 0, "{log}");
+    });
+}
+
+/// The same server joining when goal 4 is accepted: named at the next goal (or, when discovery
+/// is slower than the move, by the arm not reaching the goal it "succeeded"), the poses before
+/// it kept, and resume completes to the truth once it is gone.
+#[test]
+fn a_duplicate_action_server_mid_run_is_named_and_resume_completes() {
+    within(Duration::from_secs(400), || {
+        fails_then_resumes_with(
+            ros_domain(),
+            &["--duplicate-action-server", "4"],
+            &[],
+            &[
+                "2 action servers take the goals of",
+                "answered SUCCEEDED but /joint_states did not reach the goal's end point",
+            ],
+        )
+    });
+}
+
+/// #40: a /tf flood of 5000 frame names nobody asked for, heard before the driver's
+/// base_link → tool0 (over the TF tree's 4096-frame cap), does not crowd out the arm's frames:
+/// the run completes to the truth.
+#[test]
+fn a_tf_flood_before_the_arms_frames_does_not_crowd_them_out() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(400), move || {
+        let dir = tempfile::tempdir().unwrap();
+        let domain = ros_domain();
+        let peer = Peer::start(&python, domain, &["--tf-flood", "5000"]);
+        let config = cell(dir.path(), domain, &[]);
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        assert!(!peer.events("tf_flood").is_empty(), "no flood was sent");
+        assert!(out.status.success(), "{log}");
+        assert_truth(&out_dir);
     });
 }
