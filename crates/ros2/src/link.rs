@@ -347,20 +347,6 @@ pub fn static_reader_qos() -> QosProfile {
     static_qos().history(ros2_client::qos::History::KeepLast { depth: 100 })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn topic_names_are_checked() {
-        assert!(topic_name("/tf").is_ok());
-        assert!(topic_name("/camera/image_raw").is_ok());
-        let e = topic_name("tf").unwrap_err().to_string();
-        assert!(e.contains("absolute"), "{e}");
-        assert!(topic_name("/9bad").is_err());
-    }
-}
-
 /// How long a first request waits after our side matched its server
 /// ([`Ros2Link::wait_until_matched`]).
 const MATCH_SETTLE: Duration = Duration::from_secs(1);
@@ -409,4 +395,18 @@ where
             Err(e) => return Err(format!("{e:?}")),
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topic_names_are_checked() {
+        assert!(topic_name("/tf").is_ok());
+        assert!(topic_name("/camera/image_raw").is_ok());
+        let e = topic_name("tf").unwrap_err().to_string();
+        assert!(e.contains("absolute"), "{e}");
+        assert!(topic_name("/9bad").is_err());
+    }
 }

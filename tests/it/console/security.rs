@@ -466,7 +466,6 @@ fn two_thousand_connections_under_ulimit_1024_leave_the_run_good() {
 /// ends GOOD. Before the deadline, four tries over 80 s got nothing.
 #[test]
 fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
-    use std::io::Write;
     raise_nofile(4096);
     let dir = tempfile::tempdir().unwrap();
     // Slow moves: the run goes on through the whole test.
@@ -475,22 +474,9 @@ fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
     let (authority, secret) = url_parts(&url);
     let addr: SocketAddr = authority.parse().unwrap();
     let request = format!("GET /?token={secret} HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
-    let rt = runtime();
     // Every slot and more: 600 page loads each (about 11 MB of answers, far beyond the socket
     // buffers, which the attacker keeps small), never read.
-    let stalled: Vec<std::net::TcpStream> = rt.block_on(async {
-        let mut stalled = Vec::new();
-        for _ in 0..72 {
-            let socket = tokio::net::TcpSocket::new_v4().unwrap();
-            socket.set_recv_buffer_size(4096).unwrap();
-            let stream = socket.connect(addr).await.unwrap().into_std().unwrap();
-            stream.set_nonblocking(false).unwrap();
-            let mut writer = &stream;
-            writer.write_all(request.as_bytes()).unwrap();
-            stalled.push(stream);
-        }
-        stalled
-    });
+    let stalled = stalled_connections(addr, &request, 72);
     // Let them fill their answers' buffers and block the console's writes.
     std::thread::sleep(Duration::from_secs(2));
     let started = std::time::Instant::now();
@@ -572,5 +558,75 @@ fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_sh
         text.len() < 64 * 1024,
         "the run's output holds what the pages sent ({} bytes)",
         text.len()
+    );
+}
+
+/// `count` connections to `addr`, each sending `request` (pipelined requests) with a small
+/// receive buffer and never reading an answer; held open while the returned streams live.
+fn stalled_connections(addr: SocketAddr, request: &str, count: usize) -> Vec<std::net::TcpStream> {
+    use std::io::Write;
+    runtime().block_on(async {
+        let mut stalled = Vec::new();
+        for _ in 0..count {
+            let socket = tokio::net::TcpSocket::new_v4().unwrap();
+            socket.set_recv_buffer_size(4096).unwrap();
+            let stream = socket.connect(addr).await.unwrap().into_std().unwrap();
+            stream.set_nonblocking(false).unwrap();
+            let mut writer = &stream;
+            writer.write_all(request.as_bytes()).unwrap();
+            stalled.push(stream);
+        }
+        stalled
+    })
+}
+
+/// #40, the case: 200 connections from someone without the console's secret, each
+/// pipelining page loads and never reading an answer, held open: the operator's page (with the
+/// secret) loads and its STOP stops the run, both within 5 s of asking, and the samples are kept
+/// for resume. (Someone who has the secret can press STOP himself; a slot that a request with
+/// the secret holds is given back by the write deadline: the test above.)
+#[test]
+fn two_hundred_slow_readers_without_the_secret_do_not_keep_the_operators_stop_out() {
+    raise_nofile(4096);
+    let dir = tempfile::tempdir().unwrap();
+    // Slow moves: the run goes on through the whole test.
+    let mut live = run_with_console(dir.path(), 12, 2.5);
+    let url = live.url();
+    let (authority, secret) = url_parts(&url);
+    let addr: SocketAddr = authority.parse().unwrap();
+    let request = format!("GET / HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
+    let stalled = stalled_connections(addr, &request, 200);
+    std::thread::sleep(Duration::from_secs(2));
+    let started = std::time::Instant::now();
+    let (status, text) = raw_get(
+        addr,
+        &format!("/?token={secret}"),
+        &[("Host", authority.clone())],
+    );
+    let loaded = started.elapsed();
+    assert_eq!(status, 200, "{text}");
+    assert!(text.contains("<html"), "not the page: {text}");
+    assert!(
+        live.running(),
+        "the run ended before the page was asked for (the test proves nothing)"
+    );
+    runtime().block_on(async {
+        let mut page = util::live::Page::open(&url).await;
+        page.send("stop").await;
+    });
+    let sent = started.elapsed();
+    eprintln!(
+        "behind 200 slow readers without the secret: the page in {loaded:.1?}, its STOP sent after {sent:.1?}"
+    );
+    assert!(
+        sent < Duration::from_secs(5),
+        "the page and its STOP took {sent:.1?}"
+    );
+    let (ok, out) = live.finish();
+    drop(stalled);
+    assert!(!ok, "the run went on after STOP:\n{out}");
+    assert!(
+        out.contains("--resume"),
+        "the stop says how to resume:\n{out}"
     );
 }
