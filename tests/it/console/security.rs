@@ -460,48 +460,6 @@ fn two_thousand_connections_under_ulimit_1024_leave_the_run_good() {
     );
 }
 
-/// #40: more connections than the console has slots, each pipelining hundreds of page loads
-/// with the secret and never reading an answer, held open: a page load still gets its page (a
-/// blocked write has a deadline, so the stalled connections give their slots back), and the run
-/// ends GOOD. Before the deadline, four tries over 80 s got nothing.
-#[test]
-fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
-    raise_nofile(4096);
-    let dir = tempfile::tempdir().unwrap();
-    // Slow moves: the run goes on through the whole test.
-    let mut live = run_with_console(dir.path(), 12, 2.5);
-    let url = live.url();
-    let (authority, secret) = url_parts(&url);
-    let addr: SocketAddr = authority.parse().unwrap();
-    let request = format!("GET /?token={secret} HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
-    // Every slot and more: 600 page loads each (about 11 MB of answers, far beyond the socket
-    // buffers, which the attacker keeps small), never read.
-    let stalled = stalled_connections(addr, &request, 72);
-    // Let them fill their answers' buffers and block the console's writes.
-    std::thread::sleep(Duration::from_secs(2));
-    let started = std::time::Instant::now();
-    let (status, text) = raw_get(
-        addr,
-        &format!("/?token={secret}"),
-        &[("Host", authority.clone())],
-    );
-    let waited = started.elapsed();
-    let running = live.running();
-    eprintln!("a page load behind 72 stalled connections: {status} after {waited:.1?}");
-    assert_eq!(status, 200, "{text}");
-    assert!(text.contains("<html"), "not the page: {text}");
-    assert!(
-        running,
-        "the run ended before the page was asked for (the test proves nothing)"
-    );
-    drop(stalled);
-    let (ok, out) = live.finish();
-    assert!(
-        ok && out.contains("GOOD"),
-        "the run under stalled connections:\n{out}"
-    );
-}
-
 #[test]
 fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_shortened() {
     use futures_util::{SinkExt, StreamExt};
@@ -561,6 +519,123 @@ fn an_oversized_message_or_a_stream_of_junk_drops_the_page_and_is_logged_once_sh
     );
 }
 
+/// A run with its console, `count` connections pipelining 600 page loads each (with the secret
+/// or without it) and never reading an answer (about 11 MB of answers each, far beyond the
+/// socket buffers, which the attacker keeps small), held open; then the operator's page load
+/// with the secret, 2 s later (the stalled connections have filled their answers' buffers and
+/// blocked the console's writes by then).
+struct Behind {
+    live: util::live::Live,
+    url: String,
+    stalled: Vec<std::net::TcpStream>,
+    started: std::time::Instant,
+    /// The page load's status and text, and how long it took.
+    status: u16,
+    text: String,
+    loaded: Duration,
+}
+
+fn page_behind_stalled_connections(dir: &Path, count: usize, with_secret: bool) -> Behind {
+    raise_nofile(4096);
+    // Slow moves: the run goes on through the whole test.
+    let mut live = run_with_console(dir, 12, 2.5);
+    let url = live.url();
+    let (authority, secret) = url_parts(&url);
+    let addr: SocketAddr = authority.parse().unwrap();
+    let target = if with_secret {
+        format!("/?token={secret}")
+    } else {
+        "/".to_string()
+    };
+    let request = format!("GET {target} HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
+    let stalled = stalled_connections(addr, &request, count);
+    std::thread::sleep(Duration::from_secs(2));
+    let started = std::time::Instant::now();
+    let (status, text) = raw_get(addr, &format!("/?token={secret}"), &[("Host", authority)]);
+    let loaded = started.elapsed();
+    Behind {
+        live,
+        url,
+        stalled,
+        started,
+        status,
+        text,
+        loaded,
+    }
+}
+
+/// #40: more connections than the console has slots, each pipelining hundreds of page loads
+/// with the secret and never reading an answer, held open: a page load still gets its page (a
+/// blocked write has a deadline, so the stalled connections give their slots back), and the run
+/// ends GOOD. Before the deadline, four tries over 80 s got nothing.
+#[test]
+fn connections_that_never_read_their_answers_do_not_keep_a_page_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut behind = page_behind_stalled_connections(dir.path(), 72, true);
+    let running = behind.live.running();
+    eprintln!(
+        "a page load behind 72 stalled connections: {} after {:.1?}",
+        behind.status, behind.loaded
+    );
+    assert_eq!(behind.status, 200, "{}", behind.text);
+    assert!(
+        behind.text.contains("<html"),
+        "not the page: {}",
+        behind.text
+    );
+    assert!(
+        running,
+        "the run ended before the page was asked for (the test proves nothing)"
+    );
+    drop(behind.stalled);
+    let (ok, out) = behind.live.finish();
+    assert!(
+        ok && out.contains("GOOD"),
+        "the run under stalled connections:\n{out}"
+    );
+}
+
+/// #40, the case: 200 connections from someone without the console's secret, each
+/// pipelining page loads and never reading an answer, held open: the operator's page (with the
+/// secret) loads and its STOP stops the run, both within 5 s of asking, and the samples are kept
+/// for resume. (Someone who has the secret can press STOP himself; a slot that a request with
+/// the secret holds is given back by the write deadline: the test above.)
+#[test]
+fn two_hundred_slow_readers_without_the_secret_do_not_keep_the_operators_stop_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut behind = page_behind_stalled_connections(dir.path(), 200, false);
+    assert_eq!(behind.status, 200, "{}", behind.text);
+    assert!(
+        behind.text.contains("<html"),
+        "not the page: {}",
+        behind.text
+    );
+    assert!(
+        behind.live.running(),
+        "the run ended before the page was asked for (the test proves nothing)"
+    );
+    runtime().block_on(async {
+        let mut page = util::live::Page::open(&behind.url).await;
+        page.send("stop").await;
+    });
+    let sent = behind.started.elapsed();
+    eprintln!(
+        "behind 200 slow readers without the secret: the page in {:.1?}, its STOP sent after {sent:.1?}",
+        behind.loaded
+    );
+    assert!(
+        sent < Duration::from_secs(5),
+        "the page and its STOP took {sent:.1?}"
+    );
+    let (ok, out) = behind.live.finish();
+    drop(behind.stalled);
+    assert!(!ok, "the run went on after STOP:\n{out}");
+    assert!(
+        out.contains("--resume"),
+        "the stop says how to resume:\n{out}"
+    );
+}
+
 /// `count` connections to `addr`, each sending `request` (pipelined requests) with a small
 /// receive buffer and never reading an answer; held open while the returned streams live.
 fn stalled_connections(addr: SocketAddr, request: &str, count: usize) -> Vec<std::net::TcpStream> {
@@ -578,55 +653,4 @@ fn stalled_connections(addr: SocketAddr, request: &str, count: usize) -> Vec<std
         }
         stalled
     })
-}
-
-/// #40, the case: 200 connections from someone without the console's secret, each
-/// pipelining page loads and never reading an answer, held open: the operator's page (with the
-/// secret) loads and its STOP stops the run, both within 5 s of asking, and the samples are kept
-/// for resume. (Someone who has the secret can press STOP himself; a slot that a request with
-/// the secret holds is given back by the write deadline: the test above.)
-#[test]
-fn two_hundred_slow_readers_without_the_secret_do_not_keep_the_operators_stop_out() {
-    raise_nofile(4096);
-    let dir = tempfile::tempdir().unwrap();
-    // Slow moves: the run goes on through the whole test.
-    let mut live = run_with_console(dir.path(), 12, 2.5);
-    let url = live.url();
-    let (authority, secret) = url_parts(&url);
-    let addr: SocketAddr = authority.parse().unwrap();
-    let request = format!("GET / HTTP/1.1\r\nHost: {authority}\r\n\r\n").repeat(600);
-    let stalled = stalled_connections(addr, &request, 200);
-    std::thread::sleep(Duration::from_secs(2));
-    let started = std::time::Instant::now();
-    let (status, text) = raw_get(
-        addr,
-        &format!("/?token={secret}"),
-        &[("Host", authority.clone())],
-    );
-    let loaded = started.elapsed();
-    assert_eq!(status, 200, "{text}");
-    assert!(text.contains("<html"), "not the page: {text}");
-    assert!(
-        live.running(),
-        "the run ended before the page was asked for (the test proves nothing)"
-    );
-    runtime().block_on(async {
-        let mut page = util::live::Page::open(&url).await;
-        page.send("stop").await;
-    });
-    let sent = started.elapsed();
-    eprintln!(
-        "behind 200 slow readers without the secret: the page in {loaded:.1?}, its STOP sent after {sent:.1?}"
-    );
-    assert!(
-        sent < Duration::from_secs(5),
-        "the page and its STOP took {sent:.1?}"
-    );
-    let (ok, out) = live.finish();
-    drop(stalled);
-    assert!(!ok, "the run went on after STOP:\n{out}");
-    assert!(
-        out.contains("--resume"),
-        "the stop says how to resume:\n{out}"
-    );
 }
