@@ -955,9 +955,22 @@ fn the_arm_model_exports_reproduce_the_corrected_flange_poses() {
     let solved = result.kinematics.as_ref().expect("the arm's model");
     assert_eq!(solved.estimated, "dh");
     assert_eq!(solved.links.len(), 18, "{solved:?}");
+    let estimated = solved.links.iter().filter(|l| l.sigma.is_some()).count();
+    assert!(estimated >= 10, "{solved:?}");
+    // The run's truth check names every estimated link correction against the simulator's.
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let checked: Vec<&str> = stdout
+        .lines()
+        .skip_while(|l| *l != "arm model truth check (estimated link corrections):")
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .collect();
+    assert_eq!(checked.len(), estimated, "{stdout}");
     assert!(
-        solved.links.iter().filter(|l| l.sigma.is_some()).count() >= 10,
-        "{solved:?}"
+        checked
+            .iter()
+            .all(|l| l.contains("σ) against the simulator's")),
+        "{stdout}"
     );
     result.kinematics = Some(kinematics);
     result.save(&result_path).unwrap();

@@ -333,8 +333,10 @@ impl ArmEstimate {
         lines
     }
 
-    /// The offsets against the simulator's true arm errors (the estimated ones, in their 1σ),
-    /// one line each, for the simulated cell's truth check.
+    /// The estimated offsets and link corrections (`dh`) against the simulator's true arm
+    /// errors, each in its 1σ, one line each, for the simulated cell's truth check. A link
+    /// correction stands for what the data can tell of it: a parameter held beside it (absorbed
+    /// by the transforms, or not determined) may have moved part of its truth into it.
     pub fn compare_with_truth(&self, truth: &ArmErrors) -> String {
         let mut lines = vec!["arm model truth check (estimated joint offsets):".to_string()];
         for o in &self.fit.offsets {
@@ -349,16 +351,52 @@ impl ArmEstimate {
                 ));
             }
         }
+        let estimated: Vec<_> = self
+            .fit
+            .links
+            .iter()
+            .filter(|l| matches!(l.status, OffsetStatus::Estimated { .. }))
+            .collect();
+        if !estimated.is_empty() {
+            lines.push("arm model truth check (estimated link corrections):".to_string());
+        }
+        for l in estimated {
+            let OffsetStatus::Estimated { sigma_rad: sigma } = l.status else {
+                continue;
+            };
+            let true_value = match l.parameter {
+                LinkParameter::ThetaOffset => truth.joint_offsets_rad[l.joint],
+                LinkParameter::D => truth.d_m[l.joint],
+                LinkParameter::A => truth.a_m[l.joint],
+                LinkParameter::Alpha => truth.alpha_rad[l.joint],
+            };
+            let (unit, scale) = unit_of(l.parameter);
+            let error = l.value - true_value;
+            lines.push(format!(
+                "  {} {}: error {:+.4} {unit} ({:.1}σ) against the simulator's {:+.4} {unit}",
+                joint_name(l.joint),
+                l.parameter.name(),
+                error * scale,
+                error.abs() / sigma,
+                true_value * scale,
+            ));
+        }
         lines.join("\n")
     }
 }
 
-/// A link correction's row of the result file (`d`, `a` in mm; `alpha` in degrees).
-fn link_row(l: &handeye_solve::kinematics::LinkCorrection) -> LinkCorrectionYaml {
-    let (unit, scale) = match l.parameter {
+/// The unit a link parameter is written in (`d`, `a` in mm; `alpha`, `theta_offset` in
+/// degrees) and the factor from the solver's m or rad to it.
+fn unit_of(parameter: LinkParameter) -> (&'static str, f64) {
+    match parameter {
         LinkParameter::Alpha | LinkParameter::ThetaOffset => ("deg", 1f64.to_degrees()),
         LinkParameter::D | LinkParameter::A => ("mm", 1e3),
-    };
+    }
+}
+
+/// A link correction's row of the result file.
+fn link_row(l: &handeye_solve::kinematics::LinkCorrection) -> LinkCorrectionYaml {
+    let (unit, scale) = unit_of(l.parameter);
     let mut row = LinkCorrectionYaml {
         joint: joint_name(l.joint),
         parameter: l.parameter.name().to_string(),
