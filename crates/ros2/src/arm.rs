@@ -23,7 +23,10 @@ use handeye_robot::kinematics::UrModel;
 use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus};
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
-use crate::link::{poll_for, sensor_data_qos, static_reader_qos, topic_name, Ros2Link, POLL};
+use crate::link::{
+    poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos, topic_name, Ros2Link,
+    POLL,
+};
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
     follow_joint_trajectory_error, Duration as RosDuration, FollowJointTrajectoryFeedback,
@@ -171,21 +174,9 @@ impl Ros2Arm {
             })?;
         // The controller's action server must be on the graph before anything moves.
         let found = link.wait_until_matched(options.timeout, |node| {
-            action
-                .goal_client()
-                .wait_for_service(node)
-                .now_or_never()
-                .is_some()
-                && action
-                    .result_client()
-                    .wait_for_service(node)
-                    .now_or_never()
-                    .is_some()
-                && action
-                    .cancel_client()
-                    .wait_for_service(node)
-                    .now_or_never()
-                    .is_some()
+            serves(action.goal_client(), node)
+                && serves(action.result_client(), node)
+                && serves(action.cancel_client(), node)
         });
         if !found {
             return Err(RobotError::Connect {
@@ -197,6 +188,7 @@ impl Ros2Arm {
                 ),
             });
         }
+        settle_after_match();
         one_action_server(link, &options.action)?;
         let shared = Arc::new(Shared::wanting(&[
             &options.base_frame,

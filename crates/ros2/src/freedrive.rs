@@ -15,14 +15,13 @@ use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
-use futures::FutureExt;
 use ros2_client::service::Client;
 use ros2_client::{Publisher, ServiceMapping, ServiceTypeName};
 
 use handeye_robot::RobotError;
 
 use crate::arm::Framing;
-use crate::link::{call, reliable_qos, topic_name, Ros2Link};
+use crate::link::{call, reliable_qos, serves, settle_after_match, topic_name, Ros2Link};
 use crate::msg::{
     Bool, SwitchControllerHumble, SwitchControllerJazzy, SwitchControllerResponse, SWITCH_STRICT,
 };
@@ -70,6 +69,8 @@ pub struct Freedrive {
     link: Ros2Link,
     options: FreedriveOptions,
     switch: SwitchClient,
+    /// Whether a switch was asked for already (its client's first request settled).
+    switched: AtomicBool,
     enable: Arc<Publisher<Bool>>,
     enable_topic: String,
     /// The keep-alive while freedrive is on: its stop flag and thread.
@@ -120,6 +121,7 @@ impl Freedrive {
             link: link.clone(),
             options,
             switch,
+            switched: AtomicBool::new(false),
             enable: Arc::new(enable),
             enable_topic,
             keep_alive: None,
@@ -185,13 +187,16 @@ impl Freedrive {
         );
         let timeout = self.options.timeout;
         // The service on the graph first, then the call.
-        let served = self.link.wait_until_matched(timeout, |node| {
-            match &self.switch {
-                SwitchClient::Humble(client) => client.wait_for_service(node).now_or_never(),
-                SwitchClient::Jazzy(client) => client.wait_for_service(node).now_or_never(),
-            }
-            .is_some()
-        });
+        let served = self
+            .link
+            .wait_until_matched(timeout, |node| match &self.switch {
+                SwitchClient::Humble(client) => serves(client, node),
+                SwitchClient::Jazzy(client) => serves(client, node),
+            });
+        // The first switch of this client only (a settle on every press would slow each).
+        if served && !self.switched.swap(true, Ordering::SeqCst) {
+            settle_after_match();
+        }
         let answer = if served {
             match &self.switch {
                 SwitchClient::Humble(client) => call(

@@ -12,6 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use futures::FutureExt;
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
     Subscription,
@@ -122,26 +123,22 @@ impl Ros2Link {
     /// sorted. Our own readers and writers are not counted: what an error about a topic nobody
     /// publishes, or an empty domain, lists.
     pub fn heard_topics(&self) -> Vec<(String, String)> {
-        use ros2_client::dds::rustdds::RTPSEntity;
         let participant = self.context.domain_participant();
-        let ours = participant.guid().prefix;
         let writers = participant
             .discovered_writers()
             .into_iter()
-            .filter_map(|w| {
-                (w.writer_proxy.remote_writer_guid.prefix != ours).then(|| {
-                    let t = w.publication_topic_data;
-                    (t.topic_name, t.type_name)
-                })
+            .filter(|w| self.foreign(&w.writer_proxy.remote_writer_guid))
+            .map(|w| {
+                let t = w.publication_topic_data;
+                (t.topic_name, t.type_name)
             });
         let readers = participant
             .discovered_readers()
             .into_iter()
-            .filter_map(|r| {
-                (r.reader_proxy.remote_reader_guid.prefix != ours).then(|| {
-                    let t = r.subscription_topic_data;
-                    (t.topic_name().clone(), t.type_name().clone())
-                })
+            .filter(|r| self.foreign(&r.reader_proxy.remote_reader_guid))
+            .map(|r| {
+                let t = r.subscription_topic_data;
+                (t.topic_name().clone(), t.type_name().clone())
             });
         let mut topics: Vec<(String, String)> = writers
             .chain(readers)
@@ -170,28 +167,16 @@ impl Ros2Link {
         self.others(readers)
     }
 
-    /// Waits up to `timeout` until `matched` holds of the node (a client's
-    /// `wait_for_service(node).now_or_never().is_some()`: its request writer matched to a
-    /// server's reader, its reply reader to a server's writer), then [`MATCH_SETTLE`] more;
-    /// whether it came to hold. Asked afresh every [`POLL`]: ros2-client's `wait_for_service`
-    /// future looks at the matches only when a match event arrives, and one missed on a loaded
-    /// machine waited out the whole timeout with the server there (CI).
-    ///
-    /// Why the settle: a request must reach a server that has matched our writer too. Cyclone
-    /// DDS drops a sample from a writer it has not matched yet, and once matched it takes what
-    /// the writer's first heartbeat announces as history a volatile reader is not owed: a goal
-    /// or a controller switch written in between is lost for good (seen in CI, the peer never
-    /// heard it). Each side learns of the other's endpoints in the same discovery exchange, so
-    /// the server's match follows ours by the time it takes to process it.
+    /// Waits up to `timeout` until `matched` holds of the node ([`serves`] of each client it
+    /// needs); whether it came to hold. Asked afresh every [`POLL`]: ros2-client's
+    /// `wait_for_service` future looks at the matches only when a match event arrives, and one
+    /// missed on a loaded machine waited out the whole timeout with the server there (CI). A
+    /// client's first request waits [`settle_after_match`] more.
     pub fn wait_until_matched(&self, timeout: Duration, matched: impl Fn(&Node) -> bool) -> bool {
-        let found = poll_for(Instant::now() + timeout, || {
+        poll_for(Instant::now() + timeout, || {
             Ok::<_, ()>(self.with_node(|node| matched(node)).then_some(()))
         })
-        .is_some();
-        if found {
-            thread::sleep(MATCH_SETTLE);
-        }
-        found
+        .is_some()
     }
 
     /// The participants of `endpoints` other than ours, as GUID prefixes in hex, sorted, each
@@ -200,15 +185,19 @@ impl Ros2Link {
         &self,
         endpoints: impl Iterator<Item = ros2_client::dds::rustdds::GUID>,
     ) -> Vec<String> {
-        use ros2_client::dds::rustdds::RTPSEntity;
-        let ours = self.context.domain_participant().guid().prefix;
         let mut others: Vec<String> = endpoints
-            .filter(|guid| guid.prefix != ours)
+            .filter(|guid| self.foreign(guid))
             .map(|guid| format!("{:?}", guid.prefix))
             .collect();
         others.sort();
         others.dedup();
         others
+    }
+
+    /// Whether an endpoint discovery heard is another participant's (not one of ours).
+    fn foreign(&self, endpoint: &ros2_client::dds::rustdds::GUID) -> bool {
+        use ros2_client::dds::rustdds::RTPSEntity;
+        endpoint.prefix != self.context.domain_participant().guid().prefix
     }
 
     /// The options it was opened with.
@@ -347,9 +336,29 @@ pub fn static_reader_qos() -> QosProfile {
     static_qos().history(ros2_client::qos::History::KeepLast { depth: 100 })
 }
 
-/// How long a first request waits after our side matched its server
-/// ([`Ros2Link::wait_until_matched`]).
+/// Whether `client`'s server is on the graph: its request writer matched to a server's reader
+/// and its reply reader to a server's writer (looked at now, not awaited).
+pub(crate) fn serves<Req, Resp>(client: &ros2_client::Client<Req, Resp>, node: &Node) -> bool
+where
+    Req: ros2_client::Message,
+    Resp: ros2_client::Message,
+{
+    client.wait_for_service(node).now_or_never().is_some()
+}
+
+/// How long a new client's first request waits after our side matched its server.
 const MATCH_SETTLE: Duration = Duration::from_secs(1);
+
+/// Waits [`MATCH_SETTLE`]: before a new client's first request, once our side has matched its
+/// server ([`Ros2Link::wait_until_matched`]), the server must have matched our writer too.
+/// Cyclone DDS drops a sample from a writer it has not matched yet, and once matched it takes
+/// what the writer's first heartbeat announces as history a volatile reader is not owed: a goal
+/// or a controller switch written in between is lost for good (seen in CI, the peer never heard
+/// it). Each side learns of the other's endpoints in the same discovery exchange, so the
+/// server's match follows ours by the time it takes to process it.
+pub(crate) fn settle_after_match() {
+    thread::sleep(MATCH_SETTLE);
+}
 
 /// How often [`poll_for`] looks.
 pub(crate) const POLL: Duration = Duration::from_millis(10);
