@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use futures::{FutureExt, StreamExt};
+use futures::StreamExt;
 use ros2_client::action::{ActionClient, ActionClientQosPolicies};
 use ros2_client::action_msgs::GoalStatusEnum;
 use ros2_client::{ActionTypeName, ServiceMapping};

@@ -340,8 +340,8 @@ pub fn static_reader_qos() -> QosProfile {
 /// and its reply reader to a server's writer (looked at now, not awaited).
 pub(crate) fn serves<Req, Resp>(client: &ros2_client::Client<Req, Resp>, node: &Node) -> bool
 where
-    Req: ros2_client::Message,
-    Resp: ros2_client::Message,
+    Req: ros2_client::Message + 'static,
+    Resp: ros2_client::Message + 'static,
 {
     client.wait_for_service(node).now_or_never().is_some()
 }
