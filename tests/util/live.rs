@@ -103,6 +103,11 @@ impl Drop for Live {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+        // A failing test shows what handeye said (a console that closed under a page: why).
+        if std::thread::panicking() {
+            self.output.extend(self.lines.try_iter());
+            eprintln!("handeye's output:\n{}", self.output.join("\n"));
+        }
     }
 }
 
