@@ -24,8 +24,8 @@ use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, Robot
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
 use crate::link::{
-    poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos, topic_name, Ros2Link,
-    POLL,
+    poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos, tf_listener_qos,
+    topic_name, Ros2Link, POLL,
 };
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
@@ -141,7 +141,7 @@ impl Ros2Arm {
             .subscribe::<JointState>(&options.joint_states_topic, sensor_data_qos())
             .map_err(setup_error)?;
         let tf_sub = link
-            .subscribe::<TfMessage>(&options.tf_topic, sensor_data_qos())
+            .subscribe::<TfMessage>(&options.tf_topic, tf_listener_qos())
             .map_err(setup_error)?;
         let static_sub = link
             .subscribe::<TfMessage>(&options.tf_static_topic, static_reader_qos())
@@ -258,11 +258,17 @@ impl Ros2Arm {
         }
     }
 
-    /// The flange pose of the first /tf message heard after `asked`, waiting until `deadline`.
+    /// The flange pose of the first /tf message heard after `asked`, waiting until `deadline`;
+    /// an edge of the chain whose publishers contradict each other ends the wait at once (a
+    /// contradiction is no state a driver passes through, and waiting on leaves a loaded
+    /// machine time to miss one publisher for a moment and take the other's pose as the arm's).
     fn flange_after(&self, asked: Instant, deadline: Instant) -> Result<Pose, RobotError> {
         let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
         let (state, _) = self.shared.wait_until(deadline, |s| {
-            s.tf_received.is_some_and(|t| t >= asked) && s.tf.lookup(base, flange).is_ok()
+            s.tf_received.is_some_and(|t| t >= asked)
+                && (s.tf.lookup(base, flange).is_ok()
+                    || s.tf.contradiction_above(base).is_some()
+                    || s.tf.contradiction_above(flange).is_some())
         });
         match state.tf.lookup(base, flange) {
             Ok(pose) if state.tf_received.is_some_and(|t| t >= asked) => Ok(pose),

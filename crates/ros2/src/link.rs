@@ -309,6 +309,17 @@ pub fn sensor_data_qos() -> QosProfile {
         .history(ros2_client::qos::History::KeepLast { depth: 5 })
 }
 
+/// QoS of a `/tf` reader: tf2's listener depth (`DynamicListenerQoS`, keep last 100), best
+/// effort so that every publisher matches. /tf carries every node's frames at a few hundred
+/// messages a second: a shallow queue, read by a thread a loaded machine starves for a moment,
+/// keeps only the newest few and loses a slower publisher's edges for that moment (CI saw a
+/// driver's base → tool0 drop out for over a second beside a 200 Hz second publisher).
+pub fn tf_listener_qos() -> QosProfile {
+    QosProfile::subscription_default()
+        .reliability(ros2_client::qos::Reliability::BestEffort)
+        .history(ros2_client::qos::History::KeepLast { depth: 100 })
+}
+
 /// Reliable, volatile, keep last 10: action and service traffic.
 pub fn reliable_qos() -> QosProfile {
     QosProfile::publisher_default()
