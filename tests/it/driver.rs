@@ -146,7 +146,6 @@ fn session_setup(folder: SessionFolder, stop: Arc<AtomicBool>) -> SessionSetup {
             estimate_intrinsics: false,
         }],
         named_cameras: false,
-        lost: Vec::new(),
         plan: (0..POSES)
             .map(|i| (base_from_flange(i), joints(i)))
             .collect(),

@@ -1,8 +1,9 @@
 //! Adaptive sessions: the plan is not fixed up front but asked for one pose at a time from a
 //! [`PlanSource`] that sees the samples accepted so far (e.g. the next-best-pose planner,
-//! `plan::nbv::AdaptivePlanner`). Each pose is visited with the ordinary driver
-//! ([`run_session`]), so records, retries, faults and the folder layout are the same as for a
-//! fixed plan; the manifest grows with the plan, so `replay` and `report` work unchanged.
+//! `plan::nbv::AdaptivePlanner`). Each pose is visited by the run's one [`PoseLoop`] (started
+//! at the first pose: records read once, detection workers started once), so records, retries,
+//! faults and the folder layout are the same as for a fixed plan; the manifest grows with the
+//! plan, so `replay` and `report` work unchanged.
 //!
 //! A pose whose board pose was rejected is dropped from the plan and its index reused by the
 //! next pose (which then gets one attempt instead of two: the driver counts the earlier
@@ -19,7 +20,7 @@ use handeye_plan::nbv::AdaptivePlanner;
 use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, Robot};
 
-use crate::driver::{run_session, SessionEvent, SessionOutcome, SessionSetup};
+use crate::driver::{PoseLoop, SessionEvent, SessionOutcome, SessionSetup};
 use handeye_records::{SessionError, SessionManifest};
 
 /// Yields the next pose of a session from the samples accepted so far.
@@ -47,7 +48,7 @@ impl PlanSource for AdaptivePlanner {
 /// grabs at each pose, every camera's folder gets the growing plan, and a pose is kept when any
 /// camera accepted it (the cameras' records share the plan's numbering).
 pub fn run_adaptive_session(
-    mut setup: SessionSetup,
+    setup: SessionSetup,
     manifest_config: std::path::PathBuf,
     source: &mut dyn PlanSource,
     robot: &mut dyn Robot,
@@ -68,38 +69,28 @@ pub fn run_adaptive_session(
         seen.push(visit.base_from_flange);
     }
     source.visited(&seen);
-    let mut outcome = SessionOutcome::default();
     // The last recorded pose is finished first.
     let mut next = plan.poses.pop();
     loop {
         if next.is_none() {
-            let samples = if setup.folder().samples_path().is_file() {
-                Dataset::load(&setup.folder().samples_path())?.pairs
-            } else {
-                Vec::new()
-            };
-            next = source.next_pose(&samples);
+            next = source.next_pose(&plan.samples(&setup)?);
         }
         let Some(pose) = next.take() else {
             break;
         };
-        plan.visit(&setup, pose, robot, cameras, on_event, &mut outcome)?;
-        // A camera lost at this pose is not asked again in this run (as in a fixed plan).
-        setup.lost = outcome
-            .failed_cameras
-            .iter()
-            .map(|f| f.camera.clone())
-            .collect();
+        plan.visit(&setup, pose, robot, cameras, on_event)?;
     }
-    Ok(outcome)
+    plan.finish()
 }
 
 /// The plan of a session that grows one pose at a time (adaptive and hand-guided sessions):
-/// each pose is added to the manifest, visited with the ordinary driver on the plan so far, and
+/// each pose is added to the manifest, visited by the run's pose loop on the plan so far, and
 /// kept if its sample was accepted, dropped (its index reused by the next) if not.
 pub(super) struct GrowingPlan {
     /// The poses so far (flange pose, joints).
     pub poses: Vec<(Pose, Joints)>,
+    /// The run's pose loop, from its first pose on.
+    run: Option<PoseLoop>,
     manifest_config: std::path::PathBuf,
     /// The input hashes written when the session was created: kept with every manifest rewrite.
     inputs: Vec<handeye_records::InputFile>,
@@ -123,15 +114,16 @@ impl GrowingPlan {
         };
         Ok(GrowingPlan {
             poses,
+            run: None,
             manifest_config,
             inputs,
             manual,
         })
     }
 
-    /// Adds `pose` to the manifest and visits it with the ordinary driver (on `setup` with the
-    /// plan so far), folding what happened into `outcome`; whether its sample was accepted
-    /// (otherwise it is dropped from the plan again).
+    /// Adds `pose` to the manifest and visits it with the run's pose loop (started here at the
+    /// first pose, on `setup` with the plan so far); whether some camera accepted its sample
+    /// (otherwise it is dropped from the plan again and its index given to the next pose).
     pub(super) fn visit(
         &mut self,
         setup: &SessionSetup,
@@ -139,34 +131,27 @@ impl GrowingPlan {
         robot: &mut dyn Robot,
         cameras: &mut [&mut dyn Camera],
         on_event: &mut dyn FnMut(SessionEvent),
-        outcome: &mut SessionOutcome,
     ) -> Result<bool, SessionError> {
         self.poses.push(pose);
         self.write_manifests(setup)?;
-        let step = SessionSetup {
-            plan: self.poses.clone(),
-            ..setup.clone()
-        };
         let index = self.poses.len() - 1;
-        let step_outcome = run_session(step, robot, cameras, on_event)?;
-        outcome.visited_now += step_outcome.visited_now;
-        outcome.moving_s += step_outcome.moving_s;
-        outcome.settling_s += step_outcome.settling_s;
-        outcome.modelled_moving_s += step_outcome.modelled_moving_s;
-        outcome.moving_modelled_s += step_outcome.moving_modelled_s;
-        outcome.skipped.extend(step_outcome.skipped.iter().cloned());
-        outcome
-            .failed_cameras
-            .extend(step_outcome.failed_cameras.iter().cloned());
+        let run = match &mut self.run {
+            Some(run) => {
+                run.set_plan(self.poses.clone());
+                run
+            }
+            None => self.run.insert(PoseLoop::start(
+                SessionSetup {
+                    plan: self.poses.clone(),
+                    ..setup.clone()
+                },
+                cameras,
+            )?),
+        };
+        run.visit_pending(robot, cameras, on_event)?;
         // Several cameras: kept when any camera accepted it (their records of it stay).
-        let accepted = step_outcome
-            .accepted_by_camera
-            .iter()
-            .any(|poses| poses.contains(&index));
-        if accepted {
-            outcome.accepted = step_outcome.accepted;
-            outcome.accepted_by_camera = step_outcome.accepted_by_camera;
-        } else {
+        let accepted = run.accepted_by_any(index);
+        if !accepted {
             // The next pose reuses the index: its rejected record (the corners it saw) is kept
             // aside, for the check of intrinsics that reject every pose.
             for folder in setup.cameras.iter().map(|c| &c.folder) {
@@ -175,8 +160,31 @@ impl GrowingPlan {
                 }
             }
             self.poses.pop();
+            run.forget(index);
         }
         Ok(accepted)
+    }
+
+    /// The first camera's accepted samples so far: the pose loop's, or (before the first pose)
+    /// the session's `samples.yaml`.
+    fn samples(&self, setup: &SessionSetup) -> Result<Vec<PosePair>, SessionError> {
+        if let Some(run) = &self.run {
+            return Ok(run.samples(0));
+        }
+        let path = setup.folder().samples_path();
+        Ok(if path.is_file() {
+            Dataset::load(&path)?.pairs
+        } else {
+            Vec::new()
+        })
+    }
+
+    /// Ends the run: what its pose loop did (nothing without a pose).
+    pub(super) fn finish(self) -> Result<SessionOutcome, SessionError> {
+        match self.run {
+            Some(run) => run.finish(),
+            None => Ok(SessionOutcome::default()),
+        }
     }
 }
 

@@ -48,7 +48,7 @@ mod still;
 pub(crate) use still::{wait_until_still, NotStill};
 
 pub(crate) use record::{measure, rebuild_samples};
-use record::{spawn_workers, Fault, Job, JobResult, Recording};
+use record::{spawn_workers, Fault, Job, JobResult, Recording, SharedSamples};
 
 /// One camera of a session: where its records go and what it measures.
 #[derive(Clone)]
@@ -76,9 +76,6 @@ pub struct SessionSetup {
     pub resume_folder: std::path::PathBuf,
     /// Whether events name their camera (a config that lists its cameras).
     pub named_cameras: bool,
-    /// Cameras (by name) lost earlier in this run: not asked again (an adaptive session drives
-    /// one pose at a time).
-    pub lost: Vec<String>,
     /// The validated plan: target flange pose and the joint solution for each pose.
     pub plan: Vec<(Pose, Joints)>,
     /// Speed and acceleration caps for every move.
@@ -219,167 +216,274 @@ pub fn run_session(
     cameras: &mut [&mut dyn Camera],
     on_event: &mut dyn FnMut(SessionEvent),
 ) -> Result<SessionOutcome, SessionError> {
-    let recordings = recordings(&setup, cameras)?;
-    let devices = cameras;
-    let mut state = RunState::new(&setup, &recordings)?;
-    let mut samples = Vec::with_capacity(recordings.len());
-    for (recording, visits) in recordings.iter().zip(&state.previous) {
-        // The records are the log; samples.yaml is rebuilt from them before anything moves.
-        samples.push(rebuild_samples(&recording.folder, recording.setup, visits)?);
-    }
-    let mut pending = state.pending(setup.plan.len());
+    let mut run = PoseLoop::start(setup, cameras)?;
+    run.visit_pending(robot, cameras, on_event)?;
+    run.finish()
+}
 
-    // A stop request ends a move in progress, not only the run after it.
-    robot.set_interrupt(setup.stop.clone());
-    let (job_tx, job_rx) = mpsc::channel::<Job>();
-    let (result_tx, result_rx) = mpsc::channel::<JobResult>();
-    let fault = Arc::new(Fault::from_env());
-    let workers = spawn_workers(&recordings, samples, fault.clone(), job_rx, result_tx)?;
+/// One run's pose loop, alive for the whole run: the records read once when it starts, the
+/// detection workers started once, and the book-keeping of every pose. A fixed plan visits its
+/// poses in one [`PoseLoop::visit_pending`]; a plan that grows one pose at a time (adaptive and
+/// hand-guided runs) adds each pose with [`PoseLoop::set_plan`] and visits it the same way,
+/// without re-reading the folder or restarting the workers per pose.
+pub struct PoseLoop {
+    setup: SessionSetup,
+    recordings: Vec<Recording>,
+    state: RunState,
+    jobs: Option<mpsc::Sender<Job>>,
+    results: mpsc::Receiver<JobResult>,
+    workers: Vec<std::thread::JoinHandle<()>>,
+    fault: Arc<Fault>,
+    samples: Vec<SharedSamples>,
+    /// Whether a pass has run: a resumed run's first pass visits what is left in travel order.
+    passed: bool,
+}
 
-    // A fresh plan runs in its (checked) order; what a resumed run has left is visited in travel
-    // order from where the arm stands now. Retries follow each pass in plan order.
-    if state.resumed() {
-        order_for_travel(robot, &setup, &mut pending);
-    }
-    'passes: while !pending.is_empty() {
-        for &plan_index in &pending {
-            if state.error.is_some() {
-                break 'passes;
-            }
-            let needed: Vec<usize> = (0..recordings.len())
-                .filter(|&c| state.wants(c, plan_index))
-                .collect();
-            if needed.is_empty() {
-                continue;
-            }
-            if setup.stop.load(Ordering::SeqCst) {
-                let _ = robot.stop();
-                state.drain(&result_rx, on_event);
-                state.error = Some(SessionError::Interrupted {
-                    plan_index,
-                    recorded: state.recorded(),
-                    folder: state.folder.clone(),
-                });
-                break 'passes;
-            }
-            on_event(SessionEvent::Moving {
-                plan_index,
-                target: setup.plan[plan_index].0,
-            });
-            let visited = arrive(robot, &setup, plan_index).and_then(|arrival| {
-                let mut frames = Vec::with_capacity(needed.len());
-                for &c in &needed {
-                    let grabbed =
-                        if fault.at(&format!("camera-lost:{}", recordings[c].name), plan_index) {
-                            Err(handeye_camera::CameraError::Backend(
-                                "no fresh frame (injected by HANDEYE_FAULT)".into(),
-                            ))
-                        } else {
-                            grab_fresh(&mut *devices[c], arrival.settled)
-                        };
-                    match grabbed {
-                        Ok(frame) => frames.push((c, frame)),
-                        // Another camera still delivers: this one is named and left out.
-                        Err(error) if state.delivering() > 1 => {
-                            state.lose(c, plan_index, error.to_string(), on_event)
-                        }
-                        Err(error) => return Err(ErrorSource::Camera(error)),
-                    }
-                }
-                let base_from_flange = robot.base_from_flange()?;
-                Ok((arrival, frames, base_from_flange))
-            });
-            match visited {
-                Ok((arrival, frames, base_from_flange)) => {
-                    state.count(&arrival, frames.first().map(|(_, f)| f.captured_at));
-                    for (camera, frame) in frames {
-                        state.in_flight += 1;
-                        state.submitted.push_back((plan_index, camera));
-                        job_tx
-                            .send(Job {
-                                camera,
-                                plan_index,
-                                frame,
-                                base_from_flange,
-                            })
-                            .map_err(|_| SessionError::DetectionThread("stopped"))?;
-                    }
-                }
-                // A second visit whose path from where the arm now stands leaves the checked
-                // space (the joint limits, the workspace box): nothing moved, the pose keeps its
-                // first record, and the run goes on without it rather than ending with the
-                // samples it has (issue #40: 8 good poses, then "resume" for a retry that
-                // could never be reached from there).
-                Err(ErrorSource::UnsafeMove(problem))
-                    if needed.iter().all(|&c| state.tries(c, plan_index) > 0) =>
-                {
-                    for &c in &needed {
-                        state.attempts.insert((c, plan_index), 2);
-                    }
-                    if needed.contains(&0) {
-                        state.outcome.skipped.push((
-                            plan_index,
-                            format!("not visited again: from where the arm stood {problem}"),
-                        ));
-                    }
-                }
-                Err(source) => {
-                    // Stop first, then let the worker finish what it has so the count is true.
-                    let _ = robot.stop();
-                    state.drain(&result_rx, on_event);
-                    let folder = state.folder.clone();
-                    let recorded = state.recorded();
-                    state.error = Some(match source {
-                        ErrorSource::Robot(RobotError::Interrupted) => SessionError::Interrupted {
-                            plan_index,
-                            recorded,
-                            folder,
-                        },
-                        ErrorSource::Robot(source) => SessionError::Robot {
-                            plan_index,
-                            recorded,
-                            folder,
-                            source,
-                        },
-                        ErrorSource::UnsafeMove(problem) => SessionError::UnsafeMove {
-                            plan_index,
-                            recorded,
-                            folder,
-                            problem,
-                        },
-                        ErrorSource::Camera(source) => SessionError::Camera {
-                            plan_index,
-                            recorded,
-                            folder,
-                            source,
-                        },
-                    });
-                    break 'passes;
-                }
-            }
-            state.receive_ready(&result_rx, 2 * workers.len(), on_event);
+impl PoseLoop {
+    /// Reads the records of every camera's folder (checked against `setup.plan`), rebuilds each
+    /// `samples.yaml` from them before anything moves, and starts the detection workers.
+    /// Nothing moves. `cameras` are the devices of `setup.cameras` (their models are read).
+    pub fn start(
+        setup: SessionSetup,
+        cameras: &[&mut dyn Camera],
+    ) -> Result<PoseLoop, SessionError> {
+        let recordings = recordings(&setup, cameras)?;
+        let state = RunState::new(&setup, &recordings)?;
+        let mut samples = Vec::with_capacity(recordings.len());
+        for (recording, visits) in recordings.iter().zip(&state.previous) {
+            // The records are the log; samples.yaml is rebuilt from them before anything moves.
+            let rebuilt = rebuild_samples(&recording.folder, recording.setup, visits)?;
+            samples.push(Arc::new(std::sync::Mutex::new(rebuilt)));
         }
-        // Every result of this pass must be in before deciding on retries.
-        state.drain(&result_rx, on_event);
-        pending = state.pending(setup.plan.len());
+        let (job_tx, job_rx) = mpsc::channel::<Job>();
+        let (result_tx, results) = mpsc::channel::<JobResult>();
+        let fault = Arc::new(Fault::from_env());
+        let workers = spawn_workers(&recordings, &samples, fault.clone(), job_rx, result_tx)?;
+        Ok(PoseLoop {
+            setup,
+            recordings,
+            state,
+            jobs: Some(job_tx),
+            results,
+            workers,
+            fault,
+            samples,
+            passed: false,
+        })
     }
-    drop(job_tx);
-    state.drain(&result_rx, on_event);
-    let workers_panicked = workers.into_iter().any(|w| w.join().is_err());
-    if let Some(e) = state.error {
-        return Err(e);
+
+    /// The plan from now on: a growing plan's poses so far (the poses already visited keep
+    /// their place and index).
+    pub fn set_plan(&mut self, plan: Vec<(Pose, Joints)>) {
+        self.setup.plan = plan;
     }
-    if workers_panicked {
-        return Err(SessionError::DetectionThread("panicked"));
+
+    /// Whether some camera has an accepted record of pose `plan_index`.
+    pub fn accepted_by_any(&self, plan_index: usize) -> bool {
+        self.state.accepted.iter().any(|a| a.contains(&plan_index))
     }
-    let mut outcome = state.outcome;
-    outcome.accepted_by_camera = state
-        .accepted
-        .iter()
-        .map(|poses| poses.iter().copied().collect())
-        .collect();
-    outcome.accepted = outcome.accepted_by_camera[0].clone();
-    Ok(outcome)
+
+    /// A growing plan dropped its pose `plan_index` (no camera accepted it) and gives the index
+    /// to its next pose: the book-keeping becomes what the folder now says of that index (a
+    /// rejected record there counts as one measurement of the next pose, as on a resume).
+    pub fn forget(&mut self, plan_index: usize) {
+        for (c, recording) in self.recordings.iter().enumerate() {
+            self.state.accepted[c].remove(&plan_index);
+            if recording.folder.visit_path(plan_index).is_file() {
+                self.state.attempts.insert((c, plan_index), 1);
+            } else {
+                self.state.attempts.remove(&(c, plan_index));
+            }
+        }
+        self.state.skipped_now.remove(&plan_index);
+    }
+
+    /// Camera `camera`'s accepted samples so far, in plan order (what its `samples.yaml` holds).
+    pub fn samples(&self, camera: usize) -> Vec<handeye_core::setup::PosePair> {
+        self.samples[camera]
+            .lock()
+            .map(|samples| samples.values().cloned().collect())
+            .unwrap_or_default()
+    }
+
+    /// Visits every pose of the plan some camera still needs (a rejected one once more), until
+    /// none is left or the run stops; every result is in when it returns. An error stops the
+    /// arm first and keeps every record; the loop is not to be used after it.
+    pub fn visit_pending(
+        &mut self,
+        robot: &mut dyn Robot,
+        devices: &mut [&mut dyn Camera],
+        on_event: &mut dyn FnMut(SessionEvent),
+    ) -> Result<(), SessionError> {
+        if devices.len() != self.recordings.len() {
+            return Err(SessionError::DetectionThread(
+                "the cameras opened do not match the session's",
+            ));
+        }
+        // A stop request ends a move in progress, not only the run after it.
+        robot.set_interrupt(self.setup.stop.clone());
+        let mut pending = self.state.pending(self.setup.plan.len());
+        // A fresh plan runs in its (checked) order; what a resumed run has left is visited in
+        // travel order from where the arm stands now. Retries follow each pass in plan order.
+        if !self.passed && self.state.resumed() {
+            order_for_travel(robot, &self.setup, &mut pending);
+        }
+        self.passed = true;
+        while !pending.is_empty() && self.state.error.is_none() {
+            for &plan_index in &pending {
+                if self.state.error.is_some() {
+                    break;
+                }
+                self.visit(plan_index, robot, devices, on_event)?;
+                self.state
+                    .receive_ready(&self.results, 2 * self.workers.len(), on_event);
+            }
+            // Every result of this pass must be in before deciding on retries.
+            self.state.drain(&self.results, on_event);
+            pending = self.state.pending(self.setup.plan.len());
+        }
+        self.state.drain(&self.results, on_event);
+        match self.state.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// One visit of pose `plan_index` by the cameras that still need it: a stop request, a
+    /// fault or a move refused on the way is put in the state (the arm stopped, the results
+    /// in); only a worker that cannot be reached is an error here.
+    fn visit(
+        &mut self,
+        plan_index: usize,
+        robot: &mut dyn Robot,
+        devices: &mut [&mut dyn Camera],
+        on_event: &mut dyn FnMut(SessionEvent),
+    ) -> Result<(), SessionError> {
+        let (setup, state, recordings) = (&self.setup, &mut self.state, &self.recordings);
+        let needed: Vec<usize> = (0..recordings.len())
+            .filter(|&c| state.wants(c, plan_index))
+            .collect();
+        if needed.is_empty() {
+            return Ok(());
+        }
+        if setup.stop.load(Ordering::SeqCst) {
+            let _ = robot.stop();
+            state.drain(&self.results, on_event);
+            state.error = Some(SessionError::Interrupted {
+                plan_index,
+                recorded: state.recorded(),
+                folder: state.folder.clone(),
+            });
+            return Ok(());
+        }
+        on_event(SessionEvent::Moving {
+            plan_index,
+            target: setup.plan[plan_index].0,
+        });
+        let fault = &self.fault;
+        let visited = arrive(robot, setup, plan_index).and_then(|arrival| {
+            let mut frames = Vec::with_capacity(needed.len());
+            for &c in &needed {
+                let grabbed =
+                    if fault.at(&format!("camera-lost:{}", recordings[c].name), plan_index) {
+                        Err(handeye_camera::CameraError::Backend(
+                            "no fresh frame (injected by HANDEYE_FAULT)".into(),
+                        ))
+                    } else {
+                        grab_fresh(&mut *devices[c], arrival.settled)
+                    };
+                match grabbed {
+                    Ok(frame) => frames.push((c, frame)),
+                    // Another camera still delivers: this one is named and left out.
+                    Err(error) if state.delivering() > 1 => {
+                        state.lose(c, plan_index, error.to_string(), on_event)
+                    }
+                    Err(error) => return Err(ErrorSource::Camera(error)),
+                }
+            }
+            let base_from_flange = robot.base_from_flange()?;
+            Ok((arrival, frames, base_from_flange))
+        });
+        match visited {
+            Ok((arrival, frames, base_from_flange)) => {
+                state.count(&arrival, frames.first().map(|(_, f)| f.captured_at));
+                let jobs = self
+                    .jobs
+                    .as_ref()
+                    .ok_or(SessionError::DetectionThread("stopped"))?;
+                for (camera, frame) in frames {
+                    state.in_flight += 1;
+                    state.submitted.push_back((plan_index, camera));
+                    jobs.send(Job {
+                        camera,
+                        plan_index,
+                        frame,
+                        base_from_flange,
+                    })
+                    .map_err(|_| SessionError::DetectionThread("stopped"))?;
+                }
+            }
+            // A second visit whose path from where the arm now stands leaves the checked space
+            // (the joint limits, the workspace box): nothing moved, the pose keeps its first
+            // record, and the run goes on without it rather than ending with the samples it has
+            // (issue #40: 8 good poses, then "resume" for a retry that could never be reached
+            // from there).
+            Err(ErrorSource::UnsafeMove(problem))
+                if needed.iter().all(|&c| state.tries(c, plan_index) > 0) =>
+            {
+                for &c in &needed {
+                    state.attempts.insert((c, plan_index), 2);
+                }
+                if needed.contains(&0) {
+                    state.skip(
+                        plan_index,
+                        format!("not visited again: from where the arm stood {problem}"),
+                    );
+                }
+            }
+            Err(source) => {
+                // Stop first, then let the worker finish what it has so the count is true.
+                let _ = robot.stop();
+                state.drain(&self.results, on_event);
+                state.error =
+                    Some(source.into_session(plan_index, state.recorded(), state.folder.clone()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends the run: the workers finish what they hold and stop; what the run did.
+    pub fn finish(mut self) -> Result<SessionOutcome, SessionError> {
+        if self.stop_workers() {
+            return Err(SessionError::DetectionThread("panicked"));
+        }
+        let state = &mut self.state;
+        let mut outcome = std::mem::take(&mut state.outcome);
+        outcome.accepted_by_camera = state
+            .accepted
+            .iter()
+            .map(|poses| poses.iter().copied().collect())
+            .collect();
+        outcome.accepted = outcome.accepted_by_camera[0].clone();
+        Ok(outcome)
+    }
+
+    /// Closes the job queue and joins the workers; whether one panicked.
+    fn stop_workers(&mut self) -> bool {
+        self.jobs = None;
+        self.state.drain(&self.results, &mut |_| {});
+        std::mem::take(&mut self.workers)
+            .into_iter()
+            .any(|w| w.join().is_err())
+    }
+}
+
+impl Drop for PoseLoop {
+    /// A run that ends by an error still lets its workers finish what they hold (every
+    /// committed record stays) before the error is returned.
+    fn drop(&mut self) {
+        self.stop_workers();
+    }
 }
 
 /// The run's cameras as recordings, in `setup.cameras`' order.
@@ -415,6 +519,9 @@ struct RunState {
     outcome: SessionOutcome,
     /// Each camera's records from before this run.
     previous: Vec<Vec<PoseVisit>>,
+    /// The first camera's poses skipped in this run and still in the plan (a growing plan
+    /// gives a dropped pose's index to its next).
+    skipped_now: BTreeSet<usize>,
     /// Each camera's poses with an accepted record.
     accepted: Vec<BTreeSet<usize>>,
     /// Measurements per (camera, pose), counting those of earlier runs.
@@ -429,7 +536,6 @@ struct RunState {
     /// Results that finished before an earlier job's: held so events go out in visit order.
     arrived: BTreeMap<(usize, usize), JobResult>,
     error: Option<SessionError>,
-    recorded_before: usize,
     /// The folder a resume takes (a several-camera session's root).
     folder: std::path::PathBuf,
     /// Whether the cameras are named in events (several cameras).
@@ -470,14 +576,11 @@ impl RunState {
         }
         Ok(RunState {
             outcome: SessionOutcome::default(),
-            recorded_before: accepted[0].len(),
             previous,
+            skipped_now: BTreeSet::new(),
             accepted,
             attempts,
-            lost: recordings
-                .iter()
-                .map(|r| setup.lost.contains(&r.name))
-                .collect(),
+            lost: vec![false; recordings.len()],
             names: recordings.iter().map(|r| r.name.clone()).collect(),
             in_flight: 0,
             submitted: Default::default(),
@@ -555,8 +658,16 @@ impl RunState {
         }
     }
 
+    /// Poses of the first camera with a final record: accepted (in any run), or skipped in
+    /// this one.
     fn recorded(&self) -> usize {
-        self.recorded_before + self.outcome.accepted.len() + self.outcome.skipped.len()
+        self.accepted[0].len() + self.skipped_now.len()
+    }
+
+    /// The first camera's pose `plan_index` is skipped, for `why`.
+    fn skip(&mut self, plan_index: usize, why: String) {
+        self.skipped_now.insert(plan_index);
+        self.outcome.skipped.push((plan_index, why));
     }
 
     /// Takes a worker's result; handles it, and any held behind it, in the order the jobs were
@@ -601,7 +712,7 @@ impl RunState {
             match &visit.rejected {
                 None => self.outcome.accepted.push(i),
                 Some(_) if will_retry => {}
-                Some(why) => self.outcome.skipped.push((i, why.clone())),
+                Some(why) => self.skip(i, why.clone()),
             }
         }
         on_event(SessionEvent::Recorded {
@@ -740,6 +851,42 @@ enum ErrorSource {
     Camera(handeye_camera::CameraError),
     /// The move was refused before it was sent.
     UnsafeMove(String),
+}
+
+impl ErrorSource {
+    /// The run's error at `plan_index` with `recorded` poses kept in `folder`.
+    fn into_session(
+        self,
+        plan_index: usize,
+        recorded: usize,
+        folder: std::path::PathBuf,
+    ) -> SessionError {
+        match self {
+            ErrorSource::Robot(RobotError::Interrupted) => SessionError::Interrupted {
+                plan_index,
+                recorded,
+                folder,
+            },
+            ErrorSource::Robot(source) => SessionError::Robot {
+                plan_index,
+                recorded,
+                folder,
+                source,
+            },
+            ErrorSource::UnsafeMove(problem) => SessionError::UnsafeMove {
+                plan_index,
+                recorded,
+                folder,
+                problem,
+            },
+            ErrorSource::Camera(source) => SessionError::Camera {
+                plan_index,
+                recorded,
+                folder,
+                source,
+            },
+        }
+    }
 }
 
 impl From<RobotError> for ErrorSource {

@@ -23,7 +23,7 @@ pub mod verify;
 
 pub use adaptive::{run_adaptive_session, PlanSource};
 pub use driver::{
-    run_session, CameraFailure, SessionCamera, SessionEvent, SessionOutcome, SessionSetup,
-    SharedFrame,
+    run_session, CameraFailure, PoseLoop, SessionCamera, SessionEvent, SessionOutcome,
+    SessionSetup, SharedFrame,
 };
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};

@@ -211,7 +211,6 @@ pub fn run_manual_session(
     {
         growing.poses.pop();
     }
-    let mut outcome = SessionOutcome::default();
     robot.set_interrupt(setup.stop.clone());
     let mut freedrive = false;
     let mut confirmed = !options.real_arm;
@@ -265,15 +264,7 @@ pub fn run_manual_session(
                     }
                     freedrive = false;
                 }
-                match capture(
-                    &setup,
-                    options,
-                    &mut growing,
-                    &mut outcome,
-                    robot,
-                    camera,
-                    control,
-                ) {
+                match capture(&setup, options, &mut growing, robot, camera, control) {
                     Ok(true) => {
                         suggestion =
                             suggest(&setup, &growing.poses, suggester.as_deref_mut(), control)?;
@@ -293,9 +284,12 @@ pub fn run_manual_session(
     }
     // Kept whatever ended the session (a stop too): what was captured so far is taught.
     let taught = write_taught_plan(&setup, &growing.poses);
+    let captured = growing.poses.len();
+    let finished = growing.finish();
     result?;
     taught?;
-    outcome.accepted = (0..growing.poses.len()).collect();
+    let mut outcome = finished?;
+    outcome.accepted = (0..captured).collect();
     Ok(outcome)
 }
 
@@ -493,7 +487,6 @@ fn capture(
     setup: &SessionSetup,
     options: &ManualOptions,
     plan: &mut GrowingPlan,
-    outcome: &mut SessionOutcome,
     robot: &mut dyn Robot,
     camera: &mut dyn Camera,
     control: &mut dyn ManualControl,
@@ -580,7 +573,6 @@ fn capture(
             }
             control.event(ManualEvent::Session(event));
         },
-        outcome,
     )?;
     if accepted {
         control.event(ManualEvent::Check {

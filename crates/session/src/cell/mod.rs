@@ -791,7 +791,6 @@ impl PreparedCell {
             resume_folder: folder.root().to_path_buf(),
             cameras: vec![self.session_camera(self.config.planner, folder)],
             named_cameras: self.config.listed,
-            lost: Vec::new(),
             plan,
             limits: self.config.limits,
             settle: self.config.settle(),

@@ -104,12 +104,15 @@ impl Fault {
     }
 }
 
-/// One camera as a worker holds it: its recording, its own detector, and its samples so far
-/// (shared by the workers).
+/// One camera's accepted samples by plan index, as the workers add them (shared by the workers
+/// and the run, which reads them without going back to disk).
+pub(super) type SharedSamples = Arc<Mutex<BTreeMap<usize, PosePair>>>;
+
+/// One camera as a worker holds it: its recording, its own detector, and its samples so far.
 struct WorkerCamera {
     recording: Recording,
     detector: TargetDetector,
-    samples: Arc<Mutex<BTreeMap<usize, PosePair>>>,
+    samples: SharedSamples,
 }
 
 /// Memory the run needs besides its detection workers and what it holds already when they start
@@ -177,22 +180,18 @@ fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
 /// every sample committed before it, whichever worker finishes first.
 pub(super) fn spawn_workers(
     cameras: &[Recording],
-    samples: Vec<BTreeMap<usize, PosePair>>,
+    samples: &[SharedSamples],
     fault: Arc<Fault>,
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
 ) -> Result<Vec<std::thread::JoinHandle<()>>, SessionError> {
     let workers = worker_count(cameras)?;
     let jobs = Arc::new(Mutex::new(jobs));
-    let samples: Vec<_> = samples
-        .into_iter()
-        .map(|s| Arc::new(Mutex::new(s)))
-        .collect();
     let mut handles = Vec::with_capacity(workers);
     for worker in 0..workers {
         let held = cameras
             .iter()
-            .zip(&samples)
+            .zip(samples)
             .map(|(recording, samples)| {
                 Ok(WorkerCamera {
                     detector: TargetDetector::spawn(&recording.board, recording.detector.clone())
