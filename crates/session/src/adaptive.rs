@@ -26,15 +26,18 @@ use handeye_records::{SessionError, SessionManifest};
 /// Yields the next pose of a session from the samples accepted so far.
 pub trait PlanSource {
     /// The next flange pose and the joints that reach it, or `None` to end the session.
-    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)>;
+    /// `samples`: each camera's accepted samples so far, in the session's camera order (the
+    /// planner camera's first).
+    fn next_pose(&mut self, samples: &[Vec<PosePair>]) -> Option<(Pose, Joints)>;
     /// Flange poses a resumed session visited already (planned or measured): not to be chosen
     /// again.
     fn visited(&mut self, poses: &[Pose]);
 }
 
 impl PlanSource for AdaptivePlanner {
-    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
-        self.next(samples)
+    /// The planner camera's samples choose (one camera's model).
+    fn next_pose(&mut self, samples: &[Vec<PosePair>]) -> Option<(Pose, Joints)> {
+        self.next(samples.first().map_or(&[][..], Vec::as_slice))
     }
     fn visited(&mut self, poses: &[Pose]) {
         self.mark_visited(poses);
@@ -165,18 +168,22 @@ impl GrowingPlan {
         Ok(accepted)
     }
 
-    /// The first camera's accepted samples so far: the pose loop's, or (before the first pose)
-    /// the session's `samples.yaml`.
-    fn samples(&self, setup: &SessionSetup) -> Result<Vec<PosePair>, SessionError> {
+    /// Each camera's accepted samples so far: the pose loop's, or (before the first pose) the
+    /// cameras' `samples.yaml`.
+    fn samples(&self, setup: &SessionSetup) -> Result<Vec<Vec<PosePair>>, SessionError> {
         if let Some(run) = &self.run {
-            return Ok(run.samples(0));
+            return Ok((0..setup.cameras.len()).map(|c| run.samples(c)).collect());
         }
-        let path = setup.folder().samples_path();
-        Ok(if path.is_file() {
-            Dataset::load(&path)?.pairs
-        } else {
-            Vec::new()
-        })
+        let mut all = Vec::with_capacity(setup.cameras.len());
+        for camera in &setup.cameras {
+            let path = camera.folder.samples_path();
+            all.push(if path.is_file() {
+                Dataset::load(&path)?.pairs
+            } else {
+                Vec::new()
+            });
+        }
+        Ok(all)
     }
 
     /// Ends the run: what its pose loop did (nothing without a pose).

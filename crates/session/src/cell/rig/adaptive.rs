@@ -16,16 +16,12 @@ use handeye_robot::Joints;
 
 use crate::PlanSource;
 use handeye_plan::nbv::{AdaptivePlanner, AdaptiveStep};
-use handeye_records::dataset::Dataset;
-use handeye_records::SessionFolder;
 
 /// The next-best pose over several cameras.
 pub struct RigPlanner {
     /// One model per camera, the planner camera's first (its log is the run's), over the same
     /// candidates.
     planners: Vec<AdaptivePlanner>,
-    /// The other cameras' folders: their samples so far are read from them at each choice.
-    folders: Vec<SessionFolder>,
     /// Per camera, per candidate: whether it is expected to see its board there.
     sees: Vec<Vec<bool>>,
     /// The most poses the plan may take.
@@ -34,17 +30,15 @@ pub struct RigPlanner {
 
 impl RigPlanner {
     /// A planner over the cameras' `planners` (the planner camera's first, each over the same
-    /// candidates), with the other cameras' `folders` and, per camera and candidate, whether it
+    /// candidates, in the session's camera order) with, per camera and candidate, whether it
     /// sees its board there.
     pub fn new(
         planners: Vec<AdaptivePlanner>,
-        folders: Vec<SessionFolder>,
         sees: Vec<Vec<bool>>,
         max_poses: usize,
     ) -> RigPlanner {
         RigPlanner {
             planners,
-            folders,
             sees,
             max_poses,
         }
@@ -59,26 +53,14 @@ impl RigPlanner {
     pub fn reached_target(&self) -> bool {
         self.planners.iter().all(AdaptivePlanner::reached_target)
     }
-
-    /// Each camera's samples so far: the planner camera's given, the others' from their folders.
-    fn samples(&self, primary: &[PosePair]) -> Vec<Vec<PosePair>> {
-        let mut all = vec![primary.to_vec()];
-        for folder in &self.folders {
-            let path = folder.samples_path();
-            // No samples file yet: nothing accepted yet.
-            all.push(Dataset::load(&path).map(|d| d.pairs).unwrap_or_default());
-        }
-        all
-    }
 }
 
 impl PlanSource for RigPlanner {
-    fn next_pose(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
-        let all = self.samples(samples);
+    fn next_pose(&mut self, all: &[Vec<PosePair>]) -> Option<(Pose, Joints)> {
         let assessed: Vec<(bool, Option<f64>)> = self
             .planners
             .iter_mut()
-            .zip(&all)
+            .zip(all)
             .map(|(planner, samples)| planner.assess(samples))
             .collect();
         let done = self.reached_target() || self.planners[0].taken() >= self.max_poses;
@@ -89,7 +71,7 @@ impl PlanSource for RigPlanner {
             let gains: Vec<Vec<Option<f64>>> = self
                 .planners
                 .iter()
-                .zip(&all)
+                .zip(all)
                 .map(|(planner, samples)| {
                     if planner.reached_target() {
                         Vec::new()
@@ -116,7 +98,7 @@ impl PlanSource for RigPlanner {
                 .map(|(i, _)| i)
         };
         self.planners[0].log.push(AdaptiveStep {
-            samples: samples.len(),
+            samples: all.first().map_or(0, Vec::len),
             solved_sigma_mm: assessed[0].1,
             chose: choice,
             predicted_sigma_mm: None,
@@ -185,23 +167,13 @@ mod tests {
             .position(|(pose, _)| *pose == alone.0)
             .unwrap();
         let other = (first_alone + 1) % candidates.len();
-        let folder = std::env::temp_dir().join(format!(
-            "handeye-rig-planner-{}-{}",
-            std::process::id(),
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_nanos()
-        ));
-        let second = SessionFolder::create(&folder).unwrap();
         let choose = |second_sees: Vec<bool>| {
             let mut rig = RigPlanner::new(
                 vec![planner(), planner()],
-                vec![second.clone()],
                 vec![vec![true; 3], second_sees],
                 10,
             );
-            let (pose, _) = rig.next_pose(&[]).expect("a first pose");
+            let (pose, _) = rig.next_pose(&[vec![], vec![]]).expect("a first pose");
             candidates.iter().position(|(p, _)| *p == pose).unwrap()
         };
         let mut only_other = vec![false; 3];
@@ -212,7 +184,5 @@ mod tests {
             first_alone,
             "a blind camera adds nothing"
         );
-        drop(second);
-        let _ = std::fs::remove_dir_all(&folder);
     }
 }

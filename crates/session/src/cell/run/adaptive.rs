@@ -117,10 +117,6 @@ pub(super) fn drive_plan(
             .with_stop_check(good_enough(cell, camera))
     };
     let mut planner = camera_planner(cell.config.planner, max_poses);
-    let others: Vec<_> = setup.cameras[1..]
-        .iter()
-        .map(|o| o.folder.clone())
-        .collect();
     let mut rig_planner = cell.config.listed.then(|| {
         let planners = cell
             .run_order()
@@ -134,7 +130,7 @@ pub(super) fn drive_plan(
                     .collect()
             })
             .collect();
-        super::super::rig::adaptive::RigPlanner::new(planners, others, sees, max_poses)
+        super::super::rig::adaptive::RigPlanner::new(planners, sees, max_poses)
     });
     let source: &mut dyn crate::PlanSource = match &mut rig_planner {
         Some(rig) => rig,
