@@ -23,7 +23,8 @@ controller's keep-alive topic `~/enable_freedrive_mode` (freedrive ends after
 inactive, and `guide K` is refused unless the arm is in freedrive (the arm stops where it is when
 freedrive ends mid-guide).
 
-Faults for tests: --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
+Faults for tests: --lose-first-switch request|reply (the first switch_controller request, or only
+its reply, is lost in transit), --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
 --die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
 tool0), --succeed-without-moving N, --second-flange-publisher [N] (a second DDS writer on /tf, as
 a second robot_state_publisher or a static publisher left running would be: base_link -> tool0
@@ -225,6 +226,9 @@ def add_arguments(p):
     p.add_argument("--freedrive", choices=["humble", "jazzy"], default=None,
                    help="serve the UR driver's freedrive: switch_controller as this distribution lays it out")
     p.add_argument("--freedrive-timeout-s", type=float, default=1.0)
+    p.add_argument("--lose-first-switch", choices=["request", "reply"], default=None,
+                   help="the first switch_controller request is lost in transit (neither done nor "
+                        "answered), or only its reply is (done, not answered)")
     p.add_argument("--abort-goal", type=int, default=0)
     p.add_argument("--die-in-goal", type=int, default=0)
     p.add_argument("--no-tool0", action="store_true")
@@ -355,6 +359,7 @@ class Freedrive:
         self.motion = action.strip("/").split("/")[0]
         self.active = {self.motion}
         self.on, self.last, self.timeout = False, 0.0, args.freedrive_timeout_s
+        self.lose_first, self.requests = args.lose_first_switch, 0
         self.switch_r = R("rq/controller_manager/switch_controllerRequest", req, dds.qos_reliable())
         self.switch_w = W("rr/controller_manager/switch_controllerReply", self.reply, dds.qos_reliable())
         self.enable_r = R(f"rt/{self.FREEDRIVE}/enable_freedrive_mode", m.Bool, dds.qos_reliable())
@@ -378,6 +383,11 @@ class Freedrive:
         for req in requests:
             if not hasattr(req, "strictness"):
                 continue
+            self.requests += 1
+            lost = self.lose_first if self.requests == 1 else None
+            if lost == "request":
+                say(event="lost_switch", lost="request")
+                continue
             act, deact = list(req.activate_controllers), list(req.deactivate_controllers)
             ok = (all(c in known and c not in self.active for c in act)
                   and all(c in self.active for c in deact))
@@ -385,6 +395,9 @@ class Freedrive:
                 self.active = (self.active - set(deact)) | set(act)
                 if self.FREEDRIVE not in self.active and self.on:
                     self.set(False, "controller deactivated")
+            if lost == "reply":
+                say(event="lost_switch", lost="reply", ok=ok, active=sorted(self.active))
+                continue
             self.switch_w.write(self.reply(req.client_id, req.seq, ok))
             say(event="switch", activate=act, deactivate=deact, strictness=req.strictness, ok=ok,
                 active=sorted(self.active))

@@ -21,7 +21,9 @@ use ros2_client::{Publisher, ServiceMapping, ServiceTypeName};
 use handeye_robot::RobotError;
 
 use crate::arm::Framing;
-use crate::link::{call, reliable_qos, serves, settle_after_match, topic_name, Ros2Link};
+use crate::link::{
+    call, reliable_qos, serves, settle_after_match, topic_name, Ros2Link, REQUEST_RESEND,
+};
 use crate::msg::{
     Bool, SwitchControllerHumble, SwitchControllerJazzy, SwitchControllerResponse, SWITCH_STRICT,
 };
@@ -227,13 +229,19 @@ impl Freedrive {
             Distro::Humble => "humble",
             Distro::Jazzy => "jazzy",
         };
-        match answer {
-            Some(Ok(SwitchControllerResponse { ok: true })) => Ok(()),
-            Some(Ok(SwitchControllerResponse { ok: false })) => Err(backend(format!(
+        match answer.map(|a| (a.response, a.to_a_repeat)) {
+            Some((Ok(SwitchControllerResponse { ok: true }), _)) => Ok(()),
+            Some((Ok(SwitchControllerResponse { ok: false }), false)) => Err(backend(format!(
                 "{what}: the controller manager refused (are both controllers loaded? the UR driver 2.5 or later loads {} inactive)",
                 self.options.freedrive_controller
             ))),
-            Some(Err(e)) => Err(backend(format!("{what}: {e}"))),
+            // The first request went unanswered and its repeat was refused: the first may have
+            // switched them (only its answer lost), and a strict switch refuses to do it twice.
+            Some((Ok(SwitchControllerResponse { ok: false }), true)) => Err(backend(format!(
+                "{what}: the first request went unanswered for {}s and the controller manager refused its repeat; the first may have switched them — check which controller is active (`ros2 control list_controllers`) before you go on",
+                REQUEST_RESEND.as_secs()
+            ))),
+            Some((Err(e), _)) => Err(backend(format!("{what}: {e}"))),
             None => Err(RobotError::ConnectionLost(format!(
                 "{what}: {} within {timeout:?} (is the controller manager on this domain, and is robot.freedrive.distro ({distro}) its ROS 2 distribution? Humble and Jazzy lay this request out differently)",
                 if served { "no answer" } else { "no server of it found" }

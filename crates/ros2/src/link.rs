@@ -391,30 +391,75 @@ pub(crate) fn poll_for<T, E>(
     }
 }
 
+/// How long [`call`] waits for an answer before it sends its request again.
+pub(crate) const REQUEST_RESEND: Duration = Duration::from_secs(5);
+
+/// A service's answer and whether it answered a repeat of the request (the first sending went
+/// unanswered: it may have been lost, or only its answer).
+pub(crate) struct Answer<Resp> {
+    pub response: Result<Resp, String>,
+    pub to_a_repeat: bool,
+}
+
 /// `request` to `client`'s server and its answer, polled for up to `timeout` ([`poll_for`]);
-/// `None` without an answer.
+/// `None` without an answer. Unanswered for [`REQUEST_RESEND`], the request is sent again (and
+/// so on until `timeout`): a request sent before the server's reader has taken in our writer is
+/// dropped for good by Cyclone DDS, however long the client waits (seen in CI as a freedrive
+/// switch unanswered for 30 s). The first answer to any of the sendings is the answer. Only
+/// for requests whose repeat is harmless: a server that did the first may refuse the repeat,
+/// which the caller then says.
 pub(crate) fn call<Req, Resp>(
     client: &ros2_client::Client<Req, Resp>,
     request: Req,
     timeout: Duration,
-) -> Option<Result<Resp, String>>
+) -> Option<Answer<Resp>>
 where
-    Req: ros2_client::Message + 'static,
+    Req: ros2_client::Message + Clone + 'static,
     Resp: ros2_client::Message + 'static,
 {
-    let id = match client.send_request(request) {
-        Ok(id) => id,
-        Err(e) => return Some(Err(format!("{e:?}"))),
-    };
-    poll_for(Instant::now() + timeout, || loop {
-        match client.receive_response() {
-            Ok(Some((answered, response))) if answered == id => return Ok(Some(response)),
-            // An answer to an earlier request: read past it.
-            Ok(Some(_)) => continue,
-            Ok(None) => return Ok(None),
-            Err(e) => return Err(format!("{e:?}")),
+    let deadline = Instant::now() + timeout;
+    let mut sent = Vec::new();
+    loop {
+        match client.send_request(request.clone()) {
+            Ok(id) => sent.push(id),
+            Err(e) => {
+                return Some(Answer {
+                    response: Err(format!("{e:?}")),
+                    to_a_repeat: !sent.is_empty(),
+                })
+            }
         }
-    })
+        let resend_at = (Instant::now() + REQUEST_RESEND).min(deadline);
+        let answer = poll_for(resend_at, || loop {
+            match client.receive_response() {
+                Ok(Some((answered, response))) => {
+                    match sent.iter().position(|id| *id == answered) {
+                        Some(k) => return Ok(Some((k, response))),
+                        // An answer to an earlier call: read past it.
+                        None => continue,
+                    }
+                }
+                Ok(None) => return Ok(None),
+                Err(e) => return Err(format!("{e:?}")),
+            }
+        });
+        match answer {
+            Some(Ok((k, response))) => {
+                return Some(Answer {
+                    response: Ok(response),
+                    to_a_repeat: k > 0,
+                })
+            }
+            Some(Err(e)) => {
+                return Some(Answer {
+                    response: Err(e),
+                    to_a_repeat: sent.len() > 1,
+                })
+            }
+            None if Instant::now() >= deadline => return None,
+            None => {}
+        }
+    }
 }
 
 #[cfg(test)]
