@@ -28,7 +28,7 @@ use handeye_core::camera_model::CameraModel;
 use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::cell_model::{self, fit_cell_model, CellModel, Explanation};
-use handeye_solve::verdict::{self, Verdict};
+use handeye_solve::verdict::{self, FoldFlanges, Verdict};
 use handeye_solve::{
     self as solve, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
     ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, SolveOptions,
@@ -396,23 +396,30 @@ pub fn solve_with_arm(
     config: &CellConfig,
     mut notices: Vec<Notice>,
 ) -> Result<SolvedSession, SessionError> {
-    let solve = |pairs: &[PosePair], visits: &[PoseVisit], notices: Vec<Notice>| {
-        solve_session_with(dataset.setup, pairs, visits, vision, config, notices)
+    let solve = |pairs: &[PosePair],
+                 visits: &[PoseVisit],
+                 notices: Vec<Notice>,
+                 refit: Option<FoldFlanges<'_>>| {
+        solve_session_with(dataset.setup, pairs, visits, vision, config, notices, refit)
     };
     let (corrected, arm_choice) =
         estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
     let Some(corrected) = corrected else {
         notices.extend(arm_choice);
-        return solve(&dataset.pairs, visits, notices);
+        return solve(&dataset.pairs, visits, notices, None);
     };
     let published = match config.solver.kinematics() {
-        KinematicsChoice::Auto => Some(solve(&dataset.pairs, visits, notices.clone())?),
+        KinematicsChoice::Auto => Some(solve(&dataset.pairs, visits, notices.clone(), None)?),
         _ => None,
     };
+    // The held-out folds refit the arm without their sample: fitted to it too, the arm would
+    // predict it partly from itself.
+    let folds = &corrected.folds;
     let mut with_arm = solve(
         &corrected.pairs,
         &corrected.visits,
         notices.iter().cloned().chain(arm_choice.clone()).collect(),
+        Some(&|left_out| folds.flanges_without(left_out)),
     )?;
     if let (Some(mut published), Some(after)) = (published, contradicted_files(&with_arm)) {
         published.calibration.notices.push(Notice::info(
@@ -668,7 +675,15 @@ fn solve_from_scratch(
             sigma[0], sigma[1], sigma[2], sigma[3]
         ));
     }
-    conclude(&mut solved, &pairs, &options, config, &notes, Vec::new());
+    conclude(
+        &mut solved,
+        &pairs,
+        &options,
+        config,
+        &notes,
+        Vec::new(),
+        None,
+    );
     // The board poses just estimated are this session's samples: `samples.yaml` (which the
     // report, `verify` and `solve <session>` read) holds them, consistent with
     // `camera_info.yaml`. The run records none without intrinsics.
@@ -737,6 +752,7 @@ fn conclude(
     config: &CellConfig,
     notes: &[String],
     findings: Vec<Notice>,
+    refit: Option<FoldFlanges<'_>>,
 ) {
     solved.calibration.notices.extend(findings);
     // Swapped unknowns first (their own cause); else an answer simply far from the nominal —
@@ -765,6 +781,7 @@ fn conclude(
         options,
         config.verdict.accuracy(),
         solved.cell_model.as_ref().map(|m| &m.summary),
+        refit,
     );
     solved.summary = format!("{}\n{}", verdict.terminal_lines(), solved.describe(notes));
     solved.verdict = Some(verdict);
@@ -779,11 +796,12 @@ pub fn solve_session(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
-    solve_session_with(setup, pairs, visits, vision, config, Vec::new())
+    solve_session_with(setup, pairs, visits, vision, config, Vec::new(), None)
 }
 
 /// [`solve_session`] with `findings` of the session layer's own checks (wrong intrinsics) added
-/// to the answer's notices before the verdict judges them.
+/// to the answer's notices before the verdict judges them, and with `refit` when the robot
+/// poses were corrected by the arm's own model (the verdict's held-out folds refit it).
 pub fn solve_session_with(
     setup: Setup,
     pairs: &[PosePair],
@@ -791,6 +809,7 @@ pub fn solve_session_with(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
     findings: Vec<Notice>,
+    refit: Option<FoldFlanges<'_>>,
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();
     let pose_space =
@@ -940,7 +959,15 @@ pub fn solve_session_with(
     } else {
         &corrected
     };
-    conclude(&mut solved, judged, &options, config, &notes, findings);
+    conclude(
+        &mut solved,
+        judged,
+        &options,
+        config,
+        &notes,
+        findings,
+        refit,
+    );
     Ok(solved)
 }
 

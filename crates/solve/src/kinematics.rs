@@ -291,6 +291,58 @@ impl ArmFit {
     }
 }
 
+/// An arm fit as made, to be made again without one sample: a held-out sample predicted
+/// through an arm model fitted to it too would owe its small error partly to itself (the
+/// verdict's held-out folds refit it: `verdict::held_out_refitting`).
+#[derive(Debug, Clone)]
+pub struct ArmRefit {
+    /// The layout.
+    pub setup: Setup,
+    /// What is estimated.
+    pub model: ArmModel,
+    /// The published chain.
+    pub chain: DhChain,
+    /// Every sample, in the order of the session's pairs.
+    pub samples: Vec<ArmSample>,
+    /// Samples the start left out of the fit (its outliers).
+    pub dropped: Vec<usize>,
+    /// The start: `(camera mount, target mount)`.
+    pub start: (Pose, Pose),
+    /// The board-pose noise the fit weighs with.
+    pub noise: NoiseModel,
+    /// The solve's options.
+    pub options: SolveOptions,
+}
+
+impl ArmRefit {
+    /// Every sample's flange pose corrected by the model fitted without sample `left_out`
+    /// (from the same start as the fit of all).
+    pub fn flanges_without(&self, left_out: usize) -> Result<Vec<Pose>, String> {
+        let kept: Vec<ArmSample> = self
+            .samples
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != left_out && !self.dropped.contains(i))
+            .map(|(_, s)| s.clone())
+            .collect();
+        let fit = fit_arm(
+            self.model,
+            self.setup,
+            &self.chain,
+            &kept,
+            (&self.start.0, &self.start.1),
+            self.noise,
+            &self.options,
+        )
+        .map_err(|e| e.to_string())?;
+        Ok(self
+            .samples
+            .iter()
+            .map(|s| fit.corrected_flange(&self.chain, s))
+            .collect())
+    }
+}
+
 /// A sample prepared for the fit: its measured `A`, its correction `T_reported · FK(q)⁻¹`, its
 /// joints, and its scale `sqrt(weight)`.
 struct Prepared {

@@ -14,7 +14,8 @@ use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::arm_errors::ArmErrors;
 use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
 use handeye_solve::kinematics::{
-    fit_arm as fit_model, ArmFit, ArmModel, ArmSample, DhChain, LinkParameter, OffsetStatus,
+    fit_arm as fit_model, ArmFit, ArmModel, ArmRefit, ArmSample, DhChain, LinkParameter,
+    OffsetStatus,
 };
 use handeye_solve::{self as solve, SolveError};
 
@@ -53,6 +54,9 @@ pub struct Corrected {
     pub visits: Vec<PoseVisit>,
     /// The estimate.
     pub arm: ArmEstimate,
+    /// What the fit was made of, to make it again without one sample (the verdict's held-out
+    /// folds: [`ArmRefit::flanges_without`]).
+    pub folds: ArmRefit,
 }
 
 /// The joints a visit was taken at: its plan pose's (rad), if the plan has it.
@@ -191,7 +195,7 @@ fn fit_arm(
     .map_err(failed)?;
     let arm = ArmEstimate {
         model: model.name.clone(),
-        chain,
+        chain: chain.clone(),
         fit,
     };
     let pairs = samples
@@ -211,7 +215,22 @@ fn fit_arm(
             v
         })
         .collect();
-    Ok(Corrected { pairs, visits, arm })
+    let folds = ArmRefit {
+        setup,
+        model: estimated,
+        chain,
+        samples,
+        dropped: start.dropped.clone(),
+        start: (start.camera_mount, start.target_mount),
+        noise,
+        options,
+    };
+    Ok(Corrected {
+        pairs,
+        visits,
+        arm,
+        folds,
+    })
 }
 
 impl ArmEstimate {

@@ -30,6 +30,11 @@ pub fn working_distance_mm(pairs: &[PosePair]) -> f64 {
     diagnostics::median(&distances)
 }
 
+/// Every sample's `T_base_flange` as a fold sees it, when a fit to every sample corrects the
+/// robot poses (the arm's own model): `left_out` → the flange poses corrected by the same fit
+/// made without that sample, so its prediction owes nothing to its own measurement.
+pub type FoldFlanges<'a> = &'a dyn Fn(usize) -> Result<Vec<Pose>, String>;
+
 /// Held-out (leave-one-out) errors: each sample (at most [`MAX_HELD_OUT`], evenly spaced) is
 /// predicted by a solve of all the others with `options` (covariance and convention checks off
 /// in the folds, each started from `full`, the answer of all the samples: see
@@ -43,6 +48,18 @@ pub fn held_out(
     options: &SolveOptions,
     full: &Calibration,
 ) -> Result<HeldOut, String> {
+    held_out_refitting(setup, pairs, options, full, None)
+}
+
+/// [`held_out`] where each fold's robot poses come from `refit` (fitted without its held-out
+/// sample) instead of `pairs`' own.
+pub fn held_out_refitting(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    full: &Calibration,
+    refit: Option<FoldFlanges<'_>>,
+) -> Result<HeldOut, String> {
     let n = pairs.len();
     if n < MIN_HELD_OUT_SAMPLES {
         return Err(format!(
@@ -53,8 +70,31 @@ pub fn held_out(
     let mut errors = Vec::with_capacity(count);
     for k in 0..count {
         let left_out = k * n / count;
+        let fold: std::borrow::Cow<'_, [PosePair]> = match refit {
+            None => pairs.into(),
+            Some(refit) => {
+                let flanges = refit(left_out).map_err(|e| {
+                    format!("refitting the arm's model without sample {left_out} failed ({e})")
+                })?;
+                if flanges.len() != n {
+                    return Err(format!(
+                        "the refit without sample {left_out} gave {} robot poses for {n} samples",
+                        flanges.len()
+                    ));
+                }
+                pairs
+                    .iter()
+                    .zip(flanges)
+                    .map(|(pair, base_from_flange)| PosePair {
+                        base_from_flange,
+                        ..pair.clone()
+                    })
+                    .collect::<Vec<_>>()
+                    .into()
+            }
+        };
         let predicted =
-            solve::predict_left_out(setup, pairs, options, left_out, full).map_err(|e| {
+            solve::predict_left_out(setup, &fold, options, left_out, full).map_err(|e| {
                 format!(
                 "solving without sample {left_out} failed ({e}): the answer hangs on that one pose"
             )
@@ -148,19 +188,22 @@ pub fn assess_solved(
     options: &SolveOptions,
     accuracy: Accuracy,
 ) -> Verdict {
-    assess_modelled(calibration, pairs, options, accuracy, None)
+    assess_modelled(calibration, pairs, options, accuracy, None, None)
 }
 
 /// [`assess_solved`] with the cell model's choice (when the corners were fitted): `pairs` are
-/// then the board poses with the files as the chosen explanation corrects them.
+/// then the board poses with the files as the chosen explanation corrects them; with `refit`
+/// when the robot poses were corrected by a fit to every sample (the arm's own model), each
+/// held-out fold refits it without its sample ([`held_out_refitting`]).
 pub fn assess_modelled(
     calibration: &Calibration,
     pairs: &[PosePair],
     options: &SolveOptions,
     accuracy: Accuracy,
     cell_model: Option<&CellModelSummary>,
+    refit: Option<FoldFlanges<'_>>,
 ) -> Verdict {
-    let held = held_out(calibration.setup, pairs, options, calibration);
+    let held = held_out_refitting(calibration.setup, pairs, options, calibration, refit);
     assess(&Evidence {
         calibration,
         pairs,
