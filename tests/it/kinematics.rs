@@ -1115,7 +1115,7 @@ fn the_held_out_check_refits_the_arms_model_without_each_sample() {
             .iter()
             .map(|q| {
                 q.iter()
-                    .map(|v| v + rng.gen_range(-15f64..15.0).to_radians())
+                    .map(|v| v + rng.random_range(-15f64..15.0).to_radians())
                     .collect()
             })
             .collect();
