@@ -1157,3 +1157,113 @@ fn the_held_out_check_refits_the_arms_model_without_each_sample() {
         "fitted-to-all lower in {lower} of {HELD_OUT_DRAWS}"
     );
 }
+
+/// #41: `plan check` says what a plan determines of the arm's model before anything moves (the
+/// model fitted to noise-free samples of the nominal cell at the plan's joints, at the
+/// configured noise). Its predicted 1σ of each offset is the spread of the offsets fitted to
+/// samples drawn at that noise (30 draws: each within 0.7–1.4× of the spread); the base and
+/// last joints are named as absorbed, and so is wrist 2 when the plan moves neither it nor
+/// wrist 3 (its offset then only turns the flange-side transform).
+#[test]
+fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_move() {
+    use handeye_solve::kinematics::{fit_arm, ArmModel};
+    let config_path = repo().join("configs/sim-cell-arm-errors.yaml");
+    let prepared = handeye_session::cell::prepare(&config_path).unwrap();
+    let note = prepared
+        .report
+        .notes
+        .iter()
+        .find(|n| n.starts_with("solver.kinematics: joint_offsets"))
+        .unwrap_or_else(|| panic!("no arm model note: {:?}", prepared.report.notes))
+        .clone();
+    eprintln!("{note}");
+    assert!(
+        note.contains("base (absorbed by T_base_target)")
+            && note.contains("wrist 3 (absorbed by T_flange_camera)"),
+        "{note}"
+    );
+    let predicted = |joint: &str| -> f64 {
+        let at = note
+            .find(&format!("{joint} "))
+            .unwrap_or_else(|| panic!("{joint}: {note}"));
+        let rest = &note[at + joint.len() + 1..];
+        rest[..rest.find('°').unwrap()].parse().unwrap()
+    };
+    // Draws at the configured noise, fitted with it fixed (as the prediction assumes).
+    let (joints, model, physical) = shipped_plan(&config_path);
+    let options = SolveOptions {
+        estimate_noise: handeye_solve::EstimateNoise::NONE,
+        ..prepared.config.solver.to_options()
+    };
+    let noise = options.noise;
+    let board = BoardNoise(
+        noise.translation_sigma_m * 1e3,
+        noise.rotation_sigma_rad.to_degrees(),
+    );
+    let chain = handeye_records::solve::dh_chain(&model);
+    let none = ArmErrors::default();
+    let names = ["shoulder", "elbow", "wrist 1", "wrist 2"];
+    let mut estimates: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    for draw in 0..30 {
+        let (noisy, _) = samples_with(
+            &joints,
+            &model,
+            &none,
+            &physical,
+            [board, BoardNoise(0.0, 0.0)],
+            7000 + draw,
+        );
+        let fit = fit_arm(
+            ArmModel::JointOffsets,
+            physical.setup,
+            &chain,
+            &noisy,
+            (&physical.camera_mount, &physical.target_mount),
+            noise,
+            &options,
+        )
+        .unwrap();
+        for (k, e) in estimates.iter_mut().enumerate() {
+            e.push(fit.offsets[k + 1].offset_rad.to_degrees());
+        }
+    }
+    for (name, values) in names.iter().zip(&estimates) {
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        let spread = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+            / (values.len() - 1) as f64)
+            .sqrt();
+        let ratio = predicted(name) / spread;
+        eprintln!(
+            "{name}: predicted 1σ {:.4}°, spread of 30 draws {spread:.4}° ({ratio:.2}×)",
+            predicted(name)
+        );
+        assert!((0.7..=1.4).contains(&ratio), "{name}: {ratio}");
+    }
+    // A plan whose wrists 2 and 3 never move: wrist 2's offset is no longer estimated.
+    let plan: Vec<_> = prepared
+        .report
+        .validated()
+        .unwrap()
+        .into_iter()
+        .map(|(pose, mut q)| {
+            q[4] = 0.3;
+            q[5] = -0.2;
+            (pose, q)
+        })
+        .collect();
+    let fixed = handeye_records::solve::plan_observability(
+        &prepared.config,
+        prepared.arm.as_ref().unwrap(),
+        &prepared.config.camera().nominal,
+        &plan,
+    )
+    .unwrap();
+    eprintln!("{fixed}");
+    let estimated = &fixed[..fixed.find("; held at 0").unwrap_or(fixed.len())];
+    assert!(!estimated.contains("wrist 2 0."), "{fixed}");
+    assert!(
+        fixed.contains("wrist 2 (absorbed")
+            || fixed.contains("not determined by these poses: wrist 2"),
+        "{fixed}"
+    );
+}

@@ -13,7 +13,7 @@ mod driver_calibration;
 mod intrinsics_check;
 mod summary;
 
-pub use arm::{dh_chain, estimate_arm, ArmEstimate, Corrected};
+pub use arm::{dh_chain, estimate_arm, plan_observability, ArmEstimate, Corrected};
 pub use driver_calibration::{
     driver_calibration_notice, with_driver_calibration, DRIVER_CALIBRATION_FILE,
 };

@@ -439,3 +439,135 @@ fn joint_name(joint: usize) -> String {
         .get(joint)
         .map_or_else(|| format!("joint {}", joint + 1), |n| (*n).to_string())
 }
+
+/// What `plan`'s joints determine of the arm's model before anything moves (issue #41: plans
+/// that make it observable): the model `config` asks for (`solver.kinematics: joint_offsets |
+/// dh`) fitted to noise-free samples of the nominal cell `nominal` at the plan's joints, at the
+/// configured noise, so its 1σ are what the plan can give. A note for `plan check` (its lines
+/// after the first indented): each joint offset's 1σ or why it is held (absorbed, or not
+/// determined by these poses: a joint the plan does not move enough), the link corrections'
+/// largest 1σ (dh), and the transforms' 1σ with the model and without it. `None` when the
+/// config estimates no model or the fit fails.
+pub fn plan_observability(
+    config: &CellConfig,
+    arm: &UrModel,
+    nominal: &handeye_core::setup::CellTransforms,
+    plan: &[(Pose, handeye_robot::Joints)],
+) -> Option<String> {
+    let estimated = match config.solver.kinematics() {
+        KinematicsChoice::JointOffsets => ArmModel::JointOffsets,
+        KinematicsChoice::Dh => ArmModel::Dh,
+        _ => return None,
+    };
+    let chain = dh_chain(arm);
+    let samples: Vec<ArmSample> = plan
+        .iter()
+        .enumerate()
+        .map(|(i, (_, joints))| {
+            let flange = arm.forward(joints);
+            let mut pair = PosePair::new(flange, nominal.camera_from_target(&flange));
+            pair.id = Some(format!("pose-{i:03}"));
+            ArmSample {
+                pair,
+                joints: joints.iter().copied().collect(),
+            }
+        })
+        .collect();
+    let options = solve::SolveOptions {
+        estimate_noise: solve::EstimateNoise::NONE,
+        ..config.solver.to_options()
+    };
+    let pairs: Vec<PosePair> = samples.iter().map(|s| s.pair.clone()).collect();
+    let without = solve::solve(nominal.setup, &pairs, &options).ok()?;
+    let fit = fit_model(
+        estimated,
+        nominal.setup,
+        &chain,
+        &samples,
+        (&nominal.camera_mount, &nominal.target_mount),
+        options.noise,
+        &options,
+    )
+    .ok()?;
+    // The fits scale their covariance by χ²/dof, which noise-free samples drive to its floor:
+    // undone, the 1σ are the configured noise's.
+    let prior = |u: &solve::Uncertainty| 1.0 / u.variance_factor.sqrt();
+    let sigma_of = |u: Option<&solve::Uncertainty>| {
+        u.map(|u| {
+            (
+                u.camera_mount
+                    .translation_mm
+                    .max(u.target_mount.translation_mm)
+                    * prior(u),
+                u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg) * prior(u),
+            )
+        })
+    };
+    let fit_prior = fit.uncertainty.as_ref().map_or(1.0, prior);
+    let mut estimated_offsets = Vec::new();
+    let mut held = Vec::new();
+    let mut undetermined = Vec::new();
+    for o in &fit.offsets {
+        let name = joint_name(o.joint);
+        match o.status {
+            OffsetStatus::Estimated { sigma_rad } => {
+                estimated_offsets.push(format!("{name} {:.4}°", sigma_rad.to_degrees() * fit_prior))
+            }
+            OffsetStatus::Absorbed { by } => held.push(format!(
+                "{name} (absorbed by {})",
+                by.unwrap_or("both transforms")
+            )),
+            OffsetStatus::Undetermined => undetermined.push(name),
+        }
+    }
+    let what = match estimated {
+        ArmModel::JointOffsets => "joint_offsets",
+        ArmModel::Dh => "dh",
+    };
+    let mut lines = vec![format!(
+        "solver.kinematics: {what} from these {} poses at the configured noise: joint offsets' 1σ {}{}",
+        plan.len(),
+        if estimated_offsets.is_empty() {
+            "none estimable".to_string()
+        } else {
+            estimated_offsets.join(", ")
+        },
+        if held.is_empty() {
+            String::new()
+        } else {
+            format!("; held at 0: {}", held.join(", "))
+        }
+    )];
+    if estimated == ArmModel::Dh {
+        let rows: Vec<LinkCorrectionYaml> = fit.links.iter().map(link_row).collect();
+        let largest = |unit: &str| {
+            rows.iter()
+                .filter(|r| r.unit == unit)
+                .filter_map(|r| r.sigma)
+                .fold(0.0f64, f64::max)
+                * fit_prior
+        };
+        lines.push(format!(
+            "  {} DH link corrections estimable, 1σ up to {:.3} mm and {:.4}°",
+            rows.iter().filter(|r| r.sigma.is_some()).count(),
+            largest("mm"),
+            largest("deg")
+        ));
+    }
+    if let (Some(with), Some(plain)) = (
+        sigma_of(fit.uncertainty.as_ref()),
+        sigma_of(without.uncertainty.as_ref()),
+    ) {
+        lines.push(format!(
+            "  the transforms' 1σ {:.3} mm / {:.4}° with the arm's model, {:.3} mm / {:.4}° with the published one",
+            with.0, with.1, plain.0, plain.1
+        ));
+    }
+    if !undetermined.is_empty() {
+        lines.push(format!(
+            "  offsets not determined by these poses: {} (add poses that move these joints further)",
+            undetermined.join(", ")
+        ));
+    }
+    Some(lines.join("\n"))
+}

@@ -324,6 +324,16 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
         }
     }
     prepared.report = prepared.check();
+    // What the plan determines of the arm's model, when the config estimates one.
+    if let (Some(arm), Some(plan)) = (&prepared.arm, prepared.report.validated()) {
+        let note = handeye_records::solve::plan_observability(
+            &prepared.config,
+            arm,
+            &prepared.config.camera().nominal,
+            &plan,
+        );
+        prepared.report.notes.extend(note);
+    }
     Ok(prepared)
 }
 
