@@ -769,3 +769,31 @@ fn a_ur_model_read_in_base_link_is_refused_at_load_naming_the_fix() {
     let loaded = CellConfig::load(&config).unwrap();
     assert_eq!(loaded.robot.frames().base, "base");
 }
+
+/// #41: with the arm's own model estimated (`solver.kinematics: joint_offsets | dh`) a generated
+/// plan visits every pose by default (the adaptive stop weighs the transforms only, and stops
+/// where the offsets are barely determined); `plan.adaptive: true` still asks for the adaptive
+/// plan, and without the key (`auto`) the default stays adaptive.
+#[test]
+fn estimating_the_arms_model_makes_a_generated_plan_fixed_unless_adaptive_is_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let adaptive_of = |edits: &[(&str, &str)]| {
+        let path = sim_variant(dir.path(), edits);
+        handeye_config::CellConfig::load(&path).unwrap().adaptive()
+    };
+    assert!(adaptive_of(&[]), "the shipped sim cell is adaptive");
+    for model in ["joint_offsets", "dh"] {
+        let key = format!("space: reprojection, kinematics: {model}}}");
+        assert!(
+            !adaptive_of(&[("space: reprojection}", &key)]),
+            "{model}: adaptive by default"
+        );
+        assert!(
+            adaptive_of(&[
+                ("space: reprojection}", &key),
+                ("plan:\n", "plan:\n  adaptive: true\n")
+            ]),
+            "{model}: plan.adaptive: true is not honoured"
+        );
+    }
+}

@@ -436,12 +436,20 @@ impl CellConfig {
     }
 
     /// Whether the run chooses poses adaptively: `plan.adaptive` when given, else for a
-    /// generated plan with known intrinsics (an adaptive plan needs board poses as they come).
+    /// generated plan with known intrinsics (an adaptive plan needs board poses as they come),
+    /// unless the arm's own model is estimated (`solver.kinematics: joint_offsets | dh`): it
+    /// needs the joint spread of every pose, and the adaptive stop weighs the two transforms
+    /// only (it stops near 8 poses, where the offsets' 1σ are near the offsets themselves).
+    /// `plan.adaptive: true` still asks for it.
     pub fn adaptive(&self) -> bool {
         self.plan.adaptive.unwrap_or(
             self.plan.generate.is_some()
                 && self.camera().intrinsics.is_some()
-                && !matches!(self.robot, RobotConfig::Recorded { .. }),
+                && !matches!(self.robot, RobotConfig::Recorded { .. })
+                && !matches!(
+                    self.solver.kinematics(),
+                    KinematicsChoice::JointOffsets | KinematicsChoice::Dh
+                ),
         )
     }
 
