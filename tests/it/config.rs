@@ -779,7 +779,7 @@ fn estimating_the_arms_model_makes_a_generated_plan_fixed_unless_adaptive_is_ask
     let dir = tempfile::tempdir().unwrap();
     let adaptive_of = |edits: &[(&str, &str)]| {
         let path = sim_variant(dir.path(), edits);
-        handeye_config::CellConfig::load(&path).unwrap().adaptive()
+        CellConfig::load(&path).unwrap().adaptive()
     };
     assert!(adaptive_of(&[]), "the shipped sim cell is adaptive");
     for model in ["joint_offsets", "dh"] {
