@@ -194,7 +194,7 @@ pub(super) fn finished(
 /// every camera's, the report.
 pub(super) fn finished_rig(
     console: &Console,
-    result: &handeye_session::cell::rig::RigResultFile,
+    result: &handeye_records::result::RigResultFile,
     report: Option<PathBuf>,
     next: String,
     wait: bool,

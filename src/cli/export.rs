@@ -16,7 +16,7 @@ use handeye_formats::ExportFormat;
 
 use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
 use handeye_records::result::ResultFile;
-use handeye_session::cell::rig::RigResultFile;
+use handeye_records::result::RigResultFile;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -5,8 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use handeye_config::CellConfig;
+use handeye_records::result::RigResultFile;
 use handeye_report::session::REPLAY_REPORT_FILE;
-use handeye_session::cell::rig::{self, RigResultFile};
+use handeye_session::cell::rig;
 use handeye_session::cell::run::CellRun;
 
 /// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
@@ -58,7 +59,7 @@ pub(super) fn replay(
 
 /// Prints every camera's mount, the boards and the camera-to-camera transforms.
 pub(super) fn print_result(result: &RigResultFile, result_file: &Path) {
-    let line = |t: &rig::solve::NamedTransform| {
+    let line = |t: &handeye_records::result::NamedTransform| {
         let p = t.pose.translation.vector;
         let truth = match (t.truth_error_mm, t.truth_error_deg) {
             (Some(mm), Some(deg)) => format!("  (vs simulator truth: {mm:.3} mm, {deg:.4}°)"),

@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 
 use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
-use handeye_session::cell::rig::{camera_folder, RigResultFile};
+use handeye_records::result::RigResultFile;
+use handeye_session::cell::rig::camera_folder;
 use handeye_solve::verdict::Level;
 
 use crate::util;

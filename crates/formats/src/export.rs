@@ -29,7 +29,7 @@ use handeye_core::geometry::{
 };
 use handeye_core::setup::Setup;
 use handeye_core::setup::{is_ur_base_link, ur_base_link_from_base, CellTransforms};
-use handeye_session::cell::rig::RigResultFile;
+use handeye_records::result::{NamedTransform, RigResultFile};
 
 /// Why a result cannot be exported.
 #[derive(Debug, thiserror::Error)]
@@ -336,7 +336,7 @@ impl Exported {
     /// out of the joint solve has no mount to export.
     pub fn cameras(result: &RigResultFile, ids: &FrameIds) -> Exported {
         let two_boards = result.boards.len() > 1;
-        let named = |t: &handeye_session::cell::rig::solve::NamedTransform| {
+        let named = |t: &NamedTransform| {
             FramedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)
         };
         Exported {

@@ -22,6 +22,9 @@
 
 use std::path::Path;
 
+mod cameras;
+pub use cameras::{CameraResult, NamedTransform, RigResultFile};
+
 use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::{Pose, PoseRecord};

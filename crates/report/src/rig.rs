@@ -8,8 +8,7 @@ use std::path::{Path, PathBuf};
 
 use handeye_core::atomic_file::write_atomic;
 use handeye_core::geometry::rotvec;
-use handeye_session::cell::rig::solve::NamedTransform;
-use handeye_session::cell::rig::RigResultFile;
+use handeye_records::result::{NamedTransform, RigResultFile};
 
 use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
 use super::{escape, ReportError};

@@ -31,7 +31,7 @@ use handeye_robot::Joints;
 use handeye_solve::rig::MIN_VIEWS_PER_CAMERA;
 
 pub use crate::CameraFailure;
-pub use solve::{solve_rig_folder, RigOutput, RigResultFile, RigSolveError};
+pub use solve::{solve_rig_folder, RigOutput, RigSolveError};
 
 /// `rig.yaml`: the cameras of a several-camera session and its plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -111,7 +111,7 @@ pub struct CellRun {
     /// camera's own, in its folder).
     pub solved: SolvedSession,
     /// A several-camera cell: the joint answer, as written to the session's `result.yaml`.
-    pub rig: Option<super::rig::RigResultFile>,
+    pub rig: Option<handeye_records::result::RigResultFile>,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
