@@ -219,20 +219,14 @@ impl SessionFolder {
         if holds_a_session(root)? {
             return Err(SessionError::FolderExists(root.to_path_buf()));
         }
-        std::fs::create_dir_all(root).map_err(|source| SessionError::Io {
-            path: root.to_path_buf(),
-            source,
-        })?;
+        crate::create_dir(root)?;
         let folder = SessionFolder::locked(root)?;
         // Another run may have started in it between the first look and the lock.
         if holds_a_session(root)? {
             return Err(SessionError::FolderExists(root.to_path_buf()));
         }
         for sub in ["poses", "frames"] {
-            std::fs::create_dir_all(root.join(sub)).map_err(|source| SessionError::Io {
-                path: root.join(sub),
-                source,
-            })?;
+            crate::create_dir(&root.join(sub))?;
         }
         Ok(folder)
     }
@@ -388,10 +382,7 @@ impl SessionFolder {
     pub fn save_input_notices(&self, notices: &[Notice]) -> Result<(), SessionError> {
         let path = self.input_notices_path();
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|source| SessionError::Io {
-                path: dir.to_path_buf(),
-                source,
-            })?;
+            crate::create_dir(dir)?;
         }
         self.write_yaml(&path, &notices)
     }
@@ -446,10 +437,7 @@ impl SessionFolder {
     pub fn keep_rejected_visit(&self, plan_index: usize) -> Result<(), SessionError> {
         let visit: PoseVisit = self.read_yaml(&self.visit_path(plan_index))?;
         let folder = self.root.join(REJECTED_DIR);
-        std::fs::create_dir_all(&folder).map_err(|source| SessionError::Io {
-            path: folder.clone(),
-            source,
-        })?;
+        crate::create_dir(&folder)?;
         let serial = std::fs::read_dir(&folder)
             .map_err(|source| SessionError::Io {
                 path: folder.clone(),

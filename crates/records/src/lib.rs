@@ -274,6 +274,14 @@ pub enum SessionError {
     DetectionThread(&'static str),
 }
 
+/// Creates `dir` and its parents; a failure names it ([`SessionError::Io`]).
+pub fn create_dir(dir: &std::path::Path) -> Result<(), SessionError> {
+    std::fs::create_dir_all(dir).map_err(|source| SessionError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })
+}
+
 fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
     let mut parts = Vec::new();
     if !missing.is_empty() {

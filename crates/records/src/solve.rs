@@ -1124,10 +1124,7 @@ pub fn write_estimates(
         return Ok(Vec::new());
     }
     // A replay's estimates folder is made on first use.
-    std::fs::create_dir_all(root).map_err(|source| SessionError::Io {
-        path: root.to_path_buf(),
-        source,
-    })?;
+    crate::create_dir(root)?;
     let mut written = Vec::new();
     if summary.chosen.intrinsics_wrong() {
         let path = root.join(cell_model::CORRECTED_INTRINSICS_FILE);
