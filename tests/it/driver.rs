@@ -703,3 +703,75 @@ fn the_scripted_camera_refuses_an_unexpected_grab() {
     let _ = camera.grab(std::time::Instant::now());
     let _ = camera.grab(std::time::Instant::now());
 }
+
+/// A plan that grows one pose at a time (adaptive, hand-guided) on the run's one pose loop: a
+/// pose no camera accepts is dropped and its index given to the next pose, whose first miss
+/// then ends it (the dropped pose's rejected record counts as its first try, as on a resume);
+/// the rejected records are kept aside, and the manifest holds only the pose that was kept.
+#[test]
+fn a_growing_plan_gives_a_dropped_poses_index_to_the_next_which_gets_one_try() {
+    use handeye_core::setup::PosePair;
+    use handeye_session::{run_adaptive_session, PlanSource};
+    struct Scripted(Vec<usize>);
+    impl PlanSource for Scripted {
+        fn next_pose(&mut self, _: &[Vec<PosePair>]) -> Option<(Pose, Joints)> {
+            (!self.0.is_empty()).then(|| {
+                let i = self.0.remove(0);
+                (base_from_flange(i), joints(i))
+            })
+        }
+        fn visited(&mut self, _: &[Pose]) {}
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let folder = SessionFolder::create(&dir.path().join("session")).unwrap();
+    // Pose 0 missed twice (a retry), pose 1 missed once at the same index, pose 2 seen there.
+    let mut script = vec![Expect::SetInterrupt];
+    script.extend(visit(0));
+    script.extend(visit(0));
+    script.push(Expect::SetInterrupt);
+    script.extend(visit(1));
+    script.push(Expect::SetInterrupt);
+    script.extend(visit(2));
+    let mut robot = ScriptedRobot::new(script).with_limits(MotionLimits::default());
+    let grabs = vec![
+        Grab::Frame(empty_frame()),
+        Grab::Frame(empty_frame()),
+        Grab::Frame(empty_frame()),
+        Grab::Frame(frame(2)),
+    ];
+    let mut camera = ScriptedCamera::new(camera_model(), grabs);
+    let mut events = Vec::new();
+    let outcome = run_adaptive_session(
+        session_setup(folder.clone(), Arc::new(AtomicBool::new(false))),
+        dir.path().join("cell.yaml"),
+        &mut Scripted(vec![0, 1, 2]),
+        &mut robot,
+        &mut [&mut camera],
+        &mut |e| events.push(e),
+    )
+    .unwrap();
+    drop(robot);
+    drop(camera);
+    assert_eq!(outcome.accepted, vec![0]);
+    assert_eq!(moving(&events), vec![0, 0, 0, 0]);
+    let retries: Vec<(bool, bool)> = recorded(&events)
+        .into_iter()
+        .map(|(_, rejected, will_retry)| (rejected.is_some(), will_retry))
+        .collect();
+    assert_eq!(
+        retries,
+        vec![(true, true), (true, false), (true, false), (false, false)]
+    );
+    let manifest = folder.read_manifest().unwrap();
+    assert_eq!(manifest.plan.len(), 1);
+    let (mm, _) = pose_error_mm_deg(&manifest.plan[0].base_from_flange, &base_from_flange(2));
+    assert!(mm < 1e-9, "the manifest's pose is {mm} mm from pose 2's");
+    assert_eq!(folder.read_rejected_visits().unwrap().len(), 2);
+    let kept = samples(&folder);
+    assert_eq!(kept.len(), 1);
+    let (mm, _) = pose_error_mm_deg(&kept[0].1, &base_from_flange(2));
+    assert!(
+        mm < 1e-9,
+        "the sample's robot pose is {mm} mm from pose 2's"
+    );
+}
