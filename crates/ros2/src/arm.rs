@@ -24,8 +24,8 @@ use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, Robot
 
 use crate::freedrive::{Freedrive, FreedriveOptions};
 use crate::link::{
-    poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos, tf_listener_qos,
-    topic_name, Ros2Link, POLL,
+    answer_to, poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos,
+    tf_listener_qos, topic_name, Ros2Link, POLL,
 };
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
@@ -259,16 +259,17 @@ impl Ros2Arm {
     }
 
     /// The flange pose of the first /tf message heard after `asked`, waiting until `deadline`;
-    /// an edge of the chain whose publishers contradict each other ends the wait at once (a
-    /// contradiction is no state a driver passes through, and waiting on leaves a loaded
-    /// machine time to miss one publisher for a moment and take the other's pose as the arm's).
+    /// a chain that no wait mends ([`TfTree::broken_chain`](crate::listen::TfTree::broken_chain):
+    /// an edge whose publishers contradict each other, a loop) ends the wait at once (waiting
+    /// on leaves a loaded machine time to miss one publisher for a moment and take the other's
+    /// pose as the arm's).
     fn flange_after(&self, asked: Instant, deadline: Instant) -> Result<Pose, RobotError> {
         let (base, flange) = (&self.options.base_frame, &self.options.flange_frame);
         let (state, _) = self.shared.wait_until(deadline, |s| {
             s.tf_received.is_some_and(|t| t >= asked)
                 && (s.tf.lookup(base, flange).is_ok()
-                    || s.tf.contradiction_above(base).is_some()
-                    || s.tf.contradiction_above(flange).is_some())
+                    || s.tf.broken_chain(base).is_some()
+                    || s.tf.broken_chain(flange).is_some())
         });
         match state.tf.lookup(base, flange) {
             Ok(pose) if state.tf_received.is_some_and(|t| t >= asked) => Ok(pose),
@@ -506,14 +507,10 @@ impl Ros2Arm {
         let mut asked = vec![ask(self)?];
         let mut next_ask = started + Duration::from_secs_f64(total) + RESULT_REASK;
         let outcome = loop {
-            match self.action.result_client().receive_response() {
-                Ok(Some((id, r))) if asked.contains(&id) => {
-                    break Outcome::Done(Ok((r.status, r.result)));
-                }
-                // An answer to another request (of an earlier goal): read past it.
-                Ok(Some(_)) => continue,
+            match answer_to(self.action.result_client(), &asked) {
+                Ok(Some((_, r))) => break Outcome::Done(Ok((r.status, r.result))),
                 Ok(None) => {}
-                Err(e) => break Outcome::Done(Err(format!("{e:?}"))),
+                Err(e) => break Outcome::Done(Err(e)),
             }
             if self.interrupted() {
                 break Outcome::Interrupted;

@@ -167,11 +167,11 @@ impl Ros2Link {
         self.others(readers)
     }
 
-    /// Waits up to `timeout` until `matched` holds of the node ([`serves`] of each client it
-    /// needs); whether it came to hold. Asked afresh every [`POLL`]: ros2-client's
+    /// Waits up to `timeout` until `matched` holds of the node (`serves` of each client it
+    /// needs); whether it came to hold. Asked afresh every 10 ms: ros2-client's
     /// `wait_for_service` future looks at the matches only when a match event arrives, and one
     /// missed on a loaded machine waited out the whole timeout with the server there (CI). A
-    /// client's first request waits [`settle_after_match`] more.
+    /// client's first request waits `settle_after_match` more.
     pub fn wait_until_matched(&self, timeout: Duration, matched: impl Fn(&Node) -> bool) -> bool {
         poll_for(Instant::now() + timeout, || {
             Ok::<_, ()>(self.with_node(|node| matched(node)).then_some(()))
@@ -391,6 +391,30 @@ pub(crate) fn poll_for<T, E>(
     }
 }
 
+/// The answer `client` has in to one of the requests `sent`, with that request's place in
+/// `sent` (answers to other requests, an earlier call's, are read past); `Ok(None)` when none
+/// is in yet.
+pub(crate) fn answer_to<Req, Resp>(
+    client: &ros2_client::Client<Req, Resp>,
+    sent: &[ros2_client::RmwRequestId],
+) -> Result<Option<(usize, Resp)>, String>
+where
+    Req: ros2_client::Message + 'static,
+    Resp: ros2_client::Message + 'static,
+{
+    loop {
+        match client.receive_response() {
+            Ok(Some((answered, response))) => {
+                if let Some(k) = sent.iter().position(|id| *id == answered) {
+                    return Ok(Some((k, response)));
+                }
+            }
+            Ok(None) => return Ok(None),
+            Err(e) => return Err(format!("{e:?}")),
+        }
+    }
+}
+
 /// How long [`call`] waits for an answer before it sends its request again.
 pub(crate) const REQUEST_RESEND: Duration = Duration::from_secs(5);
 
@@ -430,19 +454,7 @@ where
             }
         }
         let resend_at = (Instant::now() + REQUEST_RESEND).min(deadline);
-        let answer = poll_for(resend_at, || loop {
-            match client.receive_response() {
-                Ok(Some((answered, response))) => {
-                    match sent.iter().position(|id| *id == answered) {
-                        Some(k) => return Ok(Some((k, response))),
-                        // An answer to an earlier call: read past it.
-                        None => continue,
-                    }
-                }
-                Ok(None) => return Ok(None),
-                Err(e) => return Err(format!("{e:?}")),
-            }
-        });
+        let answer = poll_for(resend_at, || answer_to(client, &sent));
         match answer {
             Some(Ok((k, response))) => {
                 return Some(Answer {

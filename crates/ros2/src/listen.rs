@@ -216,19 +216,11 @@ impl TfTree {
         Ok(root_from_a.inverse() * root_from_b)
     }
 
-    /// The message of the first edge on `frame`'s chain (from `frame` up) whose publishers
-    /// contradict each other, if any.
-    pub fn contradiction_above(&self, frame: &str) -> Option<&str> {
-        let mut at = frame.trim_start_matches('/');
-        // A loop ends the walk: a chain is never longer than the tree.
-        for _ in 0..=self.edges.len() {
-            let edge = self.edges.get(at)?;
-            if let Some(conflict) = &edge.conflict {
-                return Some(conflict);
-            }
-            at = &edge.parent;
-        }
-        None
+    /// Why `frame`'s chain cannot be walked however long one waits (an edge on it whose
+    /// publishers contradict each other, a loop), if it cannot: a missing frame may still come,
+    /// these will not.
+    pub fn broken_chain(&self, frame: &str) -> Option<String> {
+        self.root_and_pose(frame).err()
     }
 
     /// Every edge heard: `(parent, child, T_parent_child)`, by child.
@@ -499,8 +491,8 @@ mod tests {
             e.contains("base → tool0") && e.contains("2 publishers") && e.contains("100.0 mm"),
             "{e}"
         );
-        assert_eq!(tree.contradiction_above("tool0"), Some(e.as_str()));
-        assert_eq!(tree.contradiction_above("base"), None);
+        assert_eq!(tree.broken_chain("tool0"), Some(e.clone()));
+        assert_eq!(tree.broken_chain("base"), None);
         // One publisher moving the edge.
         let mut moving = TfTree::default();
         for k in 0..20 {
@@ -511,7 +503,7 @@ mod tests {
             moving.update_from(&msg(p), 1, ms(8 * k));
         }
         assert!(moving.lookup("base", "tool0").is_ok());
-        assert_eq!(moving.contradiction_above("tool0"), None);
+        assert_eq!(moving.broken_chain("tool0"), None);
         // A restarted publisher (a new writer) after a pause of more than the window.
         let mut handover = TfTree::default();
         handover.update_from(&msg(at_rest), 1, ms(0));

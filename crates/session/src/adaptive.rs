@@ -17,7 +17,6 @@ use handeye_camera::Camera;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
 use handeye_plan::nbv::AdaptivePlanner;
-use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, Robot};
 
 use crate::driver::{PoseLoop, SessionEvent, SessionOutcome, SessionSetup};
@@ -76,7 +75,7 @@ pub fn run_adaptive_session(
     let mut next = plan.poses.pop();
     loop {
         if next.is_none() {
-            next = source.next_pose(&plan.samples(&setup)?);
+            next = source.next_pose(&plan.samples(setup.cameras.len()));
         }
         let Some(pose) = next.take() else {
             break;
@@ -168,22 +167,14 @@ impl GrowingPlan {
         Ok(accepted)
     }
 
-    /// Each camera's accepted samples so far: the pose loop's, or (before the first pose) the
-    /// cameras' `samples.yaml`.
-    fn samples(&self, setup: &SessionSetup) -> Result<Vec<Vec<PosePair>>, SessionError> {
-        if let Some(run) = &self.run {
-            return Ok((0..setup.cameras.len()).map(|c| run.samples(c)).collect());
+    /// Each camera's accepted samples so far, from the pose loop. Before its first pose there
+    /// are none: a resumed plan visits its last recorded pose first (which starts the loop), and
+    /// a plan with no pose yet has no record.
+    fn samples(&self, cameras: usize) -> Vec<Vec<PosePair>> {
+        match &self.run {
+            Some(run) => (0..cameras).map(|c| run.samples(c)).collect(),
+            None => vec![Vec::new(); cameras],
         }
-        let mut all = Vec::with_capacity(setup.cameras.len());
-        for camera in &setup.cameras {
-            let path = camera.folder.samples_path();
-            all.push(if path.is_file() {
-                Dataset::load(&path)?.pairs
-            } else {
-                Vec::new()
-            });
-        }
-        Ok(all)
     }
 
     /// Ends the run: what its pose loop did (nothing without a pose).

@@ -284,15 +284,16 @@ impl PoseLoop {
     }
 
     /// A growing plan dropped its pose `plan_index` (no camera accepted it) and gives the index
-    /// to its next pose: the book-keeping becomes what the folder now says of that index (a
-    /// rejected record there counts as one measurement of the next pose, as on a resume).
+    /// to its next pose: a camera's rejected record there counts as one measurement of the next
+    /// pose (what a resume would read from the folder).
     pub fn forget(&mut self, plan_index: usize) {
-        for (c, recording) in self.recordings.iter().enumerate() {
+        for c in 0..self.recordings.len() {
             self.state.accepted[c].remove(&plan_index);
-            if recording.folder.visit_path(plan_index).is_file() {
-                self.state.attempts.insert((c, plan_index), 1);
+            let key = (c, plan_index);
+            if self.state.tries(c, plan_index) > 0 {
+                self.state.attempts.insert(key, 1);
             } else {
-                self.state.attempts.remove(&(c, plan_index));
+                self.state.attempts.remove(&key);
             }
         }
         self.state.skipped_now.remove(&plan_index);

@@ -315,17 +315,17 @@ pub struct ArmRefit {
 }
 
 impl ArmRefit {
-    /// Every sample's flange pose corrected by the model fitted without sample `left_out`
-    /// (from the same start as the fit of all).
-    pub fn flanges_without(&self, left_out: usize) -> Result<Vec<Pose>, String> {
+    /// The fit of every sample but the start's outliers and `left_out` (none: the fit of all),
+    /// from the start.
+    pub fn fit_without(&self, left_out: Option<usize>) -> Result<ArmFit, SolveError> {
         let kept: Vec<ArmSample> = self
             .samples
             .iter()
             .enumerate()
-            .filter(|(i, _)| *i != left_out && !self.dropped.contains(i))
+            .filter(|(i, _)| Some(*i) != left_out && !self.dropped.contains(i))
             .map(|(_, s)| s.clone())
             .collect();
-        let fit = fit_arm(
+        fit_arm(
             self.model,
             self.setup,
             &self.chain,
@@ -334,12 +334,22 @@ impl ArmRefit {
             self.noise,
             &self.options,
         )
-        .map_err(|e| e.to_string())?;
-        Ok(self
-            .samples
+    }
+
+    /// Every sample's flange pose corrected by `fit`.
+    pub fn corrected_flanges(&self, fit: &ArmFit) -> Vec<Pose> {
+        self.samples
             .iter()
             .map(|s| fit.corrected_flange(&self.chain, s))
-            .collect())
+            .collect()
+    }
+
+    /// Every sample's flange pose corrected by the model fitted without sample `left_out`.
+    pub fn flanges_without(&self, left_out: usize) -> Result<Vec<Pose>, String> {
+        let fit = self
+            .fit_without(Some(left_out))
+            .map_err(|e| e.to_string())?;
+        Ok(self.corrected_flanges(&fit))
     }
 }
 

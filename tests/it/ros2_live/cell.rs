@@ -283,6 +283,44 @@ pub(super) fn assert_truth_of(result: &Path) {
     }
 }
 
+/// handeye run against a peer started with `peer_args`, on a domain of its own, the shipped
+/// ROS 2 cell config edited by `edits` ([`cell`]), into `session/` of a fresh folder: what the
+/// tests then assert on.
+pub(super) struct PeerRun {
+    /// The folder of the config and the session: removed when the run is dropped.
+    _dir: tempfile::TempDir,
+    /// The domain id.
+    pub domain: u16,
+    /// The peer, still running.
+    pub peer: Peer,
+    /// The session folder.
+    pub out_dir: PathBuf,
+    /// handeye's exit.
+    pub out: Output,
+    /// handeye's output, both streams.
+    pub log: String,
+}
+
+impl PeerRun {
+    pub(super) fn start(python: &PathBuf, peer_args: &[&str], edits: &[(&str, &str)]) -> PeerRun {
+        let dir = tempfile::tempdir().unwrap();
+        let domain = ros_domain();
+        let peer = Peer::start(python, domain, peer_args);
+        let config = cell(dir.path(), domain, edits);
+        let out_dir = dir.path().join("session");
+        let out = run_cell(&config, &out_dir);
+        let log = text(&out);
+        PeerRun {
+            _dir: dir,
+            domain,
+            peer,
+            out_dir,
+            out,
+            log,
+        }
+    }
+}
+
 pub(super) fn poses_kept(session: &Path) -> usize {
     std::fs::read_dir(session.join("poses")).map_or(0, |d| d.count())
 }
@@ -291,15 +329,10 @@ pub(super) fn poses_kept(session: &Path) -> usize {
 fn eye_in_hand_over_ros2_recovers_the_simulated_truth() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(400), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &[]);
-        let config = cell(dir.path(), domain, &[]);
-        let out_dir = dir.path().join("session");
-        let out = run_cell(&config, &out_dir);
-        let log = text(&out);
+        let run = PeerRun::start(&python, &[], &[]);
+        let (peer, out_dir, out, log) = (&run.peer, &run.out_dir, &run.out, &run.log);
         assert!(out.status.success(), "{log}");
-        assert_truth(&out_dir);
+        assert_truth(out_dir);
         // A ROS 2 cell is told how the answer reaches its graph.
         let next = String::from_utf8_lossy(&out.stdout);
         let next = next.lines().last().unwrap_or_default();
@@ -507,12 +540,8 @@ fn a_flange_pose_off_the_models_kinematics_is_named_and_resume_completes() {
 fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &["--flange-off-model", "0"]);
-        let config = cell(dir.path(), domain, &[]);
-        let out = run_cell(&config, &dir.path().join("s"));
-        let log = text(&out);
+        let run = PeerRun::start(&python, &["--flange-off-model", "0"], &[]);
+        let (peer, out, log) = (&run.peer, &run.out, &run.log);
         assert!(!out.status.success(), "{log}");
         assert!(
             log.contains("the flange pose base → tool0 on /tf (at [")
@@ -598,16 +627,12 @@ pub(super) fn ctrl_c_mid_goal(peer: &Peer, config: &Path, out_dir: &Path) {
 fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &["--no-tool0"]);
-        let config = cell(
-            dir.path(),
-            domain,
+        let run = PeerRun::start(
+            &python,
+            &["--no-tool0"],
             &[("connect_timeout_s: 10", "connect_timeout_s: 3")],
         );
-        let out = run_cell(&config, &dir.path().join("s"));
-        let log = text(&out);
+        let (peer, out, log) = (&run.peer, &run.out, &run.log);
         assert!(!out.status.success(), "{log}");
         assert!(log.contains("\"tool0\" is not in the TF tree"), "{log}");
         assert!(
@@ -624,20 +649,15 @@ fn a_flange_frame_missing_from_tf_is_named_before_anything_moves() {
 fn an_image_topic_nobody_publishes_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &[]);
-        let config = cell(
-            dir.path(),
-            domain,
+        let run = PeerRun::start(
+            &python,
+            &[],
             &[
                 ("image_topic: /image_raw", "image_topic: /no_such_image"),
                 ("frame_timeout_s: 5", "frame_timeout_s: 2"),
             ],
         );
-        let out_dir = dir.path().join("session");
-        let out = run_cell(&config, &out_dir);
-        let log = text(&out);
+        let (peer, out, log) = (&run.peer, &run.out, &run.log);
         assert!(!out.status.success(), "{log}");
         assert!(
             log.contains("no image on /no_such_image") && log.contains("nothing has moved"),
@@ -684,19 +704,15 @@ fn without_a_driver_the_action_server_is_named() {
 fn a_middleware_mismatch_names_robot_graph_rmw() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(120), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &[]);
-        let config = cell(
-            dir.path(),
-            domain,
+        let run = PeerRun::start(
+            &python,
+            &[],
             &[
                 ("rmw: cyclonedds", "rmw: fastrtps"),
                 ("connect_timeout_s: 10", "connect_timeout_s: 3"),
             ],
         );
-        let out = run_cell(&config, &dir.path().join("s"));
-        let log = text(&out);
+        let (peer, out, log) = (&run.peer, &run.out, &run.log);
         assert!(!out.status.success(), "{log}");
         assert!(
             log.contains("robot.graph.rmw is `fastrtps`") && log.contains("set `rmw: cyclonedds`"),
@@ -781,21 +797,17 @@ fn eye_to_hand_over_ros2_recovers_the_simulated_truth() {
 /// scale or lens file is blamed, no GOOD or CHECK verdict is given. `from_goal`: the peer's
 /// second publisher starts once that goal has ended (0: from the start); `kept`: the poses
 /// recorded before it.
-fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
+fn a_second_flange_publisher(from_goal: usize, kept: usize) {
     let Some(python) = python() else { return };
-    let dir = tempfile::tempdir().unwrap();
     let from = from_goal.to_string();
-    let peer = Peer::start(&python, domain, &["--second-flange-publisher", &from]);
     // The peer floods /tf at 200 Hz: on a loaded 2-core machine its action server can take
     // longer than the shipped 10 s to answer (a CI run saw it), which is not what this tests.
-    let config = cell(
-        dir.path(),
-        domain,
+    let run = PeerRun::start(
+        &python,
+        &["--second-flange-publisher", &from],
         &[("connect_timeout_s: 10}", "connect_timeout_s: 40}")],
     );
-    let out_dir = dir.path().join("session");
-    let out = run_cell(&config, &out_dir);
-    let log = text(&out);
+    let (peer, out_dir, out, log) = (&run.peer, &run.out_dir, &run.out, &run.log);
     eprintln!("{log}");
     assert!(
         !peer.events("second_flange_publisher").is_empty(),
@@ -824,7 +836,7 @@ fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
     for level in ["GOOD", "CHECK", "REDO"] {
         assert!(!log.contains(level), "a {level} verdict:\n{log}");
     }
-    assert_eq!(poses_kept(&out_dir), kept, "poses recorded:\n{log}");
+    assert_eq!(poses_kept(out_dir), kept, "poses recorded:\n{log}");
     // Named when the arm is opened, or — when DDS discovery matches the second writer only
     // after that check — at the first pose, before its capture is recorded.
     let goals = peer.events("goal").len();
@@ -837,18 +849,14 @@ fn a_second_flange_publisher(domain: u16, from_goal: usize, kept: usize) {
 /// Named before anything moves (or at the first pose, when discovery is late), nothing recorded.
 #[test]
 fn a_second_publisher_of_the_flange_is_named_before_a_pose_is_recorded() {
-    within(Duration::from_secs(200), || {
-        a_second_flange_publisher(ros_domain(), 0, 0)
-    });
+    within(Duration::from_secs(200), || a_second_flange_publisher(0, 0));
 }
 
 /// The same publisher appearing mid-run: the poses before it are kept, the one after is not
 /// recorded, and the run stops naming it.
 #[test]
 fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
-    within(Duration::from_secs(300), || {
-        a_second_flange_publisher(ros_domain(), 4, 3)
-    });
+    within(Duration::from_secs(300), || a_second_flange_publisher(4, 3));
 }
 
 /// #40: a second action server of the driver's name (a simulated controller left running, on a
@@ -858,13 +866,9 @@ fn a_second_publisher_of_the_flange_mid_run_stops_the_run_naming_it() {
 fn a_duplicate_action_server_is_named_before_anything_moves() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(200), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &["--duplicate-action-server"]);
-        let config = cell(dir.path(), domain, &[]);
-        let out_dir = dir.path().join("session");
-        let out = run_cell(&config, &out_dir);
-        let log = text(&out);
+        let run = PeerRun::start(&python, &["--duplicate-action-server"], &[]);
+        let (domain, peer, out_dir, out, log) =
+            (&run.domain, &run.peer, &run.out_dir, &run.out, &run.log);
         assert!(!out.status.success(), "{log}");
         assert!(
             log.contains(&format!(
@@ -878,7 +882,7 @@ fn a_duplicate_action_server_is_named_before_anything_moves() {
             peer.events("liar_goal").is_empty(),
             "a goal was sent:\n{log}"
         );
-        assert_eq!(poses_kept(&out_dir), 0, "{log}");
+        assert_eq!(poses_kept(out_dir), 0, "{log}");
     });
 }
 
@@ -907,15 +911,10 @@ fn a_duplicate_action_server_mid_run_is_named_and_resume_completes() {
 fn a_tf_flood_before_the_arms_frames_does_not_crowd_them_out() {
     let Some(python) = python() else { return };
     within(Duration::from_secs(400), move || {
-        let dir = tempfile::tempdir().unwrap();
-        let domain = ros_domain();
-        let peer = Peer::start(&python, domain, &["--tf-flood", "5000"]);
-        let config = cell(dir.path(), domain, &[]);
-        let out_dir = dir.path().join("session");
-        let out = run_cell(&config, &out_dir);
-        let log = text(&out);
+        let run = PeerRun::start(&python, &["--tf-flood", "5000"], &[]);
+        let (peer, out_dir, out, log) = (&run.peer, &run.out_dir, &run.out, &run.log);
         assert!(!peer.events("tf_flood").is_empty(), "no flood was sent");
         assert!(out.status.success(), "{log}");
-        assert_truth(&out_dir);
+        assert_truth(out_dir);
     });
 }

@@ -171,40 +171,36 @@ fn fit_arm(
     }
     let options = config.solver.to_options();
     let start = solve::solve(setup, pairs, &options).map_err(failed)?;
-    let kept: Vec<ArmSample> = samples
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !start.dropped.contains(i))
-        .map(|(_, s)| s.clone())
-        .collect();
-    let noise = start.noise.map_or(options.noise, |n| n.model());
-    // `auto` chooses between the published model and the joint offsets.
-    let estimated = match config.solver.kinematics() {
-        KinematicsChoice::Dh => ArmModel::Dh,
-        _ => ArmModel::JointOffsets,
-    };
-    let fit = fit_model(
-        estimated,
+    let folds = ArmRefit {
         setup,
-        &chain,
-        &kept,
-        (&start.camera_mount, &start.target_mount),
-        noise,
-        &options,
-    )
-    .map_err(failed)?;
-    let arm = ArmEstimate {
-        model: model.name.clone(),
+        // `auto` chooses between the published model and the joint offsets.
+        model: match config.solver.kinematics() {
+            KinematicsChoice::Dh => ArmModel::Dh,
+            _ => ArmModel::JointOffsets,
+        },
         chain: chain.clone(),
-        fit,
+        samples,
+        // The start's outliers stay out of the arm's fit (and are corrected all the same).
+        dropped: start.dropped.clone(),
+        start: (start.camera_mount, start.target_mount),
+        noise: start.noise.map_or(options.noise, |n| n.model()),
+        options,
     };
-    let pairs = samples
+    let fit = folds.fit_without(None).map_err(failed)?;
+    let pairs = folds
+        .samples
         .iter()
-        .map(|s| PosePair {
-            base_from_flange: arm.fit.corrected_flange(&arm.chain, s),
+        .zip(folds.corrected_flanges(&fit))
+        .map(|(s, base_from_flange)| PosePair {
+            base_from_flange,
             ..s.pair.clone()
         })
         .collect();
+    let arm = ArmEstimate {
+        model: model.name.clone(),
+        chain,
+        fit,
+    };
     let visits = visits
         .iter()
         .map(|v| {
@@ -215,16 +211,6 @@ fn fit_arm(
             v
         })
         .collect();
-    let folds = ArmRefit {
-        setup,
-        model: estimated,
-        chain,
-        samples,
-        dropped: start.dropped.clone(),
-        start: (start.camera_mount, start.target_mount),
-        noise,
-        options,
-    };
     Ok(Corrected {
         pairs,
         visits,
