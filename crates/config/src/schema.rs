@@ -717,7 +717,9 @@ pub struct SolverConfig {
     #[serde(default = "yes")]
     pub estimate_noise: bool,
     /// The arm's own model estimated with the two transforms (issue #41): `auto` (the default:
-    /// the joint zero offsets are fitted and kept only when the data choose them), `none` (the
+    /// the joint zero offsets are fitted and kept only when the data choose them, and the DH
+    /// link corrections beside them only when the data need them and the answer is expected
+    /// nearer the truth with them), `none` (the
     /// published model, the behaviour before `auto`), or `joint_offsets` (always estimated: the
     /// joint zero offsets the data determine, from each pose's recorded joints and the arm's
     /// published DH model), or `dh` (always estimated: the offsets and the link `d`, `a` and `α`

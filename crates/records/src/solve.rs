@@ -13,7 +13,7 @@ mod driver_calibration;
 mod intrinsics_check;
 mod summary;
 
-pub use arm::{dh_chain, estimate_arm, plan_observability, ArmEstimate, Corrected};
+pub use arm::{dh_chain, estimate_arm, plan_observability, ArmChoice, ArmEstimate, Corrected};
 pub use driver_calibration::{
     driver_calibration_notice, with_driver_calibration, DRIVER_CALIBRATION_FILE,
 };
@@ -402,9 +402,12 @@ pub fn solve_with_arm(
                  refit: Option<FoldFlanges<'_>>| {
         solve_session_with(dataset.setup, pairs, visits, vision, config, notices, refit)
     };
-    let (corrected, arm_choice) =
-        estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
-    let Some(corrected) = corrected else {
+    let ArmChoice {
+        corrected,
+        notice: arm_choice,
+        links,
+    } = estimate_arm(dataset.setup, config, plan, &dataset.pairs, visits)?;
+    let Some(mut corrected) = corrected else {
         notices.extend(arm_choice);
         return solve(&dataset.pairs, visits, notices, None);
     };
@@ -429,6 +432,25 @@ pub fn solve_with_arm(
             ),
         ));
         return Ok(published);
+    }
+    // The DH link corrections the data choose beside the offsets are kept unless with them the
+    // verdict names a file: link lengths can take up a board printed at the wrong size (eye to
+    // hand: 2.5 % and GOOD 32 mm off), which the offsets' solve above still names.
+    if let Some((links, links_notice)) = links {
+        let folds = &links.folds;
+        let with_links = solve(
+            &links.pairs,
+            &links.visits,
+            notices.iter().cloned().chain([links_notice]).collect(),
+            Some(&|left_out| folds.flanges_without(left_out)),
+        )?;
+        match contradicted_files(&with_links) {
+            None => (with_arm, corrected) = (with_links, links),
+            Some(after) => with_arm.calibration.notices.push(Notice::info(
+                NoticeKind::Other,
+                format!("the arm's DH link corrections are left out: the data choose them beside the offsets, but with them the verdict names {after}"),
+            )),
+        }
     }
     with_arm.summary = format!(
         "{}\n{}",

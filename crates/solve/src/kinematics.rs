@@ -35,8 +35,8 @@ use nalgebra::{DMatrix, DVector, SMatrix};
 use super::lm::{minimize_normal, NormalEquations};
 use super::noise::Estimator;
 use super::refine::{mount_uncertainty, perturbed, sample_residual, sample_rows, variance_factor};
-use super::{Axby, NoiseModel, PoseNoise, SolveError, SolveOptions, Uncertainty};
-use handeye_core::geometry::{dh_link, Pose};
+use super::{Axby, EstimateNoise, NoiseModel, PoseNoise, SolveError, SolveOptions, Uncertainty};
+use handeye_core::geometry::{dh_link, translation_distance, Pose};
 use handeye_core::setup::{PosePair, Setup};
 
 /// A transform parameter count: φ_X, ρ_X, φ_Y, ρ_Y.
@@ -226,10 +226,22 @@ pub struct ArmFit {
     pub samples: usize,
 }
 
-/// The 99 % quantile of χ² with 1, 2, … 10 degrees of freedom (an arm's joint offsets).
-const CHI2_99: [f64; 10] = [
-    6.635, 9.210, 11.345, 13.277, 15.086, 16.812, 18.475, 20.090, 21.666, 23.209,
+/// The 99 % quantile of χ² with 1, 2, … 30 degrees of freedom (an arm's joint offsets, or its
+/// DH link corrections beside them; scipy's `chi2.ppf(0.99, k)`).
+const CHI2_99: [f64; 30] = [
+    6.635, 9.210, 11.345, 13.277, 15.086, 16.812, 18.475, 20.090, 21.666, 23.209, 24.725, 26.217,
+    27.688, 29.141, 30.578, 32.000, 33.409, 34.805, 36.191, 37.566, 38.932, 40.289, 41.638, 42.980,
+    44.314, 45.642, 46.963, 48.278, 49.588, 50.892,
 ];
+
+/// How much `k` free numbers lower χ² by noise alone in 99 % of cells, `χ²(k; 0.99)`;
+/// infinite (the data never choose them) for none or more than the table holds.
+fn chi2_99(k: usize) -> f64 {
+    k.checked_sub(1)
+        .and_then(|k| CHI2_99.get(k))
+        .copied()
+        .unwrap_or(f64::INFINITY)
+}
 
 impl ArmFit {
     /// Parameters estimated (neither absorbed nor undetermined): offsets and link corrections.
@@ -255,11 +267,7 @@ impl ArmFit {
     /// How much `k` free numbers lower χ² by noise alone in 99 % of cells, `χ²(k; 0.99)`;
     /// infinite (the data never choose) with no offset estimated or more than the table holds.
     pub fn model_choice_threshold(&self) -> f64 {
-        self.estimated()
-            .checked_sub(1)
-            .and_then(|k| CHI2_99.get(k))
-            .copied()
-            .unwrap_or(f64::INFINITY)
+        chi2_99(self.estimated())
     }
 
     /// The offsets as a vector (rad, zero where not estimated), for [`DhChain::forward`].
@@ -288,6 +296,99 @@ impl ArmFit {
         sample.pair.base_from_flange
             * chain.forward(&sample.joints, &zero).inverse()
             * chain.forward_corrected(&sample.joints, &self.corrections())
+    }
+}
+
+/// Whether an arm's DH link corrections are worth estimating beside its joint offsets: what
+/// `solver.kinematics: auto` asks before it keeps them ([`ArmRefit::links_choice`]). Both of:
+///
+/// * **The data need them**: the test of the nested models at 1 %, both χ² under the DH fit's
+///   board-pose noise and divided by the DH fit's χ²/dof, `(χ²_offsets − χ²_dh) / (χ²_dh/dof) >
+///   χ²(k; 0.99)` with `k` the link corrections estimated ([`LinksChoice::fit_margin`]; the
+///   F test, with the χ² quantile for F's at the ~150 degrees of freedom of a session). The
+///   division makes it a test of the residuals, not of the noise given: a cell whose board-pose
+///   noise is given ten times too large (a rendered sim cell's 0.2 mm) would otherwise never
+///   need the links, and one given too small would always.
+/// * **The answer is better with them, not only the fit**: the offsets' answer's expected squared
+///   error (its variance plus its squared bias, the bias read from how far it lies from the DH
+///   answer: `E|Δ|² = b² + σ²_dh − σ²_offsets` when the DH model holds) exceeds the DH answer's
+///   variance, `|Δ|² > 2·(σ²_dh − σ²_offsets)`, over both transforms' translations
+///   ([`LinksChoice::answer_margin_mm2`]). Without it a plan that determines the links poorly
+///   (the shipped eye-to-hand cell at five times its board noise: transforms' 1σ 3.1 mm with the
+///   links free) would trade a bias of about a millimetre for three of scatter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinksChoice {
+    /// χ² under the DH fit's noise: with the link corrections, with the offsets alone.
+    pub chi2: [f64; 2],
+    /// Parameters the link corrections add (the test's degrees of freedom).
+    pub added: usize,
+    /// `|Δ|²`: the squared translation difference of the two answers, summed over both
+    /// transforms, mm².
+    pub difference_mm2: f64,
+    /// `σ²_dh − σ²_offsets` of the translations, summed over both transforms, mm² (infinite when
+    /// either fit has no covariance).
+    pub added_variance_mm2: f64,
+    /// The DH fit's χ²/dof: the residuals' variance against the noise they were weighed with.
+    pub variance_factor: f64,
+}
+
+impl LinksChoice {
+    /// The choice between `offsets` (the offsets' fit under its own noise: the answer kept
+    /// without the links), `offsets_at_dh_noise` (the same under `links`' noise) and `links`.
+    fn of(offsets: &ArmFit, offsets_at_dh_noise: &ArmFit, links: &ArmFit) -> LinksChoice {
+        let squared_mm = |a: &Pose, b: &Pose| (translation_distance(a, b) * 1e3).powi(2);
+        let added_variance_mm2 = match (&offsets.uncertainty, &links.uncertainty) {
+            (Some(o), Some(l)) => {
+                l.camera_mount.translation_mm.powi(2) - o.camera_mount.translation_mm.powi(2)
+                    + l.target_mount.translation_mm.powi(2)
+                    - o.target_mount.translation_mm.powi(2)
+            }
+            _ => f64::INFINITY,
+        };
+        let dof = (6 * links.samples).saturating_sub(POSE_PARAMS + links.estimated());
+        let variance_factor = links.chi2[0] / dof as f64;
+        LinksChoice {
+            variance_factor: if variance_factor.is_finite() && variance_factor > 0.0 {
+                variance_factor
+            } else {
+                1.0
+            },
+            chi2: [links.chi2[0], offsets_at_dh_noise.chi2[0]],
+            added: links
+                .estimated()
+                .saturating_sub(offsets_at_dh_noise.estimated()),
+            difference_mm2: squared_mm(&offsets.camera_mount, &links.camera_mount)
+                + squared_mm(&offsets.target_mount, &links.target_mount),
+            added_variance_mm2,
+        }
+    }
+
+    /// `(χ²_offsets − χ²_dh) / (χ²_dh/dof)`: how much the links lower the residuals, in units of
+    /// what one free number lowers them by noise alone.
+    pub fn statistic(&self) -> f64 {
+        (self.chi2[1] - self.chi2[0]) / self.variance_factor
+    }
+
+    /// [`LinksChoice::statistic`] `− χ²(k; 0.99)`: positive when the data need the link
+    /// corrections.
+    pub fn fit_margin(&self) -> f64 {
+        self.statistic() - self.threshold()
+    }
+
+    /// `χ²(k; 0.99)` for the `k` parameters the links add.
+    pub fn threshold(&self) -> f64 {
+        chi2_99(self.added)
+    }
+
+    /// `|Δ|² − 2·(σ²_dh − σ²_offsets)`, mm²: positive when the offsets' answer is expected to
+    /// be further from the truth than the DH answer.
+    pub fn answer_margin_mm2(&self) -> f64 {
+        self.difference_mm2 - 2.0 * self.added_variance_mm2
+    }
+
+    /// Both tests pass: `auto` keeps the DH link corrections.
+    pub fn chosen(&self) -> bool {
+        self.fit_margin() > 0.0 && self.answer_margin_mm2() > 0.0
     }
 }
 
@@ -342,6 +443,37 @@ impl ArmRefit {
             .iter()
             .map(|s| fit.corrected_flange(&self.chain, s))
             .collect()
+    }
+
+    /// Whether the DH link corrections earn their place beside the joint offsets `offsets` (this
+    /// refit's fit, with [`ArmModel::JointOffsets`]): the DH fit of the same samples and the
+    /// [`LinksChoice`] between the two. Returns the DH refit (for the held-out folds), its fit
+    /// and the choice.
+    pub fn links_choice(
+        &self,
+        offsets: &ArmFit,
+    ) -> Result<(ArmRefit, ArmFit, LinksChoice), SolveError> {
+        let dh = ArmRefit {
+            model: ArmModel::Dh,
+            ..self.clone()
+        };
+        let links = dh.fit_without(None)?;
+        // The nested test compares χ² under one noise, the larger model's estimate: the offsets'
+        // own estimate swells with the residuals the links would explain.
+        let noise = links.noise.model();
+        let offsets_at_that_noise = ArmRefit {
+            model: ArmModel::JointOffsets,
+            noise,
+            options: SolveOptions {
+                noise,
+                estimate_noise: EstimateNoise::NONE,
+                ..self.options.clone()
+            },
+            ..self.clone()
+        }
+        .fit_without(None)?;
+        let choice = LinksChoice::of(offsets, &offsets_at_that_noise, &links);
+        Ok((dh, links, choice))
     }
 
     /// Every sample's flange pose corrected by the model fitted without sample `left_out`.
@@ -1035,7 +1167,7 @@ mod tests {
             // The truth the data can determine: the same fit of the poses without noise, its
             // weights fixed at the noisy fit's.
             let fixed = SolveOptions {
-                estimate_noise: crate::EstimateNoise::NONE,
+                estimate_noise: EstimateNoise::NONE,
                 ..SolveOptions::default()
             };
             let truth = fit_arm(

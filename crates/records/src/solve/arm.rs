@@ -69,7 +69,10 @@ fn joints_of(plan: &[PlannedPose], visit: &PoseVisit) -> Option<Vec<f64>> {
 /// `pairs` (ids `pose-NNN` of `visits`, whose plan poses in `plan` hold the joints) and returns
 /// the samples and visits corrected by it; with `auto` (the default), fits it where the arm's
 /// model, the joints and the intrinsics are known and keeps it when the data choose it
-/// ([`ArmFit::model_choice_margin`]), saying which in the notice; with `none`, nothing.
+/// ([`ArmFit::model_choice_margin`]), saying which in the notice, and then offers the DH link
+/// corrections as [`ArmChoice::links`] when they pass [`ArmRefit::links_choice`] (the caller
+/// keeps them unless its verdict with them contradicts a given file: link lengths absorb a
+/// board printed at the wrong size); with `none`, nothing.
 ///
 /// The start is the pose-space solve of the same samples with the config's options; the samples
 /// it drops as outliers stay out of the arm's fit (and are corrected all the same).
@@ -79,7 +82,7 @@ pub fn estimate_arm(
     plan: &[PlannedPose],
     pairs: &[PosePair],
     visits: &[PoseVisit],
-) -> Result<(Option<Corrected>, Option<Notice>), SessionError> {
+) -> Result<ArmChoice, SessionError> {
     let model = config.robot.model().and_then(UrModel::by_name);
     let chosen_by_data = match config.solver.kinematics() {
         KinematicsChoice::JointOffsets | KinematicsChoice::Dh => false,
@@ -99,11 +102,19 @@ pub fn estimate_arm(
         {
             true
         }
-        _ => return Ok((None, None)),
+        _ => return Ok(ArmChoice::default()),
     };
-    let corrected = fit_arm(setup, config, plan, pairs, visits, model)?;
+    let estimated = match config.solver.kinematics() {
+        KinematicsChoice::Dh => ArmModel::Dh,
+        // `auto` starts from the offsets; the DH link corrections are then asked for below.
+        _ => ArmModel::JointOffsets,
+    };
+    let corrected = fit_arm(setup, config, plan, pairs, visits, (model, estimated))?;
     if !chosen_by_data {
-        return Ok((Some(corrected), None));
+        return Ok(ArmChoice {
+            corrected: Some(corrected),
+            ..ArmChoice::default()
+        });
     }
     let fit = &corrected.arm.fit;
     let (gain, k) = (fit.model_choice_margin(), fit.estimated());
@@ -115,19 +126,82 @@ pub fn estimate_arm(
         if gain > 0.0 { "more" } else { "no more" },
         fit.model_choice_threshold()
     );
-    if gain > 0.0 {
-        let notice = Notice::info(
-            NoticeKind::Other,
-            format!("the data choose the arm's own model ({figures}): the robot poses are corrected by the offsets (`solver.kinematics: none` keeps the published model)"),
-        );
-        Ok((Some(corrected), Some(notice)))
-    } else {
+    if gain <= 0.0 {
         let notice = Notice::info(
             NoticeKind::Other,
             format!("the arm's published model is kept: the data do not choose the arm's own model ({figures})"),
         );
-        Ok((None, Some(notice)))
+        return Ok(ArmChoice {
+            notice: Some(notice),
+            ..ArmChoice::default()
+        });
     }
+    // The offsets are chosen: do the DH link corrections earn their place beside them? (A fit
+    // that fails leaves the offsets, said.)
+    let chose = format!("the data choose the arm's own model ({figures})");
+    let offsets_only = format!("{chose}: the robot poses are corrected by the offsets (`solver.kinematics: none` keeps the published model)");
+    let (links, said) = match corrected.folds.links_choice(&corrected.arm.fit) {
+        Ok((folds, fit, choice)) => {
+            let figures = format!(
+                "{} DH link corrections beside the offsets: χ² {:.1} with them, {:.1} without under the noise with them, a drop of {:.1} in units of the residuals' own variance (χ²/dof {:.3}), {} than noise alone explains in 99 % of cells ({:.1}); the two answers {:.3} mm apart (the links pay beyond {:.3} mm: √2 × the 1σ they add to the transforms)",
+                choice.added,
+                choice.chi2[0],
+                choice.chi2[1],
+                choice.statistic(),
+                choice.variance_factor,
+                if choice.fit_margin() > 0.0 { "more" } else { "no more" },
+                choice.threshold(),
+                choice.difference_mm2.sqrt(),
+                (2.0 * choice.added_variance_mm2).max(0.0).sqrt(),
+            );
+            if choice.chosen() {
+                let model = corrected.arm.model.clone();
+                let notice = Notice::info(
+                    NoticeKind::Other,
+                    format!("{chose} with its DH link corrections ({figures}): the robot poses are corrected by both (`solver.kinematics: joint_offsets` keeps the offsets alone, `none` the published model)"),
+                );
+                let links = (corrected_by(folds, fit, &model, plan, visits), notice);
+                (Some(links), format!("its DH link corrections ({figures})"))
+            } else {
+                let why = if choice.fit_margin() > 0.0 {
+                    ": the data need them, but the answer would be no nearer the truth with them"
+                } else {
+                    ""
+                };
+                (
+                    None,
+                    format!("its DH link corrections are left out{why} ({figures})"),
+                )
+            }
+        }
+        Err(e) => (
+            None,
+            format!("its DH link corrections could not be fitted ({e})"),
+        ),
+    };
+    // With the links offered, the offsets' notice stands only if the caller refuses them (and
+    // then says why after it).
+    let notice = match links {
+        Some(_) => offsets_only,
+        None => format!("{offsets_only}; {said}"),
+    };
+    Ok(ArmChoice {
+        corrected: Some(corrected),
+        notice: Some(Notice::info(NoticeKind::Other, notice)),
+        links,
+    })
+}
+
+/// What [`estimate_arm`] found of the arm's model.
+#[derive(Default)]
+pub struct ArmChoice {
+    /// The samples and visits corrected by the model kept (none: the published model).
+    pub corrected: Option<Corrected>,
+    /// The choice, with its figures, for the result's notices (`auto` only).
+    pub notice: Option<Notice>,
+    /// With `auto`: the DH link corrections beside the offsets, with the notice that replaces
+    /// [`ArmChoice::notice`], when the data choose them too.
+    pub links: Option<(Corrected, Notice)>,
 }
 
 /// The joint zero offsets of `model`'s published chain fitted to `pairs` with the two
@@ -138,7 +212,7 @@ fn fit_arm(
     plan: &[PlannedPose],
     pairs: &[PosePair],
     visits: &[PoseVisit],
-    model: Option<UrModel>,
+    (model, estimated): (Option<UrModel>, ArmModel),
 ) -> Result<Corrected, SessionError> {
     let failed = |source: SolveError| SessionError::Solve {
         stage: "the arm's joint offsets",
@@ -173,11 +247,7 @@ fn fit_arm(
     let start = solve::solve(setup, pairs, &options).map_err(failed)?;
     let folds = ArmRefit {
         setup,
-        // `auto` chooses between the published model and the joint offsets.
-        model: match config.solver.kinematics() {
-            KinematicsChoice::Dh => ArmModel::Dh,
-            _ => ArmModel::JointOffsets,
-        },
+        model: estimated,
         chain: chain.clone(),
         samples,
         // The start's outliers stay out of the arm's fit (and are corrected all the same).
@@ -187,6 +257,18 @@ fn fit_arm(
         options,
     };
     let fit = folds.fit_without(None).map_err(failed)?;
+    Ok(corrected_by(folds, fit, &model.name, plan, visits))
+}
+
+/// The session's samples and visits corrected by `fit`, the fit of `folds` (the arm `model`'s
+/// published chain).
+fn corrected_by(
+    folds: ArmRefit,
+    fit: ArmFit,
+    model: &str,
+    plan: &[PlannedPose],
+    visits: &[PoseVisit],
+) -> Corrected {
     let pairs = folds
         .samples
         .iter()
@@ -197,8 +279,8 @@ fn fit_arm(
         })
         .collect();
     let arm = ArmEstimate {
-        model: model.name.clone(),
-        chain,
+        model: model.to_string(),
+        chain: folds.chain.clone(),
         fit,
     };
     let visits = visits
@@ -211,12 +293,12 @@ fn fit_arm(
             v
         })
         .collect();
-    Ok(Corrected {
+    Corrected {
         pairs,
         visits,
         arm,
         folds,
-    })
+    }
 }
 
 impl ArmEstimate {
