@@ -154,7 +154,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
     let dir = tempfile::tempdir().unwrap();
     let folder = SessionFolder::create(&dir.path().join("s")).unwrap();
     let target_mm = 0.1;
-    let mut planner = planner(&prepared, target_mm);
+    let mut planner = cell_planner(&prepared, target_mm);
     let mut hardware = prepared.open_hardware().unwrap();
     let setup =
         prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
@@ -167,7 +167,7 @@ fn adaptive_session_in_the_rendered_sim_cell_stops_at_the_target() {
         &mut |_e: SessionEvent| {},
     )
     .unwrap();
-    assert!(planner.reached_target(), "{:?}", planner.log);
+    assert!(planner.reached_target(), "{:?}", planner.primary().log);
     let used = outcome.accepted.len();
     eprintln!(
         "rendered sim cell: adaptive reached {target_mm} mm with {used} of {} poses",
@@ -202,6 +202,14 @@ fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
     )
 }
 
+/// [`planner`] as a run drives it: the cell's planner over its one camera, the candidates all
+/// seen.
+fn cell_planner(prepared: &cell::PreparedCell, target_mm: f64) -> handeye_session::CellPlanner {
+    let one = planner(prepared, target_mm);
+    let count = one.candidates().len();
+    handeye_session::CellPlanner::new(vec![one], vec![vec![true; count]], count)
+}
+
 /// An adaptive session stopped by a protective stop resumes: the manifest's poses are kept, none
 /// is visited twice, and the planner goes on from the samples on disk to its target.
 #[test]
@@ -222,7 +230,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
     let target_mm = 0.1;
     let run = |config: &std::path::Path, folder: &SessionFolder| {
         let prepared = cell::prepare(config).unwrap();
-        let mut planner = planner(&prepared, target_mm);
+        let mut planner = cell_planner(&prepared, target_mm);
         let mut hardware = prepared.open_hardware().unwrap();
         let setup =
             prepared.session_setup(folder.clone(), Vec::new(), Arc::new(AtomicBool::new(false)));
@@ -247,7 +255,7 @@ fn a_stopped_adaptive_session_resumes_to_its_target() {
 
     let (outcome, planner) = run(&clean, &SessionFolder::open(folder.root()).unwrap());
     let outcome = outcome.unwrap();
-    assert!(planner.reached_target(), "{:?}", planner.log);
+    assert!(planner.reached_target(), "{:?}", planner.primary().log);
     let manifest = folder.read_manifest().unwrap();
     assert!(manifest.plan.len() > before);
     assert_eq!(

@@ -16,7 +16,7 @@
 use handeye_camera::Camera;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
-use handeye_plan::nbv::AdaptivePlanner;
+use handeye_plan::nbv::{AdaptivePlanner, AdaptiveStep};
 use handeye_robot::{Joints, Robot};
 
 use crate::driver::{PoseLoop, SessionEvent, SessionOutcome, SessionSetup};
@@ -33,13 +33,129 @@ pub trait PlanSource {
     fn visited(&mut self, poses: &[Pose]);
 }
 
-impl PlanSource for AdaptivePlanner {
-    /// The planner camera's samples choose (one camera's model).
-    fn next_pose(&mut self, samples: &[Vec<PosePair>]) -> Option<(Pose, Joints)> {
-        self.next(samples.first().map_or(&[][..], Vec::as_slice))
+/// The next-best pose of a cell's cameras, one or several: each camera has its own next-best-view
+/// model (`plan::nbv::AdaptivePlanner`: its setup, its mount and board as solved from its own
+/// samples so far, its noise) over the one candidate set (the planner camera's checked
+/// candidates). A candidate's score is the sum, over the cameras not yet good enough that are
+/// expected to see their board there (by the nominal cell), of each one's expected information
+/// gain `ln(score now / score after)`, per second of arm time (the move from where the arm
+/// stands); a candidate none of them gains from is not chosen. The plan stops when every camera
+/// has met the target 1-sigma with the stop check's agreement (held-out error, rotation spread:
+/// what its verdict would call GOOD), when it holds the plan's most poses (a pose counts when any
+/// camera accepted it), or when the candidates run out. With one camera this is that camera's
+/// planner's own choice and stop.
+pub struct CellPlanner {
+    /// One model per camera, the planner camera's first (its log is the run's), over the same
+    /// candidates.
+    planners: Vec<AdaptivePlanner>,
+    /// Per camera, per candidate: whether it is expected to see its board there.
+    sees: Vec<Vec<bool>>,
+    /// The most poses the plan may take.
+    max_poses: usize,
+}
+
+impl CellPlanner {
+    /// A planner over the cameras' `planners` (the planner camera's first, each over the same
+    /// candidates, in the session's camera order) with, per camera and candidate, whether it
+    /// sees its board there.
+    pub fn new(
+        planners: Vec<AdaptivePlanner>,
+        sees: Vec<Vec<bool>>,
+        max_poses: usize,
+    ) -> CellPlanner {
+        CellPlanner {
+            planners,
+            sees,
+            max_poses,
+        }
     }
+
+    /// The planner camera's model (its log holds the run's choices).
+    pub fn primary(&self) -> &AdaptivePlanner {
+        &self.planners[0]
+    }
+
+    /// Whether every camera met its target.
+    pub fn reached_target(&self) -> bool {
+        self.planners.iter().all(AdaptivePlanner::reached_target)
+    }
+}
+
+/// The poses the cameras' `samples` were taken at: each camera's samples are named by their pose
+/// (`pose-NNN`), and a pose counts once whichever cameras accepted it (a sample without a name
+/// counts alone).
+fn poses_kept(samples: &[Vec<PosePair>]) -> usize {
+    let mut named = std::collections::BTreeSet::new();
+    let mut unnamed = 0;
+    for pair in samples.iter().flatten() {
+        match &pair.id {
+            Some(id) => {
+                named.insert(id.as_str());
+            }
+            None => unnamed += 1,
+        }
+    }
+    named.len() + unnamed
+}
+
+impl PlanSource for CellPlanner {
+    fn next_pose(&mut self, all: &[Vec<PosePair>]) -> Option<(Pose, Joints)> {
+        let solved: Vec<Option<f64>> = self
+            .planners
+            .iter_mut()
+            .zip(all)
+            .map(|(planner, samples)| planner.assess(samples).1)
+            .collect();
+        let done = self.reached_target() || poses_kept(all) >= self.max_poses;
+        let choice = if done {
+            None
+        } else {
+            // Only the cameras still short of their target weigh in.
+            let gains: Vec<Vec<Option<f64>>> = self
+                .planners
+                .iter()
+                .zip(all)
+                .map(|(planner, samples)| {
+                    if planner.reached_target() {
+                        Vec::new()
+                    } else {
+                        planner.gains(samples)
+                    }
+                })
+                .collect();
+            let primary = &self.planners[0];
+            (0..primary.candidates().len())
+                .filter(|&i| primary.is_free(i))
+                .filter_map(|i| {
+                    let gain = gains
+                        .iter()
+                        .zip(&self.sees)
+                        .filter(|(_, sees)| sees.get(i).copied().unwrap_or(false))
+                        .filter_map(|(g, _)| g.get(i).copied().flatten())
+                        .reduce(|a, b| a + b)?;
+                    Some((i, gain / primary.seconds(i).max(1e-3)))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i)
+        };
+        self.planners[0].log.push(AdaptiveStep {
+            samples: all.first().map_or(0, Vec::len),
+            solved_sigma_mm: solved.first().copied().flatten(),
+            chose: choice,
+            predicted_sigma_mm: None,
+        });
+        let index = choice?;
+        let mut pose = None;
+        for planner in &mut self.planners {
+            pose = Some(planner.take(index));
+        }
+        pose
+    }
+
     fn visited(&mut self, poses: &[Pose]) {
-        self.mark_visited(poses);
+        for planner in &mut self.planners {
+            planner.mark_visited(poses);
+        }
     }
 }
 
@@ -210,4 +326,118 @@ fn recorded_plan(manifest: &SessionManifest) -> Vec<(Pose, Joints)> {
         .iter()
         .map(|planned| (planned.base_from_flange, planned.joints()))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use handeye_core::setup::Setup;
+    use handeye_solve::SolveOptions;
+    use nalgebra::Vector3;
+
+    /// With one camera the cell's planner is that camera's planner: the same candidates in the
+    /// same order (the nominal model choosing, before any sample), then none when they run out.
+    #[test]
+    fn with_one_camera_the_choices_are_the_cameras_own() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        let down = pose_from_rotvec(
+            Vector3::zeros(),
+            Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+        );
+        let candidates: Vec<(Pose, Joints)> = (0..6)
+            .map(|i| {
+                let turn = f64::from(i) * 0.15;
+                let rotation = Vector3::new(turn.sin() * 0.4, turn.cos() * 0.3, 0.2 * turn);
+                let at = Vector3::new(0.45 + 0.02 * f64::from(i), 0.01 * f64::from(i), 0.5);
+                let pose = pose_from_rotvec(at, rotation) * down;
+                (pose, Joints::zeros(6))
+            })
+            .collect();
+        let planner = || {
+            AdaptivePlanner::new(
+                Setup::EyeInHand,
+                camera_mount,
+                target_mount,
+                candidates.clone(),
+                SolveOptions::default(),
+                0.1,
+                usize::MAX,
+            )
+        };
+        let mut alone = planner();
+        let mut cell = CellPlanner::new(vec![planner()], vec![vec![true; 6]], 100);
+        let mut chosen = 0;
+        loop {
+            let (own, theirs) = (alone.next(&[]), cell.next_pose(&[vec![]]));
+            assert_eq!(own, theirs, "choice {chosen}");
+            if own.is_none() {
+                break;
+            }
+            chosen += 1;
+        }
+        assert_eq!(chosen, 6);
+    }
+
+    /// A candidate seen by two cameras gains for both: with the same model for each, the
+    /// choice over the cameras goes to the candidate the second camera alone sees, whichever
+    /// the first camera alone would take; with the second camera blind everywhere, the choice
+    /// is the first camera's own.
+    #[test]
+    fn the_choice_sums_the_gains_of_the_cameras_that_see_their_board() {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        let down = pose_from_rotvec(
+            Vector3::zeros(),
+            Vector3::new(std::f64::consts::PI, 0.0, 0.0),
+        );
+        let at = |x: f64, rotation: Vector3<f64>| {
+            pose_from_rotvec(Vector3::new(x, 0.0, 0.5), rotation) * down
+        };
+        let candidates: Vec<(Pose, Joints)> = [
+            at(0.5, Vector3::new(0.0, 0.0, 1.0)),
+            at(0.45, Vector3::new(0.5, 0.0, 0.0)),
+            at(0.55, Vector3::new(0.0, 0.4, 0.2)),
+        ]
+        .into_iter()
+        .map(|pose| (pose, Joints::zeros(6)))
+        .collect();
+        let planner = || {
+            AdaptivePlanner::new(
+                Setup::EyeInHand,
+                camera_mount,
+                target_mount,
+                candidates.clone(),
+                SolveOptions::default(),
+                0.1,
+                usize::MAX,
+            )
+        };
+        let alone = planner().next(&[]).expect("a first pose");
+        let first_alone = candidates
+            .iter()
+            .position(|(pose, _)| *pose == alone.0)
+            .unwrap();
+        let other = (first_alone + 1) % candidates.len();
+        let choose = |second_sees: Vec<bool>| {
+            let mut cell = CellPlanner::new(
+                vec![planner(), planner()],
+                vec![vec![true; 3], second_sees],
+                10,
+            );
+            let (pose, _) = cell.next_pose(&[vec![], vec![]]).expect("a first pose");
+            candidates.iter().position(|(p, _)| *p == pose).unwrap()
+        };
+        let mut only_other = vec![false; 3];
+        only_other[other] = true;
+        assert_eq!(choose(only_other), other, "the second camera's gain counts");
+        assert_eq!(
+            choose(vec![false; 3]),
+            first_alone,
+            "a blind camera adds nothing"
+        );
+    }
 }

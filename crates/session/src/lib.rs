@@ -21,7 +21,7 @@ pub mod manual;
 pub mod replay;
 pub mod verify;
 
-pub use adaptive::{run_adaptive_session, PlanSource};
+pub use adaptive::{run_adaptive_session, CellPlanner, PlanSource};
 pub use driver::{
     run_session, CameraFailure, PoseLoop, SessionCamera, SessionEvent, SessionOutcome,
     SessionSetup, SharedFrame,

@@ -14,7 +14,6 @@
 //! `failures.yaml` as it happens, its records so far are kept, and the run goes on with the
 //! others; `--resume` asks it again for the poses it missed.
 
-pub mod adaptive;
 pub mod solve;
 
 use std::path::{Path, PathBuf};

@@ -108,47 +108,41 @@ pub(super) fn drive_plan(
         .or(cell.config.plan.generate.map(|g| g.count))
         .unwrap_or(plan.len())
         .min(plan.len());
-    // The planner camera's model; a several-camera cell adds one per other camera (they weigh
-    // in on every choice and must each be good enough to stop: `rig::adaptive`).
-    let camera_planner = |camera: usize, max: usize| {
-        cell.adaptive_planner(camera, plan.to_vec(), cell.config.adaptive_target_mm(), max)
+    // One model per camera, the planner camera's first: each weighs in on every choice and
+    // must be good enough to stop (`CellPlanner`); the plan's most poses bound them together.
+    let planners = cell
+        .run_order()
+        .map(|camera| {
+            cell.adaptive_planner(
+                camera,
+                plan.to_vec(),
+                cell.config.adaptive_target_mm(),
+                usize::MAX,
+            )
             .with_min_poses(cell.config.plan.min_poses)
             .with_motion(cell.config.limits, start, per_pose_s(cell))
             .with_stop_check(good_enough(cell, camera))
-    };
-    let mut planner = camera_planner(cell.config.planner, max_poses);
-    let mut rig_planner = cell.config.listed.then(|| {
-        let planners = cell
-            .run_order()
-            .map(|c| camera_planner(c, usize::MAX))
-            .collect();
-        let sees = cell
-            .run_order()
-            .map(|c| {
-                plan.iter()
-                    .map(|(flange, _)| cell.sees_board(c, flange))
-                    .collect()
-            })
-            .collect();
-        super::super::rig::adaptive::RigPlanner::new(planners, sees, max_poses)
-    });
-    let source: &mut dyn crate::PlanSource = match &mut rig_planner {
-        Some(rig) => rig,
-        None => &mut planner,
-    };
+        })
+        .collect();
+    let sees = cell
+        .run_order()
+        .map(|c| {
+            plan.iter()
+                .map(|(flange, _)| cell.sees_board(c, flange))
+                .collect()
+        })
+        .collect();
+    let mut source = crate::CellPlanner::new(planners, sees, max_poses);
     let (robot, mut cameras) = hardware.devices();
     let outcome = crate::run_adaptive_session(
         setup,
         cell.config_path(),
-        source,
+        &mut source,
         robot,
         &mut cameras,
         &mut on_event,
     );
-    let (planner, reached) = match &rig_planner {
-        Some(rig) => (rig.primary(), rig.reached_target()),
-        None => (&planner, planner.reached_target()),
-    };
+    let planner = source.primary();
     let summary = AdaptiveSummary {
         in_session: folder.read_manifest().map(|m| m.plan.len()).unwrap_or(0),
         candidates: plan.len(),
@@ -161,7 +155,7 @@ pub(super) fn drive_plan(
         target_uncertainty_mm: cell.config.adaptive_target_mm(),
         max_poses,
         solved_sigma_mm: planner.log.last().and_then(|s| s.solved_sigma_mm),
-        reached,
+        reached: source.reached_target(),
     };
     (outcome, Some(summary))
 }
