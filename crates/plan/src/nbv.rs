@@ -22,11 +22,12 @@
 
 use std::sync::Arc;
 
-use nalgebra::SMatrix;
+use nalgebra::{DMatrix, SMatrix};
 
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::{Joints, MotionLimits};
+use handeye_solve::kinematics::{offsets_information, DhChain};
 use handeye_solve::refine::{mount_uncertainty, sample_information};
 use handeye_solve::{self as solve, Axby, Calibration, SolveOptions};
 
@@ -59,6 +60,21 @@ impl Predicted {
     }
 }
 
+/// The arm's joint zero offsets estimated beside the two transforms (`solver.kinematics`):
+/// predictions are made with them free, so a plan aims for the joint spread that tells them from
+/// the transforms, and stops only when the transforms are good enough with them free.
+#[derive(Debug, Clone)]
+pub struct ArmOffsets {
+    /// The arm's published chain.
+    pub chain: DhChain,
+    /// The joints whose offsets the candidates determine (`kinematics::estimable_offsets`).
+    pub free: Vec<usize>,
+}
+
+/// A sample the predictions count: its flange pose and, where known, the joints it was taken at
+/// (the arm's offsets act through them).
+pub type Taken = (Pose, Option<Joints>);
+
 /// What the predictions are made at: the cell's setup, the current estimate of both unknowns,
 /// the solver's options (its noise model) and the variance factor of the latest solve.
 #[derive(Debug, Clone)]
@@ -73,6 +89,8 @@ pub struct PredictionModel {
     pub options: SolveOptions,
     /// The variance factor of the latest solve (1 before any).
     pub variance_factor: f64,
+    /// The arm's offsets estimated with the transforms, if they are.
+    pub arm: Option<ArmOffsets>,
 }
 
 impl PredictionModel {
@@ -80,19 +98,58 @@ impl PredictionModel {
         Axby::from_mounts(&self.camera_mount, &self.target_mount)
     }
 
+    /// Parameters predicted: the transforms' 12, then one per free offset.
+    fn params(&self) -> usize {
+        12 + self.arm.as_ref().map_or(0, |arm| arm.free.len())
+    }
+
+    /// The information one sample at `taken` adds (whitened, [`Self::params`] square).
+    fn sample(&self, (pose, joints): &Taken) -> DMatrix<f64> {
+        if let (Some(arm), Some(q)) = (&self.arm, joints) {
+            return offsets_information(
+                self.setup,
+                &arm.chain,
+                &[q.to_vec()],
+                (&self.camera_mount, &self.target_mount),
+                self.options.noise,
+                &arm.free,
+            );
+        }
+        // A sample of unknown joints tells of the transforms alone.
+        let own = sample_information(
+            &self.solution(),
+            &self.setup.chain_b(pose),
+            &self.options.noise,
+        );
+        let mut out = DMatrix::zeros(self.params(), self.params());
+        out.view_mut((0, 0), (12, 12)).copy_from(&own);
+        out
+    }
+
     /// Information of samples at these robot poses.
-    fn information(&self, base_from_flange: &[Pose]) -> SMatrix<f64, 12, 12> {
-        let solution = self.solution();
-        let mut h = SMatrix::<f64, 12, 12>::identity() * PRIOR;
-        for pose in base_from_flange {
-            h += sample_information(&solution, &self.setup.chain_b(pose), &self.options.noise);
+    fn information(&self, taken: &[Taken]) -> DMatrix<f64> {
+        let n = self.params();
+        let mut h = DMatrix::identity(n, n) * PRIOR;
+        for sample in taken {
+            h += self.sample(sample);
         }
         h
     }
 
-    /// The covariance predicted from an information matrix, mapped to the unknowns and scored.
-    fn predict(&self, information: &SMatrix<f64, 12, 12>) -> Option<Predicted> {
-        let covariance = information.try_inverse()? * self.variance_factor;
+    /// The covariance predicted from an information matrix (the offsets marginalised: the
+    /// Schur complement of their block), mapped to the unknowns and scored.
+    fn predict(&self, information: &DMatrix<f64>) -> Option<Predicted> {
+        let n = information.nrows();
+        let transforms: SMatrix<f64, 12, 12> = if n == 12 {
+            information.fixed_view::<12, 12>(0, 0).into_owned()
+        } else {
+            let offsets = information.view((12, 12), (n - 12, n - 12)).into_owned();
+            let cross = information.view((0, 12), (12, n - 12)).into_owned();
+            let solved = offsets.cholesky()?.solve(&cross.transpose());
+            let marginal = information.view((0, 0), (12, 12)) - &cross * solved;
+            SMatrix::from_fn(|i, j| marginal[(i, j)])
+        };
+        let covariance = transforms.try_inverse()? * self.variance_factor;
         let u = mount_uncertainty(&self.solution(), &covariance, self.variance_factor);
         let lever_mm = ROTATION_LEVER_M * 1e3;
         let rot = |deg: f64| (deg.to_radians() * lever_mm).powi(2);
@@ -115,21 +172,19 @@ impl PredictionModel {
     /// candidate `i` and take its frame (> 0). At equal cost, the least score after.
     pub fn next_best_per_second(
         &self,
-        taken: &[Pose],
-        candidates: &[Pose],
+        taken: &[Taken],
+        candidates: &[(Pose, Joints)],
         used: &[bool],
         seconds: &dyn Fn(usize) -> f64,
     ) -> Option<(usize, Predicted)> {
-        let solution = self.solution();
         let h = self.information(taken);
         let now = self.predict(&h)?.score;
         candidates
             .iter()
             .enumerate()
             .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
-            .filter_map(|(i, c)| {
-                let added =
-                    h + sample_information(&solution, &self.setup.chain_b(c), &self.options.noise);
+            .filter_map(|(i, (pose, joints))| {
+                let added = &h + self.sample(&(*pose, Some(*joints)));
                 let p = self.predict(&added)?;
                 let gain = (now / p.score).ln();
                 Some((i, p, gain / seconds(i).max(1e-3)))
@@ -222,6 +277,7 @@ impl AdaptivePlanner {
                 target_mount: nominal_target_mount,
                 options,
                 variance_factor: 1.0,
+                arm: None,
             },
             candidates,
             used,
@@ -263,16 +319,22 @@ impl AdaptivePlanner {
         self
     }
 
+    /// Predicts with the arm's joint offsets `arm` free: the gains favour the joint spread that
+    /// tells them from the transforms, and the target must be met with them free too.
+    pub fn with_arm(mut self, arm: ArmOffsets) -> Self {
+        self.model.arm = Some(arm);
+        self
+    }
+
     /// The next pose to visit given the samples accepted so far, or `None` to stop.
     pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
         let (done, solved_sigma_mm) = self.assess(samples);
         let choice = if done {
             None
         } else {
-            let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
-            let poses: Vec<Pose> = self.candidates.iter().map(|c| c.0).collect();
+            let taken = self.counted(samples);
             self.model
-                .next_best_per_second(&taken, &poses, &self.used, &|i| self.seconds(i))
+                .next_best_per_second(&taken, &self.candidates, &self.used, &|i| self.seconds(i))
         };
         self.log.push(AdaptiveStep {
             samples: samples.len(),
@@ -301,24 +363,35 @@ impl AdaptivePlanner {
     /// Per candidate (`None` when taken already): how much its sample would reduce this
     /// camera's predicted score given `samples`, as `ln(score now / score after)`.
     pub fn gains(&self, samples: &[PosePair]) -> Vec<Option<f64>> {
-        let taken: Vec<Pose> = samples.iter().map(|p| p.base_from_flange).collect();
-        let solution = self.model.solution();
-        let h = self.model.information(&taken);
+        let h = self.model.information(&self.counted(samples));
         let now = self.model.predict(&h).map(|p| p.score);
         self.candidates
             .iter()
             .zip(&self.used)
-            .map(|((c, _), used)| {
+            .map(|((pose, joints), used)| {
                 if *used {
                     return None;
                 }
-                let added = h + sample_information(
-                    &solution,
-                    &self.model.setup.chain_b(c),
-                    &self.model.options.noise,
-                );
+                let added = &h + self.model.sample(&(*pose, Some(*joints)));
                 let after = self.model.predict(&added)?.score;
                 Some((now? / after).ln())
+            })
+            .collect()
+    }
+
+    /// The samples as the predictions count them: each with the joints of the candidate it was
+    /// taken at, when the arm's offsets are estimated (they act through the joints).
+    fn counted(&self, samples: &[PosePair]) -> Vec<Taken> {
+        samples
+            .iter()
+            .map(|p| {
+                let joints = self.model.arm.as_ref().and_then(|_| {
+                    self.candidates
+                        .iter()
+                        .find(|(candidate, _)| same_pose(candidate, &p.base_from_flange))
+                        .map(|(_, q)| *q)
+                });
+                (p.base_from_flange, joints)
             })
             .collect()
     }
@@ -367,6 +440,18 @@ impl AdaptivePlanner {
                 }
                 self.latest = Some(c);
             }
+            // With the arm's offsets estimated the answer's 1σ is theirs too: predicted at the
+            // solve just made, with the offsets free.
+            if self.model.arm.is_some() {
+                let with_offsets = self
+                    .model
+                    .predict(&self.model.information(&self.counted(samples)))
+                    .map(|p| p.worst_translation_mm());
+                solved_sigma_mm = match (solved_sigma_mm, with_offsets) {
+                    (Some(a), Some(b)) => Some(a.max(b)),
+                    _ => None,
+                };
+            }
         }
         let met = solved_sigma_mm.is_some_and(|s| s <= self.target_uncertainty_mm)
             && samples.len() >= self.min_stop;
@@ -389,10 +474,7 @@ impl AdaptivePlanner {
     /// session's poses are not chosen again.
     pub fn mark_visited(&mut self, poses: &[Pose]) {
         for (used, (candidate, _)) in self.used.iter_mut().zip(&self.candidates) {
-            *used |= poses.iter().any(|p| {
-                (p.translation.vector - candidate.translation.vector).norm() < 1e-3
-                    && p.rotation.angle_to(&candidate.rotation) < 0.1f64.to_radians()
-            });
+            *used |= poses.iter().any(|p| same_pose(p, candidate));
         }
     }
 
@@ -401,6 +483,13 @@ impl AdaptivePlanner {
     pub fn reached_target(&self) -> bool {
         self.reached
     }
+}
+
+/// Whether two flange poses are one (within 1 mm and 0.1°): a measured pose and the candidate
+/// it was taken at.
+fn same_pose(a: &Pose, b: &Pose) -> bool {
+    (a.translation.vector - b.translation.vector).norm() < 1e-3
+        && a.rotation.angle_to(&b.rotation) < 0.1f64.to_radians()
 }
 
 #[cfg(test)]
@@ -438,7 +527,13 @@ mod tests {
             target_mount,
             options: SolveOptions::default(),
             variance_factor: 1.0,
+            arm: None,
         };
+        let taken: Vec<Taken> = taken.iter().map(|pose| (*pose, None)).collect();
+        let candidates: Vec<(Pose, Joints)> = candidates
+            .iter()
+            .map(|pose| (*pose, Joints::zeros(6)))
+            .collect();
         let (best, _) = model
             .next_best_per_second(&taken, &candidates, &[false; 3], &|_| 1.0)
             .unwrap();

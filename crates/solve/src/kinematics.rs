@@ -637,6 +637,79 @@ impl NormalEquations for Problem<'_> {
     }
 }
 
+/// Samples at `joints` (rad, one list per sample) of an arm reporting its flange through
+/// `chain`, each board pose exactly as `solution` predicts it: the point a future solve is
+/// linearised at, for planning.
+fn predicted_samples(
+    setup: Setup,
+    chain: &DhChain,
+    joints: &[Vec<f64>],
+    solution: &Axby,
+) -> Vec<Prepared> {
+    let zero = vec![0.0; chain.joints()];
+    joints
+        .iter()
+        .map(|q| Prepared {
+            a: solution.x * setup.chain_b(&chain.forward(q, &zero)) * solution.y,
+            correction: Pose::identity(),
+            joints: q.clone(),
+            scale: 1.0,
+        })
+        .collect()
+}
+
+/// The whitened information `JᵀJ` that samples at `joints` (rad, one list per sample, each
+/// predicted exactly at the mounts `(camera, target)`) give of the two transforms with the
+/// joint zero offsets of the joints `free` estimated beside them: `(12 + k)²`, the transforms'
+/// 12 parameters first (as [`crate::refine::sample_information`]), then one per joint of
+/// `free`. The inverse's 12 × 12 block is the transforms' covariance with those offsets free:
+/// what a plan that estimates the arm's offsets is scored by (`plan::nbv`).
+pub fn offsets_information(
+    setup: Setup,
+    chain: &DhChain,
+    joints: &[Vec<f64>],
+    (camera, target): (&Pose, &Pose),
+    noise: NoiseModel,
+    free: &[usize],
+) -> DMatrix<f64> {
+    let columns: Vec<Param> = free.iter().map(|&j| (j, 0)).collect();
+    let anchor = Axby::from_mounts(camera, target);
+    let samples = predicted_samples(setup, chain, joints, &anchor);
+    let problem = Problem {
+        setup,
+        chain,
+        samples: &samples,
+        free: &columns,
+        noise,
+        anchor,
+        anchor_corrections: vec![[0.0; 4]; chain.joints()],
+        delta: DVector::zeros(POSE_PARAMS + columns.len()),
+    };
+    let lin = problem.linearise(&columns);
+    lin.rotation + lin.translation
+}
+
+/// The joints whose zero offsets samples at `joints` determine beside the two transforms (the
+/// identifiability analysis of [`fit_arm`]: those the transforms absorb, on a UR the base and
+/// last joints, and those the configurations do not move enough are left out), at the mounts
+/// `(camera, target)`.
+pub fn estimable_offsets(
+    setup: Setup,
+    chain: &DhChain,
+    joints: &[Vec<f64>],
+    mounts: (&Pose, &Pose),
+    noise: NoiseModel,
+) -> Vec<usize> {
+    let all: Vec<usize> = (0..chain.joints()).collect();
+    let information = offsets_information(setup, chain, joints, mounts, noise, &all);
+    identifiability(setup, &information, all.len())
+        .into_iter()
+        .enumerate()
+        .filter(|(_, status)| status.is_none())
+        .map(|(j, _)| j)
+        .collect()
+}
+
 /// Which chain parameters the data can estimate, from the information `n` (whitened `JᵀJ`, the
 /// 12 transform parameters then one column per candidate parameter) at the start: each
 /// candidate's status, `None` for the free ones.

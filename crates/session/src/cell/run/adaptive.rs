@@ -113,15 +113,20 @@ pub(super) fn drive_plan(
     let planners = cell
         .run_order()
         .map(|camera| {
-            cell.adaptive_planner(
-                camera,
-                plan.to_vec(),
-                cell.config.adaptive_target_mm(),
-                usize::MAX,
-            )
-            .with_min_poses(cell.config.plan.min_poses)
-            .with_motion(cell.config.limits, start, per_pose_s(cell))
-            .with_stop_check(good_enough(cell, camera))
+            let planner = cell
+                .adaptive_planner(
+                    camera,
+                    plan.to_vec(),
+                    cell.config.adaptive_target_mm(),
+                    usize::MAX,
+                )
+                .with_min_poses(cell.config.plan.min_poses)
+                .with_motion(cell.config.limits, start, per_pose_s(cell))
+                .with_stop_check(good_enough(cell, camera));
+            match arm_offsets(cell, camera, plan) {
+                Some(arm) => planner.with_arm(arm),
+                None => planner,
+            }
         })
         .collect();
     let sees = cell
@@ -158,6 +163,36 @@ pub(super) fn drive_plan(
         reached: source.reached_target(),
     };
     (outcome, Some(summary))
+}
+
+/// With `solver.kinematics: joint_offsets | dh` and the arm's published model: the offsets
+/// camera `camera`'s plan is scored with, free beside the transforms (those its `candidates`
+/// determine at the nominal cell), so the plan aims for the joint spread that tells them apart
+/// and stops when the transforms are good enough with them free. (The DH link corrections are
+/// not planned for: the offsets lead, and the plan check says what a plan gives of the links.)
+fn arm_offsets(
+    cell: &PreparedCell,
+    camera: usize,
+    candidates: &[(Pose, Joints)],
+) -> Option<handeye_plan::nbv::ArmOffsets> {
+    use handeye_config::KinematicsChoice;
+    if !matches!(
+        cell.config.solver.kinematics(),
+        KinematicsChoice::JointOffsets | KinematicsChoice::Dh
+    ) {
+        return None;
+    }
+    let chain = handeye_records::solve::dh_chain(cell.arm.as_ref()?);
+    let nominal = &cell.config.cameras[camera].nominal;
+    let joints: Vec<Vec<f64>> = candidates.iter().map(|(_, q)| q.to_vec()).collect();
+    let free = handeye_solve::kinematics::estimable_offsets(
+        nominal.setup,
+        &chain,
+        &joints,
+        (&nominal.camera_mount, &nominal.target_mount),
+        cell.config.solver.to_options().noise,
+    );
+    Some(handeye_plan::nbv::ArmOffsets { chain, free })
 }
 
 /// What one pose costs besides its move, s, for weighing candidates by arm time: the fixed
