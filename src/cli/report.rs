@@ -84,6 +84,7 @@ pub(super) fn write(
         calibration,
         result.verdict.clone(),
         result.robot_frames.clone().unwrap_or_default(),
+        result.kinematics.clone(),
     )?;
     for why in lacking {
         eprintln!("warning: {why}");

@@ -725,6 +725,7 @@ fn two_answers_are_shown_side_by_side() {
         corners: Vec::new(),
         image_size: None,
         robot_frames: Default::default(),
+        arm: None,
     };
     let html = render_html(&input).unwrap();
     // Without a config's nominal values the plain summary says where the answer puts each frame.

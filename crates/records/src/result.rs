@@ -98,6 +98,37 @@ pub struct KinematicsYaml {
     /// the answer's own `uncertainty` holds the offsets at their estimates.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintyYaml>,
+    /// How far the estimated model moves the flange from where the published one puts it, over
+    /// the recorded poses' joints, mm: the published model's flange position error as far as
+    /// the data tell (absent in files written before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flange_correction_mm: Option<MeanMax>,
+}
+
+/// The mean and the largest of a figure over the recorded poses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeanMax {
+    /// The mean.
+    pub mean: f64,
+    /// The largest.
+    pub max: f64,
+}
+
+impl MeanMax {
+    /// The mean and largest of `values` (`None` for none).
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Option<MeanMax> {
+        let (mut sum, mut max, mut n) = (0.0, f64::NEG_INFINITY, 0usize);
+        for v in values {
+            sum += v;
+            max = max.max(v);
+            n += 1;
+        }
+        (n > 0).then(|| MeanMax {
+            mean: sum / n as f64,
+            max,
+        })
+    }
 }
 
 /// A figure with the arm's model and without it.

@@ -42,7 +42,7 @@ use handeye_solve::Calibration;
 use base64::prelude::{Engine as _, BASE64_STANDARD};
 pub use corners::{CornerResidual, CORNER_PLOT_KINDS};
 pub use sections::export_forms;
-use sections::{figure, transforms_section, use_section, verdict_card};
+use sections::{arm_section, figure, transforms_section, use_section, verdict_card};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]
@@ -115,6 +115,8 @@ pub struct ReportInput {
     /// The frames the robot poses were read in: "use it" names the base and flange by them, as
     /// `handeye export` does by default.
     pub robot_frames: handeye_core::setup::RobotFrames,
+    /// The arm's own model the solve estimated beside the transforms, when it did.
+    pub arm: Option<handeye_records::result::KinematicsYaml>,
 }
 
 /// Why the report could not be made.
@@ -259,6 +261,9 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
         );
     }
     html.push_str("</section>\n");
+    if let Some(arm) = &input.arm {
+        arm_section(&mut html, arm);
+    }
     corners::corners_section(&mut html, input)?;
 
     per_pose_table(&mut html, input);

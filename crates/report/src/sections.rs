@@ -1,6 +1,6 @@
 //! The report's per-answer sections: the verdict card (level, reason, next action, figures,
 //! further findings), "use it" (the export snippets with copy buttons), the transforms of each answer with their 1-sigma and every export form
-//! ([`export_forms`]), and the `<figure>` wrapper of a plot. Each writes HTML into the page that
+//! ([`export_forms`]), the arm's own model when the solve estimated it, and the `<figure>` wrapper of a plot. Each writes HTML into the page that
 //! [`render_html`](super::render_html) builds.
 //!
 //! Depends on `verdict` (the card's content), `solve` (through [`ReportAnswer`]), `geometry`
@@ -409,6 +409,66 @@ pub fn export_forms(pose: &Pose) -> Vec<(&'static str, String, Option<&'static s
             None,
         ),
     ]
+}
+
+/// The arm's own model the solve estimated (`solver.kinematics`; the result's `kinematics:`):
+/// what was estimated, the residuals with and without it, how far it moves the flange over the
+/// recorded poses, and each joint offset and link correction with its 1σ or why it was held.
+pub(super) fn arm_section(html: &mut String, arm: &handeye_records::result::KinematicsYaml) {
+    let estimated = match arm.estimated.as_str() {
+        "dh" => "joint zero offsets and DH link corrections",
+        _ => "joint zero offsets",
+    };
+    let _ = write!(
+        html,
+        "<section id=\"arm-model\"><h3>The arm's own model</h3>\n<p>The {} against the {}'s published model, estimated with the two transforms: pose-space residual RMS <span data-key=\"kinematics.translation_rms_mm.with\">{:.3}</span> mm / {:.4}° with it, {:.3} mm / {:.4}° with the published model.",
+        estimated,
+        escape(&arm.model),
+        arm.translation_rms_mm.with,
+        arm.rotation_rms_deg.with,
+        arm.translation_rms_mm.without,
+        arm.rotation_rms_deg.without
+    );
+    if let Some(moved) = &arm.flange_correction_mm {
+        let _ = write!(
+            html,
+            " The flange where it puts it is <span data-key=\"kinematics.flange_correction_mm.mean\">{:.3}</span> mm from the published model's on average over the recorded poses ({:.3} mm at most).",
+            moved.mean, moved.max
+        );
+    }
+    html.push_str("</p>\n<table class=\"arm\"><thead><tr><th>joint</th><th>parameter</th><th>correction</th><th>1σ</th></tr></thead><tbody>\n");
+    let held = |absorbed_by: &Option<String>, undetermined: bool| match absorbed_by {
+        Some(by) => format!("held: absorbed by {}", escape(by)),
+        None if undetermined => "held: not determined by these poses".to_string(),
+        None => "-".to_string(),
+    };
+    for o in &arm.joint_offsets {
+        let sigma = o.sigma_deg.map_or_else(
+            || held(&o.absorbed_by, o.undetermined),
+            |s| format!("{s:.4}°"),
+        );
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>zero offset</td><td>{:+.4}°</td><td>{sigma}</td></tr>",
+            escape(&o.joint),
+            o.offset_deg
+        );
+    }
+    for l in &arm.links {
+        let unit = if l.unit == "deg" { "°" } else { " mm" };
+        let sigma = l.sigma.map_or_else(
+            || held(&l.absorbed_by, l.undetermined),
+            |s| format!("{s:.4}{unit}"),
+        );
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>{}</td><td>{:+.4}{unit}</td><td>{sigma}</td></tr>",
+            escape(&l.joint),
+            escape(&l.parameter),
+            l.correction
+        );
+    }
+    html.push_str("</tbody></table>\n</section>\n");
 }
 
 #[cfg(test)]

@@ -185,6 +185,7 @@ pub fn from_session(
         corners,
         image_size: optics.map(|o| (o.camera.width, o.camera.height)),
         robot_frames: RobotFrames::default(),
+        arm: None,
     })
 }
 
@@ -319,6 +320,7 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
             arm_time: run.arm_time,
             nominal: Some(run.cell.config.camera().nominal),
             robot_frames: run.cell.config.robot.frames(),
+            arm: solved.arm.as_ref().map(|a| a.result_section()),
             path: run.folder.root().join(REPORT_FILE),
         },
     )
@@ -351,6 +353,7 @@ pub fn write_replay_report(
             arm_time: None,
             nominal,
             robot_frames,
+            arm: solved.arm.as_ref().map(|a| a.result_section()),
             path: path.to_path_buf(),
         },
     )
@@ -366,6 +369,7 @@ pub fn write_folder_report(
     answer: Calibration,
     verdict: Option<Verdict>,
     robot_frames: RobotFrames,
+    arm: Option<handeye_records::result::KinematicsYaml>,
 ) -> Result<(std::path::PathBuf, Vec<String>), ReportError> {
     let session_error = |e: SessionError| ReportError::Session(Box::new(e));
     let evidence = Evidence {
@@ -407,6 +411,7 @@ pub fn write_folder_report(
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.camera().nominal),
             robot_frames,
+            arm,
             path: folder.root().join(REPORT_FILE),
         },
     )?;
@@ -420,6 +425,7 @@ struct Page<'a> {
     arm_time: Option<handeye_session::cell::run::ArmTime>,
     nominal: Option<handeye_core::setup::CellTransforms>,
     robot_frames: RobotFrames,
+    arm: Option<handeye_records::result::KinematicsYaml>,
     path: std::path::PathBuf,
 }
 
@@ -437,12 +443,14 @@ fn write(
         arm_time,
         nominal,
         robot_frames,
+        arm,
         path,
     } = page;
     let mut input = from_session(folder, evidence, answers, optics)?;
     input.arm_time = arm_time;
     input.nominal = nominal;
     input.robot_frames = robot_frames;
+    input.arm = arm;
     if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
         input.holdout = Some(super::HoldoutSummary {
             description: format!(

@@ -116,7 +116,7 @@ impl ArmErrors {
     /// last link at zero angle, so a base-side transform turns by `Rz(−δ1)` and a flange-side one
     /// is `K` times it.
     pub fn fold(&self, nominal: &UrModel, truth: &CellTransforms) -> (TrueArm, CellTransforms) {
-        let mut arm = self.true_arm(nominal);
+        let arm = self.true_arm(nominal);
         let base_turn = Pose::from_parts(
             nalgebra::Translation3::identity(),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -arm.joint_offsets_rad[0]),
@@ -125,8 +125,6 @@ impl ArmErrors {
         let last = dh_link(0.0, m.d[5], m.a[5], m.alpha[5]);
         let turn = dh_link(arm.joint_offsets_rad[5], 0.0, 0.0, 0.0);
         let flange_turn = last.inverse() * turn * last;
-        arm.joint_offsets_rad[0] = 0.0;
-        arm.joint_offsets_rad[5] = 0.0;
         let (camera_mount, target_mount) = match truth.setup {
             Setup::EyeInHand => (
                 flange_turn * truth.camera_mount,
@@ -138,13 +136,22 @@ impl ArmErrors {
             ),
         };
         (
-            arm,
+            self.folded_arm(nominal),
             CellTransforms {
                 setup: truth.setup,
                 camera_mount,
                 target_mount,
             },
         )
+    }
+
+    /// The true arm of [`ArmErrors::fold`]: the base and last joint offsets zero (folded into the
+    /// transforms), so its flange is the one the controller's frames hold.
+    pub fn folded_arm(&self, nominal: &UrModel) -> TrueArm {
+        let mut arm = self.true_arm(nominal);
+        arm.joint_offsets_rad[0] = 0.0;
+        arm.joint_offsets_rad[5] = 0.0;
+        arm
     }
 }
 

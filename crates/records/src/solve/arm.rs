@@ -8,7 +8,7 @@
 //! Frames: `T_base_flange` in the controller's base; the offsets in radians inside, degrees in
 //! the result file. Depends on `config`, `result`, the folder's records and `solve`.
 
-use handeye_core::geometry::Pose;
+use handeye_core::geometry::{translation_distance, Pose};
 use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::arm_errors::ArmErrors;
@@ -20,7 +20,7 @@ use handeye_solve::kinematics::{
 use handeye_solve::{self as solve, SolveError};
 
 use crate::result::{
-    JointOffsetYaml, KinematicsYaml, LinkCorrectionYaml, UncertaintyYaml, WithWithout,
+    JointOffsetYaml, KinematicsYaml, LinkCorrectionYaml, MeanMax, UncertaintyYaml, WithWithout,
 };
 use crate::{PlannedPose, PoseVisit, SessionError};
 use handeye_config::schema::arm_model_unavailable;
@@ -44,6 +44,8 @@ pub struct ArmEstimate {
     pub chain: DhChain,
     /// The joint fit (offsets, the transforms with them, residuals with and without).
     pub fit: ArmFit,
+    /// The joints of the samples fitted (rad, one list per sample): the recorded workspace.
+    pub recorded_joints: Vec<Vec<f64>>,
 }
 
 /// The session's samples and visits with the robot poses the arm's model corrects, and the model.
@@ -282,6 +284,7 @@ fn corrected_by(
         model: model.to_string(),
         chain: folds.chain.clone(),
         fit,
+        recorded_joints: folds.samples.iter().map(|s| s.joints.clone()).collect(),
     };
     let visits = visits
         .iter()
@@ -302,6 +305,25 @@ fn corrected_by(
 }
 
 impl ArmEstimate {
+    /// The flange at `joints` (rad) by the published chain and by the estimated model.
+    fn flanges(&self, joints: &[f64]) -> (Pose, Pose) {
+        let zero = vec![0.0; self.chain.joints()];
+        (
+            self.chain.forward(joints, &zero),
+            self.chain
+                .forward_corrected(joints, &self.fit.corrections()),
+        )
+    }
+
+    /// How far the estimated model moves the flange from the published one's, over the
+    /// recorded joints, mm.
+    pub fn flange_correction_mm(&self) -> Option<MeanMax> {
+        MeanMax::of(self.recorded_joints.iter().map(|q| {
+            let (published, estimated) = self.flanges(q);
+            translation_distance(&published, &estimated) * 1e3
+        }))
+    }
+
     /// A reported flange pose at `joints` (rad) corrected by the fitted model.
     pub fn corrected(&self, reported: &Pose, joints: &[f64]) -> Pose {
         let zero = vec![0.0; self.chain.joints()];
@@ -361,6 +383,7 @@ impl ArmEstimate {
                 without: fit.rotation_rms_deg[1],
             },
             uncertainty,
+            flange_correction_mm: self.flange_correction_mm(),
         }
     }
 
@@ -380,6 +403,14 @@ impl ArmEstimate {
             fit.translation_rms_mm[1],
             fit.rotation_rms_deg[1],
         )];
+        if let Some(moved) = self.flange_correction_mm() {
+            lines.push(format!(
+                "  the flange where the estimated model puts it: {:.3} mm mean ({:.3} max) from the published model's over the {} recorded poses",
+                moved.mean,
+                moved.max,
+                self.recorded_joints.len()
+            ));
+        }
         for o in &fit.offsets {
             let what = match o.status {
                 OffsetStatus::Estimated { sigma_rad } => format!(
@@ -426,6 +457,36 @@ impl ArmEstimate {
     /// by the transforms, or not determined) may have moved part of its truth into it.
     pub fn compare_with_truth(&self, truth: &ArmErrors) -> String {
         let mut lines = vec!["arm model truth check (estimated joint offsets):".to_string()];
+        // The flange over the recorded workspace against the true arm in the controller's
+        // frames (its base and last offsets folded into the transforms: no model can hold them).
+        if let Some(true_arm) = UrModel::by_name(&self.model).map(|m| truth.folded_arm(&m)) {
+            let errors: Vec<(f64, f64)> = self
+                .recorded_joints
+                .iter()
+                .filter_map(|q| {
+                    let at = handeye_robot::Joints::from_slice(q).ok()?;
+                    let true_flange = true_arm.forward(&at);
+                    let (published, estimated) = self.flanges(q);
+                    Some((
+                        translation_distance(&true_flange, &published) * 1e3,
+                        translation_distance(&true_flange, &estimated) * 1e3,
+                    ))
+                })
+                .collect();
+            if let (Some(before), Some(after)) = (
+                MeanMax::of(errors.iter().map(|e| e.0)),
+                MeanMax::of(errors.iter().map(|e| e.1)),
+            ) {
+                lines.push(format!(
+                    "  flange position over the {} recorded poses against the simulator's true arm: {:.3} mm mean ({:.3} max) with the published model, {:.3} mm ({:.3}) with the estimated one",
+                    errors.len(),
+                    before.mean,
+                    before.max,
+                    after.mean,
+                    after.max
+                ));
+            }
+        }
         for o in &self.fit.offsets {
             if let OffsetStatus::Estimated { sigma_rad } = o.status {
                 let error = o.offset_rad - truth.joint_offsets_rad[o.joint];
