@@ -1240,7 +1240,9 @@ fn the_held_out_check_refits_the_arms_model_without_each_sample() {
 /// configured noise). Its predicted 1σ of each offset is the spread of the offsets fitted to
 /// samples drawn at that noise (30 draws: each within 0.7–1.4× of the spread); the base and
 /// last joints are named as absorbed, and so is wrist 2 when the plan moves neither it nor
-/// wrist 3 (its offset then only turns the flange-side transform).
+/// wrist 3 (its offset then only turns the flange-side transform). The poses it says the model
+/// needs (the first N of the plan) give each transform an RMS error within the accuracy asked
+/// over 30 draws at that noise.
 #[test]
 fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_move() {
     use handeye_solve::kinematics::{fit_arm, ArmModel};
@@ -1316,6 +1318,53 @@ fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_mov
         );
         assert!((0.7..=1.4).contains(&ratio), "{name}: {ratio}");
     }
+    // How many poses it needs: the first N of the plan, fitted to draws at the configured
+    // noise, give each transform an RMS error within the accuracy asked (its 1σ is).
+    let needed: usize = {
+        let at = note.find("the first ").expect("the poses needed") + "the first ".len();
+        note[at..].split(' ').next().unwrap().parse().unwrap()
+    };
+    assert!(
+        (8..joints.len()).contains(&needed),
+        "{needed} poses: {note}"
+    );
+    let accuracy = prepared.config.verdict.accuracy();
+    let mut squares = [0.0f64; 4];
+    for draw in 0..30 {
+        let (noisy, _) = samples_with(
+            &joints[..needed],
+            &model,
+            &none,
+            &physical,
+            [board, BoardNoise(0.0, 0.0)],
+            8000 + draw,
+        );
+        let fit = fit_arm(
+            ArmModel::JointOffsets,
+            physical.setup,
+            &chain,
+            &noisy,
+            (&physical.camera_mount, &physical.target_mount),
+            noise,
+            &options,
+        )
+        .unwrap();
+        let camera = pose_error_mm_deg(&fit.camera_mount, &physical.camera_mount);
+        let target = pose_error_mm_deg(&fit.target_mount, &physical.target_mount);
+        for (sum, e) in squares
+            .iter_mut()
+            .zip([camera.0, camera.1, target.0, target.1])
+        {
+            *sum += e * e / 30.0;
+        }
+    }
+    let rms = squares.map(f64::sqrt);
+    eprintln!("the first {needed} poses, 30 draws: RMS error camera mount {:.3} mm / {:.4}°, target mount {:.3} mm / {:.4}°", rms[0], rms[1], rms[2], rms[3]);
+    assert!(
+        rms[0].max(rms[2]) <= accuracy.translation_mm
+            && rms[1].max(rms[3]) <= accuracy.rotation_deg,
+        "{rms:?}"
+    );
     // A plan whose wrists 2 and 3 never move: wrist 2's offset is no longer estimated.
     let plan: Vec<_> = prepared
         .report

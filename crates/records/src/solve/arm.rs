@@ -698,5 +698,75 @@ pub fn plan_observability(
             undetermined.join(", ")
         ));
     }
+    lines.push(poses_needed(
+        config, estimated, &chain, &samples, nominal, &fit,
+    ));
     Some(lines.join("\n"))
+}
+
+/// How many of a plan's poses (the first, in its order) the arm's model needs: the fewest
+/// whose fit at the configured noise estimates every offset the whole plan does, with the
+/// transforms' 1σ within the accuracy asked (`verdict.accuracy_*`). Information only grows
+/// with poses, so the figures fall with each one added and the fewest are found by bisection.
+fn poses_needed(
+    config: &CellConfig,
+    estimated: ArmModel,
+    chain: &DhChain,
+    samples: &[ArmSample],
+    nominal: &handeye_core::setup::CellTransforms,
+    whole: &ArmFit,
+) -> String {
+    let accuracy = config.verdict.accuracy();
+    let options = solve::SolveOptions {
+        estimate_noise: solve::EstimateNoise::NONE,
+        ..config.solver.to_options()
+    };
+    let estimated_count = whole.estimated();
+    let enough = |n: usize| -> bool {
+        let Ok(fit) = fit_model(
+            estimated,
+            nominal.setup,
+            chain,
+            &samples[..n],
+            (&nominal.camera_mount, &nominal.target_mount),
+            options.noise,
+            &options,
+        ) else {
+            return false;
+        };
+        let Some(u) = fit.uncertainty.as_ref() else {
+            return false;
+        };
+        // Exact samples drive χ²/dof to its floor: undone, the 1σ are the configured noise's.
+        let prior = 1.0 / u.variance_factor.sqrt();
+        fit.estimated() >= estimated_count
+            && u.camera_mount
+                .translation_mm
+                .max(u.target_mount.translation_mm)
+                * prior
+                <= accuracy.translation_mm
+            && u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg) * prior
+                <= accuracy.rotation_deg
+    };
+    let all = samples.len();
+    if !enough(all) {
+        return format!(
+            "  the transforms' 1σ with the arm's model are not within the {} mm / {}° asked even with all {all} poses: add poses, or estimate less (`solver.kinematics: joint_offsets`)",
+            accuracy.translation_mm, accuracy.rotation_deg
+        );
+    }
+    // The fewest that are enough: `low` is not (or too few to fit), `high` is.
+    let (mut low, mut high) = (2, all);
+    while high - low > 1 {
+        let mid = (low + high) / 2;
+        if enough(mid) {
+            high = mid;
+        } else {
+            low = mid;
+        }
+    }
+    format!(
+        "  the first {high} of these {all} poses determine every offset above with the transforms within the {} mm / {}° asked",
+        accuracy.translation_mm, accuracy.rotation_deg
+    )
 }
