@@ -4,6 +4,7 @@
 Reads JSON on stdin: a list of problems, each
 
     {"setup": "eye_in_hand" | "eye_to_hand",
+     "model": "joint_offsets" | "dh",                       # what is estimated (default offsets)
      "dh": {"d": [..], "a": [..], "alpha": [..]},          # the arm's nominal standard DH chain
      "sigma_rotation_rad": s_r, "sigma_translation_m": s_t,  # the board-pose noise, 1 sigma
      "start": {"camera_mount": 4x4, "target_mount": 4x4},    # the two transforms to start from
@@ -16,16 +17,20 @@ written here from its statement, solved by scipy.optimize.least_squares.
 
 The model. The controller reports T_base_flange through the nominal chain, FK(q); with joint
 zero offsets d the flange is at FK(q + d), so the flange pose of a sample is the reported one
-moved by the change of model: F(d) = T_reported . FK(q)^-1 . FK(q + d). The board is then seen
+moved by the change of model: F(d) = T_reported . FK(q)^-1 . FK(q + d). With "model": "dh" every
+link's parameters are corrected too: link i is Rz(q_i + dtheta_i) . Tz(d_i + dd_i) .
+Tx(a_i + da_i) . Rx(alpha_i + dalpha_i). The board is then seen
 at inv(X) . inv(F) . Y (eye-in-hand: X = T_flange_camera, Y = T_base_target) or
 inv(X) . F . Y (eye-to-hand: X = T_base_camera, Y = T_flange_target). The residual of a
 sample is the rotation vector of R_measured^T . R_predicted over s_r and the translation
 difference (camera frame) over s_t, both times sqrt(weight). Parameters: each transform as a
 rotation vector and a translation, and the offsets of the joints the data observe.
 
-Which offsets the data observe is decided here too: a joint whose Jacobian column (at the start,
-all offsets zero) keeps less than ABSORBED of its norm once the twelve transform columns are
-projected out is absorbed by the transforms and held at zero.
+Which parameters the data observe is decided here too: one whose Jacobian column (at the start,
+all corrections zero) keeps less than ABSORBED of its norm once the twelve transform columns are
+projected out is absorbed by the transforms and held at zero; of the rest, in order (joint by
+joint, each joint's theta, d, a, alpha), one that keeps less than ABSORBED once the transforms'
+and the parameters kept before it are projected out is undetermined and held at zero.
 
 The covariance is (J^T J)^-1 scaled by chi2/dof at the optimum; a transform's 1 sigma is the
 square root of the trace of its rotation block (as a left perturbation exp(dtheta) . R, rad) and
@@ -104,14 +109,23 @@ class Problem:
                 )
             )
 
+    def corrected(self, q, corrections):
+        """FK of the chain with each link's (theta, d, a, alpha) corrections."""
+        out = np.eye(4)
+        for i, (qi, d, a, alpha) in enumerate(zip(q, self.chain["d"], self.chain["a"], self.chain["alpha"])):
+            c = corrections[i]
+            out = out @ dh(qi + c[0], d + c[1], a + c[2], alpha + c[3])
+        return out
+
     def residuals(self, x, free):
         cam = transform(x[0:6])
         target = transform(x[6:12])
-        offsets = np.zeros(self.joints)
-        offsets[free] = x[12:]
+        corrections = np.zeros((self.joints, 4))
+        for value, (j, p) in zip(x[12:], free):
+            corrections[j, p] = value
         out = []
         for q, correction, measured, scale in self.samples:
-            flange = correction @ forward(self.chain, q + offsets)
+            flange = correction @ self.corrected(q, corrections)
             chain = inverse(flange) if self.eye_in_hand else flange
             predicted = inverse(cam) @ chain @ target
             rot = Rotation.from_matrix(measured[:3, :3].T @ predicted[:3, :3]).as_rotvec()
@@ -147,15 +161,29 @@ def solve(spec):
             as_params(np.array(spec["start"]["target_mount"], dtype=float)),
         ]
     )
-    every = list(range(problem.joints))
-    full = problem.jacobian(np.concatenate([start, np.zeros(problem.joints)]), every)
-    span = full[:, :12]
-    remains = []
-    for j in every:
-        column = full[:, 12 + j]
+    parameters = 4 if spec.get("model") == "dh" else 1
+    every = [(j, p) for j in range(problem.joints) for p in range(parameters)]
+    full = problem.jacobian(np.concatenate([start, np.zeros(len(every))]), every)
+
+    def remains(k, span):
+        column = full[:, 12 + k]
         fit, *_ = np.linalg.lstsq(span, column, rcond=None)
-        remains.append(float(np.linalg.norm(column - span @ fit) / np.linalg.norm(column)))
-    free = [j for j in every if remains[j] >= ABSORBED]
+        return float(np.linalg.norm(column - span @ fit) / np.linalg.norm(column))
+
+    transforms = full[:, :12]
+    absorbed = [remains(k, transforms) for k in range(len(every))]
+    free, held = [], {}
+    kept = transforms
+    for k, param in enumerate(every):
+        if absorbed[k] < ABSORBED:
+            held[param] = "absorbed"
+        elif remains(k, kept) < ABSORBED:
+            held[param] = "undetermined"
+        else:
+            free.append(param)
+            kept = np.hstack([kept, full[:, 12 + k : 13 + k]])
+    # The offsets' share kept of each joint's column (the offsets model's record of it).
+    remains_offsets = [absorbed[k] for k, (j, p) in enumerate(every) if p == 0]
     x0 = np.concatenate([start, np.zeros(len(free))])
     fit = least_squares(
         problem.residuals, x0, args=(free,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
@@ -176,9 +204,14 @@ def solve(spec):
 
     offsets = [None] * problem.joints
     offset_sigmas = [None] * problem.joints
-    for k, j in enumerate(free):
-        offsets[j] = float(fit.x[12 + k])
-        offset_sigmas[j] = float(np.sqrt(cov[12 + k, 12 + k]))
+    corrections = [[None] * 4 for _ in range(problem.joints)]
+    correction_sigmas = [[None] * 4 for _ in range(problem.joints)]
+    for k, (j, p) in enumerate(free):
+        corrections[j][p] = float(fit.x[12 + k])
+        correction_sigmas[j][p] = float(np.sqrt(cov[12 + k, 12 + k]))
+        if p == 0:
+            offsets[j] = corrections[j][p]
+            offset_sigmas[j] = correction_sigmas[j][p]
     return {
         "status": int(fit.status),
         "nfev": int(fit.nfev),
@@ -189,7 +222,10 @@ def solve(spec):
         "target_mount_sigma": sigma(6),
         "offsets_rad": offsets,
         "offset_sigmas_rad": offset_sigmas,
-        "remains": remains,
+        "corrections": corrections,
+        "correction_sigmas": correction_sigmas,
+        "held": {f"{j},{p}": why for (j, p), why in held.items()},
+        "remains": remains_offsets,
     }
 
 

@@ -134,7 +134,8 @@ impl LinkParameter {
         }
     }
 
-    fn index(self) -> usize {
+    /// Its place in a link's corrections `[θ, d, a, α]` ([`ArmFit::corrections`]).
+    pub fn index(self) -> usize {
         self as usize
     }
 }
