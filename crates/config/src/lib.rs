@@ -331,7 +331,10 @@ impl CellConfig {
             limits: checked.limits,
             workspace: checked.workspace,
             detector: raw.detector,
-            solver: raw.solver,
+            solver: SolverConfig {
+                arm_model: raw.solver.arm_model.as_deref().map(resolve),
+                ..raw.solver
+            },
             session: raw.session,
             verdict: raw.verdict,
             arm_errors: checked.arm_errors,

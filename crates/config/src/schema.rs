@@ -726,6 +726,13 @@ pub struct SolverConfig {
     /// corrections the data determine). Absent: `auto`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<KinematicsChoice>,
+    /// The arm's model an earlier session estimated (its `result.yaml`, whose `kinematics:`
+    /// section holds the joint offsets and link corrections): every robot pose of this cell is
+    /// corrected by it before the solve, and nothing of the arm is estimated again (a camera
+    /// mounted anew on a calibrated arm). Relative to the config file; `kinematics` is then
+    /// left out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arm_model: Option<PathBuf>,
 }
 
 impl SolverConfig {
@@ -810,6 +817,7 @@ impl Default for SolverConfig {
             robot_corrections: true,
             estimate_noise: true,
             kinematics: None,
+            arm_model: None,
         }
     }
 }

@@ -725,6 +725,20 @@ impl Validator<'_> {
                 ));
             }
         }
+        if s.arm_model.is_some() {
+            if let Some(choice) = s.kinematics {
+                return Err(self.inconsistent(
+                    "solver.arm_model",
+                    format!("the arm model given is applied as it is, and `kinematics: {}` says what to estimate: leave out `kinematics`", choice.name()),
+                ));
+            }
+            if raw.robot.model().is_none() || matches!(raw.robot, RobotConfig::Recorded { .. }) {
+                return Err(self.inconsistent(
+                    "solver.arm_model",
+                    "an arm model corrects each pose through its joints and the arm's published model: a sim, ur or ros2 arm with `robot.model`".into(),
+                ));
+            }
+        }
         Ok(())
     }
 

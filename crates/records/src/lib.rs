@@ -272,6 +272,10 @@ pub enum SessionError {
     /// The detection thread ended before the run did.
     #[error("the detection thread {0}")]
     DetectionThread(&'static str),
+    /// `solver.arm_model` names a file that cannot correct these poses (unreadable, without
+    /// an arm model, of another arm, or poses without their joints).
+    #[error("{0}")]
+    ArmModel(String),
 }
 
 /// Creates `dir` and its parents; a failure names it ([`SessionError::Io`]).

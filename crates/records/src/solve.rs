@@ -402,6 +402,13 @@ pub fn solve_with_arm(
                  refit: Option<FoldFlanges<'_>>| {
         solve_session_with(dataset.setup, pairs, visits, vision, config, notices, refit)
     };
+    // An arm model an earlier session estimated: applied as it is, nothing estimated again.
+    if let Some(file) = &config.solver.arm_model {
+        let (pairs, visits, notice) =
+            arm::apply_given_model(file, config, plan, &dataset.pairs, visits)?;
+        notices.push(notice);
+        return solve(&pairs, &visits, notices, None);
+    }
     let ArmChoice {
         corrected,
         notice: arm_choice,

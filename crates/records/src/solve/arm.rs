@@ -206,6 +206,117 @@ pub struct ArmChoice {
     pub links: Option<(Corrected, Notice)>,
 }
 
+/// The session's samples and visits with every robot pose corrected by the arm's model in
+/// `file` (`solver.arm_model`: the `kinematics:` section of an earlier session's result, of
+/// the same arm model as `config`'s), and the notice that says so. Errors: the file unreadable,
+/// without a `kinematics:` section, of another arm model, or a pose without its joints.
+pub(super) fn apply_given_model(
+    file: &std::path::Path,
+    config: &CellConfig,
+    plan: &[PlannedPose],
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+) -> Result<(Vec<PosePair>, Vec<PoseVisit>, Notice), SessionError> {
+    let refused = |why: String| {
+        SessionError::ArmModel(format!("solver.arm_model: {}: {why}", file.display()))
+    };
+    let result = crate::result::ResultFile::load(file).map_err(|e| refused(e.to_string()))?;
+    let section = result.kinematics.ok_or_else(|| {
+        refused("no `kinematics:` section: give the result of a session solved with `solver.kinematics: joint_offsets | dh`".into())
+    })?;
+    let name = config.robot.model().unwrap_or("none");
+    if section.model != name {
+        return Err(refused(format!(
+            "the model of a `{}`, this cell's arm is a `{name}`",
+            section.model
+        )));
+    }
+    let model = UrModel::by_name(name)
+        .ok_or_else(|| refused(format!("no published kinematics for `{name}`")))?;
+    let chain = dh_chain(&model);
+    let mut corrections = vec![[0.0; 4]; chain.joints()];
+    for (j, o) in section
+        .joint_offsets
+        .iter()
+        .enumerate()
+        .take(chain.joints())
+    {
+        corrections[j][0] = o.offset_deg.to_radians();
+    }
+    for l in &section.links {
+        let joint = JOINT_NAMES
+            .iter()
+            .position(|n| *n == l.joint)
+            .ok_or_else(|| {
+                refused(format!(
+                    "a link correction of an unknown joint `{}`",
+                    l.joint
+                ))
+            })?;
+        let parameter = LinkParameter::ALL
+            .into_iter()
+            .find(|p| p.name() == l.parameter)
+            .ok_or_else(|| refused(format!("an unknown link parameter `{}`", l.parameter)))?;
+        let (_, scale) = unit_of(parameter);
+        corrections[joint][parameter.index()] = l.correction / scale;
+    }
+    let zero = vec![0.0; chain.joints()];
+    let correct = |reported: &Pose, joints: &[f64]| {
+        reported
+            * chain.forward(joints, &zero).inverse()
+            * chain.forward_corrected(joints, &corrections)
+    };
+    let joints_for = |id: &Option<String>| {
+        visits
+            .iter()
+            .find(|v| Some(v.sample_id()) == *id)
+            .and_then(|v| joints_of(plan, v))
+    };
+    let mut corrected_pairs = Vec::with_capacity(pairs.len());
+    for pair in pairs {
+        let joints = joints_for(&pair.id).ok_or_else(|| {
+            refused(format!(
+                "sample {} has no recorded joints to correct its pose through",
+                pair.id.as_deref().unwrap_or("?")
+            ))
+        })?;
+        corrected_pairs.push(PosePair {
+            base_from_flange: correct(&pair.base_from_flange, &joints),
+            ..pair.clone()
+        });
+    }
+    let corrected_visits = visits
+        .iter()
+        .map(|v| {
+            let mut v = v.clone();
+            if let Some(joints) = joints_of(plan, &v) {
+                v.base_from_flange = correct(&v.base_from_flange, &joints);
+            }
+            v
+        })
+        .collect();
+    let moved = MeanMax::of(
+        pairs
+            .iter()
+            .zip(&corrected_pairs)
+            .map(|(a, b)| translation_distance(&a.base_from_flange, &b.base_from_flange) * 1e3),
+    );
+    let notice = Notice::info(
+        NoticeKind::Other,
+        format!(
+            "the robot poses are corrected by the arm's model in {} ({} of the {}, estimated by an earlier session; nothing of the arm estimated again){}",
+            file.display(),
+            section.estimated,
+            section.model,
+            moved.map_or(String::new(), |m| format!(
+                ": the flange moved by {:.3} mm mean ({:.3} max) over these {} poses",
+                m.mean, m.max, pairs.len()
+            ))
+        ),
+    );
+    Ok((corrected_pairs, corrected_visits, notice))
+}
+
 /// The joint zero offsets of `model`'s published chain fitted to `pairs` with the two
 /// transforms, and the samples and visits corrected by them.
 fn fit_arm(
