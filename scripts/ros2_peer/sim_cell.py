@@ -24,7 +24,8 @@ inactive, and `guide K` is refused unless the arm is in freedrive (the arm stops
 freedrive ends mid-guide).
 
 Faults for tests: --lose-first-switch request|reply (the first switch_controller request, or only
-its reply, is lost in transit), --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
+its reply, is lost in transit), --lose-first-goal request|reply (the first trajectory goal is
+lost in transit, or only its reply is: the goal runs unanswered), --abort-goal N (the Nth goal ends ABORTED with PATH_TOLERANCE_VIOLATED),
 --die-in-goal N (the process exits halfway through the Nth goal), --no-tool0 (the TF tree lacks
 tool0), --succeed-without-moving N, --second-flange-publisher [N] (a second DDS writer on /tf, as
 a second robot_state_publisher or a static publisher left running would be: base_link -> tool0
@@ -229,6 +230,9 @@ def add_arguments(p):
     p.add_argument("--lose-first-switch", choices=["request", "reply"], default=None,
                    help="the first switch_controller request is lost in transit (neither done nor "
                         "answered), or only its reply is (done, not answered)")
+    p.add_argument("--lose-first-goal", choices=["request", "reply"], default=None,
+                   help="the first trajectory goal request is lost in transit (neither run nor "
+                        "answered), or only its reply is (run, not answered)")
     p.add_argument("--abort-goal", type=int, default=0)
     p.add_argument("--die-in-goal", type=int, default=0)
     p.add_argument("--no-tool0", action="store_true")
@@ -545,6 +549,7 @@ def run(args):
 
     goals = {}  # goal uuid bytes -> dict(status, result, waiting=[(client_id, seq)])
     goal_count = [0]
+    goal_requests = [0]
     arrived_count = [0]
 
     def finish(gid, status, code=0, text=""):
@@ -560,6 +565,11 @@ def run(args):
                 continue
             gid = bytes(req.goal_id.uuid)
             tr = req.goal.trajectory
+            goal_requests[0] += 1
+            lost = args.lose_first_goal if goal_requests[0] == 1 else None
+            if lost == "request":
+                say(event="goal_lost", what="request")
+                continue
             goal_count[0] += 1
             n = goal_count[0]
             pts = [(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9, np.array(p.positions),
@@ -568,7 +578,10 @@ def run(args):
             # An inactive controller's action server takes no goals.
             ok = ok and (freedrive is None or freedrive.motion_active())
             max_speed = max((float(np.max(np.abs(v))) for _, _, v in pts if v is not None), default=0.0)
-            goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
+            if lost == "reply":
+                say(event="goal_lost", what="reply")
+            else:
+                goal_w.write(m.SendGoalReply(req.client_id, req.seq, bool(ok), stamp_now()))
             say(event="goal", n=n, accepted=bool(ok), points=len(pts),
                 duration_s=pts[-1][0] if pts else 0.0, max_joint_speed_rad_s=max_speed,
                 joint_names=list(tr.joint_names))

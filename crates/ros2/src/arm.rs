@@ -25,7 +25,7 @@ use handeye_robot::{trapezoid_at, Joints, MotionLimits, Robot, RobotError, Robot
 use crate::freedrive::{Freedrive, FreedriveOptions};
 use crate::link::{
     answer_to, poll_for, sensor_data_qos, serves, settle_after_match, static_reader_qos,
-    tf_listener_qos, topic_name, Ros2Link, POLL,
+    tf_listener_qos, topic_name, Ros2Link, POLL, REQUEST_RESEND,
 };
 use crate::listen::{joint_sample, JointSample, Shared, AT_REST_JITTER_M, AT_REST_JITTER_RAD};
 use crate::msg::{
@@ -460,27 +460,41 @@ impl Ros2Arm {
         // A second server may have joined since the arm was opened.
         one_action_server(&self.link, &action)?;
         let timeout = self.options.timeout;
-        let (request, goal_id) = self.action.send_goal(goal).map_err(|e| {
-            backend(format!(
-                "sending the trajectory goal to {action} failed: {e:?}"
-            ))
-        })?;
-        let response = poll_for(Instant::now() + timeout, || {
-            self.action.receive_goal_response(request)
-        });
-        let response = match response {
-            Some(Ok(r)) => r,
-            Some(Err(e)) => {
-                return Err(backend(format!(
-                    "reading the answer to the trajectory goal from {action} failed: {e:?}"
-                )))
-            }
-            None => {
-                return Err(RobotError::ConnectionLost(format!(
-                    "the action server {action} did not answer the goal within {:.1} s ({})",
-                    timeout.as_secs_f64(),
-                    silent_action(&self.link, &action, self.options.framing)
-                )))
+        // A goal unanswered for REQUEST_RESEND is sent again, as a new goal of the same
+        // trajectory: Cyclone DDS drops for good a request written before the server's reader
+        // took in our writer (a CI run: the first goal of a run unheard for 30 s). A new goal
+        // id, not the same one again: a server that took the first and lost only its answer
+        // would refuse (rclcpp: fail on) a repeated id, while a new goal of the same trajectory
+        // replaces the first (a trajectory controller preempts it) and ends where it would have.
+        // The newest goal is the one followed.
+        let deadline = Instant::now() + timeout;
+        let mut sendings = 0;
+        let (response, goal_id) = loop {
+            let (request, goal_id) = self.action.send_goal(goal.clone()).map_err(|e| {
+                backend(format!(
+                    "sending the trajectory goal to {action} failed: {e:?}"
+                ))
+            })?;
+            sendings += 1;
+            let resend_at = (Instant::now() + REQUEST_RESEND).min(deadline);
+            match poll_for(resend_at, || self.action.receive_goal_response(request)) {
+                Some(Ok(r)) => break (r, goal_id),
+                Some(Err(e)) => {
+                    return Err(backend(format!(
+                        "reading the answer to the trajectory goal from {action} failed: {e:?}"
+                    )))
+                }
+                None if Instant::now() >= deadline => {
+                    return Err(RobotError::ConnectionLost(format!(
+                        "the action server {action} did not answer the goal within {:.1} s (sent {sendings} times; {})",
+                        timeout.as_secs_f64(),
+                        silent_action(&self.link, &action, self.options.framing)
+                    )))
+                }
+                None => tracing::warn!(
+                    "{action}: no answer to the trajectory goal within {} s: sending it again",
+                    REQUEST_RESEND.as_secs()
+                ),
             }
         };
         if !response.accepted {

@@ -535,6 +535,29 @@ fn a_flange_pose_off_the_models_kinematics_is_named_and_resume_completes() {
     });
 }
 
+/// A trajectory goal lost in transit (the first of a run: Cyclone DDS drops for good a request
+/// written before the server's reader took in our writer, and a CI run waited 30 s for it) is
+/// sent again after 5 s as a new goal of the same trajectory, and so is one whose answer alone
+/// is lost (the server runs it, and the new goal replaces it as a trajectory controller's
+/// preemption does): the run completes to the truth either way, and says it sent the goal again.
+#[test]
+fn a_lost_trajectory_goal_is_sent_again_and_the_run_completes() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(500), move || {
+        for lost in ["request", "reply"] {
+            let run = PeerRun::start(&python, &["--lose-first-goal", lost], &[]);
+            let (peer, out_dir, out, log) = (&run.peer, &run.out_dir, &run.out, &run.log);
+            assert!(out.status.success(), "{lost}: {log}");
+            assert_truth(out_dir);
+            assert_eq!(peer.events("goal_lost").len(), 1, "{lost}: {log}");
+            assert!(
+                log.contains("no answer to the trajectory goal within 5 s: sending it again"),
+                "{lost}: {log}"
+            );
+        }
+    });
+}
+
 /// The same contradiction from the start: named when the arm is opened, before anything moves.
 #[test]
 fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
