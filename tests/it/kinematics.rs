@@ -1282,17 +1282,17 @@ fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_mov
     let chain = handeye_records::solve::dh_chain(&model);
     let none = ArmErrors::default();
     let names = ["shoulder", "elbow", "wrist 1", "wrist 2"];
-    let mut estimates: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-    for draw in 0..30 {
+    // The offsets' fit of the first `n` poses drawn at that noise with `seed`.
+    let drawn_fit = |n: usize, seed: u64| {
         let (noisy, _) = samples_with(
-            &joints,
+            &joints[..n],
             &model,
             &none,
             &physical,
             [board, BoardNoise(0.0, 0.0)],
-            7000 + draw,
+            seed,
         );
-        let fit = fit_arm(
+        fit_arm(
             ArmModel::JointOffsets,
             physical.setup,
             &chain,
@@ -1301,7 +1301,11 @@ fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_mov
             noise,
             &options,
         )
-        .unwrap();
+        .unwrap()
+    };
+    let mut estimates: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    for draw in 0..30 {
+        let fit = drawn_fit(joints.len(), 7000 + draw);
         for (k, e) in estimates.iter_mut().enumerate() {
             e.push(fit.offsets[k + 1].offset_rad.to_degrees());
         }
@@ -1331,24 +1335,7 @@ fn plan_check_predicts_the_offsets_sigma_and_names_a_joint_the_plan_does_not_mov
     let accuracy = prepared.config.verdict.accuracy();
     let mut squares = [0.0f64; 4];
     for draw in 0..30 {
-        let (noisy, _) = samples_with(
-            &joints[..needed],
-            &model,
-            &none,
-            &physical,
-            [board, BoardNoise(0.0, 0.0)],
-            8000 + draw,
-        );
-        let fit = fit_arm(
-            ArmModel::JointOffsets,
-            physical.setup,
-            &chain,
-            &noisy,
-            (&physical.camera_mount, &physical.target_mount),
-            noise,
-            &options,
-        )
-        .unwrap();
+        let fit = drawn_fit(needed, 8000 + draw);
         let camera = pose_error_mm_deg(&fit.camera_mount, &physical.camera_mount);
         let target = pose_error_mm_deg(&fit.target_mount, &physical.target_mount);
         for (sum, e) in squares

@@ -336,13 +336,26 @@ mod tests {
     use handeye_solve::SolveOptions;
     use nalgebra::Vector3;
 
+    /// One camera's planner (eye-in-hand, a nominal cell) over `candidates`.
+    fn planner_over(candidates: &[(Pose, Joints)]) -> AdaptivePlanner {
+        let camera_mount =
+            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
+        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
+        AdaptivePlanner::new(
+            Setup::EyeInHand,
+            camera_mount,
+            target_mount,
+            candidates.to_vec(),
+            SolveOptions::default(),
+            0.1,
+            usize::MAX,
+        )
+    }
+
     /// With one camera the cell's planner is that camera's planner: the same candidates in the
     /// same order (the nominal model choosing, before any sample), then none when they run out.
     #[test]
     fn with_one_camera_the_choices_are_the_cameras_own() {
-        let camera_mount =
-            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
-        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
         let down = pose_from_rotvec(
             Vector3::zeros(),
             Vector3::new(std::f64::consts::PI, 0.0, 0.0),
@@ -356,17 +369,7 @@ mod tests {
                 (pose, Joints::zeros(6))
             })
             .collect();
-        let planner = || {
-            AdaptivePlanner::new(
-                Setup::EyeInHand,
-                camera_mount,
-                target_mount,
-                candidates.clone(),
-                SolveOptions::default(),
-                0.1,
-                usize::MAX,
-            )
-        };
+        let planner = || planner_over(&candidates);
         let mut alone = planner();
         let mut cell = CellPlanner::new(vec![planner()], vec![vec![true; 6]], 100);
         let mut chosen = 0;
@@ -387,9 +390,6 @@ mod tests {
     /// is the first camera's own.
     #[test]
     fn the_choice_sums_the_gains_of_the_cameras_that_see_their_board() {
-        let camera_mount =
-            pose_from_rotvec(Vector3::new(0.03, -0.07, 0.04), Vector3::new(0.0, 0.0, 1.5));
-        let target_mount = pose_from_rotvec(Vector3::new(0.6, 0.0, 0.0), Vector3::zeros());
         let down = pose_from_rotvec(
             Vector3::zeros(),
             Vector3::new(std::f64::consts::PI, 0.0, 0.0),
@@ -405,17 +405,7 @@ mod tests {
         .into_iter()
         .map(|pose| (pose, Joints::zeros(6)))
         .collect();
-        let planner = || {
-            AdaptivePlanner::new(
-                Setup::EyeInHand,
-                camera_mount,
-                target_mount,
-                candidates.clone(),
-                SolveOptions::default(),
-                0.1,
-                usize::MAX,
-            )
-        };
+        let planner = || planner_over(&candidates);
         let alone = planner().next(&[]).expect("a first pose");
         let first_alone = candidates
             .iter()
