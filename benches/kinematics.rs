@@ -21,7 +21,7 @@ use handeye_core::geometry::pose_from_rotvec;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::Joints;
-use handeye_solve::kinematics::{fit_arm, ArmModel, ArmSample, DhChain};
+use handeye_solve::kinematics::{fit_arm, ArmModel, ArmRefit, ArmSample, DhChain};
 use handeye_solve::SolveOptions;
 
 fn kinematics(c: &mut Criterion) {
@@ -96,6 +96,30 @@ fn arm_fit(c: &mut Criterion) {
     ] {
         arm_fit_group(c, name, model, &chain, &options);
     }
+    // What `solver.kinematics: auto` adds once the offsets are chosen: the DH fit and the
+    // offsets' refit under its noise (`ArmRefit::links_choice`).
+    let mut group = c.benchmark_group("auto's link choice (eye-in-hand UR10e)");
+    group.sample_size(10);
+    for n in [20, 50, 200] {
+        let samples = arm_samples(n);
+        let pairs: Vec<PosePair> = samples.iter().map(|s| s.pair.clone()).collect();
+        let start = handeye_solve::solve(Setup::EyeInHand, &pairs, &options).unwrap();
+        let refit = ArmRefit {
+            setup: Setup::EyeInHand,
+            model: ArmModel::JointOffsets,
+            chain: chain.clone(),
+            samples,
+            dropped: start.dropped.clone(),
+            start: (start.camera_mount, start.target_mount),
+            noise: start.noise.map_or(options.noise, |n| n.model()),
+            options: options.clone(),
+        };
+        let offsets = refit.fit_without(None).unwrap();
+        group.bench_with_input(BenchmarkId::from_parameter(n), &refit, |b, refit| {
+            b.iter(|| refit.links_choice(black_box(&offsets)).unwrap())
+        });
+    }
+    group.finish();
 }
 
 /// One group of [`arm_fit`]: `model` at each N.
