@@ -729,8 +729,18 @@ impl Robot for Ros2Arm {
             Err(contradiction) => {
                 let now = Instant::now();
                 let again = self.flange_after(now, now + self.options.timeout)?;
-                self.check_flange_against_model(&again)
-                    .map_err(|_| contradiction)?;
+                self.check_flange_against_model(&again).map_err(|_| {
+                    // A second publisher of an edge on the chain heard in the last seconds
+                    // explains it better than a wrong model (the driver's went unheard a
+                    // moment beside a faster one on a loaded machine: a CI run).
+                    let flange_frame = &self.options.flange_frame;
+                    match self.shared.lock().tf.recent_disagreement(flange_frame) {
+                        Some(second) => {
+                            backend(format!("{second}; nothing was recorded at this pose"))
+                        }
+                        None => contradiction,
+                    }
+                })?;
                 Ok(again)
             }
         }

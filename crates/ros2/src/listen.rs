@@ -33,7 +33,8 @@ pub struct JointSample {
 struct Edge {
     parent: String,
     parent_from_child: Pose,
-    /// Per publisher heard within [`SOURCES_WINDOW`]: its id, its last pose, when.
+    /// Per publisher heard within [`RECENT_SOURCES`]: its id, its last pose, when (those
+    /// within [`SOURCES_WINDOW`] of the newest are the current ones).
     sources: Vec<(u64, Pose, Instant)>,
     /// Two publishers that disagree: the message a lookup through this edge fails with.
     conflict: Option<String>,
@@ -43,6 +44,11 @@ struct Edge {
 /// this of each other, saying different transforms, contradict each other (a handover to a
 /// restarted publisher does not).
 const SOURCES_WINDOW: Duration = Duration::from_secs(1);
+/// How long a publisher of an edge is remembered for [`TfTree::recent_disagreement`]: on a
+/// loaded machine the driver's publisher can go unheard for more than [`SOURCES_WINDOW`] beside
+/// a faster second one, and a pose that contradicts the joints is then better explained by the
+/// second publisher than by a wrong model.
+const RECENT_SOURCES: Duration = Duration::from_secs(10);
 /// How far one edge's transform may jitter at rest, m and rad (far above a driver's own
 /// jitter): two publishers of one edge farther apart contradict each other, and so does a
 /// flange pose that moves this much while its joints stand (`arm`).
@@ -117,13 +123,20 @@ impl TfTree {
                         .map(|e| e.sources)
                         .unwrap_or_default();
                     sources.retain(|(id, _, heard)| {
-                        *id != source && now.saturating_duration_since(*heard) <= SOURCES_WINDOW
+                        *id != source && now.saturating_duration_since(*heard) <= RECENT_SOURCES
                     });
                     if sources.len() >= MAX_SOURCES {
                         sources.remove(0);
                     }
                     sources.push((source, pose, now));
-                    let conflict = contradiction(&parent, &child, &sources);
+                    let current: Vec<_> = sources
+                        .iter()
+                        .filter(|(_, _, heard)| {
+                            now.saturating_duration_since(*heard) <= SOURCES_WINDOW
+                        })
+                        .copied()
+                        .collect();
+                    let conflict = contradiction(&parent, &child, &current);
                     self.edges.insert(
                         child,
                         Edge {
@@ -240,6 +253,22 @@ impl TfTree {
     /// (a loop, or an edge on it whose publishers disagree).
     pub fn root_of(&self, frame: &str) -> Result<String, String> {
         self.root_and_pose(frame).map(|(root, _)| root)
+    }
+
+    /// An edge on `frame`'s chain that two publishers gave different transforms within the
+    /// last [`RECENT_SOURCES`], worded as a lookup through a contradicted edge fails: for a pose
+    /// the lookup gave that something else contradicts (the joints' kinematics), when the
+    /// driver's publisher went unheard a moment beside a faster second one.
+    pub fn recent_disagreement(&self, frame: &str) -> Option<String> {
+        let mut at = frame;
+        for _ in 0..256 {
+            let edge = self.edges.get(at)?;
+            if let Some(found) = contradiction(&edge.parent, at, &edge.sources) {
+                return Some(found);
+            }
+            at = &edge.parent;
+        }
+        None
     }
 
     /// Every frame heard, sorted.
@@ -468,7 +497,8 @@ mod tests {
 
     /// #40: two publishers of base → tool0 10 cm and 180° apart, while the arm stands: the
     /// lookup fails naming the edge and the disagreement; one publisher moving the edge, or a
-    /// handover to another after a pause, is no contradiction.
+    /// handover to another after a pause, is no contradiction to a lookup, though the handover
+    /// is a recent disagreement for 10 s.
     #[test]
     fn two_publishers_of_one_edge_that_disagree_are_named() {
         let at_rest = Pose::new(Vector3::new(0.4, 0.1, 0.3), Vector3::zeros());
@@ -510,6 +540,18 @@ mod tests {
         handover.update_from(&msg(other), 2, ms(1500));
         let got = handover.lookup("base", "tool0").unwrap();
         assert!((got.to_homogeneous() - other.to_homogeneous()).norm() < 1e-12);
+        // ... which a pose the joints contradict may still blame (the driver's publisher unheard
+        // for a moment beside a faster second one), within the last 10 s only.
+        let recent = handover.recent_disagreement("tool0").unwrap();
+        assert!(
+            recent.contains("base → tool0 has 2 publishers that disagree by 100.0 mm"),
+            "{recent}"
+        );
+        assert_eq!(moving.recent_disagreement("tool0"), None);
+        let mut long_ago = TfTree::default();
+        long_ago.update_from(&msg(at_rest), 1, ms(0));
+        long_ago.update_from(&msg(other), 2, ms(11_000));
+        assert_eq!(long_ago.recent_disagreement("tool0"), None);
     }
 
     /// Every DDS writer is a source: a thousand writers of one edge within the window keep at
