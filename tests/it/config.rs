@@ -770,6 +770,45 @@ fn a_ur_model_read_in_base_link_is_refused_at_load_naming_the_fix() {
     assert_eq!(loaded.robot.frames().base, "base");
 }
 
+/// `robot.flange_pose` of a ROS 2 arm: absent reads `tf`, `joints` is read, `joints` without a
+/// model (nothing to compute the flange with) is refused naming the key and the fix, and an
+/// unknown value names what is expected.
+#[test]
+fn a_ros2_arms_flange_pose_source_is_read_and_checked() {
+    use handeye_config::ros2::FlangePose;
+    let dir = tempfile::tempdir().unwrap();
+    let flange_pose = |edits: &[(&str, &str)]| {
+        let config = util::config_variant(dir.path(), "ros2-sim-cell.yaml", "cell.yaml", edits);
+        CellConfig::load(&config).map(|c| match c.robot {
+            RobotConfig::Ros2(r) => r.flange_pose,
+            _ => unreachable!("a ros2 arm"),
+        })
+    };
+    assert_eq!(flange_pose(&[]).unwrap(), FlangePose::Tf);
+    let joints = ("  flange_frame: tool0", "  flange_frame: tool0\n  flange_pose: joints");
+    assert_eq!(flange_pose(&[joints]).unwrap(), FlangePose::Joints);
+    let message = flange_pose(&[
+        joints,
+        ("  model: ur10e", "  model: none\n  joint_ranges_deg: [[-360, 360], [-360, 360], [-180, 180], [-360, 360], [-360, 360], [-360, 360]]"),
+    ])
+    .unwrap_err()
+    .to_string();
+    assert!(
+        message.contains("robot.flange_pose") && message.contains("give `model`"),
+        "{message}"
+    );
+    let message = flange_pose(&[(
+        "  flange_frame: tool0",
+        "  flange_frame: tool0\n  flange_pose: fk",
+    )])
+    .unwrap_err()
+    .to_string();
+    assert!(
+        message.contains("flange_pose") && message.contains("joints"),
+        "{message}"
+    );
+}
+
 /// #41: with the arm's own model estimated (`solver.kinematics: joint_offsets | dh`) a generated
 /// plan visits every pose by default (the adaptive stop weighs the transforms only, and stops
 /// where the offsets are barely determined); `plan.adaptive: true` still asks for the adaptive

@@ -20,7 +20,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use handeye_core::geometry::{pose_from_rotvec, Pose};
+use handeye_core::geometry::{pose_from_rotvec, translation_distance, Pose};
 use handeye_core::setup::{CellTransforms, PosePair, Setup};
 use handeye_robot::arm_errors::{ArmErrorSigmas, ArmErrors};
 use handeye_robot::kinematics::UrModel;
@@ -711,13 +711,8 @@ fn by_default_the_data_choose_the_arms_model_through_the_binary() {
                 && m.contains("with its DH link corrections")),
         "{said:?}"
     );
-    let offsets_alone = [
-        links[1],
-        (
-            ", kinematics: joint_offsets}",
-            ", kinematics: joint_offsets}",
-        ),
-    ];
+    // The same cell with the shipped config's `kinematics: joint_offsets` kept.
+    let offsets_alone = [links[1]];
     let (_, (mm_offsets, _), _) = run("sim-cell-arm-errors.yaml", &offsets_alone, "links-offsets");
     assert!(
         mm_links < mm_offsets && mm_links <= 0.5 && deg_links <= 0.05,
@@ -753,10 +748,7 @@ fn arm_errors_and_kinematics_keys_are_read_and_checked() {
         .all(|v| v.abs() < 0.2f64.to_radians()));
     // The truth is folded: the sim arm's base and wrist 3 offsets are in the transforms.
     let arm = cell.true_arm.clone().unwrap();
-    assert_eq!(
-        (arm.joint_offsets_rad[0], arm.joint_offsets_rad[5]),
-        (0.0, 0.0)
-    );
+    assert_eq!((arm.joint_offsets[0], arm.joint_offsets[5]), (0.0, 0.0));
     let plain = CellConfig::load(&repo().join("configs/sim-cell.yaml")).unwrap();
     let (moved_mm, _) = pose_error_mm_deg(
         &cell.camera().simulation.unwrap().target_mount,
@@ -1876,7 +1868,9 @@ fn an_arm_model_estimated_earlier_corrects_a_later_session() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let ((mm, deg), estimated, said) = error_of(&session, &cell.unwrap());
+    let cell = cell.unwrap();
+    let ((mm, deg), estimated, said) = error_of(&session, &cell);
+    let (given_session, given_output) = (session, output);
     assert!(!estimated, "nothing of the arm is estimated again");
     assert!(
         said.iter()
@@ -1895,10 +1889,47 @@ fn an_arm_model_estimated_earlier_corrects_a_later_session() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let ((mm_published, _), _, _) = error_of(&session, &cell.unwrap());
+    let cell = cell.unwrap();
+    let ((mm_published, _), _, _) = error_of(&session, &cell);
     eprintln!("a later session of the same arm: {mm:.3} mm / {deg:.4}° with the earlier model, {mm_published:.3} mm with the published one");
     assert!(mm <= 0.5 && deg <= 0.05, "{mm} mm, {deg}°");
     assert!(mm < 0.5 * mm_published, "{mm} mm against {mm_published} mm");
+    // The plan's poses reached: moves are solved through the model used (the flange goes
+    // where the plan says), so the true arm's flange at each pose's joints is on the planned
+    // pose to the model's accuracy with the earlier model, and off by what the arm's errors
+    // do with the published one. Both sessions plan the same views (one seed).
+    let true_arm = cell.true_arm.expect("the arm-errors cell's true arm");
+    let reached = |session: &Path| {
+        let folder = handeye_records::folder::SessionFolder::open(session).unwrap();
+        let plan = folder.read_manifest().unwrap().plan;
+        let off: Vec<f64> = plan
+            .iter()
+            .map(|p| translation_distance(&true_arm.forward(&p.joints()), &p.base_from_flange))
+            .collect();
+        (
+            off.iter().sum::<f64>() / off.len() as f64 * 1e3,
+            off.iter().copied().fold(0.0, f64::max) * 1e3,
+        )
+    };
+    let ((given_mean, given_max), (published_mean, published_max)) =
+        (reached(&given_session), reached(&session));
+    eprintln!("the plan's poses reached within {given_mean:.3} mm mean ({given_max:.3} max) through the earlier model, {published_mean:.3} mm ({published_max:.3}) through the published one");
+    assert!(given_max < 0.2, "{given_max} mm");
+    let plan_note = format!(
+        "{}{}",
+        String::from_utf8_lossy(&given_output.stdout),
+        String::from_utf8_lossy(&given_output.stderr)
+    );
+    assert!(
+        plan_note.contains(
+            "the moves are solved through the ur10e model as an earlier session estimated it"
+        ),
+        "{plan_note}"
+    );
+    assert!(
+        given_mean < 0.25 * published_mean,
+        "{given_mean} mm against {published_mean} mm"
+    );
     // A result without an arm model is refused by name.
     let plain = dir.path().join("plain.yaml");
     let mut without: serde_yaml_ng::Value =
@@ -1911,12 +1942,14 @@ fn an_arm_model_estimated_earlier_corrects_a_later_session() {
     let text = serde_yaml_ng::to_string(&without).unwrap();
     std::fs::write(&plain, text).unwrap();
     let given = format!(", arm_model: {}}}", plain.display());
-    let (output, _, _) = run(
+    let (output, refused_session, _) = run(
         "no-model",
         &[later_plan, (", kinematics: joint_offsets}", &given)],
     );
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
+    // Refused when the cell is prepared, before the arm moves: no session was recorded.
+    assert!(!refused_session.exists(), "{stderr}");
     assert!(
         stderr.contains("solver.arm_model") && stderr.contains("no `kinematics:` section"),
         "{stderr}"

@@ -21,7 +21,7 @@ use std::time::Duration;
 use handeye_core::geometry::PoseError;
 use handeye_core::setup::{CellTransforms, Setup};
 use handeye_core::yaml_file::{parse_yaml, read_text, shape_error, FileError};
-use handeye_robot::arm_errors::{ArmErrors, TrueArm};
+use handeye_robot::arm_errors::ArmErrors;
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::{MotionLimits, WorkspaceBox};
 use handeye_solve::{SolveOptions, SolverChoice};
@@ -173,7 +173,7 @@ pub struct CellConfig {
     pub arm_errors: Option<ArmErrors>,
     /// The simulated arm's true geometry, the base and last joint offsets folded into each
     /// camera's `simulation` transforms (`ArmErrors::fold`): what the sim arm stands at.
-    pub true_arm: Option<TrueArm>,
+    pub true_arm: Option<UrModel>,
     /// `session.settle_s`, checked and converted.
     settle: Duration,
 }

@@ -80,6 +80,15 @@ pub struct Ros2Robot {
     /// Domain, interfaces, timeouts.
     #[serde(default)]
     pub graph: Ros2Graph,
+    /// Where each recorded flange pose comes from: `tf` (default), the driver's
+    /// `base_frame` → `flange_frame` on /tf, checked against the joints; or `joints`, the
+    /// forward kinematics of the arm's published model at the joints on /joint_states, for an
+    /// arm whose TF is not to be trusted (a relay, a second chain under the driver's frame
+    /// names, a driver that publishes another model): what the controller would report, so
+    /// `solver.kinematics` and `solver.arm_model` correct it as any reported pose. Needs
+    /// `model`.
+    #[serde(default, skip_serializing_if = "FlangePose::is_tf")]
+    pub flange_pose: FlangePose,
     /// The TF frame `T_base_flange` is measured in (the UR driver's `base`).
     #[serde(default = "default_base_frame")]
     pub base_frame: String,
@@ -112,6 +121,24 @@ pub struct Ros2Robot {
     /// 1-sigma rotation error of the reported flange pose, degrees (default 0.003).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub repeatability_deg: Option<f64>,
+}
+
+/// `robot.flange_pose`: where a ROS 2 arm's recorded flange poses come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FlangePose {
+    /// The driver's flange pose on /tf, checked against the joints.
+    #[default]
+    Tf,
+    /// The forward kinematics of the arm's published model at the joints on /joint_states.
+    Joints,
+}
+
+impl FlangePose {
+    /// The default (not written back).
+    pub fn is_tf(&self) -> bool {
+        *self == FlangePose::Tf
+    }
 }
 
 /// `robot.freedrive`: the UR driver's controllers that freedrive switches between.
@@ -329,6 +356,14 @@ impl Ros2Robot {
     /// The names, frames and numbers checked (the first problem found).
     pub(super) fn problem(&self) -> Option<Problem> {
         graph_problem("robot.graph", &self.graph)
+            .or_else(|| {
+                (self.flange_pose == FlangePose::Joints && self.model.is_none()).then(|| {
+                    (
+                        "robot.flange_pose".to_string(),
+                        "`joints` computes the flange pose through the arm's kinematics: give `model` (a UR model), or leave `flange_pose` out to read it on /tf".to_string(),
+                    )
+                })
+            })
             .or_else(|| frame_problem("robot.base_frame", &self.base_frame))
             .or_else(|| self.base_link_problem())
             .or_else(|| frame_problem("robot.flange_frame", &self.flange_frame))

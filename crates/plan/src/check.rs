@@ -10,7 +10,7 @@ use std::fmt;
 use nalgebra::Point3;
 
 use handeye_core::camera_model::CameraModel;
-use handeye_core::geometry::Pose;
+use handeye_core::geometry::{translation_distance, Pose};
 use handeye_robot::kinematics::{outside_ranges, UrModel, JOINT_NAMES};
 use handeye_robot::{Joints, MotionLimits, WorkspaceBox};
 use handeye_vision::Target;
@@ -246,8 +246,9 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
             coverage.tilted_views, coverage.tilt_direction_spread_deg, coverage.coverage_percent
         )],
     };
-    if ctx.arm.is_none() {
-        notes.push(NO_KINEMATICS_NOTE.into());
+    match ctx.arm {
+        None => notes.push(NO_KINEMATICS_NOTE.into()),
+        Some(arm) => notes.extend(calibrated_model_note(arm, &poses)),
     }
     if poses
         .iter()
@@ -273,6 +274,30 @@ pub fn check_plan(plan: &Plan, ctx: &CheckContext) -> PlanReport {
         intrinsics: Some(coverage),
         given_order_move_time_s: None,
     }
+}
+
+/// With a calibrated model of the arm (`solver.arm_model`): the plan is checked and its moves
+/// solved through it, so the flange goes to the planned poses, and the controller, computing
+/// through its published model, reports them somewhat off (the solve corrects them back): how
+/// far, over the poses that reach.
+fn calibrated_model_note(arm: &UrModel, poses: &[PoseCheck]) -> Option<String> {
+    let published = arm.published();
+    if *arm == published {
+        return None;
+    }
+    let apart_mm: Vec<f64> = poses
+        .iter()
+        .filter_map(|p| {
+            let q = p.joints.as_ref()?;
+            Some(translation_distance(&published.forward(q), &p.base_from_flange) * 1e3)
+        })
+        .collect();
+    let mean = apart_mm.iter().sum::<f64>() / apart_mm.len().max(1) as f64;
+    let max = apart_mm.iter().copied().fold(0.0, f64::max);
+    Some(format!(
+        "the moves are solved through the {} model as an earlier session estimated it (solver.arm_model), so the flange goes to the planned poses; the controller, computing through the published model, will report them {mean:.2} mm mean ({max:.2} max) from there, which the solve corrects",
+        arm.name
+    ))
 }
 
 /// Checks `plan` as [`check_plan`] does and, when `reorder`, also in the order of least total

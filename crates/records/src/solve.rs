@@ -13,7 +13,9 @@ mod driver_calibration;
 mod intrinsics_check;
 mod summary;
 
-pub use arm::{dh_chain, estimate_arm, plan_observability, ArmChoice, ArmEstimate, Corrected};
+pub use arm::{
+    dh_chain, estimate_arm, given_arm_model, plan_observability, ArmChoice, ArmEstimate, Corrected,
+};
 pub use driver_calibration::{
     driver_calibration_notice, with_driver_calibration, DRIVER_CALIBRATION_FILE,
 };

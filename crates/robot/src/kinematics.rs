@@ -7,9 +7,13 @@
 //! Units: metres and radians. Link `i` (1-based in DH tables, 0-based here) is
 //! `T_{i-1}_{i} = Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)`.
 //!
-//! The inverse assumes the UR structure (`a_1 = a_4 = a_5 = a_6 = 0`, `d_2 = d_3 = 0`,
-//! `α = [π/2, 0, 0, π/2, −π/2, 0]`, three parallel middle joints); every model here (CB3
-//! UR3/UR5/UR10, e-Series UR3e/UR5e/UR10e/UR16e, UR20, UR30) satisfies it. This module depends only on `geometry` and the `Joints` type.
+//! The closed-form inverse assumes the UR structure (`a_1 = a_4 = a_5 = a_6 = 0`, `d_2 = d_3 = 0`,
+//! `α = [π/2, 0, 0, π/2, −π/2, 0]`, three parallel middle joints); every published model here
+//! (CB3 UR3/UR5/UR10, e-Series UR3e/UR5e/UR10e/UR16e, UR20, UR30) satisfies it. A calibrated
+//! model (joint zero offsets, small link corrections: the simulator's true arm, or the model a
+//! session estimated, `solver.arm_model`) breaks it by fractions of a millimetre: its inverse
+//! starts from the closed form of its structure and is finished by Newton steps on its own
+//! forward kinematics. This module depends only on `geometry` and the `Joints` type.
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -26,6 +30,14 @@ const SOLUTION_ROTATION_TOLERANCE: f64 = 1e-7;
 /// How far (in the cosine / sine argument) a target may lie outside the reachable set and still be
 /// clamped onto its boundary, to absorb round-off for poses exactly on the boundary.
 const BOUNDARY_SLACK: f64 = 1e-10;
+/// Newton steps a calibrated model's inverse takes at most from its structure's closed form
+/// (corrections of a fraction of a millimetre converge in two or three).
+const NEWTON_STEPS: usize = 10;
+/// The flange error (m and rad together) a Newton solution stops at: far inside the solution
+/// tolerances above.
+const NEWTON_DONE: f64 = 1e-12;
+/// The joint step of the Newton Jacobian's central differences, rad.
+const NEWTON_STEP_RAD: f64 = 1e-6;
 /// Below this `|sin θ5|` the wrist is singular (joints 4 and 6 aligned): θ6 is then free and is
 /// taken from the caller's preference.
 const WRIST_SINGULAR_SIN: f64 = 1e-10;
@@ -41,6 +53,11 @@ pub struct UrModel {
     pub a: [f64; 6],
     /// DH link twists `α_i`, rad.
     pub alpha: [f64; 6],
+    /// Joint zero offsets `δθ_i`, rad: link `i` turns by the reported joint angle plus this.
+    /// Zero in a published model; an arm's calibration sets them (with corrections to `d`, `a`
+    /// and `α`): the simulator's true arm (`arm_errors`), or the model an earlier session
+    /// estimated (`solver.arm_model`).
+    pub joint_offsets: [f64; 6],
     /// Joint limits `(min, max)` per joint, rad. Every model here is planned with ±2π on every
     /// joint but the elbow (±π); a cell narrows them with `robot.joint_ranges_deg`.
     pub joint_limits: [(f64, f64); 6],
@@ -121,8 +138,35 @@ impl UrModel {
             d: [p.d1, 0.0, 0.0, p.d4, p.d5, p.d6],
             a: [0.0, p.a2, p.a3, 0.0, 0.0, 0.0],
             alpha: UR_ALPHA,
+            joint_offsets: [0.0; 6],
             joint_limits: UR_LIMITS,
         }
+    }
+
+    /// The published model of this arm (its name's), with this model's joint limits: what its
+    /// controller computes the flange pose it reports with. A published model's is itself.
+    pub fn published(&self) -> Self {
+        let mut published = UrModel::by_name(&self.name).unwrap_or_else(|| self.structure());
+        published.joint_limits = self.joint_limits;
+        published
+    }
+
+    /// Whether this model has the UR structure exactly (no joint offsets, no corrections off
+    /// it): its closed-form inverse is exact.
+    fn is_structural(&self) -> bool {
+        *self == self.structure()
+    }
+
+    /// This model with every parameter off the UR structure dropped: joint offsets zero,
+    /// `a_1 = a_4 = a_5 = a_6 = 0`, `d_2 = d_3 = 0`, UR's twists. Its closed form is the start
+    /// of a calibrated model's inverse.
+    fn structure(&self) -> Self {
+        let mut s = self.clone();
+        s.joint_offsets = [0.0; 6];
+        s.a = [0.0, self.a[1], self.a[2], 0.0, 0.0, 0.0];
+        s.d = [self.d[0], 0.0, 0.0, self.d[3], self.d[4], self.d[5]];
+        s.alpha = UR_ALPHA;
+        s
     }
 
     /// The UR5e (Universal Robots' published DH parameters).
@@ -144,8 +188,9 @@ impl UrModel {
             .map(Self::from_published)
     }
 
-    /// The transform of DH link `i` (0-based) at joint angle `theta`: `T_{i}_{i+1}` in 0-based
-    /// frame numbers, i.e. `Rz(θ) · Tz(d) · Tx(a) · Rx(α)`.
+    /// The transform of DH link `i` (0-based) at joint angle `theta` (the link's own angle, its
+    /// offset added already): `T_{i}_{i+1}` in 0-based frame numbers, i.e.
+    /// `Rz(θ) · Tz(d) · Tx(a) · Rx(α)`.
     fn link(&self, i: usize, theta: f64) -> Pose {
         dh_link(theta, self.d[i], self.a[i], self.alpha[i])
     }
@@ -155,7 +200,9 @@ impl UrModel {
     /// checked here; see [`UrModel::within_limits`].
     pub fn forward(&self, joints: &Joints) -> Pose {
         debug_assert_eq!(joints.len(), 6, "a UR arm has six joints");
-        (0..6).fold(Pose::identity(), |acc, i| acc * self.link(i, joints[i]))
+        (0..6).fold(Pose::identity(), |acc, i| {
+            acc * self.link(i, joints[i] + self.joint_offsets[i])
+        })
     }
 
     /// Whether every joint lies inside its limits (bounds included) and is finite.
@@ -246,9 +293,72 @@ impl UrModel {
         Some(out)
     }
 
-    /// The closed-form branches, each joint in (−π, π], verified by forward kinematics and
-    /// de-duplicated. `theta6_if_singular` is used for joint 6 when the wrist is singular.
+    /// The inverse's branches, each joint in (−π, π], verified by forward kinematics and
+    /// de-duplicated: the closed form's, or for a calibrated model the closed form of its
+    /// structure finished by Newton steps on its own kinematics. `theta6_if_singular` is used for
+    /// joint 6 when the wrist is singular.
     fn branches(&self, base_from_flange: &Pose, theta6_if_singular: f64) -> Vec<Joints> {
+        if self.is_structural() {
+            return self.closed_form(base_from_flange, theta6_if_singular);
+        }
+        let mut out: Vec<Joints> = Vec::new();
+        for start in self
+            .structure()
+            .closed_form(base_from_flange, theta6_if_singular)
+        {
+            let Some(q) = self.newton(base_from_flange, start) else {
+                continue;
+            };
+            let q = Joints::from_fn(6, |i| wrap_pi(q[i]));
+            if self.reaches(&q, base_from_flange)
+                && !out.iter().any(|o| max_angle_diff(o, &q) < 1e-9)
+            {
+                out.push(q);
+            }
+        }
+        out
+    }
+
+    /// Newton steps on this model's forward kinematics from `start` (a joint solution of its
+    /// structure, a fraction of a millimetre from `target`) until the flange is on `target`;
+    /// `None` when they do not converge (the start next to a singularity).
+    fn newton(&self, target: &Pose, start: Joints) -> Option<Joints> {
+        // The flange error as a twist in the base frame: translation, then rotation vector.
+        let error = |q: &Joints| {
+            let fk = self.forward(q);
+            let dp = target.translation.vector - fk.translation.vector;
+            let dr = (target.rotation * fk.rotation.inverse()).scaled_axis();
+            nalgebra::Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
+        };
+        // The structure's joints are the links' own angles; this model's are those less the
+        // offsets.
+        let mut q = Joints::from_fn(6, |i| start[i] - self.joint_offsets[i]);
+        for _ in 0..NEWTON_STEPS {
+            let e = error(&q);
+            if e.norm() < NEWTON_DONE {
+                return Some(q);
+            }
+            // The Jacobian of the flange error by central differences (6 forward kinematics).
+            let mut jacobian = nalgebra::Matrix6::zeros();
+            for j in 0..6 {
+                let mut plus = q;
+                let mut minus = q;
+                plus[j] += NEWTON_STEP_RAD;
+                minus[j] -= NEWTON_STEP_RAD;
+                let column = (error(&minus) - error(&plus)) / (2.0 * NEWTON_STEP_RAD);
+                jacobian.set_column(j, &column);
+            }
+            let step = jacobian.lu().solve(&e)?;
+            for (i, s) in step.iter().enumerate() {
+                q[i] += s;
+            }
+        }
+        (error(&q).norm() < NEWTON_DONE).then_some(q)
+    }
+
+    /// The closed-form branches of the UR structure (see the module docs), verified by forward
+    /// kinematics and de-duplicated.
+    fn closed_form(&self, base_from_flange: &Pose, theta6_if_singular: f64) -> Vec<Joints> {
         let target = base_from_flange;
         if !target.translation.vector.iter().all(|v| v.is_finite())
             || !target.rotation.coords.iter().all(|v| v.is_finite())

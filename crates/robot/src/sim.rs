@@ -17,9 +17,9 @@
 //! arm does not jitter from read to read). Joint positions are reported exactly.
 //!
 //! The arm's own errors: by default the true geometry is the model's. With
-//! [`SimRobot::with_true_arm`] the arm stands where a [`TrueArm`] puts the flange
-//! (`FK_true(q)`, what the camera renders from) while it reports the pose its nominal model
-//! computes from the same joints (`FK_nominal(q)`, perturbed by the repeatability noise), as a
+//! [`SimRobot::with_true_arm`] the arm stands where a true arm (a calibrated [`UrModel`]:
+//! `arm_errors`) puts the flange (`FK_true(q)`, what the camera renders from) while it reports
+//! the pose its nominal model computes from the same joints (`FK_nominal(q)`, perturbed by the repeatability noise), as a
 //! real controller does.
 //!
 //! Frames: `T_base_flange`; metres, radians, [`Duration`]. Depends on `robot` and `geometry` only.
@@ -34,7 +34,6 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use super::arm_errors::TrueArm;
 use super::kinematics::UrModel;
 use super::{
     leading_travel, six_joints, trapezoid_at, Joints, MotionLimits, Robot, RobotError, RobotStatus,
@@ -161,7 +160,7 @@ struct MotionRecord {
 pub struct SimRobot {
     model: UrModel,
     /// The true geometry (`None`: the model's).
-    true_arm: Option<TrueArm>,
+    true_arm: Option<UrModel>,
     options: SimRobotOptions,
     /// The commanded joints (where the arm comes to rest).
     joints: Joints,
@@ -227,7 +226,7 @@ impl SimRobot {
 
     /// The same arm whose true geometry is `arm` (see the module docs): it stands at
     /// `arm.forward(q)` and reports its model's `forward(q)`.
-    pub fn with_true_arm(mut self, arm: TrueArm) -> Self {
+    pub fn with_true_arm(mut self, arm: UrModel) -> Self {
         self.true_arm = Some(arm);
         self.true_pose = self.true_forward(&self.joints);
         self

@@ -79,6 +79,9 @@ pub struct ArmOptions {
     /// The arm's kinematics, when it is a UR model handeye knows: linear moves (IK to joints),
     /// and the check of each flange pose against the forward kinematics of its joints.
     pub kinematics: Option<UrModel>,
+    /// The flange pose from the joints (`robot.flange_pose: joints`): the forward kinematics of
+    /// the published model of `kinematics` at the joints on /joint_states, /tf not read for it.
+    pub flange_from_joints: bool,
     /// Freedrive through the UR driver's controllers; `None`: the person switches it on the arm.
     pub freedrive: Option<FreedriveOptions>,
 }
@@ -100,8 +103,9 @@ const JOINTS_STAND_RAD: f64 = 0.005 * std::f64::consts::PI / 180.0;
 const ARRIVED_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// How long `/joint_states` may take to show the arm at a succeeded goal's end point.
 const ARRIVAL_WAIT: Duration = Duration::from_secs(2);
-/// Farthest the flange pose on /tf may be from the forward kinematics of the model's nominal
-/// parameters at the joints on /joint_states (m, rad): a UR driver publishes its arm's factory
+/// Farthest the flange pose on /tf may be from the forward kinematics of the arm's model (its
+/// published parameters, or as an earlier session estimated them: `solver.arm_model`) at the
+/// joints on /joint_states (m, rad): a UR driver publishes its arm's factory
 /// calibration, a few millimetres and tenths of a degree from the nominal model; a chain that
 /// is not the arm's (another tool0, a wrong base frame, a relay) is centimetres or degrees off.
 const MODEL_AGREES_M: f64 = 0.02;
@@ -374,6 +378,21 @@ impl Ros2Arm {
             MODEL_AGREES_M * 1e3,
             MODEL_AGREES_RAD.to_degrees(),
         )))
+    }
+
+    /// `robot.flange_pose: joints`: the flange pose the arm's published model computes at the
+    /// first joint state heard after this call (what its controller would report; the solve
+    /// corrects it by the arm's model as it does any reported pose).
+    fn flange_from_joints(&self) -> Result<Pose, RobotError> {
+        let model = self.options.kinematics.as_ref().ok_or_else(|| {
+            backend(
+                "the flange pose from the joints needs the arm's kinematics (robot.model)".into(),
+            )
+        })?;
+        // Six joints: the config holds a UR model's joint names to six.
+        let joints = self.fresh_joints(Instant::now())?.positions;
+        handeye_robot::six_joints(&joints)?;
+        Ok(model.published().forward(&joints))
     }
 
     fn interrupted(&self) -> bool {
@@ -714,6 +733,9 @@ fn apply(shared: &Shared, names: &[String], event: Event) {
 
 impl Robot for Ros2Arm {
     fn base_from_flange(&mut self) -> Result<Pose, RobotError> {
+        if self.options.flange_from_joints {
+            return self.flange_from_joints();
+        }
         // A /tf message heard after this call: the pose of the arm as it stands now.
         let asked = Instant::now();
         let flange = self.flange_after(asked, asked + self.options.timeout)?;

@@ -91,6 +91,22 @@ impl DhChain {
             )
         })
     }
+
+    /// A flange pose `reported` at `joints` through this chain moved to where the chain with
+    /// `corrections` ([`DhChain::forward_corrected`]) puts it:
+    /// `T_reported · FK(q)⁻¹ · FK_corrected(q)` (the controller's repeatability noise in
+    /// `reported` kept).
+    pub fn corrected_flange(
+        &self,
+        reported: &Pose,
+        joints: &[f64],
+        corrections: &[[f64; 4]],
+    ) -> Pose {
+        let zero = vec![0.0; self.joints()];
+        reported
+            * self.forward(joints, &zero).inverse()
+            * self.forward_corrected(joints, corrections)
+    }
 }
 
 /// Which of the arm's model a fit estimates (`solver.kinematics`).
@@ -290,13 +306,13 @@ impl ArmFit {
         out
     }
 
-    /// A sample's robot pose corrected by the fitted model:
-    /// `T_reported · FK(q)⁻¹ · FK_corrected(q)`.
+    /// A sample's robot pose corrected by the fitted model ([`DhChain::corrected_flange`]).
     pub fn corrected_flange(&self, chain: &DhChain, sample: &ArmSample) -> Pose {
-        let zero = vec![0.0; chain.joints()];
-        sample.pair.base_from_flange
-            * chain.forward(&sample.joints, &zero).inverse()
-            * chain.forward_corrected(&sample.joints, &self.corrections())
+        chain.corrected_flange(
+            &sample.pair.base_from_flange,
+            &sample.joints,
+            &self.corrections(),
+        )
     }
 }
 

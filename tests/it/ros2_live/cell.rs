@@ -577,6 +577,31 @@ fn a_flange_pose_off_the_models_kinematics_is_named_before_anything_moves() {
     });
 }
 
+/// `robot.flange_pose: joints` for an arm whose TF is not to be trusted: the same flange pose
+/// 40 mm off the model on /tf from the start, and the run reads the flange from the joints
+/// through the model instead: it completes to the truth and says where its poses came from.
+#[test]
+fn with_the_flange_pose_from_the_joints_a_wrong_tf_chain_is_not_read() {
+    let Some(python) = python() else { return };
+    within(Duration::from_secs(300), move || {
+        let run = PeerRun::start(
+            &python,
+            &["--flange-off-model", "0"],
+            &[(
+                "  flange_frame: tool0",
+                "  flange_frame: tool0\n  flange_pose: joints",
+            )],
+        );
+        let (out, out_dir, log) = (&run.out, &run.out_dir, &run.log);
+        assert!(out.status.success(), "{log}");
+        assert!(
+            log.contains("the flange poses are the ur10e model's forward kinematics at the joints on /joint_states"),
+            "{log}"
+        );
+        assert_truth(out_dir);
+    });
+}
+
 #[test]
 fn a_peer_dying_mid_move_is_named_and_resume_completes() {
     within(Duration::from_secs(400), || {

@@ -105,6 +105,7 @@ pub(crate) fn open_ur_arm(link: &Ros2Link, freedrive: Option<FreedriveOptions>) 
             timeout: Duration::from_secs(10),
             framing: Framing::Cyclone,
             kinematics: None,
+            flange_from_joints: false,
             freedrive,
         },
     )

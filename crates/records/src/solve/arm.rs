@@ -13,6 +13,7 @@ use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_robot::arm_errors::ArmErrors;
 use handeye_robot::kinematics::{UrModel, JOINT_NAMES};
+use handeye_robot::Joints;
 use handeye_solve::kinematics::{
     fit_arm as fit_model, ArmFit, ArmModel, ArmRefit, ArmSample, DhChain, LinkParameter,
     OffsetStatus,
@@ -206,17 +207,17 @@ pub struct ArmChoice {
     pub links: Option<(Corrected, Notice)>,
 }
 
-/// The session's samples and visits with every robot pose corrected by the arm's model in
-/// `file` (`solver.arm_model`: the `kinematics:` section of an earlier session's result, of
-/// the same arm model as `config`'s), and the notice that says so. Errors: the file unreadable,
-/// without a `kinematics:` section, of another arm model, or a pose without its joints.
-pub(super) fn apply_given_model(
+/// The arm model of an earlier session's result `file` (`solver.arm_model`): `config`'s arm's
+/// published model with the joint zero offsets and link
+/// corrections of the file's `kinematics:` section, and that section. Read when the cell is
+/// prepared (plans are checked and moves solved through it: the flange goes where the plan
+/// says) and by the solve (every reported pose corrected through it). Errors: the file
+/// unreadable, without a `kinematics:` section, of another arm model, or a correction of an
+/// unknown joint or parameter.
+pub fn given_arm_model(
     file: &std::path::Path,
     config: &CellConfig,
-    plan: &[PlannedPose],
-    pairs: &[PosePair],
-    visits: &[PoseVisit],
-) -> Result<(Vec<PosePair>, Vec<PoseVisit>, Notice), SessionError> {
+) -> Result<(UrModel, KinematicsYaml), SessionError> {
     let refused = |why: String| {
         SessionError::ArmModel(format!("solver.arm_model: {}: {why}", file.display()))
     };
@@ -231,17 +232,10 @@ pub(super) fn apply_given_model(
             section.model
         )));
     }
-    let model = UrModel::by_name(name)
+    let mut arm = UrModel::by_name(name)
         .ok_or_else(|| refused(format!("no published kinematics for `{name}`")))?;
-    let chain = dh_chain(&model);
-    let mut corrections = vec![[0.0; 4]; chain.joints()];
-    for (j, o) in section
-        .joint_offsets
-        .iter()
-        .enumerate()
-        .take(chain.joints())
-    {
-        corrections[j][0] = o.offset_deg.to_radians();
+    for (j, o) in section.joint_offsets.iter().enumerate().take(6) {
+        arm.joint_offsets[j] = o.offset_deg.to_radians();
     }
     for l in &section.links {
         let joint = JOINT_NAMES
@@ -257,14 +251,36 @@ pub(super) fn apply_given_model(
             .into_iter()
             .find(|p| p.name() == l.parameter)
             .ok_or_else(|| refused(format!("an unknown link parameter `{}`", l.parameter)))?;
-        let (_, scale) = unit_of(parameter);
-        corrections[joint][parameter.index()] = l.correction / scale;
+        let value = l.correction / unit_of(parameter).1;
+        match parameter {
+            LinkParameter::ThetaOffset => arm.joint_offsets[joint] = value,
+            LinkParameter::D => arm.d[joint] += value,
+            LinkParameter::A => arm.a[joint] += value,
+            LinkParameter::Alpha => arm.alpha[joint] += value,
+        }
     }
-    let zero = vec![0.0; chain.joints()];
+    Ok((arm, section))
+}
+
+/// The session's samples and visits with every robot pose corrected by the arm's model in
+/// `file` (see [`given_arm_model`]): the pose the controller reported through its published
+/// model moved to where the given model puts the flange at the same joints. Errors: those of
+/// [`given_arm_model`], or a pose without its joints.
+pub(super) fn apply_given_model(
+    file: &std::path::Path,
+    config: &CellConfig,
+    plan: &[PlannedPose],
+    pairs: &[PosePair],
+    visits: &[PoseVisit],
+) -> Result<(Vec<PosePair>, Vec<PoseVisit>, Notice), SessionError> {
+    let refused = |why: String| {
+        SessionError::ArmModel(format!("solver.arm_model: {}: {why}", file.display()))
+    };
+    let (arm, section) = given_arm_model(file, config)?;
+    let published = arm.published();
     let correct = |reported: &Pose, joints: &[f64]| {
-        reported
-            * chain.forward(joints, &zero).inverse()
-            * chain.forward_corrected(joints, &corrections)
+        let joints = Joints::from_fn(6, |i| joints[i]);
+        reported * published.forward(&joints).inverse() * arm.forward(&joints)
     };
     let joints_for = |id: &Option<String>| {
         visits
@@ -437,12 +453,8 @@ impl ArmEstimate {
 
     /// A reported flange pose at `joints` (rad) corrected by the fitted model.
     pub fn corrected(&self, reported: &Pose, joints: &[f64]) -> Pose {
-        let zero = vec![0.0; self.chain.joints()];
-        reported
-            * self.chain.forward(joints, &zero).inverse()
-            * self
-                .chain
-                .forward_corrected(joints, &self.fit.corrections())
+        self.chain
+            .corrected_flange(reported, joints, &self.fit.corrections())
     }
 
     /// The result file's `kinematics:` section.
@@ -575,7 +587,7 @@ impl ArmEstimate {
                 .recorded_joints
                 .iter()
                 .filter_map(|q| {
-                    let at = handeye_robot::Joints::from_slice(q).ok()?;
+                    let at = Joints::from_slice(q).ok()?;
                     let true_flange = true_arm.forward(&at);
                     let (published, estimated) = self.flanges(q);
                     Some((
@@ -692,7 +704,7 @@ pub fn plan_observability(
     config: &CellConfig,
     arm: &UrModel,
     nominal: &handeye_core::setup::CellTransforms,
-    plan: &[(Pose, handeye_robot::Joints)],
+    plan: &[(Pose, Joints)],
 ) -> Option<String> {
     let estimated = match config.solver.kinematics() {
         KinematicsChoice::JointOffsets => ArmModel::JointOffsets,

@@ -154,8 +154,11 @@ pub struct PreparedCell {
     pub config: CellConfig,
     /// The cameras, in config order (`config.planner` is the plan's).
     pub cameras: Vec<PreparedCamera>,
-    /// The arm's kinematics (a UR model, its joint limits the cell's); `None` for a ROS 2 arm
-    /// handeye has no model of (`robot.model: none`), which replays taught plans only.
+    /// The arm's kinematics (a UR model, its joint limits the cell's): its published model, or
+    /// with `solver.arm_model` that model as an earlier session estimated it (plans are checked
+    /// and moves solved through it; `UrModel::published` is what the controller reports
+    /// through); `None` for a ROS 2 arm handeye has no model of (`robot.model: none`), which
+    /// replays taught plans only.
     pub arm: Option<UrModel>,
     /// The cell's joint ranges, `(min, max)` rad (`robot.joint_ranges_deg` or the defaults).
     pub joint_limits: Vec<(f64, f64)>,
@@ -249,7 +252,19 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
                     joint_limits.len()
                 ))
             })?;
-            Some(arm)
+            // An earlier session's estimate of this arm (solver.arm_model): plans are checked
+            // and moves solved through it, so the flange goes where the plan says; read here,
+            // before anything opens or moves.
+            match &config.solver.arm_model {
+                Some(file) => {
+                    let (mut calibrated, _) =
+                        handeye_records::solve::given_arm_model(file, &config)
+                            .map_err(|e| CellError::Backend(e.to_string()))?;
+                    calibrated.joint_limits = arm.joint_limits;
+                    Some(calibrated)
+                }
+                None => Some(arm),
+            }
         }
         None => None,
     };
@@ -692,7 +707,10 @@ impl PreparedCell {
     fn open_arm(&self) -> Result<(Box<dyn Robot>, ArmSide), CellError> {
         match &self.config.robot {
             RobotConfig::Sim { .. } => {
-                let robot = sim::arm(&self.config, self.kinematics()?, self.start_joints)?;
+                // The simulated controller reports through the arm's published model, whatever
+                // model handeye plans with.
+                let published = self.kinematics()?.published();
+                let robot = sim::arm(&self.config, published, self.start_joints)?;
                 let arm = robot.clone();
                 let side = ArmSide::Flange(Box::new(move || {
                     let arm = arm.clone();

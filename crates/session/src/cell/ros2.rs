@@ -90,6 +90,7 @@ pub fn open_arm(
                 Rmw::Cyclonedds => Framing::Cyclone,
             },
             kinematics: arm,
+            flange_from_joints: r.flange_pose == handeye_config::ros2::FlangePose::Joints,
             freedrive: r.freedrive.as_ref().map(|f| FreedriveOptions {
                 controller_manager: f.controller_manager.clone(),
                 freedrive_controller: f.controller.clone(),
@@ -178,6 +179,14 @@ pub fn record_graph(
         }
     }
     if let RobotConfig::Ros2(r) = &cell.config.robot {
+        if r.flange_pose == handeye_config::ros2::FlangePose::Joints {
+            notes.push(format!(
+                "the flange poses are the {} model's forward kinematics at the joints on {} (robot.flange_pose: joints): {} is not read for them",
+                r.model.map_or("arm's", |m| m.name()),
+                r.joint_states_topic,
+                r.tf_topic
+            ));
+        }
         // Latched messages reach a late joiner once discovery has matched it: a second or so.
         let heard = handeye_ros2::tf_static::hear_static(
             node,
