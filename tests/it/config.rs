@@ -785,7 +785,10 @@ fn a_ros2_arms_flange_pose_source_is_read_and_checked() {
         })
     };
     assert_eq!(flange_pose(&[]).unwrap(), FlangePose::Tf);
-    let joints = ("  flange_frame: tool0", "  flange_frame: tool0\n  flange_pose: joints");
+    let joints = (
+        "  flange_frame: tool0",
+        "  flange_frame: tool0\n  flange_pose: joints",
+    );
     assert_eq!(flange_pose(&[joints]).unwrap(), FlangePose::Joints);
     let message = flange_pose(&[
         joints,
