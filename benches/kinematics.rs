@@ -1,5 +1,9 @@
 //! Speed of the UR kinematics that plan checking and the simulated arm call per pose:
-//! forward kinematics, all inverse solutions, and the nearest solution to a seed.
+//! forward kinematics, all inverse solutions, and the nearest solution to a seed; the inverse of
+//! a calibrated model too (`solver.arm_model`: closed form, then Newton steps). Medians of one
+//! release run: forward 0.29 µs, inverse (all 8) 4.9 µs, calibrated inverse 101 µs (eight
+//! branches of two or three Newton steps, each with a six-column Jacobian): 3 ms for a 30-pose
+//! plan check.
 //!
 //! And of the arm fit (issue #41, `handeye_solve::kinematics::fit_arm`: the two transforms with
 //! the joint zero offsets, or with every DH link parameter, the noise re-estimated with them)
@@ -19,6 +23,7 @@ use rand_distr::{Distribution, Normal};
 
 use handeye_core::geometry::pose_from_rotvec;
 use handeye_core::setup::{PosePair, Setup};
+use handeye_robot::arm_errors::{ArmErrorSigmas, ArmErrors};
 use handeye_robot::kinematics::UrModel;
 use handeye_robot::Joints;
 use handeye_solve::kinematics::{fit_arm, ArmModel, ArmRefit, ArmSample, DhChain};
@@ -34,6 +39,24 @@ fn kinematics(c: &mut Criterion) {
     });
     c.bench_function("ur5e inverse_nearest", |b| {
         b.iter(|| model.inverse_nearest(black_box(&pose), black_box(&q)))
+    });
+    // A calibrated model (`solver.arm_model`: joint offsets and link corrections): the closed
+    // form of its structure finished by Newton steps on its own kinematics.
+    let calibrated = ArmErrors::draw(
+        41,
+        &ArmErrorSigmas {
+            joint_offset_rad: 0.05f64.to_radians(),
+            length_m: 3e-4,
+            twist_rad: 0.02f64.to_radians(),
+        },
+    )
+    .true_arm(&model);
+    let pose = calibrated.forward(&q);
+    c.bench_function("ur5e calibrated inverse (all 8)", |b| {
+        b.iter(|| calibrated.inverse(black_box(&pose)))
+    });
+    c.bench_function("ur5e calibrated inverse_nearest", |b| {
+        b.iter(|| calibrated.inverse_nearest(black_box(&pose), black_box(&q)))
     });
 }
 
