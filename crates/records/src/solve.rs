@@ -32,8 +32,9 @@ use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::cell_model::{self, fit_cell_model, CellModel, Explanation};
 use handeye_solve::verdict::{self, FoldFlanges, Verdict};
 use handeye_solve::{
-    self as solve, refine_reprojection, reprojection_errors, Calibration, Corner, Frame,
-    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior, SolveOptions,
+    self as solve, refine_reprojection, reprojection_errors, ArmOffsetsFree, Calibration, Corner,
+    Frame, ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
+    SolveOptions,
 };
 use handeye_vision::Target;
 
@@ -401,8 +402,9 @@ pub fn solve_with_arm(
     let solve = |pairs: &[PosePair],
                  visits: &[PoseVisit],
                  notices: Vec<Notice>,
-                 refit: Option<FoldFlanges<'_>>| {
-        solve_session_with(dataset.setup, pairs, visits, vision, config, notices, refit)
+                 arm: Option<(FoldFlanges<'_>, &ArmOffsetsFree)>| {
+        let arm = arm.map_or((None, None), |(refit, free)| (Some(refit), Some(free)));
+        solve_session_with(dataset.setup, pairs, visits, vision, config, notices, arm)
     };
     // An arm model an earlier session estimated: applied as it is, nothing estimated again.
     if let Some(file) = &config.solver.arm_model {
@@ -427,11 +429,12 @@ pub fn solve_with_arm(
     // The held-out folds refit the arm without their sample: fitted to it too, the arm would
     // predict it partly from itself.
     let folds = &corrected.folds;
+    let free = corrected.free_in_reprojection();
     let mut with_arm = solve(
         &corrected.pairs,
         &corrected.visits,
         notices.iter().cloned().chain(arm_choice.clone()).collect(),
-        Some(&|left_out| folds.flanges_without(left_out)),
+        Some((&|left_out| folds.flanges_without(left_out), &free)),
     )?;
     if let (Some(mut published), Some(after)) = (published, contradicted_files(&with_arm)) {
         published.calibration.notices.push(Notice::info(
@@ -447,11 +450,12 @@ pub fn solve_with_arm(
     // hand: 2.5 % and GOOD 32 mm off), which the offsets' solve above still names.
     if let Some((links, links_notice)) = links {
         let folds = &links.folds;
+        let free = links.free_in_reprojection();
         let with_links = solve(
             &links.pairs,
             &links.visits,
             notices.iter().cloned().chain([links_notice]).collect(),
-            Some(&|left_out| folds.flanges_without(left_out)),
+            Some((&|left_out| folds.flanges_without(left_out), &free)),
         )?;
         match contradicted_files(&with_links) {
             None => (with_arm, corrected) = (with_links, links),
@@ -460,6 +464,10 @@ pub fn solve_with_arm(
                 format!("the arm's DH link corrections are left out: the data choose them beside the offsets, but with them the verdict names {after}"),
             )),
         }
+    }
+    // In reprojection space the offsets were refined with the transforms over every corner.
+    if let Some(refined) = &with_arm.reprojection {
+        corrected.arm.refine_offsets(&refined.arm_offsets);
     }
     with_arm.summary = format!(
         "{}\n{}",
@@ -827,12 +835,21 @@ pub fn solve_session(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
-    solve_session_with(setup, pairs, visits, vision, config, Vec::new(), None)
+    solve_session_with(
+        setup,
+        pairs,
+        visits,
+        vision,
+        config,
+        Vec::new(),
+        (None, None),
+    )
 }
 
 /// [`solve_session`] with `findings` of the session layer's own checks (wrong intrinsics) added
-/// to the answer's notices before the verdict judges them, and with `refit` when the robot
-/// poses were corrected by the arm's own model (the verdict's held-out folds refit it).
+/// to the answer's notices before the verdict judges them, and with `arm` when the robot poses
+/// were corrected by the arm's own model: the verdict's held-out folds refit it, and in
+/// reprojection space its free joint offsets are refined with the transforms.
 pub fn solve_session_with(
     setup: Setup,
     pairs: &[PosePair],
@@ -840,7 +857,7 @@ pub fn solve_session_with(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
     findings: Vec<Notice>,
-    refit: Option<FoldFlanges<'_>>,
+    (refit, arm): (Option<FoldFlanges<'_>>, Option<&ArmOffsetsFree>),
 ) -> Result<SolvedSession, SessionError> {
     let options = config.solver.to_options();
     let pose_space =
@@ -877,13 +894,14 @@ pub fn solve_session_with(
             .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
             .collect();
         let all = frames_from_visits(visits, board, true)?;
-        let (ids, frames): (Vec<String>, Vec<Frame>) = all
+        let (mut ids, mut frames): (Vec<String>, Vec<Frame>) = all
             .iter()
             .filter(|(id, _)| !dropped.contains(&id.as_str()))
             .cloned()
             .unzip();
         if frames.iter().filter(|f| !f.corners.is_empty()).count() >= 3 {
-            let ropts = reprojection_options(config);
+            let mut ropts = reprojection_options(config);
+            ropts.arm = arm.cloned();
             let p = &solved.pose_space;
             // Which given file the corners contradict, if any (issue #38); the answer is then
             // refined with the chosen explanation's estimates free.
@@ -934,7 +952,6 @@ pub fn solve_session_with(
                 .filter_map(|&i| pairs.get(i).and_then(|p| p.id.as_deref()))
                 .collect();
             let kept = pixel_consistent(setup, &all, &flagged, &reprojection, &final_options);
-            let (mut ids, mut frames) = (ids, frames);
             if kept.iter().any(|(id, _)| dropped.contains(&id.as_str())) {
                 for (id, frame) in &all {
                     if dropped.contains(&id.as_str()) && kept.iter().any(|(k, _)| k == id) {

@@ -54,8 +54,8 @@ pub use iterative::{IterativeOptions, IterativeOutcome};
 use options::require_positive;
 pub use options::{EstimateNoise, Method, NoiseModel, RobustLoss, SolveOptions, SolverChoice};
 pub use reprojection::{
-    refine_reprojection, reprojection_errors, Corner, Frame, ReprojectionCalibration,
-    ReprojectionErrors, ReprojectionOptions, RobotPrior,
+    refine_reprojection, reprojection_errors, ArmOffsetsFree, Corner, Frame, RefinedOffset,
+    ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
 
 /// The `A = X·B·Y` form of a data set, shared by both setups.

@@ -18,7 +18,7 @@ use handeye_solve::kinematics::{
     fit_arm as fit_model, ArmFit, ArmModel, ArmRefit, ArmSample, DhChain, LinkParameter,
     OffsetStatus,
 };
-use handeye_solve::{self as solve, SolveError};
+use handeye_solve::{self as solve, ArmOffsetsFree, SolveError};
 
 use crate::result::{
     JointOffsetYaml, KinematicsYaml, LinkCorrectionYaml, MeanMax, UncertaintyYaml, WithWithout,
@@ -47,6 +47,9 @@ pub struct ArmEstimate {
     pub fit: ArmFit,
     /// The joints of the samples fitted (rad, one list per sample): the recorded workspace.
     pub recorded_joints: Vec<Vec<f64>>,
+    /// Whether the estimated offsets were refined in reprojection space with the transforms
+    /// (over every board corner; their 1σ then that fit's).
+    pub refined_in_reprojection: bool,
 }
 
 /// The session's samples and visits with the robot poses the arm's model corrects, and the model.
@@ -60,6 +63,28 @@ pub struct Corrected {
     /// What the fit was made of, to make it again without one sample (the verdict's held-out
     /// folds: [`ArmRefit::flanges_without`]).
     pub folds: ArmRefit,
+    /// Each visit's joints (rad) by its sample id: where the reprojection refinement moves a
+    /// frame's pose from as the offsets change.
+    pub joints_by_id: Vec<(String, Vec<f64>)>,
+}
+
+impl Corrected {
+    /// The reprojection refinement's arm columns: the offsets this fit estimated, refined from
+    /// its model (the one the poses are corrected by) over every frame with its joints.
+    pub fn free_in_reprojection(&self) -> ArmOffsetsFree {
+        let fit = &self.arm.fit;
+        ArmOffsetsFree {
+            chain: self.arm.chain.clone(),
+            start: fit.corrections(),
+            free: fit
+                .offsets
+                .iter()
+                .filter(|o| matches!(o.status, OffsetStatus::Estimated { .. }))
+                .map(|o| o.joint)
+                .collect(),
+            joints: self.joints_by_id.clone(),
+        }
+    }
 }
 
 /// The joints a visit was taken at: its plan pose's (rad), if the plan has it.
@@ -412,7 +437,12 @@ fn corrected_by(
         chain: folds.chain.clone(),
         fit,
         recorded_joints: folds.samples.iter().map(|s| s.joints.clone()).collect(),
+        refined_in_reprojection: false,
     };
+    let joints_by_id = visits
+        .iter()
+        .filter_map(|v| Some((v.sample_id(), joints_of(plan, v)?)))
+        .collect();
     let visits = visits
         .iter()
         .map(|v| {
@@ -428,6 +458,7 @@ fn corrected_by(
         visits,
         arm,
         folds,
+        joints_by_id,
     }
 }
 
@@ -449,6 +480,27 @@ impl ArmEstimate {
             let (published, estimated) = self.flanges(q);
             translation_distance(&published, &estimated) * 1e3
         }))
+    }
+
+    /// The offsets as the reprojection refinement left them (`refined`: the value of each
+    /// offset it refined); the rest of the model as fitted. Each keeps the larger of the two
+    /// fits' 1σ: the reprojection fit's weighs the corners and the arm's repeatability, and
+    /// link errors the offsets do not model leave a bias its scatter does not show (the shipped
+    /// arm-errors cell's 0.02 mm / 0.001° links put the shoulder 3.2 of its σ off), while the
+    /// pose-space fit's noise is estimated from the residuals those errors leave.
+    pub fn refine_offsets(&mut self, refined: &[handeye_solve::RefinedOffset]) {
+        for r in refined {
+            let Some(o) = self.fit.offsets.iter_mut().find(|o| o.joint == r.joint) else {
+                continue;
+            };
+            o.offset_rad = r.offset_rad;
+            if let (OffsetStatus::Estimated { sigma_rad }, Some(sigma)) =
+                (&mut o.status, r.sigma_rad)
+            {
+                *sigma_rad = sigma_rad.max(sigma);
+            }
+            self.refined_in_reprojection = true;
+        }
     }
 
     /// A reported flange pose at `joints` (rad) corrected by the fitted model.
@@ -526,6 +578,12 @@ impl ArmEstimate {
             fit.translation_rms_mm[1],
             fit.rotation_rms_deg[1],
         )];
+        if self.refined_in_reprojection {
+            lines.push(
+                "  the joint offsets refined in reprojection space with the transforms, over every board corner (each 1σ the larger of that fit's and the pose-space fit's)"
+                    .to_string(),
+            );
+        }
         if let Some(moved) = self.flange_correction_mm() {
             lines.push(format!(
                 "  the flange where the estimated model puts it: {:.3} mm mean ({:.3} max) from the published model's over the {} recorded poses",

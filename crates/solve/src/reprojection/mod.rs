@@ -16,7 +16,10 @@
 //! repeatability. With the robust loss on, a frame whose correction stands far out from the
 //! others' (its recorded robot pose is off) gets its prior dropped: its correction runs free and
 //! it leaves the fit of the two unknowns. Optionally the corner noise and the repeatability are
-//! estimated from the residuals (variance component estimation).
+//! estimated from the residuals (variance component estimation). Optionally the arm's joint zero
+//! offsets are refined with the two unknowns ([`ArmOffsetsFree`], issue #41): every frame's robot
+//! pose moves through the arm's chain at its joints as the offsets change (global columns after
+//! the board scale; their Jacobian is the robot correction's, times each offset's flange twist).
 //!
 //! Analytic Jacobian; each corner row touches at most 12 + 9 global columns and the 6 columns of
 //! its own frame's correction. Without corrections the Jacobian is at most 21 columns wide and
@@ -40,9 +43,10 @@ mod outliers;
 mod problem;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{Point2, Point3, SMatrix, Translation3, UnitQuaternion, Vector2};
+use nalgebra::{Point2, Point3, SMatrix, Vector2};
 
 use super::arrow::inverse_parts;
+use super::kinematics::DhChain;
 use super::lm::{minimize_dense, minimize_normal, Outcome};
 use super::refine::mount_uncertainty;
 use super::require_positive;
@@ -71,6 +75,35 @@ pub struct Frame {
     pub corners: Vec<Corner>,
     /// Optional name of the frame, carried into messages (e.g. `pose-007`).
     pub id: Option<String>,
+}
+
+/// The arm's joint zero offsets refined with the two unknowns (`solver.kinematics` in
+/// reprojection space, issue #41). The frames' robot poses carry the arm model of `start`
+/// already (the pose-space fit's); each offset in `free` is refined from there, and a frame's
+/// pose moves with the change through the chain at the frame's joints:
+/// `T_base_flange · FK(q, start)⁻¹ · FK(q, start + δ)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmOffsetsFree {
+    /// The arm's published chain.
+    pub chain: DhChain,
+    /// The corrections the frames' robot poses carry, per joint `[θ, d, a, α]`
+    /// ([`DhChain::forward_corrected`]).
+    pub start: Vec<[f64; 4]>,
+    /// The joints (0-based) whose zero offset is refined: the ones the data determine.
+    pub free: Vec<usize>,
+    /// Each frame's joints (rad), by the frame's id; a frame not here keeps its pose.
+    pub joints: Vec<(String, Vec<f64>)>,
+}
+
+/// One joint zero offset as the reprojection refinement left it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefinedOffset {
+    /// The joint, 0-based from the base.
+    pub joint: usize,
+    /// The offset, rad: the start's plus the refined change.
+    pub offset_rad: f64,
+    /// Its 1-sigma, rad (when the covariance was computed and is not singular).
+    pub sigma_rad: Option<f64>,
 }
 
 /// Prior on the per-pose robot corrections: 1-sigma of the robot's repeatability.
@@ -113,6 +146,8 @@ pub struct ReprojectionOptions {
     /// component estimation), starting from `pixel_sigma_px` and `robot_prior`: the weights of
     /// corners against robot poses then follow the data, not a guess.
     pub estimate_noise: bool,
+    /// Refine the arm's joint zero offsets too (`None`: the robot poses' arm model as given).
+    pub arm: Option<ArmOffsetsFree>,
 }
 
 impl Default for ReprojectionOptions {
@@ -131,6 +166,7 @@ impl Default for ReprojectionOptions {
             covariance: true,
             max_robust_rounds: 5,
             estimate_noise: false,
+            arm: None,
         }
     }
 }
@@ -159,8 +195,12 @@ pub struct ReprojectionCalibration {
     pub target_mount: Pose,
     /// The camera model at the optimum (the given one when intrinsics were held fixed).
     pub camera: CameraModel,
-    /// Corrected `T_base_flange` per frame (empty when no robot prior was given).
+    /// Corrected `T_base_flange` per frame (empty when no robot prior was given), the refined
+    /// joint offsets' move included.
     pub corrected_base_from_flange: Vec<Pose>,
+    /// The arm's joint zero offsets refined with the answer (empty without
+    /// [`ReprojectionOptions::arm`]).
+    pub arm_offsets: Vec<RefinedOffset>,
     /// Covariance of both unknowns (marginal, with intrinsics and corrections free as fitted).
     pub uncertainty: Option<Uncertainty>,
     /// 1-sigma of `fx fy cx cy`, px (when the intrinsics were fitted).
@@ -304,6 +344,23 @@ fn validate(
             prior.rotation_sigma_rad,
         )?;
     }
+    if let Some(arm) = &options.arm {
+        let joints = arm.chain.joints();
+        let fits = arm.start.len() == joints
+            && arm.start.iter().flatten().all(|v| v.is_finite())
+            && arm.free.iter().all(|&j| j < joints)
+            && arm
+                .joints
+                .iter()
+                .all(|(_, q)| q.len() == joints && q.iter().all(|v| v.is_finite()));
+        if !fits {
+            return Err(SolveError::InvalidOption {
+                name: "reprojection.arm",
+                value: joints as f64,
+                expected: "corrections, free joints and every frame's joints of the chain's joint count, finite",
+            });
+        }
+    }
     require_positive("camera.fx", camera.fx)?;
     require_positive("camera.fy", camera.fy)?;
     for (name, value) in [("camera.cx", camera.cx), ("camera.cy", camera.cy)] {
@@ -428,6 +485,7 @@ pub fn refine_reprojection(
     let mut intrinsics_sigma_px = None;
     let mut distortion_sigma = None;
     let mut board_scale_sigma = None;
+    let mut arm_sigma = vec![None; problem.layout.arm];
     if options.covariance {
         let (jtj, _, _) = problem
             .normal_equations()
@@ -453,6 +511,10 @@ pub fn refine_reprojection(
                 if problem.layout.board_scale > 0 {
                     board_scale_sigma = Some(sigma(problem.layout.board_scale_offset()));
                 }
+                let o = problem.layout.arm_offset();
+                arm_sigma = (o..o + problem.layout.arm)
+                    .map(|i| Some(sigma(i)))
+                    .collect();
             }
             None => notices.push(messages::singular()),
         }
@@ -464,19 +526,11 @@ pub fn refine_reprojection(
         notices.push(messages::not_converged());
     }
     let corrected_base_from_flange = if problem.layout.robot > 0 {
-        frames
-            .iter()
-            .zip(&s.corrections)
-            .map(|(frame, (phi, rho))| {
-                Pose::from_parts(
-                    Translation3::from(frame.base_from_flange.translation.vector + rho),
-                    frame.base_from_flange.rotation * UnitQuaternion::from_scaled_axis(*phi),
-                )
-            })
-            .collect()
+        s.robot_poses.clone()
     } else {
         Vec::new()
     };
+    let arm_offsets = problem.refined_offsets(&arm_sigma);
     let (camera_mount, target_mount) = s.axby.to_mounts();
     let recorded_pose_errors = if problem.layout.robot > 0 {
         reprojection_errors(setup, frames, &s.camera, &camera_mount, &target_mount)
@@ -489,6 +543,7 @@ pub fn refine_reprojection(
         target_mount,
         camera: s.camera,
         corrected_base_from_flange,
+        arm_offsets,
         uncertainty,
         intrinsics_sigma_px,
         distortion_sigma,

@@ -6,9 +6,10 @@
 //! Parameters: a local perturbation of X and Y (see [`crate::refine::perturbed`]); then
 //! `fx fy cx cy` (px) and the distortion coefficients when free (packed and differentiated by
 //! [`handeye_core::camera_model`]); then the board scale when free (the factor on every board
-//! point, for the cell model's "board not the size its file says"); then per frame a robot correction `T_base_flange ← (R·exp(φ), t + ρ)`.
-//! Each corner row touches at most 12 + 9 global columns and the 6 columns of its own frame's
-//! correction.
+//! point, for the cell model's "board not the size its file says"); then the arm's free joint
+//! zero offsets (their change from the start, rad); then per frame a robot correction
+//! `T_base_flange ← (R·exp(φ), t + ρ)`. Each corner row touches at most 12 + 9 + 1 + 6 global
+//! columns and the 6 columns of its own frame's correction.
 //!
 //! Depends on the ground floor (`geometry`, `setup`, `camera_model`), the shared parametrisation
 //! and solver interface of `solve` (`refine::perturbed`, `lm::NormalEquations`) and nalgebra.
@@ -19,7 +20,7 @@ use nalgebra::{
     Vector3,
 };
 
-use super::{Frame, ReprojectionOptions, RobotPrior};
+use super::{ArmOffsetsFree, Frame, RefinedOffset, ReprojectionOptions, RobotPrior};
 use crate::arrow::Structure;
 use crate::lm::NormalEquations;
 use crate::refine::perturbed;
@@ -38,6 +39,8 @@ pub(super) struct Layout {
     /// Board scale column (1 or 0): the factor on every board point (`0.95`: the board is 0.95×
     /// the size its file says).
     pub board_scale: usize,
+    /// Columns of the arm's free joint offsets (their change from the start).
+    pub arm: usize,
     /// Columns per frame's robot correction (6 or 0).
     pub robot: usize,
     /// Frames.
@@ -59,9 +62,13 @@ impl Layout {
     pub(super) fn board_scale_offset(&self) -> usize {
         Self::POSE + self.intrinsics + self.distortion
     }
+    /// First arm-offset column.
+    pub(super) fn arm_offset(&self) -> usize {
+        Self::POSE + self.intrinsics + self.distortion + self.board_scale
+    }
     /// First robot-correction column (= number of global columns).
     pub(super) fn robot_offset(&self) -> usize {
-        Self::POSE + self.intrinsics + self.distortion + self.board_scale
+        self.arm_offset() + self.arm
     }
     /// The shape of `JᵀJ`: with per-frame robot corrections, an arrowhead (each frame's six
     /// coupled to the others only through the global parameters before them).
@@ -111,6 +118,50 @@ pub(super) struct Problem<'a> {
     pub row_offsets: Vec<usize>,
     /// Rows of all corners (the prior's rows follow).
     pub corner_rows: usize,
+    /// The arm's joint offsets refined, with each frame's joints and its flange at the start.
+    pub arm: Option<ArmColumns>,
+}
+
+/// [`ArmOffsetsFree`] laid out by frame.
+pub(super) struct ArmColumns {
+    /// What was asked.
+    pub free: ArmOffsetsFree,
+    /// Per frame: its joints and `FK(q, start)⁻¹` (`None`: a frame without joints keeps its
+    /// pose).
+    pub frames: Vec<Option<(Vec<f64>, Pose)>>,
+}
+
+/// The joint step of the arm columns' flange twists (forward differences), rad.
+const ARM_STEP_RAD: f64 = 1e-7;
+
+impl ArmColumns {
+    fn new(free: &ArmOffsetsFree, frames: &[Frame]) -> ArmColumns {
+        let per_frame = frames
+            .iter()
+            .map(|frame| {
+                let id = frame.id.as_deref()?;
+                let (_, q) = free.joints.iter().find(|(name, _)| name == id)?;
+                let start = free.chain.forward_corrected(q, &free.start).inverse();
+                Some((q.clone(), start))
+            })
+            .collect();
+        ArmColumns {
+            free: free.clone(),
+            frames: per_frame,
+        }
+    }
+
+    /// The move of frame `f`'s flange by the offsets' change `delta` (one per free joint):
+    /// `FK(q, start)⁻¹ · FK(q, start + δ)`, in the flange frame; `None` for a frame without
+    /// joints.
+    fn flange_move(&self, f: usize, delta: &[f64]) -> Option<Pose> {
+        let (q, start_inverse) = self.frames[f].as_ref()?;
+        let mut corrections = self.free.start.clone();
+        for (&joint, d) in self.free.free.iter().zip(delta) {
+            corrections[joint][0] += d;
+        }
+        Some(start_inverse * self.free.chain.forward_corrected(q, &corrections))
+    }
 }
 
 /// The model the parameters stand for.
@@ -125,6 +176,11 @@ pub(super) struct State {
     pub b: Vec<Pose>,
     /// Per frame: (φ, ρ) robot correction.
     pub corrections: Vec<(Vector3<f64>, Vector3<f64>)>,
+    /// Per frame: `T_base_flange` as fitted (the arm's move and the correction applied).
+    pub robot_poses: Vec<Pose>,
+    /// Per frame with joints: the flange twist of each free joint offset (6 x free, rows
+    /// `φ` in the flange frame then `ρ` in the base frame: the robot correction's coordinates).
+    pub arm_twists: Vec<Option<DMatrix<f64>>>,
 }
 
 impl Problem<'_> {
@@ -145,6 +201,7 @@ impl Problem<'_> {
                 0
             },
             board_scale: usize::from(options.refine_board_scale),
+            arm: options.arm.as_ref().map_or(0, |a| a.free.len()),
             robot: if options.robot_prior.is_some() { 6 } else { 0 },
             frames: frames.len(),
         };
@@ -182,7 +239,27 @@ impl Problem<'_> {
             prior: options.robot_prior,
             row_offsets,
             corner_rows: rows,
+            arm: options.arm.as_ref().map(|a| ArmColumns::new(a, frames)),
         }
+    }
+
+    /// The arm's free joint offsets at the current parameters: the start's plus the change, each
+    /// with its 1-sigma from `sigmas` (the arm columns' order).
+    pub(super) fn refined_offsets(&self, sigmas: &[Option<f64>]) -> Vec<RefinedOffset> {
+        let Some(arm) = &self.arm else {
+            return Vec::new();
+        };
+        let o = self.layout.arm_offset();
+        arm.free
+            .free
+            .iter()
+            .enumerate()
+            .map(|(c, &joint)| RefinedOffset {
+                joint,
+                offset_rad: arm.free.start[joint][0] + self.params[o + c],
+                sigma_rad: sigmas.get(c).copied().flatten(),
+            })
+            .collect()
     }
 
     /// The model at the current parameters.
@@ -210,8 +287,33 @@ impl Problem<'_> {
         };
         let mut corrections = Vec::with_capacity(self.frames.len());
         let mut b = Vec::with_capacity(self.frames.len());
+        let mut robot_poses = Vec::with_capacity(self.frames.len());
+        let mut arm_twists = Vec::with_capacity(self.frames.len());
+        let delta = d.as_slice()[self.layout.arm_offset()..self.layout.robot_offset()].to_vec();
         for (f, frame) in self.frames.iter().enumerate() {
             let mut robot = frame.base_from_flange;
+            let mut twist = None;
+            if let Some(moved) = self.arm.as_ref().and_then(|a| a.flange_move(f, &delta)) {
+                let arm = self.arm.as_ref().expect("moved by the arm");
+                let at = robot * moved;
+                let mut columns = DMatrix::zeros(6, delta.len());
+                for c in 0..delta.len() {
+                    let mut stepped = delta.clone();
+                    stepped[c] += ARM_STEP_RAD;
+                    let next = robot * arm.flange_move(f, &stepped).expect("the same frame");
+                    let phi = (at.rotation.inverse() * next.rotation).scaled_axis();
+                    let rho = next.translation.vector - at.translation.vector;
+                    columns
+                        .fixed_view_mut::<3, 1>(0, c)
+                        .copy_from(&(phi / ARM_STEP_RAD));
+                    columns
+                        .fixed_view_mut::<3, 1>(3, c)
+                        .copy_from(&(rho / ARM_STEP_RAD));
+                }
+                robot = at;
+                twist = Some(columns);
+            }
+            arm_twists.push(twist);
             if self.layout.robot > 0 {
                 let o = self.layout.robot_offset() + 6 * f;
                 let (phi, rho) = (v(o), v(o + 3));
@@ -222,6 +324,7 @@ impl Problem<'_> {
                 corrections.push((phi, rho));
             }
             b.push(self.setup.chain_b(&robot));
+            robot_poses.push(robot);
         }
         State {
             axby,
@@ -229,6 +332,8 @@ impl Problem<'_> {
             board_scale,
             b,
             corrections,
+            robot_poses,
+            arm_twists,
         }
     }
 
@@ -377,7 +482,8 @@ impl Problem<'_> {
                         .fixed_view_mut::<2, 1>(0, layout.board_scale_offset())
                         .copy_from(&(d_pix * d_point));
                 }
-                if layout.robot > 0 {
+                let arm_twist = s.arm_twists[f].as_ref();
+                if layout.robot > 0 || arm_twist.is_some() {
                     // First order in the (tiny) correction itself; exact at zero correction.
                     let (d_phi, d_rho) = match self.setup {
                         Setup::EyeToHand => (-(rb * q.coords.cross_matrix()), Matrix3::identity()),
@@ -389,6 +495,14 @@ impl Problem<'_> {
                     robot
                         .fixed_view_mut::<2, 3>(0, 3)
                         .copy_from(&(d_pix * rx * d_rho));
+                }
+                if layout.arm > 0 {
+                    // An offset moves the flange as a correction of that twist would.
+                    let mut columns = global.view_mut((0, layout.arm_offset()), (2, layout.arm));
+                    match arm_twist {
+                        Some(twist) => columns.copy_from(&(robot * twist)),
+                        None => columns.fill(0.0),
+                    }
                 }
                 visit(f, c, &global, &robot);
             }
