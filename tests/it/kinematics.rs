@@ -1976,8 +1976,7 @@ fn corner_frames(
     truth: &CellTransforms,
     seed: u64,
 ) -> (Vec<handeye_solve::Frame>, Vec<ArmSample>) {
-    use handeye_solve::{Corner, Frame};
-    use nalgebra::Point2;
+    use handeye_solve::Frame;
     let board =
         handeye_vision::Board::load(&repo().join("configs/targets/aprilgrid-6x6.yaml")).unwrap();
     let camera = handeye_core::camera_model::CameraModel::load(
@@ -2006,28 +2005,8 @@ fn corner_frames(
             }
             Setup::EyeToHand => truth.camera_mount.inverse() * flange * truth.target_mount,
         };
-        let mut corners = Vec::new();
-        for tag in board.tags() {
-            for point in board.tag_corners_in_target(tag.id).unwrap() {
-                let Some(seen) = camera.project(&(camera_from_target * point)) else {
-                    continue;
-                };
-                let noisy = Point2::new(
-                    seen.x + pixel.sample(&mut rng),
-                    seen.y + pixel.sample(&mut rng),
-                );
-                if noisy.x > 5.0
-                    && noisy.y > 5.0
-                    && noisy.x < f64::from(camera.width) - 5.0
-                    && noisy.y < f64::from(camera.height) - 5.0
-                {
-                    corners.push(Corner {
-                        point_in_target: point,
-                        pixel: noisy,
-                    });
-                }
-            }
-        }
+        let corners =
+            crate::util::seen_corners(&board, &camera, &camera_from_target, &pixel, &mut rng);
         if corners.len() < 40 {
             continue;
         }

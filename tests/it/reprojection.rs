@@ -130,28 +130,8 @@ fn scenario(
             Translation3::from(true_base_from_flange.translation.vector + dt),
             true_base_from_flange.rotation * UnitQuaternion::from_scaled_axis(dr),
         );
-        let mut corners = Vec::new();
-        for tag in board.tags() {
-            for point in board.tag_corners_in_target(tag.id).unwrap() {
-                let Some(pixel) = camera.project(&(camera_from_target * point)) else {
-                    continue;
-                };
-                let noisy = Point2::new(
-                    pixel.x + pixel_noise.sample(&mut rng),
-                    pixel.y + pixel_noise.sample(&mut rng),
-                );
-                if noisy.x > 5.0
-                    && noisy.y > 5.0
-                    && noisy.x < f64::from(camera.width) - 5.0
-                    && noisy.y < f64::from(camera.height) - 5.0
-                {
-                    corners.push(Corner {
-                        point_in_target: point,
-                        pixel: noisy,
-                    });
-                }
-            }
-        }
+        let corners =
+            util::seen_corners(&board, &camera, &camera_from_target, &pixel_noise, &mut rng);
         if corners.len() < 40 {
             continue;
         }

@@ -341,3 +341,38 @@ pub fn folder_bytes(root: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>>
     }
     files
 }
+
+/// Every tag corner of `board` a camera `camera` sees from `camera_from_target`, its pixel off
+/// by `pixel_noise` (per axis), kept 5 px inside the image: a synthetic frame's detections.
+pub fn seen_corners(
+    board: &handeye_vision::Board,
+    camera: &handeye_core::camera_model::CameraModel,
+    camera_from_target: &Pose,
+    pixel_noise: &rand_distr::Normal<f64>,
+    rng: &mut rand::rngs::StdRng,
+) -> Vec<handeye_solve::Corner> {
+    use rand_distr::Distribution;
+    let mut corners = Vec::new();
+    for tag in board.tags() {
+        for point in board.tag_corners_in_target(tag.id).unwrap() {
+            let Some(pixel) = camera.project(&(camera_from_target * point)) else {
+                continue;
+            };
+            let noisy = nalgebra::Point2::new(
+                pixel.x + pixel_noise.sample(rng),
+                pixel.y + pixel_noise.sample(rng),
+            );
+            if noisy.x > 5.0
+                && noisy.y > 5.0
+                && noisy.x < f64::from(camera.width) - 5.0
+                && noisy.y < f64::from(camera.height) - 5.0
+            {
+                corners.push(handeye_solve::Corner {
+                    point_in_target: point,
+                    pixel: noisy,
+                });
+            }
+        }
+    }
+    corners
+}
