@@ -292,7 +292,10 @@ fn calibrated_model_note(arm: &UrModel, poses: &[PoseCheck]) -> Option<String> {
             Some(translation_distance(&published.forward(q), &p.base_from_flange) * 1e3)
         })
         .collect();
-    let mean = apart_mm.iter().sum::<f64>() / apart_mm.len().max(1) as f64;
+    if apart_mm.is_empty() {
+        return None;
+    }
+    let mean = apart_mm.iter().sum::<f64>() / apart_mm.len() as f64;
     let max = apart_mm.iter().copied().fold(0.0, f64::max);
     Some(format!(
         "the moves are solved through the {} model as an earlier session estimated it (solver.arm_model), so the flange goes to the planned poses; the controller, computing through the published model, will report them {mean:.2} mm mean ({max:.2} max) from there, which the solve corrects",

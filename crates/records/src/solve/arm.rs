@@ -303,22 +303,28 @@ pub(super) fn apply_given_model(
     };
     let (arm, section) = given_arm_model(file, config)?;
     let published = arm.published();
-    let correct = |reported: &Pose, joints: &[f64]| {
-        let joints = Joints::from_fn(6, |i| joints[i]);
-        reported * published.forward(&joints).inverse() * arm.forward(&joints)
+    let correct = |reported: &Pose, joints: &Joints| {
+        reported * published.forward(joints).inverse() * arm.forward(joints)
+    };
+    // A UR model's six joints, or none to correct through.
+    let six = |v: &PoseVisit| {
+        joints_of(plan, v)
+            .and_then(|q| Joints::from_slice(&q).ok())
+            .filter(|q| q.len() == 6)
     };
     let joints_for = |id: &Option<String>| {
         visits
             .iter()
             .find(|v| Some(v.sample_id()) == *id)
-            .and_then(|v| joints_of(plan, v))
+            .and_then(six)
     };
     let mut corrected_pairs = Vec::with_capacity(pairs.len());
     for pair in pairs {
         let joints = joints_for(&pair.id).ok_or_else(|| {
             refused(format!(
-                "sample {} has no recorded joints to correct its pose through",
-                pair.id.as_deref().unwrap_or("?")
+                "sample {} has no recorded joints (the six of a {}) to correct its pose through",
+                pair.id.as_deref().unwrap_or("?"),
+                section.model
             ))
         })?;
         corrected_pairs.push(PosePair {
@@ -330,7 +336,7 @@ pub(super) fn apply_given_model(
         .iter()
         .map(|v| {
             let mut v = v.clone();
-            if let Some(joints) = joints_of(plan, &v) {
+            if let Some(joints) = six(&v) {
                 v.base_from_flange = correct(&v.base_from_flange, &joints);
             }
             v
