@@ -13,7 +13,6 @@ use clap::Args;
 
 use handeye_console::manual::run_manual;
 use handeye_console::{Command, Console, ConsoleEvent, ConsoleOptions};
-use handeye_records::SolvedSession;
 use handeye_session::cell::run::{open_run, OpenedRun, RunRequest, SessionTarget};
 
 /// Capture by hand: jog or hand-guide the arm, capture on the console page (or Enter here).
@@ -105,7 +104,7 @@ pub(super) fn hand_guided(
         }
     };
     let (report, next) = super::run::finish_run(&done)?;
-    finished(console, &done.solved, report, next, wait);
+    finished(console, &done, report, next, wait);
     Ok(())
 }
 
@@ -172,47 +171,19 @@ pub(super) fn failed(console: &Console, error: &anyhow::Error, wait: bool) {
     linger(console, wait);
 }
 
-/// Tells the page the verdict and where the report is, then ends as [`linger`] says.
+/// The end of a run on the console (one camera or several): its verdict and summary
+/// (`CellRun::verdict_and_summary`), the report, the next step.
 pub(super) fn finished(
     console: &Console,
-    solved: &SolvedSession,
+    done: &handeye_session::cell::run::CellRun,
     report: Option<PathBuf>,
     next: String,
     wait: bool,
 ) {
-    let verdict = solved.verdict.as_ref().map(|v| v.level.word().to_string());
+    let (verdict, summary) = done.verdict_and_summary();
     publish_finished(
         console,
-        (verdict, solved.summary.clone()),
-        report,
-        next,
-        wait,
-    );
-}
-
-/// The end of a several-camera run on the console: the cell's verdict (the worst camera's) and
-/// every camera's, the report.
-pub(super) fn finished_rig(
-    console: &Console,
-    result: &handeye_records::result::RigResultFile,
-    report: Option<PathBuf>,
-    next: String,
-    wait: bool,
-) {
-    let cameras: Vec<String> = result
-        .cameras
-        .iter()
-        .map(|c| format!("{}: {} — {}", c.name, c.verdict.level, c.verdict.reason))
-        .collect();
-    let summary = format!(
-        "cell: {} — {}\n{}",
-        result.verdict.level,
-        result.verdict.reason,
-        cameras.join("\n")
-    );
-    publish_finished(
-        console,
-        (Some(result.verdict.level.word().into()), summary),
+        (verdict.map(|v| v.level.word().to_string()), summary),
         report,
         next,
         wait,

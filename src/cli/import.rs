@@ -10,7 +10,6 @@ use clap::{Args, Subcommand, ValueEnum};
 use handeye_config::{recorded_cell, CellConfig, RecordedFiles};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::setup::Setup;
-use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
 use handeye_formats::import::{
     import_csv_pairs, import_csv_two_files, import_moveit_json, import_visp, CsvOptions,
     CsvPoseForm, VispOptions,
@@ -18,6 +17,7 @@ use handeye_formats::import::{
 use handeye_records::dataset::Dataset;
 use handeye_robot::recorded::save_recorded_poses;
 use handeye_ros2_bag::BagOptions;
+use handeye_session::cell::bag::{import_bag_session, BagNote, BagSessionRequest};
 use handeye_vision::{DetectorOptions, Target};
 
 /// The cell layout on the command line.
@@ -285,10 +285,11 @@ fn import_bag(a: BagArgs) -> anyhow::Result<()> {
         continuous: a.continuous,
         output: a.output,
     };
-    let imported = import_bag_session(&request, &mut |note| match note {
+    let say = &mut |note| match note {
         BagNote::Line(line) => outln!("{line}"),
         BagNote::Warning(warning) => eprintln!("warning: {warning}"),
-    })?;
+    };
+    let imported = import_bag_session(&request, say, &super::run::run_report)?;
     let out = imported.folder.display();
     outln!(
         "session {out}: {} samples accepted, {} skipped (board not found or rejected)",
@@ -304,21 +305,21 @@ fn import_bag(a: BagArgs) -> anyhow::Result<()> {
             imported.folder.join("result.yaml").display()
         );
     }
-    // The report, as after a run (the import solved the session with the run's solve).
-    match super::report::write(&imported.folder, None) {
-        Ok((report, verdict)) => {
+    // The report the run's tail wrote, as after `handeye run`.
+    match &imported.report {
+        Ok(report) => {
             outln!("report:  {}", report.display());
             outln!(
                 "{}",
                 super::run::next_step(
-                    verdict.as_ref(),
+                    imported.solved.verdict.as_ref(),
                     &imported.folder.join("result.yaml"),
                     super::run::Stack::Ros2
                 )
             );
         }
         Err(e) => {
-            eprintln!("warning: the report could not be written: {e:#}");
+            eprintln!("warning: the report could not be written: {e}");
             outln!("next: handeye replay {out}");
         }
     }

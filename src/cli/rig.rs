@@ -2,7 +2,7 @@
 //! session folder with `rig.yaml`): every camera's answer printed, the report written. The run
 //! itself is `cell::run::run`, as for one camera; replay is [`rig::solve_rig_folder`].
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use handeye_config::CellConfig;
 use handeye_records::result::RigResultFile;
@@ -10,29 +10,21 @@ use handeye_report::session::REPLAY_REPORT_FILE;
 use handeye_session::cell::rig;
 use handeye_session::cell::run::CellRun;
 
-/// The end of `handeye run` of a several-camera cell (the run itself is `cell::run::run`, as
-/// for one camera): what the run did, every camera's answer, the report.
-pub(super) fn finish_run(
-    done: &CellRun,
-    result: &RigResultFile,
-) -> anyhow::Result<(Option<PathBuf>, String)> {
-    let root = rig::root_of(done.folder.root()).unwrap_or(done.folder.root());
+/// What `handeye run` of a several-camera cell prints before its report (the run itself is
+/// `cell::run::run`, its report `write_run_report`, as for one camera): what the run did and
+/// every camera's answer. Returns the line printed last, after the report's path.
+pub(super) fn print_run(done: &CellRun, result: &RigResultFile) -> String {
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",
         done.outcome.visited_now,
         done.outcome.arm_time_s()
     );
-    let output = rig::RigOutput::run(root);
+    let output = rig::RigOutput::run(done.root());
     print_result(result, &output.result);
-    let report = root.join("report.html");
-    handeye_report::rig::write_rig_report(result, root, &report)?;
-    outln!("report: {}", report.display());
-    let next = format!(
+    format!(
         "next: handeye export {} --format ros2|urdf|opencv",
         output.result.display()
-    );
-    outln!("{next}");
-    Ok((Some(report), next))
+    )
 }
 
 /// `handeye replay` of a several-camera session folder: the joint solve again from its

@@ -116,14 +116,8 @@ pub(super) fn run(args: RunArgs) -> anyhow::Result<()> {
     };
     let done = done.map_err(|e| failed(&console, e))?;
     let (report, next) = finish_run(&done)?;
-    match (&console, &done.rig) {
-        (Some(console), Some(rig)) => {
-            super::console::finished_rig(console, rig, report, next, args.console_wait)
-        }
-        (Some(console), None) => {
-            super::console::finished(console, &done.solved, report, next, args.console_wait)
-        }
-        (None, _) => {}
+    if let Some(console) = &console {
+        super::console::finished(console, &done, report, next, args.console_wait);
     }
     Ok(())
 }
@@ -142,9 +136,15 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
                 .join(", ")
         );
     }
-    // A cell with several cameras: the joint answer, its report, and every camera named.
+    // A cell with several cameras: the joint answer, every camera named.
     if let Some(rig) = &done.rig {
-        return super::rig::finish_run(done, rig);
+        let next = super::rig::print_run(done, rig);
+        let report = write_report(done);
+        if let Some(report) = &report {
+            outln!("report: {}", report.display());
+        }
+        outln!("{next}");
+        return Ok((report, next));
     }
     let result = &done.solved;
     outln!("{}", result.summary);
@@ -154,17 +154,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     if let (Some(arm), Some(errors)) = (&result.arm, &done.cell.config.arm_errors) {
         outln!("{}", arm.compare_with_truth(errors));
     }
-    let report = match handeye_report::session::write_run_report(done) {
-        Ok(path) => Some(path),
-        // The calibration is saved; a report problem must not hide it.
-        Err(e) => {
-            eprintln!(
-                "warning: the report could not be written: {:#}",
-                anyhow::Error::from(e)
-            );
-            None
-        }
-    };
+    let report = write_report(done);
     let result_path = done.folder.result_path();
     outln!();
     outln!("session: {}", done.folder.root().display());
@@ -180,6 +170,22 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
     outln!("{next}");
     Ok((report, next))
 }
+
+/// The run's tail ([`cell::run::RunReport`]): its report, one camera or several; its path, or
+/// why it could not be written.
+pub(super) fn run_report(done: &cell::run::CellRun) -> Result<PathBuf, String> {
+    handeye_report::session::write_run_report(done)
+        .map_err(|e| format!("{:#}", anyhow::Error::from(e)))
+}
+
+/// Writes a finished run's report; its path, or `None` with a warning: the calibration is
+/// saved, and a report problem must not hide it.
+fn write_report(done: &cell::run::CellRun) -> Option<PathBuf> {
+    run_report(done)
+        .map_err(|e| eprintln!("warning: the report could not be written: {e}"))
+        .ok()
+}
+
 /// The last line after a run: the export command, or what the verdict says to do first.
 pub(super) fn next_step(
     verdict: Option<&Verdict>,

@@ -580,10 +580,11 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
 }
 
 /// The import as a library call (what `handeye import bag` is a thin caller of): the notes
-/// arrive as it goes, the session is where it was asked for, and the answer is the truth.
+/// arrive as it goes, the session is where it was asked for, the answer is the truth, and the
+/// report is the run's tail (`write_run_report`, as after `handeye run`), where the session is.
 #[test]
 fn the_library_imports_a_bag_into_a_solved_session() {
-    use handeye_formats::bag::{import_bag_session, BagNote, BagSessionRequest};
+    use handeye_session::cell::bag::{import_bag_session, BagNote, BagSessionRequest};
     let dir = tempfile::tempdir().unwrap();
     let board = Board::load(&board_path()).unwrap();
     let trajectory = StopAndGo {
@@ -618,7 +619,20 @@ fn the_library_imports_a_bag_into_a_solved_session() {
         output: out.clone(),
     };
     let mut notes = Vec::new();
-    let imported = import_bag_session(&request, &mut |note| notes.push(note)).unwrap();
+    let report = |done: &handeye_session::cell::run::CellRun| {
+        handeye_report::session::write_run_report(done).map_err(|e| e.to_string())
+    };
+    let imported = import_bag_session(&request, &mut |note| notes.push(note), &report).unwrap();
+    assert_eq!(imported.report, Ok(out.join("report.html")));
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let staging = page.find(".importing-").map(|i| {
+        page.get(i.saturating_sub(300)..i + 100)
+            .unwrap_or(".importing-")
+    });
+    assert!(
+        page.contains("T_flange_camera") && staging.is_none(),
+        "the page of the session, never naming the staging folder: {staging:?}"
+    );
     assert!(
         notes
             .iter()

@@ -183,14 +183,32 @@ pub(crate) fn run(
         stop,
         error: None,
     };
-    let outcome = py.detach(|| -> Result<PathBuf, Failed> {
+    let outcome = py.detach(|| -> Result<(PathBuf, Option<String>), Failed> {
         let opened = open_run(&request, &mut observer).map_err(Failed::Run)?;
         if let Some(why) = opened.hand_guided() {
             return Err(Failed::HandGuided(why));
         }
         let done =
             run_opened(opened, &request, Strategy::Planned, &mut observer).map_err(Failed::Run)?;
-        Ok(done.folder.root().to_path_buf())
+        // The run's tail, as `handeye run` writes it: the report of one camera or several.
+        let report = handeye_report::session::write_run_report(&done)
+            .err()
+            .map(|e| error_chain(&e));
+        Ok((done.root().to_path_buf(), report))
+    });
+    // The calibration is saved; a report that could not be written is said, not raised.
+    let outcome = outcome.map(|(folder, report)| {
+        if let Some(why) = report {
+            let warning = py.get_type::<pyo3::exceptions::PyUserWarning>();
+            let _ = PyErr::warn(
+                py,
+                &warning,
+                &std::ffi::CString::new(format!("the report could not be written: {why}"))
+                    .unwrap_or_default(),
+                1,
+            );
+        }
+        folder
     });
     let interrupted = match &outcome {
         Err(Failed::Run(RunError::Session(SessionError::Interrupted { folder, .. }))) => {

@@ -11,13 +11,15 @@ use std::path::{Path, PathBuf};
 use handeye_config::{CellConfig, SolveSpace};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
+use handeye_core::yaml_file::read_yaml;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::ResultFile;
+use handeye_records::result::{ResultFile, RigResultFile};
 use handeye_records::{SessionFolder, SolveInputs};
+use handeye_session::cell::rig;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::calibrate::Calibration;
+use crate::calibrate::{Calibration, VerdictPy};
 use crate::convert::{pose_to_py, poses_to_py};
 use crate::errors;
 
@@ -61,15 +63,46 @@ pub(crate) fn read_result_py(py: Python<'_>, path: PathBuf) -> PyResult<Calibrat
     read_result(py, &path, Vec::new())
 }
 
-/// A recorded session folder.
+/// A recorded session folder: one camera's, or a cell's with several cameras (`rig.yaml` and a
+/// one-camera session folder per camera under `cameras/`).
 #[pyclass(name = "Session", module = "handeye", frozen)]
 pub(crate) struct Session {
     root: PathBuf,
     config: PathBuf,
-    setup: &'static str,
+    /// One camera's setup; `None` for several cameras (each has its own).
+    setup: Option<&'static str>,
+    /// Several cameras: their names, config order (empty for one camera).
+    cameras: Vec<String>,
 }
 
 impl Session {
+    /// Refuses `what` of a several-camera session, naming where each camera's is.
+    fn one_camera(&self, py: Python<'_>, what: &str) -> PyResult<()> {
+        match self.cameras.first() {
+            None => Ok(()),
+            Some(first) => Err(errors::input(
+                py,
+                format!(
+                    "session {} has {} cameras ({}): `{what}` is each camera's, session.cameras[{first:?}].{what}; the joint answer is session.joint",
+                    self.root.display(),
+                    self.cameras.len(),
+                    self.cameras.join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// Several cameras: the joint answer (`result.yaml` at the root), None when not solved.
+    fn joint_file(&self, py: Python<'_>) -> PyResult<Option<RigResultFile>> {
+        let path = self.root.join("result.yaml");
+        if self.cameras.is_empty() || !path.exists() {
+            return Ok(None);
+        }
+        read_yaml(&path)
+            .map(Some)
+            .map_err(|e| errors::from_error(py, &e))
+    }
+
     fn folder(&self, py: Python<'_>) -> PyResult<SessionFolder> {
         SessionFolder::open(&self.root).map_err(|e| errors::from_error(py, &e))
     }
@@ -88,9 +121,19 @@ impl Session {
 
 #[pymethods]
 impl Session {
-    /// Opens the session folder at `path` (it must hold `session.yaml`).
+    /// Opens the session folder at `path` (it must hold `session.yaml`, or `rig.yaml` for a
+    /// cell with several cameras).
     #[new]
     pub(crate) fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
+        if rig::is_rig_folder(&path) {
+            let manifest = rig::read_manifest(&path).map_err(|e| errors::from_error(py, &e))?;
+            return Ok(Session {
+                root: path,
+                config: manifest.config,
+                setup: None,
+                cameras: manifest.cameras.into_iter().map(|c| c.name).collect(),
+            });
+        }
         let folder = SessionFolder::open(&path).map_err(|e| errors::from_error(py, &e))?;
         let manifest = folder
             .read_manifest()
@@ -98,7 +141,8 @@ impl Session {
         Ok(Session {
             root: path,
             config: manifest.config,
-            setup: manifest.setup.name(),
+            setup: Some(manifest.setup.name()),
+            cameras: Vec::new(),
         })
     }
 
@@ -114,16 +158,86 @@ impl Session {
         self.config.clone()
     }
 
-    /// `"eye_in_hand"` or `"eye_to_hand"`.
+    /// `"eye_in_hand"` or `"eye_to_hand"`; None for several cameras (each camera's session
+    /// has its own).
     #[getter]
-    fn setup(&self) -> &'static str {
+    fn setup(&self) -> Option<&'static str> {
         self.setup
+    }
+
+    /// Several cameras: each camera's own session (`cameras/<name>`, its frames, samples and
+    /// setup) by name, config order; empty for one camera.
+    #[getter]
+    fn cameras<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let dict = PyDict::new(py);
+        for name in &self.cameras {
+            let session = Session::new(py, rig::camera_folder(&self.root, name))?;
+            dict.set_item(name, Py::new(py, session)?)?;
+        }
+        Ok(dict)
+    }
+
+    /// Several cameras: the joint answer of `result.yaml` (None when not solved):
+    /// `{"transforms": {name: 4x4}, "sigma": {name: {"rotation_deg", "translation_mm"}},
+    /// "truth_error": {name: {"rotation_deg", "translation_mm"}}` (a simulated cell's),
+    /// `"verdicts": {camera: Verdict}, "verdict": Verdict}` (the cell's: its worst camera's).
+    /// None for one camera (its answer is `result`).
+    #[getter]
+    fn joint<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(file) = self.joint_file(py)? else {
+            return Ok(None);
+        };
+        let (transforms, sigma, truth) = (PyDict::new(py), PyDict::new(py), PyDict::new(py));
+        let figures = |deg: f64, mm: f64| -> PyResult<Bound<'py, PyDict>> {
+            let d = PyDict::new(py);
+            d.set_item("rotation_deg", deg)?;
+            d.set_item("translation_mm", mm)?;
+            Ok(d)
+        };
+        for t in file.transforms() {
+            transforms.set_item(&t.name, pose_to_py(py, &t.pose))?;
+            sigma.set_item(
+                &t.name,
+                figures(t.sigma.rotation_deg, t.sigma.translation_mm)?,
+            )?;
+            if let (Some(deg), Some(mm)) = (t.truth_error_deg, t.truth_error_mm) {
+                truth.set_item(&t.name, figures(deg, mm)?)?;
+            }
+        }
+        let verdicts = PyDict::new(py);
+        for camera in &file.cameras {
+            verdicts.set_item(
+                &camera.name,
+                Py::new(
+                    py,
+                    VerdictPy {
+                        inner: camera.verdict.clone(),
+                    },
+                )?,
+            )?;
+        }
+        let joint = PyDict::new(py);
+        joint.set_item("transforms", transforms)?;
+        joint.set_item("sigma", sigma)?;
+        joint.set_item("truth_error", truth)?;
+        joint.set_item("verdicts", verdicts)?;
+        joint.set_item(
+            "verdict",
+            Py::new(
+                py,
+                VerdictPy {
+                    inner: file.verdict,
+                },
+            )?,
+        )?;
+        Ok(Some(joint))
     }
 
     /// The accepted samples (`samples.yaml`): `{"setup", "T_base_flange" (N, 4, 4),
     /// "T_camera_target" (N, 4, 4), "ids", "weights"}`, metres.
     #[getter]
     fn samples<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.one_camera(py, "samples")?;
         dataset_to_py(py, &self.dataset(py)?)
     }
 
@@ -131,6 +245,7 @@ impl Session {
     /// session was not solved.
     #[getter]
     fn result(&self, py: Python<'_>) -> PyResult<Option<Calibration>> {
+        self.one_camera(py, "result")?;
         let path = self.folder(py)?.result_path();
         if !path.exists() {
             return Ok(None);
@@ -139,9 +254,22 @@ impl Session {
         read_result(py, &path, pairs).map(Some)
     }
 
-    /// The verdict of `result.yaml`, or None.
+    /// The verdict of `result.yaml` (several cameras: the cell's), or None.
     #[getter]
-    fn verdict(&self, py: Python<'_>) -> PyResult<Option<Py<crate::calibrate::VerdictPy>>> {
+    fn verdict(&self, py: Python<'_>) -> PyResult<Option<Py<VerdictPy>>> {
+        if !self.cameras.is_empty() {
+            return self
+                .joint_file(py)?
+                .map(|file| {
+                    Py::new(
+                        py,
+                        VerdictPy {
+                            inner: file.verdict,
+                        },
+                    )
+                })
+                .transpose();
+        }
         match self.result(py)? {
             Some(result) => result.verdict(py),
             None => Ok(None),
@@ -152,6 +280,7 @@ impl Session {
     /// (`{"T_flange_camera": 4x4, "T_base_target": 4x4}`), or None for a real cell.
     #[getter]
     fn truth<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.one_camera(py, "truth")?;
         let config = self.load_config(py, None)?;
         let Some(truth) = config.camera().simulation else {
             return Ok(None);
@@ -174,6 +303,7 @@ impl Session {
         space: Option<&str>,
         config: Option<PathBuf>,
     ) -> PyResult<Calibration> {
+        self.one_camera(py, "solve()")?;
         let folder = self.folder(py)?;
         let config = self.load_config(py, config)?;
         let space = match space {
@@ -207,6 +337,13 @@ impl Session {
     }
 
     fn __repr__(&self) -> String {
-        format!("<handeye.Session {} ({})>", self.root.display(), self.setup)
+        match self.setup {
+            Some(setup) => format!("<handeye.Session {} ({setup})>", self.root.display()),
+            None => format!(
+                "<handeye.Session {} ({} cameras)>",
+                self.root.display(),
+                self.cameras.len()
+            ),
+        }
     }
 }

@@ -35,6 +35,7 @@ def test_run_recovers_the_simulated_truth_with_progress_events(tmp_path):
         session = handeye.run(CONFIG, out=tmp_path / "session", progress=events.append)
     assert isinstance(session, handeye.Session) and session.path == tmp_path / "session"
     assert session.verdict.level == "GOOD", session.verdict.reason
+    assert (session.path / "report.html").is_file(), "the run's report, as `handeye run` writes it"
     assert_truth_recovered(session)
     kinds = [e["event"] for e in events]
     assert kinds[:2] == ["plan_checked", "started"], kinds
@@ -46,6 +47,35 @@ def test_run_recovers_the_simulated_truth_with_progress_events(tmp_path):
     accepted = [e for e in events if e["event"] == "recorded" and e["rejected"] is None]
     assert len(accepted) == len(session.samples["T_base_flange"])
     assert all(e["reprojection_rms_px"] < 1.0 and e["tags"] > 0 for e in accepted)
+
+
+THREE_CAMERAS = REPO / "configs" / "sim-cell-three-cameras.yaml"
+
+
+def test_a_cell_with_several_cameras_runs_to_its_joint_answer_and_report(tmp_path):
+    """The three-camera simulated cell: `handeye.run` gives the session `out` names (not one
+    camera's folder inside it), with the joint answer of every camera and board within the
+    tolerance of the simulator's truth, each camera's own session, and the report the CLI
+    writes; what is each camera's is refused at the cell's level, naming where it is."""
+    out = tmp_path / "three"
+    session = handeye.run(THREE_CAMERAS, out=out)
+    assert session.path == out and session.setup is None
+    assert list(session.cameras) == ["wrist", "left", "right"]
+    joint = session.joint
+    names = {"T_flange_cam_wrist", "T_base_cam_left", "T_base_cam_right", "T_base_target", "T_flange_target", "T_cam_left_cam_right"}
+    assert set(joint["transforms"]) == names and set(joint["truth_error"]) == names
+    for name, error in joint["truth_error"].items():
+        assert error["translation_mm"] < TOLERANCE_MM and error["rotation_deg"] < TOLERANCE_DEG, (name, error)
+        assert joint["transforms"][name].shape == (4, 4)
+    assert session.verdict.level == joint["verdict"].level == "GOOD", joint["verdict"].reason
+    assert set(joint["verdicts"]) == {"wrist", "left", "right"}
+    assert (out / "report.html").is_file()
+    wrist = session.cameras["wrist"]
+    assert wrist.setup == "eye_in_hand" and session.cameras["left"].setup == "eye_to_hand"
+    assert len(wrist.samples["T_base_flange"]) == 20 and wrist.joint is None
+    with pytest.raises(handeye.InputError, match=r'has 3 cameras \(wrist, left, right\): `result` is each camera\'s, session.cameras\["wrist"\].result; the joint answer is session.joint'):
+        session.result
+    assert handeye.Session(out).joint["transforms"].keys() == joint["transforms"].keys()
 
 
 def test_run_records_and_solves_what_the_cli_does(sim_session, tmp_path):

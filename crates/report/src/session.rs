@@ -170,7 +170,7 @@ pub fn from_session(
             .collect::<Result<Vec<_>, ReportError>>()?;
     }
     Ok(ReportInput {
-        title: folder.root().display().to_string(),
+        title: folder.shown_root().display().to_string(),
         setup: answers
             .first()
             .map(|a| a.calibration.setup)
@@ -295,10 +295,17 @@ fn annotated_frame(
     Ok(bytes)
 }
 
-/// Writes `<session>/report.html` for a run that just ended, from what the run holds: its
-/// answers, the samples and records its solve read, the board and lens of its cell, its verdict
-/// and arm time (nothing is read again, nothing judged again). Returns the path written.
+/// Writes `<session>/report.html` for a run that just ended, one camera or several (the page of
+/// [`CellRun::root`]), from what the run holds: its answers, the samples and records its solve
+/// read, the board and lens of its cell, its verdict and arm time (nothing is read again,
+/// nothing judged again). The one tail of every run: `handeye run`, `handeye.run` in Python.
+/// Returns the path written.
 pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
+    if let Some(cameras) = &run.rig {
+        let path = run.root().join(REPORT_FILE);
+        super::rig::write_rig_report(cameras, run.root(), &path)?;
+        return Ok(path);
+    }
     let solved = &run.solved;
     // The intrinsics of the config, else the ones the run estimated.
     let camera = if run.cell.camera().intrinsics_known {

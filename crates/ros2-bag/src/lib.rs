@@ -22,7 +22,7 @@
 //! error ([`BagError::OutOfMemory`]), not an abort.
 //!
 //! The samples (image, `T_base_flange`) and the intrinsics go to the caller, which writes them as
-//! an ordinary session through the recorded-cell path (`handeye_formats::bag`); this crate
+//! an ordinary session through the recorded-cell path (`handeye_session::cell::bag`); this crate
 //! writes nothing. Each chosen frame is handed over the moment it is chosen ([`import_bag_to`])
 //! and not kept, so the import's memory does not grow with the number of samples either: a few
 //! decoded frames are alive at once ([`BagImport::frames_held_at_once`]).

@@ -280,7 +280,15 @@ class Session:
     def config(self) -> Path:
         """The cell config the session was recorded with."""
     @property
-    def setup(self) -> str: ...
+    def setup(self) -> Optional[str]:
+        """``eye_in_hand`` or ``eye_to_hand``; None for several cameras (each has its own)."""
+    @property
+    def cameras(self) -> Dict[str, "Session"]:
+        """Several cameras: each camera's own session by name; empty for one camera."""
+    @property
+    def joint(self) -> Optional[Dict[str, Any]]:
+        """Several cameras: the joint answer (``transforms``, ``sigma``, ``truth_error`` by
+        name, ``verdicts`` by camera, the cell's ``verdict``); None for one camera or unsolved."""
     @property
     def samples(self) -> Dict[str, Any]:
         """``setup``, ``T_base_flange`` and ``T_camera_target`` (N, 4, 4) m, ``ids``, ``weights``."""
@@ -305,8 +313,9 @@ def run(
     yes: bool = False,
     accept_changed: bool = False,
 ) -> Session:
-    """Runs a cell as ``handeye run`` (progress as one dict per event; Ctrl-C keeps the samples)
-    and returns its session (``.path``, ``.result``, ``.verdict``)."""
+    """Runs a cell as ``handeye run`` (progress as one dict per event; Ctrl-C keeps the samples),
+    writes its report, and returns its session (``.path``, ``.result``, ``.verdict``; several
+    cameras: ``.cameras``, ``.joint``)."""
 
 def read_dataset(path: _Path) -> Dict[str, Any]:
     """A dataset file: ``setup``, ``T_base_flange``, ``T_camera_target`` (N, 4, 4), ``ids``, ``weights``."""

@@ -3,6 +3,7 @@
 //! This is the one place that maps config backends to implementations. `run` drives a prepared
 //! cell through a whole calibration run (what `handeye run` does).
 
+pub mod bag;
 pub mod recorded;
 pub mod rig;
 pub mod ros2;

@@ -119,6 +119,40 @@ pub struct CellRun {
     pub arm_time: Option<ArmTime>,
 }
 
+/// The tail of a finished run that lives above the run layer: its report
+/// (`handeye_report::session::write_run_report`), written while the run still holds its folder
+/// (a bag's import, before its staging folder moves into place). Returns the page's path, or why
+/// it could not be written.
+pub type RunReport<'a> = &'a dyn Fn(&CellRun) -> Result<PathBuf, String>;
+
+impl CellRun {
+    /// The session's own folder, what `-o` named: the run's folder, or for several cameras the
+    /// folder holding `rig.yaml` and every camera's folder (the run's is the planner camera's).
+    pub fn root(&self) -> &std::path::Path {
+        let run = self.folder.root();
+        match self.rig {
+            Some(_) => super::rig::root_of(run).unwrap_or(run),
+            None => run,
+        }
+    }
+
+    /// The run's verdict (several cameras: the cell's, its worst camera's) and the summary a
+    /// person reads first (several cameras: the cell's verdict, then each camera's).
+    pub fn verdict_and_summary(&self) -> (Option<&handeye_solve::verdict::Verdict>, String) {
+        match &self.rig {
+            Some(result) => {
+                let mut summary =
+                    format!("cell: {} — {}", result.verdict.level, result.verdict.reason);
+                for c in &result.cameras {
+                    summary += &format!("\n{}: {} — {}", c.name, c.verdict.level, c.verdict.reason);
+                }
+                (Some(&result.verdict), summary)
+            }
+            None => (self.solved.verdict.as_ref(), self.solved.summary.clone()),
+        }
+    }
+}
+
 /// Why a run did not happen or did not finish.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {

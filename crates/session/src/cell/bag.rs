@@ -1,10 +1,11 @@
-//! A ROS 2 bag imported as a session (`handeye import bag`): the bag read
-//! ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its frames written as
-//! they are chosen (none is kept in memory) with their flange poses as a recorded cell in a
-//! staging folder beside the output, run through the ordinary session driver and solved there,
-//! and the folder renamed into place only when all of that succeeded; the staging folder of an
-//! import that was killed is removed by the next one. What the import did is recorded in
-//! `<session>/import/bag-import.yaml`.
+//! A ROS 2 bag imported as a session (`handeye import bag`): a recorded pose source for the one
+//! run. The bag read ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its
+//! frames written as they are chosen (none is kept in memory) with their flange poses as a
+//! recorded cell in a staging folder beside the output, run through the one run
+//! ([`run::run`]) and solved there, its report written by the caller's [`RunReport`] (the
+//! run's tail, as after `handeye run`), and the folder renamed into place only when all of
+//! that succeeded; the staging folder of an import that was killed is removed by the next one.
+//! What the import did is recorded in `<session>/import/bag-import.yaml`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -18,11 +19,11 @@ use handeye_robot::recorded::save_recorded_poses;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use handeye_records::{SessionFolder, SolvedSession};
-use handeye_session::cell::run::{
-    self as run, RunError, RunObserver, RunRequest, SessionTarget, Strategy,
+use super::run::{
+    self as run, RunError, RunObserver, RunReport, RunRequest, SessionTarget, Strategy,
 };
-use handeye_session::cell::PreparedCell;
+use super::PreparedCell;
+use handeye_records::{SessionFolder, SolvedSession};
 
 use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, SkipReason};
 
@@ -67,6 +68,9 @@ pub struct BagSession {
     pub summary: String,
     /// The solved session.
     pub solved: SolvedSession,
+    /// The report the run's tail wrote (`report.html` where the session is now), or why it
+    /// could not be written (the calibration is saved all the same).
+    pub report: Result<PathBuf, String>,
 }
 
 /// What `import bag` records about itself in `<session>/import/bag-import.yaml`.
@@ -240,10 +244,12 @@ fn import_record(
 
 /// Imports a bag as a session: reads it, then runs its frames as a recorded cell into a staging
 /// folder next to the output and renames it into place when everything succeeded. What it finds
-/// on the way goes to `say` at once (so what was said before a refusal is read).
+/// on the way goes to `say` at once (so what was said before a refusal is read). `report` is
+/// the run's tail (`handeye_report::session::write_run_report`), called before the folder moves.
 pub fn import_bag_session(
     request: &BagSessionRequest,
     say: &mut dyn FnMut(BagNote),
+    report: RunReport<'_>,
 ) -> anyhow::Result<BagSession> {
     let a = request;
     let out = absolute(&a.output)?;
@@ -346,6 +352,8 @@ pub fn import_bag_session(
         input.path = final_path(&std::fs::canonicalize(&input.path).unwrap_or(input.path.clone()));
     }
     done.folder.write_manifest(&manifest)?;
+    // The run's tail, as after `handeye run`: its report, from what the run holds.
+    let report = report(&done).map(|path| final_path(&path));
     let (outcome, solved) = (done.outcome, done.solved);
     for (index, why) in &outcome.skipped {
         say(BagNote::Line(format!(
@@ -372,6 +380,7 @@ pub fn import_bag_session(
         warnings: imported.warnings.len(),
         summary,
         solved,
+        report,
     })
 }
 
