@@ -20,7 +20,7 @@ if [ "${1:-}" = "--quick" ]; then
   cargo test --workspace --lib --bins -q "$@"
   # The integration areas that need no browser, arm library or Python packages.
   cargo test --test it -q "$@" -- cli_names:: cli_run:: closed_forms:: config:: dataset:: \
-    driver:: formats:: friction:: layers:: plausibility:: rig:: solve:: verdict::
+    driver:: formats:: friction:: layers:: plausibility:: cameras:: solve:: verdict::
   exit 0
 fi
 

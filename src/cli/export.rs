@@ -15,8 +15,8 @@ use handeye_formats::export::{self, Exported};
 use handeye_formats::ExportFormat;
 
 use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
+use handeye_records::result::CamerasResultFile;
 use handeye_records::result::ResultFile;
-use handeye_records::result::RigResultFile;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -177,7 +177,7 @@ pub(super) fn exported_result(
     let several = value.filter(|v| v.get("cameras").is_some());
     let exported = match several {
         Some(value) => {
-            let rig: RigResultFile = serde_yaml_ng::from_value(value).map_err(|e| {
+            let cameras: CamerasResultFile = serde_yaml_ng::from_value(value).map_err(|e| {
                 // result.yaml is derived from the session's records: an older layout is
                 // solved again, not converted.
                 anyhow::anyhow!(
@@ -187,7 +187,7 @@ pub(super) fn exported_result(
                     result.display()
                 )
             })?;
-            Exported::cameras(&rig, ids)
+            Exported::cameras(&cameras, ids)
         }
         None => Exported::one(&ResultFile::load_mounts(result)?, ids),
     };

@@ -5,6 +5,7 @@ pub(crate) mod out;
 
 mod camera;
 mod camera_link;
+mod cameras;
 mod console;
 mod detect;
 mod export;
@@ -14,7 +15,6 @@ mod plan;
 mod publish;
 mod replay;
 mod report;
-mod rig;
 mod run;
 mod shell;
 mod solve;

@@ -24,9 +24,9 @@ pub(super) struct ReportArgs {
 
 /// Runs `handeye report`.
 pub(super) fn run(args: ReportArgs) -> anyhow::Result<()> {
-    if handeye_session::cell::rig::is_rig_folder(&args.session) {
+    if handeye_session::cell::cameras::is_cameras_folder(&args.session) {
         super::say_if_live(&args.session)?;
-        let path = handeye_report::rig::write_rig_folder_report(&args.session)?;
+        let path = handeye_report::cameras::write_cameras_folder_report(&args.session)?;
         outln!("report: {}", path.display());
         return Ok(());
     }

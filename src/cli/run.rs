@@ -137,8 +137,8 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         );
     }
     // A cell with several cameras: the joint answer, every camera named.
-    if let Some(rig) = &done.rig {
-        let next = super::rig::print_run(done, rig);
+    if let Some(cameras) = &done.cameras_result {
+        let next = super::cameras::print_run(done, cameras);
         let report = write_report(done);
         if let Some(report) = &report {
             outln!("report: {}", report.display());
@@ -314,7 +314,7 @@ impl RunObserver for Printer {
             .then(|| cell.config.camera().name.clone());
     }
 
-    fn cameras_planned(&mut self, views: &[cell::rig::PlannedViews]) {
+    fn cameras_planned(&mut self, views: &[cell::cameras::PlannedViews]) {
         let seen: Vec<String> = views
             .iter()
             .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))

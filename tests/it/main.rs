@@ -15,6 +15,7 @@ mod aprilgrid_photos;
 mod armtime;
 mod bag_import;
 mod boards;
+mod cameras;
 mod cell_model;
 mod cell_model_run;
 mod cellkit;
@@ -41,7 +42,6 @@ mod noise;
 mod plausibility;
 mod report;
 mod reprojection;
-mod rig;
 mod ros2_export;
 #[cfg(feature = "ros2")]
 mod ros2_live;

@@ -456,7 +456,7 @@ fn every_shipped_cell_config_loads_and_its_plan_passes_its_checks() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "yaml") {
             // A several-camera config is prepared as every config is (its plan checked for the
-            // camera it is made for; its run, tests/it/rig.rs, checks every camera's views).
+            // camera it is made for; its run, tests/it/cameras.rs, checks every camera's views).
             let prepared =
                 cell::prepare(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(

@@ -14,9 +14,9 @@ use handeye_core::geometry::{translation_distance, Pose};
 use handeye_session::cell::run::{CellRun, RunObserver, RunRequest, SessionTarget};
 use handeye_session::cell::PreparedCell;
 
+pub mod cameras;
 pub mod fakes;
 pub mod live;
-pub mod rig;
 
 /// A DDS domain id no other test of this process uses: live ROS 2 tests run side by side, and two
 /// on one domain hear each other's nodes (a second action server of one name, a domain that was

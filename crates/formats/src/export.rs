@@ -29,7 +29,7 @@ use handeye_core::geometry::{
 };
 use handeye_core::setup::Setup;
 use handeye_core::setup::{is_ur_base_link, ur_base_link_from_base, CellTransforms};
-use handeye_records::result::{NamedTransform, RigResultFile};
+use handeye_records::result::{CamerasResultFile, NamedTransform};
 
 /// Why a result cannot be exported.
 #[derive(Debug, thiserror::Error)]
@@ -334,7 +334,7 @@ impl Exported {
     /// The export of a several-camera result: every camera's mount (from the joint solve) and
     /// the boards in the tree, the camera-to-camera transforms implied by them. A camera left
     /// out of the joint solve has no mount to export.
-    pub fn cameras(result: &RigResultFile, ids: &FrameIds) -> Exported {
+    pub fn cameras(result: &CamerasResultFile, ids: &FrameIds) -> Exported {
         let two_boards = result.boards.len() > 1;
         let named = |t: &NamedTransform| {
             FramedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)

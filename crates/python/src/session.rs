@@ -13,9 +13,9 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
 use handeye_core::yaml_file::read_yaml;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::{ResultFile, RigResultFile};
+use handeye_records::result::{CamerasResultFile, ResultFile};
 use handeye_records::{SessionFolder, SolveInputs};
-use handeye_session::cell::rig;
+use handeye_session::cell::cameras;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -93,7 +93,7 @@ impl Session {
     }
 
     /// Several cameras: the joint answer (`result.yaml` at the root), None when not solved.
-    fn joint_file(&self, py: Python<'_>) -> PyResult<Option<RigResultFile>> {
+    fn joint_file(&self, py: Python<'_>) -> PyResult<Option<CamerasResultFile>> {
         let path = self.root.join("result.yaml");
         if self.cameras.is_empty() || !path.exists() {
             return Ok(None);
@@ -125,8 +125,8 @@ impl Session {
     /// cell with several cameras).
     #[new]
     pub(crate) fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
-        if rig::is_rig_folder(&path) {
-            let manifest = rig::read_manifest(&path).map_err(|e| errors::from_error(py, &e))?;
+        if cameras::is_cameras_folder(&path) {
+            let manifest = cameras::read_manifest(&path).map_err(|e| errors::from_error(py, &e))?;
             return Ok(Session {
                 root: path,
                 config: manifest.config,
@@ -171,7 +171,7 @@ impl Session {
     fn cameras<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let dict = PyDict::new(py);
         for name in &self.cameras {
-            let session = Session::new(py, rig::camera_folder(&self.root, name))?;
+            let session = Session::new(py, cameras::camera_folder(&self.root, name))?;
             dict.set_item(name, Py::new(py, session)?)?;
         }
         Ok(dict)

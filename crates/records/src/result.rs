@@ -23,7 +23,7 @@
 use std::path::Path;
 
 mod cameras;
-pub use cameras::{CameraResult, NamedTransform, RigResultFile};
+pub use cameras::{CameraResult, CamerasResultFile, NamedTransform};
 
 use serde::{Deserialize, Serialize};
 

@@ -23,9 +23,9 @@
 //! `result.yaml` also holds carries a `data-key`, so tests can check the page's structure and
 //! values without parsing prose.
 
+pub mod cameras;
 mod corners;
 pub mod plots;
-pub mod rig;
 mod scale;
 mod sections;
 pub mod session;

@@ -301,9 +301,9 @@ fn annotated_frame(
 /// nothing judged again). The one tail of every run: `handeye run`, `handeye.run` in Python.
 /// Returns the path written.
 pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
-    if let Some(cameras) = &run.rig {
+    if let Some(cameras) = &run.cameras_result {
         let path = run.root().join(REPORT_FILE);
-        super::rig::write_rig_report(cameras, run.root(), &path)?;
+        super::cameras::write_cameras_report(cameras, run.root(), &path)?;
         return Ok(path);
     }
     let solved = &run.solved;

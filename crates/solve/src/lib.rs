@@ -22,6 +22,7 @@
 mod arrow;
 pub mod board_scale;
 pub mod calibration;
+pub mod cameras;
 pub mod cell_model;
 pub mod closed_form;
 pub mod compare;
@@ -36,7 +37,6 @@ pub mod options;
 pub mod plausibility;
 pub mod refine;
 pub mod reprojection;
-pub mod rig;
 mod robust;
 pub mod verdict;
 

@@ -144,9 +144,9 @@ fn publish_until_latched(
 fn a_several_camera_result_is_published_as_one_tree() {
     let Some(python) = python() else { return };
     let domain = ros_domain();
-    let (_, session, _) = crate::rig::shipped_run();
+    let (_, session, _) = crate::cameras::shipped_run();
     let result_path = session.join("result.yaml");
-    let result = crate::rig::read_result(session);
+    let result = crate::cameras::read_result(session);
     within(std::time::Duration::from_secs(300), move || {
         let (publisher, printed) =
             publish_until_latched(&result_path, domain, &["--duration", "90"]);

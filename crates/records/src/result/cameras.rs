@@ -80,7 +80,7 @@ pub struct CameraResult {
 /// `result.yaml` of a several-camera session.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RigResultFile {
+pub struct CamerasResultFile {
     /// The frames the robot poses were read in (absent in files written before it: the UR
     /// controller's `base` and `tool0`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -97,7 +97,7 @@ pub struct RigResultFile {
     pub verdict: Verdict,
 }
 
-impl RigResultFile {
+impl CamerasResultFile {
     /// Every transform of the answer: the joint mounts, the boards, the camera-to-camera ones.
     pub fn transforms(&self) -> impl Iterator<Item = &NamedTransform> {
         self.cameras

@@ -4,8 +4,9 @@
 //! cell through a whole calibration run (what `handeye run` does).
 
 pub mod bag;
+pub mod cameras;
 pub mod recorded;
-pub mod rig;
+pub mod replay;
 pub mod ros2;
 pub mod run;
 pub mod sim;

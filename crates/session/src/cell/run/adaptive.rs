@@ -89,7 +89,7 @@ pub(super) fn drive_plan(
     let mut on_event = |event: SessionEvent| {
         // A lost camera of a several-camera session is kept in `failures.yaml` as it happens.
         if let (SessionEvent::CameraLost(failure), Some(root)) = (&event, &rig_root) {
-            if let Err(e) = super::super::rig::record_failure(root, failure) {
+            if let Err(e) = super::super::cameras::record_failure(root, failure) {
                 observer.note(&format!("failures.yaml could not be written: {e}"));
             }
         }

@@ -85,7 +85,7 @@ pub trait RunObserver {
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
     /// A several-camera cell: how many of the plan's poses each camera is expected to see its
     /// board at (by the nominal cell), before anything moves.
-    fn cameras_planned(&mut self, _views: &[super::rig::PlannedViews]) {}
+    fn cameras_planned(&mut self, _views: &[super::cameras::PlannedViews]) {}
     /// Something a person should know (a stale lock taken over, changed inputs accepted...).
     fn note(&mut self, _message: &str) {}
     /// The session folder is ready and `plan` (for an adaptive plan: its candidates) validated
@@ -111,7 +111,7 @@ pub struct CellRun {
     /// camera's own, in its folder).
     pub solved: SolvedSession,
     /// A several-camera cell: the joint answer, as written to the session's `result.yaml`.
-    pub rig: Option<handeye_records::result::RigResultFile>,
+    pub cameras_result: Option<handeye_records::result::CamerasResultFile>,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
@@ -130,8 +130,8 @@ impl CellRun {
     /// folder holding `rig.yaml` and every camera's folder (the run's is the planner camera's).
     pub fn root(&self) -> &std::path::Path {
         let run = self.folder.root();
-        match self.rig {
-            Some(_) => super::rig::root_of(run).unwrap_or(run),
+        match self.cameras_result {
+            Some(_) => super::cameras::root_of(run).unwrap_or(run),
             None => run,
         }
     }
@@ -139,7 +139,7 @@ impl CellRun {
     /// The run's verdict (several cameras: the cell's, its worst camera's) and the summary a
     /// person reads first (several cameras: the cell's verdict, then each camera's).
     pub fn verdict_and_summary(&self) -> (Option<&handeye_solve::verdict::Verdict>, String) {
-        match &self.rig {
+        match &self.cameras_result {
             Some(result) => {
                 let mut summary =
                     format!("cell: {} — {}", result.verdict.level, result.verdict.reason);
@@ -174,7 +174,7 @@ pub enum RunError {
     Cameras(String),
     /// The joint solve of a several-camera cell.
     #[error(transparent)]
-    RigSolve(#[from] super::rig::RigSolveError),
+    CamerasSolve(#[from] super::cameras::CamerasSolveError),
     /// A new session needs a config.
     #[error("a new session needs a cell config (--config)")]
     NoConfig,
@@ -289,7 +289,7 @@ pub fn open_run(
     let (resumed, config_path) = match &request.target {
         SessionTarget::Resume(dir) => {
             // A several-camera session is resumed through its planner camera's folder.
-            let folder = SessionFolder::resume(&super::rig::session_folder_of(dir))?;
+            let folder = SessionFolder::resume(&super::cameras::session_folder_of(dir))?;
             let manifest = folder.read_manifest()?;
             let config = request
                 .config
@@ -416,11 +416,11 @@ pub fn run_opened(
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
     let solved = handeye_records::solve_folder(&folder, &cell.solve_inputs())?;
-    let rig = match (cell.config.listed, super::rig::root_of(folder.root())) {
-        (true, Some(root)) => Some(super::rig::solve_rig_folder(
+    let cameras_result = match (cell.config.listed, super::cameras::root_of(folder.root())) {
+        (true, Some(root)) => Some(super::cameras::solve_cameras_folder(
             root,
             &cell.config,
-            &super::rig::RigOutput::run(root),
+            &super::cameras::CamerasOutput::run(root),
         )?),
         _ => None,
     };
@@ -429,7 +429,7 @@ pub fn run_opened(
         folder,
         outcome,
         solved,
-        rig,
+        cameras_result,
         adaptive,
         arm_time,
     })

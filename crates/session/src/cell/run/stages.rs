@@ -214,13 +214,13 @@ pub(super) fn session_folder(
     }
     let folder = match (&request.target, cell.config.listed) {
         (SessionTarget::New(out), true) => {
-            if super::super::rig::is_rig_folder(out) {
+            if super::super::cameras::is_cameras_folder(out) {
                 return Err(RunError::Cameras(format!(
                     "{}: already holds a several-camera session: pass --resume to continue it, or choose another folder",
                     out.display()
                 )));
             }
-            SessionFolder::create(&super::super::rig::camera_folder(
+            SessionFolder::create(&super::super::cameras::camera_folder(
                 out,
                 &cell.config.camera().name,
             ))?
@@ -274,7 +274,7 @@ pub(super) fn drive_session(
             let mut setup = cell.session_setup(folder.clone(), plan.to_vec(), request.stop.clone());
             setup.detector.jobs = request.jobs;
             if cell.config.listed {
-                let root = super::super::rig::root_of(folder.root()).ok_or_else(|| {
+                let root = super::super::cameras::root_of(folder.root()).ok_or_else(|| {
                     RunError::Cameras(format!(
                         "{}: not inside a several-camera session",
                         folder.root().display()

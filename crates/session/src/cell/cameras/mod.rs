@@ -27,19 +27,19 @@ use handeye_core::setup::Setup;
 use handeye_core::yaml_file::{read_yaml, write_yaml};
 use handeye_records::{PlannedPose, SessionError, SessionFolder, SessionManifest};
 use handeye_robot::Joints;
-use handeye_solve::rig::MIN_VIEWS_PER_CAMERA;
+use handeye_solve::cameras::MIN_VIEWS_PER_CAMERA;
 
 pub use crate::CameraFailure;
-pub use solve::{solve_rig_folder, RigOutput, RigSolveError};
+pub use solve::{solve_cameras_folder, CamerasOutput, CamerasSolveError};
 
 /// `rig.yaml`: the cameras of a several-camera session and its plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RigManifest {
+pub struct CamerasManifest {
     /// The cell config the session was started with.
     pub config: PathBuf,
     /// The cameras, in config order: (name, setup).
-    pub cameras: Vec<RigManifestCamera>,
+    pub cameras: Vec<ManifestCamera>,
     /// The planner camera's name.
     pub planner: String,
     /// The plan, in visiting order.
@@ -49,7 +49,7 @@ pub struct RigManifest {
 /// One camera in `rig.yaml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RigManifestCamera {
+pub struct ManifestCamera {
     /// Its name.
     pub name: String,
     /// Its setup.
@@ -57,11 +57,11 @@ pub struct RigManifestCamera {
 }
 
 /// The manifest's file name in a several-camera session folder.
-pub const RIG_MANIFEST: &str = "rig.yaml";
+pub const CAMERAS_MANIFEST: &str = "rig.yaml";
 
 /// Whether `folder` is a several-camera session.
-pub fn is_rig_folder(folder: &Path) -> bool {
-    folder.join(RIG_MANIFEST).is_file()
+pub fn is_cameras_folder(folder: &Path) -> bool {
+    folder.join(CAMERAS_MANIFEST).is_file()
 }
 
 /// A camera's folder inside a several-camera session.
@@ -70,8 +70,8 @@ pub fn camera_folder(root: &Path, name: &str) -> PathBuf {
 }
 
 /// Reads `rig.yaml`.
-pub fn read_manifest(root: &Path) -> Result<RigManifest, SessionError> {
-    Ok(read_yaml(&root.join(RIG_MANIFEST))?)
+pub fn read_manifest(root: &Path) -> Result<CamerasManifest, SessionError> {
+    Ok(read_yaml(&root.join(CAMERAS_MANIFEST))?)
 }
 
 /// How many plan poses each camera is expected to see its board at, by the nominal cell: the
@@ -88,15 +88,15 @@ pub struct PlannedViews {
 }
 
 impl PreparedCell {
-    /// The rig manifest of a session visiting `plan`.
-    fn rig_manifest(&self, plan: &[(Pose, Joints)]) -> RigManifest {
-        RigManifest {
+    /// The manifest (`rig.yaml`) of a session visiting `plan`.
+    fn cameras_manifest(&self, plan: &[(Pose, Joints)]) -> CamerasManifest {
+        CamerasManifest {
             config: self.config.file.clone(),
             cameras: self
                 .config
                 .cameras
                 .iter()
-                .map(|c| RigManifestCamera {
+                .map(|c| ManifestCamera {
                     name: c.name.clone(),
                     setup: c.setup,
                 })
@@ -142,16 +142,16 @@ impl PreparedCell {
         resume: bool,
         plan: &[(Pose, Joints)],
     ) -> Result<(), String> {
-        let manifest = self.rig_manifest(plan);
+        let manifest = self.cameras_manifest(plan);
         let problem = |p: String| format!("{}: {p}", root.display());
-        if resume && root.join(RIG_MANIFEST).is_file() {
+        if resume && root.join(CAMERAS_MANIFEST).is_file() {
             let on_disk = read_manifest(root).map_err(|e| {
                 problem(format!(
-                    "not a several-camera session ({RIG_MANIFEST}: {e})"
+                    "not a several-camera session ({CAMERAS_MANIFEST}: {e})"
                 ))
             })?;
             if on_disk.cameras != manifest.cameras {
-                let names = |m: &RigManifest| {
+                let names = |m: &CamerasManifest| {
                     m.cameras
                         .iter()
                         .map(|c| format!("{} ({})", c.name, c.setup))
@@ -165,7 +165,8 @@ impl PreparedCell {
                 )));
             }
         } else {
-            write_yaml(&manifest, &root.join(RIG_MANIFEST)).map_err(|e| problem(e.to_string()))?;
+            write_yaml(&manifest, &root.join(CAMERAS_MANIFEST))
+                .map_err(|e| problem(e.to_string()))?;
         }
         // The failures of an earlier run are history: this run asks every camera again.
         let _ = std::fs::remove_file(root_failures(root));

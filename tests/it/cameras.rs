@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 
 use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
-use handeye_records::result::RigResultFile;
-use handeye_session::cell::rig::camera_folder;
+use handeye_records::result::CamerasResultFile;
+use handeye_session::cell::cameras::camera_folder;
 use handeye_solve::verdict::Level;
 
 use crate::util;
@@ -26,7 +26,7 @@ fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
     util::config_variant(dir, "sim-cell-three-cameras.yaml", "cell.yaml", edits)
 }
 
-pub(crate) fn read_result(folder: &Path) -> RigResultFile {
+pub(crate) fn read_result(folder: &Path) -> CamerasResultFile {
     let text = std::fs::read_to_string(folder.join("result.yaml")).unwrap();
     serde_yaml_ng::from_str(&text).unwrap()
 }
@@ -34,8 +34,8 @@ pub(crate) fn read_result(folder: &Path) -> RigResultFile {
 /// The simulator's truth of every camera mount, by transform name, from the config itself (not
 /// from what the run wrote).
 fn truth(config: &Path) -> Vec<(String, Pose)> {
-    let rig = CellConfig::load(config).unwrap();
-    rig.cameras
+    let cell = CellConfig::load(config).unwrap();
+    cell.cameras
         .iter()
         .map(|c| (c.mount_key(), c.simulation.unwrap().camera_mount))
         .collect()
@@ -323,7 +323,7 @@ fn killed_mid_run_then_resumed_and_replayed() {
             String::from_utf8_lossy(&replay.stderr)
         );
         let file = output.cloned().unwrap_or(out.join("replay-result.yaml"));
-        let replayed: RigResultFile =
+        let replayed: CamerasResultFile =
             serde_yaml_ng::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
         for (a, b) in resumed.transforms().zip(replayed.transforms()) {
             assert_eq!(a.name, b.name);
@@ -378,13 +378,13 @@ fn fixed_cameras_relative_pose_agrees_with_opencv_stereo_calibrate() {
         return;
     };
     let (config, out, _) = shipped_run();
-    let rig = CellConfig::load(config).unwrap();
+    let cell = CellConfig::load(config).unwrap();
     let (l, r) = (
-        rig.index_of("left").unwrap(),
-        rig.index_of("right").unwrap(),
+        cell.index_of("left").unwrap(),
+        cell.index_of("right").unwrap(),
     );
-    let board = Target::load(&rig.cameras[l].target).unwrap();
-    let model = |c: usize| CameraModel::load(rig.cameras[c].intrinsics.as_ref().unwrap()).unwrap();
+    let board = Target::load(&cell.cameras[l].target).unwrap();
+    let model = |c: usize| CameraModel::load(cell.cameras[c].intrinsics.as_ref().unwrap()).unwrap();
     let (left_model, right_model) = (model(l), model(r));
     let k = |m: &CameraModel| {
         vec![

@@ -15,7 +15,7 @@ use std::time::Duration;
 use handeye_core::geometry::Pose;
 use handeye_records::SessionError;
 use handeye_robot::kinematics::UrModel;
-use handeye_session::cell::rig::camera_folder;
+use handeye_session::cell::cameras::camera_folder;
 use handeye_session::cell::run::{run, RunError, RunRequest, SessionTarget, Strategy};
 use mocks::{MockFaults, MockUr, MockUrConfig};
 
@@ -124,7 +124,7 @@ fn body() {
     )
     .unwrap_or_else(|e| panic!("resume: {e}"));
     assert_eq!(done.outcome.visited_now, 8);
-    let result = done.rig.expect("the joint answer");
+    let result = done.cameras_result.expect("the joint answer");
     for (name, truth) in super::truth(&config) {
         let solved = result.transform(&name).unwrap();
         let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);

@@ -1,25 +1,25 @@
 //! The several-camera ends of `handeye run` and `handeye replay` (a config with `cameras:`, a
 //! session folder with `rig.yaml`): every camera's answer printed, the report written. The run
-//! itself is `cell::run::run`, as for one camera; replay is [`rig::solve_rig_folder`].
+//! itself is `cell::run::run` and the replay `cell::replay::replay_session`, as for one camera.
 
 use std::path::Path;
 
-use handeye_config::CellConfig;
-use handeye_records::result::RigResultFile;
+use handeye_records::result::CamerasResultFile;
 use handeye_report::session::REPLAY_REPORT_FILE;
-use handeye_session::cell::rig;
+use handeye_session::cell::cameras;
+use handeye_session::cell::replay::CamerasReplay;
 use handeye_session::cell::run::CellRun;
 
 /// What `handeye run` of a several-camera cell prints before its report (the run itself is
 /// `cell::run::run`, its report `write_run_report`, as for one camera): what the run did and
 /// every camera's answer. Returns the line printed last, after the report's path.
-pub(super) fn print_run(done: &CellRun, result: &RigResultFile) -> String {
+pub(super) fn print_run(done: &CellRun, result: &CamerasResultFile) -> String {
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",
         done.outcome.visited_now,
         done.outcome.arm_time_s()
     );
-    let output = rig::RigOutput::run(done.root());
+    let output = cameras::CamerasOutput::run(done.root());
     print_result(result, &output.result);
     format!(
         "next: handeye export {} --format ros2|urdf|opencv",
@@ -27,30 +27,19 @@ pub(super) fn print_run(done: &CellRun, result: &RigResultFile) -> String {
     )
 }
 
-/// `handeye replay` of a several-camera session folder: the joint solve again from its
-/// records, written to `output` (default `<folder>/replay-result.yaml`) with its report and
-/// estimates beside it; the session's own files are left as the run wrote them.
-pub(super) fn replay(
-    folder: &Path,
-    config: Option<&Path>,
-    output: Option<&Path>,
-) -> anyhow::Result<()> {
-    let config = match config {
-        Some(c) => c.to_path_buf(),
-        None => rig::read_manifest(folder)?.config,
-    };
-    let rig_config = CellConfig::load(&config)?;
-    let output = rig::RigOutput::replay(folder, output);
-    let result = rig::solve_rig_folder(folder, &rig_config, &output)?;
-    print_result(&result, &output.result);
-    let report = handeye_session::replay::beside(&output.result, REPLAY_REPORT_FILE);
-    handeye_report::rig::write_rig_report(&result, folder, &report)?;
+/// The end of `handeye replay` of a several-camera session folder (the joint solve again from
+/// its records, `cell::replay::replay_session`): every camera's answer printed, its report
+/// beside the result; the session's own files are left as the run wrote them.
+pub(super) fn print_replay(replay: &CamerasReplay) -> anyhow::Result<()> {
+    print_result(&replay.result, &replay.output.result);
+    let report = handeye_session::replay::beside(&replay.output.result, REPLAY_REPORT_FILE);
+    handeye_report::cameras::write_cameras_report(&replay.result, &replay.folder, &report)?;
     outln!("report: {}", report.display());
     Ok(())
 }
 
 /// Prints every camera's mount, the boards and the camera-to-camera transforms.
-pub(super) fn print_result(result: &RigResultFile, result_file: &Path) {
+pub(super) fn print_result(result: &CamerasResultFile, result_file: &Path) {
     let line = |t: &handeye_records::result::NamedTransform| {
         let p = t.pose.translation.vector;
         let truth = match (t.truth_error_mm, t.truth_error_deg) {

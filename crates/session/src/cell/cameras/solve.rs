@@ -2,7 +2,7 @@
 //!
 //! Each camera is first solved alone from its own folder (the one-camera pose-space solve with
 //! the config's solver settings: robust start, outliers left out, its noise estimated); those
-//! answers start the joint solve (`handeye_solve::rig`), which fits every mount and one board per
+//! answers start the joint solve (`handeye_solve::cameras`), which fits every mount and one board per
 //! setup together. `result.yaml` names every transform by its frames (`T_flange_cam_wrist`,
 //! `T_base_cam_left`, `T_base_target`, `T_cam_left_cam_right`), with its 1-sigma, and gives a
 //! verdict per camera and for the cell. Each camera's own answer is kept beside the joint one
@@ -18,17 +18,19 @@ use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_core::yaml_file::write_yaml;
-use handeye_records::result::{CameraResult, NamedTransform, RigResultFile, SampleResidualYaml};
+use handeye_records::result::{
+    CameraResult, CamerasResultFile, NamedTransform, SampleResidualYaml,
+};
 use handeye_records::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
 };
 use handeye_records::{PoseVisit, SessionError, SessionFolder};
+use handeye_solve::cameras::{
+    pose_error, solve_cameras, solve_cameras_pixels, CameraSpec, CamerasData, CamerasError,
+    CamerasFrame, CamerasObservation, CamerasOptions, CamerasSolution, CamerasStart, PoseResidual,
+};
 use handeye_solve::cell_model::{fit_cell_model, CellModel};
 use handeye_solve::reprojection::Frame;
-use handeye_solve::rig::{
-    pose_error, solve_rig, solve_rig_pixels, PoseResidual, RigCamera, RigData, RigError, RigFrame,
-    RigObservation, RigOptions, RigSolution, RigStart,
-};
 use handeye_solve::verdict::{self, Accuracy, HeldOut};
 use handeye_solve::Calibration;
 use handeye_solve::PoseSigma;
@@ -37,13 +39,13 @@ use nalgebra::Point3;
 
 /// Why a several-camera session could not be solved.
 #[derive(Debug, thiserror::Error)]
-pub enum RigSolveError {
+pub enum CamerasSolveError {
     /// Reading the folder.
     #[error(transparent)]
     Session(#[from] SessionError),
     /// The joint solve failed.
     #[error("the joint solve: {0}")]
-    Joint(#[from] RigError),
+    Joint(#[from] CamerasError),
     /// A camera's board or lens file could not be read.
     #[error("camera `{camera}`: {}: {problem}", file.display())]
     Input {
@@ -124,11 +126,11 @@ fn board_parent(setup: Setup) -> &'static str {
 
 /// What the joint solve reads from a session: its data with each camera's own answer as the
 /// start, and which cameras are in it.
-pub struct RigProblem {
+pub struct CamerasProblem {
     /// The data of the cameras in the solve.
-    pub data: RigData,
+    pub data: CamerasData,
     /// Each camera's own answer (same order as `data.cameras`).
-    pub start: RigStart,
+    pub start: CamerasStart,
     /// Per camera in `data`: its index in the config.
     pub config_index: Vec<usize>,
     /// Per config camera: accepted samples, and why it is left out (if it is).
@@ -139,7 +141,7 @@ pub struct RigProblem {
     /// held-out error), or why there is none.
     pub held_out: Vec<Result<HeldOut, String>>,
     /// The corners of every accepted board pose (the pixel-space solve's data).
-    pub frames: Vec<RigFrame>,
+    pub frames: Vec<CamerasFrame>,
     /// Per camera in `data`: its lens (the cell model's estimate when it corrected the file).
     pub models: Vec<CameraModel>,
     /// Per config camera: its cell model (issue #38: which of its given files its corners
@@ -148,8 +150,8 @@ pub struct RigProblem {
 }
 
 /// A camera's board and lens files, read; an error names the camera and the file.
-fn camera_files(camera: &CellCamera) -> Result<(Target, CameraModel), RigSolveError> {
-    let input = |file: &Path, problem: String| RigSolveError::Input {
+fn camera_files(camera: &CellCamera) -> Result<(Target, CameraModel), CamerasSolveError> {
+    let input = |file: &Path, problem: String| CamerasSolveError::Input {
         camera: camera.name.clone(),
         file: file.to_path_buf(),
         problem,
@@ -161,18 +163,21 @@ fn camera_files(camera: &CellCamera) -> Result<(Target, CameraModel), RigSolveEr
 }
 
 /// Reads every camera's folder and solves each camera alone: the joint problem and its start.
-pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, RigSolveError> {
+pub fn load_joint_problem(
+    root: &Path,
+    cell: &CellConfig,
+) -> Result<CamerasProblem, CamerasSolveError> {
     let manifest = read_manifest(root)?;
     // The plan as the planner camera's session holds it (an adaptive session's grows there).
     let plan = SessionFolder::open(&camera_folder(root, &manifest.planner))?
         .read_manifest()?
         .plan;
-    let mut data = RigData {
+    let mut data = CamerasData {
         cameras: Vec::new(),
         base_from_flange: plan.iter().map(|p| p.base_from_flange).collect(),
         observations: Vec::new(),
     };
-    let mut start = RigStart {
+    let mut start = CamerasStart {
         camera_mounts: Vec::new(),
         base_from_target: None,
         flange_from_target: None,
@@ -184,25 +189,25 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
     let mut models = Vec::new();
     let mut cell_models = Vec::new();
     let mut sample_poses = Vec::new();
-    for (c, camera) in rig.cameras.iter().enumerate() {
+    for (c, camera) in cell.cameras.iter().enumerate() {
         let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
         let visits = folder.read_visits()?;
         let pairs: Vec<_> = visits.iter().filter_map(|v| v.sample()).collect();
         let samples = pairs.len();
         sample_poses.push(plan_poses_of_samples(&visits));
-        if samples < handeye_solve::rig::MIN_VIEWS_PER_CAMERA {
+        if samples < handeye_solve::cameras::MIN_VIEWS_PER_CAMERA {
             held_out.push(Err(format!("only {samples} samples")));
             cameras.push((
                 samples,
                 Some(format!(
                     "saw its board at {samples} poses; a camera needs at least {} to be solved",
-                    handeye_solve::rig::MIN_VIEWS_PER_CAMERA
+                    handeye_solve::cameras::MIN_VIEWS_PER_CAMERA
                 )),
             ));
             continue;
         }
         let setup = camera.setup;
-        let options = rig.solver.to_options();
+        let options = cell.solver.to_options();
         // A camera whose own solve fails (its samples too few or too alike, say after it was
         // lost early) is left out of the joint solve, named with why; the others are solved.
         let alone = match handeye_solve::solve(setup, &pairs, &options) {
@@ -225,7 +230,7 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
             .filter(|(k, _)| !dropped.contains(k))
             .map(|(_, v)| v)
             .collect();
-        let model = camera_cell_model(&rig.for_camera(c), &kept, &board, &file_model, &alone);
+        let model = camera_cell_model(&cell.for_camera(c), &kept, &board, &file_model, &alone);
         // Where the views determine a wrong file's quantity, the camera's board poses, its lens
         // and its board points are those of the estimate: its held-out check and the joint solve
         // judge and use the corrected cell, not the wrong file.
@@ -266,19 +271,19 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
                 // Every camera records the same flange pose at a plan index; the reported pose
                 // (not the planned one) is what the solve must use.
                 data.base_from_flange[visit.plan_index] = visit.base_from_flange;
-                data.observations.push(RigObservation {
+                data.observations.push(CamerasObservation {
                     camera: index,
                     pose: visit.plan_index,
                     camera_from_target,
                 });
-                frames.push(RigFrame {
+                frames.push(CamerasFrame {
                     camera: index,
                     pose: visit.plan_index,
                     corners: corners_of(visit),
                 });
             }
         }
-        data.cameras.push(RigCamera {
+        data.cameras.push(CameraSpec {
             name: camera.name.clone(),
             setup,
             noise: alone.noise.map_or(options.noise, |n| n.model()),
@@ -299,11 +304,11 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
         cameras.push((samples, None));
     }
     if data.cameras.is_empty() {
-        return Err(RigSolveError::NothingToSolve(
-            handeye_solve::rig::MIN_VIEWS_PER_CAMERA,
+        return Err(CamerasSolveError::NothingToSolve(
+            handeye_solve::cameras::MIN_VIEWS_PER_CAMERA,
         ));
     }
-    Ok(RigProblem {
+    Ok(CamerasProblem {
         data,
         start,
         config_index,
@@ -313,7 +318,7 @@ pub fn load_rig_problem(root: &Path, rig: &CellConfig) -> Result<RigProblem, Rig
         frames,
         models,
         cell_models: {
-            cell_models.resize(rig.cameras.len(), None);
+            cell_models.resize(cell.cameras.len(), None);
             cell_models
         },
     })
@@ -352,17 +357,17 @@ fn camera_cell_model(
 /// Where a solve of a several-camera folder writes: its result file, and the folder each
 /// camera's estimates of wrong files go into.
 #[derive(Debug, Clone)]
-pub struct RigOutput {
+pub struct CamerasOutput {
     /// The result file.
     pub result: PathBuf,
     /// The folder holding one folder per camera for its estimates.
     estimates: PathBuf,
 }
 
-impl RigOutput {
+impl CamerasOutput {
     /// A run's own: `<root>/result.yaml`, each camera's estimates in `<root>/cameras/<name>`.
-    pub fn run(root: &Path) -> RigOutput {
-        RigOutput {
+    pub fn run(root: &Path) -> CamerasOutput {
+        CamerasOutput {
             result: root.join("result.yaml"),
             estimates: root.join("cameras"),
         }
@@ -370,10 +375,10 @@ impl RigOutput {
 
     /// A replay's: `result` (default `<root>/replay-result.yaml`), the estimates in
     /// `replay-estimates/<name>` beside it. Nothing a run recorded is written over.
-    pub fn replay(root: &Path, result: Option<&Path>) -> RigOutput {
+    pub fn replay(root: &Path, result: Option<&Path>) -> CamerasOutput {
         let result = result.map_or_else(|| root.join(REPLAY_RESULT_FILE), Path::to_path_buf);
         let estimates = beside(&result, REPLAY_ESTIMATES_FOLDER);
-        RigOutput { result, estimates }
+        CamerasOutput { result, estimates }
     }
 
     fn estimates_of(&self, camera: &str) -> PathBuf {
@@ -383,21 +388,21 @@ impl RigOutput {
 
 /// Solves a several-camera session folder jointly and writes the result and the estimates
 /// where `output` says.
-pub fn solve_rig_folder(
+pub fn solve_cameras_folder(
     root: &Path,
-    rig: &CellConfig,
-    output: &RigOutput,
-) -> Result<RigResultFile, RigSolveError> {
-    let problem = load_rig_problem(root, rig)?;
-    let joint = solve_joint(&problem, pixel_space(rig), robot_sigma(rig))?;
-    let mut result = result_file(rig, &problem, &joint);
-    let written = write_corrected_files(output, rig, &problem)?;
+    cell: &CellConfig,
+    output: &CamerasOutput,
+) -> Result<CamerasResultFile, CamerasSolveError> {
+    let problem = load_joint_problem(root, cell)?;
+    let joint = solve_joint(&problem, pixel_space(cell), robot_sigma(cell))?;
+    let mut result = result_file(cell, &problem, &joint);
+    let written = write_corrected_files(output, cell, &problem)?;
     for (entry, files) in result.cameras.iter_mut().zip(written) {
         if let Some(model) = entry.verdict.figures.cell_model.as_mut() {
             model.written = files.iter().map(|p| p.display().to_string()).collect();
         }
     }
-    name_files(root, output, rig, &mut result);
+    name_files(root, output, cell, &mut result);
     write_yaml(&result, &output.result).map_err(SessionError::from)?;
     Ok(result)
 }
@@ -405,12 +410,12 @@ pub fn solve_rig_folder(
 /// Writes the estimate of each camera whose cell model corrects a file into its own folder
 /// (`camera_info.yaml`, `board.yaml`); per config camera, the files written.
 fn write_corrected_files(
-    output: &RigOutput,
-    rig: &CellConfig,
-    problem: &RigProblem,
+    output: &CamerasOutput,
+    cell: &CellConfig,
+    problem: &CamerasProblem,
 ) -> Result<Vec<Vec<PathBuf>>, SessionError> {
     let mut written = Vec::new();
-    for (camera, model) in rig.cameras.iter().zip(&problem.cell_models) {
+    for (camera, model) in cell.cameras.iter().zip(&problem.cell_models) {
         written.push(match model {
             Some(model) => write_estimates(
                 &output.estimates_of(&camera.name),
@@ -426,12 +431,17 @@ fn write_corrected_files(
 
 /// Names each camera's folder, its estimates' folder, the cell config, its board and lens
 /// files in its verdict's advice, and the cell's verdict again from them.
-fn name_files(root: &Path, output: &RigOutput, rig: &CellConfig, result: &mut RigResultFile) {
-    for (camera, entry) in rig.cameras.iter().zip(&mut result.cameras) {
+fn name_files(
+    root: &Path,
+    output: &CamerasOutput,
+    cell: &CellConfig,
+    result: &mut CamerasResultFile,
+) {
+    for (camera, entry) in cell.cameras.iter().zip(&mut result.cameras) {
         let files = verdict::SessionFiles {
             session: camera_folder(root, &camera.name).display().to_string(),
             estimates: output.estimates_of(&camera.name).display().to_string(),
-            config: rig.file.display().to_string(),
+            config: cell.file.display().to_string(),
             board: camera.target.display().to_string(),
             intrinsics: camera
                 .intrinsics
@@ -449,39 +459,39 @@ fn name_files(root: &Path, output: &RigOutput, rig: &CellConfig, result: &mut Ri
 
 /// Whether the config asks for the answer in pixel space (`solver.space: reprojection`, the
 /// default) rather than pose space.
-pub fn pixel_space(rig: &CellConfig) -> bool {
-    rig.solver.space == SolveSpace::Reprojection
+pub fn pixel_space(cell: &CellConfig) -> bool {
+    cell.solver.space == SolveSpace::Reprojection
 }
 
 /// The robot's repeatability (m, rad) the pixel-space solve estimates the flange poses with.
-pub fn robot_sigma(rig: &CellConfig) -> (f64, f64) {
-    rig.robot_repeatability()
+pub fn robot_sigma(cell: &CellConfig) -> (f64, f64) {
+    cell.robot_repeatability()
 }
 
 /// The joint answer: pose space, then (when `pixels`) refined on the corners with every flange
 /// pose estimated around the reported one (1-sigma `robot`, m and rad).
 pub fn solve_joint(
-    problem: &RigProblem,
+    problem: &CamerasProblem,
     pixels: bool,
     robot: (f64, f64),
-) -> Result<RigSolution, RigError> {
+) -> Result<CamerasSolution, CamerasError> {
     solve_subset(problem, &problem.data, &problem.start, None, pixels, robot)
 }
 
 /// The joint answer of `data` (all cameras, or camera `only` of `problem` alone).
 fn solve_subset(
-    problem: &RigProblem,
-    data: &RigData,
-    start: &RigStart,
+    problem: &CamerasProblem,
+    data: &CamerasData,
+    start: &CamerasStart,
     only: Option<usize>,
     pixels: bool,
     robot: (f64, f64),
-) -> Result<RigSolution, RigError> {
-    let pose_space = solve_rig(data, start, &RigOptions::default())?;
+) -> Result<CamerasSolution, CamerasError> {
+    let pose_space = solve_cameras(data, start, &CamerasOptions::default())?;
     if !pixels {
         return Ok(pose_space);
     }
-    let (models, frames): (Vec<CameraModel>, Vec<RigFrame>) = match only {
+    let (models, frames): (Vec<CameraModel>, Vec<CamerasFrame>) = match only {
         None => (problem.models.clone(), problem.frames.clone()),
         Some(k) => (
             vec![problem.models[k]],
@@ -489,30 +499,34 @@ fn solve_subset(
                 .frames
                 .iter()
                 .filter(|f| f.camera == k)
-                .map(|f| RigFrame {
+                .map(|f| CamerasFrame {
                     camera: 0,
                     ..f.clone()
                 })
                 .collect(),
         ),
     };
-    let options = RigOptions {
+    let options = CamerasOptions {
         robot_sigma: Some(robot),
-        ..RigOptions::default()
+        ..CamerasOptions::default()
     };
-    solve_rig_pixels(data, &models, &frames, &pose_space, &options)
+    solve_cameras_pixels(data, &models, &frames, &pose_space, &options)
 }
 
 /// `result.yaml` from the joint answer; each camera's own answer is solved again by the same
 /// estimator with its views alone, so `alone` and `joint` differ only by solving together.
-pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) -> RigResultFile {
+pub fn result_file(
+    cell: &CellConfig,
+    problem: &CamerasProblem,
+    joint: &CamerasSolution,
+) -> CamerasResultFile {
     let accuracy = Accuracy {
-        translation_mm: rig.verdict.accuracy_mm,
-        rotation_deg: rig.verdict.accuracy_deg,
+        translation_mm: cell.verdict.accuracy_mm,
+        rotation_deg: cell.verdict.accuracy_deg,
     };
-    let truth_of = |c: usize| rig.cameras[c].simulation.map(|s| s.camera_mount);
+    let truth_of = |c: usize| cell.cameras[c].simulation.map(|s| s.camera_mount);
     let mut cameras = Vec::new();
-    for (c, camera) in rig.cameras.iter().enumerate() {
+    for (c, camera) in cell.cameras.iter().enumerate() {
         let (samples, left_out) = problem.cameras[c].clone();
         let setup = camera.setup;
         let frame = &camera.frame;
@@ -543,7 +557,7 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
                 joint.camera_sigmas[k],
                 truth_of(c),
             ));
-            let start_alone = RigStart {
+            let start_alone = CamerasStart {
                 camera_mounts: vec![problem.start.camera_mounts[k]],
                 ..problem.start.clone()
             };
@@ -552,8 +566,8 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
                 &problem.data.only(k),
                 &start_alone,
                 Some(k),
-                pixel_space(rig),
-                robot_sigma(rig),
+                pixel_space(cell),
+                robot_sigma(cell),
             ) {
                 entry.alone = Some(named(
                     parent,
@@ -585,7 +599,7 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
         accuracy,
     );
     let board_truth = |setup: Setup| {
-        rig.cameras
+        cell.cameras
             .iter()
             .find(|c| c.setup == setup)
             .and_then(|c| c.simulation.map(|s| s.target_mount))
@@ -618,16 +632,16 @@ pub fn result_file(rig: &CellConfig, problem: &RigProblem, joint: &RigSolution) 
                 .zip(truth_of(to))
                 .map(|(a, b)| a.inverse() * b);
             named(
-                &rig.cameras[from].frame,
-                &rig.cameras[to].frame,
+                &cell.cameras[from].frame,
+                &cell.cameras[to].frame,
                 r.pose,
                 r.sigma,
                 truth,
             )
         })
         .collect();
-    RigResultFile {
-        robot_frames: Some(rig.robot.frames()),
+    CamerasResultFile {
+        robot_frames: Some(cell.robot.frames()),
         cameras,
         boards,
         camera_to_camera,

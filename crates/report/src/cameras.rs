@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use handeye_core::atomic_file::write_atomic;
 use handeye_core::geometry::rotvec;
-use handeye_records::result::{NamedTransform, RigResultFile};
+use handeye_records::result::{CamerasResultFile, NamedTransform};
 
 use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
 use super::{escape, ReportError};
@@ -38,7 +38,7 @@ fn transform_cells(t: &NamedTransform) -> String {
 }
 
 /// The page's HTML.
-pub fn render(result: &RigResultFile, folder: &Path) -> Result<String, ReportError> {
+pub fn render(result: &CamerasResultFile, folder: &Path) -> Result<String, ReportError> {
     let mut html = format!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
          <style>{}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}\
@@ -54,7 +54,7 @@ pub fn render(result: &RigResultFile, folder: &Path) -> Result<String, ReportErr
         v = result.verdict.level.word(),
     );
     use_section(&mut html, result);
-    for f in handeye_session::cell::rig::read_failures(folder) {
+    for f in handeye_session::cell::cameras::read_failures(folder) {
         let _ = write!(
             html,
             "<p class=\"REDO\">Camera <b>{}</b> stopped delivering frames at plan pose {}: {}. Its samples until then are kept and solved.</p>",
@@ -136,7 +136,7 @@ pub fn render(result: &RigResultFile, folder: &Path) -> Result<String, ReportErr
 
 /// Every camera's residual at each plan pose in the joint solve, rotation and translation: the
 /// one-camera page's per-pose bars with a bar per camera.
-fn residuals_section(html: &mut String, result: &RigResultFile) -> Result<(), ReportError> {
+fn residuals_section(html: &mut String, result: &CamerasResultFile) -> Result<(), ReportError> {
     html.push_str("<section id=\"residuals\"><h2>Per-pose residuals (joint solve)</h2><p>For every camera at every plan pose where it saw its board: the board pose it measured against the one the joint answer predicts there. A camera whose bars stand far above the others' at the same poses disagrees with them; a grey stub marks a sample its own solve dropped as an outlier (left out of the joint solve).</p>");
     let poses = result
         .cameras
@@ -196,14 +196,14 @@ fn residuals_section(html: &mut String, result: &RigResultFile) -> Result<(), Re
 /// camera that saw its board at the most poses, from its samples).
 fn rotation_axes_section(
     html: &mut String,
-    result: &RigResultFile,
+    result: &CamerasResultFile,
     folder: &Path,
 ) -> Result<(), ReportError> {
     let pairs = result
         .cameras
         .iter()
         .filter_map(|c| {
-            let camera = handeye_session::cell::rig::camera_folder(folder, &c.name);
+            let camera = handeye_session::cell::cameras::camera_folder(folder, &c.name);
             let samples = handeye_records::SessionFolder::open(&camera)
                 .ok()?
                 .samples_path();
@@ -241,7 +241,7 @@ const USE_FORMS: [(ExportFormat, &str); 4] = [
 /// "Use it": every camera's mount and the boards in the forms of [`USE_FORMS`], each the exact
 /// text `handeye export result.yaml --format …` writes (its default frame ids, the result's
 /// robot frames), in a `<pre>` with a copy button; a caution above them when the cell is REDO.
-fn use_section(html: &mut String, result: &RigResultFile) {
+fn use_section(html: &mut String, result: &CamerasResultFile) {
     let robot = result.robot_frames.clone().unwrap_or_default();
     let ids = FrameIds {
         base: robot.base.clone(),
@@ -251,7 +251,7 @@ fn use_section(html: &mut String, result: &RigResultFile) {
     };
     // The result as result.yaml holds it (written and read back), so the page shows the very
     // text `handeye export result.yaml` prints, to the last digit.
-    let read_back: Option<RigResultFile> = serde_yaml_ng::to_string(result)
+    let read_back: Option<CamerasResultFile> = serde_yaml_ng::to_string(result)
         .ok()
         .and_then(|text| serde_yaml_ng::from_str(&text).ok());
     let exported = Exported::cameras(read_back.as_ref().unwrap_or(result), &ids);
@@ -288,18 +288,18 @@ fn use_section(html: &mut String, result: &RigResultFile) {
 
 /// Writes `<folder>/report.html` from the folder's `result.yaml` (`handeye report DIR`);
 /// returns its path.
-pub fn write_rig_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
+pub fn write_cameras_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
     let result_path = folder.join("result.yaml");
-    let result: RigResultFile = handeye_core::yaml_file::read_yaml(&result_path)
+    let result: CamerasResultFile = handeye_core::yaml_file::read_yaml(&result_path)
         .map_err(|e| ReportError::Session(Box::new(handeye_records::SessionError::from(e))))?;
     let path = folder.join("report.html");
-    write_rig_report(&result, folder, &path)?;
+    write_cameras_report(&result, folder, &path)?;
     Ok(path)
 }
 
 /// Writes the page of `result`, the answer of the session in `folder`, to `path`.
-pub fn write_rig_report(
-    result: &RigResultFile,
+pub fn write_cameras_report(
+    result: &CamerasResultFile,
     folder: &Path,
     path: &Path,
 ) -> Result<(), ReportError> {

@@ -1,4 +1,4 @@
-//! The joint solve of a cell with several cameras (a "rig"): every camera's mount and the boards
+//! The joint solve of a cell with several cameras: every camera's mount and the boards
 //! in one maximum-likelihood problem in pose space.
 //!
 //! Cameras on the flange (eye-in-hand) see the board fixed in the cell, `T_base_target`;
@@ -35,11 +35,11 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 
 mod pixels;
-pub use pixels::{solve_rig_pixels, RigFrame};
+pub use pixels::{solve_cameras_pixels, CamerasFrame};
 
-/// One camera of the rig.
+/// One camera of the cell.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigCamera {
+pub struct CameraSpec {
     /// Its name (`wrist`, `left`): frames are named `cam_<name>` in results.
     pub name: String,
     /// On the flange or fixed in the cell.
@@ -50,39 +50,39 @@ pub struct RigCamera {
 
 /// One board pose seen by one camera at one robot pose.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigObservation {
-    /// Index into [`RigData::cameras`].
+pub struct CamerasObservation {
+    /// Index into [`CamerasData::cameras`].
     pub camera: usize,
-    /// Index into [`RigData::base_from_flange`].
+    /// Index into [`CamerasData::base_from_flange`].
     pub pose: usize,
     /// `T_camera_target` as PnP reports it.
     pub camera_from_target: Pose,
 }
 
-/// Everything a rig solve reads: the cameras, the robot poses (shared by every camera), the
+/// Everything the joint solve reads: the cameras, the robot poses (shared by every camera), the
 /// observations.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigData {
+pub struct CamerasData {
     /// The cameras.
-    pub cameras: Vec<RigCamera>,
+    pub cameras: Vec<CameraSpec>,
     /// `T_base_flange` as the robot reported it, per pose.
     pub base_from_flange: Vec<Pose>,
     /// Every accepted board pose, any camera, any robot pose.
-    pub observations: Vec<RigObservation>,
+    pub observations: Vec<CamerasObservation>,
 }
 
-impl RigData {
+impl CamerasData {
     /// The data of camera `camera` alone (same robot poses, only its observations): what a
     /// single-camera solve of that camera sees.
-    pub fn only(&self, camera: usize) -> RigData {
-        RigData {
+    pub fn only(&self, camera: usize) -> CamerasData {
+        CamerasData {
             cameras: vec![self.cameras[camera].clone()],
             base_from_flange: self.base_from_flange.clone(),
             observations: self
                 .observations
                 .iter()
                 .filter(|o| o.camera == camera)
-                .map(|o| RigObservation {
+                .map(|o| CamerasObservation {
                     camera: 0,
                     ..o.clone()
                 })
@@ -105,7 +105,7 @@ impl RigData {
 
 /// Where the joint solve starts (each camera's own answer, typically).
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigStart {
+pub struct CamerasStart {
     /// Per camera: `T_flange_camera` (eye-in-hand) or `T_base_camera` (eye-to-hand).
     pub camera_mounts: Vec<Pose>,
     /// `T_base_target`, needed when some camera is eye-in-hand.
@@ -114,10 +114,10 @@ pub struct RigStart {
     pub flange_from_target: Option<Pose>,
 }
 
-/// How the rig solve runs.
+/// How the joint solve runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RigOptions {
-    /// Estimate each camera's noise from its residuals (otherwise [`RigCamera::noise`] is used
+pub struct CamerasOptions {
+    /// Estimate each camera's noise from its residuals (otherwise [`CameraSpec::noise`] is used
     /// as given).
     pub estimate_noise: bool,
     /// Most Levenberg-Marquardt iterations per fit.
@@ -128,9 +128,9 @@ pub struct RigOptions {
     pub robot_sigma: Option<(f64, f64)>,
 }
 
-impl Default for RigOptions {
+impl Default for CamerasOptions {
     fn default() -> Self {
-        RigOptions {
+        CamerasOptions {
             estimate_noise: true,
             max_iterations: 100,
             robot_sigma: None,
@@ -153,7 +153,7 @@ pub struct RelativeMount {
 
 /// A camera's residuals at the optimum.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigResiduals {
+pub struct CamerasResiduals {
     /// Observations used.
     pub samples: usize,
     /// RMS rotation residual, degrees.
@@ -168,7 +168,7 @@ pub struct RigResiduals {
 /// how far the board pose it saw is from the one the answer predicts there).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseResidual {
-    /// The pose (index into [`RigData::base_from_flange`]).
+    /// The pose (index into [`CamerasData::base_from_flange`]).
     pub pose: usize,
     /// Rotation residual, rad.
     pub rotation_rad: f64,
@@ -178,7 +178,7 @@ pub struct PoseResidual {
 
 /// The joint answer.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigSolution {
+pub struct CamerasSolution {
     /// Per camera: `T_flange_camera` or `T_base_camera`.
     pub camera_mounts: Vec<Pose>,
     /// Per camera: 1-sigma of its mount.
@@ -195,7 +195,7 @@ pub struct RigSolution {
     /// the pose-space answer.
     pub pixel_sigma_px: Vec<f64>,
     /// Per camera: residuals.
-    pub residuals: Vec<RigResiduals>,
+    pub residuals: Vec<CamerasResiduals>,
     /// Covariance of all parameters (6 per camera, then `T_base_target`, then
     /// `T_flange_target` where present; each `[δθ, δt]`).
     pub covariance: DMatrix<f64>,
@@ -205,9 +205,9 @@ pub struct RigSolution {
     pub iterations: usize,
 }
 
-/// Why a rig solve failed.
+/// Why the joint solve failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RigError {
+pub enum CamerasError {
     /// A camera without enough views to be solved.
     #[error("camera `{camera}` saw the board at {found} poses; a joint solve needs at least {required} per camera: add poses where it sees its board, or leave it out of the cell")]
     TooFewViews {
@@ -250,7 +250,7 @@ struct Layout {
 }
 
 impl Layout {
-    fn new(data: &RigData) -> Layout {
+    fn new(data: &CamerasData) -> Layout {
         let mut next = 6 * data.cameras.len();
         let mut take = |present: bool| {
             present.then(|| {
@@ -331,7 +331,7 @@ const STEP: f64 = 1e-6;
 
 /// Normal equations `JᵀJ`, `Jᵀr` and the cost `Σ r²` at `state`.
 fn normal_equations(
-    data: &RigData,
+    data: &CamerasData,
     layout: &Layout,
     state: &State,
     noise: &[NoiseModel],
@@ -387,7 +387,7 @@ fn normal_equations(
     (jtj, jtr, cost)
 }
 
-fn cost(data: &RigData, layout: &Layout, state: &State, noise: &[NoiseModel]) -> f64 {
+fn cost(data: &CamerasData, layout: &Layout, state: &State, noise: &[NoiseModel]) -> f64 {
     data.observations
         .iter()
         .map(|o| {
@@ -465,7 +465,7 @@ fn minimize(
 }
 
 /// Per-camera residual figures (unwhitened) at `state`.
-fn residual_figures(data: &RigData, layout: &Layout, state: &State) -> Vec<Vec<PoseResidual>> {
+fn residual_figures(data: &CamerasData, layout: &Layout, state: &State) -> Vec<Vec<PoseResidual>> {
     let mut per_camera = vec![Vec::new(); data.cameras.len()];
     let unit = NoiseModel {
         rotation_sigma_rad: 1.0,
@@ -500,14 +500,14 @@ const NOISE_ROUNDS: usize = 4;
 /// Errors: a camera with fewer than [`MIN_VIEWS_PER_CAMERA`] observations (named), a start
 /// without a mount per camera or without the board a setup needs, an observation pointing
 /// nowhere, or views that leave some mount unconstrained.
-pub fn solve_rig(
-    data: &RigData,
-    start: &RigStart,
-    options: &RigOptions,
-) -> Result<RigSolution, RigError> {
+pub fn solve_cameras(
+    data: &CamerasData,
+    start: &CamerasStart,
+    options: &CamerasOptions,
+) -> Result<CamerasSolution, CamerasError> {
     for (index, o) in data.observations.iter().enumerate() {
         if o.camera >= data.cameras.len() || o.pose >= data.base_from_flange.len() {
-            return Err(RigError::BadIndex {
+            return Err(CamerasError::BadIndex {
                 index,
                 camera: o.camera,
                 pose: o.pose,
@@ -517,7 +517,7 @@ pub fn solve_rig(
     for (c, camera) in data.cameras.iter().enumerate() {
         let found = data.count(c);
         if found < MIN_VIEWS_PER_CAMERA {
-            return Err(RigError::TooFewViews {
+            return Err(CamerasError::TooFewViews {
                 camera: camera.name.clone(),
                 found,
                 required: MIN_VIEWS_PER_CAMERA,
@@ -525,7 +525,7 @@ pub fn solve_rig(
         }
     }
     if start.camera_mounts.len() != data.cameras.len() {
-        return Err(RigError::MissingStart("mount for every camera"));
+        return Err(CamerasError::MissingStart("mount for every camera"));
     }
     let layout = Layout::new(data);
     let mut poses = start.camera_mounts.clone();
@@ -533,14 +533,14 @@ pub fn solve_rig(
         poses.push(
             start
                 .base_from_target
-                .ok_or(RigError::MissingStart("T_base_target"))?,
+                .ok_or(CamerasError::MissingStart("T_base_target"))?,
         );
     }
     if layout.flange_board.is_some() {
         poses.push(
             start
                 .flange_from_target
-                .ok_or(RigError::MissingStart("T_flange_target"))?,
+                .ok_or(CamerasError::MissingStart("T_flange_target"))?,
         );
     }
     let mut state = State { poses };
@@ -595,7 +595,7 @@ pub fn solve_rig(
 /// The answer at `state` with the covariance `(JᵀJ)⁻¹·variance_factor` (whitened `J`).
 #[allow(clippy::too_many_arguments)]
 fn finish(
-    data: &RigData,
+    data: &CamerasData,
     layout: &Layout,
     state: State,
     jtj: &DMatrix<f64>,
@@ -603,8 +603,8 @@ fn finish(
     noise: Vec<NoiseModel>,
     pixel_sigma_px: Vec<f64>,
     iterations: usize,
-) -> Result<RigSolution, RigError> {
-    let information = jtj.clone().cholesky().ok_or(RigError::Singular)?;
+) -> Result<CamerasSolution, CamerasError> {
+    let information = jtj.clone().cholesky().ok_or(CamerasError::Singular)?;
     let covariance = information.inverse() * variance_factor;
     let block = |at: usize| -> Matrix6<f64> { covariance.fixed_view::<6, 6>(at, at).into_owned() };
     let camera_sigmas = (0..data.cameras.len())
@@ -619,7 +619,7 @@ fn finish(
             let rms = |value: fn(&PoseResidual) -> f64| {
                 (per_pose.iter().map(|r| value(r).powi(2)).sum::<f64>() / n).sqrt()
             };
-            RigResiduals {
+            CamerasResiduals {
                 samples: per_pose.len(),
                 rotation_rms_deg: rms(|r| r.rotation_rad).to_degrees(),
                 translation_rms_mm: rms(|r| r.translation_m) * 1e3,
@@ -627,7 +627,7 @@ fn finish(
             }
         })
         .collect();
-    Ok(RigSolution {
+    Ok(CamerasSolution {
         camera_mounts: state.poses[..layout.cameras].to_vec(),
         camera_sigmas,
         base_from_target: board(layout.fixed_board),
@@ -644,7 +644,11 @@ fn finish(
 
 /// `T_cam_i_cam_j` for every pair of cameras of one setup, with the covariance propagated
 /// through the relative pose (numerically: the map is smooth and only 12 parameters wide).
-fn relative_mounts(data: &RigData, state: &State, covariance: &DMatrix<f64>) -> Vec<RelativeMount> {
+fn relative_mounts(
+    data: &CamerasData,
+    state: &State,
+    covariance: &DMatrix<f64>,
+) -> Vec<RelativeMount> {
     let mut out = Vec::new();
     for i in 0..data.cameras.len() {
         for j in i + 1..data.cameras.len() {

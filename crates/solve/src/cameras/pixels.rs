@@ -15,17 +15,19 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Point2, Point3, SMatrix, SVector, Vector2};
 
-use super::{finish, minimize, Layout, RigData, RigError, RigOptions, RigSolution, State};
+use super::{
+    finish, minimize, CamerasData, CamerasError, CamerasOptions, CamerasSolution, Layout, State,
+};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
 
 /// The corners one camera saw at one robot pose.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RigFrame {
-    /// Index into [`RigData::cameras`].
+pub struct CamerasFrame {
+    /// Index into [`CamerasData::cameras`].
     pub camera: usize,
-    /// Index into [`RigData::base_from_flange`].
+    /// Index into [`CamerasData::base_from_flange`].
     pub pose: usize,
     /// Each corner: its point on the board (target frame, m) and where it was seen (px).
     pub corners: Vec<(Point3<f64>, Point2<f64>)>,
@@ -88,9 +90,9 @@ fn corner_rows(
 }
 
 struct Problem<'a> {
-    data: &'a RigData,
+    data: &'a CamerasData,
     models: &'a [CameraModel],
-    frames: &'a [RigFrame],
+    frames: &'a [CamerasFrame],
     layout: Layout,
     /// The robot's repeatability (m, rad) when the flange poses are estimated; then the state
     /// holds one flange pose per robot pose after the boards.
@@ -112,7 +114,7 @@ impl Problem<'_> {
     }
 
     /// `(mount, board, flange, board offset)` of a frame at `state`.
-    fn chain(&self, state: &State, frame: &RigFrame) -> (Pose, Pose, Pose, usize) {
+    fn chain(&self, state: &State, frame: &CamerasFrame) -> (Pose, Pose, Pose, usize) {
         let setup = self.data.cameras[frame.camera].setup;
         let bi = self.layout.board_of(setup);
         let flange = match self.robot {
@@ -222,26 +224,26 @@ const NOISE_ROUNDS: usize = 3;
 /// The corner noise the first round assumes, px.
 const START_SIGMA_PX: f64 = 0.2;
 
-/// Refines a pose-space rig answer (`start`, from [`super::solve_rig`] on the same `data`) on
+/// Refines a pose-space joint answer (`start`, from [`super::solve_cameras`] on the same `data`) on
 /// the corners: `models[c]` is camera `c`'s lens, `frames` the corners of every accepted board
 /// pose. Returns the same kind of answer, its covariance from the corners, each camera's corner
-/// noise in [`RigSolution::pixel_sigma_px`].
+/// noise in [`CamerasSolution::pixel_sigma_px`].
 ///
 /// Errors: a frame naming a camera or pose the data lacks, fewer models than cameras, or corners
 /// that leave some mount unconstrained.
-pub fn solve_rig_pixels(
-    data: &RigData,
+pub fn solve_cameras_pixels(
+    data: &CamerasData,
     models: &[CameraModel],
-    frames: &[RigFrame],
-    start: &RigSolution,
-    options: &RigOptions,
-) -> Result<RigSolution, RigError> {
+    frames: &[CamerasFrame],
+    start: &CamerasSolution,
+    options: &CamerasOptions,
+) -> Result<CamerasSolution, CamerasError> {
     if models.len() != data.cameras.len() {
-        return Err(RigError::MissingStart("lens for every camera"));
+        return Err(CamerasError::MissingStart("lens for every camera"));
     }
     for (index, f) in frames.iter().enumerate() {
         if f.camera >= data.cameras.len() || f.pose >= data.base_from_flange.len() {
-            return Err(RigError::BadIndex {
+            return Err(CamerasError::BadIndex {
                 index,
                 camera: f.camera,
                 pose: f.pose,

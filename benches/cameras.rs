@@ -13,8 +13,9 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::setup::predict;
-use handeye_solve::rig::{
-    solve_rig, solve_rig_pixels, RigData, RigFrame, RigObservation, RigOptions, RigStart,
+use handeye_solve::cameras::{
+    solve_cameras, solve_cameras_pixels, CamerasData, CamerasFrame, CamerasObservation,
+    CamerasOptions, CamerasStart,
 };
 use handeye_vision::Target;
 use rand::rngs::StdRng;
@@ -24,23 +25,23 @@ use rand_distr::{Distribution, Normal};
 #[path = "../tests/util/mod.rs"]
 mod util;
 
-use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
+use util::cameras::{board_pose_noise, cameras_data, jitter, nominal_start, wrist_views};
 
 /// The pose-space problem, the lenses, every camera's corners, the robot's repeatability.
 type Problem = (
-    RigData,
-    RigStart,
+    CamerasData,
+    CamerasStart,
     Vec<CameraModel>,
-    Vec<RigFrame>,
+    Vec<CamerasFrame>,
     (f64, f64),
 );
 
 fn problem() -> Problem {
-    let rig = util::rig::three_cameras();
+    let cell = util::cameras::three_cameras();
     let mut rng = StdRng::seed_from_u64(27);
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     let flanges = wrist_views(&mut rng, 20);
-    let models: Vec<CameraModel> = rig
+    let models: Vec<CameraModel> = cell
         .cameras
         .iter()
         .map(|c| CameraModel::load(c.intrinsics.as_ref().expect("intrinsics")).expect("lens"))
@@ -48,7 +49,7 @@ fn problem() -> Problem {
     let mut observations = Vec::new();
     let mut frames = Vec::new();
     for (i, flange) in flanges.iter().enumerate() {
-        for (c, camera) in rig.cameras.iter().enumerate() {
+        for (c, camera) in cell.cameras.iter().enumerate() {
             let board = Target::load(&camera.target).expect("board");
             let truth = camera.simulation.expect("a simulated cell");
             let (sr, st) = board_pose_noise(truth.setup);
@@ -59,7 +60,7 @@ fn problem() -> Problem {
                 &truth.target_mount,
                 flange,
             );
-            observations.push(RigObservation {
+            observations.push(CamerasObservation {
                 camera: c,
                 pose: i,
                 camera_from_target: exact * noise,
@@ -73,35 +74,40 @@ fn problem() -> Problem {
                     Some((p, pixel + n * 0.1))
                 })
                 .collect();
-            frames.push(RigFrame {
+            frames.push(CamerasFrame {
                 camera: c,
                 pose: i,
                 corners,
             });
         }
     }
-    let data = rig_data(&rig, flanges, observations);
-    let start = nominal_start(&rig);
-    let robot = rig.robot_repeatability();
+    let data = cameras_data(&cell, flanges, observations);
+    let start = nominal_start(&cell);
+    let robot = cell.robot_repeatability();
     (data, start, models, frames, robot)
 }
 
 fn joint_solve(c: &mut Criterion) {
     let (data, start, models, frames, robot) = problem();
-    c.bench_function("rig/joint_solve_3_cameras_20_poses", |b| {
+    c.bench_function("cell/joint_solve_3_cameras_20_poses", |b| {
         b.iter(|| {
-            solve_rig(black_box(&data), black_box(&start), &RigOptions::default()).expect("solves")
+            solve_cameras(
+                black_box(&data),
+                black_box(&start),
+                &CamerasOptions::default(),
+            )
+            .expect("solves")
         })
     });
-    let pose_space = solve_rig(&data, &start, &RigOptions::default()).expect("solves");
-    let options = RigOptions {
+    let pose_space = solve_cameras(&data, &start, &CamerasOptions::default()).expect("solves");
+    let options = CamerasOptions {
         robot_sigma: Some(robot),
-        ..RigOptions::default()
+        ..CamerasOptions::default()
     };
-    c.bench_function("rig/joint_pixel_solve_3_cameras_20_poses", |b| {
+    c.bench_function("cell/joint_pixel_solve_3_cameras_20_poses", |b| {
         b.iter(|| {
             let frames = black_box(&frames);
-            solve_rig_pixels(&data, &models, frames, &pose_space, &options).expect("solves")
+            solve_cameras_pixels(&data, &models, frames, &pose_space, &options).expect("solves")
         })
     });
 }

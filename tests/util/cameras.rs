@@ -5,7 +5,7 @@
 use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
-use handeye_solve::rig::{RigCamera, RigData, RigObservation, RigStart};
+use handeye_solve::cameras::{CameraSpec, CamerasData, CamerasObservation, CamerasStart};
 use handeye_solve::NoiseModel;
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -55,17 +55,17 @@ pub fn board_pose_noise(setup: Setup) -> (f64, f64) {
     }
 }
 
-/// The joint problem's data: every camera of `rig` with the default noise model.
-pub fn rig_data(
-    rig: &CellConfig,
+/// The joint problem's data: every camera of `cell` with the default noise model.
+pub fn cameras_data(
+    cell: &CellConfig,
     base_from_flange: Vec<Pose>,
-    observations: Vec<RigObservation>,
-) -> RigData {
-    RigData {
-        cameras: rig
+    observations: Vec<CamerasObservation>,
+) -> CamerasData {
+    CamerasData {
+        cameras: cell
             .cameras
             .iter()
-            .map(|c| RigCamera {
+            .map(|c| CameraSpec {
                 name: c.name.clone(),
                 setup: c.setup,
                 noise: NoiseModel::default(),
@@ -78,10 +78,14 @@ pub fn rig_data(
 
 /// The start a run without a prior has: the config's nominal mounts (the wrist camera's board on
 /// the table, the fixed cameras' board on the flange).
-pub fn nominal_start(rig: &CellConfig) -> RigStart {
-    RigStart {
-        camera_mounts: rig.cameras.iter().map(|c| c.nominal.camera_mount).collect(),
-        base_from_target: Some(rig.cameras[0].nominal.target_mount),
-        flange_from_target: Some(rig.cameras[1].nominal.target_mount),
+pub fn nominal_start(cell: &CellConfig) -> CamerasStart {
+    CamerasStart {
+        camera_mounts: cell
+            .cameras
+            .iter()
+            .map(|c| c.nominal.camera_mount)
+            .collect(),
+        base_from_target: Some(cell.cameras[0].nominal.target_mount),
+        flange_from_target: Some(cell.cameras[1].nominal.target_mount),
     }
 }

@@ -1,4 +1,4 @@
-//! The joint solve on a synthetic three-camera rig: every mount back from a perturbed start,
+//! The joint solve on a synthetic three-camera cell: every mount back from a perturbed start,
 //! the noise estimated per camera, a camera without enough views named.
 
 use super::*;
@@ -23,7 +23,7 @@ fn noisy(p: &Pose, rng: &mut rand::rngs::StdRng, sr: f64, st: f64) -> Pose {
 }
 
 /// A wrist camera and two fixed cameras; returns the data, the truth (mounts, boards).
-fn rig(seed: u64) -> (RigData, Vec<Pose>, Pose, Pose) {
+fn three_cameras(seed: u64) -> (CamerasData, Vec<Pose>, Pose, Pose) {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mounts = vec![
         pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
@@ -62,7 +62,7 @@ fn rig(seed: u64) -> (RigData, Vec<Pose>, Pose, Pose) {
                 flange_board
             };
             let truth = predict(*setup, &mounts[c], &board, f);
-            observations.push(RigObservation {
+            observations.push(CamerasObservation {
                 camera: c,
                 pose: i,
                 camera_from_target: noisy(
@@ -77,14 +77,14 @@ fn rig(seed: u64) -> (RigData, Vec<Pose>, Pose, Pose) {
     let cameras = ["wrist", "left", "right"]
         .iter()
         .zip(setups)
-        .map(|(name, setup)| RigCamera {
+        .map(|(name, setup)| CameraSpec {
             name: name.to_string(),
             setup,
             noise: NoiseModel::default(),
         })
         .collect();
     (
-        RigData {
+        CamerasData {
             cameras,
             base_from_flange: flanges,
             observations,
@@ -95,9 +95,9 @@ fn rig(seed: u64) -> (RigData, Vec<Pose>, Pose, Pose) {
     )
 }
 
-fn start_near(mounts: &[Pose], fixed: Pose, flange: Pose) -> RigStart {
+fn start_near(mounts: &[Pose], fixed: Pose, flange: Pose) -> CamerasStart {
     let off = pose([0.004, -0.003, 0.002], [0.01, -0.008, 0.012]);
-    RigStart {
+    CamerasStart {
         camera_mounts: mounts.iter().map(|m| m * off).collect(),
         base_from_target: Some(fixed * off),
         flange_from_target: Some(flange * off),
@@ -106,11 +106,11 @@ fn start_near(mounts: &[Pose], fixed: Pose, flange: Pose) -> RigStart {
 
 #[test]
 fn recovers_every_mount_of_a_three_camera_rig_from_a_perturbed_start() {
-    let (data, mounts, fixed, flange) = rig(3);
-    let answer = solve_rig(
+    let (data, mounts, fixed, flange) = three_cameras(3);
+    let answer = solve_cameras(
         &data,
         &start_near(&mounts, fixed, flange),
-        &RigOptions::default(),
+        &CamerasOptions::default(),
     )
     .unwrap();
     for (c, truth) in mounts.iter().enumerate() {
@@ -146,12 +146,12 @@ fn recovers_every_mount_of_a_three_camera_rig_from_a_perturbed_start() {
 
 #[test]
 fn a_camera_with_too_few_views_is_named() {
-    let (mut data, mounts, fixed, flange) = rig(1);
+    let (mut data, mounts, fixed, flange) = three_cameras(1);
     data.observations.retain(|o| o.camera != 2 || o.pose < 2);
-    let err = solve_rig(
+    let err = solve_cameras(
         &data,
         &start_near(&mounts, fixed, flange),
-        &RigOptions::default(),
+        &CamerasOptions::default(),
     )
     .unwrap_err();
     assert!(

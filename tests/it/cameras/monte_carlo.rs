@@ -16,12 +16,14 @@ use crate::util;
 #[test]
 fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
     use handeye_core::setup::{predict, Setup};
-    use handeye_solve::rig::{pose_error, solve_rig, RigObservation, RigOptions, RigStart};
+    use handeye_solve::cameras::{
+        pose_error, solve_cameras, CamerasObservation, CamerasOptions, CamerasStart,
+    };
     use rand::SeedableRng;
-    use util::rig::{board_pose_noise, jitter, nominal_start, rig_data, wrist_views};
+    use util::cameras::{board_pose_noise, cameras_data, jitter, nominal_start, wrist_views};
 
-    let rig = util::rig::three_cameras();
-    let truth: Vec<_> = rig.cameras.iter().map(|c| c.simulation.unwrap()).collect();
+    let cell = util::cameras::three_cameras();
+    let truth: Vec<_> = cell.cameras.iter().map(|c| c.simulation.unwrap()).collect();
     let setups: Vec<Setup> = truth.iter().map(|t| t.setup).collect();
     let seeds = 200;
     let cameras = truth.len();
@@ -35,24 +37,24 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
             for (c, t) in truth.iter().enumerate() {
                 let (sr, st) = board_pose_noise(setups[c]);
                 let exact = predict(t.setup, &t.camera_mount, &t.target_mount, flange);
-                observations.push(RigObservation {
+                observations.push(CamerasObservation {
                     camera: c,
                     pose: i,
                     camera_from_target: exact * jitter(&mut rng, sr, st),
                 });
             }
         }
-        let data = rig_data(&rig, flanges, observations);
+        let data = cameras_data(&cell, flanges, observations);
         // Both solves start from the same nominal (the config's), as a run without a prior would.
-        let start = nominal_start(&rig);
-        let joint = solve_rig(&data, &start, &RigOptions::default()).unwrap();
+        let start = nominal_start(&cell);
+        let joint = solve_cameras(&data, &start, &CamerasOptions::default()).unwrap();
         let mut alone_mounts = Vec::new();
         for c in 0..cameras {
-            let one = RigStart {
+            let one = CamerasStart {
                 camera_mounts: vec![start.camera_mounts[c]],
                 ..start.clone()
             };
-            let alone = solve_rig(&data.only(c), &one, &RigOptions::default()).unwrap();
+            let alone = solve_cameras(&data.only(c), &one, &CamerasOptions::default()).unwrap();
             let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
             let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
             joint_sq[c] += joint_mm * joint_mm;
@@ -75,7 +77,7 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
         let (joint, alone) = (rms(joint_sq[c]), rms(alone_sq[c]));
         println!(
             "{}: mount translation RMS error joint {joint:.4} mm, alone {alone:.4} mm ({:.0} % lower)",
-            rig.cameras[c].name,
+            cell.cameras[c].name,
             100.0 * (1.0 - joint / alone)
         );
         // Never worse (to the precision of the fit); the wrist camera is the only eye-in-hand
@@ -83,13 +85,13 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
         assert!(
             joint <= alone * 1.001,
             "{}: joint {joint} mm > alone {alone} mm",
-            rig.cameras[c].name
+            cell.cameras[c].name
         );
         if setups[c] == Setup::EyeToHand {
             assert!(
                 joint < 0.95 * alone,
                 "{}: sharing the flange board must help: {joint} vs {alone}",
-                rig.cameras[c].name
+                cell.cameras[c].name
             );
         }
     }
@@ -111,22 +113,23 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
 fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
     use handeye_core::camera_model::CameraModel;
     use handeye_core::setup::predict;
-    use handeye_solve::rig::{
-        pose_error, solve_rig, solve_rig_pixels, RigFrame, RigObservation, RigOptions, RigStart,
+    use handeye_solve::cameras::{
+        pose_error, solve_cameras, solve_cameras_pixels, CamerasFrame, CamerasObservation,
+        CamerasOptions, CamerasStart,
     };
     use handeye_vision::Target;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use util::rig::{jitter, nominal_start, rig_data, wrist_views};
+    use util::cameras::{cameras_data, jitter, nominal_start, wrist_views};
 
-    let rig = util::rig::three_cameras();
-    let truth: Vec<_> = rig.cameras.iter().map(|c| c.simulation.unwrap()).collect();
-    let models: Vec<CameraModel> = rig
+    let cell = util::cameras::three_cameras();
+    let truth: Vec<_> = cell.cameras.iter().map(|c| c.simulation.unwrap()).collect();
+    let models: Vec<CameraModel> = cell
         .cameras
         .iter()
         .map(|c| CameraModel::load(c.intrinsics.as_ref().unwrap()).unwrap())
         .collect();
-    let boards: Vec<Vec<nalgebra::Point3<f64>>> = rig
+    let boards: Vec<Vec<nalgebra::Point3<f64>>> = cell
         .cameras
         .iter()
         .map(|c| {
@@ -138,15 +141,15 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                 .collect()
         })
         .collect();
-    let robot = rig.robot_repeatability();
+    let robot = cell.robot_repeatability();
     let pixel_sigma = 0.1;
     let seeds = 40;
     let cameras = truth.len();
     let (mut joint_sq, mut alone_sq) = (vec![0.0; cameras], vec![0.0; cameras]);
     let (mut relative_joint_sq, mut relative_chained_sq) = (0.0, 0.0);
-    let options = RigOptions {
+    let options = CamerasOptions {
         robot_sigma: Some(robot),
-        ..RigOptions::default()
+        ..CamerasOptions::default()
     };
     for seed in 0..seeds {
         let mut rng = rand::rngs::StdRng::seed_from_u64(1000 + seed);
@@ -175,40 +178,41 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                     continue;
                 }
                 // A board pose to start from (PnP's role in the run): near the truth.
-                observations.push(RigObservation {
+                observations.push(CamerasObservation {
                     camera: c,
                     pose: i,
                     camera_from_target: camera_from_target * jitter(&mut rng, 0.001, 0.001),
                 });
-                frames.push(RigFrame {
+                frames.push(CamerasFrame {
                     camera: c,
                     pose: i,
                     corners,
                 });
             }
         }
-        let data = rig_data(&rig, reported, observations);
-        let start = nominal_start(&rig);
-        let pose_space = solve_rig(&data, &start, &RigOptions::default()).unwrap();
-        let joint = solve_rig_pixels(&data, &models, &frames, &pose_space, &options).unwrap();
+        let data = cameras_data(&cell, reported, observations);
+        let start = nominal_start(&cell);
+        let pose_space = solve_cameras(&data, &start, &CamerasOptions::default()).unwrap();
+        let joint = solve_cameras_pixels(&data, &models, &frames, &pose_space, &options).unwrap();
         let mut alone_mounts = Vec::new();
         for c in 0..cameras {
-            let one = RigStart {
+            let one = CamerasStart {
                 camera_mounts: vec![start.camera_mounts[c]],
                 ..start.clone()
             };
             let only = data.only(c);
-            let own_frames: Vec<RigFrame> = frames
+            let own_frames: Vec<CamerasFrame> = frames
                 .iter()
                 .filter(|f| f.camera == c)
-                .map(|f| RigFrame {
+                .map(|f| CamerasFrame {
                     camera: 0,
                     ..f.clone()
                 })
                 .collect();
-            let alone_pose = solve_rig(&only, &one, &RigOptions::default()).unwrap();
-            let alone = solve_rig_pixels(&only, &models[c..=c], &own_frames, &alone_pose, &options)
-                .unwrap();
+            let alone_pose = solve_cameras(&only, &one, &CamerasOptions::default()).unwrap();
+            let alone =
+                solve_cameras_pixels(&only, &models[c..=c], &own_frames, &alone_pose, &options)
+                    .unwrap();
             let (_, joint_mm) = pose_error(&joint.camera_mounts[c], &truth[c].camera_mount);
             let (_, alone_mm) = pose_error(&alone.camera_mounts[0], &truth[c].camera_mount);
             joint_sq[c] += joint_mm * joint_mm;
@@ -229,13 +233,13 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
         let (joint, alone) = (rms(joint_sq[c]), rms(alone_sq[c]));
         println!(
             "pixel space, {}: mount translation RMS error joint {joint:.4} mm, alone {alone:.4} mm ({:.0} % lower)",
-            rig.cameras[c].name,
+            cell.cameras[c].name,
             100.0 * (1.0 - joint / alone)
         );
         assert!(
             joint <= alone * 1.001,
             "{}: joint {joint} mm > alone {alone} mm",
-            rig.cameras[c].name
+            cell.cameras[c].name
         );
     }
     let (joint, chained) = (rms(relative_joint_sq), rms(relative_chained_sq));

@@ -1,0 +1,182 @@
+//! A session replayed (`handeye replay DIR`), one camera or several: its frames detected again
+//! and solved as the run's solve is (the checks of the given files included), the answer
+//! written beside the session's own files — `replay-result.yaml` in the session folder, or
+//! where `output` says — with the estimates of a blamed file beside it. A replay never writes
+//! over what the run recorded. Printing and the report are the caller's (`handeye replay`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use handeye_config::CellConfig;
+use handeye_core::camera_model::CameraModel;
+use handeye_records::dataset::Dataset;
+use handeye_records::result::CamerasResultFile;
+use handeye_records::{PoseVisit, SessionFolder, SolvedSession};
+
+use super::cameras::{self, CamerasOutput};
+use super::PreparedCell;
+use crate::replay::{beside, redetect, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
+
+/// What to replay.
+#[derive(Debug, Clone, Copy)]
+pub struct ReplayRequest<'a> {
+    /// The session folder (one camera's, or the root of several cameras').
+    pub session: &'a Path,
+    /// A cell config to use instead of the one the session was run with.
+    pub config: Option<&'a Path>,
+    /// Where to write the replayed result (default `<session>/replay-result.yaml`).
+    pub output: Option<&'a Path>,
+}
+
+/// A replayed session.
+pub enum Replayed {
+    /// One camera's.
+    OneCamera(Box<OneCameraReplay>),
+    /// Several cameras'.
+    Cameras(Box<CamerasReplay>),
+}
+
+/// A several-camera session replayed: the joint answer, written to `output.result`.
+pub struct CamerasReplay {
+    /// The session folder.
+    pub folder: PathBuf,
+    /// The joint answer.
+    pub result: CamerasResultFile,
+    /// Where it and the estimates were written.
+    pub output: CamerasOutput,
+}
+
+/// One camera's session replayed.
+pub struct OneCameraReplay {
+    /// The session folder.
+    pub folder: SessionFolder,
+    /// The cell as the session recorded it (its board, the lens the frames were measured with).
+    pub cell: PreparedCell,
+    /// The lens the frames were measured with (the config's, else the one the run estimated).
+    pub camera_model: CameraModel,
+    /// Every saved frame as measured again, plan order.
+    pub visits: Vec<PoseVisit>,
+    /// The answer, its verdict and evidence.
+    pub solved: SolvedSession,
+    /// The samples it was solved from.
+    pub dataset: Dataset,
+    /// The result file written.
+    pub output: PathBuf,
+}
+
+/// Replays the session of `request`; `measured` is told each frame as measured again, before
+/// the solve (so a solve that fails still leaves what each frame gave on the screen).
+pub fn replay_session(
+    request: ReplayRequest<'_>,
+    measured: &mut dyn FnMut(&[PoseVisit]),
+) -> anyhow::Result<Replayed> {
+    if cameras::is_cameras_folder(request.session) {
+        let config = match request.config {
+            Some(c) => c.to_path_buf(),
+            None => cameras::read_manifest(request.session)?.config,
+        };
+        let config = CellConfig::load(&config)?;
+        let output = CamerasOutput::replay(request.session, request.output);
+        let result = cameras::solve_cameras_folder(request.session, &config, &output)?;
+        return Ok(Replayed::Cameras(Box::new(CamerasReplay {
+            folder: request.session.to_path_buf(),
+            result,
+            output,
+        })));
+    }
+    let folder = SessionFolder::open(request.session)?;
+    let manifest = folder.read_manifest()?;
+    let config_path = request.config.unwrap_or(&manifest.config);
+    let cell = prepare_for(&folder, config_path)?;
+    // The frames were taken in the session's layout: solving them as the other one gives an
+    // answer of the wrong unknowns (a camera "on the flange" metres away).
+    anyhow::ensure!(
+        cell.config.camera().setup == manifest.setup,
+        "session {} was recorded as {}, but {} describes a {} cell: replay it with the config it was recorded with",
+        folder.root().display(),
+        manifest.setup,
+        config_path.display(),
+        cell.config.camera().setup
+    );
+    // A cell without configured intrinsics replays with the ones its run estimated.
+    let camera_model = if cell.camera().intrinsics_known {
+        cell.camera().camera_model
+    } else {
+        let file = folder.root().join(handeye_records::solve::CAMERA_INFO_FILE);
+        CameraModel::load(&file).context(
+            "the config has no intrinsics and the session has no estimated ones: solve the session first",
+        )?
+    };
+    let (dataset, visits) = redetect(
+        &folder,
+        &cell.camera().board,
+        &camera_model,
+        cell.detector_options(),
+        cell.config.session.max_reprojection_rms_px,
+    )?;
+    measured(&visits);
+    // Solved and judged as a run's solve is: the checks of the given files included.
+    let samples = if dataset.pairs.is_empty() {
+        Err(handeye_records::solve::no_samples(&folder, &visits))
+    } else {
+        Ok(dataset)
+    };
+    let (mut solved, dataset) = handeye_records::solve::solve_records(
+        &folder,
+        &manifest,
+        samples,
+        &visits,
+        &visits,
+        (&cell.camera().board, &camera_model),
+        cell.config.solver.space,
+        &cell.config,
+    )?;
+    let output = request
+        .output
+        .map_or_else(|| folder.root().join(REPLAY_RESULT_FILE), Path::to_path_buf);
+    // `-o` into a folder that does not exist yet makes it, as a several-camera replay does.
+    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot make the folder", parent.display()))?;
+    }
+    // The estimates of a file the cell model blames, beside the replay's result (the run's own
+    // stay as they were).
+    let estimates = beside(&output, REPLAY_ESTIMATES_FOLDER);
+    let written = handeye_records::solve::write_corrected_files(&estimates, &solved, &cell.config)?;
+    handeye_records::solve::record_written(&mut solved, &written);
+    solved.name_replay(folder.root(), &estimates, &cell.config);
+    solved
+        .result_file(&dataset.pairs, &cell.config)
+        .save(&output)?;
+    Ok(Replayed::OneCamera(Box::new(OneCameraReplay {
+        folder,
+        cell,
+        camera_model,
+        visits,
+        solved,
+        dataset,
+        output,
+    })))
+}
+
+/// The cell of `config_path` as the session `folder` recorded it: intrinsics a run read from
+/// the camera driver's topic are the session's (no driver needed); the shipped placeholder lens
+/// is refused.
+fn prepare_for(folder: &SessionFolder, config_path: &Path) -> anyhow::Result<PreparedCell> {
+    let mut config = CellConfig::load(config_path).context("preparing the cell")?;
+    let from_topic = folder.root().join(super::INTRINSICS_FROM_TOPIC_FILE);
+    if config.camera().intrinsics.is_none() && from_topic.is_file() {
+        config.camera_mut().intrinsics = Some(from_topic);
+    }
+    let prepared = super::prepare_config(config).context("preparing the cell")?;
+    if let Some((file, name)) = prepared.placeholder_intrinsics() {
+        anyhow::bail!(
+            "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
+            file.display(),
+            config_path.display(),
+            folder.root().display()
+        );
+    }
+    Ok(prepared)
+}
