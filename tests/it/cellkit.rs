@@ -163,7 +163,7 @@ fn every_model_name_is_accepted_in_the_config() {
     let dir = tempfile::tempdir().unwrap();
     for name in UrModel::NAMES {
         let config = CellConfig::load(&sim_with_model(dir.path(), name)).unwrap();
-        assert!(matches!(config.robot, RobotConfig::Sim { .. }));
+        assert!(matches!(config.robot, RobotConfig::Sim(_)));
         assert_eq!(config.robot.model(), Some(name));
         assert_eq!(
             UrModel::by_name(config.robot.model().unwrap())
@@ -655,7 +655,7 @@ fn the_templates_load_without_the_simulated_lens() {
         let path = util::repo().join("configs").join(name);
         let config = CellConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
         assert_eq!(config.camera().setup, setup, "{name}");
-        assert!(matches!(config.robot, RobotConfig::Ur { .. }), "{name}");
+        assert!(matches!(config.robot, RobotConfig::Ur(_)), "{name}");
         assert!(
             matches!(
                 config.camera().backend,

@@ -587,7 +587,7 @@ fn configs_written_through_serde_load_back() {
     );
     assert_eq!(a.plan, b.plan);
     assert_eq!(a.solver, b.solver);
-    assert!(matches!(b.robot, RobotConfig::Sim { .. }));
+    assert!(matches!(b.robot, RobotConfig::Sim(_)));
 
     let mut broken = shape.clone();
     broken.workspace.min[0] = 5.0;
@@ -701,7 +701,7 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     assert!(text.starts_with("# Replays the ViSP folder "), "{text}");
     assert!(text.contains("joint_speed_deg: 30.0\n"), "{text}");
     let config = CellConfig::load(&cell).unwrap_or_else(|e| panic!("{e:#}"));
-    assert!(matches!(config.robot, RobotConfig::Recorded { .. }));
+    assert!(matches!(config.robot, RobotConfig::Recorded(_)));
     assert!(matches!(
         config.camera().backend,
         handeye_config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()

@@ -11,6 +11,7 @@
 
 pub mod cameras;
 pub mod recorded;
+pub mod robot;
 pub mod ros2;
 pub mod schema;
 pub mod validate;
@@ -27,6 +28,7 @@ use handeye_robot::{MotionLimits, WorkspaceBox};
 use handeye_solve::{SolveOptions, SolverChoice};
 
 pub use recorded::{recorded_cell, RecordedFiles};
+pub use robot::{RecordedRobot, RobotBackend, SimRobot, UrRobot};
 pub use schema::{
     ArmErrorsFile, ArmModel, CameraConfig, CameraFile, ConfigFile, DetectorConfig,
     KinematicsChoice, LimitsConfig, PixelFormatName, PlanConfig, RobotConfig, SessionConfig,
@@ -119,7 +121,7 @@ pub enum ConfigError {
 /// The joints a plan assumes the arm starts from when the config gives none (UR's upright
 /// "home" with the tool pointing down), radians.
 pub fn default_start_joints() -> [f64; 6] {
-    schema::default_start_joints_deg().map(f64::to_radians)
+    robot::default_start_joints_deg().map(f64::to_radians)
 }
 
 impl SolverConfig {
@@ -282,8 +284,8 @@ impl CellConfig {
         let mut plan = raw.plan;
         plan.file = plan.file.as_deref().map(resolve);
         let mut robot = raw.robot;
-        if let RobotConfig::Recorded { poses, .. } = &mut robot {
-            *poses = resolve(poses);
+        if let RobotConfig::Recorded(recorded) = &mut robot {
+            recorded.poses = resolve(&recorded.poses);
         }
         let mut backend = checked.camera;
         match &mut backend {
@@ -299,7 +301,7 @@ impl CellConfig {
         // The base and last joint offsets no data tell from the transforms: the truth a run
         // can find is in the controller's frames (see `handeye_robot::arm_errors`).
         let (true_arm, simulation) = match (&checked.arm_errors, &checked.simulation, &robot) {
-            (Some(errors), Some(truth), RobotConfig::Sim { model, .. }) => {
+            (Some(errors), Some(truth), RobotConfig::Sim(SimRobot { model, .. })) => {
                 let nominal =
                     UrModel::by_name(model.name()).ok_or_else(|| ConfigError::Inconsistent {
                         file: file.to_path_buf(),
@@ -389,36 +391,7 @@ impl CellConfig {
     /// or default figure of a UR (0.03 mm / 0.003°) or a recorded arm (0.1 mm / 0.01°). The
     /// reprojection solve starts its noise estimate here.
     pub fn robot_repeatability(&self) -> (f64, f64) {
-        let (mm, deg) = match &self.robot {
-            RobotConfig::Sim {
-                repeatability_mm,
-                repeatability_deg,
-                ..
-            } if *repeatability_mm > 0.0 && *repeatability_deg > 0.0 => {
-                (*repeatability_mm, *repeatability_deg)
-            }
-            RobotConfig::Sim { .. } => (0.01, 0.001),
-            RobotConfig::Ur {
-                repeatability_mm,
-                repeatability_deg,
-                ..
-            } => (
-                repeatability_mm.unwrap_or(0.03),
-                repeatability_deg.unwrap_or(0.003),
-            ),
-            RobotConfig::Recorded {
-                repeatability_mm,
-                repeatability_deg,
-                ..
-            } => (
-                repeatability_mm.unwrap_or(0.1),
-                repeatability_deg.unwrap_or(0.01),
-            ),
-            RobotConfig::Ros2(r) => (
-                r.repeatability_mm.unwrap_or(0.03),
-                r.repeatability_deg.unwrap_or(0.003),
-            ),
-        };
+        let (mm, deg) = self.robot.backend().repeatability();
         (mm * 1e-3, deg.to_radians())
     }
 
@@ -448,7 +421,7 @@ impl CellConfig {
         self.plan.adaptive.unwrap_or(
             self.plan.generate.is_some()
                 && self.camera().intrinsics.is_some()
-                && !matches!(self.robot, RobotConfig::Recorded { .. })
+                && self.robot.backend().moves()
                 && !matches!(
                     self.solver.kinematics(),
                     KinematicsChoice::JointOffsets | KinematicsChoice::Dh

@@ -55,12 +55,12 @@ pub fn recorded_cell(
         cameras: None,
         target: files.target,
         intrinsics: files.intrinsics,
-        robot: RobotConfig::Recorded {
+        robot: RobotConfig::Recorded(super::RecordedRobot {
             poses: files.poses,
             repeatability_mm: None,
             repeatability_deg: None,
             frames: Some(files.frames),
-        },
+        }),
         camera: Some(CameraConfig::Files {
             folder: files.images,
         }),

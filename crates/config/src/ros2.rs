@@ -332,6 +332,45 @@ fn graph_problem(key: &str, graph: &Ros2Graph) -> Option<Problem> {
     })
 }
 
+impl super::robot::RobotBackend for Ros2Robot {
+    fn name(&self) -> &'static str {
+        "ros2"
+    }
+
+    fn model(&self) -> Option<ArmModel> {
+        self.model
+    }
+
+    fn given_joint_ranges_deg(&self) -> Option<&[[f64; 2]]> {
+        self.joint_ranges_deg.as_deref()
+    }
+
+    fn has_flange_cable(&self) -> bool {
+        true
+    }
+
+    fn repeatability(&self) -> (f64, f64) {
+        (
+            self.repeatability_mm.unwrap_or(0.03),
+            self.repeatability_deg.unwrap_or(0.003),
+        )
+    }
+
+    fn frames(&self) -> handeye_core::setup::RobotFrames {
+        handeye_core::setup::RobotFrames {
+            base: self.base_frame.clone(),
+            flange: self.flange_frame.clone(),
+        }
+    }
+
+    fn check(&self, v: &super::validate::Validator<'_>) -> Result<(), super::ConfigError> {
+        if let Some((key, problem)) = self.problem() {
+            return Err(v.inconsistent(&key, problem));
+        }
+        v.repeatability(self.repeatability_mm, self.repeatability_deg)
+    }
+}
+
 impl Ros2Robot {
     /// A UR model's poses read in the driver's `base_link`: the model plans, and the nominal
     /// transforms and the workspace box are given, in the controller's `base` (`base_link` is

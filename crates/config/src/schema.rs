@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::PoseYaml;
-use handeye_core::setup::{RobotFrames, Setup};
+use handeye_core::setup::Setup;
 use handeye_plan::GenerateSpec;
 use handeye_robot::MotionLimits;
 use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
@@ -209,112 +209,15 @@ impl ArmModel {
 )]
 pub enum RobotConfig {
     /// The simulated UR arm.
-    Sim {
-        /// The arm model (`ur5e` by default; see [`ArmModel`]).
-        #[serde(default)]
-        model: ArmModel,
-        /// Where the arm starts, degrees.
-        #[serde(default = "default_start_joints_deg")]
-        start_joints_deg: [f64; 6],
-        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
-        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
-        /// Absent: see [`RobotConfig::joint_ranges_deg`].
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        joint_ranges_deg: Option<[[f64; 2]; 6]>,
-        /// Time each move takes, s (0 = instant); ignored with `move_at_limits`.
-        #[serde(default)]
-        move_duration_s: f64,
-        /// Moves take the time a UR `moveJ` takes at the configured joint limits (trapezoidal
-        /// profile) instead of `move_duration_s`.
-        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-        move_at_limits: bool,
-        /// After each move the arm rings down: a joint oscillation of this amplitude (leading
-        /// joint), degrees, decaying with `ringing_decay_s` (0 = the arm stops dead).
-        #[serde(default, skip_serializing_if = "is_zero")]
-        ringing_deg: f64,
-        /// Ringing frequency, Hz.
-        #[serde(default = "default_ringing_hz")]
-        ringing_hz: f64,
-        /// Ringing decay time constant, s.
-        #[serde(default = "default_ringing_decay_s")]
-        ringing_decay_s: f64,
-        /// 1-sigma position noise on the reported flange pose, mm.
-        #[serde(default)]
-        repeatability_mm: f64,
-        /// 1-sigma rotation noise on the reported flange pose, degrees.
-        #[serde(default)]
-        repeatability_deg: f64,
-        /// Raise a protective stop after this many moves (fault injection for tests).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        protective_stop_after_moves: Option<usize>,
-        /// Noise seed.
-        #[serde(default)]
-        seed: u64,
-    },
+    Sim(super::robot::SimRobot),
     /// A Universal Robots controller through ur_rtde (needs the `ur-rtde` feature).
-    Ur {
-        /// Controller address.
-        host: String,
-        /// The arm model (`ur5e` by default; see [`ArmModel`]): used to check reachability before
-        /// moving.
-        #[serde(default)]
-        model: ArmModel,
-        /// Allowed range of each joint, `[min, max]` degrees, base to wrist 3 (narrower than the
-        /// arm's own limits: keeps a cable from winding, the arm from swinging through the cell).
-        /// Absent: see [`RobotConfig::joint_ranges_deg`].
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        joint_ranges_deg: Option<[[f64; 2]; 6]>,
-        /// Give up connecting after this long, s.
-        #[serde(default = "default_connect_timeout_s")]
-        connect_timeout_s: f64,
-        /// How far the reported flange pose may be from the true one, 1-sigma per axis, mm
-        /// (default 0.03: the UR e-Series repeatability; the reprojection solve starts from it
-        /// and estimates the real figure from the residuals).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        repeatability_mm: Option<f64>,
-        /// The same for rotation, degrees (default 0.003).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        repeatability_deg: Option<f64>,
-    },
-    /// Replays the flange poses a real arm measured during a recording made elsewhere
-    /// (`robot::recorded`); used with the image-folder camera. The recorded poses are the plan, so
-    /// the config has no `plan` source, and nothing moves.
-    Recorded {
-        /// The recorded-poses file (`T_base_flange: [pose, ...]`, frame order).
-        poses: PathBuf,
-        /// How far a recorded flange pose may be from the true one, 1-sigma per axis, mm
-        /// (default 0.1: an arm of unknown make; the reprojection solve starts from it and
-        /// estimates the real figure from the residuals).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        repeatability_mm: Option<f64>,
-        /// The same for rotation, degrees (default 0.01).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        repeatability_deg: Option<f64>,
-        /// The frames the recorded poses are in (a bag's `--base` and `--flange`); default the
-        /// UR controller's `base` and `tool0`.
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        frames: Option<RobotFrames>,
-    },
+    Ur(super::robot::UrRobot),
+    /// Replays the flange poses a real arm measured during a recording made elsewhere; used with
+    /// the image-folder camera.
+    Recorded(super::robot::RecordedRobot),
     /// An arm under a ROS 2 driver: `/tf`, `/joint_states`, FollowJointTrajectory (needs the
     /// `ros2` feature; `config::ros2`).
     Ros2(Box<super::ros2::Ros2Robot>),
-}
-
-fn is_zero(v: &f64) -> bool {
-    *v == 0.0
-}
-fn default_ringing_hz() -> f64 {
-    8.0
-}
-fn default_ringing_decay_s() -> f64 {
-    0.15
-}
-
-pub(super) fn default_start_joints_deg() -> [f64; 6] {
-    [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]
-}
-fn default_connect_timeout_s() -> f64 {
-    5.0
 }
 
 pub use handeye_robot::kinematics::JOINT_NAMES;
@@ -352,78 +255,14 @@ pub fn arm_model_unavailable(
     robot: &RobotConfig,
     intrinsics: Option<&std::path::Path>,
 ) -> Option<&'static str> {
-    let modelled = match robot {
-        RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => true,
-        RobotConfig::Ros2(r) => r.model.is_some(),
-        RobotConfig::Recorded { .. } => false,
-    };
-    if !modelled {
+    let backend = robot.backend();
+    if !backend.reports_joints() || backend.model().is_none() {
         return Some("the arm's published model and each pose's joints: a sim, ur or ros2 arm with `robot.model`");
     }
     if intrinsics.is_none() {
         return Some("the camera's `intrinsics`: a run that estimates them does not estimate the arm's model yet");
     }
     None
-}
-
-impl RobotConfig {
-    /// The joint ranges in force, `[min, max]` degrees, base joint first: the config's
-    /// `joint_ranges_deg` when given; otherwise [`FLANGE_CAMERA_JOINT_RANGES_DEG`] for a real
-    /// arm (`backend: ur`) carrying the camera (`setup: eye_in_hand`), and the arm's own
-    /// [`ARM_JOINT_RANGES_DEG`] for everything else (eye-to-hand has no cable on the flange; the
-    /// simulator has no cable at all).
-    pub fn joint_ranges_deg(&self, setup: Setup) -> Vec<[f64; 2]> {
-        let ur_ranges = match self {
-            RobotConfig::Sim {
-                joint_ranges_deg: Some(r),
-                ..
-            }
-            | RobotConfig::Ur {
-                joint_ranges_deg: Some(r),
-                ..
-            } => *r,
-            RobotConfig::Ros2(r) if r.joint_ranges_deg.is_some() => {
-                return r.joint_ranges_deg.clone().unwrap_or_default();
-            }
-            RobotConfig::Ur { .. } | RobotConfig::Ros2(_) if setup == Setup::EyeInHand => {
-                FLANGE_CAMERA_JOINT_RANGES_DEG
-            }
-            _ => ARM_JOINT_RANGES_DEG,
-        };
-        ur_ranges.to_vec()
-    }
-
-    /// [`RobotConfig::joint_ranges_deg`] in radians, as `UrModel::joint_limits` takes them.
-    pub fn joint_limits(&self, setup: Setup) -> Vec<(f64, f64)> {
-        self.joint_ranges_deg(setup)
-            .into_iter()
-            .map(|[lo, hi]| (lo.to_radians(), hi.to_radians()))
-            .collect()
-    }
-
-    /// The frames the arm's flange poses are read in: a ROS 2 arm's TF frames, a recorded arm's
-    /// recorded ones, the UR controller's `base` and `tool0` otherwise.
-    pub fn frames(&self) -> RobotFrames {
-        match self {
-            RobotConfig::Ros2(r) => RobotFrames {
-                base: r.base_frame.clone(),
-                flange: r.flange_frame.clone(),
-            },
-            RobotConfig::Recorded { frames, .. } => frames.clone().unwrap_or_default(),
-            RobotConfig::Sim { .. } | RobotConfig::Ur { .. } => RobotFrames::default(),
-        }
-    }
-
-    /// The arm model name, for kinematics checks; `None` for a ROS 2 arm of no model handeye
-    /// knows (`model: none`).
-    pub fn model(&self) -> Option<&'static str> {
-        match self {
-            RobotConfig::Sim { model, .. } | RobotConfig::Ur { model, .. } => Some(model.name()),
-            RobotConfig::Ros2(r) => r.model.map(ArmModel::name),
-            // A recorded arm is never planned with kinematics; any valid name will do.
-            RobotConfig::Recorded { .. } => Some(ArmModel::Ur5e.name()),
-        }
-    }
 }
 
 /// The pixel formats a USB camera can be asked for.

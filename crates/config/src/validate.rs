@@ -259,7 +259,7 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
         None => None,
     };
     let uses_sim =
-        matches!(raw.robot, RobotConfig::Sim { .. }) || matches!(camera, CameraConfig::Sim { .. });
+        matches!(raw.robot, RobotConfig::Sim(_)) || matches!(camera, CameraConfig::Sim { .. });
     if uses_sim && simulation.is_none() {
         let (camera_key, target_key) = setup.unknown_names();
         return Err(v.inconsistent(
@@ -279,13 +279,14 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
     })
 }
 
-struct Validator<'a> {
+/// Checks the values of one config file, naming it and the key in every error.
+pub struct Validator<'a> {
     file: &'a Path,
 }
 
 impl Validator<'_> {
     /// `value` at `key` must lie in `range`.
-    fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
+    pub(crate) fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
         if range.contains(value) {
             Ok(value)
         } else {
@@ -294,7 +295,7 @@ impl Validator<'_> {
     }
 
     /// An integer at `key` must lie in `range` (shown as an integer).
-    fn integer(&self, key: &str, value: i128, range: Range) -> Result<(), ConfigError> {
+    pub(crate) fn integer(&self, key: &str, value: i128, range: Range) -> Result<(), ConfigError> {
         // Every bound is far below 2^53, so the comparison in f64 is exact where it matters.
         if range.contains(value as f64) {
             Ok(())
@@ -312,7 +313,7 @@ impl Validator<'_> {
         }
     }
 
-    fn inconsistent(&self, key: &str, problem: String) -> ConfigError {
+    pub(crate) fn inconsistent(&self, key: &str, problem: String) -> ConfigError {
         ConfigError::Inconsistent {
             file: self.file.to_path_buf(),
             key: key.to_string(),
@@ -321,101 +322,13 @@ impl Validator<'_> {
     }
 
     fn robot(&self, robot: &RobotConfig) -> Result<(), ConfigError> {
-        match robot {
-            RobotConfig::Sim {
-                start_joints_deg,
-                move_duration_s,
-                repeatability_mm,
-                repeatability_deg,
-                protective_stop_after_moves,
-                ringing_deg,
-                ringing_hz,
-                ringing_decay_s,
-                ..
-            } => {
-                for (i, q) in start_joints_deg.iter().enumerate() {
-                    self.number(&format!("robot.start_joints_deg[{i}]"), *q, START_JOINT_DEG)?;
-                }
-                self.number("robot.move_duration_s", *move_duration_s, MOVE_DURATION_S)?;
-                self.number("robot.ringing_deg", *ringing_deg, RINGING_DEG)?;
-                self.number("robot.ringing_hz", *ringing_hz, RINGING_HZ)?;
-                self.number("robot.ringing_decay_s", *ringing_decay_s, RINGING_DECAY_S)?;
-                self.number(
-                    "robot.repeatability_mm",
-                    *repeatability_mm,
-                    SIM_REPEATABILITY_MM,
-                )?;
-                self.number(
-                    "robot.repeatability_deg",
-                    *repeatability_deg,
-                    SIM_REPEATABILITY_DEG,
-                )?;
-                if let Some(n) = protective_stop_after_moves {
-                    self.integer(
-                        "robot.protective_stop_after_moves",
-                        *n as i128,
-                        PROTECTIVE_STOP_AFTER_MOVES,
-                    )?;
-                }
-            }
-            RobotConfig::Ur {
-                host,
-                connect_timeout_s,
-                repeatability_mm,
-                repeatability_deg,
-                ..
-            } => {
-                if host.trim().is_empty() {
-                    return Err(self.inconsistent(
-                        "robot.host",
-                        "expected the controller's IP address or host name, found an empty string"
-                            .into(),
-                    ));
-                }
-                self.number(
-                    "robot.connect_timeout_s",
-                    *connect_timeout_s,
-                    CONNECT_TIMEOUT_S,
-                )?;
-                self.repeatability(*repeatability_mm, *repeatability_deg)?;
-            }
-            RobotConfig::Recorded {
-                repeatability_mm,
-                repeatability_deg,
-                frames,
-                ..
-            } => {
-                self.repeatability(*repeatability_mm, *repeatability_deg)?;
-                if let Some((key, problem)) = frames.as_ref().and_then(|f| {
-                    super::ros2::frame_problem("robot.frames.base", &f.base)
-                        .or_else(|| super::ros2::frame_problem("robot.frames.flange", &f.flange))
-                }) {
-                    return Err(self.inconsistent(&key, problem));
-                }
-            }
-            RobotConfig::Ros2(r) => {
-                if let Some((key, problem)) = r.problem() {
-                    return Err(self.inconsistent(&key, problem));
-                }
-                self.repeatability(r.repeatability_mm, r.repeatability_deg)?;
-            }
-        }
-        Ok(())
+        robot.backend().check(self)
     }
 
     /// `robot.joint_ranges_deg`: per joint `[min, max]` inside the arm's own range with
     /// `min < max`; a sim arm's `start_joints_deg` inside the ranges in force.
     fn joint_ranges(&self, robot: &RobotConfig, setup: Setup) -> Result<(), ConfigError> {
-        let given: Option<&[[f64; 2]]> = match robot {
-            RobotConfig::Sim {
-                joint_ranges_deg, ..
-            }
-            | RobotConfig::Ur {
-                joint_ranges_deg, ..
-            } => joint_ranges_deg.as_ref().map(|r| &r[..]),
-            RobotConfig::Ros2(r) => r.joint_ranges_deg.as_deref(),
-            RobotConfig::Recorded { .. } => None,
-        };
+        let given = robot.backend().given_joint_ranges_deg();
         // An arm of no known model (a ROS 2 arm with `model: none`) has its own limits: any
         // range within a full turn each way is taken as the datasheet's.
         let no_model = robot.model().is_none();
@@ -443,10 +356,7 @@ impl Validator<'_> {
                 }
             }
         }
-        if let RobotConfig::Sim {
-            start_joints_deg, ..
-        } = robot
-        {
+        if let Some(start_joints_deg) = robot.backend().start_joints_deg() {
             let ranges = robot.joint_ranges_deg(setup);
             for (i, (q, [lo, hi])) in start_joints_deg.iter().zip(ranges).enumerate() {
                 if *q < lo || *q > hi {
@@ -467,7 +377,11 @@ impl Validator<'_> {
         Ok(())
     }
 
-    fn repeatability(&self, mm: Option<f64>, deg: Option<f64>) -> Result<(), ConfigError> {
+    pub(crate) fn repeatability(
+        &self,
+        mm: Option<f64>,
+        deg: Option<f64>,
+    ) -> Result<(), ConfigError> {
         if let Some(mm) = mm {
             self.number("robot.repeatability_mm", mm, REPEATABILITY_MM)?;
         }
@@ -607,7 +521,7 @@ impl Validator<'_> {
 
     fn plan(&self, raw: &ConfigFile) -> Result<(), ConfigError> {
         let plan = &raw.plan;
-        let recorded = matches!(raw.robot, RobotConfig::Recorded { .. });
+        let recorded = !raw.robot.backend().moves();
         if plan.manual && (recorded || plan.adaptive == Some(true)) {
             return Err(self.inconsistent(
                 "plan.manual",
@@ -732,7 +646,7 @@ impl Validator<'_> {
                     format!("the arm model given is applied as it is, and `kinematics: {}` says what to estimate: leave out `kinematics`", choice.name()),
                 ));
             }
-            if raw.robot.model().is_none() || matches!(raw.robot, RobotConfig::Recorded { .. }) {
+            if raw.robot.model().is_none() || !raw.robot.backend().reports_joints() {
                 return Err(self.inconsistent(
                     "solver.arm_model",
                     "an arm model corrects each pose through its joints and the arm's published model: a sim, ur or ros2 arm with `robot.model`".into(),
@@ -745,7 +659,7 @@ impl Validator<'_> {
     /// `simulation.arm_errors`: a seeded draw or the per-joint lists (not both), for the sim arm.
     fn arm_errors(&self, robot: &RobotConfig, e: &ArmErrorsFile) -> Result<ArmErrors, ConfigError> {
         const KEY: &str = "simulation.arm_errors";
-        if !matches!(robot, RobotConfig::Sim { .. }) {
+        if !matches!(robot, RobotConfig::Sim(_)) {
             return Err(self.inconsistent(
                 KEY,
                 "the arm's own errors are simulated by the sim arm only (`robot: {backend: sim}`)"

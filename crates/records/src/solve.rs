@@ -25,7 +25,7 @@ pub use summary::{FrameRms, ReprojectionSummary};
 
 use crate::dataset::Dataset;
 use crate::result::ResultFile;
-use handeye_config::{CellConfig, KinematicsChoice, RobotConfig, SolveSpace};
+use handeye_config::{CellConfig, KinematicsChoice, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::notice::{Notice, NoticeKind};
 use handeye_core::setup::{PosePair, Setup};
@@ -797,7 +797,7 @@ fn conclude(
     // Swapped unknowns first (their own cause); else an answer simply far from the nominal —
     // unless the nominal is a recorded cell's, which its importer wrote (the identity, or the
     // data's own answer), not a person's drawing or tape measure.
-    let measured_nominal = !matches!(config.robot, RobotConfig::Recorded { .. });
+    let measured_nominal = config.robot.backend().moves();
     let nominal = solve::diagnostics::check_against_nominal(
         &solved.calibration,
         &config.camera().nominal,

@@ -204,7 +204,7 @@ fn prepare_camera(config: &CellConfig, index: usize) -> Result<PreparedCamera, C
             (Some(file), ..) => Some(file.clone()),
             (None, Some(lens), ..) => Some(lens.to_path_buf()),
             // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
-            (None, None, RobotConfig::Recorded { .. }, CameraConfig::Files { .. }) => None,
+            (None, None, RobotConfig::Recorded(_), CameraConfig::Files { .. }) => None,
             (None, None, ..) => {
                 return Err(CellError::Backend(
                     "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
@@ -270,13 +270,9 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
         }
         None => None,
     };
-    let start_joints = match &config.robot {
-        RobotConfig::Sim {
-            start_joints_deg, ..
-        } => Joints::from(start_joints_deg.map(f64::to_radians)),
-        RobotConfig::Ur { .. } | RobotConfig::Recorded { .. } | RobotConfig::Ros2(_) => {
-            Joints::from(handeye_config::default_start_joints())
-        }
+    let start_joints = match config.robot.backend().start_joints_deg() {
+        Some(start_joints_deg) => Joints::from(start_joints_deg.map(f64::to_radians)),
+        None => Joints::from(handeye_config::default_start_joints()),
     };
     let mut prepared = PreparedCell {
         config,
@@ -295,7 +291,7 @@ pub fn prepare_config(config: CellConfig) -> Result<PreparedCell, CellError> {
             given_order_move_time_s: None,
         },
     };
-    if let RobotConfig::Recorded { .. } = prepared.config.robot {
+    if !prepared.config.robot.backend().moves() {
         let camera = prepared.camera();
         let (plan, report) = recorded::plan(&prepared.config, &camera.camera_model, &camera.board)?;
         prepared.plan = plan;
@@ -484,10 +480,7 @@ impl PreparedCell {
 
     /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
-        matches!(
-            self.config.robot,
-            RobotConfig::Sim { .. } | RobotConfig::Recorded { .. }
-        )
+        matches!(self.config.robot, RobotConfig::Sim(_)) || !self.config.robot.backend().moves()
     }
 
     /// Detector settings from the config.
@@ -568,8 +561,8 @@ impl PreparedCell {
         if let Some(file) = &self.config.plan.file {
             files.push(("plan", file.clone()));
         }
-        if let RobotConfig::Recorded { poses, .. } = &self.config.robot {
-            files.push(("robot.poses", poses.clone()));
+        if let RobotConfig::Recorded(recorded) = &self.config.robot {
+            files.push(("robot.poses", recorded.poses.clone()));
         }
         // A several-camera cell's other cameras: their boards and lenses, once each.
         for other in self.others().map(|c| &self.config.cameras[c]) {
@@ -708,7 +701,7 @@ impl PreparedCell {
     /// Opens the arm the config names, with what its cameras need of it.
     fn open_arm(&self) -> Result<(Box<dyn Robot>, ArmSide), CellError> {
         match &self.config.robot {
-            RobotConfig::Sim { .. } => {
+            RobotConfig::Sim(_) => {
                 // The simulated controller reports through the arm's published model, whatever
                 // model handeye plans with.
                 let published = self.kinematics()?.published();
@@ -720,7 +713,7 @@ impl PreparedCell {
                 }));
                 Ok((Box::new(robot), side))
             }
-            RobotConfig::Ur { .. } => {
+            RobotConfig::Ur(_) => {
                 let robot = self.open_ur()?;
                 let arm = robot.clone();
                 let side = ArmSide::Flange(Box::new(move || arm.reported_flange()));
@@ -730,7 +723,7 @@ impl PreparedCell {
                 let (robot, node) = ros2::open_arm(&self.config, self.arm.clone())?;
                 Ok((robot, ArmSide::Ros2(node)))
             }
-            RobotConfig::Recorded { .. } => {
+            RobotConfig::Recorded(_) => {
                 let plan = self.report.validated().ok_or_else(|| {
                     CellError::Backend("the recorded poses failed their checks".into())
                 })?;
@@ -774,7 +767,7 @@ impl PreparedCell {
             (camera, _) => Err(CellError::Backend(format!(
                 "a camera with backend `{}` beside the `{}` arm is not available (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
                 camera_name(camera),
-                robot_name(&self.config.robot)
+                self.config.robot.backend().name()
             ))),
         }
     }
@@ -783,11 +776,11 @@ impl PreparedCell {
     /// camera can follow the pose it reports.
     #[cfg(feature = "ur-rtde")]
     fn open_ur(&self) -> Result<Shared<dyn Robot>, CellError> {
-        let RobotConfig::Ur {
+        let RobotConfig::Ur(handeye_config::UrRobot {
             host,
             connect_timeout_s,
             ..
-        } = &self.config.robot
+        }) = &self.config.robot
         else {
             return Err(CellError::Backend("the robot backend is not `ur`".into()));
         };
@@ -829,12 +822,10 @@ impl PreparedCell {
             max_reprojection_rms_px: self.config.session.max_reprojection_rms_px,
             detector: self.detector_options(),
             stop,
-            move_check: (!matches!(self.config.robot, RobotConfig::Recorded { .. })).then(|| {
-                MoveCheck {
-                    arm: self.arm.clone(),
-                    joint_limits: self.joint_limits.clone(),
-                    workspace: self.config.workspace,
-                }
+            move_check: self.config.robot.backend().moves().then(|| MoveCheck {
+                arm: self.arm.clone(),
+                joint_limits: self.joint_limits.clone(),
+                workspace: self.config.workspace,
             }),
         }
     }
@@ -857,7 +848,7 @@ impl PreparedCell {
         start_joints: Joints,
     ) -> Result<Vec<(Pose, Joints)>, &PlanReport> {
         // Recorded poses were taken already: there is no arm to move and nothing to re-check.
-        if !matches!(self.config.robot, RobotConfig::Recorded { .. }) {
+        if self.config.robot.backend().moves() {
             self.start_joints = start_joints;
             self.report = self.check();
         }
@@ -879,15 +870,6 @@ pub enum ArmSide {
         /// Poses recorded (a frame each).
         poses: usize,
     },
-}
-
-fn robot_name(r: &RobotConfig) -> &'static str {
-    match r {
-        RobotConfig::Sim { .. } => "sim",
-        RobotConfig::Ur { .. } => "ur",
-        RobotConfig::Recorded { .. } => "recorded",
-        RobotConfig::Ros2(_) => "ros2",
-    }
 }
 
 fn camera_name(c: &CameraConfig) -> &'static str {

@@ -24,7 +24,7 @@ pub fn plan(
     camera: &CameraModel,
     board: &Target,
 ) -> Result<(Plan, PlanReport), CellError> {
-    let RobotConfig::Recorded { poses, .. } = &config.robot else {
+    let RobotConfig::Recorded(handeye_config::RecordedRobot { poses, .. }) = &config.robot else {
         return Err(CellError::Backend(
             "a recorded plan needs `robot: {backend: recorded}`".into(),
         ));
@@ -101,7 +101,7 @@ pub fn arm(
     config: &CellConfig,
     plan: &[(Pose, Joints)],
 ) -> Result<(Box<dyn Robot>, FrameSelector), CellError> {
-    let RobotConfig::Recorded { .. } = &config.robot else {
+    let RobotConfig::Recorded(_) = &config.robot else {
         return Err(CellError::Backend(
             "a recorded cell needs `robot: {backend: recorded}` and `camera: {backend: files}`"
                 .into(),

@@ -109,7 +109,7 @@ pub fn arm(
     arm: UrModel,
     start: Joints,
 ) -> Result<Shared<SimRobot>, CellError> {
-    let RobotConfig::Sim {
+    let RobotConfig::Sim(handeye_config::SimRobot {
         move_duration_s,
         repeatability_mm,
         repeatability_deg,
@@ -120,7 +120,7 @@ pub fn arm(
         ringing_hz,
         ringing_decay_s,
         ..
-    } = &config.robot
+    }) = &config.robot
     else {
         return Err(CellError::Backend(
             "the simulated cell needs `robot: {backend: sim}`".into(),

@@ -23,7 +23,6 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use crate::{ManualControl, SessionEvent, SessionOutcome};
-use handeye_config::RobotConfig;
 use handeye_core::geometry::Pose;
 use handeye_plan::GenerateSpec;
 use handeye_records::{SessionError, SessionFolder, SolvedSession};
@@ -502,8 +501,7 @@ fn drive_opened(
         &mut hardware,
         observer,
     )?;
-    let recorded = matches!(cell.config.robot, RobotConfig::Recorded { .. });
-    let arm_time = (matches!(strategy, Strategy::Planned) && !recorded)
+    let arm_time = (matches!(strategy, Strategy::Planned) && cell.config.robot.backend().moves())
         .then(|| stages::keep_arm_time(&cell, &folder, &outcome, observer));
     Ok(DrivenRun {
         cell,
