@@ -659,7 +659,7 @@ fn the_templates_load_without_the_simulated_lens() {
         assert!(
             matches!(
                 config.camera().backend,
-                handeye_config::CameraConfig::Uvc { .. }
+                handeye_config::CameraConfig::Uvc(_)
             ),
             "{name}"
         );

@@ -704,7 +704,7 @@ fn imported_visp_folder_cell_config_is_written_through_serde_and_loads() {
     assert!(matches!(config.robot, RobotConfig::Recorded(_)));
     assert!(matches!(
         config.camera().backend,
-        handeye_config::CameraConfig::Files { ref folder } if folder == &std::fs::canonicalize(&visp).unwrap()
+        handeye_config::CameraConfig::Files(ref files) if files.folder == std::fs::canonicalize(&visp).unwrap()
     ));
     assert_eq!(config.detector.decimate, 1.0);
     assert!(config.plan.file.is_none() && config.plan.generate.is_none());

@@ -9,6 +9,7 @@
 //! Units are SI with the suffix in the key where a person reads (`_deg`, `_mm`, `_s`). Depends
 //! on the ground floor, `plan`, `robot`, `solve` and `vision` (for their types and bounds).
 
+pub mod camera;
 pub mod cameras;
 pub mod recorded;
 pub mod robot;
@@ -27,6 +28,7 @@ use handeye_robot::kinematics::UrModel;
 use handeye_robot::{MotionLimits, WorkspaceBox};
 use handeye_solve::{SolveOptions, SolverChoice};
 
+pub use camera::{CameraBackend, FilesCamera, SimCamera, UvcCamera};
 pub use recorded::{recorded_cell, RecordedFiles};
 pub use robot::{RecordedRobot, RobotBackend, SimRobot, UrRobot};
 pub use schema::{
@@ -213,13 +215,10 @@ impl CellCamera {
 
     /// The lens the simulated camera renders with (`camera.intrinsics`, else the cell's).
     pub fn sim_lens(&self) -> Option<&Path> {
-        match &self.backend {
-            CameraConfig::Sim {
-                intrinsics: Some(lens),
-                ..
-            } => Some(lens),
-            CameraConfig::Sim { .. } => self.intrinsics.as_deref(),
-            CameraConfig::Files { .. } | CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => None,
+        let backend = self.backend.backend();
+        match backend.simulated() {
+            true => backend.own_lens().or(self.intrinsics.as_deref()),
+            false => None,
         }
     }
 }
@@ -288,16 +287,7 @@ impl CellConfig {
             recorded.poses = resolve(&recorded.poses);
         }
         let mut backend = checked.camera;
-        match &mut backend {
-            CameraConfig::Files { folder } => *folder = resolve(folder),
-            CameraConfig::Sim {
-                intrinsics, target, ..
-            } => {
-                *intrinsics = intrinsics.as_deref().map(resolve);
-                *target = target.as_deref().map(resolve);
-            }
-            CameraConfig::Uvc { .. } | CameraConfig::Ros2(_) => {}
-        }
+        backend.backend_mut().resolve_paths(&resolve);
         // The base and last joint offsets no data tell from the transforms: the truth a run
         // can find is in the controller's frames (see `handeye_robot::arm_errors`).
         let (true_arm, simulation) = match (&checked.arm_errors, &checked.simulation, &robot) {

@@ -61,9 +61,9 @@ pub fn recorded_cell(
             repeatability_deg: None,
             frames: Some(files.frames),
         }),
-        camera: Some(CameraConfig::Files {
+        camera: Some(CameraConfig::Files(super::FilesCamera {
             folder: files.images,
-        }),
+        })),
         nominal: BTreeMap::from([
             (camera_key.to_string(), PoseYaml::from_pose(&camera_mount)),
             (target_key.to_string(), PoseYaml::from_pose(&target_mount)),

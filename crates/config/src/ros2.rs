@@ -465,6 +465,23 @@ impl Ros2Robot {
     }
 }
 
+impl super::camera::CameraBackend for Ros2Camera {
+    fn name(&self) -> &'static str {
+        "ros2"
+    }
+
+    fn check(
+        &self,
+        v: &super::validate::Validator<'_>,
+        _cell_intrinsics: bool,
+    ) -> Result<(), super::ConfigError> {
+        match self.problem() {
+            Some((key, problem)) => Err(v.inconsistent(&key, problem)),
+            None => Ok(()),
+        }
+    }
+}
+
 impl Ros2Camera {
     /// The names and numbers checked (the first problem found).
     pub(super) fn problem(&self) -> Option<Problem> {

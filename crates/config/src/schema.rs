@@ -299,85 +299,13 @@ impl PixelFormatName {
 )]
 pub enum CameraConfig {
     /// Frames rendered from the simulated cell's true chain.
-    Sim {
-        /// Sensor noise, grey levels (1-sigma).
-        #[serde(default = "default_noise")]
-        noise_sigma: f64,
-        /// Optical blur, pixels (1-sigma of a Gaussian), 0 = none.
-        #[serde(default)]
-        blur_sigma_px: f64,
-        /// Render seed.
-        #[serde(default)]
-        seed: u64,
-        /// Grab numbers (0-based) in which the board is hidden (fault injection for tests).
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        hide_board_in_grabs: Vec<usize>,
-        /// The simulated lens (camera_info YAML); defaults to the cell's `intrinsics`. Required
-        /// when the cell has no `intrinsics` (they are then estimated from the run). Differing
-        /// from the cell's `intrinsics`, it simulates a camera calibrated wrongly.
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        intrinsics: Option<PathBuf>,
-        /// The board the simulated camera sees (board file); defaults to the cell's `target`.
-        /// Differing from it (another `tagSize`), it simulates a board printed at another scale.
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        target: Option<PathBuf>,
-    },
+    Sim(super::camera::SimCamera),
     /// Frames from an image folder, in plan order.
-    Files {
-        /// The folder.
-        folder: PathBuf,
-    },
+    Files(super::camera::FilesCamera),
     /// A USB/UVC camera (needs the `uvc` build feature).
-    Uvc {
-        /// Camera index (`/dev/video<N>`) or (part of) its name.
-        #[serde(default = "default_uvc_device")]
-        device: String,
-        /// Requested width, px.
-        #[serde(default = "default_uvc_width")]
-        width: u32,
-        /// Requested height, px.
-        #[serde(default = "default_uvc_height")]
-        height: u32,
-        /// Requested pixel format: `mjpeg`, `yuyv` or `gray`.
-        #[serde(default)]
-        pixel_format: PixelFormatName,
-        /// Requested frame rate, frames/s.
-        #[serde(default = "default_uvc_fps")]
-        fps: u32,
-        /// Fixed exposure, µs (auto exposure off).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        exposure_us: Option<u32>,
-        /// Fixed gain, camera units (auto gain off).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        gain: Option<i64>,
-        /// Fixed focus, camera units (autofocus is turned off whenever the camera allows).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        focus: Option<i64>,
-        /// Frames dropped after the arm settles (the driver's queue depth).
-        #[serde(default = "default_uvc_stale_frames")]
-        stale_frames: usize,
-    },
+    Uvc(super::camera::UvcCamera),
     /// A camera under a ROS 2 camera node (needs the `ros2` feature; `config::ros2`).
     Ros2(super::ros2::Ros2Camera),
-}
-
-fn default_uvc_device() -> String {
-    "0".into()
-}
-fn default_uvc_width() -> u32 {
-    1280
-}
-fn default_uvc_height() -> u32 {
-    720
-}
-fn default_uvc_fps() -> u32 {
-    30
-}
-fn default_uvc_stale_frames() -> usize {
-    4
-}
-fn default_noise() -> f64 {
-    2.0
 }
 
 /// Motion limits as written (degrees for joints).

@@ -258,8 +258,7 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
         Some(errors) => Some(v.arm_errors(&raw.robot, errors)?),
         None => None,
     };
-    let uses_sim =
-        matches!(raw.robot, RobotConfig::Sim(_)) || matches!(camera, CameraConfig::Sim { .. });
+    let uses_sim = matches!(raw.robot, RobotConfig::Sim(_)) || camera.backend().simulated();
     if uses_sim && simulation.is_none() {
         let (camera_key, target_key) = setup.unknown_names();
         return Err(v.inconsistent(
@@ -392,69 +391,7 @@ impl Validator<'_> {
     }
 
     fn camera(&self, camera: &CameraConfig, cell_intrinsics: bool) -> Result<(), ConfigError> {
-        match camera {
-            CameraConfig::Sim {
-                noise_sigma,
-                blur_sigma_px,
-                hide_board_in_grabs,
-                intrinsics,
-                ..
-            } => {
-                self.number("camera.noise_sigma", *noise_sigma, NOISE_SIGMA)?;
-                self.number("camera.blur_sigma_px", *blur_sigma_px, BLUR_SIGMA_PX)?;
-                for (i, grab) in hide_board_in_grabs.iter().enumerate() {
-                    self.integer(
-                        &format!("camera.hide_board_in_grabs[{i}]"),
-                        *grab as i128,
-                        HIDDEN_GRAB,
-                    )?;
-                }
-                if !cell_intrinsics && intrinsics.is_none() {
-                    return Err(self.inconsistent(
-                        "camera.intrinsics",
-                        "the cell has no `intrinsics` (they will be estimated), so the sim camera needs its lens: `camera: {backend: sim, intrinsics: <camera_info.yaml>}`".into(),
-                    ));
-                }
-            }
-            CameraConfig::Files { .. } => {}
-            CameraConfig::Ros2(c) => {
-                if let Some((key, problem)) = c.problem() {
-                    return Err(self.inconsistent(&key, problem));
-                }
-            }
-            CameraConfig::Uvc {
-                device,
-                width,
-                height,
-                fps,
-                exposure_us,
-                gain,
-                focus,
-                stale_frames,
-                ..
-            } => {
-                if device.trim().is_empty() {
-                    return Err(self.inconsistent(
-                        "camera.device",
-                        "expected a /dev/video index or (part of) the camera's name, found an empty string".into(),
-                    ));
-                }
-                self.integer("camera.width", i128::from(*width), IMAGE_SIDE_PX)?;
-                self.integer("camera.height", i128::from(*height), IMAGE_SIDE_PX)?;
-                self.integer("camera.fps", i128::from(*fps), FPS)?;
-                if let Some(us) = exposure_us {
-                    self.integer("camera.exposure_us", i128::from(*us), EXPOSURE_US)?;
-                }
-                if let Some(gain) = gain {
-                    self.integer("camera.gain", i128::from(*gain), CAMERA_CONTROL)?;
-                }
-                if let Some(focus) = focus {
-                    self.integer("camera.focus", i128::from(*focus), CAMERA_CONTROL)?;
-                }
-                self.integer("camera.stale_frames", *stale_frames as i128, STALE_FRAMES)?;
-            }
-        }
-        Ok(())
+        camera.backend().check(self, cell_intrinsics)
     }
 
     fn limits(&self, raw: &ConfigFile) -> Result<MotionLimits, ConfigError> {

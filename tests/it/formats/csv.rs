@@ -310,12 +310,12 @@ fn uvc_camera_config_is_validated_and_needs_the_feature() {
     let config = handeye_config::CellConfig::parse(&text("yuyv"), Path::new("cell.yaml")).unwrap();
     assert!(matches!(
         &config.camera().backend,
-        handeye_config::CameraConfig::Uvc {
+        handeye_config::CameraConfig::Uvc(handeye_config::UvcCamera {
             width: 640,
             height: 480,
             stale_frames: 4,
             ..
-        }
+        })
     ));
     let e = handeye_config::CellConfig::parse(&text("h264"), Path::new("cell.yaml"))
         .unwrap_err()
@@ -325,7 +325,10 @@ fn uvc_camera_config_is_validated_and_needs_the_feature() {
         "{e}"
     );
     let model = CameraModel::load(&repo().join("tests/data/visp_franka_camera_info.yaml")).unwrap();
-    let opened = cell::uvc::open_camera(&config.camera().backend, model);
+    let handeye_config::CameraConfig::Uvc(usb) = &config.camera().backend else {
+        panic!("a uvc camera")
+    };
+    let opened = cell::uvc::open_camera(usb, model);
     if cfg!(feature = "uvc") {
         // No camera exists on build machines: opening must fail cleanly, not panic.
         assert!(opened.is_err());

@@ -204,7 +204,7 @@ fn prepare_camera(config: &CellConfig, index: usize) -> Result<PreparedCamera, C
             (Some(file), ..) => Some(file.clone()),
             (None, Some(lens), ..) => Some(lens.to_path_buf()),
             // Recorded frames: a provisional lens of the frames' size (see `recorded::provisional_model`).
-            (None, None, RobotConfig::Recorded(_), CameraConfig::Files { .. }) => None,
+            (None, None, RobotConfig::Recorded(_), CameraConfig::Files(_)) => None,
             (None, None, ..) => {
                 return Err(CellError::Backend(
                     "the config has no `intrinsics`: estimating them is available with the sim camera or recorded frames only (give `intrinsics:` for this camera)".into(),
@@ -604,9 +604,9 @@ impl PreparedCell {
     /// scale), else the cell's.
     fn sim_world(&self, camera: usize) -> Result<(CameraModel, Target), CellError> {
         let prepared = &self.cameras[camera];
-        let CameraConfig::Sim {
+        let CameraConfig::Sim(handeye_config::SimCamera {
             intrinsics, target, ..
-        } = &self.config.cameras[camera].backend
+        }) = &self.config.cameras[camera].backend
         else {
             return Ok((prepared.camera_model, prepared.board.clone()));
         };
@@ -659,11 +659,8 @@ impl PreparedCell {
     pub fn open_hardware(&self) -> Result<Hardware, CellError> {
         let planner = self.config.planner;
         let mut standalone = match &self.config.camera().backend {
-            CameraConfig::Uvc { .. } => Some(uvc::open_camera(
-                &self.config.camera().backend,
-                self.camera().camera_model,
-            )?),
-            CameraConfig::Sim { .. } | CameraConfig::Files { .. } | CameraConfig::Ros2(_) => None,
+            CameraConfig::Uvc(usb) => Some(uvc::open_camera(usb, self.camera().camera_model)?),
+            CameraConfig::Sim(_) | CameraConfig::Files(_) | CameraConfig::Ros2(_) => None,
         };
         let (robot, arm) = self.open_arm()?;
         let ros2 = match &arm {
@@ -751,22 +748,20 @@ impl PreparedCell {
         let config = self.config.for_camera(camera);
         let model = self.cameras[camera].camera_model;
         match (&config.camera().backend, arm) {
-            (CameraConfig::Sim { .. }, ArmSide::Flange(flange)) => {
+            (CameraConfig::Sim(_), ArmSide::Flange(flange)) => {
                 let truth = self.sim_truth(camera)?;
                 let (lens, board) = self.sim_world(camera)?;
                 let camera = sim::camera(&config, truth, flange(), lens, board)?.reporting(model);
                 Ok(Box::new(camera))
             }
-            (CameraConfig::Uvc { .. }, ArmSide::Flange(_)) => {
-                uvc::open_camera(&config.camera().backend, model)
-            }
+            (CameraConfig::Uvc(usb), ArmSide::Flange(_)) => uvc::open_camera(usb, model),
             (CameraConfig::Ros2(_), ArmSide::Ros2(node)) => ros2::open_camera(&config, node, model),
-            (CameraConfig::Files { .. }, ArmSide::Recorded { selector, poses }) => {
+            (CameraConfig::Files(_), ArmSide::Recorded { selector, poses }) => {
                 recorded::open_camera(&config, selector, *poses, model)
             }
             (camera, _) => Err(CellError::Backend(format!(
                 "a camera with backend `{}` beside the `{}` arm is not available (sim or uvc cameras beside a sim or ur arm are, files cameras beside a recorded arm, ros2 cameras beside a ros2 arm)",
-                camera_name(camera),
+                camera.backend().name(),
                 self.config.robot.backend().name()
             ))),
         }
@@ -870,13 +865,4 @@ pub enum ArmSide {
         /// Poses recorded (a frame each).
         poses: usize,
     },
-}
-
-fn camera_name(c: &CameraConfig) -> &'static str {
-    match c {
-        CameraConfig::Sim { .. } => "sim",
-        CameraConfig::Files { .. } => "files",
-        CameraConfig::Uvc { .. } => "uvc",
-        CameraConfig::Ros2(_) => "ros2",
-    }
 }

@@ -70,7 +70,8 @@ pub fn plan(
 /// distortion), used only for the plan report's information-only margins and the folder camera's
 /// frame-size check.
 pub fn provisional_model(config: &CellConfig) -> Result<CameraModel, CellError> {
-    let CameraConfig::Files { folder } = &config.camera().backend else {
+    let CameraConfig::Files(handeye_config::FilesCamera { folder }) = &config.camera().backend
+    else {
         return Err(CellError::Backend(
             "a recorded cell needs `camera: {backend: files}`".into(),
         ));
@@ -123,7 +124,8 @@ pub fn open_camera(
     poses: usize,
     camera_model: CameraModel,
 ) -> Result<Box<dyn handeye_camera::Camera>, CellError> {
-    let CameraConfig::Files { folder } = &config.camera().backend else {
+    let CameraConfig::Files(handeye_config::FilesCamera { folder }) = &config.camera().backend
+    else {
         return Err(CellError::Backend(
             "recorded poses need `camera: {backend: files}`".into(),
         ));

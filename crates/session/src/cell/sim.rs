@@ -160,13 +160,13 @@ pub fn camera(
     camera_model: CameraModel,
     board: Target,
 ) -> Result<SimCamera, CellError> {
-    let CameraConfig::Sim {
+    let CameraConfig::Sim(handeye_config::SimCamera {
         noise_sigma,
         blur_sigma_px,
         seed,
         hide_board_in_grabs,
         ..
-    } = &config.camera().backend
+    }) = &config.camera().backend
     else {
         return Err(CellError::Backend(
             "expected `camera: {backend: sim}`".into(),

@@ -3,37 +3,29 @@
 //! trait either way.
 
 use handeye_camera::Camera;
-use handeye_config::CameraConfig;
+use handeye_config::UvcCamera;
 use handeye_core::camera_model::CameraModel;
 
 use super::CellError;
 
 /// Opens the USB camera `config` describes with intrinsics `model` (the granted resolution must
 /// be the intrinsics' size).
-pub fn open_camera(
-    config: &CameraConfig,
-    model: CameraModel,
-) -> Result<Box<dyn Camera>, CellError> {
-    let CameraConfig::Uvc { .. } = config else {
-        return Err(CellError::Backend(
-            "a USB camera needs `camera: {backend: uvc}`".into(),
-        ));
-    };
+pub fn open_camera(config: &UvcCamera, model: CameraModel) -> Result<Box<dyn Camera>, CellError> {
     open(config, model)
 }
 
 #[cfg(not(feature = "uvc"))]
-fn open(_: &CameraConfig, _: CameraModel) -> Result<Box<dyn Camera>, CellError> {
+fn open(_: &UvcCamera, _: CameraModel) -> Result<Box<dyn Camera>, CellError> {
     Err(CellError::Backend(
         "camera backend `uvc` needs a handeye build with the `uvc` feature: `cargo build --release --features uvc` (needs libclang-dev)".into(),
     ))
 }
 
 #[cfg(feature = "uvc")]
-fn open(config: &CameraConfig, model: CameraModel) -> Result<Box<dyn Camera>, CellError> {
+fn open(config: &UvcCamera, model: CameraModel) -> Result<Box<dyn Camera>, CellError> {
     use handeye_camera::decode::PixelFormat;
-    use handeye_camera::uvc::{UvcCamera, UvcDevice, UvcOptions};
-    let CameraConfig::Uvc {
+    use handeye_camera::uvc::{UvcDevice, UvcOptions};
+    let UvcCamera {
         device,
         width,
         height,
@@ -43,10 +35,7 @@ fn open(config: &CameraConfig, model: CameraModel) -> Result<Box<dyn Camera>, Ce
         gain,
         focus,
         stale_frames,
-    } = config
-    else {
-        return Err(CellError::Backend("the camera backend is not `uvc`".into()));
-    };
+    } = config;
     let options = UvcOptions {
         device: match device.parse::<u32>() {
             Ok(i) => UvcDevice::Index(i),
@@ -66,7 +55,7 @@ fn open(config: &CameraConfig, model: CameraModel) -> Result<Box<dyn Camera>, Ce
         stale_frames: *stale_frames,
         ..UvcOptions::default()
     };
-    let camera = UvcCamera::open(&options, Some(model))
+    let camera = handeye_camera::uvc::UvcCamera::open(&options, Some(model))
         .map_err(|e| CellError::Backend(format!("opening USB camera `{device}`: {e}")))?;
     Ok(Box::new(camera))
 }
