@@ -33,8 +33,14 @@ pub(super) fn print_run(done: &CellRun, result: &CamerasResultFile) -> String {
 pub(super) fn print_replay(replay: &CamerasReplay) -> anyhow::Result<()> {
     print_result(&replay.result, &replay.output.result);
     let report = handeye_session::replay::beside(&replay.output.result, REPLAY_REPORT_FILE);
-    handeye_report::cameras::write_cameras_report(&replay.result, &replay.folder, &report)?;
-    outln!("report: {}", report.display());
+    // The result is saved; a report problem must not hide it (as for one camera).
+    match handeye_report::cameras::write_cameras_report(&replay.result, &replay.folder, &report) {
+        Ok(()) => outln!("report: {}", report.display()),
+        Err(e) => eprintln!(
+            "warning: the report could not be written: {:#}",
+            anyhow::Error::from(e)
+        ),
+    }
     Ok(())
 }
 

@@ -27,8 +27,7 @@ fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
 }
 
 pub(crate) fn read_result(folder: &Path) -> CamerasResultFile {
-    let text = std::fs::read_to_string(folder.join("result.yaml")).unwrap();
-    serde_yaml_ng::from_str(&text).unwrap()
+    CamerasResultFile::load(&folder.join("result.yaml")).unwrap()
 }
 
 /// The simulator's truth of every camera mount, by transform name, from the config itself (not
@@ -323,8 +322,7 @@ fn killed_mid_run_then_resumed_and_replayed() {
             String::from_utf8_lossy(&replay.stderr)
         );
         let file = output.cloned().unwrap_or(out.join("replay-result.yaml"));
-        let replayed: CamerasResultFile =
-            serde_yaml_ng::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        let replayed = CamerasResultFile::load(&file).unwrap();
         for (a, b) in resumed.transforms().zip(replayed.transforms()) {
             assert_eq!(a.name, b.name);
             let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);

@@ -45,8 +45,11 @@ const RENDERED: BoardNoise = BoardNoise(0.02, 0.005);
 /// Five times that: a poorer lens or board.
 const PESSIMISTIC: BoardNoise = BoardNoise(0.1, 0.02);
 
+/// A shipped cell's plan joints (rad), its arm model and its physical truth.
+type ShippedPlan = (Vec<Vec<f64>>, UrModel, CellTransforms);
+
 /// The shipped cell `config`'s plan joints (rad), its arm model and its physical truth.
-fn shipped_plan(config: &Path) -> (Vec<Vec<f64>>, UrModel, CellTransforms) {
+fn shipped_plan(config: &Path) -> ShippedPlan {
     let prepared = handeye_session::cell::prepare(config).unwrap();
     let joints: Vec<Vec<f64>> = prepared
         .report
@@ -56,6 +59,19 @@ fn shipped_plan(config: &Path) -> (Vec<Vec<f64>>, UrModel, CellTransforms) {
         .collect();
     let truth = prepared.config.camera().simulation.unwrap();
     (joints, prepared.arm.unwrap(), truth)
+}
+
+/// Both shipped cells (eye in hand, eye to hand) with their plans generated at 30 poses, by
+/// config name: [`shipped_plan`] of each.
+fn shipped_cells_at_30_poses() -> Vec<(&'static str, ShippedPlan)> {
+    let dir = tempfile::tempdir().unwrap();
+    ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"]
+        .into_iter()
+        .map(|config| {
+            let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
+            (config, shipped_plan(&variant))
+        })
+        .collect()
 }
 
 /// Samples of the cell `truth` whose arm has `errors`: reported through `model` with the arm's
@@ -266,10 +282,7 @@ fn drawn_joint_offsets_are_found_within_their_sigma_and_the_transforms_within_th
         joint_offset_rad: 0.03f64.to_radians(),
         ..ArmErrorSigmas::default()
     };
-    let dir = tempfile::tempdir().unwrap();
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let cell = shipped_plan(&variant);
+    for (config, cell) in shipped_cells_at_30_poses() {
         assert!(cell.0.len() >= 25, "{} plan poses", cell.0.len());
         let t = monte_carlo(&cell, &sigmas, RENDERED);
         print(config, &t);
@@ -299,10 +312,7 @@ fn an_arm_as_published_is_not_given_a_model_by_the_default() {
         joint_offset_rad: 0.0,
         ..ArmErrorSigmas::default()
     };
-    let dir = tempfile::tempdir().unwrap();
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let cell = shipped_plan(&variant);
+    for (config, cell) in shipped_cells_at_30_poses() {
         for (noise, board) in [("rendered", RENDERED), ("5x", PESSIMISTIC)] {
             let t = monte_carlo(&cell, &exact, board);
             print(&format!("{config}, an exact arm, {noise} board noise"), &t);
@@ -1403,10 +1413,7 @@ fn auto_keeps_the_dh_link_corrections_where_they_bring_the_answer_nearer() {
         joint_offset_rad: 0.0,
         ..ArmErrorSigmas::default()
     };
-    let dir = tempfile::tempdir().unwrap();
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let (joints, model, physical) = shipped_plan(&variant);
+    for (config, (joints, model, physical)) in shipped_cells_at_30_poses() {
         let chain = handeye_records::solve::dh_chain(&model);
         for (class, sigmas, board) in [
             ("an exact arm", exact, RENDERED),
@@ -2052,10 +2059,7 @@ fn the_joint_offsets_are_refined_in_reprojection_space_with_the_transforms() {
         joint_offset_rad: 0.03f64.to_radians(),
         ..ArmErrorSigmas::default()
     };
-    let dir = tempfile::tempdir().unwrap();
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let (joints, model, physical) = shipped_plan(&variant);
+    for (config, (joints, model, physical)) in shipped_cells_at_30_poses() {
         let chain = handeye_records::solve::dh_chain(&model);
         let camera = handeye_core::camera_model::CameraModel::load(
             &repo().join("configs/cameras/sim-1280x720.yaml"),

@@ -33,9 +33,7 @@ pub trait CameraBackend {
         None
     }
     /// Its paths made relative to the config's folder (`resolve`), as the config is read.
-    fn resolve_paths(&mut self, resolve: &dyn Fn(&Path) -> PathBuf) {
-        let _ = resolve;
-    }
+    fn resolve_paths(&mut self, _resolve: &dyn Fn(&Path) -> PathBuf) {}
     /// Its section's own checks (`camera.*`); `cell_intrinsics`: the cell gives `intrinsics`.
     fn check(&self, v: &Validator<'_>, cell_intrinsics: bool) -> Result<(), ConfigError>;
 }

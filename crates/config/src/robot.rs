@@ -44,6 +44,10 @@ pub trait RobotBackend {
     fn frames(&self) -> RobotFrames {
         RobotFrames::default()
     }
+    /// It is the simulated arm (the cell then needs its ground truth).
+    fn simulated(&self) -> bool {
+        false
+    }
     /// It moves (a recorded arm replays poses measured elsewhere: nothing moves, its poses are
     /// the plan).
     fn moves(&self) -> bool {
@@ -165,6 +169,10 @@ impl RobotBackend for SimRobot {
 
     fn given_joint_ranges_deg(&self) -> Option<&[[f64; 2]]> {
         self.joint_ranges_deg.as_ref().map(|r| &r[..])
+    }
+
+    fn simulated(&self) -> bool {
+        true
     }
 
     fn repeatability(&self) -> (f64, f64) {

@@ -258,7 +258,7 @@ pub(super) fn check(raw: &ConfigFile, file: &Path) -> Result<Checked, ConfigErro
         Some(errors) => Some(v.arm_errors(&raw.robot, errors)?),
         None => None,
     };
-    let uses_sim = matches!(raw.robot, RobotConfig::Sim(_)) || camera.backend().simulated();
+    let uses_sim = raw.robot.backend().simulated() || camera.backend().simulated();
     if uses_sim && simulation.is_none() {
         let (camera_key, target_key) = setup.unknown_names();
         return Err(v.inconsistent(

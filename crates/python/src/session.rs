@@ -11,7 +11,6 @@ use std::path::{Path, PathBuf};
 use handeye_config::{CellConfig, SolveSpace};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
-use handeye_core::yaml_file::read_yaml;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::{CamerasResultFile, ResultFile};
 use handeye_records::{SessionFolder, SolveInputs};
@@ -98,7 +97,7 @@ impl Session {
         if self.cameras.is_empty() || !path.exists() {
             return Ok(None);
         }
-        read_yaml(&path)
+        CamerasResultFile::load(&path)
             .map(Some)
             .map_err(|e| errors::from_error(py, &e))
     }

@@ -403,7 +403,6 @@ pub fn solve_with_arm(
                  visits: &[PoseVisit],
                  notices: Vec<Notice>,
                  arm: Option<(FoldFlanges<'_>, &ArmOffsetsFree)>| {
-        let arm = arm.map_or((None, None), |(refit, free)| (Some(refit), Some(free)));
         solve_session_with(dataset.setup, pairs, visits, vision, config, notices, arm)
     };
     // An arm model an earlier session estimated: applied as it is, nothing estimated again.
@@ -835,15 +834,7 @@ pub fn solve_session(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
 ) -> Result<SolvedSession, SessionError> {
-    solve_session_with(
-        setup,
-        pairs,
-        visits,
-        vision,
-        config,
-        Vec::new(),
-        (None, None),
-    )
+    solve_session_with(setup, pairs, visits, vision, config, Vec::new(), None)
 }
 
 /// [`solve_session`] with `findings` of the session layer's own checks (wrong intrinsics) added
@@ -857,8 +848,9 @@ pub fn solve_session_with(
     vision: Option<(&Target, &CameraModel)>,
     config: &CellConfig,
     findings: Vec<Notice>,
-    (refit, arm): (Option<FoldFlanges<'_>>, Option<&ArmOffsetsFree>),
+    arm: Option<(FoldFlanges<'_>, &ArmOffsetsFree)>,
 ) -> Result<SolvedSession, SessionError> {
+    let (refit, arm) = arm.unzip();
     let options = config.solver.to_options();
     let pose_space =
         solve::solve(setup, pairs, &options).map_err(|source| SessionError::Solve {

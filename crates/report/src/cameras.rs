@@ -290,7 +290,7 @@ fn use_section(html: &mut String, result: &CamerasResultFile) {
 /// returns its path.
 pub fn write_cameras_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
     let result_path = folder.join("result.yaml");
-    let result: CamerasResultFile = handeye_core::yaml_file::read_yaml(&result_path)
+    let result = CamerasResultFile::load(&result_path)
         .map_err(|e| ReportError::Session(Box::new(handeye_records::SessionError::from(e))))?;
     let path = folder.join("report.html");
     write_cameras_report(&result, folder, &path)?;

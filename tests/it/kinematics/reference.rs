@@ -17,8 +17,8 @@ use handeye_robot::arm_errors::{ArmErrorSigmas, ArmErrors};
 use handeye_robot::kinematics::UrModel;
 use handeye_solve::kinematics::{ArmFit, ArmModel, ArmSample, LinkParameter, OffsetStatus};
 
-use super::{samples, shipped_plan, solve_both, RENDERED};
-use crate::util::{config_variant, pose_error_mm_deg, repo, skip};
+use super::{samples, shipped_cells_at_30_poses, solve_both, RENDERED};
+use crate::util::{pose_error_mm_deg, repo, skip};
 
 /// Seeded sessions per setup.
 const SESSIONS: u64 = 5;
@@ -112,12 +112,9 @@ fn the_arm_fit_agrees_with_scipy_within_its_sigma() {
         joint_offset_rad: 0.03f64.to_radians(),
         ..ArmErrorSigmas::default()
     };
-    let dir = tempfile::tempdir().unwrap();
     let mut problems = Vec::new();
     let mut ours = Vec::new();
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let (joints, model, physical) = shipped_plan(&variant);
+    for (config, (joints, model, physical)) in shipped_cells_at_30_poses() {
         for seed in 0..SESSIONS {
             let errors = ArmErrors::draw(2000 + seed, &sigmas);
             let (samples, _) = samples(&joints, &model, &errors, &physical, RENDERED, seed);
@@ -225,11 +222,8 @@ fn the_dh_fit_agrees_with_scipy_within_its_sigma() {
         length_m: 0.2e-3,
         twist_rad: 0.01f64.to_radians(),
     };
-    let dir = tempfile::tempdir().unwrap();
     let (mut problems, mut ours) = (Vec::new(), Vec::new());
-    for config in ["sim-cell.yaml", "sim-cell-eye-to-hand.yaml"] {
-        let variant = config_variant(dir.path(), config, config, &[("count: 20", "count: 30")]);
-        let (joints, model, physical) = shipped_plan(&variant);
+    for (config, (joints, model, physical)) in shipped_cells_at_30_poses() {
         let chain = handeye_records::solve::dh_chain(&model);
         for seed in 0..3 {
             let errors = ArmErrors::draw(2500 + seed, &sigmas);

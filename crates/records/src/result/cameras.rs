@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::{RobotFrames, Setup};
+use handeye_core::yaml_file::{read_yaml, FileError};
 use handeye_solve::verdict::{HeldOut, Verdict};
 use handeye_solve::PoseSigma;
 
@@ -98,6 +99,11 @@ pub struct CamerasResultFile {
 }
 
 impl CamerasResultFile {
+    /// Reads a several-camera result file (a several-camera session's `result.yaml`).
+    pub fn load(path: &std::path::Path) -> Result<CamerasResultFile, FileError> {
+        read_yaml(path)
+    }
+
     /// Every transform of the answer: the joint mounts, the boards, the camera-to-camera ones.
     pub fn transforms(&self) -> impl Iterator<Item = &NamedTransform> {
         self.cameras

@@ -480,7 +480,8 @@ impl PreparedCell {
 
     /// Whether no real hardware moves (simulated or recorded robot).
     pub fn is_simulated(&self) -> bool {
-        matches!(self.config.robot, RobotConfig::Sim(_)) || !self.config.robot.backend().moves()
+        let robot = self.config.robot.backend();
+        robot.simulated() || !robot.moves()
     }
 
     /// Detector settings from the config.

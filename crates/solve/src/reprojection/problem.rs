@@ -162,6 +162,35 @@ impl ArmColumns {
         }
         Some(start_inverse * self.free.chain.forward_corrected(q, &corrections))
     }
+
+    /// Frame `f`'s recorded pose `reported` moved by the offsets' change `delta`, with the flange
+    /// twist of each free offset there (6 x free, forward differences; rows `φ` in the flange
+    /// frame then `ρ` in the base frame: the robot correction's coordinates); `None` for a frame
+    /// without joints.
+    fn moved_flange(
+        &self,
+        f: usize,
+        reported: &Pose,
+        delta: &[f64],
+    ) -> Option<(Pose, DMatrix<f64>)> {
+        let at = reported * self.flange_move(f, delta)?;
+        let mut twist = DMatrix::zeros(6, delta.len());
+        let mut stepped = delta.to_vec();
+        for c in 0..delta.len() {
+            stepped[c] = delta[c] + ARM_STEP_RAD;
+            let next = reported * self.flange_move(f, &stepped)?;
+            stepped[c] = delta[c];
+            let phi = (at.rotation.inverse() * next.rotation).scaled_axis();
+            let rho = next.translation.vector - at.translation.vector;
+            twist
+                .fixed_view_mut::<3, 1>(0, c)
+                .copy_from(&(phi / ARM_STEP_RAD));
+            twist
+                .fixed_view_mut::<3, 1>(3, c)
+                .copy_from(&(rho / ARM_STEP_RAD));
+        }
+        Some((at, twist))
+    }
 }
 
 /// The model the parameters stand for.
@@ -292,28 +321,14 @@ impl Problem<'_> {
         let delta = d.as_slice()[self.layout.arm_offset()..self.layout.robot_offset()].to_vec();
         for (f, frame) in self.frames.iter().enumerate() {
             let mut robot = frame.base_from_flange;
-            let mut twist = None;
-            if let Some(moved) = self.arm.as_ref().and_then(|a| a.flange_move(f, &delta)) {
-                let arm = self.arm.as_ref().expect("moved by the arm");
-                let at = robot * moved;
-                let mut columns = DMatrix::zeros(6, delta.len());
-                for c in 0..delta.len() {
-                    let mut stepped = delta.clone();
-                    stepped[c] += ARM_STEP_RAD;
-                    let next = robot * arm.flange_move(f, &stepped).expect("the same frame");
-                    let phi = (at.rotation.inverse() * next.rotation).scaled_axis();
-                    let rho = next.translation.vector - at.translation.vector;
-                    columns
-                        .fixed_view_mut::<3, 1>(0, c)
-                        .copy_from(&(phi / ARM_STEP_RAD));
-                    columns
-                        .fixed_view_mut::<3, 1>(3, c)
-                        .copy_from(&(rho / ARM_STEP_RAD));
-                }
-                robot = at;
-                twist = Some(columns);
+            let moved = self
+                .arm
+                .as_ref()
+                .and_then(|a| a.moved_flange(f, &robot, &delta));
+            if let Some((at, _)) = &moved {
+                robot = *at;
             }
-            arm_twists.push(twist);
+            arm_twists.push(moved.map(|(_, twist)| twist));
             if self.layout.robot > 0 {
                 let o = self.layout.robot_offset() + 6 * f;
                 let (phi, rho) = (v(o), v(o + 3));
