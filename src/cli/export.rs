@@ -10,13 +10,13 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye_core::atomic_file::write_atomic_reporting;
-use handeye_core::setup::RobotFrames;
+use handeye_core::yaml_file::FileError;
 use handeye_formats::export::{self, Exported};
 use handeye_formats::ExportFormat;
 
 use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
-use handeye_records::result::CamerasResultFile;
 use handeye_records::result::ResultFile;
+use handeye_records::result::SessionResult;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -155,16 +155,20 @@ pub(super) fn exported_result(
     if let Some(folder) = result.parent() {
         super::say_if_live(folder)?;
     }
-    let text = std::fs::read_to_string(result).ok();
-    let value: Option<serde_yaml_ng::Value> = text
-        .as_deref()
-        .and_then(|t| serde_yaml_ng::from_str::<serde_yaml_ng::Value>(t).ok());
+    // result.yaml is derived from the session's records: a layout this handeye does not write
+    // (an older one's) is solved again, not converted.
+    let solved = SessionResult::load(result).map_err(|e| {
+        let hint = matches!(e, FileError::Shape { .. }).then(|| {
+            format!(
+                "; if an older handeye wrote it, solve the session again: `handeye replay {} -o {}`",
+                result.parent().unwrap_or(std::path::Path::new(".")).display(),
+                result.display()
+            )
+        });
+        anyhow::anyhow!("{e}{}", hint.unwrap_or_default())
+    })?;
     // Which frames the robot poses are in (older results: the UR controller's `base`, `tool0`).
-    let robot: RobotFrames = match value.as_ref().and_then(|v| v.get("robot_frames")) {
-        Some(v) => serde_yaml_ng::from_value(v.clone())
-            .map_err(|e| anyhow::anyhow!("{}: robot_frames: {e}", result.display()))?,
-        None => RobotFrames::default(),
-    };
+    let robot = solved.robot_frames();
     let ids = &frames.ids(&robot)?;
     if export::base_turn(&ids.poses_in, &ids.base).is_some() {
         eprintln!(
@@ -174,22 +178,9 @@ pub(super) fn exported_result(
             ids.base
         );
     }
-    let several = value.filter(|v| v.get("cameras").is_some());
-    let exported = match several {
-        Some(value) => {
-            let cameras: CamerasResultFile = serde_yaml_ng::from_value(value).map_err(|e| {
-                // result.yaml is derived from the session's records: an older layout is
-                // solved again, not converted.
-                anyhow::anyhow!(
-                    "{}: not the several-camera result layout this handeye writes ({e}); solve the session again with `handeye replay {} -o {}`",
-                    result.display(),
-                    result.parent().unwrap_or(std::path::Path::new(".")).display(),
-                    result.display()
-                )
-            })?;
-            Exported::cameras(&cameras, ids)
-        }
-        None => Exported::one(&ResultFile::load_mounts(result)?, ids),
+    let exported = match &solved {
+        SessionResult::Cameras(cameras) => Exported::cameras(cameras, ids),
+        SessionResult::OneCamera(one) => Exported::one(&one.mounts(result)?, ids),
     };
     exported
         .check(ids)

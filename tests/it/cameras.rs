@@ -736,6 +736,36 @@ fn json_and_launch_exports_hold_every_camera_and_an_old_layout_says_replay() {
     }
 }
 
+/// The one-camera commands given a several-camera session's root say what it is, which
+/// commands take it whole and where each camera's own one-camera session is.
+#[test]
+fn one_camera_commands_given_the_several_camera_root_name_the_cameras_folders() {
+    let (_, out, _) = shipped_run();
+    for args in [
+        vec!["solve".into(), out.display().to_string()],
+        vec![
+            "verify".into(),
+            "--session".into(),
+            out.display().to_string(),
+        ],
+    ] {
+        let output = handeye().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("several-camera session")
+                && stderr.contains("handeye replay")
+                && stderr.contains("(left, right, wrist)"),
+            "{args:?}: {stderr}"
+        );
+        // The folder it names is one `handeye verify --session` reads.
+        assert!(
+            stderr.contains(&out.join("cameras").display().to_string()),
+            "{stderr}"
+        );
+    }
+}
+
 /// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every
 /// error names the camera and the key; the one-camera form is not taken for it.
 #[test]

@@ -664,6 +664,81 @@ fn result_file_round_trips_through_a_calibration() {
     }
 }
 
+/// One loader reads a session's result.yaml whichever cell wrote it, and `handeye report`'s
+/// library call writes the page of either: a one-camera session and the three-camera one
+/// give their own layout with the verdict the file holds; a file that is neither is refused
+/// naming the file and the key; a folder not solved yet is refused saying to solve it.
+#[test]
+fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
+    use handeye_records::result::SessionResult;
+    use handeye_report::session::write_folder_report;
+    let (_dir, path) = report();
+    // A copy: the page written here has only the file's answer, and the other tests read the
+    // run's page with both.
+    let scratch = tempfile::tempdir().unwrap();
+    let one = &scratch.path().join("one");
+    util::copy_folder(path.parent().unwrap(), one);
+    let result_path = one.join("result.yaml");
+    let read = SessionResult::load(&result_path).unwrap();
+    let file = ResultFile::load(&result_path).unwrap();
+    assert!(
+        matches!(&read, SessionResult::OneCamera(r) if **r == file),
+        "{read:?}"
+    );
+    assert_eq!(read.verdict(), file.verdict.as_ref());
+    let written = write_folder_report(one, None).unwrap();
+    assert_eq!(written.path, one.join("report.html"));
+    assert_eq!(written.verdict.as_ref(), file.verdict.as_ref());
+    assert!(written.lacking.is_empty(), "{:?}", written.lacking);
+    assert!(written.provisional.is_none());
+
+    let (_, cameras, _) = crate::cameras::shipped_run();
+    let read = SessionResult::load(&cameras.join("result.yaml")).unwrap();
+    let file = crate::cameras::read_result(cameras);
+    assert!(
+        matches!(&read, SessionResult::Cameras(r) if **r == file),
+        "{read:?}"
+    );
+    assert_eq!(read.verdict(), Some(&file.verdict));
+    assert_eq!(
+        read.robot_frames(),
+        file.robot_frames.clone().unwrap_or_default()
+    );
+    let written = write_folder_report(cameras, None).unwrap();
+    assert_eq!(written.path, cameras.join("report.html"));
+    assert_eq!(written.verdict.as_ref(), Some(&file.verdict));
+
+    // A one-camera file with a stray key and a several-camera one missing its verdict: each
+    // refused by its own layout's rules, naming the file and the key.
+    let stray = scratch.path().join("stray.yaml");
+    let text = std::fs::read_to_string(&result_path).unwrap();
+    std::fs::write(&stray, format!("{text}stray_key: 1\n")).unwrap();
+    let e = SessionResult::load(&stray).unwrap_err().to_string();
+    assert!(e.contains("stray.yaml") && e.contains("stray_key"), "{e}");
+    let unjudged = scratch.path().join("unjudged.yaml");
+    let mut value: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(cameras.join("result.yaml")).unwrap())
+            .unwrap();
+    value.as_mapping_mut().unwrap().remove("verdict");
+    std::fs::write(&unjudged, serde_yaml_ng::to_string(&value).unwrap()).unwrap();
+    let e = SessionResult::load(&unjudged).unwrap_err().to_string();
+    assert!(e.contains("unjudged.yaml") && e.contains("verdict"), "{e}");
+
+    // A session folder with records but no answer yet.
+    let unsolved = scratch.path().join("unsolved");
+    std::fs::create_dir(&unsolved).unwrap();
+    for file in ["session.yaml", "samples.yaml"] {
+        std::fs::copy(one.join(file), unsolved.join(file)).unwrap();
+    }
+    let e = write_folder_report(&unsolved, None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("result.yaml") && e.contains("handeye replay"),
+        "{e}"
+    );
+}
+
 /// Two answers side by side (here the refined and the iterative method on pose-space data with
 /// no frames): both in the transforms section and in the bar legends, each plot still once.
 #[test]

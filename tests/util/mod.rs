@@ -342,6 +342,16 @@ pub fn folder_bytes(root: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>>
     files
 }
 
+/// A copy of the folder `from` (every file, same relative paths) at `to`, for a test that writes
+/// into a session other tests of its binary read.
+pub fn copy_folder(from: &Path, to: &Path) {
+    for (file, bytes) in folder_bytes(from) {
+        let path = to.join(file);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, bytes).unwrap();
+    }
+}
+
 /// Every tag corner of `board` a camera `camera` sees from `camera_from_target`, its pixel off
 /// by `pixel_noise` (per axis), kept 5 px inside the image: a synthetic frame's detections.
 pub fn seen_corners(

@@ -39,6 +39,10 @@ use handeye_core::notice::Notice;
 use handeye_core::setup::{CornerObservation, PosePair, Setup};
 use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::{Joints, MAX_JOINTS};
+
+/// A solved session's answer, at its root (one camera's or a several-camera cell's: read it
+/// with [`SessionResult::load`](crate::result::SessionResult::load)).
+pub const RESULT_FILE: &str = "result.yaml";
 use handeye_vision::Target;
 
 /// Where a growing plan keeps the rejected records whose index the next pose reuses.
@@ -368,7 +372,7 @@ impl SessionFolder {
 
     /// `result.yaml`.
     pub fn result_path(&self) -> PathBuf {
-        self.root.join("result.yaml")
+        self.root.join(RESULT_FILE)
     }
 
     /// `import/notices.yaml`: what the session's input said about itself that its data do not

@@ -23,7 +23,9 @@ pub mod tf_static;
 
 use std::path::PathBuf;
 
-pub use folder::{dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest};
+pub use folder::{
+    dated_session_path, PlannedPose, PoseVisit, SessionFolder, SessionManifest, RESULT_FILE,
+};
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::{live_run, refuse_live, LiveRun, SessionLock};
 pub use solve::{
@@ -308,6 +310,22 @@ fn describe_disagreement(missing: &[String], extra: &[String]) -> String {
 fn not_a_session_hint(root: &std::path::Path) -> String {
     if let Some(at) = handeye_core::yaml_file::symlink_loop(&root.join("session.yaml")) {
         format!(": symlink loop at {}", at.display())
+    } else if root.join("rig.yaml").is_file() {
+        // A several-camera session: its root holds the cameras' folders, each a one-camera
+        // session of the same poses.
+        let mut names: Vec<String> = std::fs::read_dir(root.join("cameras"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| e.path().join("session.yaml").is_file())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        format!(
+            "; it is a several-camera session (rig.yaml): `handeye replay`, `report` and `export` take it whole, and each camera's samples are the one-camera session {} ({})",
+            root.join("cameras").join("<name>").display(),
+            names.join(", ")
+        )
     } else if root.join("poses").is_dir() || root.join("frames").is_dir() {
         format!(
             "; a run stopped before it wrote session.yaml recorded nothing: start it again with `handeye run --config <cell.yaml> --output {}`",

@@ -31,12 +31,59 @@ use handeye_core::geometry::{Pose, PoseRecord};
 use handeye_core::notice::Notice;
 use handeye_core::setup::{CellTransforms, PosePair, RobotFrames, Setup};
 use handeye_core::yaml_file::SchemaVersion;
-use handeye_core::yaml_file::{read_yaml, write_yaml, FileError};
+use handeye_core::yaml_file::{parse_yaml, read_text, read_yaml, write_yaml, FileError};
 use handeye_solve::verdict::Verdict;
 use handeye_solve::{
     Calibration, Method, Phase, PoseNoise, PoseSigma, Residuals, SolverReport, TraceStep,
     Uncertainty,
 };
+
+/// A session's `result.yaml`, whichever cell wrote it: one camera's answer ([`ResultFile`]) or a
+/// several-camera cell's ([`CamerasResultFile`], the one with a `cameras:` list). Read through
+/// [`SessionResult::load`], the one place that tells them apart.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SessionResult {
+    /// One camera.
+    OneCamera(Box<ResultFile>),
+    /// Several cameras.
+    Cameras(Box<CamerasResultFile>),
+}
+
+impl SessionResult {
+    /// Reads a result file of either layout: a top-level `cameras:` key is a several-camera
+    /// cell's; errors name the file, the key and the line as every result read does.
+    pub fn load(path: &Path) -> Result<SessionResult, FileError> {
+        let text = read_text(path)?;
+        // Only the top-level keys decide; a file that is not a mapping is left to the
+        // one-camera reader, whose error says what a result looks like.
+        let several = serde_yaml_ng::from_str::<serde_yaml_ng::Mapping>(&text)
+            .is_ok_and(|keys| keys.contains_key("cameras"));
+        Ok(if several {
+            SessionResult::Cameras(Box::new(parse_yaml(&text, path)?))
+        } else {
+            SessionResult::OneCamera(Box::new(parse_yaml(&text, path)?))
+        })
+    }
+
+    /// The frames the robot poses were read in (files written before it: the UR controller's
+    /// `base` and `tool0`).
+    pub fn robot_frames(&self) -> RobotFrames {
+        match self {
+            SessionResult::OneCamera(one) => one.robot_frames.clone(),
+            SessionResult::Cameras(cameras) => cameras.robot_frames.clone(),
+        }
+        .unwrap_or_default()
+    }
+
+    /// The verdict recorded with the answer (a one-camera file written before verdicts has
+    /// none); a several-camera file's is the cell's.
+    pub fn verdict(&self) -> Option<&Verdict> {
+        match self {
+            SessionResult::OneCamera(one) => one.verdict.as_ref(),
+            SessionResult::Cameras(cameras) => Some(&cameras.verdict),
+        }
+    }
+}
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -4,7 +4,7 @@
 //! transforms. Renders `result.yaml` as written; judges nothing. Self-contained HTML.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use handeye_core::atomic_file::write_atomic;
 use handeye_core::geometry::rotvec;
@@ -284,17 +284,6 @@ fn use_section(html: &mut String, result: &CamerasResultFile) {
         );
     }
     html.push_str("</div></section>");
-}
-
-/// Writes `<folder>/report.html` from the folder's `result.yaml` (`handeye report DIR`);
-/// returns its path.
-pub fn write_cameras_folder_report(folder: &Path) -> Result<PathBuf, ReportError> {
-    let result_path = folder.join("result.yaml");
-    let result = CamerasResultFile::load(&result_path)
-        .map_err(|e| ReportError::Session(Box::new(handeye_records::SessionError::from(e))))?;
-    let path = folder.join("report.html");
-    write_cameras_report(&result, folder, &path)?;
-    Ok(path)
 }
 
 /// Writes the page of `result`, the answer of the session in `folder`, to `path`.

@@ -133,6 +133,14 @@ pub enum ReportError {
         /// The plotting error.
         message: String,
     },
+    /// The session has no answer to show: its `result.yaml` is missing or unusable.
+    #[error("{}: no usable result: {why}", path.display())]
+    NotSolved {
+        /// The session's result file.
+        path: PathBuf,
+        /// Why, and what to do.
+        why: String,
+    },
     /// A session file could not be read.
     #[error("reading the session for the report failed")]
     Session(#[source] Box<handeye_records::SessionError>),

@@ -17,6 +17,7 @@ use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_records::dataset::Dataset;
+use handeye_records::result::SessionResult;
 use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
@@ -366,26 +367,98 @@ pub fn write_replay_report(
     )
 }
 
-/// Writes `<session>/report.html` for a session folder solved earlier (`handeye report DIR`):
-/// the folder's records read through the session loader, `answer` and `verdict` from its
-/// `result.yaml`, the board and lens from `config` when it loads. Returns the path written
-/// and what the page lacks and why (a board or intrinsics file that cannot be read: no frames).
+/// What [`write_folder_report`] wrote.
+#[derive(Debug)]
+pub struct FolderReport {
+    /// The page.
+    pub path: std::path::PathBuf,
+    /// The verdict `result.yaml` holds (for several cameras, the cell's).
+    pub verdict: Option<Verdict>,
+    /// What the page lacks and why (a config, board or intrinsics file that cannot be read: no
+    /// frames or reprojection errors).
+    pub lacking: Vec<String>,
+    /// The run still recording the session, when one is: the page is of the answer an earlier
+    /// part of it wrote, and says so.
+    pub provisional: Option<handeye_records::LiveRun>,
+}
+
+/// Writes `<session>/report.html` for a session folder solved earlier (`handeye report DIR`),
+/// one camera's or a several-camera cell's, from its `result.yaml` and its records; the board
+/// and lens from `config` (default: the config the session was recorded with) when it loads.
+/// While a run is still recording the session, the page is of the result an earlier part of
+/// it wrote (refused when there is none yet).
 pub fn write_folder_report(
-    folder: &SessionFolder,
-    config: Option<&handeye_config::CellConfig>,
-    answer: Calibration,
-    verdict: Option<Verdict>,
-    robot_frames: RobotFrames,
-    arm: Option<handeye_records::result::KinematicsYaml>,
-) -> Result<(std::path::PathBuf, Vec<String>), ReportError> {
+    dir: &std::path::Path,
+    config: Option<&std::path::Path>,
+) -> Result<FolderReport, ReportError> {
     let session_error = |e: SessionError| ReportError::Session(Box::new(e));
+    let provisional = handeye_records::live_run(dir).map_err(session_error)?;
+    let result_path = dir.join(handeye_records::RESULT_FILE);
+    if let Some(run) = &provisional {
+        // Without a result there is nothing to report yet; the run writes both when it ends.
+        if !result_path.is_file() {
+            return Err(ReportError::NotSolved {
+                path: result_path,
+                why: format!(
+                    "{run}; it writes result.yaml and report.html when it ends (`handeye solve {}` gives a provisional answer now)",
+                    dir.display()
+                ),
+            });
+        }
+    }
+    let not_solved = |e: handeye_core::yaml_file::FileError| ReportError::NotSolved {
+        path: result_path.clone(),
+        why: format!(
+            "{e}; solve the session first: `handeye replay {}`",
+            dir.display()
+        ),
+    };
+    let result = SessionResult::load(&result_path).map_err(not_solved)?;
+    let verdict = result.verdict().cloned();
+    let result = match result {
+        SessionResult::Cameras(cameras) => {
+            let path = dir.join(REPORT_FILE);
+            super::cameras::write_cameras_report(&cameras, dir, &path)?;
+            return Ok(FolderReport {
+                path,
+                verdict,
+                lacking: Vec::new(),
+                provisional,
+            });
+        }
+        SessionResult::OneCamera(one) => one,
+    };
+    let folder = SessionFolder::open(dir).map_err(session_error)?;
+    let mut lacking = Vec::new();
+    let config_path = match config {
+        Some(path) => path.to_path_buf(),
+        None => folder.read_manifest().map_err(session_error)?.config,
+    };
+    let config = match handeye_config::CellConfig::load(&config_path)
+        .and_then(handeye_config::CellConfig::single_camera)
+    {
+        Ok(config) => Some(config),
+        Err(e) => {
+            lacking.push(format!(
+                "{e}; the report will have no thumbnails or reprojection errors"
+            ));
+            None
+        }
+    };
+    let mut calibration = result.to_calibration(&result_path).map_err(not_solved)?;
+    if let Some(run) = &provisional {
+        // The page's findings say it too.
+        calibration
+            .notices
+            .insert(0, handeye_records::solve::provisional_notice(run));
+    }
+    let config = config.as_ref();
     let evidence = Evidence {
         pairs: Dataset::load(&folder.samples_path())
             .map_err(|e| session_error(SessionError::File(e)))?
             .pairs,
         visits: folder.read_visits().map_err(session_error)?,
     };
-    let mut lacking = Vec::new();
     let board = config.and_then(|c| match Target::load(&c.camera().target) {
         Ok(board) => Some(board),
         Err(e) => {
@@ -409,20 +482,25 @@ pub fn write_folder_report(
         _ => None,
     };
     let path = write(
-        folder,
+        &folder,
         &evidence,
-        vec![Answer::ResultFile(answer)],
+        vec![Answer::ResultFile(calibration)],
         Page {
             optics,
-            verdict,
+            verdict: verdict.clone(),
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.camera().nominal),
-            robot_frames,
-            arm,
+            robot_frames: result.robot_frames.clone().unwrap_or_default(),
+            arm: result.kinematics.clone(),
             path: folder.root().join(REPORT_FILE),
         },
     )?;
-    Ok((path, lacking))
+    Ok(FolderReport {
+        path,
+        verdict,
+        lacking,
+        provisional,
+    })
 }
 
 /// What a session's page shows besides its evidence and answers.
