@@ -2,7 +2,7 @@
 //! holdout run on the cell (`--config` + `--result`) or leave-one-out on recorded data
 //! (`--session` or `--dataset`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::Args;
@@ -11,10 +11,10 @@ use handeye_config::CellConfig;
 use handeye_core::atomic_file::write_atomic;
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::ResultFile;
+use handeye_records::result::SessionResult;
 use handeye_records::SessionFolder;
 use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
-use handeye_session::cell::PreparedCell;
+use handeye_session::cell::{cameras, PreparedCell};
 use handeye_session::verify;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
@@ -58,7 +58,14 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 "verify its result on the cell when the run has ended: the arm is the run's until then",
             )?;
         }
-        let mounts = ResultFile::load_mounts(result)?;
+        let mounts = match SessionResult::load(result)? {
+            SessionResult::OneCamera(file) => file.mounts(result)?,
+            SessionResult::Cameras(_) => bail!(
+                "{}: a several-camera result: a held-out run checks one camera's answer (`handeye verify --session {}` checks each camera's samples by leave-one-out)",
+                result.display(),
+                result.parent().unwrap_or(Path::new(".")).display()
+            ),
+        };
         let cell_config = CellConfig::load(config)
             .and_then(CellConfig::single_camera)
             .context("reading the cell config")?;
@@ -77,7 +84,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         };
         let out = args.out.clone().unwrap_or_else(|| {
             handeye_records::dated_session_path(
-                std::path::Path::new("sessions"),
+                Path::new("sessions"),
                 "verify-",
                 std::time::SystemTime::now(),
             )
@@ -99,6 +106,13 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     // The session's own solver options and accuracy when its config loads; the defaults else.
+    if let Some(root) = args
+        .session
+        .as_deref()
+        .filter(|d| cameras::is_cameras_folder(d))
+    {
+        return verify_cameras_session(root);
+    }
     let (setup, pairs, config) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         if let Some(run) = folder.live_run() {
@@ -128,6 +142,38 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     let v = verify::leave_one_out(setup, &pairs, &options)?;
     outln!("{}", v.table());
     outln!("{}", v.verdict(&accuracy).1);
+    Ok(())
+}
+
+/// `verify --session ROOT` of a several-camera session: each camera's samples by leave-one-out
+/// as for one camera (a camera's folder is a one-camera session of the same poses), with the
+/// cell's solver options and accuracy; a camera with too few samples is named and the others
+/// checked.
+fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
+    super::say_if_live(root)?;
+    let manifest = cameras::read_manifest(root)?;
+    let config = CellConfig::load(&manifest.config).ok();
+    let options = config
+        .as_ref()
+        .map(|c| c.solver.to_options())
+        .unwrap_or_default();
+    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
+    for camera in &manifest.cameras {
+        let samples =
+            SessionFolder::open(&cameras::camera_folder(root, &camera.name))?.samples_path();
+        if !samples.is_file() {
+            outln!("camera `{}`: no samples recorded", camera.name);
+            continue;
+        }
+        let dataset = Dataset::load(&samples)?;
+        match verify::leave_one_out(dataset.setup, &dataset.pairs, &options) {
+            Ok(v) => {
+                outln!("camera `{}`: {}", camera.name, v.table());
+                outln!("{}", v.verdict(&accuracy).1);
+            }
+            Err(e) => outln!("camera `{}`: {e}", camera.name),
+        }
+    }
     Ok(())
 }
 

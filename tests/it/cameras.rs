@@ -736,34 +736,78 @@ fn json_and_launch_exports_hold_every_camera_and_an_old_layout_says_replay() {
     }
 }
 
-/// The one-camera commands given a several-camera session's root say what it is, which
-/// commands take it whole and where each camera's own one-camera session is.
+/// `handeye verify --session ROOT` of a several-camera session checks each camera's samples by
+/// leave-one-out as for one camera — the figures its verdict in result.yaml holds, its flagged
+/// samples named and left out as there; a held-out run of the several-camera result is refused naming it, and
+/// `handeye solve ROOT` (one camera's command) says what the folder is and where each camera's
+/// own session is.
 #[test]
-fn one_camera_commands_given_the_several_camera_root_name_the_cameras_folders() {
-    let (_, out, _) = shipped_run();
-    for args in [
-        vec!["solve".into(), out.display().to_string()],
-        vec![
-            "verify".into(),
-            "--session".into(),
-            out.display().to_string(),
-        ],
-    ] {
-        let output = handeye().args(&args).output().unwrap();
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(output.status.code(), Some(1), "{args:?}: {stderr}");
-        assert!(
-            stderr.contains("several-camera session")
-                && stderr.contains("handeye replay")
-                && stderr.contains("(left, right, wrist)"),
-            "{args:?}: {stderr}"
+fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() {
+    let (config, out, _) = shipped_run();
+    let result = read_result(out);
+    let verify = handeye()
+        .args(["verify", "--session"])
+        .arg(out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&verify.stdout);
+    assert!(
+        verify.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&verify.stderr)
+    );
+    for camera in &result.cameras {
+        let part = stdout
+            .split(&format!("camera `{}`: ", camera.name))
+            .nth(1)
+            .unwrap_or_else(|| panic!("no camera {}: {stdout}", camera.name));
+        let line = part.lines().find(|l| l.starts_with("verdict: ")).unwrap();
+        let held = camera.held_out.as_ref().unwrap();
+        let expected = format!(
+            "error {:.2} mm, {:.3}° (RMS over {} poses)",
+            held.translation_rms_mm, held.rotation_rms_deg, held.poses
         );
-        // The folder it names is one `handeye verify --session` reads.
         assert!(
-            stderr.contains(&out.join("cameras").display().to_string()),
-            "{stderr}"
+            line.contains(&expected),
+            "{}: {line} vs {expected}",
+            camera.name
         );
+        // The samples its figure leaves out are named in the table and the verdict.
+        let flagged = camera.samples - held.poses;
+        let table = part.split("verdict: ").next().unwrap();
+        assert_eq!(
+            table.matches("outlier (not in the RMS)").count(),
+            flagged,
+            "{part}"
+        );
+        assert_eq!(flagged > 0, line.contains("flagged as"), "{line}");
     }
+
+    let holdout = handeye()
+        .arg("verify")
+        .arg("--config")
+        .arg(config)
+        .arg("--result")
+        .arg(out.join("result.yaml"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&holdout.stderr);
+    assert_eq!(holdout.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("several-camera result") && stderr.contains("verify --session"),
+        "{stderr}"
+    );
+
+    let solve = handeye().arg("solve").arg(out).output().unwrap();
+    let stderr = String::from_utf8_lossy(&solve.stderr);
+    assert_eq!(solve.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("several-camera session")
+            && stderr.contains("handeye replay")
+            && stderr.contains("(left, right, wrist)")
+            && stderr.contains(&out.join("cameras").display().to_string()),
+        "{stderr}"
+    );
 }
 
 /// The `cameras:` form is read by its own rules and each camera by the one-camera rules; every

@@ -153,6 +153,20 @@ fn leave_one_out_points_at_a_corrupted_sample() {
     assert_eq!(worst.index, 5, "{}", v.table());
     // Predicted from the 11 clean samples, sample 5 is off by the full 5 mm.
     assert!((worst.translation_mm - 5.0).abs() < 0.05, "{}", v.table());
+    // The solve of every sample flags it: listed and marked, left out of the summary as the
+    // calibration's own held-out check leaves it out, and named by a CHECK.
+    assert_eq!(v.outliers, [5], "{}", v.table());
+    assert_eq!(v.summary.poses, 11);
+    assert!(v.summary.translation_max_mm < 0.05, "{}", v.table());
+    let table = v.table();
+    assert_eq!(
+        table.matches("outlier (not in the RMS)").count(),
+        1,
+        "{table}"
+    );
+    let (level, line) = v.verdict(&Default::default());
+    assert_eq!(level, handeye_solve::verdict::Level::Check, "{line}");
+    assert!(line.contains("sample 5 is flagged as an outlier"), "{line}");
 }
 
 /// `handeye verify --config --result`: a holdout session recorded through the one run, its

@@ -62,8 +62,13 @@ pub struct Verification {
     pub kind: String,
     /// Per pose.
     pub poses: Vec<PredictionError>,
-    /// Summary.
+    /// Summary (of the poses not in `outliers`).
     pub summary: ErrorSummary,
+    /// Leave-one-out: the samples the solve of every sample flagged as outliers. Their errors
+    /// are listed but not summarised, as the calibration's own held-out check leaves them out
+    /// (`verdict::held_out`): the two give one figure for one session.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outliers: Vec<usize>,
 }
 
 /// Why a verification could not run.
@@ -171,6 +176,7 @@ pub fn compare(
         kind: "holdout".into(),
         summary: summarise(&poses),
         poses,
+        outliers: Vec::new(),
     }
 }
 
@@ -200,10 +206,16 @@ pub fn leave_one_out(
             &p.camera_from_target,
         ));
     }
+    let judged: Vec<PredictionError> = poses
+        .iter()
+        .filter(|p| !full.outliers.contains(&p.index))
+        .cloned()
+        .collect();
     Ok(Verification {
         kind: "leave-one-out".into(),
-        summary: summarise(&poses),
+        summary: summarise(&judged),
         poses,
+        outliers: full.outliers,
     })
 }
 
@@ -248,12 +260,37 @@ pub fn holdout(
 
 impl Verification {
     /// The verdict on the errors against `accuracy` (the verdict's bands: GOOD within it, CHECK
-    /// up to 3×, REDO beyond) and the line that says it, with what to do.
+    /// up to 3×, REDO beyond; samples flagged as outliers make it at least CHECK, as they make
+    /// the calibration's) and the line that says it, with what to do.
     pub fn verdict(&self, accuracy: &Accuracy) -> (Level, String) {
         let s = &self.summary;
-        let level = accuracy.level_of(s.translation_rms_mm, s.rotation_rms_deg);
+        let measured = accuracy.level_of(s.translation_rms_mm, s.rotation_rms_deg);
+        let advice = match (measured, self.kind == "holdout") {
+            (Level::Good, _) => "",
+            // Fresh poses disagree with the result: the cell changed since, or the result
+            // was off where the calibration poses did not reach.
+            (Level::Check, true) => ": was the camera or the board moved since the calibration? If not, calibrate again with poses that cover where these are (the largest errors are listed above)",
+            (Level::Redo, true) => ": do not use this result; if nothing moved since the calibration, calibrate again with poses that cover where these are",
+            // The calibration's own samples disagree with each other.
+            (_, false) => ": the samples disagree with each other: look at the largest errors above (a frame or robot pose recorded wrong) and record more poses with larger, more varied rotations",
+        };
+        // Flagged samples are named, never dropped in silence.
+        let (level, flagged) = match self.outliers.as_slice() {
+            [] => (measured, String::new()),
+            [one] => (
+                measured.max(Level::Check),
+                format!("; sample {one} is flagged as an outlier by the solve of every sample and not in the RMS (as the calibration leaves it out): look at it (a frame or robot pose recorded wrong)"),
+            ),
+            several => (
+                measured.max(Level::Check),
+                format!(
+                    "; samples {} are flagged as outliers by the solve of every sample and not in the RMS (as the calibration leaves them out): look at them (a frame or robot pose recorded wrong)",
+                    several.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
+                ),
+            ),
+        };
         let line = format!(
-            "verdict: {} — {} error {:.2} mm, {:.3}° (RMS over {} poses) against the {} mm, {}° asked for{}",
+            "verdict: {} — {} error {:.2} mm, {:.3}° (RMS over {} poses) against the {} mm, {}° asked for{advice}{flagged}",
             level.word(),
             self.kind,
             s.translation_rms_mm,
@@ -261,15 +298,6 @@ impl Verification {
             s.poses,
             accuracy.translation_mm,
             accuracy.rotation_deg,
-            match (level, self.kind == "holdout") {
-                (Level::Good, _) => "",
-                // Fresh poses disagree with the result: the cell changed since, or the result
-                // was off where the calibration poses did not reach.
-                (Level::Check, true) => ": was the camera or the board moved since the calibration? If not, calibrate again with poses that cover where these are (the largest errors are listed above)",
-                (Level::Redo, true) => ": do not use this result; if nothing moved since the calibration, calibrate again with poses that cover where these are",
-                // The calibration's own samples disagree with each other.
-                (_, false) => ": the samples disagree with each other: look at the largest errors above (a frame or robot pose recorded wrong) and record more poses with larger, more varied rotations",
-            }
         );
         (level, line)
     }
@@ -281,11 +309,16 @@ impl Verification {
         for p in &self.poses {
             let _ = writeln!(
                 out,
-                "  {:>3} {:<10} {:>9.4}° {:>9.3} mm",
+                "  {:>3} {:<10} {:>9.4}° {:>9.3} mm{}",
                 p.index,
                 p.id.as_deref().unwrap_or(""),
                 p.rotation_deg,
-                p.translation_mm
+                p.translation_mm,
+                if self.outliers.contains(&p.index) {
+                    "  outlier (not in the RMS)"
+                } else {
+                    ""
+                }
             );
         }
         let s = &self.summary;
