@@ -113,6 +113,9 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     {
         return verify_cameras_session(root);
     }
+    // A session's recorded answer flags its outliers after its pixel fit: those are the
+    // samples its held-out figure left out.
+    let mut recorded_outliers = None;
     let (setup, pairs, config) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         if let Some(run) = folder.live_run() {
@@ -124,6 +127,16 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             outln!("provisional: {run}; this check is of the samples so far: verify again when the run has ended");
         }
         let dataset = Dataset::load(&folder.samples_path())?;
+        // Only a final answer of these very samples (not a run's earlier one, nor that of a
+        // resumed session not solved since).
+        if folder.live_run().is_none() {
+            if let Ok(SessionResult::OneCamera(result)) = SessionResult::load(&folder.result_path())
+            {
+                if result.residuals.samples.len() == dataset.pairs.len() {
+                    recorded_outliers = Some(result.outliers);
+                }
+            }
+        }
         let config = CellConfig::load(&folder.read_manifest()?.config)
             .and_then(CellConfig::single_camera)
             .ok();
@@ -139,7 +152,10 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         .map(|c| c.solver.to_options())
         .unwrap_or_default();
     let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
-    let v = verify::leave_one_out(setup, &pairs, &options)?;
+    let mut v = verify::leave_one_out(setup, &pairs, &options)?;
+    if let Some(outliers) = recorded_outliers {
+        v = v.with_outliers(outliers);
+    }
     outln!("{}", v.table());
     outln!("{}", v.verdict(&accuracy).1);
     Ok(())

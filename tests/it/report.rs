@@ -688,6 +688,20 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
     assert_eq!(read.verdict(), file.verdict.as_ref());
     let written = write_folder_report(one, None).unwrap();
     assert_eq!(written.path, one.join("report.html"));
+    // `handeye verify --session` gives the held-out figure the verdict holds (its samples, the
+    // answer's own outlier flags).
+    let held = file.verdict.as_ref().unwrap().figures.held_out.unwrap();
+    let verify = util::handeye()
+        .args(["verify", "--session"])
+        .arg(one)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&verify.stdout);
+    let expected = format!(
+        "error {:.2} mm, {:.3}° (RMS over {} poses)",
+        held.translation_rms_mm, held.rotation_rms_deg, held.poses
+    );
+    assert!(stdout.contains(&expected), "{stdout} vs {expected}");
     assert_eq!(written.verdict.as_ref(), file.verdict.as_ref());
     assert!(written.lacking.is_empty(), "{:?}", written.lacking);
     assert!(written.provisional.is_none());

@@ -64,8 +64,9 @@ pub struct Verification {
     pub poses: Vec<PredictionError>,
     /// Summary (of the poses not in `outliers`).
     pub summary: ErrorSummary,
-    /// Leave-one-out: the samples the solve of every sample flagged as outliers. Their errors
-    /// are listed but not summarised, as the calibration's own held-out check leaves them out
+    /// Leave-one-out: the samples the calibration flags as outliers (the solve of every sample,
+    /// or the session's recorded answer: [`Verification::with_outliers`]). Their errors are
+    /// listed but not summarised, as the calibration's own held-out check leaves them out
     /// (`verdict::held_out`): the two give one figure for one session.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outliers: Vec<usize>,
@@ -206,17 +207,13 @@ pub fn leave_one_out(
             &p.camera_from_target,
         ));
     }
-    let judged: Vec<PredictionError> = poses
-        .iter()
-        .filter(|p| !full.outliers.contains(&p.index))
-        .cloned()
-        .collect();
     Ok(Verification {
         kind: "leave-one-out".into(),
-        summary: summarise(&judged),
+        summary: summarise(&poses),
         poses,
-        outliers: full.outliers,
-    })
+        outliers: Vec::new(),
+    }
+    .with_outliers(full.outliers))
 }
 
 /// Holdout verification on the cell: views generated from `spec` (a seed the calibration did not
@@ -279,12 +276,12 @@ impl Verification {
             [] => (measured, String::new()),
             [one] => (
                 measured.max(Level::Check),
-                format!("; sample {one} is flagged as an outlier by the solve of every sample and not in the RMS (as the calibration leaves it out): look at it (a frame or robot pose recorded wrong)"),
+                format!("; sample {one} is flagged as an outlier by the calibration and not in the RMS (as its own held-out check leaves it out): look at it (a frame or robot pose recorded wrong)"),
             ),
             several => (
                 measured.max(Level::Check),
                 format!(
-                    "; samples {} are flagged as outliers by the solve of every sample and not in the RMS (as the calibration leaves them out): look at them (a frame or robot pose recorded wrong)",
+                    "; samples {} are flagged as outliers by the calibration and not in the RMS (as its own held-out check leaves them out): look at them (a frame or robot pose recorded wrong)",
                     several.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
                 ),
             ),
@@ -300,6 +297,21 @@ impl Verification {
             accuracy.rotation_deg,
         );
         (level, line)
+    }
+
+    /// The same errors with `outliers` as the flagged samples, left out of the summary: the
+    /// calibration's own flags (a session's recorded answer, whose held-out figure left them
+    /// out; its pixel fit may have cleared flags a pose-space solve raises).
+    pub fn with_outliers(mut self, outliers: Vec<usize>) -> Verification {
+        let judged: Vec<PredictionError> = self
+            .poses
+            .iter()
+            .filter(|p| !outliers.contains(&p.index))
+            .cloned()
+            .collect();
+        self.summary = summarise(&judged);
+        self.outliers = outliers;
+        self
     }
 
     /// A table for a terminal: one line per pose, then the summary.
