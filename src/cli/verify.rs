@@ -38,7 +38,8 @@ pub(super) struct VerifyArgs {
     /// Do not ask for confirmation before moving a real robot (holdout on a real cell).
     #[arg(long)]
     yes: bool,
-    /// Leave-one-out cross-validation of a session folder's samples.
+    /// Leave-one-out cross-validation of a session folder's samples (a several-camera
+    /// session's: each camera's).
     #[arg(long, conflicts_with = "dataset")]
     session: Option<PathBuf>,
     /// Leave-one-out cross-validation of a dataset file (its setup is in the file).
