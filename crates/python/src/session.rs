@@ -12,7 +12,7 @@ use handeye_config::{CellConfig, SolveSpace};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::{CamerasResultFile, ResultFile};
+use handeye_records::result::{CamerasResultFile, SessionResult};
 use handeye_records::{SessionFolder, SolveInputs};
 use handeye_session::cell::cameras;
 use pyo3::prelude::*;
@@ -48,7 +48,20 @@ pub(crate) fn read_dataset(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, 
 /// Reads a result file (`handeye solve -o`, a session's `result.yaml`) as a [`Calibration`]
 /// with the verdict it holds; `pairs` are its samples when known (for ids).
 fn read_result(py: Python<'_>, path: &Path, pairs: Vec<PosePair>) -> PyResult<Calibration> {
-    let file = ResultFile::load(path).map_err(|e| errors::from_error(py, &e))?;
+    let file = match SessionResult::load(path).map_err(|e| errors::from_error(py, &e))? {
+        SessionResult::OneCamera(file) => *file,
+        // One Calibration is one camera's answer: the cell's is the session's `joint`.
+        SessionResult::Cameras(_) => {
+            return Err(errors::input(
+                py,
+                format!(
+                    "{}: a several-camera result: read it with handeye.Session({:?}), whose .joint holds every transform and .cameras[name] each camera's own session",
+                    path.display(),
+                    path.parent().unwrap_or(Path::new(".")).display().to_string()
+                ),
+            ))
+        }
+    };
     let inner = file
         .to_calibration(path)
         .map_err(|e| errors::from_error(py, &e))?;

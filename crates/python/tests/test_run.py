@@ -92,6 +92,9 @@ def test_a_cell_with_several_cameras_runs_to_its_joint_answer_and_report(tmp_pat
     with pytest.raises(handeye.InputError, match=r'has 3 cameras \(wrist, left, right\): `result` is each camera\'s, session.cameras\["wrist"\].result; the joint answer is session.joint'):
         session.result
     assert handeye.Session(out).joint["transforms"].keys() == joint["transforms"].keys()
+    # The cell's result.yaml is no one camera's Calibration: read_result says where it is read.
+    with pytest.raises(handeye.InputError, match=r"a several-camera result: read it with handeye.Session\(.*three.*\), whose .joint"):
+        handeye.read_result(out / "result.yaml")
 
 
 def test_run_records_and_solves_what_the_cli_does(sim_session, tmp_path):
