@@ -120,7 +120,10 @@ pub fn remove_stale_temp_files(folder: &Path, scope: TempScope<'_>) -> Vec<Remov
             continue;
         }
         let path = entry.path();
-        if let Some(bytes) = remove_if_unlocked(&path) {
+        // Beside live writers, an empty unlocked one may be a writer about to lock it; a folder
+        // owned under its lock has no other writer.
+        let grace = !matches!(scope, TempScope::OwnedFolder);
+        if let Some(bytes) = remove_if_unlocked(&path, grace) {
             removed.push(RemovedTemp { path, bytes });
         }
     }
@@ -128,10 +131,11 @@ pub fn remove_stale_temp_files(folder: &Path, scope: TempScope<'_>) -> Vec<Remov
     removed
 }
 
-/// Removes the regular file `path` when its lock can be taken; its size when removed.
-fn remove_if_unlocked(path: &Path) -> Option<u64> {
+/// Removes the regular file `path` when its lock can be taken (with `grace`, not while it is
+/// [`just_created`]); its size when removed.
+fn remove_if_unlocked(path: &Path, grace: bool) -> Option<u64> {
     let before = std::fs::symlink_metadata(path).ok()?;
-    if !before.is_file() {
+    if !before.is_file() || (grace && just_created(&before)) {
         return None;
     }
     let file = File::open(path).ok()?;
@@ -145,6 +149,23 @@ fn remove_if_unlocked(path: &Path) -> Option<u64> {
     }
     std::fs::remove_file(path).ok()?;
     Some(before.len())
+}
+
+/// How long an empty, unlocked temporary file is taken for a writer still between creating and
+/// locking it (an instant; under load, a little more): a killed writer's is removed by a sweep
+/// after this, and a live one is neither removed (it would retry under another name) nor
+/// reported as a killed write.
+const JUST_CREATED: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Whether a temporary file is empty and younger than [`JUST_CREATED`] (a modification time in
+/// the future counts as young).
+fn just_created(metadata: &std::fs::Metadata) -> bool {
+    metadata.len() == 0
+        && metadata.modified().is_ok_and(|modified| {
+            std::time::SystemTime::now()
+                .duration_since(modified)
+                .map_or(true, |age| age < JUST_CREATED)
+        })
 }
 
 /// Whether the open `file` is the file at `path` now (not removed, renamed away or replaced
@@ -290,6 +311,41 @@ mod tests {
         // A long destination name keeps its temporary file's name within 255 bytes.
         let long = "é".repeat(120);
         assert!(temp_prefix(Path::new(&long)).len() <= MAX_NAME_IN_TEMP + 2);
+    }
+
+    /// A writer between creating its temporary file and locking it leaves it empty and unlocked
+    /// for an instant: a sweep then (another thread's write into the folder) leaves it, where it
+    /// used to remove it and warn of a killed write; an empty one left by a writer killed there
+    /// goes once it is older than a live writer's could be.
+    #[test]
+    fn an_empty_temp_being_created_is_left_and_an_old_one_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let creating = dir.path().join(format!(".003.png.Cr3ate{TEMP_SUFFIX}"));
+        File::create(&creating).unwrap();
+        let removed = write_atomic_reporting(&dir.path().join("004.png"), b"png").unwrap();
+        assert!(removed.is_empty() && creating.exists(), "{removed:?}");
+        let old = std::time::SystemTime::now() - JUST_CREATED * 2;
+        File::options()
+            .write(true)
+            .open(&creating)
+            .unwrap()
+            .set_modified(old)
+            .unwrap();
+        let removed = write_atomic_reporting(&dir.path().join("005.png"), b"png").unwrap();
+        assert_eq!(
+            removed,
+            vec![RemovedTemp {
+                path: creating.clone(),
+                bytes: 0
+            }]
+        );
+        assert!(!creating.exists());
+        // A folder owned under its lock (a resumed session's) has no writer between creating and
+        // locking: its sweep takes a young empty one too.
+        File::create(&creating).unwrap();
+        let removed = remove_stale_temp_files(dir.path(), TempScope::OwnedFolder);
+        assert_eq!(removed.len(), 1);
+        assert!(!creating.exists());
     }
 
     #[test]
