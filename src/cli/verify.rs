@@ -16,6 +16,8 @@ use handeye_records::SessionFolder;
 use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye_session::cell::{cameras, PreparedCell};
 use handeye_session::verify;
+use handeye_solve::verdict::Accuracy;
+use handeye_solve::SolveOptions;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
 #[derive(Debug, Args)]
@@ -148,11 +150,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     } else {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
-    let options = config
-        .as_ref()
-        .map(|c| c.solver.to_options())
-        .unwrap_or_default();
-    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
+    let (options, accuracy) = judged_as(config);
     let mut v = verify::leave_one_out(setup, &pairs, &options)?;
     if let Some(outliers) = recorded_outliers {
         v = v.with_outliers(outliers);
@@ -160,6 +158,13 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     outln!("{}", v.table());
     outln!("{}", v.verdict(&accuracy).1);
     Ok(())
+}
+
+/// The solver options and accuracy of the session's config when it loads; the defaults else.
+fn judged_as(config: Option<CellConfig>) -> (SolveOptions, Accuracy) {
+    config.map_or_else(Default::default, |c| {
+        (c.solver.to_options(), c.verdict.accuracy())
+    })
 }
 
 /// `verify --session ROOT` of a several-camera session: each camera's samples by leave-one-out
@@ -170,11 +175,7 @@ fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
     super::say_if_live(root)?;
     let manifest = cameras::read_manifest(root)?;
     let config = CellConfig::load(&manifest.config).ok();
-    let options = config
-        .as_ref()
-        .map(|c| c.solver.to_options())
-        .unwrap_or_default();
-    let accuracy = config.map(|c| c.verdict.accuracy()).unwrap_or_default();
+    let (options, accuracy) = judged_as(config);
     for camera in &manifest.cameras {
         let samples =
             SessionFolder::open(&cameras::camera_folder(root, &camera.name))?.samples_path();

@@ -685,7 +685,6 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
         matches!(&read, SessionResult::OneCamera(r) if **r == file),
         "{read:?}"
     );
-    assert_eq!(read.verdict(), file.verdict.as_ref());
     let written = write_folder_report(one, None).unwrap();
     assert_eq!(written.path, one.join("report.html"));
     // `handeye verify --session` gives the held-out figure the verdict holds (its samples, the
@@ -702,7 +701,6 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
         held.translation_rms_mm, held.rotation_rms_deg, held.poses
     );
     assert!(stdout.contains(&expected), "{stdout} vs {expected}");
-    assert_eq!(written.verdict.as_ref(), file.verdict.as_ref());
     assert!(written.lacking.is_empty(), "{:?}", written.lacking);
     assert!(written.provisional.is_none());
 
@@ -713,14 +711,12 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
         matches!(&read, SessionResult::Cameras(r) if **r == file),
         "{read:?}"
     );
-    assert_eq!(read.verdict(), Some(&file.verdict));
     assert_eq!(
         read.robot_frames(),
         file.robot_frames.clone().unwrap_or_default()
     );
     let written = write_folder_report(cameras, None).unwrap();
     assert_eq!(written.path, cameras.join("report.html"));
-    assert_eq!(written.verdict.as_ref(), Some(&file.verdict));
 
     // A one-camera file with a stray key and a several-camera one missing its verdict: each
     // refused by its own layout's rules, naming the file and the key.

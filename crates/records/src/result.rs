@@ -74,15 +74,6 @@ impl SessionResult {
         }
         .unwrap_or_default()
     }
-
-    /// The verdict recorded with the answer (a one-camera file written before verdicts has
-    /// none); a several-camera file's is the cell's.
-    pub fn verdict(&self) -> Option<&Verdict> {
-        match self {
-            SessionResult::OneCamera(one) => one.verdict.as_ref(),
-            SessionResult::Cameras(cameras) => Some(&cameras.verdict),
-        }
-    }
 }
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).

@@ -372,8 +372,6 @@ pub fn write_replay_report(
 pub struct FolderReport {
     /// The page.
     pub path: std::path::PathBuf,
-    /// The verdict `result.yaml` holds (for several cameras, the cell's).
-    pub verdict: Option<Verdict>,
     /// What the page lacks and why (a config, board or intrinsics file that cannot be read: no
     /// frames or reprojection errors).
     pub lacking: Vec<String>,
@@ -383,8 +381,9 @@ pub struct FolderReport {
 }
 
 /// Writes `<session>/report.html` for a session folder solved earlier (`handeye report DIR`),
-/// one camera's or a several-camera cell's, from its `result.yaml` and its records; the board
-/// and lens from `config` (default: the config the session was recorded with) when it loads.
+/// one camera's or a several-camera cell's, from its `result.yaml` and its records; for one
+/// camera, the board and lens that draw its frames from `config` (default: the config the
+/// session was recorded with) when it loads (a several-camera page draws no frames).
 /// While a run is still recording the session, the page is of the result an earlier part of
 /// it wrote (refused when there is none yet).
 pub fn write_folder_report(
@@ -413,15 +412,12 @@ pub fn write_folder_report(
             dir.display()
         ),
     };
-    let result = SessionResult::load(&result_path).map_err(not_solved)?;
-    let verdict = result.verdict().cloned();
-    let result = match result {
+    let result = match SessionResult::load(&result_path).map_err(not_solved)? {
         SessionResult::Cameras(cameras) => {
             let path = dir.join(REPORT_FILE);
             super::cameras::write_cameras_report(&cameras, dir, &path)?;
             return Ok(FolderReport {
                 path,
-                verdict,
                 lacking: Vec::new(),
                 provisional,
             });
@@ -487,7 +483,7 @@ pub fn write_folder_report(
         vec![Answer::ResultFile(calibration)],
         Page {
             optics,
-            verdict: verdict.clone(),
+            verdict: result.verdict.clone(),
             arm_time: handeye_session::cell::run::ArmTime::load(folder.root()),
             nominal: config.map(|c| c.camera().nominal),
             robot_frames: result.robot_frames.clone().unwrap_or_default(),
@@ -497,7 +493,6 @@ pub fn write_folder_report(
     )?;
     Ok(FolderReport {
         path,
-        verdict,
         lacking,
         provisional,
     })

@@ -604,25 +604,24 @@ pub fn result_file(
             .find(|c| c.setup == setup)
             .and_then(|c| c.simulation.map(|s| s.target_mount))
     };
-    let mut boards = Vec::new();
-    if let Some((pose, sigma)) = joint.base_from_target {
-        boards.push(named(
-            board_parent(Setup::EyeInHand),
+    // The board of each setup the cell has: eye-in-hand cameras see it in the cell, eye-to-hand
+    // ones on the flange.
+    let boards: Vec<NamedTransform> = [
+        (Setup::EyeInHand, joint.base_from_target),
+        (Setup::EyeToHand, joint.flange_from_target),
+    ]
+    .into_iter()
+    .filter_map(|(setup, board)| {
+        let (pose, sigma) = board?;
+        Some(named(
+            board_parent(setup),
             "target",
             pose,
             sigma,
-            board_truth(Setup::EyeInHand),
-        ));
-    }
-    if let Some((pose, sigma)) = joint.flange_from_target {
-        boards.push(named(
-            board_parent(Setup::EyeToHand),
-            "target",
-            pose,
-            sigma,
-            board_truth(Setup::EyeToHand),
-        ));
-    }
+            board_truth(setup),
+        ))
+    })
+    .collect();
     let camera_to_camera = joint
         .relative
         .iter()
