@@ -135,26 +135,15 @@ def board_flipped(camera, indices=(3, 11)):
     return bad
 
 
-# How far each closed form may be from handeye's refined answer on the seeded cells below
-# (rotation and translation error, × refined's): the measured ratios and why not 2× are in
-# test_every_opencv_method_drops_and_names_two_outliers.
-CLOSED_FORM_BOUND = {"TSAI": 2.3, "PARK": 2.3, "HORAUD": 2.3, "ANDREFF": 2.3, "DANIILIDIS": 2.2}
-
-
 @pytest.mark.parametrize("method", ["TSAI", "PARK", "HORAUD", "ANDREFF", "DANIILIDIS"])
 @pytest.mark.parametrize("outliers", [with_outliers, board_flipped])
 def test_every_opencv_method_drops_and_names_two_outliers(method, outliers, cv2):
     """The README's 10 seeded cells (N = 20, 0.2° / 1 mm noise) with two gross outliers
     (samples 3 and 11): each of OpenCV's methods run by handeye names both, leaves them out (its
     answer is its own fit of the 18 other samples), and is far better than cv2's same method.
-    Against handeye's refined answer on the same data (0.110°, 1.04 mm), measured: TSAI 2.24× /
-    2.16× (rotation / translation), PARK, HORAUD and ANDREFF 2.26× / 2.16×, DANIILIDIS 2.13× /
-    2.13×; bounded at 2.3× and 2.2× (`CLOSED_FORM_BOUND`). The issue's 2× is out of reach of these
-    methods on these cells: TSAI, PARK, HORAUD and ANDREFF take the rotation from the rotations
-    alone, and the best any estimate from the rotations alone does here is 2.26× (the next
-    test); DANIILIDIS, which solves rotation and translation together, gains a little on that.
-    Their translation follows from their rotation (the answer's lever arm)."""
-    ours, refined, theirs = [], [], []
+    How far each is from the refined answer is a figure of the class of such cells, not of ten:
+    the next test."""
+    ours, theirs = [], []
     for seed in range(10, 20):
         flange, camera, truth, _ = cell(seed, n=20)
         bad = outliers(camera)
@@ -171,19 +160,19 @@ def test_every_opencv_method_drops_and_names_two_outliers(method, outliers, cv2)
         )
         assert np.max(np.abs(R - R_clean)) < 1e-9 and np.max(np.abs(t - t_clean)) < 1e-9, seed
         ours.append(errors(as_matrix(R, t), truth))
-        refined.append(errors(handeye.calibrate(flange, bad, verdict=False).T_flange_camera, truth))
         R_cv, t_cv = cv2.calibrateHandEye(*opencv_inputs(flange, bad), method=getattr(cv2, f"CALIB_HAND_EYE_{method}"))
         theirs.append(errors(as_matrix(R_cv, t_cv), truth))
-    rms = lambda rows: np.sqrt(np.mean(np.square(rows), axis=0))  # noqa: E731
-    ours, refined, theirs = rms(ours), rms(refined), rms(theirs)
+    ours, theirs = rms(ours), rms(theirs)
     print(
-        f"\n{method} with 2 outliers ({outliers.__name__}), RMS over 10 cells: handeye {ours[0]:.3f}° {ours[1]:.2f} mm "
-        f"({ours[0] / refined[0]:.2f}×, {ours[1] / refined[1]:.2f}× refined's {refined[0]:.3f}° {refined[1]:.2f} mm), "
+        f"\n{method} with 2 outliers ({outliers.__name__}), RMS over 10 cells: handeye {ours[0]:.3f}° {ours[1]:.2f} mm, "
         f"cv2 {theirs[0]:.3f}° {theirs[1]:.2f} mm"
     )
-    bound = CLOSED_FORM_BOUND[method]
-    assert ours[0] <= bound * refined[0] and ours[1] <= bound * refined[1], (ours, refined)
     assert ours[0] < theirs[0] and ours[1] < theirs[1], (ours, theirs)
+
+
+def rms(rows):
+    """Root mean square over the first axis (per column of `(rotation, translation)` rows)."""
+    return np.sqrt(np.mean(np.square(rows), axis=0))
 
 
 def log_rotation(R):
@@ -213,34 +202,56 @@ def rotation_from_rotations_alone(T_base_flange, T_camera_target, R_flange_camer
     return R_x.T
 
 
-def test_the_rotation_of_the_rotation_only_methods_is_what_the_rotations_hold():
-    """Why TSAI, PARK, HORAUD and ANDREFF are 2.2-2.3× the refined answer's error, not 2×, on
-    the cells of the test above (its 18 samples without the outliers): each takes `R_X` from the
-    rotations alone, and the least-squares rotation of the rotations alone is 2.26× refined's
-    error there (0.248° against 0.110°; refined also reads the rotation off the translations,
-    through the board's ~0.6 m lever arm, where 1 mm of noise is ~0.1°). Each method's rotation
-    is that good (measured 0.245-0.248°): their algebra loses nothing."""
+# Seeded cells of the class test below: enough that the RMS ratio is the class's, not a draw's.
+# Daniilidis' ratio to the refined answer over the first 1000 cells: 1.80× / 1.80× (rotation /
+# translation; the other methods 1.92× / 1.79×); over batches of 10 of them 1.0-2.9×, 45 % of
+# the batches above 2× (seeds 10-19: 2.13×, the figure a 10-cell test measured); over batches
+# of 200 1.75-1.89×.
+CLASS_CELLS = range(400)
+
+
+def test_every_opencv_method_with_two_outliers_is_within_2x_of_refined_over_the_class(cv2):
+    """Each OpenCV method run by handeye on 400 seeded cells of the README's kind (N = 20,
+    0.2° / 1 mm noise, samples 3 and 11 gross outliers): RMS error of `T_flange_camera` within
+    2× of handeye's refined answer on the same data (the issue's bound), in rotation and in
+    translation, and below cv2's same method. Measured (`pytest -s`): TSAI, PARK, HORAUD,
+    ANDREFF 1.91× / 1.82×, DANIILIDIS 1.77× / 1.83× (refined 0.129°, 1.38 mm). TSAI, PARK,
+    HORAUD and ANDREFF take the rotation from the rotations alone; their rotation is within 2 %
+    of the least-squares rotation of the rotations alone (their algebra loses nothing there): the
+    refined answer also reads the rotation off the translations, through the board's ~0.6 m
+    lever arm, which is why they sit near 2×."""
+    methods = ("TSAI", "PARK", "HORAUD", "ANDREFF", "DANIILIDIS")
+    ours, theirs = {m: [] for m in methods}, {m: [] for m in methods}
+    refined, alone = [], []
     keep = [i for i in range(20) if i not in (3, 11)]
-    methods = ("TSAI", "PARK", "HORAUD", "ANDREFF")
-    ours, alone, refined = {m: [] for m in methods}, [], []
-    for seed in range(10, 20):
+    for seed in CLASS_CELLS:
         flange, camera, truth, _ = cell(seed, n=20)
-        flange, camera = flange[keep], camera[keep]
+        bad = with_outliers(camera)
+        inputs = opencv_inputs(flange, bad)
         for method in methods:
-            R, t = handeye.calibrateHandEye(
-                *opencv_inputs(flange, camera), method=getattr(handeye, f"CALIB_HAND_EYE_{method}"), verdict=False
+            R, t, cal = handeye.calibrateHandEye(
+                *inputs, method=getattr(handeye, f"CALIB_HAND_EYE_{method}"), verdict=False, return_calibration=True
             )
-            ours[method].append(errors(as_matrix(R, t), truth)[0])
-        R_alone = rotation_from_rotations_alone(flange, camera, as_matrix(R, t)[:3, :3])
+            assert cal.dropped == [3, 11], (seed, method, cal.dropped)
+            ours[method].append(errors(as_matrix(R, t), truth))
+            R_cv, t_cv = cv2.calibrateHandEye(*inputs, method=getattr(cv2, f"CALIB_HAND_EYE_{method}"))
+            theirs[method].append(errors(as_matrix(R_cv, t_cv), truth))
+        refined.append(errors(handeye.calibrate(flange, bad, verdict=False).T_flange_camera, truth))
+        R_alone = rotation_from_rotations_alone(flange[keep], camera[keep], as_matrix(R, t)[:3, :3])
         alone.append(errors(as_matrix(R_alone, truth[:3, 3:4]), truth)[0])
-        refined.append(errors(handeye.calibrate(flange, camera, verdict=False).T_flange_camera, truth)[0])
-    rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
-    alone, refined = rms(alone), rms(refined)
-    print(f"\nrotation from the rotations alone {alone:.3f}° = {alone / refined:.2f}× refined's {refined:.3f}°")
-    assert alone > 2.0 * refined, (alone, refined)
+    refined, alone = rms(refined), float(rms(alone))
+    print(
+        f"\nover {len(CLASS_CELLS)} cells: refined {refined[0]:.3f}° {refined[1]:.2f} mm; rotation from the rotations "
+        f"alone {alone:.3f}° = {alone / refined[0]:.2f}× refined's"
+    )
     for method in methods:
-        print(f"{method}: {rms(ours[method]):.3f}°")
-        assert rms(ours[method]) <= 1.02 * alone, (method, rms(ours[method]), alone)
+        mine, cv = rms(ours[method]), rms(theirs[method])
+        ratio = mine / refined
+        print(f"{method}: {mine[0]:.3f}° {mine[1]:.2f} mm = {ratio[0]:.2f}× / {ratio[1]:.2f}×; cv2 {cv[0]:.3f}° {cv[1]:.2f} mm")
+        assert ratio[0] <= 2.0 and ratio[1] <= 2.0, (method, ratio)
+        assert mine[0] < cv[0] and mine[1] < cv[1], (method, mine, cv)
+        if method != "DANIILIDIS":
+            assert mine[0] <= 1.02 * alone, (method, mine[0], alone)
 
 
 # --- units ----------------------------------------------------------------------------------
