@@ -61,17 +61,28 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 "verify its result on the cell when the run has ended: the arm is the run's until then",
             )?;
         }
+        let cell_config = CellConfig::load(config).context("reading the cell config")?;
+        // Each camera's transforms by its name in the config: one camera's result is the
+        // config's one camera's; a several-camera result's joint answer names its cameras.
         let mounts = match SessionResult::load(result)? {
-            SessionResult::OneCamera(file) => file.mounts(result)?,
-            SessionResult::Cameras(_) => bail!(
-                "{}: a several-camera result: a held-out run checks one camera's answer (`handeye verify --session {}` checks each camera's samples by leave-one-out)",
-                result.display(),
-                result.parent().unwrap_or(Path::new(".")).display()
-            ),
+            SessionResult::OneCamera(file) => {
+                let one = cell_config
+                    .clone()
+                    .single_camera()
+                    .context("reading the cell config")?;
+                vec![(one.camera().name.clone(), file.mounts(result)?)]
+            }
+            SessionResult::Cameras(file) => {
+                for camera in file.cameras.iter().filter(|c| c.joint.is_none()) {
+                    outln!(
+                        "camera `{}`: not in the joint answer ({}): not checked",
+                        camera.name,
+                        camera.left_out.as_deref().unwrap_or("no mount")
+                    );
+                }
+                file.mounts()
+            }
         };
-        let cell_config = CellConfig::load(config)
-            .and_then(CellConfig::single_camera)
-            .context("reading the cell config")?;
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -100,10 +111,25 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             stop: super::stop_on_ctrl_c(),
             jobs: None,
         };
-        let v = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
-        outln!("{}", v.table());
-        outln!("{}", v.verdict(&cell_config.verdict.accuracy()).1);
-        let text = serde_yaml_ng::to_string(&v)?;
+        let checked = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
+        let accuracy = cell_config.verdict.accuracy();
+        let text = if let [(_, v)] = checked.as_slice() {
+            outln!("{}", v.table());
+            outln!("{}", v.verdict(&accuracy).1);
+            serde_yaml_ng::to_string(v)?
+        } else {
+            for (name, v) in &checked {
+                outln!("camera `{name}`: {}", v.table());
+                outln!("{}", v.verdict(&accuracy).1);
+            }
+            // A several-camera check: each camera's errors under its name.
+            serde_yaml_ng::to_string(
+                &checked
+                    .iter()
+                    .cloned()
+                    .collect::<std::collections::BTreeMap<_, _>>(),
+            )?
+        };
         write_atomic(&out.join("verify.yaml"), text.as_bytes())?;
         outln!("holdout session: {}", out.display());
         return Ok(());

@@ -15,7 +15,7 @@ use util::live::{runtime, Live, Page};
 
 /// Sends the arm to the suggested view and captures there until `n` captures were accepted
 /// (the checks' messages go into the failure when they are not).
-async fn capture_views(page: &mut Page, n: usize) {
+pub(crate) async fn capture_views(page: &mut Page, n: usize) {
     let (mut accepted, mut tries) = (0, 0);
     let mut messages = Vec::new();
     while accepted < n {

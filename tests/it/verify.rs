@@ -35,13 +35,15 @@ fn holdout(
         camera_mount: *camera_mount,
         target_mount: *target_mount,
     };
-    verify::holdout(
+    let mut checked = verify::holdout(
         &util::new_run(&config, dir),
-        &calibration,
+        &[("camera".to_string(), calibration)],
         &spec,
         &mut util::QuietObserver,
     )
-    .unwrap()
+    .unwrap();
+    assert_eq!(checked.len(), 1);
+    checked.remove(0).1
 }
 
 #[test]

@@ -185,14 +185,16 @@ impl Robot for StandStill<'_> {
 /// `setup.plan` is ignored: the captures are the plan. `suggester`'s candidates are the views it
 /// suggests. The session folder's manifest, marked hand-guided
 /// ([`SessionManifest::hand_guided`](handeye_records::SessionManifest::hand_guided)), is the caller's to
-/// write first: every capture keeps its mark.
+/// write first: every capture keeps its mark. A several-camera session (`setup.cameras`,
+/// `cameras` their devices, the planner camera first) grabs with every camera at each capture,
+/// as a planned one does; the live view is the planner camera's.
 pub fn run_manual_session(
     setup: SessionSetup,
     manifest_config: PathBuf,
     mut suggester: Option<&mut AdaptivePlanner>,
     options: &ManualOptions,
     robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
+    cameras: &mut [&mut dyn Camera],
     control: &mut dyn ManualControl,
 ) -> Result<SessionOutcome, SessionError> {
     let mut growing = GrowingPlan::open(&setup, manifest_config)?;
@@ -227,7 +229,7 @@ pub fn run_manual_session(
         }
         if last_live.is_none_or(|t| t.elapsed() >= options.live_every) {
             last_live = Some(Instant::now());
-            if let Err(e) = live_view(robot, camera, freedrive, control) {
+            if let Err(e) = live_view(robot, &mut *cameras[0], freedrive, control) {
                 break Err(e.into_session(&setup, growing.poses.len()));
             }
         }
@@ -264,7 +266,7 @@ pub fn run_manual_session(
                     }
                     freedrive = false;
                 }
-                match capture(&setup, options, &mut growing, robot, camera, control) {
+                match capture(&setup, options, &mut growing, robot, cameras, control) {
                     Ok(true) => {
                         suggestion =
                             suggest(&setup, &growing.poses, suggester.as_deref_mut(), control)?;
@@ -359,20 +361,27 @@ fn go_to_suggestion(
 /// The file in a hand-guided session's folder that holds its accepted captures as a plan.
 pub const TAUGHT_PLAN_FILE: &str = "taught-plan.yaml";
 
-/// The plan indices of the captures on disk that were accepted.
+/// The plan indices of the captures on disk that were accepted, by any camera.
 fn accepted_indices(setup: &SessionSetup) -> Result<Vec<usize>, SessionError> {
-    Ok(setup
-        .folder()
-        .read_visits()?
-        .iter()
-        .filter(|v| {
-            v.camera_from_target.is_some()
-                || (setup.cameras[0].estimate_intrinsics
-                    && v.rejected.is_none()
-                    && !v.corners_px.is_empty())
-        })
-        .map(|v| v.plan_index)
-        .collect())
+    let mut accepted = Vec::new();
+    for camera in &setup.cameras {
+        accepted.extend(
+            camera
+                .folder
+                .read_visits()?
+                .iter()
+                .filter(|v| {
+                    v.camera_from_target.is_some()
+                        || (camera.estimate_intrinsics
+                            && v.rejected.is_none()
+                            && !v.corners_px.is_empty())
+                })
+                .map(|v| v.plan_index),
+        );
+    }
+    accepted.sort_unstable();
+    accepted.dedup();
+    Ok(accepted)
 }
 
 /// Writes the accepted captures as a taught plan ([`TAUGHT_PLAN_FILE`]): each the joints the
@@ -488,7 +497,7 @@ fn capture(
     options: &ManualOptions,
     plan: &mut GrowingPlan,
     robot: &mut dyn Robot,
-    camera: &mut dyn Camera,
+    cameras: &mut [&mut dyn Camera],
     control: &mut dyn ManualControl,
 ) -> Result<bool, SessionError> {
     std::thread::sleep(setup.settle);
@@ -540,16 +549,24 @@ fn capture(
         });
         return Ok(false);
     }
-    let frame = match camera.grab(Instant::now()) {
-        Ok(frame) => frame,
-        Err(e) => return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len())),
-    };
-    let sharp = sharpness(&frame.image);
+    // Blur is the arm still moving or a camera out of focus: the capture waits for a sharp frame
+    // from at least one camera (with several, one may look at a plain wall from here).
+    let mut sharp = f64::NEG_INFINITY;
+    for camera in cameras.iter_mut() {
+        match camera.grab(Instant::now()) {
+            Ok(frame) => sharp = sharp.max(sharpness(&frame.image)),
+            Err(e) => return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len())),
+        }
+    }
     if sharp < options.min_sharpness {
         control.event(ManualEvent::Check {
             ok: false,
             message: format!(
-                "the frame is blurred (sharpness {sharp:.1}, at least {:.1} needed): hold the arm still, check the focus, then capture again",
+                "{} (sharpness {sharp:.1}, at least {:.1} needed): hold the arm still, check the focus, then capture again",
+                match cameras.len() {
+                    1 => "the frame is blurred",
+                    _ => "every camera's frame is blurred (the sharpest's",
+                },
                 options.min_sharpness
             ),
         });
@@ -566,7 +583,7 @@ fn capture(
         &step,
         (base_from_flange, joints),
         &mut StandStill(robot),
-        &mut [&mut *camera],
+        cameras,
         &mut |event| {
             if let SessionEvent::Recorded { rejected, .. } = &event {
                 last_rejection.clone_from(rejected);

@@ -18,7 +18,7 @@ use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
-use handeye_records::SessionError;
+use handeye_records::{SessionError, SessionFolder};
 use handeye_solve::verdict::{Accuracy, Level};
 use handeye_solve::{self as solve, SolveError, SolveOptions};
 
@@ -219,40 +219,76 @@ pub fn leave_one_out(
 /// Holdout verification on the cell: views generated from `spec` (a seed the calibration did not
 /// use) are checked from the arm's actual joints, those that pass are recorded as a session —
 /// the one run ([`run::drive`] with [`Strategy::Holdout`]) into `request`'s folder — and each
-/// measured `T_camera_target` is compared with the prediction of `calibration`. Setting
-/// `request.stop` stops the arm and ends the session cleanly, as in a calibration run.
+/// camera's measured `T_camera_target` is compared with the prediction of its transforms in
+/// `calibrations` (by the camera's name in the config: every camera of a several-camera cell
+/// grabs at each view, as in its calibration run; `camera` for a config without a `cameras:`
+/// list). Each camera's errors, in `calibrations`' order. Setting `request.stop` stops the arm
+/// and ends the session cleanly, as in a calibration run.
 pub fn holdout(
     request: &RunRequest,
-    calibration: &CellTransforms,
+    calibrations: &[(String, CellTransforms)],
     spec: &GenerateSpec,
     observer: &mut dyn RunObserver,
-) -> Result<Verification, VerifyError> {
-    // The result must be of the cell's setup: checked before anything opens.
+) -> Result<Vec<(String, Verification)>, VerifyError> {
+    // Each result must be of its camera's setup: checked before anything opens.
     let config = request
         .config
         .as_deref()
         .ok_or_else(|| VerifyError::Plan("a holdout check needs the cell config".into()))?;
-    let cell_setup = CellConfig::load(config)
-        .and_then(CellConfig::single_camera)
-        .map_err(|e| VerifyError::Plan(e.to_string()))?
-        .camera()
-        .setup;
-    if calibration.setup != cell_setup {
-        return Err(VerifyError::SetupMismatch {
-            result: calibration.setup,
-            cell: cell_setup,
-        });
+    let cell = CellConfig::load(config).map_err(|e| VerifyError::Plan(e.to_string()))?;
+    for (name, calibration) in calibrations {
+        let camera = cell
+            .cameras
+            .iter()
+            .find(|c| c.name == *name)
+            .ok_or_else(|| {
+                VerifyError::Plan(format!(
+                    "the cell has no camera `{name}` (its cameras: {})",
+                    cell.cameras
+                        .iter()
+                        .map(|c| c.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })?;
+        if calibration.setup != camera.setup {
+            return Err(VerifyError::SetupMismatch {
+                result: calibration.setup,
+                cell: camera.setup,
+            });
+        }
     }
     let driven = run::drive(request, Strategy::Holdout(*spec), observer)
         .map_err(|e| VerifyError::Run(Box::new(e)))?;
-    let dataset = Dataset::load(&driven.folder.samples_path())
-        .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
-    Ok(compare(
-        calibration.setup,
-        &calibration.camera_mount,
-        &calibration.target_mount,
-        &dataset.pairs,
-    ))
+    let root = crate::cell::cameras::root_of(driven.folder.root());
+    calibrations
+        .iter()
+        .map(|(name, calibration)| {
+            let samples = match (cell.listed, root) {
+                (true, Some(root)) => {
+                    SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
+                        .map_err(|e| VerifyError::Session(Box::new(e)))?
+                        .samples_path()
+                }
+                _ => driven.folder.samples_path(),
+            };
+            if !samples.is_file() {
+                return Err(VerifyError::Plan(format!(
+                    "camera `{name}` saw its board at none of the held-out views (its records are in {})",
+                    samples.parent().unwrap_or(&samples).display()
+                )));
+            }
+            let dataset = Dataset::load(&samples)
+                .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
+            let verification = compare(
+                calibration.setup,
+                &calibration.camera_mount,
+                &calibration.target_mount,
+                &dataset.pairs,
+            );
+            Ok((name.clone(), verification))
+        })
+        .collect()
 }
 
 impl Verification {

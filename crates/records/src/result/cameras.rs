@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::{serde_pose, Pose};
-use handeye_core::setup::{RobotFrames, Setup};
+use handeye_core::setup::{CellTransforms, RobotFrames, Setup};
 use handeye_core::yaml_file::{read_yaml, FileError};
 use handeye_solve::verdict::{HeldOut, Verdict};
 use handeye_solve::PoseSigma;
@@ -111,6 +111,30 @@ impl CamerasResultFile {
             .filter_map(|c| c.joint.as_ref())
             .chain(&self.boards)
             .chain(&self.camera_to_camera)
+    }
+
+    /// Each solved camera's transforms from the joint answer, by camera name: its mount and its
+    /// setup's board (`T_base_target` for an eye-in-hand camera, `T_flange_target` for an
+    /// eye-to-hand one). A camera left out of the joint solve has none and is not listed.
+    pub fn mounts(&self) -> Vec<(String, CellTransforms)> {
+        self.cameras
+            .iter()
+            .filter_map(|camera| {
+                let board_parent = match camera.setup {
+                    Setup::EyeInHand => "base",
+                    Setup::EyeToHand => "flange",
+                };
+                let board = self.boards.iter().find(|b| b.parent == board_parent)?;
+                Some((
+                    camera.name.clone(),
+                    CellTransforms {
+                        setup: camera.setup,
+                        camera_mount: camera.joint.as_ref()?.pose,
+                        target_mount: board.pose,
+                    },
+                ))
+            })
+            .collect()
     }
 
     /// The transform called `name`.

@@ -57,11 +57,6 @@ pub(super) fn check_before_opening(
             }
             Ok(adaptive)
         }
-        Strategy::Holdout(_) | Strategy::HandGuided(_) if cell.config.listed => {
-            Err(RunError::Cameras(
-                "a cell with several cameras runs its planned poses only (no held-out check or hand-guided capture yet); nothing was moved".into(),
-            ))
-        }
         Strategy::Holdout(spec) => {
             spec.validate()
                 .map_err(|e| RunError::Holdout(e.to_string()))?;
@@ -268,24 +263,15 @@ pub(super) fn drive_session(
             observer.note(&note);
         }
     }
+    // A hand-guided session's captures are its plan; the others visit `plan`.
+    let setup_plan = match strategy {
+        Strategy::HandGuided(_) => Vec::new(),
+        Strategy::Planned | Strategy::Holdout(_) => plan.to_vec(),
+    };
+    let setup = session_setup(cell, folder, request, setup_plan, plan, fixed_plan)?;
     let guide = match strategy {
         Strategy::HandGuided(guide) => guide,
         Strategy::Planned | Strategy::Holdout(_) => {
-            let mut setup = cell.session_setup(folder.clone(), plan.to_vec(), request.stop.clone());
-            setup.detector.jobs = request.jobs;
-            if cell.config.listed {
-                let root = super::super::cameras::root_of(folder.root()).ok_or_else(|| {
-                    RunError::Cameras(format!(
-                        "{}: not inside a several-camera session",
-                        folder.root().display()
-                    ))
-                })?;
-                let resuming = matches!(request.target, SessionTarget::Resume(_));
-                // An adaptive session's plan grows as it goes (in the planner camera's folder).
-                let recorded: &[(Pose, Joints)] = if fixed_plan { plan } else { &[] };
-                cell.session_cameras(&mut setup, root, resuming, recorded)
-                    .map_err(RunError::Cameras)?;
-            }
             observer.session_folder(folder, plan);
             observer.session_started(match strategy {
                 Strategy::Holdout(_) => plan.len(),
@@ -307,8 +293,6 @@ pub(super) fn drive_session(
             return Ok((outcome?, summary));
         }
     };
-    let mut setup = cell.session_setup(folder.clone(), Vec::new(), request.stop.clone());
-    setup.detector.jobs = request.jobs;
     observer.session_folder(folder, &[]);
     observer.session_started(plan.len());
     let mut planner = (!plan.is_empty() && cell.camera().intrinsics_known).then(|| {
@@ -321,19 +305,48 @@ pub(super) fn drive_session(
     };
     let outcome: Result<SessionOutcome, SessionError> = {
         let mut control = guide.control(cell, folder, plan, &mut *observer);
+        let (robot, mut cameras) = hardware.devices();
         crate::run_manual_session(
             setup,
             cell.config_path(),
             planner.as_mut(),
             &options,
-            hardware.robot.as_mut(),
-            hardware.cameras[0].as_mut(),
+            robot,
+            &mut cameras,
             control.as_mut(),
         )
     };
     observer.session_ended();
     guide.ended();
     Ok((outcome?, None))
+}
+
+/// The session's setup on `folder` visiting `setup_plan`, with the cell's other cameras each in
+/// its folder beside it (a several-camera session; `plan` is what their manifests record when
+/// `fixed_plan`, otherwise the plan grows as the session goes, in the planner camera's folder).
+fn session_setup(
+    cell: &PreparedCell,
+    folder: &SessionFolder,
+    request: &RunRequest,
+    setup_plan: Vec<(Pose, Joints)>,
+    plan: &[(Pose, Joints)],
+    fixed_plan: bool,
+) -> Result<crate::SessionSetup, RunError> {
+    let mut setup = cell.session_setup(folder.clone(), setup_plan, request.stop.clone());
+    setup.detector.jobs = request.jobs;
+    if cell.config.listed {
+        let root = super::super::cameras::root_of(folder.root()).ok_or_else(|| {
+            RunError::Cameras(format!(
+                "{}: not inside a several-camera session",
+                folder.root().display()
+            ))
+        })?;
+        let resuming = matches!(request.target, SessionTarget::Resume(_));
+        let recorded: &[(Pose, Joints)] = if fixed_plan { plan } else { &[] };
+        cell.session_cameras(&mut setup, root, resuming, recorded)
+            .map_err(RunError::Cameras)?;
+    }
+    Ok(setup)
 }
 
 /// The arm time of a planned run with an arm that moved now (a person moved a hand-guided arm;
