@@ -125,10 +125,10 @@ fn the_console_shows_every_camera_of_a_several_camera_run_by_name() {
 
 /// `handeye console` of the three-camera cell: a hand-guided session, driven over the console's
 /// WebSocket as a person would (go to the suggested view, capture), grabs with every camera at
-/// each capture and records into each camera's folder; finished, it solves every camera jointly
-/// (each mount within 0.5 mm / 0.05° of the simulator's truth, as a planned run's, no right file
-/// blamed) and keeps the captures as the taught plan. The several-camera root resumes and replays as a
-/// planned session's does.
+/// each capture and records into each camera's folder. Stopped after five captures, every
+/// camera's records are kept, and `handeye run --resume ROOT` continues it by hand on the console;
+/// finished, it solves every camera jointly (each mount within 0.5 mm / 0.05° of the simulator's
+/// truth, as a planned run's, no right file blamed) and keeps the captures as the taught plan.
 #[test]
 fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
     let dir = tempfile::tempdir().unwrap();
@@ -148,15 +148,41 @@ fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
         dir.path(),
     );
     let url = live.url();
-    let captures = 12;
-    let finished = util::live::runtime().block_on(async {
+    let runtime = util::live::runtime();
+    // Five captures, then STOP: every camera's records are kept.
+    runtime.block_on(async {
         let mut page = util::live::Page::open(&url).await;
-        crate::manual::capture_views(&mut page, captures).await;
+        crate::manual::capture_views(&mut page, 5).await;
+        page.send("stop").await;
+        page.next("ended").await;
+    });
+    let (ok, out) = live.finish();
+    assert!(
+        !ok && out.contains(&format!("handeye run --resume {session_s}")),
+        "a stopped session says how to resume:\n{out}"
+    );
+    for name in ["wrist", "left", "right"] {
+        let manifest = handeye_records::SessionFolder::open(&session.join("cameras").join(name))
+            .and_then(|f| f.read_manifest())
+            .unwrap();
+        assert_eq!(manifest.plan.len(), 5, "{name}: the captures so far");
+    }
+    // `handeye run --resume ROOT` sees a hand-guided session and serves the console again:
+    // seven more, finish.
+    let captures = 12;
+    let mut live = util::live::Live::start(
+        &["run", "--resume", &session_s, "--console", "127.0.0.1:0"],
+        dir.path(),
+    );
+    let url = live.url();
+    let finished = runtime.block_on(async {
+        let mut page = util::live::Page::open(&url).await;
+        crate::manual::capture_views(&mut page, captures - 5).await;
         page.send("finish").await;
         page.next("finished").await
     });
     let (ok, out) = live.finish();
-    assert!(ok, "the hand-guided session failed:\n{out}");
+    assert!(ok, "the resumed hand-guided session failed:\n{out}");
     let result = super::read_result(&session);
     assert_eq!(
         finished["verdict"],
