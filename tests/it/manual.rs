@@ -84,22 +84,11 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
     let dir = tempfile::tempdir().unwrap();
     let (config, board) = cell(dir.path());
     let session = dir.path().join("manual");
-    let (config_s, session_s) = (config.display().to_string(), session.display().to_string());
+    let session_s = session.display().to_string();
     let rt = runtime();
 
     // 1. A new hand-guided session: four captures at suggested views, then STOP.
-    let mut live = Live::start(
-        &[
-            "console",
-            "--config",
-            &config_s,
-            "--output",
-            &session_s,
-            "--addr",
-            "127.0.0.1:0",
-        ],
-        dir.path(),
-    );
+    let mut live = Live::console(&config, &session, dir.path());
     let url = live.url();
     rt.block_on(async {
         let mut page = Page::open(&url).await;

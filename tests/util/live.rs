@@ -23,6 +23,21 @@ impl Live {
         Live::spawn(super::handeye().args(args).current_dir(cwd))
     }
 
+    /// Starts a new hand-guided session of `config` into `session` on the console
+    /// (`handeye console --config CONFIG --output SESSION --addr 127.0.0.1:0`) in `cwd`.
+    pub fn console(config: &Path, session: &Path, cwd: &Path) -> Live {
+        Live::spawn(
+            super::handeye()
+                .arg("console")
+                .arg("--config")
+                .arg(config)
+                .arg("--output")
+                .arg(session)
+                .args(["--addr", "127.0.0.1:0"])
+                .current_dir(cwd),
+        )
+    }
+
     /// Starts `command` (a `handeye` command, or a shell that execs one).
     pub fn spawn(command: &mut Command) -> Live {
         let mut child = command

@@ -134,19 +134,8 @@ fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
     let dir = tempfile::tempdir().unwrap();
     let config = super::three_cameras(dir.path(), &[]);
     let session = dir.path().join("session");
-    let (config_s, session_s) = (config.display().to_string(), session.display().to_string());
-    let mut live = util::live::Live::start(
-        &[
-            "console",
-            "--config",
-            &config_s,
-            "--output",
-            &session_s,
-            "--addr",
-            "127.0.0.1:0",
-        ],
-        dir.path(),
-    );
+    let session_s = session.display().to_string();
+    let mut live = util::live::Live::console(&config, &session, dir.path());
     let url = live.url();
     let runtime = util::live::runtime();
     // Five captures, then STOP: every camera's records are kept.

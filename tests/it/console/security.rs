@@ -91,20 +91,8 @@ fn foreign_pages_rebound_hosts_and_missing_or_wrong_secrets_are_refused_for_ever
     let dir = tempfile::tempdir().unwrap();
     let config = sim_config(dir.path(), 20, 0.0);
     let session = dir.path().join("session");
-    let (config_s, session_s) = (config.display().to_string(), session.display().to_string());
     // A hand-guided session: its page's commands move the arm and finish the session.
-    let mut live = util::live::Live::start(
-        &[
-            "console",
-            "--config",
-            &config_s,
-            "--output",
-            &session_s,
-            "--addr",
-            "127.0.0.1:0",
-        ],
-        dir.path(),
-    );
+    let mut live = util::live::Live::console(&config, &session, dir.path());
     let url = live.url();
     let (authority, secret) = url_parts(&url);
     let addr: SocketAddr = authority.parse().unwrap();
