@@ -19,7 +19,7 @@ use handeye_core::setup::{self, PosePair, Setup};
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
 use handeye_records::{SessionError, SessionFolder};
-use handeye_solve::verdict::{Accuracy, Level};
+use handeye_solve::verdict::{self, Accuracy, Level};
 use handeye_solve::{self as solve, SolveError, SolveOptions};
 
 /// Prediction error at one pose.
@@ -196,17 +196,20 @@ pub fn leave_one_out(
         });
     }
     let full = solve::solve(setup, pairs, options).map_err(VerifyError::Solve)?;
-    let mut poses = Vec::with_capacity(pairs.len());
-    for (left_out, p) in pairs.iter().enumerate() {
-        let predicted = solve::predict_left_out(setup, pairs, options, left_out, &full)
-            .map_err(|source| VerifyError::Fold { left_out, source })?;
-        poses.push(prediction_error(
-            left_out,
-            p.id.clone(),
-            &predicted,
-            &p.camera_from_target,
-        ));
-    }
+    let predictions = verdict::predict_folds(setup, pairs, options, &full, None, 0..pairs.len())
+        .map_err(|failure| match failure {
+            verdict::FoldFailure::Solve { left_out, source } => {
+                VerifyError::Fold { left_out, source }
+            }
+            refit @ verdict::FoldFailure::Refit { .. } => VerifyError::Plan(refit.to_string()),
+        })?;
+    let poses: Vec<PredictionError> = predictions
+        .iter()
+        .map(|(left_out, predicted)| {
+            let p = &pairs[*left_out];
+            prediction_error(*left_out, p.id.clone(), predicted, &p.camera_from_target)
+        })
+        .collect();
     Ok(Verification {
         kind: "leave-one-out".into(),
         summary: summarise(&poses),

@@ -65,7 +65,7 @@ pub mod rules;
 
 pub use evidence::{
     assess_modelled, assess_result, assess_solved, coverage_notices, held_out, held_out_refitting,
-    residual_notice, working_distance_mm, FoldFlanges,
+    predict_folds, residual_notice, working_distance_mm, FoldFailure, FoldFlanges,
 };
 pub use mount::{assess_mount, with_cell_model, worst_camera};
 pub use rules::{assess, Evidence};

@@ -67,47 +67,25 @@ pub fn held_out_refitting(
         ));
     }
     let count = n.min(MAX_HELD_OUT);
-    let mut errors = Vec::with_capacity(count);
-    for k in 0..count {
-        let left_out = k * n / count;
-        let fold: std::borrow::Cow<'_, [PosePair]> = match refit {
-            None => pairs.into(),
-            Some(refit) => {
-                let flanges = refit(left_out).map_err(|e| {
-                    format!("refitting the arm's model without sample {left_out} failed ({e})")
-                })?;
-                if flanges.len() != n {
-                    return Err(format!(
-                        "the refit without sample {left_out} gave {} robot poses for {n} samples",
-                        flanges.len()
-                    ));
-                }
-                pairs
-                    .iter()
-                    .zip(flanges)
-                    .map(|(pair, base_from_flange)| PosePair {
-                        base_from_flange,
-                        ..pair.clone()
-                    })
-                    .collect::<Vec<_>>()
-                    .into()
+    let folds = (0..count).map(|k| k * n / count);
+    let predictions =
+        predict_folds(setup, pairs, options, full, refit, folds).map_err(|f| match &f {
+            FoldFailure::Solve { source, .. } => {
+                format!("{f} ({source}): the answer hangs on that one pose")
             }
-        };
-        let predicted =
-            solve::predict_left_out(setup, &fold, options, left_out, full).map_err(|e| {
-                format!(
-                "solving without sample {left_out} failed ({e}): the answer hangs on that one pose"
+            FoldFailure::Refit { .. } => f.to_string(),
+        })?;
+    let errors: Vec<(f64, f64)> = predictions
+        .iter()
+        .filter(|(left_out, _)| !full.outliers.contains(left_out))
+        .map(|(left_out, predicted)| {
+            let measured = &pairs[*left_out].camera_from_target;
+            (
+                (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
+                predicted.rotation.angle_to(&measured.rotation).to_degrees(),
             )
-            })?;
-        if full.outliers.contains(&left_out) {
-            continue;
-        }
-        let measured: &Pose = &pairs[left_out].camera_from_target;
-        errors.push((
-            (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
-            predicted.rotation.angle_to(&measured.rotation).to_degrees(),
-        ));
-    }
+        })
+        .collect();
     if errors.is_empty() {
         return Err("every held-out sample is flagged as an outlier".into());
     }
@@ -117,6 +95,74 @@ pub fn held_out_refitting(
         rotation_rms_deg: rms(errors.iter().map(|e| e.1)),
         working_distance_mm: working_distance_mm(pairs),
     })
+}
+
+/// Why a held-out fold gave no prediction.
+#[derive(Debug, thiserror::Error)]
+pub enum FoldFailure {
+    /// The arm's model could not be refitted without the sample.
+    #[error("refitting the arm's model without sample {left_out} failed ({why})")]
+    Refit {
+        /// The held-out sample.
+        left_out: usize,
+        /// Why.
+        why: String,
+    },
+    /// The solve of the other samples failed.
+    #[error("solving without sample {left_out} failed")]
+    Solve {
+        /// The held-out sample.
+        left_out: usize,
+        /// Why.
+        #[source]
+        source: SolveError,
+    },
+}
+
+/// Each sample of `folds` predicted by a solve of all the others with `options`, started from
+/// `full` ([`solve::predict_left_out`]), the robot poses of each fold from `refit` when given
+/// (fitted without its sample): `(sample, predicted T_camera_target)` in `folds`' order. The one
+/// leave-one-out loop: the verdict's held-out check ([`held_out`]) and `handeye verify`'s
+/// cross-validation both run it.
+pub fn predict_folds(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    full: &Calibration,
+    refit: Option<FoldFlanges<'_>>,
+    folds: impl IntoIterator<Item = usize>,
+) -> Result<Vec<(usize, Pose)>, FoldFailure> {
+    let n = pairs.len();
+    folds
+        .into_iter()
+        .map(|left_out| {
+            let fold: std::borrow::Cow<'_, [PosePair]> = match refit {
+                None => pairs.into(),
+                Some(refit) => {
+                    let flanges =
+                        refit(left_out).map_err(|why| FoldFailure::Refit { left_out, why })?;
+                    if flanges.len() != n {
+                        return Err(FoldFailure::Refit {
+                            left_out,
+                            why: format!("{} robot poses for {n} samples", flanges.len()),
+                        });
+                    }
+                    pairs
+                        .iter()
+                        .zip(flanges)
+                        .map(|(pair, base_from_flange)| PosePair {
+                            base_from_flange,
+                            ..pair.clone()
+                        })
+                        .collect::<Vec<_>>()
+                        .into()
+                }
+            };
+            let predicted = solve::predict_left_out(setup, &fold, options, left_out, full)
+                .map_err(|source| FoldFailure::Solve { left_out, source })?;
+            Ok((left_out, predicted))
+        })
+        .collect()
 }
 
 /// Notices about the poses themselves: fewer than [`GOOD_POSES`], or rotations less than
