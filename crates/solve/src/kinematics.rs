@@ -287,11 +287,6 @@ impl ArmFit {
         chi2_99(self.estimated())
     }
 
-    /// The offsets as a vector (rad, zero where not estimated), for [`DhChain::forward`].
-    pub fn offset_vector(&self) -> Vec<f64> {
-        self.offsets.iter().map(|o| o.offset_rad).collect()
-    }
-
     /// Every joint's corrections in the order of [`LinkParameter`] (zero where not estimated),
     /// for [`DhChain::forward_corrected`].
     pub fn corrections(&self) -> Vec<[f64; 4]> {
