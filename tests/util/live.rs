@@ -26,16 +26,7 @@ impl Live {
     /// Starts a new hand-guided session of `config` into `session` on the console
     /// (`handeye console --config CONFIG --output SESSION --addr 127.0.0.1:0`) in `cwd`.
     pub fn console(config: &Path, session: &Path, cwd: &Path) -> Live {
-        Live::spawn(
-            super::handeye()
-                .arg("console")
-                .arg("--config")
-                .arg(config)
-                .arg("--output")
-                .arg(session)
-                .args(["--addr", "127.0.0.1:0"])
-                .current_dir(cwd),
-        )
+        Live::spawn(&mut console_command(config, session, cwd))
     }
 
     /// Starts `command` (a `handeye` command, or a shell that execs one).
@@ -191,4 +182,18 @@ pub fn runtime() -> tokio::runtime::Runtime {
         .enable_all()
         .build()
         .expect("a runtime")
+}
+
+/// The command [`Live::console`] runs, to add to (an environment variable, say).
+pub fn console_command(config: &Path, session: &Path, cwd: &Path) -> Command {
+    let mut command = super::handeye();
+    command
+        .arg("console")
+        .arg("--config")
+        .arg(config)
+        .arg("--output")
+        .arg(session)
+        .args(["--addr", "127.0.0.1:0"])
+        .current_dir(cwd);
+    command
 }

@@ -121,6 +121,27 @@ pub struct CameraFailure {
     pub error: String,
 }
 
+/// `failures.yaml` of a several-camera session: the cameras that stopped delivering frames in
+/// its last run (absent when none did).
+pub fn root_failures(root: &std::path::Path) -> std::path::PathBuf {
+    root.join("failures.yaml")
+}
+
+/// The cameras that stopped delivering frames in the session's last run.
+pub fn read_failures(root: &std::path::Path) -> Vec<CameraFailure> {
+    handeye_core::yaml_file::read_yaml(&root_failures(root)).unwrap_or_default()
+}
+
+/// Adds `failure` to the session's `failures.yaml` as it happens (a crash keeps it).
+fn record_failure(root: &std::path::Path, failure: &CameraFailure) -> Result<(), SessionError> {
+    let mut failures = read_failures(root);
+    failures.push(failure.clone());
+    Ok(handeye_core::yaml_file::write_yaml(
+        &failures,
+        &root_failures(root),
+    )?)
+}
+
 /// How often the joint speeds are read while settling (a UR streams them at 500 Hz).
 const SETTLE_POLL: Duration = Duration::from_millis(4);
 
@@ -395,9 +416,13 @@ impl PoseLoop {
                     };
                 match grabbed {
                     Ok(frame) => frames.push((c, frame)),
-                    // Another camera still delivers: this one is named and left out.
+                    // Another camera still delivers: this one is named and left out, and
+                    // kept in the session's `failures.yaml` (a several-camera session's root).
                     Err(error) if state.delivering() > 1 => {
-                        state.lose(c, plan_index, error.to_string(), on_event)
+                        let failure = state.lose(c, plan_index, error.to_string(), on_event);
+                        if let Err(e) = record_failure(&setup.resume_folder, &failure) {
+                            tracing::warn!("failures.yaml could not be written: {e}");
+                        }
                     }
                     Err(error) => return Err(ErrorSource::Camera(error)),
                 }
@@ -633,7 +658,7 @@ impl RunState {
         plan_index: usize,
         error: String,
         on_event: &mut dyn FnMut(SessionEvent),
-    ) {
+    ) -> CameraFailure {
         self.lost[c] = true;
         let failure = CameraFailure {
             camera: self.names[c].clone(),
@@ -641,7 +666,8 @@ impl RunState {
             error,
         };
         on_event(SessionEvent::CameraLost(failure.clone()));
-        self.outcome.failed_cameras.push(failure);
+        self.outcome.failed_cameras.push(failure.clone());
+        failure
     }
 
     /// Adds one visit's arm time (settling up to the first frame's exposure).

@@ -550,13 +550,19 @@ fn capture(
         return Ok(false);
     }
     // Blur is the arm still moving or a camera out of focus: the capture waits for a sharp frame
-    // from at least one camera (with several, one may look at a plain wall from here).
+    // from at least one camera (with several, one may look at a plain wall from here). A camera
+    // that fails to grab while another delivers is left to the capture, which names it and goes
+    // on with the others as a planned run does; when none delivers, the session stops.
     let mut sharp = f64::NEG_INFINITY;
+    let mut failed = None;
     for camera in cameras.iter_mut() {
         match camera.grab(Instant::now()) {
             Ok(frame) => sharp = sharp.max(sharpness(&frame.image)),
-            Err(e) => return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len())),
+            Err(e) => failed = failed.or(Some(e)),
         }
+    }
+    if let (Some(e), true) = (failed, sharp == f64::NEG_INFINITY) {
+        return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len()));
     }
     if sharp < options.min_sharpness {
         control.event(ManualEvent::Check {

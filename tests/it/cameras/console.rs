@@ -225,6 +225,47 @@ fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
     assert_eq!(taught.waypoints.len(), captures);
 }
 
+/// A camera that stops delivering frames during a hand-guided session of three cameras (unplugged
+/// at the third capture, `HANDEYE_FAULT`) is named, its captures until then kept and solved, and
+/// the others go on capturing, as in a planned run.
+#[test]
+fn a_camera_lost_during_a_hand_guided_session_is_named_and_the_others_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = super::three_cameras(dir.path(), &[]);
+    let session = dir.path().join("session");
+    let mut live = util::live::Live::spawn(
+        util::live::console_command(&config, &session, dir.path())
+            .env("HANDEYE_FAULT", "camera-lost:left:2"),
+    );
+    let url = live.url();
+    util::live::runtime().block_on(async {
+        let mut page = util::live::Page::open(&url).await;
+        crate::manual::capture_views(&mut page, 8).await;
+        page.send("finish").await;
+        page.next("finished").await
+    });
+    let (ok, out) = live.finish();
+    assert!(ok, "the session failed:\n{out}");
+    assert!(
+        out.contains("camera `left` stopped delivering frames at plan pose 2"),
+        "{out}"
+    );
+    let result = super::read_result(&session);
+    let samples = |name: &str| {
+        result
+            .cameras
+            .iter()
+            .find(|c| c.name == name)
+            .unwrap()
+            .samples
+    };
+    assert!(samples("left") <= 2, "{:?}", result.cameras);
+    assert_eq!(samples("wrist"), 8, "{:?}", result.cameras);
+    assert!(samples("right") >= 6, "{:?}", result.cameras);
+    let failures = std::fs::read_to_string(session.join("failures.yaml")).unwrap();
+    assert!(failures.contains("camera: left"), "{failures}");
+}
+
 /// The events of one type, in order.
 fn of_type<'a>(
     events: &'a [serde_json::Value],

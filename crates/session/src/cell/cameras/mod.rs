@@ -204,20 +204,5 @@ pub fn session_folder_of(dir: &Path) -> PathBuf {
     }
 }
 
-/// `failures.yaml` of a several-camera session: the cameras that stopped delivering frames in
-/// its last run (absent when none did).
-pub fn root_failures(root: &Path) -> PathBuf {
-    root.join("failures.yaml")
-}
-
-/// The cameras that stopped delivering frames in the session's last run.
-pub fn read_failures(root: &Path) -> Vec<CameraFailure> {
-    read_yaml(&root_failures(root)).unwrap_or_default()
-}
-
-/// Adds `failure` to the session's `failures.yaml` as it happens (a crash keeps it).
-pub fn record_failure(root: &Path, failure: &CameraFailure) -> Result<(), SessionError> {
-    let mut failures = read_failures(root);
-    failures.push(failure.clone());
-    Ok(write_yaml(&failures, &root_failures(root))?)
-}
+// `failures.yaml` is the pose loop's: it writes each lost camera as it happens.
+pub use crate::driver::{read_failures, root_failures};

@@ -85,16 +85,7 @@ pub(super) fn drive_plan(
     Option<AdaptiveSummary>,
 ) {
     let folder = setup.folder().clone();
-    let rig_root = cell.config.listed.then(|| setup.resume_folder.clone());
-    let mut on_event = |event: SessionEvent| {
-        // A lost camera of a several-camera session is kept in `failures.yaml` as it happens.
-        if let (SessionEvent::CameraLost(failure), Some(root)) = (&event, &rig_root) {
-            if let Err(e) = super::super::cameras::record_failure(root, failure) {
-                observer.note(&format!("failures.yaml could not be written: {e}"));
-            }
-        }
-        observer.event(event)
-    };
+    let mut on_event = |event: SessionEvent| observer.event(event);
     if !adaptive {
         let (robot, mut cameras) = hardware.devices();
         let outcome = crate::run_session(setup, robot, &mut cameras, &mut on_event);
