@@ -112,8 +112,14 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             jobs: None,
         };
         let checked = verify::holdout(&request, &mounts, &spec, &mut Asker)?;
+        for (name, _) in mounts
+            .iter()
+            .filter(|(n, _)| !checked.iter().any(|(c, _)| c == n))
+        {
+            outln!("camera `{name}`: saw its board at none of the held-out views: not checked");
+        }
         let accuracy = cell_config.verdict.accuracy();
-        let text = if let [(_, v)] = checked.as_slice() {
+        let text = if let ([_], [(_, v)]) = (mounts.as_slice(), checked.as_slice()) {
             outln!("{}", v.table());
             outln!("{}", v.verdict(&accuracy).1);
             serde_yaml_ng::to_string(v)?

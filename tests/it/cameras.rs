@@ -885,7 +885,8 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
 /// left camera's mount moved 2 mm in the result, the left camera's held-out error is that 2 mm
 /// (each pose's as the known error predicts, within 0.3 mm) and CHECK, the others stay within
 /// 0.5 mm and GOOD (measured: wrist 0.04 mm, right 0.23 mm, left 2.01 mm); verify.yaml holds
-/// each camera's errors under its name.
+/// each camera's errors under its name. A camera knocked away since (it sees no board) is named
+/// and the others are checked.
 #[test]
 fn a_held_out_run_checks_each_camera_against_its_own_mount() {
     let (config, out, _) = shipped_run();
@@ -956,6 +957,41 @@ fn a_held_out_run_checks_each_camera_against_its_own_mount() {
             );
             assert!(verdict.starts_with("verdict: GOOD"), "{name}: {verdict}");
         }
+    }
+
+    // The right camera knocked away since (it sees no board now): named, the others checked.
+    let knocked = three_cameras(
+        dir.path(),
+        &[(
+            "rotation_vector: [2.2103, 2.2240, -0.0117]",
+            "rotation_vector: [0.0, 0.0, 0.0]",
+        )],
+    );
+    let run = handeye()
+        .arg("verify")
+        .arg("--config")
+        .arg(&knocked)
+        .arg("--result")
+        .arg(out.join("result.yaml"))
+        .args(["--poses", "6", "-o"])
+        .arg(dir.path().join("knocked"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        stdout.contains("camera `right`: saw its board at none of the held-out views: not checked"),
+        "{stdout}"
+    );
+    for name in ["wrist", "left"] {
+        assert!(
+            stdout.contains(&format!("camera `{name}`: holdout")),
+            "{stdout}"
+        );
     }
 }
 

@@ -225,7 +225,8 @@ pub fn leave_one_out(
 /// camera's measured `T_camera_target` is compared with the prediction of its transforms in
 /// `calibrations` (by the camera's name in the config: every camera of a several-camera cell
 /// grabs at each view, as in its calibration run; `camera` for a config without a `cameras:`
-/// list). Each camera's errors, in `calibrations`' order. Setting `request.stop` stops the arm
+/// list). Each camera's errors, in `calibrations`' order; a camera that saw its board at none of
+/// the views is left out (an error when every camera is). Setting `request.stop` stops the arm
 /// and ends the session cleanly, as in a calibration run.
 pub fn holdout(
     request: &RunRequest,
@@ -264,34 +265,41 @@ pub fn holdout(
     let driven = run::drive(request, Strategy::Holdout(*spec), observer)
         .map_err(|e| VerifyError::Run(Box::new(e)))?;
     let root = crate::cell::cameras::root_of(driven.folder.root());
-    calibrations
-        .iter()
-        .map(|(name, calibration)| {
-            let samples = match (cell.listed, root) {
-                (true, Some(root)) => {
-                    SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
-                        .map_err(|e| VerifyError::Session(Box::new(e)))?
-                        .samples_path()
-                }
-                _ => driven.folder.samples_path(),
-            };
-            if !samples.is_file() {
-                return Err(VerifyError::Plan(format!(
-                    "camera `{name}` saw its board at none of the held-out views (its records are in {})",
-                    samples.parent().unwrap_or(&samples).display()
-                )));
+    let mut checked = Vec::new();
+    let mut unseen = Vec::new();
+    for (name, calibration) in calibrations {
+        let samples = match (cell.listed, root) {
+            (true, Some(root)) => {
+                SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
+                    .map_err(|e| VerifyError::Session(Box::new(e)))?
+                    .samples_path()
             }
-            let dataset = Dataset::load(&samples)
-                .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
-            let verification = compare(
-                calibration.setup,
-                &calibration.camera_mount,
-                &calibration.target_mount,
-                &dataset.pairs,
-            );
-            Ok((name.clone(), verification))
-        })
-        .collect()
+            _ => driven.folder.samples_path(),
+        };
+        // A camera that saw its board at none of the views is left out (the caller names
+        // it); the others are checked.
+        if !samples.is_file() {
+            unseen.push(format!("`{name}`"));
+            continue;
+        }
+        let dataset = Dataset::load(&samples)
+            .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
+        let verification = compare(
+            calibration.setup,
+            &calibration.camera_mount,
+            &calibration.target_mount,
+            &dataset.pairs,
+        );
+        checked.push((name.clone(), verification));
+    }
+    if checked.is_empty() {
+        return Err(VerifyError::Plan(format!(
+            "camera {} saw its board at none of the held-out views (recorded in {})",
+            unseen.join(", "),
+            driven.folder.root().display()
+        )));
+    }
+    Ok(checked)
 }
 
 impl Verification {
