@@ -116,7 +116,10 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             .iter()
             .filter(|(n, _)| !checked.iter().any(|(c, _)| c == n))
         {
-            outln!("camera `{name}`: saw its board at none of the held-out views: not checked");
+            outln!(
+                "camera `{name}`: saw its board at none of the held-out views: not checked — it was moved or covered since the calibration, or these views fall outside what it sees: look at its frames in {}",
+                cameras::camera_folder(&out, name).join("frames").display()
+            );
         }
         let accuracy = cell_config.verdict.accuracy();
         let text = if let ([_], [(_, v)]) = (mounts.as_slice(), checked.as_slice()) {

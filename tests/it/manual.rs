@@ -38,6 +38,13 @@ pub(crate) async fn capture_views(page: &mut Page, n: usize) {
     }
 }
 
+/// [`capture_views`], then Finish: the `finished` event (the verdict).
+pub(crate) async fn capture_and_finish(page: &mut Page, n: usize) -> serde_json::Value {
+    capture_views(page, n).await;
+    page.send("finish").await;
+    page.next("finished").await
+}
+
 /// The simulated cell with its 20 generated views as the candidates suggested, its board a
 /// copy in `dir` (so the test can change it).
 fn cell(dir: &Path) -> (PathBuf, PathBuf) {
@@ -151,9 +158,7 @@ fn a_hand_guided_session_stops_resumes_by_hand_to_good_and_replays_and_reports()
                 captured.insert(pose["plan_index"].as_u64());
             }
         }
-        capture_views(&mut page, 6).await;
-        page.send("finish").await;
-        page.next("finished").await
+        capture_and_finish(&mut page, 6).await
     });
     let (ok, out) = live.finish();
     assert!(ok, "the resumed session did not finish:\n{out}");

@@ -14,9 +14,7 @@ use handeye_core::geometry::yaml::PoseRecord;
 use handeye_core::geometry::{rotvec, to_matrix4_rows, Pose};
 use handeye_core::setup::RobotFrames;
 use handeye_formats::export::{export, ExportFormat, FrameIds};
-use handeye_solve::cell_model::{
-    explained_px, CellModelSummary, Explanation, GivenFile, MIN_EXPLAINED_PX,
-};
+use handeye_solve::cell_model::{CellModelSummary, GivenFile, MIN_EXPLAINED_PX};
 use handeye_solve::verdict::{Level, Verdict};
 
 /// The forms "use it" shows, with their headings: what `handeye export --format <name>` writes.
@@ -170,27 +168,16 @@ pub(super) fn cell_model_table(html: &mut String, model: &CellModelSummary) {
         escape(model.chosen.label())
     );
     if let Some(e) = model.immaterial {
-        let rms_of = |e: Explanation| {
-            model
-                .candidates
-                .iter()
-                .find(|c| c.explanation == e)
-                .map(|c| c.rms_px)
+        let why = match model.explained_px(e) {
+            Some(px) if px < MIN_EXPLAINED_PX => format!(
+                "explains only {px:.3} px of the corners' fit (less than the {MIN_EXPLAINED_PX} px a detector and a lens model miss a true lens by)"
+            ),
+            _ => "moves neither transform by half the accuracy asked".to_string(),
         };
-        let (given_rms, preferred_rms) = (rms_of(Explanation::AsGiven), rms_of(e));
         let _ = writeln!(
             html,
-            "<p>The corners prefer \"{}\", but it {}: the files as given stand.</p>",
+            "<p>The corners prefer \"{}\", but it {why}: the files as given stand.</p>",
             escape(e.label()),
-            match (given_rms, preferred_rms) {
-                (Some(given), Some(preferred))
-                    if explained_px(given, preferred) < MIN_EXPLAINED_PX =>
-                    format!(
-                        "explains only {:.3} px of the corners' fit (less than the {MIN_EXPLAINED_PX} px a detector and a lens model miss a true lens by)",
-                        explained_px(given, preferred)
-                    ),
-                _ => "moves neither transform by half the accuracy asked".to_string(),
-            }
         );
     }
     html.push_str("<table><tr><th>explanation</th><th>free parameters</th><th>corner RMS (px)</th><th>BIC above the chosen</th></tr>\n");

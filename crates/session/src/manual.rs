@@ -553,26 +553,32 @@ fn capture(
     // from at least one camera (with several, one may look at a plain wall from here). A camera
     // that fails to grab while another delivers is left to the capture, which names it and goes
     // on with the others as a planned run does; when none delivers, the session stops.
-    let mut sharp = f64::NEG_INFINITY;
+    let mut sharpest: Option<f64> = None;
     let mut failed = None;
     for camera in cameras.iter_mut() {
         match camera.grab(Instant::now()) {
-            Ok(frame) => sharp = sharp.max(sharpness(&frame.image)),
+            Ok(frame) => {
+                let sharp = sharpness(&frame.image);
+                sharpest = Some(sharpest.map_or(sharp, |s| s.max(sharp)));
+            }
             Err(e) => failed = failed.or(Some(e)),
         }
     }
-    if let (Some(e), true) = (failed, sharp == f64::NEG_INFINITY) {
-        return Err(ArmFault::Camera(e).into_session(setup, plan.poses.len()));
-    }
+    let Some(sharp) = sharpest else {
+        let error = failed.unwrap_or_else(|| {
+            handeye_camera::CameraError::Backend("the session has no camera".into())
+        });
+        return Err(ArmFault::Camera(error).into_session(setup, plan.poses.len()));
+    };
     if sharp < options.min_sharpness {
+        let blurred = match cameras.len() {
+            1 => "the frame is blurred (sharpness",
+            _ => "every camera's frame is blurred (the sharpest's sharpness",
+        };
         control.event(ManualEvent::Check {
             ok: false,
             message: format!(
-                "{} (sharpness {sharp:.1}, at least {:.1} needed): hold the arm still, check the focus, then capture again",
-                match cameras.len() {
-                    1 => "the frame is blurred",
-                    _ => "every camera's frame is blurred (the sharpest's",
-                },
+                "{blurred} {sharp:.1}, at least {:.1} needed): hold the arm still, check the focus, then capture again",
                 options.min_sharpness
             ),
         });

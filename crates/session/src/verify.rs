@@ -264,17 +264,19 @@ pub fn holdout(
     }
     let driven = run::drive(request, Strategy::Holdout(*spec), observer)
         .map_err(|e| VerifyError::Run(Box::new(e)))?;
-    let root = crate::cell::cameras::root_of(driven.folder.root());
+    // A several-camera session's root, which holds each camera's folder.
+    let root = cell
+        .listed
+        .then(|| crate::cell::cameras::root_of(driven.folder.root()))
+        .flatten();
     let mut checked = Vec::new();
     let mut unseen = Vec::new();
     for (name, calibration) in calibrations {
-        let samples = match (cell.listed, root) {
-            (true, Some(root)) => {
-                SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
-                    .map_err(|e| VerifyError::Session(Box::new(e)))?
-                    .samples_path()
-            }
-            _ => driven.folder.samples_path(),
+        let samples = match root {
+            Some(root) => SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
+                .map_err(|e| VerifyError::Session(Box::new(e)))?
+                .samples_path(),
+            None => driven.folder.samples_path(),
         };
         // A camera that saw its board at none of the views is left out (the caller names
         // it); the others are checked.
@@ -294,9 +296,9 @@ pub fn holdout(
     }
     if checked.is_empty() {
         return Err(VerifyError::Plan(format!(
-            "camera {} saw its board at none of the held-out views (recorded in {})",
+            "camera {} saw its board at none of the held-out views: moved or covered since the calibration, or the views fall outside what it sees (its frames are in the session {})",
             unseen.join(", "),
-            driven.folder.root().display()
+            root.unwrap_or(driven.folder.root()).display()
         )));
     }
     Ok(checked)

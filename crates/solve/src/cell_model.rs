@@ -70,12 +70,22 @@ use handeye_core::setup::Setup;
 /// off), a board 0.6 % off 0.14 px.
 pub const MIN_EXPLAINED_PX: f64 = 0.05;
 
-/// How much of the corners' fit (px RMS) a richer fit explains over a simpler one: the RMS of
-/// what it removes, `√(rms_simpler² − rms_richer²)`.
-pub fn explained_px(rms_simpler: f64, rms_richer: f64) -> f64 {
-    (rms_simpler * rms_simpler - rms_richer * rms_richer)
-        .max(0.0)
-        .sqrt()
+/// How much of the corners' fit (px RMS) explanation `richer` explains over `simpler` among
+/// `candidates`: the RMS of what it removes, `√(rms_simpler² − rms_richer²)`; `None` when either
+/// was not fitted.
+fn explained_px(
+    candidates: &[Candidate],
+    simpler: Explanation,
+    richer: Explanation,
+) -> Option<f64> {
+    let rms = |e: Explanation| {
+        candidates
+            .iter()
+            .find(|c| c.explanation == e)
+            .map(|c| c.rms_px)
+    };
+    let (a, b) = (rms(simpler)?, rms(richer)?);
+    Some((a * a - b * b).max(0.0).sqrt())
 }
 
 /// A BIC difference above this between two explanations is decisive (Kass and Raftery 1995:
@@ -289,6 +299,12 @@ impl CellModelSummary {
         } else {
             self.chosen.files()
         }
+    }
+
+    /// How much of the corners' fit (px RMS) freeing `e`'s file(s) explains over the files as
+    /// given; `None` when either fit failed. Below [`MIN_EXPLAINED_PX`] the files stand.
+    pub fn explained_px(&self, e: Explanation) -> Option<f64> {
+        explained_px(&self.candidates, Explanation::AsGiven, e)
     }
 
     fn candidate(&self, e: Explanation) -> Option<&Candidate> {
@@ -699,17 +715,9 @@ pub fn fit_cell_model(
     // explains less than [`MIN_EXPLAINED_PX`] of the corners' fit is not told from how lens
     // models and detectors miss a true lens: the files as given stand, and the deviation is only
     // reported.
-    let rms_of = |e: Explanation| {
-        candidates
-            .iter()
-            .find(|c| c.explanation == e)
-            .map(|c| c.rms_px)
+    let explains_enough = |simpler: Explanation, richer: Explanation| {
+        explained_px(&candidates, simpler, richer).is_none_or(|px| px >= MIN_EXPLAINED_PX)
     };
-    let explains_enough =
-        |simpler: Explanation, richer: Explanation| match (rms_of(simpler), rms_of(richer)) {
-            (Some(a), Some(b)) => explained_px(a, b) >= MIN_EXPLAINED_PX,
-            _ => true,
-        };
     let mut immaterial = None;
     if best != Explanation::AsGiven {
         let of = |e: Explanation| fits.iter().find(|(f, _)| *f == e).map(|(_, fit)| fit);

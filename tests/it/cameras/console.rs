@@ -166,9 +166,7 @@ fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
     let url = live.url();
     let finished = runtime.block_on(async {
         let mut page = util::live::Page::open(&url).await;
-        crate::manual::capture_views(&mut page, captures - 5).await;
-        page.send("finish").await;
-        page.next("finished").await
+        crate::manual::capture_and_finish(&mut page, captures - 5).await
     });
     let (ok, out) = live.finish();
     assert!(ok, "the resumed hand-guided session failed:\n{out}");
@@ -240,9 +238,7 @@ fn a_camera_lost_during_a_hand_guided_session_is_named_and_the_others_go_on() {
     let url = live.url();
     util::live::runtime().block_on(async {
         let mut page = util::live::Page::open(&url).await;
-        crate::manual::capture_views(&mut page, 8).await;
-        page.send("finish").await;
-        page.next("finished").await
+        crate::manual::capture_and_finish(&mut page, 8).await
     });
     let (ok, out) = live.finish();
     assert!(ok, "the session failed:\n{out}");

@@ -120,10 +120,7 @@ impl CamerasResultFile {
         self.cameras
             .iter()
             .filter_map(|camera| {
-                let board_parent = match camera.setup {
-                    Setup::EyeInHand => "base",
-                    Setup::EyeToHand => "flange",
-                };
+                let [_, (board_parent, _)] = camera.setup.unknown_frames();
                 let board = self.boards.iter().find(|b| b.parent == board_parent)?;
                 Some((
                     camera.name.clone(),

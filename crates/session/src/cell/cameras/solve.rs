@@ -110,20 +110,6 @@ fn named(
     }
 }
 
-fn mount_parent(setup: Setup) -> &'static str {
-    match setup {
-        Setup::EyeInHand => "flange",
-        Setup::EyeToHand => "base",
-    }
-}
-
-fn board_parent(setup: Setup) -> &'static str {
-    match setup {
-        Setup::EyeInHand => "base",
-        Setup::EyeToHand => "flange",
-    }
-}
-
 /// What the joint solve reads from a session: its data with each camera's own answer as the
 /// start, and which cameras are in it.
 pub struct CamerasProblem {
@@ -549,7 +535,8 @@ pub fn result_file(
             ),
         };
         if let Some(k) = problem.config_index.iter().position(|&i| i == c) {
-            let parent = mount_parent(setup);
+            // The mount's parent frame: `flange` (eye in hand) or `base` (eye to hand).
+            let [(parent, _), _] = setup.unknown_frames();
             entry.joint = Some(named(
                 parent,
                 frame,
@@ -614,7 +601,7 @@ pub fn result_file(
     .filter_map(|(setup, board)| {
         let (pose, sigma) = board?;
         Some(named(
-            board_parent(setup),
+            setup.unknown_frames()[1].0,
             "target",
             pose,
             sigma,
