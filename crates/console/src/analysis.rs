@@ -452,10 +452,6 @@ impl State {
                 draw::cross(&mut out, at, 2.0, Rgb([255, 40, 40]));
             }
         }
-        let mut jpeg = Vec::new();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY)
-            .encode_image(&out)
-            .ok()?;
-        Some(jpeg)
+        draw::jpeg(&out, JPEG_QUALITY).ok()
     }
 }

@@ -5,9 +5,7 @@
 //! the top-left pixel's centre).
 
 use std::collections::HashMap;
-use std::io::Cursor;
 
-use image::codecs::jpeg::JpegEncoder;
 use image::{Rgb, RgbImage};
 use nalgebra::Point2;
 
@@ -289,11 +287,7 @@ fn annotated_frame(
             Rgb([0, 230, 0]),
         );
     }
-    let mut bytes = Vec::new();
-    JpegEncoder::new_with_quality(&mut Cursor::new(&mut bytes), FRAME_JPEG_QUALITY)
-        .encode_image(&out)
-        .map_err(|e| frame_error(e.to_string()))?;
-    Ok(bytes)
+    draw::jpeg(&out, FRAME_JPEG_QUALITY).map_err(frame_error)
 }
 
 /// Writes `<session>/report.html` for a run that just ended, one camera or several (the page of
