@@ -632,6 +632,76 @@ fn right_files_are_not_blamed_on_any_few_views_of_a_rendered_cell() {
     assert!(fitted >= 27, "only {fitted} of 30 draws solved");
 }
 
+/// The several-camera page draws every camera's frames as a one-camera page does (its corners
+/// and its board at the joint answer), under the cell's verdict card; a camera whose config no
+/// longer loads is named with the file and the others are drawn.
+#[test]
+fn the_page_draws_every_cameras_frames_and_names_what_it_cannot_draw() {
+    let (_, shipped, _) = shipped_run();
+    let scratch = tempfile::tempdir().unwrap();
+    let out = scratch.path().join("session");
+    for (file, bytes) in util::folder_bytes(shipped) {
+        let to = out.join(file);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::write(to, bytes).unwrap();
+    }
+    let page = |out: &Path| {
+        let report = handeye().arg("report").arg(out).output().unwrap();
+        assert!(
+            report.status.success(),
+            "{}",
+            String::from_utf8_lossy(&report.stderr)
+        );
+        std::fs::read_to_string(out.join("report.html")).unwrap()
+    };
+    let samples = |name: &str| {
+        handeye_records::dataset::Dataset::load(&camera_folder(&out, name).join("samples.yaml"))
+            .unwrap()
+            .pairs
+            .len()
+    };
+    let html = page(&out);
+    let result = read_result(&out);
+    assert!(html.contains(&format!(
+        "<section id=\"verdict\" class=\"verdict {}\">",
+        result.verdict.level.word().to_ascii_lowercase()
+    )));
+    for name in ["wrist", "left", "right"] {
+        assert!(
+            html.contains(&format!("<section id=\"frames-{name}\">")),
+            "{name}"
+        );
+        let drawn = html.matches(&format!("id=\"frame-{name}-")).count();
+        assert!(drawn >= 12, "{name}: {drawn} frames drawn");
+        assert_eq!(drawn, samples(name), "{name}: a frame per sample");
+    }
+    // The right camera's session names a config that is gone: named, the others still drawn.
+    let manifest = camera_folder(&out, "right").join("session.yaml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let (config_line, _) = text
+        .lines()
+        .find_map(|l| l.strip_prefix("config: ").map(|rest| (l, rest)))
+        .unwrap();
+    let gone = scratch.path().join("gone.yaml");
+    std::fs::write(
+        &manifest,
+        text.replace(config_line, &format!("config: {}", gone.display())),
+    )
+    .unwrap();
+    let html = page(&out);
+    assert_eq!(html.matches("id=\"frame-right-").count(), 0);
+    assert!(
+        html.contains("<p class=\"error\">Camera right: ") && html.contains("gone.yaml"),
+        "the page does not say why the right camera's frames are missing"
+    );
+    for name in ["wrist", "left"] {
+        assert_eq!(
+            html.matches(&format!("id=\"frame-{name}-")).count(),
+            samples(name)
+        );
+    }
+}
+
 /// `handeye report` and `handeye export` of a several-camera session name every camera: the
 /// report has a row per camera and the camera-to-camera transform; ROS 2 and URDF publish every
 /// mount and both boards as a tree (one parent per frame); OpenCV holds every transform, whose

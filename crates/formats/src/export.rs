@@ -27,8 +27,8 @@ use serde_json::json;
 use handeye_core::geometry::{
     check_translation, rotvec, to_matrix4_rows, Pose, TranslationProblem,
 };
-use handeye_core::setup::Setup;
 use handeye_core::setup::{is_ur_base_link, ur_base_link_from_base, CellTransforms};
+use handeye_core::setup::{RobotFrames, Setup};
 use handeye_records::result::{CamerasResultFile, NamedTransform};
 
 /// Why a result cannot be exported.
@@ -183,6 +183,17 @@ pub struct FrameIds {
 }
 
 impl FrameIds {
+    /// The default ids for a result whose robot poses were read in `robot`'s frames: its base
+    /// and flange, the default camera and board ids.
+    pub fn of_robot(robot: &RobotFrames) -> FrameIds {
+        FrameIds {
+            base: robot.base.clone(),
+            flange: robot.flange.clone(),
+            poses_in: robot.base.clone(),
+            ..FrameIds::default()
+        }
+    }
+
     /// Checks every id with [`validate_frame_id`].
     pub fn validate(&self) -> Result<(), ExportError> {
         for (role, id) in [

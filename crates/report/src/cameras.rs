@@ -1,7 +1,10 @@
 //! The HTML report of a cell with several cameras (`<session>/report.html` of a several-camera
-//! session): the cell's verdict, one row per camera (its mount from the joint solve and from its
-//! own views alone, 1-sigma, samples, residuals, verdict), the boards, and the camera-to-camera
-//! transforms. Renders `result.yaml` as written; judges nothing. Self-contained HTML.
+//! session): the cell's verdict card, one row per camera (its mount from the joint solve and
+//! from its own views alone, 1-sigma, samples, residuals, verdict), the boards, the
+//! camera-to-camera transforms, and each camera's annotated frames. Renders `result.yaml` as
+//! written; judges nothing. Self-contained HTML. The parts a one-camera page also has are that
+//! page's own (`sections::verdict_card`, `sections::use_section`, `frames_section` with
+//! `session::frame_thumbnails`): this module adds only what several cameras have.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -12,7 +15,15 @@ use handeye_records::result::{CamerasResultFile, NamedTransform};
 
 use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
 use super::{escape, ReportError};
+use handeye_config::CellConfig;
+use handeye_core::camera_model::CameraModel;
 use handeye_formats::export::{ExportFormat, Exported, FrameIds};
+use handeye_records::dataset::Dataset;
+use handeye_records::{Evidence, SessionFolder};
+use handeye_session::cell::cameras::camera_folder;
+use handeye_vision::Target;
+
+use super::session::{frame_thumbnails, load_optics, sample_visits, Optics};
 use handeye_solve::verdict::Level;
 
 fn transform_cells(t: &NamedTransform) -> String {
@@ -47,12 +58,15 @@ pub fn render(result: &CamerasResultFile, folder: &Path) -> Result<String, Repor
     );
     let _ = write!(
         html,
-        "<h1>Calibration of a cell with {} cameras</h1><p>Session <code>{}</code></p><h2 class=\"{v}\">Cell: {v}</h2><p>{}</p>",
+        "<h1>Calibration of a cell with {} cameras</h1><p>Session <code>{}</code></p>",
         result.cameras.len(),
         escape(&folder.display().to_string()),
-        escape(&result.verdict.reason),
-        v = result.verdict.level.word(),
     );
+    // The cell's verdict (the worst camera's, naming it) on the card of a one-camera page; each
+    // camera's cell model is shown under that camera below.
+    let mut cell_verdict = result.verdict.clone();
+    cell_verdict.figures.cell_model = None;
+    super::sections::verdict_card(&mut html, &cell_verdict);
     use_section(&mut html, result);
     for f in handeye_session::cell::cameras::read_failures(folder) {
         let _ = write!(
@@ -129,7 +143,14 @@ pub fn render(result: &CamerasResultFile, folder: &Path) -> Result<String, Repor
         result.variance_factor
     );
     residuals_section(&mut html, result)?;
-    rotation_axes_section(&mut html, result, folder)?;
+    // Each camera's samples and records, read once for the plots and the frames.
+    let records: Vec<Result<CameraRecords, String>> = result
+        .cameras
+        .iter()
+        .map(|c| camera_records(folder, &c.name))
+        .collect();
+    rotation_axes_section(&mut html, &records)?;
+    frames_sections(&mut html, result, &records)?;
     let _ = write!(html, "<script>{}</script></body></html>", super::SCRIPT);
     Ok(html)
 }
@@ -196,27 +217,19 @@ fn residuals_section(html: &mut String, result: &CamerasResultFile) -> Result<()
 /// camera that saw its board at the most poses, from its samples).
 fn rotation_axes_section(
     html: &mut String,
-    result: &CamerasResultFile,
-    folder: &Path,
+    records: &[Result<CameraRecords, String>],
 ) -> Result<(), ReportError> {
-    let pairs = result
-        .cameras
+    let Some(pairs) = records
         .iter()
-        .filter_map(|c| {
-            let camera = handeye_session::cell::cameras::camera_folder(folder, &c.name);
-            let samples = handeye_records::SessionFolder::open(&camera)
-                .ok()?
-                .samples_path();
-            handeye_records::dataset::Dataset::load(&samples).ok()
-        })
-        .map(|d| d.pairs)
-        .max_by_key(Vec::len)
-        .unwrap_or_default();
-    if pairs.len() < 2 {
+        .filter_map(|r| r.as_ref().ok())
+        .map(|r| &r.evidence.pairs)
+        .max_by_key(|pairs| pairs.len())
+        .filter(|pairs| pairs.len() >= 2)
+    else {
         return Ok(());
-    }
+    };
     html.push_str("<section id=\"rotation-axes\"><h2>Relative rotation axes</h2><p>Axes of the relative flange rotations between every two poses (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.</p>");
-    super::sections::figure(html, "rotation-axes", &rotation_axes(&pairs)?);
+    super::sections::figure(html, "rotation-axes", &rotation_axes(pairs)?);
     html.push_str("</section>");
     Ok(())
 }
@@ -238,52 +251,138 @@ const USE_FORMS: [(ExportFormat, &str); 4] = [
     ),
 ];
 
-/// "Use it": every camera's mount and the boards in the forms of [`USE_FORMS`], each the exact
-/// text `handeye export result.yaml --format …` writes (its default frame ids, the result's
-/// robot frames), in a `<pre>` with a copy button; a caution above them when the cell is REDO.
+/// "Use it" of the cell (`sections::use_section`): every camera's mount and the boards in the
+/// forms of [`USE_FORMS`], each the exact text `handeye export result.yaml --format …` writes
+/// (its default frame ids, the result's robot frames).
 fn use_section(html: &mut String, result: &CamerasResultFile) {
-    let robot = result.robot_frames.clone().unwrap_or_default();
-    let ids = FrameIds {
-        base: robot.base.clone(),
-        flange: robot.flange.clone(),
-        poses_in: robot.base,
-        ..FrameIds::default()
-    };
+    let ids = FrameIds::of_robot(&result.robot_frames.clone().unwrap_or_default());
     // The result as result.yaml holds it (written and read back), so the page shows the very
     // text `handeye export result.yaml` prints, to the last digit.
     let read_back: Option<CamerasResultFile> = serde_yaml_ng::to_string(result)
         .ok()
         .and_then(|text| serde_yaml_ng::from_str(&text).ok());
     let exported = Exported::cameras(read_back.as_ref().unwrap_or(result), &ids);
-    let _ = write!(
-        html,
-        "<section id=\"use\"><h2>Use it</h2><p>Every camera's mount and the boards, as <code>handeye export result.yaml --format …</code> writes them: camera <code>&lt;name&gt;</code>'s optical frame is <code>{}_&lt;name&gt;</code>, the robot base <code>{}</code>, the flange <code>{}</code>. Camera-to-camera transforms are comments (published, they would give a camera a second parent).</p>",
+    let intro = format!(
+        "Every camera's mount and the boards, as <code>handeye export result.yaml --format …</code> writes them: camera <code>&lt;name&gt;</code>'s optical frame is <code>{}_&lt;name&gt;</code>, the robot base <code>{}</code>, the flange <code>{}</code>. Camera-to-camera transforms are comments (published, they would give a camera a second parent).",
         escape(&ids.camera),
         escape(&ids.base),
         escape(&ids.flange)
     );
-    if result.verdict.level == Level::Redo {
-        html.push_str("<p class=\"caution\">The cell's verdict is REDO: do not put these numbers on the cell; record again as the verdict says.</p>");
-    }
-    html.push_str("<div class=\"snippets\">");
-    for (format, heading) in USE_FORMS {
-        let name = format.name();
-        let body = match exported.check(&ids).and_then(|()| exported.text(format)) {
-            Ok(text) => format!(
-                "<div class=\"snippet-head\"><h4>{heading}</h4><button type=\"button\" class=\"copy\" data-target=\"export-{name}\">Copy</button></div><pre id=\"export-{name}\">{}</pre>",
-                escape(&text)
-            ),
-            Err(e) => format!(
-                "<div class=\"snippet-head\"><h4>{heading}</h4></div><p class=\"error\">not exported: {}</p>",
-                escape(&e.to_string())
-            ),
+    let redo = result.verdict.level == Level::Redo;
+    super::sections::use_section(
+        html,
+        &intro,
+        redo.then_some("The cell's verdict is REDO"),
+        &exported,
+        &ids,
+        &USE_FORMS,
+    );
+}
+
+/// Each camera's frames, as a one-camera page draws them (`session::frame_thumbnails`): its
+/// detected corners and its board reprojected by the joint answer (its mount and its setup's
+/// board), with the board and lens of the config its session was recorded with. A camera left
+/// out of the joint solve, or whose files do not load, says so instead.
+fn frames_sections(
+    html: &mut String,
+    result: &CamerasResultFile,
+    records: &[Result<CameraRecords, String>],
+) -> Result<(), ReportError> {
+    let mounts = result.mounts();
+    html.push_str("<h2>Frames</h2>");
+    for (camera, records) in result.cameras.iter().zip(records) {
+        let heading = format!("Frames of camera {}", camera.name);
+        let id = format!("frames-{}", camera.name);
+        let Some((_, mount)) = mounts.iter().find(|(name, _)| *name == camera.name) else {
+            let _ = write!(
+                html,
+                "<section id=\"{}\"><h3>{}</h3><p>Not drawn: the camera is not in the joint answer.</p></section>",
+                escape(&id),
+                escape(&heading)
+            );
+            continue;
         };
-        let _ = write!(
+        let mut lacking = Vec::new();
+        let thumbnails = match records {
+            Ok(records) => match camera_optics(records, &camera.name, &mut lacking) {
+                Some((board, lens)) => frame_thumbnails(
+                    &records.folder,
+                    &records.evidence.pairs,
+                    &sample_visits(&records.evidence),
+                    Optics {
+                        board: &board,
+                        camera: &lens,
+                    },
+                    |b| mount.camera_from_target(b),
+                )?,
+                None => Vec::new(),
+            },
+            Err(e) => {
+                lacking.push(e.clone());
+                Vec::new()
+            }
+        };
+        if !lacking.is_empty() {
+            let _ = write!(
+                html,
+                "<p class=\"error\">Camera {}: {}</p>",
+                escape(&camera.name),
+                escape(&lacking.join("; "))
+            );
+        }
+        super::frames_section(
             html,
-            "<div class=\"snippet\" data-format=\"{name}\">{body}</div>"
+            &heading,
+            &id,
+            &format!("frame-{}-", camera.name),
+            "the joint solve",
+            &thumbnails,
         );
     }
-    html.push_str("</div></section>");
+    Ok(())
+}
+
+/// One camera's folder of a several-camera session, with its samples and records.
+struct CameraRecords {
+    folder: SessionFolder,
+    evidence: Evidence,
+}
+
+/// Camera `name`'s folder under `root` with its samples and records, or why they do not load.
+fn camera_records(root: &Path, name: &str) -> Result<CameraRecords, String> {
+    let folder = SessionFolder::open(&camera_folder(root, name)).map_err(|e| e.to_string())?;
+    let pairs = Dataset::load(&folder.samples_path())
+        .map_err(|e| e.to_string())?
+        .pairs;
+    let visits = folder.read_visits().map_err(|e| e.to_string())?;
+    Ok(CameraRecords {
+        folder,
+        evidence: Evidence { pairs, visits },
+    })
+}
+
+/// Camera `name`'s board and lens from the config its session was recorded with; `None` when
+/// they do not load (`lacking` says why).
+fn camera_optics(
+    records: &CameraRecords,
+    name: &str,
+    lacking: &mut Vec<String>,
+) -> Option<(Target, CameraModel)> {
+    let config = records
+        .folder
+        .read_manifest()
+        .map_err(|e| e.to_string())
+        .and_then(|m| CellConfig::load(&m.config).map_err(|e| e.to_string()))
+        .map_err(|e| lacking.push(format!("{e}; its frames are not drawn")))
+        .ok()?;
+    let camera = config.cameras.iter().find(|c| c.name == name);
+    if camera.is_none() {
+        lacking.push(format!(
+            "{} has no camera `{name}`; its frames are not drawn",
+            config.file.display()
+        ));
+    }
+    load_optics(&records.folder, camera, lacking)
 }
 
 /// Writes the page of `result`, the answer of the session in `folder`, to `path`.

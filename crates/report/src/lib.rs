@@ -42,7 +42,7 @@ use handeye_solve::Calibration;
 use base64::prelude::{Engine as _, BASE64_STANDARD};
 pub use corners::{CornerResidual, CORNER_PLOT_KINDS};
 pub use sections::export_forms;
-use sections::{arm_section, figure, transforms_section, use_section, verdict_card};
+use sections::{arm_section, figure, transforms_section, use_answer_section, verdict_card};
 
 /// One answer (a calibration of the same samples) to show.
 #[derive(Debug, Clone)]
@@ -224,7 +224,7 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     sections::plain_summary(&mut html, &input.answers[0], input.nominal.as_ref());
 
     // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
-    use_section(&mut html, &input.answers[0], verdict, &input.robot_frames);
+    use_answer_section(&mut html, &input.answers[0], verdict, &input.robot_frames);
 
     // 3. The evidence.
     html.push_str("<h2 class=\"part\">Evidence</h2>\n");
@@ -275,7 +275,14 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     corners::corners_section(&mut html, input)?;
 
     per_pose_table(&mut html, input);
-    frames_section(&mut html, input);
+    frames_section(
+        &mut html,
+        "Frames",
+        "frames",
+        "frame-",
+        &input.answers[0].label,
+        &input.thumbnails,
+    );
 
     html.push_str("<section id=\"poses-3d\"><h3>Cell sketch</h3>\n<p>Where the primary answer puts the robot base, the board and the camera at every sample (base frame, metres; axis names on the frame). Each triad shows a frame's axes: x red, y green, z blue.</p>\n");
     figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
@@ -395,20 +402,30 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
 }
 
 /// The frames with detections, small in a grid; a click shows one full size in an overlay.
-fn frames_section(html: &mut String, input: &ReportInput) {
-    html.push_str("<section id=\"frames\"><h3>Frames</h3>\n");
-    if input.thumbnails.is_empty() {
+/// The frames of one camera (`id` the section's, `prefix` its frames' anchors: `frame-` on a
+/// one-camera page, `frame-<camera>-` for each of several), annotated with the board predicted
+/// by `answer`.
+pub(crate) fn frames_section(
+    html: &mut String,
+    heading: &str,
+    id: &str,
+    prefix: &str,
+    answer: &str,
+    thumbnails: &[FrameThumbnail],
+) {
+    let _ = writeln!(html, "<section id=\"{id}\"><h3>{}</h3>", escape(heading));
+    if thumbnails.is_empty() {
         html.push_str("<p>No frames recorded with these samples.</p>\n");
     } else {
         let _ = writeln!(
             html,
             "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>\n<div class=\"thumbs\">",
-            escape(&input.answers[0].label)
+            escape(answer)
         );
-        for t in &input.thumbnails {
+        for t in thumbnails {
             let _ = writeln!(
                 html,
-                "<figure class=\"thumb\" id=\"frame-{}\"><img class=\"frame\" alt=\"{}\" src=\"data:{};base64,{}\"><figcaption>{}</figcaption></figure>",
+                "<figure class=\"thumb\" id=\"{prefix}{}\"><img class=\"frame\" alt=\"{}\" src=\"data:{};base64,{}\"><figcaption>{}</figcaption></figure>",
                 t.sample,
                 escape(&t.caption),
                 t.mime,

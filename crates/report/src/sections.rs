@@ -13,7 +13,7 @@ use super::{escape, ReportAnswer};
 use handeye_core::geometry::yaml::PoseRecord;
 use handeye_core::geometry::{rotvec, to_matrix4_rows, Pose};
 use handeye_core::setup::RobotFrames;
-use handeye_formats::export::{export, ExportFormat, FrameIds};
+use handeye_formats::export::{ExportFormat, Exported, FrameIds};
 use handeye_solve::cell_model::{CellModelSummary, GivenFile, MIN_EXPLAINED_PX};
 use handeye_solve::verdict::{Level, Verdict};
 
@@ -34,60 +34,78 @@ const USE_FORMS: [(ExportFormat, &str); 4] = [
     ),
 ];
 
-/// "Use it": the primary answer in every form of [`USE_FORMS`], each the exact text
-/// `handeye export` writes with the default frame ids, in a `<pre>` with a copy button. A REDO
-/// verdict puts a caution above them; an answer the exporter refuses shows why instead.
-pub(super) fn use_section(
+/// "Use it" of one camera's answer: [`use_section`] with the forms of [`USE_FORMS`], the
+/// transforms as `result.yaml` holds them (quaternion w ≥ 0, read back), so the page shows the
+/// very text `handeye export result.yaml` prints with the default frame ids.
+pub(super) fn use_answer_section(
     html: &mut String,
     answer: &ReportAnswer,
     verdict: Option<&Verdict>,
     robot: &RobotFrames,
 ) {
-    let ids = FrameIds {
-        base: robot.base.clone(),
-        flange: robot.flange.clone(),
-        poses_in: robot.base.clone(),
-        ..FrameIds::default()
-    };
-    let _ = writeln!(
-        html,
-        "<section id=\"use\"><h2>Use it</h2>\n<p>The transforms of <b>{}</b>, as <code>handeye export result.yaml --format …</code> writes them, with the frame ids <code>{}</code> (robot base), <code>{}</code> (flange), <code>{}</code> (camera optical frame: x right, y down, z forward) and <code>{}</code> (board). For other ids, or the UR ROS driver's <code>base_link</code> (<code>base</code> turned 180° about z), run <code>handeye export</code> with <code>--base-frame</code>, <code>--camera-frame</code>, …</p>",
-        escape(&answer.label),
-        ids.base,
-        ids.flange,
-        ids.camera,
-        ids.target
-    );
-    if verdict.is_some_and(|v| v.level == Level::Redo) {
-        html.push_str("<p class=\"caution\">The verdict is REDO: do not put these numbers on the cell; record again as the verdict says.</p>\n");
-    }
-    html.push_str("<div class=\"snippets\">\n");
-    // The transforms as result.yaml holds them (quaternion w ≥ 0, read back), so the page shows
-    // the very text `handeye export result.yaml` prints.
+    let ids = FrameIds::of_robot(robot);
     let mut mounts = answer.calibration.transforms();
     for pose in [&mut mounts.camera_mount, &mut mounts.target_mount] {
         if let Ok(read_back) = PoseRecord::from_pose(pose).to_pose("") {
             *pose = read_back;
         }
     }
-    for (format, heading) in USE_FORMS {
+    let intro = format!(
+        "The transforms of <b>{}</b>, as <code>handeye export result.yaml --format …</code> writes them, with the frame ids <code>{}</code> (robot base), <code>{}</code> (flange), <code>{}</code> (camera optical frame: x right, y down, z forward) and <code>{}</code> (board). For other ids, or the UR ROS driver's <code>base_link</code> (<code>base</code> turned 180° about z), run <code>handeye export</code> with <code>--base-frame</code>, <code>--camera-frame</code>, …",
+        escape(&answer.label),
+        ids.base,
+        ids.flange,
+        ids.camera,
+        ids.target
+    );
+    let redo = verdict.is_some_and(|v| v.level == Level::Redo);
+    use_section(
+        html,
+        &intro,
+        redo.then_some("The verdict is REDO"),
+        &Exported::one(&mounts, &ids),
+        &ids,
+        &USE_FORMS,
+    );
+}
+
+/// "Use it": `exported` in each of `forms` (with its heading), each the exact text `handeye
+/// export` writes with `ids`, in a `<pre>` with a copy button, below `intro` (HTML). A
+/// `caution` (a REDO verdict: "The verdict is REDO") goes above them; a form the exporter
+/// refuses shows why instead. One camera's page and a several-camera cell's alike.
+pub(super) fn use_section(
+    html: &mut String,
+    intro: &str,
+    caution: Option<&str>,
+    exported: &Exported,
+    ids: &FrameIds,
+    forms: &[(ExportFormat, &str)],
+) {
+    let _ = writeln!(html, "<section id=\"use\"><h2>Use it</h2>\n<p>{intro}</p>");
+    if let Some(caution) = caution {
+        let _ = writeln!(
+            html,
+            "<p class=\"caution\">{}: do not put these numbers on the cell; record again as the verdict says.</p>",
+            escape(caution)
+        );
+    }
+    html.push_str("<div class=\"snippets\">\n");
+    for &(format, heading) in forms {
         let name = format.name();
-        match export(&mounts, format, &ids) {
-            Ok(text) => {
-                let _ = writeln!(
-                    html,
-                    "<div class=\"snippet\" data-format=\"{name}\"><div class=\"snippet-head\"><h4>{heading}</h4><button type=\"button\" class=\"copy\" data-target=\"export-{name}\">Copy</button></div><pre id=\"export-{name}\">{}</pre></div>",
-                    escape(&text)
-                );
-            }
-            Err(e) => {
-                let _ = writeln!(
-                    html,
-                    "<div class=\"snippet\" data-format=\"{name}\"><div class=\"snippet-head\"><h4>{heading}</h4></div><p class=\"error\">not exported: {}</p></div>",
-                    escape(&e.to_string())
-                );
-            }
-        }
+        let body = match exported.check(ids).and_then(|()| exported.text(format)) {
+            Ok(text) => format!(
+                "<div class=\"snippet-head\"><h4>{heading}</h4><button type=\"button\" class=\"copy\" data-target=\"export-{name}\">Copy</button></div><pre id=\"export-{name}\">{}</pre>",
+                escape(&text)
+            ),
+            Err(e) => format!(
+                "<div class=\"snippet-head\"><h4>{heading}</h4></div><p class=\"error\">not exported: {}</p>",
+                escape(&e.to_string())
+            ),
+        };
+        let _ = writeln!(
+            html,
+            "<div class=\"snippet\" data-format=\"{name}\">{body}</div>"
+        );
     }
     html.push_str("</div>\n</section>\n");
 }

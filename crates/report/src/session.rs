@@ -90,12 +90,7 @@ pub fn from_session(
     optics: Option<Optics<'_>>,
 ) -> Result<ReportInput, ReportError> {
     let pairs = &evidence.pairs;
-    let by_id: HashMap<String, &PoseVisit> =
-        evidence.visits.iter().map(|v| (v.sample_id(), v)).collect();
-    let sample_visits: Vec<Option<&PoseVisit>> = pairs
-        .iter()
-        .map(|p| p.id.as_ref().and_then(|id| by_id.get(id).copied()))
-        .collect();
+    let sample_visits = sample_visits(evidence);
 
     let answers: Vec<ReportAnswer> = answers
         .into_iter()
@@ -134,40 +129,14 @@ pub fn from_session(
             ));
         }
     }
-    // One frame per sample read, annotated and encoded: on every core (rayon keeps the order).
-    let mut thumbnails = Vec::new();
-    if let (Some(optics), Some(primary)) = (optics, answers.first()) {
-        use rayon::prelude::*;
-        let shown: Vec<(usize, &PosePair, &PoseVisit)> = pairs
-            .iter()
-            .zip(&sample_visits)
-            .enumerate()
-            .filter_map(|(sample, (pair, visit))| Some((sample, pair, (*visit)?)))
-            .collect();
-        thumbnails = shown
-            .into_par_iter()
-            .map(|(sample, pair, visit)| {
-                let predicted = primary
-                    .calibration
-                    .predict_camera_from_target(&pair.base_from_flange);
-                let path = folder.root().join(&visit.frame);
-                let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
-                Ok(FrameThumbnail {
-                    sample,
-                    caption: format!(
-                        "sample {sample} ({}), board RMS {}",
-                        pair.id.as_deref().unwrap_or("?"),
-                        visit
-                            .reprojection_rms_px
-                            .map(|r| format!("{r:.3} px"))
-                            .unwrap_or_else(|| "-".into())
-                    ),
-                    bytes,
-                    mime: "image/jpeg",
-                })
-            })
-            .collect::<Result<Vec<_>, ReportError>>()?;
-    }
+    let thumbnails = match (optics, answers.first()) {
+        (Some(optics), Some(primary)) => {
+            frame_thumbnails(folder, pairs, &sample_visits, optics, |b| {
+                primary.calibration.predict_camera_from_target(b)
+            })?
+        }
+        _ => Vec::new(),
+    };
     Ok(ReportInput {
         title: folder.shown_root().display().to_string(),
         setup: answers
@@ -186,6 +155,58 @@ pub fn from_session(
         robot_frames: RobotFrames::default(),
         arm: None,
     })
+}
+
+/// Each sample's visit (its frame and detected corners), matched by the sample id `pose-NNN`.
+pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
+    let by_id: HashMap<String, &PoseVisit> =
+        evidence.visits.iter().map(|v| (v.sample_id(), v)).collect();
+    evidence
+        .pairs
+        .iter()
+        .map(|p| p.id.as_ref().and_then(|id| by_id.get(id).copied()))
+        .collect()
+}
+
+/// Every sample's frame that has a visit, annotated ([`annotated_frame`]) with the board at
+/// `predict(T_base_flange)` (`T_camera_target` of the answer shown): read, annotated and
+/// encoded on every core (rayon keeps the order). The one way a page draws its frames, one
+/// camera's or each of several.
+pub(crate) fn frame_thumbnails(
+    folder: &SessionFolder,
+    pairs: &[PosePair],
+    sample_visits: &[Option<&PoseVisit>],
+    optics: Optics<'_>,
+    predict: impl Fn(&Pose) -> Pose + Sync,
+) -> Result<Vec<FrameThumbnail>, ReportError> {
+    use rayon::prelude::*;
+    let shown: Vec<(usize, &PosePair, &PoseVisit)> = pairs
+        .iter()
+        .zip(sample_visits)
+        .enumerate()
+        .filter_map(|(sample, (pair, visit))| Some((sample, pair, (*visit)?)))
+        .collect();
+    shown
+        .into_par_iter()
+        .map(|(sample, pair, visit)| {
+            let predicted = predict(&pair.base_from_flange);
+            let path = folder.root().join(&visit.frame);
+            let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
+            Ok(FrameThumbnail {
+                sample,
+                caption: format!(
+                    "sample {sample} ({}), board RMS {}",
+                    pair.id.as_deref().unwrap_or("?"),
+                    visit
+                        .reprojection_rms_px
+                        .map(|r| format!("{r:.3} px"))
+                        .unwrap_or_else(|| "-".into())
+                ),
+                bytes,
+                mime: "image/jpeg",
+            })
+        })
+        .collect()
 }
 
 /// RMS pixel distance between detected corners and the board's corners projected at
@@ -377,7 +398,8 @@ pub struct FolderReport {
 /// Writes `<session>/report.html` for a session folder solved earlier (`handeye report DIR`),
 /// one camera's or a several-camera cell's, from its `result.yaml` and its records; for one
 /// camera, the board and lens that draw its frames from `config` (default: the config the
-/// session was recorded with) when it loads (a several-camera page draws no frames).
+/// session was recorded with) when it loads (a several-camera page draws each camera's frames
+/// with the board and lens of the config its own session names).
 /// While a run is still recording the session, the page is of the result an earlier part of
 /// it wrote (refused when there is none yet).
 pub fn write_folder_report(
@@ -449,28 +471,10 @@ pub fn write_folder_report(
             .pairs,
         visits: folder.read_visits().map_err(session_error)?,
     };
-    let board = config.and_then(|c| match Target::load(&c.camera().target) {
-        Ok(board) => Some(board),
-        Err(e) => {
-            lacking.push(format!("no frames or reprojection errors: {e}"));
-            None
-        }
-    });
-    // Intrinsics from the config, else the ones a from-scratch run estimated into the session.
-    let camera_file = config
-        .and_then(|c| c.camera().intrinsics.clone())
-        .or_else(|| Some(folder.root().join("camera_info.yaml")).filter(|p| p.is_file()));
-    let camera = camera_file.and_then(|file| match CameraModel::load(&file) {
-        Ok(camera) => Some(camera),
-        Err(e) => {
-            lacking.push(format!("no frames or reprojection errors: {e}"));
-            None
-        }
-    });
-    let optics = match (&board, &camera) {
-        (Some(board), Some(camera)) => Some(Optics { board, camera }),
-        _ => None,
-    };
+    let loaded = load_optics(&folder, config.map(|c| c.camera()), &mut lacking);
+    let optics = loaded
+        .as_ref()
+        .map(|(board, camera)| Optics { board, camera });
     let path = write(
         &folder,
         &evidence,
@@ -490,6 +494,31 @@ pub fn write_folder_report(
         lacking,
         provisional,
     })
+}
+
+/// The board and lens that draw `camera`'s frames: its config's, the intrinsics a from-scratch
+/// run estimated into `folder` when the config gives none; `None` without a config or when a
+/// file does not load (`lacking` says which and why: the page then has no frames or
+/// reprojection errors).
+pub(crate) fn load_optics(
+    folder: &SessionFolder,
+    camera: Option<&handeye_config::CellCamera>,
+    lacking: &mut Vec<String>,
+) -> Option<(Target, CameraModel)> {
+    let camera = camera?;
+    let board = Target::load(&camera.target)
+        .map_err(|e| lacking.push(format!("no frames or reprojection errors: {e}")))
+        .ok();
+    let camera_file = camera
+        .intrinsics
+        .clone()
+        .or_else(|| Some(folder.root().join("camera_info.yaml")).filter(|p| p.is_file()));
+    let model = camera_file.and_then(|file| {
+        CameraModel::load(&file)
+            .map_err(|e| lacking.push(format!("no frames or reprojection errors: {e}")))
+            .ok()
+    });
+    Some((board?, model?))
 }
 
 /// What a session's page shows besides its evidence and answers.
