@@ -324,7 +324,7 @@ impl PoseLoop {
     pub fn samples(&self, camera: usize) -> Vec<handeye_core::setup::PosePair> {
         self.samples[camera]
             .lock()
-            .map(|samples| samples.values().cloned().collect())
+            .map(|samples| samples.pairs().cloned().collect())
             .unwrap_or_default()
     }
 

@@ -1,7 +1,6 @@
 //! The recording side of the run loop: the detection workers that measure each frame and commit
 //! it (frame, record, `samples.yaml`) into its camera's folder, and the `HANDEYE_FAULT` test hook.
 
-use std::collections::BTreeMap;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 
@@ -9,8 +8,8 @@ use handeye_camera::Frame;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::memory;
-use handeye_core::setup::{PosePair, Setup};
-use handeye_records::dataset::Dataset;
+use handeye_core::setup::Setup;
+use handeye_records::dataset::SamplesLog;
 use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 use handeye_records::folder::{PoseVisit, SessionFolder};
@@ -54,20 +53,16 @@ pub(crate) fn rebuild_samples(
     folder: &SessionFolder,
     setup: Setup,
     visits: &[PoseVisit],
-) -> Result<BTreeMap<usize, PosePair>, SessionError> {
-    let mut samples: BTreeMap<usize, PosePair> = BTreeMap::new();
+) -> Result<SamplesLog, SessionError> {
+    let path = folder.samples_path();
+    let mut samples = SamplesLog::new(setup);
     for visit in visits {
         if let Some(sample) = visit.sample() {
-            samples.insert(visit.plan_index, sample);
+            samples.insert(visit.plan_index, sample, &path)?;
         }
     }
-    let path = folder.samples_path();
     if !samples.is_empty() {
-        Dataset {
-            setup,
-            pairs: samples.values().cloned().collect(),
-        }
-        .save(&path)?;
+        samples.save(&path)?;
     } else if path.is_file() {
         std::fs::remove_file(&path).map_err(|source| SessionError::Io { path, source })?;
     }
@@ -106,7 +101,7 @@ impl Fault {
 
 /// One camera's accepted samples by plan index, as the workers add them (shared by the workers
 /// and the run, which reads them without going back to disk).
-pub(super) type SharedSamples = Arc<Mutex<BTreeMap<usize, PosePair>>>;
+pub(super) type SharedSamples = Arc<Mutex<SamplesLog>>;
 
 /// One camera as a worker holds it: its recording, its own detector, and its samples so far.
 struct WorkerCamera {
@@ -216,12 +211,9 @@ pub(super) fn spawn_workers(
                         let Ok(mut samples) = camera.samples.lock() else {
                             return Err(SessionError::DetectionThread("panicked"));
                         };
-                        samples.insert(visit.plan_index, sample);
-                        let dataset = Dataset {
-                            setup: camera.recording.setup,
-                            pairs: samples.values().cloned().collect(),
-                        };
-                        dataset.save(&camera.recording.folder.samples_path())?;
+                        let path = camera.recording.folder.samples_path();
+                        samples.insert(visit.plan_index, sample, &path)?;
+                        samples.save(&path)?;
                         fault.abort_at("abort-after-samples", visit.plan_index);
                     }
                     Ok(visit)
