@@ -13,8 +13,8 @@ use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use image::{GrayImage, Rgb, RgbImage};
-use nalgebra::{Point2, Point3};
+use image::GrayImage;
+use nalgebra::Point2;
 
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
@@ -22,7 +22,7 @@ use handeye_core::setup::{predict, PosePair, Setup};
 use handeye_records::PoseVisit;
 use handeye_session::SharedFrame;
 use handeye_solve::{solve, SolveOptions};
-use handeye_vision::{draw, Target};
+use handeye_vision::{annotate, draw, Target};
 
 use super::events::{ConsoleEvent, PoseView, SigmaView};
 use super::Publisher;
@@ -196,20 +196,6 @@ enum FrameSource {
     File(usize, PathBuf, Pose, Vec<Point2<f64>>),
     /// A live view and its flange pose.
     Image(Arc<GrayImage>, Pose),
-}
-
-/// `image` averaged over `factor`×`factor` blocks into a `w`×`h` image.
-fn box_downscale(image: &GrayImage, factor: u32, w: u32, h: u32) -> GrayImage {
-    let area = factor * factor;
-    GrayImage::from_fn(w, h, |x, y| {
-        let mut sum = 0u32;
-        for dy in 0..factor {
-            for dx in 0..factor {
-                sum += image.get_pixel(x * factor + dx, y * factor + dy)[0] as u32;
-            }
-        }
-        image::Luma([(sum / area) as u8])
-    })
 }
 
 /// Makes the calling thread yield the CPU to the run's threads (Linux: its nice value 10 above
@@ -403,32 +389,14 @@ impl State {
     }
 
     /// The frame, scaled down, with the detected corners and the board as the current estimate
-    /// (or the nominal cell, before one) predicts it.
+    /// (or the nominal cell, before one) predicts it, as the report draws its frames
+    /// (`annotate::prediction`).
     fn render(
         &self,
         image: &GrayImage,
         base_from_flange: &Pose,
         corners: &[Point2<f64>],
     ) -> Option<Vec<u8>> {
-        if image.width() == 0 || image.height() == 0 {
-            return None;
-        }
-        // Scale down by a whole factor with a box average: cheap, and sharp enough to look at.
-        let factor = image.width().div_ceil(FRAME_WIDTH).max(1);
-        let scale = 1.0 / factor as f64;
-        let (w, h) = (
-            (image.width() / factor).max(1),
-            (image.height() / factor).max(1),
-        );
-        let small = if factor > 1 {
-            box_downscale(image, factor, w, h)
-        } else {
-            image.clone()
-        };
-        let mut out = RgbImage::from_fn(w, h, |x, y| {
-            let v = small.get_pixel(x, y)[0];
-            Rgb([v, v, v])
-        });
         let (camera_mount, target_mount) = self.estimate.unwrap_or(self.cell.nominal);
         let camera_from_target = predict(
             self.cell.setup,
@@ -436,22 +404,15 @@ impl State {
             &target_mount,
             base_from_flange,
         );
-        for c in corners {
-            draw::cross(
-                &mut out,
-                Point2::new(c.x * scale, c.y * scale),
-                3.0,
-                Rgb([0, 230, 0]),
-            );
-        }
-        let image_scale = image.width() as f64 / self.cell.model.width.max(1) as f64;
-        for (_, _, p) in self.cell.board.points() {
-            let in_camera: Point3<f64> = camera_from_target * p;
-            if let Some(px) = self.cell.model.project(&in_camera) {
-                let at = Point2::new(px.x * image_scale * scale, px.y * image_scale * scale);
-                draw::cross(&mut out, at, 2.0, Rgb([255, 40, 40]));
-            }
-        }
+        let out = annotate::prediction(
+            image,
+            FRAME_WIDTH,
+            &self.cell.board,
+            &self.cell.model,
+            &camera_from_target,
+            corners.iter().copied(),
+        )
+        .ok()?;
         draw::jpeg(&out, JPEG_QUALITY).ok()
     }
 }

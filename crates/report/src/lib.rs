@@ -26,7 +26,6 @@
 pub mod cameras;
 mod corners;
 pub mod plots;
-mod scale;
 mod sections;
 pub mod session;
 

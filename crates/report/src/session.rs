@@ -6,10 +6,8 @@
 
 use std::collections::HashMap;
 
-use image::{Rgb, RgbImage};
 use nalgebra::Point2;
 
-use super::scale::box_shrink;
 use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
@@ -20,7 +18,7 @@ use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSe
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
 use handeye_solve::Calibration;
-use handeye_vision::{draw, Target};
+use handeye_vision::{annotate, draw, Target};
 
 /// Largest width of a frame in the report, px: the grid shows it small, a click full size.
 /// Narrower frames keep their size.
@@ -238,7 +236,7 @@ fn corner_residuals<'c>(
 }
 
 /// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at `camera_from_target`
-/// (magenta outlines) and the detected corners (green crosses), as JPEG.
+/// and the detected corners (`handeye_vision::annotate::prediction`), as JPEG.
 fn annotated_frame(
     path: &std::path::Path,
     optics: Optics<'_>,
@@ -252,62 +250,15 @@ fn annotated_frame(
     let grey = image::open(path)
         .map_err(|e| frame_error(e.to_string()))?
         .to_luma8();
-    let width = grey.width().clamp(1, FRAME_WIDTH);
-    let scale = f64::from(width) / f64::from(grey.width().max(1));
-    let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
-    // A box filter (`scale`: a fraction of a filtered resize's time, which was a tenth of a bag
-    // import's CPU); a frame already narrow enough is kept as it is.
-    let small = if width == grey.width() {
-        grey
-    } else {
-        box_shrink(&grey, width, height).map_err(frame_error)?
-    };
-    // Lines and crosses readable at full size and in the small grid alike.
-    let stroke = if width >= 640 { 2 } else { 1 };
-    let mut rgb = vec![0u8; 3 * small.as_raw().len()];
-    for (pixel, &v) in rgb.chunks_exact_mut(3).zip(small.as_raw()) {
-        pixel.fill(v);
-    }
-    let mut out =
-        RgbImage::from_raw(small.width(), small.height(), rgb).expect("three bytes a pixel");
-    // Pixel centres: OpenCV pixel u maps to (u + 0.5)·s − 0.5 in the scaled frame.
-    let to_thumb =
-        |p: Point2<f64>| Point2::new((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
-    let magenta = Rgb([255, 0, 255]);
-    // Chessboard corners (ChArUco, chessboard): a small magenta mark at each predicted corner.
-    if optics.board.aprilgrid().is_none() {
-        for (_, _, p) in optics.board.points() {
-            if let Some(pixel) = optics.camera.project(&(camera_from_target * p)) {
-                draw::cross(&mut out, to_thumb(pixel), 2.0, magenta);
-            }
-        }
-    }
-    let tags = optics.board.aprilgrid().map(|b| b.tags()).unwrap_or(&[]);
-    for tag in tags {
-        let points = tag.corners_in_target;
-        let pixels: Vec<Option<Point2<f64>>> = points
-            .iter()
-            .map(|p| {
-                optics
-                    .camera
-                    .project(&(camera_from_target * p))
-                    .map(to_thumb)
-            })
-            .collect();
-        for k in 0..4 {
-            if let (Some(a), Some(b)) = (pixels[k], pixels[(k + 1) % 4]) {
-                draw::line(&mut out, a, b, stroke, magenta);
-            }
-        }
-    }
-    for c in corners_px {
-        draw::cross(
-            &mut out,
-            to_thumb(c.pixel),
-            2.0 + 2.0 * f64::from(stroke),
-            Rgb([0, 230, 0]),
-        );
-    }
+    let out = annotate::prediction(
+        &grey,
+        FRAME_WIDTH,
+        optics.board,
+        optics.camera,
+        camera_from_target,
+        corners_px.iter().map(|c| c.pixel),
+    )
+    .map_err(frame_error)?;
     draw::jpeg(&out, FRAME_JPEG_QUALITY).map_err(frame_error)
 }
 

@@ -28,6 +28,7 @@ pub mod pnp;
 pub mod print;
 mod regrid;
 pub mod sharpness;
+pub mod shrink;
 pub mod subpix;
 pub mod target;
 pub mod xcorner;

@@ -1,5 +1,6 @@
-//! A grey frame made smaller for the report by box filtering: `fast_image_resize`'s box
-//! convolution, each output pixel a mean of the input pixels under it, in SIMD fixed point.
+//! A grey frame made smaller for people (the report's frames, the console's live view) by box
+//! filtering: `fast_image_resize`'s box convolution, each output pixel a mean of the input
+//! pixels under it, in SIMD fixed point.
 //!
 //! Why not `image::imageops::thumbnail`: it gives each input pixel to one output pixel (aliasing
 //! where the ratio is not an integer, as 1280 → 960), and its per-pixel float arithmetic was,
@@ -11,7 +12,7 @@ use image::GrayImage;
 
 /// `grey` scaled to `width` x `height` by a box filter; what went wrong otherwise (a size of
 /// zero).
-pub(super) fn box_shrink(grey: &GrayImage, width: u32, height: u32) -> Result<GrayImage, String> {
+pub fn box_shrink(grey: &GrayImage, width: u32, height: u32) -> Result<GrayImage, String> {
     let source = ImageRef::new(grey.width(), grey.height(), grey.as_raw(), PixelType::U8)
         .map_err(|e| e.to_string())?;
     let mut scaled = Image::new(width, height, PixelType::U8);
