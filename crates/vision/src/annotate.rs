@@ -192,25 +192,20 @@ mod tests {
     use super::*;
     use crate::board::Board;
     use crate::TagFamily;
-    use handeye_core::camera_model::Distortion;
     use handeye_core::geometry::pose_from_rotvec;
     use nalgebra::Vector3;
 
-    fn camera(width: u32, height: u32, scale: f64) -> CameraModel {
+    /// The crate's test lens, or the same lens at `scale` times its resolution.
+    fn camera(scale: f64) -> CameraModel {
+        let lens = crate::pnp::tests::camera();
         CameraModel {
-            width,
-            height,
-            fx: 910.0 * scale,
-            fy: 905.0 * scale,
-            cx: 640.5 * scale,
-            cy: 358.7 * scale,
-            distortion: Distortion::RadTan {
-                k1: -0.2,
-                k2: 0.05,
-                p1: 0.001,
-                p2: -0.0008,
-                k3: 0.0,
-            },
+            width: (f64::from(lens.width) * scale) as u32,
+            height: (f64::from(lens.height) * scale) as u32,
+            fx: lens.fx * scale,
+            fy: lens.fy * scale,
+            cx: lens.cx * scale,
+            cy: lens.cy * scale,
+            ..lens
         }
     }
 
@@ -235,8 +230,8 @@ mod tests {
             Vector3::new(0.2, -0.1, 0.05),
         );
         let grey = GrayImage::from_pixel(1280, 720, image::Luma([120]));
-        let frame_lens = camera(1280, 720, 1.0);
-        for lens in [frame_lens, camera(2560, 1440, 2.0)] {
+        let frame_lens = camera(1.0);
+        for lens in [frame_lens, camera(2.0)] {
             let corners: Vec<Point2<f64>> = board
                 .aprilgrid()
                 .unwrap()

@@ -362,7 +362,7 @@ fn summarise(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::TagFamily;
     use handeye_core::camera_model::Distortion;
@@ -370,7 +370,8 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
-    fn camera() -> CameraModel {
+    /// A 1280x720 lens with radial-tangential distortion (tests of the crate share it).
+    pub(crate) fn camera() -> CameraModel {
         CameraModel {
             width: 1280,
             height: 720,
