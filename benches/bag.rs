@@ -24,6 +24,10 @@
 //!   `HANDEYE_BENCH_BAG=DIR/bag`: measure that bag instead of writing one.
 //! * `HANDEYE_BENCH_BEFORE=PATH`: also measure another `handeye` build (before a change), in the
 //!   same rounds; `HANDEYE_BENCH_ROUNDS=N` rounds (default 1), interleaved.
+//! * `HANDEYE_BENCH_LOAD=N`: the comparison under a fixed load, N threads of this process
+//!   spinning on the CPU while each command runs (the load is the same for the reader and the
+//!   import, and is not counted in their CPU): how the ratio holds on a machine shared with
+//!   other work, where a quiet machine's figures say little.
 //!
 //! `cargo bench --bench bag -- --warm-up-time 1 --measurement-time 3`
 
@@ -400,6 +404,44 @@ fn the_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
     }
 }
 
+/// `threads` threads spinning on the CPU until dropped: a fixed load beside the commands
+/// measured (`HANDEYE_BENCH_LOAD`).
+struct FixedLoad {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl FixedLoad {
+    fn start(threads: usize) -> FixedLoad {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        if threads > 0 {
+            println!("under a fixed load: {threads} thread(s) spinning beside each command");
+        }
+        let threads = (0..threads)
+            .map(|_| {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    let mut x = 0u64;
+                    while !stop.load(Ordering::Relaxed) {
+                        x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005) + 1);
+                    }
+                })
+            })
+            .collect();
+        FixedLoad { stop, threads }
+    }
+}
+
+impl Drop for FixedLoad {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        for thread in self.threads.drain(..) {
+            let _ = thread.join();
+        }
+    }
+}
+
 /// The whole command, and `HANDEYE_BENCH_BEFORE`'s (an earlier build) when given, each beside
 /// the `rosbags` reader, `HANDEYE_BENCH_ROUNDS` times (default 1) interleaved: peak RSS, CPU
 /// (user + system) and the ratio to the reader's CPU in the same round, with the load average.
@@ -410,6 +452,12 @@ fn compare(bag: &Path, board: &Path, dir: &Path) {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(1);
+    // A fixed background load for the whole comparison, when asked for.
+    let load_threads: usize = std::env::var("HANDEYE_BENCH_LOAD")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let _load = FixedLoad::start(load_threads);
     let mut binaries = vec![(
         "this build",
         std::path::PathBuf::from(env!("CARGO_BIN_EXE_handeye")),
