@@ -50,14 +50,7 @@ fn run_ok(config: &Path, out: &Path, env: &[(&str, &str)]) -> String {
     for (k, v) in env {
         command.env(k, v);
     }
-    let output = command.output().unwrap();
-    let stdout = String::from_utf8_lossy(&output.stdout).to_string();
-    assert!(
-        output.status.success(),
-        "run failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    stdout
+    util::succeeds(&mut command)
 }
 
 /// One run of the shipped three-camera cell, shared by the tests that read it (the accuracy test
@@ -225,17 +218,7 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     assert!(camera_folder(&out, "left").join("poses/011.yaml").is_file());
     assert!(left.joint.is_some());
     // The camera is back (plugged in again): a resume visits only the poses it missed.
-    let resumed = handeye()
-        .args(["run", "--resume"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&resumed.stdout);
-    assert!(
-        resumed.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&resumed.stderr)
-    );
+    let stdout = util::succeeds(&mut handeye().args(["run", "--resume"]).arg(&out));
     assert!(stdout.contains("8 poses visited in this run"), "{stdout}");
     assert!(!out.join("failures.yaml").exists());
     let wrist = read_result(&out)
@@ -646,12 +629,7 @@ fn the_page_draws_every_cameras_frames_and_names_what_it_cannot_draw() {
         std::fs::write(to, bytes).unwrap();
     }
     let page = |out: &Path| {
-        let report = handeye().arg("report").arg(out).output().unwrap();
-        assert!(
-            report.status.success(),
-            "{}",
-            String::from_utf8_lossy(&report.stderr)
-        );
+        util::succeeds(handeye().arg("report").arg(out));
         std::fs::read_to_string(out.join("report.html")).unwrap()
     };
     let samples = |name: &str| {
@@ -709,12 +687,7 @@ fn the_page_draws_every_cameras_frames_and_names_what_it_cannot_draw() {
 #[test]
 fn report_and_exports_name_every_camera() {
     let (_, out, _) = shipped_run();
-    let report = handeye().arg("report").arg(out).output().unwrap();
-    assert!(
-        report.status.success(),
-        "{}",
-        String::from_utf8_lossy(&report.stderr)
-    );
+    util::succeeds(handeye().arg("report").arg(out));
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     for name in [
         "T_flange_cam_wrist",
@@ -1030,21 +1003,15 @@ fn a_held_out_run_checks_each_camera_against_its_own_mount() {
             "rotation_vector: [0.0, 0.0, 0.0]",
         )],
     );
-    let run = handeye()
-        .arg("verify")
-        .arg("--config")
-        .arg(&knocked)
-        .arg("--result")
-        .arg(out.join("result.yaml"))
-        .args(["--poses", "6", "-o"])
-        .arg(dir.path().join("knocked"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&run.stderr)
+    let stdout = util::succeeds(
+        &mut handeye()
+            .arg("verify")
+            .arg("--config")
+            .arg(&knocked)
+            .arg("--result")
+            .arg(out.join("result.yaml"))
+            .args(["--poses", "6", "-o"])
+            .arg(dir.path().join("knocked")),
     );
     assert!(
         stdout.contains("camera `right`: saw its board at none of the held-out views: not checked — it was moved or covered")

@@ -46,6 +46,19 @@ pub fn handeye() -> Command {
     Command::new(env!("CARGO_BIN_EXE_handeye"))
 }
 
+/// Runs `command` and returns its standard output; fails the test with its output and errors
+/// when it does not succeed.
+pub fn succeeds(command: &mut Command) -> String {
+    let output = command.output().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout).to_string();
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}
+
 /// A public data set folder, or `None` (with the reason printed) when it is absent. The data
 /// sets live in `../shared/datasets` beside the crate; a clone made elsewhere from a local
 /// checkout (CI clones main into a scratch folder) finds them beside that checkout, its

@@ -217,7 +217,7 @@ impl SamplesLog {
     pub fn insert(&mut self, key: usize, pair: PosePair, path: &Path) -> Result<(), FileError> {
         let one = Dataset {
             setup: self.setup,
-            pairs: vec![pair],
+            pairs: vec![pair.clone()],
         };
         let text = serde_yaml_ng::to_string(&one.to_yaml().samples).map_err(|source| {
             FileError::Serialise {
@@ -225,7 +225,6 @@ impl SamplesLog {
                 source,
             }
         })?;
-        let [pair] = <[PosePair; 1]>::try_from(one.pairs).expect("one sample");
         self.samples.insert(key, (pair, text));
         Ok(())
     }
@@ -242,19 +241,25 @@ impl SamplesLog {
 
     /// Writes the file atomically (what [`Dataset::save`] of the same samples writes).
     pub fn save(&self, path: &Path) -> Result<(), FileError> {
-        if self.samples.is_empty() {
-            return write_yaml(&self.header(), path);
-        }
-        let serialise = |source| FileError::Serialise {
-            path: path.to_path_buf(),
-            source,
-        };
+        let header =
+            serde_yaml_ng::to_string(&self.header()).map_err(|source| FileError::Serialise {
+                path: path.to_path_buf(),
+                source,
+            })?;
         // The header's keys as serde writes them, the empty list's `[]` replaced by the block
-        // list of every sample's text.
-        let header = serde_yaml_ng::to_string(&self.header()).map_err(serialise)?;
-        let head = header
+        // list of every sample's text (with no sample, or were serde to write the empty list
+        // otherwise, the whole file is serialised as `Dataset::save` does).
+        let Some(head) = header
             .strip_suffix(" []\n")
-            .expect("a dataset with no sample ends with `samples: []`");
+            .filter(|_| !self.samples.is_empty())
+        else {
+            let pairs = self.pairs().cloned().collect();
+            return Dataset {
+                setup: self.setup,
+                pairs,
+            }
+            .save(path);
+        };
         let mut text = String::with_capacity(
             head.len() + 1 + self.samples.values().map(|(_, t)| t.len()).sum::<usize>(),
         );
