@@ -218,7 +218,7 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     assert!(camera_folder(&out, "left").join("poses/011.yaml").is_file());
     assert!(left.joint.is_some());
     // The camera is back (plugged in again): a resume visits only the poses it missed.
-    let stdout = util::succeeds(&mut handeye().args(["run", "--resume"]).arg(&out));
+    let stdout = util::succeeds(handeye().args(["run", "--resume"]).arg(&out));
     assert!(stdout.contains("8 poses visited in this run"), "{stdout}");
     assert!(!out.join("failures.yaml").exists());
     let wrist = read_result(&out)
@@ -1004,7 +1004,7 @@ fn a_held_out_run_checks_each_camera_against_its_own_mount() {
         )],
     );
     let stdout = util::succeeds(
-        &mut handeye()
+        handeye()
             .arg("verify")
             .arg("--config")
             .arg(&knocked)
