@@ -599,11 +599,6 @@ const X_JUNCTION_CONTRAST: f64 = 12.0;
 /// Only the quad search and decoding see this frame; corners are refined on the original.
 fn separate_x_junctions(image: &GrayImage) -> GrayImage {
     const TILE: usize = 8;
-    // curve(t) = t^p with SEPARATION_LEVEL^p = 1/2.
-    let p = 0.5f64.ln() / SEPARATION_LEVEL.ln();
-    let curve: Vec<u32> = (0..=255u32)
-        .map(|t| (255.0 * (t as f64 / 255.0).powf(p)).round() as u32)
-        .collect();
     let (w, h) = (image.width() as usize, image.height() as usize);
     let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
     let raw = image.as_raw();
@@ -611,12 +606,17 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
     let mut tile_hi = vec![0u8; tw * th];
     for y in 0..h {
         let row = &raw[y * w..(y + 1) * w];
-        for (tx, chunk) in row.chunks(TILE).enumerate() {
-            let k = (y / TILE) * tw + tx;
-            for &v in chunk {
-                tile_lo[k] = tile_lo[k].min(v);
-                tile_hi[k] = tile_hi[k].max(v);
-            }
+        let tiles = (y / TILE) * tw..;
+        for ((chunk, lo), hi) in row
+            .chunks(TILE)
+            .zip(&mut tile_lo[tiles.clone()])
+            .zip(&mut tile_hi[tiles])
+        {
+            let (chunk_lo, chunk_hi) = chunk
+                .iter()
+                .fold((255u8, 0u8), |(l, h), &v| (l.min(v), h.max(v)));
+            *lo = (*lo).min(chunk_lo);
+            *hi = (*hi).max(chunk_hi);
         }
     }
     // Each tile's range over its 3x3 tile neighbourhood.
@@ -633,36 +633,47 @@ fn separate_x_junctions(image: &GrayImage) -> GrayImage {
             }
         }
     }
-    // Each tile's remap: its `lo`, its range and the range's reciprocal (`(n·m) >> 24` is
-    // `n / range` exactly for every n < 2^16 the remap divides).
-    let remaps: Vec<(u32, u32, u64)> = lo
-        .iter()
-        .zip(&hi)
-        .map(|(&l, &h)| {
-            let r = (h - l) as u32;
-            (
-                l as u32,
-                r,
-                if r == 0 { 0 } else { (1 << 24) / r as u64 + 1 },
-            )
-        })
-        .collect();
+    let remap = separation_remap();
     let mut out = binomial_blur(image);
     let buffer: &mut [u8] = &mut out;
     for (y, row) in buffer.chunks_exact_mut(w).enumerate() {
-        let tiles = &remaps[(y / TILE) * tw..][..tw];
-        for (chunk, &(l, r, m)) in row.chunks_mut(TILE).zip(tiles) {
-            if r < MIN_SEPARATION_RANGE {
+        let tiles = (y / TILE) * tw..;
+        for ((chunk, &l), &h) in row.chunks_mut(TILE).zip(&lo[tiles.clone()]).zip(&hi[tiles]) {
+            let range = h - l;
+            if u32::from(range) < MIN_SEPARATION_RANGE {
                 continue;
             }
+            let curve = &remap[usize::from(range)];
             for v in chunk {
                 // The smoothed pixel lies inside its 3x3 tile neighbourhood's range.
-                let t = (((*v as u32 - l) * 255) as u64 * m) >> 24;
-                *v = (l + r * curve[t as usize] / 255) as u8;
+                *v = l + curve[usize::from(*v - l)];
             }
         }
     }
     out
+}
+
+/// [`separate_x_junctions`]' remap of a pixel `d` grey levels above its neighbourhood's darkest
+/// inside a range of `r` levels, `remap[r][d]` (`d ≤ r`): the concave curve `t^p` with
+/// `SEPARATION_LEVEL^p = 1/2` over the range, in integers (one table look-up a pixel).
+fn separation_remap() -> &'static [[u8; 256]; 256] {
+    static REMAP: std::sync::OnceLock<Box<[[u8; 256]; 256]>> = std::sync::OnceLock::new();
+    REMAP.get_or_init(|| {
+        let p = 0.5f64.ln() / SEPARATION_LEVEL.ln();
+        let curve: Vec<u32> = (0..=255u32)
+            .map(|t| (255.0 * (t as f64 / 255.0).powf(p)).round() as u32)
+            .collect();
+        let mut remap = Box::new([[0u8; 256]; 256]);
+        for (r, levels) in remap.iter_mut().enumerate().skip(1) {
+            let r = r as u32;
+            for (d, out) in levels.iter_mut().enumerate().take(r as usize + 1) {
+                // d·255/r rounded down, then the curve scaled back to the range.
+                let t = d as u32 * 255 / r;
+                *out = (r * curve[t as usize] / 255) as u8;
+            }
+        }
+        remap
+    })
 }
 
 /// The frame smoothed by the 3x3 binomial kernel (`[1 2 1]/4` each way, sigma ≈ 0.7 px),

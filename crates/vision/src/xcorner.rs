@@ -80,10 +80,16 @@ pub fn refine_saddle(
         };
         let (columns, rows) = (offsets(cx, p.x), offsets(cy, p.y));
         // The normal equations of the fit in the basis (x², xy, y², x, y, 1) need only the
-        // weighted moments Σ w·xⁱ·yʲ (i + j ≤ 4) and Σ w·v·xⁱ·yʲ (i + j ≤ 2).
+        // weighted moments Σ w·xⁱ·yʲ (i + j ≤ 4) and Σ w·v·xⁱ·yʲ (i + j ≤ 2): summed along
+        // each row first (the powers of x), then each row's sums times the powers of its y.
+        let column_powers: Vec<[f64; 5]> = columns
+            .iter()
+            .map(|&(x, _)| [1.0, x, x * x, x * x * x, x * x * x * x])
+            .collect();
         let mut m = Moments::default();
         for (dy, &(y, gy)) in (-r..).zip(&rows) {
-            for (dx, &(x, gx)) in (-r..).zip(&columns) {
+            let mut row = Moments::default();
+            for ((dx, &(x, gx)), xs) in (-r..).zip(&columns).zip(&column_powers) {
                 // A Gaussian tapered to zero at `reach`: the window is round and has no edge,
                 // so the pixels it takes in are balanced about the estimate.
                 let d2 = x * x + y * y;
@@ -91,8 +97,9 @@ pub fn refine_saddle(
                 if taper <= 0.0 {
                     continue;
                 }
-                m.add(x, y, gx * gy * taper * taper, patch.at(cx + dx, cy + dy));
+                row.add_row_pixel(xs, gx * gy * taper * taper, patch.at(cx + dx, cy + dy));
             }
+            m.add_row(&row, y);
         }
         cached = Some(patch);
         let (normal, rhs) = m.normal_equations();
@@ -128,18 +135,29 @@ struct Moments {
 }
 
 impl Moments {
-    fn add(&mut self, x: f64, y: f64, weight: f64, value: f64) {
-        let mut wx = weight;
-        for i in 0..5 {
-            let mut wxy = wx;
-            for j in 0..5 - i {
-                self.w[i][j] += wxy;
+    /// Adds a pixel of a row to that row's sums (`w[i][0]`, `v[i][0]`): `xs` are the powers of
+    /// its x.
+    fn add_row_pixel(&mut self, xs: &[f64; 5], weight: f64, value: f64) {
+        for (sum, x) in self.w.iter_mut().zip(xs) {
+            sum[0] += weight * x;
+        }
+        let weighted = weight * value;
+        for (sum, x) in self.v.iter_mut().zip(xs) {
+            sum[0] += weighted * x;
+        }
+    }
+
+    /// Adds a row's sums (from [`Moments::add_row_pixel`]) at height `y`.
+    fn add_row(&mut self, row: &Moments, y: f64) {
+        let mut yj = 1.0;
+        for j in 0..5 {
+            for i in 0..5 - j {
+                self.w[i][j] += row.w[i][0] * yj;
                 if i + j <= 2 {
-                    self.v[i][j] += wxy * value;
+                    self.v[i][j] += row.v[i][0] * yj;
                 }
-                wxy *= y;
             }
-            wx *= x;
+            yj *= y;
         }
     }
 
@@ -231,26 +249,27 @@ impl Patch {
         let (cols, rows) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
         let taps = kernel.len();
         // Rows first (over the padded height), then columns; each sum runs over the kernel
-        // from its first tap.
+        // from its first tap, a tap at a time across the whole row (which vectorises).
         let mut horizontal = vec![0.0; (rows + taps - 1) * cols];
+        let mut line = vec![0.0; cols + taps - 1];
         for (row, y) in (y0 - pad..=y1 + pad).enumerate() {
-            let line = &raw[(y * w + x0 - pad) as usize..][..cols + taps - 1];
-            for (col, out) in horizontal[row * cols..][..cols].iter_mut().enumerate() {
-                let mut sum = 0.0;
-                for (k, &v) in kernel.iter().zip(&line[col..col + taps]) {
-                    sum += k * f64::from(v);
+            let pixels = &raw[(y * w + x0 - pad) as usize..][..cols + taps - 1];
+            for (value, &pixel) in line.iter_mut().zip(pixels) {
+                *value = f64::from(pixel);
+            }
+            let out = &mut horizontal[row * cols..][..cols];
+            for (tap, &k) in kernel.iter().enumerate() {
+                for (sum, &v) in out.iter_mut().zip(&line[tap..tap + cols]) {
+                    *sum += k * v;
                 }
-                *out = sum;
             }
         }
         let mut values = vec![0.0; rows * cols];
-        for row in 0..rows {
-            for col in 0..cols {
-                let mut sum = 0.0;
-                for (o, k) in kernel.iter().enumerate() {
-                    sum += k * horizontal[(row + o) * cols + col];
+        for (row, out) in values.chunks_exact_mut(cols).enumerate() {
+            for (o, &k) in kernel.iter().enumerate() {
+                for (sum, &v) in out.iter_mut().zip(&horizontal[(row + o) * cols..][..cols]) {
+                    *sum += k * v;
                 }
-                values[row * cols + col] = sum;
             }
         }
         Patch {

@@ -534,27 +534,55 @@ impl Problem<'_> {
         let n_global = layout.robot_offset();
         let mut h = DMatrix::zeros(n, n);
         let mut g = DVector::zeros(n);
+        // Only the upper triangle of the global block and the global × robot blocks above the
+        // diagonal are summed corner by corner (no temporary matrix a corner); the rest is
+        // their mirror, filled once at the end.
+        // The corner's two global rows, each as one slice (the matrix is column-major).
+        let (mut top, mut bottom) = (vec![0.0; n_global], vec![0.0; n_global]);
         self.corner_jacobians(&s, |f, c, global, robot| {
             let row = self.row_offsets[f] + 2 * c;
             let res = Vector2::new(r[row], r[row + 1]);
-            let gt = global.transpose();
-            let mut hgg = h.view_mut((0, 0), (n_global, n_global));
-            hgg += &gt * global;
-            let mut gg = g.rows_mut(0, n_global);
-            gg += &gt * res;
+            for (i, (t, b)) in top.iter_mut().zip(&mut bottom).enumerate() {
+                (*t, *b) = (global[(0, i)], global[(1, i)]);
+            }
+            // Column `j` of `h` from row 0: `h[(i, j)] += Jᵢ·Jⱼ` for the rows above the column.
+            let add_column = |h: &mut DMatrix<f64>, j: usize, rows: usize, a0: f64, a1: f64| {
+                let column = &mut h.as_mut_slice()[j * n..][..rows];
+                for ((sum, &t), &b) in column.iter_mut().zip(&top).zip(&bottom) {
+                    *sum += t * a0 + b * a1;
+                }
+            };
+            for j in 0..n_global {
+                let (a0, a1) = (top[j], bottom[j]);
+                add_column(&mut h, j, j + 1, a0, a1);
+                g[j] += a0 * res.x + a1 * res.y;
+            }
             if layout.robot > 0 {
                 let o = layout.robot_offset() + 6 * f;
-                let cross = &gt * robot;
-                let mut hgf = h.view_mut((0, o), (n_global, 6));
-                hgf += &cross;
-                let mut hfg = h.view_mut((o, 0), (6, n_global));
-                hfg += cross.transpose();
+                for j in 0..6 {
+                    add_column(&mut h, o + j, n_global, robot[(0, j)], robot[(1, j)]);
+                }
                 let mut hff = h.fixed_view_mut::<6, 6>(o, o);
                 hff += robot.transpose() * robot;
                 let mut gf = g.fixed_rows_mut::<6>(o);
                 gf += robot.transpose() * res;
             }
         });
+        for j in 0..n_global {
+            for i in 0..j {
+                h[(j, i)] = h[(i, j)];
+            }
+        }
+        if layout.robot > 0 {
+            for f in 0..self.frames.len() {
+                let o = layout.robot_offset() + 6 * f;
+                for j in o..o + 6 {
+                    for i in 0..n_global {
+                        h[(j, i)] = h[(i, j)];
+                    }
+                }
+            }
+        }
         if let Some(prior) = self.prior {
             for f in 0..self.frames.len() {
                 let row = self.corner_rows + 6 * f;
