@@ -307,7 +307,7 @@ impl State {
                 }
                 // A pose recorded before a resume: read back from its file.
                 match image::open(&path) {
-                    Ok(decoded) => self.render(&decoded.to_luma8(), &base_from_flange, &corners),
+                    Ok(decoded) => self.render(&decoded.into_luma8(), &base_from_flange, &corners),
                     Err(e) => {
                         tracing::warn!("console: frame {}: {e}", path.display());
                         None

@@ -249,7 +249,7 @@ fn annotated_frame(
     };
     let grey = image::open(path)
         .map_err(|e| frame_error(e.to_string()))?
-        .to_luma8();
+        .into_luma8();
     let out = annotate::prediction(
         &grey,
         FRAME_WIDTH,

@@ -250,7 +250,7 @@ pub fn compressed_to_gray(image: &CompressedImage) -> Result<GrayImage, String> 
         ),
         e => fail(e),
     })?;
-    Ok(decoded.to_luma8())
+    Ok(decoded.into_luma8())
 }
 
 #[cfg(test)]

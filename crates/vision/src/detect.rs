@@ -792,6 +792,24 @@ mod tests {
     }
 
     #[test]
+    fn the_separation_remap_keeps_each_range_and_cuts_it_at_the_separation_level() {
+        let remap = separation_remap();
+        for r in 1..=255usize {
+            let curve = &remap[r];
+            // The range's ends stay where they are; inside it the curve only rises.
+            assert_eq!((curve[0], usize::from(curve[r])), (0, r), "range {r}");
+            assert!(curve[..=r].windows(2).all(|w| w[0] <= w[1]), "range {r}");
+            // SEPARATION_LEVEL of the range goes to its middle (within the integer steps).
+            let at_level = f64::from(curve[(SEPARATION_LEVEL * r as f64).round() as usize]);
+            let middle = r as f64 / 2.0;
+            assert!(
+                (at_level - middle).abs() <= 1.0 + 0.02 * r as f64,
+                "range {r}: {at_level} for {middle}"
+            );
+        }
+    }
+
+    #[test]
     fn library_corners_move_half_a_pixel_to_the_project_convention() {
         let corners = to_project_pixels([[10.5, 20.5], [11.0, 20.5], [11.0, 21.0], [10.5, 21.0]]);
         assert_eq!(corners[0], Point2::new(10.0, 20.0));
