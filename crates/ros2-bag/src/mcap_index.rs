@@ -110,6 +110,19 @@ impl McapIndex {
     /// the file: a damaged index otherwise reads past its end or allocates what a broken length
     /// field says.
     pub(super) fn read(&self, offset: u64, len: u64) -> Result<Vec<u8>, BagError> {
+        let mut bytes = Vec::new();
+        self.read_into(offset, len, &mut bytes)?;
+        Ok(bytes)
+    }
+
+    /// [`McapIndex::read`] into `bytes`, reusing its memory: a buffer read into again and again
+    /// (a frame at a time) is allocated and cleared only when it must grow.
+    pub(super) fn read_into(
+        &self,
+        offset: u64,
+        len: u64,
+        bytes: &mut Vec<u8>,
+    ) -> Result<(), BagError> {
         let end = offset.checked_add(len).filter(|&e| e <= self.len);
         if end.is_none() || len > mcap_record_limit(self.len) as u64 {
             return Err(self.damaged(format!(
@@ -117,18 +130,20 @@ impl McapIndex {
                 self.len
             )));
         }
-        let mut bytes = Vec::new();
-        bytes
-            .try_reserve_exact(len as usize)
-            .map_err(|_| super::storage::out_of_memory(&self.path, len, "reading a message"))?;
-        bytes.resize(len as usize, 0);
+        let len = len as usize;
+        if bytes.len() < len {
+            bytes.try_reserve_exact(len - bytes.len()).map_err(|_| {
+                super::storage::out_of_memory(&self.path, len as u64, "reading a message")
+            })?;
+            bytes.resize(len, 0);
+        }
+        bytes.truncate(len);
         self.file
-            .read_exact_at(&mut bytes, offset)
+            .read_exact_at(bytes, offset)
             .map_err(|source| BagError::Read {
                 path: self.path.clone(),
                 source,
-            })?;
-        Ok(bytes)
+            })
     }
 
     /// Every message on `topics` in file order, lent to `visit`; of the topics in `heads_only`

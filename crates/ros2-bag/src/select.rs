@@ -21,7 +21,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use ::image::GrayImage;
+use ::image::{GrayImage, ImageBuffer, Luma};
 
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
@@ -270,18 +270,30 @@ fn decode<'f>(
     let data = frames.reader.data(image.location)?;
     frames.decoded += 1;
     let gray = to_gray(path, topic, image, frames.compressed, &data, &frames.lies)?;
-    Ok(frames.held.hold(gray))
+    Ok(frames.held.hold(owned(gray)))
+}
+
+/// A frame's grey pixels: lent by its message (a packed `mono8` image, the usual case: nothing
+/// is copied to rank it) or made from it (other encodings, compressed frames).
+type Gray<'m> = ImageBuffer<Luma<u8>, std::borrow::Cow<'m, [u8]>>;
+
+/// The frame as an image of its own (a copy only of lent pixels).
+fn owned(gray: Gray<'_>) -> GrayImage {
+    let (width, height) = gray.dimensions();
+    GrayImage::from_raw(width, height, gray.into_raw().into_owned())
+        .expect("the same pixels, the same size")
 }
 
 /// A frame's message turned grey, its header's lies about its data noted in `lies`.
-fn to_gray(
+fn to_gray<'m>(
     path: &Path,
     topic: &str,
     image: &ImageRef,
     compressed: bool,
-    data: &[u8],
+    data: &'m [u8],
     lies: &ImageLies,
-) -> Result<GrayImage, BagError> {
+) -> Result<Gray<'m>, BagError> {
+    use std::borrow::Cow;
     let wrap = |source: super::MessageError| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),
@@ -289,39 +301,42 @@ fn to_gray(
         stamp_ns: image.stamp_ns,
         source,
     };
-    if compressed {
+    let (width, height, pixels) = if compressed {
         let c = cdr::decode::<CompressedImage>(data).map_err(|e| wrap(e.into()))?;
         if let Some(lie) = compressed_lie(&c) {
             lies.note(lie, image.index);
         }
-        compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))
+        let gray = compressed_to_gray(&c).map_err(|e| wrap(super::MessageError::Pixels(e)))?;
+        let (width, height) = gray.dimensions();
+        (width, height, Cow::Owned(gray.into_raw()))
     } else {
-        let r = cdr::decode::<Image>(data).map_err(|e| wrap(e.into()))?;
+        let r = cdr::decode::<Image<&[u8]>>(data).map_err(|e| wrap(e.into()))?;
         for lie in raw_lies(&r) {
             lies.note(lie, image.index);
         }
-        match packed_mono8(r) {
-            Ok(gray) => Ok(gray),
-            Err(r) => raw_to_gray(&r).map_err(|e| wrap(super::MessageError::Pixels(e))),
-        }
-    }
+        let pixels = match packed_mono8(&r) {
+            Some(pixels) => Cow::Borrowed(pixels),
+            None => Cow::Owned(
+                raw_to_gray(&r)
+                    .map_err(|e| wrap(super::MessageError::Pixels(e)))?
+                    .into_raw(),
+            ),
+        };
+        (r.width, r.height, pixels)
+    };
+    Ok(ImageBuffer::from_raw(width, height, pixels).expect("width × height pixels, checked"))
 }
 
-/// A `mono8` image whose rows are packed (`step` = `width`, the usual case) is its own grey
-/// image: its pixels are taken as they are, not copied ([`raw_to_gray`] copies every other
-/// form, and checks it).
-pub(crate) fn packed_mono8(raw: Image) -> Result<GrayImage, Image> {
+/// The pixels of a `mono8` image whose rows are packed (`step` = `width`, the usual case): the
+/// frame as it is (every other form is left to [`raw_to_gray`], which copies and checks it).
+pub(crate) fn packed_mono8<'m>(raw: &Image<&'m [u8]>) -> Option<&'m [u8]> {
     let pixels = raw.width as usize * raw.height as usize;
+    let data = raw.data;
     let packed = matches!(raw.encoding.as_str(), "mono8" | "8UC1")
         && raw.step == raw.width
         && pixels > 0
-        && raw.data.len() >= pixels;
-    if !packed {
-        return Err(raw);
-    }
-    let (width, height, mut data) = (raw.width, raw.height, raw.data);
-    data.truncate(pixels);
-    Ok(GrayImage::from_raw(width, height, data).expect("width × height pixels, checked"))
+        && data.len() >= pixels;
+    packed.then(|| &data[..pixels])
 }
 
 pub(crate) fn seconds_to_ns(s: f64) -> i64 {
@@ -557,11 +572,12 @@ fn sharpest<'f>(
 ) -> Result<(usize, f64, Held<'f>), BagError> {
     type Best<'h> = Option<(f64, usize, Held<'h>)>;
     // Sharper wins; of equally sharp frames the earlier one.
+    fn wins(best: &Best<'_>, score: f64, k: usize) -> bool {
+        best.as_ref()
+            .is_none_or(|b| score > b.0 || (score == b.0 && k < b.1))
+    }
     fn keep<'h>(best: &mut Best<'h>, candidate: (f64, usize, Held<'h>)) {
-        if best
-            .as_ref()
-            .is_none_or(|b| candidate.0 > b.0 || (candidate.0 == b.0 && candidate.1 < b.1))
-        {
+        if wins(best, candidate.0, candidate.1) {
             *best = Some(candidate);
         }
     }
@@ -596,19 +612,27 @@ fn sharpest<'f>(
                 scope,
                 move || -> (Best<'f>, Option<(usize, BagError)>) {
                     let mut best: Best<'f> = None;
+                    // The message being ranked: one buffer, read into frame after frame.
+                    let mut message = Vec::new();
                     while let Ok(Ok((k, job))) = jobs.lock().map(|j| j.recv()) {
                         let image = &images[interval[k].0];
-                        let message = match job {
-                            Job::Message(data) => Ok(data),
-                            Job::Read => bag.read_direct(image.location),
-                        };
-                        match message
-                            .and_then(|m| to_gray(path, topic, image, compressed, &m, lies))
-                        {
-                            Ok(gray) => {
-                                let score = sharpness_at(&gray, RANKING_BLOCK);
-                                keep(&mut best, (score, k, held.hold(gray)));
+                        let read = match job {
+                            Job::Message(data) => {
+                                message = data;
+                                Ok(())
                             }
+                            Job::Read => bag.read_direct_into(image.location, &mut message),
+                        };
+                        // Ranked on the pixels where they lie in the message; only a frame
+                        // that beats this worker's best so far is copied out and kept.
+                        let ranked = read.and_then(|()| {
+                            let gray = to_gray(path, topic, image, compressed, &message, lies)?;
+                            let score = sharpness_at(&gray, RANKING_BLOCK);
+                            Ok(wins(&best, score, k).then(|| (score, owned(gray))))
+                        });
+                        match ranked {
+                            Ok(Some((score, gray))) => keep(&mut best, (score, k, held.hold(gray))),
+                            Ok(None) => {}
                             // Later frames are still taken so the reader is not blocked.
                             Err(e) => return (best, Some((k, e))),
                         }

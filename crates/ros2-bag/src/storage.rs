@@ -440,8 +440,16 @@ impl Bag {
     /// The message at a [`Location::direct`] location read where it is, from any thread (read
     /// the others through [`MessageAt`]).
     pub fn read_direct(&self, at: Location) -> Result<Vec<u8>, BagError> {
+        let mut bytes = Vec::new();
+        self.read_direct_into(at, &mut bytes)?;
+        Ok(bytes)
+    }
+
+    /// [`Bag::read_direct`] into `bytes`, reusing its memory (a worker reading frame after
+    /// frame allocates and clears its buffer only when a frame is larger than any before).
+    pub fn read_direct_into(&self, at: Location, bytes: &mut Vec<u8>) -> Result<(), BagError> {
         match (at.at, self.indexes.get(at.file).and_then(Option::as_ref)) {
-            (Position::Bytes { offset, len }, Some(index)) => index.read(offset, len),
+            (Position::Bytes { offset, len }, Some(index)) => index.read_into(offset, len, bytes),
             (position, _) => Err(BagError::Storage {
                 path: self.path.clone(),
                 problem: format!(

@@ -10,8 +10,7 @@
 //! error naming the message type, never a panic.
 
 use byteorder::{BigEndian, LittleEndian};
-use serde::de::DeserializeOwned;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::msg::{RosType, Time};
 
@@ -54,7 +53,7 @@ fn body(message: &[u8]) -> Result<(bool, &[u8]), CdrError> {
     }
 }
 
-fn decode_named<T: DeserializeOwned>(message: &[u8], type_name: &str) -> Result<T, CdrError> {
+fn decode_named<'a, T: Deserialize<'a>>(message: &'a [u8], type_name: &str) -> Result<T, CdrError> {
     let (little, body) = body(message)?;
     let decoded = if little {
         cdr_encoding::from_bytes::<T, LittleEndian>(body)
@@ -70,8 +69,9 @@ fn decode_named<T: DeserializeOwned>(message: &[u8], type_name: &str) -> Result<
 }
 
 /// Decodes one serialised message (encapsulation header included). Bytes after the message's
-/// last field are ignored, as every ROS 2 reader does.
-pub fn decode<T: DeserializeOwned + RosType>(message: &[u8]) -> Result<T, CdrError> {
+/// last field are ignored, as every ROS 2 reader does. A message type that borrows
+/// (`Image<&[u8]>`) lends its pixels from `message`.
+pub fn decode<'a, T: Deserialize<'a> + RosType>(message: &'a [u8]) -> Result<T, CdrError> {
     decode_named(message, &T::type_name())
 }
 
@@ -233,6 +233,17 @@ mod tests {
             "{bytes:?}"
         );
         assert_eq!(decode::<Image>(&bytes).unwrap(), image);
+        // Lent: the same fields, the pixels where they lie in the message (no copy).
+        let lent = decode::<Image<&[u8]>>(&bytes).unwrap();
+        assert_eq!(
+            (lent.width, lent.height, &lent.encoding),
+            (3, 2, &image.encoding)
+        );
+        assert_eq!(lent.data, &image.data[..]);
+        assert!(std::ptr::eq(lent.data, &bytes[bytes.len() - 6..]));
+        // A length prefix past the message is the same clear error either way.
+        let cut = &bytes[..bytes.len() - 1];
+        assert!(decode::<Image<&[u8]>>(cut).is_err() && decode::<Image>(cut).is_err());
         assert_eq!(
             decode_header_stamp(&bytes[..12]).unwrap(),
             Time { sec: 0, nanosec: 5 }

@@ -88,12 +88,13 @@ pub fn compressed_lie(image: &CompressedImage) -> Option<ImageLie> {
 }
 
 /// The lies of a raw image's header about its data (see [`ImageLie`]).
-pub fn raw_lies(raw: &Image) -> Vec<ImageLie> {
+pub fn raw_lies<Data: AsRef<[u8]>>(raw: &Image<Data>) -> Vec<ImageLie> {
+    let data = raw.data.as_ref();
     let mut lies = Vec::new();
     let rows = raw.height as usize * raw.step as usize;
-    if raw.data.len() > rows {
+    if data.len() > rows {
         lies.push(ImageLie::DataPastLastRow {
-            bytes: raw.data.len(),
+            bytes: data.len(),
             rows,
         });
     }
@@ -132,7 +133,8 @@ fn layout(encoding: &str) -> Option<Layout> {
 }
 
 /// A raw image as 8-bit grey.
-pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
+pub fn raw_to_gray<Data: AsRef<[u8]>>(raw: &Image<Data>) -> Result<GrayImage, String> {
+    let data = raw.data.as_ref();
     let (w, h) = (raw.width as usize, raw.height as usize);
     let Some(Layout {
         pixel_bytes: bytes_per_pixel,
@@ -148,7 +150,7 @@ pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
     if w == 0
         || h == 0
         || step < w * bytes_per_pixel
-        || raw.data.len() < step * (h - 1) + w * bytes_per_pixel
+        || data.len() < step * (h - 1) + w * bytes_per_pixel
     {
         return Err(format!(
             "{}x{} {} with step {} needs {} bytes, the message has {}",
@@ -157,10 +159,10 @@ pub fn raw_to_gray(raw: &Image) -> Result<GrayImage, String> {
             raw.encoding,
             step,
             step * h,
-            raw.data.len()
+            data.len()
         ));
     }
-    let row = |y: usize| &raw.data[y * step..y * step + w * bytes_per_pixel];
+    let row = |y: usize| &data[y * step..y * step + w * bytes_per_pixel];
     let mut out = vec![0u8; w * h];
     match raw.encoding.as_str() {
         "mono8" | "8UC1" => {

@@ -36,36 +36,64 @@ mod octets {
     use serde::de::{Error, SeqAccess, Visitor};
     use serde::{Deserializer, Serializer};
 
-    pub(super) fn serialize<S: Serializer>(bytes: &[u8], serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.serialize_bytes(bytes)
+    pub(super) fn serialize<S: Serializer, B: AsRef<[u8]>>(
+        bytes: &B,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        serializer.serialize_bytes(bytes.as_ref())
     }
 
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Vec<u8>, D::Error> {
-        struct Octets;
-        impl<'de> Visitor<'de> for Octets {
-            type Value = Vec<u8>;
-            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                f.write_str("a byte sequence")
-            }
-            fn visit_bytes<E: Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
-                Ok(v.to_vec())
-            }
-            fn visit_byte_buf<E: Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
-                Ok(v)
-            }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<u8>, A::Error> {
-                let mut out = Vec::new();
-                while let Some(b) = seq.next_element()? {
-                    out.push(b);
+    /// A container of a `uint8[]` field: owned (`Vec<u8>`, a copy of the message's bytes) or
+    /// lent (`&[u8]`, the bytes where they lie in the message being decoded, no copy).
+    pub trait Octets<'de>: Sized {
+        /// Reads the field.
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error>;
+    }
+
+    impl<'de> Octets<'de> for Vec<u8> {
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Vec<u8>, D::Error> {
+            struct Owned;
+            impl<'de> Visitor<'de> for Owned {
+                type Value = Vec<u8>;
+                fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                    f.write_str("a byte sequence")
                 }
-                Ok(out)
+                fn visit_bytes<E: Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
+                    Ok(v.to_vec())
+                }
+                fn visit_byte_buf<E: Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
+                    Ok(v)
+                }
+                fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<u8>, A::Error> {
+                    let mut out = Vec::new();
+                    while let Some(b) = seq.next_element()? {
+                        out.push(b);
+                    }
+                    Ok(out)
+                }
             }
+            deserializer.deserialize_byte_buf(Owned)
         }
-        deserializer.deserialize_byte_buf(Octets)
+    }
+
+    impl<'de: 'a, 'a> Octets<'de> for &'a [u8] {
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<&'a [u8], D::Error> {
+            struct Lent;
+            impl<'de> Visitor<'de> for Lent {
+                type Value = &'de [u8];
+                fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                    f.write_str("a byte sequence lent by the message")
+                }
+                fn visit_borrowed_bytes<E: Error>(self, v: &'de [u8]) -> Result<&'de [u8], E> {
+                    Ok(v)
+                }
+            }
+            deserializer.deserialize_bytes(Lent)
+        }
     }
 }
+
+pub use octets::Octets;
 
 macro_rules! ros_type {
     ($ty:ty, $pkg:literal, $name:literal) => {
@@ -268,9 +296,12 @@ pub struct JointState {
 }
 ros_type!(JointState, "sensor_msgs", "JointState");
 
-/// sensor_msgs/Image.
+/// sensor_msgs/Image. The pixels are owned (`Image`, the default) or lent by the message being
+/// decoded (`Image<&[u8]>`, through [`crate::cdr::decode`]: no copy of the frame, for a reader
+/// that looks at the pixels before deciding to keep them).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct Image {
+#[serde(bound(serialize = "Data: AsRef<[u8]>", deserialize = "Data: Octets<'de>"))]
+pub struct Image<Data = Vec<u8>> {
     /// Exposure time and the camera's optical frame.
     pub header: Header,
     /// Rows.
@@ -284,10 +315,14 @@ pub struct Image {
     /// Bytes per row.
     pub step: u32,
     /// The pixels.
-    #[serde(with = "octets")]
-    pub data: Vec<u8>,
+    #[serde(
+        serialize_with = "octets::serialize",
+        deserialize_with = "Octets::deserialize"
+    )]
+    pub data: Data,
 }
 ros_type!(Image, "sensor_msgs", "Image");
+ros_type!(Image<&[u8]>, "sensor_msgs", "Image");
 
 /// sensor_msgs/CompressedImage.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -297,7 +332,10 @@ pub struct CompressedImage {
     /// `jpeg`, `png` (image_transport adds the raw encoding: `bgr8; jpeg compressed bgr8`).
     pub format: String,
     /// The compressed file's bytes.
-    #[serde(with = "octets")]
+    #[serde(
+        serialize_with = "octets::serialize",
+        deserialize_with = "Octets::deserialize"
+    )]
     pub data: Vec<u8>,
 }
 ros_type!(CompressedImage, "sensor_msgs", "CompressedImage");

@@ -3,7 +3,7 @@
 //! by it (an absolute threshold), a bag import keeps the sharpest frame of a standing interval
 //! by it (a ranking).
 
-use image::GrayImage;
+use image::{GrayImage, ImageBuffer, Luma};
 
 /// A frame's sharpness: the mean square of the 4-neighbour Laplacian over the mean square of
 /// the (forward-difference) gradient, at half resolution (2×2 averages: sensor noise halves,
@@ -15,13 +15,20 @@ pub fn sharpness(image: &GrayImage) -> f64 {
     sharpness_at(image, 2)
 }
 
+/// Largest block [`sharpness_at`] decimates by (a view of 1/64² of the frame sees no focus).
+pub const MAX_BLOCK: usize = 64;
+
 /// The same measure on a view decimated by `block` (`block`×`block` averages; 2 is
 /// [`sharpness`]): the work is about one addition per pixel plus a `block²`-th of the filter's, so
 /// 4 costs about half of 2. Steep edges still score about 2; blur is seen once it spans a block
 /// or more (sigma of `block / 2` pixels and up). A bag import ranks a standing interval's frames
-/// by it before scoring the winner with [`sharpness`]. `block` 0 or 1 is the full resolution.
-pub fn sharpness_at(image: &GrayImage, block: usize) -> f64 {
-    let b = block.max(1);
+/// by it before scoring the winner with [`sharpness`]. `block` 0 or 1 is the full resolution;
+/// blocks past [`MAX_BLOCK`] are taken as that.
+pub fn sharpness_at<Pixels: std::ops::Deref<Target = [u8]>>(
+    image: &ImageBuffer<Luma<u8>, Pixels>,
+    block: usize,
+) -> f64 {
+    let b = block.clamp(1, MAX_BLOCK);
     let (sw, w, h) = (
         image.width() as usize,
         image.width() as usize / b,
@@ -39,15 +46,19 @@ pub fn sharpness_at(image: &GrayImage, block: usize) -> f64 {
     };
     let (mut laplacian, mut gradient) = (0f64, 0f64);
     for y in 1..h - 1 {
-        // Per row in integers (at most 8160² per pixel: no overflow in a row of i64).
-        let (mut l_row, mut g_row) = (0i64, 0i64);
-        for x in 1..w - 1 {
-            let i = y * w + x;
-            let c = small[i];
-            let l = i64::from(small[i - 1] + small[i + 1] + small[i - w] + small[i + w] - 4 * c);
-            let (dx, dy) = (i64::from(small[i + 1] - c), i64::from(small[i + w] - c));
-            l_row += l * l;
-            g_row += dx * dx + dy * dy;
+        // Per row in integers (at most (4·255·b²)² per pixel: no overflow in a row of u64), over
+        // the row and its neighbours as slices, so the loop vectorises.
+        let (up, row, down) = (
+            &small[(y - 1) * w + 1..y * w - 1],
+            &small[y * w..(y + 1) * w],
+            &small[(y + 1) * w + 1..(y + 2) * w - 1],
+        );
+        let (left, centre, right) = (&row[..w - 2], &row[1..w - 1], &row[2..]);
+        let (mut l_row, mut g_row) = (0u64, 0u64);
+        for ((((&c, &l), &r), &u), &d) in centre.iter().zip(left).zip(right).zip(up).zip(down) {
+            let square = |v: i32| u64::from(v.unsigned_abs()).pow(2);
+            l_row += square(l + r + u + d - 4 * c);
+            g_row += square(r - c) + square(d - c);
         }
         laplacian += l_row as f64;
         gradient += g_row as f64;
@@ -64,16 +75,18 @@ pub fn sharpness_at(image: &GrayImage, block: usize) -> f64 {
 #[inline(always)]
 fn block_sums(p: &[u8], sw: usize, w: usize, h: usize, b: usize) -> Vec<i32> {
     let mut small = vec![0i32; w * h];
-    let mut columns = vec![0i32; w * b];
+    // The columns' sums over `b` rows fit 16 bits (at most 255·b, b ≤ MAX_BLOCK): twice the
+    // pixels an instruction of 32.
+    let mut columns = vec![0u16; w * b];
     for (y, row) in small.chunks_exact_mut(w).enumerate() {
         columns.fill(0);
         for r in y * b..(y + 1) * b {
             for (c, &v) in columns.iter_mut().zip(&p[r * sw..r * sw + w * b]) {
-                *c += i32::from(v);
+                *c += u16::from(v);
             }
         }
         for (sum, block) in row.iter_mut().zip(columns.chunks_exact(b)) {
-            *sum = block.iter().sum();
+            *sum = block.iter().map(|&c| i32::from(c)).sum();
         }
     }
     small
@@ -83,7 +96,7 @@ fn block_sums(p: &[u8], sw: usize, w: usize, h: usize, b: usize) -> Vec<i32> {
 /// sharpness measure and the capture threshold that uses it are tested on.
 pub fn checkerboard(dark: u8, light: u8) -> GrayImage {
     GrayImage::from_fn(256, 256, |x, y| {
-        image::Luma([if (x / 16 + y / 16) % 2 == 0 {
+        Luma([if (x / 16 + y / 16) % 2 == 0 {
             dark
         } else {
             light
@@ -124,8 +137,8 @@ mod tests {
 
     #[test]
     fn a_step_scores_far_above_a_ramp_and_a_flat_frame_scores_zero() {
-        let edge = GrayImage::from_fn(20, 20, |x, _| image::Luma([if x < 10 { 0 } else { 200 }]));
-        let ramp = GrayImage::from_fn(20, 20, |x, _| image::Luma([(x * 10) as u8]));
+        let edge = GrayImage::from_fn(20, 20, |x, _| Luma([if x < 10 { 0 } else { 200 }]));
+        let ramp = GrayImage::from_fn(20, 20, |x, _| Luma([(x * 10) as u8]));
         assert!(
             sharpness(&edge) > 10.0 * sharpness(&ramp),
             "{} {}",
@@ -139,9 +152,7 @@ mod tests {
 
     #[test]
     fn blocks_of_four_and_three_are_the_sums_written_out() {
-        let noisy = GrayImage::from_fn(41, 27, |x, y| {
-            image::Luma([((x * 37 + y * 11) % 253) as u8])
-        });
+        let noisy = GrayImage::from_fn(41, 27, |x, y| Luma([((x * 37 + y * 11) % 253) as u8]));
         let p = noisy.as_raw();
         for (b, w, h) in [(4usize, 10usize, 6usize), (3, 13, 9)] {
             let naive: Vec<i32> = (0..w * h)
@@ -159,9 +170,7 @@ mod tests {
     #[test]
     fn block_two_is_the_two_by_two_sum_written_out() {
         // The general block sum at 2 is exactly the 2×2 sums it replaced.
-        let noisy = GrayImage::from_fn(37, 29, |x, y| {
-            image::Luma([((x * 31 + y * 17) % 251) as u8])
-        });
+        let noisy = GrayImage::from_fn(37, 29, |x, y| Luma([((x * 31 + y * 17) % 251) as u8]));
         let (w, h) = (18usize, 14usize);
         let p = noisy.as_raw();
         let sums: Vec<i32> = (0..w * h)
