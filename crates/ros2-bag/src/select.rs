@@ -17,6 +17,7 @@
 //!
 //! Frames whose TF lookup fails (a TF gap, or outside the TF stream) are skipped with the reason.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -275,7 +276,7 @@ fn decode<'f>(
 
 /// A frame's grey pixels: lent by its message (a packed `mono8` image, the usual case: nothing
 /// is copied to rank it) or made from it (other encodings, compressed frames).
-type Gray<'m> = ImageBuffer<Luma<u8>, std::borrow::Cow<'m, [u8]>>;
+type Gray<'m> = ImageBuffer<Luma<u8>, Cow<'m, [u8]>>;
 
 /// The frame as an image of its own (a copy only of lent pixels).
 fn owned(gray: Gray<'_>) -> GrayImage {
@@ -293,7 +294,6 @@ fn to_gray<'m>(
     data: &'m [u8],
     lies: &ImageLies,
 ) -> Result<Gray<'m>, BagError> {
-    use std::borrow::Cow;
     let wrap = |source: super::MessageError| BagError::Message {
         path: path.to_path_buf(),
         topic: topic.to_string(),

@@ -88,7 +88,8 @@ pub fn refine_saddle(
             .collect();
         let mut m = Moments::default();
         for (dy, &(y, gy)) in (-r..).zip(&rows) {
-            let mut row = Moments::default();
+            // The row's Σ w·xⁱ (i ≤ 4) and Σ w·v·xⁱ (i ≤ 2).
+            let (mut w_row, mut v_row) = ([0.0; 5], [0.0; 3]);
             for ((dx, &(x, gx)), xs) in (-r..).zip(&columns).zip(&column_powers) {
                 // A Gaussian tapered to zero at `reach`: the window is round and has no edge,
                 // so the pixels it takes in are balanced about the estimate.
@@ -97,9 +98,16 @@ pub fn refine_saddle(
                 if taper <= 0.0 {
                     continue;
                 }
-                row.add_row_pixel(xs, gx * gy * taper * taper, patch.at(cx + dx, cy + dy));
+                let weight = gx * gy * taper * taper;
+                let weighted = weight * patch.at(cx + dx, cy + dy);
+                for (sum, x) in w_row.iter_mut().zip(xs) {
+                    *sum += weight * x;
+                }
+                for (sum, x) in v_row.iter_mut().zip(xs) {
+                    *sum += weighted * x;
+                }
             }
-            m.add_row(&row, y);
+            m.add_row(&w_row, &v_row, y);
         }
         cached = Some(patch);
         let (normal, rhs) = m.normal_equations();
@@ -135,26 +143,14 @@ struct Moments {
 }
 
 impl Moments {
-    /// Adds a pixel of a row to that row's sums (`w[i][0]`, `v[i][0]`): `xs` are the powers of
-    /// its x.
-    fn add_row_pixel(&mut self, xs: &[f64; 5], weight: f64, value: f64) {
-        for (sum, x) in self.w.iter_mut().zip(xs) {
-            sum[0] += weight * x;
-        }
-        let weighted = weight * value;
-        for (sum, x) in self.v.iter_mut().zip(xs) {
-            sum[0] += weighted * x;
-        }
-    }
-
-    /// Adds a row's sums (from [`Moments::add_row_pixel`]) at height `y`.
-    fn add_row(&mut self, row: &Moments, y: f64) {
+    /// Adds a row at height `y` from its sums `w_row[i] = Σ w·xⁱ` and `v_row[i] = Σ w·v·xⁱ`.
+    fn add_row(&mut self, w_row: &[f64; 5], v_row: &[f64; 3], y: f64) {
         let mut yj = 1.0;
         for j in 0..5 {
             for i in 0..5 - j {
-                self.w[i][j] += row.w[i][0] * yj;
+                self.w[i][j] += w_row[i] * yj;
                 if i + j <= 2 {
-                    self.v[i][j] += row.v[i][0] * yj;
+                    self.v[i][j] += v_row[i] * yj;
                 }
             }
             yj *= y;

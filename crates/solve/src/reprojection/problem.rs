@@ -534,10 +534,9 @@ impl Problem<'_> {
         let n_global = layout.robot_offset();
         let mut h = DMatrix::zeros(n, n);
         let mut g = DVector::zeros(n);
-        // Only the upper triangle of the global block and the global × robot blocks above the
-        // diagonal are summed corner by corner (no temporary matrix a corner); the rest is
-        // their mirror, filled once at the end.
-        // The corner's two global rows, each as one slice (the matrix is column-major).
+        // Only the upper triangle is summed corner by corner (no temporary matrix a corner);
+        // the lower is its mirror, filled once at the end. The corner's two global rows are
+        // copied to slices, and `h` is summed a column (contiguous: column-major) at a time.
         let (mut top, mut bottom) = (vec![0.0; n_global], vec![0.0; n_global]);
         self.corner_jacobians(&s, |f, c, global, robot| {
             let row = self.row_offsets[f] + 2 * c;
@@ -568,21 +567,8 @@ impl Problem<'_> {
                 gf += robot.transpose() * res;
             }
         });
-        for j in 0..n_global {
-            for i in 0..j {
-                h[(j, i)] = h[(i, j)];
-            }
-        }
-        if layout.robot > 0 {
-            for f in 0..self.frames.len() {
-                let o = layout.robot_offset() + 6 * f;
-                for j in o..o + 6 {
-                    for i in 0..n_global {
-                        h[(j, i)] = h[(i, j)];
-                    }
-                }
-            }
-        }
+        // (The 6x6 robot blocks were summed whole; they are symmetric, so this leaves them.)
+        h.fill_lower_triangle_with_upper_triangle();
         if let Some(prior) = self.prior {
             for f in 0..self.frames.len() {
                 let row = self.corner_rows + 6 * f;
