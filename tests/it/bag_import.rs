@@ -654,8 +654,63 @@ fn the_library_imports_a_bag_into_a_solved_session() {
         imported.summary
     );
     assert!(out.join("import/bag-import.yaml").is_file());
+    assert_frames_stored_once(&out, 12);
     assert_calibrated(&out);
     no_staging_left(dir.path());
+}
+
+/// Each chosen frame is on disk once, as the session's frame file of its pose: the import wrote
+/// `frames/NNN.png`, its record names it, and the run kept it (no second copy under `import/`).
+fn assert_frames_stored_once(session: &Path, samples: usize) {
+    let record: serde_yaml_ng::Value = serde_yaml_ng::from_str(
+        &std::fs::read_to_string(session.join("import/bag-import.yaml")).unwrap(),
+    )
+    .unwrap();
+    let named: Vec<&str> = record["samples"]
+        .as_sequence()
+        .unwrap()
+        .iter()
+        .map(|s| s["frame"].as_str().unwrap())
+        .collect();
+    let expected: Vec<String> = (0..samples).map(|i| format!("frames/{i:03}.png")).collect();
+    assert_eq!(named, expected);
+    let mut stored: Vec<String> = std::fs::read_dir(session.join("frames"))
+        .unwrap()
+        .map(|e| format!("frames/{}", e.unwrap().file_name().to_string_lossy()))
+        .collect();
+    stored.sort();
+    assert_eq!(
+        stored, expected,
+        "one file per sample in frames/, nothing else"
+    );
+    let copies: Vec<PathBuf> = walk_files(&session.join("import"))
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    assert!(copies.is_empty(), "a second copy of the frames: {copies:?}");
+    // The frames the run detected the board in are these files.
+    for file in &expected {
+        let frame = image::open(session.join(file)).unwrap();
+        assert_eq!(
+            (frame.width(), frame.height()),
+            (camera().width, camera().height),
+            "{file}"
+        );
+    }
+}
+
+fn walk_files(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flat_map(|e| {
+            let path = e.unwrap().path();
+            if path.is_dir() {
+                walk_files(&path)
+            } else {
+                vec![path]
+            }
+        })
+        .collect()
 }
 
 #[test]

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicUsize, Ordering as AtomicOrdering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::{Camera, CameraError, Frame};
+use super::{Camera, CameraError, Frame, PngFile};
 use handeye_core::camera_model::CameraModel;
 
 /// Image file extensions the folder camera serves (lower case).
@@ -185,7 +185,10 @@ impl Camera for FilesCamera {
         let is_png = reader.format() == Some(image::ImageFormat::Png);
         let decoded = reader.decode().map_err(|e| unreadable(e.to_string()))?;
         // A grey 8-bit PNG holds exactly the frame's pixels: its bytes can be stored as they are.
-        let png = (is_png && decoded.color() == image::ColorType::L8).then_some(bytes);
+        let png = (is_png && decoded.color() == image::ColorType::L8).then(|| PngFile {
+            path: path.clone(),
+            bytes,
+        });
         let image = decoded.into_luma8();
         if (image.width(), image.height()) != (self.model.width, self.model.height) {
             return Err(CameraError::Frame {
@@ -302,7 +305,9 @@ mod tests {
         let mut camera = FilesCamera::open(dir.path(), model(4, 3)).unwrap();
         let frame = camera.grab(Instant::now()).unwrap();
         let file = std::fs::read(dir.path().join("0.png")).unwrap();
-        assert_eq!(frame.png.as_deref(), Some(file.as_slice()));
+        let png = frame.png.expect("a grey PNG hands on its file");
+        assert_eq!(png.bytes, file);
+        assert_eq!(png.path, dir.path().join("0.png"));
         assert_eq!(frame.image, grey);
         // A colour frame is served grey: its file does not hold those pixels.
         let frame = camera.grab(Instant::now()).unwrap();

@@ -30,10 +30,19 @@ pub struct Frame {
     pub image: GrayImage,
     /// When the exposure happened (or the best the backend knows).
     pub captured_at: Instant,
-    /// The frame's PNG file as it was read, when the frame is a recorded grey PNG (the
-    /// image-folder camera): a session stores these bytes as its frame file instead of encoding
-    /// the same pixels again.
-    pub png: Option<Vec<u8>>,
+    /// The frame's PNG file, when the frame is a recorded grey PNG (the image-folder camera): a
+    /// session stores it as its frame file instead of encoding the same pixels again (or keeps
+    /// it where it is, when it already is that file).
+    pub png: Option<PngFile>,
+}
+
+/// A recorded grey PNG a frame was read from: where it is and its bytes as read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PngFile {
+    /// The file.
+    pub path: std::path::PathBuf,
+    /// Its bytes.
+    pub bytes: Vec<u8>,
 }
 
 /// Why a camera call failed.

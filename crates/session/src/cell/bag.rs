@@ -271,10 +271,9 @@ pub fn import_bag_session(
     let stage = staging.path().to_path_buf();
     let folder = SessionFolder::create(&stage)?.to_be_moved_to(&out);
     let import_dir = stage.join("import");
-    let images_dir = import_dir.join("images");
-    std::fs::create_dir_all(&images_dir)
-        .with_context(|| format!("creating {}", images_dir.display()))?;
-    let (imported, samples) = import_frames(a, &images_dir)?;
+    std::fs::create_dir_all(&import_dir)
+        .with_context(|| format!("creating {}", import_dir.display()))?;
+    let (imported, samples) = import_frames(a, &stage)?;
     say_what_was_read(request, &imported, say);
     anyhow::ensure!(
         imported.samples.len() >= 3,
@@ -384,18 +383,20 @@ pub fn import_bag_session(
     })
 }
 
-/// Reads the bag, writing each chosen frame into `images_dir` (`NNN.png`) the moment it is
-/// chosen; returns what was read and the frames' records.
+/// Reads the bag, writing each chosen frame the moment it is chosen as the session's frame file
+/// of its pose (`frames/NNN.png` under `session`: the one copy; the run detects the board in it
+/// and keeps it there); returns what was read and the frames' records.
 fn import_frames(
     request: &BagSessionRequest,
-    images_dir: &Path,
+    session: &Path,
 ) -> anyhow::Result<(BagImport, Vec<BagSampleRecord>)> {
     let mut samples = Vec::new();
     let imported = import_bag_to(&request.bag, &request.options, &mut |i, sample, image| {
-        let file = images_dir.join(format!("{i:03}.png"));
+        let frame = SessionFolder::frame_name(i);
+        let file = session.join(&frame);
         write_frame_png(image, &file).with_context(|| format!("writing {}", file.display()))?;
         samples.push(BagSampleRecord {
-            frame: format!("import/images/{i:03}.png"),
+            frame: frame.display().to_string(),
             image_stamp_s: sample.image_stamp_ns as f64 * 1e-9,
             robot_stamp_s: sample.robot_stamp_ns as f64 * 1e-9,
             sharpness: sample.sharpness,
@@ -408,7 +409,7 @@ fn import_frames(
 
 /// Writes an imported frame as PNG with the `Up` filter (each row minus the one above) rather
 /// than the encoder's default choice per row: the frame is decoded twice after (by the session's
-/// detection, which then stores these bytes as its frame file, and by the report), and undoing
+/// detection and by the report), and undoing
 /// `Up` is a vectorised add where the default's `Paeth` rows were a sixth of a short import's
 /// PNG cost; camera frames compress about as well either way.
 fn write_frame_png(frame: &image::GrayImage, file: &Path) -> anyhow::Result<()> {
@@ -481,7 +482,8 @@ fn recorded_config(
             target: PathBuf::from("target.yaml"),
             intrinsics: with_intrinsics.then(|| PathBuf::from("camera_info.yaml")),
             poses: PathBuf::from("poses.yaml"),
-            images: PathBuf::from("images"),
+            // The session's own frames: the import wrote them there, the run keeps them.
+            images: PathBuf::from("../frames"),
             frames: RobotFrames {
                 base: options.base_frame.clone(),
                 flange: options.flange_frame.clone(),

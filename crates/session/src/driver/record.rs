@@ -1,6 +1,7 @@
 //! The recording side of the run loop: the detection workers that measure each frame and commit
 //! it (frame, record, `samples.yaml`) into its camera's folder, and the `HANDEYE_FAULT` test hook.
 
+use std::path::Path;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 
@@ -245,10 +246,12 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
     let recording = &camera.recording;
     let folder = &recording.folder;
     let frame_name = SessionFolder::frame_name(job.plan_index);
-    // A recorded grey PNG (an image folder, a bag's imported frames) is stored as it was read:
-    // the same pixels, not encoded a second time.
-    let png: std::borrow::Cow<[u8]> = match &job.frame.png {
-        Some(png) => png.into(),
+    // A recorded grey PNG (an image folder) is stored as it was read: the same pixels, not
+    // encoded a second time. A frame that already is this pose's frame file (a bag's chosen
+    // frames, written into `frames/` by its import) stays as it is: written once.
+    match &job.frame.png {
+        Some(png) if is_same_file(&png.path, &folder.root().join(&frame_name)) => {}
+        Some(png) => folder.write_file(&frame_name, &png.bytes)?,
         None => {
             let mut png = Vec::new();
             job.frame
@@ -258,10 +261,9 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
                     path: frame_name.clone(),
                     source: Box::new(source),
                 })?;
-            png.into()
+            folder.write_file(&frame_name, &png)?;
         }
-    };
-    folder.write_file(&frame_name, &png)?;
+    }
     fault.abort_at("abort-after-frame", job.plan_index);
 
     let visit = measure(
@@ -284,6 +286,14 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
     folder.write_visit(&visit)?;
     fault.abort_at("abort-after-record", job.plan_index);
     Ok(visit)
+}
+
+/// Whether two paths name one file (both exist and resolve to the same place).
+fn is_same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
 }
 
 /// Detects the board in `image`, estimates its pose and fills the detection fields of `visit`
@@ -337,4 +347,29 @@ pub(crate) fn measure(
         }
     }
     Ok(visit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_same_file;
+
+    #[test]
+    fn a_frame_file_is_the_same_file_only_under_another_name_of_itself() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("frames")).unwrap();
+        std::fs::create_dir_all(dir.path().join("import")).unwrap();
+        let frame = dir.path().join("frames/000.png");
+        std::fs::write(&frame, b"png").unwrap();
+        let copy = dir.path().join("import/000.png");
+        std::fs::write(&copy, b"png").unwrap();
+        assert!(is_same_file(
+            &dir.path().join("import/../frames/000.png"),
+            &frame
+        ));
+        assert!(
+            !is_same_file(&copy, &frame),
+            "the same bytes in another file"
+        );
+        assert!(!is_same_file(&dir.path().join("frames/001.png"), &frame));
+    }
 }
