@@ -379,6 +379,15 @@ impl AdaptivePlanner {
             .collect()
     }
 
+    /// The larger translation 1-sigma of the two unknowns this camera's model predicts once a
+    /// sample at candidate `index` joins `samples`, mm (what a suggestion of it promises).
+    pub fn predicted_sigma_mm(&self, samples: &[PosePair], index: usize) -> Option<f64> {
+        let (pose, joints) = self.candidates.get(index)?;
+        let h = self.model.information(&self.counted(samples));
+        let added = &h + self.model.sample(&(*pose, Some(*joints)));
+        self.model.predict(&added).map(|p| p.worst_translation_mm())
+    }
+
     /// The samples as the predictions count them: each with the joints of the candidate it was
     /// taken at, when the arm's offsets are estimated (they act through the joints).
     fn counted(&self, samples: &[PosePair]) -> Vec<Taken> {

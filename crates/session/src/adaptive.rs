@@ -138,11 +138,17 @@ impl PlanSource for CellPlanner {
                 .max_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(i, _)| i)
         };
+        // What the choice promises the planner camera (its 1-sigma with that sample, when it
+        // sees its board there), as a one-camera planner's log says.
+        let primary_samples = all.first().map_or(&[][..], Vec::as_slice);
+        let predicted_sigma_mm = choice
+            .filter(|&i| self.sees[0].get(i).copied().unwrap_or(false))
+            .and_then(|i| self.planners[0].predicted_sigma_mm(primary_samples, i));
         self.planners[0].log.push(AdaptiveStep {
-            samples: all.first().map_or(0, Vec::len),
+            samples: primary_samples.len(),
             solved_sigma_mm: solved.first().copied().flatten(),
             chose: choice,
-            predicted_sigma_mm: None,
+            predicted_sigma_mm,
         });
         let index = choice?;
         let mut pose = None;
@@ -353,7 +359,8 @@ mod tests {
     }
 
     /// With one camera the cell's planner is that camera's planner: the same candidates in the
-    /// same order (the nominal model choosing, before any sample), then none when they run out.
+    /// same order (the nominal model choosing, before any sample), each promising the same
+    /// 1-sigma, then none when they run out.
     #[test]
     fn with_one_camera_the_choices_are_the_cameras_own() {
         let down = pose_from_rotvec(
@@ -376,6 +383,14 @@ mod tests {
         loop {
             let (own, theirs) = (alone.next(&[]), cell.next_pose(&[vec![]]));
             assert_eq!(own, theirs, "choice {chosen}");
+            // And it promises what the camera's own planner promises of it.
+            let promised = |log: &[AdaptiveStep]| log.last().and_then(|s| s.predicted_sigma_mm);
+            assert_eq!(
+                promised(&alone.log),
+                promised(&cell.primary().log),
+                "choice {chosen}"
+            );
+            assert_eq!(promised(&alone.log).is_some(), own.is_some());
             if own.is_none() {
                 break;
             }

@@ -1,8 +1,9 @@
 //! Hand-guided capture (`handeye console`): no plan drives the arm; a person jogs or
 //! hand-guides it (freedrive) to views of their choosing and asks for a sample where it stands.
 //! Each capture is checked at once — too close to an earlier view, a blurred frame, the board
-//! seen (the ordinary driver's detection) — and the next-best-pose planner suggests the view that
-//! helps most, which the arm can also be sent to.
+//! seen (the ordinary driver's detection) — and the cell's next-best-pose planner (every camera
+//! weighing in, as in an adaptive run) suggests the view that helps most, which the arm can also
+//! be sent to.
 //!
 //! A sample is taken with the ordinary driver ([`run_session`]) on a one-pose plan that is where
 //! the arm already stands (the "move" is a no-op), so records, the folder layout, resume,
@@ -16,12 +17,12 @@ use std::time::{Duration, Instant};
 
 use image::GrayImage;
 
+use crate::adaptive::{CellPlanner, PlanSource};
 use handeye_camera::Camera;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{
     relative_rotation_axis, translation_distance, Pose, MIN_AXIS_ANGLE_RAD,
 };
-use handeye_plan::nbv::AdaptivePlanner;
 use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_vision::sharpness::sharpness;
@@ -191,7 +192,7 @@ impl Robot for StandStill<'_> {
 pub fn run_manual_session(
     setup: SessionSetup,
     manifest_config: PathBuf,
-    mut suggester: Option<&mut AdaptivePlanner>,
+    mut suggester: Option<&mut CellPlanner>,
     options: &ManualOptions,
     robot: &mut dyn Robot,
     cameras: &mut [&mut dyn Camera],
@@ -200,7 +201,7 @@ pub fn run_manual_session(
     let mut growing = GrowingPlan::open(&setup, manifest_config)?;
     if let Some(planner) = suggester.as_deref_mut() {
         let seen: Vec<Pose> = growing.poses.iter().map(|(pose, _)| *pose).collect();
-        planner.mark_visited(&seen);
+        planner.visited(&seen);
     }
     // The recorded plan's poses were all accepted except perhaps the last (refused, or a stop
     // mid-capture): it is dropped and its index reused, as during the session.
@@ -460,23 +461,30 @@ fn live_view(
     Ok(())
 }
 
-/// The planner's next view from the samples on disk, told to `control`.
+/// The cell planner's next view from every camera's samples on disk, told to `control`.
 fn suggest(
     setup: &SessionSetup,
     accepted: &[(Pose, Joints)],
-    suggester: Option<&mut AdaptivePlanner>,
+    suggester: Option<&mut CellPlanner>,
     control: &mut dyn ManualControl,
 ) -> Result<Option<(Pose, Joints)>, SessionError> {
     let Some(planner) = suggester else {
         return Ok(None);
     };
-    let samples = if setup.folder().samples_path().is_file() {
-        Dataset::load(&setup.folder().samples_path())?.pairs
-    } else {
-        Vec::new()
-    };
-    let next = planner.next(&samples);
-    let step = planner.log.last();
+    let samples = setup
+        .cameras
+        .iter()
+        .map(|camera| {
+            let path = camera.folder.samples_path();
+            Ok(if path.is_file() {
+                Dataset::load(&path)?.pairs
+            } else {
+                Vec::new()
+            })
+        })
+        .collect::<Result<Vec<_>, SessionError>>()?;
+    let next = planner.next_pose(&samples);
+    let step = planner.primary().log.last();
     if let Some((pose, joints)) = next {
         control.event(ManualEvent::Suggestion {
             pose,

@@ -205,8 +205,9 @@ fn a_hand_guided_session_of_three_cameras_captures_with_every_camera() {
             "{}: {rotation_deg}° {translation_mm} mm",
             camera.name
         );
-        // Every file is right: none is blamed (the views were chosen for the wrist camera, and
-        // the fixed cameras' own cell models see fewer kinds of view than in a planned run).
+        // Every file is right: none is blamed (the views were suggested by the cell's planner for
+        // the three cameras at once, and 12 captures give the fixed cameras' own cell models
+        // fewer kinds of view than a planned run's 20).
         let blamed = std::iter::once(camera.verdict.basis)
             .chain(camera.verdict.also.iter().map(|f| f.basis))
             .any(|basis| {

@@ -120,15 +120,7 @@ pub(super) fn drive_plan(
             }
         })
         .collect();
-    let sees = cell
-        .run_order()
-        .map(|c| {
-            plan.iter()
-                .map(|(flange, _)| cell.sees_board(c, flange))
-                .collect()
-        })
-        .collect();
-    let mut source = crate::CellPlanner::new(planners, sees, max_poses);
+    let mut source = crate::CellPlanner::new(planners, sees(cell, plan), max_poses);
     let (robot, mut cameras) = hardware.devices();
     let outcome = crate::run_adaptive_session(
         setup,
@@ -154,6 +146,29 @@ pub(super) fn drive_plan(
         reached: source.reached_target(),
     };
     (outcome, Some(summary))
+}
+
+/// Per camera in run order, per candidate of `plan`: whether the nominal cell has the camera
+/// see its board there.
+fn sees(cell: &PreparedCell, plan: &[(Pose, Joints)]) -> Vec<Vec<bool>> {
+    cell.run_order()
+        .map(|c| {
+            plan.iter()
+                .map(|(flange, _)| cell.sees_board(c, flange))
+                .collect()
+        })
+        .collect()
+}
+
+/// The suggestions of a hand-guided run over `plan`'s candidates: the cell's planner, every
+/// camera weighing in as in an adaptive run, but never stopping on its own (the person decides
+/// when to finish) and costing every view the same (the person moves the arm).
+pub(super) fn suggester(cell: &PreparedCell, plan: &[(Pose, Joints)]) -> crate::CellPlanner {
+    let planners = cell
+        .run_order()
+        .map(|camera| cell.adaptive_planner(camera, plan.to_vec(), 0.0, usize::MAX))
+        .collect();
+    crate::CellPlanner::new(planners, sees(cell, plan), usize::MAX)
 }
 
 /// With `solver.kinematics: joint_offsets | dh` and the arm's published model: the offsets

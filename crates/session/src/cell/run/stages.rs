@@ -295,10 +295,8 @@ pub(super) fn drive_session(
     };
     observer.session_folder(folder, &[]);
     observer.session_started(plan.len());
-    let mut planner = (!plan.is_empty() && cell.camera().intrinsics_known).then(|| {
-        // Suggestions never stop on their own: the person decides when to finish.
-        cell.adaptive_planner(cell.config.planner, plan.to_vec(), 0.0, usize::MAX)
-    });
+    let mut planner = (!plan.is_empty() && cell.camera().intrinsics_known)
+        .then(|| super::adaptive::suggester(cell, plan));
     let options = ManualOptions {
         real_arm: !cell.is_simulated() && !request.motion_confirmed,
         ..ManualOptions::default()
