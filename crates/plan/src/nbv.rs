@@ -166,32 +166,43 @@ impl PredictionModel {
         })
     }
 
-    /// The candidate (index into `candidates`, skipping `used`) that reduces the predicted score
-    /// the most per second of arm time when added to `taken`, with its prediction:
-    /// `ln(score now / score after) / seconds(i)`, with `seconds(i)` the time to move to
-    /// candidate `i` and take its frame (> 0). At equal cost, the least score after.
-    pub fn next_best_per_second(
+    /// Per candidate (`None` when `used`, or when no score can be predicted): how much a sample
+    /// there, added to `taken`, reduces the predicted score, as `ln(score now / score after)`.
+    fn gains(
         &self,
         taken: &[Taken],
         candidates: &[(Pose, Joints)],
         used: &[bool],
-        seconds: &dyn Fn(usize) -> f64,
-    ) -> Option<(usize, Predicted)> {
+    ) -> Vec<Option<f64>> {
         let h = self.information(taken);
-        let now = self.predict(&h)?.score;
+        let now = self.predict(&h).map(|p| p.score);
         candidates
             .iter()
-            .enumerate()
-            .filter(|(i, _)| !used.get(*i).copied().unwrap_or(false))
-            .filter_map(|(i, (pose, joints))| {
+            .zip(used)
+            .map(|((pose, joints), used)| {
+                if *used {
+                    return None;
+                }
                 let added = &h + self.sample(&(*pose, Some(*joints)));
-                let p = self.predict(&added)?;
-                let gain = (now / p.score).ln();
-                Some((i, p, gain / seconds(i).max(1e-3)))
+                let after = self.predict(&added)?.score;
+                Some((now? / after).ln())
             })
-            .max_by(|a, b| a.2.total_cmp(&b.2))
-            .map(|(i, p, _)| (i, p))
+            .collect()
     }
+}
+
+/// Of `(candidate, gain)`, the candidate with the most gain per second of arm time
+/// (`seconds(i)`: the move to candidate `i` and its frame, > 0); at equal cost, the most gain
+/// (the least score after). The one choice rule of a camera's planner and of a cell's.
+pub fn best_per_second(
+    gains: impl IntoIterator<Item = (usize, f64)>,
+    seconds: impl Fn(usize) -> f64,
+) -> Option<usize> {
+    gains
+        .into_iter()
+        .map(|(i, gain)| (i, gain / seconds(i).max(1e-3)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
 }
 
 /// A caller's judgement whether a solve is good enough to stop (say, its held-out error and the
@@ -332,18 +343,22 @@ impl AdaptivePlanner {
         let choice = if done {
             None
         } else {
-            let taken = self.counted(samples);
-            self.model
-                .next_best_per_second(&taken, &self.candidates, &self.used, &|i| self.seconds(i))
+            let gains = self.gains(samples);
+            best_per_second(
+                gains
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, g)| Some((i, (*g)?))),
+                |i| self.seconds(i),
+            )
         };
         self.log.push(AdaptiveStep {
             samples: samples.len(),
             solved_sigma_mm,
-            chose: choice.map(|c| c.0),
-            predicted_sigma_mm: choice.map(|c| c.1.worst_translation_mm()),
+            chose: choice,
+            predicted_sigma_mm: choice.and_then(|i| self.predicted_sigma_mm(samples, i)),
         });
-        let (index, _) = choice?;
-        Some(self.take(index))
+        Some(self.take(choice?))
     }
 
     /// Arm time of candidate `i` from where the arm stands (move and the per-pose time), s;
@@ -363,20 +378,8 @@ impl AdaptivePlanner {
     /// Per candidate (`None` when taken already): how much its sample would reduce this
     /// camera's predicted score given `samples`, as `ln(score now / score after)`.
     pub fn gains(&self, samples: &[PosePair]) -> Vec<Option<f64>> {
-        let h = self.model.information(&self.counted(samples));
-        let now = self.model.predict(&h).map(|p| p.score);
-        self.candidates
-            .iter()
-            .zip(&self.used)
-            .map(|((pose, joints), used)| {
-                if *used {
-                    return None;
-                }
-                let added = &h + self.model.sample(&(*pose, Some(*joints)));
-                let after = self.model.predict(&added)?.score;
-                Some((now? / after).ln())
-            })
-            .collect()
+        self.model
+            .gains(&self.counted(samples), &self.candidates, &self.used)
     }
 
     /// The larger translation 1-sigma of the two unknowns this camera's model predicts once a
@@ -543,9 +546,15 @@ mod tests {
             .iter()
             .map(|pose| (*pose, Joints::zeros(6)))
             .collect();
-        let (best, _) = model
-            .next_best_per_second(&taken, &candidates, &[false; 3], &|_| 1.0)
-            .unwrap();
+        let gains = model.gains(&taken, &candidates, &[false; 3]);
+        let best = best_per_second(
+            gains
+                .iter()
+                .enumerate()
+                .filter_map(|(i, g)| Some((i, (*g)?))),
+            |_| 1.0,
+        )
+        .unwrap();
         assert_eq!(best, 1, "the tilted pose adds the missing rotation axis");
     }
 }

@@ -16,7 +16,7 @@
 use handeye_camera::Camera;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
-use handeye_plan::nbv::{AdaptivePlanner, AdaptiveStep};
+use handeye_plan::nbv::{best_per_second, AdaptivePlanner, AdaptiveStep};
 use handeye_robot::{Joints, Robot};
 
 use crate::driver::{PoseLoop, SessionEvent, SessionOutcome, SessionSetup};
@@ -124,7 +124,7 @@ impl PlanSource for CellPlanner {
                 })
                 .collect();
             let primary = &self.planners[0];
-            (0..primary.candidates().len())
+            let summed = (0..primary.candidates().len())
                 .filter(|&i| primary.is_free(i))
                 .filter_map(|i| {
                     let gain = gains
@@ -133,10 +133,9 @@ impl PlanSource for CellPlanner {
                         .filter(|(_, sees)| sees.get(i).copied().unwrap_or(false))
                         .filter_map(|(g, _)| g.get(i).copied().flatten())
                         .reduce(|a, b| a + b)?;
-                    Some((i, gain / primary.seconds(i).max(1e-3)))
-                })
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(i, _)| i)
+                    Some((i, gain))
+                });
+            best_per_second(summed, |i| primary.seconds(i))
         };
         // What the choice promises the planner camera (its 1-sigma with that sample, when it
         // sees its board there), as a one-camera planner's log says.
