@@ -662,18 +662,8 @@ fn the_library_imports_a_bag_into_a_solved_session() {
 /// Each chosen frame is on disk once, as the session's frame file of its pose: the import wrote
 /// `frames/NNN.png`, its record names it, and the run kept it (no second copy under `import/`).
 fn assert_frames_stored_once(session: &Path, samples: usize) {
-    let record: serde_yaml_ng::Value = serde_yaml_ng::from_str(
-        &std::fs::read_to_string(session.join("import/bag-import.yaml")).unwrap(),
-    )
-    .unwrap();
-    let named: Vec<&str> = record["samples"]
-        .as_sequence()
-        .unwrap()
-        .iter()
-        .map(|s| s["frame"].as_str().unwrap())
-        .collect();
     let expected: Vec<String> = (0..samples).map(|i| format!("frames/{i:03}.png")).collect();
-    assert_eq!(named, expected);
+    assert_eq!(import_record_field(session, "samples", "frame"), expected);
     let mut stored: Vec<String> = std::fs::read_dir(session.join("frames"))
         .unwrap()
         .map(|e| format!("frames/{}", e.unwrap().file_name().to_string_lossy()))
@@ -697,6 +687,18 @@ fn assert_frames_stored_once(session: &Path, samples: usize) {
             "{file}"
         );
     }
+}
+
+/// `field` of each entry of `list` in the session's `import/bag-import.yaml`, as text.
+fn import_record_field(session: &Path, list: &str, field: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(session.join("import/bag-import.yaml")).unwrap();
+    let record: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).unwrap();
+    record[list]
+        .as_sequence()
+        .unwrap_or_else(|| panic!("no list `{list}` in the import record:\n{text}"))
+        .iter()
+        .map(|entry| entry[field].as_str().unwrap().to_string())
+        .collect()
 }
 
 fn walk_files(dir: &Path) -> Vec<PathBuf> {

@@ -61,16 +61,8 @@ fn imported_with(dir: &Path, bag: &Path, warnings: &[(&str, &[&str])]) -> String
         warnings.len(),
         "{log}"
     );
-    let record = std::fs::read_to_string(out.join("import/bag-import.yaml")).unwrap();
-    let value: serde_yaml_ng::Value = serde_yaml_ng::from_str(&record).unwrap();
-    let kinds: Vec<&str> = value["warnings"]
-        .as_sequence()
-        .unwrap()
-        .iter()
-        .map(|w| w["kind"].as_str().unwrap())
-        .collect();
     let expected: Vec<&str> = warnings.iter().map(|(kind, _)| *kind).collect();
-    assert_eq!(kinds, expected, "{record}");
+    assert_eq!(import_record_field(&out, "warnings", "kind"), expected);
     assert!(log.contains("6 samples accepted"), "{log}");
     bag_notices_in_result(&out, bag, warnings);
     solved_again_keeps_them(&out, warnings);
