@@ -141,7 +141,7 @@ impl PlanSource for CellPlanner {
         // sees its board there), as a one-camera planner's log says.
         let primary_samples = all.first().map_or(&[][..], Vec::as_slice);
         let predicted_sigma_mm = choice
-            .filter(|&i| self.sees[0].get(i).copied().unwrap_or(false))
+            .filter(|&i| self.sees.first().and_then(|s| s.get(i)).copied() == Some(true))
             .and_then(|i| self.planners[0].predicted_sigma_mm(primary_samples, i));
         self.planners[0].log.push(AdaptiveStep {
             samples: primary_samples.len(),

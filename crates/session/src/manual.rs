@@ -17,7 +17,6 @@ use std::time::{Duration, Instant};
 
 use image::GrayImage;
 
-use crate::adaptive::{CellPlanner, PlanSource};
 use handeye_camera::Camera;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{
@@ -27,7 +26,7 @@ use handeye_records::dataset::Dataset;
 use handeye_robot::{Joints, MotionLimits, Robot, RobotError, RobotStatus};
 use handeye_vision::sharpness::sharpness;
 
-use crate::adaptive::GrowingPlan;
+use crate::adaptive::{CellPlanner, GrowingPlan, PlanSource};
 use crate::driver::{wait_until_still, NotStill, SessionEvent, SessionOutcome, SessionSetup};
 use handeye_records::SessionError;
 

@@ -409,9 +409,9 @@ fn import_frames(
 
 /// Writes an imported frame as PNG with the `Up` filter (each row minus the one above) rather
 /// than the encoder's default choice per row: the frame is decoded twice after (by the session's
-/// detection and by the report), and undoing
-/// `Up` is a vectorised add where the default's `Paeth` rows were a sixth of a short import's
-/// PNG cost; camera frames compress about as well either way.
+/// detection and by the report), and undoing `Up` is a vectorised add where the default's
+/// `Paeth` rows were a sixth of a short import's PNG cost; camera frames compress about as well
+/// either way.
 fn write_frame_png(frame: &image::GrayImage, file: &Path) -> anyhow::Result<()> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     use image::ImageEncoder as _;
