@@ -389,8 +389,8 @@ fn issue25_staging_folders_of_killed_imports_are_removed_and_named_on_the_next_r
     // file naming the dead process (the lock itself went with the process); and one an older
     // version left, without a lock file.
     let killed = dir.path().join(".refused-session.importing-abc123");
-    std::fs::create_dir_all(killed.join("import/images")).unwrap();
-    std::fs::write(killed.join("import/images/000.png"), b"partial").unwrap();
+    std::fs::create_dir_all(killed.join("frames")).unwrap();
+    std::fs::write(killed.join("frames/000.png"), b"partial").unwrap();
     let killed_lock = dir.path().join(".refused-session.importing-abc123.lock");
     std::fs::write(&killed_lock, "4194999\n").unwrap();
     let older = dir.path().join(".refused-session.importing-Xy9Z0q");
