@@ -392,21 +392,21 @@ impl Ros2Arm {
     /// after it, on a loaded machine: CI runs); else `contradiction`.
     fn second_publisher_or(&self, contradiction: RobotError) -> RobotError {
         let flange_frame = &self.options.flange_frame;
-        let second = || self.shared.lock().tf.recent_disagreement(flange_frame);
+        let named = || {
+            let second = self.shared.lock().tf.recent_disagreement(flange_frame)?;
+            Some(backend(format!(
+                "{second}; nothing was recorded at this pose"
+            )))
+        };
         let deadline = Instant::now() + LATE_PUBLISHER_WAIT;
-        loop {
-            if let Some(second) = second() {
-                return backend(format!("{second}; nothing was recorded at this pose"));
-            }
-            // Every /tf message (of either publisher) is a new look, until the deadline; a
-            // lookup that fails outright is a last look.
-            if Instant::now() >= deadline || self.flange_after(Instant::now(), deadline).is_err() {
-                return match second() {
-                    Some(second) => backend(format!("{second}; nothing was recorded at this pose")),
-                    None => contradiction,
-                };
+        // Every /tf message (of either publisher) is a new look, until the deadline; a lookup
+        // that fails outright is a last look.
+        while Instant::now() < deadline && self.flange_after(Instant::now(), deadline).is_ok() {
+            if let Some(error) = named() {
+                return error;
             }
         }
+        named().unwrap_or(contradiction)
     }
 
     /// `robot.flange_pose: joints`: the flange pose the arm's published model computes at the
