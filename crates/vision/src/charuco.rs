@@ -3,7 +3,7 @@
 //! the corner geometry in the target frame, the printed reflectance (chessboard squares and
 //! ArUco markers, for the simulated camera), and detection: markers decoded and chessboard
 //! corners labelled by the `calib-targets-charuco` crate (its dictionaries are OpenCV's bit
-//! tables; partial views are labelled by the markers the view shows), then refined to sub-pixel precision by [`super::subpix`].
+//! tables; partial views are labelled by the markers the view shows), then refined to sub-pixel precision by the saddle fit of [`super::xcorner`].
 //!
 //! Geometry: `squaresX x squaresY` squares of `squareLength`, the top-left square black
 //! (OpenCV ≥ 4.6), a marker of `markerLength` centred in every white square, marker ids
@@ -12,7 +12,7 @@
 //! the bottom-left outer corner of the squares, x to the right, y up, z out of the printed
 //! face; corner `k` (column `c = k mod (squaresX - 1)`, row `r` from the top) sits at
 //! `((c + 1)·squareLength, (squaresY - 1 - r)·squareLength, 0)`. Units: metres. Depends on
-//! `vision::subpix` and the `calib-targets-charuco` crate.
+//! `vision::xcorner` and the `calib-targets-charuco` crate.
 
 use image::GrayImage;
 use nalgebra::{Point2, Point3};
@@ -25,7 +25,7 @@ use calib_targets_charuco::{
 use super::TargetError;
 use rayon::prelude::*;
 
-use super::{subpix, xcorner};
+use super::xcorner;
 use handeye_core::geometry::homography::homography;
 
 /// The crate's ChESS strength floor for grid corners (its ChArUco default is 33): 20 keeps
@@ -398,17 +398,8 @@ impl CharucoCornerDetector {
             ) else {
                 return;
             };
-            let Some(to_squares) = nalgebra::Matrix2::from_columns(&[along, down]).try_inverse()
-            else {
-                return;
-            };
             let square_px = along.norm().min(down.norm());
-            let half = subpix::window_for_square(square_px);
-            let mask = subpix::GridMask {
-                to_squares,
-                band: 0.55 * gap,
-            };
-            if let Some(refined) = subpix::refine_masked(image, *pixel, half, Some(mask)) {
+            if let Some(refined) = xcorner::refine_grid_corner(image, *pixel, square_px, gap) {
                 *pixel = refined;
             }
         });
@@ -470,16 +461,7 @@ impl CharucoCornerDetector {
             if square_px < 8.0 {
                 continue;
             }
-            let Some(to_squares) = nalgebra::Matrix2::from_columns(&[along, down]).try_inverse()
-            else {
-                continue;
-            };
-            let mask = subpix::GridMask {
-                to_squares,
-                band: 0.55 * gap,
-            };
-            let half = subpix::window_for_square(square_px);
-            if let Some(found) = subpix::refine_masked(image, predicted, half, Some(mask)) {
+            if let Some(found) = xcorner::refine_grid_corner(image, predicted, square_px, gap) {
                 if (found - predicted).norm() < 0.1 * square_px
                     && xcorner::is_x_junction(
                         image,

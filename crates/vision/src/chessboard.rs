@@ -1,7 +1,7 @@
 //! Plain chessboards (Kalibr's `target_type: checkerboard`): the board file keys, the corner
 //! geometry in the target frame, the printed reflectance, and detection in an image — corners
 //! labelled by the `calib-targets-chessboard` grid detector, refined to sub-pixel precision by
-//! [`super::subpix`], and oriented from the board's colour asymmetry.
+//! the saddle fit of [`super::xcorner`], and oriented from the board's colour asymmetry.
 //!
 //! Geometry: `targetCols x targetRows` inner corners, `colSpacingMeters` apart along x and
 //! `rowSpacingMeters` along y; the printed board has one more square than inner corners on each
@@ -15,14 +15,14 @@
 //! colours at its four corners tell which only when the square counts are odd x even (an
 //! inner-corner count `cols + rows` odd). A board with `cols + rows` even looks the same
 //! turned, so it is refused when the board file is read. Units: metres. Depends on
-//! `vision::subpix` and the `calib-targets-chessboard` crate.
+//! `vision::xcorner` and the `calib-targets-chessboard` crate.
 
 use image::GrayImage;
 use nalgebra::{Point2, Point3};
 
 use rayon::prelude::*;
 
-use super::subpix;
+use super::xcorner;
 use super::TargetError;
 
 /// A plain chessboard with a known orientation.
@@ -296,8 +296,8 @@ impl Checkerboard {
             .par_iter_mut()
             .zip(cell_px.par_iter())
             .for_each(|((_, pixel), &cell)| {
-                let half = subpix::window_for_square(cell);
-                if let Some(refined) = subpix::refine(image, *pixel, half) {
+                // A chessboard's squares are plain up to the next corner: half a square clear.
+                if let Some(refined) = xcorner::refine_grid_corner(image, *pixel, cell, 0.5) {
                     *pixel = refined;
                 }
             });
@@ -317,7 +317,7 @@ impl Checkerboard {
 /// fine: the ChESS response — most of the detection time at full resolution — is computed on a
 /// half-resolution copy, and each corner found there is located again in the full frame within
 /// [`PYRAMID_REFINE_RADIUS`] px of the copy (2x that in the frame). The corners are refined to
-/// sub-pixel precision by `vision::subpix` afterwards either way. Two levels, not the crate's
+/// sub-pixel precision by `vision::xcorner` afterwards either way. Two levels, not the crate's
 /// three: at a quarter of the resolution the bench's ChArUco board (squares ~50 px across in
 /// the 1280x720 frame) is no longer found.
 pub(crate) fn corner_search() -> calib_targets_chessboard::DetectorConfig {

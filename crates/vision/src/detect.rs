@@ -546,8 +546,10 @@ impl XJunctions {
             (before.min(after) / self.cells_across).max(1.0)
         });
         let saddle_near = |k: usize, start: Point2<f64>| {
-            // Capped: past ~7 px the fit gains little precision and costs the cube of the size.
-            let half_window = (1.5 * cell_px[k]).round().clamp(2.0, MAX_HALF_WINDOW_PX) as u32;
+            let half_window = (1.5 * cell_px[k])
+                .round()
+                .clamp(2.0, f64::from(xcorner::MAX_HALF_WINDOW_PX))
+                as u32;
             let saddle = xcorner::refine_saddle(image, start, half_window)?;
             // A quad that half-merged with a square can put its corner a cell off; the next
             // other X-junction (a data cell's, the square's far corner) is 2 cells away.
@@ -579,9 +581,6 @@ impl XJunctions {
         }
     }
 }
-
-/// Largest saddle-fit half window, px.
-const MAX_HALF_WINDOW_PX: f64 = 7.0;
 
 /// Smallest grey-level difference between the bright and dark sectors of an X-junction.
 const X_JUNCTION_CONTRAST: f64 = 12.0;

@@ -1,9 +1,9 @@
 //! The calibration target: the board of any kind (`target`: aprilgrid, ChArUco or chessboard,
 //! and its detector), the aprilgrid specification (`board`), the AprilTag family tables it is
 //! printed from (`family`), tag detection on a dedicated thread (`detect`), ChArUco boards
-//! (`charuco`), plain chessboards (`chessboard`), sub-pixel corner refinement for ChArUco and
-//! chessboard corners (`subpix`), saddle-point refinement of the X-junctions of Kalibr's corner
-//! squares (`xcorner`), a frame's sharpness (`sharpness`), printable boards (`print`) and the
+//! (`charuco`), plain chessboards (`chessboard`), sub-pixel refinement of every board's corners
+//! to the saddle point of the image (`xcorner`: Kalibr's corner squares, chessboard and ChArUco
+//! corners), a frame's sharpness (`sharpness`), printable boards (`print`) and the
 //! board pose `T_camera_target` by PnP with lens distortion (`pnp`).
 //!
 //! Frames: `target` is the board frame, x to the right and y up as printed, z out of the
@@ -29,7 +29,6 @@ pub mod print;
 mod regrid;
 pub mod sharpness;
 pub mod shrink;
-pub mod subpix;
 pub mod target;
 pub mod xcorner;
 
