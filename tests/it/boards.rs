@@ -311,11 +311,17 @@ fn visp_eye_in_hand_chessboard_set_is_detected_in_every_frame_and_solved() {
     assert_eq!(imported.frames.len(), 8);
     assert_eq!(imported.dataset.pairs.len(), 8, "the board in every frame");
     let mut worst_rms: f64 = 0.0;
+    let mut sum_rms = 0.0;
     for f in &imported.frames {
         let rms = f.rms_px.unwrap();
         worst_rms = worst_rms.max(rms);
+        sum_rms += rms;
         assert!(rms < 1.0, "{}: board RMS {rms} px", f.files.image.display());
     }
+    // The corner refinement on real photographs: the mean board RMS was 0.421 px with the
+    // gradient criterion, 0.426 px with the saddle fit's 4 px window, 0.446 px with a 7 px one.
+    let mean_rms = sum_rms / imported.frames.len() as f64;
+    assert!(mean_rms < 0.44, "mean board RMS {mean_rms:.3} px");
     let options = SolveOptions {
         noise: NoiseModel {
             rotation_sigma_rad: 0.5f64.to_radians(),
@@ -327,7 +333,7 @@ fn visp_eye_in_hand_chessboard_set_is_detected_in_every_frame_and_solved() {
     println!("{}", cal.summary());
     let r = &cal.residuals;
     println!(
-        "ViSP eye-in-hand chessboard: worst board RMS {worst_rms:.3} px; residuals rotation \
+        "ViSP eye-in-hand chessboard: board RMS mean {mean_rms:.3} px, worst {worst_rms:.3} px; residuals rotation \
          max {:.3}°, translation max {:.2} mm",
         r.rotation_max_deg, r.translation_max_mm
     );
