@@ -13,7 +13,7 @@ use handeye_core::setup::{CellTransforms, PosePair};
 use handeye_plan::nbv::AdaptivePlanner;
 use handeye_plan::{generate, GenerateSpec, Plan, Waypoint};
 use handeye_robot::Joints;
-use handeye_session::cell;
+use handeye_session::{cell, CellPlanner, PlanSource};
 use handeye_solve as solve;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::rngs::StdRng;
@@ -98,7 +98,7 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
             .max(u.target_mount.translation_mm);
         random_sq += true_error_mm(&c, &truth).powi(2);
 
-        let mut planner = AdaptivePlanner::new(
+        let planner = AdaptivePlanner::new(
             truth.setup,
             prepared.config.camera().nominal.camera_mount,
             prepared.config.camera().nominal.target_mount,
@@ -107,10 +107,13 @@ fn adaptive_plan_matches_the_random_plan_with_fewer_poses() {
             target_mm,
             20,
         );
-        let mut samples = Vec::new();
-        while let Some((pose, _joints)) = planner.next(&samples) {
-            samples.push(measure(&truth, &pose, &mut rng));
+        // As a run drives it: the cell's planner over its one camera, the candidates all seen.
+        let mut planner = CellPlanner::new(vec![planner], vec![vec![true; candidates.len()]], 20);
+        let mut samples = vec![Vec::new()];
+        while let Some((pose, _joints)) = planner.next_pose(&samples) {
+            samples[0].push(measure(&truth, &pose, &mut rng));
         }
+        let samples = samples.remove(0);
         reached += usize::from(planner.reached_target());
         let final_solve = solve::solve(truth.setup, &samples, &options).expect("adaptive solves");
         adaptive_sq += true_error_mm(&final_solve, &truth).powi(2);
@@ -204,10 +207,10 @@ fn planner(prepared: &cell::PreparedCell, target_mm: f64) -> AdaptivePlanner {
 
 /// [`planner`] as a run drives it: the cell's planner over its one camera, the candidates all
 /// seen.
-fn cell_planner(prepared: &cell::PreparedCell, target_mm: f64) -> handeye_session::CellPlanner {
+fn cell_planner(prepared: &cell::PreparedCell, target_mm: f64) -> CellPlanner {
     let one = planner(prepared, target_mm);
     let count = one.candidates().len();
-    handeye_session::CellPlanner::new(vec![one], vec![vec![true; count]], count)
+    CellPlanner::new(vec![one], vec![vec![true; count]], count)
 }
 
 /// An adaptive session stopped by a protective stop resumes: the manifest's poses are kept, none

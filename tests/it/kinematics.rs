@@ -1776,15 +1776,18 @@ fn ten_poses_with_and_without_the_arm(
         if let Some(arm) = arm {
             planner = planner.with_arm(arm);
         }
-        let (mut samples, mut chosen) = (Vec::new(), Vec::new());
-        while let Some((pose, q)) = planner.next(&samples) {
+        // As a run drives it: the cell's planner over its one camera, the candidates all seen.
+        use handeye_session::{CellPlanner, PlanSource};
+        let mut planner = CellPlanner::new(vec![planner], vec![vec![true; candidates.len()]], 10);
+        let (mut samples, mut chosen) = (vec![Vec::new()], Vec::new());
+        while let Some((pose, q)) = planner.next_pose(&samples) {
             let mut pair = PosePair::new(pose, nominal.camera_from_target(&pose));
-            pair.id = Some(format!("pose-{:03}", samples.len()));
+            pair.id = Some(format!("pose-{:03}", samples[0].len()));
             chosen.push(ArmSample {
                 pair: pair.clone(),
                 joints: q.to_vec(),
             });
-            samples.push(pair);
+            samples[0].push(pair);
         }
         assert_eq!(chosen.len(), 10);
         let fixed = SolveOptions {

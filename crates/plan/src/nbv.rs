@@ -337,30 +337,6 @@ impl AdaptivePlanner {
         self
     }
 
-    /// The next pose to visit given the samples accepted so far, or `None` to stop.
-    pub fn next(&mut self, samples: &[PosePair]) -> Option<(Pose, Joints)> {
-        let (done, solved_sigma_mm) = self.assess(samples);
-        let choice = if done {
-            None
-        } else {
-            let gains = self.gains(samples);
-            best_per_second(
-                gains
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, g)| Some((i, (*g)?))),
-                |i| self.seconds(i),
-            )
-        };
-        self.log.push(AdaptiveStep {
-            samples: samples.len(),
-            solved_sigma_mm,
-            chose: choice,
-            predicted_sigma_mm: choice.and_then(|i| self.predicted_sigma_mm(samples, i)),
-        });
-        Some(self.take(choice?))
-    }
-
     /// Arm time of candidate `i` from where the arm stands (move and the per-pose time), s;
     /// without a motion model every candidate costs the same.
     pub fn seconds(&self, i: usize) -> f64 {
