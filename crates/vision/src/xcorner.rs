@@ -482,47 +482,54 @@ mod tests {
         image::imageops::blur(&sharp, 0.7)
     }
 
+    /// The class of ChArUco boards (markers from 0.9 to 0.6 of the square: a white gap of 0.05
+    /// to 0.2 of it) in four views: where the gap is 0.13 of the square or more (markers at most
+    /// 0.74 of it) every corner is found within 0.04 px; narrower, a corner is found within
+    /// 0.07 px or not at all (the caller keeps its estimate), never pulled onto a marker. At
+    /// the 0.13 gap a 7 px window alone is 0.05 to 0.22 px off in these views, and the masked
+    /// gradient criterion this fit replaced was 0.08 to 0.46 px off (0.45 to 1.3 px at the
+    /// narrower gaps).
     #[test]
     fn a_charuco_corner_is_found_inside_its_markers_through_perspective() {
-        let gap = 0.13;
-        let mut worst: f64 = 0.0;
         // Rotation (°), square (px), perspective terms, and the start's offset from the truth.
-        for (k, (angle, square_px, px, py, start_off)) in [
+        let views = [
             (0.0f64, 34.0, 0.0, 0.0, (1.0, -0.7)),
             (17.0, 30.0, 0.06, -0.04, (-0.9, 0.6)),
             (-28.0, 38.0, -0.05, 0.07, (0.5, 1.1)),
             (40.0, 26.0, 0.08, 0.05, (-0.8, -0.8)),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            let (c, s) = (angle.to_radians().cos(), angle.to_radians().sin());
-            let centre = (47.3 + k as f64 * 0.21, 48.6 - k as f64 * 0.17);
-            let h = nalgebra::Matrix3::new(
-                square_px * c,
-                -square_px * s,
-                centre.0,
-                square_px * s,
-                square_px * c,
-                centre.1,
-                px,
-                py,
-                1.0,
-            );
-            let image = charuco_corner(&h, gap);
-            let truth = Point2::new(centre.0, centre.1);
-            let start = truth + nalgebra::Vector2::new(start_off.0, start_off.1);
-            let found = refine_grid_corner(&image, start, square_px, gap)
-                .unwrap_or_else(|| panic!("case {k}: no corner"));
-            let error = (found - truth).norm();
-            worst = worst.max(error);
-            // A quarter-square window alone (7 px) is 0.05 to 0.22 px off in these views: the
-            // markers' borders pull it.
-            assert!(
-                error < 0.04,
-                "case {k}: {found} is {error:.4} px from {truth}"
-            );
+        ];
+        for gap in [0.05, 0.08, 0.13, 0.2] {
+            for (k, (angle, square_px, px, py, start_off)) in views.into_iter().enumerate() {
+                let (c, s) = (angle.to_radians().cos(), angle.to_radians().sin());
+                let centre = (47.3 + k as f64 * 0.21, 48.6 - k as f64 * 0.17);
+                let h = nalgebra::Matrix3::new(
+                    square_px * c,
+                    -square_px * s,
+                    centre.0,
+                    square_px * s,
+                    square_px * c,
+                    centre.1,
+                    px,
+                    py,
+                    1.0,
+                );
+                let image = charuco_corner(&h, gap);
+                let truth = Point2::new(centre.0, centre.1);
+                let start = truth + nalgebra::Vector2::new(start_off.0, start_off.1);
+                let found = refine_grid_corner(&image, start, square_px, gap);
+                let error = found.map(|p| (p - truth).norm());
+                if gap >= 0.13 {
+                    assert!(
+                        error.is_some_and(|e| e < 0.04),
+                        "gap {gap}, view {k}: {error:?} px"
+                    );
+                } else {
+                    assert!(
+                        error.is_none_or(|e| e < 0.07),
+                        "gap {gap}, view {k}: {error:?} px"
+                    );
+                }
+            }
         }
-        println!("worst {worst:.4} px");
     }
 }
