@@ -32,7 +32,7 @@ pub(super) fn print_run(done: &CellRun, result: &CamerasResultFile) -> String {
 /// beside the result; the session's own files are left as the run wrote them.
 pub(super) fn print_replay(replay: &CamerasReplay) -> anyhow::Result<()> {
     print_result(&replay.result, &replay.output.result);
-    let report = handeye_session::replay::beside(&replay.output.result, REPLAY_REPORT_FILE);
+    let report = handeye_session::cell::replay::beside(&replay.output.result, REPLAY_REPORT_FILE);
     // The result is saved; a report problem must not hide it (as for one camera).
     match handeye_report::cameras::write_cameras_report(&replay.result, &replay.folder, &report) {
         Ok(()) => outln!("report: {}", report.display()),

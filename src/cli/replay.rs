@@ -7,8 +7,9 @@ use clap::Args;
 use handeye_records::result::ResultFile;
 use handeye_records::{PoseVisit, SessionFolder};
 use handeye_report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
-use handeye_session::cell::replay::{replay_session, OneCameraReplay, ReplayRequest, Replayed};
-use handeye_session::replay::beside;
+use handeye_session::cell::replay::{
+    beside, replay_session, OneCameraReplay, ReplayRequest, Replayed,
+};
 
 /// Re-detect the board in a session's frames and solve again offline.
 #[derive(Debug, Args)]

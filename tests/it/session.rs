@@ -89,7 +89,7 @@ fn eye_in_hand_sim_cell_recovers_the_ground_truth() {
         solved.compare_with_truth(prepared.config.camera().simulation.as_ref().unwrap())
     );
     // Replay re-detects the saved frames and reproduces the result (both answers).
-    let (dataset, visits) = handeye_session::replay::redetect(
+    let (dataset, visits) = cell::replay::redetect(
         &folder,
         &prepared.camera().board,
         &prepared.camera().camera_model,

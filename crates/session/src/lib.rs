@@ -10,15 +10,14 @@
 //!   It sees the `Robot` and `Camera` traits, never a backend;
 //! - [`adaptive`], [`manual`]: plans that grow as the run goes (next-best view) and hand-guided
 //!   capture;
-//! - [`replay`]: a recorded session's frames detected again;
-//! - [`cell`]: a cell prepared from its config, its hardware opened, and a run of it end to end;
+//! - [`cell`]: a cell prepared from its config, its hardware opened, and a run of it end to end
+//!   (and `cell::replay`: a recorded session's frames detected again and solved);
 //! - [`verify`]: held-out checks of a result.
 
 pub mod adaptive;
 pub mod cell;
 pub mod driver;
 pub mod manual;
-pub mod replay;
 pub mod verify;
 
 pub use adaptive::{run_adaptive_session, CellPlanner, PlanSource};

@@ -220,7 +220,7 @@ fn resume_checks_the_records_and_rebuilds_the_samples_from_them() {
     );
     assert!(!message.contains("frames/005.png"), "{message}");
     let prepared = cell::prepare(&config).unwrap();
-    let replay = handeye_session::replay::redetect(
+    let replay = cell::replay::redetect(
         &SessionFolder::open(&dir.path().join("zero")).unwrap(),
         &prepared.camera().board,
         &prepared.camera().camera_model,

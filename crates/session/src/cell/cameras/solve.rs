@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{camera_folder, read_manifest};
-use crate::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
+use crate::cell::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
 use handeye_config::{CellCamera, CellConfig, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
