@@ -668,6 +668,41 @@ fn result_file_round_trips_through_a_calibration() {
 /// library call writes the page of either: a one-camera session and the three-camera one
 /// give their own layout with the verdict the file holds; a file that is neither is refused
 /// naming the file and the key; a folder not solved yet is refused saying to solve it.
+/// The page is written as its frames are drawn, a few at a time: a frame that cannot be read
+/// halfway through fails the report naming the frame, and leaves the page the session had
+/// byte for byte, with no partial file beside it.
+#[test]
+fn a_frame_that_cannot_be_read_leaves_the_previous_page_as_it_was() {
+    use handeye_report::session::write_folder_report;
+    let (_dir, path) = report();
+    let scratch = tempfile::tempdir().unwrap();
+    let session = &scratch.path().join("s");
+    util::copy_folder(path.parent().unwrap(), session);
+    write_folder_report(session, None).unwrap();
+    let page = session.join("report.html");
+    let before = std::fs::read(&page).unwrap();
+    // The seventh of ten frames: six are drawn and written before it.
+    let frame = session.join("frames/006.png");
+    let bytes = std::fs::read(&frame).unwrap();
+    std::fs::write(&frame, &bytes[..bytes.len() / 3]).unwrap();
+    let error = format!(
+        "{:#}",
+        anyhow::Error::new(write_folder_report(session, None).unwrap_err())
+    );
+    assert!(error.contains("frames/006.png"), "{error}");
+    assert_eq!(std::fs::read(&page).unwrap(), before, "the page changed");
+    let names: Vec<String> = std::fs::read_dir(session)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| !n.contains("report.html") || n == "report.html"),
+        "a partial page is left: {names:?}"
+    );
+}
+
 #[test]
 fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
     use handeye_records::result::SessionResult;
@@ -802,7 +837,7 @@ fn two_answers_are_shown_side_by_side() {
             answer(Method::Refined, "answer-one"),
             answer(Method::Iterative, "answer-two"),
         ],
-        thumbnails: Vec::new(),
+        frames: None,
         holdout: None,
         verdict: None,
         arm_time: None,

@@ -203,22 +203,59 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
 /// [`write_atomic`], returning the stale temporary files of `path` it removed instead of
 /// warning about them.
 pub fn write_atomic_reporting(path: &Path, contents: &[u8]) -> std::io::Result<Vec<RemovedTemp>> {
+    let (removed, written) = write_atomic_streamed(path, |out| out.write_all(contents))?;
+    written?;
+    Ok(removed)
+}
+
+/// [`write_atomic`] of what `write` writes to it (buffered), for a file too large to hold in
+/// memory whole before it is written (a report of hundreds of frames). The outer error is the
+/// file's (creating, syncing, renaming); the inner one `write`'s own, after which `path` is left
+/// as it was and the temporary file removed, as after any failed write.
+pub fn write_atomic_with<E>(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> Result<(), E>,
+) -> std::io::Result<Result<(), E>> {
+    let (removed, written) = write_atomic_streamed(path, write)?;
+    for removed in removed {
+        tracing::warn!(
+            "removed {} ({} bytes): the unfinished temporary file of a killed write of {}",
+            removed.path.display(),
+            removed.bytes,
+            path.display()
+        );
+    }
+    Ok(written)
+}
+
+/// The one atomic write: stale temporary files of `path` removed (returned), a locked temporary
+/// file in its folder written by `write` through a buffer, synced and renamed over `path` —
+/// unless `write` fails (its error returned inside, the temporary file removed).
+fn write_atomic_streamed<E>(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> Result<(), E>,
+) -> std::io::Result<(Vec<RemovedTemp>, Result<(), E>)> {
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
     let removed = remove_stale_temp_files(folder, TempScope::Ours);
-    let mut temp = locked_temp_file(folder, path)?;
+    let temp = locked_temp_file(folder, path)?;
     if let Ok(existing) = std::fs::metadata(path) {
         if existing.is_file() {
             temp.as_file().set_permissions(existing.permissions())?;
         }
     }
-    temp.write_all(contents)?;
+    let mut buffered = std::io::BufWriter::new(temp);
+    if let Err(e) = write(&mut buffered) {
+        // Dropping the temporary file removes it.
+        return Ok((removed, Err(e)));
+    }
+    let temp = buffered.into_inner().map_err(|e| e.into_error())?;
     temp.as_file().sync_all()?;
     // The lock goes with the handle `persist` returns, after the rename.
     let _file = temp.persist(path).map_err(|e| e.error)?;
-    Ok(removed)
+    Ok((removed, Ok(())))
 }
 
 /// A new temporary file for `destination` in `folder`, locked. A sweep by another process may

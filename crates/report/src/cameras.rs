@@ -3,13 +3,12 @@
 //! from its own views alone, 1-sigma, samples, residuals, verdict), the boards, the
 //! camera-to-camera transforms, and each camera's annotated frames. Renders `result.yaml` as
 //! written; judges nothing. Self-contained HTML. The parts a one-camera page also has are that
-//! page's own (`sections::verdict_card`, `sections::use_section`, `frames_section` with
-//! `session::frame_thumbnails`): this module adds only what several cameras have.
+//! page's own (`sections::verdict_card`, `sections::use_section`, `PageOut::frames_section`
+//! with `session::page_frames`): this module adds only what several cameras have.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
-use handeye_core::atomic_file::write_atomic;
 use handeye_core::geometry::rotvec;
 use handeye_records::result::{CamerasResultFile, NamedTransform};
 
@@ -23,7 +22,8 @@ use handeye_records::{Evidence, SessionFolder};
 use handeye_session::cell::cameras::camera_folder;
 use handeye_vision::Target;
 
-use super::session::{frame_thumbnails, load_optics, sample_visits, Optics};
+use super::session::{load_optics, page_frames, sample_visits, Optics};
+use super::PageOut;
 use handeye_solve::verdict::Level;
 
 fn transform_cells(t: &NamedTransform) -> String {
@@ -48,8 +48,13 @@ fn transform_cells(t: &NamedTransform) -> String {
     )
 }
 
-/// The page's HTML.
-pub fn render(result: &CamerasResultFile, folder: &Path) -> Result<String, ReportError> {
+/// Writes the page to `out` (the file `path`, for errors), the frames as they are drawn.
+fn render_to(
+    result: &CamerasResultFile,
+    folder: &Path,
+    out: &mut dyn std::io::Write,
+    path: &Path,
+) -> Result<(), ReportError> {
     let mut html = format!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
          <style>{}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}\
@@ -150,9 +155,14 @@ pub fn render(result: &CamerasResultFile, folder: &Path) -> Result<String, Repor
         .map(|c| camera_records(folder, &c.name))
         .collect();
     rotation_axes_section(&mut html, &records)?;
-    frames_sections(&mut html, result, &records)?;
-    let _ = write!(html, "<script>{}</script></body></html>", super::SCRIPT);
-    Ok(html)
+    let mut page = PageOut::new(html, out, path);
+    frames_sections(&mut page, result, &records)?;
+    let _ = write!(
+        page.html,
+        "<script>{}</script></body></html>",
+        super::SCRIPT
+    );
+    page.flush()
 }
 
 /// Every camera's residual at each plan pose in the joint solve, rotation and translation: the
@@ -279,23 +289,23 @@ fn use_section(html: &mut String, result: &CamerasResultFile) {
     );
 }
 
-/// Each camera's frames, as a one-camera page draws them (`session::frame_thumbnails`): its
+/// Each camera's frames, as a one-camera page draws them (`session::page_frames`): its
 /// detected corners and its board reprojected by the joint answer (its mount and its setup's
 /// board), with the board and lens of the config its session was recorded with. A camera left
 /// out of the joint solve, or whose files do not load, says so instead.
 fn frames_sections(
-    html: &mut String,
+    page: &mut PageOut<'_>,
     result: &CamerasResultFile,
     records: &[Result<CameraRecords, String>],
 ) -> Result<(), ReportError> {
     let mounts = result.mounts();
-    html.push_str("<h2>Frames</h2>");
+    page.html.push_str("<h2>Frames</h2>");
     for (camera, records) in result.cameras.iter().zip(records) {
         let heading = format!("Frames of camera {}", camera.name);
         let id = format!("frames-{}", camera.name);
         let Some((_, mount)) = mounts.iter().find(|(name, _)| *name == camera.name) else {
             let _ = write!(
-                html,
+                page.html,
                 "<section id=\"{}\"><h3>{}</h3><p>Not drawn: the camera is not in the joint answer.</p></section>",
                 escape(&id),
                 escape(&heading)
@@ -303,41 +313,41 @@ fn frames_sections(
             continue;
         };
         let mut lacking = Vec::new();
-        let thumbnails = match records {
-            Ok(records) => match camera_optics(records, &camera.name, &mut lacking) {
-                Some((board, lens)) => frame_thumbnails(
-                    &records.folder,
-                    &records.evidence.pairs,
-                    &sample_visits(&records.evidence),
-                    Optics {
-                        board: &board,
-                        camera: &lens,
-                    },
-                    |b| mount.camera_from_target(b),
-                )?,
-                None => Vec::new(),
-            },
+        let frames = match records {
+            Ok(records) => {
+                camera_optics(records, &camera.name, &mut lacking).map(|(board, lens)| {
+                    page_frames(
+                        &records.folder,
+                        &records.evidence.pairs,
+                        &sample_visits(&records.evidence),
+                        Optics {
+                            board: &board,
+                            camera: &lens,
+                        },
+                        |b| mount.camera_from_target(b),
+                    )
+                })
+            }
             Err(e) => {
                 lacking.push(e.clone());
-                Vec::new()
+                None
             }
         };
         if !lacking.is_empty() {
             let _ = write!(
-                html,
+                page.html,
                 "<p class=\"error\">Camera {}: {}</p>",
                 escape(&camera.name),
                 escape(&lacking.join("; "))
             );
         }
-        super::frames_section(
-            html,
+        page.frames_section(
             &heading,
             &id,
             &format!("frame-{}-", camera.name),
             "the joint solve",
-            &thumbnails,
-        );
+            frames.as_ref(),
+        )?;
     }
     Ok(())
 }
@@ -391,8 +401,5 @@ pub fn write_cameras_report(
     folder: &Path,
     path: &Path,
 ) -> Result<(), ReportError> {
-    write_atomic(path, render(result, folder)?.as_bytes()).map_err(|source| ReportError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
+    super::write_page(path, |out| render_to(result, folder, out, path))
 }

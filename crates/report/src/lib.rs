@@ -32,7 +32,7 @@ pub mod session;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
-use handeye_core::atomic_file::write_atomic;
+use handeye_core::atomic_file::write_atomic_with;
 use handeye_core::notice::Notice;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::verdict::Verdict;
@@ -56,18 +56,33 @@ pub struct ReportAnswer {
     pub reprojection_px: Vec<Option<f64>>,
 }
 
-/// A frame with detected corners and the reprojected board drawn on it: shown small in the
-/// page's grid and full size in an overlay on a click.
+/// The frames a page shows, each with its detected corners and the board reprojected at the
+/// `T_camera_target` the answer predicts there: small in the page's grid, full size in an
+/// overlay on a click. Read, drawn and encoded while the page is written, a few at a time, so
+/// a page of hundreds of frames is never held in memory whole.
 #[derive(Debug, Clone)]
-pub struct FrameThumbnail {
+pub struct PageFrames {
+    /// The board the frames show.
+    pub board: handeye_vision::Target,
+    /// The lens they were taken through.
+    pub camera: handeye_core::camera_model::CameraModel,
+    /// The frames, in the order shown.
+    pub frames: Vec<PageFrame>,
+}
+
+/// One frame of [`PageFrames`].
+#[derive(Debug, Clone)]
+pub struct PageFrame {
     /// Sample index (into [`ReportInput::pairs`]).
     pub sample: usize,
     /// Caption (sample id and plan index).
     pub caption: String,
-    /// The encoded image.
-    pub bytes: Vec<u8>,
-    /// Its media type (`image/jpeg`, `image/png`).
-    pub mime: &'static str,
+    /// The frame file.
+    pub path: PathBuf,
+    /// The board pose the answer predicts at this sample.
+    pub camera_from_target: handeye_core::geometry::Pose,
+    /// The detected corners, px.
+    pub corners_px: Vec<nalgebra::Point2<f64>>,
 }
 
 /// Leave-one-out figures to show beside the answers (see `verify::leave_one_out`).
@@ -92,9 +107,9 @@ pub struct ReportInput {
     pub pairs: Vec<PosePair>,
     /// The answers, first one primary (the frames reproject with it).
     pub answers: Vec<ReportAnswer>,
-    /// The annotated frames, shown small and full size on a click (may be empty for a plain
-    /// dataset).
-    pub thumbnails: Vec<FrameThumbnail>,
+    /// The frames, shown small and full size on a click (`None` for a plain dataset, or
+    /// without the board and lens to draw them).
+    pub frames: Option<PageFrames>,
     /// Held-out prediction errors, when computed.
     pub holdout: Option<HoldoutSummary>,
     /// The verdict on the primary answer as the session's solve judged it (the one
@@ -193,6 +208,18 @@ pub const SECTIONS: [&str; 12] = [
 
 /// Renders the page.
 pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
+    let mut page = Vec::new();
+    render_to(input, &mut page, Path::new("the page in memory"))?;
+    Ok(String::from_utf8(page).expect("the page is UTF-8"))
+}
+
+/// Writes the page to `out` (the file `path`, for errors): the text before the frames, the
+/// frames as they are drawn, then the rest.
+fn render_to(
+    input: &ReportInput,
+    out: &mut dyn std::io::Write,
+    path: &Path,
+) -> Result<(), ReportError> {
     if input.answers.is_empty() || input.pairs.is_empty() {
         return Err(ReportError::Empty);
     }
@@ -274,14 +301,15 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     corners::corners_section(&mut html, input)?;
 
     per_pose_table(&mut html, input);
-    frames_section(
-        &mut html,
+    let mut page = PageOut::new(html, out, path);
+    page.frames_section(
         "Frames",
         "frames",
         "frame-",
         &input.answers[0].label,
-        &input.thumbnails,
-    );
+        input.frames.as_ref(),
+    )?;
+    let mut html = std::mem::take(&mut page.html);
 
     html.push_str("<section id=\"poses-3d\"><h3>Cell sketch</h3>\n<p>Where the primary answer puts the robot base, the board and the camera at every sample (base frame, metres; axis names on the frame). Each triad shows a frame's axes: x red, y green, z blue.</p>\n");
     figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
@@ -344,7 +372,8 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     html.push_str("</section>\n</main>\n");
     html.push_str(OVERLAY);
     let _ = write!(html, "<script>{SCRIPT}</script>\n</body></html>\n");
-    Ok(html)
+    page.html = html;
+    page.flush()
 }
 
 /// Status of a sample in the primary answer: `dropped`, `outlier` or `ok`.
@@ -380,7 +409,11 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
     };
     for i in order {
         let status = sample_status(c, i);
-        let frame = if input.thumbnails.iter().any(|t| t.sample == i) {
+        let has_frame = input
+            .frames
+            .as_ref()
+            .is_some_and(|f| f.frames.iter().any(|t| t.sample == i));
+        let frame = if has_frame {
             format!(
                 "<a href=\"#frame-{i}\" class=\"open-frame\" data-frame=\"frame-{i}\">frame</a>"
             )
@@ -400,50 +433,95 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
     html.push_str("</tbody></table></div>\n</section>\n");
 }
 
-/// The frames with detections, small in a grid; a click shows one full size in an overlay.
-/// The frames of one camera (`id` the section's, `prefix` its frames' anchors: `frame-` on a
-/// one-camera page, `frame-<camera>-` for each of several), annotated with the board predicted
-/// by `answer`.
-pub(crate) fn frames_section(
-    html: &mut String,
-    heading: &str,
-    id: &str,
-    prefix: &str,
-    answer: &str,
-    thumbnails: &[FrameThumbnail],
-) {
-    let _ = writeln!(html, "<section id=\"{id}\"><h3>{}</h3>", escape(heading));
-    if thumbnails.is_empty() {
-        html.push_str("<p>No frames recorded with these samples.</p>\n");
-    } else {
-        let _ = writeln!(
-            html,
-            "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>\n<div class=\"thumbs\">",
-            escape(answer)
-        );
-        for t in thumbnails {
-            let _ = writeln!(
-                html,
-                "<figure class=\"thumb\" id=\"{prefix}{}\"><img class=\"frame\" alt=\"{}\" src=\"data:{};base64,{}\"><figcaption>{}</figcaption></figure>",
-                t.sample,
-                escape(&t.caption),
-                t.mime,
-                BASE64_STANDARD.encode(&t.bytes),
-                escape(&t.caption)
-            );
-        }
-        html.push_str("</div>\n");
-    }
-    html.push_str("</section>\n");
+/// A page being written: the text not yet written (`html`) and where it goes (`out`, the file
+/// `path`).
+pub(crate) struct PageOut<'o> {
+    /// Text not yet written.
+    pub(crate) html: String,
+    out: &'o mut dyn std::io::Write,
+    path: &'o Path,
 }
 
-/// Renders the page and writes it atomically to `path`.
+impl<'o> PageOut<'o> {
+    /// A page written to `out` (the file `path`), with `html` to come first.
+    pub(crate) fn new(html: String, out: &'o mut dyn std::io::Write, path: &'o Path) -> Self {
+        PageOut { html, out, path }
+    }
+
+    /// Writes the text so far.
+    pub(crate) fn flush(&mut self) -> Result<(), ReportError> {
+        self.out
+            .write_all(self.html.as_bytes())
+            .map_err(|source| ReportError::Write {
+                path: self.path.to_path_buf(),
+                source,
+            })?;
+        self.html.clear();
+        Ok(())
+    }
+
+    /// The frames of one camera (`id` the section's, `prefix` its frames' anchors: `frame-` on
+    /// a one-camera page, `frame-<camera>-` for each of several), annotated with the board
+    /// predicted by `answer`, small in a grid; a click shows one full size in an overlay. Each
+    /// frame is drawn (`session::annotated_frame`) and written as it comes, a few at a time on
+    /// every core.
+    pub(crate) fn frames_section(
+        &mut self,
+        heading: &str,
+        id: &str,
+        prefix: &str,
+        answer: &str,
+        frames: Option<&PageFrames>,
+    ) -> Result<(), ReportError> {
+        let _ = writeln!(
+            self.html,
+            "<section id=\"{id}\"><h3>{}</h3>",
+            escape(heading)
+        );
+        match frames.filter(|f| !f.frames.is_empty()) {
+            None => self
+                .html
+                .push_str("<p>No frames recorded with these samples.</p>\n"),
+            Some(frames) => {
+                let _ = writeln!(
+                    self.html,
+                    "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>\n<div class=\"thumbs\">",
+                    escape(answer)
+                );
+                session::draw_frames(frames, |frame, jpeg| {
+                    let _ = writeln!(
+                        self.html,
+                        "<figure class=\"thumb\" id=\"{prefix}{}\"><img class=\"frame\" alt=\"{}\" src=\"data:image/jpeg;base64,{}\"><figcaption>{}</figcaption></figure>",
+                        frame.sample,
+                        escape(&frame.caption),
+                        BASE64_STANDARD.encode(jpeg),
+                        escape(&frame.caption)
+                    );
+                    self.flush()
+                })?;
+                self.html.push_str("</div>\n");
+            }
+        }
+        self.html.push_str("</section>\n");
+        Ok(())
+    }
+}
+
+/// Renders the page and writes it atomically to `path`, the frames as they are drawn.
 pub fn write_report(path: &Path, input: &ReportInput) -> Result<(), ReportError> {
-    let html = render_html(input)?;
-    write_atomic(path, html.as_bytes()).map_err(|source| ReportError::Write {
+    write_page(path, |out| render_to(input, out, path))
+}
+
+/// Writes a page atomically to `path` through `render`: a page that fails leaves `path` as it
+/// was.
+pub(crate) fn write_page(
+    path: &Path,
+    render: impl FnOnce(&mut dyn std::io::Write) -> Result<(), ReportError>,
+) -> Result<(), ReportError> {
+    write_atomic_with(path, render).map_err(|source| ReportError::Write {
         path: path.to_path_buf(),
         source,
-    })
+    })?
 }
 
 /// What each answer's solver said about how it was made (prefixed with the answer's label).

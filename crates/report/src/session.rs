@@ -8,7 +8,7 @@ use std::collections::HashMap;
 
 use nalgebra::Point2;
 
-use super::{CornerResidual, FrameThumbnail, ReportAnswer, ReportError, ReportInput};
+use super::{CornerResidual, PageFrame, PageFrames, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
@@ -26,7 +26,7 @@ pub const FRAME_WIDTH: u32 = 960;
 /// JPEG quality of the frames in the report (a page of 20 frames stays a few MB).
 const FRAME_JPEG_QUALITY: u8 = 80;
 
-/// The board and lens a session was recorded with (needed for reprojection and thumbnails).
+/// The board and lens a session was recorded with (needed for reprojection and the frames).
 #[derive(Debug, Clone, Copy)]
 pub struct Optics<'a> {
     /// The board.
@@ -127,13 +127,13 @@ pub fn from_session(
             ));
         }
     }
-    let thumbnails = match (optics, answers.first()) {
+    let frames = match (optics, answers.first()) {
         (Some(optics), Some(primary)) => {
-            frame_thumbnails(folder, pairs, &sample_visits, optics, |b| {
+            Some(page_frames(folder, pairs, &sample_visits, optics, |b| {
                 primary.calibration.predict_camera_from_target(b)
-            })?
+            }))
         }
-        _ => Vec::new(),
+        _ => None,
     };
     Ok(ReportInput {
         title: folder.shown_root().display().to_string(),
@@ -143,7 +143,7 @@ pub fn from_session(
             .ok_or(ReportError::Empty)?,
         pairs: pairs.clone(),
         answers,
-        thumbnails,
+        frames,
         holdout: None,
         verdict: None,
         arm_time: None,
@@ -166,31 +166,23 @@ pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
         .collect()
 }
 
-/// Every sample's frame that has a visit, annotated ([`annotated_frame`]) with the board at
-/// `predict(T_base_flange)` (`T_camera_target` of the answer shown): read, annotated and
-/// encoded on every core (rayon keeps the order). The one way a page draws its frames, one
-/// camera's or each of several.
-pub(crate) fn frame_thumbnails(
+/// Every sample's frame that has a visit, to be drawn ([`draw_frames`]) with the board at
+/// `predict(T_base_flange)` (`T_camera_target` of the answer shown). The one way a page lists
+/// its frames, one camera's or each of several.
+pub(crate) fn page_frames(
     folder: &SessionFolder,
     pairs: &[PosePair],
     sample_visits: &[Option<&PoseVisit>],
     optics: Optics<'_>,
-    predict: impl Fn(&Pose) -> Pose + Sync,
-) -> Result<Vec<FrameThumbnail>, ReportError> {
-    use rayon::prelude::*;
-    let shown: Vec<(usize, &PosePair, &PoseVisit)> = pairs
+    predict: impl Fn(&Pose) -> Pose,
+) -> PageFrames {
+    let frames = pairs
         .iter()
         .zip(sample_visits)
         .enumerate()
-        .filter_map(|(sample, (pair, visit))| Some((sample, pair, (*visit)?)))
-        .collect();
-    shown
-        .into_par_iter()
-        .map(|(sample, pair, visit)| {
-            let predicted = predict(&pair.base_from_flange);
-            let path = folder.root().join(&visit.frame);
-            let bytes = annotated_frame(&path, optics, &predicted, &visit.corners_px)?;
-            Ok(FrameThumbnail {
+        .filter_map(|(sample, (pair, visit))| {
+            let visit = (*visit)?;
+            Some(PageFrame {
                 sample,
                 caption: format!(
                     "sample {sample} ({}), board RMS {}",
@@ -200,11 +192,44 @@ pub(crate) fn frame_thumbnails(
                         .map(|r| format!("{r:.3} px"))
                         .unwrap_or_else(|| "-".into())
                 ),
-                bytes,
-                mime: "image/jpeg",
+                path: folder.root().join(&visit.frame),
+                camera_from_target: predict(&pair.base_from_flange),
+                corners_px: visit.corners_px.iter().map(|c| c.pixel).collect(),
             })
         })
-        .collect()
+        .collect();
+    PageFrames {
+        board: optics.board.clone(),
+        camera: *optics.camera,
+        frames,
+    }
+}
+
+/// Frames drawn at once (on every core) before they are written: the page holds this many
+/// encoded frames at most, whatever the session's size.
+const FRAMES_AT_ONCE: usize = 8;
+
+/// Each of `frames` read, annotated ([`annotated_frame`]) and encoded, handed to `write` in
+/// order with its JPEG: [`FRAMES_AT_ONCE`] at a time on every core (rayon keeps the order).
+pub(crate) fn draw_frames(
+    frames: &PageFrames,
+    mut write: impl FnMut(&PageFrame, Vec<u8>) -> Result<(), ReportError>,
+) -> Result<(), ReportError> {
+    use rayon::prelude::*;
+    let optics = Optics {
+        board: &frames.board,
+        camera: &frames.camera,
+    };
+    for chunk in frames.frames.chunks(FRAMES_AT_ONCE) {
+        let drawn: Vec<Result<Vec<u8>, ReportError>> = chunk
+            .par_iter()
+            .map(|frame| annotated_frame(frame, optics))
+            .collect();
+        for (frame, jpeg) in chunk.iter().zip(drawn) {
+            write(frame, jpeg?)?;
+        }
+    }
+    Ok(())
 }
 
 /// RMS pixel distance between detected corners and the board's corners projected at
@@ -235,19 +260,15 @@ fn corner_residuals<'c>(
     })
 }
 
-/// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at `camera_from_target`
-/// and the detected corners (`handeye_vision::annotate::prediction`), as JPEG.
-fn annotated_frame(
-    path: &std::path::Path,
-    optics: Optics<'_>,
-    camera_from_target: &Pose,
-    corners_px: &[CornerObservation],
-) -> Result<Vec<u8>, ReportError> {
+/// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at its predicted
+/// `T_camera_target` and its detected corners (`handeye_vision::annotate::prediction`), as
+/// JPEG.
+fn annotated_frame(frame: &PageFrame, optics: Optics<'_>) -> Result<Vec<u8>, ReportError> {
     let frame_error = |message: String| ReportError::Frame {
-        path: path.to_path_buf(),
+        path: frame.path.clone(),
         message,
     };
-    let grey = image::open(path)
+    let grey = image::open(&frame.path)
         .map_err(|e| frame_error(e.to_string()))?
         .into_luma8();
     let out = annotate::prediction(
@@ -255,8 +276,8 @@ fn annotated_frame(
         FRAME_WIDTH,
         optics.board,
         optics.camera,
-        camera_from_target,
-        corners_px.iter().map(|c| c.pixel),
+        &frame.camera_from_target,
+        frame.corners_px.iter().copied(),
     )
     .map_err(frame_error)?;
     draw::jpeg(&out, FRAME_JPEG_QUALITY).map_err(frame_error)
@@ -403,7 +424,7 @@ pub fn write_folder_report(
         Ok(config) => Some(config),
         Err(e) => {
             lacking.push(format!(
-                "{e}; the report will have no thumbnails or reprojection errors"
+                "{e}; the report will have no frames or reprojection errors"
             ));
             None
         }
