@@ -664,20 +664,23 @@ fn result_file_round_trips_through_a_calibration() {
     }
 }
 
-/// One loader reads a session's result.yaml whichever cell wrote it, and `handeye report`'s
-/// library call writes the page of either: a one-camera session and the three-camera one
-/// give their own layout with the verdict the file holds; a file that is neither is refused
-/// naming the file and the key; a folder not solved yet is refused saying to solve it.
+/// A copy of the shared session (`report`) in a folder of its own, for a test that writes into
+/// it.
+fn session_copy() -> (tempfile::TempDir, PathBuf) {
+    let (_dir, path) = report();
+    let scratch = tempfile::tempdir().unwrap();
+    let session = scratch.path().join("s");
+    util::copy_folder(path.parent().unwrap(), &session);
+    (scratch, session)
+}
+
 /// The page is written as its frames are drawn, a few at a time: a frame that cannot be read
 /// halfway through fails the report naming the frame, and leaves the page the session had
 /// byte for byte, with no partial file beside it.
 #[test]
 fn a_frame_that_cannot_be_read_leaves_the_previous_page_as_it_was() {
     use handeye_report::session::write_folder_report;
-    let (_dir, path) = report();
-    let scratch = tempfile::tempdir().unwrap();
-    let session = &scratch.path().join("s");
-    util::copy_folder(path.parent().unwrap(), session);
+    let (_scratch, session) = &session_copy();
     write_folder_report(session, None).unwrap();
     let page = session.join("report.html");
     let before = std::fs::read(&page).unwrap();
@@ -703,16 +706,17 @@ fn a_frame_that_cannot_be_read_leaves_the_previous_page_as_it_was() {
     );
 }
 
+/// One loader reads a session's result.yaml whichever cell wrote it, and `handeye report`'s
+/// library call writes the page of either: a one-camera session and the three-camera one
+/// give their own layout with the verdict the file holds; a file that is neither is refused
+/// naming the file and the key; a folder not solved yet is refused saying to solve it.
 #[test]
 fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
     use handeye_records::result::SessionResult;
     use handeye_report::session::write_folder_report;
-    let (_dir, path) = report();
     // A copy: the page written here has only the file's answer, and the other tests read the
     // run's page with both.
-    let scratch = tempfile::tempdir().unwrap();
-    let one = &scratch.path().join("one");
-    util::copy_folder(path.parent().unwrap(), one);
+    let (scratch, one) = &session_copy();
     let result_path = one.join("result.yaml");
     let read = SessionResult::load(&result_path).unwrap();
     let file = ResultFile::load(&result_path).unwrap();
