@@ -1743,6 +1743,7 @@ fn ten_poses_with_and_without_the_arm(
     candidates: &[(Pose, handeye_robot::Joints)],
 ) -> Vec<(f64, f64)> {
     use handeye_plan::nbv::{AdaptivePlanner, ArmOffsets};
+    use handeye_session::{CellPlanner, PlanSource};
     use handeye_solve::kinematics::{estimable_offsets, fit_arm, ArmModel};
     let nominal = prepared.config.camera().nominal;
     let chain = handeye_records::solve::dh_chain(prepared.arm.as_ref().unwrap());
@@ -1777,7 +1778,6 @@ fn ten_poses_with_and_without_the_arm(
             planner = planner.with_arm(arm);
         }
         // As a run drives it: the cell's planner over its one camera, the candidates all seen.
-        use handeye_session::{CellPlanner, PlanSource};
         let mut planner = CellPlanner::new(vec![planner], vec![vec![true; candidates.len()]], 10);
         let (mut samples, mut chosen) = (vec![Vec::new()], Vec::new());
         while let Some((pose, q)) = planner.next_pose(&samples) {

@@ -189,15 +189,7 @@ pub fn same_file(file: &File, path: &Path) -> bool {
 /// rename), with the mode `File::create` would leave (see the module docs). The stale temporary
 /// files of `path` that killed writers left are removed first, each named in a warning.
 pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
-    for removed in write_atomic_reporting(path, contents)? {
-        tracing::warn!(
-            "removed {} ({} bytes): the unfinished temporary file of a killed write of {}",
-            removed.path.display(),
-            removed.bytes,
-            path.display()
-        );
-    }
-    Ok(())
+    write_atomic_with(path, |out| out.write_all(contents))?
 }
 
 /// [`write_atomic`], returning the stale temporary files of `path` it removed instead of

@@ -209,6 +209,7 @@ pub const SECTIONS: [&str; 12] = [
 /// Renders the page.
 pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     let mut page = Vec::new();
+    // Writing into memory cannot fail: the path only names the page in an error that never comes.
     render_to(input, &mut page, Path::new("the page in memory"))?;
     Ok(String::from_utf8(page).expect("the page is UTF-8"))
 }

@@ -166,10 +166,9 @@ pub fn refine_saddle(
 /// along each grid line (0.5 for a chessboard; the white gap between the corner and the
 /// markers, as a share of the square, for a ChArUco board): a saddle fit over a quarter of a
 /// square (at most [`GRID_MAX_HALF_WINDOW_PX`]), then, where the clear region is narrower, a
-/// fit inside it started from the first
-/// (a marker's border in the window would pull the saddle towards itself). For a start about a
-/// pixel off, as the grid detectors give. `None` when neither settles (see [`refine_saddle`]):
-/// keep the estimate.
+/// fit inside it started from the first (a marker's border in the window would pull the
+/// saddle towards itself). For a start about a pixel off, as the grid detectors give. `None`
+/// when neither settles (see [`refine_saddle`]): keep the estimate.
 pub fn refine_grid_corner(
     image: &GrayImage,
     start: Point2<f64>,
