@@ -93,7 +93,7 @@ cargo test --workspace --features handeye/ur-rtde,handeye/ros2 "$@"
 # tests beside them on a 2-core machine (#[ignore] says so): here they run alone, one at a time.
 cargo test --features handeye/ros2 --test it "$@" -- --ignored --test-threads=1 ros2_live::oversized::
 
-# The Python package (crates/python, docs/python.md): its abi3 wheel built by maturin in the same
+# The Python package (crates/10-top/python, docs/python.md): its abi3 wheel built by maturin in the same
 # target dir (the dev profile, whose dependencies the build above already compiled), installed into
 # a venv of its own (which sees the numpy and OpenCV installed above), and its pytest suite, which
 # compares with the `handeye` binary cargo test just built and with OpenCV.
@@ -106,6 +106,6 @@ fi
 "$py_venv/bin/python" -c "import numpy, cv2" 2>/dev/null \
   || "$py_venv/bin/pip" install -q numpy "opencv-python-headless<5"
 rm -rf "$target_dir/wheels"
-"$py_venv/bin/maturin" build -m crates/python/Cargo.toml -o "$target_dir/wheels"
+"$py_venv/bin/maturin" build -m crates/10-top/python/Cargo.toml -o "$target_dir/wheels"
 "$py_venv/bin/pip" install -q --force-reinstall --no-deps "$target_dir"/wheels/handeye-*.whl
-HANDEYE_BIN="$target_dir/debug/handeye" "$py_venv/bin/python" -m pytest crates/python/tests -q -rs
+HANDEYE_BIN="$target_dir/debug/handeye" "$py_venv/bin/python" -m pytest crates/10-top/python/tests -q -rs

@@ -2,8 +2,9 @@
 //! name only its dependencies. What is left to check here:
 //!
 //! - ARCHITECTURE.md's crate table is the workspace (`cargo metadata`): every member crate has
-//!   its row, folder and layer, its "may use" is exactly its dependencies, and no `Cargo.toml`
-//!   adds a dependency that reaches up a layer;
+//!   its row, folder and layer, the folder is its layer's (`crates/<NN>-<layer>/`), its "may
+//!   use" is exactly its dependencies, and no `Cargo.toml` adds a dependency that reaches up a
+//!   layer;
 //! - inside `handeye-session` (the pose loops below the cell run, the held-out check above it),
 //!   every module names only the modules below it, whether through `crate::x`, `crate::{x, y}`
 //!   or `super::…` paths that climb to the crate root. The plan, the config and the session's
@@ -123,6 +124,16 @@ fn the_architecture_table_is_the_workspace_and_no_crate_depends_on_a_crate_above
                 row.folder
             ));
         }
+        // A library crate sits in its layer's folder (`crates/07-run/session`), so the list of
+        // `crates/` is the layer map; the binary (`src`) and the test stand-ins (`mocks`) are
+        // the top level the project promises.
+        let layer_folder = format!("crates/{:02}-", row.layer);
+        if !(folder == "src" || folder == "mocks" || folder.starts_with(&layer_folder)) {
+            violations.push(format!(
+                "`{name}` (layer {}) is in `{folder}`: a crate of layer {} belongs in `{layer_folder}<layer>/`",
+                row.layer, row.layer
+            ));
+        }
         let uses: BTreeSet<String> = package["dependencies"]
             .as_array()
             .unwrap()
@@ -169,7 +180,7 @@ struct Ladder {
 }
 
 const LADDERS: &[Ladder] = &[Ladder {
-    src: "crates/session/src",
+    src: "crates/07-run/session/src",
     below: &[],
     modules: &[
         ("driver", &[]),

@@ -1227,7 +1227,7 @@ mod tests {
     #[test]
     fn a_scaled_board_of_every_kind_reads_back_at_its_measured_size() {
         let targets =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/targets");
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../configs/targets");
         let dir = tempfile::tempdir().unwrap();
         for name in [
             "aprilgrid-6x6.yaml",

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Calibrates the simulated cell's recorded samples with handeye from Python.
 
-    python crates/python/examples/calibrate_sim_cell.py            # the samples beside this file
-    python crates/python/examples/calibrate_sim_cell.py SESSION    # a session `handeye run` wrote
+    python crates/10-top/python/examples/calibrate_sim_cell.py            # the samples beside this file
+    python crates/10-top/python/examples/calibrate_sim_cell.py SESSION    # a session `handeye run` wrote
 
 The samples (sim-cell-samples.yaml) are what `handeye run --config configs/sim-cell.yaml`
 recorded; the simulator's ground truth is that config's `simulation:` section (copied below, or

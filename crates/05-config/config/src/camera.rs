@@ -6,8 +6,8 @@
 //!
 //! A new camera is its section struct and its `CameraBackend` impl (here, or in a module of its
 //! own as `ros2.rs` is), a variant of [`CameraConfig`] and its line in the two dispatches below,
-//! its `handeye_camera::Camera` in `crates/camera`, and its opener in
-//! `PreparedCell::open_camera_beside` (`crates/session/src/cell/mod.rs`).
+//! its `handeye_camera::Camera` in `crates/02-devices/camera`, and its opener in
+//! `PreparedCell::open_camera_beside` (`crates/07-run/session/src/cell/mod.rs`).
 
 use std::path::{Path, PathBuf};
 

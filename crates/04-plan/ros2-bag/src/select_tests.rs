@@ -139,7 +139,7 @@ fn write_stops_bag(file: &Path, stops: usize) {
 
 fn options(jobs: usize) -> BagOptions {
     let board =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/targets/aprilgrid-6x6.yaml");
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../configs/targets/aprilgrid-6x6.yaml");
     BagOptions {
         base_frame: "base".into(),
         flange_frame: "tool0".into(),

@@ -9,7 +9,7 @@
 //! refinement). Levenberg-Marquardt on the 12x12 normal equations (`solve::lm::minimize_normal`,
 //! shared with the reprojection-space refinement) minimises, re-anchoring the perturbation at
 //! every accepted step; the normal equations are summed per sample by 3x3 blocks, no tall
-//! Jacobian is formed (the speed of the default pipeline: `crates/solve/benches/solve.rs`). The problem is
+//! Jacobian is formed (the speed of the default pipeline: `crates/01-maths/solve/benches/solve.rs`). The problem is
 //! re-linearised at the optimum so the covariance `(JᵀJ)⁻¹` is exact there. Robust losses (Huber, Cauchy) work by iteratively
 //! reweighted least squares on each sample's whitened norm. The sigmas themselves are
 //! estimated from the residuals, alternated with the fit (see [`super::noise`]), unless

@@ -578,7 +578,7 @@ mod tests {
     fn model(width: u32, height: u32) -> CameraModel {
         let mut m = CameraModel::load(
             &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../configs/cameras/sim-1280x720.yaml"),
+                .join("../../../configs/cameras/sim-1280x720.yaml"),
         )
         .unwrap();
         (m.width, m.height) = (width, height);

@@ -2,7 +2,7 @@
 the same seeded synthetic cells (tests/synth.py: 0.2° / 1 mm board-pose noise), N = 20 and 200,
 as the issue #42 table asks; timeit, median and best of the repeats, ms.
 
-    python crates/python/bench/vs_opencv.py            # after installing the wheel (release
+    python crates/10-top/python/bench/vs_opencv.py            # after installing the wheel (release
                                                        # build for figures worth quoting)
 
 `calibrate` and `calibrateHandEye` run as a cv2 user calls them (the default: the verdict is
