@@ -16,25 +16,120 @@
 //! 200 frames, and its inverse (the covariance, the noise estimate's redundancy) three times
 //! that, which is where a 200-sample session spent most of its solve. The Schur complement costs
 //! `m · (6³ + 2·6·g² )`: linear in the frames. Both are exact; they differ by rounding only.
+//!
+//! The matrix is built and kept as those parts ([`Arrowhead`]), never whole: the whole of it
+//! grows with the square of the frames (1,000 frames: 289 MB, zeroed at every iteration) where
+//! the parts grow with the frames (1,000 frames: about 1 MB).
 
-use nalgebra::{Cholesky, Const, DMatrix, DVector, Dyn, OMatrix, SMatrix, SVector};
+use nalgebra::allocator::Allocator;
+use nalgebra::{
+    Cholesky, Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, SMatrix, SVector,
+};
 
 /// The size of each diagonal block (a frame's flange correction: rotation and translation).
 pub(crate) const BLOCK: usize = 6;
 
-/// How a problem's `JᵀJ` is laid out, for [`crate::lm::minimize_normal`] to solve it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Structure {
+type Block = SMatrix<f64, BLOCK, BLOCK>;
+
+/// One frame's column of the border, `Bₖ` (`g × 6`).
+type Border = OMatrix<f64, Dyn, Const<BLOCK>>;
+
+/// `JᵀJ` as a problem builds it for [`crate::lm::minimize_normal`]: one dense matrix, or an
+/// arrowhead kept as its parts, so that its memory grows with the frames and not with their
+/// square (a dense `JᵀJ` of 1,000 frames with corrections is 6,012² numbers, 289 MB).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Normal {
     /// No structure used: one Cholesky of the whole matrix.
-    Dense,
-    /// `global` leading parameters, then blocks of [`BLOCK`] that only the global ones couple.
-    Arrow {
-        /// The number of global parameters.
-        global: usize,
-    },
+    Dense(DMatrix<f64>),
+    /// Global parameters, then blocks of [`BLOCK`] that only the global ones couple.
+    Arrow(Arrowhead),
 }
 
-type Block = SMatrix<f64, BLOCK, BLOCK>;
+/// The non-zero parts of an arrowhead matrix (see the module's picture).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Arrowhead {
+    /// `A`, the global parameters' block (`g × g`).
+    pub(crate) corner: DMatrix<f64>,
+    /// `Bₖ`, each frame's column of the border (`g × 6`; the row of the border is its transpose).
+    pub(crate) border: Vec<Border>,
+    /// `Dₖ`, each frame's diagonal block.
+    pub(crate) blocks: Vec<Block>,
+}
+
+impl Arrowhead {
+    /// The zero matrix of `global` global parameters and `frames` blocks.
+    pub(crate) fn zeros(global: usize, frames: usize) -> Arrowhead {
+        Arrowhead {
+            corner: DMatrix::zeros(global, global),
+            border: vec![Border::zeros(global); frames],
+            blocks: vec![Block::zeros(); frames],
+        }
+    }
+
+    /// The number of global parameters.
+    fn global(&self) -> usize {
+        self.corner.nrows()
+    }
+
+    /// The whole matrix (tests compare it with a dense product).
+    #[cfg(test)]
+    pub(crate) fn to_dense(&self) -> DMatrix<f64> {
+        let g = self.global();
+        let n = g + BLOCK * self.blocks.len();
+        let mut h = DMatrix::zeros(n, n);
+        h.view_mut((0, 0), (g, g)).copy_from(&self.corner);
+        for (k, (b, d)) in self.border.iter().zip(&self.blocks).enumerate() {
+            let o = g + BLOCK * k;
+            h.view_mut((0, o), (g, BLOCK)).copy_from(b);
+            h.view_mut((o, 0), (BLOCK, g)).copy_from(&b.transpose());
+            h.fixed_view_mut::<BLOCK, BLOCK>(o, o).copy_from(d);
+        }
+        h
+    }
+
+    /// The parts of a whole arrowhead matrix `h` with `global` global parameters (what lies
+    /// outside them is dropped).
+    #[cfg(test)]
+    pub(crate) fn from_dense(h: &DMatrix<f64>, global: usize) -> Arrowhead {
+        let frames = (h.nrows() - global) / BLOCK;
+        let o = |k: usize| global + BLOCK * k;
+        Arrowhead {
+            corner: h.view((0, 0), (global, global)).clone_owned(),
+            border: (0..frames)
+                .map(|k| {
+                    h.generic_view((0, o(k)), (Dyn(global), Const::<BLOCK>))
+                        .clone_owned()
+                })
+                .collect(),
+            blocks: (0..frames)
+                .map(|k| h.fixed_view::<BLOCK, BLOCK>(o(k), o(k)).into())
+                .collect(),
+        }
+    }
+}
+
+impl Normal {
+    /// The whole matrix (tests compare it with a dense product).
+    #[cfg(test)]
+    pub(crate) fn to_dense(&self) -> DMatrix<f64> {
+        match self {
+            Normal::Dense(h) => h.clone(),
+            Normal::Arrow(arrow) => arrow.to_dense(),
+        }
+    }
+}
+
+/// `d` plus `damping · diag(d)` (Marquardt's scaling; each diagonal entry at least 1e-12 before
+/// scaling).
+fn damped<D: Dim>(mut d: OMatrix<f64, D, D>, damping: f64) -> OMatrix<f64, D, D>
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    for i in 0..d.nrows() {
+        d[(i, i)] += damping * d[(i, i)].max(1e-12);
+    }
+    d
+}
 
 /// The factorised pieces of an arrowhead matrix: each diagonal block's Cholesky, `Dₖ⁻¹ Bₖᵀ`,
 /// and the Schur complement's Cholesky.
@@ -46,31 +141,17 @@ struct Factors {
     schur: Cholesky<f64, Dyn>,
 }
 
-/// Factorises `h` plus `damping · diag(h)` (Marquardt's scaling; each diagonal entry at least
-/// 1e-12 before scaling, as the dense solver does) as an arrowhead with `global` leading
-/// parameters; `None` when a block or the Schur complement is not positive definite.
-fn factor(h: &DMatrix<f64>, global: usize, damping: f64) -> Option<Factors> {
-    let n = h.nrows();
-    debug_assert!(n >= global && (n - global).is_multiple_of(BLOCK));
-    let damp = |i: usize| damping * h[(i, i)].max(1e-12);
-    let mut schur = h.view((0, 0), (global, global)).clone_owned();
-    for i in 0..global {
-        schur[(i, i)] += damp(i);
-    }
-    let frames = (n - global) / BLOCK;
-    let mut blocks = Vec::with_capacity(frames);
-    let mut block_inv_border = Vec::with_capacity(frames);
-    for k in 0..frames {
-        let o = global + BLOCK * k;
-        let mut d: Block = h.fixed_view::<BLOCK, BLOCK>(o, o).into();
-        for i in 0..BLOCK {
-            d[(i, i)] += damp(o + i);
-        }
-        let chol = d.cholesky()?;
-        // Bₖᵀ is the block's rows of the border (6 × g).
-        let border_t = h.generic_view((o, 0), (Const::<BLOCK>, Dyn(global)));
-        let inv_border = chol.solve(&border_t);
-        schur -= border_t.transpose() * &inv_border;
+/// Factorises `h` plus `damping · diag(h)` ([`damped`]); `None` when a block or the Schur
+/// complement is not positive definite.
+fn factor(h: &Arrowhead, damping: f64) -> Option<Factors> {
+    let global = h.global();
+    let mut schur = damped(h.corner.clone(), damping);
+    let mut blocks = Vec::with_capacity(h.blocks.len());
+    let mut block_inv_border = Vec::with_capacity(h.blocks.len());
+    for (border, block) in h.border.iter().zip(&h.blocks) {
+        let chol = damped(*block, damping).cholesky()?;
+        let inv_border = chol.solve(&border.transpose());
+        schur -= border * &inv_border;
         blocks.push(chol);
         block_inv_border.push(inv_border);
     }
@@ -105,23 +186,12 @@ impl Factors {
     }
 }
 
-/// `x` with `(h + damping · diag(h)) x = rhs` for a matrix of `structure`; `None` when the
-/// damped matrix is not positive definite.
-pub(crate) fn solve_damped(
-    h: &DMatrix<f64>,
-    rhs: &DVector<f64>,
-    damping: f64,
-    structure: Structure,
-) -> Option<DVector<f64>> {
-    match structure {
-        Structure::Arrow { global } => Some(factor(h, global, damping)?.solve(rhs)),
-        Structure::Dense => {
-            let mut a = h.clone();
-            for i in 0..a.nrows() {
-                a[(i, i)] += damping * h[(i, i)].max(1e-12);
-            }
-            Some(a.cholesky()?.solve(rhs))
-        }
+/// `x` with `(h + damping · diag(h)) x = rhs`; `None` when the damped matrix is not positive
+/// definite.
+pub(crate) fn solve_damped(h: &Normal, rhs: &DVector<f64>, damping: f64) -> Option<DVector<f64>> {
+    match h {
+        Normal::Arrow(arrow) => Some(factor(arrow, damping)?.solve(rhs)),
+        Normal::Dense(h) => Some(damped(h.clone(), damping).cholesky()?.solve(rhs)),
     }
 }
 
@@ -147,17 +217,17 @@ impl InverseParts {
     }
 }
 
-/// The parts of `h⁻¹` a covariance needs, for a matrix of `structure`; `None` when `h` is not
-/// positive definite. For an arrowhead: `S⁻¹` over the global parameters and, per block,
+/// The parts of `h⁻¹` a covariance needs; `None` when `h` is not positive definite. For an
+/// arrowhead: `S⁻¹` over the global parameters and, per block,
 /// `diag(Dₖ⁻¹ + Dₖ⁻¹ Bₖᵀ S⁻¹ Bₖ Dₖ⁻¹)`.
-pub(crate) fn inverse_parts(h: &DMatrix<f64>, structure: Structure) -> Option<InverseParts> {
-    match structure {
-        Structure::Dense => Some(InverseParts {
+pub(crate) fn inverse_parts(h: &Normal) -> Option<InverseParts> {
+    match h {
+        Normal::Dense(h) => Some(InverseParts {
             global: h.clone().cholesky()?.inverse(),
             tail_diagonal: Vec::new(),
         }),
-        Structure::Arrow { global } => {
-            let factors = factor(h, global, 0.0)?;
+        Normal::Arrow(arrow) => {
+            let factors = factor(arrow, 0.0)?;
             let schur_inverse = factors.schur.inverse();
             let mut tail_diagonal = Vec::with_capacity(factors.blocks.len() * BLOCK);
             for (chol, inv_border) in factors.blocks.iter().zip(&factors.block_inv_border) {
@@ -221,14 +291,26 @@ mod tests {
         arrow_normal_scaled(global, frames, seed, 1.0)
     }
 
+    /// The whole matrix `h` kept as an arrowhead's parts.
+    fn arrow_of(h: &DMatrix<f64>, global: usize) -> Normal {
+        Normal::Arrow(Arrowhead::from_dense(h, global))
+    }
+
+    /// The parts give back the whole matrix they were taken from.
+    #[test]
+    fn an_arrowhead_is_its_whole_matrix() {
+        let h = arrow_normal(13, 4, 9);
+        assert_eq!(arrow_of(&h, 13).to_dense(), h);
+    }
+
     #[test]
     fn the_schur_solve_is_the_dense_solve() {
         for (global, frames, seed) in [(12, 1, 1), (21, 20, 2), (22, 60, 3)] {
             let h = arrow_normal(global, frames, seed);
             let rhs = DVector::from_fn(h.nrows(), |i, _| (i as f64 * 0.37).sin());
             for damping in [0.0, 1e-4, 10.0] {
-                let dense = solve_damped(&h, &rhs, damping, Structure::Dense).unwrap();
-                let arrow = solve_damped(&h, &rhs, damping, Structure::Arrow { global }).unwrap();
+                let dense = solve_damped(&Normal::Dense(h.clone()), &rhs, damping).unwrap();
+                let arrow = solve_damped(&arrow_of(&h, global), &rhs, damping).unwrap();
                 let scale = dense.amax();
                 assert!(
                     (&dense - &arrow).amax() <= 1e-9 * scale,
@@ -252,12 +334,16 @@ mod tests {
             for i in 0..h.nrows() {
                 damped[(i, i)] += damping * h[(i, i)];
             }
-            for structure in [Structure::Dense, Structure::Arrow { global }] {
-                let x = solve_damped(&h, &rhs, damping, structure).unwrap();
+            for structure in [Normal::Dense(h.clone()), arrow_of(&h, global)] {
+                let x = solve_damped(&structure, &rhs, damping).unwrap();
                 let residual = (&damped * &x - &rhs).norm() / (damped.norm() * x.norm());
                 assert!(
                     residual < 1e-13,
-                    "{structure:?}, damping {damping}: {residual}"
+                    "{}, damping {damping}: {residual}",
+                    match structure {
+                        Normal::Dense(_) => "dense",
+                        Normal::Arrow(_) => "arrowhead",
+                    }
                 );
             }
         }
@@ -268,7 +354,7 @@ mod tests {
         let (global, frames) = (21, 30);
         let h = arrow_normal(global, frames, 7);
         let dense = h.clone().cholesky().unwrap().inverse();
-        let parts = inverse_parts(&h, Structure::Arrow { global }).unwrap();
+        let parts = inverse_parts(&arrow_of(&h, global)).unwrap();
         let global_block = dense.view((0, 0), (global, global));
         assert!((global_block - &parts.global).amax() <= 1e-9 * global_block.amax());
         assert_eq!(parts.tail_diagonal.len(), BLOCK * frames);
@@ -294,9 +380,10 @@ mod tests {
             }
         }
         let rhs = DVector::from_element(h.nrows(), 1.0);
-        assert!(solve_damped(&h, &rhs, 0.0, Structure::Arrow { global }).is_none());
-        assert!(inverse_parts(&h, Structure::Arrow { global }).is_none());
+        let h = arrow_of(&h, global);
+        assert!(solve_damped(&h, &rhs, 0.0).is_none());
+        assert!(inverse_parts(&h).is_none());
         // Damping makes it solvable, as in the dense solve (each diagonal at least 1e-12).
-        assert!(solve_damped(&h, &rhs, 1.0, Structure::Arrow { global }).is_some());
+        assert!(solve_damped(&h, &rhs, 1.0).is_some());
     }
 }

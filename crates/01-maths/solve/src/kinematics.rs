@@ -32,6 +32,7 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix};
 
+use super::arrow::Normal;
 use super::lm::{minimize_normal, NormalEquations};
 use super::noise::Estimator;
 use super::refine::{mount_uncertainty, perturbed, sample_residual, sample_rows, variance_factor};
@@ -623,13 +624,17 @@ impl Problem<'_> {
 }
 
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
         let lin = self.linearise(self.free);
         let cost = lin.squares[0] + lin.squares[1];
         if !cost.is_finite() {
             return None;
         }
-        Some((&lin.rotation + &lin.translation, lin.gradient, cost))
+        Some((
+            Normal::Dense(&lin.rotation + &lin.translation),
+            lin.gradient,
+            cost,
+        ))
     }
 
     fn cost(&self) -> Option<f64> {

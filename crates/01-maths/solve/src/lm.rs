@@ -18,9 +18,9 @@
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::allocator::{Allocator, Reallocator};
-use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
+use nalgebra::{DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
 
-use super::arrow::{solve_damped, Structure};
+use super::arrow::{solve_damped, Normal};
 use super::SolveError;
 
 /// Most outer iterations (normal-equation builds) of [`minimize_normal`].
@@ -96,9 +96,11 @@ fn converged(termination: &TerminationReason) -> Result<bool, SolveError> {
 
 /// A least-squares problem that builds its own normal equations, for [`minimize_normal`].
 pub(crate) trait NormalEquations {
-    /// `JᵀJ`, `Jᵀr` and the cost `‖r‖²` at the current parameters; `None` when the residuals
+    /// `JᵀJ` (dense, or an arrowhead kept as its parts: per-frame blocks coupled only through
+    /// the global parameters, solved by its Schur complement in time and memory linear in the
+    /// frames), `Jᵀr` and the cost `‖r‖²` at the current parameters; `None` when the residuals
     /// are not finite.
-    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)>;
+    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)>;
 
     /// The cost `‖r‖²` at the current parameters; `None` when the residuals are not finite.
     fn cost(&self) -> Option<f64>;
@@ -109,12 +111,6 @@ pub(crate) trait NormalEquations {
     /// Called after every accepted step, e.g. to re-anchor a local parametrisation so the next
     /// linearisation is exact at the new point.
     fn accepted(&mut self) {}
-
-    /// How `JᵀJ` is laid out: an arrowhead (per-frame blocks coupled only through the global
-    /// parameters) is solved by its Schur complement, in time linear in the frames.
-    fn structure(&self) -> Structure {
-        Structure::Dense
-    }
 }
 
 /// Levenberg-Marquardt on the normal equations of `problem` (Marquardt's scaling: the damping
@@ -129,7 +125,6 @@ pub(crate) trait NormalEquations {
 pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Outcome, SolveError> {
     let mut lambda = INITIAL_DAMPING;
     let mut evaluations = 0;
-    let structure = problem.structure();
     for _ in 0..MAX_NORMAL_ITERATIONS {
         let (h, g, cost) = problem
             .normal_equations()
@@ -137,7 +132,7 @@ pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Out
         evaluations += 1;
         let mut accepted = false;
         for _ in 0..MAX_DAMPING_TRIES {
-            let Some(step) = solve_damped(&h, &g, lambda, structure) else {
+            let Some(step) = solve_damped(&h, &g, lambda) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -182,6 +177,7 @@ pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Out
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::DMatrix;
 
     /// Rosenbrock's function as least squares, `r = (10·(y − x²), 1 − x)`: a curved valley
     /// whose minimum (1, 1) plain Gauss-Newton steps overshoot from the classic start.
@@ -197,11 +193,15 @@ mod tests {
     }
 
     impl NormalEquations for Rosenbrock {
-        fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
             let (r0, r1) = self.residuals();
             let j = DMatrix::from_row_slice(2, 2, &[-20.0 * self.p[0], 10.0, -1.0, 0.0]);
             let r = DVector::from_vec(vec![r0, r1]);
-            Some((j.transpose() * &j, j.transpose() * &r, r.norm_squared()))
+            Some((
+                Normal::Dense(j.transpose() * &j),
+                j.transpose() * &r,
+                r.norm_squared(),
+            ))
         }
 
         fn cost(&self) -> Option<f64> {
@@ -235,7 +235,7 @@ mod tests {
     fn broken_residuals_are_an_error_not_an_answer() {
         struct Broken(DVector<f64>);
         impl NormalEquations for Broken {
-            fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+            fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
                 None
             }
             fn cost(&self) -> Option<f64> {

@@ -492,7 +492,7 @@ pub fn refine_reprojection(
             .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;
         // The global parameters' block of the inverse only (the robot corrections' is never
         // read): by the Schur complement when the corrections make `JᵀJ` an arrowhead.
-        match inverse_parts(&jtj, problem.layout.structure()) {
+        match inverse_parts(&jtj) {
             Some(parts) => {
                 let cov = parts.global * variance_factor;
                 let pose_cov: SMatrix<f64, 12, 12> = cov.fixed_view::<12, 12>(0, 0).into();

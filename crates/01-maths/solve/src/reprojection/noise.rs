@@ -39,7 +39,7 @@ fn estimate_noise(problem: &Problem<'_>) -> Option<NoiseEstimate> {
     let (normal, _, _) = problem.normal_equations()?;
     // The robot parameters' variances only: by blocks (linear in the frames), not the whole
     // inverse (cubic).
-    let covariance = inverse_parts(&normal, problem.layout.structure())?;
+    let covariance = inverse_parts(&normal)?;
     let residuals = problem.residuals()?;
     let n_params = problem.layout.len() as f64;
     let pixel_sum = residuals.rows(0, problem.corner_rows).norm_squared();

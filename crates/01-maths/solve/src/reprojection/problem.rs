@@ -21,7 +21,7 @@ use nalgebra::{
 };
 
 use super::{ArmOffsetsFree, Frame, RefinedOffset, ReprojectionOptions, RobotPrior};
-use crate::arrow::Structure;
+use crate::arrow::{Arrowhead, Normal};
 use crate::lm::NormalEquations;
 use crate::refine::perturbed;
 use crate::Axby;
@@ -70,18 +70,6 @@ impl Layout {
     pub(super) fn robot_offset(&self) -> usize {
         self.arm_offset() + self.arm
     }
-    /// The shape of `JᵀJ`: with per-frame robot corrections, an arrowhead (each frame's six
-    /// coupled to the others only through the global parameters before them).
-    pub(super) fn structure(&self) -> Structure {
-        if self.robot > 0 {
-            Structure::Arrow {
-                global: self.robot_offset(),
-            }
-        } else {
-            Structure::Dense
-        }
-    }
-
     /// All columns.
     pub(super) fn len(&self) -> usize {
         self.robot_offset() + self.robot * self.frames
@@ -525,18 +513,25 @@ impl Problem<'_> {
     }
 
     /// The normal equations `JᵀJ` and `Jᵀr` at the current parameters, accumulated corner by
-    /// corner from the block structure (never forming the tall Jacobian), and `‖r‖²`.
-    pub(super) fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+    /// corner from the block structure (never forming the tall Jacobian), and `‖r‖²`. With
+    /// per-frame robot corrections `JᵀJ` is an arrowhead, kept as its parts: memory linear in
+    /// the frames.
+    pub(super) fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
         let r = self.residuals()?;
         let s = self.state();
         let layout = self.layout;
-        let n = layout.len();
         let n_global = layout.robot_offset();
-        let mut h = DMatrix::zeros(n, n);
-        let mut g = DVector::zeros(n);
-        // Only the upper triangle is summed corner by corner (no temporary matrix a corner);
-        // the lower is its mirror, filled once at the end. The corner's two global rows are
-        // copied to slices, and `h` is summed a column (contiguous: column-major) at a time.
+        let corrected = if layout.robot > 0 {
+            self.frames.len()
+        } else {
+            0
+        };
+        let mut h = Arrowhead::zeros(n_global, corrected);
+        let mut g = DVector::zeros(layout.len());
+        // Only the upper triangle of the global block is summed corner by corner (no temporary
+        // matrix a corner); the lower is its mirror, filled once at the end. The corner's two
+        // global rows are copied to slices, and every block is summed a column (contiguous:
+        // column-major) at a time.
         let (mut top, mut bottom) = (vec![0.0; n_global], vec![0.0; n_global]);
         self.corner_jacobians(&s, |f, c, global, robot| {
             let row = self.row_offsets[f] + 2 * c;
@@ -544,41 +539,37 @@ impl Problem<'_> {
             for (i, (t, b)) in top.iter_mut().zip(&mut bottom).enumerate() {
                 (*t, *b) = (global[(0, i)], global[(1, i)]);
             }
-            // Column `j` of `h` from row 0: `h[(i, j)] += Jᵢ·Jⱼ` for the rows above the column.
-            let add_column = |h: &mut DMatrix<f64>, j: usize, rows: usize, a0: f64, a1: f64| {
-                let column = &mut h.as_mut_slice()[j * n..][..rows];
+            // A column's entries `Jᵢ·Jⱼ` over the global rows above it.
+            let add_column = |column: &mut [f64], a0: f64, a1: f64| {
                 for ((sum, &t), &b) in column.iter_mut().zip(&top).zip(&bottom) {
                     *sum += t * a0 + b * a1;
                 }
             };
+            let corner = h.corner.as_mut_slice();
             for j in 0..n_global {
                 let (a0, a1) = (top[j], bottom[j]);
-                add_column(&mut h, j, j + 1, a0, a1);
+                add_column(&mut corner[j * n_global..][..=j], a0, a1);
                 g[j] += a0 * res.x + a1 * res.y;
             }
             if layout.robot > 0 {
-                let o = layout.robot_offset() + 6 * f;
+                let border = h.border[f].as_mut_slice();
                 for j in 0..6 {
-                    add_column(&mut h, o + j, n_global, robot[(0, j)], robot[(1, j)]);
+                    add_column(
+                        &mut border[j * n_global..][..n_global],
+                        robot[(0, j)],
+                        robot[(1, j)],
+                    );
                 }
-                let mut hff = h.fixed_view_mut::<6, 6>(o, o);
-                hff += robot.transpose() * robot;
-                let mut gf = g.fixed_rows_mut::<6>(o);
+                h.blocks[f] += robot.transpose() * robot;
+                let mut gf = g.fixed_rows_mut::<6>(n_global + 6 * f);
                 gf += robot.transpose() * res;
             }
         });
-        // Every entry above the diagonal lies in the global rows (the 6x6 robot blocks were
-        // summed whole, and no two frames' corrections meet): mirroring those rows is enough,
-        // O(n·globals) where nalgebra's whole-triangle fill is O(n²) (5 % of a 200-frame solve).
-        for j in 1..n {
-            for i in 0..j.min(n_global) {
-                h[(j, i)] = h[(i, j)];
-            }
-        }
+        h.corner.fill_lower_triangle_with_upper_triangle();
         if let Some(prior) = self.prior {
-            for f in 0..self.frames.len() {
+            for (f, block) in h.blocks.iter_mut().enumerate() {
                 let row = self.corner_rows + 6 * f;
-                let o = layout.robot_offset() + 6 * f;
+                let o = n_global + 6 * f;
                 let k = self.prior_weights[f].sqrt();
                 for i in 0..6 {
                     let inv = k / if i < 3 {
@@ -586,11 +577,16 @@ impl Problem<'_> {
                     } else {
                         prior.translation_sigma_m
                     };
-                    h[(o + i, o + i)] += inv * inv;
+                    block[(i, i)] += inv * inv;
                     g[o + i] += inv * r[row + i];
                 }
             }
         }
+        let h = if layout.robot > 0 {
+            Normal::Arrow(h)
+        } else {
+            Normal::Dense(h.corner)
+        };
         Some((h, g, r.norm_squared()))
     }
 }
@@ -608,7 +604,7 @@ pub(super) fn reanchor(problem: &mut Problem<'_>) {
 /// The block-structured solver's view: normal equations built corner by corner, re-anchored
 /// after every accepted step.
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
         Problem::normal_equations(self)
     }
 
@@ -622,10 +618,6 @@ impl NormalEquations for Problem<'_> {
 
     fn accepted(&mut self) {
         reanchor(self);
-    }
-
-    fn structure(&self) -> Structure {
-        self.layout.structure()
     }
 }
 
@@ -776,6 +768,7 @@ mod tests {
             let j = problem.jacobian().unwrap();
             let r = problem.residuals().unwrap();
             let (h, g, _) = problem.normal_equations().unwrap();
+            let h = h.to_dense();
             let dense_h = j.transpose() * &j;
             let dense_g = j.transpose() * &r;
             // Same sums in another order: agreement to rounding, relative to the largest entry.
