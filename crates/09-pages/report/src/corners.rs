@@ -7,11 +7,13 @@
 //! in one region; empty parts of the map are parts of the image the board never covered, where
 //! the intrinsics were not checked.
 
+use std::borrow::Cow;
 use std::fmt::Write;
 
 use nalgebra::{Point2, Vector2};
 use plotters::prelude::*;
 
+use super::plots::EvenlySpaced;
 use super::sections::figure;
 use super::{ReportError, ReportInput};
 
@@ -50,6 +52,34 @@ fn plot_error<E: std::fmt::Display>(kind: &'static str) -> impl Fn(E) -> ReportE
     }
 }
 
+/// Most corners the two plots draw (140 samples of a 6x6 aprilgrid's 144): a long recording's
+/// corners would make a drawing of tens of megabytes (1,000 samples: 144,000 corners, 40 MB)
+/// that shows no more. Past it, every corner at 3× the RMS or more is drawn (up to half of
+/// this; they are what to look at) and the others evenly through the list.
+pub(crate) const MAX_CORNERS_DRAWN: usize = 20_000;
+
+/// The corners the plots draw ([`MAX_CORNERS_DRAWN`]), in their order.
+fn drawn(corners: &[CornerResidual]) -> Cow<'_, [CornerResidual]> {
+    if corners.len() <= MAX_CORNERS_DRAWN {
+        return Cow::Borrowed(corners);
+    }
+    let far_from = 3.0 * rms(corners);
+    let is_far = |c: &CornerResidual| c.residual_px.norm() >= far_from;
+    let far = corners.iter().filter(|c| is_far(c)).count();
+    let mut far_drawn = EvenlySpaced::new(far, MAX_CORNERS_DRAWN / 2);
+    let mut near_drawn =
+        EvenlySpaced::new(corners.len() - far, MAX_CORNERS_DRAWN - far_drawn.drawn());
+    corners
+        .iter()
+        .filter(|c| match is_far(c) {
+            true => far_drawn.take(),
+            false => near_drawn.take(),
+        })
+        .copied()
+        .collect::<Vec<_>>()
+        .into()
+}
+
 /// RMS of the residuals' lengths, px.
 fn rms(corners: &[CornerResidual]) -> f64 {
     let sum: f64 = corners.iter().map(|c| c.residual_px.norm_squared()).sum();
@@ -74,19 +104,37 @@ pub(super) fn corners_section(html: &mut String, input: &ReportInput) -> Result<
         width,
         height
     );
-    figure(html, CORNER_PLOT_KINDS[0], &residual_scatter(corners)?);
+    let drawn = drawn(corners);
+    if drawn.len() < corners.len() {
+        let _ = writeln!(
+            html,
+            "<p>The plots draw {} of the {} corners: every one at 3× the RMS or more (up to {}), and the others evenly through the samples.</p>",
+            drawn.len(),
+            corners.len(),
+            MAX_CORNERS_DRAWN / 2
+        );
+    }
+    figure(
+        html,
+        CORNER_PLOT_KINDS[0],
+        &residual_scatter(corners, &drawn)?,
+    );
     figure(
         html,
         CORNER_PLOT_KINDS[1],
-        &coverage_map(corners, width, height)?,
+        &coverage_map(&drawn, rms(corners), width, height)?,
     );
     html.push_str("</section>\n");
     Ok(())
 }
 
-/// The residuals as points (dx right, dy down as in the image), one colour per sample, with a
-/// circle at the RMS; equal scales on both axes.
-fn residual_scatter(corners: &[CornerResidual]) -> Result<String, ReportError> {
+/// The residuals of `drawn` (of `corners`, whose figures the side gives) as points (dx right,
+/// dy down as in the image), one colour per sample, with a circle at the RMS; equal scales on
+/// both axes.
+fn residual_scatter(
+    corners: &[CornerResidual],
+    drawn: &[CornerResidual],
+) -> Result<String, ReportError> {
     let kind = CORNER_PLOT_KINDS[0];
     let err = plot_error(kind);
     let rms = rms(corners);
@@ -126,7 +174,7 @@ fn residual_scatter(corners: &[CornerResidual]) -> Result<String, ReportError> {
             .draw_series(LineSeries::new(circle, BLACK.stroke_width(1)))
             .map_err(&err)?;
         chart
-            .draw_series(corners.iter().map(|c| {
+            .draw_series(drawn.iter().map(|c| {
                 let colour = SAMPLE_COLOURS[c.sample % SAMPLE_COLOURS.len()];
                 Circle::new(
                     (c.residual_px.x, c.residual_px.y),
@@ -155,17 +203,19 @@ fn residual_scatter(corners: &[CornerResidual]) -> Result<String, ReportError> {
     Ok(svg)
 }
 
-/// The image frame with every detected corner, its residual drawn as an arrow magnified so that
-/// the RMS residual is about 2 % of the image width, coloured from blue (0) to red (3× RMS and over).
+/// The image frame with the detected corners `drawn`, each residual drawn as an arrow magnified
+/// so that the RMS residual (`rms`, of every corner) is about 2 % of the image width, coloured
+/// from blue (0) to red (3× RMS and over).
 fn coverage_map(
-    corners: &[CornerResidual],
+    drawn: &[CornerResidual],
+    rms: f64,
     width: u32,
     height: u32,
 ) -> Result<String, ReportError> {
     let kind = CORNER_PLOT_KINDS[1];
     let err = plot_error(kind);
     let (w, h) = (f64::from(width.max(1)), f64::from(height.max(1)));
-    let rms = rms(corners).max(1e-9);
+    let rms = rms.max(1e-9);
     // The RMS residual drawn about 2 % of the image width, at a round magnification (1, 2, 5 ×
     // a power of ten) a reader can take in.
     let wanted = (0.02 * w / rms).max(1.0);
@@ -205,7 +255,7 @@ fn coverage_map(
             RGBColor((40.0 + 200.0 * s) as u8, 90, (220.0 - 190.0 * s) as u8)
         };
         chart
-            .draw_series(corners.iter().map(|c| {
+            .draw_series(drawn.iter().map(|c| {
                 let end = c.detected_px + c.residual_px * gain;
                 PathElement::new(
                     [(c.detected_px.x, c.detected_px.y), (end.x, end.y)],
@@ -214,7 +264,7 @@ fn coverage_map(
             }))
             .map_err(&err)?;
         chart
-            .draw_series(corners.iter().map(|c| {
+            .draw_series(drawn.iter().map(|c| {
                 Circle::new(
                     (c.detected_px.x, c.detected_px.y),
                     1,
@@ -245,4 +295,65 @@ fn coverage_map(
         root.present().map_err(&err)?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `samples` samples of 144 corners, each residual 0.1 px but every 500th corner's 2 px.
+    fn corners(samples: usize) -> Vec<CornerResidual> {
+        (0..samples * 144)
+            .map(|k| CornerResidual {
+                sample: k / 144,
+                detected_px: Point2::new((k % 1280) as f64, (k % 720) as f64),
+                residual_px: Vector2::new(if k % 500 == 0 { 2.0 } else { 0.1 }, 0.0),
+            })
+            .collect()
+    }
+
+    /// A session's corners are all drawn; a long recording's are drawn at
+    /// `MAX_CORNERS_DRAWN`, every far one among them, the others from every part of the list.
+    #[test]
+    fn the_plots_of_a_long_recording_draw_every_far_corner_and_a_bounded_number() {
+        let few = corners(100);
+        assert_eq!(drawn(&few).len(), few.len());
+        let many = corners(1000);
+        let shown = drawn(&many);
+        assert_eq!(shown.len(), MAX_CORNERS_DRAWN);
+        let far = |c: &&CornerResidual| c.residual_px.x > 1.0;
+        assert_eq!(
+            shown.iter().filter(far).count(),
+            many.iter().filter(far).count()
+        );
+        let last_sample = shown.iter().map(|c| c.sample).max().unwrap();
+        assert!(
+            last_sample >= 990,
+            "the last samples are drawn too: {last_sample}"
+        );
+        let section = |corners: Vec<CornerResidual>| {
+            let mut html = String::new();
+            let input = ReportInput {
+                title: String::new(),
+                setup: handeye_core::setup::Setup::EyeInHand,
+                pairs: Vec::new(),
+                answers: Vec::new(),
+                frames: None,
+                holdout: None,
+                verdict: None,
+                arm_time: None,
+                nominal: None,
+                corners,
+                image_size: Some((1280, 720)),
+                robot_frames: Default::default(),
+                arm: None,
+            };
+            corners_section(&mut html, &input).unwrap();
+            html
+        };
+        assert!(!section(few).contains("The plots draw"));
+        assert!(section(many).contains(&format!(
+            "The plots draw {MAX_CORNERS_DRAWN} of the 144000 corners"
+        )));
+    }
 }

@@ -246,14 +246,62 @@ pub fn bars(
     Ok(svg)
 }
 
+/// Which of `count` items in a row a plot draws when it draws at most `most`: all of them, or
+/// `most` evenly spaced through them (item `⌊k·count / most⌋` for k = 0, 1, ...). Asked once per
+/// item, in order.
+pub(crate) struct EvenlySpaced {
+    count: usize,
+    drawn: usize,
+    item: usize,
+    next: usize,
+}
+
+impl EvenlySpaced {
+    /// For `count` items, at most `most` drawn.
+    pub(crate) fn new(count: usize, most: usize) -> EvenlySpaced {
+        EvenlySpaced {
+            count,
+            drawn: count.min(most),
+            item: 0,
+            next: 0,
+        }
+    }
+
+    /// How many are drawn.
+    pub(crate) fn drawn(&self) -> usize {
+        self.drawn
+    }
+
+    /// Whether the next item is drawn.
+    pub(crate) fn take(&mut self) -> bool {
+        let taken = self.next < self.drawn && self.item == self.next * self.count / self.drawn;
+        self.next += usize::from(taken);
+        self.item += 1;
+        taken
+    }
+}
+
+/// Most relative rotation axes [`rotation_axes`] draws: 2,016 pairs are those of 64 samples.
+/// Every two samples make a pair, so a long recording's pairs grow with the square of its
+/// samples (1,000 samples: 499,500 pairs, a 134 MB drawing); past this many, pairs are taken
+/// evenly through the list, which shows the same spread.
+pub const MAX_ROTATION_AXES: usize = 2016;
+
 /// Axes of the relative rotation between every two samples (`R_j·R_iᵀ`, base frame), an axis
-/// and its opposite folded together (z ≥ 0); two orthographic views of the unit sphere.
+/// and its opposite folded together (z ≥ 0); two orthographic views of the unit sphere. At most
+/// [`MAX_ROTATION_AXES`] pairs, evenly spaced through all of them (the title says how many).
 pub fn rotation_axes(pairs: &[PosePair]) -> Result<String, ReportError> {
     let kind = "rotation-axes";
     let err = plot_error(kind);
-    let mut axes: Vec<([f64; 3], f64)> = Vec::new();
+    let all = pairs.len() * pairs.len().saturating_sub(1) / 2;
+    let mut spaced = EvenlySpaced::new(all, MAX_ROTATION_AXES);
+    let drawn = spaced.drawn();
+    let mut axes: Vec<([f64; 3], f64)> = Vec::with_capacity(drawn);
     for i in 0..pairs.len() {
         for j in (i + 1)..pairs.len() {
+            if !spaced.take() {
+                continue;
+            }
             if let Some((axis, angle)) = relative_rotation_axis(
                 &pairs[i].base_from_flange.rotation,
                 &pairs[j].base_from_flange.rotation,
@@ -263,16 +311,18 @@ pub fn rotation_axes(pairs: &[PosePair]) -> Result<String, ReportError> {
             }
         }
     }
+    let title = if drawn < all {
+        format!(
+            "relative rotation axes (unit sphere, base frame; marker size ~ angle; {drawn} of {all} pairs, evenly through them)"
+        )
+    } else {
+        "relative rotation axes (unit sphere, base frame; marker size ~ angle)".to_string()
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH, 440)).into_drawing_area();
         root.fill(&WHITE).map_err(&err)?;
-        let root = root
-            .titled(
-                "relative rotation axes (unit sphere, base frame; marker size ~ angle)",
-                ("sans-serif", 16),
-            )
-            .map_err(&err)?;
+        let root = root.titled(&title, ("sans-serif", 16)).map_err(&err)?;
         let panels = root.split_evenly((1, 2));
         let views: [(&str, usize, usize); 2] = [
             ("seen from +z (x right, y up)", 0, 1),
@@ -571,4 +621,51 @@ pub fn convergence(input: &ReportInput) -> Result<String, ReportError> {
         root.present().map_err(&err)?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use nalgebra::Vector3;
+
+    /// `n` samples whose flange turns about a different axis each time.
+    fn samples(n: usize) -> Vec<PosePair> {
+        (0..n)
+            .map(|k| {
+                let t = k as f64;
+                let turn = Vector3::new((0.7 * t).sin(), (1.3 * t).cos(), 0.5) * (0.2 + 0.01 * t);
+                PosePair::new(
+                    pose_from_rotvec(Vector3::new(0.4, 0.0, 0.3), turn),
+                    pose_from_rotvec(Vector3::zeros(), Vector3::zeros()),
+                )
+            })
+            .collect()
+    }
+
+    /// Markers drawn: each axis is drawn in both views.
+    fn markers(svg: &str) -> usize {
+        svg.matches("<circle").count() / 2
+    }
+
+    /// Up to 64 samples every pair is drawn; past that, the drawing stays at
+    /// `MAX_ROTATION_AXES` pairs however many samples there are, and its title says so.
+    #[test]
+    fn the_rotation_axes_of_a_long_recording_are_drawn_at_a_bounded_number() {
+        for (n, drawn) in [
+            (20, 190),
+            (64, 2016),
+            (200, MAX_ROTATION_AXES),
+            (1000, MAX_ROTATION_AXES),
+        ] {
+            let svg = rotation_axes(&samples(n)).unwrap();
+            assert_eq!(markers(&svg), drawn, "{n} samples");
+            let all = n * (n - 1) / 2;
+            assert_eq!(
+                svg.contains(&format!("{drawn} of {all} pairs")),
+                drawn < all,
+                "{n} samples: the title"
+            );
+        }
+    }
 }
