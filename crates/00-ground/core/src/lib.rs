@@ -20,3 +20,28 @@ pub mod memory;
 pub mod notice;
 pub mod setup;
 pub mod yaml_file;
+
+/// `most` indices evenly spaced through `0..count` (`⌊k·count / most⌋` for k = 0, 1, …), or every
+/// index when `count ≤ most`; increasing. The one way the tree thins a long list: the held-out
+/// check's folds, the pairs and corners a report draws.
+pub fn evenly_spaced(count: usize, most: usize) -> impl Iterator<Item = usize> + Clone {
+    let taken = count.min(most);
+    (0..taken).map(move |k| k * count / taken)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::evenly_spaced;
+
+    #[test]
+    fn a_short_list_is_kept_whole_and_a_long_one_thinned_from_end_to_end() {
+        assert_eq!(evenly_spaced(5, 8).collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
+        assert_eq!(evenly_spaced(10, 4).collect::<Vec<_>>(), [0, 2, 5, 7]);
+        let thinned: Vec<usize> = evenly_spaced(499_500, 2016).collect();
+        assert_eq!(thinned.len(), 2016);
+        assert!(thinned.windows(2).all(|w| w[0] < w[1]));
+        // The last within one stride of the end.
+        assert!(*thinned.last().unwrap() >= 499_500 - 499_500_usize.div_ceil(2016));
+        assert_eq!(evenly_spaced(0, 3).count(), 0);
+    }
+}

@@ -35,10 +35,9 @@ type Block = SMatrix<f64, BLOCK, BLOCK>;
 type Border = OMatrix<f64, Dyn, Const<BLOCK>>;
 
 /// `JᵀJ` as a problem builds it for [`crate::lm::minimize_normal`]: one dense matrix, or an
-/// arrowhead kept as its parts, so that its memory grows with the frames and not with their
-/// square (a dense `JᵀJ` of 1,000 frames with corrections is 6,012² numbers, 289 MB).
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) enum Normal {
+/// arrowhead kept as its parts (see the module's note on memory).
+#[derive(Debug, Clone)]
+pub(crate) enum NormalMatrix {
     /// No structure used: one Cholesky of the whole matrix.
     Dense(DMatrix<f64>),
     /// Global parameters, then blocks of [`BLOCK`] that only the global ones couple.
@@ -46,7 +45,7 @@ pub(crate) enum Normal {
 }
 
 /// The non-zero parts of an arrowhead matrix (see the module's picture).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub(crate) struct Arrowhead {
     /// `A`, the global parameters' block (`g × g`).
     pub(crate) corner: DMatrix<f64>,
@@ -108,13 +107,13 @@ impl Arrowhead {
     }
 }
 
-impl Normal {
+impl NormalMatrix {
     /// The whole matrix (tests compare it with a dense product).
     #[cfg(test)]
     pub(crate) fn to_dense(&self) -> DMatrix<f64> {
         match self {
-            Normal::Dense(h) => h.clone(),
-            Normal::Arrow(arrow) => arrow.to_dense(),
+            NormalMatrix::Dense(h) => h.clone(),
+            NormalMatrix::Arrow(arrow) => arrow.to_dense(),
         }
     }
 }
@@ -188,10 +187,14 @@ impl Factors {
 
 /// `x` with `(h + damping · diag(h)) x = rhs`; `None` when the damped matrix is not positive
 /// definite.
-pub(crate) fn solve_damped(h: &Normal, rhs: &DVector<f64>, damping: f64) -> Option<DVector<f64>> {
+pub(crate) fn solve_damped(
+    h: &NormalMatrix,
+    rhs: &DVector<f64>,
+    damping: f64,
+) -> Option<DVector<f64>> {
     match h {
-        Normal::Arrow(arrow) => Some(factor(arrow, damping)?.solve(rhs)),
-        Normal::Dense(h) => Some(damped(h.clone(), damping).cholesky()?.solve(rhs)),
+        NormalMatrix::Arrow(arrow) => Some(factor(arrow, damping)?.solve(rhs)),
+        NormalMatrix::Dense(h) => Some(damped(h.clone(), damping).cholesky()?.solve(rhs)),
     }
 }
 
@@ -220,13 +223,13 @@ impl InverseParts {
 /// The parts of `h⁻¹` a covariance needs; `None` when `h` is not positive definite. For an
 /// arrowhead: `S⁻¹` over the global parameters and, per block,
 /// `diag(Dₖ⁻¹ + Dₖ⁻¹ Bₖᵀ S⁻¹ Bₖ Dₖ⁻¹)`.
-pub(crate) fn inverse_parts(h: &Normal) -> Option<InverseParts> {
+pub(crate) fn inverse_parts(h: &NormalMatrix) -> Option<InverseParts> {
     match h {
-        Normal::Dense(h) => Some(InverseParts {
+        NormalMatrix::Dense(h) => Some(InverseParts {
             global: h.clone().cholesky()?.inverse(),
             tail_diagonal: Vec::new(),
         }),
-        Normal::Arrow(arrow) => {
+        NormalMatrix::Arrow(arrow) => {
             let factors = factor(arrow, 0.0)?;
             let schur_inverse = factors.schur.inverse();
             let mut tail_diagonal = Vec::with_capacity(factors.blocks.len() * BLOCK);
@@ -292,11 +295,12 @@ mod tests {
     }
 
     /// The whole matrix `h` kept as an arrowhead's parts.
-    fn arrow_of(h: &DMatrix<f64>, global: usize) -> Normal {
-        Normal::Arrow(Arrowhead::from_dense(h, global))
+    fn arrow_of(h: &DMatrix<f64>, global: usize) -> NormalMatrix {
+        NormalMatrix::Arrow(Arrowhead::from_dense(h, global))
     }
 
-    /// The parts give back the whole matrix they were taken from.
+    /// The parts give back the whole matrix they were taken from (the other tests build their
+    /// arrowheads with `from_dense` and compare them with the whole matrix).
     #[test]
     fn an_arrowhead_is_its_whole_matrix() {
         let h = arrow_normal(13, 4, 9);
@@ -309,7 +313,7 @@ mod tests {
             let h = arrow_normal(global, frames, seed);
             let rhs = DVector::from_fn(h.nrows(), |i, _| (i as f64 * 0.37).sin());
             for damping in [0.0, 1e-4, 10.0] {
-                let dense = solve_damped(&Normal::Dense(h.clone()), &rhs, damping).unwrap();
+                let dense = solve_damped(&NormalMatrix::Dense(h.clone()), &rhs, damping).unwrap();
                 let arrow = solve_damped(&arrow_of(&h, global), &rhs, damping).unwrap();
                 let scale = dense.amax();
                 assert!(
@@ -334,15 +338,15 @@ mod tests {
             for i in 0..h.nrows() {
                 damped[(i, i)] += damping * h[(i, i)];
             }
-            for structure in [Normal::Dense(h.clone()), arrow_of(&h, global)] {
+            for structure in [NormalMatrix::Dense(h.clone()), arrow_of(&h, global)] {
                 let x = solve_damped(&structure, &rhs, damping).unwrap();
                 let residual = (&damped * &x - &rhs).norm() / (damped.norm() * x.norm());
                 assert!(
                     residual < 1e-13,
                     "{}, damping {damping}: {residual}",
                     match structure {
-                        Normal::Dense(_) => "dense",
-                        Normal::Arrow(_) => "arrowhead",
+                        NormalMatrix::Dense(_) => "dense",
+                        NormalMatrix::Arrow(_) => "arrowhead",
                     }
                 );
             }

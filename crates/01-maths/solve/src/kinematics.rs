@@ -32,7 +32,7 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix};
 
-use super::arrow::Normal;
+use super::arrow::NormalMatrix;
 use super::lm::{minimize_normal, NormalEquations};
 use super::noise::Estimator;
 use super::refine::{mount_uncertainty, perturbed, sample_residual, sample_rows, variance_factor};
@@ -624,14 +624,14 @@ impl Problem<'_> {
 }
 
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
+    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let lin = self.linearise(self.free);
         let cost = lin.squares[0] + lin.squares[1];
         if !cost.is_finite() {
             return None;
         }
         Some((
-            Normal::Dense(&lin.rotation + &lin.translation),
+            NormalMatrix::Dense(&lin.rotation + &lin.translation),
             lin.gradient,
             cost,
         ))

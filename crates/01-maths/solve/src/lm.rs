@@ -20,7 +20,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::allocator::{Allocator, Reallocator};
 use nalgebra::{DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
 
-use super::arrow::{solve_damped, Normal};
+use super::arrow::{solve_damped, NormalMatrix};
 use super::SolveError;
 
 /// Most outer iterations (normal-equation builds) of [`minimize_normal`].
@@ -100,7 +100,7 @@ pub(crate) trait NormalEquations {
     /// the global parameters, solved by its Schur complement in time and memory linear in the
     /// frames), `Jᵀr` and the cost `‖r‖²` at the current parameters; `None` when the residuals
     /// are not finite.
-    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)>;
+    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)>;
 
     /// The cost `‖r‖²` at the current parameters; `None` when the residuals are not finite.
     fn cost(&self) -> Option<f64>;
@@ -193,12 +193,12 @@ mod tests {
     }
 
     impl NormalEquations for Rosenbrock {
-        fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
+        fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
             let (r0, r1) = self.residuals();
             let j = DMatrix::from_row_slice(2, 2, &[-20.0 * self.p[0], 10.0, -1.0, 0.0]);
             let r = DVector::from_vec(vec![r0, r1]);
             Some((
-                Normal::Dense(j.transpose() * &j),
+                NormalMatrix::Dense(j.transpose() * &j),
                 j.transpose() * &r,
                 r.norm_squared(),
             ))
@@ -235,7 +235,7 @@ mod tests {
     fn broken_residuals_are_an_error_not_an_answer() {
         struct Broken(DVector<f64>);
         impl NormalEquations for Broken {
-            fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
+            fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
                 None
             }
             fn cost(&self) -> Option<f64> {

@@ -21,7 +21,7 @@ use nalgebra::{
     DMatrix, DVector, Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3,
 };
 
-use super::arrow;
+use super::arrow::NormalMatrix;
 use super::lm::{minimize_normal, NormalEquations};
 use super::noise;
 use super::{
@@ -283,7 +283,7 @@ impl Fit<'_> {
 }
 
 impl NormalEquations for Fit<'_> {
-    fn normal_equations(&self) -> Option<(arrow::Normal, DVector<f64>, f64)> {
+    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let normal = normal_equations(self.data, &self.current(), self.scale, &self.noise);
         let cost = normal.cost();
         self.trace.borrow_mut().push(0.5 * cost);
@@ -293,7 +293,7 @@ impl NormalEquations for Fit<'_> {
         let h = normal.information();
         *self.last.borrow_mut() = Some(normal);
         Some((
-            arrow::Normal::Dense(DMatrix::from_column_slice(PARAMS, PARAMS, h.as_slice())),
+            NormalMatrix::Dense(DMatrix::from_column_slice(PARAMS, PARAMS, h.as_slice())),
             DVector::from_column_slice(normal.gradient.as_slice()),
             cost,
         ))

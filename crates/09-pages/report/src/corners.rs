@@ -10,10 +10,10 @@
 use std::borrow::Cow;
 use std::fmt::Write;
 
+use handeye_core::evenly_spaced;
 use nalgebra::{Point2, Vector2};
 use plotters::prelude::*;
 
-use super::plots::EvenlySpaced;
 use super::sections::figure;
 use super::{ReportError, ReportInput};
 
@@ -58,22 +58,29 @@ fn plot_error<E: std::fmt::Display>(kind: &'static str) -> impl Fn(E) -> ReportE
 /// this; they are what to look at) and the others evenly through the list.
 pub(crate) const MAX_CORNERS_DRAWN: usize = 20_000;
 
-/// The corners the plots draw ([`MAX_CORNERS_DRAWN`]), in their order.
-fn drawn(corners: &[CornerResidual]) -> Cow<'_, [CornerResidual]> {
+/// The corners the plots draw ([`MAX_CORNERS_DRAWN`]), in their order; `rms` is theirs.
+fn drawn(corners: &[CornerResidual], rms: f64) -> Cow<'_, [CornerResidual]> {
     if corners.len() <= MAX_CORNERS_DRAWN {
         return Cow::Borrowed(corners);
     }
-    let far_from = 3.0 * rms(corners);
+    let far_from = 3.0 * rms;
     let is_far = |c: &CornerResidual| c.residual_px.norm() >= far_from;
     let far = corners.iter().filter(|c| is_far(c)).count();
-    let mut far_drawn = EvenlySpaced::new(far, MAX_CORNERS_DRAWN / 2);
-    let mut near_drawn =
-        EvenlySpaced::new(corners.len() - far, MAX_CORNERS_DRAWN - far_drawn.drawn());
+    let far_drawn = far.min(MAX_CORNERS_DRAWN / 2);
+    // Each kind numbered in its order; the chosen numbers of each, increasing.
+    let mut far_chosen = evenly_spaced(far, far_drawn).peekable();
+    let mut near_chosen =
+        evenly_spaced(corners.len() - far, MAX_CORNERS_DRAWN - far_drawn).peekable();
+    let (mut far_number, mut near_number) = (0, 0);
     corners
         .iter()
-        .filter(|c| match is_far(c) {
-            true => far_drawn.take(),
-            false => near_drawn.take(),
+        .filter(|c| {
+            let (chosen, number) = match is_far(c) {
+                true => (&mut far_chosen, &mut far_number),
+                false => (&mut near_chosen, &mut near_number),
+            };
+            *number += 1;
+            chosen.next_if_eq(&(*number - 1)).is_some()
         })
         .copied()
         .collect::<Vec<_>>()
@@ -95,16 +102,17 @@ pub(super) fn corners_section(html: &mut String, input: &ReportInput) -> Result<
         return Ok(());
     };
     let samples = corners.iter().map(|c| c.sample).max().map_or(0, |m| m + 1);
+    let rms = rms(corners);
     let _ = writeln!(
         html,
         "<p>Every detected corner's residual at the primary answer (detected − reprojected, px): <span data-key=\"corners.count\">{}</span> corners of {} samples, RMS <span data-key=\"corners.rms_px\">{:.3}</span> px. Noise is a round cloud on the left and arrows pointing every way on the right; arrows that grow toward the image edges or run the same way in one region are a lens model that does not fit (intrinsics or distortion), not noise. Parts of the {}×{} image without corners were never covered by the board: the intrinsics are untested there.</p>",
         corners.len(),
         samples,
-        rms(corners),
+        rms,
         width,
         height
     );
-    let drawn = drawn(corners);
+    let drawn = drawn(corners, rms);
     if drawn.len() < corners.len() {
         let _ = writeln!(
             html,
@@ -117,27 +125,27 @@ pub(super) fn corners_section(html: &mut String, input: &ReportInput) -> Result<
     figure(
         html,
         CORNER_PLOT_KINDS[0],
-        &residual_scatter(corners, &drawn)?,
+        &residual_scatter(corners, &drawn, rms)?,
     );
     figure(
         html,
         CORNER_PLOT_KINDS[1],
-        &coverage_map(&drawn, rms(corners), width, height)?,
+        &coverage_map(&drawn, rms, width, height)?,
     );
     html.push_str("</section>\n");
     Ok(())
 }
 
-/// The residuals of `drawn` (of `corners`, whose figures the side gives) as points (dx right,
-/// dy down as in the image), one colour per sample, with a circle at the RMS; equal scales on
-/// both axes.
+/// The residuals of `drawn` (of `corners`, whose figures the side gives; `rms` is theirs) as
+/// points (dx right, dy down as in the image), one colour per sample, with a circle at the RMS;
+/// equal scales on both axes.
 fn residual_scatter(
     corners: &[CornerResidual],
     drawn: &[CornerResidual],
+    rms: f64,
 ) -> Result<String, ReportError> {
     let kind = CORNER_PLOT_KINDS[0];
     let err = plot_error(kind);
-    let rms = rms(corners);
     let largest = corners
         .iter()
         .map(|c| c.residual_px.abs().max())
@@ -317,9 +325,9 @@ mod tests {
     #[test]
     fn the_plots_of_a_long_recording_draw_every_far_corner_and_a_bounded_number() {
         let few = corners(100);
-        assert_eq!(drawn(&few).len(), few.len());
+        assert_eq!(drawn(&few, rms(&few)).len(), few.len());
         let many = corners(1000);
-        let shown = drawn(&many);
+        let shown = drawn(&many, rms(&many));
         assert_eq!(shown.len(), MAX_CORNERS_DRAWN);
         let far = |c: &&CornerResidual| c.residual_px.x > 1.0;
         assert_eq!(

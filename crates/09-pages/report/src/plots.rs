@@ -7,6 +7,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{ReportError, ReportInput};
+use handeye_core::evenly_spaced;
 use handeye_core::geometry::{relative_rotation_axis, Pose};
 use handeye_core::setup::{PosePair, Setup};
 use handeye_solve::Phase;
@@ -246,41 +247,6 @@ pub fn bars(
     Ok(svg)
 }
 
-/// Which of `count` items in a row a plot draws when it draws at most `most`: all of them, or
-/// `most` evenly spaced through them (item `⌊k·count / most⌋` for k = 0, 1, ...). Asked once per
-/// item, in order.
-pub(crate) struct EvenlySpaced {
-    count: usize,
-    drawn: usize,
-    item: usize,
-    next: usize,
-}
-
-impl EvenlySpaced {
-    /// For `count` items, at most `most` drawn.
-    pub(crate) fn new(count: usize, most: usize) -> EvenlySpaced {
-        EvenlySpaced {
-            count,
-            drawn: count.min(most),
-            item: 0,
-            next: 0,
-        }
-    }
-
-    /// How many are drawn.
-    pub(crate) fn drawn(&self) -> usize {
-        self.drawn
-    }
-
-    /// Whether the next item is drawn.
-    pub(crate) fn take(&mut self) -> bool {
-        let taken = self.next < self.drawn && self.item == self.next * self.count / self.drawn;
-        self.next += usize::from(taken);
-        self.item += 1;
-        taken
-    }
-}
-
 /// Most relative rotation axes [`rotation_axes`] draws: 2,016 pairs are those of 64 samples.
 /// Every two samples make a pair, so a long recording's pairs grow with the square of its
 /// samples (1,000 samples: 499,500 pairs, a 134 MB drawing); past this many, pairs are taken
@@ -294,21 +260,21 @@ pub fn rotation_axes(pairs: &[PosePair]) -> Result<String, ReportError> {
     let kind = "rotation-axes";
     let err = plot_error(kind);
     let all = pairs.len() * pairs.len().saturating_sub(1) / 2;
-    let mut spaced = EvenlySpaced::new(all, MAX_ROTATION_AXES);
-    let drawn = spaced.drawn();
+    let drawn = all.min(MAX_ROTATION_AXES);
+    // The pairs in the order i < j, numbered; the chosen numbers, increasing.
+    let mut chosen = evenly_spaced(all, MAX_ROTATION_AXES).peekable();
     let mut axes: Vec<([f64; 3], f64)> = Vec::with_capacity(drawn);
-    for i in 0..pairs.len() {
-        for j in (i + 1)..pairs.len() {
-            if !spaced.take() {
-                continue;
-            }
-            if let Some((axis, angle)) = relative_rotation_axis(
-                &pairs[i].base_from_flange.rotation,
-                &pairs[j].base_from_flange.rotation,
-                1e-3,
-            ) {
-                axes.push((axis.into(), angle.to_degrees()));
-            }
+    let every_pair = (0..pairs.len()).flat_map(|i| ((i + 1)..pairs.len()).map(move |j| (i, j)));
+    for (number, (i, j)) in every_pair.enumerate() {
+        if chosen.next_if_eq(&number).is_none() {
+            continue;
+        }
+        if let Some((axis, angle)) = relative_rotation_axis(
+            &pairs[i].base_from_flange.rotation,
+            &pairs[j].base_from_flange.rotation,
+            1e-3,
+        ) {
+            axes.push((axis.into(), angle.to_degrees()));
         }
     }
     let title = if drawn < all {

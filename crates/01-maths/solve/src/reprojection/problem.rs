@@ -21,7 +21,7 @@ use nalgebra::{
 };
 
 use super::{ArmOffsetsFree, Frame, RefinedOffset, ReprojectionOptions, RobotPrior};
-use crate::arrow::{Arrowhead, Normal};
+use crate::arrow::{Arrowhead, NormalMatrix};
 use crate::lm::NormalEquations;
 use crate::refine::perturbed;
 use crate::Axby;
@@ -516,7 +516,7 @@ impl Problem<'_> {
     /// corner from the block structure (never forming the tall Jacobian), and `‖r‖²`. With
     /// per-frame robot corrections `JᵀJ` is an arrowhead, kept as its parts: memory linear in
     /// the frames.
-    pub(super) fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
+    pub(super) fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let r = self.residuals()?;
         let s = self.state();
         let layout = self.layout;
@@ -583,9 +583,9 @@ impl Problem<'_> {
             }
         }
         let h = if layout.robot > 0 {
-            Normal::Arrow(h)
+            NormalMatrix::Arrow(h)
         } else {
-            Normal::Dense(h.corner)
+            NormalMatrix::Dense(h.corner)
         };
         Some((h, g, r.norm_squared()))
     }
@@ -604,7 +604,7 @@ pub(super) fn reanchor(problem: &mut Problem<'_>) {
 /// The block-structured solver's view: normal equations built corner by corner, re-anchored
 /// after every accepted step.
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(Normal, DVector<f64>, f64)> {
+    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         Problem::normal_equations(self)
     }
 

@@ -66,8 +66,7 @@ pub fn held_out_refitting(
             "only {n} samples: a held-out check needs at least {MIN_HELD_OUT_SAMPLES}"
         ));
     }
-    let count = n.min(MAX_HELD_OUT);
-    let folds = (0..count).map(|k| k * n / count);
+    let folds = handeye_core::evenly_spaced(n, MAX_HELD_OUT);
     let predictions =
         predict_folds(setup, pairs, options, full, refit, folds).map_err(|f| match &f {
             FoldFailure::Solve { source, .. } => {
