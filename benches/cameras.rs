@@ -7,6 +7,11 @@
 //! pose estimated with the sim arm's repeatability; 3 rounds of corner-noise estimation).
 //! Measured (release, shared 2-core machine, a clippy build running beside it): pose space
 //! 5.8 ms, pixel space 88 ms per solve.
+//!
+//! The pixel-space stage also at 200 poses (a long recording, issue #43: 600 board poses,
+//! 1,206 parameters), where its normal equations are kept as an arrowhead (`arrow.rs`).
+//! `CAMERAS_BENCH_POSES=N` adds a case of N poses (e.g. 1,000: run it alone, with
+//! `/usr/bin/time`, to see the peak memory).
 
 use std::hint::black_box;
 
@@ -36,11 +41,11 @@ type Problem = (
     (f64, f64),
 );
 
-fn problem() -> Problem {
+fn problem(poses: usize) -> Problem {
     let cell = util::cameras::three_cameras();
     let mut rng = StdRng::seed_from_u64(27);
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
-    let flanges = wrist_views(&mut rng, 20);
+    let flanges = wrist_views(&mut rng, poses);
     let models: Vec<CameraModel> = cell
         .cameras
         .iter()
@@ -88,7 +93,7 @@ fn problem() -> Problem {
 }
 
 fn joint_solve(c: &mut Criterion) {
-    let (data, start, models, frames, robot) = problem();
+    let (data, start, _, _, _) = problem(20);
     c.bench_function("cell/joint_solve_3_cameras_20_poses", |b| {
         b.iter(|| {
             solve_cameras(
@@ -99,22 +104,34 @@ fn joint_solve(c: &mut Criterion) {
             .expect("solves")
         })
     });
-    let pose_space = solve_cameras(&data, &start, &CamerasOptions::default()).expect("solves");
-    let options = CamerasOptions {
-        robot_sigma: Some(robot),
-        ..CamerasOptions::default()
-    };
-    c.bench_function("cell/joint_pixel_solve_3_cameras_20_poses", |b| {
-        b.iter(|| {
-            let frames = black_box(&frames);
-            solve_cameras_pixels(&data, &models, frames, &pose_space, &options).expect("solves")
-        })
-    });
+}
+
+fn joint_pixel_solve(c: &mut Criterion) {
+    let extra = std::env::var("CAMERAS_BENCH_POSES")
+        .ok()
+        .and_then(|n| n.parse::<usize>().ok());
+    let mut group = c.benchmark_group("cell");
+    group.sample_size(10);
+    for poses in [20, 200].into_iter().chain(extra) {
+        let (data, start, models, frames, robot) = problem(poses);
+        let pose_space = solve_cameras(&data, &start, &CamerasOptions::default()).expect("solves");
+        let options = CamerasOptions {
+            robot_sigma: Some(robot),
+            ..CamerasOptions::default()
+        };
+        group.bench_function(format!("joint_pixel_solve_3_cameras_{poses}_poses"), |b| {
+            b.iter(|| {
+                let frames = black_box(&frames);
+                solve_cameras_pixels(&data, &models, frames, &pose_space, &options).expect("solves")
+            })
+        });
+    }
+    group.finish();
 }
 
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20);
-    targets = joint_solve
+    targets = joint_solve, joint_pixel_solve
 }
 criterion_main!(benches);

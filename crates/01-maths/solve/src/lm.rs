@@ -1,5 +1,7 @@
-//! The Levenberg-Marquardt solvers shared by the pose-space refinement ([`super::refine`]) and
-//! the reprojection-space refinement ([`super::reprojection`]).
+//! The Levenberg-Marquardt solvers shared by the pose-space refinement ([`super::refine`]), the
+//! reprojection-space refinement ([`super::reprojection`]), the arm's model
+//! ([`super::kinematics`]) and the joint solve of several cameras ([`super::cameras`], in pose
+//! and in pixel space).
 //!
 //! Two drivers, one meaning of "converged":
 //! * [`minimize_dense`] runs the `levenberg-marquardt` crate (MINPACK's trust region on a dense
@@ -12,7 +14,9 @@
 //!   (the reprojection refinement with per-pose robot corrections: 12 + 9 + 6·frames columns,
 //!   where the dense QR was ~50x slower), and for the pose-space refinement (12 parameters,
 //!   called once per noise-estimation round: the normal equations by 3x3 blocks cost 8x fewer
-//!   instructions per default solve than the dense QR did).
+//!   instructions per default solve than the dense QR did). The several-camera pixel solve with
+//!   per-pose flange corrections has the same arrowhead (6 per camera and board, then 6 per
+//!   pose).
 //!
 //! Pure maths: no I/O, no clocks. Depends on nalgebra and the `levenberg-marquardt` crate only.
 
@@ -23,7 +27,8 @@ use nalgebra::{DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
 use super::arrow::{solve_damped, NormalMatrix};
 use super::SolveError;
 
-/// Most outer iterations (normal-equation builds) of [`minimize_normal`].
+/// Most outer iterations (normal-equation builds) of [`minimize_normal`], unless the problem
+/// says otherwise ([`NormalEquations::max_iterations`]).
 pub(crate) const MAX_NORMAL_ITERATIONS: usize = 100;
 /// Most damping increases [`minimize_normal`] tries for one step before it calls the point a
 /// minimum.
@@ -111,6 +116,11 @@ pub(crate) trait NormalEquations {
     /// Called after every accepted step, e.g. to re-anchor a local parametrisation so the next
     /// linearisation is exact at the new point.
     fn accepted(&mut self) {}
+
+    /// Most outer iterations (normal-equation builds).
+    fn max_iterations(&self) -> usize {
+        MAX_NORMAL_ITERATIONS
+    }
 }
 
 /// Levenberg-Marquardt on the normal equations of `problem` (Marquardt's scaling: the damping
@@ -125,7 +135,7 @@ pub(crate) trait NormalEquations {
 pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Outcome, SolveError> {
     let mut lambda = INITIAL_DAMPING;
     let mut evaluations = 0;
-    for _ in 0..MAX_NORMAL_ITERATIONS {
+    for _ in 0..problem.max_iterations() {
         let (h, g, cost) = problem
             .normal_equations()
             .ok_or(SolveError::RefinementFailed("residuals are not finite"))?;

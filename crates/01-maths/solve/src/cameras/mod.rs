@@ -29,6 +29,8 @@
 
 use nalgebra::{DMatrix, DVector, Matrix6, SVector, Translation3, UnitQuaternion, Vector3};
 
+use super::arrow::{inverse_parts, NormalMatrix};
+use super::lm::{minimize_normal, NormalEquations};
 use super::refine::pose_sigma;
 use super::{NoiseModel, PoseSigma};
 use handeye_core::geometry::Pose;
@@ -196,12 +198,15 @@ pub struct CamerasSolution {
     pub pixel_sigma_px: Vec<f64>,
     /// Per camera: residuals.
     pub residuals: Vec<CamerasResiduals>,
-    /// Covariance of all parameters (6 per camera, then `T_base_target`, then
-    /// `T_flange_target` where present; each `[δθ, δt]`).
+    /// Covariance of the unknowns (6 per camera, then `T_base_target`, then `T_flange_target`
+    /// where present; each `[δθ, δt]`): the unknowns' block of the whole inverse, so the
+    /// pixel-space solve's per-pose flange corrections, when estimated, are accounted for
+    /// without being listed.
     pub covariance: DMatrix<f64>,
     /// `χ²/dof` at the optimum (≈ 1 when the noise model fits).
     pub variance_factor: f64,
-    /// LM iterations over all noise rounds.
+    /// Levenberg-Marquardt evaluations (normal-equation builds and trial steps) over all noise
+    /// rounds, and for the pixel-space answer the pose-space ones before it.
     pub iterations: usize,
 }
 
@@ -233,6 +238,9 @@ pub enum CamerasError {
         /// Its pose index.
         pose: usize,
     },
+    /// The residuals stopped being finite during the fit (a start far from any answer).
+    #[error("the joint fit's residuals are not finite: the start is too far from an answer")]
+    NotFinite,
     /// The normal equations are singular (a camera whose views do not constrain its mount).
     #[error("the joint problem is singular: the views do not constrain every camera's mount (each camera needs views with rotations about two axes)")]
     Singular,
@@ -329,13 +337,14 @@ fn residual(
 /// O(1) in those units).
 const STEP: f64 = 1e-6;
 
-/// Normal equations `JᵀJ`, `Jᵀr` and the cost `Σ r²` at `state`.
+/// Normal equations `JᵀJ` (dense: 6 per camera and per board), `Jᵀr` and the cost `Σ r²` at
+/// `state`.
 fn normal_equations(
     data: &CamerasData,
     layout: &Layout,
     state: &State,
     noise: &[NoiseModel],
-) -> (DMatrix<f64>, DVector<f64>, f64) {
+) -> Normal {
     let n = layout.len();
     let mut jtj = DMatrix::<f64>::zeros(n, n);
     let mut jtr = DVector::<f64>::zeros(n);
@@ -384,7 +393,7 @@ fn normal_equations(
         }
         cost += r.norm_squared();
     }
-    (jtj, jtr, cost)
+    (NormalMatrix::Dense(jtj), jtr, cost)
 }
 
 fn cost(data: &CamerasData, layout: &Layout, state: &State, noise: &[NoiseModel]) -> f64 {
@@ -419,49 +428,63 @@ fn stepped(state: &State, step: &DVector<f64>) -> State {
 }
 
 /// `JᵀJ`, `Jᵀr` and the cost `Σ r²` at one state.
-type NormalEquations = (DMatrix<f64>, DVector<f64>, f64);
+type Normal = (NormalMatrix, DVector<f64>, f64);
 
-/// Levenberg-Marquardt with Marquardt's diagonal scaling on normal equations the problem builds
-/// (`normal`: `JᵀJ`, `Jᵀr`, cost) and a cost alone (`cost`, for trial steps); returns the
-/// iterations spent. Shared by the pose-space and the pixel-space solve.
+/// A joint problem for [`minimize_normal`], the Levenberg-Marquardt every refinement of the crate
+/// runs: the unknowns' poses are the point the normal equations are built at, the parameters a
+/// step `[δθ, δt]` per pose from it, folded into the poses after every accepted step (so each
+/// linearisation is exact at its point, as the perturbation's Jacobian assumes).
+struct Anchored<'p> {
+    state: State,
+    step: DVector<f64>,
+    max_iterations: usize,
+    normal: &'p dyn Fn(&State) -> Normal,
+    cost: &'p dyn Fn(&State) -> f64,
+}
+
+impl NormalEquations for Anchored<'_> {
+    fn normal_equations(&self) -> Option<Normal> {
+        let (h, g, cost) = (self.normal)(&stepped(&self.state, &self.step));
+        cost.is_finite().then_some((h, g, cost))
+    }
+
+    fn cost(&self) -> Option<f64> {
+        Some((self.cost)(&stepped(&self.state, &self.step))).filter(|c| c.is_finite())
+    }
+
+    fn params_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.step
+    }
+
+    fn accepted(&mut self) {
+        self.state = stepped(&self.state, &self.step);
+        self.step.fill(0.0);
+    }
+
+    fn max_iterations(&self) -> usize {
+        self.max_iterations
+    }
+}
+
+/// Minimises the cost whose normal equations `normal` builds (`cost` alone for trial steps) from
+/// `state`, leaving `state` at the minimum; returns the evaluations spent. Shared by the
+/// pose-space and the pixel-space solve.
 fn minimize(
     state: &mut State,
     max_iterations: usize,
-    normal: &dyn Fn(&State) -> NormalEquations,
+    normal: &dyn Fn(&State) -> Normal,
     cost: &dyn Fn(&State) -> f64,
-) -> usize {
-    let mut damping = 1e-4;
-    for iteration in 0..max_iterations {
-        let (jtj, jtr, current) = normal(state);
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut a = jtj.clone();
-            for d in 0..a.nrows() {
-                a[(d, d)] += damping * jtj[(d, d)].max(1e-12);
-            }
-            let Some(step) = a.cholesky().map(|c| c.solve(&(-&jtr))) else {
-                damping *= 10.0;
-                continue;
-            };
-            let candidate = stepped(state, &step);
-            let next = cost(&candidate);
-            if next.is_finite() && next <= current {
-                *state = candidate;
-                damping = (damping * 0.1).max(1e-12);
-                accepted = true;
-                if current - next <= 1e-12 * current.max(1e-300) || step.amax() < 1e-13 {
-                    return iteration + 1;
-                }
-                break;
-            }
-            damping *= 10.0;
-        }
-        if !accepted {
-            // No step lowers the cost: at the minimum to machine precision.
-            return iteration + 1;
-        }
-    }
-    max_iterations
+) -> Result<usize, CamerasError> {
+    let mut problem = Anchored {
+        step: DVector::zeros(6 * state.poses.len()),
+        state: state.clone(),
+        max_iterations,
+        normal,
+        cost,
+    };
+    let outcome = minimize_normal(&mut problem).map_err(|_| CamerasError::NotFinite)?;
+    *state = problem.state;
+    Ok(outcome.evaluations)
 }
 
 /// Per-camera residual figures (unwhitened) at `state`.
@@ -562,7 +585,7 @@ pub fn solve_cameras(
             options.max_iterations,
             &|s| normal_equations(data, &layout, s, &noise),
             &|s| cost(data, &layout, s, &noise),
-        );
+        )?;
         if options.estimate_noise && round + 1 < rounds {
             for (c, per_pose) in residual_figures(data, &layout, &state)
                 .into_iter()
@@ -592,20 +615,20 @@ pub fn solve_cameras(
     )
 }
 
-/// The answer at `state` with the covariance `(JᵀJ)⁻¹·variance_factor` (whitened `J`).
+/// The answer at `state` with the covariance `(JᵀJ)⁻¹·variance_factor` (whitened `J`) over the
+/// unknowns (an arrowhead's per-pose parameters are inverted through, not kept).
 #[allow(clippy::too_many_arguments)]
 fn finish(
     data: &CamerasData,
     layout: &Layout,
     state: State,
-    jtj: &DMatrix<f64>,
+    jtj: &NormalMatrix,
     variance_factor: f64,
     noise: Vec<NoiseModel>,
     pixel_sigma_px: Vec<f64>,
     iterations: usize,
 ) -> Result<CamerasSolution, CamerasError> {
-    let information = jtj.clone().cholesky().ok_or(CamerasError::Singular)?;
-    let covariance = information.inverse() * variance_factor;
+    let covariance = inverse_parts(jtj).ok_or(CamerasError::Singular)?.global * variance_factor;
     let block = |at: usize| -> Matrix6<f64> { covariance.fixed_view::<6, 6>(at, at).into_owned() };
     let camera_sigmas = (0..data.cameras.len())
         .map(|c| pose_sigma(&block(6 * c)))

@@ -13,11 +13,13 @@
 //! so the covariance reads the same way. The robot poses are taken as exact: their noise (a UR's
 //! 0.03 mm) is far below what the cameras see.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Point2, Point3, SMatrix, SVector, Vector2};
+use nalgebra::{DVector, Matrix3, Point2, Point3, SMatrix, SVector, Vector2};
 
 use super::{
-    finish, minimize, CamerasData, CamerasError, CamerasOptions, CamerasSolution, Layout, State,
+    finish, minimize, CamerasData, CamerasError, CamerasOptions, CamerasSolution, Layout, Normal,
+    State,
 };
+use crate::arrow::{Arrowhead, NormalMatrix};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::Setup;
@@ -138,12 +140,16 @@ impl Problem<'_> {
         d
     }
 
-    fn normal(&self, state: &State, sigma: &[f64]) -> (DMatrix<f64>, DVector<f64>, f64) {
-        let n = self.len();
-        let mut jtj = DMatrix::<f64>::zeros(n, n);
-        let mut jtr = DVector::<f64>::zeros(n);
+    /// `JᵀJ`, `Jᵀr` and the cost at `state`. With the flange poses estimated `JᵀJ` is an
+    /// arrowhead (each frame couples its camera, its board and its pose's flange; the flanges
+    /// only through the unknowns) kept as its parts, so memory and time grow with the poses, not
+    /// their square; without them it is the unknowns' dense block.
+    fn normal(&self, state: &State, sigma: &[f64]) -> Normal {
+        let g = self.layout.len();
+        let poses = self.robot.map_or(0, |_| self.data.base_from_flange.len());
+        let mut arrow = Arrowhead::zeros(g, poses);
+        let mut jtr = DVector::<f64>::zeros(self.len());
         let mut cost = 0.0;
-        let blocks = if self.robot.is_some() { 3 } else { 2 };
         for frame in self.frames {
             let (mount, board, flange, bi) = self.chain(state, frame);
             let setup = self.data.cameras[frame.camera].setup;
@@ -158,31 +164,48 @@ impl Problem<'_> {
                 gradient += j.transpose() * r;
                 cost += r.norm_squared();
             }
-            let at = [6 * frame.camera, bi, self.flange_at(frame.pose)];
-            for (a, &ra) in at.iter().enumerate().take(blocks) {
-                for (c, &rc) in at.iter().enumerate().take(blocks) {
-                    let mut block = jtj.view_mut((ra, rc), (6, 6));
+            // The frame's two unknowns (its camera, its board) in the corner block.
+            let unknowns = [6 * frame.camera, bi];
+            for (a, &ra) in unknowns.iter().enumerate() {
+                for (c, &rc) in unknowns.iter().enumerate() {
+                    let mut block = arrow.corner.view_mut((ra, rc), (6, 6));
                     block += local.fixed_view::<6, 6>(6 * a, 6 * c);
                 }
-                let mut g = jtr.rows_mut(ra, 6);
-                g += gradient.fixed_rows::<6>(6 * a);
+                let mut grad = jtr.rows_mut(ra, 6);
+                grad += gradient.fixed_rows::<6>(6 * a);
+            }
+            if self.robot.is_some() {
+                // Its pose's flange: the diagonal block and the border column.
+                let i = frame.pose;
+                arrow.blocks[i] += local.fixed_view::<6, 6>(12, 12);
+                for (a, &ra) in unknowns.iter().enumerate() {
+                    let mut border = arrow.border[i].rows_mut(ra, 6);
+                    border += local.fixed_view::<6, 6>(6 * a, 12);
+                }
+                let mut grad = jtr.rows_mut(self.flange_at(i), 6);
+                grad += gradient.fixed_rows::<6>(12);
             }
         }
         if let Some((st, sr)) = self.robot {
             // The prior's Jacobian is the identity scaled by 1/σ (exact for the translation,
             // to first order in the small correction for the rotation).
-            for i in 0..self.data.base_from_flange.len() {
+            for i in 0..poses {
                 let r = self.prior(state, i);
                 let at = self.flange_at(i);
                 for k in 0..6 {
                     let w = if k < 3 { 1.0 / sr } else { 1.0 / st };
-                    jtj[(at + k, at + k)] += w * w;
+                    arrow.blocks[i][(k, k)] += w * w;
                     jtr[at + k] += w * r[k];
                 }
                 cost += r.norm_squared();
             }
         }
-        (jtj, jtr, cost)
+        let h = if self.robot.is_some() {
+            NormalMatrix::Arrow(arrow)
+        } else {
+            NormalMatrix::Dense(arrow.corner)
+        };
+        (h, jtr, cost)
     }
 
     /// Per camera: (corners, Σ squared pixel residuals) at `state`.
@@ -281,7 +304,7 @@ pub fn solve_cameras_pixels(
             options.max_iterations,
             &|s| problem.normal(s, &sigma_now),
             &|s| problem.cost(s, &sigma_now),
-        );
+        )?;
         if options.estimate_noise && round + 1 < rounds {
             for (c, (count, squares)) in problem.squares(&state).into_iter().enumerate() {
                 if count > 0 {
@@ -316,6 +339,132 @@ mod tests {
             Translation3::new(t[0], t[1], t[2]),
             UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
         )
+    }
+
+    /// With the flange poses estimated, the normal equations kept as an arrowhead are those of
+    /// the whole stacked Jacobian: every corner's rows put in its camera's, its board's and its
+    /// pose's flange's columns, and the prior's rows.
+    #[test]
+    fn the_arrowhead_normal_equations_are_the_stacked_jacobians() {
+        let model = CameraModel {
+            width: 1280,
+            height: 720,
+            fx: 800.0,
+            fy: 810.0,
+            cx: 640.0,
+            cy: 360.0,
+            distortion: handeye_core::camera_model::Distortion::None,
+        };
+        let spec = |name: &str, setup| super::super::CameraSpec {
+            name: name.into(),
+            setup,
+            noise: crate::NoiseModel::default(),
+        };
+        let flanges: Vec<Pose> = (0..4)
+            .map(|i| {
+                let a = f64::from(i);
+                pose(
+                    [0.5 + 0.02 * a, -0.1, 0.6],
+                    [3.0, 0.1 * a - 0.15, 0.2 - 0.1 * a],
+                )
+            })
+            .collect();
+        let data = CamerasData {
+            cameras: vec![
+                spec("wrist", Setup::EyeInHand),
+                spec("left", Setup::EyeToHand),
+            ],
+            base_from_flange: flanges.clone(),
+            observations: Vec::new(),
+        };
+        // Pose 2 seen by the wrist camera only: a flange block with one camera's frame.
+        let frames: Vec<CamerasFrame> = (0..4)
+            .flat_map(|i| [(0, i), (1, i)])
+            .filter(|&(camera, pose)| !(camera == 1 && pose == 2))
+            .map(|(camera, pose)| CamerasFrame {
+                camera,
+                pose,
+                corners: (0..5)
+                    .map(|k| {
+                        let k = f64::from(k);
+                        let pixel = Point2::new(600.0 + 7.0 * k, 300.0 - 5.0 * k);
+                        (Point3::new(0.03 * k, 0.02 * (k - 2.0), 0.0), pixel)
+                    })
+                    .collect(),
+            })
+            .collect();
+        let models = [model, model];
+        let layout = Layout::new(&data);
+        let problem = Problem {
+            data: &data,
+            models: &models,
+            frames: &frames,
+            layout,
+            robot: Some((3e-5, 1e-4)),
+        };
+        let mut poses = vec![
+            pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
+            pose([0.5, 0.1, 1.6], [3.1, 0.05, 0.0]),
+            pose([0.5, -0.15, 0.0], [0.01, -0.02, 0.3]),
+            pose([0.0, -0.1, -0.05], [3.1, 0.0, 0.0]),
+        ];
+        // Flanges a little off the reported ones, so the prior's residuals are not zero.
+        let off = pose([1e-4, -2e-4, 5e-5], [2e-4, 0.0, -1e-4]);
+        poses.extend(flanges.iter().map(|f| f * off));
+        let state = State { poses };
+        let sigma = [0.2, 0.3];
+        let (h, jtr, cost) = problem.normal(&state, &sigma);
+        assert!(matches!(h, NormalMatrix::Arrow(_)));
+
+        let n = problem.len();
+        let mut rows: Vec<(DVector<f64>, f64)> = Vec::new();
+        for frame in &frames {
+            let (mount, board, flange, bi) = problem.chain(&state, frame);
+            let setup = data.cameras[frame.camera].setup;
+            for (point, pixel) in &frame.corners {
+                let scale = 1.0 / sigma[frame.camera];
+                let (r, j) = corner_rows(
+                    &models[frame.camera],
+                    setup,
+                    &mount,
+                    &board,
+                    &flange,
+                    point,
+                    pixel,
+                    scale,
+                );
+                for axis in 0..2 {
+                    let mut row = DVector::zeros(n);
+                    let columns = [6 * frame.camera, bi, problem.flange_at(frame.pose)];
+                    for (block, &at) in columns.iter().enumerate() {
+                        for k in 0..6 {
+                            row[at + k] = j[(axis, 6 * block + k)];
+                        }
+                    }
+                    rows.push((row, r[axis]));
+                }
+            }
+        }
+        for i in 0..flanges.len() {
+            let r = problem.prior(&state, i);
+            for k in 0..6 {
+                let mut row = DVector::zeros(n);
+                row[problem.flange_at(i) + k] = if k < 3 { 1.0 / 1e-4 } else { 1.0 / 3e-5 };
+                rows.push((row, r[k]));
+            }
+        }
+        let mut dense_h = nalgebra::DMatrix::<f64>::zeros(n, n);
+        let mut dense_g = DVector::<f64>::zeros(n);
+        let mut dense_cost = 0.0;
+        for (row, r) in &rows {
+            dense_h += row * row.transpose();
+            dense_g += row * *r;
+            dense_cost += r * r;
+        }
+        let scale = dense_h.amax();
+        assert!((h.to_dense() - &dense_h).amax() < 1e-12 * scale);
+        assert!((jtr - &dense_g).amax() < 1e-12 * (scale + dense_g.amax()));
+        assert!((cost - dense_cost).abs() < 1e-12 * dense_cost);
     }
 
     #[test]
