@@ -341,20 +341,25 @@ mod tests {
         )
     }
 
-    /// With the flange poses estimated, the normal equations kept as an arrowhead are those of
-    /// the whole stacked Jacobian: every corner's rows put in its camera's, its board's and its
-    /// pose's flange's columns, and the prior's rows.
-    #[test]
-    fn the_arrowhead_normal_equations_are_the_stacked_jacobians() {
-        let model = CameraModel {
+    /// A 1280 x 720 lens with `distortion`.
+    fn lens(distortion: handeye_core::camera_model::Distortion) -> CameraModel {
+        CameraModel {
             width: 1280,
             height: 720,
             fx: 800.0,
             fy: 810.0,
             cx: 640.0,
             cy: 360.0,
-            distortion: handeye_core::camera_model::Distortion::None,
-        };
+            distortion,
+        }
+    }
+
+    /// With the flange poses estimated, the normal equations kept as an arrowhead are those of
+    /// the whole stacked Jacobian: every corner's rows put in its camera's, its board's and its
+    /// pose's flange's columns, and the prior's rows.
+    #[test]
+    fn the_arrowhead_normal_equations_are_the_stacked_jacobians() {
+        let model = lens(handeye_core::camera_model::Distortion::None);
         let spec = |name: &str, setup| super::super::CameraSpec {
             name: name.into(),
             setup,
@@ -469,21 +474,13 @@ mod tests {
 
     #[test]
     fn analytic_corner_jacobian_matches_finite_differences() {
-        let model = CameraModel {
-            width: 1280,
-            height: 720,
-            fx: 800.0,
-            fy: 810.0,
-            cx: 640.0,
-            cy: 360.0,
-            distortion: handeye_core::camera_model::Distortion::RadTan {
-                k1: -0.08,
-                k2: 0.05,
-                p1: 0.0004,
-                p2: -0.0006,
-                k3: 0.0,
-            },
-        };
+        let model = lens(handeye_core::camera_model::Distortion::RadTan {
+            k1: -0.08,
+            k2: 0.05,
+            p1: 0.0004,
+            p2: -0.0006,
+            k3: 0.0,
+        });
         let mount = pose([0.5, -0.1, 1.4], [2.2, 2.2, 0.05]);
         let board = pose([-0.14, 0.14, -0.03], [3.1, 0.02, 0.01]);
         let b = pose([0.6, -0.1, 0.65], [3.0, 0.2, -0.1]);
