@@ -10,6 +10,8 @@
 //! `[u - 0.5, u + 0.5) x [v - 0.5, v + 0.5)`. Rows are rendered on all cores with scoped std
 //! threads. Depends on `camera_model`, `vision::target` and `geometry`.
 
+use std::sync::{Arc, Mutex, PoisonError, Weak};
+
 use image::GrayImage;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use rand::rngs::StdRng;
@@ -93,6 +95,28 @@ impl PixelRays {
             }
         }
         PixelRays { rays }
+    }
+
+    /// The rays of `camera`'s lens, shared with every other user of the same lens in this
+    /// process while one of them holds it. The table is 56 bytes a pixel (52 MB at 1280 x 720),
+    /// so a simulated cell of several cameras with one lens, or the tests' many simulated cells
+    /// at once, would otherwise hold a copy each. Computed by the first to ask, the others
+    /// waiting for it; identical to [`PixelRays::new`] of the lens.
+    pub fn shared(camera: &CameraModel) -> Arc<PixelRays> {
+        static TABLES: Mutex<Vec<(CameraModel, Weak<PixelRays>)>> = Mutex::new(Vec::new());
+        // A panic elsewhere while the lock was held leaves the list as valid as before.
+        let mut tables = TABLES.lock().unwrap_or_else(PoisonError::into_inner);
+        tables.retain(|(_, table)| table.strong_count() > 0);
+        if let Some(table) = tables
+            .iter()
+            .find(|(lens, _)| lens == camera)
+            .and_then(|(_, table)| table.upgrade())
+        {
+            return table;
+        }
+        let table = Arc::new(PixelRays::new(camera));
+        tables.push((*camera, Arc::downgrade(&table)));
+        table
     }
 }
 
@@ -445,6 +469,47 @@ mod tests {
     use handeye_core::geometry::pose_from_rotvec;
     use handeye_vision::TagFamily;
     use nalgebra::Point3;
+
+    #[test]
+    fn one_lens_shares_one_ray_table_while_held_and_another_lens_has_its_own() {
+        // A lens no other test uses, so no other holder shares it while this test runs.
+        let lens = CameraModel {
+            width: 64,
+            height: 48,
+            fx: 71.25,
+            fy: 70.5,
+            cx: 31.5,
+            cy: 23.5,
+            distortion: Distortion::RadTan {
+                k1: -0.1,
+                k2: 0.02,
+                p1: 0.0,
+                p2: 0.0,
+                k3: 0.0,
+            },
+        };
+        let first = PixelRays::shared(&lens);
+        let second = PixelRays::shared(&lens);
+        assert!(Arc::ptr_eq(&first, &second), "one table for one lens");
+        let own = PixelRays::new(&lens);
+        let same = |a: &PixelRays, b: &PixelRays| {
+            a.rays.len() == b.rays.len()
+                && a.rays.iter().zip(&b.rays).all(|(x, y)| match (x, y) {
+                    (Some(x), Some(y)) => x.xn == y.xn && x.jacobian_inverse == y.jacobian_inverse,
+                    (None, None) => true,
+                    _ => false,
+                })
+        };
+        assert!(same(&first, &own), "the shared table is the lens's own");
+        let other_lens = CameraModel { fx: 72.0, ..lens };
+        let other = PixelRays::shared(&other_lens);
+        assert!(!Arc::ptr_eq(&first, &other), "another lens, another table");
+        assert!(same(&other, &PixelRays::new(&other_lens)));
+        // Once nobody holds it, it is freed: the next holder computes it again.
+        let weak = Arc::downgrade(&first);
+        drop((first, second));
+        assert!(weak.upgrade().is_none(), "the table outlived its holders");
+    }
 
     #[test]
     fn fronto_parallel_render_puts_black_and_white_where_the_board_projects() {

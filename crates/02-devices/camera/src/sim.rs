@@ -5,6 +5,7 @@
 //! still rings down shows the arm off its resting pose).
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 use std::time::Instant;
 
 use rand::rngs::StdRng;
@@ -34,8 +35,9 @@ pub struct SimCamera {
     rng: StdRng,
     hidden_grabs: BTreeSet<usize>,
     grabs: usize,
-    /// The lens's pixel rays, computed at the first grab and reused by every frame.
-    rays: Option<PixelRays>,
+    /// The lens's pixel rays, taken at the first grab and reused by every frame (shared with the
+    /// other cameras of the same lens, [`PixelRays::shared`]).
+    rays: Option<Arc<PixelRays>>,
 }
 
 impl SimCamera {
@@ -91,7 +93,7 @@ impl Camera for SimCamera {
                 .camera_from_target(&(self.true_base_from_flange)())
         };
         let lens = &self.lens;
-        let rays = self.rays.get_or_insert_with(|| PixelRays::new(lens));
+        let rays = self.rays.get_or_insert_with(|| PixelRays::shared(lens));
         let image = render_with_rays(
             &self.board,
             &self.lens,
