@@ -23,15 +23,61 @@ pub mod yaml_file;
 
 /// `most` indices evenly spaced through `0..count` (`⌊k·count / most⌋` for k = 0, 1, …), or every
 /// index when `count ≤ most`; increasing. The one way the tree thins a long list: the held-out
-/// check's folds, the pairs and corners a report draws.
+/// check's folds, the pairs a report draws, and with [`keeping_notable`] its corners and frames.
 pub fn evenly_spaced(count: usize, most: usize) -> impl Iterator<Item = usize> + Clone {
     let taken = count.min(most);
     (0..taken).map(move |k| k * count / taken)
 }
 
+/// The indices of `0..count` to keep when at most `most` may be: every index when they fit;
+/// past it, the notable ones (`is_notable`; up to half of `most`, [`evenly_spaced`] among them)
+/// and the others evenly spaced to fill `most`; increasing. How a report draws a long list (its
+/// corners, its frames): the notable items are what a reader looks for.
+pub fn keeping_notable(
+    count: usize,
+    most: usize,
+    is_notable: impl Fn(usize) -> bool,
+) -> Vec<usize> {
+    if count <= most {
+        return (0..count).collect();
+    }
+    let (notable, others): (Vec<usize>, Vec<usize>) = (0..count).partition(|&i| is_notable(i));
+    let notable_kept = notable.len().min(most / 2);
+    let mut kept: Vec<usize> = evenly_spaced(notable.len(), notable_kept)
+        .map(|k| notable[k])
+        .chain(evenly_spaced(others.len(), most - notable_kept).map(|k| others[k]))
+        .collect();
+    kept.sort_unstable();
+    kept
+}
+
 #[cfg(test)]
 mod tests {
-    use super::evenly_spaced;
+    use super::{evenly_spaced, keeping_notable};
+
+    #[test]
+    fn a_long_list_keeps_its_notable_items_up_to_half_and_thins_the_rest() {
+        // Short: all, notable or not.
+        assert_eq!(keeping_notable(4, 10, |i| i == 2), [0, 1, 2, 3]);
+        // 1,000 items, every 100th notable: all 10 kept, 90 others evenly spaced.
+        let kept = keeping_notable(1000, 100, |i| i % 100 == 7);
+        assert_eq!(kept.len(), 100);
+        assert!(kept.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(kept.iter().filter(|&&i| i % 100 == 7).count(), 10);
+        assert!(
+            *kept.last().unwrap() >= 980,
+            "the others reach the end: {kept:?}"
+        );
+        // Mostly notable: they take half, the others the rest.
+        let kept = keeping_notable(1000, 100, |i| i < 900);
+        assert_eq!(kept.iter().filter(|&&i| i < 900).count(), 50);
+        assert_eq!(kept.iter().filter(|&&i| i >= 900).count(), 50);
+        // Nothing notable: plain even spacing.
+        assert_eq!(
+            keeping_notable(1000, 100, |_| false),
+            evenly_spaced(1000, 100).collect::<Vec<_>>()
+        );
+    }
 
     #[test]
     fn a_short_list_is_kept_whole_and_a_long_one_thinned_from_end_to_end() {

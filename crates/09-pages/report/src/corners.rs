@@ -10,7 +10,7 @@
 use std::borrow::Cow;
 use std::fmt::Write;
 
-use handeye_core::evenly_spaced;
+use handeye_core::keeping_notable;
 use nalgebra::{Point2, Vector2};
 use plotters::prelude::*;
 
@@ -64,27 +64,13 @@ fn drawn(corners: &[CornerResidual], rms: f64) -> Cow<'_, [CornerResidual]> {
         return Cow::Borrowed(corners);
     }
     let far_from = 3.0 * rms;
-    let is_far = |c: &CornerResidual| c.residual_px.norm() >= far_from;
-    let far = corners.iter().filter(|c| is_far(c)).count();
-    let far_drawn = far.min(MAX_CORNERS_DRAWN / 2);
-    // Each kind numbered in its order; the chosen numbers of each, increasing.
-    let mut far_chosen = evenly_spaced(far, far_drawn).peekable();
-    let mut near_chosen =
-        evenly_spaced(corners.len() - far, MAX_CORNERS_DRAWN - far_drawn).peekable();
-    let (mut far_number, mut near_number) = (0, 0);
-    corners
-        .iter()
-        .filter(|c| {
-            let (chosen, number) = match is_far(c) {
-                true => (&mut far_chosen, &mut far_number),
-                false => (&mut near_chosen, &mut near_number),
-            };
-            *number += 1;
-            chosen.next_if_eq(&(*number - 1)).is_some()
-        })
-        .copied()
-        .collect::<Vec<_>>()
-        .into()
+    keeping_notable(corners.len(), MAX_CORNERS_DRAWN, |i| {
+        corners[i].residual_px.norm() >= far_from
+    })
+    .into_iter()
+    .map(|i| corners[i])
+    .collect::<Vec<_>>()
+    .into()
 }
 
 /// RMS of the residuals' lengths, px.

@@ -68,6 +68,9 @@ pub struct PageFrames {
     pub camera: handeye_core::camera_model::CameraModel,
     /// The frames, in the order shown.
     pub frames: Vec<PageFrame>,
+    /// How many frames the session holds of these samples (more than `frames` when a long
+    /// recording's are thinned: `session::MAX_FRAMES_DRAWN`).
+    pub recorded: usize,
 }
 
 /// One frame of [`PageFrames`].
@@ -486,9 +489,19 @@ impl<'o> PageOut<'o> {
             Some(frames) => {
                 let _ = writeln!(
                     self.html,
-                    "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>\n<div class=\"thumbs\">",
+                    "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>",
                     escape(answer)
                 );
+                if frames.frames.len() < frames.recorded {
+                    let _ = writeln!(
+                        self.html,
+                        "<p>The page draws {} of the {} frames: every frame whose board lies 3× the frames' RMS or more from where <b>{}</b> predicts it (up to half), and the others evenly through the session. Every frame is in the session folder.</p>",
+                        frames.frames.len(),
+                        frames.recorded,
+                        escape(answer)
+                    );
+                }
+                self.html.push_str("<div class=\"thumbs\">\n");
                 session::draw_frames(frames, |frame, jpeg| {
                     let _ = writeln!(
                         self.html,

@@ -11,6 +11,7 @@ use nalgebra::Point2;
 use super::{CornerResidual, PageFrame, PageFrames, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
+use handeye_core::keeping_notable;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_records::dataset::Dataset;
 use handeye_records::result::SessionResult;
@@ -166,9 +167,18 @@ pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
         .collect()
 }
 
+/// Most frames a page draws of one camera: a long recording's frames would make a page of a
+/// hundred megabytes or more (1,000 samples: 83 MB of JPEG; three cameras: 197 MB) that no
+/// browser shows well and no reader pages through. Past it, the page draws every frame whose
+/// board sits at 3× the frames' RMS or more from where the answer predicts it (up to half of
+/// this; they are what to look at) and the others evenly through the session; every frame stays
+/// in the session folder.
+pub(crate) const MAX_FRAMES_DRAWN: usize = 200;
+
 /// Every sample's frame that has a visit, to be drawn ([`draw_frames`]) with the board at
-/// `predict(T_base_flange)` (`T_camera_target` of the answer shown). The one way a page lists
-/// its frames, one camera's or each of several.
+/// `predict(T_base_flange)` (`T_camera_target` of the answer shown), at most
+/// [`MAX_FRAMES_DRAWN`] of them. The one way a page lists its frames, one camera's or each of
+/// several.
 pub(crate) fn page_frames(
     folder: &SessionFolder,
     pairs: &[PosePair],
@@ -176,13 +186,38 @@ pub(crate) fn page_frames(
     optics: Optics<'_>,
     predict: impl Fn(&Pose) -> Pose,
 ) -> PageFrames {
-    let frames = pairs
+    let visited: Vec<(usize, &PosePair, &PoseVisit)> = pairs
         .iter()
         .zip(sample_visits)
         .enumerate()
-        .filter_map(|(sample, (pair, visit))| {
-            let visit = (*visit)?;
-            Some(PageFrame {
+        .filter_map(|(sample, (pair, visit))| Some((sample, pair, (*visit)?)))
+        .collect();
+    let predicted: Vec<Pose> = visited
+        .iter()
+        .map(|(_, pair, _)| predict(&pair.base_from_flange))
+        .collect();
+    let drawn = if visited.len() <= MAX_FRAMES_DRAWN {
+        (0..visited.len()).collect()
+    } else {
+        // How far each frame's board is from where the answer puts it, px (RMS over its corners).
+        let fits: Vec<Option<f64>> = visited
+            .iter()
+            .zip(&predicted)
+            .map(|((_, _, visit), camera_from_target)| {
+                reprojection_rms(optics, camera_from_target, &visit.corners_px)
+            })
+            .collect();
+        let known: Vec<f64> = fits.iter().flatten().copied().collect();
+        let rms = (known.iter().map(|f| f * f).sum::<f64>() / known.len().max(1) as f64).sqrt();
+        keeping_notable(visited.len(), MAX_FRAMES_DRAWN, |i| {
+            fits[i].is_some_and(|fit| fit >= 3.0 * rms)
+        })
+    };
+    let frames = drawn
+        .into_iter()
+        .map(|i| {
+            let (sample, pair, visit) = visited[i];
+            PageFrame {
                 sample,
                 caption: format!(
                     "sample {sample} ({}), board RMS {}",
@@ -193,15 +228,16 @@ pub(crate) fn page_frames(
                         .unwrap_or_else(|| "-".into())
                 ),
                 path: folder.root().join(&visit.frame),
-                camera_from_target: predict(&pair.base_from_flange),
+                camera_from_target: predicted[i],
                 corners_px: visit.corners_px.iter().map(|c| c.pixel).collect(),
-            })
+            }
         })
         .collect();
     PageFrames {
         board: optics.board.clone(),
         camera: *optics.camera,
         frames,
+        recorded: visited.len(),
     }
 }
 
@@ -539,4 +575,99 @@ fn write(
     input.verdict = verdict;
     super::write_report(&path, &input)?;
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::{Board, TagFamily};
+
+    /// `samples` visits of a 6 x 6 aprilgrid seen at one pose, the answer predicting that pose;
+    /// the samples in `misfit` saw the board 5 px to the right of where it predicts.
+    fn frames_of(samples: usize, misfit: &[usize]) -> PageFrames {
+        let board: Target = Board::aprilgrid(6, 6, 0.03, 0.3, TagFamily::Tag36h11, 0, 1)
+            .expect("board")
+            .into();
+        let camera = CameraModel {
+            width: 1280,
+            height: 720,
+            fx: 900.0,
+            fy: 900.0,
+            cx: 639.5,
+            cy: 359.5,
+            distortion: handeye_core::camera_model::Distortion::None,
+        };
+        let seen_at = Pose::translation(-0.1, -0.1, 0.6);
+        let root = std::env::temp_dir().join(format!(
+            "handeye-report-frames-{}-{samples}",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&root);
+        let folder = SessionFolder::create(&root).expect("session folder");
+        let pairs: Vec<PosePair> = (0..samples)
+            .map(|i| PosePair::new(Pose::translation(1e-3 * i as f64, 0.0, 0.0), seen_at))
+            .collect();
+        let visits: Vec<PoseVisit> = (0..samples)
+            .map(|i| {
+                let shift = if misfit.contains(&i) { 5.0 } else { 0.0 };
+                PoseVisit {
+                    schema_version: handeye_core::yaml_file::SchemaVersion::CURRENT,
+                    plan_index: i,
+                    base_from_flange: pairs[i].base_from_flange,
+                    frame: format!("frames/pose_{i:04}.png").into(),
+                    camera_from_target: Some(seen_at),
+                    reprojection_rms_px: Some(0.1),
+                    tags: 36,
+                    corners_px: board
+                        .points()
+                        .into_iter()
+                        .filter_map(|(tag_id, corner, point)| {
+                            let pixel = camera.project(&(seen_at * point))?;
+                            Some(CornerObservation {
+                                tag_id,
+                                corner,
+                                pixel: pixel + nalgebra::Vector2::new(shift, 0.0),
+                            })
+                        })
+                        .collect(),
+                    rejected: None,
+                }
+            })
+            .collect();
+        let sample_visits: Vec<Option<&PoseVisit>> = visits.iter().map(Some).collect();
+        let optics = Optics {
+            board: &board,
+            camera: &camera,
+        };
+        let frames = page_frames(&folder, &pairs, &sample_visits, optics, |_| seen_at);
+        drop(folder);
+        let _ = std::fs::remove_dir_all(&root);
+        frames
+    }
+
+    /// A session's frames are all drawn; a long recording's at `MAX_FRAMES_DRAWN`, every frame
+    /// whose board is far from the prediction among them, the others from every part of it.
+    #[test]
+    fn a_long_recording_draws_every_misfit_frame_and_a_bounded_number() {
+        let few = frames_of(MAX_FRAMES_DRAWN, &[3]);
+        assert_eq!(few.frames.len(), MAX_FRAMES_DRAWN);
+        assert_eq!(few.recorded, MAX_FRAMES_DRAWN);
+
+        let misfit = [3, 250, 511, 777, 999];
+        let many = frames_of(1000, &misfit);
+        assert_eq!(many.recorded, 1000);
+        assert_eq!(many.frames.len(), MAX_FRAMES_DRAWN);
+        let samples: Vec<usize> = many.frames.iter().map(|f| f.sample).collect();
+        assert!(samples.windows(2).all(|w| w[0] < w[1]), "in session order");
+        for m in misfit {
+            assert!(samples.contains(&m), "misfit frame {m} not drawn");
+        }
+        assert!(
+            *samples.last().unwrap() >= 990,
+            "the end of the session is drawn"
+        );
+        let frame = &many.frames[samples.iter().position(|&s| s == 511).unwrap()];
+        assert!(frame.caption.starts_with("sample 511"));
+        assert!(frame.path.ends_with("frames/pose_0511.png"));
+    }
 }

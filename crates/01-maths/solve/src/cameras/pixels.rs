@@ -10,8 +10,12 @@
 //! `(π_c(inv(M_c) · B_i · Y_b · P_k) − pixel) / σ_c`, with `B_i = chain_b(T_base_flange_i)`; the
 //! corner noise `σ_c` of each camera is estimated from its residuals, alternated with the fit.
 //! The Jacobian is analytic (see `corner_rows`), the perturbations those of the pose-space solve,
-//! so the covariance reads the same way. The robot poses are taken as exact: their noise (a UR's
-//! 0.03 mm) is far below what the cameras see.
+//! so the covariance reads the same way. Without [`CamerasOptions::robot_sigma`] the robot poses
+//! are taken as exact; with it (what a run does) each flange pose is estimated too, around the
+//! reported one with the robot's repeatability as its prior, and every camera that sees a board at
+//! a pose corrects the flange pose the others use. Each flange pose couples only with the unknowns,
+//! so `JᵀJ` is an arrowhead, kept as its parts and solved by its Schur complement
+//! ([`crate::arrow`]): time and memory grow with the poses, not their square.
 
 use nalgebra::{DVector, Matrix3, Point2, Point3, SMatrix, SVector, Vector2};
 
