@@ -23,7 +23,8 @@ pub mod yaml_file;
 
 /// `most` indices evenly spaced through `0..count` (`⌊k·count / most⌋` for k = 0, 1, …), or every
 /// index when `count ≤ most`; increasing. The one way the tree thins a long list: the held-out
-/// check's folds, the pairs a report draws, and with [`keeping_notable`] its corners and frames.
+/// check's folds, the pairs a report draws, and with [`keeping_notable`] and [`keeping_largest`]
+/// its corners and frames.
 pub fn evenly_spaced(count: usize, most: usize) -> impl Iterator<Item = usize> + Clone {
     let taken = count.min(most);
     (0..taken).map(move |k| k * count / taken)
@@ -31,8 +32,8 @@ pub fn evenly_spaced(count: usize, most: usize) -> impl Iterator<Item = usize> +
 
 /// The indices of `0..count` to keep when at most `most` may be: every index when they fit;
 /// past it, the notable ones (`is_notable`; up to half of `most`, [`evenly_spaced`] among them)
-/// and the others evenly spaced to fill `most`; increasing. How a report draws a long list (its
-/// corners, its frames): the notable items are what a reader looks for.
+/// and the others evenly spaced to fill `most`; increasing. How a report draws a long list of
+/// corners: the notable ones are what a reader looks for.
 pub fn keeping_notable(
     count: usize,
     most: usize,
@@ -51,9 +52,37 @@ pub fn keeping_notable(
     kept
 }
 
+/// The indices of `0..count` to keep when at most `most` may be: every index when they fit;
+/// past it, the `most / 2` with the largest `key` and the others evenly spaced to fill `most`;
+/// increasing. How a report draws a long recording's frames: the worst are what a reader opens.
+pub fn keeping_largest(count: usize, most: usize, key: impl Fn(usize) -> f64) -> Vec<usize> {
+    if count <= most {
+        return (0..count).collect();
+    }
+    let mut by_key: Vec<usize> = (0..count).collect();
+    by_key.sort_by(|&a, &b| key(b).total_cmp(&key(a)));
+    let mut largest = vec![false; count];
+    for &i in &by_key[..most / 2] {
+        largest[i] = true;
+    }
+    keeping_notable(count, most, |i| largest[i])
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{evenly_spaced, keeping_notable};
+    use super::{evenly_spaced, keeping_largest, keeping_notable};
+
+    #[test]
+    fn a_long_list_keeps_its_largest_half_and_thins_the_rest() {
+        assert_eq!(keeping_largest(3, 10, |i| i as f64), [0, 1, 2]);
+        // Keys rising with the index: the largest half is the last 50.
+        let kept = keeping_largest(1000, 100, |i| i as f64);
+        assert_eq!(kept.len(), 100);
+        assert!(kept.windows(2).all(|w| w[0] < w[1]));
+        assert!((950..1000).all(|i| kept.contains(&i)));
+        assert_eq!(kept.iter().filter(|&&i| i < 950).count(), 50);
+        assert_eq!(kept[0], 0, "the others start at the start");
+    }
 
     #[test]
     fn a_long_list_keeps_its_notable_items_up_to_half_and_thins_the_rest() {

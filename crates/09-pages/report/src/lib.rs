@@ -495,9 +495,10 @@ impl<'o> PageOut<'o> {
                 if frames.frames.len() < frames.recorded {
                     let _ = writeln!(
                         self.html,
-                        "<p>The page draws {} of the {} frames: every frame whose board lies 3× the frames' RMS or more from where <b>{}</b> predicts it (up to half), and the others evenly through the session. Every frame is in the session folder.</p>",
+                        "<p>The page draws {} of the {} frames: the {} whose board lies farthest from where <b>{}</b> predicts it, and the others evenly through the session. Every frame is in the session folder.</p>",
                         frames.frames.len(),
                         frames.recorded,
+                        frames.frames.len() / 2,
                         escape(answer)
                     );
                 }

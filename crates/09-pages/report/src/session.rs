@@ -11,7 +11,7 @@ use nalgebra::Point2;
 use super::{CornerResidual, PageFrame, PageFrames, ReportAnswer, ReportError, ReportInput};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
-use handeye_core::keeping_notable;
+use handeye_core::keeping_largest;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_records::dataset::Dataset;
 use handeye_records::result::SessionResult;
@@ -169,10 +169,9 @@ pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
 
 /// Most frames a page draws of one camera: a long recording's frames would make a page of a
 /// hundred megabytes or more (1,000 samples: 83 MB of JPEG; three cameras: 197 MB) that no
-/// browser shows well and no reader pages through. Past it, the page draws every frame whose
-/// board sits at 3× the frames' RMS or more from where the answer predicts it (up to half of
-/// this; they are what to look at) and the others evenly through the session; every frame stays
-/// in the session folder.
+/// browser shows well and no reader pages through. Past it, the page draws the half whose board
+/// lies farthest from where the answer predicts it (the frames a reader wants to open) and the
+/// others evenly through the session; every frame stays in the session folder.
 pub(crate) const MAX_FRAMES_DRAWN: usize = 200;
 
 /// Every sample's frame that has a visit, to be drawn ([`draw_frames`]) with the board at
@@ -207,10 +206,8 @@ pub(crate) fn page_frames(
                 reprojection_rms(optics, camera_from_target, &visit.corners_px)
             })
             .collect();
-        let known: Vec<f64> = fits.iter().flatten().copied().collect();
-        let rms = (known.iter().map(|f| f * f).sum::<f64>() / known.len().max(1) as f64).sqrt();
-        keeping_notable(visited.len(), MAX_FRAMES_DRAWN, |i| {
-            fits[i].is_some_and(|fit| fit >= 3.0 * rms)
+        keeping_largest(visited.len(), MAX_FRAMES_DRAWN, |i| {
+            fits[i].unwrap_or(f64::NEG_INFINITY)
         })
     };
     let frames = drawn
@@ -645,8 +642,8 @@ mod tests {
         frames
     }
 
-    /// A session's frames are all drawn; a long recording's at `MAX_FRAMES_DRAWN`, every frame
-    /// whose board is far from the prediction among them, the others from every part of it.
+    /// A session's frames are all drawn; a long recording's at `MAX_FRAMES_DRAWN`, the frames
+    /// whose board is farthest from the prediction among them, the others from every part of it.
     #[test]
     fn a_long_recording_draws_every_misfit_frame_and_a_bounded_number() {
         let few = frames_of(MAX_FRAMES_DRAWN, &[3]);
