@@ -68,9 +68,9 @@ pub struct PageFrames {
     pub camera: handeye_core::camera_model::CameraModel,
     /// The frames, in the order shown.
     pub frames: Vec<PageFrame>,
-    /// How many frames the session holds of these samples (more than `frames` when a long
-    /// recording's are thinned: `session::MAX_FRAMES_DRAWN`).
-    pub recorded: usize,
+    /// The samples whose frame the page leaves out, increasing (a long recording's:
+    /// `session::MAX_FRAMES_DRAWN`); their frames are in the session folder.
+    pub not_drawn: Vec<usize>,
 }
 
 /// One frame of [`PageFrames`].
@@ -417,10 +417,18 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
             .frames
             .as_ref()
             .is_some_and(|f| f.frames.iter().any(|t| t.sample == i));
+        let not_drawn = || {
+            input
+                .frames
+                .as_ref()
+                .is_some_and(|f| f.not_drawn.binary_search(&i).is_ok())
+        };
         let frame = if has_frame {
             format!(
                 "<a href=\"#frame-{i}\" class=\"open-frame\" data-frame=\"frame-{i}\">frame</a>"
             )
+        } else if not_drawn() {
+            "not drawn".to_string()
         } else {
             "–".to_string()
         };
@@ -492,12 +500,12 @@ impl<'o> PageOut<'o> {
                     "<p>Detected corners (green crosses) and the board reprojected at the T_camera_target predicted by <b>{}</b> (magenta outlines). Click a frame to see it full size.</p>",
                     escape(answer)
                 );
-                if frames.frames.len() < frames.recorded {
+                if !frames.not_drawn.is_empty() {
                     let _ = writeln!(
                         self.html,
                         "<p>The page draws {} of the {} frames: the {} whose board lies farthest from where <b>{}</b> predicts it, and the others evenly through the session. Every frame is in the session folder.</p>",
                         frames.frames.len(),
-                        frames.recorded,
+                        frames.frames.len() + frames.not_drawn.len(),
                         frames.frames.len() / 2,
                         escape(answer)
                     );

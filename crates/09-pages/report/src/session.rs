@@ -210,6 +210,14 @@ pub(crate) fn page_frames(
             fits[i].unwrap_or(f64::NEG_INFINITY)
         })
     };
+    let mut is_drawn = vec![false; visited.len()];
+    for &i in &drawn {
+        is_drawn[i] = true;
+    }
+    let not_drawn = (0..visited.len())
+        .filter(|&i| !is_drawn[i])
+        .map(|i| visited[i].0)
+        .collect();
     let frames = drawn
         .into_iter()
         .map(|i| {
@@ -234,7 +242,7 @@ pub(crate) fn page_frames(
         board: optics.board.clone(),
         camera: *optics.camera,
         frames,
-        recorded: visited.len(),
+        not_drawn,
     }
 }
 
@@ -648,14 +656,18 @@ mod tests {
     fn a_long_recording_draws_every_misfit_frame_and_a_bounded_number() {
         let few = frames_of(MAX_FRAMES_DRAWN, &[3]);
         assert_eq!(few.frames.len(), MAX_FRAMES_DRAWN);
-        assert_eq!(few.recorded, MAX_FRAMES_DRAWN);
+        assert!(few.not_drawn.is_empty());
 
         let misfit = [3, 250, 511, 777, 999];
         let many = frames_of(1000, &misfit);
-        assert_eq!(many.recorded, 1000);
+        assert_eq!(many.not_drawn.len(), 1000 - MAX_FRAMES_DRAWN);
         assert_eq!(many.frames.len(), MAX_FRAMES_DRAWN);
         let samples: Vec<usize> = many.frames.iter().map(|f| f.sample).collect();
         assert!(samples.windows(2).all(|w| w[0] < w[1]), "in session order");
+        assert!(
+            many.not_drawn.iter().all(|s| !samples.contains(s)),
+            "a frame both drawn and not"
+        );
         for m in misfit {
             assert!(samples.contains(&m), "misfit frame {m} not drawn");
         }
