@@ -112,7 +112,7 @@ pub struct Uncertainty {
     pub target_mount: PoseSigma,
     /// A-posteriori variance factor `χ²/dof` the covariance was scaled by (≈ 1 if the noise
     /// model is right; floored at 1 only with fewer than 36 residual degrees of freedom, i.e.
-    /// 8 pose samples, see [`refine::variance_factor`]).
+    /// 8 pose samples, see [`variance_factor`](crate::refine::variance_factor)).
     pub variance_factor: f64,
 }
 

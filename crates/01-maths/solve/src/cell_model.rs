@@ -36,9 +36,9 @@
 //! naming the file and the views that would check it.
 //!
 //! An explanation is *determined* when its fit pins both transforms within the accuracy asked
-//! (the marginal 1-sigma, with the freed quantities estimated). [`CellModel::finding`] turns the
-//! choice into the verdict's finding: CHECK with the estimates (the answer uses them) when
-//! determined, REDO naming the file and the measurement when not. The session layer writes the
+//! (the marginal 1-sigma, with the freed quantities estimated). [`CellModelSummary::finding`]
+//! turns the choice into the verdict's finding: CHECK with the estimates (the answer uses them)
+//! when determined, REDO naming the file and the measurement when not. The session layer writes the
 //! corrected files.
 //!
 //! Pure: no I/O. Depends on the reprojection refinement and the ground floor.

@@ -4,7 +4,7 @@
 //!
 //! A cross-check for users coming from OpenCV's `calibrateHandEye`: on good data all methods
 //! agree within the noise; a method far from the rest points at a problem (degenerate motion
-//! for the AX = XB methods, outliers for the linear ones). Pure: runs [`solve`](super::solve)
+//! for the AX = XB methods, outliers for the linear ones). Pure: runs [`solve`]
 //! once per method; depends only on the solver and the ground floor.
 
 use std::fmt::Write as _;

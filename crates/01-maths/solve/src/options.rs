@@ -87,7 +87,7 @@ impl Default for EstimateNoise {
     }
 }
 
-/// Which estimator [`solve`] runs.
+/// Which estimator [`solve`](crate::solve) runs.
 ///
 /// One list of names for the config (`solver.method`), the CLI (`--method`) and the result
 /// file: [`Method::name`] of each of [`Method::ALL`], plus [`Method::ALIASES`]; (de)serialized
@@ -340,7 +340,7 @@ impl SolverChoice {
     }
 }
 
-/// Everything [`solve`] can be told.
+/// Everything [`solve`](crate::solve) can be told.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolveOptions {
     /// The estimator (default [`Method::Refined`]).

@@ -95,7 +95,7 @@ pub struct UncertaintyYaml {
     pub T_flange_target: Option<PoseSigma>,
     /// The a-posteriori variance factor the covariance was scaled by.
     pub variance_factor: f64,
-    /// 12x12 covariance: camera mount [rotation rad, translation m], target mount [same].
+    /// 12x12 covariance: camera mount [rotation rad, translation m], target mount (the same).
     pub covariance: Vec<Vec<f64>>,
 }
 

@@ -5,7 +5,7 @@
 //! weighing in, as in an adaptive run) suggests the view that helps most, which the arm can also
 //! be sent to.
 //!
-//! A sample is taken with the ordinary driver ([`run_session`]) on a one-pose plan that is where
+//! A sample is taken with the ordinary driver ([`run_session`](crate::driver::run_session)) on a one-pose plan that is where
 //! the arm already stands (the "move" is a no-op), so records, the folder layout, resume,
 //! replay and report are those of any session; like an adaptive session, the manifest's plan
 //! grows with each accepted capture, and a rejected capture's index is reused by the next.
@@ -70,7 +70,7 @@ pub enum ManualEvent<'a> {
         joints: Joints,
         /// The relative-rotation axis it adds (unit, base frame, upper hemisphere): from the
         /// accepted view nearest in rotation (of those at least
-        /// [`MIN_AXIS_ANGLE_RAD`](handeye_core::geometry::MIN_AXIS_ANGLE_RAD) away);
+        /// [`MIN_AXIS_ANGLE_RAD`] away);
         /// `None` before the first capture.
         axis: Option<[f64; 3]>,
         /// Predicted worst translation 1-sigma after it, mm.

@@ -10,10 +10,9 @@
 //!   no inertias, `effort`/`velocity` 0), so for a full robot description the same numbers go
 //!   to `ur_description` through `--format ur-calibration`.
 //!
-//! Both are computed from the one corrected chain ([`ur_calibration::corrected_arm`]) and the
-//! URDF's origins by the one [`ur_calibration::joint_origins`], so the three forms cannot
-//! disagree. `base` is the controller's base frame (`ur_description`'s `base` and
-//! `base_link_inertia`), `tool0` the flange (no TCP offset).
+//! Both are computed from the one corrected chain ([`corrected_arm`]) and the URDF's origins by
+//! the one [`joint_origins`], so the three forms cannot disagree. `base` is the controller's base
+//! frame (`ur_description`'s `base` and `base_link_inertia`), `tool0` the flange (no TCP offset).
 
 use std::fmt::Write as _;
 

@@ -1,7 +1,7 @@
 //! The evidence a verdict is made from: the held-out (leave-one-out) errors ([`held_out`]), the
 //! health notices shared by terminal, result file and report ([`coverage_notices`],
 //! [`residual_notice`]), and the one-call entry points around a solve ([`assess_solved`],
-//! [`assess_result`]) that gather it and hand it to [`assess`](super::assess).
+//! [`assess_result`]) that gather it and hand it to [`assess`].
 //!
 //! Depends on `solve` (the solver for the held-out folds, its diagnostics), `notice`, the ground
 //! floor (`setup`, `geometry`) and the types of its parent [`verdict`](super).
