@@ -223,7 +223,7 @@ type Hit = Option<bool>;
 
 /// A pixel centre's undistorted normalised point and the inverse distortion Jacobian there:
 /// the lens linearised over the pixel.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 struct PixelRay {
     xn: Vector2<f64>,
     jacobian_inverse: Matrix2<f64>,
@@ -491,20 +491,14 @@ mod tests {
         let first = PixelRays::shared(&lens);
         let second = PixelRays::shared(&lens);
         assert!(Arc::ptr_eq(&first, &second), "one table for one lens");
-        let own = PixelRays::new(&lens);
-        let same = |a: &PixelRays, b: &PixelRays| {
-            a.rays.len() == b.rays.len()
-                && a.rays.iter().zip(&b.rays).all(|(x, y)| match (x, y) {
-                    (Some(x), Some(y)) => x.xn == y.xn && x.jacobian_inverse == y.jacobian_inverse,
-                    (None, None) => true,
-                    _ => false,
-                })
-        };
-        assert!(same(&first, &own), "the shared table is the lens's own");
+        assert!(
+            first.rays == PixelRays::new(&lens).rays,
+            "the shared table is the lens's own"
+        );
         let other_lens = CameraModel { fx: 72.0, ..lens };
         let other = PixelRays::shared(&other_lens);
         assert!(!Arc::ptr_eq(&first, &other), "another lens, another table");
-        assert!(same(&other, &PixelRays::new(&other_lens)));
+        assert!(other.rays == PixelRays::new(&other_lens).rays);
         // Once nobody holds it, it is freed: the next holder computes it again.
         let weak = Arc::downgrade(&first);
         drop((first, second));

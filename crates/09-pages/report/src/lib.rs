@@ -413,21 +413,12 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
     };
     for i in order {
         let status = sample_status(c, i);
-        let has_frame = input
-            .frames
-            .as_ref()
-            .is_some_and(|f| f.frames.iter().any(|t| t.sample == i));
-        let not_drawn = || {
-            input
-                .frames
-                .as_ref()
-                .is_some_and(|f| f.not_drawn.binary_search(&i).is_ok())
-        };
-        let frame = if has_frame {
+        let frames = input.frames.as_ref();
+        let frame = if frames.is_some_and(|f| f.frames.iter().any(|t| t.sample == i)) {
             format!(
                 "<a href=\"#frame-{i}\" class=\"open-frame\" data-frame=\"frame-{i}\">frame</a>"
             )
-        } else if not_drawn() {
+        } else if frames.is_some_and(|f| f.not_drawn.binary_search(&i).is_ok()) {
             "not drawn".to_string()
         } else {
             "–".to_string()

@@ -603,12 +603,8 @@ mod tests {
             distortion: handeye_core::camera_model::Distortion::None,
         };
         let seen_at = Pose::translation(-0.1, -0.1, 0.6);
-        let root = std::env::temp_dir().join(format!(
-            "handeye-report-frames-{}-{samples}",
-            std::process::id()
-        ));
-        let _ = std::fs::remove_dir_all(&root);
-        let folder = SessionFolder::create(&root).expect("session folder");
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let folder = SessionFolder::create(&dir.path().join("session")).expect("session folder");
         let pairs: Vec<PosePair> = (0..samples)
             .map(|i| PosePair::new(Pose::translation(1e-3 * i as f64, 0.0, 0.0), seen_at))
             .collect();
@@ -644,10 +640,7 @@ mod tests {
             board: &board,
             camera: &camera,
         };
-        let frames = page_frames(&folder, &pairs, &sample_visits, optics, |_| seen_at);
-        drop(folder);
-        let _ = std::fs::remove_dir_all(&root);
-        frames
+        page_frames(&folder, &pairs, &sample_visits, optics, |_| seen_at)
     }
 
     /// A session's frames are all drawn; a long recording's at `MAX_FRAMES_DRAWN`, the frames

@@ -238,8 +238,9 @@ pub enum CamerasError {
         /// Its pose index.
         pose: usize,
     },
-    /// The residuals stopped being finite during the fit (a start far from any answer).
-    #[error("the joint fit's residuals are not finite: the start is too far from an answer")]
+    /// A residual is not finite (NaN or infinite): some input is (residuals are clamped
+    /// everywhere else, a corner behind its camera included).
+    #[error("the joint fit's residuals are not finite: a flange pose, board pose, corner or starting mount holds a NaN or an infinite number; check the samples and each camera's starting mount")]
     NotFinite,
     /// The normal equations are singular (a camera whose views do not constrain its mount).
     #[error("the joint problem is singular: the views do not constrain every camera's mount (each camera needs views with rotations about two axes)")]

@@ -1,5 +1,6 @@
 //! The joint solve on a synthetic three-camera cell: every mount back from a perturbed start,
-//! the noise estimated per camera, a camera without enough views named.
+//! the noise estimated per camera, a camera without enough views named, a board pose that is not
+//! finite refused.
 
 use super::*;
 use rand::{Rng, SeedableRng};
@@ -159,4 +160,17 @@ fn a_camera_with_too_few_views_is_named() {
             .contains("camera `right` saw the board at 2 poses"),
         "{err}"
     );
+}
+
+#[test]
+fn a_board_pose_that_is_not_finite_is_an_error_not_a_nan_answer() {
+    let (mut data, mounts, fixed, flange) = three_cameras(2);
+    data.observations[7].camera_from_target.translation.vector.x = f64::NAN;
+    let err = solve_cameras(
+        &data,
+        &start_near(&mounts, fixed, flange),
+        &CamerasOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(err, CamerasError::NotFinite, "{err}");
 }
