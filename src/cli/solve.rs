@@ -90,6 +90,10 @@ pub(super) struct SolveArgs {
     /// Fit every sample, only flag outliers (the default leaves them out, each named).
     #[arg(long)]
     keep_outliers: bool,
+    /// Take every view as equally precise (the default weighs each sample by how precisely its
+    /// view fixed its board pose, when the samples record it).
+    #[arg(long)]
+    every_view_alike: bool,
     /// Start the iterative method from the closed form instead of the identity.
     #[arg(long)]
     warm_start: bool,
@@ -142,6 +146,7 @@ impl SolveArgs {
                 RobustArg::Cauchy => RobustLoss::Cauchy(self.robust_scale),
             },
             drop_outliers: !self.keep_outliers,
+            weigh_views: !self.every_view_alike,
             warm_start: self.warm_start,
         }
         .options())

@@ -289,13 +289,12 @@ fn case(seed: u64, setup: Setup, mistake: Mistake, board: &Target) -> Case {
             frame: PathBuf::from(format!("frames/{plan_index:03}.png")),
             camera_from_target: Some(measured.camera_from_target),
             reprojection_rms_px: Some(measured.rms_px),
+            view_sigma: measured.view_sigma(),
             tags: corners_px.len() / 4,
             corners_px,
             rejected: None,
         };
-        let mut pair = PosePair::new(reported, measured.camera_from_target);
-        pair.id = Some(visit.sample_id());
-        pairs.push(pair);
+        pairs.push(visit.sample().expect("a measured visit is a sample"));
         visits.push(visit);
     }
     Case {

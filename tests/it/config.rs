@@ -839,3 +839,21 @@ fn estimating_the_arms_model_makes_a_generated_plan_fixed_unless_adaptive_is_ask
         );
     }
 }
+
+/// `solver.weigh_views` (default true) weighs each sample by its view's precision; `false` is
+/// the old form (every view alike), one key away.
+#[test]
+fn the_solver_weighs_views_by_default_and_every_view_alike_is_one_key_away() {
+    let dir = tempfile::tempdir().unwrap();
+    let shipped = CellConfig::load(&util::repo().join("configs/sim-cell.yaml")).unwrap();
+    assert!(shipped.solver.weigh_views && shipped.solver.to_options().weigh_views);
+    let config = sim_variant(
+        dir.path(),
+        &[(
+            "drop_outliers: true",
+            "drop_outliers: true, weigh_views: false",
+        )],
+    );
+    let loaded = CellConfig::load(&config).unwrap();
+    assert!(!loaded.solver.weigh_views && !loaded.solver.to_options().weigh_views);
+}

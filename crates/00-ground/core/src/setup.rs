@@ -76,10 +76,40 @@ pub struct PosePair {
     pub base_from_flange: Pose,
     /// `T_camera_target` as pose estimation (PnP) reports it.
     pub camera_from_target: Pose,
-    /// Relative weight of this sample (> 0, 1 by default); multiplies its squared residuals.
+    /// Relative weight of this sample (> 0, 1 by default): its inverse variance relative to the
+    /// noise model's, so it multiplies its squared residuals in the fit and its whitened residual
+    /// (outlier tests) is scaled by its square root.
     pub weight: f64,
     /// Optional name of the sample, carried into messages.
     pub id: Option<String>,
+    /// How precisely its view fixes `T_camera_target` (from the board pose estimate), when
+    /// known: the solve weights each sample by it relative to the typical view
+    /// (`handeye_solve::view_weighted`).
+    pub view_sigma: Option<ViewSigma>,
+}
+
+/// How precisely one view fixed its board pose: the 1-sigma of its `T_camera_target` from the
+/// pose estimate's covariance (the view's geometry, how many corners, how far, how oblique, at
+/// the frame's own corner noise, which grows as the tags shrink in the image). A far board seen
+/// by a few tags at the image's edge gives a pose several times noisier than a near, whole
+/// board: a solve that takes every `T_camera_target` as equally good lets such views pull the
+/// answer, or calls them outliers.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewSigma {
+    /// Rotation, degrees (the root of the covariance's rotation trace).
+    pub rotation_deg: f64,
+    /// Translation of the target origin in the camera frame, mm.
+    pub translation_mm: f64,
+}
+
+impl ViewSigma {
+    /// Both figures finite and positive.
+    pub fn is_valid(&self) -> bool {
+        [self.rotation_deg, self.translation_mm]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0)
+    }
 }
 
 impl PosePair {
@@ -90,6 +120,7 @@ impl PosePair {
             camera_from_target,
             weight: 1.0,
             id: None,
+            view_sigma: None,
         }
     }
 }

@@ -119,16 +119,18 @@ pub fn residuals(data: &AxbyData, solution: &Axby, noise: &NoiseModel) -> Residu
     let mut rotation_deg = Vec::with_capacity(data.len());
     let mut translation_mm = Vec::with_capacity(data.len());
     let mut normalised = Vec::with_capacity(data.len());
-    for (a, b) in data.a.iter().zip(&data.b) {
+    for ((a, b), weight) in data.a.iter().zip(&data.b).zip(&data.weights) {
         let predicted = solution.x * b * solution.y;
         let rotation = predicted.rotation.angle_to(&a.rotation);
         let translation = (predicted.translation.vector - a.translation.vector).norm();
         rotation_deg.push(rotation.to_degrees());
         translation_mm.push(translation * 1e3);
+        // A sample of weight w has the noise model's variance over w.
         normalised.push(
-            ((rotation / noise.rotation_sigma_rad).powi(2)
-                + (translation / noise.translation_sigma_m).powi(2))
-            .sqrt(),
+            weight.sqrt()
+                * ((rotation / noise.rotation_sigma_rad).powi(2)
+                    + (translation / noise.translation_sigma_m).powi(2))
+                .sqrt(),
         );
     }
     Residuals {

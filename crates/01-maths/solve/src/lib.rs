@@ -39,6 +39,7 @@ pub mod refine;
 pub mod reprojection;
 mod robust;
 pub mod verdict;
+mod view_weights;
 
 use handeye_core::geometry::Pose;
 use handeye_core::notice::{Notice, NoticeKind};
@@ -57,6 +58,7 @@ pub use reprojection::{
     refine_reprojection, reprojection_errors, ArmOffsetsFree, Corner, Frame, RefinedOffset,
     ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
+pub use view_weights::view_weighted;
 
 /// The `A = X·B·Y` form of a data set, shared by both setups.
 #[derive(Debug, Clone, PartialEq)]
@@ -174,6 +176,7 @@ pub fn solve(
     options: &SolveOptions,
 ) -> Result<Calibration, SolveError> {
     validate(pairs, options)?;
+    let pairs = &*options.weighted(pairs);
     if options.check_conventions {
         // Units before anything else: a solve of millimetres as metres "succeeds" with advice
         // about pose variety.
@@ -383,6 +386,8 @@ pub fn predict_left_out(
         check_conventions: false,
         ..options.clone()
     };
+    // The weights of the whole set, as `full` was solved with.
+    let pairs = &*options.weighted(pairs);
     let base_from_flange = &pairs[left_out].base_from_flange;
     if options.method == Method::Refined {
         let used: Vec<PosePair> = (0..pairs.len())

@@ -298,6 +298,9 @@ pub struct SolverChoice {
     pub robust: RobustLoss,
     /// Leave outliers out of the final fit (`false`: only flag them).
     pub drop_outliers: bool,
+    /// Weigh each sample by its view's precision (`false`: every view alike, as before samples
+    /// recorded it).
+    pub weigh_views: bool,
     /// Start the iterative method from the closed form.
     pub warm_start: bool,
 }
@@ -312,6 +315,7 @@ impl Default for SolverChoice {
             estimate_noise: true,
             robust: options.robust,
             drop_outliers: options.drop_outliers,
+            weigh_views: options.weigh_views,
             warm_start: options.iterative.warm_start,
         }
     }
@@ -333,6 +337,7 @@ impl SolverChoice {
             estimate_noise,
             robust: self.robust,
             drop_outliers: self.drop_outliers,
+            weigh_views: self.weigh_views,
             ..SolveOptions::default()
         };
         options.iterative.warm_start = self.warm_start;
@@ -359,6 +364,10 @@ pub struct SolveOptions {
     /// inliers; a clean data set keeps every sample and gives the plain fit. `false`: one fit of
     /// every sample, outliers only flagged.
     pub drop_outliers: bool,
+    /// Weigh each sample by how precisely its view fixed its board pose, relative to the
+    /// typical view ([`view_weighted`](crate::view_weighted); default). `false`: every view
+    /// alike, each sample at its own `weight` only.
+    pub weigh_views: bool,
     /// Outlier threshold: a sample is flagged when its normalised residual exceeds
     /// `median + outlier_mad_factor · 1.4826 · MAD` and [`SolveOptions::outlier_floor_sigma`].
     pub outlier_mad_factor: f64,
@@ -385,6 +394,7 @@ impl Default for SolveOptions {
             estimate_noise: EstimateNoise::BOTH,
             robust: RobustLoss::None,
             drop_outliers: true,
+            weigh_views: true,
             outlier_mad_factor: 5.0,
             // sqrt of the 99.9 % quantile of chi-square with 6 dof (22.46).
             outlier_floor_sigma: 4.74,

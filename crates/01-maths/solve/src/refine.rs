@@ -315,14 +315,15 @@ impl NormalEquations for Fit<'_> {
     }
 }
 
-/// Whitened residual norm of each sample (sigmas, 6 dof), ignoring weights.
+/// Whitened residual norm of each sample (sigmas, 6 dof), its weight's variance included.
 fn whitened_norms(data: &AxbyData, s: &Axby, noise: &NoiseModel) -> Vec<f64> {
     (0..data.len())
         .map(|i| {
             let (r, t, _) = raw_residual(s, &data.a[i], &data.b[i]);
-            ((r / noise.rotation_sigma_rad).norm_squared()
-                + (t / noise.translation_sigma_m).norm_squared())
-            .sqrt()
+            data.weights[i].sqrt()
+                * ((r / noise.rotation_sigma_rad).norm_squared()
+                    + (t / noise.translation_sigma_m).norm_squared())
+                .sqrt()
         })
         .collect()
 }
@@ -389,10 +390,10 @@ pub(super) fn groups_of(normal: &Normal, scale: &[f64]) -> Option<[(f64, f64); 2
 }
 
 /// Whitened residual norm (sigmas, 6 dof) of every sample of `data` at `solution`, the fit of
-/// the samples with `in_fit`: a sample in the fit is whitened by the noise alone, one left out
-/// by the noise plus the uncertainty of its prediction, `I + J_i·N⁻¹·J_iᵀ` (whitened, `N` the
-/// information of the fitted samples), so a sample is tested for what a fit without it can
-/// predict. Weights scale the fit's information, not a sample's own test. `None` when `N` is
+/// the samples with `in_fit`: a sample in the fit is whitened by its noise alone (the noise
+/// model's variance over its weight), one left out by its noise plus the uncertainty of its
+/// prediction, `I/w_i + J_i·N⁻¹·J_iᵀ` (whitened, `N` the weighted information of the fitted
+/// samples), so a sample is tested for what a fit without it can predict. `None` when `N` is
 /// singular.
 pub(super) fn test_norms(
     data: &AxbyData,
@@ -416,10 +417,13 @@ pub(super) fn test_norms(
         rows.iter()
             .enumerate()
             .map(|(i, (e, ji))| {
+                // A sample of weight w has the noise model's variance over w.
+                let weight = data.weights[i];
                 if in_fit[i] {
-                    return e.norm();
+                    return e.norm() * weight.sqrt();
                 }
-                let spread = SMatrix::<f64, 6, 6>::identity() + ji * inverse * ji.transpose();
+                let spread =
+                    SMatrix::<f64, 6, 6>::identity() / weight + ji * inverse * ji.transpose();
                 spread
                     .cholesky()
                     .map_or(e.norm(), |c| e.dot(&c.solve(e)).max(0.0).sqrt())

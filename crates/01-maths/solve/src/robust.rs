@@ -84,12 +84,20 @@ fn consensus_inliers(
     let (_, start) = best?;
     let r = diagnostics::residuals(&data, &start, &options.noise);
     // Robust per-group scales of this start, so the test does not depend on the starting noise.
-    let scale_r = (median(&r.rotation_deg) / CHI3_MEDIAN).max(1e-9);
-    let scale_t = (median(&r.translation_mm) / CHI3_MEDIAN).max(1e-9);
-    let normalised: Vec<f64> = r
-        .rotation_deg
+    // Each residual at its sample's weight (a weight w is the noise model's variance over w).
+    let scaled = |values: &[f64]| -> Vec<f64> {
+        values
+            .iter()
+            .zip(&data.weights)
+            .map(|(v, w)| v * w.sqrt())
+            .collect()
+    };
+    let (rotation, translation) = (scaled(&r.rotation_deg), scaled(&r.translation_mm));
+    let scale_r = (median(&rotation) / CHI3_MEDIAN).max(1e-9);
+    let scale_t = (median(&translation) / CHI3_MEDIAN).max(1e-9);
+    let normalised: Vec<f64> = rotation
         .iter()
-        .zip(&r.translation_mm)
+        .zip(&translation)
         .map(|(a, t)| ((a / scale_r).powi(2) + (t / scale_t).powi(2)).sqrt())
         .collect();
     let flagged = diagnostics::flag_outliers(

@@ -248,9 +248,10 @@ impl Default for Accuracy {
 pub struct HeldOut {
     /// Samples held out and summarised.
     pub poses: usize,
-    /// RMS distance between predicted and measured target origin (camera frame), mm.
+    /// RMS distance between predicted and measured target origin (camera frame), mm, each
+    /// sample at its weight (its view's precision: `solve::view_weighted`).
     pub translation_rms_mm: f64,
-    /// RMS angle between predicted and measured rotation, degrees.
+    /// RMS angle between predicted and measured rotation, degrees, weighted alike.
     pub rotation_rms_deg: f64,
     /// Median camera-to-target distance of the samples, mm (where the error is measured).
     pub working_distance_mm: f64,

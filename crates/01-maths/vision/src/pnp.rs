@@ -23,6 +23,7 @@ use super::TargetError;
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::homography::{homography, pose_from_homography};
 use handeye_core::geometry::Pose;
+use handeye_core::setup::ViewSigma;
 
 /// Ratio of best to second-best RMS above which a lone tag's pose counts as ambiguous.
 pub const AMBIGUITY_WARN_RATIO: f64 = 0.6;
@@ -48,6 +49,17 @@ pub struct BoardPose {
 }
 
 impl BoardPose {
+    /// How precisely the view fixed the pose: the root of the rotation and of the translation
+    /// trace of [`BoardPose::covariance`]; `None` when the view does not fix the pose.
+    pub fn view_sigma(&self) -> Option<ViewSigma> {
+        let c = &self.covariance;
+        let sigma = ViewSigma {
+            rotation_deg: c.fixed_view::<3, 3>(0, 0).trace().sqrt().to_degrees(),
+            translation_mm: c.fixed_view::<3, 3>(3, 3).trace().sqrt() * 1e3,
+        };
+        sigma.is_valid().then_some(sigma)
+    }
+
     /// True for a lone tag whose two planar solutions fit almost equally well.
     pub fn is_ambiguous(&self) -> bool {
         self.ambiguity.is_some_and(|r| r > AMBIGUITY_WARN_RATIO)

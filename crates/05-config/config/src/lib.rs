@@ -137,6 +137,7 @@ impl SolverConfig {
             translation_sigma_mm: self.translation_sigma_mm,
             estimate_noise: self.estimate_noise,
             drop_outliers: self.drop_outliers,
+            weigh_views: self.weigh_views,
             ..SolverChoice::default()
         }
         .options()

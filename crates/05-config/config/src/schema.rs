@@ -465,6 +465,11 @@ pub struct SolverConfig {
     /// data set keeps every sample. `false`: fit every sample, only flag outliers.
     #[serde(default = "yes")]
     pub drop_outliers: bool,
+    /// Weigh each sample by how precisely its view fixed its board pose (default): a far or
+    /// partly seen board counts for less instead of standing out as an outlier. `false`: every
+    /// view alike (the behaviour before sessions recorded each view's precision).
+    #[serde(default = "yes")]
+    pub weigh_views: bool,
     /// `reprojection` (default: refine over every detected corner when frames have corners) or
     /// `pose` (the pose-space answer only).
     #[serde(default)]
@@ -579,6 +584,7 @@ impl Default for SolverConfig {
             rotation_sigma_deg: None,
             translation_sigma_mm: None,
             drop_outliers: true,
+            weigh_views: true,
             space: SolveSpace::default(),
             pixel_sigma_px: default_pixel_sigma_px(),
             robot_corrections: true,

@@ -7,6 +7,8 @@
 //!     T_camera_target: {translation: [..], rotation_vector: [..]}
 //!     id: pose-03             # optional; text (quote a number: "7"), unique in the file
 //!     weight: 1.0             # optional, > 0
+//!     view_sigma: {rotation_deg: .., translation_mm: ..}  # optional, written by
+//!                             # a session: how precisely the view fixed T_camera_target
 //! ```
 //!
 //! Poses use the YAML pose form of `geometry::yaml` (metres, radians). Unknown keys are refused so
@@ -20,7 +22,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::PoseYaml;
-use handeye_core::setup::{PosePair, Setup};
+use handeye_core::setup::{PosePair, Setup, ViewSigma};
 
 pub use handeye_core::yaml_file::FileError;
 use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml, SchemaVersion};
@@ -47,6 +49,10 @@ pub struct SampleYaml {
     /// The target's pose in the camera.
     #[serde(rename = "T_camera_target")]
     pub camera_from_target: PoseYaml,
+    /// How precisely the view fixed `T_camera_target` (the 1-sigma of its board pose), when the
+    /// board pose estimate gave it: the solve weights the sample by it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view_sigma: Option<ViewSigma>,
 }
 
 /// Reads a sample id: a string (or null); a number, boolean, list or mapping is refused with a
@@ -148,6 +154,16 @@ impl Dataset {
                         problem: format!("weight {weight} must be a positive finite number"),
                     });
                 }
+                if let Some(sigma) = s.view_sigma.filter(|v| !v.is_valid()) {
+                    return Err(FileError::Value {
+                        path: path.to_path_buf(),
+                        yaml_path: format!("samples[{i}].view_sigma"),
+                        problem: format!(
+                            "{}° and {} mm: both must be positive finite numbers",
+                            sigma.rotation_deg, sigma.translation_mm
+                        ),
+                    });
+                }
                 Ok(PosePair {
                     base_from_flange: s
                         .base_from_flange
@@ -159,6 +175,7 @@ impl Dataset {
                         .map_err(pose_error)?,
                     weight,
                     id: s.id.clone(),
+                    view_sigma: s.view_sigma,
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -181,6 +198,7 @@ impl Dataset {
                     weight: (p.weight != 1.0).then_some(p.weight),
                     base_from_flange: PoseYaml::from_pose(&p.base_from_flange),
                     camera_from_target: PoseYaml::from_pose(&p.camera_from_target),
+                    view_sigma: p.view_sigma,
                 })
                 .collect(),
         }
@@ -354,6 +372,10 @@ mod tests {
                     camera_from_target: pose(&mut rng),
                     weight: if rng.random_bool(0.3) { 2.5 } else { 1.0 },
                     id: rng.random_bool(0.7).then(|| format!("pose-{key:03}")),
+                    view_sigma: rng.random_bool(0.5).then(|| ViewSigma {
+                        rotation_deg: rng.random_range(0.001..0.1),
+                        translation_mm: rng.random_range(0.01..1.0),
+                    }),
                 };
                 log.insert(key, pair.clone(), &log_path).unwrap();
                 by_key.insert(key, pair);
@@ -394,6 +416,10 @@ mod tests {
                     camera_from_target: pose(-(k as f64)),
                     weight: if k == 1 { 2.5 } else { 1.0 },
                     id: (k == 2).then(|| "last".to_string()),
+                    view_sigma: (k == 0).then_some(ViewSigma {
+                        rotation_deg: 0.0125,
+                        translation_mm: 0.375,
+                    }),
                 })
                 .collect(),
         };
@@ -415,6 +441,7 @@ mod tests {
             );
             assert_eq!(a.weight, b.weight);
             assert_eq!(a.id, b.id);
+            assert_eq!(a.view_sigma, b.view_sigma);
         }
     }
 }

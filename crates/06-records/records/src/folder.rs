@@ -36,7 +36,7 @@ use handeye_core::atomic_file::{
 };
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::notice::Notice;
-use handeye_core::setup::{CornerObservation, PosePair, Setup};
+use handeye_core::setup::{CornerObservation, PosePair, Setup, ViewSigma};
 use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::{Joints, MAX_JOINTS};
 
@@ -169,6 +169,10 @@ pub struct PoseVisit {
     /// Board reprojection RMS, px.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reprojection_rms_px: Option<f64>,
+    /// How precisely the view fixes the board pose (the 1-sigma of its board pose); absent in
+    /// records written before it, whose samples then weigh alike.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view_sigma: Option<ViewSigma>,
     /// Tags used for the board pose.
     #[serde(default)]
     pub tags: usize,
@@ -624,6 +628,7 @@ impl PoseVisit {
         let camera_from_target = self.camera_from_target?;
         Some(PosePair {
             id: Some(self.sample_id()),
+            view_sigma: self.view_sigma,
             ..PosePair::new(self.base_from_flange, camera_from_target)
         })
     }
@@ -637,6 +642,7 @@ impl PoseVisit {
             frame,
             camera_from_target: None,
             reprojection_rms_px: None,
+            view_sigma: None,
             tags: 0,
             corners_px: Vec::new(),
             rejected: None,

@@ -664,9 +664,11 @@ fn solve_from_scratch(
         if let Ok(pose) =
             handeye_vision::pnp::estimate_pose_from_points(&camera, &correspondences, tags.max(2))
         {
-            let mut pair = PosePair::new(frame.base_from_flange, pose.camera_from_target);
-            pair.id = Some(id.clone());
-            pairs.push(pair);
+            pairs.push(PosePair {
+                id: Some(id.clone()),
+                view_sigma: pose.view_sigma(),
+                ..PosePair::new(frame.base_from_flange, pose.camera_from_target)
+            });
         }
     }
     let pose_space =

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cell::run::{self, RunError, RunObserver, RunRequest, Strategy};
 use handeye_config::CellConfig;
-use handeye_core::geometry::Pose;
+use handeye_core::geometry::{weighted_rms, Pose};
 use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
 use handeye_plan::GenerateSpec;
@@ -34,6 +34,18 @@ pub struct PredictionError {
     pub rotation_deg: f64,
     /// Distance between predicted and measured target origin (camera frame), mm.
     pub translation_mm: f64,
+    /// Its weight in the RMS: its view's precision relative to the typical view's
+    /// (`solve::view_weighted`), 1 when the sample does not record it.
+    #[serde(default = "unit_weight", skip_serializing_if = "is_unit_weight")]
+    pub weight: f64,
+}
+
+fn unit_weight() -> f64 {
+    1.0
+}
+
+fn is_unit_weight(weight: &f64) -> bool {
+    *weight == 1.0
 }
 
 /// Summary of the prediction errors.
@@ -41,13 +53,13 @@ pub struct PredictionError {
 pub struct ErrorSummary {
     /// Poses compared.
     pub poses: usize,
-    /// RMS rotation error, degrees.
+    /// RMS rotation error, degrees (each pose at its weight).
     pub rotation_rms_deg: f64,
     /// Median rotation error, degrees.
     pub rotation_median_deg: f64,
     /// Largest rotation error, degrees.
     pub rotation_max_deg: f64,
-    /// RMS translation error at the target, mm.
+    /// RMS translation error at the target, mm (each pose at its weight).
     pub translation_rms_mm: f64,
     /// Median translation error at the target, mm.
     pub translation_median_mm: f64,
@@ -115,11 +127,12 @@ pub enum VerifyError {
 }
 
 fn summarise(errors: &[PredictionError]) -> ErrorSummary {
+    let weights: Vec<f64> = errors.iter().map(|e| e.weight).collect();
     let stats = |values: Vec<f64>| -> (f64, f64, f64) {
         if values.is_empty() {
             return (f64::NAN, f64::NAN, f64::NAN);
         }
-        let rms = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
+        let rms = weighted_rms(values.iter().copied().zip(weights.iter().copied()));
         let mut sorted = values.clone();
         sorted.sort_by(f64::total_cmp);
         let mid = sorted.len() / 2;
@@ -143,18 +156,17 @@ fn summarise(errors: &[PredictionError]) -> ErrorSummary {
     }
 }
 
-/// The error of a predicted against a measured `T_camera_target`.
-pub fn prediction_error(
-    index: usize,
-    id: Option<String>,
-    predicted: &Pose,
-    measured: &Pose,
-) -> PredictionError {
+/// The error of a predicted against the measured `T_camera_target` of sample `index` of
+/// `pairs`, which are weighted by their views' precision (`solve::view_weighted`).
+fn prediction_error(index: usize, pairs: &[PosePair], predicted: &Pose) -> PredictionError {
+    let sample = &pairs[index];
+    let measured = &sample.camera_from_target;
     PredictionError {
         index,
-        id,
+        id: sample.id.clone(),
         rotation_deg: predicted.rotation.angle_to(&measured.rotation).to_degrees(),
         translation_mm: (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
+        weight: sample.weight,
     }
 }
 
@@ -165,12 +177,16 @@ pub fn compare(
     target_mount: &Pose,
     pairs: &[PosePair],
 ) -> Verification {
-    let poses: Vec<PredictionError> = pairs
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let predicted = setup::predict(setup, camera_mount, target_mount, &p.base_from_flange);
-            prediction_error(i, p.id.clone(), &predicted, &p.camera_from_target)
+    let weighted = solve::view_weighted(pairs);
+    let poses: Vec<PredictionError> = (0..pairs.len())
+        .map(|i| {
+            let predicted = setup::predict(
+                setup,
+                camera_mount,
+                target_mount,
+                &pairs[i].base_from_flange,
+            );
+            prediction_error(i, &weighted, &predicted)
         })
         .collect();
     Verification {
@@ -203,12 +219,10 @@ pub fn leave_one_out(
             }
             refit @ verdict::FoldFailure::Refit { .. } => VerifyError::Plan(refit.to_string()),
         })?;
+    let weighted = options.weighted(pairs);
     let poses: Vec<PredictionError> = predictions
         .iter()
-        .map(|(left_out, predicted)| {
-            let p = &pairs[*left_out];
-            prediction_error(*left_out, p.id.clone(), predicted, &p.camera_from_target)
-        })
+        .map(|(left_out, predicted)| prediction_error(*left_out, &weighted, predicted))
         .collect();
     Ok(Verification {
         kind: "leave-one-out".into(),
@@ -336,11 +350,16 @@ impl Verification {
             ),
         };
         let line = format!(
-            "verdict: {} — {} error {:.2} mm, {:.3}° (RMS over {} poses) against the {} mm, {}° asked for{advice}{flagged}",
+            "verdict: {} — {} error {:.2} mm, {:.3}° ({}RMS over {} poses) against the {} mm, {}° asked for{advice}{flagged}",
             level.word(),
             self.kind,
             s.translation_rms_mm,
             s.rotation_rms_deg,
+            if self.poses.iter().any(|p| p.weight != 1.0) {
+                "weighted "
+            } else {
+                ""
+            },
             s.poses,
             accuracy.translation_mm,
             accuracy.rotation_deg,
@@ -376,9 +395,11 @@ impl Verification {
                 p.rotation_deg,
                 p.translation_mm,
                 if self.outliers.contains(&p.index) {
-                    "  outlier (not in the RMS)"
+                    "  outlier (not in the RMS)".to_string()
+                } else if p.weight != 1.0 {
+                    format!("  weight {:.2}", p.weight)
                 } else {
-                    ""
+                    String::new()
                 }
             );
         }

@@ -618,6 +618,7 @@ mod tests {
                     frame: format!("frames/pose_{i:04}.png").into(),
                     camera_from_target: Some(seen_at),
                     reprojection_rms_px: Some(0.1),
+                    view_sigma: None,
                     tags: 36,
                     corners_px: board
                         .points()

@@ -94,6 +94,8 @@ fn options(
         estimate_noise: true,
         robust,
         drop_outliers: !keep_outliers,
+        // Samples given as arrays carry no view precision: every view weighs alike.
+        weigh_views: true,
         warm_start,
     }
     .options())
@@ -189,6 +191,7 @@ pub(crate) fn calibrate(
             camera_from_target,
             weight: weights.as_ref().map_or(1.0, |w| w[i]),
             id: ids.as_ref().map(|ids| ids[i].clone()),
+            view_sigma: None,
         })
         .collect();
     solve_pairs(py, setup, pairs, options, accuracy, units)
@@ -255,6 +258,7 @@ pub(crate) fn calibrate_rt(
             camera_from_target,
             weight: 1.0,
             id: None,
+            view_sigma: None,
         })
         .collect();
     solve_pairs(

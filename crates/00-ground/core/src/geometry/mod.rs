@@ -191,6 +191,18 @@ pub fn rms(values: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+/// Weighted root mean square of `(value, weight)`: `sqrt(Σ w·v² / Σ w)`, each value at its
+/// weight's precision (a weight is an inverse variance relative to the typical value's); the
+/// plain [`rms`] when every weight is 1. `NaN` for no value.
+pub fn weighted_rms(values: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (sum, total) = values.fold((0.0, 0.0), |(s, t), (v, w)| (s + w * v * v, t + w));
+    if total > 0.0 {
+        (sum / total).sqrt()
+    } else {
+        f64::NAN
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

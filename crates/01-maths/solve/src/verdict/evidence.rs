@@ -10,7 +10,7 @@ use crate::{
     self as solve, diagnostics, rotation_diversity, Calibration, NoiseModel, SolveError,
     SolveOptions,
 };
-use handeye_core::geometry::{rms, Pose};
+use handeye_core::geometry::{weighted_rms, Pose};
 use handeye_core::notice::{Notice, NoticeKind, Severity};
 use handeye_core::setup::{PosePair, Setup};
 
@@ -74,7 +74,10 @@ pub fn held_out_refitting(
             }
             FoldFailure::Refit { .. } => f.to_string(),
         })?;
-    let errors: Vec<(f64, f64)> = predictions
+    // A held-out error is the calibration's error plus the left-out view's own: a view noisier
+    // than the typical one counts at its precision ([`solve::view_weighted`]).
+    let weighted = options.weighted(pairs);
+    let errors: Vec<(f64, f64, f64)> = predictions
         .iter()
         .filter(|(left_out, _)| !full.outliers.contains(left_out))
         .map(|(left_out, predicted)| {
@@ -82,6 +85,7 @@ pub fn held_out_refitting(
             (
                 (predicted.translation.vector - measured.translation.vector).norm() * 1e3,
                 predicted.rotation.angle_to(&measured.rotation).to_degrees(),
+                weighted[*left_out].weight,
             )
         })
         .collect();
@@ -90,8 +94,8 @@ pub fn held_out_refitting(
     }
     Ok(HeldOut {
         poses: errors.len(),
-        translation_rms_mm: rms(errors.iter().map(|e| e.0)),
-        rotation_rms_deg: rms(errors.iter().map(|e| e.1)),
+        translation_rms_mm: weighted_rms(errors.iter().map(|e| (e.0, e.2))),
+        rotation_rms_deg: weighted_rms(errors.iter().map(|e| (e.1, e.2))),
         working_distance_mm: working_distance_mm(pairs),
     })
 }

@@ -334,6 +334,7 @@ pub(crate) fn measure(
                 Ok(board_pose) => {
                     visit.tags = board_pose.tags_used;
                     visit.reprojection_rms_px = Some(board_pose.rms_px);
+                    visit.view_sigma = board_pose.view_sigma();
                     if board_pose.rms_px > max_rms {
                         visit.rejected = Some(format!(
                             "board reprojection RMS {:.2} px exceeds {:.2} px",

@@ -383,9 +383,11 @@ pub fn import_visp(folder: &Path, options: &VispOptions) -> Result<VispImport, I
             .and_then(|d| estimate_board_pose(&options.board, &camera, &d));
         let frame = match pose {
             Ok(p) => {
-                let mut pair = PosePair::new(base_from_flange, p.camera_from_target);
-                pair.id = Some(format!("visp-{}", files.number));
-                pairs.push(pair);
+                pairs.push(PosePair {
+                    id: Some(format!("visp-{}", files.number)),
+                    view_sigma: p.view_sigma(),
+                    ..PosePair::new(base_from_flange, p.camera_from_target)
+                });
                 VispFrame {
                     files,
                     base_from_flange,
