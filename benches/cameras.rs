@@ -85,6 +85,7 @@ fn problem(poses: usize) -> Problem {
                 camera: c,
                 pose: i,
                 corners,
+                weight: 1.0,
             });
         }
     }

@@ -187,6 +187,7 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                     camera: c,
                     pose: i,
                     corners,
+                    weight: 1.0,
                 });
             }
         }

@@ -58,7 +58,7 @@ pub use reprojection::{
     refine_reprojection, reprojection_errors, ArmOffsetsFree, Corner, Frame, RefinedOffset,
     ReprojectionCalibration, ReprojectionErrors, ReprojectionOptions, RobotPrior,
 };
-pub use view_weights::view_weighted;
+pub use view_weights::{relative_weight, view_weighted};
 
 /// The `A = X·B·Y` form of a data set, shared by both setups.
 #[derive(Debug, Clone, PartialEq)]

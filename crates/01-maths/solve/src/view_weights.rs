@@ -56,13 +56,24 @@ pub fn view_weighted(pairs: &[PosePair]) -> Cow<'_, [PosePair]> {
             .map(|(pair, (r, t))| {
                 let ratio = 0.5 * (r / typical_rotation + t / typical_translation);
                 PosePair {
-                    weight: pair.weight * ratio.recip().min(1.0),
+                    weight: pair.weight * relative_weight(ratio),
                     view_sigma: None,
                     ..pair.clone()
                 }
             })
             .collect(),
     )
+}
+
+/// The weight of a measurement whose variance is `ratio` times the typical one's:
+/// `min(1, 1/ratio)`, the rule of [`view_weighted`] (a noisier one counts for less, a better one
+/// no more than the typical one). 1 for a ratio that is not a positive number.
+pub fn relative_weight(ratio: f64) -> f64 {
+    if ratio.is_finite() && ratio > 0.0 {
+        ratio.recip().min(1.0)
+    } else {
+        1.0
+    }
 }
 
 #[cfg(test)]

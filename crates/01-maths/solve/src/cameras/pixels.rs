@@ -37,6 +37,9 @@ pub struct CamerasFrame {
     pub pose: usize,
     /// Each corner: its point on the board (target frame, m) and where it was seen (px).
     pub corners: Vec<(Point3<f64>, Point2<f64>)>,
+    /// Its corners' inverse variance relative to the camera's corner noise (1: a typical
+    /// frame's; a frame of small, far or oblique tags locates its corners less precisely).
+    pub weight: f64,
 }
 
 /// Residual (2) and its Jacobian (2 x 18: the camera's mount, its board, then the flange pose) of
@@ -158,7 +161,7 @@ impl Problem<'_> {
             let (mount, board, flange, bi) = self.chain(state, frame);
             let setup = self.data.cameras[frame.camera].setup;
             let model = &self.models[frame.camera];
-            let scale = 1.0 / sigma[frame.camera];
+            let scale = frame.weight.sqrt() / sigma[frame.camera];
             let mut local = SMatrix::<f64, 18, 18>::zeros();
             let mut gradient = SMatrix::<f64, 18, 1>::zeros();
             for (point, pixel) in &frame.corners {
@@ -212,7 +215,7 @@ impl Problem<'_> {
         (h, jtr, cost)
     }
 
-    /// Per camera: (corners, Σ squared pixel residuals) at `state`.
+    /// Per camera: (corners, Σ weighted squared pixel residuals) at `state`.
     fn squares(&self, state: &State) -> Vec<(usize, f64)> {
         let mut out = vec![(0usize, 0.0); self.data.cameras.len()];
         for frame in self.frames {
@@ -223,7 +226,7 @@ impl Problem<'_> {
                 let in_camera = mount.inverse_transform_point(&(b * (board * point)));
                 let e = model.project_clamped(&in_camera) - pixel;
                 out[frame.camera].0 += 1;
-                out[frame.camera].1 += e.norm_squared();
+                out[frame.camera].1 += frame.weight * e.norm_squared();
             }
         }
         out
@@ -400,6 +403,8 @@ mod tests {
                         (Point3::new(0.03 * k, 0.02 * (k - 2.0), 0.0), pixel)
                     })
                     .collect(),
+                // A frame of less precise corners among them.
+                weight: if pose == 1 { 0.25 } else { 1.0 },
             })
             .collect();
         let models = [model, model];
@@ -431,7 +436,7 @@ mod tests {
             let (mount, board, flange, bi) = problem.chain(&state, frame);
             let setup = data.cameras[frame.camera].setup;
             for (point, pixel) in &frame.corners {
-                let scale = 1.0 / sigma[frame.camera];
+                let scale = frame.weight.sqrt() / sigma[frame.camera];
                 let (r, j) = corner_rows(
                     &models[frame.camera],
                     setup,

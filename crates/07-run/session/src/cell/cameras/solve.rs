@@ -252,6 +252,10 @@ pub fn load_joint_problem(
             .collect();
         held_out.push(verdict::held_out(setup, &judged, &options, &alone));
         models.push(lens_used);
+        // Each frame's corners at their precision: a frame of small, far or oblique tags fits
+        // its corners worse than the camera's typical frame (its board RMS) and counts for less.
+        let board_rms: Vec<f64> = kept.iter().filter_map(|v| v.reprojection_rms_px).collect();
+        let typical_rms = handeye_solve::diagnostics::median(&board_rms);
         for visit in kept {
             if let Some(camera_from_target) = corrected_pose(visit) {
                 // Every camera records the same flange pose at a plan index; the reported pose
@@ -266,6 +270,9 @@ pub fn load_joint_problem(
                     camera: index,
                     pose: visit.plan_index,
                     corners: corners_of(visit),
+                    weight: visit.reprojection_rms_px.map_or(1.0, |rms| {
+                        handeye_solve::relative_weight((rms / typical_rms).powi(2))
+                    }),
                 });
             }
         }
