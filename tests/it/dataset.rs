@@ -98,6 +98,30 @@ fn every_malformed_input_names_file_path_and_problem() {
             ],
         ),
         (
+            text.replacen(
+                "  - id: pose-3\n",
+                "  - id: pose-3\n    view_sigma: {rotation_deg: -0.01, translation_mm: 0.2}\n",
+                1,
+            ),
+            vec![
+                "cell-samples.yaml",
+                "samples[3].view_sigma",
+                "-0.01° and 0.2 mm: both must be positive finite numbers",
+            ],
+        ),
+        (
+            text.replacen(
+                "  - id: pose-3\n",
+                "  - id: pose-3\n    view_sigma: {rotation_deg: 0.01}\n",
+                1,
+            ),
+            vec![
+                "cell-samples.yaml",
+                "samples[3]",
+                "missing field `translation_mm`",
+            ],
+        ),
+        (
             // Scale every quaternion component of sample 0's robot pose: norm far from 1.
             format!(
                 "{}quaternion: {{w: 0.5, x: 0.5, y: 0.5, z: 0.1}}\n{}",

@@ -193,6 +193,18 @@ const FIGURES: [&str; 4] = [
     "T_base_target translation",
 ];
 
+/// Adds `found`'s errors against `cell`'s truth to each figure's list.
+fn push_errors(lists: &mut [Vec<f64>], found: &Calibration, cell: &Cell) {
+    for (list, e) in lists.iter_mut().zip(errors(found, cell)) {
+        list.push(e);
+    }
+}
+
+/// The median over the seeds of each figure's errors.
+fn medians(errors: &[Vec<f64>]) -> [f64; 4] {
+    std::array::from_fn(|k| median(errors[k].clone()))
+}
+
 /// Median errors of the default and of the reference over the seeds, per figure.
 struct Comparison {
     default: [f64; 4],
@@ -261,19 +273,14 @@ fn compare_clean(noise: Noise, first_seed: u64) -> Comparison {
             &ml_options(NoiseModel::default()),
         )
         .unwrap();
-        for k in 0..4 {
-            default[k].push(errors(&found, &c)[k]);
-            reference[k].push(errors(&ml, &c)[k]);
-            fixed[k].push(errors(&old, &c)[k]);
-        }
+        push_errors(&mut default, &found, &c);
+        push_errors(&mut reference, &ml, &c);
+        push_errors(&mut fixed, &old, &c);
     }
     Comparison {
-        default: std::array::from_fn(|k| median(default[k].clone())),
-        reference: std::array::from_fn(|k| median(reference[k].clone())),
-        fixed: Some((
-            "fixed 0.2°/1 mm",
-            std::array::from_fn(|k| median(fixed[k].clone())),
-        )),
+        default: medians(&default),
+        reference: medians(&reference),
+        fixed: Some(("fixed 0.2°/1 mm", medians(&fixed))),
     }
 }
 
@@ -339,26 +346,15 @@ fn gross_outliers_are_left_out_named_and_the_answer_matches_ml_on_the_inliers() 
             ..SolveOptions::default()
         };
         let pulled = solve::solve(Setup::EyeInHand, &c.pairs, &every).unwrap();
-        for (list, e) in kept.iter_mut().zip(errors(&pulled, &c)) {
-            list.push(e);
-        }
-        for (k, (f, m)) in errors(&found, &c)
-            .into_iter()
-            .zip(errors(&ml, &c))
-            .enumerate()
-        {
-            default[k].push(f);
-            reference[k].push(m);
-        }
+        push_errors(&mut kept, &pulled, &c);
+        push_errors(&mut default, &found, &c);
+        push_errors(&mut reference, &ml, &c);
     }
     Comparison {
-        default: std::array::from_fn(|k| median(default[k].clone())),
-        reference: std::array::from_fn(|k| median(reference[k].clone())),
+        default: medians(&default),
+        reference: medians(&reference),
         // Fitting every sample (the previous default): pulled far off, for the note.
-        fixed: Some((
-            "every sample kept",
-            std::array::from_fn(|k| median(kept[k].clone())),
-        )),
+        fixed: Some(("every sample kept", medians(&kept))),
     }
     .assert_within("10 % gross outliers", 1.25);
 }
@@ -687,14 +683,8 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
             .collect();
         let ml =
             solve::solve(Setup::EyeInHand, &truth_weighted, &ml_options(base.model())).unwrap();
-        for (k, (f, m)) in errors(&found, &c)
-            .into_iter()
-            .zip(errors(&ml, &c))
-            .enumerate()
-        {
-            default[k].push(f);
-            reference[k].push(m);
-        }
+        push_errors(&mut default, &found, &c);
+        push_errors(&mut reference, &ml, &c);
         // The old form, one key away (config `solver: {weigh_views: false}`).
         let every_alike = SolveOptions {
             weigh_views: false,
@@ -702,9 +692,7 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
         };
         let alike = solve::solve(Setup::EyeInHand, &c.pairs, &every_alike).unwrap();
         unweighted_dropped += alike.dropped.len();
-        for (k, e) in errors(&alike, &c).into_iter().enumerate() {
-            every_view_alike[k].push(e);
-        }
+        push_errors(&mut every_view_alike, &alike, &c);
 
         // A wrong robot pose at a random view, whatever its precision.
         let wrong = rng.random_range(0..SAMPLES);
@@ -744,12 +732,9 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
         "the sets no longer hold views the unweighted rule drops: the test lost its class"
     );
     Comparison {
-        default: std::array::from_fn(|k| median(default[k].clone())),
-        reference: std::array::from_fn(|k| median(reference[k].clone())),
-        fixed: Some((
-            "every view alike",
-            std::array::from_fn(|k| median(every_view_alike[k].clone())),
-        )),
+        default: medians(&default),
+        reference: medians(&reference),
+        fixed: Some(("every view alike", medians(&every_view_alike))),
     }
     .assert_within("mixed precision", 1.25);
 }
