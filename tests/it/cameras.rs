@@ -886,7 +886,7 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
         // One figure for one session: the run's held-out check and verify's leave-one-out
         // weigh each view at its precision alike.
         let expected = format!(
-            "error {:.2} mm, {:.3}° (weighted RMS over {} poses)",
+            "error {:.2} mm, {:.3}° (RMS over {} poses)",
             held.translation_rms_mm, held.rotation_rms_deg, held.poses
         );
         assert!(

@@ -350,16 +350,11 @@ impl Verification {
             ),
         };
         let line = format!(
-            "verdict: {} — {} error {:.2} mm, {:.3}° ({}RMS over {} poses) against the {} mm, {}° asked for{advice}{flagged}",
+            "verdict: {} — {} error {:.2} mm, {:.3}° (RMS over {} poses) against the {} mm, {}° asked for{advice}{flagged}",
             level.word(),
             self.kind,
             s.translation_rms_mm,
             s.rotation_rms_deg,
-            if self.poses.iter().any(|p| p.weight != 1.0) {
-                "weighted "
-            } else {
-                ""
-            },
             s.poses,
             accuracy.translation_mm,
             accuracy.rotation_deg,
