@@ -71,6 +71,7 @@ fn problem(poses: usize) -> Problem {
                 camera: c,
                 pose: i,
                 camera_from_target: exact * noise,
+                weight: 1.0,
             });
             let corners = board
                 .points()

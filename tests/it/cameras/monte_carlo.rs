@@ -41,6 +41,7 @@ fn joint_solve_beats_each_camera_alone_and_chaining_over_seeds() {
                     camera: c,
                     pose: i,
                     camera_from_target: exact * jitter(&mut rng, sr, st),
+                    weight: 1.0,
                 });
             }
         }
@@ -182,6 +183,7 @@ fn joint_pixel_solve_beats_each_camera_alone_over_seeds() {
                     camera: c,
                     pose: i,
                     camera_from_target: camera_from_target * jitter(&mut rng, 0.001, 0.001),
+                    weight: 1.0,
                 });
                 frames.push(CamerasFrame {
                     camera: c,

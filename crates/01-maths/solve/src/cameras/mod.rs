@@ -59,6 +59,9 @@ pub struct CamerasObservation {
     pub pose: usize,
     /// `T_camera_target` as PnP reports it.
     pub camera_from_target: Pose,
+    /// Its inverse variance relative to the camera's noise model (1: a typical view; the
+    /// one-camera solve's view weight, `crate::view_weighted`).
+    pub weight: f64,
 }
 
 /// Everything the joint solve reads: the cameras, the robot poses (shared by every camera), the
@@ -357,7 +360,8 @@ fn normal_equations(
         let board = state.poses[bi / 6];
         let flange = &data.base_from_flange[o.pose];
         let nm = &noise[o.camera];
-        let r = residual(setup, nm, &mount, &board, flange, &o.camera_from_target);
+        let scale = o.weight.sqrt();
+        let r = scale * residual(setup, nm, &mount, &board, flange, &o.camera_from_target);
         let mut j = nalgebra::SMatrix::<f64, 6, 12>::zeros();
         for k in 0..12 {
             let mut delta = SVector::<f64, 6>::zeros();
@@ -379,7 +383,7 @@ fn normal_equations(
             };
             let plus = residual(setup, nm, &m_plus, &b_plus, flange, &o.camera_from_target);
             let minus = residual(setup, nm, &m_minus, &b_minus, flange, &o.camera_from_target);
-            j.set_column(k, &((plus - minus) / (2.0 * STEP)));
+            j.set_column(k, &((plus - minus) * (scale / (2.0 * STEP))));
         }
         let jtj_local = j.transpose() * j;
         let jtr_local = j.transpose() * r;
@@ -404,15 +408,16 @@ fn cost(data: &CamerasData, layout: &Layout, state: &State, noise: &[NoiseModel]
             let setup = data.cameras[o.camera].setup;
             let bi = layout.board_of(setup);
             let board = state.poses[bi / 6];
-            residual(
-                setup,
-                &noise[o.camera],
-                &state.poses[o.camera],
-                &board,
-                &data.base_from_flange[o.pose],
-                &o.camera_from_target,
-            )
-            .norm_squared()
+            o.weight
+                * residual(
+                    setup,
+                    &noise[o.camera],
+                    &state.poses[o.camera],
+                    &board,
+                    &data.base_from_flange[o.pose],
+                    &o.camera_from_target,
+                )
+                .norm_squared()
         })
         .sum()
 }
@@ -592,8 +597,22 @@ pub fn solve_cameras(
                 .into_iter()
                 .enumerate()
             {
-                let rot: f64 = per_pose.iter().map(|r| r.rotation_rad.powi(2)).sum();
-                let trans: f64 = per_pose.iter().map(|r| r.translation_m.powi(2)).sum();
+                // Each view at its weight, in the order `residual_figures` lists them.
+                let weights = data
+                    .observations
+                    .iter()
+                    .filter(|o| o.camera == c)
+                    .map(|o| o.weight);
+                let (rot, trans) =
+                    per_pose
+                        .iter()
+                        .zip(weights)
+                        .fold((0.0, 0.0), |(r, t), (p, w)| {
+                            (
+                                r + w * p.rotation_rad.powi(2),
+                                t + w * p.translation_m.powi(2),
+                            )
+                        });
                 let dof = (3.0 * per_pose.len() as f64 * redundancy).max(1.0);
                 noise[c] = NoiseModel {
                     rotation_sigma_rad: (rot / dof).sqrt().max(1e-7),

@@ -252,10 +252,7 @@ pub fn load_joint_problem(
             .collect();
         held_out.push(verdict::held_out(setup, &judged, &options, &alone));
         models.push(lens_used);
-        // Each frame's corners at their precision: a frame of small, far or oblique tags fits
-        // its corners worse than the camera's typical frame (its board RMS) and counts for less.
-        let board_rms: Vec<f64> = kept.iter().filter_map(|v| v.reprojection_rms_px).collect();
-        let typical_rms = handeye_solve::diagnostics::median(&board_rms);
+        let weights = ViewWeights::of(&visits, &pairs, &kept, &options);
         for visit in kept {
             if let Some(camera_from_target) = corrected_pose(visit) {
                 // Every camera records the same flange pose at a plan index; the reported pose
@@ -265,14 +262,13 @@ pub fn load_joint_problem(
                     camera: index,
                     pose: visit.plan_index,
                     camera_from_target,
+                    weight: weights.board_pose(visit),
                 });
                 frames.push(CamerasFrame {
                     camera: index,
                     pose: visit.plan_index,
                     corners: corners_of(visit),
-                    weight: visit.reprojection_rms_px.map_or(1.0, |rms| {
-                        handeye_solve::relative_weight((rms / typical_rms).powi(2))
-                    }),
+                    weight: weights.corners(visit),
                 });
             }
         }
@@ -504,6 +500,52 @@ fn solve_subset(
         ..CamerasOptions::default()
     };
     solve_cameras_pixels(data, &models, &frames, &pose_space, &options)
+}
+
+/// A camera's views at their precision in the joint solve.
+struct ViewWeights {
+    /// Each sample's board-pose weight by plan index, as the camera's own solve weighs it
+    /// (`SolveOptions::weighted`: its view's 1-sigma against the typical view's).
+    board_poses: std::collections::HashMap<usize, f64>,
+    /// The camera's typical board RMS over the views kept, px.
+    typical_rms_px: f64,
+}
+
+impl ViewWeights {
+    fn of(
+        visits: &[PoseVisit],
+        pairs: &[PosePair],
+        kept: &[&PoseVisit],
+        options: &handeye_solve::SolveOptions,
+    ) -> ViewWeights {
+        let board_rms: Vec<f64> = kept.iter().filter_map(|v| v.reprojection_rms_px).collect();
+        ViewWeights {
+            board_poses: visits
+                .iter()
+                .filter(|v| v.sample().is_some())
+                .zip(options.weighted(pairs).iter())
+                .map(|(visit, pair)| (visit.plan_index, pair.weight))
+                .collect(),
+            typical_rms_px: handeye_solve::diagnostics::median(&board_rms),
+        }
+    }
+
+    /// The weight of `visit`'s board pose in the pose-space solve.
+    fn board_pose(&self, visit: &PoseVisit) -> f64 {
+        self.board_poses
+            .get(&visit.plan_index)
+            .copied()
+            .unwrap_or(1.0)
+    }
+
+    /// The weight of `visit`'s corners in the pixel-space solve: a frame of small, far or
+    /// oblique tags fits its corners worse than the camera's typical frame (its board RMS) and
+    /// counts for less, by the rule of the board poses (`handeye_solve::relative_weight`).
+    fn corners(&self, visit: &PoseVisit) -> f64 {
+        visit.reprojection_rms_px.map_or(1.0, |rms| {
+            handeye_solve::relative_weight((rms / self.typical_rms_px).powi(2))
+        })
+    }
 }
 
 /// `result.yaml` from the joint answer; each camera's own answer is solved again by the same
