@@ -30,33 +30,42 @@ impl SolveOptions {
 }
 
 /// `pairs` with each sample's weight multiplied by its view's precision relative to the
-/// typical view's (the median over `pairs`): with the variance ratio
+/// typical view's (the median over the samples that record one): with the variance ratio
 /// `v = ½ (σ_rot² / median σ_rot² + σ_t² / median σ_t²)` of its [`ViewSigma`], the weight is
 /// multiplied by `min(1, 1/v)`. A view noisier than the typical one counts for less in the fit
 /// and in every outlier test; a view better than the typical one is not trusted beyond it (the
 /// robot's noise, the same at every pose, sets a floor its corners do not show). The weights
 /// are folded in and `view_sigma` cleared, so a subset or fold solved again keeps the weights of
-/// the whole set. `pairs` as given when any sample has no valid `view_sigma` (a dataset written
-/// by hand or before sessions recorded it).
+/// the whole set. A sample with no valid `view_sigma` (a dataset written by hand, a session
+/// recorded before it and resumed since) is taken as a typical view: its weight as given, as
+/// every sample's is with `weigh_views` off. `pairs` as given when none records one.
 pub fn view_weighted(pairs: &[PosePair]) -> Cow<'_, [PosePair]> {
-    let sigmas: Option<Vec<ViewSigma>> = pairs
+    let sigmas: Vec<Option<ViewSigma>> = pairs
         .iter()
         .map(|p| p.view_sigma.filter(ViewSigma::is_valid))
         .collect();
-    let Some(sigmas) = sigmas.filter(|s| !s.is_empty()) else {
+    let known: Vec<&ViewSigma> = sigmas.iter().flatten().collect();
+    if known.is_empty() {
         return Cow::Borrowed(pairs);
+    }
+    let typical = |figure: fn(&ViewSigma) -> f64| {
+        median(&known.iter().map(|s| figure(s).powi(2)).collect::<Vec<_>>())
     };
-    let rotation: Vec<f64> = sigmas.iter().map(|s| s.rotation_deg.powi(2)).collect();
-    let translation: Vec<f64> = sigmas.iter().map(|s| s.translation_mm.powi(2)).collect();
-    let (typical_rotation, typical_translation) = (median(&rotation), median(&translation));
+    let typical_rotation = typical(|s| s.rotation_deg);
+    let typical_translation = typical(|s| s.translation_mm);
     Cow::Owned(
         pairs
             .iter()
-            .zip(rotation.iter().zip(&translation))
-            .map(|(pair, (r, t))| {
-                let ratio = 0.5 * (r / typical_rotation + t / typical_translation);
+            .zip(&sigmas)
+            .map(|(pair, sigma)| {
+                let factor = sigma.map_or(1.0, |s| {
+                    relative_weight(
+                        0.5 * (s.rotation_deg.powi(2) / typical_rotation
+                            + s.translation_mm.powi(2) / typical_translation),
+                    )
+                });
                 PosePair {
-                    weight: pair.weight * relative_weight(ratio),
+                    weight: pair.weight * factor,
                     view_sigma: None,
                     ..pair.clone()
                 }
@@ -115,13 +124,21 @@ mod tests {
     }
 
     #[test]
-    fn a_set_with_a_sample_of_unknown_precision_is_left_as_given() {
-        let pairs = vec![pair(Some((0.01, 0.2)), 1.0), pair(None, 1.0)];
-        assert!(matches!(view_weighted(&pairs), Cow::Borrowed(_)));
-        let invalid = vec![
+    fn a_sample_of_unknown_precision_is_taken_as_a_typical_view() {
+        // A session recorded before `view_sigma` and resumed since: the old samples have none.
+        let pairs = vec![
             pair(Some((0.01, 0.2)), 1.0),
-            pair(Some((f64::NAN, 0.2)), 1.0),
+            pair(None, 1.0),
+            pair(Some((0.01, 0.2)), 1.0),
+            pair(Some((f64::NAN, 0.2)), 0.5),
+            // Twice the typical sigma: a quarter of the weight, though others record none.
+            pair(Some((0.02, 0.4)), 1.0),
         ];
-        assert!(matches!(view_weighted(&invalid), Cow::Borrowed(_)));
+        let weights: Vec<f64> = view_weighted(&pairs).iter().map(|p| p.weight).collect();
+        assert_eq!(weights[..4], [1.0, 1.0, 1.0, 0.5]);
+        assert!((weights[4] - 0.25).abs() < 1e-12, "{weights:?}");
+        // None recorded: the set as given.
+        let unknown = vec![pair(None, 1.0), pair(Some((0.0, 0.2)), 1.0)];
+        assert!(matches!(view_weighted(&unknown), Cow::Borrowed(_)));
     }
 }

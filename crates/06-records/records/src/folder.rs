@@ -144,6 +144,19 @@ fn joint_angles<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::E
     Ok(angles)
 }
 
+/// `view_sigma`: both figures finite and positive (a bad one would be taken as a typical view
+/// without a word).
+fn view_sigma<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<ViewSigma>, D::Error> {
+    let sigma = ViewSigma::deserialize(d)?;
+    if !sigma.is_valid() {
+        return Err(serde::de::Error::custom(format!(
+            "expected two positive figures (rotation_deg, translation_mm), got {} and {}",
+            sigma.rotation_deg, sigma.translation_mm
+        )));
+    }
+    Ok(Some(sigma))
+}
+
 /// What happened at one plan pose.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -170,8 +183,12 @@ pub struct PoseVisit {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reprojection_rms_px: Option<f64>,
     /// How precisely the view fixes the board pose (the 1-sigma of its board pose); absent in
-    /// records written before it, whose samples then weigh alike.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// records written before it, whose samples then count as typical views. Checked when read.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "view_sigma"
+    )]
     pub view_sigma: Option<ViewSigma>,
     /// Tags used for the board pose.
     #[serde(default)]
@@ -702,5 +719,41 @@ impl PoseVisit {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::yaml_file::parse_yaml;
+
+    const RECORD: &str = "plan_index: 3\nT_base_flange: {translation: [0.5, 0.0, 0.7], \
+        quaternion: {w: 1.0, x: 0.0, y: 0.0, z: 0.0}}\nframe: frames/003.png\n";
+
+    /// A pose record's `view_sigma` weighs its sample; a bad one must not pass for a typical
+    /// view without a word.
+    #[test]
+    fn a_pose_records_view_sigma_is_checked_when_read() {
+        let file = Path::new("session/poses/003.yaml");
+        let good = format!("{RECORD}view_sigma: {{rotation_deg: 0.01, translation_mm: 0.2}}\n");
+        let visit: PoseVisit = parse_yaml(&good, file).unwrap();
+        assert_eq!(visit.view_sigma.unwrap().translation_mm, 0.2);
+        let absent: PoseVisit = parse_yaml(RECORD, file).unwrap();
+        assert!(absent.view_sigma.is_none());
+        for bad in [
+            "{rotation_deg: 0.01, translation_mm: -0.2}",
+            "{rotation_deg: .nan, translation_mm: 0.2}",
+            "{rotation_deg: 0.0, translation_mm: 0.2}",
+            "{rotation_deg: 0.01}",
+        ] {
+            let text = format!("{RECORD}view_sigma: {bad}\n");
+            let error = parse_yaml::<PoseVisit>(&text, file)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                error.contains("session/poses/003.yaml") && error.contains("view_sigma"),
+                "{bad}: {error}"
+            );
+        }
     }
 }

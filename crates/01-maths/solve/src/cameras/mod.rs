@@ -179,6 +179,9 @@ pub struct PoseResidual {
     pub rotation_rad: f64,
     /// Translation residual, m.
     pub translation_m: f64,
+    /// The observation's weight ([`CamerasObservation::weight`]): its residual counts for this
+    /// much in the fit and in the camera's noise estimate.
+    pub weight: f64,
 }
 
 /// The joint answer.
@@ -516,6 +519,7 @@ fn residual_figures(data: &CamerasData, layout: &Layout, state: &State) -> Vec<V
             pose: o.pose,
             rotation_rad: r.fixed_rows::<3>(0).norm(),
             translation_m: r.fixed_rows::<3>(3).norm(),
+            weight: o.weight,
         });
     }
     per_camera
@@ -597,22 +601,12 @@ pub fn solve_cameras(
                 .into_iter()
                 .enumerate()
             {
-                // Each view at its weight, in the order `residual_figures` lists them.
-                let weights = data
-                    .observations
-                    .iter()
-                    .filter(|o| o.camera == c)
-                    .map(|o| o.weight);
-                let (rot, trans) =
-                    per_pose
-                        .iter()
-                        .zip(weights)
-                        .fold((0.0, 0.0), |(r, t), (p, w)| {
-                            (
-                                r + w * p.rotation_rad.powi(2),
-                                t + w * p.translation_m.powi(2),
-                            )
-                        });
+                let (rot, trans) = per_pose.iter().fold((0.0, 0.0), |(r, t), p| {
+                    (
+                        r + p.weight * p.rotation_rad.powi(2),
+                        t + p.weight * p.translation_m.powi(2),
+                    )
+                });
                 let dof = (3.0 * per_pose.len() as f64 * redundancy).max(1.0);
                 noise[c] = NoiseModel {
                     rotation_sigma_rad: (rot / dof).sqrt().max(1e-7),
