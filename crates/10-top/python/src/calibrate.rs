@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 use handeye_config::validate;
 use handeye_core::error_text::error_chain;
 use handeye_core::geometry::{readable, Pose};
-use handeye_core::setup::{PosePair, Setup};
+use handeye_core::setup::{PosePair, Setup, ViewSigma};
 use handeye_records::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
 use handeye_solve::{Method, RobustLoss, SolveError, SolveOptions, SolverChoice};
@@ -47,6 +47,7 @@ fn options(
     robust_scale: f64,
     keep_outliers: bool,
     warm_start: bool,
+    weigh_views: bool,
 ) -> PyResult<SolveOptions> {
     let method: Method = method.parse().map_err(|e: String| errors::input(py, e))?;
     for (name, value, range) in [
@@ -94,8 +95,8 @@ fn options(
         estimate_noise: true,
         robust,
         drop_outliers: !keep_outliers,
-        // Samples given as arrays carry no view precision: every view weighs alike.
-        weigh_views: true,
+        // Samples without a view precision (`view_sigmas` not given) weigh alike either way.
+        weigh_views,
         warm_start,
     }
     .options())
@@ -122,8 +123,8 @@ pub(crate) fn accuracy(py: Python<'_>, accuracy_mm: f64, accuracy_deg: f64) -> P
 #[pyo3(signature = (
     base_from_flange, camera_from_target, setup = "eye_in_hand", *, method = "refined",
     rotation_sigma_deg = None, translation_sigma_mm = None, robust = "none", robust_scale = 3.0,
-    keep_outliers = false, warm_start = false, ids = None, weights = None,
-    accuracy_mm = verdict::DEFAULT_ACCURACY_MM, accuracy_deg = verdict::DEFAULT_ACCURACY_DEG,
+    keep_outliers = false, warm_start = false, ids = None, weights = None, view_sigmas = None,
+    weigh_views = true, accuracy_mm = verdict::DEFAULT_ACCURACY_MM, accuracy_deg = verdict::DEFAULT_ACCURACY_DEG,
     units = "m",
 ))]
 #[allow(clippy::too_many_arguments)]
@@ -141,6 +142,8 @@ pub(crate) fn calibrate(
     warm_start: bool,
     ids: Option<Vec<String>>,
     weights: Option<Vec<f64>>,
+    view_sigmas: Option<Vec<Option<(f64, f64)>>>,
+    weigh_views: bool,
     accuracy_mm: f64,
     accuracy_deg: f64,
     units: &str,
@@ -155,6 +158,7 @@ pub(crate) fn calibrate(
         robust_scale,
         keep_outliers,
         warm_start,
+        weigh_views,
     )?;
     let accuracy = accuracy(py, accuracy_mm, accuracy_deg)?;
     let units = Units::parse(py, units)?;
@@ -174,6 +178,7 @@ pub(crate) fn calibrate(
     for (name, len) in [
         ("ids", ids.as_ref().map(Vec::len)),
         ("weights", weights.as_ref().map(Vec::len)),
+        ("view_sigmas", view_sigmas.as_ref().map(Vec::len)),
     ] {
         if let Some(len) = len.filter(|&len| len != n) {
             return Err(errors::input(
@@ -191,9 +196,27 @@ pub(crate) fn calibrate(
             camera_from_target,
             weight: weights.as_ref().map_or(1.0, |w| w[i]),
             id: ids.as_ref().map(|ids| ids[i].clone()),
-            view_sigma: None,
+            view_sigma: view_sigmas
+                .as_ref()
+                .and_then(|s| s[i])
+                .map(|(r, t)| ViewSigma {
+                    rotation_deg: r,
+                    translation_mm: t,
+                }),
         })
         .collect();
+    if let Some(i) = pairs
+        .iter()
+        .position(|p| p.view_sigma.is_some_and(|s| !s.is_valid()))
+    {
+        let (r, t) = view_sigmas.as_ref().and_then(|s| s[i]).unwrap_or_default();
+        return Err(errors::input(
+            py,
+            format!(
+                "view_sigmas[{i}] = ({r}, {t}): expected two positive figures (rotation_deg, translation_mm), or None for a view of unknown precision"
+            ),
+        ));
+    }
     solve_pairs(py, setup, pairs, options, accuracy, units)
 }
 
@@ -218,7 +241,7 @@ pub(crate) fn calibrate_rt(
     units: &str,
     invert_flange: bool,
 ) -> PyResult<Calibration> {
-    let options = options(py, method, None, None, "none", 3.0, false, false)?;
+    let options = options(py, method, None, None, "none", 3.0, false, false, true)?;
     let units = Units::parse(py, units)?;
     let robot = poses_from_rt(
         py,

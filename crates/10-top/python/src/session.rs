@@ -15,6 +15,7 @@ use handeye_records::dataset::Dataset;
 use handeye_records::result::{CamerasResultFile, SessionResult};
 use handeye_records::{SessionFolder, SolveInputs};
 use handeye_session::cell::cameras;
+use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -23,7 +24,9 @@ use crate::convert::{pose_to_py, poses_to_py};
 use crate::errors;
 
 /// A dataset as Python objects: `{"setup", "T_base_flange" (N, 4, 4), "T_camera_target"
-/// (N, 4, 4), "ids", "weights"}`.
+/// (N, 4, 4), "ids", "weights", "view_sigmas" (N, 2)}`; a view's precision is `(rotation_deg,
+/// translation_mm)`, a row of NaN where the sample records none (what `calibrate` reads as a
+/// view of unknown precision).
 fn dataset_to_py<'py>(py: Python<'py>, dataset: &Dataset) -> PyResult<Bound<'py, PyDict>> {
     let flange: Vec<Pose> = dataset.pairs.iter().map(|p| p.base_from_flange).collect();
     let camera: Vec<Pose> = dataset.pairs.iter().map(|p| p.camera_from_target).collect();
@@ -35,6 +38,12 @@ fn dataset_to_py<'py>(py: Python<'py>, dataset: &Dataset) -> PyResult<Bound<'py,
     dict.set_item("ids", ids)?;
     let weights: Vec<f64> = dataset.pairs.iter().map(|p| p.weight).collect();
     dict.set_item("weights", weights)?;
+    let view_sigmas = numpy::ndarray::Array2::from_shape_fn((dataset.pairs.len(), 2), |(i, k)| {
+        dataset.pairs[i]
+            .view_sigma
+            .map_or(f64::NAN, |s| [s.rotation_deg, s.translation_mm][k])
+    });
+    dict.set_item("view_sigmas", view_sigmas.into_pyarray(py))?;
     Ok(dict)
 }
 

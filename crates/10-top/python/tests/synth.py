@@ -99,8 +99,9 @@ def record_matrix(record):
     return T
 
 
-def write_dataset(path, setup, flange, camera, ids=None):
-    """A dataset file in the matrix form, every number written exactly (repr round-trips)."""
+def write_dataset(path, setup, flange, camera, ids=None, view_sigmas=None):
+    """A dataset file in the matrix form, every number written exactly (repr round-trips);
+    `view_sigmas`: each sample's `(rotation_deg, translation_mm)`, NaN rows left out."""
 
     def pose(T):
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in T[r, :3]) + "]" for r in range(3))
@@ -113,5 +114,8 @@ def write_dataset(path, setup, flange, camera, ids=None):
         lines.append(f"    T_camera_target: {pose(C)}")
         if ids is not None:
             lines.append(f'    id: "{ids[i]}"')
+        if view_sigmas is not None and not np.isnan(view_sigmas[i]).all():
+            r, t = (repr(float(v)) for v in view_sigmas[i])
+            lines.append(f"    view_sigma: {{rotation_deg: {r}, translation_mm: {t}}}")
     Path(path).write_text("\n".join(lines) + "\n")
 

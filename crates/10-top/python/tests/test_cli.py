@@ -2,6 +2,8 @@
 and on a session folder, against `handeye.calibrate` and `handeye.Session(...).solve` on the
 same samples. The CLI's result file is read with PyYAML (not with handeye)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -105,6 +107,44 @@ def test_read_dataset_and_read_result_give_the_files_numbers(cli, yaml, tmp_path
     for name, matrix in back.transforms.items():
         close(matrix, record_matrix(result[name]), name)
     assert back.verdict.reason == result["verdict"]["reason"]
+
+
+@pytest.mark.parametrize("which", ["sim_session", "sim_session_eye_to_hand"])
+def test_view_sigmas_weigh_the_samples_as_the_cli_weighs_them(cli, yaml, request, tmp_path, which):
+    """A session records each view's precision with its sample; `read_dataset` gives it as
+    `view_sigmas`, and `calibrate` given it answers what `handeye solve` answers of a dataset that
+    records it. Without it (or with `weigh_views=False`) every view weighs alike, as
+    `--every-view-alike`."""
+    d = handeye.read_dataset(request.getfixturevalue(which) / "samples.yaml")
+    sigmas = d["view_sigmas"]
+    assert sigmas.shape == (len(d["ids"]), 2) and np.all(sigmas > 0), sigmas
+    # The session's own numbers in the matrix form both sides read alike.
+    args = (d["T_base_flange"], d["T_camera_target"], d["setup"])
+    dataset = tmp_path / "samples.yaml"
+    write_dataset(dataset, d["setup"], d["T_base_flange"], d["T_camera_target"], d["ids"], sigmas)
+    solved = {}
+    for flag in ([], ["--every-view-alike"]):
+        out = tmp_path / f"result{len(flag)}.yaml"
+        cli("solve", dataset, "-o", out, *flag)
+        solved[bool(flag)] = yaml.safe_load(out.read_text())
+    kwargs = dict(ids=d["ids"], weights=d["weights"], verdict=False)
+    weighed = handeye.calibrate(*args, view_sigmas=sigmas, **kwargs)
+    compare(weighed, solved[False], len(d["ids"]))
+    for alike in (handeye.calibrate(*args, **kwargs), handeye.calibrate(*args, view_sigmas=sigmas, weigh_views=False, **kwargs)):
+        compare(alike, solved[True], len(d["ids"]))
+    # The two answers differ (by 9 µm and more), so the comparisons above tell them apart.
+    differ = max(np.abs(weighed.transforms[n] - alike.transforms[n]).max() for n in weighed.transforms)
+    assert differ > 1e3 * TOL, differ
+    # A view of unknown precision (None or NaN) counts as a typical one; a bad figure is named.
+    partly = [None if i % 3 == 0 else tuple(s) for i, s in enumerate(sigmas)]
+    handeye.calibrate(*args, view_sigmas=partly, **kwargs)
+    for bad, message in (((0.01, -0.2), "view_sigmas[4] = (0.01, -0.2)"), ((0.01,), "view_sigmas[4]")):
+        rows = [tuple(s) for s in sigmas]
+        rows[4] = bad
+        with pytest.raises(handeye.InputError, match=re.escape(message)):
+            handeye.calibrate(*args, view_sigmas=rows, **kwargs)
+    with pytest.raises(handeye.InputError, match="view_sigmas has 3 entries"):
+        handeye.calibrate(*args, view_sigmas=sigmas[:3], **kwargs)
 
 
 def test_a_refused_solve_raises_the_cli_message(cli, tmp_path):

@@ -18,6 +18,8 @@ Errors are :class:`InputError` (a ``ValueError``) for bad input and :class:`File
 verdict is CHECK or REDO comes with a :class:`CalibrationWarning` (a ``UserWarning``).
 """
 
+import math as _math
+
 from ._errors import CalibrationWarning, FileError, HandeyeError, InputError
 from ._errors import warn_verdict as _warn_verdict
 from . import _handeye
@@ -82,6 +84,27 @@ def _wrong_call(positional):
     )
 
 
+def _view_sigmas(rows):
+    """``view_sigmas`` as the extension takes them: per sample ``(rotation_deg,
+    translation_mm)`` or ``None`` (given as ``None`` or a row of NaN); the figures are checked in
+    Rust."""
+    out = []
+    for i, row in enumerate(rows):
+        if row is None:
+            out.append(None)
+            continue
+        try:
+            rotation, translation = (float(v) for v in row)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"view_sigmas[{i}] = {row!r}: expected (rotation_deg, translation_mm), or None "
+                "for a view of unknown precision"
+            ) from None
+        unknown = _math.isnan(rotation) and _math.isnan(translation)
+        out.append(None if unknown else (rotation, translation))
+    return out
+
+
 def calibrate(
     T_base_flange,
     T_camera_target,
@@ -98,6 +121,8 @@ def calibrate(
     warm_start=False,
     ids=None,
     weights=None,
+    view_sigmas=None,
+    weigh_views=True,
     accuracy_mm=1.0,
     accuracy_deg=0.1,
 ):
@@ -131,6 +156,14 @@ def calibrate(
         warm_start: start the iterative method from the closed form.
         ids: a name per sample (carried into messages and the result file).
         weights: a relative weight (> 0) per sample.
+        view_sigmas: how precisely each view fixed its board pose, ``(rotation_deg,
+            translation_mm)`` per sample (the 1-sigma of its ``T_camera_target``, e.g. from the
+            pose estimate's covariance; ``read_dataset``'s and ``Session.samples``'
+            ``view_sigmas``). Each sample is weighed by it against the typical view's, as
+            ``handeye solve`` weighs a dataset that records them; ``None`` (or a row of NaN)
+            for a view of unknown precision, which counts as a typical one.
+        weigh_views: ``False`` takes every view as equally good (``handeye solve
+            --every-view-alike``).
         accuracy_mm, accuracy_deg: the accuracy the verdict judges against.
 
     Returns:
@@ -165,6 +198,8 @@ def calibrate(
         warm_start=warm_start,
         ids=None if ids is None else [str(i) for i in ids],
         weights=None if weights is None else [float(w) for w in weights],
+        view_sigmas=None if view_sigmas is None else _view_sigmas(view_sigmas),
+        weigh_views=bool(weigh_views),
         accuracy_mm=accuracy_mm,
         accuracy_deg=accuracy_deg,
         units=units,

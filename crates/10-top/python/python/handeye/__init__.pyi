@@ -151,6 +151,8 @@ def calibrate(
     warm_start: bool = False,
     ids: Optional[Sequence[str]] = None,
     weights: Optional[Sequence[float]] = None,
+    view_sigmas: Optional[Any] = None,
+    weigh_views: bool = True,
     accuracy_mm: float = 1.0,
     accuracy_deg: float = 0.1,
 ) -> Calibration:
@@ -291,7 +293,8 @@ class Session:
         name, ``verdicts`` by camera, the cell's ``verdict``); None for one camera or unsolved."""
     @property
     def samples(self) -> Dict[str, Any]:
-        """``setup``, ``T_base_flange`` and ``T_camera_target`` (N, 4, 4) m, ``ids``, ``weights``."""
+        """``setup``, ``T_base_flange`` and ``T_camera_target`` (N, 4, 4) m, ``ids``, ``weights``,
+        ``view_sigmas`` (N, 2): each view's ``(rotation_deg, translation_mm)``, NaN where unknown."""
     @property
     def result(self) -> Optional[Calibration]:
         """``result.yaml`` with its verdict, or None."""
@@ -318,7 +321,9 @@ def run(
     cameras: ``.cameras``, ``.joint``)."""
 
 def read_dataset(path: _Path) -> Dict[str, Any]:
-    """A dataset file: ``setup``, ``T_base_flange``, ``T_camera_target`` (N, 4, 4), ``ids``, ``weights``."""
+    """A dataset file: ``setup``, ``T_base_flange``, ``T_camera_target`` (N, 4, 4), ``ids``,
+    ``weights``, ``view_sigmas`` (N, 2: each view's ``(rotation_deg, translation_mm)``, NaN where
+    the file records none)."""
 
 def read_result(path: _Path) -> Calibration:
     """A result file as a Calibration with its verdict."""
