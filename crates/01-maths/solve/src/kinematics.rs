@@ -809,8 +809,14 @@ pub fn fit_joint_offsets(
     )
 }
 
-/// Each sample prepared for the fit, checked against the chain's joint count.
-fn prepare(chain: &DhChain, samples: &[ArmSample]) -> Result<Vec<Prepared>, SolveError> {
+/// Each sample prepared for the fit, checked against the chain's joint count, at its weight as
+/// `options` weigh it (each view at its precision, [`SolveOptions::weighted`], as the pose-space
+/// solve weighs it: a far view taken as a typical one would read its noise as the arm's error).
+fn prepare(
+    chain: &DhChain,
+    samples: &[ArmSample],
+    options: &SolveOptions,
+) -> Result<Vec<Prepared>, SolveError> {
     if samples.len() < 3 {
         return Err(SolveError::TooFewSamples {
             found: samples.len(),
@@ -819,10 +825,13 @@ fn prepare(chain: &DhChain, samples: &[ArmSample]) -> Result<Vec<Prepared>, Solv
     }
     let joints = chain.joints();
     let zero = vec![0.0; joints];
+    let pairs: Vec<PosePair> = samples.iter().map(|s| s.pair.clone()).collect();
+    let weighted = options.weighted(&pairs);
     samples
         .iter()
+        .zip(weighted.iter())
         .enumerate()
-        .map(|(index, s)| {
+        .map(|(index, (s, weighted))| {
             if s.joints.len() != joints || s.joints.iter().any(|q| !q.is_finite()) {
                 return Err(SolveError::ArmJoints {
                     index,
@@ -835,7 +844,7 @@ fn prepare(chain: &DhChain, samples: &[ArmSample]) -> Result<Vec<Prepared>, Solv
                 a: s.pair.camera_from_target,
                 correction: s.pair.base_from_flange * chain.forward(&s.joints, &zero).inverse(),
                 joints: s.joints.clone(),
-                scale: s.pair.weight.sqrt(),
+                scale: weighted.weight.sqrt(),
             })
         })
         .collect()
@@ -855,7 +864,7 @@ pub fn fit_arm(
     noise: NoiseModel,
     options: &SolveOptions,
 ) -> Result<ArmFit, SolveError> {
-    let prepared = prepare(chain, samples)?;
+    let prepared = prepare(chain, samples, options)?;
     let joints = chain.joints();
     let zero = vec![[0.0; 4]; joints];
     let candidates: Vec<Param> = match model {

@@ -384,6 +384,10 @@ fn fit_arm(
         ))
     })?;
     let chain = dh_chain(&model);
+    let options = config.solver.to_options();
+    // Each view at its precision in the arm's fit and its χ² as in the start's solve: a far view
+    // taken as a typical one would read its noise as the arm's error.
+    let pairs = options.weighted(pairs);
     let mut samples = Vec::with_capacity(pairs.len());
     for (index, pair) in pairs.iter().enumerate() {
         let joints = visits
@@ -403,8 +407,7 @@ fn fit_arm(
             joints,
         });
     }
-    let options = config.solver.to_options();
-    let start = solve::solve(setup, pairs, &options).map_err(failed)?;
+    let start = solve::solve(setup, &pairs, &options).map_err(failed)?;
     let folds = ArmRefit {
         setup,
         model: estimated,
