@@ -21,7 +21,7 @@ use handeye_core::geometry::{relative_rotation_axis, Pose, MIN_AXIS_ANGLE_RAD};
 use handeye_core::setup::{predict, PosePair, Setup};
 use handeye_records::PoseVisit;
 use handeye_session::SharedFrame;
-use handeye_solve::{solve, SolveOptions};
+use handeye_solve::{solve, Calibration, SolveOptions};
 use handeye_vision::{annotate, draw, Target};
 
 use super::events::{ConsoleEvent, PoseView, SigmaView};
@@ -212,7 +212,8 @@ fn lower_priority() {
 
 struct Sample {
     base_from_flange: Pose,
-    camera_from_target: Option<Pose>,
+    /// The solver's sample (its view's precision with it), when the board pose was accepted.
+    pair: Option<PosePair>,
 }
 
 struct State {
@@ -257,19 +258,17 @@ impl State {
                             continue;
                         }
                     };
-                    let (base_from_flange, camera_from_target) =
-                        (visit.base_from_flange, visit.camera_from_target);
                     let corners: Vec<Point2<f64>> =
                         visit.corners_px.iter().map(|c| c.pixel).collect();
                     if visit.rejected.is_none() {
-                        self.add(index, &corners, base_from_flange, camera_from_target);
+                        self.add(index, &corners, visit.base_from_flange, visit.sample());
                         changed = true;
                     }
                     // Decoding a frame costs more than the rest: only the newest is read.
                     newest = Some(FrameSource::File(
                         index,
                         self.root.join(&visit.frame),
-                        base_from_flange,
+                        visit.base_from_flange,
                         corners,
                     ));
                 }
@@ -322,7 +321,7 @@ impl State {
         index: usize,
         corners: &[Point2<f64>],
         base_from_flange: Pose,
-        camera_from_target: Option<Pose>,
+        pair: Option<PosePair>,
     ) {
         let (w, h) = (self.cell.model.width as f64, self.cell.model.height as f64);
         for c in corners {
@@ -343,7 +342,7 @@ impl State {
             let excess = self.axes.len() - MAX_AXES;
             self.axes.drain(..excess);
         }
-        if let Some(c) = &camera_from_target {
+        if let Some(c) = pair.as_ref().map(|p| &p.camera_from_target) {
             let d = c.translation.vector.norm();
             self.distance = Some(match self.distance {
                 Some([lo, hi]) => [lo.min(d), hi.max(d)],
@@ -354,29 +353,34 @@ impl State {
             index,
             Sample {
                 base_from_flange,
-                camera_from_target,
+                pair,
             },
         );
     }
 
-    fn solve(&mut self, publisher: &Publisher) {
+    /// The running estimate of the accepted samples and how many there are: the run's samples as
+    /// the run's solve weighs them (each view at its precision). None below three samples or
+    /// when the solve refuses them.
+    fn estimate(&self) -> Option<(Calibration, usize)> {
         let pairs: Vec<PosePair> = self
             .accepted
             .values()
-            .filter_map(|s| {
-                s.camera_from_target
-                    .map(|c| PosePair::new(s.base_from_flange, c))
-            })
+            .filter_map(|s| s.pair.clone())
             .collect();
         if pairs.len() < 3 {
-            return;
+            return None;
         }
-        let Ok(calibration) = solve(self.cell.setup, &pairs, &self.cell.options) else {
+        let calibration = solve(self.cell.setup, &pairs, &self.cell.options).ok()?;
+        Some((calibration, pairs.len()))
+    }
+
+    fn solve(&mut self, publisher: &Publisher) {
+        let Some((calibration, samples)) = self.estimate() else {
             return;
         };
         self.estimate = Some((calibration.camera_mount, calibration.target_mount));
         publisher.publish(&ConsoleEvent::Estimate {
-            samples: pairs.len(),
+            samples,
             camera_mount: PoseView::of(&calibration.camera_mount),
             target_mount: PoseView::of(&calibration.target_mount),
             sigma: calibration.uncertainty.as_ref().map(|u| SigmaView {
@@ -414,5 +418,93 @@ impl State {
         )
         .ok()?;
         draw::jpeg(&out, JPEG_QUALITY).ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_core::geometry::pose_from_rotvec;
+    use handeye_core::setup::ViewSigma;
+    use nalgebra::Vector3;
+    use std::path::Path;
+
+    fn configs() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../configs")
+    }
+
+    /// The console's running estimate is the run's pose-space answer of the same records: each
+    /// view weighed by its recorded precision (a far view's noisy board pose counts for less),
+    /// not every view alike.
+    #[test]
+    fn the_running_estimate_weighs_each_view_as_the_run_does() {
+        let root = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(root.path().join("poses")).unwrap();
+        let (camera_mount, target_mount) = (
+            pose_from_rotvec(
+                Vector3::new(0.03, -0.07, 0.04),
+                Vector3::new(0.0, 0.0, 1.57),
+            ),
+            pose_from_rotvec(Vector3::new(0.5, -0.15, 0.0), Vector3::new(0.0, 0.0, 0.3)),
+        );
+        let mut pairs = Vec::new();
+        for i in 0..10 {
+            let a = i as f64;
+            let flange = pose_from_rotvec(
+                Vector3::new(0.45 + 0.02 * a, -0.1 + 0.015 * a, 0.6 + 0.01 * (a % 3.0)),
+                Vector3::new(3.0 + 0.08 * (a % 4.0), 0.25 * (a % 3.0) - 0.25, 0.3 * a),
+            );
+            // Two far views, their board poses eight times noisier, and recorded so.
+            let k = if i % 5 == 4 { 8.0 } else { 1.0 };
+            let noise = pose_from_rotvec(
+                Vector3::new(0.2, -0.3, 0.25) * (k * 1e-4 * (a - 4.5).signum()),
+                Vector3::new(-0.3, 0.2, 0.1) * (k * 1e-4),
+            );
+            let seen = predict(Setup::EyeInHand, &camera_mount, &target_mount, &flange) * noise;
+            let mut visit = PoseVisit::new(i, &flange, PathBuf::from(format!("frames/{i:03}.png")));
+            visit.camera_from_target = Some(seen);
+            visit.view_sigma = Some(ViewSigma {
+                rotation_deg: 0.01 * k,
+                translation_mm: 0.2 * k,
+            });
+            handeye_core::yaml_file::write_yaml(
+                &visit,
+                &root
+                    .path()
+                    .join(handeye_records::SessionFolder::visit_name(i)),
+            )
+            .unwrap();
+            pairs.push(visit.sample().unwrap());
+        }
+        let options = SolveOptions {
+            drop_outliers: false,
+            ..SolveOptions::default()
+        };
+        let cell = CellView {
+            setup: Setup::EyeInHand,
+            board: Target::load(&configs().join("targets/aprilgrid-6x6.yaml")).unwrap(),
+            model: CameraModel::load(&configs().join("cameras/sim-1280x720.yaml")).unwrap(),
+            options: options.clone(),
+            nominal: (camera_mount, target_mount),
+        };
+        let mut state = State::new(cell, root.path().to_path_buf(), FrameSlot::default());
+        let (changed, _) = state.ingest((0..10).map(Job::Recorded).collect());
+        assert!(changed);
+        let (estimate, samples) = state.estimate().unwrap();
+        assert_eq!(samples, 10);
+        let run = solve(Setup::EyeInHand, &pairs, &options).unwrap();
+        assert_eq!(estimate.camera_mount, run.camera_mount);
+        assert_eq!(estimate.target_mount, run.target_mount);
+        let alike: Vec<PosePair> = pairs
+            .iter()
+            .map(|p| PosePair {
+                view_sigma: None,
+                ..p.clone()
+            })
+            .collect();
+        let alike = solve(Setup::EyeInHand, &alike, &options).unwrap();
+        let moved =
+            (alike.camera_mount.translation.vector - run.camera_mount.translation.vector).norm();
+        assert!(moved > 1e-6, "the far views change nothing: {moved} m");
     }
 }
