@@ -7,6 +7,7 @@ use crate::util::median;
 use handeye_core::geometry::Pose;
 use handeye_core::notice::{NoticeKind, Severity};
 use handeye_core::setup::{predict, PosePair, Setup};
+use handeye_solve::verdict::{self, Accuracy, Basis};
 use handeye_solve::{
     self as solve, Calibration, EstimateNoise, NoiseModel, NoiseSource, SolveOptions,
 };
@@ -636,6 +637,7 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
         translation_sigma_m: base_translation,
     } = base.model();
     let (mut flagged, mut views, mut unweighted_dropped) = (0, 0, 0);
+    let (mut residuals_blamed, mut alike_blamed) = (0, 0);
     let mut default = vec![Vec::new(); 4];
     let mut reference = vec![Vec::new(); 4];
     let mut every_view_alike = vec![Vec::new(); 4];
@@ -693,6 +695,28 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
         let alike = solve::solve(Setup::EyeInHand, &c.pairs, &every_alike).unwrap();
         unweighted_dropped += alike.dropped.len();
         push_errors(&mut every_view_alike, &alike, &c);
+        // Told the typical view's noise, the verdict finds the residuals as expected: the far
+        // views' larger residuals are their own noise (each at its weight), not "robot poses
+        // and frames not synchronised".
+        let given = SolveOptions {
+            noise: base.model(),
+            estimate_noise: EstimateNoise::NONE,
+            ..SolveOptions::default()
+        };
+        let answer = solve::solve(Setup::EyeInHand, &c.pairs, &given).unwrap();
+        let verdict = verdict::assess_solved(&answer, &c.pairs, &given, Accuracy::default());
+        residuals_blamed += usize::from(
+            std::iter::once(verdict.basis)
+                .chain(verdict.also.iter().map(|f| f.basis))
+                .any(|b| b == Basis::Residuals),
+        );
+        // What the rule read before: every view's residual alike against the typical view's
+        // noise (norms of 3-axis noise: √3 σ).
+        let expected = |sigma: f64| verdict::RESIDUAL_FACTOR * sigma * 3f64.sqrt();
+        alike_blamed += usize::from(
+            answer.residuals.rotation_rms_deg > expected(base_rotation.to_degrees())
+                || answer.residuals.translation_rms_mm > expected(base_translation * 1e3),
+        );
 
         // A wrong robot pose at a random view, whatever its precision.
         let wrong = rng.random_range(0..SAMPLES);
@@ -721,7 +745,12 @@ fn views_of_mixed_precision_are_weighted_not_dropped_and_wrong_robot_poses_still
         );
     }
     eprintln!(
-        "mixed precision: {flagged} of {views} clean views flagged; without the views' sigmas {unweighted_dropped} clean views dropped"
+        "mixed precision: {flagged} of {views} clean views flagged; without the views' sigmas {unweighted_dropped} clean views dropped; told the typical view's noise, the verdict blames the residuals in {residuals_blamed} of {SEEDS} sets (every view's residual alike: {alike_blamed})"
+    );
+    assert_eq!(residuals_blamed, 0, "a clean set's residuals blamed");
+    assert!(
+        alike_blamed > 0,
+        "no set whose residuals the old rule blames: the test lost its class"
     );
     assert!(
         flagged * 100 <= views,

@@ -193,14 +193,31 @@ pub fn coverage_notices(pairs: &[PosePair]) -> Vec<Notice> {
 /// The residual health of one answer, judged one way everywhere: an `error` notice when the data
 /// fits far better with inverted robot poses (the solver's own convention check,
 /// `solve::diagnostics::check_convention`, thresholds relative to the noise model), else a
-/// warning when the residual RMS is more than [`RESIDUAL_FACTOR`] × what the noise model
-/// expects; `None` when the residuals are as expected.
+/// warning when the residual RMS (each sample at its weight: `pairs` as the solve weighed them)
+/// is more than [`RESIDUAL_FACTOR`] × what the noise model expects; `None` when the residuals
+/// are as expected.
 pub fn residual_notice(
     calibration: &Calibration,
     pairs: &[PosePair],
     noise: &NoiseModel,
 ) -> Option<Notice> {
     let r = &calibration.residuals;
+    // Each view at its weight: a far view's larger residual is its own noise, not more than the
+    // model expects (the model's sigmas are the typical view's).
+    let rms_at_weights = |values: &[f64]| {
+        weighted_rms(
+            values
+                .iter()
+                .zip(pairs)
+                .enumerate()
+                .filter(|(i, (v, _))| !calibration.dropped.contains(i) && v.is_finite())
+                .map(|(_, (v, p))| (*v, p.weight)),
+        )
+    };
+    let (rotation_rms_deg, translation_rms_mm) = (
+        rms_at_weights(&r.rotation_deg),
+        rms_at_weights(&r.translation_mm),
+    );
     let used: Vec<PosePair> = pairs
         .iter()
         .enumerate()
@@ -219,12 +236,11 @@ pub fn residual_notice(
     // Norms of 3-axis noise: √3 σ.
     let expected_rot_deg = noise.rotation_sigma_rad.to_degrees() * 3f64.sqrt();
     let expected_t_mm = noise.translation_sigma_m * 1e3 * 3f64.sqrt();
-    if r.rotation_rms_deg > RESIDUAL_FACTOR * expected_rot_deg
-        || r.translation_rms_mm > RESIDUAL_FACTOR * expected_t_mm
+    if rotation_rms_deg > RESIDUAL_FACTOR * expected_rot_deg
+        || translation_rms_mm > RESIDUAL_FACTOR * expected_t_mm
     {
         return Some(Notice::warning(NoticeKind::LargeResiduals, format!(
-            "residuals (RMS {:.3}°, {:.2} mm) are more than {RESIDUAL_FACTOR}× what the noise model expects ({:.3}°, {:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic",
-            r.rotation_rms_deg, r.translation_rms_mm, expected_rot_deg, expected_t_mm
+            "residuals (RMS {rotation_rms_deg:.3}°, {translation_rms_mm:.2} mm) are more than {RESIDUAL_FACTOR}× what the noise model expects ({expected_rot_deg:.3}°, {expected_t_mm:.2} mm): the robot poses and frames may not be synchronised, the board may be loose, or the noise model is optimistic",
         )));
     }
     None
@@ -255,7 +271,7 @@ pub fn assess_modelled(
     let held = held_out_refitting(calibration.setup, pairs, options, calibration, refit);
     assess(&Evidence {
         calibration,
-        pairs,
+        pairs: &options.weighted(pairs),
         noise: &options.noise,
         held_out: &held,
         accuracy,

@@ -22,7 +22,8 @@ use super::{Accuracy, Basis, Figures, Finding, HeldOut, Level, Verdict, REDO_FAC
 pub struct Evidence<'a> {
     /// The answer.
     pub calibration: &'a Calibration,
-    /// The samples it was solved from (indexed like its residuals).
+    /// The samples it was solved from (indexed like its residuals), as the solve weighed them
+    /// (each view's precision folded into its weight, [`crate::SolveOptions::weighted`]).
     pub pairs: &'a [PosePair],
     /// The noise model the solver was told.
     pub noise: &'a NoiseModel,
