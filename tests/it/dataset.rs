@@ -106,7 +106,7 @@ fn every_malformed_input_names_file_path_and_problem() {
             vec![
                 "cell-samples.yaml",
                 "samples[3].view_sigma",
-                "-0.01° and 0.2 mm: both must be positive finite numbers",
+                "expected two positive figures (rotation_deg, translation_mm), got -0.01 and 0.2",
             ],
         ),
         (

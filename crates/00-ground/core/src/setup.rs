@@ -94,13 +94,43 @@ pub struct PosePair {
 /// by a few tags at the image's edge gives a pose several times noisier than a near, whole
 /// board: a solve that takes every `T_camera_target` as equally good lets such views pull the
 /// answer, or calls them outliers.
+///
+/// Checked when read: a figure that is not positive and finite is an error naming where it is
+/// (a bad one would otherwise weigh its sample as a typical view without a word).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "ViewSigmaFields")]
 pub struct ViewSigma {
     /// Rotation, degrees (the root of the covariance's rotation trace).
     pub rotation_deg: f64,
     /// Translation of the target origin in the camera frame, mm.
     pub translation_mm: f64,
+}
+
+/// [`ViewSigma`] as written, before its check.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ViewSigmaFields {
+    rotation_deg: f64,
+    translation_mm: f64,
+}
+
+impl TryFrom<ViewSigmaFields> for ViewSigma {
+    type Error = String;
+
+    fn try_from(fields: ViewSigmaFields) -> Result<ViewSigma, String> {
+        let sigma = ViewSigma {
+            rotation_deg: fields.rotation_deg,
+            translation_mm: fields.translation_mm,
+        };
+        if sigma.is_valid() {
+            Ok(sigma)
+        } else {
+            Err(format!(
+                "expected two positive figures (rotation_deg, translation_mm), got {} and {}",
+                sigma.rotation_deg, sigma.translation_mm
+            ))
+        }
+    }
 }
 
 impl ViewSigma {

@@ -251,7 +251,7 @@ pub struct HeldOut {
     /// RMS distance between predicted and measured target origin (camera frame), mm, each
     /// sample at its weight (its view's precision: `solve::view_weighted`).
     pub translation_rms_mm: f64,
-    /// RMS angle between predicted and measured rotation, degrees, weighted alike.
+    /// RMS angle between predicted and measured rotation, degrees, each sample at its weight.
     pub rotation_rms_deg: f64,
     /// Median camera-to-target distance of the samples, mm (where the error is measured).
     pub working_distance_mm: f64,

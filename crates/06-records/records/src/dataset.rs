@@ -154,16 +154,6 @@ impl Dataset {
                         problem: format!("weight {weight} must be a positive finite number"),
                     });
                 }
-                if let Some(sigma) = s.view_sigma.filter(|v| !v.is_valid()) {
-                    return Err(FileError::Value {
-                        path: path.to_path_buf(),
-                        yaml_path: format!("samples[{i}].view_sigma"),
-                        problem: format!(
-                            "{}° and {} mm: both must be positive finite numbers",
-                            sigma.rotation_deg, sigma.translation_mm
-                        ),
-                    });
-                }
                 Ok(PosePair {
                     base_from_flange: s
                         .base_from_flange

@@ -144,19 +144,6 @@ fn joint_angles<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::E
     Ok(angles)
 }
 
-/// `view_sigma`: both figures finite and positive (a bad one would be taken as a typical view
-/// without a word).
-fn view_sigma<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<ViewSigma>, D::Error> {
-    let sigma = ViewSigma::deserialize(d)?;
-    if !sigma.is_valid() {
-        return Err(serde::de::Error::custom(format!(
-            "expected two positive figures (rotation_deg, translation_mm), got {} and {}",
-            sigma.rotation_deg, sigma.translation_mm
-        )));
-    }
-    Ok(Some(sigma))
-}
-
 /// What happened at one plan pose.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -184,11 +171,7 @@ pub struct PoseVisit {
     pub reprojection_rms_px: Option<f64>,
     /// How precisely the view fixes the board pose (the 1-sigma of its board pose); absent in
     /// records written before it, whose samples then count as typical views. Checked when read.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "view_sigma"
-    )]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub view_sigma: Option<ViewSigma>,
     /// Tags used for the board pose.
     #[serde(default)]

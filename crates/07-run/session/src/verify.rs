@@ -170,14 +170,16 @@ fn prediction_error(index: usize, pairs: &[PosePair], predicted: &Pose) -> Predi
     }
 }
 
-/// Compares the calibration's prediction with every measured pair.
+/// Compares the calibration's prediction with every measured pair, each at its weight as
+/// `options` weigh it (its view's precision, when the pairs record it).
 pub fn compare(
     setup: Setup,
     camera_mount: &Pose,
     target_mount: &Pose,
     pairs: &[PosePair],
+    options: &SolveOptions,
 ) -> Verification {
-    let weighted = solve::view_weighted(pairs);
+    let weighted = options.weighted(pairs);
     let poses: Vec<PredictionError> = (0..pairs.len())
         .map(|i| {
             let predicted = setup::predict(
@@ -305,6 +307,7 @@ pub fn holdout(
             &calibration.camera_mount,
             &calibration.target_mount,
             &dataset.pairs,
+            &cell.solver.to_options(),
         );
         checked.push((name.clone(), verification));
     }
@@ -438,6 +441,7 @@ mod tests {
             &camera_mount,
             &target_mount,
             &[PosePair::new(robot, measured)],
+            &SolveOptions::default(),
         );
         assert!(
             (v.summary.rotation_rms_deg - 0.5).abs() < 1e-9,

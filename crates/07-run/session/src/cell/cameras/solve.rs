@@ -252,7 +252,7 @@ pub fn load_joint_problem(
             .collect();
         held_out.push(verdict::held_out(setup, &judged, &options, &alone));
         models.push(lens_used);
-        let weights = ViewWeights::of(&visits, &pairs, &kept, &options);
+        let weights = ViewWeights::of(&pairs, &kept, &options);
         for visit in kept {
             if let Some(camera_from_target) = corrected_pose(visit) {
                 // Every camera records the same flange pose at a plan index; the reported pose
@@ -504,27 +504,25 @@ fn solve_subset(
 
 /// A camera's views at their precision in the joint solve.
 struct ViewWeights {
-    /// Each sample's board-pose weight by plan index, as the camera's own solve weighs it
-    /// (`SolveOptions::weighted`: its view's 1-sigma against the typical view's).
-    board_poses: std::collections::HashMap<usize, f64>,
+    /// Each sample's board-pose weight by its id (`pose-NNN`), as the camera's own solve weighs
+    /// it (`SolveOptions::weighted`: its view's 1-sigma against the typical view's).
+    board_poses: std::collections::HashMap<String, f64>,
     /// The camera's typical board RMS over the views kept, px.
     typical_rms_px: f64,
 }
 
 impl ViewWeights {
     fn of(
-        visits: &[PoseVisit],
         pairs: &[PosePair],
         kept: &[&PoseVisit],
         options: &handeye_solve::SolveOptions,
     ) -> ViewWeights {
         let board_rms: Vec<f64> = kept.iter().filter_map(|v| v.reprojection_rms_px).collect();
         ViewWeights {
-            board_poses: visits
+            board_poses: options
+                .weighted(pairs)
                 .iter()
-                .filter(|v| v.sample().is_some())
-                .zip(options.weighted(pairs).iter())
-                .map(|(visit, pair)| (visit.plan_index, pair.weight))
+                .filter_map(|pair| Some((pair.id.clone()?, pair.weight)))
                 .collect(),
             typical_rms_px: handeye_solve::diagnostics::median(&board_rms),
         }
@@ -533,7 +531,7 @@ impl ViewWeights {
     /// The weight of `visit`'s board pose in the pose-space solve.
     fn board_pose(&self, visit: &PoseVisit) -> f64 {
         self.board_poses
-            .get(&visit.plan_index)
+            .get(&visit.sample_id())
             .copied()
             .unwrap_or(1.0)
     }
