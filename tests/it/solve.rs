@@ -703,7 +703,7 @@ fn sample_weights_scale_the_fit() {
     let left_out = solve::solve(c.setup, &without, &SolveOptions::default()).unwrap();
     let shift = errors(&tiny.camera_mount, &left_out.camera_mount).1;
     assert!(shift < 5e-5, "shift {shift:e} m");
-    // At full weight the same error pulls the answer far more (or is dropped as an outlier).
+    // At full weight (outliers kept in the fit) the same error pulls the answer far more.
     corrupted[3].weight = 1.0;
     let kept = SolveOptions {
         drop_outliers: false,
