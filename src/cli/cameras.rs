@@ -4,16 +4,17 @@
 
 use std::path::Path;
 
-use handeye_records::result::CamerasResultFile;
+use handeye_records::result::CellResult;
 use handeye_report::session::REPLAY_REPORT_FILE;
 use handeye_session::cell::cameras;
 use handeye_session::cell::replay::CamerasReplay;
 use handeye_session::cell::run::CellRun;
+use handeye_solve::verdict::Verdict;
 
 /// What `handeye run` of a several-camera cell prints before its report (the run itself is
 /// `cell::run::run`, its report `write_run_report`, as for one camera): what the run did and
 /// every camera's answer. Returns the line printed last, after the report's path.
-pub(super) fn print_run(done: &CellRun, result: &CamerasResultFile) -> String {
+pub(super) fn print_run(done: &CellRun, result: &CellResult) -> String {
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",
         done.outcome.visited_now,
@@ -45,38 +46,47 @@ pub(super) fn print_replay(replay: &CamerasReplay) -> anyhow::Result<()> {
 }
 
 /// Prints every camera's mount, the boards and the camera-to-camera transforms.
-pub(super) fn print_result(result: &CamerasResultFile, result_file: &Path) {
+pub(super) fn print_result(result: &CellResult, result_file: &Path) {
     let line = |t: &handeye_records::result::NamedTransform| {
         let p = t.pose.translation.vector;
+        let sigma = t.sigma.map_or_else(String::new, |s| {
+            format!("  ±{:.3} mm ±{:.4}°", s.translation_mm, s.rotation_deg)
+        });
         let truth = match (t.truth_error_mm, t.truth_error_deg) {
             (Some(mm), Some(deg)) => format!("  (vs simulator truth: {mm:.3} mm, {deg:.4}°)"),
             _ => String::new(),
         };
         format!(
-            "{:<24} t = [{:.4}, {:.4}, {:.4}] m  ±{:.3} mm ±{:.4}°{truth}",
-            t.name, p.x, p.y, p.z, t.sigma.translation_mm, t.sigma.rotation_deg
+            "{:<24} t = [{:.4}, {:.4}, {:.4}] m{sigma}{truth}",
+            t.name, p.x, p.y, p.z
         )
     };
     for camera in &result.cameras {
+        let (level, reason) = verdict(camera.verdict.as_ref());
         match &camera.joint {
             Some(t) => outln!(
-                "{}   [{}: {} samples, {}]",
+                "{}   [{level}: {} samples, {reason}]",
                 line(t),
-                camera.verdict.level,
-                camera.samples,
-                camera.verdict.reason
+                camera.samples
             ),
             None => outln!(
-                "camera `{}`: {} ({})",
+                "camera `{}`: {level} ({})",
                 camera.name,
-                camera.verdict.level,
-                camera.left_out.as_deref().unwrap_or(&camera.verdict.reason)
+                camera.left_out.as_deref().unwrap_or(reason)
             ),
         }
     }
     for t in result.boards.iter().chain(&result.camera_to_camera) {
         outln!("{}", line(t));
     }
-    outln!("cell: {} — {}", result.verdict.level, result.verdict.reason);
+    let (level, reason) = verdict(result.verdict.as_ref());
+    outln!("cell: {level} — {reason}");
     outln!("result: {}", result_file.display());
+}
+
+/// A verdict's level and reason as printed; a file without one says so.
+fn verdict(verdict: Option<&Verdict>) -> (String, &str) {
+    verdict.map_or(("no verdict".into(), ""), |v| {
+        (v.level.to_string(), v.reason.as_str())
+    })
 }

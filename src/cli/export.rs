@@ -15,8 +15,8 @@ use handeye_formats::export::{self, Exported};
 use handeye_formats::ExportFormat;
 
 use super::camera_link::{hang_camera, CameraLinkArgs, DomainArgs};
+use handeye_records::result::CellResult;
 use handeye_records::result::ResultFile;
-use handeye_records::result::SessionResult;
 
 /// Export form on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -157,7 +157,7 @@ pub(super) fn exported_result(
     }
     // result.yaml is derived from the session's records: a layout this handeye does not write
     // (an older one's) is solved again, not converted.
-    let solved = SessionResult::load(result).map_err(|e| {
+    let solved = CellResult::load(result).map_err(|e| {
         let hint = matches!(e, FileError::Shape { .. }).then(|| {
             format!(
                 "; if an older handeye wrote it, solve the session again: `handeye replay {} -o {}`",
@@ -178,10 +178,7 @@ pub(super) fn exported_result(
             ids.base
         );
     }
-    let exported = match &solved {
-        SessionResult::Cameras(cameras) => Exported::cameras(cameras, ids),
-        SessionResult::OneCamera(one) => Exported::one(&one.mounts(result)?, ids),
-    };
+    let exported = Exported::of(&solved, ids);
     exported
         .check(ids)
         .with_context(|| format!("exporting {}", result.display()))?;

@@ -92,7 +92,10 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
 }
 
 /// What each saved frame gives when measured again.
-fn print_visits(visits: &[PoseVisit]) {
+fn print_visits(camera: Option<&str>, visits: &[PoseVisit]) {
+    if let Some(name) = camera {
+        outln!("camera `{name}`:");
+    }
     for v in visits {
         match (&v.rejected, v.reprojection_rms_px) {
             (None, Some(rms)) => outln!(

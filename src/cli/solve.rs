@@ -13,6 +13,7 @@ use handeye_core::geometry::readable;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::ResultFile;
 use handeye_records::SessionFolder;
+use handeye_session::cell::cameras;
 use handeye_solve::{self as solve, Method, RobustLoss, SolveOptions, SolverChoice};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
@@ -54,7 +55,8 @@ pub(super) enum SpaceArg {
 /// Arguments of `handeye solve`.
 #[derive(Debug, Args)]
 pub(super) struct SolveArgs {
-    /// Dataset file (setup + samples of T_base_flange and T_camera_target), or a session folder.
+    /// Dataset file (setup + samples of T_base_flange and T_camera_target), or a session folder
+    /// (a several-camera cell's: the joint solve of its records).
     samples: PathBuf,
     /// Session folder only: solve in this space (default: the session config's `solver.space`).
     /// The pose-space options below apply to dataset files; a session uses its config's solver.
@@ -201,8 +203,44 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `handeye solve <several-camera session>`: the joint solve of the measurements its pose
+/// records hold, as the run's own solve (`handeye replay` measures the frames again); writes
+/// `-o` or `<session>/result-<space>.yaml`, the estimates of a blamed file in
+/// `replay-estimates/` beside it, never over the run's files.
+fn run_cameras_session(args: &SolveArgs) -> anyhow::Result<()> {
+    let root = &args.samples;
+    handeye_records::refuse_live(
+        root,
+        "solve it when the run has ended: its joint answer is written then",
+    )?;
+    let config_path = match &args.config {
+        Some(path) => path.clone(),
+        None => cameras::read_manifest(root)?.config,
+    };
+    let mut config = CellConfig::load(&config_path).context("reading the cell config")?;
+    if let Some(space) = args.space {
+        config.solver.space = match space {
+            SpaceArg::Pose => SolveSpace::Pose,
+            SpaceArg::Reprojection => SolveSpace::Reprojection,
+        };
+    }
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| root.join(format!("result-{}.yaml", config.solver.space.name())));
+    let visits = cameras::recorded_visits(root, &config)?;
+    let written = cameras::CamerasOutput::replay(root, Some(&output));
+    let result = cameras::solve_cameras_folder(root, &config, visits, &written)
+        .with_context(|| format!("solving session {}", root.display()))?;
+    super::cameras::print_result(&result, &output);
+    Ok(())
+}
+
 /// Runs `handeye solve`.
 pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
+    if cameras::is_cameras_folder(&args.samples) {
+        return run_cameras_session(&args);
+    }
     if args.samples.is_dir() {
         return run_session(&args);
     }

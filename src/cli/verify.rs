@@ -11,7 +11,7 @@ use handeye_config::CellConfig;
 use handeye_core::atomic_file::write_atomic;
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::SessionResult;
+use handeye_records::result::CellResult;
 use handeye_records::SessionFolder;
 use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
 use handeye_session::cell::{cameras, PreparedCell};
@@ -64,25 +64,23 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         let cell_config = CellConfig::load(config).context("reading the cell config")?;
         // Each camera's transforms by its name in the config: one camera's result is the
         // config's one camera's; a several-camera result's joint answer names its cameras.
-        let mounts = match SessionResult::load(result)? {
-            SessionResult::OneCamera(file) => {
-                let one = cell_config
-                    .clone()
-                    .single_camera()
-                    .context("reading the cell config")?;
-                vec![(one.camera().name.clone(), file.mounts(result)?)]
-            }
-            SessionResult::Cameras(file) => {
-                for camera in file.cameras.iter().filter(|c| c.joint.is_none()) {
-                    outln!(
-                        "camera `{}`: not in the joint answer ({}): not checked",
-                        camera.name,
-                        camera.left_out.as_deref().unwrap_or("no mount")
-                    );
-                }
-                file.mounts()
-            }
-        };
+        let solved = CellResult::load(result)?;
+        for camera in solved.cameras.iter().filter(|c| c.joint.is_none()) {
+            outln!(
+                "camera `{}`: not in the joint answer ({}): not checked",
+                camera.name,
+                camera.left_out.as_deref().unwrap_or("no mount")
+            );
+        }
+        let mut mounts = solved.mounts();
+        // A one-camera answer does not name its camera: it is the config's one camera.
+        if solved.only_camera().is_some() {
+            let one = cell_config
+                .clone()
+                .single_camera()
+                .context("reading the cell config")?;
+            mounts[0].0.clone_from(&one.camera().name);
+        }
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -168,10 +166,10 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         // Only a final answer of these very samples (not a run's earlier one, nor that of a
         // resumed session not solved since).
         if folder.live_run().is_none() {
-            if let Ok(SessionResult::OneCamera(result)) = SessionResult::load(&folder.result_path())
-            {
+            let solved = CellResult::load(&folder.result_path()).ok();
+            if let Some(result) = solved.as_ref().and_then(CellResult::only_camera) {
                 if result.residuals.samples.len() == dataset.pairs.len() {
-                    recorded_outliers = Some(result.outliers);
+                    recorded_outliers = Some(result.outliers.clone());
                 }
             }
         }

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use handeye_config::CellConfig;
 use handeye_core::geometry::Pose;
-use handeye_records::result::CamerasResultFile;
+use handeye_records::result::CellResult;
 use handeye_session::cell::cameras::camera_folder;
 use handeye_solve::verdict::Level;
 
@@ -26,8 +26,8 @@ fn three_cameras(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
     util::config_variant(dir, "sim-cell-three-cameras.yaml", "cell.yaml", edits)
 }
 
-pub(crate) fn read_result(folder: &Path) -> CamerasResultFile {
-    CamerasResultFile::load(&folder.join("result.yaml")).unwrap()
+pub(crate) fn read_result(folder: &Path) -> CellResult {
+    CellResult::load(&folder.join("result.yaml")).unwrap()
 }
 
 /// The simulator's truth of every camera mount, by transform name, from the config itself (not
@@ -96,7 +96,8 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
         let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);
         println!(
             "{name}: {mm:.3} mm, {deg:.4}° from the truth (1-sigma {:.3} mm, {:.4}°)",
-            solved.sigma.translation_mm, solved.sigma.rotation_deg
+            solved.sigma.unwrap().translation_mm,
+            solved.sigma.unwrap().rotation_deg
         );
         assert!(
             mm < 0.5 && deg < 0.05,
@@ -115,36 +116,37 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
         let held_out = camera.held_out.unwrap_or_else(|| {
             panic!(
                 "{}: no held-out check ({})",
-                camera.name, camera.verdict.reason
+                camera.name,
+                camera.verdict.as_ref().unwrap().reason
             )
         });
         println!(
             "{}: {} — held-out {:.3} mm / {:.4}° over {} poses",
             camera.name,
-            camera.verdict.level,
+            camera.verdict.as_ref().unwrap().level,
             held_out.translation_rms_mm,
             held_out.rotation_rms_deg,
             held_out.poses
         );
         assert!(held_out.poses >= 8, "{}: {held_out:?}", camera.name);
         assert_eq!(
-            camera.verdict.level,
+            camera.verdict.as_ref().unwrap().level,
             Level::Good,
             "{}: {}",
             camera.name,
-            camera.verdict.reason
+            camera.verdict.as_ref().unwrap().reason
         );
         assert!(
-            camera.verdict.reason.contains("held-out"),
+            camera.verdict.as_ref().unwrap().reason.contains("held-out"),
             "{}",
-            camera.verdict.reason
+            camera.verdict.as_ref().unwrap().reason
         );
     }
     assert_eq!(
-        result.verdict.level,
+        result.verdict.as_ref().unwrap().level,
         Level::Good,
         "{}",
-        result.verdict.reason
+        result.verdict.as_ref().unwrap().reason
     );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains("Verdict per camera"));
@@ -194,12 +196,21 @@ fn a_camera_that_stops_delivering_frames_is_named_and_its_samples_kept() {
     // Too few samples for the leave-one-out check: the camera is not GOOD, and says why; the
     // cell's verdict is the worst camera's and names it.
     assert!(wrist.held_out.is_none(), "{wrist:?}");
-    assert_ne!(wrist.verdict.level, Level::Good, "{wrist:?}");
-    assert_ne!(result.verdict.level, Level::Good);
+    assert_ne!(
+        wrist.verdict.as_ref().unwrap().level,
+        Level::Good,
+        "{wrist:?}"
+    );
+    assert_ne!(result.verdict.as_ref().unwrap().level, Level::Good);
     assert!(
-        result.verdict.reason.contains("camera `wrist`"),
+        result
+            .verdict
+            .as_ref()
+            .unwrap()
+            .reason
+            .contains("camera `wrist`"),
         "{}",
-        result.verdict.reason
+        result.verdict.as_ref().unwrap().reason
     );
     assert!(
         wrist.joint.is_some(),
@@ -305,7 +316,7 @@ fn killed_mid_run_then_resumed_and_replayed() {
             String::from_utf8_lossy(&replay.stderr)
         );
         let file = output.cloned().unwrap_or(out.join("replay-result.yaml"));
-        let replayed = CamerasResultFile::load(&file).unwrap();
+        let replayed = CellResult::load(&file).unwrap();
         for (a, b) in resumed.transforms().zip(replayed.transforms()) {
             assert_eq!(a.name, b.name);
             let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
@@ -341,6 +352,82 @@ fn killed_mid_run_then_resumed_and_replayed() {
             after.get(file) == Some(bytes),
             "{}: changed by the replay",
             file.display()
+        );
+    }
+}
+
+/// `handeye replay` of a several-camera session measures every camera's saved frames again, as
+/// one camera's replay does, rather than solving the measurements its records hold: with one
+/// camera's records tampered with (every corner moved 3 px, every board pose 10 mm), the
+/// records solved as they are (`handeye solve DIR`, the old form) give another answer, and the
+/// replay gives the run's back.
+#[test]
+fn a_several_camera_replay_measures_the_frames_again() {
+    let (_, shipped, _) = shipped_run();
+    let run = read_result(shipped);
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session");
+    util::copy_folder(shipped, &session);
+    let poses = camera_folder(&session, "left").join("poses");
+    let mut tampered = 0;
+    for entry in std::fs::read_dir(&poses).unwrap() {
+        let path = entry.unwrap().path();
+        let mut record: serde_yaml_ng::Value =
+            serde_yaml_ng::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let Some(corners) = record["corners_px"].as_sequence_mut() else {
+            continue;
+        };
+        for corner in corners {
+            let u = corner[2].as_f64().unwrap();
+            corner[2] = (u + 3.0).into();
+        }
+        let x = record["T_camera_target"]["translation"][0]
+            .as_f64()
+            .unwrap();
+        record["T_camera_target"]["translation"][0] = (x + 0.01).into();
+        std::fs::write(&path, serde_yaml_ng::to_string(&record).unwrap()).unwrap();
+        tampered += 1;
+    }
+    assert!(tampered >= 10, "{tampered} records of `left` tampered with");
+    let left = |result: &CellResult| {
+        result
+            .transform("T_base_cam_left")
+            .unwrap_or_else(|| panic!("no T_base_cam_left in {result:?}"))
+            .pose
+    };
+    // The tampered records, solved as they are (`handeye solve`, the old form of a
+    // several-camera replay): the answer moves.
+    let as_recorded = dir.path().join("as-recorded.yaml");
+    util::succeeds(
+        handeye()
+            .arg("solve")
+            .arg(&session)
+            .arg("-o")
+            .arg(&as_recorded),
+    );
+    let as_recorded = CellResult::load(&as_recorded).unwrap();
+    let (mm, deg) = util::pose_error_mm_deg(&left(&as_recorded), &left(&run));
+    assert!(
+        mm > 0.05 || deg > 0.005,
+        "the tampered records moved `left` only {mm} mm, {deg}°"
+    );
+    // The replay: the frames measured again, the run's answer.
+    let replayed = dir.path().join("replayed.yaml");
+    util::succeeds(
+        handeye()
+            .arg("replay")
+            .arg(&session)
+            .arg("-o")
+            .arg(&replayed),
+    );
+    let replayed = CellResult::load(&replayed).unwrap();
+    for (a, b) in run.transforms().zip(replayed.transforms()) {
+        assert_eq!(a.name, b.name);
+        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+        assert!(
+            mm < 1e-6 && deg < 1e-6,
+            "{}: replay differs by {mm} mm {deg}°",
+            a.name
         );
     }
 }
@@ -642,7 +729,13 @@ fn the_page_draws_every_cameras_frames_and_names_what_it_cannot_draw() {
     let result = read_result(&out);
     assert!(html.contains(&format!(
         "<section id=\"verdict\" class=\"verdict {}\">",
-        result.verdict.level.word().to_ascii_lowercase()
+        result
+            .verdict
+            .as_ref()
+            .unwrap()
+            .level
+            .word()
+            .to_ascii_lowercase()
     )));
     for name in ["wrist", "left", "right"] {
         assert!(
@@ -897,10 +990,10 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
         // The run judged every camera GOOD (three_camera_run_recovers_every_mount_within_half_a_
         // millimetre): verify of its session says so too, blaming no view of a clean cell.
         assert_eq!(
-            camera.verdict.level,
+            camera.verdict.as_ref().unwrap().level,
             Level::Good,
             "{}",
-            camera.verdict.reason
+            camera.verdict.as_ref().unwrap().reason
         );
         assert!(line.starts_with("verdict: GOOD"), "{}: {line}", camera.name);
         // The samples its figure leaves out are named in the table and the verdict.
@@ -914,15 +1007,42 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
         assert_eq!(flagged > 0, line.contains("flagged as"), "{line}");
     }
 
-    let solve = handeye().arg("solve").arg(out).output().unwrap();
-    let stderr = String::from_utf8_lossy(&solve.stderr);
-    assert_eq!(solve.status.code(), Some(1), "{stderr}");
+    // `handeye solve` of the cell's folder is its joint solve of the records, as the run's
+    // own: the run's answer, written where `-o` says and nowhere in the session.
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session");
+    util::copy_folder(out, &session);
+    let before = util::folder_bytes(&session);
+    let answer = dir.path().join("answer.yaml");
+    let printed = util::succeeds(handeye().arg("solve").arg(&session).arg("-o").arg(&answer));
     assert!(
-        stderr.contains("several-camera session")
-            && stderr.contains("handeye replay")
-            && stderr.contains("(left, right, wrist)")
-            && stderr.contains(&out.join("cameras").display().to_string()),
-        "{stderr}"
+        printed.contains("T_base_cam_left") && printed.contains("cell: "),
+        "{printed}"
+    );
+    let run = read_result(&session);
+    let solved = CellResult::load(&answer).unwrap();
+    assert_eq!(run.transforms().count(), solved.transforms().count());
+    for (a, b) in run.transforms().zip(solved.transforms()) {
+        assert_eq!(a.name, b.name);
+        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+        assert!(mm < 1e-9 && deg < 1e-9, "{}: {mm} mm {deg}°", a.name);
+    }
+    assert_eq!(
+        util::folder_bytes(&session),
+        before,
+        "solve wrote into the session"
+    );
+    // A one-camera command given the cell's folder names the cameras' folders.
+    let Err(e) = handeye_records::SessionFolder::open(out) else {
+        panic!("the cell's folder opened as one camera's");
+    };
+    let e = e.to_string();
+    assert!(
+        e.contains("several-camera session")
+            && e.contains("`handeye solve` (its records), `replay` (its frames)")
+            && e.contains("(left, right, wrist)")
+            && e.contains(&out.join("cameras").display().to_string()),
+        "{e}"
     );
 }
 
@@ -1199,11 +1319,11 @@ fn adaptive_three_camera_run_stops_when_every_camera_is_good_enough() {
     // It stopped because every camera was good enough, not because it ran out.
     for camera in &result.cameras {
         assert_eq!(
-            camera.verdict.level,
+            camera.verdict.as_ref().unwrap().level,
             Level::Good,
             "{}: {}",
             camera.name,
-            camera.verdict.reason
+            camera.verdict.as_ref().unwrap().reason
         );
         // Every camera's folder records the same growing plan.
         let other: handeye_records::SessionManifest = serde_yaml_ng::from_str(
@@ -1304,12 +1424,17 @@ fn adaptive_run_names_a_lost_camera_once_and_goes_on() {
             .is_some_and(|why| why.contains("own solve")),
         "{left:?}"
     );
-    assert_eq!(left.verdict.level, Level::Redo);
-    assert_eq!(result.verdict.level, Level::Redo);
+    assert_eq!(left.verdict.as_ref().unwrap().level, Level::Redo);
+    assert_eq!(result.verdict.as_ref().unwrap().level, Level::Redo);
     assert!(
-        result.verdict.reason.contains("camera `left`"),
+        result
+            .verdict
+            .as_ref()
+            .unwrap()
+            .reason
+            .contains("camera `left`"),
         "{}",
-        result.verdict.reason
+        result.verdict.as_ref().unwrap().reason
     );
     for name in ["wrist", "right"] {
         let camera = result.cameras.iter().find(|c| c.name == name).unwrap();
@@ -1351,7 +1476,7 @@ fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay
     let camera = |name: &str| result.cameras.iter().find(|c| c.name == name).unwrap();
 
     let wrist = camera("wrist");
-    let v = &wrist.verdict;
+    let v = wrist.verdict.as_ref().unwrap();
     println!("wrist: {}", v.terminal_lines());
     assert!(v.level >= Level::Check, "{}", v.terminal_lines());
     // The lens file alone is named: the board file is right.
@@ -1434,13 +1559,15 @@ fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay
     for name in ["left", "right"] {
         let c = camera(name);
         assert_eq!(
-            c.verdict.level,
+            c.verdict.as_ref().unwrap().level,
             Level::Good,
             "{name}: {}",
-            c.verdict.terminal_lines()
+            c.verdict.as_ref().unwrap().terminal_lines()
         );
         let m = c
             .verdict
+            .as_ref()
+            .unwrap()
             .figures
             .cell_model
             .as_ref()
@@ -1448,10 +1575,15 @@ fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay
         assert!(m.blamed().is_empty(), "{name}: {m:?}");
         assert!(!camera_folder(&out, name).join("camera_info.yaml").exists());
     }
-    assert!(result.verdict.level >= Level::Check);
+    assert!(result.verdict.as_ref().unwrap().level >= Level::Check);
     assert!(
-        result.verdict.reason.starts_with("camera `wrist`: "),
+        result
+            .verdict
+            .as_ref()
+            .unwrap()
+            .reason
+            .starts_with("camera `wrist`: "),
         "{}",
-        result.verdict.reason
+        result.verdict.as_ref().unwrap().reason
     );
 }

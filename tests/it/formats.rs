@@ -592,4 +592,80 @@ fn export_reads_a_saved_result_file() {
     );
 }
 
+/// A one-camera result read as its cell's answer (`CellResult`, what `handeye export` reads)
+/// exports exactly what its two unknowns do, in every form, for both setups and under the UR
+/// ROS driver's `base_link` (the turned base); a file with no verdict (a solve not judged) or
+/// no uncertainty (the iterative method) reads, its cell then without them.
+#[test]
+fn a_one_camera_result_read_as_the_cells_exports_its_two_unknowns() {
+    use handeye_formats::export::Exported;
+    use handeye_records::result::CellResult;
+    use handeye_solve::Method;
+    let dir = tempfile::tempdir().unwrap();
+    for (setup, method) in [
+        (Setup::EyeInHand, Method::Refined),
+        (Setup::EyeToHand, Method::Refined),
+        (Setup::EyeInHand, Method::Iterative),
+    ] {
+        let truth = mounts(setup);
+        let pairs: Vec<PosePair> = (0..8)
+            .map(|k| {
+                let k = f64::from(k);
+                let base_from_flange = pose_from_rotvec(
+                    Vector3::new(0.4 + 0.05 * k, -0.1 * k, 0.5),
+                    Vector3::new(0.5 * (k * 1.3).sin(), 0.6 * (k * 0.7).cos(), 0.4 * k),
+                );
+                let seen = setup::predict(
+                    setup,
+                    &truth.camera_mount,
+                    &truth.target_mount,
+                    &base_from_flange,
+                );
+                PosePair::new(base_from_flange, seen)
+            })
+            .collect();
+        let options = SolveOptions {
+            method,
+            ..SolveOptions::default()
+        };
+        let cal = solve::solve(setup, &pairs, &options).unwrap();
+        let path = dir.path().join(format!("{setup}-{method:?}.yaml"));
+        ResultFile::from_calibration(&cal, &pairs)
+            .save(&path)
+            .unwrap();
+        let file = ResultFile::load(&path).unwrap();
+        let cell = CellResult::load(&path).unwrap();
+        assert_eq!(cell.only_camera(), Some(&file));
+        assert!(cell.verdict.is_none() && cell.cameras[0].verdict.is_none());
+        let refined = method == Method::Refined;
+        assert_eq!(
+            cell.variance_factor.is_some(),
+            refined,
+            "{setup} {method:?}"
+        );
+        let [camera_key, board_key] = [setup.unknown_names().0, setup.unknown_names().1];
+        let named: Vec<&str> = cell.transforms().map(|t| t.name.as_str()).collect();
+        assert_eq!(named, [camera_key, board_key]);
+        assert!(cell.transforms().all(|t| t.sigma.is_some() == refined));
+        let mounts = file.mounts(&path).unwrap();
+        for ids in [
+            FrameIds::default(),
+            FrameIds {
+                base: "base_link".into(),
+                ..FrameIds::default()
+            },
+        ] {
+            let (of_cell, of_mounts) = (Exported::of(&cell, &ids), Exported::one(&mounts, &ids));
+            assert_eq!(of_cell, of_mounts, "{setup} under {}", ids.base);
+            for format in ExportFormat::ALL {
+                assert_eq!(
+                    of_cell.text(format).unwrap(),
+                    of_mounts.text(format).unwrap(),
+                    "{format:?}"
+                );
+            }
+        }
+    }
+}
+
 mod csv;

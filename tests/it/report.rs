@@ -712,18 +712,19 @@ fn a_frame_that_cannot_be_read_leaves_the_previous_page_as_it_was() {
 /// naming the file and the key; a folder not solved yet is refused saying to solve it.
 #[test]
 fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
-    use handeye_records::result::SessionResult;
+    use handeye_records::result::CellResult;
     use handeye_report::session::write_folder_report;
     // A copy: the page written here has only the file's answer, and the other tests read the
     // run's page with both.
     let (scratch, one) = &session_copy();
     let result_path = one.join("result.yaml");
-    let read = SessionResult::load(&result_path).unwrap();
+    let read = CellResult::load(&result_path).unwrap();
     let file = ResultFile::load(&result_path).unwrap();
-    assert!(
-        matches!(&read, SessionResult::OneCamera(r) if **r == file),
-        "{read:?}"
-    );
+    // One camera's answer is the cell's only camera, its two unknowns the cell's transforms.
+    assert_eq!(read.only_camera(), Some(&file), "{read:?}");
+    let mounts = file.mounts(&result_path).unwrap();
+    assert_eq!(read.mounts(), vec![("camera".to_string(), mounts)]);
+    assert_eq!(read.verdict, file.verdict);
     let written = write_folder_report(one, None).unwrap();
     assert_eq!(written.path, one.join("report.html"));
     // `handeye verify --session` gives the held-out figure the verdict holds (its samples, the
@@ -744,12 +745,14 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
     assert!(written.provisional.is_none());
 
     let (_, cameras, _) = crate::cameras::shipped_run();
-    let read = SessionResult::load(&cameras.join("result.yaml")).unwrap();
-    let file = crate::cameras::read_result(cameras);
-    assert!(
-        matches!(&read, SessionResult::Cameras(r) if **r == file),
-        "{read:?}"
-    );
+    let read = CellResult::load(&cameras.join("result.yaml")).unwrap();
+    // The several-camera layout is the cell's list as written.
+    let file: CellResult =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(cameras.join("result.yaml")).unwrap())
+            .unwrap();
+    assert_eq!(read, file);
+    assert_eq!(read.cameras.len(), 3);
+    assert!(read.only_camera().is_none());
     assert_eq!(
         read.robot_frames(),
         file.robot_frames.clone().unwrap_or_default()
@@ -762,7 +765,7 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
     let stray = scratch.path().join("stray.yaml");
     let text = std::fs::read_to_string(&result_path).unwrap();
     std::fs::write(&stray, format!("{text}stray_key: 1\n")).unwrap();
-    let e = SessionResult::load(&stray).unwrap_err().to_string();
+    let e = CellResult::load(&stray).unwrap_err().to_string();
     assert!(e.contains("stray.yaml") && e.contains("stray_key"), "{e}");
     let unjudged = scratch.path().join("unjudged.yaml");
     let mut value: serde_yaml_ng::Value =
@@ -770,8 +773,34 @@ fn both_result_layouts_read_through_one_loader_and_report_through_one_call() {
             .unwrap();
     value.as_mapping_mut().unwrap().remove("verdict");
     std::fs::write(&unjudged, serde_yaml_ng::to_string(&value).unwrap()).unwrap();
-    let e = SessionResult::load(&unjudged).unwrap_err().to_string();
+    let e = CellResult::load(&unjudged).unwrap_err().to_string();
     assert!(e.contains("unjudged.yaml") && e.contains("verdict"), "{e}");
+    // What only a one-camera answer may lack, a several-camera one may not: a camera's verdict,
+    // a transform's 1-sigma.
+    let whole: serde_yaml_ng::Value =
+        serde_yaml_ng::from_str(&std::fs::read_to_string(cameras.join("result.yaml")).unwrap())
+            .unwrap();
+    let mut value = whole.clone();
+    value["cameras"][1]
+        .as_mapping_mut()
+        .unwrap()
+        .remove("verdict");
+    std::fs::write(&unjudged, serde_yaml_ng::to_string(&value).unwrap()).unwrap();
+    let e = CellResult::load(&unjudged).unwrap_err().to_string();
+    assert!(
+        e.contains("unjudged.yaml") && e.contains("cameras[1].verdict"),
+        "{e}"
+    );
+    let mut value = whole;
+    let board = &mut value["boards"][0];
+    let name = board["name"].as_str().unwrap().to_string();
+    board.as_mapping_mut().unwrap().remove("sigma");
+    std::fs::write(&unjudged, serde_yaml_ng::to_string(&value).unwrap()).unwrap();
+    let e = CellResult::load(&unjudged).unwrap_err().to_string();
+    assert!(
+        e.contains("unjudged.yaml") && e.contains(&name) && e.contains("sigma"),
+        "{e}"
+    );
 
     // A session folder with records but no answer yet.
     let unsolved = scratch.path().join("unsolved");

@@ -41,7 +41,7 @@ use handeye_core::yaml_file::{read_yaml, symlink_loop, write_yaml};
 use handeye_robot::{Joints, MAX_JOINTS};
 
 /// A solved session's answer, at its root (one camera's or a several-camera cell's: read it
-/// with [`SessionResult::load`](crate::result::SessionResult::load)).
+/// with [`CellResult::load`](crate::result::CellResult::load)).
 pub const RESULT_FILE: &str = "result.yaml";
 use handeye_vision::Target;
 

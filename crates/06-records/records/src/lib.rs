@@ -322,7 +322,7 @@ fn not_a_session_hint(root: &std::path::Path) -> String {
             .collect();
         names.sort();
         format!(
-            "; it is a several-camera session (rig.yaml): `handeye replay`, `report`, `export` and `verify --session` take it whole, and each camera's samples are the one-camera session {} ({})",
+            "; it is a several-camera session (rig.yaml): `handeye solve` (its records), `replay` (its frames), `report`, `export` and `verify --session` take it whole, and each camera's samples are the one-camera session {} ({})",
             root.join("cameras").join("<name>").display(),
             names.join(", ")
         )

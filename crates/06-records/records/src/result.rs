@@ -15,15 +15,20 @@
 //! ```
 //!
 //! (eye_to_hand uses `T_base_camera` and `T_flange_target`.) The verdict comes first, where a
-//! person reads first; files written before it existed (no `verdict:`) still read. Metres and radians in poses; deg
-//! and mm where the key says so. Written atomically; read back (by `export` and `verify`) with
-//! the same validation as every pose file. Depends on `solve`, `verdict`, `geometry` and
+//! person reads first; files written before it existed (no `verdict:`) still read. Metres and
+//! radians in poses; deg and mm where the key says so. Written atomically; read back with the
+//! same validation as every pose file. Depends on `solve`, `verdict`, `geometry` and
 //! `dataset`'s I/O.
+//!
+//! That is one camera's answer ([`ResultFile`], what `handeye solve` writes). A session's
+//! `result.yaml` is its cell's answer ([`CellResult`], the one type every reader takes): a cell
+//! of one camera writes its camera's answer as above, a cell of several a `cameras:` list with
+//! the joint solve's transforms (`result/cell.rs`).
 
 use std::path::Path;
 
-mod cameras;
-pub use cameras::{CameraResult, CamerasResultFile, NamedTransform};
+mod cell;
+pub use cell::{CameraResult, CellResult, NamedTransform};
 
 use serde::{Deserialize, Serialize};
 
@@ -31,50 +36,12 @@ use handeye_core::geometry::{Pose, PoseRecord};
 use handeye_core::notice::Notice;
 use handeye_core::setup::{CellTransforms, PosePair, RobotFrames, Setup};
 use handeye_core::yaml_file::SchemaVersion;
-use handeye_core::yaml_file::{parse_yaml, read_text, read_yaml, write_yaml, FileError};
+use handeye_core::yaml_file::{read_yaml, write_yaml, FileError};
 use handeye_solve::verdict::Verdict;
 use handeye_solve::{
     Calibration, Method, Phase, PoseNoise, PoseSigma, Residuals, SolverReport, TraceStep,
     Uncertainty,
 };
-
-/// A session's `result.yaml`, whichever cell wrote it: one camera's answer ([`ResultFile`]) or a
-/// several-camera cell's ([`CamerasResultFile`], the one with a `cameras:` list). Read through
-/// [`SessionResult::load`], the one place that tells them apart.
-#[derive(Debug, Clone, PartialEq)]
-pub enum SessionResult {
-    /// One camera.
-    OneCamera(Box<ResultFile>),
-    /// Several cameras.
-    Cameras(Box<CamerasResultFile>),
-}
-
-impl SessionResult {
-    /// Reads a result file of either layout: a top-level `cameras:` key is a several-camera
-    /// cell's; errors name the file, the key and the line as every result read does.
-    pub fn load(path: &Path) -> Result<SessionResult, FileError> {
-        let text = read_text(path)?;
-        // Only the top-level keys decide; a file that is not a mapping is left to the
-        // one-camera reader, whose error says what a result looks like.
-        let several = serde_yaml_ng::from_str::<serde_yaml_ng::Mapping>(&text)
-            .is_ok_and(|keys| keys.contains_key("cameras"));
-        Ok(if several {
-            SessionResult::Cameras(Box::new(parse_yaml(&text, path)?))
-        } else {
-            SessionResult::OneCamera(Box::new(parse_yaml(&text, path)?))
-        })
-    }
-
-    /// The frames the robot poses were read in (files written before it: the UR controller's
-    /// `base` and `tool0`).
-    pub fn robot_frames(&self) -> RobotFrames {
-        match self {
-            SessionResult::OneCamera(one) => one.robot_frames.clone(),
-            SessionResult::Cameras(cameras) => cameras.robot_frames.clone(),
-        }
-        .unwrap_or_default()
-    }
-}
 
 /// Uncertainty section: 1-sigma per unknown (only the setup's two keys are present).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -97,6 +64,19 @@ pub struct UncertaintyYaml {
     pub variance_factor: f64,
     /// 12x12 covariance: camera mount [rotation rad, translation m], target mount (the same).
     pub covariance: Vec<Vec<f64>>,
+}
+
+impl UncertaintyYaml {
+    /// The 1-sigma of the unknown called `key` (`T_flange_camera`, ...), when the file holds it.
+    pub fn sigma(&self, key: &str) -> Option<PoseSigma> {
+        match key {
+            "T_flange_camera" => self.T_flange_camera,
+            "T_base_target" => self.T_base_target,
+            "T_base_camera" => self.T_base_camera,
+            "T_flange_target" => self.T_flange_target,
+            _ => None,
+        }
+    }
 }
 
 /// The arm's model section (`solver.kinematics: joint_offsets`): each joint's zero offset (the
@@ -539,13 +519,7 @@ impl ResultFile {
                 }
                 let (camera_key, target_key) = self.setup.unknown_names();
                 let sigma = |key: &str| -> Result<PoseSigma, FileError> {
-                    let found = match key {
-                        "T_flange_camera" => u.T_flange_camera,
-                        "T_base_target" => u.T_base_target,
-                        "T_base_camera" => u.T_base_camera,
-                        _ => u.T_flange_target,
-                    };
-                    found.ok_or_else(|| FileError::Value {
+                    u.sigma(key).ok_or_else(|| FileError::Value {
                         path: path.to_path_buf(),
                         yaml_path: format!("uncertainty.{key}"),
                         problem: format!("missing (required for setup {})", self.setup),

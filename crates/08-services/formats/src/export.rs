@@ -29,7 +29,7 @@ use handeye_core::geometry::{
 };
 use handeye_core::setup::{is_ur_base_link, ur_base_link_from_base, CellTransforms};
 use handeye_core::setup::{RobotFrames, Setup};
-use handeye_records::result::{CamerasResultFile, NamedTransform};
+use handeye_records::result::{CellResult, NamedTransform};
 
 /// Why a result cannot be exported.
 #[derive(Debug, thiserror::Error)]
@@ -342,16 +342,20 @@ pub struct Exported {
 }
 
 impl Exported {
-    /// The export of a several-camera result: every camera's mount (from the joint solve) and
-    /// the boards in the tree, the camera-to-camera transforms implied by them. A camera left
-    /// out of the joint solve has no mount to export.
-    pub fn cameras(result: &CamerasResultFile, ids: &FrameIds) -> Exported {
+    /// The export of a session's result, one camera or several: every camera's mount (from the
+    /// joint solve; a cell of one camera, its answer's) and the boards in the tree, the
+    /// camera-to-camera transforms implied by them. A camera left out of the joint solve has no
+    /// mount to export.
+    pub fn of(result: &CellResult, ids: &FrameIds) -> Exported {
         let two_boards = result.boards.len() > 1;
         let named = |t: &NamedTransform| {
             FramedTransform::with_ids(&t.parent, &t.child, t.pose, ids, two_boards)
         };
         Exported {
-            cell: ExportedCell::Cameras(result.cameras.len()),
+            cell: match result.cameras.as_slice() {
+                [only] => ExportedCell::One(only.setup),
+                cameras => ExportedCell::Cameras(cameras.len()),
+            },
             tree: result
                 .cameras
                 .iter()
@@ -363,7 +367,8 @@ impl Exported {
         }
     }
 
-    /// The export of a one-camera cell's two unknowns.
+    /// The export of a one-camera cell's two unknowns given as poses (the same as
+    /// [`Exported::of`] its result).
     pub fn one(mounts: &CellTransforms, ids: &FrameIds) -> Exported {
         Exported {
             cell: ExportedCell::One(mounts.setup),

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use handeye_core::geometry::rotvec;
-use handeye_records::result::{CamerasResultFile, NamedTransform};
+use handeye_records::result::{CellResult, NamedTransform};
 
 use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
 use super::{escape, ReportError};
@@ -24,7 +24,7 @@ use handeye_vision::Target;
 
 use super::session::{load_optics, page_frames, sample_visits, Optics};
 use super::PageOut;
-use handeye_solve::verdict::Level;
+use handeye_solve::verdict::{Level, Verdict};
 
 fn transform_cells(t: &NamedTransform) -> String {
     let p = t.pose.translation.vector;
@@ -34,7 +34,7 @@ fn transform_cells(t: &NamedTransform) -> String {
         _ => "—".into(),
     };
     format!(
-        "<td><code>{}</code></td><td>[{:.5}, {:.5}, {:.5}]</td><td>[{:.5}, {:.5}, {:.5}]</td><td>±{:.3} mm / ±{:.4}°</td><td>{}</td>",
+        "<td><code>{}</code></td><td>[{:.5}, {:.5}, {:.5}]</td><td>[{:.5}, {:.5}, {:.5}]</td><td>{}</td><td>{}</td>",
         escape(&t.name),
         p.x,
         p.y,
@@ -42,15 +42,27 @@ fn transform_cells(t: &NamedTransform) -> String {
         r.x,
         r.y,
         r.z,
-        t.sigma.translation_mm,
-        t.sigma.rotation_deg,
+        t.sigma.map_or_else(
+            || "—".into(),
+            |s| format!("±{:.3} mm / ±{:.4}°", s.translation_mm, s.rotation_deg)
+        ),
         truth
     )
 }
 
+/// A verdict's level as the page writes it (its CSS class too); "—" where there is none.
+fn level_word(verdict: Option<&Verdict>) -> &'static str {
+    verdict.map_or("—", |v| v.level.word())
+}
+
+/// A verdict's reason; what a missing verdict means.
+fn reason(verdict: Option<&Verdict>) -> &str {
+    verdict.map_or("no verdict", |v| &v.reason)
+}
+
 /// Writes the page to `out` (the file `path`, for errors), the frames as they are drawn.
 fn render_to(
-    result: &CamerasResultFile,
+    result: &CellResult,
     folder: &Path,
     out: &mut dyn std::io::Write,
     path: &Path,
@@ -69,9 +81,11 @@ fn render_to(
     );
     // The cell's verdict (the worst camera's, naming it) on the card of a one-camera page; each
     // camera's cell model is shown under that camera below.
-    let mut cell_verdict = result.verdict.clone();
-    cell_verdict.figures.cell_model = None;
-    super::sections::verdict_card(&mut html, &cell_verdict);
+    if let Some(verdict) = &result.verdict {
+        let mut cell_verdict = verdict.clone();
+        cell_verdict.figures.cell_model = None;
+        super::sections::verdict_card(&mut html, &cell_verdict);
+    }
     use_section(&mut html, result);
     for f in handeye_session::cell::cameras::read_failures(folder) {
         let _ = write!(
@@ -95,8 +109,8 @@ fn render_to(
                 "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{}</td><td colspan=\"6\">{}</td></tr>",
                 escape(&c.name),
                 c.samples,
-                escape(c.left_out.as_deref().unwrap_or(&c.verdict.reason)),
-                v = c.verdict.level.word()
+                escape(c.left_out.as_deref().unwrap_or(reason(c.verdict.as_ref()))),
+                v = level_word(c.verdict.as_ref())
             );
         }
         for (k, t) in rows {
@@ -106,7 +120,7 @@ fn render_to(
                 escape(&c.name),
                 c.samples,
                 transform_cells(t),
-                v = c.verdict.level.word()
+                v = level_word(c.verdict.as_ref())
             );
         }
     }
@@ -126,14 +140,18 @@ fn render_to(
             html,
             "<tr><td>{}</td><td class=\"{v}\">{v}</td><td>{held_out}</td><td>{}</td></tr>",
             escape(&c.name),
-            escape(&c.verdict.reason),
-            v = c.verdict.level.word()
+            escape(reason(c.verdict.as_ref())),
+            v = level_word(c.verdict.as_ref())
         );
     }
     html.push_str("</table>");
     // Each camera's cell model (issue #38): which of its files its corners contradict.
     for c in &result.cameras {
-        if let Some(model) = &c.verdict.figures.cell_model {
+        let model = c
+            .verdict
+            .as_ref()
+            .and_then(|v| v.figures.cell_model.as_ref());
+        if let Some(model) = model {
             let _ = write!(html, "<h3>Camera {}</h3>", escape(&c.name));
             super::sections::cell_model_table(&mut html, model);
         }
@@ -144,8 +162,10 @@ fn render_to(
     }
     let _ = write!(
         html,
-        "</table><p>Variance factor of the joint solve (χ²/dof): {:.3}</p>",
-        result.variance_factor
+        "</table><p>Variance factor of the joint solve (χ²/dof): {}</p>",
+        result
+            .variance_factor
+            .map_or_else(|| "—".into(), |f| format!("{f:.3}"))
     );
     residuals_section(&mut html, result)?;
     // Each camera's samples and records, read once for the plots and the frames.
@@ -167,7 +187,7 @@ fn render_to(
 
 /// Every camera's residual at each plan pose in the joint solve, rotation and translation: the
 /// one-camera page's per-pose bars with a bar per camera.
-fn residuals_section(html: &mut String, result: &CamerasResultFile) -> Result<(), ReportError> {
+fn residuals_section(html: &mut String, result: &CellResult) -> Result<(), ReportError> {
     html.push_str("<section id=\"residuals\"><h2>Per-pose residuals (joint solve)</h2><p>For every camera at every plan pose where it saw its board: the board pose it measured against the one the joint answer predicts there. A camera whose bars stand far above the others' at the same poses disagrees with them; a grey stub marks a sample its own solve dropped as an outlier (left out of the joint solve).</p>");
     let poses = result
         .cameras
@@ -264,21 +284,24 @@ const USE_FORMS: [(ExportFormat, &str); 4] = [
 /// "Use it" of the cell (`sections::use_section`): every camera's mount and the boards in the
 /// forms of [`USE_FORMS`], each the exact text `handeye export result.yaml --format …` writes
 /// (its default frame ids, the result's robot frames).
-fn use_section(html: &mut String, result: &CamerasResultFile) {
+fn use_section(html: &mut String, result: &CellResult) {
     let ids = FrameIds::of_robot(&result.robot_frames.clone().unwrap_or_default());
     // The result as result.yaml holds it (written and read back), so the page shows the very
     // text `handeye export result.yaml` prints, to the last digit.
-    let read_back: Option<CamerasResultFile> = serde_yaml_ng::to_string(result)
+    let read_back: Option<CellResult> = serde_yaml_ng::to_string(result)
         .ok()
         .and_then(|text| serde_yaml_ng::from_str(&text).ok());
-    let exported = Exported::cameras(read_back.as_ref().unwrap_or(result), &ids);
+    let exported = Exported::of(read_back.as_ref().unwrap_or(result), &ids);
     let intro = format!(
         "Every camera's mount and the boards, as <code>handeye export result.yaml --format …</code> writes them: camera <code>&lt;name&gt;</code>'s optical frame is <code>{}_&lt;name&gt;</code>, the robot base <code>{}</code>, the flange <code>{}</code>. Camera-to-camera transforms are comments (published, they would give a camera a second parent).",
         escape(&ids.camera),
         escape(&ids.base),
         escape(&ids.flange)
     );
-    let redo = result.verdict.level == Level::Redo;
+    let redo = result
+        .verdict
+        .as_ref()
+        .is_some_and(|v| v.level == Level::Redo);
     super::sections::use_section(
         html,
         &intro,
@@ -295,7 +318,7 @@ fn use_section(html: &mut String, result: &CamerasResultFile) {
 /// out of the joint solve, or whose files do not load, says so instead.
 fn frames_sections(
     page: &mut PageOut<'_>,
-    result: &CamerasResultFile,
+    result: &CellResult,
     records: &[Result<CameraRecords, String>],
 ) -> Result<(), ReportError> {
     let mounts = result.mounts();
@@ -397,7 +420,7 @@ fn camera_optics(
 
 /// Writes the page of `result`, the answer of the session in `folder`, to `path`.
 pub fn write_cameras_report(
-    result: &CamerasResultFile,
+    result: &CellResult,
     folder: &Path,
     path: &Path,
 ) -> Result<(), ReportError> {

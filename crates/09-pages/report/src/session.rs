@@ -14,7 +14,7 @@ use handeye_core::geometry::Pose;
 use handeye_core::keeping_largest;
 use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_records::dataset::Dataset;
-use handeye_records::result::SessionResult;
+use handeye_records::result::CellResult;
 use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
@@ -441,17 +441,16 @@ pub fn write_folder_report(
             dir.display()
         ),
     };
-    let result = match SessionResult::load(&result_path).map_err(not_solved)? {
-        SessionResult::Cameras(cameras) => {
-            let path = dir.join(REPORT_FILE);
-            super::cameras::write_cameras_report(&cameras, dir, &path)?;
-            return Ok(FolderReport {
-                path,
-                lacking: Vec::new(),
-                provisional,
-            });
-        }
-        SessionResult::OneCamera(one) => one,
+    let cell = CellResult::load(&result_path).map_err(not_solved)?;
+    // A cell of several cameras has its page; one camera's answer is drawn below.
+    let Some(result) = cell.only_camera() else {
+        let path = dir.join(REPORT_FILE);
+        super::cameras::write_cameras_report(&cell, dir, &path)?;
+        return Ok(FolderReport {
+            path,
+            lacking: Vec::new(),
+            provisional,
+        });
     };
     let folder = SessionFolder::open(dir).map_err(session_error)?;
     let mut lacking = Vec::new();

@@ -12,9 +12,10 @@ use handeye_config::{CellConfig, SolveSpace};
 use handeye_core::geometry::Pose;
 use handeye_core::setup::PosePair;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::{CamerasResultFile, SessionResult};
+use handeye_records::result::CellResult;
 use handeye_records::{SessionFolder, SolveInputs};
 use handeye_session::cell::cameras;
+use handeye_solve::verdict::Verdict;
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -57,24 +58,27 @@ pub(crate) fn read_dataset(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, 
 /// Reads a result file (`handeye solve -o`, a session's `result.yaml`) as a [`Calibration`]
 /// with the verdict it holds; `pairs` are its samples when known (for ids).
 fn read_result(py: Python<'_>, path: &Path, pairs: Vec<PosePair>) -> PyResult<Calibration> {
-    let file = match SessionResult::load(path).map_err(|e| errors::from_error(py, &e))? {
-        SessionResult::OneCamera(file) => *file,
-        // One Calibration is one camera's answer: the cell's is the session's `joint`.
-        SessionResult::Cameras(_) => {
-            return Err(errors::input(
-                py,
-                format!(
-                    "{}: a several-camera result: read it with handeye.Session({:?}), whose .joint holds every transform and .cameras[name] each camera's own session",
-                    path.display(),
-                    path.parent().unwrap_or(Path::new(".")).display().to_string()
-                ),
-            ))
-        }
+    let cell = CellResult::load(path).map_err(|e| errors::from_error(py, &e))?;
+    // One Calibration is one camera's answer: the cell's is the session's `joint`.
+    let Some(file) = cell.only_camera() else {
+        return Err(errors::input(
+            py,
+            format!(
+                "{}: a several-camera result: read it with handeye.Session({:?}), whose .joint holds every transform and .cameras[name] each camera's own session",
+                path.display(),
+                path.parent().unwrap_or(Path::new(".")).display().to_string()
+            ),
+        ));
     };
     let inner = file
         .to_calibration(path)
         .map_err(|e| errors::from_error(py, &e))?;
-    Ok(Calibration::with_verdict(inner, pairs, file.verdict, None))
+    Ok(Calibration::with_verdict(
+        inner,
+        pairs,
+        file.verdict.clone(),
+        None,
+    ))
 }
 
 /// Reads a result file as a `Calibration` (transforms, 1-sigma, residuals, notices, verdict).
@@ -114,12 +118,12 @@ impl Session {
     }
 
     /// Several cameras: the joint answer (`result.yaml` at the root), None when not solved.
-    fn joint_file(&self, py: Python<'_>) -> PyResult<Option<CamerasResultFile>> {
+    fn joint_file(&self, py: Python<'_>) -> PyResult<Option<CellResult>> {
         let path = self.root.join("result.yaml");
         if self.cameras.is_empty() || !path.exists() {
             return Ok(None);
         }
-        CamerasResultFile::load(&path)
+        CellResult::load(&path)
             .map(Some)
             .map_err(|e| errors::from_error(py, &e))
     }
@@ -217,40 +221,23 @@ impl Session {
         };
         for t in file.transforms() {
             transforms.set_item(&t.name, pose_to_py(py, &t.pose))?;
-            sigma.set_item(
-                &t.name,
-                figures(t.sigma.rotation_deg, t.sigma.translation_mm)?,
-            )?;
+            if let Some(s) = t.sigma {
+                sigma.set_item(&t.name, figures(s.rotation_deg, s.translation_mm)?)?;
+            }
             if let (Some(deg), Some(mm)) = (t.truth_error_deg, t.truth_error_mm) {
                 truth.set_item(&t.name, figures(deg, mm)?)?;
             }
         }
         let verdicts = PyDict::new(py);
         for camera in &file.cameras {
-            verdicts.set_item(
-                &camera.name,
-                Py::new(
-                    py,
-                    VerdictPy {
-                        inner: camera.verdict.clone(),
-                    },
-                )?,
-            )?;
+            verdicts.set_item(&camera.name, verdict_py(py, camera.verdict.clone())?)?;
         }
         let joint = PyDict::new(py);
         joint.set_item("transforms", transforms)?;
         joint.set_item("sigma", sigma)?;
         joint.set_item("truth_error", truth)?;
         joint.set_item("verdicts", verdicts)?;
-        joint.set_item(
-            "verdict",
-            Py::new(
-                py,
-                VerdictPy {
-                    inner: file.verdict,
-                },
-            )?,
-        )?;
+        joint.set_item("verdict", verdict_py(py, file.verdict)?)?;
         Ok(Some(joint))
     }
 
@@ -279,17 +266,10 @@ impl Session {
     #[getter]
     fn verdict(&self, py: Python<'_>) -> PyResult<Option<Py<VerdictPy>>> {
         if !self.cameras.is_empty() {
-            return self
-                .joint_file(py)?
-                .map(|file| {
-                    Py::new(
-                        py,
-                        VerdictPy {
-                            inner: file.verdict,
-                        },
-                    )
-                })
-                .transpose();
+            return match self.joint_file(py)? {
+                Some(file) => verdict_py(py, file.verdict),
+                None => Ok(None),
+            };
         }
         match self.result(py)? {
             Some(result) => result.verdict(py),
@@ -367,4 +347,11 @@ impl Session {
             ),
         }
     }
+}
+
+/// A result's verdict for Python (None where the file holds none).
+fn verdict_py(py: Python<'_>, verdict: Option<Verdict>) -> PyResult<Option<Py<VerdictPy>>> {
+    verdict
+        .map(|inner| Py::new(py, VerdictPy { inner }))
+        .transpose()
 }

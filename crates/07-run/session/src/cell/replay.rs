@@ -11,7 +11,7 @@ use anyhow::Context;
 use handeye_config::CellConfig;
 use handeye_core::camera_model::CameraModel;
 use handeye_records::dataset::Dataset;
-use handeye_records::result::CamerasResultFile;
+use handeye_records::result::CellResult;
 use handeye_records::{PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
@@ -102,7 +102,7 @@ pub struct CamerasReplay {
     /// The session folder.
     pub folder: PathBuf,
     /// The joint answer.
-    pub result: CamerasResultFile,
+    pub result: CellResult,
     /// Where it and the estimates were written.
     pub output: CamerasOutput,
 }
@@ -125,20 +125,41 @@ pub struct OneCameraReplay {
     pub output: PathBuf,
 }
 
-/// Replays the session of `request`; `measured` is told each frame as measured again, before
-/// the solve (so a solve that fails still leaves what each frame gave on the screen).
+/// Replays the session of `request`: every camera's saved frames measured again and solved.
+/// `measured` is told each frame as measured again (with the camera's name in a cell of
+/// several), before the solve, so a solve that fails still leaves what each frame gave on the
+/// screen.
 pub fn replay_session(
     request: ReplayRequest<'_>,
-    measured: &mut dyn FnMut(&[PoseVisit]),
+    measured: &mut dyn FnMut(Option<&str>, &[PoseVisit]),
 ) -> anyhow::Result<Replayed> {
     if cameras::is_cameras_folder(request.session) {
         let config = match request.config {
             Some(c) => c.to_path_buf(),
             None => cameras::read_manifest(request.session)?.config,
         };
-        let config = CellConfig::load(&config)?;
+        let cell =
+            super::prepare_config(CellConfig::load(&config)?).context("preparing the cell")?;
+        // Every camera's frames measured again with its board and lens, as one camera's are.
+        let mut visits = Vec::new();
+        for (camera, name) in cell
+            .cameras
+            .iter()
+            .zip(cell.config.cameras.iter().map(|c| &c.name))
+        {
+            let folder = SessionFolder::open(&cameras::camera_folder(request.session, name))?;
+            let (_, measured_now) = redetect(
+                &folder,
+                &camera.board,
+                &camera.camera_model,
+                cell.detector_options(),
+                cell.config.session.max_reprojection_rms_px,
+            )?;
+            measured(Some(name), &measured_now);
+            visits.push(measured_now);
+        }
         let output = CamerasOutput::replay(request.session, request.output);
-        let result = cameras::solve_cameras_folder(request.session, &config, &output)?;
+        let result = cameras::solve_cameras_folder(request.session, &cell.config, visits, &output)?;
         return Ok(Replayed::Cameras(Box::new(CamerasReplay {
             folder: request.session.to_path_buf(),
             result,
@@ -175,7 +196,7 @@ pub fn replay_session(
         cell.detector_options(),
         cell.config.session.max_reprojection_rms_px,
     )?;
-    measured(&visits);
+    measured(None, &visits);
     // Solved and judged as a run's solve is: the checks of the given files included.
     let samples = if dataset.pairs.is_empty() {
         Err(handeye_records::solve::no_samples(&folder, &visits))

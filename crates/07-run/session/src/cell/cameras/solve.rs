@@ -1,6 +1,7 @@
 //! The joint solve of a several-camera session folder and its `result.yaml`.
 //!
-//! Each camera is first solved alone from its own folder (the one-camera pose-space solve with
+//! The measurements are each camera's pose records (a run's) or its frames measured again (a
+//! replay's, `cell::replay`). Each camera is first solved alone from its own (the one-camera pose-space solve with
 //! the config's solver settings: robust start, outliers left out, its noise estimated); those
 //! answers start the joint solve (`handeye_solve::cameras`), which fits every mount and one board per
 //! setup together. `result.yaml` names every transform by its frames (`T_flange_cam_wrist`,
@@ -18,9 +19,7 @@ use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
 use handeye_core::yaml_file::write_yaml;
-use handeye_records::result::{
-    CameraResult, CamerasResultFile, NamedTransform, SampleResidualYaml,
-};
+use handeye_records::result::{CameraResult, CellResult, NamedTransform, SampleResidualYaml};
 use handeye_records::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
 };
@@ -104,7 +103,7 @@ fn named(
         parent: parent.into(),
         child: child.into(),
         pose,
-        sigma,
+        sigma: Some(sigma),
         truth_error_deg: error.map(|e| e.0),
         truth_error_mm: error.map(|e| e.1),
     }
@@ -148,10 +147,28 @@ fn camera_files(camera: &CellCamera) -> Result<(Target, CameraModel), CamerasSol
     Ok((board, model))
 }
 
-/// Reads every camera's folder and solves each camera alone: the joint problem and its start.
+/// Each camera's measurements as its pose records hold them (config order): what a run
+/// measured.
+pub fn recorded_visits(
+    root: &Path,
+    cell: &CellConfig,
+) -> Result<Vec<Vec<PoseVisit>>, CamerasSolveError> {
+    cell.cameras
+        .iter()
+        .map(|camera| {
+            let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
+            Ok(folder.read_visits()?)
+        })
+        .collect()
+}
+
+/// The joint problem of the session at `root` from each camera's measurements `visits`
+/// (config order: recorded, [`recorded_visits`], or measured again from the frames by a
+/// replay), each camera solved alone for its start.
 pub fn load_joint_problem(
     root: &Path,
     cell: &CellConfig,
+    visits: Vec<Vec<PoseVisit>>,
 ) -> Result<CamerasProblem, CamerasSolveError> {
     let manifest = read_manifest(root)?;
     // The plan as the planner camera's session holds it (an adaptive session's grows there).
@@ -175,9 +192,7 @@ pub fn load_joint_problem(
     let mut models = Vec::new();
     let mut cell_models = Vec::new();
     let mut sample_poses = Vec::new();
-    for (c, camera) in cell.cameras.iter().enumerate() {
-        let folder = SessionFolder::open(&camera_folder(root, &camera.name))?;
-        let visits = folder.read_visits()?;
+    for ((c, camera), visits) in cell.cameras.iter().enumerate().zip(visits) {
         let pairs: Vec<_> = visits.iter().filter_map(|v| v.sample()).collect();
         let samples = pairs.len();
         sample_poses.push(plan_poses_of_samples(&visits));
@@ -375,19 +390,25 @@ impl CamerasOutput {
     }
 }
 
-/// Solves a several-camera session folder jointly and writes the result and the estimates
-/// where `output` says.
+/// Solves a several-camera session folder jointly from each camera's measurements `visits`
+/// (config order; [`load_joint_problem`]) and writes the result and the estimates where
+/// `output` says.
 pub fn solve_cameras_folder(
     root: &Path,
     cell: &CellConfig,
+    visits: Vec<Vec<PoseVisit>>,
     output: &CamerasOutput,
-) -> Result<CamerasResultFile, CamerasSolveError> {
-    let problem = load_joint_problem(root, cell)?;
+) -> Result<CellResult, CamerasSolveError> {
+    let problem = load_joint_problem(root, cell, visits)?;
     let joint = solve_joint(&problem, pixel_space(cell), robot_sigma(cell))?;
     let mut result = result_file(cell, &problem, &joint);
     let written = write_corrected_files(output, cell, &problem)?;
     for (entry, files) in result.cameras.iter_mut().zip(written) {
-        if let Some(model) = entry.verdict.figures.cell_model.as_mut() {
+        let model = entry
+            .verdict
+            .as_mut()
+            .and_then(|v| v.figures.cell_model.as_mut());
+        if let Some(model) = model {
             model.written = files.iter().map(|p| p.display().to_string()).collect();
         }
     }
@@ -420,12 +441,7 @@ fn write_corrected_files(
 
 /// Names each camera's folder, its estimates' folder, the cell config, its board and lens
 /// files in its verdict's advice, and the cell's verdict again from them.
-fn name_files(
-    root: &Path,
-    output: &CamerasOutput,
-    cell: &CellConfig,
-    result: &mut CamerasResultFile,
-) {
+fn name_files(root: &Path, output: &CamerasOutput, cell: &CellConfig, result: &mut CellResult) {
     for (camera, entry) in cell.cameras.iter().zip(&mut result.cameras) {
         let files = verdict::SessionFiles {
             session: camera_folder(root, &camera.name).display().to_string(),
@@ -438,12 +454,11 @@ fn name_files(
                 .map(|f| f.display().to_string())
                 .unwrap_or_default(),
         };
-        entry.verdict.name_session(&files);
+        if let Some(verdict) = entry.verdict.as_mut() {
+            verdict.name_session(&files);
+        }
     }
-    result.verdict = verdict::worst_camera(
-        result.cameras.iter().map(|c| (c.name.as_str(), &c.verdict)),
-        result.verdict.accuracy,
-    );
+    result.verdict = Some(cell_verdict(&result.cameras, cell.verdict.accuracy()));
 }
 
 /// Whether the config asks for the answer in pixel space (`solver.space: reprojection`, the
@@ -552,7 +567,7 @@ pub fn result_file(
     cell: &CellConfig,
     problem: &CamerasProblem,
     joint: &CamerasSolution,
-) -> CamerasResultFile {
+) -> CellResult {
     let accuracy = Accuracy {
         translation_mm: cell.verdict.accuracy_mm,
         rotation_deg: cell.verdict.accuracy_deg,
@@ -575,11 +590,12 @@ pub fn result_file(
             residual_translation_rms_mm: None,
             residuals_per_pose: Vec::new(),
             held_out: problem.held_out[c].as_ref().ok().copied(),
-            verdict: verdict::mount::left_out(
+            verdict: Some(verdict::mount::left_out(
                 left_out.as_deref().unwrap_or_default(),
                 samples,
                 accuracy,
-            ),
+            )),
+            answer: None,
         };
         if let Some(k) = problem.config_index.iter().position(|&i| i == c) {
             // The mount's parent frame: `flange` (eye in hand) or `base` (eye to hand).
@@ -616,7 +632,7 @@ pub fn result_file(
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
             entry.residuals_per_pose =
                 per_pose_residuals(&problem.sample_poses[c], &joint.residuals[k].per_pose);
-            entry.verdict = verdict::with_cell_model(
+            entry.verdict = Some(verdict::with_cell_model(
                 verdict::assess_mount(
                     &joint.camera_sigmas[k],
                     problem.held_out[c].as_ref().map_err(String::as_str),
@@ -624,14 +640,11 @@ pub fn result_file(
                     accuracy,
                 ),
                 problem.cell_models[c].as_ref().map(|m| &m.summary),
-            );
+            ));
         }
         cameras.push(entry);
     }
-    let cell_verdict = verdict::worst_camera(
-        cameras.iter().map(|c| (c.name.as_str(), &c.verdict)),
-        accuracy,
-    );
+    let cell_verdict = cell_verdict(&cameras, accuracy);
     let board_truth = |setup: Setup| {
         cell.cameras
             .iter()
@@ -673,14 +686,24 @@ pub fn result_file(
             )
         })
         .collect();
-    CamerasResultFile {
+    CellResult {
         robot_frames: Some(cell.robot.frames()),
         cameras,
         boards,
         camera_to_camera,
-        variance_factor: joint.variance_factor,
-        verdict: cell_verdict,
+        variance_factor: Some(joint.variance_factor),
+        verdict: Some(cell_verdict),
     }
+}
+
+/// The cell's verdict: the worst of its cameras' (each several-camera entry has one).
+fn cell_verdict(cameras: &[CameraResult], accuracy: Accuracy) -> verdict::Verdict {
+    verdict::worst_camera(
+        cameras
+            .iter()
+            .filter_map(|c| Some((c.name.as_str(), c.verdict.as_ref()?))),
+        accuracy,
+    )
 }
 
 /// The result file of a several-camera session folder.

@@ -110,7 +110,7 @@ pub struct CellRun {
     /// camera's own, in its folder).
     pub solved: SolvedSession,
     /// A several-camera cell: the joint answer, as written to the session's `result.yaml`.
-    pub cameras_result: Option<handeye_records::result::CamerasResultFile>,
+    pub cameras_result: Option<handeye_records::result::CellResult>,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
@@ -140,12 +140,17 @@ impl CellRun {
     pub fn verdict_and_summary(&self) -> (Option<&handeye_solve::verdict::Verdict>, String) {
         match &self.cameras_result {
             Some(result) => {
-                let mut summary =
-                    format!("cell: {} — {}", result.verdict.level, result.verdict.reason);
+                let line = |name: &str, verdict: Option<&handeye_solve::verdict::Verdict>| {
+                    verdict.map_or_else(
+                        || format!("{name}: no verdict"),
+                        |v| format!("{name}: {} — {}", v.level, v.reason),
+                    )
+                };
+                let mut summary = line("cell", result.verdict.as_ref());
                 for c in &result.cameras {
-                    summary += &format!("\n{}: {} — {}", c.name, c.verdict.level, c.verdict.reason);
+                    summary += &format!("\n{}", line(&c.name, c.verdict.as_ref()));
                 }
-                (Some(&result.verdict), summary)
+                (result.verdict.as_ref(), summary)
             }
             None => (self.solved.verdict.as_ref(), self.solved.summary.clone()),
         }
@@ -419,6 +424,7 @@ pub fn run_opened(
         (true, Some(root)) => Some(super::cameras::solve_cameras_folder(
             root,
             &cell.config,
+            super::cameras::recorded_visits(root, &cell.config)?,
             &super::cameras::CamerasOutput::run(root),
         )?),
         _ => None,

@@ -1,0 +1,277 @@
+//! A session's `result.yaml` as its cell's answer, for N ≥ 1 cameras: every transform named by
+//! its frames with its 1-sigma, per camera its mount, residuals and verdict, the boards, and
+//! the cell's verdict. Every reader (`export`, `verify`, the report, Python) takes this one type.
+//!
+//! Two layouts are written, by the number of cameras:
+//! - a cell of one camera writes its camera's whole answer at the top level
+//!   ([`ResultFile`], the layout `handeye solve` writes), read here as a camera list of one
+//!   whose answer it is ([`CellResult::of_one_camera`]);
+//! - a cell of several writes the list itself: each camera's mount from the joint solve beside
+//!   the one solved from its views alone, the boards, the camera-to-camera transforms.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use handeye_core::geometry::{serde_pose, Pose};
+use handeye_core::setup::{CellTransforms, RobotFrames, Setup};
+use handeye_core::yaml_file::{parse_yaml, read_text, FileError};
+use handeye_solve::verdict::{HeldOut, Verdict};
+use handeye_solve::PoseSigma;
+
+use super::{ResultFile, SampleResidualYaml};
+
+/// One solved transform, named by its frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NamedTransform {
+    /// `T_<parent>_<child>`.
+    pub name: String,
+    /// The parent frame (`flange`, `base`, `cam_left`).
+    pub parent: String,
+    /// The child frame (`cam_wrist`, `target`, `cam_right`).
+    pub child: String,
+    /// The transform.
+    #[serde(with = "serde_pose")]
+    pub pose: Pose,
+    /// Its 1-sigma (absent when the answer has none: a one-camera answer not refined).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<PoseSigma>,
+    /// Against the simulator's truth (sim cells only): rotation, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_error_deg: Option<f64>,
+    /// Against the simulator's truth: translation, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_error_mm: Option<f64>,
+}
+
+/// One camera's part of the answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraResult {
+    /// Its name.
+    pub name: String,
+    /// Its setup.
+    pub setup: Setup,
+    /// Poses where it saw its board (accepted samples).
+    pub samples: usize,
+    /// Why it is not in the joint solve, when it is not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub left_out: Option<String>,
+    /// Its mount from the joint solve (absent when left out).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<NamedTransform>,
+    /// Its mount solved from its own views alone (absent for a cell's only camera: its joint
+    /// answer is its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alone: Option<NamedTransform>,
+    /// Its corner noise estimated by the pixel-space joint solve (1-sigma per image axis), px.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corner_noise_px: Option<f64>,
+    /// RMS rotation residual of its samples in the joint solve, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_rotation_rms_deg: Option<f64>,
+    /// RMS translation residual, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_translation_rms_mm: Option<f64>,
+    /// Each of its samples' residual in the joint solve, the one-camera result's per-sample form
+    /// (`index`: the plan pose; absent in files written before it and when it is left out).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub residuals_per_pose: Vec<SampleResidualYaml>,
+    /// The leave-one-out check of its own samples (each predicted by a one-camera solve of the
+    /// others), as the one-camera verdict runs it; absent when it could not run (`reason`
+    /// says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOut>,
+    /// GOOD, CHECK or REDO with its reason and next action: the worse of its 1-sigma and its
+    /// held-out error against the accuracy asked for (`verdict::assess_mount`); REDO when it is
+    /// left out. A cell's only camera: its answer's verdict (absent in files written before
+    /// verdicts).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+    /// Its whole answer, when it is the cell's only camera: the file a one-camera session writes
+    /// (uncertainty, noise, the arm's model, the solver's run, notices), this entry's figures
+    /// read from it. A several-camera file holds none (each camera's own session folder does).
+    #[serde(skip)]
+    pub answer: Option<Box<ResultFile>>,
+}
+
+/// A session's `result.yaml`: the cell's answer, one camera or several ([`CellResult::load`]
+/// reads either layout).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellResult {
+    /// The frames the robot poses were read in (absent in files written before it: the UR
+    /// controller's `base` and `tool0`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_frames: Option<RobotFrames>,
+    /// Per camera, config order.
+    pub cameras: Vec<CameraResult>,
+    /// The boards (`T_base_target`, `T_flange_target`) from the joint solve.
+    pub boards: Vec<NamedTransform>,
+    /// Camera-to-camera transforms of cameras of one setup (`T_cam_left_cam_right`).
+    #[serde(default)]
+    pub camera_to_camera: Vec<NamedTransform>,
+    /// `χ²/dof` of the joint solve (absent for an answer without uncertainty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variance_factor: Option<f64>,
+    /// The cell's verdict: the worst camera's, naming it (`verdict::worst_camera`); a cell of
+    /// one camera, its camera's (absent in files written before verdicts).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+}
+
+impl CellResult {
+    /// Reads a session's result file of either layout: a top-level `cameras:` key is a
+    /// several-camera cell's, anything else one camera's answer ([`CellResult::of_one_camera`]).
+    /// Errors name the file, the key and the line as every result read does.
+    pub fn load(path: &Path) -> Result<CellResult, FileError> {
+        let text = read_text(path)?;
+        // Only the top-level keys decide; a file that is not a mapping is left to the
+        // one-camera reader, whose error says what a result looks like.
+        let several = serde_yaml_ng::from_str::<serde_yaml_ng::Mapping>(&text)
+            .is_ok_and(|keys| keys.contains_key("cameras"));
+        if several {
+            let cell: CellResult = parse_yaml(&text, path)?;
+            cell.check_joint(path)?;
+            Ok(cell)
+        } else {
+            CellResult::of_one_camera(parse_yaml(&text, path)?, path)
+        }
+    }
+
+    /// A several-camera answer is whole: every transform has its 1-sigma, every camera and the
+    /// cell their verdict (the fields only a one-camera answer may lack).
+    fn check_joint(&self, path: &Path) -> Result<(), FileError> {
+        let missing = |yaml_path: String| FileError::Value {
+            path: path.to_path_buf(),
+            yaml_path,
+            problem: "missing (a several-camera answer judges every camera and the cell)".into(),
+        };
+        if self.verdict.is_none() {
+            return Err(missing("verdict".into()));
+        }
+        if let Some(i) = self.cameras.iter().position(|c| c.verdict.is_none()) {
+            return Err(missing(format!("cameras[{i}].verdict")));
+        }
+        if self.variance_factor.is_none() {
+            return Err(missing("variance_factor".into()));
+        }
+        match self.transforms().find(|t| t.sigma.is_none()) {
+            Some(t) => Err(FileError::Value {
+                path: path.to_path_buf(),
+                yaml_path: t.name.clone(),
+                problem: "missing its sigma (a several-camera answer gives every transform's)"
+                    .into(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// A one-camera answer (read from `path`) as its cell's: a camera list of one, named
+    /// `camera` as its frame is, whose mount and board are the answer's two unknowns (checked as
+    /// [`ResultFile::mounts`] checks them) and whose whole answer is kept.
+    pub fn of_one_camera(answer: ResultFile, path: &Path) -> Result<CellResult, FileError> {
+        let mounts = answer.mounts(path)?;
+        let [(camera_parent, camera_frame), (board_parent, board_frame)] =
+            answer.setup.unknown_frames();
+        let sigma = |key: &str| answer.uncertainty.as_ref().and_then(|u| u.sigma(key));
+        let (camera_key, board_key) = answer.setup.unknown_names();
+        let transform = |parent: &str, child: &str, pose: Pose, key: &str| NamedTransform {
+            name: key.to_string(),
+            parent: parent.to_string(),
+            child: child.to_string(),
+            pose,
+            sigma: sigma(key),
+            truth_error_deg: None,
+            truth_error_mm: None,
+        };
+        let residuals = &answer.residuals;
+        let camera = CameraResult {
+            name: camera_frame.to_string(),
+            setup: answer.setup,
+            samples: residuals.samples.len(),
+            left_out: None,
+            joint: Some(transform(
+                camera_parent,
+                camera_frame,
+                mounts.camera_mount,
+                camera_key,
+            )),
+            alone: None,
+            corner_noise_px: None,
+            residual_rotation_rms_deg: Some(residuals.rotation_rms_deg),
+            residual_translation_rms_mm: Some(residuals.translation_rms_mm),
+            residuals_per_pose: residuals.samples.clone(),
+            held_out: answer.verdict.as_ref().and_then(|v| v.figures.held_out),
+            verdict: answer.verdict.clone(),
+            answer: None,
+        };
+        Ok(CellResult {
+            robot_frames: answer.robot_frames.clone(),
+            boards: vec![transform(
+                board_parent,
+                board_frame,
+                mounts.target_mount,
+                board_key,
+            )],
+            camera_to_camera: Vec::new(),
+            variance_factor: answer.uncertainty.as_ref().map(|u| u.variance_factor),
+            verdict: answer.verdict.clone(),
+            cameras: vec![CameraResult {
+                answer: Some(Box::new(answer)),
+                ..camera
+            }],
+        })
+    }
+
+    /// The whole answer of a cell of one camera ([`CameraResult::answer`]); `None` for a cell
+    /// of several.
+    pub fn only_camera(&self) -> Option<&ResultFile> {
+        match self.cameras.as_slice() {
+            [only] => only.answer.as_deref(),
+            _ => None,
+        }
+    }
+
+    /// The frames the robot poses were read in (files written before it: the UR controller's
+    /// `base` and `tool0`).
+    pub fn robot_frames(&self) -> RobotFrames {
+        self.robot_frames.clone().unwrap_or_default()
+    }
+
+    /// Every transform of the answer: the joint mounts, the boards, the camera-to-camera ones.
+    pub fn transforms(&self) -> impl Iterator<Item = &NamedTransform> {
+        self.cameras
+            .iter()
+            .filter_map(|c| c.joint.as_ref())
+            .chain(&self.boards)
+            .chain(&self.camera_to_camera)
+    }
+
+    /// Each solved camera's transforms from the joint answer, by camera name: its mount and its
+    /// setup's board (`T_base_target` for an eye-in-hand camera, `T_flange_target` for an
+    /// eye-to-hand one). A camera left out of the joint solve has none and is not listed.
+    pub fn mounts(&self) -> Vec<(String, CellTransforms)> {
+        self.cameras
+            .iter()
+            .filter_map(|camera| {
+                let [_, (board_parent, _)] = camera.setup.unknown_frames();
+                let board = self.boards.iter().find(|b| b.parent == board_parent)?;
+                Some((
+                    camera.name.clone(),
+                    CellTransforms {
+                        setup: camera.setup,
+                        camera_mount: camera.joint.as_ref()?.pose,
+                        target_mount: board.pose,
+                    },
+                ))
+            })
+            .collect()
+    }
+
+    /// The transform called `name`.
+    pub fn transform(&self, name: &str) -> Option<&NamedTransform> {
+        self.transforms().find(|t| t.name == name)
+    }
+}
