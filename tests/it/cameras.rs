@@ -30,6 +30,25 @@ pub(crate) fn read_result(folder: &Path) -> CellResult {
     CellResult::load(&folder.join("result.yaml")).unwrap()
 }
 
+/// Asserts that `got` names the transforms `want` names, each within `tolerance` (mm and
+/// degrees) of it; `what` says which answer `got` is.
+fn assert_same_answer(want: &CellResult, got: &CellResult, tolerance: f64, what: &str) {
+    assert_eq!(
+        want.transforms().count(),
+        got.transforms().count(),
+        "{what}"
+    );
+    for (a, b) in want.transforms().zip(got.transforms()) {
+        assert_eq!(a.name, b.name, "{what}");
+        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
+        assert!(
+            mm < tolerance && deg < tolerance,
+            "{}: {what} differs by {mm} mm {deg}°",
+            a.name
+        );
+    }
+}
+
 /// The simulator's truth of every camera mount, by transform name, from the config itself (not
 /// from what the run wrote).
 fn truth(config: &Path) -> Vec<(String, Pose)> {
@@ -317,15 +336,7 @@ fn killed_mid_run_then_resumed_and_replayed() {
         );
         let file = output.cloned().unwrap_or(out.join("replay-result.yaml"));
         let replayed = CellResult::load(&file).unwrap();
-        for (a, b) in resumed.transforms().zip(replayed.transforms()) {
-            assert_eq!(a.name, b.name);
-            let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
-            assert!(
-                mm < 1e-6 && deg < 1e-6,
-                "{}: replay differs by {mm} mm {deg}°",
-                a.name
-            );
-        }
+        assert_same_answer(&resumed, &replayed, 1e-6, "the replay");
         assert!(file.with_file_name("replay-report.html").is_file());
         if output.is_some() {
             assert_eq!(
@@ -421,15 +432,7 @@ fn a_several_camera_replay_measures_the_frames_again() {
             .arg(&replayed),
     );
     let replayed = CellResult::load(&replayed).unwrap();
-    for (a, b) in run.transforms().zip(replayed.transforms()) {
-        assert_eq!(a.name, b.name);
-        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
-        assert!(
-            mm < 1e-6 && deg < 1e-6,
-            "{}: replay differs by {mm} mm {deg}°",
-            a.name
-        );
-    }
+    assert_same_answer(&run, &replayed, 1e-6, "the replay");
 }
 
 /// The independent anchor for the two fixed cameras: OpenCV's `cv2.stereoCalibrate`
@@ -1021,12 +1024,7 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
     );
     let run = read_result(&session);
     let solved = CellResult::load(&answer).unwrap();
-    assert_eq!(run.transforms().count(), solved.transforms().count());
-    for (a, b) in run.transforms().zip(solved.transforms()) {
-        assert_eq!(a.name, b.name);
-        let (mm, deg) = util::pose_error_mm_deg(&a.pose, &b.pose);
-        assert!(mm < 1e-9 && deg < 1e-9, "{}: {mm} mm {deg}°", a.name);
-    }
+    assert_same_answer(&run, &solved, 1e-9, "`handeye solve`");
     assert_eq!(
         util::folder_bytes(&session),
         before,

@@ -594,8 +594,9 @@ fn export_reads_a_saved_result_file() {
 
 /// A one-camera result read as its cell's answer (`CellResult`, what `handeye export` reads)
 /// exports exactly what its two unknowns do, in every form, for both setups and under the UR
-/// ROS driver's `base_link` (the turned base); a file with no verdict (a solve not judged) or
-/// no uncertainty (the iterative method) reads, its cell then without them.
+/// ROS driver's `base_link` (the turned base), and saves as the same file; a file with no
+/// verdict (a solve not judged) or no uncertainty (the iterative method) reads, its cell then
+/// without them.
 #[test]
 fn a_one_camera_result_read_as_the_cells_exports_its_two_unknowns() {
     use handeye_formats::export::Exported;
@@ -636,6 +637,13 @@ fn a_one_camera_result_read_as_the_cells_exports_its_two_unknowns() {
         let file = ResultFile::load(&path).unwrap();
         let cell = CellResult::load(&path).unwrap();
         assert_eq!(cell.only_camera(), Some(&file));
+        // Saved, the cell of one camera is its camera's file again, byte for byte.
+        let again = dir.path().join("again.yaml");
+        cell.save(&again).unwrap();
+        assert_eq!(
+            std::fs::read(&again).unwrap(),
+            std::fs::read(&path).unwrap()
+        );
         assert!(cell.verdict.is_none() && cell.cameras[0].verdict.is_none());
         let refined = method == Method::Refined;
         assert_eq!(

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use handeye_core::geometry::{serde_pose, Pose};
 use handeye_core::setup::{CellTransforms, RobotFrames, Setup};
-use handeye_core::yaml_file::{parse_yaml, read_text, FileError};
+use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml, FileError};
 use handeye_solve::verdict::{HeldOut, Verdict};
 use handeye_solve::PoseSigma;
 
@@ -137,6 +137,16 @@ impl CellResult {
             Ok(cell)
         } else {
             CellResult::of_one_camera(parse_yaml(&text, path)?, path)
+        }
+    }
+
+    /// Writes the answer atomically in the layout of its number of cameras: a cell of one
+    /// camera its camera's whole answer at the top level ([`ResultFile::save`]), a cell of
+    /// several the camera list.
+    pub fn save(&self, path: &Path) -> Result<(), FileError> {
+        match self.only_camera() {
+            Some(answer) => answer.save(path),
+            None => write_yaml(self, path),
         }
     }
 

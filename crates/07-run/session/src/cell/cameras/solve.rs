@@ -18,7 +18,6 @@ use handeye_config::{CellCamera, CellConfig, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup};
-use handeye_core::yaml_file::write_yaml;
 use handeye_records::result::{CameraResult, CellResult, NamedTransform, SampleResidualYaml};
 use handeye_records::solve::{
     board_pose, frames_from_visits, reprojection_options, write_estimates,
@@ -413,7 +412,7 @@ pub fn solve_cameras_folder(
         }
     }
     name_files(root, output, cell, &mut result);
-    write_yaml(&result, &output.result).map_err(SessionError::from)?;
+    result.save(&output.result).map_err(SessionError::from)?;
     Ok(result)
 }
 
