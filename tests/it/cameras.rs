@@ -408,7 +408,8 @@ fn a_several_camera_replay_measures_the_frames_again() {
     };
     // The tampered records, solved as they are (`handeye solve`, the old form of a
     // several-camera replay): the answer moves.
-    let as_recorded = dir.path().join("as-recorded.yaml");
+    // (Each written into a folder `-o` names that does not exist yet.)
+    let as_recorded = dir.path().join("solved/as-recorded.yaml");
     util::succeeds(
         handeye()
             .arg("solve")
@@ -423,7 +424,7 @@ fn a_several_camera_replay_measures_the_frames_again() {
         "the tampered records moved `left` only {mm} mm, {deg}°"
     );
     // The replay: the frames measured again, the run's answer.
-    let replayed = dir.path().join("replayed.yaml");
+    let replayed = dir.path().join("replayed/answer.yaml");
     util::succeeds(
         handeye()
             .arg("replay")

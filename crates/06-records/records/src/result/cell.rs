@@ -91,7 +91,8 @@ pub struct CameraResult {
     pub verdict: Option<Verdict>,
     /// Its whole answer, when it is the cell's only camera: the file a one-camera session writes
     /// (uncertainty, noise, the arm's model, the solver's run, notices), this entry's figures
-    /// read from it. A several-camera file holds none (each camera's own session folder does).
+    /// read from it. A several-camera file holds none: its cameras' figures are the joint
+    /// solve's (the run's own one-camera solve of the planner camera is in that camera's folder).
     #[serde(skip)]
     pub answer: Option<Box<ResultFile>>,
 }

@@ -216,7 +216,8 @@ pub fn replay_session(
     let output = request
         .output
         .map_or_else(|| folder.root().join(REPLAY_RESULT_FILE), Path::to_path_buf);
-    // `-o` into a folder that does not exist yet makes it, as a several-camera replay does.
+    // `-o` into a folder that does not exist yet makes it, as a several-camera replay does
+    // (`cameras::solve_cameras_folder`).
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("{}: cannot make the folder", parent.display()))?;

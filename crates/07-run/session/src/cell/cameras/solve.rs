@@ -412,6 +412,10 @@ pub fn solve_cameras_folder(
         }
     }
     name_files(root, output, cell, &mut result);
+    // `-o` into a folder that does not exist yet makes it, as one camera's replay does.
+    if let Some(parent) = output.result.parent().filter(|p| !p.as_os_str().is_empty()) {
+        handeye_records::create_dir(parent)?;
+    }
     result.save(&output.result).map_err(SessionError::from)?;
     Ok(result)
 }
