@@ -209,6 +209,12 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
 /// `replay-estimates/` beside it, never over the run's files.
 fn run_cameras_session(args: &SolveArgs) -> anyhow::Result<()> {
     let root = &args.samples;
+    anyhow::ensure!(
+        !args.compare,
+        "--compare compares the methods on one camera's samples; {} is a several-camera session: compare a camera's, `handeye solve {} --compare`",
+        root.display(),
+        cameras::camera_folder(root, "<name>").join("samples.yaml").display()
+    );
     handeye_records::refuse_live(
         root,
         "solve it when the run has ended: its joint answer is written then",

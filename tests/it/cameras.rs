@@ -1031,6 +1031,19 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
         before,
         "solve wrote into the session"
     );
+    // `--compare` (one camera's methods side by side) is refused, naming a camera's samples.
+    let compare = handeye()
+        .arg("solve")
+        .arg(&session)
+        .arg("--compare")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&compare.stderr);
+    assert_eq!(compare.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("--compare") && stderr.contains("cameras/<name>/samples.yaml"),
+        "{stderr}"
+    );
     // A one-camera command given the cell's folder names the cameras' folders.
     let Err(e) = handeye_records::SessionFolder::open(out) else {
         panic!("the cell's folder opened as one camera's");
