@@ -118,22 +118,28 @@ impl TryFrom<ViewSigmaFields> for ViewSigma {
     type Error = String;
 
     fn try_from(fields: ViewSigmaFields) -> Result<ViewSigma, String> {
+        ViewSigma::new(fields.rotation_deg, fields.translation_mm)
+    }
+}
+
+impl ViewSigma {
+    /// A view's precision, checked: both figures finite and positive, else what was expected
+    /// and what was given (the one check of a file's `view_sigma` and of Python's
+    /// `view_sigmas`).
+    pub fn new(rotation_deg: f64, translation_mm: f64) -> Result<ViewSigma, String> {
         let sigma = ViewSigma {
-            rotation_deg: fields.rotation_deg,
-            translation_mm: fields.translation_mm,
+            rotation_deg,
+            translation_mm,
         };
         if sigma.is_valid() {
             Ok(sigma)
         } else {
             Err(format!(
-                "expected two positive figures (rotation_deg, translation_mm), got {} and {}",
-                sigma.rotation_deg, sigma.translation_mm
+                "expected two positive figures (rotation_deg, translation_mm), got {rotation_deg} and {translation_mm}"
             ))
         }
     }
-}
 
-impl ViewSigma {
     /// Both figures finite and positive.
     pub fn is_valid(&self) -> bool {
         [self.rotation_deg, self.translation_mm]

@@ -187,36 +187,39 @@ pub(crate) fn calibrate(
             ));
         }
     }
+    // Each view's precision checked as a file's `view_sigma` is (`ViewSigma::new`).
+    let view_sigmas: Vec<Option<ViewSigma>> = match view_sigmas {
+        None => vec![None; n],
+        Some(rows) => rows
+            .into_iter()
+            .enumerate()
+            .map(|(i, row)| {
+                row.map(|(r, t)| ViewSigma::new(r, t))
+                    .transpose()
+                    .map_err(|e| {
+                        errors::input(
+                            py,
+                            format!("view_sigmas[{i}]: {e}; None for a view of unknown precision"),
+                        )
+                    })
+            })
+            .collect::<PyResult<_>>()?,
+    };
     let pairs: Vec<PosePair> = flange
         .into_iter()
         .zip(camera)
+        .zip(view_sigmas)
         .enumerate()
-        .map(|(i, (base_from_flange, camera_from_target))| PosePair {
-            base_from_flange,
-            camera_from_target,
-            weight: weights.as_ref().map_or(1.0, |w| w[i]),
-            id: ids.as_ref().map(|ids| ids[i].clone()),
-            view_sigma: view_sigmas
-                .as_ref()
-                .and_then(|s| s[i])
-                .map(|(r, t)| ViewSigma {
-                    rotation_deg: r,
-                    translation_mm: t,
-                }),
-        })
+        .map(
+            |(i, ((base_from_flange, camera_from_target), view_sigma))| PosePair {
+                base_from_flange,
+                camera_from_target,
+                weight: weights.as_ref().map_or(1.0, |w| w[i]),
+                id: ids.as_ref().map(|ids| ids[i].clone()),
+                view_sigma,
+            },
+        )
         .collect();
-    if let Some(i) = pairs
-        .iter()
-        .position(|p| p.view_sigma.is_some_and(|s| !s.is_valid()))
-    {
-        let (r, t) = view_sigmas.as_ref().and_then(|s| s[i]).unwrap_or_default();
-        return Err(errors::input(
-            py,
-            format!(
-                "view_sigmas[{i}] = ({r}, {t}): expected two positive figures (rotation_deg, translation_mm), or None for a view of unknown precision"
-            ),
-        ));
-    }
     solve_pairs(py, setup, pairs, options, accuracy, units)
 }
 

@@ -138,7 +138,7 @@ def test_view_sigmas_weigh_the_samples_as_the_cli_weighs_them(cli, yaml, request
     # A view of unknown precision (None or NaN) counts as a typical one; a bad figure is named.
     partly = [None if i % 3 == 0 else tuple(s) for i, s in enumerate(sigmas)]
     handeye.calibrate(*args, view_sigmas=partly, **kwargs)
-    for bad, message in (((0.01, -0.2), "view_sigmas[4] = (0.01, -0.2)"), ((0.01,), "view_sigmas[4]")):
+    for bad, message in (((0.01, -0.2), "view_sigmas[4]: expected two positive figures (rotation_deg, translation_mm), got 0.01 and -0.2"), ((0.01,), "view_sigmas[4]")):
         rows = [tuple(s) for s in sigmas]
         rows[4] = bad
         with pytest.raises(handeye.InputError, match=re.escape(message)):

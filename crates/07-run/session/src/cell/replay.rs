@@ -219,8 +219,7 @@ pub fn replay_session(
     // `-o` into a folder that does not exist yet makes it, as a several-camera replay does
     // (`cameras::solve_cameras_folder`).
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("{}: cannot make the folder", parent.display()))?;
+        handeye_records::create_dir(parent)?;
     }
     // The estimates of a file the cell model blames, beside the replay's result (the run's own
     // stay as they were).

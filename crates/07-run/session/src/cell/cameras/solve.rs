@@ -571,10 +571,7 @@ pub fn result_file(
     problem: &CamerasProblem,
     joint: &CamerasSolution,
 ) -> CellResult {
-    let accuracy = Accuracy {
-        translation_mm: cell.verdict.accuracy_mm,
-        rotation_deg: cell.verdict.accuracy_deg,
-    };
+    let accuracy = cell.verdict.accuracy();
     let truth_of = |c: usize| cell.cameras[c].simulation.map(|s| s.camera_mount);
     let mut cameras = Vec::new();
     for (c, camera) in cell.cameras.iter().enumerate() {
