@@ -14,14 +14,14 @@ use handeye_solve::verdict::Verdict;
 /// What `handeye run` of a several-camera cell prints before its report (the run itself is
 /// `cell::run::run`, its report `write_run_report`, as for one camera): what the run did and
 /// every camera's answer. Returns the line printed last, after the report's path.
-pub(super) fn print_run(done: &CellRun, result: &CellResult) -> String {
+pub(super) fn print_run(done: &CellRun) -> String {
     outln!(
         "{} poses visited in this run, arm time {:.1} s (shared by all cameras)",
         done.outcome.visited_now,
         done.outcome.arm_time_s()
     );
-    let output = cameras::CamerasOutput::run(done.root());
-    print_result(result, &output.result);
+    let output = cameras::CamerasOutput::run(&done.root);
+    print_result(&done.result, &output.result);
     format!(
         "next: handeye export {} --format ros2|urdf|opencv",
         output.result.display()

@@ -137,8 +137,8 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         );
     }
     // A cell with several cameras: the joint answer, every camera named.
-    if let Some(cameras) = &done.cameras_result {
-        let next = super::cameras::print_run(done, cameras);
+    if done.result.only_camera().is_none() {
+        let next = super::cameras::print_run(done);
         let report = write_report(done);
         if let Some(report) = &report {
             outln!("report: {}", report.display());

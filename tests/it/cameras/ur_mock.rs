@@ -124,7 +124,7 @@ fn body() {
     )
     .unwrap_or_else(|e| panic!("resume: {e}"));
     assert_eq!(done.outcome.visited_now, 8);
-    let result = done.cameras_result.expect("the joint answer");
+    let result = done.result;
     for (name, truth) in super::truth(&config) {
         let solved = result.transform(&name).unwrap();
         let (mm, deg) = util::pose_error_mm_deg(&solved.pose, &truth);

@@ -280,19 +280,17 @@ pub fn holdout(
     }
     let driven = run::drive(request, Strategy::Holdout(*spec), observer)
         .map_err(|e| VerifyError::Run(Box::new(e)))?;
-    // A several-camera session's root, which holds each camera's folder.
-    let root = cell
-        .listed
-        .then(|| crate::cell::cameras::root_of(driven.folder.root()))
-        .flatten();
+    // The session's own folder (of several cameras: the one holding each camera's).
+    let root = request.target.root(&driven.folder);
     let mut checked = Vec::new();
     let mut unseen = Vec::new();
     for (name, calibration) in calibrations {
-        let samples = match root {
-            Some(root) => SessionFolder::open(&crate::cell::cameras::camera_folder(root, name))
+        let samples = if cell.listed {
+            SessionFolder::open(&crate::cell::cameras::camera_folder(&root, name))
                 .map_err(|e| VerifyError::Session(Box::new(e)))?
-                .samples_path(),
-            None => driven.folder.samples_path(),
+                .samples_path()
+        } else {
+            driven.folder.samples_path()
         };
         // A camera that saw its board at none of the views is left out (the caller names
         // it); the others are checked.
@@ -315,7 +313,7 @@ pub fn holdout(
         return Err(VerifyError::Plan(format!(
             "camera {} saw its board at none of the held-out views: moved or covered since the calibration, or the views fall outside what it sees (its frames are in the session {})",
             unseen.join(", "),
-            root.unwrap_or(driven.folder.root()).display()
+            root.display()
         )));
     }
     Ok(checked)

@@ -330,9 +330,9 @@ fn annotated_frame(frame: &PageFrame, optics: Optics<'_>) -> Result<Vec<u8>, Rep
 /// nothing judged again). The one tail of every run: `handeye run`, `handeye.run` in Python.
 /// Returns the path written.
 pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
-    if let Some(cameras) = &run.cameras_result {
-        let path = run.root().join(REPORT_FILE);
-        super::cameras::write_cameras_report(cameras, run.root(), &path)?;
+    if run.result.only_camera().is_none() {
+        let path = run.root.join(REPORT_FILE);
+        super::cameras::write_cameras_report(&run.result, &run.root, &path)?;
         return Ok(path);
     }
     let solved = &run.solved;

@@ -194,7 +194,7 @@ pub(crate) fn run(
         let report = handeye_report::session::write_run_report(&done)
             .err()
             .map(|e| error_chain(&e));
-        Ok((done.root().to_path_buf(), report))
+        Ok((done.root.clone(), report))
     });
     // The calibration is saved; a report that could not be written is said, not raised.
     let outcome = outcome.map(|(folder, report)| {

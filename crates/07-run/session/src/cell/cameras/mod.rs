@@ -189,12 +189,6 @@ impl PreparedCell {
     }
 }
 
-/// The root folder of a several-camera session whose planner camera records into
-/// `planner_folder` (`<root>/cameras/<name>`).
-pub fn root_of(planner_folder: &Path) -> Option<&Path> {
-    planner_folder.parent()?.parent()
-}
-
 /// Where `--resume` of `dir` finds the session's own folder: a several-camera session's
 /// planner camera folder, else `dir`.
 pub fn session_folder_of(dir: &Path) -> PathBuf {

@@ -25,6 +25,7 @@ use std::sync::Arc;
 use crate::{ManualControl, SessionEvent, SessionOutcome};
 use handeye_core::geometry::Pose;
 use handeye_plan::GenerateSpec;
+use handeye_records::result::CellResult;
 use handeye_records::{SessionError, SessionFolder, SolvedSession};
 use handeye_robot::{Joints, Robot, RobotError, RobotStatus};
 
@@ -50,6 +51,17 @@ pub enum SessionTarget {
     /// A new session in a folder the caller created and holds (locked), with files of its own
     /// in it: an import's frames and recorded cell, which the run then uses.
     Created(SessionFolder),
+}
+
+impl SessionTarget {
+    /// The session's own folder, what `-o` (or `--resume`) named: for one camera the run's
+    /// `folder`, for several the folder holding every camera's.
+    pub fn root(&self, folder: &SessionFolder) -> PathBuf {
+        match self {
+            SessionTarget::New(dir) | SessionTarget::Resume(dir) => dir.clone(),
+            SessionTarget::Created(_) => folder.root().to_path_buf(),
+        }
+    }
 }
 
 /// What to run: a planned run ([`run`]) or a hand-guided one (`console::manual::run_manual`).
@@ -109,8 +121,13 @@ pub struct CellRun {
     /// The solved session (`result.yaml` is written; of a several-camera cell: the planner
     /// camera's own, in its folder).
     pub solved: SolvedSession,
-    /// A several-camera cell: the joint answer, as written to the session's `result.yaml`.
-    pub cameras_result: Option<handeye_records::result::CellResult>,
+    /// The session's own folder, what `-o` named (or `--resume`): the run's folder, or for
+    /// several cameras the folder holding `rig.yaml` and every camera's folder (the run's is
+    /// the planner camera's).
+    pub root: PathBuf,
+    /// The cell's answer as the session's `result.yaml` holds it, whatever the number of
+    /// cameras: one camera's answer (a cell of one), or the joint answer of several.
+    pub result: CellResult,
     /// For an adaptive plan: how it went.
     pub adaptive: Option<AdaptiveSummary>,
     /// Arm time spent, and what the full plan would have cost (`None` for a hand-guided session:
@@ -125,35 +142,25 @@ pub struct CellRun {
 pub type RunReport<'a> = &'a dyn Fn(&CellRun) -> Result<PathBuf, String>;
 
 impl CellRun {
-    /// The session's own folder, what `-o` named: the run's folder, or for several cameras the
-    /// folder holding `rig.yaml` and every camera's folder (the run's is the planner camera's).
-    pub fn root(&self) -> &std::path::Path {
-        let run = self.folder.root();
-        match self.cameras_result {
-            Some(_) => super::cameras::root_of(run).unwrap_or(run),
-            None => run,
-        }
-    }
-
-    /// The run's verdict (several cameras: the cell's, its worst camera's) and the summary a
-    /// person reads first (several cameras: the cell's verdict, then each camera's).
+    /// The run's verdict (the cell's: of several cameras, its worst camera's) and the summary a
+    /// person reads first (one camera: its solve's; several: the cell's verdict, then each
+    /// camera's).
     pub fn verdict_and_summary(&self) -> (Option<&handeye_solve::verdict::Verdict>, String) {
-        match &self.cameras_result {
-            Some(result) => {
-                let line = |name: &str, verdict: Option<&handeye_solve::verdict::Verdict>| {
-                    verdict.map_or_else(
-                        || format!("{name}: no verdict"),
-                        |v| format!("{name}: {} — {}", v.level, v.reason),
-                    )
-                };
-                let mut summary = line("cell", result.verdict.as_ref());
-                for c in &result.cameras {
-                    summary += &format!("\n{}", line(&c.name, c.verdict.as_ref()));
-                }
-                (result.verdict.as_ref(), summary)
-            }
-            None => (self.solved.verdict.as_ref(), self.solved.summary.clone()),
+        let result = &self.result;
+        if result.only_camera().is_some() {
+            return (result.verdict.as_ref(), self.solved.summary.clone());
         }
+        let line = |name: &str, verdict: Option<&handeye_solve::verdict::Verdict>| {
+            verdict.map_or_else(
+                || format!("{name}: no verdict"),
+                |v| format!("{name}: {} — {}", v.level, v.reason),
+            )
+        };
+        let mut summary = line("cell", result.verdict.as_ref());
+        for c in &result.cameras {
+            summary += &format!("\n{}", line(&c.name, c.verdict.as_ref()));
+        }
+        (result.verdict.as_ref(), summary)
     }
 }
 
@@ -420,21 +427,26 @@ pub fn run_opened(
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
     let solved = handeye_records::solve_folder(&folder, &cell.solve_inputs())?;
-    let cameras_result = match (cell.config.listed, super::cameras::root_of(folder.root())) {
-        (true, Some(root)) => Some(super::cameras::solve_cameras_folder(
-            root,
+    let root = request.target.root(&folder);
+    // The session's answer: the one camera's as its solve wrote it, or the joint solve of
+    // every camera's records.
+    let result = if cell.config.listed {
+        super::cameras::solve_cameras_folder(
+            &root,
             &cell.config,
-            super::cameras::recorded_visits(root, &cell.config)?,
-            &super::cameras::CamerasOutput::run(root),
-        )?),
-        _ => None,
+            super::cameras::recorded_visits(&root, &cell.config)?,
+            &super::cameras::CamerasOutput::run(&root),
+        )?
+    } else {
+        CellResult::load(&folder.result_path()).map_err(SessionError::File)?
     };
     Ok(CellRun {
         cell,
         folder,
         outcome,
         solved,
-        cameras_result,
+        root,
+        result,
         adaptive,
         arm_time,
     })

@@ -333,15 +333,10 @@ fn session_setup(
     let mut setup = cell.session_setup(folder.clone(), setup_plan, request.stop.clone());
     setup.detector.jobs = request.jobs;
     if cell.config.listed {
-        let root = super::super::cameras::root_of(folder.root()).ok_or_else(|| {
-            RunError::Cameras(format!(
-                "{}: not inside a several-camera session",
-                folder.root().display()
-            ))
-        })?;
+        let root = request.target.root(folder);
         let resuming = matches!(request.target, SessionTarget::Resume(_));
         let recorded: &[(Pose, Joints)] = if fixed_plan { plan } else { &[] };
-        cell.session_cameras(&mut setup, root, resuming, recorded)
+        cell.session_cameras(&mut setup, &root, resuming, recorded)
             .map_err(RunError::Cameras)?;
     }
     Ok(setup)
