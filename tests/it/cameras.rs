@@ -777,6 +777,87 @@ fn the_page_draws_every_cameras_frames_and_names_what_it_cannot_draw() {
     }
 }
 
+/// One page layout for any number of cameras (issue #37): below the cell's tables, every camera
+/// has the part a one-camera page has, each of its sections (`SECTIONS` but the cell's verdict
+/// card and "use it") in the same order, its id suffixed with the camera's name, drawn at the
+/// joint answer: its per-pose table holds, sample by sample, the residuals the result holds for
+/// it, and each frame link opens a frame of that camera. The page has the overlay its script
+/// opens frames in, and no id twice.
+#[test]
+fn every_camera_has_the_part_a_one_camera_page_has() {
+    use handeye_report::SECTIONS;
+    let (_, out, _) = shipped_run();
+    let result = read_result(out);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("<div id=\"overlay\""), "no frame overlay");
+    let ids: Vec<&str> = html
+        .match_indices(" id=\"")
+        .map(|(at, m)| {
+            let rest = &html[at + m.len()..];
+            &rest[..rest.find('"').unwrap()]
+        })
+        .collect();
+    let mut seen = std::collections::HashSet::new();
+    for id in &ids {
+        assert!(seen.insert(*id), "id {id} twice");
+    }
+    let position = |id: &str| ids.iter().position(|i| *i == id);
+    let mut last = position("cameras").expect("the cameras section");
+    let value = |cell: &str| cell.parse::<f64>().ok();
+    for camera in &result.cameras {
+        let name = &camera.name;
+        for section in SECTIONS.iter().filter(|s| !["verdict", "use"].contains(s)) {
+            let id = format!("{section}-{name}");
+            let at = position(&id).unwrap_or_else(|| panic!("no section {id}"));
+            assert!(at > last, "{id} out of order");
+            last = at;
+        }
+        let start = html
+            .find(&format!("id=\"pose-table-{name}\""))
+            .unwrap_or_else(|| panic!("no per-pose table of {name}"));
+        let table = &html[start..start + html[start..].find("</table>").unwrap()];
+        let rows: Vec<&str> = table.split("<tr class=").skip(1).collect();
+        assert_eq!(rows.len(), camera.samples, "{name}: a row per sample");
+        for row in rows {
+            let plan: usize = row.split("<td>pose-").nth(1).unwrap()[..3].parse().unwrap();
+            let expected = camera
+                .residuals_per_pose
+                .iter()
+                .find(|r| r.index == plan)
+                .unwrap_or_else(|| panic!("{name}: the result has no residual at pose {plan}"));
+            // Sample, rotation, translation, normalised, reprojection.
+            let cells: Vec<&str> = row
+                .split("data-value=\"")
+                .skip(1)
+                .map(|c| &c[..c.find('"').unwrap()])
+                .collect();
+            for (shown, held) in [
+                (value(cells[1]), expected.rotation_deg),
+                (value(cells[2]), expected.translation_mm),
+            ] {
+                match (shown, held) {
+                    (Some(a), Some(b)) => assert!((a - b).abs() < 1e-9, "{name} pose {plan}"),
+                    (a, b) => assert_eq!(a, b, "{name} pose {plan}"),
+                }
+            }
+            assert_eq!(
+                row.contains("dropped"),
+                expected.dropped,
+                "{name} pose {plan}"
+            );
+            let link = row
+                .split("data-frame=\"")
+                .nth(1)
+                .map(|c| &c[..c.find('"').unwrap()])
+                .unwrap_or_else(|| panic!("{name} pose {plan}: no frame link"));
+            assert!(
+                link.starts_with(&format!("frame-{name}-")) && seen.contains(link),
+                "{name} pose {plan}: the link {link} opens no frame of the camera"
+            );
+        }
+    }
+}
+
 /// `handeye report` and `handeye export` of a several-camera session name every camera: the
 /// report has a row per camera and the camera-to-camera transform; ROS 2 and URDF publish every
 /// mount and both boards as a tree (one parent per frame); OpenCV holds every transform, whose
@@ -1547,15 +1628,19 @@ fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay
     } else {
         assert_eq!(v.level, Level::Redo, "{}", v.terminal_lines());
     }
-    // The page shows each camera's cell model as its verdict holds it.
-    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    // The page shows each camera's cell model as its verdict holds it, in that camera's part.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let wrist_part = page
+        .find("<h2 class=\"part\">Camera wrist: evidence</h2>")
+        .expect("the wrist camera's part");
+    let report = &page[wrist_part..];
+    let report = &report[..report.find("<section id=\"plain-wrist\">").unwrap()];
     let fx = model
         .estimates
         .iter()
         .find(|e| e.parameter == "fx")
         .unwrap();
     for expected in [
-        "<h3>Camera wrist</h3>".to_string(),
         "Cell model: the data choose <span data-key=\"cell_model.chosen\">intrinsics free</span>"
             .to_string(),
         format!(

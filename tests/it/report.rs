@@ -855,6 +855,7 @@ fn two_answers_are_shown_side_by_side() {
             label: label.into(),
             calibration: handeye_solve::solve(Setup::EyeInHand, &pairs, &options).unwrap(),
             reprojection_px: vec![None; pairs.len()],
+            joint: None,
         }
     };
     let input = ReportInput {

@@ -1,18 +1,21 @@
-//! The HTML report of a cell with several cameras (`<session>/report.html` of a several-camera
-//! session): the cell's verdict card, one row per camera (its mount from the joint solve and
-//! from its own views alone, 1-sigma, samples, residuals, verdict), the boards, the
-//! camera-to-camera transforms, and each camera's annotated frames. Renders `result.yaml` as
-//! written; judges nothing. Self-contained HTML. The parts a one-camera page also has are that
-//! page's own (`sections::verdict_card`, `sections::use_section`, `PageOut::frames_section`
-//! with `session::page_frames`): this module adds only what several cameras have.
+//! The report of a cell with several cameras (`<session>/report.html` of a several-camera
+//! session): the page of one camera (`super::render_to`) with N camera parts. On top, the
+//! cell's verdict card, "use it" for every mount and board, the cameras (each one's mount from
+//! the joint solve and from its own views alone, 1-sigma, verdict with its held-out check, cell
+//! model), the boards and camera-to-camera transforms, and every camera's residual at each plan
+//! pose; then, for each camera, the evidence and details a one-camera page shows
+//! ([`super::camera_part`], its ids suffixed with the camera's name): its answer in plain words,
+//! residuals, corner residuals, per-pose table, frames, cell sketch, rotation axes and full
+//! numbers, at the joint answer. Renders `result.yaml` as written; judges nothing.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use handeye_core::geometry::rotvec;
-use handeye_records::result::{CellResult, NamedTransform};
+use handeye_core::setup::CellTransforms;
+use handeye_records::result::{CameraResult, CellResult, NamedTransform};
 
-use super::plots::{bars, rotation_axes, BarSeries, ResidualKind};
+use super::plots::{bars, BarSeries, ResidualKind};
 use super::{escape, ReportError};
 use handeye_config::CellConfig;
 use handeye_core::camera_model::CameraModel;
@@ -22,8 +25,8 @@ use handeye_records::{Evidence, SessionFolder};
 use handeye_session::cell::cameras::camera_folder;
 use handeye_vision::Target;
 
-use super::session::{load_optics, page_frames, sample_visits, Optics};
-use super::PageOut;
+use super::session::{from_session, holdout_summary, load_optics, sample_visits, Answer, Optics};
+use super::{JointFigures, PageOut, Part, ReportInput};
 use handeye_solve::verdict::{Level, Verdict};
 
 fn transform_cells(t: &NamedTransform) -> String {
@@ -60,43 +63,61 @@ fn reason(verdict: Option<&Verdict>) -> &str {
     verdict.map_or("no verdict", |v| &v.reason)
 }
 
-/// Writes the page to `out` (the file `path`, for errors), the frames as they are drawn.
+/// Writes the page to `out` (the file `path`, for errors), the frames as they are drawn: the
+/// cell's verdict, "use it", the cameras and the boards, the joint residuals, then each
+/// camera's evidence and details as a one-camera page shows them ([`super::camera_part`]).
 fn render_to(
     result: &CellResult,
     folder: &Path,
     out: &mut dyn std::io::Write,
     path: &Path,
 ) -> Result<(), ReportError> {
-    let mut html = format!(
-        "<!doctype html><html><head><meta charset=\"utf-8\"><title>handeye: cell with several cameras</title>\
-         <style>{}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}\
-         .GOOD{{color:#070}}.CHECK{{color:#a60}}.REDO{{color:#b00}}</style></head><body>",
-        super::CSS
-    );
-    let _ = write!(
-        html,
-        "<h1>Calibration of a cell with {} cameras</h1><p>Session <code>{}</code></p>",
-        result.cameras.len(),
-        escape(&folder.display().to_string()),
+    let names: Vec<&str> = result.cameras.iter().map(|c| c.name.as_str()).collect();
+    let mut html = String::new();
+    super::page_head(
+        &mut html,
+        &folder.display().to_string(),
+        &format!(
+            "a cell of <b>{}</b> cameras ({}) · answer: the joint solve",
+            names.len(),
+            escape(&names.join(", "))
+        ),
     );
     // The cell's verdict (the worst camera's, naming it) on the card of a one-camera page; each
-    // camera's cell model is shown under that camera below.
+    // camera's verdict and cell model (issue #38) open its part below.
     if let Some(verdict) = &result.verdict {
         let mut cell_verdict = verdict.clone();
         cell_verdict.figures.cell_model = None;
         super::sections::verdict_card(&mut html, &cell_verdict);
     }
     use_section(&mut html, result);
+    cameras_section(&mut html, result, folder);
+    residuals_section(&mut html, result)?;
+    let mut page = PageOut::new(html, out, path);
+    for camera in &result.cameras {
+        let records = camera_records(folder, &camera.name);
+        camera_section(&mut page, result, camera, records)?;
+        page.flush()?;
+    }
+    super::page_tail(&mut page.html);
+    page.flush()
+}
+
+/// The cameras: a camera that stopped delivering frames, each camera's mount (joint and alone)
+/// and verdict with its held-out check, then the boards and the camera-to-camera transforms of
+/// the joint solve.
+fn cameras_section(html: &mut String, result: &CellResult, folder: &Path) {
+    html.push_str("<section id=\"cameras\"><h2>Cameras</h2>\n");
     for f in handeye_session::cell::cameras::read_failures(folder) {
         let _ = write!(
             html,
-            "<p class=\"REDO\">Camera <b>{}</b> stopped delivering frames at plan pose {}: {}. Its samples until then are kept and solved.</p>",
+            "<p class=\"error\">Camera <b>{}</b> stopped delivering frames at plan pose {}: {}. Its samples until then are kept and solved.</p>",
             escape(&f.camera),
             f.plan_index,
             escape(&f.error)
         );
     }
-    html.push_str("<h2>Cameras</h2><table><tr><th>camera</th><th>verdict</th><th>samples</th><th>solve</th><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
+    html.push_str("<table class=\"cell\"><tr><th>camera</th><th>verdict</th><th>samples</th><th>solve</th><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for c in &result.cameras {
         let rows: Vec<(&str, &NamedTransform)> =
             [("joint", c.joint.as_ref()), ("alone", c.alone.as_ref())]
@@ -127,7 +148,7 @@ fn render_to(
     html.push_str("</table><p>“alone”: the same camera solved from its own views only (the one-camera answer); “joint”: every camera and the boards solved together.</p>");
     // Each camera's verdict with the leave-one-out check of its own samples; the cell's is the
     // worst of them.
-    html.push_str("<h2>Verdict per camera</h2><table><tr><th>camera</th><th>verdict</th><th>held-out error (leave-one-out, its own samples)</th><th>why</th></tr>");
+    html.push_str("<h3>Verdict per camera</h3><table class=\"cell\"><tr><th>camera</th><th>verdict</th><th>held-out error (leave-one-out, its own samples)</th><th>why</th></tr>");
     for c in &result.cameras {
         let held_out = match &c.held_out {
             Some(h) => format!(
@@ -145,44 +166,124 @@ fn render_to(
         );
     }
     html.push_str("</table>");
-    // Each camera's cell model (issue #38): which of its files its corners contradict.
-    for c in &result.cameras {
-        let model = c
-            .verdict
-            .as_ref()
-            .and_then(|v| v.figures.cell_model.as_ref());
-        if let Some(model) = model {
-            let _ = write!(html, "<h3>Camera {}</h3>", escape(&c.name));
-            super::sections::cell_model_table(&mut html, model);
-        }
-    }
-    html.push_str("<h2>Boards and camera-to-camera transforms (joint solve)</h2><table><tr><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
+    html.push_str("<h3>Boards and camera-to-camera transforms (joint solve)</h3><table class=\"cell\"><tr><th>transform</th><th>translation (m)</th><th>rotation vector (rad)</th><th>1-sigma</th><th>vs simulator truth</th></tr>");
     for t in result.boards.iter().chain(&result.camera_to_camera) {
         let _ = write!(html, "<tr>{}</tr>", transform_cells(t));
     }
-    let _ = write!(
+    let _ = writeln!(
         html,
-        "</table><p>Variance factor of the joint solve (χ²/dof): {}</p>",
+        "</table><p>Variance factor of the joint solve (χ²/dof): {}</p></section>",
         result
             .variance_factor
             .map_or_else(|| "—".into(), |f| format!("{f:.3}"))
     );
-    residuals_section(&mut html, result)?;
-    // Each camera's samples and records, read once for the plots and the frames.
-    let records: Vec<Result<CameraRecords, String>> = result
-        .cameras
+}
+
+/// One camera's part of the page: its evidence and details at the joint answer, as a
+/// one-camera page shows them (its residuals as the result holds them, its corners and frames
+/// drawn with the board and lens of the config its session names); what cannot be shown, and
+/// why, above it.
+fn camera_section(
+    page: &mut PageOut<'_>,
+    result: &CellResult,
+    camera: &CameraResult,
+    records: Result<CameraRecords, String>,
+) -> Result<(), ReportError> {
+    let mut lacking = Vec::new();
+    let input = match records {
+        Ok(records) => camera_input(result, camera, &records, &mut lacking)?,
+        Err(e) => {
+            lacking.push(e);
+            None
+        }
+    };
+    if !lacking.is_empty() {
+        let _ = writeln!(
+            page.html,
+            "<p class=\"error\">Camera {}: {}</p>",
+            escape(&camera.name),
+            escape(&lacking.join("; "))
+        );
+    }
+    match input {
+        Some(input) => super::camera_part(page, &input, Part::Camera(&camera.name)),
+        None => {
+            let _ = writeln!(
+                page.html,
+                "<h2 class=\"part\">Camera {}</h2>",
+                escape(&camera.name)
+            );
+            if let Some(v) = &camera.verdict {
+                super::camera_verdict(&mut page.html, v);
+            }
+            let _ = writeln!(
+                page.html,
+                "<p>No evidence shown: {}.</p>",
+                escape(
+                    camera
+                        .left_out
+                        .as_deref()
+                        .unwrap_or("its samples or records do not load")
+                )
+            );
+            Ok(())
+        }
+    }
+}
+
+/// Camera `camera`'s page input at the joint answer, from its folder's samples and records;
+/// `None` when it is not in the joint answer. `lacking` names a file that does not load (its
+/// frames are then not drawn).
+fn camera_input(
+    result: &CellResult,
+    camera: &CameraResult,
+    records: &CameraRecords,
+    lacking: &mut Vec<String>,
+) -> Result<Option<ReportInput>, ReportError> {
+    let Some((_, mount)) = result
+        .mounts()
+        .into_iter()
+        .find(|(name, _)| *name == camera.name)
+    else {
+        // Left out of the joint solve: the cameras' table and the part's line say why.
+        return Ok(None);
+    };
+    // Each sample's plan pose, by which the result names its residuals.
+    let plan_poses: Vec<Option<usize>> = sample_visits(&records.evidence)
         .iter()
-        .map(|c| camera_records(folder, &c.name))
+        .map(|visit| visit.map(|v| v.plan_index))
         .collect();
-    rotation_axes_section(&mut html, &records)?;
-    let mut page = PageOut::new(html, out, path);
-    frames_sections(&mut page, result, &records)?;
-    let _ = write!(
-        page.html,
-        "<script>{}</script></body></html>",
-        super::SCRIPT
-    );
-    page.flush()
+    let Some(calibration) = camera.joint_calibration(&mount.target_mount, &plan_poses) else {
+        return Ok(None);
+    };
+    let (optics, nominal) = camera_optics(records, &camera.name, lacking);
+    let mut input = from_session(
+        &records.folder,
+        &records.evidence,
+        vec![Answer::Joint(
+            calibration,
+            JointFigures {
+                sigmas: [
+                    camera.joint.as_ref().and_then(|t| t.sigma),
+                    result.board_of(camera).and_then(|b| b.sigma),
+                ],
+                variance_factor: result.variance_factor,
+            },
+        )],
+        optics
+            .as_ref()
+            .map(|(board, camera)| Optics { board, camera }),
+    )?;
+    input.nominal = nominal;
+    input.robot_frames = result.robot_frames();
+    input.holdout = camera.held_out.as_ref().map(|h| {
+        holdout_summary(
+            h,
+            "its own samples, each predicted by a one-camera solve of the others",
+        )
+    });
+    input.verdict.clone_from(&camera.verdict);
+    Ok(Some(input))
 }
 
 /// Every camera's residual at each plan pose in the joint solve, rotation and translation: the
@@ -243,27 +344,6 @@ fn residuals_section(html: &mut String, result: &CellResult) -> Result<(), Repor
     Ok(())
 }
 
-/// The relative rotation axes of the flange poses (one arm for every camera: those of the
-/// camera that saw its board at the most poses, from its samples).
-fn rotation_axes_section(
-    html: &mut String,
-    records: &[Result<CameraRecords, String>],
-) -> Result<(), ReportError> {
-    let Some(pairs) = records
-        .iter()
-        .filter_map(|r| r.as_ref().ok())
-        .map(|r| &r.evidence.pairs)
-        .max_by_key(|pairs| pairs.len())
-        .filter(|pairs| pairs.len() >= 2)
-    else {
-        return Ok(());
-    };
-    html.push_str("<section id=\"rotation-axes\"><h2>Relative rotation axes</h2><p>Axes of the relative flange rotations between every two poses (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.</p>");
-    super::sections::figure(html, "rotation-axes", &rotation_axes(pairs)?);
-    html.push_str("</section>");
-    Ok(())
-}
-
 /// The forms "use it" shows for several cameras (`ur` holds one TCP: not for a cell).
 const USE_FORMS: [(ExportFormat, &str); 4] = [
     (
@@ -312,69 +392,6 @@ fn use_section(html: &mut String, result: &CellResult) {
     );
 }
 
-/// Each camera's frames, as a one-camera page draws them (`session::page_frames`): its
-/// detected corners and its board reprojected by the joint answer (its mount and its setup's
-/// board), with the board and lens of the config its session was recorded with. A camera left
-/// out of the joint solve, or whose files do not load, says so instead.
-fn frames_sections(
-    page: &mut PageOut<'_>,
-    result: &CellResult,
-    records: &[Result<CameraRecords, String>],
-) -> Result<(), ReportError> {
-    let mounts = result.mounts();
-    page.html.push_str("<h2>Frames</h2>");
-    for (camera, records) in result.cameras.iter().zip(records) {
-        let heading = format!("Frames of camera {}", camera.name);
-        let id = format!("frames-{}", camera.name);
-        let Some((_, mount)) = mounts.iter().find(|(name, _)| *name == camera.name) else {
-            let _ = write!(
-                page.html,
-                "<section id=\"{}\"><h3>{}</h3><p>Not drawn: the camera is not in the joint answer.</p></section>",
-                escape(&id),
-                escape(&heading)
-            );
-            continue;
-        };
-        let mut lacking = Vec::new();
-        let frames = match records {
-            Ok(records) => {
-                camera_optics(records, &camera.name, &mut lacking).map(|(board, lens)| {
-                    page_frames(
-                        &records.folder,
-                        &records.evidence.pairs,
-                        &sample_visits(&records.evidence),
-                        Optics {
-                            board: &board,
-                            camera: &lens,
-                        },
-                        |b| mount.camera_from_target(b),
-                    )
-                })
-            }
-            Err(e) => {
-                lacking.push(e.clone());
-                None
-            }
-        };
-        if !lacking.is_empty() {
-            let _ = write!(
-                page.html,
-                "<p class=\"error\">Camera {}: {}</p>",
-                escape(&camera.name),
-                escape(&lacking.join("; "))
-            );
-        }
-        page.frames_section(
-            &heading,
-            &id,
-            &format!("frame-{}-", camera.name),
-            "the joint solve",
-            frames.as_ref(),
-        )?;
-    }
-    Ok(())
-}
-
 /// One camera's folder of a several-camera session, with its samples and records.
 struct CameraRecords {
     folder: SessionFolder,
@@ -394,20 +411,25 @@ fn camera_records(root: &Path, name: &str) -> Result<CameraRecords, String> {
     })
 }
 
-/// Camera `name`'s board and lens from the config its session was recorded with; `None` when
-/// they do not load (`lacking` says why).
+/// Camera `name`'s board and lens, and its nominal mount, from the config its session was
+/// recorded with; no board and lens when they do not load (`lacking` says why).
 fn camera_optics(
     records: &CameraRecords,
     name: &str,
     lacking: &mut Vec<String>,
-) -> Option<(Target, CameraModel)> {
-    let config = records
+) -> (Option<(Target, CameraModel)>, Option<CellTransforms>) {
+    let config = match records
         .folder
         .read_manifest()
         .map_err(|e| e.to_string())
         .and_then(|m| CellConfig::load(&m.config).map_err(|e| e.to_string()))
-        .map_err(|e| lacking.push(format!("{e}; its frames are not drawn")))
-        .ok()?;
+    {
+        Ok(config) => config,
+        Err(e) => {
+            lacking.push(format!("{e}; its frames are not drawn"));
+            return (None, None);
+        }
+    };
     let camera = config.cameras.iter().find(|c| c.name == name);
     if camera.is_none() {
         lacking.push(format!(
@@ -415,7 +437,10 @@ fn camera_optics(
             config.file.display()
         ));
     }
-    load_optics(&records.folder, camera, lacking)
+    (
+        load_optics(&records.folder, camera, lacking),
+        camera.map(|c| c.nominal),
+    )
 }
 
 /// Writes the page of `result`, the answer of the session in `folder`, to `path`.

@@ -80,8 +80,15 @@ fn rms(corners: &[CornerResidual]) -> f64 {
 }
 
 /// The section: both plots, or a line saying why there are none.
-pub(super) fn corners_section(html: &mut String, input: &ReportInput) -> Result<(), ReportError> {
-    html.push_str("<section id=\"corners\"><h3>Corner residuals and coverage</h3>\n");
+pub(super) fn corners_section(
+    html: &mut String,
+    input: &ReportInput,
+    id: &str,
+) -> Result<(), ReportError> {
+    let _ = writeln!(
+        html,
+        "<section id=\"{id}\"><h3>Corner residuals and coverage</h3>"
+    );
     let corners = &input.corners;
     let Some((width, height)) = input.image_size.filter(|_| !corners.is_empty()) else {
         html.push_str("<p>No detected corners in this input (a plain dataset of pose pairs, or the board or intrinsics file could not be read): no per-corner plots.</p>\n</section>\n");
@@ -342,7 +349,7 @@ mod tests {
                 robot_frames: Default::default(),
                 arm: None,
             };
-            corners_section(&mut html, &input).unwrap();
+            corners_section(&mut html, &input, "corners").unwrap();
             html
         };
         assert!(!section(few).contains("The plots draw"));

@@ -54,6 +54,19 @@ pub struct ReportAnswer {
     /// board corners and the board reprojected at the `T_camera_target` this answer predicts;
     /// `None` where the corners are unknown.
     pub reprojection_px: Vec<Option<f64>>,
+    /// For one camera's part of a cell's joint answer: what the joint solve gives of it (the
+    /// calibration holds its transforms and residuals, but the solve's run and covariance are
+    /// the cell's); `None` for an answer of its own.
+    pub joint: Option<JointFigures>,
+}
+
+/// What a cell's joint solve gives of one camera's answer beyond its transforms and residuals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointFigures {
+    /// The 1-sigma of its mount and of its board, as the result holds them.
+    pub sigmas: [Option<handeye_solve::PoseSigma>; 2],
+    /// The joint solve's variance factor (χ²/dof).
+    pub variance_factor: Option<f64>,
 }
 
 /// The frames a page shows, each with its detected corners and the board reprojected at the
@@ -217,6 +230,58 @@ pub fn render_html(input: &ReportInput) -> Result<String, ReportError> {
     Ok(String::from_utf8(page).expect("the page is UTF-8"))
 }
 
+/// Which part of a page a camera's evidence is: the only camera's (plain ids: `residuals`,
+/// `frames`, a frame `frame-<sample>`), or one camera's of several (ids suffixed with its name:
+/// `residuals-wrist`, `frames-wrist`, `frame-wrist-<sample>`; headings name it).
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Part<'a> {
+    /// The page's only camera.
+    Only,
+    /// The camera of that name, one of several.
+    Camera(&'a str),
+}
+
+impl Part<'_> {
+    /// A section's id in this part.
+    fn id(self, section: &str) -> String {
+        match self {
+            Part::Only => section.to_string(),
+            Part::Camera(name) => format!("{section}-{}", escape(name)),
+        }
+    }
+
+    /// The anchor prefix of this part's frames (a frame's anchor: the prefix, its sample).
+    fn frame_prefix(self) -> String {
+        self.id("frame") + "-"
+    }
+
+    /// The heading of one of the part's halves (`Evidence`, `Details`).
+    fn heading(self, half: &str) -> String {
+        match self {
+            Part::Only => half.to_string(),
+            Part::Camera(name) => format!("Camera {name}: {}", half.to_lowercase()),
+        }
+    }
+}
+
+/// The start of every page: its title, the style, the header with `meta` (HTML) under it.
+pub(crate) fn page_head(html: &mut String, title: &str, meta: &str) {
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{}</title>\n<style>{}</style></head><body>\n<header><h1>Calibration report</h1>\n<p class=\"meta\"><span class=\"title\">{}</span> · {meta}</p></header>\n<main>\n",
+        escape(title),
+        CSS,
+        escape(title),
+    );
+}
+
+/// The end of every page: the full-size frame overlay and the script.
+pub(crate) fn page_tail(html: &mut String) {
+    html.push_str("</main>\n");
+    html.push_str(OVERLAY);
+    let _ = write!(html, "<script>{SCRIPT}</script>\n</body></html>\n");
+}
+
 /// Writes the page to `out` (the file `path`, for errors): the text before the frames, the
 /// frames as they are drawn, then the rest.
 fn render_to(
@@ -228,20 +293,20 @@ fn render_to(
         return Err(ReportError::Empty);
     }
     let mut html = String::new();
-    let _ = write!(
-        html,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{}</title>\n<style>{}</style></head><body>\n<header><h1>Calibration report</h1>\n<p class=\"meta\"><span class=\"title\">{}</span> · setup <b>{}</b> · {} samples · answers: {}</p></header>\n<main>\n",
-        escape(&input.title),
-        CSS,
-        escape(&input.title),
-        input.setup,
-        input.pairs.len(),
-        input
-            .answers
-            .iter()
-            .map(|a| escape(&a.label))
-            .collect::<Vec<_>>()
-            .join(", ")
+    page_head(
+        &mut html,
+        &input.title,
+        &format!(
+            "setup <b>{}</b> · {} samples · answers: {}",
+            input.setup,
+            input.pairs.len(),
+            input
+                .answers
+                .iter()
+                .map(|a| escape(&a.label))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     );
 
     // 1. The verdict first: GOOD / CHECK / REDO, the reason that decided it and what to do next.
@@ -251,18 +316,73 @@ fn render_to(
     }
 
     // In plain words: where the answer puts the camera and the board, beside the nominal.
-    sections::plain_summary(&mut html, &input.answers[0], input.nominal.as_ref());
+    sections::plain_summary(
+        &mut html,
+        &input.answers[0],
+        input.nominal.as_ref(),
+        "plain",
+    );
 
     // 2. Use it: the primary answer in the forms other tools read, with copy buttons.
     use_answer_section(&mut html, &input.answers[0], verdict, &input.robot_frames);
 
-    // 3. The evidence.
-    html.push_str("<h2 class=\"part\">Evidence</h2>\n");
+    // 3. The evidence and 4. the details.
+    let mut page = PageOut::new(html, out, path);
+    camera_part(&mut page, input, Part::Only)?;
+    page_tail(&mut page.html);
+    page.flush()
+}
+
+/// One camera's verdict in a cell of several (the cell's is on the card): its level and reason,
+/// and its cell model (which of its files its corners contradict, issue #38).
+pub(crate) fn camera_verdict(html: &mut String, verdict: &Verdict) {
+    let _ = writeln!(
+        html,
+        "<p class=\"camera-verdict\">Verdict: <b class=\"{level}\">{level}</b> — {}</p>",
+        escape(&verdict.reason),
+        level = verdict.level.word()
+    );
+    if let Some(model) = &verdict.figures.cell_model {
+        sections::cell_model_table(html, model);
+    }
+}
+
+/// A camera's evidence and details, as `part` of a page: the solvers' findings, the residual
+/// plots, the arm's model, the corner residuals, the per-pose table, the frames, the cell sketch
+/// and the rotation axes; then every number of every answer and the solver's convergence.
+pub(crate) fn camera_part(
+    page: &mut PageOut<'_>,
+    input: &ReportInput,
+    part: Part<'_>,
+) -> Result<(), ReportError> {
+    let html = &mut page.html;
+    let _ = writeln!(
+        html,
+        "<h2 class=\"part\">{}</h2>",
+        escape(&part.heading("Evidence"))
+    );
+    // A one-camera page shows its verdict (with its cell model) on the card and says it in plain
+    // words above "use it"; each camera of several here, under the cell's card.
+    if let Part::Camera(_) = part {
+        if let Some(v) = &input.verdict {
+            camera_verdict(html, v);
+        }
+        sections::plain_summary(
+            html,
+            &input.answers[0],
+            input.nominal.as_ref(),
+            &part.id("plain"),
+        );
+    }
     // Information (how the answer was made) is listed apart, never in the warnings list.
     let notices = notices(input);
     let (attention, info): (Vec<&Notice>, Vec<&Notice>) =
         notices.iter().partition(|n| n.needs_attention());
-    html.push_str("<section id=\"warnings\"><h3>Findings</h3>\n");
+    let _ = writeln!(
+        html,
+        "<section id=\"{}\"><h3>Findings</h3>",
+        part.id("warnings")
+    );
     if attention.is_empty() {
         html.push_str("<p class=\"ok\">No warnings from the solver (the checks on the poses and residuals are on the verdict card).</p>\n");
     } else {
@@ -286,59 +406,58 @@ fn render_to(
     }
     html.push_str("</section>\n");
 
-    html.push_str("<section id=\"residuals\"><h3>Per-pose residuals</h3>\n<p>Measured against predicted T_camera_target for every sample. Red bars are flagged outliers; a grey stub marks a sample dropped from the final solve.</p>\n");
+    let _ = writeln!(html, "<section id=\"{}\"><h3>Per-pose residuals</h3>\n<p>Measured against predicted T_camera_target for every sample. Red bars are flagged outliers; a grey stub marks a sample dropped from the final solve.</p>", part.id("residuals"));
     for which in [
         plots::ResidualKind::Rotation,
         plots::ResidualKind::Translation,
         plots::ResidualKind::Reprojection,
     ] {
-        figure(
-            &mut html,
-            which.kind(),
-            &plots::residual_bars(input, which)?,
-        );
+        figure(html, which.kind(), &plots::residual_bars(input, which)?);
     }
     html.push_str("</section>\n");
     if let Some(arm) = &input.arm {
-        arm_section(&mut html, arm);
+        arm_section(html, arm);
     }
-    corners::corners_section(&mut html, input)?;
+    corners::corners_section(html, input, &part.id("corners"))?;
 
-    per_pose_table(&mut html, input);
-    let mut page = PageOut::new(html, out, path);
+    per_pose_table(html, input, part);
     page.frames_section(
         "Frames",
-        "frames",
-        "frame-",
+        &part.id("frames"),
+        &part.frame_prefix(),
         &input.answers[0].label,
         input.frames.as_ref(),
     )?;
-    let mut html = std::mem::take(&mut page.html);
+    let html = &mut page.html;
 
-    html.push_str("<section id=\"poses-3d\"><h3>Cell sketch</h3>\n<p>Where the primary answer puts the robot base, the board and the camera at every sample (base frame, metres; axis names on the frame). Each triad shows a frame's axes: x red, y green, z blue.</p>\n");
-    figure(&mut html, "poses-3d", &plots::poses_3d(input)?);
+    let _ = writeln!(html, "<section id=\"{}\"><h3>Cell sketch</h3>\n<p>Where the primary answer puts the robot base, the board and the camera at every sample (base frame, metres; axis names on the frame). Each triad shows a frame's axes: x red, y green, z blue.</p>", part.id("poses-3d"));
+    figure(html, "poses-3d", &plots::poses_3d(input)?);
     html.push_str("</section>\n");
 
     // The spread the verdict measured (the page measures nothing itself).
-    let spread = verdict
+    let spread = input
+        .verdict
+        .as_ref()
         .and_then(|v| v.figures.rotation_off_axis_deg)
         .map(|deg| format!(" Largest rotation off the dominant axis: {deg:.1}°."))
         .unwrap_or_default();
     let _ = write!(
         html,
-        "<section id=\"rotation-axes\"><h3>Relative rotation axes</h3>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.{spread}</p>\n"
+        "<section id=\"{}\"><h3>Relative rotation axes</h3>\n<p>Axes of the relative flange rotations between every two samples (base frame; an axis and its opposite are the same, so all are drawn with z ≥ 0), on the unit sphere seen from +z and from +x; marker size grows with the rotation angle. The solver needs axes spread over the sphere, not bunched about one direction.{spread}</p>\n",
+        part.id("rotation-axes")
     );
-    figure(
-        &mut html,
-        "rotation-axes",
-        &plots::rotation_axes(&input.pairs)?,
-    );
+    figure(html, "rotation-axes", &plots::rotation_axes(&input.pairs)?);
     html.push_str("</section>\n");
 
-    // 4. The details: every number.
-    html.push_str("<h2 class=\"part\">Details</h2>\n<section id=\"transforms\"><h3>Transforms (full numbers)</h3>\n<div class=\"answers\">\n");
+    // The details: every number.
+    let _ = writeln!(
+        html,
+        "<h2 class=\"part\">{}</h2>\n<section id=\"{}\"><h3>Transforms (full numbers)</h3>\n<div class=\"answers\">",
+        escape(&part.heading("Details")),
+        part.id("transforms")
+    );
     for (k, answer) in input.answers.iter().enumerate() {
-        transforms_section(&mut html, k, answer);
+        transforms_section(html, k, answer);
     }
     html.push_str("</div>\n");
     if let Some(h) = &input.holdout {
@@ -371,13 +490,25 @@ fn render_to(
     }
     html.push_str("</section>\n");
 
-    html.push_str("<section id=\"convergence\"><h3>Solver convergence</h3>\n<p>Update size per step of each phase of the iterative method (rotation rad, translation m) and the refinement cost per evaluation, log scale.</p>\n");
-    figure(&mut html, "convergence", &plots::convergence(input)?);
-    html.push_str("</section>\n</main>\n");
-    html.push_str(OVERLAY);
-    let _ = write!(html, "<script>{SCRIPT}</script>\n</body></html>\n");
-    page.html = html;
-    page.flush()
+    let _ = writeln!(
+        html,
+        "<section id=\"{}\"><h3>Solver convergence</h3>",
+        part.id("convergence")
+    );
+    let solver = &input.answers[0].calibration.solver;
+    if matches!(part, Part::Camera(_)) && solver.trace.is_empty() {
+        // The joint solve of several cameras keeps no trace per camera.
+        let _ = writeln!(
+            html,
+            "<p>The {} keeps no trace of its steps for one camera.</p>",
+            escape(&input.answers[0].label)
+        );
+    } else {
+        html.push_str("<p>Update size per step of each phase of the iterative method (rotation rad, translation m) and the refinement cost per evaluation, log scale.</p>\n");
+        figure(html, "convergence", &plots::convergence(input)?);
+    }
+    html.push_str("</section>\n");
+    Ok(())
 }
 
 /// Status of a sample in the primary answer: `dropped`, `outlier` or `ok`.
@@ -393,7 +524,7 @@ fn sample_status(calibration: &Calibration, sample: usize) -> &'static str {
 
 /// The per-pose table of the primary answer, worst translation residual first; every column
 /// sorts on a click (inline script), numbers by value.
-fn per_pose_table(html: &mut String, input: &ReportInput) {
+fn per_pose_table(html: &mut String, input: &ReportInput, part: Part<'_>) {
     let primary = &input.answers[0];
     let c = &primary.calibration;
     let value = |v: Option<&f64>| v.copied().filter(|v| v.is_finite());
@@ -404,9 +535,12 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
     });
     let _ = writeln!(
         html,
-        "<section id=\"per-pose\"><h3>Per pose</h3>\n<p>Residuals of <b>{}</b> per sample, worst translation first. Click a column heading to sort by it (again to reverse); click <i>frame</i> to see the frame full size.</p>\n<div class=\"table-wrap\"><table class=\"sortable\" id=\"pose-table\">\n<thead><tr><th data-type=\"number\" aria-sort=\"none\">sample</th><th data-type=\"text\" aria-sort=\"none\">id</th><th data-type=\"text\" aria-sort=\"none\">status</th><th data-type=\"number\" aria-sort=\"none\">rotation (°)</th><th data-type=\"number\" aria-sort=\"descending\">translation (mm)</th><th data-type=\"number\" aria-sort=\"none\">normalised (σ)</th><th data-type=\"number\" aria-sort=\"none\">reprojection (px)</th><th>frame</th></tr></thead>\n<tbody>",
-        escape(&primary.label)
+        "<section id=\"{}\"><h3>Per pose</h3>\n<p>Residuals of <b>{}</b> per sample, worst translation first. Click a column heading to sort by it (again to reverse); click <i>frame</i> to see the frame full size.</p>\n<div class=\"table-wrap\"><table class=\"sortable\" id=\"{}\">\n<thead><tr><th data-type=\"number\" aria-sort=\"none\">sample</th><th data-type=\"text\" aria-sort=\"none\">id</th><th data-type=\"text\" aria-sort=\"none\">status</th><th data-type=\"number\" aria-sort=\"none\">rotation (°)</th><th data-type=\"number\" aria-sort=\"descending\">translation (mm)</th><th data-type=\"number\" aria-sort=\"none\">normalised (σ)</th><th data-type=\"number\" aria-sort=\"none\">reprojection (px)</th><th>frame</th></tr></thead>\n<tbody>",
+        part.id("per-pose"),
+        escape(&primary.label),
+        part.id("pose-table")
     );
+    let prefix = part.frame_prefix();
     let cell = |v: Option<f64>, decimals: usize| match v {
         Some(v) => format!("<td data-value=\"{v}\">{v:.decimals$}</td>"),
         None => "<td data-value=\"\">–</td>".to_string(),
@@ -416,7 +550,7 @@ fn per_pose_table(html: &mut String, input: &ReportInput) {
         let frames = input.frames.as_ref();
         let frame = if frames.is_some_and(|f| f.frames.iter().any(|t| t.sample == i)) {
             format!(
-                "<a href=\"#frame-{i}\" class=\"open-frame\" data-frame=\"frame-{i}\">frame</a>"
+                "<a href=\"#{prefix}{i}\" class=\"open-frame\" data-frame=\"{prefix}{i}\">frame</a>"
             )
         } else if frames.is_some_and(|f| f.not_drawn.binary_search(&i).is_ok()) {
             "not drawn".to_string()
@@ -607,6 +741,8 @@ table.sortable th[data-type]{cursor:pointer}table.sortable th[data-type]:hover{b
 table.sortable th[aria-sort=ascending]::after{content:' \\25B2'}table.sortable th[aria-sort=descending]::after{content:' \\25BC'}\
 table.sortable td{text-align:right;padding:2px 8px;border-top:1px solid #eee;font-variant-numeric:tabular-nums}\
 table.sortable tr.ok td{color:inherit}table.sortable tr.outlier td{color:#a40000}table.sortable tr.dropped td{color:#888}\
+table.cell{border-collapse:collapse;font-size:0.92em;margin:0.4em 0}table.cell td,table.cell th{border:1px solid #ccc;padding:4px 8px;text-align:left}\
+td.GOOD,b.GOOD{color:#1e7e34}td.CHECK,b.CHECK{color:#8a4600}td.REDO,b.REDO{color:#a40000}\
 .thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%;width:240px}\
 figure.thumb img{width:240px;display:block;cursor:zoom-in;border:1px solid #ccc}\
 #overlay{position:fixed;inset:0;background:rgba(0,0,0,0.85);display:flex;flex-direction:column;align-items:center;justify-content:center;z-index:10;cursor:zoom-out}\

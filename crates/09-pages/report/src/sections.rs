@@ -251,6 +251,7 @@ pub(super) fn plain_summary(
     html: &mut String,
     answer: &ReportAnswer,
     nominal: Option<&handeye_core::setup::CellTransforms>,
+    id: &str,
 ) {
     let ids = FrameIds::default();
     let frame = |name: &str| match name {
@@ -275,7 +276,7 @@ pub(super) fn plain_summary(
             tenth(yaw.to_degrees())
         )
     };
-    html.push_str("<section id=\"plain\"><h3>In plain words</h3>\n<ul>\n");
+    let _ = writeln!(html, "<section id=\"{id}\"><h3>In plain words</h3>\n<ul>");
     let nominal = nominal.map(|n| n.unknowns());
     let frames = answer.calibration.setup.unknown_frames();
     for (k, ((key, pose), (parent, child))) in
@@ -319,23 +320,41 @@ pub(super) fn figure(html: &mut String, kind: &str, svg: &str) {
 
 pub(super) fn transforms_section(html: &mut String, k: usize, answer: &ReportAnswer) {
     let c = &answer.calibration;
-    let _ = writeln!(
+    let _ = write!(
         html,
-        "<div class=\"answer\" data-answer=\"{k}\"><h3>{}</h3><p>method {}, {} iterations, {}converged</p>",
-        escape(&answer.label),
-        c.solver.method.name(),
-        c.solver.iterations,
-        if c.solver.converged { "" } else { "NOT " }
+        "<div class=\"answer\" data-answer=\"{k}\"><h3>{}</h3>",
+        escape(&answer.label)
     );
-    let sigmas = c
-        .uncertainty
-        .as_ref()
-        .map(|u| [u.camera_mount, u.target_mount]);
+    let sigmas = match &answer.joint {
+        Some(joint) => {
+            let _ = writeln!(
+                html,
+                "<p>the joint solve of every camera and the boards (variance factor {})</p>",
+                joint
+                    .variance_factor
+                    .map_or_else(|| "—".into(), |f| format!("{f:.3}"))
+            );
+            joint.sigmas
+        }
+        None => {
+            let _ = writeln!(
+                html,
+                "<p>method {}, {} iterations, {}converged</p>",
+                c.solver.method.name(),
+                c.solver.iterations,
+                if c.solver.converged { "" } else { "NOT " }
+            );
+            let sigmas = c.uncertainty.as_ref();
+            [
+                sigmas.map(|u| u.camera_mount),
+                sigmas.map(|u| u.target_mount),
+            ]
+        }
+    };
     for (i, (name, pose)) in c.unknowns().iter().enumerate() {
         let _ = writeln!(html, "<h4>{name}</h4>");
-        match sigmas {
+        match sigmas[i] {
             Some(s) => {
-                let s = s[i];
                 let _ = writeln!(
                     html,
                     "<p class=\"sigma\">1-sigma: <span data-key=\"uncertainty.{name}.rotation_deg\">{:.4}</span>° (x {:.4}, y {:.4}, z {:.4}), <span data-key=\"uncertainty.{name}.translation_mm\">{:.3}</span> mm (x {:.3}, y {:.3}, z {:.3})</p>",

@@ -46,13 +46,19 @@ pub enum Answer {
     PoseSpace(Calibration),
     /// The answer `result.yaml` holds (a report made again from a session folder).
     ResultFile(Calibration),
+    /// One camera's part of a several-camera cell's joint answer (`result.yaml` of the cell),
+    /// with what the joint solve gives of it.
+    Joint(Calibration, super::JointFigures),
 }
 
 impl Answer {
     /// Its calibration.
     pub fn calibration(&self) -> &Calibration {
         match self {
-            Answer::ReprojectionSpace(c) | Answer::PoseSpace(c) | Answer::ResultFile(c) => c,
+            Answer::ReprojectionSpace(c)
+            | Answer::PoseSpace(c)
+            | Answer::ResultFile(c)
+            | Answer::Joint(c, _) => c,
         }
     }
 
@@ -62,6 +68,7 @@ impl Answer {
             Answer::ReprojectionSpace(_) => "reprojection space".into(),
             Answer::PoseSpace(_) => "pose space".into(),
             Answer::ResultFile(c) => format!("result.yaml ({})", c.solver.method.name()),
+            Answer::Joint(..) => "joint solve".into(),
         }
     }
 
@@ -95,6 +102,10 @@ pub fn from_session(
         .into_iter()
         .map(|answer| {
             let (label, calibration) = (answer.label(), answer.calibration().clone());
+            let joint = match answer {
+                Answer::Joint(_, figures) => Some(figures),
+                _ => None,
+            };
             let reprojection_px = pairs
                 .iter()
                 .zip(&sample_visits)
@@ -108,6 +119,7 @@ pub fn from_session(
                 label,
                 calibration,
                 reprojection_px,
+                joint,
             }
         })
         .collect();
@@ -566,19 +578,25 @@ fn write(
     input.nominal = nominal;
     input.robot_frames = robot_frames;
     input.arm = arm;
-    if let Some(h) = verdict.as_ref().and_then(|v| v.figures.held_out.as_ref()) {
-        input.holdout = Some(super::HoldoutSummary {
-            description: format!(
-                "leave-one-out over {} samples (flagged outliers not counted)",
-                h.poses
-            ),
-            rotation_rms_deg: h.rotation_rms_deg,
-            translation_rms_mm: h.translation_rms_mm,
-        });
-    }
+    input.holdout = verdict
+        .as_ref()
+        .and_then(|v| v.figures.held_out.as_ref())
+        .map(|h| holdout_summary(h, "flagged outliers not counted"));
     input.verdict = verdict;
     super::write_report(&path, &input)?;
     Ok(path)
+}
+
+/// A verdict's held-out figures as the page shows them (`note`: how they were made).
+pub(crate) fn holdout_summary(
+    held_out: &handeye_solve::verdict::HeldOut,
+    note: &str,
+) -> super::HoldoutSummary {
+    super::HoldoutSummary {
+        description: format!("leave-one-out over {} samples ({note})", held_out.poses),
+        rotation_rms_deg: held_out.rotation_rms_deg,
+        translation_rms_mm: held_out.translation_rms_mm,
+    }
 }
 
 #[cfg(test)]

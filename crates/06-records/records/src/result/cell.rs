@@ -13,11 +13,11 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use handeye_core::geometry::{serde_pose, Pose};
+use handeye_core::geometry::{rms, serde_pose, Pose};
 use handeye_core::setup::{CellTransforms, RobotFrames, Setup};
 use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml, FileError};
 use handeye_solve::verdict::{HeldOut, Verdict};
-use handeye_solve::PoseSigma;
+use handeye_solve::{Calibration, Method, PoseSigma, Residuals, SolverReport};
 
 use super::{ResultFile, SampleResidualYaml};
 
@@ -95,6 +95,77 @@ pub struct CameraResult {
     /// solve's (the run's own one-camera solve of the planner camera is in that camera's folder).
     #[serde(skip)]
     pub answer: Option<Box<ResultFile>>,
+}
+
+impl CameraResult {
+    /// Its joint answer as a calibration of its samples, what a page draws for one camera of
+    /// several: its mount from the joint solve, `board` its setup's board (from
+    /// [`CellResult::mounts`]), and the residuals the file holds for it. `plan_poses`: each
+    /// sample's plan pose, as its residual's `index` names it; a sample without one, or dropped
+    /// by its own solve, has no residual and is listed as dropped. The joint solve keeps no
+    /// trace, covariance or notices per camera: the calibration has none. `None` for a camera
+    /// left out of the joint solve.
+    pub fn joint_calibration(
+        &self,
+        board: &Pose,
+        plan_poses: &[Option<usize>],
+    ) -> Option<Calibration> {
+        let mount = self.joint.as_ref()?;
+        let of_sample: Vec<Option<&SampleResidualYaml>> = plan_poses
+            .iter()
+            .map(|pose| {
+                pose.and_then(|pose| self.residuals_per_pose.iter().find(|r| r.index == pose))
+                    .filter(|r| !r.dropped)
+            })
+            .collect();
+        let values = |value: fn(&SampleResidualYaml) -> Option<f64>| -> Vec<f64> {
+            of_sample
+                .iter()
+                .map(|r| r.and_then(value).unwrap_or(f64::NAN))
+                .collect()
+        };
+        let (rotation_deg, translation_mm) =
+            (values(|r| r.rotation_deg), values(|r| r.translation_mm));
+        // The RMS the file holds (over the samples the joint solve kept), else the shown values'.
+        let finite = |v: &[f64]| {
+            v.iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect::<Vec<_>>()
+        };
+        let rms = |held: Option<f64>, v: &[f64]| held.unwrap_or_else(|| rms(finite(v).into_iter()));
+        let max = |v: &[f64]| finite(v).into_iter().fold(0.0, f64::max);
+        Some(Calibration {
+            setup: self.setup,
+            camera_mount: mount.pose,
+            target_mount: *board,
+            uncertainty: None,
+            residuals: Residuals {
+                normalised: values(|r| r.normalised),
+                rotation_rms_deg: rms(self.residual_rotation_rms_deg, &rotation_deg),
+                rotation_max_deg: max(&rotation_deg),
+                translation_rms_mm: rms(self.residual_translation_rms_mm, &translation_mm),
+                translation_max_mm: max(&translation_mm),
+                rotation_deg,
+                translation_mm,
+            },
+            noise: None,
+            outliers: (0..of_sample.len())
+                .filter(|&i| of_sample[i].is_some_and(|r| r.outlier))
+                .collect(),
+            dropped: (0..of_sample.len())
+                .filter(|&i| of_sample[i].is_none())
+                .collect(),
+            solver: SolverReport {
+                method: Method::Refined,
+                iterations: 0,
+                converged: true,
+                restarts: 0,
+                trace: Vec::new(),
+            },
+            notices: Vec::new(),
+        })
+    }
 }
 
 /// A session's `result.yaml`: the cell's answer, one camera or several ([`CellResult::load`]
@@ -267,8 +338,7 @@ impl CellResult {
         self.cameras
             .iter()
             .filter_map(|camera| {
-                let [_, (board_parent, _)] = camera.setup.unknown_frames();
-                let board = self.boards.iter().find(|b| b.parent == board_parent)?;
+                let board = self.board_of(camera)?;
                 Some((
                     camera.name.clone(),
                     CellTransforms {
@@ -279,6 +349,13 @@ impl CellResult {
                 ))
             })
             .collect()
+    }
+
+    /// The board `camera` sees in the joint answer: its setup's (`T_base_target` for an
+    /// eye-in-hand camera, `T_flange_target` for an eye-to-hand one).
+    pub fn board_of(&self, camera: &CameraResult) -> Option<&NamedTransform> {
+        let [_, (board_parent, _)] = camera.setup.unknown_frames();
+        self.boards.iter().find(|b| b.parent == board_parent)
     }
 
     /// The transform called `name`.
