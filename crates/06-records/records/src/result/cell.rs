@@ -363,3 +363,80 @@ impl CellResult {
         self.transforms().find(|t| t.name == name)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn residual(index: usize, translation_mm: Option<f64>, dropped: bool) -> SampleResidualYaml {
+        SampleResidualYaml {
+            index,
+            id: None,
+            rotation_deg: translation_mm.map(|t| t / 10.0),
+            translation_mm,
+            normalised: None,
+            outlier: false,
+            dropped,
+        }
+    }
+
+    /// A camera's joint residuals reach a page sample by sample through each sample's plan pose,
+    /// whatever the order of either list: a sample the camera's own solve dropped, one whose pose
+    /// the result does not name and one without a plan pose have no residual and are listed as
+    /// dropped; the RMS is the file's.
+    #[test]
+    fn joint_residuals_follow_the_samples_plan_poses() {
+        let mount = Pose::translation(0.1, 0.0, 0.0);
+        let board = Pose::translation(0.0, 0.5, 0.0);
+        let camera = CameraResult {
+            name: "left".into(),
+            setup: Setup::EyeToHand,
+            samples: 4,
+            left_out: None,
+            joint: Some(NamedTransform {
+                name: "T_base_cam_left".into(),
+                parent: "base".into(),
+                child: "cam_left".into(),
+                pose: mount,
+                sigma: None,
+                truth_error_deg: None,
+                truth_error_mm: None,
+            }),
+            alone: None,
+            corner_noise_px: None,
+            residual_rotation_rms_deg: Some(0.25),
+            residual_translation_rms_mm: Some(2.5),
+            residuals_per_pose: vec![
+                residual(7, Some(3.0), false),
+                residual(2, Some(1.0), false),
+                residual(9, None, true),
+                residual(4, Some(2.0), false),
+            ],
+            held_out: None,
+            verdict: None,
+            answer: None,
+        };
+        // Samples at plan poses 4, 9 (dropped), 2, 11 (not in the result), none, 7.
+        let plan_poses = [Some(4), Some(9), Some(2), Some(11), None, Some(7)];
+        let c = camera.joint_calibration(&board, &plan_poses).unwrap();
+        assert_eq!((c.camera_mount, c.target_mount), (mount, board));
+        assert_eq!(c.setup, Setup::EyeToHand);
+        let shown: Vec<Option<f64>> = c
+            .residuals
+            .translation_mm
+            .iter()
+            .map(|v| v.is_finite().then_some(*v))
+            .collect();
+        assert_eq!(shown, [Some(2.0), None, Some(1.0), None, None, Some(3.0)]);
+        assert!((c.residuals.rotation_deg[5] - 0.3).abs() < 1e-12);
+        assert_eq!(c.dropped, [1, 3, 4]);
+        assert_eq!(c.residuals.translation_rms_mm, 2.5);
+        assert_eq!(c.residuals.translation_max_mm, 3.0);
+        // A camera left out of the joint solve has no answer to draw.
+        let left_out = CameraResult {
+            joint: None,
+            ..camera
+        };
+        assert!(left_out.joint_calibration(&board, &plan_poses).is_none());
+    }
+}
