@@ -296,9 +296,10 @@ fn killed_mid_run_then_resumed_and_replayed() {
     child.kill().unwrap();
     child.wait().unwrap();
     assert!(!out.join("result.yaml").exists());
+    // Resumed through the planner camera's own folder: that is the several-camera session's.
     let output = handeye()
         .args(["run", "--resume"])
-        .arg(&out)
+        .arg(camera_folder(&out, "wrist"))
         .output()
         .unwrap();
     assert!(

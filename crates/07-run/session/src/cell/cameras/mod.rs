@@ -64,6 +64,22 @@ pub fn is_cameras_folder(folder: &Path) -> bool {
     folder.join(CAMERAS_MANIFEST).is_file()
 }
 
+/// The several-camera session `dir` is one camera's folder of (`<root>/cameras/<name>`), if it
+/// is one.
+pub fn session_of_camera_folder(dir: &Path) -> Option<PathBuf> {
+    let cameras = dir
+        .parent()
+        .filter(|p| p.file_name() == Some("cameras".as_ref()))?;
+    let root = cameras.parent()?;
+    // `cameras/wrist` under the working directory: the session is `.`.
+    let root = if root.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        root
+    };
+    is_cameras_folder(root).then(|| root.to_path_buf())
+}
+
 /// A camera's folder inside a several-camera session.
 pub fn camera_folder(root: &Path, name: &str) -> PathBuf {
     root.join("cameras").join(name)

@@ -58,10 +58,17 @@ impl SessionTarget {
     /// `folder`, for several the folder holding every camera's.
     pub fn root(&self, folder: &SessionFolder) -> PathBuf {
         match self {
-            SessionTarget::New(dir) | SessionTarget::Resume(dir) => dir.clone(),
+            SessionTarget::New(dir) => dir.clone(),
+            SessionTarget::Resume(dir) => resumed_root(dir),
             SessionTarget::Created(_) => folder.root().to_path_buf(),
         }
     }
+}
+
+/// The session `--resume dir` continues: `dir`, or when it is one camera's folder of a
+/// several-camera session, that session (every camera's records and the joint answer are its).
+fn resumed_root(dir: &std::path::Path) -> PathBuf {
+    super::cameras::session_of_camera_folder(dir).unwrap_or_else(|| dir.to_path_buf())
 }
 
 /// What to run: a planned run ([`run`]) or a hand-guided one (`console::manual::run_manual`).
@@ -300,7 +307,8 @@ pub fn open_run(
     let (resumed, config_path) = match &request.target {
         SessionTarget::Resume(dir) => {
             // A several-camera session is resumed through its planner camera's folder.
-            let folder = SessionFolder::resume(&super::cameras::session_folder_of(dir))?;
+            let folder =
+                SessionFolder::resume(&super::cameras::session_folder_of(&resumed_root(dir)))?;
             let manifest = folder.read_manifest()?;
             let config = request
                 .config
