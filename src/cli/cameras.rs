@@ -6,8 +6,7 @@ use std::path::Path;
 
 use handeye_records::result::CellResult;
 use handeye_report::session::REPLAY_REPORT_FILE;
-use handeye_session::cell::cameras;
-use handeye_session::cell::replay::CamerasReplay;
+use handeye_session::cell::replay::{AnswerOutput, CamerasReplay};
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
 
@@ -20,7 +19,7 @@ pub(super) fn print_run(done: &CellRun) -> String {
         done.outcome.visited_now,
         done.outcome.arm_time_s()
     );
-    let output = cameras::CamerasOutput::run(&done.root);
+    let output = AnswerOutput::run(&done.root);
     print_result(&done.result, &output.result);
     format!(
         "next: handeye export {} --format ros2|urdf|opencv",

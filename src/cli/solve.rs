@@ -52,6 +52,15 @@ pub(super) enum SpaceArg {
     Reprojection,
 }
 
+impl From<SpaceArg> for SolveSpace {
+    fn from(space: SpaceArg) -> SolveSpace {
+        match space {
+            SpaceArg::Pose => SolveSpace::Pose,
+            SpaceArg::Reprojection => SolveSpace::Reprojection,
+        }
+    }
+}
+
 /// Arguments of `handeye solve`.
 #[derive(Debug, Args)]
 pub(super) struct SolveArgs {
@@ -163,11 +172,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let config = CellConfig::load(&config_path)
         .and_then(CellConfig::single_camera)
         .context("reading the cell config")?;
-    let space = match args.space {
-        Some(SpaceArg::Pose) => SolveSpace::Pose,
-        Some(SpaceArg::Reprojection) => SolveSpace::Reprojection,
-        None => config.solver.space,
-    };
+    let space = args.space.map_or(config.solver.space, SolveSpace::from);
     let inputs = handeye_records::SolveInputs::load(config)?;
     // A run still recording: said before the solve (whose failure with few samples so far is
     // then read as such) and after the answer; the result file holds it too, as the solve's
@@ -225,17 +230,14 @@ fn run_cameras_session(args: &SolveArgs) -> anyhow::Result<()> {
     };
     let mut config = CellConfig::load(&config_path).context("reading the cell config")?;
     if let Some(space) = args.space {
-        config.solver.space = match space {
-            SpaceArg::Pose => SolveSpace::Pose,
-            SpaceArg::Reprojection => SolveSpace::Reprojection,
-        };
+        config.solver.space = space.into();
     }
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| root.join(format!("result-{}.yaml", config.solver.space.name())));
     let visits = cameras::recorded_visits(root, &config)?;
-    let written = cameras::CamerasOutput::replay(root, Some(&output));
+    let written = handeye_session::cell::replay::AnswerOutput::replay(root, Some(&output));
     let result = cameras::solve_cameras_folder(root, &config, visits, &written)
         .with_context(|| format!("solving session {}", root.display()))?;
     super::cameras::print_result(&result, &output);

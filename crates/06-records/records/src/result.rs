@@ -246,6 +246,24 @@ pub struct SampleResidualYaml {
     pub dropped: bool,
 }
 
+/// The per-sample residual columns of `samples` (rotation in degrees, translation in mm,
+/// normalised in sigmas), `NaN` where a sample has none (dropped, or not in the file): the form a
+/// `Calibration`'s residuals take.
+pub(crate) fn residual_columns<'a>(
+    samples: impl Iterator<Item = Option<&'a SampleResidualYaml>>,
+) -> [Vec<f64>; 3] {
+    let mut columns = [Vec::new(), Vec::new(), Vec::new()];
+    for sample in samples {
+        let values = sample.map_or([None; 3], |s| {
+            [s.rotation_deg, s.translation_mm, s.normalised]
+        });
+        for (column, value) in columns.iter_mut().zip(values) {
+            column.push(value.unwrap_or(f64::NAN));
+        }
+    }
+    columns
+}
+
 /// Residuals section.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -534,11 +552,12 @@ impl ResultFile {
             }
         };
         let r = &self.residuals;
-        let nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
+        let [rotation_deg, translation_mm, normalised] =
+            residual_columns(r.samples.iter().map(Some));
         let residuals = Residuals {
-            rotation_deg: r.samples.iter().map(|s| nan(s.rotation_deg)).collect(),
-            translation_mm: r.samples.iter().map(|s| nan(s.translation_mm)).collect(),
-            normalised: r.samples.iter().map(|s| nan(s.normalised)).collect(),
+            rotation_deg,
+            translation_mm,
+            normalised,
             rotation_rms_deg: r.rotation_rms_deg,
             rotation_max_deg: r.rotation_max_deg,
             translation_rms_mm: r.translation_rms_mm,

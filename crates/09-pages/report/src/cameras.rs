@@ -267,7 +267,6 @@ fn camera_input(
                     camera.joint.as_ref().and_then(|t| t.sigma),
                     result.board_of(camera).and_then(|b| b.sigma),
                 ],
-                variance_factor: result.variance_factor,
             },
         )],
         optics

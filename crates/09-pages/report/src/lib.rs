@@ -65,8 +65,6 @@ pub struct ReportAnswer {
 pub struct JointFigures {
     /// The 1-sigma of its mount and of its board, as the result holds them.
     pub sigmas: [Option<handeye_solve::PoseSigma>; 2],
-    /// The joint solve's variance factor (χ²/dof).
-    pub variance_factor: Option<f64>,
 }
 
 /// The frames a page shows, each with its detected corners and the board reprojected at the
@@ -384,7 +382,12 @@ pub(crate) fn camera_part(
         part.id("warnings")
     );
     if attention.is_empty() {
-        html.push_str("<p class=\"ok\">No warnings from the solver (the checks on the poses and residuals are on the verdict card).</p>\n");
+        html.push_str(if input.answers[0].joint.is_some() {
+            // Not "no warnings": the joint solve's findings are the cell's, not the camera's.
+            "<p>The joint solve keeps no findings per camera: its checks of this camera are its verdict above.</p>\n"
+        } else {
+            "<p class=\"ok\">No warnings from the solver (the checks on the poses and residuals are on the verdict card).</p>\n"
+        });
     } else {
         html.push_str("<ul>\n");
         for n in &attention {

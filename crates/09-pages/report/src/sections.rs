@@ -327,13 +327,8 @@ pub(super) fn transforms_section(html: &mut String, k: usize, answer: &ReportAns
     );
     let sigmas = match &answer.joint {
         Some(joint) => {
-            let _ = writeln!(
-                html,
-                "<p>the joint solve of every camera and the boards (variance factor {})</p>",
-                joint
-                    .variance_factor
-                    .map_or_else(|| "—".into(), |f| format!("{f:.3}"))
-            );
+            // Its run and variance factor are the cell's, in the cameras' section.
+            html.push_str("<p>the joint solve of every camera and the boards</p>\n");
             joint.sigmas
         }
         None => {

@@ -19,7 +19,7 @@ use handeye_core::yaml_file::{parse_yaml, read_text, write_yaml, FileError};
 use handeye_solve::verdict::{HeldOut, Verdict};
 use handeye_solve::{Calibration, Method, PoseSigma, Residuals, SolverReport};
 
-use super::{ResultFile, SampleResidualYaml};
+use super::{residual_columns, ResultFile, SampleResidualYaml};
 
 /// One solved transform, named by its frames.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -118,30 +118,21 @@ impl CameraResult {
                     .filter(|r| !r.dropped)
             })
             .collect();
-        let values = |value: fn(&SampleResidualYaml) -> Option<f64>| -> Vec<f64> {
-            of_sample
-                .iter()
-                .map(|r| r.and_then(value).unwrap_or(f64::NAN))
-                .collect()
-        };
-        let (rotation_deg, translation_mm) =
-            (values(|r| r.rotation_deg), values(|r| r.translation_mm));
+        let [rotation_deg, translation_mm, normalised] =
+            residual_columns(of_sample.iter().copied());
+        fn finite(values: &[f64]) -> impl Iterator<Item = f64> + '_ {
+            values.iter().copied().filter(|v| v.is_finite())
+        }
         // The RMS the file holds (over the samples the joint solve kept), else the shown values'.
-        let finite = |v: &[f64]| {
-            v.iter()
-                .copied()
-                .filter(|v| v.is_finite())
-                .collect::<Vec<_>>()
-        };
-        let rms = |held: Option<f64>, v: &[f64]| held.unwrap_or_else(|| rms(finite(v).into_iter()));
-        let max = |v: &[f64]| finite(v).into_iter().fold(0.0, f64::max);
+        let rms = |held: Option<f64>, values: &[f64]| held.unwrap_or_else(|| rms(finite(values)));
+        let max = |values: &[f64]| finite(values).fold(0.0, f64::max);
         Some(Calibration {
             setup: self.setup,
             camera_mount: mount.pose,
             target_mount: *board,
             uncertainty: None,
             residuals: Residuals {
-                normalised: values(|r| r.normalised),
+                normalised,
                 rotation_rms_deg: rms(self.residual_rotation_rms_deg, &rotation_deg),
                 rotation_max_deg: max(&rotation_deg),
                 translation_rms_mm: rms(self.residual_translation_rms_mm, &translation_mm),

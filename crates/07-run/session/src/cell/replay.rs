@@ -15,7 +15,7 @@ use handeye_records::result::CellResult;
 use handeye_records::{PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
-use super::cameras::{self, CamerasOutput};
+use super::cameras;
 use super::PreparedCell;
 use crate::driver::measure;
 
@@ -29,6 +29,48 @@ pub fn beside(file: &Path, name: &str) -> PathBuf {
     match file.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir.join(name),
         _ => PathBuf::from(name),
+    }
+}
+
+/// Where a solve writes its answer: the result file, and the folder the estimates of wrong
+/// files go into (one folder per camera for a cell of several).
+#[derive(Debug, Clone)]
+pub struct AnswerOutput {
+    /// The result file.
+    pub result: PathBuf,
+    /// The estimates' folder.
+    pub estimates: PathBuf,
+}
+
+impl AnswerOutput {
+    /// A several-camera run's own: `<root>/result.yaml`, each camera's estimates in
+    /// `<root>/cameras/<name>`.
+    pub fn run(root: &Path) -> AnswerOutput {
+        AnswerOutput {
+            result: root.join("result.yaml"),
+            estimates: root.join("cameras"),
+        }
+    }
+
+    /// A replay's, of one camera or several: `result` (default `<session>/replay-result.yaml`),
+    /// the estimates in `replay-estimates` beside it. Nothing a run recorded is written over.
+    pub fn replay(session: &Path, result: Option<&Path>) -> AnswerOutput {
+        let result = result.map_or_else(|| session.join(REPLAY_RESULT_FILE), Path::to_path_buf);
+        let estimates = beside(&result, REPLAY_ESTIMATES_FOLDER);
+        AnswerOutput { result, estimates }
+    }
+
+    /// Camera `camera`'s estimates' folder in a cell of several.
+    pub fn estimates_of(&self, camera: &str) -> PathBuf {
+        self.estimates.join(camera)
+    }
+
+    /// Makes the result's folder when it does not exist yet (`-o` into a new folder).
+    pub fn create_folder(&self) -> Result<(), SessionError> {
+        match self.result.parent() {
+            Some(dir) if !dir.as_os_str().is_empty() => handeye_records::create_dir(dir),
+            _ => Ok(()),
+        }
     }
 }
 
@@ -104,7 +146,7 @@ pub struct CamerasReplay {
     /// The joint answer.
     pub result: CellResult,
     /// Where it and the estimates were written.
-    pub output: CamerasOutput,
+    pub output: AnswerOutput,
 }
 
 /// One camera's session replayed.
@@ -158,7 +200,7 @@ pub fn replay_session(
             measured(Some(name), &measured_now);
             visits.push(measured_now);
         }
-        let output = CamerasOutput::replay(request.session, request.output);
+        let output = AnswerOutput::replay(request.session, request.output);
         let result = cameras::solve_cameras_folder(request.session, &cell.config, visits, &output)?;
         return Ok(Replayed::Cameras(Box::new(CamerasReplay {
             folder: request.session.to_path_buf(),
@@ -213,17 +255,14 @@ pub fn replay_session(
         cell.config.solver.space,
         &cell.config,
     )?;
-    let output = request
-        .output
-        .map_or_else(|| folder.root().join(REPLAY_RESULT_FILE), Path::to_path_buf);
-    // `-o` into a folder that does not exist yet makes it, as a several-camera replay does
-    // (`cameras::solve_cameras_folder`).
-    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
-        handeye_records::create_dir(parent)?;
-    }
+    let answer_output = AnswerOutput::replay(folder.root(), request.output);
+    answer_output.create_folder()?;
+    let AnswerOutput {
+        result: output,
+        estimates,
+    } = answer_output;
     // The estimates of a file the cell model blames, beside the replay's result (the run's own
     // stay as they were).
-    let estimates = beside(&output, REPLAY_ESTIMATES_FOLDER);
     let written = handeye_records::solve::write_corrected_files(&estimates, &solved, &cell.config)?;
     handeye_records::solve::record_written(&mut solved, &written);
     solved.name_replay(folder.root(), &estimates, &cell.config);

@@ -30,7 +30,7 @@ use handeye_robot::Joints;
 use handeye_solve::cameras::MIN_VIEWS_PER_CAMERA;
 
 pub use crate::CameraFailure;
-pub use solve::{recorded_visits, solve_cameras_folder, CamerasOutput, CamerasSolveError};
+pub use solve::{recorded_visits, solve_cameras_folder, CamerasSolveError};
 
 /// `rig.yaml`: the cameras of a several-camera session and its plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{camera_folder, read_manifest};
-use crate::cell::replay::{beside, REPLAY_ESTIMATES_FOLDER, REPLAY_RESULT_FILE};
+use crate::cell::replay::AnswerOutput;
 use handeye_config::{CellCamera, CellConfig, SolveSpace};
 use handeye_core::camera_model::CameraModel;
 use handeye_core::geometry::Pose;
@@ -357,38 +357,6 @@ fn camera_cell_model(
     .ok()
 }
 
-/// Where a solve of a several-camera folder writes: its result file, and the folder each
-/// camera's estimates of wrong files go into.
-#[derive(Debug, Clone)]
-pub struct CamerasOutput {
-    /// The result file.
-    pub result: PathBuf,
-    /// The folder holding one folder per camera for its estimates.
-    estimates: PathBuf,
-}
-
-impl CamerasOutput {
-    /// A run's own: `<root>/result.yaml`, each camera's estimates in `<root>/cameras/<name>`.
-    pub fn run(root: &Path) -> CamerasOutput {
-        CamerasOutput {
-            result: root.join("result.yaml"),
-            estimates: root.join("cameras"),
-        }
-    }
-
-    /// A replay's: `result` (default `<root>/replay-result.yaml`), the estimates in
-    /// `replay-estimates/<name>` beside it. Nothing a run recorded is written over.
-    pub fn replay(root: &Path, result: Option<&Path>) -> CamerasOutput {
-        let result = result.map_or_else(|| root.join(REPLAY_RESULT_FILE), Path::to_path_buf);
-        let estimates = beside(&result, REPLAY_ESTIMATES_FOLDER);
-        CamerasOutput { result, estimates }
-    }
-
-    fn estimates_of(&self, camera: &str) -> PathBuf {
-        self.estimates.join(camera)
-    }
-}
-
 /// Solves a several-camera session folder jointly from each camera's measurements `visits`
 /// (config order; [`load_joint_problem`]) and writes the result and the estimates where
 /// `output` says.
@@ -396,7 +364,7 @@ pub fn solve_cameras_folder(
     root: &Path,
     cell: &CellConfig,
     visits: Vec<Vec<PoseVisit>>,
-    output: &CamerasOutput,
+    output: &AnswerOutput,
 ) -> Result<CellResult, CamerasSolveError> {
     let problem = load_joint_problem(root, cell, visits)?;
     let joint = solve_joint(&problem, pixel_space(cell), robot_sigma(cell))?;
@@ -412,10 +380,7 @@ pub fn solve_cameras_folder(
         }
     }
     name_files(root, output, cell, &mut result);
-    // `-o` into a folder that does not exist yet makes it, as one camera's replay does.
-    if let Some(parent) = output.result.parent().filter(|p| !p.as_os_str().is_empty()) {
-        handeye_records::create_dir(parent)?;
-    }
+    output.create_folder()?;
     result.save(&output.result).map_err(SessionError::from)?;
     Ok(result)
 }
@@ -423,7 +388,7 @@ pub fn solve_cameras_folder(
 /// Writes the estimate of each camera whose cell model corrects a file into its own folder
 /// (`camera_info.yaml`, `board.yaml`); per config camera, the files written.
 fn write_corrected_files(
-    output: &CamerasOutput,
+    output: &AnswerOutput,
     cell: &CellConfig,
     problem: &CamerasProblem,
 ) -> Result<Vec<Vec<PathBuf>>, SessionError> {
@@ -444,7 +409,7 @@ fn write_corrected_files(
 
 /// Names each camera's folder, its estimates' folder, the cell config, its board and lens
 /// files in its verdict's advice, and the cell's verdict again from them.
-fn name_files(root: &Path, output: &CamerasOutput, cell: &CellConfig, result: &mut CellResult) {
+fn name_files(root: &Path, output: &AnswerOutput, cell: &CellConfig, result: &mut CellResult) {
     for (camera, entry) in cell.cameras.iter().zip(&mut result.cameras) {
         let files = verdict::SessionFiles {
             session: camera_folder(root, &camera.name).display().to_string(),

@@ -443,7 +443,7 @@ pub fn run_opened(
             &root,
             &cell.config,
             super::cameras::recorded_visits(&root, &cell.config)?,
-            &super::cameras::CamerasOutput::run(&root),
+            &super::replay::AnswerOutput::run(&root),
         )?
     } else {
         CellResult::load(&folder.result_path()).map_err(SessionError::File)?
