@@ -8,12 +8,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use handeye_config::{validate, CellConfig, SolveSpace};
+use handeye_config::{validate, SolveSpace};
 use handeye_core::geometry::readable;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::ResultFile;
 use handeye_records::SessionFolder;
-use handeye_session::cell::cameras;
+use handeye_session::cell::{cameras, session_config};
 use handeye_solve::{self as solve, Method, RobustLoss, SolveOptions, SolverChoice};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
@@ -168,9 +168,8 @@ impl SolveArgs {
 fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.samples)?;
     let manifest = folder.read_manifest()?;
-    let config_path = args.config.clone().unwrap_or(manifest.config);
-    let config = CellConfig::load(&config_path)
-        .and_then(CellConfig::single_camera)
+    let config = session_config(args.config.as_deref(), &manifest.config)?
+        .single_camera()
         .context("reading the cell config")?;
     let space = args.space.map_or(config.solver.space, SolveSpace::from);
     let inputs = handeye_records::SolveInputs::load(config)?;
@@ -224,11 +223,8 @@ fn run_cameras_session(args: &SolveArgs) -> anyhow::Result<()> {
         root,
         "solve it when the run has ended: its joint answer is written then",
     )?;
-    let config_path = match &args.config {
-        Some(path) => path.clone(),
-        None => cameras::read_manifest(root)?.config,
-    };
-    let mut config = CellConfig::load(&config_path).context("reading the cell config")?;
+    let recorded = cameras::read_manifest(root)?.config;
+    let mut config = session_config(args.config.as_deref(), &recorded)?;
     if let Some(space) = args.space {
         config.solver.space = space.into();
     }

@@ -173,17 +173,18 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        let config = CellConfig::load(&folder.read_manifest()?.config)
-            .and_then(CellConfig::single_camera)
-            .ok();
-        (dataset.setup, dataset.pairs, config)
+        (
+            dataset.setup,
+            dataset.pairs,
+            Some(folder.read_manifest()?.config),
+        )
     } else if let Some(file) = &args.dataset {
         let dataset = Dataset::load(file)?;
         (dataset.setup, dataset.pairs, None)
     } else {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
-    let (options, accuracy) = judged_as(config);
+    let (options, accuracy) = judged_as(config.as_deref());
     let mut v = verify::leave_one_out(setup, &pairs, &options)?;
     if let Some(outliers) = recorded_outliers {
         v = v.with_outliers(outliers);
@@ -193,11 +194,26 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The solver options and accuracy of the session's config when it loads; the defaults else.
-fn judged_as(config: Option<CellConfig>) -> (SolveOptions, Accuracy) {
-    config.map_or_else(Default::default, |c| {
-        (c.solver.to_options(), c.verdict.accuracy())
-    })
+/// The solver options and accuracy of the session's config (`config`, the file its manifest
+/// records; a dataset file has none): the cell's, whatever its number of cameras (both are the
+/// cell's sections). When it does not load (moved, edited since) the defaults judge, and the
+/// reason is said: a verdict against another accuracy than the cell's must not look like the
+/// cell's.
+fn judged_as(config: Option<&Path>) -> (SolveOptions, Accuracy) {
+    let Some(file) = config else {
+        return Default::default();
+    };
+    match CellConfig::load(file) {
+        Ok(c) => (c.solver.to_options(), c.verdict.accuracy()),
+        Err(e) => {
+            let accuracy = Accuracy::default();
+            eprintln!(
+                "note: the config the session recorded does not load ({e}): judged with the default solver options and accuracy ({} mm, {}°), not the cell's",
+                accuracy.translation_mm, accuracy.rotation_deg
+            );
+            (SolveOptions::default(), accuracy)
+        }
+    }
 }
 
 /// `verify --session ROOT` of a several-camera session: each camera's samples by leave-one-out
@@ -207,8 +223,7 @@ fn judged_as(config: Option<CellConfig>) -> (SolveOptions, Accuracy) {
 fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
     super::say_if_live(root)?;
     let manifest = cameras::read_manifest(root)?;
-    let config = CellConfig::load(&manifest.config).ok();
-    let (options, accuracy) = judged_as(config);
+    let (options, accuracy) = judged_as(Some(&manifest.config));
     for camera in &manifest.cameras {
         let samples =
             SessionFolder::open(&cameras::camera_folder(root, &camera.name))?.samples_path();

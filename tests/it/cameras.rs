@@ -1140,6 +1140,107 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
     );
 }
 
+/// A session is solved, replayed and verified from any working directory, whatever the path
+/// its run was given. `rig.yaml` once held the config's path as typed (`--config cell.yaml`),
+/// so a several-camera session started with a relative path could be solved only from the
+/// folder its run started in ("cannot read"), and `verify --session` then judged it silently
+/// against the default accuracy instead of the cell's. Now the path is recorded absolute, an
+/// old session's relative one is read through its planner camera's `session.yaml`, and a config
+/// gone since is named with `--config` as the way on (verify says it judges with the defaults).
+#[test]
+fn a_session_run_with_a_relative_config_path_is_solved_and_verified_from_anywhere() {
+    let started_in = tempfile::tempdir().unwrap();
+    let accuracy = "verdict: {accuracy_mm: 0.9, accuracy_deg: 0.09}\nsession: {settle_s";
+    let config = three_cameras(started_in.path(), &[("session: {settle_s", accuracy)]);
+    util::succeeds(handeye().current_dir(started_in.path()).args([
+        "run",
+        "--config",
+        "cell.yaml",
+        "-o",
+        "session",
+    ]));
+    let session = started_in.path().join("session");
+    let manifest = handeye_session::cell::cameras::read_manifest(&session).unwrap();
+    assert_eq!(manifest.config, std::fs::canonicalize(&config).unwrap());
+    // As a session of an earlier build holds it.
+    let rig = session.join("rig.yaml");
+    let text = std::fs::read_to_string(&rig).unwrap();
+    let recorded = format!("config: {}\n", manifest.config.display());
+    assert!(text.contains(&recorded), "{text}");
+    std::fs::write(&rig, text.replace(&recorded, "config: cell.yaml\n")).unwrap();
+
+    let elsewhere = tempfile::tempdir().unwrap();
+    let answer = elsewhere.path().join("answer.yaml");
+    util::succeeds(
+        handeye()
+            .current_dir(elsewhere.path())
+            .arg("solve")
+            .arg(&session)
+            .arg("-o")
+            .arg(&answer),
+    );
+    assert_same_answer(
+        &read_result(&session),
+        &CellResult::load(&answer).unwrap(),
+        1e-9,
+        "`handeye solve` from another folder",
+    );
+    let verify = |what: &str| {
+        let out = handeye()
+            .current_dir(elsewhere.path())
+            .args(["verify", "--session"])
+            .arg(&session)
+            .output()
+            .unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout).to_string(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        );
+        assert!(out.status.success(), "{what}: {stdout}{stderr}");
+        (stdout, stderr)
+    };
+    let (stdout, stderr) = verify("config in place");
+    assert_eq!(
+        stdout
+            .matches("against the 0.9 mm, 0.09° asked for")
+            .count(),
+        3,
+        "{stdout}"
+    );
+    assert!(!stderr.contains("note:"), "{stderr}");
+
+    // The config moved away: `solve` names it and `--config`; verify judges with the defaults
+    // and says so.
+    std::fs::rename(&config, started_in.path().join("moved.yaml")).unwrap();
+    let out = handeye()
+        .current_dir(elsewhere.path())
+        .arg("solve")
+        .arg(&session)
+        .arg("-o")
+        .arg(&answer)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("the cell config the session recorded")
+            && stderr.contains(&manifest.config.display().to_string())
+            && stderr.contains("--config FILE"),
+        "{stderr}"
+    );
+    let (stdout, stderr) = verify("config moved");
+    assert_eq!(
+        stdout.matches("against the 1 mm, 0.1° asked for").count(),
+        3,
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("note: the config the session recorded does not load")
+            && stderr.contains("not the cell's"),
+        "{stderr}"
+    );
+}
+
 /// A fixed camera watching the board on the flange sees it near and whole at some poses and far,
 /// oblique or partly at others (the left camera: 7 to 36 tags, 0.6 to 1.2 m): its far views give
 /// board poses several times noisier. Each sample carries its view's 1-sigma, and the solve of

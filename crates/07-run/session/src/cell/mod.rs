@@ -149,6 +149,23 @@ pub struct PreparedCamera {
 /// config without an `intrinsics:` file uses them; with one, the solve compares the two).
 pub use handeye_records::solve::DRIVER_CALIBRATION_FILE as INTRINSICS_FROM_TOPIC_FILE;
 
+/// The cell config a recorded session is solved, replayed or verified with: `given`
+/// (`--config`), else `recorded`, the one its manifest names. When the recorded one does not
+/// load, the error says it is the session's and that `--config` names another (a session
+/// copied from another machine, a config moved or renamed since).
+pub fn session_config(given: Option<&Path>, recorded: &Path) -> anyhow::Result<CellConfig> {
+    use anyhow::Context;
+    match given {
+        Some(file) => CellConfig::load(file).context("reading the cell config"),
+        None => CellConfig::load(recorded).with_context(|| {
+            format!(
+                "reading the cell config the session recorded ({}): give `--config FILE` if it was moved or the session was copied from elsewhere",
+                recorded.display()
+            )
+        }),
+    }
+}
+
 /// A cell whose config, boards, intrinsics and plan are loaded and checked: one arm, one plan,
 /// and its cameras (one, or several sharing the arm's poses).
 pub struct PreparedCell {

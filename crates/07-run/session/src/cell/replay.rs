@@ -176,12 +176,9 @@ pub fn replay_session(
     measured: &mut dyn FnMut(Option<&str>, &[PoseVisit]),
 ) -> anyhow::Result<Replayed> {
     if cameras::is_cameras_folder(request.session) {
-        let config = match request.config {
-            Some(c) => c.to_path_buf(),
-            None => cameras::read_manifest(request.session)?.config,
-        };
-        let cell =
-            super::prepare_config(CellConfig::load(&config)?).context("preparing the cell")?;
+        let recorded = cameras::read_manifest(request.session)?.config;
+        let config = super::session_config(request.config, &recorded)?;
+        let cell = super::prepare_config(config).context("preparing the cell")?;
         // Every camera's frames measured again with its board and lens, as one camera's are.
         let mut visits = Vec::new();
         for (camera, name) in cell
@@ -210,8 +207,8 @@ pub fn replay_session(
     }
     let folder = SessionFolder::open(request.session)?;
     let manifest = folder.read_manifest()?;
-    let config_path = request.config.unwrap_or(&manifest.config);
-    let cell = prepare_for(&folder, config_path)?;
+    let config = super::session_config(request.config, &manifest.config)?;
+    let cell = prepare_for(&folder, config)?;
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(
@@ -219,7 +216,7 @@ pub fn replay_session(
         "session {} was recorded as {}, but {} describes a {} cell: replay it with the config it was recorded with",
         folder.root().display(),
         manifest.setup,
-        config_path.display(),
+        cell.config.file.display(),
         cell.config.camera().setup
     );
     // A cell without configured intrinsics replays with the ones its run estimated.
@@ -280,11 +277,10 @@ pub fn replay_session(
     })))
 }
 
-/// The cell of `config_path` as the session `folder` recorded it: intrinsics a run read from
+/// The cell of `config` as the session `folder` recorded it: intrinsics a run read from
 /// the camera driver's topic are the session's (no driver needed); the shipped placeholder lens
 /// is refused.
-fn prepare_for(folder: &SessionFolder, config_path: &Path) -> anyhow::Result<PreparedCell> {
-    let mut config = CellConfig::load(config_path).context("preparing the cell")?;
+fn prepare_for(folder: &SessionFolder, mut config: CellConfig) -> anyhow::Result<PreparedCell> {
     let from_topic = folder.root().join(super::INTRINSICS_FROM_TOPIC_FILE);
     if config.camera().intrinsics.is_none() && from_topic.is_file() {
         config.camera_mut().intrinsics = Some(from_topic);
@@ -294,7 +290,7 @@ fn prepare_for(folder: &SessionFolder, config_path: &Path) -> anyhow::Result<Pre
         anyhow::bail!(
             "{}: the intrinsics are the shipped placeholder (camera_name: {name}), not this camera's calibration; point `intrinsics:` in {} at the camera's calibration (or at {}/camera_info.yaml when a solve estimated them), or drop `intrinsics:`",
             file.display(),
-            config_path.display(),
+            prepared.config.file.display(),
             folder.root().display()
         );
     }

@@ -85,9 +85,22 @@ pub fn camera_folder(root: &Path, name: &str) -> PathBuf {
     root.join("cameras").join(name)
 }
 
-/// Reads `rig.yaml`.
+/// Reads `rig.yaml`. Its config path is absolute since sessions record it so; an older
+/// session's holds it as the run was given it (relative to where the run was started), and is
+/// then read as its planner camera's `session.yaml` records it (absolute), so a session is
+/// solved, replayed and verified from any working directory.
 pub fn read_manifest(root: &Path) -> Result<CamerasManifest, SessionError> {
-    Ok(read_yaml(&root.join(CAMERAS_MANIFEST))?)
+    let mut manifest: CamerasManifest = read_yaml(&root.join(CAMERAS_MANIFEST))?;
+    if manifest.config.is_relative() && !manifest.config.is_file() {
+        let planner = SessionFolder::open(&camera_folder(root, &manifest.planner))
+            .and_then(|folder| folder.read_manifest());
+        if let Ok(planner) = planner {
+            if planner.config.is_absolute() {
+                manifest.config = planner.config;
+            }
+        }
+    }
+    Ok(manifest)
 }
 
 /// How many plan poses each camera is expected to see its board at, by the nominal cell: the
@@ -107,7 +120,7 @@ impl PreparedCell {
     /// The manifest (`rig.yaml`) of a session visiting `plan`.
     fn cameras_manifest(&self, plan: &[(Pose, Joints)]) -> CamerasManifest {
         CamerasManifest {
-            config: self.config.file.clone(),
+            config: self.config_path(),
             cameras: self
                 .config
                 .cameras
