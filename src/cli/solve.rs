@@ -199,6 +199,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
+    handeye_records::create_parent_dir(&output)?;
     solved.result_file(&dataset.pairs, config).save(&output)?;
     outln!("wrote {}", output.display());
     if let Some(line) = &provisional {
@@ -278,6 +279,7 @@ pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
         outln!("{}", comparison.table());
     }
     if let Some(output) = &args.output {
+        handeye_records::create_parent_dir(output)?;
         ResultFile::from_calibration(&calibration, &dataset.pairs)
             .with_verdict(verdict)
             .save(output)?;

@@ -228,7 +228,9 @@ fn cli_solve_writes_a_result_that_reads_back() {
     let (text, camera_mount, target_mount) = dataset_text();
     let dir = tempfile::tempdir().unwrap();
     let samples = dir.path().join("samples.yaml");
-    let output = dir.path().join("result.yaml");
+    // Into a folder that does not exist yet: `solve -o` makes it, whatever it solves (a samples
+    // file, one camera's session, a several-camera one).
+    let output = dir.path().join("answers/result.yaml");
     std::fs::write(&samples, &text).unwrap();
     let run = Command::new(env!("CARGO_BIN_EXE_handeye"))
         .args([
@@ -291,6 +293,25 @@ fn cli_solve_writes_a_result_that_reads_back() {
         .output()
         .unwrap();
     assert!(run.status.success());
+
+    // Another writer's file into a folder that does not exist: the error names the folder (it
+    // named the write's temporary file, `.calibration.urdf.XXXXXX.handeye-tmp`).
+    let missing = dir.path().join("no-such-folder");
+    let run = Command::new(env!("CARGO_BIN_EXE_handeye"))
+        .arg("export")
+        .arg(&output)
+        .args(["--format", "urdf", "-o"])
+        .arg(missing.join("calibration.urdf"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!("the folder {} does not exist", missing.display()))
+            && !stderr.contains("handeye-tmp"),
+        "{stderr}"
+    );
+    assert!(!missing.exists());
 }
 
 #[test]

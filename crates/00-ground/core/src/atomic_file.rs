@@ -231,6 +231,24 @@ fn write_atomic_streamed<E>(
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
+    // Said of the folder, not of the temporary file the write would have made in it (whose
+    // random name means nothing to the person who named `path`).
+    match std::fs::metadata(folder) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::NotADirectory,
+                format!("{} is a file, not a folder", folder.display()),
+            ))
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("the folder {} does not exist", folder.display()),
+            ))
+        }
+        Err(e) => return Err(e),
+    }
     let removed = remove_stale_temp_files(folder, TempScope::Ours);
     let temp = locked_temp_file(folder, path)?;
     if let Ok(existing) = std::fs::metadata(path) {
@@ -324,9 +342,24 @@ mod tests {
     }
 
     #[test]
-    fn missing_folder_is_an_error_not_a_panic() {
+    fn missing_folder_is_an_error_naming_it_not_a_panic() {
         let dir = tempfile::tempdir().unwrap();
-        assert!(write_atomic(&dir.path().join("no/such/dir/x.yaml"), b"x").is_err());
+        let missing = dir.path().join("no/such/dir");
+        let e = write_atomic(&missing.join("x.yaml"), b"x").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::NotFound);
+        assert_eq!(
+            e.to_string(),
+            format!("the folder {} does not exist", missing.display())
+        );
+        assert!(!dir.path().join("no").exists(), "a folder was made");
+        // A file where the folder should be.
+        let file = dir.path().join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = write_atomic(&file.join("x.yaml"), b"x").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("{} is a file, not a folder", file.display())
+        );
     }
 
     #[test]

@@ -67,10 +67,7 @@ impl AnswerOutput {
 
     /// Makes the result's folder when it does not exist yet (`-o` into a new folder).
     pub fn create_folder(&self) -> Result<(), SessionError> {
-        match self.result.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => handeye_records::create_dir(dir),
-            _ => Ok(()),
-        }
+        handeye_records::create_parent_dir(&self.result)
     }
 }
 
