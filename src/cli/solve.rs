@@ -13,7 +13,7 @@ use handeye_core::geometry::readable;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::ResultFile;
 use handeye_records::SessionFolder;
-use handeye_session::cell::{cameras, session_config};
+use handeye_session::cell::{cameras, config_of_camera_folder, session_config};
 use handeye_solve::{self as solve, Method, RobustLoss, SolveOptions, SolverChoice};
 
 /// `--method`: the solver's one list of names ([`Method::NAMES`], the same the config's
@@ -168,9 +168,11 @@ impl SolveArgs {
 fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let folder = SessionFolder::open(&args.samples)?;
     let manifest = folder.read_manifest()?;
-    let config = session_config(args.config.as_deref(), &manifest.config)?
-        .single_camera()
-        .context("reading the cell config")?;
+    let config = config_of_camera_folder(
+        session_config(args.config.as_deref(), &manifest.config)?,
+        folder.root(),
+    )
+    .context("reading the cell config")?;
     let space = args.space.map_or(config.solver.space, SolveSpace::from);
     let inputs = handeye_records::SolveInputs::load(config)?;
     // A run still recording: said before the solve (whose failure with few samples so far is

@@ -1140,6 +1140,51 @@ fn verify_checks_each_camera_and_one_camera_commands_name_the_cameras_folders() 
     );
 }
 
+/// A camera's folder of a several-camera session is a one-camera session of the same poses: the
+/// one-camera commands given it take that camera out of the session's config (its setup, board,
+/// lens and truth). `handeye solve` and `replay` of a camera folder refused the listed config
+/// ("this command takes a one-camera config"), or replayed a fixed camera's frames as the wrist
+/// camera's ("recorded as eye_to_hand, but … describes a eye_in_hand cell"); Python's
+/// `session.cameras["left"].solve()`, which the several-camera `solve()` error points to,
+/// failed the same way. Each camera's answer alone is within 1 mm / 0.1° of the simulator's
+/// truth, nothing is written into the session, and a camera's folder without an answer of its
+/// own sends `handeye report` to the cell's page.
+#[test]
+fn each_cameras_folder_is_solved_and_replayed_as_a_one_camera_session() {
+    let (config, out, _) = shipped_run();
+    let session = read_result(out);
+    let before = util::folder_bytes(out);
+    let dir = tempfile::tempdir().unwrap();
+    for (camera, (mount_name, truth)) in session.cameras.iter().zip(truth(config)) {
+        let folder = camera_folder(out, &camera.name);
+        for command in ["solve", "replay"] {
+            let answer = dir.path().join(format!("{command}-{}.yaml", camera.name));
+            util::succeeds(handeye().arg(command).arg(&folder).arg("-o").arg(&answer));
+            let result = handeye_records::result::ResultFile::load(&answer).unwrap();
+            let mounts = result.mounts(&answer).unwrap();
+            assert_eq!(mounts.setup, camera.setup, "{command} {}", camera.name);
+            let (mm, deg) = util::pose_error_mm_deg(&mounts.camera_mount, &truth);
+            assert!(
+                mm < 1.0 && deg < 0.1,
+                "{command} {}: {mount_name} {mm:.3} mm, {deg:.4}° from the truth",
+                camera.name
+            );
+        }
+    }
+    assert!(
+        util::folder_bytes(out) == before,
+        "a camera's solve or replay wrote into the session"
+    );
+    let left = camera_folder(out, "left");
+    let report = handeye().arg("report").arg(&left).output().unwrap();
+    let stderr = String::from_utf8_lossy(&report.stderr);
+    assert_eq!(report.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!("`handeye report {}`", out.display())),
+        "{stderr}"
+    );
+}
+
 /// A session is solved, replayed and verified from any working directory, whatever the path
 /// its run was given. `rig.yaml` once held the config's path as typed (`--config cell.yaml`),
 /// so a several-camera session started with a relative path could be solved only from the

@@ -446,12 +446,25 @@ pub fn write_folder_report(
             });
         }
     }
-    let not_solved = |e: handeye_core::yaml_file::FileError| ReportError::NotSolved {
+    // What writes a page of these records: `replay` writes its own answer and page beside the
+    // session's (it never writes result.yaml); a camera's folder of several has the cell's.
+    let not_solved = |e: handeye_core::yaml_file::FileError| {
+        ReportError::NotSolved {
         path: result_path.clone(),
-        why: format!(
-            "{e}; solve the session first: `handeye replay {}`",
-            dir.display()
-        ),
+        why: match handeye_session::cell::cameras::session_of_camera_folder(dir) {
+            Some(root) => format!(
+                "{e}; this camera's answer is the joint one of the session {}: `handeye report {}` draws its page, a part for each camera (`handeye replay {}` solves this camera alone and writes that page beside its answer)",
+                root.display(),
+                root.display(),
+                dir.display()
+            ),
+            None => format!(
+                "{e}; `handeye run --resume {}` finishes an interrupted run, `handeye replay {}` solves the session again from its frames and writes that page beside its answer",
+                dir.display(),
+                dir.display()
+            ),
+        },
+    }
     };
     let cell = CellResult::load(&result_path).map_err(not_solved)?;
     // A cell of several cameras has its page; one camera's answer is drawn below.
@@ -471,7 +484,7 @@ pub fn write_folder_report(
         None => folder.read_manifest().map_err(session_error)?.config,
     };
     let config = match handeye_config::CellConfig::load(&config_path)
-        .and_then(handeye_config::CellConfig::single_camera)
+        .and_then(|c| handeye_session::cell::config_of_camera_folder(c, dir))
     {
         Ok(config) => Some(config),
         Err(e) => {

@@ -139,7 +139,7 @@ impl Session {
     fn load_config(&self, py: Python<'_>, config: Option<PathBuf>) -> PyResult<CellConfig> {
         let path = config.unwrap_or_else(|| self.config.clone());
         CellConfig::load(&path)
-            .and_then(CellConfig::single_camera)
+            .and_then(|c| handeye_session::cell::config_of_camera_folder(c, &self.root))
             .map_err(|e| errors::with_context(py, "reading the cell config", &e))
     }
 }

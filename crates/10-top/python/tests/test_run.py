@@ -89,6 +89,19 @@ def test_a_cell_with_several_cameras_runs_to_its_joint_answer_and_report(tmp_pat
     wrist = session.cameras["wrist"]
     assert wrist.setup == "eye_in_hand" and session.cameras["left"].setup == "eye_to_hand"
     assert len(wrist.samples["T_base_flange"]) == 20 and wrist.joint is None
+    # Each camera's folder is a one-camera session of the same poses, solved alone with the
+    # session's config as that camera sees it (its setup, board and lens): as `solve()` below
+    # says to. It refused the listed config before.
+    import warnings
+
+    for name, key in (("wrist", "T_flange_camera"), ("left", "T_base_camera"), ("right", "T_base_camera")):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", handeye.CalibrationWarning)
+            alone = session.cameras[name].solve()
+        rot, trans = errors(alone.transforms[key], mounts[name])
+        assert trans < 1.0 and rot < 0.1, f"{name} alone: {trans:.3f} mm, {rot:.4f}°"
+    with pytest.raises(handeye.InputError, match=r'`solve\(\)` is each camera\'s, session.cameras\["wrist"\].solve\(\)'):
+        session.solve()
     with pytest.raises(handeye.InputError, match=r'has 3 cameras \(wrist, left, right\): `result` is each camera\'s, session.cameras\["wrist"\].result; the joint answer is session.joint'):
         session.result
     assert handeye.Session(out).joint["transforms"].keys() == joint["transforms"].keys()

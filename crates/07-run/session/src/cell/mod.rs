@@ -149,6 +149,52 @@ pub struct PreparedCamera {
 /// config without an `intrinsics:` file uses them; with one, the solve compares the two).
 pub use handeye_records::solve::DRIVER_CALIBRATION_FILE as INTRINSICS_FROM_TOPIC_FILE;
 
+/// The cell as the one-camera session `folder` saw it: `config` itself in the one-camera form;
+/// a listed config (`cameras:`) as the camera whose folder `folder` is (`<root>/cameras/<name>`,
+/// [`CellConfig::for_camera`]) sees it, so a several-camera session's camera folder is solved,
+/// replayed, reported and read from Python as a one-camera session of the same poses. A folder
+/// whose camera the config does not list (or a listed config of several cameras given for a
+/// flat session folder) is refused, naming the config's cameras.
+pub fn config_of_camera_folder(
+    config: CellConfig,
+    folder: &Path,
+) -> Result<CellConfig, ConfigError> {
+    if !config.listed {
+        return config.single_camera();
+    }
+    let name = cameras::session_of_camera_folder(folder)
+        .and_then(|_| folder.file_name())
+        .map(|n| n.to_string_lossy().into_owned());
+    let index = match &name {
+        Some(name) => config.cameras.iter().position(|c| &c.name == name),
+        None if config.cameras.len() == 1 => Some(0),
+        None => None,
+    };
+    match index {
+        Some(i) => Ok(config.for_camera(i)),
+        None => {
+            let names: Vec<&str> = config.cameras.iter().map(|c| c.name.as_str()).collect();
+            Err(ConfigError::Inconsistent {
+                problem: match name {
+                    Some(name) => format!(
+                        "session folder {} is camera `{name}`'s, and this config's cameras are {}: give the config the session was recorded with",
+                        folder.display(),
+                        names.join(", ")
+                    ),
+                    None => format!(
+                        "session folder {} is a one-camera session, and this config lists {} cameras ({}): give a one-camera config, or solve a several-camera session's folder",
+                        folder.display(),
+                        names.len(),
+                        names.join(", ")
+                    ),
+                },
+                file: config.file,
+                key: "cameras".into(),
+            })
+        }
+    }
+}
+
 /// The cell config a recorded session is solved, replayed or verified with: `given`
 /// (`--config`), else `recorded`, the one its manifest names. When the recorded one does not
 /// load, the error says it is the session's and that `--config` names another (a session

@@ -204,7 +204,11 @@ pub fn replay_session(
     }
     let folder = SessionFolder::open(request.session)?;
     let manifest = folder.read_manifest()?;
-    let config = super::session_config(request.config, &manifest.config)?;
+    let config = super::config_of_camera_folder(
+        super::session_config(request.config, &manifest.config)?,
+        request.session,
+    )
+    .context("reading the cell config")?;
     let cell = prepare_for(&folder, config)?;
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
