@@ -12,11 +12,11 @@ use handeye_core::atomic_file::write_atomic;
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::CellResult;
-use handeye_records::SessionFolder;
+use handeye_records::{SessionFolder, SolveInputs, SolvedSession};
 use handeye_session::cell::run::{RunObserver, RunRequest, SessionTarget};
-use handeye_session::cell::{cameras, PreparedCell};
+use handeye_session::cell::{cameras, config_of_camera_folder, PreparedCell};
 use handeye_session::verify;
-use handeye_solve::verdict::Accuracy;
+use handeye_solve::verdict::{self, Accuracy};
 use handeye_solve::SolveOptions;
 
 /// Verify a calibration: holdout poses on the cell, or leave-one-out on recorded samples.
@@ -141,7 +141,13 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         outln!("holdout session: {}", out.display());
         return Ok(());
     }
-    // The session's own solver options and accuracy when its config loads; the defaults else.
+    leave_one_out(&args)
+}
+
+/// `verify --session DIR` or `--dataset FILE`: leave-one-out cross-validation of the samples,
+/// judged with the session's solver options and accuracy when its config loads (the defaults
+/// else).
+fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
     if let Some(root) = args
         .session
         .as_deref()
@@ -152,7 +158,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     // A session's recorded answer flags its outliers after its pixel fit: those are the
     // samples its held-out figure left out.
     let mut recorded_outliers = None;
-    let (setup, pairs, config) = if let Some(dir) = &args.session {
+    let (setup, pairs, config, session) = if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         if let Some(run) = folder.live_run() {
             anyhow::ensure!(
@@ -177,15 +183,47 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             dataset.setup,
             dataset.pairs,
             Some(folder.read_manifest()?.config),
+            Some(folder),
         )
     } else if let Some(file) = &args.dataset {
         let dataset = Dataset::load(file)?;
-        (dataset.setup, dataset.pairs, None)
+        (dataset.setup, dataset.pairs, None, None)
     } else {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
-    let (options, accuracy) = judged_as(config.as_deref());
-    let mut v = verify::leave_one_out(setup, &pairs, &options)?;
+    let config = judging_config(config.as_deref());
+    let (options, accuracy) = judged_as(config.as_ref());
+    // A session's samples as its solve judged them (one figure for one session): the robot
+    // poses corrected by the arm's own model when the solve estimated one, each fold fitting it
+    // again without its sample; the board poses measured again with the corrected files when
+    // the solve found a given one wrong. As recorded they disagree by what the answer corrects.
+    let folder_shown = args.session.clone().unwrap_or_default();
+    let solved = session
+        .zip(config)
+        .and_then(|(folder, config)| as_solved(&folder, config));
+    let refit = solved.as_ref().and_then(|s| s.arm_refit.as_ref());
+    let pairs = match &solved {
+        Some(solved) => {
+            if refit.is_some() {
+                outln!("the robot poses as the session's solve corrected them with the arm's own model; each left-out sample's fold fits that model again without it");
+            }
+            if let Some(chosen) = solved.cell_model.as_ref().map(|m| m.summary.chosen) {
+                if chosen != handeye_solve::cell_model::Explanation::AsGiven {
+                    outln!("the board poses as the session's solve measured them again with its estimate ({}): a given file does not fit the corners; fix it as the session's verdict says (`handeye solve {}`)", chosen.label(), folder_shown.display());
+                }
+            }
+            solved.judged.clone()
+        }
+        None => pairs,
+    };
+    let fold_flanges =
+        |left_out: usize| refit.map_or(Ok(Vec::new()), |r| r.flanges_without(left_out));
+    let mut v = verify::leave_one_out_refitting(
+        setup,
+        &pairs,
+        &options,
+        refit.map(|_| &fold_flanges as verdict::FoldFlanges<'_>),
+    )?;
     if let Some(outliers) = recorded_outliers {
         v = v.with_outliers(outliers);
     }
@@ -194,24 +232,51 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The solver options and accuracy of the session's config (`config`, the file its manifest
-/// records; a dataset file has none): the cell's, whatever its number of cameras (both are the
-/// cell's sections). When it does not load (moved, edited since) the defaults judge, and the
-/// reason is said: a verdict against another accuracy than the cell's must not look like the
-/// cell's.
-fn judged_as(config: Option<&Path>) -> (SolveOptions, Accuracy) {
-    let Some(file) = config else {
-        return Default::default();
-    };
-    match CellConfig::load(file) {
-        Ok(c) => (c.solver.to_options(), c.verdict.accuracy()),
+/// The session's config (`config`, the file its manifest records; a dataset file has none),
+/// when it loads. When it does not (moved, edited since) the defaults judge, and the reason is
+/// said: a verdict against another accuracy than the cell's must not look like the cell's.
+fn judging_config(config: Option<&Path>) -> Option<CellConfig> {
+    match CellConfig::load(config?) {
+        Ok(c) => Some(c),
         Err(e) => {
             let accuracy = Accuracy::default();
             eprintln!(
                 "note: the config the session recorded does not load ({e}): judged with the default solver options and accuracy ({} mm, {}°), not the cell's",
                 accuracy.translation_mm, accuracy.rotation_deg
             );
-            (SolveOptions::default(), accuracy)
+            None
+        }
+    }
+}
+
+/// The solver options and accuracy of the cell's config, whatever its number of cameras (both
+/// are the cell's sections); the defaults without one.
+fn judged_as(config: Option<&CellConfig>) -> (SolveOptions, Accuracy) {
+    config.map_or_else(Default::default, |c| {
+        (c.solver.to_options(), c.verdict.accuracy())
+    })
+}
+
+/// The one-camera session `folder` solved as `handeye solve` solves it, writing nothing
+/// (`solve_unwritten`): `None` when it cannot be (intrinsics to estimate, a file missing, a
+/// solve that fails; said in a note), and the samples are checked as recorded.
+fn as_solved(folder: &SessionFolder, config: CellConfig) -> Option<SolvedSession> {
+    let solved = config_of_camera_folder(config, folder.root())
+        .map_err(anyhow::Error::from)
+        .and_then(|config| Ok(SolveInputs::load(config)?))
+        .and_then(|inputs| {
+            let space = inputs.config.solver.space;
+            handeye_records::solve_unwritten(folder, &inputs, space)
+                .transpose()
+                .map_err(anyhow::Error::from)
+        });
+    match solved {
+        Ok(solved) => solved.map(|(solved, _)| solved),
+        Err(e) => {
+            eprintln!(
+                "note: the session's solve failed ({e:#}): its samples are checked as recorded"
+            );
+            None
         }
     }
 }
@@ -223,7 +288,7 @@ fn judged_as(config: Option<&Path>) -> (SolveOptions, Accuracy) {
 fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
     super::say_if_live(root)?;
     let manifest = cameras::read_manifest(root)?;
-    let (options, accuracy) = judged_as(Some(&manifest.config));
+    let (options, accuracy) = judged_as(judging_config(Some(&manifest.config)).as_ref());
     for camera in &manifest.cameras {
         let samples =
             SessionFolder::open(&cameras::camera_folder(root, &camera.name))?.samples_path();

@@ -718,6 +718,37 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
         page.contains("held: absorbed by T_base_target"),
         "no held offset on the page"
     );
+    // `verify --session` checks the samples as the solve saw them: the robot poses corrected by
+    // the arm's model, refitted without each left-out sample. It checked them as recorded,
+    // where they disagree by the arm's errors (1.09 mm, CHECK, blaming "a frame or robot pose
+    // recorded wrong") while the run's held-out figure was 0.05 mm, GOOD.
+    let held = result
+        .verdict
+        .as_ref()
+        .and_then(|v| v.figures.held_out)
+        .expect("the run's held-out figure");
+    let verify = crate::util::succeeds(
+        crate::util::handeye()
+            .args(["verify", "--session"])
+            .arg(&session),
+    );
+    assert!(
+        verify.contains("corrected them with the arm's own model"),
+        "{verify}"
+    );
+    let figure = format!(
+        "{} poses: rotation RMS {:.4}°",
+        held.poses, held.rotation_rms_deg
+    );
+    let translation = format!(
+        "translation at the target RMS {:.3} mm",
+        held.translation_rms_mm
+    );
+    assert!(
+        verify.contains(&figure) && verify.contains(&translation),
+        "{verify}\nagainst the run's {held:?}"
+    );
+    assert!(verify.contains("verdict: GOOD"), "{verify}");
 }
 
 /// `solver.kinematics` absent is `auto`: the data choose. The shipped arm-errors cell without

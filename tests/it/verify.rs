@@ -240,3 +240,67 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
         "nothing is recorded for the wrong setup"
     );
 }
+
+/// `verify --session` predicts each sample as the session's solve judged them, so its figure is
+/// the run's held-out one: with an intrinsics file 8 % off in fx and fy (the simulated camera has
+/// the shipped lens), the solve measures the board poses again with its estimate. The samples
+/// as recorded (PnP with the wrong file) disagree by the file's error: verify called that REDO,
+/// 4.9 mm, "a frame or robot pose recorded wrong", where the run's held-out figure was 0.05 mm.
+#[test]
+fn leave_one_out_of_a_session_with_a_wrong_lens_file_predicts_what_its_solve_judged() {
+    let dir = tempfile::tempdir().unwrap();
+    let shipped = util::repo().join("configs/cameras/sim-1280x720.yaml");
+    let wrong = dir.path().join("wrong-lens.yaml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    let off = "data: [864.0, 0.0, 641.3, 0.0, 864.0,";
+    let lens = text.replace("data: [800.0, 0.0, 641.3, 0.0, 800.0,", off);
+    assert!(lens.contains(off), "the shipped lens changed: {text}");
+    std::fs::write(&wrong, lens).unwrap();
+    let given = format!("intrinsics: {}", shipped.display());
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[
+            (&given, &format!("intrinsics: {}", wrong.display())),
+            (
+                "camera:\n  backend: sim\n",
+                &format!("camera:\n  backend: sim\n  {given}\n"),
+            ),
+        ],
+    );
+    let session = dir.path().join("session");
+    let run = util::run_cli(&config, &session);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let result = handeye_records::result::ResultFile::load(&session.join("result.yaml")).unwrap();
+    let verdict = result.verdict.expect("a verdict");
+    assert_eq!(
+        verdict.basis,
+        handeye_solve::verdict::Basis::Intrinsics,
+        "{}",
+        verdict.reason
+    );
+    let held = verdict.figures.held_out.expect("the run's held-out figure");
+    let stdout = util::succeeds(util::handeye().args(["verify", "--session"]).arg(&session));
+    assert!(
+        stdout.contains("measured them again with its estimate (intrinsics free)"),
+        "{stdout}"
+    );
+    let figure = format!(
+        "{} poses: rotation RMS {:.4}°",
+        held.poses, held.rotation_rms_deg
+    );
+    let translation = format!(
+        "translation at the target RMS {:.3} mm",
+        held.translation_rms_mm
+    );
+    assert!(
+        stdout.contains(&figure) && stdout.contains(&translation),
+        "{stdout}\nagainst the run's {held:?}"
+    );
+    assert!(!stdout.contains("recorded wrong"), "{stdout}");
+}

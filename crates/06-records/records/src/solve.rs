@@ -69,6 +69,16 @@ pub struct SolvedSession {
     /// The arm's own model estimated with the transforms (`solver.kinematics: joint_offsets`):
     /// the samples and visits above are corrected by it.
     pub arm: Option<ArmEstimate>,
+    /// The pose pairs the verdict judged (its held-out check predicts each from the others):
+    /// the samples as solved (robot poses corrected by `arm`), with the board poses measured
+    /// again with the corrected files when the cell model found a given one wrong. A check of
+    /// the session (`verify --session`) predicts these, so that its figure is the verdict's.
+    pub judged: Vec<PosePair>,
+    /// The arm's model fit as made, to be made again without one sample: the verdict's held-out
+    /// folds refit it (fitted to the left-out sample too, the model would predict it partly
+    /// from itself), and so does a check of the session. `None` when the robot poses are the
+    /// arm's own, or corrected by a model given as a file (nothing refitted).
+    pub arm_refit: Option<handeye_solve::kinematics::ArmRefit>,
 }
 
 /// What a session was solved from: its samples (`samples.yaml`) and its pose records
@@ -122,6 +132,25 @@ impl SolveInputs {
 }
 
 impl SolvedSession {
+    /// The answer of `pose_space` alone, before the rest of a solve fills in what it computes.
+    fn of_pose_space(pose_space: Calibration) -> SolvedSession {
+        SolvedSession {
+            calibration: pose_space.clone(),
+            pose_space,
+            reprojection: None,
+            pose_space_errors: None,
+            frame_ids: Vec::new(),
+            estimated_camera: None,
+            summary: String::new(),
+            verdict: None,
+            cell_model: None,
+            evidence: Evidence::default(),
+            arm: None,
+            judged: Vec::new(),
+            arm_refit: None,
+        }
+    }
+
     /// Names the session folder, the cell config, its board and intrinsics files in the
     /// verdict's advice and the summary (the verdict's rules know none of them: see
     /// `verdict::SessionFiles`), for a replay of `session` whose estimates of wrong files went
@@ -245,11 +274,39 @@ fn solve_loaded(
     inputs: &SolveInputs,
     space: SolveSpace,
 ) -> Result<(SolvedSession, Dataset), SessionError> {
-    let config = &inputs.config;
     let Some(camera) = &inputs.camera else {
         // Every visit with corners goes through `frames_from_visits`, which checks them.
-        return solve_from_scratch(folder, config, &inputs.board);
+        return solve_from_scratch(folder, &inputs.config, &inputs.board);
     };
+    let (mut solved, dataset) = solve_with_lens(folder, inputs, camera, space)?;
+    let written = write_corrected_files(folder.root(), &solved, &inputs.config)?;
+    // Named where a person finds them (an import's staging folder is renamed into place).
+    let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
+    record_written(&mut solved, &shown);
+    Ok((solved, dataset))
+}
+
+/// The session solved and judged as [`load_and_solve`] solves it when its intrinsics are given,
+/// writing nothing into it (the estimates of files it finds wrong stay in the answer): what a
+/// check of a session reads, `verify --session` (its samples as the solve saw them: corrected by
+/// the arm's own model when the solve estimated one, [`SolvedSession::arm_refit`]). `None`
+/// without intrinsics: they would be estimated, and that solve writes its board poses.
+pub fn solve_unwritten(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    space: SolveSpace,
+) -> Option<Result<(SolvedSession, Dataset), SessionError>> {
+    let camera = inputs.camera.as_ref()?;
+    Some(solve_with_lens(folder, inputs, camera, space))
+}
+
+fn solve_with_lens(
+    folder: &SessionFolder,
+    inputs: &SolveInputs,
+    camera: &CameraModel,
+    space: SolveSpace,
+) -> Result<(SolvedSession, Dataset), SessionError> {
+    let config = &inputs.config;
     let visits = folder.read_visits()?;
     // Checked here too: the pose-space space uses no corners, but the report draws them.
     for visit in &visits {
@@ -260,7 +317,7 @@ fn solve_loaded(
     let mut seen = visits.clone();
     seen.extend(folder.read_rejected_visits()?);
     let samples = committed_samples(folder, &visits);
-    let (mut solved, dataset) = solve_records(
+    solve_records(
         folder,
         &manifest,
         samples,
@@ -269,12 +326,7 @@ fn solve_loaded(
         (&inputs.board, camera),
         space,
         config,
-    )?;
-    let written = write_corrected_files(folder.root(), &solved, config)?;
-    // Named where a person finds them (an import's staging folder is renamed into place).
-    let shown: Vec<_> = written.iter().map(|p| folder.shown(p)).collect();
-    record_written(&mut solved, &shown);
-    Ok((solved, dataset))
+    )
 }
 
 /// A session's records solved and judged with the checks of its given files, as every solve of
@@ -473,6 +525,7 @@ pub fn solve_with_arm(
         with_arm.summary,
         corrected.arm.describe().join("\n")
     );
+    with_arm.arm_refit = Some(corrected.folds);
     with_arm.arm = Some(corrected.arm);
     Ok(with_arm)
 }
@@ -688,16 +741,11 @@ fn solve_from_scratch(
         .to_calibration(&pose_space, &pairs, &options.noise);
     let mut solved = SolvedSession {
         calibration,
-        pose_space,
         reprojection: Some(scratch.joint.clone()),
         pose_space_errors: Some(pose_space_errors),
         frame_ids: ids,
         estimated_camera: Some(camera),
-        summary: String::new(),
-        verdict: None,
-        cell_model: None,
-        evidence: Evidence::default(),
-        arm: None,
+        ..SolvedSession::of_pose_space(pose_space)
     };
     let c = &scratch.joint.camera;
     let i = &scratch.initial;
@@ -794,6 +842,7 @@ fn conclude(
     findings: Vec<Notice>,
     refit: Option<FoldFlanges<'_>>,
 ) {
+    solved.judged = pairs.to_vec();
     solved.calibration.notices.extend(findings);
     // Swapped unknowns first (their own cause); else an answer simply far from the nominal —
     // unless the nominal is a recorded cell's, which its importer wrote (the identity, or the
@@ -860,21 +909,12 @@ pub fn solve_session_with(
             source: Box::new(source),
         })?;
     let mut solved = SolvedSession {
-        calibration: pose_space.clone(),
-        pose_space,
-        reprojection: None,
-        pose_space_errors: None,
-        frame_ids: Vec::new(),
-        estimated_camera: None,
-        summary: String::new(),
-        verdict: None,
-        cell_model: None,
         // What it was solved from, for the report.
         evidence: Evidence {
             pairs: pairs.to_vec(),
             visits: visits.to_vec(),
         },
-        arm: None,
+        ..SolvedSession::of_pose_space(pose_space)
     };
     let mut notes = Vec::new();
     let mut corrected = Vec::new();

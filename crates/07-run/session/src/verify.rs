@@ -206,6 +206,19 @@ pub fn leave_one_out(
     pairs: &[PosePair],
     options: &SolveOptions,
 ) -> Result<Verification, VerifyError> {
+    leave_one_out_refitting(setup, pairs, options, None)
+}
+
+/// [`leave_one_out`] of samples whose robot poses an arm model fitted to them corrects: each
+/// fold's robot poses come from `refit`, the model fitted without its left-out sample (as the
+/// verdict's held-out folds: `verdict::held_out_refitting`), so a session's check and its
+/// solve's held-out figure are of one model.
+pub fn leave_one_out_refitting(
+    setup: Setup,
+    pairs: &[PosePair],
+    options: &SolveOptions,
+    refit: Option<verdict::FoldFlanges<'_>>,
+) -> Result<Verification, VerifyError> {
     const REQUIRED: usize = 4;
     if pairs.len() < REQUIRED {
         return Err(VerifyError::TooFewSamples {
@@ -214,13 +227,11 @@ pub fn leave_one_out(
         });
     }
     let full = solve::solve(setup, pairs, options).map_err(VerifyError::Solve)?;
-    let predictions = verdict::predict_folds(setup, pairs, options, &full, None, 0..pairs.len())
+    let predictions = verdict::predict_folds(setup, pairs, options, &full, refit, 0..pairs.len())
         .map_err(|failure| match failure {
-            verdict::FoldFailure::Solve { left_out, source } => {
-                VerifyError::Fold { left_out, source }
-            }
-            refit @ verdict::FoldFailure::Refit { .. } => VerifyError::Plan(refit.to_string()),
-        })?;
+        verdict::FoldFailure::Solve { left_out, source } => VerifyError::Fold { left_out, source },
+        refit @ verdict::FoldFailure::Refit { .. } => VerifyError::Plan(refit.to_string()),
+    })?;
     let weighted = options.weighted(pairs);
     let poses: Vec<PredictionError> = predictions
         .iter()
