@@ -155,10 +155,7 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
     {
         return verify_cameras_session(root);
     }
-    // A session's recorded answer flags its outliers after its pixel fit: those are the
-    // samples its held-out figure left out.
-    let mut recorded_outliers = None;
-    let (setup, pairs, config, session) = if let Some(dir) = &args.session {
+    if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
         if let Some(run) = folder.live_run() {
             anyhow::ensure!(
@@ -168,39 +165,39 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
             );
             outln!("provisional: {run}; this check is of the samples so far: verify again when the run has ended");
         }
-        let dataset = Dataset::load(&folder.samples_path())?;
-        // Only a final answer of these very samples (not a run's earlier one, nor that of a
-        // resumed session not solved since).
-        if folder.live_run().is_none() {
-            let solved = CellResult::load(&folder.result_path()).ok();
-            if let Some(result) = solved.as_ref().and_then(CellResult::only_camera) {
-                if result.residuals.samples.len() == dataset.pairs.len() {
-                    recorded_outliers = Some(result.outliers.clone());
-                }
-            }
-        }
-        (
-            dataset.setup,
-            dataset.pairs,
-            Some(folder.read_manifest()?.config),
-            Some(folder),
-        )
-    } else if let Some(file) = &args.dataset {
-        let dataset = Dataset::load(file)?;
-        (dataset.setup, dataset.pairs, None, None)
-    } else {
+        let config = judging_config(Some(&folder.read_manifest()?.config));
+        let v = check_session(&folder, config.clone(), true)?;
+        outln!("{}", v.table());
+        outln!("{}", v.verdict(&judged_as(config.as_ref()).1).1);
+        return Ok(());
+    }
+    let Some(file) = &args.dataset else {
         bail!("give --config and --result (holdout on the cell), or --session / --dataset (leave-one-out)");
     };
-    let config = judging_config(config.as_deref());
-    let (options, accuracy) = judged_as(config.as_ref());
-    // A session's samples as its solve judged them (one figure for one session): the robot
-    // poses corrected by the arm's own model when the solve estimated one, each fold fitting it
-    // again without its sample; the board poses measured again with the corrected files when
-    // the solve found a given one wrong. As recorded they disagree by what the answer corrects.
-    let folder_shown = args.session.clone().unwrap_or_default();
-    let solved = session
-        .zip(config)
-        .and_then(|(folder, config)| as_solved(&folder, config));
+    let dataset = Dataset::load(file)?;
+    let (options, accuracy) = judged_as(None);
+    let v = verify::leave_one_out(dataset.setup, &dataset.pairs, &options)?;
+    outln!("{}", v.table());
+    outln!("{}", v.verdict(&accuracy).1);
+    Ok(())
+}
+
+/// Leave-one-out of the one-camera session `folder` (one camera's folder of a several-camera
+/// session too), with its `config`'s solver options: each sample predicted as the session's
+/// solve judged them (one figure for one session): the robot poses corrected by the arm's own
+/// model when the solve estimated one, each fold fitting it again without its sample; the board
+/// poses measured again with the corrected files when the solve found a given one wrong (as
+/// recorded they disagree by what the answer corrects). With `recorded_outliers`, the samples
+/// the session's own `result.yaml` flags (after its pixel fit) are the ones left out of the RMS,
+/// as its held-out figure leaves them out.
+fn check_session(
+    folder: &SessionFolder,
+    config: Option<CellConfig>,
+    recorded_outliers: bool,
+) -> anyhow::Result<verify::Verification> {
+    let dataset = Dataset::load(&folder.samples_path())?;
+    let (options, _) = judged_as(config.as_ref());
+    let solved = config.and_then(|config| as_solved(folder, config));
     let refit = solved.as_ref().and_then(|s| s.arm_refit.as_ref());
     let pairs = match &solved {
         Some(solved) => {
@@ -209,27 +206,32 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
             }
             if let Some(chosen) = solved.cell_model.as_ref().map(|m| m.summary.chosen) {
                 if chosen != handeye_solve::cell_model::Explanation::AsGiven {
-                    outln!("the board poses as the session's solve measured them again with its estimate ({}): a given file does not fit the corners; fix it as the session's verdict says (`handeye solve {}`)", chosen.label(), folder_shown.display());
+                    outln!("the board poses as the session's solve measured them again with its estimate ({}): a given file does not fit the corners; fix it as the session's verdict says (`handeye solve {}`)", chosen.label(), folder.root().display());
                 }
             }
-            solved.judged.clone()
+            &solved.judged
         }
-        None => pairs,
+        None => &dataset.pairs,
     };
     let fold_flanges =
         |left_out: usize| refit.map_or(Ok(Vec::new()), |r| r.flanges_without(left_out));
-    let mut v = verify::leave_one_out_refitting(
-        setup,
-        &pairs,
+    let v = verify::leave_one_out_refitting(
+        dataset.setup,
+        pairs,
         &options,
         refit.map(|_| &fold_flanges as verdict::FoldFlanges<'_>),
     )?;
-    if let Some(outliers) = recorded_outliers {
-        v = v.with_outliers(outliers);
+    // Only a final answer of these very samples (not a run's earlier one, nor that of a
+    // resumed session not solved since).
+    if recorded_outliers && folder.live_run().is_none() {
+        let recorded = CellResult::load(&folder.result_path()).ok();
+        if let Some(result) = recorded.as_ref().and_then(CellResult::only_camera) {
+            if result.residuals.samples.len() == dataset.pairs.len() {
+                return Ok(v.with_outliers(result.outliers.clone()));
+            }
+        }
     }
-    outln!("{}", v.table());
-    outln!("{}", v.verdict(&accuracy).1);
-    Ok(())
+    Ok(v)
 }
 
 /// The session's config (`config`, the file its manifest records; a dataset file has none),
@@ -288,16 +290,16 @@ fn as_solved(folder: &SessionFolder, config: CellConfig) -> Option<SolvedSession
 fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
     super::say_if_live(root)?;
     let manifest = cameras::read_manifest(root)?;
-    let (options, accuracy) = judged_as(judging_config(Some(&manifest.config)).as_ref());
+    let config = judging_config(Some(&manifest.config));
+    let accuracy = judged_as(config.as_ref()).1;
     for camera in &manifest.cameras {
-        let samples =
-            SessionFolder::open(&cameras::camera_folder(root, &camera.name))?.samples_path();
-        if !samples.is_file() {
+        let folder = SessionFolder::open(&cameras::camera_folder(root, &camera.name))?;
+        if !folder.samples_path().is_file() {
             outln!("camera `{}`: no samples recorded", camera.name);
             continue;
         }
-        let dataset = Dataset::load(&samples)?;
-        match verify::leave_one_out(dataset.setup, &dataset.pairs, &options) {
+        // Its answer is the joint one: the outliers are those of the camera's own solve.
+        match check_session(&folder, config.clone(), false) {
             Ok(v) => {
                 outln!("camera `{}`: {}", camera.name, v.table());
                 outln!("{}", v.verdict(&accuracy).1);

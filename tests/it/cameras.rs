@@ -1830,4 +1830,25 @@ fn a_camera_whose_lens_file_is_wrong_is_named_in_its_verdict_and_the_others_stay
         "{}",
         result.verdict.as_ref().unwrap().reason
     );
+    // `verify --session` checks the wrist camera's board poses as its solve measured them
+    // again with its estimate of the lens: as recorded (PnP with the file 6 % off) they
+    // disagree, which verify called REDO, "a frame or robot pose recorded wrong".
+    let verify = util::succeeds(handeye().args(["verify", "--session"]).arg(&out));
+    let wrist_part = verify
+        .split("camera `wrist`: ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("{verify}"));
+    let line = wrist_part
+        .lines()
+        .find(|l| l.starts_with("verdict: "))
+        .unwrap();
+    assert!(
+        !line.starts_with("verdict: REDO") && !line.contains("recorded wrong"),
+        "{verify}"
+    );
+    let before = verify.split("camera `wrist`: ").next().unwrap();
+    assert!(
+        before.contains("measured them again with its estimate (intrinsics free)"),
+        "{verify}"
+    );
 }
