@@ -38,6 +38,7 @@ fn holdout(
     let mut checked = verify::holdout(
         &util::new_run(&config, dir),
         &[("camera".to_string(), calibration)],
+        None,
         &spec,
         &mut util::QuietObserver,
     )

@@ -29,8 +29,8 @@ pub use folder::{
 pub use inputs::{changed_inputs, InputChange, InputFile};
 pub use lock::{live_run, refuse_live, LiveRun, SessionLock};
 pub use solve::{
-    load_and_solve, solve_folder, solve_folder_in, solve_session, solve_session_with,
-    solve_unwritten, Evidence, SolveInputs, SolvedSession,
+    corrected_by_arm_model, load_and_solve, solve_folder, solve_folder_in, solve_session,
+    solve_session_with, solve_unwritten, Evidence, SolveInputs, SolvedSession,
 };
 pub use staging::{remove_abandoned, Leftover, Staging};
 

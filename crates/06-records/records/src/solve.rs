@@ -212,6 +212,22 @@ impl SolvedSession {
     }
 }
 
+/// The samples `pairs` of the session `folder`, each robot pose corrected by the arm's model the
+/// result file `file` holds (its `kinematics:` section, applied as `solver.arm_model` applies
+/// it to a session it solves): what a held-out check of that result predicts, since the answer
+/// was solved with the arm where that model puts it, not where its published model does.
+pub fn corrected_by_arm_model(
+    file: &std::path::Path,
+    config: &CellConfig,
+    folder: &SessionFolder,
+    pairs: &[PosePair],
+) -> Result<Vec<PosePair>, SessionError> {
+    let plan = folder.read_manifest()?.plan;
+    let visits = folder.read_visits()?;
+    let (corrected, _, _) = arm::apply_given_model(file, config, &plan, pairs, &visits)?;
+    Ok(corrected)
+}
+
 /// Solves the folder with the config's solver settings (`solver.space`) and writes `result.yaml`.
 pub fn solve_folder(
     folder: &SessionFolder,

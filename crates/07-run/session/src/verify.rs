@@ -253,11 +253,15 @@ pub fn leave_one_out_refitting(
 /// `calibrations` (by the camera's name in the config: every camera of a several-camera cell
 /// grabs at each view, as in its calibration run; `camera` for a config without a `cameras:`
 /// list). Each camera's errors, in `calibrations`' order; a camera that saw its board at none of
-/// the views is left out (an error when every camera is). Setting `request.stop` stops the arm
-/// and ends the session cleanly, as in a calibration run.
+/// the views is left out (an error when every camera is). With `arm_model` (the result file,
+/// when its answer was solved with the arm's own model: its `kinematics:` section) each robot
+/// pose is first corrected by that model, as the answer's own were: the arm's errors are not the
+/// calibration's. Setting `request.stop` stops the arm and ends the session cleanly, as in a
+/// calibration run.
 pub fn holdout(
     request: &RunRequest,
     calibrations: &[(String, CellTransforms)],
+    arm_model: Option<&std::path::Path>,
     spec: &GenerateSpec,
     observer: &mut dyn RunObserver,
 ) -> Result<Vec<(String, Verification)>, VerifyError> {
@@ -295,27 +299,36 @@ pub fn holdout(
     let root = request.target.root(&driven.folder);
     let mut checked = Vec::new();
     let mut unseen = Vec::new();
+    let session_error = |e: SessionError| VerifyError::Session(Box::new(e));
     for (name, calibration) in calibrations {
-        let samples = if cell.listed {
-            SessionFolder::open(&crate::cell::cameras::camera_folder(&root, name))
-                .map_err(|e| VerifyError::Session(Box::new(e)))?
-                .samples_path()
+        let camera_folder;
+        let folder = if cell.listed {
+            camera_folder = SessionFolder::open(&crate::cell::cameras::camera_folder(&root, name))
+                .map_err(session_error)?;
+            &camera_folder
         } else {
-            driven.folder.samples_path()
+            &driven.folder
         };
+        let samples = folder.samples_path();
         // A camera that saw its board at none of the views is left out (the caller names
         // it); the others are checked.
         if !samples.is_file() {
             unseen.push(format!("`{name}`"));
             continue;
         }
-        let dataset = Dataset::load(&samples)
-            .map_err(|e| VerifyError::Session(Box::new(SessionError::File(e))))?;
+        let dataset = Dataset::load(&samples).map_err(|e| session_error(SessionError::File(e)))?;
+        let pairs = match arm_model {
+            Some(file) => {
+                handeye_records::corrected_by_arm_model(file, &cell, folder, &dataset.pairs)
+                    .map_err(session_error)?
+            }
+            None => dataset.pairs,
+        };
         let verification = compare(
             calibration.setup,
             &calibration.camera_mount,
             &calibration.target_mount,
-            &dataset.pairs,
+            &pairs,
             &cell.solver.to_options(),
         );
         checked.push((name.clone(), verification));
