@@ -81,6 +81,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 .context("reading the cell config")?;
             mounts[0].0.clone_from(&one.camera().name);
         }
+        refuse_files_found_wrong(&solved, &mounts, &cell_config)?;
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -150,6 +151,74 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     leave_one_out(&args)
+}
+
+/// Refuses, before anything moves, a held-out check of a result that found a camera's
+/// intrinsics file wrong while the cell still gives that file (each of its lens parameters the
+/// result estimated still at the file's value): measured with it, the fresh views would
+/// disagree by the file's error (tens of mm), and the check would blame the calibration or a
+/// moved camera. The result's own next step says how to fix the file.
+fn refuse_files_found_wrong(
+    solved: &CellResult,
+    mounts: &[(String, handeye_core::setup::CellTransforms)],
+    cell: &CellConfig,
+) -> anyhow::Result<()> {
+    use handeye_solve::cell_model::GivenFile;
+    for (name, _) in mounts {
+        let Some(result) = solved
+            .cameras
+            .iter()
+            .find(|c| c.name == *name || solved.cameras.len() == 1)
+        else {
+            continue;
+        };
+        let Some(verdict) = &result.verdict else {
+            continue;
+        };
+        let Some(model) = &verdict.figures.cell_model else {
+            continue;
+        };
+        let lens = cell
+            .cameras
+            .iter()
+            .find(|c| c.name == *name)
+            .and_then(|c| c.intrinsics.as_ref());
+        let Some(file) = lens.filter(|_| model.blamed().contains(&GivenFile::Intrinsics)) else {
+            continue;
+        };
+        let Ok(given) = handeye_core::camera_model::CameraModel::load(file) else {
+            continue;
+        };
+        let value = |parameter: &str| match parameter {
+            "fx" => Some(given.fx),
+            "fy" => Some(given.fy),
+            "cx" => Some(given.cx),
+            "cy" => Some(given.cy),
+            _ => None,
+        };
+        let lens_estimates: Vec<_> = model
+            .estimates
+            .iter()
+            .filter_map(|e| value(&e.parameter).map(|v| (e, v)))
+            .collect();
+        let unchanged = !lens_estimates.is_empty()
+            && lens_estimates
+                .iter()
+                .all(|(e, v)| (v - e.file_value).abs() <= 1e-6 * e.file_value.abs().max(1.0));
+        if unchanged {
+            let (e, _) = lens_estimates[0];
+            bail!(
+                "camera `{name}`: the result found the intrinsics in {} wrong ({} in the file {:.1} px, estimated from its session {:.1} ± {:.2} px), and the cell still gives that file: measured with it, the held-out views would disagree by the file's error, not the calibration's. First: {}; nothing was moved",
+                file.display(),
+                e.parameter,
+                e.file_value,
+                e.estimate,
+                e.sigma,
+                verdict.next_action
+            );
+        }
+    }
+    Ok(())
 }
 
 /// `verify --session DIR` or `--dataset FILE`: leave-one-out cross-validation of the samples,

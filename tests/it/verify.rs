@@ -247,8 +247,12 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
 /// the shipped lens), the solve measures the board poses again with its estimate. The samples
 /// as recorded (PnP with the wrong file) disagree by the file's error: verify called that REDO,
 /// 4.9 mm, "a frame or robot pose recorded wrong", where the run's held-out figure was 0.05 mm.
+/// A held-out run of that answer on the cell still giving the wrong file is refused before
+/// anything moves, naming the file and the result's fix (it measured the fresh views with the
+/// wrong file: REDO, 51 mm, "do not use this result"); with the file fixed as the result says,
+/// it is GOOD.
 #[test]
-fn leave_one_out_of_a_session_with_a_wrong_lens_file_predicts_what_its_solve_judged() {
+fn a_session_with_a_wrong_lens_file_is_verified_as_its_solve_judged_it() {
     let dir = tempfile::tempdir().unwrap();
     let shipped = util::repo().join("configs/cameras/sim-1280x720.yaml");
     let wrong = dir.path().join("wrong-lens.yaml");
@@ -304,4 +308,42 @@ fn leave_one_out_of_a_session_with_a_wrong_lens_file_predicts_what_its_solve_jud
         "{stdout}\nagainst the run's {held:?}"
     );
     assert!(!stdout.contains("recorded wrong"), "{stdout}");
+
+    let holdout = |config: &std::path::Path, out: &str| {
+        util::handeye()
+            .args(["verify", "--config"])
+            .arg(config)
+            .arg("--result")
+            .arg(session.join("result.yaml"))
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap()
+    };
+    let refused = holdout(&config, "holdout-wrong");
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the result found the intrinsics in {} wrong",
+            wrong.display()
+        )) && stderr.contains("camera_info.yaml")
+            && stderr.contains("nothing was moved"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("holdout-wrong").exists());
+    let fixed = dir.path().join("fixed.yaml");
+    let text = std::fs::read_to_string(&config).unwrap().replace(
+        &format!("intrinsics: {}", wrong.display()),
+        &format!("intrinsics: {}", session.join("camera_info.yaml").display()),
+    );
+    std::fs::write(&fixed, text).unwrap();
+    let checked = holdout(&fixed, "holdout-fixed");
+    let stdout = String::from_utf8_lossy(&checked.stdout);
+    assert!(
+        checked.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
 }
