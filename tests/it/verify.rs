@@ -347,3 +347,82 @@ fn a_session_with_a_wrong_lens_file_is_verified_as_its_solve_judged_it() {
     );
     assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
 }
+
+/// A held-out run of an answer that found the board file wrong (printed at 95 % of its file's
+/// size) is refused before anything moves while the cell still gives that file as the session
+/// recorded it (its sha256 in `session.yaml`): measured with it, the fresh views were REDO, 33 mm,
+/// "do not use this result". With the file fixed in place it is GOOD.
+#[test]
+fn a_held_out_run_is_refused_while_the_cell_gives_the_board_file_its_answer_found_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let shipped = util::repo().join("configs/targets/aprilgrid-6x6.yaml");
+    let board = dir.path().join("board.yaml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    assert!(
+        text.contains("tagSize: 0.04\n"),
+        "the shipped board changed: {text}"
+    );
+    std::fs::write(&board, text.replace("tagSize: 0.04\n", "tagSize: 0.042\n")).unwrap();
+    let given = format!("target: {}", shipped.display());
+    let config = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[
+            (&given, &format!("target: {}", board.display())),
+            (
+                "camera:\n  backend: sim\n",
+                &format!("camera:\n  backend: sim\n  {given}\n"),
+            ),
+        ],
+    );
+    let session = dir.path().join("session");
+    let run = util::run_cli(&config, &session);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let result = session.join("result.yaml");
+    let verdict = handeye_records::result::ResultFile::load(&result)
+        .unwrap()
+        .verdict
+        .expect("a verdict");
+    assert_eq!(
+        verdict.basis,
+        handeye_solve::verdict::Basis::BoardScale,
+        "{}",
+        verdict.reason
+    );
+    let holdout = |out: &str| {
+        util::handeye()
+            .args(["verify", "--config"])
+            .arg(&config)
+            .arg("--result")
+            .arg(&result)
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .output()
+            .unwrap()
+    };
+    let refused = holdout("holdout-wrong");
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the result found the board file {} wrong",
+            board.display()
+        )) && stderr.contains("nothing was moved"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("holdout-wrong").exists());
+    std::fs::write(&board, &text).unwrap();
+    let checked = holdout("holdout-fixed");
+    let stdout = String::from_utf8_lossy(&checked.stdout);
+    assert!(
+        checked.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
+}

@@ -398,7 +398,7 @@ impl CellModelSummary {
             );
             let _ = write!(
                 next,
-                "then set the board's measured {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or a calibrated lens in {INTRINSICS_PLACEHOLDER}, and `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`"
+                "then set {BOARD_SIZE_KEYS}, measured, in {BOARD_PLACEHOLDER}, or a calibrated lens in {INTRINSICS_PLACEHOLDER}, and `handeye replay {SESSION_PLACEHOLDER} --config {CONFIG_PLACEHOLDER}`"
             );
             return Some(Finding {
                 level: Level::Redo,
@@ -422,7 +422,7 @@ impl CellModelSummary {
                     "set `intrinsics: {ESTIMATES_PLACEHOLDER}/{CORRECTED_INTRINSICS_FILE}` (the estimate, written there) in {CONFIG_PLACEHOLDER} or calibrate the camera"
                 )),
                 GivenFile::Board => fixes.push(format!(
-                    "measure a printed tag or square with a ruler and set the board's {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or use {ESTIMATES_PLACEHOLDER}/{CORRECTED_BOARD_FILE} (the estimate, written there) as the config's `target`"
+                    "measure a printed tag or square with a ruler and set {BOARD_SIZE_KEYS} in {BOARD_PLACEHOLDER}, or use {ESTIMATES_PLACEHOLDER}/{CORRECTED_BOARD_FILE} (the estimate, written there) as the config's `target`"
                 )),
             }
         }
