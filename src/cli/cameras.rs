@@ -89,3 +89,16 @@ fn verdict(verdict: Option<&Verdict>) -> (String, &str) {
         (v.level.to_string(), v.reason.as_str())
     })
 }
+
+/// The line saying how many of the plan's poses each camera should see its board at (nominal
+/// cell): the run's before it moves, and `plan check`'s.
+pub(super) fn planned_views_line(views: &[handeye_session::cell::cameras::PlannedViews]) -> String {
+    let seen: Vec<String> = views
+        .iter()
+        .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))
+        .collect();
+    format!(
+        "poses where each camera should see its board (nominal cell): {}",
+        seen.join(" · ")
+    )
+}

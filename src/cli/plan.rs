@@ -116,6 +116,13 @@ pub(super) fn run(args: PlanArgs) -> anyhow::Result<()> {
                 );
                 outln!("{extra}");
             }
+            // Each camera of several: the share of the plan it should see its board at, refused
+            // as the run refuses it (the plan is made for one camera).
+            match prepared.planned_views() {
+                Ok(Some(views)) => outln!("{}", super::cameras::planned_views_line(&views)),
+                Ok(None) => {}
+                Err(refused) => bail!(refused),
+            }
             // Good enough to check views with, never to calibrate: `run` refuses it.
             if let Some((file, name)) = prepared.placeholder_intrinsics() {
                 outln!(

@@ -315,14 +315,7 @@ impl RunObserver for Printer {
     }
 
     fn cameras_planned(&mut self, views: &[cell::cameras::PlannedViews]) {
-        let seen: Vec<String> = views
-            .iter()
-            .map(|v| format!("{} {}/{}", v.camera, v.poses, v.of))
-            .collect();
-        outln!(
-            "poses where each camera should see its board (nominal cell): {}",
-            seen.join(" · ")
-        );
+        outln!("{}", super::cameras::planned_views_line(views));
     }
 
     fn confirm_motion(

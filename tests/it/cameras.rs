@@ -1185,6 +1185,53 @@ fn each_cameras_folder_is_solved_and_replayed_as_a_one_camera_session() {
     );
 }
 
+/// The plan is made for one camera; a camera of the cell that would see its board at too few
+/// of its poses (by the nominal cell) is refused before anything moves, by `plan check` as by
+/// `run` (`PreparedCell::planned_views`). `plan check` said "plan OK" and exited 0 for a plan
+/// the run then refused.
+#[test]
+fn a_camera_the_plan_leaves_blind_is_refused_by_plan_check_as_by_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let aimed = "nominal: {translation: [0.5, -0.025, 1.45]";
+    let config = three_cameras(
+        dir.path(),
+        &[(aimed, "nominal: {translation: [2.5, -0.025, 1.45]")],
+    );
+    let refusal = "camera `left`: by the nominal cell it sees its board at 0 of the 20 poses (planned for camera `wrist`), and a camera needs 3";
+    let check = handeye()
+        .args(["plan", "check", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&check.stderr);
+    assert_eq!(check.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains(refusal), "{stderr}");
+    let out = dir.path().join("session");
+    let run = handeye()
+        .args(["run", "--config"])
+        .arg(&config)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains(refusal), "{stderr}");
+    assert!(
+        !camera_folder(&out, "wrist").join("poses").exists(),
+        "the run recorded a pose"
+    );
+    // The shipped cell: every camera's share said, as the run says it.
+    let shipped = three_cameras(dir.path(), &[]);
+    let stdout = util::succeeds(handeye().args(["plan", "check", "--config"]).arg(&shipped));
+    assert!(
+        stdout.contains(
+            "poses where each camera should see its board (nominal cell): wrist 20/20 · left "
+        ),
+        "{stdout}"
+    );
+}
+
 /// A session is solved, replayed and verified from any working directory, whatever the path
 /// its run was given. `rig.yaml` once held the config's path as typed (`--config cell.yaml`),
 /// so a several-camera session started with a relative path could be solved only from the

@@ -135,6 +135,22 @@ impl PreparedCell {
         }
     }
 
+    /// How many of the plan's poses each camera of a listed cell is expected to see its board at
+    /// ([`Self::check_views`]; an adaptive plan's candidates are its passing poses, a fixed
+    /// plan's all of them), or the refusal naming a camera that would see too few: the check a
+    /// run makes before anything moves, and `plan check` makes the same. `None` for a cell in the
+    /// one-camera form.
+    pub fn planned_views(&self) -> Result<Option<Vec<PlannedViews>>, String> {
+        if !self.config.listed {
+            return Ok(None);
+        }
+        let plan = match self.config.adaptive() {
+            true => self.report.passing(),
+            false => self.report.validated().unwrap_or_default(),
+        };
+        self.check_views(&plan).map(Some)
+    }
+
     /// How many of `plan`'s poses each camera is expected to see its board at (by the nominal
     /// mounts, its lens and the configured image margin); refuses (naming it) a camera expected
     /// to see it at fewer than a camera needs: the plan is made for one camera, so the others'

@@ -41,13 +41,7 @@ pub(super) fn check_before_opening(
             if !adaptive && !cell.report.ok() {
                 return Err(RunError::PlanFailed);
             }
-            if cell.config.listed {
-                // An adaptive plan's candidates are the passing poses; a fixed plan all of them.
-                let plan = match adaptive {
-                    true => cell.report.passing(),
-                    false => cell.report.validated().unwrap_or_default(),
-                };
-                let views = cell.check_views(&plan).map_err(RunError::Cameras)?;
+            if let Some(views) = cell.planned_views().map_err(RunError::Cameras)? {
                 observer.cameras_planned(&views);
             }
             if !cell.is_simulated() && !request.motion_confirmed {
