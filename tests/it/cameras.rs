@@ -1185,12 +1185,13 @@ fn each_cameras_folder_is_solved_and_replayed_as_a_one_camera_session() {
     );
 }
 
-/// The plan is made for one camera; a camera of the cell that would see its board at too few
-/// of its poses (by the nominal cell) is refused before anything moves, by `plan check` as by
-/// `run` (`PreparedCell::planned_views`). `plan check` said "plan OK" and exited 0 for a plan
-/// the run then refused.
+/// `plan check` refuses what the run refuses before anything moves, in the run's words
+/// (`cell::run::check_plan`, one check for both). The plan is made for one camera; a camera of
+/// the cell that would see its board at too few of its poses (by the nominal cell) is refused,
+/// and so is an adaptive plan without intrinsics. `plan check` said "plan OK" and exited 0 for
+/// both, plans the run then refused.
 #[test]
-fn a_camera_the_plan_leaves_blind_is_refused_by_plan_check_as_by_the_run() {
+fn plan_check_refuses_what_the_run_refuses_before_anything_moves() {
     let dir = tempfile::tempdir().unwrap();
     let aimed = "nominal: {translation: [0.5, -0.025, 1.45]";
     let config = three_cameras(
@@ -1230,6 +1231,37 @@ fn a_camera_the_plan_leaves_blind_is_refused_by_plan_check_as_by_the_run() {
         ),
         "{stdout}"
     );
+    // One camera, an adaptive plan, no intrinsics (the simulated camera has its lens).
+    let lens = util::repo().join("configs/cameras/sim-1280x720.yaml");
+    let adaptive = util::config_variant(
+        dir.path(),
+        "sim-cell.yaml",
+        "adaptive.yaml",
+        &[
+            (&format!("intrinsics: {}\n", lens.display()), ""),
+            (
+                "camera:\n  backend: sim\n",
+                &format!(
+                    "camera:\n  backend: sim\n  intrinsics: {}\n",
+                    lens.display()
+                ),
+            ),
+            ("plan:\n", "plan:\n  adaptive: true\n"),
+        ],
+    );
+    let refusal = "an adaptive plan needs the camera intrinsics";
+    for command in [&["plan", "check"][..], &["run", "-o", "adaptive"]] {
+        let out = handeye()
+            .current_dir(dir.path())
+            .args(command)
+            .arg("--config")
+            .arg(&adaptive)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{command:?}: {stderr}");
+        assert!(stderr.contains(refusal), "{command:?}: {stderr}");
+    }
 }
 
 /// A session is solved, replayed and verified from any working directory, whatever the path

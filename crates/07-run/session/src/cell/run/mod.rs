@@ -209,7 +209,7 @@ pub enum RunError {
     #[error("an adaptive plan needs the camera intrinsics (it chooses poses from board poses as they come): give `intrinsics:` or use a fixed plan")]
     AdaptiveNeedsIntrinsics,
     /// No candidate of an adaptive plan passes its checks.
-    #[error("no pose of the plan passes its checks (see the table above); nothing was moved")]
+    #[error("no candidate of the adaptive plan passes its checks (see the table above); nothing was moved")]
     NoPassingPose,
     /// A fixed plan fails its checks.
     #[error("the plan failed its checks (see the table above); nothing was moved")]
@@ -401,6 +401,26 @@ pub trait HandGuide {
     ) -> Box<dyn ManualControl + 'g>;
     /// The session loop ended (well or not).
     fn ended(&mut self) {}
+}
+
+/// The checks of a cell's plan a planned run makes before anything opens, and `plan check` makes
+/// the same: an adaptive plan needs the intrinsics and one passing pose (its poses are
+/// candidates, the failing ones skipped), a fixed plan every pose passing, and each camera of a
+/// listed cell its share of the views ([`PreparedCell::planned_views`], returned).
+pub fn check_plan(
+    cell: &PreparedCell,
+) -> Result<Option<Vec<super::cameras::PlannedViews>>, RunError> {
+    let adaptive = cell.config.adaptive();
+    if adaptive && !cell.camera().intrinsics_known {
+        return Err(RunError::AdaptiveNeedsIntrinsics);
+    }
+    if adaptive && cell.report.passing().is_empty() {
+        return Err(RunError::NoPassingPose);
+    }
+    if !adaptive && !cell.report.ok() {
+        return Err(RunError::PlanFailed);
+    }
+    cell.planned_views().map_err(RunError::Cameras)
 }
 
 /// Runs (or resumes) a calibration of a cell and solves it: `handeye run` (planned), `handeye

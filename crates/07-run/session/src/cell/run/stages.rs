@@ -29,19 +29,8 @@ pub(super) fn check_before_opening(
 ) -> Result<bool, RunError> {
     match strategy {
         Strategy::Planned => {
-            // Adaptive: the plan's poses are candidates; the ones that fail their checks are
-            // skipped.
             let adaptive = cell.config.adaptive();
-            if adaptive && !cell.camera().intrinsics_known {
-                return Err(RunError::AdaptiveNeedsIntrinsics);
-            }
-            if adaptive && cell.report.passing().is_empty() {
-                return Err(RunError::NoPassingPose);
-            }
-            if !adaptive && !cell.report.ok() {
-                return Err(RunError::PlanFailed);
-            }
-            if let Some(views) = cell.planned_views().map_err(RunError::Cameras)? {
+            if let Some(views) = super::check_plan(cell)? {
                 observer.cameras_planned(&views);
             }
             if !cell.is_simulated() && !request.motion_confirmed {
