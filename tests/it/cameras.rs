@@ -1199,27 +1199,11 @@ fn plan_check_refuses_what_the_run_refuses_before_anything_moves() {
         &[(aimed, "nominal: {translation: [2.5, -0.025, 1.45]")],
     );
     let refusal = "camera `left`: by the nominal cell it sees its board at 0 of the 20 poses (planned for camera `wrist`), and a camera needs 3";
-    let check = handeye()
-        .args(["plan", "check", "--config"])
-        .arg(&config)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&check.stderr);
-    assert_eq!(check.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains(refusal), "{stderr}");
-    let out = dir.path().join("session");
-    let run = handeye()
-        .args(["run", "--config"])
-        .arg(&config)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert_eq!(run.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains(refusal), "{stderr}");
+    refused_by_plan_check_and_run(dir.path(), &config, refusal);
     assert!(
-        !camera_folder(&out, "wrist").join("poses").exists(),
+        !camera_folder(&dir.path().join("refused"), "wrist")
+            .join("poses")
+            .exists(),
         "the run recorded a pose"
     );
     // The shipped cell: every camera's share said, as the run says it.
@@ -1249,13 +1233,22 @@ fn plan_check_refuses_what_the_run_refuses_before_anything_moves() {
             ("plan:\n", "plan:\n  adaptive: true\n"),
         ],
     );
-    let refusal = "an adaptive plan needs the camera intrinsics";
-    for command in [&["plan", "check"][..], &["run", "-o", "adaptive"]] {
+    refused_by_plan_check_and_run(
+        dir.path(),
+        &adaptive,
+        "an adaptive plan needs the camera intrinsics",
+    );
+}
+
+/// Asserts that `plan check` and `run` (into `dir/refused`) of `config` both exit 1 with
+/// `refusal`.
+fn refused_by_plan_check_and_run(dir: &Path, config: &Path, refusal: &str) {
+    for command in [&["plan", "check"][..], &["run", "-o", "refused"]] {
         let out = handeye()
-            .current_dir(dir.path())
+            .current_dir(dir)
             .args(command)
             .arg("--config")
-            .arg(&adaptive)
+            .arg(config)
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);

@@ -736,18 +736,7 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
         verify.contains("corrected them with the arm's own model"),
         "{verify}"
     );
-    let figure = format!(
-        "{} poses: rotation RMS {:.4}°",
-        held.poses, held.rotation_rms_deg
-    );
-    let translation = format!(
-        "translation at the target RMS {:.3} mm",
-        held.translation_rms_mm
-    );
-    assert!(
-        verify.contains(&figure) && verify.contains(&translation),
-        "{verify}\nagainst the run's {held:?}"
-    );
+    crate::util::assert_leave_one_out_is_held_out(&verify, &held);
     assert!(verify.contains("verdict: GOOD"), "{verify}");
     // A held-out run of the result on the cell predicts the arm where its estimated model puts
     // it, as the answer's own poses were: with the robot poses as the controller reports them

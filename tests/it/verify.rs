@@ -242,6 +242,84 @@ fn the_verify_command_records_a_holdout_session_and_refuses_the_wrong_setup() {
     );
 }
 
+/// A run of the shipped sim cell whose `key` file (`intrinsics` or `target`) is `wrong` while
+/// the simulated camera renders with the shipped one (`shipped`), into `dir/session`: (config,
+/// session, the result's verdict).
+fn run_with_a_wrong_file(
+    dir: &std::path::Path,
+    key: &str,
+    shipped: &std::path::Path,
+    wrong: &std::path::Path,
+) -> (PathBuf, PathBuf, handeye_solve::verdict::Verdict) {
+    let given = format!("{key}: {}", shipped.display());
+    let config = util::config_variant(
+        dir,
+        "sim-cell.yaml",
+        "cell.yaml",
+        &[
+            (&given, &format!("{key}: {}", wrong.display())),
+            (
+                "camera:\n  backend: sim\n",
+                &format!("camera:\n  backend: sim\n  {given}\n"),
+            ),
+        ],
+    );
+    let session = dir.join("session");
+    let run = util::run_cli(&config, &session);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let verdict = handeye_records::result::ResultFile::load(&session.join("result.yaml"))
+        .unwrap()
+        .verdict
+        .expect("a verdict");
+    (config, session, verdict)
+}
+
+/// `handeye verify --config CONFIG --result SESSION/result.yaml -o DIR/OUT`.
+fn holdout_of(
+    config: &std::path::Path,
+    session: &std::path::Path,
+    out: &std::path::Path,
+) -> std::process::Output {
+    util::handeye()
+        .args(["verify", "--config"])
+        .arg(config)
+        .arg("--result")
+        .arg(session.join("result.yaml"))
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+/// Asserts that a held-out run of `config` is refused before anything moves (exit 1, nothing
+/// recorded), its error holding each of `named`; then that once `fix` has fixed the file as the
+/// result says (returning the config to check with) it is GOOD.
+fn holdout_refused_then_good(
+    dir: &std::path::Path,
+    session: &std::path::Path,
+    config: &std::path::Path,
+    named: &[&str],
+    fix: impl FnOnce() -> PathBuf,
+) {
+    let wrong = dir.join("holdout-wrong");
+    let refused = holdout_of(config, session, &wrong);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    for expected in named.iter().chain(&["nothing was moved"]) {
+        assert!(stderr.contains(expected), "{expected:?} not in {stderr}");
+    }
+    assert!(!wrong.exists(), "the refused check recorded a session");
+    let checked = holdout_of(&fix(), session, &dir.join("holdout-fixed"));
+    let stdout = String::from_utf8_lossy(&checked.stdout);
+    assert!(
+        checked.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
+}
+
 /// `verify --session` predicts each sample as the session's solve judged them, so its figure is
 /// the run's held-out one: with an intrinsics file 8 % off in fx and fy (the simulated camera has
 /// the shipped lens), the solve measures the board poses again with its estimate. The samples
@@ -261,28 +339,8 @@ fn a_session_with_a_wrong_lens_file_is_verified_as_its_solve_judged_it() {
     let lens = text.replace("data: [800.0, 0.0, 641.3, 0.0, 800.0,", off);
     assert!(lens.contains(off), "the shipped lens changed: {text}");
     std::fs::write(&wrong, lens).unwrap();
-    let given = format!("intrinsics: {}", shipped.display());
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[
-            (&given, &format!("intrinsics: {}", wrong.display())),
-            (
-                "camera:\n  backend: sim\n",
-                &format!("camera:\n  backend: sim\n  {given}\n"),
-            ),
-        ],
-    );
-    let session = dir.path().join("session");
-    let run = util::run_cli(&config, &session);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let result = handeye_records::result::ResultFile::load(&session.join("result.yaml")).unwrap();
-    let verdict = result.verdict.expect("a verdict");
+    let (config, session, verdict) =
+        run_with_a_wrong_file(dir.path(), "intrinsics", &shipped, &wrong);
     assert_eq!(
         verdict.basis,
         handeye_solve::verdict::Basis::Intrinsics,
@@ -295,57 +353,30 @@ fn a_session_with_a_wrong_lens_file_is_verified_as_its_solve_judged_it() {
         stdout.contains("measured them again with its estimate (intrinsics free)"),
         "{stdout}"
     );
-    let figure = format!(
-        "{} poses: rotation RMS {:.4}°",
-        held.poses, held.rotation_rms_deg
-    );
-    let translation = format!(
-        "translation at the target RMS {:.3} mm",
-        held.translation_rms_mm
-    );
-    assert!(
-        stdout.contains(&figure) && stdout.contains(&translation),
-        "{stdout}\nagainst the run's {held:?}"
-    );
+    util::assert_leave_one_out_is_held_out(&stdout, &held);
     assert!(!stdout.contains("recorded wrong"), "{stdout}");
 
-    let holdout = |config: &std::path::Path, out: &str| {
-        util::handeye()
-            .args(["verify", "--config"])
-            .arg(config)
-            .arg("--result")
-            .arg(session.join("result.yaml"))
-            .arg("-o")
-            .arg(dir.path().join(out))
-            .output()
-            .unwrap()
+    // The fix the result names: the config's `intrinsics:` at the estimate it wrote.
+    let fix = || {
+        let fixed = dir.path().join("fixed.yaml");
+        let text = std::fs::read_to_string(&config).unwrap().replace(
+            &format!("intrinsics: {}", wrong.display()),
+            &format!("intrinsics: {}", session.join("camera_info.yaml").display()),
+        );
+        std::fs::write(&fixed, text).unwrap();
+        fixed
     };
-    let refused = holdout(&config, "holdout-wrong");
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains(&format!(
-            "the result found the intrinsics in {} wrong",
-            wrong.display()
-        )) && stderr.contains("camera_info.yaml")
-            && stderr.contains("nothing was moved"),
-        "{stderr}"
+    let named = format!(
+        "the result found the intrinsics in {} wrong",
+        wrong.display()
     );
-    assert!(!dir.path().join("holdout-wrong").exists());
-    let fixed = dir.path().join("fixed.yaml");
-    let text = std::fs::read_to_string(&config).unwrap().replace(
-        &format!("intrinsics: {}", wrong.display()),
-        &format!("intrinsics: {}", session.join("camera_info.yaml").display()),
+    holdout_refused_then_good(
+        dir.path(),
+        &session,
+        &config,
+        &[&named, "camera_info.yaml"],
+        fix,
     );
-    std::fs::write(&fixed, text).unwrap();
-    let checked = holdout(&fixed, "holdout-fixed");
-    let stdout = String::from_utf8_lossy(&checked.stdout);
-    assert!(
-        checked.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
 }
 
 /// A held-out run of an answer that found the board file wrong (printed at 95 % of its file's
@@ -363,66 +394,18 @@ fn a_held_out_run_is_refused_while_the_cell_gives_the_board_file_its_answer_foun
         "the shipped board changed: {text}"
     );
     std::fs::write(&board, text.replace("tagSize: 0.04\n", "tagSize: 0.042\n")).unwrap();
-    let given = format!("target: {}", shipped.display());
-    let config = util::config_variant(
-        dir.path(),
-        "sim-cell.yaml",
-        "cell.yaml",
-        &[
-            (&given, &format!("target: {}", board.display())),
-            (
-                "camera:\n  backend: sim\n",
-                &format!("camera:\n  backend: sim\n  {given}\n"),
-            ),
-        ],
-    );
-    let session = dir.path().join("session");
-    let run = util::run_cli(&config, &session);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let result = session.join("result.yaml");
-    let verdict = handeye_records::result::ResultFile::load(&result)
-        .unwrap()
-        .verdict
-        .expect("a verdict");
+    let (config, session, verdict) = run_with_a_wrong_file(dir.path(), "target", &shipped, &board);
     assert_eq!(
         verdict.basis,
         handeye_solve::verdict::Basis::BoardScale,
         "{}",
         verdict.reason
     );
-    let holdout = |out: &str| {
-        util::handeye()
-            .args(["verify", "--config"])
-            .arg(&config)
-            .arg("--result")
-            .arg(&result)
-            .arg("-o")
-            .arg(dir.path().join(out))
-            .output()
-            .unwrap()
+    // Refused while the file is as the session recorded it; fixed in place, checked.
+    let named = format!("the result found the board file {} wrong", board.display());
+    let fix = || {
+        std::fs::write(&board, &text).unwrap();
+        config.clone()
     };
-    let refused = holdout("holdout-wrong");
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains(&format!(
-            "the result found the board file {} wrong",
-            board.display()
-        )) && stderr.contains("nothing was moved"),
-        "{stderr}"
-    );
-    assert!(!dir.path().join("holdout-wrong").exists());
-    std::fs::write(&board, &text).unwrap();
-    let checked = holdout("holdout-fixed");
-    let stdout = String::from_utf8_lossy(&checked.stdout);
-    assert!(
-        checked.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    assert!(stdout.contains("verdict: GOOD — holdout error"), "{stdout}");
+    holdout_refused_then_good(dir.path(), &session, &config, &[&named], fix);
 }

@@ -399,3 +399,21 @@ pub fn seen_corners(
     }
     corners
 }
+
+/// Asserts that the leave-one-out figures `verify --session` printed (`stdout`) are the run's
+/// held-out ones (`held`, its result's verdict figures) to the printed digit: one figure for one
+/// session.
+pub fn assert_leave_one_out_is_held_out(stdout: &str, held: &handeye_solve::verdict::HeldOut) {
+    let rotation = format!(
+        "{} poses: rotation RMS {:.4}°",
+        held.poses, held.rotation_rms_deg
+    );
+    let translation = format!(
+        "translation at the target RMS {:.3} mm",
+        held.translation_rms_mm
+    );
+    assert!(
+        stdout.contains(&rotation) && stdout.contains(&translation),
+        "{stdout}\nagainst the run's {held:?}"
+    );
+}
