@@ -110,15 +110,20 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             stop: super::stop_on_ctrl_c(),
             jobs: None,
         };
-        // An answer solved with the arm's own model predicts the arm where that model puts it.
-        let arm_model = solved
-            .only_camera()
-            .and_then(|r| r.kinematics.as_ref())
-            .map(|_| result.as_path());
-        if arm_model.is_some() {
-            outln!("the held-out robot poses are corrected by the arm's model the result holds (its `kinematics:` section), as the answer's own were");
+        // An answer solved with the arm's own model predicts the arm where that model puts it:
+        // the one it estimated (its `kinematics:` section), or the one the cell gives
+        // (`solver.arm_model`, an earlier session's).
+        let arm_model = match solved.only_camera().and_then(|r| r.kinematics.as_ref()) {
+            Some(_) => Some(result.clone()),
+            None => cell_config.solver.arm_model.clone(),
+        };
+        if let Some(file) = &arm_model {
+            outln!(
+                "the held-out robot poses are corrected by the arm's model in {} (its `kinematics:` section), as the answer's own were",
+                file.display()
+            );
         }
-        let checked = verify::holdout(&request, &mounts, arm_model, &spec, &mut Asker)?;
+        let checked = verify::holdout(&request, &mounts, arm_model.as_deref(), &spec, &mut Asker)?;
         for (name, _) in mounts
             .iter()
             .filter(|(n, _)| !checked.iter().any(|(c, _)| c == n))

@@ -752,7 +752,10 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
             .arg(dir.path().join("holdout")),
     );
     assert!(
-        holdout.contains("corrected by the arm's model the result holds"),
+        holdout.contains(&format!(
+            "corrected by the arm's model in {}",
+            result_path.display()
+        )),
         "{holdout}"
     );
     let rms = holdout
@@ -2058,6 +2061,24 @@ fn an_arm_model_estimated_earlier_corrects_a_later_session() {
     assert!(
         given_mean < 0.25 * published_mean,
         "{given_mean} mm against {published_mean} mm"
+    );
+    // A held-out run of the later answer predicts the arm where the model the cell gives puts
+    // it, as that answer's own poses were (its result estimates no model of its own).
+    let holdout = crate::util::succeeds(
+        crate::util::handeye()
+            .args(["verify", "--config"])
+            .arg(dir.path().join("given.yaml"))
+            .arg("--result")
+            .arg(given_session.join("result.yaml"))
+            .arg("-o")
+            .arg(dir.path().join("holdout")),
+    );
+    assert!(
+        holdout.contains(&format!(
+            "corrected by the arm's model in {}",
+            earlier.display()
+        )) && holdout.contains("verdict: GOOD"),
+        "{holdout}"
     );
     // A result without an arm model is refused by name.
     let plain = dir.path().join("plain.yaml");

@@ -88,10 +88,12 @@ pub fn camera_folder(root: &Path, name: &str) -> PathBuf {
 /// Reads `rig.yaml`. Its config path is absolute since sessions record it so; an older
 /// session's holds it as the run was given it (relative to where the run was started), and is
 /// then read as its planner camera's `session.yaml` records it (absolute), so a session is
-/// solved, replayed and verified from any working directory.
+/// solved, replayed and verified from any working directory with its own config.
 pub fn read_manifest(root: &Path) -> Result<CamerasManifest, SessionError> {
     let mut manifest: CamerasManifest = read_yaml(&root.join(CAMERAS_MANIFEST))?;
-    if manifest.config.is_relative() && !manifest.config.is_file() {
+    // As the planner camera's `session.yaml` holds it, also when a file of that relative name
+    // is where this command runs: it may be another cell's.
+    if manifest.config.is_relative() {
         let planner = SessionFolder::open(&camera_folder(root, &manifest.planner))
             .and_then(|folder| folder.read_manifest());
         if let Ok(planner) = planner {
