@@ -47,6 +47,12 @@ pub(super) struct VerifyArgs {
     /// Leave-one-out cross-validation of a dataset file (its setup is in the file).
     #[arg(long)]
     dataset: Option<PathBuf>,
+    /// With --session: check the samples as recorded (the robot poses as the controller
+    /// reported them, the board poses as measured with the given files), not as the session's
+    /// solve judged them (corrected by the arm's model it estimated, or measured again with its
+    /// estimate of a file it found wrong): how far those corrections move them.
+    #[arg(long, requires = "session")]
+    as_recorded: bool,
 }
 
 /// Runs `handeye verify`.
@@ -267,7 +273,7 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
         .as_deref()
         .filter(|d| cameras::is_cameras_folder(d))
     {
-        return verify_cameras_session(root);
+        return verify_cameras_session(root, args.as_recorded);
     }
     if let Some(dir) = &args.session {
         let folder = SessionFolder::open(dir)?;
@@ -280,7 +286,7 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
             outln!("provisional: {run}; this check is of the samples so far: verify again when the run has ended");
         }
         let config = judging_config(Some(&folder.read_manifest()?.config));
-        let v = check_session(&folder, config.clone(), true)?;
+        let v = check_session(&folder, config.clone(), true, args.as_recorded)?;
         outln!("{}", v.table());
         outln!("{}", v.verdict(&judged_as(config.as_ref()).1).1);
         return Ok(());
@@ -303,15 +309,19 @@ fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
 /// poses measured again with the corrected files when the solve found a given one wrong (as
 /// recorded they disagree by what the answer corrects). With `recorded_outliers`, the samples
 /// the session's own `result.yaml` flags (after its pixel fit) are the ones left out of the RMS,
-/// as its held-out figure leaves them out.
+/// as its held-out figure leaves them out. `as_recorded`: the samples as recorded instead (no
+/// solve).
 fn check_session(
     folder: &SessionFolder,
     config: Option<CellConfig>,
     recorded_outliers: bool,
+    as_recorded: bool,
 ) -> anyhow::Result<verify::Verification> {
     let dataset = Dataset::load(&folder.samples_path())?;
     let (options, _) = judged_as(config.as_ref());
-    let solved = config.and_then(|config| as_solved(folder, config));
+    let solved = config
+        .filter(|_| !as_recorded)
+        .and_then(|config| as_solved(folder, config));
     let refit = solved.as_ref().and_then(|s| s.arm_refit.as_ref());
     let pairs = match &solved {
         Some(solved) => {
@@ -401,7 +411,7 @@ fn as_solved(folder: &SessionFolder, config: CellConfig) -> Option<SolvedSession
 /// as for one camera (a camera's folder is a one-camera session of the same poses), with the
 /// cell's solver options and accuracy; a camera with too few samples is named and the others
 /// checked.
-fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
+fn verify_cameras_session(root: &Path, as_recorded: bool) -> anyhow::Result<()> {
     super::say_if_live(root)?;
     let manifest = cameras::read_manifest(root)?;
     let config = judging_config(Some(&manifest.config));
@@ -413,7 +423,7 @@ fn verify_cameras_session(root: &Path) -> anyhow::Result<()> {
             continue;
         }
         // Its answer is the joint one: the outliers are those of the camera's own solve.
-        match check_session(&folder, config.clone(), false) {
+        match check_session(&folder, config.clone(), false, as_recorded) {
             Ok(v) => {
                 outln!("camera `{}`: {}", camera.name, v.table());
                 outln!("{}", v.verdict(&accuracy).1);

@@ -738,6 +738,16 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
     );
     crate::util::assert_leave_one_out_is_held_out(&verify, &held);
     assert!(verify.contains("verdict: GOOD"), "{verify}");
+    // The old form one flag away: the samples as recorded disagree by the arm's errors.
+    let recorded = crate::util::succeeds(
+        crate::util::handeye()
+            .args(["verify", "--as-recorded", "--session"])
+            .arg(&session),
+    );
+    assert!(
+        !recorded.contains("corrected them") && recorded.contains("verdict: CHECK"),
+        "{recorded}"
+    );
     // A held-out run of the result on the cell predicts the arm where its estimated model puts
     // it, as the answer's own poses were: with the robot poses as the controller reports them
     // (its published model) the fresh views disagree by the arm's errors, which verify called
