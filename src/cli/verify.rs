@@ -87,7 +87,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
                 .context("reading the cell config")?;
             mounts[0].0.clone_from(&one.camera().name);
         }
-        refuse_files_found_wrong(&solved, result, &mounts, &cell_config)?;
+        verify::refuse_files_found_wrong(&solved, result, &mounts, &cell_config)?;
         let base = cell_config.plan.generate.unwrap_or(GenerateSpec {
             count: args.poses,
             distance: [0.4, 0.7],
@@ -116,13 +116,7 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
             stop: super::stop_on_ctrl_c(),
             jobs: None,
         };
-        // An answer solved with the arm's own model predicts the arm where that model puts it:
-        // the one it estimated (its `kinematics:` section), or the one the cell gives
-        // (`solver.arm_model`, an earlier session's).
-        let arm_model = match solved.only_camera().and_then(|r| r.kinematics.as_ref()) {
-            Some(_) => Some(result.clone()),
-            None => cell_config.solver.arm_model.clone(),
-        };
+        let arm_model = verify::arm_model_of(&solved, result, &cell_config);
         if let Some(file) = &arm_model {
             outln!(
                 "the held-out robot poses are corrected by the arm's model in {} (its `kinematics:` section), as the answer's own were",
@@ -162,106 +156,6 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     leave_one_out(&args)
-}
-
-/// Refuses, before anything moves, a held-out check of a result that found a camera's lens or
-/// board file wrong while the cell still gives that file: measured with it, the fresh views
-/// would disagree by the file's error (tens of mm), and the check would blame the calibration
-/// or a moved camera. A lens file is still the wrong one when each lens parameter the result
-/// estimated is at the file's value; a board file when it is the one the result's session
-/// recorded (its path and sha256 in `session.yaml`). The result's own next step says the fix.
-fn refuse_files_found_wrong(
-    solved: &CellResult,
-    result_path: &Path,
-    mounts: &[(String, handeye_core::setup::CellTransforms)],
-    cell: &CellConfig,
-) -> anyhow::Result<()> {
-    use handeye_solve::cell_model::GivenFile;
-    // The files the result's session was recorded with (its planner camera's, for several).
-    let recorded = result_path
-        .parent()
-        .map(|dir| {
-            cameras::session_folder_of(if dir.as_os_str().is_empty() {
-                Path::new(".")
-            } else {
-                dir
-            })
-        })
-        .and_then(|folder| SessionFolder::open(&folder).ok())
-        .and_then(|folder| folder.read_manifest().ok())
-        .map(|manifest| manifest.inputs)
-        .unwrap_or_default();
-    for (name, _) in mounts {
-        let result = solved
-            .cameras
-            .iter()
-            .find(|c| c.name == *name || solved.cameras.len() == 1);
-        let (Some(verdict), Some(camera)) = (
-            result.and_then(|r| r.verdict.as_ref()),
-            cell.cameras.iter().find(|c| c.name == *name),
-        ) else {
-            continue;
-        };
-        let Some(model) = &verdict.figures.cell_model else {
-            continue;
-        };
-        let estimate = |parameter: &str| model.estimates.iter().find(|e| e.parameter == parameter);
-        let still_given = |file: &Path, what: String| {
-            bail!(
-                "camera `{name}`: the result found the {what}, and the cell still gives {}: measured with it, the held-out views would disagree by the file's error, not the calibration's. First: {}; nothing was moved",
-                file.display(),
-                verdict.next_action
-            )
-        };
-        let blamed = model.blamed();
-        if let Some(file) = camera
-            .intrinsics
-            .as_ref()
-            .filter(|_| blamed.contains(&GivenFile::Intrinsics))
-        {
-            if let Ok(given) = handeye_core::camera_model::CameraModel::load(file) {
-                let lens = [
-                    ("fx", given.fx),
-                    ("fy", given.fy),
-                    ("cx", given.cx),
-                    ("cy", given.cy),
-                ];
-                let estimated: Vec<_> = lens
-                    .iter()
-                    .filter_map(|(p, v)| estimate(p).map(|e| (e, *v)))
-                    .collect();
-                let unchanged = !estimated.is_empty()
-                    && estimated.iter().all(|(e, v)| {
-                        (v - e.file_value).abs() <= 1e-6 * e.file_value.abs().max(1.0)
-                    });
-                if let (true, Some((e, _))) = (unchanged, estimated.first()) {
-                    still_given(
-                        file,
-                        format!(
-                            "intrinsics in {} wrong ({} in the file {:.1} px, estimated from its session {:.1} ± {:.2} px)",
-                            file.display(), e.parameter, e.file_value, e.estimate, e.sigma
-                        ),
-                    )?;
-                }
-            }
-        }
-        if blamed.contains(&GivenFile::Board) {
-            let file = &camera.target;
-            let now = handeye_records::InputFile::hash("target", file).ok();
-            let unchanged = now.is_some_and(|now| {
-                recorded
-                    .iter()
-                    .any(|r| r.role == "target" && r.path == now.path && r.sha256 == now.sha256)
-            });
-            if unchanged {
-                let scale = estimate("scale").map_or(String::new(), |e| {
-                    format!(" (the board measures {:.3}× the size in it)", e.estimate)
-                });
-                still_given(file, format!("board file {} wrong{scale}", file.display()))?;
-            }
-        }
-    }
-    Ok(())
 }
 
 /// `verify --session DIR` or `--dataset FILE`: leave-one-out cross-validation of the samples,

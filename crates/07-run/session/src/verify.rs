@@ -9,6 +9,8 @@
 //! target origin in the camera frame). Depends on `solve`, `plan`, `cell` and `session` (the
 //! holdout run records a normal session folder, so it can be replayed and reported).
 
+use std::path::{Path, PathBuf};
+
 use serde::{Deserialize, Serialize};
 
 use crate::cell::run::{self, RunError, RunObserver, RunRequest, Strategy};
@@ -18,6 +20,7 @@ use handeye_core::setup::CellTransforms;
 use handeye_core::setup::{self, PosePair, Setup};
 use handeye_plan::GenerateSpec;
 use handeye_records::dataset::Dataset;
+use handeye_records::result::CellResult;
 use handeye_records::{SessionError, SessionFolder};
 use handeye_solve::verdict::{self, Accuracy, Level};
 use handeye_solve::{self as solve, SolveError, SolveOptions};
@@ -124,6 +127,9 @@ pub enum VerifyError {
     /// The holdout run failed (its message says why, and how to resume when samples are kept).
     #[error(transparent)]
     Run(Box<RunError>),
+    /// The cell still gives a file the answer found wrong (refused before anything moves).
+    #[error("{0}")]
+    FileFoundWrong(String),
 }
 
 fn summarise(errors: &[PredictionError]) -> ErrorSummary {
@@ -261,7 +267,7 @@ pub fn leave_one_out_refitting(
 pub fn holdout(
     request: &RunRequest,
     calibrations: &[(String, CellTransforms)],
-    arm_model: Option<&std::path::Path>,
+    arm_model: Option<&Path>,
     spec: &GenerateSpec,
     observer: &mut dyn RunObserver,
 ) -> Result<Vec<(String, Verification)>, VerifyError> {
@@ -341,6 +347,117 @@ pub fn holdout(
         )));
     }
     Ok(checked)
+}
+
+/// Refuses, before anything moves, a held-out check of a result that found a camera's lens or
+/// board file wrong while the cell still gives that file: measured with it, the fresh views
+/// would disagree by the file's error (tens of mm), and the check would blame the calibration
+/// or a moved camera. A lens file is still the wrong one when each lens parameter the result
+/// estimated is at the file's value; a board file when it is the one the result's session
+/// recorded (its path and sha256 in `session.yaml`). The result's own next step says the fix.
+pub fn refuse_files_found_wrong(
+    solved: &CellResult,
+    result_path: &Path,
+    mounts: &[(String, CellTransforms)],
+    cell: &CellConfig,
+) -> Result<(), VerifyError> {
+    use handeye_solve::cell_model::GivenFile;
+    // The files the result's session was recorded with (its planner camera's, for several).
+    let recorded = result_path
+        .parent()
+        .map(|dir| {
+            crate::cell::cameras::session_folder_of(if dir.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                dir
+            })
+        })
+        .and_then(|folder| SessionFolder::open(&folder).ok())
+        .and_then(|folder| folder.read_manifest().ok())
+        .map(|manifest| manifest.inputs)
+        .unwrap_or_default();
+    for (name, _) in mounts {
+        let result = solved
+            .cameras
+            .iter()
+            .find(|c| c.name == *name || solved.cameras.len() == 1);
+        let (Some(verdict), Some(camera)) = (
+            result.and_then(|r| r.verdict.as_ref()),
+            cell.cameras.iter().find(|c| c.name == *name),
+        ) else {
+            continue;
+        };
+        let Some(model) = &verdict.figures.cell_model else {
+            continue;
+        };
+        let estimate = |parameter: &str| model.estimates.iter().find(|e| e.parameter == parameter);
+        let still_given = |file: &Path, what: String| {
+            Err(VerifyError::FileFoundWrong(format!(
+                "camera `{name}`: the result found the {what}, and the cell still gives {}: measured with it, the held-out views would disagree by the file's error, not the calibration's. First: {}; nothing was moved",
+                file.display(),
+                verdict.next_action
+            )))
+        };
+        let blamed = model.blamed();
+        if let Some(file) = camera
+            .intrinsics
+            .as_ref()
+            .filter(|_| blamed.contains(&GivenFile::Intrinsics))
+        {
+            if let Ok(given) = handeye_core::camera_model::CameraModel::load(file) {
+                let lens = [
+                    ("fx", given.fx),
+                    ("fy", given.fy),
+                    ("cx", given.cx),
+                    ("cy", given.cy),
+                ];
+                let estimated: Vec<_> = lens
+                    .iter()
+                    .filter_map(|(p, v)| estimate(p).map(|e| (e, *v)))
+                    .collect();
+                let unchanged = !estimated.is_empty()
+                    && estimated.iter().all(|(e, v)| {
+                        (v - e.file_value).abs() <= 1e-6 * e.file_value.abs().max(1.0)
+                    });
+                if let (true, Some((e, _))) = (unchanged, estimated.first()) {
+                    return still_given(
+                        file,
+                        format!(
+                            "intrinsics in {} wrong ({} in the file {:.1} px, estimated from its session {:.1} ± {:.2} px)",
+                            file.display(), e.parameter, e.file_value, e.estimate, e.sigma
+                        ),
+                    );
+                }
+            }
+        }
+        if blamed.contains(&GivenFile::Board) {
+            let file = &camera.target;
+            let now = handeye_records::InputFile::hash("target", file).ok();
+            let unchanged = now.is_some_and(|now| {
+                recorded
+                    .iter()
+                    .any(|r| r.role == "target" && r.path == now.path && r.sha256 == now.sha256)
+            });
+            if unchanged {
+                let scale = estimate("scale").map_or(String::new(), |e| {
+                    format!(" (the board measures {:.3}× the size in it)", e.estimate)
+                });
+                return still_given(file, format!("board file {} wrong{scale}", file.display()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The arm model a held-out check of `solved` (read from `result_path`) corrects the robot
+/// poses by, as the answer's own were: the one it estimated (its `kinematics:` section), else
+/// the one the cell gives (`solver.arm_model`, an earlier session's); `None` when the answer
+/// took the arm as its published model says.
+pub fn arm_model_of(solved: &CellResult, result_path: &Path, cell: &CellConfig) -> Option<PathBuf> {
+    match solved.only_camera().and_then(|r| r.kinematics.as_ref()) {
+        Some(_) => Some(result_path.to_path_buf()),
+        None => cell.solver.arm_model.clone(),
+    }
 }
 
 impl Verification {
