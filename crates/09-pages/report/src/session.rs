@@ -336,6 +336,23 @@ fn annotated_frame(frame: &PageFrame, optics: Optics<'_>) -> Result<Vec<u8>, Rep
     draw::jpeg(&out, FRAME_JPEG_QUALITY).map_err(frame_error)
 }
 
+/// What writes a page of the records in `dir`, which hold no answer: `replay` writes its own
+/// answer and page beside the session's (it never writes `result.yaml`); a camera's folder of
+/// several has the cell's page.
+fn what_writes_a_page(dir: &std::path::Path) -> String {
+    let dir_shown = dir.display();
+    match handeye_session::cell::cameras::session_of_camera_folder(dir) {
+        Some(root) => format!(
+            "this camera's answer is the joint one of the session {}: `handeye report {}` draws its page, a part for each camera (`handeye replay {dir_shown}` solves this camera alone and writes that page beside its answer)",
+            root.display(),
+            root.display()
+        ),
+        None => format!(
+            "`handeye run --resume {dir_shown}` finishes an interrupted run, `handeye replay {dir_shown}` solves the session again from its frames and writes that page beside its answer"
+        ),
+    }
+}
+
 /// Writes `<session>/report.html` for a run that just ended, one camera or several (the page of
 /// [`CellRun::root`]), from what the run holds: its answers, the samples and records its solve
 /// read, the board and lens of its cell, its verdict and arm time (nothing is read again,
@@ -446,25 +463,9 @@ pub fn write_folder_report(
             });
         }
     }
-    // What writes a page of these records: `replay` writes its own answer and page beside the
-    // session's (it never writes result.yaml); a camera's folder of several has the cell's.
-    let not_solved = |e: handeye_core::yaml_file::FileError| {
-        ReportError::NotSolved {
+    let not_solved = |e: handeye_core::yaml_file::FileError| ReportError::NotSolved {
         path: result_path.clone(),
-        why: match handeye_session::cell::cameras::session_of_camera_folder(dir) {
-            Some(root) => format!(
-                "{e}; this camera's answer is the joint one of the session {}: `handeye report {}` draws its page, a part for each camera (`handeye replay {}` solves this camera alone and writes that page beside its answer)",
-                root.display(),
-                root.display(),
-                dir.display()
-            ),
-            None => format!(
-                "{e}; `handeye run --resume {}` finishes an interrupted run, `handeye replay {}` solves the session again from its frames and writes that page beside its answer",
-                dir.display(),
-                dir.display()
-            ),
-        },
-    }
+        why: format!("{e}; {}", what_writes_a_page(dir)),
     };
     let cell = CellResult::load(&result_path).map_err(not_solved)?;
     // A cell of several cameras has its page; one camera's answer is drawn below.
