@@ -195,7 +195,7 @@ pub fn config_of_camera_folder(
     }
 }
 
-/// The cell config a recorded session is solved, replayed or verified with: `given`
+/// The cell config a recorded session is solved or replayed with: `given`
 /// (`--config`), else `recorded`, the one its manifest names. When the recorded one does not
 /// load, the error says it is the session's and that `--config` names another (a session
 /// copied from another machine, a config moved or renamed since).
