@@ -167,11 +167,11 @@ pub fn render_with_rays(
         .min(height.max(1));
     let rows_per_chunk = height.div_ceil(threads).max(1);
     let background_table = &Background::new(width);
-    std::thread::scope(|scope| {
-        for (chunk_index, chunk) in radiance.chunks_mut(rows_per_chunk * width).enumerate() {
+    run_parallel(radiance.chunks_mut(rows_per_chunk * width).enumerate().map(
+        |(chunk_index, chunk)| {
             let first_row = chunk_index * rows_per_chunk;
             let chunk_rays = &rays.rays[first_row * width..first_row * width + chunk.len()];
-            scope.spawn(move || {
+            move || {
                 render_rows(
                     board,
                     camera,
@@ -183,9 +183,9 @@ pub fn render_with_rays(
                     chunk_rays,
                     chunk,
                 );
-            });
-        }
-    });
+            }
+        },
+    ));
     if options.blur_sigma_px > 0.0 {
         gaussian_blur(&mut radiance, width, height, options.blur_sigma_px, threads);
     }
@@ -196,25 +196,25 @@ pub fn render_with_rays(
     // count, and the noise is drawn on all cores.
     let mut pixels = vec![0u8; width * height];
     let seeds: Vec<u64> = (0..threads).map(|_| rng.random()).collect();
-    std::thread::scope(|scope| {
-        for ((out, input), seed) in pixels
+    let noise = noise.as_ref();
+    run_parallel(
+        pixels
             .chunks_mut(rows_per_chunk * width)
             .zip(radiance.chunks(rows_per_chunk * width))
             .zip(seeds)
-        {
-            let noise = noise.as_ref();
-            scope.spawn(move || {
-                let mut chunk_rng = StdRng::seed_from_u64(seed);
-                for (pixel, value) in out.iter_mut().zip(input) {
-                    let noisy = match noise {
-                        Some(n) => value + n.sample(&mut chunk_rng),
-                        None => *value,
-                    };
-                    *pixel = noisy.round().clamp(0.0, 255.0) as u8;
+            .map(|((out, input), seed)| {
+                move || {
+                    let mut chunk_rng = StdRng::seed_from_u64(seed);
+                    for (pixel, value) in out.iter_mut().zip(input) {
+                        let noisy = match noise {
+                            Some(n) => value + n.sample(&mut chunk_rng),
+                            None => *value,
+                        };
+                        *pixel = noisy.round().clamp(0.0, 255.0) as u8;
+                    }
                 }
-            });
-        }
-    });
+            }),
+    );
     GrayImage::from_raw(camera.width, camera.height, pixels).expect("buffer sized to the image")
 }
 
@@ -420,9 +420,9 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
     let mut temp = vec![0f32; image.len()];
     {
         let source: &[f32] = image;
-        std::thread::scope(|scope| {
-            for (chunk_index, chunk) in temp.chunks_mut(rows_per_chunk * width).enumerate() {
-                scope.spawn(move || {
+        run_parallel(temp.chunks_mut(rows_per_chunk * width).enumerate().map(
+            |(chunk_index, chunk)| {
+                move || {
                     for (k, out_row) in chunk.chunks_mut(width).enumerate() {
                         let y = chunk_index * rows_per_chunk + k;
                         let row = &source[y * width..(y + 1) * width];
@@ -437,14 +437,14 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
                             *out = acc;
                         }
                     }
-                });
-            }
-        });
+                }
+            },
+        ));
     }
     let temp: &[f32] = &temp;
-    std::thread::scope(|scope| {
-        for (chunk_index, chunk) in image.chunks_mut(rows_per_chunk * width).enumerate() {
-            scope.spawn(move || {
+    run_parallel(image.chunks_mut(rows_per_chunk * width).enumerate().map(
+        |(chunk_index, chunk)| {
+            move || {
                 for (k, out_row) in chunk.chunks_mut(width).enumerate() {
                     let y = chunk_index * rows_per_chunk + k;
                     for (x, out) in out_row.iter_mut().enumerate() {
@@ -458,7 +458,32 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
                         *out = acc;
                     }
                 }
+            }
+        },
+    ));
+}
+
+/// Runs each of `jobs` on a scoped thread of its own, and on this thread any whose thread cannot
+/// start (under a memory limit a new thread's stack may not fit the address space left): the
+/// frame is the same either way, and the simulated camera never panics for it (issue #44: a run
+/// under `ulimit -v` ends or says memory, never a signal or a panic).
+fn run_parallel<F: FnOnce() + Send>(jobs: impl IntoIterator<Item = F>) {
+    let slots: Vec<Mutex<Option<F>>> = jobs.into_iter().map(|job| Mutex::new(Some(job))).collect();
+    // The job is taken out of its slot by whichever thread runs it (a poisoned slot still holds
+    // its job: the panic that poisoned it was that job's own, and is raised again by the scope).
+    let take = |slot: &Mutex<Option<F>>| slot.lock().unwrap_or_else(PoisonError::into_inner).take();
+    std::thread::scope(|scope| {
+        for slot in &slots {
+            let started = std::thread::Builder::new().spawn_scoped(scope, move || {
+                if let Some(job) = take(slot) {
+                    job();
+                }
             });
+            if started.is_err() {
+                if let Some(job) = take(slot) {
+                    job();
+                }
+            }
         }
     });
 }
