@@ -153,6 +153,10 @@ def test_ctrl_c_while_the_cell_runs_stops_it_cleanly(tmp_path):
     out = tmp_path / "session"
     accepted = []
     sent = threading.Event()
+    # Python's own Ctrl-C handler, whatever this process inherited: a shell that starts the
+    # suite in the background without job control has SIGINT ignored, and Python then keeps it
+    # ignored (the signal would be lost, not raised).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
 
     def interrupt():
         os.kill(os.getpid(), signal.SIGINT)
@@ -169,8 +173,11 @@ def test_ctrl_c_while_the_cell_runs_stops_it_cleanly(tmp_path):
         if accepted and len(accepted) >= 2 and not sent.is_set():
             sent.wait(5.0)
 
-    with pytest.raises(KeyboardInterrupt) as error:
-        handeye.run(CONFIG, out=out, progress=progress)
+    try:
+        with pytest.raises(KeyboardInterrupt) as error:
+            handeye.run(CONFIG, out=out, progress=progress)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert error.value.session_folder == out
     # Stopped at the next event: a move (the samples are the ones seen) or the next record's
     # callback, interrupted before it counted the sample already written.
