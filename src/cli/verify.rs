@@ -231,13 +231,12 @@ fn check_session(
         }
         None => &dataset.pairs,
     };
-    let fold_flanges =
-        |left_out: usize| refit.map_or(Ok(Vec::new()), |r| r.flanges_without(left_out));
+    let fold_flanges = refit.map(|r| move |left_out: usize| r.flanges_without(left_out));
     let v = verify::leave_one_out_refitting(
         dataset.setup,
         pairs,
         &options,
-        refit.map(|_| &fold_flanges as verdict::FoldFlanges<'_>),
+        fold_flanges.as_ref().map(|f| f as verdict::FoldFlanges<'_>),
     )?;
     // Only a final answer of these very samples (not a run's earlier one, nor that of a
     // resumed session not solved since).

@@ -752,15 +752,11 @@ fn the_shipped_arm_errors_cell_finds_its_offsets_and_transforms_through_the_bina
     // it, as the answer's own poses were: with the robot poses as the controller reports them
     // (its published model) the fresh views disagree by the arm's errors, which verify called
     // CHECK, 1.18 mm, "was the camera or the board moved since the calibration?".
-    let holdout = crate::util::succeeds(
-        crate::util::handeye()
-            .args(["verify", "--config"])
-            .arg(&config)
-            .arg("--result")
-            .arg(&result_path)
-            .arg("-o")
-            .arg(dir.path().join("holdout")),
-    );
+    let holdout = crate::util::succeeds(&mut crate::util::holdout_command(
+        &config,
+        &result_path,
+        &dir.path().join("holdout"),
+    ));
     assert!(
         holdout.contains(&format!(
             "corrected by the arm's model in {}",
@@ -2074,15 +2070,11 @@ fn an_arm_model_estimated_earlier_corrects_a_later_session() {
     );
     // A held-out run of the later answer predicts the arm where the model the cell gives puts
     // it, as that answer's own poses were (its result estimates no model of its own).
-    let holdout = crate::util::succeeds(
-        crate::util::handeye()
-            .args(["verify", "--config"])
-            .arg(dir.path().join("given.yaml"))
-            .arg("--result")
-            .arg(given_session.join("result.yaml"))
-            .arg("-o")
-            .arg(dir.path().join("holdout")),
-    );
+    let holdout = crate::util::succeeds(&mut crate::util::holdout_command(
+        &dir.path().join("given.yaml"),
+        &given_session.join("result.yaml"),
+        &dir.path().join("holdout"),
+    ));
     assert!(
         holdout.contains(&format!(
             "corrected by the arm's model in {}",

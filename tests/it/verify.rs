@@ -275,23 +275,6 @@ fn run_with_a_wrong_file(
     (config, session, verdict)
 }
 
-/// `handeye verify --config CONFIG --result SESSION/result.yaml -o DIR/OUT`.
-fn holdout_of(
-    config: &std::path::Path,
-    session: &std::path::Path,
-    out: &std::path::Path,
-) -> std::process::Output {
-    util::handeye()
-        .args(["verify", "--config"])
-        .arg(config)
-        .arg("--result")
-        .arg(session.join("result.yaml"))
-        .arg("-o")
-        .arg(out)
-        .output()
-        .unwrap()
-}
-
 /// Asserts that a held-out run of `config` is refused before anything moves (exit 1, nothing
 /// recorded), its error holding each of `named`; then that once `fix` has fixed the file as the
 /// result says (returning the config to check with) it is GOOD.
@@ -303,14 +286,22 @@ fn holdout_refused_then_good(
     fix: impl FnOnce() -> PathBuf,
 ) {
     let wrong = dir.join("holdout-wrong");
-    let refused = holdout_of(config, session, &wrong);
+    let refused = util::holdout_command(config, &session.join("result.yaml"), &wrong)
+        .output()
+        .unwrap();
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(1), "{stderr}");
     for expected in named.iter().chain(&["nothing was moved"]) {
         assert!(stderr.contains(expected), "{expected:?} not in {stderr}");
     }
     assert!(!wrong.exists(), "the refused check recorded a session");
-    let checked = holdout_of(&fix(), session, &dir.join("holdout-fixed"));
+    let checked = util::holdout_command(
+        &fix(),
+        &session.join("result.yaml"),
+        &dir.join("holdout-fixed"),
+    )
+    .output()
+    .unwrap();
     let stdout = String::from_utf8_lossy(&checked.stdout);
     assert!(
         checked.status.success(),

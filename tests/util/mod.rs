@@ -417,3 +417,17 @@ pub fn assert_leave_one_out_is_held_out(stdout: &str, held: &handeye_solve::verd
         "{stdout}\nagainst the run's {held:?}"
     );
 }
+
+/// `handeye verify --config CONFIG --result RESULT -o OUT`: a held-out run of an answer on the
+/// cell.
+pub fn holdout_command(config: &Path, result: &Path, out: &Path) -> Command {
+    let mut command = handeye();
+    command
+        .args(["verify", "--config"])
+        .arg(config)
+        .arg("--result")
+        .arg(result)
+        .arg("-o")
+        .arg(out);
+    command
+}

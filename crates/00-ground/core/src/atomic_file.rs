@@ -227,10 +227,7 @@ fn write_atomic_streamed<E>(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> Result<(), E>,
 ) -> std::io::Result<(Vec<RemovedTemp>, Result<(), E>)> {
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let folder = crate::folder_of(path);
     // Said of the folder, not of the temporary file the write would have made in it (whose
     // random name means nothing to the person who named `path`).
     match std::fs::metadata(folder) {

@@ -21,6 +21,15 @@ pub mod notice;
 pub mod setup;
 pub mod yaml_file;
 
+/// The folder `path` is in: its parent, or `.` for a bare file name (whose `parent()` is the
+/// empty path, which no file call accepts).
+pub fn folder_of(path: &std::path::Path) -> &std::path::Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => std::path::Path::new("."),
+    }
+}
+
 /// `most` indices evenly spaced through `0..count` (`⌊k·count / most⌋` for k = 0, 1, …), or every
 /// index when `count ≤ most`; increasing. The one way the tree thins a long list: the held-out
 /// check's folds, the pairs a report draws, and with [`keeping_notable`] and [`keeping_largest`]

@@ -291,10 +291,7 @@ pub fn create_dir(dir: &std::path::Path) -> Result<(), SessionError> {
 /// Makes the folder `file` goes into when it does not exist yet: an answer written with `-o`
 /// into a new folder (`handeye solve`, `replay`).
 pub fn create_parent_dir(file: &std::path::Path) -> Result<(), SessionError> {
-    match file.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => create_dir(dir),
-        _ => Ok(()),
-    }
+    create_dir(handeye_core::folder_of(file))
 }
 
 fn describe_disagreement(missing: &[String], extra: &[String]) -> String {

@@ -363,16 +363,9 @@ pub fn refuse_files_found_wrong(
 ) -> Result<(), VerifyError> {
     use handeye_solve::cell_model::GivenFile;
     // The files the result's session was recorded with (its planner camera's, for several).
-    let recorded = result_path
-        .parent()
-        .map(|dir| {
-            crate::cell::cameras::session_folder_of(if dir.as_os_str().is_empty() {
-                Path::new(".")
-            } else {
-                dir
-            })
-        })
-        .and_then(|folder| SessionFolder::open(&folder).ok())
+    let session = crate::cell::cameras::session_folder_of(handeye_core::folder_of(result_path));
+    let recorded = SessionFolder::open(&session)
+        .ok()
         .and_then(|folder| folder.read_manifest().ok())
         .map(|manifest| manifest.inputs)
         .unwrap_or_default();

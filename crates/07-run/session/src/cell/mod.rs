@@ -76,11 +76,7 @@ fn file_exists(config: &CellConfig, key: &str, path: &Path) -> Result<(), CellEr
     if path.exists() {
         return Ok(());
     }
-    let folder = config
-        .file
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let folder = handeye_core::folder_of(&config.file);
     let folder_shown = std::path::absolute(folder).unwrap_or_else(|_| folder.to_path_buf());
     Err(CellError::Config(Box::new(ConfigError::Inconsistent {
         file: config.file.clone(),

@@ -70,13 +70,8 @@ pub fn session_of_camera_folder(dir: &Path) -> Option<PathBuf> {
     let cameras = dir
         .parent()
         .filter(|p| p.file_name() == Some("cameras".as_ref()))?;
-    let root = cameras.parent()?;
     // `cameras/wrist` under the working directory: the session is `.`.
-    let root = if root.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        root
-    };
+    let root = handeye_core::folder_of(cameras);
     is_cameras_folder(root).then(|| root.to_path_buf())
 }
 
