@@ -203,8 +203,10 @@ struct BagArgs {
     /// Largest spacing of two TF messages to interpolate between, ms (0.1 to 10000).
     #[arg(long, default_value_t = 100.0)]
     max_tf_gap_ms: f64,
-    /// Quad decimation of the detector (1 = full resolution, at most 16).
-    #[arg(long, default_value_t = 1.0)]
+    /// Quad decimation of the detector, as a cell's `detector.decimate` and `handeye detect`:
+    /// 2 searches the quads at half resolution, the corners are still refined at full
+    /// resolution; 1 (full resolution, this import's default before) for tags under ~20 px.
+    #[arg(long, default_value_t = 2.0)]
     decimation: f32,
     /// Frames decoded and detected at once, each by a thread of its own (default: one per core,
     /// at most four, fewer when the memory limit leaves room for fewer).

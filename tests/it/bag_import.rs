@@ -577,6 +577,34 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
         next.lines().last().unwrap().starts_with("next: ") && next.contains("verdict: "),
         "{log}"
     );
+    // The detector searched the quads at half resolution, as a cell's default; the old default
+    // (full resolution) is one flag away and gives the same answer.
+    assert_eq!(recorded_decimation(&out), 2.0);
+    let full = dir.path().join("full-resolution");
+    let run = import(
+        &bag,
+        &full,
+        &[
+            "--time-offset",
+            "0.030",
+            "--camera-info",
+            "/camera/camera_info",
+            "--decimation",
+            "1",
+        ],
+    );
+    assert!(run.status.success(), "{}", text(&run));
+    assert_eq!(recorded_decimation(&full), 1.0);
+    assert_calibrated(&full);
+}
+
+/// The quad decimation the import's recorded cell (`import/cell.yaml`) detects with.
+fn recorded_decimation(session: &Path) -> f64 {
+    let cell: serde_yaml_ng::Value = serde_yaml_ng::from_str(
+        &std::fs::read_to_string(session.join("import/cell.yaml")).unwrap(),
+    )
+    .unwrap();
+    cell["detector"]["decimate"].as_f64().unwrap()
 }
 
 /// The import as a library call (what `handeye import bag` is a thin caller of): the notes

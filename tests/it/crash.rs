@@ -200,7 +200,7 @@ fn sigkill_mid_run_then_resume_cleans_temp_files_and_has_every_pose_once() {
         message.contains("unfinished temporary file(s)") && message.contains("kB)"),
         "{message}"
     );
-    for dir in ["", "frames", "poses"] {
+    for dir in ["", "frames", "previews", "poses"] {
         for entry in std::fs::read_dir(session.join(dir)).unwrap() {
             let name = entry.unwrap().file_name();
             assert!(
@@ -421,7 +421,7 @@ fn a_folder_left_before_session_yaml_is_reusable_and_resume_says_how() {
     let dir = tempfile::tempdir().unwrap();
     let config = cell(dir.path(), 0.0);
     let session = dir.path().join("s");
-    for sub in ["poses", "frames"] {
+    for sub in ["poses", "frames", "previews"] {
         std::fs::create_dir_all(session.join(sub)).unwrap();
     }
     std::fs::write(session.join(".lock"), "4194999\n").unwrap();

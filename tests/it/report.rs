@@ -130,15 +130,32 @@ fn report_has_every_section_one_plot_per_kind_and_the_result_numbers() {
     );
     let plots = PLOT_KINDS.len() + CORNER_PLOT_KINDS.len();
     assert_eq!(count(&html, "<figure class=\"plot\""), plots);
-    assert_eq!(count(&html, "<svg"), plots);
+    assert_eq!(
+        count(&html, "<svg"),
+        plots + count(&html, "<svg class=\"frame\"")
+    );
     assert!(!html.contains("http://") || count(&html, "http://") == count(&html, "xmlns"));
     assert!(!html.contains("https://"));
     assert_eq!(count(&html, "<script"), 1);
     assert_eq!(count(&html, "<script>"), 1, "the script is inline, no src");
     assert!(!html.contains("<link") && !html.contains("@import"));
     // A frame for each of the 10 samples, as an inline JPEG that decodes, wider than the grid
-    // shows it (a click shows it full size).
-    assert_eq!(count(&html, "src=\"data:image/jpeg;base64,"), 10);
+    // shows it (a click shows it full size), under its marks: every detected corner a cross, the
+    // 36 tags' outlines where the answer puts them.
+    assert_eq!(count(&html, "<svg class=\"frame\""), 10);
+    assert_eq!(count(&html, "href=\"data:image/jpeg;base64,"), 10);
+    let first = &html[html.find("<svg class=\"frame\"").unwrap()..];
+    let first = &first[..first.find("</svg>").unwrap()];
+    let path_of = |class: &str| {
+        let at = first.find(&format!("class=\"{class}\" d=\"")).unwrap();
+        let d = &first[at..];
+        d[..d.find("\"/>").unwrap()].to_string()
+    };
+    assert_eq!(path_of("board").matches('L').count(), 36 * 4);
+    assert_eq!(
+        path_of("corners").matches('h').count(),
+        visits[0].corners_px.len()
+    );
     let at = html.find("data:image/jpeg;base64,").unwrap() + "data:image/jpeg;base64,".len();
     let encoded = &html[at..at + html[at..].find('"').unwrap()];
     use base64::Engine as _;
@@ -552,11 +569,11 @@ const DRIVER: &str = r#"<script>
   heading.click();
   out.second = order();
   out.secondSort = heading.getAttribute('aria-sort');
-  var thumb = document.querySelector('figure.thumb img');
-  thumb.click();
+  var thumb = document.querySelector('figure.thumb svg.frame');
+  thumb.dispatchEvent(new MouseEvent('click', {bubbles: true}));
   var overlay = document.getElementById('overlay');
   out.overlayShown = !overlay.hidden;
-  out.overlaySameImage = overlay.querySelector('img').src === thumb.src;
+  out.overlaySameImage = overlay.querySelector('svg.frame image').getAttribute('href') === thumb.querySelector('image').getAttribute('href');
   overlay.click();
   out.overlayClosed = overlay.hidden;
   var button = document.querySelector('button.copy');
@@ -672,6 +689,49 @@ fn session_copy() -> (tempfile::TempDir, PathBuf) {
     let session = scratch.path().join("s");
     util::copy_folder(path.parent().unwrap(), &session);
     (scratch, session)
+}
+
+/// The JPEG of each frame on a page, in page order.
+fn page_jpegs(html: &str) -> Vec<Vec<u8>> {
+    use base64::Engine as _;
+    let marker = "href=\"data:image/jpeg;base64,";
+    html.match_indices(marker)
+        .map(|(at, _)| {
+            let encoded = &html[at + marker.len()..];
+            base64::engine::general_purpose::STANDARD
+                .decode(&encoded[..encoded.find('"').unwrap()])
+                .unwrap()
+        })
+        .collect()
+}
+
+/// The page shows each frame from the preview its run made while it decoded the frame for
+/// detection (`previews/NNN.jpg`): the report decodes no frame. A session without previews
+/// (recorded before them) gets the same pictures, made from its frames.
+#[test]
+fn frames_are_shown_from_the_runs_previews_or_made_from_the_frames_without_them() {
+    use handeye_report::session::write_folder_report;
+    let (_dir, path) = report();
+    let session = path.parent().unwrap();
+    let shown = page_jpegs(&std::fs::read_to_string(path).unwrap());
+    assert_eq!(shown.len(), 10);
+    for (k, jpeg) in shown.iter().enumerate() {
+        let preview = session.join(format!("previews/{k:03}.jpg"));
+        assert_eq!(
+            jpeg,
+            &std::fs::read(&preview).unwrap(),
+            "{}",
+            preview.display()
+        );
+    }
+    let (_scratch, copy) = &session_copy();
+    std::fs::remove_dir_all(copy.join("previews")).unwrap();
+    write_folder_report(copy, None).unwrap();
+    let made = page_jpegs(&std::fs::read_to_string(copy.join("report.html")).unwrap());
+    assert!(
+        made == shown,
+        "the pictures made from the frames differ from the previews"
+    );
 }
 
 /// The page is written as its frames are drawn, a few at a time: a frame that cannot be read

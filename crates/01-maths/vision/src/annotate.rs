@@ -1,9 +1,9 @@
 //! Annotated frames for people. [`annotate`] (`handeye detect`): detected tag outlines, corners
 //! (corner 0 marked), ids, the board's axes at `T_camera_target` (x red, y green, z blue, drawn
 //! through the lens model) and the reprojection RMS; for ChArUco boards and chessboards the
-//! labelled corners (corner 0 red). [`prediction`] (the report's frames, the console's live
-//! view): the frame made smaller with the board where an answer predicts it beside the corners
-//! detected. Depends on `vision::{target, detect, pnp, draw, shrink}` and `camera_model`.
+//! labelled corners (corner 0 red). [`PredictionMarks`]: where an answer predicts the board
+//! beside the corners detected, drawn into the frame made smaller ([`prediction`], the console's
+//! live view) or over its [`preview`] (the report's frames). Depends on `vision::{target, detect, pnp, draw, shrink}` and `camera_model`.
 
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
@@ -110,16 +110,138 @@ pub fn annotate(
     out
 }
 
-/// The frame made smaller to at most `max_width` px wide (box filtered, [`box_shrink`]; a frame
-/// already narrow enough keeps its size), with the board as `camera_from_target` places it
-/// through `camera` in magenta (each tag's outline on an aprilgrid, a mark at each corner of a
-/// ChArUco board or chessboard) and the `detected` corners (full-resolution pixels) as green
-/// crosses: what an answer predicts beside what was measured. `camera` may be of another
-/// resolution than the frame (a live view decoded smaller): its pixels are scaled to the
-/// frame's. Lines and crosses are sized to read at full size and in a small grid alike. `Err`
-/// says what failed (a frame of no pixels).
+/// The size, px, of a `width`×`height` frame shown at most `max_width` wide ([`prediction`],
+/// [`preview`]): its own size when narrow enough, else scaled to `max_width`, the height rounded.
+pub fn shown_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
+    let shown_width = width.clamp(1, max_width.max(1));
+    let scale = f64::from(shown_width) / f64::from(width.max(1));
+    (
+        shown_width,
+        ((f64::from(height) * scale).round() as u32).max(1),
+    )
+}
+
+/// Largest width of a frame on a page, px (the report's grid shows it small, a click full
+/// size); narrower frames keep their size.
+pub const PREVIEW_WIDTH: u32 = 960;
+/// JPEG quality of a frame on a page (a page of 20 frames stays a few MB).
+pub const PREVIEW_QUALITY: u8 = 80;
+
+/// A frame as a page shows it: grey JPEG at most `max_width` wide ([`shown_size`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Preview {
+    /// The JPEG file's bytes.
+    pub jpeg: Vec<u8>,
+    /// Its size, px.
+    pub width: u32,
+    /// Its size, px.
+    pub height: u32,
+}
+
+/// `grey` made smaller to at most `max_width` px wide (box filtered, [`box_shrink`]) and coded
+/// as grey JPEG at `quality`: the picture under a page's marks ([`PredictionMarks`]). A run makes
+/// it once, where the frame is decoded for detection (the session's `previews/NNN.jpg`), so a
+/// page drawn later neither decodes the frame again nor codes colour planes for a few lines.
+/// `Err` says what failed (a frame of no pixels).
 ///
 /// [`box_shrink`]: crate::shrink::box_shrink
+pub fn preview(grey: &GrayImage, max_width: u32, quality: u8) -> Result<Preview, String> {
+    let small = shown(grey, max_width)?;
+    Ok(Preview {
+        jpeg: draw::grey_jpeg(&small, quality)?,
+        width: small.width(),
+        height: small.height(),
+    })
+}
+
+/// `grey` at most `max_width` wide ([`shown_size`]), box filtered; borrowed when narrow enough.
+fn shown(grey: &GrayImage, max_width: u32) -> Result<std::borrow::Cow<'_, GrayImage>, String> {
+    if grey.width() == 0 || grey.height() == 0 {
+        return Err("a frame of no pixels".into());
+    }
+    let (width, height) = shown_size(grey.width(), grey.height(), max_width);
+    Ok(if width == grey.width() {
+        std::borrow::Cow::Borrowed(grey)
+    } else {
+        std::borrow::Cow::Owned(crate::shrink::box_shrink(grey, width, height)?)
+    })
+}
+
+/// Where an answer puts the board on a frame, beside the corners detected, in the pixels of the
+/// frame as shown ([`shown_size`]; pixel centres at integers): what [`prediction`] draws into the
+/// frame and a page draws over its [`preview`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PredictionMarks {
+    /// The shown frame's size, px.
+    pub size: (u32, u32),
+    /// An aprilgrid's tag outlines where the answer puts them: each a segment of two ends.
+    pub outlines: Vec<[Point2<f64>; 2]>,
+    /// A ChArUco board's or chessboard's corners where the answer puts them.
+    pub board_corners: Vec<Point2<f64>>,
+    /// The corners detected.
+    pub detected: Vec<Point2<f64>>,
+}
+
+impl PredictionMarks {
+    /// The marks of a `frame_size` frame shown at most `max_width` wide: `board` placed at
+    /// `camera_from_target` through `camera` (which may be of another resolution than the frame,
+    /// a live view decoded smaller: its pixels are scaled to the frame's), and the `detected`
+    /// corners (full-resolution pixels).
+    pub fn of(
+        frame_size: (u32, u32),
+        max_width: u32,
+        board: &Target,
+        camera: &CameraModel,
+        camera_from_target: &Pose,
+        detected: impl IntoIterator<Item = Point2<f64>>,
+    ) -> Self {
+        let size = shown_size(frame_size.0, frame_size.1, max_width);
+        let scale = f64::from(size.0) / f64::from(frame_size.0.max(1));
+        // Pixel centres: full-resolution pixel u maps to (u + 0.5)·s − 0.5 in the smaller frame.
+        let to_small =
+            |p: Point2<f64>, s: f64| Point2::new((p.x + 0.5) * s - 0.5, (p.y + 0.5) * s - 0.5);
+        let lens_scale = scale * f64::from(frame_size.0) / f64::from(camera.width.max(1));
+        let project = |p: &Point3<f64>| {
+            camera
+                .project(&(camera_from_target * p))
+                .map(|pixel| to_small(pixel, lens_scale))
+        };
+        let mut marks = PredictionMarks {
+            size,
+            outlines: Vec::new(),
+            board_corners: Vec::new(),
+            detected: detected.into_iter().map(|c| to_small(c, scale)).collect(),
+        };
+        match board.aprilgrid() {
+            Some(grid) => {
+                for tag in grid.tags() {
+                    let pixels: Vec<Option<Point2<f64>>> =
+                        tag.corners_in_target.iter().map(project).collect();
+                    for k in 0..4 {
+                        if let (Some(a), Some(b)) = (pixels[k], pixels[(k + 1) % 4]) {
+                            marks.outlines.push([a, b]);
+                        }
+                    }
+                }
+            }
+            None => {
+                marks.board_corners = board
+                    .points()
+                    .into_iter()
+                    .filter_map(|(_, _, p)| project(&p))
+                    .collect();
+            }
+        }
+        marks
+    }
+}
+
+/// The frame made smaller to at most `max_width` px wide ([`shown_size`], box filtered), with
+/// its [`PredictionMarks`] drawn in: the board as `camera_from_target` places it through
+/// `camera` in magenta (each tag's outline on an aprilgrid, a mark at each corner of a ChArUco
+/// board or chessboard) and the `detected` corners as green crosses — what an answer predicts
+/// beside what was measured (the console's live view). Lines and crosses are sized to read at
+/// full size and in a small grid alike. `Err` says what failed (a frame of no pixels).
 pub fn prediction(
     grey: &GrayImage,
     max_width: u32,
@@ -128,61 +250,31 @@ pub fn prediction(
     camera_from_target: &Pose,
     detected: impl IntoIterator<Item = Point2<f64>>,
 ) -> Result<RgbImage, String> {
-    if grey.width() == 0 || grey.height() == 0 {
-        return Err("a frame of no pixels".into());
-    }
-    let width = grey.width().clamp(1, max_width.max(1));
-    let scale = f64::from(width) / f64::from(grey.width());
-    let height = ((f64::from(grey.height()) * scale).round() as u32).max(1);
-    let small = if width == grey.width() {
-        std::borrow::Cow::Borrowed(grey)
-    } else {
-        std::borrow::Cow::Owned(crate::shrink::box_shrink(grey, width, height)?)
-    };
-    let stroke = if width >= 640 { 2 } else { 1 };
+    let small = shown(grey, max_width)?;
+    let marks = PredictionMarks::of(
+        (grey.width(), grey.height()),
+        max_width,
+        board,
+        camera,
+        camera_from_target,
+        detected,
+    );
+    let stroke = if small.width() >= 640 { 2 } else { 1 };
     let mut rgb = vec![0u8; 3 * small.as_raw().len()];
     for (pixel, &v) in rgb.chunks_exact_mut(3).zip(small.as_raw()) {
         pixel.fill(v);
     }
     let mut out =
         RgbImage::from_raw(small.width(), small.height(), rgb).expect("three bytes a pixel");
-    // Pixel centres: full-resolution pixel u maps to (u + 0.5)·s − 0.5 in the smaller frame.
-    let to_small =
-        |p: Point2<f64>, s: f64| Point2::new((p.x + 0.5) * s - 0.5, (p.y + 0.5) * s - 0.5);
-    let lens_scale = scale * f64::from(grey.width()) / f64::from(camera.width.max(1));
-    let project = |p: &Point3<f64>| {
-        camera
-            .project(&(camera_from_target * p))
-            .map(|pixel| to_small(pixel, lens_scale))
-    };
     let magenta = Rgb([255, 0, 255]);
-    match board.aprilgrid() {
-        Some(grid) => {
-            for tag in grid.tags() {
-                let pixels: Vec<Option<Point2<f64>>> =
-                    tag.corners_in_target.iter().map(project).collect();
-                for k in 0..4 {
-                    if let (Some(a), Some(b)) = (pixels[k], pixels[(k + 1) % 4]) {
-                        draw::line(&mut out, a, b, stroke, magenta);
-                    }
-                }
-            }
-        }
-        None => {
-            for (_, _, p) in board.points() {
-                if let Some(pixel) = project(&p) {
-                    draw::cross(&mut out, pixel, 2.0, magenta);
-                }
-            }
-        }
+    for [a, b] in &marks.outlines {
+        draw::line(&mut out, *a, *b, stroke, magenta);
     }
-    for c in detected {
-        draw::cross(
-            &mut out,
-            to_small(c, scale),
-            2.0 + 2.0 * f64::from(stroke),
-            Rgb([0, 230, 0]),
-        );
+    for &corner in &marks.board_corners {
+        draw::cross(&mut out, corner, 2.0, magenta);
+    }
+    for &c in &marks.detected {
+        draw::cross(&mut out, c, 2.0 + 2.0 * f64::from(stroke), Rgb([0, 230, 0]));
     }
     Ok(out)
 }
@@ -276,5 +368,62 @@ mod tests {
         }
         let empty = GrayImage::new(0, 0);
         assert!(prediction(&empty, 640, &board, &frame_lens, &camera_from_target, []).is_err());
+    }
+
+    /// The marks a page draws over a preview are the lens's projections in the shown frame's
+    /// pixels (centres at integers), exactly, whatever the lens model's resolution; the preview
+    /// is the frame at that size, grey.
+    #[test]
+    fn marks_are_the_lens_projections_in_the_shown_frames_pixels_over_a_grey_preview() {
+        let board = Target::Aprilgrid(
+            Board::aprilgrid(6, 6, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap(),
+        );
+        let camera_from_target = pose_from_rotvec(
+            Vector3::new(-0.14, -0.1, 0.6),
+            Vector3::new(0.2, -0.1, 0.05),
+        );
+        let frame_lens = camera(1.0);
+        let (width, height) = (frame_lens.width, frame_lens.height);
+        let scale = 960.0 / f64::from(width);
+        let shown = |p: Point2<f64>| ((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
+        let detected = [Point2::new(100.25, 200.75), Point2::new(0.0, 0.0)];
+        // The doubled lens scales cx, cy without the half-pixel shift: a quarter pixel off.
+        for (lens, tolerance) in [(frame_lens, 1e-6), (camera(2.0), 0.25 * scale)] {
+            let marks = PredictionMarks::of(
+                (width, height),
+                960,
+                &board,
+                &lens,
+                &camera_from_target,
+                detected,
+            );
+            assert_eq!(marks.size, shown_size(width, height, 960));
+            assert!(marks.board_corners.is_empty(), "an aprilgrid is outlined");
+            let tags = board.aprilgrid().unwrap().tags();
+            assert_eq!(marks.outlines.len(), 4 * tags.len());
+            for (tag, sides) in tags.iter().zip(marks.outlines.chunks(4)) {
+                for (k, [a, _]) in sides.iter().enumerate() {
+                    let at = frame_lens
+                        .project(&(camera_from_target * tag.corners_in_target[k]))
+                        .unwrap();
+                    let (x, y) = shown(at);
+                    let off = (a.x - x).abs().max((a.y - y).abs());
+                    assert!(off <= tolerance, "{a} vs {at}");
+                }
+            }
+            for (mark, c) in marks.detected.iter().zip(detected) {
+                assert_eq!((mark.x, mark.y), shown(c));
+            }
+        }
+        let grey = GrayImage::from_fn(width, height, |x, _| image::Luma([(x % 256) as u8]));
+        let made = preview(&grey, 960, 80).unwrap();
+        let decoded = image::load_from_memory(&made.jpeg).unwrap();
+        assert_eq!(decoded.color(), image::ColorType::L8);
+        assert_eq!(
+            (decoded.width(), decoded.height()),
+            shown_size(width, height, 960)
+        );
+        assert_eq!((made.width, made.height), shown_size(width, height, 960));
+        assert!(preview(&GrayImage::new(0, 0), 960, 80).is_err());
     }
 }

@@ -80,13 +80,38 @@ pub fn cross<I: GenericImage>(image: &mut I, at: Point2<f64>, radius: f64, colou
 /// 2.95 ms, 50 KB against 11.9 ms, 85 KB), which had been a quarter of a bag import's CPU.
 /// `Err` names what failed (a frame wider or taller than 65535 px).
 pub fn jpeg(frame: &image::RgbImage, quality: u8) -> Result<Vec<u8>, String> {
+    encode_jpeg(
+        frame.as_raw(),
+        (frame.width(), frame.height()),
+        jpeg_encoder::ColorType::Rgb,
+        quality,
+    )
+}
+
+/// A grey frame as grey JPEG at `quality` (one plane: under half the time of [`jpeg`]'s three
+/// at 4:2:0). `Err` as [`jpeg`]'s.
+pub fn grey_jpeg(frame: &image::GrayImage, quality: u8) -> Result<Vec<u8>, String> {
+    encode_jpeg(
+        frame.as_raw(),
+        (frame.width(), frame.height()),
+        jpeg_encoder::ColorType::Luma,
+        quality,
+    )
+}
+
+fn encode_jpeg(
+    pixels: &[u8],
+    (width, height): (u32, u32),
+    colour: jpeg_encoder::ColorType,
+    quality: u8,
+) -> Result<Vec<u8>, String> {
     let size = |n: u32| u16::try_from(n).map_err(|_| format!("{n} px is too large for JPEG"));
-    let (width, height) = (size(frame.width())?, size(frame.height())?);
+    let (width, height) = (size(width)?, size(height)?);
     let mut bytes = Vec::new();
     let mut encoder = jpeg_encoder::Encoder::new(&mut bytes, quality);
     encoder.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
     encoder
-        .encode(frame.as_raw(), width, height, jpeg_encoder::ColorType::Rgb)
+        .encode(pixels, width, height, colour)
         .map_err(|e| e.to_string())?;
     Ok(bytes)
 }

@@ -7,6 +7,8 @@
 //!                       the sha256 of every input file
 //!   poses/007.yaml      one record per visited plan pose: measured T_base_flange, detection, board pose
 //!   frames/007.png      the frame grabbed at that pose
+//!   previews/007.jpg    that frame as a page shows it (grey JPEG, at most 960 px wide), made
+//!                       where the frame was decoded so the report does not decode it again
 //!   samples.yaml        the solver's dataset (only poses whose board pose was accepted), id "pose-007"
 //!                       (without intrinsics: written by the solve, board poses by PnP with the
 //!                       estimated camera_info.yaml)
@@ -222,7 +224,7 @@ pub fn dated_session_path(parent: &Path, prefix: &str, now: std::time::SystemTim
 impl SessionFolder {
     /// Creates a new session folder and takes its lock. The folder may exist when it holds
     /// nothing of a session: empty, or what a run killed before writing `session.yaml` left
-    /// (its lock, empty `poses/` and `frames/`, temporary files).
+    /// (its lock, empty [`RECORD_FOLDERS`], temporary files).
     pub fn create(root: &Path) -> Result<SessionFolder, SessionError> {
         if holds_a_session(root)? {
             return Err(SessionError::FolderExists(root.to_path_buf()));
@@ -233,7 +235,7 @@ impl SessionFolder {
         if holds_a_session(root)? {
             return Err(SessionError::FolderExists(root.to_path_buf()));
         }
-        for sub in ["poses", "frames"] {
+        for sub in RECORD_FOLDERS {
             crate::create_dir(&root.join(sub))?;
         }
         Ok(folder)
@@ -411,6 +413,34 @@ impl SessionFolder {
         PathBuf::from(format!("frames/{plan_index:03}.png"))
     }
 
+    /// The preview of a frame file (`frames/007.png` → `previews/007.jpg`, beside `frames/` in
+    /// the session or camera folder the frame is in); `None` for a name that is no frame file.
+    pub fn preview_of(frame: &Path) -> Option<PathBuf> {
+        let folder = frame.parent()?;
+        if folder.file_name()? != "frames" {
+            return None;
+        }
+        let stem = frame.file_stem()?;
+        Some(
+            folder
+                .with_file_name("previews")
+                .join(stem)
+                .with_extension("jpg"),
+        )
+    }
+
+    /// Writes the preview of the frame `frame_name` ([`Self::preview_of`]; `previews/` made when
+    /// a session recorded before previews is resumed).
+    pub fn write_preview(&self, frame_name: &Path, jpeg: &[u8]) -> Result<(), SessionError> {
+        let Some(name) = Self::preview_of(frame_name) else {
+            return Ok(());
+        };
+        if let Some(folder) = name.parent() {
+            crate::create_dir(&self.root.join(folder))?;
+        }
+        self.write_file(&name, jpeg)
+    }
+
     /// Record file of a plan pose, relative to the session folder.
     pub fn visit_name(plan_index: usize) -> PathBuf {
         PathBuf::from(format!("poses/{plan_index:03}.yaml"))
@@ -573,8 +603,11 @@ impl SessionFolder {
     }
 }
 
+/// The folders a session's records are written into, made with it.
+const RECORD_FOLDERS: [&str; 3] = ["poses", "frames", "previews"];
+
 /// Whether `root` holds anything of a session: anything but its lock file, temporary files and
-/// empty `poses/` and `frames/` folders (what a run killed before `session.yaml` leaves).
+/// empty [`RECORD_FOLDERS`] (what a run killed before `session.yaml` leaves).
 fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
     let entries = match std::fs::read_dir(root) {
         Ok(entries) => entries,
@@ -593,7 +626,7 @@ fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
             continue;
         }
         let path = entry.path();
-        let empty_sub = (name == "poses" || name == "frames")
+        let empty_sub = RECORD_FOLDERS.contains(&name.as_ref())
             && path.is_dir()
             && std::fs::read_dir(&path).is_ok_and(|mut d| {
                 d.all(|e| e.is_ok_and(|e| is_temp_name(&e.file_name().to_string_lossy())))
@@ -605,13 +638,13 @@ fn holds_a_session(root: &Path) -> Result<bool, SessionError> {
     Ok(false)
 }
 
-/// Removes the temporary files a killed writer left in the session folder, `poses/` and
-/// `frames/` (`atomic_file`'s sweep: only files whose writer's lock is gone); returns them. Called with the session's lock held, so earlier versions' unlocked temporary
+/// Removes the temporary files a killed writer left in the session folder and its
+/// [`RECORD_FOLDERS`] (`atomic_file`'s sweep: only files whose writer's lock is gone); returns them. Called with the session's lock held, so earlier versions' unlocked temporary
 /// files are a killed run's too.
 fn remove_temp_files(root: &Path) -> Vec<RemovedTemp> {
-    [root.to_path_buf(), root.join("poses"), root.join("frames")]
-        .iter()
-        .flat_map(|dir| remove_stale_temp_files(dir, TempScope::OwnedFolder))
+    std::iter::once(root.to_path_buf())
+        .chain(RECORD_FOLDERS.iter().map(|sub| root.join(sub)))
+        .flat_map(|dir| remove_stale_temp_files(&dir, TempScope::OwnedFolder))
         .collect()
 }
 

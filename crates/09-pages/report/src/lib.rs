@@ -639,13 +639,16 @@ impl<'o> PageOut<'o> {
                     );
                 }
                 self.html.push_str("<div class=\"thumbs\">\n");
-                session::draw_frames(frames, |frame, jpeg| {
+                session::draw_frames(frames, |frame, shown| {
+                    let _ = write!(
+                        self.html,
+                        "<figure class=\"thumb\" id=\"{prefix}{}\">",
+                        frame.sample
+                    );
+                    frame_svg(&mut self.html, &escape(&frame.caption), &shown);
                     let _ = writeln!(
                         self.html,
-                        "<figure class=\"thumb\" id=\"{prefix}{}\"><img class=\"frame\" alt=\"{}\" src=\"data:image/jpeg;base64,{}\"><figcaption>{}</figcaption></figure>",
-                        frame.sample,
-                        escape(&frame.caption),
-                        BASE64_STANDARD.encode(jpeg),
+                        "<figcaption>{}</figcaption></figure>",
                         escape(&frame.caption)
                     );
                     self.flush()
@@ -656,6 +659,45 @@ impl<'o> PageOut<'o> {
         self.html.push_str("</section>\n");
         Ok(())
     }
+}
+
+/// A frame on the page: its preview (inline JPEG) under its marks, in the shown frame's pixels
+/// (pixel centres at integers): the board where the answer puts it in magenta, the detected
+/// corners as green crosses. Drawn by the browser, the marks stay sharp at any size and the
+/// frame is coded once, grey, where the run decoded it.
+fn frame_svg(html: &mut String, label: &str, shown: &session::ShownFrame) {
+    let (width, height) = shown.marks.size;
+    let _ = write!(
+        html,
+        "<svg class=\"frame\" xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" viewBox=\"-0.5 -0.5 {width} {height}\" role=\"img\" aria-label=\"{label}\"><image x=\"-0.5\" y=\"-0.5\" width=\"{width}\" height=\"{height}\" href=\"data:image/jpeg;base64,{}\"/><path class=\"board\" d=\"",
+        BASE64_STANDARD.encode(&shown.preview.jpeg)
+    );
+    for [a, b] in &shown.marks.outlines {
+        let _ = write!(html, "M{:.1} {:.1}L{:.1} {:.1}", a.x, a.y, b.x, b.y);
+    }
+    // Arms of the crosses, px: as the frames were drawn before (a wide frame's strokes were 2 px).
+    let board_arm = 2.0;
+    let detected_arm = if width >= 640 { 6.0 } else { 4.0 };
+    let cross = |html: &mut String, c: &nalgebra::Point2<f64>, arm: f64| {
+        let _ = write!(
+            html,
+            "M{:.1} {:.1}h{:.0}M{:.1} {:.1}v{:.0}",
+            c.x - arm,
+            c.y,
+            2.0 * arm,
+            c.x,
+            c.y - arm,
+            2.0 * arm
+        );
+    };
+    for c in &shown.marks.board_corners {
+        cross(html, c, board_arm);
+    }
+    html.push_str("\"/><path class=\"corners\" d=\"");
+    for c in &shown.marks.detected {
+        cross(html, c, detected_arm);
+    }
+    html.push_str("\"/></svg>");
 }
 
 /// Renders the page and writes it atomically to `path`, the frames as they are drawn.
@@ -747,14 +789,15 @@ table.sortable tr.ok td{color:inherit}table.sortable tr.outlier td{color:#a40000
 table.cell{border-collapse:collapse;font-size:0.92em;margin:0.4em 0}table.cell td,table.cell th{border:1px solid #ccc;padding:4px 8px;text-align:left}\
 td.GOOD,b.GOOD{color:#1e7e34}td.CHECK,b.CHECK{color:#8a4600}td.REDO,b.REDO{color:#a40000}\
 .thumbs{display:flex;flex-wrap:wrap;gap:8px}figure.thumb{margin:0;font-size:80%;width:240px}\
-figure.thumb img{width:240px;display:block;cursor:zoom-in;border:1px solid #ccc}\
+figure.thumb svg{width:240px;height:auto;display:block;cursor:zoom-in;border:1px solid #ccc}\
+svg.frame path{fill:none;stroke-width:1.5;vector-effect:non-scaling-stroke}figure.thumb svg.frame path{stroke-width:0.75}svg.frame .board{stroke:#f0f}svg.frame .corners{stroke:#00e600}\
 #overlay{position:fixed;inset:0;background:rgba(0,0,0,0.85);display:flex;flex-direction:column;align-items:center;justify-content:center;z-index:10;cursor:zoom-out}\
-#overlay[hidden]{display:none}#overlay img{max-width:96vw;max-height:88vh;background:#fff}\
+#overlay[hidden]{display:none}#overlay svg{width:auto;height:auto;max-width:96vw;max-height:88vh;background:#fff}\
 #overlay p{color:#fff;margin:0.4em}\
 @media (max-width:700px){.snippets{grid-template-columns:1fr}}";
 
 /// The full-size frame overlay (filled and shown by [`SCRIPT`]).
-const OVERLAY: &str = "<div id=\"overlay\" hidden role=\"dialog\" aria-label=\"frame, full size\"><img alt=\"\"><p></p></div>\n";
+const OVERLAY: &str = "<div id=\"overlay\" hidden role=\"dialog\" aria-label=\"frame, full size\"><div></div><p></p></div>\n";
 
 /// The page's only script: copy buttons, table sorting, the frame overlay. No network, no
 /// storage; the page reads fine without it.
@@ -814,17 +857,15 @@ const SCRIPT: &str = r#"
     });
   });
   var overlay = document.getElementById('overlay');
-  var big = overlay.querySelector('img');
+  var big = overlay.querySelector('div');
   var caption = overlay.querySelector('p');
   function show(figure) {
-    var img = figure.querySelector('img');
-    big.src = img.src;
-    big.alt = img.alt;
+    big.replaceChildren(figure.querySelector('svg.frame').cloneNode(true));
     caption.textContent = figure.querySelector('figcaption').textContent;
     overlay.hidden = false;
   }
   document.querySelectorAll('figure.thumb').forEach(function (figure) {
-    figure.querySelector('img').addEventListener('click', function () { show(figure); });
+    figure.querySelector('svg.frame').addEventListener('click', function () { show(figure); });
   });
   document.querySelectorAll('a.open-frame').forEach(function (link) {
     link.addEventListener('click', function (event) {

@@ -19,13 +19,12 @@ use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSe
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
 use handeye_solve::Calibration;
-use handeye_vision::{annotate, draw, Target};
+use handeye_vision::annotate::{self, PredictionMarks, Preview};
+use handeye_vision::Target;
 
 /// Largest width of a frame in the report, px: the grid shows it small, a click full size.
 /// Narrower frames keep their size.
-pub const FRAME_WIDTH: u32 = 960;
-/// JPEG quality of the frames in the report (a page of 20 frames stays a few MB).
-const FRAME_JPEG_QUALITY: u8 = 80;
+pub const FRAME_WIDTH: u32 = annotate::PREVIEW_WIDTH;
 
 /// The board and lens a session was recorded with (needed for reprojection and the frames).
 #[derive(Debug, Clone, Copy)]
@@ -262,11 +261,17 @@ pub(crate) fn page_frames(
 /// encoded frames at most, whatever the session's size.
 const FRAMES_AT_ONCE: usize = 8;
 
-/// Each of `frames` read, annotated ([`annotated_frame`]) and encoded, handed to `write` in
-/// order with its JPEG: [`FRAMES_AT_ONCE`] at a time on every core (rayon keeps the order).
+/// A frame as a page shows it: its [`Preview`] and the marks to draw over it.
+pub(crate) struct ShownFrame {
+    pub(crate) preview: Preview,
+    pub(crate) marks: PredictionMarks,
+}
+
+/// Each of `frames` shown ([`shown_frame`]), handed to `write` in order: [`FRAMES_AT_ONCE`] at a
+/// time on every core (rayon keeps the order).
 pub(crate) fn draw_frames(
     frames: &PageFrames,
-    mut write: impl FnMut(&PageFrame, Vec<u8>) -> Result<(), ReportError>,
+    mut write: impl FnMut(&PageFrame, ShownFrame) -> Result<(), ReportError>,
 ) -> Result<(), ReportError> {
     use rayon::prelude::*;
     let optics = Optics {
@@ -274,12 +279,12 @@ pub(crate) fn draw_frames(
         camera: &frames.camera,
     };
     for chunk in frames.frames.chunks(FRAMES_AT_ONCE) {
-        let drawn: Vec<Result<Vec<u8>, ReportError>> = chunk
+        let drawn: Vec<Result<ShownFrame, ReportError>> = chunk
             .par_iter()
-            .map(|frame| annotated_frame(frame, optics))
+            .map(|frame| shown_frame(frame, optics))
             .collect();
-        for (frame, jpeg) in chunk.iter().zip(drawn) {
-            write(frame, jpeg?)?;
+        for (frame, shown) in chunk.iter().zip(drawn) {
+            write(frame, shown?)?;
         }
     }
     Ok(())
@@ -313,27 +318,55 @@ fn corner_residuals<'c>(
     })
 }
 
-/// The frame at most [`FRAME_WIDTH`] wide, with the board reprojected at its predicted
-/// `T_camera_target` and its detected corners (`handeye_vision::annotate::prediction`), as
-/// JPEG.
-fn annotated_frame(frame: &PageFrame, optics: Optics<'_>) -> Result<Vec<u8>, ReportError> {
+/// The frame at most [`FRAME_WIDTH`] wide with the marks of the board reprojected at its
+/// predicted `T_camera_target` and of its detected corners
+/// (`handeye_vision::annotate::PredictionMarks`). The picture is the preview the run wrote when
+/// it decoded the frame (`previews/NNN.jpg`), unless that is missing, older than the frame or of
+/// another size; then it is made from the frame.
+fn shown_frame(frame: &PageFrame, optics: Optics<'_>) -> Result<ShownFrame, ReportError> {
     let frame_error = |message: String| ReportError::Frame {
         path: frame.path.clone(),
         message,
     };
-    let grey = image::open(&frame.path)
-        .map_err(|e| frame_error(e.to_string()))?
-        .into_luma8();
-    let out = annotate::prediction(
-        &grey,
+    let size = image::image_dimensions(&frame.path).map_err(|e| frame_error(e.to_string()))?;
+    let marks = PredictionMarks::of(
+        size,
         FRAME_WIDTH,
         optics.board,
         optics.camera,
         &frame.camera_from_target,
         frame.corners_px.iter().copied(),
-    )
-    .map_err(frame_error)?;
-    draw::jpeg(&out, FRAME_JPEG_QUALITY).map_err(frame_error)
+    );
+    let preview = match recorded_preview(&frame.path, marks.size) {
+        Some(preview) => preview,
+        None => {
+            let grey = image::open(&frame.path)
+                .map_err(|e| frame_error(e.to_string()))?
+                .into_luma8();
+            annotate::preview(&grey, FRAME_WIDTH, annotate::PREVIEW_QUALITY).map_err(frame_error)?
+        }
+    };
+    Ok(ShownFrame { preview, marks })
+}
+
+/// The preview a run wrote of `frame` when it is of `size` and no older than the frame (a frame
+/// written again since has a preview no longer its own).
+fn recorded_preview(frame: &std::path::Path, size: (u32, u32)) -> Option<Preview> {
+    let path = SessionFolder::preview_of(frame)?;
+    let modified = |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if modified(&path)? < modified(frame)? {
+        return None;
+    }
+    let jpeg = std::fs::read(&path).ok()?;
+    let shown =
+        image::ImageReader::with_format(std::io::Cursor::new(&jpeg), image::ImageFormat::Jpeg)
+            .into_dimensions()
+            .ok()?;
+    (shown == size).then_some(Preview {
+        jpeg,
+        width: size.0,
+        height: size.1,
+    })
 }
 
 /// What writes a page of the records in `dir`, which hold no answer: `replay` writes its own

@@ -11,7 +11,7 @@ use handeye_core::geometry::Pose;
 use handeye_core::memory;
 use handeye_core::setup::Setup;
 use handeye_records::dataset::SamplesLog;
-use handeye_vision::{estimate_board_pose, DetectorOptions, Target, TargetDetector};
+use handeye_vision::{annotate, estimate_board_pose, DetectorOptions, Target, TargetDetector};
 
 use handeye_records::folder::{PoseVisit, SessionFolder};
 use handeye_records::SessionError;
@@ -263,6 +263,16 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
                 })?;
             folder.write_file(&frame_name, &png)?;
         }
+    }
+    // The frame as the report will show it, made while it is decoded (the report then reads
+    // this small file, not the frame). A frame it cannot be made of (no pixels) is the
+    // detection's to report; a page without the preview makes it from the frame.
+    if let Ok(preview) = annotate::preview(
+        &job.frame.image,
+        annotate::PREVIEW_WIDTH,
+        annotate::PREVIEW_QUALITY,
+    ) {
+        folder.write_preview(&frame_name, &preview.jpeg)?;
     }
     fault.abort_at("abort-after-frame", job.plan_index);
 
