@@ -126,6 +126,15 @@ pub fn shown_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
 pub const PREVIEW_WIDTH: u32 = 960;
 /// JPEG quality of a frame on a page (a page of 20 frames stays a few MB).
 pub const PREVIEW_QUALITY: u8 = 80;
+/// Most frames a page shows of one camera: a long recording's frames would make a page of a
+/// hundred megabytes or more (1,000 samples: 83 MB of JPEG; three cameras: 197 MB) that no
+/// browser shows well and no reader pages through. Past it, the report draws the half whose
+/// board lies farthest from where the answer predicts it (the frames a reader wants to open) and
+/// the others evenly through the session; every frame stays in the session folder. A run makes
+/// the [`preview`]s of this many frames: which of a longer session's are drawn depends on its
+/// answer, and a preview made for each of a thousand frames would cost more than drawing the
+/// shown ones from their frames.
+pub const MAX_FRAMES_SHOWN: usize = 200;
 
 /// A frame as a page shows it: grey JPEG at most `max_width` wide ([`shown_size`]).
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -9,6 +9,7 @@
 //!   frames/007.png      the frame grabbed at that pose
 //!   previews/007.jpg    that frame as a page shows it (grey JPEG, at most 960 px wide), made
 //!                       where the frame was decoded so the report does not decode it again
+//!                       (the first `annotate::MAX_FRAMES_SHOWN` poses, as many as a page shows)
 //!   samples.yaml        the solver's dataset (only poses whose board pose was accepted), id "pose-007"
 //!                       (without intrinsics: written by the solve, board poses by PnP with the
 //!                       estimated camera_info.yaml)

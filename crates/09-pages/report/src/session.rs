@@ -178,12 +178,8 @@ pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
         .collect()
 }
 
-/// Most frames a page draws of one camera: a long recording's frames would make a page of a
-/// hundred megabytes or more (1,000 samples: 83 MB of JPEG; three cameras: 197 MB) that no
-/// browser shows well and no reader pages through. Past it, the page draws the half whose board
-/// lies farthest from where the answer predicts it (the frames a reader wants to open) and the
-/// others evenly through the session; every frame stays in the session folder.
-pub(crate) const MAX_FRAMES_DRAWN: usize = 200;
+/// Most frames a page draws of one camera ([`annotate::MAX_FRAMES_SHOWN`]).
+pub(crate) const MAX_FRAMES_DRAWN: usize = annotate::MAX_FRAMES_SHOWN;
 
 /// Every sample's frame that has a visit, to be drawn ([`draw_frames`]) with the board at
 /// `predict(T_base_flange)` (`T_camera_target` of the answer shown), at most

@@ -265,13 +265,20 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
         }
     }
     // The frame as the report will show it, made while it is decoded (the report then reads
-    // this small file, not the frame). A frame it cannot be made of (no pixels) is the
-    // detection's to report; a page without the preview makes it from the frame.
-    if let Ok(preview) = annotate::preview(
-        &job.frame.image,
-        annotate::PREVIEW_WIDTH,
-        annotate::PREVIEW_QUALITY,
-    ) {
+    // this small file, not the frame), for as many frames as a page shows. A frame it cannot be
+    // made of (no pixels) is the detection's to report; a page draws a frame without a preview
+    // from the frame itself.
+    let preview = (job.plan_index < annotate::MAX_FRAMES_SHOWN)
+        .then(|| {
+            annotate::preview(
+                &job.frame.image,
+                annotate::PREVIEW_WIDTH,
+                annotate::PREVIEW_QUALITY,
+            )
+            .ok()
+        })
+        .flatten();
+    if let Some(preview) = preview {
         folder.write_preview(&frame_name, &preview.jpeg)?;
     }
     fault.abort_at("abort-after-frame", job.plan_index);
