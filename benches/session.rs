@@ -101,7 +101,11 @@ fn timed_run(config: &Path, out: &Path) -> (CellRun, f64) {
 /// Worst translation 1-sigma of the final answer, mm, and its true error against the
 /// simulator, mm (worst of the two unknowns).
 fn accuracy(done: &CellRun) -> (f64, f64) {
-    let c = &done.solved.calibration;
+    let c = &done
+        .solved
+        .as_ref()
+        .expect("one camera, solved alone")
+        .calibration;
     let u = c.uncertainty.as_ref().expect("covariance");
     let truth = done.cell.config.camera().simulation.expect("sim truth");
     let error = |a: &handeye_core::geometry::Pose, b: &handeye_core::geometry::Pose| {

@@ -137,7 +137,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         );
     }
     // A cell with several cameras: the joint answer, every camera named.
-    if done.result.only_camera().is_none() {
+    let Some(result) = &done.solved else {
         let next = super::cameras::print_run(done);
         let report = write_report(done);
         if let Some(report) = &report {
@@ -145,8 +145,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         }
         outln!("{next}");
         return Ok((report, next));
-    }
-    let result = &done.solved;
+    };
     outln!("{}", result.summary);
     if let Some(truth) = &done.cell.config.camera().simulation {
         outln!("{}", result.compare_with_truth(truth));

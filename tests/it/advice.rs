@@ -73,7 +73,13 @@ fn wrong_board_size(scale: f64, name: &str) {
     );
     let session = dir.path().join(name);
     let run = run_cell(&config, &session);
-    let verdict = run.solved.verdict.clone().expect("a verdict");
+    let verdict = run
+        .solved
+        .as_ref()
+        .unwrap()
+        .verdict
+        .clone()
+        .expect("a verdict");
     eprintln!("{}", verdict.terminal_lines());
     assert_eq!(
         verdict.basis,
@@ -184,7 +190,7 @@ fn a_board_of_the_right_size_is_not_called_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let config = util::sim_cell(dir.path(), 12);
     let run = run_cell(&config, &dir.path().join("session"));
-    let verdict = run.solved.verdict.clone().unwrap();
+    let verdict = run.solved.as_ref().unwrap().verdict.clone().unwrap();
     assert_eq!(verdict.level, Level::Good, "{}", verdict.terminal_lines());
     let s = verdict.figures.board_scale.unwrap();
     assert!((s - 1.0).abs() < 0.005, "{s}");
@@ -291,7 +297,7 @@ fn an_answer_10_cm_from_the_nominal_is_flagged_with_both_values() {
     );
     let session = dir.path().join("session");
     let run = run_cell(&config, &session);
-    let verdict = run.solved.verdict.clone().unwrap();
+    let verdict = run.solved.as_ref().unwrap().verdict.clone().unwrap();
     // The run ends here, as `handeye run` exits: its lock goes with it (a replay of a
     // session a run still holds is refused, issue #44).
     drop(run);
@@ -440,9 +446,9 @@ fn the_placeholder_intrinsics_are_refused_before_the_arm_moves() {
     assert!(text.contains(&line));
     std::fs::write(&fixed, text.replace(&line, "")).unwrap();
     let run = run_cell(&fixed, &dir.path().join("fixed-session"));
-    let verdict = run.solved.verdict.clone().unwrap();
+    let verdict = run.solved.as_ref().unwrap().verdict.clone().unwrap();
     assert_eq!(verdict.level, Level::Good, "{}", verdict.terminal_lines());
-    let fx = run.solved.estimated_camera.unwrap().fx;
+    let fx = run.solved.as_ref().unwrap().estimated_camera.unwrap().fx;
     eprintln!("placeholder dropped: fx estimated {fx:.2} px (true {TRUE_FX})");
     assert!((fx / TRUE_FX - 1.0).abs() < 0.005, "fx {fx}");
 }
@@ -550,7 +556,7 @@ fn intrinsics_8_percent_off_are_the_verdicts_reason() {
     );
     let session = dir.path().join("session");
     let run = run_cell(&config, &session);
-    let verdict = run.solved.verdict.clone().unwrap();
+    let verdict = run.solved.as_ref().unwrap().verdict.clone().unwrap();
     // The run ends here, as `handeye run` exits: its lock goes with it (a replay of a
     // session a run still holds is refused, issue #44).
     drop(run);

@@ -226,6 +226,8 @@ fn settling_by_measurement_never_captures_a_frame_exposed_while_the_arm_moved() 
 fn sigma_mm(run: &cell_run::CellRun) -> f64 {
     let u = run
         .solved
+        .as_ref()
+        .unwrap()
         .calibration
         .uncertainty
         .as_ref()

@@ -479,11 +479,11 @@ fn sim_cell_sessions_with_charuco_and_chessboard_recover_the_truth() {
         let record = std::fs::read_to_string(done.folder.root().join("poses/000.yaml")).unwrap();
         assert!(record.contains("corners_px"), "{record}");
         assert!(
-            done.solved.reprojection.is_some(),
+            done.solved.as_ref().unwrap().reprojection.is_some(),
             "{board}: no reprojection answer"
         );
         let truth = done.cell.config.camera().simulation.as_ref().unwrap();
-        let [(ck, cm), (tk, tm)] = done.solved.calibration.unknowns();
+        let [(ck, cm), (tk, tm)] = done.solved.as_ref().unwrap().calibration.unknowns();
         for (key, estimate, truth) in [(ck, cm, truth.camera_mount), (tk, tm, truth.target_mount)] {
             let (mm, deg) = util::pose_error_mm_deg(&estimate, &truth);
             println!("{board}: {key} {mm:.3} mm, {deg:.4}° from the truth");
@@ -510,7 +510,7 @@ fn intrinsics_from_scratch_with_a_charuco_board() {
     let done = util::run_cell(&config, &dir.path().join("s"));
     assert!(!done.cell.camera().intrinsics_known);
     assert_eq!(done.outcome.accepted.len(), done.cell.plan.waypoints.len());
-    let solved = &done.solved;
+    let solved = done.solved.as_ref().unwrap();
     let truth = CameraModel::load(&util::repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
     let estimated = solved.estimated_camera.unwrap();
     for (name, found, truth) in [

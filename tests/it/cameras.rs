@@ -106,6 +106,12 @@ fn three_camera_run_recovers_every_mount_within_half_a_millimetre() {
             "{name}: no record of pose 19"
         );
         assert!(folder.join("samples.yaml").is_file(), "{name}: no samples");
+        // The cell's answer is the joint one beside rig.yaml: no camera's folder holds a second
+        // answer of its own (the planner camera's used to hold its solve alone).
+        assert!(
+            !folder.join("result.yaml").exists(),
+            "{name}: an answer of its own in its folder"
+        );
     }
     let result = read_result(out);
     for (name, truth) in truth(config) {

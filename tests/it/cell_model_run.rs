@@ -160,9 +160,10 @@ fn run_case(setup: Setup, plan: Plan, mistake: Mistake, seed: u64) -> Outcome {
     );
     match run {
         Ok(run) => {
-            let verdict = run.solved.verdict.clone().expect("a verdict");
-            let e1 = pose_error_mm_deg(&run.solved.calibration.camera_mount, &camera_mount);
-            let e2 = pose_error_mm_deg(&run.solved.calibration.target_mount, &target_mount);
+            let solved = run.solved.as_ref().expect("one camera, solved alone");
+            let verdict = solved.verdict.clone().expect("a verdict");
+            let e1 = pose_error_mm_deg(&solved.calibration.camera_mount, &camera_mount);
+            let e2 = pose_error_mm_deg(&solved.calibration.target_mount, &target_mount);
             Outcome {
                 mistake,
                 setup,
@@ -170,7 +171,7 @@ fn run_case(setup: Setup, plan: Plan, mistake: Mistake, seed: u64) -> Outcome {
                 level: verdict.level,
                 blamed: named_files(&verdict),
                 error: Some((e1.0.max(e2.0), e1.1.max(e2.1))),
-                poses: run.solved.frame_ids.len(),
+                poses: solved.frame_ids.len(),
                 said: verdict.terminal_lines(),
             }
         }

@@ -388,12 +388,11 @@ fn what_writes_a_page(dir: &std::path::Path) -> String {
 /// nothing judged again). The one tail of every run: `handeye run`, `handeye.run` in Python.
 /// Returns the path written.
 pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError> {
-    if run.result.only_camera().is_none() {
+    let Some(solved) = &run.solved else {
         let path = run.root.join(REPORT_FILE);
         super::cameras::write_cameras_report(&run.result, &run.root, &path)?;
         return Ok(path);
-    }
-    let solved = &run.solved;
+    };
     // The intrinsics of the config, else the ones the run estimated.
     let camera = if run.cell.camera().intrinsics_known {
         Some(run.cell.camera().camera_model)

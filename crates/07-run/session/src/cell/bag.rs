@@ -354,6 +354,7 @@ pub fn import_bag_session(
     // The run's tail, as after `handeye run`: its report, from what the run holds.
     let report = report(&done).map(|path| final_path(&path));
     let (outcome, solved) = (done.outcome, done.solved);
+    let solved = solved.context("a bag's recorded cell has one camera, solved alone")?;
     for (index, why) in &outcome.skipped {
         say(BagNote::Line(format!(
             "  frame {index:03} ({:.3} s): board not found or rejected: {why}",

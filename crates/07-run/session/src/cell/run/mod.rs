@@ -125,9 +125,10 @@ pub struct CellRun {
     pub folder: SessionFolder,
     /// What the loop did.
     pub outcome: SessionOutcome,
-    /// The solved session (`result.yaml` is written; of a several-camera cell: the planner
-    /// camera's own, in its folder).
-    pub solved: SolvedSession,
+    /// A cell of one camera: its solved session (`result.yaml` is written). `None` for several
+    /// cameras, whose answer is the joint one ([`Self::result`]): no camera of theirs is solved
+    /// alone, which would leave a second, different answer in its folder.
+    pub solved: Option<SolvedSession>,
     /// The session's own folder, what `-o` named (or `--resume`): the run's folder, or for
     /// several cameras the folder holding `rig.yaml` and every camera's folder (the run's is
     /// the planner camera's).
@@ -154,8 +155,8 @@ impl CellRun {
     /// camera's).
     pub fn verdict_and_summary(&self) -> (Option<&handeye_solve::verdict::Verdict>, String) {
         let result = &self.result;
-        if result.only_camera().is_some() {
-            return (result.verdict.as_ref(), self.solved.summary.clone());
+        if let Some(solved) = &self.solved {
+            return (result.verdict.as_ref(), solved.summary.clone());
         }
         let line = |name: &str, verdict: Option<&handeye_solve::verdict::Verdict>| {
             verdict.map_or_else(
@@ -454,10 +455,12 @@ pub fn run_opened(
         adaptive,
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
-    let solved = handeye_records::solve_folder(&folder, &cell.solve_inputs())?;
-    let root = request.target.root(&folder);
     // The session's answer: the one camera's as its solve wrote it, or the joint solve of
-    // every camera's records.
+    // every camera's records (a listed cell of one camera has both, and they agree).
+    let solved = (cell.config.cameras.len() == 1)
+        .then(|| handeye_records::solve_folder(&folder, &cell.solve_inputs()))
+        .transpose()?;
+    let root = request.target.root(&folder);
     let result = if cell.config.listed {
         super::cameras::solve_cameras_folder(
             &root,
