@@ -1,6 +1,7 @@
 //! Small raster drawing for annotated frames and printed boards: lines, crosses and text in a
 //! built-in 3x5 pixel font (scaled by whole pixels). Coordinates are pixels in the project
-//! convention (centres at integers), and [`jpeg`], the one encoder of annotated frames.
+//! convention (centres at integers), and [`jpeg`] and [`grey_jpeg`], the one JPEG encoder of
+//! frames shown to people (annotated live frames, the report's previews).
 //! Depends on the `image` and `jpeg-encoder` crates only.
 
 use image::{GenericImage, Pixel};

@@ -603,8 +603,8 @@ impl<'o> PageOut<'o> {
     /// The frames of one camera (`id` the section's, `prefix` its frames' anchors: `frame-` on
     /// a one-camera page, `frame-<camera>-` for each of several), annotated with the board
     /// predicted by `answer`, small in a grid; a click shows one full size in an overlay. Each
-    /// frame is drawn (`session::annotated_frame`) and written as it comes, a few at a time on
-    /// every core.
+    /// frame is shown (`session::shown_frame`: its preview, the marks over it as SVG) and
+    /// written as it comes, a few at a time on every core.
     pub(crate) fn frames_section(
         &mut self,
         heading: &str,

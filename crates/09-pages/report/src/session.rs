@@ -1,8 +1,9 @@
 //! Gathers a report's input from a session folder: the samples (`samples.yaml`), the recorded
 //! visits (frames and detected corners, `poses/NNN.yaml`), and — with the board and the camera
-//! model — per-sample reprojection errors at the predicted `T_camera_target` and annotated
-//! frames (JPEG, at most [`FRAME_WIDTH`] wide). Pixels follow the OpenCV convention (origin at
-//! the top-left pixel's centre).
+//! model — per-sample reprojection errors at the predicted `T_camera_target` and the frames as
+//! a page shows them (the run's grey JPEG previews, at most [`FRAME_WIDTH`] wide, with the marks
+//! to draw over them). Pixels follow the OpenCV convention (origin at the top-left pixel's
+//! centre).
 
 use std::collections::HashMap;
 
