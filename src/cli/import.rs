@@ -205,7 +205,8 @@ struct BagArgs {
     max_tf_gap_ms: f64,
     /// Quad decimation of the detector, as a cell's `detector.decimate` and `handeye detect`:
     /// 2 searches the quads at half resolution, the corners are still refined at full
-    /// resolution; 1 (full resolution, this import's default before) for tags under ~20 px.
+    /// resolution; 1 (full resolution, this import's default before) when tags far away or
+    /// small are not found at half.
     #[arg(long, default_value_t = 2.0)]
     decimation: f32,
     /// Frames decoded and detected at once, each by a thread of its own (default: one per core,

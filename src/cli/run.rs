@@ -137,7 +137,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         );
     }
     // A cell with several cameras: the joint answer, every camera named.
-    let Some(result) = &done.solved else {
+    let Some(solved) = &done.solved else {
         let next = super::cameras::print_run(done);
         let report = write_report(done);
         if let Some(report) = &report {
@@ -146,11 +146,11 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         outln!("{next}");
         return Ok((report, next));
     };
-    outln!("{}", result.summary);
+    outln!("{}", solved.summary);
     if let Some(truth) = &done.cell.config.camera().simulation {
-        outln!("{}", result.compare_with_truth(truth));
+        outln!("{}", solved.compare_with_truth(truth));
     }
-    if let (Some(arm), Some(errors)) = (&result.arm, &done.cell.config.arm_errors) {
+    if let (Some(arm), Some(errors)) = (&solved.arm, &done.cell.config.arm_errors) {
         outln!("{}", arm.compare_with_truth(errors));
     }
     let report = write_report(done);
@@ -162,7 +162,7 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         outln!("report:  {}", report.display());
     }
     let next = next_step(
-        result.verdict.as_ref(),
+        solved.verdict.as_ref(),
         &result_path,
         Stack::of(&done.cell.config.robot),
     );

@@ -3,7 +3,8 @@
 //! through the lens model) and the reprojection RMS; for ChArUco boards and chessboards the
 //! labelled corners (corner 0 red). [`PredictionMarks`]: where an answer predicts the board
 //! beside the corners detected, drawn into the frame made smaller ([`prediction`], the console's
-//! live view) or over its [`preview`] (the report's frames). Depends on `vision::{target, detect, pnp, draw, shrink}` and `camera_model`.
+//! live view) or over its [`preview`] (the report's frames). Depends on
+//! `vision::{target, detect, pnp, draw, shrink}` and `camera_model`.
 
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Point2, Point3};
@@ -243,6 +244,14 @@ impl PredictionMarks {
         }
         marks
     }
+
+    /// Half the length of a cross's arms, px of the shown frame: a ChArUco board's or
+    /// chessboard's predicted corner, and a detected corner (longer on a frame 640 px wide or
+    /// more, whose lines are drawn 2 px wide). Sized to read at full size and in a small grid.
+    pub fn cross_arms(&self) -> (f64, f64) {
+        let detected = if self.size.0 >= 640 { 6.0 } else { 4.0 };
+        (2.0, detected)
+    }
 }
 
 /// The frame made smaller to at most `max_width` px wide ([`shown_size`], box filtered), with
@@ -269,6 +278,7 @@ pub fn prediction(
         detected,
     );
     let stroke = if small.width() >= 640 { 2 } else { 1 };
+    let (board_arm, detected_arm) = marks.cross_arms();
     let mut rgb = vec![0u8; 3 * small.as_raw().len()];
     for (pixel, &v) in rgb.chunks_exact_mut(3).zip(small.as_raw()) {
         pixel.fill(v);
@@ -280,10 +290,10 @@ pub fn prediction(
         draw::line(&mut out, *a, *b, stroke, magenta);
     }
     for &corner in &marks.board_corners {
-        draw::cross(&mut out, corner, 2.0, magenta);
+        draw::cross(&mut out, corner, board_arm, magenta);
     }
     for &c in &marks.detected {
-        draw::cross(&mut out, c, 2.0 + 2.0 * f64::from(stroke), Rgb([0, 230, 0]));
+        draw::cross(&mut out, c, detected_arm, Rgb([0, 230, 0]));
     }
     Ok(out)
 }

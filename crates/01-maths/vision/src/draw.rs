@@ -89,8 +89,8 @@ pub fn jpeg(frame: &image::RgbImage, quality: u8) -> Result<Vec<u8>, String> {
     )
 }
 
-/// A grey frame as grey JPEG at `quality` (one plane: under half the time of [`jpeg`]'s three
-/// at 4:2:0). `Err` as [`jpeg`]'s.
+/// A grey frame as grey JPEG at `quality`: one plane, no colour conversion (a 960x540 frame of a
+/// bag import took about 2.2 ms in a profile, against [`jpeg`]'s 2.95 ms). `Err` as [`jpeg`]'s.
 pub fn grey_jpeg(frame: &image::GrayImage, quality: u8) -> Result<Vec<u8>, String> {
     encode_jpeg(
         frame.as_raw(),

@@ -675,9 +675,7 @@ fn frame_svg(html: &mut String, label: &str, shown: &session::ShownFrame) {
     for [a, b] in &shown.marks.outlines {
         let _ = write!(html, "M{:.1} {:.1}L{:.1} {:.1}", a.x, a.y, b.x, b.y);
     }
-    // Arms of the crosses, px: as the frames were drawn before (a wide frame's strokes were 2 px).
-    let board_arm = 2.0;
-    let detected_arm = if width >= 640 { 6.0 } else { 4.0 };
+    let (board_arm, detected_arm) = shown.marks.cross_arms();
     let cross = |html: &mut String, c: &nalgebra::Point2<f64>, arm: f64| {
         let _ = write!(
             html,

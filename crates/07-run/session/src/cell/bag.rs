@@ -354,7 +354,8 @@ pub fn import_bag_session(
     // The run's tail, as after `handeye run`: its report, from what the run holds.
     let report = report(&done).map(|path| final_path(&path));
     let (outcome, solved) = (done.outcome, done.solved);
-    let solved = solved.context("a bag's recorded cell has one camera, solved alone")?;
+    // A bag's recorded cell has one camera, which the run solves alone.
+    let solved = solved.context("the bag's recorded cell was not solved as one camera")?;
     for (index, why) in &outcome.skipped {
         say(BagNote::Line(format!(
             "  frame {index:03} ({:.3} s): board not found or rejected: {why}",

@@ -268,18 +268,15 @@ fn process(job: &Job, camera: &WorkerCamera, fault: &Fault) -> Result<PoseVisit,
     // this small file, not the frame), for as many frames as a page shows. A frame it cannot be
     // made of (no pixels) is the detection's to report; a page draws a frame without a preview
     // from the frame itself.
-    let preview = (job.plan_index < annotate::MAX_FRAMES_SHOWN)
-        .then(|| {
-            annotate::preview(
-                &job.frame.image,
-                annotate::PREVIEW_WIDTH,
-                annotate::PREVIEW_QUALITY,
-            )
-            .ok()
-        })
-        .flatten();
-    if let Some(preview) = preview {
-        folder.write_preview(&frame_name, &preview.jpeg)?;
+    if job.plan_index < annotate::MAX_FRAMES_SHOWN {
+        let made = annotate::preview(
+            &job.frame.image,
+            annotate::PREVIEW_WIDTH,
+            annotate::PREVIEW_QUALITY,
+        );
+        if let Ok(preview) = made {
+            folder.write_preview(&frame_name, &preview.jpeg)?;
+        }
     }
     fault.abort_at("abort-after-frame", job.plan_index);
 

@@ -456,7 +456,8 @@ pub fn run_opened(
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
     // The session's answer: the one camera's as its solve wrote it, or the joint solve of
-    // every camera's records (a listed cell of one camera has both, and they agree).
+    // every camera's records (a listed cell of one camera has both: its folder's, and the joint
+    // one at the root).
     let solved = (cell.config.cameras.len() == 1)
         .then(|| handeye_records::solve_folder(&folder, &cell.solve_inputs()))
         .transpose()?;
