@@ -380,7 +380,13 @@ fn shoulder_static() -> Pose {
 }
 
 fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    handeye()
+    import_command(bag, out, extra).output().unwrap()
+}
+
+/// The `import bag` command of [`import`], to run with more set (the environment).
+fn import_command(bag: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut command = handeye();
+    command
         .args(["import", "bag"])
         .arg(bag)
         .args(["--base", "base_link", "--flange", "tool0"])
@@ -389,9 +395,34 @@ fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
         .arg(board_path())
         .arg("-o")
         .arg(out)
-        .args(extra)
-        .output()
-        .unwrap()
+        .args(extra);
+    command
+}
+
+/// A stop-and-go bag of 6 views with the board rendered while standing (so an import that
+/// finishes calibrates), 5 fps, in `storage`.
+fn six_view_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
+    let board = Board::load(&board_path()).unwrap();
+    let trajectory = StopAndGo {
+        views: views(6, &board),
+        stay: 0.6,
+        travel: 0.4,
+    };
+    let standing = |t: f64| trajectory.standing(t);
+    make_bag(
+        dir,
+        &format!("six-views-{storage}"),
+        &BagSpec {
+            storage,
+            image_kind: "mono8",
+            trajectory: &trajectory,
+            fps: 5.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render: &standing,
+        },
+    )
 }
 
 /// The import options of the bags these tests write (the sim arm's frames and topics).
@@ -500,6 +531,7 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
     );
     assert!(log.contains("16 samples accepted, 0 skipped"), "{log}");
     assert_calibrated(&out);
+    assert_recorded_as_the_run_records(&out, &dir.path().join("rerun"));
     // The result says which frames its robot poses were read in, and the exports name them and
     // leave the transforms as they are: by default and with `--base-frame base_link` alike (it
     // used to be turned 180° a second time as if it were the controller's `base`).
@@ -596,6 +628,70 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
     assert!(run.status.success(), "{}", text(&run));
     assert_eq!(recorded_decimation(&full), 1.0);
     assert_calibrated(&full);
+}
+
+/// The import measures each frame while it is in memory, as it is chosen; a run of its recorded
+/// cell (`import/cell.yaml`, reading the frames from the session) into `rerun` records the same:
+/// every pose record, preview and `samples.yaml`, byte for byte.
+fn assert_recorded_as_the_run_records(session: &Path, rerun: &Path) {
+    let run = handeye()
+        .arg("run")
+        .arg("--config")
+        .arg(session.join("import/cell.yaml"))
+        .arg("-o")
+        .arg(rerun)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", text(&run));
+    for folder in ["poses", "previews"] {
+        let names = |root: &Path| -> Vec<_> {
+            let mut names: Vec<_> = std::fs::read_dir(root.join(folder))
+                .unwrap()
+                .map(|e| e.unwrap().file_name())
+                .collect();
+            names.sort();
+            names
+        };
+        let imported = names(session);
+        assert!(!imported.is_empty(), "no {folder} in {}", session.display());
+        assert_eq!(imported, names(rerun), "{folder}");
+        for name in imported {
+            let read = |root: &Path| std::fs::read(root.join(folder).join(&name)).unwrap();
+            assert!(
+                read(session) == read(rerun),
+                "{folder}/{}: the import's differs from the run's",
+                name.to_string_lossy()
+            );
+        }
+    }
+    assert_eq!(
+        std::fs::read_to_string(session.join("samples.yaml")).unwrap(),
+        std::fs::read_to_string(rerun.join("samples.yaml")).unwrap()
+    );
+}
+
+/// The import measures and records each frame as it is chosen: a record that cannot be written
+/// (a full disk) stops it there with the error, naming the file, and leaves nothing behind.
+#[test]
+fn a_record_that_cannot_be_written_stops_the_import_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bag) = six_view_bag(dir.path(), "mcap") else {
+        return;
+    };
+    let out = dir.path().join("session");
+    let run = import_command(&bag, &out, &["--camera-info", "/camera/camera_info"])
+        .env("HANDEYE_FAULT", "full-disk-at-record:2")
+        .output()
+        .unwrap();
+    let log = text(&run);
+    assert_eq!(run.status.code(), Some(1), "{log}");
+    assert!(
+        log.contains("recording the bag's chosen frames")
+            && log.contains("poses/002.yaml")
+            && log.contains("no space left on device"),
+        "{log}"
+    );
+    no_leftovers(dir.path(), &out);
 }
 
 /// The quad decimation the import's recorded cell (`import/cell.yaml`) detects with.

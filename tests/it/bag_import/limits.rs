@@ -40,37 +40,11 @@ fn import_under(bag: &Path, out: &Path, limit_mb: u64, jobs: usize) -> Ending {
     ended
 }
 
-/// A stop-and-go bag of 6 views with the board rendered while standing (so an import that
-/// finishes calibrates), 5 fps.
-fn limit_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(6, &board),
-        stay: 0.6,
-        travel: 0.4,
-    };
-    let standing = |t: f64| trajectory.standing(t);
-    make_bag(
-        dir,
-        &format!("limits-{storage}"),
-        &BagSpec {
-            storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
-            fps: 5.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
-        },
-    )
-}
-
 fn sweep(limits: impl Iterator<Item = u64> + Clone, repetitions: usize) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     let mut table = Vec::new();
     for storage in ["mcap", "sqlite3"] {
-        let Some(bag) = limit_bag(dir.path(), storage) else {
+        let Some(bag) = six_view_bag(dir.path(), storage) else {
             return table;
         };
         for limit in limits.clone() {

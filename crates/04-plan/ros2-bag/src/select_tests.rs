@@ -165,7 +165,8 @@ fn frames_held_at_once_stay_bounded_however_many_stops_and_each_stops_sharp_fram
         let file = dir.path().join(format!("stops-{stops}.mcap"));
         write_stops_bag(&file, stops);
         let mut handed: Vec<(usize, i64)> = Vec::new();
-        let imported = import_bag_to(&file, &options(jobs), &mut |i, sample, image| {
+        let imported = import_bag_to(&file, &options(jobs), &mut |chosen| {
+            let (i, sample, image) = (chosen.index, chosen.sample, chosen.image);
             assert!(
                 image == &sharp,
                 "sample {i} at {} ns is not its stop's sharp frame",
@@ -205,7 +206,8 @@ fn a_sink_that_fails_stops_the_import_with_its_error() {
     let file = dir.path().join("stops.mcap");
     write_stops_bag(&file, 3);
     let mut calls = 0;
-    let error = import_bag_to(&file, &options(1), &mut |i, _, _| {
+    let error = import_bag_to(&file, &options(1), &mut |chosen| {
+        let i = chosen.index;
         calls += 1;
         if i == 1 {
             return Err(format!("writing /nowhere/{i:03}.png: no space left on device").into());

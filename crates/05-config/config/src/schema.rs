@@ -438,6 +438,19 @@ impl Default for DetectorConfig {
     }
 }
 
+impl DetectorConfig {
+    /// The detector's options this section asks for (the others at their defaults): what a run
+    /// of the cell measures its frames with.
+    pub fn options(&self) -> handeye_vision::DetectorOptions {
+        handeye_vision::DetectorOptions {
+            decimation: self.decimate,
+            threads: self.threads,
+            max_hamming: self.max_hamming,
+            ..handeye_vision::DetectorOptions::default()
+        }
+    }
+}
+
 /// The solver a config asks for: the solver's own [`Method`], read and written by the one list
 /// of names ([`Method::NAMES`]) that `--method` takes too.
 pub type SolverMethod = Method;

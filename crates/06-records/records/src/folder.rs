@@ -7,8 +7,9 @@
 //!                       the sha256 of every input file
 //!   poses/007.yaml      one record per visited plan pose: measured T_base_flange, detection, board pose
 //!   frames/007.png      the frame grabbed at that pose
-//!   previews/007.jpg    that frame as a page shows it (grey JPEG, at most 960 px wide), made
-//!                       where the frame was decoded so the report does not decode it again
+//!   previews/007.jpg    that frame as a page shows it (grey JPEG, shrunk by a whole factor to
+//!                       at most 960 px wide), made where the frame was in memory for detection
+//!                       so the report does not decode it again
 //!                       (the first `annotate::MAX_FRAMES_SHOWN` poses, as many as a page shows)
 //!   samples.yaml        the solver's dataset (only poses whose board pose was accepted), id "pose-007"
 //!                       (without intrinsics: written by the solve, board poses by PnP with the

@@ -279,7 +279,13 @@ impl PoseLoop {
         let (job_tx, job_rx) = mpsc::channel::<Job>();
         let (result_tx, results) = mpsc::channel::<JobResult>();
         let fault = Arc::new(Fault::from_env());
-        let workers = spawn_workers(&recordings, &samples, fault.clone(), job_rx, result_tx)?;
+        let workers = spawn_workers(
+            &recordings,
+            Some(&samples),
+            fault.clone(),
+            job_rx,
+            result_tx,
+        )?;
         Ok(PoseLoop {
             setup,
             recordings,
@@ -507,6 +513,125 @@ impl PoseLoop {
 impl Drop for PoseLoop {
     /// A run that ends by an error still lets its workers finish what they hold (every
     /// committed record stays) before the error is returned.
+    fn drop(&mut self) {
+        self.stop_workers();
+    }
+}
+
+/// Frames of a recorded source measured while they are in memory, before the run that uses them:
+/// a bag import, whose poses are known only as its frames are chosen, and whose plan is checked
+/// when all of them are. The run's own detection workers, started once, measure each frame
+/// handed over and commit it as a run commits a pose (its preview, its record, `samples.yaml`);
+/// the frame file is the caller's, written already. The run that follows in the same folder
+/// finds every pose recorded: it neither reads nor decodes a frame again, and measures again
+/// only a frame whose board was not found (every pose's second try). A frame waits for a worker
+/// only while [`FrameRecorder::WAITING`] others do: the reader is held back when detection falls
+/// behind, so the frames in memory stay few however many there are.
+pub struct FrameRecorder {
+    jobs: Option<mpsc::SyncSender<Job>>,
+    results: mpsc::Receiver<JobResult>,
+    workers: Vec<std::thread::JoinHandle<()>>,
+    error: Option<SessionError>,
+}
+
+impl FrameRecorder {
+    /// Frames handed over that may wait for a worker at once.
+    pub const WAITING: usize = 2;
+
+    /// Starts the detection workers of `camera` (its folder, board and setup), measuring with
+    /// `detector` and judging by `max_rms` as the run's [`SessionSetup`] would; `model`: the
+    /// camera's intrinsics (`None` when they are to be estimated: corners only); `frame_size`:
+    /// its frames' size, px (what the workers' memory is counted at).
+    pub fn start(
+        camera: &SessionCamera,
+        detector: DetectorOptions,
+        max_rms: f64,
+        model: Option<handeye_core::camera_model::CameraModel>,
+        frame_size: (u32, u32),
+    ) -> Result<FrameRecorder, SessionError> {
+        let recording = Recording {
+            name: camera.name.clone(),
+            folder: camera.folder.clone(),
+            setup: camera.setup,
+            board: camera.board.clone(),
+            detector,
+            max_rms,
+            model: model.filter(|_| !camera.estimate_intrinsics),
+            frame_size,
+        };
+        let (jobs, job_rx) = mpsc::sync_channel::<Job>(Self::WAITING);
+        let (result_tx, results) = mpsc::channel::<JobResult>();
+        let fault = Arc::new(Fault::from_env());
+        // No `samples.yaml` meanwhile: the run rebuilds it from the records when it starts.
+        let workers = spawn_workers(&[recording], None, fault, job_rx, result_tx)?;
+        Ok(FrameRecorder {
+            jobs: Some(jobs),
+            results,
+            workers,
+            error: None,
+        })
+    }
+
+    /// Hands over pose `plan_index`'s `frame`, taken with the flange at `base_from_flange` (as
+    /// the recorded robot will serve it); waits while [`Self::WAITING`] frames wait. The first
+    /// error a worker met (a record that could not be written) is returned here once it is in.
+    pub fn record(
+        &mut self,
+        plan_index: usize,
+        frame: Frame,
+        base_from_flange: Pose,
+    ) -> Result<(), SessionError> {
+        while let Ok(result) = self.results.try_recv() {
+            self.keep_error(result);
+        }
+        if let Some(error) = self.error.take() {
+            return Err(error);
+        }
+        let jobs = self
+            .jobs
+            .as_ref()
+            .ok_or(SessionError::DetectionThread("stopped"))?;
+        jobs.send(Job {
+            camera: 0,
+            plan_index,
+            frame,
+            base_from_flange,
+        })
+        .map_err(|_| SessionError::DetectionThread("stopped"))
+    }
+
+    /// Waits for every frame handed over to be committed, stops the workers; the first error
+    /// met.
+    pub fn finish(mut self) -> Result<(), SessionError> {
+        if self.stop_workers() {
+            return Err(SessionError::DetectionThread("panicked"));
+        }
+        match self.error.take() {
+            Some(error) => Err(error),
+            None => Ok(()),
+        }
+    }
+
+    fn keep_error(&mut self, result: JobResult) {
+        if let (Err(error), None) = (result.visit, &self.error) {
+            self.error = Some(error);
+        }
+    }
+
+    /// Closes the queue, takes every result and joins the workers; whether one panicked.
+    fn stop_workers(&mut self) -> bool {
+        self.jobs = None;
+        while let Ok(result) = self.results.recv() {
+            self.keep_error(result);
+        }
+        std::mem::take(&mut self.workers)
+            .into_iter()
+            .any(|w| w.join().is_err())
+    }
+}
+
+impl Drop for FrameRecorder {
+    /// An import that ends by an error still lets the workers finish what they hold.
     fn drop(&mut self) {
         self.stop_workers();
     }

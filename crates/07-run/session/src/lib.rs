@@ -22,7 +22,7 @@ pub mod verify;
 
 pub use adaptive::{run_adaptive_session, CellPlanner, PlanSource};
 pub use driver::{
-    run_session, CameraFailure, PoseLoop, SessionCamera, SessionEvent, SessionOutcome,
-    SessionSetup, SharedFrame,
+    run_session, CameraFailure, FrameRecorder, PoseLoop, SessionCamera, SessionEvent,
+    SessionOutcome, SessionSetup, SharedFrame,
 };
 pub use manual::{run_manual_session, ManualCommand, ManualControl, ManualEvent, ManualOptions};

@@ -1,8 +1,10 @@
 //! A ROS 2 bag imported as a session (`handeye import bag`): a recorded pose source for the one
-//! run. The bag read ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), its
-//! frames written as they are chosen (none is kept in memory) with their flange poses as a
-//! recorded cell in a staging folder beside the output, run through the one run
-//! ([`run::run`]) and solved there, its report written by the caller's [`RunReport`] (the
+//! run. The bag read ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), each
+//! frame, as it is chosen, written as the session's frame file and measured while it is in
+//! memory by the run's own detection workers ([`FrameRecorder`]: its preview and record
+//! committed; a few frames in memory at a time, never a frame decoded again), with their flange
+//! poses as a recorded cell in a staging folder beside the output, run through the one run
+//! ([`run::run`], which finds every pose recorded) and solved there, its report written by the caller's [`RunReport`] (the
 //! run's tail, as after `handeye run`), and the folder renamed into place only when all of
 //! that succeeded; the staging folder of an import that was killed is removed by the next one.
 //! What the import did is recorded in `<session>/import/bag-import.yaml`.
@@ -23,9 +25,12 @@ use super::run::{
     self as run, RunError, RunObserver, RunReport, RunRequest, SessionTarget, Strategy,
 };
 use super::PreparedCell;
+use crate::driver::{FrameRecorder, SessionCamera};
+use handeye_camera::{Frame, PngFile};
+use handeye_core::geometry::PoseYaml;
 use handeye_records::{SessionFolder, SolvedSession};
 
-use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, SkipReason};
+use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, ChosenFrame, SkipReason};
 
 /// What to import and where.
 #[derive(Debug, Clone)]
@@ -273,7 +278,7 @@ pub fn import_bag_session(
     let import_dir = stage.join("import");
     std::fs::create_dir_all(&import_dir)
         .with_context(|| format!("creating {}", import_dir.display()))?;
-    let (imported, samples) = import_frames(a, &stage)?;
+    let (imported, samples) = import_frames(a, &folder)?;
     say_what_was_read(request, &imported, say);
     anyhow::ensure!(
         imported.samples.len() >= 3,
@@ -386,46 +391,101 @@ pub fn import_bag_session(
 }
 
 /// Reads the bag, writing each chosen frame the moment it is chosen as the session's frame file
-/// of its pose (`frames/NNN.png` under `session`: the one copy; the run detects the board in it
-/// and keeps it there); returns what was read and the frames' records.
+/// of its pose (`frames/NNN.png` under `folder`: the one copy) and measuring it while it is in
+/// memory, as the run measures a pose ([`FrameRecorder`]: the board detected, its preview and
+/// record committed), so the run that follows finds every pose recorded; returns what was read
+/// and the frames' records.
 fn import_frames(
     request: &BagSessionRequest,
-    session: &Path,
+    folder: &SessionFolder,
 ) -> anyhow::Result<(BagImport, Vec<BagSampleRecord>)> {
     let mut samples = Vec::new();
-    let imported = import_bag_to(&request.bag, &request.options, &mut |i, sample, image| {
-        let frame = SessionFolder::frame_name(i);
-        let file = session.join(&frame);
-        write_frame_png(image, &file).with_context(|| format!("writing {}", file.display()))?;
+    let mut recorder: Option<FrameRecorder> = None;
+    let imported = import_bag_to(&request.bag, &request.options, &mut |chosen| {
+        let frame = SessionFolder::frame_name(chosen.index);
+        let file = folder.root().join(&frame);
+        let png = frame_png(chosen.image)?;
+        std::fs::write(&file, &png).with_context(|| format!("writing {}", file.display()))?;
         samples.push(BagSampleRecord {
             frame: frame.display().to_string(),
-            image_stamp_s: sample.image_stamp_ns as f64 * 1e-9,
-            robot_stamp_s: sample.robot_stamp_ns as f64 * 1e-9,
-            sharpness: sample.sharpness,
+            image_stamp_s: chosen.sample.image_stamp_ns as f64 * 1e-9,
+            robot_stamp_s: chosen.sample.robot_stamp_ns as f64 * 1e-9,
+            sharpness: chosen.sample.sharpness,
         });
+        let recorder = match &mut recorder {
+            Some(recorder) => recorder,
+            None => recorder.insert(start_recorder(request, folder, &chosen)?),
+        };
+        let image = Frame {
+            image: chosen.image.clone(),
+            captured_at: std::time::Instant::now(),
+            png: Some(PngFile {
+                path: file,
+                bytes: png,
+            }),
+        };
+        let base_from_flange = served(&chosen.sample.base_from_flange)?;
+        recorder
+            .record(chosen.index, image, base_from_flange)
+            .context(RECORDING)?;
         Ok(())
     })
     .context("importing a ROS 2 bag")?;
+    if let Some(recorder) = recorder {
+        recorder.finish().context(RECORDING)?;
+    }
     Ok((imported, samples))
 }
 
-/// Writes an imported frame as PNG with the `Up` filter (each row minus the one above) rather
-/// than the encoder's default choice per row: the frame is decoded twice after (by the session's
-/// detection and by the report), and undoing `Up` is a vectorised add where the default's
-/// `Paeth` rows were a sixth of a short import's PNG cost; camera frames compress about as well
-/// either way.
-fn write_frame_png(frame: &image::GrayImage, file: &Path) -> anyhow::Result<()> {
+/// What a failure to measure or record a chosen frame stopped (the staging folder goes with it).
+const RECORDING: &str = "recording the bag's chosen frames into the session (nothing is kept)";
+
+/// The detection workers of the import's recorded cell, measuring as its run would: the
+/// detector and the rejection threshold of the cell config the import writes
+/// ([`recorded_config`]), its board, and the bag's intrinsics as the run reads them back.
+fn start_recorder(
+    request: &BagSessionRequest,
+    folder: &SessionFolder,
+    chosen: &ChosenFrame<'_>,
+) -> anyhow::Result<FrameRecorder> {
+    let config = recorded_config(request, chosen.camera.is_some(), &[]);
+    let camera = SessionCamera {
+        name: "camera".into(),
+        folder: folder.clone(),
+        setup: request.options.setup,
+        board: request.options.board.clone(),
+        estimate_intrinsics: chosen.camera.is_none(),
+    };
+    Ok(FrameRecorder::start(
+        &camera,
+        config.detector.options(),
+        config.session.max_reprojection_rms_px,
+        chosen.camera.copied(),
+        chosen.image.dimensions(),
+    )?)
+}
+
+/// `T_base_flange` as the recorded robot serves it: read back from the `poses.yaml` the import
+/// writes (the same digits), so a pose's record holds the pose the run's plan has.
+fn served(base_from_flange: &Pose) -> anyhow::Result<Pose> {
+    Ok(PoseYaml::from_pose(base_from_flange).to_pose("T_base_flange")?)
+}
+
+/// An imported frame as PNG with the `Up` filter (each row minus the one above) rather than the
+/// encoder's default choice per row: undoing `Up` is a vectorised add where the default's
+/// `Paeth` rows were a sixth of a short import's PNG cost, and camera frames compress about as
+/// well either way. (The frame is measured from memory; the report draws it from its preview.)
+fn frame_png(frame: &image::GrayImage) -> anyhow::Result<Vec<u8>> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     use image::ImageEncoder as _;
-    let mut out = std::io::BufWriter::new(std::fs::File::create(file)?);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Up).write_image(
+    let mut png = Vec::new();
+    PngEncoder::new_with_quality(&mut png, CompressionType::Fast, FilterType::Up).write_image(
         frame.as_raw(),
         frame.width(),
         frame.height(),
         image::ExtendedColorType::L8,
     )?;
-    std::io::Write::flush(&mut out)?;
-    Ok(())
+    Ok(png)
 }
 
 /// The tag of `import bag`'s staging folders: `.<session>.importing-XXXXXX`.

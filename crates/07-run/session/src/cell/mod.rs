@@ -545,13 +545,7 @@ impl PreparedCell {
 
     /// Detector settings from the config.
     pub fn detector_options(&self) -> DetectorOptions {
-        let d = self.config.detector;
-        DetectorOptions {
-            decimation: d.decimate,
-            threads: d.threads,
-            max_hamming: d.max_hamming,
-            ..DetectorOptions::default()
-        }
+        self.config.detector.options()
     }
 
     /// The camera the plan is made for (`config.planner`).

@@ -104,11 +104,13 @@ impl Fault {
 /// and the run, which reads them without going back to disk).
 pub(super) type SharedSamples = Arc<Mutex<SamplesLog>>;
 
-/// One camera as a worker holds it: its recording, its own detector, and its samples so far.
+/// One camera as a worker holds it: its recording, its own detector, and its samples so far
+/// (`None`: its `samples.yaml` is left to the run that follows, which rebuilds it from the
+/// records).
 struct WorkerCamera {
     recording: Recording,
     detector: TargetDetector,
-    samples: SharedSamples,
+    samples: Option<SharedSamples>,
 }
 
 /// Memory the run needs besides its detection workers and what it holds already when they start
@@ -171,12 +173,12 @@ fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
 /// work). A recorded cell (a bag import, say) hands over frames faster than one core detects
 /// them.
 ///
-/// Each pose is committed by the worker that measured it (frame, then record); a camera's
-/// `samples.yaml` is rewritten under its lock after the sample is added, so each write holds
-/// every sample committed before it, whichever worker finishes first.
+/// Each pose is committed by the worker that measured it (frame, then record); with `samples`
+/// (one per camera), a camera's `samples.yaml` is rewritten under its lock after the sample is
+/// added, so each write holds every sample committed before it, whichever worker finishes first.
 pub(super) fn spawn_workers(
     cameras: &[Recording],
-    samples: &[SharedSamples],
+    samples: Option<&[SharedSamples]>,
     fault: Arc<Fault>,
     jobs: mpsc::Receiver<Job>,
     results: mpsc::Sender<JobResult>,
@@ -187,13 +189,13 @@ pub(super) fn spawn_workers(
     for worker in 0..workers {
         let held = cameras
             .iter()
-            .zip(samples)
-            .map(|(recording, samples)| {
+            .enumerate()
+            .map(|(c, recording)| {
                 Ok(WorkerCamera {
                     detector: TargetDetector::spawn(&recording.board, recording.detector.clone())
                         .map_err(|e| SessionError::Detector(Box::new(e)))?,
                     recording: recording.clone(),
-                    samples: samples.clone(),
+                    samples: samples.and_then(|samples| samples.get(c)).cloned(),
                 })
             })
             .collect::<Result<Vec<_>, SessionError>>()?;
@@ -208,8 +210,8 @@ pub(super) fn spawn_workers(
                 };
                 let camera = &held[job.camera];
                 let visit = process(&job, camera, &fault).and_then(|visit| {
-                    if let Some(sample) = visit.sample() {
-                        let Ok(mut samples) = camera.samples.lock() else {
+                    if let (Some(sample), Some(samples)) = (visit.sample(), &camera.samples) {
+                        let Ok(mut samples) = samples.lock() else {
                             return Err(SessionError::DetectionThread("panicked"));
                         };
                         let path = camera.recording.folder.samples_path();
