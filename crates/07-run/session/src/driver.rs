@@ -10,6 +10,8 @@
 //! Per pose the worker writes, in this order: the frame, the pose record (the commit point), then
 //! `samples.yaml` (derived from the records). A run or resume first rebuilds `samples.yaml` from
 //! the committed records, so a crash between any two writes loses nothing and doubles nothing.
+//! The same workers measure a recorded source's frames before its run ([`FrameRecorder`]: a bag
+//! import's, as they are read), writing no `samples.yaml` meanwhile; the run then rebuilds it.
 //!
 //! Test hook: the environment variable `HANDEYE_FAULT=<fault>:<plan index>` makes the worker
 //! fail on purpose at that pose — `abort-after-frame`, `abort-after-record` and
@@ -1044,5 +1046,73 @@ impl ErrorSource {
 impl From<RobotError> for ErrorSource {
     fn from(e: RobotError) -> Self {
         ErrorSource::Robot(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_camera::PngFile;
+    use handeye_vision::{annotate, Board, TagFamily};
+    use image::{GrayImage, Luma};
+
+    /// A recorded source's frames are committed as a run commits its poses: each frame handed
+    /// over gets its record, those among the first [`annotate::MAX_FRAMES_SHOWN`] (as many as a
+    /// page shows) their preview, and the frame file stays as the caller wrote it.
+    #[test]
+    fn the_recorder_commits_each_frame_and_previews_as_many_as_a_page_shows() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = SessionFolder::create(dir.path()).unwrap();
+        let board = Board::aprilgrid(6, 6, 0.04, 0.25, TagFamily::Tag36h11, 0, 1).unwrap();
+        let camera = SessionCamera {
+            name: "camera".into(),
+            folder: folder.clone(),
+            setup: Setup::EyeInHand,
+            board: Target::Aprilgrid(board),
+            estimate_intrinsics: true,
+        };
+        let size = (64, 48);
+        let mut recorder =
+            FrameRecorder::start(&camera, DetectorOptions::default(), 1.0, None, size).unwrap();
+        let last = annotate::MAX_FRAMES_SHOWN;
+        let poses = [0, last - 1, last];
+        let mut written = Vec::new();
+        for plan_index in poses {
+            let image = GrayImage::from_pixel(size.0, size.1, Luma([200]));
+            let mut png = Vec::new();
+            image
+                .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+                .unwrap();
+            let path = folder.root().join(SessionFolder::frame_name(plan_index));
+            std::fs::write(&path, &png).unwrap();
+            written.push(png.clone());
+            let frame = Frame {
+                image,
+                captured_at: Instant::now(),
+                png: Some(PngFile { path, bytes: png }),
+            };
+            recorder
+                .record(plan_index, frame, Pose::identity())
+                .unwrap();
+        }
+        recorder.finish().unwrap();
+        let visits = folder.read_visits().unwrap();
+        assert_eq!(
+            visits.iter().map(|v| v.plan_index).collect::<Vec<_>>(),
+            poses
+        );
+        // A blank frame: measured, and rejected for want of a board.
+        assert!(visits.iter().all(|v| v.rejected.is_some()), "{visits:?}");
+        for (plan_index, png) in poses.into_iter().zip(written) {
+            let frame = SessionFolder::frame_name(plan_index);
+            assert_eq!(std::fs::read(folder.root().join(&frame)).unwrap(), png);
+            let preview = SessionFolder::preview_of(&frame).unwrap();
+            assert_eq!(
+                folder.root().join(&preview).is_file(),
+                plan_index < last,
+                "{}",
+                preview.display()
+            );
+        }
     }
 }
