@@ -235,6 +235,33 @@ pub fn probe(what: &str, bytes: u64, advice: &str) -> Result<(), NotEnoughMemory
     {
         return Ok(());
     }
+    Err(not_enough(what, bytes, advice))
+}
+
+/// `n` copies of `value`, or, when their memory cannot be had, the error naming `what` and the
+/// tightest limit: an allocation that would otherwise abort the process (a frame's buffers under
+/// `ulimit -v`) made an error the caller reports.
+pub fn try_filled<T: Clone>(what: &str, n: usize, value: T) -> Result<Vec<T>, NotEnoughMemory> {
+    let mut filled = try_with_capacity(what, n)?;
+    filled.resize(n, value);
+    Ok(filled)
+}
+
+/// An empty vector with room for `n` values, or the error of [`try_filled`].
+pub fn try_with_capacity<T>(what: &str, n: usize) -> Result<Vec<T>, NotEnoughMemory> {
+    let mut empty = Vec::new();
+    match empty.try_reserve_exact(n) {
+        Ok(()) => Ok(empty),
+        Err(_) => {
+            let bytes = n.saturating_mul(size_of::<T>());
+            Err(not_enough(what, bytes as u64, ""))
+        }
+    }
+}
+
+/// The error of `what` needing `bytes` more that could not be had, against the tightest limit
+/// the process runs under (the system's when none is set).
+fn not_enough(what: &str, bytes: u64, advice: &str) -> NotEnoughMemory {
     let limit = limits()
         .into_iter()
         .min_by_key(Limit::room)
@@ -243,12 +270,12 @@ pub fn probe(what: &str, bytes: u64, advice: &str) -> Result<(), NotEnoughMemory
             bytes: 0,
             in_use: 0,
         });
-    Err(NotEnoughMemory {
+    NotEnoughMemory {
         what: what.to_string(),
         needs: bytes,
         limit,
         advice: advice.to_string(),
-    })
+    }
 }
 
 /// Checks that `needs` bytes more fit under every limit the process runs under now.

@@ -20,6 +20,7 @@ use rand_distr::{Distribution, Normal};
 
 use handeye_core::camera_model::{CameraModel, Distortion};
 use handeye_core::geometry::Pose;
+use handeye_core::memory::{try_filled, try_with_capacity, NotEnoughMemory};
 use handeye_vision::target::AsTarget;
 use handeye_vision::Target;
 
@@ -68,10 +69,17 @@ pub struct PixelRays {
 }
 
 impl PixelRays {
-    /// The rays of every pixel of `camera`'s image.
+    /// The rays of every pixel of `camera`'s image (aborts when their memory cannot be had:
+    /// [`PixelRays::try_new`] says so instead).
     pub fn new(camera: &CameraModel) -> Self {
+        PixelRays::try_new(camera).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`PixelRays::new`], or the error when the table's memory cannot be had.
+    pub fn try_new(camera: &CameraModel) -> Result<Self, NotEnoughMemory> {
         let (width, height) = (camera.width as usize, camera.height as usize);
-        let mut rays = Vec::with_capacity(width * height);
+        let what = "the simulated camera's table of pixel rays";
+        let mut rays = try_with_capacity(what, width * height)?;
         for v in 0..height {
             let mut warm: Option<Vector2<f64>> = None;
             for u in 0..width {
@@ -94,7 +102,7 @@ impl PixelRays {
                 rays.push(ray);
             }
         }
-        PixelRays { rays }
+        Ok(PixelRays { rays })
     }
 
     /// The rays of `camera`'s lens, shared with every other user of the same lens in this
@@ -103,6 +111,11 @@ impl PixelRays {
     /// at once, would otherwise hold a copy each. Computed by the first to ask, the others
     /// waiting for it; identical to [`PixelRays::new`] of the lens.
     pub fn shared(camera: &CameraModel) -> Arc<PixelRays> {
+        PixelRays::try_shared(camera).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`PixelRays::shared`], or the error when a new table's memory cannot be had.
+    pub fn try_shared(camera: &CameraModel) -> Result<Arc<PixelRays>, NotEnoughMemory> {
         static TABLES: Mutex<Vec<(CameraModel, Weak<PixelRays>)>> = Mutex::new(Vec::new());
         // A panic elsewhere while the lock was held leaves the list as valid as before.
         let mut tables = TABLES.lock().unwrap_or_else(PoisonError::into_inner);
@@ -112,11 +125,11 @@ impl PixelRays {
             .find(|(lens, _)| lens == camera)
             .and_then(|(_, table)| table.upgrade())
         {
-            return table;
+            return Ok(table);
         }
-        let table = Arc::new(PixelRays::new(camera));
+        let table = Arc::new(PixelRays::try_new(camera)?);
         tables.push((*camera, Arc::downgrade(&table)));
-        table
+        Ok(table)
     }
 }
 
@@ -138,7 +151,8 @@ pub fn render(
     )
 }
 
-/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`).
+/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`; aborts
+/// when the frame's memory cannot be had: [`try_render_with_rays`] says so instead).
 pub fn render_with_rays(
     board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
@@ -147,14 +161,30 @@ pub fn render_with_rays(
     options: &RenderOptions,
     rng: &mut impl Rng,
 ) -> GrayImage {
+    try_render_with_rays(board, camera, rays, camera_from_target, options, rng)
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// [`render_with_rays`], or the error when the frame's buffers (9 bytes a pixel, 4 more with
+/// blur) cannot be had: a simulated camera under a memory limit reports it as a camera error
+/// rather than aborting the run.
+pub fn try_render_with_rays(
+    board: &(impl AsTarget + ?Sized),
+    camera: &CameraModel,
+    rays: &PixelRays,
+    camera_from_target: &Pose,
+    options: &RenderOptions,
+    rng: &mut impl Rng,
+) -> Result<GrayImage, NotEnoughMemory> {
     let board = board.as_target();
     let board: &Target = &board;
     let (width, height) = (camera.width as usize, camera.height as usize);
     assert_eq!(rays.rays.len(), width * height, "rays of another camera");
     if width == 0 || height == 0 {
-        return GrayImage::new(camera.width, camera.height);
+        return Ok(GrayImage::new(camera.width, camera.height));
     }
-    let mut radiance = vec![0f32; width * height];
+    let what = format!("a simulated frame at {width}x{height}");
+    let mut radiance = try_filled(&what, width * height, 0f32)?;
     let rotation = camera_from_target.rotation.to_rotation_matrix();
     let r = rotation.matrix();
     let t = camera_from_target.translation.vector;
@@ -187,14 +217,21 @@ pub fn render_with_rays(
         },
     ));
     if options.blur_sigma_px > 0.0 {
-        gaussian_blur(&mut radiance, width, height, options.blur_sigma_px, threads);
+        let mut temp = try_filled(&what, radiance.len(), 0f32)?;
+        gaussian_blur(
+            &mut radiance,
+            &mut temp,
+            (width, height),
+            options.blur_sigma_px,
+            threads,
+        );
     }
     let noise = (options.noise_sigma > 0.0)
         .then(|| Normal::new(0.0f32, options.noise_sigma as f32).ok())
         .flatten();
     // One RNG per chunk, seeded from the caller's: deterministic for a given seed and thread
     // count, and the noise is drawn on all cores.
-    let mut pixels = vec![0u8; width * height];
+    let mut pixels = try_filled(&what, width * height, 0u8)?;
     let seeds: Vec<u64> = (0..threads).map(|_| rng.random()).collect();
     let noise = noise.as_ref();
     run_parallel(
@@ -215,7 +252,10 @@ pub fn render_with_rays(
                 }
             }),
     );
-    GrayImage::from_raw(camera.width, camera.height, pixels).expect("buffer sized to the image")
+    Ok(
+        GrayImage::from_raw(camera.width, camera.height, pixels)
+            .expect("buffer sized to the image"),
+    )
 }
 
 /// What one sample ray sees: `Some(true)` white, `Some(false)` black, `None` background.
@@ -408,8 +448,14 @@ impl Background {
 }
 
 /// Separable Gaussian blur, kernel radius 3 sigma, edges clamped; rows split across
-/// `threads` scoped threads for both passes.
-fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, threads: usize) {
+/// `threads` scoped threads for both passes; `temp` (the image's size) holds the first.
+fn gaussian_blur(
+    image: &mut [f32],
+    temp: &mut [f32],
+    (width, height): (usize, usize),
+    sigma: f64,
+    threads: usize,
+) {
     let radius = (3.0 * sigma).ceil() as isize;
     let kernel: Vec<f32> = (-radius..=radius)
         .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
@@ -417,7 +463,6 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
     let total: f32 = kernel.iter().sum();
     let kernel: &[f32] = &kernel.iter().map(|k| k / total).collect::<Vec<_>>();
     let rows_per_chunk = height.div_ceil(threads.max(1)).max(1);
-    let mut temp = vec![0f32; image.len()];
     {
         let source: &[f32] = image;
         run_parallel(temp.chunks_mut(rows_per_chunk * width).enumerate().map(
@@ -441,7 +486,7 @@ fn gaussian_blur(image: &mut [f32], width: usize, height: usize, sigma: f64, thr
             },
         ));
     }
-    let temp: &[f32] = &temp;
+    let temp: &[f32] = temp;
     run_parallel(image.chunks_mut(rows_per_chunk * width).enumerate().map(
         |(chunk_index, chunk)| {
             move || {

@@ -15,7 +15,7 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_vision::Target;
 
-use super::render::{render_with_rays, PixelRays, RenderOptions};
+use super::render::{try_render_with_rays, PixelRays, RenderOptions};
 use super::{Camera, CameraError, Frame};
 use handeye_core::camera_model::CameraModel;
 
@@ -92,16 +92,24 @@ impl Camera for SimCamera {
             self.truth
                 .camera_from_target(&(self.true_base_from_flange)())
         };
-        let lens = &self.lens;
-        let rays = self.rays.get_or_insert_with(|| PixelRays::shared(lens));
-        let image = render_with_rays(
+        // Under a memory limit the table or the frame may not fit: a camera error that ends the
+        // run cleanly with what it recorded, never an abort.
+        let out_of_memory = |e| CameraError::Backend(Box::new(e));
+        let rays = match &self.rays {
+            Some(rays) => rays,
+            None => self
+                .rays
+                .insert(PixelRays::try_shared(&self.lens).map_err(out_of_memory)?),
+        };
+        let image = try_render_with_rays(
             &self.board,
             &self.lens,
             rays,
             &camera_from_target,
             &self.options,
             &mut self.rng,
-        );
+        )
+        .map_err(out_of_memory)?;
         // The frame reports when its exposure started (it shows the arm as it stood then),
         // never before `not_before`.
         Ok(Frame {
