@@ -4,10 +4,11 @@
 //! memory by the run's own detection workers ([`FrameRecorder`]: its preview and record
 //! committed; a few frames in memory at a time, never a frame decoded again), with their flange
 //! poses as a recorded cell in a staging folder beside the output, run through the one run
-//! ([`run::run`], which finds every pose recorded) and solved there, its report written by the caller's [`RunReport`] (the
-//! run's tail, as after `handeye run`), and the folder renamed into place only when all of
-//! that succeeded; the staging folder of an import that was killed is removed by the next one.
-//! What the import did is recorded in `<session>/import/bag-import.yaml`.
+//! ([`run::run`], which finds every pose recorded) and solved there, its report written by the
+//! caller's [`RunReport`] (the run's tail, as after `handeye run`), and the folder renamed into
+//! place only when all of that succeeded; the staging folder of an import that was killed is
+//! removed by the next one. What the import did is recorded in
+//! `<session>/import/bag-import.yaml`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -465,8 +466,9 @@ fn start_recorder(
     )?)
 }
 
-/// `T_base_flange` as the recorded robot serves it: read back from the `poses.yaml` the import
-/// writes (the same digits), so a pose's record holds the pose the run's plan has.
+/// `T_base_flange` as the recorded robot will serve it: through the [`PoseYaml`] the import's
+/// `poses.yaml` holds (whose digits read back exactly), so a pose's record holds the very pose
+/// of the run's plan.
 fn served(base_from_flange: &Pose) -> anyhow::Result<Pose> {
     Ok(PoseYaml::from_pose(base_from_flange).to_pose("T_base_flange")?)
 }
