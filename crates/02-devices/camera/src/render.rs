@@ -69,8 +69,8 @@ pub struct PixelRays {
 }
 
 impl PixelRays {
-    /// The rays of every pixel of `camera`'s image (aborts when their memory cannot be had:
-    /// [`PixelRays::try_new`] says so instead).
+    /// The rays of every pixel of `camera`'s image (panics when their memory cannot be had:
+    /// [`PixelRays::try_new`] returns the error instead).
     pub fn new(camera: &CameraModel) -> Self {
         PixelRays::try_new(camera).unwrap_or_else(|e| panic!("{e}"))
     }
@@ -151,8 +151,8 @@ pub fn render(
     )
 }
 
-/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`; aborts
-/// when the frame's memory cannot be had: [`try_render_with_rays`] says so instead).
+/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`; panics
+/// when the frame's memory cannot be had: [`try_render_with_rays`] returns the error instead).
 pub fn render_with_rays(
     board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
@@ -165,7 +165,7 @@ pub fn render_with_rays(
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// [`render_with_rays`], or the error when the frame's buffers (9 bytes a pixel, 4 more with
+/// [`render_with_rays`], or the error when the frame's buffers (5 bytes a pixel, 4 more with
 /// blur) cannot be had: a simulated camera under a memory limit reports it as a camera error
 /// rather than aborting the run.
 pub fn try_render_with_rays(

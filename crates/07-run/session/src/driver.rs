@@ -523,8 +523,9 @@ impl Drop for PoseLoop {
 /// Frames of a recorded source measured while they are in memory, before the run that uses them:
 /// a bag import, whose poses are known only as its frames are chosen, and whose plan is checked
 /// when all of them are. The run's own detection workers, started once, measure each frame
-/// handed over and commit it as a run commits a pose (its preview, its record, `samples.yaml`);
-/// the frame file is the caller's, written already. The run that follows in the same folder
+/// handed over and commit it as a run commits a pose (its preview and its record; no
+/// `samples.yaml`, which the run rebuilds from the records); the frame file is the caller's,
+/// written already. The run that follows in the same folder
 /// finds every pose recorded: it neither reads nor decodes a frame again, and measures again
 /// only a frame whose board was not found (every pose's second try). A frame waits for a worker
 /// only while [`FrameRecorder::WAITING`] others do: the reader is held back when detection falls
@@ -551,16 +552,7 @@ impl FrameRecorder {
         model: Option<handeye_core::camera_model::CameraModel>,
         frame_size: (u32, u32),
     ) -> Result<FrameRecorder, SessionError> {
-        let recording = Recording {
-            name: camera.name.clone(),
-            folder: camera.folder.clone(),
-            setup: camera.setup,
-            board: camera.board.clone(),
-            detector,
-            max_rms,
-            model: model.filter(|_| !camera.estimate_intrinsics),
-            frame_size,
-        };
+        let recording = Recording::new(camera, detector, max_rms, model.as_ref(), frame_size);
         let (jobs, job_rx) = mpsc::sync_channel::<Job>(Self::WAITING);
         let (result_tx, results) = mpsc::channel::<JobResult>();
         let fault = Arc::new(Fault::from_env());
@@ -653,15 +645,15 @@ fn recordings(
         .cameras
         .iter()
         .zip(devices)
-        .map(|(camera, device)| Recording {
-            name: camera.name.clone(),
-            folder: camera.folder.clone(),
-            setup: camera.setup,
-            board: camera.board.clone(),
-            detector: setup.detector.clone(),
-            max_rms: setup.max_reprojection_rms_px,
-            model: (!camera.estimate_intrinsics).then(|| *device.model()),
-            frame_size: (device.model().width, device.model().height),
+        .map(|(camera, device)| {
+            let lens = device.model();
+            Recording::new(
+                camera,
+                setup.detector.clone(),
+                setup.max_reprojection_rms_px,
+                Some(lens),
+                (lens.width, lens.height),
+            )
         })
         .collect())
 }
@@ -1056,9 +1048,15 @@ mod tests {
     use handeye_vision::{annotate, Board, TagFamily};
     use image::{GrayImage, Luma};
 
+    /// The file's inode number: a file replaced (written to a temporary file and renamed over
+    /// it) has another.
+    fn inode(path: &std::path::Path) -> u64 {
+        std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(path).unwrap())
+    }
+
     /// A recorded source's frames are committed as a run commits its poses: each frame handed
     /// over gets its record, those among the first [`annotate::MAX_FRAMES_SHOWN`] (as many as a
-    /// page shows) their preview, and the frame file stays as the caller wrote it.
+    /// page shows) their preview, and the frame file stays the one the caller wrote.
     #[test]
     fn the_recorder_commits_each_frame_and_previews_as_many_as_a_page_shows() {
         let dir = tempfile::tempdir().unwrap();
@@ -1085,7 +1083,7 @@ mod tests {
                 .unwrap();
             let path = folder.root().join(SessionFolder::frame_name(plan_index));
             std::fs::write(&path, &png).unwrap();
-            written.push(png.clone());
+            written.push(inode(&path));
             let frame = Frame {
                 image,
                 captured_at: Instant::now(),
@@ -1103,9 +1101,15 @@ mod tests {
         );
         // A blank frame: measured, and rejected for want of a board.
         assert!(visits.iter().all(|v| v.rejected.is_some()), "{visits:?}");
-        for (plan_index, png) in poses.into_iter().zip(written) {
+        for (plan_index, file) in poses.into_iter().zip(written) {
             let frame = SessionFolder::frame_name(plan_index);
-            assert_eq!(std::fs::read(folder.root().join(&frame)).unwrap(), png);
+            // Written once, by the caller: not replaced by a copy of the same bytes.
+            assert_eq!(
+                inode(&folder.root().join(&frame)),
+                file,
+                "{}",
+                frame.display()
+            );
             let preview = SessionFolder::preview_of(&frame).unwrap();
             assert_eq!(
                 folder.root().join(&preview).is_file(),

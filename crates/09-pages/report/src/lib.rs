@@ -80,7 +80,7 @@ pub struct PageFrames {
     /// The frames, in the order shown.
     pub frames: Vec<PageFrame>,
     /// The samples whose frame the page leaves out, increasing (a long recording's:
-    /// `session::MAX_FRAMES_DRAWN`); their frames are in the session folder.
+    /// `annotate::MAX_FRAMES_SHOWN`); their frames are in the session folder.
     pub not_drawn: Vec<usize>,
 }
 

@@ -179,13 +179,10 @@ pub(crate) fn sample_visits(evidence: &Evidence) -> Vec<Option<&PoseVisit>> {
         .collect()
 }
 
-/// Most frames a page draws of one camera ([`annotate::MAX_FRAMES_SHOWN`]).
-pub(crate) const MAX_FRAMES_DRAWN: usize = annotate::MAX_FRAMES_SHOWN;
-
 /// Every sample's frame that has a visit, to be drawn ([`draw_frames`]) with the board at
 /// `predict(T_base_flange)` (`T_camera_target` of the answer shown), at most
-/// [`MAX_FRAMES_DRAWN`] of them. The one way a page lists its frames, one camera's or each of
-/// several.
+/// [`annotate::MAX_FRAMES_SHOWN`] of them. The one way a page lists its frames, one camera's or
+/// each of several.
 pub(crate) fn page_frames(
     folder: &SessionFolder,
     pairs: &[PosePair],
@@ -203,7 +200,7 @@ pub(crate) fn page_frames(
         .iter()
         .map(|(_, pair, _)| predict(&pair.base_from_flange))
         .collect();
-    let drawn = if visited.len() <= MAX_FRAMES_DRAWN {
+    let drawn = if visited.len() <= annotate::MAX_FRAMES_SHOWN {
         (0..visited.len()).collect()
     } else {
         // How far each frame's board is from where the answer puts it, px (RMS over its corners).
@@ -214,7 +211,7 @@ pub(crate) fn page_frames(
                 reprojection_rms(optics, camera_from_target, &visit.corners_px)
             })
             .collect();
-        keeping_largest(visited.len(), MAX_FRAMES_DRAWN, |i| {
+        keeping_largest(visited.len(), annotate::MAX_FRAMES_SHOWN, |i| {
             fits[i].unwrap_or(f64::NEG_INFINITY)
         })
     };
@@ -704,18 +701,19 @@ mod tests {
         page_frames(&folder, &pairs, &sample_visits, optics, |_| seen_at)
     }
 
-    /// A session's frames are all drawn; a long recording's at `MAX_FRAMES_DRAWN`, the frames
-    /// whose board is farthest from the prediction among them, the others from every part of it.
+    /// A session's frames are all drawn; a long recording's at `annotate::MAX_FRAMES_SHOWN`, the
+    /// frames whose board is farthest from the prediction among them, the others from every part
+    /// of it.
     #[test]
     fn a_long_recording_draws_every_misfit_frame_and_a_bounded_number() {
-        let few = frames_of(MAX_FRAMES_DRAWN, &[3]);
-        assert_eq!(few.frames.len(), MAX_FRAMES_DRAWN);
+        let few = frames_of(annotate::MAX_FRAMES_SHOWN, &[3]);
+        assert_eq!(few.frames.len(), annotate::MAX_FRAMES_SHOWN);
         assert!(few.not_drawn.is_empty());
 
         let misfit = [3, 250, 511, 777, 999];
         let many = frames_of(1000, &misfit);
-        assert_eq!(many.not_drawn.len(), 1000 - MAX_FRAMES_DRAWN);
-        assert_eq!(many.frames.len(), MAX_FRAMES_DRAWN);
+        assert_eq!(many.not_drawn.len(), 1000 - annotate::MAX_FRAMES_SHOWN);
+        assert_eq!(many.frames.len(), annotate::MAX_FRAMES_SHOWN);
         let samples: Vec<usize> = many.frames.iter().map(|f| f.sample).collect();
         assert!(samples.windows(2).all(|w| w[0] < w[1]), "in session order");
         assert!(

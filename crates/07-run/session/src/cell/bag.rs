@@ -28,7 +28,6 @@ use super::run::{
 use super::PreparedCell;
 use crate::driver::{FrameRecorder, SessionCamera};
 use handeye_camera::{Frame, PngFile};
-use handeye_core::geometry::PoseYaml;
 use handeye_records::{SessionFolder, SolvedSession};
 
 use handeye_ros2_bag::{import_bag_to, BagImport, BagOptions, ChosenFrame, SkipReason};
@@ -425,9 +424,10 @@ fn import_frames(
                 bytes: png,
             }),
         };
-        let base_from_flange = served(&chosen.sample.base_from_flange)?;
+        // The pose the recorded robot serves the run: `poses.yaml` reads a unit quaternion back
+        // as written, so the record holds the very pose of the run's plan.
         recorder
-            .record(chosen.index, image, base_from_flange)
+            .record(chosen.index, image, chosen.sample.base_from_flange)
             .context(RECORDING)?;
         Ok(())
     })
@@ -449,6 +449,7 @@ fn start_recorder(
     folder: &SessionFolder,
     chosen: &ChosenFrame<'_>,
 ) -> anyhow::Result<FrameRecorder> {
+    // The poses are not known yet; only the config's detector and session sections are read.
     let config = recorded_config(request, chosen.camera.is_some(), &[]);
     let camera = SessionCamera {
         name: "camera".into(),
@@ -464,13 +465,6 @@ fn start_recorder(
         chosen.camera.copied(),
         chosen.image.dimensions(),
     )?)
-}
-
-/// `T_base_flange` as the recorded robot will serve it: through the [`PoseYaml`] the import's
-/// `poses.yaml` holds (whose digits read back exactly), so a pose's record holds the very pose
-/// of the run's plan.
-fn served(base_from_flange: &Pose) -> anyhow::Result<Pose> {
-    Ok(PoseYaml::from_pose(base_from_flange).to_pose("T_base_flange")?)
 }
 
 /// An imported frame as PNG with the `Up` filter (each row minus the one above) rather than the

@@ -33,6 +33,30 @@ pub(super) struct Recording {
     pub frame_size: (u32, u32),
 }
 
+impl Recording {
+    /// `camera`'s recording, measured with `detector` and judged by `max_rms`: with the
+    /// intrinsics of `lens` unless they are to be estimated (then corners only), its frames
+    /// `frame_size` px.
+    pub(super) fn new(
+        camera: &super::SessionCamera,
+        detector: DetectorOptions,
+        max_rms: f64,
+        lens: Option<&CameraModel>,
+        frame_size: (u32, u32),
+    ) -> Recording {
+        Recording {
+            name: camera.name.clone(),
+            folder: camera.folder.clone(),
+            setup: camera.setup,
+            board: camera.board.clone(),
+            detector,
+            max_rms,
+            model: lens.filter(|_| !camera.estimate_intrinsics).copied(),
+            frame_size,
+        }
+    }
+}
+
 pub(super) struct Job {
     pub camera: usize,
     pub plan_index: usize,
