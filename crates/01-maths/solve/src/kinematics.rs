@@ -624,7 +624,7 @@ impl Problem<'_> {
 }
 
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
+    fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let lin = self.linearise(self.free);
         let cost = lin.squares[0] + lin.squares[1];
         if !cost.is_finite() {
@@ -637,7 +637,7 @@ impl NormalEquations for Problem<'_> {
         ))
     }
 
-    fn cost(&self) -> Option<f64> {
+    fn cost(&mut self) -> Option<f64> {
         let cost = self.total_cost();
         cost.is_finite().then_some(cost)
     }

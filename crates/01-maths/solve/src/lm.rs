@@ -105,10 +105,12 @@ pub(crate) trait NormalEquations {
     /// the global parameters, solved by its Schur complement in time and memory linear in the
     /// frames), `Jᵀr` and the cost `‖r‖²` at the current parameters; `None` when the residuals
     /// are not finite.
-    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)>;
+    fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)>;
 
-    /// The cost `‖r‖²` at the current parameters; `None` when the residuals are not finite.
-    fn cost(&self) -> Option<f64>;
+    /// The cost `‖r‖²` at the current parameters (a trial step's); `None` when the residuals are
+    /// not finite. A problem may keep the residuals for the next [`Self::normal_equations`] when
+    /// the step is taken ([`Self::accepted`]): they are those of the same point.
+    fn cost(&mut self) -> Option<f64>;
 
     /// The parameters, for the solver to step and restore.
     fn params_mut(&mut self) -> &mut DVector<f64>;
@@ -116,6 +118,10 @@ pub(crate) trait NormalEquations {
     /// Called after every accepted step, e.g. to re-anchor a local parametrisation so the next
     /// linearisation is exact at the new point.
     fn accepted(&mut self) {}
+
+    /// Called when the minimisation ends, however it ends: what [`Self::cost`] kept is dropped
+    /// (the caller may reweight the problem before minimising again).
+    fn finished(&mut self) {}
 
     /// Most outer iterations (normal-equation builds).
     fn max_iterations(&self) -> usize {
@@ -133,6 +139,13 @@ pub(crate) trait NormalEquations {
 ///
 /// Errors: residuals that are not finite at the start of an iteration.
 pub(crate) fn minimize_normal<P: NormalEquations>(problem: &mut P) -> Result<Outcome, SolveError> {
+    let outcome = damped_steps(problem);
+    problem.finished();
+    outcome
+}
+
+/// [`minimize_normal`]'s iterations.
+fn damped_steps<P: NormalEquations>(problem: &mut P) -> Result<Outcome, SolveError> {
     let mut lambda = INITIAL_DAMPING;
     let mut evaluations = 0;
     for _ in 0..problem.max_iterations() {
@@ -203,7 +216,7 @@ mod tests {
     }
 
     impl NormalEquations for Rosenbrock {
-        fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
+        fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
             let (r0, r1) = self.residuals();
             let j = DMatrix::from_row_slice(2, 2, &[-20.0 * self.p[0], 10.0, -1.0, 0.0]);
             let r = DVector::from_vec(vec![r0, r1]);
@@ -214,7 +227,7 @@ mod tests {
             ))
         }
 
-        fn cost(&self) -> Option<f64> {
+        fn cost(&mut self) -> Option<f64> {
             let (r0, r1) = self.residuals();
             Some(r0 * r0 + r1 * r1)
         }
@@ -245,10 +258,10 @@ mod tests {
     fn broken_residuals_are_an_error_not_an_answer() {
         struct Broken(DVector<f64>);
         impl NormalEquations for Broken {
-            fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
+            fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
                 None
             }
-            fn cost(&self) -> Option<f64> {
+            fn cost(&mut self) -> Option<f64> {
                 None
             }
             fn params_mut(&mut self) -> &mut DVector<f64> {

@@ -283,7 +283,7 @@ impl Fit<'_> {
 }
 
 impl NormalEquations for Fit<'_> {
-    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
+    fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let normal = normal_equations(self.data, &self.current(), self.scale, &self.noise);
         let cost = normal.cost();
         self.trace.borrow_mut().push(0.5 * cost);
@@ -299,7 +299,7 @@ impl NormalEquations for Fit<'_> {
         ))
     }
 
-    fn cost(&self) -> Option<f64> {
+    fn cost(&mut self) -> Option<f64> {
         let cost = cost(self.data, &self.current(), self.scale, &self.noise);
         self.trace.borrow_mut().push(0.5 * cost);
         cost.is_finite().then_some(cost)

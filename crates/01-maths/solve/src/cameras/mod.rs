@@ -452,12 +452,12 @@ struct Anchored<'p> {
 }
 
 impl NormalEquations for Anchored<'_> {
-    fn normal_equations(&self) -> Option<Normal> {
+    fn normal_equations(&mut self) -> Option<Normal> {
         let (h, g, cost) = (self.normal)(&stepped(&self.state, &self.step));
         cost.is_finite().then_some((h, g, cost))
     }
 
-    fn cost(&self) -> Option<f64> {
+    fn cost(&mut self) -> Option<f64> {
         Some((self.cost)(&stepped(&self.state, &self.step))).filter(|c| c.is_finite())
     }
 

@@ -108,6 +108,11 @@ pub(super) struct Problem<'a> {
     pub corner_rows: usize,
     /// The arm's joint offsets refined, with each frame's joints and its flange at the start.
     pub arm: Option<ArmColumns>,
+    /// The residuals of the last trial step of [`crate::lm::minimize_normal`], kept for the
+    /// normal equations that follow when the step is taken (re-anchoring moves no parameter
+    /// value: they are the residuals of the same point, to the bit). Dropped when the
+    /// parameters move and when the minimisation ends.
+    trial_residuals: Option<DVector<f64>>,
 }
 
 /// [`ArmOffsetsFree`] laid out by frame.
@@ -257,6 +262,7 @@ impl Problem<'_> {
             row_offsets,
             corner_rows: rows,
             arm: options.arm.as_ref().map(|a| ArmColumns::new(a, frames)),
+            trial_residuals: None,
         }
     }
 
@@ -517,7 +523,11 @@ impl Problem<'_> {
     /// per-frame robot corrections `JᵀJ` is an arrowhead, kept as its parts: memory linear in
     /// the frames.
     pub(super) fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
-        let r = self.residuals()?;
+        self.normal_equations_at(self.residuals()?)
+    }
+
+    /// [`Self::normal_equations`] with the residuals `r` at the current parameters.
+    fn normal_equations_at(&self, r: DVector<f64>) -> Option<(NormalMatrix, DVector<f64>, f64)> {
         let s = self.state();
         let layout = self.layout;
         let n_global = layout.robot_offset();
@@ -604,20 +614,31 @@ pub(super) fn reanchor(problem: &mut Problem<'_>) {
 /// The block-structured solver's view: normal equations built corner by corner, re-anchored
 /// after every accepted step.
 impl NormalEquations for Problem<'_> {
-    fn normal_equations(&self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
-        Problem::normal_equations(self)
+    fn normal_equations(&mut self) -> Option<(NormalMatrix, DVector<f64>, f64)> {
+        match self.trial_residuals.take() {
+            Some(r) => self.normal_equations_at(r),
+            None => Problem::normal_equations(self),
+        }
     }
 
-    fn cost(&self) -> Option<f64> {
-        self.residuals().map(|r| r.norm_squared())
+    fn cost(&mut self) -> Option<f64> {
+        let r = self.residuals();
+        let cost = r.as_ref().map(|r| r.norm_squared());
+        self.trial_residuals = r;
+        cost
     }
 
     fn params_mut(&mut self) -> &mut DVector<f64> {
+        self.trial_residuals = None;
         &mut self.params
     }
 
     fn accepted(&mut self) {
         reanchor(self);
+    }
+
+    fn finished(&mut self) {
+        self.trial_residuals = None;
     }
 }
 
@@ -747,6 +768,40 @@ mod tests {
                 // Central differences of smooth maps: relative error ~1e-6 at worst.
                 assert!(err < 1e-4, "{setup}: column {k}: relative error {err}");
             }
+        }
+    }
+
+    /// The minimiser builds the normal equations after a taken step from the residuals its
+    /// trial kept: they must be those built afresh at the re-anchored point, to the bit (the
+    /// answer is not to depend on the reuse), and be dropped once the parameters move.
+    #[test]
+    fn a_taken_step_keeps_the_residuals_of_its_point() {
+        for setup in [Setup::EyeInHand, Setup::EyeToHand] {
+            let frames = frames(setup);
+            let mut problem = full_problem(
+                setup,
+                &frames,
+                &pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
+                &pose([0.5, -0.15, 0.0], [0.01, 0.02, 0.3]),
+            );
+            let step = DVector::from_fn(problem.params.len(), |k, _| 1e-4 * (k as f64 - 7.5));
+            *NormalEquations::params_mut(&mut problem) += &step;
+            let trial = NormalEquations::cost(&mut problem).unwrap();
+            NormalEquations::accepted(&mut problem);
+            let (h_kept, g_kept, cost_kept) = NormalEquations::normal_equations(&mut problem).unwrap();
+            let (h_fresh, g_fresh, cost_fresh) = problem.normal_equations().unwrap();
+            assert_eq!(cost_kept.to_bits(), trial.to_bits(), "{setup}: the trial's cost");
+            assert_eq!(cost_kept.to_bits(), cost_fresh.to_bits(), "{setup}: cost");
+            assert_eq!(g_kept, g_fresh, "{setup}: Jᵀr");
+            assert_eq!(h_kept.to_dense(), h_fresh.to_dense(), "{setup}: JᵀJ");
+            // Kept for one build only; a step moves the parameters away from them.
+            assert!(problem.trial_residuals.is_none());
+            NormalEquations::cost(&mut problem).unwrap();
+            *NormalEquations::params_mut(&mut problem) += &step;
+            assert!(problem.trial_residuals.is_none(), "{setup}: a moved point");
+            NormalEquations::cost(&mut problem).unwrap();
+            NormalEquations::finished(&mut problem);
+            assert!(problem.trial_residuals.is_none(), "{setup}: a finished minimisation");
         }
     }
 
