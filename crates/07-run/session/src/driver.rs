@@ -50,7 +50,7 @@ mod still;
 pub(crate) use still::{wait_until_still, NotStill};
 
 pub(crate) use record::{measure, rebuild_samples};
-use record::{spawn_workers, Fault, Job, JobResult, Recording, SharedSamples};
+use record::{DetectionWorkers, Fault, Job, JobResult, Recording, SharedSamples};
 
 /// One camera of a session: where its records go and what it measures.
 #[derive(Clone)]
@@ -253,9 +253,7 @@ pub struct PoseLoop {
     setup: SessionSetup,
     recordings: Vec<Recording>,
     state: RunState,
-    jobs: Option<mpsc::Sender<Job>>,
-    results: mpsc::Receiver<JobResult>,
-    workers: Vec<std::thread::JoinHandle<()>>,
+    workers: DetectionWorkers,
     fault: Arc<Fault>,
     samples: Vec<SharedSamples>,
     /// Whether a pass has run: a resumed run's first pass visits what is left in travel order.
@@ -278,22 +276,12 @@ impl PoseLoop {
             let rebuilt = rebuild_samples(&recording.folder, recording.setup, visits)?;
             samples.push(Arc::new(std::sync::Mutex::new(rebuilt)));
         }
-        let (job_tx, job_rx) = mpsc::channel::<Job>();
-        let (result_tx, results) = mpsc::channel::<JobResult>();
         let fault = Arc::new(Fault::from_env());
-        let workers = spawn_workers(
-            &recordings,
-            Some(&samples),
-            fault.clone(),
-            job_rx,
-            result_tx,
-        )?;
+        let workers = DetectionWorkers::start(&recordings, Some(&samples), fault.clone(), None)?;
         Ok(PoseLoop {
             setup,
             recordings,
             state,
-            jobs: Some(job_tx),
-            results,
             workers,
             fault,
             samples,
@@ -365,14 +353,17 @@ impl PoseLoop {
                     break;
                 }
                 self.visit(plan_index, robot, devices, on_event)?;
-                self.state
-                    .receive_ready(&self.results, 2 * self.workers.len(), on_event);
+                self.state.receive_ready(
+                    self.workers.results(),
+                    2 * self.workers.count(),
+                    on_event,
+                );
             }
             // Every result of this pass must be in before deciding on retries.
-            self.state.drain(&self.results, on_event);
+            self.state.drain(self.workers.results(), on_event);
             pending = self.state.pending(self.setup.plan.len());
         }
-        self.state.drain(&self.results, on_event);
+        self.state.drain(self.workers.results(), on_event);
         match self.state.error.take() {
             Some(e) => Err(e),
             None => Ok(()),
@@ -398,7 +389,7 @@ impl PoseLoop {
         }
         if setup.stop.load(Ordering::SeqCst) {
             let _ = robot.stop();
-            state.drain(&self.results, on_event);
+            state.drain(self.workers.results(), on_event);
             state.error = Some(SessionError::Interrupted {
                 plan_index,
                 recorded: state.recorded(),
@@ -441,20 +432,15 @@ impl PoseLoop {
         match visited {
             Ok((arrival, frames, base_from_flange)) => {
                 state.count(&arrival, frames.first().map(|(_, f)| f.captured_at));
-                let jobs = self
-                    .jobs
-                    .as_ref()
-                    .ok_or(SessionError::DetectionThread("stopped"))?;
                 for (camera, frame) in frames {
                     state.in_flight += 1;
                     state.submitted.push_back((plan_index, camera));
-                    jobs.send(Job {
+                    self.workers.send(Job {
                         camera,
                         plan_index,
                         frame,
                         base_from_flange,
-                    })
-                    .map_err(|_| SessionError::DetectionThread("stopped"))?;
+                    })?;
                 }
             }
             // A second visit whose path from where the arm now stands leaves the checked space
@@ -478,7 +464,7 @@ impl PoseLoop {
             Err(source) => {
                 // Stop first, then let the worker finish what it has so the count is true.
                 let _ = robot.stop();
-                state.drain(&self.results, on_event);
+                state.drain(self.workers.results(), on_event);
                 state.error =
                     Some(source.into_session(plan_index, state.recorded(), state.folder.clone()));
             }
@@ -502,21 +488,11 @@ impl PoseLoop {
         Ok(outcome)
     }
 
-    /// Closes the job queue and joins the workers; whether one panicked.
+    /// Closes the job queue, takes every result in and joins the workers; whether one panicked.
     fn stop_workers(&mut self) -> bool {
-        self.jobs = None;
-        self.state.drain(&self.results, &mut |_| {});
-        std::mem::take(&mut self.workers)
-            .into_iter()
-            .any(|w| w.join().is_err())
-    }
-}
-
-impl Drop for PoseLoop {
-    /// A run that ends by an error still lets its workers finish what they hold (every
-    /// committed record stays) before the error is returned.
-    fn drop(&mut self) {
-        self.stop_workers();
+        let state = &mut self.state;
+        self.workers
+            .stop(&mut |result| state.receive(result, &mut |_| {}))
     }
 }
 
@@ -531,9 +507,7 @@ impl Drop for PoseLoop {
 /// only while [`FrameRecorder::WAITING`] others do: the reader is held back when detection falls
 /// behind, so the frames in memory stay few however many there are.
 pub struct FrameRecorder {
-    jobs: Option<mpsc::SyncSender<Job>>,
-    results: mpsc::Receiver<JobResult>,
-    workers: Vec<std::thread::JoinHandle<()>>,
+    workers: DetectionWorkers,
     error: Option<SessionError>,
 }
 
@@ -553,14 +527,10 @@ impl FrameRecorder {
         frame_size: (u32, u32),
     ) -> Result<FrameRecorder, SessionError> {
         let recording = Recording::new(camera, detector, max_rms, model.as_ref(), frame_size);
-        let (jobs, job_rx) = mpsc::sync_channel::<Job>(Self::WAITING);
-        let (result_tx, results) = mpsc::channel::<JobResult>();
         let fault = Arc::new(Fault::from_env());
         // No `samples.yaml` meanwhile: the run rebuilds it from the records when it starts.
-        let workers = spawn_workers(&[recording], None, fault, job_rx, result_tx)?;
+        let workers = DetectionWorkers::start(&[recording], None, fault, Some(Self::WAITING))?;
         Ok(FrameRecorder {
-            jobs: Some(jobs),
-            results,
             workers,
             error: None,
         })
@@ -575,29 +545,28 @@ impl FrameRecorder {
         frame: Frame,
         base_from_flange: Pose,
     ) -> Result<(), SessionError> {
-        while let Ok(result) = self.results.try_recv() {
-            self.keep_error(result);
+        while let Ok(result) = self.workers.results().try_recv() {
+            keep_first_error(&mut self.error, result);
         }
         if let Some(error) = self.error.take() {
             return Err(error);
         }
-        let jobs = self
-            .jobs
-            .as_ref()
-            .ok_or(SessionError::DetectionThread("stopped"))?;
-        jobs.send(Job {
+        self.workers.send(Job {
             camera: 0,
             plan_index,
             frame,
             base_from_flange,
         })
-        .map_err(|_| SessionError::DetectionThread("stopped"))
     }
 
     /// Waits for every frame handed over to be committed, stops the workers; the first error
     /// met.
     pub fn finish(mut self) -> Result<(), SessionError> {
-        if self.stop_workers() {
+        let error = &mut self.error;
+        if self
+            .workers
+            .stop(&mut |result| keep_first_error(error, result))
+        {
             return Err(SessionError::DetectionThread("panicked"));
         }
         match self.error.take() {
@@ -605,29 +574,12 @@ impl FrameRecorder {
             None => Ok(()),
         }
     }
-
-    fn keep_error(&mut self, result: JobResult) {
-        if let (Err(error), None) = (result.visit, &self.error) {
-            self.error = Some(error);
-        }
-    }
-
-    /// Closes the queue, takes every result and joins the workers; whether one panicked.
-    fn stop_workers(&mut self) -> bool {
-        self.jobs = None;
-        while let Ok(result) = self.results.recv() {
-            self.keep_error(result);
-        }
-        std::mem::take(&mut self.workers)
-            .into_iter()
-            .any(|w| w.join().is_err())
-    }
 }
 
-impl Drop for FrameRecorder {
-    /// An import that ends by an error still lets the workers finish what they hold.
-    fn drop(&mut self) {
-        self.stop_workers();
+/// Keeps the first error a worker met.
+fn keep_first_error(kept: &mut Option<SessionError>, result: JobResult) {
+    if let (Err(error), None) = (result.visit, &kept) {
+        *kept = Some(error);
     }
 }
 

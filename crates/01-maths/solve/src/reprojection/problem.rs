@@ -788,9 +788,14 @@ mod tests {
             *NormalEquations::params_mut(&mut problem) += &step;
             let trial = NormalEquations::cost(&mut problem).unwrap();
             NormalEquations::accepted(&mut problem);
-            let (h_kept, g_kept, cost_kept) = NormalEquations::normal_equations(&mut problem).unwrap();
+            let (h_kept, g_kept, cost_kept) =
+                NormalEquations::normal_equations(&mut problem).unwrap();
             let (h_fresh, g_fresh, cost_fresh) = problem.normal_equations().unwrap();
-            assert_eq!(cost_kept.to_bits(), trial.to_bits(), "{setup}: the trial's cost");
+            assert_eq!(
+                cost_kept.to_bits(),
+                trial.to_bits(),
+                "{setup}: the trial's cost"
+            );
             assert_eq!(cost_kept.to_bits(), cost_fresh.to_bits(), "{setup}: cost");
             assert_eq!(g_kept, g_fresh, "{setup}: Jᵀr");
             assert_eq!(h_kept.to_dense(), h_fresh.to_dense(), "{setup}: JᵀJ");
@@ -801,7 +806,10 @@ mod tests {
             assert!(problem.trial_residuals.is_none(), "{setup}: a moved point");
             NormalEquations::cost(&mut problem).unwrap();
             NormalEquations::finished(&mut problem);
-            assert!(problem.trial_residuals.is_none(), "{setup}: a finished minimisation");
+            assert!(
+                problem.trial_residuals.is_none(),
+                "{setup}: a finished minimisation"
+            );
         }
     }
 

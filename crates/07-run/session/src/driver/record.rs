@@ -180,7 +180,7 @@ fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
                 return Err(error);
             }
         }
-        // Once a process: an adaptive run starts its workers again for every pose.
+        // Once a process: a bag import starts workers for its recorder, then for its run.
         static SAID: std::sync::Once = std::sync::Once::new();
         SAID.call_once(|| {
             tracing::warn!(
@@ -192,15 +192,100 @@ fn worker_count(cameras: &[Recording]) -> Result<usize, SessionError> {
     Ok(fit)
 }
 
-/// Starts the detection workers ([`worker_count`] of them), each with its own detector for
-/// every camera (the AprilTag detector is single-threaded: frames are the unit of parallel
-/// work). A recorded cell (a bag import, say) hands over frames faster than one core detects
-/// them.
+/// The detection workers of a run or of a [`super::FrameRecorder`], started once: the queue of
+/// frames they measure, their results, their threads ([`worker_count`] of them, each with its
+/// own detector for every camera: the AprilTag detector is single-threaded, frames are the unit
+/// of parallel work). A recorded cell (a bag import, say) hands over frames faster than one core
+/// detects them.
 ///
 /// Each pose is committed by the worker that measured it (frame, then record); with `samples`
 /// (one per camera), a camera's `samples.yaml` is rewritten under its lock after the sample is
 /// added, so each write holds every sample committed before it, whichever worker finishes first.
-pub(super) fn spawn_workers(
+/// Dropped, they finish what they hold (every record committed stays) and stop.
+pub(super) struct DetectionWorkers {
+    jobs: Option<JobQueue>,
+    results: mpsc::Receiver<JobResult>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+/// Where frames wait for a worker: as many as the run hands over (it bounds the frames in
+/// flight itself, by results), or at most a few (a recorder, whose caller would otherwise read
+/// ahead without bound).
+enum JobQueue {
+    Open(mpsc::Sender<Job>),
+    Bounded(mpsc::SyncSender<Job>),
+}
+
+impl DetectionWorkers {
+    /// Starts the workers of `cameras`; `waiting`: at most that many frames wait for a worker
+    /// (a [`Self::send`] waits meanwhile), `None` for no bound.
+    pub(super) fn start(
+        cameras: &[Recording],
+        samples: Option<&[SharedSamples]>,
+        fault: Arc<Fault>,
+        waiting: Option<usize>,
+    ) -> Result<DetectionWorkers, SessionError> {
+        let (jobs, job_rx) = match waiting {
+            Some(bound) => {
+                let (tx, rx) = mpsc::sync_channel::<Job>(bound);
+                (JobQueue::Bounded(tx), rx)
+            }
+            None => {
+                let (tx, rx) = mpsc::channel::<Job>();
+                (JobQueue::Open(tx), rx)
+            }
+        };
+        let (result_tx, results) = mpsc::channel::<JobResult>();
+        let threads = spawn(cameras, samples, fault, job_rx, result_tx)?;
+        Ok(DetectionWorkers {
+            jobs: Some(jobs),
+            results,
+            threads,
+        })
+    }
+
+    /// Hands `job` to the workers.
+    pub(super) fn send(&self, job: Job) -> Result<(), SessionError> {
+        let stopped = |_| SessionError::DetectionThread("stopped");
+        match &self.jobs {
+            Some(JobQueue::Open(jobs)) => jobs.send(job).map_err(stopped),
+            Some(JobQueue::Bounded(jobs)) => jobs.send(job).map_err(stopped),
+            None => Err(SessionError::DetectionThread("stopped")),
+        }
+    }
+
+    /// The workers' results, one per job, in the order they finish.
+    pub(super) fn results(&self) -> &mpsc::Receiver<JobResult> {
+        &self.results
+    }
+
+    /// How many workers measure.
+    pub(super) fn count(&self) -> usize {
+        self.threads.len()
+    }
+
+    /// Closes the queue, hands `receive` every result still to come and joins the workers;
+    /// whether one panicked.
+    pub(super) fn stop(&mut self, receive: &mut dyn FnMut(JobResult)) -> bool {
+        self.jobs = None;
+        while let Ok(result) = self.results.recv() {
+            receive(result);
+        }
+        std::mem::take(&mut self.threads)
+            .into_iter()
+            .any(|worker| worker.join().is_err())
+    }
+}
+
+impl Drop for DetectionWorkers {
+    /// A run or an import that ends by an error still lets the workers finish what they hold.
+    fn drop(&mut self) {
+        self.stop(&mut |_| {});
+    }
+}
+
+/// Starts [`DetectionWorkers`]' threads.
+fn spawn(
     cameras: &[Recording],
     samples: Option<&[SharedSamples]>,
     fault: Arc<Fault>,
