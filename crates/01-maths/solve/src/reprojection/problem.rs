@@ -771,6 +771,16 @@ mod tests {
         }
     }
 
+    /// [`full_problem`] with mounts away from the frames' (non-zero residuals everywhere).
+    fn off_truth_problem(setup: Setup, frames: &[Frame]) -> Problem<'_> {
+        full_problem(
+            setup,
+            frames,
+            &pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
+            &pose([0.5, -0.15, 0.0], [0.01, 0.02, 0.3]),
+        )
+    }
+
     /// The minimiser builds the normal equations after a taken step from the residuals its
     /// trial kept: they must be those built afresh at the re-anchored point, to the bit (the
     /// answer is not to depend on the reuse), and be dropped once the parameters move.
@@ -778,12 +788,7 @@ mod tests {
     fn a_taken_step_keeps_the_residuals_of_its_point() {
         for setup in [Setup::EyeInHand, Setup::EyeToHand] {
             let frames = frames(setup);
-            let mut problem = full_problem(
-                setup,
-                &frames,
-                &pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
-                &pose([0.5, -0.15, 0.0], [0.01, 0.02, 0.3]),
-            );
+            let mut problem = off_truth_problem(setup, &frames);
             let step = DVector::from_fn(problem.params.len(), |k, _| 1e-4 * (k as f64 - 7.5));
             *NormalEquations::params_mut(&mut problem) += &step;
             let trial = NormalEquations::cost(&mut problem).unwrap();
@@ -817,12 +822,7 @@ mod tests {
     fn block_normal_equations_match_the_dense_jacobian() {
         for setup in [Setup::EyeInHand, Setup::EyeToHand] {
             let frames = frames(setup);
-            let mut problem = full_problem(
-                setup,
-                &frames,
-                &pose([0.03, -0.07, 0.04], [0.02, -0.01, 1.56]),
-                &pose([0.5, -0.15, 0.0], [0.01, 0.02, 0.3]),
-            );
+            let mut problem = off_truth_problem(setup, &frames);
             // Non-zero corrections so the prior's gradient is tested too.
             let o = problem.layout.robot_offset();
             problem.params[o + 1] = 2e-5;
