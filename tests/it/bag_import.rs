@@ -122,6 +122,17 @@ struct StopAndGo {
 }
 
 impl StopAndGo {
+    /// Stands `stay` s at each of `n` views of the test board ([`views`]), `travel` s between
+    /// them.
+    fn through_views(n: usize, stay: f64, travel: f64) -> StopAndGo {
+        let board = Board::load(&board_path()).unwrap();
+        StopAndGo {
+            views: views(n, &board),
+            stay,
+            travel,
+        }
+    }
+
     /// Whether the arm stands at `t` (s): the frames worth rendering.
     fn standing(&self, t: f64) -> bool {
         t % (self.stay + self.travel) <= self.stay + 1e-9
@@ -178,6 +189,24 @@ struct BagSpec<'a> {
     /// Render only frames for which this says true (others reuse a blank frame: they must never
     /// become samples).
     render: &'a dyn Fn(f64) -> bool,
+}
+
+impl<'a> BagSpec<'a> {
+    /// The bag most tests write: MCAP, `mono8` frames at 5 fps, TF at 50 Hz, the clocks in step,
+    /// camera_info recorded; the arm's `trajectory` and the frames that show the board (`render`)
+    /// are each test's.
+    fn of(trajectory: &'a dyn Trajectory, render: &'a dyn Fn(f64) -> bool) -> BagSpec<'a> {
+        BagSpec {
+            storage: "mcap",
+            image_kind: "mono8",
+            trajectory,
+            fps: 5.0,
+            tf_hz: 50.0,
+            offset_s: 0.0,
+            camera_info: true,
+            render,
+        }
+    }
 }
 
 const ROBOT_START_NS: i64 = 1_700_000_000_000_000_000;
@@ -402,25 +431,14 @@ fn import_command(bag: &Path, out: &Path, extra: &[&str]) -> Command {
 /// A stop-and-go bag of 6 views with the board rendered while standing (so an import that
 /// finishes calibrates), 5 fps, in `storage`.
 fn six_view_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(6, &board),
-        stay: 0.6,
-        travel: 0.4,
-    };
+    let trajectory = StopAndGo::through_views(6, 0.6, 0.4);
     let standing = |t: f64| trajectory.standing(t);
     make_bag(
         dir,
         &format!("six-views-{storage}"),
         &BagSpec {
             storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
-            fps: 5.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
     )
 }
@@ -495,14 +513,10 @@ fn stop_and_go_mcap_raw_images_calibrate_within_tolerance() {
         dir.path(),
         "stop-and-go",
         &BagSpec {
-            storage: "mcap",
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 15.0,
             tf_hz: 125.0,
             offset_s: 0.030,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
     ) else {
         return;
@@ -710,25 +724,15 @@ fn recorded_decimation(session: &Path) -> f64 {
 fn the_library_imports_a_bag_into_a_solved_session() {
     use handeye_session::cell::bag::{import_bag_session, BagNote, BagSessionRequest};
     let dir = tempfile::tempdir().unwrap();
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(12, &board),
-        stay: 0.8,
-        travel: 0.7,
-    };
+    let trajectory = StopAndGo::through_views(12, 0.8, 0.7);
     let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag(
         dir.path(),
         "library",
         &BagSpec {
-            storage: "mcap",
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 15.0,
             tf_hz: 125.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
     ) else {
         return;
@@ -854,12 +858,9 @@ fn continuous_sqlite_compressed_images_recover_the_clock_offset() {
         &BagSpec {
             storage: "sqlite3",
             image_kind: "png",
-            trajectory: &trajectory,
-            fps: 5.0,
             tf_hz: 200.0,
             offset_s: offset,
-            camera_info: true,
-            render: &|_| true,
+            ..BagSpec::of(&trajectory, &|_| true)
         },
     ) else {
         return;
@@ -916,14 +917,11 @@ fn without_camera_info_the_intrinsics_are_estimated() {
         dir.path(),
         "no-info",
         &BagSpec {
-            storage: "mcap",
             image_kind: "png",
-            trajectory: &trajectory,
             fps: 10.0,
             tf_hz: 100.0,
-            offset_s: 0.0,
             camera_info: false,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
     ) else {
         return;
@@ -952,24 +950,13 @@ fn without_camera_info_the_intrinsics_are_estimated() {
 
 /// A small stop-and-go bag for the failure tests.
 fn small_bag(dir: &Path, storage: &str) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(4, &board),
-        stay: 0.5,
-        travel: 0.5,
-    };
+    let trajectory = StopAndGo::through_views(4, 0.5, 0.5);
     make_bag(
         dir,
         &format!("small-{storage}"),
         &BagSpec {
             storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
-            fps: 5.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &|_| false,
+            ..BagSpec::of(&trajectory, &|_| false)
         },
     )
 }

@@ -9,24 +9,13 @@ fn small_bag_edited(
     storage: &str,
     edit: impl FnOnce(&mut serde_json::Value),
 ) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(4, &board),
-        stay: 0.5,
-        travel: 0.5,
-    };
+    let trajectory = StopAndGo::through_views(4, 0.5, 0.5);
     make_bag_edited(
         dir,
         name,
         &BagSpec {
             storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
-            fps: 5.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &|_| false,
+            ..BagSpec::of(&trajectory, &|_| false)
         },
         edit,
     )
@@ -284,25 +273,16 @@ fn issue25_a_fifth_of_the_rows_pointing_at_an_unknown_topic_is_refused() {
 #[test]
 fn issue25_small_lies_are_imported_with_named_warnings() {
     let dir = tempfile::tempdir().unwrap();
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(8, &board),
-        stay: 0.8,
-        travel: 0.7,
-    };
+    let trajectory = StopAndGo::through_views(8, 0.8, 0.7);
     let standing = |t: f64| trajectory.standing(t);
     let Some(bag) = make_bag_edited(
         dir.path(),
         "small-lies",
         &BagSpec {
             storage: "sqlite3",
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 15.0,
             tf_hz: 125.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
         |spec| {
             let tf = spec["tf"].as_array_mut().unwrap();
@@ -444,24 +424,15 @@ fn issue25_the_staging_folder_of_an_import_still_running_is_left_alone() {
 
 /// A bag of `frames` incompressible 640x480 mono8 frames (300 KB each).
 fn big_bag(dir: &Path, storage: &str, frames: usize) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(2, &board),
-        stay: frames as f64 / 25.0 / 2.0,
-        travel: 0.5,
-    };
+    let trajectory = StopAndGo::through_views(2, frames as f64 / 25.0 / 2.0, 0.5);
     make_bag_edited(
         dir,
         &format!("big-{storage}"),
         &BagSpec {
             storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 25.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
             camera_info: false,
-            render: &|_| false,
+            ..BagSpec::of(&trajectory, &|_| false)
         },
         |spec| {
             for image in spec["images"].as_array_mut().unwrap() {

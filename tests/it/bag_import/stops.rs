@@ -10,26 +10,16 @@ use super::*;
 /// triggers the camera once the arm settled sends them): every frame is stationary over the whole
 /// window. With the trajectory's views.
 fn stops_only_bag(dir: &Path, stops: usize) -> Option<(PathBuf, Vec<Pose>)> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(stops, &board),
-        stay: 0.6,
-        travel: 1.0,
-    };
+    let trajectory = StopAndGo::through_views(stops, 0.6, 1.0);
     let period = trajectory.stay + trajectory.travel;
     let settled = |t: f64| (0.15..=trajectory.stay - 0.15).contains(&(t % period));
     let bag = make_bag_edited(
         dir,
         "only-at-stops",
         &BagSpec {
-            storage: "mcap",
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 10.0,
             tf_hz: 100.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &settled,
+            ..BagSpec::of(&trajectory, &settled)
         },
         // No frame while moving: the bag holds only the stops' frames.
         |spec| {

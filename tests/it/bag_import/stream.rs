@@ -14,12 +14,7 @@ fn stop_and_go_bag(
     travel: f64,
     moving: &str,
 ) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(views_n, &board),
-        stay: 0.6,
-        travel,
-    };
+    let trajectory = StopAndGo::through_views(views_n, 0.6, travel);
     let standing = |t: f64| trajectory.standing(t);
     let name = format!("stream-{storage}");
     make_bag_edited(
@@ -27,13 +22,9 @@ fn stop_and_go_bag(
         &name,
         &BagSpec {
             storage,
-            image_kind: "mono8",
-            trajectory: &trajectory,
             fps: 20.0,
             tf_hz: 100.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
         |spec| {
             if moving.starts_with("random:") {
@@ -157,7 +148,6 @@ fn issue29_a_bag_larger_than_the_address_space_allowed_imports_and_calibrates() 
 fn write_measurement_bags() {
     let out = PathBuf::from(std::env::var("HANDEYE_BAG_OUT").expect("HANDEYE_BAG_OUT"));
     std::fs::create_dir_all(&out).unwrap();
-    let board = Board::load(&board_path()).unwrap();
     let camera = CameraModel::load(&repo().join("configs/cameras/sim-1280x720.yaml")).unwrap();
     for (name, storage, fps, travel) in [
         ("measure-60s", "mcap", 30.0, 1.5),
@@ -167,24 +157,16 @@ fn write_measurement_bags() {
         if out.join(name).exists() {
             continue;
         }
-        let trajectory = StopAndGo {
-            views: views(20, &board),
-            stay: 1.55,
-            travel,
-        };
+        let trajectory = StopAndGo::through_views(20, 1.55, travel);
         let standing = |t: f64| trajectory.standing(t);
         let Some(bag) = make_bag_with_camera(
             &out,
             name,
             &BagSpec {
                 storage,
-                image_kind: "mono8",
-                trajectory: &trajectory,
                 fps,
                 tf_hz: 125.0,
-                offset_s: 0.0,
-                camera_info: true,
-                render: &standing,
+                ..BagSpec::of(&trajectory, &standing)
             },
             &camera,
             |_| {},

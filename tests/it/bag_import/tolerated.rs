@@ -14,25 +14,14 @@ fn tolerated_bag(
     image_kind: &str,
     edit: impl FnOnce(&mut serde_json::Value),
 ) -> Option<PathBuf> {
-    let board = Board::load(&board_path()).unwrap();
-    let trajectory = StopAndGo {
-        views: views(6, &board),
-        stay: 0.6,
-        travel: 0.6,
-    };
+    let trajectory = StopAndGo::through_views(6, 0.6, 0.6);
     let standing = |t: f64| trajectory.standing(t);
     make_bag_edited(
         dir,
         name,
         &BagSpec {
-            storage: "mcap",
             image_kind,
-            trajectory: &trajectory,
-            fps: 5.0,
-            tf_hz: 50.0,
-            offset_s: 0.0,
-            camera_info: true,
-            render: &standing,
+            ..BagSpec::of(&trajectory, &standing)
         },
         edit,
     )
