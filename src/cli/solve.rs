@@ -9,7 +9,6 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use handeye_config::{validate, SolveSpace};
-use handeye_core::geometry::readable;
 use handeye_records::dataset::Dataset;
 use handeye_records::result::ResultFile;
 use handeye_records::SessionFolder;
@@ -116,36 +115,14 @@ pub(super) struct SolveArgs {
 
 impl SolveArgs {
     fn options(&self) -> anyhow::Result<SolveOptions> {
-        // Only the values given are checked (an absent sigma is estimated); the sigmas against
-        // the ranges the config's `solver.rotation_sigma_deg` / `translation_sigma_mm` take.
-        for (name, value, range) in [
-            (
-                "--rotation-sigma-deg",
-                self.rotation_sigma_deg,
-                Some(validate::ROTATION_SIGMA_DEG),
-            ),
-            (
-                "--translation-sigma-mm",
-                self.translation_sigma_mm,
-                Some(validate::TRANSLATION_SIGMA_MM),
-            ),
-            ("--robust-scale", Some(self.robust_scale), None),
-        ]
-        .into_iter()
-        .filter_map(|(name, value, range)| Some((name, value?, range)))
-        {
-            match range {
-                Some(range) => anyhow::ensure!(
-                    range.contains(value),
-                    "{name} = {}: must be a value in {range}",
-                    readable(value)
-                ),
-                None => anyhow::ensure!(
-                    value.is_finite() && value > 0.0,
-                    "{name} = {value}: must be a positive number"
-                ),
-            }
-        }
+        // Checked as the Python package and the config's `solver:` section check them.
+        validate::check_solver_choice(
+            self.rotation_sigma_deg,
+            self.translation_sigma_mm,
+            self.robust_scale,
+            &|setting| format!("--{}", setting.replace('_', "-")),
+        )
+        .map_err(anyhow::Error::msg)?;
         Ok(SolverChoice {
             method: self.method,
             rotation_sigma_deg: self.rotation_sigma_deg,

@@ -777,3 +777,75 @@ impl Validator<'_> {
         })
     }
 }
+
+/// The pose-space solver's settings given on a command line or to the Python package, checked
+/// as the config's `solver:` section is: a noise sigma given lies in its range
+/// ([`ROTATION_SIGMA_DEG`], [`TRANSLATION_SIGMA_MM`]; an absent one is estimated), and the
+/// robust loss's scale is a positive number. `name` spells a setting as its caller's user types
+/// it (`--rotation-sigma-deg`, `rotation_sigma_deg`).
+pub fn check_solver_choice(
+    rotation_sigma_deg: Option<f64>,
+    translation_sigma_mm: Option<f64>,
+    robust_scale: f64,
+    name: &dyn Fn(&str) -> String,
+) -> Result<(), String> {
+    for (setting, value, range) in [
+        ("rotation_sigma_deg", rotation_sigma_deg, ROTATION_SIGMA_DEG),
+        (
+            "translation_sigma_mm",
+            translation_sigma_mm,
+            TRANSLATION_SIGMA_MM,
+        ),
+    ] {
+        if let Some(value) = value.filter(|v| !range.contains(*v)) {
+            return Err(format!(
+                "{} = {}: must be a value in {range}",
+                name(setting),
+                readable(value)
+            ));
+        }
+    }
+    if !(robust_scale.is_finite() && robust_scale > 0.0) {
+        return Err(format!(
+            "{} = {robust_scale}: must be a positive number",
+            name("robust_scale")
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The CLI's and the Python package's solver settings are checked by one rule, each naming
+    /// the setting as its user types it; a sigma left out is estimated, so not checked.
+    #[test]
+    fn a_solver_choice_is_checked_as_the_config_is_and_named_as_its_caller_spells_it() {
+        let cli = |setting: &str| format!("--{}", setting.replace('_', "-"));
+        assert_eq!(check_solver_choice(None, None, 3.0, &cli), Ok(()));
+        assert_eq!(
+            check_solver_choice(Some(10.0), Some(100.0), 0.5, &cli),
+            Ok(())
+        );
+        assert_eq!(
+            check_solver_choice(Some(20.0), None, 3.0, &cli),
+            Err(format!(
+                "--rotation-sigma-deg = 20: must be a value in {ROTATION_SIGMA_DEG}"
+            ))
+        );
+        assert_eq!(
+            check_solver_choice(None, Some(0.0), 3.0, &str::to_string),
+            Err(format!(
+                "translation_sigma_mm = 0: must be a value in {TRANSLATION_SIGMA_MM}"
+            ))
+        );
+        for scale in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let error = check_solver_choice(None, None, scale, &str::to_string).unwrap_err();
+            assert_eq!(
+                error,
+                format!("robust_scale = {scale}: must be a positive number")
+            );
+        }
+    }
+}

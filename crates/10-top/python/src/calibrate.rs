@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 
 use handeye_config::validate;
 use handeye_core::error_text::error_chain;
-use handeye_core::geometry::{readable, Pose};
+use handeye_core::geometry::Pose;
 use handeye_core::setup::{PosePair, Setup, ViewSigma};
 use handeye_records::result::ResultFile;
 use handeye_solve::verdict::{self, Accuracy, Verdict};
@@ -50,33 +50,14 @@ fn options(
     weigh_views: bool,
 ) -> PyResult<SolveOptions> {
     let method: Method = method.parse().map_err(|e: String| errors::input(py, e))?;
-    for (name, value, range) in [
-        (
-            "rotation_sigma_deg",
-            rotation_sigma_deg,
-            validate::ROTATION_SIGMA_DEG,
-        ),
-        (
-            "translation_sigma_mm",
-            translation_sigma_mm,
-            validate::TRANSLATION_SIGMA_MM,
-        ),
-    ] {
-        if let Some(value) = value {
-            if !range.contains(value) {
-                return Err(errors::input(
-                    py,
-                    format!("{name} = {}: must be a value in {range}", readable(value)),
-                ));
-            }
-        }
-    }
-    if !(robust_scale.is_finite() && robust_scale > 0.0) {
-        return Err(errors::input(
-            py,
-            format!("robust_scale = {robust_scale}: must be a positive number"),
-        ));
-    }
+    // Checked as the CLI and the config's `solver:` section check them.
+    validate::check_solver_choice(
+        rotation_sigma_deg,
+        translation_sigma_mm,
+        robust_scale,
+        &str::to_string,
+    )
+    .map_err(|e| errors::input(py, e))?;
     let robust = match robust {
         "none" => RobustLoss::None,
         "huber" => RobustLoss::Huber(robust_scale),
