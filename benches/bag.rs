@@ -154,7 +154,7 @@ fn write_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
             base_from_target * look.target_from_camera(&centre) * flange_from_camera.inverse()
         })
         .collect();
-    let rays = PixelRays::new(&camera);
+    let rays = PixelRays::new(&camera).expect("memory for the lens's rays");
     let mut rng = rand::rngs::StdRng::seed_from_u64(5);
     let frames: Vec<Vec<u8>> = views
         .iter()
@@ -168,6 +168,7 @@ fn write_bag(dir: &Path, seconds: f64, stops: usize) -> std::path::PathBuf {
                 &RenderOptions::default(),
                 &mut rng,
             )
+            .expect("memory for a frame")
             .into_raw()
         })
         .collect();

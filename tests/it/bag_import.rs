@@ -240,7 +240,7 @@ fn make_bag_with_camera(
     let (flange_from_camera, base_from_target) = truth();
     let frames = dir.join(format!("{name}-frames"));
     std::fs::create_dir_all(&frames).unwrap();
-    let rays = PixelRays::new(&camera);
+    let rays = PixelRays::new(&camera).expect("memory for the lens's rays");
     let options = RenderOptions {
         supersample: 2,
         ..RenderOptions::default()
@@ -286,7 +286,8 @@ fn make_bag_with_camera(
                         &camera_from_target,
                         &options,
                         &mut rng,
-                    );
+                    )
+                    .expect("memory for a frame");
                     let f = format!("{i:05}.{ext}");
                     write_frame(&image, &frames.join(&f));
                     rendered.push((flange, f.clone()));

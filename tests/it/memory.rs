@@ -55,6 +55,12 @@ pub(crate) fn ending(out: &Output, what: &str) -> Ending {
                 log.contains("memory") && log.contains("limit"),
                 "{what}: exit 1 without naming memory and the limit:\n{log}"
             );
+            // A run the limit stopped fails the same way when resumed under it: advice to
+            // resume says to raise the limit first.
+            assert!(
+                !log.contains("resume with") || log.contains("raise the memory limit, then resume"),
+                "{what}: advises resuming without raising the limit:\n{log}"
+            );
             Ending::Refused
         }
         other => panic!("{what}: exit {other:?}:\n{log}"),

@@ -75,9 +75,19 @@ pub enum CameraError {
         /// What went wrong.
         reason: String,
     },
+    /// The frame's memory could not be had (a limit such as `ulimit -v`): the cause to act on
+    /// before resuming.
+    #[error(transparent)]
+    Memory(Box<handeye_core::memory::NotEnoughMemory>),
     /// Anything else the backend reports.
     #[error("camera backend error")]
     Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl From<handeye_core::memory::NotEnoughMemory> for CameraError {
+    fn from(error: handeye_core::memory::NotEnoughMemory) -> Self {
+        CameraError::Memory(Box::new(error))
+    }
 }
 
 /// A camera. `grab` blocks until a frame exposed no earlier than `not_before` is available, so a

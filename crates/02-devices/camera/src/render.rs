@@ -69,14 +69,9 @@ pub struct PixelRays {
 }
 
 impl PixelRays {
-    /// The rays of every pixel of `camera`'s image (panics when their memory cannot be had:
-    /// [`PixelRays::try_new`] returns the error instead).
-    pub fn new(camera: &CameraModel) -> Self {
-        PixelRays::try_new(camera).unwrap_or_else(|e| panic!("{e}"))
-    }
-
-    /// [`PixelRays::new`], or the error when the table's memory cannot be had.
-    pub fn try_new(camera: &CameraModel) -> Result<Self, NotEnoughMemory> {
+    /// The rays of every pixel of `camera`'s image, or the error when the table's memory cannot
+    /// be had.
+    pub fn new(camera: &CameraModel) -> Result<Self, NotEnoughMemory> {
         let (width, height) = (camera.width as usize, camera.height as usize);
         let what = "the simulated camera's table of pixel rays";
         let mut rays = try_with_capacity(what, width * height)?;
@@ -110,12 +105,8 @@ impl PixelRays {
     /// so a simulated cell of several cameras with one lens, or the tests' many simulated cells
     /// at once, would otherwise hold a copy each. Computed by the first to ask, the others
     /// waiting for it; identical to [`PixelRays::new`] of the lens.
-    pub fn shared(camera: &CameraModel) -> Arc<PixelRays> {
-        PixelRays::try_shared(camera).unwrap_or_else(|e| panic!("{e}"))
-    }
-
-    /// [`PixelRays::shared`], or the error when a new table's memory cannot be had.
-    pub fn try_shared(camera: &CameraModel) -> Result<Arc<PixelRays>, NotEnoughMemory> {
+    /// The error: a new table's memory could not be had.
+    pub fn shared(camera: &CameraModel) -> Result<Arc<PixelRays>, NotEnoughMemory> {
         static TABLES: Mutex<Vec<(CameraModel, Weak<PixelRays>)>> = Mutex::new(Vec::new());
         // A panic elsewhere while the lock was held leaves the list as valid as before.
         let mut tables = TABLES.lock().unwrap_or_else(PoisonError::into_inner);
@@ -127,13 +118,15 @@ impl PixelRays {
         {
             return Ok(table);
         }
-        let table = Arc::new(PixelRays::try_new(camera)?);
+        let table = Arc::new(PixelRays::new(camera)?);
         tables.push((*camera, Arc::downgrade(&table)));
         Ok(table)
     }
 }
 
-/// Renders `board` seen by `camera` at `camera_from_target`.
+/// Renders `board` seen by `camera` at `camera_from_target`: the convenience of tests and
+/// benches, which panics when the frame's memory cannot be had (a camera renders with
+/// [`render_with_rays`], which returns the error).
 pub fn render(
     board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
@@ -141,34 +134,16 @@ pub fn render(
     options: &RenderOptions,
     rng: &mut impl Rng,
 ) -> GrayImage {
-    render_with_rays(
-        board,
-        camera,
-        &PixelRays::new(camera),
-        camera_from_target,
-        options,
-        rng,
-    )
-}
-
-/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`; panics
-/// when the frame's memory cannot be had: [`try_render_with_rays`] returns the error instead).
-pub fn render_with_rays(
-    board: &(impl AsTarget + ?Sized),
-    camera: &CameraModel,
-    rays: &PixelRays,
-    camera_from_target: &Pose,
-    options: &RenderOptions,
-    rng: &mut impl Rng,
-) -> GrayImage {
-    try_render_with_rays(board, camera, rays, camera_from_target, options, rng)
+    PixelRays::new(camera)
+        .and_then(|rays| render_with_rays(board, camera, &rays, camera_from_target, options, rng))
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// [`render_with_rays`], or the error when the frame's buffers (5 bytes a pixel, 4 more with
-/// blur) cannot be had: a simulated camera under a memory limit reports it as a camera error
-/// rather than aborting the run.
-pub fn try_render_with_rays(
+/// [`render`] with the lens's rays computed beforehand (`rays` must be of this `camera`), or
+/// the error when the frame's buffers (5 bytes a pixel, 4 more with blur) cannot be had: a
+/// simulated camera under a memory limit reports it as a camera error rather than aborting the
+/// run.
+pub fn render_with_rays(
     board: &(impl AsTarget + ?Sized),
     camera: &CameraModel,
     rays: &PixelRays,
@@ -558,17 +533,17 @@ mod tests {
                 k3: 0.0,
             },
         };
-        let first = PixelRays::shared(&lens);
-        let second = PixelRays::shared(&lens);
+        let first = PixelRays::shared(&lens).unwrap();
+        let second = PixelRays::shared(&lens).unwrap();
         assert!(Arc::ptr_eq(&first, &second), "one table for one lens");
         assert!(
-            first.rays == PixelRays::new(&lens).rays,
+            first.rays == PixelRays::new(&lens).unwrap().rays,
             "the shared table is the lens's own"
         );
         let other_lens = CameraModel { fx: 72.0, ..lens };
-        let other = PixelRays::shared(&other_lens);
+        let other = PixelRays::shared(&other_lens).unwrap();
         assert!(!Arc::ptr_eq(&first, &other), "another lens, another table");
-        assert!(other.rays == PixelRays::new(&other_lens).rays);
+        assert!(other.rays == PixelRays::new(&other_lens).unwrap().rays);
         // Once nobody holds it, it is freed: the next holder computes it again.
         let weak = Arc::downgrade(&first);
         drop((first, second));

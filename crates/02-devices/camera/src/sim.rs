@@ -15,7 +15,7 @@ use handeye_core::geometry::Pose;
 use handeye_core::setup::CellTransforms;
 use handeye_vision::Target;
 
-use super::render::{try_render_with_rays, PixelRays, RenderOptions};
+use super::render::{render_with_rays, PixelRays, RenderOptions};
 use super::{Camera, CameraError, Frame};
 use handeye_core::camera_model::CameraModel;
 
@@ -94,22 +94,18 @@ impl Camera for SimCamera {
         };
         // Under a memory limit the table or the frame may not fit: a camera error that ends the
         // run cleanly with what it recorded, never an abort.
-        let out_of_memory = |e| CameraError::Backend(Box::new(e));
         let rays = match &self.rays {
             Some(rays) => rays,
-            None => self
-                .rays
-                .insert(PixelRays::try_shared(&self.lens).map_err(out_of_memory)?),
+            None => self.rays.insert(PixelRays::shared(&self.lens)?),
         };
-        let image = try_render_with_rays(
+        let image = render_with_rays(
             &self.board,
             &self.lens,
             rays,
             &camera_from_target,
             &self.options,
             &mut self.rng,
-        )
-        .map_err(out_of_memory)?;
+        )?;
         // The frame reports when its exposure started (it shows the arm as it stood then),
         // never before `not_before`.
         Ok(Frame {

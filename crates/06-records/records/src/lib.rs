@@ -41,6 +41,15 @@ use handeye_robot::RobotError;
 use handeye_solve::SolveError;
 use handeye_vision::TargetError;
 
+/// What must change before a camera's failure is resumed, said before the resume: a memory
+/// limit the frame did not fit under fails the same way again until it is raised.
+fn raise_first(source: &CameraError) -> &'static str {
+    match source {
+        CameraError::Memory(_) => "raise the memory limit, then ",
+        _ => "",
+    }
+}
+
 /// Why a session stopped or could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
@@ -187,7 +196,7 @@ pub enum SessionError {
         source: RobotError,
     },
     /// The camera failed; every sample so far is kept.
-    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); resume with `handeye run --resume {folder}`")]
+    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); {}resume with `handeye run --resume {folder}`", raise_first(source))]
     Camera {
         /// Where it failed.
         plan_index: usize,

@@ -498,14 +498,14 @@ impl PoseLoop {
 
 /// Frames of a recorded source measured while they are in memory, before the run that uses them:
 /// a bag import, whose poses are known only as its frames are chosen, and whose plan is checked
-/// when all of them are. The run's own detection workers, started once, measure each frame
-/// handed over and commit it as a run commits a pose (its preview and its record; no
-/// `samples.yaml`, which the run rebuilds from the records); the frame file is the caller's,
-/// written already. The run that follows in the same folder
-/// finds every pose recorded: it neither reads nor decodes a frame again, and measures again
-/// only a frame whose board was not found (every pose's second try). A frame waits for a worker
-/// only while [`FrameRecorder::WAITING`] others do: the reader is held back when detection falls
-/// behind, so the frames in memory stay few however many there are.
+/// when all of them are. Detection workers of the run's own kind (`record::DetectionWorkers`,
+/// started once for the whole recording) measure each frame handed over and commit it as a run
+/// commits a pose (its preview and its record; no `samples.yaml`, which the run rebuilds from the
+/// records); the frame file is the caller's, written already. The run that follows in the same
+/// folder finds every pose recorded: it neither reads nor decodes a frame again, and measures
+/// again only a frame whose board was not found (every pose's second try). A frame waits for a
+/// worker only while [`FrameRecorder::WAITING`] others do: the reader is held back when detection
+/// falls behind, so the frames in memory stay few however many there are.
 pub struct FrameRecorder {
     workers: DetectionWorkers,
     error: Option<SessionError>,

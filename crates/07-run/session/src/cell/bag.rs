@@ -1,7 +1,7 @@
 //! A ROS 2 bag imported as a session (`handeye import bag`): a recorded pose source for the one
 //! run. The bag read ([`handeye_ros2_bag::import_bag_to`]: storage, TF, the frames chosen), each
 //! frame, as it is chosen, written as the session's frame file and measured while it is in
-//! memory by the run's own detection workers ([`FrameRecorder`]: its preview and record
+//! memory by detection workers of the run's own kind ([`FrameRecorder`]: its preview and record
 //! committed; a few frames in memory at a time, never a frame decoded again), with their flange
 //! poses as a recorded cell in a staging folder beside the output, run through the one run
 //! ([`run::run`], which finds every pose recorded) and solved there, its report written by the
@@ -403,9 +403,10 @@ fn import_frames(
     let mut recorder: Option<FrameRecorder> = None;
     let imported = import_bag_to(&request.bag, &request.options, &mut |chosen| {
         let frame = SessionFolder::frame_name(chosen.index);
-        let file = folder.root().join(&frame);
         let png = frame_png(chosen.image)?;
-        std::fs::write(&file, &png).with_context(|| format!("writing {}", file.display()))?;
+        // Written as every session file is (atomically); the workers keep it as it is.
+        folder.write_file(&frame, &png)?;
+        let file = folder.root().join(&frame);
         samples.push(BagSampleRecord {
             frame: frame.display().to_string(),
             image_stamp_s: chosen.sample.image_stamp_ns as f64 * 1e-9,
