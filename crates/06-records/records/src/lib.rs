@@ -41,12 +41,13 @@ use handeye_robot::RobotError;
 use handeye_solve::SolveError;
 use handeye_vision::TargetError;
 
-/// What must change before a camera's failure is resumed, said before the resume: a memory
-/// limit the frame did not fit under fails the same way again until it is raised.
-fn raise_first(source: &CameraError) -> &'static str {
-    match source {
-        CameraError::Memory(_) => "raise the memory limit, then ",
-        _ => "",
+/// What to do before resuming a stopped run: raise the memory limit when that is what stopped
+/// it (resumed under the same limit, it fails the same way), else `otherwise`.
+fn before_resuming(short_of_memory: bool, otherwise: &'static str) -> &'static str {
+    if short_of_memory {
+        "raise the memory limit, then "
+    } else {
+        otherwise
     }
 }
 
@@ -86,7 +87,7 @@ pub enum SessionError {
     },
     /// A pose's frame, record or the samples file could not be written (a full disk, say);
     /// every pose committed before is kept.
-    #[error("could not record plan pose {plan_index} ({recorded} poses recorded and kept); fix the cause (free disk space, say), then resume with `handeye run --resume {}`", folder.display())]
+    #[error("could not record plan pose {plan_index} ({recorded} poses recorded and kept); {}resume with `handeye run --resume {}`", before_resuming(source.short_of_memory(), "fix the cause (free disk space, say), then "), folder.display())]
     RecordFailed {
         /// The pose being recorded.
         plan_index: usize,
@@ -196,7 +197,7 @@ pub enum SessionError {
         source: RobotError,
     },
     /// The camera failed; every sample so far is kept.
-    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); {}resume with `handeye run --resume {folder}`", raise_first(source))]
+    #[error("camera failed at plan pose {plan_index} ({recorded} poses recorded); {}resume with `handeye run --resume {folder}`", before_resuming(matches!(source, CameraError::Memory(_)), ""))]
     Camera {
         /// Where it failed.
         plan_index: usize,
@@ -287,6 +288,19 @@ pub enum SessionError {
     /// an arm model, of another arm, or poses without their joints).
     #[error("{0}")]
     ArmModel(String),
+}
+
+impl SessionError {
+    /// Whether a memory limit stopped this: a frame or a detector that did not fit, also when
+    /// recording the pose is what it stopped.
+    pub fn short_of_memory(&self) -> bool {
+        match self {
+            SessionError::Detector(error) => matches!(**error, TargetError::Memory(_)),
+            SessionError::Camera { source, .. } => matches!(source, CameraError::Memory(_)),
+            SessionError::RecordFailed { source, .. } => source.short_of_memory(),
+            _ => false,
+        }
+    }
 }
 
 /// Creates `dir` and its parents; a failure names it ([`SessionError::Io`]).
