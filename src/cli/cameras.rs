@@ -1,12 +1,12 @@
-//! The several-camera ends of `handeye run` and `handeye replay` (a config with `cameras:`, a
-//! session folder with `rig.yaml`): every camera's answer printed, the report written. The run
-//! itself is `cell::run::run` and the replay `cell::replay::replay_session`, as for one camera.
+//! The several-camera ends of `handeye run`, `replay` and `solve` (a config with `cameras:`, a
+//! session folder with `rig.yaml`): every camera's answer printed. The run itself is
+//! `cell::run::run` and the replay `cell::replay::replay_session`, as for one camera, and their
+//! pages are written as one camera's are.
 
 use std::path::Path;
 
 use handeye_records::result::CellResult;
-use handeye_report::session::REPLAY_REPORT_FILE;
-use handeye_session::cell::replay::{AnswerOutput, CamerasReplay};
+use handeye_session::cell::replay::AnswerOutput;
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
 
@@ -25,23 +25,6 @@ pub(super) fn print_run(done: &CellRun) -> String {
         "next: handeye export {} --format ros2|urdf|opencv",
         output.result.display()
     )
-}
-
-/// The end of `handeye replay` of a several-camera session folder (the joint solve again from
-/// its records, `cell::replay::replay_session`): every camera's answer printed, its report
-/// beside the result; the session's own files are left as the run wrote them.
-pub(super) fn print_replay(replay: &CamerasReplay) -> anyhow::Result<()> {
-    print_result(&replay.result, &replay.output.result);
-    let report = handeye_session::cell::replay::beside(&replay.output.result, REPLAY_REPORT_FILE);
-    // The result is saved; a report problem must not hide it (as for one camera).
-    match handeye_report::cameras::write_cameras_report(&replay.result, &replay.folder, &report) {
-        Ok(()) => outln!("report: {}", report.display()),
-        Err(e) => eprintln!(
-            "warning: the report could not be written: {:#}",
-            anyhow::Error::from(e)
-        ),
-    }
-    Ok(())
 }
 
 /// Prints every camera's mount, the boards and the camera-to-camera transforms.

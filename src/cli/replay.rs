@@ -6,9 +6,9 @@ use clap::Args;
 
 use handeye_records::result::ResultFile;
 use handeye_records::{PoseVisit, SessionFolder};
-use handeye_report::session::{write_replay_report, Optics, REPLAY_REPORT_FILE};
+use handeye_report::session::{write_replay_report, REPLAY_REPORT_FILE};
 use handeye_session::cell::replay::{
-    beside, replay_session, OneCameraReplay, ReplayRequest, Replayed,
+    beside, replay_session, CameraReplay, ReplayRequest, Replayed,
 };
 
 /// Re-detect the board in a session's frames and solve again offline.
@@ -41,53 +41,43 @@ pub(super) fn run(args: ReplayArgs) -> anyhow::Result<()> {
         config: args.config.as_deref(),
         output: args.output.as_deref(),
     };
-    let replay = match replay_session(request, &mut print_visits)? {
-        Replayed::Cameras(replay) => return super::cameras::print_replay(&replay),
-        Replayed::OneCamera(replay) => replay,
-    };
-    let OneCameraReplay {
-        folder,
-        cell,
-        camera_model,
-        solved,
-        output,
-        ..
-    } = *replay;
-    outln!("{}", solved.summary);
-    print_difference_from_recorded(&folder, &solved.calibration)?;
-    if let Some(truth) = &cell.config.camera().simulation {
-        outln!("{}", solved.compare_with_truth(truth));
+    let replay = replay_session(request, &mut print_visits)?;
+    match &replay.camera {
+        Some(camera) => print_camera(&replay, camera)?,
+        None => super::cameras::print_result(&replay.result, &replay.output.result),
     }
-    outln!();
-    outln!("result:  {}", output.display());
-    let optics = Optics {
-        board: &cell.camera().board,
-        camera: &camera_model,
-    };
-    let report = beside(&output, REPLAY_REPORT_FILE);
-    match write_replay_report(
-        &folder,
-        &report,
-        &solved,
-        optics,
-        Some(cell.config.camera().nominal),
-        cell.config.robot.frames(),
-    ) {
+    // The result is saved; a report problem must not hide it.
+    let report = beside(&replay.output.result, REPLAY_REPORT_FILE);
+    match write_replay_report(&replay, &report) {
         Ok(report) => outln!("report:  {}", report.display()),
-        // The result is saved; a report problem must not hide it.
         Err(e) => eprintln!(
             "warning: the report could not be written: {:#}",
             anyhow::Error::from(e)
         ),
     }
-    outln!(
-        "{}",
-        super::run::next_step(
-            solved.verdict.as_ref(),
-            &output,
-            super::run::Stack::of(&cell.config.robot)
-        )
-    );
+    if let Some(camera) = &replay.camera {
+        outln!(
+            "{}",
+            super::run::next_step(
+                camera.solved.verdict.as_ref(),
+                &replay.output.result,
+                super::run::Stack::of(&replay.cell.config.robot)
+            )
+        );
+    }
+    Ok(())
+}
+
+/// What a one-camera replay prints before its report: the answer, how far it is from the one
+/// the run recorded, from the simulator's truth (a simulated cell), and where it was written.
+fn print_camera(replay: &Replayed, camera: &CameraReplay) -> anyhow::Result<()> {
+    outln!("{}", camera.solved.summary);
+    print_difference_from_recorded(&camera.folder, &camera.solved.calibration)?;
+    if let Some(truth) = &replay.cell.config.camera().simulation {
+        outln!("{}", camera.solved.compare_with_truth(truth));
+    }
+    outln!();
+    outln!("result:  {}", replay.output.result.display());
     Ok(())
 }
 

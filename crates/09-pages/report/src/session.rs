@@ -17,6 +17,7 @@ use handeye_core::setup::{CornerObservation, PosePair, RobotFrames};
 use handeye_records::dataset::Dataset;
 use handeye_records::result::CellResult;
 use handeye_records::{Evidence, PoseVisit, SessionError, SessionFolder, SolvedSession};
+use handeye_session::cell::replay::Replayed;
 use handeye_session::cell::run::CellRun;
 use handeye_solve::verdict::Verdict;
 use handeye_solve::Calibration;
@@ -423,28 +424,33 @@ pub const REPORT_FILE: &str = "report.html";
 /// default, where the run's own `report.html` stays).
 pub const REPLAY_REPORT_FILE: &str = "replay-report.html";
 
-/// Writes the page of a replay (`handeye replay DIR`) to `path`: the answers, the verdict and
-/// the evidence of the solve just made from the frames detected again (`solved`), with the
-/// board and lens it used; the run's own `report.html` stays. Returns the path written.
+/// Writes the page of a replay (`handeye replay DIR`, [`Replayed`]), one camera or several, to
+/// `path`: the answers, the verdict and the evidence of the solve just made from the frames
+/// detected again, with the board and lens it used; the run's own `report.html` stays. Returns
+/// the path written.
 pub fn write_replay_report(
-    folder: &SessionFolder,
+    replay: &Replayed,
     path: &std::path::Path,
-    solved: &SolvedSession,
-    optics: Optics<'_>,
-    nominal: Option<handeye_core::setup::CellTransforms>,
-    robot_frames: RobotFrames,
 ) -> Result<std::path::PathBuf, ReportError> {
+    let Some(camera) = &replay.camera else {
+        super::cameras::write_cameras_report(&replay.result, &replay.root, path)?;
+        return Ok(path.to_path_buf());
+    };
+    let config = &replay.cell.config;
     write(
-        folder,
-        &solved.evidence,
-        Answer::of(solved),
+        &camera.folder,
+        &camera.solved.evidence,
+        Answer::of(&camera.solved),
         Page {
-            optics: Some(optics),
-            verdict: solved.verdict.clone(),
+            optics: Some(Optics {
+                board: &replay.cell.camera().board,
+                camera: &camera.camera_model,
+            }),
+            verdict: camera.solved.verdict.clone(),
             arm_time: None,
-            nominal,
-            robot_frames,
-            arm: solved.arm.as_ref().map(|a| a.result_section()),
+            nominal: Some(config.camera().nominal),
+            robot_frames: config.robot.frames(),
+            arm: camera.solved.arm.as_ref().map(|a| a.result_section()),
             path: path.to_path_buf(),
         },
     )

@@ -16,7 +16,7 @@ use handeye_records::{PoseVisit, SessionError, SessionFolder, SolvedSession};
 use handeye_vision::{DetectorOptions, Target, TargetDetector};
 
 use super::cameras;
-use super::PreparedCell;
+use super::{PreparedCamera, PreparedCell};
 use crate::driver::measure;
 
 /// A replay's result file in the session folder when no other is asked for.
@@ -128,30 +128,27 @@ pub struct ReplayRequest<'a> {
     pub output: Option<&'a Path>,
 }
 
-/// A replayed session.
-pub enum Replayed {
-    /// One camera's.
-    OneCamera(Box<OneCameraReplay>),
-    /// Several cameras'.
-    Cameras(Box<CamerasReplay>),
-}
-
-/// A several-camera session replayed: the joint answer, written to `output.result`.
-pub struct CamerasReplay {
-    /// The session folder.
-    pub folder: PathBuf,
-    /// The joint answer.
+/// A replayed session, one camera or several, in the shape of a run's answer
+/// ([`super::run::CellRun`]): the cell's answer whatever its number of cameras, and a one-camera
+/// session's own solve beside it.
+pub struct Replayed {
+    /// The session folder (for several cameras the folder holding `rig.yaml`).
+    pub root: PathBuf,
+    /// The cell as the session recorded it (its boards, the lenses the frames were measured with).
+    pub cell: PreparedCell,
+    /// The answer as written to `output.result`, whatever the number of cameras.
     pub result: CellResult,
-    /// Where it and the estimates were written.
+    /// A one-camera session's solve (its verdict and evidence, what its page draws); `None` for a
+    /// cell of listed cameras, whose answer is the joint one ([`Self::result`]).
+    pub camera: Option<Box<CameraReplay>>,
+    /// Where the answer and the estimates were written.
     pub output: AnswerOutput,
 }
 
-/// One camera's session replayed.
-pub struct OneCameraReplay {
-    /// The session folder.
+/// A one-camera session's frames measured again and solved.
+pub struct CameraReplay {
+    /// Its session folder.
     pub folder: SessionFolder,
-    /// The cell as the session recorded it (its board, the lens the frames were measured with).
-    pub cell: PreparedCell,
     /// The lens the frames were measured with (the config's, else the one the run estimated).
     pub camera_model: CameraModel,
     /// Every saved frame as measured again, plan order.
@@ -160,56 +157,98 @@ pub struct OneCameraReplay {
     pub solved: SolvedSession,
     /// The samples it was solved from.
     pub dataset: Dataset,
-    /// The result file written.
-    pub output: PathBuf,
 }
 
-/// Replays the session of `request`: every camera's saved frames measured again and solved.
-/// `measured` is told each frame as measured again (with the camera's name in a cell of
-/// several), before the solve, so a solve that fails still leaves what each frame gave on the
-/// screen.
+/// Replays the session of `request`: every camera's saved frames measured again with its board
+/// and lens, then solved as the run's solve is — one camera's by its session solve (the checks
+/// of the given files included), listed cameras' jointly. `measured` is told each camera's
+/// frames as measured again (with the camera's name in a cell of listed cameras), before the
+/// solve, so a solve that fails still leaves what each frame gave on the screen.
 pub fn replay_session(
     request: ReplayRequest<'_>,
     measured: &mut dyn FnMut(Option<&str>, &[PoseVisit]),
 ) -> anyhow::Result<Replayed> {
-    if cameras::is_cameras_folder(request.session) {
-        let recorded = cameras::read_manifest(request.session)?.config;
+    let root = request.session;
+    let listed = cameras::is_cameras_folder(root);
+    let (cell, mut folders) = if listed {
+        let recorded = cameras::read_manifest(root)?.config;
         let config = super::session_config(request.config, &recorded)?;
         let cell = super::prepare_config(config).context("preparing the cell")?;
-        // Every camera's frames measured again with its board and lens, as one camera's are.
-        let mut visits = Vec::new();
-        for (camera, name) in cell
-            .cameras
-            .iter()
-            .zip(cell.config.cameras.iter().map(|c| &c.name))
-        {
-            let folder = SessionFolder::open(&cameras::camera_folder(request.session, name))?;
-            let (_, measured_now) = redetect(
-                &folder,
-                &camera.board,
-                &camera.camera_model,
-                cell.detector_options(),
-                cell.config.session.max_reprojection_rms_px,
-            )?;
-            measured(Some(name), &measured_now);
-            visits.push(measured_now);
-        }
-        let output = AnswerOutput::replay(request.session, request.output);
-        let result = cameras::solve_cameras_folder(request.session, &cell.config, visits, &output)?;
-        return Ok(Replayed::Cameras(Box::new(CamerasReplay {
-            folder: request.session.to_path_buf(),
-            result,
-            output,
-        })));
+        let folders = (cell.config.cameras.iter())
+            .map(|c| SessionFolder::open(&cameras::camera_folder(root, &c.name)))
+            .collect::<Result<Vec<_>, _>>()?;
+        (cell, folders)
+    } else {
+        let folder = SessionFolder::open(root)?;
+        let cell = one_camera_cell(&folder, request.config)?;
+        (cell, vec![folder])
+    };
+    // Every camera's frames measured again with its board and lens, config order.
+    let mut visits: Vec<Vec<PoseVisit>> = Vec::new();
+    let mut lenses = Vec::new();
+    for ((camera, config), folder) in cell.cameras.iter().zip(&cell.config.cameras).zip(&folders) {
+        let lens = replay_lens(folder, camera)?;
+        let (_, measured_now) = redetect(
+            folder,
+            &camera.board,
+            &lens,
+            cell.detector_options(),
+            cell.config.session.max_reprojection_rms_px,
+        )?;
+        measured(listed.then_some(config.name.as_str()), &measured_now);
+        visits.push(measured_now);
+        lenses.push(lens);
     }
-    let folder = SessionFolder::open(request.session)?;
+    let output = AnswerOutput::replay(root, request.output);
+    let (result, camera) = if listed {
+        let result = cameras::solve_cameras_folder(root, &cell.config, visits, &output)?;
+        (result, None)
+    } else {
+        // A one-camera session: one folder, its camera's measurements and lens.
+        let (folder, visits) = (folders.swap_remove(0), visits.swap_remove(0));
+        let replay = solve_camera(folder, &cell, lenses[0], visits, &output)?;
+        let result = CellResult::of_one_camera(
+            replay
+                .solved
+                .result_file(&replay.dataset.pairs, &cell.config),
+            &output.result,
+        )?;
+        (result, Some(Box::new(replay)))
+    };
+    Ok(Replayed {
+        root: root.to_path_buf(),
+        cell,
+        result,
+        camera,
+        output,
+    })
+}
+
+/// The lens `camera`'s frames in `folder` are measured again with: the config's, else (a cell
+/// without configured intrinsics) the one its run estimated.
+fn replay_lens(folder: &SessionFolder, camera: &PreparedCamera) -> anyhow::Result<CameraModel> {
+    if camera.intrinsics_known {
+        return Ok(camera.camera_model);
+    }
+    let file = folder.root().join(handeye_records::solve::CAMERA_INFO_FILE);
+    CameraModel::load(&file).with_context(|| {
+        format!(
+            "the config has no intrinsics and {} holds no estimated ones: solve the session first",
+            folder.root().display()
+        )
+    })
+}
+
+/// The cell of a one-camera session `folder` (its recorded config, or `config`), checked to be
+/// the cell its frames were taken in.
+fn one_camera_cell(folder: &SessionFolder, config: Option<&Path>) -> anyhow::Result<PreparedCell> {
     let manifest = folder.read_manifest()?;
     let config = super::config_of_camera_folder(
-        super::session_config(request.config, &manifest.config)?,
-        request.session,
+        super::session_config(config, &manifest.config)?,
+        folder.root(),
     )
     .context("reading the cell config")?;
-    let cell = prepare_for(&folder, config)?;
+    let cell = prepare_for(folder, config)?;
     // The frames were taken in the session's layout: solving them as the other one gives an
     // answer of the wrong unknowns (a camera "on the flange" metres away).
     anyhow::ensure!(
@@ -220,24 +259,25 @@ pub fn replay_session(
         cell.config.file.display(),
         cell.config.camera().setup
     );
-    // A cell without configured intrinsics replays with the ones its run estimated.
-    let camera_model = if cell.camera().intrinsics_known {
-        cell.camera().camera_model
-    } else {
-        let file = folder.root().join(handeye_records::solve::CAMERA_INFO_FILE);
-        CameraModel::load(&file).context(
-            "the config has no intrinsics and the session has no estimated ones: solve the session first",
-        )?
+    Ok(cell)
+}
+
+/// A one-camera session's frames as measured again (`visits`, through `camera_model`), solved
+/// and judged as a run's solve is (the checks of the given files included); the answer written
+/// to `output.result` and the estimates of a file the cell model blames beside it (the run's
+/// own stay as they were).
+fn solve_camera(
+    folder: SessionFolder,
+    cell: &PreparedCell,
+    camera_model: CameraModel,
+    visits: Vec<PoseVisit>,
+    output: &AnswerOutput,
+) -> anyhow::Result<CameraReplay> {
+    let manifest = folder.read_manifest()?;
+    let dataset = Dataset {
+        setup: manifest.setup,
+        pairs: visits.iter().filter_map(PoseVisit::sample).collect(),
     };
-    let (dataset, visits) = redetect(
-        &folder,
-        &cell.camera().board,
-        &camera_model,
-        cell.detector_options(),
-        cell.config.session.max_reprojection_rms_px,
-    )?;
-    measured(None, &visits);
-    // Solved and judged as a run's solve is: the checks of the given files included.
     let samples = if dataset.pairs.is_empty() {
         Err(handeye_records::solve::no_samples(&folder, &visits))
     } else {
@@ -253,29 +293,21 @@ pub fn replay_session(
         cell.config.solver.space,
         &cell.config,
     )?;
-    let answer_output = AnswerOutput::replay(folder.root(), request.output);
-    answer_output.create_folder()?;
-    let AnswerOutput {
-        result: output,
-        estimates,
-    } = answer_output;
-    // The estimates of a file the cell model blames, beside the replay's result (the run's own
-    // stay as they were).
-    let written = handeye_records::solve::write_corrected_files(&estimates, &solved, &cell.config)?;
+    output.create_folder()?;
+    let written =
+        handeye_records::solve::write_corrected_files(&output.estimates, &solved, &cell.config)?;
     handeye_records::solve::record_written(&mut solved, &written);
-    solved.name_replay(folder.root(), &estimates, &cell.config);
+    solved.name_replay(folder.root(), &output.estimates, &cell.config);
     solved
         .result_file(&dataset.pairs, &cell.config)
-        .save(&output)?;
-    Ok(Replayed::OneCamera(Box::new(OneCameraReplay {
+        .save(&output.result)?;
+    Ok(CameraReplay {
         folder,
-        cell,
         camera_model,
         visits,
         solved,
         dataset,
-        output,
-    })))
+    })
 }
 
 /// The cell of `config` as the session `folder` recorded it: intrinsics a run read from
