@@ -154,9 +154,10 @@ pub(super) fn finish_run(done: &cell::run::CellRun) -> anyhow::Result<(Option<Pa
         outln!("{}", arm.compare_with_truth(errors));
     }
     let report = write_report(done);
-    let result_path = done.folder.result_path();
+    // The session's own folder (a listed cell of one camera's root, where its answer is too).
+    let result_path = done.root.join(handeye_records::RESULT_FILE);
     outln!();
-    outln!("session: {}", done.folder.root().display());
+    outln!("session: {}", done.root.display());
     outln!("result:  {}", result_path.display());
     if let Some(report) = &report {
         outln!("report:  {}", report.display());

@@ -143,7 +143,7 @@ impl SolveArgs {
 
 /// `handeye solve <session>`: both answers side by side; writes `-o` or `<session>/result-<space>.yaml`.
 fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
-    let folder = SessionFolder::open(&args.samples)?;
+    let folder = SessionFolder::open(&cameras::session_to_read(&args.samples))?;
     let manifest = folder.read_manifest()?;
     let config = config_of_camera_folder(
         session_config(args.config.as_deref(), &manifest.config)?,
@@ -177,7 +177,7 @@ fn run_session(args: &SolveArgs) -> anyhow::Result<()> {
     let output = args
         .output
         .clone()
-        .unwrap_or_else(|| folder.root().join(format!("result-{}.yaml", space.name())));
+        .unwrap_or_else(|| args.samples.join(format!("result-{}.yaml", space.name())));
     handeye_records::create_parent_dir(&output)?;
     solved.result_file(&dataset.pairs, config).save(&output)?;
     outln!("wrote {}", output.display());
@@ -222,7 +222,7 @@ fn run_cameras_session(args: &SolveArgs) -> anyhow::Result<()> {
 
 /// Runs `handeye solve`.
 pub(super) fn run(args: SolveArgs) -> anyhow::Result<()> {
-    if cameras::is_cameras_folder(&args.samples) {
+    if cameras::is_cameras_folder(&cameras::session_to_read(&args.samples)) {
         return run_cameras_session(&args);
     }
     if args.samples.is_dir() {

@@ -162,14 +162,12 @@ pub(super) fn run(args: VerifyArgs) -> anyhow::Result<()> {
 /// judged with the session's solver options and accuracy when its config loads (the defaults
 /// else).
 fn leave_one_out(args: &VerifyArgs) -> anyhow::Result<()> {
-    if let Some(root) = args
-        .session
-        .as_deref()
-        .filter(|d| cameras::is_cameras_folder(d))
-    {
+    // A listed cell of one camera is its camera's session.
+    let session = args.session.as_deref().map(cameras::session_to_read);
+    if let Some(root) = session.as_deref().filter(|d| cameras::is_cameras_folder(d)) {
         return verify_cameras_session(root, args.as_recorded);
     }
-    if let Some(dir) = &args.session {
+    if let Some(dir) = &session {
         let folder = SessionFolder::open(dir)?;
         if let Some(run) = folder.live_run() {
             anyhow::ensure!(

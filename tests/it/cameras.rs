@@ -19,6 +19,7 @@ use util::handeye;
 
 mod console;
 mod monte_carlo;
+mod of_one;
 mod ur_mock;
 
 /// The three-camera cell with absolute board and lens paths, `edits` applied.

@@ -413,7 +413,8 @@ pub fn write_run_report(run: &CellRun) -> Result<std::path::PathBuf, ReportError
             nominal: Some(run.cell.config.camera().nominal),
             robot_frames: run.cell.config.robot.frames(),
             arm: solved.arm.as_ref().map(|a| a.result_section()),
-            path: run.folder.root().join(REPORT_FILE),
+            // The session's own folder: a listed cell of one camera's root.
+            path: run.root.join(REPORT_FILE),
         },
     )
 }
@@ -481,7 +482,10 @@ pub fn write_folder_report(
     config: Option<&std::path::Path>,
 ) -> Result<FolderReport, ReportError> {
     let session_error = |e: SessionError| ReportError::Session(Box::new(e));
-    let provisional = handeye_records::live_run(dir).map_err(session_error)?;
+    // A listed cell of one camera's run is recorded in its camera's folder.
+    let provisional =
+        handeye_records::live_run(&handeye_session::cell::cameras::session_to_read(dir))
+            .map_err(session_error)?;
     let result_path = dir.join(handeye_records::RESULT_FILE);
     if let Some(run) = &provisional {
         // Without a result there is nothing to report yet; the run writes both when it ends.
@@ -510,14 +514,16 @@ pub fn write_folder_report(
             provisional,
         });
     };
-    let folder = SessionFolder::open(dir).map_err(session_error)?;
+    // A listed cell of one camera: its camera's session (whose answer its root holds too).
+    let folder = SessionFolder::open(&handeye_session::cell::cameras::session_to_read(dir))
+        .map_err(session_error)?;
     let mut lacking = Vec::new();
     let config_path = match config {
         Some(path) => path.to_path_buf(),
         None => folder.read_manifest().map_err(session_error)?.config,
     };
     let config = match handeye_config::CellConfig::load(&config_path)
-        .and_then(|c| handeye_session::cell::config_of_camera_folder(c, dir))
+        .and_then(|c| handeye_session::cell::config_of_camera_folder(c, folder.root()))
     {
         Ok(config) => Some(config),
         Err(e) => {
@@ -556,7 +562,7 @@ pub fn write_folder_report(
             nominal: config.map(|c| c.camera().nominal),
             robot_frames: result.robot_frames.clone().unwrap_or_default(),
             arm: result.kinematics.clone(),
-            path: folder.root().join(REPORT_FILE),
+            path: dir.join(REPORT_FILE),
         },
     )?;
     Ok(FolderReport {

@@ -93,6 +93,8 @@ pub(crate) fn read_result_py(py: Python<'_>, path: PathBuf) -> PyResult<Calibrat
 #[pyclass(name = "Session", module = "handeye", frozen)]
 pub(crate) struct Session {
     root: PathBuf,
+    /// The session folder read: `root`, or for a listed cell of one camera its camera's folder.
+    read: PathBuf,
     config: PathBuf,
     /// One camera's setup; `None` for several cameras (each has its own).
     setup: Option<&'static str>,
@@ -129,7 +131,7 @@ impl Session {
     }
 
     fn folder(&self, py: Python<'_>) -> PyResult<SessionFolder> {
-        SessionFolder::open(&self.root).map_err(|e| errors::from_error(py, &e))
+        SessionFolder::open(&self.read).map_err(|e| errors::from_error(py, &e))
     }
 
     fn dataset(&self, py: Python<'_>) -> PyResult<Dataset> {
@@ -139,7 +141,7 @@ impl Session {
     fn load_config(&self, py: Python<'_>, config: Option<PathBuf>) -> PyResult<CellConfig> {
         let path = config.unwrap_or_else(|| self.config.clone());
         CellConfig::load(&path)
-            .and_then(|c| handeye_session::cell::config_of_camera_folder(c, &self.root))
+            .and_then(|c| handeye_session::cell::config_of_camera_folder(c, &self.read))
             .map_err(|e| errors::with_context(py, "reading the cell config", &e))
     }
 }
@@ -147,24 +149,28 @@ impl Session {
 #[pymethods]
 impl Session {
     /// Opens the session folder at `path` (it must hold `session.yaml`, or `rig.yaml` for a
-    /// cell with several cameras).
+    /// cell with several cameras; a listed cell of one camera opens as its camera's session).
     #[new]
     pub(crate) fn new(py: Python<'_>, path: PathBuf) -> PyResult<Session> {
-        if cameras::is_cameras_folder(&path) {
+        // A listed cell of one camera is its camera's session (`cameras/<name>`).
+        let read = cameras::session_to_read(&path);
+        if cameras::is_cameras_folder(&read) {
             let manifest = cameras::read_manifest(&path).map_err(|e| errors::from_error(py, &e))?;
             return Ok(Session {
                 root: path,
+                read,
                 config: manifest.config,
                 setup: None,
                 cameras: manifest.cameras.into_iter().map(|c| c.name).collect(),
             });
         }
-        let folder = SessionFolder::open(&path).map_err(|e| errors::from_error(py, &e))?;
+        let folder = SessionFolder::open(&read).map_err(|e| errors::from_error(py, &e))?;
         let manifest = folder
             .read_manifest()
             .map_err(|e| errors::from_error(py, &e))?;
         Ok(Session {
             root: path,
+            read,
             config: manifest.config,
             setup: Some(manifest.setup.name()),
             cameras: Vec::new(),

@@ -110,6 +110,41 @@ def test_a_cell_with_several_cameras_runs_to_its_joint_answer_and_report(tmp_pat
         handeye.read_result(out / "result.yaml")
 
 
+def test_a_list_of_one_camera_is_read_as_the_one_camera_session(tmp_path):
+    """The simulated cell written as a `cameras:` list of one camera runs to the answer of its
+    one-camera form, to the bit, and its session (`rig.yaml` at `out`) reads as that camera's:
+    samples, result, verdict and `solve()` (issue #37: the old form read as a list of one)."""
+    import yaml
+
+    config = yaml.safe_load(CONFIG.read_text())
+    for key in ("target", "intrinsics"):
+        config[key] = str(CONFIG.parent / config[key])
+    config["plan"]["generate"]["count"] = 8
+    one = tmp_path / "one.yaml"
+    one.write_text(yaml.safe_dump(config))
+    listed = dict(config)
+    listed["cameras"] = [{
+        "name": "wrist",
+        "setup": listed.pop("setup"),
+        "intrinsics": listed.pop("intrinsics"),
+        "camera": listed.pop("camera"),
+        "nominal": listed["nominal"].pop("T_flange_camera"),
+        "simulation": listed["simulation"].pop("T_flange_camera"),
+    }]
+    (tmp_path / "listed.yaml").write_text(yaml.safe_dump(listed))
+    theirs = handeye.run(one, out=tmp_path / "one")
+    ours = handeye.run(tmp_path / "listed.yaml", out=tmp_path / "listed")
+    assert ours.path == tmp_path / "listed" and (ours.path / "rig.yaml").is_file()
+    assert ours.setup == "eye_in_hand" and ours.verdict.level == theirs.verdict.level == "GOOD"
+    for key in ("T_base_flange", "T_camera_target"):
+        assert np.array_equal(ours.samples[key], theirs.samples[key]), key
+    for name, T in theirs.result.transforms.items():
+        assert np.array_equal(ours.result.transforms[name], T), name
+    assert_truth_recovered(ours)
+    assert (ours.path / "result.yaml").read_bytes() == (theirs.path / "result.yaml").read_bytes()
+    assert np.array_equal(ours.solve().transforms["T_flange_camera"], theirs.solve().transforms["T_flange_camera"])
+
+
 def test_run_records_and_solves_what_the_cli_does(sim_session, tmp_path):
     """The same config through `handeye run` (the sim_session fixture) and `handeye.run`: the
     same samples and the same answer (the simulator is seeded)."""

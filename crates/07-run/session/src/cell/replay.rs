@@ -169,7 +169,10 @@ pub fn replay_session(
     measured: &mut dyn FnMut(Option<&str>, &[PoseVisit]),
 ) -> anyhow::Result<Replayed> {
     let root = request.session;
-    let listed = cameras::is_cameras_folder(root);
+    // A listed cell of one camera is its camera's session; its replay's answer goes beside the
+    // root all the same.
+    let session = cameras::session_to_read(root);
+    let listed = cameras::is_cameras_folder(&session);
     let (cell, mut folders) = if listed {
         let recorded = cameras::read_manifest(root)?.config;
         let config = super::session_config(request.config, &recorded)?;
@@ -179,7 +182,7 @@ pub fn replay_session(
             .collect::<Result<Vec<_>, _>>()?;
         (cell, folders)
     } else {
-        let folder = SessionFolder::open(root)?;
+        let folder = SessionFolder::open(&session)?;
         let cell = one_camera_cell(&folder, request.config)?;
         (cell, vec![folder])
     };

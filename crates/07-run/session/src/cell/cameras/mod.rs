@@ -75,6 +75,22 @@ pub fn session_of_camera_folder(dir: &Path) -> Option<PathBuf> {
     is_cameras_folder(root).then(|| root.to_path_buf())
 }
 
+/// The session folder a command given `dir` reads: `dir` itself, unless it is the root of a
+/// listed cell of one camera (`rig.yaml` naming one camera), whose session is its camera's
+/// folder — a cell of one camera has one answer in either form (its camera's, which its run
+/// also writes at the root), and `solve`, `replay`, `report`, `verify` and Python read that
+/// camera's session whichever folder they are given.
+pub fn session_to_read(dir: &Path) -> PathBuf {
+    let only_camera = is_cameras_folder(dir)
+        .then(|| read_manifest(dir).ok())
+        .flatten()
+        .and_then(|manifest| match manifest.cameras.as_slice() {
+            [only] => Some(camera_folder(dir, &only.name)),
+            _ => None,
+        });
+    only_camera.unwrap_or_else(|| dir.to_path_buf())
+}
+
 /// A camera's folder inside a several-camera session.
 pub fn camera_folder(root: &Path, name: &str) -> PathBuf {
     root.join("cameras").join(name)

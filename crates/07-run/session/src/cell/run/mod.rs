@@ -455,22 +455,28 @@ pub fn run_opened(
         adaptive,
         arm_time,
     } = drive_opened(opened, request, strategy, observer)?;
-    // The session's answer: the one camera's as its solve wrote it, or the joint solve of
-    // every camera's records (a listed cell of one camera has both: its folder's, and the joint
-    // one at the root).
+    // The session's answer: a cell of one camera's is its camera's, as its solve wrote it (in
+    // either form of the config: a listed cell of one has that one answer at its root too),
+    // several cameras' the joint solve of every camera's records.
     let solved = (cell.config.cameras.len() == 1)
         .then(|| handeye_records::solve_folder(&folder, &cell.solve_inputs()))
         .transpose()?;
     let root = request.target.root(&folder);
-    let result = if cell.config.listed {
+    let result = if solved.is_some() {
+        let result = CellResult::load(&folder.result_path()).map_err(SessionError::File)?;
+        if cell.config.listed {
+            result
+                .save(&super::replay::AnswerOutput::run(&root).result)
+                .map_err(SessionError::File)?;
+        }
+        result
+    } else {
         super::cameras::solve_cameras_folder(
             &root,
             &cell.config,
             super::cameras::recorded_visits(&root, &cell.config)?,
             &super::replay::AnswerOutput::run(&root),
         )?
-    } else {
-        CellResult::load(&folder.result_path()).map_err(SessionError::File)?
     };
     Ok(CellRun {
         cell,
