@@ -50,8 +50,9 @@ fn printed(args: &[&str], session: &Path) -> String {
 /// The run of a `cameras:` list of one writes the answer the one-camera form writes, byte for
 /// byte, at its root (where the run says it is, with its report) and in its camera's folder;
 /// `solve`, `replay` and `verify --session` of its root read its camera's session and write and
-/// print what they do for the one-camera form. Before, the list of one had a second, different
-/// answer at its root: the joint solve of one camera.
+/// print what they do for the one-camera form, and a held-out run checks it as it checks the
+/// one-camera form's. Before, the list of one had a second, different answer at its root (the
+/// joint solve of one camera), and the held-out run refused its config.
 #[test]
 fn a_list_of_one_camera_gives_the_one_camera_forms_answer_to_the_bit() {
     let dir = tempfile::tempdir().unwrap();
@@ -117,6 +118,26 @@ fn a_list_of_one_camera_gives_the_one_camera_forms_answer_to_the_bit() {
             "{written}"
         );
     }
+    // A held-out run on fresh views checks the list of one's answer as the one-camera form's.
+    let holdout = |config: &Path, session: &Path| {
+        let out = dir.path().join(format!(
+            "holdout-{}",
+            session.file_name().unwrap().to_string_lossy()
+        ));
+        let stdout = util::succeeds(
+            handeye()
+                .args(["verify", "--poses", "6", "--config"])
+                .arg(config)
+                .arg("--result")
+                .arg(session.join("result.yaml"))
+                .arg("-o")
+                .arg(&out),
+        );
+        stdout
+            .replace(&out.display().to_string(), "HOLDOUT")
+            .replace(&session.display().to_string(), "SESSION")
+    };
+    assert_eq!(holdout(&listed, &listed_out), holdout(&one, &one_out));
     util::succeeds(handeye().arg("report").arg(&listed_out));
     assert!(read(&listed_out.join("report.html")).contains("T_flange_camera"));
 }

@@ -361,10 +361,11 @@ impl CellConfig {
         }
     }
 
-    /// This config when it is the one-camera form; else (a `cameras:` list, also of one) the
-    /// error a command that takes one camera gives (`handeye run`, `replay`, `report` and `export` take several).
+    /// This config when it has one camera (the one-camera form, or a `cameras:` list of one: the
+    /// same cell); else the error a command that takes one camera gives (`handeye run`,
+    /// `replay`, `report` and `export` take several).
     pub fn single_camera(self) -> Result<CellConfig, ConfigError> {
-        if self.cameras.len() == 1 && !self.listed {
+        if self.cameras.len() == 1 {
             return Ok(self);
         }
         Err(ConfigError::Inconsistent {
