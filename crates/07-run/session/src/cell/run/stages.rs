@@ -194,7 +194,7 @@ pub(super) fn session_folder(
         (SessionTarget::New(out), true) => {
             if super::super::cameras::is_cameras_folder(out) {
                 return Err(RunError::Cameras(format!(
-                    "{}: already holds a several-camera session: pass --resume to continue it, or choose another folder",
+                    "{}: already holds a session of listed cameras (rig.yaml): pass --resume to continue it, or choose another folder",
                     out.display()
                 )));
             }
