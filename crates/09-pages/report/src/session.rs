@@ -482,10 +482,7 @@ pub fn write_folder_report(
     config: Option<&std::path::Path>,
 ) -> Result<FolderReport, ReportError> {
     let session_error = |e: SessionError| ReportError::Session(Box::new(e));
-    // A listed cell of one camera's run is recorded in its camera's folder.
-    let provisional =
-        handeye_records::live_run(&handeye_session::cell::cameras::session_to_read(dir))
-            .map_err(session_error)?;
+    let provisional = handeye_records::live_run(dir).map_err(session_error)?;
     let result_path = dir.join(handeye_records::RESULT_FILE);
     if let Some(run) = &provisional {
         // Without a result there is nothing to report yet; the run writes both when it ends.
