@@ -143,7 +143,10 @@ pub(super) fn hand_guided_session(
                 }
                 peer.guide(k);
                 let limit = Duration::from_secs(30);
-                if freedrive || n % 2 == 0 {
+                // The last view too: the arm then stands where it was captured, as a replay of
+                // the taught plan expects (one goal fewer than views). Captured near the end of
+                // a move still slowing, its joints are a hair from where the arm comes to rest.
+                if freedrive || n % 2 == 0 || n + 1 == rendered.len() {
                     // Let go at the view: the arm stands still when the capture is asked for.
                     peer.wait_for_one("guided", limit, |e| e["k"] == k);
                 } else {
