@@ -209,13 +209,7 @@ pub fn replay_session(
     } else {
         // A one-camera session: one folder, its camera's measurements and lens.
         let (folder, visits) = (folders.swap_remove(0), visits.swap_remove(0));
-        let replay = solve_camera(folder, &cell, lenses[0], visits, &output)?;
-        let result = CellResult::of_one_camera(
-            replay
-                .solved
-                .result_file(&replay.dataset.pairs, &cell.config),
-            &output.result,
-        )?;
+        let (replay, result) = solve_camera(folder, &cell, lenses[0], visits, &output)?;
         (result, Some(Box::new(replay)))
     };
     Ok(Replayed {
@@ -268,14 +262,14 @@ fn one_camera_cell(folder: &SessionFolder, config: Option<&Path>) -> anyhow::Res
 /// A one-camera session's frames as measured again (`visits`, through `camera_model`), solved
 /// and judged as a run's solve is (the checks of the given files included); the answer written
 /// to `output.result` and the estimates of a file the cell model blames beside it (the run's
-/// own stay as they were).
+/// own stay as they were); with that answer as the cell's result.
 fn solve_camera(
     folder: SessionFolder,
     cell: &PreparedCell,
     camera_model: CameraModel,
     visits: Vec<PoseVisit>,
     output: &AnswerOutput,
-) -> anyhow::Result<CameraReplay> {
+) -> anyhow::Result<(CameraReplay, CellResult)> {
     let manifest = folder.read_manifest()?;
     let dataset = Dataset {
         setup: manifest.setup,
@@ -301,16 +295,17 @@ fn solve_camera(
         handeye_records::solve::write_corrected_files(&output.estimates, &solved, &cell.config)?;
     handeye_records::solve::record_written(&mut solved, &written);
     solved.name_replay(folder.root(), &output.estimates, &cell.config);
-    solved
-        .result_file(&dataset.pairs, &cell.config)
-        .save(&output.result)?;
-    Ok(CameraReplay {
+    let file = solved.result_file(&dataset.pairs, &cell.config);
+    file.save(&output.result)?;
+    let result = CellResult::of_one_camera(file, &output.result)?;
+    let replay = CameraReplay {
         folder,
         camera_model,
         visits,
         solved,
         dataset,
-    })
+    };
+    Ok((replay, result))
 }
 
 /// The cell of `config` as the session `folder` recorded it: intrinsics a run read from
