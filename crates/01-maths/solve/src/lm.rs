@@ -1,28 +1,22 @@
-//! The Levenberg-Marquardt solvers shared by the pose-space refinement ([`super::refine`]), the
+//! The Levenberg-Marquardt solver shared by the pose-space refinement ([`super::refine`]), the
 //! reprojection-space refinement ([`super::reprojection`]), the arm's model
 //! ([`super::kinematics`]) and the joint solve of several cameras ([`super::cameras`], in pose
 //! and in pixel space).
 //!
-//! Two drivers, one meaning of "converged":
-//! * [`minimize_dense`] runs the `levenberg-marquardt` crate (MINPACK's trust region on a dense
-//!   QR of the whole Jacobian) and maps its termination to converged / out of patience / a
-//!   [`SolveError`]. Used by the reprojection refinement without robot corrections (at most
-//!   21 parameters).
-//! * [`minimize_normal`] runs Levenberg-Marquardt on normal equations `JᵀJ δ = −Jᵀr` that the
-//!   problem accumulates itself ([`NormalEquations`]), with Marquardt's diagonal scaling. Right
-//!   for wide, block-structured problems whose tall Jacobian would be wasteful to form and factor
-//!   (the reprojection refinement with per-pose robot corrections: 12 + 9 + 6·frames columns,
-//!   where the dense QR was ~50x slower), and for the pose-space refinement (12 parameters,
-//!   called once per noise-estimation round: the normal equations by 3x3 blocks cost 8x fewer
-//!   instructions per default solve than the dense QR did). The several-camera pixel solve with
-//!   per-pose flange corrections has the same arrowhead (6 per camera and board, then 6 per
-//!   pose).
+//! One driver, one meaning of "converged": [`minimize_normal`] runs Levenberg-Marquardt on
+//! normal equations `JᵀJ δ = −Jᵀr` that the problem accumulates itself ([`NormalEquations`]),
+//! with Marquardt's diagonal scaling. Right for wide, block-structured problems whose tall
+//! Jacobian would be wasteful to form and factor (the reprojection refinement with per-pose
+//! robot corrections: 12 + 9 + 6·frames columns, where a dense QR was ~50x slower), and for the
+//! small ones (the pose-space refinement's 12 parameters, called once per noise-estimation
+//! round: the normal equations by 3x3 blocks cost 8x fewer instructions per default solve than
+//! a dense QR did; the reprojection refinement without corrections, its global columns only). The
+//! several-camera pixel solve with per-pose flange corrections has the same arrowhead (6 per
+//! camera and board, then 6 per pose).
 //!
-//! Pure maths: no I/O, no clocks. Depends on nalgebra and the `levenberg-marquardt` crate only.
+//! Pure maths: no I/O, no clocks. Depends on nalgebra only.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::allocator::{Allocator, Reallocator};
-use nalgebra::{DVector, DefaultAllocator, Dim, DimMax, DimMaximum, DimMin};
+use nalgebra::DVector;
 
 use super::arrow::{solve_damped, NormalMatrix};
 use super::SolveError;
@@ -41,7 +35,7 @@ const RELATIVE_COST_TOLERANCE: f64 = 1e-12;
 /// What a minimisation spent and whether it met its tolerance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Outcome {
-    /// Residual evaluations (for [`minimize_normal`]: normal-equation builds plus trial steps).
+    /// Residual evaluations: normal-equation builds plus trial steps.
     pub evaluations: usize,
     /// The solver met its tolerance (false: out of iterations or patience).
     pub converged: bool,
@@ -52,50 +46,6 @@ impl Outcome {
     pub(crate) fn absorb(&mut self, later: Outcome) {
         self.evaluations += later.evaluations;
         self.converged &= later.converged;
-    }
-}
-
-/// Runs the `levenberg-marquardt` crate's `solver` on `problem`; returns the problem at the
-/// optimum with what it cost.
-///
-/// Errors: a problem that is empty or numerically broken (non-finite residuals or Jacobian).
-pub(crate) fn minimize_dense<N, M, O>(
-    solver: &LevenbergMarquardt<f64>,
-    problem: O,
-) -> Result<(O, Outcome), SolveError>
-where
-    N: Dim,
-    M: DimMin<N> + DimMax<N>,
-    O: LeastSquaresProblem<f64, M, N>,
-    DefaultAllocator: Allocator<N> + Reallocator<f64, M, N, DimMaximum<M, N>, N>,
-{
-    let (problem, report) = solver.minimize(problem);
-    let converged = converged(&report.termination)?;
-    Ok((
-        problem,
-        Outcome {
-            evaluations: report.number_of_evaluations,
-            converged,
-        },
-    ))
-}
-
-/// What an LM run's termination means: `Ok(true)` at the optimum, `Ok(false)` out of patience,
-/// an error when the problem itself was broken.
-fn converged(termination: &TerminationReason) -> Result<bool, SolveError> {
-    match termination {
-        TerminationReason::Numerical(what)
-        | TerminationReason::User(what)
-        | TerminationReason::WrongDimensions(what) => Err(SolveError::RefinementFailed(what)),
-        TerminationReason::NoParameters | TerminationReason::NoResiduals => {
-            Err(SolveError::RefinementFailed("empty problem"))
-        }
-        // The requested tolerance is below what floating point can show: at the optimum.
-        TerminationReason::NoImprovementPossible(_) => Ok(true),
-        TerminationReason::LostPatience => Ok(false),
-        TerminationReason::ResidualsZero
-        | TerminationReason::Orthogonal
-        | TerminationReason::Converged { .. } => Ok(true),
     }
 }
 

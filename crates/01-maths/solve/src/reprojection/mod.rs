@@ -22,11 +22,10 @@
 //! the board scale; their Jacobian is the robot correction's, times each offset's flange twist).
 //!
 //! Analytic Jacobian; each corner row touches at most 12 + 9 global columns and the 6 columns of
-//! its own frame's correction. Without corrections the Jacobian is at most 21 columns wide and
-//! the `levenberg-marquardt` crate minimises it with its dense QR; with them (12 + 9 + 6·frames
-//! columns) a Levenberg-Marquardt on the normal equations accumulated block by block replaces it
-//! (the dense QR was ~50x slower) — see `benches/reprojection.rs`. Both drivers live in
-//! `solve::lm`, shared with the pose-space refinement.
+//! its own frame's correction. One Levenberg-Marquardt minimises it, `solve::lm`'s on the normal
+//! equations accumulated block by block (never the tall Jacobian: with corrections, 12 + 9 +
+//! 6·frames columns, a dense QR was ~50x slower — see `benches/reprojection.rs`), the driver the
+//! pose-space refinement, the arm's model and the several-camera solve share.
 //!
 //! This file owns the API types and the pipeline (validate, fit, noise, covariance, outliers,
 //! answer); beside it: `problem` (parameters, residuals, Jacobians, normal equations), `noise`
@@ -42,12 +41,11 @@ mod noise;
 mod outliers;
 mod problem;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Point2, Point3, SMatrix, Vector2};
 
 use super::arrow::inverse_parts;
 use super::kinematics::DhChain;
-use super::lm::{minimize_dense, minimize_normal, Outcome};
+use super::lm::{minimize_normal, Outcome};
 use super::refine::mount_uncertainty;
 use super::require_positive;
 use super::{Axby, AxbyData, Calibration, NoiseModel, RobustLoss, SolveError, Uncertainty};
@@ -398,15 +396,12 @@ fn validate(
     Ok(())
 }
 
-/// One Levenberg-Marquardt minimisation from the current parameters: the crate's dense QR
-/// without robot corrections, the block-structured normal equations with them.
-fn run_lm(problem: Problem<'_>) -> Result<(Problem<'_>, Outcome), SolveError> {
-    if problem.layout.robot > 0 {
-        let mut problem = problem;
-        let outcome = minimize_normal(&mut problem)?;
-        return Ok((problem, outcome));
-    }
-    minimize_dense(&LevenbergMarquardt::new().with_patience(50), problem)
+/// One Levenberg-Marquardt minimisation from the current parameters, on the normal equations
+/// accumulated corner by corner (an arrowhead with robot corrections, the dense matrix of the
+/// global columns without).
+fn run_lm(mut problem: Problem<'_>) -> Result<(Problem<'_>, Outcome), SolveError> {
+    let outcome = minimize_normal(&mut problem)?;
+    Ok((problem, outcome))
 }
 
 /// LM, then rounds of robust reweighting (each followed by LM) until the weights settle.

@@ -5,8 +5,6 @@
 //!
 //! Depends on the problem's residuals and normal equations, and on the pipeline's fit.
 
-use levenberg_marquardt::LeastSquaresProblem;
-
 use super::outliers::reweight;
 use super::problem::{reanchor, Problem};
 use super::{fit, run_lm, ReprojectionOptions, RobotPrior};

@@ -1,7 +1,6 @@
 //! The reprojection problem: its parameter layout, the residuals (pixel errors whitened by the
 //! corner noise, and the Gaussian prior on the robot corrections) and their analytic Jacobian,
-//! both as the dense matrix the `levenberg-marquardt` crate takes and as normal equations
-//! accumulated block by block for [`crate::lm::minimize_normal`].
+//! as normal equations accumulated block by block for [`crate::lm::minimize_normal`].
 //!
 //! Parameters: a local perturbation of X and Y (see [`crate::refine::perturbed`]); then
 //! `fx fy cx cy` (px) and the distortion coefficients when free (packed and differentiated by
@@ -14,10 +13,8 @@
 //! Depends on the ground floor (`geometry`, `setup`, `camera_model`), the shared parametrisation
 //! and solver interface of `solve` (`refine::perturbed`, `lm::NormalEquations`) and nalgebra.
 
-use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{
-    DMatrix, DVector, Dyn, Matrix3, Owned, Point3, SMatrix, Translation3, UnitQuaternion, Vector2,
-    Vector3,
+    DMatrix, DVector, Matrix3, Point3, SMatrix, Translation3, UnitQuaternion, Vector2, Vector3,
 };
 
 use super::{ArmOffsetsFree, Frame, RefinedOffset, ReprojectionOptions, RobotPrior};
@@ -370,20 +367,10 @@ impl Problem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.params.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.params.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
+impl Problem<'_> {
+    /// Every residual at the current parameters (the whitened pixel errors, then the robot
+    /// corrections' prior); `None` when one is not finite.
+    pub(super) fn residuals(&self) -> Option<DVector<f64>> {
         let s = self.state();
         let mut out = DVector::zeros(self.rows());
         for (f, errors) in self.pixel_errors(&s).iter().enumerate() {
@@ -407,6 +394,9 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
 
+    /// The whole Jacobian of [`Self::residuals`], formed densely: the tests' reference for the
+    /// normal equations built block by block.
+    #[cfg(test)]
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         let s = self.state();
         let layout = self.layout;
