@@ -114,14 +114,6 @@ pub enum Explanation {
 }
 
 impl Explanation {
-    /// All four, simplest first.
-    pub const ALL: [Explanation; 4] = [
-        Explanation::AsGiven,
-        Explanation::BoardScale,
-        Explanation::Intrinsics,
-        Explanation::IntrinsicsAndBoard,
-    ];
-
     /// Whether this explanation says the intrinsics file is wrong.
     pub fn intrinsics_wrong(self) -> bool {
         matches!(
@@ -252,7 +244,7 @@ impl Estimate {
 pub struct CellModelSummary {
     /// The explanation the data choose (smallest BIC).
     pub chosen: Explanation,
-    /// Every explanation fitted, in [`Explanation::ALL`] order.
+    /// Every explanation fitted, simplest first (as given, board scale, intrinsics, both).
     pub candidates: Vec<Candidate>,
     /// The parameters of the blamed files: each estimate with its 1-sigma against the file's
     /// value, largest deviation (in sigmas) first.

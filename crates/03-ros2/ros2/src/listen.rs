@@ -249,12 +249,6 @@ impl TfTree {
         self.edges.get(frame).map(|e| e.parent.as_str())
     }
 
-    /// The top of `frame`'s chain (`frame` itself when it has no parent), or why there is none
-    /// (a loop, or an edge on it whose publishers disagree).
-    pub fn root_of(&self, frame: &str) -> Result<String, String> {
-        self.root_and_pose(frame).map(|(root, _)| root)
-    }
-
     /// An edge on `frame`'s chain that two publishers gave different transforms within the
     /// last [`RECENT_SOURCES`], worded as a lookup through a contradicted edge fails: for a pose
     /// the lookup gave that something else contradicts (the joints' kinematics), when the

@@ -173,11 +173,6 @@ impl Duration {
             nanosec: d.subsec_nanos(),
         }
     }
-
-    /// In seconds.
-    pub fn as_secs_f64(self) -> f64 {
-        self.sec as f64 + self.nanosec as f64 * 1e-9
-    }
 }
 
 /// std_msgs/Header.

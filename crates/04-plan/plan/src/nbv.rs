@@ -389,11 +389,6 @@ impl AdaptivePlanner {
         !self.used.get(i).copied().unwrap_or(true)
     }
 
-    /// How many candidates are taken (chosen, or visited before a resume).
-    pub fn taken(&self) -> usize {
-        self.used.iter().filter(|used| **used).count()
-    }
-
     /// Takes candidate `index`: not chosen again, and the arm stands there next.
     pub fn take(&mut self, index: usize) -> (Pose, Joints) {
         self.used[index] = true;

@@ -670,8 +670,3 @@ fn cell_verdict(cameras: &[CameraResult], accuracy: Accuracy) -> verdict::Verdic
         accuracy,
     )
 }
-
-/// The result file of a several-camera session folder.
-pub fn result_path(root: &Path) -> PathBuf {
-    root.join("result.yaml")
-}
