@@ -67,7 +67,7 @@ pub use evidence::{
     assess_modelled, assess_result, assess_solved, coverage_notices, held_out, held_out_refitting,
     predict_folds, residual_notice, working_distance_mm, FoldFailure, FoldFlanges,
 };
-pub use mount::{assess_mount, with_cell_model, worst_camera};
+pub use mount::{assess_mount, worst_camera};
 pub use rules::{assess, Evidence};
 
 /// Default accuracy the user wants for translation, mm.

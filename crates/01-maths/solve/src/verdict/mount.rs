@@ -1,130 +1,53 @@
-//! The verdict on one camera's mount solved with others (a cell with several cameras): the same
-//! bands as a one-camera verdict ([`Accuracy::level_of`]) applied to what the joint solve
-//! measures of that camera — its mount's 1-sigma and the held-out error of its own samples —
-//! with the same pose count for GOOD ([`GOOD_POSES`]). The cell's verdict is its worst camera's
-//! ([`worst_camera`]).
+//! The verdict on one camera's mount solved with others (a cell with several cameras), by the
+//! one-camera verdict's rules ([`super::rules`]) applied to what the joint solve measures of that
+//! camera: its cell model (a given file the corners contradict), the held-out error of its own
+//! samples, its mount's 1-sigma, with the same pose count for GOOD ([`GOOD_POSES`]). The cell's
+//! verdict is its worst camera's ([`worst_camera`]).
 
+use super::rules::{decide, held_out_finding, sigma_finding};
 use super::{Accuracy, Basis, Figures, Finding, HeldOut, Level, Verdict, GOOD_POSES};
 use crate::cell_model::CellModelSummary;
 use crate::PoseSigma;
 
-/// The verdict of a camera's mount from the joint solve: the worse of its 1-sigma and its
-/// held-out error against `accuracy` (GOOD within it, CHECK up to the REDO factor, REDO
-/// beyond); CHECK with fewer than [`GOOD_POSES`] samples or with no held-out check
-/// (`held_out` says why there is none).
+/// The verdict of a camera's mount from the joint solve, as [`super::assess`] judges one
+/// camera's answer: its cell model's finding (a camera whose lens or board file is wrong is
+/// never GOOD, and its verdict names the file), its held-out error (`held_out`, or why there is
+/// none: CHECK) and its 1-sigma against `accuracy` (GOOD within it, CHECK up to the REDO factor,
+/// REDO beyond), CHECK with fewer than [`GOOD_POSES`] samples; the worst leads, the others
+/// follow under `also`.
 pub fn assess_mount(
     sigma: &PoseSigma,
     held_out: Result<&HeldOut, &str>,
     samples: usize,
     accuracy: Accuracy,
+    cell_model: Option<&CellModelSummary>,
 ) -> Verdict {
-    let level = accuracy.level_of(sigma.translation_mm, sigma.rotation_deg);
-    let against = format!(
-        "against the accuracy {} mm / {}°",
-        accuracy.translation_mm, accuracy.rotation_deg
-    );
-    let figures = Figures {
+    let mut figures = Figures {
         poses: samples,
-        held_out: held_out.ok().copied(),
-        sigma_translation_mm: Some(sigma.translation_mm),
-        sigma_rotation_deg: Some(sigma.rotation_deg),
+        cell_model: cell_model.cloned(),
         ..Figures::default()
     };
-    let verdict = |level, basis, reason: String, next_action: &str| Verdict {
-        level,
-        basis,
-        reason,
-        next_action: next_action.into(),
+    let mut findings: Vec<Finding> = cell_model
+        .and_then(|model| model.finding(accuracy))
+        .into_iter()
+        .collect();
+    findings.extend(held_out_finding(held_out, accuracy, &mut figures));
+    findings.extend(sigma_finding(
+        sigma.translation_mm,
+        sigma.rotation_deg,
+        "",
         accuracy,
-        figures: figures.clone(),
-        also: Vec::new(),
-    };
-    let more_poses = "record more poses with larger, more varied rotations where it sees its board";
-    match held_out {
-        Ok(h) => {
-            let held = accuracy.level_of(h.translation_rms_mm, h.rotation_rms_deg);
-            if held > level {
-                return verdict(
-                    held,
-                    Basis::HeldOutError,
-                    format!(
-                        "held-out error {:.2} mm, {:.3}° (RMS over {} poses of its own, target at ~{:.0} mm) {against}",
-                        h.translation_rms_mm, h.rotation_rms_deg, h.poses, h.working_distance_mm
-                    ),
-                    more_poses,
-                );
-            }
-        }
-        Err(why) if level == Level::Good => {
-            return verdict(
-                Level::Check,
-                Basis::FewPoses,
-                format!("no held-out check ({why})"),
-                "record more poses where it sees its board",
-            )
-        }
-        Err(_) => {}
+        &mut figures,
+    ));
+    if samples < GOOD_POSES {
+        findings.push(Finding {
+            level: Level::Check,
+            basis: Basis::FewPoses,
+            reason: format!("only {samples} samples (GOOD needs {GOOD_POSES})"),
+            next_action: "add poses where it sees its board".into(),
+        });
     }
-    if level == Level::Good && samples < GOOD_POSES {
-        return verdict(
-            Level::Check,
-            Basis::FewPoses,
-            format!("only {samples} samples (GOOD needs {GOOD_POSES})"),
-            "add poses where it sees its board",
-        );
-    }
-    let held = match held_out {
-        Ok(h) => format!(
-            ", held-out {:.2} mm / {:.3}° over {} poses",
-            h.translation_rms_mm, h.rotation_rms_deg, h.poses
-        ),
-        Err(_) => String::new(),
-    };
-    let (basis, next_action) = match level {
-        Level::Good => (Basis::WithinAccuracy, "use it"),
-        _ => (Basis::Uncertainty, more_poses),
-    };
-    verdict(
-        level,
-        basis,
-        format!(
-            "1-sigma {:.3} mm / {:.4}°{held} {against}",
-            sigma.translation_mm, sigma.rotation_deg
-        ),
-        next_action,
-    )
-}
-
-/// A camera's verdict with its cell model (issue #38): the model's summary goes into the
-/// figures; its finding (a given file the corners contradict, or one these views cannot check)
-/// leads when it is at least as bad as `verdict`, which then follows under `also` (when not
-/// GOOD), and follows under `also` otherwise. So a camera whose lens or board file is wrong is
-/// never GOOD, and its verdict names the file.
-pub fn with_cell_model(verdict: Verdict, model: Option<&CellModelSummary>) -> Verdict {
-    let Some(model) = model else {
-        return verdict;
-    };
-    let mut verdict = verdict;
-    verdict.figures.cell_model = Some(model.clone());
-    let Some(finding) = model.finding(verdict.accuracy) else {
-        return verdict;
-    };
-    if finding.level >= verdict.level {
-        let before = Finding {
-            level: verdict.level,
-            basis: verdict.basis,
-            reason: std::mem::replace(&mut verdict.reason, finding.reason),
-            next_action: std::mem::replace(&mut verdict.next_action, finding.next_action),
-        };
-        verdict.level = finding.level;
-        verdict.basis = finding.basis;
-        if before.level > Level::Good {
-            verdict.also.insert(0, before);
-        }
-    } else {
-        verdict.also.push(finding);
-    }
-    verdict
+    decide(findings, figures, accuracy)
 }
 
 /// The verdict of a camera left out of the joint solve (too few views, its own solve failed):
@@ -200,24 +123,30 @@ mod tests {
     #[test]
     fn a_mount_is_judged_by_the_worse_of_its_sigma_and_its_held_out_error() {
         let accuracy = Accuracy::default();
-        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy, None);
         assert_eq!(
             (good.level, good.basis),
             (Level::Good, Basis::WithinAccuracy)
         );
-        let held_out = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy);
+        let held_out = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy, None);
         assert_eq!(
             (held_out.level, held_out.basis),
             (Level::Check, Basis::HeldOutError)
         );
-        let unsure = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy);
+        let unsure = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy, None);
         assert_eq!(
             (unsure.level, unsure.basis),
             (Level::Redo, Basis::Uncertainty)
         );
-        let few = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), GOOD_POSES - 1, accuracy);
+        let few = assess_mount(
+            &sigma(0.1, 0.01),
+            Ok(&held(0.5)),
+            GOOD_POSES - 1,
+            accuracy,
+            None,
+        );
         assert_eq!((few.level, few.basis), (Level::Check, Basis::FewPoses));
-        let unchecked = assess_mount(&sigma(0.1, 0.01), Err("only 4 samples"), 12, accuracy);
+        let unchecked = assess_mount(&sigma(0.1, 0.01), Err("only 4 samples"), 12, accuracy, None);
         assert_eq!(unchecked.level, Level::Check);
         assert!(
             unchecked.reason.contains("only 4 samples"),
@@ -266,8 +195,15 @@ mod tests {
     fn a_good_mount_with_a_wrong_lens_file_is_not_good_and_names_the_file() {
         use crate::cell_model::Explanation;
         let accuracy = Accuracy::default();
-        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
-        let wrong = with_cell_model(good.clone(), Some(&summary(Explanation::Intrinsics)));
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy, None);
+        let mount = |sigma_mm, model| {
+            assess_mount(&sigma(sigma_mm, 0.01), Ok(&held(0.5)), 12, accuracy, model)
+        };
+        let (wrong_lens, as_given) = (
+            summary(Explanation::Intrinsics),
+            summary(Explanation::AsGiven),
+        );
+        let wrong = mount(0.1, Some(&wrong_lens));
         assert_eq!(
             (wrong.level, wrong.basis),
             (Level::Check, Basis::Intrinsics)
@@ -280,12 +216,11 @@ mod tests {
         assert!(wrong.also.is_empty(), "a GOOD mount adds no finding");
         assert!(wrong.figures.cell_model.is_some());
         // A worse mount verdict leads; the cell model's finding follows it.
-        let redo = assess_mount(&sigma(4.0, 0.01), Ok(&held(0.5)), 12, accuracy);
-        let both = with_cell_model(redo, Some(&summary(Explanation::Intrinsics)));
+        let both = mount(4.0, Some(&wrong_lens));
         assert_eq!((both.level, both.basis), (Level::Redo, Basis::Uncertainty));
         assert_eq!(both.also[0].basis, Basis::Intrinsics);
         // Files as given: the verdict stands, with the model's figures.
-        let right = with_cell_model(good.clone(), Some(&summary(Explanation::AsGiven)));
+        let right = mount(0.1, Some(&as_given));
         assert_eq!(
             (right.level, right.reason.as_str()),
             (Level::Good, good.reason.as_str())
@@ -296,8 +231,8 @@ mod tests {
     #[test]
     fn the_cell_is_its_worst_camera_named() {
         let accuracy = Accuracy::default();
-        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy);
-        let check = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy);
+        let good = assess_mount(&sigma(0.1, 0.01), Ok(&held(0.5)), 12, accuracy, None);
+        let check = assess_mount(&sigma(0.1, 0.01), Ok(&held(2.0)), 12, accuracy, None);
         let cell = worst_camera([("wrist", &good), ("left", &check)], accuracy);
         assert_eq!(cell.level, Level::Check);
         assert!(

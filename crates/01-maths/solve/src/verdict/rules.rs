@@ -225,7 +225,7 @@ pub fn assess(evidence: &Evidence<'_>) -> Verdict {
 
 /// The held-out error at the working distance against the accuracy (none within it), or the
 /// missing check; kept in `figures`.
-fn held_out_finding(
+pub(super) fn held_out_finding(
     held_out: Result<&HeldOut, &str>,
     a: Accuracy,
     figures: &mut Figures,
@@ -277,28 +277,47 @@ fn uncertainty_finding(c: &Calibration, a: Accuracy, figures: &mut Figures) -> O
             next_action: "solve with the refined method to see the uncertainty".into(),
         });
     };
-    let t = u
-        .camera_mount
-        .translation_mm
-        .max(u.target_mount.translation_mm);
-    let r = u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg);
-    figures.sigma_translation_mm = Some(t);
-    figures.sigma_rotation_deg = Some(r);
-    let level = band(t, a.translation_mm).max(band(r, a.rotation_deg));
     let (camera_name, target_name) = c.setup.unknown_names();
-    (level > Level::Good).then(|| Finding {
-        level,
-        basis: Basis::Uncertainty,
-        reason: format!(
-            "1-sigma up to {t:.2} mm, {r:.3}° ({camera_name}: {:.2} mm, {:.3}°; {target_name}: {:.2} mm, {:.3}°) against the {} mm, {}° asked for",
+    sigma_finding(
+        u.camera_mount
+            .translation_mm
+            .max(u.target_mount.translation_mm),
+        u.camera_mount.rotation_deg.max(u.target_mount.rotation_deg),
+        &format!(
+            " ({camera_name}: {:.2} mm, {:.3}°; {target_name}: {:.2} mm, {:.3}°)",
             u.camera_mount.translation_mm,
             u.camera_mount.rotation_deg,
             u.target_mount.translation_mm,
             u.target_mount.rotation_deg,
-            a.translation_mm,
-            a.rotation_deg
         ),
-        next_action: next_for_band(level, "record more poses with larger, more varied rotations"),
+        a,
+        figures,
+    )
+}
+
+/// A 1-sigma of `t` mm and `r`° (the larger of what `parts` details) against the accuracy (none
+/// within it); kept in `figures`.
+pub(super) fn sigma_finding(
+    t: f64,
+    r: f64,
+    parts: &str,
+    a: Accuracy,
+    figures: &mut Figures,
+) -> Option<Finding> {
+    figures.sigma_translation_mm = Some(t);
+    figures.sigma_rotation_deg = Some(r);
+    let level = band(t, a.translation_mm).max(band(r, a.rotation_deg));
+    (level > Level::Good).then(|| Finding {
+        level,
+        basis: Basis::Uncertainty,
+        reason: format!(
+            "1-sigma up to {t:.2} mm, {r:.3}°{parts} against the {} mm, {}° asked for",
+            a.translation_mm, a.rotation_deg
+        ),
+        next_action: next_for_band(
+            level,
+            "record more poses with larger, more varied rotations",
+        ),
     })
 }
 
@@ -395,7 +414,9 @@ fn board_scale_finding(scale: &BoardScale, pairs: &[PosePair], a: Accuracy) -> F
     }
 }
 
-fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> Verdict {
+/// The verdict of `findings`: the worst leads (ties in the order given), the rest follow under
+/// `also`; GOOD, with the figures, when there is none.
+pub(super) fn decide(mut findings: Vec<Finding>, figures: Figures, accuracy: Accuracy) -> Verdict {
     // Stable: among equal levels the order of the checks above (their importance) stays.
     findings.sort_by_key(|f| std::cmp::Reverse(f.level));
     if findings.is_empty() {

@@ -83,9 +83,9 @@ pub struct CameraResult {
     /// says why).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOut>,
-    /// GOOD, CHECK or REDO with its reason and next action: the worse of its 1-sigma and its
-    /// held-out error against the accuracy asked for (`verdict::assess_mount`); REDO when it is
-    /// left out. A cell's only camera: its answer's verdict (absent in files written before
+    /// GOOD, CHECK or REDO with its reason and next action, by the one-camera verdict's rules
+    /// (`verdict::assess_mount`: its cell model, its held-out error and its 1-sigma against the
+    /// accuracy asked for, its sample count); REDO when it is left out. A cell's only camera: its answer's verdict (absent in files written before
     /// verdicts).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<Verdict>,

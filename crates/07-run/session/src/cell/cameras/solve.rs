@@ -597,13 +597,11 @@ pub fn result_file(
             entry.residual_translation_rms_mm = Some(joint.residuals[k].translation_rms_mm);
             entry.residuals_per_pose =
                 per_pose_residuals(&problem.sample_poses[c], &joint.residuals[k].per_pose);
-            entry.verdict = Some(verdict::with_cell_model(
-                verdict::assess_mount(
-                    &joint.camera_sigmas[k],
-                    problem.held_out[c].as_ref().map_err(String::as_str),
-                    samples,
-                    accuracy,
-                ),
+            entry.verdict = Some(verdict::assess_mount(
+                &joint.camera_sigmas[k],
+                problem.held_out[c].as_ref().map_err(String::as_str),
+                samples,
+                accuracy,
                 problem.cell_models[c].as_ref().map(|m| &m.summary),
             ));
         }
