@@ -379,10 +379,11 @@ pub struct CameraInfo {
 ros_type!(CameraInfo, "sensor_msgs", "CameraInfo");
 
 impl CameraInfo {
-    /// handeye's camera model of this camera: the one conversion of a `CameraInfo`, for bags and
-    /// the live graph. `plumb_bob` (4 or 5 coefficients) or no distortion; binning, a region of
-    /// interest smaller than the image and skew are refused (the images would not be the
-    /// calibrated ones), with the reason; so are intrinsics the model's checks refuse.
+    /// handeye's camera model of this camera, for bags and the live graph: its distortion and
+    /// camera matrix read as a `camera_info` file's are (`Distortion::from_model_name`,
+    /// `CameraModel::from_camera_matrix`: `plumb_bob`, `equidistant` or none; skew refused);
+    /// binning and a region of interest smaller than the image are refused (the images would
+    /// not be the calibrated ones), with the reason; so are intrinsics the model's checks refuse.
     pub fn camera_model(&self) -> Result<CameraModel, String> {
         let binned = |b: u32| b > 1;
         if binned(self.binning_x) || binned(self.binning_y) {
@@ -399,40 +400,15 @@ impl CameraInfo {
                 roi.width, roi.height, roi.x_offset, roi.y_offset
             ));
         }
-        let distortion = match (self.distortion_model.as_str(), self.d.as_slice()) {
-            (_, []) => Distortion::None,
-            ("plumb_bob", d) if d.len() == 5 || d.len() == 4 => Distortion::RadTan {
-                k1: d[0],
-                k2: d[1],
-                p1: d[2],
-                p2: d[3],
-                k3: d.get(4).copied().unwrap_or(0.0),
-            },
-            ("plumb_bob", d) => {
-                return Err(format!(
-                    "distortion_model plumb_bob with {} coefficients, expected 5 (k1, k2, p1, p2, k3)",
-                    d.len()
-                ))
-            }
-            (other, _) => {
-                return Err(format!(
-                    "distortion_model `{other}` is not supported (only plumb_bob); give the intrinsics without --camera-info so they are estimated"
-                ))
-            }
-        };
+        let distortion =
+            Distortion::from_model_name(&self.distortion_model, &self.d).map_err(|e| {
+                format!("{e}; give the intrinsics without --camera-info so they are estimated")
+            })?;
         let k = self.k;
-        let model = CameraModel {
-            width: self.width,
-            height: self.height,
-            fx: k[0],
-            fy: k[4],
-            cx: k[2],
-            cy: k[5],
-            distortion,
-        };
-        if k[1] != 0.0 {
-            return Err(format!("skew K[0][1] = {} is not supported", k[1]));
-        }
+        let model = CameraModel::from_camera_matrix((self.width, self.height), &k, distortion)
+            .ok_or_else(|| {
+                format!("K {k:?} is not supported: skew, or not [fx, 0, cx, 0, fy, cy, 0, 0, 1]")
+            })?;
         model
             .validate(std::path::Path::new("camera_info"))
             .map_err(|e| format!("K {:?}, D {:?}: {e}", k, self.d))?;
@@ -696,6 +672,16 @@ mod tests {
             .camera_model()
             .unwrap_err()
             .contains("rational_polynomial"));
+        // A fisheye driver's message reads as its camera_info file does.
+        info.distortion_model = "equidistant".into();
+        info.d = vec![0.1, -0.02, 0.003, -0.0004];
+        assert!(matches!(
+            info.camera_model().unwrap().distortion,
+            Distortion::Equidistant { k4, .. } if k4 == -0.0004
+        ));
+        info.d.push(0.0);
+        assert!(info.camera_model().unwrap_err().contains("expected 4"));
+        info.d = vec![-0.1, 0.01, 0.001, 0.002, 0.0];
         info.distortion_model = "plumb_bob".into();
         info.binning_x = 2;
         assert!(info.camera_model().unwrap_err().contains("binning 2x0"));

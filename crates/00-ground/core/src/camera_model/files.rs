@@ -340,19 +340,6 @@ const CAMERA_INFO_KEYS: [&str; 8] = [
     "projection_matrix",
 ];
 
-/// The model of the row-major camera matrix `k` (checked: no skew) with its image size.
-fn pinhole((width, height): (u32, u32), k: &[f64], distortion: Distortion) -> CameraModel {
-    CameraModel {
-        width,
-        height,
-        fx: k[0],
-        fy: k[4],
-        cx: k[2],
-        cy: k[5],
-        distortion,
-    }
-}
-
 /// `text` without the `---` line `ros2 topic echo` prints after a message (and what follows
 /// only blank lines); any other text as it is.
 fn strip_echo_end(text: &str) -> &str {
@@ -537,7 +524,6 @@ impl Reader<'_> {
                 self.matrix_shape(node, key, shape)?;
             }
         }
-        self.no_skew(&k, "camera_matrix.data", &matrix["data"])?;
         let model_name = match root.get("distortion_model") {
             None => "plumb_bob".to_string(),
             Some(v) => v
@@ -554,16 +540,27 @@ impl Reader<'_> {
             )?,
         };
         let distortion = self.distortion(&model_name, &coefficients, "distortion_model")?;
-        Ok(pinhole((width, height), &k, distortion))
+        self.pinhole(
+            (width, height),
+            &k,
+            distortion,
+            "camera_matrix.data",
+            &matrix["data"],
+        )
     }
 
-    /// A row-major camera matrix `k` (at `key`, the node `found`) without skew:
-    /// `[fx, 0, cx, 0, fy, cy, 0, 0, 1]`.
-    fn no_skew(&self, k: &[f64], key: &str, found: &Value) -> Result<(), CameraModelError> {
-        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-            return Err(self.bad(key, "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", found));
-        }
-        Ok(())
+    /// The pinhole of the row-major camera matrix `k` (at `key`, the node `found`), which must
+    /// be `[fx, 0, cx, 0, fy, cy, 0, 0, 1]`.
+    fn pinhole(
+        &self,
+        size: (u32, u32),
+        k: &[f64],
+        distortion: Distortion,
+        key: &str,
+        found: &Value,
+    ) -> Result<CameraModel, CameraModelError> {
+        CameraModel::from_camera_matrix(size, k, distortion)
+            .ok_or_else(|| self.bad(key, "[fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", found))
     }
 
     /// A `sensor_msgs/CameraInfo` message as `ros2 topic echo` prints it: `width`, `height`,
@@ -573,22 +570,19 @@ impl Reader<'_> {
         let width = self.size(self.get(root, "width", "width")?, "width")?;
         let height = self.size(self.get(root, "height", "height")?, "height")?;
         let k = self.numbers(self.get(root, "k", "k")?, "k", &[9])?;
-        self.no_skew(&k, "k", &root["k"])?;
         let coefficients = match root.get("d") {
             None | Some(Value::Null) => Vec::new(),
             Some(d) => self.numbers(d, "d", &[0, 4, 5, 8])?,
         };
         // A driver without a calibration publishes an empty model name and no coefficients.
         let model_name = match root.get("distortion_model") {
-            None => "plumb_bob".to_string(),
-            Some(v) => match v.as_str() {
-                Some("") if coefficients.is_empty() => "plumb_bob".to_string(),
-                Some(name) => name.to_string(),
-                None => return Err(self.bad("distortion_model", "a string", v)),
-            },
+            None => "plumb_bob",
+            Some(v) => v
+                .as_str()
+                .ok_or_else(|| self.bad("distortion_model", "a string", v))?,
         };
-        let distortion = self.distortion(&model_name, &coefficients, "distortion_model")?;
-        Ok(pinhole((width, height), &k, distortion))
+        let distortion = self.distortion(model_name, &coefficients, "distortion_model")?;
+        self.pinhole((width, height), &k, distortion, "k", &root["k"])
     }
 
     fn kalibr(&self, cam0: &Value) -> Result<CameraModel, CameraModelError> {
@@ -638,41 +632,99 @@ impl Reader<'_> {
     }
 
     fn distortion(&self, name: &str, c: &[f64], key: &str) -> Result<Distortion, CameraModelError> {
-        let count_error = |expected: &str| CameraModelError::BadValue {
-            path: self.path.to_path_buf(),
-            key: format!("{key} coefficients"),
-            expected: expected.to_string(),
-            found: format!("{} coefficients for `{name}`", c.len()),
-        };
-        match name {
-            "plumb_bob" | "radtan" => match c.len() {
-                0 => Ok(Distortion::None),
-                4 | 5 => Ok(Distortion::RadTan {
-                    k1: c[0],
-                    k2: c[1],
-                    p1: c[2],
-                    p2: c[3],
-                    k3: c.get(4).copied().unwrap_or(0.0),
-                }),
-                _ => Err(count_error("4 or 5 coefficients (k1 k2 p1 p2 [k3])")),
+        Distortion::from_model_name(name, c).map_err(|e| match e {
+            ModelNameError::Count { expected, .. } => CameraModelError::BadValue {
+                path: self.path.to_path_buf(),
+                key: format!("{key} coefficients"),
+                expected: expected.to_string(),
+                found: format!("{} coefficients for `{name}`", c.len()),
             },
-            "equidistant" | "fisheye" => match c.len() {
-                4 => Ok(Distortion::Equidistant {
-                    k1: c[0],
-                    k2: c[1],
-                    k3: c[2],
-                    k4: c[3],
-                }),
-                _ => Err(count_error("4 coefficients (k1 k2 k3 k4)")),
-            },
-            "none" => Ok(Distortion::None),
-            _ => Err(CameraModelError::BadValue {
+            ModelNameError::Unknown(_) => CameraModelError::BadValue {
                 path: self.path.to_path_buf(),
                 key: key.to_string(),
-                expected: "plumb_bob, radtan, equidistant, fisheye or none".to_string(),
+                expected: MODEL_NAMES.to_string(),
                 found: name.to_string(),
+            },
+        })
+    }
+}
+
+/// The distortion model names [`Distortion::from_model_name`] reads.
+const MODEL_NAMES: &str = "plumb_bob, radtan, equidistant, fisheye or none";
+
+/// Why a distortion model name and its coefficients describe no [`Distortion`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelNameError {
+    /// A model handeye knows, with another number of coefficients than it takes.
+    #[error("{found} coefficients for `{name}`, expected {expected}")]
+    Count {
+        /// The model's name.
+        name: String,
+        /// How many coefficients were given.
+        found: usize,
+        /// What the model takes.
+        expected: &'static str,
+    },
+    /// A model handeye does not know.
+    #[error("distortion model `{0}`, expected {MODEL_NAMES}")]
+    Unknown(String),
+}
+
+impl Distortion {
+    /// The distortion a ROS `distortion_model` (or Kalibr camchain) name and its coefficients
+    /// describe: `plumb_bob` / `radtan` (4 or 5: k1 k2 p1 p2 [k3]), `equidistant` / `fisheye`
+    /// (4: k1..k4), `none`; no coefficients under `plumb_bob`, `radtan` or an empty name (a
+    /// driver without a calibration) is an ideal pinhole. The one reading of a model name, for
+    /// `camera_info` files and `sensor_msgs/CameraInfo` messages alike.
+    pub fn from_model_name(name: &str, c: &[f64]) -> Result<Distortion, ModelNameError> {
+        let count = |expected| ModelNameError::Count {
+            name: name.to_string(),
+            found: c.len(),
+            expected,
+        };
+        match (name, c.len()) {
+            ("plumb_bob" | "radtan" | "", 0) | ("none", _) => Ok(Distortion::None),
+            ("plumb_bob" | "radtan", 4 | 5) => Ok(Distortion::RadTan {
+                k1: c[0],
+                k2: c[1],
+                p1: c[2],
+                p2: c[3],
+                k3: c.get(4).copied().unwrap_or(0.0),
             }),
+            ("plumb_bob" | "radtan", _) => Err(count("4 or 5 coefficients (k1 k2 p1 p2 [k3])")),
+            ("equidistant" | "fisheye", 4) => Ok(Distortion::Equidistant {
+                k1: c[0],
+                k2: c[1],
+                k3: c[2],
+                k4: c[3],
+            }),
+            ("equidistant" | "fisheye", _) => Err(count("4 coefficients (k1 k2 k3 k4)")),
+            _ => Err(ModelNameError::Unknown(name.to_string())),
         }
+    }
+}
+
+impl CameraModel {
+    /// The pinhole of the row-major camera matrix `k` (`[fx, 0, cx, 0, fy, cy, 0, 0, 1]`) with
+    /// its image size and `distortion`; `None` for a matrix of another form (skew, a scaled last
+    /// row) or not of 9 numbers. The one reading of a camera matrix, for `camera_info` files and
+    /// `sensor_msgs/CameraInfo` messages alike.
+    pub fn from_camera_matrix(
+        (width, height): (u32, u32),
+        k: &[f64],
+        distortion: Distortion,
+    ) -> Option<CameraModel> {
+        let plain =
+            k.len() == 9 && k[1] == 0.0 && k[3] == 0.0 && k[6] == 0.0 && k[7] == 0.0 && k[8] == 1.0;
+        plain.then(|| CameraModel {
+            width,
+            height,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion,
+        })
     }
 }
 

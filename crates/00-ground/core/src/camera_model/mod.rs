@@ -23,7 +23,7 @@ mod distortion;
 mod files;
 
 pub use distortion::{Distortion, DistortionProblem, MAX_RADIAL_SCALE};
-pub use files::{CameraModelError, MAX_FOCAL_PER_SIZE, MIN_FOCAL_PER_SIZE};
+pub use files::{CameraModelError, ModelNameError, MAX_FOCAL_PER_SIZE, MIN_FOCAL_PER_SIZE};
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix2x4, Matrix2xX, Point2, Point3, Vector2, Vector3};
 
