@@ -323,7 +323,7 @@ impl RobotBackend for RecordedRobot {
 
     fn model(&self) -> Option<ArmModel> {
         // A recorded arm is never planned with kinematics; any valid model will do.
-        Some(ArmModel::Ur5e)
+        Some(ArmModel::default())
     }
 
     fn repeatability(&self) -> (f64, f64) {

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use handeye_core::geometry::PoseYaml;
 use handeye_core::setup::Setup;
 use handeye_plan::GenerateSpec;
+use handeye_robot::kinematics::UrModel;
 use handeye_robot::MotionLimits;
 use handeye_solve::verdict::{Accuracy, DEFAULT_ACCURACY_DEG, DEFAULT_ACCURACY_MM};
 use handeye_solve::Method;
@@ -156,46 +157,39 @@ pub struct CameraFile {
     pub simulation: Option<PoseYaml>,
 }
 
-/// The arm models whose kinematics the tool knows (Universal Robots' published DH parameters,
-/// `robot::kinematics`). An unknown name is refused listing these.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ArmModel {
-    /// Universal Robots UR3 (CB3).
-    Ur3,
-    /// Universal Robots UR5 (CB3).
-    Ur5,
-    /// Universal Robots UR10 (CB3).
-    Ur10,
-    /// Universal Robots UR3e.
-    Ur3e,
-    /// Universal Robots UR5e.
-    #[default]
-    Ur5e,
-    /// Universal Robots UR10e.
-    Ur10e,
-    /// Universal Robots UR16e.
-    Ur16e,
-    /// Universal Robots UR20.
-    Ur20,
-    /// Universal Robots UR30.
-    Ur30,
-}
+/// An arm model whose kinematics the tool knows: one of Universal Robots' published DH tables
+/// (`robot::kinematics::UrModel::NAMES`, the one list; `ur5e` by default). An unknown name is
+/// refused listing those.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ArmModel(&'static str);
 
 impl ArmModel {
     /// The YAML name (`ur5e`), as `robot::kinematics::UrModel::by_name` takes it.
     pub fn name(self) -> &'static str {
-        match self {
-            ArmModel::Ur3 => "ur3",
-            ArmModel::Ur5 => "ur5",
-            ArmModel::Ur10 => "ur10",
-            ArmModel::Ur3e => "ur3e",
-            ArmModel::Ur5e => "ur5e",
-            ArmModel::Ur10e => "ur10e",
-            ArmModel::Ur16e => "ur16e",
-            ArmModel::Ur20 => "ur20",
-            ArmModel::Ur30 => "ur30",
-        }
+        self.0
+    }
+}
+
+impl Default for ArmModel {
+    fn default() -> Self {
+        ArmModel("ur5e")
+    }
+}
+
+impl Serialize for ArmModel {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.0)
+    }
+}
+
+impl<'de> Deserialize<'de> for ArmModel {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        UrModel::NAMES
+            .iter()
+            .find(|known| **known == name)
+            .map(|known| ArmModel(known))
+            .ok_or_else(|| serde::de::Error::unknown_variant(&name, &UrModel::NAMES))
     }
 }
 
