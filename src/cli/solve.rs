@@ -31,15 +31,12 @@ fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
     PossibleValuesParser::new(values).try_map(|name| name.parse::<Method>())
 }
 
-/// Robust loss on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub(super) enum RobustArg {
-    /// Plain least squares.
-    None,
-    /// Huber loss.
-    Huber,
-    /// Cauchy loss.
-    Cauchy,
+/// `--robust`: the solver's names of its losses ([`RobustLoss::NAMES`], as Python's `robust=`).
+fn robust_parser() -> clap::builder::PossibleValuesParser {
+    use clap::builder::{PossibleValue, PossibleValuesParser};
+    PossibleValuesParser::new(
+        RobustLoss::NAMES.map(|(name, help)| PossibleValue::new(name).help(help)),
+    )
 }
 
 /// Solve space on the command line.
@@ -88,8 +85,8 @@ pub(super) struct SolveArgs {
     #[arg(long)]
     translation_sigma_mm: Option<f64>,
     /// Robust loss of the refinement.
-    #[arg(long, value_enum, default_value_t = RobustArg::None)]
-    robust: RobustArg,
+    #[arg(long, value_parser = robust_parser(), default_value = "none")]
+    robust: String,
     /// Scale of the robust loss, in sigmas.
     #[arg(long, default_value_t = 3.0)]
     robust_scale: f64,
@@ -128,11 +125,8 @@ impl SolveArgs {
             rotation_sigma_deg: self.rotation_sigma_deg,
             translation_sigma_mm: self.translation_sigma_mm,
             estimate_noise: true,
-            robust: match self.robust {
-                RobustArg::None => RobustLoss::None,
-                RobustArg::Huber => RobustLoss::Huber(self.robust_scale),
-                RobustArg::Cauchy => RobustLoss::Cauchy(self.robust_scale),
-            },
+            robust: RobustLoss::named(&self.robust, self.robust_scale)
+                .map_err(anyhow::Error::msg)?,
             drop_outliers: !self.keep_outliers,
             weigh_views: !self.every_view_alike,
             warm_start: self.warm_start,

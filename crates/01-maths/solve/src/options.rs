@@ -256,6 +256,27 @@ pub enum RobustLoss {
 }
 
 impl RobustLoss {
+    /// The losses by name with a line on each: what `handeye solve --robust` and Python's
+    /// `robust=` take ([`RobustLoss::named`]).
+    pub const NAMES: [(&'static str, &'static str); 3] = [
+        ("none", "plain least squares"),
+        ("huber", "Huber loss"),
+        ("cauchy", "Cauchy loss"),
+    ];
+
+    /// The loss called `name` (one of [`RobustLoss::NAMES`]) at `scale` sigmas (unused by
+    /// `none`); an unknown name is refused listing them.
+    pub fn named(name: &str, scale: f64) -> Result<RobustLoss, String> {
+        match name {
+            "none" => Ok(RobustLoss::None),
+            "huber" => Ok(RobustLoss::Huber(scale)),
+            "cauchy" => Ok(RobustLoss::Cauchy(scale)),
+            other => Err(format!(
+                "robust `{other}`: expected `none`, `huber` or `cauchy`"
+            )),
+        }
+    }
+
     /// Checks the loss's scale is a positive finite number; the names are the option keys of
     /// the Huber and Cauchy scales in the caller's configuration.
     pub(super) fn validate(

@@ -58,17 +58,7 @@ fn options(
         &str::to_string,
     )
     .map_err(|e| errors::input(py, e))?;
-    let robust = match robust {
-        "none" => RobustLoss::None,
-        "huber" => RobustLoss::Huber(robust_scale),
-        "cauchy" => RobustLoss::Cauchy(robust_scale),
-        other => {
-            return Err(errors::input(
-                py,
-                format!("robust `{other}`: expected `none`, `huber` or `cauchy`"),
-            ))
-        }
-    };
+    let robust = RobustLoss::named(robust, robust_scale).map_err(|e| errors::input(py, e))?;
     Ok(SolverChoice {
         method,
         rotation_sigma_deg,
