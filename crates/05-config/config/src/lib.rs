@@ -284,9 +284,7 @@ impl CellConfig {
         let mut plan = raw.plan;
         plan.file = plan.file.as_deref().map(resolve);
         let mut robot = raw.robot;
-        if let RobotConfig::Recorded(recorded) = &mut robot {
-            recorded.poses = resolve(&recorded.poses);
-        }
+        robot.backend_mut().resolve_paths(&resolve);
         let mut backend = checked.camera;
         backend.backend_mut().resolve_paths(&resolve);
         // The base and last joint offsets no data tell from the transforms: the truth a run

@@ -2,14 +2,14 @@
 //! section's keys (a struct), and what the rest of handeye asks of any arm ([`RobotBackend`]):
 //! its name, the model it is planned with, the joint ranges given and the defaults in force, how
 //! far its reported poses may be off, the frames they are in, whether it moves, whether each
-//! pose's joints are known, and its section's checks. [`RobotConfig`] holds one of them and
+//! pose's joints are known, the files it names, and its section's checks. [`RobotConfig`] holds one of them and
 //! answers through [`RobotConfig::backend`]; nothing else matches on the backend to learn these.
 //!
 //! A new arm is its section struct and its `RobotBackend` impl (here, or in a module of its own
 //! as `ros2.rs` is), a variant of [`RobotConfig`] and its line in [`RobotConfig::backend`], its
 //! opener in `handeye_session::cell` (`open_arm`), and a mock to test against.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +61,12 @@ pub trait RobotBackend {
     fn start_joints_deg(&self) -> Option<[f64; 6]> {
         None
     }
+    /// The files its section names (role, path), which a session records with their hashes.
+    fn input_files(&self) -> Vec<(&'static str, PathBuf)> {
+        Vec::new()
+    }
+    /// Its paths made relative to the config's folder (`resolve`), as the config is read.
+    fn resolve_paths(&mut self, _resolve: &dyn Fn(&Path) -> PathBuf) {}
     /// Its section's own checks (`robot.*`): every number in its range, every name valid.
     fn check(&self, v: &Validator<'_>) -> Result<(), ConfigError>;
 }
@@ -73,6 +79,16 @@ impl RobotConfig {
             RobotConfig::Ur(ur) => ur,
             RobotConfig::Recorded(recorded) => recorded,
             RobotConfig::Ros2(ros2) => ros2.as_ref(),
+        }
+    }
+
+    /// The backend the config names, to change.
+    pub fn backend_mut(&mut self) -> &mut dyn RobotBackend {
+        match self {
+            RobotConfig::Sim(sim) => sim,
+            RobotConfig::Ur(ur) => ur,
+            RobotConfig::Recorded(recorded) => recorded,
+            RobotConfig::Ros2(ros2) => ros2.as_mut(),
         }
     }
 
@@ -339,6 +355,14 @@ impl RobotBackend for RecordedRobot {
 
     fn moves(&self) -> bool {
         false
+    }
+
+    fn input_files(&self) -> Vec<(&'static str, PathBuf)> {
+        vec![("robot.poses", self.poses.clone())]
+    }
+
+    fn resolve_paths(&mut self, resolve: &dyn Fn(&Path) -> PathBuf) {
+        self.poses = resolve(&self.poses);
     }
 
     fn reports_joints(&self) -> bool {

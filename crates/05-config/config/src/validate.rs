@@ -596,7 +596,7 @@ impl Validator<'_> {
     /// `simulation.arm_errors`: a seeded draw or the per-joint lists (not both), for the sim arm.
     fn arm_errors(&self, robot: &RobotConfig, e: &ArmErrorsFile) -> Result<ArmErrors, ConfigError> {
         const KEY: &str = "simulation.arm_errors";
-        if !matches!(robot, RobotConfig::Sim(_)) {
+        if !robot.backend().simulated() {
             return Err(self.inconsistent(
                 KEY,
                 "the arm's own errors are simulated by the sim arm only (`robot: {backend: sim}`)"

@@ -615,9 +615,7 @@ impl PreparedCell {
         if let Some(file) = &self.config.plan.file {
             files.push(("plan", file.clone()));
         }
-        if let RobotConfig::Recorded(recorded) = &self.config.robot {
-            files.push(("robot.poses", recorded.poses.clone()));
-        }
+        files.extend(self.config.robot.backend().input_files());
         // A several-camera cell's other cameras: their boards and lenses, once each.
         for other in self.others().map(|c| &self.config.cameras[c]) {
             for (role, file) in [
