@@ -271,9 +271,14 @@ impl RobustLoss {
             "none" => Ok(RobustLoss::None),
             "huber" => Ok(RobustLoss::Huber(scale)),
             "cauchy" => Ok(RobustLoss::Cauchy(scale)),
-            other => Err(format!(
-                "robust `{other}`: expected `none`, `huber` or `cauchy`"
-            )),
+            other => {
+                let names: Vec<String> =
+                    Self::NAMES.iter().map(|(n, _)| format!("`{n}`")).collect();
+                Err(format!(
+                    "robust `{other}`: expected one of {}",
+                    names.join(", ")
+                ))
+            }
         }
     }
 

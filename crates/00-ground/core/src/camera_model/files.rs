@@ -1,7 +1,9 @@
 //! The intrinsics file forms of a [`CameraModel`]: reading ROS/OpenCV `camera_info` YAML and
 //! Kalibr camchain YAML (its `cam0`), detected by their keys; writing `camera_info` YAML
 //! (atomically); checking a model's numbers; and [`CameraModelError`], which names the file, the
-//! YAML key, the value found and what was expected.
+//! YAML key, the value found and what was expected. The one reading of a ROS distortion model
+//! name ([`Distortion::from_model_name`]) and camera matrix ([`CameraModel::from_camera_matrix`])
+//! is here, for these files and for `sensor_msgs/CameraInfo` messages (`handeye-ros2`) alike.
 //!
 //! Both forms use OpenCV's pixel convention (centres at integers), like [`CameraModel`], so
 //! nothing is shifted on the way in or out. Depends on `atomic_file` (the write), `yaml_file`
@@ -633,11 +635,13 @@ impl Reader<'_> {
 
     fn distortion(&self, name: &str, c: &[f64], key: &str) -> Result<Distortion, CameraModelError> {
         Distortion::from_model_name(name, c).map_err(|e| match e {
-            ModelNameError::Count { expected, .. } => CameraModelError::BadValue {
+            ModelNameError::Count {
+                found, expected, ..
+            } => CameraModelError::BadValue {
                 path: self.path.to_path_buf(),
                 key: format!("{key} coefficients"),
                 expected: expected.to_string(),
-                found: format!("{} coefficients for `{name}`", c.len()),
+                found: format!("{found} coefficients for `{name}`"),
             },
             ModelNameError::Unknown(_) => CameraModelError::BadValue {
                 path: self.path.to_path_buf(),

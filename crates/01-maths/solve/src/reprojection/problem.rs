@@ -365,9 +365,7 @@ impl Problem<'_> {
             })
             .collect()
     }
-}
 
-impl Problem<'_> {
     /// Every residual at the current parameters (the whitened pixel errors, then the robot
     /// corrections' prior); `None` when one is not finite.
     pub(super) fn residuals(&self) -> Option<DVector<f64>> {
@@ -423,9 +421,7 @@ impl Problem<'_> {
         }
         Some(j)
     }
-}
 
-impl Problem<'_> {
     /// Visits each corner's two (weighted) Jacobian rows: the global columns (pose, intrinsics,
     /// distortion: 2 x `robot_offset`) and the 2 x 6 block of its frame's robot correction
     /// (zero without a prior). Every corner touches only these columns: the block structure the
