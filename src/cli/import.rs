@@ -167,7 +167,7 @@ struct BagArgs {
     /// The image topic (sensor_msgs/Image or sensor_msgs/CompressedImage).
     #[arg(long)]
     image: String,
-    /// The camera_info topic (plumb_bob); without it the intrinsics are estimated from the
+    /// The camera_info topic (plumb_bob or equidistant); without it the intrinsics are estimated from the
     /// frames.
     #[arg(long)]
     camera_info: Option<String>,

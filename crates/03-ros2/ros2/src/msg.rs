@@ -400,10 +400,10 @@ impl CameraInfo {
                 roi.width, roi.height, roi.x_offset, roi.y_offset
             ));
         }
-        let distortion =
-            Distortion::from_model_name(&self.distortion_model, &self.d).map_err(|e| {
-                format!("{e}; give the intrinsics without --camera-info so they are estimated")
-            })?;
+        // The reason only: what to do instead is the caller's (a bag import's flag, a live
+        // cell's `intrinsics:`).
+        let distortion = Distortion::from_model_name(&self.distortion_model, &self.d)
+            .map_err(|e| e.to_string())?;
         let k = self.k;
         let model = CameraModel::from_camera_matrix((self.width, self.height), &k, distortion)
             .ok_or_else(|| {
@@ -668,10 +668,10 @@ mod tests {
         );
         assert!(matches!(model.distortion, Distortion::RadTan { k1, .. } if k1 == -0.1));
         info.distortion_model = "rational_polynomial".into();
-        assert!(info
-            .camera_model()
-            .unwrap_err()
-            .contains("rational_polynomial"));
+        let unknown = info.camera_model().unwrap_err();
+        assert!(unknown.contains("rational_polynomial"), "{unknown}");
+        // The reason only: a live cell and a bag import each say what to do instead.
+        assert!(!unknown.contains("--camera-info"), "{unknown}");
         // A fisheye driver's message reads as its camera_info file does.
         info.distortion_model = "equidistant".into();
         info.d = vec![0.1, -0.02, 0.003, -0.0004];

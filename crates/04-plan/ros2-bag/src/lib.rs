@@ -126,8 +126,8 @@ pub enum BagError {
         #[source]
         source: Box<TfError>,
     },
-    /// The camera_info cannot become our camera model.
-    #[error("{}: topic `{topic}`: {problem}", path.display())]
+    /// The camera_info cannot become our camera model (or is not the images' size).
+    #[error("{}: topic `{topic}`: {problem}; leave out --camera-info and the intrinsics are estimated from the frames", path.display())]
     CameraInfo {
         /// The bag.
         path: PathBuf,
@@ -823,5 +823,51 @@ fn expect_type(path: &Path, topic: &TopicInfo, expected: &'static str) -> Result
             found: topic.type_name.clone(),
             expected,
         })
+    }
+}
+
+#[cfg(test)]
+mod camera_info_tests {
+    use super::*;
+    use handeye_core::camera_model::Distortion;
+
+    fn info(model: &str, d: Vec<f64>) -> CameraInfo {
+        CameraInfo {
+            width: 640,
+            height: 480,
+            distortion_model: model.into(),
+            d,
+            k: [600.0, 0.0, 320.0, 0.0, 600.0, 240.0, 0.0, 0.0, 1.0],
+            ..CameraInfo::default()
+        }
+    }
+
+    /// A bag's camera_info reads as its driver's file does (a fisheye lens too); one that cannot
+    /// be used says which topic and what to do instead: import without `--camera-info`.
+    #[test]
+    fn a_bags_camera_info_is_read_as_a_file_is_or_refused_with_the_way_round() {
+        let topic = TopicInfo {
+            name: "/camera/camera_info".into(),
+            type_name: "sensor_msgs/msg/CameraInfo".into(),
+            count: 1,
+        };
+        let path = Path::new("run.mcap");
+        let fisheye = info("equidistant", vec![0.1, -0.02, 0.003, -0.0004]);
+        let model = camera_of(path, Some(&topic), Some(&fisheye))
+            .unwrap()
+            .unwrap();
+        assert!(matches!(model.distortion, Distortion::Equidistant { k1, .. } if k1 == 0.1));
+        let mut binned = info("plumb_bob", vec![0.0; 5]);
+        binned.binning_x = 2;
+        let refused = camera_of(path, Some(&topic), Some(&binned))
+            .unwrap_err()
+            .to_string();
+        for words in [
+            "/camera/camera_info",
+            "binning 2x0",
+            "leave out --camera-info",
+        ] {
+            assert!(refused.contains(words), "{words:?} not in {refused}");
+        }
     }
 }
